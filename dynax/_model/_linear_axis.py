@@ -1,0 +1,46 @@
+"""`LinearAxis`: one prismatic or rotary axis driven by a force (the EMPS benchmark's structure)."""
+
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ._system import AbstractSystem
+
+LINEAR_AXIS_PARAMETER_NAMES = ("mass", "viscous", "coulomb", "offset")
+
+
+class LinearAxis(AbstractSystem):
+    r"""One axis: $m \ddot q = F - F_v \dot q - F_c \operatorname{sign}(\dot q) - F_0$.
+
+    This is the EMPS reference model `force = M q'' + Fv q' + Fc sign(q') + offset`
+    (Janot, Gautier and Brunot 2019). In simulation the sign is smoothed as
+    $\tanh(\dot q / v_s)$ with `coulomb_velocity` $v_s$ (default 1e-3 m/s) so that fixed-step
+    integrators stay accurate; identification uses the exact sign.
+
+    State `(q, dq)`, input `(force,)`. Defaults are the published EMPS values.
+    """
+
+    mass: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(95.1089))
+    viscous: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(203.5034))
+    coulomb: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(20.3935))
+    offset: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(-3.1648))
+    coulomb_velocity: float = eqx.field(static=True, default=1e-3)
+
+    state_names: ClassVar[tuple[str, ...]] = ("q", "dq")
+    input_names: ClassVar[tuple[str, ...]] = ("force",)
+
+    def __check_init__(self):
+        if self.coulomb_velocity <= 0:
+            raise ValueError(f"LinearAxis: `coulomb_velocity` must be positive, got {self.coulomb_velocity}")
+
+    @property
+    def parameters(self) -> dict[str, Array]:
+        """`mass`, `viscous`, `coulomb`, `offset` as a dict (the contract's names)."""
+        return {k: getattr(self, k) for k in LINEAR_AXIS_PARAMETER_NAMES}
+
+    def vector_field(self, t, x, u):
+        dq = x[1]
+        friction = self.viscous * dq + self.coulomb * jnp.tanh(dq / self.coulomb_velocity) + self.offset
+        return jnp.stack([dq, (u[0] - friction) / self.mass])

@@ -1,0 +1,173 @@
+"""The Spong / Drake two-link arm: `Acrobot` (elbow driven) and `DoublePendulum` (both driven).
+
+Both are written in the seven base parameters of the data contract, which is the minimal set the
+dynamics depend on (I1, I2 about the pivots):
+
+$$\theta_1 = I_1 + m_2 l_1^2,\ \theta_2 = I_2,\ \theta_3 = m_2 l_1 l_{c2},\ \theta_4 = g(m_1 l_{c1} + m_2 l_1),\
+\theta_5 = g m_2 l_{c2},\ \theta_6 = b_1,\ \theta_7 = b_2.$$
+
+q1 is measured from hanging straight down, q2 relative to link 1.
+"""
+
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from ._system import AbstractManipulator
+
+BASE_PARAMETER_NAMES = ("theta1", "theta2", "theta3", "theta4", "theta5", "theta6", "theta7")
+
+# Drake's AcrobotParams defaults (drake/examples/acrobot/acrobot_params.h).
+DRAKE_DEFAULTS = dict(m1=1.0, m2=1.0, l1=1.0, lc1=0.5, lc2=1.0, Ic1=0.083, Ic2=0.33, b1=0.1, b2=0.1, g=9.81)
+
+
+def base_parameters_from_physical(
+    *, m1, m2, l1, lc1, lc2, Ic1, Ic2, b1, b2, g=9.81
+) -> dict[str, float]:
+    r"""Map physical parameters to the base parameters theta1..theta7.
+
+    **Arguments:** masses `m1`, `m2` [kg]; length of link 1 `l1` [m]; centre-of-mass distances
+    `lc1`, `lc2` [m]; inertias `Ic1`, `Ic2` about the centres of mass [kg m^2]; viscous friction
+    `b1`, `b2` [N m s/rad]; gravity `g` [m/s^2].
+
+    **Returns:** a dict `theta1..theta7`.
+
+    Not every physical parameter can be recovered from the base ones: the seven base parameters
+    are what the equations of motion depend on, while (m1, lc1, Ic1) enter only through
+    $I_1 = I_{c1} + m_1 l_{c1}^2$ and $m_1 l_{c1}$, and $(m_2, l_{c2}, I_{c2})$ only through
+    $m_2 l_{c2}$, $I_2$ and $m_2$ (the latter in combination with $l_1$). `l2` does not enter at all.
+    """
+    I1 = Ic1 + m1 * lc1**2
+    I2 = Ic2 + m2 * lc2**2
+    return dict(
+        theta1=I1 + m2 * l1**2,
+        theta2=I2,
+        theta3=m2 * l1 * lc2,
+        theta4=g * (m1 * lc1 + m2 * l1),
+        theta5=g * m2 * lc2,
+        theta6=b1,
+        theta7=b2,
+    )
+
+
+DRAKE_BASE_PARAMETERS = base_parameters_from_physical(**DRAKE_DEFAULTS)
+
+
+def _field(name):
+    return eqx.field(default_factory=lambda: jnp.asarray(DRAKE_BASE_PARAMETERS[name]))
+
+
+def _mass_matrix(p, q):
+    c2 = jnp.cos(q[1])
+    m12 = p.theta2 + p.theta3 * c2
+    return jnp.stack(
+        [jnp.stack([p.theta1 + p.theta2 + 2 * p.theta3 * c2, m12]), jnp.stack([m12, p.theta2 * jnp.ones_like(c2)])]
+    )
+
+
+def _bias_force(p, q, dq):
+    s1, s2, s12 = jnp.sin(q[0]), jnp.sin(q[1]), jnp.sin(q[0] + q[1])
+    coriolis = jnp.stack(
+        [-2 * p.theta3 * s2 * dq[1] * dq[0] - p.theta3 * s2 * dq[1] ** 2, p.theta3 * s2 * dq[0] ** 2]
+    )
+    gravity = jnp.stack([-p.theta4 * s1 - p.theta5 * s12, -p.theta5 * s12])  # tau_g
+    damping = jnp.stack([p.theta6 * dq[0], p.theta7 * dq[1]])
+    return coriolis - gravity + damping
+
+
+def _energy(p, x):
+    q, dq = x[:2], x[2:]
+    kinetic = 0.5 * dq @ _mass_matrix(p, q) @ dq
+    potential = -p.theta4 * jnp.cos(q[0]) - p.theta5 * jnp.cos(q[0] + q[1])
+    return kinetic + potential
+
+
+class AbstractTwoLink(AbstractManipulator):
+    """Shared dynamics of `Acrobot` and `DoublePendulum`, in base parameters theta1..theta7."""
+
+    theta1: Float[Array, ""] = _field("theta1")
+    theta2: Float[Array, ""] = _field("theta2")
+    theta3: Float[Array, ""] = _field("theta3")
+    theta4: Float[Array, ""] = _field("theta4")
+    theta5: Float[Array, ""] = _field("theta5")
+    theta6: Float[Array, ""] = _field("theta6")
+    theta7: Float[Array, ""] = _field("theta7")
+
+    state_names: ClassVar[tuple[str, ...]] = ("q1", "q2", "dq1", "dq2")
+    n_joints: ClassVar[int] = 2
+
+    def __check_init__(self):
+        for name in BASE_PARAMETER_NAMES:
+            if jnp.shape(getattr(self, name)) != ():
+                raise ValueError(
+                    f"{type(self).__name__}: `{name}` must be a scalar, got shape {jnp.shape(getattr(self, name))}"
+                )
+
+    @classmethod
+    def from_physical(cls, **physical):
+        """Build from physical parameters (see `base_parameters_from_physical`); missing ones take Drake's defaults."""
+        unknown = set(physical) - set(DRAKE_DEFAULTS)
+        if unknown:
+            raise ValueError(
+                f"{cls.__name__}.from_physical: unknown parameter(s) {sorted(unknown)}; expected {sorted(DRAKE_DEFAULTS)}"
+            )
+        base = base_parameters_from_physical(**{**DRAKE_DEFAULTS, **physical})
+        return cls(**{k: jnp.asarray(v) for k, v in base.items()})
+
+    @classmethod
+    def from_base_parameters(cls, parameters: dict[str, ArrayLike]):
+        """Build from a dict of base parameters (the contract's `theta1..theta7`); missing ones take Drake's values."""
+        unknown = set(parameters) - set(BASE_PARAMETER_NAMES)
+        if unknown:
+            raise ValueError(f"{cls.__name__}: unknown base parameter(s) {sorted(unknown)}; expected theta1..theta7")
+        return cls(**{k: jnp.asarray(v) for k, v in parameters.items()})
+
+    @property
+    def base_parameters(self) -> dict[str, Array]:
+        """The seven base parameters `theta1..theta7` as a dict."""
+        return {k: getattr(self, k) for k in BASE_PARAMETER_NAMES}
+
+    def mass_matrix(self, q):
+        return _mass_matrix(self, q)
+
+    def bias_force(self, q, dq):
+        return _bias_force(self, q, dq)
+
+    def energy(self, x: Float[Array, " 4"]) -> Float[Array, ""]:
+        """Total mechanical energy (zero potential at the pivot height), linear in theta1..theta5."""
+        return _energy(self, x)
+
+
+class Acrobot(AbstractTwoLink):
+    r"""The Spong acrobot: two links, only the elbow driven (input `tau2`).
+
+    State `(q1, q2, dq1, dq2)`, input `(tau2,)`. The defaults are Drake's `AcrobotParams`
+    (m1 = m2 = 1, l1 = 1, l2 = 2, lc1 = 0.5, lc2 = 1, Ic1 = 0.083, Ic2 = 0.33, b1 = b2 = 0.1,
+    g = 9.81). Build from physical parameters with `Acrobot.from_physical(...)`, or pass base
+    parameters `theta1..theta7` as keywords.
+
+    ??? cite
+
+        M. W. Spong, "The swing up control problem for the Acrobot", IEEE Control Systems
+        Magazine 15(1), 1995; R. Tedrake, *Underactuated Robotics*, ch. 3.
+    """
+
+    input_names: ClassVar[tuple[str, ...]] = ("tau2",)
+
+    def input_matrix(self):
+        return jnp.array([[0.0], [1.0]], dtype=jnp.result_type(self.theta1))
+
+
+class DoublePendulum(AbstractTwoLink):
+    r"""The two-link arm with both joints driven (inputs `tau1`, `tau2`).
+
+    Same geometry, parameters and defaults as `Acrobot`; the acrobot is this system with
+    `tau1 = 0`.
+    """
+
+    input_names: ClassVar[tuple[str, ...]] = ("tau1", "tau2")
+
+    def input_matrix(self):
+        return jnp.eye(2, dtype=jnp.result_type(self.theta1))

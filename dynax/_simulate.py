@@ -1,0 +1,224 @@
+"""`simulate`: roll a system out on a sample grid with zero-order-hold inputs, through diffrax."""
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from ._model._system import AbstractSystem
+
+
+class FixedGrid(eqx.Module):
+    r"""Integrate with `substeps` fixed steps of a diffrax `solver` per sample interval, inside `lax.scan`.
+
+    The integrator restarts at every sample time, where the zero-order-hold input jumps, so no
+    step straddles a discontinuity. This is the default: on fixed sample grids it is several times
+    faster than `Adaptive` for the same accuracy (see `benchmarks/simulate_paths.py`), and its cost
+    and memory are known in advance, which suits `vmap` over populations and reverse-mode
+    gradients. With the default `Tsit5` and 2 substeps, a 100 Hz acrobot rollout matches
+    scipy's DOP853 at rtol 1e-11 to about 1e-8 rad over 5 s.
+
+    **Arguments:**
+
+    - `solver`: a diffrax explicit Runge-Kutta solver (default `diffrax.Tsit5()`).
+    - `substeps`: steps per sample interval (default 2).
+    """
+
+    solver: diffrax.AbstractSolver = diffrax.Tsit5()
+    substeps: int = eqx.field(static=True, default=2)
+
+    def __check_init__(self):
+        if self.substeps < 1:
+            raise ValueError(f"FixedGrid: `substeps` must be at least 1, got {self.substeps}")
+
+
+class Adaptive(eqx.Module):
+    """Integrate with `diffrax.diffeqsolve` and an adaptive PID step-size controller.
+
+    The sample times are passed as `jump_ts`, so steps end exactly where the input jumps.
+    Use it for stiff or badly scaled systems, or when a tolerance (not a step count) is the
+    specification.
+
+    **Arguments:**
+
+    - `solver`: diffrax solver (default `diffrax.Dopri8()`).
+    - `rtol`, `atol`: tolerances (default 1e-10, 1e-10).
+    - `max_steps`: the step budget of one rollout (default 100,000).
+    """
+
+    solver: diffrax.AbstractSolver = diffrax.Dopri8()
+    rtol: float = 1e-10
+    atol: float = 1e-10
+    max_steps: int = eqx.field(static=True, default=100_000)
+
+
+class Simulation(eqx.Module):
+    """The result of `simulate`.
+
+    **Fields:**
+
+    - `ts`: the sample times, shape `(time,)`.
+    - `xs`: the states at `ts`, shape `(time, n_states)`; `xs[0] = x0`. Past a divergence the
+      rows are NaN.
+    - `diverged_at`: the first sample time at which the state left the finite range (non-finite
+      or larger than `divergence_bound` in magnitude), `inf` if the rollout stayed bounded.
+    """
+
+    ts: Float[Array, " time"]
+    xs: Float[Array, "time n_states"]
+    diverged_at: Float[Array, ""]
+
+    @property
+    def diverged(self) -> Array:
+        """Whether the rollout diverged."""
+        return jnp.isfinite(self.diverged_at)
+
+
+def _zoh_term(system):
+    return diffrax.ODETerm(lambda t, x, u: system.vector_field(t, x, u))
+
+
+def _check_arguments(system, x0, ts, us):
+    if not isinstance(system, AbstractSystem):
+        raise ValueError(f"simulate: `system` must be a dynax system (AbstractSystem), got {type(system).__name__}")
+    x0 = jnp.asarray(x0)
+    ts = jnp.asarray(ts)
+    if ts.ndim != 1 or ts.shape[0] < 2:
+        raise ValueError(f"simulate: `ts` must be a 1-d array of at least 2 sample times, got shape {ts.shape}")
+    if x0.ndim != 1:
+        raise ValueError(f"simulate: `x0` must be a 1-d state vector, got shape {x0.shape}")
+    if x0.shape[0] < system.n_states:
+        raise ValueError(
+            f"simulate: `x0` has {x0.shape[0]} entries but {type(system).__name__} has "
+            f"{system.n_states} states {system.state_names}"
+        )
+    dtype = jnp.result_type(x0, ts)
+    if not jnp.issubdtype(dtype, jnp.floating):
+        dtype = jnp.result_type(float)
+    if us is None:
+        us = jnp.zeros((ts.shape[0], system.n_inputs), dtype)
+    us = jnp.asarray(us)
+    if us.ndim == 1 and system.n_inputs == 1:
+        us = us[:, None]
+    if us.ndim != 2 or us.shape[1] != system.n_inputs:
+        raise ValueError(
+            f"simulate: `us` must have shape (time, {system.n_inputs}) for inputs {system.input_names}, got {us.shape}"
+        )
+    if us.shape[0] not in (ts.shape[0], ts.shape[0] - 1):
+        raise ValueError(
+            f"simulate: `us` has {us.shape[0]} rows but `ts` has {ts.shape[0]} samples "
+            "(give one input per sample; the last one is not used)"
+        )
+    return x0.astype(dtype), ts.astype(dtype), us.astype(dtype)
+
+
+def _fixed_grid(system, x0, ts, us, method, bound):
+    term = _zoh_term(system)
+    solver = method.solver
+    n = method.substeps
+
+    def interval(carry, inputs):
+        x, diverged_at = carry
+        t0, t1, u = inputs
+        h = (t1 - t0) / n
+
+        def substep(i, y):
+            ta = t0 + i * h
+            state = solver.init(term, ta, ta + h, y, u)
+            y_next, _, _, _, _ = solver.step(term, ta, ta + h, y, u, state, made_jump=True)
+            return y_next
+
+        x_new = jax.lax.fori_loop(0, n, substep, x, unroll=True)
+        bad = ~jnp.all(jnp.isfinite(x_new)) | jnp.any(jnp.abs(x_new) > bound)
+        newly = bad & jnp.isinf(diverged_at)
+        diverged_at = jnp.where(newly, t1, diverged_at)
+        stopped = jnp.isfinite(diverged_at)
+        # Freeze the carried state once diverged so no inf/NaN feeds later steps (or their gradients).
+        x_carry = jnp.where(stopped, x, x_new)
+        return (x_carry, diverged_at), jnp.where(stopped, jnp.nan, x_new)
+
+    inputs = (ts[:-1], ts[1:], us[: ts.shape[0] - 1])
+    init = (x0, jnp.asarray(jnp.inf, x0.dtype))
+    (_, diverged_at), xs = jax.lax.scan(interval, init, inputs)
+    return jnp.concatenate([x0[None], xs]), diverged_at
+
+
+def _adaptive(system, x0, ts, us, method, bound):
+    u_grid = us[: ts.shape[0] - 1]
+
+    def vector_field(t, x, args):
+        k = jnp.clip(jnp.searchsorted(ts, t, side="right") - 1, 0, u_grid.shape[0] - 1)
+        return system.vector_field(t, x, u_grid[k])
+
+    solution = diffrax.diffeqsolve(
+        diffrax.ODETerm(vector_field),
+        method.solver,
+        t0=ts[0],
+        t1=ts[-1],
+        dt0=ts[1] - ts[0],
+        y0=x0,
+        saveat=diffrax.SaveAt(ts=ts),
+        stepsize_controller=diffrax.PIDController(rtol=method.rtol, atol=method.atol, jump_ts=ts),
+        max_steps=method.max_steps,
+        throw=False,
+    )
+    xs = solution.ys
+    bad = ~jnp.all(jnp.isfinite(xs), axis=1) | jnp.any(jnp.abs(xs) > bound, axis=1)
+    failed = solution.result != diffrax.RESULTS.successful
+    bad = bad | (failed & ~jnp.all(jnp.isfinite(xs), axis=1))
+    first = jnp.argmax(bad)
+    diverged_at = jnp.where(jnp.any(bad), ts[first], jnp.inf)
+    after = jnp.arange(ts.shape[0]) >= jnp.where(jnp.any(bad), first, ts.shape[0])
+    return jnp.where(after[:, None], jnp.nan, xs), diverged_at
+
+
+def simulate(
+    system: AbstractSystem,
+    x0: Float[ArrayLike, " n_states"],
+    ts: Float[ArrayLike, " time"],
+    us: Float[ArrayLike, "time n_inputs"] | None = None,
+    *,
+    method: FixedGrid | Adaptive = FixedGrid(),
+    divergence_bound: float = 1e6,
+    throw: bool = True,
+) -> Simulation:
+    r"""Simulate `system` from `x0`, returning its states at the sample times `ts`.
+
+    Inputs are a zero-order hold: `us[k]` acts on $[t_k, t_{k+1})$. Sampling may be irregular.
+    The function is pure and jittable, differentiable with respect to the system's parameters,
+    `x0` and `us`, and batches with `jax.vmap`. The caller's dtype is respected (float32 for
+    throughput, float64 for identification).
+
+    **Arguments:**
+
+    - `system`: a dynax system.
+    - `x0`: initial state, ordered as `system.state_names`.
+    - `ts`: strictly increasing sample times, shape `(time,)`.
+    - `us`: inputs, shape `(time, n_inputs)` (or `(time - 1, n_inputs)`); `None` means zero input.
+    - `method`: `FixedGrid()` (default: solver steps inside `lax.scan`) or `Adaptive()`
+      (`diffrax.diffeqsolve`).
+    - `divergence_bound`: a state entry larger than this in magnitude counts as divergence.
+    - `throw`: if `True` (default), a divergent rollout raises an error (via `eqx.error_if`);
+      if `False`, it is reported in `Simulation.diverged_at` and the states past it are NaN.
+      Use `throw=False` for populations in which some members may diverge.
+
+    **Returns:**
+
+    A `Simulation` with `ts`, `xs` of shape `(time, n_states)` and `diverged_at`.
+    """
+    x0, ts, us = _check_arguments(system, x0, ts, us)
+    if isinstance(method, FixedGrid):
+        xs, diverged_at = _fixed_grid(system, x0, ts, us, method, divergence_bound)
+    elif isinstance(method, Adaptive):
+        xs, diverged_at = _adaptive(system, x0, ts, us, method, divergence_bound)
+    else:
+        raise ValueError(f"simulate: `method` must be FixedGrid or Adaptive, got {type(method).__name__}")
+    if throw:
+        xs = eqx.error_if(
+            xs,
+            jnp.isfinite(diverged_at),
+            "simulate: the rollout diverged (a state became non-finite or exceeded `divergence_bound`). "
+            "Call simulate(..., throw=False) and read Simulation.diverged_at to see where.",
+        )
+    return Simulation(ts=ts, xs=xs, diverged_at=diverged_at)
