@@ -8,6 +8,17 @@ from ._model import (
     DoublePendulum as DoublePendulum,
     LinearAxis as LinearAxis,
 )
+from ._data import (
+    butterworth_filtfilt as butterworth_filtfilt,
+    central_difference as central_difference,
+    load_trajectory as load_trajectory,
+    resample as resample,
+    save_trajectory as save_trajectory,
+    savitzky_golay as savitzky_golay,
+    Trajectory as Trajectory,
+)
+from ._errors import DataError as DataError, UsageError as UsageError
+from ._sim_error import simulation_error as simulation_error, SimulationError as SimulationError
 from ._simulate import Adaptive as Adaptive, FixedGrid as FixedGrid, Simulation as Simulation, simulate as simulate
 
 __version__ = "0.1.0"

@@ -1,0 +1,9 @@
+from ._columns import columns_for as columns_for, SYSTEM_COLUMNS as SYSTEM_COLUMNS
+from ._derivatives import (
+    butterworth_filtfilt as butterworth_filtfilt,
+    central_difference as central_difference,
+    resample as resample,
+    savitzky_golay as savitzky_golay,
+)
+from ._io import load_trajectory as load_trajectory, parse_assignments as parse_assignments, save_trajectory as save_trajectory
+from ._trajectory import Trajectory as Trajectory

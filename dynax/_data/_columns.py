@@ -1,0 +1,23 @@
+"""The contract's column names per system (CONTRACT.md section 1)."""
+
+SYSTEM_COLUMNS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    "acrobot": (("q1", "q2", "dq1", "dq2"), ("tau2",)),
+    "double_pendulum": (("q1", "q2", "dq1", "dq2"), ("tau1", "tau2")),
+    "linear_axis": (("q", "dq"), ("force",)),
+    "helicopter": (
+        ("x", "y", "z", "qw", "qx", "qy", "qz", "u", "v", "w", "p", "q", "r"),
+        ("u1", "u2", "u3", "u4"),
+    ),
+}
+
+# State columns that may be absent from a file and are then estimated (from the named column).
+OPTIONAL_STATES: dict[str, dict[str, str]] = {"linear_axis": {"dq": "q"}}
+
+
+def columns_for(system: str) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """State and input column names of a system named as in the contract."""
+    if system not in SYSTEM_COLUMNS:
+        from .._errors import UsageError
+
+        raise UsageError(f"unknown system '{system}'; expected one of {sorted(SYSTEM_COLUMNS)}")
+    return SYSTEM_COLUMNS[system]
