@@ -1,0 +1,19 @@
+"""Model extensions: candidate physical effects that compose with a nominal system (see `Extended`)."""
+
+from ._extended import Extended as Extended
+from ._inputs import (
+    AbstractInputTerm as AbstractInputTerm,
+    InputDelay as InputDelay,
+    InputGain as InputGain,
+    InputLag as InputLag,
+    InputOffset as InputOffset,
+)
+from ._terms import (
+    AbstractJointTerm as AbstractJointTerm,
+    AbstractTerm as AbstractTerm,
+    CoulombFriction as CoulombFriction,
+    JointSpring as JointSpring,
+    QuadraticDrag as QuadraticDrag,
+    RotorInertia as RotorInertia,
+    ViscousFriction as ViscousFriction,
+)

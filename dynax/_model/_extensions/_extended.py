@@ -1,0 +1,126 @@
+"""`Extended`: a system composed with model extensions, itself a system."""
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from .._system import _solve_spd, AbstractManipulator, AbstractSystem
+from ._inputs import AbstractInputTerm
+from ._terms import AbstractJointTerm, AbstractTerm
+
+
+class Extended(AbstractSystem):
+    r"""A system with model extensions added: `Extended(Acrobot(), (CoulombFriction(joint=1, fc=0.2),))`.
+
+    Joint terms (friction, drag, rotor inertia, springs) act on a manipulator through its pieces,
+    $\big(M(q) + \operatorname{diag}(I_r)\big)\ddot q + h(q, \dot q) = B\,a + \sum_k f_k(q, \dot q)$,
+    so they compose with any `AbstractManipulator`. Input terms (gain, offset, lag, delay) act on
+    any system between the recorded input $u$ and the applied input $a$; they are applied in the
+    order given, so `(InputGain(0, 2.0), InputLag(0, 0.05))` lags the doubled input. Terms whose
+    coefficients are at their neutral values leave the nominal system unchanged.
+
+    The state is the nominal state followed by the terms' internal states (an input lag's output,
+    a delay's filter states), named in `state_names`. `initial_state(x0, u0)` completes a measured
+    state with internal states at rest.
+
+    **Arguments:**
+
+    - `system`: the nominal system.
+    - `terms`: a tuple of terms (`CoulombFriction`, `InputDelay`, ...).
+    """
+
+    system: AbstractSystem
+    terms: tuple[AbstractTerm, ...]
+
+    def __check_init__(self):
+        if not isinstance(self.system, AbstractSystem):
+            raise ValueError(f"Extended: `system` must be a dynax system, got {type(self.system).__name__}")
+        if isinstance(self.system, Extended):
+            raise ValueError("Extended: `system` is already Extended; pass all terms in one tuple")
+        if not isinstance(self.terms, tuple) or not all(isinstance(t, AbstractTerm) for t in self.terms):
+            raise ValueError("Extended: `terms` must be a tuple of model extension terms (e.g. CoulombFriction)")
+        labels = []
+        for term in self.terms:
+            if isinstance(term, AbstractJointTerm) and not isinstance(self.system, AbstractManipulator):
+                raise ValueError(
+                    f"Extended: {type(term).__name__} acts on a joint, but {type(self.system).__name__} "
+                    "is not a manipulator (it has no mass matrix and bias force to extend)"
+                )
+            labels.append(term.label(self.system))  # also checks the joint / input index
+        duplicates = sorted({label for label in labels if labels.count(label) > 1})
+        if duplicates:
+            raise ValueError(f"Extended: the same term is given twice: {duplicates}")
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        hidden = tuple(n for t in self.input_terms for n in t.hidden_names(self.system))
+        return tuple(self.system.state_names) + hidden
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return tuple(self.system.input_names)
+
+    @property
+    def joint_terms(self) -> tuple[AbstractJointTerm, ...]:
+        return tuple(t for t in self.terms if isinstance(t, AbstractJointTerm))
+
+    @property
+    def input_terms(self) -> tuple[AbstractInputTerm, ...]:
+        return tuple(t for t in self.terms if isinstance(t, AbstractInputTerm))
+
+    @property
+    def labels(self) -> tuple[str, ...]:
+        """`cause@where` of each term, e.g. `("coulomb_friction@q2",)`."""
+        return tuple(t.label(self.system) for t in self.terms)
+
+    @property
+    def parameters(self) -> dict[str, Array]:
+        """The terms' coefficients by report name, e.g. `{"fc2": 0.21}`."""
+        return {t.parameter_name(self.system): t.coefficient for t in self.terms}
+
+    def applied_input(
+        self, u: Float[Array, " n_inputs"], z: Float[Array, " n_hidden"]
+    ) -> tuple[Float[Array, " n_inputs"], Float[Array, " n_hidden"]]:
+        """The applied input and the internal states' derivative, from the recorded input and internal states."""
+        a = jnp.asarray(u)
+        dz, offset = [], 0
+        for term in self.input_terms:
+            zi = z[offset : offset + term.n_hidden]
+            offset += term.n_hidden
+            ui = a[term.input]
+            dz.append(term.hidden_derivative(ui, zi))
+            a = a.at[term.input].set(term.applied(ui, zi))
+        dz = jnp.concatenate(dz) if dz else z[:0]
+        return a, dz
+
+    def initial_state(self, x0: Float[ArrayLike, " n_measured"], u0: Float[ArrayLike, " n_inputs"]) -> Float[Array, " n_states"]:
+        """Complete the nominal state `x0` with internal states at rest under a constant input `u0`."""
+        x0 = jnp.asarray(x0)
+        a = jnp.asarray(u0, x0.dtype)
+        hidden = []
+        for term in self.input_terms:
+            ui = a[term.input]
+            zi = term.steady_state(ui).astype(x0.dtype)
+            hidden.append(zi)
+            a = a.at[term.input].set(term.applied(ui, zi))
+        return jnp.concatenate([x0, *hidden]) if hidden else x0
+
+    def vector_field(self, t, x, u):
+        n = self.system.n_states
+        x_nominal, z = x[:n], x[n:]
+        a, dz = self.applied_input(u, z)
+        if not self.joint_terms:
+            dx = self.system.vector_field(t, x_nominal, a)
+        else:
+            system = self.system
+            k = system.n_joints
+            q, dq = x_nominal[:k], x_nominal[k:]
+            force = system.input_matrix() @ a - system.bias_force(q, dq)
+            inertia = jnp.zeros(k, force.dtype)
+            for term in self.joint_terms:
+                j = term.joint
+                force = force.at[j].add(term.force(q[j], dq[j]))
+                inertia = inertia.at[j].add(term.inertia())
+            ddq = _solve_spd(system.mass_matrix(q) + jnp.diag(inertia), force)
+            dx = jnp.concatenate([dq, ddq])
+        return jnp.concatenate([dx, dz])
