@@ -1,0 +1,85 @@
+"""Figures of the diagnosis (matplotlib, Agg backend, PNG)."""
+
+import jax.numpy as jnp
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .._simulate import FixedGrid, simulate  # noqa: E402
+from ._rollouts import full_initial_state  # noqa: E402
+
+
+def plot_measured_vs_simulated(trajectory, models: dict, path, *, segment_s: float = 2.0, max_duration_s: float = 10.0):
+    """Measured positions against open-loop simulations restarted from the measured state every `segment_s`.
+
+    **Arguments:** `trajectory` (held-out data); `models` label -> system; `path` of the PNG;
+    `segment_s` restart interval [s]; `max_duration_s` how much of the record to draw.
+    """
+    ts = np.asarray(trajectory.ts)
+    n = min(len(ts), int(np.searchsorted(ts, ts[0] + max_duration_s)) + 1)
+    seg = max(2, int(round(segment_s / trajectory.dt)))
+    positions = [i for i, s in enumerate(trajectory.state_names) if not s.startswith("d")]
+    fig, axes = plt.subplots(len(positions), 1, figsize=(9, 2.6 * len(positions)), sharex=True, squeeze=False)
+    colors = ["tab:red", "tab:green", "tab:purple", "tab:orange"]
+    for ax, i in zip(axes[:, 0], positions):
+        ax.plot(ts[:n], np.asarray(trajectory.xs)[:n, i], color="k", lw=1.2, label="measured")
+        ax.set_ylabel(f"{trajectory.state_names[i]} [rad]" if trajectory.system != "linear_axis" else "q [m]")
+    for c, (label, system) in enumerate(models.items()):
+        for start in range(0, n - 1, seg):
+            stop = min(start + seg, n - 1) + 1
+            t = trajectory.ts[start:stop]
+            u = trajectory.us[start:stop]
+            x0 = full_initial_state(system, trajectory.xs[start], u[0])
+            xs = np.asarray(simulate(system, x0, t, u, method=FixedGrid(), throw=False).xs)
+            for ax, i in zip(axes[:, 0], positions):
+                ax.plot(np.asarray(t), xs[:, i], color=colors[c % 4], lw=1.0, ls="--",
+                        label=label if start == 0 else None)
+                ax.plot(np.asarray(t[:1]), xs[:1, i], "o", color=colors[c % 4], ms=2.5)
+    axes[0, 0].legend(loc="upper right", fontsize=8)
+    axes[0, 0].set_title(f"held-out data against open-loop simulation (restarted every {segment_s:g} s)")
+    axes[-1, 0].set_xlabel("t [s]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_error_vs_horizon(curves: dict, path, *, unit: str = "rad"):
+    """Open-loop RMSE against horizon, one line per model. `curves`: label -> (horizons_s, rmse)."""
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for label, (h, r) in curves.items():
+        ax.plot(h, r, "o-", label=label)
+    ax.set_xlabel("horizon [s]")
+    ax.set_ylabel(f"position RMSE [{unit}]")
+    ax.set_yscale("log")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    ax.set_title("simulation error against horizon (held-out data)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_residuals(ts, residuals, names, path, *, features: dict | None = None):
+    """One-step acceleration residuals over time, and against velocity (where friction shows).
+
+    **Arguments:** `ts`; `residuals` of shape `(time, n_joints)`; `names` of the joints' velocities;
+    `path`; `features` name -> `(time,)` array to plot residuals against (default the velocities).
+    """
+    residuals = np.asarray(residuals)
+    k = residuals.shape[1]
+    fig, axes = plt.subplots(k, 2, figsize=(10, 2.6 * k), squeeze=False)
+    for j in range(k):
+        axes[j, 0].plot(np.asarray(ts), residuals[:, j], lw=0.6)
+        axes[j, 0].set_ylabel(f"residual d{names[j]}/dt")
+        if features is not None and j < len(features):
+            fname, fvals = list(features.items())[j]
+            axes[j, 1].plot(np.asarray(fvals), residuals[:, j], ".", ms=1.5, alpha=0.5)
+            axes[j, 1].set_xlabel(fname)
+    axes[0, 0].set_title("one-step acceleration residual against time")
+    axes[0, 1].set_title("against velocity")
+    axes[-1, 0].set_xlabel("t [s]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
