@@ -1,0 +1,27 @@
+from ._lqr import (
+    discrete_lqr as discrete_lqr,
+    linearise as linearise,
+    LQR as LQR,
+    lqr as lqr,
+    solve_continuous_are as solve_continuous_are,
+    solve_discrete_are as solve_discrete_are,
+    wrap_angle as wrap_angle,
+)
+from ._swing_up import (
+    AbstractSwitchingRule as AbstractSwitchingRule,
+    balancing_lqr as balancing_lqr,
+    CostToGoThreshold as CostToGoThreshold,
+    DRAKE_SPONG_PARAMETERS as DRAKE_SPONG_PARAMETERS,
+    SaturationAwareRegion as SaturationAwareRegion,
+    SmoothActivation as SmoothActivation,
+    SPONG_PARAMETER_NAMES as SPONG_PARAMETER_NAMES,
+    SpongController as SpongController,
+)
+from ._closed_loop import (
+    ClosedLoop as ClosedLoop,
+    is_upright as is_upright,
+    simulate_closed_loop as simulate_closed_loop,
+    swing_up_reward as swing_up_reward,
+    swing_up_time as swing_up_time,
+    upright_error as upright_error,
+)
