@@ -1,0 +1,434 @@
+r"""`identify(system, data, method=...)`: fit a system's parameters to measured trajectories.
+
+Three linear-in-parameter least-squares models and one output-error fit:
+
+- `Dynamic()`: the inverse-dynamics model $Y(q, \dot q, \ddot q)\,\theta = B u$, both joints' rows
+  stacked (never summed); needs $\ddot q$, by central differences of (optionally low-passed)
+  velocities.
+- `Power()`: the power model $\dot q^\top B u = \frac{d}{dt} H + \dot q^\top F(\dot q)$; no $\ddot q$.
+- `Energy()`: the energy model $\int_{t_a}^{t_b} \dot q^\top B u\,dt = H(t_b) - H(t_a) +
+  \int_{t_a}^{t_b} \dot q^\top F\,dt$ over windows, by the trapezoid rule; no $\ddot q$.
+- `SimulationFit()`: minimise the simulation (output) error through `dynax.simulate`.
+"""
+
+from collections.abc import Sequence
+from typing import Literal
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from .._data._derivatives import butterworth_filtfilt, central_difference, resample
+from .._data._trajectory import Trajectory
+from .._errors import DataError, UsageError
+from .._model._linear_axis import LinearAxis
+from .._model._system import AbstractSystem
+from .._model._two_link import AbstractTwoLink, Acrobot, DoublePendulum
+from ._coulomb import WithCoulombFriction
+from ._least_squares import least_squares, LeastSquaresFit
+from ._regressors import (
+    _positions,
+    dynamic_regressor,
+    energy_regressor,
+    Friction,
+    friction_power_regressor,
+    generalised_force,
+    input_power,
+    parameter_names,
+)
+
+_SYSTEM_NAMES = {Acrobot: "acrobot", DoublePendulum: "double_pendulum", LinearAxis: "linear_axis"}
+
+
+def _uniform(trajectory: Trajectory) -> Trajectory:
+    """The record itself if uniformly sampled, else resampled at its median interval."""
+    return trajectory if trajectory.is_uniform else resample(trajectory, trajectory.dt)
+
+
+def _lowpass(trajectory, ys, cutoff_hz, order):
+    return butterworth_filtfilt(trajectory.ts, ys, cutoff_hz=cutoff_hz, order=order)
+
+
+class Dynamic(eqx.Module):
+    r"""The inverse-dynamics (dynamic) least-squares model.
+
+    Accelerations are central differences of the velocities, after an optional zero-phase
+    Butterworth low-pass of the states (and of the inputs, with `lowpass_inputs`). Rows near the
+    ends, where the filter and the differences are one-sided, are dropped (`trim`), and the rows
+    can be decimated. Records that are sampled irregularly are resampled at their median interval
+    before filtering (central differences alone work on the recorded grid).
+
+    **Arguments:**
+
+    - `lowpass_hz`: cut-off of the zero-phase Butterworth filter [Hz], or `None` (no filter).
+    - `lowpass_order`: order of one filter pass (default 4).
+    - `lowpass_inputs`: also filter the inputs (parallel filtering; default `False`).
+    - `trim`: samples dropped at each end (default 1: the one-sided differences).
+    - `decimate`: keep every `decimate`-th row (default 1).
+    - `weighting`: `"none"` (ordinary least squares) or `"joint"`: weight each joint's equations
+      by the inverse of its residual variance from a first ordinary fit (Gautier's weighted least
+      squares; joints with noisier torque count less).
+
+    ??? cite
+
+        M. Gautier, "Dynamic identification of robots with power model", Proc. IEEE ICRA 1997
+        (the filtering and decimation recipe, and weighted least squares); A. Janot, M. Gautier
+        and M. Brunot, "Data set and reference models of EMPS", Nonlinear System Identification
+        Benchmarks workshop, 2019.
+    """
+
+    lowpass_hz: float | None = None
+    lowpass_order: int = 4
+    lowpass_inputs: bool = False
+    trim: int = 1
+    decimate: int = 1
+    weighting: Literal["none", "joint"] = "none"
+
+
+class Power(eqx.Module):
+    r"""The power least-squares model (Gautier 1997): $\dot q^\top B u = \dot H + \dot q^\top F(\dot q)$.
+
+    Each sample gives one equation. $\dot H = \dot w\,\theta$ is the central difference of the
+    energy regressor columns; no acceleration is needed. With `lowpass_hz` every column of the
+    regressor and the target are filtered by the same zero-phase Butterworth filter before the
+    difference (parallel filtering: the model stays exact, the noise is cut).
+
+    **Arguments:** `lowpass_hz` (or `None`), `lowpass_order` (default 4), `trim` (samples dropped
+    at each end, default 1), `decimate` (default 1).
+
+    ??? cite
+
+        M. Gautier, "Dynamic identification of robots with power model", Proc. IEEE ICRA 1997.
+    """
+
+    lowpass_hz: float | None = None
+    lowpass_order: int = 4
+    trim: int = 1
+    decimate: int = 1
+
+
+class Energy(eqx.Module):
+    r"""The energy least-squares model (Gautier and Khalil 1988), one equation per window.
+
+    Over a window $[t_a, t_b]$: $\int \dot q^\top B u\,dt = (w(t_b) - w(t_a))\,\theta +
+    \int \dot q^\top F\,dt$. Integrals use the trapezoid rule on the recorded grid, with the input
+    held over each interval (zero-order hold), so irregular sampling is handled exactly as
+    recorded. No acceleration is needed.
+
+    **Arguments:**
+
+    - `window`: samples per window (default 10).
+    - `stride`: samples between window starts (default `window`: consecutive windows).
+    - `lowpass_hz`, `lowpass_order`: optional zero-phase filter of the states first.
+
+    ??? cite
+
+        M. Gautier and W. Khalil, "On the identification of the inertial parameters of robots",
+        Proc. 27th IEEE CDC, 1988; M. Gautier, "Dynamic identification of robots with power
+        model", Proc. IEEE ICRA 1997 (comparison of the energy, power and dynamic models).
+    """
+
+    window: int = 10
+    stride: int | None = None
+    lowpass_hz: float | None = None
+    lowpass_order: int = 4
+
+    def __check_init__(self):
+        if self.window < 1:
+            raise ValueError(f"Energy: `window` must be at least 1 sample, got {self.window}")
+        if self.stride is not None and self.stride < 1:
+            raise ValueError(f"Energy: `stride` must be at least 1, got {self.stride}")
+
+
+class Identification(eqx.Module):
+    """The result of `identify`.
+
+    **Fields:**
+
+    - `system`: the system with the fitted parameters (for two-link arms with
+      `friction="coulomb"`, a `WithCoulombFriction` around it).
+    - `estimate`, `std_errors`: parameter values and standard errors, in the order of `names`.
+    - `names`: parameter names (the contract's).
+    - `condition_number`: of the column-scaled regressor (least-squares methods) or of the
+      Jacobian at the solution (`SimulationFit`).
+    - `rank`: numerical rank.
+    - `n_samples`: samples that entered the fit.
+    - `residual_rms`: root-mean-square residual of the fitted equations.
+    - `method`, `friction`, `system_name`: as in the contract's output.
+    - `fit`: the `LeastSquaresFit` (least-squares methods) or `None`.
+    """
+
+    system: AbstractSystem
+    estimate: Float[Array, " n_params"]
+    std_errors: Float[Array, " n_params"]
+    condition_number: Float[Array, ""]
+    rank: Array
+    residual_rms: Float[Array, ""]
+    fit: LeastSquaresFit | None
+    names: tuple[str, ...] = eqx.field(static=True)
+    n_samples: int = eqx.field(static=True)
+    method: str = eqx.field(static=True)
+    friction: str = eqx.field(static=True)
+    system_name: str = eqx.field(static=True)
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """Parameter name -> value."""
+        return {n: float(v) for n, v in zip(self.names, np.asarray(self.estimate))}
+
+    @property
+    def standard_errors(self) -> dict[str, float]:
+        """Parameter name -> standard error."""
+        return {n: float(v) for n, v in zip(self.names, np.asarray(self.std_errors))}
+
+    def to_json(self) -> dict:
+        """The contract's `identify` output object."""
+        return {
+            "system": self.system_name,
+            "method": self.method,
+            "friction": self.friction,
+            "parameters": self.parameters,
+            "std_errors": self.standard_errors,
+            "condition_number": float(self.condition_number),
+            "n_samples": int(self.n_samples),
+        }
+
+
+def _as_list(data) -> list[Trajectory]:
+    if isinstance(data, Trajectory):
+        return [data]
+    if isinstance(data, Sequence) and data and all(isinstance(d, Trajectory) for d in data):
+        return list(data)
+    raise UsageError(f"identify: `data` must be a Trajectory or a non-empty list of Trajectory, got {type(data).__name__}")
+
+
+def _check_data(system, trajectories):
+    for k, traj in enumerate(trajectories):
+        if traj.xs.shape[1] != system.n_states or traj.us.shape[1] != system.n_inputs:
+            raise UsageError(
+                f"identify: trajectory {k} has {traj.xs.shape[1]} states and {traj.us.shape[1]} inputs "
+                f"({traj.state_names}, {traj.input_names}) but {type(system).__name__} has "
+                f"{system.state_names} and {system.input_names}"
+            )
+
+
+def _needs(traj, n, method):
+    if len(traj) < n:
+        raise DataError(
+            f"{len(traj)} samples are too few for the {method} model (it needs at least {n})",
+            path=traj.source or None,
+        )
+
+
+def _keep(n, trim, decimate):
+    if trim < 0 or decimate < 1:
+        raise UsageError(f"`trim` must be >= 0 and `decimate` >= 1, got {trim}, {decimate}")
+    return np.arange(trim, n - trim, decimate)
+
+
+def _held_input_at_samples(ts, us):
+    r"""The input that central differences "see" at each sample under the zero-order hold.
+
+    The central difference at $t_k$ is $(h_2 s_1 + h_1 s_2)/(h_1 + h_2)$, a weighted mean of the
+    slopes over $[t_{k-1}, t_k]$ (input `us[k-1]`) and $[t_k, t_{k+1}]$ (input `us[k]`). Pairing it
+    with `us[k]` alone would leave an $O(h)$ bias wherever the input moves; the same weighted mean of
+    the held inputs keeps the model consistent to $O(h^2)$.
+    """
+    h1 = (ts[1:-1] - ts[:-2])[:, None]
+    h2 = (ts[2:] - ts[1:-1])[:, None]
+    interior = (h2 * us[:-2] + h1 * us[1:-1]) / (h1 + h2)
+    return jnp.concatenate([us[:1], interior, us[-1:]])
+
+
+def _dynamic_rows(system, traj, method: Dynamic, friction):
+    _needs(traj, 2 * method.trim + 3, "dynamic")
+    if method.lowpass_hz is not None:
+        traj = _uniform(traj)
+        xs = _lowpass(traj, traj.xs, method.lowpass_hz, method.lowpass_order)
+    else:
+        xs = traj.xs
+    us = _held_input_at_samples(traj.ts, traj.us)
+    if method.lowpass_hz is not None and method.lowpass_inputs:
+        us = _lowpass(traj, us, method.lowpass_hz, method.lowpass_order)
+    _, dq = _positions(system, xs)
+    ddq = central_difference(traj.ts, dq)
+    keep = _keep(len(traj), method.trim, method.decimate)
+    ys = dynamic_regressor(system, xs[keep], ddq[keep], friction)  # (rows, joints, params)
+    forces = generalised_force(system, us[keep])  # (rows, joints)
+    return ys, forces, len(keep)
+
+
+def _interval_integrals(ts, values_left, values_right):
+    h = jnp.diff(ts)
+    h = h.reshape(h.shape + (1,) * (values_left.ndim - 1))
+    return 0.5 * h * (values_left + values_right)
+
+
+@eqx.filter_jit
+def _work_and_dissipation(system, ts, xs, us, friction):
+    """Per-interval integrals (trapezoid, input held) of the input power and of the friction-power columns."""
+    f = friction_power_regressor(system, xs, friction)
+    tau = generalised_force(system, us)[:-1]  # on [t_j, t_{j+1}] the input is us[j]
+    _, dq = _positions(system, xs)
+    work = _interval_integrals(ts, jnp.sum(dq[:-1] * tau, axis=-1), jnp.sum(dq[1:] * tau, axis=-1))
+    dissipated = _interval_integrals(ts, f[:-1], f[1:])
+    return work, dissipated
+
+
+def _power_rows(system, traj, method: Power, friction):
+    _needs(traj, 2 * method.trim + 3, "power")
+    if method.lowpass_hz is not None:
+        traj = _uniform(traj)
+    rows, target = _power_equations(system, traj.ts, traj.xs, traj.us, friction)
+    if method.lowpass_hz is not None:
+        inner = traj.slice(1, -1)
+        rows, target = (_lowpass(inner, v, method.lowpass_hz, method.lowpass_order) for v in (rows, target))
+    keep = _keep(len(traj) - 2, max(method.trim - 1, 0), method.decimate)
+    return rows[keep], target[keep], len(keep)
+
+
+@eqx.filter_jit
+def _power_equations(system, ts, xs, us, friction):
+    w = energy_regressor(system, xs, friction)
+    work, dissipated = _work_and_dissipation(system, ts, xs, us, friction)
+    # dH/dt by central differences of the energy columns; the powers averaged with the same weights
+    # over the two neighbouring intervals, so each row is exact to O(h^2) under the zero-order hold.
+    h = jnp.diff(ts)
+    h1, h2 = h[:-1], h[1:]
+    a1, a2 = h2 / (h1 + h2) / h1, h1 / (h1 + h2) / h2
+    dw = (a1[:, None] * (w[1:-1] - w[:-2]) + a2[:, None] * (w[2:] - w[1:-1]))
+    f = a1[:, None] * dissipated[:-1] + a2[:, None] * dissipated[1:]
+    p = a1 * work[:-1] + a2 * work[1:]
+    return dw + f, p
+
+
+def _energy_rows(system, traj, method: Energy, friction):
+    window = method.window
+    stride = method.stride or window
+    _needs(traj, window + 1, "energy")
+    if method.lowpass_hz is not None:
+        traj = _uniform(traj)
+        xs = _lowpass(traj, traj.xs, method.lowpass_hz, method.lowpass_order)
+    else:
+        xs = traj.xs
+    w = energy_regressor(system, xs, friction)
+    work, dissipated = _work_and_dissipation(system, traj.ts, xs, traj.us, friction)
+    work = jnp.concatenate([jnp.zeros(1, xs.dtype), jnp.cumsum(work)])
+    dissipated = jnp.concatenate([jnp.zeros((1, dissipated.shape[1]), xs.dtype), jnp.cumsum(dissipated, axis=0)])
+    starts = np.arange(0, len(traj) - window, stride)
+    ends = starts + window
+    rows = (w[ends] - w[starts]) + (dissipated[ends] - dissipated[starts])
+    target = work[ends] - work[starts]
+    return rows, target, int(ends[-1] - starts[0] + 1) if len(starts) else 0
+
+
+def _system_name(system):
+    base = system.system if isinstance(system, WithCoulombFriction) else system
+    return _SYSTEM_NAMES.get(type(base), type(base).__name__)
+
+
+def _fitted_system(system, names, estimate, friction):
+    base = system.system if isinstance(system, WithCoulombFriction) else system
+    values = dict(zip(names, (jnp.asarray(v) for v in estimate)))
+    fields = [n for n in names if hasattr(base, n) and not n.startswith("fc")]
+    fitted = eqx.tree_at(lambda s: [getattr(s, n) for n in fields], base, [values[n].astype(jnp.result_type(getattr(base, n))) for n in fields])
+    if isinstance(base, AbstractTwoLink) and friction == "coulomb":
+        coulomb = jnp.stack([values["fc1"], values["fc2"]])
+        return WithCoulombFriction(fitted, coulomb)
+    return fitted
+
+
+def identify(
+    system: AbstractSystem,
+    data: Trajectory | Sequence[Trajectory],
+    method: "Dynamic | Power | Energy | SimulationFit" = Dynamic(),
+    *,
+    friction: Friction = "viscous",
+    weights: Float[Array, " rows"] | None = None,
+    rcond: float = 1e-7,
+) -> Identification:
+    r"""Fit the parameters of `system` to measured trajectories.
+
+    The least-squares methods (`Dynamic`, `Power`, `Energy`) build the linear-in-parameter model
+    of each trajectory, stack the rows of all of them and solve one weighted least-squares problem
+    (QR and SVD of the column-scaled regressor); they return standard errors from the residual
+    variance, the condition number and the numerical rank. `SimulationFit` minimises the
+    simulation error through the integrator instead (see `fit_simulation_error`).
+
+    **Arguments:**
+
+    - `system`: `Acrobot`, `DoublePendulum` or `LinearAxis` (least squares), or any system
+      (`SimulationFit`). Its parameter values are the starting point of `SimulationFit` and are
+      otherwise ignored.
+    - `data`: a `Trajectory` or a list of them (same system).
+    - `method`: `Dynamic()` (default), `Power()`, `Energy()` or `SimulationFit()`.
+    - `friction`: `"viscous"` (default) or `"coulomb"` (adds `fc1`, `fc2`, or the linear axis's
+      `coulomb`).
+    - `weights`: optional row weights for the least-squares problem (one per stacked equation).
+    - `rcond`: relative singular-value threshold of the numerical rank.
+
+    **Returns:** an `Identification`.
+
+    **Raises:** `IdentifiabilityError` (a `DataError`) when the data do not determine all
+    parameters, naming the unidentified combinations; `DataError` when a record is too short;
+    `UsageError` for a system or method that does not fit.
+    """
+    from ._simulation_fit import SimulationFit, _identify_by_simulation
+
+    trajectories = _as_list(data)
+    _check_data(system, trajectories)
+    if isinstance(method, SimulationFit):
+        return _identify_by_simulation(system, trajectories, method, friction)
+    base = system.system if isinstance(system, WithCoulombFriction) else system
+    names = parameter_names(base, friction)
+    if isinstance(method, Dynamic):
+        parts = [_dynamic_rows(base, t, method, friction) for t in trajectories]
+        ys = jnp.concatenate([p[0] for p in parts])  # (rows, joints, params)
+        forces = jnp.concatenate([p[1] for p in parts])
+        n_samples = sum(p[2] for p in parts)
+        n_joints = ys.shape[1]
+        # Stack joint by joint so that a per-joint weight is one block of rows.
+        a = jnp.transpose(ys, (1, 0, 2)).reshape(-1, ys.shape[2])
+        y = forces.T.reshape(-1)
+        if method.weighting == "joint" and weights is None:
+            first = least_squares(a, y, names=names, rcond=rcond)
+            residual = (a @ first.estimate - y).reshape(n_joints, -1)
+            variance = jnp.mean(residual**2, axis=1)
+            variance = jnp.where(variance > 0, variance, jnp.max(variance) + jnp.finfo(a.dtype).tiny)
+            weights = jnp.repeat(1.0 / variance, ys.shape[0])
+        elif method.weighting not in ("none", "joint"):
+            raise UsageError(f"Dynamic: `weighting` must be 'none' or 'joint', got {method.weighting!r}")
+        label = "dynamic"
+    elif isinstance(method, Power):
+        parts = [_power_rows(base, t, method, friction) for t in trajectories]
+        a = jnp.concatenate([p[0] for p in parts])
+        y = jnp.concatenate([p[1] for p in parts])
+        n_samples = sum(p[2] for p in parts)
+        label = "power"
+    elif isinstance(method, Energy):
+        parts = [_energy_rows(base, t, method, friction) for t in trajectories]
+        a = jnp.concatenate([p[0] for p in parts])
+        y = jnp.concatenate([p[1] for p in parts])
+        n_samples = sum(p[2] for p in parts)
+        label = "energy"
+    else:
+        raise UsageError(
+            f"identify: `method` must be Dynamic(), Power(), Energy() or SimulationFit(), got {type(method).__name__}"
+        )
+    fit = least_squares(a, y, names=names, weights=weights, rcond=rcond)
+    return Identification(
+        system=_fitted_system(system, names, fit.estimate, friction),
+        estimate=fit.estimate,
+        std_errors=fit.std_errors,
+        condition_number=fit.condition_number,
+        rank=fit.rank,
+        residual_rms=fit.residual_rms,
+        fit=fit,
+        names=names,
+        n_samples=int(n_samples),
+        method=label,
+        friction=friction,
+        system_name=_system_name(system),
+    )

@@ -1,0 +1,193 @@
+r"""Weighted linear least squares with identifiability diagnostics (SVD).
+
+The regressor's columns are first scaled to unit norm, so the condition number and the numerical
+rank do not depend on the parameters' units; then $W^{1/2} A D^{-1} = Q R$ and $R = U S V^\top$.
+Singular values below `rcond` times the largest mark directions of the (scaled) parameter space
+that the data do not determine; they are reported by name, as linear combinations of parameters.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from .._errors import DataError
+
+
+class IdentifiabilityError(DataError):
+    """The data do not determine some parameter combinations (a rank-deficient regressor).
+
+    **Attributes:** `unidentified` (the combinations, as strings), `rank`, `n_params`,
+    `condition_number`.
+    """
+
+    def __init__(self, message, *, unidentified=(), rank=None, n_params=None, condition_number=None, path=None):
+        super().__init__(message, path=path)
+        self.unidentified = tuple(unidentified)
+        self.rank, self.n_params, self.condition_number = rank, n_params, condition_number
+
+
+class LeastSquaresFit(eqx.Module):
+    r"""The result of `least_squares`.
+
+    **Fields:**
+
+    - `estimate`: $\hat\theta$, shape `(n_params,)`.
+    - `std_errors`: standard errors from the residual variance,
+      $\sigma^2 = \lVert r \rVert^2_W / (m - n)$, $\operatorname{cov} = \sigma^2 (A^\top W A)^{-1}$.
+    - `covariance`: that covariance, shape `(n_params, n_params)`.
+    - `singular_values`: of the column-scaled weighted regressor, descending.
+    - `directions`: right singular vectors mapped back to parameter units, as rows, each scaled to
+      unit max-norm; row `i` belongs to `singular_values[i]`.
+    - `condition_number`: largest over smallest singular value (of the column-scaled regressor).
+    - `rank`: numerical rank (singular values above `rcond` times the largest).
+    - `residual_rms`: root-mean-square of the weighted residual.
+    - `n_rows`: number of equations.
+    - `names`: parameter names (static).
+    """
+
+    estimate: Float[Array, " n_params"]
+    std_errors: Float[Array, " n_params"]
+    covariance: Float[Array, "n_params n_params"]
+    singular_values: Float[Array, " n_params"]
+    directions: Float[Array, "n_params n_params"]
+    condition_number: Float[Array, ""]
+    rank: Array
+    residual_rms: Float[Array, ""]
+    n_rows: int = eqx.field(static=True)
+    names: tuple[str, ...] = eqx.field(static=True)
+
+    @property
+    def unidentified(self) -> tuple[str, ...]:
+        """The parameter combinations the data leave undetermined, e.g. `("theta6 - 0.5 theta7",)`."""
+        rank = int(self.rank)
+        return tuple(_combination(np.asarray(d), self.names) for d in np.asarray(self.directions)[rank:])
+
+
+def _combination(direction, names, threshold=0.05):
+    terms = []
+    for c, n in sorted(zip(direction, names), key=lambda cn: -abs(cn[0])):
+        if abs(c) < threshold:
+            continue
+        coef = "" if np.isclose(abs(c), 1.0, atol=5e-3) else f"{abs(c):.3g} "
+        sign = "-" if c < 0 else "+"
+        terms.append((sign, f"{coef}{n}"))
+    if not terms:
+        return "(none)"
+    first_sign, first = terms[0]
+    text = ("-" if first_sign == "-" else "") + first
+    for sign, term in terms[1:]:
+        text += f" {sign} {term}"
+    return text
+
+
+@jax.jit
+def _solve(a, y, w):
+    sw = jnp.sqrt(w)
+    aw = a * sw[:, None]
+    yw = y * sw
+    scale = jnp.linalg.norm(aw, axis=0)
+    scale = jnp.where(scale > 0, scale, 1.0)
+    q, r = jnp.linalg.qr(aw / scale, mode="reduced")
+    u, s, vt = jnp.linalg.svd(r)
+    qty = q.T @ yw
+    m, n = a.shape
+    return u, s, vt, qty, scale, aw, yw, m, n
+
+
+def least_squares(
+    regressor: Float[ArrayLike, "rows n_params"],
+    target: Float[ArrayLike, " rows"],
+    *,
+    names: tuple[str, ...] | None = None,
+    weights: Float[ArrayLike, " rows"] | None = None,
+    rcond: float = 1e-7,
+    allow_rank_deficient: bool = False,
+) -> LeastSquaresFit:
+    r"""Solve $\min_\theta \lVert W^{1/2}(A\theta - y)\rVert^2$, with standard errors and identifiability.
+
+    **Arguments:**
+
+    - `regressor`: $A$, shape `(rows, n_params)`.
+    - `target`: $y$, shape `(rows,)`.
+    - `names`: parameter names for messages (default `p0, p1, ...`).
+    - `weights`: non-negative row weights $W$ (default 1), e.g. inverse noise variances.
+    - `rcond`: singular values of the column-scaled regressor below `rcond * s_max` count as zero.
+    - `allow_rank_deficient`: if `False` (default) a rank-deficient problem raises
+      `IdentifiabilityError` naming the unidentified combinations; if `True` the minimum-norm
+      solution (in scaled coordinates) is returned with infinite standard errors.
+
+    **Returns:** a `LeastSquaresFit`.
+
+    **Raises:** `IdentifiabilityError` (a `DataError`) when the data do not determine all
+    parameters; `ValueError` on shape mismatches.
+
+    ??? cite
+
+        M. Gautier, "Numerical calculation of the base inertial parameters of robots", Journal of
+        Robotic Systems 8(4), 1991 (QR/SVD identifiability); G. H. Golub and C. F. Van Loan,
+        *Matrix Computations*, 4th ed., sections 5.3-5.5.
+    """
+    a = jnp.asarray(regressor)
+    y = jnp.asarray(target)
+    if a.ndim != 2:
+        raise ValueError(f"least_squares: `regressor` must be 2-d (rows, n_params), got shape {a.shape}")
+    if y.shape != (a.shape[0],):
+        raise ValueError(f"least_squares: `target` must have shape ({a.shape[0]},), got {y.shape}")
+    m, n = a.shape
+    names = tuple(names) if names is not None else tuple(f"p{i}" for i in range(n))
+    if len(names) != n:
+        raise ValueError(f"least_squares: {len(names)} `names` for {n} regressor columns")
+    w = jnp.ones(m, a.dtype) if weights is None else jnp.asarray(weights, a.dtype)
+    if w.shape != (m,):
+        raise ValueError(f"least_squares: `weights` must have shape ({m},), got {w.shape}")
+    if m < n:
+        a = jnp.concatenate([a, jnp.zeros((n - m, n), a.dtype)])
+        y = jnp.concatenate([y, jnp.zeros(n - m, y.dtype)])
+        w = jnp.concatenate([w, jnp.zeros(n - m, w.dtype)])
+    u, s, vt, qty, scale, aw, yw, _, _ = _solve(a, y, w)
+    s_np = np.asarray(s)
+    finite = np.all(np.isfinite(s_np))
+    rank = int(np.sum(s_np > rcond * s_np[0])) if finite and s_np[0] > 0 else 0
+    cond = float(s_np[0] / s_np[-1]) if finite and s_np[-1] > 0 else float("inf")
+    directions = np.asarray(vt) / np.asarray(scale)[None, :]
+    directions = directions / np.max(np.abs(directions), axis=1, keepdims=True)
+    inv_s = np.where(np.arange(n) < rank, 1.0 / np.where(s_np > 0, s_np, 1.0), 0.0)
+    uty = np.asarray(u).T @ np.asarray(qty)
+    z = np.asarray(vt).T @ (inv_s * uty)
+    estimate = z / np.asarray(scale)
+    residual = np.asarray(aw) @ (estimate) - np.asarray(yw)
+    dof = max(min(m, int(np.sum(np.asarray(w) > 0))) - rank, 1)
+    sigma2 = float(residual @ residual) / dof
+    v_over = (np.asarray(vt).T * inv_s) / np.asarray(scale)[:, None]
+    covariance = sigma2 * v_over @ v_over.T
+    std = np.sqrt(np.diag(covariance))
+    if rank < n:
+        std = np.full(n, np.inf)
+    fit = LeastSquaresFit(
+        estimate=jnp.asarray(estimate),
+        std_errors=jnp.asarray(std),
+        covariance=jnp.asarray(covariance),
+        singular_values=jnp.asarray(s_np),
+        directions=jnp.asarray(directions),
+        condition_number=jnp.asarray(cond),
+        rank=jnp.asarray(rank),
+        residual_rms=jnp.asarray(np.sqrt(float(residual @ residual) / max(m, 1))),
+        n_rows=m,
+        names=names,
+    )
+    if rank < n and not allow_rank_deficient:
+        unidentified = fit.unidentified
+        listed = "; ".join(unidentified)
+        raise IdentifiabilityError(
+            f"the data do not identify all parameters: numerical rank {rank} of {n} "
+            f"(condition number {cond:.3g}, {m} equations). Unidentified parameter combination(s): {listed}. "
+            "Excite the system more (larger and richer inputs, more motion in every joint, more samples) "
+            "or fix these parameters.",
+            unidentified=unidentified,
+            rank=rank,
+            n_params=n,
+            condition_number=cond,
+        )
+    return fit
