@@ -1,4 +1,3 @@
-from ._coulomb import WithCoulombFriction as WithCoulombFriction
 from ._identify import (
     Dynamic as Dynamic,
     Energy as Energy,
@@ -16,6 +15,7 @@ from ._regressors import (
     energy_regressor as energy_regressor,
     friction_power_regressor as friction_power_regressor,
     parameter_names as parameter_names,
+    with_friction as with_friction,
 )
 from ._simulation_fit import (
     fit_simulation_error as fit_simulation_error,

@@ -21,6 +21,8 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .._errors import UsageError
+from .._model._extensions import CoulombFriction, Extended, JointSpring, RotorInertia
+from .._model._extensions._terms import AbstractJointTerm
 from .._model._linear_axis import LinearAxis
 from .._model._system import AbstractSystem
 from .._model._two_link import AbstractTwoLink, BASE_PARAMETER_NAMES
@@ -28,6 +30,8 @@ from .._model._two_link import AbstractTwoLink, BASE_PARAMETER_NAMES
 Friction = Literal["viscous", "coulomb"]
 
 _TWO_LINK_ENERGY = BASE_PARAMETER_NAMES[:5]
+# Joint terms that store energy (the rest dissipate it).
+_CONSERVATIVE_TERMS = (RotorInertia, JointSpring)
 
 
 def _check_friction(friction):
@@ -35,66 +39,103 @@ def _check_friction(friction):
         raise UsageError(f"`friction` must be 'viscous' or 'coulomb', got {friction!r}")
 
 
+def _split(system):
+    """`(nominal system, joint terms)`; refuses what the linear models cannot express."""
+    if isinstance(system, Extended):
+        base, terms = system.system, system.terms
+    else:
+        base, terms = system, ()
+    if not isinstance(base, (AbstractTwoLink, LinearAxis)):
+        raise UsageError(
+            f"least-squares identification supports Acrobot, DoublePendulum and LinearAxis (optionally Extended with "
+            f"joint terms), got {type(base).__name__}; use SimulationFit() for other systems"
+        )
+    if any(not isinstance(t, AbstractJointTerm) for t in terms) or (terms and isinstance(base, LinearAxis)):
+        raise UsageError(
+            "least-squares identification takes joint terms (friction, drag, rotor inertia, springs) on a two-link "
+            "arm; input terms (gain, offset, lag, delay) are not linear in the data: use SimulationFit()"
+        )
+    return base, tuple(terms)
+
+
+def with_friction(system: AbstractSystem, friction: Friction = "viscous") -> AbstractSystem:
+    """The model `identify` fits: for a two-link arm with `friction="coulomb"`, `system` extended
+    with `CoulombFriction` at every joint that has none (coefficients `fc1`, `fc2`)."""
+    _check_friction(friction)
+    base, terms = _split(system)
+    if friction == "viscous" or isinstance(base, LinearAxis):
+        return system
+    have = {t.joint for t in terms if isinstance(t, CoulombFriction)}
+    extra = tuple(CoulombFriction(j, jnp.zeros((), jnp.result_type(base.theta1))) for j in range(base.n_joints) if j not in have)
+    return Extended(base, terms + extra) if extra else system
+
+
 def parameter_names(system: AbstractSystem, friction: Friction = "viscous") -> tuple[str, ...]:
     """The names of the regressor's columns (the identified parameters), in the contract's names.
 
     **Arguments:**
 
-    - `system`: an `Acrobot`, `DoublePendulum` or `LinearAxis`.
+    - `system`: an `Acrobot`, `DoublePendulum` or `LinearAxis`, or a two-link arm `Extended` with
+      joint terms (whose coefficients are then identified too, e.g. `Ir2` for `RotorInertia(1)`).
     - `friction`: `"viscous"` or `"coulomb"` (adds the Coulomb columns).
 
     **Returns:** a tuple of names, e.g. `("theta1", ..., "theta7", "fc1", "fc2")`.
     """
-    _check_friction(friction)
-    if isinstance(system, AbstractTwoLink):
-        return BASE_PARAMETER_NAMES + (("fc1", "fc2") if friction == "coulomb" else ())
-    if isinstance(system, LinearAxis):
-        return ("mass", "viscous") + (("coulomb",) if friction == "coulomb" else ()) + ("offset",)
-    raise UsageError(
-        f"least-squares identification supports Acrobot, DoublePendulum and LinearAxis, got {type(system).__name__}; "
-        "use SimulationFit() for other systems"
-    )
+    system = with_friction(system, friction)
+    base, terms = _split(system)
+    if isinstance(base, AbstractTwoLink):
+        return BASE_PARAMETER_NAMES + tuple(t.parameter_name(base) for t in terms)
+    return ("mass", "viscous") + (("coulomb",) if friction == "coulomb" else ()) + ("offset",)
 
 
-def energy_parameter_names(system: AbstractSystem) -> tuple[str, ...]:
-    """The parameters the total energy depends on (the rest enter through dissipation only)."""
-    if isinstance(system, AbstractTwoLink):
-        return _TWO_LINK_ENERGY
-    if isinstance(system, LinearAxis):
+def energy_parameter_names(system: AbstractSystem, friction: Friction = "viscous") -> tuple[str, ...]:
+    """The parameters the stored energy depends on (the rest enter through dissipation only)."""
+    system = with_friction(system, friction)
+    base, terms = _split(system)
+    if isinstance(base, LinearAxis):
         return ("mass",)
-    parameter_names(system)  # raises the informative error
-    raise AssertionError
+    return _TWO_LINK_ENERGY + tuple(t.parameter_name(base) for t in terms if isinstance(t, _CONSERVATIVE_TERMS))
 
 
 def parameter_vector(system: AbstractSystem, friction: Friction = "viscous") -> Float[Array, " n_params"]:
-    """The system's current parameters as a vector in the order of `parameter_names` (Coulomb terms 0)."""
+    """The system's current parameter values as a vector, in the order of `parameter_names`."""
+    system = with_friction(system, friction)
+    base, terms = _split(system)
     names = parameter_names(system, friction)
-    values = [getattr(system, n) if hasattr(system, n) and not n.startswith("fc") else 0.0 for n in names]
-    dtype = jnp.result_type(*[jnp.asarray(v) for v in values], float)
-    return jnp.stack([jnp.asarray(v, dtype) for v in values])
+    values = {n: getattr(base, n) for n in names if hasattr(base, n)}
+    values.update({t.parameter_name(base): t.coefficient for t in terms})
+    dtype = jnp.result_type(*values.values(), float)
+    return jnp.stack([jnp.asarray(values[n], dtype) for n in names])
 
 
-def _with(system, names, theta):
-    """`system` with its parameter fields replaced by the entries of `theta` (Coulomb ones left out)."""
-    fields = [n for n in names if hasattr(system, n)]
-    values = [theta[names.index(n)] for n in fields]
-    return eqx.tree_at(lambda s: [getattr(s, n) for n in fields], system, values)
-
-
-def _coulomb(names, theta, dq):
-    """The Coulomb friction force, exact sign (identification does not need it smooth)."""
-    out = jnp.zeros_like(dq)
-    for i, n in enumerate(("fc1", "fc2")):
-        if n in names:
-            out = out.at[i].add(theta[names.index(n)] * jnp.sign(dq[i]))
-    return out
+def with_parameters(system: AbstractSystem, names: tuple[str, ...], theta: Float[Array, " n_params"]) -> AbstractSystem:
+    """`system` with the parameters `names` set to `theta` (fields of the nominal system and coefficients
+    of its joint terms)."""
+    base, terms = _split(system)
+    fields = [n for n in names if hasattr(base, n) and not isinstance(getattr(type(base), n, None), property)]
+    new_base = eqx.tree_at(lambda s: [getattr(s, n) for n in fields], base, [theta[names.index(n)] for n in fields])
+    if not isinstance(system, Extended):
+        return new_base
+    new_terms = tuple(
+        eqx.tree_at(lambda t: t.coefficient, t, theta[names.index(t.parameter_name(base))])
+        if t.parameter_name(base) in names
+        else t
+        for t in terms
+    )
+    return Extended(new_base, new_terms)
 
 
 def _inverse_dynamics(system, names, theta, q, dq, ddq):
     """Generalised force that produces `ddq` at `(q, dq)`; linear in `theta`."""
-    if isinstance(system, AbstractTwoLink):
-        s = _with(system, names, theta)
-        return s.mass_matrix(q) @ ddq + s.bias_force(q, dq) + _coulomb(names, theta, dq)
+    base, terms = _split(system)
+    if isinstance(base, AbstractTwoLink):
+        fitted = with_parameters(system, names, theta)
+        base, terms = _split(fitted)
+        force = base.mass_matrix(q) @ ddq + base.bias_force(q, dq)
+        for t in terms:
+            j = t.joint
+            force = force.at[j].add(t.inertia() * ddq[j] - t.force(q[j], dq[j]))
+        return force
     # LinearAxis, exact sign.
     p = dict(zip(names, theta))
     force = p["mass"] * ddq[0] + p["viscous"] * dq[0] + p["offset"]
@@ -104,21 +145,31 @@ def _inverse_dynamics(system, names, theta, q, dq, ddq):
 
 
 def _energy(system, names, theta, q, dq):
-    if isinstance(system, AbstractTwoLink):
-        return _with(system, names, theta).energy(jnp.concatenate([q, dq]))
-    return 0.5 * theta[names.index("mass")] * dq[0] ** 2
+    base, terms = _split(system)
+    if isinstance(base, LinearAxis):
+        return 0.5 * theta[names.index("mass")] * dq[0] ** 2
+    fitted = with_parameters(system, names, theta)
+    base, terms = _split(fitted)
+    energy = base.energy(jnp.concatenate([q, dq]))
+    for t in terms:
+        if isinstance(t, RotorInertia):
+            energy = energy + 0.5 * t.coefficient * dq[t.joint] ** 2
+        elif isinstance(t, JointSpring):
+            energy = energy + 0.5 * t.coefficient * q[t.joint] ** 2
+    return energy
 
 
 def _positions(system, xs):
-    n = system.n_joints if isinstance(system, AbstractTwoLink) else 1
+    base, _ = _split(system)
+    n = base.n_joints if isinstance(base, AbstractTwoLink) else 1
     return xs[..., :n], xs[..., n : 2 * n]
 
 
 def generalised_force(system: AbstractSystem, us: Float[Array, "time n_inputs"]) -> Float[Array, "time n_joints"]:
     r"""The measured generalised forces $B u$, one entry per joint (the acrobot's `tau1` is 0)."""
-    parameter_names(system)
-    if isinstance(system, AbstractTwoLink):
-        return us @ system.input_matrix().T.astype(us.dtype)
+    base, _ = _split(system)
+    if isinstance(base, AbstractTwoLink):
+        return us @ base.input_matrix().T.astype(us.dtype)
     return us[..., :1]
 
 
@@ -148,6 +199,7 @@ def dynamic_regressor(
         M. Gautier and W. Khalil, "Direct calculation of minimum set of inertial parameters of
         serial robots", IEEE Transactions on Robotics and Automation 6(3), 1990.
     """
+    system = with_friction(system, friction)
     names = parameter_names(system, friction)
     theta0 = jnp.zeros(len(names), xs.dtype)
     q, dq = _positions(system, xs)
@@ -176,6 +228,7 @@ def energy_regressor(
         M. Gautier and W. Khalil, "On the identification of the inertial parameters of robots",
         Proc. 27th IEEE Conference on Decision and Control, 1988.
     """
+    system = with_friction(system, friction)
     names = parameter_names(system, friction)
     theta0 = jnp.zeros(len(names), xs.dtype)
     q, dq = _positions(system, xs)
@@ -197,7 +250,7 @@ def friction_power_regressor(
     **Returns:** shape `(time, n_params)`.
     """
     names = parameter_names(system, friction)
-    energy_names = energy_parameter_names(system)
+    energy_names = energy_parameter_names(system, friction)
     mask = jnp.asarray([n not in energy_names for n in names], xs.dtype)
     q, dq = _positions(system, xs)
     ys = dynamic_regressor(system, xs, jnp.zeros_like(dq), friction)

@@ -28,9 +28,7 @@ from .._data._trajectory import Trajectory
 from .._errors import DataError, UsageError
 from .._model._linear_axis import LinearAxis
 from .._model._system import AbstractSystem
-from .._model._two_link import AbstractTwoLink
 from .._simulate import FixedGrid, simulate
-from ._coulomb import WithCoulombFriction
 from ._least_squares import least_squares, LeastSquaresFit
 
 # diffrax's Runge-Kutta stages default to a checkpointed while loop (reverse mode only); a plain scan
@@ -74,6 +72,7 @@ class SimulationFitResult(eqx.Module):
     - `condition_number`, `rank`: of the column-scaled Jacobian of all unknowns.
     - `residual_rms`: root-mean-square of the scaled state residuals at the solution.
     - `initial_residual_rms`: the same at the starting point.
+    - `relative_error`: $\lVert \hat x - x \rVert / \lVert x \rVert$ over all segment samples (unscaled).
     - `n_segments`, `n_samples`, `steps`: bookkeeping.
     """
 
@@ -85,6 +84,7 @@ class SimulationFitResult(eqx.Module):
     rank: Array
     residual_rms: Float[Array, ""]
     initial_residual_rms: Float[Array, ""]
+    relative_error: Float[Array, ""]
     n_segments: int = eqx.field(static=True)
     n_samples: int = eqx.field(static=True)
     steps: Array
@@ -224,6 +224,7 @@ def fit_simulation_error(
         rank=linearised.rank,
         residual_rms=jnp.sqrt(jnp.mean(r[:n_state_residuals] ** 2)),
         initial_residual_rms=jnp.sqrt(jnp.mean(r0[:n_state_residuals] ** 2)),
+        relative_error=jnp.linalg.norm(r[:n_state_residuals].reshape(xs.shape) * sigma) / jnp.linalg.norm(xs),
         n_segments=int(xs.shape[0]),
         n_samples=int(n_samples),
         steps=solution.stats["num_steps"],
@@ -232,24 +233,24 @@ def fit_simulation_error(
 
 def _identify_by_simulation(system, trajectories, method: SimulationFit, friction):
     from ._identify import _fitted_system, _system_name, Identification
-    from ._regressors import parameter_names
+    from ._regressors import _split, parameter_names, parameter_vector, with_friction
 
-    base = system.system if isinstance(system, WithCoulombFriction) else system
-    if isinstance(base, AbstractTwoLink):
-        names = parameter_names(base, friction)
-        if friction == "coulomb" and not isinstance(system, WithCoulombFriction):
-            system = WithCoulombFriction(base, jnp.zeros(2, jnp.result_type(base.theta1)))
-        elif friction == "viscous" and isinstance(system, WithCoulombFriction):
-            system = base
-    elif isinstance(base, LinearAxis):
-        names = parameter_names(base, friction)
-        if friction == "viscous":
-            system = eqx.tree_at(lambda s: s.coulomb, base, jnp.zeros_like(base.coulomb))
+    try:
+        system = with_friction(system, friction)
+        names = parameter_names(system, friction)
+    except UsageError:
+        names = None  # any other system: fit every inexact array leaf, named by position
+    if names is not None:
+        # Start from the system's values; the leaves not in `names` (a linear axis's Coulomb term
+        # under viscous friction) are fixed.
+        system = _fitted_system(system, names, parameter_vector(system, friction))
+        fitted_names = jax.tree.map(lambda _: True, system)
+        filter_spec = jax.tree.map(eqx.is_inexact_array, system)
+        if isinstance(system, LinearAxis) and "coulomb" not in names:
+            filter_spec = eqx.tree_at(lambda s: s.coulomb, filter_spec, False)
+        del fitted_names
     else:
-        names = None
-    filter_spec = jax.tree.map(eqx.is_inexact_array, system)
-    if isinstance(system, LinearAxis) and friction == "viscous":
-        filter_spec = eqx.tree_at(lambda s: s.coulomb, filter_spec, False)
+        filter_spec = jax.tree.map(eqx.is_inexact_array, system)
     result = fit_simulation_error(
         system,
         trajectories,
@@ -262,24 +263,21 @@ def _identify_by_simulation(system, trajectories, method: SimulationFit, frictio
         max_steps=method.max_steps,
         simulation=method.simulation,
     )
-    fitted = result.system
     if names is None:
         names = tuple(f"p{i}" for i in range(result.parameters.size))
         estimate, std = result.parameters, result.std_errors
     else:
-        # Map the flat fitted leaves back to the contract's names.
-        leaves = _named_leaves(fitted, friction)
-        estimate = jnp.stack([leaves[n] for n in names])
-        flat_names = _flat_names(system, filter_spec, friction)
-        std_map = dict(zip(flat_names, result.std_errors))
-        std = jnp.stack([std_map.get(n, jnp.nan) for n in names])
+        # The flattened leaves follow the fields' order, which is the order of `names`.
+        estimate = parameter_vector(result.system, friction)
+        std = result.std_errors
     return Identification(
-        system=fitted,
+        system=result.system,
         estimate=estimate,
         std_errors=std,
         condition_number=result.condition_number,
         rank=result.rank,
         residual_rms=result.residual_rms,
+        relative_error=result.relative_error,
         fit=None,
         names=names,
         n_samples=result.n_samples,
@@ -287,29 +285,3 @@ def _identify_by_simulation(system, trajectories, method: SimulationFit, frictio
         friction=friction,
         system_name=_system_name(system),
     )
-
-
-def _named_leaves(system, friction):
-    base = system.system if isinstance(system, WithCoulombFriction) else system
-    out = {}
-    for n in ("theta1", "theta2", "theta3", "theta4", "theta5", "theta6", "theta7", "mass", "viscous", "coulomb", "offset"):
-        if hasattr(base, n):
-            out[n] = getattr(base, n)
-    if isinstance(system, WithCoulombFriction):
-        out["fc1"], out["fc2"] = system.coulomb[0], system.coulomb[1]
-    return out
-
-
-def _flat_names(system, filter_spec, friction):
-    """Names of the flattened fitted leaves, in `ravel_pytree` order."""
-    fitted, _ = eqx.partition(system, filter_spec)
-    named = _named_leaves(system, friction)
-    # Tag each leaf with its name by identity, then flatten in the same order as ravel_pytree.
-    tags = {id(v): n for n, v in named.items() if not n.startswith("fc")}
-    names = []
-    for leaf in jax.tree.leaves(fitted):
-        if isinstance(system, WithCoulombFriction) and leaf is system.coulomb:
-            names += ["fc1", "fc2"]
-        else:
-            names.append(tags.get(id(leaf), "?"))
-    return names

@@ -1,0 +1,13 @@
+"""Vehicle dynamics learning (Abbeel, Ganapathi and Ng 2005): one-step, frequency-domain, lagged, backprop."""
+
+from ._criteria import (
+    Backprop as Backprop,
+    fit_backprop as fit_backprop,
+    fit_lagged as fit_lagged,
+    fit_one_step as fit_one_step,
+    Lagged as Lagged,
+    lagged_loss_of as lagged_loss_of,
+    OneStep as OneStep,
+    VehicleFit as VehicleFit,
+)
+from ._windows import lagged_loss as lagged_loss, prediction_error as prediction_error, STATE_GROUPS as STATE_GROUPS
