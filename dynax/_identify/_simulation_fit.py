@@ -264,7 +264,7 @@ def _identify_by_simulation(system, trajectories, method: SimulationFit, frictio
         simulation=method.simulation,
     )
     if names is None:
-        names = tuple(f"p{i}" for i in range(result.parameters.size))
+        names = _leaf_names(system, filter_spec)
         estimate, std = result.parameters, result.std_errors
     else:
         # The flattened leaves follow the fields' order, which is the order of `names`.
@@ -285,3 +285,17 @@ def _identify_by_simulation(system, trajectories, method: SimulationFit, frictio
         friction=friction,
         system_name=_system_name(system),
     )
+
+
+def _leaf_names(system, filter_spec) -> tuple[str, ...]:
+    """Names of the flattened fitted leaves, from their paths: `body_model.a[0,1]`."""
+    fitted, _ = eqx.partition(system, filter_spec)
+    names = []
+    for path, leaf in jax.tree_util.tree_flatten_with_path(fitted)[0]:
+        base = jax.tree_util.keystr(path).lstrip(".")
+        shape = np.shape(leaf)
+        if shape == ():
+            names.append(base)
+        else:
+            names.extend(f"{base}[{','.join(map(str, idx))}]" for idx in np.ndindex(*shape))
+    return tuple(names)
