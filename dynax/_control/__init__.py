@@ -25,3 +25,16 @@ from ._closed_loop import (
     swing_up_time as swing_up_time,
     upright_error as upright_error,
 )
+from ._pgpe import (
+    AbstractFitnessShaping as AbstractFitnessShaping,
+    BaselineNormalisation as BaselineNormalisation,
+    CentredRank as CentredRank,
+    clipup as clipup,
+    evaluate_population as evaluate_population,
+    PGPE as PGPE,
+    PGPEHistory as PGPEHistory,
+    PGPEState as PGPEState,
+    population_sharding as population_sharding,
+    run as run_pgpe,
+)
+from ._swing_up_task import random_starts as random_starts, SwingUpTask as SwingUpTask

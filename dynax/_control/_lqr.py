@@ -360,11 +360,16 @@ def lqr(
         R. E. Kalman, "Contributions to the theory of optimal control", Boletin de la Sociedad
         Matematica Mexicana 5, 1960.
     """
+    return _lqr(system, x_eq, u_eq, q, r, tuple(angles))
+
+
+@eqx.filter_jit
+def _lqr(system, x_eq, u_eq, q, r, angles):
     a, b = linearise(system, x_eq, u_eq)
     q, r = _costs(system, q, r, a.dtype)
     s = solve_continuous_are(a, b, q, r)
     k = jnp.linalg.solve(r, b.T @ s)
-    return LQR(k, s, jnp.asarray(x_eq, a.dtype), jnp.asarray(u_eq, a.dtype), tuple(angles))
+    return LQR(k, s, jnp.asarray(x_eq, a.dtype), jnp.asarray(u_eq, a.dtype), angles)
 
 
 def discrete_lqr(
@@ -388,6 +393,11 @@ def discrete_lqr(
 
     **Returns:** an `LQR` controller whose `cost_to_go_matrix` solves the DARE.
     """
+    return _discrete_lqr(system, x_eq, u_eq, q, r, dt, tuple(angles))
+
+
+@eqx.filter_jit
+def _discrete_lqr(system, x_eq, u_eq, q, r, dt, angles):
     a, b = linearise(system, x_eq, u_eq)
     q, r = _costs(system, q, r, a.dtype)
     n, m = b.shape
@@ -396,4 +406,4 @@ def discrete_lqr(
     ad, bd = phi[:n, :n], phi[:n, n:]
     s = solve_discrete_are(ad, bd, q, r)
     k = jnp.linalg.solve(r + bd.T @ s @ bd, bd.T @ s @ ad)
-    return LQR(k, s, jnp.asarray(x_eq, a.dtype), jnp.asarray(u_eq, a.dtype), tuple(angles))
+    return LQR(k, s, jnp.asarray(x_eq, a.dtype), jnp.asarray(u_eq, a.dtype), angles)
