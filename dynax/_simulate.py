@@ -76,7 +76,8 @@ class Simulation(eqx.Module):
 
 
 def _zoh_term(system):
-    return diffrax.ODETerm(lambda t, x, u: system.vector_field(t, x, u))
+    # The state's dtype rules: parameters identified in float64 must not promote a float32 rollout.
+    return diffrax.ODETerm(lambda t, x, u: system.vector_field(t, x, u).astype(x.dtype))
 
 
 def _check_arguments(system, x0, ts, us):
@@ -149,7 +150,7 @@ def _adaptive(system, x0, ts, us, method, bound):
 
     def vector_field(t, x, args):
         k = jnp.clip(jnp.searchsorted(ts, t, side="right") - 1, 0, u_grid.shape[0] - 1)
-        return system.vector_field(t, x, u_grid[k])
+        return system.vector_field(t, x, u_grid[k]).astype(x.dtype)
 
     solution = diffrax.diffeqsolve(
         diffrax.ODETerm(vector_field),

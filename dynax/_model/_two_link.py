@@ -1,4 +1,4 @@
-"""The Spong / Drake two-link arm: `Acrobot` (elbow driven) and `DoublePendulum` (both driven).
+r"""The Spong / Drake two-link arm: `Acrobot` (elbow driven) and `DoublePendulum` (both driven).
 
 Both are written in the seven base parameters of the data contract, which is the minimal set the
 dynamics depend on (I1, I2 about the pivots):

@@ -1,0 +1,43 @@
+"""Test configuration: float64 for the whole suite (identification needs it), a seeded key, paths."""
+
+import pathlib
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+DATASETS = REPO.parent / "shared" / "datasets"
+
+DFKI_MAPPING = {
+    "t": "time",
+    "q1": "pos_meas1",
+    "q2": "pos_meas2",
+    "dq1": "vel_meas1",
+    "dq2": "vel_meas2",
+    "tau1": "tau_meas1",
+    "tau2": "tau_meas2",
+}
+
+
+@pytest.fixture
+def key():
+    return jax.random.PRNGKey(0)
+
+
+@pytest.fixture(scope="session")
+def datasets():
+    if not DATASETS.is_dir():
+        pytest.fail(f"the shared datasets are missing: expected {DATASETS} beside the repository")
+    return DATASETS
+
+
+def tree_allclose(a, b, rtol=1e-7, atol=1e-9):
+    """Whether two PyTrees have the same structure and close leaves."""
+    la, ta = jax.tree.flatten(a)
+    lb, tb = jax.tree.flatten(b)
+    return ta == tb and all(np.allclose(np.asarray(x), np.asarray(y), rtol=rtol, atol=atol) for x, y in zip(la, lb))

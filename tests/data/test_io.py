@@ -1,0 +1,145 @@
+"""Loading measured data: the contract's columns, mapping, scale and every bad-file case."""
+
+import numpy as np
+import pytest
+import scipy.io
+
+import dynax
+from dynax._data import parse_assignments
+from tests.conftest import DFKI_MAPPING
+
+HEADER = "t,q1,q2,dq1,dq2,tau2"
+
+
+def write(tmp_path, text, name="run.csv"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def good_rows(n=5):
+    return "\n".join(f"{0.01 * i},{0.1 * i},0,0,0,1" for i in range(n))
+
+
+def test_loads_contract_csv(tmp_path):
+    path = write(tmp_path, HEADER + "\n" + good_rows())
+    tr = dynax.load_trajectory(path, "acrobot")
+    assert tr.state_names == ("q1", "q2", "dq1", "dq2") and tr.input_names == ("tau2",)
+    assert tr.xs.shape == (5, 4) and tr.us.shape == (5, 1)
+    np.testing.assert_allclose(tr.state("q1"), 0.1 * np.arange(5))
+
+
+def test_missing_column_names_file_and_column(tmp_path):
+    path = write(tmp_path, "t,q1,q2,dq1,tau2\n" + "\n".join("0,0,0,0,0".replace("0,", f"{i},", 1) for i in range(5)))
+    with pytest.raises(dynax.DataError, match=r"run\.csv.*column 'dq2'.*missing"):
+        dynax.load_trajectory(path, "acrobot")
+
+
+def test_non_numeric_value_names_row(tmp_path):
+    rows = good_rows().split("\n")
+    rows[2] = "0.02,abc,0,0,0,1"
+    path = write(tmp_path, HEADER + "\n" + "\n".join(rows))
+    with pytest.raises(dynax.DataError, match=r"column 'q1', row 3: non-numeric value 'abc'") as e:
+        dynax.load_trajectory(path, "acrobot")
+    assert e.value.row == 3 and e.value.column == "q1" and str(path) == e.value.path
+
+
+@pytest.mark.parametrize("bad", ["nan", "inf", "-inf"])
+def test_non_finite_value_names_row(tmp_path, bad):
+    rows = good_rows().split("\n")
+    rows[4] = f"0.04,0.4,0,{bad},0,1"
+    path = write(tmp_path, HEADER + "\n" + "\n".join(rows))
+    with pytest.raises(dynax.DataError, match=r"column 'dq1', row 5: non-finite"):
+        dynax.load_trajectory(path, "acrobot")
+
+
+@pytest.mark.parametrize("times", [[0, 0.01, 0.01, 0.03, 0.04], [0, 0.01, 0.02, 0.015, 0.04]])
+def test_time_must_strictly_increase(tmp_path, times):
+    text = HEADER + "\n" + "\n".join(f"{t},0,0,0,0,1" for t in times)
+    path = write(tmp_path, text)
+    with pytest.raises(dynax.DataError, match=r"column 't', row \d: time does not strictly increase"):
+        dynax.load_trajectory(path, "acrobot")
+
+
+def test_too_few_samples(tmp_path):
+    path = write(tmp_path, HEADER + "\n" + good_rows(3))
+    with pytest.raises(dynax.DataError, match="has 3 samples; at least 10"):
+        dynax.load_trajectory(path, "acrobot", min_samples=10)
+
+
+def test_ragged_row(tmp_path):
+    path = write(tmp_path, HEADER + "\n0,0,0,0,0,1\n0.01,0,0,0\n")
+    with pytest.raises(dynax.DataError, match="row 2: has 4 fields"):
+        dynax.load_trajectory(path, "acrobot")
+
+
+def test_empty_and_missing_file(tmp_path):
+    with pytest.raises(dynax.DataError, match="empty"):
+        dynax.load_trajectory(write(tmp_path, ""), "acrobot")
+    with pytest.raises(dynax.DataError, match="no such file"):
+        dynax.load_trajectory(tmp_path / "nope.csv", "acrobot")
+
+
+def test_mapping_and_scale(tmp_path):
+    path = write(tmp_path, "time,a,b,c,d,volts\n" + "\n".join(f"{0.1 * i},{i},0,0,0,2" for i in range(4)))
+    tr = dynax.load_trajectory(
+        path, "acrobot", mapping={"t": "time", "q1": "a", "q2": "b", "dq1": "c", "dq2": "d", "tau2": "volts"},
+        scale={"tau2": 1.5, "q1": 2.0},
+    )
+    np.testing.assert_allclose(tr.us[:, 0], 3.0)
+    np.testing.assert_allclose(tr.state("q1"), 2.0 * np.arange(4))
+
+
+def test_mapping_names_unknown_column(tmp_path):
+    path = write(tmp_path, HEADER + "\n" + good_rows())
+    with pytest.raises(dynax.UsageError, match=r"`mapping` names \['tau9'\]"):
+        dynax.load_trajectory(path, "acrobot", mapping={"tau9": "x"})
+    with pytest.raises(dynax.DataError, match=r"column 'nothere': missing column \(mapped from 'q1'\)"):
+        dynax.load_trajectory(path, "acrobot", mapping={"q1": "nothere"})
+
+
+def test_npz_round_trip(tmp_path):
+    ts = np.linspace(0, 1, 11)
+    tr = dynax.Trajectory(ts, np.random.default_rng(0).normal(size=(11, 4)), np.ones((11, 2)),
+                          ("q1", "q2", "dq1", "dq2"), ("tau1", "tau2"), "double_pendulum")
+    for name in ("run.npz", "run.csv"):
+        dynax.save_trajectory(tr, tmp_path / name)
+        back = dynax.load_trajectory(tmp_path / name, "double_pendulum")
+        np.testing.assert_allclose(back.xs, tr.xs, rtol=1e-15)
+        np.testing.assert_allclose(back.ts, tr.ts, rtol=1e-15)
+
+
+def test_mat_file_with_mapping_scale_and_estimated_velocity(tmp_path):
+    t = np.linspace(0, 1, 101)[:, None]
+    scipy.io.savemat(tmp_path / "axis.mat", {"time": t, "pos": t**2, "volts": np.ones_like(t), "gain": 3.0})
+    tr = dynax.load_trajectory(tmp_path / "axis.mat", "linear_axis",
+                               mapping={"t": "time", "q": "pos", "force": "volts"}, scale={"force": 35.0})
+    assert tr.state_names == ("q", "dq")
+    np.testing.assert_allclose(tr.us, 35.0)
+    # dq estimated from q = t^2 by central differences: exact (2t) in the interior.
+    np.testing.assert_allclose(tr.state("dq")[1:-1], 2 * t[1:-1, 0], atol=1e-12)
+
+
+def test_parse_assignments():
+    assert parse_assignments("t=time, q1=pos", "--map", numeric=False) == {"t": "time", "q1": "pos"}
+    assert parse_assignments("force=35.15", "--scale", numeric=True) == {"force": 35.15}
+    with pytest.raises(dynax.UsageError, match="--map: 'q1' is not of the form"):
+        parse_assignments("q1", "--map", numeric=False)
+    with pytest.raises(dynax.UsageError, match="not a number"):
+        parse_assignments("force=abc", "--scale", numeric=True)
+
+
+def test_dfki_runs_load_through_mapping(datasets):
+    for run in ("00", "03", "12"):
+        tr = dynax.load_trajectory(datasets / "dfki_double_pendulum" / "sys_id" / f"trajectory_{run}.csv",
+                                   "double_pendulum", mapping=DFKI_MAPPING)
+        assert tr.input_names == ("tau1", "tau2") and len(tr) > 3000
+        assert not tr.is_uniform  # the rig jitters; it is kept as recorded
+        assert np.all(np.diff(np.asarray(tr.ts)) > 0)
+
+
+def test_emps_loads_from_mat(datasets):
+    tr = dynax.load_trajectory(datasets / "emps" / "DATA_EMPS.mat", "linear_axis",
+                               mapping={"q": "qm", "force": "vir"}, scale={"force": 35.15065188})
+    assert len(tr) == 24841
+    assert abs(tr.duration - 24.84) < 0.01
