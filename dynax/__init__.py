@@ -1,5 +1,20 @@
 """dynax: differentiable dynamics, system identification, discrepancy diagnosis and control in JAX."""
 
+from ._model._extensions import (
+    AbstractInputTerm as AbstractInputTerm,
+    AbstractJointTerm as AbstractJointTerm,
+    AbstractTerm as AbstractTerm,
+    CoulombFriction as CoulombFriction,
+    Extended as Extended,
+    InputDelay as InputDelay,
+    InputGain as InputGain,
+    InputLag as InputLag,
+    InputOffset as InputOffset,
+    JointSpring as JointSpring,
+    QuadraticDrag as QuadraticDrag,
+    RotorInertia as RotorInertia,
+    ViscousFriction as ViscousFriction,
+)
 from ._model import (
     AbstractManipulator as AbstractManipulator,
     AbstractSystem as AbstractSystem,

@@ -24,13 +24,14 @@ DRAKE_DEFAULTS = dict(m1=1.0, m2=1.0, l1=1.0, lc1=0.5, lc2=1.0, Ic1=0.083, Ic2=0
 
 
 def base_parameters_from_physical(
-    *, m1, m2, l1, lc1, lc2, Ic1, Ic2, b1, b2, g=9.81
+    *, m1, m2, l1, lc1, lc2, Ic1=None, Ic2=None, b1, b2, g=9.81, I1=None, I2=None
 ) -> dict[str, float]:
     r"""Map physical parameters to the base parameters theta1..theta7.
 
     **Arguments:** masses `m1`, `m2` [kg]; length of link 1 `l1` [m]; centre-of-mass distances
-    `lc1`, `lc2` [m]; inertias `Ic1`, `Ic2` about the centres of mass [kg m^2]; viscous friction
-    `b1`, `b2` [N m s/rad]; gravity `g` [m/s^2].
+    `lc1`, `lc2` [m]; inertias `Ic1`, `Ic2` about the centres of mass [kg m^2], or instead `I1`,
+    `I2` about the pivots (as the DFKI lab's parameter files give them); viscous friction `b1`,
+    `b2` [N m s/rad]; gravity `g` [m/s^2].
 
     **Returns:** a dict `theta1..theta7`.
 
@@ -39,8 +40,13 @@ def base_parameters_from_physical(
     $I_1 = I_{c1} + m_1 l_{c1}^2$ and $m_1 l_{c1}$, and $(m_2, l_{c2}, I_{c2})$ only through
     $m_2 l_{c2}$, $I_2$ and $m_2$ (the latter in combination with $l_1$). `l2` does not enter at all.
     """
-    I1 = Ic1 + m1 * lc1**2
-    I2 = Ic2 + m2 * lc2**2
+    if (Ic1 is None) == (I1 is None) or (Ic2 is None) == (I2 is None):
+        raise ValueError(
+            "base_parameters_from_physical: give each link's inertia once, either `Ic1`/`Ic2` "
+            "(about the centre of mass) or `I1`/`I2` (about the pivot)"
+        )
+    I1 = Ic1 + m1 * lc1**2 if I1 is None else I1
+    I2 = Ic2 + m2 * lc2**2 if I2 is None else I2
     return dict(
         theta1=I1 + m2 * l1**2,
         theta2=I2,
@@ -107,13 +113,23 @@ class AbstractTwoLink(AbstractManipulator):
 
     @classmethod
     def from_physical(cls, **physical):
-        """Build from physical parameters (see `base_parameters_from_physical`); missing ones take Drake's defaults."""
-        unknown = set(physical) - set(DRAKE_DEFAULTS)
+        """Build from physical parameters (see `base_parameters_from_physical`); missing ones take Drake's defaults.
+
+        For example the DFKI lab's rigid-body model (inertias about the pivots):
+        `DoublePendulum.from_physical(m1=0.642, m2=0.564, l1=0.2, lc1=0.2, lc2=0.321, I1=0.0267,
+        I2=0.0539, b1=0.001, b2=0.001)`.
+        """
+        allowed = set(DRAKE_DEFAULTS) | {"I1", "I2"}
+        unknown = set(physical) - allowed
         if unknown:
             raise ValueError(
-                f"{cls.__name__}.from_physical: unknown parameter(s) {sorted(unknown)}; expected {sorted(DRAKE_DEFAULTS)}"
+                f"{cls.__name__}.from_physical: unknown parameter(s) {sorted(unknown)}; expected {sorted(allowed)}"
             )
-        base = base_parameters_from_physical(**{**DRAKE_DEFAULTS, **physical})
+        defaults = dict(DRAKE_DEFAULTS)
+        for pivot, centre in (("I1", "Ic1"), ("I2", "Ic2")):
+            if pivot in physical:
+                defaults.pop(centre)
+        base = base_parameters_from_physical(**{**defaults, **physical})
         return cls(**{k: jnp.asarray(v) for k, v in base.items()})
 
     @classmethod

@@ -59,3 +59,12 @@ def test_linear_axis_matches_emps_model():
     acc = axis.vector_field(0.0, jnp.array([0.0, dq]), jnp.array([force]))[1]
     expected = (force - 203.5034 * dq - 20.3935 * np.tanh(dq / 1e-3) + 3.1648) / 95.1089
     assert float(acc) == pytest.approx(expected, rel=1e-12)
+
+
+def test_pivot_inertias_give_the_same_base_parameters():
+    centre = dynax.Acrobot.from_physical(m2=0.8, lc2=0.9, Ic2=0.2)
+    pivot = dynax.Acrobot.from_physical(m2=0.8, lc2=0.9, I2=0.2 + 0.8 * 0.9**2, I1=0.083 + 0.25)
+    for k, v in centre.base_parameters.items():
+        assert float(pivot.base_parameters[k]) == pytest.approx(float(v), rel=1e-12), k
+    with pytest.raises(ValueError, match="give each link's inertia once"):
+        dynax.Acrobot.from_physical(Ic1=0.1, I1=0.2)

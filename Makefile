@@ -1,0 +1,36 @@
+# Two entry points, each creating the virtual environment and installing the project first:
+#   make demo   runs the main job (`dynax demo`) on the embedded default
+#   make test   runs the test suite and builds the docs site strictly
+PYTHON ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+
+.PHONY: demo test docs bench clean
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+
+$(VENV)/.installed-base: pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet -e .
+	touch $@
+
+$(VENV)/.installed-dev: pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet -e ".[test,docs,bench]"
+	touch $@ $(VENV)/.installed-base
+
+demo: $(VENV)/.installed-base
+	$(BIN)/dynax demo
+
+test: $(VENV)/.installed-dev
+	$(BIN)/python -m pytest -n 2
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
+
+docs: $(VENV)/.installed-dev
+	$(BIN)/mkdocs serve
+
+bench: $(VENV)/.installed-dev
+	$(BIN)/python benchmarks/rollout.py
+
+clean:
+	rm -rf $(VENV) site dynax-demo .pytest_cache
