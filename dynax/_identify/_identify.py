@@ -156,7 +156,7 @@ class Energy(eqx.Module):
 
 
 class Identification(eqx.Module):
-    """The result of `identify`.
+    r"""The result of `identify`.
 
     **Fields:**
 

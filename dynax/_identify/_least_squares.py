@@ -60,26 +60,52 @@ class LeastSquaresFit(eqx.Module):
 
     @property
     def unidentified(self) -> tuple[str, ...]:
-        """The parameter combinations the data leave undetermined, e.g. `("theta6 - 0.5 theta7",)`."""
+        """The parameter combinations the data leave undetermined, e.g. `("theta1 + theta2 - theta3", "theta7")`.
+
+        A basis of the null space in reduced row-echelon form, so the answer does not depend on
+        how the SVD happened to rotate a multi-dimensional null space: each combination starts
+        with a parameter of coefficient 1 that the others do not contain.
+        """
         rank = int(self.rank)
-        return tuple(_combination(np.asarray(d), self.names) for d in np.asarray(self.directions)[rank:])
+        basis = _reduced_row_echelon(np.asarray(self.directions)[rank:])
+        return tuple(_combination(row, self.names) for row in basis)
 
 
-def _combination(direction, names, threshold=0.05):
-    terms = []
-    for c, n in sorted(zip(direction, names), key=lambda cn: -abs(cn[0])):
-        if abs(c) < threshold:
+def _reduced_row_echelon(rows, tol=1e-6):
+    rows = np.array(rows, dtype=float)
+    if rows.size == 0:
+        return rows
+    rows = rows / np.max(np.abs(rows), axis=1, keepdims=True)
+    lead = 0
+    for r in range(rows.shape[0]):
+        while lead < rows.shape[1]:
+            pivot = r + int(np.argmax(np.abs(rows[r:, lead])))
+            if abs(rows[pivot, lead]) > tol:
+                break
+            lead += 1
+        else:
+            break
+        rows[[r, pivot]] = rows[[pivot, r]]
+        rows[r] = rows[r] / rows[r, lead]
+        for other in range(rows.shape[0]):
+            if other != r:
+                rows[other] = rows[other] - rows[other, lead] * rows[r]
+        lead += 1
+    rows[np.abs(rows) < tol] = 0.0
+    return rows
+
+
+def _combination(direction, names, tol=1e-3):
+    text = ""
+    for c, n in zip(direction, names):
+        if abs(c) < tol:
             continue
-        coef = "" if np.isclose(abs(c), 1.0, atol=5e-3) else f"{abs(c):.3g} "
-        sign = "-" if c < 0 else "+"
-        terms.append((sign, f"{coef}{n}"))
-    if not terms:
-        return "(none)"
-    first_sign, first = terms[0]
-    text = ("-" if first_sign == "-" else "") + first
-    for sign, term in terms[1:]:
-        text += f" {sign} {term}"
-    return text
+        coef = "" if np.isclose(abs(c), 1.0, rtol=1e-3) else f"{abs(c):.3g} "
+        if not text:
+            text = ("-" if c < 0 else "") + coef + n
+        else:
+            text += (" - " if c < 0 else " + ") + coef + n
+    return text or "(none)"
 
 
 @jax.jit

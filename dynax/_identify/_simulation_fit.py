@@ -61,7 +61,7 @@ class SimulationFit(eqx.Module):
 
 
 class SimulationFitResult(eqx.Module):
-    """The result of `fit_simulation_error`.
+    r"""The result of `fit_simulation_error`.
 
     **Fields:**
 
@@ -108,6 +108,48 @@ def _segments(trajectories, segment_s):
             follows.append(k > 0)
         n_samples += starts[-1] + length
     return np.stack(ts), np.stack(xs), np.stack(us), np.asarray(follows), n_samples
+
+
+class _Config(eqx.Module):
+    fit_initial_states: bool = eqx.field(static=True)
+    rtol: float = eqx.field(static=True)
+    atol: float = eqx.field(static=True)
+    max_steps: int = eqx.field(static=True)
+    simulation: FixedGrid
+
+
+@eqx.filter_jit
+def _solve(fitted, fixed, ts, xs, us, sigma, link, continuity_weight, config: _Config):
+    """Levenberg-Marquardt on the scaled unknowns; one compiled program per problem shape."""
+    p0, unravel = jax.flatten_util.ravel_pytree(fitted)
+    p0 = p0.astype(xs.dtype)
+    p_scale = jnp.where(jnp.abs(p0) > 0, jnp.abs(p0), 1.0)
+    x0_data = xs[:, 0]
+    w_cont = jnp.sqrt(continuity_weight)
+
+    def unpack(z):
+        p = p0 + p_scale * z[: p0.size]
+        x0 = x0_data + sigma * z[p0.size :].reshape(x0_data.shape) if config.fit_initial_states else x0_data
+        return p, x0
+
+    def residuals(z, _):
+        p, x0 = unpack(z)
+        model = eqx.combine(unravel(p), fixed)
+        sims = jax.vmap(lambda x0, t, u: simulate(model, x0, t, u, method=config.simulation, throw=False).xs)(x0, ts, us)
+        r = (sims - xs) / sigma
+        r = jnp.where(jnp.isfinite(r), r, 1e3)
+        out = [r.reshape(-1)]
+        if config.fit_initial_states and x0.shape[0] > 1:
+            defect = (sims[:-1, -1] - x0[1:]) / sigma * link[:, None] * w_cont
+            out.append(jnp.where(jnp.isfinite(defect), defect, 1e3).reshape(-1))
+        return jnp.concatenate(out)
+
+    n_z = p0.size + (x0_data.size if config.fit_initial_states else 0)
+    z0 = jnp.zeros(n_z, xs.dtype)
+    solver = optx.LevenbergMarquardt(rtol=config.rtol, atol=config.atol)
+    solution = optx.least_squares(residuals, solver, z0, max_steps=config.max_steps, throw=False)
+    z = solution.value
+    return z, residuals(z, None), residuals(z0, None), jax.jacfwd(residuals)(z, None), solution.stats["num_steps"]
 
 
 def fit_simulation_error(
@@ -180,38 +222,21 @@ def fit_simulation_error(
         state_scale = np.std(flat, axis=0)
         state_scale = np.where(state_scale > 0, state_scale, 1.0)
     sigma = jnp.asarray(state_scale, dtype)
+    link = jnp.asarray(follows[1:], dtype)  # segment s+1 continues segment s
+    config = _Config(fit_initial_states, rtol, atol, max_steps, simulation)
+    z, r, r0, jac, steps = _solve(fitted, fixed, ts, xs, us, sigma, link, jnp.asarray(continuity_weight, dtype), config)
+    p0, unravel = jax.flatten_util.ravel_pytree(fitted)
+    p0 = p0.astype(dtype)
     p_scale = jnp.where(jnp.abs(p0) > 0, jnp.abs(p0), 1.0)
     x0_data = xs[:, 0]
-    link = jnp.asarray(follows[1:], dtype)  # segment s+1 continues segment s
-    w_cont = jnp.sqrt(jnp.asarray(continuity_weight, dtype))
+    n_z = z.size
+    n_state_residuals = xs.size
 
     def unpack(z):
         p = p0 + p_scale * z[: p0.size]
         x0 = x0_data + sigma * z[p0.size :].reshape(x0_data.shape) if fit_initial_states else x0_data
         return p, x0
 
-    def residuals(z, _):
-        p, x0 = unpack(z)
-        model = eqx.combine(unravel(p), fixed)
-        sims = jax.vmap(lambda x0, t, u: simulate(model, x0, t, u, method=simulation, throw=False).xs)(x0, ts, us)
-        r = (sims - xs) / sigma
-        r = jnp.where(jnp.isfinite(r), r, 1e3)
-        out = [r.reshape(-1)]
-        if fit_initial_states and x0.shape[0] > 1:
-            defect = (sims[:-1, -1] - x0[1:]) / sigma * link[:, None] * w_cont
-            out.append(jnp.where(jnp.isfinite(defect), defect, 1e3).reshape(-1))
-        return jnp.concatenate(out)
-
-    n_z = p0.size + (x0_data.size if fit_initial_states else 0)
-    z0 = jnp.zeros(n_z, dtype)
-    residuals_jit = eqx.filter_jit(residuals)
-    r0 = residuals_jit(z0, None)
-    n_state_residuals = xs.size
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-    solution = optx.least_squares(residuals, solver, z0, max_steps=max_steps, throw=False)
-    z = solution.value
-    r = residuals_jit(z, None)
-    jac = eqx.filter_jit(jax.jacfwd(residuals))(z, None)
     names = tuple(f"p{i}" for i in range(p0.size)) + tuple(f"x0_{i}" for i in range(n_z - p0.size))
     linearised: LeastSquaresFit = least_squares(jac, -r, names=names, allow_rank_deficient=True)
     p, x0 = unpack(z)
@@ -227,7 +252,7 @@ def fit_simulation_error(
         relative_error=jnp.linalg.norm(r[:n_state_residuals].reshape(xs.shape) * sigma) / jnp.linalg.norm(xs),
         n_segments=int(xs.shape[0]),
         n_samples=int(n_samples),
-        steps=solution.stats["num_steps"],
+        steps=steps,
     )
 
 

@@ -11,3 +11,11 @@ from ._criteria import (
     VehicleFit as VehicleFit,
 )
 from ._windows import lagged_loss as lagged_loss, prediction_error as prediction_error, STATE_GROUPS as STATE_GROUPS
+from ._fit import (
+    CRITERIA as CRITERIA,
+    fit_vehicle as fit_vehicle,
+    initial_helicopter as initial_helicopter,
+    model_from_json as model_from_json,
+    model_to_json as model_to_json,
+)
+from ._frequency import fit_frequency as fit_frequency, FrequencyDomain as FrequencyDomain, frequency_responses as frequency_responses

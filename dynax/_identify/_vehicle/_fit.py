@@ -1,0 +1,112 @@
+"""`fit_vehicle`: one entry point for the four criteria, and the model file (`MODEL.json`) format."""
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..._data._trajectory import Trajectory
+from ..._errors import DataError, UsageError
+from ..._model._helicopter import (
+    AccelerationModel,
+    Helicopter,
+    LinearVelocityModel,
+    RICH_FEATURES,
+    TEMPEST_FEATURES,
+)
+from ._criteria import Backprop, fit_backprop, fit_lagged, fit_one_step, Lagged, OneStep, VehicleFit
+from ._frequency import fit_frequency, FrequencyDomain
+
+CRITERIA = {"one-step": OneStep, "frequency": FrequencyDomain, "lagged": Lagged, "backprop": Backprop}
+
+
+def initial_helicopter(model: str, features: str = "tempest") -> Helicopter:
+    """The starting `Helicopter` for `--model acceleration|linear` (`features`: `tempest` or `rich`)."""
+    if model == "acceleration":
+        axes = {"tempest": TEMPEST_FEATURES, "rich": RICH_FEATURES}.get(features)
+        if axes is None:
+            raise UsageError(f"unknown feature set '{features}'; expected 'tempest' or 'rich'")
+        return Helicopter(AccelerationModel.with_features(axes))
+    if model == "linear":
+        return Helicopter(LinearVelocityModel())
+    raise UsageError(f"unknown model '{model}'; expected 'acceleration' or 'linear'")
+
+
+def fit_vehicle(
+    system: Helicopter,
+    trajectory: Trajectory,
+    criterion: OneStep | FrequencyDomain | Lagged | Backprop = OneStep(),
+    *,
+    callback=None,
+) -> VehicleFit:
+    r"""Learn the body model of `system` from `trajectory` with a learning `criterion`.
+
+    `Lagged` and `Backprop` start from the one-step fit (the paper's initialisation), so both
+    descend the same lagged loss from the same point.
+
+    **Arguments:**
+
+    - `system`: a `Helicopter` whose body model's mask says which weights to fit.
+    - `trajectory`: uniformly sampled helicopter data (`dynax.load_trajectory(path, "helicopter")`).
+    - `criterion`: `OneStep()`, `FrequencyDomain()` (linear model only), `Lagged(horizon=...)` or
+      `Backprop(horizon=...)`.
+    - `callback`: `callback(iteration, loss)` after each iteration of the iterative criteria.
+
+    **Returns:** a `VehicleFit` with the fitted `system`, the final loss and its history.
+
+    ??? cite "Reference"
+
+        P. Abbeel, V. Ganapathi and A. Y. Ng, "Learning vehicular dynamics, with application to
+        modeling helicopters", NIPS 18, 2005.
+    """
+    if isinstance(criterion, OneStep):
+        return fit_one_step(system, trajectory, criterion)
+    if isinstance(criterion, FrequencyDomain):
+        return fit_frequency(system, trajectory, criterion)
+    if isinstance(criterion, Lagged):
+        return fit_lagged(fit_one_step(system, trajectory).system, trajectory, criterion, callback=callback)
+    if isinstance(criterion, Backprop):
+        return fit_backprop(fit_one_step(system, trajectory).system, trajectory, criterion, callback=callback)
+    raise UsageError(f"fit_vehicle: unknown criterion {type(criterion).__name__}")
+
+
+def model_to_json(fit: VehicleFit, *, horizon_s: float | None = None) -> dict:
+    """The `MODEL.json` object of a fit: model kind, features, mask, weights and named parameters."""
+    body = fit.system.body_model
+    kind = "acceleration" if isinstance(body, AccelerationModel) else "linear"
+    out = {
+        "system": "helicopter",
+        "model": kind,
+        "criterion": fit.criterion,
+        "horizon_s": horizon_s,
+        "features": list(body.feature_names),
+        "mask": [[int(v) for v in row] for row in body.mask],
+        "weights": np.asarray(body.weights).tolist(),
+        "parameters": {k: float(v) for k, v in body.parameters.items()},
+        "loss": fit.loss,
+        "n_samples": fit.n_samples,
+    }
+    if kind == "acceleration":
+        out["gravity"] = body.gravity
+    return out
+
+
+def model_from_json(obj: dict, path=None) -> Helicopter:
+    """The `Helicopter` described by a `MODEL.json` object (as written by `model_to_json`)."""
+    try:
+        if obj.get("system") != "helicopter":
+            raise DataError(f"not a helicopter model file (system = {obj.get('system')!r})", path=path)
+        features = tuple(obj["features"])
+        mask = tuple(tuple(bool(v) for v in row) for row in obj["mask"])
+        weights = jnp.asarray(np.asarray(obj["weights"], float))
+        if obj["model"] == "acceleration":
+            body = AccelerationModel(weights=weights, feature_names=features, mask=mask, gravity=float(obj.get("gravity", 9.81)))
+        elif obj["model"] == "linear":
+            body = LinearVelocityModel(weights=weights, feature_names=features, mask=mask)
+        else:
+            raise DataError(f"unknown model kind {obj['model']!r}", path=path, column="model")
+    except KeyError as e:
+        raise DataError(f"the model file lacks the field {e.args[0]!r}", path=path) from None
+    except (TypeError, ValueError) as e:
+        if isinstance(e, DataError):
+            raise
+        raise DataError(f"malformed model file ({e})", path=path) from None
+    return Helicopter(body)

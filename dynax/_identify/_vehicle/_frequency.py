@@ -1,0 +1,161 @@
+r"""The frequency-domain criterion (CIFER-style) for the linear velocity model.
+
+1. **Frequency responses** from the data: Welch auto- and cross-spectra of the four inputs and the
+   six body velocities and rates, the multi-input estimate $\hat H(f) = (G_{uu}^{-1} G_{uy})^\top$
+   (which removes the correlation between inputs that a feedback controller creates), and for each
+   input/output pair the *partial coherence* $\gamma^2_{ij}$ (from the inverse of the augmented
+   spectral matrix of $(u, y_j)$).
+2. **The model's responses**: the linear velocity model is linearised about level flight as the
+   8-state LTI system $(\nu, \omega, \phi_r, \theta_p)$ with $\dot\phi_r = p$, $\dot\theta_p = q$, so
+   $H_m(j\omega) = C(j\omega I - A)^{-1}B$.
+3. **The fit**: minimise the coherence-weighted magnitude (dB) and phase (deg) error over the
+   identified band, pairs and frequencies with $\gamma^2 \ge$ `min_coherence`,
+
+   $$J = \sum W_\gamma\big[(20\log_{10}|\hat H| - 20\log_{10}|H_m|)^2 + W_p(\angle\hat H - \angle H_m)^2\big],
+   \quad W_\gamma = \big(1.58(1 - e^{-\gamma^2})\big)^2,\ W_p = 0.01745,$$
+
+   by Levenberg-Marquardt (optimistix) from the one-step fit. The constant column, which has no
+   frequency response, is then re-fitted by one-step least squares with the rest held.
+
+??? cite "References"
+
+    M. B. Tischler and R. K. Remple, *Aircraft and Rotorcraft System Identification: Engineering
+    Methods with Flight-Test Examples*, 2nd ed., AIAA, 2012 (CIFER: the cost function, its weights
+    and the coherence criterion).
+
+    B. Mettler, M. B. Tischler and T. Kanade, "System identification modeling of a small-scale
+    unmanned rotorcraft for flight control design", Journal of the American Helicopter Society
+    47(1), 2002.
+"""
+
+import time
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+import scipy.signal
+from jaxtyping import Array, Float
+
+from ..._data._trajectory import Trajectory
+from ..._errors import UsageError
+from ..._model._helicopter import BODY, Helicopter, LINEAR_FEATURE_NAMES, LinearVelocityModel
+from ._criteria import _normal_equations, _solve, _with_theta, fit_one_step, VehicleFit
+from ._windows import check_helicopter_data, valid_starts
+
+
+class FrequencyDomain(eqx.Module):
+    """The CIFER-style frequency-domain criterion (linear velocity model only).
+
+    **Fields:**
+
+    - `band_hz`: the identified band `(low, high)` [Hz] (default 0.2 to 8 Hz).
+    - `segment_s`: the Welch segment length [s] (default 10 s; 50 % overlap, Hann window).
+    - `min_coherence`: pairs and frequencies with a lower partial coherence are left out (0.6).
+    - `max_steps`: Levenberg-Marquardt iterations (default 200).
+    """
+
+    band_hz: tuple[float, float] = eqx.field(static=True, default=(0.2, 8.0))
+    segment_s: float = eqx.field(static=True, default=10.0)
+    min_coherence: float = eqx.field(static=True, default=0.6)
+    max_steps: int = eqx.field(static=True, default=200)
+
+
+def frequency_responses(
+    trajectory: Trajectory, segment_s: float = 10.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Multi-input frequency responses and partial coherences of the body states to the inputs.
+
+    **Returns:** `(freqs (f,), H (f, 6, 4) complex, coherence (f, 6, 4))`.
+    """
+    dt = check_helicopter_data(trajectory, "frequency_responses")
+    u = np.asarray(trajectory.us, float)
+    y = np.asarray(trajectory.xs[:, BODY], float)
+    nperseg = min(int(round(segment_s / dt)), len(u))
+    z = np.concatenate([u, y], axis=1)
+    n = z.shape[1]
+    spectra = None
+    for a in range(n):
+        for b in range(n):
+            f, g = scipy.signal.csd(z[:, a], z[:, b], fs=1 / dt, nperseg=nperseg, detrend="linear")
+            if spectra is None:
+                spectra = np.zeros((len(f), n, n), complex)
+            spectra[:, a, b] = g
+    guu, guy = spectra[:, :4, :4], spectra[:, :4, 4:]
+    responses = np.transpose(np.linalg.solve(guu, guy), (0, 2, 1))  # y = H u
+    coherence = np.zeros((len(f), 6, 4))
+    for j in range(6):
+        idx = [0, 1, 2, 3, 4 + j]
+        inverse = np.linalg.inv(spectra[:, idx][:, :, idx])
+        for i in range(4):
+            coherence[:, j, i] = np.abs(inverse[:, i, 4]) ** 2 / np.real(inverse[:, i, i] * inverse[:, 4, 4])
+    return f, responses, np.clip(coherence, 0.0, 1.0)
+
+
+def _model_response(weights, omegas):
+    """$C(j\\omega I - A)^{-1}B$ of the linear velocity model linearised about level flight."""
+    names = LINEAR_FEATURE_NAMES
+    idx = lambda *ns: [names.index(n) for n in ns]  # noqa: E731
+    top = jnp.concatenate([weights[:, idx("u", "v", "w", "p", "q", "r")], weights[:, idx("roll", "pitch")]], axis=1)
+    kinematics = jnp.zeros((2, 8), weights.dtype).at[0, 3].set(1.0).at[1, 4].set(1.0)
+    a = jnp.concatenate([top, kinematics])
+    b = jnp.concatenate([weights[:, idx("u1", "u2", "u3", "u4")], jnp.zeros((2, 4), weights.dtype)])
+
+    def at(w):
+        return jnp.linalg.solve(1j * w * jnp.eye(8) - a, b.astype(complex))[:6]
+
+    return jax.vmap(at)(omegas)
+
+
+def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: FrequencyDomain = FrequencyDomain()) -> VehicleFit:
+    """Fit a linear velocity model by the frequency-domain criterion (see the module docstring)."""
+    if not isinstance(system.body_model, LinearVelocityModel) or system.body_model.feature_names != LINEAR_FEATURE_NAMES:
+        raise UsageError("fit_frequency: the frequency-domain criterion fits the linear model only (--model linear)")
+    check_helicopter_data(trajectory, "fit_frequency")
+    t0 = time.perf_counter()
+    initial = fit_one_step(system, trajectory).system
+    freqs, measured, coherence = frequency_responses(trajectory, criterion.segment_s)
+    low, high = criterion.band_hz
+    band = (freqs >= low) & (freqs <= high)
+    if band.sum() < 3:
+        raise UsageError(f"fit_frequency: fewer than 3 frequencies in the band {criterion.band_hz} Hz; use longer data")
+    freqs, measured, coherence = freqs[band], measured[band], coherence[band]
+    use = coherence >= criterion.min_coherence
+    if not use.any():
+        raise UsageError("fit_frequency: no input/output pair reaches the coherence threshold; the data lack excitation")
+    w_gamma = np.where(use, (1.58 * (1 - np.exp(-coherence))) ** 2, 0.0)
+    safe = np.where(use, measured, 1.0)
+    dtype = trajectory.xs.dtype
+    omegas = jnp.asarray(2 * np.pi * freqs, dtype)
+    sqrt_wg = jnp.asarray(np.sqrt(w_gamma), dtype)
+    measured_j = jnp.asarray(safe)
+    mask = np.array(initial.body_model.mask, bool)
+    mask[:, LINEAR_FEATURE_NAMES.index("1")] = False
+    free = np.nonzero(mask)
+
+    def residuals(theta, _):
+        weights = initial.body_model.weights.at[free].set(theta)
+        ratio = measured_j / _model_response(weights, omegas)
+        magnitude = 20 * jnp.log10(jnp.abs(ratio))
+        phase = jnp.degrees(jnp.angle(ratio))
+        return jnp.concatenate([(sqrt_wg * magnitude).ravel(), (sqrt_wg * jnp.sqrt(0.01745) * phase).ravel()])
+
+    theta0 = initial.body_model.weights[free]
+    solver = optx.LevenbergMarquardt(rtol=1e-8, atol=1e-10)
+    solution = optx.least_squares(residuals, solver, theta0, max_steps=criterion.max_steps, throw=False)
+    weights = initial.body_model.weights.at[free].set(solution.value)
+    fitted = eqx.tree_at(lambda h: h.body_model.weights, initial, weights)
+    cost = float(jnp.sum(residuals(solution.value, None) ** 2) / max(1, int(use.sum())))
+
+    # Re-fit the constant column (no frequency response) by one-step least squares, the rest held.
+    starts = jnp.asarray(valid_starts(len(trajectory), 1))
+    ata, atb, _ = _normal_equations(fitted, trajectory, starts, 1, jnp.ones(6, dtype), False, 1024)
+    theta = fitted.body_model.parameter_vector()
+    names = fitted.body_model.parameter_names
+    bias = np.array([n.endswith("/1") for n in names])
+    rest = ~bias
+    rhs = atb[bias] - ata[np.ix_(bias, rest)] @ theta[rest]
+    theta = theta.at[np.nonzero(bias)[0]].set(_solve(ata[np.ix_(bias, bias)], rhs, 1e-12))
+    fitted = _with_theta(fitted, theta)
+    return VehicleFit(fitted, "frequency", cost, ((time.perf_counter() - t0, cost),), len(trajectory))

@@ -1,0 +1,135 @@
+"""`identify` recovers the parameters that generated the data, and refuses data that cannot determine them."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import dynax
+from dynax._data import load_trajectory, Trajectory
+from dynax._errors import DataError
+from dynax._identify import Dynamic, Energy, IdentifiabilityError, identify, Power, SimulationFit
+from dynax._model._extensions import CoulombFriction, Extended
+
+TRUE = dynax.Acrobot()  # Drake's parameters
+THETA = np.array([float(v) for v in TRUE.base_parameters.values()])
+
+
+def multisine(ts, amplitudes, phase=0.0):
+    freqs = np.array([0.7, 1.9, 3.3, 5.1])
+    return sum(a * np.sin(f * ts + phase + k) for k, (a, f) in enumerate(zip(amplitudes, freqs)))
+
+
+def record(system, ts, us, x0):
+    sim = dynax.simulate(system, jnp.asarray(x0), jnp.asarray(ts), jnp.asarray(us))
+    return Trajectory(jnp.asarray(ts), sim.xs[:, :4], jnp.asarray(us), ("q1", "q2", "dq1", "dq2"), system.input_names)
+
+
+@pytest.fixture(scope="module")
+def acrobot_data():
+    ts = np.arange(0.0, 10.0, 0.005)
+    us = multisine(ts, [2.0, 1.5, 1.0, 0.5])[:, None]
+    return record(TRUE, ts, us, [0.2, 0.0, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("method, tolerance", [(Dynamic(), 1e-3), (Power(), 1e-2), (Energy(), 1e-2)])
+def test_noise_free_acrobot_recovers_base_parameters(acrobot_data, method, tolerance):
+    result = identify(dynax.Acrobot(theta1=5.0), acrobot_data, method)  # the starting values do not matter
+    relative = np.abs(np.asarray(result.estimate) - THETA) / THETA
+    assert np.all(relative[:5] < tolerance), relative
+    assert np.all(relative[5:] < 10 * tolerance), relative  # friction: weaker excitation, still close
+    assert result.names == ("theta1", "theta2", "theta3", "theta4", "theta5", "theta6", "theta7")
+    assert int(result.rank) == 7 and np.isfinite(float(result.condition_number))
+    # without noise only discretisation error is left: the standard errors say the fit is tight
+    assert np.all(np.asarray(result.std_errors) < tolerance * THETA)
+    # and the fitted system is the data's system
+    assert isinstance(result.system, dynax.Acrobot)
+    np.testing.assert_allclose(float(result.system.theta3), result.parameters["theta3"])
+
+
+def test_double_pendulum_with_coulomb_friction(key):
+    true = Extended(dynax.DoublePendulum(), (CoulombFriction(0, 0.3), CoulombFriction(1, 0.2)))
+    ts = np.arange(0.0, 4.0, 0.005)
+    us = np.stack([multisine(ts, [3.0, 2.0, 1.0, 0.5]), multisine(ts, [1.5, 1.0, 0.7, 0.3], phase=1.0)], axis=1)
+    data = record(true, ts, us, [0.3, -0.2, 0.0, 0.0])
+    result = identify(dynax.DoublePendulum(), data, Dynamic(), friction="coulomb")
+    assert result.names[-2:] == ("fc1", "fc2")
+    np.testing.assert_allclose(result.parameters["fc1"], 0.3, rtol=1e-2)
+    np.testing.assert_allclose(result.parameters["fc2"], 0.2, rtol=1e-2)
+    np.testing.assert_allclose(np.asarray(result.estimate[:5]), THETA[:5], rtol=1e-3)
+    assert isinstance(result.system, Extended) and result.system.labels == ("coulomb_friction@q1", "coulomb_friction@q2")
+    # without the Coulomb columns the same data give a visibly worse equation fit
+    viscous = identify(dynax.DoublePendulum(), data, Dynamic())
+    assert float(viscous.relative_error) > 5 * float(result.relative_error)
+
+
+def test_data_at_rest_name_every_unidentified_parameter():
+    ts = np.arange(0.0, 2.0, 0.01)
+    # Held still by a constant elbow torque at an equilibrium of the shoulder:
+    # theta4 sin q1 + theta5 sin(q1 + q2) = 0 (no shoulder torque) and tau2 = theta5 sin(q1 + q2).
+    theta4, theta5 = float(TRUE.theta4), float(TRUE.theta5)
+    q1 = 0.1
+    q12 = np.arcsin(-theta4 * np.sin(q1) / theta5)
+    tau2 = theta5 * np.sin(q12)
+    xs = np.tile([q1, q12 - q1, 0.0, 0.0], (len(ts), 1))
+    data = Trajectory(jnp.asarray(ts), jnp.asarray(xs), jnp.full((len(ts), 1), tau2), ("q1", "q2", "dq1", "dq2"), ("tau2",))
+    with pytest.raises(IdentifiabilityError) as info:
+        identify(TRUE, data, Dynamic())
+    # a static pose can only show gravity: theta4 and theta5 are seen, everything that needs motion is not
+    assert info.value.rank == 2
+    assert set(info.value.unidentified) == {"theta1", "theta2", "theta3", "theta6", "theta7"}
+    assert "theta1" in str(info.value) and "Excite" in str(info.value)
+    with pytest.raises(IdentifiabilityError):
+        identify(TRUE, data, Energy())  # nothing moves: no energy changes at all
+
+
+def test_a_locked_elbow_leaves_a_named_combination_unidentified():
+    # The double pendulum swinging as one rigid link: q2 = 0 throughout.
+    system = dynax.DoublePendulum()
+    ts = np.arange(0.0, 5.0, 0.01)
+    q1 = 0.8 * np.sin(2.0 * ts)
+    dq1 = 1.6 * np.cos(2.0 * ts)
+    ddq1 = -3.2 * np.sin(2.0 * ts)
+    xs = np.stack([q1, 0 * ts, dq1, 0 * ts], axis=1)
+    ddq = np.stack([ddq1, 0 * ts], axis=1)
+    tau = jax.vmap(lambda x, a: system.mass_matrix(x[:2]) @ a + system.bias_force(x[:2], x[2:]))(jnp.asarray(xs), jnp.asarray(ddq))
+    data = Trajectory(jnp.asarray(ts), jnp.asarray(xs), jnp.asarray(tau), ("q1", "q2", "dq1", "dq2"), ("tau1", "tau2"))
+    with pytest.raises(IdentifiabilityError) as info:
+        identify(system, data, Dynamic())
+    # only theta1 + theta2 + 2 theta3, theta2 + theta3, theta4 + theta5, theta5 and theta6 are seen
+    assert info.value.unidentified == ("theta1 + theta2 - theta3", "theta7")
+
+
+def test_too_few_samples_is_a_data_error(acrobot_data):
+    with pytest.raises(DataError, match="too few"):
+        identify(TRUE, acrobot_data.slice(0, 4), Dynamic())
+    with pytest.raises(IdentifiabilityError, match="rank"):
+        identify(TRUE, acrobot_data.slice(0, 5), Dynamic())  # 3 samples' rows: 6 equations for 7 parameters
+
+
+@pytest.mark.slow  # about 25 s, nearly all of it compiling the Levenberg-Marquardt program
+def test_simulation_fit_recovers_parameters_from_a_wrong_start(acrobot_data):
+    start = dynax.Acrobot.from_base_parameters({k: 1.1 * float(v) for k, v in TRUE.base_parameters.items()})
+    short = acrobot_data.slice(0, 201)  # 1 s
+    result = identify(start, short, SimulationFit(segment_s=0.25, max_steps=30))
+    np.testing.assert_allclose(np.asarray(result.estimate), THETA, rtol=1e-4)
+    assert result.to_json()["method"] == "simulation"
+
+
+def test_emps_reproduces_the_published_reference_model(datasets):
+    path = datasets / "emps" / "DATA_EMPS.mat"
+    data = load_trajectory(path, "linear_axis", mapping={"q": "qm", "force": "vir"}, scale={"force": 35.15065188})
+    recipe = Dynamic(lowpass_hz=100.0, lowpass_order=4, trim=50, decimate=10, inputs="sampled")
+    result = identify(dynax.LinearAxis(), data, recipe, friction="coulomb")
+    p = result.parameters
+    # Janot, Gautier and Brunot (2019): M = 95.1089, Fv = 203.5034, Fc = 20.3935, offset = -3.1648, 4.08 % error
+    assert abs(p["mass"] / 95.1089 - 1) < 0.01
+    assert abs(p["viscous"] / 203.5034 - 1) < 0.01
+    assert abs(p["coulomb"] / 20.3935 - 1) < 0.03
+    assert abs(p["offset"] / -3.1648 - 1) < 0.03
+    assert 0.035 < float(result.relative_error) < 0.045
+    without = identify(dynax.LinearAxis(), data, recipe, friction="viscous")
+    # The Coulomb term matters: without it the force error is 17 % here. (The paper quotes about 38 %
+    # without it, which this recipe does not reproduce; see docs/identification.md.)
+    assert float(without.relative_error) > 3 * float(result.relative_error)
+    assert "coulomb" not in without.parameters and float(without.system.coulomb) == 0.0

@@ -1,0 +1,54 @@
+"""`dynax identify` writes the contract's JSON, and refuses bad input with exit status 2 and no output."""
+
+import json
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import dynax
+from dynax._cli._main import main
+from dynax._data import save_trajectory, Trajectory
+
+
+@pytest.fixture(scope="module")
+def acrobot_csv(tmp_path_factory):
+    ts = np.arange(0.0, 6.0, 0.01)
+    us = (2.0 * np.sin(1.3 * ts) + 1.0 * np.sin(3.7 * ts + 0.5))[:, None]
+    sim = dynax.simulate(dynax.Acrobot(), jnp.array([0.2, 0.0, 0.0, 0.0]), jnp.asarray(ts), jnp.asarray(us))
+    path = tmp_path_factory.mktemp("data") / "acrobot.csv"
+    save_trajectory(Trajectory(jnp.asarray(ts), sim.xs, jnp.asarray(us), ("q1", "q2", "dq1", "dq2"), ("tau2",)), path)
+    return path
+
+
+def test_identify_writes_the_contract_json(acrobot_csv, tmp_path, capsys):
+    out = tmp_path / "params.json"
+    assert main(["identify", "acrobot", str(acrobot_csv), "--method", "power", "--out", str(out)]) == 0
+    report = json.loads(out.read_text())
+    assert set(report) == {"system", "method", "friction", "parameters", "std_errors", "condition_number", "n_samples"}
+    assert report["system"] == "acrobot" and report["method"] == "power" and report["friction"] == "viscous"
+    assert list(report["parameters"]) == [f"theta{i}" for i in range(1, 8)]
+    truth = dynax.Acrobot().base_parameters
+    for name, value in report["parameters"].items():
+        assert abs(value / float(truth[name]) - 1) < 0.02, name
+    assert report["n_samples"] > 500 and report["condition_number"] > 1
+    assert "theta3" in capsys.readouterr().out
+
+
+def test_identify_refuses_bad_input_without_writing(acrobot_csv, tmp_path, capsys):
+    out = tmp_path / "params.json"
+    bad = tmp_path / "bad.csv"
+    bad.write_text(acrobot_csv.read_text().replace("tau2", "torque"))
+    assert main(["identify", "acrobot", str(bad), "--out", str(out)]) == 2
+    assert "tau2" in capsys.readouterr().err and not out.exists()
+    # a method the system does not have
+    assert main(["identify", "linear_axis", str(acrobot_csv), "--method", "energy", "--out", str(out)]) == 2
+    assert "not available" in capsys.readouterr().err and not out.exists()
+    # a record that cannot determine the parameters: the arm never moves
+    still = tmp_path / "still.csv"
+    lines = acrobot_csv.read_text().splitlines()
+    header, rows = lines[0], lines[1:40]
+    still.write_text("\n".join([header] + [f"{0.01 * k},0,0,0,0,0" for k in range(len(rows))]) + "\n")
+    assert main(["identify", "acrobot", str(still), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "theta1" in err and "rank 0 of 7" in err and not out.exists()

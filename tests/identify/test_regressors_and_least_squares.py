@@ -1,0 +1,89 @@
+"""The regressors are the models they claim to be, and least squares says what the data leave undetermined."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import dynax
+from dynax._identify import (
+    dynamic_regressor,
+    energy_regressor,
+    friction_power_regressor,
+    IdentifiabilityError,
+    least_squares,
+    parameter_names,
+)
+from dynax._identify._regressors import parameter_vector, with_friction
+from dynax._model._extensions import CoulombFriction, Extended, RotorInertia
+
+
+@pytest.fixture(scope="module")
+def states():
+    rng = np.random.default_rng(0)
+    xs = jnp.asarray(rng.uniform(-2, 2, size=(50, 4)))
+    ddq = jnp.asarray(rng.uniform(-5, 5, size=(50, 2)))
+    return xs, ddq
+
+
+def test_dynamic_regressor_times_parameters_is_the_inverse_dynamics(states):
+    xs, ddq = states
+    system = dynax.DoublePendulum.from_physical(m1=0.6, m2=0.4, l1=0.3, lc1=0.2, lc2=0.25, Ic1=0.01, Ic2=0.02, b1=0.05, b2=0.02)
+    theta = parameter_vector(system)
+    ys = dynamic_regressor(dynax.DoublePendulum(), xs, ddq)  # parameter values of the model are irrelevant
+    tau = jax.vmap(lambda x, a: system.mass_matrix(x[:2]) @ a + system.bias_force(x[:2], x[2:]))(xs, ddq)
+    assert ys.shape == (50, 2, 7)
+    np.testing.assert_allclose(ys @ theta, tau, rtol=1e-12, atol=1e-12)
+    # and the forward dynamics agree: the acceleration the vector field gives reproduces tau = 0 rows.
+    accel = jax.vmap(lambda x: system.vector_field(0.0, x, jnp.zeros(2))[2:])(xs)
+    np.testing.assert_allclose(dynamic_regressor(system, xs, accel) @ theta, 0.0, atol=1e-10)
+
+
+def test_extended_terms_enter_the_regressor_with_their_names(states):
+    xs, ddq = states
+    system = Extended(dynax.DoublePendulum(), (RotorInertia(1, 0.05), CoulombFriction(0, 0.2)))
+    names = parameter_names(system, "coulomb")
+    assert names == ("theta1", "theta2", "theta3", "theta4", "theta5", "theta6", "theta7", "Ir2", "fc1", "fc2")
+    full = with_friction(system, "coulomb")
+    theta = parameter_vector(full, "coulomb")
+    ys = dynamic_regressor(full, xs, ddq, "coulomb")
+    # M ddq + h - extension forces = B u, with the vector field's own accelerations
+    us = jnp.asarray(np.random.default_rng(1).normal(size=(50, 2)))
+    accel = jax.vmap(lambda x, u: full.vector_field(0.0, x, u)[2:])(xs, us)
+    np.testing.assert_allclose(dynamic_regressor(full, xs, accel, "coulomb") @ theta, us, rtol=1e-9, atol=1e-9)
+    assert ys.shape == (50, 2, 10)
+
+
+def test_energy_regressor_is_the_energy_and_friction_power_is_the_dissipation(states):
+    xs, _ = states
+    system = dynax.Acrobot.from_physical(m1=1.3, lc2=0.8, b1=0.2, b2=0.05)
+    theta = parameter_vector(system)
+    w = energy_regressor(system, xs)
+    np.testing.assert_allclose(w @ theta, jax.vmap(system.energy)(xs), rtol=1e-12)
+    assert np.all(w[:, 5:] == 0)  # friction stores no energy
+    f = friction_power_regressor(system, xs)
+    np.testing.assert_allclose(f @ theta, 0.2 * xs[:, 2] ** 2 + 0.05 * xs[:, 3] ** 2, rtol=1e-12)
+
+
+def test_least_squares_matches_numpy_and_textbook_standard_errors():
+    rng = np.random.default_rng(2)
+    a = rng.normal(size=(200, 3)) * np.array([1.0, 100.0, 0.01])
+    theta = np.array([1.0, -2.0, 3.0])
+    y = a @ theta + 0.1 * rng.normal(size=200)
+    fit = least_squares(a, y, names=("a", "b", "c"))
+    ref, res, *_ = np.linalg.lstsq(a, y, rcond=None)
+    np.testing.assert_allclose(fit.estimate, ref, rtol=1e-10)
+    sigma2 = res[0] / (200 - 3)
+    np.testing.assert_allclose(fit.std_errors, np.sqrt(np.diag(sigma2 * np.linalg.inv(a.T @ a))), rtol=1e-8)
+    assert int(fit.rank) == 3 and float(fit.condition_number) < 2  # column scaling removes the units
+
+
+def test_rank_deficiency_names_the_unidentified_combination():
+    rng = np.random.default_rng(3)
+    x = rng.normal(size=(100, 2))
+    a = np.column_stack([x[:, 0], x[:, 1], x[:, 0] + 2 * x[:, 1], x[:, 0] * 0])
+    with pytest.raises(IdentifiabilityError) as info:
+        least_squares(a, x[:, 0], names=("m", "b", "c", "d"))
+    assert info.value.rank == 2
+    assert info.value.unidentified == ("m + 2 b - c", "d")
+    assert "d" in str(info.value) and "rank 2 of 4" in str(info.value)
