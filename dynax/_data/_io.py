@@ -155,7 +155,7 @@ def load_trajectory(
         arr = _to_float(path, column, raw[column])
         bad = np.flatnonzero(~np.isfinite(arr))
         if bad.size:
-            raise DataError(f"non-finite value {arr[bad[0]]!r}", path=path, column=column, row=int(bad[0]) + 1)
+            raise DataError(f"non-finite value {float(arr[bad[0]])}", path=path, column=column, row=int(bad[0]) + 1)
         values[name] = arr * float(scale.get(name, 1.0))
 
     n = values[TIME].shape[0]
@@ -170,7 +170,7 @@ def load_trajectory(
     if bad.size:
         k = int(bad[0]) + 1
         raise DataError(
-            f"time does not strictly increase ({ts[k - 1]!r} then {ts[k]!r})",
+            f"time does not strictly increase ({float(ts[k - 1])} then {float(ts[k])})",
             path=path,
             column=mapping.get(TIME, TIME),
             row=k + 1,
