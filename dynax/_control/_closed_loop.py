@@ -157,13 +157,15 @@ def swing_up_time(
     return jnp.where(success, ts[first] - ts[0], duration), success
 
 
-def swing_up_reward(loop: ClosedLoop, *, rate_weight: float = 0.1, input_weight: float = 1e-3) -> Float[Array, ""]:
-    r"""The average reward of a swing-up episode: minus the mean quadratic distance from upright.
+def swing_up_reward(loop: ClosedLoop, *, rate_weight: float = 0.01, input_weight: float = 1e-4) -> Float[Array, ""]:
+    r"""The average reward of a swing-up episode: minus the mean height deficit, rates and effort.
 
-    $r = -\frac{1}{N}\sum_k \big(\|e_q(x_k)\|^2 + w_{\dot q}\|\dot q_k\|^2 + w_u u_k^2\big)$ with
-    $e_q$ the wrapped angle error from upright. It rewards getting up early and staying there;
-    a diverged episode gets the reward of sitting at the worst wrapped error ($-2\pi^2$) for its
-    remaining samples, so it is finite and worse than any bounded one.
+    $r = -\frac{1}{N}\sum_k \big((1 - \cos e_1) + (1 - \cos(e_1 + e_2)) + w_{\dot q}\|\dot q_k\|^2
+    + w_u u_k^2\big)$ with $e = x \ominus x_{up}$ the wrapped angle error: the first two terms are the
+    normalised height deficits of link 1 and of link 2 (0 upright, 2 each hanging down), so
+    pumping energy is rewarded on the way up and the reward is quadratic near upright. It
+    rewards getting up early and staying there. A diverged episode gets the worst per-step cost
+    for its remaining samples, so it is finite and worse than any bounded one.
 
     **Arguments:**
 
@@ -172,10 +174,11 @@ def swing_up_reward(loop: ClosedLoop, *, rate_weight: float = 0.1, input_weight:
 
     **Returns:**
 
-    The average reward (a scalar, at most 0).
+    The average reward (a scalar in $[-4 - \ldots, 0]$).
     """
     e = upright_error(loop.xs)
-    per_step = jnp.sum(e[:, :2] ** 2, -1) + rate_weight * jnp.sum(e[:, 2:] ** 2, -1) + input_weight * jnp.sum(loop.us**2, -1)
-    worst = 2 * jnp.pi**2 + rate_weight * 100.0
+    height = (1 - jnp.cos(e[:, 0])) + (1 - jnp.cos(e[:, 0] + e[:, 1]))
+    per_step = height + rate_weight * jnp.sum(e[:, 2:] ** 2, -1) + input_weight * jnp.sum(loop.us**2, -1)
+    worst = 4.0 + rate_weight * 400.0
     per_step = jnp.where(jnp.isfinite(per_step), jnp.minimum(per_step, worst), worst)
     return -jnp.mean(per_step)
