@@ -12,7 +12,6 @@ from ._swing_up import (
     balancing_lqr as balancing_lqr,
     CostToGoThreshold as CostToGoThreshold,
     DRAKE_SPONG_PARAMETERS as DRAKE_SPONG_PARAMETERS,
-    SaturationAwareRegion as SaturationAwareRegion,
     SmoothActivation as SmoothActivation,
     SPONG_PARAMETER_NAMES as SPONG_PARAMETER_NAMES,
     SpongController as SpongController,
@@ -38,3 +37,4 @@ from ._pgpe import (
     run as run_pgpe,
 )
 from ._swing_up_task import random_starts as random_starts, SwingUpTask as SwingUpTask
+from ._region_of_attraction import estimate_region_of_attraction as estimate_region_of_attraction, RegionOfAttraction as RegionOfAttraction

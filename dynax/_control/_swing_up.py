@@ -54,29 +54,6 @@ class CostToGoThreshold(AbstractSwitchingRule):
         return jnp.where(controller.balance.cost_to_go(x) < controller.phi, 1.0, 0.0).astype(x.dtype)
 
 
-class SaturationAwareRegion(AbstractSwitchingRule):
-    r"""Balance inside an estimated region of attraction of the saturated LQR loop.
-
-    The LQR takes over only when (a) the cost-to-go is below `phi`, which the caller sets to the
-    level $\rho$ of an estimated region of attraction (`estimate_region_of_attraction`), and
-    (b) the unsaturated LQR torque is within `margin` times the torque limit. Condition (b)
-    rejects states on the level set where the linear design would saturate at once, which is
-    where the hand-over of the threshold rule typically fails.
-
-    **Arguments:**
-
-    - `margin`: fraction of the torque limit the LQR torque may use at hand-over (default 1).
-    """
-
-    margin: float = 1.0
-
-    def weight(self, controller, x):
-        inside = controller.balance.cost_to_go(x) < controller.phi
-        torque = jnp.abs(controller.balance(0.0, x)[0])
-        ok = torque <= self.margin * controller.torque_limit
-        return jnp.where(inside & ok, 1.0, 0.0).astype(x.dtype)
-
-
 class SmoothActivation(AbstractSwitchingRule):
     r"""A learnable soft hand-over: weight $\sigma((\log\phi - \log V(x)) / \tau)$ on the LQR torque.
 

@@ -49,7 +49,7 @@ class SwingUpTask(eqx.Module):
 
     @property
     def dtype(self):
-        return jnp.result_type(self.plant.theta1)
+        return jnp.result_type(self.controller.system.theta1)
 
     @property
     def ts(self) -> Float[Array, " time"]:
