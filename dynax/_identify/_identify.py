@@ -267,6 +267,16 @@ def _held_input_at_samples(ts, us):
     return jnp.concatenate([us[:1], interior, us[-1:]])
 
 
+@eqx.filter_jit
+def _dynamic_equations(system, ts, xs, us, friction, held):
+    """Regressor `(time, joints, params)` and generalised forces `(time, joints)` of the dynamic model."""
+    if held:
+        us = _held_input_at_samples(ts, us)
+    _, dq = _positions(system, xs)
+    ddq = central_difference(ts, dq)
+    return dynamic_regressor(system, xs, ddq, friction), generalised_force(system, us)
+
+
 def _dynamic_rows(system, traj, method: Dynamic, friction):
     _needs(traj, 2 * method.trim + 3, "dynamic")
     if method.lowpass_hz is not None:
@@ -274,18 +284,17 @@ def _dynamic_rows(system, traj, method: Dynamic, friction):
         xs = _lowpass(traj, traj.xs, method.lowpass_hz, method.lowpass_order)
     else:
         xs = traj.xs
-    if method.inputs == "held":
-        us = _held_input_at_samples(traj.ts, traj.us)
-    elif method.inputs == "sampled":
-        us = traj.us
-    else:
+    if method.inputs not in ("held", "sampled"):
         raise UsageError(f"Dynamic: `inputs` must be 'held' or 'sampled', got {method.inputs!r}")
+    us = traj.us
     if method.lowpass_hz is not None and method.lowpass_inputs:
+        if method.inputs == "held":
+            us = _held_input_at_samples(traj.ts, us)
         us = _lowpass(traj, us, method.lowpass_hz, method.lowpass_order)
-    _, dq = _positions(system, xs)
-    ddq = central_difference(traj.ts, dq)
-    ys = dynamic_regressor(system, xs, ddq, friction)  # (rows, joints, params)
-    forces = generalised_force(system, us)  # (rows, joints)
+        held = False
+    else:
+        held = method.inputs == "held"
+    ys, forces = _dynamic_equations(system, traj.ts, xs, us, friction, held)
     ys, forces = _trim_and_decimate(ys, forces, method.trim, method.decimate)
     return ys, forces, ys.shape[0]
 

@@ -109,7 +109,9 @@ def _combination(direction, names, tol=1e-3):
 
 
 @jax.jit
-def _solve(a, y, w):
+def _solve(a, y, w, rcond):
+    """QR of the column-scaled weighted regressor, SVD of R, pseudo-inverse at the numerical rank."""
+    m, n = a.shape
     sw = jnp.sqrt(w)
     aw = a * sw[:, None]
     yw = y * sw
@@ -117,9 +119,20 @@ def _solve(a, y, w):
     scale = jnp.where(scale > 0, scale, 1.0)
     q, r = jnp.linalg.qr(aw / scale, mode="reduced")
     u, s, vt = jnp.linalg.svd(r)
-    qty = q.T @ yw
-    m, n = a.shape
-    return u, s, vt, qty, scale, aw, yw, m, n
+    finite = jnp.all(jnp.isfinite(s)) & (s[0] > 0)
+    rank = jnp.where(finite, jnp.sum(s > rcond * s[0]), 0)
+    cond = jnp.where(finite & (s[-1] > 0), s[0] / jnp.where(s[-1] > 0, s[-1], 1.0), jnp.inf)
+    inv_s = jnp.where(jnp.arange(n) < rank, 1.0 / jnp.where(s > 0, s, 1.0), 0.0)
+    estimate = (vt.T @ (inv_s * (u.T @ (q.T @ yw)))) / scale
+    residual = aw @ estimate - yw
+    dof = jnp.maximum(jnp.minimum(m, jnp.sum(w > 0)) - rank, 1)
+    sigma2 = residual @ residual / dof
+    v_over = (vt.T * inv_s) / scale[:, None]
+    covariance = sigma2 * v_over @ v_over.T
+    directions = vt / scale[None, :]
+    directions = directions / jnp.max(jnp.abs(directions), axis=1, keepdims=True)
+    residual_rms = jnp.sqrt(residual @ residual / m)
+    return estimate, covariance, s, directions, cond, rank, residual_rms
 
 
 def least_squares(
@@ -172,37 +185,22 @@ def least_squares(
         a = jnp.concatenate([a, jnp.zeros((n - m, n), a.dtype)])
         y = jnp.concatenate([y, jnp.zeros(n - m, y.dtype)])
         w = jnp.concatenate([w, jnp.zeros(n - m, w.dtype)])
-    u, s, vt, qty, scale, aw, yw, _, _ = _solve(a, y, w)
-    s_np = np.asarray(s)
-    finite = np.all(np.isfinite(s_np))
-    rank = int(np.sum(s_np > rcond * s_np[0])) if finite and s_np[0] > 0 else 0
-    cond = float(s_np[0] / s_np[-1]) if finite and s_np[-1] > 0 else float("inf")
-    directions = np.asarray(vt) / np.asarray(scale)[None, :]
-    directions = directions / np.max(np.abs(directions), axis=1, keepdims=True)
-    inv_s = np.where(np.arange(n) < rank, 1.0 / np.where(s_np > 0, s_np, 1.0), 0.0)
-    uty = np.asarray(u).T @ np.asarray(qty)
-    z = np.asarray(vt).T @ (inv_s * uty)
-    estimate = z / np.asarray(scale)
-    residual = np.asarray(aw) @ (estimate) - np.asarray(yw)
-    dof = max(min(m, int(np.sum(np.asarray(w) > 0))) - rank, 1)
-    sigma2 = float(residual @ residual) / dof
-    v_over = (np.asarray(vt).T * inv_s) / np.asarray(scale)[:, None]
-    covariance = sigma2 * v_over @ v_over.T
-    std = np.sqrt(np.diag(covariance))
-    if rank < n:
-        std = np.full(n, np.inf)
+    estimate, covariance, s, directions, cond, rank, residual_rms = _solve(a, y, w, rcond)
+    rank = int(rank)
+    std = jnp.sqrt(jnp.diag(covariance)) if rank == n else jnp.full(n, jnp.inf, a.dtype)
     fit = LeastSquaresFit(
-        estimate=jnp.asarray(estimate),
-        std_errors=jnp.asarray(std),
-        covariance=jnp.asarray(covariance),
-        singular_values=jnp.asarray(s_np),
-        directions=jnp.asarray(directions),
-        condition_number=jnp.asarray(cond),
+        estimate=estimate,
+        std_errors=std,
+        covariance=covariance,
+        singular_values=s,
+        directions=directions,
+        condition_number=cond,
         rank=jnp.asarray(rank),
-        residual_rms=jnp.asarray(np.sqrt(float(residual @ residual) / max(m, 1))),
+        residual_rms=residual_rms,
         n_rows=m,
         names=names,
     )
+    cond = float(cond)
     if rank < n and not allow_rank_deficient:
         unidentified = fit.unidentified
         listed = "; ".join(unidentified)

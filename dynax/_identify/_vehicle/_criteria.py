@@ -125,6 +125,9 @@ class VehicleFit(eqx.Module):
     n_samples: int = eqx.field(static=True)
 
 
+_lagged_loss_jit = eqx.filter_jit(lagged_loss)  # compiled once per (model structure, data shape, horizon)
+
+
 def _with_theta(system: Helicopter, theta) -> Helicopter:
     return eqx.tree_at(lambda h: h.body_model, system, system.body_model.with_parameter_vector(theta))
 
@@ -226,7 +229,7 @@ def fit_lagged(
     n_steps = horizon_steps(criterion.horizon, dt, "fit_lagged")
     starts = _starts(trajectory, n_steps, criterion.stride)
     w = _weights(weights, trajectory.xs.dtype)
-    loss_fn = eqx.filter_jit(lambda s: lagged_loss(s, trajectory, n_steps, starts=starts, weights=w))
+    loss_fn = lambda s: _lagged_loss_jit(s, trajectory, n_steps, starts=starts, weights=w)  # noqa: E731
     t0 = time.perf_counter()
     current = float(loss_fn(system))
     history = [(time.perf_counter() - t0, current)]
@@ -306,4 +309,4 @@ def lagged_loss_of(system: Helicopter, trajectory: Trajectory, horizon: float, *
     n_steps = horizon_steps(horizon, dt, "lagged_loss_of")
     starts = _starts(trajectory, n_steps, stride)
     w = _weights(weights, trajectory.xs.dtype)
-    return float(eqx.filter_jit(lambda s: lagged_loss(s, trajectory, n_steps, starts=starts, weights=w))(system))
+    return float(_lagged_loss_jit(system, trajectory, n_steps, starts=starts, weights=w))

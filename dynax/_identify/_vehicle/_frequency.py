@@ -9,7 +9,8 @@ r"""The frequency-domain criterion (CIFER-style) for the linear velocity model.
    8-state LTI system $(\nu, \omega, \phi_r, \theta_p)$ with $\dot\phi_r = p$, $\dot\theta_p = q$, so
    $H_m(j\omega) = C(j\omega I - A)^{-1}B$.
 3. **The fit**: minimise the coherence-weighted magnitude (dB) and phase (deg) error over the
-   identified band, pairs and frequencies with $\gamma^2 \ge$ `min_coherence`,
+   identified band, over the pairs and frequencies with $\gamma^2 \ge$ `min_coherence` whose
+   magnitude is within 30 dB of the largest response of that output,
 
    $$J = \sum W_\gamma\big[(20\log_{10}|\hat H| - 20\log_{10}|H_m|)^2 + W_p(\angle\hat H - \angle H_m)^2\big],
    \quad W_\gamma = \big(1.58(1 - e^{-\gamma^2})\big)^2,\ W_p = 0.01745,$$
@@ -121,7 +122,10 @@ def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: Frequen
     if band.sum() < 3:
         raise UsageError(f"fit_frequency: fewer than 3 frequencies in the band {criterion.band_hz} Hz; use longer data")
     freqs, measured, coherence = freqs[band], measured[band], coherence[band]
-    use = coherence >= criterion.min_coherence
+    # Pairs with good partial coherence and a response within 30 dB of the output's largest one:
+    # off-axis responses that are (nearly) absent carry no information and their dB error is noise.
+    magnitude_db = 20 * np.log10(np.abs(measured) + 1e-300)
+    use = (coherence >= criterion.min_coherence) & (magnitude_db >= magnitude_db.max(axis=2, keepdims=True) - 30.0)
     if not use.any():
         raise UsageError("fit_frequency: no input/output pair reaches the coherence threshold; the data lack excitation")
     w_gamma = np.where(use, (1.58 * (1 - np.exp(-coherence))) ** 2, 0.0)
