@@ -176,7 +176,7 @@ def main(argv=None):
     task = SwingUpTask(plant, controller, duration=DURATION, control_rate=RATE)
     scales = jnp.asarray(DRAKE_SPONG_PARAMETERS, jnp.float32)
     start = scales
-    pgpe = PGPE(population_size=POPULATION, scales=scales, init_sigma=0.1, optimizer=clipup(0.02), fitness_shaping=CentredRank())
+    pgpe = PGPE(population_size=POPULATION, scales=scales, init_sigma=0.1, optimizer=clipup(0.02, max_speed=0.04), fitness_shaping=CentredRank())
     state = pgpe.init(start)
     pairs = POPULATION // 2
 
@@ -194,8 +194,13 @@ def main(argv=None):
     print(f"dynax, one device:       {results['dynax_s']:.3f} s / generation", flush=True)
 
     from evosax.algorithms import PGPE as EvosaxPGPE
+    from evosax.core.optimizer import clipup as evosax_clipup
 
-    es = EvosaxPGPE(population_size=POPULATION, solution=jnp.zeros(4, jnp.float32))
+    es = EvosaxPGPE(
+        population_size=POPULATION,
+        solution=jnp.zeros(4, jnp.float32),
+        optimizer=evosax_clipup(learning_rate=0.02, max_velocity=0.04),
+    )
     es_params = es.default_params.replace(std_init=0.1)
     es_state = es.init(key, start / scales, es_params)
 

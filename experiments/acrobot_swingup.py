@@ -254,7 +254,14 @@ def evosax_baseline(cfg, task, start, pgpe, key, held_out, evaluate):
     from evosax.algorithms import PGPE as EvosaxPGPE
 
     scales = jnp.asarray(SCALES, jnp.float32)
-    es = EvosaxPGPE(population_size=cfg["population"], solution=jnp.zeros(4, jnp.float32))
+    from evosax.core.optimizer import clipup as evosax_clipup
+
+    # Same settings as dynax's: ClipUp with step 0.02 and max speed 0.04, centred ranks, sigma 0.1.
+    es = EvosaxPGPE(
+        population_size=cfg["population"],
+        solution=jnp.zeros(4, jnp.float32),
+        optimizer=evosax_clipup(learning_rate=0.02, max_velocity=0.04),
+    )
     es_params = es.default_params.replace(std_init=0.1)
     pairs = cfg["population"] // 2
 

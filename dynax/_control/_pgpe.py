@@ -309,7 +309,8 @@ def evaluate_population(
     return jax.vmap(objective)(population, keys)
 
 
-def run(
+@eqx.filter_jit
+def run_pgpe(
     pgpe: PGPE,
     objective: Objective,
     params: Float[ArrayLike, " n_params"],
@@ -318,7 +319,7 @@ def run(
     *,
     shard: bool = True,
 ) -> tuple[PGPEState, PGPEHistory]:
-    """Run `n_iterations` of PGPE from `params`, as one `lax.scan` (`jit` it, `vmap` it over keys).
+    """Run `n_iterations` of PGPE from `params`: one compiled `lax.scan` (`vmap` it over keys for a sweep).
 
     **Arguments:**
 
