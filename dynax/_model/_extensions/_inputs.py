@@ -65,6 +65,7 @@ class InputGain(AbstractInputTerm):
     cause: ClassVar[str] = "input_gain"
     prefix: ClassVar[str] = "gain"
     neutral: ClassVar[float] = 1.0
+    sign: ClassVar[int] = 0
 
     def __init__(self, input: int, gain: ArrayLike = 1.0):
         self.input = input
@@ -85,6 +86,7 @@ class InputOffset(AbstractInputTerm):
     cause: ClassVar[str] = "input_offset"
     prefix: ClassVar[str] = "offset"
     neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 0
 
     def __init__(self, input: int, offset: ArrayLike = 0.0):
         self.input = input
@@ -108,6 +110,7 @@ class InputLag(AbstractInputTerm):
     cause: ClassVar[str] = "input_lag"
     prefix: ClassVar[str] = "lag"
     neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 1
     n_hidden: ClassVar[int] = 1
 
     def __init__(self, input: int, time_constant: ArrayLike = 0.0):
@@ -147,6 +150,7 @@ class InputDelay(AbstractInputTerm):
     cause: ClassVar[str] = "input_delay"
     prefix: ClassVar[str] = "delay"
     neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 1
     n_hidden: ClassVar[int] = 2
 
     def __init__(self, input: int, delay: ArrayLike = 0.0):

@@ -26,12 +26,15 @@ class AbstractTerm(eqx.Module):
     - `cause`: the contract's cause name (`"coulomb_friction"`, ...).
     - `prefix`: the parameter's short name in reports (`"fc"` for Coulomb friction, ...).
     - `neutral`: the coefficient value at which the term does nothing.
+    - `sign`: +1 when only deviations above `neutral` are physical (friction, inertia, delay),
+      0 when both signs are.
     """
 
     coefficient: eqx.AbstractVar[Float[Array, ""]]
     cause: eqx.AbstractClassVar[str]
     prefix: eqx.AbstractClassVar[str]
     neutral: eqx.AbstractClassVar[float]
+    sign: eqx.AbstractClassVar[int]
 
     @abc.abstractmethod
     def where(self, system) -> str:
@@ -107,6 +110,7 @@ class CoulombFriction(AbstractJointTerm):
     cause: ClassVar[str] = "coulomb_friction"
     prefix: ClassVar[str] = "fc"
     neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 1
 
     def __init__(self, joint: int, fc: ArrayLike = 0.0, *, velocity_scale: float = 0.01):
         self.joint = joint
@@ -128,6 +132,7 @@ class ViscousFriction(AbstractJointTerm):
     cause: ClassVar[str] = "viscous_friction"
     prefix: ClassVar[str] = "b"
     neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 0
 
     def __init__(self, joint: int, b: ArrayLike = 0.0):
         self.joint = joint
@@ -148,6 +153,7 @@ class QuadraticDrag(AbstractJointTerm):
     cause: ClassVar[str] = "quadratic_drag"
     prefix: ClassVar[str] = "cd"
     neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 1
 
     def __init__(self, joint: int, c: ArrayLike = 0.0):
         self.joint = joint
@@ -176,6 +182,7 @@ class RotorInertia(AbstractJointTerm):
     cause: ClassVar[str] = "rotor_inertia"
     prefix: ClassVar[str] = "Ir"
     neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 1
 
     def __init__(self, joint: int, inertia: ArrayLike = 0.0):
         self.joint = joint
@@ -199,6 +206,7 @@ class JointSpring(AbstractJointTerm):
     cause: ClassVar[str] = "joint_spring"
     prefix: ClassVar[str] = "k"
     neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 0
 
     def __init__(self, joint: int, k: ArrayLike = 0.0):
         self.joint = joint

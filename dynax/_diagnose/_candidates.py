@@ -1,0 +1,149 @@
+"""The candidate library and its structural identifiability in the diagnosis mode used."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._model._extensions import (
+    AbstractInputTerm,
+    AbstractTerm,
+    CoulombFriction,
+    Extended,
+    InputDelay,
+    InputGain,
+    InputLag,
+    InputOffset,
+    QuadraticDrag,
+    RotorInertia,
+    ViscousFriction,
+)
+from .._model._system import AbstractManipulator
+
+# Groups of causes that look alike in data; the report says how well each finding is told apart.
+LOOK_ALIKES = (
+    frozenset({"coulomb_friction", "viscous_friction", "quadratic_drag"}),
+    frozenset({"input_delay", "input_lag"}),
+    frozenset({"wind", "body_bias"}),
+)
+
+
+def default_candidates(system) -> tuple[AbstractTerm, ...]:
+    """The contract's vocabulary for `system`, at neutral values.
+
+    For a manipulator, per coordinate: `coulomb_friction`, `viscous_friction`, `quadratic_drag`,
+    `rotor_inertia`; for every system, per input: `input_delay`, `input_lag`, `input_gain`,
+    `input_offset`.
+    """
+    terms: list[AbstractTerm] = []
+    if isinstance(system, AbstractManipulator):
+        for j in range(system.n_joints):
+            terms += [CoulombFriction(j), ViscousFriction(j), QuadraticDrag(j), RotorInertia(j)]
+    for i in range(system.n_inputs):
+        terms += [InputDelay(i), InputLag(i), InputGain(i), InputOffset(i)]
+    return tuple(terms)
+
+
+def look_alikes(system, term, candidates) -> list[int]:
+    """Indices of the candidates that look like `term` in data: same place, cause in the same group."""
+    where = term.where(system)
+    return [
+        k
+        for k, other in enumerate(candidates)
+        if other.where(system) == where
+        and other.cause != term.cause
+        and any(term.cause in group and other.cause in group for group in LOOK_ALIKES)
+    ]
+
+
+def structurally_absorbed(family, refit, *, n_points: int = 64, seed: int = 0, tol: float = 1e-7) -> np.ndarray:
+    r"""For each candidate of `family`, whether refitting the nominal parameters reproduces it exactly.
+
+    The test is structural, not about a data set: at random states and inputs, the derivative of
+    the vector field with respect to a candidate's coefficient (at its neutral value) is projected
+    on the derivatives with respect to the refitted nominal parameters (`refit`, a 0/1 mask); if
+    nothing is left, a change of the coefficient is a change of nominal parameters, and the cause
+    cannot be identified in this mode (an input gain on the acrobot is a rescaling of
+    theta1..theta7; a viscous friction on a model that fits its own viscous coefficients is that
+    coefficient). Terms with internal states (lag, delay) change the dynamics' order and are never
+    absorbed.
+
+    **Returns:** a bool per candidate.
+
+    ??? cite
+
+        E. Walter and L. Pronzato, *Identification of Parametric Models from Experimental Data*,
+        Springer 1997, ch. 2 (structural identifiability; local rank test of the sensitivity matrix).
+    """
+    model = family.model
+    system = model.system
+    refit = np.asarray(refit) > 0
+    rng = np.random.default_rng(seed)
+    n_x, n_u = system.n_states, system.n_inputs
+    xs = rng.uniform(-1.0, 1.0, (n_points, n_x)) * np.where(np.arange(n_x) < n_x // 2, 2.0, 3.0)
+    us = rng.normal(0.0, 1.0, (n_points, n_u))
+    values = jnp.asarray([getattr(system, n) for n in family.names], float)
+    J_nom, J_c = _sensitivities(family, values, family.neutral, jnp.asarray(xs), jnp.asarray(us))
+    A = np.asarray(J_nom).reshape(-1, len(family.names))[:, refit]
+    out = []
+    for k, term in enumerate(model.terms):
+        b = np.asarray(J_c)[..., k].reshape(-1)
+        if isinstance(term, AbstractInputTerm) and term.n_hidden:
+            out.append(False)
+        elif np.linalg.norm(b) == 0:
+            out.append(True)
+        elif A.shape[1] == 0:
+            out.append(False)
+        else:
+            coef, *_ = np.linalg.lstsq(A, b, rcond=None)
+            out.append(bool(np.linalg.norm(b - A @ coef) <= tol * np.linalg.norm(b)))
+    return np.asarray(out)
+
+
+@eqx.filter_jit
+def _sensitivities(family, values, coefficients, xs, us):
+    n = family.model.system.n_states
+
+    def field(v, c, x, u):
+        model = family.build(v, c)
+        return model.vector_field(0.0, model.initial_state(x, u), u)[:n]
+
+    jac = jax.jacfwd(field, argnums=(0, 1))
+    return jax.vmap(lambda x, u: jac(values, coefficients, x, u))(xs, us)
+
+
+def candidate_scales(system, candidates, trajectories) -> tuple[np.ndarray, np.ndarray]:
+    """Typical size and start value of each candidate's coefficient, from the data's spread.
+
+    A friction or drag term of typical size produces a tenth of the RMS input force; inertia a
+    tenth of the nominal diagonal inertia; delays and lags start at two sample intervals (a
+    zero delay has no gradient).
+    """
+    xs = np.concatenate([np.asarray(t.xs) for t in trajectories])
+    us = np.concatenate([np.asarray(t.us) for t in trajectories])
+    dt = float(np.median(np.concatenate([np.diff(np.asarray(t.ts)) for t in trajectories])))
+    force = max(float(np.sqrt(np.mean(us**2))), 1e-6)
+    scales, inits = [], []
+    for term in candidates:
+        init = term.neutral
+        if isinstance(term, AbstractInputTerm):
+            rms_u = max(float(np.sqrt(np.mean(us[:, term.input] ** 2))), 1e-6)
+            if term.n_hidden:
+                scale = init = 2.0 * dt
+            elif term.cause == "input_gain":
+                scale = 0.1
+            else:
+                scale = 0.1 * rms_u
+        else:
+            j, n = term.joint, system.n_joints
+            rms_q = max(float(np.sqrt(np.mean(xs[:, j] ** 2))), 1e-6)
+            rms_dq = max(float(np.sqrt(np.mean(xs[:, n + j] ** 2))), 1e-6)
+            scale = {
+                "coulomb_friction": 0.1 * force,
+                "viscous_friction": 0.1 * force / rms_dq,
+                "quadratic_drag": 0.1 * force / rms_dq**2,
+                "rotor_inertia": 0.1 * float(system.mass_matrix(jnp.zeros(n))[j, j]),
+            }.get(term.cause, 0.1 * force / rms_q)
+        scales.append(scale)
+        inits.append(init)
+    return np.asarray(scales, float), np.asarray(inits, float)

@@ -1,0 +1,112 @@
+"""Writing a diagnosis `Report`: `report.json` (the contract), `report.md` (for a person) and figures."""
+
+import pathlib
+
+import numpy as np
+
+from ._figures import plot_error_vs_horizon, plot_measured_vs_simulated, plot_residuals
+from ._residuals import acceleration_residuals, velocity_indices
+
+_VERDICT_TEXT = {
+    "explained": "**explained**: the named causes account for what the nominal model got wrong; the extended "
+    "model's residuals have no significant structure left.",
+    "none": "**none**: the nominal model's errors show no significant structure; no cause is claimed.",
+    "unexplained": "**unexplained**: the errors have significant structure that the candidate causes do not "
+    "(fully) explain. Partial findings, if any, are listed, but they are not an explanation.",
+}
+
+
+def _fmt(x, digits=4):
+    return "n/a" if x is None else f"{x:.{digits}g}"
+
+
+def report_markdown(report) -> str:
+    """The report as Markdown, written for a person."""
+    j = report.to_json()
+    ref = j["reference_horizon_s"]
+    h = j["nominal"]["sim_error"]["horizons_s"]
+    lines = [f"# Discrepancy diagnosis: {j['system']}", ""]
+    lines += [f"Verdict: {_VERDICT_TEXT[j['verdict']]}", ""]
+    if j["findings"]:
+        lines += [f"Held-out simulation error at {ref:g} s is reduced by **{j['gain']:.0%}** by the extended model "
+                  f"({', '.join(j['extended']['terms'])}).", ""]
+    lines += ["## Data", "",
+              f"- training: {j['data']['train']} ({j['data']['n_train']} samples)",
+              f"- held out: {j['data']['validation']} ({j['data']['n_validation']} samples)",
+              f"- mode: `{j['mode']}` ("
+              + ("the nominal parameters were refitted on the training data" if j["mode"] == "refit"
+                 else "the nominal parameters were trusted and kept") + ")", ""]
+    lines += ["## What the nominal simulation gets wrong", "",
+              "Open-loop simulation from measured states, position RMSE on the held-out data:", "",
+              "| horizon [s] | " + " | ".join(f"{x:g}" for x in h) + " |",
+              "|---|" + "---|" * len(h),
+              "| nominal | " + " | ".join(_fmt(x) for x in j["nominal"]["sim_error"]["rmse"]) + " |"]
+    if j["findings"]:
+        lines.append("| extended | " + " | ".join(_fmt(x) for x in j["extended"]["sim_error"]["rmse"]) + " |")
+    s = j["structure"]["nominal"]
+    lines += ["", f"Residual analysis of one-step accelerations (nominal model): a generic probe explains "
+              f"{max(s['r2'], 0):.0%} of the held-out residual variance (p = {s['p_value']:.2g}; "
+              f"{'significant' if s['significant'] else 'not significant'}). "
+              "Features carrying it: " + ", ".join(f"{f['feature']} ({f['share']:.0%})" for f in s["top_features"][:3])
+              + ". Share of residual energy by state: "
+              + ", ".join(f"{k} {v:.0%}" for k, v in s["by_state"].items())
+              + ". Largest residuals around t = " + ", ".join(f"{t:.1f} s" for t in s["worst_times_s"]) + ".", ""]
+    lines += ["![measured against simulated](measured_vs_simulated.png)", "", "![error against horizon](sim_error.png)", "",
+              "![residuals](residuals.png)", ""]
+    lines += ["## Causes", ""]
+    if j["findings"]:
+        lines += ["| cause | where | coefficient | std. error | gain | p | told apart from look-alikes |", "|---|---|---|---|---|---|---|"]
+        for f in j["findings"]:
+            alts = "; ".join(f"{a['cause']} (gain {a['gain']:.0%}, p = {a['p_value']:.2g})" for a in f["look_alikes"]) or "none in the library"
+            lines.append(f"| `{f['cause']}` | `{f['where']}` | {f['parameter']} = {f['coefficient']:.4g} | {f['std_error']:.2g} | "
+                         f"{f['gain']:.0%} | {f['p_value']:.2g} | {f['confidence']}: {alts} |")
+        lines += ["", "Standard errors come from the Gauss-Newton covariance and assume white residuals; "
+                  "read them as lower bounds.", ""]
+    else:
+        lines += ["No candidate improved the held-out simulation significantly.", ""]
+    if j["candidates"]:
+        lines += ["Every candidate in the first round (held-out improvement of the window error over the nominal model):", "",
+                  "| candidate | gain (screening) | gain (joint refit) | p |", "|---|---|---|---|"]
+        for c in j["candidates"]:
+            lines.append(f"| `{c['cause']}@{c['where']}` | {c['screening_gain']:+.0%} | "
+                         + (f"{c['gain']:+.0%} | {c['p_value']:.2g}" if "gain" in c else "| ") + " |")
+        lines.append("")
+    if j["not_identifiable"]:
+        lines += ["## Not identifiable in this mode", ""]
+        lines += [f"- `{c['cause']}@{c['where']}`: {c['reason']}." for c in j["not_identifiable"]]
+        lines.append("")
+    if j["notes"]:
+        lines += ["## Notes", ""] + [f"- {n}" for n in j["notes"]] + [""]
+    lines += ["## Parameters", "", "| parameter | nominal | extended |", "|---|---|---|"]
+    ext = j["extended"]["parameters"]
+    for name in dict.fromkeys(list(j["nominal"]["parameters"]) + list(ext)):
+        lines.append(f"| {name} | {_fmt(j['nominal']['parameters'].get(name))} | {_fmt(ext.get(name))} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_report(report, out_dir, validation, *, write_json) -> None:
+    """Write `report.json`, `report.md` and the figures into `out_dir` (which must exist).
+
+    **Arguments:** `report`; `out_dir`; `validation` the held-out record the figures show;
+    `write_json` the atomic JSON writer.
+    """
+    out = pathlib.Path(out_dir)
+    write_json(out / "report.json", report.to_json())
+    (out / "report.md").write_text(report.to_markdown())
+    models = {"nominal": report.nominal_model}
+    if report.findings:
+        models["extended"] = report.extended_model
+    plot_measured_vs_simulated(validation, models, out / "measured_vs_simulated.png")
+    j = report.to_json()
+    curves = {"nominal": (j["nominal"]["sim_error"]["horizons_s"], j["nominal"]["sim_error"]["rmse"])}
+    if report.findings:
+        curves["extended"] = (j["extended"]["sim_error"]["horizons_s"], j["extended"]["sim_error"]["rmse"])
+    unit = "m" if report.system == "linear_axis" else "rad"
+    plot_error_vs_horizon({k: (h, [np.nan if r is None else r for r in rs]) for k, (h, rs) in curves.items()},
+                          out / "sim_error.png", unit=unit)
+    residuals, xs, _, _ = acceleration_residuals(report.nominal_model, validation)
+    nominal = report.nominal_model
+    idx = velocity_indices(nominal)
+    names = [nominal.state_names[i] for i in idx]
+    ts = np.asarray(validation.ts)[: residuals.shape[0]]
+    plot_residuals(ts, residuals, names, out / "residuals.png", features={n: xs[:, i] for n, i in zip(names, idx)})
