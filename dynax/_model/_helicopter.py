@@ -255,15 +255,16 @@ TEMPEST_FEATURES: dict[str, tuple[str, ...]] = {
     "q": ("q", "u2"),
     "r": ("r", "u3"),
 }
-#: A richer feature set: a bias on every axis, quadratic drag, the collective on every axis
-#: (rotor-torque and thrust-tilt coupling) and the gyroscopic products on the rates.
+#: A richer feature set: a bias on every axis, quadratic drag, rotor-tilt couplings (rates and
+#: cyclic on the translational axes, velocities on the rates), the rotor-torque coupling of the
+#: collective and the tail, weathercock stability (v on r) and the gyroscopic products on the rates.
 RICH_FEATURES: dict[str, tuple[str, ...]] = {
-    "u": ("u", "|u|u", "u2", "u4", "1"),
-    "v": ("v", "|v|v", "u1", "u3", "u4", "1"),
+    "u": ("u", "|u|u", "q", "u2", "u4", "1"),
+    "v": ("v", "|v|v", "p", "r", "u1", "u3", "u4", "1"),
     "w": ("w", "|w|w", "u4", "1"),
-    "p": ("p", "v", "u1", "qr", "u4", "1"),
-    "q": ("q", "u", "u2", "pr", "u4", "1"),
-    "r": ("r", "u3", "u4", "pq", "1"),
+    "p": ("p", "v", "r", "u1", "u3", "u4", "qr", "1"),
+    "q": ("q", "u", "u2", "pr", "1"),
+    "r": ("r", "v", "w", "u3", "u4", "pq", "1"),
 }
 ACCELERATION_FEATURE_NAMES = ("u", "v", "w", "p", "q", "r", "u1", "u2", "u3", "u4", "1", "|u|u", "|v|v", "|w|w", "qr", "pr", "pq")
 LINEAR_FEATURE_NAMES = ("u", "v", "w", "p", "q", "r", "roll", "pitch", "u1", "u2", "u3", "u4", "1")

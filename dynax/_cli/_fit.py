@@ -1,0 +1,104 @@
+"""`dynax fit helicopter DATA --model M --criterion C [--horizon S] --out MODEL.json`: vehicle learning."""
+
+import argparse
+import pathlib
+import time
+
+from .._errors import DataError, UsageError
+from ._output import write_json
+
+_MODELS = ("acceleration", "linear")
+_CRITERIA = ("one-step", "frequency", "lagged", "backprop")
+
+
+def register(subparsers):
+    parser = subparsers.add_parser(
+        "fit",
+        help="learn a vehicle dynamics model (helicopter) from flight data",
+        description=(
+            "Learn the body-frame model of a helicopter from the record DATA (Abbeel, Ganapathi and Ng 2005) "
+            "and write it to --out. Models: acceleration (body accelerations linear in a few features, gravity "
+            "and frame rotation from physics) or linear (next velocities linear in state and inputs). Criteria: "
+            "one-step least squares, frequency (CIFER-style, linear model only), lagged (EM-free minimisation "
+            "of the H-step prediction error) and backprop (the same loss by gradients through the rollouts)."
+        ),
+    )
+    parser.add_argument("system", choices=("helicopter",), help="the vehicle (only helicopter)")
+    parser.add_argument("data", help="CSV or NPZ file with t, x..r and u1..u4 (the contract's helicopter columns)")
+    parser.add_argument("--model", choices=_MODELS, default="acceleration", help="body model (default acceleration)")
+    parser.add_argument("--criterion", choices=_CRITERIA, default="one-step", help="learning criterion (default one-step)")
+    parser.add_argument("--horizon", type=float, default=1.0, metavar="SECONDS",
+                        help="lagged and backprop: prediction horizon H (default 1 s)")
+    parser.add_argument("--features", choices=("tempest", "rich"), default="tempest",
+                        help="acceleration model: the Tempest features (default) or a richer set")
+    parser.add_argument("--stride", type=int, default=1, metavar="N",
+                        help="lagged and backprop: use every N-th start time (default 1, every start)")
+    parser.add_argument("--map", default=None, help="NAME=COLUMN,... for files whose columns are named otherwise")
+    parser.add_argument("--scale", default=None, help="NAME=FACTOR,... multiplied into columns (units)")
+    parser.add_argument("--out", required=True, help="output model file (JSON)")
+    parser.set_defaults(run=run)
+
+
+def load_helicopter_data(path, mapping=None, scale=None, *, min_samples=3):
+    """Load helicopter data; resample an irregular grid to its median interval (and say so)."""
+    import jax.numpy as jnp
+    import numpy as np
+
+    from .._data import load_trajectory, resample
+
+    data = load_trajectory(path, "helicopter", mapping=mapping, scale=scale, min_samples=min_samples)
+    quats = np.asarray(data.xs[:, 3:7])
+    norms = np.linalg.norm(quats, axis=1)
+    bad = np.nonzero(norms < 1e-6)[0]
+    if bad.size:
+        raise DataError("the quaternion (qw, qx, qy, qz) has zero norm", path=path, column="qw", row=int(bad[0]) + 1)
+    if not data.is_uniform:
+        dt = data.dt
+        data = resample(data, dt)
+        print(f"note: {path} is irregularly sampled; resampled to its median interval {dt:.6g} s")
+    xs = data.xs.at[:, 3:7].set(data.xs[:, 3:7] / jnp.linalg.norm(data.xs[:, 3:7], axis=1, keepdims=True))
+    return type(data)(data.ts, xs, data.us, data.state_names, data.input_names, data.system, data.source)
+
+
+def run(args: argparse.Namespace) -> int:
+    import jax
+
+    jax.config.update("jax_enable_x64", True)  # learning in float64; the library leaves config alone
+
+    from .._data import parse_assignments
+    from .._identify._vehicle import Backprop, FrequencyDomain, Lagged, OneStep
+    from .._identify._vehicle import fit_vehicle, initial_helicopter, model_to_json
+
+    if args.criterion == "frequency" and args.model != "linear":
+        raise UsageError("--criterion frequency fits the linear model only; use --model linear")
+    if not args.horizon > 0:
+        raise UsageError(f"--horizon must be positive seconds, got {args.horizon}")
+    if args.stride < 1:
+        raise UsageError(f"--stride must be at least 1, got {args.stride}")
+    out = pathlib.Path(args.out)
+    if out.exists() and out.is_dir():
+        raise UsageError(f"--out {out} is a directory; give a file name such as {out / 'model.json'}")
+    mapping = parse_assignments(args.map, "--map", numeric=False)
+    scale = parse_assignments(args.scale, "--scale", numeric=True)
+    start = time.perf_counter()
+    data = load_helicopter_data(args.data, mapping, scale)
+    n_needed = int(round(args.horizon / data.dt)) + 2 if args.criterion in ("lagged", "backprop") else 3
+    if len(data) < n_needed:
+        raise DataError(f"has {len(data)} samples; the {args.criterion} criterion with horizon {args.horizon} s "
+                        f"needs at least {n_needed}", path=args.data)
+    criterion = {
+        "one-step": lambda: OneStep(),
+        "frequency": lambda: FrequencyDomain(),
+        "lagged": lambda: Lagged(horizon=args.horizon, stride=args.stride),
+        "backprop": lambda: Backprop(horizon=args.horizon, stride=args.stride),
+    }[args.criterion]()
+    system = initial_helicopter(args.model, args.features)
+    progress = lambda i, loss: print(f"  iteration {i + 1}: loss {loss:.6g}", flush=True)  # noqa: E731
+    fit = fit_vehicle(system, data, criterion, callback=progress)
+    horizon = args.horizon if args.criterion in ("lagged", "backprop") else None
+    write_json(out, model_to_json(fit, horizon_s=horizon))
+    print(f"helicopter, {args.model} model, {args.criterion} criterion, {fit.n_samples} samples: loss {fit.loss:.6g}")
+    for name, value in fit.system.body_model.parameters.items():
+        print(f"  {name:>10s} = {float(value):.6g}")
+    print(f"wrote {out} in {time.perf_counter() - start:.1f} s")
+    return 0

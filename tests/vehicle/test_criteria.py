@@ -1,0 +1,126 @@
+"""The learning criteria: coefficient recovery, monotone EM-free loss, backprop gradients."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from dynax._identify._vehicle import (
+    Backprop,
+    fit_backprop,
+    fit_frequency,
+    fit_lagged,
+    fit_one_step,
+    fit_vehicle,
+    FrequencyDomain,
+    Lagged,
+    lagged_loss,
+    OneStep,
+)
+from dynax._identify._vehicle._criteria import _with_theta
+from dynax._model._helicopter import (
+    AccelerationModel,
+    Helicopter,
+    LinearVelocityModel,
+    TEMPEST_COEFFICIENTS,
+    TEMPEST_FEATURES,
+)
+from dynax._model._helicopter_truth import generate_helicopter_flight
+
+TEMPEST_NAMES = {
+    "du/u": "Ax", "dv/v": "Ay", "dw/w": "Az", "dp/p": "Bx", "dq/q": "By", "dr/r": "Bz",
+    "dp/u1": "C1", "dq/u2": "C2", "dr/u3": "C3", "dw/u4": "C4", "dv/1": "Dv",
+}
+
+
+@pytest.fixture(scope="module")
+def tempest_data():
+    """Hover flight of the Tempest acceleration model itself (noise-free, still air)."""
+    return generate_helicopter_flight("hover", 20.0, seed=5, truth=Helicopter(), measurement_noise=False)
+
+
+@pytest.fixture(scope="module")
+def truth_data():
+    """Hover flight of the higher-fidelity truth simulator (the acceleration model is not exact)."""
+    return generate_helicopter_flight("hover", 20.0, seed=6)
+
+
+def _zero_tempest():
+    return Helicopter(AccelerationModel.with_features(TEMPEST_FEATURES))
+
+
+def _check_tempest(system, rtol):
+    for name, value in system.body_model.parameters.items():
+        expected = TEMPEST_COEFFICIENTS[TEMPEST_NAMES[name]]
+        assert float(value) == pytest.approx(expected, rel=rtol), name
+
+
+def test_one_step_recovers_the_tempest_coefficients(tempest_data):
+    # From all-zero weights; the data came from the model itself, so only the quadrature of the
+    # one-step regression (trapezoidal over 10 ms, against the 4-substep RK4 of the generator) remains.
+    fit = fit_one_step(_zero_tempest(), tempest_data)
+    _check_tempest(fit.system, rtol=0.01)
+
+
+def test_lagged_keeps_the_true_coefficients(tempest_data):
+    start = fit_one_step(_zero_tempest(), tempest_data).system
+    fit = fit_lagged(start, tempest_data, Lagged(horizon=0.3, stride=5, max_iterations=2))
+    _check_tempest(fit.system, rtol=0.01)
+    assert fit.loss < 1e-6
+
+
+def test_em_free_loss_decreases_monotonically(truth_data):
+    start = fit_one_step(_zero_tempest(), truth_data).system
+    fit = fit_lagged(start, truth_data, Lagged(horizon=0.3, stride=5, max_iterations=4))
+    losses = np.array([h[1] for h in fit.history])
+    assert len(losses) >= 3
+    assert np.all(np.diff(losses) < 0)
+    assert losses[-1] < 0.8 * losses[0]  # the lagged criterion improves on the one-step fit
+
+
+def test_backprop_gradient_matches_finite_differences(truth_data):
+    system = fit_one_step(_zero_tempest(), truth_data).system
+    starts = jnp.arange(0, 500, 100)
+    theta = system.body_model.parameter_vector()
+
+    def loss(th, segment):
+        return lagged_loss(_with_theta(system, th), truth_data, 8, starts=starts, checkpoint_segment=segment)
+
+    grad = jax.jit(jax.grad(loss), static_argnums=1)(theta, None)  # checkpointed: 3 segments of 3, one padded
+    grad_plain = jax.jit(jax.grad(loss), static_argnums=1)(theta, 0)
+    np.testing.assert_allclose(grad, grad_plain, rtol=1e-10, atol=1e-14)
+    f = jax.jit(loss, static_argnums=1)
+    for i in (0, 5, 8):  # du/u, dp/p, dq/u2
+        h = 1e-5 * max(1.0, abs(float(theta[i])))
+        e = jnp.zeros_like(theta).at[i].set(h)
+        fd = (f(theta + e, None) - f(theta - e, None)) / (2 * h)
+        assert float(grad[i]) == pytest.approx(float(fd), rel=1e-5, abs=1e-10)
+
+
+@pytest.mark.slow
+def test_backprop_reaches_the_lagged_loss(truth_data):
+    start = fit_one_step(_zero_tempest(), truth_data).system
+    lagged = fit_lagged(start, truth_data, Lagged(horizon=0.3, stride=10, max_iterations=6))
+    direct = fit_backprop(start, truth_data, Backprop(horizon=0.3, stride=10, max_steps=40))
+    assert direct.loss < lagged.history[0][1]
+    # The EM-free approximation is close to the direct minimum (the issue's 5 % check, small scale).
+    assert lagged.loss <= 1.05 * direct.loss
+
+
+def test_frequency_domain_recovers_the_rate_dynamics():
+    linear = Helicopter(LinearVelocityModel())
+    data = generate_helicopter_flight("hover", 40.0, seed=7, truth=linear)
+    # Equation-error fit only (max_steps=0) keeps the default suite fast; the on-axis rate and
+    # collective dynamics are what closed-loop frequency responses identify well (the off-axis
+    # terms are weakly determined, as in CIFER practice).
+    fit = fit_frequency(linear, data, FrequencyDomain(segment_s=5.0, max_steps=0))
+    p = fit.system.body_model.parameters
+    true = linear.body_model.parameters
+    for name in ("dp/p", "dp/u1", "dq/q", "dq/u2", "dr/r", "dr/u3", "dw/u4"):
+        assert float(p[name]) == pytest.approx(float(true[name]), rel=0.15), name
+
+
+def test_frequency_domain_refuses_the_acceleration_model(truth_data):
+    with pytest.raises(ValueError, match="linear model only"):
+        fit_vehicle(Helicopter(), truth_data, FrequencyDomain())

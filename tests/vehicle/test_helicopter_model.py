@@ -1,0 +1,110 @@
+"""Frame conventions of the `Helicopter` (NED, body-to-world quaternion) and the Tempest model."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from dynax._identify._vehicle._windows import rollout
+from dynax._model._helicopter import (
+    AccelerationModel,
+    euler_from_quaternion,
+    Helicopter,
+    hover_state,
+    LinearVelocityModel,
+    quaternion_angle,
+    quaternion_from_euler,
+    TEMPEST_COEFFICIENTS,
+)
+
+DT = 0.01
+
+
+def _free(gravity=9.81):
+    """A helicopter with no aerodynamic forces: rigid-body kinematics and gravity only."""
+    body = AccelerationModel(weights=jnp.zeros((6, 17)), gravity=gravity)
+    return Helicopter(body)
+
+
+def _roll_out(system, x0, seconds):
+    n = int(round(seconds / DT))
+    return rollout(system, jnp.asarray(x0), jnp.zeros((n, 4)), DT)
+
+
+def test_pure_roll_rotates_right_wing_down():
+    p = 1.0
+    x0 = hover_state().at[10].set(p)
+    xs = _roll_out(_free(gravity=0.0), x0, 1.0)
+    roll, pitch, yaw = euler_from_quaternion(xs[-1, 3:7])
+    assert roll == pytest.approx(p * 1.0, abs=1e-6)
+    assert abs(pitch) < 1e-9 and abs(yaw) < 1e-9
+    # The body y axis (right wing) points partly down (+z in NED) after a positive roll.
+    quat = xs[-1, 3:7]
+    np.testing.assert_allclose(quat, [np.cos(0.5), np.sin(0.5), 0, 0], atol=1e-6)
+
+
+def test_pure_yaw_keeps_world_velocity():
+    """Yawing at rate r while moving forward: the body velocity turns, the world velocity does not."""
+    r = np.pi / 2
+    x0 = hover_state().at[12].set(r).at[7].set(1.0)
+    xs = _roll_out(_free(gravity=0.0), x0, 1.0)
+    _, _, yaw = euler_from_quaternion(xs[-1, 3:7])
+    assert yaw == pytest.approx(np.pi / 2, abs=1e-6)  # nose turned from north to east
+    np.testing.assert_allclose(xs[-1, 7:10], [0.0, -1.0, 0.0], atol=1e-6)  # the old heading is now to the left
+    np.testing.assert_allclose(xs[-1, 0:3], [1.0, 0.0, 0.0], atol=1e-6)  # moved 1 m north in a straight line
+
+
+@pytest.mark.parametrize("roll", [0.0, np.pi / 2, np.pi])
+def test_free_fall_is_down_in_the_world_whatever_the_attitude(roll):
+    x0 = hover_state().at[3:7].set(quaternion_from_euler(roll, 0.0, 0.3))
+    t = 1.0
+    xs = _roll_out(_free(), x0, t)
+    np.testing.assert_allclose(xs[-1, 0:3], [0.0, 0.0, 0.5 * 9.81 * t**2], atol=1e-6)
+    # In the body frame the velocity is gravity rotated in: g t along body z when level, body y when rolled 90 deg.
+    expected = {0.0: [0, 0, 9.81], np.pi / 2: [0, 9.81, 0], np.pi: [0, 0, -9.81]}[roll]
+    np.testing.assert_allclose(xs[-1, 7:10], expected, atol=1e-6)
+
+
+def test_tempest_model_coefficients_in_vector_field():
+    c = TEMPEST_COEFFICIENTS
+    heli = Helicopter()
+    x = hover_state().at[7:13].set(jnp.array([1.0, 1.0, 1.0, 1.0, 1.0, 1.0]))
+    dx = heli.vector_field(0.0, hover_state(), jnp.array([1.0, 1.0, 1.0, 1.0]))
+    np.testing.assert_allclose(dx[10:13], [c["C1"], c["C2"], c["C3"]])
+    np.testing.assert_allclose(dx[7:10], [0.0, c["Dv"], 9.81 + c["C4"]])
+    dx = heli.vector_field(0.0, x, jnp.zeros(4))
+    # omega x v vanishes for parallel (1,1,1) vectors, so only the linear terms and gravity remain.
+    np.testing.assert_allclose(dx[7:10], [c["Ax"], c["Ay"] + c["Dv"], c["Az"] + 9.81])
+    np.testing.assert_allclose(dx[10:13], [c["Bx"], c["By"], c["Bz"]])
+
+
+def test_linear_model_is_gravity_linearised_at_hover():
+    heli = Helicopter(LinearVelocityModel())
+    x = hover_state().at[3:7].set(quaternion_from_euler(0.01, 0.0, 0.0))
+    dx = heli.vector_field(0.0, x, jnp.array([0.0, 0.0, 0.0, 0.0]))
+    acc = Helicopter().vector_field(0.0, x, jnp.zeros(4))
+    np.testing.assert_allclose(dx[7:10], acc[7:10], atol=1e-3)
+
+
+def test_quaternion_angle_is_sign_invariant_and_exact():
+    a = quaternion_from_euler(0.1, -0.2, 0.3)
+    b = quaternion_from_euler(0.1, -0.2, 0.3 + 0.25)
+    assert quaternion_angle(a, b) == pytest.approx(0.25, abs=1e-9)
+    assert quaternion_angle(a, -b) == pytest.approx(0.25, abs=1e-9)
+    assert quaternion_angle(a, a) == pytest.approx(0.0, abs=1e-7)
+
+
+def test_bad_body_model_is_refused():
+    with pytest.raises(ValueError, match="body_model"):
+        Helicopter(body_model="tempest")
+    with pytest.raises(ValueError, match="weights"):
+        AccelerationModel(weights=jnp.zeros((6, 3)))
+
+
+def test_vector_field_vmaps_and_differentiates():
+    heli = Helicopter()
+    xs = jnp.stack([hover_state(), hover_state().at[10].set(0.5)])
+    out = jax.vmap(lambda x: heli.vector_field(0.0, x, jnp.zeros(4)))(xs)
+    assert out.shape == (2, 13)
+    g = jax.grad(lambda h: h.vector_field(0.0, xs[1], jnp.zeros(4))[10])(heli)
+    assert float(g.body_model.weights[3, 3]) == pytest.approx(0.5)  # d(pdot)/d(Bx) = p
