@@ -117,13 +117,15 @@ def _solve(a, y, w, rcond):
     yw = y * sw
     scale = jnp.linalg.norm(aw, axis=0)
     scale = jnp.where(scale > 0, scale, 1.0)
-    q, r = jnp.linalg.qr(aw / scale, mode="reduced")
+    # QR of [A | y] without forming Q: R gives the SVD, its last column Q^T y.
+    r_aug = jnp.linalg.qr(jnp.concatenate([aw / scale, yw[:, None]], axis=1), mode="r")
+    r, qty = r_aug[:n, :n], r_aug[:n, n]
     u, s, vt = jnp.linalg.svd(r)
     finite = jnp.all(jnp.isfinite(s)) & (s[0] > 0)
     rank = jnp.where(finite, jnp.sum(s > rcond * s[0]), 0)
     cond = jnp.where(finite & (s[-1] > 0), s[0] / jnp.where(s[-1] > 0, s[-1], 1.0), jnp.inf)
     inv_s = jnp.where(jnp.arange(n) < rank, 1.0 / jnp.where(s > 0, s, 1.0), 0.0)
-    estimate = (vt.T @ (inv_s * (u.T @ (q.T @ yw)))) / scale
+    estimate = (vt.T @ (inv_s * (u.T @ qty))) / scale
     residual = aw @ estimate - yw
     dof = jnp.maximum(jnp.minimum(m, jnp.sum(w > 0)) - rank, 1)
     sigma2 = residual @ residual / dof

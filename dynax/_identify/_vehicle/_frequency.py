@@ -54,7 +54,8 @@ class FrequencyDomain(eqx.Module):
     **Fields:**
 
     - `band_hz`: the identified band `(low, high)` [Hz] (default 0.2 to 8 Hz).
-    - `segment_s`: the Welch segment length [s] (default 10 s; 50 % overlap, Hann window).
+    - `segment_s`: the Welch segment length [s] (default 10 s; 50 % overlap, Hann window; shortened
+      to an eighth of the record when the record is short).
     - `min_coherence`: pairs and frequencies with a lower partial coherence are left out (0.6).
     - `max_steps`: Levenberg-Marquardt iterations (default 30; 0 keeps the equation-error fit).
     """
@@ -75,7 +76,8 @@ def frequency_responses(
     dt = check_helicopter_data(trajectory, "frequency_responses")
     u = np.asarray(trajectory.us, float)
     y = np.asarray(trajectory.xs[:, BODY], float)
-    nperseg = min(int(round(segment_s / dt)), len(u))
+    # At least ~15 averaged segments (50 % overlap), or the 4x4 input spectra are singular.
+    nperseg = max(16, min(int(round(segment_s / dt)), len(u) // 8))
     z = np.concatenate([u, y], axis=1)
     n = z.shape[1]
     spectra = None
@@ -86,11 +88,11 @@ def frequency_responses(
                 spectra = np.zeros((len(f), n, n), complex)
             spectra[:, a, b] = g
     guu, guy = spectra[:, :4, :4], spectra[:, :4, 4:]
-    responses = np.transpose(np.linalg.solve(guu, guy), (0, 2, 1))  # y = H u
+    responses = np.transpose(np.linalg.pinv(guu) @ guy, (0, 2, 1))  # y = H u
     coherence = np.zeros((len(f), 6, 4))
     for j in range(6):
         idx = [0, 1, 2, 3, 4 + j]
-        inverse = np.linalg.inv(spectra[:, idx][:, :, idx])
+        inverse = np.linalg.pinv(spectra[:, idx][:, :, idx])
         for i in range(4):
             coherence[:, j, i] = np.abs(inverse[:, i, 4]) ** 2 / np.real(inverse[:, i, i] * inverse[:, 4, 4])
     return f, responses, np.clip(coherence, 0.0, 1.0)
