@@ -52,14 +52,15 @@ def run(args: argparse.Namespace) -> int:
 
     from .._data._io import save_trajectory
     from .._diagnose._demo import run_demo
+    from ._diagnose import summary
 
     if args.seed < 0:
         raise UsageError(f"--seed must be a non-negative integer, got {args.seed}")
     start = time.perf_counter()
     out = pathlib.Path(args.out)
     with staged_directory(out) as stage:
-        summary = run_demo(hidden_effect(args.seed), seed=args.seed, out=stage, save_trajectory=save_trajectory,
-                           write_json=write_json)
-    print(summary)
+        text = run_demo(hidden_effect(args.seed), seed=args.seed, out=stage, save_trajectory=save_trajectory,
+                        write_json=write_json, summary=summary)
+    print(text)
     print(f"wrote {out}/ in {time.perf_counter() - start:.0f} s")
     return 0

@@ -61,7 +61,7 @@ def synthetic_trajectory(
 ) -> Trajectory:
     """Simulate `truth` under a random multisine and record it as measured data with noise.
 
-    The rollout uses 8 Runge-Kutta substeps per sample (the truth is integrated finer than any
+    The rollout uses 4 Runge-Kutta substeps per sample (the truth is integrated finer than any
     model the diagnosis fits). Internal states of an `Extended` truth (lags, delays) are not
     recorded, just as on a real rig.
 
@@ -86,7 +86,7 @@ def synthetic_trajectory(
         x0 = jnp.zeros(n)
     x0 = jnp.asarray(x0, ts.dtype)
     full_x0 = truth.initial_state(x0, us[0]) if isinstance(truth, Extended) else x0
-    xs = simulate(truth, full_x0, ts, us, method=FixedGrid(substeps=8)).xs[:, :n]
+    xs = simulate(truth, full_x0, ts, us, method=FixedGrid(substeps=4)).xs[:, :n]
     if noise is None:
         noise = tuple(1e-2 if s.startswith("d") else 1e-3 for s in names)
     noise = jnp.asarray(noise, xs.dtype)

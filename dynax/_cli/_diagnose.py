@@ -1,0 +1,151 @@
+"""`dynax diagnose SYSTEM DATA [--validation DATA2] --out DIR`: the discrepancy workflow on measured data."""
+
+import argparse
+import json
+import pathlib
+import sys
+import time
+
+from .._errors import UsageError
+from ._output import staged_directory, write_json
+
+_SYSTEMS = ("acrobot", "double_pendulum", "linear_axis", "helicopter")
+
+
+def register(subparsers):
+    parser = subparsers.add_parser(
+        "diagnose",
+        help="show what a model's simulation gets wrong, name the cause, extend the model, measure the gain",
+        description=(
+            "Fit the nominal model of SYSTEM on DATA, show what its simulation gets wrong on held-out data, "
+            "name the cause from the library of model extensions, extend the model and measure the gain. "
+            "Writes DIR/report.json (the contract's schema), DIR/report.md and figures DIR/*.png. Without "
+            "--validation the last 30%% of DATA is held out."
+        ),
+    )
+    parser.add_argument("system", choices=_SYSTEMS, help="the system (its data columns are in the contract)")
+    parser.add_argument("data", help="training record: CSV, NPZ or MAT with t, the states and the inputs")
+    parser.add_argument("--validation", default=None, metavar="DATA2", help="held-out record (same columns)")
+    parser.add_argument("--map", default=None, help="NAME=COLUMN,... for files whose columns are named otherwise")
+    parser.add_argument("--scale", default=None, help="NAME=FACTOR,... multiplied into columns (units)")
+    parser.add_argument("--mode", choices=("refit", "known"), default="refit",
+                        help="refit the nominal parameters on DATA (default) or trust them (known)")
+    parser.add_argument("--nominal", default=None, metavar="FILE.json",
+                        help="nominal parameters: a JSON with a 'parameters' object (e.g. the output of dynax identify)")
+    parser.add_argument("--refit", default=None, metavar="NAMES",
+                        help="comma-separated nominal parameters to refit (default all; for linear_axis mass,viscous)")
+    parser.add_argument("--dt", type=float, default=None, metavar="SECONDS",
+                        help="resample the records to this interval first (default: as recorded)")
+    parser.add_argument("--reference-horizon", type=float, default=1.0, metavar="SECONDS",
+                        help="horizon at which the gain is judged (default 1 s)")
+    parser.add_argument("--max-terms", type=int, default=3, help="at most this many causes (default 3)")
+    parser.add_argument("--out", required=True, help="output directory")
+    parser.set_defaults(run=run)
+
+
+def nominal_system(name: str, parameters: dict | None = None):
+    """The nominal model dynax diagnoses for a contract system name (linear_axis: mass and viscous friction only)."""
+    from .._model import Acrobot, DoublePendulum, LinearAxis
+
+    if name == "helicopter":
+        from .._model._helicopter import Helicopter
+
+        cls, defaults = Helicopter, {}
+    else:
+        cls = {"acrobot": Acrobot, "double_pendulum": DoublePendulum, "linear_axis": LinearAxis}[name]
+        defaults = {"coulomb": 0.0, "offset": 0.0} if name == "linear_axis" else {}
+    import jax.numpy as jnp
+
+    values = {**defaults, **(parameters or {})}
+    try:
+        return cls(**{k: jnp.asarray(float(v)) for k, v in values.items()})
+    except TypeError as e:
+        raise UsageError(f"--nominal: parameters {sorted(values)} do not fit {cls.__name__}: {e}") from None
+
+
+def run(args: argparse.Namespace) -> int:
+    import jax
+
+    jax.config.update("jax_enable_x64", True)  # the CLI identifies in float64; the library does not change config
+
+    from .._data import load_trajectory, parse_assignments, resample
+    from .._diagnose import diagnose, Known, Refit, write_report
+
+    mapping = parse_assignments(args.map, "--map", numeric=False)
+    scale = parse_assignments(args.scale, "--scale", numeric=True)
+    if args.dt is not None and not args.dt > 0:
+        raise UsageError(f"--dt must be positive, got {args.dt}")
+    if not args.reference_horizon > 0:
+        raise UsageError(f"--reference-horizon must be positive, got {args.reference_horizon}")
+    if args.max_terms < 1:
+        raise UsageError(f"--max-terms must be at least 1, got {args.max_terms}")
+    parameters = None
+    if args.nominal is not None:
+        try:
+            parameters = json.loads(pathlib.Path(args.nominal).read_text())["parameters"]
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            raise UsageError(f"--nominal: cannot read a 'parameters' object from {args.nominal}: {e}") from None
+        parameters = {k: v for k, v in parameters.items() if not k.startswith("fc")}
+    # Everything that can be refused is read before anything is written.
+    train = load_trajectory(args.data, args.system, mapping=mapping, scale=scale, min_samples=50)
+    validation = None
+    if args.validation is not None:
+        validation = load_trajectory(args.validation, args.system, mapping=mapping, scale=scale, min_samples=50)
+    if args.dt is not None:
+        train = resample(train, args.dt)
+        validation = None if validation is None else resample(validation, args.dt)
+    system = nominal_system(args.system, parameters)
+    if args.mode == "known":
+        mode = Known()
+    else:
+        names = tuple(n.strip() for n in args.refit.split(",") if n.strip()) if args.refit else None
+        if names is None and args.system == "linear_axis":
+            names = ("mass", "viscous")
+        mode = Refit(parameters=names)
+    start = time.perf_counter()
+    report = diagnose(
+        system, train, validation, mode=mode, reference_horizon_s=args.reference_horizon,
+        max_terms=args.max_terms, system_name=args.system,
+        progress=lambda line: print(f"[{time.perf_counter() - start:5.1f} s] {line}", file=sys.stderr),
+    )
+    held_out = validation if validation is not None else _held_out(train)
+    with staged_directory(args.out) as stage:
+        write_report(report, stage, held_out, write_json=write_json)
+    print(summary(report))
+    print(f"wrote {args.out}/report.json, report.md and figures")
+    return 0
+
+
+def _held_out(train, fraction: float = 0.3):
+    from .._data import Trajectory
+
+    k = int(round(len(train) * (1 - fraction)))
+    return Trajectory(train.ts[k:], train.xs[k:], train.us[k:], train.state_names, train.input_names, train.system, train.source)
+
+
+def summary(report) -> str:
+    """A few lines for the terminal: what the simulation got wrong, the cause, the gain."""
+    j = report.to_json()
+    ref = j["reference_horizon_s"]
+    h = j["nominal"]["sim_error"]["horizons_s"]
+    i = h.index(ref) if ref in h else len(h) - 1
+    unit = "m" if j["system"] == "linear_axis" else "rad"
+    lines = [
+        "What the simulation gets wrong: held-out position RMSE of the nominal model "
+        + ", ".join(f"{r:.3g} {unit} at {t:g} s" for t, r in zip(h, j["nominal"]["sim_error"]["rmse"]) if r is not None) + ".",
+    ]
+    s = j["structure"]["nominal"]
+    if s["significant"]:
+        lines.append(f"Its one-step residuals have structure ({max(s['r2'], 0):.0%} explained by "
+                     + ", ".join(f["feature"] for f in s["top_features"][:2]) + ").")
+    lines.append(f"Verdict: {j['verdict']}.")
+    for f in j["findings"]:
+        lines.append(f"Cause: {f['cause']} at {f['where']}, {f['parameter']} = {f['coefficient']:.4g} "
+                     f"(± {f['std_error']:.2g}); gain {f['gain']:.0%}; look-alikes told apart: {f['confidence']}.")
+    if j["findings"]:
+        lines.append(f"Gain of the extended model ({', '.join(j['extended']['terms'])}): "
+                     f"{j['gain']:.0%} less simulation error at {ref:g} s "
+                     f"({j['nominal']['sim_error']['rmse'][i]:.3g} -> {j['extended']['sim_error']['rmse'][i]:.3g} {unit}).")
+    if j["not_identifiable"]:
+        lines.append("Not identifiable in this mode: " + ", ".join(f"{c['cause']}@{c['where']}" for c in j["not_identifiable"]) + ".")
+    return "\n".join(lines)
