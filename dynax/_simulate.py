@@ -1,12 +1,9 @@
 """`simulate`: roll a system out on a sample grid with zero-order-hold inputs, through diffrax."""
 
-import functools
-
 import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._model._system import AbstractSystem
@@ -117,79 +114,34 @@ def _check_arguments(system, x0, ts, us):
     return x0.astype(dtype), ts.astype(dtype), us.astype(dtype)
 
 
-def _stages_used(tableau) -> list[bool]:
-    """Which stages of an explicit Runge-Kutta tableau the step's solution depends on.
-
-    The last stage of an FSAL method (Tsit5, Dopri5, ...) feeds only the error estimate and the
-    next step's first stage, so on a fixed grid it is never evaluated.
-    """
-    rows = [np.zeros(0)] + [np.asarray(row) for row in tableau.a_lower]
-    used = [bool(b != 0) for b in np.asarray(tableau.b_sol)]
-    for i in reversed(range(len(rows))):
-        if used[i]:
-            for j, a in enumerate(rows[i]):
-                used[j] = used[j] or bool(a != 0)
-    return used
-
-
-def _explicit_rk_step(vector_field, tableau, t0, h, y, u):
-    r"""One step of an explicit Runge-Kutta method with its stages unrolled.
-
-    $k_i = h f(t_0 + c_i h, y_0 + \sum_{j<i} a_{ij} k_j, u)$, $y_1 = y_0 + \sum_i b_i k_i$, with the
-    coefficients of the diffrax `tableau` as compile-time constants and zero terms left out. The
-    same values as diffrax's `solver.step` up to rounding, without its loop over stages (built to
-    keep adaptive solves cheap to compile), error estimate and dense output, which a fixed grid
-    does not use.
-    """
-    cs = (float(tableau.c1),) + tuple(float(c) for c in tableau.c)
-    rows = ((),) + tuple(tuple(float(a) for a in row) for row in tableau.a_lower)
-    ks = []
-    for c, row, used in zip(cs, rows, _stages_used(tableau)):
-        if used:
-            y_stage = sum((a * k for a, k in zip(row, ks) if a != 0), y)
-            ks.append(h * vector_field(t0 + c * h, y_stage, u).astype(y.dtype))
-        else:
-            ks.append(None)
-    return sum((float(b) * k for b, k in zip(tableau.b_sol, ks) if b != 0), y)
-
-
 def _fixed_grid(system, x0, ts, us, method, bound):
+    term = _zoh_term(system)
     solver = method.solver
     n = method.substeps
-    if isinstance(solver, diffrax.AbstractERK) and isinstance(getattr(solver, "tableau", None), diffrax.ButcherTableau):
-        # Explicit Runge-Kutta (Tsit5, Dopri5, Bosh3, classical RK4 tableaus, ...): stages unrolled,
-        # which brings the rollout to the speed of a hand-written RK4 scan (benchmarks/rollout.py).
-        def solver_step(t, h, y, u):
-            return _explicit_rk_step(system.vector_field, solver.tableau, t, h, y, u)
-
-    else:
-        term = _zoh_term(system)
-
-        def solver_step(t, h, y, u):
-            state = solver.init(term, t, t + h, y, u)
-            y_next, _, _, _, _ = solver.step(term, t, t + h, y, u, state, made_jump=True)
-            return y_next
 
     def interval(carry, inputs):
-        x, stopped = carry
-        t0, h, u = inputs
-        x_new = x
-        for i in range(n):
-            x_new = solver_step(t0 + i * h, h, x_new, u)
-        # Largest |entry| by elementwise maxima: NaN propagates, and unlike a reduction it fuses
-        # with the step (a reduction here cost a third of the rollout's time on CPU).
-        size = functools.reduce(jnp.maximum, [jnp.abs(x_new[j]) for j in range(x_new.shape[0])])
-        stopped = stopped | ~(size <= bound)  # non-finite or beyond the bound
+        x, diverged_at = carry
+        t0, t1, u = inputs
+        h = (t1 - t0) / n
+
+        def substep(i, y):
+            ta = t0 + i * h
+            state = solver.init(term, ta, ta + h, y, u)
+            y_next, _, _, _, _ = solver.step(term, ta, ta + h, y, u, state, made_jump=True)
+            return y_next
+
+        x_new = jax.lax.fori_loop(0, n, substep, x, unroll=True)
+        bad = ~jnp.all(jnp.isfinite(x_new)) | jnp.any(jnp.abs(x_new) > bound)
+        newly = bad & jnp.isinf(diverged_at)
+        diverged_at = jnp.where(newly, t1, diverged_at)
+        stopped = jnp.isfinite(diverged_at)
         # Freeze the carried state once diverged so no inf/NaN feeds later steps (or their gradients).
         x_carry = jnp.where(stopped, x, x_new)
-        return (x_carry, stopped), jnp.where(stopped, jnp.nan, x_new)
+        return (x_carry, diverged_at), jnp.where(stopped, jnp.nan, x_new)
 
-    # Substep sizes computed once, outside the loop.
-    inputs = (ts[:-1], jnp.diff(ts) / n, us[: ts.shape[0] - 1])
-    (_, stopped), xs = jax.lax.scan(interval, (x0, jnp.asarray(False)), inputs)
-    # Past a divergence every row is NaN, so the first NaN row dates it.
-    first = jnp.argmax(jnp.isnan(xs[:, 0]))
-    diverged_at = jnp.where(stopped, ts[1:][first], jnp.asarray(jnp.inf, x0.dtype))
+    inputs = (ts[:-1], ts[1:], us[: ts.shape[0] - 1])
+    init = (x0, jnp.asarray(jnp.inf, x0.dtype))
+    (_, diverged_at), xs = jax.lax.scan(interval, init, inputs)
     return jnp.concatenate([x0[None], xs]), diverged_at
 
 

@@ -2,8 +2,8 @@
 
 `benchmarks/rollout.py` compares throughput against `mujoco.rollout` on `benchmarks/acrobot.xml`;
 the comparison is only fair if both integrate the same equations with the same scheme, which the
-first tests check in float64. The last ones check that `FixedGrid`'s fast path (explicit
-Runge-Kutta stages unrolled) gives what diffrax's own `solver.step` gives.
+first tests check in float64. The last ones guard `FixedGrid`'s scan (which a faster step
+would replace) against diffrax's own `solver.step`, restarted at every sample.
 """
 
 import pathlib
@@ -121,7 +121,7 @@ def diffrax_step_rollout(system, solver, substeps):
 
 
 @pytest.mark.parametrize(
-    "solver", [diffrax.Tsit5(), diffrax.Dopri5(), diffrax.Bosh3(), diffrax.Heun(), RK4(), diffrax.Euler()],
+    "solver", [diffrax.Tsit5(), diffrax.Dopri5(), RK4(), diffrax.Euler()],
     ids=lambda s: type(s).__name__,
 )
 def test_fixed_grid_equals_diffrax_step(solver):
