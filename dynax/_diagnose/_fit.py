@@ -7,7 +7,8 @@ fits of all candidates of a forward-selection round run as one `vmap`ped, jit-co
 Levenberg-Marquardt solve (compiled once for the whole diagnosis).
 
 The cost is the output error of open-loop rollouts on windows of the record, each started from
-the measured state (internal states at rest), scaled per state by the data's spread.
+the measured state (internal states of input terms driven by the input history before the window),
+scaled per state by the data's spread.
 
 ??? cite
 
@@ -46,26 +47,65 @@ def nominal_parameter_names(system) -> tuple[str, ...]:
 
 
 class Windows(eqx.Module):
-    """Windows of measured records, stacked: `ts (window, step)`, `xs (window, step, n)`, `us (window, step, m)`."""
+    """Windows of measured records, stacked: `ts (window, step)`, `xs (window, step, n)`, `us (window, step, m)`.
+
+    `ts_before`, `us_before` hold the `n_before` samples of input history before each window (the
+    first input repeated where the record has none): internal states of input terms (a lag's output,
+    a delay's filter) are driven through them, so each window starts with the internal state the
+    input history implies rather than at rest.
+    """
 
     ts: Float[Array, "window step"]
     xs: Float[Array, "window step n_states"]
     us: Float[Array, "window step n_inputs"]
+    ts_before: Float[Array, "window before"]
+    us_before: Float[Array, "window before n_inputs"]
     starts: tuple = eqx.field(static=True)  # (record index, start sample) per window
 
 
-def make_windows(trajectories, n_steps: int, stride: int) -> Windows:
-    """Cut records into windows of `n_steps + 1` samples every `stride` samples."""
-    ts, xs, us, starts = [], [], [], []
+def make_windows(trajectories, n_steps: int, stride: int, *, history_s: float = 0.5) -> Windows:
+    """Cut records into windows of `n_steps + 1` samples every `stride` samples, with `history_s` of input history."""
+    ts, xs, us, tb, ub, starts = [], [], [], [], [], []
     for r, traj in enumerate(trajectories):
+        t_all, x_all, u_all = np.asarray(traj.ts), np.asarray(traj.xs), np.asarray(traj.us)
+        dt = float(np.median(np.diff(t_all)))
+        n_before = max(1, int(round(history_s / dt)))
         for k in range(0, len(traj) - n_steps, stride):
-            ts.append(np.asarray(traj.ts[k : k + n_steps + 1]))
-            xs.append(np.asarray(traj.xs[k : k + n_steps + 1]))
-            us.append(np.asarray(traj.us[k : k + n_steps + 1]))
+            ts.append(t_all[k : k + n_steps + 1])
+            xs.append(x_all[k : k + n_steps + 1])
+            us.append(u_all[k : k + n_steps + 1])
+            idx = np.arange(k - n_before, k + 1)
+            tb.append(t_all[k] + dt * (idx - k))
+            ub.append(u_all[np.maximum(idx, 0)])
             starts.append((r, k))
     if not ts:
         raise ValueError(f"the records are shorter than one window of {n_steps} samples")
-    return Windows(jnp.asarray(np.stack(ts)), jnp.asarray(np.stack(xs)), jnp.asarray(np.stack(us)), tuple(starts))
+    stack = lambda a: jnp.asarray(np.stack(a))  # noqa: E731
+    return Windows(stack(ts), stack(xs), stack(us), stack(tb), stack(ub), tuple(starts))
+
+
+def hidden_at_start(model, ts_before, us_before):
+    """Internal states of `model`'s input terms at the end of an input history (from rest at its start; RK4)."""
+    if not isinstance(model, Extended) or model.n_states == model.system.n_states:
+        return jnp.zeros((0,), us_before.dtype)
+    n = model.system.n_states
+    z0 = model.initial_state(jnp.zeros(n, us_before.dtype), us_before[0])[n:]
+
+    def f(z, u):
+        return model.applied_input(u, z)[1]
+
+    def interval(z, inputs):
+        h, u = inputs
+        for _ in range(2):
+            k1 = f(z, u)
+            k2 = f(z + 0.25 * h * k1, u)
+            k3 = f(z + 0.25 * h * k2, u)
+            k4 = f(z + 0.5 * h * k3, u)
+            z = z + h / 12 * (k1 + 2 * k2 + 2 * k3 + k4)
+        return z, None
+
+    z, _ = jax.lax.scan(interval, z0, (jnp.diff(ts_before), us_before[:-1]))
+    return z
 
 
 class Family(eqx.Module):
@@ -121,11 +161,11 @@ def window_errors(model, windows: Windows, method=FORWARD_GRID):
     """Simulated minus measured states on every window, `(window, step, n_measured)`, NaN past a divergence."""
     n = windows.xs.shape[-1]
 
-    def one(t, x, u):
-        x0 = model.initial_state(x[0], u[0])
+    def one(t, x, u, tb, ub):
+        x0 = jnp.concatenate([x[0], hidden_at_start(model, tb, ub)])
         return simulate(model, x0, t, u, method=method, throw=False).xs[:, :n] - x
 
-    return jax.vmap(one)(windows.ts, windows.xs, windows.us)
+    return jax.vmap(one)(windows.ts, windows.xs, windows.us, windows.ts_before, windows.us_before)
 
 
 def _residuals(family, windows, slots, new, p):
@@ -133,7 +173,7 @@ def _residuals(family, windows, slots, new, p):
     return e.reshape(-1)
 
 
-def fit_configuration(family: Family, windows: Windows, slots, new, p_init, free, n_iter: int = 12):
+def fit_configuration(family: Family, windows: Windows, slots, new, p_init, free, n_iter: int = 16):
     """Levenberg-Marquardt on the window output error for one configuration (vmap this over configurations).
 
     The parameter vector `p` holds the nominal values, the slot coefficients and the new term's
@@ -182,7 +222,7 @@ def fit_configuration(family: Family, windows: Windows, slots, new, p_init, free
 
 
 @eqx.filter_jit
-def fit_configurations(family, windows, slots, new, p_init, free, n_iter: int = 12):
+def fit_configurations(family, windows, slots, new, p_init, free, n_iter: int = 16):
     """`fit_configuration` for a batch: `slots (batch, n_slots)`, `new (batch,)`, `p_init (batch, n_params)`, `free (n_params,)`."""
     return jax.vmap(lambda s_, n_, p_: fit_configuration(family, windows, s_, n_, p_, free, n_iter))(slots, new, p_init)
 

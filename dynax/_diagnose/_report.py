@@ -68,8 +68,8 @@ def report_markdown(report) -> str:
         lines += ["Every candidate in the first round (held-out improvement of the window error over the nominal model):", "",
                   "| candidate | gain (screening) | gain (joint refit) | p |", "|---|---|---|---|"]
         for c in j["candidates"]:
-            lines.append(f"| `{c['cause']}@{c['where']}` | {c['screening_gain']:+.0%} | "
-                         + (f"{c['gain']:+.0%} | {c['p_value']:.2g}" if "gain" in c else "| ") + " |")
+            refit = f"{c['gain']:+.0%} | {c['p_value']:.2g}" if "gain" in c else "not refitted | "
+            lines.append(f"| `{c['cause']}@{c['where']}` | {c['screening_gain']:+.0%} | {refit} |")
         lines.append("")
     if j["not_identifiable"]:
         lines += ["## Not identifiable in this mode", ""]

@@ -1,0 +1,120 @@
+"""Hidden-effect tests: data from a truth acrobot with one effect the nominal model lacks; the diagnosis must find it.
+
+The default suite runs one representative effect and the no-effect control (they share compiled
+code); every other candidate, the out-of-vocabulary spring and the known-parameter mode are marked
+slow. Assertions are about the answer (verdict, cause, place, positive gain), not internal numbers.
+"""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from dynax import Acrobot
+from dynax._data import Trajectory
+from dynax._diagnose import diagnose, Known, Refit
+from dynax._diagnose._demo import demo_data
+from dynax._diagnose._synthetic import synthetic_trajectory
+from dynax._model._extensions import (
+    CoulombFriction,
+    Extended,
+    InputDelay,
+    InputGain,
+    InputLag,
+    InputOffset,
+    JointSpring,
+    QuadraticDrag,
+    RotorInertia,
+    ViscousFriction,
+)
+
+
+def _diagnose_hidden(term, seed, mode=Refit()):
+    if isinstance(mode, Known):
+        # The user's parameters are right; only the hidden effect is missing.
+        truth = Extended(Acrobot(), (term,))
+        run = synthetic_trajectory(truth, duration=30.0, seed=seed, amplitude=2.0, system_name="acrobot")
+        k = 2001
+        train = Trajectory(run.ts[:k], run.xs[:k], run.us[:k], run.state_names, run.input_names, "acrobot")
+        validation = Trajectory(run.ts[k:], run.xs[k:], run.us[k:], run.state_names, run.input_names, "acrobot")
+    else:
+        _, train, validation = demo_data(term, seed=seed)
+    return diagnose(Acrobot(), train, validation, mode=mode), train, validation
+
+
+def _assert_found(report, cause, where):
+    j = report.to_json()
+    assert j["verdict"] == "explained", (j["verdict"], j["findings"], j["structure"])
+    assert (j["findings"][0]["cause"], j["findings"][0]["where"]) == (cause, where), j["findings"]
+    assert j["gain"] > 0.2
+    assert j["findings"][0]["gain"] > 0.2
+    h = j["nominal"]["sim_error"]["horizons_s"].index(j["reference_horizon_s"])
+    assert j["extended"]["sim_error"]["rmse"][h] < j["nominal"]["sim_error"]["rmse"][h]
+
+
+@pytest.fixture(scope="module")
+def coulomb_report():
+    return _diagnose_hidden(CoulombFriction(1, 0.22), seed=11)
+
+
+def test_hidden_coulomb_friction_is_named_with_its_size(coulomb_report):
+    report, _, _ = coulomb_report
+    _assert_found(report, "coulomb_friction", "q2")
+    finding = report.findings[0]
+    assert abs(finding["coefficient"] - 0.22) < 0.03  # noise-limited; the fit is unbiased for this effect
+    assert finding["confidence"] == "high"  # told apart from viscous friction and quadratic drag
+    assert report.extended_model.labels == ("coulomb_friction@q2",)
+
+
+def test_refit_mode_reports_what_it_cannot_identify(coulomb_report):
+    report, _, _ = coulomb_report
+    absorbed = {(c["cause"], c["where"]) for c in report.not_identifiable}
+    # An input gain on the acrobot rescales all base parameters; viscous friction is theta6/theta7.
+    assert ("input_gain", "tau2") in absorbed
+    assert ("viscous_friction", "q2") in absorbed
+    assert ("coulomb_friction", "q2") not in absorbed
+
+
+def test_no_hidden_effect_gives_verdict_none():
+    report, _, _ = _diagnose_hidden(CoulombFriction(1, 0.0), seed=12)
+    j = report.to_json()
+    assert j["verdict"] == "none", (j["findings"], j["structure"])
+    assert j["findings"] == []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "term, cause, where, seed",
+    [
+        (CoulombFriction(0, 0.3), "coulomb_friction", "q1", 21),
+        (QuadraticDrag(1, 0.12), "quadratic_drag", "q2", 22),
+        (RotorInertia(1, 0.1), "rotor_inertia", "q2", 23),
+        (InputDelay(0, 0.04), "input_delay", "tau2", 24),
+        (InputLag(0, 0.06), "input_lag", "tau2", 25),
+        (InputOffset(0, 0.2), "input_offset", "tau2", 26),
+    ],
+)
+def test_hidden_effect_is_named(term, cause, where, seed):
+    report, _, _ = _diagnose_hidden(term, seed)
+    _assert_found(report, cause, where)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "term, cause, where",
+    [(ViscousFriction(1, 0.3), "viscous_friction", "q2"), (InputGain(0, 1.25), "input_gain", "tau2")],
+)
+def test_known_parameters_make_viscous_friction_and_input_gain_identifiable(term, cause, where):
+    report, _, _ = _diagnose_hidden(term, seed=31, mode=Known())
+    assert report.not_identifiable == []
+    _assert_found(report, cause, where)
+
+
+@pytest.mark.slow
+def test_out_of_vocabulary_spring_is_unexplained_not_misnamed():
+    report, _, _ = _diagnose_hidden(JointSpring(1, 1.5), seed=41)
+    j = report.to_json()
+    assert j["verdict"] == "unexplained"
+    assert j["structure"]["extended"]["significant"]
+    # The report says where: the probe's leading features involve the elbow angle.
+    features = [f["feature"] for f in j["structure"]["extended"]["top_features"][:3]]
+    assert any("q2" in f for f in features), features

@@ -1,0 +1,79 @@
+"""`report.json` follows the contract, `report.md` and figures are written, and `dynax diagnose` works end to end."""
+
+import json
+
+import numpy as np
+import pytest
+
+from dynax._cli._main import main
+from dynax._data import save_trajectory
+from dynax._diagnose import diagnose, write_report
+from dynax._diagnose._demo import demo_data
+from dynax._cli._output import write_json
+from dynax._model._extensions import InputOffset
+from dynax import Acrobot
+
+CONTRACT_KEYS = ["system", "data", "nominal", "verdict", "findings", "extended", "gain", "reference_horizon_s"]
+
+
+@pytest.fixture(scope="module")
+def offset_data(tmp_path_factory):
+    _, train, validation = demo_data(InputOffset(0, 0.25), seed=3)
+    folder = tmp_path_factory.mktemp("offset")
+    save_trajectory(train, folder / "run1.csv")
+    save_trajectory(validation, folder / "run2.csv")
+    return folder, train, validation
+
+
+def test_cli_diagnose_writes_the_contract_report(offset_data, tmp_path, capsys):
+    folder, _, _ = offset_data
+    out = tmp_path / "diag"
+    code = main(["diagnose", "acrobot", str(folder / "run1.csv"), "--validation", str(folder / "run2.csv"),
+                 "--out", str(out)])
+    assert code == 0
+    report = json.loads((out / "report.json").read_text())
+    assert list(report)[: len(CONTRACT_KEYS)] == CONTRACT_KEYS
+    assert report["system"] == "acrobot"
+    assert report["data"]["train"].endswith("run1.csv") and report["data"]["validation"].endswith("run2.csv")
+    assert report["data"]["n_train"] == 2001 and report["data"]["n_validation"] == 1000
+    assert report["verdict"] == "explained"
+    finding = report["findings"][0]
+    assert {"cause", "where", "coefficient", "std_error", "gain"} <= set(finding)
+    assert (finding["cause"], finding["where"]) == ("input_offset", "tau2")
+    assert abs(finding["coefficient"] - 0.25) < 0.05
+    assert report["extended"]["terms"] == ["input_offset@tau2"]
+    assert "offset_tau2" in report["extended"]["parameters"]
+    for model in ("nominal", "extended"):
+        sim = report[model]["sim_error"]
+        assert len(sim["horizons_s"]) == len(sim["rmse"]) and report["reference_horizon_s"] in sim["horizons_s"]
+    h = report["nominal"]["sim_error"]["horizons_s"].index(report["reference_horizon_s"])
+    expected_gain = 1 - report["extended"]["sim_error"]["rmse"][h] / report["nominal"]["sim_error"]["rmse"][h]
+    assert np.isclose(report["gain"], expected_gain)
+    for name in ("report.md", "measured_vs_simulated.png", "sim_error.png", "residuals.png"):
+        assert (out / name).stat().st_size > 0
+    assert "input_offset" in (out / "report.md").read_text()
+    printed = capsys.readouterr().out
+    assert "Cause: input_offset at tau2" in printed and "Gain" in printed
+
+
+@pytest.mark.slow  # other record lengths: compiles the fits again
+def test_cli_diagnose_without_validation_holds_out_and_says_so(offset_data, tmp_path):
+    folder, _, _ = offset_data
+    out = tmp_path / "diag"
+    assert main(["diagnose", "acrobot", str(folder / "run1.csv"), "--out", str(out), "--max-terms", "1"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert "held out" in " ".join(report["notes"])
+    assert report["data"]["n_train"] + report["data"]["n_validation"] == 2001
+
+
+def test_cli_diagnose_refuses_bad_input_and_writes_nothing(offset_data, tmp_path, capsys):
+    folder, _, _ = offset_data
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,q1,q2,dq1\n0,0,0,0\n")
+    out = tmp_path / "never"
+    assert main(["diagnose", "acrobot", str(bad), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "bad.csv" in err and "dq2" in err
+    assert not out.exists()
+    assert main(["diagnose", "acrobot", str(folder / "run1.csv"), "--max-terms", "0", "--out", str(out)]) == 2
+    assert not out.exists()
