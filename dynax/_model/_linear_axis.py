@@ -6,12 +6,12 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._system import AbstractSystem
+from ._system import AbstractManipulator
 
 LINEAR_AXIS_PARAMETER_NAMES = ("mass", "viscous", "coulomb", "offset")
 
 
-class LinearAxis(AbstractSystem):
+class LinearAxis(AbstractManipulator):
     r"""One axis: $m \ddot q = F - F_v \dot q - F_c \operatorname{sign}(\dot q) - F_0$.
 
     This is the EMPS reference model `force = M q'' + Fv q' + Fc sign(q') + offset`
@@ -29,6 +29,7 @@ class LinearAxis(AbstractSystem):
     coulomb_velocity: float = eqx.field(static=True, default=1e-3)
 
     state_names: ClassVar[tuple[str, ...]] = ("q", "dq")
+    n_joints: ClassVar[int] = 1
     input_names: ClassVar[tuple[str, ...]] = ("force",)
 
     def __check_init__(self):
@@ -39,6 +40,16 @@ class LinearAxis(AbstractSystem):
     def parameters(self) -> dict[str, Array]:
         """`mass`, `viscous`, `coulomb`, `offset` as a dict (the contract's names)."""
         return {k: getattr(self, k) for k in LINEAR_AXIS_PARAMETER_NAMES}
+
+    def mass_matrix(self, q):
+        return jnp.reshape(self.mass, (1, 1))
+
+    def bias_force(self, q, dq):
+        friction = self.viscous * dq + self.coulomb * jnp.tanh(dq / self.coulomb_velocity) + self.offset
+        return jnp.reshape(friction, (1,))
+
+    def input_matrix(self):
+        return jnp.ones((1, 1), jnp.result_type(self.mass))
 
     def vector_field(self, t, x, u):
         dq = x[1]
