@@ -3,10 +3,12 @@ without noise; the effect of a zero-phase filter and of D-optimal excitation; an
 pendulum, EMPS linear axis).
 
     python experiments/acrobot_identification.py            # full study (about 15 min on 2 CPU cores)
-    python experiments/acrobot_identification.py --quick    # a smoke run in well under a minute
+    python experiments/acrobot_identification.py --quick    # a smoke run (about a minute, mostly compiling)
+    python experiments/acrobot_identification.py --parts simulation   # one part; results.json keeps the rest
 
 Writes `experiments/results/acrobot_identification/` (or `--out DIR`): `results.json` and the figures
-`study_noise_free.png`, `study_noisy.png`, `filter.png`, `excitation.png`, `dfki_torque.png`.
+`study_noise_free.png`, `study_noisy.png`, `filter.png`, `excitation.png`, `simulation_fit.png`,
+`dfki_torque.png`.
 Every number in docs/identification.md comes from this script.
 """
 
@@ -37,6 +39,7 @@ from dynax._identify import (  # noqa: E402
     IdentifiabilityError,
     identify,
     Power,
+    SimulationFit,
 )
 from dynax._model._extensions import CoulombFriction, Extended, RotorInertia  # noqa: E402
 
@@ -316,15 +319,22 @@ def main():
     parser.add_argument("--quick", action="store_true", help="a few runs and sample counts (smoke test)")
     parser.add_argument("--runs", type=int, default=None, help="independent runs per point (default 20; quick 3)")
     parser.add_argument("--out", default=str(REPO / "experiments" / "results" / "acrobot_identification"))
-    parser.add_argument("--skip-real", action="store_true", help="skip the DFKI and EMPS real-data part")
+    parser.add_argument("--parts", default="study,excitation,simulation,real",
+                        help="comma-separated parts to run (default all); results.json keeps the others")
     args = parser.parse_args()
+    parts = set(args.parts.split(","))
+    unknown = parts - {"study", "excitation", "simulation", "real"}
+    if unknown:
+        parser.error(f"--parts: unknown part(s) {sorted(unknown)}")
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     runs = args.runs or (3 if args.quick else 20)
     counts = [200, 400] if args.quick else [100, 200, 500, 1000, 2000, 5000]
     excitation_steps = 3 if args.quick else 300
     key = jax.random.PRNGKey(0)
-    results = {"runs": runs, "counts": counts, "dt": DT, "noise": NOISE, "true": dict(zip(NAMES, THETA.tolist()))}
+    previous = out / "results.json"
+    results = json.loads(previous.read_text()) if previous.exists() and not args.quick else {}
+    results.update({"runs": runs, "counts": counts, "dt": DT, "noise": NOISE, "true": dict(zip(NAMES, THETA.tolist()))})
 
     log(f"simulating {runs} runs of {max(counts)} samples of random constant elbow torques")
     k_torque, k_x0, k_noise, k_exc = jax.random.split(key, 4)
@@ -333,6 +343,24 @@ def main():
     xs = rollouts(x0s, us)
     noisy = jax.vmap(lambda k, x, u: add_noise(k, x, u, 1.0))(jax.random.split(k_noise, runs), xs, us)
 
+    cutoff = 4.0  # Hz: above the arm's motion (under 2 Hz here), well below the 50 Hz Nyquist frequency
+    results["filter_cutoff_hz"] = cutoff
+    if "study" in parts:
+        study(results, out, xs, us, noisy, counts, cutoff)
+    if "excitation" in parts:
+        excitation(results, out, xs, us, noisy, x0s, counts, cutoff, k_exc, k_noise, k_torque, runs, excitation_steps)
+    if "simulation" in parts:
+        output_error(results, out, noisy, counts, cutoff, runs, quick=args.quick)
+    if "real" in parts and not args.quick:
+        log("real data: DFKI double pendulum and EMPS")
+        results["real"] = real_data(out)
+
+    with open(out / "results.json", "w") as f:
+        json.dump(results, f, indent=1)
+    log(f"wrote {out}")
+
+
+def study(results, out, xs, us, noisy, counts, cutoff):
     plain = {"energy": Energy(), "power": Power(), "dynamic": Dynamic()}
     clean_curves = sweep(plain, (xs, us), counts, "noise-free")
     plot_sweep(clean_curves, counts, out / "study_noise_free.png", "Noise-free, random constant torques")
@@ -340,8 +368,6 @@ def main():
     plot_sweep(noisy_curves, counts, out / "study_noisy.png", "Measurement noise, random constant torques")
     results["noise_free"] = table(clean_curves, counts)
     results["noisy"] = table(noisy_curves, counts)
-
-    cutoff = 4.0  # Hz: above the arm's motion (under 2 Hz here), well below the 50 Hz Nyquist frequency
     filtered = {
         "energy + low-pass": Energy(lowpass_hz=cutoff),
         "power + low-pass": Power(lowpass_hz=cutoff),
@@ -351,8 +377,9 @@ def main():
     plot_sweep({**noisy_curves, **filter_curves}, counts, out / "filter.png",
                f"Measurement noise: zero-phase Butterworth at {cutoff:g} Hz (4th order)")
     results["noisy_filtered"] = table(filter_curves, counts)
-    results["filter_cutoff_hz"] = cutoff
 
+
+def excitation(results, out, xs, us, noisy, x0s, counts, cutoff, k_exc, k_noise, k_torque, runs, excitation_steps):
     log("optimising a D-optimal Fourier excitation through the simulator")
     coefficients, history, ts_exc, period, tau_max = optimise_excitation(k_exc, excitation_steps)
     u_period = fourier_torque(coefficients, ts_exc, period, tau_max)
@@ -365,7 +392,9 @@ def main():
     exc_methods = {"energy": Energy(), "power + low-pass": Power(lowpass_hz=cutoff),
                    "dynamic + low-pass": Dynamic(lowpass_hz=cutoff, lowpass_inputs=True)}
     opt_curves = sweep(exc_methods, noisy_opt, counts, "noisy, optimised excitation")
-    baseline = {k: (noisy_curves | filter_curves)[k] for k in exc_methods}
+    baseline_methods = {"energy": Energy(), "power + low-pass": Power(lowpass_hz=cutoff),
+                        "dynamic + low-pass": Dynamic(lowpass_hz=cutoff, lowpass_inputs=True)}
+    baseline = sweep(baseline_methods, noisy, counts, "noisy, constant torques (baseline)")
     plot_sweep({**{f"{k} (constant torques)": v for k, v in baseline.items()},
                 **{f"{k} (D-optimal)": v for k, v in opt_curves.items()}},
                counts, out / "excitation.png", "Measurement noise: random constant torques vs D-optimal Fourier torque")
@@ -380,13 +409,34 @@ def main():
         "noisy_optimised": table(opt_curves, counts),
     }
 
-    if not args.skip_real and not args.quick:
-        log("real data: DFKI double pendulum and EMPS")
-        results["real"] = real_data(out)
 
-    with open(out / "results.json", "w") as f:
-        json.dump(results, f, indent=1)
-    log(f"wrote {out}")
+def output_error(results, out, noisy, counts, cutoff, runs, quick):
+    """The output-error (simulation) fit on the same noisy runs, from a start 20 % off, against the best
+    least-squares models."""
+    sim_counts = counts if quick else [200, 500, 2000]
+    start = dynax.Acrobot.from_base_parameters({k: 1.2 * v for k, v in zip(NAMES, THETA)})
+    deviations = np.full((runs, len(sim_counts), len(THETA)), np.nan)
+    coverage = []
+    t0 = time.perf_counter()
+    for r, (x, u) in enumerate(zip(*noisy)):
+        for i, n in enumerate(sim_counts):
+            fit = identify(start, as_trajectory(x[:n], u[:n]), SimulationFit(segment_s=2.0, max_steps=50))
+            deviations[r, i] = np.abs(np.asarray(fit.estimate) - THETA) / np.abs(THETA)
+            coverage.append(np.abs(np.asarray(fit.estimate) - THETA) / np.asarray(fit.std_errors))
+        log(f"  output-error fit: run {r + 1}/{runs} ({time.perf_counter() - t0:.0f} s)")
+    baseline = sweep({"energy": Energy(), "power + low-pass": Power(lowpass_hz=cutoff)}, noisy, sim_counts,
+                     "noisy, least-squares baseline")
+    curves = {**baseline, "simulation (output error)": deviations}
+    plot_sweep(curves, sim_counts, out / "simulation_fit.png",
+               "Measurement noise: output-error fit through the simulator vs the best least-squares models")
+    coverage = np.asarray(coverage)
+    results["simulation_fit"] = {
+        "counts": sim_counts,
+        "table": table(curves, sim_counts),
+        "fraction_within_2_std_errors": float(np.mean(coverage[:, :5] < 2.0)),
+        "segment_s": 2.0,
+        "start": "all parameters 20 % high",
+    }
 
 
 def information_log_det_of(u, ts):

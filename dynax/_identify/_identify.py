@@ -401,7 +401,8 @@ def identify(
     - `method`: `Dynamic()` (default), `Power()`, `Energy()` or `SimulationFit()`.
     - `friction`: `"viscous"` (default) or `"coulomb"` (adds `fc1`, `fc2`, or the linear axis's
       `coulomb`).
-    - `weights`: optional row weights for the least-squares problem (one per stacked equation).
+    - `weights`: optional row weights for the least-squares problem, one per stacked equation
+      (for `Dynamic`, all of joint 1's equations come first, then joint 2's).
     - `rcond`: relative singular-value threshold of the numerical rank.
 
     **Returns:** an `Identification`.
@@ -417,10 +418,9 @@ def identify(
     if isinstance(method, SimulationFit):
         return _identify_by_simulation(system, trajectories, method, friction)
     system = with_friction(system, friction)
-    base = system
     names = parameter_names(system, friction)
     if isinstance(method, Dynamic):
-        parts = [_dynamic_rows(base, t, method, friction) for t in trajectories]
+        parts = [_dynamic_rows(system, t, method, friction) for t in trajectories]
         ys = jnp.concatenate([p[0] for p in parts])  # (rows, joints, params)
         forces = jnp.concatenate([p[1] for p in parts])
         n_samples = sum(p[2] for p in parts)
@@ -438,13 +438,13 @@ def identify(
             raise UsageError(f"Dynamic: `weighting` must be 'none' or 'joint', got {method.weighting!r}")
         label = "dynamic"
     elif isinstance(method, Power):
-        parts = [_power_rows(base, t, method, friction) for t in trajectories]
+        parts = [_power_rows(system, t, method, friction) for t in trajectories]
         a = jnp.concatenate([p[0] for p in parts])
         y = jnp.concatenate([p[1] for p in parts])
         n_samples = sum(p[2] for p in parts)
         label = "power"
     elif isinstance(method, Energy):
-        parts = [_energy_rows(base, t, method, friction) for t in trajectories]
+        parts = [_energy_rows(system, t, method, friction) for t in trajectories]
         a = jnp.concatenate([p[0] for p in parts])
         y = jnp.concatenate([p[1] for p in parts])
         n_samples = sum(p[2] for p in parts)

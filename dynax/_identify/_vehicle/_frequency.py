@@ -17,7 +17,8 @@ r"""The frequency-domain criterion (CIFER-style) for the linear velocity model.
 
    by Levenberg-Marquardt (optimistix), started from the frequency-domain *equation-error* fit
    $j\omega \hat H = A\hat H + B e^{-j\omega\Delta t/2}$ (linear least squares, same weights). The
-   model includes the half-sample delay of the zero-order hold. The constant column, which has no
+   model includes the half-sample delay of the zero-order hold. A weak prior toward the one-step
+   weights holds the terms that the responses do not determine. The constant column, which has no
    frequency response, is then re-fitted by one-step least squares with the rest held.
 
 ??? cite "References"
@@ -43,9 +44,22 @@ from jaxtyping import Array, Float
 
 from ..._data._trajectory import Trajectory
 from ..._errors import UsageError
-from ..._model._helicopter import BODY, Helicopter, LINEAR_FEATURE_NAMES, LinearVelocityModel
+from ..._model._helicopter import BODY, BODY_AXES, Helicopter, LINEAR_FEATURE_NAMES, LinearVelocityModel
 from ._criteria import _normal_equations, _solve, _with_theta, fit_one_step, VehicleFit
 from ._windows import check_helicopter_data, valid_starts
+
+
+#: The derivatives of a hover model that frequency responses identify (Mettler, Tischler and
+#: Kanade 2002 use this kind of structure): on-axis damping, attitude (gravity) and rotor-tilt
+#: couplings, speed stability, weathercock stability and the control derivatives.
+HOVER_DERIVATIVES = {
+    "u": ("u", "q", "pitch", "u2"),
+    "v": ("v", "p", "roll", "u1", "u3"),
+    "w": ("w", "u4"),
+    "p": ("p", "v", "u1", "u3"),
+    "q": ("q", "u", "u2"),
+    "r": ("r", "v", "u3", "u4"),
+}
 
 
 class FrequencyDomain(eqx.Module):
@@ -58,12 +72,25 @@ class FrequencyDomain(eqx.Module):
       to an eighth of the record when the record is short).
     - `min_coherence`: pairs and frequencies with a lower partial coherence are left out (0.6).
     - `max_steps`: Levenberg-Marquardt iterations (default 30; 0 keeps the equation-error fit).
+    - `structure`: per body axis, the weights fitted (default `HOVER_DERIVATIVES`: the on-axis
+      damping, the gravity and rotor-tilt couplings and the control derivatives of a hover
+      model); the other weights of the linear model are zero, as in a CIFER hover model.
+    - `start`: the starting point of the output-error fit, `"one-step"` (default) or
+      `"equation-error"` (the frequency-domain equation-error fit, which is fast but biased by the
+      collinear responses of closed-loop data).
+    - `prior_weight`: weight of a prior pulling each weight toward its one-step value, relative to
+      its magnitude (default 0.1). Closed-loop responses determine the on-axis dynamics well and
+      many off-axis terms hardly at all; the prior holds the latter (whose free drift otherwise
+      yields unstable models) and is negligible where the data speak.
     """
 
-    band_hz: tuple[float, float] = eqx.field(static=True, default=(0.2, 8.0))
+    band_hz: tuple[float, float] = eqx.field(static=True, default=(0.1, 2.5))
     segment_s: float = eqx.field(static=True, default=10.0)
     min_coherence: float = eqx.field(static=True, default=0.6)
     max_steps: int = eqx.field(static=True, default=30)
+    prior_weight: float = 0.1
+    start: str = eqx.field(static=True, default="equation-error")
+    structure: dict = eqx.field(static=True, default_factory=lambda: dict(HOVER_DERIVATIVES))
 
 
 def frequency_responses(
@@ -116,7 +143,7 @@ def _model_response(weights, omegas, delay=0.0):
     return jax.vmap(at)(omegas)
 
 
-def _equation_error(weights, freqs, measured, w_gamma, dt):
+def _equation_error(weights, freqs, measured, w_gamma, dt, prior_weight, structure_mask):
     r"""Frequency-domain equation error: $j\omega H = A_s H + A_\theta H_\theta + B e^{-j\omega\tau}$,
     linear least squares per output row, weighted by the coherence weights (the starting point)."""
     names = LINEAR_FEATURE_NAMES
@@ -131,15 +158,28 @@ def _equation_error(weights, freqs, measured, w_gamma, dt):
     regressors = np.concatenate([hs, attitude, delay], axis=1)  # (f, 12, 4)
     x = np.transpose(regressors, (0, 2, 1)).reshape(-1, 12)  # rows: (f, input)
     new = np.asarray(weights, float).copy()
+    fixed = new.copy()
     for row in range(6):
-        target = (jw[:, None] * hs[:, row, :]).reshape(-1)
+        free_cols = [c for c in state_cols + input_cols if structure_mask[row, c]]
+        if not free_cols:
+            continue
+        held_cols = [c for c in state_cols + input_cols if not structure_mask[row, c]]
+        held = x[:, [(state_cols + input_cols).index(c) for c in held_cols]] @ fixed[row, held_cols] if held_cols else 0.0
+        target = (jw[:, None] * hs[:, row, :]).reshape(-1) - held
         w = np.sqrt(w_gamma[:, row, :].reshape(-1))
         if not np.any(w > 0):
             continue
-        a = np.concatenate([(w[:, None] * x).real, (w[:, None] * x).imag])
+        xf = x[:, [(state_cols + input_cols).index(c) for c in free_cols]]
+        a = np.concatenate([(w[:, None] * xf).real, (w[:, None] * xf).imag])
         b = np.concatenate([(w * target).real, (w * target).imag])
+        # The same prior as the output-error cost, scaled to these equations: a ridge toward the
+        # one-step weights that holds the terms the responses do not determine.
+        centre = new[row, free_cols]
+        ridge = prior_weight * np.sqrt(np.trace(a.T @ a) / a.shape[1]) / np.maximum(np.abs(centre), 1.0)
+        a = np.concatenate([a, np.diag(ridge)])
+        b = np.concatenate([b, ridge * centre])
         coef, *_ = np.linalg.lstsq(a, b, rcond=1e-10)
-        new[row, state_cols + input_cols] = coef
+        new[row, free_cols] = coef
     return jnp.asarray(new, weights.dtype)
 
 
@@ -168,22 +208,37 @@ def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: Frequen
     omegas = jnp.asarray(2 * np.pi * freqs, dtype)
     sqrt_wg = jnp.asarray(np.sqrt(w_gamma), dtype)
     measured_j = jnp.asarray(safe)
+    use_j = jnp.asarray(use)
     delay = 0.5 * float(trajectory.ts[1] - trajectory.ts[0])
-    mask = np.array(initial.body_model.mask, bool)
-    mask[:, LINEAR_FEATURE_NAMES.index("1")] = False
+    mask = np.array([[name in criterion.structure.get(axis, ()) for name in LINEAR_FEATURE_NAMES] for axis in BODY_AXES])
+    mask &= np.array(initial.body_model.mask, bool)
     free = np.nonzero(mask)
+    # The frequency-domain model is the hover-derivative structure: the other weights are zero
+    # (the constant column is re-fitted at the end).
+    keep = mask.copy()
+    keep[:, LINEAR_FEATURE_NAMES.index("1")] = True
+    initial = eqx.tree_at(lambda h: h.body_model.weights, initial, jnp.where(jnp.asarray(keep), initial.body_model.weights, 0.0))
+
+    prior_centre = initial.body_model.weights[free]
+    prior_scale = jnp.maximum(jnp.abs(prior_centre), 1.0) / criterion.prior_weight
 
     def residuals(theta, _):
         weights = initial.body_model.weights.at[free].set(theta)
-        ratio = measured_j / _model_response(weights, omegas, delay)
+        model = _model_response(weights, omegas, delay)
+        ratio = measured_j / jnp.where(use_j, model, 1.0)  # unused pairs (weight 0) may have no response
         magnitude = 20 * jnp.log10(jnp.abs(ratio))
         phase = jnp.degrees(jnp.angle(ratio))
-        return jnp.concatenate([(sqrt_wg * magnitude).ravel(), (sqrt_wg * jnp.sqrt(0.01745) * phase).ravel()])
+        prior = (theta - prior_centre) / prior_scale
+        return jnp.concatenate([(sqrt_wg * magnitude).ravel(), (sqrt_wg * jnp.sqrt(0.01745) * phase).ravel(), prior])
 
     dt = float(trajectory.ts[1] - trajectory.ts[0])
     coherent = coherence >= criterion.min_coherence
     w_equation = np.where(coherent, (1.58 * (1 - np.exp(-coherence))) ** 2, 0.0)
-    weights0 = _equation_error(initial.body_model.weights, freqs, measured, w_equation, dt)
+    weights0 = (
+        _equation_error(initial.body_model.weights, freqs, measured, w_equation, dt, criterion.prior_weight, mask)
+        if criterion.start == "equation-error"
+        else initial.body_model.weights
+    )
     theta0 = weights0[free]
 
     def cost(theta):
