@@ -352,15 +352,21 @@ def _energy_rows(system, traj, method: Energy, friction):
         xs = _lowpass(traj, traj.xs, method.lowpass_hz, method.lowpass_order)
     else:
         xs = traj.xs
+    starts = np.arange(0, len(traj) - window, stride)
+    rows, target = _energy_equations(system, traj.ts, xs, traj.us, friction, jnp.asarray(starts), window)
+    return rows, target, int(starts[-1] + window - starts[0] + 1)
+
+
+@eqx.filter_jit
+def _energy_equations(system, ts, xs, us, friction, starts, window):
+    """One energy-balance equation per window `[starts[i], starts[i] + window]`."""
     w = energy_regressor(system, xs, friction)
-    work, dissipated = _work_and_dissipation(system, traj.ts, xs, traj.us, friction)
+    work, dissipated = _work_and_dissipation(system, ts, xs, us, friction)
     work = jnp.concatenate([jnp.zeros(1, xs.dtype), jnp.cumsum(work)])
     dissipated = jnp.concatenate([jnp.zeros((1, dissipated.shape[1]), xs.dtype), jnp.cumsum(dissipated, axis=0)])
-    starts = np.arange(0, len(traj) - window, stride)
     ends = starts + window
     rows = (w[ends] - w[starts]) + (dissipated[ends] - dissipated[starts])
-    target = work[ends] - work[starts]
-    return rows, target, int(ends[-1] - starts[0] + 1) if len(starts) else 0
+    return rows, work[ends] - work[starts]
 
 
 def _system_name(system):
