@@ -208,10 +208,15 @@ def bench_jax(args, x0, us, ts, results):
             sharded = jax.jit(fn, in_shardings=batch_sharding, out_shardings=batch_sharding).lower(x0_s, us_s).compile()
             compile_s = time.perf_counter() - start
             _row(results, name, _best_time(sharded, x0_s, us_s, reps=args.reps), n_steps, compile_s=compile_s)
-        xs_sharded = np.asarray(sharded(x0_s, us_s))
-        assert xs_sharded.shape == (args.batch, args.steps, 4)
+            compiled[name] = sharded
 
     xs_dynax = np.asarray(compiled["dynax simulate, 1 device"](x0_32, us_32))
+    if n_dev > 1:
+        # The sharded run computes the same rollouts, each on one device.
+        xs_sharded = compiled[f"dynax simulate, {n_dev} devices"](x0_s, us_s)
+        assert len(xs_sharded.sharding.device_set) == n_dev
+        results["sharded_max_difference"] = float(np.max(np.abs(np.asarray(xs_sharded) - xs_dynax)))
+        print(f"  sharded vs 1-device rollouts: max |difference| {results['sharded_max_difference']:.1e}")
     xs_hand = np.asarray(compiled["hand-written RK4 scan, 1 device"](x0_32, us_32))
     return system, xs_dynax, xs_hand
 
