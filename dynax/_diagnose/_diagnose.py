@@ -100,7 +100,11 @@ def _as_records(data, name) -> list[Trajectory]:
 
 def _paired_test(score_ref, score_new, n_eff):
     """One-sided paired test that `score_new` is smaller than `score_ref` over windows; n_eff independent ones."""
-    d = np.log(np.maximum(score_ref, 1e-300) / np.maximum(score_new, 1e-300))  # improvements are multiplicative
+    # Improvements are multiplicative, so the test is on log ratios; a floor of a tenth of the typical
+    # window error keeps windows where both models are at the noise floor (a machine at rest) from
+    # counting as large changes either way.
+    floor = 0.1 * float(np.median(score_ref)) + 1e-300
+    d = np.log((score_ref + floor) / (score_new + floor))
     sd = float(np.std(d, ddof=1)) if d.size > 1 else 0.0
     if sd == 0.0:
         return 0.0 if np.mean(d) > 0 else 1.0
@@ -396,12 +400,18 @@ def diagnose(
         p_cur = p_j[r["i"]].copy()
         p_cur[n_nom + len(selected) - 1] = p_cur[-1]
         p_cur[-1] = 0.0
+        std_cur = std_j[r["i"]].copy()
+        std_cur[n_nom + len(selected) - 1] = std_cur[-1]
         score_cur, rmse_current = scores_j[r["i"]], r["rmse"]
         say("probing the extended model's residuals for structure ...")
         structure_current = structure_test(model_of(slots_cur, p_cur), train_records, validation_records)
         if not structure_current.significant:
             break
 
+    # Every finding's coefficient from the final joint fit (earlier rounds' values move when later terms join).
+    for m, (finding, k) in enumerate(zip(findings, selected)):
+        finding["coefficient"] = float(neutral[k] + p_cur[n_nom + m])
+        finding["std_error"] = float(std_cur[n_nom + m])
     extended_model = model_of(slots_cur, p_cur)
     extended_model = Extended(extended_model.system, tuple(extended_model.terms[k] for k in selected))
     if not selected:

@@ -113,8 +113,8 @@ def probe_features(system, xs, us, predicted, dt) -> tuple[np.ndarray, list[str]
             q, v = xs[:, j], xs[:, n + j]
             c = system.state_names[j]
             vs = max(0.05 * float(np.std(v)), 1e-6)
-            cols += [np.tanh(v / vs), v, np.abs(v) * v, q, np.sin(q), np.cos(q), predicted[:, j]]
-            names += [f"sign(d{c})", f"d{c}", f"|d{c}|d{c}", c, f"sin({c})", f"cos({c})", f"model acceleration d{c}/dt"]
+            cols += [np.tanh(v / vs), v, np.abs(v) * v, np.sin(q), np.cos(q), predicted[:, j]]
+            names += [f"sign(d{c})", f"d{c}", f"|d{c}|d{c}", f"sin({c})", f"cos({c})", f"model acceleration d{c}/dt"]
     else:
         for j, c in enumerate(system.state_names):
             x = xs[:, j]
@@ -175,7 +175,7 @@ def structure_test(model, train, validation, *, alpha: float = 0.01, min_r2: flo
     Phi_tr, Phi_va = (feats[0] - mu) / sd, (feats[1] - mu) / sd
     Phi_tr[:, -1], Phi_va[:, -1] = 1.0, 1.0
     R_tr, R_va = resid[0] / scale, resid[1] / scale
-    ridge = 1e-6 * Phi_tr.shape[0]
+    ridge = 1e-3 * Phi_tr.shape[0]  # standardised features: a mild ridge keeps the probe from extrapolating wildly
     beta = np.linalg.solve(Phi_tr.T @ Phi_tr + ridge * np.eye(Phi_tr.shape[1]), Phi_tr.T @ R_tr)
     E_va = R_va - Phi_va @ beta
     sse0 = (R_va**2).sum(axis=1)
