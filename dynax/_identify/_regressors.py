@@ -1,8 +1,8 @@
 r"""Linear-in-parameter regressors of the rigid-body models: dynamic, energy and power.
 
 Every model here is linear in its parameter vector $\theta$, so its regressor is the Jacobian of the
-model with respect to $\theta$. Nothing is expanded by hand: the dynamic regressor is
-`jax.jacfwd` of the inverse dynamics $M(q)\ddot q + h(q, \dot q) + F(\dot q)$, the energy regressor is
+model with respect to $\theta$. Nothing is expanded by hand: the dynamic regressor is the
+Jacobian (`jax.jacrev`: a model has fewer outputs than parameters) of the inverse dynamics $M(q)\ddot q + h(q, \dot q) + F(\dot q)$, the energy regressor is
 `jax.grad` of the total energy $H(q, \dot q)$ (linear in $\theta_1..\theta_5$), and the friction
 columns are the Jacobian of the friction force. The parameter vectors are named in the contract's
 names:
@@ -131,7 +131,9 @@ def _inverse_dynamics(system, names, theta, q, dq, ddq):
     if isinstance(base, AbstractTwoLink):
         fitted = with_parameters(system, names, theta)
         base, terms = _split(fitted)
-        force = base.mass_matrix(q) @ ddq + base.bias_force(q, dq)
+        # Elementwise rather than `@`: under vmap a 2x2 matrix-vector product becomes a batched dot,
+        # which XLA's CPU backend runs several times slower than the same arithmetic fused.
+        force = jnp.sum(base.mass_matrix(q) * ddq[None, :], axis=1) + base.bias_force(q, dq)
         for t in terms:
             j = t.joint
             force = force.at[j].add(t.inertia() * ddq[j] - t.force(q[j], dq[j]))
@@ -169,7 +171,8 @@ def generalised_force(system: AbstractSystem, us: Float[Array, "time n_inputs"])
     r"""The measured generalised forces $B u$, one entry per joint (the acrobot's `tau1` is 0)."""
     base, _ = _split(system)
     if isinstance(base, AbstractTwoLink):
-        return us @ base.input_matrix().T.astype(us.dtype)
+        b = base.input_matrix().astype(us.dtype)  # (joints, inputs); broadcast, not a batched dot
+        return jnp.sum(b * us[..., None, :], axis=-1)
     return us[..., :1]
 
 
@@ -205,7 +208,7 @@ def dynamic_regressor(
     q, dq = _positions(system, xs)
 
     def row(q, dq, ddq):
-        return jax.jacfwd(lambda th: _inverse_dynamics(system, names, th, q, dq, ddq))(theta0)
+        return jax.jacrev(lambda th: _inverse_dynamics(system, names, th, q, dq, ddq))(theta0)
 
     return jax.vmap(row)(q, dq, ddq)
 
@@ -252,9 +255,15 @@ def friction_power_regressor(
     names = parameter_names(system, friction)
     energy_names = energy_parameter_names(system, friction)
     mask = jnp.asarray([n not in energy_names for n in names], xs.dtype)
+    system = with_friction(system, friction)
+    theta0 = jnp.zeros(len(names), xs.dtype)
     q, dq = _positions(system, xs)
-    ys = dynamic_regressor(system, xs, jnp.zeros_like(dq), friction)
-    return jnp.einsum("tj,tjp->tp", dq, ys) * mask
+
+    def row(q, dq):
+        # The power is a scalar linear in theta: one reverse pass gives the whole row.
+        return jax.grad(lambda th: dq @ _inverse_dynamics(system, names, th, q, dq, jnp.zeros_like(dq)))(theta0)
+
+    return jax.vmap(row)(q, dq) * mask
 
 
 @eqx.filter_jit
