@@ -41,7 +41,7 @@ from dynax._identify import (  # noqa: E402
     Power,
     SimulationFit,
 )
-from dynax._model._extensions import CoulombFriction, Extended, RotorInertia  # noqa: E402
+from dynax._model._extensions import Extended, RotorInertia  # noqa: E402
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 DATASETS = REPO.parent / "shared" / "datasets"

@@ -15,7 +15,6 @@ from collections.abc import Sequence
 from typing import Literal
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.signal
@@ -27,7 +26,7 @@ from .._errors import DataError, UsageError
 from .._model._linear_axis import LinearAxis
 from .._model._extensions import Extended
 from .._model._system import AbstractSystem
-from .._model._two_link import AbstractTwoLink, Acrobot, DoublePendulum
+from .._model._two_link import Acrobot, DoublePendulum
 from ._least_squares import least_squares, LeastSquaresFit
 from ._regressors import (
     _positions,
@@ -36,7 +35,6 @@ from ._regressors import (
     Friction,
     friction_power_regressor,
     generalised_force,
-    input_power,
     parameter_names,
     with_friction,
     with_parameters,

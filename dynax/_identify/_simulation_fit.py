@@ -258,7 +258,7 @@ def fit_simulation_error(
 
 def _identify_by_simulation(system, trajectories, method: SimulationFit, friction):
     from ._identify import _fitted_system, _system_name, Identification
-    from ._regressors import _split, parameter_names, parameter_vector, with_friction
+    from ._regressors import parameter_names, parameter_vector, with_friction
 
     try:
         system = with_friction(system, friction)
@@ -269,11 +269,10 @@ def _identify_by_simulation(system, trajectories, method: SimulationFit, frictio
         # Start from the system's values; the leaves not in `names` (a linear axis's Coulomb term
         # under viscous friction) are fixed.
         system = _fitted_system(system, names, parameter_vector(system, friction))
-        fitted_names = jax.tree.map(lambda _: True, system)
         filter_spec = jax.tree.map(eqx.is_inexact_array, system)
         if isinstance(system, LinearAxis) and "coulomb" not in names:
             filter_spec = eqx.tree_at(lambda s: s.coulomb, filter_spec, False)
-        del fitted_names
+        # The fitted leaves flatten in field order, which is the order of `names`.
     else:
         filter_spec = jax.tree.map(eqx.is_inexact_array, system)
     result = fit_simulation_error(
