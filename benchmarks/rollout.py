@@ -53,9 +53,7 @@ if ARGS is not None and ARGS.devices > 1:
     ).strip()
 
 import json  # noqa: E402
-from typing import ClassVar  # noqa: E402
 
-import diffrax  # noqa: E402
 import equinox as eqx  # noqa: E402
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
@@ -71,22 +69,6 @@ except ImportError:  # run from a checkout without installing it
 MJCF = pathlib.Path(__file__).resolve().parent / "acrobot.xml"
 
 
-class RK4(diffrax.AbstractERK):
-    """The classical fourth-order Runge-Kutta method (diffrax ships no such solver).
-
-    The embedded error weights (RK4 minus the midpoint rule) are never used on a fixed grid.
-    """
-
-    tableau: ClassVar[diffrax.ButcherTableau] = diffrax.ButcherTableau(
-        c=np.array([0.5, 0.5, 1.0]),
-        b_sol=np.array([1 / 6, 1 / 3, 1 / 3, 1 / 6]),
-        b_error=np.array([1 / 6, 1 / 3 - 1, 1 / 3, 1 / 6]),
-        a_lower=(np.array([0.5]), np.array([0.0, 0.5]), np.array([0.0, 0.0, 1.0])),
-    )
-    interpolation_cls: ClassVar = diffrax.ThirdOrderHermitePolynomialInterpolation.from_k
-
-    def order(self, terms):
-        return 4
 
 
 def _problem(batch, steps, dt, seed=0):
@@ -144,7 +126,7 @@ def bench_jax(args, x0, us, ts, results):
     ts32 = jnp.asarray(ts, dtype)
     x0_32, us_32 = jnp.asarray(x0, dtype), jnp.asarray(us, dtype)
     n_steps = args.batch * args.steps
-    method = dynax.FixedGrid(RK4(), substeps=1)
+    method = dynax.FixedGrid(dynax.RK4(), substeps=1)
 
     def dynax_rollouts(x0, us):
         simulate = lambda x, u: dynax.simulate(system, x, ts32, u, method=method, throw=False).xs  # noqa: E731
@@ -229,7 +211,7 @@ def bench_gradient(args, system, x0, us, ts, results):
     """
     dtype = jnp.float32
     ts32, x0_32, us_32 = jnp.asarray(ts, dtype), jnp.asarray(x0, dtype), jnp.asarray(us, dtype)
-    method = dynax.FixedGrid(RK4(), substeps=1)
+    method = dynax.FixedGrid(dynax.RK4(), substeps=1)
 
     def dynax_rollouts(system, x0):
         simulate = lambda x, u: dynax.simulate(system, x, ts32, u, method=method, throw=False).xs[1:]  # noqa: E731

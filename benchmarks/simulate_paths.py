@@ -42,7 +42,6 @@ except ImportError:  # run from a checkout without installing it
     import dynax
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from rollout import RK4  # noqa: E402
 
 
 def _problem(batch, seed=0):
@@ -149,7 +148,7 @@ def main():
     paths = {
         "FixedGrid(Tsit5, substeps=2)  [default]": _simulate(system, dynax.FixedGrid()),
         "FixedGrid(Tsit5, substeps=1)": _simulate(system, dynax.FixedGrid(diffrax.Tsit5(), substeps=1)),
-        "FixedGrid(RK4, substeps=1)": _simulate(system, dynax.FixedGrid(RK4(), substeps=1)),
+        "FixedGrid(RK4, substeps=1)": _simulate(system, dynax.FixedGrid(dynax.RK4(), substeps=1)),
         "FixedGrid(Dopri8, substeps=1)": _simulate(system, dynax.FixedGrid(diffrax.Dopri8(), substeps=1)),
         "Adaptive(Dopri8, rtol=atol=1e-10)": _simulate(system, dynax.Adaptive()),
         "Adaptive(Tsit5, rtol=atol=1e-8)": _simulate(

@@ -34,6 +34,7 @@ from ._data import (
 )
 from ._errors import DataError as DataError, UsageError as UsageError
 from ._sim_error import simulation_error as simulation_error, SimulationError as SimulationError
+from ._solvers import RK4 as RK4
 from ._simulate import Adaptive as Adaptive, FixedGrid as FixedGrid, Simulation as Simulation, simulate as simulate
 
 __version__ = "0.1.0"

@@ -7,7 +7,6 @@ would replace) against diffrax's own `solver.step`, restarted at every sample.
 """
 
 import pathlib
-from typing import ClassVar
 
 import diffrax
 import jax
@@ -20,19 +19,6 @@ import dynax
 MJCF = pathlib.Path(__file__).resolve().parents[2] / "benchmarks" / "acrobot.xml"
 
 
-class RK4(diffrax.AbstractERK):
-    """Classical RK4, MuJoCo's `RK4` integrator (diffrax ships none; as in benchmarks/rollout.py)."""
-
-    tableau: ClassVar[diffrax.ButcherTableau] = diffrax.ButcherTableau(
-        c=np.array([0.5, 0.5, 1.0]),
-        b_sol=np.array([1 / 6, 1 / 3, 1 / 3, 1 / 6]),
-        b_error=np.array([1 / 6, 1 / 3 - 1, 1 / 3, 1 / 6]),
-        a_lower=(np.array([0.5]), np.array([0.0, 0.5]), np.array([0.0, 0.0, 1.0])),
-    )
-    interpolation_cls: ClassVar = diffrax.ThirdOrderHermitePolynomialInterpolation.from_k
-
-    def order(self, terms):
-        return 4
 
 
 @pytest.fixture(scope="module")
@@ -92,7 +78,7 @@ def test_rk4_rollout_matches_fixed_grid(model):
 
     ts = dt * np.arange(n_steps + 1)
     sim = dynax.simulate(
-        dynax.Acrobot(), x0, ts, np.concatenate([us, us[-1:]]), method=dynax.FixedGrid(RK4(), substeps=1)
+        dynax.Acrobot(), x0, ts, np.concatenate([us, us[-1:]]), method=dynax.FixedGrid(dynax.RK4(), substeps=1)
     )
     np.testing.assert_allclose(states[0, :, 0], ts[1:], atol=1e-12)
     np.testing.assert_allclose(np.asarray(sim.xs[1:]), mj_xs, rtol=0, atol=1e-9)
@@ -121,7 +107,7 @@ def diffrax_step_rollout(system, solver, substeps):
 
 
 @pytest.mark.parametrize(
-    "solver", [diffrax.Tsit5(), diffrax.Dopri5(), RK4(), diffrax.Euler()],
+    "solver", [diffrax.Tsit5(), diffrax.Dopri5(), dynax.RK4(), diffrax.Euler()],
     ids=lambda s: type(s).__name__,
 )
 def test_fixed_grid_equals_diffrax_step(solver):
