@@ -22,9 +22,15 @@ def test_demo_writes_data_report_and_figures(tmp_path, capsys):
     assert main(["demo", "--out", str(out), "--seed", "0"]) == 0
     train = load_trajectory(out / "train.csv", "acrobot")
     assert len(train) > 1000 and np.isclose(train.dt, 0.01)
-    assert (out / "measured_vs_simulated.png").stat().st_size > 0
+    for name in ("validation.csv", "report.json", "report.md", "measured_vs_simulated.png", "sim_error.png"):
+        assert (out / name).stat().st_size > 0
+    report = json.loads((out / "report.json").read_text())
+    hidden = hidden_effect(0)
+    assert report["verdict"] == "explained"
+    assert (report["findings"][0]["cause"], report["findings"][0]["where"]) == (hidden.cause, "q2")
+    assert report["gain"] > 0.2
     summary = capsys.readouterr().out
-    assert "gets wrong" in summary
+    assert "gets wrong" in summary and "Cause: coulomb_friction at q2" in summary and "Gain" in summary
 
 
 def test_demo_refuses_a_negative_seed(tmp_path, capsys):
