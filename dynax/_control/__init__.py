@@ -1,3 +1,5 @@
+"""Control: LQR (differentiable Riccati solvers), Drake's Spong swing-up controller, closed loops, PGPE."""
+
 from ._lqr import (
     discrete_lqr as discrete_lqr,
     linearise as linearise,

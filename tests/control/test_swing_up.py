@@ -9,14 +9,11 @@ import scipy.linalg
 
 import dynax
 from dynax._control import (
-    balancing_lqr,
-    CostToGoThreshold,
     is_upright,
     random_starts,
     simulate_closed_loop,
     SmoothActivation,
     SpongController,
-    swing_up_reward,
     swing_up_time,
     SwingUpTask,
     upright_error,
