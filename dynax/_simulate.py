@@ -21,11 +21,16 @@ class FixedGrid(eqx.Module):
 
     **Arguments:**
 
-    - `solver`: a diffrax explicit Runge-Kutta solver (default `diffrax.Tsit5()`).
+    - `solver`: a diffrax explicit Runge-Kutta solver (default `diffrax.Tsit5(scan_kind="bounded")`,
+      differentiable in forward and reverse mode). Pass `scan_kind="bounded"` to other
+      Runge-Kutta solvers too if you need forward-mode derivatives.
     - `substeps`: steps per sample interval (default 2).
     """
 
-    solver: diffrax.AbstractSolver = diffrax.Tsit5()
+    # "bounded": diffrax's stage loop then supports forward mode (`jax.jvp`, `jax.jacfwd`, used by
+    # Levenberg-Marquardt) as well as reverse mode, at the speed of the default "checkpointed" loop,
+    # which supports reverse mode only.
+    solver: diffrax.AbstractSolver = diffrax.Tsit5(scan_kind="bounded")
     substeps: int = eqx.field(static=True, default=2)
 
     def __check_init__(self):

@@ -77,6 +77,18 @@ def test_gradients_match_finite_differences():
         assert float(g_x0[i]) == pytest.approx(float(fd), rel=1e-5, abs=1e-7)
 
 
+def test_forward_mode_matches_reverse_mode():
+    ts, us = TS[:101], US[:101]
+
+    def final(theta3):
+        return dynax.simulate(dynax.Acrobot(theta3=theta3), X0, ts, us).xs[-1]
+
+    theta3 = jnp.asarray(1.0)
+    forward = jax.jacfwd(final)(theta3)  # what Levenberg-Marquardt uses
+    reverse = jax.jacrev(final)(theta3)
+    np.testing.assert_allclose(forward, reverse, rtol=1e-8, atol=1e-10)
+
+
 def test_vmap_equals_loop():
     x0s = jnp.stack([X0, X0 * 0.5, -X0, jnp.array([0.1, -0.1, 0.0, 0.02])])
     run = jax.jit(jax.vmap(lambda x0: dynax.simulate(dynax.Acrobot(), x0, TS[:201], US[:201]).xs))

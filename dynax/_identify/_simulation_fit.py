@@ -15,7 +15,6 @@ with the number of residuals, which is where forward mode is the right tool.
 
 from collections.abc import Sequence
 
-import diffrax
 import equinox as eqx
 import jax
 import jax.flatten_util
@@ -31,11 +30,6 @@ from .._model._system import AbstractSystem
 from .._simulate import FixedGrid, simulate
 from ._least_squares import least_squares, LeastSquaresFit
 
-# diffrax's Runge-Kutta stages default to a checkpointed while loop (reverse mode only); a plain scan
-# keeps the rollout differentiable in forward mode, which Levenberg-Marquardt uses for its Jacobian.
-_FORWARD_MODE_GRID = FixedGrid(solver=diffrax.Tsit5(scan_kind="lax"))
-
-
 class SimulationFit(eqx.Module):
     """The output-error (simulation-error) method for `identify`; see `fit_simulation_error`.
 
@@ -47,8 +41,8 @@ class SimulationFit(eqx.Module):
     - `continuity_weight`: weight of the continuity defects between segments (default 10).
     - `rtol`, `atol`: Levenberg-Marquardt tolerances (default 1e-8).
     - `max_steps`: iteration budget (default 100).
-    - `simulation`: the `simulate` method (default `FixedGrid(Tsit5(scan_kind="lax"))`: the
-      stages in a plain `lax.scan`, which forward-mode autodiff can differentiate).
+    - `simulation`: the `simulate` method (default `FixedGrid()`, which forward-mode autodiff can
+      differentiate, as Levenberg-Marquardt's Jacobian needs).
     """
 
     segment_s: float = 1.0
@@ -57,7 +51,7 @@ class SimulationFit(eqx.Module):
     rtol: float = 1e-8
     atol: float = 1e-8
     max_steps: int = eqx.field(static=True, default=100)
-    simulation: FixedGrid = _FORWARD_MODE_GRID
+    simulation: FixedGrid = FixedGrid()
 
 
 class SimulationFitResult(eqx.Module):
@@ -164,7 +158,7 @@ def fit_simulation_error(
     rtol: float = 1e-8,
     atol: float = 1e-8,
     max_steps: int = 100,
-    simulation: FixedGrid = _FORWARD_MODE_GRID,
+    simulation: FixedGrid = FixedGrid(),
 ) -> SimulationFitResult:
     r"""Fit the leaves of `system` selected by `filter_spec` by minimising the simulation error.
 
@@ -216,7 +210,6 @@ def fit_simulation_error(
     dtype = jnp.result_type(p0.dtype, xs.dtype)
     ts, xs, us = (jnp.asarray(a, dtype) for a in (ts, xs, us))
     p0 = p0.astype(dtype)
-    n_states = xs.shape[-1]
     if state_scale is None:
         flat = np.concatenate([np.asarray(t.xs) for t in trajectories])
         state_scale = np.std(flat, axis=0)
