@@ -1,5 +1,23 @@
 """dynax: differentiable dynamics, system identification, discrepancy diagnosis and control in JAX."""
 
+from ._identify import (
+    Dynamic as Dynamic,
+    dynamic_regressor as dynamic_regressor,
+    Energy as Energy,
+    energy_regressor as energy_regressor,
+    fit_simulation_error as fit_simulation_error,
+    friction_power_regressor as friction_power_regressor,
+    IdentifiabilityError as IdentifiabilityError,
+    Identification as Identification,
+    identify as identify,
+    least_squares as least_squares,
+    LeastSquaresFit as LeastSquaresFit,
+    parameter_names as parameter_names,
+    Power as Power,
+    SimulationFit as SimulationFit,
+    SimulationFitResult as SimulationFitResult,
+    with_friction as with_friction,
+)
 from ._model._extensions import (
     AbstractInputTerm as AbstractInputTerm,
     AbstractJointTerm as AbstractJointTerm,
