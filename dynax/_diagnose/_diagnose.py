@@ -18,6 +18,9 @@ from ._residuals import acceleration_residuals, Structure, structure_test
 from ._screening import screen
 
 
+_CONTRACT_NAMES = {"Acrobot": "acrobot", "DoublePendulum": "double_pendulum", "LinearAxis": "linear_axis", "Helicopter": "helicopter"}
+
+
 class Refit(eqx.Module):
     """Diagnosis mode: the nominal parameters are refitted on the training data with every candidate.
 
@@ -433,7 +436,7 @@ def diagnose(
     extended_parameters.update({t.parameter_name(system): float(t.coefficient) for t in extended_model.terms})
     horizons_list = [float(h) for h in horizons]
     return Report(
-        system=system_name or train_records[0].system or type(system).__name__.lower(),
+        system=system_name or train_records[0].system or _CONTRACT_NAMES.get(type(system).__name__, type(system).__name__.lower()),
         data={
             "train": ", ".join(r.source or "(train)" for r in _as_records(train, "train")),
             "validation": ", ".join(r.source or "(held out)" for r in validation_records) if validation is not None
