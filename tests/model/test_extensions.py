@@ -128,3 +128,15 @@ def test_bad_compositions_are_refused_naming_the_problem():
         Extended(Acrobot(), (CoulombFriction(1), CoulombFriction(1, 0.3)))
     with pytest.raises(ValueError, match="non-negative int"):
         CoulombFriction(-1)
+
+
+def test_coulomb_friction_on_a_linear_axis_equals_its_own_coulomb_term():
+    from dynax import LinearAxis
+
+    axis = LinearAxis(coulomb=jnp.asarray(0.0), coulomb_velocity=0.01)
+    reference = LinearAxis(coulomb=jnp.asarray(20.0), coulomb_velocity=0.01)
+    extended = Extended(axis, (CoulombFriction(0, 20.0),))
+    assert extended.labels == ("coulomb_friction@q",) and set(extended.parameters) == {"fc"}
+    for x in (jnp.array([0.1, 0.05]), jnp.array([0.0, -0.003])):
+        np.testing.assert_allclose(extended.vector_field(0.0, x, jnp.array([30.0])),
+                                   reference.vector_field(0.0, x, jnp.array([30.0])), rtol=1e-12)
