@@ -65,23 +65,41 @@ def plot_error_vs_horizon(curves: dict, path, *, unit: str = "rad"):
 
 
 def plot_residuals(ts, residuals, names, path, *, features: dict | None = None):
-    """One-step acceleration residuals over time, and against velocity (where friction shows).
+    """One-step acceleration residuals: over time, against velocity, autocorrelation and spectrum.
+
+    Friction shows against velocity (a step at zero for Coulomb friction), input dynamics in the
+    autocorrelation and at the excitation frequencies of the spectrum; white noise is flat.
 
     **Arguments:** `ts`; `residuals` of shape `(time, n_joints)`; `names` of the joints' velocities;
     `path`; `features` name -> `(time,)` array to plot residuals against (default the velocities).
     """
+    import scipy.signal
+
     residuals = np.asarray(residuals)
+    ts = np.asarray(ts)
+    dt = float(np.median(np.diff(ts)))
     k = residuals.shape[1]
-    fig, axes = plt.subplots(k, 2, figsize=(10, 2.6 * k), squeeze=False)
+    fig, axes = plt.subplots(k, 4, figsize=(15, 2.6 * k), squeeze=False)
+    max_lag = min(len(ts) // 4, int(round(1.0 / dt)))
     for j in range(k):
-        axes[j, 0].plot(np.asarray(ts), residuals[:, j], lw=0.6)
+        r = residuals[:, j] - residuals[:, j].mean()
+        axes[j, 0].plot(ts, residuals[:, j], lw=0.6)
         axes[j, 0].set_ylabel(f"residual d{names[j]}/dt")
         if features is not None and j < len(features):
             fname, fvals = list(features.items())[j]
             axes[j, 1].plot(np.asarray(fvals), residuals[:, j], ".", ms=1.5, alpha=0.5)
             axes[j, 1].set_xlabel(fname)
+        acf = np.correlate(r, r, mode="full")[len(r) - 1 : len(r) + max_lag] / max(float(r @ r), 1e-300)
+        axes[j, 2].plot(np.arange(max_lag + 1) * dt, acf, lw=1.0)
+        axes[j, 2].axhline(0.0, color="k", lw=0.5)
+        axes[j, 2].set_xlabel("lag [s]")
+        f, psd = scipy.signal.welch(r, fs=1.0 / dt, nperseg=min(len(r), 512))
+        axes[j, 3].semilogy(f, psd, lw=1.0)
+        axes[j, 3].set_xlabel("frequency [Hz]")
     axes[0, 0].set_title("one-step acceleration residual against time")
     axes[0, 1].set_title("against velocity")
+    axes[0, 2].set_title("autocorrelation")
+    axes[0, 3].set_title("spectrum (Welch)")
     axes[-1, 0].set_xlabel("t [s]")
     fig.tight_layout()
     fig.savefig(path, dpi=110)

@@ -52,6 +52,8 @@ def report_markdown(report) -> str:
               + ", ".join(f"{k} {v:.0%}" for k, v in s["by_state"].items())
               + ". Largest residuals around t = " + ", ".join(f"{t:.1f} s" for t in s["worst_times_s"]) + ".", ""]
     lines += ["![measured against simulated](measured_vs_simulated.png)", "", "![error against horizon](sim_error.png)", "",
+              "The nominal model's one-step residuals over time, against velocity (friction shows here), "
+              "their autocorrelation and spectrum (white noise is flat):", "",
               "![residuals](residuals.png)", ""]
     lines += ["## Causes", ""]
     if j["findings"]:
@@ -104,9 +106,9 @@ def write_report(report, out_dir, validation, *, write_json) -> None:
     unit = "m" if report.system == "linear_axis" else "rad"
     plot_error_vs_horizon({k: (h, [np.nan if r is None else r for r in rs]) for k, (h, rs) in curves.items()},
                           out / "sim_error.png", unit=unit)
-    residuals, xs, _, _ = acceleration_residuals(report.nominal_model, validation)
+    residuals, xs, _, keep = acceleration_residuals(report.nominal_model, validation)
     nominal = report.nominal_model
     idx = velocity_indices(nominal)
     names = [nominal.state_names[i] for i in idx]
-    ts = np.asarray(validation.ts)[: residuals.shape[0]]
+    ts = np.asarray(validation.ts)[keep]
     plot_residuals(ts, residuals, names, out / "residuals.png", features={n: xs[:, i] for n, i in zip(names, idx)})
