@@ -52,6 +52,7 @@ from dynax._control import (  # noqa: E402
     SmoothActivation,
     SPONG_PARAMETER_NAMES,
     SpongController,
+    sweep_pgpe,
     SwingUpTask,
 )
 
@@ -158,9 +159,8 @@ def main(argv=None):
     checkpoints = np.arange(0, cfg["iterations"] + 1, cfg["eval_every"])
     curves = {}
     for regime, task in (("fixed_start", task_fixed), ("random_starts", task_random)):
-        train = eqx.filter_jit(jax.vmap(lambda k, task=task: run_pgpe(pgpe, task, drake, k, cfg["iterations"])))
         t0 = time.perf_counter()
-        states, history = train(run_keys)
+        states, history = sweep_pgpe(pgpe, task, drake, run_keys, cfg["iterations"])
         jax.block_until_ready(history.reward)
         wall = time.perf_counter() - t0
         final = jax.vmap(pgpe.mean_params)(states)
@@ -328,7 +328,7 @@ def soft_handover(cfg, template, plant, key, held_out, curve_starts, run_keys):
     start = jnp.array([*DRAKE_SPONG_PARAMETERS, np.log10(0.3)], jnp.float32)
     pgpe = pgpe_strategy(cfg, 5, np.array([*SCALES, 1.0]))
     t0 = time.perf_counter()
-    states, _ = eqx.filter_jit(jax.vmap(lambda k: run_pgpe(pgpe, task, start, k, cfg["soft_iterations"])))(run_keys)
+    states, _ = sweep_pgpe(pgpe, task, start, run_keys, cfg["soft_iterations"])
     final = jax.vmap(pgpe.mean_params)(states)
     wall = time.perf_counter() - t0
     evaluate_runs = eqx.filter_jit(lambda starts: jax.vmap(lambda p: task.evaluate(p, starts))(final))
@@ -414,7 +414,7 @@ def pipeline(cfg, key, held_out, tuned_on_nominal):
     drake = jnp.asarray(DRAKE_SPONG_PARAMETERS, jnp.float32)
     pgpe = pgpe_strategy(cfg)
     keys = jax.random.split(k_tune, cfg["pipeline_runs"])
-    states, _ = eqx.filter_jit(jax.vmap(lambda k: run_pgpe(pgpe, tune_task, drake, k, cfg["pipeline_iterations"])))(keys)
+    states, _ = sweep_pgpe(pgpe, tune_task, drake, keys, cfg["pipeline_iterations"])
     finals = jax.vmap(pgpe.mean_params)(states)
     on_identified = eqx.filter_jit(jax.vmap(lambda p: tune_task.evaluate(p, held_out)))(finals)
     chosen = int(np.argmax(on_identified["reward"]))  # selected on the identified model, not on the truth

@@ -37,6 +37,7 @@ from ._pgpe import (
     PGPEState as PGPEState,
     population_sharding as population_sharding,
     run_pgpe as run_pgpe,
+    sweep_pgpe as sweep_pgpe,
 )
 from ._swing_up_task import random_starts as random_starts, SwingUpTask as SwingUpTask
 from ._region_of_attraction import estimate_region_of_attraction as estimate_region_of_attraction, RegionOfAttraction as RegionOfAttraction

@@ -353,3 +353,30 @@ def run_pgpe(
         return new_state, record
 
     return jax.lax.scan(generation, state, jax.random.split(key, n_iterations))
+
+
+@eqx.filter_jit
+def sweep_pgpe(
+    pgpe: PGPE,
+    objective: Objective,
+    params: Float[ArrayLike, " n_params"],
+    keys: PRNGKeyArray,
+    n_iterations: int,
+    *,
+    shard: bool = True,
+) -> tuple[PGPEState, PGPEHistory]:
+    """Independent PGPE runs, one per key, as one compiled `vmap` of `run_pgpe`; runs split across devices.
+
+    With several devices (and a number of runs that divides evenly) the run axis is constrained
+    to a `NamedSharding` across them, so each device does whole runs and no data moves between
+    them. For a sweep over hyper-parameters, give `PGPE` array-valued fields (for example
+    `sigma_learning_rate`) and `eqx.filter_vmap` this function over the strategy.
+
+    **Arguments:** as `run_pgpe`, with `keys` of shape `(runs,)`.
+
+    **Returns:** `(states, histories)` with a leading `runs` axis.
+    """
+    sharding = population_sharding(keys.shape[0]) if shard else None
+    if sharding is not None:
+        keys = jax.lax.with_sharding_constraint(keys, sharding)
+    return jax.vmap(lambda key: run_pgpe(pgpe, objective, params, key, n_iterations, shard=False))(keys)

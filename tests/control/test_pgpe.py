@@ -93,7 +93,7 @@ def test_pgpe_improves_swing_up_from_a_poor_start():
 SHARDED_SCRIPT = textwrap.dedent(
     """
     import jax, jax.numpy as jnp
-    from dynax._control import PGPE, population_sharding, run_pgpe, evaluate_population
+    from dynax._control import PGPE, population_sharding, run_pgpe, evaluate_population, sweep_pgpe
     assert jax.device_count() == 2, jax.devices()
     assert population_sharding(8) is not None and population_sharding(7) is None
     target = jnp.arange(4.0)
@@ -106,6 +106,13 @@ SHARDED_SCRIPT = textwrap.dedent(
     sharded = jax.jit(lambda k: run_pgpe(pgpe, objective, jnp.zeros(4), k, 30))(jax.random.PRNGKey(0))
     single = jax.jit(lambda k: run_pgpe(pgpe, objective, jnp.zeros(4), k, 30, shard=False))(jax.random.PRNGKey(0))
     assert jnp.allclose(sharded[1].reward, single[1].reward, rtol=1e-5), (sharded[1].reward, single[1].reward)
+    # A sweep over seeds puts whole runs on each device and matches the unsharded vmap.
+    keys = jax.random.split(jax.random.PRNGKey(2), 4)
+    states, histories = sweep_pgpe(pgpe, objective, jnp.zeros(4), keys, 20)
+    assert len(histories.reward.sharding.device_set) == 2, histories.reward.sharding
+    _, reference = sweep_pgpe(pgpe, objective, jnp.zeros(4), keys, 20, shard=False)
+    assert jnp.allclose(histories.reward, reference.reward, rtol=1e-5)
+    assert histories.reward.shape == (4, 20)
     print("ok")
     """
 )
