@@ -72,7 +72,11 @@ def run(args: argparse.Namespace) -> int:
         raise DataError(f"has {len(data)} samples; the horizon {max(horizons)} s needs at least {n_needed + 1}",
                         path=args.data)
     mse = prediction_error(system, data, horizons, stride=args.stride)
+    diverged = [float(v) for v in mse.pop("diverged_fraction")]
     metrics = {"horizons_s": horizons, "mse": {name: [float(v) for v in values] for name, values in mse.items()}}
+    if any(diverged):
+        metrics["diverged_fraction"] = diverged
+        print(f"note: {max(diverged):.1%} of the rollouts diverged; their error counts as infinite")
     write_json(out, metrics)
     print(f"helicopter model {args.model} on {args.data}: mean squared open-loop prediction error")
     print("  horizon [s]  " + "  ".join(f"{h:>10g}" for h in horizons))

@@ -70,6 +70,9 @@ class Lagged(eqx.Module):
     - `stride`: use every `stride`-th start time (default 1: every start).
     - `batch_size`: start times per batch when accumulating the normal equations.
     - `ridge`: Tikhonov term relative to the trace of the normal equations.
+    - `step_sizes`: the line search's steps along (new - old) weights, tried in order.
+    - `best_step`: take the best of all `step_sizes` (an exact line search on that grid) rather than
+      the first that decreases the loss.
 
     ??? cite "Reference"
 
@@ -83,6 +86,8 @@ class Lagged(eqx.Module):
     stride: int = eqx.field(static=True, default=1)
     batch_size: int = eqx.field(static=True, default=128)
     ridge: float = 1e-10
+    step_sizes: tuple[float, ...] = eqx.field(static=True, default=(1.0, 0.5, 0.25, 0.125, 0.0625, 0.03125))
+    best_step: bool = eqx.field(static=True, default=False)
 
 
 class Backprop(eqx.Module):
@@ -238,12 +243,13 @@ def fit_lagged(
         theta_old = system.body_model.parameter_vector()
         theta_new = _solve(ata, atb, criterion.ridge)
         accepted = None
-        for step in (1.0, 0.5, 0.25, 0.125, 0.0625, 0.03125):
+        for step in criterion.step_sizes:
             candidate = _with_theta(system, theta_old + step * (theta_new - theta_old))
             value = float(loss_fn(candidate))
-            if np.isfinite(value) and value < current:
+            if np.isfinite(value) and value < (current if accepted is None else accepted[1]):
                 accepted = candidate, value
-                break
+                if not criterion.best_step:
+                    break
         if accepted is None:
             break
         system, value = accepted

@@ -199,7 +199,11 @@ def _group_mse(system, trajectory, starts, n_steps, lags):
         return errors
 
     errors = jax.lax.map(window, starts, batch_size=256)
-    return {name: jnp.mean(value, axis=0) for name, value in errors.items()}
+    # A diverged window counts as an infinite error (reported, not a NaN in the table).
+    finite = jnp.all(jnp.stack([jnp.isfinite(v) for v in errors.values()]), axis=0)
+    out = {name: jnp.mean(jnp.where(finite, value, jnp.inf), axis=0) for name, value in errors.items()}
+    out["diverged_fraction"] = jnp.mean(~finite, axis=0)
+    return out
 
 
 def prediction_error(
@@ -225,7 +229,9 @@ def prediction_error(
     - `horizons_s`: the horizons [s].
     - `stride`: take every `stride`-th start sample.
 
-    **Returns:** a dict `velocity`, `angular_rate`, `position`, `orientation` -> array over horizons.
+    **Returns:** a dict `velocity`, `angular_rate`, `position`, `orientation` -> array over horizons
+    (`inf` where some rollout diverged), and `diverged_fraction`, the fraction of windows whose
+    rollout left the finite range by each horizon.
     """
     dt = check_helicopter_data(trajectory, "prediction_error")
     horizons = [float(h) for h in horizons_s]
@@ -235,4 +241,4 @@ def prediction_error(
     n_steps = max(max(lags), 1)
     starts = jnp.asarray(valid_starts(len(trajectory), n_steps, stride))
     result = _group_mse(system, trajectory, starts, n_steps, jnp.asarray(lags))
-    return {name: result[name] for name in STATE_GROUPS}
+    return {name: result[name] for name in (*STATE_GROUPS, "diverged_fraction")}
