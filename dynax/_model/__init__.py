@@ -7,3 +7,17 @@ from ._two_link import (
     base_parameters_from_physical as base_parameters_from_physical,
     DoublePendulum as DoublePendulum,
 )
+from ._helicopter import (
+    AbstractBodyModel as AbstractBodyModel,
+    AccelerationModel as AccelerationModel,
+    Helicopter as Helicopter,
+    hover_state as hover_state,
+    LinearVelocityModel as LinearVelocityModel,
+    RICH_FEATURES as RICH_FEATURES,
+    TEMPEST_FEATURES as TEMPEST_FEATURES,
+)
+from ._helicopter_truth import (
+    FlightController as FlightController,
+    generate_helicopter_flight as generate_helicopter_flight,
+    HelicopterTruth as HelicopterTruth,
+)
