@@ -71,6 +71,11 @@ def run(args: argparse.Namespace) -> int:
     from .._data import load_trajectory, parse_assignments, resample
     from .._diagnose import diagnose, Known, Refit, write_report
 
+    if args.system == "helicopter":
+        raise UsageError(
+            "diagnose helicopter: the helicopter's candidates (quadratic_drag per body axis, wind, body_bias) "
+            "are not in the library yet; only acrobot, double_pendulum and linear_axis can be diagnosed"
+        )
     mapping = parse_assignments(args.map, "--map", numeric=False)
     scale = parse_assignments(args.scale, "--scale", numeric=True)
     if args.dt is not None and not args.dt > 0:
