@@ -207,9 +207,15 @@ class AbstractBodyModel(eqx.Module):
     def masked_weights(self) -> Float[Array, "6 n_features"]:
         return self.weights * jnp.asarray(np.asarray(self.mask, dtype=float), self.weights.dtype)
 
-    def __call__(self, quat, s, u) -> Float[Array, "6"]:
-        r"""$(\dot\nu, \dot\omega)$ at body state `s = (u, v, w, p, q, r)`, attitude `quat` and inputs `u`."""
-        return self.known(quat, s, u) + self.masked_weights() @ self.features(quat, s, u)
+    def __call__(self, quat, s, u, air=None) -> Float[Array, "6"]:
+        r"""$(\dot\nu, \dot\omega)$ at body state `s = (u, v, w, p, q, r)`, attitude `quat` and inputs `u`.
+
+        `air` (optional, default `s`) is the body state relative to the air, $(\nu - R(q)^\top
+        w_\text{world}, \omega)$ in a wind $w_\text{world}$: the learned (aerodynamic) features are
+        evaluated at it, the known part (gravity, the rotating-frame term) at the inertial `s`.
+        """
+        air = s if air is None else air
+        return self.known(quat, s, u) + self.masked_weights() @ self.features(quat, air, u)
 
     # Parameter bookkeeping for the learning criteria.
 
