@@ -44,6 +44,19 @@ class SimulationError(eqx.Module):
         return {"horizons_s": [float(h) for h in self.horizons_s], "rmse": [float(r) for r in self.rmse]}
 
 
+def _complete_state(system, x_measured, u0):
+    """The model's full initial state from a measured one.
+
+    Models with internal states (an input lag or delay, see `Extended`) complete it with
+    `initial_state(x, u0)`: internal states at rest under the input in force. Otherwise internal
+    states beyond the measured ones start at zero.
+    """
+    initial_state = getattr(system, "initial_state", None)
+    if initial_state is not None:
+        return initial_state(x_measured, u0)
+    return jnp.zeros(system.n_states, x_measured.dtype).at[: x_measured.shape[0]].set(x_measured)
+
+
 @eqx.filter_jit
 def _window_errors(system, ts, xs, us, starts, n_steps, method):
     n_measured = xs.shape[1]
@@ -52,8 +65,7 @@ def _window_errors(system, ts, xs, us, starts, n_steps, method):
         t = jax.lax.dynamic_slice_in_dim(ts, k, n_steps + 1)
         u = jax.lax.dynamic_slice_in_dim(us, k, n_steps + 1)
         x = jax.lax.dynamic_slice_in_dim(xs, k, n_steps + 1)
-        # Internal states of the model beyond the measured ones (e.g. an input lag) start at zero.
-        x0 = jnp.zeros(system.n_states, xs.dtype).at[:n_measured].set(x[0])
+        x0 = _complete_state(system, x[0], u[0])
         sim = simulate(system, x0, t, u, method=method, throw=False)
         return sim.xs[:, :n_measured] - x, sim.diverged
 
@@ -79,7 +91,8 @@ def simulation_error(
 
     **Arguments:**
 
-    - `system`: the model. Internal states beyond the measured ones start at zero.
+    - `system`: the model. Internal states beyond the measured ones (an input lag or delay) start
+      at rest under the input in force (`Extended.initial_state`), or at zero for other systems.
     - `trajectory`: the measured record (its `state_names` must be the system's first states).
     - `horizons_s`: horizons [s].
     - `stride`: samples between start times; default spreads at most `max_windows` windows over
