@@ -17,3 +17,9 @@ from ._terms import (
     RotorInertia as RotorInertia,
     ViscousFriction as ViscousFriction,
 )
+from ._vehicle_terms import (
+    AbstractVehicleTerm as AbstractVehicleTerm,
+    BodyBias as BodyBias,
+    BodyQuadraticDrag as BodyQuadraticDrag,
+    Wind as Wind,
+)

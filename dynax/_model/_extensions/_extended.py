@@ -4,9 +4,11 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from .._helicopter import Helicopter
 from .._system import _solve_spd, AbstractManipulator, AbstractSystem
 from ._inputs import AbstractInputTerm
 from ._terms import AbstractJointTerm, AbstractTerm
+from ._vehicle_terms import AbstractVehicleTerm, vehicle_vector_field
 
 
 class Extended(AbstractSystem):
@@ -14,7 +16,9 @@ class Extended(AbstractSystem):
 
     Joint terms (friction, drag, rotor inertia, springs) act on a manipulator through its pieces,
     $\big(M(q) + \operatorname{diag}(I_r)\big)\ddot q + h(q, \dot q) = B\,a + \sum_k f_k(q, \dot q)$,
-    so they compose with any `AbstractManipulator`. Input terms (gain, offset, lag, delay) act on
+    so they compose with any `AbstractManipulator`. Vehicle terms (`BodyQuadraticDrag`, `Wind`,
+    `BodyBias`) act on a `Helicopter`'s body-frame accelerations, the body model's aerodynamic
+    features seeing the air-relative velocity (see `dynax._model._extensions._vehicle_terms`). Input terms (gain, offset, lag, delay) act on
     any system between the recorded input $u$ and the applied input $a$; they are applied in the
     order given, so `(InputGain(0, 2.0), InputLag(0, 0.05))` lags the doubled input. Terms whose
     coefficients are at their neutral values leave the nominal system unchanged.
@@ -41,12 +45,18 @@ class Extended(AbstractSystem):
             raise ValueError("Extended: `terms` must be a tuple of model extension terms (e.g. CoulombFriction)")
         labels = []
         for term in self.terms:
+            if isinstance(term, AbstractVehicleTerm) and not isinstance(self.system, Helicopter):
+                raise ValueError(
+                    f"Extended: {type(term).__name__} acts on a helicopter's body axes, but "
+                    f"{type(self.system).__name__} is not a Helicopter"
+                )
             if isinstance(term, AbstractJointTerm) and not isinstance(self.system, AbstractManipulator):
                 raise ValueError(
                     f"Extended: {type(term).__name__} acts on a joint, but {type(self.system).__name__} "
                     "is not a manipulator (it has no mass matrix and bias force to extend)"
                 )
-            labels.append(term.label(self.system))  # also checks the joint / input index
+            # `label` also checks the joint / input index; wind components share `wind@world`
+            labels.append(f"{term.label(self.system)} ({term.parameter_name(self.system)})")
         duplicates = sorted({label for label in labels if labels.count(label) > 1})
         if duplicates:
             raise ValueError(f"Extended: the same term is given twice: {duplicates}")
@@ -63,6 +73,10 @@ class Extended(AbstractSystem):
     @property
     def joint_terms(self) -> tuple[AbstractJointTerm, ...]:
         return tuple(t for t in self.terms if isinstance(t, AbstractJointTerm))
+
+    @property
+    def vehicle_terms(self) -> tuple[AbstractVehicleTerm, ...]:
+        return tuple(t for t in self.terms if isinstance(t, AbstractVehicleTerm))
 
     @property
     def input_terms(self) -> tuple[AbstractInputTerm, ...]:
@@ -109,7 +123,9 @@ class Extended(AbstractSystem):
         n = self.system.n_states
         x_nominal, z = x[:n], x[n:]
         a, dz = self.applied_input(u, z)
-        if not self.joint_terms:
+        if self.vehicle_terms:
+            dx = vehicle_vector_field(self.system, self.vehicle_terms, x_nominal, a)
+        elif not self.joint_terms:
             dx = self.system.vector_field(t, x_nominal, a)
         else:
             system = self.system

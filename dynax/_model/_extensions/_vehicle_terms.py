@@ -1,0 +1,170 @@
+r"""Model extensions for the helicopter: per-axis quadratic drag, wind, and a body-fixed bias.
+
+They compose with a `Helicopter` through `Extended`, like the joint terms compose with a manipulator:
+
+$$\dot\nu, \dot\omega = \text{body\_model}\big(q, (\nu, \omega), u;\ \text{air} = (\nu - R(q)^\top w, \omega)\big)
+    + \sum_k a_k(q, \nu_\text{air}, \omega, u),$$
+
+where $w$ is the sum of the `Wind` terms' world-frame components, the body model's aerodynamic
+features see the air-relative velocity (its known part, gravity and $-\omega\times\nu$, the inertial
+one), and every other vehicle term adds a body-frame acceleration $a_k$. The position and attitude
+kinematics are unchanged. Every term is at its neutral value (zero) the nominal helicopter.
+
+The look-alikes `Wind` and `BodyBias` differ in the frame they are fixed in: a steady wind is fixed
+in the world, so the force it causes in the body frame turns with the heading and attitude
+($-D\,R(q)^\top w$ for a drag matrix $D$); a body bias (a trim offset, a mis-mounted sensor, a rotor
+mast tilt) turns with the body and stays the same on the body axes. Only data with heading or
+attitude changes tell them apart.
+
+??? cite
+
+    P. Abbeel, V. Ganapathi and A. Y. Ng, "Learning vehicular dynamics, with application to modeling
+    helicopters", NIPS 18, 2005 (the acceleration model these terms extend).
+    B. Etkin and L. D. Reid, *Dynamics of Flight: Stability and Control*, 3rd ed., Wiley 1996,
+    ch. 4 and 9 (air-relative velocity in a steady wind; aerodynamic forces on the body axes).
+"""
+
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from .._helicopter import (
+    BODY,
+    BODY_AXES,
+    Helicopter,
+    QUATERNION,
+    quaternion_to_rotation,
+    rigid_body_kinematics,
+)
+from ._terms import _scalar, AbstractTerm
+
+WORLD_AXES = ("n", "e", "d")
+
+
+class AbstractVehicleTerm(AbstractTerm):
+    """A term acting on a `Helicopter`'s body-frame accelerations (see the module docs).
+
+    **Fields:** `axis`, the 0-based body axis (`u, v, w, p, q, r`) or, for `Wind`, world axis
+    (north, east, down) the coefficient belongs to (static).
+    """
+
+    axis: eqx.AbstractVar[int]
+    n_axes: ClassVar[int] = 6
+
+    def __check_init__(self):
+        if not isinstance(self.axis, int) or not 0 <= self.axis < self.n_axes:
+            raise ValueError(f"{type(self).__name__}: `axis` must be an int in [0, {self.n_axes}), got {self.axis!r}")
+
+    def where(self, system) -> str:
+        if not isinstance(system, Helicopter):
+            raise ValueError(f"{type(self).__name__} acts on a helicopter's body axes; {type(system).__name__} has none")
+        return BODY_AXES[self.axis]
+
+    def wind(self) -> Float[Array, "3"]:
+        """The world-frame wind [m/s] the term contributes (default none)."""
+        return jnp.zeros(3, self.coefficient.dtype)
+
+    def acceleration(self, quat: Float[Array, "4"], air: Float[Array, "6"], u: Float[Array, "4"]) -> Float[Array, "6"]:
+        """The body-frame acceleration `(du, dv, dw, dp, dq, dr)` the term adds, at the air-relative body state `air`."""
+        return jnp.zeros_like(air)
+
+
+class BodyQuadraticDrag(AbstractVehicleTerm):
+    r"""Quadratic aerodynamic drag $-c\,|\nu_i|\,\nu_i$ on one translational body axis ($u$, $v$ or $w$).
+
+    $\nu_i$ is the air-relative velocity on the axis (the ground velocity in still air); $c$ is per
+    unit mass, $\tfrac12 \rho C_D A / m$ [1/m].
+
+    **Arguments:** `axis` (0 `u`, 1 `v`, 2 `w`), `c` [1/m].
+    """
+
+    axis: int = eqx.field(static=True)
+    coefficient: Float[Array, ""]
+    n_axes: ClassVar[int] = 3
+    cause: ClassVar[str] = "quadratic_drag"
+    prefix: ClassVar[str] = "cd"
+    neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 1
+
+    def __init__(self, axis: int, c: ArrayLike = 0.0):
+        self.axis = axis
+        self.coefficient = _scalar(c)
+
+    def acceleration(self, quat, air, u):
+        v = air[self.axis]
+        return jnp.zeros_like(air).at[self.axis].set(-self.coefficient * jnp.abs(v) * v)
+
+
+class BodyBias(AbstractVehicleTerm):
+    r"""A constant force or moment fixed in the body frame: $b$ added to one body axis' acceleration.
+
+    On `u, v, w` a specific force [m/s^2] (a rotor mast tilt, a trim offset), on `p, q, r` an
+    angular acceleration [rad/s^2] (an unbalanced moment). It turns with the body, unlike `Wind`.
+
+    **Arguments:** `axis` (0..5 for `u, v, w, p, q, r`), `b`.
+    """
+
+    axis: int = eqx.field(static=True)
+    coefficient: Float[Array, ""]
+    cause: ClassVar[str] = "body_bias"
+    prefix: ClassVar[str] = "bias"
+    neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 0
+
+    def __init__(self, axis: int, b: ArrayLike = 0.0):
+        self.axis = axis
+        self.coefficient = _scalar(b)
+
+    def acceleration(self, quat, air, u):
+        return jnp.zeros_like(air).at[self.axis].set(self.coefficient)
+
+
+class Wind(AbstractVehicleTerm):
+    r"""One world-frame component of a steady wind: the air moves at $w$ in the world (NED) frame.
+
+    The body model's aerodynamic features (and `BodyQuadraticDrag`) act on the air-relative
+    body velocity $\nu - R(q)^\top w$; the kinematics use the ground velocity. Its effect on the
+    body axes turns with the attitude, which tells it apart from a `BodyBias`. A wind with several
+    components is several `Wind` terms (`Wind(0, 3.0), Wind(1, -1.0)`); their `where` is `world`.
+
+    **Arguments:** `axis` (0 north, 1 east, 2 down), `speed` [m/s].
+    """
+
+    axis: int = eqx.field(static=True)
+    coefficient: Float[Array, ""]
+    n_axes: ClassVar[int] = 3
+    cause: ClassVar[str] = "wind"
+    prefix: ClassVar[str] = "wind"
+    neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 0
+
+    def __init__(self, axis: int, speed: ArrayLike = 0.0):
+        self.axis = axis
+        self.coefficient = _scalar(speed)
+
+    def where(self, system) -> str:
+        super().where(system)  # checks the system
+        return "world"
+
+    def parameter_name(self, system) -> str:
+        """`wind_n`, `wind_e` or `wind_d`."""
+        return f"{self.prefix}_{WORLD_AXES[self.axis]}"
+
+    def wind(self):
+        return jnp.zeros(3, self.coefficient.dtype).at[self.axis].set(self.coefficient)
+
+
+def vehicle_vector_field(
+    system: Helicopter, terms: tuple[AbstractVehicleTerm, ...], x: Float[Array, " 13"], u: Float[Array, "4"]
+) -> Float[Array, " 13"]:
+    """The helicopter's vector field with vehicle terms added (see the module docs)."""
+    quat, s = x[QUATERNION], x[BODY]
+    wind = sum((t.wind() for t in terms), jnp.zeros(3, x.dtype)).astype(x.dtype)
+    air = s.at[:3].add(-quaternion_to_rotation(quat).T @ wind)
+    dpos, dquat = rigid_body_kinematics(x, system.normalisation_gain)
+    dbody = system.body_model(quat, s, u, air=air)
+    for term in terms:
+        dbody = dbody + term.acceleration(quat, air, u).astype(x.dtype)
+    return jnp.concatenate([dpos, dquat, dbody])
