@@ -108,6 +108,19 @@ from ._data import (
     savitzky_golay as savitzky_golay,
     Trajectory as Trajectory,
 )
+from ._diagnose import (
+    default_candidates as default_candidates,
+    diagnose as diagnose,
+    Known as Known,
+    LOOK_ALIKES as LOOK_ALIKES,
+    multisine as multisine,
+    Refit as Refit,
+    Report as Report,
+    Structure as Structure,
+    structure_test as structure_test,
+    synthetic_trajectory as synthetic_trajectory,
+    write_report as write_report,
+)
 from ._errors import DataError as DataError, UsageError as UsageError
 from ._sim_error import simulation_error as simulation_error, SimulationError as SimulationError
 from ._solvers import RK4 as RK4
