@@ -119,14 +119,19 @@ def _check_arguments(system, x0, ts, us):
     return x0.astype(dtype), ts.astype(dtype), us.astype(dtype)
 
 
-def _fixed_grid(system, x0, ts, us, method, bound):
+def _sample_interval(system, method: FixedGrid, bound):
+    """One sample interval of a fixed-grid rollout, with divergence tracking.
+
+    Returns `advance(x, diverged_at, t0, t1, u) -> (x_carry, diverged_at, x_out)`: `method.substeps`
+    solver steps from `t0` to `t1` under the constant input `u`. Once diverged, the carried state is
+    frozen (so no inf/NaN feeds later steps or their gradients) and the output is NaN. Shared by
+    `simulate` and the closed-loop rollouts of `dynax.simulate_closed_loop`.
+    """
     term = _zoh_term(system)
     solver = method.solver
     n = method.substeps
 
-    def interval(carry, inputs):
-        x, diverged_at = carry
-        t0, t1, u = inputs
+    def advance(x, diverged_at, t0, t1, u):
         h = (t1 - t0) / n
 
         def substep(i, y):
@@ -137,12 +142,19 @@ def _fixed_grid(system, x0, ts, us, method, bound):
 
         x_new = jax.lax.fori_loop(0, n, substep, x, unroll=True)
         bad = ~jnp.all(jnp.isfinite(x_new)) | jnp.any(jnp.abs(x_new) > bound)
-        newly = bad & jnp.isinf(diverged_at)
-        diverged_at = jnp.where(newly, t1, diverged_at)
+        diverged_at = jnp.where(bad & jnp.isinf(diverged_at), t1, diverged_at)
         stopped = jnp.isfinite(diverged_at)
-        # Freeze the carried state once diverged so no inf/NaN feeds later steps (or their gradients).
-        x_carry = jnp.where(stopped, x, x_new)
-        return (x_carry, diverged_at), jnp.where(stopped, jnp.nan, x_new)
+        return jnp.where(stopped, x, x_new), diverged_at, jnp.where(stopped, jnp.nan, x_new)
+
+    return advance
+
+
+def _fixed_grid(system, x0, ts, us, method, bound):
+    advance = _sample_interval(system, method, bound)
+
+    def interval(carry, inputs):
+        x_carry, diverged_at, x_out = advance(*carry, *inputs)
+        return (x_carry, diverged_at), x_out
 
     inputs = (ts[:-1], ts[1:], us[: ts.shape[0] - 1])
     init = (x0, jnp.asarray(jnp.inf, x0.dtype))

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._model._system import AbstractSystem
-from .._simulate import _zoh_term, FixedGrid
+from .._simulate import _sample_interval, FixedGrid
 from ._lqr import wrap_angle
 
 Controller = Callable[[Float[Array, ""], Float[Array, " n_states"]], Float[Array, " n_inputs"]]
@@ -79,28 +79,14 @@ def simulate_closed_loop(
         raise ValueError(f"simulate_closed_loop: `ts` must be 1-d with at least 2 samples, got shape {ts.shape}")
     dtype = jnp.result_type(x0, ts, float)
     x0, ts = x0.astype(dtype), ts.astype(dtype)
-    term = _zoh_term(system)
-    solver = method.solver
-    n = method.substeps
+    advance = _sample_interval(system, method, divergence_bound)
 
     def interval(carry, times):
         x, diverged_at = carry
         t0, t1 = times
         u = jnp.asarray(controller(t0, x), dtype).reshape(system.n_inputs)
-        h = (t1 - t0) / n
-
-        def substep(i, y):
-            ta = t0 + i * h
-            state = solver.init(term, ta, ta + h, y, u)
-            y_next, _, _, _, _ = solver.step(term, ta, ta + h, y, u, state, made_jump=True)
-            return y_next
-
-        x_new = jax.lax.fori_loop(0, n, substep, x, unroll=True)
-        bad = ~jnp.all(jnp.isfinite(x_new)) | jnp.any(jnp.abs(x_new) > divergence_bound)
-        diverged_at = jnp.where(bad & jnp.isinf(diverged_at), t1, diverged_at)
-        stopped = jnp.isfinite(diverged_at)
-        x_carry = jnp.where(stopped, x, x_new)
-        return (x_carry, diverged_at), (jnp.where(stopped, jnp.nan, x_new), u)
+        x_carry, diverged_at, x_out = advance(x, diverged_at, t0, t1, u)
+        return (x_carry, diverged_at), (x_out, u)
 
     init = (x0, jnp.asarray(jnp.inf, dtype))
     (x_last, diverged_at), (xs, us) = jax.lax.scan(interval, init, (ts[:-1], ts[1:]))
