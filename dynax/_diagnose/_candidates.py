@@ -18,7 +18,10 @@ from .._model._extensions import (
     RotorInertia,
     ViscousFriction,
 )
+from .._model._extensions._vehicle_terms import AbstractVehicleTerm, BodyBias, BodyQuadraticDrag, Wind
+from .._model._helicopter import BODY, Helicopter
 from .._model._system import AbstractManipulator
+from ._fit import nominal_values
 
 # Groups of causes that look alike in data; the report says how well each finding is told apart.
 LOOK_ALIKES = (
@@ -32,26 +35,43 @@ def default_candidates(system) -> tuple[AbstractTerm, ...]:
     """The contract's vocabulary for `system`, at neutral values.
 
     For a manipulator, per coordinate: `coulomb_friction`, `viscous_friction`, `quadratic_drag`,
-    `rotor_inertia`; for every system, per input: `input_delay`, `input_lag`, `input_gain`,
-    `input_offset`.
+    `rotor_inertia`; for a `Helicopter`, `quadratic_drag` on each translational body axis
+    (`u, v, w`), `wind` (its north, east and down components, each a candidate at `world`) and
+    `body_bias` on each body axis (`u, v, w, p, q, r`); for every system, per input: `input_delay`,
+    `input_lag`, `input_gain`, `input_offset`.
     """
     terms: list[AbstractTerm] = []
     if isinstance(system, AbstractManipulator):
         for j in range(system.n_joints):
             terms += [CoulombFriction(j), ViscousFriction(j), QuadraticDrag(j), RotorInertia(j)]
+    if isinstance(system, Helicopter):
+        terms += [BodyQuadraticDrag(i) for i in range(3)]
+        terms += [Wind(i) for i in range(3)]
+        terms += [BodyBias(i) for i in range(6)]
     for i in range(system.n_inputs):
         terms += [InputDelay(i), InputLag(i), InputGain(i), InputOffset(i)]
     return tuple(terms)
 
 
 def look_alikes(system, term, candidates) -> list[int]:
-    """Indices of the candidates that look like `term` in data: same place, cause in the same group."""
+    """Indices of the candidates that look like `term` in data: same place, cause in the same group.
+
+    A wind (at `world`) and a body bias on a translational axis (`u`, `v`, `w`) look alike
+    whatever their places: at a constant attitude a steady wind is a constant force on the body axes.
+    """
     where = term.where(system)
+
+    def same_place(other):
+        if {term.cause, other.cause} == {"wind", "body_bias"}:
+            bias = term if term.cause == "body_bias" else other
+            return bias.axis < 3
+        return other.where(system) == where
+
     return [
         k
         for k, other in enumerate(candidates)
-        if other.where(system) == where
-        and other.cause != term.cause
+        if other.cause != term.cause
+        and same_place(other)
         and any(term.cause in group and other.cause in group for group in LOOK_ALIKES)
     ]
 
@@ -82,7 +102,7 @@ def structurally_absorbed(family, refit, *, n_points: int = 64, seed: int = 0, t
     n_x, n_u = system.n_states, system.n_inputs
     xs = rng.uniform(-1.0, 1.0, (n_points, n_x)) * np.where(np.arange(n_x) < n_x // 2, 2.0, 3.0)
     us = rng.normal(0.0, 1.0, (n_points, n_u))
-    values = jnp.asarray([getattr(system, n) for n in family.names], float)
+    values = jnp.asarray(nominal_values(system, family.names), float)
     J_nom, J_c = _sensitivities(family, values, family.neutral, jnp.asarray(xs), jnp.asarray(us))
     A = np.asarray(J_nom).reshape(-1, len(family.names))[:, refit]
     out = []
@@ -117,7 +137,8 @@ def candidate_scales(system, candidates, trajectories) -> tuple[np.ndarray, np.n
 
     A friction or drag term of typical size produces a tenth of the RMS input force; inertia a
     tenth of the nominal diagonal inertia; delays and lags start at two sample intervals (a
-    zero delay has no gradient).
+    zero delay has no gradient). On a helicopter, a body bias or a quadratic drag of typical size
+    is a tenth of the spread of the body-axis accelerations, a wind 1 m/s.
     """
     xs = np.concatenate([np.asarray(t.xs) for t in trajectories])
     us = np.concatenate([np.asarray(t.us) for t in trajectories])
@@ -134,6 +155,16 @@ def candidate_scales(system, candidates, trajectories) -> tuple[np.ndarray, np.n
                 scale = 0.1
             else:
                 scale = 0.1 * rms_u
+        elif isinstance(term, AbstractVehicleTerm):
+            body = xs[:, BODY.start : BODY.stop]
+            accel = np.gradient(body, dt, axis=0).std(axis=0)
+            size = max(0.1 * float(accel[term.axis]), 1e-3)
+            if term.cause == "quadratic_drag":
+                scale = size / max(float(np.mean(body[:, term.axis] ** 2)), 1e-2)
+            elif term.cause == "wind":
+                scale = 1.0
+            else:
+                scale = size
         else:
             j, n = term.joint, system.n_joints
             rms_q = max(float(np.sqrt(np.mean(xs[:, j] ** 2))), 1e-6)

@@ -11,9 +11,10 @@ from .._data._derivatives import resample
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
 from .._model._extensions import AbstractInputTerm, AbstractTerm, Extended
+from .._model._helicopter import Helicopter
 from .._model._system import AbstractManipulator, AbstractSystem
 from ._candidates import candidate_scales, default_candidates, look_alikes, structurally_absorbed
-from ._fit import Family, fit_configurations, make_windows, nominal_parameter_names, validate_configurations
+from ._fit import Family, fit_configurations, make_windows, nominal_parameter_names, nominal_values, validate_configurations
 from ._residuals import acceleration_residuals, Structure, structure_test
 from ._screening import screen
 
@@ -229,7 +230,7 @@ def diagnose(
         refit_names = ()
     scales, inits = candidate_scales(system, candidates, train_records)
     neutral = np.asarray([t.neutral for t in candidates], float)
-    p0_nominal = np.asarray([float(getattr(system, n)) for n in names])
+    p0_nominal = np.asarray(nominal_values(system, names), float)
     xs_train = np.concatenate([np.asarray(r.xs) for r in train_records])
     family = Family(
         model=Extended(system, candidates),
@@ -272,10 +273,12 @@ def diagnose(
     val_windows = make_windows(validation_records, int(steps.max()), val_stride)
     covered = sum(max(r.duration - horizons.max() + reference_horizon_s, reference_horizon_s) for r in validation_records)
     n_eff = max(2.0, covered / reference_horizon_s)
-    position_index = (
-        list(range(system.n_joints)) if isinstance(system, AbstractManipulator)
-        else [i for i, s in enumerate(system.state_names) if not s.startswith("d")]
-    )
+    if isinstance(system, AbstractManipulator):
+        position_index = list(range(system.n_joints))
+    elif isinstance(system, Helicopter):
+        position_index = [0, 1, 2]  # world position x, y, z [m]
+    else:
+        position_index = [i for i, s in enumerate(system.state_names) if not s.startswith("d")]
 
     n_nom, n_slots = len(names), max_terms
     n_params = n_nom + n_slots + 1
@@ -431,8 +434,8 @@ def diagnose(
             + f"; largest in {', '.join(f'{k} ({v:.0%})' for k, v in s.by_state.items())}; worst around t = "
             + ", ".join(f"{t:.1f} s" for t in s.worst_times) + " of the held-out record."
         )
-    nominal_parameters = {n: float(getattr(nominal_model, n)) for n in names}
-    extended_parameters = {n: float(getattr(extended_model.system, n)) for n in names}
+    nominal_parameters = dict(zip(names, map(float, nominal_values(nominal_model, names))))
+    extended_parameters = dict(zip(names, map(float, nominal_values(extended_model.system, names))))
     extended_parameters.update({t.parameter_name(system): float(t.coefficient) for t in extended_model.terms})
     horizons_list = [float(h) for h in horizons]
     return Report(

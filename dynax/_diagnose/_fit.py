@@ -29,6 +29,7 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from .._model._extensions import Extended
+from .._model._helicopter import Helicopter, QUATERNION
 from .._simulate import FixedGrid, simulate
 
 # The Runge-Kutta stages in a plain scan: forward-mode differentiable (the Jacobians use jacfwd).
@@ -38,12 +39,32 @@ FORWARD_GRID = FixedGrid(solver=diffrax.Tsit5(scan_kind="lax"), substeps=1)
 
 
 def nominal_parameter_names(system) -> tuple[str, ...]:
-    """The scalar array fields of a nominal system: its fittable physical or base parameters."""
+    """The fittable parameters of a nominal system: its scalar array fields (physical or base
+    parameters), or for a `Helicopter` the free weights of its body model (`du/u`, `dv/1`, ...)."""
+    if isinstance(system, Helicopter):
+        return tuple(system.body_model.parameter_names)
     return tuple(
         f.name
         for f in dataclasses.fields(system)
         if isinstance(getattr(system, f.name), jax.Array) and jnp.shape(getattr(system, f.name)) == ()
     )
+
+
+def nominal_values(system, names: tuple[str, ...]) -> Float[Array, " n_nominal"]:
+    """The values of the parameters `names` (from `nominal_parameter_names`) of `system`."""
+    if isinstance(system, Helicopter):
+        return jnp.asarray(system.body_model.parameter_vector()) if names else jnp.zeros(0)
+    return jnp.asarray([getattr(system, n) for n in names])
+
+
+def with_nominal_values(system, names: tuple[str, ...], values):
+    """A copy of `system` with the parameters `names` set to `values`."""
+    if not names:
+        return system
+    if isinstance(system, Helicopter):
+        body = system.body_model.with_parameter_vector(jnp.stack(list(values)))
+        return eqx.tree_at(lambda h: h.body_model, system, body)
+    return eqx.tree_at(lambda m: [getattr(m, n) for n in names], system, [v for v in values])
 
 
 class Windows(eqx.Module):
@@ -134,9 +155,7 @@ class Family(eqx.Module):
         """The `Extended` model with these nominal parameter values and candidate coefficients."""
         model = self.model
         if self.names:
-            model = eqx.tree_at(
-                lambda m: [getattr(m.system, n) for n in self.names], model, [v for v in nominal_values]
-            )
+            model = eqx.tree_at(lambda m: m.system, model, with_nominal_values(model.system, self.names, nominal_values))
         return eqx.tree_at(lambda m: [t.coefficient for t in m.terms], model, [c for c in coefficients])
 
     def coefficients(self, slots: Int[Array, " n_slots"], new: Int[Array, ""], p: Float[Array, " n_params"]):
@@ -161,9 +180,16 @@ def window_errors(model, windows: Windows, method=FORWARD_GRID):
     """Simulated minus measured states on every window, `(window, step, n_measured)`, NaN past a divergence."""
     n = windows.xs.shape[-1]
 
+    nominal = model.system if isinstance(model, Extended) else model
+
     def one(t, x, u, tb, ub):
         x0 = jnp.concatenate([x[0], hidden_at_start(model, tb, ub)])
-        return simulate(model, x0, t, u, method=method, throw=False).xs[:, :n] - x
+        xs = simulate(model, x0, t, u, method=method, throw=False).xs[:, :n]
+        if isinstance(nominal, Helicopter):  # q and -q are one attitude: compare on the measured hemisphere
+            quat = xs[:, QUATERNION]
+            sign = jnp.where(jnp.sum(quat * x[:, QUATERNION], axis=1, keepdims=True) < 0, -1.0, 1.0)
+            xs = xs.at[:, QUATERNION].set(sign * quat)
+        return xs - x
 
     return jax.vmap(one)(windows.ts, windows.xs, windows.us, windows.ts_before, windows.us_before)
 

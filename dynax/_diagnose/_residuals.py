@@ -28,6 +28,7 @@ import scipy.stats
 
 from .._data._derivatives import savitzky_golay
 from .._model._extensions import Extended
+from .._model._helicopter import BODY, BODY_AXES, Helicopter, QUATERNION, quaternion_to_rotation
 from .._model._system import AbstractManipulator
 
 
@@ -76,10 +77,21 @@ def _predicted_accelerations(model, ts, xs_smooth, us, idx):
     return 0.5 * (field(ts, full, us) + field(ts, full, us_before))[:, idx]
 
 
+@eqx.filter_jit
+def _interval_accelerations(model, ts, xs_smooth, us, idx):
+    """The model's mean acceleration over each sample interval under the held input (trapezoid rule)."""
+    zs = _hidden_trajectory(model, ts, us)
+    full = jnp.concatenate([xs_smooth, zs], axis=1)
+    field = jax.vmap(lambda t, x, u: model.vector_field(t, x, u)[idx])
+    return 0.5 * (field(ts[:-1], full[:-1], us[:-1]) + field(ts[1:], full[1:], us[:-1]))
+
+
 def velocity_indices(system) -> list[int]:
     """The states whose derivatives the residual analysis looks at: the velocities of a manipulator."""
     if isinstance(system, AbstractManipulator):
         return list(range(system.n_joints, 2 * system.n_joints))
+    if isinstance(system, Helicopter):
+        return list(range(BODY.start, BODY.stop))  # body velocities and rates u, v, w, p, q, r
     return list(range(system.n_states))
 
 
@@ -99,6 +111,15 @@ def acceleration_residuals(model, trajectory):
     # The measured acceleration is a local polynomial fit; smoothing the prediction with the same
     # filter compares like with like.
     predicted = savitzky_golay(ts, predicted, window=w, order=3)
+    if isinstance(nominal, Helicopter):
+        # A helicopter's rates answer its inputs within a sample (the held input makes the
+        # acceleration jump at every sample, and a stiff flight controller moves the input every
+        # sample): compare velocity *increments* over each interval, integrated under the held
+        # input, and differentiate the accumulated difference with the same filter.
+        increments = jnp.diff(trajectory.ts)[:, None] * _interval_accelerations(model, ts, xs_smooth, trajectory.us, jnp.asarray(idx))
+        drift = jnp.diff(trajectory.xs[:, idx], axis=0) - increments
+        accumulated = jnp.concatenate([jnp.zeros((1, len(idx)), drift.dtype), jnp.cumsum(drift, axis=0)])
+        measured = predicted + savitzky_golay(ts, accumulated, window=w, order=3, deriv=1)
     # The filter's start-up and run-out samples are not trusted.
     keep = slice(w, len(ts) - w)
     return np.asarray(measured - predicted)[keep], np.asarray(xs_smooth)[keep], np.asarray(predicted)[keep], keep
@@ -115,6 +136,19 @@ def probe_features(system, xs, us, predicted, dt) -> tuple[np.ndarray, list[str]
             vs = max(0.05 * float(np.std(v)), 1e-6)
             cols += [np.tanh(v / vs), v, np.abs(v) * v, np.sin(q), np.cos(q), predicted[:, j]]
             names += [f"sign(d{c})", f"d{c}", f"|d{c}|d{c}", f"sin({c})", f"cos({c})", f"model acceleration d{c}/dt"]
+    elif isinstance(system, Helicopter):
+        # Body velocities and rates with their signs and squares, and the world's axes seen in the
+        # body frame (gravity's direction, and north and east: what a world-fixed effect such as
+        # wind turns with), alone and times the body velocities.
+        rotations = np.asarray(jax.vmap(quaternion_to_rotation)(jnp.asarray(xs[:, QUATERNION])))
+        for i, c in zip(range(BODY.start, BODY.stop), BODY_AXES):
+            x = xs[:, i]
+            cols += [x, np.abs(x) * x, np.tanh(x / max(0.05 * float(np.std(x)), 1e-6)), predicted[:, i - BODY.start]]
+            names += [c, f"|{c}|{c}", f"sign({c})", f"model acceleration d{c}/dt"]
+        for a, world in enumerate(("north", "east", "down")):
+            for b, body in enumerate(("u", "v", "w")):
+                cols.append(rotations[:, a, b])
+                names.append(f"{world} on body {body}")
     else:
         for j, c in enumerate(system.state_names):
             x = xs[:, j]

@@ -92,3 +92,61 @@ def synthetic_trajectory(
     noise = jnp.asarray(noise, xs.dtype)
     xs = xs + noise * jax.random.normal(jax.random.PRNGKey(seed + 7919), xs.shape, xs.dtype)
     return Trajectory(ts, xs, us, names, tuple(nominal.input_names), system_name, source)
+
+
+def helicopter_flight(
+    truth: AbstractSystem,
+    *,
+    duration: float,
+    dt: float = 0.02,
+    seed: int = 0,
+    yaw_amplitude: float = 2.5,
+    excitation: float = 0.08,
+    noise: bool = True,
+    source: str = "",
+) -> Trajectory:
+    r"""Fly a helicopter `truth` in closed loop and record it as measured data, with heading changes.
+
+    The truth simulator's cascaded controller (`FlightController`) holds position near waypoints a
+    metre or two apart while the heading sweeps sinusoidally over $\pm$`yaw_amplitude` (one period
+    per `duration`), with low-pass filtered excitation (3 Hz, standard deviation `excitation`) on all
+    inputs. The heading sweep is what tells a world-fixed effect (wind) from a body-fixed one (a
+    body bias); it stays inside $(-\pi, \pi)$ so the recorded quaternion needs no sign flips.
+
+    **Arguments:** `truth` (a `Helicopter` or an `Extended` helicopter, e.g. with a hidden
+    `Wind`), `duration` [s], `dt` [s], `seed`, `yaw_amplitude` [rad], `excitation`, `noise` (5 mm,
+    2 mrad, 0.02 m/s, 0.01 rad/s as `generate_helicopter_flight`), `source`.
+
+    **Returns:** a `Trajectory` with the contract's helicopter columns.
+    """
+    from .._model._helicopter import hover_state, HELICOPTER_INPUT_NAMES, HELICOPTER_STATE_NAMES
+    from .._model._helicopter_truth import _batch_qmul, _filtered_noise, FlightController, fly
+
+    rng = np.random.default_rng(seed)
+    n = int(round(duration / dt))
+    dtype = jnp.result_type(float)
+    t = np.arange(n) * dt
+    refs = np.zeros((n, 13))
+    refs[:, 4] = 1.0
+    segment = max(1, int(round(3.0 / dt)))
+    for k in range(0, n, segment):
+        refs[k : k + segment, 0:3] = rng.uniform(-1.0, 1.0, 3) * np.array([1.0, 1.0, 0.3])
+    refs[:, 3] = yaw_amplitude * np.sin(2 * np.pi * t / duration + rng.uniform(-0.3, 0.3))
+    kick = _filtered_noise(rng, n, dt, [excitation] * 4, cutoff_hz=3.0)
+    x0 = jnp.concatenate([hover_state(yaw=float(refs[0, 3]), dtype=dtype), jnp.zeros(truth.n_states - 13, dtype)])
+    xs, us = fly(truth, FlightController(), x0, dt, jnp.asarray(refs, dtype), jnp.asarray(kick, dtype),
+                 jnp.zeros((n, 3), dtype))
+    xs = np.array(xs[:, :13], float)
+    if not np.all(np.isfinite(xs)) or np.abs(xs).max() > 1e4:
+        raise RuntimeError("helicopter_flight: the closed-loop flight diverged")
+    xs[:, 3:7] *= np.sign(xs[:, 3:4] + 1e-12)
+    if noise:
+        e = rng.standard_normal((n, 13))
+        xs[:, 0:3] += 0.005 * e[:, 0:3]
+        small = np.concatenate([np.ones((n, 1)), 0.5 * 0.002 * e[:, 4:7]], axis=1)
+        xs[:, 3:7] = _batch_qmul(xs[:, 3:7], small)
+        xs[:, 3:7] /= np.linalg.norm(xs[:, 3:7], axis=1, keepdims=True)
+        xs[:, 7:10] += 0.02 * e[:, 7:10]
+        xs[:, 10:13] += 0.01 * e[:, 10:13]
+    return Trajectory(jnp.asarray(t, dtype), jnp.asarray(xs, dtype), jnp.asarray(np.asarray(us), dtype),
+                      HELICOPTER_STATE_NAMES, HELICOPTER_INPUT_NAMES, "helicopter", source)
