@@ -19,7 +19,7 @@ from dynax._identify._vehicle import (
     lagged_loss,
     OneStep,
 )
-from dynax._identify._vehicle._criteria import _with_theta
+from dynax._identify._vehicle._criteria import _normal_equations, _starts, _with_theta
 from dynax._model._helicopter import (
     AccelerationModel,
     Helicopter,
@@ -72,13 +72,35 @@ def test_lagged_keeps_the_true_coefficients(tempest_data):
     assert fit.loss < 1e-6
 
 
-def test_em_free_loss_decreases_monotonically(truth_data):
+@pytest.fixture(scope="module")
+def em_free_fit(truth_data):
     start = fit_one_step(_zero_tempest(), truth_data).system
-    fit = fit_lagged(start, truth_data, Lagged(horizon=0.2, stride=10, max_iterations=3))
+    return start, fit_lagged(start, truth_data, Lagged(horizon=0.2, stride=10, max_iterations=3))
+
+
+def test_em_free_loss_decreases_monotonically(em_free_fit):
+    _, fit = em_free_fit
     losses = np.array([h[1] for h in fit.history])
     assert len(losses) >= 3
     assert np.all(np.diff(losses) < 0)
     assert losses[-1] < 0.9 * losses[0]  # the lagged criterion improves on the one-step fit (by 19 % here)
+
+
+def test_state_sensitivities_reach_a_stationary_point_of_the_lagged_loss(truth_data, em_free_fit):
+    # Gauss-Newton on the true loss (the EM-free least squares with the rollout's full Jacobian):
+    # at its result the true loss's gradient, J^T W r, vanishes, and the loss is no higher than
+    # the paper's EM-free iteration, which holds the predicted states fixed.
+    start, em_free = em_free_fit
+    criterion = Lagged(horizon=0.2, stride=10, max_iterations=6, state_sensitivities=True)
+    fit = fit_lagged(start, truth_data, criterion)
+    assert fit.loss <= em_free.loss
+    starts = _starts(truth_data, 20, 10)
+
+    def stationarity(system):  # |J^T W r| through the Gauss-Newton normal equations
+        ata, atb, _ = _normal_equations(system, truth_data, starts, 20, jnp.ones(6), True, 128, True)
+        return float(jnp.linalg.norm(ata @ system.body_model.parameter_vector() - atb))
+
+    assert stationarity(fit.system) < 1e-3 * stationarity(start)
 
 
 def test_backprop_gradient_matches_finite_differences(truth_data):

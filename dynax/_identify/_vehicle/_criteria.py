@@ -37,6 +37,7 @@ removed exactly, and the acceleration model's known part contributes $R(\omega\t
 
 import time
 
+import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -73,6 +74,13 @@ class Lagged(eqx.Module):
     - `step_sizes`: the line search's steps along (new - old) weights, tried in order.
     - `best_step`: take the best of all `step_sizes` (an exact line search on that grid) rather than
       the first that decreases the loss.
+    - `state_sensitivities`: *not the paper's algorithm* (default `False`). With `True` the design
+      matrix is the full Jacobian of the rollout's body states with respect to the weights,
+      including how the weights move the predicted states at which the features are evaluated, and
+      the offset is the rollout itself: each least-squares solve is then a Gauss-Newton step on
+      the true lagged loss, whose fixed point is a stationary point of that loss. The paper's
+      EM-free iteration holds the predicted states fixed, so its fixed point is stationary for a
+      slightly different problem (see `docs/helicopter.md`, "The EM-free approximation").
 
     ??? cite "Reference"
 
@@ -88,6 +96,7 @@ class Lagged(eqx.Module):
     ridge: float = 1e-10
     step_sizes: tuple[float, ...] = eqx.field(static=True, default=(1.0, 0.5, 0.25, 0.125, 0.0625, 0.03125))
     best_step: bool = eqx.field(static=True, default=False)
+    state_sensitivities: bool = eqx.field(static=True, default=False)
 
 
 class Backprop(eqx.Module):
@@ -158,9 +167,35 @@ def _window_prediction(system: Helicopter, theta, states, inputs, dt):
     return jnp.concatenate([v_body, rates], axis=-1)
 
 
+_TSIT5 = diffrax.Tsit5.tableau
+
+
+def _tsit5_step(system: Helicopter, x, u, dt):
+    """One Tsit5 step from its Butcher tableau, the same step as `_windows.rollout`'s diffrax
+    `Tsit5` (which is not forward-mode differentiable); used for the Jacobians of the rollout."""
+    stages = []
+    for i in range(_TSIT5.num_stages - 1):  # the last (FSAL) stage has zero weight in the solution
+        y = x if i == 0 else x + dt * sum(a * k for a, k in zip(_TSIT5.a_lower[i - 1], stages))
+        t = 0.0 if i == 0 else _TSIT5.c[i - 1] * dt
+        stages.append(system.vector_field(t, y, u))
+    return x + dt * sum(b * k for b, k in zip(_TSIT5.b_sol, stages))
+
+
+def _tsit5_rollout(system: Helicopter, x0, us, dt):
+    def step(x, u):
+        x_next = _tsit5_step(system, x, u, dt)
+        return x_next, x_next
+
+    return jax.lax.scan(step, x0, us)[1]
+
+
 @eqx.filter_jit
-def _normal_equations(system, trajectory, starts, n_steps, weights, use_rollout, batch_size):
-    """Accumulate $A^\\top \\Lambda A$ and $A^\\top\\Lambda(y - c)$ over windows, in batches."""
+def _normal_equations(system, trajectory, starts, n_steps, weights, use_rollout, batch_size, sensitivities=False):
+    """Accumulate $A^\\top \\Lambda A$ and $A^\\top\\Lambda(y - c)$ over windows, in batches.
+
+    With `sensitivities` (only with `use_rollout`), $A$ is the Jacobian of the rollout's body states
+    and $c = \\hat s(\\theta) - A\\theta$: the Gauss-Newton linearisation of the true predictions.
+    """
     theta = system.body_model.parameter_vector()
     dt = trajectory.ts[1] - trajectory.ts[0]
     n_params = theta.shape[0]
@@ -169,12 +204,17 @@ def _normal_equations(system, trajectory, starts, n_steps, weights, use_rollout,
     def window(k):
         measured = jax.lax.dynamic_slice_in_dim(trajectory.xs, k, n_steps + 1)
         inputs = jax.lax.dynamic_slice_in_dim(trajectory.us, k, n_steps)
+        target = measured[1:, BODY].reshape(-1)
+        if sensitivities:
+            g = lambda th: _tsit5_rollout(_with_theta(system, th), measured[0], inputs, dt)[:, BODY].reshape(-1)  # noqa: E731
+            value, design = g(theta), jax.jacfwd(g)(theta)
+            offset = value - design @ theta
+            return design.T @ (w[:, None] * design), design.T @ (w * (target - offset)), jnp.sum(w * (value - target) ** 2)
         states = rollout(system, measured[0], inputs, dt) if use_rollout else measured
         states = jax.lax.stop_gradient(states)
         f = lambda th: _window_prediction(system, th, states, inputs, dt).reshape(-1)  # noqa: E731
         design = jax.jacfwd(f)(theta)
         offset = f(jnp.zeros_like(theta))
-        target = measured[1:, BODY].reshape(-1)
         return design.T @ (w[:, None] * design), design.T @ (w * (target - offset)), jnp.sum(w * (f(theta) - target) ** 2)
 
     n = starts.shape[0]
@@ -239,7 +279,9 @@ def fit_lagged(
     current = float(loss_fn(system))
     history = [(time.perf_counter() - t0, current)]
     for iteration in range(criterion.max_iterations):
-        ata, atb, _ = _normal_equations(system, trajectory, starts, n_steps, w, True, criterion.batch_size)
+        ata, atb, _ = _normal_equations(
+            system, trajectory, starts, n_steps, w, True, criterion.batch_size, criterion.state_sensitivities
+        )
         theta_old = system.body_model.parameter_vector()
         theta_new = _solve(ata, atb, criterion.ridge)
         accepted = None
