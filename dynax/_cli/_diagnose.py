@@ -33,7 +33,8 @@ def register(subparsers):
     parser.add_argument("--nominal", default=None, metavar="FILE.json",
                         help="nominal parameters: a JSON with a 'parameters' object (e.g. the output of dynax identify)")
     parser.add_argument("--refit", default=None, metavar="NAMES",
-                        help="comma-separated nominal parameters to refit (default all; for linear_axis mass,viscous)")
+                        help="comma-separated nominal parameters to refit (default all; for linear_axis mass,viscous; "
+                             "for helicopter the Tempest weights, e.g. du/u,dv/1)")
     parser.add_argument("--dt", type=float, default=None, metavar="SECONDS",
                         help="resample the records to this interval first (default: as recorded)")
     parser.add_argument("--reference-horizon", type=float, default=1.0, metavar="SECONDS",
@@ -48,9 +49,20 @@ def nominal_system(name: str, parameters: dict | None = None):
     from .._model import Acrobot, DoublePendulum, LinearAxis
 
     if name == "helicopter":
+        # The Tempest acceleration model; --nominal may give its free weights by name (`du/u`, `dv/1`, ...).
+        from .._diagnose._fit import nominal_parameter_names, with_nominal_values
         from .._model._helicopter import Helicopter
 
-        cls, defaults = Helicopter, {}
+        system = Helicopter()
+        names = nominal_parameter_names(system)
+        unknown = sorted(set(parameters or {}) - set(names))
+        if unknown:
+            raise UsageError(f"--nominal: {unknown} are not weights of the helicopter's Tempest model {list(names)}")
+        import jax.numpy as jnp
+
+        values = dict(zip(names, system.body_model.parameter_vector()))
+        values.update({k: float(v) for k, v in (parameters or {}).items()})
+        return with_nominal_values(system, names, [jnp.asarray(float(values[n])) for n in names])
     else:
         cls = {"acrobot": Acrobot, "double_pendulum": DoublePendulum, "linear_axis": LinearAxis}[name]
         defaults = {"coulomb": 0.0, "offset": 0.0} if name == "linear_axis" else {}
@@ -71,11 +83,6 @@ def run(args: argparse.Namespace) -> int:
     from .._data import load_trajectory, parse_assignments, resample
     from .._diagnose import diagnose, Known, Refit, write_report
 
-    if args.system == "helicopter":
-        raise UsageError(
-            "diagnose helicopter: the helicopter's candidates (quadratic_drag per body axis, wind, body_bias) "
-            "are not in the library yet; only acrobot, double_pendulum and linear_axis can be diagnosed"
-        )
     mapping = parse_assignments(args.map, "--map", numeric=False)
     scale = parse_assignments(args.scale, "--scale", numeric=True)
     if args.dt is not None and not args.dt > 0:
@@ -134,7 +141,7 @@ def summary(report) -> str:
     ref = j["reference_horizon_s"]
     h = j["nominal"]["sim_error"]["horizons_s"]
     i = h.index(ref) if ref in h else len(h) - 1
-    unit = "m" if j["system"] == "linear_axis" else "rad"
+    unit = "m" if j["system"] in ("linear_axis", "helicopter") else "rad"
     lines = [
         "What the simulation gets wrong: held-out position RMSE of the nominal model "
         + ", ".join(f"{r:.3g} {unit} at {t:g} s" for t, r in zip(h, j["nominal"]["sim_error"]["rmse"]) if r is not None) + ".",

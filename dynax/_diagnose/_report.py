@@ -103,7 +103,7 @@ def write_report(report, out_dir, validation, *, write_json) -> None:
     curves = {"nominal": (j["nominal"]["sim_error"]["horizons_s"], j["nominal"]["sim_error"]["rmse"])}
     if report.findings:
         curves["extended"] = (j["extended"]["sim_error"]["horizons_s"], j["extended"]["sim_error"]["rmse"])
-    unit = "m" if report.system == "linear_axis" else "rad"
+    unit = "m" if report.system in ("linear_axis", "helicopter") else "rad"
     plot_error_vs_horizon({k: (h, [np.nan if r is None else r for r in rs]) for k, (h, rs) in curves.items()},
                           out / "sim_error.png", unit=unit)
     residuals, xs, _, keep = acceleration_residuals(report.nominal_model, validation)

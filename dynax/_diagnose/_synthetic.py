@@ -102,19 +102,23 @@ def helicopter_flight(
     seed: int = 0,
     yaw_amplitude: float = 2.5,
     excitation: float = 0.08,
+    spread: float = 1.0,
+    controller=None,
     noise: bool = True,
     source: str = "",
 ) -> Trajectory:
     r"""Fly a helicopter `truth` in closed loop and record it as measured data, with heading changes.
 
     The truth simulator's cascaded controller (`FlightController`) holds position near waypoints a
-    metre or two apart while the heading sweeps sinusoidally over $\pm$`yaw_amplitude` (one period
+    few metres apart (uniform within `spread` north and east, 0.3 `spread` down, a new one every
+    3 s; a wide spread makes faster flight) while the heading sweeps sinusoidally over $\pm$`yaw_amplitude` (one period
     per `duration`), with low-pass filtered excitation (3 Hz, standard deviation `excitation`) on all
     inputs. The heading sweep is what tells a world-fixed effect (wind) from a body-fixed one (a
     body bias); it stays inside $(-\pi, \pi)$ so the recorded quaternion needs no sign flips.
 
     **Arguments:** `truth` (a `Helicopter` or an `Extended` helicopter, e.g. with a hidden
-    `Wind`), `duration` [s], `dt` [s], `seed`, `yaw_amplitude` [rad], `excitation`, `noise` (5 mm,
+    `Wind`), `duration` [s], `dt` [s], `seed`, `yaw_amplitude` [rad], `excitation`, `spread` [m], `controller` (default `FlightController()`; a larger
+    `max_position_error` flies faster between waypoints), `noise` (5 mm,
     2 mrad, 0.02 m/s, 0.01 rad/s as `generate_helicopter_flight`), `source`.
 
     **Returns:** a `Trajectory` with the contract's helicopter columns.
@@ -130,11 +134,11 @@ def helicopter_flight(
     refs[:, 4] = 1.0
     segment = max(1, int(round(3.0 / dt)))
     for k in range(0, n, segment):
-        refs[k : k + segment, 0:3] = rng.uniform(-1.0, 1.0, 3) * np.array([1.0, 1.0, 0.3])
+        refs[k : k + segment, 0:3] = spread * rng.uniform(-1.0, 1.0, 3) * np.array([1.0, 1.0, 0.3])
     refs[:, 3] = yaw_amplitude * np.sin(2 * np.pi * t / duration + rng.uniform(-0.3, 0.3))
     kick = _filtered_noise(rng, n, dt, [excitation] * 4, cutoff_hz=3.0)
     x0 = jnp.concatenate([hover_state(yaw=float(refs[0, 3]), dtype=dtype), jnp.zeros(truth.n_states - 13, dtype)])
-    xs, us = fly(truth, FlightController(), x0, dt, jnp.asarray(refs, dtype), jnp.asarray(kick, dtype),
+    xs, us = fly(truth, FlightController() if controller is None else controller, x0, dt, jnp.asarray(refs, dtype), jnp.asarray(kick, dtype),
                  jnp.zeros((n, 3), dtype))
     xs = np.array(xs[:, :13], float)
     if not np.all(np.isfinite(xs)) or np.abs(xs).max() > 1e4:

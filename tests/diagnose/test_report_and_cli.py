@@ -79,9 +79,9 @@ def test_cli_diagnose_refuses_bad_input_and_writes_nothing(offset_data, tmp_path
     assert not out.exists()
 
 
-def test_cli_diagnose_says_the_helicopter_is_not_supported_yet(offset_data, tmp_path, capsys):
+def test_cli_diagnose_helicopter_refuses_a_file_without_its_columns(offset_data, tmp_path, capsys):
     folder, _, _ = offset_data
     out = tmp_path / "heli"
     assert main(["diagnose", "helicopter", str(folder / "run1.csv"), "--out", str(out)]) == 2
-    assert "wind" in capsys.readouterr().err
+    assert "run1.csv" in capsys.readouterr().err
     assert not out.exists()
