@@ -4,4 +4,8 @@ from ._candidates import default_candidates as default_candidates, LOOK_ALIKES a
 from ._diagnose import diagnose as diagnose, Known as Known, Refit as Refit, Report as Report
 from ._report import write_report as write_report
 from ._residuals import Structure as Structure, structure_test as structure_test
-from ._synthetic import multisine as multisine, synthetic_trajectory as synthetic_trajectory
+from ._synthetic import (
+    helicopter_flight as helicopter_flight,
+    multisine as multisine,
+    synthetic_trajectory as synthetic_trajectory,
+)

@@ -109,17 +109,24 @@ def helicopter_flight(
 ) -> Trajectory:
     r"""Fly a helicopter `truth` in closed loop and record it as measured data, with heading changes.
 
-    The truth simulator's cascaded controller (`FlightController`) holds position near waypoints a
-    few metres apart (uniform within `spread` north and east, 0.3 `spread` down, a new one every
-    3 s; a wide spread makes faster flight) while the heading sweeps sinusoidally over $\pm$`yaw_amplitude` (one period
-    per `duration`), with low-pass filtered excitation (3 Hz, standard deviation `excitation`) on all
-    inputs. The heading sweep is what tells a world-fixed effect (wind) from a body-fixed one (a
-    body bias); it stays inside $(-\pi, \pi)$ so the recorded quaternion needs no sign flips.
+    The truth simulator's cascaded controller (`FlightController`) holds position near waypoints
+    (uniform within `spread` north and east and 0.3 `spread` down, a new one every 3 s; a wide
+    spread makes faster flight) while the heading sweeps sinusoidally over $\pm$`yaw_amplitude`
+    (one period per `duration`), with low-pass filtered excitation (3 Hz, standard deviation
+    `excitation`) on all inputs. The heading sweep is what tells a world-fixed effect (wind) from a
+    body-fixed one (a body bias); it stays inside $(-\pi, \pi)$ so the recorded quaternion needs no
+    sign flips.
 
-    **Arguments:** `truth` (a `Helicopter` or an `Extended` helicopter, e.g. with a hidden
-    `Wind`), `duration` [s], `dt` [s], `seed`, `yaw_amplitude` [rad], `excitation`, `spread` [m], `controller` (default `FlightController()`; a larger
-    `max_position_error` flies faster between waypoints), `noise` (5 mm,
-    2 mrad, 0.02 m/s, 0.01 rad/s as `generate_helicopter_flight`), `source`.
+    **Arguments:**
+
+    - `truth`: a `Helicopter` or an `Extended` helicopter (e.g. with a hidden `Wind`).
+    - `duration` [s], `dt` [s], `seed`.
+    - `yaw_amplitude` [rad], `excitation`, `spread` [m].
+    - `controller`: default `FlightController()`; a larger `max_position_error` flies faster
+      between waypoints.
+    - `noise`: add measurement noise (5 mm, 2 mrad, 0.02 m/s, 0.01 rad/s, as
+      `generate_helicopter_flight`).
+    - `source`: recorded in the `Trajectory`.
 
     **Returns:** a `Trajectory` with the contract's helicopter columns.
     """
