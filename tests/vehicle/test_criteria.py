@@ -127,9 +127,13 @@ def test_backprop_reaches_the_lagged_loss(truth_data):
     start = fit_one_step(_zero_tempest(), truth_data).system
     lagged = fit_lagged(start, truth_data, Lagged(horizon=0.3, stride=10, max_iterations=6))
     direct = fit_backprop(start, truth_data, Backprop(horizon=0.3, stride=10, max_steps=40))
+    newton = fit_lagged(start, truth_data, Lagged(horizon=0.3, stride=10, max_iterations=6, state_sensitivities=True))
     assert direct.loss < lagged.history[0][1]
-    # The EM-free approximation is close to the direct minimum (the 5 % check, small scale).
-    assert lagged.loss <= 1.05 * direct.loss
+    # Backprop and Gauss-Newton on the true loss find the same minimum (0.100083 here).
+    assert newton.loss == pytest.approx(direct.loss, rel=1e-4)
+    # At this small scale (Tempest features, H = 0.3 s) the EM-free fixed point is 0.4 % above it; with
+    # the rich features and H = 1 s of the experiment the gap is 7 % (hover) to 12 % (aerobatic).
+    assert lagged.loss <= 1.05 * min(direct.loss, newton.loss)
 
 
 def test_measured_frequency_response_matches_the_model(tempest_data):
