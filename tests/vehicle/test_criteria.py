@@ -1,6 +1,5 @@
 """The learning criteria: coefficient recovery, monotone EM-free loss, backprop gradients."""
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -17,7 +16,6 @@ from dynax._identify._vehicle import (
     frequency_responses,
     Lagged,
     lagged_loss,
-    OneStep,
 )
 from dynax._identify._vehicle._criteria import _normal_equations, _starts, _with_theta
 from dynax._model._helicopter import (

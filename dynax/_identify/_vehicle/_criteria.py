@@ -48,10 +48,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
-from jaxtyping import Array, Float
 
 from ..._data._trajectory import Trajectory
-from ..._errors import UsageError
 from ..._model._helicopter import ANGULAR_RATE, BODY, Helicopter, QUATERNION, VELOCITY, quaternion_to_rotation
 from ._windows import check_helicopter_data, horizon_steps, lagged_loss, rollout, valid_starts
 
