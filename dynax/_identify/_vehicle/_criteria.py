@@ -42,7 +42,6 @@ removed exactly, and the acceleration model's known part contributes $R(\omega\t
 
 import time
 
-import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -170,28 +169,6 @@ def _window_prediction(system: Helicopter, theta, states, inputs, dt):
     return jnp.concatenate([v_body, rates], axis=-1)
 
 
-_TSIT5 = diffrax.Tsit5.tableau
-
-
-def _tsit5_step(system: Helicopter, x, u, dt):
-    """One Tsit5 step from its Butcher tableau, the same step as `_windows.rollout`'s diffrax
-    `Tsit5` (which is not forward-mode differentiable); used for the Jacobians of the rollout."""
-    stages = []
-    for i in range(_TSIT5.num_stages - 1):  # the last (FSAL) stage has zero weight in the solution
-        y = x if i == 0 else x + dt * sum(a * k for a, k in zip(_TSIT5.a_lower[i - 1], stages))
-        t = 0.0 if i == 0 else _TSIT5.c[i - 1] * dt
-        stages.append(system.vector_field(t, y, u))
-    return x + dt * sum(b * k for b, k in zip(_TSIT5.b_sol, stages))
-
-
-def _tsit5_rollout(system: Helicopter, x0, us, dt):
-    def step(x, u):
-        x_next = _tsit5_step(system, x, u, dt)
-        return x_next, x_next
-
-    return jax.lax.scan(step, x0, us)[1]
-
-
 @eqx.filter_jit
 def _normal_equations(system, trajectory, starts, n_steps, weights, use_rollout, batch_size, sensitivities=False):
     """Accumulate $A^\\top \\Lambda A$ and $A^\\top\\Lambda(y - c)$ over windows, in batches.
@@ -209,7 +186,7 @@ def _normal_equations(system, trajectory, starts, n_steps, weights, use_rollout,
         inputs = jax.lax.dynamic_slice_in_dim(trajectory.us, k, n_steps)
         target = measured[1:, BODY].reshape(-1)
         if sensitivities:
-            g = lambda th: _tsit5_rollout(_with_theta(system, th), measured[0], inputs, dt)[:, BODY].reshape(-1)  # noqa: E731
+            g = lambda th: rollout(_with_theta(system, th), measured[0], inputs, dt)[1:, BODY].reshape(-1)  # noqa: E731
             value, design = g(theta), jax.jacfwd(g)(theta)
             offset = value - design @ theta
             return design.T @ (w[:, None] * design), design.T @ (w * (target - offset)), jnp.sum(w * (value - target) ** 2)

@@ -26,7 +26,6 @@ from ..._model._helicopter import (
     POSITION,
     QUATERNION,
     quaternion_angle,
-    quaternion_to_rotation,
     VELOCITY,
 )
 
@@ -61,7 +60,7 @@ def horizon_steps(horizon_s: float, dt: float, where: str) -> int:
 
 def _solver_step(system: Helicopter, x, u, dt):
     term = diffrax.ODETerm(lambda t, y, args: system.vector_field(t, y, args))
-    solver = diffrax.Tsit5()
+    solver = diffrax.Tsit5(scan_kind="bounded")  # forward and reverse mode (see dynax.FixedGrid)
     zero = jnp.zeros((), x.dtype)
     state = solver.init(term, zero, zero + dt, x, u)
     y, _, _, _, _ = solver.step(term, zero, zero + dt, x, u, state, made_jump=True)
