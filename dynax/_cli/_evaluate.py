@@ -3,10 +3,10 @@
 import argparse
 import json
 import math
-import pathlib
 import time
 
 from .._errors import DataError, UsageError
+from ._common import add_data_options, data_options, output_file
 from ._output import write_json
 
 
@@ -24,8 +24,7 @@ def register(subparsers):
     parser.add_argument("data", help="CSV or NPZ file with the contract's helicopter columns")
     parser.add_argument("--horizons", default="0.1,0.5,1,2", help="comma-separated horizons in seconds (default 0.1,0.5,1,2)")
     parser.add_argument("--stride", type=int, default=1, metavar="N", help="use every N-th start sample (default 1: every)")
-    parser.add_argument("--map", default=None, help="NAME=COLUMN,... for files whose columns are named otherwise")
-    parser.add_argument("--scale", default=None, help="NAME=FACTOR,... multiplied into columns (units)")
+    add_data_options(parser)
     parser.add_argument("--out", required=True, help="output metrics file (JSON)")
     parser.set_defaults(run=run)
 
@@ -45,18 +44,14 @@ def run(args: argparse.Namespace) -> int:
 
     jax.config.update("jax_enable_x64", True)
 
-    from .._data import parse_assignments
     from .._identify._vehicle import model_from_json, prediction_error
     from ._fit import load_helicopter_data
 
     horizons = _horizons(args.horizons)
     if args.stride < 1:
         raise UsageError(f"--stride must be at least 1, got {args.stride}")
-    out = pathlib.Path(args.out)
-    if out.exists() and out.is_dir():
-        raise UsageError(f"--out {out} is a directory; give a file name such as {out / 'metrics.json'}")
-    mapping = parse_assignments(args.map, "--map", numeric=False)
-    scale = parse_assignments(args.scale, "--scale", numeric=True)
+    out = output_file(args.out, "metrics.json")
+    mapping, scale = data_options(args)
     start = time.perf_counter()
     try:
         with open(args.model) as f:

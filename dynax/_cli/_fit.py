@@ -1,10 +1,10 @@
 """`dynax fit helicopter DATA --model M --criterion C [--horizon S] --out MODEL.json`: vehicle learning."""
 
 import argparse
-import pathlib
 import time
 
 from .._errors import DataError, UsageError
+from ._common import add_data_options, data_options, output_file
 from ._output import write_json
 
 _MODELS = ("acceleration", "linear")
@@ -33,8 +33,7 @@ def register(subparsers):
                         help="acceleration model: the Tempest features (default) or a richer set")
     parser.add_argument("--stride", type=int, default=1, metavar="N",
                         help="lagged and backprop: use every N-th start time (default 1, every start)")
-    parser.add_argument("--map", default=None, help="NAME=COLUMN,... for files whose columns are named otherwise")
-    parser.add_argument("--scale", default=None, help="NAME=FACTOR,... multiplied into columns (units)")
+    add_data_options(parser)
     parser.add_argument("--out", required=True, help="output model file (JSON)")
     parser.set_defaults(run=run)
 
@@ -65,7 +64,6 @@ def run(args: argparse.Namespace) -> int:
 
     jax.config.update("jax_enable_x64", True)  # learning in float64; the library leaves config alone
 
-    from .._data import parse_assignments
     from .._identify._vehicle import Backprop, FrequencyDomain, Lagged, OneStep
     from .._identify._vehicle import fit_vehicle, initial_helicopter, model_to_json
 
@@ -75,11 +73,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--horizon must be positive seconds, got {args.horizon}")
     if args.stride < 1:
         raise UsageError(f"--stride must be at least 1, got {args.stride}")
-    out = pathlib.Path(args.out)
-    if out.exists() and out.is_dir():
-        raise UsageError(f"--out {out} is a directory; give a file name such as {out / 'model.json'}")
-    mapping = parse_assignments(args.map, "--map", numeric=False)
-    scale = parse_assignments(args.scale, "--scale", numeric=True)
+    out = output_file(args.out, "model.json")
+    mapping, scale = data_options(args)
     start = time.perf_counter()
     data = load_helicopter_data(args.data, mapping, scale)
     n_needed = int(round(args.horizon / data.dt)) + 2 if args.criterion in ("lagged", "backprop") else 3

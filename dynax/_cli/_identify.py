@@ -1,10 +1,10 @@
 """`dynax identify SYSTEM DATA --out FILE.json`: fit a system's parameters to a measured record."""
 
 import argparse
-import pathlib
 import time
 
 from .._errors import UsageError
+from ._common import add_data_options, data_options, output_file
 from ._output import write_json
 
 _SYSTEMS = ("acrobot", "double_pendulum", "linear_axis", "helicopter")
@@ -28,8 +28,7 @@ def register(subparsers):
                         help="identification model (default dynamic)")
     parser.add_argument("--friction", choices=("viscous", "coulomb"), default=None,
                         help="friction model (default: coulomb for linear_axis, viscous otherwise)")
-    parser.add_argument("--map", default=None, help="NAME=COLUMN,... for files whose columns are named otherwise")
-    parser.add_argument("--scale", default=None, help="NAME=FACTOR,... multiplied into columns (units)")
+    add_data_options(parser)
     parser.add_argument("--lowpass", type=float, default=None, metavar="HZ",
                         help="zero-phase Butterworth cut-off [Hz] applied before differentiating (dynamic), to the "
                              "equations (power) or to the states (energy); default none")
@@ -84,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
 
     jax.config.update("jax_enable_x64", True)  # identification in float64; the library leaves config alone
 
-    from .._data import load_trajectory, parse_assignments
+    from .._data import load_trajectory
     from .._identify import identify
 
     allowed = _LEAST_SQUARES[args.system] + ("simulation",)
@@ -94,11 +93,8 @@ def run(args: argparse.Namespace) -> int:
     if args.system == "helicopter" and args.friction is not None:
         raise UsageError("--friction does not apply to the helicopter")
     method = _method(args)
-    mapping = parse_assignments(args.map, "--map", numeric=False)
-    scale = parse_assignments(args.scale, "--scale", numeric=True)
-    out = pathlib.Path(args.out)
-    if out.exists() and out.is_dir():
-        raise UsageError(f"--out {out} is a directory; give a file name such as {out / 'parameters.json'}")
+    mapping, scale = data_options(args)
+    out = output_file(args.out, "parameters.json")
     start = time.perf_counter()
     data = load_trajectory(args.data, args.system, mapping=mapping, scale=scale, min_samples=3)
     result = identify(_system(args.system), data, method, friction=friction)
