@@ -20,12 +20,19 @@ def plot_measured_vs_simulated(trajectory, models: dict, path, *, segment_s: flo
     ts = np.asarray(trajectory.ts)
     n = min(len(ts), int(np.searchsorted(ts, ts[0] + max_duration_s)) + 1)
     seg = max(2, int(round(segment_s / trajectory.dt)))
-    positions = [i for i, s in enumerate(trajectory.state_names) if not s.startswith("d")]
+    helicopter = trajectory.system == "helicopter"
+    if helicopter:  # world position and body velocities: where a wind or a bias shows first
+        positions = [trajectory.state_names.index(s) for s in ("x", "y", "z", "u", "v", "w")]
+    else:
+        positions = [i for i, s in enumerate(trajectory.state_names) if not s.startswith("d")]
     fig, axes = plt.subplots(len(positions), 1, figsize=(9, 2.6 * len(positions)), sharex=True, squeeze=False)
     colors = ["tab:red", "tab:green", "tab:purple", "tab:orange"]
     for ax, i in zip(axes[:, 0], positions):
         ax.plot(ts[:n], np.asarray(trajectory.xs)[:n, i], color="k", lw=1.2, label="measured")
-        ax.set_ylabel(f"{trajectory.state_names[i]} [rad]" if trajectory.system != "linear_axis" else "q [m]")
+        if helicopter:
+            ax.set_ylabel(f"{trajectory.state_names[i]} [{'m' if i < 3 else 'm/s'}]")
+        else:
+            ax.set_ylabel(f"{trajectory.state_names[i]} [rad]" if trajectory.system != "linear_axis" else "q [m]")
     starts = np.arange(0, n - 1, seg)
     ts_pad = np.concatenate([ts, ts[-1] + trajectory.dt * np.arange(1, seg + 1)])
     xs_pad = np.concatenate([np.asarray(trajectory.xs), np.repeat(np.asarray(trajectory.xs)[-1:], seg, axis=0)])
