@@ -22,6 +22,9 @@ from ._model._extensions import (
     AbstractInputTerm as AbstractInputTerm,
     AbstractJointTerm as AbstractJointTerm,
     AbstractTerm as AbstractTerm,
+    AbstractVehicleTerm as AbstractVehicleTerm,
+    BodyBias as BodyBias,
+    BodyQuadraticDrag as BodyQuadraticDrag,
     CoulombFriction as CoulombFriction,
     Extended as Extended,
     InputDelay as InputDelay,
@@ -32,6 +35,7 @@ from ._model._extensions import (
     QuadraticDrag as QuadraticDrag,
     RotorInertia as RotorInertia,
     ViscousFriction as ViscousFriction,
+    Wind as Wind,
 )
 from ._identify._vehicle import (
     Backprop as Backprop,
@@ -111,6 +115,7 @@ from ._data import (
 from ._diagnose import (
     default_candidates as default_candidates,
     diagnose as diagnose,
+    helicopter_flight as helicopter_flight,
     Known as Known,
     LOOK_ALIKES as LOOK_ALIKES,
     multisine as multisine,

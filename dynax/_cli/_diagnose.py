@@ -7,6 +7,7 @@ import sys
 import time
 
 from .._errors import UsageError
+from ._common import add_data_options, data_options
 from ._output import staged_directory, write_json
 
 _SYSTEMS = ("acrobot", "double_pendulum", "linear_axis", "helicopter")
@@ -26,8 +27,7 @@ def register(subparsers):
     parser.add_argument("system", choices=_SYSTEMS, help="the system (its data columns are in the contract)")
     parser.add_argument("data", help="training record: CSV, NPZ or MAT with t, the states and the inputs")
     parser.add_argument("--validation", default=None, metavar="DATA2", help="held-out record (same columns)")
-    parser.add_argument("--map", default=None, help="NAME=COLUMN,... for files whose columns are named otherwise")
-    parser.add_argument("--scale", default=None, help="NAME=FACTOR,... multiplied into columns (units)")
+    add_data_options(parser)
     parser.add_argument("--mode", choices=("refit", "known"), default="refit",
                         help="refit the nominal parameters on DATA (default) or trust them (known)")
     parser.add_argument("--nominal", default=None, metavar="FILE.json",
@@ -80,11 +80,10 @@ def run(args: argparse.Namespace) -> int:
 
     jax.config.update("jax_enable_x64", True)  # the CLI identifies in float64; the library does not change config
 
-    from .._data import load_trajectory, parse_assignments, resample
+    from .._data import load_trajectory, resample
     from .._diagnose import diagnose, Known, Refit, write_report
 
-    mapping = parse_assignments(args.map, "--map", numeric=False)
-    scale = parse_assignments(args.scale, "--scale", numeric=True)
+    mapping, scale = data_options(args)
     if args.dt is not None and not args.dt > 0:
         raise UsageError(f"--dt must be positive, got {args.dt}")
     if not args.reference_horizon > 0:
