@@ -42,6 +42,7 @@ except ImportError:  # run from a checkout without installing it
     import dynax
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from rollout import _best_time  # noqa: E402  (the same timing as the rollout benchmark)
 
 
 def _problem(batch, seed=0):
@@ -120,17 +121,6 @@ def _simulate(system, method):
     return rollout
 
 
-def _time(fn, *args, reps):
-    jax.block_until_ready(fn(*args))
-    walls, cpus = [], []
-    for _ in range(reps):
-        wall, cpu = time.perf_counter(), time.process_time()
-        jax.block_until_ready(fn(*args))
-        walls.append(time.perf_counter() - wall)
-        cpus.append(time.process_time() - cpu)
-    return min(walls), min(cpus)
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--batch", type=int, default=256, help="rollouts in the vmapped batch (default 256)")
@@ -172,8 +162,8 @@ def main():
         compile_s = time.perf_counter() - start
         xs = np.asarray(batched(x0_j, ts_j, us_j))[: args.references]
         error = float(np.max(np.abs(xs[..., :2] - references[..., :2])))
-        single_wall, _ = _time(single, x0_j[0], ts_j, us_j[0], reps=args.reps)
-        batch_wall, batch_cpu = _time(batched, x0_j, ts_j, us_j, reps=args.reps)
+        single_wall, _, _ = _best_time(single, x0_j[0], ts_j, us_j[0], reps=args.reps)
+        batch_wall, _, batch_cpu = _best_time(batched, x0_j, ts_j, us_j, reps=args.reps)
         results[name] = dict(
             max_angle_error_rad=error, compile_s=compile_s, single_ms=single_wall * 1e3,
             batch_ms=batch_wall * 1e3, batch_cpu_ms=batch_cpu * 1e3,
