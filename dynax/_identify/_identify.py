@@ -441,18 +441,12 @@ def identify(
         elif method.weighting not in ("none", "joint"):
             raise UsageError(f"Dynamic: `weighting` must be 'none' or 'joint', got {method.weighting!r}")
         label = "dynamic"
-    elif isinstance(method, Power):
-        parts = [_power_rows(system, t, method, friction) for t in trajectories]
+    elif isinstance(method, (Power, Energy)):
+        rows, label = (_power_rows, "power") if isinstance(method, Power) else (_energy_rows, "energy")
+        parts = [rows(system, t, method, friction) for t in trajectories]
         a = jnp.concatenate([p[0] for p in parts])
         y = jnp.concatenate([p[1] for p in parts])
         n_samples = sum(p[2] for p in parts)
-        label = "power"
-    elif isinstance(method, Energy):
-        parts = [_energy_rows(system, t, method, friction) for t in trajectories]
-        a = jnp.concatenate([p[0] for p in parts])
-        y = jnp.concatenate([p[1] for p in parts])
-        n_samples = sum(p[2] for p in parts)
-        label = "energy"
     else:
         raise UsageError(
             f"identify: `method` must be Dynamic(), Power(), Energy() or SimulationFit(), got {type(method).__name__}"
