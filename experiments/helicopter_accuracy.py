@@ -41,22 +41,13 @@ from dynax._identify._vehicle import (  # noqa: E402
     FrequencyDomain,
     initial_helicopter,
     Lagged,
+    lagged_loss_gradient_norm,
     lagged_loss_of,
     prediction_error,
     STATE_GROUPS,
 )
-from dynax._identify._vehicle import _criteria  # noqa: E402
 from dynax._model._helicopter_truth import generate_helicopter_flight  # noqa: E402
 
-
-def lagged_loss_gradient(system, trajectory, horizon, *, stride):
-    """The gradient of the lagged loss with respect to the body model's weights."""
-    from dynax._identify._vehicle._windows import horizon_steps, lagged_loss, valid_starts
-
-    n_steps = horizon_steps(horizon, trajectory.dt, "gradient")
-    starts = jax.numpy.asarray(valid_starts(len(trajectory), n_steps, stride))
-    theta = system.body_model.parameter_vector()
-    return jax.grad(lambda t: lagged_loss(_criteria._with_theta(system, t), trajectory, n_steps, starts=starts))(theta)
 
 METHODS = ("linear one-step", "linear frequency", "linear lagged", "acceleration one-step", "acceleration lagged")
 STYLES = {
@@ -127,7 +118,7 @@ def run_set(kind, args, out):
     direct_time = time.perf_counter() - t0
     minimum = min(direct.loss, gauss_newton.loss, em_loss)
     # The gradient of the true loss at the EM-free and Gauss-Newton points (zero at a minimum).
-    grad_norm = {name: float(np.linalg.norm(lagged_loss_gradient(fit.system, train, args.horizon, stride=check_stride)))
+    grad_norm = {name: lagged_loss_gradient_norm(fit.system, train, args.horizon, stride=check_stride)
                  for name, fit in (("em_free", em_free), ("gauss_newton", gauss_newton))}
     check = {
         "horizon_s": args.horizon,

@@ -6,6 +6,7 @@ from ._criteria import (
     fit_lagged as fit_lagged,
     fit_one_step as fit_one_step,
     Lagged as Lagged,
+    lagged_loss_gradient_norm as lagged_loss_gradient_norm,
     lagged_loss_of as lagged_loss_of,
     OneStep as OneStep,
     VehicleFit as VehicleFit,

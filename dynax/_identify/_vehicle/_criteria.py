@@ -338,3 +338,19 @@ def lagged_loss_of(system: Helicopter, trajectory: Trajectory, horizon: float, *
     starts = _starts(trajectory, n_steps, stride)
     w = _weights(weights, trajectory.xs.dtype)
     return float(_lagged_loss_jit(system, trajectory, n_steps, starts=starts, weights=w))
+
+
+def lagged_loss_gradient_norm(
+    system: Helicopter, trajectory: Trajectory, horizon: float, *, stride: int = 1, weights=None
+) -> float:
+    """The norm of the lagged loss's gradient with respect to the body model's weights.
+
+    Zero at a stationary point of the loss; at the EM-free fixed point it is not (see `Lagged`).
+    """
+    dt = check_helicopter_data(trajectory, "lagged_loss_gradient_norm")
+    n_steps = horizon_steps(horizon, dt, "lagged_loss_gradient_norm")
+    starts = _starts(trajectory, n_steps, stride)
+    w = _weights(weights, trajectory.xs.dtype)
+    theta = system.body_model.parameter_vector()
+    grad = jax.jit(jax.grad(lambda t: lagged_loss(_with_theta(system, t), trajectory, n_steps, starts=starts, weights=w)))(theta)
+    return float(jnp.linalg.norm(grad))
