@@ -110,6 +110,30 @@ class HelicopterTruth(AbstractSystem):
     state_names: ClassVar[tuple[str, ...]] = (*HELICOPTER_STATE_NAMES, "a1", "b1")
     input_names: ClassVar[tuple[str, ...]] = (*HELICOPTER_INPUT_NAMES, *WIND_NAMES)
 
+    def hover_derivatives(self, collective: float = 0.223) -> tuple[Array, Array]:
+        r"""The quasi-steady stability and control derivatives about level hover in still air.
+
+        The vector field is linearised (autodiff) at the level hover state with zero flapping and
+        the inputs `(0, 0, 0, collective)` (the default is `FlightController.hover_collective`); the
+        fast flapping states are then eliminated quasi-statically,
+        $A = A_{ss} - A_{sf}A_{ff}^{-1}A_{fs}$, $B = B_s - A_{sf}A_{ff}^{-1}B_f$. These are the
+        derivatives a hover model without rotor states should find (e.g. $L_v = A_{pv}$ and
+        $M_u = A_{qu}$, the speed stability from flap-back).
+
+        **Returns:** `(A, B)`: `A` (6, 6) rows and columns $(u, v, w, p, q, r)$, `B` (6, 4) columns
+        `u1..u4`; per second and per unit input.
+        """
+        dtype = jnp.result_type(float)
+        x0 = jnp.zeros(self.n_states, dtype).at[3].set(1.0)  # level, at rest, flapping zero
+        u0 = jnp.zeros(7, dtype).at[3].set(collective)
+        a = np.asarray(jax.jacfwd(lambda x: self.vector_field(0.0, x, u0))(x0))
+        b = np.asarray(jax.jacfwd(lambda u: self.vector_field(0.0, x0, u))(u0))[:, :4]
+        body, flap = np.arange(7, 13), np.arange(13, self.n_states)
+        eliminate = a[np.ix_(body, flap)] @ np.linalg.inv(a[np.ix_(flap, flap)])
+        a_red = a[np.ix_(body, body)] - eliminate @ a[np.ix_(flap, body)]
+        b_red = b[body] - eliminate @ b[flap]
+        return jnp.asarray(a_red, dtype), jnp.asarray(b_red, dtype)
+
     def rotor_thrust(self, collective_pitch, w_air, edgewise_speed_sq):
         """Thrust [N] and induced velocity [m/s] from blade-element momentum theory (Glauert inflow).
 

@@ -79,3 +79,17 @@ def test_evaluate_refuses_a_malformed_model(flight_csv, tmp_path, capsys):
     assert "features" in capsys.readouterr().err
     assert not metrics.exists()
     assert main(["evaluate", str(model), str(flight_csv), "--horizons", "1,-2", "--out", str(metrics)]) == 2
+
+
+def test_frequency_fit_reports_its_identification_statistics(flight_csv, tmp_path):
+    model = tmp_path / "linear.json"
+    assert main(["fit", "helicopter", str(flight_csv), "--model", "linear", "--criterion", "frequency",
+                 "--out", str(model)]) == 0
+    obj = json.loads(model.read_text())
+    stats = obj["identification"]
+    assert obj["criterion"] == "frequency" and stats["eliminated"] == []
+    # Every identified weight has a Cramer-Rao bound and an insensitivity (12 s of data give wide ones).
+    assert set(stats["cramer_rao_percent"]) == set(stats["insensitivity_percent"]) >= {"dp/u1", "dq/u2", "dr/u3"}
+    # (null where a weight is not determined at all)
+    bounds = [v for v in stats["cramer_rao_percent"].values() if v is not None]
+    assert len(bounds) >= 3 and all(np.isfinite(v) and v > 0 for v in bounds)

@@ -18,6 +18,7 @@ from dynax._identify._vehicle import (
     lagged_loss,
 )
 from dynax._identify._vehicle._criteria import _normal_equations, _starts, _with_theta
+from dynax._identify._vehicle._frequency import HOVER_DERIVATIVES
 from dynax._model._helicopter import (
     AccelerationModel,
     Helicopter,
@@ -163,3 +164,25 @@ def test_frequency_domain_recovers_the_rate_dynamics():
 def test_frequency_domain_refuses_the_acceleration_model(truth_data):
     with pytest.raises(ValueError, match="linear model only"):
         fit_vehicle(Helicopter(), truth_data, FrequencyDomain())
+
+
+def test_frequency_structure_reduction_drops_what_the_responses_do_not_determine():
+    """CIFER's elimination (insensitivity > 10 %, Cramer-Rao > 20 %) on data from the linear model itself:
+    two derivatives the model does not have are dropped, the on-axis ones are kept and recovered."""
+    linear = Helicopter(LinearVelocityModel())
+    data = generate_helicopter_flight("hover", 40.0, seed=7, truth=linear)
+    structure = dict(HOVER_DERIVATIVES)
+    structure["p"] += ("w",)
+    structure["q"] += ("w",)
+    fit = fit_frequency(linear, data, FrequencyDomain(structure=structure, eliminate=True))
+    assert "dp/w" in fit.eliminated and "dq/w" in fit.eliminated
+    kept = {name: (value, cramer_rao, insensitivity) for name, value, cramer_rao, insensitivity in fit.statistics}
+    assert not set(kept) & set(fit.eliminated)
+    true = linear.body_model.parameters
+    for name in ("dp/p", "dp/u1", "dq/q", "dq/u2", "dr/r", "dr/u3", "dw/u4", "du/pitch", "dv/roll"):
+        value, cramer_rao, insensitivity = kept[name]
+        assert value == pytest.approx(float(true[name]), rel=0.15), name
+        assert cramer_rao <= 20.0 and insensitivity <= 10.0, name
+    # Eliminated weights are zero in the fitted model.
+    fitted = fit.system.body_model.parameters
+    assert all(float(fitted[name]) == 0.0 for name in fit.eliminated)

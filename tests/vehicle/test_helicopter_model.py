@@ -16,6 +16,7 @@ from dynax._model._helicopter import (
     quaternion_from_euler,
     TEMPEST_COEFFICIENTS,
 )
+from dynax._model._helicopter_truth import HelicopterTruth
 
 DT = 0.01
 
@@ -108,3 +109,17 @@ def test_vector_field_vmaps_and_differentiates():
     assert out.shape == (2, 13)
     g = jax.grad(lambda h: h.vector_field(0.0, xs[1], jnp.zeros(4))[10])(heli)
     assert float(g.body_model.weights[3, 3]) == pytest.approx(0.5)  # d(pdot)/d(Bx) = p
+
+
+def test_truth_hover_derivatives_are_those_the_docs_quote():
+    """The truth's quasi-steady hover linearisation: Tempest-like damping and control derivatives, and
+    the flap-back speed stability (L_v < 0, M_u > 0) a hover model without rotor states should find."""
+    a, b = HelicopterTruth().hover_derivatives()
+    a, b = np.asarray(a), np.asarray(b)
+    u, v, w, p, q, r = range(6)
+    assert a[p, p] == pytest.approx(-12.7, abs=0.1) and a[q, q] == pytest.approx(-10.1, abs=0.1)
+    assert a[r, r] == pytest.approx(-8.1, abs=0.1) and a[w, w] == pytest.approx(-1.06, abs=0.02)
+    assert b[p, 0] == pytest.approx(49.3, abs=0.2) and b[q, 1] == pytest.approx(-50.0, abs=0.2)
+    assert b[r, 2] == pytest.approx(70.6, abs=0.2) and b[w, 3] == pytest.approx(-42.7, abs=0.2)
+    assert a[p, v] == pytest.approx(-3.6, abs=0.05) and a[q, u] == pytest.approx(2.0, abs=0.05)
+    assert a[r, v] == pytest.approx(9.0, abs=0.05)

@@ -132,6 +132,9 @@ class VehicleFit(eqx.Module):
     - `loss`: the final value of the criterion's own loss (for `lagged` and `backprop` the lagged loss).
     - `history`: `(seconds since start, loss)` after each iteration, as a tuple of pairs.
     - `n_samples`: the number of samples fitted.
+    - `statistics`: for the frequency criterion, `(name, value, Cramer-Rao bound %, insensitivity %)`
+      of each identified weight (empty for the others).
+    - `eliminated`: for the frequency criterion, the weights its structure reduction dropped, in order.
     """
 
     system: Helicopter
@@ -139,6 +142,8 @@ class VehicleFit(eqx.Module):
     loss: float = eqx.field(static=True)
     history: tuple = eqx.field(static=True)
     n_samples: int = eqx.field(static=True)
+    statistics: tuple = eqx.field(static=True, default=())
+    eliminated: tuple = eqx.field(static=True, default=())
 
 
 _lagged_loss_jit = eqx.filter_jit(lagged_loss)  # compiled once per (model structure, data shape, horizon)

@@ -1,5 +1,7 @@
 """`fit_vehicle`: one entry point for the four criteria, and the model file (`MODEL.json`) format."""
 
+import math
+
 import jax.numpy as jnp
 import numpy as np
 
@@ -86,6 +88,13 @@ def model_to_json(fit: VehicleFit, *, horizon_s: float | None = None) -> dict:
     }
     if kind == "acceleration":
         out["gravity"] = body.gravity
+    if fit.statistics:  # the frequency criterion's Cramer-Rao bounds and insensitivities
+        out["identification"] = {
+            # null where a weight is not determined at all (an infinite bound)
+            "cramer_rao_percent": {name: cr if math.isfinite(cr) else None for name, _, cr, _ in fit.statistics},
+            "insensitivity_percent": {name: ins if math.isfinite(ins) else None for name, _, _, ins in fit.statistics},
+            "eliminated": list(fit.eliminated),
+        }
     return out
 
 

@@ -20,6 +20,11 @@ r"""The frequency-domain criterion (CIFER-style) for the linear velocity model.
    model includes the half-sample delay of the zero-order hold. A weak prior toward the one-step
    weights holds the terms that the responses do not determine. The constant column, which has no
    frequency response, is then re-fitted by one-step least squares with the rest held.
+4. **Accuracy** (CIFER's): each weight's Cramer-Rao bound $\sqrt{\hat\sigma^2 (J^\top J)^{-1}_{ii}}$
+   and insensitivity $\hat\sigma / \sqrt{(J^\top J)_{ii}}$, in % of the weight, from the Jacobian $J$ of
+   the weighted response residuals and their variance $\hat\sigma^2$ (`VehicleFit.statistics`).
+   With `eliminate=True`, weights beyond 10 % insensitivity or 20 % bound are dropped one at a
+   time and the rest refitted (the model-structure reduction of Tischler and Remple, 2012).
 
 ??? cite "References"
 
@@ -82,6 +87,13 @@ class FrequencyDomain(eqx.Module):
       its magnitude (default 0.1). Closed-loop responses determine the on-axis dynamics well and
       many off-axis terms hardly at all; the prior holds the latter (whose free drift otherwise
       yields unstable models) and is negligible where the data speak.
+    - `eliminate`: CIFER's model-structure reduction (default `False`): after each fit, compute every
+      weight's Cramer-Rao bound and insensitivity (relative to the weight); while some weight is
+      more insensitive than `max_insensitivity` (10 %), drop the most insensitive one, otherwise
+      while some bound is wider than `max_cramer_rao` (20 %), drop the one with the widest bound;
+      refit; repeat. Dropped weights are zero (`VehicleFit.eliminated`); the final bounds are in
+      `VehicleFit.statistics`. These are the guidelines of Tischler and Remple (2012) for a model
+      whose weights the responses determine.
     """
 
     band_hz: tuple[float, float] = eqx.field(static=True, default=(0.1, 2.5))
@@ -91,6 +103,9 @@ class FrequencyDomain(eqx.Module):
     prior_weight: float = 0.1
     start: str = eqx.field(static=True, default="equation-error")
     structure: dict = eqx.field(static=True, default_factory=lambda: dict(HOVER_DERIVATIVES))
+    eliminate: bool = eqx.field(static=True, default=False)
+    max_cramer_rao: float = 0.2
+    max_insensitivity: float = 0.1
 
 
 def frequency_responses(
@@ -221,15 +236,20 @@ def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: Frequen
 
     prior_centre = initial.body_model.weights[free]
     prior_scale = jnp.maximum(jnp.abs(prior_centre), 1.0) / criterion.prior_weight
+    n_free = len(free[0])
+    names = [f"d{BODY_AXES[i]}/{LINEAR_FEATURE_NAMES[j]}" for i, j in zip(*free)]
 
-    def residuals(theta, _):
-        weights = initial.body_model.weights.at[free].set(theta)
+    def response_residuals(theta, active):
+        weights = initial.body_model.weights.at[free].set(theta * active)  # eliminated weights are zero
         model = _model_response(weights, omegas, delay)
         ratio = measured_j / jnp.where(use_j, model, 1.0)  # unused pairs (weight 0) may have no response
         magnitude = 20 * jnp.log10(jnp.abs(ratio))
         phase = jnp.degrees(jnp.angle(ratio))
+        return jnp.concatenate([(sqrt_wg * magnitude).ravel(), (sqrt_wg * jnp.sqrt(0.01745) * phase).ravel()])
+
+    def residuals(theta, active):
         prior = (theta - prior_centre) / prior_scale
-        return jnp.concatenate([(sqrt_wg * magnitude).ravel(), (sqrt_wg * jnp.sqrt(0.01745) * phase).ravel(), prior])
+        return jnp.concatenate([response_residuals(theta, active), prior])
 
     dt = float(trajectory.ts[1] - trajectory.ts[0])
     coherent = coherence >= criterion.min_coherence
@@ -239,17 +259,72 @@ def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: Frequen
         if criterion.start == "equation-error"
         else initial.body_model.weights
     )
-    theta0 = weights0[free]
+    theta = weights0[free]
+    active = np.ones(n_free, bool)
+    cost_jit = jax.jit(lambda th, act: jnp.sum(residuals(th, act) ** 2))
+    jacobian = jax.jit(jax.jacfwd(response_residuals))
+    n_rows = 2 * int(use.sum())  # magnitude and phase at every used (frequency, pair)
 
     def cost(theta):
-        return float(jnp.sum(residuals(theta, None) ** 2) / max(1, int(use.sum())))
+        return float(cost_jit(theta, jnp.asarray(active, theta.dtype))) / max(1, int(use.sum()))
 
-    theta = theta0
-    if criterion.max_steps > 0:
-        solver = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-8)
-        solution = optx.least_squares(residuals, solver, theta0, max_steps=criterion.max_steps, throw=False)
-        if np.all(np.isfinite(solution.value)) and cost(solution.value) < cost(theta0):
-            theta = solution.value
+    def statistics(theta):
+        """Cramer-Rao bounds and insensitivities [% of each weight] of the active weights."""
+        act = jnp.asarray(active, theta.dtype)
+        r = np.asarray(response_residuals(theta, act))
+        j = np.asarray(jacobian(theta, act))[:, active]
+        dof = max(1, n_rows - int(active.sum()))
+        sigma2 = float(r @ r) / dof
+        info = j.T @ j
+        diag = np.diag(info)
+        # A weight the responses do not move at all has an infinite bound (not pinv's zero).
+        seen = diag > 1e-12 * max(float(diag.max(initial=0.0)), 1e-300)
+        variance = np.full(len(diag), np.inf)
+        variance[seen] = np.abs(np.diag(np.linalg.pinv(info[np.ix_(seen, seen)])))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            magnitude = np.abs(np.asarray(theta)[active])
+            cramer_rao = np.nan_to_num(100 * np.sqrt(sigma2 * variance) / magnitude, nan=np.inf)
+            insensitivity = np.nan_to_num(100 * np.sqrt(sigma2 / diag) / magnitude, nan=np.inf)
+        return cramer_rao, insensitivity
+
+    solver = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-8)
+    eliminated = []
+    for _ in range(n_free + 1):  # the last pass only re-checks (at most n_free eliminations)
+        if criterion.max_steps > 0:
+            act = jnp.asarray(active, theta.dtype)
+            solution = optx.least_squares(residuals, solver, theta, args=act, max_steps=criterion.max_steps, throw=False)
+            if np.all(np.isfinite(solution.value)) and cost(solution.value) < cost(theta):
+                theta = solution.value
+        cramer_rao, insensitivity = statistics(theta)
+        if not criterion.eliminate:
+            break
+        # CIFER's structure reduction: drop the most insensitive weight while any is insensitive,
+        # then the one with the largest Cramer-Rao bound while any bound is too wide; refit. A weight
+        # whose removal would leave a fitted (coherent) response with no path is kept.
+        if np.any(insensitivity > 100 * criterion.max_insensitivity):
+            score = np.where(insensitivity > 100 * criterion.max_insensitivity, insensitivity, -np.inf)
+        elif np.any(cramer_rao > 100 * criterion.max_cramer_rao):
+            score = np.where(cramer_rao > 100 * criterion.max_cramer_rao, cramer_rao, -np.inf)
+        else:
+            break
+        dropped = None
+        for worst in np.argsort(-score)[: int(np.isfinite(score).sum())]:
+            index = np.nonzero(active)[0][worst]
+            trial = active.copy()
+            trial[index] = False
+            if np.all(np.isfinite(np.asarray(response_residuals(theta, jnp.asarray(trial, theta.dtype))))):
+                dropped = index
+                break
+        if dropped is None:
+            break
+        active[dropped] = False
+        eliminated.append(names[dropped])
+        theta = theta.at[dropped].set(0.0)
+    theta = theta * jnp.asarray(active, theta.dtype)
+    kept = [n for n, a in zip(names, active) if a]
+    summary = tuple(
+        (n, float(v), float(c), float(i)) for n, v, c, i in zip(kept, np.asarray(theta)[active], cramer_rao, insensitivity)
+    )
     weights = initial.body_model.weights.at[free].set(theta)
     fitted = eqx.tree_at(lambda h: h.body_model.weights, initial, weights)
     final_cost = cost(theta)
@@ -264,4 +339,7 @@ def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: Frequen
     rhs = atb[bias] - ata[np.ix_(bias, rest)] @ theta[rest]
     theta = theta.at[np.nonzero(bias)[0]].set(_solve(ata[np.ix_(bias, bias)], rhs, 1e-12))
     fitted = _with_theta(fitted, theta)
-    return VehicleFit(fitted, "frequency", final_cost, ((time.perf_counter() - t0, final_cost),), len(trajectory))
+    return VehicleFit(
+        fitted, "frequency", final_cost, ((time.perf_counter() - t0, final_cost),), len(trajectory),
+        statistics=summary, eliminated=tuple(eliminated),
+    )
