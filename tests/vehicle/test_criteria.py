@@ -186,3 +186,8 @@ def test_frequency_structure_reduction_drops_what_the_responses_do_not_determine
     # Eliminated weights are zero in the fitted model.
     fitted = fit.system.body_model.parameters
     assert all(float(fitted[name]) == 0.0 for name in fit.eliminated)
+
+
+def test_frequency_elimination_thresholds_must_be_positive(truth_data):
+    with pytest.raises(ValueError, match="max_cramer_rao and max_insensitivity must be positive"):
+        fit_frequency(Helicopter(LinearVelocityModel()), truth_data, FrequencyDomain(max_cramer_rao=0.0))

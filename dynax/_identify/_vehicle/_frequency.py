@@ -198,11 +198,44 @@ def _equation_error(weights, freqs, measured, w_gamma, dt, prior_weight, structu
     return jnp.asarray(new, weights.dtype)
 
 
+def _accuracy(residuals: np.ndarray, jacobian: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    r"""CIFER's accuracy measures of weights `theta` [% of each weight]: the Cramer-Rao bound
+    $\sqrt{\hat\sigma^2 (J^\top J)^{-1}_{ii}}$ and the insensitivity $\hat\sigma/\sqrt{(J^\top J)_{ii}}$, with
+    $\hat\sigma^2$ the residual variance. A weight the residuals do not depend on gets infinite ones."""
+    dof = max(1, residuals.size - theta.size)
+    sigma2 = float(residuals @ residuals) / dof
+    info = jacobian.T @ jacobian
+    diag = np.diag(info)
+    seen = diag > 1e-12 * max(float(diag.max(initial=0.0)), 1e-300)
+    variance = np.full(len(diag), np.inf)
+    variance[seen] = np.abs(np.diag(np.linalg.pinv(info[np.ix_(seen, seen)])))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        magnitude = np.abs(theta)
+        cramer_rao = np.nan_to_num(100 * np.sqrt(sigma2 * variance) / magnitude, nan=np.inf)
+        insensitivity = np.nan_to_num(100 * np.sqrt(sigma2 / diag) / magnitude, nan=np.inf)
+    return cramer_rao, insensitivity
+
+
+def _elimination_order(cramer_rao, insensitivity, criterion: "FrequencyDomain") -> np.ndarray:
+    """Candidates to drop, worst first: the insensitive weights while there are any, else those
+    whose Cramer-Rao bound is too wide (Tischler and Remple 2012); empty when all pass."""
+    for measure, limit in ((insensitivity, criterion.max_insensitivity), (cramer_rao, criterion.max_cramer_rao)):
+        failing = np.nonzero(measure > 100 * limit)[0]
+        if failing.size:
+            return failing[np.argsort(-measure[failing])]
+    return np.zeros(0, int)
+
+
 def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: FrequencyDomain = FrequencyDomain()) -> VehicleFit:
     """Fit a linear velocity model by the frequency-domain criterion (see the module docstring)."""
     if not isinstance(system.body_model, LinearVelocityModel) or system.body_model.feature_names != LINEAR_FEATURE_NAMES:
         raise UsageError("fit_frequency: the frequency-domain criterion fits the linear model only (--model linear)")
     check_helicopter_data(trajectory, "fit_frequency")
+    if not (criterion.max_cramer_rao > 0 and criterion.max_insensitivity > 0):
+        raise UsageError(
+            f"fit_frequency: max_cramer_rao and max_insensitivity must be positive fractions, got "
+            f"{criterion.max_cramer_rao} and {criterion.max_insensitivity}"
+        )
     t0 = time.perf_counter()
     initial = fit_one_step(system, trajectory).system
     freqs, measured, coherence = frequency_responses(trajectory, criterion.segment_s)
@@ -237,7 +270,7 @@ def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: Frequen
     prior_centre = initial.body_model.weights[free]
     prior_scale = jnp.maximum(jnp.abs(prior_centre), 1.0) / criterion.prior_weight
     n_free = len(free[0])
-    names = [f"d{BODY_AXES[i]}/{LINEAR_FEATURE_NAMES[j]}" for i, j in zip(*free)]
+    free_names = [f"d{BODY_AXES[i]}/{LINEAR_FEATURE_NAMES[j]}" for i, j in zip(*free)]
 
     def response_residuals(theta, active):
         weights = initial.body_model.weights.at[free].set(theta * active)  # eliminated weights are zero
@@ -263,29 +296,11 @@ def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: Frequen
     active = np.ones(n_free, bool)
     cost_jit = jax.jit(lambda th, act: jnp.sum(residuals(th, act) ** 2))
     jacobian = jax.jit(jax.jacfwd(response_residuals))
-    n_rows = 2 * int(use.sum())  # magnitude and phase at every used (frequency, pair)
+    # The rows that carry data: magnitude and phase at every used (frequency, pair).
+    response_rows = np.concatenate([use.ravel(), use.ravel()])
 
     def cost(theta):
         return float(cost_jit(theta, jnp.asarray(active, theta.dtype))) / max(1, int(use.sum()))
-
-    def statistics(theta):
-        """Cramer-Rao bounds and insensitivities [% of each weight] of the active weights."""
-        act = jnp.asarray(active, theta.dtype)
-        r = np.asarray(response_residuals(theta, act))
-        j = np.asarray(jacobian(theta, act))[:, active]
-        dof = max(1, n_rows - int(active.sum()))
-        sigma2 = float(r @ r) / dof
-        info = j.T @ j
-        diag = np.diag(info)
-        # A weight the responses do not move at all has an infinite bound (not pinv's zero).
-        seen = diag > 1e-12 * max(float(diag.max(initial=0.0)), 1e-300)
-        variance = np.full(len(diag), np.inf)
-        variance[seen] = np.abs(np.diag(np.linalg.pinv(info[np.ix_(seen, seen)])))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            magnitude = np.abs(np.asarray(theta)[active])
-            cramer_rao = np.nan_to_num(100 * np.sqrt(sigma2 * variance) / magnitude, nan=np.inf)
-            insensitivity = np.nan_to_num(100 * np.sqrt(sigma2 / diag) / magnitude, nan=np.inf)
-        return cramer_rao, insensitivity
 
     solver = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-8)
     eliminated = []
@@ -295,20 +310,18 @@ def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: Frequen
             solution = optx.least_squares(residuals, solver, theta, args=act, max_steps=criterion.max_steps, throw=False)
             if np.all(np.isfinite(solution.value)) and cost(solution.value) < cost(theta):
                 theta = solution.value
-        cramer_rao, insensitivity = statistics(theta)
+        act = jnp.asarray(active, theta.dtype)
+        cramer_rao, insensitivity = _accuracy(
+            np.asarray(response_residuals(theta, act))[response_rows],
+            np.asarray(jacobian(theta, act))[np.ix_(response_rows, active)],
+            np.asarray(theta)[active],
+        )
         if not criterion.eliminate:
             break
-        # CIFER's structure reduction: drop the most insensitive weight while any is insensitive,
-        # then the one with the largest Cramer-Rao bound while any bound is too wide; refit. A weight
-        # whose removal would leave a fitted (coherent) response with no path is kept.
-        if np.any(insensitivity > 100 * criterion.max_insensitivity):
-            score = np.where(insensitivity > 100 * criterion.max_insensitivity, insensitivity, -np.inf)
-        elif np.any(cramer_rao > 100 * criterion.max_cramer_rao):
-            score = np.where(cramer_rao > 100 * criterion.max_cramer_rao, cramer_rao, -np.inf)
-        else:
-            break
+        # CIFER's structure reduction: drop the worst weight and refit. A weight whose removal
+        # would leave a fitted (coherent) response with no path is kept.
         dropped = None
-        for worst in np.argsort(-score)[: int(np.isfinite(score).sum())]:
+        for worst in _elimination_order(cramer_rao, insensitivity, criterion):
             index = np.nonzero(active)[0][worst]
             trial = active.copy()
             trial[index] = False
@@ -318,10 +331,10 @@ def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: Frequen
         if dropped is None:
             break
         active[dropped] = False
-        eliminated.append(names[dropped])
+        eliminated.append(free_names[dropped])
         theta = theta.at[dropped].set(0.0)
     theta = theta * jnp.asarray(active, theta.dtype)
-    kept = [n for n, a in zip(names, active) if a]
+    kept = [n for n, a in zip(free_names, active) if a]
     summary = tuple(
         (n, float(v), float(c), float(i)) for n, v, c, i in zip(kept, np.asarray(theta)[active], cramer_rao, insensitivity)
     )
