@@ -151,8 +151,9 @@ def summary(report) -> str:
                      + ", ".join(f["feature"] for f in s["top_features"][:2]) + ").")
     lines.append(f"Verdict: {j['verdict']}.")
     for f in j["findings"]:
+        components = "".join(f", {n} = {v:.4g}" for n, v in f.get("components", {}).items())
         lines.append(f"Cause: {f['cause']} at {f['where']}, {f['parameter']} = {f['coefficient']:.4g} "
-                     f"(± {f['std_error']:.2g}); gain {f['gain']:.0%}; look-alikes told apart: {f['confidence']}.")
+                     f"(± {f['std_error']:.2g}{components}); gain {f['gain']:.0%}; look-alikes told apart: {f['confidence']}.")
     if j["findings"]:
         lines.append(f"Gain of the extended model ({', '.join(j['extended']['terms'])}): "
                      f"{j['gain']:.0%} less simulation error at {ref:g} s "

@@ -102,6 +102,45 @@ def _as_records(data, name) -> list[Trajectory]:
     raise UsageError(f"diagnose: `{name}` must be a Trajectory or a non-empty sequence of them, got {type(data).__name__}")
 
 
+def _merge_repeated_causes(findings: list[dict]) -> list[dict]:
+    """One finding per cause and place. The wind's north, east and down components are separate
+    candidates at `world`, so a wind blowing in two directions is found in two rounds; report it
+    once: `coefficient` is the wind speed (the norm of the components, its standard error
+    propagated to first order), `components` the components, `gain` the two rounds' gains
+    compounded, `p_value` the weaker round's, and `confidence` high only if every round's was."""
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for finding in findings:
+        groups.setdefault((finding["cause"], finding["where"]), []).append(finding)
+    merged = []
+    for (cause, where), group in groups.items():
+        if len(group) == 1:
+            merged.append(group[0])
+            continue
+        values = np.array([f["coefficient"] for f in group])
+        stds = np.array([f["std_error"] for f in group])
+        size = float(np.linalg.norm(values))
+        std = float(np.sqrt(np.sum((values / size) ** 2 * stds**2))) if size > 0 else float(np.linalg.norm(stds))
+        look_alikes: dict[str, dict] = {}
+        for f in group:
+            for alt in f["look_alikes"]:  # keep the weakest separation from each look-alike cause
+                if alt["cause"] not in look_alikes or alt["p_value"] > look_alikes[alt["cause"]]["p_value"]:
+                    look_alikes[alt["cause"]] = alt
+        merged.append({
+            "cause": cause,
+            "where": where,
+            "coefficient": size,
+            "std_error": std,
+            "gain": float(1 - np.prod([1 - f["gain"] for f in group])),
+            "parameter": f"{cause}_speed" if cause == "wind" else f"|{cause}|",
+            "components": {f["parameter"]: f["coefficient"] for f in group},
+            "component_std_errors": {f["parameter"]: f["std_error"] for f in group},
+            "p_value": max(f["p_value"] for f in group),
+            "look_alikes": list(look_alikes.values()),
+            "confidence": "high" if all(f["confidence"] == "high" for f in group) else "low",
+        })
+    return merged
+
+
 def _paired_test(score_ref, score_new, n_eff):
     """One-sided paired test that `score_new` is smaller than `score_ref` over windows; n_eff independent ones."""
     # Improvements are multiplicative, so the test is on log ratios; a floor of a tenth of the typical
@@ -418,6 +457,7 @@ def diagnose(
     for m, (finding, k) in enumerate(zip(findings, selected)):
         finding["coefficient"] = float(neutral[k] + p_cur[n_nom + m])
         finding["std_error"] = float(std_cur[n_nom + m])
+    findings = _merge_repeated_causes(findings)
     extended_model = model_of(slots_cur, p_cur)
     extended_model = Extended(extended_model.system, tuple(extended_model.terms[k] for k in selected))
     if not selected:
@@ -453,7 +493,7 @@ def diagnose(
         verdict=verdict,
         findings=findings,
         extended={
-            "terms": [t.label(system) for t in extended_model.terms],
+            "terms": list(dict.fromkeys(t.label(system) for t in extended_model.terms)),  # wind@world once
             "parameters": extended_parameters,
             "sim_error": {"horizons_s": horizons_list, "rmse": _floats(rmse_current)},
         },

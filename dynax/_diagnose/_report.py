@@ -60,7 +60,8 @@ def report_markdown(report) -> str:
         lines += ["| cause | where | coefficient | std. error | gain | p | told apart from look-alikes |", "|---|---|---|---|---|---|---|"]
         for f in j["findings"]:
             alts = "; ".join(f"{a['cause']} (gain {a['gain']:.0%}, p = {a['p_value']:.2g})" for a in f["look_alikes"]) or "none in the library"
-            lines.append(f"| `{f['cause']}` | `{f['where']}` | {f['parameter']} = {f['coefficient']:.4g} | {f['std_error']:.2g} | "
+            components = "".join(f"; {n} = {v:.4g}" for n, v in f.get("components", {}).items())
+            lines.append(f"| `{f['cause']}` | `{f['where']}` | {f['parameter']} = {f['coefficient']:.4g}{components} | {f['std_error']:.2g} | "
                          f"{f['gain']:.0%} | {f['p_value']:.2g} | {f['confidence']}: {alts} |")
         lines += ["", "Standard errors come from the Gauss-Newton covariance and assume white residuals; "
                   "read them as lower bounds.", ""]

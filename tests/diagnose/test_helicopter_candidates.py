@@ -143,10 +143,15 @@ def bias_report():
 def test_hidden_wind_is_named_wind_not_body_bias(wind_report):
     j = wind_report
     _assert_found(j, "wind", "world")
-    assert {f["cause"] for f in j["findings"]} == {"wind"}
-    found = {f["parameter"]: f["coefficient"] for f in j["findings"]}
+    # One finding for the wind, though its two components were found in two rounds.
+    assert [f["cause"] for f in j["findings"]] == ["wind"] and j["extended"]["terms"] == ["wind@world"]
+    wind = j["findings"][0]
+    found = wind["components"]
     assert found.keys() == {"wind_n", "wind_e"}
     assert found["wind_n"] == pytest.approx(3.5, rel=0.15) and found["wind_e"] == pytest.approx(-2.0, rel=0.15)
+    assert wind["coefficient"] == pytest.approx(np.hypot(found["wind_n"], found["wind_e"]))
+    assert wind["parameter"] == "wind_speed" and 0 < wind["std_error"] < 0.2 * wind["coefficient"]
+    assert set(j["extended"]["parameters"]) >= {"wind_n", "wind_e"}
     assert j["findings"][0]["confidence"] == "high"  # told apart from a body bias
     json.dumps(j)
 
