@@ -350,7 +350,7 @@ def main():
     if "excitation" in parts:
         excitation(results, out, xs, us, noisy, x0s, counts, cutoff, k_exc, k_noise, k_torque, runs, excitation_steps)
     if "simulation" in parts:
-        output_error(results, out, noisy, counts, cutoff, runs, quick=args.quick)
+        output_error(results, out, noisy, us, counts, cutoff, runs, quick=args.quick)
     if "real" in parts and not args.quick:
         log("real data: DFKI double pendulum and EMPS")
         results["real"] = real_data(out)
@@ -410,7 +410,7 @@ def excitation(results, out, xs, us, noisy, x0s, counts, cutoff, k_exc, k_noise,
     }
 
 
-def output_error(results, out, noisy, counts, cutoff, runs, quick):
+def output_error(results, out, noisy, clean_us, counts, cutoff, runs, quick):
     """The output-error (simulation) fit on the same noisy runs, from a start 20 % off, against the best
     least-squares models."""
     sim_counts = counts if quick else [200, 500, 2000]
@@ -430,10 +430,23 @@ def output_error(results, out, noisy, counts, cutoff, runs, quick):
     plot_sweep(curves, sim_counts, out / "simulation_fit.png",
                "Measurement noise: output-error fit through the simulator vs the best least-squares models")
     coverage = np.asarray(coverage)
+    # Calibration check: the same runs with the torque recorded exactly (state noise only, which is
+    # what the output-error criterion models). Standardised errors of theta1..theta5.
+    exact_torque = []
+    for r, (x, u) in enumerate(zip(noisy[0], clean_us)):
+        for n in sim_counts:
+            fit = identify(start, as_trajectory(x[:n], u[:n]), SimulationFit(segment_s=2.0, max_steps=50))
+            exact_torque.append((np.asarray(fit.estimate) - THETA) / np.asarray(fit.std_errors))
+    exact_torque = np.asarray(exact_torque)[:, :5]
+    log(f"  output-error fit, torque recorded exactly: {np.mean(np.abs(exact_torque) < 2):.0%} within 2 std errors")
     results["simulation_fit"] = {
         "counts": sim_counts,
         "table": table(curves, sim_counts),
         "fraction_within_2_std_errors": float(np.mean(coverage[:, :5] < 2.0)),
+        # RMS of (estimate - truth) / std error: 1 when the standard errors are calibrated.
+        "standardised_error_rms": float(np.sqrt(np.mean(coverage[:, :5] ** 2))),
+        "exact_torque_fraction_within_2_std_errors": float(np.mean(np.abs(exact_torque) < 2.0)),
+        "exact_torque_standardised_error_rms": float(np.sqrt(np.mean(exact_torque**2))),
         "segment_s": 2.0,
         "start": "all parameters 20 % high",
     }

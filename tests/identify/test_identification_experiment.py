@@ -26,3 +26,8 @@ def test_quick_experiment_writes_results_and_figures(tmp_path):
     # the excitation optimiser raised the information
     history = results["excitation"]["log_det_history"]
     assert history[-1][0] > history[0][0]
+    # the output-error fit's standard errors are checked for calibration, with and without torque noise
+    fit = results["simulation_fit"]
+    for key in ("fraction_within_2_std_errors", "exact_torque_fraction_within_2_std_errors"):
+        assert 0.0 <= fit[key] <= 1.0
+    assert fit["standardised_error_rms"] > 0 and fit["exact_torque_standardised_error_rms"] > 0
