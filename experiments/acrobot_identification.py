@@ -242,7 +242,8 @@ def dfki_torque_rmse(system, names, theta, trajectories, cutoff_hz=5.0):
 
 
 def dfki_output_error(raw, trajectories, system, recipe, segment_s=0.5):
-    """Output-error fit on DFKI runs 00-04 from their inverse-dynamics estimate, judged on run 05.
+    """Output-error fit on the first five DFKI runs (00, 01, 02, 03, 05) from their inverse-dynamics
+    estimate, judged on the sixth (12).
 
     Both models (Coulomb friction and elbow rotor inertia) are simulated open loop on the held-out
     run from its measured states under its measured torques; the numbers are the position RMSE
@@ -260,7 +261,9 @@ def dfki_output_error(raw, trajectories, system, recipe, segment_s=0.5):
               for name, model in (("least_squares", least_squares), ("output_error", fit))}
     log(f"  DFKI output-error fit ({seconds:.0f} s): held-out position RMSE at 0.5 s "
         f"{errors['least_squares'][2]:.3f} (least squares) -> {errors['output_error'][2]:.3f} rad")
-    return {"train_runs": [0, 1, 2, 3, 4], "held_out_run": 5, "segment_s": segment_s, "seconds": seconds,
+    return {"train_runs": [pathlib.Path(t.source).name for t in raw[:5]], "held_out_run": pathlib.Path(raw[5].source).name,
+            "segment_s": segment_s,
+            "seconds": seconds,
             "horizons_s": list(horizons), "held_out_rmse": errors,
             "least_squares_parameters": least_squares.parameters, "output_error_parameters": fit.parameters,
             "output_error_std_errors": fit.standard_errors}
