@@ -110,11 +110,11 @@ class HelicopterTruth(AbstractSystem):
     state_names: ClassVar[tuple[str, ...]] = (*HELICOPTER_STATE_NAMES, "a1", "b1")
     input_names: ClassVar[tuple[str, ...]] = (*HELICOPTER_INPUT_NAMES, *WIND_NAMES)
 
-    def hover_derivatives(self, collective: float = 0.223) -> tuple[Array, Array]:
+    def hover_derivatives(self, collective: float | None = None) -> tuple[Array, Array]:
         r"""The quasi-steady stability and control derivatives about level hover in still air.
 
         The vector field is linearised (autodiff) at the level hover state with zero flapping and
-        the inputs `(0, 0, 0, collective)` (the default is `FlightController.hover_collective`); the
+        the inputs `(0, 0, 0, collective)` (default: `FlightController().hover_collective`); the
         fast flapping states are then eliminated quasi-statically,
         $A = A_{ss} - A_{sf}A_{ff}^{-1}A_{fs}$, $B = B_s - A_{sf}A_{ff}^{-1}B_f$. These are the
         derivatives a hover model without rotor states should find (e.g. $L_v = A_{pv}$ and
@@ -123,6 +123,8 @@ class HelicopterTruth(AbstractSystem):
         **Returns:** `(A, B)`: `A` (6, 6) rows and columns $(u, v, w, p, q, r)$, `B` (6, 4) columns
         `u1..u4`; per second and per unit input.
         """
+        if collective is None:
+            collective = FlightController().hover_collective
         dtype = jnp.result_type(float)
         x0 = jnp.zeros(self.n_states, dtype).at[3].set(1.0)  # level, at rest, flapping zero
         u0 = jnp.zeros(7, dtype).at[3].set(collective)
