@@ -16,6 +16,7 @@ from dynax._identify._vehicle import (
     frequency_responses,
     Lagged,
     lagged_loss,
+    lagged_loss_gradient_norm,
 )
 from dynax._identify._vehicle._criteria import _normal_equations, _starts, _with_theta
 from dynax._identify._vehicle._frequency import HOVER_DERIVATIVES
@@ -100,6 +101,9 @@ def test_state_sensitivities_reach_a_stationary_point_of_the_lagged_loss(truth_d
         return float(jnp.linalg.norm(ata @ system.body_model.parameter_vector() - atb))
 
     assert stationarity(fit.system) < 1e-3 * stationarity(start)
+    # The same by reverse-mode autodiff of the loss itself, independent of the normal equations.
+    gradient_norm = lambda system: lagged_loss_gradient_norm(system, truth_data, 0.2, stride=10)  # noqa: E731
+    assert gradient_norm(fit.system) < 1e-3 * gradient_norm(start)
 
 
 def test_backprop_gradient_matches_finite_differences(truth_data):
