@@ -131,4 +131,4 @@ from ._sim_error import simulation_error as simulation_error, SimulationError as
 from ._solvers import RK4 as RK4
 from ._simulate import Adaptive as Adaptive, FixedGrid as FixedGrid, Simulation as Simulation, simulate as simulate
 
-__version__ = "0.1.0"
+from ._version import __version__ as __version__

@@ -6,7 +6,6 @@ grid: resample irregular records first with `resample` (they raise otherwise).
 
 import jax.numpy as jnp
 import numpy as np
-import scipy.signal
 from jaxtyping import Array, ArrayLike, Float
 
 from .._errors import UsageError
@@ -76,6 +75,8 @@ def savitzky_golay(
     if window % 2 == 0 or window <= order:
         raise UsageError(f"savitzky_golay: `window` must be odd and larger than `order`, got {window} (order {order})")
     dt = _uniform_dt(ts, "savitzky_golay")
+    import scipy.signal  # lazily: keeps `import dynax` light
+
     out = scipy.signal.savgol_filter(np.asarray(ys), window, order, deriv=deriv, delta=dt, axis=0, mode="interp")
     return jnp.asarray(out)
 
@@ -102,6 +103,8 @@ def butterworth_filtfilt(
     nyquist = 0.5 / dt
     if not 0 < cutoff_hz < nyquist:
         raise UsageError(f"butterworth_filtfilt: `cutoff_hz` must be in (0, {nyquist:g}) Hz, got {cutoff_hz}")
+    import scipy.signal
+
     sos = scipy.signal.butter(order, cutoff_hz / nyquist, output="sos")
     return jnp.asarray(scipy.signal.sosfiltfilt(sos, np.asarray(ys), axis=0))
 

@@ -5,7 +5,6 @@ from collections.abc import Callable, Sequence
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-import scipy.stats
 
 from .._data._derivatives import resample
 from .._data._trajectory import Trajectory
@@ -152,6 +151,8 @@ def _paired_test(score_ref, score_new, n_eff):
     if sd == 0.0:
         return 0.0 if np.mean(d) > 0 else 1.0
     t = float(np.mean(d)) / (sd / np.sqrt(n_eff))
+    import scipy.stats  # lazily: keeps `import dynax` light
+
     return float(scipy.stats.t.sf(t, max(n_eff - 1, 1)))
 
 

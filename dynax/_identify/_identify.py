@@ -17,7 +17,6 @@ from typing import Literal
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-import scipy.signal
 from jaxtyping import Array, Float
 
 from .._data._derivatives import butterworth_filtfilt, central_difference, resample
@@ -238,6 +237,8 @@ def _needs(traj, n, method):
 
 
 def _trim_and_decimate(rows, target, trim, decimate):
+    import scipy.signal  # lazily: keeps `import dynax` light
+
     """Drop `trim` rows at each end, then decimate rows and target alike (parallel filtering)."""
     if trim < 0 or decimate < 1:
         raise UsageError(f"`trim` must be >= 0 and `decimate` >= 1, got {trim}, {decimate}")
