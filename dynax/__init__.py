@@ -144,6 +144,7 @@ from ._metrics import (
     WhitenessTest as WhitenessTest,
 )
 from ._plots import plot_compare as plot_compare, plot_error_horizon as plot_error_horizon, plot_residuals as plot_residuals
+from ._precision import PrecisionWarning as PrecisionWarning
 from ._progress import ProgressBar as ProgressBar, progress_mode as progress_mode
 from ._errors import DataError as DataError, UsageError as UsageError
 from ._sim_error import simulation_error as simulation_error, SimulationError as SimulationError

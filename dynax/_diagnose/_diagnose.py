@@ -6,6 +6,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._precision import warn_if_float32
 from .._data._derivatives import resample
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
@@ -217,6 +218,7 @@ def diagnose(
         structure selection and validation). N. R. Draper and H. Smith, *Applied Regression
         Analysis*, 3rd ed., 1998, ch. 15 (forward selection).
     """
+    warn_if_float32("diagnosis")  # the float64 policy: say so, once, naming the switch
     say = progress or (lambda _: None)
     if not isinstance(system, AbstractSystem) or isinstance(system, Extended):
         raise UsageError(f"diagnose: `system` must be a nominal dynax system, got {type(system).__name__}")

@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._precision import warn_if_float32
 from .._data._derivatives import butterworth_filtfilt, central_difference, resample
 from .._data._trajectory import Trajectory
 from .._errors import DataError, UsageError
@@ -416,6 +417,7 @@ def identify(
     parameters, naming the unidentified combinations; `DataError` when a record is too short;
     `UsageError` for a system or method that does not fit.
     """
+    warn_if_float32("identification")  # the float64 policy: say so, once, naming the switch
     from ._simulation_fit import SimulationFit, _identify_by_simulation
 
     trajectories = _as_list(data)

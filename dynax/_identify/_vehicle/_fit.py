@@ -7,6 +7,7 @@ import numpy as np
 
 from ..._data._trajectory import Trajectory
 from ..._errors import DataError, UsageError
+from ..._precision import warn_if_float32
 from ..._progress import ProgressBar
 from ..._model._helicopter import (
     AccelerationModel,
@@ -64,6 +65,7 @@ def fit_vehicle(
         P. Abbeel, V. Ganapathi and A. Y. Ng, "Learning vehicular dynamics, with application to
         modeling helicopters", NIPS 18, 2005.
     """
+    warn_if_float32("vehicle learning")
     if isinstance(criterion, OneStep):
         return fit_one_step(system, trajectory, criterion)
     if isinstance(criterion, FrequencyDomain):
