@@ -151,7 +151,8 @@ class CrossCorrelationTest(eqx.Module):
     - `q_statistic`, `p_value`: per channel and input, $N \hat\rho^\top C^{-1} \hat\rho$ over the
       $2M+1$ lags, with $C$ the lags' covariance by Bartlett's formula
       $C_{\tau_1\tau_2} = \sum_{|k|\le M} \hat\rho_e(k)\hat\rho_u(k + \tau_1 - \tau_2)$, and its
-      $\chi^2_{2M+1}$ tail probability (Ljung 1999, eq. 16.75, generalised to a coloured residual):
+      $\chi^2$ tail probability (Ljung 1999, eq. 16.75, generalised to a coloured residual; the
+      eigen-directions of $C$ below $10^{-3}$ of its largest are dropped, with their degrees of freedom):
       one test over all lags, so testing 51 lags does not raise the false-alarm rate the way
       counting bars outside the band does, and a coloured input does not either.
     - `independent`: per channel and input, `p_value >= 1 - confidence`.
@@ -208,19 +209,23 @@ def cross_correlation_test(
     ks = np.arange(-max_lag, max_lag + 1)
     bound = np.zeros(xc.shape[:2])
     q = np.zeros(xc.shape[:2])
+    dof = np.zeros(xc.shape[:2], dtype=int)
     for i, re in enumerate(rho_e):
         for j, ru in enumerate(rho_u):
             index = np.clip(ks[None, None, :] + shifts[..., None], -wide, wide) + wide
             cov = np.sum(re[None, None, :] * ru[index], axis=-1)
             cov = 0.5 * (cov + cov.T)
             w, v = np.linalg.eigh(cov)
-            w = np.maximum(w, 1e-9 * max(w.max(), 1e-300))
+            # Directions the truncated estimate of C barely resolves would turn estimation noise into
+            # evidence: keep those above 1e-3 of the largest and count only them as degrees of freedom.
+            keep = w > 1e-3 * max(w.max(), 1e-300)
             bound[i, j] = z * math.sqrt(max(cov[max_lag, max_lag], 1e-12) / n)
-            proj = v.T @ xc[i, j]
-            q[i, j] = n * np.sum(proj**2 / w)
+            proj = v[:, keep].T @ xc[i, j]
+            q[i, j] = n * np.sum(proj**2 / w[keep])
+            dof[i, j] = keep.sum()
     from scipy.stats import chi2
 
-    p_value = chi2.sf(q, 2 * max_lag + 1)
+    p_value = chi2.sf(q, dof)
     return CrossCorrelationTest(lags, xc, bound, q, p_value, p_value >= 1 - confidence,
                                 confidence)
 
