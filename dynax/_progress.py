@@ -127,19 +127,16 @@ class ProgressBar:
 
     def _merge(self, values):
         for name, value in values.items():
-            value = np.asarray(value, dtype=float)
+            value = np.asarray(value, dtype=float).reshape(-1)
             if value.size == 0:
                 continue
-            if self.reduce == "max":
-                value = float(np.nanmax(value)) if not np.all(np.isnan(value)) else float("nan")
-                old = self.values.get(name)
-                self.values[name] = value if old is None or not value <= old else old
+            old = self.values.get(name, np.nan)
+            if self.reduce == "max":  # fmax ignores NaN unless every value is NaN
+                self.values[name] = float(np.fmax(old, np.fmax.reduce(value)))
             elif self.reduce == "min":
-                value = float(np.nanmin(value)) if not np.all(np.isnan(value)) else float("nan")
-                old = self.values.get(name)
-                self.values[name] = value if old is None or not value >= old else old
+                self.values[name] = float(np.fmin(old, np.fmin.reduce(value)))
             else:
-                self.values[name] = float(value.reshape(-1)[-1])
+                self.values[name] = float(value[-1])
         if values:
             self._bar.set_postfix({k: f"{v:.4g}" for k, v in self.values.items()}, refresh=False)
 
