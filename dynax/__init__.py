@@ -137,6 +137,7 @@ from ._metrics import (
     cross_validate as cross_validate,
     CrossCorrelationTest as CrossCorrelationTest,
     fpe as fpe,
+    horizon_fit as horizon_fit,
     kfold_splits as kfold_splits,
     leave_one_out_splits as leave_one_out_splits,
     nrmse_fit as nrmse_fit,

@@ -65,6 +65,52 @@ def nrmse_fit(
     return 100.0 * (1.0 - np.linalg.norm(y - y_hat, axis=0) / spread)
 
 
+def horizon_fit(
+    system,
+    trajectory: Trajectory,
+    horizon_s: float,
+    *,
+    states: Sequence[str] | None = None,
+    max_windows: int = 200,
+) -> dict[str, float]:
+    r"""Fit % of the `horizon_s`-ahead prediction, as MATLAB's `compare(data, sys, k)` with $k = H/dt$.
+
+    From many start samples (`dynax.simulation_error`'s windows) the model is simulated open loop
+    from the measured state under the recorded inputs; its states $H$ seconds later are compared
+    with the measured ones by `nrmse_fit`. A long horizon approaches the pure simulation fit; the
+    diagnosis's reference horizon is the natural choice. A diverged window makes that state's
+    fit `-inf`.
+
+    **Arguments:**
+
+    - `system`: the model (its first states are the trajectory's).
+    - `trajectory`: the measured (held-out) record.
+    - `horizon_s`: $H$ [s].
+    - `states`: which states to score (default all of the trajectory's).
+    - `max_windows`: at most this many start samples, spread over the record.
+
+    **Returns:** state name -> fit [%].
+    """
+    from ._sim_error import simulation_error
+
+    names = trajectory.state_names
+    states = tuple(names if states is None else states)
+    unknown = [s for s in states if s not in names]
+    if unknown:
+        raise ValueError(f"horizon_fit: {unknown} are not states of the trajectory; the states are {names}")
+    error = simulation_error(system, trajectory, (horizon_s,), max_windows=max_windows, states=states)
+    k = error.errors.shape[1] - 1
+    rows = np.asarray(error.starts) + k
+    measured = np.asarray(trajectory.xs)[rows]
+    predicted = measured + np.asarray(error.errors)[:, k, :]
+    out = {}
+    for s in states:
+        i = names.index(s)
+        finite = np.all(np.isfinite(predicted[:, i]))
+        out[s] = float(nrmse_fit(measured[:, i], predicted[:, i])[0]) if finite else -math.inf
+    return out
+
+
 def _normal_quantile(confidence: float) -> float:
     if not 0 < confidence < 1:
         raise ValueError(f"`confidence` must be in (0, 1), got {confidence}")

@@ -130,3 +130,25 @@ def test_kfold_and_leave_one_out_cross_validation_with_identify():
         dynax.kfold_splits(run, 1)
     with pytest.raises(dynax.UsageError, match="at least 2 experiments"):
         dynax.leave_one_out_splits(parts[:1])
+
+
+def test_horizon_fit_is_compare_with_a_k_step_prediction():
+    # independent check: each window simulated on its own with dynax.simulate
+    ts = np.arange(0, 3.0, 0.01)
+    us = (0.5 * np.sin(2 * ts) + 0.3 * np.sin(5.1 * ts))[:, None]
+    truth = dynax.Acrobot()
+    xs = dynax.simulate(truth, jnp.array([0.4, -0.2, 0.0, 0.0]), ts, us).xs
+    run = dynax.Trajectory(jnp.asarray(ts), xs, jnp.asarray(us), ("q1", "q2", "dq1", "dq2"), ("tau2",), "acrobot")
+    assert all(v > 99.9 for v in dynax.horizon_fit(truth, run, 0.2, max_windows=8).values())
+    wrong = dynax.Acrobot(theta4=truth.theta4 * 1.2)
+    fits = dynax.horizon_fit(wrong, run, 0.2, states=["q1"], max_windows=8)
+    error = dynax.simulation_error(wrong, run, (0.2,), max_windows=8)
+    measured, predicted = [], []
+    for k in np.asarray(error.starts):
+        window = dynax.simulate(wrong, xs[k], ts[k : k + 21], us[k : k + 21])
+        measured.append(float(xs[k + 20, 0]))
+        predicted.append(float(window.xs[-1, 0]))
+    expected = float(dynax.nrmse_fit(np.array(measured), np.array(predicted))[0])
+    assert fits["q1"] == pytest.approx(expected, abs=1e-6) and expected < 99
+    with pytest.raises(ValueError, match="not states"):
+        dynax.horizon_fit(wrong, run, 0.2, states=["x"])
