@@ -87,3 +87,13 @@ def test_importing_dynax_sets_no_matplotlib_backend_and_skips_heavy_modules():
                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "MPLBACKEND": ""})
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["unset"]
+
+
+def test_a_real_sigint_exits_130():
+    code = ("import os, signal, sys, time\n"
+            "from dynax._cli import _identify\n"
+            "from dynax._cli._main import main\n"
+            "_identify.run = lambda args: (os.kill(os.getpid(), signal.SIGINT), time.sleep(30))\n"
+            "sys.exit(main(['identify', 'acrobot', 'x.csv', '--out', 'p.json']))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert out.returncode == 130 and "interrupted" in out.stderr

@@ -65,3 +65,12 @@ def test_the_emps_benchmark_file_still_loads(datasets):
     run = dynax.load_trajectory(datasets / "emps" / "DATA_EMPS.mat", "linear_axis", mapping={"q": "qm", "force": "vir"},
                                 scale={"force": 35.15065188})
     assert len(run) == 24841 and run.is_uniform
+
+
+def test_v73_without_h5py_says_what_to_install(tmp_path, monkeypatch):
+    t, q, dq, force = _signals(50)
+    path = tmp_path / "v73.mat"
+    _write_v73(path, {"t": t[:, None], "q": q[:, None], "force": force[:, None]})
+    monkeypatch.setitem(__import__("sys").modules, "h5py", None)  # as if it were not installed
+    with pytest.raises(dynax.DataError, match=r'v73.mat.*needs h5py: pip install "dynax\[mat\]"'):
+        dynax.load_trajectory(path, "linear_axis")
