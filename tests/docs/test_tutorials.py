@@ -34,7 +34,7 @@ def test_notebook_matches_its_page(page):
 
 @pytest.mark.parametrize("page", make_notebooks.EXECUTED)
 def test_tutorial_runs_top_to_bottom(page, datasets, monkeypatch, tmp_path):
-    monkeypatch.chdir(REPO)  # the pages read ../shared/datasets/ from the repository root, as the README does
+    monkeypatch.chdir(TUTORIALS)  # where Jupyter starts the notebook; the pages find ../shared/datasets/ from there
     matplotlib.rcParams["figure.max_open_warning"] = 0
     namespace = {"__name__": "__tutorial__"}
     for i, block in enumerate(_code(page)):
