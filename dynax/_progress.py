@@ -95,6 +95,7 @@ class ProgressBar:
         if reduce not in ("max", "min", "last"):
             raise ValueError(f"ProgressBar: `reduce` must be 'max', 'min' or 'last', got {reduce!r}")
         self.enabled = progress_enabled(progress)
+        self._lines = progress is not False and _MODE.get() != "never"  # `say` prints when no bar is drawn
         self.reduce = reduce
         self.values: dict[str, float] = {}
         self._bar = None
@@ -124,6 +125,19 @@ class ProgressBar:
             self._bar.update(step - self._bar.n)
         else:
             self._bar.refresh()
+
+    def say(self, line: str) -> None:
+        """Report a stage in words and advance one step: the line is written above the bar, or, with
+        no bar (stderr not a terminal), printed to stderr as a log line; `"never"` mode prints nothing.
+
+        Pass `bar.say` where a function takes a `progress(line)` callback, e.g.
+        `with ProgressBar(None, "diagnose", unit="stage") as bar: dynax.diagnose(..., progress=bar.say)`.
+        """
+        if self._bar is not None:
+            self._bar.write(line, file=sys.stderr)
+            self._bar.update(1)
+        elif self._lines:
+            print(line, file=sys.stderr, flush=True)
 
     def _merge(self, values):
         for name, value in values.items():

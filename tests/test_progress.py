@@ -90,3 +90,17 @@ def test_no_bar_inside_a_users_jit(stderr):
     with progress_mode("always"):
         jax.jit(lambda k: dynax.run_pgpe(pgpe, quadratic, jnp.zeros(2), k, 3))(jax.random.PRNGKey(0))
     assert stderr.getvalue() == ""
+
+
+def test_say_writes_stage_lines_above_a_bar_or_as_log_lines(stderr):
+    with ProgressBar(None, "diagnose", unit="stage") as bar:  # stderr is not a terminal: plain lines
+        bar.say("round 1: screening")
+    assert stderr.getvalue() == "round 1: screening\n"
+    with progress_mode("never"), ProgressBar(None, "diagnose") as bar:
+        bar.say("round 1: screening")
+    assert stderr.getvalue() == ""
+    with progress_mode("always"), ProgressBar(None, "diagnose", unit="stage") as bar:
+        bar.say("round 1: screening")
+        bar.say("round 2: refit")
+    text = stderr.getvalue()
+    assert "round 1: screening\n" in text and "round 2: refit" in text and "2stage" in text.replace(" ", "")
