@@ -74,6 +74,11 @@ from ._control import (
     CentredRank as CentredRank,
     clipup as clipup,
     ClosedLoop as ClosedLoop,
+    ctrb as ctrb,
+    dlqr as dlqr,
+    lqe as lqe,
+    lqr_matrices as lqr_matrices,
+    obsv as obsv,
     CostToGoThreshold as CostToGoThreshold,
     discrete_lqr as discrete_lqr,
     DRAKE_SPONG_PARAMETERS as DRAKE_SPONG_PARAMETERS,
@@ -126,9 +131,25 @@ from ._diagnose import (
     synthetic_trajectory as synthetic_trajectory,
     write_report as write_report,
 )
+from ._metrics import (
+    aic as aic,
+    cross_correlation_test as cross_correlation_test,
+    cross_validate as cross_validate,
+    CrossCorrelationTest as CrossCorrelationTest,
+    fpe as fpe,
+    horizon_fit as horizon_fit,
+    kfold_splits as kfold_splits,
+    leave_one_out_splits as leave_one_out_splits,
+    nrmse_fit as nrmse_fit,
+    whiteness_test as whiteness_test,
+    WhitenessTest as WhitenessTest,
+)
+from ._plots import plot_compare as plot_compare, plot_error_horizon as plot_error_horizon, plot_residuals as plot_residuals
+from ._precision import PrecisionWarning as PrecisionWarning
+from ._progress import ProgressBar as ProgressBar, progress_mode as progress_mode
 from ._errors import DataError as DataError, UsageError as UsageError
 from ._sim_error import simulation_error as simulation_error, SimulationError as SimulationError
 from ._solvers import RK4 as RK4
 from ._simulate import Adaptive as Adaptive, FixedGrid as FixedGrid, Simulation as Simulation, simulate as simulate
 
-__version__ = "0.1.0"
+from ._version import __version__ as __version__

@@ -21,7 +21,7 @@ def register(subparsers):
             "Fit the nominal model of SYSTEM on DATA, show what its simulation gets wrong on held-out data, "
             "name the cause from the library of model extensions, extend the model and measure the gain. "
             "Writes DIR/report.json (the contract's schema), DIR/report.md and figures DIR/*.png. Without "
-            "--validation the last 30%% of DATA is held out."
+            "--validation the last 30% of DATA is held out."
         ),
     )
     parser.add_argument("system", choices=_SYSTEMS, help="the system (its data columns are in the contract)")

@@ -88,8 +88,7 @@ def run(args: argparse.Namespace) -> int:
         "backprop": lambda: Backprop(horizon=args.horizon, stride=args.stride),
     }[args.criterion]()
     system = initial_helicopter(args.model, args.features)
-    progress = lambda i, loss: print(f"  iteration {i + 1}: loss {loss:.6g}", flush=True)  # noqa: E731
-    fit = fit_vehicle(system, data, criterion, callback=progress)
+    fit = fit_vehicle(system, data, criterion)  # a bar per iteration with the loss on stderr (see --quiet)
     horizon = args.horizon if args.criterion in ("lagged", "backprop") else None
     write_json(out, model_to_json(fit, horizon_s=horizon))
     print(f"helicopter, {args.model} model, {args.criterion} criterion, {fit.n_samples} samples: loss {fit.loss:.6g}")

@@ -1,4 +1,10 @@
-"""The `dynax` console script. Exit status: 0 success, 2 bad input or usage, 1 internal failure."""
+"""dynax: differentiable dynamics, system identification, model-discrepancy diagnosis and optimal control.
+
+Load measured data, identify a model's parameters, show what its simulation gets wrong and name the
+cause, learn vehicle models and evaluate them. Exit status: 0 success, 2 bad input or usage,
+1 internal failure, 130 interrupted (Ctrl-C). Progress bars go to stderr when it is a terminal
+(--progress forces them, --quiet silences them).
+"""
 
 import argparse
 import importlib
@@ -6,10 +12,13 @@ import sys
 import traceback
 
 from .._errors import DataError, UsageError
+from .._version import __version__
 
 # Each module defines `register(subparsers)`, which adds its sub-command and sets `run=...`
 # (a function `run(args) -> int`) as the parser default.
 _COMMANDS = ("_demo", "_identify", "_diagnose", "_fit", "_evaluate")
+
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as shells report a Ctrl-C
 
 
 class _Parser(argparse.ArgumentParser):
@@ -19,26 +28,46 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(2)
 
 
+def _add_output_options(parser: argparse.ArgumentParser, *, default) -> None:
+    """`--quiet` / `--progress`, accepted before and after the sub-command."""
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("-q", "--quiet", action="store_true", default=default,
+                       help="no progress bars")
+    group.add_argument("--progress", action="store_true", default=default,
+                       help="show progress bars even when stderr is not a terminal")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="dynax", description=__doc__)
+    summary, _, details = __doc__.partition("\n\n")
+    parser = _Parser(prog="dynax", description=f"{summary}\n\n{details}",
+                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"dynax {__version__}")
+    _add_output_options(parser, default=False)
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     subparsers.required = True
     for name in _COMMANDS:
         importlib.import_module(f".{name}", __package__).register(subparsers)
+    for sub in subparsers.choices.values():
+        # SUPPRESS: given after the sub-command they count, absent they leave the global value alone.
+        _add_output_options(sub, default=argparse.SUPPRESS)
     return parser
 
 
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    from .._progress import progress_mode
+
+    mode = "never" if args.quiet else "always" if args.progress else "auto"
     try:
-        return int(args.run(args) or 0)
+        with progress_mode(mode):
+            return int(args.run(args) or 0)
     except (DataError, UsageError) as e:
         print(f"dynax {args.command}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("dynax: interrupted", file=sys.stderr)
-        return 1
+        print(f"dynax {args.command}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except Exception:
         traceback.print_exc()
         print(f"dynax {args.command}: internal failure (see the traceback above)", file=sys.stderr)

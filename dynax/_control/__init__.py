@@ -9,6 +9,7 @@ from ._lqr import (
     solve_discrete_are as solve_discrete_are,
     wrap_angle as wrap_angle,
 )
+from ._linear_design import ctrb as ctrb, dlqr as dlqr, lqe as lqe, lqr_matrices as lqr_matrices, obsv as obsv
 from ._swing_up import (
     AbstractSwitchingRule as AbstractSwitchingRule,
     balancing_lqr as balancing_lqr,

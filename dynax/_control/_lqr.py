@@ -331,12 +331,16 @@ def lqr(
     system: AbstractSystem,
     x_eq: Float[ArrayLike, " n_states"],
     u_eq: Float[ArrayLike, " n_inputs"],
-    q: Float[ArrayLike, "n_states n_states"],
-    r: Float[ArrayLike, "n_inputs n_inputs"],
+    q: Float[ArrayLike, "n_states n_states"] | None = None,
+    r: Float[ArrayLike, "n_inputs n_inputs"] | None = None,
     *,
     angles: tuple[int, ...] = (),
 ) -> LQR:
     r"""The continuous-time infinite-horizon LQR of `system` linearised about `(x_eq, u_eq)`.
+
+    Also python-control's matrix form: `lqr(A, B, Q, R) -> (K, S, E)` (positional, four
+    matrices) returns the gain, the Riccati solution and the closed-loop eigenvalues; see
+    `dynax.lqr_matrices`.
 
     Minimises $\int_0^\infty \delta x^\top Q \delta x + \delta u^\top R \delta u \, dt$ for the
     linearisation $\delta\dot x = A \delta x + B \delta u$ (`linearise`); $K = R^{-1} B^\top S$
@@ -360,6 +364,17 @@ def lqr(
         R. E. Kalman, "Contributions to the theory of optimal control", Boletin de la Sociedad
         Matematica Mexicana 5, 1960.
     """
+    if not isinstance(system, AbstractSystem):  # python-control's lqr(A, B, Q, R)
+        if r is not None or angles:
+            raise ValueError("lqr: the matrix form is lqr(A, B, Q, R) (four matrices); the system form is "
+                             "lqr(system, x_eq, u_eq, q, r)")
+        if q is None:
+            raise ValueError("lqr(A, B, Q, R): `R` is missing")
+        from ._linear_design import lqr_matrices
+
+        return lqr_matrices(system, x_eq, u_eq, q)
+    if q is None or r is None:
+        raise ValueError(f"lqr: the cost `{'q' if q is None else 'r'}` is missing")
     return _lqr(system, x_eq, u_eq, q, r, tuple(angles))
 
 

@@ -16,6 +16,8 @@ import optax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from jaxtyping import Array, ArrayLike, Float, Int, PRNGKeyArray
 
+from .._progress import bar_token, progress_enabled, ProgressBar, report
+
 Objective = Callable[[Float[Array, " n_params"], PRNGKeyArray], Float[Array, ""]]
 """`objective(params, key) -> reward`: the episode reward of one parameter vector (maximised).
 `key` draws whatever is random in the episode (for example its start state); the two members of
@@ -309,7 +311,6 @@ def evaluate_population(
     return jax.vmap(objective)(population, keys)
 
 
-@eqx.filter_jit
 def run_pgpe(
     pgpe: PGPE,
     objective: Objective,
@@ -318,6 +319,7 @@ def run_pgpe(
     n_iterations: int,
     *,
     shard: bool = True,
+    progress: bool | None = None,
 ) -> tuple[PGPEState, PGPEHistory]:
     """Run `n_iterations` of PGPE from `params`: one compiled `lax.scan` (`vmap` it over keys for a sweep).
 
@@ -329,15 +331,33 @@ def run_pgpe(
     - `key`: a PRNG key.
     - `n_iterations`: number of generations (static).
     - `shard`: split each population across devices when several exist (`evaluate_population`).
+    - `progress`: a bar per generation with the best reward so far, on stderr, reported from
+      inside the compiled scan (`jax.debug.callback`); `None` draws it when stderr is a terminal
+      (see `dynax.progress_mode`). Never drawn when called inside a user's `jit` or `vmap`.
 
     **Returns:**
 
     `(state, history)`: the final `PGPEState` and a `PGPEHistory` with one row per iteration.
     """
+    return _with_bar(_run_pgpe_jit, "PGPE", pgpe, objective, params, key, n_iterations, shard, progress)
+
+
+def _with_bar(run, description, pgpe, objective, params, key, n_iterations, shard, progress):
+    traced = any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves((params, key)))
+    if traced or not progress_enabled(progress):
+        return run(pgpe, objective, params, key, n_iterations, shard, False, bar_token(None))
+    with ProgressBar(n_iterations, description, progress=True, unit="gen", reduce="max") as bar:
+        out = run(pgpe, objective, params, key, n_iterations, shard, True, bar_token(bar))
+        jax.block_until_ready(out)
+    return out
+
+
+def _run_pgpe(pgpe, objective, params, key, n_iterations, shard, with_progress, token):
     state = pgpe.init(params)
     pairs = pgpe.population_size // 2
 
-    def generation(state, key):
+    def generation(state, inputs):
+        i, key = inputs
         sample_key, episode_key = jax.random.split(key)
         population, noise = pgpe.ask(state, sample_key)
         pair_keys = jax.random.split(episode_key, pairs)
@@ -350,12 +370,16 @@ def run_pgpe(
             mean_params=pgpe.mean_params(state),
             sigma=state.sigma,
         )
+        if with_progress:
+            report(token, i, best_reward=new_state.best_reward)
         return new_state, record
 
-    return jax.lax.scan(generation, state, jax.random.split(key, n_iterations))
+    return jax.lax.scan(generation, state, (jnp.arange(n_iterations), jax.random.split(key, n_iterations)))
 
 
-@eqx.filter_jit
+_run_pgpe_jit = eqx.filter_jit(_run_pgpe)
+
+
 def sweep_pgpe(
     pgpe: PGPE,
     objective: Objective,
@@ -364,6 +388,7 @@ def sweep_pgpe(
     n_iterations: int,
     *,
     shard: bool = True,
+    progress: bool | None = None,
 ) -> tuple[PGPEState, PGPEHistory]:
     """Independent PGPE runs, one per key, as one compiled `vmap` of `run_pgpe`; runs split across devices.
 
@@ -372,11 +397,19 @@ def sweep_pgpe(
     them. For a sweep over hyper-parameters, give `PGPE` array-valued fields (for example
     `sigma_learning_rate`) and `eqx.filter_vmap` this function over the strategy.
 
-    **Arguments:** as `run_pgpe`, with `keys` of shape `(runs,)`.
+    **Arguments:** as `run_pgpe`, with `keys` of shape `(runs,)`; the bar shows the generation
+    and the best reward over all runs.
 
     **Returns:** `(states, histories)` with a leading `runs` axis.
     """
+    return _with_bar(_sweep_pgpe_jit, "PGPE sweep", pgpe, objective, params, keys, n_iterations, shard, progress)
+
+
+@eqx.filter_jit
+def _sweep_pgpe_jit(pgpe, objective, params, keys, n_iterations, shard, with_progress, token):
     sharding = population_sharding(keys.shape[0]) if shard else None
     if sharding is not None:
         keys = jax.lax.with_sharding_constraint(keys, sharding)
-    return jax.vmap(lambda key: run_pgpe(pgpe, objective, params, key, n_iterations, shard=False))(keys)
+    return jax.vmap(
+        lambda key: _run_pgpe(pgpe, objective, params, key, n_iterations, False, with_progress, token)
+    )(keys)

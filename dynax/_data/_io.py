@@ -10,6 +10,8 @@ import numpy as np
 
 from .._errors import DataError, UsageError
 from ._columns import columns_for, OPTIONAL_STATES
+from .._precision import check_times_for_float32
+from ._matlab import read_mat_columns
 from ._trajectory import Trajectory
 
 TIME = "t"
@@ -58,25 +60,6 @@ def _read_npz(path):
         raise DataError(f"cannot be read as .npz ({e})", path=path) from None
 
 
-def _read_mat(path):
-    import scipy.io
-
-    try:
-        data = scipy.io.loadmat(path)
-    except Exception as e:
-        raise DataError(f"cannot be read as a MATLAB .mat file ({e})", path=path) from None
-    columns = {}
-    for k, v in data.items():
-        if k.startswith("__"):
-            continue
-        arr = np.asarray(v)
-        if arr.ndim == 2 and 1 in arr.shape and arr.size > 1:
-            columns[k] = arr.reshape(-1)
-        elif arr.ndim == 1 and arr.size > 1:
-            columns[k] = arr
-    return columns
-
-
 def _check_names(argument, given, allowed, system):
     unknown = sorted(set(given) - set(allowed))
     if unknown:
@@ -95,7 +78,8 @@ def load_trajectory(
 ) -> Trajectory:
     """Load a measured data file as a `Trajectory`, checking it against the data contract.
 
-    CSV (header row), `.npz` (one array per column) and MATLAB `.mat` (one vector per column) are
+    CSV (header row), `.npz` (one array per column) and MATLAB `.mat` (v4 to v7.3; vectors by
+    name, matrix variables such as iddata-style `y`, `u` by column as `name[col]`, 0-based) are
     read. Sampling may be irregular; it is kept as recorded.
 
     **Arguments:**
@@ -111,7 +95,10 @@ def load_trajectory(
 
     **Returns:**
 
-    A `Trajectory` in float64 numpy-backed JAX arrays (cast with `.astype` for float32).
+    A `Trajectory` whose times are a float64 numpy array (kept on the host, whatever JAX's
+    mode) and whose states and inputs are JAX arrays in float64 when JAX's float64 mode is on
+    (`jax.config.update("jax_enable_x64", True)`), float32 otherwise. In float32 mode a record
+    whose times float32 cannot resolve to 1 % of a step raises a `PrecisionWarning` naming the file.
 
     **Raises:**
 
@@ -134,7 +121,7 @@ def load_trajectory(
     if suffix == ".npz":
         raw = _read_npz(path)
     elif suffix == ".mat":
-        raw = _read_mat(path)
+        raw = read_mat_columns(path)
     else:
         raw = _read_csv(path)
 
@@ -182,7 +169,8 @@ def load_trajectory(
             values[name] = np.asarray(central_difference(ts, values[source]))
     xs = np.stack([values[s] for s in state_names], axis=1)
     us = np.stack([values[s] for s in input_names], axis=1)
-    return Trajectory(jnp.asarray(ts), jnp.asarray(xs), jnp.asarray(us), state_names, input_names, system, path)
+    check_times_for_float32(ts, path)
+    return Trajectory(ts, jnp.asarray(xs), jnp.asarray(us), state_names, input_names, system, path)
 
 
 def save_trajectory(trajectory: Trajectory, path: str | os.PathLike) -> None:

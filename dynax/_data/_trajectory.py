@@ -17,7 +17,8 @@ class Trajectory(eqx.Module):
 
     **Fields:**
 
-    - `ts`: sample times [s], strictly increasing, shape `(time,)`.
+    - `ts`: sample times [s], strictly increasing, shape `(time,)`; a float64 numpy array when
+      loaded from a file (times stay float64 on the host whatever JAX's mode), or a JAX array.
     - `xs`: states, shape `(time, n_states)`, columns named by `state_names`.
     - `us`: inputs, shape `(time, n_inputs)`, columns named by `input_names`.
     - `state_names`, `input_names`: the contract's column names (static).
@@ -94,8 +95,13 @@ class Trajectory(eqx.Module):
         return self.slice(None, k), self.slice(k, None)
 
     def astype(self, dtype) -> "Trajectory":
-        """Cast the arrays to `dtype` (e.g. `jnp.float32` for throughput)."""
+        """Cast the states and inputs to `dtype` (e.g. `jnp.float32` for throughput).
+
+        Times held on the host in float64 (as `load_trajectory` gives them) stay so; times that are
+        JAX arrays are cast too.
+        """
+        ts = self.ts if isinstance(self.ts, np.ndarray) else jnp.asarray(self.ts, dtype)
         return Trajectory(
-            jnp.asarray(self.ts, dtype), jnp.asarray(self.xs, dtype), jnp.asarray(self.us, dtype),
+            ts, jnp.asarray(self.xs, dtype), jnp.asarray(self.us, dtype),
             self.state_names, self.input_names, self.system, self.source,
         )

@@ -5,8 +5,8 @@ from collections.abc import Callable, Sequence
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-import scipy.stats
 
+from .._precision import warn_if_float32
 from .._data._derivatives import resample
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
@@ -152,6 +152,8 @@ def _paired_test(score_ref, score_new, n_eff):
     if sd == 0.0:
         return 0.0 if np.mean(d) > 0 else 1.0
     t = float(np.mean(d)) / (sd / np.sqrt(n_eff))
+    import scipy.stats  # lazily: keeps `import dynax` light
+
     return float(scipy.stats.t.sf(t, max(n_eff - 1, 1)))
 
 
@@ -216,6 +218,7 @@ def diagnose(
         structure selection and validation). N. R. Draper and H. Smith, *Applied Regression
         Analysis*, 3rd ed., 1998, ch. 15 (forward selection).
     """
+    warn_if_float32("diagnosis")  # the float64 policy: say so, once, naming the switch
     say = progress or (lambda _: None)
     if not isinstance(system, AbstractSystem) or isinstance(system, Extended):
         raise UsageError(f"diagnose: `system` must be a nominal dynax system, got {type(system).__name__}")

@@ -1,14 +1,17 @@
-"""Figures of the diagnosis (matplotlib, Agg backend, PNG)."""
+"""Figures of the diagnosis (matplotlib `Figure`s drawn without pyplot, so no backend is chosen; PNG)."""
 
 import jax.numpy as jnp
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .._simulate import FixedGrid  # noqa: E402
 from ._rollouts import _jit_window_rollouts  # noqa: E402
+
+
+def _subplots(*args, figsize, **kwargs):
+    from matplotlib.figure import Figure  # lazily: importing dynax stays light and sets no backend
+
+    fig = Figure(figsize=figsize)
+    return fig, fig.subplots(*args, **kwargs)
 
 
 def plot_measured_vs_simulated(trajectory, models: dict, path, *, segment_s: float = 2.0, max_duration_s: float = 10.0):
@@ -25,7 +28,7 @@ def plot_measured_vs_simulated(trajectory, models: dict, path, *, segment_s: flo
         positions = [trajectory.state_names.index(s) for s in ("x", "y", "z", "u", "v", "w")]
     else:
         positions = [i for i, s in enumerate(trajectory.state_names) if not s.startswith("d")]
-    fig, axes = plt.subplots(len(positions), 1, figsize=(9, 2.6 * len(positions)), sharex=True, squeeze=False)
+    fig, axes = _subplots(len(positions), 1, figsize=(9, 2.6 * len(positions)), sharex=True, squeeze=False)
     colors = ["tab:red", "tab:green", "tab:purple", "tab:orange"]
     for ax, i in zip(axes[:, 0], positions):
         ax.plot(ts[:n], np.asarray(trajectory.xs)[:n, i], color="k", lw=1.2, label="measured")
@@ -52,12 +55,11 @@ def plot_measured_vs_simulated(trajectory, models: dict, path, *, segment_s: flo
     axes[-1, 0].set_xlabel("t [s]")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_error_vs_horizon(curves: dict, path, *, unit: str = "rad"):
     """Open-loop RMSE against horizon, one line per model. `curves`: label -> (horizons_s, rmse)."""
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = _subplots(figsize=(6, 4))
     for label, (h, r) in curves.items():
         ax.plot(h, r, "o-", label=label)
     ax.set_xlabel("horizon [s]")
@@ -68,7 +70,6 @@ def plot_error_vs_horizon(curves: dict, path, *, unit: str = "rad"):
     ax.set_title("simulation error against horizon (held-out data)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_residuals(ts, residuals, names, path, *, features: dict | None = None):
@@ -86,7 +87,7 @@ def plot_residuals(ts, residuals, names, path, *, features: dict | None = None):
     ts = np.asarray(ts)
     dt = float(np.median(np.diff(ts)))
     k = residuals.shape[1]
-    fig, axes = plt.subplots(k, 4, figsize=(15, 2.6 * k), squeeze=False)
+    fig, axes = _subplots(k, 4, figsize=(15, 2.6 * k), squeeze=False)
     max_lag = min(len(ts) // 4, int(round(1.0 / dt)))
     for j in range(k):
         r = residuals[:, j] - residuals[:, j].mean()
@@ -110,4 +111,3 @@ def plot_residuals(ts, residuals, names, path, *, features: dict | None = None):
     axes[-1, 0].set_xlabel("t [s]")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)

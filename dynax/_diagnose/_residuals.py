@@ -24,7 +24,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import scipy.stats
 
 from .._data._derivatives import savitzky_golay
 from .._model._extensions import Extended
@@ -191,6 +190,8 @@ def structure_test(model, train, validation, *, alpha: float = 0.01, min_r2: flo
 
     **Returns:** a `Structure`.
     """
+    import scipy.stats  # lazily: keeps `import dynax` light
+
     nominal = model.system if isinstance(model, Extended) else model
     train = list(train) if isinstance(train, (list, tuple)) else [train]
     validation = list(validation) if isinstance(validation, (list, tuple)) else [validation]

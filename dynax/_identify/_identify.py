@@ -17,9 +17,9 @@ from typing import Literal
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-import scipy.signal
 from jaxtyping import Array, Float
 
+from .._precision import warn_if_float32
 from .._data._derivatives import butterworth_filtfilt, central_difference, resample
 from .._data._trajectory import Trajectory
 from .._errors import DataError, UsageError
@@ -238,6 +238,8 @@ def _needs(traj, n, method):
 
 
 def _trim_and_decimate(rows, target, trim, decimate):
+    import scipy.signal  # lazily: keeps `import dynax` light
+
     """Drop `trim` rows at each end, then decimate rows and target alike (parallel filtering)."""
     if trim < 0 or decimate < 1:
         raise UsageError(f"`trim` must be >= 0 and `decimate` >= 1, got {trim}, {decimate}")
@@ -415,6 +417,7 @@ def identify(
     parameters, naming the unidentified combinations; `DataError` when a record is too short;
     `UsageError` for a system or method that does not fit.
     """
+    warn_if_float32("identification")  # the float64 policy: say so, once, naming the switch
     from ._simulation_fit import SimulationFit, _identify_by_simulation
 
     trajectories = _as_list(data)

@@ -7,6 +7,8 @@ import numpy as np
 
 from ..._data._trajectory import Trajectory
 from ..._errors import DataError, UsageError
+from ..._precision import warn_if_float32
+from ..._progress import ProgressBar
 from ..._model._helicopter import (
     AccelerationModel,
     Helicopter,
@@ -38,6 +40,7 @@ def fit_vehicle(
     criterion: OneStep | FrequencyDomain | Lagged | Backprop = OneStep(),
     *,
     callback=None,
+    progress: bool | None = None,
 ) -> VehicleFit:
     r"""Learn the body model of `system` from `trajectory` with a learning `criterion`.
 
@@ -51,6 +54,9 @@ def fit_vehicle(
     - `criterion`: `OneStep()`, `FrequencyDomain()` (linear model only), `Lagged(horizon=...)` or
       `Backprop(horizon=...)`.
     - `callback`: `callback(iteration, loss)` after each iteration of the iterative criteria.
+    - `progress`: for `Lagged` and `Backprop`, a bar per iteration with the loss on stderr (an
+      ETA against the iteration limit; a fit that converges early finishes early); `None` draws it
+      when stderr is a terminal (see `dynax.progress_mode`).
 
     **Returns:** a `VehicleFit` with the fitted `system`, the final loss and its history.
 
@@ -59,14 +65,22 @@ def fit_vehicle(
         P. Abbeel, V. Ganapathi and A. Y. Ng, "Learning vehicular dynamics, with application to
         modeling helicopters", NIPS 18, 2005.
     """
+    warn_if_float32("vehicle learning")
     if isinstance(criterion, OneStep):
         return fit_one_step(system, trajectory, criterion)
     if isinstance(criterion, FrequencyDomain):
         return fit_frequency(system, trajectory, criterion)
-    if isinstance(criterion, Lagged):
-        return fit_lagged(fit_one_step(system, trajectory).system, trajectory, criterion, callback=callback)
-    if isinstance(criterion, Backprop):
-        return fit_backprop(fit_one_step(system, trajectory).system, trajectory, criterion, callback=callback)
+    if isinstance(criterion, (Lagged, Backprop)):
+        fit = fit_lagged if isinstance(criterion, Lagged) else fit_backprop
+        limit = criterion.max_iterations if isinstance(criterion, Lagged) else criterion.max_steps
+        with ProgressBar(limit, f"{type(criterion).__name__.lower()} fit", progress=progress, reduce="last") as bar:
+
+            def report(iteration, loss):
+                bar.reach(iteration + 1, loss=loss)
+                if callback is not None:
+                    callback(iteration, loss)
+
+            return fit(fit_one_step(system, trajectory).system, trajectory, criterion, callback=report)
     raise UsageError(f"fit_vehicle: unknown criterion {type(criterion).__name__}")
 
 

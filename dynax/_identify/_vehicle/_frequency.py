@@ -44,7 +44,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
-import scipy.signal
 from jaxtyping import Array, Float
 
 from ..._data._trajectory import Trajectory
@@ -125,6 +124,8 @@ def frequency_responses(
     spectra = None
     for a in range(n):
         for b in range(n):
+            import scipy.signal  # lazily: keeps `import dynax` light
+
             f, g = scipy.signal.csd(z[:, a], z[:, b], fs=1 / dt, nperseg=nperseg, detrend="linear")
             if spectra is None:
                 spectra = np.zeros((len(f), n, n), complex)

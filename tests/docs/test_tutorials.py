@@ -1,0 +1,44 @@
+"""The tutorials run as written, with the public API only, and their notebooks match their pages."""
+
+import importlib.util
+import json
+import re
+
+import matplotlib
+import pytest
+
+from tests.conftest import REPO
+
+TUTORIALS = REPO / "docs" / "tutorials"
+_spec = importlib.util.spec_from_file_location("make_notebooks", TUTORIALS / "make_notebooks.py")
+make_notebooks = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(make_notebooks)
+
+
+def _code(page):
+    return [text for kind, text in make_notebooks.cells((TUTORIALS / page).read_text()) if kind == "code"]
+
+
+@pytest.mark.parametrize("page", sorted(p.name for p in TUTORIALS.glob("*.md")))
+def test_tutorials_use_only_the_public_api(page):
+    private = re.findall(r"(?:from|import)\s+dynax\.\w+|dynax\._\w+", (TUTORIALS / page).read_text())
+    assert not private, f"{page} reaches into private modules: {private}"
+
+
+@pytest.mark.parametrize("page", make_notebooks.EXECUTED)
+def test_notebook_matches_its_page(page):
+    notebook = json.loads((TUTORIALS / page).with_suffix(".ipynb").read_text())
+    assert notebook == make_notebooks.to_notebook((TUTORIALS / page).read_text()), (
+        f"docs/tutorials/{page} changed: run python docs/tutorials/make_notebooks.py")
+
+
+@pytest.mark.parametrize("page", make_notebooks.EXECUTED)
+def test_tutorial_runs_top_to_bottom(page, datasets, monkeypatch, tmp_path):
+    monkeypatch.chdir(TUTORIALS)  # where Jupyter starts the notebook; the pages find ../shared/datasets/ from there
+    matplotlib.rcParams["figure.max_open_warning"] = 0
+    namespace = {"__name__": "__tutorial__"}
+    for i, block in enumerate(_code(page)):
+        try:
+            exec(compile(block, f"{page}, code block {i + 1}", "exec"), namespace)
+        except Exception as e:
+            raise AssertionError(f"{page}, code block {i + 1} failed: {e!r}\n{block}") from e
