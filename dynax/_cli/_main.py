@@ -6,6 +6,7 @@ import sys
 import traceback
 
 from .._errors import DataError, UsageError
+from ._common import check_command_output
 
 # Each module defines `register(subparsers)`, which adds its sub-command and sets `run=...`
 # (a function `run(args) -> int`) as the parser default.
@@ -32,6 +33,7 @@ def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        check_command_output(args)  # before any work: a bad --out costs a second, not a fit
         return int(args.run(args) or 0)
     except (DataError, UsageError) as e:
         print(f"dynax {args.command}: error: {e}", file=sys.stderr)
