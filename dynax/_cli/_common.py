@@ -8,6 +8,7 @@ import json
 import math
 import os
 import pathlib
+import tempfile
 
 from .._data import parse_assignments
 from .._errors import DataError, UsageError
@@ -48,8 +49,12 @@ def _writable_folder(out: pathlib.Path) -> None:
         ancestor = ancestor.parent
     if not ancestor.is_dir():
         raise UsageError(f"--out {out}: {ancestor} is a file, not a folder")
-    if not os.access(ancestor, os.W_OK | os.X_OK):
-        raise UsageError(f"--out {out}: cannot write in the folder {ancestor} (permission denied)")
+    try:  # a real probe: permissions, ACLs and read-only mounts all answer it
+        with tempfile.TemporaryFile(dir=ancestor, prefix=".dynax-probe."):
+            pass
+    except OSError as e:
+        reason = "permission denied" if isinstance(e, PermissionError) else (e.strerror or str(e))
+        raise UsageError(f"--out {out}: cannot write in the folder {ancestor} ({reason})") from None
 
 
 def _report_folder_replaceable(out: pathlib.Path) -> None:
@@ -167,6 +172,21 @@ def read_nominal_parameters(path) -> dict[str, float]:
             raise DataError(f"parameter '{name}' is {json.dumps(value)[:40]}, not a finite number", path=path)
         values[name] = float(value)
     return values
+
+
+# Standard errors scale with the residual standard deviation; estimated from d degrees of freedom
+# it is uncertain by about 1/sqrt(2 d) (chi-square), so d >= 8 keeps the errors within about 25 %.
+MIN_RESIDUAL_DOF = 8
+# The most base parameters dynax identifies for one system (two-link arm with Coulomb friction).
+MAX_BASE_PARAMETERS = 9
+
+
+def min_fit_samples(n_parameters: int = MAX_BASE_PARAMETERS, *, trim: int = 2) -> int:
+    """The fewest samples a fit of `n_parameters` is run on: one equation per sample at least, the
+    `trim` samples lost to differentiation at the ends, and `MIN_RESIDUAL_DOF` left over for the
+    standard errors. Fewer is refused rather than fitted (3 samples fit 7 parameters exactly, with
+    standard errors of noise)."""
+    return n_parameters + MIN_RESIDUAL_DOF + trim
 
 
 def finite_seconds(value: float, argument: str) -> float:

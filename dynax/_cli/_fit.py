@@ -5,7 +5,7 @@ import sys
 import time
 
 from .._errors import DataError, UsageError
-from ._common import add_data_options, data_options, finite_seconds, output_file
+from ._common import add_data_options, data_options, finite_seconds, min_fit_samples, MIN_RESIDUAL_DOF, output_file
 from ._output import write_json
 
 _MODELS = ("acceleration", "linear")
@@ -73,16 +73,13 @@ def load_helicopter_data(path, mapping=None, scale=None, *, min_samples=3):
 
 
 def required_samples(system, criterion: str, horizon_s: float, dt: float) -> tuple[int, str]:
-    """The fewest samples a fit can be trusted with, and why.
-
-    The one-step regression of every body axis must be over-determined twice over (at least two
-    equations per free weight, so the residual has as many degrees of freedom as the fit uses);
-    the lagged and backprop criteria need, beyond that, one horizon of samples after a start.
-    """
+    """The fewest samples a fit can be trusted with, and why: each body axis's one-step regression
+    needs `min_fit_samples` for its free weights; lagged and backprop, one horizon more."""
     import numpy as np
 
     free = int(np.max(np.sum(np.asarray(system.body_model.mask, dtype=bool), axis=1)))
-    need, why = 2 * free + 1, f"{free} free weights per axis need at least {2 * free} one-step equations"
+    need = min_fit_samples(free, trim=1)
+    why = f"{free} free weights per axis and {MIN_RESIDUAL_DOF} residual degrees of freedom"
     if criterion in ("lagged", "backprop"):
         steps = int(round(horizon_s / dt))
         need, why = need + steps, why + f", plus the {steps} samples the horizon {horizon_s:g} s spans"
