@@ -11,7 +11,8 @@ something was written).
 Run from the repository root: `python experiments/malformed_inputs.py [--code PATH] [--out FILE]`.
 `--code` puts another checkout's `dynax` first on the path (e.g. the code before the fixes) so that
 the same cases judge it; the default is this checkout. Writes a JSON list of outcomes to `--out`
-(default `experiments/results/malformed_inputs.json`) and prints a Markdown table and the counts.
+(default `experiments/results/malformed_inputs/after.json`) and prints a Markdown table and the
+counts. `--compare BEFORE.json AFTER.json` prints the two side by side instead of running anything.
 """
 
 import argparse
@@ -29,9 +30,12 @@ REPO = pathlib.Path(__file__).resolve().parents[1]
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--code", default=str(REPO), help="checkout whose dynax is judged (default: this one)")
-    parser.add_argument("--out", default=str(REPO / "experiments" / "results" / "malformed_inputs.json"))
+    parser.add_argument("--out", default=str(REPO / "experiments" / "results" / "malformed_inputs" / "after.json"))
     parser.add_argument("--only", default=None, help="comma-separated case ids")
+    parser.add_argument("--compare", nargs=2, default=None, metavar=("BEFORE", "AFTER"))
     args = parser.parse_args()
+    if args.compare:
+        return compare(*args.compare)
     sys.path.insert(0, str(pathlib.Path(args.code).resolve()))
     import jax
 
@@ -72,6 +76,24 @@ def main():
     for r in rows:
         print(f"| {r['id']} | {r['expect']} | {r['verdict']} | {r['status']} | {r['message'][:90].replace('|', '/')} |")
     print(f"\n{len(rows)} inputs tried: " + ", ".join(f"{n} {k}" for k, n in counts.most_common()))
+
+
+def _short(verdict):
+    return verdict.split(" (")[0]
+
+
+def compare(before_path, after_path):
+    """A Markdown table of two runs' outcomes, case by case, and both tallies."""
+    before = {r["id"]: r for r in json.loads(pathlib.Path(before_path).read_text())}
+    after = json.loads(pathlib.Path(after_path).read_text())
+    print("| input | expected | before | after |\n|---|---|---|---|")
+    for r in after:
+        b = before.get(r["id"])
+        was = "-" if b is None else _short(b["verdict"]) + (f" (exit {b['status']})" if b["status"] is not None else "")
+        print(f"| `{r['id']}` | {r['expect']} | {was} | {_short(r['verdict'])} |")
+    for name, rows in (("before", [before[r["id"]] for r in after if r["id"] in before]), ("after", after)):
+        counts = collections.Counter(_short(r["verdict"]) for r in rows)
+        print(f"\n{name}: {len(rows)} inputs: " + ", ".join(f"{n} {k}" for k, n in counts.most_common()))
 
 
 if __name__ == "__main__":

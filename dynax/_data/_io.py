@@ -3,9 +3,9 @@
 import csv
 import io
 import os
+import pathlib
 import re
 import zipfile
-import pathlib
 from collections.abc import Mapping
 
 import jax.numpy as jnp
@@ -29,7 +29,7 @@ MAX_MAGNITUDE = 1e12
 
 
 def _open_text(path):
-    """The lines of a text file, refusing a directory, an unreadable file or bytes that are not UTF-8."""
+    """The text of a file, refusing a directory, an unreadable file, binary data or bytes that are not UTF-8."""
     try:
         with open(path, "rb") as f:
             raw = f.read()

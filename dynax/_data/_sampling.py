@@ -38,7 +38,7 @@ def check_time_stamps(ts, *, path=None, column="t", max_gap: float | None = MAX_
     bad = np.flatnonzero(~(steps > 0))
     if bad.size:
         k = int(bad[0]) + 1
-        raise DataError(f"time does not strictly increase ({ts[k - 1]!r} then {ts[k]!r})",
+        raise DataError(f"time does not strictly increase ({float(ts[k - 1])!r} then {float(ts[k])!r})",
                         path=path, column=column, row=k + 1)
     if steps.size < 2:
         return
@@ -48,7 +48,7 @@ def check_time_stamps(ts, *, path=None, column="t", max_gap: float | None = MAX_
         if gap.size:
             k = int(gap[0]) + 1
             raise DataError(
-                f"a gap in the record: time jumps from {ts[k - 1]!r} to {ts[k]!r} s, {steps[k - 1] / median:.3g} times the "
+                f"a gap in the record: time jumps from {float(ts[k - 1])!r} to {float(ts[k])!r} s, {steps[k - 1] / median:.3g} times the "
                 f"median interval {median:.6g} s (more than {max_gap:g} is refused: it would be interpolated or held "
                 f"across); {gap.size} such gap(s). Split the record there into separate files",
                 path=path, column=column, row=k + 1,
@@ -58,7 +58,7 @@ def check_time_stamps(ts, *, path=None, column="t", max_gap: float | None = MAX_
         if tiny.size:
             k = int(tiny[0]) + 1
             raise DataError(
-                f"near-duplicate time stamps {ts[k - 1]!r} and {ts[k]!r}: a step of {steps[k - 1]:.3g} s is "
+                f"near-duplicate time stamps {float(ts[k - 1])!r} and {float(ts[k])!r}: a step of {steps[k - 1]:.3g} s is "
                 f"{steps[k - 1] / median:.2g} times the median interval {median:.6g} s (less than {min_step:g} is "
                 "refused: derivatives across it are noise)",
                 path=path, column=column, row=k + 1,

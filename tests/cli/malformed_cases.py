@@ -193,9 +193,8 @@ def _metrics_honest(out):
     values = [v for group in obj["mse"].values() for v in group]
     status = obj.get("status", ["ok"] * len(obj["horizons_s"]))
     finite_ok = all(v is None or (np.isfinite(v) and v < 1e100) for v in values) and None in values
-    nulls_explained = all(
-        obj["mse"][g][i] is not None or status[i] == "ok" for g in obj["mse"] for i in range(len(status))
-    ) and all(status[i] == "diverged" for g in obj["mse"] for i, v in enumerate(obj["mse"][g]) if v is None)
+    # A horizon's error is null exactly where its status says the rollouts diverged.
+    nulls_explained = all((v is None) == (status[i] == "diverged") for g in obj["mse"].values() for i, v in enumerate(g))
     return finite_ok and nulls_explained
 
 

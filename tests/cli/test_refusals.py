@@ -33,6 +33,7 @@ def test_malformed_input_is_refused_or_answered_correctly(case, fixtures, tmp_pa
         # One clear line, never a traceback.
         assert "Traceback" not in outcome.stderr
         assert outcome.message.startswith("dynax ") and ": error: " in outcome.message
+        assert "np." not in outcome.message  # numbers and names as the user wrote them, not numpy reprs
 
 
 @pytest.mark.parametrize("case", simulate_cases(), ids=[c[0] for c in simulate_cases()])
