@@ -74,7 +74,8 @@ def check_output(path, *, kind: str, inputs=()) -> pathlib.Path:
     **Arguments:**
 
     - `path`: the `--out` argument.
-    - `kind`: `"file"` (replaced atomically) or `"directory"` (a report folder, replaced whole).
+    - `kind`: `"file"` (replaced atomically, so an existing device or pipe such as `/dev/null` is
+      refused rather than replaced) or `"directory"` (a report folder, replaced whole).
     - `inputs`: the paths the command reads; `--out` may not be one of them (nor, for a folder,
       contain one).
 
@@ -89,6 +90,9 @@ def check_output(path, *, kind: str, inputs=()) -> pathlib.Path:
         raise UsageError(f"--out {out} is a directory; give a file name such as {out / 'result.json'}")
     if kind == "directory" and out.exists() and not out.is_dir():
         raise UsageError(f"--out {out} is a file; give a folder for the report")
+    if kind == "file" and out.exists() and not out.is_file():
+        raise UsageError(f"--out {out} is not a regular file (a device, pipe or socket); the result is written to a "
+                         "temporary file renamed into place, which would replace it: give a file path")
     _writable_folder(out)
     target = out.resolve()
     for given in inputs:

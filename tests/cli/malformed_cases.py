@@ -158,6 +158,13 @@ def _unstable(obj):
     return obj
 
 
+def _fifo(folder):
+    """A named pipe, standing in for /dev/null (which an atomic rename would replace)."""
+    path = folder / "pipe"
+    os.mkfifo(path)
+    return path
+
+
 def _gap(last):
     def edit(t):
         t[-1, 0] = last
@@ -277,6 +284,7 @@ CASES = [
     Case("out-read-only-folder", lambda d, fx: _identify(fx["acrobot"], out=str(_readonly(d) / "out.json")), "refuse", "permission denied", needs_permissions=True),
     Case("out-is-directory", lambda d, fx: _identify(fx["acrobot"], out=str(d)), "refuse", "is a directory"),
     Case("out-is-the-data", lambda d, fx: _identify(_text(d, fx, lambda s: s), out=str(d / "run.csv")), "refuse", "is the input"),
+    Case("out-is-a-pipe", lambda d, fx: _identify(fx["acrobot"], out=str(_fifo(d))), "refuse", "is not a regular file"),
     Case("out-empty", lambda d, fx: _identify(fx["acrobot"], out=""), "refuse", "--out is empty"),
     Case("diagnose-out-parent-is-file", lambda d, fx: ["diagnose", "acrobot", str(fx["acrobot"]), "--out", str(pathlib.Path(fx["acrobot"]) / "r")], "refuse", "is a file, not a folder"),
     Case("diagnose-out-is-file", lambda d, fx: ["diagnose", "acrobot", str(fx["acrobot"]), "--out", _bytes(d, b"x", "report")], "refuse", "is a file; give a folder"),
