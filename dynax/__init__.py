@@ -115,6 +115,7 @@ from ._data import (
     resample as resample,
     save_trajectory as save_trajectory,
     savitzky_golay as savitzky_golay,
+    split_at_gaps as split_at_gaps,
     Trajectory as Trajectory,
 )
 from ._diagnose import (

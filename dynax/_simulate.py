@@ -4,8 +4,10 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ._errors import UsageError
 from ._model._system import AbstractSystem
 
 
@@ -67,7 +69,9 @@ class Simulation(eqx.Module):
     - `xs`: the states at `ts`, shape `(time, n_states)`; `xs[0] = x0`. Past a divergence the
       rows are NaN.
     - `diverged_at`: the first sample time at which the state left the finite range (non-finite
-      or larger than `divergence_bound` in magnitude), `inf` if the rollout stayed bounded.
+      or larger than `divergence_bound` in magnitude), `inf` if the rollout stayed bounded,
+      `-inf` if the inputs were invalid (non-finite, or `ts` not strictly increasing; only under
+      `jax.jit`/`vmap` with `throw=False`, where they cannot be refused up front) and every row is NaN.
     """
 
     ts: Float[Array, " time"]
@@ -76,8 +80,8 @@ class Simulation(eqx.Module):
 
     @property
     def diverged(self) -> Array:
-        """Whether the rollout diverged."""
-        return jnp.isfinite(self.diverged_at)
+        """Whether the rollout diverged (or, `diverged_at = -inf`, was given invalid inputs)."""
+        return self.diverged_at != jnp.inf
 
 
 def _zoh_term(system):
@@ -85,17 +89,41 @@ def _zoh_term(system):
     return diffrax.ODETerm(lambda t, x, u: system.vector_field(t, x, u).astype(x.dtype))
 
 
+def _is_concrete(*arrays) -> bool:
+    return not any(isinstance(a, jax.core.Tracer) for a in arrays)
+
+
+def _check_values(x0, ts, us):
+    """On concrete (not traced) arguments: refuse non-finite inputs and times that do not strictly increase."""
+    for name, arr in (("x0", x0), ("ts", ts), ("us", us)):
+        bad = np.argwhere(~np.isfinite(np.asarray(arr)))
+        if bad.size:
+            where = "[" + ", ".join(str(int(i)) for i in bad[0]) + "]"
+            raise UsageError(f"simulate: non-finite input: `{name}`{where} is {np.asarray(arr)[tuple(bad[0])].item()!r}")
+    ts = np.asarray(ts)
+    bad = np.flatnonzero(np.diff(ts) <= 0)
+    if bad.size:
+        k = int(bad[0])
+        raise UsageError(f"simulate: `ts` must strictly increase; ts[{k}] = {ts[k].item()!r} then ts[{k + 1}] = {ts[k + 1].item()!r}")
+
+
+def _invalid_input(x0, ts, us):
+    """Traced counterpart of `_check_values`: whether any input is non-finite or `ts` does not increase."""
+    finite = jnp.all(jnp.isfinite(x0)) & jnp.all(jnp.isfinite(ts)) & jnp.all(jnp.isfinite(us))
+    return ~finite | ~jnp.all(jnp.diff(ts) > 0)
+
+
 def _check_arguments(system, x0, ts, us):
     if not isinstance(system, AbstractSystem):
-        raise ValueError(f"simulate: `system` must be a dynax system (AbstractSystem), got {type(system).__name__}")
+        raise UsageError(f"simulate: `system` must be a dynax system (AbstractSystem), got {type(system).__name__}")
     x0 = jnp.asarray(x0)
     ts = jnp.asarray(ts)
     if ts.ndim != 1 or ts.shape[0] < 2:
-        raise ValueError(f"simulate: `ts` must be a 1-d array of at least 2 sample times, got shape {ts.shape}")
+        raise UsageError(f"simulate: `ts` must be a 1-d array of at least 2 sample times, got shape {ts.shape}")
     if x0.ndim != 1:
-        raise ValueError(f"simulate: `x0` must be a 1-d state vector, got shape {x0.shape}")
-    if x0.shape[0] < system.n_states:
-        raise ValueError(
+        raise UsageError(f"simulate: `x0` must be a 1-d state vector, got shape {x0.shape}")
+    if x0.shape[0] != system.n_states:
+        raise UsageError(
             f"simulate: `x0` has {x0.shape[0]} entries but {type(system).__name__} has "
             f"{system.n_states} states {system.state_names}"
         )
@@ -108,15 +136,18 @@ def _check_arguments(system, x0, ts, us):
     if us.ndim == 1 and system.n_inputs == 1:
         us = us[:, None]
     if us.ndim != 2 or us.shape[1] != system.n_inputs:
-        raise ValueError(
+        raise UsageError(
             f"simulate: `us` must have shape (time, {system.n_inputs}) for inputs {system.input_names}, got {us.shape}"
         )
     if us.shape[0] not in (ts.shape[0], ts.shape[0] - 1):
-        raise ValueError(
+        raise UsageError(
             f"simulate: `us` has {us.shape[0]} rows but `ts` has {ts.shape[0]} samples "
             "(give one input per sample; the last one is not used)"
         )
-    return x0.astype(dtype), ts.astype(dtype), us.astype(dtype)
+    x0, ts, us = x0.astype(dtype), ts.astype(dtype), us.astype(dtype)
+    if _is_concrete(x0, ts, us):
+        _check_values(x0, ts, us)
+    return x0, ts, us
 
 
 def _sample_interval(system, method: FixedGrid, bound):
@@ -217,21 +248,33 @@ def simulate(
     - `method`: `FixedGrid()` (default: solver steps inside `lax.scan`) or `Adaptive()`
       (`diffrax.diffeqsolve`).
     - `divergence_bound`: a state entry larger than this in magnitude counts as divergence.
-    - `throw`: if `True` (default), a divergent rollout raises an error (via `eqx.error_if`);
+    - `throw`: if `True` (default), a divergent rollout, or under `jax.jit` an invalid input,
+      raises an error (via `eqx.error_if`);
       if `False`, it is reported in `Simulation.diverged_at` and the states past it are NaN.
       Use `throw=False` for populations in which some members may diverge.
 
     **Returns:**
 
     A `Simulation` with `ts`, `xs` of shape `(time, n_states)` and `diverged_at`.
+
+    **Raises:** `UsageError` (a `ValueError`) for arguments of the wrong shape (`x0` must have
+    exactly `system.n_states` entries) and, when the arguments are concrete arrays (not traced),
+    for a non-finite `x0`, `ts` or `us` or `ts` that does not strictly increase, whatever `throw`.
     """
     x0, ts, us = _check_arguments(system, x0, ts, us)
+    invalid = _invalid_input(x0, ts, us)
+    if throw:
+        x0 = eqx.error_if(
+            x0, invalid, "simulate: non-finite input (`x0`, `ts` or `us`) or `ts` not strictly increasing"
+        )
     if isinstance(method, FixedGrid):
         xs, diverged_at = _fixed_grid(system, x0, ts, us, method, divergence_bound)
     elif isinstance(method, Adaptive):
         xs, diverged_at = _adaptive(system, x0, ts, us, method, divergence_bound)
     else:
-        raise ValueError(f"simulate: `method` must be FixedGrid or Adaptive, got {type(method).__name__}")
+        raise UsageError(f"simulate: `method` must be FixedGrid or Adaptive, got {type(method).__name__}")
+    xs = jnp.where(invalid, jnp.nan, xs)
+    diverged_at = jnp.where(invalid, -jnp.inf, diverged_at)
     if throw:
         xs = eqx.error_if(
             xs,

@@ -129,6 +129,21 @@ def test_divergence_is_reported_not_silent():
     assert not bool(ok.diverged) and float(ok.diverged_at) == np.inf
 
 
+def test_invalid_member_of_a_population_is_flagged_not_simulated():
+    # Under vmap the values cannot be refused up front: an invalid member comes back all NaN with
+    # diverged_at = -inf (told apart from a divergence), and the others are untouched.
+    axis = dynax.LinearAxis(coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0))
+    ts = jnp.linspace(0.0, 0.5, 51)
+    x0s = jnp.array([[0.0, 1.0], [jnp.nan, 0.0], [0.0, 2.0]])
+    sims = jax.jit(jax.vmap(lambda x0: dynax.simulate(axis, x0, ts, throw=False)))(x0s)
+    assert float(sims.diverged_at[1]) == -np.inf and bool(sims.diverged[1]) and np.all(np.isnan(sims.xs[1]))
+    alone = dynax.simulate(axis, x0s[2], ts)
+    np.testing.assert_allclose(sims.xs[2], alone.xs, rtol=1e-12, atol=1e-15)  # jit vs eager rounding
+    assert not bool(sims.diverged[0]) and not bool(sims.diverged[2])
+    with pytest.raises(Exception, match="non-finite input"):
+        jax.jit(jax.vmap(lambda x0: dynax.simulate(axis, x0, ts).xs))(x0s).block_until_ready()
+
+
 def test_float32_is_respected():
     xs = dynax.simulate(dynax.Acrobot(), X0.astype(jnp.float32), TS.astype(jnp.float32), US.astype(jnp.float32)).xs
     assert xs.dtype == jnp.float32

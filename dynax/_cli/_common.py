@@ -1,10 +1,24 @@
-"""Options and checks shared by the sub-commands that read measured data."""
+"""Options and checks shared by the sub-commands: data options, output paths, JSON inputs.
+
+Everything here runs before any work, so that a user's mistake costs a second, not a fit.
+"""
 
 import argparse
+import json
+import math
+import os
 import pathlib
+import tempfile
 
 from .._data import parse_assignments
-from .._errors import UsageError
+from .._errors import DataError, UsageError
+
+# What each sub-command writes to --out.
+OUTPUT_KIND = {"demo": "directory", "diagnose": "directory", "identify": "file", "fit": "file", "evaluate": "file"}
+# The arguments that name files a sub-command reads.
+INPUT_ARGUMENTS = ("data", "validation", "model", "nominal")
+# Files a report folder may hold for dynax to replace it whole (what `demo` and `diagnose` write).
+REPORT_SUFFIXES = (".json", ".md", ".png", ".csv", ".npz", ".svg", ".pdf")
 
 
 def add_data_options(parser: argparse.ArgumentParser) -> None:
@@ -24,3 +38,163 @@ def output_file(path: str, example: str) -> pathlib.Path:
     if out.is_dir():
         raise UsageError(f"--out {out} is a directory; give a file name such as {out / example}")
     return out
+
+
+def _writable_folder(out: pathlib.Path) -> None:
+    """Refuse an output whose nearest existing ancestor is a file or a folder we may not write in."""
+    ancestor = out.absolute().parent
+    while not ancestor.exists():
+        if ancestor.is_symlink():
+            raise UsageError(f"--out {out}: {ancestor} is a broken link")
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise UsageError(f"--out {out}: {ancestor} is a file, not a folder")
+    try:  # a real probe: permissions, ACLs and read-only mounts all answer it
+        with tempfile.TemporaryFile(dir=ancestor, prefix=".dynax-probe."):
+            pass
+    except OSError as e:
+        reason = "permission denied" if isinstance(e, PermissionError) else (e.strerror or str(e))
+        raise UsageError(f"--out {out}: cannot write in the folder {ancestor} ({reason})") from None
+
+
+def _report_folder_replaceable(out: pathlib.Path) -> None:
+    """An existing --out folder is replaced whole; refuse one that holds anything dynax did not write."""
+    foreign = sorted(p.name for p in out.iterdir()
+                     if not (p.is_file() and not p.is_symlink() and p.suffix.lower() in REPORT_SUFFIXES))
+    if foreign:
+        raise UsageError(
+            f"--out {out} exists and holds {foreign[:3]}{' ...' if len(foreign) > 3 else ''}, which dynax did not "
+            "write; the report folder is replaced whole, so give a new or empty folder (or a previous report's)"
+        )
+
+
+def check_output(path, *, kind: str, inputs=()) -> pathlib.Path:
+    """Refuse an `--out` that cannot be written, before any work is done.
+
+    **Arguments:**
+
+    - `path`: the `--out` argument.
+    - `kind`: `"file"` (replaced atomically, so an existing device or pipe such as `/dev/null` is
+      refused rather than replaced) or `"directory"` (a report folder, replaced whole).
+    - `inputs`: the paths the command reads; `--out` may not be one of them (nor, for a folder,
+      contain one).
+
+    **Raises:** `UsageError` naming the problem: a folder where a file is due or the reverse, a
+    parent that is a file, a folder without write permission, an input that would be overwritten,
+    a report folder holding other files.
+    """
+    if not str(path).strip():
+        raise UsageError("--out is empty")
+    out = pathlib.Path(path)
+    if kind == "file" and out.is_dir():
+        raise UsageError(f"--out {out} is a directory; give a file name such as {out / 'result.json'}")
+    if kind == "directory" and out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out} is a file; give a folder for the report")
+    if kind == "file" and out.exists() and not out.is_file():
+        raise UsageError(f"--out {out} is not a regular file (a device, pipe or socket); the result is written to a "
+                         "temporary file renamed into place, which would replace it: give a file path")
+    _writable_folder(out)
+    target = out.resolve()
+    for given in inputs:
+        if given is None or not os.path.exists(given):
+            continue
+        source = pathlib.Path(given).resolve()
+        if source == target:
+            raise UsageError(f"--out {out} is the input {given}; writing would overwrite it")
+        if kind == "directory" and target in source.parents:
+            raise UsageError(f"--out {out} holds the input {given}; replacing the report folder would delete it")
+    if kind == "directory" and out.is_dir():
+        _report_folder_replaceable(out)
+    return out
+
+
+def check_command_output(args: argparse.Namespace) -> None:
+    """`check_output` for a parsed command line (the main entry point calls it before running)."""
+    kind = OUTPUT_KIND.get(getattr(args, "command", None))
+    if kind is None or getattr(args, "out", None) is None:
+        return
+    check_output(args.out, kind=kind, inputs=[getattr(args, name, None) for name in INPUT_ARGUMENTS])
+
+
+def _refuse_constant(what, path):
+    def refuse(name):
+        raise DataError(f"holds {name}, which is not a JSON number; {what} must hold finite numbers", path=path)
+
+    return refuse
+
+
+def read_json_object(path, what: str) -> dict:
+    """Read a JSON file that must hold an object, refusing what is not (as `DataError` naming the file).
+
+    Refused: a missing file, a directory, bytes that are not UTF-8, invalid JSON, `NaN`/`Infinity`
+    and numbers that overflow to infinity, and a top-level value that is not an object.
+    """
+    try:
+        raw = pathlib.Path(path).read_bytes()
+    except FileNotFoundError:
+        raise DataError("no such file", path=path) from None
+    except IsADirectoryError:
+        raise DataError(f"is a directory, not {what}", path=path) from None
+    except OSError as e:
+        raise DataError(f"cannot be read ({e.strerror or e})", path=path) from None
+
+    def number(text):
+        value = float(text)
+        if not math.isfinite(value):
+            raise DataError(f"holds the number {text}, which overflows; {what} must hold finite numbers", path=path)
+        return value
+
+    try:
+        obj = json.loads(raw.decode("utf-8-sig"), parse_float=number, parse_constant=_refuse_constant(what, path))
+    except UnicodeDecodeError:
+        raise DataError(f"is not UTF-8 text (a binary file?); {what} is JSON", path=path) from None
+    except json.JSONDecodeError as e:
+        raise DataError(f"is not valid JSON ({e})", path=path) from None
+    if not isinstance(obj, dict):
+        raise DataError(f"holds a JSON {type(obj).__name__}, not the object {what} is", path=path)
+    return obj
+
+
+def read_nominal_parameters(path) -> dict[str, float]:
+    """The `parameters` object of a `--nominal` JSON (e.g. written by `dynax identify`), checked.
+
+    **Raises:** `DataError` naming the file and the entry: no `parameters` object, or a value that
+    is not a finite number (a string, `null`, `NaN`, a list).
+    """
+    obj = read_json_object(path, "a --nominal parameters file")
+    parameters = obj.get("parameters")
+    if not isinstance(parameters, dict):
+        found = "no 'parameters'" if parameters is None else f"a JSON {type(parameters).__name__} as 'parameters'"
+        raise DataError(f"has {found}; --nominal needs an object of name: number", path=path)
+    values = {}
+    for name, value in parameters.items():
+        try:
+            ok = not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(float(value))
+        except OverflowError:
+            ok = False
+        if not ok:
+            raise DataError(f"parameter '{name}' is {json.dumps(value)[:40]}, not a finite number", path=path)
+        values[name] = float(value)
+    return values
+
+
+# Standard errors scale with the residual standard deviation; estimated from d degrees of freedom
+# it is uncertain by about 1/sqrt(2 d) (chi-square), so d >= 8 keeps the errors within about 25 %.
+MIN_RESIDUAL_DOF = 8
+# The most base parameters dynax identifies for one system (two-link arm with Coulomb friction).
+MAX_BASE_PARAMETERS = 9
+
+
+def min_fit_samples(n_parameters: int = MAX_BASE_PARAMETERS, *, trim: int = 2) -> int:
+    """The fewest samples a fit of `n_parameters` is run on: one equation per sample at least, the
+    `trim` samples lost to differentiation at the ends, and `MIN_RESIDUAL_DOF` left over for the
+    standard errors. Fewer is refused rather than fitted (3 samples fit 7 parameters exactly, with
+    standard errors of noise)."""
+    return n_parameters + MIN_RESIDUAL_DOF + trim
+
+
+def finite_seconds(value: float, argument: str) -> float:
+    """A positive finite number of seconds, or a `UsageError` naming the argument."""
+    if not (math.isfinite(value) and value > 0):
+        raise UsageError(f"{argument} must be a positive finite number of seconds, got {value}")
+    return value

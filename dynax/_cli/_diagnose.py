@@ -1,13 +1,11 @@
 """`dynax diagnose SYSTEM DATA [--validation DATA2] --out DIR`: the discrepancy workflow on measured data."""
 
 import argparse
-import json
-import pathlib
 import sys
 import time
 
 from .._errors import UsageError
-from ._common import add_data_options, data_options
+from ._common import add_data_options, data_options, read_nominal_parameters
 from ._output import staged_directory, write_json
 
 _SYSTEMS = ("acrobot", "double_pendulum", "linear_axis", "helicopter")
@@ -92,10 +90,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--max-terms must be at least 1, got {args.max_terms}")
     parameters = None
     if args.nominal is not None:
-        try:
-            parameters = json.loads(pathlib.Path(args.nominal).read_text())["parameters"]
-        except (OSError, ValueError, KeyError, TypeError) as e:
-            raise UsageError(f"--nominal: cannot read a 'parameters' object from {args.nominal}: {e}") from None
+        parameters = read_nominal_parameters(args.nominal)
         parameters = {k: v for k, v in parameters.items() if not k.startswith("fc")}
     # Everything that can be refused is read before anything is written.
     train = load_trajectory(args.data, args.system, mapping=mapping, scale=scale, min_samples=50)

@@ -1,12 +1,11 @@
 """`dynax evaluate MODEL.json DATA --horizons 0.1,0.5,1,2 --out METRICS.json`: held-out prediction error."""
 
 import argparse
-import json
 import math
 import time
 
 from .._errors import DataError, UsageError
-from ._common import add_data_options, data_options, output_file
+from ._common import add_data_options, data_options, output_file, read_json_object
 from ._output import write_json
 
 
@@ -39,6 +38,34 @@ def _horizons(text):
     return values
 
 
+def check_model_file(obj: dict, path) -> None:
+    """Refuse a model file that `dynax fit` could not have written: a feature list that does not
+    belong to its `model` kind (a hand-edited kind) or weights that are not finite numbers."""
+    import numpy as np
+
+    from .._model._helicopter import ACCELERATION_FEATURE_NAMES, LINEAR_FEATURE_NAMES
+
+    kind, features = obj.get("model"), obj.get("features")
+    if not isinstance(features, list) or not all(isinstance(f, str) for f in features):
+        raise DataError("'features' must be a list of feature names", path=path)
+    if kind == "linear" and tuple(features) != LINEAR_FEATURE_NAMES:
+        raise DataError(f"'model' is 'linear' but the features {features} are not the linear model's "
+                        f"{list(LINEAR_FEATURE_NAMES)}", path=path)
+    if kind == "acceleration" and not set(features) <= set(ACCELERATION_FEATURE_NAMES):
+        raise DataError(f"'model' is 'acceleration' but the features {sorted(set(features) - set(ACCELERATION_FEATURE_NAMES))} "
+                        "are not acceleration-model features", path=path)
+    try:
+        weights = np.asarray(obj.get("weights"), dtype=float)
+    except (TypeError, ValueError):
+        raise DataError("'weights' must be a 6 x n_features array of numbers", path=path) from None
+    if weights.shape != (6, len(features)):
+        raise DataError(f"'weights' has shape {weights.shape}; 6 x {len(features)} (axes x features) expected", path=path)
+    bad = np.argwhere(~np.isfinite(weights))
+    if bad.size:
+        axis, j = bad[0]
+        raise DataError(f"weight [{axis}][{j}] (feature '{features[j]}') is not a finite number", path=path)
+
+
 def run(args: argparse.Namespace) -> int:
     import jax
 
@@ -53,13 +80,8 @@ def run(args: argparse.Namespace) -> int:
     out = output_file(args.out, "metrics.json")
     mapping, scale = data_options(args)
     start = time.perf_counter()
-    try:
-        with open(args.model) as f:
-            model_obj = json.load(f)
-    except FileNotFoundError:
-        raise DataError("no such file", path=args.model) from None
-    except json.JSONDecodeError as e:
-        raise DataError(f"is not valid JSON ({e})", path=args.model) from None
+    model_obj = read_json_object(args.model, "a model file written by `dynax fit`")
+    check_model_file(model_obj, args.model)
     system = model_from_json(model_obj, path=args.model)
     data = load_helicopter_data(args.data, mapping, scale)
     n_needed = int(round(max(horizons) / data.dt)) + 1
@@ -68,14 +90,19 @@ def run(args: argparse.Namespace) -> int:
                         path=args.data)
     mse = prediction_error(system, data, horizons, stride=args.stride)
     diverged = [float(v) for v in mse.pop("diverged_fraction")]
-    metrics = {"horizons_s": horizons, "mse": {name: [float(v) for v in values] for name, values in mse.items()}}
+    # A diverged rollout has no finite error: its horizon's mse is null, with the reason beside it.
+    metrics = {"horizons_s": horizons,
+               "mse": {name: [float(v) if math.isfinite(v) else None for v in map(float, values)]
+                       for name, values in mse.items()}}
     if any(diverged):
         metrics["diverged_fraction"] = diverged
-        print(f"note: {max(diverged):.1%} of the rollouts diverged; their error counts as infinite")
+        metrics["status"] = ["diverged" if d else "ok" for d in diverged]
+        print(f"note: {max(diverged):.1%} of the rollouts diverged; the mean squared error at those horizons is "
+              "infinite, written as null with status 'diverged'")
     write_json(out, metrics)
     print(f"helicopter model {args.model} on {args.data}: mean squared open-loop prediction error")
     print("  horizon [s]  " + "  ".join(f"{h:>10g}" for h in horizons))
     for name, values in metrics["mse"].items():
-        print(f"  {name:>12s} " + "  ".join(f"{v:>10.4g}" for v in values))
+        print(f"  {name:>12s} " + "  ".join(f"{v:>10.4g}" if v is not None else f"{'diverged':>10s}" for v in values))
     print(f"wrote {out} in {time.perf_counter() - start:.1f} s")
     return 0

@@ -1,10 +1,11 @@
 """`dynax fit helicopter DATA --model M --criterion C [--horizon S] --out MODEL.json`: vehicle learning."""
 
 import argparse
+import sys
 import time
 
 from .._errors import DataError, UsageError
-from ._common import add_data_options, data_options, output_file
+from ._common import add_data_options, data_options, finite_seconds, min_fit_samples, MIN_RESIDUAL_DOF, output_file
 from ._output import write_json
 
 _MODELS = ("acceleration", "linear")
@@ -38,8 +39,17 @@ def register(subparsers):
     parser.set_defaults(run=run)
 
 
+# A body-to-world quaternion further than this from unit norm is not an attitude measurement
+# (wrong column, wrong scaling); closer than it, rounding in the file is normalised away.
+QUATERNION_TOLERANCE = 0.01
+
+
 def load_helicopter_data(path, mapping=None, scale=None, *, min_samples=3):
-    """Load helicopter data; resample an irregular grid to its median interval (and say so)."""
+    """Load helicopter data; check the quaternion; resample jittered sampling to its median interval (and say so).
+
+    Gaps and near-duplicate time stamps are refused by the loader, so resampling only evens out
+    jitter; it never interpolates across a missing stretch.
+    """
     import jax.numpy as jnp
     import numpy as np
 
@@ -48,9 +58,12 @@ def load_helicopter_data(path, mapping=None, scale=None, *, min_samples=3):
     data = load_trajectory(path, "helicopter", mapping=mapping, scale=scale, min_samples=min_samples)
     quats = np.asarray(data.xs[:, 3:7])
     norms = np.linalg.norm(quats, axis=1)
-    bad = np.nonzero(norms < 1e-6)[0]
+    bad = np.flatnonzero(np.abs(norms - 1) > QUATERNION_TOLERANCE)
     if bad.size:
-        raise DataError("the quaternion (qw, qx, qy, qz) has zero norm", path=path, column="qw", row=int(bad[0]) + 1)
+        k = int(bad[0])
+        raise DataError(f"the quaternion (qw, qx, qy, qz) has norm {norms[k]:.6g}, not 1 (tolerance "
+                        f"{QUATERNION_TOLERANCE:g}; {bad.size} such rows): the contract's attitude is a unit "
+                        "quaternion", path=path, column=(mapping or {}).get("qw", "qw"), row=k + 1)
     if not data.is_uniform:
         dt = data.dt
         data = resample(data, dt)
@@ -59,8 +72,23 @@ def load_helicopter_data(path, mapping=None, scale=None, *, min_samples=3):
     return type(data)(data.ts, xs, data.us, data.state_names, data.input_names, data.system, data.source)
 
 
+def required_samples(system, criterion: str, horizon_s: float, dt: float) -> tuple[int, str]:
+    """The fewest samples a fit can be trusted with, and why: each body axis's one-step regression
+    needs `min_fit_samples` for its free weights; lagged and backprop, one horizon more."""
+    import numpy as np
+
+    free = int(np.max(np.sum(np.asarray(system.body_model.mask, dtype=bool), axis=1)))
+    need = min_fit_samples(free, trim=1)
+    why = f"{free} free weights per axis and {MIN_RESIDUAL_DOF} residual degrees of freedom"
+    if criterion in ("lagged", "backprop"):
+        steps = int(round(horizon_s / dt))
+        need, why = need + steps, why + f", plus the {steps} samples the horizon {horizon_s:g} s spans"
+    return need, why
+
+
 def run(args: argparse.Namespace) -> int:
     import jax
+    import numpy as np
 
     jax.config.update("jax_enable_x64", True)  # learning in float64; the library leaves config alone
 
@@ -69,27 +97,31 @@ def run(args: argparse.Namespace) -> int:
 
     if args.criterion == "frequency" and args.model != "linear":
         raise UsageError("--criterion frequency fits the linear model only; use --model linear")
-    if not args.horizon > 0:
-        raise UsageError(f"--horizon must be positive seconds, got {args.horizon}")
+    finite_seconds(args.horizon, "--horizon")
     if args.stride < 1:
         raise UsageError(f"--stride must be at least 1, got {args.stride}")
     out = output_file(args.out, "model.json")
     mapping, scale = data_options(args)
     start = time.perf_counter()
     data = load_helicopter_data(args.data, mapping, scale)
-    n_needed = int(round(args.horizon / data.dt)) + 2 if args.criterion in ("lagged", "backprop") else 3
+    system = initial_helicopter(args.model, args.features)
+    n_needed, why = required_samples(system, args.criterion, args.horizon, data.dt)
     if len(data) < n_needed:
-        raise DataError(f"has {len(data)} samples; the {args.criterion} criterion with horizon {args.horizon} s "
-                        f"needs at least {n_needed}", path=args.data)
+        raise DataError(f"has {len(data)} samples; the {args.model} model with the {args.criterion} criterion needs "
+                        f"at least {n_needed} ({why})", path=args.data)
     criterion = {
         "one-step": lambda: OneStep(),
         "frequency": lambda: FrequencyDomain(),
         "lagged": lambda: Lagged(horizon=args.horizon, stride=args.stride),
         "backprop": lambda: Backprop(horizon=args.horizon, stride=args.stride),
     }[args.criterion]()
-    system = initial_helicopter(args.model, args.features)
     fit = fit_vehicle(system, data, criterion)  # a bar per iteration with the loss on stderr (see --quiet)
     horizon = args.horizon if args.criterion in ("lagged", "backprop") else None
+    weights = np.asarray(fit.system.body_model.weights)
+    if not (np.all(np.isfinite(weights)) and np.isfinite(fit.loss)):
+        print(f"dynax fit: error: the fit failed numerically (loss {fit.loss}, {np.sum(~np.isfinite(weights))} "
+              "non-finite weights); nothing written", file=sys.stderr)
+        return 1
     write_json(out, model_to_json(fit, horizon_s=horizon))
     print(f"helicopter, {args.model} model, {args.criterion} criterion, {fit.n_samples} samples: loss {fit.loss:.6g}")
     for name, value in fit.system.body_model.parameters.items():

@@ -4,7 +4,7 @@ import argparse
 import time
 
 from .._errors import UsageError
-from ._common import add_data_options, data_options, output_file
+from ._common import add_data_options, data_options, min_fit_samples, output_file
 from ._output import write_json
 
 _SYSTEMS = ("acrobot", "double_pendulum", "linear_axis", "helicopter")
@@ -96,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     mapping, scale = data_options(args)
     out = output_file(args.out, "parameters.json")
     start = time.perf_counter()
-    data = load_trajectory(args.data, args.system, mapping=mapping, scale=scale, min_samples=3)
+    data = load_trajectory(args.data, args.system, mapping=mapping, scale=scale, min_samples=min_fit_samples())
     result = identify(_system(args.system), data, method, friction=friction)
     report = result.to_json()
     if args.system == "helicopter":

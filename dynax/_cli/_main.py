@@ -13,6 +13,7 @@ import traceback
 
 from .._errors import DataError, UsageError
 from .._version import __version__
+from ._common import check_command_output
 
 # Each module defines `register(subparsers)`, which adds its sub-command and sets `run=...`
 # (a function `run(args) -> int`) as the parser default.
@@ -60,6 +61,7 @@ def main(argv=None) -> int:
 
     mode = "never" if args.quiet else "always" if args.progress else "auto"
     try:
+        check_command_output(args)  # before any work: a bad --out costs a second, not a fit
         with progress_mode(mode):
             return int(args.run(args) or 0)
     except (DataError, UsageError) as e:

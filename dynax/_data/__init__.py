@@ -7,3 +7,4 @@ from ._derivatives import (
 )
 from ._io import load_trajectory as load_trajectory, parse_assignments as parse_assignments, save_trajectory as save_trajectory
 from ._trajectory import Trajectory as Trajectory
+from ._sampling import check_time_stamps as check_time_stamps, split_at_gaps as split_at_gaps

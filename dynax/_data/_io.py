@@ -1,8 +1,11 @@
 """Read and write measured data: CSV, NPZ and MATLAB `.mat` files, per the data contract."""
 
 import csv
+import io
 import os
 import pathlib
+import re
+import zipfile
 from collections.abc import Mapping
 
 import jax.numpy as jnp
@@ -12,22 +15,57 @@ from .._errors import DataError, UsageError
 from ._columns import columns_for, OPTIONAL_STATES
 from .._precision import check_times_for_float32
 from ._matlab import read_mat_columns
+from ._sampling import check_time_stamps, MAX_GAP, MIN_STEP
 from ._trajectory import Trajectory
 
 TIME = "t"
 
 
+# A decimal number as a measuring program writes it (what Python's float() accepts minus digit
+# separators "1_0" and non-ASCII digits); nan/inf are read so that they are refused by name.
+_NUMBER = re.compile(r"\s*[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|inf|infinity|nan)\s*", re.IGNORECASE)
+
+# Beyond this magnitude a value in SI units is no measurement of these machines (and its square
+# overflows a least-squares problem's sums or swamps every other sample in float64).
+MAX_MAGNITUDE = 1e12
+
+
+def _open_text(path):
+    """The text of a file, refusing a directory, an unreadable file, binary data or bytes that are not UTF-8."""
+    try:
+        with open(path, "rb") as f:
+            raw = f.read()
+    except IsADirectoryError:
+        raise DataError("is a directory, not a data file", path=path) from None
+    except OSError as e:
+        raise DataError(f"cannot be read ({e.strerror or e})", path=path) from None
+    if b"\x00" in raw:
+        line = raw.count(b"\n", 0, raw.index(b"\x00")) + 1
+        raise DataError(f"is not a text CSV file (a NUL byte at line {line}); "
+                        "give a CSV, .npz or .mat file", path=path)
+    try:
+        return raw.decode("utf-8-sig")  # the byte-order mark spreadsheet programs write is stripped
+    except UnicodeDecodeError as e:
+        line = raw.count(b"\n", 0, e.start) + 1
+        raise DataError(f"is not UTF-8 text (byte 0x{raw[e.start]:02x} at line {line}); save it as UTF-8 CSV",
+                        path=path) from None
+
+
 def _read_csv(path):
-    with open(path, newline="") as f:
-        reader = csv.reader(f)
+    text = _open_text(path)
+    try:
+        reader = csv.reader(io.StringIO(text, newline=""))
         try:
             header = next(reader)
         except StopIteration:
             raise DataError("the file is empty (a header row is required)", path=path) from None
         header = [h.strip() for h in header]
         rows = list(reader)
+    except csv.Error as e:
+        raise DataError(f"is not a readable CSV file ({e})", path=path) from None
     while rows and not any(c.strip() for c in rows[-1]):
         rows.pop()  # trailing blank lines
+    _check_unique(path, header)
     for i, row in enumerate(rows):
         if len(row) != len(header):
             raise DataError(
@@ -39,25 +77,54 @@ def _read_csv(path):
     return columns
 
 
+def _check_unique(path, names):
+    seen = {}
+    for j, name in enumerate(names):
+        if name in seen:
+            raise DataError(f"the column name appears twice (columns {seen[name] + 1} and {j + 1}); "
+                            "rename one of them", path=path, column=name)
+        seen[name] = j
+
+
 def _to_float(path, name, values):
-    """Convert a column to float64, naming the first bad cell."""
-    try:
-        return np.asarray(values, dtype=np.float64).reshape(-1)
-    except (ValueError, TypeError):
-        for i, v in enumerate(values):
-            try:
-                float(v)
-            except (ValueError, TypeError):
-                raise DataError(f"non-numeric value {v!r}", path=path, column=name, row=i + 1) from None
-        raise
+    """Convert a column to a 1-d float64 array, naming the first cell that is not a real number."""
+    arr = np.asarray(values)
+    if arr.dtype.kind in "US":  # text: the CSV's cells, or strings stored in an .npz
+        arr = arr.reshape(-1)
+        for i, v in enumerate(arr.tolist()):
+            if not _NUMBER.fullmatch(v if isinstance(v, str) else v.decode("latin-1")):
+                raise DataError(f"non-numeric value {str(v)!r}", path=path, column=name, row=i + 1)
+        return arr.astype(np.float64)
+    if arr.dtype.kind == "c":
+        raise DataError("holds complex numbers; a measured column must be real", path=path, column=name)
+    if arr.dtype.kind not in "biuf":
+        raise DataError(f"holds values of type {arr.dtype} where numbers are expected", path=path, column=name)
+    if arr.ndim > 1 and sum(d > 1 for d in arr.shape) > 1:
+        raise DataError(f"is an array of shape {arr.shape}; a column must be one vector", path=path, column=name)
+    return arr.astype(np.float64).reshape(-1)
 
 
 def _read_npz(path):
+    if os.path.isdir(path):
+        raise DataError("is a directory, not a data file", path=path)
+    if not zipfile.is_zipfile(path):
+        raise DataError("is not an .npz archive (not a zip file); give a CSV, .npz or .mat file", path=path)
     try:
         with np.load(path, allow_pickle=False) as data:
-            return {k: data[k] for k in data.files}
+            return {str(k): data[k] for k in data.files}
     except Exception as e:
         raise DataError(f"cannot be read as .npz ({e})", path=path) from None
+
+
+def _check_finite(path, column, arr, after):
+    bad = np.flatnonzero(~np.isfinite(arr))
+    if bad.size:
+        raise DataError(f"non-finite value {float(arr[bad[0]])}{after}", path=path, column=column, row=int(bad[0]) + 1)
+    big = np.flatnonzero(np.abs(arr) > MAX_MAGNITUDE)
+    if big.size:
+        raise DataError(f"value {float(arr[big[0]]):g}{after} is beyond {MAX_MAGNITUDE:g} in magnitude: no measurement "
+                        "in SI units is that large (wrong units, or a corrupt cell?)", path=path, column=column,
+                        row=int(big[0]) + 1)
 
 
 def _check_names(argument, given, allowed, system):
@@ -75,6 +142,8 @@ def load_trajectory(
     mapping: Mapping[str, str] | None = None,
     scale: Mapping[str, float] | None = None,
     min_samples: int = 2,
+    max_gap: float | None = MAX_GAP,
+    min_step: float | None = MIN_STEP,
 ) -> Trajectory:
     """Load a measured data file as a `Trajectory`, checking it against the data contract.
 
@@ -92,6 +161,11 @@ def load_trajectory(
     - `scale`: contract name -> factor multiplied into that column after reading (units), e.g.
       `{"force": 35.15}` when the file holds volts.
     - `min_samples`: refuse files with fewer samples (the method's need).
+    - `max_gap`: refuse a time step longer than this many median intervals (default 10): a gap
+      in the record, which every method would otherwise bridge by holding or interpolating.
+      `None` accepts gaps; then cut the record with `split_at_gaps`.
+    - `min_step`: refuse a time step shorter than this fraction of the median interval (default
+      0.01): a near-duplicate stamp, across which derivatives are noise. `None` accepts it.
 
     **Returns:**
 
@@ -102,9 +176,12 @@ def load_trajectory(
 
     **Raises:**
 
-    `DataError` naming the file, column and row for: a missing column, a non-numeric or
-    non-finite value, time that does not strictly increase, too few samples.
-    `UsageError` for a `mapping`/`scale` that names no column of the system.
+    `DataError` naming the file, column and row for: a file that is not UTF-8 CSV, `.npz` or
+    `.mat` (or is a directory), a missing or duplicated column, a non-numeric (`"1_0"` included),
+    complex or non-finite value, a value beyond $10^{12}$ in magnitude (before or after `scale`),
+    time that does not strictly increase, a gap or a near-duplicate time stamp, too few samples.
+    `UsageError` for a `mapping`/`scale` that names no column of the system, or a zero or
+    non-finite `scale` factor. A UTF-8 byte-order mark is ignored.
 
     For `linear_axis`, a missing `dq` column is estimated from `q` by central differences.
     """
@@ -115,6 +192,9 @@ def load_trajectory(
     scale = dict(scale or {})
     _check_names("mapping", mapping, wanted, system)
     _check_names("scale", scale, wanted, system)
+    for name, factor in scale.items():
+        if not (np.isfinite(factor) and factor != 0):
+            raise UsageError(f"`scale` for '{name}' must be a finite non-zero factor, got {factor}")
     if not os.path.exists(path):
         raise DataError("no such file", path=path)
     suffix = pathlib.Path(path).suffix.lower()
@@ -140,10 +220,13 @@ def load_trajectory(
                 column=column,
             )
         arr = _to_float(path, column, raw[column])
-        bad = np.flatnonzero(~np.isfinite(arr))
-        if bad.size:
-            raise DataError(f"non-finite value {float(arr[bad[0]])}", path=path, column=column, row=int(bad[0]) + 1)
-        values[name] = arr * float(scale.get(name, 1.0))
+        _check_finite(path, column, arr, "")
+        factor = float(scale.get(name, 1.0))
+        if factor != 1.0:
+            with np.errstate(over="ignore"):
+                arr = arr * factor
+            _check_finite(path, column, arr, f" after scaling by {factor:g}")
+        values[name] = arr
 
     n = values[TIME].shape[0]
     for name, arr in values.items():
@@ -152,16 +235,7 @@ def load_trajectory(
     if n < max(min_samples, 2):
         raise DataError(f"has {n} samples; at least {max(min_samples, 2)} are needed", path=path)
     ts = values[TIME]
-    steps = np.diff(ts)
-    bad = np.flatnonzero(steps <= 0)
-    if bad.size:
-        k = int(bad[0]) + 1
-        raise DataError(
-            f"time does not strictly increase ({float(ts[k - 1])} then {float(ts[k])})",
-            path=path,
-            column=mapping.get(TIME, TIME),
-            row=k + 1,
-        )
+    check_time_stamps(ts, path=path, column=mapping.get(TIME, TIME), max_gap=max_gap, min_step=min_step)
     from ._derivatives import central_difference
 
     for name, source in optional.items():
@@ -207,12 +281,15 @@ def parse_assignments(text: str | None, argument: str, *, numeric: bool) -> dict
         name, value = name.strip(), value.strip()
         if not sep or not name or not value:
             raise UsageError(f"{argument}: '{item}' is not of the form NAME=VALUE")
+        if name in result:
+            raise UsageError(f"{argument}: '{name}' is given twice")
         if numeric:
-            try:
-                value = float(value)
-            except ValueError:
-                raise UsageError(f"{argument}: the factor for '{name}' is not a number: '{value}'") from None
+            if not _NUMBER.fullmatch(value):
+                raise UsageError(f"{argument}: the factor for '{name}' is not a number: '{value}'")
+            value = float(value)
             if not np.isfinite(value):
                 raise UsageError(f"{argument}: the factor for '{name}' is not finite: '{value}'")
+            if value == 0:
+                raise UsageError(f"{argument}: the factor for '{name}' is zero, which would erase the column")
         result[name] = value
     return result

@@ -143,3 +143,27 @@ def test_emps_loads_from_mat(datasets):
                                mapping={"q": "qm", "force": "vir"}, scale={"force": 35.15065188})
     assert len(tr) == 24841
     assert abs(tr.duration - 24.84) < 0.01
+
+
+def test_gap_is_refused_with_its_place_and_records_with_pauses_split_into_runs(tmp_path):
+    times = np.r_[0.01 * np.arange(30), 60.0 + 0.01 * np.arange(20)]
+    path = write(tmp_path, HEADER + "\n" + "\n".join(f"{t!r},{t},0,0,0,1" for t in times.tolist()))
+    with pytest.raises(dynax.DataError, match=r"column 't', row 31: a gap in the record: time jumps from 0\.29\d* to 60\.0 s"):
+        dynax.load_trajectory(path, "acrobot")
+    record = dynax.load_trajectory(path, "acrobot", max_gap=None)
+    runs = dynax.split_at_gaps(record)
+    assert [len(r) for r in runs] == [30, 20]
+    np.testing.assert_array_equal(runs[1].ts, times[30:])
+    np.testing.assert_array_equal(runs[1].state("q1"), times[30:])
+    # Jitter of a few intervals, as real rigs have, is neither refused nor split.
+    jitter = np.cumsum(0.01 * np.r_[0, np.random.default_rng(0).uniform(0.5, 4.0, 60)])
+    path = write(tmp_path, HEADER + "\n" + "\n".join(f"{t!r},0,0,0,0,1" for t in jitter.tolist()), "jitter.csv")
+    assert len(dynax.split_at_gaps(dynax.load_trajectory(path, "acrobot"))) == 1
+
+
+def test_near_duplicate_time_stamp_is_refused(tmp_path):
+    times = np.r_[0.01 * np.arange(10), 0.09 + 1e-12, 0.1 + 0.01 * np.arange(10)]
+    path = write(tmp_path, HEADER + "\n" + "\n".join(f"{t!r},0,0,0,0,1" for t in times.tolist()))
+    with pytest.raises(dynax.DataError, match=r"row 11: near-duplicate time stamps"):
+        dynax.load_trajectory(path, "acrobot")
+    assert len(dynax.load_trajectory(path, "acrobot", min_step=None)) == 21
