@@ -1,8 +1,13 @@
 """Test configuration: float64 for the whole suite (identification needs it), a seeded key, paths."""
 
+import os
 import pathlib
 
 import jax
+
+# In-process CLI calls must not fill the user's cache folder; tests/cli/test_cache.py checks the cache
+# in subprocesses with a folder of their own.
+os.environ.setdefault("DYNAX_NO_CACHE", "1")
 
 jax.config.update("jax_enable_x64", True)
 

@@ -3,7 +3,8 @@
 Load measured data, identify a model's parameters, show what its simulation gets wrong and name the
 cause, learn vehicle models and evaluate them. Exit status: 0 success, 2 bad input or usage,
 1 internal failure, 130 interrupted (Ctrl-C). Progress bars go to stderr when it is a terminal
-(--progress forces them, --quiet silences them).
+(--progress forces them, --quiet silences them). Compiled code is kept between runs in
+$XDG_CACHE_HOME/dynax/jax (--no-cache skips it).
 """
 
 import argparse
@@ -13,6 +14,7 @@ import traceback
 
 from .._errors import DataError, UsageError
 from .._version import __version__
+from ._cache import enable_compilation_cache
 from ._common import check_command_output
 
 # Each module defines `register(subparsers)`, which adds its sub-command and sets `run=...`
@@ -36,6 +38,9 @@ def _add_output_options(parser: argparse.ArgumentParser, *, default) -> None:
                        help="no progress bars")
     group.add_argument("--progress", action="store_true", default=default,
                        help="show progress bars even when stderr is not a terminal")
+    parser.add_argument("--no-cache", action="store_true", default=default,
+                        help="do not use the compilation cache (compiled code kept between runs in "
+                             "$XDG_CACHE_HOME/dynax/jax; DYNAX_NO_CACHE=1 does the same)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -62,6 +67,7 @@ def main(argv=None) -> int:
     mode = "never" if args.quiet else "always" if args.progress else "auto"
     try:
         check_command_output(args)  # before any work: a bad --out costs a second, not a fit
+        enable_compilation_cache(disabled=args.no_cache)
         with progress_mode(mode):
             return int(args.run(args) or 0)
     except (DataError, UsageError) as e:

@@ -1,0 +1,54 @@
+"""The command line keeps compiled code between runs (JAX's persistent compilation cache), and the
+cached run answers exactly as the first; `--no-cache` keeps nothing."""
+
+import json
+import os
+import subprocess
+import sys
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import dynax
+from dynax._data import save_trajectory, Trajectory
+
+
+@pytest.fixture(scope="module")
+def acrobot_csv(tmp_path_factory):
+    ts = np.arange(0.0, 4.0, 0.01)
+    us = (2.0 * np.sin(1.3 * ts) + 1.0 * np.sin(3.7 * ts + 0.5))[:, None]
+    sim = dynax.simulate(dynax.Acrobot(), jnp.array([0.2, 0.0, 0.0, 0.0]), jnp.asarray(ts), jnp.asarray(us))
+    path = tmp_path_factory.mktemp("data") / "acrobot.csv"
+    save_trajectory(Trajectory(jnp.asarray(ts), sim.xs, jnp.asarray(us), ("q1", "q2", "dq1", "dq2"), ("tau2",)), path)
+    return path
+
+
+def _identify(csv, out, cache_dir, *extra):
+    env = {k: v for k, v in os.environ.items() if k != "DYNAX_NO_CACHE"}
+    env["DYNAX_CACHE_DIR"] = str(cache_dir)
+    cmd = [sys.executable, "-m", "dynax", "identify", "acrobot", str(csv), "--method", "simulation",
+           "--out", str(out), *extra]
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    return json.loads(out.read_text())
+
+
+def _cached_files(folder):
+    return [p for p in folder.rglob("*") if p.is_file()] if folder.exists() else []
+
+
+def test_second_run_reads_the_cache_and_answers_the_same(acrobot_csv, tmp_path):
+    cache = tmp_path / "cache"
+    first = _identify(acrobot_csv, tmp_path / "a.json", cache)
+    entries = _cached_files(cache)
+    assert entries, "the first run compiled but left nothing in the cache folder"
+    second = _identify(acrobot_csv, tmp_path / "b.json", cache)
+    assert second["parameters"] == first["parameters"]
+    assert second["std_errors"] == first["std_errors"]
+
+
+def test_no_cache_keeps_nothing(acrobot_csv, tmp_path):
+    cache = tmp_path / "cache"
+    _identify(acrobot_csv, tmp_path / "a.json", cache, "--no-cache")
+    assert not _cached_files(cache)
