@@ -1,0 +1,128 @@
+r"""Filter and derivative settings chosen from the data: noise level and signal band from spectra.
+
+The least-squares models differentiate measured velocities; how hard to low-pass them is a property
+of the record, not of the method. For each velocity channel the Welch power spectral density is
+estimated; its **noise floor** is the median density over the upper half of the band (measurement
+noise is white there, the motion of a mechanical system is not), and the **signal band** ends at the
+highest frequency whose density still stands `snr` times above that floor. From these:
+
+- cut-off $f_c$: the widest signal band over the velocity channels (no motion the data show is cut);
+- order: the smallest Butterworth order $n$ (one pass; the filter runs forward and backward) at
+  which the *differentiated* white noise let through above $f_c$ is under 10 % of the differentiated
+  noise inside the band: $\int_1^\infty x^2 (1 + x^{2n})^{-2} dx < 0.1 \int_0^1 x^2 dx$;
+- trim: one cut-off period $f_s / f_c$ of samples at each end, where the zero-phase filter's
+  transient lives;
+- decimation: the filtered equations carry nothing above $f_c$, so they are decimated (in parallel)
+  to a Nyquist frequency of twice the cut-off, $\lfloor f_s / (4 f_c) \rfloor$, at most 13 (scipy's
+  single-stage limit).
+
+A record without detectable noise (simulated data: the spectrum falls to round-off without a floor
+above it) gets a cut-off at its Nyquist frequency, which means no filter.
+
+??? cite
+
+    P. D. Welch, "The use of fast Fourier transform for the estimation of power spectra", IEEE
+    Trans. Audio and Electroacoustics 15(2), 1967; M. Gautier, "Dynamic identification of robots with
+    power model", Proc. IEEE ICRA 1997 (cut-off a few times the motion's bandwidth, parallel
+    decimation).
+"""
+
+import dataclasses
+
+import numpy as np
+import scipy.integrate
+import scipy.signal
+
+from .._data._trajectory import Trajectory
+
+
+@dataclasses.dataclass(frozen=True)
+class FilterChoice:
+    """The settings `choose_filter` picked for one record, and why.
+
+    **Fields:**
+
+    - `cutoff_hz`: Butterworth cut-off [Hz], or `None` when no noise was detected (no filter).
+    - `order`: filter order of one pass.
+    - `trim`: samples dropped at each end.
+    - `decimate`: parallel decimation factor.
+    - `sample_rate_hz`: the record's (median) sample rate.
+    - `band_hz`: per velocity channel, the highest frequency with signal above the noise.
+    - `noise_std`: per velocity channel, the white-noise standard deviation the floor implies.
+    - `reason`: one sentence for reports.
+    """
+
+    cutoff_hz: float | None
+    order: int
+    trim: int
+    decimate: int
+    sample_rate_hz: float
+    band_hz: dict[str, float]
+    noise_std: dict[str, float]
+    reason: str
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def noise_floor_and_band(ys: np.ndarray, sample_rate_hz: float, *, snr: float = 100.0) -> tuple[float, float]:
+    r"""The white-noise floor of a signal's spectrum and the edge of its signal band.
+
+    **Arguments:** `ys` samples on a uniform grid, shape `(time,)`; `sample_rate_hz`; `snr`, the
+    factor by which the density must exceed the floor to count as signal (default 100, 20 dB: far
+    above the scatter of a Welch estimate averaged over many segments).
+
+    **Returns:** `(floor, band_hz)`: the one-sided density of the floor [unit^2/Hz] and the highest
+    frequency whose density exceeds `snr * floor` (the Nyquist frequency when there is no floor
+    above round-off).
+    """
+    ys = np.asarray(ys, dtype=float)
+    nperseg = int(min(len(ys), max(64, 2 ** int(np.floor(np.log2(len(ys) / 8))))))
+    f, p = scipy.signal.welch(ys - ys.mean(), fs=sample_rate_hz, nperseg=nperseg)
+    nyquist = 0.5 * sample_rate_hz
+    floor = float(np.median(p[f > 0.5 * nyquist]))
+    peak = float(np.max(p[1:])) if len(p) > 1 else 0.0
+    # No floor: the upper half of the band is round-off (relative 1e-20 in power, well below any sensor).
+    if not floor > 1e-20 * peak:
+        return floor, nyquist
+    above = f[(p > snr * floor) & (f > 0)]
+    return floor, float(above.max()) if above.size else float(f[1])
+
+
+def _tail_ratio(order: int) -> float:
+    tail = scipy.integrate.quad(lambda x: x**2 / (1 + x ** (2 * order)) ** 2, 1, np.inf)[0]
+    return tail / (1.0 / 3.0)
+
+
+def choose_filter(trajectory: Trajectory, *, snr: float = 100.0) -> FilterChoice:
+    """Pick the low-pass cut-off, order, trim and decimation for the dynamic model from one record.
+
+    **Arguments:** `trajectory` (resampled to its median interval first if irregular), `snr` as in
+    `noise_floor_and_band`.
+
+    **Returns:** a `FilterChoice` (see the module notes for the rules).
+    """
+    fs = 1.0 / trajectory.dt
+    nyquist = 0.5 * fs
+    names = trajectory.state_names
+    n = len(names) // 2
+    velocities = names[n:]
+    bands, noise = {}, {}
+    for k, name in enumerate(velocities):
+        floor, band = noise_floor_and_band(np.asarray(trajectory.xs[:, n + k]), fs, snr=snr)
+        bands[name] = band
+        noise[name] = float(np.sqrt(max(floor, 0.0) * nyquist))
+    band = max(bands.values())
+    if band >= 0.5 * nyquist:
+        return FilterChoice(None, 0, 1, 1, fs, bands, noise,
+                            f"no noise floor below {0.5 * nyquist:.3g} Hz in the velocities: no filter")
+    order = next(o for o in range(1, 9) if _tail_ratio(o) < 0.1)
+    trim = int(np.ceil(fs / band))
+    decimate = int(max(1, min(13, np.floor(fs / (4 * band)))))
+    worst = max(noise, key=noise.get)
+    reason = (
+        f"velocity signal band ends at {band:.3g} Hz (density {snr:g} x above the noise floor; "
+        f"noisiest channel {worst}, {noise[worst]:.3g} rms): order-{order} zero-phase Butterworth at "
+        f"{band:.3g} Hz, {trim} samples trimmed (one cut-off period), parallel decimation by {decimate}"
+    )
+    return FilterChoice(band, order, trim, decimate, fs, bands, noise, reason)
