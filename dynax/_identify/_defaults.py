@@ -94,6 +94,15 @@ def _tail_ratio(order: int) -> float:
     return tail / (1.0 / 3.0)
 
 
+def trim_and_decimation(sample_rate_hz: float, cutoff_hz: float, n_samples: int) -> tuple[int, int]:
+    """Samples to trim (one cut-off period) and the parallel decimation factor (Nyquist at twice the
+    cut-off, at most 13) for a filter at `cutoff_hz`; both reduced on short records so that at least
+    half of the record and 28 rows per decimation step remain."""
+    trim = int(min(np.ceil(sample_rate_hz / cutoff_hz), n_samples // 4))
+    decimate = int(max(1, min(13, np.floor(sample_rate_hz / (4 * cutoff_hz)), (n_samples - 2 * trim) // 28)))
+    return trim, decimate
+
+
 def choose_filter(trajectory: Trajectory, *, snr: float = 100.0) -> FilterChoice:
     """Pick the low-pass cut-off, order, trim and decimation for the dynamic model from one record.
 
@@ -113,12 +122,11 @@ def choose_filter(trajectory: Trajectory, *, snr: float = 100.0) -> FilterChoice
         bands[name] = band
         noise[name] = float(np.sqrt(max(floor, 0.0) * nyquist))
     band = max(bands.values())
-    if band >= 0.5 * nyquist:
-        return FilterChoice(None, 0, 1, 1, fs, bands, noise,
-                            f"no noise floor below {0.5 * nyquist:.3g} Hz in the velocities: no filter")
     order = next(o for o in range(1, 9) if _tail_ratio(o) < 0.1)
-    trim = int(np.ceil(fs / band))
-    decimate = int(max(1, min(13, np.floor(fs / (4 * band)))))
+    if band >= 0.5 * nyquist:
+        return FilterChoice(None, order, 1, 1, fs, bands, noise,
+                            f"no noise floor below {0.5 * nyquist:.3g} Hz in the velocities: no filter")
+    trim, decimate = trim_and_decimation(fs, band, len(trajectory))
     worst = max(noise, key=noise.get)
     reason = (
         f"velocity signal band ends at {band:.3g} Hz (density {snr:g} x above the noise floor; "
