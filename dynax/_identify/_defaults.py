@@ -16,8 +16,11 @@ highest frequency whose density still stands `snr` times above that floor. From 
   to a Nyquist frequency of twice the cut-off, $\lfloor f_s / (4 f_c) \rfloor$, at most 13 (scipy's
   single-stage limit).
 
-A record without detectable noise (simulated data: the spectrum falls to round-off without a floor
-above it) gets a cut-off at its Nyquist frequency, which means no filter.
+A record whose velocity noise is negligible gets no filter: when the noise the floor implies,
+differenced into $\ddot q$ ($\sigma f_s/\sqrt 2$ for a central difference), is under 1 % of the
+acceleration's rms, the errors-in-variables bias it causes (of the order of its square) is under
+$10^{-4}$ and filtering would only distort the model (simulated data fall here: their "floor" is
+the spectral tail of the motion itself).
 
 ??? cite
 
@@ -89,6 +92,21 @@ def noise_floor_and_band(ys: np.ndarray, sample_rate_hz: float, *, snr: float = 
     return floor, float(above.max()) if above.size else float(f[1])
 
 
+def measurement_noise_std(trajectory: Trajectory) -> np.ndarray:
+    """Per state column, the standard deviation of the white measurement noise its spectrum's floor implies.
+
+    A column without a floor above round-off gets `1e-6` of its own standard deviation (a floor for
+    weights built from it).
+    """
+    fs = 1.0 / trajectory.dt
+    out = []
+    for k in range(trajectory.xs.shape[1]):
+        column = np.asarray(trajectory.xs[:, k], dtype=float)
+        floor, _ = noise_floor_and_band(column, fs)
+        out.append(max(np.sqrt(max(floor, 0.0) * 0.5 * fs), 1e-6 * float(np.std(column)), 1e-12))
+    return np.asarray(out)
+
+
 def _tail_ratio(order: int) -> float:
     tail = scipy.integrate.quad(lambda x: x**2 / (1 + x ** (2 * order)) ** 2, 1, np.inf)[0]
     return tail / (1.0 / 3.0)
@@ -123,6 +141,17 @@ def choose_filter(trajectory: Trajectory, *, snr: float = 100.0) -> FilterChoice
         noise[name] = float(np.sqrt(max(floor, 0.0) * nyquist))
     band = max(bands.values())
     order = next(o for o in range(1, 9) if _tail_ratio(o) < 0.1)
+    negligible = []
+    for k, name in enumerate(velocities):
+        dq = np.asarray(trajectory.xs[:, n + k], dtype=float)
+        accel_rms = np.sqrt(np.mean(((dq[2:] - dq[:-2]) * 0.5 * fs) ** 2))
+        noise_accel = noise[name] * fs / np.sqrt(2.0)
+        signal = np.sqrt(max(accel_rms**2 - noise_accel**2, 0.0))
+        negligible.append(noise_accel < 0.01 * signal)
+    if all(negligible):
+        return FilterChoice(None, order, 1, 1, fs, bands, noise,
+                            "velocity noise negligible (differenced into accelerations it is under 1 % of their rms): "
+                            "no filter")
     if band >= 0.5 * nyquist:
         return FilterChoice(None, order, 1, 1, fs, bands, noise,
                             f"no noise floor below {0.5 * nyquist:.3g} Hz in the velocities: no filter")

@@ -559,30 +559,37 @@ def _stage_json(method, names, estimate, std, relative_error, validation, **extr
     return out
 
 
-def _is_noisy(trajectories) -> bool:
-    return any(choose_filter(_uniform(t)).cutoff_hz is not None for t in trajectories)
+def _signal_band_hz(trajectories) -> float | None:
+    """The widest velocity signal band over the records, or `None` when no record's velocities are noisy."""
+    bands = [c.cutoff_hz for c in (choose_filter(_uniform(t)) for t in trajectories) if c.cutoff_hz is not None]
+    return max(bands) if bands else None
 
 
 def _refinement_method(refine, system, method, trajectories):
-    """The `SimulationFit` that refines the least-squares estimate, or `None`."""
+    """The `SimulationFit` that refines the least-squares estimate, or `None`.
+
+    `"auto"`: two-link arms whose velocities carry measurement noise (real data), with segments of
+    one period of the signal band's edge (long enough to show the motion, short enough that a
+    chaotic run's divergence does not swamp the fit) and 60 Levenberg-Marquardt steps.
+    """
     from ._simulation_fit import SimulationFit
 
     if refine is None or refine is False:
         return None
     arm = isinstance(_split(system)[0], AbstractTwoLink)
-    if isinstance(refine, SimulationFit):
-        chosen = refine
-    elif refine is True or refine == "auto":
-        chosen = SimulationFit(segment_s=0.5, fit_initial_states=False, max_steps=30)
-    else:
+    if not (refine is True or isinstance(refine, SimulationFit) or (isinstance(refine, str) and refine == "auto")):
         raise UsageError(f"identify: `refine` must be 'auto', True, False or a SimulationFit(), got {refine!r}")
     if not arm:
-        if refine == "auto":
+        if isinstance(refine, str):
             return None
         raise UsageError("identify: the output-error refinement is for two-link arms; use SimulationFit() as the method")
-    if refine == "auto" and not _is_noisy(trajectories):
+    if isinstance(refine, SimulationFit):
+        return refine
+    band = _signal_band_hz(trajectories)
+    if band is None and isinstance(refine, str):
         return None  # noise-free velocities: least squares is not biased, nothing to refine
-    return chosen
+    segment = 1.0 / band if band is not None else 0.25
+    return SimulationFit(segment_s=segment, fit_initial_states=False, max_steps=60)
 
 
 def identify(

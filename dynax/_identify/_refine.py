@@ -9,9 +9,12 @@ off-diagonal coupling $-g_r I_r$, see `dynax._identify._consistency`), and fits 
 `fit_simulation_error` (Levenberg-Marquardt, optimistix) through a `ConsistentParametrisation`, so
 every iterate is physically consistent.
 
-The data it fits are the records low-passed at their signal band (`choose_filter`) and resampled
-to 20 samples per period of that band: the simulation is compared with the motion, not with the
-velocity estimate's noise, and the integrator takes as few steps as the motion needs.
+The data it fits are the records low-passed at their signal band (`choose_filter`) and cut to 40
+samples per period of the band's edge (inputs averaged over each new interval): the simulation is
+compared with the motion, not with the velocity estimate's noise, and the integrator takes as few
+steps as the motion needs. Each state's residual is divided by its measurement-noise level
+(`measurement_noise_std`): maximum likelihood under white measurement noise, which lets the
+precise encoder positions, not the noisy velocity estimate, decide.
 """
 
 import dataclasses
@@ -27,9 +30,12 @@ from .._model._extensions import Extended, RotorInertia
 from .._model._system import AbstractSystem
 from .._model._two_link import AbstractTwoLink
 from ._consistency import consistent_parametrisation, ConsistentParametrisation
-from ._defaults import choose_filter
+from ._defaults import choose_filter, measurement_noise_std
 from ._regressors import _split, parameter_vector, with_parameters
 from ._simulation_fit import fit_simulation_error, SimulationFit
+
+
+SAMPLES_PER_PERIOD = 40.0  # grid of the fit: samples per period of the signal band's edge
 
 
 class ConsistentSystem(AbstractSystem):
@@ -73,7 +79,7 @@ def with_elbow_rotor(system: AbstractSystem) -> AbstractSystem:
 @dataclasses.dataclass(frozen=True)
 class Refinement:
     """What `refine_by_simulation` did. Fields: `system` (refined), `names`, `estimate`,
-    `std_errors`, `initial_residual_rms` and `residual_rms` (scaled state residual at the start and
+    `std_errors` (through the parametrisation's Jacobian, ignoring correlations: indicative), `initial_residual_rms` and `residual_rms` (scaled state residual at the start and
     at the end), `steps`, `dt` and `segment_s` (the grid and segment length fitted)."""
 
     system: AbstractSystem
@@ -89,28 +95,36 @@ class Refinement:
     n_samples: int
 
 
-def motion_records(records: list[Trajectory]) -> tuple[list[Trajectory], float]:
-    """The records low-passed at their signal band and resampled to 20 samples per period of it.
+def motion_records(records: list[Trajectory], *, filtered: bool = True) -> tuple[list[Trajectory], float]:
+    """The records on a grid of about 40 samples per period of their signal band's edge.
 
-    **Returns:** `(records, dt)`; records without detectable noise are only resampled.
+    Each record (resampled at its median interval if irregular) is cut to every `d`-th sample,
+    `d` the integer nearest to that grid; its inputs become the mean over each block of `d`
+    samples (the same impulse as the recorded zero-order hold, without aliasing the torque noise);
+    with `filtered` its states are first low-passed at their signal band (`choose_filter`).
+
+    **Returns:** `(records, dt)`.
     """
-    choices = [choose_filter(r if r.is_uniform else resample(r, r.dt)) for r in records]
+    uniform = [r if r.is_uniform else resample(r, r.dt) for r in records]
+    choices = [choose_filter(r) for r in uniform]
     bands = [c.cutoff_hz for c in choices if c.cutoff_hz is not None]
-    finest = min(r.dt for r in records)
-    dt = max(finest, 1.0 / (20.0 * max(bands))) if bands else finest
-    out = []
-    for record, choice in zip(records, choices):
-        uniform = record if record.is_uniform else resample(record, record.dt)
-        if choice.cutoff_hz is not None:
-            xs = butterworth_filtfilt(uniform.ts, uniform.xs, cutoff_hz=choice.cutoff_hz, order=choice.order)
-            uniform = Trajectory(uniform.ts, xs, uniform.us, uniform.state_names, uniform.input_names,
-                                 uniform.system, uniform.source)
-        out.append(resample(uniform, dt) if dt > uniform.dt * 1.01 else uniform)
-    return out, dt
+    out, steps = [], []
+    for record, choice in zip(uniform, choices):
+        d = max(1, int(round(1.0 / (SAMPLES_PER_PERIOD * max(bands)) / record.dt))) if bands else 1
+        xs, us = np.asarray(record.xs), np.asarray(record.us)
+        if filtered and choice.cutoff_hz is not None:
+            xs = np.asarray(butterworth_filtfilt(record.ts, xs, cutoff_hz=choice.cutoff_hz, order=choice.order))
+        n = (len(record) // d) * d
+        us = us[:n].reshape(n // d, d, -1).mean(axis=1)
+        out.append(Trajectory(jnp.asarray(np.asarray(record.ts)[:n:d]), jnp.asarray(xs[:n:d]), jnp.asarray(us),
+                              record.state_names, record.input_names, record.system, record.source))
+        steps.append(d * record.dt)
+    return out, float(np.median(steps))
 
 
 def refine_by_simulation(
-    system: AbstractSystem, names: tuple[str, ...], records: list[Trajectory], method: SimulationFit
+    system: AbstractSystem, names: tuple[str, ...], records: list[Trajectory], method: SimulationFit,
+    *, filtered: bool = True,
 ) -> Refinement:
     """Refine a two-link arm's least-squares model by the output-error fit, consistent by construction.
 
@@ -133,9 +147,11 @@ def refine_by_simulation(
     wrapped = ConsistentSystem(parametrisation.phi(start), model, parametrisation, names)
     filter_spec = jax.tree.map(lambda _: False, wrapped)
     filter_spec = eqx.tree_at(lambda s: s.phi, filter_spec, True)
-    fitted, dt = motion_records(records)
+    fitted, dt = motion_records(records, filtered=filtered)
+    # Maximum likelihood under white measurement noise: each state weighted by its noise level.
+    noise = np.median(np.stack([measurement_noise_std(r if r.is_uniform else resample(r, r.dt)) for r in records]), axis=0)
     result = fit_simulation_error(
-        wrapped, fitted, filter_spec=filter_spec, segment_s=method.segment_s,
+        wrapped, fitted, filter_spec=filter_spec, state_scale=jnp.asarray(noise), segment_s=method.segment_s,
         fit_initial_states=method.fit_initial_states, continuity_weight=method.continuity_weight,
         rtol=method.rtol, atol=method.atol, max_steps=method.max_steps, simulation=method.simulation,
     )
@@ -144,6 +160,7 @@ def refine_by_simulation(
     # Standard errors through the parametrisation's Jacobian (delta method).
     jac = np.asarray(jax.jacfwd(parametrisation.theta)(result.system.phi))
     phi_std = np.asarray(result.std_errors)
-    std = np.sqrt(np.sum((jac * phi_std[None, :]) ** 2, axis=1))
+    with np.errstate(invalid="ignore"):  # an unidentified direction has an infinite standard error
+        std = np.sqrt(np.sum((jac * phi_std[None, :]) ** 2, axis=1))
     return Refinement(refined, names, estimate, std, float(result.initial_residual_rms), float(result.residual_rms),
                       float(result.relative_error), int(result.steps), dt, method.segment_s, result.n_samples)
