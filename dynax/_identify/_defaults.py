@@ -68,6 +68,9 @@ class FilterChoice:
         return dataclasses.asdict(self)
 
 
+MIN_SAMPLES = 128  # two Welch segments of 64 samples
+
+
 def noise_floor_and_band(ys: np.ndarray, sample_rate_hz: float, *, snr: float = 100.0) -> tuple[float, float]:
     r"""The white-noise floor of a signal's spectrum and the edge of its signal band.
 
@@ -132,6 +135,10 @@ def choose_filter(trajectory: Trajectory, *, snr: float = 100.0) -> FilterChoice
     fs = 1.0 / trajectory.dt
     nyquist = 0.5 * fs
     names = trajectory.state_names
+    order = next(o for o in range(1, 9) if _tail_ratio(o) < 0.1)
+    if len(trajectory) < MIN_SAMPLES:
+        return FilterChoice(None, order, 1, 1, fs, {}, {},
+                            f"{len(trajectory)} samples are too few for a spectrum (at least {MIN_SAMPLES}): no filter")
     n = len(names) // 2
     velocities = names[n:]
     bands, noise = {}, {}
@@ -140,7 +147,6 @@ def choose_filter(trajectory: Trajectory, *, snr: float = 100.0) -> FilterChoice
         bands[name] = band
         noise[name] = float(np.sqrt(max(floor, 0.0) * nyquist))
     band = max(bands.values())
-    order = next(o for o in range(1, 9) if _tail_ratio(o) < 0.1)
     negligible = []
     for k, name in enumerate(velocities):
         dq = np.asarray(trajectory.xs[:, n + k], dtype=float)

@@ -35,6 +35,7 @@ from ._regressors import _split, parameter_vector, with_parameters
 from ._simulation_fit import fit_simulation_error, SimulationFit
 
 
+BALANCE = True
 SAMPLES_PER_PERIOD = 40.0  # grid of the fit: samples per period of the signal band's edge
 
 
@@ -150,8 +151,12 @@ def refine_by_simulation(
     fitted, dt = motion_records(records, filtered=filtered)
     # Maximum likelihood under white measurement noise: each state weighted by its noise level.
     noise = np.median(np.stack([measurement_noise_std(r if r.is_uniform else resample(r, r.dt)) for r in records]), axis=0)
+    # Each record counts alike, whatever its amplitude: a large-amplitude (chaotic) run must not swamp the rest.
+    motion = np.array([float(np.sqrt(np.mean(np.square(np.asarray(r.xs[:, :2]) - np.mean(np.asarray(r.xs[:, :2]), 0)))))
+                       for r in fitted])
+    weights = (1.0 / motion) / np.mean(1.0 / motion) if BALANCE else None
     result = fit_simulation_error(
-        wrapped, fitted, filter_spec=filter_spec, state_scale=jnp.asarray(noise), segment_s=method.segment_s,
+        wrapped, fitted, filter_spec=filter_spec, state_scale=jnp.asarray(noise), record_weights=weights, segment_s=method.segment_s,
         fit_initial_states=method.fit_initial_states, continuity_weight=method.continuity_weight,
         rtol=method.rtol, atol=method.atol, max_steps=method.max_steps, simulation=method.simulation,
     )
