@@ -75,7 +75,8 @@ class Dynamic(eqx.Module):
     Every setting defaults to `"auto"`: chosen per record from the spectra of its velocities
     (noise floor and signal band, see `choose_filter`), and reported in
     `Identification.settings`. An explicit value overrides the choice; `lowpass_hz=None` means no
-    filter.
+    filter. With an explicit cut-off (your own recipe) the settings left at `"auto"` take their
+    classic values: order 4, inputs not filtered, `trim=1`, no decimation.
 
     **Arguments:**
 
@@ -333,12 +334,16 @@ def _resolve_dynamic(traj, method: Dynamic) -> dict:
     auto = [f for f in fields if isinstance(getattr(method, f), str) and getattr(method, f) == "auto"]
     settings = {f: getattr(method, f) for f in fields}
     reason = "explicit settings"
-    if auto:
+    if auto and settings["lowpass_hz"] != "auto":
+        # An explicit cut-off is the user's recipe: the rest keeps the classic values.
+        classic = {"lowpass_order": 4, "lowpass_inputs": False, "trim": 1, "decimate": 1}
+        settings.update({f: classic[f] for f in auto})
+        reason = f"explicit cut-off; {', '.join(auto)} at their classic values"
+        auto = []
+    elif auto:
         uniform = _uniform(traj)
         choice = choose_filter(uniform)
-        if settings["lowpass_hz"] == "auto":
-            settings["lowpass_hz"] = choice.cutoff_hz
-        cutoff = settings["lowpass_hz"]
+        settings["lowpass_hz"] = cutoff = choice.cutoff_hz
         if settings["lowpass_order"] == "auto":
             settings["lowpass_order"] = choice.order
         if settings["lowpass_inputs"] == "auto":
