@@ -225,3 +225,25 @@ def test_cli_identifies_raw_dfki_files_with_no_recipe_flags(datasets, tmp_path, 
     assert all(np.isfinite(report["validation"]["rmse"]))
     printed = capsys.readouterr().out
     assert "open-loop RMSE on validation records (output_error)" in printed
+
+
+def test_the_labs_geared_rotor_with_its_coupling_is_base_parameters_plus_elbow_rotor_inertia():
+    # The DFKI README's equations, written out here in numpy (not dynax): M11 = I1 + I2 + l1^2 m2
+    # + 2 l1 m2 r2 cos q2 + gr^2 Ir + Ir, M12 = I2 + l1 m2 r2 cos q2 - gr Ir, M22 = I2 + gr^2 Ir, Spong's C
+    # and G with lc = r, viscous friction. dynax's base parameters plus RotorInertia(1) must give the same
+    # inverse dynamics at random states, with the mapping the docs state.
+    m1, m2, l1, r1, r2, i1, i2, ir, gr, b1, b2, g = 0.64, 0.56, 0.2, 0.2, 0.32, 0.027, 0.054, 1e-4, 6.0, 0.01, 0.02, 9.81
+    rigid = dynax.DoublePendulum.from_base_parameters(dict(
+        theta1=i1 + l1**2 * m2 + (gr**2 + gr + 1) * ir, theta2=i2 - gr * ir, theta3=l1 * m2 * r2,
+        theta4=g * (m1 * r1 + m2 * l1), theta5=g * m2 * r2, theta6=b1, theta7=b2))
+    model = dynax.Extended(rigid, (dynax.RotorInertia(1, (gr**2 + gr) * ir),))
+    rng = np.random.default_rng(5)
+    for q1, q2, dq1, dq2, a1, a2 in rng.uniform(-3, 3, size=(20, 6)):
+        c2, s2 = np.cos(q2), np.sin(q2)
+        m = np.array([[i1 + i2 + l1**2 * m2 + 2 * l1 * m2 * r2 * c2 + gr**2 * ir + ir, i2 + l1 * m2 * r2 * c2 - gr * ir],
+                      [i2 + l1 * m2 * r2 * c2 - gr * ir, i2 + gr**2 * ir]])
+        c = np.array([-2 * m2 * l1 * r2 * s2 * dq1 * dq2 - m2 * l1 * r2 * s2 * dq2**2, m2 * l1 * r2 * s2 * dq1**2])
+        grav = np.array([g * (m1 * r1 + m2 * l1) * np.sin(q1) + g * m2 * r2 * np.sin(q1 + q2), g * m2 * r2 * np.sin(q1 + q2)])
+        tau = m @ [a1, a2] + c + grav + [b1 * dq1, b2 * dq2]
+        ddq = model.vector_field(0.0, jnp.array([q1, q2, dq1, dq2]), jnp.asarray(tau))[2:]
+        np.testing.assert_allclose(np.asarray(ddq), [a1, a2], rtol=1e-9, atol=1e-9)
