@@ -126,9 +126,9 @@ def main():
     results = {"samples": args.samples, "device": str(jax.devices()[0]), "jax": jax.__version__, "methods": {}}
     for name, (method, reference) in cases.items():
         start = time.perf_counter()
-        first = identify(system, data, method)
+        first = identify(system, data, method, refine=False, holdout=0, consistency="off")
         compile_s = time.perf_counter() - start
-        t_dynax, result = best_time(lambda: identify(system, data, method).estimate, args.repeats)
+        t_dynax, result = best_time(lambda: identify(system, data, method, refine=False, holdout=0, consistency="off").estimate, args.repeats)
         t_numpy, estimate = best_time(lambda: reference(ts, xs, us), args.repeats)
         agree = float(np.max(np.abs(np.asarray(result) - estimate) / np.abs(estimate)))
         results["methods"][name] = {

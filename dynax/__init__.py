@@ -1,6 +1,22 @@
 """dynax: differentiable dynamics, system identification, discrepancy diagnosis and control in JAX."""
 
 from ._identify import (
+    check_consistency as check_consistency,
+    choose_filter as choose_filter,
+    Consistency as Consistency,
+    consistency_conditions as consistency_conditions,
+    consistent_least_squares as consistent_least_squares,
+    ConsistentParametrisation as ConsistentParametrisation,
+    ConsistentSystem as ConsistentSystem,
+    FilterChoice as FilterChoice,
+    held_out_error as held_out_error,
+    HeldOutError as HeldOutError,
+    InconsistentEstimateWarning as InconsistentEstimateWarning,
+    measurement_noise_std as measurement_noise_std,
+    noise_floor_and_band as noise_floor_and_band,
+    refine_by_simulation as refine_by_simulation,
+    Refinement as Refinement,
+    split_for_validation as split_for_validation,
     Dynamic as Dynamic,
     dynamic_regressor as dynamic_regressor,
     Energy as Energy,

@@ -113,7 +113,11 @@ def check_command_output(args: argparse.Namespace) -> None:
     kind = OUTPUT_KIND.get(getattr(args, "command", None))
     if kind is None or getattr(args, "out", None) is None:
         return
-    check_output(args.out, kind=kind, inputs=[getattr(args, name, None) for name in INPUT_ARGUMENTS])
+    inputs = []
+    for name in INPUT_ARGUMENTS:  # a data argument may take several files (TRAIN..., --validation ...)
+        given = getattr(args, name, None)
+        inputs.extend(given if isinstance(given, (list, tuple)) else [given])
+    check_output(args.out, kind=kind, inputs=inputs)
 
 
 def _refuse_constant(what, path):

@@ -1,4 +1,9 @@
-"""`dynax identify SYSTEM DATA --out FILE.json`: fit a system's parameters to a measured record."""
+"""`dynax identify SYSTEM DATA... [--validation DATA...] --out FILE.json`: fit a system's parameters to measured records.
+
+With no recipe flags every filter setting is chosen from the data, the estimate is constrained to
+the physically consistent set, two-link arms on noisy (real) data are refined by the output-error
+fit, and the model is validated open loop on held-out data; all of it goes into the JSON.
+"""
 
 import argparse
 import time
@@ -23,19 +28,33 @@ def register(subparsers):
         ),
     )
     parser.add_argument("system", choices=_SYSTEMS, help="the system (its data columns are in the contract)")
-    parser.add_argument("data", help="CSV, NPZ or MAT file with t, the states and the inputs")
+    parser.add_argument("data", nargs="+", help="CSV, NPZ or MAT file(s) with t, the states and the inputs")
+    parser.add_argument("--validation", nargs="+", default=None, metavar="DATA",
+                        help="held-out file(s) for the open-loop validation (default: the last 20 %% of each DATA "
+                             "file is held out and not fitted)")
+    parser.add_argument("--holdout", type=float, default=None, metavar="FRACTION",
+                        help="fraction of each DATA file held out when no --validation is given (default 0.2; "
+                             "0 fits everything and reports no validation)")
     parser.add_argument("--method", choices=("energy", "power", "dynamic", "simulation"), default="dynamic",
                         help="identification model (default dynamic)")
     parser.add_argument("--friction", choices=("viscous", "coulomb"), default=None,
                         help="friction model (default: coulomb for linear_axis, viscous otherwise)")
     add_data_options(parser)
-    parser.add_argument("--lowpass", type=float, default=None, metavar="HZ",
+    parser.add_argument("--lowpass", default="auto", metavar="HZ|auto|none",
                         help="zero-phase Butterworth cut-off [Hz] applied before differentiating (dynamic), to the "
-                             "equations (power) or to the states (energy); default none")
-    parser.add_argument("--decimate", type=int, default=1, metavar="N",
-                        help="parallel decimation of the equations (dynamic, power; default 1)")
-    parser.add_argument("--trim", type=int, default=None, metavar="N",
-                        help="samples dropped at each end (dynamic, power; default 1)")
+                             "equations (power) or to the states (energy); dynamic default 'auto' (the velocities' "
+                             "signal band, from their spectra), power and energy default none")
+    parser.add_argument("--order", default="auto", metavar="N|auto",
+                        help="dynamic model: order of one filter pass (default auto)")
+    parser.add_argument("--decimate", default="auto", metavar="N|auto",
+                        help="parallel decimation of the equations (dynamic default auto, power default 1)")
+    parser.add_argument("--trim", default="auto", metavar="N|auto",
+                        help="samples dropped at each end (dynamic default auto, power default 1)")
+    parser.add_argument("--consistency", choices=("constrain", "check", "off"), default="constrain",
+                        help="physical consistency: fit over the consistent set when needed (default), only check "
+                             "and warn, or off")
+    parser.add_argument("--refine", choices=("auto", "yes", "no"), default="auto",
+                        help="output-error refinement after least squares (default auto: two-link arms on noisy data)")
     parser.add_argument("--inputs", choices=("held", "sampled"), default="held",
                         help="dynamic model: inputs as a zero-order hold (default) or as sampled measurements")
     parser.add_argument("--window", type=int, default=10, metavar="N", help="energy model: samples per window (default 10)")
@@ -45,26 +64,41 @@ def register(subparsers):
     parser.set_defaults(run=run)
 
 
+def _setting(value, flag, *, kind=int, minimum=0, allow_none=False):
+    """`auto`, `none` (where allowed) or a number >= `minimum`, else a UsageError naming the flag."""
+    text = str(value).strip().lower()
+    if text == "auto":
+        return "auto"
+    if allow_none and text == "none":
+        return None
+    try:
+        number = kind(text)
+    except ValueError:
+        raise UsageError(f"{flag} must be a number{', none' if allow_none else ''} or auto, got {value!r}") from None
+    if not number >= minimum or (kind is float and not number > 0):
+        raise UsageError(f"{flag} must be {'positive' if kind is float else f'at least {minimum}'}, got {value}")
+    return number
+
+
 def _method(args):
     from .._identify import Dynamic, Energy, Power, SimulationFit
 
-    if args.decimate < 1:
-        raise UsageError(f"--decimate must be at least 1, got {args.decimate}")
-    if args.trim is not None and args.trim < 0:
-        raise UsageError(f"--trim must be non-negative, got {args.trim}")
-    if args.lowpass is not None and not args.lowpass > 0:
-        raise UsageError(f"--lowpass must be a positive frequency in Hz, got {args.lowpass}")
+    lowpass = _setting(args.lowpass, "--lowpass", kind=float, allow_none=True)
+    order = _setting(args.order, "--order", minimum=1)
+    decimate = _setting(args.decimate, "--decimate", minimum=1)
+    trim = _setting(args.trim, "--trim", minimum=0)
     if args.window < 1:
         raise UsageError(f"--window must be at least 1 sample, got {args.window}")
     if not args.segment > 0:
         raise UsageError(f"--segment must be positive, got {args.segment}")
-    trim = 1 if args.trim is None else args.trim
     if args.method == "dynamic":
-        return Dynamic(lowpass_hz=args.lowpass, trim=trim, decimate=args.decimate, inputs=args.inputs)
+        return Dynamic(lowpass_hz=lowpass, lowpass_order=order, trim=trim, decimate=decimate, inputs=args.inputs)
+    plain = lambda value, default: default if value == "auto" else value  # noqa: E731
     if args.method == "power":
-        return Power(lowpass_hz=args.lowpass, trim=trim, decimate=args.decimate)
+        return Power(lowpass_hz=plain(lowpass, None), lowpass_order=plain(order, 4), trim=plain(trim, 1),
+                     decimate=plain(decimate, 1))
     if args.method == "energy":
-        return Energy(window=args.window, lowpass_hz=args.lowpass)
+        return Energy(window=args.window, lowpass_hz=plain(lowpass, None), lowpass_order=plain(order, 4))
     return SimulationFit(segment_s=args.segment)
 
 
@@ -95,19 +129,51 @@ def run(args: argparse.Namespace) -> int:
     method = _method(args)
     mapping, scale = data_options(args)
     out = output_file(args.out, "parameters.json")
+    if args.holdout is not None and not 0 <= args.holdout < 1:
+        raise UsageError(f"--holdout must be in [0, 1), got {args.holdout}")
+    if args.holdout is not None and args.validation:
+        raise UsageError("give either --validation files or --holdout, not both")
     start = time.perf_counter()
-    data = load_trajectory(args.data, args.system, mapping=mapping, scale=scale, min_samples=min_fit_samples())
-    result = identify(_system(args.system), data, method, friction=friction)
+    data = [load_trajectory(path, args.system, mapping=mapping, scale=scale, min_samples=min_fit_samples()) for path in args.data]
+    validation = None
+    if args.validation:
+        validation = [load_trajectory(path, args.system, mapping=mapping, scale=scale, min_samples=min_fit_samples())
+                      for path in args.validation]
+    refine = {"auto": "auto", "yes": True, "no": False}[args.refine]
+    if refine is True and args.system not in ("acrobot", "double_pendulum"):
+        raise UsageError(f"--refine yes is for acrobot and double_pendulum; use --method simulation for {args.system}")
+    result = identify(_system(args.system), data, method, friction=friction, consistency=args.consistency,
+                      refine=refine, validation=validation, holdout="auto" if args.holdout is None else args.holdout)
     report = result.to_json()
     if args.system == "helicopter":
         report.pop("friction")
     write_json(out, report)
     print(
         f"{args.system}, {report['method']} model, {report['n_samples']} samples: "
-        f"condition number {report['condition_number']:.3g}, relative error {float(result.relative_error):.3%}"
+        f"condition number {report['condition_number']:.3g}, relative equation error {float(result.relative_error):.3%}"
     )
     for name, value in report["parameters"].items():
         std = report["std_errors"].get(name)
         print(f"  {name:>8s} = {value:.6g}" + (f" +- {std:.2g}" if std is not None else ""))
+    for settings in result.settings:
+        if settings.get("chosen_from_data"):
+            print(f"  settings ({settings.get('record') or 'record'}): {settings['reason']}")
+    consistency = result.consistency
+    if consistency is not None:
+        if consistency.violated:
+            print("  physically INCONSISTENT: " + "; ".join(consistency.violated))
+        stages = result.stages or {}
+        enforced = stages.get("least_squares", {}).get("consistency", {}).get("active", [])
+        if enforced:
+            print("  consistency constraint active (the plain least-squares estimate broke: " + "; ".join(enforced) + ")")
+        elif not consistency.violated:
+            print("  physically consistent")
+    for stage, content in (result.stages or {}).items():
+        held = content.get("validation")
+        if held:
+            cells = ", ".join(f"{h:g} s: {r:.4g}" for h, r in zip(held["horizons_s"], held["rmse"]))
+            print(f"  open-loop RMSE on {held['source']} ({stage}): {cells}")
+    if result.validation is None:
+        print("  no held-out validation (nothing held out)")
     print(f"wrote {out} in {time.perf_counter() - start:.1f} s")
     return 0

@@ -1,3 +1,17 @@
+from ._consistency import (
+    check_consistency as check_consistency,
+    Consistency as Consistency,
+    consistency_conditions as consistency_conditions,
+    consistent_least_squares as consistent_least_squares,
+    ConsistentParametrisation as ConsistentParametrisation,
+    InconsistentEstimateWarning as InconsistentEstimateWarning,
+)
+from ._defaults import (
+    choose_filter as choose_filter,
+    FilterChoice as FilterChoice,
+    measurement_noise_std as measurement_noise_std,
+    noise_floor_and_band as noise_floor_and_band,
+)
 from ._identify import (
     Dynamic as Dynamic,
     Energy as Energy,
@@ -21,4 +35,14 @@ from ._simulation_fit import (
     fit_simulation_error as fit_simulation_error,
     SimulationFit as SimulationFit,
     SimulationFitResult as SimulationFitResult,
+)
+from ._refine import (
+    ConsistentSystem as ConsistentSystem,
+    refine_by_simulation as refine_by_simulation,
+    Refinement as Refinement,
+)
+from ._validation import (
+    held_out_error as held_out_error,
+    HeldOutError as HeldOutError,
+    split_for_validation as split_for_validation,
 )

@@ -2,7 +2,8 @@ r"""Weighted linear least squares with identifiability diagnostics (SVD).
 
 The regressor's columns are first scaled to unit norm, so the condition number and the numerical
 rank do not depend on the parameters' units; then the SVD $W^{1/2} A D^{-1} = U S V^\top$ gives the
-rank, the estimate and its covariance.
+rank, the estimate and its covariance. The SVD is of the regressor itself (through its QR
+factorisation), never of $A^\top A$, so float32 problems keep the accuracy of numpy's `lstsq`.
 Singular values below `rcond` times the largest mark directions of the (scaled) parameter space
 that the data do not determine; they are reported by name, as linear combinations of parameters.
 """
@@ -111,13 +112,13 @@ def _combination(direction, names, tol=1e-3):
 
 @jax.jit
 def _solve(a, y, w, rcond):
-    """Column-scaled weighted least squares via the SVD, at the numerical rank.
+    """Column-scaled weighted least squares by factoring the regressor itself (QR, then SVD of R).
 
-    The SVD of the column-scaled $W^{1/2}A$ comes from the eigendecomposition of its Gram matrix
-    ($S^2$, $V$): XLA's CPU QR of a tall matrix is far slower than a matrix product, and after
-    column scaling the Gram matrix is well enough conditioned for the ranks that `rcond` can tell
-    apart. One step of iterative refinement on the residual brings the estimate back to the accuracy
-    of a QR solve.
+    $W^{1/2} A D^{-1} = Q R$ (Householder), $R = U_R S V^\top$, so $W^{1/2} A D^{-1} = (Q U_R) S V^\top$
+    is the SVD of the scaled regressor, obtained without forming $A^\top A$ (which would square the
+    condition number and lose half the digits: in float32 two columns that differ by $10^{-3}$ of
+    their scale would not be told apart). The estimate is $V S^{+} (Q U_R)^\top W^{1/2} y$ at the
+    numerical rank.
     """
     m, n = a.shape
     sw = jnp.sqrt(w)
@@ -126,19 +127,16 @@ def _solve(a, y, w, rcond):
     scale = jnp.linalg.norm(aw, axis=0)
     scale = jnp.where(scale > 0, scale, 1.0)
     a_scaled = aw / scale
-    gram = a_scaled.T @ a_scaled
-    eigenvalues, v = jnp.linalg.eigh(gram)
-    order = jnp.argsort(eigenvalues)[::-1]
-    s = jnp.sqrt(jnp.clip(eigenvalues[order], 0.0, None))
-    vt = v[:, order].T
+    q, r = jnp.linalg.qr(a_scaled)
+    u_r, s, vt = jnp.linalg.svd(r)
     finite = jnp.all(jnp.isfinite(s)) & (s[0] > 0)
     rank = jnp.where(finite, jnp.sum(s > rcond * s[0]), 0)
     cond = jnp.where(finite & (s[-1] > 0), s[0] / jnp.where(s[-1] > 0, s[-1], 1.0), jnp.inf)
-    inv_s2 = jnp.where(jnp.arange(n) < rank, 1.0 / jnp.where(s > 0, s, 1.0) ** 2, 0.0)
-    pinv_gram = (vt.T * inv_s2) @ vt
-
-    z = pinv_gram @ (a_scaled.T @ yw)
-    z = z + pinv_gram @ (a_scaled.T @ (yw - a_scaled @ z))  # iterative refinement
+    keep = jnp.arange(n) < rank
+    inv_s = jnp.where(keep, 1.0 / jnp.where(s > 0, s, 1.0), 0.0)
+    projected = u_r.T @ (q.T @ yw)  # (Q U_R)^T W^{1/2} y
+    z = vt.T @ (inv_s * projected)
+    pinv_gram = (vt.T * inv_s**2) @ vt
     estimate = z / scale
     residual = aw @ estimate - yw
     dof = jnp.maximum(jnp.minimum(m, jnp.sum(w > 0)) - rank, 1)

@@ -91,17 +91,18 @@ def _segments(trajectories, segment_s):
     if shortest < 2:
         raise DataError(f"{shortest} samples are too few for a simulation fit")
     length = min(max(int(round(segment_s / dt)) + 1, 2), shortest)
-    ts, xs, us, follows = [], [], [], []
+    ts, xs, us, follows, owner = [], [], [], [], []
     n_samples = 0
-    for traj in trajectories:
+    for j, traj in enumerate(trajectories):
         starts = range(0, len(traj) - length + 1, length - 1)
         for k, s in enumerate(starts):
             ts.append(np.asarray(traj.ts[s : s + length]))
             xs.append(np.asarray(traj.xs[s : s + length]))
             us.append(np.asarray(traj.us[s : s + length]))
             follows.append(k > 0)
+            owner.append(j)
         n_samples += starts[-1] + length
-    return np.stack(ts), np.stack(xs), np.stack(us), np.asarray(follows), n_samples
+    return np.stack(ts), np.stack(xs), np.stack(us), np.asarray(follows), np.asarray(owner), n_samples
 
 
 class _Config(eqx.Module):
@@ -113,7 +114,7 @@ class _Config(eqx.Module):
 
 
 @eqx.filter_jit
-def _solve(fitted, fixed, ts, xs, us, sigma, link, continuity_weight, config: _Config):
+def _solve(fitted, fixed, ts, xs, us, sigma, link, continuity_weight, config: _Config, segment_weight):
     """Levenberg-Marquardt on the scaled unknowns; one compiled program per problem shape."""
     p0, unravel = jax.flatten_util.ravel_pytree(fitted)
     p0 = p0.astype(xs.dtype)
@@ -130,7 +131,7 @@ def _solve(fitted, fixed, ts, xs, us, sigma, link, continuity_weight, config: _C
         p, x0 = unpack(z)
         model = eqx.combine(unravel(p), fixed)
         sims = jax.vmap(lambda x0, t, u: simulate(model, x0, t, u, method=config.simulation, throw=False).xs)(x0, ts, us)
-        r = (sims - xs) / sigma
+        r = (sims - xs) / sigma * segment_weight[:, None, None]
         r = jnp.where(jnp.isfinite(r), r, 1e3)
         out = [r.reshape(-1)]
         if config.fit_initial_states and x0.shape[0] > 1:
@@ -159,6 +160,7 @@ def fit_simulation_error(
     atol: float = 1e-8,
     max_steps: int = 100,
     simulation: FixedGrid = FixedGrid(),
+    record_weights: Float[Array, " n_records"] | None = None,
 ) -> SimulationFitResult:
     r"""Fit the leaves of `system` selected by `filter_spec` by minimising the simulation error.
 
@@ -183,6 +185,7 @@ def fit_simulation_error(
     - `state_scale`: $\sigma$, shape `(n_states,)`.
     - `rtol`, `atol`, `max_steps`: Levenberg-Marquardt settings.
     - `simulation`: `FixedGrid` settings of the rollouts.
+    - `record_weights`: optional weight per trajectory multiplying its state residuals (default 1).
 
     **Returns:** a `SimulationFitResult`.
 
@@ -206,7 +209,7 @@ def fit_simulation_error(
     p0, unravel = jax.flatten_util.ravel_pytree(fitted)
     if p0.size == 0:
         raise UsageError("fit_simulation_error: `filter_spec` selects no array leaves to fit")
-    ts, xs, us, follows, n_samples = _segments(trajectories, segment_s)
+    ts, xs, us, follows, owner, n_samples = _segments(trajectories, segment_s)
     dtype = jnp.result_type(p0.dtype, xs.dtype)
     ts, xs, us = (jnp.asarray(a, dtype) for a in (ts, xs, us))
     p0 = p0.astype(dtype)
@@ -217,7 +220,12 @@ def fit_simulation_error(
     sigma = jnp.asarray(state_scale, dtype)
     link = jnp.asarray(follows[1:], dtype)  # segment s+1 continues segment s
     config = _Config(fit_initial_states, rtol, atol, max_steps, simulation)
-    z, r, r0, jac, steps = _solve(fitted, fixed, ts, xs, us, sigma, link, jnp.asarray(continuity_weight, dtype), config)
+    weight = np.ones(len(trajectories)) if record_weights is None else np.asarray(record_weights, dtype=float)
+    if weight.shape != (len(trajectories),) or not np.all(weight > 0):
+        raise UsageError(f"fit_simulation_error: `record_weights` must be {len(trajectories)} positive numbers")
+    segment_weight = jnp.asarray(weight[owner], dtype)
+    z, r, r0, jac, steps = _solve(fitted, fixed, ts, xs, us, sigma, link, jnp.asarray(continuity_weight, dtype), config,
+                                  segment_weight)
     p0, unravel = jax.flatten_util.ravel_pytree(fitted)
     p0 = p0.astype(dtype)
     p_scale = jnp.where(jnp.abs(p0) > 0, jnp.abs(p0), 1.0)

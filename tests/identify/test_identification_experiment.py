@@ -31,3 +31,22 @@ def test_quick_experiment_writes_results_and_figures(tmp_path):
     for key in ("fraction_within_2_std_errors", "exact_torque_fraction_within_2_std_errors"):
         assert 0.0 <= fit[key] <= 1.0
     assert fit["standardised_error_rms"] > 0 and fit["exact_torque_standardised_error_rms"] > 0
+
+
+@pytest.mark.slow  # about 1 to 4 minutes: one leave-one-run-out fold with the output-error refinement
+def test_dfki_default_identification_experiment_writes_a_consistent_fold(tmp_path):
+    subprocess.run(
+        [sys.executable, str(REPO / "experiments" / "dfki_default_identification.py"), "--runs", "05",
+         "--out", str(tmp_path)],
+        check=True,
+        cwd=REPO,
+        env={**__import__("os").environ, "PYTHONPATH": str(REPO)},
+    )
+    results = json.loads((tmp_path / "results.json").read_text())
+    fold = results["runs"]["05"]
+    assert fold["consistency"]["consistent"] and fold["least_squares_consistency"]["consistent"]
+    assert results["horizons_s"] == [0.1, 0.25, 0.5]
+    # both models are simulated on the same held-out windows; the errors grow with the horizon
+    for key in ("dynax", "dynax_least_squares", "lab_model_3.0"):
+        assert 0 < fold[key][0] < fold[key][1] < fold[key][2]
+    assert (tmp_path / "loro.png").stat().st_size > 10_000

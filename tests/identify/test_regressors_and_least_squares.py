@@ -87,3 +87,25 @@ def test_rank_deficiency_names_the_unidentified_combination():
     assert info.value.rank == 2
     assert info.value.unidentified == ("m + 2 b - c", "d")
     assert "d" in str(info.value) and "rank 2 of 4" in str(info.value)
+
+
+def test_float32_least_squares_is_as_accurate_as_numpy_lstsq():
+    # Two columns that differ by 1e-3 of their scale: the normal equations square the condition
+    # number (1e3 -> 1e6, at float32's resolution) and lose the difference; factoring A keeps it.
+    rng = np.random.default_rng(0)
+    m = 2000
+    base = rng.normal(size=m)
+    a = np.stack([base, base + 1e-3 * rng.normal(size=m), rng.normal(size=m)], axis=1)
+    theta = np.array([1.0, -2.0, 0.5])
+    y = a @ theta + 1e-6 * rng.normal(size=m)
+    a32, y32 = a.astype(np.float32), y.astype(np.float32)
+    reference = np.linalg.lstsq(a32, y32, rcond=None)[0]
+    fit = dynax.least_squares(jnp.asarray(a32), jnp.asarray(y32))
+    assert fit.estimate.dtype == jnp.float32
+    error_numpy = np.max(np.abs(reference - theta))
+    error_dynax = np.max(np.abs(np.asarray(fit.estimate, dtype=float) - theta))
+    # numpy's float32 lstsq gets the two nearly collinear coefficients to about 1e-3 here; dynax must
+    # do as well (within a factor 3), where the normal equations would be off by order one
+    assert error_dynax < 3 * max(error_numpy, 1e-4), (error_dynax, error_numpy)
+    gram = np.linalg.solve((a32.T @ a32).astype(np.float32), (a32.T @ y32).astype(np.float32))
+    assert np.max(np.abs(gram - theta)) > 10 * error_dynax  # the test can tell the two apart

@@ -1,0 +1,286 @@
+r"""Physical consistency of identified parameters: the conditions, a check, and a constrained fit.
+
+**Two-link arms** (`Acrobot`, `DoublePendulum`, base parameters of the contract). With
+$I_1 = I_{c1} + m_1 l_{c1}^2$, $I_2 = I_{c2} + m_2 l_{c2}^2$, $m_i > 0$, $I_{ci} \ge 0$, the base
+parameters satisfy
+
+- **rigid-body inertia**: $\begin{pmatrix}\theta_1 & \theta_3\\ \theta_3 & \theta_2\end{pmatrix}
+  \succeq 0$ with $\theta_2 > 0$, because $\theta_1\theta_2 - \theta_3^2 = I_1 I_2 + m_2 l_1^2 I_{c2}
+  \ge 0$ (it is $\theta_1 \ge m_2 l_1^2$, $\theta_2 \ge m_2 l_{c2}^2$ and $\theta_3 = m_2 l_1 l_{c2}$).
+  It is exactly the condition that the rigid-body mass matrix $M(q)$ is positive definite at *every*
+  elbow angle, since $\det M = \theta_1\theta_2 - \theta_3^2\cos^2 q_2$;
+- **hanging rest is stable**: $\theta_4 > 0$ and $\theta_5 > 0$. The contract measures $q$ from
+  hanging straight down; the potential $-\theta_4\cos q_1 - \theta_5\cos(q_1 + q_2)$ has a minimum
+  there iff its Hessian $\begin{pmatrix}\theta_4 + \theta_5 & \theta_5\\ \theta_5 & \theta_5
+  \end{pmatrix}$ is positive definite;
+- **link 1 has positive length**: $\theta_3 \ge 0$, since $g\theta_3/\theta_5 = l_1$;
+- **friction dissipates**: $\theta_6, \theta_7, f_{c1}, f_{c2} \ge 0$;
+- **rotor inertia**: $I_{r} \ge 0$. A geared motor's coupling term ($M_{12} \mathrel{-}= g_r I_r$,
+  $M_{11} \mathrel{+}= (g_r^2 + 1) I_r$, $M_{22} \mathrel{+}= g_r^2 I_r$, as in the DFKI lab's
+  equations) is absorbed exactly by the base parameters: $\theta_1 \mathrel{+}= (g_r^2 + g_r + 1) I_r$,
+  $\theta_2 \mathrel{-}= g_r I_r$ and $I_{r2} = (g_r^2 + g_r) I_r$ at the elbow. The conditions
+  above then hold for the rigid-body-plus-coupling part as long as $g_r I_r < I_2$ (the case for
+  quasi-direct drives; on the DFKI rig $g_r I_r = 0.0006$ against $I_2 = 0.054$).
+
+On top, `check_consistency` evaluates the whole model's mass matrix (with rotor inertia) at the
+data's configurations.
+
+**Linear axis**: mass $> 0$, viscous and Coulomb friction $\ge 0$; the offset is free.
+
+**The constrained fit** (`consistent_least_squares`) minimises the same weighted least-squares cost
+over the consistent set, a convex set (a 2x2 linear matrix inequality and sign constraints, the
+two-link reduction of Wensing, Kim and Slotine's LMI), through a parametrisation that is consistent
+by construction: every non-negative parameter is $s\,\mathrm{softplus}(\phi)$, and
+$\theta_1 = \theta_3^2/\theta_2 + s_1\mathrm{softplus}(\phi_1)$ (a positive Schur complement).
+The map is a diffeomorphism onto the interior of the set and the cost is convex in $\theta$, so a
+stationary point in $\phi$ is the global constrained minimum. It is solved by Levenberg-Marquardt
+(optimistix) on the $n$ residuals $S V^\top D\theta - U^\top W^{1/2} y$ of the regressor's SVD,
+which has the same minimiser as the full problem.
+
+??? cite
+
+    C. D. Sousa and R. Cortesão, "Physical feasibility of robot base inertial parameter
+    identification: a linear matrix inequality approach", Int. J. Robotics Research 33(6), 2014;
+    P. M. Wensing, S. Kim and J.-J. E. Slotine, "Linear matrix inequalities for physically
+    consistent inertial parameter identification: a statistical perspective on the mass
+    distribution", IEEE Robotics and Automation Letters 3(1), 2018.
+"""
+
+import dataclasses
+import warnings
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from .._model._extensions import Extended
+from .._model._linear_axis import LinearAxis
+from .._model._two_link import AbstractTwoLink
+
+
+class InconsistentEstimateWarning(UserWarning):
+    """An identified parameter set violates a physical-consistency condition."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Consistency:
+    """The outcome of `check_consistency` (and of the constrained fit).
+
+    **Fields:**
+
+    - `violated`: the conditions the estimate breaks, each as a sentence naming the parameters.
+    - `active`: the conditions the constrained fit had to enforce (those the unconstrained
+      estimate broke); empty when the constraint was not needed or not applied.
+    - `constrained`: whether the returned estimate comes from the constrained fit.
+    - `min_mass_eigenvalue`: the smallest eigenvalue of the model's mass matrix over the data's
+      configurations (`None` where not evaluated).
+    """
+
+    violated: tuple[str, ...]
+    active: tuple[str, ...] = ()
+    constrained: bool = False
+    min_mass_eigenvalue: float | None = None
+
+    @property
+    def consistent(self) -> bool:
+        return not self.violated
+
+    def to_json(self) -> dict:
+        return {"consistent": self.consistent, "violated": list(self.violated), "constraint_active": bool(self.active),
+                "active": list(self.active), "constrained": self.constrained,
+                "min_mass_eigenvalue": self.min_mass_eigenvalue}
+
+
+def _base(system):
+    return system.system if isinstance(system, Extended) else system
+
+
+_NON_NEGATIVE_PREFIXES = ("fc", "Ir", "b", "cd")  # Coulomb, rotor inertia, viscous, drag coefficients
+
+
+def _kinds(system, names):
+    """Per parameter: 'inertia1' (theta1, Schur complement), 'positive', 'nonnegative' or 'free'."""
+    base = _base(system)
+    kinds = []
+    for n in names:
+        if isinstance(base, AbstractTwoLink):
+            if n == "theta1":
+                kinds.append("inertia1")
+            elif n in ("theta2", "theta4", "theta5"):
+                kinds.append("positive")
+            elif n in ("theta3", "theta6", "theta7") or n.startswith(_NON_NEGATIVE_PREFIXES):
+                kinds.append("nonnegative")
+            else:
+                kinds.append("free")
+        elif isinstance(base, LinearAxis):
+            kinds.append({"mass": "positive", "viscous": "nonnegative", "coulomb": "nonnegative"}.get(n, "free"))
+        else:
+            kinds.append("free")
+    return tuple(kinds)
+
+
+def consistency_conditions(system, names: tuple[str, ...], theta) -> tuple[str, ...]:
+    """The physical-consistency conditions `theta` (named `names`) violates, as sentences.
+
+    **Arguments:** `system` (its type decides the conditions: two-link arm or linear axis,
+    optionally `Extended` with joint terms), `names`, `theta`.
+
+    **Returns:** a tuple of sentences, empty when consistent. Other systems have no conditions here.
+    """
+    p = {n: float(v) for n, v in zip(names, np.asarray(theta))}
+    base = _base(system)
+    out = []
+    if isinstance(base, AbstractTwoLink):
+        t1, t2, t3, t4, t5 = (p[f"theta{i}"] for i in range(1, 6))
+        if not t2 > 0:
+            out.append(f"rigid-body inertia: theta2 = {t2:.4g} must be positive (I2, the inertia of link 2 about the elbow)")
+        elif not t1 * t2 >= t3**2:
+            out.append(f"rigid-body inertia: theta1 * theta2 = {t1 * t2:.4g} must be at least theta3^2 = {t3**2:.4g} "
+                       "(else the mass matrix is singular or indefinite at some elbow angle)")
+        if not t4 > 0:
+            out.append(f"gravity: theta4 = {t4:.4g} must be positive (hanging straight down is the stable rest)")
+        if not t5 > 0:
+            out.append(f"gravity: theta5 = {t5:.4g} must be positive (hanging straight down is the stable rest)")
+        if not t3 >= 0:
+            out.append(f"geometry: theta3 = {t3:.4g} must be non-negative (g theta3 / theta5 is the length of link 1)")
+    for n, kind in zip(names, _kinds(system, names)):
+        if kind == "nonnegative" and not n.startswith("theta") and not p[n] >= 0:
+            what = "friction" if n.startswith(("fc", "b", "cd", "viscous", "coulomb")) else "rotor inertia"
+            out.append(f"{what}: {n} = {p[n]:.4g} must be non-negative")
+        elif isinstance(base, AbstractTwoLink) and n in ("theta6", "theta7") and not p[n] >= 0:
+            out.append(f"friction: {n} = {p[n]:.4g} (viscous) must be non-negative")
+        elif isinstance(base, LinearAxis) and kind == "positive" and not p[n] > 0:
+            out.append(f"inertia: {n} = {p[n]:.4g} must be positive")
+        elif isinstance(base, LinearAxis) and kind == "nonnegative" and n in ("viscous", "coulomb") and not p[n] >= 0:
+            out.append(f"friction: {n} = {p[n]:.4g} must be non-negative")
+    return tuple(dict.fromkeys(out))
+
+
+def min_mass_eigenvalue(system, qs) -> float:
+    """The smallest eigenvalue of the model's mass matrix (with its terms' inertia) over configurations `qs`."""
+    base = _base(system)
+    terms = system.joint_terms if isinstance(system, Extended) else ()
+
+    def mass(q):
+        m = base.mass_matrix(q)
+        for t in terms:
+            m = m.at[t.joint, t.joint].add(t.inertia())
+        return jnp.linalg.eigvalsh(m)[0]
+
+    return float(jnp.min(jax.vmap(mass)(jnp.asarray(qs))))
+
+
+def check_consistency(system, names, theta, qs=None, *, warn: bool = True) -> Consistency:
+    """Check an estimate against the physical-consistency conditions; warn when it breaks one.
+
+    **Arguments:** `system` carrying the estimate (for the mass matrix at `qs`), `names`, `theta`,
+    `qs` the data's joint configurations `(time, n_joints)` (optional), `warn` whether to emit an
+    `InconsistentEstimateWarning` naming each violated condition.
+
+    **Returns:** a `Consistency`.
+    """
+    violated = list(consistency_conditions(system, names, theta))
+    eigenvalue = None
+    if qs is not None and isinstance(_base(system), AbstractTwoLink):
+        eigenvalue = min_mass_eigenvalue(system, qs)
+        if not eigenvalue > 0:
+            violated.append(f"mass matrix: not positive definite at the data's configurations "
+                            f"(smallest eigenvalue {eigenvalue:.4g})")
+    if violated and warn:
+        warnings.warn("physically inconsistent estimate: " + "; ".join(violated), InconsistentEstimateWarning,
+                      stacklevel=3)
+    return Consistency(tuple(violated), min_mass_eigenvalue=eigenvalue)
+
+
+def _softplus_inverse(x):
+    return x + jnp.log(-jnp.expm1(-x))
+
+
+class ConsistentParametrisation(eqx.Module):
+    r"""The map $\phi \mapsto \theta$ onto the interior of the consistent set (see the module notes).
+
+    **Fields:** `kinds` per parameter (`"inertia1"`, `"positive"`, `"nonnegative"`, `"free"`),
+    `scale` per parameter (the natural size $s$), and the indices of $\theta_2, \theta_3$.
+    """
+
+    scale: jax.Array
+    kinds: tuple[str, ...] = eqx.field(static=True)
+    i2: int = eqx.field(static=True)
+    i3: int = eqx.field(static=True)
+
+    def theta(self, phi):
+        values = []
+        for i, kind in enumerate(self.kinds):
+            values.append(self.scale[i] * (phi[i] if kind == "free" else jax.nn.softplus(phi[i])))
+        theta = jnp.stack(values)
+        if "inertia1" in self.kinds:
+            i1 = self.kinds.index("inertia1")
+            theta = theta.at[i1].add(theta[self.i3] ** 2 / theta[self.i2])
+        return theta
+
+    def phi(self, theta, floor=1e-3):
+        """A point whose image is `theta` pushed into the interior (each bound parameter at least `floor * scale`)."""
+        theta = jnp.asarray(theta)
+        s = self.scale
+        lifted = theta
+        if "inertia1" in self.kinds:
+            i1 = self.kinds.index("inertia1")
+            t2 = jnp.maximum(theta[self.i2], floor * s[self.i2])
+            t3 = jnp.maximum(theta[self.i3], floor * s[self.i3])
+            lifted = lifted.at[i1].add(-(t3**2) / t2)
+        out = []
+        for i, kind in enumerate(self.kinds):
+            if kind == "free":
+                out.append(lifted[i] / s[i])
+            else:
+                out.append(_softplus_inverse(jnp.maximum(lifted[i] / s[i], floor)))
+        return jnp.stack(out)
+
+
+def consistent_parametrisation(system, names, scale) -> ConsistentParametrisation:
+    """The `ConsistentParametrisation` of `system`'s parameters `names`, with natural sizes `scale`."""
+    kinds = _kinds(system, names)
+    i2 = names.index("theta2") if "theta2" in names else 0
+    i3 = names.index("theta3") if "theta3" in names else 0
+    return ConsistentParametrisation(jnp.asarray(scale), kinds, i2, i3)
+
+
+@eqx.filter_jit
+def _constrained_solve(parametrisation, reduced, projected, col_scale, phi0, max_steps):
+    def residuals(phi, _):
+        return reduced @ (parametrisation.theta(phi) * col_scale) - projected
+
+    solver = optx.LevenbergMarquardt(rtol=1e-10, atol=1e-12)
+    solution = optx.least_squares(residuals, solver, phi0, max_steps=max_steps, throw=False)
+    return solution.value, solution.result == optx.RESULTS.successful
+
+
+def consistent_least_squares(system, names, a, y, weights=None, start=None, *, max_steps: int = 500):
+    r"""Weighted least squares over the physically consistent set of `system`'s parameters.
+
+    **Arguments:** `system` and `names` (which parameters, which conditions), regressor `a`
+    `(rows, n)`, target `y`, optional row `weights`, optional `start` (an estimate to start from,
+    pushed into the interior; default the unconstrained solution).
+
+    **Returns:** `(theta, converged)`: the constrained estimate and whether Levenberg-Marquardt met
+    its tolerance within `max_steps`.
+    """
+    a = jnp.asarray(a)
+    y = jnp.asarray(y)
+    w = jnp.ones(a.shape[0], a.dtype) if weights is None else jnp.asarray(weights, a.dtype)
+    sw = jnp.sqrt(w)
+    aw, yw = a * sw[:, None], y * sw
+    col = jnp.linalg.norm(aw, axis=0)
+    col = jnp.where(col > 0, col, 1.0)
+    q, r = jnp.linalg.qr(aw / col)
+    projected = q.T @ yw
+    if start is None:
+        start = jnp.linalg.lstsq(r, projected)[0] / col
+    # Natural size of each parameter: the value at which its column alone would explain the target.
+    scale = jnp.linalg.norm(yw) / col / np.sqrt(len(names))
+    scale = jnp.where(jnp.abs(start) > scale * 1e-2, jnp.abs(start), scale)
+    parametrisation = consistent_parametrisation(system, names, scale)
+    phi, converged = _constrained_solve(parametrisation, r, projected, col, parametrisation.phi(start), max_steps)
+    return parametrisation.theta(phi), bool(converged)

@@ -1,0 +1,173 @@
+r"""Filter and derivative settings chosen from the data: noise level and signal band from spectra.
+
+The least-squares models differentiate measured velocities; how hard to low-pass them is a property
+of the record, not of the method. For each velocity channel the Welch power spectral density is
+estimated; its **noise floor** is the median density over the upper half of the band (measurement
+noise is white there, the motion of a mechanical system is not), and the **signal band** ends at the
+highest frequency whose density still stands `snr` times above that floor. From these:
+
+- cut-off $f_c$: the widest signal band over the velocity channels (no motion the data show is cut);
+- order: the smallest Butterworth order $n$ (one pass; the filter runs forward and backward) at
+  which the *differentiated* white noise let through above $f_c$ is under 10 % of the differentiated
+  noise inside the band: $\int_1^\infty x^2 (1 + x^{2n})^{-2} dx < 0.1 \int_0^1 x^2 dx$;
+- trim: one cut-off period $f_s / f_c$ of samples at each end, where the zero-phase filter's
+  transient lives;
+- decimation: the filtered equations carry nothing above $f_c$, so they are decimated (in parallel)
+  to a Nyquist frequency of twice the cut-off, $\lfloor f_s / (4 f_c) \rfloor$, at most 13 (scipy's
+  single-stage limit).
+
+A record whose velocity noise is negligible gets no filter: when the noise the floor implies,
+differenced into $\ddot q$ ($\sigma f_s/\sqrt 2$ for a central difference), is under 1 % of the
+acceleration's rms, the errors-in-variables bias it causes (of the order of its square) is under
+$10^{-4}$ and filtering would only distort the model (simulated data fall here: their "floor" is
+the spectral tail of the motion itself).
+
+??? cite
+
+    P. D. Welch, "The use of fast Fourier transform for the estimation of power spectra", IEEE
+    Trans. Audio and Electroacoustics 15(2), 1967; M. Gautier, "Dynamic identification of robots with
+    power model", Proc. IEEE ICRA 1997 (cut-off a few times the motion's bandwidth, parallel
+    decimation).
+"""
+
+import dataclasses
+
+import numpy as np
+
+from .._data._trajectory import Trajectory
+
+
+@dataclasses.dataclass(frozen=True)
+class FilterChoice:
+    """The settings `choose_filter` picked for one record, and why.
+
+    **Fields:**
+
+    - `cutoff_hz`: Butterworth cut-off [Hz], or `None` when no noise was detected (no filter).
+    - `order`: filter order of one pass.
+    - `trim`: samples dropped at each end.
+    - `decimate`: parallel decimation factor.
+    - `sample_rate_hz`: the record's (median) sample rate.
+    - `band_hz`: per velocity channel, the highest frequency with signal above the noise.
+    - `noise_std`: per velocity channel, the white-noise standard deviation the floor implies.
+    - `reason`: one sentence for reports.
+    """
+
+    cutoff_hz: float | None
+    order: int
+    trim: int
+    decimate: int
+    sample_rate_hz: float
+    band_hz: dict[str, float]
+    noise_std: dict[str, float]
+    reason: str
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+MIN_SAMPLES = 128  # two Welch segments of 64 samples
+
+
+def noise_floor_and_band(ys: np.ndarray, sample_rate_hz: float, *, snr: float = 100.0) -> tuple[float, float]:
+    r"""The white-noise floor of a signal's spectrum and the edge of its signal band.
+
+    **Arguments:** `ys` samples on a uniform grid, shape `(time,)`; `sample_rate_hz`; `snr`, the
+    factor by which the density must exceed the floor to count as signal (default 100, 20 dB: far
+    above the scatter of a Welch estimate averaged over many segments).
+
+    **Returns:** `(floor, band_hz)`: the one-sided density of the floor [unit^2/Hz] and the highest
+    frequency whose density exceeds `snr * floor` (the Nyquist frequency when there is no floor
+    above round-off).
+    """
+    ys = np.asarray(ys, dtype=float)
+    nperseg = int(min(len(ys), max(64, 2 ** int(np.floor(np.log2(len(ys) / 8))))))
+    import scipy.signal  # lazily: keeps `import dynax` light
+
+    f, p = scipy.signal.welch(ys - ys.mean(), fs=sample_rate_hz, nperseg=nperseg)
+    nyquist = 0.5 * sample_rate_hz
+    floor = float(np.median(p[f > 0.5 * nyquist]))
+    peak = float(np.max(p[1:])) if len(p) > 1 else 0.0
+    # No floor: the upper half of the band is round-off (relative 1e-20 in power, well below any sensor).
+    if not floor > 1e-20 * peak:
+        return floor, nyquist
+    above = f[(p > snr * floor) & (f > 0)]
+    return floor, float(above.max()) if above.size else float(f[1])
+
+
+def measurement_noise_std(trajectory: Trajectory) -> np.ndarray:
+    """Per state column, the standard deviation of the white measurement noise its spectrum's floor implies.
+
+    A column without a floor above round-off gets `1e-6` of its own standard deviation (a floor for
+    weights built from it).
+    """
+    fs = 1.0 / trajectory.dt
+    out = []
+    for k in range(trajectory.xs.shape[1]):
+        column = np.asarray(trajectory.xs[:, k], dtype=float)
+        floor, _ = noise_floor_and_band(column, fs)
+        out.append(max(np.sqrt(max(floor, 0.0) * 0.5 * fs), 1e-6 * float(np.std(column)), 1e-12))
+    return np.asarray(out)
+
+
+def _tail_ratio(order: int) -> float:
+    import scipy.integrate
+
+    tail = scipy.integrate.quad(lambda x: x**2 / (1 + x ** (2 * order)) ** 2, 1, np.inf)[0]
+    return tail / (1.0 / 3.0)
+
+
+def trim_and_decimation(sample_rate_hz: float, cutoff_hz: float, n_samples: int) -> tuple[int, int]:
+    """Samples to trim (one cut-off period) and the parallel decimation factor (Nyquist at twice the
+    cut-off, at most 13) for a filter at `cutoff_hz`; both reduced on short records so that at least
+    half of the record and 28 rows per decimation step remain."""
+    trim = int(min(np.ceil(sample_rate_hz / cutoff_hz), n_samples // 4))
+    decimate = int(max(1, min(13, np.floor(sample_rate_hz / (4 * cutoff_hz)), (n_samples - 2 * trim) // 28)))
+    return trim, decimate
+
+
+def choose_filter(trajectory: Trajectory, *, snr: float = 100.0) -> FilterChoice:
+    """Pick the low-pass cut-off, order, trim and decimation for the dynamic model from one record.
+
+    **Arguments:** `trajectory` (resampled to its median interval first if irregular), `snr` as in
+    `noise_floor_and_band`.
+
+    **Returns:** a `FilterChoice` (see the module notes for the rules).
+    """
+    fs = 1.0 / trajectory.dt
+    nyquist = 0.5 * fs
+    names = trajectory.state_names
+    order = next(o for o in range(1, 9) if _tail_ratio(o) < 0.1)
+    if len(trajectory) < MIN_SAMPLES:
+        return FilterChoice(None, order, 1, 1, fs, {}, {},
+                            f"{len(trajectory)} samples are too few for a spectrum (at least {MIN_SAMPLES}): no filter")
+    n = len(names) // 2
+    velocities = names[n:]
+    bands, noise = {}, {}
+    for k, name in enumerate(velocities):
+        floor, band = noise_floor_and_band(np.asarray(trajectory.xs[:, n + k]), fs, snr=snr)
+        bands[name] = band
+        noise[name] = float(np.sqrt(max(floor, 0.0) * nyquist))
+    band = max(bands.values())
+    negligible = []
+    for k, name in enumerate(velocities):
+        dq = np.asarray(trajectory.xs[:, n + k], dtype=float)
+        accel_rms = np.sqrt(np.mean(((dq[2:] - dq[:-2]) * 0.5 * fs) ** 2))
+        noise_accel = noise[name] * fs / np.sqrt(2.0)
+        signal = np.sqrt(max(accel_rms**2 - noise_accel**2, 0.0))
+        negligible.append(noise_accel < 0.01 * signal)
+    if all(negligible):
+        return FilterChoice(None, order, 1, 1, fs, bands, noise,
+                            "velocity noise negligible (differenced into accelerations it is under 1 % of their rms): "
+                            "no filter")
+    if band >= 0.5 * nyquist:
+        return FilterChoice(None, order, 1, 1, fs, bands, noise,
+                            f"no noise floor below {0.5 * nyquist:.3g} Hz in the velocities: no filter")
+    trim, decimate = trim_and_decimation(fs, band, len(trajectory))
+    worst = max(noise, key=noise.get)
+    reason = (
+        f"velocity signal band ends at {band:.3g} Hz (density {snr:g} x above the noise floor; "
+        f"noisiest channel {worst}, {noise[worst]:.3g} rms): order-{order} zero-phase Butterworth at "
+        f"{band:.3g} Hz, {trim} samples trimmed (one cut-off period), parallel decimation by {decimate}"
+    )
+    return FilterChoice(band, order, trim, decimate, fs, bands, noise, reason)
