@@ -30,6 +30,7 @@ from .._data._derivatives import savitzky_golay
 from .._model._extensions import Extended
 from .._model._helicopter import BODY, BODY_AXES, Helicopter, QUATERNION, quaternion_to_rotation
 from .._model._system import AbstractManipulator
+from ._probe import cross_validated_ridge, ridge_fit
 
 
 def _sg_window(dt: float) -> int:
@@ -194,7 +195,7 @@ def structure_test(model, train, validation, *, alpha: float = 0.01, min_r2: flo
     nominal = model.system if isinstance(model, Extended) else model
     train = list(train) if isinstance(train, (list, tuple)) else [train]
     validation = list(validation) if isinstance(validation, (list, tuple)) else [validation]
-    feats, resid, times = [], [], []
+    feats, resid, times, sizes = [], [], [], []
     for records in (train, validation):
         parts = [acceleration_residuals(model, traj) for traj in records]
         phis = [probe_features(nominal, xs, np.asarray(traj.us)[keep], pred, traj.dt) for traj, (_, xs, pred, keep) in zip(records, parts)]
@@ -202,6 +203,7 @@ def structure_test(model, train, validation, *, alpha: float = 0.01, min_r2: flo
         feats.append(np.concatenate([phi for phi, _ in phis]))
         resid.append(np.concatenate([r for r, *_ in parts]))
         times.append(np.concatenate([np.asarray(traj.ts)[keep] for traj, (*_, keep) in zip(records, parts)]))
+        sizes.append([r.shape[0] for r, *_ in parts])
     scale = resid[0].std(axis=0) + 1e-12
     mu, sd = feats[0].mean(axis=0), feats[0].std(axis=0)
     sd[sd == 0] = 1.0
@@ -209,17 +211,26 @@ def structure_test(model, train, validation, *, alpha: float = 0.01, min_r2: flo
     Phi_tr, Phi_va = (feats[0] - mu) / sd, (feats[1] - mu) / sd
     Phi_tr[:, -1], Phi_va[:, -1] = 1.0, 1.0
     R_tr, R_va = resid[0] / scale, resid[1] / scale
-    ridge = 1e-3 * Phi_tr.shape[0]  # standardised features: a mild ridge keeps the probe from extrapolating wildly
-    beta = np.linalg.solve(Phi_tr.T @ Phi_tr + ridge * np.eye(Phi_tr.shape[1]), Phi_tr.T @ R_tr)
+    # The ridge strength by leave-one-run-out cross-validation: only structure that transfers to a
+    # run the probe was not fitted on counts (see `cross_validated_ridge`).
+    strength, _ = cross_validated_ridge(Phi_tr, R_tr, sizes[0])
+    beta = ridge_fit(Phi_tr, R_tr, strength)
     E_va = R_va - Phi_va @ beta
     sse0 = (R_va**2).sum(axis=1)
     sse1 = (E_va**2).sum(axis=1)
     r2 = float(1 - sse1.sum() / sse0.sum())
     block = max(1, int(round(block_s / validation[0].dt)))
-    nb = len(sse0) // block
-    b0 = sse0[: nb * block].reshape(nb, block).sum(axis=1)
-    b1 = sse1[: nb * block].reshape(nb, block).sum(axis=1)
-    d = (b0 - b1) / b0.mean()  # per-block improvement; a log ratio would let near-empty blocks dominate
+    b0, b1, t_blocks, start = [], [], [], 0
+    for size in sizes[1]:  # blocks never cross a run boundary
+        nb_run = size // block
+        sl = slice(start, start + nb_run * block)
+        b0.append(sse0[sl].reshape(nb_run, block).sum(axis=1))
+        b1.append(sse1[sl].reshape(nb_run, block).sum(axis=1))
+        t_blocks.append(times[1][sl][::block])
+        start += size
+    b0, b1, t_blocks = np.concatenate(b0), np.concatenate(b1), np.concatenate(t_blocks)
+    nb = b0.size
+    d = (b0 - b1) / b0.mean() if nb else np.zeros(0)  # per-block improvement; a log ratio would let near-empty blocks dominate
     if nb >= 3 and d.std(ddof=1) > 0:
         t = d.mean() / (d.std(ddof=1) / np.sqrt(nb))
         p = float(scipy.stats.t.sf(t, nb - 1))
@@ -230,7 +241,6 @@ def structure_test(model, train, validation, *, alpha: float = 0.01, min_r2: flo
     share[-1] = 0.0
     share = share / max(share.sum(), 1e-300)
     order = np.argsort(share)[::-1][:4]
-    t_blocks = times[1][: nb * block : block] if nb else np.zeros(0)
     worst = np.argsort(b0)[::-1][:3] if nb else []
     vel_names = [nominal.state_names[i] for i in velocity_indices(nominal)]
     energy = (R_va**2).sum(axis=0)
