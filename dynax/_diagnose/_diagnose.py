@@ -20,6 +20,8 @@ from ._screening import screen
 from ._statistics import benjamini_hochberg, detectable_gain, helps_on_most_runs, log_ratio_differences, paired_block_test
 
 
+MIN_BATCHES = 10  # the data-driven reference horizon leaves the paired test at least this many batches
+
 _CONTRACT_NAMES = {"Acrobot": "acrobot", "DoublePendulum": "double_pendulum", "LinearAxis": "linear_axis", "Helicopter": "helicopter"}
 
 
@@ -509,7 +511,11 @@ def _horizon_grid(horizons_s, reference_horizon_s, train_records, validation_rec
         if reference_horizon_s not in horizons:
             horizons = np.sort(np.append(horizons, reference_horizon_s))
         return horizons, np.asarray([reference_horizon_s])
-    longest = min(horizons.max(), 0.5 * min(r.duration for r in train_records))
+    # The paired test compares batches of windows twice the horizon long: a horizon of at most a
+    # twentieth of the held-out time leaves it at least ten batches (their *length* is looked at,
+    # never their errors).
+    held_out_s = sum(r.duration for r in validation_records)
+    longest = min(horizons.max(), 0.5 * min(r.duration for r in train_records), held_out_s / MIN_BATCHES / 2)
     candidates_s = np.round(np.arange(0.1, longest + 1e-9, 0.05), 6)
     return horizons, candidates_s if candidates_s.size else np.asarray([horizons.min()])
 

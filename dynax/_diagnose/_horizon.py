@@ -19,7 +19,7 @@ choice cannot favour a candidate.
 
 import numpy as np
 
-DEFAULT_FRACTION = 0.25
+DEFAULT_FRACTION = 0.1
 
 
 class Horizon:

@@ -27,7 +27,7 @@ import numpy as np
 import scipy.stats
 
 from .._data._derivatives import savitzky_golay
-from .._model._extensions import Extended
+from .._model._extensions import Extended, InputDelay
 from .._model._helicopter import BODY, BODY_AXES, Helicopter, QUATERNION, quaternion_to_rotation
 from .._model._system import AbstractManipulator
 from ._probe import cross_validated_ridge, ridge_fit
@@ -65,7 +65,7 @@ def _hidden_trajectory(model, ts, us):
 
 
 @eqx.filter_jit
-def _predicted_accelerations(model, ts, xs_smooth, us, idx):
+def _predicted_accelerations(model, ts, xs_smooth, us, idx, us_before):
     """The model's acceleration at each sample: the mean of its left and right limits under the held input.
 
     The input is a zero-order hold, so the true acceleration jumps at every sample: at t_k it is
@@ -73,7 +73,6 @@ def _predicted_accelerations(model, ts, xs_smooth, us, idx):
     """
     zs = _hidden_trajectory(model, ts, us)
     full = jnp.concatenate([xs_smooth, zs], axis=1)
-    us_before = jnp.concatenate([us[:1], us[:-1]])
     field = jax.vmap(lambda t, x, u: model.vector_field(t, x, u))
     return 0.5 * (field(ts, full, us) + field(ts, full, us_before))[:, idx]
 
@@ -96,6 +95,51 @@ def velocity_indices(system) -> list[int]:
     return list(range(system.n_states))
 
 
+def _held_average(ts, u, a, b):
+    """The mean of the zero-order-hold signal `u` (held from each sample time) over `[a, b]` (arrays of times)."""
+    cumulative = np.concatenate([[0.0], np.cumsum(u[:-1] * np.diff(ts))])
+
+    def integral(s):
+        i = np.clip(np.searchsorted(ts, s, side="right") - 1, 0, len(ts) - 1)
+        return cumulative[i] + u[i] * (s - ts[i])  # before the record: the first value held back in time
+
+    return (integral(b) - integral(a)) / (b - a)
+
+
+def exact_delays(model, trajectory):
+    """Run an active input delay as the dead time it stands for, not as its Pade filter.
+
+    A model found with `input_delay` simulates it with a Pade approximant, which passes a held
+    input's every step through at once (its high-frequency gain is one) and then rings. Judged on
+    one-step residuals, that model would still show `du/dt` structure where the rig has a pure
+    dead time. Here each delay that acts first on its input is replaced by the recorded input
+    itself, shifted by the delay: the held input's mean over the sample interval centred on
+    `t - T` (what the left and right limits average to at `T` a whole number of samples, and
+    continuous in `T` in between), and the term is set to zero delay (it then passes the shifted
+    input through).
+
+    **Returns:** `(model, us, us_before)`: the model to evaluate, and the input's right and left
+    limits at each sample (equal, the interval mean, for a delayed input).
+    """
+    ts = np.asarray(trajectory.ts)
+    us = np.array(trajectory.us)
+    us_before = np.concatenate([us[:1], us[:-1]])
+    if not isinstance(model, Extended):
+        return model, jnp.asarray(us), jnp.asarray(us_before)
+    first_on_input = {}
+    for term in model.input_terms:
+        first_on_input.setdefault(term.input, term)
+    half = 0.5 * float(np.median(np.diff(ts)))
+    for k, term in enumerate(model.terms):
+        if not isinstance(term, InputDelay) or first_on_input.get(term.input) is not term or not float(term.coefficient) > 0:
+            continue
+        centre = ts - float(term.coefficient)
+        mean = _held_average(ts, np.asarray(trajectory.us)[:, term.input], centre - half, centre + half)
+        us[:, term.input] = us_before[:, term.input] = mean
+        model = eqx.tree_at(lambda m: m.terms[k].coefficient, model, jnp.zeros_like(term.coefficient))
+    return model, jnp.asarray(us, trajectory.us.dtype), jnp.asarray(us_before, trajectory.us.dtype)
+
+
 def acceleration_residuals(model, trajectory):
     """One-step acceleration residuals of `model` on `trajectory`.
 
@@ -108,7 +152,8 @@ def acceleration_residuals(model, trajectory):
     xs_smooth = savitzky_golay(ts, trajectory.xs, window=w, order=3)
     idx = velocity_indices(nominal)
     measured = savitzky_golay(ts, trajectory.xs[:, idx], window=w, order=3, deriv=1)
-    predicted = _predicted_accelerations(model, ts, xs_smooth, trajectory.us, jnp.asarray(idx))
+    model, us, us_before = exact_delays(model, trajectory)
+    predicted = _predicted_accelerations(model, ts, xs_smooth, us, jnp.asarray(idx), us_before)
     # The measured acceleration is a local polynomial fit; smoothing the prediction with the same
     # filter compares like with like.
     predicted = savitzky_golay(ts, predicted, window=w, order=3)
@@ -117,7 +162,7 @@ def acceleration_residuals(model, trajectory):
         # acceleration jump at every sample, and a stiff flight controller moves the input every
         # sample): compare velocity *increments* over each interval, integrated under the held
         # input, and differentiate the accumulated difference with the same filter.
-        increments = jnp.diff(trajectory.ts)[:, None] * _interval_accelerations(model, ts, xs_smooth, trajectory.us, jnp.asarray(idx))
+        increments = jnp.diff(trajectory.ts)[:, None] * _interval_accelerations(model, ts, xs_smooth, us, jnp.asarray(idx))
         drift = jnp.diff(trajectory.xs[:, idx], axis=0) - increments
         accumulated = jnp.concatenate([jnp.zeros((1, len(idx)), drift.dtype), jnp.cumsum(drift, axis=0)])
         measured = predicted + savitzky_golay(ts, accumulated, window=w, order=3, deriv=1)
