@@ -324,7 +324,7 @@ def diagnose(
         for i, k in enumerate(new_j):
             if k >= 0:
                 p_init_j[i, -1] = _start_value(candidates[k], deltas_scr[remaining.index(k)], inits[k] - neutral[k], scales[k])
-        p_j, _, std_j, err_j = run_fits(np.tile(slots_cur, (batch, 1)), new_j, p_init_j, free_all)
+        p_j, cost_j, std_j, err_j = run_fits(np.tile(slots_cur, (batch, 1)), new_j, p_init_j, free_all)
         if round_ == 0:  # the nominal model, refitted; the reference horizon from its training error
             p_cur = p_j[0].copy()
             nominal_model = model_of(slots_cur, p_cur).system
@@ -351,7 +351,7 @@ def diagnose(
                                overlap, alpha, min_gain, steps, position_index)
         tests_last = results
         if round_ == 0:
-            candidate_table = _candidate_table(system, candidates, remaining, gains_scr, results, neutral)
+            candidate_table = _candidate_table(system, candidates, remaining, gains_scr, results, neutral, cost_j)
         admissible = [k for k in short if results[k]["significant"]]
         if not admissible:
             say(f"round {round_ + 1}: no candidate improves the held-out simulation significantly")
@@ -585,14 +585,17 @@ def _judge_round(candidates, short, remaining, p_j, std_j, err_j, scores_j, scor
     return results
 
 
-def _candidate_table(system, candidates, remaining, gains_scr, results, neutral):
+def _candidate_table(system, candidates, remaining, gains_scr, results, neutral, cost):
+    """Every candidate of the first round: screening gain, and for those refitted the held-out gain, p,
+    coefficient, runs helped and `training_gain` (the reduction of the training fit's cost: a candidate
+    that lowers it but not the held-out error was fitted to what does not transfer)."""
     table = []
     for i, k in enumerate(remaining):
         entry = {"cause": candidates[k].cause, "where": candidates[k].where(system), "screening_gain": float(gains_scr[i])}
         if k in results:
             r = results[k]
             entry.update(gain=float(r["gain_windows"]), p_value=r["p"], coefficient=float(neutral[k] + r["delta"]),
-                         runs_helped=f"{r['runs_helped']}/{r['n_runs']}")
+                         runs_helped=f"{r['runs_helped']}/{r['n_runs']}", training_gain=float(1 - cost[r["i"]] / cost[0]))
         table.append(entry)
     table.sort(key=lambda e: (-e.get("gain", -np.inf), -e["screening_gain"]))
     return table
