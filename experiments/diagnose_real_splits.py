@@ -4,7 +4,7 @@ The nominal model is the lab's rigid-body `model_3.1` (no friction, no rotor ine
 holds out runs dynax does not train on; `S2` and `S3` hold out the 6 s large-amplitude run 12.
 Writes `OUT/splits.json` (verdict, findings, gain, horizon per split and mode) and `OUT/splits.png`.
 
-    python experiments/diagnose_real_splits.py ../shared/datasets experiments/results/diagnose_real_splits [SPLITS] [MODES] [REFERENCE_HORIZON]
+    python experiments/diagnose_real_splits.py ../shared/datasets experiments/results/diagnose_real_splits [SPLITS] [MODES] [REFERENCE_HORIZON|auto] [FIT_WINDOW]
 """
 
 import json
@@ -99,7 +99,10 @@ if __name__ == "__main__":
     results = []
     for s in splits:
         for m in modes:
-            r = run_split(data, s, m, **({"reference_horizon_s": float(sys.argv[5])} if len(sys.argv) > 5 else {}))
+            kwargs = {"reference_horizon_s": float(sys.argv[5])} if len(sys.argv) > 5 and sys.argv[5] != "auto" else {}
+            if len(sys.argv) > 6:
+                kwargs["fit_window_s"] = float(sys.argv[6])
+            r = run_split(data, s, m, **kwargs)
             print(json.dumps({k: r[k] for k in ("split", "mode", "verdict", "gain", "reference_horizon_s", "findings", "cpu_s")}), flush=True)
             results.append(r)
     (out / "splits.json").write_text(json.dumps(results, indent=1))

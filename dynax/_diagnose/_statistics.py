@@ -7,7 +7,9 @@ changes in excitation); counting every window as independent would claim far too
 variance of the mean difference is estimated from the differences' own correlation: within each
 run the windows are cut into non-overlapping batches of consecutive windows, each batch twice as
 long as the correlation lasts (at least the number of windows that overlap, and at least the lag
-at which the differences' sample autocorrelation falls below 0.1), and the batch means, nearly
+at which the differences' sample autocorrelation falls below 0.1, up to twice the overlap or ten
+windows, whichever is longer), and
+the batch means, nearly
 independent, are compared with Student's t. This is the non-overlapping-block (subseries)
 estimator of the variance of a mean, a Bartlett-free HAC estimator; runs never share a batch.
 
@@ -33,6 +35,9 @@ must also help on most held-out runs, not on one.
 
 import numpy as np
 import scipy.stats
+
+MAX_LAG_OVER_OVERLAP = 2  # correlation longer than this many horizons (and MIN_LAG_CAP windows) is read
+MIN_LAG_CAP = 10  # as an effect that varies with the manoeuvre, not as noise
 
 
 def log_ratio_differences(score_ref, score_new) -> np.ndarray:
@@ -82,7 +87,11 @@ def paired_block_test(d, runs, overlap: int, batch: int | None = None) -> Paired
 
     **Arguments:** `d` the per-window differences, in start order within each run; `runs` the run
     index of each window; `overlap` how many consecutive windows share data (horizon over stride);
-    `batch` windows per batch (default twice the longer of `overlap` and `decorrelation_lag`).
+    `batch` windows per batch (default twice the longer of `overlap` and `decorrelation_lag`, the
+    latter at most `MAX_LAG_OVER_OVERLAP` times `overlap` or `MIN_LAG_CAP` windows, whichever is
+    longer: on a real record a large effect that
+    varies slowly with the manoeuvre (a wind seen at changing headings) makes the differences
+    correlated for seconds; counting that as noise would leave a handful of batches and no power).
 
     **Returns:** a `PairedTest`.
     """
@@ -90,7 +99,9 @@ def paired_block_test(d, runs, overlap: int, batch: int | None = None) -> Paired
     if d.shape != runs.shape or d.ndim != 1 or d.size == 0:
         raise ValueError(f"paired_block_test: `d` and `runs` must be equal-length 1-D arrays, got {d.shape} and {runs.shape}")
     if batch is None:
-        batch = 2 * max(int(overlap), decorrelation_lag(d, runs), 1)
+        overlap = max(int(overlap), 1)
+        longest = max(MAX_LAG_OVER_OVERLAP * overlap, MIN_LAG_CAP)
+        batch = 2 * min(max(overlap, decorrelation_lag(d, runs)), longest)
     means, per_run = [], {}
     for r in np.unique(runs):
         dr = d[runs == r]
