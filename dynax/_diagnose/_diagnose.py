@@ -167,7 +167,7 @@ def diagnose(
     horizons_s: Sequence[float] = (0.1, 0.25, 0.5, 1.0, 2.0),
     reference_horizon_s: float | None = None,
     horizon_fraction: float = DEFAULT_FRACTION,
-    fit_window_s: float = 1.0,
+    fit_window_s: float | None = None,
     max_terms: int = 3,
     alpha: float = 0.01,
     min_gain: float = 0.05,
@@ -209,7 +209,9 @@ def diagnose(
     - `reference_horizon_s`: where it is judged; default the *predictability horizon*: the
       longest horizon at which the nominal model's open-loop position error on the training runs
       is at most `horizon_fraction` of the positions' spread (see `predictability_horizon`).
-    - `fit_window_s`: window length of the simulation-error fits.
+    - `fit_window_s`: window length of the simulation-error fits; default from the data: 2.5 times
+      the starting model's predictability horizon on the training runs, between 0.25 s and 1 s
+      (a fit over windows longer than the model can predict fits chaos, not physics).
     - `max_terms`: at most this many causes are selected.
     - `alpha`, `min_gain`: significance level and smallest held-out gain that counts.
     - `shortlist`: candidates refitted jointly per round.
@@ -278,6 +280,7 @@ def diagnose(
         raise UsageError("diagnose: no candidate is identifiable in this mode")
 
     # --- windows ---------------------------------------------------------------------------
+    fit_window_s = _fit_window(system, train_records, fit_window_s, horizon_fraction, dt, notes)
     n_fit = max(2, int(round(fit_window_s / dt)))
     train_windows = make_windows(train_records, n_fit, n_fit)
     horizons, candidates_s = _horizon_grid(horizons_s, reference_horizon_s, train_records, validation_records, notes)
@@ -531,6 +534,23 @@ def _reference_horizon(nominal_model, train_records, candidates_s, given, fracti
     spread = np.maximum(positions.std(axis=0), 1e-12)
     relative = relative_position_error(np.concatenate(errors), position_index, spread)
     return predictability_horizon(relative, dt, candidates_s, fraction)
+
+
+def _fit_window(system, train_records, given, fraction, dt, notes) -> float:
+    """The fit windows: `given`, or 2.5 times the starting model's predictability horizon on the training runs, in [0.25, 1] s."""
+    if given is not None:
+        return float(given)
+    longest = min(1.0, 0.5 * min(r.duration for r in train_records))
+    candidates_s = np.round(np.arange(0.1, longest + 1e-9, 0.05), 6)
+    if candidates_s.size == 0:
+        return longest
+    start = _reference_horizon(system, train_records, candidates_s, None, fraction, max(1, int(round(0.05 / dt))),
+                               _position_index(system), dt)
+    window = float(np.clip(2.5 * start.seconds, 0.25, longest))
+    if window < longest:
+        notes.append(f"The starting model predicts the training runs for {start.seconds:g} s only: the simulation-error "
+                     f"fits use {window:g} s windows (2.5 times that) instead of {longest:g} s.")
+    return window
 
 
 def _shortlist(system, candidates, remaining, gains_scr, shortlist):
