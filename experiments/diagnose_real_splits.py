@@ -67,7 +67,7 @@ def run_split(data, name, mode_name, **kwargs):
         "findings": [{k: f[k] for k in ("cause", "where", "coefficient", "gain", "p_value")} for f in j["findings"]],
         "named_lab_effect": any(f["cause"] in LAB_EFFECTS for f in j["findings"]),
         "nominal_rmse": j["nominal"]["sim_error"], "extended_rmse": j["extended"]["sim_error"],
-        "per_run": j.get("per_run"), "detectable_gain": j.get("detectable_gain"),
+        "per_run": j["runs"], "detectable_gain": j["test"]["detectable_gain"], "notes": j["notes"],
         "structure": {k: {"significant": v["significant"], "r2": v["r2"]} for k, v in j["structure"].items()},
         "candidates": j["candidates"][:8],
     }
