@@ -1,4 +1,4 @@
-"""`dynax diagnose SYSTEM DATA [--validation DATA2] --out DIR`: the discrepancy workflow on measured data."""
+"""`dynax diagnose SYSTEM TRAIN... [--validation VAL...] --out DIR`: the discrepancy workflow on measured runs."""
 
 import argparse
 import sys
@@ -18,13 +18,15 @@ def register(subparsers):
         description=(
             "Fit the nominal model of SYSTEM on DATA, show what its simulation gets wrong on held-out data, "
             "name the cause from the library of model extensions, extend the model and measure the gain. "
-            "Writes DIR/report.json (the contract's schema), DIR/report.md and figures DIR/*.png. Without "
-            "--validation the last 30% of DATA is held out."
+            "Several training and held-out runs may be given; runs are never concatenated and no window crosses "
+            "a run boundary. Writes DIR/report.json (the contract's schema), DIR/report.md and figures DIR/*.png. "
+            "Without --validation the last 30% of each training run is held out."
         ),
     )
     parser.add_argument("system", choices=_SYSTEMS, help="the system (its data columns are in the contract)")
-    parser.add_argument("data", help="training record: CSV, NPZ or MAT with t, the states and the inputs")
-    parser.add_argument("--validation", default=None, metavar="DATA2", help="held-out record (same columns)")
+    parser.add_argument("data", nargs="+", metavar="DATA",
+                        help="training run(s): CSV, NPZ or MAT with t, the states and the inputs")
+    parser.add_argument("--validation", nargs="+", default=None, metavar="VAL", help="held-out run(s) (same columns)")
     add_data_options(parser)
     parser.add_argument("--mode", choices=("refit", "known"), default="refit",
                         help="refit the nominal parameters on DATA (default) or trust them (known)")
@@ -35,8 +37,9 @@ def register(subparsers):
                              "for helicopter the Tempest weights, e.g. du/u,dv/1)")
     parser.add_argument("--dt", type=float, default=None, metavar="SECONDS",
                         help="resample the records to this interval first (default: as recorded)")
-    parser.add_argument("--reference-horizon", type=float, default=1.0, metavar="SECONDS",
-                        help="horizon at which the gain is judged (default 1 s)")
+    parser.add_argument("--reference-horizon", type=float, default=None, metavar="SECONDS",
+                        help="horizon at which the gain is judged (default: the predictability horizon of the "
+                             "nominal model on the training runs, see report.json 'horizon')")
     parser.add_argument("--max-terms", type=int, default=3, help="at most this many causes (default 3)")
     parser.add_argument("--out", required=True, help="output directory")
     parser.set_defaults(run=run)
@@ -84,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     mapping, scale = data_options(args)
     if args.dt is not None and not args.dt > 0:
         raise UsageError(f"--dt must be positive, got {args.dt}")
-    if not args.reference_horizon > 0:
+    if args.reference_horizon is not None and not args.reference_horizon > 0:
         raise UsageError(f"--reference-horizon must be positive, got {args.reference_horizon}")
     if args.max_terms < 1:
         raise UsageError(f"--max-terms must be at least 1, got {args.max_terms}")
@@ -93,13 +96,14 @@ def run(args: argparse.Namespace) -> int:
         parameters = read_nominal_parameters(args.nominal)
         parameters = {k: v for k, v in parameters.items() if not k.startswith("fc")}
     # Everything that can be refused is read before anything is written.
-    train = load_trajectory(args.data, args.system, mapping=mapping, scale=scale, min_samples=50)
+    train = [load_trajectory(path, args.system, mapping=mapping, scale=scale, min_samples=50) for path in args.data]
     validation = None
     if args.validation is not None:
-        validation = load_trajectory(args.validation, args.system, mapping=mapping, scale=scale, min_samples=50)
+        validation = [load_trajectory(path, args.system, mapping=mapping, scale=scale, min_samples=50)
+                      for path in args.validation]
     if args.dt is not None:
-        train = resample(train, args.dt)
-        validation = None if validation is None else resample(validation, args.dt)
+        train = [resample(t, args.dt) for t in train]
+        validation = None if validation is None else [resample(v, args.dt) for v in validation]
     system = nominal_system(args.system, parameters)
     if args.mode == "known":
         mode = Known()
@@ -114,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
         max_terms=args.max_terms, system_name=args.system,
         progress=lambda line: print(f"[{time.perf_counter() - start:5.1f} s] {line}", file=sys.stderr),
     )
-    held_out = validation if validation is not None else _held_out(train)
+    held_out = validation if validation is not None else [_held_out(t) for t in train]
     with staged_directory(args.out) as stage:
         write_report(report, stage, held_out, write_json=write_json)
     print(summary(report))
@@ -144,7 +148,11 @@ def summary(report) -> str:
     if s["significant"]:
         lines.append(f"Its one-step residuals have structure ({max(s['r2'], 0):.0%} explained by "
                      + ", ".join(f["feature"] for f in s["top_features"][:2]) + ").")
+    if "horizon" in j:
+        lines.append(f"Reference horizon {ref:g} s: {j['horizon']['rule']}.")
     lines.append(f"Verdict: {j['verdict']}.")
+    if j.get("test", {}).get("detectable_gain") is not None:
+        lines.append(f"The test would have detected a gain of about {j['test']['detectable_gain']:.0%} at {ref:g} s.")
     for f in j["findings"]:
         components = "".join(f", {n} = {v:.4g}" for n, v in f.get("components", {}).items())
         lines.append(f"Cause: {f['cause']} at {f['where']}, {f['parameter']} = {f['coefficient']:.4g} "

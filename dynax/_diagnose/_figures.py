@@ -14,11 +14,13 @@ def _subplots(*args, figsize, **kwargs):
     return fig, fig.subplots(*args, **kwargs)
 
 
-def plot_measured_vs_simulated(trajectory, models: dict, path, *, segment_s: float = 2.0, max_duration_s: float = 10.0):
+def plot_measured_vs_simulated(trajectory, models: dict, path, *, segment_s: float = 2.0, max_duration_s: float = 10.0,
+                               run_name: str | None = None):
     """Measured positions against open-loop simulations restarted from the measured state every `segment_s`.
 
     **Arguments:** `trajectory` (held-out data); `models` label -> system; `path` of the PNG;
-    `segment_s` restart interval [s]; `max_duration_s` how much of the record to draw.
+    `segment_s` restart interval [s]; `max_duration_s` how much of the record to draw; `run_name`
+    which run it is (in the title).
     """
     ts = np.asarray(trajectory.ts)
     n = min(len(ts), int(np.searchsorted(ts, ts[0] + max_duration_s)) + 1)
@@ -51,7 +53,8 @@ def plot_measured_vs_simulated(trajectory, models: dict, path, *, segment_s: flo
                 ax.plot(t, xs[:, i], color=colors[c % 4], lw=1.0, ls="--", label=label if start == 0 else None)
                 ax.plot(t[:1], xs[:1, i], "o", color=colors[c % 4], ms=2.5)
     axes[0, 0].legend(loc="upper right", fontsize=8)
-    axes[0, 0].set_title(f"held-out data against open-loop simulation (restarted every {segment_s:g} s)")
+    axes[0, 0].set_title((f"{run_name}: " if run_name else "")
+                         + f"held-out data against open-loop simulation (restarted every {segment_s:g} s)")
     axes[-1, 0].set_xlabel("t [s]")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -72,14 +75,15 @@ def plot_error_vs_horizon(curves: dict, path, *, unit: str = "rad"):
     fig.savefig(path, dpi=110)
 
 
-def plot_residuals(ts, residuals, names, path, *, features: dict | None = None):
+def plot_residuals(ts, residuals, names, path, *, features: dict | None = None, run_name: str | None = None):
     """One-step acceleration residuals: over time, against velocity, autocorrelation and spectrum.
 
     Friction shows against velocity (a step at zero for Coulomb friction), input dynamics in the
     autocorrelation and at the excitation frequencies of the spectrum; white noise is flat.
 
     **Arguments:** `ts`; `residuals` of shape `(time, n_joints)`; `names` of the joints' velocities;
-    `path`; `features` name -> `(time,)` array to plot residuals against (default the velocities).
+    `path`; `features` name -> `(time,)` array to plot residuals against (default the velocities);
+    `run_name` which run it is (in the title).
     """
     import scipy.signal
 
@@ -104,7 +108,7 @@ def plot_residuals(ts, residuals, names, path, *, features: dict | None = None):
         f, psd = scipy.signal.welch(r, fs=1.0 / dt, nperseg=min(len(r), 512))
         axes[j, 3].semilogy(f, psd, lw=1.0)
         axes[j, 3].set_xlabel("frequency [Hz]")
-    axes[0, 0].set_title("one-step acceleration residual against time")
+    axes[0, 0].set_title((f"{run_name}: " if run_name else "") + "one-step acceleration residual against time")
     axes[0, 1].set_title("against velocity")
     axes[0, 2].set_title("autocorrelation")
     axes[0, 3].set_title("spectrum (Welch)")

@@ -43,6 +43,14 @@ def report_markdown(report) -> str:
               "| nominal | " + " | ".join(_fmt(x) for x in j["nominal"]["sim_error"]["rmse"]) + " |"]
     if j["findings"]:
         lines.append("| extended | " + " | ".join(_fmt(x) for x in j["extended"]["sim_error"]["rmse"]) + " |")
+    if j.get("runs"):
+        lines += ["", f"Per held-out run, position RMSE at the reference horizon {ref:g} s:", "",
+                  "| run | windows | nominal | extended | gain |", "|---|---|---|---|---|"]
+        for r in j["runs"]:
+            gain = "n/a" if r["gain"] is None else f"{r['gain']:.0%}"
+            lines.append(f"| {r['run']} | {r['n_windows']} | {_fmt(r['nominal_rmse'])} | {_fmt(r['extended_rmse'])} | {gain} |")
+    if j.get("horizon"):
+        lines += ["", f"Reference horizon {ref:g} s: {j['horizon']['rule']}."]
     s = j["structure"]["nominal"]
     lines += ["", f"Residual analysis of one-step accelerations (nominal model): a generic probe explains "
               f"{max(s['r2'], 0):.0%} of the held-out residual variance (p = {s['p_value']:.2g}; "
@@ -78,6 +86,13 @@ def report_markdown(report) -> str:
         lines += ["## Not identifiable in this mode", ""]
         lines += [f"- `{c['cause']}@{c['where']}`: {c['reason']}." for c in j["not_identifiable"]]
         lines.append("")
+    if j.get("test"):
+        t = j["test"]
+        lines += ["## The test", "", f"- paired: {t['paired']}", f"- multiple comparisons: {t['multiple_comparisons']}",
+                  f"- across runs: {t['run_agreement']}", f"- smallest gain that counts: {t['min_gain']:.0%}"]
+        if t["detectable_gain"] is not None:
+            lines.append(f"- with these held-out runs it would have detected a gain of about {t['detectable_gain']:.0%} (power 80 %)")
+        lines.append("")
     if j["notes"]:
         lines += ["## Notes", ""] + [f"- {n}" for n in j["notes"]] + [""]
     lines += ["## Parameters", "", "| parameter | nominal | extended |", "|---|---|---|"]
@@ -90,16 +105,22 @@ def report_markdown(report) -> str:
 def write_report(report, out_dir, validation, *, write_json) -> None:
     """Write `report.json`, `report.md` and the figures into `out_dir` (which must exist).
 
-    **Arguments:** `report`; `out_dir`; `validation` the held-out record the figures show;
-    `write_json` the atomic JSON writer.
+    **Arguments:** `report`; `out_dir`; `validation` the held-out record(s) the figures show (a
+    `Trajectory` or a list: one `measured_vs_simulated.png` for the first run and
+    `measured_vs_simulated_run2.png`, ... for the others, each titled with its run; the residual
+    figure shows the first run); `write_json` the atomic JSON writer.
     """
     out = pathlib.Path(out_dir)
+    runs = list(validation) if isinstance(validation, (list, tuple)) else [validation]
+    validation = runs[0]
     write_json(out / "report.json", report.to_json())
     (out / "report.md").write_text(report.to_markdown())
     models = {"nominal": report.nominal_model}
     if report.findings:
         models["extended"] = report.extended_model
-    plot_measured_vs_simulated(validation, models, out / "measured_vs_simulated.png")
+    for i, run in enumerate(runs):
+        name = "measured_vs_simulated.png" if i == 0 else f"measured_vs_simulated_run{i + 1}.png"
+        plot_measured_vs_simulated(run, models, out / name, run_name=run.source or f"held-out run {i + 1}")
     j = report.to_json()
     curves = {"nominal": (j["nominal"]["sim_error"]["horizons_s"], j["nominal"]["sim_error"]["rmse"])}
     if report.findings:
@@ -112,4 +133,5 @@ def write_report(report, out_dir, validation, *, write_json) -> None:
     idx = velocity_indices(nominal)
     names = [nominal.state_names[i] for i in idx]
     ts = np.asarray(validation.ts)[keep]
-    plot_residuals(ts, residuals, names, out / "residuals.png", features={n: xs[:, i] for n, i in zip(names, idx)})
+    plot_residuals(ts, residuals, names, out / "residuals.png", features={n: xs[:, i] for n, i in zip(names, idx)},
+                   run_name=validation.source or "held-out run 1")

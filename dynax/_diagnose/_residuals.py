@@ -26,9 +26,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._data._derivatives import savitzky_golay
-from .._model._extensions import Extended
+from .._model._extensions import Extended, InputDelay
 from .._model._helicopter import BODY, BODY_AXES, Helicopter, QUATERNION, quaternion_to_rotation
 from .._model._system import AbstractManipulator
+from ._probe import cross_validated_ridge, ridge_fit
 
 
 def _sg_window(dt: float) -> int:
@@ -63,7 +64,7 @@ def _hidden_trajectory(model, ts, us):
 
 
 @eqx.filter_jit
-def _predicted_accelerations(model, ts, xs_smooth, us, idx):
+def _predicted_accelerations(model, ts, xs_smooth, us, idx, us_before):
     """The model's acceleration at each sample: the mean of its left and right limits under the held input.
 
     The input is a zero-order hold, so the true acceleration jumps at every sample: at t_k it is
@@ -71,7 +72,6 @@ def _predicted_accelerations(model, ts, xs_smooth, us, idx):
     """
     zs = _hidden_trajectory(model, ts, us)
     full = jnp.concatenate([xs_smooth, zs], axis=1)
-    us_before = jnp.concatenate([us[:1], us[:-1]])
     field = jax.vmap(lambda t, x, u: model.vector_field(t, x, u))
     return 0.5 * (field(ts, full, us) + field(ts, full, us_before))[:, idx]
 
@@ -94,6 +94,51 @@ def velocity_indices(system) -> list[int]:
     return list(range(system.n_states))
 
 
+def _held_average(ts, u, a, b):
+    """The mean of the zero-order-hold signal `u` (held from each sample time) over `[a, b]` (arrays of times)."""
+    cumulative = np.concatenate([[0.0], np.cumsum(u[:-1] * np.diff(ts))])
+
+    def integral(s):
+        i = np.clip(np.searchsorted(ts, s, side="right") - 1, 0, len(ts) - 1)
+        return cumulative[i] + u[i] * (s - ts[i])  # before the record: the first value held back in time
+
+    return (integral(b) - integral(a)) / (b - a)
+
+
+def exact_delays(model, trajectory):
+    """Run an active input delay as the dead time it stands for, not as its Pade filter.
+
+    A model found with `input_delay` simulates it with a Pade approximant, which passes a held
+    input's every step through at once (its high-frequency gain is one) and then rings. Judged on
+    one-step residuals, that model would still show `du/dt` structure where the rig has a pure
+    dead time. Here each delay that acts first on its input is replaced by the recorded input
+    itself, shifted by the delay: the held input's mean over the sample interval centred on
+    `t - T` (what the left and right limits average to at `T` a whole number of samples, and
+    continuous in `T` in between), and the term is set to zero delay (it then passes the shifted
+    input through).
+
+    **Returns:** `(model, us, us_before)`: the model to evaluate, and the input's right and left
+    limits at each sample (equal, the interval mean, for a delayed input).
+    """
+    ts = np.asarray(trajectory.ts)
+    us = np.array(trajectory.us)
+    us_before = np.concatenate([us[:1], us[:-1]])
+    if not isinstance(model, Extended):
+        return model, jnp.asarray(us), jnp.asarray(us_before)
+    first_on_input = {}
+    for term in model.input_terms:
+        first_on_input.setdefault(term.input, term)
+    half = 0.5 * float(np.median(np.diff(ts)))
+    for k, term in enumerate(model.terms):
+        if not isinstance(term, InputDelay) or first_on_input.get(term.input) is not term or not float(term.coefficient) > 0:
+            continue
+        centre = ts - float(term.coefficient)
+        mean = _held_average(ts, np.asarray(trajectory.us)[:, term.input], centre - half, centre + half)
+        us[:, term.input] = us_before[:, term.input] = mean
+        model = eqx.tree_at(lambda m: m.terms[k].coefficient, model, jnp.zeros_like(term.coefficient))
+    return model, jnp.asarray(us, trajectory.us.dtype), jnp.asarray(us_before, trajectory.us.dtype)
+
+
 def acceleration_residuals(model, trajectory):
     """One-step acceleration residuals of `model` on `trajectory`.
 
@@ -106,7 +151,8 @@ def acceleration_residuals(model, trajectory):
     xs_smooth = savitzky_golay(ts, trajectory.xs, window=w, order=3)
     idx = velocity_indices(nominal)
     measured = savitzky_golay(ts, trajectory.xs[:, idx], window=w, order=3, deriv=1)
-    predicted = _predicted_accelerations(model, ts, xs_smooth, trajectory.us, jnp.asarray(idx))
+    model, us, us_before = exact_delays(model, trajectory)
+    predicted = _predicted_accelerations(model, ts, xs_smooth, us, jnp.asarray(idx), us_before)
     # The measured acceleration is a local polynomial fit; smoothing the prediction with the same
     # filter compares like with like.
     predicted = savitzky_golay(ts, predicted, window=w, order=3)
@@ -115,7 +161,7 @@ def acceleration_residuals(model, trajectory):
         # acceleration jump at every sample, and a stiff flight controller moves the input every
         # sample): compare velocity *increments* over each interval, integrated under the held
         # input, and differentiate the accumulated difference with the same filter.
-        increments = jnp.diff(trajectory.ts)[:, None] * _interval_accelerations(model, ts, xs_smooth, trajectory.us, jnp.asarray(idx))
+        increments = jnp.diff(trajectory.ts)[:, None] * _interval_accelerations(model, ts, xs_smooth, us, jnp.asarray(idx))
         drift = jnp.diff(trajectory.xs[:, idx], axis=0) - increments
         accumulated = jnp.concatenate([jnp.zeros((1, len(idx)), drift.dtype), jnp.cumsum(drift, axis=0)])
         measured = predicted + savitzky_golay(ts, accumulated, window=w, order=3, deriv=1)
@@ -195,7 +241,7 @@ def structure_test(model, train, validation, *, alpha: float = 0.01, min_r2: flo
     nominal = model.system if isinstance(model, Extended) else model
     train = list(train) if isinstance(train, (list, tuple)) else [train]
     validation = list(validation) if isinstance(validation, (list, tuple)) else [validation]
-    feats, resid, times = [], [], []
+    feats, resid, times, sizes = [], [], [], []
     for records in (train, validation):
         parts = [acceleration_residuals(model, traj) for traj in records]
         phis = [probe_features(nominal, xs, np.asarray(traj.us)[keep], pred, traj.dt) for traj, (_, xs, pred, keep) in zip(records, parts)]
@@ -203,6 +249,7 @@ def structure_test(model, train, validation, *, alpha: float = 0.01, min_r2: flo
         feats.append(np.concatenate([phi for phi, _ in phis]))
         resid.append(np.concatenate([r for r, *_ in parts]))
         times.append(np.concatenate([np.asarray(traj.ts)[keep] for traj, (*_, keep) in zip(records, parts)]))
+        sizes.append([r.shape[0] for r, *_ in parts])
     scale = resid[0].std(axis=0) + 1e-12
     mu, sd = feats[0].mean(axis=0), feats[0].std(axis=0)
     sd[sd == 0] = 1.0
@@ -210,17 +257,26 @@ def structure_test(model, train, validation, *, alpha: float = 0.01, min_r2: flo
     Phi_tr, Phi_va = (feats[0] - mu) / sd, (feats[1] - mu) / sd
     Phi_tr[:, -1], Phi_va[:, -1] = 1.0, 1.0
     R_tr, R_va = resid[0] / scale, resid[1] / scale
-    ridge = 1e-3 * Phi_tr.shape[0]  # standardised features: a mild ridge keeps the probe from extrapolating wildly
-    beta = np.linalg.solve(Phi_tr.T @ Phi_tr + ridge * np.eye(Phi_tr.shape[1]), Phi_tr.T @ R_tr)
+    # The ridge strength by leave-one-run-out cross-validation: only structure that transfers to a
+    # run the probe was not fitted on counts (see `cross_validated_ridge`).
+    strength, _ = cross_validated_ridge(Phi_tr, R_tr, sizes[0])
+    beta = ridge_fit(Phi_tr, R_tr, strength)
     E_va = R_va - Phi_va @ beta
     sse0 = (R_va**2).sum(axis=1)
     sse1 = (E_va**2).sum(axis=1)
     r2 = float(1 - sse1.sum() / sse0.sum())
     block = max(1, int(round(block_s / validation[0].dt)))
-    nb = len(sse0) // block
-    b0 = sse0[: nb * block].reshape(nb, block).sum(axis=1)
-    b1 = sse1[: nb * block].reshape(nb, block).sum(axis=1)
-    d = (b0 - b1) / b0.mean()  # per-block improvement; a log ratio would let near-empty blocks dominate
+    b0, b1, t_blocks, start = [], [], [], 0
+    for size in sizes[1]:  # blocks never cross a run boundary
+        nb_run = size // block
+        sl = slice(start, start + nb_run * block)
+        b0.append(sse0[sl].reshape(nb_run, block).sum(axis=1))
+        b1.append(sse1[sl].reshape(nb_run, block).sum(axis=1))
+        t_blocks.append(times[1][sl][::block])
+        start += size
+    b0, b1, t_blocks = np.concatenate(b0), np.concatenate(b1), np.concatenate(t_blocks)
+    nb = b0.size
+    d = (b0 - b1) / b0.mean() if nb else np.zeros(0)  # per-block improvement; a log ratio would let near-empty blocks dominate
     if nb >= 3 and d.std(ddof=1) > 0:
         t = d.mean() / (d.std(ddof=1) / np.sqrt(nb))
         p = float(scipy.stats.t.sf(t, nb - 1))
@@ -231,7 +287,6 @@ def structure_test(model, train, validation, *, alpha: float = 0.01, min_r2: flo
     share[-1] = 0.0
     share = share / max(share.sum(), 1e-300)
     order = np.argsort(share)[::-1][:4]
-    t_blocks = times[1][: nb * block : block] if nb else np.zeros(0)
     worst = np.argsort(b0)[::-1][:3] if nb else []
     vel_names = [nominal.state_names[i] for i in velocity_indices(nominal)]
     energy = (R_va**2).sum(axis=0)

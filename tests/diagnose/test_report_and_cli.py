@@ -85,3 +85,31 @@ def test_cli_diagnose_helicopter_refuses_a_file_without_its_columns(offset_data,
     assert main(["diagnose", "helicopter", str(folder / "run1.csv"), "--out", str(out)]) == 2
     assert "run1.csv" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_cli_diagnose_takes_several_runs_and_keeps_them_apart(offset_data, tmp_path, capsys):
+    folder, train, validation = offset_data
+    runs = {}
+    for name, record, cut in (("a", train, 1000), ("b", validation, 500)):
+        for part, (lo, hi) in zip("12", ((0, cut), (cut, len(record)))):
+            path = folder / f"{name}{part}.csv"
+            save_trajectory(type(record)(record.ts[lo:hi], record.xs[lo:hi], record.us[lo:hi], record.state_names,
+                                         record.input_names, "acrobot"), path)
+            runs[name + part] = (path, hi - lo)
+    out = tmp_path / "multi"
+    code = main(["diagnose", "acrobot", str(runs["a1"][0]), str(runs["a2"][0]),
+                 "--validation", str(runs["b1"][0]), str(runs["b2"][0]), "--max-terms", "1", "--out", str(out)])
+    assert code == 0
+    report = json.loads((out / "report.json").read_text())
+    assert [p.rsplit("/", 1)[-1] for p in report["data"]["validation_runs"]] == ["b1.csv", "b2.csv"]
+    assert report["data"]["n_train"] == runs["a1"][1] + runs["a2"][1]
+    # No window crosses a run boundary: each run has as many windows as fit inside it alone.
+    longest = int(round(max(report["nominal"]["sim_error"]["horizons_s"]) / 0.01))
+    for row, key in zip(report["runs"], ("b1", "b2")):
+        n = runs[key][1]
+        assert row["run"].endswith(f"{key}.csv") and row["n_windows"] == len(range(0, n - longest, 5))
+    assert report["horizon"]["rule"].startswith("predictability horizon")
+    assert report["test"]["multiple_comparisons"].startswith("Benjamini-Hochberg")
+    assert (out / "measured_vs_simulated_run2.png").stat().st_size > 0
+    assert "b2.csv" in (out / "report.md").read_text()
+    assert (report["findings"][0]["cause"], report["findings"][0]["where"]) == ("input_offset", "tau2")

@@ -1,0 +1,102 @@
+"""The held-out test of `diagnose` on data made without it: overlapping-window averages of correlated noise."""
+
+import numpy as np
+import pytest
+import scipy.signal
+import scipy.stats
+
+from dynax._diagnose._statistics import (
+    benjamini_hochberg,
+    decorrelation_lag,
+    detectable_gain,
+    helps_on_most_runs,
+    holm,
+    log_ratio_differences,
+    paired_block_test,
+)
+
+
+def window_differences(rng, n_windows, overlap, shift=0.0, rho=0.9, substeps=5):
+    """Differences of overlapping windows as `diagnose` makes them: each window averages `overlap`
+    strides of AR(1) noise (correlated beyond a window, as slowly changing excitation is)."""
+    n = (n_windows + overlap) * substeps
+    e = scipy.signal.lfilter([1.0], [1.0, -rho], rng.normal(size=n))[::substeps][: n_windows + overlap]
+    return np.convolve(e, np.ones(overlap) / overlap, "valid")[:n_windows] + shift
+
+
+@pytest.mark.parametrize("overlap, n_windows, n_runs", [(10, 110, 1), (10, 110, 2), (20, 100, 2), (2, 400, 3)])
+def test_false_claim_rate_on_no_effect_data_is_near_the_level(overlap, n_windows, n_runs):
+    rng = np.random.default_rng(overlap + n_runs)
+    runs = np.repeat(np.arange(n_runs), n_windows)
+    p = np.array([
+        paired_block_test(np.concatenate([window_differences(rng, n_windows, overlap) for _ in range(n_runs)]), runs, overlap).p_value
+        for _ in range(400)
+    ])
+    # Nominal 5 %; with 400 repetitions the binomial spread is about 1 %. Short correlated records make
+    # any HAC test slightly liberal; it must stay near the level, not at the 10-30 % of counting windows.
+    assert np.mean(p < 0.05) < 0.09
+    assert np.mean(p < 0.01) < 0.03
+    naive = [scipy_t_naive(np.concatenate([window_differences(rng, n_windows, overlap) for _ in range(n_runs)])) for _ in range(100)]
+    assert np.mean(np.asarray(naive) < 0.05) > 0.15  # counting every window as independent would claim far too much
+
+
+def scipy_t_naive(d):
+    return scipy.stats.ttest_1samp(d, 0.0, alternative="greater").pvalue
+
+
+def test_a_real_improvement_is_detected_and_reported_per_run():
+    rng = np.random.default_rng(3)
+    d = np.concatenate([window_differences(rng, 110, 10, shift=1.5), window_differences(rng, 110, 10, shift=1.5)])
+    test = paired_block_test(d, np.repeat([0, 1], 110), 10)
+    assert test.p_value < 1e-3
+    assert set(test.per_run) == {0, 1} and all(v > 0 for v in test.per_run.values())
+    assert test.batch >= 20  # at least twice the windows that overlap
+
+
+def test_decorrelation_lag_sees_the_overlap():
+    rng = np.random.default_rng(4)
+    d = window_differences(rng, 2000, 10, rho=0.0, substeps=1)
+    assert 7 <= decorrelation_lag(d, np.zeros(d.size, int)) <= 11  # a moving average of 10 decorrelates at lag ~9
+
+
+def test_log_ratio_is_positive_when_the_new_model_is_better():
+    ref = np.array([1.0, 2.0, 4.0])
+    assert np.all(log_ratio_differences(ref, ref / 2) > 0)
+    assert np.allclose(log_ratio_differences(ref, ref), 0.0)
+
+
+def test_benjamini_hochberg_and_holm_by_hand():
+    p = [0.001, 0.008, 0.039, 0.041, 0.6]
+    # BH thresholds k * 0.05 / 5 = 0.01, 0.02, 0.03, 0.04, 0.05: the largest k with p_(k) below is 2.
+    assert benjamini_hochberg(p, 0.05).tolist() == [True, True, False, False, False]
+    # Holm thresholds 0.05 / (5, 4, 3, ...): 0.001 < 0.01, 0.008 < 0.0125, 0.039 > 0.0167.
+    assert holm(p, 0.05).tolist() == [True, True, False, False, False]
+    p = [0.04, 0.01, 0.03, 0.02]
+    assert benjamini_hochberg(p, 0.05).all()  # all four: 0.04 <= 4 * 0.05 / 4
+    assert holm(p, 0.05).tolist() == [False, True, False, False]  # 0.02 > 0.05 / 3
+
+
+def test_benjamini_hochberg_keeps_the_family_wise_rate_when_nothing_has_an_effect():
+    rng = np.random.default_rng(5)
+    claims = [benjamini_hochberg(rng.uniform(size=16), 0.05).any() for _ in range(4000)]
+    assert np.mean(claims) < 0.06
+
+
+def test_a_cause_must_help_on_most_runs():
+    assert helps_on_most_runs({0: 0.2})
+    assert not helps_on_most_runs({0: 0.5, 1: -0.1})  # one of two is not most
+    assert helps_on_most_runs({0: 0.5, 1: 0.1, 2: -0.1})
+    assert not helps_on_most_runs({})
+
+
+def test_detectable_gain_shrinks_with_the_standard_error():
+    big, small = detectable_gain(0.2, 20, 0.01), detectable_gain(0.05, 20, 0.01)
+    assert 0 < small < big < 1
+    # The detectable log ratio of mean squares is (t_alpha + t_power) * se; the RMSE gain is half of it.
+    shift = (scipy.stats.t.isf(0.01, 20) + scipy.stats.t.ppf(0.8, 20)) * 0.05
+    assert small == pytest.approx(1 - np.exp(-shift / 2))
+
+
+def test_bad_input_is_refused():
+    with pytest.raises(ValueError, match="equal-length"):
+        paired_block_test(np.zeros(3), np.zeros(4), 1)
