@@ -14,7 +14,8 @@ from .._model._extensions import AbstractInputTerm, AbstractTerm, Extended
 from .._model._helicopter import Helicopter
 from .._model._system import AbstractManipulator, AbstractSystem
 from ._candidates import candidate_scales, default_candidates, look_alikes, structurally_absorbed
-from ._fit import Family, fit_configurations, make_windows, nominal_parameter_names, nominal_values, validate_configurations
+from ._discovery import discover
+from ._fit import Family, fit_configurations, make_windows, nominal_parameter_names, nominal_values, validate_configurations, window_errors
 from ._residuals import acceleration_residuals, Structure, structure_test
 from ._screening import screen
 
@@ -69,6 +70,7 @@ class Report(eqx.Module):
     notes: list
     nominal_model: AbstractSystem
     extended_model: AbstractSystem
+    discovery: dict = eqx.field(default_factory=dict)
 
     def to_json(self) -> dict:
         """The contract's `report.json` (section 3), with extra keys after the contract's."""
@@ -86,6 +88,7 @@ class Report(eqx.Module):
             "not_identifiable": self.not_identifiable,
             "candidates": self.candidates,
             "notes": self.notes,
+            **({"discovery": self.discovery} if self.discovery else {}),
         }
 
     def to_markdown(self) -> str:
@@ -171,6 +174,7 @@ def diagnose(
     holdout_fraction: float = 0.3,
     shortlist: int = 4,
     system_name: str | None = None,
+    discovery: bool = True,
     progress: Callable[[str], None] | None = None,
 ) -> Report:
     r"""Diagnose what `system` gets wrong on measured data, name the cause and measure the gain.
@@ -191,6 +195,11 @@ def diagnose(
     6. **Verdict**: `none` (no candidate helps and the probe finds no structure), `explained`
        (causes found and the extended model's residuals have no structure left), `unexplained`
        (structure the candidates do not fully explain; partial findings are listed).
+    7. **Discover** (where the verdict would be `unexplained` and `discovery` is on): a sparse
+       search for the missing term beyond the vocabulary, refitted through simulation and kept
+       only if it passes the same held-out test (see `dynax._diagnose._discovery.discover`);
+       findings with cause `discovered`. The verdict is then `explained` if the named and
+       discovered terms leave no significant structure.
 
     **Arguments:**
 
@@ -206,6 +215,7 @@ def diagnose(
     - `alpha`, `min_gain`: significance level and smallest held-out gain that counts.
     - `shortlist`: candidates refitted jointly per round.
     - `system_name`: the contract name for the report (default the records' `system`).
+    - `discovery`: search for a term beyond the vocabulary when structure is left (default on).
     - `progress`: called with a line of text at each stage (e.g. `print`).
 
     **Returns:** a `Report`.
@@ -465,6 +475,29 @@ def diagnose(
     else:
         verdict = "unexplained" if structure_current.significant else "explained"
     gain = float(1 - rmse_current[ref_index] / nominal_rmse[ref_index]) if selected and np.isfinite(nominal_rmse[ref_index]) else 0.0
+    discovery_json: dict = {}
+    if discovery and verdict == "unexplained":  # beyond the vocabulary: search, refit, the same held-out test
+        held_out_errors = eqx.filter_jit(window_errors)
+
+        def held_out(model):
+            errors = np.asarray(held_out_errors(model, val_windows))
+            curve = rmse_curve(errors)
+            return window_scores(errors[None])[0], curve, curve[ref_index]
+
+        found = discover(
+            extended_model if selected else nominal_model, train_records, validation_records, held_out=held_out,
+            significance=lambda ref, new: _paired_test(ref, new, n_eff), refit=refit_names,
+            vocabulary=[t.label(system) for t in candidates], alpha=alpha, min_gain=min_gain, fit_window_s=fit_window_s,
+            current=(score_cur, rmse_current, rmse_current[ref_index]), progress=say,
+        )
+        notes += found.notes
+        discovery_json = found.summary(system)
+        if found.kept:
+            findings, extended_model, rmse_current = findings + found.findings, found.model, found.held_out[1]
+            say("probing the residuals of the model with the discovered terms for structure ...")
+            structure_current = structure_test(extended_model, train_records, validation_records)
+            verdict = "unexplained" if structure_current.significant else "explained"
+            gain = float(1 - rmse_current[ref_index] / nominal_rmse[ref_index]) if np.isfinite(nominal_rmse[ref_index]) else 0.0
     if verdict == "unexplained":
         s = structure_current
         notes.append(
@@ -476,7 +509,7 @@ def diagnose(
         )
     nominal_parameters = dict(zip(names, map(float, nominal_values(nominal_model, names))))
     extended_parameters = dict(zip(names, map(float, nominal_values(extended_model.system, names))))
-    extended_parameters.update({t.parameter_name(system): float(t.coefficient) for t in extended_model.terms})
+    extended_parameters.update({k: float(v) for t in extended_model.terms for k, v in t.parameters(system).items()})
     horizons_list = [float(h) for h in horizons]
     return Report(
         system=system_name or train_records[0].system or _CONTRACT_NAMES.get(type(system).__name__, type(system).__name__.lower()),
@@ -505,6 +538,7 @@ def diagnose(
         notes=notes,
         nominal_model=nominal_model,
         extended_model=extended_model,
+        discovery=discovery_json,
     )
 
 
