@@ -40,6 +40,8 @@ def register(subparsers):
     parser.add_argument("--reference-horizon", type=float, default=1.0, metavar="SECONDS",
                         help="horizon at which the gain is judged (default 1 s)")
     parser.add_argument("--max-terms", type=int, default=3, help="at most this many causes (default 3)")
+    parser.add_argument("--no-discovery", action="store_true",
+                        help="do not search for a term beyond the cause vocabulary when structure is left")
     parser.add_argument("--out", required=True, help="output directory")
     parser.set_defaults(run=run)
 
@@ -116,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     report = diagnose(
         system, train, validation, mode=mode, reference_horizon_s=args.reference_horizon,
-        max_terms=args.max_terms, system_name=args.system,
+        max_terms=args.max_terms, system_name=args.system, discovery=not args.no_discovery,
         progress=lambda line: print(f"[{time.perf_counter() - start:5.1f} s] {line}", file=sys.stderr),
     )
     held_out = validation if validation is not None else _held_out(train)
@@ -151,6 +153,10 @@ def summary(report) -> str:
                      + ", ".join(f["feature"] for f in s["top_features"][:2]) + ").")
     lines.append(f"Verdict: {j['verdict']}.")
     for f in j["findings"]:
+        if f["cause"] == "discovered":
+            lines.append(f"Discovered (beyond the vocabulary) at {f['where']}: {f['formula']}; gain {f['gain']:.0%}"
+                         + "".join(f"; {r}" for r in f["readings"]) + ".")
+            continue
         components = "".join(f", {n} = {v:.4g}" for n, v in f.get("components", {}).items())
         lines.append(f"Cause: {f['cause']} at {f['where']}, {f['parameter']} = {f['coefficient']:.4g} "
                      f"(± {f['std_error']:.2g}{components}); gain {f['gain']:.0%}; look-alikes told apart: {f['confidence']}.")

@@ -195,7 +195,7 @@ def diagnose(
     6. **Verdict**: `none` (no candidate helps and the probe finds no structure), `explained`
        (causes found and the extended model's residuals have no structure left), `unexplained`
        (structure the candidates do not fully explain; partial findings are listed).
-    7. **Discover** (where the verdict would be `unexplained` and `discovery` is on): a sparse
+    7. **Discover** (where the verdict would be `unexplained` or `none` and `discovery` is on): a sparse
        search for the missing term beyond the vocabulary, refitted through simulation and kept
        only if it passes the same held-out test (see `dynax._diagnose._discovery.discover`);
        findings with cause `discovered`. The verdict is then `explained` if the named and
@@ -476,7 +476,9 @@ def diagnose(
         verdict = "unexplained" if structure_current.significant else "explained"
     gain = float(1 - rmse_current[ref_index] / nominal_rmse[ref_index]) if selected and np.isfinite(nominal_rmse[ref_index]) else 0.0
     discovery_json: dict = {}
-    if discovery and verdict == "unexplained":  # beyond the vocabulary: search, refit, the same held-out test
+    # Beyond the vocabulary: search, refit, the same held-out test. Also after a `none`: the generic
+    # probe cannot see every structure (a force periodic in position), the search's own guards can.
+    if discovery and verdict != "explained":
         held_out_errors = eqx.filter_jit(window_errors)
 
         def held_out(model):

@@ -254,6 +254,7 @@ class Discovery(eqx.Module):
         """The search in `report.json`'s `discovery` entry: kept or not, the held-out test, and every proposal."""
         return {
             "kept": self.kept,
+            "tested": any(p.features for p in self.proposals),
             "gain": self.gain,
             "p_value": self.p_value,
             "proposals": [
@@ -408,3 +409,28 @@ def discover(
         })
     findings.sort(key=lambda f: -f["gain"])
     return Discovery(True, fitted, findings, proposals, gain, p_value, (scores_new, curve_new, rmse_new), notes)
+
+
+def discovery_markdown(j: dict) -> list[str]:
+    """The `report.md` section of the discovered terms (kept apart from the named causes), from `report.json`."""
+    found = [f for f in j["findings"] if f["cause"] == "discovered"]
+    search = j.get("discovery")
+    if not found and not search:
+        return []
+    lines = ["## Discovered terms (beyond the vocabulary)", ""]
+    if found:
+        lines += ["Sparse search of the one-step force residuals, refitted through simulation and kept because it "
+                  "passed the same held-out test as a named cause:", "",
+                  "| where | formula | std. errors | gain | p | selection frequency | reading |", "|---|---|---|---|---|---|---|"]
+        for f in found:
+            stds = ", ".join(f"{n}: {v:.2g}" for n, v in f["std_errors"].items())
+            freq = ", ".join(f"{n}: {v:.0%}" for n, v in f["selection_frequency"].items())
+            lines.append(f"| `{f['where']}` | `{f['formula']}` | {stds} | {f['gain']:.0%} | {f['p_value']:.2g} | {freq} | "
+                         f"{'; '.join(f['readings']) or 'no known physical reading'} |")
+        lines += ["", "A discovered term is a description of what is missing, not a named cause: read the formula "
+                  "and its reading as a lead for the model's next version.", ""]
+    else:
+        lines += ["The search for a term beyond the vocabulary kept nothing"
+                  + (f" (the proposal's held-out gain was {search['gain']:.0%}, p = {search['p_value']:.2g})" if search.get("tested") else "")
+                  + "; see the notes.", ""]
+    return lines
