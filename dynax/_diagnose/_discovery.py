@@ -216,6 +216,8 @@ def propose(
 
         cv_r2, _ = group_cv_r2(cols, y, groups, lambda Z, t: np.linalg.lstsq(Z, t, rcond=None)[0])
         if cv_r2 < min_cv_r2:
+            if deferred and fit.cv_r2 >= min_cv_r2:
+                proposals.append(Proposal(j, (), np.zeros(0), (), float(fit.cv_r2), tuple(deferred), None))
             continue
         proposals.append(Proposal(
             channel=j,
