@@ -489,7 +489,8 @@ def diagnose(
         found = discover(
             extended_model if selected else nominal_model, train_records, validation_records, held_out=held_out,
             significance=lambda ref, new: _paired_test(ref, new, n_eff), refit=refit_names,
-            vocabulary=[candidates[k].label(system) for k in searchable], alpha=alpha, min_gain=min_gain, fit_window_s=fit_window_s,
+            vocabulary=[candidates[k].label(system) for k in searchable],
+            absorbed=[f"{c['cause']}@{c['where']}" for c in not_identifiable], alpha=alpha, min_gain=min_gain, fit_window_s=fit_window_s,
             current=(score_cur, rmse_current, rmse_current[ref_index]), progress=say,
         )
         notes += found.notes

@@ -107,10 +107,10 @@ def test_without_discovery_the_spring_stays_unexplained(spring_report):
 # --- the search on its own: no false discoveries, named causes win -----------------------------
 
 
-def _acrobot_search(term, seed):
+def _acrobot_search(term, seed, *, named=True):
     _, train, _ = demo_data(term, seed=seed)
     system = Acrobot.from_physical(**DEMO_TRUTH_PHYSICAL)
-    vocabulary = [t.label(system) for t in default_candidates(system)]
+    vocabulary = [t.label(system) for t in default_candidates(system)] if named else []
     return propose(system, [train], refit=ACROBOT_BASE, vocabulary=vocabulary)
 
 
@@ -126,6 +126,10 @@ def test_no_hidden_effect_gives_no_proposal_on_the_axis():
 
 
 def test_a_named_cause_wins_over_the_equivalent_discovered_formula():
+    # Without a vocabulary the search finds the hidden Coulomb friction as sign(dq2) at the elbow ...
+    blind = [p for p in _acrobot_search(CoulombFriction(1, 0.22), seed=11, named=False) if p.features]
+    assert [(p.channel, [f.kind for f in p.features]) for p in blind] == [(1, ["sign"])]
+    # ... and with it, the named cause wins: nothing is proposed, and the search says whose it is.
     proposals = _acrobot_search(CoulombFriction(1, 0.22), seed=11)
     assert [p for p in proposals if p.features] == []
     assert any("coulomb_friction@q2" in p.deferred for p in proposals)
