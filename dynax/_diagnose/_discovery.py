@@ -210,6 +210,9 @@ def propose(
                 deferred.append(label)
                 chosen.remove(k)
         periodic = [k for k, f in enumerate(library) if f.kind.startswith("periodic")]
+        allowed = [k for k, f in enumerate(library)
+                   if not inert[k] and k not in periodic and named_equivalent(system, f, j) not in vocabulary]
+        chosen = _look_alike_by_cross_validation(chosen, allowed, phi, y, groups)
         if any(k in chosen for k in periodic):  # a phase needs both halves of the pair
             chosen = sorted(set(chosen) | set(periodic))
         if not chosen:
@@ -236,6 +239,28 @@ def propose(
         ))
     proposals.sort(key=lambda p: (not p.features, -p.cv_r2))
     return proposals
+
+
+def _look_alike_by_cross_validation(chosen, allowed, phi, y, groups, *, min_correlation: float = 0.9):
+    """Swap a selected feature for a near-equivalent one ($q_2$ for $\sin q_2$ on a wide swing) where
+    that predicts the left-out runs better; the thresholding alone picks between them by chance."""
+    fit = lambda Z, t: np.linalg.lstsq(Z, t, rcond=None)[0]  # noqa: E731
+    score = lambda cols: group_cv_r2(phi[:, cols], y, groups, fit)[0] if cols else -np.inf  # noqa: E731
+    chosen = list(chosen)
+    best = score(chosen)
+    norms = np.sqrt(np.sum(phi**2, axis=0)) + 1e-300
+    for pos in range(len(chosen)):
+        k = chosen[pos]
+        if k not in allowed:
+            continue
+        for alt in allowed:
+            if alt in chosen or abs(phi[:, k] @ phi[:, alt]) / (norms[k] * norms[alt]) < min_correlation:
+                continue
+            trial = chosen[:pos] + [alt] + chosen[pos + 1 :]
+            value = score(trial)
+            if value > best:
+                best, chosen = value, trial
+    return sorted(chosen)
 
 
 class Discovery(eqx.Module):
