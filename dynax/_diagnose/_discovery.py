@@ -242,7 +242,7 @@ def propose(
 
 
 def _look_alike_by_cross_validation(chosen, allowed, phi, y, groups, *, min_correlation: float = 0.9):
-    """Swap a selected feature for a near-equivalent one ($q_2$ for $\sin q_2$ on a wide swing) where
+    r"""Swap a selected feature for a near-equivalent one ($q_2$ for $\sin q_2$ on a wide swing) where
     that predicts the left-out runs better; the thresholding alone picks between them by chance."""
     fit = lambda Z, t: np.linalg.lstsq(Z, t, rcond=None)[0]  # noqa: E731
     score = lambda cols: group_cv_r2(phi[:, cols], y, groups, fit)[0] if cols else -np.inf  # noqa: E731
