@@ -41,6 +41,8 @@ def register(subparsers):
                         help="horizon at which the gain is judged (default: the predictability horizon of the "
                              "nominal model on the training runs, see report.json 'horizon')")
     parser.add_argument("--max-terms", type=int, default=3, help="at most this many causes (default 3)")
+    parser.add_argument("--no-discovery", action="store_true",
+                        help="do not search for a term beyond the cause vocabulary when structure is left")
     parser.add_argument("--out", required=True, help="output directory")
     parser.set_defaults(run=run)
 
@@ -115,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     report = diagnose(
         system, train, validation, mode=mode, reference_horizon_s=args.reference_horizon,
-        max_terms=args.max_terms, system_name=args.system,
+        max_terms=args.max_terms, system_name=args.system, discovery=not args.no_discovery,
         progress=lambda line: print(f"[{time.perf_counter() - start:5.1f} s] {line}", file=sys.stderr),
     )
     held_out = validation if validation is not None else [_held_out(t) for t in train]
@@ -154,6 +156,10 @@ def summary(report) -> str:
     if j.get("test", {}).get("detectable_gain") is not None:
         lines.append(f"The test would have detected a gain of about {j['test']['detectable_gain']:.0%} at {ref:g} s.")
     for f in j["findings"]:
+        if f["cause"] == "discovered":
+            lines.append(f"Discovered (beyond the vocabulary) at {f['where']}: {f['formula']}; gain {f['gain']:.0%}"
+                         + "".join(f"; {r}" for r in f["readings"]) + ".")
+            continue
         components = "".join(f", {n} = {v:.4g}" for n, v in f.get("components", {}).items())
         lines.append(f"Cause: {f['cause']} at {f['where']}, {f['parameter']} = {f['coefficient']:.4g} "
                      f"(± {f['std_error']:.2g}{components}); gain {f['gain']:.0%}; look-alikes told apart: {f['confidence']}.")

@@ -16,6 +16,8 @@ from .._model._system import AbstractManipulator, AbstractSystem
 from ._candidates import candidate_scales, default_candidates, look_alikes, structurally_absorbed
 from ._fit import Family, fit_configurations, make_windows, nominal_parameter_names, nominal_values, validate_configurations
 from ._horizon import DEFAULT_FRACTION, Horizon, predictability_horizon, relative_position_error
+from ._discovery import discover
+from ._fit import window_errors
 from ._residuals import acceleration_residuals, Structure, structure_test
 from ._screening import screen
 from ._statistics import benjamini_hochberg, detectable_gain, helps_on_most_runs, log_ratio_differences, paired_block_test
@@ -78,6 +80,7 @@ class Report(eqx.Module):
     test: dict
     nominal_model: AbstractSystem
     extended_model: AbstractSystem
+    discovery: dict = eqx.field(default_factory=dict)
 
     def to_json(self) -> dict:
         """The contract's `report.json` (section 3), with extra keys after the contract's."""
@@ -98,6 +101,7 @@ class Report(eqx.Module):
             "horizon": self.horizon,
             "runs": self.runs,
             "test": self.test,
+            **({"discovery": self.discovery} if self.discovery else {}),
         }
 
     def to_markdown(self) -> str:
@@ -175,6 +179,7 @@ def diagnose(
     holdout_fraction: float = 0.3,
     shortlist: int = 4,
     system_name: str | None = None,
+    discovery: bool = True,
     progress: Callable[[str], None] | None = None,
 ) -> Report:
     r"""Diagnose what `system` gets wrong on measured data, name the cause and measure the gain.
@@ -197,6 +202,11 @@ def diagnose(
     6. **Verdict**: `none` (no candidate helps and the probe finds no structure), `explained`
        (causes found and the extended model's residuals have no structure left), `unexplained`
        (structure the candidates do not fully explain; partial findings are listed).
+    7. **Discover** (where the verdict would be `unexplained` or `none` and `discovery` is on): a sparse
+       search for the missing term beyond the vocabulary, refitted through simulation and kept
+       only if it passes the same held-out test (see `dynax._diagnose._discovery.discover`);
+       findings with cause `discovered`. The verdict is then `explained` if the named and
+       discovered terms leave no significant structure.
 
     **Arguments:**
 
@@ -217,6 +227,7 @@ def diagnose(
     - `alpha`, `min_gain`: significance level and smallest held-out gain that counts.
     - `shortlist`: candidates refitted jointly per round.
     - `system_name`: the contract name for the report (default the records' `system`).
+    - `discovery`: search for a term beyond the vocabulary when structure is left (default on).
     - `progress`: called with a line of text at each stage (e.g. `print`).
 
     **Returns:** a `Report`.
@@ -414,6 +425,32 @@ def diagnose(
     else:
         verdict = "unexplained" if structure_current.significant else "explained"
     gain = float(1 - rmse_current[ref_index] / nominal_rmse[ref_index]) if selected and np.isfinite(nominal_rmse[ref_index]) else 0.0
+    discovery_json: dict = {}
+    # Beyond the vocabulary: search, refit, the same held-out test. Also after a `none`: the generic
+    # probe cannot see every structure (a force periodic in position), the search's own guards can.
+    if discovery and verdict != "explained":
+        held_out_errors = eqx.filter_jit(window_errors)
+
+        def held_out(model):
+            errors = np.asarray(held_out_errors(model, val_windows))
+            curve = _rmse_curve(errors, steps, position_index)
+            return _window_scores(errors[None], n_ref, state_scale)[0], curve, curve[ref_index]
+
+        found = discover(
+            extended_model if selected else nominal_model, train_records, validation_records, held_out=held_out,
+            significance=lambda ref, new: _paired_test(ref, new, window_runs, overlap).p_value, refit=refit_names,
+            vocabulary=[candidates[k].label(system) for k in searchable],
+            absorbed=[f"{c['cause']}@{c['where']}" for c in not_identifiable], alpha=alpha, min_gain=min_gain, fit_window_s=fit_window_s,
+            current=(score_cur, rmse_current, rmse_current[ref_index]), progress=say,
+        )
+        notes += found.notes
+        discovery_json = found.summary(system)
+        if found.kept:
+            findings, extended_model, rmse_current = findings + found.findings, found.model, found.held_out[1]
+            say("probing the residuals of the model with the discovered terms for structure ...")
+            structure_current = structure_test(extended_model, train_records, validation_records)
+            verdict = "unexplained" if structure_current.significant else "explained"
+            gain = float(1 - rmse_current[ref_index] / nominal_rmse[ref_index]) if np.isfinite(nominal_rmse[ref_index]) else 0.0
     if verdict == "unexplained":
         notes.append(_unexplained_note(structure_current))
     test = _test_summary(alpha, min_gain, tests_last, len(searchable), verdict)
@@ -423,7 +460,7 @@ def diagnose(
     runs = _per_run_table(validation_records, window_runs, err_nominal, err_cur, n_ref, position_index)
     nominal_parameters = dict(zip(names, map(float, nominal_values(nominal_model, names))))
     extended_parameters = dict(zip(names, map(float, nominal_values(extended_model.system, names))))
-    extended_parameters.update({t.parameter_name(system): float(t.coefficient) for t in extended_model.terms})
+    extended_parameters.update({k: float(v) for t in extended_model.terms for k, v in t.parameters(system).items()})
     horizons_list = [float(h) for h in horizons]
     return Report(
         system=system_name or train_records[0].system or _CONTRACT_NAMES.get(type(system).__name__, type(system).__name__.lower()),
@@ -457,6 +494,7 @@ def diagnose(
         test=test,
         nominal_model=nominal_model,
         extended_model=extended_model,
+        discovery=discovery_json,
     )
 
 

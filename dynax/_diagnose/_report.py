@@ -4,12 +4,13 @@ import pathlib
 
 import numpy as np
 
+from ._discovery import discovery_markdown
 from ._figures import plot_error_vs_horizon, plot_measured_vs_simulated, plot_residuals
 from ._residuals import acceleration_residuals, velocity_indices
 
 _VERDICT_TEXT = {
-    "explained": "**explained**: the named causes account for what the nominal model got wrong; the extended "
-    "model's residuals have no significant structure left.",
+    "explained": "**explained**: the named causes (and any discovered terms) account for what the nominal model "
+    "got wrong; the extended model's residuals have no significant structure left.",
     "none": "**none**: the nominal model's errors show no significant structure; no cause is claimed.",
     "unexplained": "**unexplained**: the errors have significant structure that the candidate causes do not "
     "(fully) explain. Partial findings, if any, are listed, but they are not an explanation.",
@@ -64,9 +65,10 @@ def report_markdown(report) -> str:
               "their autocorrelation and spectrum (white noise is flat):", "",
               "![residuals](residuals.png)", ""]
     lines += ["## Causes", ""]
-    if j["findings"]:
+    named = [f for f in j["findings"] if f["cause"] != "discovered"]
+    if named:
         lines += ["| cause | where | coefficient | std. error | gain | p | told apart from look-alikes |", "|---|---|---|---|---|---|---|"]
-        for f in j["findings"]:
+        for f in named:
             alts = "; ".join(f"{a['cause']} (gain {a['gain']:.0%}, p = {a['p_value']:.2g})" for a in f["look_alikes"]) or "none in the library"
             components = "".join(f"; {n} = {v:.4g}" for n, v in f.get("components", {}).items())
             lines.append(f"| `{f['cause']}` | `{f['where']}` | {f['parameter']} = {f['coefficient']:.4g}{components} | {f['std_error']:.2g} | "
@@ -75,6 +77,7 @@ def report_markdown(report) -> str:
                   "read them as lower bounds.", ""]
     else:
         lines += ["No candidate improved the held-out simulation significantly.", ""]
+    lines += discovery_markdown(j)
     if j["candidates"]:
         lines += ["Every candidate in the first round (held-out improvement of the window error over the nominal model):", "",
                   "| candidate | gain (screening) | gain (joint refit) | p |", "|---|---|---|---|"]

@@ -1,5 +1,6 @@
 """Model extensions: candidate physical effects that compose with a nominal system (see `Extended`)."""
 
+from ._discovered import Discovered as Discovered, Feature as Feature
 from ._extended import Extended as Extended
 from ._inputs import (
     AbstractInputTerm as AbstractInputTerm,

@@ -90,7 +90,7 @@ class Extended(AbstractSystem):
     @property
     def parameters(self) -> dict[str, Array]:
         """The terms' coefficients by report name, e.g. `{"fc2": 0.21}`."""
-        return {t.parameter_name(self.system): t.coefficient for t in self.terms}
+        return {k: v for t in self.terms for k, v in t.parameters(self.system).items()}
 
     def applied_input(
         self, u: Float[Array, " n_inputs"], z: Float[Array, " n_hidden"]
@@ -135,7 +135,7 @@ class Extended(AbstractSystem):
             inertia = jnp.zeros(k, force.dtype)
             for term in self.joint_terms:
                 j = term.joint
-                force = force.at[j].add(term.force(q[j], dq[j]))
+                force = force.at[j].add(term.joint_force(q, dq, a))
                 inertia = inertia.at[j].add(term.inertia())
             ddq = _solve_spd(system.mass_matrix(q) + jnp.diag(inertia), force)
             dx = jnp.concatenate([dq, ddq])

@@ -51,6 +51,10 @@ class AbstractTerm(eqx.Module):
         """`cause@where`, e.g. `coulomb_friction@q2` (the contract's `extended.terms` entries)."""
         return f"{self.cause}@{self.where(system)}"
 
+    def parameters(self, system) -> dict[str, Array]:
+        """The term's coefficients by report name (one for a named cause; several for a `Discovered` term)."""
+        return {self.parameter_name(system): self.coefficient}
+
 
 class AbstractJointTerm(AbstractTerm):
     r"""A term acting on one generalised coordinate of a manipulator $M(q)\ddot q + h = B u$.
@@ -82,6 +86,12 @@ class AbstractJointTerm(AbstractTerm):
     def force(self, q: Float[Array, ""], dq: Float[Array, ""]) -> Float[Array, ""]:
         """Generalised force the term adds at its joint (default none)."""
         return jnp.zeros_like(dq)
+
+    def joint_force(
+        self, q: Float[Array, " n_joints"], dq: Float[Array, " n_joints"], a: Float[Array, " n_inputs"]
+    ) -> Float[Array, ""]:
+        """Generalised force at its joint from the whole state and applied input (default `force(q_j, dq_j)`)."""
+        return self.force(q[self.joint], dq[self.joint])
 
     def inertia(self) -> Float[Array, ""]:
         """Inertia the term adds to $M_{jj}$ (default none)."""
