@@ -93,9 +93,9 @@ def refit_spec(model: Extended, refit: Sequence[str]):
 
 
 @eqx.filter_jit
-def _acceleration_sensitivities(fitted, fixed, ts, xs_smooth, us, idx):
+def _acceleration_sensitivities(fitted, fixed, ts, xs_smooth, us, idx, us_before):
     p0, unravel = jax.flatten_util.ravel_pytree(fitted)
-    return jax.jacfwd(lambda p: _predicted_accelerations(eqx.combine(unravel(p), fixed), ts, xs_smooth, us, idx))(p0)
+    return jax.jacfwd(lambda p: _predicted_accelerations(eqx.combine(unravel(p), fixed), ts, xs_smooth, us, idx, us_before))(p0)
 
 
 def force_residuals(model, records, refit: Sequence[str] = ()) -> tuple[np.ndarray, ...]:
@@ -122,7 +122,8 @@ def force_residuals(model, records, refit: Sequence[str] = ()) -> tuple[np.ndarr
         out.append(np.einsum("tij,tj->ti", m, resid))
         ts = traj.ts
         smooth = savitzky_golay(ts, traj.xs, window=_sg_window(traj.dt), order=3)
-        sens = np.asarray(_acceleration_sensitivities(fitted, fixed, ts, smooth, traj.us, idx))
+        us_before = jnp.concatenate([traj.us[:1], traj.us[:-1]])  # the held input's left limit, as the residuals use
+        sens = np.asarray(_acceleration_sensitivities(fitted, fixed, ts, smooth, traj.us, idx, us_before))
         if sens.shape[-1]:  # the residual machinery smooths the prediction; its sensitivities alike
             flat = sens.reshape(len(ts), -1)
             sens = np.asarray(savitzky_golay(ts, jnp.asarray(flat), window=_sg_window(traj.dt), order=3)).reshape(sens.shape)
