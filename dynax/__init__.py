@@ -138,6 +138,7 @@ from ._data import (
 )
 from ._diagnose import (
     default_candidates as default_candidates,
+    demo_data as demo_data,
     diagnose as diagnose,
     discover as discover,
     Discovery as Discovery,

@@ -12,3 +12,4 @@ from ._synthetic import (
     multisine as multisine,
     synthetic_trajectory as synthetic_trajectory,
 )
+from ._demo import demo_data as demo_data

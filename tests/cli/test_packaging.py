@@ -38,7 +38,7 @@ def test_help_starts_with_a_plain_description_and_has_no_literal_percent_signs(c
         help_text = sub.format_help()
         assert "%%" not in help_text, name
         assert "--quiet" in help_text and "--progress" in help_text
-    assert "last 30% of DATA" in " ".join(parser._subparsers._group_actions[0].choices["diagnose"].format_help().split())
+    assert "last 30% of each training run" in " ".join(parser._subparsers._group_actions[0].choices["diagnose"].format_help().split())
 
 
 def test_ctrl_c_exits_130(monkeypatch, tmp_path, capsys):
