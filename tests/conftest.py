@@ -41,6 +41,20 @@ def datasets():
     return DATASETS
 
 
+@pytest.fixture(scope="session")
+def acrobot_csv(tmp_path_factory):
+    """6 s of the default acrobot under a two-sine elbow torque, simulated and saved as a contract CSV (read-only)."""
+    import dynax
+    from dynax._data import save_trajectory, Trajectory
+
+    ts = np.arange(0.0, 6.0, 0.01)
+    us = (2.0 * np.sin(1.3 * ts) + 1.0 * np.sin(3.7 * ts + 0.5))[:, None]
+    sim = dynax.simulate(dynax.Acrobot(), jnp.array([0.2, 0.0, 0.0, 0.0]), jnp.asarray(ts), jnp.asarray(us))
+    path = tmp_path_factory.mktemp("data") / "acrobot.csv"
+    save_trajectory(Trajectory(jnp.asarray(ts), sim.xs, jnp.asarray(us), ("q1", "q2", "dq1", "dq2"), ("tau2",)), path)
+    return path
+
+
 def tree_allclose(a, b, rtol=1e-7, atol=1e-9):
     """Whether two PyTrees have the same structure and close leaves."""
     la, ta = jax.tree.flatten(a)

@@ -6,23 +6,6 @@ import os
 import subprocess
 import sys
 
-import jax.numpy as jnp
-import numpy as np
-import pytest
-
-import dynax
-from dynax._data import save_trajectory, Trajectory
-
-
-@pytest.fixture(scope="module")
-def acrobot_csv(tmp_path_factory):
-    ts = np.arange(0.0, 4.0, 0.01)
-    us = (2.0 * np.sin(1.3 * ts) + 1.0 * np.sin(3.7 * ts + 0.5))[:, None]
-    sim = dynax.simulate(dynax.Acrobot(), jnp.array([0.2, 0.0, 0.0, 0.0]), jnp.asarray(ts), jnp.asarray(us))
-    path = tmp_path_factory.mktemp("data") / "acrobot.csv"
-    save_trajectory(Trajectory(jnp.asarray(ts), sim.xs, jnp.asarray(us), ("q1", "q2", "dq1", "dq2"), ("tau2",)), path)
-    return path
-
 
 def _identify(csv, out, cache_dir, *extra):
     env = {k: v for k, v in os.environ.items() if k != "DYNAX_NO_CACHE"}
