@@ -93,7 +93,9 @@ def test_a_real_sigint_exits_130():
     code = ("import os, signal, sys, time\n"
             "from dynax._cli import _identify\n"
             "from dynax._cli._main import main\n"
-            "_identify.run = lambda args: (os.kill(os.getpid(), signal.SIGINT), time.sleep(30))\n"
+            # raise_signal delivers to the main thread, as a terminal's Ctrl-C reaches Python's handler; os.kill
+            # may land on a thread JAX started (the compilation cache), and the sleep would then run out.
+            "_identify.run = lambda args: (signal.raise_signal(signal.SIGINT), time.sleep(30))\n"
             "sys.exit(main(['identify', 'acrobot', 'x.csv', '--out', 'p.json']))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert out.returncode == 130 and "interrupted" in out.stderr
