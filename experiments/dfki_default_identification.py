@@ -31,18 +31,10 @@ import numpy as np  # noqa: E402
 import dynax  # noqa: E402
 from dynax._identify._validation import held_out_error  # noqa: E402
 
-REPO = pathlib.Path(__file__).resolve().parents[1]
-DFKI = REPO.parent / "shared" / "datasets" / "dfki_double_pendulum"
-MAPPING = {"t": "time", "q1": "pos_meas1", "q2": "pos_meas2", "dq1": "vel_meas1", "dq2": "vel_meas2",
-           "tau1": "tau_meas1", "tau2": "tau_meas2"}
+from dfki_simulation import DFKI, MAPPING, read_parameters  # noqa: E402  (the script's folder is on sys.path)
+
 RUNS = ("00", "01", "02", "03", "05", "12")
 HORIZONS = (0.1, 0.25, 0.5)
-
-
-def read_parameters(model: str) -> dict[str, float]:
-    """The lab's `model_parameters.yml` (flat `key: value` lines)."""
-    text = (DFKI / "identified_parameters" / "design_C.0" / model / "model_parameters.yml").read_text()
-    return {k.strip(): float(v) for k, v in (line.split(":", 1) for line in text.splitlines() if ":" in line)}
 
 
 def lab_model(p: dict[str, float]) -> dynax.AbstractSystem:
