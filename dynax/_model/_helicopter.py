@@ -39,6 +39,7 @@ fixed 0/1 mask $M$ choosing which features each axis uses. The learning criteria
 from typing import Callable, ClassVar
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
@@ -426,6 +427,29 @@ class Helicopter(AbstractSystem):
                 f"Helicopter: `body_model` must be an AccelerationModel or LinearVelocityModel, "
                 f"got {type(self.body_model).__name__}"
             )
+
+    def parameter_filter(self):
+        """The body model's free weights (its feature `mask`); gravity and the frame are physics."""
+        spec = jax.tree.map(lambda _: False, self)
+        return eqx.tree_at(lambda h: h.body_model.weights, spec, np.asarray(self.body_model.mask, dtype=bool))
+
+    def parameter_labels(self) -> tuple[str, ...]:
+        return tuple(self.body_model.parameter_names)
+
+    def state_error(self, simulated, measured):
+        """Simulated minus measured, with the simulated quaternion taken on the measured one's
+        hemisphere: $q$ and $-q$ are one attitude."""
+        quat = simulated[..., QUATERNION]
+        sign = jnp.where(jnp.sum(quat * measured[..., QUATERNION], axis=-1, keepdims=True) < 0, -1.0, 1.0)
+        return simulated.at[..., QUATERNION].set(sign * quat) - measured
+
+    @property
+    def position_indices(self) -> tuple[int, ...]:
+        return (0, 1, 2)  # world position x, y, z [m]
+
+    @property
+    def velocity_indices(self) -> tuple[int, ...]:
+        return tuple(range(BODY.start, BODY.stop))  # body velocities and rates u, v, w, p, q, r
 
     def vector_field(self, t, x, u):
         dpos, dquat = rigid_body_kinematics(x, self.normalisation_gain)

@@ -1,9 +1,12 @@
 """The system abstraction: an `eqx.Module` whose dynamics is `vector_field(t, x, u)`."""
 
 import abc
+from typing import Any
+
 import equinox as eqx
+import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float, ArrayLike
+from jaxtyping import Array, Float, ArrayLike, PyTree
 
 
 class AbstractSystem(eqx.Module):
@@ -42,6 +45,36 @@ class AbstractSystem(eqx.Module):
     def n_inputs(self) -> int:
         return len(self.input_names)
 
+    # What differs per system is a method here, so that generic layers (identification, diagnosis,
+    # simulation error) never need to check a concrete class.
+
+    def parameter_filter(self) -> PyTree[Any]:
+        """What a fit moves by default (a filter for `dynax.Parameters`): every inexact array leaf."""
+        return jax.tree.map(eqx.is_inexact_array, self)
+
+    def parameter_labels(self) -> tuple[str, ...] | None:
+        """Readable names of the `parameter_filter()` elements, in order; `None` uses the tree paths."""
+        return None
+
+    def state_error(
+        self, simulated: Float[Array, "*batch n_measured"], measured: Float[Array, "*batch n_measured"]
+    ) -> Float[Array, "*batch n_measured"]:
+        """Simulated minus measured states, for the measured (leading) states. Systems whose state
+        has a symmetry (a unit quaternion's sign) override this."""
+        return simulated - measured
+
+    @property
+    def position_indices(self) -> tuple[int, ...]:
+        """The states that are positions (or angles): the headline of simulation errors. Default:
+        the names not starting with `d`."""
+        return tuple(i for i, s in enumerate(self.state_names) if not s.startswith("d"))
+
+    @property
+    def velocity_indices(self) -> tuple[int, ...]:
+        """The states whose time derivatives the residual analysis reads (a manipulator's joint
+        velocities). Default: every state."""
+        return tuple(range(self.n_states))
+
 
 class AbstractManipulator(AbstractSystem):
     r"""A rigid-body system $M(q)\ddot q + h(q, \dot q) = B u$ with state $x = (q, \dot q)$.
@@ -67,6 +100,14 @@ class AbstractManipulator(AbstractSystem):
     @abc.abstractmethod
     def input_matrix(self) -> Float[Array, "n_joints n_inputs"]:
         """$B$, mapping the input vector to generalised forces."""
+
+    @property
+    def position_indices(self) -> tuple[int, ...]:
+        return tuple(range(self.n_joints))
+
+    @property
+    def velocity_indices(self) -> tuple[int, ...]:
+        return tuple(range(self.n_joints, 2 * self.n_joints))
 
     def vector_field(self, t, x, u):
         n = self.n_joints

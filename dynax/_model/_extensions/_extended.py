@@ -1,6 +1,7 @@
 """`Extended`: a system composed with model extensions, itself a system."""
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
@@ -69,6 +70,22 @@ class Extended(AbstractSystem):
     @property
     def input_names(self) -> tuple[str, ...]:
         return tuple(self.system.input_names)
+
+    def parameter_filter(self):
+        """The nominal system's own filter, and every term's coefficients."""
+        spec = jax.tree.map(eqx.is_inexact_array, self)
+        return eqx.tree_at(lambda m: m.system, spec, self.system.parameter_filter())
+
+    def state_error(self, simulated, measured):
+        return self.system.state_error(simulated, measured)
+
+    @property
+    def position_indices(self) -> tuple[int, ...]:
+        return self.system.position_indices
+
+    @property
+    def velocity_indices(self) -> tuple[int, ...]:
+        return self.system.velocity_indices
 
     @property
     def joint_terms(self) -> tuple[AbstractJointTerm, ...]:

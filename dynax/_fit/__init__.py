@@ -1,0 +1,6 @@
+"""The fitting engine: one way to say what to fit (`Parameters`), one solve (`fit_least_squares`,
+`fit_minimise`), one result (`Solution`). Identification and diagnosis are built on it."""
+
+from ._engine import fit_least_squares as fit_least_squares, fit_minimise as fit_minimise
+from ._parameters import Parameters as Parameters
+from ._solution import Solution as Solution

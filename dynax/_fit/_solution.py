@@ -1,0 +1,73 @@
+"""The one result type of every fit, after optimistix's `Solution`."""
+
+import equinox as eqx
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Float, PyTree
+
+from ._parameters import Parameters
+
+
+def _result_name(result) -> str | None:
+    if np.ndim(result._value) != 0:
+        return None
+    message = optx.RESULTS[result]
+    return "successful" if message == "" else message
+
+
+class Solution(eqx.Module):
+    r"""The result of a fit: the fitted model, its estimate with names and uncertainty, and how it went.
+
+    **Fields:**
+
+    - `model`: the fitted model (the input model with its free elements replaced).
+    - `value`: the estimate, flattened in `parameters.names` order.
+    - `parameters`: what was fitted (`Parameters`: names and selection).
+    - `covariance`: Gauss-Newton covariance of `value`, $\hat\sigma^2 (J^\top J)^{+}$ with
+      $\hat\sigma^2 = \lVert r \rVert^2 / (m - n)$ (least squares), or the inverse Hessian
+      approximation where the solver has one; NaN where not computed. With residuals correlated in
+      time it is too small: read it as a lower bound.
+    - `std_errors`: square roots of its diagonal.
+    - `result`: an `optimistix.RESULTS` code (`successful`, `max_steps_reached`, `nonlinear_divergence`, ...).
+    - `loss`, `initial_loss`: $\tfrac12\lVert r\rVert^2$ (least squares) or the scalar loss, at the end and the start.
+    - `steps`: iterations taken.
+    - `n_residuals`: residual count (0 for a scalar loss).
+    """
+
+    model: PyTree
+    value: Float[Array, " n"]
+    parameters: Parameters
+    covariance: Float[Array, "n n"]
+    std_errors: Float[Array, " n"]
+    result: optx.RESULTS
+    loss: Float[Array, ""]
+    initial_loss: Float[Array, ""]
+    steps: Array
+    n_residuals: int = eqx.field(static=True, default=0)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.parameters.names
+
+    @property
+    def succeeded(self) -> bool:
+        return bool(self.result == optx.RESULTS.successful)
+
+    def estimates(self) -> dict[str, float]:
+        """`{name: value}`."""
+        return self.parameters.named(self.value)
+
+    def standard_errors(self) -> dict[str, float]:
+        """`{name: standard error}`."""
+        return self.parameters.named(self.std_errors)
+
+    def to_json(self) -> dict:
+        """A JSON-ready summary: estimates and standard errors by name, the result code and the losses."""
+        return {
+            "estimates": self.estimates(),
+            "std_errors": self.standard_errors(),
+            "result": _result_name(self.result),
+            "steps": int(self.steps) if np.ndim(self.steps) == 0 else None,
+            "loss": float(self.loss) if np.ndim(self.loss) == 0 else None,
+            "initial_loss": float(self.initial_loss) if np.ndim(self.initial_loss) == 0 else None,
+        }
