@@ -30,14 +30,15 @@ def cells(markdown: str) -> list[tuple[str, str]]:
 def to_notebook(markdown: str) -> dict:
     """A minimal nbformat-4 notebook of the page (no outputs)."""
 
-    def cell(kind, text):
-        c = {"cell_type": kind, "metadata": {}, "source": text.splitlines(keepends=True)}
+    def cell(i, kind, text):
+        # nbformat 4.5 requires an id per cell; the position keeps the file reproducible
+        c = {"cell_type": kind, "id": f"cell-{i}", "metadata": {}, "source": text.splitlines(keepends=True)}
         if kind == "code":
             c.update(execution_count=None, outputs=[])
         return c
 
     return {
-        "cells": [cell(kind, text) for kind, text in cells(markdown)],
+        "cells": [cell(i, kind, text) for i, (kind, text) in enumerate(cells(markdown))],
         "metadata": {"kernelspec": {"display_name": "Python 3", "language": "python", "name": "python3"},
                      "language_info": {"name": "python"}},
         "nbformat": 4,

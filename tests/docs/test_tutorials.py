@@ -42,3 +42,19 @@ def test_tutorial_runs_top_to_bottom(page, datasets, monkeypatch, tmp_path):
             exec(compile(block, f"{page}, code block {i + 1}", "exec"), namespace)
         except Exception as e:
             raise AssertionError(f"{page}, code block {i + 1} failed: {e!r}\n{block}") from e
+
+
+def test_notebook_runs_in_a_jupyter_kernel(datasets, tmp_path):
+    """What a user does: open the notebook in Jupyter and run all cells. Executed by a real
+    IPython kernel (nbclient), from the notebook's folder, with this interpreter's packages."""
+    nbformat = pytest.importorskip("nbformat")
+    nbclient = pytest.importorskip("nbclient")
+    pytest.importorskip("ipykernel")
+    notebook = nbformat.read(TUTORIALS / "first_steps.ipynb", as_version=4)
+    client = nbclient.NotebookClient(
+        notebook, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(TUTORIALS)}}
+    )
+    client.execute()
+    errors = [o for c in notebook.cells if c.cell_type == "code" for o in c.get("outputs", []) if o.output_type == "error"]
+    assert not errors, errors
+    assert sum(c.cell_type == "code" for c in notebook.cells) >= 3
