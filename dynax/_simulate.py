@@ -150,6 +150,47 @@ def _check_arguments(system, x0, ts, us):
     return x0, ts, us
 
 
+def _explicit_step(system, solver):
+    r"""The step of an explicit Runge-Kutta `solver` from its Butcher tableau, unrolled at trace time.
+
+    On a fixed grid nothing of diffrax's per-step machinery is needed: no error estimate, no dense
+    output, no stage buffers. diffrax evaluates the stages in a loop over a square tableau (so that
+    one implementation serves every Runge-Kutta family and adaptive stepping); here the stages are
+    written out with the tableau's nonzero coefficients as constants,
+    $k_i = f(t_0 + c_i h, y_0 + h \sum_{j<i} a_{ij} k_j)$, $y_1 = y_0 + h \sum_i b_i k_i$,
+    which is the same arithmetic as `solver.step` (equal to rounding) at the cost of a hand-written
+    step. Returns `None` for other solvers, which then take diffrax's `step`.
+    """
+    tableau = getattr(solver, "tableau", None)
+    if not isinstance(solver, diffrax.AbstractERK) or not isinstance(tableau, diffrax.ButcherTableau):
+        return None
+    c = np.concatenate([[0.0], np.asarray(tableau.c)])
+    a = [np.zeros(0)] + [np.asarray(row) for row in tableau.a_lower]
+    b = np.asarray(tableau.b_sol)
+
+    def field(t, y, u):
+        return system.vector_field(t, y, u).astype(y.dtype)
+
+    # A stage is needed if the solution or a later needed stage uses it (the last stage of an FSAL
+    # method such as Tsit5 only feeds the next step's error estimate: skipped).
+    needed = [False] * len(b)
+    for i in reversed(range(len(b))):
+        needed[i] = b[i] != 0 or any(needed[j] and a[j][i] != 0 for j in range(i + 1, len(b)))
+
+    def combine(y, h, coefficients, ks):
+        terms = [float(w) * ks[j] for j, w in enumerate(coefficients) if w != 0.0]
+        return y if not terms else y + h * sum(terms[1:], terms[0])
+
+    def step(t0, y0, u, h):
+        ks = {}
+        for i in range(len(b)):
+            if needed[i]:
+                ks[i] = field(t0 + float(c[i]) * h, combine(y0, h, a[i], ks), u)
+        return combine(y0, h, b, ks)
+
+    return step
+
+
 def _sample_interval(system, method: FixedGrid, bound):
     """One sample interval of a fixed-grid rollout, with divergence tracking.
 
@@ -161,12 +202,15 @@ def _sample_interval(system, method: FixedGrid, bound):
     term = _zoh_term(system)
     solver = method.solver
     n = method.substeps
+    explicit = _explicit_step(system, solver)
 
     def advance(x, diverged_at, t0, t1, u):
         h = (t1 - t0) / n
 
         def substep(i, y):
             ta = t0 + i * h
+            if explicit is not None:
+                return explicit(ta, y, u, h)
             state = solver.init(term, ta, ta + h, y, u)
             y_next, _, _, _, _ = solver.step(term, ta, ta + h, y, u, state, made_jump=True)
             return y_next
