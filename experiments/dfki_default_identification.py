@@ -78,7 +78,7 @@ def main(argv=None):
         results["runs"].update(json.loads((part / "results.json").read_text())["runs"])
     held_out = [] if args.merge else args.runs.split(",")
     runs = {r: load(r) for r in RUNS} if held_out else {}
-    lab = lab_model(read_parameters("model_3.0"))
+    lab = lab_model(read_parameters("model_3.0")) if held_out else None
     for held in held_out:
         train = [runs[r] for r in RUNS if r != held]
         start = time.perf_counter()
