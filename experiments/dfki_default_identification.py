@@ -2,6 +2,8 @@
 
     python experiments/dfki_default_identification.py --out experiments/results/dfki_default_identification
 
+(or folds in parallel: `--runs 00,01,02 --out A`, `--runs 03,05,12 --out B`, then `--merge A B --out ...`)
+
 For each of the six `sys_id` runs: fit `identify(DoublePendulum(), other_five_runs, Dynamic(),
 friction="coulomb", validation=[this_run])` with no recipe (every setting chosen from the data),
 and simulate the held-out run open loop from 200 start samples; compare the position RMSE at 0.1,
@@ -68,11 +70,16 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", required=True, type=pathlib.Path)
     parser.add_argument("--runs", default=",".join(RUNS), help="held-out runs to evaluate (default all six)")
+    parser.add_argument("--merge", nargs="+", type=pathlib.Path, default=(), metavar="DIR",
+                        help="fit nothing: merge the results.json of earlier runs (e.g. folds run in parallel)")
     args = parser.parse_args(argv)
-    runs = {r: load(r) for r in RUNS}
-    lab = lab_model(read_parameters("model_3.0"))
     results = {"horizons_s": list(HORIZONS), "runs": {}}
-    for held in args.runs.split(","):
+    for part in args.merge:
+        results["runs"].update(json.loads((part / "results.json").read_text())["runs"])
+    held_out = [] if args.merge else args.runs.split(",")
+    runs = {r: load(r) for r in RUNS} if held_out else {}
+    lab = lab_model(read_parameters("model_3.0")) if held_out else None
+    for held in held_out:
         train = [runs[r] for r in RUNS if r != held]
         start = time.perf_counter()
         result = dynax.identify(dynax.DoublePendulum(), train, dynax.Dynamic(), friction="coulomb",
@@ -100,7 +107,7 @@ def main(argv=None):
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "results.json").write_text(json.dumps(results, indent=2) + "\n")
 
-    held_runs = list(results["runs"])
+    held_runs = sorted(results["runs"])
     fig, axes = plt.subplots(1, len(HORIZONS), figsize=(5 * len(HORIZONS), 4))
     x = np.arange(len(held_runs))
     for ax, (k, h) in zip(axes, enumerate(HORIZONS)):
