@@ -69,17 +69,17 @@ from ._identify._vehicle import (
 from ._model import (
     AbstractBodyModel as AbstractBodyModel,
     AbstractManipulator as AbstractManipulator,
-    AccelerationModel as AccelerationModel,
-    Helicopter as Helicopter,
-    hover_state as hover_state,
-    LinearVelocityModel as LinearVelocityModel,
-    RICH_FEATURES as RICH_FEATURES,
-    TEMPEST_FEATURES as TEMPEST_FEATURES,
     AbstractSystem as AbstractSystem,
+    AccelerationModel as AccelerationModel,
     Acrobot as Acrobot,
     base_parameters_from_physical as base_parameters_from_physical,
     DoublePendulum as DoublePendulum,
+    Helicopter as Helicopter,
+    hover_state as hover_state,
     LinearAxis as LinearAxis,
+    LinearVelocityModel as LinearVelocityModel,
+    RICH_FEATURES as RICH_FEATURES,
+    TEMPEST_FEATURES as TEMPEST_FEATURES,
 )
 from ._control import (
     AbstractFitnessShaping as AbstractFitnessShaping,
