@@ -69,20 +69,17 @@ from ._identify._vehicle import (
 from ._model import (
     AbstractBodyModel as AbstractBodyModel,
     AbstractManipulator as AbstractManipulator,
-    AccelerationModel as AccelerationModel,
-    FlightController as FlightController,
-    generate_helicopter_flight as generate_helicopter_flight,
-    Helicopter as Helicopter,
-    HelicopterTruth as HelicopterTruth,
-    hover_state as hover_state,
-    LinearVelocityModel as LinearVelocityModel,
-    RICH_FEATURES as RICH_FEATURES,
-    TEMPEST_FEATURES as TEMPEST_FEATURES,
     AbstractSystem as AbstractSystem,
+    AccelerationModel as AccelerationModel,
     Acrobot as Acrobot,
     base_parameters_from_physical as base_parameters_from_physical,
     DoublePendulum as DoublePendulum,
+    Helicopter as Helicopter,
+    hover_state as hover_state,
     LinearAxis as LinearAxis,
+    LinearVelocityModel as LinearVelocityModel,
+    RICH_FEATURES as RICH_FEATURES,
+    TEMPEST_FEATURES as TEMPEST_FEATURES,
 )
 from ._control import (
     AbstractFitnessShaping as AbstractFitnessShaping,
@@ -138,17 +135,14 @@ from ._data import (
 )
 from ._diagnose import (
     default_candidates as default_candidates,
-    demo_data as demo_data,
     diagnose as diagnose,
     discover as discover,
     Discovery as Discovery,
     feature_library as feature_library,
-    helicopter_flight as helicopter_flight,
     Known as Known,
     LOOK_ALIKES as LOOK_ALIKES,
     propose as propose,
     Proposal as Proposal,
-    multisine as multisine,
     Refit as Refit,
     Report as Report,
     search_period as search_period,
@@ -157,8 +151,18 @@ from ._diagnose import (
     stlsq as stlsq,
     Structure as Structure,
     structure_test as structure_test,
-    synthetic_trajectory as synthetic_trajectory,
     write_report as write_report,
+)
+# Synthetic data (truth simulators, data generators) lives in `dynax.synthetic`; the top-level names stay.
+from . import synthetic as synthetic
+from ._synthetic import (
+    demo_data as demo_data,
+    FlightController as FlightController,
+    generate_helicopter_flight as generate_helicopter_flight,
+    helicopter_flight as helicopter_flight,
+    HelicopterTruth as HelicopterTruth,
+    multisine as multisine,
+    synthetic_trajectory as synthetic_trajectory,
 )
 from ._metrics import (
     aic as aic,

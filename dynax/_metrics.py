@@ -22,6 +22,7 @@ from jaxtyping import ArrayLike, Float
 
 from ._data._trajectory import Trajectory
 from ._errors import UsageError
+from ._sim_error import simulation_error
 
 
 def _as_columns(name: str, values: ArrayLike) -> np.ndarray:
@@ -91,8 +92,6 @@ def horizon_fit(
 
     **Returns:** state name -> fit [%].
     """
-    from ._sim_error import simulation_error
-
     names = trajectory.state_names
     states = tuple(names if states is None else states)
     unknown = [s for s in states if s not in names]

@@ -191,7 +191,7 @@ def _explicit_step(system, solver):
     return step
 
 
-def _sample_interval(system, method: FixedGrid, bound):
+def sample_interval(system, method: FixedGrid, bound):
     """One sample interval of a fixed-grid rollout, with divergence tracking.
 
     Returns `advance(x, diverged_at, t0, t1, u) -> (x_carry, diverged_at, x_out)`: `method.substeps`
@@ -224,8 +224,12 @@ def _sample_interval(system, method: FixedGrid, bound):
     return advance
 
 
+# The old private spelling, for code written before the helper got its in-package name.
+_sample_interval = sample_interval
+
+
 def _fixed_grid(system, x0, ts, us, method, bound):
-    advance = _sample_interval(system, method, bound)
+    advance = sample_interval(system, method, bound)
 
     def interval(carry, inputs):
         x_carry, diverged_at, x_out = advance(*carry, *inputs)

@@ -4,32 +4,9 @@ import argparse
 import pathlib
 import time
 
-import numpy as np
-
 from .._errors import UsageError
+from .._synthetic import hidden_effect
 from ._output import staged_directory, write_json
-
-# (cause, where, term factory from a size in [0, 1]): the effects the demo hides, picked by --seed.
-_EFFECTS = (
-    ("coulomb_friction", "q2", lambda s: ("CoulombFriction", 1, 0.15 + 0.25 * s)),
-    ("rotor_inertia", "q2", lambda s: ("RotorInertia", 1, 0.08 + 0.12 * s)),
-    ("input_delay", "tau2", lambda s: ("InputDelay", 0, 0.03 + 0.03 * s)),
-    ("quadratic_drag", "q2", lambda s: ("QuadraticDrag", 1, 0.08 + 0.08 * s)),
-    ("input_lag", "tau2", lambda s: ("InputLag", 0, 0.04 + 0.04 * s)),
-    ("coulomb_friction", "q1", lambda s: ("CoulombFriction", 0, 0.2 + 0.3 * s)),
-    ("input_offset", "tau2", lambda s: ("InputOffset", 0, 0.15 + 0.15 * s)),
-)
-
-
-def hidden_effect(seed: int):
-    """The term the demo hides for `seed`: the effect cycles with the seed, its size is drawn from it."""
-    from .._model import _extensions
-
-    rng = np.random.default_rng(seed)
-    cause, where, factory = _EFFECTS[seed % len(_EFFECTS)]
-    name, index, size = factory(rng.uniform())
-    return getattr(_extensions, name)(index, round(float(size), 3))
-
 
 def register(subparsers):
     parser = subparsers.add_parser(

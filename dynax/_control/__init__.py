@@ -5,10 +5,9 @@ from ._lqr import (
     linearise as linearise,
     LQR as LQR,
     lqr as lqr,
-    solve_continuous_are as solve_continuous_are,
-    solve_discrete_are as solve_discrete_are,
     wrap_angle as wrap_angle,
 )
+from ._riccati import solve_continuous_are as solve_continuous_are, solve_discrete_are as solve_discrete_are
 from ._linear_design import ctrb as ctrb, dlqr as dlqr, lqe as lqe, lqr_matrices as lqr_matrices, obsv as obsv
 from ._swing_up import (
     AbstractSwitchingRule as AbstractSwitchingRule,

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._model._system import AbstractSystem
-from .._simulate import _sample_interval, FixedGrid
+from .._simulate import FixedGrid, sample_interval
 from ._lqr import wrap_angle
 
 Controller = Callable[[Float[Array, ""], Float[Array, " n_states"]], Float[Array, " n_inputs"]]
@@ -79,7 +79,7 @@ def simulate_closed_loop(
         raise ValueError(f"simulate_closed_loop: `ts` must be 1-d with at least 2 samples, got shape {ts.shape}")
     dtype = jnp.result_type(x0, ts, float)
     x0, ts = x0.astype(dtype), ts.astype(dtype)
-    advance = _sample_interval(system, method, divergence_bound)
+    advance = sample_interval(system, method, divergence_bound)
 
     def interval(carry, times):
         x, diverged_at = carry

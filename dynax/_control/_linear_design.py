@@ -9,7 +9,7 @@ differentiable (the Riccati solutions are, see `solve_continuous_are`). The syst
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Complex, Float
 
-from ._lqr import solve_continuous_are, solve_discrete_are
+from ._riccati import solve_continuous_are, solve_discrete_are
 
 
 def _matrix(name: str, function: str, value, rows: int | None = None, cols: int | None = None) -> Array:

@@ -129,8 +129,12 @@ class SpongController(eqx.Module):
     ):
         if system is None:
             system = Acrobot()
-        if not isinstance(system, Acrobot):
-            raise ValueError(f"SpongController: `system` must be an Acrobot, got {type(system).__name__}")
+        # What the controller needs, asked of the system: two joints, the torque at the elbow only.
+        if tuple(system.joint_names) != ("q1", "q2") or tuple(system.input_names) != ("tau2",):
+            raise ValueError(
+                "SpongController: `system` must be an Acrobot (a two-link manipulator driven at the elbow, "
+                f"input 'tau2'), got {type(system).__name__}"
+            )
         self.system = system
         self.k_e, self.k_p, self.k_d, self.phi = (jnp.asarray(v) for v in (k_e, k_p, k_d, phi))
         self.balance = balancing_lqr(system) if balance is None else balance

@@ -7,9 +7,3 @@ from ._library import feature_library as feature_library, search_period as searc
 from ._sparse import sparse_search as sparse_search, SparseFit as SparseFit, stlsq as stlsq
 from ._report import write_report as write_report
 from ._residuals import Structure as Structure, structure_test as structure_test
-from ._synthetic import (
-    helicopter_flight as helicopter_flight,
-    multisine as multisine,
-    synthetic_trajectory as synthetic_trajectory,
-)
-from ._demo import demo_data as demo_data

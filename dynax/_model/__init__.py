@@ -16,8 +16,3 @@ from ._helicopter import (
     RICH_FEATURES as RICH_FEATURES,
     TEMPEST_FEATURES as TEMPEST_FEATURES,
 )
-from ._helicopter_truth import (
-    FlightController as FlightController,
-    generate_helicopter_flight as generate_helicopter_flight,
-    HelicopterTruth as HelicopterTruth,
-)

@@ -451,6 +451,10 @@ class Helicopter(AbstractSystem):
     def velocity_indices(self) -> tuple[int, ...]:
         return tuple(range(BODY.start, BODY.stop))  # body velocities and rates u, v, w, p, q, r
 
+    @property
+    def body_axes(self) -> tuple[str, ...]:
+        return BODY_AXES
+
     def vector_field(self, t, x, u):
         dpos, dquat = rigid_body_kinematics(x, self.normalisation_gain)
         dbody = self.body_model(x[QUATERNION], x[BODY], u)

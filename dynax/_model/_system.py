@@ -75,6 +75,18 @@ class AbstractSystem(eqx.Module):
         velocities). Default: every state."""
         return tuple(range(self.n_states))
 
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """The generalised coordinates joint terms (friction, rotor inertia, springs) can act on:
+        a manipulator's `q1, q2, ...`. Default: none (no mass matrix and bias force to extend)."""
+        return ()
+
+    @property
+    def body_axes(self) -> tuple[str, ...]:
+        """The body axes vehicle terms (drag, wind, body bias) can act on: a rigid-body vehicle's
+        `u, v, w, p, q, r`. Default: none."""
+        return ()
+
 
 class AbstractManipulator(AbstractSystem):
     r"""A rigid-body system $M(q)\ddot q + h(q, \dot q) = B u$ with state $x = (q, \dot q)$.
@@ -104,6 +116,10 @@ class AbstractManipulator(AbstractSystem):
     @property
     def position_indices(self) -> tuple[int, ...]:
         return tuple(range(self.n_joints))
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return tuple(self.state_names[: self.n_joints])
 
     @property
     def velocity_indices(self) -> tuple[int, ...]:

@@ -36,7 +36,7 @@ def make_fixtures(root) -> dict:
     import dynax
     from dynax._identify._vehicle import initial_helicopter
     from dynax._model._helicopter import Helicopter
-    from dynax._model._helicopter_truth import generate_helicopter_flight
+    from dynax.synthetic import generate_helicopter_flight
 
     root = pathlib.Path(root)
     ts = np.arange(0, 2.0, 0.01)

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from dynax._cli._demo import hidden_effect
+from dynax.synthetic import hidden_effect
 from dynax._cli._main import main
 from dynax._data import load_trajectory
 

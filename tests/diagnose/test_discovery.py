@@ -21,9 +21,9 @@ from dynax._cli._main import main
 from dynax._data import save_trajectory, Trajectory
 from dynax._diagnose import diagnose
 from dynax._diagnose._candidates import default_candidates
-from dynax._diagnose._demo import demo_data, DEMO_TRUTH_PHYSICAL
+from dynax.synthetic import demo_data, DEMO_TRUTH_PHYSICAL
 from dynax._diagnose._discovery import propose
-from dynax._diagnose._synthetic import synthetic_trajectory
+from dynax.synthetic import synthetic_trajectory
 from dynax._model._extensions import AbstractJointTerm, CoulombFriction, Extended, JointSpring
 
 ACROBOT_BASE = ("theta1", "theta2", "theta3", "theta4", "theta5", "theta6", "theta7")

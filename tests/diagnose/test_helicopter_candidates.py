@@ -16,10 +16,10 @@ import pytest
 from dynax import Acrobot
 from dynax._diagnose import diagnose, Known, Refit
 from dynax._diagnose._candidates import default_candidates
-from dynax._diagnose._synthetic import helicopter_flight
+from dynax.synthetic import helicopter_flight
 from dynax._model._extensions import AbstractVehicleTerm, BodyBias, BodyQuadraticDrag, Extended, Wind
 from dynax._model._helicopter import Helicopter, hover_state, TEMPEST_COEFFICIENTS
-from dynax._model._helicopter_truth import FlightController
+from dynax.synthetic import FlightController
 
 
 U = jnp.asarray([0.1, -0.2, 0.05, 0.3])

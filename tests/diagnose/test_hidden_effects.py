@@ -12,8 +12,8 @@ import pytest
 from dynax import Acrobot
 from dynax._data import Trajectory
 from dynax._diagnose import diagnose, Known, Refit
-from dynax._diagnose._demo import demo_data
-from dynax._diagnose._synthetic import synthetic_trajectory
+from dynax.synthetic import demo_data
+from dynax.synthetic import synthetic_trajectory
 from dynax._model._extensions import (
     CoulombFriction,
     Extended,

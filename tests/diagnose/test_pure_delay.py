@@ -9,9 +9,9 @@ import pytest
 from dynax import Acrobot
 from dynax._data import Trajectory
 from dynax._diagnose import diagnose, Refit
-from dynax._diagnose._demo import DEMO_TRUTH_PHYSICAL
+from dynax.synthetic import DEMO_TRUTH_PHYSICAL
 from dynax._diagnose._residuals import acceleration_residuals, exact_delays
-from dynax._diagnose._synthetic import multisine
+from dynax.synthetic import multisine
 from dynax._model._extensions import Extended, InputDelay
 from dynax._simulate import FixedGrid, simulate
 

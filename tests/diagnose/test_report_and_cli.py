@@ -8,7 +8,7 @@ import pytest
 from dynax._cli._main import main
 from dynax._data import save_trajectory
 from dynax._diagnose import diagnose, write_report
-from dynax._diagnose._demo import demo_data
+from dynax.synthetic import demo_data
 from dynax._cli._output import write_json
 from dynax._model._extensions import InputOffset
 from dynax import Acrobot

@@ -8,7 +8,7 @@ import pytest
 from dynax._cli._main import main
 from dynax._data import save_trajectory
 from dynax._model._helicopter import Helicopter
-from dynax._model._helicopter_truth import generate_helicopter_flight
+from dynax.synthetic import generate_helicopter_flight
 
 GROUPS = ("velocity", "angular_rate", "position", "orientation")
 

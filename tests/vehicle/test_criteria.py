@@ -27,7 +27,7 @@ from dynax._model._helicopter import (
     TEMPEST_COEFFICIENTS,
     TEMPEST_FEATURES,
 )
-from dynax._model._helicopter_truth import generate_helicopter_flight
+from dynax.synthetic import generate_helicopter_flight
 
 TEMPEST_NAMES = {
     "du/u": "Ax", "dv/v": "Ay", "dw/w": "Az", "dp/p": "Bx", "dq/q": "By", "dr/r": "Bz",

@@ -16,7 +16,7 @@ from dynax._model._helicopter import (
     quaternion_from_euler,
     TEMPEST_COEFFICIENTS,
 )
-from dynax._model._helicopter_truth import HelicopterTruth
+from dynax.synthetic import HelicopterTruth
 
 DT = 0.01
 

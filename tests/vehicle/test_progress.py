@@ -5,7 +5,7 @@ import pytest
 from dynax import fit_vehicle, Helicopter, Lagged, save_trajectory
 from dynax._cli._main import main
 from dynax._identify._vehicle import initial_helicopter
-from dynax._model._helicopter_truth import generate_helicopter_flight
+from dynax.synthetic import generate_helicopter_flight
 
 
 @pytest.fixture(scope="module")

@@ -5,11 +5,10 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from .._helicopter import Helicopter
-from .._system import _solve_spd, AbstractManipulator, AbstractSystem
+from .._system import AbstractSystem
 from ._inputs import AbstractInputTerm
 from ._terms import AbstractJointTerm, AbstractTerm
-from ._vehicle_terms import AbstractVehicleTerm, vehicle_vector_field
+from ._vehicle_terms import AbstractVehicleTerm
 
 
 class Extended(AbstractSystem):
@@ -46,16 +45,11 @@ class Extended(AbstractSystem):
             raise ValueError("Extended: `terms` must be a tuple of model extension terms (e.g. CoulombFriction)")
         labels = []
         for term in self.terms:
-            if isinstance(term, AbstractVehicleTerm) and not isinstance(self.system, Helicopter):
-                raise ValueError(
-                    f"Extended: {type(term).__name__} acts on a helicopter's body axes, but "
-                    f"{type(self.system).__name__} is not a Helicopter"
-                )
-            if isinstance(term, AbstractJointTerm) and not isinstance(self.system, AbstractManipulator):
-                raise ValueError(
-                    f"Extended: {type(term).__name__} acts on a joint, but {type(self.system).__name__} "
-                    "is not a manipulator (it has no mass matrix and bias force to extend)"
-                )
+            # Each term knows what it acts on (a manipulator's joints, a vehicle's body axes, an input).
+            try:
+                term.check_system(self.system)
+            except ValueError as e:
+                raise ValueError(f"Extended: {e}") from None
             # `label` also checks the joint / input index; wind components share `wind@world`
             labels.append(f"{term.label(self.system)} ({term.parameter_name(self.system)})")
         duplicates = sorted({label for label in labels if labels.count(label) > 1})
@@ -140,20 +134,11 @@ class Extended(AbstractSystem):
         n = self.system.n_states
         x_nominal, z = x[:n], x[n:]
         a, dz = self.applied_input(u, z)
+        # The terms that change the nominal dynamics (not just its input) say how, per kind.
         if self.vehicle_terms:
-            dx = vehicle_vector_field(self.system, self.vehicle_terms, x_nominal, a)
-        elif not self.joint_terms:
-            dx = self.system.vector_field(t, x_nominal, a)
+            dx = AbstractVehicleTerm.extended_vector_field(self.system, self.vehicle_terms, x_nominal, a)
+        elif self.joint_terms:
+            dx = AbstractJointTerm.extended_vector_field(self.system, self.joint_terms, x_nominal, a)
         else:
-            system = self.system
-            k = system.n_joints
-            q, dq = x_nominal[:k], x_nominal[k:]
-            force = system.input_matrix() @ a - system.bias_force(q, dq)
-            inertia = jnp.zeros(k, force.dtype)
-            for term in self.joint_terms:
-                j = term.joint
-                force = force.at[j].add(term.joint_force(q, dq, a))
-                inertia = inertia.at[j].add(term.inertia())
-            ddq = _solve_spd(system.mass_matrix(q) + jnp.diag(inertia), force)
-            dx = jnp.concatenate([dq, ddq])
+            dx = self.system.vector_field(t, x_nominal, a)
         return jnp.concatenate([dx, dz])

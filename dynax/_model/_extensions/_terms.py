@@ -13,6 +13,8 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from .._system import _solve_spd
+
 
 def _scalar(value) -> Array:
     return jnp.asarray(value, dtype=jnp.result_type(float))
@@ -35,6 +37,10 @@ class AbstractTerm(eqx.Module):
     prefix: eqx.AbstractClassVar[str]
     neutral: eqx.AbstractClassVar[float]
     sign: eqx.AbstractClassVar[int]
+
+    def check_system(self, system) -> None:
+        """Raise a `ValueError` naming the term and the system if the term cannot act on `system`
+        (`Extended` calls it for every term). Default: a term acts on any system."""
 
     @abc.abstractmethod
     def where(self, system) -> str:
@@ -71,17 +77,37 @@ class AbstractJointTerm(AbstractTerm):
         if not isinstance(self.joint, int) or self.joint < 0:
             raise ValueError(f"{type(self).__name__}: `joint` must be a non-negative int index, got {self.joint!r}")
 
+    def check_system(self, system) -> None:
+        if not system.joint_names:
+            raise ValueError(
+                f"{type(self).__name__} acts on a joint, but {type(system).__name__} is not a manipulator "
+                "(it has no mass matrix and bias force to extend)"
+            )
+
     def where(self, system) -> str:
-        n = getattr(system, "n_joints", None)
-        if n is None:
+        self.check_system(system)
+        joints = system.joint_names
+        if self.joint >= len(joints):
             raise ValueError(
-                f"{type(self).__name__} acts on a joint of a manipulator; {type(system).__name__} has no joints"
+                f"{type(self).__name__}: `joint={self.joint}` but {type(system).__name__} has {len(joints)} joint(s)"
             )
-        if self.joint >= n:
-            raise ValueError(
-                f"{type(self).__name__}: `joint={self.joint}` but {type(system).__name__} has {n} joint(s)"
-            )
-        return system.state_names[self.joint]
+        return joints[self.joint]
+
+    @staticmethod
+    def extended_vector_field(
+        system, terms: tuple["AbstractJointTerm", ...], x: Float[Array, " n_states"], a: Float[Array, " n_inputs"]
+    ) -> Float[Array, " n_states"]:
+        r"""The manipulator's $\dot x$ with joint terms acting on its pieces (used by `Extended`):
+        $\big(M(q) + \operatorname{diag}(I_r)\big)\ddot q + h(q, \dot q) = B\,a + \sum_k f_k(q, \dot q)$."""
+        k = system.n_joints
+        q, dq = x[:k], x[k:]
+        force = system.input_matrix() @ a - system.bias_force(q, dq)
+        inertia = jnp.zeros(k, force.dtype)
+        for term in terms:
+            force = force.at[term.joint].add(term.joint_force(q, dq, a))
+            inertia = inertia.at[term.joint].add(term.inertia())
+        ddq = _solve_spd(system.mass_matrix(q) + jnp.diag(inertia), force)
+        return jnp.concatenate([dq, ddq])
 
     def force(self, q: Float[Array, ""], dq: Float[Array, ""]) -> Float[Array, ""]:
         """Generalised force the term adds at its joint (default none)."""

@@ -32,7 +32,6 @@ from jaxtyping import Array, ArrayLike, Float
 
 from .._helicopter import (
     BODY,
-    BODY_AXES,
     Helicopter,
     QUATERNION,
     quaternion_to_rotation,
@@ -57,10 +56,29 @@ class AbstractVehicleTerm(AbstractTerm):
         if not isinstance(self.axis, int) or not 0 <= self.axis < self.n_axes:
             raise ValueError(f"{type(self).__name__}: `axis` must be an int in [0, {self.n_axes}), got {self.axis!r}")
 
+    def check_system(self, system) -> None:
+        if not system.body_axes:
+            raise ValueError(
+                f"{type(self).__name__} acts on a helicopter's body axes, but {type(system).__name__} is not a Helicopter"
+            )
+
     def where(self, system) -> str:
-        if not isinstance(system, Helicopter):
-            raise ValueError(f"{type(self).__name__} acts on a helicopter's body axes; {type(system).__name__} has none")
-        return BODY_AXES[self.axis]
+        self.check_system(system)
+        return system.body_axes[self.axis]
+
+    @staticmethod
+    def extended_vector_field(
+        system: Helicopter, terms: tuple["AbstractVehicleTerm", ...], x: Float[Array, " 13"], u: Float[Array, "4"]
+    ) -> Float[Array, " 13"]:
+        """The helicopter's vector field with vehicle terms added (see the module docs; used by `Extended`)."""
+        quat, s = x[QUATERNION], x[BODY]
+        wind = sum((t.wind() for t in terms), jnp.zeros(3, x.dtype)).astype(x.dtype)
+        air = s.at[:3].add(-quaternion_to_rotation(quat).T @ wind)
+        dpos, dquat = rigid_body_kinematics(x, system.normalisation_gain)
+        dbody = system.body_model(quat, s, u, air=air)
+        for term in terms:
+            dbody = dbody + term.acceleration(quat, air, u).astype(x.dtype)
+        return jnp.concatenate([dpos, dquat, dbody])
 
     def wind(self) -> Float[Array, "3"]:
         """The world-frame wind [m/s] the term contributes (default none)."""
@@ -154,17 +172,3 @@ class Wind(AbstractVehicleTerm):
 
     def wind(self):
         return jnp.zeros(3, self.coefficient.dtype).at[self.axis].set(self.coefficient)
-
-
-def vehicle_vector_field(
-    system: Helicopter, terms: tuple[AbstractVehicleTerm, ...], x: Float[Array, " 13"], u: Float[Array, "4"]
-) -> Float[Array, " 13"]:
-    """The helicopter's vector field with vehicle terms added (see the module docs)."""
-    quat, s = x[QUATERNION], x[BODY]
-    wind = sum((t.wind() for t in terms), jnp.zeros(3, x.dtype)).astype(x.dtype)
-    air = s.at[:3].add(-quaternion_to_rotation(quat).T @ wind)
-    dpos, dquat = rigid_body_kinematics(x, system.normalisation_gain)
-    dbody = system.body_model(quat, s, u, air=air)
-    for term in terms:
-        dbody = dbody + term.acceleration(quat, air, u).astype(x.dtype)
-    return jnp.concatenate([dpos, dquat, dbody])
