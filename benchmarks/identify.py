@@ -14,6 +14,7 @@ jax.config.update("jax_enable_x64", True)
 
 import argparse  # noqa: E402
 import json  # noqa: E402
+import os  # noqa: E402
 import pathlib  # noqa: E402
 import platform  # noqa: E402
 import time  # noqa: E402
@@ -23,6 +24,7 @@ import numpy as np  # noqa: E402
 import scipy.linalg  # noqa: E402
 
 import dynax  # noqa: E402
+from _device import describe, device_info  # noqa: E402
 from dynax._data import Trajectory  # noqa: E402
 from dynax._identify import Dynamic, Energy, identify, Power  # noqa: E402
 
@@ -125,7 +127,9 @@ def main():
         "power": (Power(), numpy_power),
         "energy": (Energy(), numpy_energy),
     }
-    results = {"samples": args.samples, "device": str(jax.devices()[0]), "jax": jax.__version__, "methods": {}}
+    print(describe(device_info()))
+    results = {"samples": args.samples, "device": device_info(), "jax": jax.__version__, "methods": {},
+               "load_average": os.getloadavg()}
     for name, (method, reference) in cases.items():
         start = time.perf_counter()
         first = identify(system, data, method, refine=False, holdout=0, consistency="off")
