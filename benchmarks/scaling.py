@@ -14,7 +14,7 @@ needs an otherwise idle machine (the load average is recorded with the numbers);
 efficiency (CPU seconds of one process over those of all processes together) measures what the
 split itself costs, whatever else the machine runs.
 
-    python benchmarks/scaling.py [--processes 2] [--population 256] [--steps 400] [--generations 8]
+    python benchmarks/scaling.py [--processes 2] [--population 512] [--steps 1000] [--generations 4]
 """
 
 import argparse
@@ -115,9 +115,9 @@ def launch(args, processes, population, tmp):
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--processes", type=int, default=2)
-    parser.add_argument("--population", type=int, default=256)
-    parser.add_argument("--steps", type=int, default=400)
-    parser.add_argument("--generations", type=int, default=8)
+    parser.add_argument("--population", type=int, default=512)
+    parser.add_argument("--steps", type=int, default=1000)
+    parser.add_argument("--generations", type=int, default=4)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--rounds", type=int, default=2, help="alternating rounds of the three set-ups; best taken")
     parser.add_argument("--timeout", type=float, default=900)

@@ -348,7 +348,8 @@ def run_pgpe(
     - `params`: the starting parameters (the initial mean), parameter units.
     - `key`: a PRNG key.
     - `n_iterations`: number of generations (static).
-    - `shard`: split each population across devices when several exist (`evaluate_population`).
+    - `shard`: split each population across devices when several exist (`evaluate_population`),
+      in a multi-process run across every process's devices; every process gets the whole result.
     - `progress`: a bar per generation with the best reward so far, on stderr, reported from
       inside the compiled scan (`jax.debug.callback`); `None` draws it when stderr is a terminal
       (see `dynax.progress_mode`). Never drawn when called inside a user's `jit` or `vmap`.

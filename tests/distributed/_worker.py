@@ -1,7 +1,9 @@
 """One process of the two-process test (and the single-process reference): a PGPE search, an
-evaluation of one population outside `jit`, and a `simulation_error` sweep, saved to an `.npz`.
+evaluation of one population outside `jit`, a sweep of two PGPE runs, and a `simulation_error`
+sweep, saved to an `.npz`.
 
     python _worker.py OUT.npz                      # one process, one CPU device
+    DYNAX_TEST_HOST_DEVICES=2 python _worker.py OUT.npz   # one process, two CPU devices
     python _worker.py OUT.npz PORT N_PROC RANK     # one of N_PROC processes (jax.distributed)
 """
 
@@ -9,7 +11,8 @@ import os
 import sys
 
 os.environ["JAX_PLATFORMS"] = "cpu"
-os.environ["XLA_FLAGS"] = "--xla_force_host_platform_device_count=1"
+# One CPU device per process, or as many as DYNAX_TEST_HOST_DEVICES asks (one process, several devices).
+os.environ["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={os.environ.get('DYNAX_TEST_HOST_DEVICES', '1')}"
 
 import jax  # noqa: E402
 
@@ -43,6 +46,9 @@ def main(out):
     state, history = dynax.run_pgpe(pgpe, objective, jnp.array([0.2, 0.1]), jax.random.key(0), 2, progress=False)
     population = pgpe.ask(state, jax.random.key(1))[0]
     rewards = dynax.evaluate_population(objective, population, jax.random.split(jax.random.key(2), 8))
+    # Two runs of one generation with population 4: the runs are split across the devices.
+    sweep, _ = dynax.sweep_pgpe(dynax.PGPE(population_size=4, init_sigma=0.3), objective, jnp.array([0.2, 0.1]),
+                                jax.random.split(jax.random.key(3), 2), 1, progress=False)
 
     # A record of an acrobot under a varying torque, replayed through a model with the wrong
     # damping: the errors are not zero, and 9 windows do not divide among 2 devices (padding).
@@ -60,6 +66,7 @@ def main(out):
         best=np.asarray(state.best_reward),
         history_reward=np.asarray(history.reward),
         rewards=np.asarray(rewards),
+        sweep_mean=np.asarray(sweep.mean),
         rmse=np.asarray(error.rmse),
         errors=np.asarray(error.errors),
         n_windows=error.n_windows,
