@@ -417,8 +417,9 @@ def sweep_pgpe(
     With several devices (and a number of runs that divides evenly) the run axis is constrained
     to a `NamedSharding` across them, so each device does whole runs and no data moves between
     them; in a multi-process run (`dynax.initialize_distributed`) across every process's devices,
-    and every process gets all runs' results. For a sweep over hyper-parameters, give `PGPE` array-valued fields (for example
-    `sigma_learning_rate`) and `eqx.filter_vmap` this function over the strategy.
+    and every process gets all runs' results. For a sweep over hyper-parameters, give `PGPE`
+    array-valued fields (for example `sigma_learning_rate`) and `eqx.filter_vmap` this function
+    over the strategy.
 
     **Arguments:** as `run_pgpe`, with `keys` of shape `(runs,)`; the bar shows the generation
     and the best reward over all runs.
