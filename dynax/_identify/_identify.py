@@ -410,27 +410,33 @@ def _interval_integrals(ts, values_left, values_right):
 
 
 def _work_and_dissipation(system, ts, xs, us, friction):
-    """Per-interval integrals (trapezoid, input held) of the input power and of the friction-power columns.
-
-    The regressor and the forces are compiled calls of their own and the integrals a third: in one
-    program XLA's CPU backend fuses the vmapped Jacobian into each shifted slice that reads it and
-    evaluates it several times (the power model ran at a quarter of numpy's speed that way).
-    """
-    f = friction_power_regressor(system, xs, friction)
-    tau = _generalised_force(system, us)
-    _, dq = _positions(system, xs)
-    return _integrate_intervals(ts, dq, tau, f)
-
-
-_generalised_force = eqx.filter_jit(generalised_force)
+    """Per-interval integrals (trapezoid, input held) of the input power and of the friction-power columns."""
+    _, f, tau, dq = _model_columns(system, xs, us, friction)
+    return _integrals(ts, dq, tau, f)
 
 
 @eqx.filter_jit
+def _model_columns(system, xs, us, friction):
+    """The energy and friction-power regressors, the generalised forces and the velocities at every sample.
+
+    One compiled call, and the differences and integrals another: in one program with them, XLA's
+    CPU backend fuses the vmapped Jacobians into every shifted slice that reads them and evaluates
+    them several times (the power model ran at a quarter of numpy's speed that way).
+    """
+    _, dq = _positions(system, xs)
+    w = energy_regressor(system, xs, friction)
+    f = friction_power_regressor(system, xs, friction)
+    return w, f, generalised_force(system, us), dq
+
+
 def _integrate_intervals(ts, dq, tau, f):
     tau = tau[:-1]  # on [t_j, t_{j+1}] the input is us[j]
     work = _interval_integrals(ts, jnp.sum(dq[:-1] * tau, axis=-1), jnp.sum(dq[1:] * tau, axis=-1))
     dissipated = _interval_integrals(ts, f[:-1], f[1:])
     return work, dissipated
+
+
+_integrals = eqx.filter_jit(_integrate_intervals)
 
 
 def _power_rows(system, traj, method: Power, friction):
@@ -446,13 +452,13 @@ def _power_rows(system, traj, method: Power, friction):
 
 
 def _power_equations(system, ts, xs, us, friction):
-    w = energy_regressor(system, xs, friction)
-    work, dissipated = _work_and_dissipation(system, ts, xs, us, friction)
-    return _power_balance(ts, w, work, dissipated)
+    w, f, tau, dq = _model_columns(system, xs, us, friction)
+    return _power_balance(ts, w, f, tau, dq)
 
 
 @eqx.filter_jit
-def _power_balance(ts, w, work, dissipated):
+def _power_balance(ts, w, f, tau, dq):
+    work, dissipated = _integrate_intervals(ts, dq, tau, f)
     # dH/dt by central differences of the energy columns; the powers averaged with the same weights
     # over the two neighbouring intervals, so each row is exact to O(h^2) under the zero-order hold.
     h = jnp.diff(ts)
@@ -480,13 +486,13 @@ def _energy_rows(system, traj, method: Energy, friction):
 
 def _energy_equations(system, ts, xs, us, friction, starts, window):
     """One energy-balance equation per window `[starts[i], starts[i] + window]`."""
-    w = energy_regressor(system, xs, friction)
-    work, dissipated = _work_and_dissipation(system, ts, xs, us, friction)
-    return _energy_balance(w, work, dissipated, starts, window)
+    w, f, tau, dq = _model_columns(system, xs, us, friction)
+    return _energy_balance(ts, w, f, tau, dq, starts, window)
 
 
 @eqx.filter_jit
-def _energy_balance(w, work, dissipated, starts, window):
+def _energy_balance(ts, w, f, tau, dq, starts, window):
+    work, dissipated = _integrate_intervals(ts, dq, tau, f)
     # Each window's integrals as the sum of its `window` intervals (gathered), not as differences of
     # running sums: XLA's CPU cumsum of 100,000 rows is slow, and differences of long running sums
     # lose digits.
