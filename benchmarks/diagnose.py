@@ -22,6 +22,7 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
+from _device import describe, device_info  # noqa: E402
 from dynax import Acrobot  # noqa: E402
 from dynax._cli._output import write_json  # noqa: E402
 from dynax._data import load_trajectory, save_trajectory  # noqa: E402
@@ -41,6 +42,7 @@ def main():
         path = pathlib.Path(folder) / "acrobot_40s.csv"
         save_trajectory(record, path)
         data = load_trajectory(path, "acrobot")
+    print(describe(device_info()))
     print(f"{len(data)} samples, {data.duration:g} s at {1 / data.dt:g} Hz; hidden: coulomb_friction@q2 = 0.25")
     runs = []
     for label in ("first call (with compilation)", "second call (compiled)"):
@@ -57,7 +59,7 @@ def main():
     write_json(out / "diagnose.json", {
         "benchmark": "diagnose: 40 s, 100 Hz acrobot file, full candidate library, last 30 % held out",
         "n_samples": len(data), "n_candidates": 12, "target_s": 60.0, "runs": runs,
-        "cpu_count": __import__("os").cpu_count(),
+        "cpu_count": __import__("os").cpu_count(), "device": device_info(),
     })
     print(f"wrote {out / 'diagnose.json'}")
 

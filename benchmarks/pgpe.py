@@ -30,6 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import dynax
+from _device import describe, device_info
 from dynax._control import (
     DRAKE_SPONG_PARAMETERS,
     evaluate_population,
@@ -160,7 +161,8 @@ def main(argv=None):
     args = parser.parse_args(argv)
 
     devices = jax.devices()
-    print(f"devices: {len(devices)} x {devices[0].platform}; XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r}", flush=True)
+    print(f"devices: {len(devices)} x {devices[0].device_kind}; XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r}", flush=True)
+    print(describe(device_info()), flush=True)
     jax.config.update("jax_enable_x64", True)
     controller = f32(SpongController())  # LQR in float64, then float32
     plant = f32(dynax.Acrobot())
@@ -179,7 +181,8 @@ def main(argv=None):
         return pgpe.tell(state, noise, rewards), rewards
 
     key = jax.random.PRNGKey(0)
-    results = {"population": POPULATION, "episode_s": DURATION, "control_hz": RATE, "devices": len(devices)}
+    results = {"population": POPULATION, "episode_s": DURATION, "control_hz": RATE, "devices": len(devices),
+               "device": device_info()}
     single = eqx.filter_jit(lambda s, k: dynax_generation(s, k, False))
 
     from evosax.algorithms import PGPE as EvosaxPGPE

@@ -19,7 +19,9 @@ and the initial states, relative to the forward pass, with the compiled peak mem
 XLA runs one jitted computation on one CPU core; to use more cores the batch is sharded over
 several host "devices". Their number is fixed when JAX starts, so this script (the caller, never
 the library) sets `XLA_FLAGS=--xla_force_host_platform_device_count=N` before importing jax.
-On a GPU machine the same sharding spreads the batch over GPUs.
+On a GPU machine the script runs unchanged: the same sharding spreads the batch over the GPUs, and
+the device's name (`jax.devices()[0].device_kind`) is printed and stored with the numbers (CPU-only
+runs say so). MuJoCo and gymnasium always run on the host CPU.
 
     python benchmarks/rollout.py [--devices 2] [--batch 1024] [--steps 1000] [--json FILE]
 """
@@ -59,6 +61,8 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 from jax.sharding import NamedSharding, PartitionSpec  # noqa: E402
+
+from _device import describe, device_info  # noqa: E402
 
 try:
     import dynax
@@ -163,7 +167,7 @@ def bench_jax(args, x0, us, ts, results):
 
         return jax.vmap(rollout)(x0, us)
 
-    print(f"\nJAX {jax.__version__} ({jax.devices()[0].platform}, {jax.device_count()} device(s)), float32:")
+    print(f"\nJAX {jax.__version__} ({jax.devices()[0].device_kind}, {jax.device_count()} device(s)), float32:")
     print(HEADER)
     compiled = {}
     for name, fn in [
@@ -331,6 +335,7 @@ def main(args):
         f"{args.batch} acrobot rollouts x {args.steps} RK4 steps (dt = {args.dt} s); best of {args.reps}; "
         f"{os.cpu_count()} CPU cores, load average {os.getloadavg()[0]:.1f}"
     )
+    print(describe(device_info()))
     x0, us, ts = _problem(args.batch, args.steps, args.dt)
     results = {}
     load_start = os.getloadavg()[0]
@@ -380,7 +385,7 @@ def main(args):
     if args.json is not None:
         meta = dict(
             batch=args.batch, steps=args.steps, dt=args.dt, reps=args.reps, devices=n_dev, cpu_count=os.cpu_count(),
-            jax=jax.__version__, load_average_start=load_start, load_average_end=os.getloadavg()[0], date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+            jax=jax.__version__, device=device_info(), load_average_start=load_start, load_average_end=os.getloadavg()[0], date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         )
         args.json.write_text(json.dumps(dict(meta=meta, results=results), indent=2))
         print(f"wrote {args.json}")

@@ -181,6 +181,7 @@ from ._plots import plot_compare as plot_compare, plot_error_horizon as plot_err
 from ._precision import PrecisionWarning as PrecisionWarning
 from ._progress import ProgressBar as ProgressBar, progress_mode as progress_mode
 from ._errors import DataError as DataError, UsageError as UsageError
+from ._distributed import initialize_distributed as initialize_distributed
 from ._sim_error import simulation_error as simulation_error, SimulationError as SimulationError
 from ._solvers import RK4 as RK4
 from ._simulate import Adaptive as Adaptive, FixedGrid as FixedGrid, Simulation as Simulation, simulate as simulate

@@ -7,6 +7,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._data._trajectory import Trajectory
+from ._distributed import _global_array, _leading_sharding, _replicate
 from ._errors import DataError
 from ._model._system import AbstractSystem
 from ._simulate import FixedGrid, simulate
@@ -101,6 +102,10 @@ def simulation_error(
       starting with `d`, e.g. `q1, q2` for the acrobot: RMSE in rad).
     - `method`: the integration strategy passed to `simulate`.
 
+    With several devices the windows are split across them (padded to a multiple of their
+    number); in a multi-process run (`dynax.initialize_distributed`) across every process's
+    devices, each process computing its share and getting every window's errors back.
+
     **Returns:** a `SimulationError`.
     """
     names = trajectory.state_names
@@ -124,7 +129,7 @@ def simulation_error(
     if stride is None:
         stride = max(1, int(np.ceil(n_starts / max_windows)))
     starts = jnp.arange(0, n_starts, stride)
-    errors, diverged = _window_errors(system, trajectory.ts, trajectory.xs, trajectory.us, starts, n_steps, method)
+    errors, diverged = _sharded_window_errors(system, trajectory, starts, n_steps, method)
     at = errors[:, steps, :]  # (window, horizon, state)
     if states is None:
         states = tuple(s for s in names if not s.startswith("d"))
@@ -143,3 +148,18 @@ def simulation_error(
         errors=errors,
         starts=starts,
     )
+
+
+def _sharded_window_errors(system, trajectory, starts, n_steps, method):
+    """`_window_errors` with the windows split across every device (of every process), then gathered."""
+    n_windows = starts.shape[0]
+    n_devices = jax.device_count()
+    if n_devices < 2:
+        return _window_errors(system, trajectory.ts, trajectory.xs, trajectory.us, starts, n_steps, method)
+    padded = -(-n_windows // n_devices) * n_devices
+    host_starts = np.asarray(starts)
+    host_starts = np.concatenate([host_starts, np.full(padded - n_windows, host_starts[-1])])
+    sharded = _global_array(host_starts, _leading_sharding(padded))
+    errors, diverged = _window_errors(system, trajectory.ts, trajectory.xs, trajectory.us, sharded, n_steps, method)
+    errors, diverged = _replicate((errors, diverged))
+    return errors[:n_windows], diverged[:n_windows]

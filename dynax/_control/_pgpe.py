@@ -16,6 +16,7 @@ import optax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from jaxtyping import Array, ArrayLike, Float, Int, PRNGKeyArray
 
+from .._distributed import _multi_process, _replicate_in_jit
 from .._progress import bar_token, progress_enabled, ProgressBar, report
 
 Objective = Callable[[Float[Array, " n_params"], PRNGKeyArray], Float[Array, ""]]
@@ -275,6 +276,8 @@ class PGPEHistory(eqx.Module):
 def population_sharding(population_size: int) -> NamedSharding | None:
     """A sharding that splits a population's leading axis across all devices, or `None` with one device.
 
+    All devices of all processes: after `dynax.initialize_distributed` (`jax.distributed`),
+    `jax.devices()` lists every process's devices, so the population is split across them all.
     `None` also when `population_size` does not divide evenly among the devices.
     """
     devices = jax.devices()
@@ -298,17 +301,32 @@ def evaluate_population(
     - `population`: parameter vectors, shape `(population, n_params)`.
     - `keys`: one key per member, shape `(population,)` (or a key array of that length).
     - `shard`: constrain the population axis to be split across devices (`jax.sharding`) when
-      more than one device is available; XLA then runs each device's share of the `vmap`.
+      more than one device is available; XLA then runs each device's share of the `vmap`. In a
+      multi-process run (`dynax.initialize_distributed`) the devices are those of every
+      process: each process passes the whole population, evaluates its devices' share, and gets
+      all rewards back (called outside `jit`, the evaluation is compiled for that).
 
     **Returns:**
 
     The rewards, shape `(population,)`.
     """
+    traced = any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves((population, keys)))
+    if shard and not traced and _multi_process():
+        return _evaluate_everywhere(objective, population, keys)
+    return _evaluate(objective, population, keys, shard)
+
+
+def _evaluate(objective, population, keys, shard):
     sharding = population_sharding(population.shape[0]) if shard else None
     if sharding is not None:
         population = jax.lax.with_sharding_constraint(population, sharding)
         keys = jax.lax.with_sharding_constraint(keys, sharding)
     return jax.vmap(objective)(population, keys)
+
+
+@eqx.filter_jit
+def _evaluate_everywhere(objective, population, keys):
+    return _replicate_in_jit(_evaluate(objective, population, keys, True))
 
 
 def run_pgpe(
@@ -330,7 +348,8 @@ def run_pgpe(
     - `params`: the starting parameters (the initial mean), parameter units.
     - `key`: a PRNG key.
     - `n_iterations`: number of generations (static).
-    - `shard`: split each population across devices when several exist (`evaluate_population`).
+    - `shard`: split each population across devices when several exist (`evaluate_population`),
+      in a multi-process run across every process's devices; every process gets the whole result.
     - `progress`: a bar per generation with the best reward so far, on stderr, reported from
       inside the compiled scan (`jax.debug.callback`); `None` draws it when stderr is a terminal
       (see `dynax.progress_mode`). Never drawn when called inside a user's `jit` or `vmap`.
@@ -377,7 +396,10 @@ def _run_pgpe(pgpe, objective, params, key, n_iterations, shard, with_progress, 
     return jax.lax.scan(generation, state, (jnp.arange(n_iterations), jax.random.split(key, n_iterations)))
 
 
-_run_pgpe_jit = eqx.filter_jit(_run_pgpe)
+@eqx.filter_jit
+def _run_pgpe_jit(pgpe, objective, params, key, n_iterations, shard, with_progress, token):
+    # In a multi-process run every process gets the whole result (a no-op in one process).
+    return _replicate_in_jit(_run_pgpe(pgpe, objective, params, key, n_iterations, shard, with_progress, token))
 
 
 def sweep_pgpe(
@@ -394,8 +416,10 @@ def sweep_pgpe(
 
     With several devices (and a number of runs that divides evenly) the run axis is constrained
     to a `NamedSharding` across them, so each device does whole runs and no data moves between
-    them. For a sweep over hyper-parameters, give `PGPE` array-valued fields (for example
-    `sigma_learning_rate`) and `eqx.filter_vmap` this function over the strategy.
+    them; in a multi-process run (`dynax.initialize_distributed`) across every process's devices,
+    and every process gets all runs' results. For a sweep over hyper-parameters, give `PGPE`
+    array-valued fields (for example `sigma_learning_rate`) and `eqx.filter_vmap` this function
+    over the strategy.
 
     **Arguments:** as `run_pgpe`, with `keys` of shape `(runs,)`; the bar shows the generation
     and the best reward over all runs.
@@ -410,6 +434,7 @@ def _sweep_pgpe_jit(pgpe, objective, params, keys, n_iterations, shard, with_pro
     sharding = population_sharding(keys.shape[0]) if shard else None
     if sharding is not None:
         keys = jax.lax.with_sharding_constraint(keys, sharding)
-    return jax.vmap(
+    out = jax.vmap(
         lambda key: _run_pgpe(pgpe, objective, params, key, n_iterations, False, with_progress, token)
     )(keys)
+    return _replicate_in_jit(out)

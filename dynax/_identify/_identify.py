@@ -321,14 +321,23 @@ def _held_input_at_samples(ts, us):
     return jnp.concatenate([us[:1], interior, us[-1:]])
 
 
-@eqx.filter_jit
 def _dynamic_equations(system, ts, xs, us, friction, held):
-    """Regressor `(time, joints, params)` and generalised forces `(time, joints)` of the dynamic model."""
+    """Regressor `(time, joints, params)` and generalised forces `(time, joints)` of the dynamic model.
+
+    The regressor is its own compiled call: fused into one program with the differences, XLA's CPU
+    backend re-evaluates the vmapped Jacobian for each neighbouring slice and runs several times
+    slower than the two calls.
+    """
+    ddq, forces = _accelerations_and_forces(system, ts, xs, us, held)
+    return dynamic_regressor(system, xs, ddq, friction), forces
+
+
+@eqx.filter_jit
+def _accelerations_and_forces(system, ts, xs, us, held):
     if held:
         us = _held_input_at_samples(ts, us)
     _, dq = _positions(system, xs)
-    ddq = central_difference(ts, dq)
-    return dynamic_regressor(system, xs, ddq, friction), generalised_force(system, us)
+    return central_difference(ts, dq), generalised_force(system, us)
 
 
 def _resolve_dynamic(traj, method: Dynamic) -> dict:
@@ -400,15 +409,34 @@ def _interval_integrals(ts, values_left, values_right):
     return 0.5 * h * (values_left + values_right)
 
 
-@eqx.filter_jit
 def _work_and_dissipation(system, ts, xs, us, friction):
     """Per-interval integrals (trapezoid, input held) of the input power and of the friction-power columns."""
-    f = friction_power_regressor(system, xs, friction)
-    tau = generalised_force(system, us)[:-1]  # on [t_j, t_{j+1}] the input is us[j]
+    _, f, tau, dq = _model_columns(system, xs, us, friction)
+    return _integrals(ts, dq, tau, f)
+
+
+@eqx.filter_jit
+def _model_columns(system, xs, us, friction):
+    """The energy and friction-power regressors, the generalised forces and the velocities at every sample.
+
+    One compiled call, and the differences and integrals another: in one program with them, XLA's
+    CPU backend fuses the vmapped Jacobians into every shifted slice that reads them and evaluates
+    them several times (the power model ran at a quarter of numpy's speed that way).
+    """
     _, dq = _positions(system, xs)
+    w = energy_regressor(system, xs, friction)
+    f = friction_power_regressor(system, xs, friction)
+    return w, f, generalised_force(system, us), dq
+
+
+def _integrate_intervals(ts, dq, tau, f):
+    tau = tau[:-1]  # on [t_j, t_{j+1}] the input is us[j]
     work = _interval_integrals(ts, jnp.sum(dq[:-1] * tau, axis=-1), jnp.sum(dq[1:] * tau, axis=-1))
     dissipated = _interval_integrals(ts, f[:-1], f[1:])
     return work, dissipated
+
+
+_integrals = eqx.filter_jit(_integrate_intervals)
 
 
 def _power_rows(system, traj, method: Power, friction):
@@ -423,10 +451,14 @@ def _power_rows(system, traj, method: Power, friction):
     return rows, target, rows.shape[0]
 
 
-@eqx.filter_jit
 def _power_equations(system, ts, xs, us, friction):
-    w = energy_regressor(system, xs, friction)
-    work, dissipated = _work_and_dissipation(system, ts, xs, us, friction)
+    w, f, tau, dq = _model_columns(system, xs, us, friction)
+    return _power_balance(ts, w, f, tau, dq)
+
+
+@eqx.filter_jit
+def _power_balance(ts, w, f, tau, dq):
+    work, dissipated = _integrate_intervals(ts, dq, tau, f)
     # dH/dt by central differences of the energy columns; the powers averaged with the same weights
     # over the two neighbouring intervals, so each row is exact to O(h^2) under the zero-order hold.
     h = jnp.diff(ts)
@@ -452,16 +484,22 @@ def _energy_rows(system, traj, method: Energy, friction):
     return rows, target, int(starts[-1] + window - starts[0] + 1)
 
 
-@eqx.filter_jit
 def _energy_equations(system, ts, xs, us, friction, starts, window):
     """One energy-balance equation per window `[starts[i], starts[i] + window]`."""
-    w = energy_regressor(system, xs, friction)
-    work, dissipated = _work_and_dissipation(system, ts, xs, us, friction)
-    work = jnp.concatenate([jnp.zeros(1, xs.dtype), jnp.cumsum(work)])
-    dissipated = jnp.concatenate([jnp.zeros((1, dissipated.shape[1]), xs.dtype), jnp.cumsum(dissipated, axis=0)])
+    w, f, tau, dq = _model_columns(system, xs, us, friction)
+    return _energy_balance(ts, w, f, tau, dq, starts, window)
+
+
+@eqx.filter_jit
+def _energy_balance(ts, w, f, tau, dq, starts, window):
+    work, dissipated = _integrate_intervals(ts, dq, tau, f)
+    # Each window's integrals as the sum of its `window` intervals (gathered), not as differences of
+    # running sums: XLA's CPU cumsum of 100,000 rows is slow, and differences of long running sums
+    # lose digits.
+    intervals = starts[:, None] + jnp.arange(window)[None, :]  # (windows, window)
     ends = starts + window
-    rows = (w[ends] - w[starts]) + (dissipated[ends] - dissipated[starts])
-    return rows, work[ends] - work[starts]
+    rows = (w[ends] - w[starts]) + jnp.sum(dissipated[intervals], axis=1)
+    return rows, jnp.sum(work[intervals], axis=1)
 
 
 def _system_name(system):

@@ -110,15 +110,44 @@ def _combination(direction, names, tol=1e-3):
     return text or "(none)"
 
 
+_CHUNK_ROWS = 256
+
+
+def _qr_r(a):
+    r"""The triangular factor $R$ of a tall matrix by tall-skinny QR (TSQR), without forming $Q$.
+
+    The rows are split into blocks of `_CHUNK_ROWS`; each block is factored on its own (one
+    batched Householder QR), and the stacked triangular factors are factored again, until few rows
+    are left. $R$ is that of a Householder QR of the whole matrix up to the signs of its rows, and
+    TSQR is as backward stable as Householder QR; on a CPU it runs many times faster than one
+    Householder QR of a 100,000-row matrix (short blocks stay in cache), and on a GPU the blocks
+    run in parallel.
+
+    ??? cite
+
+        J. Demmel, L. Grigori, M. Hoemmen and J. Langou, "Communication-optimal parallel and
+        sequential QR and LU factorizations", SIAM Journal on Scientific Computing 34(1), 2012.
+    """
+    m, n = a.shape
+    chunk = max(_CHUNK_ROWS, 4 * n)
+    while a.shape[0] > 2 * chunk:
+        blocks = a.shape[0] // chunk
+        head = a[: blocks * chunk].reshape(blocks, chunk, n)
+        r = jnp.linalg.qr(head, mode="r")  # (blocks, n, n): each block's triangular factor
+        a = jnp.concatenate([r.reshape(-1, n), a[blocks * chunk :]])
+    return jnp.linalg.qr(a, mode="r")
+
+
 @jax.jit
 def _solve(a, y, w, rcond):
-    """Column-scaled weighted least squares by factoring the regressor itself (QR, then SVD of R).
+    r"""Column-scaled weighted least squares by factoring the regressor itself (QR, then SVD of R).
 
-    $W^{1/2} A D^{-1} = Q R$ (Householder), $R = U_R S V^\top$, so $W^{1/2} A D^{-1} = (Q U_R) S V^\top$
-    is the SVD of the scaled regressor, obtained without forming $A^\top A$ (which would square the
-    condition number and lose half the digits: in float32 two columns that differ by $10^{-3}$ of
-    their scale would not be told apart). The estimate is $V S^{+} (Q U_R)^\top W^{1/2} y$ at the
-    numerical rank.
+    $[W^{1/2} A D^{-1},\ W^{1/2} y] = Q [R, c; 0, \rho]$ (Householder, as TSQR: `_qr_r`), so
+    $c = Q^\top W^{1/2} y$ comes with $R$ and $Q$ is never formed; $R = U_R S V^\top$, so
+    $W^{1/2} A D^{-1} = (Q U_R) S V^\top$ is the SVD of the scaled regressor, obtained without
+    forming $A^\top A$ (which would square the condition number and lose half the digits: in
+    float32 two columns that differ by $10^{-3}$ of their scale would not be told apart). The
+    estimate is $V S^{+} U_R^\top c$ at the numerical rank.
     """
     m, n = a.shape
     sw = jnp.sqrt(w)
@@ -127,14 +156,15 @@ def _solve(a, y, w, rcond):
     scale = jnp.linalg.norm(aw, axis=0)
     scale = jnp.where(scale > 0, scale, 1.0)
     a_scaled = aw / scale
-    q, r = jnp.linalg.qr(a_scaled)
+    r_full = _qr_r(jnp.concatenate([a_scaled, yw[:, None]], axis=1))
+    r, qty = r_full[:n, :n], r_full[:n, n]
     u_r, s, vt = jnp.linalg.svd(r)
     finite = jnp.all(jnp.isfinite(s)) & (s[0] > 0)
     rank = jnp.where(finite, jnp.sum(s > rcond * s[0]), 0)
     cond = jnp.where(finite & (s[-1] > 0), s[0] / jnp.where(s[-1] > 0, s[-1], 1.0), jnp.inf)
     keep = jnp.arange(n) < rank
     inv_s = jnp.where(keep, 1.0 / jnp.where(s > 0, s, 1.0), 0.0)
-    projected = u_r.T @ (q.T @ yw)  # (Q U_R)^T W^{1/2} y
+    projected = u_r.T @ qty  # (Q U_R)^T W^{1/2} y
     z = vt.T @ (inv_s * projected)
     pinv_gram = (vt.T * inv_s**2) @ vt
     estimate = z / scale
@@ -179,7 +209,9 @@ def least_squares(
 
         M. Gautier, "Numerical calculation of the base inertial parameters of robots", Journal of
         Robotic Systems 8(4), 1991 (QR/SVD identifiability); G. H. Golub and C. F. Van Loan,
-        *Matrix Computations*, 4th ed., sections 5.3-5.5.
+        *Matrix Computations*, 4th ed., sections 5.3-5.5; J. Demmel, L. Grigori, M. Hoemmen and
+        J. Langou, "Communication-optimal parallel and sequential QR and LU factorizations", SIAM
+        Journal on Scientific Computing 34(1), 2012 (TSQR).
     """
     a = jnp.asarray(regressor)
     y = jnp.asarray(target)

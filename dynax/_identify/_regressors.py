@@ -112,6 +112,8 @@ def with_parameters(system: AbstractSystem, names: tuple[str, ...], theta: Float
     """`system` with the parameters `names` set to `theta` (fields of the nominal system and coefficients
     of its joint terms)."""
     base, terms = _split(system)
+    if isinstance(theta, jax.Array) and theta.ndim == 1:
+        theta = _entries(theta)  # one call instead of one indexing operation per parameter
     fields = [n for n in names if hasattr(base, n) and not isinstance(getattr(type(base), n, None), property)]
     new_base = eqx.tree_at(lambda s: [getattr(s, n) for n in fields], base, [theta[names.index(n)] for n in fields])
     if not isinstance(system, Extended):
@@ -123,6 +125,11 @@ def with_parameters(system: AbstractSystem, names: tuple[str, ...], theta: Float
         for t in terms
     )
     return Extended(new_base, new_terms)
+
+
+@jax.jit
+def _entries(theta):
+    return tuple(theta[i] for i in range(theta.shape[0]))
 
 
 def _inverse_dynamics(system, names, theta, q, dq, ddq):

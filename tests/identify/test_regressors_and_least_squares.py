@@ -109,3 +109,29 @@ def test_float32_least_squares_is_as_accurate_as_numpy_lstsq():
     assert error_dynax < 3 * max(error_numpy, 1e-4), (error_dynax, error_numpy)
     gram = np.linalg.solve((a32.T @ a32).astype(np.float32), (a32.T @ y32).astype(np.float32))
     assert np.max(np.abs(gram - theta)) > 10 * error_dynax  # the test can tell the two apart
+
+
+@pytest.mark.parametrize("rows", [5, 700, 70_000])
+def test_tall_skinny_qr_is_householder_qr_up_to_row_signs(rows):
+    # 5 rows: one plain QR; 700: one level of blocks and a remainder; 70,000: two levels.
+    from dynax._identify._least_squares import _qr_r
+
+    rng = np.random.default_rng(4)
+    a = rng.normal(size=(rows, 6)) * np.array([1.0, 1e3, 1e-3, 1.0, 1.0, 1.0])
+    r = np.asarray(_qr_r(jnp.asarray(a)))
+    reference = np.linalg.qr(a, mode="r")
+    assert r.shape == reference.shape
+    np.testing.assert_allclose(np.abs(r), np.abs(reference), rtol=1e-9, atol=1e-9 * np.abs(reference).max())
+    np.testing.assert_allclose(r.T @ r, a.T @ a, rtol=1e-9, atol=1e-9 * np.abs(a.T @ a).max())
+
+
+def test_least_squares_on_many_rows_matches_scipy_lstsq():
+    import scipy.linalg
+
+    rng = np.random.default_rng(5)
+    a = rng.normal(size=(50_001, 7)) * np.logspace(-2, 2, 7)
+    y = a @ np.arange(1.0, 8.0) + rng.normal(size=50_001)
+    fit = least_squares(a, y)
+    np.testing.assert_allclose(fit.estimate, scipy.linalg.lstsq(a, y)[0], rtol=1e-10)
+    residual = a @ np.asarray(fit.estimate) - y
+    np.testing.assert_allclose(float(fit.residual_rms), np.sqrt(np.mean(residual**2)), rtol=1e-10)
