@@ -671,7 +671,7 @@ def _test_summary(alpha, min_gain, results, n_searchable, verdict) -> dict:
         detectable = max(detectable, min_gain)
     return {
         "paired": "log ratio of each held-out window's mean squared error, nominal (or current) against extended; "
-                  "HAC variance within each run (truncated lag window over the windows' correlation length, "
+                  "HAC variance within each run (flat-top lag window over the windows' correlation length, "
                   "corrected for centring on the run's mean), Student t with its equivalent degrees of freedom",
         "multiple_comparisons": f"Benjamini-Hochberg over the candidates remaining in each round, false-discovery "
                                 f"rate {alpha:g} (family-wise {alpha:g} when no candidate has an effect)",

@@ -54,23 +54,24 @@ def test_a_real_improvement_is_detected_and_reported_per_run():
     assert test.p_value < 1e-3
     assert set(test.per_run) == {0, 1} and all(v > 0 for v in test.per_run.values())
     assert test.batch >= 10  # the lag window covers at least the windows that overlap
-    assert test.method == "truncated"
+    assert test.method == "flat_top"
 
 
 def test_the_long_run_variance_is_unbiased_on_short_records():
     """Averages of `overlap` white-noise strides have long-run variance 1 (the MA weights sum to one). On runs
-    of 110 windows, centring on the run's mean removes about (2M + 1) / n of it (a fifth here): the truncated
-    estimator puts it back; overlapping batch means, whose Bartlett-like weights also shrink the
+    of 110 windows, centring on the run's mean removes about (2M + 1) / n of it (a fifth here): the flat-top and
+    truncated estimators put it back; overlapping batch means, whose Bartlett-like weights also shrink the
     correlation it must count, come out low."""
     rng = np.random.default_rng(9)
     n, overlap = 110, 10
-    est = {"truncated": [], "obm": []}
+    est = {"flat_top": [], "truncated": [], "obm": []}
     for _ in range(600):
         d = window_differences(rng, n, overlap, rho=0.0, substeps=1)
         for method in est:
-            t = paired_block_test(d, np.zeros(n, int), overlap, batch=overlap if method == "truncated" else 2 * overlap,
+            t = paired_block_test(d, np.zeros(n, int), overlap, batch=2 * overlap if method == "obm" else overlap,
                                   method=method)
             est[method].append(t.std_error**2 * n)
+    assert np.mean(est["flat_top"]) == pytest.approx(1.0, abs=0.1)
     assert np.mean(est["truncated"]) == pytest.approx(1.0, abs=0.08)
     assert np.mean(est["obm"]) < 0.92
 
