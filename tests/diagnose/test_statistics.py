@@ -71,7 +71,9 @@ def test_the_long_run_variance_is_unbiased_on_short_records():
             t = paired_block_test(d, np.zeros(n, int), overlap, batch=2 * overlap if method == "obm" else overlap,
                                   method=method)
             est[method].append(t.std_error**2 * n)
-    assert np.mean(est["flat_top"]) == pytest.approx(1.0, abs=0.1)
+    flat = np.asarray(est["flat_top"])
+    assert np.mean(np.isfinite(flat)) > 0.97  # a negative estimate (p = 1) is rare
+    assert np.mean(flat[np.isfinite(flat)]) == pytest.approx(1.0, abs=0.1)
     assert np.mean(est["truncated"]) == pytest.approx(1.0, abs=0.08)
     assert np.mean(est["obm"]) < 0.92
 
