@@ -671,8 +671,8 @@ def _test_summary(alpha, min_gain, results, n_searchable, verdict) -> dict:
         detectable = max(detectable, min_gain)
     return {
         "paired": "log ratio of each held-out window's mean squared error, nominal (or current) against extended; "
-                  "variance from non-overlapping batches of consecutive windows within each run (batch length twice "
-                  "the windows' correlation length), Student t on the batch means",
+                  "HAC variance within each run (flat-top lag window over the windows' correlation length, "
+                  "corrected for centring on the run's mean), Student t with its equivalent degrees of freedom",
         "multiple_comparisons": f"Benjamini-Hochberg over the candidates remaining in each round, false-discovery "
                                 f"rate {alpha:g} (family-wise {alpha:g} when no candidate has an effect)",
         "run_agreement": "a cause must improve the mean window error on more than half of the held-out runs",

@@ -6,8 +6,16 @@ $J_\theta \Delta\theta + J_c \delta_c$, with the sensitivities $J$ from forward-
 the vector field at the measured (smoothed) states. Regressing the training residuals on
 $[J_\theta, J_c]$ and measuring the reduction of the *held-out* residuals ranks every candidate in
 one linear least-squares solve each. A delay or lag at zero has no sensitivity (it is a dynamic
-term); to first order both act as $-\tau\,\partial f/\partial u\,\dot u$, so they screen alike and
-the output-error refit that follows tells them apart.
+term); to first order both act as $-\tau\,\partial f/\partial u\,\dot u$. That first order holds only
+while $\omega\tau \ll 1$ for the input's frequencies: a 0.15 s lag on a helicopter collective that a
+closed-loop controller moves at a few hertz is far outside it, and the linear direction ranked it
+below a constant bias (issue 10, item 7). So a delay or lag is screened at finite sizes too: on a
+grid of time constants $\tau_g$ (from two samples to `MAX_SCREEN_TIME` s) the direction is
+$\partial f/\partial u\,(a_{\tau_g}(t) - u(t))$, with $a_\tau$ the recorded input passed through the
+lag ($\tau \dot a = u - a$, exact for a held input) or shifted by the delay; the grid point that
+fits the *training* residuals best is kept, its held-out gain is the candidate's screening gain and
+its $\tau_g$ (times the fitted scale, if that is near one) the refit's start value.
+The output-error refit that follows tells a delay from a lag.
 
 ??? cite
 
@@ -63,7 +71,42 @@ def screening_data(family, values, coefficients, trajectory, residual_fn):
         if isinstance(term, AbstractInputTerm) and term.n_hidden and not np.any(J_c[:, :, k]):
             J_c[:, :, k] = -np.asarray(J_u)[:, :, term.input] * np.asarray(du)[:, None, term.input]
     smooth = lambda a: np.asarray(savitzky_golay(ts, a, window=w, order=3))  # noqa: E731
-    return r, smooth(np.asarray(J_nom))[keep], smooth(J_c)[keep]
+    grid = screening_grid(trajectory.dt)
+    J_grid = {}
+    for k, term in enumerate(family.model.terms):
+        if isinstance(term, AbstractInputTerm) and term.n_hidden and term.cause in ("input_lag", "input_delay"):
+            J_u_k = np.asarray(J_u)[:, :, term.input]
+            u = np.asarray(us)[:, term.input]
+            shifted = np.stack([_lagged(ts, u, tau) if term.cause == "input_lag" else _delayed(ts, u, tau) for tau in grid], axis=1)
+            J_grid[k] = smooth(J_u_k[:, :, None] * (shifted - u[:, None])[:, None, :])[keep]  # (time, n_vel, n_grid)
+    return r, smooth(np.asarray(J_nom))[keep], smooth(J_c)[keep], J_grid
+
+
+MAX_SCREEN_TIME = 0.5  # [s] the longest delay or lag screened at finite size
+
+
+def screening_grid(dt: float) -> np.ndarray:
+    """Time constants at which delays and lags are screened: geometric from two samples to `MAX_SCREEN_TIME`."""
+    lo = 2.0 * float(dt)
+    return np.geomspace(lo, max(MAX_SCREEN_TIME, 2 * lo), 10)
+
+
+def _lagged(ts, u, tau):
+    """`u` (held between samples) through the first-order lag `tau a' = u - a`, started at steady state."""
+    ts, u = np.asarray(ts, float), np.asarray(u, float)
+    decay = np.exp(-np.diff(ts) / tau)
+    out = np.empty_like(u)
+    out[0] = u[0]
+    for i in range(1, u.size):
+        out[i] = u[i - 1] + (out[i - 1] - u[i - 1]) * decay[i - 1]
+    return out
+
+
+def _delayed(ts, u, delay):
+    """`u` (held between samples) `delay` seconds late; the first value held back in time."""
+    ts, u = np.asarray(ts, float), np.asarray(u, float)
+    i = np.clip(np.searchsorted(ts, ts - delay, side="right") - 1, 0, u.size - 1)
+    return u[i]
 
 
 def screen(family, values, coefficients, refit_mask, train, validation, candidates_to_screen, residual_fn):
@@ -72,18 +115,22 @@ def screen(family, values, coefficients, refit_mask, train, validation, candidat
     **Returns:** `(gain, delta)` arrays: the fraction by which the candidate reduces the held-out
     residual sum of squares (beyond refitting the nominal parameters), and its coefficient step.
     """
-    parts = {}
+    parts, grids = {}, {}
     for name, records in (("train", train), ("validation", validation)):
         data = [screening_data(family, values, coefficients, rec, residual_fn) for rec in records]
         parts[name] = tuple(np.concatenate([d[i] for d in data]) for i in range(3))
+        grids[name] = {k: np.concatenate([d[3][k] for d in data]) for k in data[0][3]}
     r_tr, Jn_tr, Jc_tr = parts["train"]
     r_va, Jn_va, Jc_va = parts["validation"]
+    grid = screening_grid(float(np.median(np.diff(np.asarray(train[0].ts)))))
     scale = r_tr.std(axis=0) + 1e-12
     refit = np.asarray(refit_mask) > 0
 
-    def design(Jn, Jc, k):
+    def design(Jn, Jc, k, column=None):
         cols = [Jn[:, :, refit]] if refit.any() else []
-        if k is not None:
+        if column is not None:
+            cols.append(column[:, :, None])
+        elif k is not None:
             cols.append(Jc[:, :, k : k + 1])
         if not cols:
             return np.zeros((Jn.shape[0] * Jn.shape[1], 0))
@@ -92,19 +139,31 @@ def screen(family, values, coefficients, refit_mask, train, validation, candidat
 
     y_tr, y_va = (r_tr / scale).reshape(-1), (r_va / scale).reshape(-1)
 
-    def held_out_sse(k):
-        X_tr, X_va = design(Jn_tr, Jc_tr, k), design(Jn_va, Jc_va, k)
+    def sse(k, g=None):
+        """Training and held-out sums of squares and the last coefficient (`g`: grid point of a delay or lag)."""
+        col_tr = None if g is None else grids["train"][k][:, :, g]
+        col_va = None if g is None else grids["validation"][k][:, :, g]
+        X_tr, X_va = design(Jn_tr, Jc_tr, k, col_tr), design(Jn_va, Jc_va, k, col_va)
         if X_tr.shape[1] == 0:
-            return float(np.sum(y_va**2)), 0.0
+            return float(np.sum(y_tr**2)), float(np.sum(y_va**2)), 0.0
         norms = np.linalg.norm(X_tr, axis=0)
         norms[norms == 0] = 1.0
         beta = np.linalg.lstsq(X_tr / norms, y_tr, rcond=None)[0] / norms
-        return float(np.sum((y_va - X_va @ beta) ** 2)), float(beta[-1])
+        return float(np.sum((y_tr - X_tr @ beta) ** 2)), float(np.sum((y_va - X_va @ beta) ** 2)), float(beta[-1])
 
-    base, _ = held_out_sse(None)
+    _, base, _ = sse(None)
     gains, deltas = [], []
     for k in candidates_to_screen:
-        sse, delta = held_out_sse(k)
-        gains.append(1 - sse / base)
+        train_sse, held_out, delta = sse(k)
+        if k in grids["train"]:
+            # Finite sizes: the grid point that fits the training residuals best (its direction's
+            # coefficient must be positive: a lag or delay of that size, scaled), if it beats first order.
+            fits = [sse(k, g) for g in range(len(grid))]
+            ok = [g for g, f in enumerate(fits) if f[2] > 0]
+            if ok:
+                g = min(ok, key=lambda g: fits[g][0])
+                if fits[g][0] < train_sse:
+                    held_out, delta = fits[g][1], float(grid[g] * min(max(fits[g][2], 0.5), 2.0))
+        gains.append(1 - held_out / base)
         deltas.append(delta)
     return np.asarray(gains), np.asarray(deltas)

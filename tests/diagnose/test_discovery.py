@@ -67,9 +67,10 @@ def spring_report():
     return diagnose(Acrobot(), train, validation)
 
 
-@pytest.mark.xfail(reason="after the merge with issue 10's paired block test (variance from batch means), the refitted "
-                   "spring's held-out gain (73 %) has p = 0.028 on the demo's held-out run, above alpha = 0.01; under "
-                   "the earlier test it was 0.0012. Open in issue 12.", strict=False)
+@pytest.mark.xfail(reason="the refitted spring's held-out gain (73 %) is not significant on the demo's one 8 s held-out run: "
+                   "p = 0.064 with the calibrated flat-top HAC test (0.028 with the earlier batch means, 0.027 with a "
+                   "truncated window, 0.016 with overlapping batch means, which claims effects in 2.8 % of no-effect "
+                   "records at 1 %: experiments/test_calibration.py), above alpha = 0.01. Open in issue 12.", strict=False)
 def test_hidden_joint_spring_is_discovered_with_its_stiffness(spring_report):
     j = spring_report.to_json()
     discovered = [f for f in j["findings"] if f["cause"] == "discovered"]
@@ -86,9 +87,10 @@ def test_hidden_joint_spring_is_discovered_with_its_stiffness(spring_report):
     assert j["gain"] >= 0.5
 
 
-@pytest.mark.xfail(reason="after the merge with issue 10's paired block test (variance from batch means), the refitted "
-                   "spring's held-out gain (73 %) has p = 0.028 on the demo's held-out run, above alpha = 0.01; under "
-                   "the earlier test it was 0.0012. Open in issue 12.", strict=False)
+@pytest.mark.xfail(reason="the refitted spring's held-out gain (73 %) is not significant on the demo's one 8 s held-out run: "
+                   "p = 0.064 with the calibrated flat-top HAC test (0.028 with the earlier batch means, 0.027 with a "
+                   "truncated window, 0.016 with overlapping batch means, which claims effects in 2.8 % of no-effect "
+                   "records at 1 %: experiments/test_calibration.py), above alpha = 0.01. Open in issue 12.", strict=False)
 def test_discovered_terms_are_reported_apart_from_named_causes(spring_report):
     md = spring_report.to_markdown()
     assert "## Discovered terms (beyond the vocabulary)" in md
