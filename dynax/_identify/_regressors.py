@@ -172,7 +172,7 @@ def generalised_force(system: AbstractSystem, us: Float[Array, "time n_inputs"])
     base, _ = _split(system)
     if isinstance(base, AbstractTwoLink):
         b = base.input_matrix().astype(us.dtype)  # (joints, inputs); broadcast, not a batched dot
-        return jnp.sum(b * us[..., None, :], axis=-1)
+        return jnp.sum(jnp.broadcast_to(b, us.shape[:-1] + b.shape) * us[..., None, :], axis=-1)
     return us[..., :1]
 
 
