@@ -29,13 +29,13 @@ def spong_reference(p, x, tau, coulomb=(0.0, 0.0), rotor=(0.0, 0.0)):
     return np.concatenate([[dq1, dq2], ddq])
 
 
-def scipy_acrobot(x0, ts, us, p=DRAKE, coulomb=(0.0, 0.0), rtol=1e-11, atol=1e-12):
+def scipy_acrobot(x0, ts, us, p=DRAKE, coulomb=(0.0, 0.0), rotor=(0.0, 0.0), rtol=1e-11, atol=1e-12):
     """The acrobot (elbow torque `us[:, 0]`) by DOP853, restarted at each sample (zero-order hold)."""
     x = np.asarray(x0, dtype=float)
     out = [x]
     for k in range(len(ts) - 1):
         tau = np.array([0.0, float(us[k][0])])
-        sol = solve_ivp(lambda t, y: spong_reference(p, y, tau, coulomb), (float(ts[k]), float(ts[k + 1])), x,
+        sol = solve_ivp(lambda t, y: spong_reference(p, y, tau, coulomb, rotor), (float(ts[k]), float(ts[k + 1])), x,
                         method="DOP853", rtol=rtol, atol=atol)
         x = sol.y[:, -1]
         out.append(x)

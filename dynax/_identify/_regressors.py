@@ -263,7 +263,7 @@ def friction_power_regressor(
         # The power is a scalar linear in theta: one reverse pass gives the whole row.
         return jax.grad(lambda th: dq @ _inverse_dynamics(system, names, th, q, dq, jnp.zeros_like(dq)))(theta0)
 
-    return jax.vmap(row)(q, dq) * mask
+    return jax.vmap(row)(q, dq) * mask[None, :]
 
 
 @eqx.filter_jit
