@@ -8,7 +8,8 @@ import numpy as np
 
 def tree_allclose(x, y, *, rtol=1e-7, atol=1e-9):
     """Whether two PyTrees have the same structure, the same leaf types and close leaves."""
-    return eqx.tree_equal(x, y, typematch=True, rtol=rtol, atol=atol) is True
+    # `eqx.tree_equal` answers False for a structure mismatch and a boolean array for a leaf comparison
+    return bool(eqx.tree_equal(x, y, typematch=True, rtol=rtol, atol=atol))
 
 
 def finite_difference_jvp(fn, primals, tangents, eps=None):

@@ -14,6 +14,7 @@ import pytest
 
 import dynax
 from dynax._control import BaselineNormalisation, CentredRank, clipup, PGPE, random_starts, run_pgpe, SpongController, SwingUpTask
+from tests.helpers import tree_allclose
 
 TARGET = jnp.array([1.0, -2.0, 3.0, 500.0])
 SCALES = jnp.array([1.0, 1.0, 1.0, 100.0])
@@ -101,6 +102,9 @@ def test_runs_vmap_over_seeds(key):
     states, histories = jax.jit(jax.vmap(lambda k: run_pgpe(pgpe, quadratic, jnp.zeros(4), k, 60)))(keys)
     assert histories.reward.shape == (3, 60)
     assert not np.allclose(histories.reward[0], histories.reward[1])  # independent runs
+    # a member of the vmapped sweep is the run made alone with its key: state and history alike
+    alone = jax.jit(lambda k: run_pgpe(pgpe, quadratic, jnp.zeros(4), k, 60))(keys[1])
+    assert tree_allclose(jax.tree.map(lambda x: x[1], (states, histories)), alone, rtol=1e-10, atol=1e-12)
     assert jnp.all(histories.reward[:, -5:].mean(1) > histories.reward[:, :5].mean(1))
 
 
