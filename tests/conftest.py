@@ -1,4 +1,6 @@
-"""Test configuration: float64 for the whole suite (identification needs it), a seeded key, paths."""
+"""Test configuration in diffrax's manner: float64 for the whole suite (identification needs it), rank
+promotion raised (implicit broadcasting in the library is an error, not a silent reshape), a seeded key,
+paths and shared data fixtures. Comparison helpers live in `tests/helpers.py`."""
 
 import os
 import pathlib
@@ -10,6 +12,9 @@ import jax
 os.environ.setdefault("DYNAX_NO_CACHE", "1")
 
 jax.config.update("jax_enable_x64", True)
+# As in diffrax's and optimistix's test suites: `x[:, None] + y` with mismatched ranks must be written
+# out (`jnp.broadcast_to`, explicit indexing), so a shape bug cannot hide behind broadcasting.
+jax.config.update("jax_numpy_rank_promotion", "raise")
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
@@ -54,9 +59,3 @@ def acrobot_csv(tmp_path_factory):
     save_trajectory(Trajectory(jnp.asarray(ts), sim.xs, jnp.asarray(us), ("q1", "q2", "dq1", "dq2"), ("tau2",)), path)
     return path
 
-
-def tree_allclose(a, b, rtol=1e-7, atol=1e-9):
-    """Whether two PyTrees have the same structure and close leaves."""
-    la, ta = jax.tree.flatten(a)
-    lb, tb = jax.tree.flatten(b)
-    return ta == tb and all(np.allclose(np.asarray(x), np.asarray(y), rtol=rtol, atol=atol) for x, y in zip(la, lb))

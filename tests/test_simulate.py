@@ -6,11 +6,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 
 import dynax
-from dynax._model._two_link import DRAKE_DEFAULTS as DRAKE
-from tests.reference import spong_reference
+from tests.helpers import assert_jvp_matches_finite_differences, random_tangent
+from tests.reference import DRAKE, scipy_acrobot
 
 TS = jnp.linspace(0.0, 5.0, 501)  # 5 s at 100 Hz
 US = (2.0 * jnp.sin(2.0 * TS) + jnp.where(TS > 2.5, 1.0, 0.0))[:, None]  # includes a jump
@@ -19,15 +18,7 @@ X0 = jnp.array([1.0, 0.5, 0.0, 0.0])
 
 def scipy_reference(x0, ts, us):
     """Drake's acrobot by DOP853 at rtol 1e-11 (numpy equations), restarted at each sample (zero-order hold)."""
-    x = np.asarray(x0, dtype=float)
-    out = [x]
-    for k in range(len(ts) - 1):
-        tau = np.array([0.0, float(us[k][0])])
-        sol = solve_ivp(lambda t, y: spong_reference(DRAKE, y, tau), (float(ts[k]), float(ts[k + 1])), x,
-                        method="DOP853", rtol=1e-11, atol=1e-12)
-        x = sol.y[:, -1]
-        out.append(x)
-    return np.asarray(out)
+    return scipy_acrobot(x0, ts, us, DRAKE)
 
 
 @pytest.fixture(scope="module")
@@ -42,10 +33,30 @@ def test_matches_scipy_dop853(method, reference):
     assert np.max(np.abs(np.asarray(xs) - reference)) < 1e-6  # in fact far tighter
 
 
-def test_default_is_the_fixed_grid_scan():
-    import inspect
+def test_default_is_two_tsit5_steps_per_sample_restarted_at_each_sample():
+    """What a call without `method` computes, against a per-interval `diffeqsolve` written out here:
+    Tsit5 with two constant steps on each zero-order-hold interval (the documented default)."""
+    ts, us = TS[:101], US[:101]
+    system = dynax.Acrobot()
+    term = diffrax.ODETerm(lambda t, x, u: system.vector_field(t, x, u))
 
-    assert isinstance(inspect.signature(dynax.simulate).parameters["method"].default, dynax.FixedGrid)
+    @jax.jit
+    def interval(x, t0, t1, u):
+        sol = diffrax.diffeqsolve(term, diffrax.Tsit5(), t0, t1, (t1 - t0) / 2, x, args=u,
+                                  stepsize_controller=diffrax.ConstantStepSize())
+        return sol.ys[-1]
+
+    x, reference = X0, [X0]
+    for k in range(len(ts) - 1):
+        x = interval(x, ts[k], ts[k + 1], us[k])
+        reference.append(x)
+    reference = np.asarray(jnp.stack(reference))
+    default = np.asarray(dynax.simulate(system, X0, ts, us).xs)
+    np.testing.assert_allclose(default, reference, rtol=0, atol=1e-12)  # the same arithmetic, up to rounding
+    # and it is told apart from the other choices: one step per sample, or the adaptive Dopri8 (which
+    # both agree with the default only to their truncation error, ~1e-9 and more)
+    for other in (dynax.FixedGrid(substeps=1), dynax.Adaptive()):
+        assert np.max(np.abs(np.asarray(dynax.simulate(system, X0, ts, us, method=other).xs) - default)) > 1e-11
 
 
 def test_irregular_sampling(reference):
@@ -56,25 +67,20 @@ def test_irregular_sampling(reference):
     np.testing.assert_allclose(xs, scipy_reference(X0, ts, us), atol=1e-7)
 
 
-def test_gradients_match_finite_differences():
+def test_gradients_match_finite_differences(key):
+    """Forward-mode derivatives of a rollout with respect to every parameter and the initial state,
+    along a random direction, against central differences; reverse mode against forward mode below."""
     ts, us = TS[:101], US[:101]
+    params, static = eqx.partition(dynax.Acrobot(), eqx.is_inexact_array)
 
-    @eqx.filter_jit
-    def loss(system, x0):
-        return jnp.sum(dynax.simulate(system, x0, ts, us).xs[-1] ** 2)
+    @jax.jit
+    def final(params, x0):
+        return dynax.simulate(eqx.combine(params, static), x0, ts, us).xs[-1]
 
-    system = dynax.Acrobot()
-    g_sys, g_x0 = jax.grad(loss, argnums=(0, 1))(system, X0)
-    eps = 1e-6
-    for name in ("theta1", "theta3", "theta5", "theta7"):
-        plus = eqx.tree_at(lambda s: getattr(s, name), system, getattr(system, name) + eps)
-        minus = eqx.tree_at(lambda s: getattr(s, name), system, getattr(system, name) - eps)
-        fd = (loss(plus, X0) - loss(minus, X0)) / (2 * eps)
-        assert float(getattr(g_sys, name)) == pytest.approx(float(fd), rel=1e-5, abs=1e-7), name
-    for i in range(4):
-        e = jnp.zeros(4).at[i].set(eps)
-        fd = (loss(system, X0 + e) - loss(system, X0 - e)) / (2 * eps)
-        assert float(g_x0[i]) == pytest.approx(float(fd), rel=1e-5, abs=1e-7)
+    tangents = random_tangent(key, (params, X0))
+    # central differences at h ~ 6e-6 have a truncation error ~ h^2 times the third derivative:
+    # about 1e-9 relative here, far inside the tolerance
+    assert_jvp_matches_finite_differences(final, (params, X0), tangents, rtol=1e-6, atol=1e-8)
 
 
 def test_forward_mode_matches_reverse_mode():

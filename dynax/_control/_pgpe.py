@@ -211,9 +211,9 @@ class PGPE(eqx.Module):
     def ask(self, state: PGPEState, key: PRNGKeyArray) -> tuple[Float[Array, "population n_params"], Float[Array, "pairs n_params"]]:
         """Sample a population: `(params, noise)` with `params[:P/2] = mean + noise`, `params[P/2:] = mean - noise` (parameter units)."""
         pairs = self.population_size // 2
-        noise = state.sigma * jax.random.normal(key, (pairs, state.mean.shape[0]), state.mean.dtype)
-        z = jnp.concatenate([state.mean + noise, state.mean - noise])
-        return z * self._scales(state.mean), noise
+        noise = state.sigma[None] * jax.random.normal(key, (pairs, state.mean.shape[0]), state.mean.dtype)
+        z = jnp.concatenate([state.mean[None] + noise, state.mean[None] - noise])
+        return z * self._scales(state.mean)[None], noise
 
     def tell(self, state: PGPEState, noise: Float[Array, "pairs n_params"], rewards: Float[Array, " population"]) -> PGPEState:
         """Update the search distribution from the rewards of the population `ask` returned."""
@@ -231,7 +231,7 @@ class PGPE(eqx.Module):
         first = state.iteration == 0
         batch_best = jnp.argmax(rewards)
         improved = rewards[batch_best] > state.best_reward
-        candidates = jnp.concatenate([state.mean + noise, state.mean - noise]) * scales
+        candidates = jnp.concatenate([state.mean[None] + noise, state.mean[None] - noise]) * scales[None]
         best_params = jnp.where(improved, candidates[batch_best], state.best_params)
         best_reward = jnp.maximum(state.best_reward, rewards[batch_best])
         baseline = jnp.where(first, jnp.mean(rewards), state.baseline)
@@ -243,7 +243,7 @@ class PGPE(eqx.Module):
         mean = optax.apply_updates(state.mean, updates)
 
         sigma = state.sigma
-        grad_sigma = sigma_signal @ ((noise**2 - sigma**2) / sigma) / pairs
+        grad_sigma = sigma_signal @ ((noise**2 - sigma[None] ** 2) / sigma[None]) / pairs
         step = jnp.clip(self.sigma_learning_rate * grad_sigma, -self.max_sigma_change * sigma, self.max_sigma_change * sigma)
         sigma = jnp.maximum(sigma + step, self.min_sigma)
 

@@ -195,7 +195,8 @@ def window_errors(model, windows: Windows, method=FORWARD_GRID):
 
 
 def _residuals(family, windows, slots, new, p):
-    e = window_errors(family.model_for(slots, new, p), windows)[:, 1:] / family.state_scale
+    e = window_errors(family.model_for(slots, new, p), windows)[:, 1:]
+    e = e / jnp.broadcast_to(family.state_scale, e.shape)
     return e.reshape(-1)
 
 

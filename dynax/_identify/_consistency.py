@@ -282,7 +282,7 @@ def consistent_least_squares(system, names, a, y, weights=None, start=None, *, m
     aw, yw = a * sw[:, None], y * sw
     col = jnp.linalg.norm(aw, axis=0)
     col = jnp.where(col > 0, col, 1.0)
-    q, r = jnp.linalg.qr(aw / col)
+    q, r = jnp.linalg.qr(aw / col[None, :])
     projected = q.T @ yw
     if start is None:
         start = jnp.linalg.lstsq(r, projected)[0] / col

@@ -155,7 +155,7 @@ def _solve(a, y, w, rcond):
     yw = y * sw
     scale = jnp.linalg.norm(aw, axis=0)
     scale = jnp.where(scale > 0, scale, 1.0)
-    a_scaled = aw / scale
+    a_scaled = aw / scale[None, :]
     r_full = _qr_r(jnp.concatenate([a_scaled, yw[:, None]], axis=1))
     r, qty = r_full[:n, :n], r_full[:n, n]
     u_r, s, vt = jnp.linalg.svd(r)
@@ -166,7 +166,7 @@ def _solve(a, y, w, rcond):
     inv_s = jnp.where(keep, 1.0 / jnp.where(s > 0, s, 1.0), 0.0)
     projected = u_r.T @ qty  # (Q U_R)^T W^{1/2} y
     z = vt.T @ (inv_s * projected)
-    pinv_gram = (vt.T * inv_s**2) @ vt
+    pinv_gram = (vt.T * inv_s[None, :] ** 2) @ vt
     estimate = z / scale
     residual = aw @ estimate - yw
     dof = jnp.maximum(jnp.minimum(m, jnp.sum(w > 0)) - rank, 1)

@@ -179,7 +179,7 @@ def generalised_force(system: AbstractSystem, us: Float[Array, "time n_inputs"])
     base, _ = _split(system)
     if isinstance(base, AbstractTwoLink):
         b = base.input_matrix().astype(us.dtype)  # (joints, inputs); broadcast, not a batched dot
-        return jnp.sum(b * us[..., None, :], axis=-1)
+        return jnp.sum(jnp.broadcast_to(b, us.shape[:-1] + b.shape) * us[..., None, :], axis=-1)
     return us[..., :1]
 
 
@@ -270,7 +270,7 @@ def friction_power_regressor(
         # The power is a scalar linear in theta: one reverse pass gives the whole row.
         return jax.grad(lambda th: dq @ _inverse_dynamics(system, names, th, q, dq, jnp.zeros_like(dq)))(theta0)
 
-    return jax.vmap(row)(q, dq) * mask
+    return jax.vmap(row)(q, dq) * mask[None, :]
 
 
 @eqx.filter_jit

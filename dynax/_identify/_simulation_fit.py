@@ -131,7 +131,7 @@ def _solve(fitted, fixed, ts, xs, us, sigma, link, continuity_weight, config: _C
         p, x0 = unpack(z)
         model = eqx.combine(unravel(p), fixed)
         sims = jax.vmap(lambda x0, t, u: simulate(model, x0, t, u, method=config.simulation, throw=False).xs)(x0, ts, us)
-        r = (sims - xs) / sigma * segment_weight[:, None, None]
+        r = (sims - xs) / jnp.broadcast_to(sigma, xs.shape) * segment_weight[:, None, None]
         r = jnp.where(jnp.isfinite(r), r, 1e3)
         out = [r.reshape(-1)]
         if config.fit_initial_states and x0.shape[0] > 1:
@@ -250,7 +250,7 @@ def fit_simulation_error(
         rank=linearised.rank,
         residual_rms=jnp.sqrt(jnp.mean(r[:n_state_residuals] ** 2)),
         initial_residual_rms=jnp.sqrt(jnp.mean(r0[:n_state_residuals] ** 2)),
-        relative_error=jnp.linalg.norm(r[:n_state_residuals].reshape(xs.shape) * sigma) / jnp.linalg.norm(xs),
+        relative_error=jnp.linalg.norm(r[:n_state_residuals].reshape(xs.shape) * jnp.broadcast_to(sigma, xs.shape)) / jnp.linalg.norm(xs),
         n_segments=int(xs.shape[0]),
         n_samples=int(n_samples),
         steps=steps,

@@ -55,5 +55,5 @@ def synthetic_trajectory(
     if noise is None:
         noise = tuple(1e-2 if s.startswith("d") else 1e-3 for s in names)
     noise = jnp.asarray(noise, xs.dtype)
-    xs = xs + noise * jax.random.normal(jax.random.PRNGKey(seed + 7919), xs.shape, xs.dtype)
+    xs = xs + noise[None, :] * jax.random.normal(jax.random.PRNGKey(seed + 7919), xs.shape, xs.dtype)
     return Trajectory(ts, xs, us, names, tuple(nominal.input_names), system_name, source)

@@ -1,12 +1,16 @@
-"""The candidate library and the structural identifiability test."""
+"""The candidate library against independent equations, and the structural identifiability test."""
 
+import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from dynax import Acrobot, DoublePendulum
 from dynax._diagnose._candidates import default_candidates, look_alikes, structurally_absorbed
 from dynax._diagnose._fit import Family, nominal_parameter_names
 from dynax._model._extensions import Extended
+from tests.reference import DRAKE, spong_reference
 
 
 def _family(system):
@@ -24,12 +28,69 @@ def _absorbed(system, refit):
     return {t.label(system) for t, a in zip(family.model.terms, structurally_absorbed(family, refit)) if a}
 
 
-def test_the_library_covers_the_contract_vocabulary():
-    labels = {t.label(Acrobot()) for t in default_candidates(Acrobot())}
-    for cause in ("coulomb_friction", "viscous_friction", "quadratic_drag", "rotor_inertia"):
-        assert {f"{cause}@q1", f"{cause}@q2"} <= labels
-    for cause in ("input_delay", "input_lag", "input_gain", "input_offset"):
-        assert f"{cause}@tau2" in labels
+# A non-neutral value per cause, and what it does in Drake's equations written out independently
+# (tests/reference.py): a generalised force at the joint, an inertia on the joint's diagonal, or a
+# change of the applied elbow torque.
+VALUES = {"coulomb_friction": 0.3, "viscous_friction": 0.2, "quadratic_drag": 0.15, "rotor_inertia": 0.05,
+          "input_gain": 1.3, "input_offset": 0.4}
+
+
+def _reference(cause, joint, value, x, tau2):
+    force, rotor, tau = np.zeros(2), [0.0, 0.0], tau2
+    dq = x[2 + joint] if joint is not None else 0.0
+    if cause == "coulomb_friction":
+        force[joint] = -value * np.sign(dq)  # |dq| >= 0.5 rad/s here: tanh(dq / 0.01) is 1 to 1e-40
+    elif cause == "viscous_friction":
+        force[joint] = -value * dq
+    elif cause == "quadratic_drag":
+        force[joint] = -value * abs(dq) * dq
+    elif cause == "rotor_inertia":
+        rotor[joint] = value
+    elif cause == "input_gain":
+        tau = value * tau2
+    elif cause == "input_offset":
+        tau = tau2 + value
+    return spong_reference(DRAKE, x, np.array([0.0, tau]) + force, rotor=rotor)
+
+
+@pytest.mark.parametrize("x", [np.array([0.4, -1.1, 0.8, -1.5]), np.array([2.0, 0.7, -0.5, 2.5])])
+def test_every_joint_and_gain_candidate_acts_as_its_name_says(x):
+    system = Acrobot()
+    checked = set()
+    for term in default_candidates(system):
+        if term.cause not in VALUES:
+            continue
+        value = VALUES[term.cause]
+        model = Extended(system, (eqx.tree_at(lambda t: t.coefficient, term, jnp.asarray(value)),))
+        dx = model.vector_field(0.0, model.initial_state(jnp.asarray(x), jnp.array([0.7])), jnp.array([0.7]))
+        joint = getattr(term, "joint", None)
+        np.testing.assert_allclose(dx[:4], _reference(term.cause, joint, value, x, 0.7), rtol=1e-10, atol=1e-12,
+                                   err_msg=term.label(system))
+        checked.add(term.label(system))
+    assert len(checked) == 10  # four joint causes at each of the two joints, gain and offset at tau2
+
+
+def test_lag_and_delay_candidates_have_their_transfer_functions():
+    r"""The internal-state candidates as linear filters from recorded to applied input,
+    $H(j\omega) = C (j\omega - A)^{-1} B + D$, against a first-order lag $1/(1 + j\omega\tau)$ and a dead
+    time $e^{-j\omega T}$ (through its (2, 2) Pade approximant, exact to $(\omega T)^5/720$)."""
+    system = Acrobot()
+    candidates = {t.cause: t for t in default_candidates(system)}
+    for cause, value, reference in (
+        ("input_lag", 0.1, lambda w: 1 / (1 + 1j * w * 0.1)),
+        ("input_delay", 0.05, lambda w: np.exp(-1j * w * 0.05)),
+    ):
+        term = eqx.tree_at(lambda t: t.coefficient, candidates[cause], jnp.asarray(value))
+        u0, z0 = jnp.asarray(0.0), jnp.zeros(term.n_hidden)
+        a_z, b_u = jax.jacfwd(term.hidden_derivative, argnums=(1, 0))(u0, z0)
+        c_z, d_u = jax.jacfwd(term.applied, argnums=(1, 0))(u0, z0)
+        for w in (0.5, 2.0, 6.0):  # rad/s; omega T <= 0.3 for the delay
+            h = c_z @ np.linalg.solve(1j * w * np.eye(term.n_hidden) - np.asarray(a_z), np.asarray(b_u)) + d_u
+            assert abs(h - reference(w)) < 1e-5, (cause, w, h, reference(w))
+        # at rest under a constant input the applied input is the recorded one and nothing moves
+        z = term.steady_state(jnp.asarray(0.7))
+        assert float(term.applied(jnp.asarray(0.7), z)) == pytest.approx(0.7, abs=1e-12)
+        np.testing.assert_allclose(term.hidden_derivative(jnp.asarray(0.7), z), 0.0, atol=1e-12)
 
 
 def test_refitting_base_parameters_absorbs_exactly_the_expected_causes():

@@ -26,7 +26,7 @@ def dead_time_run(seed: int, duration: float = 30.0):
     applied = jnp.concatenate([jnp.repeat(us[:1], DELAY_SAMPLES, axis=0), us[:-DELAY_SAMPLES]])
     xs = simulate(truth, jnp.zeros(4), ts, applied, method=FixedGrid(substeps=4)).xs
     noise = jnp.asarray([1e-3, 1e-3, 1e-2, 1e-2])
-    xs = xs + noise * jax.random.normal(jax.random.PRNGKey(seed + 7919), xs.shape, xs.dtype)
+    xs = xs + noise[None, :] * jax.random.normal(jax.random.PRNGKey(seed + 7919), xs.shape, xs.dtype)
     return Trajectory(ts, xs, us, ("q1", "q2", "dq1", "dq2"), ("tau2",), "acrobot", "dead_time.csv")
 
 

@@ -1,4 +1,4 @@
-"""The learning criteria: coefficient recovery, monotone EM-free loss, backprop gradients."""
+"""The learning criteria: coefficient recovery (noise-free and noisy), EM-free prediction on a new flight, backprop gradients."""
 
 import jax
 import jax.numpy as jnp
@@ -17,6 +17,7 @@ from dynax._identify._vehicle import (
     Lagged,
     lagged_loss,
     lagged_loss_gradient_norm,
+    lagged_loss_of,
 )
 from dynax._identify._vehicle._criteria import _normal_equations, _starts, _with_theta
 from dynax._identify._vehicle._frequency import HOVER_DERIVATIVES
@@ -78,12 +79,52 @@ def em_free_fit(truth_data):
     return start, fit_lagged(start, truth_data, Lagged(horizon=0.2, stride=10, max_iterations=3))
 
 
-def test_em_free_loss_decreases_monotonically(em_free_fit):
-    _, fit = em_free_fit
-    losses = np.array([h[1] for h in fit.history])
-    assert len(losses) >= 3
-    assert np.all(np.diff(losses) < 0)
-    assert losses[-1] < 0.9 * losses[0]  # the lagged criterion improves on the one-step fit (by 19 % here)
+@pytest.fixture(scope="module")
+def held_out_flight():
+    """Another hover flight of the truth simulator (new excitation, gusts and noise)."""
+    return generate_helicopter_flight("hover", 12.0, seed=8)
+
+
+def test_em_free_fit_predicts_a_new_flight_better_than_one_step(truth_data, held_out_flight, em_free_fit):
+    """The EM-free iteration accepts only steps that lower its training loss, so a lower training loss
+    proves nothing; the 0.2 s prediction error on a flight it never saw is what it is for. And the loss
+    it reports is the lagged loss of the model it returns, recomputed here."""
+    start, fit = em_free_fit
+    assert fit.loss == pytest.approx(lagged_loss_of(fit.system, truth_data, 0.2, stride=10), rel=1e-10)
+    before = lagged_loss_of(start, held_out_flight, 0.2, stride=10)
+    after = lagged_loss_of(fit.system, held_out_flight, 0.2, stride=10)
+    # the held-out loss averages about 100 overlapping 0.2 s windows; the training gain (19 %) is
+    # several times the window-to-window scatter of such a mean, so most of it must carry over
+    assert after < 0.9 * before, (before, after)
+
+
+@pytest.fixture(scope="module")
+def noisy_tempest_data():
+    """The Tempest model flown by the generator (RK4, 4 substeps) with the recorder's measurement noise."""
+    return generate_helicopter_flight("hover", 20.0, seed=5, truth=Helicopter())
+
+
+def test_one_step_on_a_noisy_flight_is_within_the_noise(noisy_tempest_data):
+    r"""Rate damping and control power from the noisy flight against the true Tempest values, with a
+    tolerance from the known noise: 4 standard errors of the same on-axis regression written out in
+    numpy ($\dot p \approx (p_{k+1} - p_k)/\Delta t$ on the interval's mean rate and held input), plus
+    the 1 % the noise-free fit is held to (and which covers the errors-in-variables bias, 0.3 % here).
+    The rate noise $n_k$ (0.01 rad/s, white) enters each equation as $e_k = a n_{k+1} - b n_k$ with
+    $a, b = 1/\Delta t \mp B/2$, so the equation errors are correlated and the standard errors are
+    the sandwich $(X^T X)^{-1} X^T \Sigma X (X^T X)^{-1}$ with that tridiagonal $\Sigma$."""
+    fit = fit_one_step(_zero_tempest(), noisy_tempest_data)
+    fitted = fit.system.body_model.parameters
+    xs, us, dt, sigma = np.asarray(noisy_tempest_data.xs), np.asarray(noisy_tempest_data.us), 0.01, 0.01
+    for column, channel, names in ((10, 0, ("dp/p", "dp/u1")), (11, 1, ("dq/q", "dq/u2")), (12, 2, ("dr/r", "dr/u3"))):
+        x = np.stack([(xs[1:, column] + xs[:-1, column]) / 2, us[:-1, channel]], axis=1)
+        damping = TEMPEST_COEFFICIENTS[TEMPEST_NAMES[names[0]]]
+        a, b = 1 / dt - damping / 2, 1 / dt + damping / 2
+        sigma_x = sigma**2 * ((a * a + b * b) * x - a * b * (np.r_[x[1:], 0 * x[:1]] + np.r_[0 * x[:1], x[:-1]]))
+        inverse = np.linalg.inv(x.T @ x)
+        std_errors = np.sqrt(np.diag(inverse @ (x.T @ sigma_x) @ inverse))
+        for name, std_error in zip(names, std_errors):
+            true = TEMPEST_COEFFICIENTS[TEMPEST_NAMES[name]]
+            assert abs(float(fitted[name]) - true) < 4 * std_error + 0.01 * abs(true), (name, float(fitted[name]), true, std_error)
 
 
 def test_state_sensitivities_reach_a_stationary_point_of_the_lagged_loss(truth_data, em_free_fit):

@@ -167,10 +167,10 @@ def _window_prediction(system: Helicopter, theta, states, inputs, dt):
     wa, ra = jax.vmap(point)(states[:-1], inputs)
     wb, rb = jax.vmap(point)(states[1:], inputs)
     x0 = states[0]
-    v_world = quaternion_to_rotation(x0[QUATERNION]) @ x0[VELOCITY] + jnp.cumsum(dt / 2 * (wa + wb), axis=0)
+    v_world = (quaternion_to_rotation(x0[QUATERNION]) @ x0[VELOCITY])[None, :] + jnp.cumsum(dt / 2 * (wa + wb), axis=0)
     rotations = jax.vmap(quaternion_to_rotation)(states[1:, QUATERNION])
     v_body = jnp.einsum("hji,hj->hi", rotations, v_world)
-    rates = x0[ANGULAR_RATE] + jnp.cumsum(dt / 2 * (ra + rb), axis=0)
+    rates = x0[ANGULAR_RATE][None, :] + jnp.cumsum(dt / 2 * (ra + rb), axis=0)
     return jnp.concatenate([v_body, rates], axis=-1)
 
 
