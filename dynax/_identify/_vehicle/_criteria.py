@@ -446,6 +446,13 @@ def fit_backprop(
                       solution=solution)
 
 
+def auto_stride(n_samples: int, n_steps: int, windows: int = 600) -> int:
+    """The smallest stride that uses at most about `windows` start times of a record of `n_samples`
+    samples with a horizon of `n_steps` samples (1: every start, when there are no more than that)."""
+    n_starts = max(n_samples - n_steps, 1)
+    return max(1, -(-n_starts // max(int(windows), 1)))
+
+
 def lagged_loss_of(system: Helicopter, trajectory: Trajectory, horizon: float, *, stride: int = 1, weights=None) -> float:
     """The lagged loss of `system` on `trajectory` over `horizon` seconds (every `stride`-th start)."""
     dt = check_helicopter_data(trajectory, "lagged_loss_of")
