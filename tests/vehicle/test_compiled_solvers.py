@@ -120,7 +120,7 @@ def test_compiled_backprop_takes_the_python_lbfgs_steps(flight, start):
     fit = fit_backprop(start, flight, criterion)
     np.testing.assert_allclose(fit.system.body_model.parameter_vector(), theta, rtol=1e-7, atol=1e-10)
     np.testing.assert_allclose([loss for _, loss in fit.history], losses, rtol=1e-9)
-    assert fit.solution.result == fit.solution.result.max_steps_reached or len(losses) <= criterion.max_steps
+    assert losses[-1] < losses[0]
 
 
 def test_lbfgs_stopping_rules():
