@@ -92,12 +92,17 @@ def _python_lbfgs(loss_fn, theta, steps, tolerance):
     optimiser = optax.lbfgs()
     state = optimiser.init(theta)
     value_and_grad = optax.value_and_grad_from_state(loss_fn)
+
+    @jax.jit
+    def step(theta, state):
+        value, grad = value_and_grad(theta, state=state)
+        updates, state = optimiser.update(grad, state, theta, value=value, grad=grad, value_fn=loss_fn)
+        return optax.apply_updates(theta, updates), state
+
     current, losses = float(loss_fn(theta)), []
     losses.append(current)
     for _ in range(steps):
-        value, grad = value_and_grad(theta, state=state)
-        updates, state = optimiser.update(grad, state, theta, value=value, grad=grad, value_fn=loss_fn)
-        theta = optax.apply_updates(theta, updates)
+        theta, state = step(theta, state)
         value = float(optax.tree_utils.tree_get(state, "value"))
         improvement = (current - value) / current
         current = value
@@ -115,7 +120,7 @@ def test_compiled_backprop_takes_the_python_lbfgs_steps(flight, start):
     def loss_fn(theta):
         return lagged_loss(_with_theta(start, theta), flight, n_steps, starts=starts)
 
-    theta, losses = _python_lbfgs(jax.jit(loss_fn), start.body_model.parameter_vector(), criterion.max_steps,
+    theta, losses = _python_lbfgs(loss_fn, start.body_model.parameter_vector(), criterion.max_steps,
                                   criterion.tolerance)
     fit = fit_backprop(start, flight, criterion)
     np.testing.assert_allclose(fit.system.body_model.parameter_vector(), theta, rtol=1e-7, atol=1e-10)
