@@ -4,3 +4,4 @@
 from ._engine import fit_least_squares as fit_least_squares, fit_minimise as fit_minimise
 from ._parameters import Parameters as Parameters
 from ._solution import Solution as Solution
+from ._solvers import History as History, monitor as monitor, notify as notify, OptaxLBFGS as OptaxLBFGS

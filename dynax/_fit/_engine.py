@@ -117,6 +117,8 @@ def fit_least_squares(
         initial_loss=0.5 * jnp.sum(r0**2),
         steps=solution.stats["num_steps"],
         n_residuals=int(m),
+        loss_history=solution.stats.get("loss_history"),
+        time_history=solution.stats.get("time_history"),
     )
 
 
@@ -129,12 +131,16 @@ def fit_minimise(
     solver: optx.AbstractMinimiser = DEFAULT_MINIMISER,
     scale: Float[Array, " n"] | None = None,
     max_steps: int = 256,
+    covariance: bool = True,
 ) -> Solution:
     r"""Fit the free elements of `model` by minimising a scalar `loss(model, args)` (default BFGS).
 
     Arguments as for `fit_least_squares`. The covariance is the inverse of the loss's Hessian at the
     solution (computed by forward-over-reverse autodiff), which is the parameter covariance when the
     loss is a negative log-likelihood; NaN where the Hessian is not positive definite.
+    `covariance=False` skips the Hessian (it costs about one gradient per parameter; NaN instead).
+    A solver that records a loss history (`OptaxLBFGS`) passes it on as `Solution.loss_history`
+    and `Solution.time_history`.
 
     **Returns:** a `Solution`.
     """
@@ -149,14 +155,14 @@ def fit_minimise(
     solution = optx.minimise(fn, solver, z0, args, max_steps=max_steps, throw=False)
     z = solution.value
     n = z.shape[0]
-    if n:
+    if n and covariance:
         H = jax.jacfwd(jax.grad(fn))(z, args)
         H = 0.5 * (H + H.T)
         pd = jnp.all(jnp.linalg.eigvalsh(H) > 0)
         cov = jnp.where(pd, jnp.linalg.pinv(H, hermitian=True), jnp.nan) * s[:, None] * s[None, :]
         std = jnp.sqrt(jnp.abs(jnp.diag(cov)))
     else:
-        cov, std = jnp.zeros((0, 0), p0.dtype), jnp.zeros(0, p0.dtype)
+        cov, std = jnp.full((n, n), jnp.nan, p0.dtype), jnp.full(n, jnp.nan, p0.dtype)
     value = p0 + s * z
     return Solution(
         model=parameters.with_vector(model, value),
@@ -168,6 +174,8 @@ def fit_minimise(
         loss=fn(z, args),
         initial_loss=fn(z0, args),
         steps=solution.stats["num_steps"],
+        loss_history=solution.stats.get("loss_history"),
+        time_history=solution.stats.get("time_history"),
     )
 
 

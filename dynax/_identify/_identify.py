@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from typing import Literal
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -24,6 +25,7 @@ from .._precision import warn_if_float32
 from .._data._derivatives import butterworth_filtfilt, central_difference, resample
 from .._data._trajectory import Trajectory
 from .._errors import DataError, UsageError
+from .._fit import Parameters, Solution
 from .._simulate import FixedGrid
 from .._model._linear_axis import LinearAxis
 from .._model._extensions import Extended
@@ -39,6 +41,7 @@ from ._defaults import choose_filter, trim_and_decimation
 from ._refine import refine_by_simulation
 from ._validation import DEFAULT_HORIZONS_S, held_out_error, HeldOutError, split_for_validation
 from ._least_squares import least_squares, LeastSquaresFit
+from ._simulation_fit import fit_simulation_error, SimulationFit
 from ._regressors import (
     _positions,
     _split,
@@ -48,6 +51,7 @@ from ._regressors import (
     friction_power_regressor,
     generalised_force,
     parameter_names,
+    parameter_vector,
     with_friction,
     with_parameters,
 )
@@ -202,6 +206,13 @@ class Identification(eqx.Module):
       horizon on held-out data), or `None` when nothing could be held out.
     - `stages`: per stage (`"least_squares"`, and `"output_error"` after a refinement), its
       parameters, equation error and held-out simulation error, as a JSON-ready dict.
+    - `solution`: for the iterative method (`SimulationFit`), the engine's `Solution` this result
+      is built from (the same names, estimate, standard errors and covariance, plus the result
+      code, steps and losses); `None` for the least-squares methods, whose `fit` holds the same.
+
+    **Properties** in `Solution`'s spelling: `value` (= `estimate`), `covariance`; and
+    `parameters` / `standard_errors` as `{name: value}` (`Solution.estimates()` /
+    `Solution.standard_errors()`).
     """
 
     system: AbstractSystem
@@ -221,6 +232,22 @@ class Identification(eqx.Module):
     consistency: Consistency | None = None
     validation: HeldOutError | None = None
     stages: dict | None = None
+    solution: Solution | None = None
+
+    @property
+    def value(self) -> Float[Array, " n_params"]:
+        """The estimate (`Solution`'s name for it)."""
+        return self.estimate
+
+    @property
+    def covariance(self) -> Float[Array, "n_params n_params"] | None:
+        """The estimate's covariance, from the solution (iterative) or the least-squares fit; `None`
+        where neither applies (after the output-error refinement, whose stage reports standard errors)."""
+        if self.solution is not None:
+            return self.solution.covariance
+        if self.fit is not None and self.fit.covariance.shape[0] == self.estimate.shape[0] and "simulation" not in self.method:
+            return self.fit.covariance
+        return None
 
     @property
     def parameters(self) -> dict[str, float]:
@@ -619,8 +646,6 @@ def _refinement_method(refine, system, method, trajectories):
     chaotic run's divergence does not swamp the fit), 60 Levenberg-Marquardt steps, and 4 integrator
     steps per sample.
     """
-    from ._simulation_fit import SimulationFit
-
     if refine is None or refine is False:
         return None
     arm = isinstance(_split(system)[0], AbstractTwoLink)
@@ -639,6 +664,72 @@ def _refinement_method(refine, system, method, trajectories):
     # Four integrator steps per sample of the fitted grid (40 per band period): the smoothed Coulomb
     # friction (tanh at 0.01 rad/s) is stiff, and two steps left a visible bias on synthetic data.
     return SimulationFit(segment_s=segment, fit_initial_states=False, max_steps=60, simulation=FixedGrid(substeps=4))
+
+
+def _named_parameters(system, names) -> Parameters:
+    """The `Parameters` of the named coefficients (fields of the nominal system and of its joint
+    terms) of a system the regressors know, named as `parameter_names` names them, in tree order."""
+    base, terms = _split(system)
+    fields = [n for n in names if hasattr(base, n) and not isinstance(getattr(type(base), n, None), property)]
+    named_terms = [i for i, t in enumerate(terms) if t.parameter_name(base) in names]
+    labels = fields + [terms[i].parameter_name(base) for i in named_terms]
+
+    def places(tree):  # `tree` is shaped like `system` (a bare system or `Extended`)
+        nominal = tree.system if base is not system else tree
+        return [getattr(nominal, n) for n in fields] + [tree.terms[i].coefficient for i in named_terms]
+
+    spec = eqx.tree_at(places, jax.tree.map(lambda _: False, system), [True] * len(labels))
+    tags = eqx.tree_at(places, jax.tree.map(lambda _: "", system), labels)
+    selected = Parameters.of(system, spec)
+    ordered = tuple(tag for tag, chosen in zip(jax.tree.leaves(tags), selected.selection) if chosen)
+    return Parameters.of(system, spec, names=ordered)
+
+
+def _identify_by_simulation(system, trajectories, method: SimulationFit, friction) -> Identification:
+    """`identify` with `SimulationFit`: the output-error fit of the system's named coefficients
+    (the regressors' names, for the systems they know) or of its `parameter_filter()`."""
+    try:
+        system = with_friction(system, friction)
+        names = parameter_names(system, friction)
+    except UsageError:
+        names = None  # any other system: its own parameter filter, named by its labels or tree paths
+    if names is not None:
+        # Start from the system's values; the coefficients not in `names` (a linear axis's Coulomb
+        # term under viscous friction) are fixed.
+        system = _fitted_system(system, names, parameter_vector(system, friction))
+        parameters = _named_parameters(system, names)
+    else:
+        parameters = Parameters.of(system)
+    result = fit_simulation_error(
+        system, trajectories, filter_spec=parameters, segment_s=method.segment_s,
+        fit_initial_states=method.fit_initial_states, continuity_weight=method.continuity_weight,
+        rtol=method.rtol, atol=method.atol, max_steps=method.max_steps, simulation=method.simulation,
+    )
+    # The system's part of the engine's solution: the same names, estimate, errors and covariance.
+    n = parameters.size
+    full = result.solution
+    solution = Solution(
+        model=result.system, value=full.value[:n], parameters=parameters, covariance=full.covariance[:n, :n],
+        std_errors=full.std_errors[:n], result=full.result, loss=full.loss, initial_loss=full.initial_loss,
+        steps=full.steps, n_residuals=full.n_residuals,
+    )
+    order = np.arange(n) if names is None else np.asarray([parameters.names.index(name) for name in names])
+    return Identification(
+        system=result.system,
+        estimate=solution.value[order],
+        std_errors=solution.std_errors[order],
+        condition_number=result.condition_number,
+        rank=result.rank,
+        residual_rms=result.residual_rms,
+        relative_error=result.relative_error,
+        fit=None,
+        names=parameters.names if names is None else tuple(names),
+        n_samples=result.n_samples,
+        method="simulation",
+        friction=friction,
+        system_name=_system_name(system),
+        solution=solution,
+    )
 
 
 def identify(
@@ -706,7 +797,6 @@ def identify(
     `UsageError` for a system or method that does not fit.
     """
     warn_if_float32("identification")  # the float64 policy: say so, once, naming the switch
-    from ._simulation_fit import SimulationFit, _identify_by_simulation
 
     trajectories = _as_list(data)
     _check_data(system, trajectories)

@@ -8,16 +8,18 @@ next), weighted by `continuity_weight`. Short segments keep the problem well con
 or unstable records (a single shooting fit of a chaotic double pendulum has a cost surface full of
 local minima); the continuity defects tie the segments back into one trajectory.
 
-The problem is solved with Levenberg-Marquardt (optimistix) using forward-mode Jacobians through
-the fixed-grid integrator: the number of unknowns (parameters plus segment states) is small compared
-with the number of residuals, which is where forward mode is the right tool.
+The problem is solved by the engine's `fit_least_squares` (Levenberg-Marquardt, optimistix) using
+forward-mode Jacobians through the fixed-grid integrator: the number of unknowns (parameters plus
+segment states) is small compared with the number of residuals, which is where forward mode is the
+right tool. What is fitted is a `Parameters` filter over `(system, initial states)`, so the
+parameters carry the names of their tree paths (or the system's `parameter_labels()`).
 """
 
+import functools
 from collections.abc import Sequence
 
 import equinox as eqx
 import jax
-import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
@@ -25,7 +27,7 @@ from jaxtyping import Array, Float, PyTree
 
 from .._data._trajectory import Trajectory
 from .._errors import DataError, UsageError
-from .._model._linear_axis import LinearAxis
+from .._fit import fit_least_squares, Parameters, Solution
 from .._model._system import AbstractSystem
 from .._simulate import FixedGrid, simulate
 from ._least_squares import least_squares, LeastSquaresFit
@@ -61,13 +63,18 @@ class SimulationFitResult(eqx.Module):
 
     - `system`: the system with the fitted leaves.
     - `initial_states`: fitted (or measured) initial state of each segment, `(segment, n_states)`.
-    - `parameters`: the fitted leaves, flattened, shape `(n_params,)`.
+    - `parameters`: the fitted leaves, flattened, shape `(n_params,)`, in the order of `names`.
     - `std_errors`: their standard errors (Gauss-Newton covariance at the solution), same shape.
     - `condition_number`, `rank`: of the column-scaled Jacobian of all unknowns.
     - `residual_rms`: root-mean-square of the scaled state residuals at the solution.
     - `initial_residual_rms`: the same at the starting point.
     - `relative_error`: $\lVert \hat x - x \rVert / \lVert x \rVert$ over all segment samples (unscaled).
     - `n_segments`, `n_samples`, `steps`: bookkeeping.
+    - `solution`: the engine's `Solution` over all unknowns (the system's parameters, then the
+      segments' initial states when fitted), named by tree path (`theta1`, `system.theta5`,
+      `terms[0].coefficient`, `initial_states[3,1]`) or by the system's `parameter_labels()`.
+
+    **Properties:** `names`, the fitted parameters' names (the first `n_params` of the solution's).
     """
 
     system: AbstractSystem
@@ -82,6 +89,11 @@ class SimulationFitResult(eqx.Module):
     n_segments: int = eqx.field(static=True)
     n_samples: int = eqx.field(static=True)
     steps: Array
+    solution: Solution | None = None
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.solution.names[: self.parameters.shape[0]]
 
 
 def _segments(trajectories, segment_s):
@@ -105,53 +117,58 @@ def _segments(trajectories, segment_s):
     return np.stack(ts), np.stack(xs), np.stack(us), np.asarray(follows), np.asarray(owner), n_samples
 
 
-class _Config(eqx.Module):
-    fit_initial_states: bool = eqx.field(static=True)
-    rtol: float = eqx.field(static=True)
-    atol: float = eqx.field(static=True)
-    max_steps: int = eqx.field(static=True)
-    simulation: FixedGrid
+class _Unknowns(eqx.Module):
+    """What the output-error fit moves: the system and the segments' initial states."""
+
+    system: AbstractSystem
+    initial_states: Float[Array, "segment n_states"]
+
+
+class _Segments(eqx.Module):
+    """The data of the fit: segments, per-state scale, continuity links and weights."""
+
+    ts: Array
+    xs: Array
+    us: Array
+    sigma: Array
+    link: Array
+    continuity_weight: Array
+    segment_weight: Array
+
+
+def _residuals(unknowns: _Unknowns, data: _Segments, *, simulation: FixedGrid, fit_initial_states: bool):
+    """Scaled simulated-minus-measured states of every segment, then the weighted continuity defects."""
+    model, x0 = unknowns.system, unknowns.initial_states
+    sims = jax.vmap(lambda x0, t, u: simulate(model, x0, t, u, method=simulation, throw=False).xs)(x0, data.ts, data.us)
+    r = (sims - data.xs) / data.sigma[None, None, :] * data.segment_weight[:, None, None]
+    r = jnp.where(jnp.isfinite(r), r, 1e3)
+    out = [r.reshape(-1)]
+    if fit_initial_states and x0.shape[0] > 1:
+        defect = (sims[:-1, -1] - x0[1:]) / data.sigma[None, :] * data.link[:, None] * jnp.sqrt(data.continuity_weight)
+        out.append(jnp.where(jnp.isfinite(defect), defect, 1e3).reshape(-1))
+    return jnp.concatenate(out)
 
 
 @eqx.filter_jit
-def _solve(fitted, fixed, ts, xs, us, sigma, link, continuity_weight, config: _Config, segment_weight):
-    """Levenberg-Marquardt on the scaled unknowns; one compiled program per problem shape."""
-    p0, unravel = jax.flatten_util.ravel_pytree(fitted)
-    p0 = p0.astype(xs.dtype)
-    p_scale = jnp.where(jnp.abs(p0) > 0, jnp.abs(p0), 1.0)
-    x0_data = xs[:, 0]
-    w_cont = jnp.sqrt(continuity_weight)
+def _solve(unknowns, parameters: Parameters, data: _Segments, scale, solver, max_steps: int, simulation, fit_initial_states: bool):
+    """The engine's Levenberg-Marquardt, and the Jacobian (scaled unknowns) at the solution; one
+    compiled program per problem shape."""
+    residuals = functools.partial(_residuals, simulation=simulation, fit_initial_states=fit_initial_states)
+    solution = fit_least_squares(residuals, unknowns, parameters, data, solver=solver, scale=scale,
+                                 max_steps=max_steps, nonfinite=None, covariance=False)
 
-    def unpack(z):
-        p = p0 + p_scale * z[: p0.size]
-        x0 = x0_data + sigma * z[p0.size :].reshape(x0_data.shape) if config.fit_initial_states else x0_data
-        return p, x0
+    def scaled(z):
+        return residuals(parameters.with_vector(unknowns, solution.value + scale * z), data)
 
-    def residuals(z, _):
-        p, x0 = unpack(z)
-        model = eqx.combine(unravel(p), fixed)
-        sims = jax.vmap(lambda x0, t, u: simulate(model, x0, t, u, method=config.simulation, throw=False).xs)(x0, ts, us)
-        r = (sims - xs) / jnp.broadcast_to(sigma, xs.shape) * segment_weight[:, None, None]
-        r = jnp.where(jnp.isfinite(r), r, 1e3)
-        out = [r.reshape(-1)]
-        if config.fit_initial_states and x0.shape[0] > 1:
-            defect = (sims[:-1, -1] - x0[1:]) / sigma * link[:, None] * w_cont
-            out.append(jnp.where(jnp.isfinite(defect), defect, 1e3).reshape(-1))
-        return jnp.concatenate(out)
-
-    n_z = p0.size + (x0_data.size if config.fit_initial_states else 0)
-    z0 = jnp.zeros(n_z, xs.dtype)
-    solver = optx.LevenbergMarquardt(rtol=config.rtol, atol=config.atol)
-    solution = optx.least_squares(residuals, solver, z0, max_steps=config.max_steps, throw=False)
-    z = solution.value
-    return z, residuals(z, None), residuals(z0, None), jax.jacfwd(residuals)(z, None), solution.stats["num_steps"]
+    z = jnp.zeros_like(solution.value)
+    return solution, scaled(z), residuals(unknowns, data), jax.jacfwd(scaled)(z)
 
 
 def fit_simulation_error(
     system: AbstractSystem,
     trajectories: Trajectory | Sequence[Trajectory],
     *,
-    filter_spec: PyTree[bool] | None = None,
+    filter_spec: PyTree[bool] | Parameters | None = None,
     segment_s: float = 1.0,
     fit_initial_states: bool = True,
     continuity_weight: float = 10.0,
@@ -162,22 +179,26 @@ def fit_simulation_error(
     simulation: FixedGrid = FixedGrid(),
     record_weights: Float[Array, " n_records"] | None = None,
 ) -> SimulationFitResult:
-    r"""Fit the leaves of `system` selected by `filter_spec` by minimising the simulation error.
+    r"""Fit the elements of `system` selected by `filter_spec` by minimising the simulation error.
 
     Generic over systems: any `AbstractSystem` whose `vector_field` is differentiable, with any
-    PyTree filter of what to fit (the others stay fixed). The cost is
+    filter of what to fit (the others stay fixed). The cost is
 
     $$\sum_{s,k} \lVert (\hat x_s(t_k) - x(t_k)) / \sigma \rVert^2 + w \sum_s \lVert (\hat x_s(t_{end}) - x_{0,s+1}) / \sigma \rVert^2$$
 
     over segments $s$ simulated from their initial states $x_{0,s}$, where $\sigma$ is the
-    per-state scale (default: the data's standard deviation of each state).
+    per-state scale (default: the data's standard deviation of each state). It is minimised by the
+    engine's `fit_least_squares` (Levenberg-Marquardt) on the unknowns scaled by $|p_0|$ (parameters)
+    and $\sigma$ (initial states).
 
     **Arguments:**
 
     - `system`: the starting model.
     - `trajectories`: a `Trajectory` or a list of them.
-    - `filter_spec`: a PyTree of bools like `system` (as for `eqx.partition`) marking the leaves
-      to fit; default every inexact array leaf.
+    - `filter_spec`: what to fit: a filter over `system` as `dynax.Parameters.of` takes (a PyTree
+      of bools or callables like `system`, with boolean arrays for single elements), or a
+      `Parameters` of `system`; default the system's `parameter_filter()` (every inexact array
+      leaf unless the system says otherwise), named by its `parameter_labels()` or tree paths.
     - `segment_s`: segment length [s] for multiple shooting (a value longer than the record means
       single shooting).
     - `fit_initial_states`: also fit each segment's initial state (default `True`).
@@ -187,7 +208,7 @@ def fit_simulation_error(
     - `simulation`: `FixedGrid` settings of the rollouts.
     - `record_weights`: optional weight per trajectory multiplying its state residuals (default 1).
 
-    **Returns:** a `SimulationFitResult`.
+    **Returns:** a `SimulationFitResult` (with the engine's `Solution` as `.solution`).
 
     ??? cite
 
@@ -203,49 +224,47 @@ def fit_simulation_error(
         raise UsageError("fit_simulation_error: `trajectories` is empty")
     if not segment_s > 0:
         raise UsageError(f"fit_simulation_error: `segment_s` must be positive, got {segment_s}")
-    if filter_spec is None:
-        filter_spec = jax.tree.map(eqx.is_inexact_array, system)
-    fitted, fixed = eqx.partition(system, filter_spec)
-    p0, unravel = jax.flatten_util.ravel_pytree(fitted)
-    if p0.size == 0:
+    chosen = filter_spec if isinstance(filter_spec, Parameters) else Parameters.of(system, filter_spec)
+    if chosen.size == 0:
         raise UsageError("fit_simulation_error: `filter_spec` selects no array leaves to fit")
     ts, xs, us, follows, owner, n_samples = _segments(trajectories, segment_s)
+    p0 = chosen.vector(system)
     dtype = jnp.result_type(p0.dtype, xs.dtype)
     ts, xs, us = (jnp.asarray(a, dtype) for a in (ts, xs, us))
-    p0 = p0.astype(dtype)
     if state_scale is None:
         flat = np.concatenate([np.asarray(t.xs) for t in trajectories])
         state_scale = np.std(flat, axis=0)
         state_scale = np.where(state_scale > 0, state_scale, 1.0)
     sigma = jnp.asarray(state_scale, dtype)
-    link = jnp.asarray(follows[1:], dtype)  # segment s+1 continues segment s
-    config = _Config(fit_initial_states, rtol, atol, max_steps, simulation)
     weight = np.ones(len(trajectories)) if record_weights is None else np.asarray(record_weights, dtype=float)
     if weight.shape != (len(trajectories),) or not np.all(weight > 0):
         raise UsageError(f"fit_simulation_error: `record_weights` must be {len(trajectories)} positive numbers")
-    segment_weight = jnp.asarray(weight[owner], dtype)
-    z, r, r0, jac, steps = _solve(fitted, fixed, ts, xs, us, sigma, link, jnp.asarray(continuity_weight, dtype), config,
-                                  segment_weight)
-    p0, unravel = jax.flatten_util.ravel_pytree(fitted)
-    p0 = p0.astype(dtype)
-    p_scale = jnp.where(jnp.abs(p0) > 0, jnp.abs(p0), 1.0)
-    x0_data = xs[:, 0]
-    n_z = z.size
+    data = _Segments(ts, xs, us, sigma, jnp.asarray(follows[1:], dtype),  # segment s+1 continues segment s
+                     jnp.asarray(continuity_weight, dtype), jnp.asarray(weight[owner], dtype))
+    # The unknowns: the system's chosen elements, then (when fitted) every segment's initial state,
+    # scaled by |p0| (or 1) and by the state scale.
+    unknowns = _Unknowns(system, xs[:, 0])
+    x0_names = tuple(f"initial_states[{s},{i}]" for s in range(xs.shape[0]) for i in range(xs.shape[2]))
+    parameters = Parameters(
+        chosen.names + (x0_names if fit_initial_states else ()),
+        chosen.selection + ((tuple(range(xs[:, 0].size)),) if fit_initial_states else ((),)),
+    )
+    p_scale = jnp.where(jnp.abs(p0) > 0, jnp.abs(p0), 1.0).astype(dtype)
+    scale = jnp.concatenate([p_scale, jnp.tile(sigma, xs.shape[0])]) if fit_initial_states else p_scale
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+    solution, r, r0, jac = _solve(unknowns, parameters, data, scale, solver, max_steps, simulation, fit_initial_states)
+    n_params = chosen.size
     n_state_residuals = xs.size
-
-    def unpack(z):
-        p = p0 + p_scale * z[: p0.size]
-        x0 = x0_data + sigma * z[p0.size :].reshape(x0_data.shape) if fit_initial_states else x0_data
-        return p, x0
-
-    names = tuple(f"p{i}" for i in range(p0.size)) + tuple(f"x0_{i}" for i in range(n_z - p0.size))
-    linearised: LeastSquaresFit = least_squares(jac, -r, names=names, allow_rank_deficient=True)
-    p, x0 = unpack(z)
+    linearised: LeastSquaresFit = least_squares(jac, -r, names=parameters.names, allow_rank_deficient=True)
+    std = linearised.std_errors * scale
+    covariance = linearised.covariance * scale[:, None] * scale[None, :]
+    solution = eqx.tree_at(lambda s: (s.std_errors, s.covariance), solution, (std, covariance))
+    fitted = solution.model
     return SimulationFitResult(
-        system=eqx.combine(unravel(p), fixed),
-        initial_states=x0,
-        parameters=p,
-        std_errors=linearised.std_errors[: p0.size] * p_scale,
+        system=fitted.system,
+        initial_states=fitted.initial_states,
+        parameters=solution.value[:n_params],
+        std_errors=std[:n_params],
         condition_number=linearised.condition_number,
         rank=linearised.rank,
         residual_rms=jnp.sqrt(jnp.mean(r[:n_state_residuals] ** 2)),
@@ -253,74 +272,6 @@ def fit_simulation_error(
         relative_error=jnp.linalg.norm(r[:n_state_residuals].reshape(xs.shape) * jnp.broadcast_to(sigma, xs.shape)) / jnp.linalg.norm(xs),
         n_segments=int(xs.shape[0]),
         n_samples=int(n_samples),
-        steps=steps,
+        steps=solution.steps,
+        solution=solution,
     )
-
-
-def _identify_by_simulation(system, trajectories, method: SimulationFit, friction):
-    from ._identify import _fitted_system, _system_name, Identification
-    from ._regressors import parameter_names, parameter_vector, with_friction
-
-    try:
-        system = with_friction(system, friction)
-        names = parameter_names(system, friction)
-    except UsageError:
-        names = None  # any other system: fit every inexact array leaf, named by position
-    if names is not None:
-        # Start from the system's values; the leaves not in `names` (a linear axis's Coulomb term
-        # under viscous friction) are fixed.
-        system = _fitted_system(system, names, parameter_vector(system, friction))
-        filter_spec = jax.tree.map(eqx.is_inexact_array, system)
-        if isinstance(system, LinearAxis) and "coulomb" not in names:
-            filter_spec = eqx.tree_at(lambda s: s.coulomb, filter_spec, False)
-        # The fitted leaves flatten in field order, which is the order of `names`.
-    else:
-        filter_spec = jax.tree.map(eqx.is_inexact_array, system)
-    result = fit_simulation_error(
-        system,
-        trajectories,
-        filter_spec=filter_spec,
-        segment_s=method.segment_s,
-        fit_initial_states=method.fit_initial_states,
-        continuity_weight=method.continuity_weight,
-        rtol=method.rtol,
-        atol=method.atol,
-        max_steps=method.max_steps,
-        simulation=method.simulation,
-    )
-    if names is None:
-        names = _leaf_names(system, filter_spec)
-        estimate, std = result.parameters, result.std_errors
-    else:
-        # The flattened leaves follow the fields' order, which is the order of `names`.
-        estimate = parameter_vector(result.system, friction)
-        std = result.std_errors
-    return Identification(
-        system=result.system,
-        estimate=estimate,
-        std_errors=std,
-        condition_number=result.condition_number,
-        rank=result.rank,
-        residual_rms=result.residual_rms,
-        relative_error=result.relative_error,
-        fit=None,
-        names=names,
-        n_samples=result.n_samples,
-        method="simulation",
-        friction=friction,
-        system_name=_system_name(system),
-    )
-
-
-def _leaf_names(system, filter_spec) -> tuple[str, ...]:
-    """Names of the flattened fitted leaves, from their paths: `body_model.a[0,1]`."""
-    fitted, _ = eqx.partition(system, filter_spec)
-    names = []
-    for path, leaf in jax.tree_util.tree_flatten_with_path(fitted)[0]:
-        base = jax.tree_util.keystr(path).lstrip(".")
-        shape = np.shape(leaf)
-        if shape == ():
-            names.append(base)
-        else:
-            names.extend(f"{base}[{','.join(map(str, idx))}]" for idx in np.ndindex(*shape))
-    return tuple(names)

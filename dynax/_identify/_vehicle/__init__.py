@@ -1,6 +1,8 @@
 """Vehicle dynamics learning (Abbeel, Ganapathi and Ng 2005): one-step, frequency-domain, lagged, backprop."""
 
 from ._criteria import (
+    auto_stride as auto_stride,
+    EMFree as EMFree,
     Backprop as Backprop,
     fit_backprop as fit_backprop,
     fit_lagged as fit_lagged,

@@ -40,16 +40,20 @@ removed exactly, and the acceleration model's known part contributes $R(\omega\t
     P. Abbeel and A. Y. Ng, "Learning first-order Markov models for control", NIPS 17, 2004.
 """
 
+import functools
 import time
+from collections.abc import Callable
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
+import optimistix as optx
+from jaxtyping import Array, Bool, Float, Int, Scalar
 
 from ..._data._trajectory import Trajectory
 from ..._model._helicopter import ANGULAR_RATE, BODY, Helicopter, QUATERNION, VELOCITY, quaternion_to_rotation
+from ..._fit import fit_minimise, History, monitor, notify, OptaxLBFGS, Parameters, Solution
 from ._windows import check_helicopter_data, horizon_steps, lagged_loss, rollout, valid_starts
 
 
@@ -128,22 +132,49 @@ class VehicleFit(eqx.Module):
     **Fields:**
 
     - `system`: the fitted `Helicopter`.
+    - `losses`: the criterion's own loss at the start and after each iteration (for `lagged` and
+      `backprop` the lagged loss), NaN past the last iteration: an array of fixed length.
+    - `seconds`: the wall-clock seconds since the start of the iteration at which each entry of
+      `losses` was reached (read on the host from inside the compiled loop), same shape.
     - `criterion`: the criterion's name (`one-step`, `frequency`, `lagged`, `backprop`).
-    - `loss`: the final value of the criterion's own loss (for `lagged` and `backprop` the lagged loss).
-    - `history`: `(seconds since start, loss)` after each iteration, as a tuple of pairs.
     - `n_samples`: the number of samples fitted.
     - `statistics`: for the frequency criterion, `(name, value, Cramer-Rao bound %, insensitivity %)`
       of each identified weight (empty for the others).
     - `eliminated`: for the frequency criterion, the weights its structure reduction dropped, in order.
+    - `solution`: for `lagged` and `backprop`, the engine's `Solution` (weights by name, result
+      code, steps, loss history); `None` for the others.
+
+    **Properties:** `loss`, the final loss (a float), and `history`, `(seconds, loss)` pairs of
+    the recorded entries.
     """
 
     system: Helicopter
+    losses: Float[Array, " history"]
+    seconds: Float[Array, " history"]
     criterion: str = eqx.field(static=True)
-    loss: float = eqx.field(static=True)
-    history: tuple = eqx.field(static=True)
     n_samples: int = eqx.field(static=True)
     statistics: tuple = eqx.field(static=True, default=())
     eliminated: tuple = eqx.field(static=True, default=())
+    solution: Solution | None = None
+
+    @property
+    def loss(self) -> float:
+        """The final value of the criterion's loss."""
+        losses = np.asarray(self.losses)
+        recorded = losses[~np.isnan(losses)]
+        return float(recorded[-1]) if recorded.size else float("nan")
+
+    @property
+    def history(self) -> tuple[tuple[float, float], ...]:
+        """`(seconds since start, loss)` at the start and after each iteration."""
+        losses, seconds = np.asarray(self.losses), np.asarray(self.seconds)
+        keep = ~np.isnan(losses)
+        return tuple((float(t), float(v)) for t, v in zip(seconds[keep], losses[keep]))
+
+
+def _single(loss, seconds):
+    """`losses`, `seconds` arrays of a one-shot criterion."""
+    return jnp.asarray([loss], jnp.float64 if jax.config.jax_enable_x64 else jnp.float32), jnp.asarray([seconds])
 
 
 _lagged_loss_jit = eqx.filter_jit(lagged_loss)  # compiled once per (model structure, data shape, horizon)
@@ -244,96 +275,182 @@ def fit_one_step(system: Helicopter, trajectory: Trajectory, criterion: OneStep 
     theta = _solve(ata, atb, criterion.ridge)
     fitted = _with_theta(system, theta)
     _, _, loss = _normal_equations(fitted, trajectory, starts, 1, w, False, 1024)
-    loss = float(loss)
-    return VehicleFit(fitted, "one-step", loss, ((time.perf_counter() - t0, loss),), len(trajectory))
+    losses, seconds = _single(loss, time.perf_counter() - t0)
+    return VehicleFit(fitted, losses, seconds, "one-step", len(trajectory))
+
+
+class _EMFreeState(eqx.Module):
+    step: Int[Array, ""]
+    f: Scalar
+    terminate: Bool[Array, ""]
+    history: History
+
+
+class EMFree(optx.AbstractMinimiser):
+    r"""The EM-free iteration of Abbeel, Ganapathi and Ng (2005) as an optimistix minimiser.
+
+    Each step linearises the predictions about the current iterate (`linearise(theta, args) ->
+    (A^T Lambda A, A^T Lambda (y - c))`, the normal equations of the affine predictor with the
+    current rollout's states held fixed; see the module docstring), solves them with a small ridge
+    term, and takes the first step size along (new - old) that lowers the true objective `fn`
+    (or, with `best_step`, the best of all step sizes). It stops when no step size lowers the
+    objective or when the relative decrease is below `rtol`. The objective never increases: each
+    accepted step lowers it, and a step that lowers nothing ends the iteration.
+
+    **Fields:**
+
+    - `linearise`: the normal equations at `theta` (static).
+    - `rtol`: the relative-decrease tolerance (`Lagged.tolerance`); `atol` unused.
+    - `ridge`: Tikhonov term relative to the trace of the normal equations.
+    - `step_sizes`, `best_step`: the line search (see `Lagged`).
+    - `history`: length of the recorded loss and wall-clock history (`max_iterations + 1`).
+    - `token`: a `dynax._fit.monitor` token; each accepted iteration is reported to the host.
+
+    ??? cite "Reference"
+
+        P. Abbeel, V. Ganapathi and A. Y. Ng, "Learning vehicular dynamics, with application to
+        modeling helicopters", NIPS 18, 2005 (Section 4, the EM-free algorithm).
+    """
+
+    linearise: Callable = eqx.field(static=True)
+    rtol: float = 1e-4
+    atol: float = 0.0
+    norm: Callable = eqx.field(static=True, default=optx.max_norm)
+    ridge: float = 1e-10
+    step_sizes: tuple[float, ...] = eqx.field(static=True, default=(1.0, 0.5, 0.25, 0.125, 0.0625, 0.03125))
+    best_step: bool = eqx.field(static=True, default=False)
+    history: int = eqx.field(static=True, default=1)
+    token: Int[Array, ""] | int = 0
+
+    def init(self, fn, y, args, options, f_struct, aux_struct, tags):
+        f, _ = fn(y, args)
+        return _EMFreeState(jnp.array(0), f, jnp.array(False), History.start(max(self.history, 1), f))
+
+    def step(self, fn, y, args, options, state, tags):
+        ata, atb = self.linearise(y, args)
+        direction = _solve(ata, atb, self.ridge) - y
+        sizes = jnp.asarray(self.step_sizes, y.dtype)
+        n_sizes = len(self.step_sizes)
+
+        def untried(carry):
+            i, _, _, accepted = carry
+            return (i < n_sizes) & (jnp.asarray(self.best_step) | ~accepted)
+
+        def try_size(carry):
+            i, best_y, best_f, accepted = carry
+            candidate = y + sizes[i] * direction
+            value, _ = fn(candidate, args)
+            better = jnp.isfinite(value) & (value < best_f)
+            return (i + 1, jnp.where(better, candidate, best_y), jnp.where(better, value, best_f), accepted | better)
+
+        _, new_y, new_f, accepted = jax.lax.while_loop(untried, try_size, (0, y, state.f, jnp.array(False)))
+        terminate = ~accepted | ((state.f - new_f) / state.f < self.rtol)
+        notify(self.token, state.step, new_f, accepted)
+        history = state.history.record(state.step + 1, new_f, accepted)
+        return new_y, _EMFreeState(state.step + 1, new_f, terminate, history), None
+
+    def terminate(self, fn, y, args, options, state, tags):
+        return state.terminate, optx.RESULTS.successful
+
+    def postprocess(self, fn, y, aux, args, options, state, tags, result):
+        return y, aux, state.history.stats()
+
+
+def _lagged_objective(theta, args, *, n_steps):
+    system, trajectory, starts, w = args
+    return lagged_loss(_with_theta(system, theta), trajectory, n_steps, starts=starts, weights=w)
+
+
+def _em_free_normal_equations(theta, args, *, n_steps, batch_size, sensitivities):
+    system, trajectory, starts, w = args
+    ata, atb, _ = _normal_equations(_with_theta(system, theta), trajectory, starts, n_steps, w, True,
+                                    batch_size, sensitivities)
+    return ata, atb
+
+
+@eqx.filter_jit
+def _em_free(system, trajectory, starts, w, n_steps: int, criterion: Lagged, token):
+    linearise = functools.partial(_em_free_normal_equations, n_steps=n_steps, batch_size=criterion.batch_size,
+                                  sensitivities=criterion.state_sensitivities)
+    solver = EMFree(linearise, rtol=criterion.tolerance, ridge=criterion.ridge, step_sizes=criterion.step_sizes,
+                    best_step=criterion.best_step, history=criterion.max_iterations + 1, token=token)
+    objective = functools.partial(_lagged_objective, n_steps=n_steps)
+    theta0 = system.body_model.parameter_vector()
+    return optx.minimise(objective, solver, theta0, (system, trajectory, starts, w), max_steps=criterion.max_iterations,
+                         throw=False)
+
+
+def _vehicle_solution(system, fitted, theta, solution) -> Solution:
+    """The engine's `Solution` of an iterative vehicle fit (no covariance: NaN)."""
+    n = theta.shape[0]
+    history = solution.stats["loss_history"]
+    return Solution(
+        model=fitted, value=theta, parameters=Parameters.of(system), covariance=jnp.full((n, n), jnp.nan, theta.dtype),
+        std_errors=jnp.full(n, jnp.nan, theta.dtype), result=solution.result, loss=solution.state.f,
+        initial_loss=history[0], steps=solution.stats["num_steps"], loss_history=history,
+        time_history=solution.stats["time_history"],
+    )
 
 
 def fit_lagged(
     system: Helicopter, trajectory: Trajectory, criterion: Lagged = Lagged(), *, weights=None, callback=None
 ) -> VehicleFit:
-    """Minimise the lagged loss by the EM-free iteration with line search (see `Lagged`).
+    """Minimise the lagged loss by the EM-free iteration with line search (see `Lagged`, `EMFree`).
 
-    `callback(iteration, loss)` is called after every iteration (for progress).
+    The whole iteration runs compiled (`optimistix.minimise` with the `EMFree` solver, one
+    `while_loop`); `callback(iteration, loss)` is called from it after every accepted iteration
+    (through `jax.debug.callback`, for progress).
     """
     dt = check_helicopter_data(trajectory, "fit_lagged")
     n_steps = horizon_steps(criterion.horizon, dt, "fit_lagged")
     starts = _starts(trajectory, n_steps, criterion.stride)
     w = _weights(weights, trajectory.xs.dtype)
-    loss_fn = lambda s: _lagged_loss_jit(s, trajectory, n_steps, starts=starts, weights=w)  # noqa: E731
-    t0 = time.perf_counter()
-    current = float(loss_fn(system))
-    history = [(time.perf_counter() - t0, current)]
-    for iteration in range(criterion.max_iterations):
-        ata, atb, _ = _normal_equations(
-            system, trajectory, starts, n_steps, w, True, criterion.batch_size, criterion.state_sensitivities
-        )
-        theta_old = system.body_model.parameter_vector()
-        theta_new = _solve(ata, atb, criterion.ridge)
-        accepted = None
-        for step in criterion.step_sizes:
-            candidate = _with_theta(system, theta_old + step * (theta_new - theta_old))
-            value = float(loss_fn(candidate))
-            if np.isfinite(value) and value < (current if accepted is None else accepted[1]):
-                accepted = candidate, value
-                if not criterion.best_step:
-                    break
-        if accepted is None:
-            break
-        system, value = accepted
-        improvement = (current - value) / current
-        current = value
-        history.append((time.perf_counter() - t0, current))
-        if callback is not None:
-            callback(iteration, current)
-        if improvement < criterion.tolerance:
-            break
-    return VehicleFit(system, "lagged", current, tuple(history), len(trajectory))
+    with monitor(callback) as token:
+        solution = _em_free(system, trajectory, starts, w, n_steps, criterion, token)
+    theta = solution.value
+    fitted = _with_theta(system, theta)
+    result = _vehicle_solution(system, fitted, theta, solution)
+    return VehicleFit(fitted, result.loss_history, result.time_history, "lagged", len(trajectory), solution=result)
+
+
+def _backprop_loss(model, args, *, n_steps, checkpoint_segment):
+    trajectory, starts, w = args
+    return lagged_loss(model, trajectory, n_steps, starts=starts, weights=w, checkpoint_segment=checkpoint_segment)
+
+
+@eqx.filter_jit
+def _backprop(system, trajectory, starts, w, n_steps: int, criterion: Backprop, target, token):
+    solver = OptaxLBFGS(rtol=criterion.tolerance, target=target, history=criterion.max_steps + 1, token=token)
+    loss = functools.partial(_backprop_loss, n_steps=n_steps, checkpoint_segment=criterion.checkpoint_segment)
+    # Unit scale: the solver sees the weights themselves, as optax's L-BFGS always did here.
+    return fit_minimise(loss, system, Parameters.of(system), (trajectory, starts, w), solver=solver, scale=1.0,
+                        max_steps=criterion.max_steps, covariance=False)
 
 
 def fit_backprop(
     system: Helicopter, trajectory: Trajectory, criterion: Backprop = Backprop(), *, weights=None, callback=None
 ) -> VehicleFit:
-    """Minimise the lagged loss by L-BFGS with gradients through checkpointed rollouts (see `Backprop`)."""
+    """Minimise the lagged loss by L-BFGS with gradients through checkpointed rollouts (see `Backprop`).
+
+    The engine's `fit_minimise` with `OptaxLBFGS` (optax's L-BFGS as an optimistix minimiser), one
+    compiled `while_loop`; `callback(iteration, loss)` is called from it after every step.
+    """
     dt = check_helicopter_data(trajectory, "fit_backprop")
     n_steps = horizon_steps(criterion.horizon, dt, "fit_backprop")
     starts = _starts(trajectory, n_steps, criterion.stride)
     w = _weights(weights, trajectory.xs.dtype)
+    target = -jnp.inf if criterion.target_loss is None else criterion.target_loss
+    with monitor(callback) as token:
+        solution = _backprop(system, trajectory, starts, w, n_steps, criterion, jnp.asarray(target, w.dtype), token)
+    return VehicleFit(solution.model, solution.loss_history, solution.time_history, "backprop", len(trajectory),
+                      solution=solution)
 
-    def loss_fn(theta):
-        return lagged_loss(
-            _with_theta(system, theta), trajectory, n_steps, starts=starts, weights=w,
-            checkpoint_segment=criterion.checkpoint_segment,
-        )
 
-    optimiser = optax.lbfgs()
-    value_and_grad = optax.value_and_grad_from_state(loss_fn)
-
-    @jax.jit
-    def step(theta, state):
-        value, grad = value_and_grad(theta, state=state)
-        updates, state = optimiser.update(grad, state, theta, value=value, grad=grad, value_fn=loss_fn)
-        return optax.apply_updates(theta, updates), state, value
-
-    theta = system.body_model.parameter_vector()
-    state = optimiser.init(theta)
-    t0 = time.perf_counter()
-    current = float(jax.jit(loss_fn)(theta))
-    history = [(time.perf_counter() - t0, current)]
-    for iteration in range(criterion.max_steps):
-        new_theta, new_state, _ = step(theta, state)
-        value = float(optax.tree_utils.tree_get(new_state, "value"))  # the loss at `new_theta`
-        if not np.isfinite(value):
-            break
-        improvement = (current - value) / current
-        theta, state, current = new_theta, new_state, value
-        history.append((time.perf_counter() - t0, current))
-        if callback is not None:
-            callback(iteration, current)
-        if criterion.target_loss is not None and current <= criterion.target_loss:
-            break
-        if 0 <= improvement < criterion.tolerance:
-            break
-    return VehicleFit(_with_theta(system, theta), "backprop", current, tuple(history), len(trajectory))
+def auto_stride(n_samples: int, n_steps: int, windows: int = 600) -> int:
+    """The smallest stride that uses at most about `windows` start times of a record of `n_samples`
+    samples with a horizon of `n_steps` samples (1: every start, when there are no more than that)."""
+    n_starts = max(n_samples - n_steps, 1)
+    return max(1, -(-n_starts // max(int(windows), 1)))
 
 
 def lagged_loss_of(system: Helicopter, trajectory: Trajectory, horizon: float, *, stride: int = 1, weights=None) -> float:

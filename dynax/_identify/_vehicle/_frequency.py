@@ -49,7 +49,7 @@ from jaxtyping import Array, Float
 from ..._data._trajectory import Trajectory
 from ..._errors import UsageError
 from ..._model._helicopter import BODY, BODY_AXES, Helicopter, LINEAR_FEATURE_NAMES, LinearVelocityModel
-from ._criteria import _normal_equations, _solve, _with_theta, fit_one_step, VehicleFit
+from ._criteria import _normal_equations, _single, _solve, _with_theta, fit_one_step, VehicleFit
 from ._windows import check_helicopter_data, valid_starts
 
 
@@ -353,7 +353,6 @@ def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: Frequen
     rhs = atb[bias] - ata[np.ix_(bias, rest)] @ theta[rest]
     theta = theta.at[np.nonzero(bias)[0]].set(_solve(ata[np.ix_(bias, bias)], rhs, 1e-12))
     fitted = _with_theta(fitted, theta)
-    return VehicleFit(
-        fitted, "frequency", final_cost, ((time.perf_counter() - t0, final_cost),), len(trajectory),
-        statistics=summary, eliminated=tuple(eliminated),
-    )
+    losses, seconds = _single(final_cost, time.perf_counter() - t0)
+    return VehicleFit(fitted, losses, seconds, "frequency", len(trajectory), statistics=summary,
+                      eliminated=tuple(eliminated))

@@ -1,0 +1,83 @@
+"""The output-error fit on the engine: names from the system's tree, one `Solution` behind the
+result, and recovery from data made by another integrator with measurement noise."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import dynax
+from dynax._data import Trajectory
+from dynax._fit import Parameters, Solution
+from dynax._identify import identify, SimulationFit
+from dynax._identify._simulation_fit import fit_simulation_error
+from dynax._model._extensions import CoulombFriction, Extended
+from dynax._simulate import Adaptive
+
+
+def _noisy_record(system, ts, us, x0, names, noise, seed):
+    """Data from the adaptive Dopri8 integrator (the fit simulates with fixed Tsit5 steps), with
+    white measurement noise on every state."""
+    sim = dynax.simulate(system, jnp.asarray(x0), jnp.asarray(ts), jnp.asarray(us), method=Adaptive())
+    rng = np.random.default_rng(seed)
+    xs = np.asarray(sim.xs[:, : len(names)]) + noise * rng.standard_normal((len(ts), len(names)))
+    return Trajectory(jnp.asarray(ts), jnp.asarray(xs), jnp.asarray(us), names, system.input_names)
+
+
+@pytest.mark.slow  # one Levenberg-Marquardt compilation (about 30 s on 2 cores)
+def test_linear_axis_named_by_tree_path_recovers_parameters_within_their_errors():
+    truth = dynax.LinearAxis(mass=jnp.asarray(95.0), viscous=jnp.asarray(200.0), coulomb=jnp.asarray(20.0),
+                             offset=jnp.asarray(-3.0))
+    ts = np.arange(0.0, 4.0, 0.002)
+    us = (60 * np.sin(3 * ts) + 40 * np.sin(7.1 * ts) + 25 * np.sin(13.3 * ts))[:, None]
+    data = _noisy_record(truth, ts, us, [0.0, 0.0], truth.state_names, noise=1e-4, seed=0)
+    start = dynax.LinearAxis(mass=jnp.asarray(80.0), viscous=jnp.asarray(240.0), coulomb=jnp.asarray(15.0),
+                             offset=jnp.asarray(0.0))
+    result = fit_simulation_error(start, data, segment_s=1.0, max_steps=40)
+    assert result.names == ("mass", "viscous", "coulomb", "offset")  # the tree paths of the default filter
+    assert isinstance(result.solution, Solution)
+    assert set(result.solution.standard_errors()) >= set(result.names)
+    estimate, std = np.asarray(result.parameters), np.asarray(result.std_errors)
+    expected = np.array([95.0, 200.0, 20.0, -3.0])
+    np.testing.assert_allclose(estimate, expected, rtol=0.02, atol=0.1)
+    assert np.all(np.isfinite(std)) and np.all(std > 0)
+    # The covariance ignores the smoothing of the Coulomb term and the integrator's own error, so
+    # allow a generous multiple; a wrong estimate (or wrong errors) is typically far outside.
+    assert np.all(np.abs(estimate - expected) < 10 * std + 1e-3 * np.abs(expected)), (estimate, std)
+
+
+@pytest.mark.slow  # one Levenberg-Marquardt compilation
+def test_identify_by_simulation_is_built_from_one_solution_with_the_contract_names():
+    truth = Extended(dynax.Acrobot(), (CoulombFriction(0, jnp.asarray(0.05)), CoulombFriction(1, jnp.asarray(0.03))))
+    ts = np.arange(0.0, 1.0 + 1e-9, 0.005)
+    us = (2.0 * np.sin(0.7 * ts) + 1.5 * np.sin(1.9 * ts + 1) + np.sin(3.3 * ts + 2))[:, None]
+    data = _noisy_record(truth, ts, us, [0.2, 0.0, 0.0, 0.0], ("q1", "q2", "dq1", "dq2"), noise=1e-5, seed=1)
+    start = dynax.Acrobot.from_base_parameters({k: 1.05 * float(v) for k, v in dynax.Acrobot().base_parameters.items()})
+    result = identify(start, data, SimulationFit(segment_s=0.25, max_steps=30), friction="coulomb", holdout=0)
+    names = ("theta1", "theta2", "theta3", "theta4", "theta5", "theta6", "theta7", "fc1", "fc2")
+    assert result.names == names and result.solution.names == names
+    out = result.to_json()
+    assert tuple(out["parameters"]) == names and tuple(out["std_errors"]) == names
+    assert out["parameters"] == result.solution.estimates() and out["std_errors"] == result.solution.standard_errors()
+    np.testing.assert_array_equal(result.value, result.estimate)
+    np.testing.assert_allclose(np.sqrt(np.diag(result.covariance)), result.std_errors, rtol=1e-10)
+    theta = np.array([float(v) for v in dynax.Acrobot().base_parameters.values()] + [0.05, 0.03])
+    np.testing.assert_allclose(np.asarray(result.estimate)[:7], theta[:7], rtol=1e-2)
+    np.testing.assert_allclose(np.asarray(result.estimate)[7:], theta[7:], atol=0.01)
+
+
+def test_named_parameters_pick_the_named_coefficients_of_nominal_system_and_terms():
+    from dynax._identify._identify import _named_parameters
+
+    system = Extended(dynax.Acrobot(), (CoulombFriction(1, jnp.asarray(0.3)), CoulombFriction(0, jnp.asarray(0.2))))
+    names = ("theta1", "theta2", "theta3", "theta4", "theta5", "theta6", "theta7", "fc2", "fc1")
+    parameters = _named_parameters(system, names)
+    assert parameters.names == names  # tree order: the nominal fields, then the terms in their order
+    values = dict(zip(parameters.names, np.asarray(parameters.vector(system))))
+    assert values["fc2"] == pytest.approx(0.3) and values["fc1"] == pytest.approx(0.2)
+    assert values["theta1"] == pytest.approx(float(system.system.theta1))
+    moved = parameters.with_vector(system, jnp.arange(1.0, 10.0))
+    assert float(moved.terms[0].coefficient) == 8.0 and float(moved.system.theta7) == 7.0
+    axis = Parameters.of(dynax.LinearAxis())
+    assert axis.names == ("mass", "viscous", "coulomb", "offset")
+    fixed = _named_parameters(dynax.LinearAxis(), ("mass", "viscous", "offset"))
+    assert fixed.names == ("mass", "viscous", "offset")  # the Coulomb term is not fitted
