@@ -104,3 +104,22 @@ def test_say_writes_stage_lines_above_a_bar_or_as_log_lines(stderr):
         bar.say("round 2: refit")
     text = stderr.getvalue()
     assert "round 1: screening\n" in text and "round 2: refit" in text and "2stage" in text.replace(" ", "")
+
+
+def test_output_error_fit_reports_each_iteration(capsys):
+    """The engine's Levenberg-Marquardt reports through optimistix's verbose hook from compiled code."""
+    import jax.numpy as jnp
+
+    from dynax._identify._simulation_fit import fit_simulation_error
+
+    def axis(m, b):
+        return dynax.LinearAxis(mass=jnp.asarray(m), viscous=jnp.asarray(b), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0))
+
+    ts = jnp.linspace(0.0, 2.0, 201)
+    us = jnp.sin(3.0 * ts)[:, None]
+    xs = dynax.simulate(axis(0.8, 0.3), jnp.zeros(2), ts, us).xs
+    trajectory = dynax.Trajectory(ts, xs, us, ("q", "dq"), ("F",), "linear_axis", "")
+    result = fit_simulation_error(axis(1.5, 1.0), trajectory, segment_s=10.0, progress=True)
+    err = capsys.readouterr().err
+    assert "output-error fit" in err and "loss=" in err
+    assert abs(float(result.parameters[0]) - 0.8) < 1e-6  # the bar does not disturb the fit

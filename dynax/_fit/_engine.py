@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Float, PyTree
 
+from .._progress import report
 from ._parameters import Parameters
 from ._solution import Solution
 
@@ -47,6 +48,11 @@ def _scale(p0, scale):
     return scale
 
 
+def _report_step(token, **info):
+    """optimistix's `verbose` hook: each entry is `(label, value)`."""
+    report(token, info["num_steps"][1], loss=info["loss_last_accepted_step"][1])
+
+
 def fit_least_squares(
     residuals: Callable[[PyTree, Any], Float[Array, " m"]],
     model: PyTree,
@@ -59,6 +65,7 @@ def fit_least_squares(
     jac: str = "fwd",
     nonfinite: float | None = 1e3,
     covariance: bool = True,
+    progress_token: Array | None = None,
 ) -> Solution:
     r"""Fit the free elements of `model` by minimising $\tfrac12 \lVert r(\text{model}) \rVert^2$.
 
@@ -78,12 +85,18 @@ def fit_least_squares(
     - `nonfinite`: value substituted for non-finite residuals (a diverging rollout), so the solver
       backs away from them instead of stopping on NaN; `None` keeps them.
     - `covariance`: compute the Gauss-Newton covariance at the solution (one more Jacobian).
+    - `progress_token`: a `dynax.ProgressBar`'s token (`dynax._progress.bar_token(bar)`); each
+      iteration then reports its step and loss to that bar through the solver's `verbose` hook
+      (`jax.debug.callback`), as diffrax's progress meter does. Solvers without a `verbose` field
+      report nothing.
 
     **Returns:** a `Solution`.
     """
     parameters = _parameters(model, parameters)
     p0 = parameters.vector(model)
     s = _scale(p0, scale)
+    if progress_token is not None and hasattr(solver, "verbose"):
+        solver = eqx.tree_at(lambda sv: sv.verbose, solver, jax.tree_util.Partial(_report_step, progress_token))
 
     def fn(z, args):
         r = residuals(parameters.with_vector(model, p0 + s * z), args)

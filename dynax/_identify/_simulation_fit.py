@@ -27,6 +27,7 @@ from jaxtyping import Array, Float, PyTree
 
 from .._data._trajectory import Trajectory
 from .._errors import DataError, UsageError
+from .._progress import bar_token, ProgressBar
 from .._fit import fit_least_squares, Parameters, Solution
 from .._model._system import AbstractSystem
 from .._simulate import FixedGrid, simulate
@@ -150,12 +151,13 @@ def _residuals(unknowns: _Unknowns, data: _Segments, *, simulation: FixedGrid, f
 
 
 @eqx.filter_jit
-def _solve(unknowns, parameters: Parameters, data: _Segments, scale, solver, max_steps: int, simulation, fit_initial_states: bool):
+def _solve(unknowns, parameters: Parameters, data: _Segments, scale, solver, max_steps: int, simulation, fit_initial_states: bool,
+           token=None):
     """The engine's Levenberg-Marquardt, and the Jacobian (scaled unknowns) at the solution; one
     compiled program per problem shape."""
     residuals = functools.partial(_residuals, simulation=simulation, fit_initial_states=fit_initial_states)
     solution = fit_least_squares(residuals, unknowns, parameters, data, solver=solver, scale=scale,
-                                 max_steps=max_steps, nonfinite=None, covariance=False)
+                                 max_steps=max_steps, nonfinite=None, covariance=False, progress_token=token)
 
     def scaled(z):
         return residuals(parameters.with_vector(unknowns, solution.value + scale * z), data)
@@ -178,6 +180,7 @@ def fit_simulation_error(
     max_steps: int = 100,
     simulation: FixedGrid = FixedGrid(),
     record_weights: Float[Array, " n_records"] | None = None,
+    progress: bool | None = None,
 ) -> SimulationFitResult:
     r"""Fit the elements of `system` selected by `filter_spec` by minimising the simulation error.
 
@@ -206,6 +209,8 @@ def fit_simulation_error(
     - `state_scale`: $\sigma$, shape `(n_states,)`.
     - `rtol`, `atol`, `max_steps`: Levenberg-Marquardt settings.
     - `simulation`: `FixedGrid` settings of the rollouts.
+    - `progress`: a bar per Levenberg-Marquardt iteration with the loss on stderr (`None`: when
+      stderr is a terminal, see `dynax.progress_mode`; `False` never).
     - `record_weights`: optional weight per trajectory multiplying its state residuals (default 1).
 
     **Returns:** a `SimulationFitResult` (with the engine's `Solution` as `.solution`).
@@ -252,7 +257,10 @@ def fit_simulation_error(
     p_scale = jnp.where(jnp.abs(p0) > 0, jnp.abs(p0), 1.0).astype(dtype)
     scale = jnp.concatenate([p_scale, jnp.tile(sigma, xs.shape[0])]) if fit_initial_states else p_scale
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-    solution, r, r0, jac = _solve(unknowns, parameters, data, scale, solver, max_steps, simulation, fit_initial_states)
+    with ProgressBar(max_steps, "output-error fit", progress=progress, reduce="last") as bar:
+        solution, r, r0, jac = _solve(unknowns, parameters, data, scale, solver, max_steps, simulation, fit_initial_states,
+                                      bar_token(bar))
+        jax.block_until_ready(r)
     n_params = chosen.size
     n_state_residuals = xs.size
     linearised: LeastSquaresFit = least_squares(jac, -r, names=parameters.names, allow_rank_deficient=True)
