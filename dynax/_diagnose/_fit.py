@@ -40,12 +40,14 @@ from .._simulate import FixedGrid
 # below measurement noise for these models.
 FORWARD_GRID = FixedGrid(solver=diffrax.Tsit5(scan_kind="lax"), substeps=1)
 
-# Levenberg-Marquardt's stopping rule. The scaled parameters are O(1) (see `Family.scale`) and the
-# cost is a sum of squared residuals in units of the data's spread: a step that moves no scaled
-# parameter by more than 1e-4 and changes the cost by less than 1e-6 of itself is converged far
-# below what the held-out test resolves. `MAX_STEPS` bounds a batch whose worst member creeps.
-SOLVER = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-4)
-MAX_STEPS = 48
+# Levenberg-Marquardt's stopping rule (optimistix's Cauchy test on an RMS norm): the scaled
+# parameters are O(1) (see `Family.scale`) and the residuals are in units of each state's spread, so
+# a step that moves the scaled parameters and the residuals by less than 1e-3 (RMS, plus 1e-3 of
+# their size) is converged far below the standard errors and what the held-out test resolves. On
+# the demo's records a batch converges in 6 to 10 steps (the former fixed loop took 16). Under `vmap`
+# the batch stops when its slowest member has converged; `MAX_STEPS` bounds a member that creeps.
+SOLVER = optx.LevenbergMarquardt(rtol=1e-3, atol=1e-3, norm=optx.rms_norm)
+MAX_STEPS = 32
 
 
 def nominal_parameters(system) -> Parameters:

@@ -27,8 +27,6 @@ import numpy as np
 
 from .._data._derivatives import savitzky_golay
 from .._model._extensions import Extended, InputDelay
-from .._model._helicopter import BODY, BODY_AXES, Helicopter, QUATERNION, quaternion_to_rotation
-from .._model._system import AbstractManipulator
 from .._sim_error import InputStates
 from .._simulate import FixedGrid, simulate
 from .._solvers import RK4
@@ -147,8 +145,8 @@ def acceleration_residuals(model, trajectory):
     # The measured acceleration is a local polynomial fit; smoothing the prediction with the same
     # filter compares like with like.
     predicted = savitzky_golay(ts, predicted, window=w, order=3)
-    if isinstance(nominal, Helicopter):
-        # A helicopter's rates answer its inputs within a sample (the held input makes the
+    if nominal.fast_input_response:
+        # The rates answer the inputs within a sample (a helicopter: the held input makes the
         # acceleration jump at every sample, and a stiff flight controller moves the input every
         # sample): compare velocity *increments* over each interval, integrated under the held
         # input, and differentiate the accumulated difference with the same filter.
@@ -163,33 +161,7 @@ def acceleration_residuals(model, trajectory):
 
 def probe_features(system, xs, us, predicted, dt) -> tuple[np.ndarray, list[str]]:
     """The generic feature library the probe regresses residuals on (columns standardised later)."""
-    names, cols = [], []
-    if isinstance(system, AbstractManipulator):
-        n = system.n_joints
-        for j in range(n):
-            q, v = xs[:, j], xs[:, n + j]
-            c = system.state_names[j]
-            vs = max(0.05 * float(np.std(v)), 1e-6)
-            cols += [np.tanh(v / vs), v, np.abs(v) * v, np.sin(q), np.cos(q), predicted[:, j]]
-            names += [f"sign(d{c})", f"d{c}", f"|d{c}|d{c}", f"sin({c})", f"cos({c})", f"model acceleration d{c}/dt"]
-    elif isinstance(system, Helicopter):
-        # Body velocities and rates with their signs and squares, and the world's axes seen in the
-        # body frame (gravity's direction, and north and east: what a world-fixed effect such as
-        # wind turns with), alone and times the body velocities.
-        rotations = np.asarray(jax.vmap(quaternion_to_rotation)(jnp.asarray(xs[:, QUATERNION])))
-        for i, c in zip(range(BODY.start, BODY.stop), BODY_AXES):
-            x = xs[:, i]
-            cols += [x, np.abs(x) * x, np.tanh(x / max(0.05 * float(np.std(x)), 1e-6)), predicted[:, i - BODY.start]]
-            names += [c, f"|{c}|{c}", f"sign({c})", f"model acceleration d{c}/dt"]
-        for a, world in enumerate(("north", "east", "down")):
-            for b, body in enumerate(("u", "v", "w")):
-                cols.append(rotations[:, a, b])
-                names.append(f"{world} on body {body}")
-    else:
-        for j, c in enumerate(system.state_names):
-            x = xs[:, j]
-            cols += [x, np.abs(x) * x, np.tanh(x / max(0.05 * float(np.std(x)), 1e-6))]
-            names += [c, f"|{c}|{c}", f"sign({c})"]
+    cols, names = system.residual_features(xs, predicted)  # what differs per system is a method on it
     lag = max(1, int(round(0.03 / dt)))
     for i, c in enumerate(system.input_names):
         u = us[:, i]

@@ -45,14 +45,14 @@ def residual_tests(model, record, *, max_lag: int = 25, confidence: float = 0.99
     """Whiteness and input cross-correlation tests of `model`'s one-step residuals on one held-out `record`.
 
     The residuals are read every `w` samples (`w` the filter window; see the module docs); `max_lag`
-    is lowered to a quarter of what is left. `None` if fewer than 20 residuals are left.
+    is lowered to a quarter of what is left. `None` if fewer than 20 residuals are left (or one is not finite).
     """
     residuals, _, _, keep = acceleration_residuals(model, record)
     stride = _sg_window(record.dt)
     r = np.asarray(residuals)[::stride]
     us = np.asarray(record.us)[keep][::stride]
     n = r.shape[0]
-    if n < 20:
+    if n < 20 or not np.all(np.isfinite(r)):
         return None
     lag = int(min(max_lag, n // 4))
     white = whiteness_test(r, max_lag=lag, confidence=confidence)
@@ -62,7 +62,7 @@ def residual_tests(model, record, *, max_lag: int = 25, confidence: float = 0.99
         run=record.source or "held-out run",
         channels=channels,
         inputs=tuple(record.input_names),
-        lag_s=float(stride * record.dt),
+        lag_s=round(float(stride * record.dt), 9),
         max_lag=lag,
         confidence=confidence,
         whiteness_p=tuple(float(p) for p in white.p_value),
