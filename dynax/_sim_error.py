@@ -11,6 +11,7 @@ from ._distributed import _global_array, _leading_sharding, _replicate
 from ._errors import DataError
 from ._model._system import AbstractSystem
 from ._simulate import FixedGrid, simulate
+from ._solvers import RK4
 
 
 class SimulationError(eqx.Module):
@@ -45,32 +46,95 @@ class SimulationError(eqx.Module):
         return {"horizons_s": [float(h) for h in self.horizons_s], "rmse": [float(r) for r in self.rmse]}
 
 
-def _complete_state(system, x_measured, u0):
+class InputStates(AbstractSystem):
+    r"""The internal states of a model's input terms (a lag's output, a delay's filter) as a system of their own.
+
+    $\dot z = g(z, u)$ from `Extended.applied_input`: driven by the recorded input alone, so they
+    can be integrated along an input history with `simulate` before the measured states are known.
+    """
+
+    model: AbstractSystem
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return tuple(self.model.state_names[self.model.system.n_states :])
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return tuple(self.model.input_names)
+
+    def vector_field(self, t, z, u):
+        return self.model.applied_input(u, z)[1]
+
+
+# The input-term states change slowly next to the sample rate (lags and delays of tens of
+# milliseconds at 100 Hz and above); two RK4 steps per sample interval are far below noise. The
+# "lax" scan keeps the whole rollout forward-mode differentiable.
+HISTORY_GRID = FixedGrid(solver=RK4(scan_kind="lax"), substeps=2)
+
+
+def _complete_state(system, x_measured, u0, ts_before=None, us_before=None, history_method=HISTORY_GRID):
     """The model's full initial state from a measured one.
 
     Models with internal states (an input lag or delay, see `Extended`) complete it with
-    `initial_state(x, u0)`: internal states at rest under the input in force. Otherwise internal
+    `initial_state(x, u0)`: internal states at rest under the input in force. With an input history
+    (`ts_before`, `us_before`: the samples up to and including the start), the internal states
+    start at rest under its first input and are integrated along it (`simulate` on `InputStates`),
+    so a window starts with the internal state the inputs before it imply. Otherwise internal
     states beyond the measured ones start at zero.
     """
     initial_state = getattr(system, "initial_state", None)
-    if initial_state is not None:
+    if initial_state is None:
+        return jnp.zeros(system.n_states, x_measured.dtype).at[: x_measured.shape[0]].set(x_measured)
+    if ts_before is None or system.n_states == x_measured.shape[0]:
         return initial_state(x_measured, u0)
-    return jnp.zeros(system.n_states, x_measured.dtype).at[: x_measured.shape[0]].set(x_measured)
+    n = x_measured.shape[0]
+    z0 = initial_state(x_measured, us_before[0])[n:]
+    z = simulate(InputStates(system), z0, ts_before, us_before, method=history_method, throw=False).xs[-1]
+    return jnp.concatenate([x_measured, z.astype(x_measured.dtype)])
+
+
+def window_rollout(system, ts, xs, us, ts_before=None, us_before=None, *, method=FixedGrid(),
+                   history_method=HISTORY_GRID):
+    """One open-loop rollout of `system` from the measured state `xs[0]` under the inputs `us`.
+
+    **Arguments:** `ts (step,)`, `xs (step, n_measured)`, `us (step, m)` one window of a record;
+    `ts_before`, `us_before` optionally the input history before it (ending at the window's start),
+    which drives the internal states of input terms (see `_complete_state`); `method` the
+    integration strategy of `simulate`.
+
+    **Returns:** `(errors, diverged)`: `system.state_error(simulated, measured)` for the measured
+    states, shape `(step, n_measured)` (NaN past a divergence), and whether the rollout diverged.
+    """
+    n_measured = xs.shape[-1]
+    x0 = _complete_state(system, xs[0], us[0], ts_before, us_before, history_method)
+    sim = simulate(system, x0, ts, us, method=method, throw=False)
+    return system.state_error(sim.xs[:, :n_measured], xs), sim.diverged
+
+
+def window_rollouts(system, ts, xs, us, ts_before=None, us_before=None, *, method=FixedGrid(),
+                    history_method=HISTORY_GRID):
+    """`window_rollout` on stacked windows (`ts (window, step)`, `xs (window, step, n)`, ...), one `vmap`.
+
+    The one windowed rollout of dynax: `simulation_error` slices its windows from a record and
+    calls it, `diagnose` fits and judges candidate models through it.
+
+    **Returns:** `(errors (window, step, n_measured), diverged (window,))`.
+    """
+    if ts_before is None:
+        one = lambda t, x, u: window_rollout(system, t, x, u, method=method)  # noqa: E731
+        return jax.vmap(one)(ts, xs, us)
+    one = lambda t, x, u, tb, ub: window_rollout(system, t, x, u, tb, ub, method=method,  # noqa: E731
+                                                 history_method=history_method)
+    return jax.vmap(one)(ts, xs, us, ts_before, us_before)
 
 
 @eqx.filter_jit
 def _window_errors(system, ts, xs, us, starts, n_steps, method):
-    n_measured = xs.shape[1]
+    def cut(a):
+        return jax.vmap(lambda k: jax.lax.dynamic_slice_in_dim(a, k, n_steps + 1))(starts)
 
-    def one(k):
-        t = jax.lax.dynamic_slice_in_dim(ts, k, n_steps + 1)
-        u = jax.lax.dynamic_slice_in_dim(us, k, n_steps + 1)
-        x = jax.lax.dynamic_slice_in_dim(xs, k, n_steps + 1)
-        x0 = _complete_state(system, x[0], u[0])
-        sim = simulate(system, x0, t, u, method=method, throw=False)
-        return sim.xs[:, :n_measured] - x, sim.diverged
-
-    return jax.vmap(one)(starts)
+    return window_rollouts(system, cut(ts), cut(xs), cut(us), method=method)
 
 
 def simulation_error(

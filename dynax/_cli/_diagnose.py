@@ -1,7 +1,7 @@
 """`dynax diagnose SYSTEM TRAIN... [--validation VAL...] --out DIR`: the discrepancy workflow on measured runs."""
 
 import argparse
-import sys
+import contextlib
 import time
 
 from .._errors import UsageError
@@ -114,18 +114,29 @@ def run(args: argparse.Namespace) -> int:
         if names is None and args.system == "linear_axis":
             names = ("mass", "viscous")
         mode = Refit(parameters=names)
-    start = time.perf_counter()
-    report = diagnose(
-        system, train, validation, mode=mode, reference_horizon_s=args.reference_horizon,
-        max_terms=args.max_terms, system_name=args.system, discovery=not args.no_discovery,
-        progress=lambda line: print(f"[{time.perf_counter() - start:5.1f} s] {line}", file=sys.stderr),
-    )
+    with stage_log() as say:
+        report = diagnose(
+            system, train, validation, mode=mode, reference_horizon_s=args.reference_horizon,
+            max_terms=args.max_terms, system_name=args.system, discovery=not args.no_discovery, progress=say,
+        )
     held_out = validation if validation is not None else [_held_out(t) for t in train]
     with staged_directory(args.out) as stage:
         write_report(report, stage, held_out, write_json=write_json)
     print(summary(report))
     print(f"wrote {args.out}/report.json, report.md and figures")
     return 0
+
+
+@contextlib.contextmanager
+def stage_log():
+    """`say(line)` for a diagnosis on the command line: a progress bar on stderr with one step per stage and
+    per candidate batch, each stage's line (with the elapsed time) written above it; without a terminal the
+    lines alone, as a log; nothing under `--quiet` (see `dynax._progress`)."""
+    from .._progress import ProgressBar
+
+    start = time.perf_counter()
+    with ProgressBar(None, "diagnose", unit="stage") as bar:
+        yield lambda line: bar.say(f"[{time.perf_counter() - start:5.1f} s] {line}")
 
 
 def _held_out(train, fraction: float = 0.3):

@@ -6,4 +6,11 @@ from ._discovery import discover as discover, Discovery as Discovery, propose as
 from ._library import feature_library as feature_library, search_period as search_period
 from ._sparse import sparse_search as sparse_search, SparseFit as SparseFit, stlsq as stlsq
 from ._report import write_report as write_report
+from ._result import (
+    DataSummary as DataSummary,
+    ModelSummary as ModelSummary,
+    ResidualTests as ResidualTests,
+    SimErrorCurve as SimErrorCurve,
+    Validation as Validation,
+)
 from ._residuals import Structure as Structure, structure_test as structure_test

@@ -19,8 +19,7 @@ from .._model._extensions import (
     ViscousFriction,
 )
 from .._model._extensions._vehicle_terms import AbstractVehicleTerm, BodyBias, BodyQuadraticDrag, Wind
-from .._model._helicopter import BODY, Helicopter
-from .._model._system import AbstractManipulator
+from .._model._helicopter import BODY
 from ._fit import nominal_values
 
 # Groups of causes that look alike in data; the report says how well each finding is told apart.
@@ -59,12 +58,12 @@ def default_candidates(system, trajectories=None) -> tuple[AbstractTerm, ...]:
     `input_lag`, `input_gain`, `input_offset`.
     """
     terms: list[AbstractTerm] = []
-    if isinstance(system, AbstractManipulator):
-        for j in range(system.n_joints):
+    if system.joints:
+        for j in system.joints:
             coulomb = (CoulombFriction(j) if trajectories is None
                        else CoulombFriction(j, velocity_scale=coulomb_velocity_scale(system, j, trajectories)))
             terms += [coulomb, ViscousFriction(j), QuadraticDrag(j), RotorInertia(j)]
-    if isinstance(system, Helicopter):
+    if system.body_axes:
         terms += [BodyQuadraticDrag(i) for i in range(3)]
         terms += [Wind(i) for i in range(3)]
         terms += [BodyBias(i) for i in range(6)]

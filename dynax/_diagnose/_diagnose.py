@@ -1,26 +1,45 @@
-"""`diagnose`: show what a model's simulation gets wrong, name the cause, extend the model, measure the gain."""
+"""`diagnose`: show what a model's simulation gets wrong, name the cause, extend the model, measure the gain.
 
+`diagnose` is `dynax._fit.fit_least_squares` (the candidate refits, `vmap`ped over configurations,
+`_fit.py`), `dynax._sim_error.window_rollouts` (every held-out rollout) and the statistics
+(`_statistics.py`), in named steps: prepare the problem, fit the nominal model, show what is wrong,
+then per round screen, refit, select; finally extend, judge and (where structure is left) discover.
+"""
+
+import contextlib
+import dataclasses
+import time
 from collections.abc import Callable, Sequence
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._precision import warn_if_float32
 from .._data._derivatives import resample
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
 from .._model._extensions import AbstractInputTerm, AbstractTerm, Extended
-from .._model._helicopter import Helicopter
-from .._model._system import AbstractManipulator, AbstractSystem
+from .._model._system import AbstractSystem
+from .._precision import warn_if_float32
+from .._progress import ProgressBar
 from ._candidates import candidate_scales, default_candidates, look_alikes, structurally_absorbed
-from ._fit import Family, fit_configurations, make_windows, nominal_parameter_names, nominal_values, validate_configurations
-from ._horizon import DEFAULT_FRACTION, Horizon, predictability_horizon, relative_position_error
 from ._discovery import discover
-from ._fit import window_errors
+from ._fit import (
+    Family,
+    fit_configurations,
+    make_windows,
+    nominal_parameter_names,
+    nominal_values,
+    validate_configurations,
+    window_errors,
+    Windows,
+)
+from ._horizon import DEFAULT_FRACTION, Horizon, predictability_horizon, relative_position_error
 from ._residuals import acceleration_residuals, Structure, structure_test
+from ._result import DataSummary, ModelSummary, Report as Report, SimErrorCurve
 from ._screening import screen
 from ._statistics import benjamini_hochberg, detectable_gain, helps_on_most_runs, log_ratio_differences, paired_block_test
+from ._validation import validation_summary
 
 
 MIN_BATCHES = 10  # the data-driven reference horizon leaves the paired test at least this many batches
@@ -49,73 +68,119 @@ class Known(eqx.Module):
     """
 
 
-class Report(eqx.Module):
-    """The result of `diagnose`. `to_json()` is the contract's `report.json`; `to_markdown()` is for a person.
+@dataclasses.dataclass
+class _Options:
+    """The knobs of one diagnosis (see `diagnose`'s arguments)."""
 
-    **Fields:** `system` (contract name), `data` (record names and sizes), `mode`, `nominal`
-    (parameters and held-out simulation error), `verdict` (`explained`, `none`, `unexplained`),
-    `findings` (most important first), `extended` (terms, parameters, simulation error), `gain`,
-    `reference_horizon_s`, `structure` (the residual probe on the nominal and the extended model),
-    `not_identifiable`, `candidates` (every candidate's held-out gain in the first round),
-    `notes`, `horizon` (the reference horizon and how it was chosen), `runs` (held-out error per
-    run), `test` (the significance test, and with verdict `none` the gain it could have detected),
-    and the fitted models `nominal_model` and `extended_model`.
-    """
+    horizons_s: Sequence[float]
+    reference_horizon_s: float | None
+    horizon_fraction: float
+    fit_window_s: float | None
+    max_terms: int
+    alpha: float
+    min_gain: float
+    holdout_fraction: float
+    shortlist: int
+    discovery: bool
 
-    system: str
-    data: dict
-    mode: str
-    nominal: dict
-    verdict: str
-    findings: list
-    extended: dict
-    gain: float
-    reference_horizon_s: float
-    structure: dict
-    not_identifiable: list
-    candidates: list
+
+@dataclasses.dataclass
+class _Problem:
+    """Everything fixed for one diagnosis: records, candidates, the candidate family, windows."""
+
+    system: AbstractSystem
+    train: list
+    validation: list
+    dt: float
     notes: list
-    horizon: dict
-    runs: list
-    test: dict
-    nominal_model: AbstractSystem
-    extended_model: AbstractSystem
-    discovery: dict = eqx.field(default_factory=dict)
+    candidates: tuple
+    refit_names: tuple
+    family: Family
+    scales: np.ndarray
+    inits: np.ndarray
+    searchable: list
+    not_identifiable: list
+    fit_window_s: float
+    train_windows: Windows
+    val_windows: Windows
+    window_runs: np.ndarray
+    val_stride: int
+    horizons: np.ndarray
+    candidates_s: np.ndarray
+    options: _Options
 
-    def to_json(self) -> dict:
-        """The contract's `report.json` (section 3), with extra keys after the contract's."""
-        return {
-            "system": self.system,
-            "data": self.data,
-            "nominal": self.nominal,
-            "verdict": self.verdict,
-            "findings": self.findings,
-            "extended": self.extended,
-            "gain": self.gain,
-            "reference_horizon_s": self.reference_horizon_s,
-            "mode": self.mode,
-            "structure": self.structure,
-            "not_identifiable": self.not_identifiable,
-            "candidates": self.candidates,
-            "notes": self.notes,
-            "horizon": self.horizon,
-            "runs": self.runs,
-            "test": self.test,
-            **({"discovery": self.discovery} if self.discovery else {}),
-        }
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.family.names
 
-    def to_markdown(self) -> str:
-        from ._report import report_markdown
+    @property
+    def neutral(self) -> np.ndarray:
+        return np.asarray(self.family.neutral)
 
-        return report_markdown(self)
+    @property
+    def state_scale(self) -> np.ndarray:
+        return np.asarray(self.family.state_scale)
+
+    @property
+    def position_index(self) -> list[int]:
+        return list(self.system.position_indices)
+
+    @property
+    def n_params(self) -> int:
+        return len(self.names) + self.options.max_terms + 1
+
+    def model_of(self, slots, p):
+        """The extended model (every candidate; neutral but for `slots`) at parameters `p`."""
+        return self.family.model_for(jnp.asarray(slots), jnp.asarray(-1), jnp.asarray(p, self.family.neutral.dtype))
 
 
-def _as_records(data, name) -> list[Trajectory]:
-    if isinstance(data, Trajectory):
-        return [data]
-    if isinstance(data, Sequence) and data and all(isinstance(t, Trajectory) for t in data):
-        return list(data)
-    raise UsageError(f"diagnose: `{name}` must be a Trajectory or a non-empty sequence of them, got {type(data).__name__}")
+@dataclasses.dataclass
+class _Batch:
+    """Fits of a batch of configurations: parameters, training cost, standard errors, held-out window errors, steps."""
+
+    p: np.ndarray
+    cost: np.ndarray
+    std: np.ndarray
+    errors: np.ndarray
+    steps: np.ndarray
+
+
+@dataclasses.dataclass
+class _Yardstick:
+    """Where held-out errors are judged: the reference horizon and the indices derived from it."""
+
+    horizon: Horizon
+    horizons: np.ndarray
+    steps: np.ndarray
+    n_ref: int
+    overlap: int
+    ref_index: int
+
+
+@dataclasses.dataclass
+class _Current:
+    """The model selection has reached: selected candidates, parameters, held-out scores and errors, structure."""
+
+    slots: np.ndarray
+    p: np.ndarray
+    std: np.ndarray
+    score: np.ndarray
+    errors: np.ndarray
+    rmse: np.ndarray
+    structure: Structure
+    selected: list = dataclasses.field(default_factory=list)
+    findings: list = dataclasses.field(default_factory=list)
+
+
+@dataclasses.dataclass
+class _Nominal:
+    """The fitted nominal model and what it gets wrong on held-out data."""
+
+    model: AbstractSystem
+    errors: np.ndarray
+    rmse: np.ndarray
+    structure: Structure
+    cost: float
 
 
 def _merge_repeated_causes(findings: list[dict]) -> list[dict]:
@@ -162,6 +227,417 @@ def _paired_test(score_ref, score_new, runs, overlap):
     return paired_block_test(log_ratio_differences(score_ref, score_new), runs, overlap)
 
 
+def _as_records(data, name) -> list[Trajectory]:
+    if isinstance(data, Trajectory):
+        return [data]
+    if isinstance(data, Sequence) and data and all(isinstance(t, Trajectory) for t in data):
+        return list(data)
+    raise UsageError(f"diagnose: `{name}` must be a Trajectory or a non-empty sequence of them, got {type(data).__name__}")
+
+
+@contextlib.contextmanager
+def stage_reporter(progress: Callable[[str], None] | bool | None):
+    """The `say(line)` a diagnosis reports its stages through.
+
+    A callable is used as given. Otherwise a `dynax.ProgressBar` with one step per stage and per
+    candidate batch, on stderr: `True` / `False` force it on / off; `None` follows
+    `dynax.progress_mode` (a bar only when stderr is a terminal; the CLI's `--quiet` silences it).
+    Without a bar the library prints nothing (the CLI prints the lines as a log instead).
+    """
+    if callable(progress):
+        yield progress
+        return
+    with ProgressBar(None, "diagnose", progress=progress, unit="stage") as bar:
+        yield bar.say if bar.enabled else (lambda _: None)
+
+
+def _check_arguments(system, mode, max_terms) -> None:
+    if not isinstance(system, AbstractSystem) or isinstance(system, Extended):
+        raise UsageError(f"diagnose: `system` must be a nominal dynax system, got {type(system).__name__}")
+    if not isinstance(mode, (Refit, Known)):
+        raise UsageError(f"diagnose: `mode` must be Refit() or Known(), got {type(mode).__name__}")
+    if max_terms < 1:
+        raise UsageError(f"diagnose: `max_terms` must be at least 1, got {max_terms}")
+
+
+def _refit_names(system, mode) -> tuple[str, ...]:
+    names = nominal_parameter_names(system)
+    if isinstance(mode, Known):
+        return ()
+    refit = names if mode.parameters is None else tuple(mode.parameters)
+    unknown = set(refit) - set(names)
+    if unknown:
+        raise UsageError(f"diagnose: Refit(parameters=...) names {sorted(unknown)}, not parameters of {type(system).__name__} {names}")
+    return refit
+
+
+def _candidate_family(system, candidates, refit_names, train_records):
+    """The `Family` (nominal system with every candidate at neutral), the candidates' scales and start values."""
+    names = nominal_parameter_names(system)
+    dtype = jnp.result_type(float)
+    scales, inits = candidate_scales(system, candidates, train_records)
+    p0 = np.asarray(nominal_values(system, names), float)
+    xs_train = np.concatenate([np.asarray(r.xs) for r in train_records])
+    family = Family(
+        model=Extended(system, candidates),
+        names=names,
+        refit=jnp.asarray([1.0 if n in refit_names else 0.0 for n in names], dtype),
+        nominal_scale=jnp.asarray(np.maximum(np.abs(p0), 1e-2), dtype),
+        candidate_scale=jnp.asarray(scales, dtype),
+        candidate_init=jnp.asarray(inits, dtype),
+        neutral=jnp.asarray(np.asarray([t.neutral for t in candidates], float), dtype),
+        state_scale=jnp.asarray(np.maximum(xs_train.std(axis=0), 1e-9), dtype),
+    )
+    return family, scales, inits
+
+
+def _identifiable(system, candidates, family, refit_names):
+    """`(searchable indices, not_identifiable entries)`: candidates a refit of the nominal parameters reproduces are set aside."""
+    absorbed = structurally_absorbed(family, family.refit)
+    not_identifiable, searchable = [], []
+    for k, term in enumerate(candidates):
+        if absorbed[k]:
+            not_identifiable.append(
+                {"cause": term.cause, "where": term.where(system),
+                 "reason": f"a refit of the nominal parameters ({', '.join(refit_names)}) reproduces it exactly; "
+                           "diagnose in Known() mode with trusted parameters to test it"})
+        else:
+            searchable.append(k)
+    if not searchable:
+        raise UsageError("diagnose: no candidate is identifiable in this mode")
+    return searchable, not_identifiable
+
+
+def _prepare(system, train, validation, candidates, mode, options: _Options) -> _Problem:
+    """Step 0: records on one grid, the candidates and their identifiability, the training and held-out windows."""
+    notes: list[str] = []
+    train_records, validation_records, dt = _prepare_records(system, train, validation, options.holdout_fraction, notes)
+    candidates = tuple(default_candidates(system, train_records) if candidates is None else candidates)
+    if not candidates:
+        raise UsageError("diagnose: `candidates` is empty")
+    Extended(system, candidates)  # checks every candidate fits this system
+    refit_names = _refit_names(system, mode)
+    family, scales, inits = _candidate_family(system, candidates, refit_names, train_records)
+    searchable, not_identifiable = _identifiable(system, candidates, family, refit_names)
+    fit_window_s = _fit_window(system, train_records, options.fit_window_s, options.horizon_fraction, dt, notes)
+    n_fit = max(2, int(round(fit_window_s / dt)))
+    horizons, candidates_s = _horizon_grid(options.horizons_s, options.reference_horizon_s, train_records,
+                                           validation_records, notes)
+    val_stride = max(1, int(round(0.05 / dt)))
+    val_windows = make_windows(validation_records, int(round(horizons.max() / dt)), val_stride)
+    return _Problem(
+        system=system, train=train_records, validation=validation_records, dt=dt, notes=notes, candidates=candidates,
+        refit_names=refit_names, family=family, scales=scales, inits=inits, searchable=searchable,
+        not_identifiable=not_identifiable, fit_window_s=fit_window_s,
+        train_windows=make_windows(train_records, n_fit, n_fit), val_windows=val_windows,
+        window_runs=np.asarray([r for r, _ in val_windows.starts]), val_stride=val_stride, horizons=horizons,
+        candidates_s=candidates_s, options=options,
+    )
+
+
+def _fit_batch(problem: _Problem, slots, new, p_init, say) -> _Batch:
+    """Refit a batch of configurations on the training windows (one vmapped `fit_least_squares`) and
+    roll every fitted model out on the held-out windows."""
+    dtype = problem.family.neutral.dtype
+    slots, new = jnp.asarray(slots), jnp.asarray(new)
+    free = jnp.ones(problem.n_params, dtype)
+    start = time.perf_counter()
+    p, cost, std, steps = fit_configurations(problem.family, problem.train_windows, slots, new, jnp.asarray(p_init, dtype), free)
+    errors = validate_configurations(problem.family, problem.val_windows, slots, new, p)
+    batch = _Batch(np.asarray(p), np.asarray(cost), np.asarray(std), np.asarray(errors), np.asarray(steps))
+    say(f"  batch of {len(batch.p)} fits done in {time.perf_counter() - start:.1f} s "
+        f"(Levenberg-Marquardt, {int(batch.steps.max())} steps for the slowest)")
+    return batch
+
+
+def _screen(problem: _Problem, current_slots, current_p, remaining, round_, say):
+    """Screen: every remaining candidate's linearised held-out gain on one-step residuals; the shortlist."""
+    say(f"round {round_ + 1}: screening {len(remaining)} candidates on one-step residuals ...")
+    dtype = problem.family.neutral.dtype
+    n_nom = len(problem.names)
+    coefficients = problem.family.coefficients(jnp.asarray(current_slots), jnp.asarray(-1), jnp.asarray(current_p, dtype))
+    gains, deltas = screen(problem.family, current_p[:n_nom], np.asarray(coefficients), problem.family.refit,
+                           problem.train, problem.validation, remaining, acceleration_residuals)
+    short = _shortlist(problem.system, problem.candidates, remaining, gains, problem.options.shortlist)
+    return gains, deltas, short
+
+
+def _refit(problem: _Problem, current_slots, current_p, short, remaining, deltas, round_, say) -> tuple[np.ndarray, _Batch]:
+    """Refit: the current model (member 0) and each shortlisted candidate added to it, jointly with the nominal parameters."""
+    if short:
+        say(f"round {round_ + 1}: simulation-error refit of "
+            + ("the nominal model with " if round_ == 0 else "the current model with ")
+            + ", ".join(problem.candidates[k].label(problem.system) for k in short) + " (one batch) ...")
+    shortlist = problem.options.shortlist
+    new = np.asarray([-1] + short + [-1] * (shortlist - len(short)))
+    p_init = np.tile(current_p, (shortlist + 1, 1))
+    for i, k in enumerate(new):
+        if k >= 0:
+            start = problem.inits[k] - problem.neutral[k]
+            p_init[i, -1] = _start_value(problem.candidates[k], deltas[remaining.index(k)], start, problem.scales[k])
+    return new, _fit_batch(problem, np.tile(current_slots, (shortlist + 1, 1)), new, p_init, say)
+
+
+def _fit_nominal(problem: _Problem, batch: _Batch, say) -> tuple[AbstractSystem, _Yardstick]:
+    """Fit the nominal model (member 0 of the first batch) and choose the reference horizon from its training error."""
+    model = problem.model_of(-np.ones(problem.options.max_terms, int), batch.p[0]).system
+    o = problem.options
+    horizon = _reference_horizon(model, problem.train, problem.candidates_s, o.reference_horizon_s, o.horizon_fraction,
+                                 problem.val_stride, problem.position_index, problem.dt)
+    horizons = problem.horizons
+    if horizon.seconds not in horizons:
+        horizons = np.sort(np.append(horizons, horizon.seconds))
+    n_ref = int(np.round(horizon.seconds / problem.dt))
+    yard = _Yardstick(horizon=horizon, horizons=horizons, steps=np.maximum(np.round(horizons / problem.dt).astype(int), 1),
+                      n_ref=n_ref, overlap=max(1, int(np.ceil(n_ref / problem.val_stride))),
+                      ref_index=int(np.flatnonzero(np.isclose(horizons, horizon.seconds))[0]))
+    return model, yard
+
+
+def _show_what_is_wrong(problem: _Problem, model, batch: _Batch, yard: _Yardstick, say) -> _Nominal:
+    """Show what is wrong: the nominal model's held-out simulation error and the structure left in its residuals."""
+    rmse = _rmse_curve(batch.errors[0], yard.steps, problem.position_index)
+    say(f"reference horizon {yard.horizon.seconds:g} s ({yard.horizon.rule}); nominal model: held-out position RMSE "
+        f"{rmse[yard.ref_index]:.4g} there; probing its one-step residuals for structure ...")
+    structure = structure_test(model, problem.train, problem.validation)
+    return _Nominal(model=model, errors=batch.errors[0], rmse=rmse, structure=structure, cost=float(batch.cost[0]))
+
+
+def _look_alike_tests(problem, yard, term, best, results, scores):
+    alternatives = []
+    for k in look_alikes(problem.system, term, problem.candidates):
+        if k in results:
+            test = _paired_test(scores[results[k]["i"]], scores[results[best]["i"]], problem.window_runs, yard.overlap)
+            alternatives.append({"cause": problem.candidates[k].cause, "gain": float(results[k]["gain_windows"]),
+                                 "p_value": test.p_value})
+    return alternatives
+
+
+def _select(problem: _Problem, yard: _Yardstick, current: _Current, results, scores, round_, say) -> dict | None:
+    """Select: the admissible candidate with the largest held-out gain, as a finding; `None` if none passed."""
+    admissible = [k for k in results if results[k]["significant"]]
+    if not admissible:
+        say(f"round {round_ + 1}: no candidate improves the held-out simulation significantly")
+        return None
+    best = max(admissible, key=lambda k: results[k]["gain_windows"])
+    r, term, system = results[best], problem.candidates[best], problem.system
+    ref = yard.ref_index
+    gain = float(1 - r["rmse"][ref] / current.rmse[ref]) if np.isfinite(current.rmse[ref]) else 1.0
+    alternatives = _look_alike_tests(problem, yard, term, best, results, scores)
+    confidence = "high" if all(a["p_value"] < problem.options.alpha for a in alternatives) else "low"
+    coefficient = problem.neutral[best] + r["delta"]
+    say(f"round {round_ + 1}: found {term.label(system)}, {term.parameter_name(system)} = {coefficient:.4g} "
+        f"(held-out gain {gain:.0%}, p = {r['p']:.2g}, helps on {r['runs_helped']}/{r['n_runs']} held-out runs; "
+        f"told apart from look-alikes: {confidence})")
+    return {"index": best, "cause": term.cause, "where": term.where(system), "coefficient": float(coefficient),
+            "std_error": float(r["std"]), "gain": gain, "parameter": term.parameter_name(system), "p_value": r["p"],
+            "look_alikes": alternatives, "confidence": confidence, "runs_helped": f"{r['runs_helped']}/{r['n_runs']}"}
+
+
+def _accept(problem: _Problem, current: _Current, finding: dict, results, batch: _Batch, scores, say) -> _Current:
+    """Add the selected candidate to the current model (its coefficient moves into the next free slot)."""
+    best = finding.pop("index")
+    r = results[best]
+    selected = current.selected + [best]
+    slot = len(problem.names) + len(selected) - 1
+    slots = current.slots.copy()
+    slots[len(selected) - 1] = best
+    p, std = batch.p[r["i"]].copy(), batch.std[r["i"]].copy()
+    p[slot], p[-1] = p[-1], 0.0
+    std[slot] = std[-1]
+    say("probing the extended model's residuals for structure ...")
+    structure = structure_test(problem.model_of(slots, p), problem.train, problem.validation)
+    # The probe never vetoes: selection goes on while a candidate's own held-out test passes.
+    return _Current(slots=slots, p=p, std=std, score=scores[r["i"]], errors=batch.errors[r["i"]], rmse=r["rmse"],
+                    structure=structure, selected=selected, findings=current.findings + [finding])
+
+
+def _forward_selection(problem: _Problem, say):
+    """Fit the nominal model, show what is wrong, then per round screen, refit and select.
+
+    **Returns:** `(nominal, yardstick, current, candidate_table, last_round_results)`.
+    """
+    o = problem.options
+    slots = -np.ones(o.max_terms, int)
+    p0 = np.concatenate([np.asarray(nominal_values(problem.system, problem.names), float), np.zeros(o.max_terms + 1)])
+    nominal = yard = current = None
+    table, last = [], {}
+    for round_ in range(o.max_terms):
+        remaining = [k for k in problem.searchable if current is None or k not in current.selected]
+        if not remaining and round_ > 0:
+            break
+        cur_slots, cur_p = (slots, p0) if current is None else (current.slots, current.p)
+        gains, deltas, short = _screen(problem, cur_slots, cur_p, remaining, round_, say) if remaining else ([], [], [])
+        _, batch = _refit(problem, cur_slots, cur_p, short, remaining, deltas, round_, say)
+        if round_ == 0:
+            model, yard = _fit_nominal(problem, batch, say)
+            nominal = _show_what_is_wrong(problem, model, batch, yard, say)
+            scores = _window_scores(batch.errors, yard.n_ref, problem.state_scale)
+            current = _Current(slots=slots, p=batch.p[0].copy(), std=batch.std[0].copy(), score=scores[0],
+                               errors=batch.errors[0], rmse=nominal.rmse, structure=nominal.structure)
+        else:
+            scores = _window_scores(batch.errors, yard.n_ref, problem.state_scale)
+        if not short:
+            break
+        results = _judge_round(problem.candidates, short, remaining, batch.p, batch.std, batch.errors, scores,
+                               current.score, problem.window_runs, yard.overlap, o.alpha, o.min_gain, yard.steps,
+                               problem.position_index)
+        last = results
+        if round_ == 0:
+            table = _candidate_table(problem.system, problem.candidates, remaining, gains, results, problem.neutral, batch.cost)
+        finding = _select(problem, yard, current, results, scores, round_, say)
+        if finding is None:
+            break
+        current = _accept(problem, current, finding, results, batch, scores, say)
+    return nominal, yard, current, table, last
+
+
+def _extend(problem: _Problem, current: _Current) -> tuple[Extended, list[dict]]:
+    """Extend: the nominal model with the selected terms, every coefficient from the final joint fit
+    (earlier rounds' values move when later terms join); repeated causes merged into one finding."""
+    n_nom = len(problem.names)
+    findings = [dict(f) for f in current.findings]
+    for m, (finding, k) in enumerate(zip(findings, current.selected)):
+        finding["coefficient"] = float(problem.neutral[k] + current.p[n_nom + m])
+        finding["std_error"] = float(current.std[n_nom + m])
+    model = problem.model_of(current.slots, current.p)
+    return Extended(model.system, tuple(model.terms[k] for k in current.selected)), _merge_repeated_causes(findings)
+
+
+@dataclasses.dataclass
+class _Judgement:
+    """The verdict and what it rests on: the final model, its findings, held-out errors and structure."""
+
+    verdict: str
+    model: AbstractSystem
+    findings: list
+    errors: np.ndarray
+    rmse: np.ndarray
+    structure: Structure
+    gain: float
+    discovery: dict
+
+
+def _gain(rmse, nominal_rmse, ref) -> float:
+    return float(1 - rmse[ref] / nominal_rmse[ref]) if np.isfinite(nominal_rmse[ref]) else 0.0
+
+
+def _judge(problem: _Problem, nominal: _Nominal, yard: _Yardstick, current: _Current, say) -> _Judgement:
+    """Judge: `explained`, `none` or `unexplained` from the findings and the structure left; then, where
+    it is not `explained` and discovery is on, search beyond the vocabulary with the same held-out test."""
+    model, findings = _extend(problem, current)
+    if not current.selected:
+        verdict = "unexplained" if nominal.structure.significant else "none"
+    else:
+        verdict = "unexplained" if current.structure.significant else "explained"
+    gain = _gain(current.rmse, nominal.rmse, yard.ref_index) if current.selected else 0.0
+    judgement = _Judgement(verdict, model, findings, current.errors, current.rmse, current.structure, gain, {})
+    # Beyond the vocabulary: search, refit, the same held-out test. Also after a `none`: the generic
+    # probe cannot see every structure (a force periodic in position), the search's own guards can.
+    if problem.options.discovery and verdict != "explained":
+        judgement = _discover(problem, nominal, yard, current, judgement, say)
+    return judgement
+
+
+def _discover(problem: _Problem, nominal: _Nominal, yard: _Yardstick, current: _Current, judgement: _Judgement, say):
+    o = problem.options
+    held_out_errors = eqx.filter_jit(window_errors)
+    last_errors = {}
+
+    def held_out(model):
+        errors = np.asarray(held_out_errors(model, problem.val_windows))
+        last_errors[id(model)] = errors
+        curve = _rmse_curve(errors, yard.steps, problem.position_index)
+        return _window_scores(errors[None], yard.n_ref, problem.state_scale)[0], curve, curve[yard.ref_index]
+
+    system = problem.system
+    found = discover(
+        judgement.model if current.selected else nominal.model, problem.train, problem.validation, held_out=held_out,
+        significance=lambda ref, new: _paired_test(ref, new, problem.window_runs, yard.overlap).p_value,
+        refit=problem.refit_names, vocabulary=[problem.candidates[k].label(system) for k in problem.searchable],
+        absorbed=[f"{c['cause']}@{c['where']}" for c in problem.not_identifiable], alpha=o.alpha, min_gain=o.min_gain,
+        fit_window_s=problem.fit_window_s, current=(current.score, current.rmse, current.rmse[yard.ref_index]),
+        progress=say,
+    )
+    problem.notes.extend(found.notes)
+    judgement.discovery = found.summary(system)
+    if found.kept:
+        say("probing the residuals of the model with the discovered terms for structure ...")
+        structure = structure_test(found.model, problem.train, problem.validation)
+        errors = last_errors.get(id(found.model))
+        if errors is None:
+            errors = np.asarray(held_out_errors(found.model, problem.val_windows))
+        judgement = _Judgement("unexplained" if structure.significant else "explained", found.model,
+                               judgement.findings + found.findings, errors, found.held_out[1], structure,
+                               _gain(found.held_out[1], nominal.rmse, yard.ref_index), judgement.discovery)
+    return judgement
+
+
+def _model_summary(problem: _Problem, model, errors, rmse, yard: _Yardstick, terms=None) -> ModelSummary:
+    """The `nominal` / `extended` object: parameters by report name, held-out error curve, validation block."""
+    system = model.system if isinstance(model, Extended) else model
+    parameters = dict(zip(problem.names, map(float, nominal_values(system, problem.names))))
+    if isinstance(model, Extended):
+        parameters.update({k: float(v) for t in model.terms for k, v in t.parameters(problem.system).items()})
+    measured = np.asarray(problem.val_windows.xs)[:, yard.n_ref]
+    validation = validation_summary(model, problem.validation, np.asarray(errors)[:, yard.n_ref], measured,
+                                    yard.horizon.seconds)
+    return ModelSummary(parameters=parameters, sim_error=SimErrorCurve.of(yard.horizons, rmse), terms=terms,
+                        validation=validation)
+
+
+def _data_summary(problem: _Problem, train, validation) -> DataSummary:
+    given = _as_records(train, "train")
+    held_out = problem.validation
+    if validation is not None:
+        validation_name = ", ".join(r.source or "(held out)" for r in held_out)
+    else:
+        validation_name = "last {:.0%} of {}".format(problem.options.holdout_fraction,
+                                                     ", ".join(r.source or "train" for r in given))
+    return DataSummary(
+        train=", ".join(r.source or "(train)" for r in given), validation=validation_name,
+        n_train=int(sum(len(r) for r in problem.train)), n_validation=int(sum(len(r) for r in held_out)), dt=problem.dt,
+        train_runs=tuple(r.source or f"train run {i + 1}" for i, r in enumerate(problem.train)),
+        validation_runs=tuple(r.source or f"held-out run {i + 1}" for i, r in enumerate(held_out)),
+    )
+
+
+def _report(problem, nominal, yard, judgement, table, last, *, mode, system_name, train, validation) -> Report:
+    """The typed `Report` that `report.json` and `report.md` are written from."""
+    system, o = problem.system, problem.options
+    notes = list(problem.notes)
+    if judgement.verdict == "unexplained":
+        notes.append(_unexplained_note(judgement.structure))
+    test = _test_summary(o.alpha, o.min_gain, last, len(problem.searchable), judgement.verdict)
+    if test["detectable_gain"] is not None:
+        notes.append(f"No candidate passed the test. With these held-out runs the test would have detected a gain of "
+                     f"about {test['detectable_gain']:.0%} at {yard.horizon.seconds:g} s (power 80 %); a smaller effect may be present.")
+    extended = judgement.model
+    terms = tuple(dict.fromkeys(t.label(system) for t in extended.terms))  # wind@world once
+    return Report(
+        system=system_name or problem.train[0].system or _CONTRACT_NAMES.get(type(system).__name__, type(system).__name__.lower()),
+        data=_data_summary(problem, train, validation),
+        mode="refit" if isinstance(mode, Refit) else "known",
+        nominal=_model_summary(problem, nominal.model, nominal.errors, nominal.rmse, yard),
+        verdict=judgement.verdict,
+        findings=judgement.findings,
+        extended=_model_summary(problem, extended, judgement.errors, judgement.rmse, yard, terms=terms),
+        gain=judgement.gain,
+        reference_horizon_s=float(yard.horizon.seconds),
+        structure={"nominal": nominal.structure, "extended": judgement.structure},
+        not_identifiable=problem.not_identifiable,
+        candidates=table,
+        notes=notes,
+        horizon=yard.horizon,
+        runs=_per_run_table(problem.validation, problem.window_runs, nominal.errors, judgement.errors, yard.n_ref,
+                            problem.position_index),
+        test=test,
+        nominal_model=nominal.model,
+        extended_model=extended,
+        discovery=judgement.discovery,
+    )
+
+
 def diagnose(
     system: AbstractSystem,
     train: Trajectory | Sequence[Trajectory],
@@ -180,7 +656,7 @@ def diagnose(
     shortlist: int = 4,
     system_name: str | None = None,
     discovery: bool = True,
-    progress: Callable[[str], None] | None = None,
+    progress: Callable[[str], None] | bool | None = None,
 ) -> Report:
     r"""Diagnose what `system` gets wrong on measured data, name the cause and measure the gain.
 
@@ -228,7 +704,10 @@ def diagnose(
     - `shortlist`: candidates refitted jointly per round.
     - `system_name`: the contract name for the report (default the records' `system`).
     - `discovery`: search for a term beyond the vocabulary when structure is left (default on).
-    - `progress`: called with a line of text at each stage (e.g. `print`).
+    - `progress`: a callable is called with a line of text at each stage (e.g. `print`, or a
+      `dynax.ProgressBar`'s `say`); otherwise a progress bar on stderr, one step per stage and per
+      candidate batch: `True` / `False` force it on / off, `None` (default) draws it when stderr is a
+      terminal (see `dynax.progress_mode`; the CLI's `--quiet` silences it).
 
     **Returns:** a `Report`.
 
@@ -239,263 +718,16 @@ def diagnose(
         Analysis*, 3rd ed., 1998, ch. 15 (forward selection).
     """
     warn_if_float32("diagnosis")  # the float64 policy: say so, once, naming the switch
-    say = progress or (lambda _: None)
-    if not isinstance(system, AbstractSystem) or isinstance(system, Extended):
-        raise UsageError(f"diagnose: `system` must be a nominal dynax system, got {type(system).__name__}")
-    if not isinstance(mode, (Refit, Known)):
-        raise UsageError(f"diagnose: `mode` must be Refit() or Known(), got {type(mode).__name__}")
-    if max_terms < 1:
-        raise UsageError(f"diagnose: `max_terms` must be at least 1, got {max_terms}")
-    notes: list[str] = []
-    train_records, validation_records, dt = _prepare_records(system, train, validation, holdout_fraction, notes)
-    dtype = jnp.result_type(float)
-
-    # --- candidates and their identifiability in this mode -------------------------------------
-    candidates = tuple(default_candidates(system, train_records) if candidates is None else candidates)
-    if not candidates:
-        raise UsageError("diagnose: `candidates` is empty")
-    Extended(system, candidates)  # checks every candidate fits this system
-    names = nominal_parameter_names(system)
-    if isinstance(mode, Refit):
-        refit_names = names if mode.parameters is None else tuple(mode.parameters)
-        unknown = set(refit_names) - set(names)
-        if unknown:
-            raise UsageError(f"diagnose: Refit(parameters=...) names {sorted(unknown)}, not parameters of {type(system).__name__} {names}")
-    else:
-        refit_names = ()
-    scales, inits = candidate_scales(system, candidates, train_records)
-    neutral = np.asarray([t.neutral for t in candidates], float)
-    p0_nominal = np.asarray(nominal_values(system, names), float)
-    xs_train = np.concatenate([np.asarray(r.xs) for r in train_records])
-    family = Family(
-        model=Extended(system, candidates),
-        names=names,
-        refit=jnp.asarray([1.0 if n in refit_names else 0.0 for n in names], dtype),
-        nominal_scale=jnp.asarray(np.maximum(np.abs(p0_nominal), 1e-2), dtype),
-        candidate_scale=jnp.asarray(scales, dtype),
-        candidate_init=jnp.asarray(inits, dtype),
-        neutral=jnp.asarray(neutral, dtype),
-        state_scale=jnp.asarray(np.maximum(xs_train.std(axis=0), 1e-9), dtype),
-    )
-
-    absorbed = structurally_absorbed(family, family.refit)
-    not_identifiable, searchable = [], []
-    for k, term in enumerate(candidates):
-        if absorbed[k]:
-            not_identifiable.append(
-                {"cause": term.cause, "where": term.where(system),
-                 "reason": f"a refit of the nominal parameters ({', '.join(refit_names)}) reproduces it exactly; "
-                           "diagnose in Known() mode with trusted parameters to test it"}
-            )
-        else:
-            searchable.append(k)
-    if not searchable:
-        raise UsageError("diagnose: no candidate is identifiable in this mode")
-
-    # --- windows ---------------------------------------------------------------------------
-    fit_window_s = _fit_window(system, train_records, fit_window_s, horizon_fraction, dt, notes)
-    n_fit = max(2, int(round(fit_window_s / dt)))
-    train_windows = make_windows(train_records, n_fit, n_fit)
-    horizons, candidates_s = _horizon_grid(horizons_s, reference_horizon_s, train_records, validation_records, notes)
-    val_stride = max(1, int(round(0.05 / dt)))
-    val_windows = make_windows(validation_records, int(round(horizons.max() / dt)), val_stride)
-    window_runs = np.asarray([r for r, _ in val_windows.starts])
-    position_index = _position_index(system)
-
-    n_nom, n_slots = len(names), max_terms
-    n_params = n_nom + n_slots + 1
-    free_all = jnp.ones(n_params, dtype)
-    state_scale = np.asarray(family.state_scale)
-
-    def run_fits(slots, new, p_init, free):
-        p, cost, std = fit_configurations(family, train_windows, jnp.asarray(slots), jnp.asarray(new), jnp.asarray(p_init, dtype), free)
-        errors = validate_configurations(family, val_windows, jnp.asarray(slots), jnp.asarray(new), p)
-        return np.asarray(p), np.asarray(cost), np.asarray(std), np.asarray(errors)
-
-    def model_of(slots, p):
-        return family.model_for(jnp.asarray(slots), jnp.asarray(-1), jnp.asarray(p, dtype))
-
-    # --- forward selection; round 1 also fits the nominal model --------------------------------
-    findings, candidate_table, selected, tests_last = [], [], [], {}
-    slots_cur = -np.ones(n_slots, int)
-    p_cur = np.concatenate([p0_nominal, np.zeros(n_slots + 1)])
-    batch = shortlist + 1
-    nominal_rmse = structure_nominal = structure_current = nominal_model = horizon = None
-    for round_ in range(max_terms):
-        remaining = [k for k in searchable if k not in selected]
-        short = []
-        if remaining:
-            say(f"round {round_ + 1}: screening {len(remaining)} candidates on one-step residuals ...")
-            coefficients = family.coefficients(jnp.asarray(slots_cur), jnp.asarray(-1), jnp.asarray(p_cur, dtype))
-            gains_scr, deltas_scr = screen(family, p_cur[:n_nom], np.asarray(coefficients), family.refit,
-                                           train_records, validation_records, remaining, acceleration_residuals)
-            short = _shortlist(system, candidates, remaining, gains_scr, shortlist)
-            say(f"round {round_ + 1}: simulation-error refit of "
-                + ("the nominal model with " if round_ == 0 else "the current model with ")
-                + ", ".join(candidates[k].label(system) for k in short) + " (one batch) ...")
-        elif round_ > 0:
-            break
-        new_j = np.asarray([-1] + short + [-1] * (shortlist - len(short)))
-        p_init_j = np.tile(p_cur, (batch, 1))
-        for i, k in enumerate(new_j):
-            if k >= 0:
-                p_init_j[i, -1] = _start_value(candidates[k], deltas_scr[remaining.index(k)], inits[k] - neutral[k], scales[k])
-        p_j, cost_j, std_j, err_j = run_fits(np.tile(slots_cur, (batch, 1)), new_j, p_init_j, free_all)
-        if round_ == 0:  # the nominal model, refitted; the reference horizon from its training error
-            p_cur = p_j[0].copy()
-            nominal_model = model_of(slots_cur, p_cur).system
-            horizon = _reference_horizon(nominal_model, train_records, candidates_s, reference_horizon_s,
-                                         horizon_fraction, val_stride, position_index, dt)
-            if horizon.seconds not in horizons:
-                horizons = np.sort(np.append(horizons, horizon.seconds))
-            steps = np.maximum(np.round(horizons / dt).astype(int), 1)
-            n_ref = int(np.round(horizon.seconds / dt))
-            overlap = max(1, int(np.ceil(n_ref / val_stride)))
-            ref_index = int(np.flatnonzero(np.isclose(horizons, horizon.seconds))[0])
-            scores_j = _window_scores(err_j, n_ref, state_scale)
-            score_cur, err_cur = scores_j[0], err_j[0]
-            err_nominal = err_j[0]
-            nominal_rmse = rmse_current = _rmse_curve(err_j[0], steps, position_index)
-            say(f"reference horizon {horizon.seconds:g} s ({horizon.rule}); nominal model: held-out position RMSE "
-                f"{nominal_rmse[ref_index]:.4g} there; probing its one-step residuals for structure ...")
-            structure_nominal = structure_current = structure_test(nominal_model, train_records, validation_records)
-        else:
-            scores_j = _window_scores(err_j, n_ref, state_scale)
-        if not short:
-            break
-        results = _judge_round(candidates, short, remaining, p_j, std_j, err_j, scores_j, score_cur, window_runs,
-                               overlap, alpha, min_gain, steps, position_index)
-        tests_last = results
-        if round_ == 0:
-            candidate_table = _candidate_table(system, candidates, remaining, gains_scr, results, neutral, cost_j)
-        admissible = [k for k in short if results[k]["significant"]]
-        if not admissible:
-            say(f"round {round_ + 1}: no candidate improves the held-out simulation significantly")
-            break
-        best = max(admissible, key=lambda k: results[k]["gain_windows"])
-        r = results[best]
-        term = candidates[best]
-        gain_rmse = float(1 - r["rmse"][ref_index] / rmse_current[ref_index]) if np.isfinite(rmse_current[ref_index]) else 1.0
-        alternatives = []
-        for k in look_alikes(system, term, candidates):
-            if k in results:
-                alternatives.append({
-                    "cause": candidates[k].cause,
-                    "gain": float(results[k]["gain_windows"]),
-                    "p_value": _paired_test(scores_j[results[k]["i"]], scores_j[r["i"]], window_runs, overlap).p_value,
-                })
-        confidence = "high" if all(a["p_value"] < alpha for a in alternatives) else "low"
-        findings.append({
-            "cause": term.cause,
-            "where": term.where(system),
-            "coefficient": float(neutral[best] + r["delta"]),
-            "std_error": float(r["std"]),
-            "gain": gain_rmse,
-            "parameter": term.parameter_name(system),
-            "p_value": r["p"],
-            "look_alikes": alternatives,
-            "confidence": confidence,
-            "runs_helped": f"{r['runs_helped']}/{r['n_runs']}",
-        })
-        say(f"round {round_ + 1}: found {term.label(system)}, {term.parameter_name(system)} = {neutral[best] + r['delta']:.4g} "
-            f"(held-out gain {gain_rmse:.0%}, p = {r['p']:.2g}, helps on {r['runs_helped']}/{r['n_runs']} held-out runs; "
-            f"told apart from look-alikes: {confidence})")
-        selected.append(best)
-        slots_cur = slots_cur.copy()
-        slots_cur[len(selected) - 1] = best
-        p_cur = p_j[r["i"]].copy()
-        p_cur[n_nom + len(selected) - 1] = p_cur[-1]
-        p_cur[-1] = 0.0
-        std_cur = std_j[r["i"]].copy()
-        std_cur[n_nom + len(selected) - 1] = std_cur[-1]
-        score_cur, err_cur, rmse_current = scores_j[r["i"]], err_j[r["i"]], r["rmse"]
-        say("probing the extended model's residuals for structure ...")
-        structure_current = structure_test(model_of(slots_cur, p_cur), train_records, validation_records)
-        # The probe never vetoes: selection goes on while a candidate's own held-out test passes.
-
-    # Every finding's coefficient from the final joint fit (earlier rounds' values move when later terms join).
-    for m, (finding, k) in enumerate(zip(findings, selected)):
-        finding["coefficient"] = float(neutral[k] + p_cur[n_nom + m])
-        finding["std_error"] = float(std_cur[n_nom + m])
-    findings = _merge_repeated_causes(findings)
-    extended_model = model_of(slots_cur, p_cur)
-    extended_model = Extended(extended_model.system, tuple(extended_model.terms[k] for k in selected))
-    if not selected:
-        verdict = "unexplained" if structure_nominal.significant else "none"
-    else:
-        verdict = "unexplained" if structure_current.significant else "explained"
-    gain = float(1 - rmse_current[ref_index] / nominal_rmse[ref_index]) if selected and np.isfinite(nominal_rmse[ref_index]) else 0.0
-    discovery_json: dict = {}
-    # Beyond the vocabulary: search, refit, the same held-out test. Also after a `none`: the generic
-    # probe cannot see every structure (a force periodic in position), the search's own guards can.
-    if discovery and verdict != "explained":
-        held_out_errors = eqx.filter_jit(window_errors)
-
-        def held_out(model):
-            errors = np.asarray(held_out_errors(model, val_windows))
-            curve = _rmse_curve(errors, steps, position_index)
-            return _window_scores(errors[None], n_ref, state_scale)[0], curve, curve[ref_index]
-
-        found = discover(
-            extended_model if selected else nominal_model, train_records, validation_records, held_out=held_out,
-            significance=lambda ref, new: _paired_test(ref, new, window_runs, overlap).p_value, refit=refit_names,
-            vocabulary=[candidates[k].label(system) for k in searchable],
-            absorbed=[f"{c['cause']}@{c['where']}" for c in not_identifiable], alpha=alpha, min_gain=min_gain, fit_window_s=fit_window_s,
-            current=(score_cur, rmse_current, rmse_current[ref_index]), progress=say,
-        )
-        notes += found.notes
-        discovery_json = found.summary(system)
-        if found.kept:
-            findings, extended_model, rmse_current = findings + found.findings, found.model, found.held_out[1]
-            say("probing the residuals of the model with the discovered terms for structure ...")
-            structure_current = structure_test(extended_model, train_records, validation_records)
-            verdict = "unexplained" if structure_current.significant else "explained"
-            gain = float(1 - rmse_current[ref_index] / nominal_rmse[ref_index]) if np.isfinite(nominal_rmse[ref_index]) else 0.0
-    if verdict == "unexplained":
-        notes.append(_unexplained_note(structure_current))
-    test = _test_summary(alpha, min_gain, tests_last, len(searchable), verdict)
-    if test["detectable_gain"] is not None:
-        notes.append(f"No candidate passed the test. With these held-out runs the test would have detected a gain of "
-                     f"about {test['detectable_gain']:.0%} at {horizon.seconds:g} s (power 80 %); a smaller effect may be present.")
-    runs = _per_run_table(validation_records, window_runs, err_nominal, err_cur, n_ref, position_index)
-    nominal_parameters = dict(zip(names, map(float, nominal_values(nominal_model, names))))
-    extended_parameters = dict(zip(names, map(float, nominal_values(extended_model.system, names))))
-    extended_parameters.update({k: float(v) for t in extended_model.terms for k, v in t.parameters(system).items()})
-    horizons_list = [float(h) for h in horizons]
-    return Report(
-        system=system_name or train_records[0].system or _CONTRACT_NAMES.get(type(system).__name__, type(system).__name__.lower()),
-        data={
-            "train": ", ".join(r.source or "(train)" for r in _as_records(train, "train")),
-            "validation": ", ".join(r.source or "(held out)" for r in validation_records) if validation is not None
-            else "last {:.0%} of {}".format(holdout_fraction, ", ".join(r.source or "train" for r in _as_records(train, "train"))),
-            "n_train": int(sum(len(r) for r in train_records)),
-            "n_validation": int(sum(len(r) for r in validation_records)),
-            "dt": dt,
-            "train_runs": [r.source or f"train run {i + 1}" for i, r in enumerate(train_records)],
-            "validation_runs": [r.source or f"held-out run {i + 1}" for i, r in enumerate(validation_records)],
-        },
-        mode="refit" if isinstance(mode, Refit) else "known",
-        nominal={"parameters": nominal_parameters, "sim_error": {"horizons_s": horizons_list, "rmse": _floats(nominal_rmse)}},
-        verdict=verdict,
-        findings=findings,
-        extended={
-            "terms": list(dict.fromkeys(t.label(system) for t in extended_model.terms)),  # wind@world once
-            "parameters": extended_parameters,
-            "sim_error": {"horizons_s": horizons_list, "rmse": _floats(rmse_current)},
-        },
-        gain=gain,
-        reference_horizon_s=float(horizon.seconds),
-        structure={"nominal": _structure_json(structure_nominal), "extended": _structure_json(structure_current)},
-        not_identifiable=not_identifiable,
-        candidates=candidate_table,
-        notes=notes,
-        horizon=horizon.to_json(),
-        runs=runs,
-        test=test,
-        nominal_model=nominal_model,
-        extended_model=extended_model,
-        discovery=discovery_json,
-    )
+    _check_arguments(system, mode, max_terms)
+    options = _Options(horizons_s, reference_horizon_s, horizon_fraction, fit_window_s, max_terms, alpha, min_gain,
+                       holdout_fraction, shortlist, discovery)
+    with stage_reporter(progress) as say:
+        problem = _prepare(system, train, validation, candidates, mode, options)
+        nominal, yard, current, table, last = _forward_selection(problem, say)
+        judgement = _judge(problem, nominal, yard, current, say)
+        say("validation: fit % and residual tests of the nominal and the extended model ...")
+        return _report(problem, nominal, yard, judgement, table, last, mode=mode, system_name=system_name,
+                       train=train, validation=validation)
 
 
 def _prepare_records(system, train, validation, holdout_fraction, notes):
@@ -532,14 +764,6 @@ def _prepare_records(system, train, validation, holdout_fraction, notes):
     dtype = jnp.result_type(float)
 
     return [_cast(r, dtype) for r in train_records], [_cast(r, dtype) for r in validation_records], dt
-
-
-def _position_index(system) -> list[int]:
-    if isinstance(system, AbstractManipulator):
-        return list(range(system.n_joints))
-    if isinstance(system, Helicopter):
-        return [0, 1, 2]  # world position x, y, z [m]
-    return [i for i, s in enumerate(system.state_names) if not s.startswith("d")]
 
 
 def _horizon_grid(horizons_s, reference_horizon_s, train_records, validation_records, notes):
@@ -585,7 +809,7 @@ def _fit_window(system, train_records, given, fraction, dt, notes) -> float:
     if candidates_s.size == 0:
         return longest
     start = _reference_horizon(system, train_records, candidates_s, None, fraction, max(1, int(round(0.05 / dt))),
-                               _position_index(system), dt)
+                               list(system.position_indices), dt)
     window = float(np.clip(2.5 * start.seconds, 0.25, longest))
     if window < longest:
         notes.append(f"The starting model predicts the training runs for {start.seconds:g} s only: the simulation-error "
@@ -702,21 +926,6 @@ def _unexplained_note(s: Structure) -> str:
             + ", ".join(f"{n} ({w:.0%})" for n, w in s.top_features[:3])
             + f"; largest in {', '.join(f'{k} ({v:.0%})' for k, v in s.by_state.items())}; worst around t = "
             + ", ".join(f"{t:.1f} s" for t in s.worst_times) + " of the held-out record.")
-
-
-def _floats(a):
-    return [float(x) if np.isfinite(x) else None for x in np.asarray(a)]
-
-
-def _structure_json(s: Structure) -> dict:
-    return {
-        "significant": s.significant,
-        "r2": s.r2,
-        "p_value": s.p_value,
-        "top_features": [{"feature": n, "share": w} for n, w in s.top_features],
-        "worst_times_s": list(s.worst_times),
-        "by_state": s.by_state,
-    }
 
 
 def _slice(rec: Trajectory, a: int, b: int) -> Trajectory:

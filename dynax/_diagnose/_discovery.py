@@ -40,7 +40,6 @@ import numpy as np
 
 from .._identify._simulation_fit import fit_simulation_error
 from .._model._extensions import Discovered, Extended, Feature
-from .._model._system import AbstractManipulator
 from ._fit import nominal_parameter_names
 from ._library import evaluate_features, feature_library, is_angle, named_equivalent, physical_readings, search_period
 from .._data._derivatives import savitzky_golay
@@ -169,7 +168,7 @@ def propose(
     **Returns:** proposals, the best explained coordinate first.
     """
     system = model.system if isinstance(model, Extended) else model
-    if not isinstance(system, AbstractManipulator):
+    if not system.joints:  # forces at joints: only a manipulator has them
         return []
     n = system.n_joints
     tau, nuisance, xs, us, runs = force_residuals(model, list(records), refit)
@@ -182,17 +181,7 @@ def propose(
     proposals = []
     for j in range(n):
         (y,) = _project_out(nuisance[:, j], tau[:, j])
-        period = None
-        if not is_angle(system, j):
-            base = feature_library(system, j, xs)
-            phi, y0 = _project_out(nuisance[:, j], evaluate_features(base, n, xs, us), y)
-            y0 = y0 - phi @ np.linalg.lstsq(phi, y0, rcond=None)[0]
-            q = xs[:, j]
-            span = float(np.ptp(q))
-            v_rms = float(np.sqrt(np.mean(xs[:, n + j] ** 2)))
-            p_min = max(span / 200, 20 * dt * v_rms)  # resolved in time: at most 1/20 of the sampling rate
-            if span / 2 > 1.5 * p_min:
-                period, _ = search_period(q, y0, p_min=p_min, p_max=span / 2)
+        period = None if is_angle(system, j) else _position_period(system, j, nuisance[:, j], xs, us, y, dt)
         library = feature_library(system, j, xs, period=period)
         raw = evaluate_features(library, n, xs, us)
         (phi,) = _project_out(nuisance[:, j], raw)
@@ -240,6 +229,23 @@ def propose(
         ))
     proposals.sort(key=lambda p: (not p.features, -p.cv_r2))
     return proposals
+
+
+def _position_period(system, j, nuisance, xs, us, y, dt) -> float | None:
+    """The period of a force periodic in a prismatic coordinate `j` (a lead screw's ripple), by periodogram of the
+    residual left after the non-periodic library; `None` where the travel is too short to resolve one."""
+    n = system.n_joints
+    base = feature_library(system, j, xs)
+    phi, y0 = _project_out(nuisance, evaluate_features(base, n, xs, us), y)
+    y0 = y0 - phi @ np.linalg.lstsq(phi, y0, rcond=None)[0]
+    q = xs[:, j]
+    span = float(np.ptp(q))
+    v_rms = float(np.sqrt(np.mean(xs[:, n + j] ** 2)))
+    p_min = max(span / 200, 20 * dt * v_rms)  # resolved in time: at most 1/20 of the sampling rate
+    if span / 2 <= 1.5 * p_min:
+        return None
+    period, _ = search_period(q, y0, p_min=p_min, p_max=span / 2)
+    return period
 
 
 def _look_alike_by_cross_validation(chosen, allowed, phi, y, groups, *, min_correlation: float = 0.9):
@@ -362,7 +368,7 @@ def discover(
     system = model.system if isinstance(model, Extended) else model
     notes: list[str] = []
     empty = lambda why, proposals=(): Discovery(False, model, [], list(proposals), 0.0, 1.0, None, notes + [why])  # noqa: E731
-    if not isinstance(system, AbstractManipulator):
+    if not system.joints:
         return empty(f"Discovery searches forces at the joints of a manipulator; {type(system).__name__} is not one.")
     say("discovery: sparse search of the one-step force residuals over the feature library ...")
     searched = propose(model, train, refit=refit, vocabulary=vocabulary, absorbed=absorbed, max_terms=max_terms)
@@ -381,6 +387,40 @@ def discover(
     xs_train = np.concatenate([np.asarray(r.xs) for r in train])
     state_scale = np.maximum(xs_train.std(axis=0), 1e-9)
     scores_cur, _, rmse_cur = current if current is not None else held_out(model)
+    test = _refit_and_test(model, terms, proposals, train, refit, fit_window_s, state_scale, held_out, significance,
+                           scores_cur, rmse_cur, alpha, min_gain, say)
+    if not test.passed:
+        notes.append(
+            "The discovery search proposed " + "; ".join(t.formula(system) for t in test.terms)
+            + f", but refitted through simulation it did not pass the held-out test (gain {test.gain:.0%}, "
+            f"p = {test.p_value:.2g}); no discovered term is kept."
+        )
+        return Discovery(False, model, [], test.proposals, test.gain, test.p_value, None, notes)
+    n_named = len(model.terms) if isinstance(model, Extended) else 0
+    findings = _findings(system, test, n_named, held_out)
+    return Discovery(True, test.fitted, findings, test.proposals, test.gain, test.p_value,
+                     (test.scores, test.curve, test.rmse), notes)
+
+
+class _Test(eqx.Module):
+    """The outcome of refitting the proposed terms and testing them on held-out data."""
+
+    passed: bool
+    terms: list
+    proposals: list
+    fitted: object
+    stds: list
+    gain: float
+    p_value: float
+    scores: object
+    curve: object
+    rmse: float
+
+
+def _refit_and_test(model, terms, proposals, train, refit, fit_window_s, state_scale, held_out, significance,
+                    scores_cur, rmse_cur, alpha, min_gain, say) -> _Test:
+    """Refit the proposed terms through simulation and test them on held-out data; where several pass together,
+    drop each that does not carry its weight (dropping it costs less than `min_gain`) and refit once more."""
     n_named = len(model.terms) if isinstance(model, Extended) else 0
     for _ in range(2):
         fitted, stds = _fit_with(model, terms, train, refit, fit_window_s, state_scale)
@@ -405,24 +445,24 @@ def discover(
         if not terms:
             passed = False
             break
-    if not passed:
-        notes.append(
-            "The discovery search proposed " + "; ".join(t.formula(system) for t in terms)
-            + f", but refitted through simulation it did not pass the held-out test (gain {gain:.0%}, p = {p_value:.2g}); "
-            "no discovered term is kept."
-        )
-        return Discovery(False, model, [], proposals, gain, p_value, None, notes)
+    return _Test(passed, terms, proposals, fitted, stds, gain, p_value, scores_new, curve_new, rmse_new)
+
+
+def _findings(system, test: _Test, n_named: int, held_out) -> list[dict]:
+    """One finding (cause `discovered`) per kept term, with its own held-out gain, most important first."""
     findings = []
+    fitted = test.fitted
     discovered = fitted.terms[n_named:]
-    for k, (term, std, proposal) in enumerate(zip(discovered, stds, proposals)):
+    for k, (term, std, proposal) in enumerate(zip(discovered, test.stds, test.proposals)):
         if len(discovered) > 1:
             others = tuple(t for i, t in enumerate(fitted.terms) if i != n_named + k)
             _, _, rmse_without = held_out(Extended(fitted.system, others))
-            term_gain = float(1 - rmse_new / rmse_without)
+            term_gain = float(1 - test.rmse / rmse_without)
         else:
-            term_gain = gain
+            term_gain = test.gain
         coefficients = np.asarray(term.coefficients, float)
         single = len(coefficients) == 1
+        names = term.feature_names(system)
         findings.append({
             "cause": "discovered",
             "where": term.where(system),
@@ -432,19 +472,19 @@ def discover(
             "parameter": term.parameter_names(system)[0] if single else f"|c_{term.where(system)}|",
             "formula": term.formula(system),
             "acceleration_formula": term.acceleration_formula(system),
-            "features": list(term.feature_names(system)),
-            "coefficients": dict(zip(term.feature_names(system), map(float, coefficients))),
-            "std_errors": dict(zip(term.feature_names(system), map(float, std))),
+            "features": list(names),
+            "coefficients": dict(zip(names, map(float, coefficients))),
+            "std_errors": dict(zip(names, map(float, std))),
             "readings": physical_readings(system, term),
             "period": proposal.period,
-            "selection_frequency": dict(zip(term.feature_names(system), proposal.frequency)),
+            "selection_frequency": dict(zip(names, proposal.frequency)),
             "cv_r2_one_step": proposal.cv_r2,
-            "p_value": p_value,
+            "p_value": test.p_value,
             "look_alikes": [],
             "confidence": "high" if min(proposal.frequency) >= 0.9 else "low",
         })
     findings.sort(key=lambda f: -f["gain"])
-    return Discovery(True, fitted, findings, proposals, gain, p_value, (scores_new, curve_new, rmse_new), notes)
+    return findings
 
 
 def discovery_markdown(j: dict) -> list[str]:

@@ -30,12 +30,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._model._extensions import Discovered, Feature
-from .._model._linear_axis import LinearAxis
 
 
 def is_angle(system, k: int) -> bool:
-    """Whether coordinate `k` of `system` is an angle (revolute joint): every joint but a `LinearAxis`'s."""
-    return not isinstance(system, LinearAxis)
+    """Whether coordinate `k` of `system` is an angle (a revolute joint): the system's `angle_indices`."""
+    return k in system.angle_indices
 
 
 def feature_library(system, channel: int, xs: np.ndarray, *, period: float | None = None) -> list[Feature]:

@@ -24,24 +24,43 @@ def _fmt(x, digits=4):
 def report_markdown(report) -> str:
     """The report as Markdown, written for a person."""
     j = report.to_json()
+    lines = [f"# Discrepancy diagnosis: {j['system']}", "", f"Verdict: {_VERDICT_TEXT[j['verdict']]}", ""]
+    if j["findings"]:
+        lines += [f"Held-out simulation error at {j['reference_horizon_s']:g} s is reduced by **{j['gain']:.0%}** by the "
+                  f"extended model ({', '.join(j['extended']['terms'])}).", ""]
+    lines += _data_markdown(j) + _error_markdown(j) + _validation_markdown(j)
+    lines += ["![measured against simulated](measured_vs_simulated.png)", "", "![error against horizon](sim_error.png)", "",
+              "The nominal model's one-step residuals over time, against velocity (friction shows here), "
+              "their autocorrelation and spectrum (white noise is flat):", "",
+              "![residuals](residuals.png)", ""]
+    lines += _causes_markdown(j) + discovery_markdown(j) + _candidates_markdown(j) + _test_markdown(j)
+    if j["notes"]:
+        lines += ["## Notes", ""] + [f"- {n}" for n in j["notes"]] + [""]
+    lines += ["## Parameters", "", "| parameter | nominal | extended |", "|---|---|---|"]
+    ext = j["extended"]["parameters"]
+    for name in dict.fromkeys(list(j["nominal"]["parameters"]) + list(ext)):
+        lines.append(f"| {name} | {_fmt(j['nominal']['parameters'].get(name))} | {_fmt(ext.get(name))} |")
+    return "\n".join(lines) + "\n"
+
+
+def _data_markdown(j: dict) -> list[str]:
+    return ["## Data", "",
+            f"- training: {j['data']['train']} ({j['data']['n_train']} samples)",
+            f"- held out: {j['data']['validation']} ({j['data']['n_validation']} samples)",
+            f"- mode: `{j['mode']}` ("
+            + ("the nominal parameters were refitted on the training data" if j["mode"] == "refit"
+               else "the nominal parameters were trusted and kept") + ")", ""]
+
+
+def _error_markdown(j: dict) -> list[str]:
+    """What the nominal simulation gets wrong: error against horizon, per run, and the residual probe."""
     ref = j["reference_horizon_s"]
     h = j["nominal"]["sim_error"]["horizons_s"]
-    lines = [f"# Discrepancy diagnosis: {j['system']}", ""]
-    lines += [f"Verdict: {_VERDICT_TEXT[j['verdict']]}", ""]
-    if j["findings"]:
-        lines += [f"Held-out simulation error at {ref:g} s is reduced by **{j['gain']:.0%}** by the extended model "
-                  f"({', '.join(j['extended']['terms'])}).", ""]
-    lines += ["## Data", "",
-              f"- training: {j['data']['train']} ({j['data']['n_train']} samples)",
-              f"- held out: {j['data']['validation']} ({j['data']['n_validation']} samples)",
-              f"- mode: `{j['mode']}` ("
-              + ("the nominal parameters were refitted on the training data" if j["mode"] == "refit"
-                 else "the nominal parameters were trusted and kept") + ")", ""]
-    lines += ["## What the nominal simulation gets wrong", "",
-              "Open-loop simulation from measured states, position RMSE on the held-out data:", "",
-              "| horizon [s] | " + " | ".join(f"{x:g}" for x in h) + " |",
-              "|---|" + "---|" * len(h),
-              "| nominal | " + " | ".join(_fmt(x) for x in j["nominal"]["sim_error"]["rmse"]) + " |"]
+    lines = ["## What the nominal simulation gets wrong", "",
+             "Open-loop simulation from measured states, position RMSE on the held-out data:", "",
+             "| horizon [s] | " + " | ".join(f"{x:g}" for x in h) + " |",
+             "|---|" + "---|" * len(h),
+             "| nominal | " + " | ".join(_fmt(x) for x in j["nominal"]["sim_error"]["rmse"]) + " |"]
     if j["findings"]:
         lines.append("| extended | " + " | ".join(_fmt(x) for x in j["extended"]["sim_error"]["rmse"]) + " |")
     if j.get("runs"):
@@ -60,24 +79,26 @@ def report_markdown(report) -> str:
               + ". Share of residual energy by state: "
               + ", ".join(f"{k} {v:.0%}" for k, v in s["by_state"].items())
               + ". Largest residuals around t = " + ", ".join(f"{t:.1f} s" for t in s["worst_times_s"]) + ".", ""]
-    lines += ["![measured against simulated](measured_vs_simulated.png)", "", "![error against horizon](sim_error.png)", "",
-              "The nominal model's one-step residuals over time, against velocity (friction shows here), "
-              "their autocorrelation and spectrum (white noise is flat):", "",
-              "![residuals](residuals.png)", ""]
-    lines += ["## Causes", ""]
+    return lines
+
+
+def _causes_markdown(j: dict) -> list[str]:
+    lines = ["## Causes", ""]
     named = [f for f in j["findings"] if f["cause"] != "discovered"]
-    if named:
-        lines += ["| cause | where | coefficient | std. error | gain | p | told apart from look-alikes |", "|---|---|---|---|---|---|---|"]
-        for f in named:
-            alts = "; ".join(f"{a['cause']} (gain {a['gain']:.0%}, p = {a['p_value']:.2g})" for a in f["look_alikes"]) or "none in the library"
-            components = "".join(f"; {n} = {v:.4g}" for n, v in f.get("components", {}).items())
-            lines.append(f"| `{f['cause']}` | `{f['where']}` | {f['parameter']} = {f['coefficient']:.4g}{components} | {f['std_error']:.2g} | "
-                         f"{f['gain']:.0%} | {f['p_value']:.2g} | {f['confidence']}: {alts} |")
-        lines += ["", "Standard errors come from the Gauss-Newton covariance and assume white residuals; "
-                  "read them as lower bounds.", ""]
-    else:
-        lines += ["No candidate improved the held-out simulation significantly.", ""]
-    lines += discovery_markdown(j)
+    if not named:
+        return lines + ["No candidate improved the held-out simulation significantly.", ""]
+    lines += ["| cause | where | coefficient | std. error | gain | p | told apart from look-alikes |", "|---|---|---|---|---|---|---|"]
+    for f in named:
+        alts = "; ".join(f"{a['cause']} (gain {a['gain']:.0%}, p = {a['p_value']:.2g})" for a in f["look_alikes"]) or "none in the library"
+        components = "".join(f"; {n} = {v:.4g}" for n, v in f.get("components", {}).items())
+        lines.append(f"| `{f['cause']}` | `{f['where']}` | {f['parameter']} = {f['coefficient']:.4g}{components} | {f['std_error']:.2g} | "
+                     f"{f['gain']:.0%} | {f['p_value']:.2g} | {f['confidence']}: {alts} |")
+    return lines + ["", "Standard errors come from the Gauss-Newton covariance and assume white residuals; "
+                    "read them as lower bounds.", ""]
+
+
+def _candidates_markdown(j: dict) -> list[str]:
+    lines = []
     if j["candidates"]:
         lines += ["Every candidate in the first round (held-out improvement of the window error over the nominal model):", "",
                   "| candidate | gain (screening) | gain (joint refit) | p |", "|---|---|---|---|"]
@@ -89,20 +110,42 @@ def report_markdown(report) -> str:
         lines += ["## Not identifiable in this mode", ""]
         lines += [f"- `{c['cause']}@{c['where']}`: {c['reason']}." for c in j["not_identifiable"]]
         lines.append("")
-    if j.get("test"):
-        t = j["test"]
-        lines += ["## The test", "", f"- paired: {t['paired']}", f"- multiple comparisons: {t['multiple_comparisons']}",
-                  f"- across runs: {t['run_agreement']}", f"- smallest gain that counts: {t['min_gain']:.0%}"]
-        if t["detectable_gain"] is not None:
-            lines.append(f"- with these held-out runs it would have detected a gain of about {t['detectable_gain']:.0%} (power 80 %)")
-        lines.append("")
-    if j["notes"]:
-        lines += ["## Notes", ""] + [f"- {n}" for n in j["notes"]] + [""]
-    lines += ["## Parameters", "", "| parameter | nominal | extended |", "|---|---|---|"]
-    ext = j["extended"]["parameters"]
-    for name in dict.fromkeys(list(j["nominal"]["parameters"]) + list(ext)):
-        lines.append(f"| {name} | {_fmt(j['nominal']['parameters'].get(name))} | {_fmt(ext.get(name))} |")
-    return "\n".join(lines) + "\n"
+    return lines
+
+
+def _test_markdown(j: dict) -> list[str]:
+    if not j.get("test"):
+        return []
+    t = j["test"]
+    lines = ["## The test", "", f"- paired: {t['paired']}", f"- multiple comparisons: {t['multiple_comparisons']}",
+             f"- across runs: {t['run_agreement']}", f"- smallest gain that counts: {t['min_gain']:.0%}"]
+    if t["detectable_gain"] is not None:
+        lines.append(f"- with these held-out runs it would have detected a gain of about {t['detectable_gain']:.0%} (power 80 %)")
+    return lines + [""]
+
+
+def _validation_markdown(j: dict) -> list[str]:
+    """The validation block (fit % and residual tests) of each model as a table."""
+    models = [(name, j[name]["validation"]) for name in ("nominal", "extended")
+              if "validation" in j[name] and (name == "nominal" or j["findings"])]
+    if not models:
+        return []
+    states = list(models[0][1]["fit_percent"])
+    lines = [f"Fit % of the {models[0][1]['horizon_s']:g} s-ahead open-loop prediction from every held-out window "
+             "(MATLAB `compare`), and tests of the one-step residuals (MATLAB `resid`, confidence 99 %: "
+             "Ljung-Box whiteness, cross-correlation with the inputs):", "",
+             "| model | " + " | ".join(f"fit {s}" for s in states) + " | white | independent of inputs |",
+             "|---|" + "---|" * (len(states) + 2)]
+    for name, v in models:
+        tests = v["residual_tests"]
+        white = ", ".join(f"{'yes' if t['white'] else 'no'} (min p {min(c['p_value'] for c in t['whiteness'].values()):.2g})"
+                          for t in tests) or "n/a"
+        independent = ", ".join(
+            f"{'yes' if t['independent'] else 'no'} (min p "
+            f"{min(u['p_value'] for c in t['cross_correlation'].values() for u in c.values()):.2g})" for t in tests) or "n/a"
+        fits = " | ".join("n/a" if v["fit_percent"][s] is None else f"{v['fit_percent'][s]:.1f} %" for s in states)
+        lines.append(f"| {name} | {fits} | {white} | {independent} |")
+    return lines + [""]
 
 
 def write_report(report, out_dir, validation, *, write_json) -> None:

@@ -27,8 +27,9 @@ import numpy as np
 
 from .._data._derivatives import savitzky_golay
 from .._model._extensions import Extended, InputDelay
-from .._model._helicopter import BODY, BODY_AXES, Helicopter, QUATERNION, quaternion_to_rotation
-from .._model._system import AbstractManipulator
+from .._sim_error import InputStates
+from .._simulate import FixedGrid, simulate
+from .._solvers import RK4
 from ._probe import cross_validated_ridge, ridge_fit
 
 
@@ -37,30 +38,21 @@ def _sg_window(dt: float) -> int:
     return max(w, 7)
 
 
+# Four RK4 steps per sample interval: the one-step residuals compare accelerations, so the input
+# terms' states must be accurate at every sample, not only at a window's end.
+_HIDDEN_GRID = FixedGrid(solver=RK4(scan_kind="lax"), substeps=4)
+
+
 @eqx.filter_jit
 def _hidden_trajectory(model, ts, us):
-    """Internal states of the input terms along the recorded inputs (RK4, 4 substeps per sample)."""
+    """Internal states of the input terms along the recorded inputs, from rest under the first input
+    (`simulate` on `InputStates`, RK4 with 4 steps per sample)."""
     n_hidden = model.n_states - model.system.n_states if isinstance(model, Extended) else 0
     if n_hidden == 0:
         return jnp.zeros((ts.shape[0], 0), us.dtype)
-    z0 = model.initial_state(jnp.zeros(model.system.n_states, us.dtype), us[0])[model.system.n_states :]
-
-    def f(z, u):
-        return model.applied_input(u, z)[1]
-
-    def interval(z, inputs):
-        h, u = inputs
-        h = h / 4
-        for _ in range(4):
-            k1 = f(z, u)
-            k2 = f(z + 0.5 * h * k1, u)
-            k3 = f(z + 0.5 * h * k2, u)
-            k4 = f(z + h * k3, u)
-            z = z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        return z, z
-
-    _, zs = jax.lax.scan(interval, z0, (jnp.diff(ts), us[:-1]))
-    return jnp.concatenate([z0[None], zs])
+    n = model.system.n_states
+    z0 = model.initial_state(jnp.zeros(n, us.dtype), us[0])[n:]
+    return simulate(InputStates(model), z0, ts, us, method=_HIDDEN_GRID, throw=False).xs
 
 
 @eqx.filter_jit
@@ -86,12 +78,9 @@ def _interval_accelerations(model, ts, xs_smooth, us, idx):
 
 
 def velocity_indices(system) -> list[int]:
-    """The states whose derivatives the residual analysis looks at: the velocities of a manipulator."""
-    if isinstance(system, AbstractManipulator):
-        return list(range(system.n_joints, 2 * system.n_joints))
-    if isinstance(system, Helicopter):
-        return list(range(BODY.start, BODY.stop))  # body velocities and rates u, v, w, p, q, r
-    return list(range(system.n_states))
+    """The states whose derivatives the residual analysis looks at: the system's `velocity_indices`
+    (a manipulator's joint velocities, a helicopter's body velocities and rates)."""
+    return list(system.velocity_indices)
 
 
 def _held_average(ts, u, a, b):
@@ -156,8 +145,8 @@ def acceleration_residuals(model, trajectory):
     # The measured acceleration is a local polynomial fit; smoothing the prediction with the same
     # filter compares like with like.
     predicted = savitzky_golay(ts, predicted, window=w, order=3)
-    if isinstance(nominal, Helicopter):
-        # A helicopter's rates answer its inputs within a sample (the held input makes the
+    if nominal.fast_input_response:
+        # The rates answer the inputs within a sample (a helicopter: the held input makes the
         # acceleration jump at every sample, and a stiff flight controller moves the input every
         # sample): compare velocity *increments* over each interval, integrated under the held
         # input, and differentiate the accumulated difference with the same filter.
@@ -172,33 +161,7 @@ def acceleration_residuals(model, trajectory):
 
 def probe_features(system, xs, us, predicted, dt) -> tuple[np.ndarray, list[str]]:
     """The generic feature library the probe regresses residuals on (columns standardised later)."""
-    names, cols = [], []
-    if isinstance(system, AbstractManipulator):
-        n = system.n_joints
-        for j in range(n):
-            q, v = xs[:, j], xs[:, n + j]
-            c = system.state_names[j]
-            vs = max(0.05 * float(np.std(v)), 1e-6)
-            cols += [np.tanh(v / vs), v, np.abs(v) * v, np.sin(q), np.cos(q), predicted[:, j]]
-            names += [f"sign(d{c})", f"d{c}", f"|d{c}|d{c}", f"sin({c})", f"cos({c})", f"model acceleration d{c}/dt"]
-    elif isinstance(system, Helicopter):
-        # Body velocities and rates with their signs and squares, and the world's axes seen in the
-        # body frame (gravity's direction, and north and east: what a world-fixed effect such as
-        # wind turns with), alone and times the body velocities.
-        rotations = np.asarray(jax.vmap(quaternion_to_rotation)(jnp.asarray(xs[:, QUATERNION])))
-        for i, c in zip(range(BODY.start, BODY.stop), BODY_AXES):
-            x = xs[:, i]
-            cols += [x, np.abs(x) * x, np.tanh(x / max(0.05 * float(np.std(x)), 1e-6)), predicted[:, i - BODY.start]]
-            names += [c, f"|{c}|{c}", f"sign({c})", f"model acceleration d{c}/dt"]
-        for a, world in enumerate(("north", "east", "down")):
-            for b, body in enumerate(("u", "v", "w")):
-                cols.append(rotations[:, a, b])
-                names.append(f"{world} on body {body}")
-    else:
-        for j, c in enumerate(system.state_names):
-            x = xs[:, j]
-            cols += [x, np.abs(x) * x, np.tanh(x / max(0.05 * float(np.std(x)), 1e-6))]
-            names += [c, f"|{c}|{c}", f"sign({c})"]
+    cols, names = system.residual_features(xs, predicted)  # what differs per system is a method on it
     lag = max(1, int(round(0.03 / dt)))
     for i, c in enumerate(system.input_names):
         u = us[:, i]

@@ -455,6 +455,26 @@ class Helicopter(AbstractSystem):
     def body_axes(self) -> tuple[str, ...]:
         return BODY_AXES
 
+    # Its rates answer the inputs within a sample (the held input makes the acceleration jump at
+    # every sample, and a stiff flight controller moves the input every sample).
+    fast_input_response: ClassVar[bool] = True
+
+    def residual_features(self, xs, accelerations):
+        """Body velocities and rates with their signs and squares and the model's accelerations, and
+        the world's axes seen in the body frame (gravity's direction, and north and east: what a
+        world-fixed effect such as wind turns with)."""
+        names, cols = [], []
+        rotations = np.asarray(jax.vmap(quaternion_to_rotation)(jnp.asarray(xs[:, QUATERNION])))
+        for i, c in zip(range(BODY.start, BODY.stop), BODY_AXES):
+            x = xs[:, i]
+            cols += [x, np.abs(x) * x, np.tanh(x / max(0.05 * float(np.std(x)), 1e-6)), accelerations[:, i - BODY.start]]
+            names += [c, f"|{c}|{c}", f"sign({c})", f"model acceleration d{c}/dt"]
+        for a, world in enumerate(("north", "east", "down")):
+            for b, body in enumerate(("u", "v", "w")):
+                cols.append(rotations[:, a, b])
+                names.append(f"{world} on body {body}")
+        return cols, names
+
     def vector_field(self, t, x, u):
         dpos, dquat = rigid_body_kinematics(x, self.normalisation_gain)
         dbody = self.body_model(x[QUATERNION], x[BODY], u)

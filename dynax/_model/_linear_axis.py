@@ -32,6 +32,10 @@ class LinearAxis(AbstractManipulator):
     n_joints: ClassVar[int] = 1
     input_names: ClassVar[tuple[str, ...]] = ("force",)
 
+    @property
+    def angle_indices(self) -> tuple[int, ...]:
+        return ()  # the EMPS axis is prismatic; a rotary axis' angle is not treated as periodic either
+
     def __check_init__(self):
         if self.coulomb_velocity <= 0:
             raise ValueError(f"LinearAxis: `coulomb_velocity` must be positive, got {self.coulomb_velocity}")

@@ -1,11 +1,12 @@
 """The system abstraction: an `eqx.Module` whose dynamics is `vector_field(t, x, u)`."""
 
 import abc
-from typing import Any
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float, ArrayLike, PyTree
 
 
@@ -87,6 +88,43 @@ class AbstractSystem(eqx.Module):
         `u, v, w, p, q, r`. Default: none."""
         return ()
 
+    # What the discrepancy diagnosis (`dynax.diagnose`) needs to know about a system. Additive:
+    # every default below describes a system with no joints, no body axes and no angles.
+
+    @property
+    def joints(self) -> tuple[int, ...]:
+        """The joints that joint-space model extensions (`CoulombFriction`, `RotorInertia`, ...) act on.
+        Default: none (only a manipulator has a mass matrix and bias force to extend)."""
+        return ()
+
+    @property
+    def angle_indices(self) -> tuple[int, ...]:
+        """The position states that are angles (periodic features `sin q`, `cos q` make sense for them).
+        Default: none."""
+        return ()
+
+    #: Whether the rates answer a held input within one sample (a helicopter under a stiff flight
+    #: controller). The residual analysis then compares velocity increments over each sample interval,
+    #: integrated under the held input, instead of accelerations at the samples.
+    fast_input_response: ClassVar[bool] = False
+
+    def residual_features(
+        self, xs: Float[np.ndarray, "time n_states"], accelerations: Float[np.ndarray, "time n_velocities"]
+    ) -> tuple[list[np.ndarray], list[str]]:
+        """Columns a probe of one-step residuals regresses on: functions of the (smoothed) state in
+        which a missing force would show, and the model's own accelerations (`accelerations`, one
+        column per `velocity_indices`). Returns `(columns, names)`.
+
+        Default: each state $x$, $|x|x$ and a smoothed sign; manipulators and the helicopter
+        give their own (see `dynax.structure_test`).
+        """
+        names, cols = [], []
+        for j, c in enumerate(self.state_names):
+            x = xs[:, j]
+            cols += [x, np.abs(x) * x, np.tanh(x / max(0.05 * float(np.std(x)), 1e-6))]
+            names += [c, f"|{c}|{c}", f"sign({c})"]
+        return cols, names
+
 
 class AbstractManipulator(AbstractSystem):
     r"""A rigid-body system $M(q)\ddot q + h(q, \dot q) = B u$ with state $x = (q, \dot q)$.
@@ -124,6 +162,28 @@ class AbstractManipulator(AbstractSystem):
     @property
     def velocity_indices(self) -> tuple[int, ...]:
         return tuple(range(self.n_joints, 2 * self.n_joints))
+
+    @property
+    def joints(self) -> tuple[int, ...]:
+        return tuple(range(self.n_joints))
+
+    @property
+    def angle_indices(self) -> tuple[int, ...]:
+        """Revolute joints: every joint (a prismatic axis overrides this)."""
+        return tuple(range(self.n_joints))
+
+    def residual_features(self, xs, accelerations):
+        r"""Per joint: the smoothed sign of its velocity, the velocity, $|\dot q|\dot q$, $\sin q$,
+        $\cos q$ and the model's acceleration."""
+        names, cols = [], []
+        n = self.n_joints
+        for j in range(n):
+            q, v = xs[:, j], xs[:, n + j]
+            c = self.state_names[j]
+            vs = max(0.05 * float(np.std(v)), 1e-6)
+            cols += [np.tanh(v / vs), v, np.abs(v) * v, np.sin(q), np.cos(q), accelerations[:, j]]
+            names += [f"sign(d{c})", f"d{c}", f"|d{c}|d{c}", f"sin({c})", f"cos({c})", f"model acceleration d{c}/dt"]
+        return cols, names
 
     def vector_field(self, t, x, u):
         n = self.n_joints

@@ -52,8 +52,22 @@ def test_cli_diagnose_writes_the_contract_report(offset_data, tmp_path, capsys):
     for name in ("report.md", "measured_vs_simulated.png", "sim_error.png", "residuals.png"):
         assert (out / name).stat().st_size > 0
     assert "input_offset" in (out / "report.md").read_text()
-    printed = capsys.readouterr().out
+    # the validation block (an extension inside the contract's model objects): fit % and residual tests
+    for model in ("nominal", "extended"):
+        v = report[model]["validation"]
+        assert v["horizon_s"] == report["reference_horizon_s"]
+        assert set(v["fit_percent"]) == {"q1", "q2", "dq1", "dq2"}
+        (tests,) = v["residual_tests"]
+        assert tests["run"].endswith("run2.csv") and set(tests["whiteness"]) == {"dq1", "dq2"}
+        assert set(tests["cross_correlation"]["dq2"]) == {"tau2"} and 0 <= tests["whiteness"]["dq2"]["p_value"] <= 1
+    fits = {m: report[m]["validation"]["fit_percent"] for m in ("nominal", "extended")}
+    assert all(fits["extended"][s] > fits["nominal"][s] for s in ("q1", "q2"))  # the offset costs fit, found it is back
+    assert "| extended |" in (out / "report.md").read_text() and "fit q1" in (out / "report.md").read_text()
+    captured = capsys.readouterr()
+    printed = captured.out
     assert "Cause: input_offset at tau2" in printed and "Gain" in printed
+    # stderr is not a terminal here: the stages as log lines (with the candidate batches), no bar
+    assert "screening" in captured.err and "batch of 5 fits" in captured.err and "\r" not in captured.err
 
 
 @pytest.mark.slow  # other record lengths: compiles the fits again
