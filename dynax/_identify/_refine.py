@@ -199,7 +199,7 @@ def record_residual_scale(system, initial_states, records, scale, method: Simula
 
 
 def _ml_weights(sigma: np.ndarray) -> np.ndarray:
-    """Weights $1/\hat\sigma_r$ of the residuals (so $1/\hat\sigma_r^2$ of their squares), mean 1,
+    r"""Weights $1/\hat\sigma_r$ of the residuals (so $1/\hat\sigma_r^2$ of their squares), mean 1,
     with $\hat\sigma_r$ floored at the noise level (1) and at a tenth of the records' median."""
     floored = np.maximum(sigma, max(1.0, 0.1 * float(np.median(sigma))))
     weights = 1.0 / floored
