@@ -271,12 +271,16 @@ def test_each_records_residual_scale_is_estimated_from_its_own_residuals():
     records, starts = [], []
     for k, level in enumerate(levels):
         ts = np.arange(0.0, 6.0 + dt / 2, dt)
-        solution = scipy.integrate.solve_ivp(
-            lambda t, x: np.asarray(field(jnp.asarray(x), jnp.asarray(torques(np.atleast_1d(np.floor(t / dt + 1e-9) * dt), k)[0]))),
-            (0.0, ts[-1]), np.zeros(4), method="DOP853", t_eval=ts, rtol=1e-10, atol=1e-12, max_step=dt / 4)
-        clean = solution.y.T
+        us = torques(ts, k)
+        clean = [np.zeros(4)]
+        for i in range(len(ts) - 1):  # the recorded zero-order hold: one DOP853 solve per sample interval
+            u = jnp.asarray(us[i])
+            step = scipy.integrate.solve_ivp(lambda t, x: np.asarray(field(jnp.asarray(x), u)), (ts[i], ts[i + 1]),
+                                             clean[-1], method="DOP853", rtol=1e-10, atol=1e-12)
+            clean.append(step.y[:, -1])
+        clean = np.stack(clean)
         noisy = clean + level * scale * np.random.default_rng(k).normal(size=clean.shape)
-        records.append(Trajectory(jnp.asarray(ts), jnp.asarray(noisy), jnp.asarray(torques(ts, k)), NAMES, ("tau1", "tau2")))
+        records.append(Trajectory(jnp.asarray(ts), jnp.asarray(noisy), jnp.asarray(us), NAMES, ("tau1", "tau2")))
         starts.append(clean[: len(ts) - 1 : 50])  # the true state at each 0.5 s segment's start
     sigma = record_residual_scale(model, jnp.asarray(np.concatenate(starts)), records, scale, method)
     np.testing.assert_allclose(sigma, levels, rtol=0.05)
