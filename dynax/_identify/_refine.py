@@ -45,10 +45,10 @@ from .._data._trajectory import Trajectory
 from .._model._extensions import Extended, RotorInertia
 from .._model._system import AbstractSystem
 from .._model._two_link import AbstractTwoLink
+from .._simulate import FixedGrid, simulate
 from ._consistency import consistent_parametrisation, ConsistentParametrisation
 from ._defaults import choose_filter, measurement_noise_std
 from ._regressors import _split, parameter_vector, with_parameters
-from .._simulate import FixedGrid, simulate
 from ._simulation_fit import _segments, fit_simulation_error, SimulationFit
 
 
