@@ -2,6 +2,8 @@
 
     python experiments/dfki_default_identification.py --out experiments/results/dfki_default_identification
 
+(`--record-weights motion` for the previous default, each record weighted by its motion alone)
+
 (or folds in parallel: `--runs 00,01,02 --out A`, `--runs 03,05,12 --out B`, then `--merge A B --out ...`)
 
 For each of the six `sys_id` runs: fit `identify(DoublePendulum(), other_five_runs, Dynamic(),
@@ -31,6 +33,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
+from dynax._identify import _identify as identify_module, _refine  # noqa: E402
 from dynax._identify._validation import held_out_error  # noqa: E402
 
 from dfki_simulation import DFKI, MAPPING, read_parameters  # noqa: E402  (the script's folder is on sys.path)
@@ -72,7 +75,16 @@ def main(argv=None):
     parser.add_argument("--runs", default=",".join(RUNS), help="held-out runs to evaluate (default all six)")
     parser.add_argument("--merge", nargs="+", type=pathlib.Path, default=(), metavar="DIR",
                         help="fit nothing: merge the results.json of earlier runs (e.g. folds run in parallel)")
+    parser.add_argument("--record-weights", choices=_refine.RECORD_WEIGHTS, default=_refine.DEFAULT_RECORD_WEIGHTS,
+                        help="weights of the records in the output-error refinement (default: %(default)s)")
     args = parser.parse_args(argv)
+    refinements = []  # what the refinement did (record weights), seen through a thin wrapper
+
+    def refine(*a, **k):
+        refinements.append(_refine.refine_by_simulation(*a, record_weights=args.record_weights, **k))
+        return refinements[-1]
+
+    identify_module.refine_by_simulation = refine
     results = {"horizons_s": list(HORIZONS), "runs": {}}
     for part in args.merge:
         results["runs"].update(json.loads((part / "results.json").read_text())["runs"])
@@ -97,13 +109,21 @@ def main(argv=None):
             "consistency": result.consistency.to_json(),
             "least_squares_consistency": stages["least_squares"]["consistency"],
             "relative_equation_error": {k: v["relative_equation_error"] for k, v in stages.items()},
+            "record_weights_mode": args.record_weights,
+            "training_runs": [r for r in RUNS if r != held],
+            "record_weights": list(refinements[-1].record_weights),
+            "record_residual_scale": list(refinements[-1].record_sigma),
+            "reweights": refinements[-1].reweights,
             "settings": [{k: s[k] for k in ("lowpass_hz", "lowpass_order", "trim", "decimate")} for s in result.settings],
         }
         results["runs"][held] = entry
         print(f"held out {held} ({seconds:.0f} s): dynax " + " ".join(f"{v:.3f}" for v in entry["dynax"])
               + " | least squares " + " ".join(f"{v:.3f}" for v in entry["dynax_least_squares"])
               + " | lab " + " ".join(f"{v:.3f}" for v in entry["lab_model_3.0"])
-              + f" | consistent {entry['consistency']['consistent']}", flush=True)
+              + f" | consistent {entry['consistency']['consistent']}"
+              + " | weights " + " ".join(f"{w:.2f}" for w in entry["record_weights"])
+              + " | residual scale " + " ".join(f"{v:.1f}" for v in entry["record_residual_scale"])
+              + f" | {entry['reweights']} refits", flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "results.json").write_text(json.dumps(results, indent=2) + "\n")
 

@@ -17,6 +17,20 @@ hundred times less noisy than the driver's estimate, without the amplitude loss 
 at the band's edge (which on a large-amplitude run distorts the very motion that is fitted). Each state's residual is divided by its measurement-noise level
 (`measurement_noise_std`): maximum likelihood under white measurement noise, which lets the
 precise encoder positions, not the noisy velocity estimate, decide.
+
+Records differ in how well the model can follow them (a chaotic large-amplitude swing-up leaves a
+larger output error than a gentle run, through model error the noise level does not capture), so
+by default (`record_weights="ml"`) each record's residual variance is an unknown of its own:
+maximum likelihood for independent Gaussian errors with one variance $\sigma_r^2$ per record,
+whose profile likelihood is $-\tfrac12 \sum_r N_r \log \mathrm{SSR}_r(\theta)$. It is maximised by
+iterative reweighting: fit with the weights $1/\hat\sigma_r^2$, estimate
+$\hat\sigma_r^2 = \mathrm{SSR}_r / (N_r - p_r)$ from each record's own residuals ($p_r$ the initial
+states fitted on it), refit from the previous estimate, until the weights settle (Bard,
+*Nonlinear Parameter Estimation*, 1974, sec. 4-6 and 7-6; Walter & Pronzato, *Identification of
+Parametric Models from Experimental Data*, 1997, sec. 3.3-3.4; Ljung, *System Identification*,
+2nd ed., 1999, sec. 7.4). A variance below the measurement noise's is not believed: $\hat\sigma_r$
+has a floor of 1 in the residual's unit (the noise level) and of a tenth of the records' median,
+so that no record a short or easy one fits almost exactly takes over the fit.
 """
 
 import dataclasses
@@ -31,13 +45,17 @@ from .._data._trajectory import Trajectory
 from .._model._extensions import Extended, RotorInertia
 from .._model._system import AbstractSystem
 from .._model._two_link import AbstractTwoLink
+from .._simulate import FixedGrid, simulate
 from ._consistency import consistent_parametrisation, ConsistentParametrisation
 from ._defaults import choose_filter, measurement_noise_std
 from ._regressors import _split, parameter_vector, with_parameters
-from ._simulation_fit import fit_simulation_error, SimulationFit
+from ._simulation_fit import _segments, fit_simulation_error, SimulationFit
 
 
-BALANCE = True
+RECORD_WEIGHTS = ("ml", "motion", "equal")
+DEFAULT_RECORD_WEIGHTS = "ml"  # what `identify`'s refinement uses
+MAX_REWEIGHTS = 3  # refits after the first fit, at most
+SETTLED = 0.1  # weights settled: no record's weight changed by more than 10 %
 SAMPLES_PER_PERIOD = 40.0  # grid of the fit: samples per period of the signal band's edge
 
 
@@ -83,7 +101,9 @@ def with_elbow_rotor(system: AbstractSystem) -> AbstractSystem:
 class Refinement:
     """What `refine_by_simulation` did. Fields: `system` (refined), `names`, `estimate`,
     `std_errors` (through the parametrisation's Jacobian, ignoring correlations: indicative), `initial_residual_rms` and `residual_rms` (scaled state residual at the start and
-    at the end), `steps`, `dt` and `segment_s` (the grid and segment length fitted)."""
+    at the end), `steps`, `dt` and `segment_s` (the grid and segment length fitted),
+    `record_weights` (the final weight of each record's residuals), `record_sigma` (each record's
+    residual scale at the end, in units of the measurement noise) and `reweights` (refits done)."""
 
     system: AbstractSystem
     names: tuple[str, ...]
@@ -96,6 +116,9 @@ class Refinement:
     dt: float
     segment_s: float
     n_samples: int
+    record_weights: tuple[float, ...] = ()
+    record_sigma: tuple[float, ...] = ()
+    reweights: int = 0
 
 
 def _velocities_from_positions(xs: np.ndarray, dt: float, band_hz: float) -> np.ndarray:
@@ -149,18 +172,60 @@ def motion_records(records: list[Trajectory], *, filtered: bool | str = "positio
     return out, float(np.median(steps))
 
 
+@eqx.filter_jit
+def _segment_squares(system, x0, ts, xs, us, scale, simulation: FixedGrid):
+    """Sum of squared scaled state residuals of each segment simulated from its initial state."""
+    sims = jax.vmap(lambda x, t, u: simulate(system, x, t, u, method=simulation, throw=False).xs)(x0, ts, us)
+    r = (sims - xs) / scale
+    r = jnp.where(jnp.isfinite(r), r, 1e3)  # as the fit counts a diverged rollout
+    return jnp.sum(r**2, axis=(1, 2))
+
+
+def record_residual_scale(system, initial_states, records, scale, method: SimulationFit) -> np.ndarray:
+    r"""Each record's residual scale $\hat\sigma_r = \sqrt{\mathrm{SSR}_r / (N_r - p_r)}$ at a fit.
+
+    `system` and `initial_states` are a `fit_simulation_error` solution on `records` (cut into the
+    same segments, `method.segment_s`); residuals are in units of `scale` (per state); $p_r$ counts
+    the initial states fitted on record $r$ (none unless `method.fit_initial_states`).
+    """
+    ts, xs, us, _, owner, _ = _segments(records, method.segment_s)
+    dtype = jnp.result_type(initial_states)
+    squares = np.asarray(_segment_squares(system, initial_states, *(jnp.asarray(a, dtype) for a in (ts, xs, us)),
+                                          jnp.asarray(scale, dtype), method.simulation))
+    per_segment = xs.shape[1] * xs.shape[2] - (xs.shape[2] if method.fit_initial_states else 0)
+    ssr = np.bincount(owner, weights=squares, minlength=len(records))
+    dof = np.bincount(owner, minlength=len(records)) * per_segment
+    return np.sqrt(ssr / np.maximum(dof, 1))
+
+
+def _ml_weights(sigma: np.ndarray) -> np.ndarray:
+    r"""Weights $1/\hat\sigma_r$ of the residuals (so $1/\hat\sigma_r^2$ of their squares), mean 1,
+    with $\hat\sigma_r$ floored at the noise level (1) and at a tenth of the records' median."""
+    floored = np.maximum(sigma, max(1.0, 0.1 * float(np.median(sigma))))
+    weights = 1.0 / floored
+    return weights / np.mean(weights)
+
+
 def refine_by_simulation(
     system: AbstractSystem, names: tuple[str, ...], records: list[Trajectory], method: SimulationFit,
-    *, filtered: bool | str = "positions",
+    *, filtered: bool | str = "positions", record_weights: str | None = None,
 ) -> Refinement:
     """Refine a two-link arm's least-squares model by the output-error fit, consistent by construction.
 
     **Arguments:** `system` (the least-squares model, carrying its estimate; rotor inertia at the
     elbow is added if missing), `names` its parameter names, `records` to fit, `method` the
-    `SimulationFit` settings (segment length, steps).
+    `SimulationFit` settings (segment length, steps), `record_weights` how the records' residuals
+    are weighted: `"ml"` (default) each by its own residual scale, estimated by iterative
+    reweighting (maximum likelihood with one unknown noise variance per record, see the module's
+    docstring; starts from the `"motion"` weights), `"motion"` each inversely to its motion's
+    amplitude (RMS of the joint positions about their mean), `"equal"` all alike; `None`:
+    `DEFAULT_RECORD_WEIGHTS` (`"ml"`).
 
     **Returns:** a `Refinement`.
     """
+    record_weights = DEFAULT_RECORD_WEIGHTS if record_weights is None else record_weights
+    if record_weights not in RECORD_WEIGHTS:
+        raise ValueError(f"refine_by_simulation: `record_weights` must be one of {RECORD_WEIGHTS}, got {record_weights!r}")
     if not isinstance(_split(system)[0], AbstractTwoLink):
         raise TypeError("refine_by_simulation refines two-link arms")
     model = with_elbow_rotor(system)
@@ -177,15 +242,33 @@ def refine_by_simulation(
     fitted, dt = motion_records(records, filtered=filtered)
     # Maximum likelihood under white measurement noise: each state weighted by its noise level.
     noise = np.median(np.stack([measurement_noise_std(r if r.is_uniform else resample(r, r.dt)) for r in records]), axis=0)
-    # Each record counts alike, whatever its amplitude: a large-amplitude (chaotic) run must not swamp the rest.
+    # First guess of each record's residual scale: its motion's amplitude (a large-amplitude,
+    # chaotic run must not swamp the rest).
     motion = np.array([float(np.sqrt(np.mean(np.square(np.asarray(r.xs[:, :2]) - np.mean(np.asarray(r.xs[:, :2]), 0)))))
                        for r in fitted])
-    weights = (1.0 / motion) / np.mean(1.0 / motion) if BALANCE else None
-    result = fit_simulation_error(
-        wrapped, fitted, filter_spec=filter_spec, state_scale=jnp.asarray(noise), record_weights=weights, segment_s=method.segment_s,
-        fit_initial_states=method.fit_initial_states, continuity_weight=method.continuity_weight,
-        rtol=method.rtol, atol=method.atol, max_steps=method.max_steps, simulation=method.simulation,
-    )
+    weights = np.ones(len(fitted)) if record_weights == "equal" else (1.0 / motion) / np.mean(1.0 / motion)
+
+    def fit(start, weights):
+        return fit_simulation_error(
+            start, fitted, filter_spec=filter_spec, state_scale=jnp.asarray(noise), record_weights=weights,
+            segment_s=method.segment_s, fit_initial_states=method.fit_initial_states,
+            continuity_weight=method.continuity_weight, rtol=method.rtol, atol=method.atol,
+            max_steps=method.max_steps, simulation=method.simulation,
+        )
+
+    result = fit(wrapped, weights)
+    initial_rms, steps = float(result.initial_residual_rms), int(result.steps)
+    sigma = record_residual_scale(result.system, result.initial_states, fitted, noise, method)
+    reweights = 0
+    while record_weights == "ml" and reweights < MAX_REWEIGHTS:
+        new = _ml_weights(sigma)
+        if np.max(np.abs(np.log(new / weights))) < np.log1p(SETTLED):
+            break  # the weights the last fit used are (within 10 %) those its residuals imply
+        weights = new
+        result = fit(result.system, weights)
+        steps += int(result.steps)
+        reweights += 1
+        sigma = record_residual_scale(result.system, result.initial_states, fitted, noise, method)
     refined = result.system.model
     estimate = np.asarray(parameter_vector(refined, friction))
     # Standard errors through the parametrisation's Jacobian (delta method).
@@ -193,5 +276,6 @@ def refine_by_simulation(
     phi_std = np.asarray(result.std_errors)
     with np.errstate(invalid="ignore"):  # an unidentified direction has an infinite standard error
         std = np.sqrt(np.sum((jac * phi_std[None, :]) ** 2, axis=1))
-    return Refinement(refined, names, estimate, std, float(result.initial_residual_rms), float(result.residual_rms),
-                      float(result.relative_error), int(result.steps), dt, method.segment_s, result.n_samples)
+    return Refinement(refined, names, estimate, std, initial_rms, float(result.residual_rms),
+                      float(result.relative_error), steps, dt, method.segment_s, result.n_samples,
+                      tuple(float(w) for w in weights), tuple(float(v) for v in sigma), reweights)

@@ -253,3 +253,37 @@ def test_the_labs_geared_rotor_with_its_coupling_is_base_parameters_plus_elbow_r
         tau = m @ [a1, a2] + c + grav + [b1 * dq1, b2 * dq2]
         ddq = model.vector_field(0.0, jnp.array([q1, q2, dq1, dq2]), jnp.asarray(tau))[2:]
         np.testing.assert_allclose(np.asarray(ddq), [a1, a2], rtol=1e-9, atol=1e-9)
+
+
+def test_each_records_residual_scale_is_estimated_from_its_own_residuals():
+    # The maximum-likelihood record weights (one unknown noise variance per record) rest on each record's
+    # residual scale. Records made by scipy's DOP853, with white noise of a known, different level on each:
+    # simulated by dynax from the true model and the true segment starts, the residual scale of each record
+    # gives back its own noise level (about 2400 residuals each: within 5 %).
+    from dynax._identify._refine import _ml_weights, record_residual_scale
+    from dynax._identify._simulation_fit import SimulationFit
+
+    model = dynax.DoublePendulum.from_base_parameters(RIG)
+    field = jax.jit(lambda x, u: model.vector_field(0.0, x, u))
+    scale = np.array([1e-3, 1e-3, 1e-2, 1e-2])
+    levels = (1.0, 3.0, 20.0)
+    dt, method = 0.01, SimulationFit(segment_s=0.5, fit_initial_states=False)
+    records, starts = [], []
+    for k, level in enumerate(levels):
+        ts = np.arange(0.0, 6.0 + dt / 2, dt)
+        us = torques(ts, k)
+        clean = [np.zeros(4)]
+        for i in range(len(ts) - 1):  # the recorded zero-order hold: one DOP853 solve per sample interval
+            u = jnp.asarray(us[i])
+            step = scipy.integrate.solve_ivp(lambda t, x: np.asarray(field(jnp.asarray(x), u)), (ts[i], ts[i + 1]),
+                                             clean[-1], method="DOP853", rtol=1e-10, atol=1e-12)
+            clean.append(step.y[:, -1])
+        clean = np.stack(clean)
+        noisy = clean + level * scale * np.random.default_rng(k).normal(size=clean.shape)
+        records.append(Trajectory(jnp.asarray(ts), jnp.asarray(noisy), jnp.asarray(us), NAMES, ("tau1", "tau2")))
+        starts.append(clean[: len(ts) - 1 : 50])  # the true state at each 0.5 s segment's start
+    sigma = record_residual_scale(model, jnp.asarray(np.concatenate(starts)), records, scale, method)
+    np.testing.assert_allclose(sigma, levels, rtol=0.05)
+    # the weights are 1 / sigma (of the residuals; 1 / sigma^2 of their squares), with a floor at the noise level
+    weights = _ml_weights(np.array([0.01, 2.0, 8.0]))
+    np.testing.assert_allclose(weights / weights[-1], [8.0, 4.0, 1.0])
