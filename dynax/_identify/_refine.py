@@ -176,7 +176,7 @@ def motion_records(records: list[Trajectory], *, filtered: bool | str = "positio
 def _segment_squares(system, x0, ts, xs, us, scale, simulation: FixedGrid):
     """Sum of squared scaled state residuals of each segment simulated from its initial state."""
     sims = jax.vmap(lambda x, t, u: simulate(system, x, t, u, method=simulation, throw=False).xs)(x0, ts, us)
-    r = (sims - xs) / scale
+    r = (sims - xs) / scale[None, None, :]
     r = jnp.where(jnp.isfinite(r), r, 1e3)  # as the fit counts a diverged rollout
     return jnp.sum(r**2, axis=(1, 2))
 
