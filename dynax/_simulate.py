@@ -224,10 +224,6 @@ def sample_interval(system, method: FixedGrid, bound):
     return advance
 
 
-# The old private spelling, for code written before the helper got its in-package name.
-_sample_interval = sample_interval
-
-
 def _fixed_grid(system, x0, ts, us, method, bound):
     advance = sample_interval(system, method, bound)
 
