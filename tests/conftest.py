@@ -2,6 +2,7 @@
 promotion raised (implicit broadcasting in the library is an error, not a silent reshape), a seeded key,
 paths and shared data fixtures. Comparison helpers live in `tests/helpers.py`."""
 
+import gc
 import os
 import pathlib
 
@@ -59,3 +60,36 @@ def acrobot_csv(tmp_path_factory):
     save_trajectory(Trajectory(jnp.asarray(ts), sim.xs, jnp.asarray(us), ("q1", "q2", "dq1", "dq2"), ("tau2",)), path)
     return path
 
+
+
+def _memory_maps() -> int:
+    try:
+        with open("/proc/self/maps") as f:
+            return sum(1 for _ in f)
+    except OSError:  # not Linux
+        return 0
+
+
+def _max_memory_maps() -> int:
+    try:
+        return int(pathlib.Path("/proc/sys/vm/max_map_count").read_text())
+    except (OSError, ValueError):
+        return 65530
+
+
+_MAP_LIMIT = _max_memory_maps() // 2
+
+
+@pytest.fixture(autouse=True)
+def _release_compiled_code():
+    """Drop JAX's compiled executables when this worker holds many memory maps.
+
+    XLA's CPU backend maps each compiled executable into memory of its own; a test worker that
+    compiles several hundred programs (the whole suite on two workers) reaches the kernel's limit
+    on memory maps per process (`vm.max_map_count`, 65530 by default) and the next compilation
+    dies with a segmentation fault. `jax.clear_caches()` unmaps them; later tests compile again.
+    """
+    yield
+    if _memory_maps() > _MAP_LIMIT:
+        jax.clear_caches()
+        gc.collect()

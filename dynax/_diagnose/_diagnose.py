@@ -330,7 +330,7 @@ def _prepare(system, train, validation, candidates, mode, options: _Options) -> 
         refit_names=refit_names, family=family, scales=scales, inits=inits, searchable=searchable,
         not_identifiable=not_identifiable, fit_window_s=fit_window_s,
         train_windows=make_windows(train_records, n_fit, n_fit), val_windows=val_windows,
-        window_runs=np.asarray([r for r, _ in val_windows.starts]), val_stride=val_stride, horizons=horizons,
+        window_runs=np.asarray(val_windows.starts)[:, 0], val_stride=val_stride, horizons=horizons,
         candidates_s=candidates_s, options=options,
     )
 

@@ -99,7 +99,9 @@ class Windows(eqx.Module):
     us: Float[Array, "window step n_inputs"]
     ts_before: Float[Array, "window before"]
     us_before: Float[Array, "window before n_inputs"]
-    starts: tuple = eqx.field(static=True)  # (record index, start sample) per window
+    # (record index, start sample) per window, read on the host only. An array, not a static
+    # field: a static field would compile every fit anew for records cut at other places.
+    starts: Int[Array, "window 2"]
 
 
 def make_windows(trajectories, n_steps: int, stride: int, *, history_s: float = 0.5) -> Windows:
@@ -120,7 +122,7 @@ def make_windows(trajectories, n_steps: int, stride: int, *, history_s: float = 
     if not ts:
         raise ValueError(f"the records are shorter than one window of {n_steps} samples")
     stack = lambda a: jnp.asarray(np.stack(a))  # noqa: E731
-    return Windows(stack(ts), stack(xs), stack(us), stack(tb), stack(ub), tuple(starts))
+    return Windows(stack(ts), stack(xs), stack(us), stack(tb), stack(ub), np.asarray(starts, dtype=np.int64))
 
 
 class Family(eqx.Module):

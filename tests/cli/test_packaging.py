@@ -91,6 +91,9 @@ def test_importing_dynax_sets_no_matplotlib_backend_and_skips_heavy_modules():
 
 def test_a_real_sigint_exits_130():
     code = ("import os, signal, sys, time\n"
+            # A terminal's Python has the KeyboardInterrupt handler; a child of a test worker may have inherited
+            # SIGINT ignored (as background jobs of a shell do), and Python then installs no handler at all.
+            "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
             "from dynax._cli import _identify\n"
             "from dynax._cli._main import main\n"
             # raise_signal delivers to the main thread, as a terminal's Ctrl-C reaches Python's handler; os.kill

@@ -66,9 +66,10 @@ class Extended(AbstractSystem):
         return tuple(self.system.input_names)
 
     def parameter_filter(self):
-        """The nominal system's own filter, and every term's coefficients."""
+        """The nominal system's own filter, and each term's (`AbstractTerm.parameter_filter`: its coefficients)."""
         spec = jax.tree.map(eqx.is_inexact_array, self)
-        return eqx.tree_at(lambda m: m.system, spec, self.system.parameter_filter())
+        spec = eqx.tree_at(lambda m: m.system, spec, self.system.parameter_filter())
+        return eqx.tree_at(lambda m: m.terms, spec, tuple(t.parameter_filter() for t in self.terms))
 
     def state_error(self, simulated, measured):
         return self.system.state_error(simulated, measured)

@@ -10,6 +10,7 @@ import abc
 from typing import ClassVar
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
@@ -60,6 +61,12 @@ class AbstractTerm(eqx.Module):
     def parameters(self, system) -> dict[str, Array]:
         """The term's coefficients by report name (one for a named cause; several for a `Discovered` term)."""
         return {self.parameter_name(system): self.coefficient}
+
+    def parameter_filter(self):
+        """What a fit of an `Extended` model moves in this term (a filter for `dynax.Parameters`):
+        every inexact array leaf. Terms with settings held as arrays (so that a new value does not
+        recompile, e.g. a friction's smoothing speed) leave those out."""
+        return jax.tree.map(eqx.is_inexact_array, self)
 
 
 class AbstractJointTerm(AbstractTerm):
@@ -142,7 +149,9 @@ class CoulombFriction(AbstractJointTerm):
 
     joint: int = eqx.field(static=True)
     coefficient: Float[Array, ""]
-    velocity_scale: float = eqx.field(static=True)
+    # An array leaf, not a static field: the diagnosis sets it from each record's speeds, and a
+    # static float would compile every diagnosis anew. Not fitted (see `parameter_filter`).
+    velocity_scale: Float[Array, ""]
     cause: ClassVar[str] = "coulomb_friction"
     prefix: ClassVar[str] = "fc"
     neutral: ClassVar[float] = 0.0
@@ -151,7 +160,10 @@ class CoulombFriction(AbstractJointTerm):
     def __init__(self, joint: int, fc: ArrayLike = 0.0, *, velocity_scale: float = 0.01):
         self.joint = joint
         self.coefficient = _scalar(fc)
-        self.velocity_scale = velocity_scale
+        self.velocity_scale = _scalar(velocity_scale)
+
+    def parameter_filter(self):
+        return eqx.tree_at(lambda t: t.velocity_scale, super().parameter_filter(), False)
 
     def force(self, q, dq):
         return -self.coefficient * jnp.tanh(dq / self.velocity_scale)
