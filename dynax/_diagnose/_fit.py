@@ -187,28 +187,6 @@ def _window_residuals(p, args):
     return e.reshape(-1)
 
 
-@jax.custom_jvp
-def _residuals(p, args):
-    """The scaled window errors of configuration `p`, flattened; differentiated by a dense forward-mode Jacobian.
-
-    Levenberg-Marquardt needs the whole Jacobian (a few parameters, many residuals) at every step.
-    The JVP rule below computes it with one `jacfwd` (all parameter tangents through one rollout)
-    and applies it as a matrix, so the solver's linearisation is one rollout with its tangents plus a
-    matrix product: the same work as before, and a fraction of the compilation that linearising
-    the rollout itself (a primal and a separate linear rollout, materialised again by the solver)
-    would take.
-    """
-    return _window_residuals(p, args)
-
-
-@_residuals.defjvp
-def _residuals_jvp(primals, tangents):
-    p, args = primals
-    dp, _ = tangents
-    J, r = jax.jacfwd(lambda q: (_window_residuals(q, args),) * 2, has_aux=True)(p)
-    return r, J @ dp
-
-
 def fit_configuration(family: Family, windows: Windows, slots, new, p_init, free, *, solver=SOLVER, max_steps: int = MAX_STEPS):
     """The simulation-error fit of one configuration through `fit_least_squares` (vmap this over configurations).
 
@@ -223,8 +201,10 @@ def fit_configuration(family: Family, windows: Windows, slots, new, p_init, free
     solver's iterations.
     """
     s = family.scale(slots, new) * free
-    solution = fit_least_squares(_residuals, p_init, True, (family, windows, slots, new), solver=solver, scale=s,
-                                 max_steps=max_steps)
+    # jac="dense": the whole Jacobian by one `jacfwd` per step (all parameter tangents through one
+    # rollout), applied as a matrix; far less compilation than linearising the rollout itself.
+    solution = fit_least_squares(_window_residuals, p_init, True, (family, windows, slots, new), solver=solver,
+                                 scale=s, max_steps=max_steps, jac="dense")
     return solution.value, 2.0 * solution.loss, solution.std_errors, solution.steps
 
 

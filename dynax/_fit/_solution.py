@@ -32,6 +32,9 @@ class Solution(eqx.Module):
     - `loss`, `initial_loss`: $\tfrac12\lVert r\rVert^2$ (least squares) or the scalar loss, at the end and the start.
     - `steps`: iterations taken.
     - `n_residuals`: residual count (0 for a scalar loss).
+    - `jacobian`: the Jacobian of the residuals in the solver's scaled unknowns $z$ ($p = p_0 + s
+      \odot z$) at the solution, where a least-squares solver of the Gauss-Newton kind holds it
+      (`fit_least_squares(..., covariance=True)`); `None` otherwise.
     - `loss_history`, `time_history`: where the solver records them (`OptaxLBFGS`, the EM-free
       iteration): the loss after each step (entry 0 at the start) and the seconds since the start at
       which it was reached, NaN past the last step; `None` otherwise.
@@ -49,6 +52,7 @@ class Solution(eqx.Module):
     n_residuals: int = eqx.field(static=True, default=0)
     loss_history: Float[Array, " history"] | None = None
     time_history: Float[Array, " history"] | None = None
+    jacobian: Float[Array, "m n"] | None = None
 
     @property
     def names(self) -> tuple[str, ...]:

@@ -157,13 +157,10 @@ def _solve(unknowns, parameters: Parameters, data: _Segments, scale, solver, max
     compiled program per problem shape."""
     residuals = functools.partial(_residuals, simulation=simulation, fit_initial_states=fit_initial_states)
     solution = fit_least_squares(residuals, unknowns, parameters, data, solver=solver, scale=scale,
-                                 max_steps=max_steps, nonfinite=None, covariance=False, progress_token=token)
-
-    def scaled(z):
-        return residuals(parameters.with_vector(unknowns, solution.value + scale * z), data)
-
-    z = jnp.zeros_like(solution.value)
-    return solution, scaled(z), residuals(unknowns, data), jax.jacfwd(scaled)(z)
+                                 max_steps=max_steps, nonfinite=None, progress_token=token, jac="dense")
+    # The engine's residuals and Jacobian (scaled unknowns) at the solution, as the solver last formed them.
+    r = residuals(solution.model, data)
+    return solution, r, residuals(unknowns, data), solution.jacobian
 
 
 def fit_simulation_error(
