@@ -41,6 +41,10 @@ def register(subparsers):
                         help="horizon at which the gain is judged (default: the predictability horizon of the "
                              "nominal model on the training runs, see report.json 'horizon')")
     parser.add_argument("--max-terms", type=int, default=3, help="at most this many causes (default 3)")
+    parser.add_argument("--velocities", choices=("auto", "measured"), default="auto",
+                        help="auto (default): where a joint velocity's measurement noise exceeds the bias of a local "
+                             "cubic fit of the positions, take the velocity from that fit (report.json data.velocities "
+                             "says which); measured: use the velocities as recorded")
     parser.add_argument("--no-discovery", action="store_true",
                         help="do not search for a term beyond the cause vocabulary when structure is left")
     parser.add_argument("--out", required=True, help="output directory")
@@ -117,7 +121,8 @@ def run(args: argparse.Namespace) -> int:
     with stage_log() as say:
         report = diagnose(
             system, train, validation, mode=mode, reference_horizon_s=args.reference_horizon,
-            max_terms=args.max_terms, system_name=args.system, discovery=not args.no_discovery, progress=say,
+            max_terms=args.max_terms, system_name=args.system, discovery=not args.no_discovery,
+            velocities=args.velocities, progress=say,
         )
     held_out = validation if validation is not None else [_held_out(t) for t in train]
     with staged_directory(args.out) as stage:

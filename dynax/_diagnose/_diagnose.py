@@ -18,6 +18,7 @@ import numpy as np
 from .._data._derivatives import resample
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
+from .._identify._defaults import position_fit_window, with_velocities_from_positions
 from .._model._extensions import AbstractInputTerm, AbstractTerm, Extended
 from .._model._system import AbstractSystem
 from .._precision import warn_if_float32
@@ -82,6 +83,7 @@ class _Options:
     holdout_fraction: float
     shortlist: int
     discovery: bool
+    velocities: str = "auto"
 
 
 @dataclasses.dataclass
@@ -108,6 +110,7 @@ class _Problem:
     horizons: np.ndarray
     candidates_s: np.ndarray
     options: _Options
+    velocities: str = "as measured"
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -312,6 +315,8 @@ def _prepare(system, train, validation, candidates, mode, options: _Options) -> 
     """Step 0: records on one grid, the candidates and their identifiability, the training and held-out windows."""
     notes: list[str] = []
     train_records, validation_records, dt = _prepare_records(system, train, validation, options.holdout_fraction, notes)
+    train_records, validation_records, velocities = _velocity_estimates(system, train_records, validation_records,
+                                                                        options.velocities, notes)
     candidates = tuple(default_candidates(system, train_records) if candidates is None else candidates)
     if not candidates:
         raise UsageError("diagnose: `candidates` is empty")
@@ -331,7 +336,7 @@ def _prepare(system, train, validation, candidates, mode, options: _Options) -> 
         not_identifiable=not_identifiable, fit_window_s=fit_window_s,
         train_windows=make_windows(train_records, n_fit, n_fit), val_windows=val_windows,
         window_runs=np.asarray(val_windows.starts)[:, 0], val_stride=val_stride, horizons=horizons,
-        candidates_s=candidates_s, options=options,
+        candidates_s=candidates_s, options=options, velocities=velocities,
     )
 
 
@@ -599,6 +604,7 @@ def _data_summary(problem: _Problem, train, validation) -> DataSummary:
         n_train=int(sum(len(r) for r in problem.train)), n_validation=int(sum(len(r) for r in held_out)), dt=problem.dt,
         train_runs=tuple(r.source or f"train run {i + 1}" for i, r in enumerate(problem.train)),
         validation_runs=tuple(r.source or f"held-out run {i + 1}" for i, r in enumerate(held_out)),
+        velocities=problem.velocities,
     )
 
 
@@ -656,6 +662,7 @@ def diagnose(
     shortlist: int = 4,
     system_name: str | None = None,
     discovery: bool = True,
+    velocities: str = "auto",
     progress: Callable[[str], None] | bool | None = None,
 ) -> Report:
     r"""Diagnose what `system` gets wrong on measured data, name the cause and measure the gain.
@@ -704,6 +711,14 @@ def diagnose(
     - `shortlist`: candidates refitted jointly per round.
     - `system_name`: the contract name for the report (default the records' `system`).
     - `discovery`: search for a term beyond the vocabulary when structure is left (default on).
+    - `velocities`: `"auto"` (default): for a system whose states are joint positions and velocities,
+      each measured velocity that carries white noise larger than the bias of a local cubic fit of
+      its positions (Savitzky-Golay over half a period of the signal band's edge; see
+      `dynax._identify._defaults.with_velocities_from_positions`) is replaced by that fit's
+      derivative before anything is fitted or compared: the windows then start from better
+      velocities and are compared with them, so the held-out errors measure the model, not the
+      velocity sensor. `"measured"` keeps the records as they are. The report's
+      `data.velocities` says which was used.
     - `progress`: a callable is called with a line of text at each stage (e.g. `print`, or a
       `dynax.ProgressBar`'s `say`); otherwise a progress bar on stderr, one step per stage and per
       candidate batch: `True` / `False` force it on / off, `None` (default) draws it when stderr is a
@@ -719,8 +734,10 @@ def diagnose(
     """
     warn_if_float32("diagnosis")  # the float64 policy: say so, once, naming the switch
     _check_arguments(system, mode, max_terms)
+    if velocities not in ("auto", "measured"):
+        raise UsageError(f"diagnose: `velocities` must be 'auto' or 'measured', got {velocities!r}")
     options = _Options(horizons_s, reference_horizon_s, horizon_fraction, fit_window_s, max_terms, alpha, min_gain,
-                       holdout_fraction, shortlist, discovery)
+                       holdout_fraction, shortlist, discovery, velocities)
     with stage_reporter(progress) as say:
         problem = _prepare(system, train, validation, candidates, mode, options)
         nominal, yard, current, table, last = _forward_selection(problem, say)
@@ -764,6 +781,30 @@ def _prepare_records(system, train, validation, holdout_fraction, notes):
     dtype = jnp.result_type(float)
 
     return [_cast(r, dtype) for r in train_records], [_cast(r, dtype) for r in validation_records], dt
+
+
+def _velocity_estimates(system, train_records, validation_records, velocities, notes):
+    """With `velocities="auto"`, the records of a system with joint positions and velocities get the
+    velocities of a local cubic fit of their positions wherever their measured velocities are noisy."""
+    joints = tuple(system.joint_names)
+    if velocities == "measured" or not joints or tuple(system.state_names) != joints + tuple(f"d{q}" for q in joints):
+        return train_records, validation_records, "as measured"
+    out, windows, noise, count = [], [], [], 0
+    for rec in train_records + validation_records:
+        smoothed, choice, replaced = with_velocities_from_positions(rec)
+        out.append(smoothed)
+        if replaced:
+            count += 1
+            windows.append(position_fit_window(choice.cutoff_hz, rec.dt) * rec.dt)
+            noise.append(max(choice.noise_std[name] for name in replaced))
+    if not count:
+        return train_records, validation_records, "as measured"
+    how = (f"from positions: the derivative of a local cubic fit (Savitzky-Golay over {min(windows) * 1000:.3g} to "
+           f"{max(windows) * 1000:.3g} ms) in {count} of {len(out)} records, whose measured velocities carry white "
+           f"noise of up to {max(noise):.3g} (state units per second) that the fit removes at a smaller bias")
+    notes.append(f"Velocities {how}; the windows start from them and are compared with them (velocities='measured' keeps them).")
+    n = len(train_records)
+    return out[:n], out[n:], how
 
 
 def _horizon_grid(horizons_s, reference_horizon_s, train_records, validation_records, notes):

@@ -126,11 +126,12 @@ class DataSummary(eqx.Module):
     dt: float
     train_runs: tuple[str, ...]
     validation_runs: tuple[str, ...]
+    velocities: str = "as measured"  # or how they were estimated (`diagnose(velocities=...)`)
 
     def to_json(self) -> dict:
         return {"train": self.train, "validation": self.validation, "n_train": self.n_train,
                 "n_validation": self.n_validation, "dt": self.dt, "train_runs": list(self.train_runs),
-                "validation_runs": list(self.validation_runs)}
+                "validation_runs": list(self.validation_runs), "velocities": self.velocities}
 
 
 def structure_json(s: Structure) -> dict:

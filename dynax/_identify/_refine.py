@@ -47,7 +47,7 @@ from .._model._system import AbstractSystem
 from .._model._two_link import AbstractTwoLink
 from .._simulate import FixedGrid, simulate
 from ._consistency import consistent_parametrisation, ConsistentParametrisation
-from ._defaults import choose_filter, measurement_noise_std
+from ._defaults import choose_filter, measurement_noise_std, velocities_from_positions
 from ._regressors import _split, parameter_vector, with_parameters
 from ._simulation_fit import _segments, fit_simulation_error, SimulationFit
 
@@ -121,26 +121,6 @@ class Refinement:
     reweights: int = 0
 
 
-def _velocities_from_positions(xs: np.ndarray, dt: float, band_hz: float) -> np.ndarray:
-    r"""The states with measured positions and velocities from a local cubic fit of the positions.
-
-    Encoder positions are three orders of magnitude less noisy (relative to the motion) than a
-    driver's velocity estimate; the derivative of a cubic Savitzky-Golay fit over a window of
-    half a period of the band's edge passes the band (its -3 dB point lies near
-    $4 f_s / (3.2 (2m + 1))$, about 3 times the band edge) and differentiates the position noise
-    into a velocity noise $\sim \sigma_q / (m^{3/2} dt)$ (Schafer, "What is a Savitzky-Golay
-    filter?", IEEE Signal Processing Magazine 28(4), 2011).
-    """
-    import scipy.signal
-
-    n = xs.shape[1] // 2
-    window = max(5, int(round(0.5 / (band_hz * dt))) | 1)
-    window = min(window, (len(xs) - 1) | 1 if len(xs) % 2 == 0 else len(xs))
-    out = xs.copy()
-    out[:, n:] = scipy.signal.savgol_filter(xs[:, :n], window, 3, deriv=1, delta=dt, axis=0, mode="interp")
-    return out
-
-
 def motion_records(records: list[Trajectory], *, filtered: bool | str = "positions") -> tuple[list[Trajectory], float]:
     """The records on a grid of about 40 samples per period of their signal band's edge.
 
@@ -148,7 +128,7 @@ def motion_records(records: list[Trajectory], *, filtered: bool | str = "positio
     `d` the integer nearest to that grid; its inputs become the mean over each block of `d`
     samples (the same impulse as the recorded zero-order hold, without aliasing the torque noise);
     its states are, with `filtered="positions"` (default), the measured positions and the
-    velocities of a local cubic fit of them (`_velocities_from_positions`); with `True`, the
+    velocities of a local cubic fit of them (`velocities_from_positions`); with `True`, the
     states low-passed at their signal band (`choose_filter`); with `False`, as measured.
 
     **Returns:** `(records, dt)`.
@@ -161,7 +141,7 @@ def motion_records(records: list[Trajectory], *, filtered: bool | str = "positio
         d = max(1, int(round(1.0 / (SAMPLES_PER_PERIOD * max(bands)) / record.dt))) if bands else 1
         xs, us = np.asarray(record.xs), np.asarray(record.us)
         if filtered == "positions" and choice.cutoff_hz is not None:
-            xs = _velocities_from_positions(xs, record.dt, choice.cutoff_hz)
+            xs = velocities_from_positions(xs, record.dt, choice.cutoff_hz)
         elif filtered and choice.cutoff_hz is not None:
             xs = np.asarray(butterworth_filtfilt(record.ts, xs, cutoff_hz=choice.cutoff_hz, order=choice.order))
         n = (len(record) // d) * d
