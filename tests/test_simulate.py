@@ -135,6 +135,25 @@ def test_divergence_is_reported_not_silent():
     assert not bool(ok.diverged) and float(ok.diverged_at) == np.inf
 
 
+def test_gradient_through_a_divergent_rollout_stays_finite():
+    # The carried state is frozen at divergence and only the outputs are NaN, so the gradient of a
+    # loss over the finite rows never meets an inf or NaN state (a population member that blows up
+    # must not poison the population's gradient). Unfrozen, this float32 state would overflow to
+    # inf after about 1.7 s.
+    ts = jnp.linspace(0.0, 4.0, 401, dtype=jnp.float32)
+
+    def loss(viscous):
+        axis = dynax.LinearAxis(viscous=viscous, coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0))
+        xs = dynax.simulate(axis, jnp.array([0.0, 1.0], jnp.float32), ts, throw=False).xs
+        return jnp.sum(jnp.where(jnp.isnan(xs), 0.0, xs) ** 2)
+
+    sim = dynax.simulate(dynax.LinearAxis(viscous=jnp.asarray(-5000.0), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0)),
+                         jnp.array([0.0, 1.0]), ts, throw=False)
+    assert bool(sim.diverged) and float(sim.diverged_at) < 1.0
+    gradient = jax.grad(loss)(jnp.asarray(-5000.0))
+    assert np.isfinite(float(gradient)) and float(gradient) != 0.0
+
+
 def test_invalid_member_of_a_population_is_flagged_not_simulated():
     # Under vmap the values cannot be refused up front: an invalid member comes back all NaN with
     # diverged_at = -inf (told apart from a divergence), and the others are untouched.

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._model._system import AbstractSystem
-from .._simulate import FixedGrid, sample_interval
+from .._simulate import FixedGrid, mask_diverged, sample_interval
 from ._lqr import wrap_angle
 
 Controller = Callable[[Float[Array, ""], Float[Array, " n_states"]], Float[Array, " n_inputs"]]
@@ -83,18 +83,17 @@ def simulate_closed_loop(
 
     def interval(carry, times):
         x, diverged_at = carry
-        t0, t1 = times
+        t0, t1, dt = times
         u = jnp.asarray(controller(t0, x), dtype).reshape(system.n_inputs)
-        x_carry, diverged_at, x_out = advance(x, diverged_at, t0, t1, u)
-        return (x_carry, diverged_at), (x_out, u)
+        x_next, diverged_at = advance(x, diverged_at, t0, t1, dt, u)
+        return (x_next, diverged_at), (x_next, u)
 
     init = (x0, jnp.asarray(jnp.inf, dtype))
-    (x_last, diverged_at), (xs, us) = jax.lax.scan(interval, init, (ts[:-1], ts[1:]))
+    (x_last, diverged_at), (xs, us) = jax.lax.scan(interval, init, (ts[:-1], ts[1:], jnp.diff(ts)))
     u_last = jnp.asarray(controller(ts[-1], x_last), dtype).reshape(1, system.n_inputs)
     u_last = jnp.where(jnp.isfinite(diverged_at), jnp.nan, u_last)
-    return ClosedLoop(
-        ts=ts, xs=jnp.concatenate([x0[None], xs]), us=jnp.concatenate([us, u_last]), diverged_at=diverged_at
-    )
+    xs = jnp.concatenate([x0[None], mask_diverged(ts[1:], xs, diverged_at)])
+    return ClosedLoop(ts=ts, xs=xs, us=jnp.concatenate([us, u_last]), diverged_at=diverged_at)
 
 
 def upright_error(xs: Float[Array, "*batch 4"]) -> Float[Array, "*batch 4"]:
