@@ -56,7 +56,6 @@ import numpy as np
 import optimistix as optx
 
 from .._model._extensions import Extended
-from .._model._linear_axis import LinearAxis
 from .._model._two_link import AbstractTwoLink
 
 
@@ -97,64 +96,41 @@ def _base(system):
     return system.system if isinstance(system, Extended) else system
 
 
-_NON_NEGATIVE_PREFIXES = ("fc", "Ir", "b", "cd")  # Coulomb, rotor inertia, viscous, drag coefficients
+# Joint terms' coefficients that cannot be negative: Coulomb, rotor inertia, viscous, drag.
+_NON_NEGATIVE_PREFIXES = ("fc", "Ir", "b", "cd")
 
 
 def _kinds(system, names):
-    """Per parameter: 'inertia1' (theta1, Schur complement), 'positive', 'nonnegative' or 'free'."""
-    base = _base(system)
-    kinds = []
-    for n in names:
-        if isinstance(base, AbstractTwoLink):
-            if n == "theta1":
-                kinds.append("inertia1")
-            elif n in ("theta2", "theta4", "theta5"):
-                kinds.append("positive")
-            elif n in ("theta3", "theta6", "theta7") or n.startswith(_NON_NEGATIVE_PREFIXES):
-                kinds.append("nonnegative")
-            else:
-                kinds.append("free")
-        elif isinstance(base, LinearAxis):
-            kinds.append({"mass": "positive", "viscous": "nonnegative", "coulomb": "nonnegative"}.get(n, "free"))
-        else:
-            kinds.append("free")
-    return tuple(kinds)
+    """Per parameter: 'inertia1' (theta1, Schur complement), 'positive', 'nonnegative' or 'free'.
+
+    The system's `base_parameter_kinds()` bound its base parameters; on a system with conditions,
+    the joint terms' dissipative and inertial coefficients are non-negative. A system without
+    conditions leaves every parameter free."""
+    kinds = _base(system).base_parameter_kinds()
+
+    def term_kind(n):
+        return "nonnegative" if kinds and n.startswith(_NON_NEGATIVE_PREFIXES) else "free"
+
+    return tuple(kinds[n] if n in kinds else term_kind(n) for n in names)
 
 
 def consistency_conditions(system, names: tuple[str, ...], theta) -> tuple[str, ...]:
     """The physical-consistency conditions `theta` (named `names`) violates, as sentences.
 
-    **Arguments:** `system` (its type decides the conditions: two-link arm or linear axis,
-    optionally `Extended` with joint terms), `names`, `theta`.
+    **Arguments:** `system` (its `base_parameter_conditions` and `base_parameter_kinds` decide the
+    conditions: a two-link arm's or a linear axis's, optionally `Extended` with joint terms), `names`,
+    `theta`.
 
     **Returns:** a tuple of sentences, empty when consistent. Other systems have no conditions here.
     """
     p = {n: float(v) for n, v in zip(names, np.asarray(theta))}
     base = _base(system)
-    out = []
-    if isinstance(base, AbstractTwoLink):
-        t1, t2, t3, t4, t5 = (p[f"theta{i}"] for i in range(1, 6))
-        if not t2 > 0:
-            out.append(f"rigid-body inertia: theta2 = {t2:.4g} must be positive (I2, the inertia of link 2 about the elbow)")
-        elif not t1 * t2 >= t3**2:
-            out.append(f"rigid-body inertia: theta1 * theta2 = {t1 * t2:.4g} must be at least theta3^2 = {t3**2:.4g} "
-                       "(else the mass matrix is singular or indefinite at some elbow angle)")
-        if not t4 > 0:
-            out.append(f"gravity: theta4 = {t4:.4g} must be positive (hanging straight down is the stable rest)")
-        if not t5 > 0:
-            out.append(f"gravity: theta5 = {t5:.4g} must be positive (hanging straight down is the stable rest)")
-        if not t3 >= 0:
-            out.append(f"geometry: theta3 = {t3:.4g} must be non-negative (g theta3 / theta5 is the length of link 1)")
+    own = base.base_parameter_kinds()
+    out = list(base.base_parameter_conditions({n: v for n, v in p.items() if n in own}))
     for n, kind in zip(names, _kinds(system, names)):
-        if kind == "nonnegative" and not n.startswith("theta") and not p[n] >= 0:
-            what = "friction" if n.startswith(("fc", "b", "cd", "viscous", "coulomb")) else "rotor inertia"
+        if n not in own and kind == "nonnegative" and not p[n] >= 0:
+            what = "friction" if n.startswith(("fc", "b", "cd")) else "rotor inertia"
             out.append(f"{what}: {n} = {p[n]:.4g} must be non-negative")
-        elif isinstance(base, AbstractTwoLink) and n in ("theta6", "theta7") and not p[n] >= 0:
-            out.append(f"friction: {n} = {p[n]:.4g} (viscous) must be non-negative")
-        elif isinstance(base, LinearAxis) and kind == "positive" and not p[n] > 0:
-            out.append(f"inertia: {n} = {p[n]:.4g} must be positive")
-        elif isinstance(base, LinearAxis) and kind == "nonnegative" and n in ("viscous", "coulomb") and not p[n] >= 0:
-            out.append(f"friction: {n} = {p[n]:.4g} must be non-negative")
     return tuple(dict.fromkeys(out))
 
 

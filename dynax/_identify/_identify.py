@@ -535,9 +535,8 @@ def _system_name(system):
 
 
 def _fitted_system(system, names, estimate):
-    """`system` carrying the estimate; a linear axis fitted without Coulomb friction gets `coulomb = 0`."""
-    if isinstance(system, LinearAxis) and "coulomb" not in names:
-        system = eqx.tree_at(lambda s: s.coulomb, system, jnp.zeros_like(system.coulomb))
+    """`system` carrying the estimate; base parameters the fitted model leaves out are as the system's
+    `with_base_parameters` sets them (a linear axis fitted without Coulomb friction gets `coulomb = 0`)."""
     return with_parameters(system, names, jnp.asarray(estimate))
 
 
@@ -822,7 +821,7 @@ def identify(
         result = _identify_by_simulation(system, fitted, method, friction)
         check = None
         if _has_conditions(system):
-            qs = _joint_positions(result.system, fitted) if isinstance(_split(system)[0], AbstractTwoLink) else None
+            qs = _joint_positions(result.system, fitted)
             check = check_consistency(result.system, result.names, result.estimate, qs,
                                       warn=consistency != "off")
         held_out = validate(result.system)
@@ -878,8 +877,9 @@ def identify(
 
 
 def _has_conditions(system):
+    """Whether the least-squares models know `system` and it has physical-consistency conditions."""
     try:
         base, _ = _split(system)
     except UsageError:
         return False
-    return isinstance(base, (AbstractTwoLink, LinearAxis))
+    return bool(base.base_parameter_kinds())

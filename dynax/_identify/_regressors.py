@@ -4,8 +4,9 @@ Every model here is linear in its parameter vector $\theta$, so its regressor is
 model with respect to $\theta$. Nothing is expanded by hand: the dynamic regressor is the
 Jacobian (`jax.jacrev`: a model has fewer outputs than parameters) of the inverse dynamics $M(q)\ddot q + h(q, \dot q) + F(\dot q)$, the energy regressor is
 `jax.grad` of the total energy $H(q, \dot q)$ (linear in $\theta_1..\theta_5$), and the friction
-columns are the Jacobian of the friction force. The parameter vectors are named in the contract's
-names:
+columns are the Jacobian of the friction force. What differs per system (its base parameters, its
+inverse dynamics and energy, its Coulomb friction) are methods of the system, named in the
+contract's names:
 
 - `Acrobot`, `DoublePendulum`: `theta1..theta7` (viscous friction), plus `fc1`, `fc2` with Coulomb
   friction $f_{ci} \operatorname{sign}(\dot q_i)$.
@@ -23,13 +24,10 @@ from jaxtyping import Array, Float
 from .._errors import UsageError
 from .._model._extensions import CoulombFriction, Extended, JointSpring, RotorInertia
 from .._model._extensions._terms import AbstractJointTerm
-from .._model._linear_axis import LinearAxis
 from .._model._system import AbstractSystem
-from .._model._two_link import AbstractTwoLink, BASE_PARAMETER_NAMES
 
 Friction = Literal["viscous", "coulomb"]
 
-_TWO_LINK_ENERGY = BASE_PARAMETER_NAMES[:5]
 # Joint terms that store energy (the rest dissipate it).
 _CONSERVATIVE_TERMS = (RotorInertia, JointSpring)
 
@@ -45,12 +43,8 @@ def _split(system):
         base, terms = system.system, system.terms
     else:
         base, terms = system, ()
-    if not isinstance(base, (AbstractTwoLink, LinearAxis)):
-        raise UsageError(
-            f"least-squares identification supports Acrobot, DoublePendulum and LinearAxis (optionally Extended with "
-            f"joint terms), got {type(base).__name__}; use SimulationFit() for other systems"
-        )
-    if any(not isinstance(t, AbstractJointTerm) for t in terms) or (terms and isinstance(base, LinearAxis)):
+    base.check_least_squares(tuple(terms))
+    if any(not isinstance(t, AbstractJointTerm) for t in terms):
         raise UsageError(
             "least-squares identification takes joint terms (friction, drag, rotor inertia, springs) on a two-link "
             "arm; input terms (gain, offset, lag, delay) are not linear in the data: use SimulationFit()"
@@ -59,14 +53,15 @@ def _split(system):
 
 
 def with_friction(system: AbstractSystem, friction: Friction = "viscous") -> AbstractSystem:
-    """The model `identify` fits: for a two-link arm with `friction="coulomb"`, `system` extended
-    with `CoulombFriction` at every joint that has none (coefficients `fc1`, `fc2`)."""
+    """The model `identify` fits: with `friction="coulomb"`, `system` extended with the system's
+    `coulomb_friction_terms()` at every joint that has none (for a two-link arm `CoulombFriction`,
+    coefficients `fc1`, `fc2`; a linear axis's Coulomb friction is a base parameter)."""
     _check_friction(friction)
     base, terms = _split(system)
-    if friction == "viscous" or isinstance(base, LinearAxis):
+    if friction == "viscous":
         return system
     have = {t.joint for t in terms if isinstance(t, CoulombFriction)}
-    extra = tuple(CoulombFriction(j, jnp.zeros((), jnp.result_type(base.theta1))) for j in range(base.n_joints) if j not in have)
+    extra = tuple(t for t in base.coulomb_friction_terms() if t.joint not in have)
     return Extended(base, terms + extra) if extra else system
 
 
@@ -83,18 +78,16 @@ def parameter_names(system: AbstractSystem, friction: Friction = "viscous") -> t
     """
     system = with_friction(system, friction)
     base, terms = _split(system)
-    if isinstance(base, AbstractTwoLink):
-        return BASE_PARAMETER_NAMES + tuple(t.parameter_name(base) for t in terms)
-    return ("mass", "viscous") + (("coulomb",) if friction == "coulomb" else ()) + ("offset",)
+    return base.base_parameter_names(friction) + tuple(t.parameter_name(base) for t in terms)
 
 
 def energy_parameter_names(system: AbstractSystem, friction: Friction = "viscous") -> tuple[str, ...]:
     """The parameters the stored energy depends on (the rest enter through dissipation only)."""
     system = with_friction(system, friction)
     base, terms = _split(system)
-    if isinstance(base, LinearAxis):
-        return ("mass",)
-    return _TWO_LINK_ENERGY + tuple(t.parameter_name(base) for t in terms if isinstance(t, _CONSERVATIVE_TERMS))
+    return base.energy_parameter_names() + tuple(
+        t.parameter_name(base) for t in terms if isinstance(t, _CONSERVATIVE_TERMS)
+    )
 
 
 def parameter_vector(system: AbstractSystem, friction: Friction = "viscous") -> Float[Array, " n_params"]:
@@ -109,13 +102,14 @@ def parameter_vector(system: AbstractSystem, friction: Friction = "viscous") -> 
 
 
 def with_parameters(system: AbstractSystem, names: tuple[str, ...], theta: Float[Array, " n_params"]) -> AbstractSystem:
-    """`system` with the parameters `names` set to `theta` (fields of the nominal system and coefficients
-    of its joint terms)."""
+    """`system` with the parameters `names` set to `theta`: fields of the nominal system (through its
+    `with_base_parameters`, which says what the base parameters not named become) and coefficients
+    of its joint terms."""
     base, terms = _split(system)
     if isinstance(theta, jax.Array) and theta.ndim == 1:
         theta = _entries(theta)  # one call instead of one indexing operation per parameter
     fields = [n for n in names if hasattr(base, n) and not isinstance(getattr(type(base), n, None), property)]
-    new_base = eqx.tree_at(lambda s: [getattr(s, n) for n in fields], base, [theta[names.index(n)] for n in fields])
+    new_base = base.with_base_parameters({n: theta[names.index(n)] for n in fields})
     if not isinstance(system, Extended):
         return new_base
     new_terms = tuple(
@@ -134,31 +128,16 @@ def _entries(theta):
 
 def _inverse_dynamics(system, names, theta, q, dq, ddq):
     """Generalised force that produces `ddq` at `(q, dq)`; linear in `theta`."""
-    base, terms = _split(system)
-    if isinstance(base, AbstractTwoLink):
-        fitted = with_parameters(system, names, theta)
-        base, terms = _split(fitted)
-        # Elementwise rather than `@`: under vmap a 2x2 matrix-vector product becomes a batched dot,
-        # which XLA's CPU backend runs several times slower than the same arithmetic fused.
-        force = jnp.sum(base.mass_matrix(q) * ddq[None, :], axis=1) + base.bias_force(q, dq)
-        for t in terms:
-            j = t.joint
-            force = force.at[j].add(t.inertia() * ddq[j] - t.force(q[j], dq[j]))
-        return force
-    # LinearAxis, exact sign.
-    p = dict(zip(names, theta))
-    force = p["mass"] * ddq[0] + p["viscous"] * dq[0] + p["offset"]
-    if "coulomb" in p:
-        force = force + p["coulomb"] * jnp.sign(dq[0])
-    return force[None]
+    base, terms = _split(with_parameters(system, names, theta))
+    force = base.inverse_dynamics(q, dq, ddq)
+    for t in terms:
+        j = t.joint
+        force = force.at[j].add(t.inertia() * ddq[j] - t.force(q[j], dq[j]))
+    return force
 
 
 def _energy(system, names, theta, q, dq):
-    base, terms = _split(system)
-    if isinstance(base, LinearAxis):
-        return 0.5 * theta[names.index("mass")] * dq[0] ** 2
-    fitted = with_parameters(system, names, theta)
-    base, terms = _split(fitted)
+    base, terms = _split(with_parameters(system, names, theta))
     energy = base.energy(jnp.concatenate([q, dq]))
     for t in terms:
         if isinstance(t, RotorInertia):
@@ -170,17 +149,15 @@ def _energy(system, names, theta, q, dq):
 
 def _positions(system, xs):
     base, _ = _split(system)
-    n = base.n_joints if isinstance(base, AbstractTwoLink) else 1
+    n = len(base.joints)
     return xs[..., :n], xs[..., n : 2 * n]
 
 
 def generalised_force(system: AbstractSystem, us: Float[Array, "time n_inputs"]) -> Float[Array, "time n_joints"]:
     r"""The measured generalised forces $B u$, one entry per joint (the acrobot's `tau1` is 0)."""
     base, _ = _split(system)
-    if isinstance(base, AbstractTwoLink):
-        b = base.input_matrix().astype(us.dtype)  # (joints, inputs); broadcast, not a batched dot
-        return jnp.sum(jnp.broadcast_to(b, us.shape[:-1] + b.shape) * us[..., None, :], axis=-1)
-    return us[..., :1]
+    b = base.input_matrix().astype(us.dtype)  # (joints, inputs); broadcast, not a batched dot
+    return jnp.sum(jnp.broadcast_to(b, us.shape[:-1] + b.shape) * us[..., None, :], axis=-1)
 
 
 @eqx.filter_jit

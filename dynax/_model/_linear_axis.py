@@ -6,6 +6,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from .._errors import UsageError
 from ._system import AbstractManipulator
 
 LINEAR_AXIS_PARAMETER_NAMES = ("mass", "viscous", "coulomb", "offset")
@@ -54,6 +55,56 @@ class LinearAxis(AbstractManipulator):
 
     def input_matrix(self):
         return jnp.ones((1, 1), jnp.result_type(self.mass))
+
+    def inverse_dynamics(self, q, dq, ddq):
+        r"""$M \ddot q + F_v \dot q + F_c \operatorname{sign}(\dot q) + F_0$, with the exact sign (the EMPS model)."""
+        return self.mass * ddq + self.viscous * dq + self.coulomb * jnp.sign(dq) + self.offset
+
+    def energy(self, x: Float[Array, " 2"]) -> Float[Array, ""]:
+        r"""Kinetic energy $\tfrac12 M \dot q^2$ (a constant force such as the axis's weight is in the offset)."""
+        return 0.5 * self.mass * x[1] ** 2
+
+    # Least-squares identification: the axis is linear in mass, viscous, coulomb and offset, which
+    # already hold its friction and offset, so it takes no joint terms.
+
+    def check_least_squares(self, terms=()):
+        """Refuses joint terms (friction and offset are base parameters already)."""
+        if terms:
+            raise UsageError(
+                "least-squares identification takes no joint terms on a LinearAxis: its viscous and Coulomb "
+                "friction and its offset are base parameters already; use SimulationFit() to fit it with terms"
+            )
+
+    def base_parameter_names(self, friction="viscous"):
+        """`mass`, `viscous`, `offset`, and `coulomb` (before `offset`) with `friction="coulomb"`."""
+        return ("mass", "viscous") + (("coulomb",) if friction == "coulomb" else ()) + ("offset",)
+
+    def energy_parameter_names(self):
+        """`mass`."""
+        return ("mass",)
+
+    def coulomb_friction_terms(self):
+        """None: Coulomb friction is the base parameter `coulomb`."""
+        return ()
+
+    def with_base_parameters(self, parameters):
+        """Parameters not given keep their values, except `coulomb`, which is zero: a model identified
+        with viscous friction only has no Coulomb force."""
+        return super().with_base_parameters({"coulomb": jnp.zeros_like(self.coulomb), **parameters})
+
+    def base_parameter_kinds(self):
+        """`mass` positive, `viscous` and `coulomb` non-negative, `offset` free."""
+        return dict(mass="positive", viscous="nonnegative", coulomb="nonnegative", offset="free")
+
+    def base_parameter_conditions(self, parameters):
+        """`mass > 0`; `viscous`, `coulomb` >= 0 (where given)."""
+        out = []
+        for n, v in parameters.items():
+            if n == "mass" and not v > 0:
+                out.append(f"inertia: {n} = {v:.4g} must be positive")
+            elif n in ("viscous", "coulomb") and not v >= 0:
+                out.append(f"friction: {n} = {v:.4g} must be non-negative")
+        return tuple(out)
 
     def vector_field(self, t, x, u):
         dq = x[1]

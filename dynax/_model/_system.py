@@ -1,13 +1,15 @@
 """The system abstraction: an `eqx.Module` whose dynamics is `vector_field(t, x, u)`."""
 
 import abc
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Literal
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, ArrayLike, PyTree
+
+from .._errors import UsageError
 
 
 class AbstractSystem(eqx.Module):
@@ -125,6 +127,67 @@ class AbstractSystem(eqx.Module):
             names += [c, f"|{c}|{c}", f"sign({c})"]
         return cols, names
 
+    # What least-squares identification (`dynax.identify` with `Dynamic`, `Power` or `Energy`) needs to
+    # know about a system whose inverse dynamics is linear in named base parameters. The defaults
+    # describe a system that is not: only `SimulationFit` identifies it.
+
+    def check_least_squares(self, terms: tuple = ()) -> None:
+        """Raise a `UsageError` naming the system if the least-squares methods cannot identify it,
+        extended with the joint `terms` (`dynax.Extended`). Default: they cannot."""
+        raise UsageError(
+            f"least-squares identification supports Acrobot, DoublePendulum and LinearAxis (optionally Extended with "
+            f"joint terms), got {type(self).__name__}; use SimulationFit() for other systems"
+        )
+
+    def base_parameter_names(self, friction: Literal["viscous", "coulomb"] = "viscous") -> tuple[str, ...]:
+        """The base parameters the inverse dynamics is linear in, in the regressor's column order
+        (joint terms' coefficients follow them), for the friction model `friction`.
+
+        **Raises:** `NotImplementedError` naming the system, by default.
+        """
+        raise _no_linear_model(self, "base_parameter_names")
+
+    def energy_parameter_names(self) -> tuple[str, ...]:
+        """The base parameters the stored energy depends on (the others enter through dissipation only).
+
+        **Raises:** `NotImplementedError` naming the system, by default.
+        """
+        raise _no_linear_model(self, "energy_parameter_names")
+
+    def coulomb_friction_terms(self) -> tuple:
+        """The joint terms `friction="coulomb"` adds to the identified model, at zero (empty for a
+        system whose Coulomb friction is a base parameter).
+
+        **Raises:** `NotImplementedError` naming the system, by default.
+        """
+        raise _no_linear_model(self, "coulomb_friction_terms")
+
+    def with_base_parameters(self, parameters: dict[str, Float[ArrayLike, ""]]) -> "AbstractSystem":
+        """This system carrying the base parameters `parameters` (by name), e.g. an estimate.
+        Default: the fields of those names are replaced, the rest are kept."""
+        names = list(parameters)
+        return eqx.tree_at(lambda s: [getattr(s, n) for n in names], self, [parameters[n] for n in names])
+
+    def base_parameter_kinds(self) -> dict[str, str]:
+        r"""How physical consistency bounds each base parameter (`dynax.consistent_least_squares`):
+        `"positive"`, `"nonnegative"`, `"free"`, or `"inertia1"` ($\theta_1 \ge \theta_3^2 / \theta_2$,
+        a two-link arm's Schur complement). Joint terms' coefficients are bounded by their own kind.
+        Default: no conditions (an empty dict: every parameter is free)."""
+        return {}
+
+    def base_parameter_conditions(self, parameters: dict[str, float]) -> tuple[str, ...]:
+        """The physical-consistency conditions the base parameters `parameters` (by name) violate,
+        as sentences naming them (`dynax.check_consistency`). Default: none."""
+        return ()
+
+
+def _no_linear_model(system, method):
+    name = type(system).__name__
+    return NotImplementedError(
+        f"{name}.{method}: {name} declares no model linear in base parameters, so least-squares "
+        "identification cannot fit it; use SimulationFit()"
+    )
+
 
 class AbstractManipulator(AbstractSystem):
     r"""A rigid-body system $M(q)\ddot q + h(q, \dot q) = B u$ with state $x = (q, \dot q)$.
@@ -184,6 +247,15 @@ class AbstractManipulator(AbstractSystem):
             cols += [np.tanh(v / vs), v, np.abs(v) * v, np.sin(q), np.cos(q), accelerations[:, j]]
             names += [f"sign(d{c})", f"d{c}", f"|d{c}|d{c}", f"sin({c})", f"cos({c})", f"model acceleration d{c}/dt"]
         return cols, names
+
+    def inverse_dynamics(
+        self, q: Float[Array, " n_joints"], dq: Float[Array, " n_joints"], ddq: Float[Array, " n_joints"]
+    ) -> Float[Array, " n_joints"]:
+        r"""The generalised force $M(q)\ddot q + h(q, \dot q)$ that produces `ddq` at `(q, dq)`:
+        what the least-squares regressors differentiate with respect to the base parameters."""
+        # Elementwise rather than `@`: under vmap a 2x2 matrix-vector product becomes a batched dot,
+        # which XLA's CPU backend runs several times slower than the same arithmetic fused.
+        return jnp.sum(self.mass_matrix(q) * ddq[None, :], axis=1) + self.bias_force(q, dq)
 
     def vector_field(self, t, x, u):
         n = self.n_joints

@@ -15,9 +15,11 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from ._extensions._terms import CoulombFriction
 from ._system import AbstractManipulator
 
 BASE_PARAMETER_NAMES = ("theta1", "theta2", "theta3", "theta4", "theta5", "theta6", "theta7")
+ENERGY_PARAMETER_NAMES = BASE_PARAMETER_NAMES[:5]  # theta6, theta7 (viscous friction) only dissipate
 
 # Drake's AcrobotParams defaults (drake/examples/acrobot/acrobot_params.h).
 DRAKE_DEFAULTS = dict(m1=1.0, m2=1.0, l1=1.0, lc1=0.5, lc2=1.0, Ic1=0.083, Ic2=0.33, b1=0.1, b2=0.1, g=9.81)
@@ -154,6 +156,55 @@ class AbstractTwoLink(AbstractManipulator):
     def energy(self, x: Float[Array, " 4"]) -> Float[Array, ""]:
         """Total mechanical energy (zero potential at the pivot height), linear in theta1..theta5."""
         return _energy(self, x)
+
+    # Least-squares identification: the arm is linear in theta1..theta7 and in its joint terms'
+    # coefficients; Coulomb friction is a `CoulombFriction` term per joint.
+
+    def check_least_squares(self, terms=()):
+        """Accepts the arm with any joint terms (their coefficients are identified too)."""
+
+    def base_parameter_names(self, friction="viscous"):
+        """`theta1..theta7`, whatever the friction model (Coulomb friction is a joint term, `fc1`, `fc2`)."""
+        return BASE_PARAMETER_NAMES
+
+    def energy_parameter_names(self):
+        """`theta1..theta5` (inertia and gravity)."""
+        return ENERGY_PARAMETER_NAMES
+
+    def coulomb_friction_terms(self):
+        """`CoulombFriction` at every joint, at zero."""
+        dtype = jnp.result_type(self.theta1)
+        return tuple(CoulombFriction(j, jnp.zeros((), dtype)) for j in range(self.n_joints))
+
+    def base_parameter_kinds(self):
+        r"""$\theta_1 \ge \theta_3^2/\theta_2$; $\theta_2, \theta_4, \theta_5 > 0$; $\theta_3, \theta_6, \theta_7 \ge 0$
+        (see `dynax.consistency_conditions`)."""
+        return dict(theta1="inertia1", theta2="positive", theta3="nonnegative", theta4="positive",
+                    theta5="positive", theta6="nonnegative", theta7="nonnegative")
+
+    def base_parameter_conditions(self, parameters):
+        r"""Rigid-body inertia ($\theta_2 > 0$, $\theta_1\theta_2 \ge \theta_3^2$), gravity
+        ($\theta_4, \theta_5 > 0$), geometry ($\theta_3 \ge 0$) and viscous friction
+        ($\theta_6, \theta_7 \ge 0$, where given); `theta1..theta5` must be given."""
+        p = parameters
+        t1, t2, t3, t4, t5 = (p[f"theta{i}"] for i in range(1, 6))
+        out = []
+        if not t2 > 0:
+            out.append(f"rigid-body inertia: theta2 = {t2:.4g} must be positive "
+                       "(I2, the inertia of link 2 about the elbow)")
+        elif not t1 * t2 >= t3**2:
+            out.append(f"rigid-body inertia: theta1 * theta2 = {t1 * t2:.4g} must be at least theta3^2 = {t3**2:.4g} "
+                       "(else the mass matrix is singular or indefinite at some elbow angle)")
+        if not t4 > 0:
+            out.append(f"gravity: theta4 = {t4:.4g} must be positive (hanging straight down is the stable rest)")
+        if not t5 > 0:
+            out.append(f"gravity: theta5 = {t5:.4g} must be positive (hanging straight down is the stable rest)")
+        if not t3 >= 0:
+            out.append(f"geometry: theta3 = {t3:.4g} must be non-negative (g theta3 / theta5 is the length of link 1)")
+        for n in ("theta6", "theta7"):
+            if n in p and not p[n] >= 0:
+                out.append(f"friction: {n} = {p[n]:.4g} (viscous) must be non-negative")
+        return tuple(out)
 
 
 class Acrobot(AbstractTwoLink):
