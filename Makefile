@@ -1,11 +1,12 @@
 # Two entry points, each creating the virtual environment and installing the project first:
 #   make demo   runs the main job (`dynax demo`) on the embedded default
 #   make test   runs the test suite and builds the docs site strictly
+#   make quick  the suite without the minute-long end-to-end runs (marker `heavy`), for iteration
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test docs bench clean
+.PHONY: demo test quick docs bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -25,6 +26,9 @@ demo: $(VENV)/.installed-base
 test: $(VENV)/.installed-dev
 	$(BIN)/python -m pytest -n 2
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
+
+quick: $(VENV)/.installed-dev
+	$(BIN)/python -m pytest -n 2 -m "not slow and not heavy"
 
 docs: $(VENV)/.installed-dev
 	$(BIN)/mkdocs serve

@@ -93,3 +93,32 @@ def _release_compiled_code():
     if _memory_maps() > _MAP_LIMIT:
         jax.clear_caches()
         gc.collect()
+
+
+# The end-to-end runs that take a minute or more on the 2-core machine: the hidden-effect battery,
+# the real-data diagnoses, the two-process run, the cache and tutorial runs. `make test` (and CI)
+# runs them; `make quick` (`pytest -m "not slow and not heavy"`) leaves them out for iteration.
+HEAVY_MODULES = (
+    "tests/diagnose/test_hidden_effects.py",
+    "tests/diagnose/test_real_data.py",
+    "tests/diagnose/test_helicopter_candidates.py",
+    "tests/diagnose/test_pure_delay.py",
+    "tests/diagnose/test_discovery.py",
+    "tests/distributed/test_two_processes.py",
+    "tests/cli/test_cache.py",
+    "tests/docs/test_tutorials.py",
+)
+HEAVY_TESTS = (
+    "tests/identify/test_identify_defaults.py::test_noisy_rig_data_with_defaults_give_consistent_estimates",
+    "tests/identify/test_identify_defaults.py::test_dfki_least_squares_with_defaults_is_consistent_where_the_unfiltered_fit_is_not",
+    "tests/diagnose/test_report_and_cli.py::test_cli_diagnose_takes_several_runs_and_keeps_them_apart",
+    "tests/control/test_experiment.py::test_quick_experiment_writes_results_and_figures",
+    "tests/vehicle/test_compiled_solvers.py::test_compiled_backprop_takes_the_python_lbfgs_steps",
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        node = item.nodeid.split("[")[0]
+        if node.split("::")[0] in HEAVY_MODULES or node in HEAVY_TESTS:
+            item.add_marker(pytest.mark.heavy)
