@@ -109,9 +109,10 @@ def test_runs_vmap_over_seeds(key):
 
 
 @pytest.mark.xfail(strict=False, reason=(
-    "after this session's merges the reward still improves by more than 1 but the success rate on the "
-    "32 starts stayed at 0 in one full-suite run (issue 15/11 merges: explicit RK stages, rank-explicit "
-    "PGPE); not yet investigated"))
+    "after the 2026-11-23 merges (explicit RK stages, rank-explicit PGPE) the reward still improved by more "
+    "than 1 but the success rate on the 32 starts stayed at 0 in one full-suite run; it passed in all three "
+    "full runs of 2026-11-25 (make test, make quick, a fresh-clone .ci/run), so it looks run-dependent "
+    "(float32 reductions across XLA threads?); not yet investigated"))
 def test_pgpe_improves_swing_up_from_a_poor_start():
     # Ten times too weak an energy pump: the acrobot rarely gets up. PGPE on random starts fixes it.
     plant = jax.tree.map(lambda a: jnp.asarray(a, jnp.float32), dynax.Acrobot())
