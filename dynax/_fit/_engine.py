@@ -191,6 +191,8 @@ def fit_least_squares(
         loss_history=solution.stats.get("loss_history"),
         time_history=solution.stats.get("time_history"),
         jacobian=J,
+        residuals=r,
+        initial_residuals=r0,
     )
 
 

@@ -35,6 +35,8 @@ class Solution(eqx.Module):
     - `jacobian`: the Jacobian of the residuals in the solver's scaled unknowns $z$ ($p = p_0 + s
       \odot z$) at the solution, where a least-squares solver of the Gauss-Newton kind holds it
       (`fit_least_squares(..., covariance=True)`); `None` otherwise.
+    - `residuals`, `initial_residuals`: the residual vector $r$ at the solution and at the start
+      (least squares; non-finite entries already replaced as `nonfinite` says); `None` for a scalar loss.
     - `loss_history`, `time_history`: where the solver records them (`OptaxLBFGS`, the EM-free
       iteration): the loss after each step (entry 0 at the start) and the seconds since the start at
       which it was reached, NaN past the last step; `None` otherwise.
@@ -53,6 +55,8 @@ class Solution(eqx.Module):
     loss_history: Float[Array, " history"] | None = None
     time_history: Float[Array, " history"] | None = None
     jacobian: Float[Array, "m n"] | None = None
+    residuals: Float[Array, " m"] | None = None
+    initial_residuals: Float[Array, " m"] | None = None
 
     @property
     def names(self) -> tuple[str, ...]:

@@ -158,9 +158,9 @@ def _solve(unknowns, parameters: Parameters, data: _Segments, scale, solver, max
     residuals = functools.partial(_residuals, simulation=simulation, fit_initial_states=fit_initial_states)
     solution = fit_least_squares(residuals, unknowns, parameters, data, solver=solver, scale=scale,
                                  max_steps=max_steps, nonfinite=None, progress_token=token, jac="dense")
-    # The engine's residuals and Jacobian (scaled unknowns) at the solution, as the solver last formed them.
-    r = residuals(solution.model, data)
-    return solution, r, residuals(unknowns, data), solution.jacobian
+    # The engine's residuals (at the solution and at the start) and Jacobian (scaled unknowns), as it
+    # formed them: no further rollout of the data to compile or run.
+    return solution, solution.residuals, solution.initial_residuals, solution.jacobian
 
 
 def fit_simulation_error(

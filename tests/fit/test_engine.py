@@ -95,6 +95,9 @@ def test_dense_jacobian_gives_the_forward_mode_fit_and_differentiates_in_the_dat
     z = (dense.value - jnp.array([1.0, 0.3])) / jnp.array([1.0, 0.3])
     by_hand = jax.jacfwd(lambda z: res({"a": 1.0 + z[0], "b": 0.3 + 0.3 * z[1]}, y))(z)
     np.testing.assert_allclose(dense.jacobian, by_hand, rtol=1e-8, atol=1e-12)
+    # ... and its residuals are those of the fitted model and of the starting one
+    np.testing.assert_allclose(dense.residuals, res(dense.model, y), rtol=1e-10, atol=1e-14)
+    np.testing.assert_allclose(dense.initial_residuals, res(model, y), rtol=1e-12)
     # The rule itself: tangents in the unknowns and in the data give plain forward mode's directional derivatives.
     f = lambda z, d: res({"a": 1.0 + z[0], "b": 0.3 + 0.3 * z[1]}, d[0]) * d[1]  # noqa: E731
     rule = _dense_forward(f)
