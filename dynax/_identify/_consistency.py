@@ -56,7 +56,7 @@ import numpy as np
 import optimistix as optx
 
 from .._model._extensions import Extended
-from .._model._two_link import AbstractTwoLink
+from .._model._system import AbstractManipulator
 
 
 class InconsistentEstimateWarning(UserWarning):
@@ -135,18 +135,26 @@ def consistency_conditions(system, names: tuple[str, ...], theta) -> tuple[str, 
 
 
 def min_mass_eigenvalue(system, qs) -> float:
-    """The smallest eigenvalue of the model's mass matrix (with its terms' inertia) over configurations `qs`."""
+    r"""The smallest eigenvalue of the model's mass matrix (with its terms' inertia) over configurations `qs`.
+
+    Evaluated at the configurations the system names (`mass_check_configurations`: for a two-link
+    arm the two ends of the data's range of $\cos q_2$, where the minimum is exact), not at all of them.
+    """
     terms = system.joint_terms if isinstance(system, Extended) else ()
     return float(_min_mass_eigenvalue(_base(system), terms, jnp.asarray(qs)))
 
 
 @eqx.filter_jit
 def _min_mass_eigenvalue(base, terms, qs):
-    # Compiled: op by op, the vmap over 100,000 configurations took longer than the fit itself.
+    # Compiled: op by op, even the choice of configurations costs more than the fit's solve.
+    qs = base.mass_check_configurations(qs)
+
     def mass(q):
         m = base.mass_matrix(q)
         for t in terms:
             m = m.at[t.joint, t.joint].add(t.inertia())
+        if m.shape == (1, 1):
+            return m[0, 0]
         if m.shape == (2, 2):
             # Closed form: a batched LAPACK eigensolver call per 2x2 matrix is far slower.
             half_trace, half_gap = 0.5 * (m[0, 0] + m[1, 1]), 0.5 * (m[0, 0] - m[1, 1])
@@ -167,7 +175,7 @@ def check_consistency(system, names, theta, qs=None, *, warn: bool = True) -> Co
     """
     violated = list(consistency_conditions(system, names, theta))
     eigenvalue = None
-    if qs is not None and isinstance(_base(system), AbstractTwoLink):
+    if qs is not None and isinstance(_base(system), AbstractManipulator):
         eigenvalue = min_mass_eigenvalue(system, qs)
         if not eigenvalue > 0:
             violated.append(f"mass matrix: not positive definite at the data's configurations "

@@ -30,7 +30,7 @@ from .._simulate import FixedGrid
 from .._model._linear_axis import LinearAxis
 from .._model._extensions import Extended
 from .._model._system import AbstractSystem
-from .._model._two_link import AbstractTwoLink, Acrobot, DoublePendulum
+from .._model._two_link import Acrobot, DoublePendulum
 from ._consistency import (
     check_consistency,
     Consistency,
@@ -46,9 +46,8 @@ from ._regressors import (
     _positions,
     _split,
     dynamic_regressor,
-    energy_regressor,
+    energy_and_friction_rows,
     Friction,
-    friction_power_regressor,
     generalised_force,
     parameter_names,
     parameter_vector,
@@ -436,12 +435,6 @@ def _interval_integrals(ts, values_left, values_right):
     return 0.5 * h * (values_left + values_right)
 
 
-def _work_and_dissipation(system, ts, xs, us, friction):
-    """Per-interval integrals (trapezoid, input held) of the input power and of the friction-power columns."""
-    _, f, tau, dq = _model_columns(system, xs, us, friction)
-    return _integrals(ts, dq, tau, f)
-
-
 @eqx.filter_jit
 def _model_columns(system, xs, us, friction):
     """The energy and friction-power regressors, the generalised forces and the velocities at every sample.
@@ -451,8 +444,7 @@ def _model_columns(system, xs, us, friction):
     them several times (the power model ran at a quarter of numpy's speed that way).
     """
     _, dq = _positions(system, xs)
-    w = energy_regressor(system, xs, friction)
-    f = friction_power_regressor(system, xs, friction)
+    w, f = energy_and_friction_rows(system, xs, friction)
     return w, f, generalised_force(system, us), dq
 
 
@@ -463,7 +455,6 @@ def _integrate_intervals(ts, dq, tau, f):
     return work, dissipated
 
 
-_integrals = eqx.filter_jit(_integrate_intervals)
 
 
 def _power_rows(system, traj, method: Power, friction):
@@ -506,27 +497,36 @@ def _energy_rows(system, traj, method: Energy, friction):
         xs = _lowpass(traj, traj.xs, method.lowpass_hz, method.lowpass_order)
     else:
         xs = traj.xs
-    starts = np.arange(0, len(traj) - window, stride)
-    rows, target = _energy_equations(system, traj.ts, xs, traj.us, friction, jnp.asarray(starts), window)
-    return rows, target, int(starts[-1] + window - starts[0] + 1)
+    n_windows = (len(traj) - window - 1) // stride + 1  # windows [i stride, i stride + window] inside the record
+    rows, target = _energy_equations(system, traj.ts, xs, traj.us, friction, n_windows, window, stride)
+    return rows, target, (n_windows - 1) * stride + window + 1
 
 
-def _energy_equations(system, ts, xs, us, friction, starts, window):
-    """One energy-balance equation per window `[starts[i], starts[i] + window]`."""
+def _energy_equations(system, ts, xs, us, friction, n_windows, window, stride):
+    """One energy-balance equation per window `[i stride, i stride + window]`, `i < n_windows`."""
     w, f, tau, dq = _model_columns(system, xs, us, friction)
-    return _energy_balance(ts, w, f, tau, dq, starts, window)
+    return _energy_balance(ts, w, f, tau, dq, n_windows, window, stride)
 
 
 @eqx.filter_jit
-def _energy_balance(ts, w, f, tau, dq, starts, window):
+def _energy_balance(ts, w, f, tau, dq, n_windows, window, stride):
     work, dissipated = _integrate_intervals(ts, dq, tau, f)
-    # Each window's integrals as the sum of its `window` intervals (gathered), not as differences of
-    # running sums: XLA's CPU cumsum of 100,000 rows is slow, and differences of long running sums
-    # lose digits.
-    intervals = starts[:, None] + jnp.arange(window)[None, :]  # (windows, window)
+    # Each window's integrals as the sum of its `window` intervals, not as differences of running
+    # sums: XLA's CPU cumsum of 100,000 rows is slow, and differences of long running sums lose
+    # digits. Windows that tile the record (the default) are a reshape; overlapping or spaced
+    # ones a gather.
+    starts = stride * jnp.arange(n_windows)
     ends = starts + window
-    rows = (w[ends] - w[starts]) + jnp.sum(dissipated[intervals], axis=1)
-    return rows, jnp.sum(work[intervals], axis=1)
+    if stride == window:
+        def window_sums(v):
+            return v[: n_windows * window].reshape((n_windows, window) + v.shape[1:]).sum(axis=1)
+    else:
+        intervals = starts[:, None] + jnp.arange(window)[None, :]  # (windows, window)
+
+        def window_sums(v):
+            return jnp.sum(v[intervals], axis=1)
+
+    return (w[ends] - w[starts]) + window_sums(dissipated), window_sums(work)
 
 
 def _system_name(system):
@@ -594,8 +594,13 @@ def _equations(system, trajectories, method, friction, weights, rcond):
 
 
 def _joint_positions(system, trajectories):
-    _, terms = _split(system)
-    return jnp.concatenate([_positions(system, t.xs)[0] for t in trajectories])
+    """The records' joint positions, stacked (one compiled call: slicing op by op costs more than the check)."""
+    return _stacked_positions(system, [t.xs for t in trajectories])
+
+
+@eqx.filter_jit
+def _stacked_positions(system, states):
+    return jnp.concatenate([_positions(system, xs)[0] for xs in states])
 
 
 def _least_squares_stage(system, trajectories, method, friction, weights, rcond, consistency):
@@ -604,17 +609,19 @@ def _least_squares_stage(system, trajectories, method, friction, weights, rcond,
     )
     fit = least_squares(a, y, names=names, weights=weights, rcond=rcond)
     estimate = fit.estimate
+    fitted = _fitted_system(system, names, estimate)
     qs = _joint_positions(system, trajectories)
-    check = check_consistency(_fitted_system(system, names, estimate), names, estimate, qs, warn=consistency == "check")
+    check = check_consistency(fitted, names, estimate, qs, warn=consistency == "check")
     if consistency == "constrain" and check.violated:
         estimate, _ = consistent_least_squares(system, names, a, y, weights, start=fit.estimate)
-        after = check_consistency(_fitted_system(system, names, estimate), names, estimate, qs, warn=False)
+        fitted = _fitted_system(system, names, estimate)
+        after = check_consistency(fitted, names, estimate, qs, warn=False)
         check = Consistency(after.violated, active=check.violated, constrained=True,
                             min_mass_eigenvalue=after.min_mass_eigenvalue)
         if after.violated:
             warnings.warn("the constrained fit did not reach a consistent estimate: " + "; ".join(after.violated),
                           InconsistentEstimateWarning, stacklevel=3)
-    return _LeastSquaresStage(_fitted_system(system, names, estimate), names, estimate, fit, a, y, int(n_samples),
+    return _LeastSquaresStage(fitted, names, estimate, fit, a, y, int(n_samples),
                               label, settings, check)
 
 
@@ -647,7 +654,7 @@ def _refinement_method(refine, system, method, trajectories):
     """
     if refine is None or refine is False:
         return None
-    arm = isinstance(_split(system)[0], AbstractTwoLink)
+    arm = _split(system)[0].refinement_terms() is not None
     if not (refine is True or isinstance(refine, SimulationFit) or (isinstance(refine, str) and refine == "auto")):
         raise UsageError(f"identify: `refine` must be 'auto', True, False or a SimulationFit(), got {refine!r}")
     if not arm:

@@ -150,9 +150,12 @@ def _solve(a, y, w, rcond):
     estimate is $V S^{+} U_R^\top c$ at the numerical rank.
     """
     m, n = a.shape
-    sw = jnp.sqrt(w)
-    aw = a * sw[:, None]
-    yw = y * sw
+    if w is None:  # unweighted: no pass over the rows to apply unit weights
+        aw, yw = a, y
+    else:
+        sw = jnp.sqrt(w)
+        aw = a * sw[:, None]
+        yw = y * sw
     scale = jnp.linalg.norm(aw, axis=0)
     scale = jnp.where(scale > 0, scale, 1.0)
     a_scaled = aw / scale[None, :]
@@ -169,7 +172,7 @@ def _solve(a, y, w, rcond):
     pinv_gram = (vt.T * inv_s[None, :] ** 2) @ vt
     estimate = z / scale
     residual = aw @ estimate - yw
-    dof = jnp.maximum(jnp.minimum(m, jnp.sum(w > 0)) - rank, 1)
+    dof = jnp.maximum((m if w is None else jnp.minimum(m, jnp.sum(w > 0))) - rank, 1)
     sigma2 = residual @ residual / dof
     covariance = sigma2 * pinv_gram / jnp.outer(scale, scale)
     directions = vt / scale[None, :]
@@ -223,10 +226,11 @@ def least_squares(
     names = tuple(names) if names is not None else tuple(f"p{i}" for i in range(n))
     if len(names) != n:
         raise ValueError(f"least_squares: {len(names)} `names` for {n} regressor columns")
-    w = jnp.ones(m, a.dtype) if weights is None else jnp.asarray(weights, a.dtype)
-    if w.shape != (m,):
+    w = None if weights is None else jnp.asarray(weights, a.dtype)
+    if w is not None and w.shape != (m,):
         raise ValueError(f"least_squares: `weights` must have shape ({m},), got {w.shape}")
     if m < n:
+        w = jnp.ones(m, a.dtype) if w is None else w
         a = jnp.concatenate([a, jnp.zeros((n - m, n), a.dtype)])
         y = jnp.concatenate([y, jnp.zeros(n - m, y.dtype)])
         w = jnp.concatenate([w, jnp.zeros(n - m, w.dtype)])

@@ -42,9 +42,8 @@ import numpy as np
 
 from .._data._derivatives import butterworth_filtfilt, resample
 from .._data._trajectory import Trajectory
-from .._model._extensions import Extended, RotorInertia
+from .._model._extensions import Extended
 from .._model._system import AbstractSystem
-from .._model._two_link import AbstractTwoLink
 from .._simulate import FixedGrid, simulate
 from ._consistency import consistent_parametrisation, ConsistentParametrisation
 from ._defaults import choose_filter, measurement_noise_std, velocities_from_positions
@@ -88,13 +87,13 @@ class ConsistentSystem(AbstractSystem):
         return self.model.vector_field(t, x, u)
 
 
-def with_elbow_rotor(system: AbstractSystem) -> AbstractSystem:
-    """`system` with `RotorInertia(joint=1)` (coefficient 0) if it has none."""
+def with_refinement_terms(system: AbstractSystem) -> AbstractSystem:
+    """`system` with the terms its `refinement_terms()` names (a two-link arm's `RotorInertia(joint=1)`,
+    at zero) where it has no term of that kind at that joint."""
     base, terms = _split(system)
-    if any(isinstance(t, RotorInertia) and t.joint == 1 for t in terms):
-        return system
-    dtype = jnp.result_type(base.theta1)
-    return Extended(base, terms + (RotorInertia(1, jnp.zeros((), dtype)),))
+    have = {(type(t), t.joint) for t in terms}
+    extra = tuple(t for t in base.refinement_terms() if (type(t), t.joint) not in have)
+    return Extended(base, terms + extra) if extra else system
 
 
 @dataclasses.dataclass(frozen=True)
@@ -206,9 +205,11 @@ def refine_by_simulation(
     record_weights = DEFAULT_RECORD_WEIGHTS if record_weights is None else record_weights
     if record_weights not in RECORD_WEIGHTS:
         raise ValueError(f"refine_by_simulation: `record_weights` must be one of {RECORD_WEIGHTS}, got {record_weights!r}")
-    if not isinstance(_split(system)[0], AbstractTwoLink):
-        raise TypeError("refine_by_simulation refines two-link arms")
-    model = with_elbow_rotor(system)
+    base = _split(system)[0]
+    if base.refinement_terms() is None:
+        raise TypeError(f"refine_by_simulation: {type(base).__name__} names no refinement_terms(); "
+                        "it refines two-link arms")
+    model = with_refinement_terms(system)
     friction = "coulomb" if any(n.startswith("fc") for n in names) else "viscous"
     from ._regressors import parameter_names
 

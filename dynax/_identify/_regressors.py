@@ -197,6 +197,31 @@ def dynamic_regressor(
     return jax.vmap(row)(q, dq, ddq)
 
 
+def _energy_row(system, names, theta0):
+    """`(q, dq) -> w`: one sample's energy-regressor row, `jax.grad` of the energy (linear in theta)."""
+    return lambda q, dq: jax.grad(lambda th: _energy(system, names, th, q, dq))(theta0)
+
+
+def _friction_row(system, names, theta0, mask):
+    """`(q, dq) -> row`: one sample's dissipated-power row (zero where `mask` is 0)."""
+
+    def row(q, dq):
+        # The power is a scalar linear in theta: one reverse pass gives the whole row.
+        power = lambda th: dq @ _inverse_dynamics(system, names, th, q, dq, jnp.zeros_like(dq))  # noqa: E731
+        return jax.grad(power)(theta0) * mask
+
+    return row
+
+
+def _rows_setup(system, xs, friction):
+    """The model with its friction terms, its parameter names, theta = 0, and the friction columns' mask."""
+    names = parameter_names(system, friction)
+    energy_names = energy_parameter_names(system, friction)
+    mask = jnp.asarray([n not in energy_names for n in names], xs.dtype)
+    system = with_friction(system, friction)
+    return system, names, jnp.zeros(len(names), xs.dtype), mask
+
+
 @eqx.filter_jit
 def energy_regressor(
     system: AbstractSystem, xs: Float[Array, "time n_states"], friction: Friction = "viscous"
@@ -215,11 +240,8 @@ def energy_regressor(
         M. Gautier and W. Khalil, "On the identification of the inertial parameters of robots",
         Proc. 27th IEEE Conference on Decision and Control, 1988.
     """
-    system = with_friction(system, friction)
-    names = parameter_names(system, friction)
-    theta0 = jnp.zeros(len(names), xs.dtype)
-    q, dq = _positions(system, xs)
-    return jax.vmap(lambda q, dq: jax.grad(lambda th: _energy(system, names, th, q, dq))(theta0))(q, dq)
+    system, names, theta0, _ = _rows_setup(system, xs, friction)
+    return jax.vmap(_energy_row(system, names, theta0))(*_positions(system, xs))
 
 
 @eqx.filter_jit
@@ -236,18 +258,19 @@ def friction_power_regressor(
 
     **Returns:** shape `(time, n_params)`.
     """
-    names = parameter_names(system, friction)
-    energy_names = energy_parameter_names(system, friction)
-    mask = jnp.asarray([n not in energy_names for n in names], xs.dtype)
-    system = with_friction(system, friction)
-    theta0 = jnp.zeros(len(names), xs.dtype)
-    q, dq = _positions(system, xs)
+    system, names, theta0, mask = _rows_setup(system, xs, friction)
+    return jax.vmap(_friction_row(system, names, theta0, mask))(*_positions(system, xs))
 
-    def row(q, dq):
-        # The power is a scalar linear in theta: one reverse pass gives the whole row.
-        return jax.grad(lambda th: dq @ _inverse_dynamics(system, names, th, q, dq, jnp.zeros_like(dq)))(theta0)
 
-    return jax.vmap(row)(q, dq) * mask[None, :]
+def energy_and_friction_rows(system: AbstractSystem, xs: Float[Array, "time n_states"], friction: Friction = "viscous"):
+    """`(energy_regressor, friction_power_regressor)` in one `vmap` over the samples (traced, not compiled here).
+
+    One batched loop for both: as two `vmap`s in one compiled program, XLA's CPU backend ran the
+    pair three times slower than either alone.
+    """
+    system, names, theta0, mask = _rows_setup(system, xs, friction)
+    energy, dissipation = _energy_row(system, names, theta0), _friction_row(system, names, theta0, mask)
+    return jax.vmap(lambda q, dq: (energy(q, dq), dissipation(q, dq)))(*_positions(system, xs))
 
 
 @eqx.filter_jit

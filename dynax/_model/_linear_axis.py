@@ -49,6 +49,10 @@ class LinearAxis(AbstractManipulator):
     def mass_matrix(self, q):
         return jnp.reshape(self.mass, (1, 1))
 
+    def mass_check_configurations(self, qs):
+        """One configuration: the mass matrix is the constant mass."""
+        return qs[:1]
+
     def bias_force(self, q, dq):
         friction = self.viscous * dq + self.coulomb * jnp.tanh(dq / self.coulomb_velocity) + self.offset
         return jnp.reshape(friction, (1,))

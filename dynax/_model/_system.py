@@ -180,6 +180,12 @@ class AbstractSystem(eqx.Module):
         as sentences naming them (`dynax.check_consistency`). Default: none."""
         return ()
 
+    def refinement_terms(self) -> tuple | None:
+        """The joint terms (at zero) that `identify`'s output-error refinement adds to the
+        least-squares model, e.g. a geared motor's rotor inertia; `None` (the default) when the
+        system has no output-error refinement (`identify`'s `refine="auto"` then skips it)."""
+        return None
+
 
 def _no_linear_model(system, method):
     name = type(system).__name__
@@ -213,6 +219,12 @@ class AbstractManipulator(AbstractSystem):
     @abc.abstractmethod
     def input_matrix(self) -> Float[Array, "n_joints n_inputs"]:
         """$B$, mapping the input vector to generalised forces."""
+
+    def mass_check_configurations(self, qs: Float[Array, "time n_joints"]) -> Float[Array, "k n_joints"]:
+        r"""The configurations among `qs` at which the smallest eigenvalue of $M(q)$ over all of
+        `qs` is attained (`dynax.check_consistency` evaluates $M$ there only). Default: all of
+        them; a system whose mass matrix has known structure returns fewer."""
+        return qs
 
     @property
     def position_indices(self) -> tuple[int, ...]:

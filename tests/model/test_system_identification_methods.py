@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import dynax
+from dynax._identify._consistency import min_mass_eigenvalue
 
 THETA = dict(theta1=1.1, theta2=0.7, theta3=0.4, theta4=9.0, theta5=4.5, theta6=0.05, theta7=0.08)
 
@@ -166,3 +167,36 @@ def test_a_new_system_is_identified_through_its_methods_alone():
     names = dynax.parameter_names(osc, "coulomb")
     assert dynax.consistency_conditions(osc, names, np.array([-1.0, 0.3, -5.0, -0.1])) == (
         "inertia: mass must be positive", "friction: fc = -0.1 must be non-negative")
+
+
+def test_two_link_mass_check_configurations_find_the_smallest_eigenvalue_over_the_data():
+    """The consistency check evaluates M(q) at two configurations only; against the smallest
+    eigenvalue over every sample (numpy's eigvalsh), for consistent and inconsistent base parameters,
+    with a rotor inertia, and on data that cover only part of the elbow's range."""
+    rng = np.random.default_rng(3)
+    for k in range(20):
+        theta = {n: v * rng.uniform(0.5, 1.5) for n, v in THETA.items()}
+        theta["theta3"] = rng.uniform(-1.2, 1.2)  # |theta3| large: indefinite at some elbow angles
+        arm = dynax.DoublePendulum.from_base_parameters(theta)
+        system = dynax.Extended(arm, (dynax.RotorInertia(1, jnp.asarray(rng.uniform(0.0, 0.2))),))
+        lo, hi = np.sort(rng.uniform(-4.0, 4.0, size=2))
+        qs = np.stack([rng.uniform(-3, 3, 500), rng.uniform(lo, hi, 500)], axis=1)
+        expected = min(np.linalg.eigvalsh(np.asarray(arm.mass_matrix(jnp.asarray(q))) + np.diag([0.0, float(
+            system.terms[0].coefficient)]))[0] for q in qs)
+        got = min_mass_eigenvalue(system, jnp.asarray(qs))
+        np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-12)
+    assert len(arm.mass_check_configurations(jnp.asarray(qs))) == 2
+
+
+def test_output_error_refinement_terms_are_a_method_of_the_system():
+    """`identify`'s refinement adds what the system names (the elbow's rotor inertia); a linear axis
+    names none, so `refine=True` on it is refused by name rather than by a class check."""
+    arm = dynax.DoublePendulum()
+    (term,) = arm.refinement_terms()
+    assert isinstance(term, dynax.RotorInertia) and term.joint == 1 and float(term.coefficient) == 0.0
+    assert dynax.LinearAxis().refinement_terms() is None
+    t = jnp.linspace(0.0, 2.0, 401)
+    xs = jnp.stack([0.1 * jnp.sin(3 * t), 0.3 * jnp.cos(3 * t)], axis=1)
+    data = dynax.Trajectory(t, xs, jnp.sin(t)[:, None], ("q", "dq"), ("force",), "linear_axis")
+    with pytest.raises(dynax.UsageError, match="two-link"):
+        dynax.identify(dynax.LinearAxis(), data, dynax.Power(), refine=True, holdout=0)
