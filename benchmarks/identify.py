@@ -134,13 +134,16 @@ def main():
         start = time.perf_counter()
         first = identify(system, data, method, refine=False, holdout=0, consistency="off")
         compile_s = time.perf_counter() - start
-        # Interleaved (dynax, numpy, dynax, ...), best of each: a change in the machine's load
-        # touches both alike.
+        # Alternating rounds (3 dynax calls, then 3 numpy calls, `repeats` times), best of each: a
+        # change in the machine's load touches both alike, and neither library's worker threads,
+        # which spin for a while after a call (OpenBLAS's take the cores from XLA's: 20 -> 30 ms for
+        # the dynamic model when the calls alternate one by one), run into the other's timing
+        # more than once a round.
         t_dynax, t_numpy = [], []
         for _ in range(args.repeats):
-            t, result = best_time(lambda: identify(system, data, method, refine=False, holdout=0, consistency="off").estimate, 1)
+            t, result = best_time(lambda: identify(system, data, method, refine=False, holdout=0, consistency="off").estimate, 3)
             t_dynax.append(t)
-            t, estimate = best_time(lambda: reference(ts, xs, us), 1)
+            t, estimate = best_time(lambda: reference(ts, xs, us), 3)
             t_numpy.append(t)
         t_dynax, t_numpy = min(t_dynax), min(t_numpy)
         agree = float(np.max(np.abs(np.asarray(result) - estimate) / np.abs(estimate)))

@@ -344,7 +344,7 @@ def real_data(out):
     # with its Coulomb term dropped, not refitted (refitting without it gives the "viscous" row).
     from dynax._identify._identify import _dynamic_rows
 
-    rows, forces, _ = _dynamic_rows(dynax.LinearAxis(), emps, recipe, "coulomb")
+    rows, forces = _dynamic_rows(dynax.LinearAxis(), emps, recipe, "coulomb")[:2]  # decimated, so trimmed
     fit = identify(dynax.LinearAxis(), emps, recipe, friction="coulomb", **AS_PUBLISHED)
     theta = np.asarray(fit.estimate) * (np.asarray(fit.names) != "coulomb")
     a, y = np.asarray(rows)[:, 0, :], np.asarray(forces)[:, 0]

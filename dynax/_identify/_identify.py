@@ -47,10 +47,12 @@ from ._regressors import (
     _split,
     dynamic_regressor,
     energy_and_friction_rows,
+    energy_parameter_names,
     Friction,
     generalised_force,
     parameter_names,
     parameter_vector,
+    row_dot,
     with_friction,
     with_parameters,
 )
@@ -425,8 +427,13 @@ def _dynamic_rows(system, traj, method: Dynamic, friction):
     else:
         held = method.inputs == "held"
     ys, forces = _dynamic_equations(system, traj.ts, xs, us, friction, held)
-    ys, forces = _trim_and_decimate(ys, forces, trim, settings["decimate"])
-    return ys, forces, ys.shape[0], settings
+    if settings["decimate"] > 1:
+        ys, forces = _trim_and_decimate(ys, forces, trim, settings["decimate"])
+        trim = 0
+    elif trim < 0:
+        raise UsageError(f"`trim` must be >= 0, got {trim}")
+    # Without decimation the trim is a slice that `_joint_blocks` takes in the same compiled call.
+    return ys, forces, ys.shape[0] - 2 * trim, settings, trim
 
 
 def _interval_integrals(ts, values_left, values_right):
@@ -435,9 +442,27 @@ def _interval_integrals(ts, values_left, values_right):
     return 0.5 * h * (values_left + values_right)
 
 
+def _column_kinds(system, friction):
+    """`(energy, dissipative)`: the regressor columns (indices) the stored energy depends on, and the rest.
+
+    The energy rows are zero in the dissipative columns and the friction-power rows in the energy
+    columns, so each is computed, integrated and differenced on its own columns only."""
+    names = parameter_names(system, friction)
+    energy = set(energy_parameter_names(system, friction))
+    return (tuple(i for i, n in enumerate(names) if n in energy),
+            tuple(i for i, n in enumerate(names) if n not in energy))
+
+
+def _joined(energy_part, dissipative_part, columns):
+    """The rows with every column in its place: `energy_part` in the energy columns, the rest from `dissipative_part`."""
+    order = np.argsort(np.asarray(columns[0] + columns[1], dtype=int))
+    return jnp.concatenate([energy_part, dissipative_part], axis=-1)[..., order]
+
+
 @eqx.filter_jit
-def _model_columns(system, xs, us, friction):
-    """The energy and friction-power regressors, the generalised forces and the velocities at every sample.
+def _model_columns(system, xs, us, friction, columns):
+    """The energy regressor's energy columns and the friction-power regressor's dissipative columns,
+    the generalised forces and the velocities at every sample.
 
     One compiled call, and the differences and integrals another: in one program with them, XLA's
     CPU backend fuses the vmapped Jacobians into every shifted slice that reads them and evaluates
@@ -445,16 +470,15 @@ def _model_columns(system, xs, us, friction):
     """
     _, dq = _positions(system, xs)
     w, f = energy_and_friction_rows(system, xs, friction)
-    return w, f, generalised_force(system, us), dq
+    energy, dissipative = columns
+    return w[:, list(energy)], f[:, list(dissipative)], generalised_force(system, us), dq
 
 
 def _integrate_intervals(ts, dq, tau, f):
     tau = tau[:-1]  # on [t_j, t_{j+1}] the input is us[j]
-    work = _interval_integrals(ts, jnp.sum(dq[:-1] * tau, axis=-1), jnp.sum(dq[1:] * tau, axis=-1))
+    work = _interval_integrals(ts, row_dot(dq[:-1], tau), row_dot(dq[1:], tau))
     dissipated = _interval_integrals(ts, f[:-1], f[1:])
     return work, dissipated
-
-
 
 
 def _power_rows(system, traj, method: Power, friction):
@@ -470,12 +494,13 @@ def _power_rows(system, traj, method: Power, friction):
 
 
 def _power_equations(system, ts, xs, us, friction):
-    w, f, tau, dq = _model_columns(system, xs, us, friction)
-    return _power_balance(ts, w, f, tau, dq)
+    columns = _column_kinds(system, friction)
+    w, f, tau, dq = _model_columns(system, xs, us, friction, columns)
+    return _power_balance(ts, w, f, tau, dq, columns)
 
 
 @eqx.filter_jit
-def _power_balance(ts, w, f, tau, dq):
+def _power_balance(ts, w, f, tau, dq, columns):
     work, dissipated = _integrate_intervals(ts, dq, tau, f)
     # dH/dt by central differences of the energy columns; the powers averaged with the same weights
     # over the two neighbouring intervals, so each row is exact to O(h^2) under the zero-order hold.
@@ -485,7 +510,7 @@ def _power_balance(ts, w, f, tau, dq):
     dw = (a1[:, None] * (w[1:-1] - w[:-2]) + a2[:, None] * (w[2:] - w[1:-1]))
     f = a1[:, None] * dissipated[:-1] + a2[:, None] * dissipated[1:]
     p = a1 * work[:-1] + a2 * work[1:]
-    return dw + f, p
+    return _joined(dw, f, columns), p
 
 
 def _energy_rows(system, traj, method: Energy, friction):
@@ -504,29 +529,30 @@ def _energy_rows(system, traj, method: Energy, friction):
 
 def _energy_equations(system, ts, xs, us, friction, n_windows, window, stride):
     """One energy-balance equation per window `[i stride, i stride + window]`, `i < n_windows`."""
-    w, f, tau, dq = _model_columns(system, xs, us, friction)
-    return _energy_balance(ts, w, f, tau, dq, n_windows, window, stride)
+    columns = _column_kinds(system, friction)
+    w, f, tau, dq = _model_columns(system, xs, us, friction, columns)
+    return _energy_balance(ts, w, f, tau, dq, n_windows, window, stride, columns)
 
 
 @eqx.filter_jit
-def _energy_balance(ts, w, f, tau, dq, n_windows, window, stride):
+def _energy_balance(ts, w, f, tau, dq, n_windows, window, stride, columns):
     work, dissipated = _integrate_intervals(ts, dq, tau, f)
     # Each window's integrals as the sum of its `window` intervals, not as differences of running
     # sums: XLA's CPU cumsum of 100,000 rows is slow, and differences of long running sums lose
     # digits. Windows that tile the record (the default) are a reshape; overlapping or spaced
     # ones a gather.
-    starts = stride * jnp.arange(n_windows)
-    ends = starts + window
+    last = (n_windows - 1) * stride  # start of the last window
+    gained = w[window : last + window + 1 : stride] - w[: last + 1 : stride]  # strided slices, not gathers
     if stride == window:
         def window_sums(v):
             return v[: n_windows * window].reshape((n_windows, window) + v.shape[1:]).sum(axis=1)
     else:
-        intervals = starts[:, None] + jnp.arange(window)[None, :]  # (windows, window)
+        intervals = stride * jnp.arange(n_windows)[:, None] + jnp.arange(window)[None, :]  # (windows, window)
 
         def window_sums(v):
             return jnp.sum(v[intervals], axis=1)
 
-    return (w[ends] - w[starts]) + window_sums(dissipated), window_sums(work)
+    return _joined(gained, window_sums(dissipated), columns), window_sums(work)
 
 
 def _system_name(system):
@@ -563,20 +589,16 @@ def _equations(system, trajectories, method, friction, weights, rcond):
     settings = ()
     if isinstance(method, Dynamic):
         parts = [_dynamic_rows(system, t, method, friction) for t in trajectories]
-        ys = jnp.concatenate([p[0] for p in parts])  # (rows, joints, params)
-        forces = jnp.concatenate([p[1] for p in parts])
+        a, y = _joint_blocks([p[0] for p in parts], [p[1] for p in parts], tuple(p[4] for p in parts))
         n_samples = sum(p[2] for p in parts)
         settings = tuple(p[3] for p in parts)
-        n_joints = ys.shape[1]
-        # Stack joint by joint so that a per-joint weight is one block of rows.
-        a = jnp.transpose(ys, (1, 0, 2)).reshape(-1, ys.shape[2])
-        y = forces.T.reshape(-1)
+        n_joints = parts[0][0].shape[1]
         if method.weighting == "joint" and weights is None:
             first = least_squares(a, y, names=names, rcond=rcond)
             residual = (a @ first.estimate - y).reshape(n_joints, -1)
             variance = jnp.mean(residual**2, axis=1)
             variance = jnp.where(variance > 0, variance, jnp.max(variance) + jnp.finfo(a.dtype).tiny)
-            weights = jnp.repeat(1.0 / variance, ys.shape[0])
+            weights = jnp.repeat(1.0 / variance, a.shape[0] // n_joints)
         elif method.weighting not in ("none", "joint"):
             raise UsageError(f"Dynamic: `weighting` must be 'none' or 'joint', got {method.weighting!r}")
         label = "dynamic"
@@ -591,6 +613,16 @@ def _equations(system, trajectories, method, friction, weights, rcond):
             f"identify: `method` must be Dynamic(), Power(), Energy() or SimulationFit(), got {type(method).__name__}"
         )
     return system, a, y, weights, names, n_samples, label, settings
+
+
+@eqx.filter_jit
+def _joint_blocks(rows, forces, trims):
+    """The records' dynamic equations `(time, joints, params)`, each without `trim` rows at either end,
+    stacked joint by joint (all of joint 1's rows, then joint 2's), so that a per-joint weight is one
+    block of rows; one compiled call (op by op, the copies took twice as long as the regressor)."""
+    ys = jnp.concatenate([r[t : r.shape[0] - t] for r, t in zip(rows, trims)])
+    forces = jnp.concatenate([f[t : f.shape[0] - t] for f, t in zip(forces, trims)])
+    return jnp.transpose(ys, (1, 0, 2)).reshape(-1, ys.shape[2]), forces.T.reshape(-1)
 
 
 def _joint_positions(system, trajectories):

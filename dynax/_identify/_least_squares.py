@@ -142,12 +142,15 @@ def _qr_r(a):
 def _solve(a, y, w, rcond):
     r"""Column-scaled weighted least squares by factoring the regressor itself (QR, then SVD of R).
 
-    $[W^{1/2} A D^{-1},\ W^{1/2} y] = Q [R, c; 0, \rho]$ (Householder, as TSQR: `_qr_r`), so
-    $c = Q^\top W^{1/2} y$ comes with $R$ and $Q$ is never formed; $R = U_R S V^\top$, so
+    $[W^{1/2} A,\ W^{1/2} y] = Q [R, c; 0, \rho]$ (Householder, as TSQR: `_qr_r`), so
+    $c = Q^\top W^{1/2} y$ comes with $R$ and $Q$ is never formed. The column norms $D$ of
+    $W^{1/2} A$ are those of $R$, and $W^{1/2} A D^{-1} = Q (R D^{-1})$ (Householder QR commutes
+    with column scaling), so no pass over the rows scales them. $R D^{-1} = U_R S V^\top$, so
     $W^{1/2} A D^{-1} = (Q U_R) S V^\top$ is the SVD of the scaled regressor, obtained without
     forming $A^\top A$ (which would square the condition number and lose half the digits: in
     float32 two columns that differ by $10^{-3}$ of their scale would not be told apart). The
-    estimate is $V S^{+} U_R^\top c$ at the numerical rank.
+    estimate is $D^{-1} V S^{+} U_R^\top c$ at the numerical rank, and the residual's squared norm
+    is $\rho^2$ plus the parts of $U_R^\top c$ in the directions dropped from the rank.
     """
     m, n = a.shape
     if w is None:  # unweighted: no pass over the rows to apply unit weights
@@ -156,12 +159,12 @@ def _solve(a, y, w, rcond):
         sw = jnp.sqrt(w)
         aw = a * sw[:, None]
         yw = y * sw
-    scale = jnp.linalg.norm(aw, axis=0)
-    scale = jnp.where(scale > 0, scale, 1.0)
-    a_scaled = aw / scale[None, :]
-    r_full = _qr_r(jnp.concatenate([a_scaled, yw[:, None]], axis=1))
+    r_full = _qr_r(jnp.concatenate([aw, yw[:, None]], axis=1))
     r, qty = r_full[:n, :n], r_full[:n, n]
-    u_r, s, vt = jnp.linalg.svd(r)
+    rho = r_full[n, n] if r_full.shape[0] > n else jnp.zeros((), a.dtype)  # m == n rows: y is in range
+    scale = jnp.linalg.norm(r, axis=0)
+    scale = jnp.where(scale > 0, scale, 1.0)
+    u_r, s, vt = jnp.linalg.svd(r / scale[None, :])
     finite = jnp.all(jnp.isfinite(s)) & (s[0] > 0)
     rank = jnp.where(finite, jnp.sum(s > rcond * s[0]), 0)
     cond = jnp.where(finite & (s[-1] > 0), s[0] / jnp.where(s[-1] > 0, s[-1], 1.0), jnp.inf)
@@ -171,13 +174,12 @@ def _solve(a, y, w, rcond):
     z = vt.T @ (inv_s * projected)
     pinv_gram = (vt.T * inv_s[None, :] ** 2) @ vt
     estimate = z / scale
-    residual = aw @ estimate - yw
+    residual2 = rho**2 + jnp.sum(jnp.where(keep, 0.0, projected**2))
     dof = jnp.maximum((m if w is None else jnp.minimum(m, jnp.sum(w > 0))) - rank, 1)
-    sigma2 = residual @ residual / dof
-    covariance = sigma2 * pinv_gram / jnp.outer(scale, scale)
+    covariance = residual2 / dof * pinv_gram / jnp.outer(scale, scale)
     directions = vt / scale[None, :]
     directions = directions / jnp.max(jnp.abs(directions), axis=1, keepdims=True)
-    residual_rms = jnp.sqrt(residual @ residual / m)
+    residual_rms = jnp.sqrt(residual2 / m)
     return estimate, covariance, s, directions, cond, rank, residual_rms
 
 

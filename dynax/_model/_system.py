@@ -265,9 +265,14 @@ class AbstractManipulator(AbstractSystem):
     ) -> Float[Array, " n_joints"]:
         r"""The generalised force $M(q)\ddot q + h(q, \dot q)$ that produces `ddq` at `(q, dq)`:
         what the least-squares regressors differentiate with respect to the base parameters."""
-        # Elementwise rather than `@`: under vmap a 2x2 matrix-vector product becomes a batched dot,
-        # which XLA's CPU backend runs several times slower than the same arithmetic fused.
-        return jnp.sum(self.mass_matrix(q) * ddq[None, :], axis=1) + self.bias_force(q, dq)
+        # Written out rather than `@` or a `jnp.sum`: under vmap a 2x2 matrix-vector product becomes a
+        # batched dot, and a sum over a two-entry axis a minor-axis reduction, both of which XLA's CPU
+        # backend runs several times slower than the same arithmetic fused.
+        m = self.mass_matrix(q)
+        inertial = m[:, 0] * ddq[0]
+        for k in range(1, ddq.shape[0]):
+            inertial = inertial + m[:, k] * ddq[k]
+        return inertial + self.bias_force(q, dq)
 
     def vector_field(self, t, x, u):
         n = self.n_joints

@@ -135,3 +135,22 @@ def test_least_squares_on_many_rows_matches_scipy_lstsq():
     np.testing.assert_allclose(fit.estimate, scipy.linalg.lstsq(a, y)[0], rtol=1e-10)
     residual = a @ np.asarray(fit.estimate) - y
     np.testing.assert_allclose(float(fit.residual_rms), np.sqrt(np.mean(residual**2)), rtol=1e-10)
+
+
+def test_weighted_rank_deficient_residual_is_that_of_the_returned_estimate():
+    """The residual norm comes from the QR factor (rho and the directions dropped from the rank), not
+    from another pass over the rows: against the residual of the returned estimate itself, and the
+    minimum-norm estimate against numpy's pseudo-inverse in the same column scaling."""
+    rng = np.random.default_rng(11)
+    a = rng.normal(size=(3_001, 5)) * np.array([1.0, 10.0, 0.1, 1.0, 1.0])
+    a[:, 4] = 2.0 * a[:, 0] - a[:, 3]  # a null direction: rank 4 of 5
+    y = a @ np.array([1.0, 0.2, -3.0, 0.5, 0.0]) + 0.1 * rng.normal(size=3_001)
+    w = rng.uniform(0.5, 2.0, size=3_001)
+    fit = least_squares(a, y, weights=w, allow_rank_deficient=True)
+    assert int(fit.rank) == 4
+    residual = np.sqrt(w) * (a @ np.asarray(fit.estimate) - y)
+    np.testing.assert_allclose(float(fit.residual_rms), np.sqrt(np.mean(residual**2)), rtol=1e-9)
+    aw = np.sqrt(w)[:, None] * a
+    d = np.linalg.norm(aw, axis=0)
+    reference = np.linalg.pinv(aw / d, rcond=1e-7) @ (np.sqrt(w) * y) / d
+    np.testing.assert_allclose(fit.estimate, reference, rtol=1e-8, atol=1e-10)
