@@ -56,7 +56,6 @@ import numpy as np
 import optimistix as optx
 
 from .._model._extensions import Extended
-from .._model._system import AbstractManipulator
 
 
 class InconsistentEstimateWarning(UserWarning):
@@ -134,20 +133,24 @@ def consistency_conditions(system, names: tuple[str, ...], theta) -> tuple[str, 
     return tuple(dict.fromkeys(out))
 
 
-def min_mass_eigenvalue(system, qs) -> float:
+def min_mass_eigenvalue(system, qs) -> float | None:
     r"""The smallest eigenvalue of the model's mass matrix (with its terms' inertia) over configurations `qs`.
 
     Evaluated at the configurations the system names (`mass_check_configurations`: for a two-link
-    arm the two ends of the data's range of $\cos q_2$, where the minimum is exact), not at all of them.
+    arm the two ends of the data's range of $\cos q_2$, where the minimum is exact), not at all of them;
+    `None` for a system without a mass matrix.
     """
     terms = system.joint_terms if isinstance(system, Extended) else ()
-    return float(_min_mass_eigenvalue(_base(system), terms, jnp.asarray(qs)))
+    value = _min_mass_eigenvalue(_base(system), terms, jnp.asarray(qs))
+    return None if value is None else float(value)
 
 
 @eqx.filter_jit
 def _min_mass_eigenvalue(base, terms, qs):
     # Compiled: op by op, even the choice of configurations costs more than the fit's solve.
     qs = base.mass_check_configurations(qs)
+    if qs is None:  # no mass matrix to check
+        return None
 
     def mass(q):
         m = base.mass_matrix(q)
@@ -175,9 +178,9 @@ def check_consistency(system, names, theta, qs=None, *, warn: bool = True) -> Co
     """
     violated = list(consistency_conditions(system, names, theta))
     eigenvalue = None
-    if qs is not None and isinstance(_base(system), AbstractManipulator):
+    if qs is not None:
         eigenvalue = min_mass_eigenvalue(system, qs)
-        if not eigenvalue > 0:
+        if eigenvalue is not None and not eigenvalue > 0:
             violated.append(f"mass matrix: not positive definite at the data's configurations "
                             f"(smallest eigenvalue {eigenvalue:.4g})")
     if violated and warn:

@@ -194,6 +194,8 @@ class AbstractBodyModel(eqx.Module):
     weights: eqx.AbstractVar[Float[Array, "6 n_features"]]
     feature_names: eqx.AbstractVar[tuple[str, ...]]
     mask: eqx.AbstractVar[tuple[tuple[bool, ...], ...]]
+    # The contract's name of the model (`MODEL.json`'s "model", the CLI's `--model`).
+    kind: eqx.AbstractClassVar[str]
 
     def known(
         self, quat: Float[Array, "4"], s: Float[Array, "6"], u: Float[Array, "4"]
@@ -323,6 +325,7 @@ class AccelerationModel(AbstractBodyModel):
         static=True, default=_mask_from_axes(ACCELERATION_FEATURE_NAMES, TEMPEST_FEATURES)
     )
     gravity: float = eqx.field(static=True, default=STANDARD_GRAVITY)
+    kind: ClassVar[str] = "acceleration"
 
     def __check_init__(self):
         _check_features("AccelerationModel", self.feature_names, self.mask, self.weights)
@@ -370,6 +373,7 @@ class LinearVelocityModel(AbstractBodyModel):
     mask: tuple[tuple[bool, ...], ...] = eqx.field(
         static=True, default=tuple(tuple(True for _ in LINEAR_FEATURE_NAMES) for _ in BODY_AXES)
     )
+    kind: ClassVar[str] = "linear"
 
     def __check_init__(self):
         _check_features("LinearVelocityModel", self.feature_names, self.mask, self.weights)

@@ -180,6 +180,11 @@ class AbstractSystem(eqx.Module):
         as sentences naming them (`dynax.check_consistency`). Default: none."""
         return ()
 
+    def mass_check_configurations(self, qs: Float[Array, "time n_joints"]) -> Float[Array, "k n_joints"] | None:
+        """Where `dynax.check_consistency` evaluates the mass matrix; `None` (the default): the
+        system has none to check (see `AbstractManipulator.mass_check_configurations`)."""
+        return None
+
     def refinement_terms(self) -> tuple | None:
         """The joint terms (at zero) that `identify`'s output-error refinement adds to the
         least-squares model, e.g. a geared motor's rotor inertia; `None` (the default) when the

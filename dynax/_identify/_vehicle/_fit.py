@@ -87,7 +87,7 @@ def fit_vehicle(
 def model_to_json(fit: VehicleFit, *, horizon_s: float | None = None) -> dict:
     """The `MODEL.json` object of a fit: model kind, features, mask, weights and named parameters."""
     body = fit.system.body_model
-    kind = "acceleration" if isinstance(body, AccelerationModel) else "linear"
+    kind = body.kind
     out = {
         "system": "helicopter",
         "model": kind,

@@ -37,6 +37,7 @@ r"""The frequency-domain criterion (CIFER-style) for the linear velocity model.
     47(1), 2002.
 """
 
+import dataclasses
 import time
 
 import equinox as eqx
@@ -48,7 +49,7 @@ from jaxtyping import Array, Float
 
 from ..._data._trajectory import Trajectory
 from ..._errors import UsageError
-from ..._model._helicopter import BODY, BODY_AXES, Helicopter, LINEAR_FEATURE_NAMES, LinearVelocityModel
+from ..._model._helicopter import BODY, BODY_AXES, Helicopter, LINEAR_FEATURE_NAMES
 from ._criteria import _normal_equations, _single, _solve, _with_theta, fit_one_step, VehicleFit
 from ._windows import check_helicopter_data, valid_starts
 
@@ -227,9 +228,8 @@ def _elimination_order(cramer_rao, insensitivity, criterion: "FrequencyDomain") 
     return np.zeros(0, int)
 
 
-def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: FrequencyDomain = FrequencyDomain()) -> VehicleFit:
-    """Fit a linear velocity model by the frequency-domain criterion (see the module docstring)."""
-    if not isinstance(system.body_model, LinearVelocityModel) or system.body_model.feature_names != LINEAR_FEATURE_NAMES:
+def _check(system: Helicopter, criterion: "FrequencyDomain", trajectory: Trajectory) -> None:
+    if system.body_model.kind != "linear" or system.body_model.feature_names != LINEAR_FEATURE_NAMES:
         raise UsageError("fit_frequency: the frequency-domain criterion fits the linear model only (--model linear)")
     check_helicopter_data(trajectory, "fit_frequency")
     if not (criterion.max_cramer_rao > 0 and criterion.max_insensitivity > 0):
@@ -237,8 +237,20 @@ def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: Frequen
             f"fit_frequency: max_cramer_rao and max_insensitivity must be positive fractions, got "
             f"{criterion.max_cramer_rao} and {criterion.max_insensitivity}"
         )
-    t0 = time.perf_counter()
-    initial = fit_one_step(system, trajectory).system
+
+
+@dataclasses.dataclass(frozen=True)
+class _Responses:
+    """The measured responses in the criterion's band, and which (frequency, output, input) to fit."""
+
+    freqs: np.ndarray  # (f,) [Hz]
+    measured: np.ndarray  # (f, 6 outputs, 4 inputs), complex
+    coherence: np.ndarray  # (f, 6, 4)
+    use: np.ndarray  # (f, 6, 4) bool: coherent and within 30 dB of the output's largest response
+    w_gamma: np.ndarray  # (f, 6, 4): CIFER's coherence weights where used, else 0
+
+
+def _band_responses(trajectory: Trajectory, criterion: "FrequencyDomain") -> _Responses:
     freqs, measured, coherence = frequency_responses(trajectory, criterion.segment_s)
     low, high = criterion.band_hz
     band = (freqs >= low) & (freqs <= high)
@@ -252,107 +264,135 @@ def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: Frequen
     if not use.any():
         raise UsageError("fit_frequency: no input/output pair reaches the coherence threshold; the data lack excitation")
     w_gamma = np.where(use, (1.58 * (1 - np.exp(-coherence))) ** 2, 0.0)
-    safe = np.where(use, measured, 1.0)
-    dtype = trajectory.xs.dtype
-    omegas = jnp.asarray(2 * np.pi * freqs, dtype)
-    sqrt_wg = jnp.asarray(np.sqrt(w_gamma), dtype)
-    measured_j = jnp.asarray(safe)
-    use_j = jnp.asarray(use)
-    delay = 0.5 * float(trajectory.ts[1] - trajectory.ts[0])
+    return _Responses(freqs, measured, coherence, use, w_gamma)
+
+
+def _hover_structure(initial: Helicopter, criterion: "FrequencyDomain"):
+    """`(model, mask)`: the one-step model reduced to the hover-derivative structure (the other weights
+    zero, the constant column kept for its re-fit at the end), and the mask of the weights to fit."""
     mask = np.array([[name in criterion.structure.get(axis, ()) for name in LINEAR_FEATURE_NAMES] for axis in BODY_AXES])
     mask &= np.array(initial.body_model.mask, bool)
-    free = np.nonzero(mask)
-    # The frequency-domain model is the hover-derivative structure: the other weights are zero
-    # (the constant column is re-fitted at the end).
     keep = mask.copy()
     keep[:, LINEAR_FEATURE_NAMES.index("1")] = True
-    initial = eqx.tree_at(lambda h: h.body_model.weights, initial, jnp.where(jnp.asarray(keep), initial.body_model.weights, 0.0))
+    weights = jnp.where(jnp.asarray(keep), initial.body_model.weights, 0.0)
+    return eqx.tree_at(lambda h: h.body_model.weights, initial, weights), mask
 
-    prior_centre = initial.body_model.weights[free]
-    prior_scale = jnp.maximum(jnp.abs(prior_centre), 1.0) / criterion.prior_weight
-    n_free = len(free[0])
-    free_names = [f"d{BODY_AXES[i]}/{LINEAR_FEATURE_NAMES[j]}" for i, j in zip(*free)]
 
-    def response_residuals(theta, active):
-        weights = initial.body_model.weights.at[free].set(theta * active)  # eliminated weights are zero
+def _response_residuals(initial: Helicopter, free, responses: _Responses, delay: float, dtype):
+    """`theta, active -> residuals`: weighted magnitude [dB] and phase [deg] errors of the model's
+    responses against the measured ones (eliminated weights, `active` 0, are zero)."""
+    omegas = jnp.asarray(2 * np.pi * responses.freqs, dtype)
+    sqrt_wg = jnp.asarray(np.sqrt(responses.w_gamma), dtype)
+    measured = jnp.asarray(np.where(responses.use, responses.measured, 1.0))
+    use = jnp.asarray(responses.use)
+
+    def residuals(theta, active):
+        weights = initial.body_model.weights.at[free].set(theta * active)
         model = _model_response(weights, omegas, delay)
-        ratio = measured_j / jnp.where(use_j, model, 1.0)  # unused pairs (weight 0) may have no response
+        ratio = measured / jnp.where(use, model, 1.0)  # unused pairs (weight 0) may have no response
         magnitude = 20 * jnp.log10(jnp.abs(ratio))
         phase = jnp.degrees(jnp.angle(ratio))
         return jnp.concatenate([(sqrt_wg * magnitude).ravel(), (sqrt_wg * jnp.sqrt(0.01745) * phase).ravel()])
 
-    def residuals(theta, active):
-        prior = (theta - prior_centre) / prior_scale
-        return jnp.concatenate([response_residuals(theta, active), prior])
+    return residuals
 
-    dt = float(trajectory.ts[1] - trajectory.ts[0])
-    coherent = coherence >= criterion.min_coherence
-    w_equation = np.where(coherent, (1.58 * (1 - np.exp(-coherence))) ** 2, 0.0)
-    weights0 = (
-        _equation_error(initial.body_model.weights, freqs, measured, w_equation, dt, criterion.prior_weight, mask)
-        if criterion.start == "equation-error"
-        else initial.body_model.weights
-    )
-    theta = weights0[free]
+
+def _droppable(theta, active, cramer_rao, insensitivity, response_residuals, criterion):
+    """The weight CIFER's structure reduction drops next (the worst that fails a limit), or `None`.
+    A weight whose removal would leave a fitted (coherent) response with no path is kept."""
+    for worst in _elimination_order(cramer_rao, insensitivity, criterion):
+        index = np.nonzero(active)[0][worst]
+        trial = active.copy()
+        trial[index] = False
+        if np.all(np.isfinite(np.asarray(response_residuals(theta, jnp.asarray(trial, theta.dtype))))):
+            return index
+    return None
+
+
+def _reduce_structure(theta, response_residuals, residuals, responses: _Responses, free_names, criterion):
+    """Fit (Levenberg-Marquardt), judge every weight's accuracy, drop the worst, refit, until all pass.
+
+    **Returns:** `(theta, active, cramer_rao, insensitivity, eliminated, cost)`, with the accuracies
+    of the weights kept and the final cost per used response."""
+    n_free = len(free_names)
     active = np.ones(n_free, bool)
     cost_jit = jax.jit(lambda th, act: jnp.sum(residuals(th, act) ** 2))
     jacobian = jax.jit(jax.jacfwd(response_residuals))
     # The rows that carry data: magnitude and phase at every used (frequency, pair).
-    response_rows = np.concatenate([use.ravel(), use.ravel()])
+    rows = np.concatenate([responses.use.ravel(), responses.use.ravel()])
 
     def cost(theta):
-        return float(cost_jit(theta, jnp.asarray(active, theta.dtype))) / max(1, int(use.sum()))
+        return float(cost_jit(theta, jnp.asarray(active, theta.dtype))) / max(1, int(responses.use.sum()))
 
     solver = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-8)
     eliminated = []
     for _ in range(n_free + 1):  # the last pass only re-checks (at most n_free eliminations)
+        act = jnp.asarray(active, theta.dtype)
         if criterion.max_steps > 0:
-            act = jnp.asarray(active, theta.dtype)
             solution = optx.least_squares(residuals, solver, theta, args=act, max_steps=criterion.max_steps, throw=False)
             if np.all(np.isfinite(solution.value)) and cost(solution.value) < cost(theta):
                 theta = solution.value
-        act = jnp.asarray(active, theta.dtype)
         cramer_rao, insensitivity = _accuracy(
-            np.asarray(response_residuals(theta, act))[response_rows],
-            np.asarray(jacobian(theta, act))[np.ix_(response_rows, active)],
+            np.asarray(response_residuals(theta, act))[rows],
+            np.asarray(jacobian(theta, act))[np.ix_(rows, active)],
             np.asarray(theta)[active],
         )
-        if not criterion.eliminate:
-            break
-        # CIFER's structure reduction: drop the worst weight and refit. A weight whose removal
-        # would leave a fitted (coherent) response with no path is kept.
-        dropped = None
-        for worst in _elimination_order(cramer_rao, insensitivity, criterion):
-            index = np.nonzero(active)[0][worst]
-            trial = active.copy()
-            trial[index] = False
-            if np.all(np.isfinite(np.asarray(response_residuals(theta, jnp.asarray(trial, theta.dtype))))):
-                dropped = index
-                break
+        dropped = _droppable(theta, active, cramer_rao, insensitivity, response_residuals, criterion) \
+            if criterion.eliminate else None
         if dropped is None:
             break
         active[dropped] = False
         eliminated.append(free_names[dropped])
         theta = theta.at[dropped].set(0.0)
     theta = theta * jnp.asarray(active, theta.dtype)
+    return theta, active, cramer_rao, insensitivity, eliminated, cost(theta)
+
+
+def _refit_constants(fitted: Helicopter, trajectory: Trajectory) -> Helicopter:
+    """The constant column (no frequency response) re-fitted by one-step least squares, the rest held."""
+    starts = jnp.asarray(valid_starts(len(trajectory), 1))
+    ata, atb, _ = _normal_equations(fitted, trajectory, starts, 1, jnp.ones(6, trajectory.xs.dtype), False, 1024)
+    theta = fitted.body_model.parameter_vector()
+    bias = np.array([n.endswith("/1") for n in fitted.body_model.parameter_names])
+    rest = ~bias
+    rhs = atb[bias] - ata[np.ix_(bias, rest)] @ theta[rest]
+    theta = theta.at[np.nonzero(bias)[0]].set(_solve(ata[np.ix_(bias, bias)], rhs, 1e-12))
+    return _with_theta(fitted, theta)
+
+
+def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: FrequencyDomain = FrequencyDomain()) -> VehicleFit:
+    """Fit a linear velocity model by the frequency-domain criterion (see the module docstring).
+
+    The steps: the one-step fit as the start, reduced to the hover-derivative structure; the
+    measured responses in the band; an equation-error start (optional); the output-error fit with
+    CIFER's structure reduction; the constant column re-fitted in the time domain.
+    """
+    _check(system, criterion, trajectory)
+    t0 = time.perf_counter()
+    initial, mask = _hover_structure(fit_one_step(system, trajectory).system, criterion)
+    responses = _band_responses(trajectory, criterion)
+    dt = float(trajectory.ts[1] - trajectory.ts[0])
+    free = np.nonzero(mask)
+    free_names = [f"d{BODY_AXES[i]}/{LINEAR_FEATURE_NAMES[j]}" for i, j in zip(*free)]
+    response_residuals = _response_residuals(initial, free, responses, 0.5 * dt, trajectory.xs.dtype)
+    prior_centre = initial.body_model.weights[free]
+    prior_scale = jnp.maximum(jnp.abs(prior_centre), 1.0) / criterion.prior_weight
+
+    def residuals(theta, active):
+        return jnp.concatenate([response_residuals(theta, active), (theta - prior_centre) / prior_scale])
+
+    start = initial.body_model.weights
+    if criterion.start == "equation-error":
+        coherent = responses.coherence >= criterion.min_coherence
+        w_equation = np.where(coherent, (1.58 * (1 - np.exp(-responses.coherence))) ** 2, 0.0)
+        start = _equation_error(start, responses.freqs, responses.measured, w_equation, dt, criterion.prior_weight, mask)
+    theta, active, cramer_rao, insensitivity, eliminated, final_cost = _reduce_structure(
+        start[free], response_residuals, residuals, responses, free_names, criterion)
     kept = [n for n, a in zip(free_names, active) if a]
     summary = tuple(
         (n, float(v), float(c), float(i)) for n, v, c, i in zip(kept, np.asarray(theta)[active], cramer_rao, insensitivity)
     )
-    weights = initial.body_model.weights.at[free].set(theta)
-    fitted = eqx.tree_at(lambda h: h.body_model.weights, initial, weights)
-    final_cost = cost(theta)
-
-    # Re-fit the constant column (no frequency response) by one-step least squares, the rest held.
-    starts = jnp.asarray(valid_starts(len(trajectory), 1))
-    ata, atb, _ = _normal_equations(fitted, trajectory, starts, 1, jnp.ones(6, dtype), False, 1024)
-    theta = fitted.body_model.parameter_vector()
-    names = fitted.body_model.parameter_names
-    bias = np.array([n.endswith("/1") for n in names])
-    rest = ~bias
-    rhs = atb[bias] - ata[np.ix_(bias, rest)] @ theta[rest]
-    theta = theta.at[np.nonzero(bias)[0]].set(_solve(ata[np.ix_(bias, bias)], rhs, 1e-12))
-    fitted = _with_theta(fitted, theta)
+    fitted = eqx.tree_at(lambda h: h.body_model.weights, initial, initial.body_model.weights.at[free].set(theta))
     losses, seconds = _single(final_cost, time.perf_counter() - t0)
-    return VehicleFit(fitted, losses, seconds, "frequency", len(trajectory), statistics=summary,
-                      eliminated=tuple(eliminated))
+    return VehicleFit(_refit_constants(fitted, trajectory), losses, seconds, "frequency", len(trajectory),
+                      statistics=summary, eliminated=tuple(eliminated))
