@@ -430,8 +430,8 @@ def _dynamic_rows(system, traj, method: Dynamic, friction):
     if settings["decimate"] > 1:
         ys, forces = _trim_and_decimate(ys, forces, trim, settings["decimate"])
         trim = 0
-    elif trim < 0:
-        raise UsageError(f"`trim` must be >= 0, got {trim}")
+    elif trim < 0 or settings["decimate"] < 1:
+        raise UsageError(f"`trim` must be >= 0 and `decimate` >= 1, got {trim}, {settings['decimate']}")
     # Without decimation the trim is a slice that `_joint_blocks` takes in the same compiled call.
     return ys, forces, ys.shape[0] - 2 * trim, settings, trim
 

@@ -226,9 +226,10 @@ class AbstractManipulator(AbstractSystem):
         """$B$, mapping the input vector to generalised forces."""
 
     def mass_check_configurations(self, qs: Float[Array, "time n_joints"]) -> Float[Array, "k n_joints"]:
-        r"""The configurations among `qs` at which the smallest eigenvalue of $M(q)$ over all of
-        `qs` is attained (`dynax.check_consistency` evaluates $M$ there only). Default: all of
-        them; a system whose mass matrix has known structure returns fewer."""
+        r"""Configurations whose mass matrices include the one with the smallest eigenvalue of
+        $M(q)$ over all of `qs` (`dynax.check_consistency` evaluates $M$ there only). Default: all
+        of `qs`; a system whose mass matrix has known structure returns fewer (a two-link arm two,
+        with the same $M$ as the samples at the ends of the data's range of $\cos q_2$)."""
         return qs
 
     @property

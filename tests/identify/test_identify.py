@@ -181,3 +181,17 @@ def test_irregular_sampling_is_used_as_recorded():
         result = identify(TRUE, data, method)
         relative = np.abs(np.asarray(result.estimate[:5]) - THETA[:5]) / THETA[:5]
         assert np.all(relative < tolerance), (method, relative)
+
+
+@pytest.mark.parametrize("settings, named", [(dict(trim=-1), "`trim`"), (dict(decimate=0), "`decimate`")])
+def test_impossible_dynamic_settings_are_refused_by_name(acrobot_data, settings, named):
+    with pytest.raises(dynax.UsageError, match=named):
+        identify(dynax.Acrobot(), acrobot_data, Dynamic(lowpass_hz=None, **settings), refine=False, holdout=0)
+
+
+def test_trimmed_dynamic_equations_drop_the_ends_of_every_record(acrobot_data):
+    """The trim is taken with the stacking of the rows: each record loses `trim` samples at each end."""
+    halves = [acrobot_data.slice(0, 1000), acrobot_data.slice(1000, 2000)]
+    result = identify(dynax.Acrobot(), halves, Dynamic(lowpass_hz=None, trim=7), refine=False, holdout=0)
+    assert result.n_samples == 2 * (1000 - 2 * 7)
+    assert result.fit.n_rows == 2 * result.n_samples  # two joints' equations per sample
