@@ -48,6 +48,7 @@ import optimistix as optx
 from jaxtyping import Array, Float
 
 from ..._data._trajectory import Trajectory
+from ..._fit import fit_least_squares
 from ..._errors import UsageError
 from ..._model._helicopter import BODY, BODY_AXES, Helicopter, LINEAR_FEATURE_NAMES
 from ._criteria import _normal_equations, _single, _solve, _with_theta, fit_one_step, VehicleFit
@@ -329,7 +330,8 @@ def _reduce_structure(theta, response_residuals, residuals, responses: _Response
     for _ in range(n_free + 1):  # the last pass only re-checks (at most n_free eliminations)
         act = jnp.asarray(active, theta.dtype)
         if criterion.max_steps > 0:
-            solution = optx.least_squares(residuals, solver, theta, args=act, max_steps=criterion.max_steps, throw=False)
+            solution = fit_least_squares(residuals, theta, True, act, solver=solver, scale=jnp.ones_like(theta),
+                                         max_steps=criterion.max_steps, nonfinite=None, covariance=False)
             if np.all(np.isfinite(solution.value)) and cost(solution.value) < cost(theta):
                 theta = solution.value
         cramer_rao, insensitivity = _accuracy(
