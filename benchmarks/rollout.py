@@ -124,16 +124,14 @@ def _row(results, name, timing, n_steps, **extra):
 HEADER = f"  {'':38s} {'best ms':>9s} {'median ms':>9s} {'M step/s':>9s} {'CPU ms':>9s} {'M st/CPUs':>9s}"
 
 
-def bench_jax(args, x0, us, ts, results):
-    dtype = jnp.float32
-    system = jax.tree.map(lambda p: jnp.asarray(p, dtype), dynax.Acrobot())
-    ts32 = jnp.asarray(ts, dtype)
-    x0_32, us_32 = jnp.asarray(x0, dtype), jnp.asarray(us, dtype)
-    n_steps = args.batch * args.steps
+def rollout_programs(system, ts, dt):
+    """The three batched rollout programs compared here, `(x0, us) -> xs`: `dynax.simulate` with
+    `FixedGrid(RK4())`, a hand-written RK4 `lax.scan` with `dt` a compile-time constant, and the same
+    scan reading the step size from the grid `ts` (also used by `rollout_profile.py`)."""
     method = dynax.FixedGrid(dynax.RK4(), substeps=1)
 
     def dynax_rollouts(x0, us):
-        simulate = lambda x, u: dynax.simulate(system, x, ts32, u, method=method, throw=False).xs  # noqa: E731
+        simulate = lambda x, u: dynax.simulate(system, x, ts, u, method=method, throw=False).xs  # noqa: E731
         return jax.vmap(simulate)(x0, us)
 
     def vector_field(x, u):
@@ -149,7 +147,7 @@ def bench_jax(args, x0, us, ts, results):
     def hand_rollouts(x0, us):
         def rollout(x, u_seq):
             def step(x, u):
-                x = rk4(x, u, args.dt)  # dt a compile-time constant
+                x = rk4(x, u, dt)  # dt a compile-time constant
                 return x, x
 
             return jax.lax.scan(step, x, u_seq[:-1])[1]
@@ -163,9 +161,19 @@ def bench_jax(args, x0, us, ts, results):
                 x = rk4(x, u, h)  # dt read from the sample grid
                 return x, x
 
-            return jax.lax.scan(step, x, (u_seq[:-1], jnp.diff(ts32)))[1]
+            return jax.lax.scan(step, x, (u_seq[:-1], jnp.diff(ts)))[1]
 
         return jax.vmap(rollout)(x0, us)
+
+    return dynax_rollouts, hand_rollouts, hand_grid_rollouts
+
+
+def bench_jax(args, x0, us, ts, results):
+    dtype = jnp.float32
+    system = jax.tree.map(lambda p: jnp.asarray(p, dtype), dynax.Acrobot())
+    x0_32, us_32 = jnp.asarray(x0, dtype), jnp.asarray(us, dtype)
+    n_steps = args.batch * args.steps
+    dynax_rollouts, hand_rollouts, hand_grid_rollouts = rollout_programs(system, jnp.asarray(ts, dtype), args.dt)
 
     print(f"\nJAX {jax.__version__} ({jax.devices()[0].device_kind}, {jax.device_count()} device(s)), float32:")
     print(HEADER)

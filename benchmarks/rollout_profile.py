@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import dynax
+from rollout import rollout_programs
 
 
 def _loop_body_ops(hlo: str) -> collections.Counter:
@@ -60,30 +61,7 @@ def main():
     rng = np.random.default_rng(0)
     x0 = jnp.asarray(rng.uniform(-1, 1, (args.batch, 4)), dtype)
     us = jnp.asarray(rng.uniform(-1, 1, (args.batch, args.steps + 1, 1)), dtype)
-    method = dynax.FixedGrid(dynax.RK4(), substeps=1)
-
-    def field(x, u):
-        return system.vector_field(0.0, x, u)
-
-    def rk4(x, u, h):
-        k1 = field(x, u)
-        k2 = field(x + h / 2 * k1, u)
-        k3 = field(x + h / 2 * k2, u)
-        k4 = field(x + h * k3, u)
-        return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-
-    def dynax_rollouts(x0, us):
-        return jax.vmap(lambda x, u: dynax.simulate(system, x, ts, u, method=method, throw=False).xs)(x0, us)
-
-    def hand(x0, us):
-        return jax.vmap(lambda x, u: jax.lax.scan(lambda x, u: (rk4(x, u, dt),) * 2, x, u[:-1])[1])(x0, us)
-
-    def hand_grid(x0, us):
-        def step(x, inputs):
-            x = rk4(x, *inputs)
-            return x, x
-
-        return jax.vmap(lambda x, u: jax.lax.scan(step, x, (u[:-1], jnp.diff(ts)))[1])(x0, us)
+    dynax_rollouts, hand, hand_grid = rollout_programs(system, ts, dt)
 
     print(f"{args.batch} acrobot rollouts of {args.steps} RK4 steps, float32, {jax.devices()[0].device_kind}")
     for name, fn in (("dynax simulate", dynax_rollouts), ("hand-written, dt constant", hand),
