@@ -45,9 +45,9 @@ from ._simulation_fit import fit_simulation_error, SimulationFit
 from ._regressors import (
     _positions,
     _split,
+    column_kinds,
     dynamic_regressor,
     energy_and_friction_rows,
-    energy_parameter_names,
     Friction,
     generalised_force,
     parameter_names,
@@ -442,17 +442,6 @@ def _interval_integrals(ts, values_left, values_right):
     return 0.5 * h * (values_left + values_right)
 
 
-def _column_kinds(system, friction):
-    """`(energy, dissipative)`: the regressor columns (indices) the stored energy depends on, and the rest.
-
-    The energy rows are zero in the dissipative columns and the friction-power rows in the energy
-    columns, so each is computed, integrated and differenced on its own columns only."""
-    names = parameter_names(system, friction)
-    energy = set(energy_parameter_names(system, friction))
-    return (tuple(i for i, n in enumerate(names) if n in energy),
-            tuple(i for i, n in enumerate(names) if n not in energy))
-
-
 def _joined(energy_part, dissipative_part, columns):
     """The rows with every column in its place: `energy_part` in the energy columns, the rest from `dissipative_part`."""
     order = np.argsort(np.asarray(columns[0] + columns[1], dtype=int))
@@ -494,7 +483,7 @@ def _power_rows(system, traj, method: Power, friction):
 
 
 def _power_equations(system, ts, xs, us, friction):
-    columns = _column_kinds(system, friction)
+    columns = column_kinds(system, friction)
     w, f, tau, dq = _model_columns(system, xs, us, friction, columns)
     return _power_balance(ts, w, f, tau, dq, columns)
 
@@ -529,7 +518,7 @@ def _energy_rows(system, traj, method: Energy, friction):
 
 def _energy_equations(system, ts, xs, us, friction, n_windows, window, stride):
     """One energy-balance equation per window `[i stride, i stride + window]`, `i < n_windows`."""
-    columns = _column_kinds(system, friction)
+    columns = column_kinds(system, friction)
     w, f, tau, dq = _model_columns(system, xs, us, friction, columns)
     return _energy_balance(ts, w, f, tau, dq, n_windows, window, stride, columns)
 

@@ -225,11 +225,22 @@ def _friction_row(system, names, theta0, mask):
     return row
 
 
+def column_kinds(system: AbstractSystem, friction: Friction = "viscous") -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """`(energy, dissipative)`: the regressor columns (indices) the stored energy depends on, and the rest.
+
+    The energy rows are zero in the dissipative columns and the friction-power rows in the energy
+    columns."""
+    names = parameter_names(system, friction)
+    energy = set(energy_parameter_names(system, friction))
+    return (tuple(i for i, n in enumerate(names) if n in energy),
+            tuple(i for i, n in enumerate(names) if n not in energy))
+
+
 def _rows_setup(system, xs, friction):
     """The model with its friction terms, its parameter names, theta = 0, and the friction columns' mask."""
     names = parameter_names(system, friction)
-    energy_names = energy_parameter_names(system, friction)
-    mask = jnp.asarray([n not in energy_names for n in names], xs.dtype)
+    dissipative = column_kinds(system, friction)[1]
+    mask = jnp.asarray([i in dissipative for i in range(len(names))], xs.dtype)
     system = with_friction(system, friction)
     return system, names, jnp.zeros(len(names), xs.dtype), mask
 
