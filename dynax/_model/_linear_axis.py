@@ -100,15 +100,9 @@ class LinearAxis(AbstractManipulator):
         """`mass` positive, `viscous` and `coulomb` non-negative, `offset` free."""
         return dict(mass="positive", viscous="nonnegative", coulomb="nonnegative", offset="free")
 
-    def base_parameter_conditions(self, parameters):
-        """`mass > 0`; `viscous`, `coulomb` >= 0 (where given)."""
-        out = []
-        for n, v in parameters.items():
-            if n == "mass" and not v > 0:
-                out.append(f"inertia: {n} = {v:.4g} must be positive")
-            elif n in ("viscous", "coulomb") and not v >= 0:
-                out.append(f"friction: {n} = {v:.4g} must be non-negative")
-        return tuple(out)
+    def base_parameter_meanings(self):
+        """`mass` an inertia, `viscous` and `coulomb` friction."""
+        return dict(mass=("inertia", ""), viscous=("friction", ""), coulomb=("friction", ""))
 
     def vector_field(self, t, x, u):
         dq = x[1]

@@ -175,10 +175,31 @@ class AbstractSystem(eqx.Module):
         Default: no conditions (an empty dict: every parameter is free)."""
         return {}
 
+    def base_parameter_meanings(self) -> dict[str, tuple[str, str]]:
+        """Per base parameter, the group of its consistency condition and what the bound means, e.g.
+        `{"theta4": ("gravity", "hanging straight down is the stable rest")}`: the words of
+        `base_parameter_conditions`' sentences. Default: none."""
+        return {}
+
     def base_parameter_conditions(self, parameters: dict[str, float]) -> tuple[str, ...]:
         """The physical-consistency conditions the base parameters `parameters` (by name) violate,
-        as sentences naming them (`dynax.check_consistency`). Default: none."""
-        return ()
+        as sentences naming them (`dynax.check_consistency`).
+
+        Default: each given parameter against its bound in `base_parameter_kinds` (`"positive"`,
+        `"nonnegative"`), in the words of `base_parameter_meanings`; a system with a coupled condition
+        (`"inertia1"`) adds it in its override. One statement of the bounds: the consistency-constrained
+        fit reads the same kinds."""
+        kinds, meanings = self.base_parameter_kinds(), self.base_parameter_meanings()
+        bounds = {"positive": ("positive", lambda v: v > 0), "nonnegative": ("non-negative", lambda v: v >= 0)}
+        out = []
+        for name, value in parameters.items():
+            bound = bounds.get(kinds.get(name))
+            if bound is None or bound[1](value):
+                continue
+            group, meaning = meanings.get(name, ("", ""))
+            out.append(f"{group + ': ' if group else ''}{name} = {value:.4g} must be {bound[0]}"
+                       + (f" ({meaning})" if meaning else ""))
+        return tuple(out)
 
     def mass_check_configurations(self, qs: Float[Array, "time n_joints"]) -> Float[Array, "k n_joints"] | None:
         """Where `dynax.check_consistency` evaluates the mass matrix; `None` (the default): the

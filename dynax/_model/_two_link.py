@@ -199,28 +199,24 @@ class AbstractTwoLink(AbstractManipulator):
         ends = jnp.arccos(jnp.clip(jnp.stack([jnp.min(c2), jnp.max(c2)]), -1.0, 1.0))
         return jnp.stack([jnp.zeros_like(ends), ends], axis=1)
 
+    def base_parameter_meanings(self):
+        """The groups (rigid-body inertia, gravity, geometry, friction) and meanings of the bounds."""
+        rest = "hanging straight down is the stable rest"
+        return dict(theta2=("rigid-body inertia", "I2, the inertia of link 2 about the elbow"),
+                    theta3=("geometry", "g theta3 / theta5 is the length of link 1"),
+                    theta4=("gravity", rest), theta5=("gravity", rest),
+                    theta6=("friction", "viscous, at the shoulder"), theta7=("friction", "viscous, at the elbow"))
+
     def base_parameter_conditions(self, parameters):
         r"""Rigid-body inertia ($\theta_2 > 0$, $\theta_1\theta_2 \ge \theta_3^2$), gravity
         ($\theta_4, \theta_5 > 0$), geometry ($\theta_3 \ge 0$) and viscous friction
-        ($\theta_6, \theta_7 \ge 0$, where given); `theta1..theta5` must be given."""
-        p = parameters
-        t1, t2, t3, t4, t5 = (p[f"theta{i}"] for i in range(1, 6))
-        out = []
-        if not t2 > 0:
-            out.append(f"rigid-body inertia: theta2 = {t2:.4g} must be positive "
-                       "(I2, the inertia of link 2 about the elbow)")
-        elif not t1 * t2 >= t3**2:
-            out.append(f"rigid-body inertia: theta1 * theta2 = {t1 * t2:.4g} must be at least theta3^2 = {t3**2:.4g} "
-                       "(else the mass matrix is singular or indefinite at some elbow angle)")
-        if not t4 > 0:
-            out.append(f"gravity: theta4 = {t4:.4g} must be positive (hanging straight down is the stable rest)")
-        if not t5 > 0:
-            out.append(f"gravity: theta5 = {t5:.4g} must be positive (hanging straight down is the stable rest)")
-        if not t3 >= 0:
-            out.append(f"geometry: theta3 = {t3:.4g} must be non-negative (g theta3 / theta5 is the length of link 1)")
-        for n in ("theta6", "theta7"):
-            if n in p and not p[n] >= 0:
-                out.append(f"friction: {n} = {p[n]:.4g} (viscous) must be non-negative")
+        ($\theta_6, \theta_7 \ge 0$, where given): the sign bounds of `base_parameter_kinds`, and the
+        Schur complement, which couples three parameters; `theta1..theta5` must be given."""
+        t1, t2, t3 = (parameters[f"theta{i}"] for i in range(1, 4))
+        out = list(super().base_parameter_conditions(parameters))
+        if t2 > 0 and not t1 * t2 >= t3**2:
+            out.insert(0, f"rigid-body inertia: theta1 * theta2 = {t1 * t2:.4g} must be at least theta3^2 = {t3**2:.4g} "
+                          "(else the mass matrix is singular or indefinite at some elbow angle)")
         return tuple(out)
 
 

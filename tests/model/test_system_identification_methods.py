@@ -58,7 +58,14 @@ def test_two_link_consistency_conditions_name_the_broken_base_parameter():
     (gravity,) = broken(theta5=-4.5)
     assert gravity.startswith("gravity: theta5 = -4.5")
     (friction,) = broken(theta7=-0.01)
-    assert friction == "friction: theta7 = -0.01 (viscous) must be non-negative"
+    assert friction == "friction: theta7 = -0.01 must be non-negative (viscous, at the elbow)"
+    # the sentences check the same bounds the constrained fit reads: every "positive" or "nonnegative"
+    # kind is a condition, and a parameter on or inside its bound passes
+    for name, kind in arm.base_parameter_kinds().items():
+        if kind in ("positive", "nonnegative"):
+            (sentence,) = broken(**{name: -1e-3})
+            assert sentence.split(": ")[1].startswith(f"{name} = -0.001 must be ")
+            assert broken(**{name: 0.0 if kind == "nonnegative" else 0.5 * THETA[name]}) == ()
     kinds = arm.base_parameter_kinds()
     assert kinds["theta1"] == "inertia1" and kinds["theta2"] == kinds["theta4"] == kinds["theta5"] == "positive"
 
