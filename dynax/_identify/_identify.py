@@ -759,6 +759,58 @@ def _identify_by_simulation(system, trajectories, method: SimulationFit, frictio
     )
 
 
+def _validation_split(system, trajectories, validation, weights, holdout, horizons_s):
+    """`(fitted, held, source)`: the records to fit, the held-out records and what they are.
+
+    The `validation` records when given (all of the data is fitted); otherwise the last `holdout`
+    fraction of each record (`"auto"`: 0.2, or 0 when row weights are given: they index every row)."""
+    if validation is not None:
+        held = _as_list(validation)
+        _check_data(system, held)
+        return trajectories, held, "validation records"
+    fraction = (0.0 if weights is not None else 0.2) if holdout == "auto" else float(holdout)
+    if fraction <= 0:
+        return trajectories, [], ""
+    fitted, held = split_for_validation(trajectories, fraction, max(horizons_s))
+    return fitted, held, f"held-out last {fraction:.0%} of each record (not fitted)"
+
+
+def _validated_simulation_fit(system, fitted, method, friction, consistency, validate) -> Identification:
+    """`identify` by `SimulationFit`, with its consistency check and held-out validation."""
+    result = _identify_by_simulation(system, fitted, method, friction)
+    check = None
+    if _has_conditions(system):
+        qs = _joint_positions(result.system, fitted)
+        check = check_consistency(result.system, result.names, result.estimate, qs, warn=consistency != "off")
+    held_out = validate(result.system)
+    stage = _stage_json("simulation", result.names, result.estimate, result.std_errors, None, held_out)
+    return eqx.tree_at(lambda r: (r.consistency, r.validation, r.stages), result,
+                       (check, held_out, {"simulation": stage}), is_leaf=lambda x: x is None)
+
+
+def _refined_stage(ls, fitted, method, friction, rcond, consistency, refinement, validate):
+    """The output-error refinement from the least-squares stage `ls`: `(final, stage json)`, where
+    `final` holds what `identify` returns (system, names, estimate, standard errors, equation error
+    on the least-squares rows, validation, consistency, method label)."""
+    refined = refine_by_simulation(ls.system, ls.names, fitted, refinement)
+    _, a, y, _, _, _, _, _ = _equations(refined.system, fitted, method, friction, None, rcond)
+    error = _relative_equation_error(a, y, jnp.asarray(refined.estimate))
+    qs = _joint_positions(refined.system, fitted)
+    check = check_consistency(refined.system, refined.names, refined.estimate, qs, warn=consistency != "off")
+    check = Consistency(check.violated, active=(), constrained=True, min_mass_eigenvalue=check.min_mass_eigenvalue)
+    held_out = validate(refined.system)
+    stage = _stage_json(
+        "simulation", refined.names, refined.estimate, refined.std_errors, error, held_out,
+        consistency=check.to_json(), initial_residual_rms=refined.initial_residual_rms,
+        residual_rms=refined.residual_rms, steps=refined.steps, dt=refined.dt, segment_s=refined.segment_s,
+        model="least-squares model + RotorInertia(joint=1), consistent parametrisation",
+    )
+    final = dict(system=refined.system, names=refined.names, estimate=jnp.asarray(refined.estimate),
+                 std=jnp.asarray(refined.std_errors), error=error, validation=held_out, consistency=check,
+                 label=f"{ls.label}+simulation")
+    return final, stage
+
+
 def identify(
     system: AbstractSystem,
     data: Trajectory | Sequence[Trajectory],
@@ -830,32 +882,13 @@ def identify(
     if consistency not in _CONSISTENCY:
         raise UsageError(f"identify: `consistency` must be one of {_CONSISTENCY}, got {consistency!r}")
     horizons_s = tuple(float(h) for h in horizons_s)
-    if validation is not None:
-        held = _as_list(validation)
-        _check_data(system, held)
-        fitted, source = trajectories, "validation records"
-    else:
-        fraction = (0.0 if weights is not None else 0.2) if holdout == "auto" else float(holdout)
-        if fraction > 0:
-            fitted, held = split_for_validation(trajectories, fraction, max(horizons_s))
-            source = f"held-out last {fraction:.0%} of each record (not fitted)"
-        else:
-            fitted, held, source = trajectories, [], ""
+    fitted, held, source = _validation_split(system, trajectories, validation, weights, holdout, horizons_s)
 
     def validate(model):
         return held_out_error(model, held, horizons_s, source=source) if held else None
 
     if isinstance(method, SimulationFit):
-        result = _identify_by_simulation(system, fitted, method, friction)
-        check = None
-        if _has_conditions(system):
-            qs = _joint_positions(result.system, fitted)
-            check = check_consistency(result.system, result.names, result.estimate, qs,
-                                      warn=consistency != "off")
-        held_out = validate(result.system)
-        stage = _stage_json("simulation", result.names, result.estimate, result.std_errors, None, held_out)
-        return eqx.tree_at(lambda r: (r.consistency, r.validation, r.stages), result,
-                           (check, held_out, {"simulation": stage}), is_leaf=lambda x: x is None)
+        return _validated_simulation_fit(system, fitted, method, friction, consistency, validate)
 
     ls = _least_squares_stage(system, fitted, method, friction, weights, rcond, consistency)
     ls_error = _relative_equation_error(ls.a, ls.y, ls.estimate)
@@ -867,22 +900,8 @@ def identify(
     final = dict(system=ls.system, names=ls.names, estimate=ls.estimate, std=std, error=ls_error,
                  validation=ls_validation, consistency=ls.consistency, label=ls.label)
     if refinement is not None:
-        refined = refine_by_simulation(ls.system, ls.names, fitted, refinement)
-        _, a, y, _, _, _, _, _ = _equations(refined.system, fitted, method, friction, None, rcond)
-        error = _relative_equation_error(a, y, jnp.asarray(refined.estimate))
-        qs = _joint_positions(refined.system, fitted)
-        check = check_consistency(refined.system, refined.names, refined.estimate, qs, warn=consistency != "off")
-        check = Consistency(check.violated, active=(), constrained=True, min_mass_eigenvalue=check.min_mass_eigenvalue)
-        held_out = validate(refined.system)
-        stages["output_error"] = _stage_json(
-            "simulation", refined.names, refined.estimate, refined.std_errors, error, held_out,
-            consistency=check.to_json(), initial_residual_rms=refined.initial_residual_rms,
-            residual_rms=refined.residual_rms, steps=refined.steps, dt=refined.dt, segment_s=refined.segment_s,
-            model="least-squares model + RotorInertia(joint=1), consistent parametrisation",
-        )
-        final = dict(system=refined.system, names=refined.names, estimate=jnp.asarray(refined.estimate),
-                     std=jnp.asarray(refined.std_errors), error=error, validation=held_out, consistency=check,
-                     label=f"{ls.label}+simulation")
+        final, stages["output_error"] = _refined_stage(ls, fitted, method, friction, rcond, consistency,
+                                                       refinement, validate)
     return Identification(
         system=final["system"],
         estimate=jnp.asarray(final["estimate"]),
