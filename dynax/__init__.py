@@ -1,5 +1,11 @@
 """dynax: differentiable dynamics, system identification, discrepancy diagnosis and control in JAX."""
 
+from ._fit import (
+    fit_least_squares as fit_least_squares,
+    fit_minimise as fit_minimise,
+    Parameters as Parameters,
+    Solution as Solution,
+)
 from ._identify import (
     check_consistency as check_consistency,
     choose_filter as choose_filter,

@@ -106,3 +106,29 @@ def test_dense_jacobian_gives_the_forward_mode_fit_and_differentiates_in_the_dat
                      (jnp.zeros(2), (jnp.sin(ts), jnp.asarray(0.3))),
                      (jnp.array([0.5, 1.0]), (jnp.cos(ts), jnp.asarray(-1.0)))]:
         np.testing.assert_allclose(jax.jvp(rule, primals, tangents)[1], jax.jvp(f, primals, tangents)[1], rtol=1e-12)
+
+
+def test_public_engine_matches_scipy_on_a_model_of_the_users_own():
+    """`dynax.fit_least_squares` on a plain dict model (no dynax system) against scipy's trust-region
+    least squares: the same estimate, and standard errors equal to scipy's Jacobian-based ones."""
+    import scipy.optimize
+
+    rng = np.random.default_rng(3)
+    t = np.linspace(0.0, 5.0, 200)
+    y = 2.0 * np.exp(-0.7 * t) + 0.3 + 0.02 * rng.standard_normal(t.size)
+
+    def residuals(model, data):
+        t, y = data
+        return model["a"] * jnp.exp(-model["b"] * t) + model["c"] - y
+
+    start = {"a": jnp.asarray(1.0), "b": jnp.asarray(0.2), "c": jnp.asarray(0.0)}
+    sol = dynax.fit_least_squares(residuals, start, dynax.Parameters.of(start, True), (jnp.asarray(t), jnp.asarray(y)))
+    assert isinstance(sol, dynax.Solution) and sol.names == ("['a']", "['b']", "['c']")
+
+    ref = scipy.optimize.least_squares(lambda p: p[0] * np.exp(-p[1] * t) + p[2] - y, [1.0, 0.2, 0.0],
+                                       xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    sigma2 = 2 * ref.cost / (t.size - 3)
+    ref_std = np.sqrt(np.diag(sigma2 * np.linalg.inv(ref.jac.T @ ref.jac)))
+    np.testing.assert_allclose(np.asarray(sol.value), ref.x, rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(sol.std_errors), ref_std, rtol=1e-4)
+    assert abs(ref.x[1] - 0.7) < 4 * ref_std[1]  # and both found the generating decay rate
