@@ -182,9 +182,16 @@ def _explicit_step(system, solver):
     for i in reversed(range(len(b))):
         needed[i] = b[i] != 0 or any(needed[j] and a[j][i] != 0 for j in range(i + 1, len(b)))
 
+    # The stages a combination uses are stacked and contracted with their coefficients in one dot,
+    # not summed term by term: XLA:CPU fuses a chain of scaled adds into every consumer and
+    # recomputes the stages there, which made a batched closed-loop Tsit5 rollout 2x slower than
+    # diffrax's stage loop; with the dot it is 1.3-1.6x faster than that loop (RK4 open loop 1.3x).
     def combine(y, h, coefficients, ks):
-        terms = [float(w) * ks[j] for j, w in enumerate(coefficients) if w != 0.0]
-        return y if not terms else y + h * sum(terms[1:], terms[0])
+        used = [j for j, w in enumerate(coefficients) if w != 0.0]
+        if not used:
+            return y
+        w = jnp.asarray([float(coefficients[j]) for j in used], y.dtype)
+        return y + h * jnp.tensordot(w, jnp.stack([ks[j] for j in used]), axes=1)
 
     def step(t0, y0, u, h):
         ks = {}
