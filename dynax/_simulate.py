@@ -183,9 +183,9 @@ def _explicit_step(system, solver):
         needed[i] = b[i] != 0 or any(needed[j] and a[j][i] != 0 for j in range(i + 1, len(b)))
 
     # The stages a combination uses are stacked and contracted with their coefficients in one dot,
-    # not summed term by term: XLA:CPU fuses a chain of scaled adds into every consumer and
-    # recomputes the stages there, which made a batched closed-loop Tsit5 rollout 2x slower than
-    # diffrax's stage loop; with the dot it is 1.3-1.6x faster than that loop (RK4 open loop 1.3x).
+    # not summed term by term: with chains of scaled adds XLA:CPU made a batched closed-loop Tsit5
+    # rollout 2x slower than diffrax's stage loop (`benchmarks/pgpe.py`; an optimisation barrier per
+    # stage did not help); with the dot it is 1.1-1.3x faster than that loop, RK4 open loop 1.3x.
     def combine(y, h, coefficients, ks):
         used = [j for j, w in enumerate(coefficients) if w != 0.0]
         if not used:
