@@ -57,6 +57,7 @@ import optimistix as optx
 
 from .._fit import fit_least_squares
 from .._model._extensions import Extended
+from .._model._system import violated_bound
 
 
 class InconsistentEstimateWarning(UserWarning):
@@ -128,9 +129,9 @@ def consistency_conditions(system, names: tuple[str, ...], theta) -> tuple[str, 
     own = base.base_parameter_kinds()
     out = list(base.base_parameter_conditions({n: v for n, v in p.items() if n in own}))
     for n, kind in zip(names, _kinds(system, names)):
-        if n not in own and kind == "nonnegative" and not p[n] >= 0:
-            what = "friction" if n.startswith(("fc", "b", "cd")) else "rotor inertia"
-            out.append(f"{what}: {n} = {p[n]:.4g} must be non-negative")
+        if n not in own:
+            sentence = violated_bound(n, p[n], kind, "friction" if n.startswith(("fc", "b", "cd")) else "rotor inertia")
+            out += [sentence] if sentence else []
     return tuple(dict.fromkeys(out))
 
 

@@ -12,6 +12,20 @@ from jaxtyping import Array, Float, ArrayLike, PyTree
 from .._errors import UsageError
 
 
+_BOUNDS = {"positive": ("positive", lambda v: v > 0), "nonnegative": ("non-negative", lambda v: v >= 0)}
+
+
+def violated_bound(name: str, value: float, kind: str | None, group: str = "", meaning: str = "") -> str | None:
+    """The sentence for `name = value` breaking the sign bound of its consistency `kind` (`"positive"`,
+    `"nonnegative"`; other kinds have none here), e.g. `gravity: theta4 = -0.1 must be positive (...)`;
+    `None` when it holds. One wording for base parameters and joint terms alike."""
+    bound = _BOUNDS.get(kind)
+    if bound is None or bound[1](value):
+        return None
+    return (f"{group + ': ' if group else ''}{name} = {value:.4g} must be {bound[0]}"
+            + (f" ({meaning})" if meaning else ""))
+
+
 class AbstractSystem(eqx.Module):
     r"""A continuous-time controlled system $\dot x = f(t, x, u)$.
 
@@ -190,16 +204,9 @@ class AbstractSystem(eqx.Module):
         (`"inertia1"`) adds it in its override. One statement of the bounds: the consistency-constrained
         fit reads the same kinds."""
         kinds, meanings = self.base_parameter_kinds(), self.base_parameter_meanings()
-        bounds = {"positive": ("positive", lambda v: v > 0), "nonnegative": ("non-negative", lambda v: v >= 0)}
-        out = []
-        for name, value in parameters.items():
-            bound = bounds.get(kinds.get(name))
-            if bound is None or bound[1](value):
-                continue
-            group, meaning = meanings.get(name, ("", ""))
-            out.append(f"{group + ': ' if group else ''}{name} = {value:.4g} must be {bound[0]}"
-                       + (f" ({meaning})" if meaning else ""))
-        return tuple(out)
+        sentences = (violated_bound(name, value, kinds.get(name), *meanings.get(name, ("", "")))
+                     for name, value in parameters.items())
+        return tuple(s for s in sentences if s is not None)
 
     def mass_check_configurations(self, qs: Float[Array, "time n_joints"]) -> Float[Array, "k n_joints"] | None:
         """Where `dynax.check_consistency` evaluates the mass matrix; `None` (the default): the
