@@ -484,9 +484,9 @@ def _forward_selection(problem: _Problem, say):
             scores = _window_scores(batch.errors, yard.n_ref, problem.state_scale)
         if not short:
             break
-        results = _judge_round(problem.candidates, short, remaining, batch.p, batch.std, batch.errors, scores,
-                               current.score, problem.window_runs, yard.overlap, o.alpha, o.min_gain, yard.steps,
-                               problem.position_index)
+        results = _judge_round(problem.candidates, short, remaining, current.selected, len(problem.names), batch.p,
+                               batch.std, batch.errors, scores, current.score, problem.window_runs, yard.overlap,
+                               o.alpha, o.min_gain, yard.steps, problem.position_index)
         last = results
         if round_ == 0:
             table = _candidate_table(problem.system, problem.candidates, remaining, gains, results, problem.neutral, batch.cost)
@@ -871,7 +871,7 @@ def _shortlist(system, candidates, remaining, gains_scr, shortlist):
 
 def _start_value(term, delta_screened, start, scale):
     """A candidate's starting coefficient: the screening's step if physical and moderate, else the default start."""
-    ok = np.isfinite(delta_screened) and (term.sign == 0 or delta_screened * term.sign > 0) and abs(delta_screened) < 20 * scale
+    ok = np.isfinite(delta_screened) and _physical([term], [delta_screened]) and abs(delta_screened) < 20 * scale
     lagging = isinstance(term, AbstractInputTerm) and term.n_hidden and delta_screened < start
     return delta_screened if ok and not lagging else start
 
@@ -889,18 +889,26 @@ def _rmse_curve(errors, steps, position_index):  # (window, step, state) -> per 
     return np.sqrt(np.mean(at[finite] ** 2, axis=(0, 2)))
 
 
-def _judge_round(candidates, short, remaining, p_j, std_j, err_j, scores_j, score_cur, window_runs, overlap,
-                 alpha, min_gain, steps, position_index):
+def _physical(terms, deltas) -> bool:
+    """Every coefficient on its physical side of neutral (friction, inertia, delay: above it)."""
+    return all(term.sign == 0 or delta * term.sign > 0 for term, delta in zip(terms, deltas))
+
+
+def _judge_round(candidates, short, remaining, selected, n_nom, p_j, std_j, err_j, scores_j, score_cur, window_runs,
+                 overlap, alpha, min_gain, steps, position_index):
     """Each shortlisted candidate's held-out test: paired block test, Benjamini-Hochberg over every remaining candidate
-    (those not refitted count with p = 1), the smallest gain, a physical sign, and agreement across runs."""
+    (those not refitted count with p = 1), the smallest gain, agreement across runs, and a physical sign of every
+    coefficient of the joint refit: the new one's *and* those of the terms selected in earlier rounds, which the
+    joint refit moves (a later term must not push an earlier friction below zero to fit)."""
     tests = {k: _paired_test(score_cur, scores_j[i], window_runs, overlap) for i, k in enumerate(short, start=1)}
     rejected = benjamini_hochberg([tests[k].p_value for k in short] + [1.0] * (len(remaining) - len(short)), alpha)
+    earlier = [candidates[k] for k in selected]
     results = {}
     for i, k in enumerate(short, start=1):
         term, test = candidates[k], tests[k]
         delta = p_j[i, -1]
         gain_windows = 1 - scores_j[i].mean() / score_cur.mean()
-        physical = term.sign == 0 or delta * term.sign > 0
+        physical = _physical([term] + earlier, [delta, *p_j[i, n_nom : n_nom + len(earlier)]])
         helped = sum(v > 0 for v in test.per_run.values())
         agree = helps_on_most_runs(test.per_run)
         results[k] = dict(i=i, delta=delta, std=std_j[i, -1], gain_windows=gain_windows, p=test.p_value, test=test,
