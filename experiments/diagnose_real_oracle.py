@@ -1,7 +1,8 @@
 """Was there a gain for refit mode to find? The lab's model against the refitted rigid-body model on held-out runs.
 
-For each split of `diagnose_real_splits.py`, refit mode's nominal model (theta1..theta7 refitted on the
-training runs) and the DFKI lab's `model_3.0` (rotor inertia, Coulomb and viscous friction at both
+For each split of `diagnose_real_splits.py`, refit mode's nominal model (theta1..theta5 refitted on the
+training runs, model 3.1's zero friction kept: `Refit()`'s default since 2026-11-25; theta1..theta7
+before) and the DFKI lab's `model_3.0` (rotor inertia, Coulomb and viscous friction at both
 joints; fitted by the lab on all six runs, so in-sample everywhere) are simulated on the held-out runs
 from the same windows and start states (velocities from the encoder positions, as `diagnose` takes
 them), and their open-loop position RMSE compared at several horizons.

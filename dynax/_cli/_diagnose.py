@@ -33,7 +33,8 @@ def register(subparsers):
     parser.add_argument("--nominal", default=None, metavar="FILE.json",
                         help="nominal parameters: a JSON with a 'parameters' object (e.g. the output of dynax identify)")
     parser.add_argument("--refit", default=None, metavar="NAMES",
-                        help="comma-separated nominal parameters to refit (default all; for linear_axis mass,viscous; "
+                        help="comma-separated nominal parameters to refit (default all but the nominal friction, which "
+                             "the friction candidates test, e.g. theta1..theta5; for linear_axis mass,viscous; "
                              "for helicopter the Tempest weights, e.g. du/u,dv/1)")
     parser.add_argument("--dt", type=float, default=None, metavar="SECONDS",
                         help="resample the records to this interval first (default: as recorded)")

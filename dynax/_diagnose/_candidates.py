@@ -114,19 +114,12 @@ def structurally_absorbed(family, refit, *, n_points: int = 64, seed: int = 0, t
         E. Walter and L. Pronzato, *Identification of Parametric Models from Experimental Data*,
         Springer 1997, ch. 2 (structural identifiability; local rank test of the sensitivity matrix).
     """
-    model = family.model
-    system = model.system
     refit = np.asarray(refit) > 0
-    rng = np.random.default_rng(seed)
-    n_x, n_u = system.n_states, system.n_inputs
-    xs = rng.uniform(-1.0, 1.0, (n_points, n_x)) * np.where(np.arange(n_x) < n_x // 2, 2.0, 3.0)
-    us = rng.normal(0.0, 1.0, (n_points, n_u))
-    values = jnp.asarray(nominal_values(system, family.names), float)
-    J_nom, J_c = _sensitivities(family, values, family.neutral, jnp.asarray(xs), jnp.asarray(us))
-    A = np.asarray(J_nom).reshape(-1, len(family.names))[:, refit]
+    J_nom, J_c = _sampled_sensitivities(family, n_points, seed)
+    A = J_nom[:, refit]
     out = []
-    for k, term in enumerate(model.terms):
-        b = np.asarray(J_c)[..., k].reshape(-1)
+    for k, term in enumerate(family.model.terms):
+        b = J_c[:, k]
         if isinstance(term, AbstractInputTerm) and term.n_hidden:
             out.append(False)
         elif np.linalg.norm(b) == 0:
@@ -137,6 +130,47 @@ def structurally_absorbed(family, refit, *, n_points: int = 64, seed: int = 0, t
             coef, *_ = np.linalg.lstsq(A, b, rcond=None)
             out.append(bool(np.linalg.norm(b - A @ coef) <= tol * np.linalg.norm(b)))
     return np.asarray(out)
+
+
+def held_partners(family, held, *, n_points: int = 64, seed: int = 0, tol: float = 1e-7) -> list[tuple[int, float] | None]:
+    r"""For each candidate of `family`, the nominal parameter it adds to among those `held` (not refitted), if any.
+
+    A candidate adds to nominal parameter $i$ when the derivative of the vector field with
+    respect to its coefficient is $\alpha$ times the derivative with respect to $\theta_i$ (at
+    random states and inputs, as in `structurally_absorbed`): a viscous friction candidate at a
+    joint adds to the nominal model's own viscous coefficient there. The two are then one physical
+    coefficient, $\theta_i + \alpha c$, and its consistency bound (`base_parameter_kinds`) is the
+    candidate's: a candidate may lower a held viscous coefficient, not below zero.
+
+    **Returns:** per candidate `(i, alpha)` or `None`.
+    """
+    J_nom, J_c = _sampled_sensitivities(family, n_points, seed)
+    out: list[tuple[int, float] | None] = []
+    for k in range(J_c.shape[1]):
+        b, partner = J_c[:, k], None
+        for i in np.flatnonzero(np.asarray(held) > 0):
+            a = J_nom[:, i]
+            if np.linalg.norm(a) == 0 or np.linalg.norm(b) == 0:
+                continue
+            alpha = float(a @ b / (a @ a))
+            if np.linalg.norm(b - alpha * a) <= tol * np.linalg.norm(b):
+                partner = (int(i), alpha)
+                break
+        out.append(partner)
+    return out
+
+
+def _sampled_sensitivities(family, n_points, seed) -> tuple[np.ndarray, np.ndarray]:
+    """Derivatives of the vector field with respect to the nominal parameters and the candidates'
+    coefficients (at neutral), stacked over random states and inputs: `(rows, n_nominal)`, `(rows, n_candidates)`."""
+    system = family.model.system
+    rng = np.random.default_rng(seed)
+    n_x, n_u = system.n_states, system.n_inputs
+    xs = rng.uniform(-1.0, 1.0, (n_points, n_x)) * np.where(np.arange(n_x) < n_x // 2, 2.0, 3.0)
+    us = rng.normal(0.0, 1.0, (n_points, n_u))
+    values = jnp.asarray(nominal_values(system, family.names), float)
+    J_nom, J_c = _sensitivities(family, values, family.neutral, jnp.asarray(xs), jnp.asarray(us))
+    return np.asarray(J_nom).reshape(-1, len(family.names)), np.asarray(J_c).reshape(-1, len(family.model.terms))
 
 
 @eqx.filter_jit

@@ -20,10 +20,10 @@ from .._data._trajectory import Trajectory
 from .._errors import UsageError
 from .._identify._defaults import position_fit_window, with_velocities_from_positions
 from .._model._extensions import AbstractInputTerm, AbstractTerm, Extended
-from .._model._system import AbstractSystem
+from .._model._system import AbstractSystem, violated_bound
 from .._precision import warn_if_float32
 from .._progress import ProgressBar
-from ._candidates import candidate_scales, default_candidates, look_alikes, structurally_absorbed
+from ._candidates import candidate_scales, default_candidates, held_partners, look_alikes, structurally_absorbed
 from ._discovery import discover
 from ._fit import (
     Family,
@@ -51,12 +51,20 @@ _CONTRACT_NAMES = {"Acrobot": "acrobot", "DoublePendulum": "double_pendulum", "L
 class Refit(eqx.Module):
     """Diagnosis mode: the nominal parameters are refitted on the training data with every candidate.
 
-    Causes that a change of the refitted parameters reproduces exactly are not identifiable in this
-    mode (an input gain on the acrobot rescales theta1..theta7) and are reported as such.
+    By default every nominal parameter is refitted **but the nominal model's friction** (the
+    parameters `base_parameter_meanings` puts in the group `"friction"`: `theta6`, `theta7` of a
+    two-link arm), which keeps its nominal value: friction is what the diagnosis names, and a
+    refit of it would absorb the very effects under test (a refitted viscous coefficient soaks up
+    most of a Coulomb friction's effect on short windows). The friction candidates test it
+    instead; a viscous friction candidate adds to the nominal's own coefficient and may lower it,
+    not below zero. Causes that a change of the refitted parameters reproduces exactly are not
+    identifiable in this mode (an input gain on the acrobot rescales theta1..theta7) and are
+    reported as such.
 
-    **Arguments:** `parameters`, the names of the nominal parameters to refit (default all, e.g.
-    `theta1..theta7`; `("mass", "viscous")` for a linear axis whose nominal model is mass and
-    viscous friction).
+    **Arguments:** `parameters`, the names of the nominal parameters to refit (default all but the
+    friction, e.g. `theta1..theta5`; all of them, `theta1..theta7`, to let the refit absorb
+    viscous friction as before 2026-11-25; `("mass", "viscous")` for a linear axis whose nominal
+    viscous friction is not trusted).
     """
 
     parameters: tuple[str, ...] | None = None
@@ -102,6 +110,7 @@ class _Problem:
     inits: np.ndarray
     searchable: list
     not_identifiable: list
+    partners: list
     fit_window_s: float
     train_windows: Windows
     val_windows: Windows
@@ -131,6 +140,12 @@ class _Problem:
     @property
     def n_params(self) -> int:
         return len(self.names) + self.options.max_terms + 1
+
+    def physical(self, k: int, delta: float) -> bool:
+        """Whether candidate `k` at `delta` from neutral is physical: on the physical side of neutral
+        (friction, inertia, delay), and, where it adds to a nominal parameter that is not refitted,
+        with the sum inside that parameter's consistency bound (a viscous coefficient stays non-negative)."""
+        return _physical(self.candidates[k], delta, self.partners[k], self.names, self.system)
 
     def model_of(self, slots, p):
         """The extended model (every candidate; neutral but for `slots`) at parameters `p`."""
@@ -267,7 +282,8 @@ def _refit_names(system, mode) -> tuple[str, ...]:
     names = nominal_parameter_names(system)
     if isinstance(mode, Known):
         return ()
-    refit = names if mode.parameters is None else tuple(mode.parameters)
+    friction = {n for n, (group, _) in system.base_parameter_meanings().items() if group == "friction"}
+    refit = tuple(n for n in names if n not in friction) if mode.parameters is None else tuple(mode.parameters)
     unknown = set(refit) - set(names)
     if unknown:
         raise UsageError(f"diagnose: Refit(parameters=...) names {sorted(unknown)}, not parameters of {type(system).__name__} {names}")
@@ -324,6 +340,8 @@ def _prepare(system, train, validation, candidates, mode, options: _Options) -> 
     refit_names = _refit_names(system, mode)
     family, scales, inits = _candidate_family(system, candidates, refit_names, train_records)
     searchable, not_identifiable = _identifiable(system, candidates, family, refit_names)
+    partners = held_partners(family, 1.0 - np.asarray(family.refit))
+    _note_held(system, family, refit_names, mode, notes)
     fit_window_s = _fit_window(system, train_records, options.fit_window_s, options.horizon_fraction, dt, notes)
     n_fit = max(2, int(round(fit_window_s / dt)))
     horizons, candidates_s = _horizon_grid(options.horizons_s, options.reference_horizon_s, train_records,
@@ -333,7 +351,7 @@ def _prepare(system, train, validation, candidates, mode, options: _Options) -> 
     return _Problem(
         system=system, train=train_records, validation=validation_records, dt=dt, notes=notes, candidates=candidates,
         refit_names=refit_names, family=family, scales=scales, inits=inits, searchable=searchable,
-        not_identifiable=not_identifiable, fit_window_s=fit_window_s,
+        not_identifiable=not_identifiable, partners=partners, fit_window_s=fit_window_s,
         train_windows=make_windows(train_records, n_fit, n_fit), val_windows=val_windows,
         window_runs=np.asarray(val_windows.starts)[:, 0], val_stride=val_stride, horizons=horizons,
         candidates_s=candidates_s, options=options, velocities=velocities,
@@ -379,7 +397,7 @@ def _refit(problem: _Problem, current_slots, current_p, short, remaining, deltas
     for i, k in enumerate(new):
         if k >= 0:
             start = problem.inits[k] - problem.neutral[k]
-            p_init[i, -1] = _start_value(problem.candidates[k], deltas[remaining.index(k)], start, problem.scales[k])
+            p_init[i, -1] = _start_value(problem, k, deltas[remaining.index(k)], start)
     return new, _fit_batch(problem, np.tile(current_slots, (shortlist + 1, 1)), new, p_init, say)
 
 
@@ -484,7 +502,7 @@ def _forward_selection(problem: _Problem, say):
             scores = _window_scores(batch.errors, yard.n_ref, problem.state_scale)
         if not short:
             break
-        results = _judge_round(problem.candidates, short, remaining, current.selected, len(problem.names), batch.p,
+        results = _judge_round(problem.physical, short, remaining, current.selected, len(problem.names), batch.p,
                                batch.std, batch.errors, scores, current.score, problem.window_runs, yard.overlap,
                                o.alpha, o.min_gain, yard.steps, problem.position_index)
         last = results
@@ -869,9 +887,10 @@ def _shortlist(system, candidates, remaining, gains_scr, shortlist):
     return short[:shortlist]
 
 
-def _start_value(term, delta_screened, start, scale):
+def _start_value(problem: _Problem, k: int, delta_screened, start):
     """A candidate's starting coefficient: the screening's step if physical and moderate, else the default start."""
-    ok = np.isfinite(delta_screened) and _physical([term], [delta_screened]) and abs(delta_screened) < 20 * scale
+    term, scale = problem.candidates[k], problem.scales[k]
+    ok = np.isfinite(delta_screened) and problem.physical(k, delta_screened) and abs(delta_screened) < 20 * scale
     lagging = isinstance(term, AbstractInputTerm) and term.n_hidden and delta_screened < start
     return delta_screened if ok and not lagging else start
 
@@ -889,12 +908,33 @@ def _rmse_curve(errors, steps, position_index):  # (window, step, state) -> per 
     return np.sqrt(np.mean(at[finite] ** 2, axis=(0, 2)))
 
 
-def _physical(terms, deltas) -> bool:
-    """Every coefficient on its physical side of neutral (friction, inertia, delay: above it)."""
-    return all(term.sign == 0 or delta * term.sign > 0 for term, delta in zip(terms, deltas))
+def _physical(term, delta, partner, names, system) -> bool:
+    """`term` at `delta` from neutral on its physical side (friction, inertia, delay: above neutral)
+    and, with `partner = (i, alpha)`, the held nominal parameter `names[i]` plus `alpha * delta`
+    within its consistency bound."""
+    if term.sign != 0 and not delta * term.sign > 0:
+        return False
+    if partner is None:
+        return True
+    i, alpha = partner
+    value = float(nominal_values(system, names)[i]) + alpha * float(delta)
+    return violated_bound(names[i], value, system.base_parameter_kinds().get(names[i])) is None
 
 
-def _judge_round(candidates, short, remaining, selected, n_nom, p_j, std_j, err_j, scores_j, score_cur, window_runs,
+def _note_held(system, family, refit_names, mode, notes) -> None:
+    """Say which nominal parameters a `Refit()` keeps, and why."""
+    if not isinstance(mode, Refit):
+        return
+    held = [n for n, r in zip(family.names, np.asarray(family.refit)) if r == 0]
+    if held and mode.parameters is None:
+        values = nominal_values(system, family.names)
+        notes.append("Refit mode refits " + ", ".join(refit_names) + "; the nominal model's friction ("
+                     + ", ".join(f"{n} = {float(values[family.names.index(n)]):.4g}" for n in held)
+                     + ") keeps its value and the friction candidates test it (Refit(parameters=...) "
+                     "chooses otherwise).")
+
+
+def _judge_round(physical, short, remaining, selected, n_nom, p_j, std_j, err_j, scores_j, score_cur, window_runs,
                  overlap, alpha, min_gain, steps, position_index):
     """Each shortlisted candidate's held-out test: paired block test, Benjamini-Hochberg over every remaining candidate
     (those not refitted count with p = 1), the smallest gain, agreement across runs, and a physical sign of every
@@ -902,19 +942,18 @@ def _judge_round(candidates, short, remaining, selected, n_nom, p_j, std_j, err_
     joint refit moves (a later term must not push an earlier friction below zero to fit)."""
     tests = {k: _paired_test(score_cur, scores_j[i], window_runs, overlap) for i, k in enumerate(short, start=1)}
     rejected = benjamini_hochberg([tests[k].p_value for k in short] + [1.0] * (len(remaining) - len(short)), alpha)
-    earlier = [candidates[k] for k in selected]
     results = {}
     for i, k in enumerate(short, start=1):
-        term, test = candidates[k], tests[k]
+        test = tests[k]
         delta = p_j[i, -1]
         gain_windows = 1 - scores_j[i].mean() / score_cur.mean()
-        physical = _physical([term] + earlier, [delta, *p_j[i, n_nom : n_nom + len(earlier)]])
+        ok = physical(k, delta) and all(physical(s, p_j[i, n_nom + m]) for m, s in enumerate(selected))
         helped = sum(v > 0 for v in test.per_run.values())
         agree = helps_on_most_runs(test.per_run)
         results[k] = dict(i=i, delta=delta, std=std_j[i, -1], gain_windows=gain_windows, p=test.p_value, test=test,
-                          rmse=_rmse_curve(err_j[i], steps, position_index), physical=physical,
+                          rmse=_rmse_curve(err_j[i], steps, position_index), physical=ok,
                           runs_helped=helped, n_runs=len(test.per_run), n_tested=len(remaining),
-                          significant=bool(rejected[i - 1] and gain_windows >= min_gain and physical and agree))
+                          significant=bool(rejected[i - 1] and gain_windows >= min_gain and ok and agree))
     return results
 
 

@@ -69,10 +69,11 @@ def test_hidden_coulomb_friction_is_named_with_its_size(coulomb_report):
 def test_refit_mode_reports_what_it_cannot_identify(coulomb_report):
     report, _, _ = coulomb_report
     absorbed = {(c["cause"], c["where"]) for c in report.not_identifiable}
-    # An input gain on the acrobot rescales all base parameters; viscous friction is theta6/theta7.
-    assert ("input_gain", "tau2") in absorbed
-    assert ("viscous_friction", "q2") in absorbed
-    assert ("coulomb_friction", "q2") not in absorbed
+    # Rotor inertia at the shoulder adds to theta1, which the refit fits.
+    assert ("rotor_inertia", "q1") in absorbed
+    # The nominal friction (theta6, theta7) is kept, not refitted: the friction candidates test it, and say so.
+    assert ("viscous_friction", "q2") not in absorbed and ("coulomb_friction", "q2") not in absorbed
+    assert any("theta6 = 0.1" in note and "friction candidates test it" in note for note in report.notes), report.notes
 
 
 def test_no_hidden_effect_gives_verdict_none():

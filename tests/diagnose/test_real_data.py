@@ -92,9 +92,10 @@ def test_dfki_refit_mode_names_coulomb_friction():
     report = diagnose(_model_3_1(), [_dfki("01"), _dfki("03"), _dfki("12")], [_dfki("05"), _dfki("02")], mode=Refit())
     j = _assert_lab_effect(report)
     assert any(f["cause"] == "coulomb_friction" for f in j["findings"]), j["findings"]
-    # Viscous friction is theta6/theta7 and rotor inertia at the shoulder adds to theta1: reported as absorbed.
+    # Rotor inertia at the shoulder adds to theta1, which the refit fits: reported as absorbed. The lab's
+    # rigid-body model has no friction (theta6 = theta7 = 0), which the refit keeps and the candidates test.
     absorbed = {(c["cause"], c["where"]) for c in j["not_identifiable"]}
-    assert ("viscous_friction", "q1") in absorbed and ("rotor_inertia", "q1") in absorbed
+    assert ("rotor_inertia", "q1") in absorbed and ("viscous_friction", "q1") not in absorbed
 
 
 @pytest.mark.parametrize("train, validation", [(("00", "01", "02"), ("12",)), (("02", "03", "05"), ("00", "12"))])
@@ -103,11 +104,17 @@ def test_dfki_known_mode_with_the_large_amplitude_run_held_out(train, validation
     _assert_lab_effect(report)
 
 
-@pytest.mark.xfail(reason="known shortfall (issue 10): refit mode trained on the small-amplitude runs finds no single candidate "
-                          "that helps significantly on the large-amplitude run 12 (best: Coulomb friction at the elbow, 16 %, "
-                          "p = 0.07); the lab's model_3.0 gains 37-48 % there but is worse than the refit on run 00 "
+def test_dfki_refit_mode_with_the_large_amplitude_run_and_a_small_one_held_out():
+    """Train on 02, 03, 05 (two drive one motor only); hold out 00 and the large-amplitude run 12 (split S3)."""
+    report = diagnose(_model_3_1(), [_dfki(r) for r in ("02", "03", "05")], [_dfki("00"), _dfki("12")], mode=Refit())
+    j = _assert_lab_effect(report)
+    assert all(r["gain"] > 0 for r in j["runs"])  # a cause must help on each held-out run, run 12 included
+
+
+@pytest.mark.xfail(reason="known shortfall (issue 10): refit mode trained on the small-amplitude runs, with only the "
+                          "large-amplitude run 12 held out, finds no single candidate that improves run 12's one-step "
+                          "residuals (best screening gain 5 %); the lab's model_3.0 gains 37-53 % there "
                           "(experiments/diagnose_real_oracle.py)", strict=False)
-@pytest.mark.parametrize("train, validation", [(("00", "01", "02"), ("12",)), (("02", "03", "05"), ("00", "12"))])
-def test_dfki_refit_mode_with_the_large_amplitude_run_held_out(train, validation):
-    report = diagnose(_model_3_1(), [_dfki(r) for r in train], [_dfki(r) for r in validation], mode=Refit())
+def test_dfki_refit_mode_with_only_the_large_amplitude_run_held_out():
+    report = diagnose(_model_3_1(), [_dfki(r) for r in ("00", "01", "02")], [_dfki("12")], mode=Refit())
     _assert_lab_effect(report)

@@ -1,11 +1,16 @@
 """The admissibility rules of one selection round (`_judge_round`): a candidate whose joint refit pushes
-an earlier finding's coefficient to an unphysical sign is not admissible, however much it helps."""
+an earlier finding's coefficient to an unphysical sign is not admissible, however much it helps; a
+candidate that adds to a nominal parameter the refit keeps (viscous friction) may lower it, not below zero."""
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax._diagnose._diagnose import _judge_round
-from dynax._model._extensions import CoulombFriction, InputOffset
+from dynax import Acrobot
+from dynax._data import Trajectory
+from dynax._diagnose._candidates import default_candidates, held_partners
+from dynax._diagnose._diagnose import _candidate_family, _judge_round, _physical, _refit_names, Known, Refit
+from dynax._model._extensions import CoulombFriction, InputOffset, ViscousFriction
 
 
 def _round(earlier_fc1, new_delta, *, earlier=CoulombFriction(0)):
@@ -20,7 +25,8 @@ def _round(earlier_fc1, new_delta, *, earlier=CoulombFriction(0)):
     score_cur = rng.uniform(1.0, 2.0, n_windows)
     scores = np.stack([score_cur, 0.6 * score_cur * rng.uniform(0.9, 1.1, n_windows)])
     errors = np.ones((2, n_windows, n_steps, 4)) * np.asarray([1.0, 0.7])[:, None, None, None]
-    results = _judge_round(candidates, [1], [1], [0], n_nom, p, np.full_like(p, 0.01), errors, scores, score_cur,
+    physical = lambda k, delta: _physical(candidates[k], delta, None, (), None)  # noqa: E731
+    results = _judge_round(physical, [1], [1], [0], n_nom, p, np.full_like(p, 0.01), errors, scores, score_cur,
                            np.repeat([0, 1], n_windows // 2), 1, alpha=0.01, min_gain=0.05,
                            steps=np.asarray([5, 10]), position_index=[0, 1])
     return results[1]
@@ -44,3 +50,36 @@ def test_terms_of_either_sign_are_not_constrained():
     """An input offset may be negative: a joint refit that moves it there is admissible."""
     r = _round(earlier_fc1=-0.3, new_delta=0.1, earlier=InputOffset(0))
     assert r["physical"] and r["significant"]
+
+
+def _acrobot_family(mode):
+    system = Acrobot()
+    rng = np.random.default_rng(0)
+    record = Trajectory(jnp.arange(200) * 0.01, jnp.asarray(rng.normal(size=(200, 4))), jnp.asarray(rng.normal(size=(200, 1))),
+                        system.state_names, system.input_names)
+    candidates = default_candidates(system)
+    refit = _refit_names(system, mode)
+    family, _, _ = _candidate_family(system, candidates, refit, [record])
+    return system, candidates, refit, family
+
+
+def test_refit_keeps_the_nominal_friction_and_its_viscous_candidates_add_to_it():
+    system, candidates, refit, family = _acrobot_family(Refit())
+    assert refit == ("theta1", "theta2", "theta3", "theta4", "theta5")
+    partners = held_partners(family, 1.0 - np.asarray(family.refit))
+    by_label = {t.label(system): partners[k] for k, t in enumerate(candidates)}
+    # The arm's damping is theta6 dq1 (theta7 dq2); ViscousFriction(j, b) is -b dq_j: the same coefficient.
+    assert by_label["viscous_friction@q1"][0] == family.names.index("theta6")
+    assert by_label["viscous_friction@q2"][0] == family.names.index("theta7")
+    assert by_label["viscous_friction@q1"][1] == pytest.approx(1.0, rel=1e-9)
+    assert by_label["coulomb_friction@q2"] is None and by_label["rotor_inertia@q2"] is None
+    # theta6 = 0.1 in the nominal model: lowering it by 0.05 is physical, by 0.2 is not.
+    names = family.names
+    assert _physical(ViscousFriction(0), -0.05, by_label["viscous_friction@q1"], names, system)
+    assert not _physical(ViscousFriction(0), -0.2, by_label["viscous_friction@q1"], names, system)
+    assert _physical(ViscousFriction(0), 0.3, by_label["viscous_friction@q1"], names, system)
+
+
+def test_all_parameters_can_still_be_refitted_and_known_mode_refits_none():
+    assert _refit_names(Acrobot(), Refit(parameters=tuple(f"theta{i}" for i in range(1, 8))))[-1] == "theta7"
+    assert _refit_names(Acrobot(), Known()) == ()
