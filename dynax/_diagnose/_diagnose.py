@@ -635,7 +635,9 @@ def _report(problem, nominal, yard, judgement, table, last, *, mode, system_name
     test = _test_summary(o.alpha, o.min_gain, last, len(problem.searchable), judgement.verdict)
     if test["detectable_gain"] is not None:
         notes.append(f"No candidate passed the test. With these held-out runs the test would have detected a gain of "
-                     f"about {test['detectable_gain']:.0%} at {yard.horizon.seconds:g} s (power 80 %); a smaller effect may be present.")
+                     f"about {test['detectable_gain']:.0%} at {yard.horizon.seconds:g} s (power 80 %) if its window-to-window "
+                     f"variation is like the refitted candidates'; a smaller effect, or one that varies more (friction "
+                     f"acting in the slow segments only), may be present.")
     extended = judgement.model
     terms = tuple(dict.fromkeys(t.label(system) for t in extended.terms))  # wind@world once
     return Report(
