@@ -109,6 +109,14 @@ def test_known_parameters_make_viscous_friction_and_input_gain_identifiable(term
     _assert_found(report, cause, where)
 
 
+def test_refit_mode_names_a_viscous_friction_the_nominal_model_lacks():
+    """Refit mode keeps the nominal friction (theta7 = 0.1) and tests it: 0.3 more at the elbow is named,
+    with its size, not absorbed into a refitted theta7 as before 2026-11-25."""
+    report, _, _ = _diagnose_hidden(ViscousFriction(1, 0.3), seed=32)
+    _assert_found(report, "viscous_friction", "q2")
+    assert abs(report.findings[0]["coefficient"] - 0.3) < 0.05
+
+
 def test_out_of_vocabulary_spring_is_unexplained_not_misnamed():
     # The vocabulary alone (discovery off; tests/diagnose/test_discovery.py switches it on).
     _, train, validation = demo_data(JointSpring(1, 1.5), seed=41)
