@@ -18,7 +18,7 @@ Two parts.
    and no candidate may pass; the smallest p-value of each run is printed.
 
     python experiments/test_calibration.py --part synthetic --reps 600
-    python experiments/test_calibration.py --part diagnosis --seeds 6
+    python experiments/test_calibration.py --part diagnosis --seeds 40
 
 Results are written to `experiments/results/test_calibration_<part>.json`.
 """
@@ -113,9 +113,12 @@ def diagnosis(seeds):
         t0 = time.perf_counter()
         _, train, validation = demo_data(CoulombFriction(1, 0.0), seed=1000 + seed)
         j = diagnose(Acrobot(), train, validation, discovery=False).to_json()
-        ps = [c["p_value"] for c in j["candidates"] if c.get("p_value") is not None]
+        tested = [c for c in j["candidates"] if c.get("p_value") is not None]
+        best = min(tested, key=lambda c: c["p_value"]) if tested else None
         row = dict(seed=1000 + seed, verdict=j["verdict"], findings=[f"{f['cause']}@{f['where']}" for f in j["findings"]],
-                   smallest_p=float(min(ps)) if ps else None, n_tested=len(j["candidates"]),
+                   smallest_p=float(best["p_value"]) if best else None, n_tested=len(j["candidates"]),
+                   smallest_p_candidate=None if best is None else {
+                       k: best[k] for k in ("cause", "where", "gain", "coefficient", "runs_helped")},
                    seconds=round(time.perf_counter() - t0, 1))
         rows.append(row)
         print(row, flush=True)
