@@ -1,6 +1,7 @@
 """EMPS beyond the vocabulary: diagnose the axis, search what is left after Coulomb friction and the offset.
 
-Usage: `python experiments/emps_discovery.py ../shared/datasets experiments/results/emps_discovery`
+Usage: `python experiments/emps_discovery.py ../shared/datasets experiments/results/emps_discovery [REFIT [VISCOUS]]`
+(REFIT: `default` or comma-separated names, e.g. `mass,viscous`; VISCOUS: the nominal viscous coefficient, 200 N s/m).
 
 Data: A. Janot, M. Gautier, M. Brunot, "Data Set and Reference Models of EMPS", Nonlinear System
 Identification Benchmarks workshop, 2019 (`DATA_EMPS.mat`, the estimation record). The diagnosis
@@ -44,9 +45,13 @@ us = raw.us[:n].reshape(-1, 10, 1).mean(axis=1)
 k = int(0.7 * len(ts))
 cut = lambda a, b, name: Trajectory(ts[a:b], xs[a:b], us[a:b], raw.state_names, raw.input_names, "linear_axis", name)  # noqa: E731
 train, validation = cut(0, k, "DATA_EMPS.mat, first 70 %"), cut(k, len(ts), "DATA_EMPS.mat, last 30 %")
-nominal = LinearAxis(mass=jnp.asarray(90.0), viscous=jnp.asarray(200.0), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0))
+VISCOUS = float(sys.argv[4]) if len(sys.argv) > 4 else 200.0  # the nominal viscous coefficient [N s/m]
+nominal = LinearAxis(mass=jnp.asarray(90.0), viscous=jnp.asarray(VISCOUS), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0))
 start = time.perf_counter()
-report = diagnose(nominal, train, validation, mode=Refit(parameters=("mass", "viscous")), reference_horizon_s=0.25,
+# Refit(): mass and offset refitted, the nominal friction (200 N s/m, no Coulomb) kept and tested by the
+# candidates (the default since 2026-11-25; REFIT=mass,viscous gives the earlier recipe).
+refit = Refit(parameters=tuple(sys.argv[3].split(","))) if len(sys.argv) > 3 and sys.argv[3] != "default" else Refit()
+report = diagnose(nominal, train, validation, mode=refit, reference_horizon_s=0.25,
                   system_name="linear_axis", progress=lambda s: print(f"[{time.perf_counter() - start:5.0f} s] {s}", flush=True))
 OUT.mkdir(parents=True, exist_ok=True)
 write_report(report, OUT, validation, write_json=write_json)

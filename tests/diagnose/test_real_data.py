@@ -16,11 +16,11 @@ from tests.conftest import DFKI_MAPPING
 DATASETS = pathlib.Path(__file__).resolve().parents[2] / ".." / "shared" / "datasets"
 
 
-@pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason=(
-    "with the calibrated flat-top HAC test and the engine-based refits (this session) EMPS gives no "
-    "finding at a 0.25 s horizon; it passed with the earlier, too liberal batch-means test (issue 10)"))
 def test_emps_needs_coulomb_friction_near_the_published_value():
+    """Refit mode's default keeps the nominal friction (200 N s/m, no Coulomb) and refits mass and offset:
+    Coulomb friction is named near the published value. Refitting mass and viscous instead (the earlier
+    recipe) lets the viscous coefficient absorb it, and one 7.4 s held-out segment is then too little
+    for the test (p = 0.046; docs/tutorials/real_data_diagnosis.md)."""
     raw = load_trajectory(DATASETS / "emps" / "DATA_EMPS.mat", "linear_axis",
                           mapping={"t": "t", "q": "qm", "force": "vir"}, scale={"force": 35.15065188})
     q = butterworth_filtfilt(raw.ts, raw.xs[:, 0], cutoff_hz=40.0)
@@ -33,13 +33,13 @@ def test_emps_needs_coulomb_friction_near_the_published_value():
     validation = Trajectory(ts[k:], xs[k:], us[k:], raw.state_names, raw.input_names, "linear_axis")
     nominal = LinearAxis(mass=jnp.asarray(90.0), viscous=jnp.asarray(200.0), coulomb=jnp.asarray(0.0),
                          offset=jnp.asarray(0.0))
-    report = diagnose(nominal, train, validation, mode=Refit(parameters=("mass", "viscous")),
-                      reference_horizon_s=0.25)
+    report = diagnose(nominal, train, validation, mode=Refit(), reference_horizon_s=0.25)
     causes = {(f["cause"], f["where"]): f for f in report.findings}
     assert ("coulomb_friction", "q") in causes
-    # Published: Fc = 20.39 N, M = 95.1 kg, Fv = 203.5 N s/m (Janot, Gautier and Brunot 2019).
+    # Published: Fc = 20.39 N, M = 95.1 kg, Fv = 203.5 N s/m, offset -3.16 N (Janot, Gautier and Brunot 2019).
     assert 15.0 < causes[("coulomb_friction", "q")]["coefficient"] < 26.0
     assert 85.0 < float(report.extended_model.system.mass) < 105.0
+    assert -4.5 < float(report.extended_model.system.offset) < -2.0
     assert report.gain > 0.3
     assert report.verdict in ("explained", "unexplained")
 
