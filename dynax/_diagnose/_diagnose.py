@@ -58,8 +58,8 @@ class Refit(eqx.Module):
     most of a Coulomb friction's effect on short windows). The friction candidates test it
     instead; a viscous friction candidate adds to the nominal's own coefficient and may lower it,
     not below zero. Causes that a change of the refitted parameters reproduces exactly are not
-    identifiable in this mode (an input gain on the acrobot rescales theta1..theta7) and are
-    reported as such.
+    identifiable in this mode (a rotor inertia at the acrobot's shoulder adds to theta1; with all
+    of theta1..theta7 refitted, an input gain rescales them) and are reported as such.
 
     **Arguments:** `parameters`, the names of the nominal parameters to refit (default all but the
     friction, e.g. `theta1..theta5`; all of them, `theta1..theta7`, to let the refit absorb
