@@ -3,7 +3,7 @@
 The file holds an acrobot with Coulomb friction at the elbow hidden in it (and base parameters
 that differ from the nominal model's), under a random multisine elbow torque, with measurement
 noise; it is written as a contract CSV and read back, as a user's file would be. `diagnose` holds
-out the last 30 % (no validation file) and runs the full library of 12 candidates, 11 of them
+out the last 30 % (no validation file) and runs the full library of 12 candidates, 10 of them
 identifiable in refit mode (which keeps the nominal friction; 8 when theta1..theta7 are refitted). Target: under 60 s on the 2-core machine.
 
 Reported: wall and CPU seconds of the first call (compilation included), of a second call on the

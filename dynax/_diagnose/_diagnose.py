@@ -57,9 +57,10 @@ class Refit(eqx.Module):
     refit of it would absorb the very effects under test (a refitted viscous coefficient soaks up
     most of a Coulomb friction's effect on short windows). The friction candidates test it
     instead; a viscous friction candidate adds to the nominal's own coefficient and may lower it,
-    not below zero. Causes that a change of the refitted parameters reproduces exactly are not
-    identifiable in this mode (a rotor inertia at the acrobot's shoulder adds to theta1; with all
-    of theta1..theta7 refitted, an input gain rescales them) and are reported as such.
+    not below zero. Causes that a change of the refitted parameters reproduces exactly, alone or
+    with a change of the kept friction, are not identifiable in this mode (a rotor inertia at the
+    acrobot's shoulder adds to theta1; its input gain rescales theta1..theta5 and the friction) and
+    are reported as such.
 
     **Arguments:** `parameters`, the names of the nominal parameters to refit (default all but the
     friction, e.g. `theta1..theta5`; all of them, `theta1..theta7`, to let the refit absorb
@@ -310,18 +311,37 @@ def _candidate_family(system, candidates, refit_names, train_records):
     return family, scales, inits
 
 
-def _identifiable(system, candidates, family, refit_names):
-    """`(searchable indices, not_identifiable entries)`: candidates a refit of the nominal parameters reproduces are set aside."""
-    absorbed = structurally_absorbed(family, family.refit)
+def _identifiable(system, candidates, family, refit_names, partners, mode):
+    """`(searchable indices, not_identifiable entries)`: candidates a refit of the nominal parameters reproduces are set aside.
+
+    In `Refit` mode the kept parameters that candidates test (the nominal friction, `partners`) are not
+    trusted either: a candidate that a refit reproduces together with a change of them (the acrobot's input
+    gain: rescaling theta1..theta5 *and* the friction) cannot be told from a friction error, and is set aside
+    too. The candidates that are those parameters (viscous friction) stay.
+    """
+    refit = np.asarray(family.refit) > 0
+    absorbed = structurally_absorbed(family, refit)
+    tested = sorted({p[0] for p in partners if p is not None})
+    if isinstance(mode, Refit) and tested:
+        with_tested = refit.copy()
+        with_tested[tested] = True
+        absorbed_with_tested = structurally_absorbed(family, with_tested)
+    else:
+        absorbed_with_tested = absorbed
     not_identifiable, searchable = [], []
     for k, term in enumerate(candidates):
         if absorbed[k]:
-            not_identifiable.append(
-                {"cause": term.cause, "where": term.where(system),
-                 "reason": f"a refit of the nominal parameters ({', '.join(refit_names)}) reproduces it exactly; "
-                           "diagnose in Known() mode with trusted parameters to test it"})
+            reason = (f"a refit of the nominal parameters ({', '.join(refit_names)}) reproduces it exactly; "
+                      "diagnose in Known() mode with trusted parameters to test it")
+        elif absorbed_with_tested[k] and partners[k] is None:
+            kept = ", ".join(family.names[i] for i in tested)
+            reason = (f"a refit of the nominal parameters ({', '.join(refit_names)}) with a change of the kept "
+                      f"friction ({kept}) reproduces it exactly, so it cannot be told from a friction error; "
+                      "diagnose in Known() mode with trusted parameters to test it")
         else:
             searchable.append(k)
+            continue
+        not_identifiable.append({"cause": term.cause, "where": term.where(system), "reason": reason})
     if not searchable:
         raise UsageError("diagnose: no candidate is identifiable in this mode")
     return searchable, not_identifiable
@@ -339,8 +359,8 @@ def _prepare(system, train, validation, candidates, mode, options: _Options) -> 
     Extended(system, candidates)  # checks every candidate fits this system
     refit_names = _refit_names(system, mode)
     family, scales, inits = _candidate_family(system, candidates, refit_names, train_records)
-    searchable, not_identifiable = _identifiable(system, candidates, family, refit_names)
     partners = held_partners(family, 1.0 - np.asarray(family.refit))
+    searchable, not_identifiable = _identifiable(system, candidates, family, refit_names, partners, mode)
     _note_held(system, family, refit_names, mode, notes)
     fit_window_s = _fit_window(system, train_records, options.fit_window_s, options.horizon_fraction, dt, notes)
     n_fit = max(2, int(round(fit_window_s / dt)))

@@ -69,8 +69,9 @@ def test_hidden_coulomb_friction_is_named_with_its_size(coulomb_report):
 def test_refit_mode_reports_what_it_cannot_identify(coulomb_report):
     report, _, _ = coulomb_report
     absorbed = {(c["cause"], c["where"]) for c in report.not_identifiable}
-    # Rotor inertia at the shoulder adds to theta1, which the refit fits.
-    assert ("rotor_inertia", "q1") in absorbed
+    # Rotor inertia at the shoulder adds to theta1, which the refit fits; an input gain is a rescaling of
+    # theta1..theta5 and of the kept friction, so it cannot be told from a friction error.
+    assert ("rotor_inertia", "q1") in absorbed and ("input_gain", "tau2") in absorbed
     # The nominal friction (theta6, theta7) is kept, not refitted: the friction candidates test it, and say so.
     assert ("viscous_friction", "q2") not in absorbed and ("coulomb_friction", "q2") not in absorbed
     assert any("theta6 = 0.1" in note and "friction candidates test it" in note for note in report.notes), report.notes
@@ -115,6 +116,22 @@ def test_refit_mode_names_a_viscous_friction_the_nominal_model_lacks():
     report, _, _ = _diagnose_hidden(ViscousFriction(1, 0.3), seed=32)
     _assert_found(report, "viscous_friction", "q2")
     assert abs(report.findings[0]["coefficient"] - 0.3) < 0.05
+
+
+def test_a_nominal_friction_off_by_a_common_factor_is_named_as_friction_not_as_an_input_gain():
+    """The rig's viscous friction is twice the nominal's at both joints. Refit mode keeps the nominal's and
+    tests it: the answer is viscous friction (adding about 0.1 at each joint), never an input gain, which
+    with theta1..theta5 rescaled would reproduce the data exactly (it is reported as not identifiable)."""
+    truth = Extended(Acrobot.from_physical(m1=1.05, m2=0.97, lc2=1.02, Ic2=0.32, b1=0.2, b2=0.2), (CoulombFriction(1, 0.0),))
+    run = synthetic_trajectory(truth, duration=30.0, dt=0.01, amplitude=2.0, seed=3, system_name="acrobot")
+    k = 2001
+    train = Trajectory(run.ts[:k], run.xs[:k], run.us[:k], run.state_names, run.input_names, "acrobot")
+    validation = Trajectory(run.ts[k:], run.xs[k:], run.us[k:], run.state_names, run.input_names, "acrobot")
+    j = diagnose(Acrobot(), train, validation).to_json()
+    assert j["findings"] and all(f["cause"] == "viscous_friction" for f in j["findings"]), j["findings"]
+    for f in j["findings"]:
+        assert abs(f["coefficient"] - 0.1) < 0.03, f  # 0.1 nominal + 0.1 found = the rig's 0.2
+    assert ("input_gain", "tau2") in {(c["cause"], c["where"]) for c in j["not_identifiable"]}
 
 
 def test_out_of_vocabulary_spring_is_unexplained_not_misnamed():
