@@ -335,9 +335,9 @@ def _identifiable(system, candidates, family, refit_names, partners, mode):
                       "diagnose in Known() mode with trusted parameters to test it")
         elif absorbed_with_tested[k] and partners[k] is None:
             kept = ", ".join(family.names[i] for i in tested)
-            reason = (f"a refit of the nominal parameters ({', '.join(refit_names)}) with a change of the kept "
-                      f"friction ({kept}) reproduces it exactly, so it cannot be told from a friction error; "
-                      "diagnose in Known() mode with trusted parameters to test it")
+            reason = (f"a refit of the nominal parameters ({', '.join(refit_names)}) with a change of the kept ones "
+                      f"the candidates test ({kept}) reproduces it exactly, so it cannot be told from an error in "
+                      "those; diagnose in Known() mode with trusted parameters to test it")
         else:
             searchable.append(k)
             continue
