@@ -2,6 +2,7 @@
 
 import argparse
 import contextlib
+import sys
 import time
 
 from .._errors import UsageError
@@ -34,8 +35,8 @@ def register(subparsers):
                         help="nominal parameters: a JSON with a 'parameters' object (e.g. the output of dynax identify)")
     parser.add_argument("--refit", default=None, metavar="NAMES",
                         help="comma-separated nominal parameters to refit (default all but the nominal friction, which "
-                             "the friction candidates test, e.g. theta1..theta5; for linear_axis mass,viscous; "
-                             "for helicopter the Tempest weights, e.g. du/u,dv/1)")
+                             "the friction candidates test, e.g. theta1..theta5; for linear_axis mass and "
+                             "offset; for helicopter the Tempest weights, e.g. du/u,dv/1)")
     parser.add_argument("--dt", type=float, default=None, metavar="SECONDS",
                         help="resample the records to this interval first (default: as recorded)")
     parser.add_argument("--reference-horizon", type=float, default=None, metavar="SECONDS",
@@ -53,7 +54,8 @@ def register(subparsers):
 
 
 def nominal_system(name: str, parameters: dict | None = None):
-    """The nominal model dynax diagnoses for a contract system name (linear_axis: mass and viscous friction only)."""
+    """The nominal model dynax diagnoses for a contract system name, with `parameters` (from `--nominal`) set
+    (linear_axis: Coulomb friction and offset 0 unless given)."""
     from .._model import Acrobot, DoublePendulum, LinearAxis
 
     if name == "helicopter":
@@ -98,10 +100,18 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--reference-horizon must be positive, got {args.reference_horizon}")
     if args.max_terms < 1:
         raise UsageError(f"--max-terms must be at least 1, got {args.max_terms}")
-    parameters = None
+    parameters, cli_notes = None, []
     if args.nominal is not None:
         parameters = read_nominal_parameters(args.nominal)
-        parameters = {k: v for k, v in parameters.items() if not k.startswith("fc")}
+        coulomb = {k: v for k, v in parameters.items() if k in ("fc1", "fc2")}
+        parameters = {k: v for k, v in parameters.items() if k not in coulomb}
+        if coulomb and args.system in ("acrobot", "double_pendulum"):
+            # `dynax identify --friction coulomb` writes them; the two-link nominal model has no Coulomb term.
+            dropped = ", ".join(f"{k} = {v:.4g}" for k, v in coulomb.items())
+            set_aside = (f"--nominal gave Coulomb friction ({dropped}); the nominal two-link model has no Coulomb "
+                         "term, so it was set aside and the coulomb_friction candidates test it from zero.")
+            print(f"note: {set_aside}", file=sys.stderr)
+            cli_notes.append(set_aside)
     # Everything that can be refused is read before anything is written.
     train = [load_trajectory(path, args.system, mapping=mapping, scale=scale, min_samples=50) for path in args.data]
     validation = None
@@ -116,8 +126,6 @@ def run(args: argparse.Namespace) -> int:
         mode = Known()
     else:
         names = tuple(n.strip() for n in args.refit.split(",") if n.strip()) if args.refit else None
-        if names is None and args.system == "linear_axis":
-            names = ("mass", "viscous")
         mode = Refit(parameters=names)
     with stage_log() as say:
         report = diagnose(
@@ -125,6 +133,7 @@ def run(args: argparse.Namespace) -> int:
             max_terms=args.max_terms, system_name=args.system, discovery=not args.no_discovery,
             velocities=args.velocities, progress=say,
         )
+    report.notes.extend(cli_notes)
     held_out = validation if validation is not None else [_held_out(t) for t in train]
     with staged_directory(args.out) as stage:
         write_report(report, stage, held_out, write_json=write_json)

@@ -4,6 +4,7 @@ import pathlib
 
 import numpy as np
 
+from .._data._derivatives import resample
 from ._discovery import discovery_markdown
 from ._figures import plot_error_vs_horizon, plot_measured_vs_simulated, plot_residuals
 from ._residuals import acceleration_residuals, velocity_indices
@@ -158,6 +159,8 @@ def write_report(report, out_dir, validation, *, write_json) -> None:
     """
     out = pathlib.Path(out_dir)
     runs = list(validation) if isinstance(validation, (list, tuple)) else [validation]
+    # `diagnose` resampled irregular records to one grid (`report.data.dt`); the figures are drawn on that grid too.
+    runs = [run if run.is_uniform else resample(run, report.data.dt) for run in runs]
     validation = runs[0]
     write_json(out / "report.json", report.to_json())
     (out / "report.md").write_text(report.to_markdown())

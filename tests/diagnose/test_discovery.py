@@ -158,9 +158,15 @@ def periodic_files(tmp_path_factory):
     return folder
 
 
+# The nominal's viscous coefficient (190) is 7 % off the truth's (203.5). The CLI's default refit keeps it
+# (the friction candidates test it), and the viscous candidate alone, judged against a model whose error the
+# periodic force dominates, is 15 % better at p = 0.03: not selected; after discovery no vocabulary round
+# follows, so the verdict would be `unexplained` (discovery 55 %, structure left in dq). This test is about the
+# search, so it refits the viscous coefficient with the mass, as a user who doubts it would.
 def _cli(folder, out, *extra):
     return main(["diagnose", "linear_axis", str(folder / "run1.csv"), "--validation", str(folder / "run2.csv"),
-                 "--nominal", str(folder / "nominal.json"), "--reference-horizon", "0.5", "--out", str(out), *extra])
+                 "--nominal", str(folder / "nominal.json"), "--refit", "mass,viscous", "--reference-horizon", "0.5",
+                 "--out", str(out), *extra])
 
 
 def test_cli_discovers_a_position_periodic_force_with_its_period(periodic_files, tmp_path, capsys):

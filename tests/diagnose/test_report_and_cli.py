@@ -127,3 +127,34 @@ def test_cli_diagnose_takes_several_runs_and_keeps_them_apart(offset_data, tmp_p
     assert (out / "measured_vs_simulated_run2.png").stat().st_size > 0
     assert "b2.csv" in (out / "report.md").read_text()
     assert (report["findings"][0]["cause"], report["findings"][0]["where"]) == ("input_offset", "tau2")
+
+
+@pytest.mark.heavy  # another grid: compiles the fits again
+def test_cli_diagnose_on_irregularly_sampled_files_without_dt(offset_data, tmp_path, capsys):
+    """Real rigs jitter (the DFKI files: 2 ms +- a few %). `diagnose` resamples them to their median interval;
+    the report's figures must be drawn from the same grid, not fail on the user's unresampled records."""
+    _, train, validation = offset_data
+    rng = np.random.default_rng(1)
+    paths = []
+    for name, record in (("train", train), ("held", validation)):
+        ts = np.asarray(record.ts) + rng.uniform(-0.002, 0.002, len(record)) * (np.arange(len(record)) > 0)
+        path = tmp_path / f"{name}.csv"
+        save_trajectory(type(record)(ts, record.xs, record.us, record.state_names, record.input_names, "acrobot"), path)
+        paths.append(path)
+    out = tmp_path / "diag"
+    # A nominal file from `dynax identify --friction coulomb` carries fc1, fc2, which the two-link nominal
+    # model cannot hold: set aside, and said so on stderr and in the report.
+    nominal = tmp_path / "nominal.json"
+    nominal.write_text(json.dumps({"parameters": {"fc2": 0.05}}))
+    code = main(["diagnose", "acrobot", str(paths[0]), "--validation", str(paths[1]), "--max-terms", "1",
+                 "--nominal", str(nominal), "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert "fc2 = 0.05" in err
+    report = json.loads((out / "report.json").read_text())
+    assert any("resampled" in n for n in report["notes"])
+    assert any("Coulomb friction (fc2 = 0.05)" in n and "set aside" in n for n in report["notes"])
+    assert abs(report["data"]["dt"] - 0.01) < 1e-3
+    for name in ("measured_vs_simulated.png", "sim_error.png", "residuals.png"):
+        assert (out / name).stat().st_size > 0
+    assert (report["findings"][0]["cause"], report["findings"][0]["where"]) == ("input_offset", "tau2")
