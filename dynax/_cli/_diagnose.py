@@ -85,6 +85,27 @@ def nominal_system(name: str, parameters: dict | None = None):
         raise UsageError(f"--nominal: parameters {sorted(values)} do not fit {cls.__name__}: {e}") from None
 
 
+def _split_term_coefficients(system_name: str, parameters: dict) -> tuple[dict, str | None]:
+    """`--nominal` parameters that are coefficients of the vocabulary's terms (`fc2`, `Ir2`: what `dynax
+    identify --friction coulomb` and its refinement write for a two-link arm) rather than fields of the
+    nominal system: set aside, since the nominal model has no such term, with a note saying so; the
+    candidates of those causes test them from zero. Other unknown names are left for `nominal_system`
+    to refuse."""
+    if system_name == "helicopter":
+        return parameters, None
+    from .._diagnose._candidates import default_candidates
+
+    system = nominal_system(system_name)
+    terms = {t.parameter_name(system): t for t in default_candidates(system)}
+    aside = {k: v for k, v in parameters.items() if k in terms and not hasattr(system, k)}
+    if not aside:
+        return parameters, None
+    listed = ", ".join(f"{k} = {v:.4g} ({terms[k].cause} at {terms[k].where(system)})" for k, v in aside.items())
+    note = (f"--nominal gave {listed}; the nominal model has no such term, so the value was set aside and the "
+            f"candidates of that cause test it from zero (the diagnosis may name it again).")
+    return {k: v for k, v in parameters.items() if k not in aside}, note
+
+
 def run(args: argparse.Namespace) -> int:
     import jax
 
@@ -103,13 +124,8 @@ def run(args: argparse.Namespace) -> int:
     parameters, cli_notes = None, []
     if args.nominal is not None:
         parameters = read_nominal_parameters(args.nominal)
-        coulomb = {k: v for k, v in parameters.items() if k in ("fc1", "fc2")}
-        parameters = {k: v for k, v in parameters.items() if k not in coulomb}
-        if coulomb and args.system in ("acrobot", "double_pendulum"):
-            # `dynax identify --friction coulomb` writes them; the two-link nominal model has no Coulomb term.
-            dropped = ", ".join(f"{k} = {v:.4g}" for k, v in coulomb.items())
-            set_aside = (f"--nominal gave Coulomb friction ({dropped}); the nominal two-link model has no Coulomb "
-                         "term, so it was set aside and the coulomb_friction candidates test it from zero.")
+        parameters, set_aside = _split_term_coefficients(args.system, parameters)
+        if set_aside:
             print(f"note: {set_aside}", file=sys.stderr)
             cli_notes.append(set_aside)
     # Everything that can be refused is read before anything is written.

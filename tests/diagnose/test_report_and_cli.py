@@ -150,11 +150,30 @@ def test_cli_diagnose_on_irregularly_sampled_files_without_dt(offset_data, tmp_p
                  "--nominal", str(nominal), "--out", str(out)])
     err = capsys.readouterr().err
     assert code == 0, err
-    assert "fc2 = 0.05" in err
+    assert "fc2 = 0.05 (coulomb_friction at q2)" in err
     report = json.loads((out / "report.json").read_text())
     assert any("resampled" in n for n in report["notes"])
-    assert any("Coulomb friction (fc2 = 0.05)" in n and "set aside" in n for n in report["notes"])
+    assert any("fc2 = 0.05" in n and "set aside" in n for n in report["notes"])
     assert abs(report["data"]["dt"] - 0.01) < 1e-3
     for name in ("measured_vs_simulated.png", "sim_error.png", "residuals.png"):
         assert (out / name).stat().st_size > 0
     assert (report["findings"][0]["cause"], report["findings"][0]["where"]) == ("input_offset", "tau2")
+
+
+def test_cli_nominal_sets_aside_term_coefficients_and_refuses_unknown_names():
+    """`dynax identify` writes `Ir2` (its refinement's rotor inertia) and `fc1`, `fc2`; the nominal two-link
+    model has no such terms. They are set aside with a note naming the cause; a name that is neither a field
+    nor a term's coefficient is still refused."""
+    from dynax._cli._diagnose import _split_term_coefficients, nominal_system
+    from dynax._errors import UsageError
+
+    given = {"theta1": 0.05, "theta7": 0.02, "Ir2": 0.003, "fc1": 0.1}
+    kept, note = _split_term_coefficients("double_pendulum", given)
+    assert kept == {"theta1": 0.05, "theta7": 0.02}
+    assert "Ir2 = 0.003 (rotor_inertia at q2)" in note and "fc1 = 0.1 (coulomb_friction at q1)" in note
+    assert float(nominal_system("double_pendulum", kept).theta7) == 0.02
+    assert _split_term_coefficients("linear_axis", {"mass": 90.0, "coulomb": 20.0}) == ({"mass": 90.0, "coulomb": 20.0}, None)
+    kept, note = _split_term_coefficients("acrobot", {"theta1": 1.0, "Ir9": 1.0})
+    assert note is None
+    with pytest.raises(UsageError, match="Ir9"):
+        nominal_system("acrobot", kept)
