@@ -184,7 +184,7 @@ def propose(
         period = None if is_angle(system, j) else _position_period(system, j, nuisance[:, j], xs, us, y, dt)
         library = feature_library(system, j, xs, period=period)
         raw = evaluate_features(library, n, xs, us)
-        (phi,) = _project_out(nuisance[:, j], raw)
+        phi = np.array(_project_out(nuisance[:, j], raw)[0])  # a writable copy: with nothing refitted it is `raw`
         # A feature the refitted parameters reproduce (sin q1 at the shoulder: gravity) is not a discovery.
         inert = np.sqrt(np.mean(phi**2, axis=0)) < 1e-6 * np.maximum(np.sqrt(np.mean(raw**2, axis=0)), 1e-300)
         # So is a feature equivalent to a named cause that the refit reproduces exactly (an input gain

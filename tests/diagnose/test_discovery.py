@@ -116,11 +116,18 @@ def test_without_discovery_the_spring_stays_unexplained(spring_report):
 # --- the search on its own: no false discoveries, named causes win -----------------------------
 
 
-def _acrobot_search(term, seed, *, named=True):
+def _acrobot_search(term, seed, *, named=True, refit=ACROBOT_BASE):
     _, train, _ = demo_data(term, seed=seed)
     system = Acrobot.from_physical(**DEMO_TRUTH_PHYSICAL)
     vocabulary = [t.label(system) for t in default_candidates(system)] if named else []
-    return propose(system, [train], refit=ACROBOT_BASE, vocabulary=vocabulary)
+    return propose(system, [train], refit=refit, vocabulary=vocabulary)
+
+
+def test_the_search_in_known_mode_with_nothing_refitted():
+    # Known mode refits nothing: no direction is projected out, and the features are used as evaluated
+    # (this crashed on a read-only array, `dynax diagnose --mode known` on the DFKI runs).
+    blind = [p for p in _acrobot_search(CoulombFriction(1, 0.22), seed=11, named=False, refit=()) if p.features]
+    assert [(p.channel, [f.kind for f in p.features]) for p in blind] == [(1, ["sign"])]
 
 
 @pytest.mark.parametrize("seed", [12, 13])
