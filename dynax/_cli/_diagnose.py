@@ -106,6 +106,54 @@ def _split_term_coefficients(system_name: str, parameters: dict) -> tuple[dict, 
     return {k: v for k, v in parameters.items() if k not in aside}, note
 
 
+# The defaults describe one machine (Drake's acrobot, the EMPS axis). Least squares on the user's runs
+# that puts a size parameter (an inertia, a mass, a gravity term) outside this factor of the default's
+# says the data come from another machine.
+DEFAULT_SIZE_FACTOR = 2.0
+
+
+def nominal_from_data(system, train) -> tuple[object, str]:
+    """Without `--nominal`: the default model if the training runs agree with its size, else the rigid
+    body identified from them.
+
+    Least squares (`identify(system, train, Dynamic(), refine=False, holdout=0)`: filter settings from
+    the data, consistency constrained) estimates the base parameters. If every size parameter
+    (non-friction base parameters that consistency requires positive: theta1, theta2, theta4, theta5;
+    the axis's mass) lies within `DEFAULT_SIZE_FACTOR` of the default's, the default model is kept.
+    Otherwise the nominal model is that estimate with its friction set to zero, so that the friction
+    candidates test friction (viscous and Coulomb) from zero rather than inherit the least-squares
+    viscous coefficient, which absorbs part of a Coulomb friction's effect. Returns the model and a note.
+    """
+    import jax.numpy as jnp
+
+    from .._identify import Dynamic, identify
+
+    from .._errors import DataError
+
+    try:
+        estimate = identify(system, train, Dynamic(), refine=False, holdout=0).parameters
+    except DataError as e:  # too little excitation to tell: keep the default, and say so
+        return system, f"No --nominal: the default {type(system).__name__} parameters (least squares could not check them: {e})."
+    kinds = system.base_parameter_kinds()
+    friction = {n for n, (group, _) in system.base_parameter_meanings().items() if group == "friction"}
+    size = [n for n, kind in kinds.items() if kind in ("positive", "inertia1") and n not in friction]
+    default = {n: float(getattr(system, n)) for n in size}
+    ratios = {n: estimate[n] / default[n] for n in size}
+    far = {n: r for n, r in ratios.items() if not 1 / DEFAULT_SIZE_FACTOR <= r <= DEFAULT_SIZE_FACTOR}
+    listed = ", ".join(f"{n} {estimate[n]:.4g} (default {default[n]:.4g})" for n in size)
+    if not far:
+        return system, (f"No --nominal: the default {type(system).__name__} parameters, which least squares on the "
+                        f"training runs confirms within a factor {DEFAULT_SIZE_FACTOR:g} ({listed}).")
+    values = {n: jnp.asarray(v) for n, v in estimate.items() if n in kinds and n not in friction}
+    values.update({n: jnp.zeros_like(jnp.asarray(getattr(system, n))) for n in friction})
+    nominal = system.with_base_parameters(values)
+    worst = max(far, key=lambda n: abs(jnp.log(far[n])))
+    return nominal, (f"No --nominal, and the training runs are not the default {type(system).__name__} "
+                     f"(least squares: {listed}; {worst} is {far[worst]:.3g} times the default): the nominal model is "
+                     "the rigid body identified from the training runs by least squares, with zero friction, which "
+                     "the friction candidates test. Pass --nominal to diagnose against a model of your own.")
+
+
 def run(args: argparse.Namespace) -> int:
     import jax
 
@@ -138,6 +186,10 @@ def run(args: argparse.Namespace) -> int:
         train = [resample(t, args.dt) for t in train]
         validation = None if validation is None else [resample(v, args.dt) for v in validation]
     system = nominal_system(args.system, parameters)
+    if args.nominal is None and args.system != "helicopter":
+        system, note = nominal_from_data(system, train)
+        print(f"note: {note}", file=sys.stderr)
+        cli_notes.append(note)
     if args.mode == "known":
         mode = Known()
     else:

@@ -119,3 +119,34 @@ def test_dfki_refit_mode_with_the_large_amplitude_run_and_a_small_one_held_out()
 def test_dfki_refit_mode_with_only_the_large_amplitude_run_held_out():
     report = diagnose(_model_3_1(), [_dfki(r) for r in ("00", "01", "02")], [_dfki("12")], mode=Refit())
     _assert_lab_effect(report)
+
+
+def test_dfki_cli_on_the_raw_files_with_no_nominal_and_no_resampling(tmp_path, capsys):
+    """A new user's first command: the raw recordings (irregular ~2 ms sampling), no `--nominal`, no `--dt`.
+    The default DoublePendulum is another machine (theta1 1.33 against the rig's 0.047): the CLI says so and
+    diagnoses against the rigid body least squares identifies from the training runs, friction zero. Split S1
+    (train 00, 01; hold out 02, 03) must then name the lab's Coulomb friction at the elbow, as with the lab's
+    model_3.1 as nominal (0.110 N m, 79 %; docs/tutorials/real_data_diagnosis.md)."""
+    import json
+
+    from dynax._cli._main import main
+
+    runs = DATASETS / "dfki_double_pendulum" / "sys_id"
+    mapping = ",".join(f"{k}={v}" for k, v in DFKI_MAPPING.items())
+    out = tmp_path / "s1"
+    code = main(["diagnose", "double_pendulum", str(runs / "trajectory_00.csv"), str(runs / "trajectory_01.csv"),
+                 "--validation", str(runs / "trajectory_02.csv"), str(runs / "trajectory_03.csv"),
+                 "--map", mapping, "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert "not the default DoublePendulum" in err
+    j = json.loads((out / "report.json").read_text())
+    assert abs(j["data"]["dt"] - 0.002) < 2e-4 and any("resampled" in n for n in j["notes"])
+    assert any("rigid body identified from the training runs" in n for n in j["notes"])
+    # the rig's size (the lab: theta1 = 0.049; the default 1.33), refitted; the friction kept at zero
+    assert 0.02 < j["nominal"]["parameters"]["theta1"] < 0.15 and j["nominal"]["parameters"]["theta7"] == 0.0
+    causes = {(f["cause"], f["where"]): f for f in j["findings"]}
+    assert ("coulomb_friction", "q2") in causes, j["findings"]
+    assert 0.05 < causes[("coulomb_friction", "q2")]["coefficient"] < 0.2  # the lab: c_f pi/2 = 0.12 N m
+    assert j["gain"] >= 0.25
+    assert (out / "measured_vs_simulated_run2.png").stat().st_size > 0
