@@ -17,7 +17,7 @@ import numpy as np
 
 from .._data._derivatives import resample
 from .._data._trajectory import Trajectory
-from .._errors import UsageError
+from .._errors import DataError, UsageError
 from .._identify._defaults import position_fit_window, with_velocities_from_positions
 from .._model._extensions import AbstractInputTerm, AbstractTerm, Extended
 from .._model._system import AbstractSystem, violated_bound
@@ -36,7 +36,7 @@ from ._fit import (
     Windows,
 )
 from ._horizon import DEFAULT_FRACTION, Horizon, predictability_horizon, relative_position_error
-from ._residuals import acceleration_residuals, Structure, structure_test
+from ._residuals import _sg_window, acceleration_residuals, Structure, structure_test
 from ._result import DataSummary, ModelSummary, Report as Report, SimErrorCurve
 from ._screening import screen
 from ._statistics import benjamini_hochberg, detectable_gain, helps_on_most_runs, log_ratio_differences, paired_block_test
@@ -818,6 +818,17 @@ def _prepare_records(system, train, validation, holdout_fraction, notes):
         train_records = [resample(r, dt) for r in train_records]
         validation_records = [resample(r, dt) for r in validation_records]
         notes.append(f"The sampling was irregular; the records were resampled to {dt * 1000:.3g} ms (states linearly, inputs as held).")
+    # One-step residuals drop a smoothing window (about 0.1 s) at each end of a record; a record needs
+    # room for that and as much again to be judged on.
+    need = 4 * _sg_window(dt)
+    for kind, records in (("training", train_records), ("held-out", validation_records)):
+        for rec in records:
+            if len(rec) < need:
+                what = (f"the held-out part of the record (its last {holdout_fraction:.0%})"
+                        if validation is None and kind == "held-out" else f"the {kind} record")
+                raise DataError(f"diagnose: {what} has {len(rec)} samples ({len(rec) * dt:.3g} s); "
+                                f"the diagnosis needs at least {need} ({need * dt:.3g} s) per record",
+                                path=rec.source or None)
     dtype = jnp.result_type(float)
 
     return [_cast(r, dtype) for r in train_records], [_cast(r, dtype) for r in validation_records], dt

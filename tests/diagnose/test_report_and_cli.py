@@ -91,6 +91,15 @@ def test_cli_diagnose_refuses_bad_input_and_writes_nothing(offset_data, tmp_path
     assert not out.exists()
     assert main(["diagnose", "acrobot", str(folder / "run1.csv"), "--max-terms", "0", "--out", str(out)]) == 2
     assert not out.exists()
+    # Too short to judge: the one-step residuals drop about 0.1 s at each end (this crashed with a division by zero).
+    _, train, _ = offset_data
+    short = tmp_path / "short.csv"
+    save_trajectory(type(train)(train.ts[:141], train.xs[:141], train.us[:141], train.state_names, train.input_names,
+                                "acrobot"), short)
+    assert main(["diagnose", "acrobot", str(short), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "short.csv" in err and "held-out part of the record" in err and "42 samples" in err and "at least 44" in err
+    assert not out.exists()
 
 
 def test_cli_diagnose_helicopter_refuses_a_file_without_its_columns(offset_data, tmp_path, capsys):
