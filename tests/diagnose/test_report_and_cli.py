@@ -186,3 +186,35 @@ def test_cli_nominal_sets_aside_term_coefficients_and_refuses_unknown_names():
     assert note is None
     with pytest.raises(UsageError, match="Ir9"):
         nominal_system("acrobot", kept)
+
+
+@pytest.mark.heavy  # its own record sizes: compiles the fits again
+def test_cli_without_nominal_on_another_axis_diagnoses_against_its_identified_rigid_body(tmp_path, capsys):
+    """An axis of another size than the default (EMPS: 95 kg, 203.5 N s/m): 5 kg, viscous 10 N s/m, Coulomb
+    2 N, offset 0.3 N. Without `--nominal` the CLI sees least squares put the mass 19 times below the
+    default's, diagnoses against the identified mass and offset with zero friction, and names both frictions
+    with their sizes. (Against the EMPS defaults the refit must first find the mass from 19 times too large.)"""
+    import jax.numpy as jnp
+
+    from dynax import LinearAxis
+    from dynax._data import Trajectory
+    from dynax.synthetic import synthetic_trajectory
+
+    truth = LinearAxis(mass=jnp.asarray(5.0), viscous=jnp.asarray(10.0), coulomb=jnp.asarray(2.0), offset=jnp.asarray(0.3))
+    run = synthetic_trajectory(truth, duration=30.0, dt=0.01, seed=5, amplitude=10.0, noise=(1e-5, 1e-3),
+                               system_name="linear_axis")
+    for name, (a, b) in (("train", (0, 2001)), ("held", (2001, len(run.ts)))):
+        save_trajectory(Trajectory(run.ts[a:b], run.xs[a:b], run.us[a:b], run.state_names, run.input_names,
+                                   "linear_axis"), tmp_path / f"{name}.csv")
+    out = tmp_path / "axis"
+    code = main(["diagnose", "linear_axis", str(tmp_path / "train.csv"), "--validation", str(tmp_path / "held.csv"),
+                 "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert "not the default LinearAxis" in err and "mass" in err
+    j = json.loads((out / "report.json").read_text())
+    assert j["verdict"] == "explained"
+    found = {f["cause"]: f["coefficient"] for f in j["findings"]}
+    assert set(found) == {"viscous_friction", "coulomb_friction"}, j["findings"]
+    assert abs(found["viscous_friction"] / 10.0 - 1) < 0.05 and abs(found["coulomb_friction"] / 2.0 - 1) < 0.05
+    assert abs(j["extended"]["parameters"]["mass"] / 5.0 - 1) < 0.05
