@@ -5,7 +5,9 @@ is diagnosed in both ways; a row records the hidden cause and size and, per mode
 findings and the first finding's coefficient. The summary counts the seeds where exactly the hidden
 cause was named, the wrong causes, and the coefficients' relative errors.
 
-    python experiments/refit_modes_on_demo_seeds.py 7 35 experiments/results/refit_modes/seeds.json
+    python experiments/refit_modes_on_demo_seeds.py 7 35 experiments/results/refit_modes/seeds.json [MODE]
+
+With MODE (`friction_kept` or `all_refitted`) only that mode is run.
 """
 
 import json
@@ -40,6 +42,8 @@ def summary(rows):
 
 if __name__ == "__main__":
     first, last, out = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
+    if len(sys.argv) > 4:
+        MODES = {sys.argv[4]: MODES[sys.argv[4]]}
     rows = []
     for seed in range(first, last):
         term = hidden_effect(seed)

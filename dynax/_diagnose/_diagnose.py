@@ -495,6 +495,38 @@ def _accept(problem: _Problem, current: _Current, finding: dict, results, batch:
                     structure=structure, selected=selected, findings=current.findings + [finding])
 
 
+def _complete_look_alikes(problem, yard, cur_slots, cur_p, short, remaining, deltas, batch, scores, results, judge,
+                          round_, say):
+    """Refit the look-alikes of the round's best admissible candidate that screening left off the shortlist.
+
+    A finding's confidence rests on beating its look-alikes (same place, same group of causes) in the
+    held-out test; one that was never refitted cannot have been beaten. So its missing look-alikes get
+    one more batch of fits (the same compiled batch), the round is judged again over both batches
+    (Benjamini-Hochberg over the same remaining candidates: an untested one counted as p = 1 before),
+    and if the best changes, its own missing look-alikes are added once more.
+    """
+    system, candidates = problem.system, problem.candidates
+    for _ in range(2):
+        admissible = [k for k in results if results[k]["significant"]]
+        if not admissible:
+            break
+        best = max(admissible, key=lambda k: results[k]["gain_windows"])
+        missing = [k for k in look_alikes(system, candidates[best], candidates) if k in remaining and k not in results]
+        missing = missing[: problem.options.shortlist]
+        if not missing:
+            break
+        say(f"round {round_ + 1}: {candidates[best].label(system)} leads; refitting its look-alike(s) "
+            f"{', '.join(candidates[k].label(system) for k in missing)}, which screening left out ...")
+        _, more = _refit(problem, cur_slots, cur_p, missing, remaining, deltas, round_, say)
+        n = 1 + len(short)
+        batch = _Batch(*(np.concatenate([getattr(batch, f)[:n], getattr(more, f)[1 : 1 + len(missing)]])
+                         for f in ("p", "cost", "std", "errors", "steps")))
+        scores = _window_scores(batch.errors, yard.n_ref, problem.state_scale)
+        short = short + missing
+        results = judge(short, batch, scores)
+    return short, batch, scores, results
+
+
 def _forward_selection(problem: _Problem, say):
     """Fit the nominal model, show what is wrong, then per round screen, refit and select.
 
@@ -522,9 +554,13 @@ def _forward_selection(problem: _Problem, say):
             scores = _window_scores(batch.errors, yard.n_ref, problem.state_scale)
         if not short:
             break
-        results = _judge_round(problem.physical, short, remaining, current.selected, len(problem.names), batch.p,
-                               batch.std, batch.errors, scores, current.score, problem.window_runs, yard.overlap,
-                               o.alpha, o.min_gain, yard.steps, problem.position_index)
+        judge = lambda short, batch, scores: _judge_round(  # noqa: E731
+            problem.physical, short, remaining, current.selected, len(problem.names), batch.p, batch.std, batch.errors,
+            scores, current.score, problem.window_runs, yard.overlap, o.alpha, o.min_gain, yard.steps,
+            problem.position_index)
+        results = judge(short, batch, scores)
+        short, batch, scores, results = _complete_look_alikes(problem, yard, cur_slots, cur_p, short, remaining, deltas,
+                                                              batch, scores, results, judge, round_, say)
         last = results
         if round_ == 0:
             table = _candidate_table(problem.system, problem.candidates, remaining, gains, results, problem.neutral, batch.cost)
