@@ -150,3 +150,17 @@ def test_dfki_cli_on_the_raw_files_with_no_nominal_and_no_resampling(tmp_path, c
     assert 0.05 < causes[("coulomb_friction", "q2")]["coefficient"] < 0.2  # the lab: c_f pi/2 = 0.12 N m
     assert j["gain"] >= 0.25
     assert (out / "measured_vs_simulated_run2.png").stat().st_size > 0
+
+
+def test_dfki_nominal_from_a_run_that_hardly_moves_the_elbow_says_what_it_cannot_determine():
+    """Run 05 drives the shoulder motor only: least squares on it alone sees the rig's size (not the default's)
+    but pins the elbow's gravity term theta5 poorly; the CLI's note says so rather than trusting it silently.
+    On runs 00 and 01 every size parameter is determined within 10 %: no such warning."""
+    from dynax import DoublePendulum
+    from dynax._cli._nominal import nominal_from_data
+
+    nominal, note = nominal_from_data(DoublePendulum(), [_dfki("05")])
+    assert "not the default DoublePendulum" in note and "theta5 only to ±" in note
+    assert float(nominal.theta6) == float(nominal.theta7) == 0.0 and float(nominal.theta1) < 0.1
+    _, note = nominal_from_data(DoublePendulum(), [_dfki("00"), _dfki("01")])
+    assert "not the default" in note and "only to ±" not in note

@@ -173,16 +173,16 @@ def test_cli_nominal_sets_aside_term_coefficients_and_refuses_unknown_names():
     """`dynax identify` writes `Ir2` (its refinement's rotor inertia) and `fc1`, `fc2`; the nominal two-link
     model has no such terms. They are set aside with a note naming the cause; a name that is neither a field
     nor a term's coefficient is still refused."""
-    from dynax._cli._diagnose import _split_term_coefficients, nominal_system
+    from dynax._cli._nominal import nominal_system, split_term_coefficients
     from dynax._errors import UsageError
 
     given = {"theta1": 0.05, "theta7": 0.02, "Ir2": 0.003, "fc1": 0.1}
-    kept, note = _split_term_coefficients("double_pendulum", given)
+    kept, note = split_term_coefficients("double_pendulum", given)
     assert kept == {"theta1": 0.05, "theta7": 0.02}
     assert "Ir2 = 0.003 (rotor_inertia at q2)" in note and "fc1 = 0.1 (coulomb_friction at q1)" in note
     assert float(nominal_system("double_pendulum", kept).theta7) == 0.02
-    assert _split_term_coefficients("linear_axis", {"mass": 90.0, "coulomb": 20.0}) == ({"mass": 90.0, "coulomb": 20.0}, None)
-    kept, note = _split_term_coefficients("acrobot", {"theta1": 1.0, "Ir9": 1.0})
+    assert split_term_coefficients("linear_axis", {"mass": 90.0, "coulomb": 20.0}) == ({"mass": 90.0, "coulomb": 20.0}, None)
+    kept, note = split_term_coefficients("acrobot", {"theta1": 1.0, "Ir9": 1.0})
     assert note is None
     with pytest.raises(UsageError, match="Ir9"):
         nominal_system("acrobot", kept)
