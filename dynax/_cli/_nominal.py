@@ -1,6 +1,8 @@
 """The nominal model of `dynax diagnose`: from `--nominal`, or the default checked against the data."""
 
-from .._errors import UsageError
+import math
+
+from .._errors import DataError, UsageError
 
 
 def nominal_system(name: str, parameters: dict | None = None):
@@ -81,8 +83,6 @@ def nominal_from_data(system, train) -> tuple[object, str]:
 
     from .._identify import Dynamic, identify
 
-    from .._errors import DataError
-
     try:
         identified = identify(system, train, Dynamic(), refine=False, holdout=0)
     except DataError as e:  # too little excitation to tell: keep the default, and say so
@@ -102,7 +102,7 @@ def nominal_from_data(system, train) -> tuple[object, str]:
     values = {n: jnp.asarray(v) for n, v in estimate.items() if n in kinds and n not in friction}
     values.update({n: jnp.zeros_like(jnp.asarray(getattr(system, n))) for n in friction})
     nominal = system.with_base_parameters(values)
-    worst = max(far, key=lambda n: abs(jnp.log(far[n])))
+    worst = max(far, key=lambda n: abs(math.log(far[n])))
     note = (f"No --nominal, and the training runs are not the default {type(system).__name__} "
             f"(least squares: {listed}; {worst} is {far[worst]:.3g} times the default): the nominal model is "
             "the rigid body identified from the training runs by least squares, with zero friction, which "
@@ -111,6 +111,5 @@ def nominal_from_data(system, train) -> tuple[object, str]:
     if loose:
         note += (" Least squares determines " + ", ".join(f"{n} only to ±{r:.0%}" for n, r in loose.items())
                  + f": the training runs excite {'them' if len(loose) > 1 else 'it'} little, and the nominal model "
-                 "inherits that (train on runs that "
-                 "move every joint, or pass --nominal).")
+                 "inherits that (train on runs that move every joint, or pass --nominal).")
     return nominal, note
