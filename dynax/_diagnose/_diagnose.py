@@ -424,6 +424,7 @@ def _refit(problem: _Problem, current_slots, current_p, short, remaining, deltas
 def _fit_nominal(problem: _Problem, batch: _Batch, say) -> tuple[AbstractSystem, _Yardstick]:
     """Fit the nominal model (member 0 of the first batch) and choose the reference horizon from its training error."""
     model = problem.model_of(-np.ones(problem.options.max_terms, int), batch.p[0]).system
+    _note_moved(problem, batch.p[0])
     o = problem.options
     horizon = _reference_horizon(model, problem.train, problem.candidates_s, o.reference_horizon_s, o.horizon_fraction,
                                  problem.val_stride, problem.position_index, problem.dt)
@@ -435,6 +436,34 @@ def _fit_nominal(problem: _Problem, batch: _Batch, say) -> tuple[AbstractSystem,
                       n_ref=n_ref, overlap=max(1, int(np.ceil(n_ref / problem.val_stride))),
                       ref_index=int(np.flatnonzero(np.isclose(horizons, horizon.seconds))[0]))
     return model, yard
+
+
+# A refit that moves a size parameter (an inertia, a mass, a gravity term) by more than this factor
+# started from a model of another machine.
+MOVED_FACTOR = 2.0
+
+
+def _note_moved(problem: _Problem, p) -> None:
+    """Say so when the refit moved a size parameter (non-friction, positive by consistency) by more than
+    `MOVED_FACTOR`: the nominal model describes another machine (`DoublePendulum()`'s Drake defaults on a
+    rig 25 times lighter), and a refit from so far need not reach this one (on the DFKI rig it stopped at
+    three times its inertia) and the findings then correct the wrong machine."""
+    system, names = problem.system, problem.names
+    kinds = system.base_parameter_kinds()
+    friction = {n for n, (group, _) in system.base_parameter_meanings().items() if group == "friction"}
+    given = np.asarray(nominal_values(system, names), float)
+    moved = []
+    for i, n in enumerate(names):
+        if kinds.get(n) in ("positive", "inertia1") and n not in friction and problem.family.refit[i] > 0 and given[i] > 0:
+            ratio = float(p[i]) / given[i]
+            if not 1 / MOVED_FACTOR <= ratio <= MOVED_FACTOR:
+                moved.append(f"{n} from {given[i]:.4g} to {float(p[i]):.4g}")
+    if moved:
+        problem.notes.append(
+            "The refit moved " + ", ".join(moved) + f" (more than a factor {MOVED_FACTOR:g}): the nominal model "
+            "describes another machine, and a refit from that far may stop short of this one, leaving the findings "
+            "to correct the wrong model. Start from a nominal model of this machine (e.g. `identify(...).system` "
+            "with its friction set to zero; `dynax diagnose` without --nominal does this).")
 
 
 def _show_what_is_wrong(problem: _Problem, model, batch: _Batch, yard: _Yardstick, say) -> _Nominal:
