@@ -87,7 +87,8 @@ def run(args: argparse.Namespace) -> int:
         validation = None if validation is None else [resample(v, args.dt) for v in validation]
     system = nominal_system(args.system, parameters)
     if args.nominal is None and args.system != "helicopter":
-        system, note = nominal_from_data(system, train)
+        # Only what the diagnosis trains on: without --validation, the first part of each record.
+        system, note = nominal_from_data(system, train if validation is not None else [_fitted_part(t) for t in train])
         print(f"note: {note}", file=sys.stderr)
         cli_notes.append(note)
     if args.mode == "known":
@@ -123,10 +124,19 @@ def stage_log():
 
 
 def _held_out(train, fraction: float = 0.3):
+    """The part of a record `diagnose` holds out when no validation record is given (its last `fraction`)."""
     from .._data import Trajectory
 
     k = int(round(len(train) * (1 - fraction)))
     return Trajectory(train.ts[k:], train.xs[k:], train.us[k:], train.state_names, train.input_names, train.system, train.source)
+
+
+def _fitted_part(train, fraction: float = 0.3):
+    """The rest: what `diagnose` trains on when no validation record is given."""
+    from .._data import Trajectory
+
+    k = int(round(len(train) * (1 - fraction)))
+    return Trajectory(train.ts[:k], train.xs[:k], train.us[:k], train.state_names, train.input_names, train.system, train.source)
 
 
 def summary(report) -> str:
