@@ -61,6 +61,7 @@ def run(args: argparse.Namespace) -> int:
 
     from .._data import load_trajectory, resample
     from .._diagnose import diagnose, Known, Refit, write_report
+    from .._diagnose._diagnose import holdout_split
 
     mapping, scale = data_options(args)
     if args.dt is not None and not args.dt > 0:
@@ -88,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     system = nominal_system(args.system, parameters)
     if args.nominal is None and args.system != "helicopter":
         # Only what the diagnosis trains on: without --validation, the first part of each record.
-        system, note = nominal_from_data(system, train if validation is not None else [_fitted_part(t) for t in train])
+        system, note = nominal_from_data(system, train if validation is not None else [holdout_split(t)[0] for t in train])
         print(f"note: {note}", file=sys.stderr)
         cli_notes.append(note)
     if args.mode == "known":
@@ -103,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
             velocities=args.velocities, progress=say,
         )
     report.notes.extend(cli_notes)
-    held_out = validation if validation is not None else [_held_out(t) for t in train]
+    held_out = validation if validation is not None else [holdout_split(t)[1] for t in train]
     with staged_directory(args.out) as stage:
         write_report(report, stage, held_out, write_json=write_json)
     print(summary(report))
@@ -121,22 +122,6 @@ def stage_log():
     start = time.perf_counter()
     with ProgressBar(None, "diagnose", unit="stage") as bar:
         yield lambda line: bar.say(f"[{time.perf_counter() - start:5.1f} s] {line}")
-
-
-def _held_out(train, fraction: float = 0.3):
-    """The part of a record `diagnose` holds out when no validation record is given (its last `fraction`)."""
-    from .._data import Trajectory
-
-    k = int(round(len(train) * (1 - fraction)))
-    return Trajectory(train.ts[k:], train.xs[k:], train.us[k:], train.state_names, train.input_names, train.system, train.source)
-
-
-def _fitted_part(train, fraction: float = 0.3):
-    """The rest: what `diagnose` trains on when no validation record is given."""
-    from .._data import Trajectory
-
-    k = int(round(len(train) * (1 - fraction)))
-    return Trajectory(train.ts[:k], train.xs[:k], train.us[:k], train.state_names, train.input_names, train.system, train.source)
 
 
 def summary(report) -> str:

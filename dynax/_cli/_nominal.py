@@ -58,10 +58,6 @@ def split_term_coefficients(system_name: str, parameters: dict) -> tuple[dict, s
     return {k: v for k, v in parameters.items() if k not in aside}, note
 
 
-# The defaults describe one machine (Drake's acrobot, the EMPS axis). Least squares on the user's runs
-# that puts a size parameter (an inertia, a mass, a gravity term) outside this factor of the default's
-# says the data come from another machine.
-DEFAULT_SIZE_FACTOR = 2.0
 # A size parameter whose least-squares standard error exceeds this fraction of its value is named in
 # the note: the nominal model built from it is uncertain there.
 LOOSE = 0.1
@@ -74,14 +70,17 @@ def nominal_from_data(system, train) -> tuple[object, str]:
     Least squares (`identify(system, train, Dynamic(), refine=False, holdout=0)`: filter settings from
     the data, consistency constrained) estimates the base parameters. If every size parameter
     (non-friction base parameters that consistency requires positive: theta1, theta2, theta4, theta5;
-    the axis's mass) lies within `DEFAULT_SIZE_FACTOR` of the default's, the default model is kept.
+    the axis's mass; `size_parameter_names`) lies within `OTHER_MACHINE_FACTOR` of the default's (the
+    defaults describe one machine: Drake's acrobot, the EMPS axis), the default model is kept.
     Otherwise the nominal model is that estimate with its friction set to zero, so that the friction
     candidates test friction (viscous and Coulomb) from zero rather than inherit the least-squares
     viscous coefficient, which absorbs part of a Coulomb friction's effect. Returns the model and a note.
     """
     import jax.numpy as jnp
 
+    from .._diagnose._diagnose import OTHER_MACHINE_FACTOR
     from .._identify import Dynamic, identify
+    from .._model._system import friction_parameter_names, size_parameter_names
 
     try:
         identified = identify(system, train, Dynamic(), refine=False, holdout=0)
@@ -90,15 +89,15 @@ def nominal_from_data(system, train) -> tuple[object, str]:
     estimate = identified.parameters
     spread = dict(zip(identified.names, map(float, identified.std_errors)))
     kinds = system.base_parameter_kinds()
-    friction = {n for n, (group, _) in system.base_parameter_meanings().items() if group == "friction"}
-    size = [n for n, kind in kinds.items() if kind in ("positive", "inertia1") and n not in friction]
+    friction = friction_parameter_names(system)
+    size = size_parameter_names(system)
     default = {n: float(getattr(system, n)) for n in size}
     ratios = {n: estimate[n] / default[n] for n in size}
-    far = {n: r for n, r in ratios.items() if not 1 / DEFAULT_SIZE_FACTOR <= r <= DEFAULT_SIZE_FACTOR}
+    far = {n: r for n, r in ratios.items() if not 1 / OTHER_MACHINE_FACTOR <= r <= OTHER_MACHINE_FACTOR}
     listed = ", ".join(f"{n} {estimate[n]:.4g} (default {default[n]:.4g})" for n in size)
     if not far:
         return system, (f"No --nominal: the default {type(system).__name__} parameters, which least squares on the "
-                        f"training runs confirms within a factor {DEFAULT_SIZE_FACTOR:g} ({listed}).")
+                        f"training runs confirms within a factor {OTHER_MACHINE_FACTOR:g} ({listed}).")
     values = {n: jnp.asarray(v) for n, v in estimate.items() if n in kinds and n not in friction}
     values.update({n: jnp.zeros_like(jnp.asarray(getattr(system, n))) for n in friction})
     nominal = system.with_base_parameters(values)

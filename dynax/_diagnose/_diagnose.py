@@ -20,7 +20,7 @@ from .._data._trajectory import Trajectory
 from .._errors import DataError, UsageError
 from .._identify._defaults import position_fit_window, with_velocities_from_positions
 from .._model._extensions import AbstractInputTerm, AbstractTerm, Extended
-from .._model._system import AbstractSystem, violated_bound
+from .._model._system import AbstractSystem, friction_parameter_names, size_parameter_names, violated_bound
 from .._precision import warn_if_float32
 from .._progress import ProgressBar
 from ._candidates import candidate_scales, default_candidates, held_partners, look_alikes, structurally_absorbed
@@ -46,6 +46,10 @@ from ._validation import validation_summary
 MIN_BATCHES = 10  # the data-driven reference horizon leaves the paired test at least this many batches
 
 _CONTRACT_NAMES = {"Acrobot": "acrobot", "DoublePendulum": "double_pendulum", "LinearAxis": "linear_axis", "Helicopter": "helicopter"}
+
+
+# The part of each training record held out when no validation record is given.
+HOLDOUT_FRACTION = 0.3
 
 
 class Refit(eqx.Module):
@@ -283,7 +287,7 @@ def _refit_names(system, mode) -> tuple[str, ...]:
     names = nominal_parameter_names(system)
     if isinstance(mode, Known):
         return ()
-    friction = {n for n, (group, _) in system.base_parameter_meanings().items() if group == "friction"}
+    friction = friction_parameter_names(system)
     refit = tuple(n for n in names if n not in friction) if mode.parameters is None else tuple(mode.parameters)
     unknown = set(refit) - set(names)
     if unknown:
@@ -438,29 +442,29 @@ def _fit_nominal(problem: _Problem, batch: _Batch, say) -> tuple[AbstractSystem,
     return model, yard
 
 
-# A refit that moves a size parameter (an inertia, a mass, a gravity term) by more than this factor
-# started from a model of another machine.
-MOVED_FACTOR = 2.0
+# A size parameter (an inertia, a mass, a gravity term) off by more than this factor says the model
+# describes another machine: a hidden effect biases an estimate by percent, another machine differs by
+# an order of magnitude. Used for the refit here and for the CLI's check of its default model.
+OTHER_MACHINE_FACTOR = 2.0
 
 
 def _note_moved(problem: _Problem, p) -> None:
-    """Say so when the refit moved a size parameter (non-friction, positive by consistency) by more than
-    `MOVED_FACTOR`: the nominal model describes another machine (`DoublePendulum()`'s Drake defaults on a
+    """Say so when the refit moved a size parameter (`size_parameter_names`) by more than
+    `OTHER_MACHINE_FACTOR`: the nominal model describes another machine (`DoublePendulum()`'s Drake defaults on a
     rig 25 times lighter), and a refit from so far need not reach this one (on the DFKI rig it stopped at
     three times its inertia) and the findings then correct the wrong machine."""
     system, names = problem.system, problem.names
-    kinds = system.base_parameter_kinds()
-    friction = {n for n, (group, _) in system.base_parameter_meanings().items() if group == "friction"}
+    size = set(size_parameter_names(system))
     given = np.asarray(nominal_values(system, names), float)
     moved = []
     for i, n in enumerate(names):
-        if kinds.get(n) in ("positive", "inertia1") and n not in friction and problem.family.refit[i] > 0 and given[i] > 0:
+        if n in size and problem.family.refit[i] > 0 and given[i] > 0:
             ratio = float(p[i]) / given[i]
-            if not 1 / MOVED_FACTOR <= ratio <= MOVED_FACTOR:
+            if not 1 / OTHER_MACHINE_FACTOR <= ratio <= OTHER_MACHINE_FACTOR:
                 moved.append(f"{n} from {given[i]:.4g} to {float(p[i]):.4g}")
     if moved:
         problem.notes.append(
-            "The refit moved " + ", ".join(moved) + f" (more than a factor {MOVED_FACTOR:g}): the nominal model "
+            "The refit moved " + ", ".join(moved) + f" (more than a factor {OTHER_MACHINE_FACTOR:g}): the nominal model "
             "describes another machine, and a refit from that far may stop short of this one, leaving the findings "
             "to correct the wrong model. Start from a nominal model of this machine (e.g. `identify(...).system` "
             "with its friction set to zero; `dynax diagnose` without --nominal does this).")
@@ -548,8 +552,8 @@ def _complete_look_alikes(problem, yard, cur_slots, cur_p, short, remaining, del
             f"{', '.join(candidates[k].label(system) for k in missing)}, which screening left out ...")
         _, more = _refit(problem, cur_slots, cur_p, missing, remaining, deltas, round_, say)
         n = 1 + len(short)
-        batch = _Batch(*(np.concatenate([getattr(batch, f)[:n], getattr(more, f)[1 : 1 + len(missing)]])
-                         for f in ("p", "cost", "std", "errors", "steps")))
+        batch = _Batch(*(np.concatenate([getattr(batch, f.name)[:n], getattr(more, f.name)[1 : 1 + len(missing)]])
+                         for f in dataclasses.fields(_Batch)))
         scores = _window_scores(batch.errors, yard.n_ref, problem.state_scale)
         short = short + missing
         results = judge(short, batch, scores)
@@ -763,7 +767,7 @@ def diagnose(
     max_terms: int = 3,
     alpha: float = 0.01,
     min_gain: float = 0.05,
-    holdout_fraction: float = 0.3,
+    holdout_fraction: float = HOLDOUT_FRACTION,
     shortlist: int = 4,
     system_name: str | None = None,
     discovery: bool = True,
@@ -867,12 +871,7 @@ def _prepare_records(system, train, validation, holdout_fraction, notes):
     if validation is None:
         if not 0 < holdout_fraction < 1:
             raise UsageError(f"diagnose: `holdout_fraction` must be in (0, 1), got {holdout_fraction}")
-        split = []
-        for rec in train_records:
-            k = int(round(len(rec) * (1 - holdout_fraction)))
-            split.append((rec, k))
-        train_records = [_slice(rec, 0, k) for rec, k in split]
-        validation_records = [_slice(rec, k, len(rec)) for rec, k in split]
+        train_records, validation_records = map(list, zip(*(holdout_split(rec, holdout_fraction) for rec in train_records)))
         notes.append(
             f"No validation record was given: the last {holdout_fraction:.0%} of each training record was held out."
         )
@@ -1112,6 +1111,12 @@ def _unexplained_note(s: Structure) -> str:
             + ", ".join(f"{n} ({w:.0%})" for n, w in s.top_features[:3])
             + f"; largest in {', '.join(f'{k} ({v:.0%})' for k, v in s.by_state.items())}; worst around t = "
             + ", ".join(f"{t:.1f} s" for t in s.worst_times) + " of the held-out record.")
+
+
+def holdout_split(rec: Trajectory, fraction: float = HOLDOUT_FRACTION) -> tuple[Trajectory, Trajectory]:
+    """`(fitted, held_out)`: a record cut where `diagnose` cuts it without validation records (its last `fraction` held out)."""
+    k = int(round(len(rec) * (1 - fraction)))
+    return _slice(rec, 0, k), _slice(rec, k, len(rec))
 
 
 def _slice(rec: Trajectory, a: int, b: int) -> Trajectory:

@@ -26,6 +26,19 @@ def violated_bound(name: str, value: float, kind: str | None, group: str = "", m
             + (f" ({meaning})" if meaning else ""))
 
 
+def friction_parameter_names(system) -> set[str]:
+    """The base parameters `base_parameter_meanings` puts in the group `"friction"` (`theta6`, `theta7`;
+    the axis's `viscous`, `coulomb`)."""
+    return {n for n, (group, _) in system.base_parameter_meanings().items() if group == "friction"}
+
+
+def size_parameter_names(system) -> list[str]:
+    """The base parameters that set the machine's size: not friction, and positive by consistency
+    (`theta1`, `theta2`, `theta4`, `theta5`; the axis's `mass`). Empty for a system without kinds."""
+    friction = friction_parameter_names(system)
+    return [n for n, kind in system.base_parameter_kinds().items() if kind in ("positive", "inertia1") and n not in friction]
+
+
 class AbstractSystem(eqx.Module):
     r"""A continuous-time controlled system $\dot x = f(t, x, u)$.
 
