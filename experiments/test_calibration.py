@@ -17,8 +17,14 @@ Two parts.
    without an effect (`CoulombFriction(1, 0)`), several seeds, refit mode: the verdict must be `none`
    and no candidate may pass; the smallest p-value of each run is printed.
 
+3. **Several training runs, cross-fitted** (slow; `--part diagnosis-runs`). As part 2, but trained
+   on two runs (the training parts of the demo runs of two seeds: other excitations, other noise)
+   and held out on the first seed's validation part, so that the test pools the held-out run with
+   each training run cross-fitted (`diagnose(..., cross_fit=True)`, the default).
+
     python experiments/test_calibration.py --part synthetic --reps 600
     python experiments/test_calibration.py --part diagnosis --seeds 40
+    python experiments/test_calibration.py --part diagnosis-runs --seeds 40
 
 Results are written to `experiments/results/test_calibration_<part>.json`.
 """
@@ -99,7 +105,7 @@ def synthetic(reps, seed=0):
     return dict(rows=rows, summary=summary, binomial_se=se)
 
 
-def diagnosis(seeds):
+def diagnosis(seeds, runs=1):
     import jax
 
     jax.config.update("jax_enable_x64", True)
@@ -112,6 +118,8 @@ def diagnosis(seeds):
     for seed in range(seeds):
         t0 = time.perf_counter()
         _, train, validation = demo_data(CoulombFriction(1, 0.0), seed=1000 + seed)
+        if runs > 1:  # more training runs: other seeds' excitations and noise, the same truth
+            train = [train] + [demo_data(CoulombFriction(1, 0.0), seed=5000 + runs * seed + i)[1] for i in range(1, runs)]
         j = diagnose(Acrobot(), train, validation, discovery=False).to_json()
         tested = [c for c in j["candidates"] if c.get("p_value") is not None]
         best = min(tested, key=lambda c: c["p_value"]) if tested else None
@@ -129,11 +137,14 @@ def diagnosis(seeds):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--part", choices=["synthetic", "diagnosis"], default="synthetic")
+    parser.add_argument("--part", choices=["synthetic", "diagnosis", "diagnosis-runs"], default="synthetic")
     parser.add_argument("--reps", type=int, default=600)
     parser.add_argument("--seeds", type=int, default=6)
     args = parser.parse_args()
-    out = synthetic(args.reps) if args.part == "synthetic" else diagnosis(args.seeds)
+    if args.part == "synthetic":
+        out = synthetic(args.reps)
+    else:
+        out = diagnosis(args.seeds, runs=2 if args.part == "diagnosis-runs" else 1)
     path = pathlib.Path(__file__).parent / "results" / f"test_calibration_{args.part}.json"
     path.parent.mkdir(exist_ok=True)
     path.write_text(json.dumps(out, indent=1))

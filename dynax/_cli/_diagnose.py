@@ -50,6 +50,9 @@ def register(subparsers):
                              "says which); measured: use the velocities as recorded")
     parser.add_argument("--no-discovery", action="store_true",
                         help="do not search for a term beyond the cause vocabulary when structure is left")
+    parser.add_argument("--no-cross-fit", action="store_true",
+                        help="test on the held-out runs alone; by default, with two or more training runs, each "
+                             "training run is also held out in turn (refitted on the others) and the test pools them")
     parser.add_argument("--out", required=True, help="output directory")
     parser.set_defaults(run=run)
 
@@ -101,6 +104,7 @@ def run(args: argparse.Namespace) -> int:
         report = diagnose(
             system, train, validation, mode=mode, reference_horizon_s=args.reference_horizon,
             max_terms=args.max_terms, system_name=args.system, discovery=not args.no_discovery,
+            cross_fit=not args.no_cross_fit,
             velocities=args.velocities, progress=say,
         )
     report.notes.extend(cli_notes)

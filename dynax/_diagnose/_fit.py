@@ -102,6 +102,15 @@ class Windows(eqx.Module):
     # (record index, start sample) per window, read on the host only. An array, not a static
     # field: a static field would compile every fit anew for records cut at other places.
     starts: Int[Array, "window 2"]
+    # Each window's weight in a fit (1 by default; 0 leaves it out). Cross-fitting leaves a record
+    # out by zero weights rather than by cutting its windows out: the same shapes, so the same
+    # compiled fit serves every fold.
+    weights: Float[Array, " window"]
+
+    def without_record(self, record: int) -> "Windows":
+        """These windows with the record `record`'s weights set to zero (a cross-fitting fold)."""
+        keep = np.asarray(self.starts)[:, 0] != record
+        return eqx.tree_at(lambda w: w.weights, self, jnp.asarray(keep, self.weights.dtype) * self.weights)
 
 
 def make_windows(trajectories, n_steps: int, stride: int, *, history_s: float = 0.5) -> Windows:
@@ -122,7 +131,9 @@ def make_windows(trajectories, n_steps: int, stride: int, *, history_s: float = 
     if not ts:
         raise ValueError(f"the records are shorter than one window of {n_steps} samples")
     stack = lambda a: jnp.asarray(np.stack(a))  # noqa: E731
-    return Windows(stack(ts), stack(xs), stack(us), stack(tb), stack(ub), np.asarray(starts, dtype=np.int64))
+    xs_ = stack(xs)
+    return Windows(stack(ts), xs_, stack(us), stack(tb), stack(ub), np.asarray(starts, dtype=np.int64),
+                   jnp.ones(len(ts), xs_.dtype))
 
 
 class Family(eqx.Module):
@@ -184,6 +195,9 @@ def _window_residuals(p, args):
     family, windows, slots, new = args
     e = window_errors(family.model_for(slots, new, p), windows)[:, 1:]
     e = e / jnp.broadcast_to(family.state_scale, e.shape)
+    # A left-out window (weight 0) contributes nothing, even where its rollout diverged (NaN).
+    w = windows.weights[:, None, None]
+    e = jnp.where(w > 0, e * jnp.sqrt(w), 0.0)
     return e.reshape(-1)
 
 

@@ -65,11 +65,13 @@ def _error_markdown(j: dict) -> list[str]:
     if j["findings"]:
         lines.append("| extended | " + " | ".join(_fmt(x) for x in j["extended"]["sim_error"]["rmse"]) + " |")
     if j.get("runs"):
-        lines += ["", f"Per held-out run, position RMSE at the reference horizon {ref:g} s:", "",
-                  "| run | windows | nominal | extended | gain |", "|---|---|---|---|---|"]
+        lines += ["", f"Per held-out run, position RMSE at the reference horizon {ref:g} s (cross-fitted: a training "
+                  "run simulated by the models refitted on the other training runs):", "",
+                  "| run | held out | windows | nominal | extended | gain |", "|---|---|---|---|---|---|"]
         for r in j["runs"]:
             gain = "n/a" if r["gain"] is None else f"{r['gain']:.0%}"
-            lines.append(f"| {r['run']} | {r['n_windows']} | {_fmt(r['nominal_rmse'])} | {_fmt(r['extended_rmse'])} | {gain} |")
+            lines.append(f"| {r['run']} | {r.get('held_out', 'validation')} | {r['n_windows']} | {_fmt(r['nominal_rmse'])} | "
+                         f"{_fmt(r['extended_rmse'])} | {gain} |")
     if j.get("horizon"):
         lines += ["", f"Reference horizon {ref:g} s: {j['horizon']['rule']}."]
     s = j["structure"]["nominal"]
@@ -120,6 +122,8 @@ def _test_markdown(j: dict) -> list[str]:
     t = j["test"]
     lines = ["## The test", "", f"- paired: {t['paired']}", f"- multiple comparisons: {t['multiple_comparisons']}",
              f"- across runs: {t['run_agreement']}", f"- smallest gain that counts: {t['min_gain']:.0%}"]
+    if t.get("cross_fitting"):
+        lines.append(f"- cross-fitting: {t['cross_fitting']}")
     if t["detectable_gain"] is not None:
         lines.append(f"- with these held-out runs it would have detected a gain of about {t['detectable_gain']:.0%} (power 80 %)")
     return lines + [""]

@@ -109,22 +109,37 @@ def _delayed(ts, u, delay):
     return u[i]
 
 
-def screen(family, values, coefficients, refit_mask, train, validation, candidates_to_screen, residual_fn):
+def screen(family, values, coefficients, refit_mask, train, validation, candidates_to_screen, residual_fn, *,
+           cross_fit: bool = False):
     """Held-out equation-error gain of each candidate in `candidates_to_screen` (indices), linearised.
 
+    The regression is fitted on `train` and scored on `validation`; with `cross_fit` (and two or more
+    training records) also fitted on all training records but one and scored on that one, for each
+    (leave-one-run-out, as `diagnose`'s held-out test does). A candidate's gain is then the mean of its
+    gains on these splits: each held-out split counts once, whatever its residuals' size (summed sums of
+    squares would let the run with the largest residuals rank the candidates alone; on the DFKI rig the
+    input offsets, which one training run's fit carries over to another but not to the held-out runs).
+
     **Returns:** `(gain, delta)` arrays: the fraction by which the candidate reduces the held-out
-    residual sum of squares (beyond refitting the nominal parameters), and its coefficient step.
+    residual sum of squares (beyond refitting the nominal parameters), and its coefficient step
+    (from the fit on all of `train`).
     """
-    parts, grids = {}, {}
-    for name, records in (("train", train), ("validation", validation)):
-        data = [screening_data(family, values, coefficients, rec, residual_fn) for rec in records]
-        parts[name] = tuple(np.concatenate([d[i] for d in data]) for i in range(3))
-        grids[name] = {k: np.concatenate([d[3][k] for d in data]) for k in data[0][3]}
-    r_tr, Jn_tr, Jc_tr = parts["train"]
-    r_va, Jn_va, Jc_va = parts["validation"]
+    data = {name: [screening_data(family, values, coefficients, rec, residual_fn) for rec in records]
+            for name, records in (("train", train), ("validation", validation))}
     grid = screening_grid(float(np.median(np.diff(np.asarray(train[0].ts)))))
-    scale = r_tr.std(axis=0) + 1e-12
+    scale = np.concatenate([d[0] for d in data["train"]]).std(axis=0) + 1e-12
     refit = np.asarray(refit_mask) > 0
+    # (fitted on, scored on): all training records against the validation records, then each training
+    # record against the others.
+    splits = [(data["train"], data["validation"])]
+    if cross_fit and len(train) >= 2:
+        splits += [([d for j, d in enumerate(data["train"]) if j != r], [data["train"][r]]) for r in range(len(train))]
+
+    def stacked(records):
+        r, Jn, Jc = (np.concatenate([d[i] for d in records]) for i in range(3))
+        return (r / scale).reshape(-1), Jn, Jc, {k: np.concatenate([d[3][k] for d in records]) for k in records[0][3]}
+
+    splits = [(stacked(fitted), stacked(scored)) for fitted, scored in splits]
 
     def design(Jn, Jc, k, column=None):
         cols = [Jn[:, :, refit]] if refit.any() else []
@@ -137,12 +152,11 @@ def screen(family, values, coefficients, refit_mask, train, validation, candidat
         X = np.concatenate(cols, axis=2) / scale[None, :, None]
         return X.reshape(-1, X.shape[2])
 
-    y_tr, y_va = (r_tr / scale).reshape(-1), (r_va / scale).reshape(-1)
-
-    def sse(k, g=None):
+    def sse(split, k, g=None):
         """Training and held-out sums of squares and the last coefficient (`g`: grid point of a delay or lag)."""
-        col_tr = None if g is None else grids["train"][k][:, :, g]
-        col_va = None if g is None else grids["validation"][k][:, :, g]
+        (y_tr, Jn_tr, Jc_tr, grid_tr), (y_va, Jn_va, Jc_va, grid_va) = split
+        col_tr = None if g is None else grid_tr[k][:, :, g]
+        col_va = None if g is None else grid_va[k][:, :, g]
         X_tr, X_va = design(Jn_tr, Jc_tr, k, col_tr), design(Jn_va, Jc_va, k, col_va)
         if X_tr.shape[1] == 0:
             return float(np.sum(y_tr**2)), float(np.sum(y_va**2)), 0.0
@@ -151,19 +165,24 @@ def screen(family, values, coefficients, refit_mask, train, validation, candidat
         beta = np.linalg.lstsq(X_tr / norms, y_tr, rcond=None)[0] / norms
         return float(np.sum((y_tr - X_tr @ beta) ** 2)), float(np.sum((y_va - X_va @ beta) ** 2)), float(beta[-1])
 
-    _, base, _ = sse(None)
-    gains, deltas = [], []
-    for k in candidates_to_screen:
-        train_sse, held_out, delta = sse(k)
-        if k in grids["train"]:
+    def held_out_sse(split, k):
+        """The held-out sum of squares of candidate `k` on one split, and its coefficient step."""
+        train_sse, held_out, delta = sse(split, k)
+        if k in split[0][3]:
             # Finite sizes: the grid point that fits the training residuals best (its direction's
             # coefficient must be positive: a lag or delay of that size, scaled), if it beats first order.
-            fits = [sse(k, g) for g in range(len(grid))]
+            fits = [sse(split, k, g) for g in range(len(grid))]
             ok = [g for g, f in enumerate(fits) if f[2] > 0]
             if ok:
                 g = min(ok, key=lambda g: fits[g][0])
                 if fits[g][0] < train_sse:
                     held_out, delta = fits[g][1], float(grid[g] * min(max(fits[g][2], 0.5), 2.0))
-        gains.append(1 - held_out / base)
-        deltas.append(delta)
+        return held_out, delta
+
+    bases = [sse(split, None)[1] for split in splits]
+    gains, deltas = [], []
+    for k in candidates_to_screen:
+        per_split = [held_out_sse(split, k) for split in splits]
+        gains.append(float(np.mean([1 - h / base for (h, _), base in zip(per_split, bases)])))
+        deltas.append(per_split[0][1])
     return np.asarray(gains), np.asarray(deltas)

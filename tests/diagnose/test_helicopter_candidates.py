@@ -238,8 +238,8 @@ def _round_one_screening(monkeypatch, truth):
     seen = {}
     real = diagnose_module.screen
 
-    def spy(family, values, coefficients, refit, train, validation, remaining, residual_fn):
-        gains, deltas = real(family, values, coefficients, refit, train, validation, remaining, residual_fn)
+    def spy(family, values, coefficients, refit, train, validation, remaining, residual_fn, **kwargs):
+        gains, deltas = real(family, values, coefficients, refit, train, validation, remaining, residual_fn, **kwargs)
         system = family.model.system
         seen.update({family.model.terms[k].label(system): (float(g), float(d)) for k, g, d in zip(remaining, gains, deltas)})
         raise _ScreenedOnce
