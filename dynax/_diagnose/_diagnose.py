@@ -823,7 +823,8 @@ def _report(problem, nominal, yard, judgement, table, last, *, mode, system_name
                              "refitted on the other training runs; its windows pooled with the held-out runs'"
                              if problem.folds else None)
     if test["detectable_gain"] is not None:
-        notes.append(f"No candidate passed the test. With these held-out runs the test would have detected a gain of "
+        runs = "held-out and cross-fitted runs" if problem.folds else "held-out runs"
+        notes.append(f"No candidate passed the test. With these {runs} the test would have detected a gain of "
                      f"about {test['detectable_gain']:.0%} at {yard.horizon.seconds:g} s (power 80 %) if its window-to-window "
                      f"variation is like the refitted candidates'; a smaller effect, or one that varies more (friction "
                      f"acting in the slow segments only), may be present.")
