@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
 
     from .._data import load_trajectory, resample
     from .._diagnose import diagnose, Known, Refit, write_report
-    from .._diagnose._diagnose import holdout_split
+    from .._diagnose._records import holdout_split
 
     mapping, scale = data_options(args)
     if args.dt is not None and not args.dt > 0:

@@ -4,6 +4,8 @@
 `_fit.py`), `dynax._sim_error.window_rollouts` (every held-out rollout) and the statistics
 (`_statistics.py`), in named steps: prepare the problem, fit the nominal model, show what is wrong,
 then per round screen, refit, select; finally extend, judge and (where structure is left) discover.
+The records (checked, on one grid, the hold-out cut, velocities, the horizons read from the training
+runs) are prepared in `_records.py`.
 """
 
 import contextlib
@@ -15,10 +17,8 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._data._derivatives import resample
 from .._data._trajectory import Trajectory
-from .._errors import DataError, UsageError
-from .._identify._defaults import position_fit_window, with_velocities_from_positions
+from .._errors import UsageError
 from .._model._extensions import AbstractInputTerm, AbstractTerm, Extended
 from .._model._system import AbstractSystem, friction_parameter_names, size_parameter_names, violated_bound
 from .._precision import warn_if_float32
@@ -35,21 +35,24 @@ from ._fit import (
     window_errors,
     Windows,
 )
-from ._horizon import DEFAULT_FRACTION, Horizon, predictability_horizon, relative_position_error
-from ._residuals import _sg_window, acceleration_residuals, Structure, structure_test
+from ._horizon import DEFAULT_FRACTION, Horizon
+from ._records import (
+    _as_records,
+    _fit_window,
+    _horizon_grid,
+    _prepare_records,
+    _reference_horizon,
+    _velocity_estimates,
+    HOLDOUT_FRACTION,
+)
+from ._residuals import acceleration_residuals, Structure, structure_test
 from ._result import DataSummary, ModelSummary, Report as Report, SimErrorCurve
 from ._screening import screen
 from ._statistics import benjamini_hochberg, detectable_gain, helps_on_most_runs, log_ratio_differences, paired_block_test
 from ._validation import validation_summary
 
 
-MIN_BATCHES = 10  # the data-driven reference horizon leaves the paired test at least this many batches
-
 _CONTRACT_NAMES = {"Acrobot": "acrobot", "DoublePendulum": "double_pendulum", "LinearAxis": "linear_axis", "Helicopter": "helicopter"}
-
-
-# The part of each training record held out when no validation record is given.
-HOLDOUT_FRACTION = 0.3
 
 
 class Refit(eqx.Module):
@@ -262,14 +265,6 @@ def _merge_repeated_causes(findings: list[dict]) -> list[dict]:
 def _paired_test(score_ref, score_new, runs, overlap):
     """One-sided paired test that `score_new` is smaller than `score_ref` over held-out windows (see `_statistics`)."""
     return paired_block_test(log_ratio_differences(score_ref, score_new), runs, overlap)
-
-
-def _as_records(data, name) -> list[Trajectory]:
-    if isinstance(data, Trajectory):
-        return [data]
-    if isinstance(data, Sequence) and data and all(isinstance(t, Trajectory) for t in data):
-        return list(data)
-    raise UsageError(f"diagnose: `{name}` must be a Trajectory or a non-empty sequence of them, got {type(data).__name__}")
 
 
 @contextlib.contextmanager
@@ -967,123 +962,6 @@ def diagnose(
                        train=train, validation=validation)
 
 
-def _prepare_records(system, train, validation, holdout_fraction, notes):
-    """The training and held-out runs, checked against `system`, on one uniform grid, in the default float type.
-
-    Runs are kept apart (never concatenated): every window lies inside one run.
-    """
-    train_records = _as_records(train, "train")
-    for rec in train_records:
-        if tuple(rec.state_names) != tuple(system.state_names) or tuple(rec.input_names) != tuple(system.input_names):
-            raise UsageError(
-                f"diagnose: the record {rec.source or ''} has states {rec.state_names} and inputs {rec.input_names}, "
-                f"but {type(system).__name__} has {system.state_names} and {system.input_names}"
-            )
-    if validation is None:
-        if not 0 < holdout_fraction < 1:
-            raise UsageError(f"diagnose: `holdout_fraction` must be in (0, 1), got {holdout_fraction}")
-        train_records, validation_records = map(list, zip(*(holdout_split(rec, holdout_fraction) for rec in train_records)))
-        notes.append(
-            f"No validation record was given: the last {holdout_fraction:.0%} of each training record was held out."
-        )
-    else:
-        validation_records = _as_records(validation, "validation")
-    dt = float(np.median(np.concatenate([np.diff(np.asarray(r.ts)) for r in train_records + validation_records])))
-    if not all(r.is_uniform for r in train_records + validation_records):
-        train_records = [resample(r, dt) for r in train_records]
-        validation_records = [resample(r, dt) for r in validation_records]
-        notes.append(f"The sampling was irregular; the records were resampled to {dt * 1000:.3g} ms (states linearly, inputs as held).")
-    # One-step residuals drop a smoothing window (about 0.1 s) at each end of a record; a record needs
-    # room for that and as much again to be judged on.
-    need = 4 * _sg_window(dt)
-    for kind, records in (("training", train_records), ("held-out", validation_records)):
-        for rec in records:
-            if len(rec) < need:
-                what = (f"the held-out part of the record (its last {holdout_fraction:.0%})"
-                        if validation is None and kind == "held-out" else f"the {kind} record")
-                raise DataError(f"diagnose: {what} has {len(rec)} samples ({len(rec) * dt:.3g} s); "
-                                f"the diagnosis needs at least {need} ({need * dt:.3g} s) per record",
-                                path=rec.source or None)
-    dtype = jnp.result_type(float)
-
-    return [_cast(r, dtype) for r in train_records], [_cast(r, dtype) for r in validation_records], dt
-
-
-def _velocity_estimates(system, train_records, validation_records, velocities, notes):
-    """With `velocities="auto"`, the records of a system with joint positions and velocities get the
-    velocities of a local cubic fit of their positions wherever their measured velocities are noisy."""
-    joints = tuple(system.joint_names)
-    if velocities == "measured" or not joints or tuple(system.state_names) != joints + tuple(f"d{q}" for q in joints):
-        return train_records, validation_records, "as measured"
-    out, windows, noise, count = [], [], [], 0
-    for rec in train_records + validation_records:
-        smoothed, choice, replaced = with_velocities_from_positions(rec)
-        out.append(smoothed)
-        if replaced:
-            count += 1
-            windows.append(position_fit_window(choice.cutoff_hz, rec.dt) * rec.dt)
-            noise.append(max(choice.noise_std[name] for name in replaced))
-    if not count:
-        return train_records, validation_records, "as measured"
-    how = (f"from positions: the derivative of a local cubic fit (Savitzky-Golay over {min(windows) * 1000:.3g} to "
-           f"{max(windows) * 1000:.3g} ms) in {count} of {len(out)} records, whose measured velocities carry white "
-           f"noise of up to {max(noise):.3g} (state units per second) that the fit removes at a smaller bias")
-    notes.append(f"Velocities {how}; the windows start from them and are compared with them (velocities='measured' keeps them).")
-    n = len(train_records)
-    return out[:n], out[n:], how
-
-
-def _horizon_grid(horizons_s, reference_horizon_s, train_records, validation_records, notes):
-    """The reported horizons (at most half the shortest held-out record) and the candidates for the reference horizon."""
-    shortest = min(r.duration for r in validation_records)
-    horizons = np.asarray([h for h in horizons_s if h <= 0.5 * shortest + 1e-9] or [min(horizons_s)], float)
-    if reference_horizon_s is not None:
-        if reference_horizon_s > horizons.max():
-            notes.append(f"The held-out record is short: the reference horizon was lowered from {reference_horizon_s:g} s "
-                         f"to {horizons.max():g} s.")
-            reference_horizon_s = float(horizons.max())
-        if reference_horizon_s not in horizons:
-            horizons = np.sort(np.append(horizons, reference_horizon_s))
-        return horizons, np.asarray([reference_horizon_s])
-    # The paired test compares batches of windows twice the horizon long: a horizon of at most a
-    # twentieth of the held-out time leaves it at least ten batches (their *length* is looked at,
-    # never their errors).
-    held_out_s = sum(r.duration for r in validation_records)
-    longest = min(horizons.max(), 0.5 * min(r.duration for r in train_records), held_out_s / MIN_BATCHES / 2)
-    candidates_s = np.round(np.arange(0.1, longest + 1e-9, 0.05), 6)
-    return horizons, candidates_s if candidates_s.size else np.asarray([horizons.min()])
-
-
-def _reference_horizon(nominal_model, train_records, candidates_s, given, fraction, stride, position_index, dt):
-    """The reference horizon: `given`, or the predictability horizon of the nominal model on the training runs."""
-    from .._sim_error import simulation_error  # the public rollout over windows
-
-    if given is not None:
-        return Horizon(float(candidates_s[0]), "given (reference_horizon_s)", None, candidates_s, [np.nan])
-    errors = [np.asarray(simulation_error(nominal_model, rec, candidates_s, stride=stride).errors) for rec in train_records]
-    positions = np.concatenate([np.asarray(r.xs)[:, position_index] for r in train_records])
-    spread = np.maximum(positions.std(axis=0), 1e-12)
-    relative = relative_position_error(np.concatenate(errors), position_index, spread)
-    return predictability_horizon(relative, dt, candidates_s, fraction)
-
-
-def _fit_window(system, train_records, given, fraction, dt, notes) -> float:
-    """The fit windows: `given`, or 2.5 times the starting model's predictability horizon on the training runs, in [0.25, 1] s."""
-    if given is not None:
-        return float(given)
-    longest = min(1.0, 0.5 * min(r.duration for r in train_records))
-    candidates_s = np.round(np.arange(0.1, longest + 1e-9, 0.05), 6)
-    if candidates_s.size == 0:
-        return longest
-    start = _reference_horizon(system, train_records, candidates_s, None, fraction, max(1, int(round(0.05 / dt))),
-                               list(system.position_indices), dt)
-    window = float(np.clip(2.5 * start.seconds, 0.25, longest))
-    if window < longest:
-        notes.append(f"The starting model predicts the training runs for {start.seconds:g} s only: the simulation-error "
-                     f"fits use {window:g} s windows (2.5 times that) instead of {longest:g} s.")
-    return window
-
-
 def _shortlist(system, candidates, remaining, gains_scr, shortlist):
     """The best screened candidates and the look-alikes of the best, `shortlist` in all."""
     order = [remaining[i] for i in np.argsort(-gains_scr)]
@@ -1239,17 +1117,3 @@ def _unexplained_note(s: Structure) -> str:
             + f"; largest in {', '.join(f'{k} ({v:.0%})' for k, v in s.by_state.items())}; worst around t = "
             + ", ".join(f"{t:.1f} s" for t in s.worst_times) + " of the held-out record.")
 
-
-def holdout_split(rec: Trajectory, fraction: float = HOLDOUT_FRACTION) -> tuple[Trajectory, Trajectory]:
-    """`(fitted, held_out)`: a record cut where `diagnose` cuts it without validation records (its last `fraction` held out)."""
-    k = int(round(len(rec) * (1 - fraction)))
-    return _slice(rec, 0, k), _slice(rec, k, len(rec))
-
-
-def _slice(rec: Trajectory, a: int, b: int) -> Trajectory:
-    return Trajectory(rec.ts[a:b], rec.xs[a:b], rec.us[a:b], rec.state_names, rec.input_names, rec.system, rec.source)
-
-
-def _cast(rec: Trajectory, dtype) -> Trajectory:
-    return Trajectory(rec.ts.astype(dtype), rec.xs.astype(dtype), rec.us.astype(dtype), rec.state_names,
-                      rec.input_names, rec.system, rec.source)
