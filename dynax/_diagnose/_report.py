@@ -125,7 +125,8 @@ def _test_markdown(j: dict) -> list[str]:
     if t.get("cross_fitting"):
         lines.append(f"- cross-fitting: {t['cross_fitting']}")
     if t["detectable_gain"] is not None:
-        lines.append(f"- with these held-out runs it would have detected a gain of about {t['detectable_gain']:.0%} (power 80 %)")
+        runs = "held-out and cross-fitted runs" if t.get("cross_fitting") else "held-out runs"
+        lines.append(f"- with these {runs} it would have detected a gain of about {t['detectable_gain']:.0%} (power 80 %)")
     return lines + [""]
 
 
