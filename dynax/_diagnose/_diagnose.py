@@ -650,13 +650,14 @@ def _complete_look_alikes(problem, yard, cur_slots, cur_p, short, remaining, del
 def _forward_selection(problem: _Problem, say):
     """Fit the nominal model, show what is wrong, then per round screen, refit and select.
 
-    **Returns:** `(nominal, yardstick, current, candidate_table, last_round_results)`.
+    **Returns:** `(nominal, yardstick, current, candidate_table, last_round_results, rounds)`; `rounds`
+    one `_round_summary` per round.
     """
     o = problem.options
     slots = -np.ones(o.max_terms, int)
     p0 = np.concatenate([np.asarray(nominal_values(problem.system, problem.names), float), np.zeros(o.max_terms + 1)])
     nominal = yard = current = None
-    table, last = [], {}
+    table, last, rounds = [], {}, []
     for round_ in range(o.max_terms):
         remaining = [k for k in problem.searchable if current is None or k not in current.selected]
         if not remaining and round_ > 0:
@@ -688,10 +689,52 @@ def _forward_selection(problem: _Problem, say):
         if round_ == 0:
             table = _candidate_table(problem.system, problem.candidates, remaining, gains, results, problem.neutral, batch.cost)
         finding = _select(problem, yard, current, results, scores, round_, say)
+        rounds.append(_round_summary(problem, yard, round_, current, remaining, results, finding))
         if finding is None:
             break
         current = _accept(problem, current, finding, results, batch, scores, say)
-    return nominal, yard, current, table, last
+    else:
+        if rounds:
+            rounds[-1]["outcome"] += f"; max_terms = {o.max_terms} reached"
+    return nominal, yard, current, table, last, rounds
+
+
+_RULE_TEXT = {
+    "significance": lambda r, o: (f"significance: p = {r['p']:.2g} not rejected by Benjamini-Hochberg at false-discovery "
+                                  f"rate {o.alpha:g} over the {r['n_tested']} candidates remaining"),
+    "min_gain": lambda r, o: f"min_gain: the pooled window-error gain {r['gain_windows']:.1%} is below {o.min_gain:.0%}",
+    "sign": lambda r, o: "sign: a coefficient of the joint refit (this term's or an earlier finding's) is on its unphysical side",
+    "agreement": lambda r, o: (f"agreement: helps on {r['runs_helped']} of {r['n_runs']} runs, not on more than half"),
+}
+
+
+def _round_summary(problem: _Problem, yard: _Yardstick, round_, current: _Current, remaining, results, finding) -> dict:
+    """One round of the forward selection for the report: every refitted candidate's held-out gains and p,
+    and whether it was selected, passed but lost to a larger held-out gain, or which rules stopped it."""
+    system, o = problem.system, problem.options
+    selected = finding["index"] if finding is not None else None
+    rows = []
+    for k, r in results.items():
+        term = problem.candidates[k]
+        rows.append({
+            "cause": term.cause, "where": term.where(system), "parameter": term.parameter_name(system),
+            "coefficient": float(problem.neutral[k] + r["delta"]),
+            "gain": float(r["gain_held_out"]), "gain_pooled": float(r["gain_windows"]),
+            "sim_error_gain": _finite_or_none(_gain(r["rmse"], current.rmse, yard.ref_index)), "p_value": float(r["p"]),
+            "runs_helped": f"{r['runs_helped']}/{r['n_runs']}",
+            "outcome": "selected" if k == selected else ("passed" if r["significant"] else "stopped"),
+            "stopped_by": [_RULE_TEXT[name](r, o) for name, ok in r["rules"].items() if not ok],
+        })
+    rows.sort(key=lambda e: (e["outcome"] != "selected", e["outcome"] != "passed", -e["gain"]))
+    model = [problem.candidates[k].label(system) for k in current.selected]
+    if finding is not None:
+        outcome = f"selected {problem.candidates[selected].label(system)}"
+    elif results:
+        outcome = "no candidate passed every rule: the selection stops"
+    else:
+        outcome = "no candidate left to refit: the selection stops"
+    return {"round": round_ + 1, "model": model, "screened": len(remaining), "refitted": len(results),
+            "candidates": rows, "outcome": outcome}
 
 
 def _extend(problem: _Problem, current: _Current) -> tuple[Extended, list[dict]]:
@@ -719,6 +762,10 @@ class _Judgement:
     gain: float
     discovery: dict
     cv_errors: np.ndarray  # the named causes' model on the cross-fitted windows (discovered terms are not cross-fitted)
+
+
+def _finite_or_none(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
 
 
 def _gain(rmse, nominal_rmse, ref) -> float:
@@ -809,7 +856,7 @@ def _data_summary(problem: _Problem, train, validation) -> DataSummary:
     )
 
 
-def _report(problem, nominal, yard, judgement, table, last, *, mode, system_name, train, validation) -> Report:
+def _report(problem, nominal, yard, judgement, table, last, rounds, *, mode, system_name, train, validation) -> Report:
     """The typed `Report` that `report.json` and `report.md` are written from."""
     system, o = problem.system, problem.options
     notes = list(problem.notes)
@@ -847,6 +894,7 @@ def _report(problem, nominal, yard, judgement, table, last, *, mode, system_name
         nominal_model=nominal.model,
         extended_model=extended,
         discovery=judgement.discovery,
+        rounds=rounds,
     )
 
 
@@ -957,10 +1005,10 @@ def diagnose(
                        holdout_fraction, shortlist, discovery, velocities, cross_fit)
     with stage_reporter(progress) as say:
         problem = _prepare(system, train, validation, candidates, mode, options)
-        nominal, yard, current, table, last = _forward_selection(problem, say)
+        nominal, yard, current, table, last, rounds = _forward_selection(problem, say)
         judgement = _judge(problem, nominal, yard, current, say)
         say("validation: fit % and residual tests of the nominal and the extended model ...")
-        return _report(problem, nominal, yard, judgement, table, last, mode=mode, system_name=system_name,
+        return _report(problem, nominal, yard, judgement, table, last, rounds, mode=mode, system_name=system_name,
                        train=train, validation=validation)
 
 
@@ -1042,11 +1090,13 @@ def _judge_round(physical, short, remaining, selected, n_nom, p_j, std_j, err_j,
         ok = physical(k, delta) and all(physical(s, p_j[i, n_nom + m]) for m, s in enumerate(selected))
         helped = sum(v > 0 for v in test.per_run.values())
         agree = helps_on_most_runs(test.per_run)
+        rules = {"significance": bool(rejected[i - 1]), "min_gain": bool(gain_windows >= min_gain), "sign": bool(ok),
+                 "agreement": bool(agree)}  # each rule on its own: the report says which stopped a candidate
         results[k] = dict(i=i, delta=delta, std=std_j[i, -1], gain_windows=gain_windows, gain_held_out=gain_held_out,
                           p=test.p_value, test=test,
                           rmse=_rmse_curve(err_j[i], steps, position_index), physical=ok,
-                          runs_helped=helped, n_runs=len(test.per_run), n_tested=len(remaining),
-                          significant=bool(rejected[i - 1] and gain_windows >= min_gain and ok and agree))
+                          runs_helped=helped, n_runs=len(test.per_run), n_tested=len(remaining), rules=rules,
+                          significant=all(rules.values()))
     return results
 
 

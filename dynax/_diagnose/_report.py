@@ -34,7 +34,7 @@ def report_markdown(report) -> str:
               "The nominal model's one-step residuals over time, against velocity (friction shows here), "
               "their autocorrelation and spectrum (white noise is flat):", "",
               "![residuals](residuals.png)", ""]
-    lines += _causes_markdown(j) + discovery_markdown(j) + _candidates_markdown(j) + _test_markdown(j)
+    lines += _causes_markdown(j) + discovery_markdown(j) + _candidates_markdown(j) + _rounds_markdown(j) + _test_markdown(j)
     if j["notes"]:
         lines += ["## Notes", ""] + [f"- {n}" for n in j["notes"]] + [""]
     lines += ["## Parameters", "", "| parameter | nominal | extended |", "|---|---|---|"]
@@ -112,6 +112,29 @@ def _candidates_markdown(j: dict) -> list[str]:
     if j["not_identifiable"]:
         lines += ["## Not identifiable in this mode", ""]
         lines += [f"- `{c['cause']}@{c['where']}`: {c['reason']}." for c in j["not_identifiable"]]
+        lines.append("")
+    return lines
+
+
+def _rounds_markdown(j: dict) -> list[str]:
+    """Each selection round: what was refitted, what passed, and which rule stopped the others."""
+    if not j.get("rounds"):
+        return []
+    lines = ["## Selection rounds", "",
+             "Each round refits the shortlisted candidates jointly with the current model and tests them on held-out "
+             "windows. gain: the held-out runs' mean window error; pooled: with the cross-fitted runs' windows; "
+             f"at {j['reference_horizon_s']:g} s: the position RMSE at the reference horizon (the findings' gain).", ""]
+    for r in j["rounds"]:
+        model = " + ".join(f"`{m}`" for m in r["model"]) or "the nominal model"
+        lines += [f"**Round {r['round']}** (from {model}; {r['screened']} screened, {r['refitted']} refitted): "
+                  f"{r['outcome']}.", "",
+                  "| candidate | coefficient | gain | pooled | at ref. | p | runs | outcome |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for c in r["candidates"]:
+            at_ref = "n/a" if c["sim_error_gain"] is None else f"{c['sim_error_gain']:+.0%}"
+            outcome = c["outcome"] if not c["stopped_by"] else "stopped by " + "; ".join(c["stopped_by"])
+            lines.append(f"| `{c['cause']}@{c['where']}` | {c['parameter']} = {c['coefficient']:.4g} | {c['gain']:+.0%} | "
+                         f"{c['gain_pooled']:+.0%} | {at_ref} | {c['p_value']:.2g} | {c['runs_helped']} | {outcome} |")
         lines.append("")
     return lines
 

@@ -156,7 +156,9 @@ class Report(eqx.Module):
     extended model), `not_identifiable`, `candidates` (every candidate's held-out gain in the first
     round), `notes`, `horizon` (`Horizon`: the reference horizon and how it was chosen), `runs`
     (held-out error per run), `test` (the significance test, and with verdict `none` the gain it
-    could have detected), `discovery`, and the fitted models `nominal_model` and `extended_model`.
+    could have detected), `discovery`, the fitted models `nominal_model` and `extended_model`, and
+    `rounds` (each round of the forward selection: every refitted candidate's held-out gains, p, and
+    `selected`, `passed` or `stopped` with the rules that stopped it).
     """
 
     system: str
@@ -178,6 +180,7 @@ class Report(eqx.Module):
     nominal_model: AbstractSystem
     extended_model: AbstractSystem
     discovery: dict = eqx.field(default_factory=dict)
+    rounds: list = eqx.field(default_factory=list)
 
     def to_json(self) -> dict:
         """The contract's `report.json` (section 3), with extra keys after the contract's."""
@@ -201,6 +204,7 @@ class Report(eqx.Module):
             "runs": self.runs,
             "test": self.test,
             **({"discovery": self.discovery} if self.discovery else {}),
+            "rounds": self.rounds,
         }
 
     def to_markdown(self) -> str:

@@ -63,6 +63,16 @@ def test_cli_diagnose_writes_the_contract_report(offset_data, tmp_path, capsys):
     fits = {m: report[m]["validation"]["fit_percent"] for m in ("nominal", "extended")}
     assert all(fits["extended"][s] > fits["nominal"][s] for s in ("q1", "q2"))  # the offset costs fit, found it is back
     assert "| extended |" in (out / "report.md").read_text() and "fit q1" in (out / "report.md").read_text()
+    # every round of the selection: the selected candidate is the finding; the round after it says why it stopped
+    rounds = report["rounds"]
+    assert rounds[0]["model"] == [] and rounds[0]["outcome"] == "selected input_offset@tau2"
+    (chosen,) = [c for c in rounds[0]["candidates"] if c["outcome"] == "selected"]
+    assert (chosen["cause"], chosen["where"], chosen["stopped_by"]) == ("input_offset", "tau2", [])
+    assert np.isclose(chosen["sim_error_gain"], finding["gain"])  # the finding's gain, from the same fit
+    # no second cause is in the data: every candidate of the next round names the rule that stopped it
+    assert len(rounds) == 2 and rounds[1]["model"] == ["input_offset@tau2"] and "stops" in rounds[1]["outcome"]
+    assert all(c["outcome"] == "stopped" and c["stopped_by"] for c in rounds[1]["candidates"])
+    assert "## Selection rounds" in (out / "report.md").read_text()
     captured = capsys.readouterr()
     printed = captured.out
     assert "Cause: input_offset at tau2" in printed and "Gain" in printed

@@ -44,6 +44,7 @@ def test_a_joint_refit_with_any_unphysical_coefficient_is_not_admissible(earlier
     r = _round(earlier_fc1, new_delta)
     assert r["p"] < 1e-6 and r["gain_windows"] > 0.3  # it helps ...
     assert not r["physical"] and not r["significant"]  # ... but not with a physical model
+    assert r["rules"] == {"significance": True, "min_gain": True, "sign": False, "agreement": True}  # the one rule that stops it
 
 
 def test_terms_of_either_sign_are_not_constrained():
