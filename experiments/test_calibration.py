@@ -18,9 +18,10 @@ Two parts.
    and no candidate may pass; the smallest p-value of each run is printed.
 
 3. **Several training runs, cross-fitted** (slow; `--part diagnosis-runs`). As part 2, but trained
-   on two runs (the training parts of the demo runs of two seeds: other excitations, other noise)
+   on three runs (the training parts of the demo runs of three seeds: other excitations, other noise)
    and held out on the first seed's validation part, so that the test pools the held-out run with
-   each training run cross-fitted (`diagnose(..., cross_fit=True)`, the default).
+   each training run cross-fitted (`diagnose(..., cross_fit=True)`, the default; two training runs
+   are not cross-fitted).
 
     python experiments/test_calibration.py --part synthetic --reps 600
     python experiments/test_calibration.py --part diagnosis --seeds 40
@@ -144,7 +145,7 @@ def main():
     if args.part == "synthetic":
         out = synthetic(args.reps)
     else:
-        out = diagnosis(args.seeds, runs=2 if args.part == "diagnosis-runs" else 1)
+        out = diagnosis(args.seeds, runs=3 if args.part == "diagnosis-runs" else 1)
     path = pathlib.Path(__file__).parent / "results" / f"test_calibration_{args.part}.json"
     path.parent.mkdir(exist_ok=True)
     path.write_text(json.dumps(out, indent=1))

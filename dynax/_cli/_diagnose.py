@@ -51,7 +51,7 @@ def register(subparsers):
     parser.add_argument("--no-discovery", action="store_true",
                         help="do not search for a term beyond the cause vocabulary when structure is left")
     parser.add_argument("--no-cross-fit", action="store_true",
-                        help="test on the held-out runs alone; by default, with two or more training runs, each "
+                        help="test on the held-out runs alone; by default, with three or more training runs, each "
                              "training run is also held out in turn (refitted on the others) and the test pools them")
     parser.add_argument("--out", required=True, help="output directory")
     parser.set_defaults(run=run)

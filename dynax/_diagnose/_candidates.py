@@ -9,7 +9,6 @@ from .._model._extensions import (
     AbstractInputTerm,
     AbstractTerm,
     CoulombFriction,
-    Extended,
     InputDelay,
     InputGain,
     InputLag,
@@ -130,6 +129,41 @@ def structurally_absorbed(family, refit, *, n_points: int = 64, seed: int = 0, t
             coef, *_ = np.linalg.lstsq(A, b, rcond=None)
             out.append(bool(np.linalg.norm(b - A @ coef) <= tol * np.linalg.norm(b)))
     return np.asarray(out)
+
+
+def structurally_equivalent(family, refit, among, *, n_points: int = 64, seed: int = 0,
+                            tol: float = 1e-7) -> dict[int, list[int]]:
+    r"""Pairs of candidates that are one model once the nominal parameters are refitted.
+
+    Candidate $k$ is equivalent to candidate $l$ when the derivative of the vector field with
+    respect to $k$'s coefficient lies in the span of the derivatives with respect to the refitted
+    nominal parameters (`refit`, a 0/1 mask) and $l$'s coefficient, and the other way round (at
+    random states and inputs, as in `structurally_absorbed`). A gain on one motor's torque of the
+    double pendulum is then a gain on the other's: scaling every torque-side parameter and both
+    gains by one factor leaves the motion unchanged, so a refit determines only their ratio. Data
+    cannot tell such a pair apart, so each is the other's look-alike. Only candidates in `among` (not
+    absorbed alone) and without internal states are compared.
+
+    **Returns:** `{k: [l, ...]}` for the candidates that have an equivalent.
+    """
+    refit = np.asarray(refit) > 0
+    J_nom, J_c = _sampled_sensitivities(family, n_points, seed)
+    A = J_nom[:, refit]
+    terms = family.model.terms
+    ks = [k for k in among if not (isinstance(terms[k], AbstractInputTerm) and terms[k].n_hidden)]
+
+    def in_span(k, l):
+        basis = np.concatenate([A, J_c[:, [l]]], axis=1)
+        coef, *_ = np.linalg.lstsq(basis, J_c[:, k], rcond=None)
+        return np.linalg.norm(J_c[:, k] - basis @ coef) <= tol * np.linalg.norm(J_c[:, k])
+
+    out: dict[int, list[int]] = {}
+    for i, k in enumerate(ks):
+        for l in ks[i + 1 :]:
+            if np.linalg.norm(J_c[:, k]) and np.linalg.norm(J_c[:, l]) and in_span(k, l) and in_span(l, k):
+                out.setdefault(k, []).append(l)
+                out.setdefault(l, []).append(k)
+    return out
 
 
 def held_partners(family, held, *, n_points: int = 64, seed: int = 0, tol: float = 1e-7) -> list[tuple[int, float] | None]:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from dynax import Acrobot, DoublePendulum
-from dynax._diagnose._candidates import default_candidates, look_alikes, structurally_absorbed
+from dynax._diagnose._candidates import default_candidates, look_alikes, structurally_absorbed, structurally_equivalent
 from dynax._diagnose._fit import Family, nominal_parameter_names
 from dynax._model._extensions import Extended
 from tests.reference import DRAKE, spong_reference
@@ -112,3 +112,25 @@ def test_look_alikes_are_at_the_same_place():
     assert {candidates[k].label(system) for k in look_alikes(system, coulomb_q2, candidates)} == {
         "viscous_friction@q2", "quadratic_drag@q2"}
     assert {candidates[k].label(system) for k in look_alikes(system, delay, candidates)} == {"input_lag@tau2"}
+
+
+def test_gains_on_the_two_motors_are_one_model_when_the_base_parameters_are_refitted():
+    """Scaling every torque-side base parameter and both torque gains by one factor leaves the double
+    pendulum's motion unchanged (M qdd + ... = G tau), so with the base parameters refitted a gain on tau1
+    is a gain on tau2 and only their ratio is determined; no other pair of the vocabulary is. A held
+    friction that is not zero would have to scale too: with it held, and with trusted parameters, the two
+    are different causes."""
+
+    def pairs(system, refit):
+        family = _family(system)
+        labels = [t.label(system) for t in family.model.terms]
+        among = [k for k, a in enumerate(structurally_absorbed(family, refit)) if not a]
+        return {frozenset((labels[k], labels[l])) for k, ls in structurally_equivalent(family, refit, among).items()
+                for l in ls}
+
+    gains = {frozenset(("input_gain@tau1", "input_gain@tau2"))}
+    assert pairs(DoublePendulum(), np.ones(7)) == gains
+    frictionless = eqx.tree_at(lambda s: (s.theta6, s.theta7), DoublePendulum(), (jnp.zeros(()), jnp.zeros(())))
+    assert pairs(frictionless, np.asarray([1, 1, 1, 1, 1, 0, 0])) == gains  # refit mode on the DFKI rig's model 3.1
+    assert pairs(DoublePendulum(), np.asarray([1, 1, 1, 1, 1, 0, 0])) == set()
+    assert pairs(DoublePendulum(), np.zeros(7)) == set()
