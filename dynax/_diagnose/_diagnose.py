@@ -626,8 +626,12 @@ def _select(problem: _Problem, yard: _Yardstick, current: _Current, results, sco
     ref = yard.ref_index
     gain = float(1 - r["rmse"][ref] / current.rmse[ref]) if np.isfinite(current.rmse[ref]) else 1.0
     alternatives = _look_alike_tests(problem, yard, term, best, results, scores)
-    confidence = "high" if all(a["p_value"] < problem.options.alpha for a in alternatives) else "low"
     equivalent = [problem.candidates[k].label(system) for k in problem.equivalents.get(best, [])]
+    for a in alternatives:
+        a["equivalent"] = f"{a['cause']}@{a['where']}" in equivalent
+    # A structural equivalent is never told apart, whatever the paired test of two fits of one model says.
+    confidence = ("high" if all(a["p_value"] < problem.options.alpha and not a["equivalent"] for a in alternatives)
+                  else "low")
     if equivalent:
         problem.notes.append(
             f"{term.label(system)} and {', '.join(equivalent)} are one model in this mode: a refit of the nominal "

@@ -92,7 +92,8 @@ def _causes_markdown(j: dict) -> list[str]:
         return lines + ["No candidate improved the held-out simulation significantly.", ""]
     lines += ["| cause | where | coefficient | std. error | gain | p | told apart from look-alikes |", "|---|---|---|---|---|---|---|"]
     for f in named:
-        alts = "; ".join(f"{a['cause']}@{a.get('where', f['where'])} (gain {a['gain']:.0%}, p = {a['p_value']:.2g})"
+        alts = "; ".join(f"{a['cause']}@{a.get('where', f['where'])} (gain {a['gain']:.0%}, p = {a['p_value']:.2g}"
+                         + ("; one model with it in this mode" if a.get("equivalent") else "") + ")"
                          for a in f["look_alikes"]) or "none in the library"
         components = "".join(f"; {n} = {v:.4g}" for n, v in f.get("components", {}).items())
         lines.append(f"| `{f['cause']}` | `{f['where']}` | {f['parameter']} = {f['coefficient']:.4g}{components} | {f['std_error']:.2g} | "
