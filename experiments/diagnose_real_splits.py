@@ -70,6 +70,7 @@ def run_split(data, name, mode_name, **kwargs):
         "per_run": j["runs"], "detectable_gain": j["test"]["detectable_gain"], "notes": j["notes"],
         "structure": {k: {"significant": v["significant"], "r2": v["r2"]} for k, v in j["structure"].items()},
         "candidates": j["candidates"][:8],
+        "rounds": j["rounds"],
     }
 
 
