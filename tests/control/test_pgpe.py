@@ -108,13 +108,14 @@ def test_runs_vmap_over_seeds(key):
     assert jnp.all(histories.reward[:, -5:].mean(1) > histories.reward[:, :5].mean(1))
 
 
-@pytest.mark.xfail(strict=False, reason=(
-    "after the 2026-11-23 merges (explicit RK stages, rank-explicit PGPE) the reward still improved by more "
-    "than 1 but the success rate on the 32 starts stayed at 0 in one full-suite run; it passed in all three "
-    "full runs of 2026-11-25 (make test, make quick, a fresh-clone .ci/run), so it looks run-dependent "
-    "(float32 reductions across XLA threads?); not yet investigated"))
 def test_pgpe_improves_swing_up_from_a_poor_start():
-    # Ten times too weak an energy pump: the acrobot rarely gets up. PGPE on random starts fixes it.
+    """Ten times too weak an energy pump: the acrobot rarely gets up. PGPE on random starts fixes it.
+
+    Three seeds in one vmapped sweep. Every run must raise the mean reward on 32 fresh starts by more
+    than 1; the swing-up success on those starts is a threshold event of a chaotic rollout in float32
+    (one full-suite run once left a single seed at 0 of 32 while its reward still rose by more than 1),
+    so it is asserted over the sweep, not per seed. Until 2026-11-25 this was a non-strict xfail,
+    which cannot fail."""
     plant = jax.tree.map(lambda a: jnp.asarray(a, jnp.float32), dynax.Acrobot())
     task = SwingUpTask(plant, SpongController(plant), duration=8.0, control_rate=50.0)
     poor = jnp.array([0.5, 50.0, 5.0, 1000.0], jnp.float32)
@@ -125,13 +126,15 @@ def test_pgpe_improves_swing_up_from_a_poor_start():
         optimizer=clipup(0.08),
         fitness_shaping=CentredRank(),
     )
-    state, history = eqx.filter_jit(lambda k: run_pgpe(pgpe, task, poor, k, 15))(jax.random.PRNGKey(3))
+    keys = jax.random.split(jax.random.PRNGKey(3), 3)
+    states, history = eqx.filter_jit(jax.vmap(lambda k: run_pgpe(pgpe, task, poor, k, 15)))(keys)
     starts = random_starts(jax.random.PRNGKey(123), 32, dtype=jnp.float32)
     evaluate = eqx.filter_jit(task.evaluate)
-    before, after = evaluate(poor, starts), evaluate(pgpe.mean_params(state), starts)
-    assert after["reward"] > before["reward"] + 1.0
-    assert after["success_rate"] > before["success_rate"]
-    assert history.reward[-3:].mean() > history.reward[:3].mean()
+    before = evaluate(poor, starts)
+    after = [evaluate(pgpe.mean_params(jax.tree.map(lambda x: x[i], states)), starts) for i in range(3)]
+    assert all(a["reward"] > before["reward"] + 1.0 for a in after), [float(a["reward"]) for a in after]
+    assert max(a["success_rate"] for a in after) > before["success_rate"]
+    assert jnp.all(history.reward[:, -3:].mean(1) > history.reward[:, :3].mean(1))
 
 
 SHARDED_SCRIPT = textwrap.dedent(
