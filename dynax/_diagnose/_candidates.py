@@ -152,11 +152,14 @@ def structurally_equivalent(family, refit, among, *, n_points: int = 64, seed: i
     terms = family.model.terms
     ks = [k for k in among if not (isinstance(terms[k], AbstractInputTerm) and terms[k].n_hidden)]
 
-    def in_span(k, l):
-        basis = np.concatenate([A, J_c[:, [l]]], axis=1)
+    def in_span(k, *others):
+        basis = np.concatenate([A, J_c[:, list(others)]], axis=1)
+        if basis.shape[1] == 0:
+            return False
         coef, *_ = np.linalg.lstsq(basis, J_c[:, k], rcond=None)
         return np.linalg.norm(J_c[:, k] - basis @ coef) <= tol * np.linalg.norm(J_c[:, k])
 
+    ks = [k for k in ks if not in_span(k)]  # one the refit reproduces alone is absorbed, not equivalent
     out: dict[int, list[int]] = {}
     for i, k in enumerate(ks):
         for l in ks[i + 1 :]:

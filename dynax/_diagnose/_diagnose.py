@@ -313,16 +313,6 @@ def _candidate_family(system, candidates, refit_names, train_records):
     return family, scales, inits
 
 
-def _refit_with_tested(family, partners, mode) -> np.ndarray:
-    """The nominal parameters a refit moves, and in `Refit` mode also the kept ones the candidates test
-    (the nominal friction): an error in those cannot be told from the candidate that adds to it."""
-    mask = np.asarray(family.refit) > 0
-    if isinstance(mode, Refit):
-        mask = mask.copy()
-        mask[sorted({p[0] for p in partners if p is not None})] = True
-    return mask
-
-
 def _identifiable(system, candidates, family, refit_names, partners, mode):
     """`(searchable indices, not_identifiable entries)`: candidates a refit of the nominal parameters reproduces are set aside.
 
@@ -334,8 +324,12 @@ def _identifiable(system, candidates, family, refit_names, partners, mode):
     refit = np.asarray(family.refit) > 0
     absorbed = structurally_absorbed(family, refit)
     tested = sorted({p[0] for p in partners if p is not None})
-    with_tested = _refit_with_tested(family, partners, mode)
-    absorbed_with_tested = structurally_absorbed(family, with_tested) if isinstance(mode, Refit) and tested else absorbed
+    if isinstance(mode, Refit) and tested:
+        with_tested = refit.copy()
+        with_tested[tested] = True
+        absorbed_with_tested = structurally_absorbed(family, with_tested)
+    else:
+        absorbed_with_tested = absorbed
     not_identifiable, searchable = [], []
     for k, term in enumerate(candidates):
         if absorbed[k]:
@@ -369,8 +363,8 @@ def _prepare(system, train, validation, candidates, mode, options: _Options) -> 
     family, scales, inits = _candidate_family(system, candidates, refit_names, train_records)
     partners = held_partners(family, 1.0 - np.asarray(family.refit))
     searchable, not_identifiable = _identifiable(system, candidates, family, refit_names, partners, mode)
-    equivalents = (structurally_equivalent(family, _refit_with_tested(family, partners, mode), searchable)
-                   if isinstance(mode, Refit) else {})
+    # Candidates that add to a held nominal parameter (viscous friction) are that parameter, not an equivalent.
+    equivalents = structurally_equivalent(family, family.refit, [k for k in searchable if partners[k] is None])
     _note_held(system, family, refit_names, mode, notes)
     fit_window_s = _fit_window(system, train_records, options.fit_window_s, options.horizon_fraction, dt, notes)
     n_fit = max(2, int(round(fit_window_s / dt)))
@@ -604,12 +598,16 @@ def _select(problem: _Problem, yard: _Yardstick, current: _Current, results, sco
     confidence = ("high" if all(a["p_value"] < problem.options.alpha and not a["equivalent"] for a in alternatives)
                   else "low")
     if equivalent:
+        refit = (f"with a refit of the nominal parameters ({', '.join(problem.refit_names)})" if problem.refit_names
+                 else "as the model is written")
+        gains = all(problem.candidates[k].cause == "input_gain" for k in [best, *problem.equivalents[best]])
         problem.notes.append(
-            f"{term.label(system)} and {', '.join(equivalent)} are one model in this mode: a refit of the nominal "
-            f"parameters ({', '.join(problem.refit_names)}) turns one into the other (for gains on two inputs: every "
-            "torque-side parameter and both gains scaled by one factor), so the data determine only their ratio. "
-            f"{term.label(system)} is named because it came first; its finding lists the other as a look-alike it "
-            "cannot be told apart from.")
+            f"{term.label(system)} and {', '.join(equivalent)} are one model {refit}: any change of one is a change "
+            "of the other, so no data can tell them apart"
+            + (" (every torque-side parameter and the gains scaled by one factor leave the motion unchanged: the "
+               "data determine only the ratio of the gains)" if gains else "")
+            + f". {term.label(system)} is named because it came first; its finding lists the other as a look-alike "
+            "it cannot be told apart from.")
     coefficient = problem.neutral[best] + r["delta"]
     say(f"round {round_ + 1}: found {term.label(system)}, {term.parameter_name(system)} = {coefficient:.4g} "
         f"(held-out gain {gain:.0%}, p = {r['p']:.2g}, helps on {r['runs_helped']}/{r['n_runs']} held-out runs; "

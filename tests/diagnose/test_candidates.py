@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from dynax import Acrobot, DoublePendulum
+from dynax._model._helicopter import Helicopter
 from dynax._diagnose._candidates import default_candidates, look_alikes, structurally_absorbed, structurally_equivalent
 from dynax._diagnose._fit import Family, nominal_parameter_names
 from dynax._model._extensions import Extended
@@ -134,3 +135,8 @@ def test_gains_on_the_two_motors_are_one_model_when_the_base_parameters_are_refi
     assert pairs(frictionless, np.asarray([1, 1, 1, 1, 1, 0, 0])) == gains  # refit mode on the DFKI rig's model 3.1
     assert pairs(DoublePendulum(), np.asarray([1, 1, 1, 1, 1, 0, 0])) == set()
     assert pairs(DoublePendulum(), np.zeros(7)) == set()
+    # The helicopter's control inputs each drive one body axis (collective: w; cyclics: p, q; pedal: r), so
+    # an offset on one is a constant body acceleration on its axis even with every parameter trusted.
+    heli = Helicopter()
+    assert pairs(heli, np.zeros(len(nominal_parameter_names(heli)))) == {
+        frozenset((f"input_offset@u{i}", f"body_bias@{axis}")) for i, axis in zip((1, 2, 3, 4), "pqrw")}

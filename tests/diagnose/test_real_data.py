@@ -164,7 +164,7 @@ def test_dfki_cli_on_the_raw_files_with_no_nominal_and_no_resampling(tmp_path, c
     # test of two fits of one model can still come out below alpha), and a note says why.
     gain = causes[("input_gain", "tau1")] if ("input_gain", "tau1") in causes else causes[("input_gain", "tau2")]
     assert gain["confidence"] == "low" and any(a["equivalent"] for a in gain["look_alikes"]), gain
-    assert any("one model in this mode" in n for n in j["notes"])
+    assert any("are one model with a refit of the nominal parameters" in n and "ratio" in n for n in j["notes"])
     assert (out / "measured_vs_simulated_run2.png").stat().st_size > 0
 
 
