@@ -123,12 +123,17 @@ def structurally_absorbed(family, refit, *, n_points: int = 64, seed: int = 0, t
             out.append(False)
         elif np.linalg.norm(b) == 0:
             out.append(True)
-        elif A.shape[1] == 0:
-            out.append(False)
         else:
-            coef, *_ = np.linalg.lstsq(A, b, rcond=None)
-            out.append(bool(np.linalg.norm(b - A @ coef) <= tol * np.linalg.norm(b)))
+            out.append(_in_span(A, b, tol))
     return np.asarray(out)
+
+
+def _in_span(basis, b, tol) -> bool:
+    """Whether `b` is a linear combination of `basis`'s columns, to `tol` relative to its norm."""
+    if basis.shape[1] == 0:
+        return False
+    coef, *_ = np.linalg.lstsq(basis, b, rcond=None)
+    return bool(np.linalg.norm(b - basis @ coef) <= tol * np.linalg.norm(b))
 
 
 def structurally_equivalent(family, refit, among, *, n_points: int = 64, seed: int = 0,
@@ -153,11 +158,7 @@ def structurally_equivalent(family, refit, among, *, n_points: int = 64, seed: i
     ks = [k for k in among if not (isinstance(terms[k], AbstractInputTerm) and terms[k].n_hidden)]
 
     def in_span(k, *others):
-        basis = np.concatenate([A, J_c[:, list(others)]], axis=1)
-        if basis.shape[1] == 0:
-            return False
-        coef, *_ = np.linalg.lstsq(basis, J_c[:, k], rcond=None)
-        return np.linalg.norm(J_c[:, k] - basis @ coef) <= tol * np.linalg.norm(J_c[:, k])
+        return _in_span(np.concatenate([A, J_c[:, list(others)]], axis=1), J_c[:, k], tol)
 
     ks = [k for k in ks if not in_span(k)]  # one the refit reproduces alone is absorbed, not equivalent
     out: dict[int, list[int]] = {}

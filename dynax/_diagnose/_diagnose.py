@@ -559,13 +559,15 @@ def _show_what_is_wrong(problem: _Problem, model, batch: _Batch, yard: _Yardstic
                     cv_errors=batch.cv_errors[0])
 
 
-def _look_alike_tests(problem, yard, term, best, results, scores):
+def _look_alike_tests(problem, yard, best, results, scores):
+    """Each refitted look-alike of `best` against it: held-out gain, paired p, and whether it is a structural equivalent."""
     alternatives = []
     for k in problem.look_alikes(best):
         if k in results:
             test = _paired_test(scores[results[k]["i"]], scores[results[best]["i"]], yard.window_runs, yard.overlap)
             alternatives.append({"cause": problem.candidates[k].cause, "where": problem.candidates[k].where(problem.system),
-                                 "gain": float(results[k]["gain_held_out"]), "p_value": test.p_value})
+                                 "gain": float(results[k]["gain_held_out"]), "p_value": test.p_value,
+                                 "equivalent": k in problem.equivalents.get(best, [])})
     return alternatives
 
 
@@ -590,10 +592,8 @@ def _select(problem: _Problem, yard: _Yardstick, current: _Current, results, sco
     r, term, system = results[best], problem.candidates[best], problem.system
     ref = yard.ref_index
     gain = float(1 - r["rmse"][ref] / current.rmse[ref]) if np.isfinite(current.rmse[ref]) else 1.0
-    alternatives = _look_alike_tests(problem, yard, term, best, results, scores)
+    alternatives = _look_alike_tests(problem, yard, best, results, scores)
     equivalent = [problem.candidates[k].label(system) for k in problem.equivalents.get(best, [])]
-    for a in alternatives:
-        a["equivalent"] = f"{a['cause']}@{a['where']}" in equivalent
     # A structural equivalent is never told apart, whatever the paired test of two fits of one model says.
     confidence = ("high" if all(a["p_value"] < problem.options.alpha and not a["equivalent"] for a in alternatives)
                   else "low")
