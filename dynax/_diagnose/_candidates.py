@@ -94,7 +94,8 @@ def look_alikes(system, term, candidates) -> list[int]:
     ]
 
 
-def structurally_absorbed(family, refit, *, n_points: int = 64, seed: int = 0, tol: float = 1e-7) -> np.ndarray:
+def structurally_absorbed(family, refit, *, n_points: int = 64, seed: int = 0, tol: float = 1e-7,
+                          sensitivities=None) -> np.ndarray:
     r"""For each candidate of `family`, whether refitting the nominal parameters reproduces it exactly.
 
     The test is structural, not about a data set: at random states and inputs, the derivative of
@@ -106,6 +107,9 @@ def structurally_absorbed(family, refit, *, n_points: int = 64, seed: int = 0, t
     coefficient). Terms with internal states (lag, delay) change the dynamics' order and are never
     absorbed.
 
+    `sensitivities`: `sampled_sensitivities(family, n_points, seed)` when already computed (the
+    three structural tests of a diagnosis share them).
+
     **Returns:** a bool per candidate.
 
     ??? cite
@@ -114,7 +118,7 @@ def structurally_absorbed(family, refit, *, n_points: int = 64, seed: int = 0, t
         Springer 1997, ch. 2 (structural identifiability; local rank test of the sensitivity matrix).
     """
     refit = np.asarray(refit) > 0
-    J_nom, J_c = _sampled_sensitivities(family, n_points, seed)
+    J_nom, J_c = sensitivities or sampled_sensitivities(family, n_points, seed)
     A = J_nom[:, refit]
     out = []
     for k, term in enumerate(family.model.terms):
@@ -137,7 +141,7 @@ def _in_span(basis, b, tol) -> bool:
 
 
 def structurally_equivalent(family, refit, among, *, n_points: int = 64, seed: int = 0,
-                            tol: float = 1e-7) -> dict[int, list[int]]:
+                            tol: float = 1e-7, sensitivities=None) -> dict[int, list[int]]:
     r"""Pairs of candidates that are one model once the nominal parameters are refitted.
 
     Candidate $k$ is equivalent to candidate $l$ when the derivative of the vector field with
@@ -152,7 +156,7 @@ def structurally_equivalent(family, refit, among, *, n_points: int = 64, seed: i
     **Returns:** `{k: [l, ...]}` for the candidates that have an equivalent.
     """
     refit = np.asarray(refit) > 0
-    J_nom, J_c = _sampled_sensitivities(family, n_points, seed)
+    J_nom, J_c = sensitivities or sampled_sensitivities(family, n_points, seed)
     A = J_nom[:, refit]
     terms = family.model.terms
     ks = [k for k in among if not (isinstance(terms[k], AbstractInputTerm) and terms[k].n_hidden)]
@@ -170,7 +174,8 @@ def structurally_equivalent(family, refit, among, *, n_points: int = 64, seed: i
     return out
 
 
-def held_partners(family, held, *, n_points: int = 64, seed: int = 0, tol: float = 1e-7) -> list[tuple[int, float] | None]:
+def held_partners(family, held, *, n_points: int = 64, seed: int = 0, tol: float = 1e-7,
+                  sensitivities=None) -> list[tuple[int, float] | None]:
     r"""For each candidate of `family`, the nominal parameter it adds to among those `held` (not refitted), if any.
 
     A candidate adds to nominal parameter $i$ when the derivative of the vector field with
@@ -182,7 +187,7 @@ def held_partners(family, held, *, n_points: int = 64, seed: int = 0, tol: float
 
     **Returns:** per candidate `(i, alpha)` or `None`.
     """
-    J_nom, J_c = _sampled_sensitivities(family, n_points, seed)
+    J_nom, J_c = sensitivities or sampled_sensitivities(family, n_points, seed)
     out: list[tuple[int, float] | None] = []
     for k in range(J_c.shape[1]):
         b, partner = J_c[:, k], None
@@ -198,7 +203,7 @@ def held_partners(family, held, *, n_points: int = 64, seed: int = 0, tol: float
     return out
 
 
-def _sampled_sensitivities(family, n_points, seed) -> tuple[np.ndarray, np.ndarray]:
+def sampled_sensitivities(family, n_points: int = 64, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Derivatives of the vector field with respect to the nominal parameters and the candidates'
     coefficients (at neutral), stacked over random states and inputs: `(rows, n_nominal)`, `(rows, n_candidates)`."""
     system = family.model.system

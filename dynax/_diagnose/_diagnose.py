@@ -28,6 +28,7 @@ from ._candidates import (
     default_candidates,
     held_partners,
     look_alikes,
+    sampled_sensitivities,
     structurally_absorbed,
     structurally_equivalent,
 )
@@ -313,7 +314,7 @@ def _candidate_family(system, candidates, refit_names, train_records):
     return family, scales, inits
 
 
-def _identifiable(system, candidates, family, refit_names, partners, mode):
+def _identifiable(system, candidates, family, refit_names, partners, mode, sensitivities):
     """`(searchable indices, not_identifiable entries)`: candidates a refit of the nominal parameters reproduces are set aside.
 
     In `Refit` mode the kept parameters that candidates test (the nominal friction, `partners`) are not
@@ -322,12 +323,12 @@ def _identifiable(system, candidates, family, refit_names, partners, mode):
     too. The candidates that are those parameters (viscous friction) stay.
     """
     refit = np.asarray(family.refit) > 0
-    absorbed = structurally_absorbed(family, refit)
+    absorbed = structurally_absorbed(family, refit, sensitivities=sensitivities)
     tested = sorted({p[0] for p in partners if p is not None})
     if isinstance(mode, Refit) and tested:
         with_tested = refit.copy()
         with_tested[tested] = True
-        absorbed_with_tested = structurally_absorbed(family, with_tested)
+        absorbed_with_tested = structurally_absorbed(family, with_tested, sensitivities=sensitivities)
     else:
         absorbed_with_tested = absorbed
     not_identifiable, searchable = [], []
@@ -361,10 +362,12 @@ def _prepare(system, train, validation, candidates, mode, options: _Options) -> 
     Extended(system, candidates)  # checks every candidate fits this system
     refit_names = _refit_names(system, mode)
     family, scales, inits = _candidate_family(system, candidates, refit_names, train_records)
-    partners = held_partners(family, 1.0 - np.asarray(family.refit))
-    searchable, not_identifiable = _identifiable(system, candidates, family, refit_names, partners, mode)
+    sensitivities = sampled_sensitivities(family)  # the structural tests' one sample of the vector field's derivatives
+    partners = held_partners(family, 1.0 - np.asarray(family.refit), sensitivities=sensitivities)
+    searchable, not_identifiable = _identifiable(system, candidates, family, refit_names, partners, mode, sensitivities)
     # Candidates that add to a held nominal parameter (viscous friction) are that parameter, not an equivalent.
-    equivalents = structurally_equivalent(family, family.refit, [k for k in searchable if partners[k] is None])
+    equivalents = structurally_equivalent(family, family.refit, [k for k in searchable if partners[k] is None],
+                                          sensitivities=sensitivities)
     _note_held(system, family, refit_names, mode, notes)
     fit_window_s = _fit_window(system, train_records, options.fit_window_s, options.horizon_fraction, dt, notes)
     n_fit = max(2, int(round(fit_window_s / dt)))
@@ -560,14 +563,25 @@ def _show_what_is_wrong(problem: _Problem, model, batch: _Batch, yard: _Yardstic
 
 
 def _look_alike_tests(problem, yard, best, results, scores):
-    """Each refitted look-alike of `best` against it: held-out gain, paired p, and whether it is a structural equivalent."""
-    alternatives = []
+    """Each refitted look-alike of `best` against it: held-out gain, paired p, the finding's gain over it, whether
+    it is told apart, and whether it is a structural equivalent.
+
+    Told apart takes a significant difference (`p < alpha`) *and* one that matters: the finding's windows' error
+    at least `min_gain` below the look-alike's, the margin a candidate must gain to count at all (a practical
+    margin, as in equivalence testing: with hundreds of correlated windows a 1 % difference can be significant,
+    and two causes that predict within 1 % of each other are not told apart by the data in any useful sense)."""
+    o, alternatives = problem.options, []
     for k in problem.look_alikes(best):
         if k in results:
-            test = _paired_test(scores[results[k]["i"]], scores[results[best]["i"]], yard.window_runs, yard.overlap)
+            s_k, s_best = scores[results[k]["i"]], scores[results[best]["i"]]
+            test = _paired_test(s_k, s_best, yard.window_runs, yard.overlap)
+            margin = float(1 - s_best.mean() / s_k.mean())
+            equivalent = k in problem.equivalents.get(best, [])
             alternatives.append({"cause": problem.candidates[k].cause, "where": problem.candidates[k].where(problem.system),
                                  "gain": float(results[k]["gain_held_out"]), "p_value": test.p_value,
-                                 "equivalent": k in problem.equivalents.get(best, [])})
+                                 "gain_over": margin,
+                                 "told_apart": bool(test.p_value < o.alpha and margin >= o.min_gain and not equivalent),
+                                 "equivalent": equivalent})
     return alternatives
 
 
@@ -595,8 +609,7 @@ def _select(problem: _Problem, yard: _Yardstick, current: _Current, results, sco
     alternatives = _look_alike_tests(problem, yard, best, results, scores)
     equivalent = [problem.candidates[k].label(system) for k in problem.equivalents.get(best, [])]
     # A structural equivalent is never told apart, whatever the paired test of two fits of one model says.
-    confidence = ("high" if all(a["p_value"] < problem.options.alpha and not a["equivalent"] for a in alternatives)
-                  else "low")
+    confidence = "high" if all(a["told_apart"] for a in alternatives) else "low"
     if equivalent:
         refit = (f"with a refit of the nominal parameters ({', '.join(problem.refit_names)})" if problem.refit_names
                  else "as the model is written")

@@ -92,8 +92,10 @@ def _causes_markdown(j: dict) -> list[str]:
         return lines + ["No candidate improved the held-out simulation significantly.", ""]
     lines += ["| cause | where | coefficient | std. error | gain | p | told apart from look-alikes |", "|---|---|---|---|---|---|---|"]
     for f in named:
-        alts = "; ".join(f"{a['cause']}@{a.get('where', f['where'])} (gain {a['gain']:.0%}, p = {a['p_value']:.2g}"
-                         + ("; one model with it in this mode" if a.get("equivalent") else "") + ")"
+        alts = "; ".join(f"{a['cause']}@{a.get('where', f['where'])} (gain {a['gain']:.0%}, p = {a['p_value']:.2g}, "
+                         f"the finding's error {a['gain_over']:.1%} lower"
+                         + ("; one model with it in this mode" if a.get("equivalent") else
+                            "" if a["told_apart"] else "; not told apart") + ")"
                          for a in f["look_alikes"]) or "none in the library"
         components = "".join(f"; {n} = {v:.4g}" for n, v in f.get("components", {}).items())
         lines.append(f"| `{f['cause']}` | `{f['where']}` | {f['parameter']} = {f['coefficient']:.4g}{components} | {f['std_error']:.2g} | "
@@ -124,8 +126,10 @@ def _rounds_markdown(j: dict) -> list[str]:
         return []
     lines = ["## Selection rounds", "",
              "Each round refits the shortlisted candidates jointly with the current model and tests them on held-out "
-             "windows. gain: the held-out runs' mean window error; pooled: with the cross-fitted runs' windows; "
-             f"at {j['reference_horizon_s']:g} s: the position RMSE at the reference horizon (the findings' gain).", ""]
+             "windows. gain: the held-out runs' mean window error; pooled: "
+             + ("with the cross-fitted runs' windows" if j.get("test", {}).get("cross_fitting")
+                else "the same windows (not cross-fitted: the test pools nothing more)")
+             + f"; at {j['reference_horizon_s']:g} s: the position RMSE at the reference horizon (the findings' gain).", ""]
     for r in j["rounds"]:
         model = " + ".join(f"`{m}`" for m in r["model"]) or "the nominal model"
         lines += [f"**Round {r['round']}** (from {model}; {r['screened']} screened, {r['refitted']} refitted): "

@@ -58,7 +58,6 @@ class ResidualTests(eqx.Module):
     cross_correlation_bound: tuple[tuple[float, ...], ...]
 
     def to_json(self) -> dict:
-        by_input = lambda rows: {c: dict(zip(self.inputs, row)) for c, row in zip(self.channels, rows)}  # noqa: E731
         return {
             "run": self.run,
             "lag_s": self.lag_s,

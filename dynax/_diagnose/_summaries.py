@@ -34,7 +34,8 @@ def _merge_repeated_causes(findings: list[dict]) -> list[dict]:
         for f in group:
             for alt in f["look_alikes"]:  # keep the weakest separation from each look-alike cause
                 key = (alt["cause"], alt.get("where"))
-                if key not in look_alikes or alt["p_value"] > look_alikes[key]["p_value"]:
+                weakness = lambda a: (a["told_apart"], -a["p_value"])  # noqa: E731 (not told apart, then the largest p)
+                if key not in look_alikes or weakness(alt) < weakness(look_alikes[key]):
                     look_alikes[key] = alt
         merged.append({
             "cause": cause,

@@ -84,3 +84,29 @@ def test_refit_keeps_the_nominal_friction_and_its_viscous_candidates_add_to_it()
 def test_all_parameters_can_still_be_refitted_and_known_mode_refits_none():
     assert _refit_names(Acrobot(), Refit(parameters=tuple(f"theta{i}" for i in range(1, 8))))[-1] == "theta7"
     assert _refit_names(Acrobot(), Known()) == ()
+
+
+def test_a_look_alike_is_told_apart_only_by_a_difference_that_matters():
+    """A look-alike whose every held-out window is 1 % worse than the finding's is *significantly* worse
+    (hundreds of windows, p far below alpha) but not told apart: the difference is below `min_gain`, the
+    margin any candidate must gain to count. One 30 % worse is told apart; a structural equivalent never is."""
+    from types import SimpleNamespace
+
+    from dynax._diagnose._diagnose import _look_alike_tests
+
+    rng = np.random.default_rng(1)
+    n_windows = 240
+    best = rng.uniform(1.0, 2.0, n_windows)
+    worse = lambda factor: best * factor * np.exp(rng.normal(0.0, 0.002, n_windows))  # noqa: E731
+    scores = np.stack([np.ones(n_windows), best, worse(1.01), worse(1.3), worse(1.3)])
+    candidates = (ViscousFriction(1), CoulombFriction(1), InputOffset(0), ViscousFriction(0))
+    problem = SimpleNamespace(options=SimpleNamespace(alpha=0.01, min_gain=0.05), candidates=candidates,
+                              system=Acrobot(), look_alikes=lambda k: [1, 2, 3], equivalents={0: [3]})
+    results = {k: {"i": k + 1, "gain_held_out": 0.5} for k in range(4)}
+    yard = SimpleNamespace(window_runs=np.repeat([0, 1], n_windows // 2), overlap=1)
+    tests = {a["cause"] + str(i): a for i, a in enumerate(_look_alike_tests(problem, yard, 0, results, scores))}
+    near, far, equivalent = tests["coulomb_friction0"], tests["input_offset1"], tests["viscous_friction2"]
+    assert near["p_value"] < 1e-6 and near["gain_over"] == pytest.approx(0.01, abs=0.002)
+    assert not near["told_apart"]
+    assert far["p_value"] < 1e-6 and far["gain_over"] > 0.2 and far["told_apart"]
+    assert equivalent["equivalent"] and not equivalent["told_apart"]
