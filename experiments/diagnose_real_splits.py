@@ -5,6 +5,9 @@ holds out runs dynax does not train on; `S2` and `S3` hold out the 6 s large-amp
 Writes `OUT/splits.json` (verdict, findings, gain, horizon per split and mode) and `OUT/splits.png`.
 
     python experiments/diagnose_real_splits.py ../shared/datasets experiments/results/diagnose_real_splits [SPLITS] [MODES] [REFERENCE_HORIZON|auto] [FIT_WINDOW]
+
+SPLITS: comma-separated names (`S1,S3`) or ad hoc splits `TRAIN:HELD` with runs joined by `+`
+(`00+05:03+12`: train on runs 00 and 05, hold out 03 and 12).
 """
 
 import json
@@ -51,8 +54,16 @@ def nominal_model_3_1() -> DoublePendulum:
         theta5=g * m2 * r2, theta6=0.0, theta7=0.0))
 
 
+def split_runs(name: str) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """`(training runs, held-out runs)` of a named split or of an ad hoc `TRAIN:HELD` (`00+05:03+12`)."""
+    if ":" in name:
+        train, held = name.split(":")
+        return tuple(train.split("+")), tuple(held.split("+"))
+    return SPLITS[name]
+
+
 def run_split(data, name, mode_name, **kwargs):
-    train_runs, val_runs = SPLITS[name]
+    train_runs, val_runs = split_runs(name)
     train = [load(data, r) for r in train_runs]
     validation = [load(data, r) for r in val_runs]
     mode = Known() if mode_name == "known" else Refit()

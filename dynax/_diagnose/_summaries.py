@@ -59,6 +59,8 @@ _RULE_TEXT = {
     "min_gain": lambda r, o: f"min_gain: the pooled window-error gain {r['gain_windows']:.1%} is below {o.min_gain:.0%}",
     "sign": lambda r, o: "sign: a coefficient of the joint refit (this term's or an earlier finding's) is on its unphysical side",
     "agreement": lambda r, o: (f"agreement: helps on {r['runs_helped']} of {r['n_runs']} runs, not on more than half"),
+    "held_out": lambda r, o: (f"held_out: the held-out runs' window error is {-r['gain_held_out']:.1%} larger with it "
+                              "(the cross-fitted runs' windows carried the pooled test)"),
 }
 
 

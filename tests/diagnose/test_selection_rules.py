@@ -44,7 +44,35 @@ def test_a_joint_refit_with_any_unphysical_coefficient_is_not_admissible(earlier
     r = _round(earlier_fc1, new_delta)
     assert r["p"] < 1e-6 and r["gain_windows"] > 0.3  # it helps ...
     assert not r["physical"] and not r["significant"]  # ... but not with a physical model
-    assert r["rules"] == {"significance": True, "min_gain": True, "sign": False, "agreement": True}  # the one rule that stops it
+    assert r["rules"] == {"significance": True, "min_gain": True, "sign": False, "agreement": True,
+                          "held_out": True}  # the one rule that stops it
+
+
+def test_a_candidate_the_cross_fitted_runs_carry_but_the_held_out_runs_reject_is_not_admissible():
+    """Cross-fitting pools the training runs' left-out windows with the held-out runs'. A candidate that
+    lowers the cross-fitted windows' error by half but raises the held-out runs' by 10 % passes the pooled
+    test, the smallest gain and the agreement across runs (three runs of four), and is stopped by the
+    held-out runs alone; the same candidate helping the held-out runs a little is admissible."""
+    rng = np.random.default_rng(2)
+    n_val, n_cv = 60, 180
+    score_cur = rng.uniform(1.0, 2.0, n_val + n_cv)
+    runs = np.repeat([0, 1, 2, 3], [n_val, n_cv // 3, n_cv // 3, n_cv // 3])
+
+    def judged(held_out_factor):
+        factor = np.where(np.arange(n_val + n_cv) < n_val, held_out_factor, 0.5)
+        scores = np.stack([score_cur, score_cur * factor * rng.uniform(0.95, 1.05, n_val + n_cv)])
+        p = np.zeros((2, 3))
+        p[1, -1] = 0.1
+        errors = np.ones((2, n_val + n_cv, 11, 4))
+        physical = lambda k, delta: True  # noqa: E731
+        return _judge_round(physical, [0], [0], [], 2, p, np.full_like(p, 0.01), errors, scores, score_cur, runs, 1,
+                            alpha=0.01, min_gain=0.05, steps=np.asarray([5, 10]), position_index=[0, 1], n_val=n_val)[0]
+
+    harmful = judged(1.1)
+    assert harmful["gain_windows"] > 0.3 and harmful["gain_held_out"] < 0
+    assert harmful["rules"] == {"significance": True, "min_gain": True, "sign": True, "agreement": True, "held_out": False}
+    assert not harmful["significant"]
+    assert judged(0.97)["significant"]
 
 
 def test_terms_of_either_sign_are_not_constrained():
