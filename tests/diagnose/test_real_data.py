@@ -126,6 +126,23 @@ def test_dfki_refit_mode_with_only_the_large_amplitude_run_held_out():
     assert len(cross_fitted) == 3 and all(r["gain"] > 0.25 for r in cross_fitted), j["runs"]
 
 
+def test_dfki_refit_mode_names_nothing_the_held_out_runs_reject():
+    """Train on 00, 02 and the shoulder-only run 05; hold out 01 and the elbow-only run 03 (a split outside
+    the documented four). Coulomb friction at the elbow is named (51 % at 0.1 s). Before the `held_out` rule
+    the cross-fitted runs then carried a torque gain and an offset on the shoulder through the pooled test
+    (6 % and 71 % pooled) although both made the held-out runs worse (8 % and 15 %), and the returned
+    model's held-out gain fell to 45 %. A finding must not make the returned model worse on held-out data."""
+    report = diagnose(_model_3_1(), [_dfki(r) for r in ("00", "02", "05")], [_dfki("01"), _dfki("03")], mode=Refit())
+    j = _assert_lab_effect(report)
+    assert (j["findings"][0]["cause"], j["findings"][0]["where"]) == ("coulomb_friction", "q2"), j["findings"]
+    assert j["gain"] >= j["findings"][0]["gain"] - 0.01, (j["gain"], j["findings"])
+    for r in j["rounds"]:
+        for c in r["candidates"]:
+            assert c["outcome"] == "stopped" or c["gain"] > 0, (r["round"], c)
+    stopped = [c for r in j["rounds"] for c in r["candidates"] if any(t.startswith("held_out") for t in c["stopped_by"])]
+    assert any(c["cause"] == "input_offset" and c["where"] == "tau1" for c in stopped), j["rounds"]
+
+
 def test_dfki_cli_on_the_raw_files_with_no_nominal_and_no_resampling(tmp_path, capsys):
     """A new user's first command: the raw recordings (irregular ~2 ms sampling), no `--nominal`, no `--dt`.
     The default DoublePendulum is another machine (theta1 1.33 against the rig's 0.047): the CLI says so and
