@@ -31,10 +31,10 @@ def _merge_repeated_causes(findings: list[dict]) -> list[dict]:
         size = float(np.linalg.norm(values))
         std = float(np.sqrt(np.sum((values / size) ** 2 * stds**2))) if size > 0 else float(np.linalg.norm(stds))
         look_alikes: dict[tuple, dict] = {}
+        weakness = lambda a: (a["told_apart"], -a["p_value"])  # noqa: E731 (not told apart first, then the largest p)
         for f in group:
             for alt in f["look_alikes"]:  # keep the weakest separation from each look-alike cause
                 key = (alt["cause"], alt.get("where"))
-                weakness = lambda a: (a["told_apart"], -a["p_value"])  # noqa: E731 (not told apart, then the largest p)
                 if key not in look_alikes or weakness(alt) < weakness(look_alikes[key]):
                     look_alikes[key] = alt
         merged.append({
@@ -59,8 +59,9 @@ _RULE_TEXT = {
     "min_gain": lambda r, o: f"min_gain: the pooled window-error gain {r['gain_windows']:.1%} is below {o.min_gain:.0%}",
     "sign": lambda r, o: "sign: a coefficient of the joint refit (this term's or an earlier finding's) is on its unphysical side",
     "agreement": lambda r, o: (f"agreement: helps on {r['runs_helped']} of {r['n_runs']} runs, not on more than half"),
-    "held_out": lambda r, o: (f"held_out: the held-out runs' window error is {-r['gain_held_out']:.1%} larger with it "
-                              "(the cross-fitted runs' windows carried the pooled test)"),
+    "held_out": lambda r, o: (f"held_out: the held-out runs' window error is {-r['gain_held_out']:.1%} larger with it"
+                              + (" (the cross-fitted runs' windows carried the pooled test)"
+                                 if r["gain_windows"] > r["gain_held_out"] else "")),
 }
 
 
