@@ -851,7 +851,7 @@ def _report(problem, nominal, yard, judgement, table, last, rounds, *, mode, sys
     notes = list(problem.notes)
     if judgement.verdict == "unexplained":
         notes.append(_unexplained_note(judgement.structure))
-    test = _test_summary(o.alpha, o.min_gain, last, len(problem.searchable), judgement.verdict)
+    test = _test_summary(o.alpha, o.min_gain, last, judgement.verdict)
     test["cross_fitting"] = (f"each of the {len(problem.folds)} training runs also held out in turn, every configuration "
                              "refitted on the other training runs; its windows pooled with the held-out runs'"
                              if problem.folds else None)

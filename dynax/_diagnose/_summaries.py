@@ -132,13 +132,13 @@ def _candidate_table(system, candidates, remaining, gains_scr, results, neutral,
     return table
 
 
-def _test_summary(alpha, min_gain, results, n_searchable, verdict) -> dict:
+def _test_summary(alpha, min_gain, results, verdict) -> dict:
     """How candidates were judged; with verdict `none`, the gain the test could have detected."""
     detectable = None
     if verdict == "none" and results:
-        r = next(iter(results.values()))
+        first = next(iter(results.values()))
         detectable = detectable_gain(float(np.median([r["test"].std_error for r in results.values()])),
-                                     max(r["test"].df, 1), alpha / max(r["n_tested"], 1))
+                                     max(first["test"].df, 1), alpha / max(first["n_tested"], 1))
         detectable = max(detectable, min_gain)
     return {
         "paired": "log ratio of each held-out window's mean squared error, nominal (or current) against extended; "
@@ -147,7 +147,8 @@ def _test_summary(alpha, min_gain, results, n_searchable, verdict) -> dict:
         "multiple_comparisons": f"Benjamini-Hochberg over the candidates remaining in each round, false-discovery "
                                 f"rate {alpha:g} (family-wise {alpha:g} when no candidate has an effect)",
         "run_agreement": "a cause must improve the mean window error on more than half of the held-out runs "
-                         "(cross-fitted training runs included)",
+                         "(cross-fitted training runs included), and must not raise the held-out runs' own "
+                         "(the cross-fitted windows add power; the runs no fit has seen keep a veto)",
         "alpha": alpha,
         "min_gain": min_gain,
         "detectable_gain": detectable,
