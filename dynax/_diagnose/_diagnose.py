@@ -1,9 +1,10 @@
 """`diagnose`: show what a model's simulation gets wrong, name the cause, extend the model, measure the gain.
 
 `diagnose` is `dynax._fit.fit_least_squares` (the candidate refits, `vmap`ped over configurations,
-`_fit.py`), `dynax._sim_error.window_rollouts` (every held-out rollout) and the statistics
-(`_statistics.py`), in named steps: prepare the problem, fit the nominal model, show what is wrong,
-then per round screen, refit, select; finally extend, judge and (where structure is left) discover.
+`_fit.py`), `dynax._sim_error.window_rollouts` (every held-out rollout), the statistics
+(`_statistics.py`) and the selection rules (`_selection.py`), in named steps: prepare the problem,
+fit the nominal model, show what is wrong, then per round screen, refit, select; finally extend,
+judge and (where structure is left) discover.
 The records (checked, on one grid, the hold-out cut, velocities, the horizons read from the training
 runs) are prepared in `_records.py`.
 """
@@ -20,7 +21,7 @@ import numpy as np
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
 from .._model._extensions import AbstractInputTerm, AbstractTerm, Extended
-from .._model._system import AbstractSystem, friction_parameter_names, size_parameter_names, violated_bound
+from .._model._system import AbstractSystem, friction_parameter_names, size_parameter_names
 from .._precision import warn_if_float32
 from .._progress import ProgressBar
 from ._candidates import (
@@ -56,7 +57,7 @@ from ._records import (
 from ._residuals import acceleration_residuals, Structure, structure_test
 from ._result import DataSummary, ModelSummary, Report as Report, SimErrorCurve
 from ._screening import screen
-from ._statistics import benjamini_hochberg, helps_on_most_runs, log_ratio_differences, paired_block_test
+from ._selection import choose_shortlist, judge_round, look_alike_tests, on_physical_side, paired_test, rank
 from ._summaries import (
     _candidate_table,
     _gain,
@@ -185,7 +186,7 @@ class _Problem:
         """Whether candidate `k` at `delta` from neutral is physical: on the physical side of neutral
         (friction, inertia, delay), and, where it adds to a nominal parameter that is not refitted,
         with the sum inside that parameter's consistency bound (a viscous coefficient stays non-negative)."""
-        return _physical(self.candidates[k], delta, self.partners[k], self.names, self.system)
+        return on_physical_side(self.candidates[k], delta, self.partners[k], self.names, self.system)
 
     def model_of(self, slots, p):
         """The extended model (every candidate; neutral but for `slots`) at parameters `p`."""
@@ -250,11 +251,6 @@ class _Nominal:
     structure: Structure
     cost: float
     cv_errors: np.ndarray
-
-
-def _paired_test(score_ref, score_new, runs, overlap):
-    """One-sided paired test that `score_new` is smaller than `score_ref` over held-out windows (see `_statistics`)."""
-    return paired_block_test(log_ratio_differences(score_ref, score_new), runs, overlap)
 
 
 @contextlib.contextmanager
@@ -482,7 +478,7 @@ def _screen(problem: _Problem, current_slots, current_p, remaining, round_, say)
     gains, deltas = screen(problem.family, current_p[:n_nom], np.asarray(coefficients), problem.family.refit,
                            problem.train, problem.validation, remaining, acceleration_residuals,
                            cross_fit=bool(problem.folds))
-    short = _shortlist(problem.look_alikes, remaining, gains, problem.options.shortlist)
+    short = choose_shortlist(problem.look_alikes, remaining, gains, problem.options.shortlist)
     return gains, deltas, short
 
 
@@ -562,51 +558,17 @@ def _show_what_is_wrong(problem: _Problem, model, batch: _Batch, yard: _Yardstic
                     cv_errors=batch.cv_errors[0])
 
 
-def _look_alike_tests(problem, yard, best, results, scores):
-    """Each refitted look-alike of `best` against it: held-out gain, paired p, the finding's gain over it, whether
-    it is told apart, and whether it is a structural equivalent.
-
-    Told apart takes a significant difference (`p < alpha`) *and* one that matters: the finding's windows' error
-    at least `min_gain` below the look-alike's, the margin a candidate must gain to count at all (a practical
-    margin, as in equivalence testing: with hundreds of correlated windows a 1 % difference can be significant,
-    and two causes that predict within 1 % of each other are not told apart by the data in any useful sense)."""
-    o, alternatives = problem.options, []
-    for k in problem.look_alikes(best):
-        if k in results:
-            s_k, s_best = scores[results[k]["i"]], scores[results[best]["i"]]
-            test = _paired_test(s_k, s_best, yard.window_runs, yard.overlap)
-            margin = float(1 - s_best.mean() / s_k.mean())
-            equivalent = k in problem.equivalents.get(best, [])
-            alternatives.append({"cause": problem.candidates[k].cause, "where": problem.candidates[k].where(problem.system),
-                                 "gain": float(results[k]["gain_held_out"]), "p_value": test.p_value,
-                                 "gain_over": margin,
-                                 "told_apart": bool(test.p_value < o.alpha and margin >= o.min_gain and not equivalent),
-                                 "equivalent": equivalent})
-    return alternatives
-
-
-def _rank(results):
-    """The key that ranks a round's admissible candidates: the gain on the held-out runs' windows.
-
-    The test pools the cross-fitted training runs with the held-out runs (power), but the held-out runs,
-    which no fit of the round has seen, choose among the candidates that pass: with two or three
-    training runs each fold fits on one or two runs only, and its left-out run then rewards what
-    mends a poorly determined fit as much as the cause (on the DFKI rig, viscous friction where the
-    held-out runs prefer Coulomb friction). Without cross-fitting this is the pooled gain."""
-    return lambda k: results[k]["gain_held_out"]
-
-
 def _select(problem: _Problem, yard: _Yardstick, current: _Current, results, scores, round_, say) -> dict | None:
     """Select: the admissible candidate with the largest held-out gain, as a finding; `None` if none passed."""
     admissible = [k for k in results if results[k]["significant"]]
     if not admissible:
         say(f"round {round_ + 1}: no candidate improves the held-out simulation significantly")
         return None
-    best = max(admissible, key=_rank(results))
+    best = max(admissible, key=rank(results))
     r, term, system = results[best], problem.candidates[best], problem.system
     ref = yard.ref_index
     gain = float(1 - r["rmse"][ref] / current.rmse[ref]) if np.isfinite(current.rmse[ref]) else 1.0
-    alternatives = _look_alike_tests(problem, yard, best, results, scores)
+    alternatives = look_alike_tests(problem, yard, best, results, scores)
     equivalent = [problem.candidates[k].label(system) for k in problem.equivalents.get(best, [])]
     # A structural equivalent is never told apart, whatever the paired test of two fits of one model says.
     confidence = "high" if all(a["told_apart"] for a in alternatives) else "low"
@@ -664,7 +626,7 @@ def _complete_look_alikes(problem, yard, cur_slots, cur_p, short, remaining, del
         admissible = [k for k in results if results[k]["significant"]]
         if not admissible:
             break
-        best = max(admissible, key=_rank(results))
+        best = max(admissible, key=rank(results))
         missing = [k for k in problem.look_alikes(best) if k in remaining and k not in results]
         missing = missing[: problem.options.shortlist]
         if not missing:
@@ -713,7 +675,7 @@ def _forward_selection(problem: _Problem, say):
             scores = _scores(problem, yard, batch.errors, batch.cv_errors)
         if not short:
             break
-        judge = lambda short, batch, scores: _judge_round(  # noqa: E731
+        judge = lambda short, batch, scores: judge_round(  # noqa: E731
             problem.physical, short, remaining, current.selected, len(problem.names), batch.p, batch.std, batch.errors,
             scores, current.score, yard.window_runs, yard.overlap, o.alpha, o.min_gain, yard.steps,
             problem.position_index, yard.n_val)
@@ -793,7 +755,7 @@ def _discover(problem: _Problem, nominal: _Nominal, yard: _Yardstick, current: _
     system = problem.system
     found = discover(
         judgement.model if current.selected else nominal.model, problem.train, problem.validation, held_out=held_out,
-        significance=lambda ref, new: _paired_test(ref, new, problem.window_runs, yard.overlap).p_value,
+        significance=lambda ref, new: paired_test(ref, new, problem.window_runs, yard.overlap).p_value,
         refit=problem.refit_names, vocabulary=[problem.candidates[k].label(system) for k in problem.searchable],
         absorbed=[f"{c['cause']}@{c['where']}" for c in problem.not_identifiable], alpha=o.alpha, min_gain=o.min_gain,
         fit_window_s=problem.fit_window_s,
@@ -1003,36 +965,12 @@ def diagnose(
                        train=train, validation=validation)
 
 
-def _shortlist(look_alikes_of, remaining, gains_scr, shortlist):
-    """The best screened candidates and the look-alikes of the best (`look_alikes_of(k)`), `shortlist` in all."""
-    order = [remaining[i] for i in np.argsort(-gains_scr)]
-    short = order[: max(1, shortlist - 2)]
-    for k in look_alikes_of(order[0]):
-        if k in remaining and k not in short:
-            short.append(k)
-    short += [k for k in order if k not in short][: max(0, shortlist - len(short))]
-    return short[:shortlist]
-
-
 def _start_value(problem: _Problem, k: int, delta_screened, start):
     """A candidate's starting coefficient: the screening's step if physical and moderate, else the default start."""
     term, scale = problem.candidates[k], problem.scales[k]
     ok = np.isfinite(delta_screened) and problem.physical(k, delta_screened) and abs(delta_screened) < 20 * scale
     lagging = isinstance(term, AbstractInputTerm) and term.n_hidden and delta_screened < start
     return delta_screened if ok and not lagging else start
-
-
-def _physical(term, delta, partner, names, system) -> bool:
-    """`term` at `delta` from neutral on its physical side (friction, inertia, delay: above neutral)
-    and, with `partner = (i, alpha)`, the held nominal parameter `names[i]` plus `alpha * delta`
-    within its consistency bound."""
-    if term.sign != 0 and not delta * term.sign > 0:
-        return False
-    if partner is None:
-        return True
-    i, alpha = partner
-    value = float(nominal_values(system, names)[i]) + alpha * float(delta)
-    return violated_bound(names[i], value, system.base_parameter_kinds().get(names[i])) is None
 
 
 def _note_held(system, family, refit_names, mode, notes) -> None:
@@ -1046,43 +984,4 @@ def _note_held(system, family, refit_names, mode, notes) -> None:
                      + ", ".join(f"{n} = {float(values[family.names.index(n)]):.4g}" for n in held)
                      + ") keeps its value and the friction candidates test it (Refit(parameters=...) "
                      "chooses otherwise).")
-
-
-def _judge_round(physical, short, remaining, selected, n_nom, p_j, std_j, err_j, scores_j, score_cur, window_runs,
-                 overlap, alpha, min_gain, steps, position_index, n_val=None):
-    """Each shortlisted candidate's held-out test: paired block test, Benjamini-Hochberg over every remaining candidate
-    (those not refitted count with p = 1), the smallest gain, agreement across runs, a physical sign of every
-    coefficient of the joint refit: the new one's *and* those of the terms selected in earlier rounds, which the
-    joint refit moves (a later term must not push an earlier friction below zero to fit), and no harm on the
-    held-out runs.
-
-    The last rule matters with cross-fitting only (without it the pooled windows are the held-out ones, and the
-    smallest gain implies it): the test pools the cross-fitted training runs' windows with the held-out runs' for
-    power, and on a few training runs their evidence can outweigh the held-out runs'. The held-out runs are the
-    one judge no fit has seen, and the model the diagnosis returns is the one they measure: a candidate that
-    makes their windows' error larger is not named, however much the cross-fitted folds liked it (DFKI, trained
-    on runs 00, 02 and 05: an offset on the shoulder torque, 71 % pooled, 15 % worse on held-out runs 01 and 03).
-
-    `n_val`: how many of the windows are the held-out runs' (the rest are cross-fitted); default all."""
-    n_val = len(score_cur) if n_val is None else n_val
-    tests = {k: _paired_test(score_cur, scores_j[i], window_runs, overlap) for i, k in enumerate(short, start=1)}
-    rejected = benjamini_hochberg([tests[k].p_value for k in short] + [1.0] * (len(remaining) - len(short)), alpha)
-    results = {}
-    for i, k in enumerate(short, start=1):
-        test = tests[k]
-        delta = p_j[i, -1]
-        gain_windows = 1 - scores_j[i].mean() / score_cur.mean()  # every held-out window, cross-fitted ones included
-        gain_held_out = 1 - scores_j[i][:n_val].mean() / score_cur[:n_val].mean()  # the held-out runs' alone
-        ok = physical(k, delta) and all(physical(s, p_j[i, n_nom + m]) for m, s in enumerate(selected))
-        helped = sum(v > 0 for v in test.per_run.values())
-        agree = helps_on_most_runs(test.per_run)
-        rules = {"significance": bool(rejected[i - 1]), "min_gain": bool(gain_windows >= min_gain), "sign": bool(ok),
-                 "agreement": bool(agree),  # each rule on its own: the report says which stopped a candidate
-                 "held_out": bool(gain_held_out > 0)}
-        results[k] = dict(i=i, delta=delta, std=std_j[i, -1], gain_windows=gain_windows, gain_held_out=gain_held_out,
-                          p=test.p_value, test=test,
-                          rmse=_rmse_curve(err_j[i], steps, position_index), physical=ok,
-                          runs_helped=helped, n_runs=len(test.per_run), n_tested=len(remaining), rules=rules,
-                          significant=all(rules.values()))
-    return results
 

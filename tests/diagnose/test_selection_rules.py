@@ -1,4 +1,4 @@
-"""The admissibility rules of one selection round (`_judge_round`): a candidate whose joint refit pushes
+"""The admissibility rules of one selection round (`dynax._diagnose._selection.judge_round`): a candidate whose joint refit pushes
 an earlier finding's coefficient to an unphysical sign is not admissible, however much it helps; a
 candidate that adds to a nominal parameter the refit keeps (viscous friction) may lower it, not below zero."""
 
@@ -9,7 +9,8 @@ import pytest
 from dynax import Acrobot
 from dynax._data import Trajectory
 from dynax._diagnose._candidates import default_candidates, held_partners
-from dynax._diagnose._diagnose import _candidate_family, _judge_round, _physical, _refit_names, Known, Refit
+from dynax._diagnose._diagnose import _candidate_family, _refit_names, Known, Refit
+from dynax._diagnose._selection import judge_round, look_alike_tests, on_physical_side
 from dynax._model._extensions import CoulombFriction, InputOffset, ViscousFriction
 
 
@@ -25,8 +26,8 @@ def _round(earlier_fc1, new_delta, *, earlier=CoulombFriction(0)):
     score_cur = rng.uniform(1.0, 2.0, n_windows)
     scores = np.stack([score_cur, 0.6 * score_cur * rng.uniform(0.9, 1.1, n_windows)])
     errors = np.ones((2, n_windows, n_steps, 4)) * np.asarray([1.0, 0.7])[:, None, None, None]
-    physical = lambda k, delta: _physical(candidates[k], delta, None, (), None)  # noqa: E731
-    results = _judge_round(physical, [1], [1], [0], n_nom, p, np.full_like(p, 0.01), errors, scores, score_cur,
+    physical = lambda k, delta: on_physical_side(candidates[k], delta, None, (), None)  # noqa: E731
+    results = judge_round(physical, [1], [1], [0], n_nom, p, np.full_like(p, 0.01), errors, scores, score_cur,
                            np.repeat([0, 1], n_windows // 2), 1, alpha=0.01, min_gain=0.05,
                            steps=np.asarray([5, 10]), position_index=[0, 1])
     return results[1]
@@ -65,7 +66,7 @@ def test_a_candidate_the_cross_fitted_runs_carry_but_the_held_out_runs_reject_is
         p[1, -1] = 0.1
         errors = np.ones((2, n_val + n_cv, 11, 4))
         physical = lambda k, delta: True  # noqa: E731
-        return _judge_round(physical, [0], [0], [], 2, p, np.full_like(p, 0.01), errors, scores, score_cur, runs, 1,
+        return judge_round(physical, [0], [0], [], 2, p, np.full_like(p, 0.01), errors, scores, score_cur, runs, 1,
                             alpha=0.01, min_gain=0.05, steps=np.asarray([5, 10]), position_index=[0, 1], n_val=n_val)[0]
 
     harmful = judged(1.1)
@@ -104,9 +105,9 @@ def test_refit_keeps_the_nominal_friction_and_its_viscous_candidates_add_to_it()
     assert by_label["coulomb_friction@q2"] is None and by_label["rotor_inertia@q2"] is None
     # theta6 = 0.1 in the nominal model: lowering it by 0.05 is physical, by 0.2 is not.
     names = family.names
-    assert _physical(ViscousFriction(0), -0.05, by_label["viscous_friction@q1"], names, system)
-    assert not _physical(ViscousFriction(0), -0.2, by_label["viscous_friction@q1"], names, system)
-    assert _physical(ViscousFriction(0), 0.3, by_label["viscous_friction@q1"], names, system)
+    assert on_physical_side(ViscousFriction(0), -0.05, by_label["viscous_friction@q1"], names, system)
+    assert not on_physical_side(ViscousFriction(0), -0.2, by_label["viscous_friction@q1"], names, system)
+    assert on_physical_side(ViscousFriction(0), 0.3, by_label["viscous_friction@q1"], names, system)
 
 
 def test_all_parameters_can_still_be_refitted_and_known_mode_refits_none():
@@ -120,7 +121,7 @@ def test_a_look_alike_is_told_apart_only_by_a_difference_that_matters():
     margin any candidate must gain to count. One 30 % worse is told apart; a structural equivalent never is."""
     from types import SimpleNamespace
 
-    from dynax._diagnose._diagnose import _look_alike_tests
+
 
     rng = np.random.default_rng(1)
     n_windows = 240
@@ -132,7 +133,7 @@ def test_a_look_alike_is_told_apart_only_by_a_difference_that_matters():
                               system=Acrobot(), look_alikes=lambda k: [1, 2, 3], equivalents={0: [3]})
     results = {k: {"i": k + 1, "gain_held_out": 0.5} for k in range(4)}
     yard = SimpleNamespace(window_runs=np.repeat([0, 1], n_windows // 2), overlap=1)
-    tests = {a["cause"] + str(i): a for i, a in enumerate(_look_alike_tests(problem, yard, 0, results, scores))}
+    tests = {a["cause"] + str(i): a for i, a in enumerate(look_alike_tests(problem, yard, 0, results, scores))}
     near, far, equivalent = tests["coulomb_friction0"], tests["input_offset1"], tests["viscous_friction2"]
     assert near["p_value"] < 1e-6 and near["gain_over"] == pytest.approx(0.01, abs=0.002)
     assert not near["told_apart"]
