@@ -168,6 +168,8 @@ def run(args: argparse.Namespace) -> int:
             print("  consistency constraint active (the plain least-squares estimate broke: " + "; ".join(enforced) + ")")
         elif not consistency.violated:
             print("  physically consistent")
+    if result.record_offsets is not None and result.record_offsets.differ():
+        print("  " + result.record_offsets.note())
     for stage, content in (result.stages or {}).items():
         held = content.get("validation")
         if held:

@@ -19,6 +19,7 @@ from ._identify import (
     Identification as Identification,
     Power as Power,
 )
+from ._offsets import record_offsets as record_offsets, RecordOffsets as RecordOffsets
 from ._least_squares import (
     IdentifiabilityError as IdentifiabilityError,
     least_squares as least_squares,

@@ -11,6 +11,7 @@ Three linear-in-parameter least-squares models and one output-error fit:
 - `SimulationFit()`: minimise the simulation (output) error through `dynax.simulate`.
 """
 
+import pathlib
 import warnings
 from collections.abc import Sequence
 from typing import Literal
@@ -41,6 +42,7 @@ from ._defaults import choose_filter, trim_and_decimation
 from ._refine import refine_by_simulation
 from ._validation import DEFAULT_HORIZONS_S, held_out_error, HeldOutError, split_for_validation
 from ._least_squares import least_squares, LeastSquaresFit
+from ._offsets import record_offsets, RecordOffsets
 from ._simulation_fit import fit_simulation_error, SimulationFit
 from ._regressors import (
     _positions,
@@ -210,6 +212,10 @@ class Identification(eqx.Module):
     - `solution`: for the iterative method (`SimulationFit`), the engine's `Solution` this result
       is built from (the same names, estimate, standard errors and covariance, plus the result
       code, steps and losses); `None` for the least-squares methods, whose `fit` holds the same.
+    - `record_offsets`: for `Dynamic` on two records or more, each record's constant offset on each
+      joint's recorded force (from each half of the record too) and whether they differ between
+      records (`RecordOffsets`, see `dynax._identify._offsets`): a sensor zero that changes from one
+      recording to the next, which no model term carries; `None` otherwise.
 
     **Properties** in `Solution`'s spelling: `value` (= `estimate`), `covariance`; and
     `parameters` / `standard_errors` as `{name: value}` (`Solution.estimates()` /
@@ -234,6 +240,7 @@ class Identification(eqx.Module):
     validation: HeldOutError | None = None
     stages: dict | None = None
     solution: Solution | None = None
+    record_offsets: RecordOffsets | None = None
 
     @property
     def value(self) -> Float[Array, " n_params"]:
@@ -262,7 +269,7 @@ class Identification(eqx.Module):
 
     def to_json(self) -> dict:
         """The contract's `identify` output object, extended with `settings`, `consistency`,
-        `validation` and `stages` where they apply."""
+        `validation`, `stages` and `record_offsets` where they apply."""
         out = {
             "system": self.system_name,
             "method": self.method,
@@ -280,6 +287,8 @@ class Identification(eqx.Module):
         out["validation"] = None if self.validation is None else self.validation.to_json()
         if self.stages:
             out["stages"] = self.stages
+        if self.record_offsets is not None:
+            out["record_offsets"] = self.record_offsets.to_json()
         return out
 
 
@@ -569,17 +578,26 @@ class _LeastSquaresStage(eqx.Module):
     label: str = eqx.field(static=True)
     settings: tuple
     consistency: Consistency
+    offsets: RecordOffsets | None
+
+
+def _position_names(system):
+    """The joints' position names (the first half of a mechanical system's states)."""
+    names = tuple(system.state_names)
+    return names[: len(names) // 2]
 
 
 def _equations(system, trajectories, method, friction, weights, rcond):
-    """The stacked least-squares problem `(a, y, weights, names, n_samples, label, settings)`."""
+    """The stacked least-squares problem `(a, y, weights, names, n_samples, label, settings, counts)`;
+    `counts` (for `Dynamic`) each record's rows per joint, else `()`."""
     system = with_friction(system, friction)
     names = parameter_names(system, friction)
-    settings = ()
+    settings, counts = (), ()
     if isinstance(method, Dynamic):
         parts = [_dynamic_rows(system, t, method, friction) for t in trajectories]
         a, y = _joint_blocks([p[0] for p in parts], [p[1] for p in parts], tuple(p[4] for p in parts))
-        n_samples = sum(p[2] for p in parts)
+        counts = tuple(int(p[2]) for p in parts)
+        n_samples = sum(counts)
         settings = tuple(p[3] for p in parts)
         n_joints = parts[0][0].shape[1]
         if method.weighting == "joint" and weights is None:
@@ -601,7 +619,7 @@ def _equations(system, trajectories, method, friction, weights, rcond):
         raise UsageError(
             f"identify: `method` must be Dynamic(), Power(), Energy() or SimulationFit(), got {type(method).__name__}"
         )
-    return system, a, y, weights, names, n_samples, label, settings
+    return system, a, y, weights, names, n_samples, label, settings, counts
 
 
 @eqx.filter_jit
@@ -625,7 +643,7 @@ def _stacked_positions(system, states):
 
 
 def _least_squares_stage(system, trajectories, method, friction, weights, rcond, consistency):
-    system, a, y, weights, names, n_samples, label, settings = _equations(
+    system, a, y, weights, names, n_samples, label, settings, counts = _equations(
         system, trajectories, method, friction, weights, rcond
     )
     fit = least_squares(a, y, names=names, weights=weights, rcond=rcond)
@@ -642,8 +660,10 @@ def _least_squares_stage(system, trajectories, method, friction, weights, rcond,
         if after.violated:
             warnings.warn("the constrained fit did not reach a consistent estimate: " + "; ".join(after.violated),
                           InconsistentEstimateWarning, stacklevel=3)
+    labels = [pathlib.Path(t.source).name if t.source else f"record {i}" for i, t in enumerate(trajectories)]
+    offsets = record_offsets(a, y, counts, _position_names(system), labels) if counts else None
     return _LeastSquaresStage(fitted, names, estimate, fit, a, y, int(n_samples),
-                              label, settings, check)
+                              label, settings, check, offsets)
 
 
 def _relative_equation_error(a, y, estimate):
@@ -793,7 +813,7 @@ def _refined_stage(ls, fitted, method, friction, rcond, consistency, refinement,
     `final` holds what `identify` returns (system, names, estimate, standard errors, equation error
     on the least-squares rows, validation, consistency, method label)."""
     refined = refine_by_simulation(ls.system, ls.names, fitted, refinement)
-    _, a, y, _, _, _, _, _ = _equations(refined.system, fitted, method, friction, None, rcond)
+    _, a, y, _, _, _, _, _, _ = _equations(refined.system, fitted, method, friction, None, rcond)
     error = _relative_equation_error(a, y, jnp.asarray(refined.estimate))
     qs = _joint_positions(refined.system, fitted)
     check = check_consistency(refined.system, refined.names, refined.estimate, qs, warn=consistency != "off")
@@ -920,6 +940,7 @@ def identify(
         consistency=final["consistency"],
         validation=final["validation"],
         stages=stages,
+        record_offsets=ls.offsets,
     )
 
 

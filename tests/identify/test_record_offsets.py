@@ -1,0 +1,80 @@
+"""Per-record offsets of the recorded torque (`identify(...).record_offsets`): a sensor zero that changes
+from one recording to the next is found, measured and told apart from records that agree.
+
+The records are made by scipy's DOP853 (not dynax's integrator) with sensor noise at the DFKI rig's
+level (`recorded` in `test_identify_defaults`); the offset is added to the *recorded* torque only,
+so the arm moved under the torque without it, as with a current sensor that reads high.
+"""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import dynax
+from dynax._data import Trajectory
+from dynax._identify import Dynamic, identify
+from dynax._identify._offsets import record_offsets
+from tests.identify.test_identify_defaults import dfki, recorded, rig_model
+
+SEEDS = (20, 21, 22, 23)
+
+
+@pytest.fixture(scope="module")
+def records():
+    model = rig_model()
+    return [recorded(model, 6.0, seed) for seed in SEEDS]
+
+
+def with_offset(record, offset):
+    us = jnp.asarray(np.asarray(record.us) + np.asarray(offset)[None, :])
+    return Trajectory(record.ts, record.xs, us, record.state_names, record.input_names)
+
+
+def test_offsets_that_differ_between_records_are_found_and_measured(records):
+    truth = np.array([[0.12, 0.0], [0.0, 0.0], [-0.06, 0.0], [0.05, 0.0]])  # shoulder only, N m
+    shifted = [with_offset(r, o) for r, o in zip(records, truth)]
+    result = identify(dynax.DoublePendulum(), shifted, Dynamic(), friction="coulomb", refine=False, holdout=0)
+    found = result.record_offsets
+    assert found is not None and found.differ() == ("q1",), (found.f_statistic, found.p_value)
+    # each record's offset within 0.02 N m (the torque noise is 0.02 N m per sample; the Coulomb
+    # friction, 0.15 N m, is not a constant and does not take it up)
+    assert np.max(np.abs(found.offsets[:, 0] - truth[:, 0])) < 0.02, found.offsets
+    # and each half of a record agrees with the other: a sensor's zero, not model error
+    assert np.max(np.abs(found.halves[:, 0, 0] - found.halves[:, 1, 0])) < 0.02
+    note = result.to_json()["record_offsets"]["note"]
+    assert note is not None and "q1" in note and "q2" not in note.split("differs from record to record")[1].split(":")[0]
+
+
+def test_records_without_offsets_are_not_said_to_differ(records):
+    result = identify(dynax.DoublePendulum(), records, Dynamic(), friction="coulomb", refine=False, holdout=0)
+    found = result.record_offsets
+    assert found is not None and found.differ() == (), (found.f_statistic, found.p_value)
+    assert np.max(np.abs(found.offsets)) < 0.02
+    assert result.to_json()["record_offsets"]["note"] is None
+
+
+def test_a_common_offset_is_measured_but_does_not_differ(records):
+    # The same offset in every record is a constant of the rig, not of the record: measured, not flagged.
+    shifted = [with_offset(r, (0.08, 0.0)) for r in records]
+    found = identify(dynax.DoublePendulum(), shifted, Dynamic(), friction="coulomb", refine=False,
+                     holdout=0).record_offsets
+    assert found.differ() == ()
+    np.testing.assert_allclose(found.offsets[:, 0], 0.08, atol=0.02)
+
+
+def test_one_record_has_no_offsets_to_compare(records):
+    assert identify(dynax.DoublePendulum(), records[0], Dynamic(), friction="coulomb", refine=False,
+                    holdout=0).record_offsets is None
+    assert record_offsets(np.zeros((8, 2)), np.zeros(8), (4,), ("q1", "q2")) is None
+
+
+def test_dfki_runs_00_and_01_read_the_shoulder_torque_high(datasets):
+    # The DFKI rig's shoulder torque reads about 0.14 N m high in run 00 and 0.07 N m in run 01, and
+    # each run's halves agree (experiments/dfki_torque_offsets.py); the sinusoidal runs 02 and 03 carry
+    # almost none. Checked on those four runs, whose halves agree on q1, so that the answer is not
+    # carried by the chaotic run 12 (whose halves differ: model error there).
+    runs = [dynax.resample(r, r.dt) for r in (dfki(datasets, n) for n in ("00", "01", "02", "03"))]
+    found = identify(dynax.DoublePendulum(), runs, Dynamic(), friction="coulomb", refine=False, holdout=0).record_offsets
+    assert found.differ() == ("q1",), (found.f_statistic, found.p_value)
+    assert found.offsets[0, 0] > 0.1 and 0.04 < found.offsets[1, 0] < 0.1 and np.all(np.abs(found.offsets[2:, 0]) < 0.03)
+    assert np.all(np.abs(found.halves[:, 0, 0] - found.halves[:, 1, 0]) < 0.02)
