@@ -4,10 +4,16 @@ The nominal model is the lab's rigid-body `model_3.1` (no friction, no rotor ine
 holds out runs dynax does not train on; `S2` and `S3` hold out the 6 s large-amplitude run 12.
 Writes `OUT/splits.json` (verdict, findings, gain, horizon per split and mode) and `OUT/splits.png`.
 
-    python experiments/diagnose_real_splits.py ../shared/datasets experiments/results/diagnose_real_splits [SPLITS] [MODES] [REFERENCE_HORIZON|auto] [FIT_WINDOW]
+    python experiments/diagnose_real_splits.py ../shared/datasets experiments/results/diagnose_real_splits [SPLITS] [MODES] [REFERENCE_HORIZON|auto] [FIT_WINDOW] [--variant V]
 
 SPLITS: comma-separated names (`S1,S3`) or ad hoc splits `TRAIN:HELD` with runs joined by `+`
 (`00+05:03+12`: train on runs 00 and 05, hold out 03 and 12).
+
+`--variant V` changes the data, not the method, to check that the answer does not hang on one way
+of recording the rig: `5ms` (default: every run resampled at 5 ms), `2ms` (the runs' own median
+interval), `10ms`, `half` (5 ms, each run cut to its first half: shorter records) or `noise` (5 ms,
+white noise of 0.3 rad/s added to the measured velocities and of 0.03 N m to the torques, seeded by
+the run's number: a noisier rig).
 """
 
 import json
@@ -16,6 +22,7 @@ import sys
 import time
 
 import jax
+import jax.numpy as jnp
 
 jax.config.update("jax_enable_x64", True)
 
@@ -27,6 +34,7 @@ import numpy as np  # noqa: E402
 
 from dynax import DoublePendulum  # noqa: E402
 from dynax._data import load_trajectory, resample  # noqa: E402
+from dynax._data._trajectory import Trajectory  # noqa: E402
 from dynax._diagnose import diagnose, Known, Refit  # noqa: E402
 
 MAPPING = {"t": "time", "q1": "pos_meas1", "q2": "pos_meas2", "dq1": "vel_meas1", "dq2": "vel_meas2",
@@ -40,9 +48,29 @@ SPLITS = {
 LAB_EFFECTS = {"coulomb_friction", "viscous_friction", "rotor_inertia"}
 
 
-def load(data: pathlib.Path, run: str):
+VARIANTS = ("5ms", "2ms", "10ms", "half", "noise")
+EXTRA_NOISE = (0.3, 0.03)  # `noise` variant: white noise on the velocities [rad/s] and torques [N m]
+
+
+def load(data: pathlib.Path, run: str, variant: str = "5ms"):
+    """One run, resampled and changed as `variant` says (see the module docstring)."""
+    if variant not in VARIANTS:
+        raise SystemExit(f"--variant must be one of {', '.join(VARIANTS)}, got {variant!r}")
     path = data / "dfki_double_pendulum" / "sys_id" / f"trajectory_{run}.csv"
-    return resample(load_trajectory(path, "double_pendulum", mapping=MAPPING), 0.005)
+    dt = {"2ms": 0.002, "10ms": 0.010}.get(variant, 0.005)
+    record = resample(load_trajectory(path, "double_pendulum", mapping=MAPPING), dt)
+    if variant not in ("half", "noise"):
+        return record
+    ts, xs, us = np.asarray(record.ts), np.asarray(record.xs).copy(), np.asarray(record.us).copy()
+    if variant == "half":
+        n = len(ts) // 2
+        ts, xs, us = ts[:n], xs[:n], us[:n]
+    else:
+        rng = np.random.default_rng(int(run))
+        xs[:, 2:] += rng.normal(0.0, EXTRA_NOISE[0], xs[:, 2:].shape)
+        us += rng.normal(0.0, EXTRA_NOISE[1], us.shape)
+    return Trajectory(jnp.asarray(ts), jnp.asarray(xs), jnp.asarray(us), record.state_names, record.input_names,
+                      record.system, record.source)
 
 
 def nominal_model_3_1() -> DoublePendulum:
@@ -62,17 +90,17 @@ def split_runs(name: str) -> tuple[tuple[str, ...], tuple[str, ...]]:
     return SPLITS[name]
 
 
-def run_split(data, name, mode_name, **kwargs):
+def run_split(data, name, mode_name, variant="5ms", **kwargs):
     train_runs, val_runs = split_runs(name)
-    train = [load(data, r) for r in train_runs]
-    validation = [load(data, r) for r in val_runs]
+    train = [load(data, r, variant) for r in train_runs]
+    validation = [load(data, r, variant) for r in val_runs]
     mode = Known() if mode_name == "known" else Refit()
     start = time.process_time()
     report = diagnose(nominal_model_3_1(), train, validation, mode=mode, system_name="double_pendulum",
                       progress=lambda line: print(f"  [{name} {mode_name}] {line}", flush=True), **kwargs)
     j = report.to_json()
     return {
-        "split": name, "mode": mode_name, "train": list(train_runs), "validation": list(val_runs),
+        "split": name, "mode": mode_name, "variant": variant, "train": list(train_runs), "validation": list(val_runs),
         "cpu_s": time.process_time() - start, "verdict": j["verdict"], "gain": j["gain"],
         "reference_horizon_s": j["reference_horizon_s"], "horizon": j.get("horizon"),
         "findings": [{k: f[k] for k in ("cause", "where", "coefficient", "gain", "p_value")} for f in j["findings"]],
@@ -104,6 +132,11 @@ def plot(results, path):
 
 
 if __name__ == "__main__":
+    variant = "5ms"
+    if "--variant" in sys.argv:
+        i = sys.argv.index("--variant")
+        variant = sys.argv[i + 1] if i + 1 < len(sys.argv) else ""
+        del sys.argv[i : i + 2]
     data, out = pathlib.Path(sys.argv[1]), pathlib.Path(sys.argv[2])
     splits = sys.argv[3].split(",") if len(sys.argv) > 3 else list(SPLITS)
     modes = sys.argv[4].split(",") if len(sys.argv) > 4 else ["known", "refit"]
@@ -114,8 +147,8 @@ if __name__ == "__main__":
             kwargs = {"reference_horizon_s": float(sys.argv[5])} if len(sys.argv) > 5 and sys.argv[5] != "auto" else {}
             if len(sys.argv) > 6:
                 kwargs["fit_window_s"] = float(sys.argv[6])
-            r = run_split(data, s, m, **kwargs)
-            print(json.dumps({k: r[k] for k in ("split", "mode", "verdict", "gain", "reference_horizon_s", "findings", "cpu_s")}), flush=True)
+            r = run_split(data, s, m, variant, **kwargs)
+            print(json.dumps({k: r[k] for k in ("split", "mode", "variant", "verdict", "gain", "reference_horizon_s", "findings", "cpu_s")}), flush=True)
             results.append(r)
     (out / "splits.json").write_text(json.dumps(results, indent=1))
     plot(results, out / "splits.png")
