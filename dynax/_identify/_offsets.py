@@ -36,8 +36,9 @@ ALPHA = 0.01  # the offsets "differ between records" below this p-value
 class RecordOffsets:
     r"""Each record's constant offset on each joint's equation, and whether the records differ.
 
-    **Fields:** `records` (labels: file names where known), `joints` (position names), `offsets` `(record, joint)` in the force's unit: what the
-    record's recorded force exceeds the model's by (positive: the sensor reads high); `halves`
+    **Fields:** `records` (labels: file names where known), `joints` (position names), `offsets`
+    `(record, joint)` in the force's unit: what the record's recorded force exceeds the model's by
+    (positive: the sensor reads high); `halves`
     `(record, 2, joint)` the same from each half of the record; `f_statistic`, `p_value` `(joint,)`
     the one-way analysis of variance of the halves' offsets across records (see the module);
     `estimate` the shared parameters fitted with the offsets (the equations' columns, in order) and
@@ -68,16 +69,17 @@ class RecordOffsets:
         for name in differ:
             j = self.joints.index(name)
             values = ", ".join(f"{label} {self.offsets[r, j]:+.3g}" for r, label in enumerate(labels))
-            parts.append(f"at {name} ({values}; F = {self.f_statistic[j]:.3g}, p = {self.p_value[j]:.2g})")
-        return ("The recorded force carries an offset that differs from record to record "
-                + "; ".join(parts) + ": each record's two halves agree on it, so it is most likely the sensor's zero, "
-                "which no model term carries to another record; a held-out record simulated with its recorded force "
-                "carries its own offset as error.")
+            parts.append(f"at {name} ({values}; F = {self.f_statistic[j]:.3g}, p = {self.p_value[j]:.2g}")
+        return ("The recorded force or torque carries an offset that differs from record to record "
+                + "; ".join(parts) + "): the records differ by more than the two halves of a record do, as a "
+                "sensor's zero would, which no model term carries to another record; a held-out record simulated "
+                "with its recorded force carries its own offset as error.")
 
     def to_json(self) -> dict:
-        return {"records": list(self.records), "joints": list(self.joints), "offsets": self.offsets.tolist(), "halves": self.halves.tolist(),
-                "f_statistic": self.f_statistic.tolist(), "p_value": self.p_value.tolist(), "alpha": self.alpha,
-                "differ": list(self.differ()), "relative_equation_error": self.relative_error, "note": self.note()}
+        return {"records": list(self.records), "joints": list(self.joints), "offsets": self.offsets.tolist(),
+                "halves": self.halves.tolist(), "f_statistic": self.f_statistic.tolist(),
+                "p_value": self.p_value.tolist(), "alpha": self.alpha, "differ": list(self.differ()),
+                "relative_equation_error": self.relative_error, "note": self.note()}
 
 
 def record_offsets(a, y, counts, joints, records=None, alpha: float = ALPHA) -> RecordOffsets | None:
@@ -93,24 +95,35 @@ def record_offsets(a, y, counts, joints, records=None, alpha: float = ALPHA) -> 
     n_records, n_joints = len(counts), len(joints)
     if n_records < 2 or min(counts) < 4 or a.shape[0] != n_joints * sum(counts):
         return None
-    columns = np.zeros((a.shape[0], n_records * 2 * n_joints))
+    # Each row's group: (record, half, joint). Regressing on one indicator column per group is the same as
+    # removing each group's mean from `a` and `y` (Frisch-Waugh-Lovell), which needs no indicator matrix.
+    group = np.empty(a.shape[0], int)
     joint_of_row = np.repeat(np.arange(n_joints), sum(counts))
     ends = np.cumsum((0,) + tuple(counts))
     for j in range(n_joints):
         for r in range(n_records):
             rows = j * sum(counts) + np.arange(ends[r], ends[r + 1])
             for h, half in enumerate(np.array_split(rows, 2)):
-                columns[half, (r * 2 + h) * n_joints + j] = 1.0
-    full = np.concatenate([a, columns], axis=1)
-    weights = np.ones(len(y))
+                group[half] = (r * 2 + h) * n_joints + j
+    n_groups = n_records * 2 * n_joints
+    size = np.bincount(group, minlength=n_groups)
+
+    def group_mean(values):  # (rows, columns) -> (groups, columns)
+        sums = [np.bincount(group, weights=column, minlength=n_groups) for column in values.T]
+        return np.stack(sums, axis=-1) / size[:, None]
+
+    a_within = a - group_mean(a)[group]
+    y_within = y - group_mean(y[:, None])[group, 0]
+    weights = np.ones(len(y))  # constant within each group, so the group means need no weighting
     for _ in range(2):  # unweighted, then each joint's rows by its residual scale (`Dynamic()`'s joint weighting)
-        solution = np.linalg.lstsq(full * weights[:, None], y * weights, rcond=None)[0]
-        residual = y - full @ solution
+        theta = np.linalg.lstsq(a_within * weights[:, None], y_within * weights, rcond=None)[0]
+        residual = y_within - a_within @ theta
         scale = np.sqrt([np.mean(residual[joint_of_row == j] ** 2) for j in range(n_joints)])
         weights = 1.0 / np.maximum(scale, np.finfo(float).tiny)[joint_of_row]
+    by_group = group_mean((y - a @ theta)[:, None])[:, 0]
     # The equations are model force = recorded force; an offset column fitted into the model side
     # stands for what the recorded force has in excess.
-    halves = solution[a.shape[1]:].reshape(n_records, 2, n_joints)
+    halves = by_group.reshape(n_records, 2, n_joints)
     offsets = halves.mean(axis=1)
     between = 2 * np.sum((offsets - offsets.mean(axis=0)) ** 2, axis=0) / (n_records - 1)
     within = np.sum((halves - offsets[:, None, :]) ** 2, axis=(0, 1)) / n_records
@@ -119,4 +132,4 @@ def record_offsets(a, y, counts, joints, records=None, alpha: float = ALPHA) -> 
     p = scipy.stats.f.sf(f, n_records - 1, n_records)
     relative_error = float(np.linalg.norm(residual) / np.linalg.norm(y))
     records = tuple(records) if records is not None else tuple(f"record {r}" for r in range(n_records))
-    return RecordOffsets(records, tuple(joints), offsets, halves, f, p, solution[: a.shape[1]], relative_error, alpha)
+    return RecordOffsets(records, tuple(joints), offsets, halves, f, p, theta, relative_error, alpha)
