@@ -27,7 +27,6 @@ returns has no offset term, and a held-out record's offset is not known from the
 import dataclasses
 
 import numpy as np
-import scipy.stats
 
 ALPHA = 0.01  # the offsets "differ between records" below this p-value
 
@@ -129,6 +128,8 @@ def record_offsets(a, y, counts, joints, records=None, alpha: float = ALPHA) -> 
     within = np.sum((halves - offsets[:, None, :]) ** 2, axis=(0, 1)) / n_records
     with np.errstate(divide="ignore", invalid="ignore"):
         f = np.where(within > 0, between / within, np.inf)
+    import scipy.stats  # not at import time: `import dynax` stays light (tests/cli/test_packaging.py)
+
     p = scipy.stats.f.sf(f, n_records - 1, n_records)
     relative_error = float(np.linalg.norm(residual) / np.linalg.norm(y))
     records = tuple(records) if records is not None else tuple(f"record {r}" for r in range(n_records))
