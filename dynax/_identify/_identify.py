@@ -865,7 +865,11 @@ def identify(
       by construction (`refine_by_simulation`), and both stages are reported;
     - the returned model is simulated open loop on held-out data (`validation`, or the last 20 %
       of each record, which then does not enter the fit) and the position RMSE against horizon is
-      reported next to the equation error.
+      reported next to the equation error;
+    - with `Dynamic` on two records or more, each record's constant offset on each joint's
+      recorded force is estimated (from each half of the record too) and tested for differing
+      between records (`record_offsets`, a sensor zero that changes from one recording to the
+      next); reported, not used.
 
     **Arguments:**
 
