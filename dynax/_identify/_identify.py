@@ -11,7 +11,6 @@ Three linear-in-parameter least-squares models and one output-error fit:
 - `SimulationFit()`: minimise the simulation (output) error through `dynax.simulate`.
 """
 
-import pathlib
 import warnings
 from collections.abc import Sequence
 from typing import Literal
@@ -42,7 +41,7 @@ from ._defaults import choose_filter, trim_and_decimation
 from ._refine import refine_by_simulation
 from ._validation import DEFAULT_HORIZONS_S, held_out_error, HeldOutError, split_for_validation
 from ._least_squares import least_squares, LeastSquaresFit
-from ._offsets import record_offsets, RecordOffsets
+from ._offsets import record_labels, record_offsets, RecordOffsets
 from ._simulation_fit import fit_simulation_error, SimulationFit
 from ._regressors import (
     _positions,
@@ -660,8 +659,7 @@ def _least_squares_stage(system, trajectories, method, friction, weights, rcond,
         if after.violated:
             warnings.warn("the constrained fit did not reach a consistent estimate: " + "; ".join(after.violated),
                           InconsistentEstimateWarning, stacklevel=3)
-    labels = [pathlib.Path(t.source).name if t.source else f"record {i}" for i, t in enumerate(trajectories)]
-    offsets = record_offsets(a, y, counts, _position_names(system), labels) if counts else None
+    offsets = record_offsets(a, y, counts, _position_names(system), record_labels(trajectories)) if counts else None
     return _LeastSquaresStage(fitted, names, estimate, fit, a, y, int(n_samples),
                               label, settings, check, offsets)
 

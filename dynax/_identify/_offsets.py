@@ -25,6 +25,7 @@ returns has no offset term, and a held-out record's offset is not known from the
 """
 
 import dataclasses
+import pathlib
 
 import numpy as np
 
@@ -134,3 +135,30 @@ def record_offsets(a, y, counts, joints, records=None, alpha: float = ALPHA) -> 
     relative_error = float(np.linalg.norm(residual) / np.linalg.norm(y))
     records = tuple(records) if records is not None else tuple(f"record {r}" for r in range(n_records))
     return RecordOffsets(records, tuple(joints), offsets, halves, f, p, theta, relative_error, alpha)
+
+
+def record_labels(records) -> list[str]:
+    """Each record's file name where it has one, else `record i`."""
+    return [pathlib.Path(r.source).name if r.source else f"record {i}" for i, r in enumerate(records)]
+
+
+def offsets_of_records(system, records, friction="coulomb") -> RecordOffsets | None:
+    """`record_offsets` of the inverse-dynamics equations that `identify(system, records, Dynamic(),
+    friction=friction)` builds (filter settings chosen from each record's spectra).
+
+    **Returns:** `None` where the system has no such equations (it is not a two-link arm or a linear
+    axis), a record is too short for them, or there are fewer than two records.
+    """
+    from .._errors import DataError, UsageError
+    from ._identify import _equations, _position_names, Dynamic
+    from ._regressors import _split
+
+    records = list(records)
+    if len(records) < 2:
+        return None
+    try:
+        base = _split(system)[0]
+        _, a, y, _, _, _, _, _, counts = _equations(base, records, Dynamic(), friction, None, 1e-7)
+    except (DataError, UsageError):  # not a system least squares knows, or a record too short for its filter
+        return None
+    return record_offsets(a, y, counts, _position_names(base), record_labels(records))

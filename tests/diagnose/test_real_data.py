@@ -141,6 +141,10 @@ def test_dfki_refit_mode_names_nothing_the_held_out_runs_reject():
             assert c["outcome"] == "stopped" or c["gain"] > 0, (r["round"], c)
     stopped = [c for r in j["rounds"] for c in r["candidates"] if any(t.startswith("held_out") for t in c["stopped_by"])]
     assert any(c["cause"] == "input_offset" and c["where"] == "tau1" for c in stopped), j["rounds"]
+    # That offset is the recordings': the shoulder torque reads 0.14 N m high in run 00 and 0.07 in held-out run
+    # 01, about nothing in 02 and 03 (both halves of each run agree), and the report says so.
+    offsets = [n for n in j["notes"] if "offset that differs from record to record at q1" in n]
+    assert offsets and "trajectory_00.csv +0.1" in offsets[0] and "trajectory_01.csv +0.0" in offsets[0], j["notes"]
 
 
 def test_dfki_cli_on_the_raw_files_with_no_nominal_and_no_resampling(tmp_path, capsys):
