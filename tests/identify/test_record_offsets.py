@@ -62,6 +62,22 @@ def test_a_common_offset_is_measured_but_does_not_differ(records):
     np.testing.assert_allclose(found.offsets[:, 0], 0.08, atol=0.02)
 
 
+def test_exact_equations_say_nothing_and_an_offset_on_them_is_found_exactly():
+    # Equations with no residual at all: no evidence of differing offsets (not an infinite F from 0 / 0).
+    rng = np.random.default_rng(0)
+    counts, theta = (50, 60, 70), np.array([1.0, -2.0, 0.5])
+    a = rng.normal(size=(2 * sum(counts), 3))
+    found = record_offsets(a, a @ theta, counts, ("q1", "q2"))
+    assert found.differ() == () and np.all(found.f_statistic == 0), found.f_statistic
+    np.testing.assert_allclose(found.estimate, theta, rtol=1e-10)
+    # The same equations with 0.3 added to the second record's first-joint rows: found to 1e-10.
+    y = a @ theta
+    y[counts[0] : counts[0] + counts[1]] += 0.3
+    found = record_offsets(a, y, counts, ("q1", "q2"))
+    np.testing.assert_allclose(found.offsets, [[0, 0], [0.3, 0], [0, 0]], atol=1e-10)
+    assert found.differ() == ("q1",)
+
+
 def test_one_record_has_no_offsets_to_compare(records):
     assert identify(dynax.DoublePendulum(), records[0], Dynamic(), friction="coulomb", refine=False,
                     holdout=0).record_offsets is None
