@@ -902,6 +902,10 @@ def diagnose(
        findings with cause `discovered`. The verdict is then `explained` if the named and
        discovered terms leave no significant structure.
 
+    Where the runs' recorded forces carry constant offsets that differ from run to run (a sensor's
+    zero, which no candidate can carry to another run; `dynax.record_offsets` on the nominal model's
+    inverse-dynamics equations, two-link arms and the linear axis), the report's notes say so.
+
     **Arguments:**
 
     - `system`: the nominal model (its parameters are the start of the fit, or trusted in `Known`).
