@@ -59,17 +59,15 @@ def load(data: pathlib.Path, run: str, variant: str = "5ms"):
     path = data / "dfki_double_pendulum" / "sys_id" / f"trajectory_{run}.csv"
     dt = {"2ms": 0.002, "10ms": 0.010}.get(variant, 0.005)
     record = resample(load_trajectory(path, "double_pendulum", mapping=MAPPING), dt)
-    if variant not in ("half", "noise"):
-        return record
-    ts, xs, us = np.asarray(record.ts), np.asarray(record.xs).copy(), np.asarray(record.us).copy()
     if variant == "half":
-        n = len(ts) // 2
-        ts, xs, us = ts[:n], xs[:n], us[:n]
-    else:
-        rng = np.random.default_rng(int(run))
-        xs[:, 2:] += rng.normal(0.0, EXTRA_NOISE[0], xs[:, 2:].shape)
-        us += rng.normal(0.0, EXTRA_NOISE[1], us.shape)
-    return Trajectory(jnp.asarray(ts), jnp.asarray(xs), jnp.asarray(us), record.state_names, record.input_names,
+        return record.slice(0, len(record) // 2)
+    if variant != "noise":
+        return record
+    xs, us = np.asarray(record.xs).copy(), np.asarray(record.us).copy()
+    rng = np.random.default_rng(int(run))
+    xs[:, 2:] += rng.normal(0.0, EXTRA_NOISE[0], xs[:, 2:].shape)
+    us += rng.normal(0.0, EXTRA_NOISE[1], us.shape)
+    return Trajectory(record.ts, jnp.asarray(xs), jnp.asarray(us), record.state_names, record.input_names,
                       record.system, record.source)
 
 

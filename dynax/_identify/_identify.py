@@ -580,12 +580,6 @@ class _LeastSquaresStage(eqx.Module):
     offsets: RecordOffsets | None
 
 
-def _position_names(system):
-    """The joints' position names (the first half of a mechanical system's states)."""
-    names = tuple(system.state_names)
-    return names[: len(names) // 2]
-
-
 def _equations(system, trajectories, method, friction, weights, rcond):
     """The stacked least-squares problem `(a, y, weights, names, n_samples, label, settings, counts)`;
     `counts` (for `Dynamic`) each record's rows per joint, else `()`."""
@@ -659,7 +653,7 @@ def _least_squares_stage(system, trajectories, method, friction, weights, rcond,
         if after.violated:
             warnings.warn("the constrained fit did not reach a consistent estimate: " + "; ".join(after.violated),
                           InconsistentEstimateWarning, stacklevel=3)
-    offsets = record_offsets(a, y, counts, _position_names(system), record_labels(trajectories)) if counts else None
+    offsets = record_offsets(a, y, counts, _split(system)[0].joint_names, record_labels(trajectories)) if counts else None
     return _LeastSquaresStage(fitted, names, estimate, fit, a, y, int(n_samples),
                               label, settings, check, offsets)
 

@@ -151,7 +151,7 @@ def offsets_of_records(system, records, friction="coulomb") -> RecordOffsets | N
     axis), a record is too short for them, or there are fewer than two records.
     """
     from .._errors import DataError, UsageError
-    from ._identify import _equations, _position_names, Dynamic
+    from ._identify import _equations, Dynamic
     from ._regressors import _split
 
     records = list(records)
@@ -162,4 +162,4 @@ def offsets_of_records(system, records, friction="coulomb") -> RecordOffsets | N
         _, a, y, _, _, _, _, _, counts = _equations(base, records, Dynamic(), friction, None, 1e-7)
     except (DataError, UsageError):  # not a system least squares knows, or a record too short for its filter
         return None
-    return record_offsets(a, y, counts, _position_names(base), record_labels(records))
+    return record_offsets(a, y, counts, base.joint_names, record_labels(records))
