@@ -342,7 +342,7 @@ def real_data(out):
                                  "relative_force_error": 0.0408}
     # The README's "without the Coulomb term the force error rises to about 38 %": the Coulomb model
     # with its Coulomb term dropped, not refitted (refitting without it gives the "viscous" row).
-    from dynax._identify._identify import _dynamic_rows
+    from dynax._identify._equations import _dynamic_rows
 
     rows, forces = _dynamic_rows(dynax.LinearAxis(), emps, recipe, "coulomb")[:2]  # decimated, so trimmed
     fit = identify(dynax.LinearAxis(), emps, recipe, friction="coulomb", **AS_PUBLISHED)

@@ -35,7 +35,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax._identify._identify import _equations  # noqa: E402
+from dynax._identify._equations import _equations  # noqa: E402
 from dynax._identify._least_squares import least_squares  # noqa: E402
 from dynax._identify._offsets import record_offsets  # noqa: E402
 from dynax._identify._validation import held_out_error  # noqa: E402

@@ -12,13 +12,8 @@ from ._defaults import (
     measurement_noise_std as measurement_noise_std,
     noise_floor_and_band as noise_floor_and_band,
 )
-from ._identify import (
-    Dynamic as Dynamic,
-    Energy as Energy,
-    identify as identify,
-    Identification as Identification,
-    Power as Power,
-)
+from ._equations import Dynamic as Dynamic, Energy as Energy, Power as Power
+from ._identify import identify as identify, Identification as Identification
 from ._offsets import record_offsets as record_offsets, RecordOffsets as RecordOffsets
 from ._least_squares import (
     IdentifiabilityError as IdentifiabilityError,

@@ -29,6 +29,10 @@ import pathlib
 
 import numpy as np
 
+from .._errors import DataError, UsageError
+from ._equations import _equations, Dynamic
+from ._regressors import _split
+
 ALPHA = 0.01  # the offsets "differ between records" below this p-value
 
 
@@ -150,10 +154,6 @@ def offsets_of_records(system, records, friction="coulomb") -> RecordOffsets | N
     **Returns:** `None` where the system has no such equations (it is not a two-link arm or a linear
     axis), a record is too short for them, or there are fewer than two records.
     """
-    from .._errors import DataError, UsageError
-    from ._identify import _equations, Dynamic
-    from ._regressors import _split
-
     records = list(records)
     if len(records) < 2:
         return None
