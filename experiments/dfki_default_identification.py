@@ -6,6 +6,13 @@
 
 (or folds in parallel: `--runs 00,01,02 --out A`, `--runs 03,05,12 --out B`, then `--merge A B --out ...`)
 
+`--variant 5ms|10ms|half|noise` fits the training runs recorded otherwise (as
+`diagnose_real_splits.py --variant` makes them: resampled at 5 or 10 ms; at 5 ms and cut to their
+first half; at 5 ms with white noise of 0.3 rad/s on the velocities and 0.03 N m on the torques
+added) and still validates on the held-out run as recorded, so that the table compares with the
+default one: a check that the defaults follow the data, not one format of it. Results in
+`experiments/results/dfki_identify_variants/VARIANT/`.
+
 For each of the six `sys_id` runs: fit `identify(DoublePendulum(), other_five_runs, Dynamic(),
 friction="coulomb", validation=[this_run])` with no recipe (every setting chosen from the data),
 and simulate the held-out run open loop from 200 start samples; compare the position RMSE at 0.1,
@@ -37,6 +44,7 @@ from dynax._identify import _identify as identify_module, _refine  # noqa: E402
 from dynax._identify._validation import held_out_error  # noqa: E402
 
 from dfki_simulation import DFKI, MAPPING, read_parameters  # noqa: E402  (the script's folder is on sys.path)
+import diagnose_real_splits  # noqa: E402
 
 RUNS = ("00", "01", "02", "03", "05", "12")
 HORIZONS = (0.1, 0.25, 0.5)
@@ -64,7 +72,10 @@ def lab_model(p: dict[str, float]) -> dynax.AbstractSystem:
     return dynax.Extended(rigid, terms)
 
 
-def load(run: str) -> dynax.Trajectory:
+def load(run: str, variant: str = "native") -> dynax.Trajectory:
+    """One run at its median interval (`native`), or changed as `diagnose_real_splits.load` says."""
+    if variant != "native":
+        return diagnose_real_splits.load(DFKI.parent, run, variant)
     raw = dynax.load_trajectory(DFKI / "sys_id" / f"trajectory_{run}.csv", "double_pendulum", mapping=MAPPING)
     return dynax.resample(raw, raw.dt)
 
@@ -77,6 +88,8 @@ def main(argv=None):
                         help="fit nothing: merge the results.json of earlier runs (e.g. folds run in parallel)")
     parser.add_argument("--record-weights", choices=_refine.RECORD_WEIGHTS, default=_refine.DEFAULT_RECORD_WEIGHTS,
                         help="weights of the records in the output-error refinement (default: %(default)s)")
+    parser.add_argument("--variant", choices=("native",) + diagnose_real_splits.VARIANTS[:1] + diagnose_real_splits.VARIANTS[2:],
+                        default="native", help="how the training runs are recorded (the held-out run stays native)")
     args = parser.parse_args(argv)
     refinements = []  # what the refinement did (record weights), seen through a thin wrapper
 
@@ -90,9 +103,10 @@ def main(argv=None):
         results["runs"].update(json.loads((part / "results.json").read_text())["runs"])
     held_out = [] if args.merge else args.runs.split(",")
     runs = {r: load(r) for r in RUNS} if held_out else {}
+    training = {r: load(r, args.variant) for r in RUNS} if held_out else {}
     lab = lab_model(read_parameters("model_3.0")) if held_out else None
     for held in held_out:
-        train = [runs[r] for r in RUNS if r != held]
+        train = [training[r] for r in RUNS if r != held]
         start = time.perf_counter()
         result = dynax.identify(dynax.DoublePendulum(), train, dynax.Dynamic(), friction="coulomb",
                                 validation=[runs[held]], horizons_s=HORIZONS)
@@ -110,6 +124,7 @@ def main(argv=None):
             "least_squares_consistency": stages["least_squares"]["consistency"],
             "relative_equation_error": {k: v["relative_equation_error"] for k, v in stages.items()},
             "record_weights_mode": args.record_weights,
+            "variant": args.variant,
             "training_runs": [r for r in RUNS if r != held],
             "record_weights": list(refinements[-1].record_weights),
             "record_residual_scale": list(refinements[-1].record_sigma),
