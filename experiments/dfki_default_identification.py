@@ -129,6 +129,7 @@ def main(argv=None):
             "record_weights": list(refinements[-1].record_weights),
             "record_residual_scale": list(refinements[-1].record_sigma),
             "reweights": refinements[-1].reweights,
+            "input_timing": stages["output_error"].get("input_timing"),
             "settings": [{k: s[k] for k in ("lowpass_hz", "lowpass_order", "trim", "decimate")} for s in result.settings],
         }
         results["runs"][held] = entry
@@ -138,7 +139,9 @@ def main(argv=None):
               + f" | consistent {entry['consistency']['consistent']}"
               + " | weights " + " ".join(f"{w:.2f}" for w in entry["record_weights"])
               + " | residual scale " + " ".join(f"{v:.1f}" for v in entry["record_residual_scale"])
-              + f" | {entry['reweights']} refits", flush=True)
+              + f" | {entry['reweights']} refits"
+              + ("" if entry["input_timing"] is None else f" | input latency {1e3 * entry['input_timing']['latency_s']:.2f} ms"),
+              flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "results.json").write_text(json.dumps(results, indent=2) + "\n")
 

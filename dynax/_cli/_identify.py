@@ -170,6 +170,10 @@ def run(args: argparse.Namespace) -> int:
             print("  physically consistent")
     if result.record_offsets is not None and result.record_offsets.differ():
         print("  " + result.record_offsets.note())
+    timing = (result.stages or {}).get("output_error", {}).get("input_timing")
+    if timing:
+        print(f"  input timing (fitted in the refinement): the inputs act {1e3 * timing['latency_s']:.2f} ms after "
+              "their samples (0 ms: sampled without delay; half the record's interval: held as recorded)")
     for stage, content in (result.stages or {}).items():
         held = content.get("validation")
         if held:

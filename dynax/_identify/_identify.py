@@ -409,6 +409,10 @@ def _refined_stage(ls, fitted, method, friction, rcond, consistency, refinement,
         consistency=check.to_json(), initial_residual_rms=refined.initial_residual_rms,
         residual_rms=refined.residual_rms, steps=refined.steps, dt=refined.dt, segment_s=refined.segment_s,
         model="least-squares model + RotorInertia(joint=1), consistent parametrisation",
+        input_timing=None if refined.input_alpha is None else {
+            "alpha": refined.input_alpha, "latency_s": refined.input_latency_s,
+            "meaning": "the inputs that fit best act latency_s after the sample that records them "
+                       "(0: sampled without delay; half the record's interval: the zero-order hold as recorded)"},
     )
     final = dict(system=refined.system, names=refined.names, estimate=jnp.asarray(refined.estimate),
                  std=jnp.asarray(refined.std_errors), error=error, validation=held_out, consistency=check,

@@ -18,6 +18,21 @@ at the band's edge (which on a large-amplitude run distorts the very motion that
 (`measurement_noise_std`): maximum likelihood under white measurement noise, which lets the
 precise encoder positions, not the noisy velocity estimate, decide.
 
+When the torques are measurements sampled at the state samples (a motor current read with the
+encoders) rather than commands held between them, the contract's zero-order hold applies each
+sample half a step late, and a driver's latency adds to that; an output-error fit is sensitive to
+it (on the DFKI runs a half-sample shift of the torques moved a held-out prediction error at 0.5 s by
+up to 30 %), while the least-squares equations are not. So the fit also estimates the **input
+timing**: over each interval of its grid the model is driven by the recorded input read $\alpha$
+steps later than the interval's own sample, linearly interpolated between samples (`TimedInputs`,
+$|\alpha| \le 3$; $\alpha = 0$ is the zero-order hold as recorded). It is
+reported as the latency $\tau = \Delta t/2 - \alpha h$ [s], the time by which an input acts
+after the sample that records it (negative: before it), with $\Delta t$ the records' interval and
+$h$ the fit's grid: 0 for a torque sampled without delay, $\Delta t/2$ for a command held as the
+contract says. The returned
+model is the physical one, without the timing: it is simulated, like any other, under the
+contract's zero-order hold.
+
 Records differ in how well the model can follow them (a chaotic large-amplitude swing-up leaves a
 larger output error than a gentle run, through model error the noise level does not capture), so
 by default (`record_weights="ml"`) each record's residual variance is an unknown of its own:
@@ -87,6 +102,54 @@ class ConsistentSystem(AbstractSystem):
         return self.model.vector_field(t, x, u)
 
 
+INPUT_REACH = 3  # samples of the fit's grid either side that the input timing may reach
+
+
+class TimedInputs(AbstractSystem):
+    r"""`system` driven by its input read `alpha` steps of the grid later than each interval's sample.
+
+    Its inputs are, per sample $k$, the samples $u_{k-R}, \dots, u_{k+R}$ of `system`'s inputs
+    (`with_neighbour_inputs`, $R$ = `reach`); over the interval that starts at sample $k$ it applies
+    the recorded input linearly interpolated at $k + \alpha$, with $\alpha$ clipped to $[-R, R]$:
+    $\alpha = 0$ is the zero-order hold as recorded, $\alpha = 1/2$ the interval's mean of a signal
+    sampled at the samples, $\alpha > 0$ an input that acts before the sample that records it.
+    """
+
+    system: AbstractSystem
+    alpha: jax.Array
+    reach: int = eqx.field(static=True, default=INPUT_REACH)
+
+    @property
+    def state_names(self):
+        return self.system.state_names
+
+    @property
+    def input_names(self):
+        return _neighbour_names(self.system.input_names, self.reach)
+
+    def vector_field(self, t, x, u):
+        n = u.shape[-1] // (2 * self.reach + 1)
+        stencil = u.reshape(u.shape[:-1] + (2 * self.reach + 1, n))
+        position = jnp.clip(self.alpha, -self.reach, self.reach) + self.reach
+        i = jnp.clip(jnp.floor(position), 0, 2 * self.reach - 1).astype(int)
+        f = position - i
+        return self.system.vector_field(t, x, (1 - f) * stencil[..., i, :] + f * stencil[..., i + 1, :])
+
+
+def _neighbour_names(names, reach):
+    return tuple(f"{n}[k{j:+d}]" if j else n for j in range(-reach, reach + 1) for n in names)
+
+
+def with_neighbour_inputs(record: Trajectory, reach: int = INPUT_REACH) -> Trajectory:
+    r"""`record` whose inputs at each sample $k$ are its samples $k - R, \dots, k + R$ (`reach` $R$; the
+    ends repeat their first and last samples), as `TimedInputs` reads them."""
+    us = record.us
+    padded = jnp.concatenate([jnp.repeat(us[:1], reach, axis=0), us, jnp.repeat(us[-1:], reach, axis=0)])
+    shifted = [padded[reach + j : reach + j + us.shape[0]] for j in range(-reach, reach + 1)]
+    return Trajectory(record.ts, record.xs, jnp.concatenate(shifted, axis=1), record.state_names,
+                      _neighbour_names(tuple(record.input_names), reach), record.system, record.source)
+
+
 def with_refinement_terms(system: AbstractSystem) -> AbstractSystem:
     """`system` with the terms its `refinement_terms()` names (a two-link arm's `RotorInertia(joint=1)`,
     at zero) where it has no term of that kind at that joint."""
@@ -98,11 +161,14 @@ def with_refinement_terms(system: AbstractSystem) -> AbstractSystem:
 
 @dataclasses.dataclass(frozen=True)
 class Refinement:
-    """What `refine_by_simulation` did. Fields: `system` (refined), `names`, `estimate`,
+    r"""What `refine_by_simulation` did. Fields: `system` (refined), `names`, `estimate`,
     `std_errors` (through the parametrisation's Jacobian, ignoring correlations: indicative), `initial_residual_rms` and `residual_rms` (scaled state residual at the start and
     at the end), `steps`, `dt` and `segment_s` (the grid and segment length fitted),
     `record_weights` (the final weight of each record's residuals), `record_sigma` (each record's
-    residual scale at the end, in units of the measurement noise) and `reweights` (refits done)."""
+    residual scale at the end, in units of the measurement noise), `reweights` (refits done), and
+    the input timing: `input_alpha` (steps of the fit's grid, see `TimedInputs`; `None` when not
+    fitted) and `input_latency_s`, the latency $\Delta t/2 - \alpha h$ of the inputs behind their
+    samples [s] (see the module's docstring)."""
 
     system: AbstractSystem
     names: tuple[str, ...]
@@ -118,6 +184,8 @@ class Refinement:
     record_weights: tuple[float, ...] = ()
     record_sigma: tuple[float, ...] = ()
     reweights: int = 0
+    input_alpha: float | None = None
+    input_latency_s: float | None = None
 
 
 def motion_records(records: list[Trajectory], *, filtered: bool | str = "positions") -> tuple[list[Trajectory], float]:
@@ -187,7 +255,7 @@ def _ml_weights(sigma: np.ndarray) -> np.ndarray:
 
 def refine_by_simulation(
     system: AbstractSystem, names: tuple[str, ...], records: list[Trajectory], method: SimulationFit,
-    *, filtered: bool | str = "positions", record_weights: str | None = None,
+    *, filtered: bool | str = "positions", record_weights: str | None = None, input_timing: bool = True,
 ) -> Refinement:
     """Refine a two-link arm's least-squares model by the output-error fit, consistent by construction.
 
@@ -198,7 +266,9 @@ def refine_by_simulation(
     reweighting (maximum likelihood with one unknown noise variance per record, see the module's
     docstring; starts from the `"motion"` weights), `"motion"` each inversely to its motion's
     amplitude (RMS of the joint positions about their mean), `"equal"` all alike; `None`:
-    `DEFAULT_RECORD_WEIGHTS` (`"ml"`).
+    `DEFAULT_RECORD_WEIGHTS` (`"ml"`); `input_timing` (default `True`): also fit the input timing
+    $\alpha$ (`TimedInputs`, see the module's docstring), else drive the model by the zero-order
+    hold as recorded.
 
     **Returns:** a `Refinement`.
     """
@@ -218,9 +288,13 @@ def refine_by_simulation(
     scale = jnp.maximum(jnp.abs(start), 1e-3 * jnp.max(jnp.abs(start[:5])))
     parametrisation = consistent_parametrisation(model, names, scale)
     wrapped = ConsistentSystem(parametrisation.phi(start), model, parametrisation, names)
-    filter_spec = jax.tree.map(lambda _: False, wrapped)
-    filter_spec = eqx.tree_at(lambda s: s.phi, filter_spec, True)
     fitted, dt = motion_records(records, filtered=filtered)
+    if input_timing:
+        wrapped = TimedInputs(wrapped, jnp.zeros((), jnp.result_type(wrapped.phi)))
+        fitted = [with_neighbour_inputs(r) for r in fitted]
+    filter_spec = jax.tree.map(lambda _: False, wrapped)
+    filter_spec = eqx.tree_at(lambda s: (s.system.phi, s.alpha) if input_timing else s.phi, filter_spec,
+                              (True, True) if input_timing else True)
     # Maximum likelihood under white measurement noise: each state weighted by its noise level.
     noise = np.median(np.stack([measurement_noise_std(r if r.is_uniform else resample(r, r.dt)) for r in records]), axis=0)
     # First guess of each record's residual scale: its motion's amplitude (a large-amplitude,
@@ -250,13 +324,19 @@ def refine_by_simulation(
         steps += int(result.steps)
         reweights += 1
         sigma = record_residual_scale(result.system, result.initial_states, fitted, noise, method)
-    refined = result.system.model
+    consistent = result.system.system if input_timing else result.system
+    refined = consistent.model
     estimate = np.asarray(parameter_vector(refined, friction))
     # Standard errors through the parametrisation's Jacobian (delta method).
-    jac = np.asarray(jax.jacfwd(parametrisation.theta)(result.system.phi))
-    phi_std = np.asarray(result.std_errors)
+    jac = np.asarray(jax.jacfwd(parametrisation.theta)(consistent.phi))
+    phi_std = np.asarray(result.std_errors)[: consistent.phi.shape[0]]
+    alpha = latency = None
+    if input_timing:
+        alpha = float(jnp.clip(result.system.alpha, -INPUT_REACH, INPUT_REACH))
+        record_dt = float(np.median([float(np.median(np.diff(np.asarray(r.ts)))) for r in records]))
+        latency = 0.5 * record_dt - alpha * dt
     with np.errstate(invalid="ignore"):  # an unidentified direction has an infinite standard error
         std = np.sqrt(np.sum((jac * phi_std[None, :]) ** 2, axis=1))
     return Refinement(refined, names, estimate, std, initial_rms, float(result.residual_rms),
                       float(result.relative_error), steps, dt, method.segment_s, result.n_samples,
-                      tuple(float(w) for w in weights), tuple(float(v) for v in sigma), reweights)
+                      tuple(float(w) for w in weights), tuple(float(v) for v in sigma), reweights, alpha, latency)
