@@ -81,6 +81,15 @@ class Dynamic(eqx.Module):
     - `weighting`: `"none"` (ordinary least squares) or `"joint"`: weight each joint's equations
       by the inverse of its residual variance from a first ordinary fit (Gautier's weighted least
       squares; joints with noisier torque count less).
+    - `offsets`: estimate, with the parameters, one constant offset of the recorded force per record
+      and driven joint (a current-based torque's zero, which differs from one recording to the
+      next: the "offset" term of Gautier's and the EMPS models, here per record), and fit the
+      output-error refinement to the records less them; reported in the least-squares stage, not
+      part of the returned model. `"auto"`: with the settings chosen from the data (no explicit
+      `lowpass_hz`) on systems whose model has no constant term of its own (two-link arms; a linear
+      axis has its `offset` parameter already). A small motion about an equilibrium that an offset
+      has shifted otherwise biases the gravity terms (DFKI run 00 alone: $\theta_4$ 0.47 instead of
+      about 2.3).
 
     ??? cite
 
@@ -97,6 +106,7 @@ class Dynamic(eqx.Module):
     decimate: int | Literal["auto"] = "auto"
     inputs: Literal["held", "sampled"] = "held"
     weighting: Literal["none", "joint"] = "none"
+    offsets: bool | Literal["auto"] = "auto"
 
 
 class Power(eqx.Module):

@@ -36,8 +36,8 @@ from ._defaults import choose_filter
 from ._equations import _equations, _uniform, Dynamic, Energy, Power
 from ._refine import refine_by_simulation
 from ._validation import DEFAULT_HORIZONS_S, held_out_error, HeldOutError, split_for_validation
-from ._least_squares import least_squares, LeastSquaresFit
-from ._offsets import record_labels, record_offsets, RecordOffsets
+from ._least_squares import IdentifiabilityError, least_squares, LeastSquaresFit
+from ._offsets import offset_groups, record_labels, record_offsets, RecordOffsets, without_offsets
 from ._simulation_fit import fit_simulation_error, SimulationFit
 from ._regressors import (
     _positions,
@@ -216,6 +216,9 @@ class _LeastSquaresStage(eqx.Module):
     settings: tuple
     consistency: Consistency
     offsets: RecordOffsets | None
+    groups: list | None = None  # rows that share one fitted offset (`Dynamic(offsets=...)`), or None
+    fitted_offsets: np.ndarray | None = None  # (records, driven joints) estimated with the parameters
+    driven: tuple[str, ...] = ()
 
 
 def _joint_positions(system, trajectories):
@@ -228,11 +231,43 @@ def _stacked_positions(system, states):
     return jnp.concatenate([_positions(system, xs)[0] for xs in states])
 
 
+def _offset_rows(system, method, counts):
+    """The row groups that each carry a fitted offset under `method` (see `Dynamic`'s `offsets`), or None."""
+    if not isinstance(method, Dynamic) or not counts:
+        return None
+    wanted = method.offsets
+    if isinstance(wanted, str):
+        if wanted != "auto":
+            raise UsageError(f"Dynamic: `offsets` must be True, False or 'auto', got {wanted!r}")
+        wanted = isinstance(method.lowpass_hz, str) and method.lowpass_hz == "auto"
+    if not wanted:
+        return None
+    groups = offset_groups(system, counts)
+    if groups is None and method.offsets is True:
+        raise UsageError(f"Dynamic(offsets=True): {type(_split(system)[0]).__name__} has a constant term of its own "
+                         "(or no driven joint); fit its offset as a parameter instead")
+    return groups
+
+
 def _least_squares_stage(system, trajectories, method, friction, weights, rcond, consistency):
-    system, a, y, weights, names, n_samples, label, settings, counts = _equations(
+    system, raw_a, raw_y, weights, names, n_samples, label, settings, counts = _equations(
         system, trajectories, method, friction, weights, rcond
     )
-    fit = least_squares(a, y, names=names, weights=weights, rcond=rcond)
+    groups = _offset_rows(system, method, counts)
+    a, y = raw_a, raw_y
+    if groups is not None:
+        a, y, a_means, y_means = without_offsets(raw_a, raw_y, weights, groups)
+        a, y = jnp.asarray(a, raw_a.dtype), jnp.asarray(y, raw_y.dtype)
+    try:
+        fit = least_squares(a, y, names=names, weights=weights, rcond=rcond)
+    except IdentifiabilityError as error:
+        if groups is None:
+            raise
+        raise IdentifiabilityError(
+            f"{error} Each record's constant force offset at the driven joints is estimated with the parameters "
+            "(a sensor's zero), so a constant force tells nothing about them; Dynamic(offsets=False) fixes the "
+            "offsets at zero.", unidentified=error.unidentified, rank=error.rank, n_params=error.n_params,
+            condition_number=error.condition_number) from None
     estimate = fit.estimate
     fitted = _fitted_system(system, names, estimate)
     qs = _joint_positions(system, trajectories)
@@ -246,9 +281,45 @@ def _least_squares_stage(system, trajectories, method, friction, weights, rcond,
         if after.violated:
             warnings.warn("the constrained fit did not reach a consistent estimate: " + "; ".join(after.violated),
                           InconsistentEstimateWarning, stacklevel=3)
-    offsets = record_offsets(a, y, counts, _split(system)[0].joint_names, record_labels(trajectories)) if counts else None
+    joint_names = _split(system)[0].joint_names
+    offsets = record_offsets(raw_a, raw_y, counts, joint_names, record_labels(trajectories)) if counts else None
+    fitted_offsets, driven = None, ()
+    if groups is not None:
+        values = y_means - a_means @ np.asarray(estimate)  # what each record's recorded force has in excess
+        n_driven = len(groups) // len(counts)
+        fitted_offsets = values.reshape(n_driven, len(counts)).T
+        total = sum(counts)
+        driven = tuple(joint_names[int(g[0]) // total] for g in groups[:: len(counts)])
     return _LeastSquaresStage(fitted, names, estimate, fit, a, y, int(n_samples),
-                              label, settings, check, offsets)
+                              label, settings, check, offsets, groups, fitted_offsets, driven)
+
+
+def _less_offsets(system, records, ls):
+    """The records with each one's fitted offsets taken off its inputs (through the input matrix), as
+    the refinement fits them; the records themselves where no offsets were fitted."""
+    if ls.fitted_offsets is None:
+        return records
+    base = _split(system)[0]
+    b = np.asarray(base.input_matrix())
+    rows = [base.joint_names.index(j) for j in ls.driven]
+    out = []
+    for record, offset in zip(records, ls.fitted_offsets):
+        force = np.zeros(b.shape[0])
+        force[rows] = offset
+        shift = np.linalg.pinv(b) @ force
+        out.append(Trajectory(record.ts, record.xs, record.us - jnp.asarray(shift, record.us.dtype)[None, :],
+                              record.state_names, record.input_names, record.system, record.source))
+    return out
+
+
+def _offsets_json(ls, trajectories):
+    if ls.fitted_offsets is None:
+        return None
+    return {"records": record_labels(trajectories), "joints": list(ls.driven),
+            "values": [[float(v) for v in row] for row in ls.fitted_offsets],
+            "meaning": "each record's constant offset of the recorded force at each driven joint, estimated with the "
+                       "parameters (a sensor's zero) and not part of the model; the output-error refinement fits the "
+                       "records less them"}
 
 
 def _relative_equation_error(a, y, estimate):
@@ -397,9 +468,11 @@ def _refined_stage(ls, fitted, method, friction, rcond, consistency, refinement,
     """The output-error refinement from the least-squares stage `ls`: `(final, stage json)`, where
     `final` holds what `identify` returns (system, names, estimate, standard errors, equation error
     on the least-squares rows, validation, consistency, method label)."""
-    refined = refine_by_simulation(ls.system, ls.names, fitted, refinement)
+    refined = refine_by_simulation(ls.system, ls.names, _less_offsets(ls.system, fitted, ls), refinement)
     _, a, y, _, _, _, _, _, _ = _equations(refined.system, fitted, method, friction, None, rcond)
-    error = _relative_equation_error(a, y, jnp.asarray(refined.estimate))
+    if ls.groups is not None:  # the same equations as the least-squares stage's: offsets free
+        a, y, _, _ = without_offsets(a, y, None, ls.groups)
+    error = _relative_equation_error(jnp.asarray(a), jnp.asarray(y), jnp.asarray(refined.estimate))
     qs = _joint_positions(refined.system, fitted)
     check = check_consistency(refined.system, refined.names, refined.estimate, qs, warn=consistency != "off")
     check = Consistency(check.violated, active=(), constrained=True, min_mass_eigenvalue=check.min_mass_eigenvalue)
@@ -508,7 +581,7 @@ def identify(
     ls_validation = validate(ls.system)
     std = ls.fit.std_errors
     stages = {"least_squares": _stage_json(ls.label, ls.names, ls.estimate, std, ls_error, ls_validation,
-                                           consistency=ls.consistency.to_json())}
+                                           consistency=ls.consistency.to_json(), offsets=_offsets_json(ls, fitted))}
     refinement = _refinement_method(refine, ls.system, method, fitted)
     final = dict(system=ls.system, names=ls.names, estimate=ls.estimate, std=std, error=ls_error,
                  validation=ls_validation, consistency=ls.consistency, label=ls.label)

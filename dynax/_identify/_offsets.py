@@ -142,6 +142,38 @@ def record_offsets(a, y, counts, joints, records=None, alpha: float = ALPHA) -> 
     return RecordOffsets(records, tuple(joints), offsets, halves, f, p, theta, relative_error, alpha)
 
 
+def offset_groups(system, counts) -> list[np.ndarray] | None:
+    """The row groups of the stacked dynamic equations (joint-major, `counts` rows per record) that
+    each carry one constant offset: one per record and driven joint (a joint some input acts on; an
+    unactuated joint's equation has no sensor to be off). `None` where the system's own model has
+    a constant term (a linear axis's `offset`) or drives no joint."""
+    base = _split(system)[0]
+    if "offset" in base.base_parameter_names("coulomb") or not hasattr(base, "input_matrix"):
+        return None
+    driven = np.flatnonzero(np.any(np.abs(np.asarray(base.input_matrix())) > 0, axis=1))
+    if driven.size == 0:
+        return None
+    ends = np.cumsum((0,) + tuple(counts))
+    total = int(ends[-1])
+    return [j * total + np.arange(ends[r], ends[r + 1]) for j in driven for r in range(len(counts))]
+
+
+def without_offsets(a, y, weights, groups):
+    """`(a, y)` with each group's (weighted) mean removed: least squares on them is least squares with
+    one free constant per group (Frisch-Waugh-Lovell). Also returns the group means `(a_means,
+    y_means)` from which each group's offset at an estimate $\theta$ is `y_means - a_means @ theta`."""
+    a, y = np.array(a, dtype=float), np.array(y, dtype=float)
+    w = np.ones(len(y)) if weights is None else np.asarray(weights, dtype=float)
+    a_means, y_means = [], []
+    for rows in groups:
+        total = max(float(np.sum(w[rows])), np.finfo(float).tiny)
+        a_means.append(w[rows] @ a[rows] / total)
+        y_means.append(float(w[rows] @ y[rows] / total))
+        a[rows] -= a_means[-1]
+        y[rows] -= y_means[-1]
+    return a, y, np.asarray(a_means), np.asarray(y_means)
+
+
 def record_labels(records) -> list[str]:
     """Each record's file name where it has one, else `record i`."""
     return [pathlib.Path(r.source).name if r.source else f"record {i}" for i, r in enumerate(records)]

@@ -74,11 +74,16 @@ def test_data_at_rest_name_every_unidentified_parameter():
     xs = np.tile([q1, q12 - q1, 0.0, 0.0], (len(ts), 1))
     data = Trajectory(jnp.asarray(ts), jnp.asarray(xs), jnp.full((len(ts), 1), tau2), ("q1", "q2", "dq1", "dq2"), ("tau2",))
     with pytest.raises(IdentifiabilityError) as info:
-        identify(TRUE, data, Dynamic())
+        identify(TRUE, data, Dynamic(offsets=False))
     # a static pose can only show gravity: theta4 and theta5 are seen, everything that needs motion is not
     assert info.value.rank == 2
     assert set(info.value.unidentified) == {"theta1", "theta2", "theta3", "theta6", "theta7"}
     assert "theta1" in str(info.value) and "Excite" in str(info.value)
+    # with the record's torque offset free (the default), the driven elbow's constant gravity torque is
+    # that offset's twin: only the passive shoulder's equation, theta4 sin q1 + theta5 sin(q1 + q2) = 0, is left
+    with pytest.raises(IdentifiabilityError) as info:
+        identify(TRUE, data, Dynamic())
+    assert info.value.rank == 1 and "offset" in str(info.value)
     with pytest.raises(IdentifiabilityError):
         identify(TRUE, data, Energy())  # nothing moves: no energy changes at all
 
