@@ -170,10 +170,17 @@ def run(args: argparse.Namespace) -> int:
             print("  physically consistent")
     if result.record_offsets is not None and result.record_offsets.differ():
         print("  " + result.record_offsets.note())
+    fitted_offsets = (result.stages or {}).get("least_squares", {}).get("offsets")
+    if fitted_offsets:
+        cells = "; ".join(f"{record} " + ", ".join(f"{joint} {value:+.3g}" for joint, value in zip(fitted_offsets["joints"], row))
+                          for record, row in zip(fitted_offsets["records"], fitted_offsets["values"]))
+        print(f"  force offsets fitted per record (not part of the model): {cells}")
     timing = (result.stages or {}).get("output_error", {}).get("input_timing")
     if timing:
-        print(f"  input timing (fitted in the refinement): the inputs act {1e3 * timing['latency_s']:.2f} ms after "
-              "their samples (0 ms: sampled without delay; half the record's interval: held as recorded)")
+        latency = 1e3 * timing["latency_s"]
+        print(f"  input timing (fitted in the refinement): the inputs act {abs(latency):.2f} ms "
+              f"{'after' if latency >= 0 else 'before'} their samples (0 ms: sampled without delay; "
+              "half the record's interval after: held as recorded)")
     for stage, content in (result.stages or {}).items():
         held = content.get("validation")
         if held:
