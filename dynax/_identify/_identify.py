@@ -522,16 +522,20 @@ def identify(
     - the estimate is checked for physical consistency (`check_consistency`); an inconsistent
       least-squares estimate is replaced by the constrained fit over the consistent set
       (`consistent_least_squares`), and `consistency.active` names what had to be enforced;
+    - `Dynamic` estimates one constant offset of the recorded force per record and driven joint
+      with the parameters (`Dynamic(offsets=...)`; reported in the least-squares stage, not part
+      of the model);
     - for two-link arms whose velocities carry measurement noise (real data), the least-squares
-      estimate is refined by the output-error fit with the elbow motor's rotor inertia, consistent
-      by construction (`refine_by_simulation`), and both stages are reported;
+      estimate is refined by the output-error fit with the elbow motor's rotor inertia and the
+      input timing, consistent by construction (`refine_by_simulation`, on the records less their
+      offsets), and both stages are reported;
     - the returned model is simulated open loop on held-out data (`validation`, or the last 20 %
       of each record, which then does not enter the fit) and the position RMSE against horizon is
       reported next to the equation error;
     - with `Dynamic` on two records or more, each record's constant offset on each joint's
       recorded force is estimated (from each half of the record too) and tested for differing
       between records (`record_offsets`, a sensor zero that changes from one recording to the
-      next); reported, not used.
+      next), with a note where they do.
 
     **Arguments:**
 
