@@ -99,32 +99,19 @@ def record_offsets(a, y, counts, joints, records=None, alpha: float = ALPHA) -> 
     n_records, n_joints = len(counts), len(joints)
     if n_records < 2 or min(counts) < 4 or a.shape[0] != n_joints * sum(counts):
         return None
-    # Each row's group: (record, half, joint). Regressing on one indicator column per group is the same as
+    # One group per (record, half, joint). Regressing on one indicator column per group is the same as
     # removing each group's mean from `a` and `y` (Frisch-Waugh-Lovell), which needs no indicator matrix.
-    group = np.empty(a.shape[0], int)
     joint_of_row = np.repeat(np.arange(n_joints), sum(counts))
-    ends = np.cumsum((0,) + tuple(counts))
-    for j in range(n_joints):
-        for r in range(n_records):
-            rows = j * sum(counts) + np.arange(ends[r], ends[r + 1])
-            for h, half in enumerate(np.array_split(rows, 2)):
-                group[half] = (r * 2 + h) * n_joints + j
-    n_groups = n_records * 2 * n_joints
-    size = np.bincount(group, minlength=n_groups)
-
-    def group_mean(values):  # (rows, columns) -> (groups, columns)
-        sums = [np.bincount(group, weights=column, minlength=n_groups) for column in values.T]
-        return np.stack(sums, axis=-1) / size[:, None]
-
-    a_within = a - group_mean(a)[group]
-    y_within = y - group_mean(y[:, None])[group, 0]
+    groups = [half for r in range(n_records) for half in np.array_split(_record_rows(counts, r, 0), 2)]
+    groups = [rows + j * sum(counts) for rows in groups for j in range(n_joints)]
+    a_within, y_within, a_means, y_means = without_offsets(a, y, None, groups)
     weights = np.ones(len(y))  # constant within each group, so the group means need no weighting
     for _ in range(2):  # unweighted, then each joint's rows by its residual scale (`Dynamic()`'s joint weighting)
         theta = np.linalg.lstsq(a_within * weights[:, None], y_within * weights, rcond=None)[0]
         residual = y_within - a_within @ theta
         scale = np.sqrt([np.mean(residual[joint_of_row == j] ** 2) for j in range(n_joints)])
         weights = 1.0 / np.maximum(scale, np.finfo(float).tiny)[joint_of_row]
-    by_group = group_mean((y - a @ theta)[:, None])[:, 0]
+    by_group = y_means - a_means @ theta
     # The equations are model force = recorded force; an offset column fitted into the model side
     # stands for what the recorded force has in excess.
     halves = by_group.reshape(n_records, 2, n_joints)
@@ -153,9 +140,14 @@ def offset_groups(system, counts) -> list[np.ndarray] | None:
     driven = np.flatnonzero(np.any(np.abs(np.asarray(base.input_matrix())) > 0, axis=1))
     if driven.size == 0:
         return None
-    ends = np.cumsum((0,) + tuple(counts))
-    total = int(ends[-1])
-    return [j * total + np.arange(ends[r], ends[r + 1]) for j in driven for r in range(len(counts))]
+    return [_record_rows(counts, r, j) for j in driven for r in range(len(counts))]
+
+
+def _record_rows(counts, record, joint):
+    """The rows of `record`'s equations of `joint` in the stacked dynamic equations (joint-major:
+    all records' rows of joint 0, then of joint 1, ...; `counts` rows per record)."""
+    start = int(joint * sum(counts) + sum(counts[:record]))
+    return np.arange(start, start + counts[record])
 
 
 def without_offsets(a, y, weights, groups):
