@@ -3,8 +3,9 @@ r"""Filter and derivative settings chosen from the data: noise level and signal 
 The least-squares models differentiate measured velocities; how hard to low-pass them is a property
 of the record, not of the method. For each velocity channel the Welch power spectral density is
 estimated; its **noise floor** is the median density over the upper half of the band (measurement
-noise is white there, the motion of a mechanical system is not), and the **signal band** ends at the
-highest frequency whose density still stands `snr` times above that floor. From these:
+noise is white there, the motion of a mechanical system is not), and the **signal band** ends where
+the density falls through `snr` times that floor for the last time (interpolated between Welch bins,
+so that the edge does not jump a whole bin when one bin's density crosses the threshold). From these:
 
 - cut-off $f_c$: the widest signal band over the velocity channels (no motion the data show is cut);
 - order: the smallest Butterworth order $n$ (one pass; the filter runs forward and backward) at
@@ -76,9 +77,16 @@ def noise_floor_and_band(ys: np.ndarray, sample_rate_hz: float, *, snr: float = 
     factor by which the density must exceed the floor to count as signal (default 100, 20 dB: far
     above the scatter of a Welch estimate averaged over many segments).
 
-    **Returns:** `(floor, band_hz)`: the one-sided density of the floor [unit^2/Hz] and the highest
-    frequency whose density exceeds `snr * floor` (the Nyquist frequency when there is no floor
-    above round-off).
+    **Returns:** `(floor, band_hz)`: the one-sided density of the floor [unit^2/Hz] and the
+    frequency at which the density falls through `snr * floor` for the last time (the Nyquist
+    frequency when there is no floor above round-off).
+
+    The crossing lies between the last Welch bin above the threshold and the next one; it is placed
+    where the log-density, interpolated linearly between those two bins, meets the threshold. The
+    bins are $f_s / n_{seg}$ apart (1.6 Hz on a 6 s record at 5 ms), as wide as the band edge is
+    high; taking the last bin above instead would make the edge jump by a whole bin when one bin's
+    density moves from just above to just below the threshold (from 101 to 99 times the floor), and
+    with it the cut-off and the velocity fit's window.
     """
     ys = np.asarray(ys, dtype=float)
     nperseg = int(min(len(ys), max(64, 2 ** int(np.floor(np.log2(len(ys) / 8))))))
@@ -91,8 +99,18 @@ def noise_floor_and_band(ys: np.ndarray, sample_rate_hz: float, *, snr: float = 
     # No floor: the upper half of the band is round-off (relative 1e-20 in power, well below any sensor).
     if not floor > 1e-20 * peak:
         return floor, nyquist
-    above = f[(p > snr * floor) & (f > 0)]
-    return floor, float(above.max()) if above.size else float(f[1])
+    threshold = snr * floor
+    above = np.flatnonzero((p > threshold) & (f > 0))
+    if not above.size:
+        return floor, float(f[1])
+    k = int(above.max())
+    if k + 1 >= len(f):
+        return floor, float(f[k])
+    # p[k] > threshold >= p[k + 1] >= 0: the log-linear crossing lies in [f[k], f[k + 1]).
+    if p[k + 1] <= 0:
+        return floor, float(f[k])
+    step = np.log(p[k] / threshold) / np.log(p[k] / p[k + 1])
+    return floor, float(f[k] + step * (f[k + 1] - f[k]))
 
 
 def measurement_noise_std(trajectory: Trajectory) -> np.ndarray:

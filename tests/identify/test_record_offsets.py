@@ -39,8 +39,9 @@ def test_offsets_that_differ_between_records_are_found_and_measured(records):
     # each record's offset within 0.02 N m (the torque noise is 0.02 N m per sample; the Coulomb
     # friction, 0.15 N m, is not a constant and does not take it up)
     assert np.max(np.abs(found.offsets[:, 0] - truth[:, 0])) < 0.02, found.offsets
-    # and each half of a record agrees with the other: a sensor's zero, not model error
-    assert np.max(np.abs(found.halves[:, 0, 0] - found.halves[:, 1, 0])) < 0.02
+    # and each half of a record measures the same zero, the one that was added: a sensor's zero, not model
+    # error (each half alone is within 0.02 N m of it; two halves may straddle it, -0.072 and -0.047 for -0.06)
+    assert np.max(np.abs(found.halves[:, :, 0] - truth[:, None, 0])) < 0.02, found.halves[:, :, 0]
     note = result.to_json()["record_offsets"]["note"]
     assert note is not None and "q1" in note and "q2" not in note.split("differs from record to record")[1].split(":")[0]
 
