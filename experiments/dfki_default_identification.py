@@ -13,6 +13,11 @@ added) and still validates on the held-out run as recorded, so that the table co
 default one: a check that the defaults follow the data, not one format of it. Results in
 `experiments/results/dfki_identify_variants/VARIANT/`.
 
+`--segment-band-hz F` sets the band edge that the refinement's segment length is one period of
+(default: the widest band `choose_filter` reads off the training runs), to see how much the
+segmentation alone moves a fold (docs/identification.md, "The count of cells is within what the
+fit's own settings move"): `--runs 01 --segment-band-hz 5.5 --out OUT`.
+
 For each of the six `sys_id` runs: fit `identify(DoublePendulum(), other_five_runs, Dynamic(),
 friction="coulomb", validation=[this_run])` with no recipe (every setting chosen from the data),
 and simulate the held-out run open loop from 200 start samples; compare the position RMSE at 0.1,
@@ -90,7 +95,11 @@ def main(argv=None):
                         help="weights of the records in the output-error refinement (default: %(default)s)")
     parser.add_argument("--variant", choices=("native",) + diagnose_real_splits.VARIANTS[:1] + diagnose_real_splits.VARIANTS[2:],
                         default="native", help="how the training runs are recorded (the held-out run stays native)")
+    parser.add_argument("--segment-band-hz", type=float, default=None, metavar="F",
+                        help="segments of 1/F s in the refinement instead of one period of the widest band's edge")
     args = parser.parse_args(argv)
+    if args.segment_band_hz is not None:
+        identify_module._signal_band_hz = lambda trajectories: args.segment_band_hz
     refinements = []  # what the refinement did (record weights), seen through a thin wrapper
 
     def refine(*a, **k):
@@ -125,6 +134,7 @@ def main(argv=None):
             "relative_equation_error": {k: v["relative_equation_error"] for k, v in stages.items()},
             "record_weights_mode": args.record_weights,
             "variant": args.variant,
+            "segment_s": stages["output_error"].get("segment_s"),
             "training_runs": [r for r in RUNS if r != held],
             "record_weights": list(refinements[-1].record_weights),
             "record_residual_scale": list(refinements[-1].record_sigma),
