@@ -37,7 +37,7 @@ from ._equations import _equations, _uniform, Dynamic, Energy, Power
 from ._refine import refine_by_simulation
 from ._validation import DEFAULT_HORIZONS_S, held_out_error, HeldOutError, split_for_validation
 from ._least_squares import IdentifiabilityError, least_squares, LeastSquaresFit
-from ._offsets import offset_groups, record_labels, record_offsets, RecordOffsets, without_offsets
+from ._offsets import driven_joints, offset_groups, record_labels, record_offsets, RecordOffsets, without_offsets
 from ._simulation_fit import fit_simulation_error, SimulationFit
 from ._regressors import (
     _positions,
@@ -286,10 +286,8 @@ def _least_squares_stage(system, trajectories, method, friction, weights, rcond,
     fitted_offsets, driven = None, ()
     if groups is not None:
         values = y_means - a_means @ np.asarray(estimate)  # what each record's recorded force has in excess
-        n_driven = len(groups) // len(counts)
-        fitted_offsets = values.reshape(n_driven, len(counts)).T
-        total = sum(counts)
-        driven = tuple(joint_names[int(g[0]) // total] for g in groups[:: len(counts)])
+        driven = tuple(joint_names[j] for j in driven_joints(system))  # the order of `offset_groups`
+        fitted_offsets = values.reshape(len(driven), len(counts)).T
     return _LeastSquaresStage(fitted, names, estimate, fit, a, y, int(n_samples),
                               label, settings, check, offsets, groups, fitted_offsets, driven)
 
@@ -301,12 +299,13 @@ def _less_offsets(system, records, ls):
         return records
     base = _split(system)[0]
     b = np.asarray(base.input_matrix())
+    to_inputs = np.linalg.pinv(b)  # joint forces -> the inputs that produce them
     rows = [base.joint_names.index(j) for j in ls.driven]
     out = []
     for record, offset in zip(records, ls.fitted_offsets):
         force = np.zeros(b.shape[0])
         force[rows] = offset
-        shift = np.linalg.pinv(b) @ force
+        shift = to_inputs @ force
         out.append(Trajectory(record.ts, record.xs, record.us - jnp.asarray(shift, record.us.dtype)[None, :],
                               record.state_names, record.input_names, record.system, record.source))
     return out

@@ -129,16 +129,23 @@ def record_offsets(a, y, counts, joints, records=None, alpha: float = ALPHA) -> 
     return RecordOffsets(records, tuple(joints), offsets, halves, f, p, theta, relative_error, alpha)
 
 
-def offset_groups(system, counts) -> list[np.ndarray] | None:
-    """The row groups of the stacked dynamic equations (joint-major, `counts` rows per record) that
-    each carry one constant offset: one per record and driven joint (a joint some input acts on; an
-    unactuated joint's equation has no sensor to be off). `None` where the system's own model has
-    a constant term (a linear axis's `offset`) or drives no joint."""
+def driven_joints(system) -> tuple[int, ...] | None:
+    """The indices of the joints some input acts on (an unactuated joint's equation has no sensor to
+    be off), or `None` where the system's own model has a constant term (a linear axis's `offset`)
+    or drives no joint."""
     base = _split(system)[0]
     if "offset" in base.base_parameter_names("coulomb") or not hasattr(base, "input_matrix"):
         return None
     driven = np.flatnonzero(np.any(np.abs(np.asarray(base.input_matrix())) > 0, axis=1))
-    if driven.size == 0:
+    return tuple(int(j) for j in driven) or None
+
+
+def offset_groups(system, counts) -> list[np.ndarray] | None:
+    """The row groups of the stacked dynamic equations (joint-major, `counts` rows per record) that
+    each carry one constant offset: one per record and driven joint (`driven_joints`), in that order
+    (all records of the first driven joint, then of the next). `None` where `driven_joints` is."""
+    driven = driven_joints(system)
+    if driven is None:
         return None
     return [_record_rows(counts, r, j) for j in driven for r in range(len(counts))]
 
