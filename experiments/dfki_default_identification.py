@@ -29,6 +29,7 @@ Data: DFKI RIC Underactuated Robotics Lab, `double_pendulum`, design C.0 (BSD-3-
 """
 
 import argparse
+import dataclasses
 import json
 import math
 import pathlib
@@ -97,9 +98,15 @@ def main(argv=None):
                         default="native", help="how the training runs are recorded (the held-out run stays native)")
     parser.add_argument("--segment-band-hz", type=float, default=None, metavar="F",
                         help="segments of 1/F s in the refinement instead of one period of the widest band's edge")
+    parser.add_argument("--stagger", type=int, default=None, metavar="K",
+                        help="fit K staggered cuts of the records into segments (SimulationFit.stagger)")
     args = parser.parse_args(argv)
     if args.segment_band_hz is not None:
         identify_module._signal_band_hz = lambda trajectories: args.segment_band_hz
+    if args.stagger is not None:
+        default_method = identify_module._refinement_method
+        identify_module._refinement_method = lambda *a: (lambda m: m if m is None else dataclasses.replace(
+            m, stagger=args.stagger))(default_method(*a))
     refinements = []  # what the refinement did (record weights), seen through a thin wrapper
 
     def refine(*a, **k):
@@ -135,6 +142,7 @@ def main(argv=None):
             "record_weights_mode": args.record_weights,
             "variant": args.variant,
             "segment_s": stages["output_error"].get("segment_s"),
+            "stagger": args.stagger,
             "training_runs": [r for r in RUNS if r != held],
             "record_weights": list(refinements[-1].record_weights),
             "record_residual_scale": list(refinements[-1].record_sigma),

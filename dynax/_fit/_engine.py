@@ -115,6 +115,8 @@ def fit_least_squares(
     - `scale`: per-parameter scale $s$ (default $|p_0|$, or 1 where $p_0 = 0$); a zero scale freezes
       that parameter.
     - `max_steps`: iteration budget; running out gives `result = max_steps_reached`, never an error.
+      A solution whose loss is not finite or above the starting loss gets `result =
+      nonlinear_divergence` (its value is still the solver's last point, for inspection).
     - `jac`: `"fwd"` (forward mode: few parameters, many residuals, the usual case), `"dense"`
       (forward mode with the whole Jacobian formed by one `jacfwd` per step and applied as a matrix:
       the same numbers, far less compilation through long rollouts) or `"bwd"`.
@@ -163,6 +165,10 @@ def fit_least_squares(
     final = isinstance(info, optx.FunctionInfo.ResidualJac)
     r = info.residual if final else fn(z, args)
     r0 = fn(z0, args)
+    # A solver must not end worse than it started; if it does (a step accepted on a Jacobian that
+    # misled the trust region, or a loss that is not finite), say so in the result.
+    worse = jnp.logical_not(jnp.sum(r**2) <= jnp.sum(r0**2))
+    result = optx.RESULTS.where(worse, optx.RESULTS.nonlinear_divergence, solution.result)
     m, n = r.shape[0], z.shape[0]
     J = None
     if covariance and n:
@@ -183,7 +189,7 @@ def fit_least_squares(
         parameters=parameters,
         covariance=cov,
         std_errors=jnp.where(jnp.isnan(jnp.diag(cov)), jnp.nan, std) if n else std,
-        result=solution.result,
+        result=result,
         loss=0.5 * jnp.sum(r**2),
         initial_loss=0.5 * jnp.sum(r0**2),
         steps=solution.stats["num_steps"],

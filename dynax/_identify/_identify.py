@@ -406,6 +406,7 @@ def _identify_by_simulation(system, trajectories, method: SimulationFit, frictio
         system, trajectories, filter_spec=parameters, segment_s=method.segment_s,
         fit_initial_states=method.fit_initial_states, continuity_weight=method.continuity_weight,
         rtol=method.rtol, atol=method.atol, max_steps=method.max_steps, simulation=method.simulation,
+        stagger=method.stagger,
     )
     # The system's part of the engine's solution: the same names, estimate, errors and covariance.
     n = parameters.size
@@ -481,6 +482,7 @@ def _refined_stage(ls, fitted, method, friction, rcond, consistency, refinement,
         consistency=check.to_json(), initial_residual_rms=refined.initial_residual_rms,
         residual_rms=refined.residual_rms, steps=refined.steps, dt=refined.dt, segment_s=refined.segment_s,
         model="least-squares model + RotorInertia(joint=1), consistent parametrisation",
+        diverged=refined.diverged,
         input_timing=None if refined.input_alpha is None else {
             "alpha": refined.input_alpha, "latency_s": refined.input_latency_s,
             "meaning": "the inputs that fit best act latency_s after the sample that records them "
@@ -488,7 +490,8 @@ def _refined_stage(ls, fitted, method, friction, rcond, consistency, refinement,
     )
     final = dict(system=refined.system, names=refined.names, estimate=jnp.asarray(refined.estimate),
                  std=jnp.asarray(refined.std_errors), error=error, validation=held_out, consistency=check,
-                 label=f"{ls.label}+simulation")
+                 label=f"{ls.label}+simulation" + (" (ended worse than its start: least squares kept)"
+                                                     if refined.diverged else ""))
     return final, stage
 
 

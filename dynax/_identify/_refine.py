@@ -49,6 +49,7 @@ so that no record a short or easy one fits almost exactly takes over the fit.
 """
 
 import dataclasses
+import warnings
 
 import equinox as eqx
 import jax
@@ -168,7 +169,8 @@ class Refinement:
     residual scale at the end, in units of the measurement noise), `reweights` (refits done), and
     the input timing: `input_alpha` (steps of the fit's grid, see `TimedInputs`; `None` when not
     fitted) and `input_latency_s`, the latency $\Delta t/2 - \alpha h$ of the inputs behind their
-    samples [s] (see the module's docstring)."""
+    samples [s] (see the module's docstring); `diverged`: the fit ended worse than its start (a
+    warning said so) and `system` is the start, unrefined."""
 
     system: AbstractSystem
     names: tuple[str, ...]
@@ -186,6 +188,7 @@ class Refinement:
     reweights: int = 0
     input_alpha: float | None = None
     input_latency_s: float | None = None
+    diverged: bool = False
 
 
 def motion_records(records: list[Trajectory], *, filtered: bool | str = "positions") -> tuple[list[Trajectory], float]:
@@ -235,7 +238,7 @@ def record_residual_scale(system, initial_states, records, scale, method: Simula
     same segments, `method.segment_s`); residuals are in units of `scale` (per state); $p_r$ counts
     the initial states fitted on record $r$ (none unless `method.fit_initial_states`).
     """
-    ts, xs, us, _, owner, _ = _segments(records, method.segment_s)
+    ts, xs, us, _, owner, _ = _segments(records, method.segment_s, method.stagger)
     dtype = jnp.result_type(initial_states)
     squares = np.asarray(_segment_squares(system, initial_states, *(jnp.asarray(a, dtype) for a in (ts, xs, us)),
                                           jnp.asarray(scale, dtype), method.simulation))
@@ -308,35 +311,55 @@ def refine_by_simulation(
             start, fitted, filter_spec=filter_spec, state_scale=jnp.asarray(noise), record_weights=weights,
             segment_s=method.segment_s, fit_initial_states=method.fit_initial_states,
             continuity_weight=method.continuity_weight, rtol=method.rtol, atol=method.atol,
-            max_steps=method.max_steps, simulation=method.simulation,
+            max_steps=method.max_steps, simulation=method.simulation, stagger=method.stagger,
         )
 
     result = fit(wrapped, weights)
     initial_rms, steps = float(result.initial_residual_rms), int(result.steps)
-    sigma = record_residual_scale(result.system, result.initial_states, fitted, noise, method)
+    diverged = _ended_worse(result)
+    if diverged:  # keep the start: the least-squares model, rotor inertia at zero
+        warnings.warn(f"refine_by_simulation: the output-error fit ended worse than its start (scaled residual "
+                      f"{initial_rms:.4g} -> {float(result.residual_rms):.4g}); the least-squares model is kept",
+                      RuntimeWarning, stacklevel=2)
+    else:
+        sigma = record_residual_scale(result.system, result.initial_states, fitted, noise, method)
     reweights = 0
-    while record_weights == "ml" and reweights < MAX_REWEIGHTS:
+    while not diverged and record_weights == "ml" and reweights < MAX_REWEIGHTS:
         new = _ml_weights(sigma)
         if np.max(np.abs(np.log(new / weights))) < np.log1p(SETTLED):
             break  # the weights the last fit used are (within 10 %) those its residuals imply
-        weights = new
-        result = fit(result.system, weights)
-        steps += int(result.steps)
+        refit = fit(result.system, new)
+        steps += int(refit.steps)
+        if _ended_worse(refit):
+            warnings.warn("refine_by_simulation: a reweighted output-error fit ended worse than its start; "
+                          "the fit before it is kept", RuntimeWarning, stacklevel=2)
+            break
+        weights, result = new, refit
         reweights += 1
         sigma = record_residual_scale(result.system, result.initial_states, fitted, noise, method)
-    consistent = result.system.system if input_timing else result.system
+    final = wrapped if diverged else result.system
+    consistent = final.system if input_timing else final
     refined = consistent.model
     estimate = np.asarray(parameter_vector(refined, friction))
     # Standard errors through the parametrisation's Jacobian (delta method).
     jac = np.asarray(jax.jacfwd(parametrisation.theta)(consistent.phi))
-    phi_std = np.asarray(result.std_errors)[: consistent.phi.shape[0]]
+    phi_std = np.full(consistent.phi.shape[0], np.nan) if diverged else np.asarray(result.std_errors)[: consistent.phi.shape[0]]
     alpha = latency = None
     if input_timing:
-        alpha = float(jnp.clip(result.system.alpha, -INPUT_REACH, INPUT_REACH))
+        alpha = float(jnp.clip(final.alpha, -INPUT_REACH, INPUT_REACH))
         record_dt = float(np.median([float(np.median(np.diff(np.asarray(r.ts)))) for r in records]))
         latency = 0.5 * record_dt - alpha * dt
     with np.errstate(invalid="ignore"):  # an unidentified direction has an infinite standard error
         std = np.sqrt(np.sum((jac * phi_std[None, :]) ** 2, axis=1))
+    if diverged:
+        return Refinement(refined, names, estimate, std, initial_rms, initial_rms, float("nan"), steps, dt,
+                          method.segment_s, result.n_samples, tuple(float(w) for w in weights), (), 0, alpha, latency,
+                          diverged=True)
     return Refinement(refined, names, estimate, std, initial_rms, float(result.residual_rms),
                       float(result.relative_error), steps, dt, method.segment_s, result.n_samples,
                       tuple(float(w) for w in weights), tuple(float(v) for v in sigma), reweights, alpha, latency)
+
+
+def _ended_worse(result) -> bool:
+    """Whether an output-error fit ended with a larger (or non-finite) residual than its start."""
+    return not float(result.residual_rms) <= float(result.initial_residual_rms)

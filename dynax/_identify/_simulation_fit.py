@@ -42,6 +42,8 @@ class SimulationFit(eqx.Module):
     - `fit_initial_states`: fit each segment's initial state (default `True`) or start from the
       measured one.
     - `continuity_weight`: weight of the continuity defects between segments (default 10).
+    - `stagger`: how many cuts of the records into segments to fit at once, each starting a
+      `1/stagger` of a segment after the last (default 1; more needs `fit_initial_states=False`).
     - `rtol`, `atol`: Levenberg-Marquardt tolerances (default 1e-8).
     - `max_steps`: iteration budget (default 100).
     - `simulation`: the `simulate` method (default `FixedGrid()`, which forward-mode autodiff can
@@ -55,6 +57,7 @@ class SimulationFit(eqx.Module):
     atol: float = 1e-8
     max_steps: int = eqx.field(static=True, default=100)
     simulation: FixedGrid = FixedGrid()
+    stagger: int = eqx.field(static=True, default=1)
 
 
 class SimulationFitResult(eqx.Module):
@@ -97,8 +100,14 @@ class SimulationFitResult(eqx.Module):
         return self.solution.names[: self.parameters.shape[0]]
 
 
-def _segments(trajectories, segment_s):
-    """Cut every record into equal-length segments sharing their end samples."""
+def _segments(trajectories, segment_s, stagger: int = 1):
+    """Cut every record into equal-length segments sharing their end samples.
+
+    With `stagger` $k > 1$, $k$ such cuts of each record, the $j$-th starting $j/k$ of a segment
+    later (segments start every $1/k$ of a segment): every sample is fitted from $k$ different
+    distances to its segment's start. Only the first cut's segments are `follows`-linked (the
+    continuity defects are for fitted initial states, which staggered cuts do not have).
+    """
     dt = float(np.median(np.diff(np.asarray(trajectories[0].ts))))
     shortest = min(len(t) for t in trajectories)
     if shortest < 2:
@@ -107,14 +116,16 @@ def _segments(trajectories, segment_s):
     ts, xs, us, follows, owner = [], [], [], [], []
     n_samples = 0
     for j, traj in enumerate(trajectories):
-        starts = range(0, len(traj) - length + 1, length - 1)
+        base = list(range(0, len(traj) - length + 1, length - 1))
+        shifted = [s + round(i * (length - 1) / stagger) for i in range(1, stagger) for s in base]
+        starts = base + [s for s in shifted if s + length <= len(traj)]
         for k, s in enumerate(starts):
             ts.append(np.asarray(traj.ts[s : s + length]))
             xs.append(np.asarray(traj.xs[s : s + length]))
             us.append(np.asarray(traj.us[s : s + length]))
-            follows.append(k > 0)
+            follows.append(0 < k < len(base))
             owner.append(j)
-        n_samples += starts[-1] + length
+        n_samples += base[-1] + length
     return np.stack(ts), np.stack(xs), np.stack(us), np.asarray(follows), np.asarray(owner), n_samples
 
 
@@ -178,6 +189,7 @@ def fit_simulation_error(
     simulation: FixedGrid = FixedGrid(),
     record_weights: Float[Array, " n_records"] | None = None,
     progress: bool | None = None,
+    stagger: int = 1,
 ) -> SimulationFitResult:
     r"""Fit the elements of `system` selected by `filter_spec` by minimising the simulation error.
 
@@ -209,6 +221,14 @@ def fit_simulation_error(
     - `progress`: a bar per Levenberg-Marquardt iteration with the loss on stderr (`None`: when
       stderr is a terminal, see `dynax.progress_mode`; `False` never).
     - `record_weights`: optional weight per trajectory multiplying its state residuals (default 1).
+    - `stagger`: $k$, how many cuts of the records into segments are fitted together, each starting
+      $1/k$ of a segment after the one before (default 1: one cut). A model that is not exact fits
+      a record differently depending on where its segments start (how far each sample is from its
+      segment's initial state); $k$ cuts average that out. Each cut's residuals are weighted by
+      $1/\sqrt{k}$, so the cost stays the size of one cut's, and the standard errors are multiplied
+      by $\sqrt{k}$ (the cuts' residuals repeat the same samples: counting them as independent would
+      shrink the errors by that factor). Only with `fit_initial_states=False` (staggered segments
+      start from the measured state).
 
     **Returns:** a `SimulationFitResult` (with the engine's `Solution` as `.solution`).
 
@@ -226,10 +246,15 @@ def fit_simulation_error(
         raise UsageError("fit_simulation_error: `trajectories` is empty")
     if not segment_s > 0:
         raise UsageError(f"fit_simulation_error: `segment_s` must be positive, got {segment_s}")
+    if not (isinstance(stagger, (int, np.integer)) and stagger >= 1):
+        raise UsageError(f"fit_simulation_error: `stagger` must be a positive integer, got {stagger!r}")
+    if stagger > 1 and fit_initial_states:
+        raise UsageError("fit_simulation_error: `stagger` > 1 needs `fit_initial_states=False` "
+                         "(staggered segments start from the measured state)")
     chosen = filter_spec if isinstance(filter_spec, Parameters) else Parameters.of(system, filter_spec)
     if chosen.size == 0:
         raise UsageError("fit_simulation_error: `filter_spec` selects no array leaves to fit")
-    ts, xs, us, follows, owner, n_samples = _segments(trajectories, segment_s)
+    ts, xs, us, follows, owner, n_samples = _segments(trajectories, segment_s, stagger)
     p0 = chosen.vector(system)
     dtype = jnp.result_type(p0.dtype, xs.dtype)
     ts, xs, us = (jnp.asarray(a, dtype) for a in (ts, xs, us))
@@ -242,7 +267,7 @@ def fit_simulation_error(
     if weight.shape != (len(trajectories),) or not np.all(weight > 0):
         raise UsageError(f"fit_simulation_error: `record_weights` must be {len(trajectories)} positive numbers")
     data = _Segments(ts, xs, us, sigma, jnp.asarray(follows[1:], dtype),  # segment s+1 continues segment s
-                     jnp.asarray(continuity_weight, dtype), jnp.asarray(weight[owner], dtype))
+                     jnp.asarray(continuity_weight, dtype), jnp.asarray(weight[owner] / np.sqrt(stagger), dtype))
     # The unknowns: the system's chosen elements, then (when fitted) every segment's initial state,
     # scaled by |p0| (or 1) and by the state scale.
     unknowns = _Unknowns(system, xs[:, 0])
@@ -261,8 +286,8 @@ def fit_simulation_error(
     n_params = chosen.size
     n_state_residuals = xs.size
     linearised: LeastSquaresFit = least_squares(jac, -r, names=parameters.names, allow_rank_deficient=True)
-    std = linearised.std_errors * scale
-    covariance = linearised.covariance * scale[:, None] * scale[None, :]
+    std = linearised.std_errors * scale * np.sqrt(stagger)
+    covariance = linearised.covariance * scale[:, None] * scale[None, :] * stagger
     solution = eqx.tree_at(lambda s: (s.std_errors, s.covariance), solution, (std, covariance))
     fitted = solution.model
     return SimulationFitResult(
@@ -272,9 +297,10 @@ def fit_simulation_error(
         std_errors=std[:n_params],
         condition_number=linearised.condition_number,
         rank=linearised.rank,
-        residual_rms=jnp.sqrt(jnp.mean(r[:n_state_residuals] ** 2)),
-        initial_residual_rms=jnp.sqrt(jnp.mean(r0[:n_state_residuals] ** 2)),
-        relative_error=jnp.linalg.norm(r[:n_state_residuals].reshape(xs.shape) * jnp.broadcast_to(sigma, xs.shape)) / jnp.linalg.norm(xs),
+        residual_rms=jnp.sqrt(jnp.mean(r[:n_state_residuals] ** 2) * stagger),  # undo the cuts' 1/sqrt(k)
+        initial_residual_rms=jnp.sqrt(jnp.mean(r0[:n_state_residuals] ** 2) * stagger),
+        relative_error=jnp.linalg.norm(r[:n_state_residuals].reshape(xs.shape) * jnp.broadcast_to(sigma, xs.shape))
+        * np.sqrt(stagger) / jnp.linalg.norm(xs),
         n_segments=int(xs.shape[0]),
         n_samples=int(n_samples),
         steps=solution.steps,

@@ -132,3 +132,23 @@ def test_public_engine_matches_scipy_on_a_model_of_the_users_own():
     np.testing.assert_allclose(np.asarray(sol.value), ref.x, rtol=1e-6)
     np.testing.assert_allclose(np.asarray(sol.std_errors), ref_std, rtol=1e-4)
     assert abs(ref.x[1] - 0.7) < 4 * ref_std[1]  # and both found the generating decay rate
+
+
+class _Scalar(eqx.Module):
+    p: jax.Array
+
+
+def test_a_solver_that_ends_worse_than_it_started_is_reported_as_diverged():
+    """Gauss-Newton without a trust region on arctan(p) from p = 1.5 overshoots, further each step
+    (the textbook divergence of Newton's method on arctan); Levenberg-Marquardt converges."""
+    import optimistix as optx
+
+    residual = lambda m, _: jnp.atleast_1d(jnp.arctan(m.p))  # noqa: E731
+    start = _Scalar(jnp.asarray(1.5))
+    gauss_newton = fit_least_squares(residual, start, solver=optx.GaussNewton(rtol=1e-8, atol=1e-8), max_steps=4,
+                                     covariance=False)
+    assert float(gauss_newton.loss) > float(gauss_newton.initial_loss)
+    assert gauss_newton.result == optx.RESULTS.nonlinear_divergence and not gauss_newton.succeeded
+    assert abs(float(gauss_newton.value[0])) > 1.5  # the solver's last point is kept, for inspection
+    damped = fit_least_squares(residual, start, covariance=False)
+    assert damped.succeeded and abs(float(damped.value[0])) < 1e-6

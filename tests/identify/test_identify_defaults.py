@@ -334,6 +334,33 @@ def test_the_labs_geared_rotor_with_its_coupling_is_base_parameters_plus_elbow_r
         np.testing.assert_allclose(np.asarray(ddq), [a1, a2], rtol=1e-9, atol=1e-9)
 
 
+def test_a_refinement_that_ends_worse_than_its_start_keeps_the_least_squares_model(monkeypatch):
+    # Levenberg-Marquardt through rollouts has been seen (rarely, on real data) to end at a point worse
+    # than its start. The fit below is the real one; only its reported residual is made worse than its
+    # start's, to drive the refinement's handling: a warning, the least-squares model kept, and the
+    # output-error stage saying so.
+    import equinox as eqx
+
+    from dynax._identify import _refine
+
+    real = _refine.fit_simulation_error
+
+    def ends_worse(*args, **kwargs):
+        result = real(*args, **kwargs)
+        return eqx.tree_at(lambda r: r.residual_rms, result, 2 * result.initial_residual_rms)
+
+    monkeypatch.setattr(_refine, "fit_simulation_error", ends_worse)
+    data = recorded(rig_model(), 6.0, 13)
+    with pytest.warns(RuntimeWarning, match="ended worse than its start"):
+        result = identify(dynax.DoublePendulum(), data, Dynamic(), friction="coulomb", refine=True)
+    stages = result.to_json()["stages"]
+    assert stages["output_error"]["diverged"] is True and "least squares kept" in result.method
+    least_squares = stages["least_squares"]["parameters"]
+    for name, value in least_squares.items():
+        assert result.parameters[name] == pytest.approx(value, rel=1e-9, abs=1e-12), name
+    assert result.parameters["Ir2"] < 1e-4  # the rotor inertia the refinement adds, at its start (the rig: 0.0042)
+
+
 def test_each_records_residual_scale_is_estimated_from_its_own_residuals():
     # The maximum-likelihood record weights (one unknown noise variance per record) rest on each record's
     # residual scale. Records made by scipy's DOP853, with white noise of a known, different level on each:

@@ -81,3 +81,48 @@ def test_named_parameters_pick_the_named_coefficients_of_nominal_system_and_term
     assert axis.names == ("mass", "viscous", "coulomb", "offset")
     fixed = _named_parameters(dynax.LinearAxis(), ("mass", "viscous", "offset"))
     assert fixed.names == ("mass", "viscous", "offset")  # the Coulomb term is not fitted
+
+
+def test_staggered_cuts_start_every_fraction_of_a_segment_and_link_only_the_first_cut():
+    from dynax._identify._simulation_fit import _segments
+
+    ts = np.arange(0.0, 1.0 + 1e-9, 0.01)  # 101 samples
+    record = Trajectory(jnp.asarray(ts), jnp.asarray(ts[:, None]), jnp.zeros((len(ts), 1)), ("q",), ("u",))
+    one = _segments([record], 0.2)
+    four = _segments([record], 0.2, stagger=4)
+    starts = lambda cut: sorted(np.round(cut[0][:, 0] / 0.01).astype(int))  # noqa: E731
+    assert starts(one) == [0, 20, 40, 60, 80]
+    # Segments of 21 samples starting every 5 samples, as long as they fit in the record.
+    assert starts(four) == list(range(0, 81, 5))
+    assert four[1].shape[1:] == (21, 1) and np.all(four[1][:, :, 0] == four[0])  # states follow their times
+    assert one[5] == four[5] == 101 and np.all(four[4] == 0)  # the samples covered, counted once; one record
+    # Only the first cut's segments continue one another (the continuity links of fitted states).
+    assert list(four[3][:5]) == [False, True, True, True, True] and not np.any(four[3][5:])
+    with pytest.raises(dynax.UsageError, match="stagger"):
+        fit_simulation_error(dynax.LinearAxis(), record, stagger=2)  # fitted initial states: refused
+    with pytest.raises(dynax.UsageError, match="stagger"):
+        fit_simulation_error(dynax.LinearAxis(), record, stagger=0, fit_initial_states=False)
+
+
+@pytest.mark.slow  # two Levenberg-Marquardt compilations
+def test_staggered_cuts_keep_the_standard_errors_of_one_cut():
+    """Four staggered cuts repeat each sample four times; their residuals are not independent, so the
+    standard errors must stay near one cut's, not halve (as counting them as independent would)."""
+    truth = dynax.LinearAxis(mass=jnp.asarray(95.0), viscous=jnp.asarray(200.0), coulomb=jnp.asarray(20.0),
+                             offset=jnp.asarray(-3.0))
+    ts = np.arange(0.0, 4.0, 0.002)
+    us = (60 * np.sin(3 * ts) + 40 * np.sin(7.1 * ts) + 25 * np.sin(13.3 * ts))[:, None]
+    data = _noisy_record(truth, ts, us, [0.0, 0.0], truth.state_names, noise=1e-4, seed=2)
+    start = dynax.LinearAxis(mass=jnp.asarray(80.0), viscous=jnp.asarray(240.0), coulomb=jnp.asarray(15.0),
+                             offset=jnp.asarray(0.0))
+    fits = [fit_simulation_error(start, data, segment_s=0.5, fit_initial_states=False, max_steps=40, stagger=k)
+            for k in (1, 4)]
+    expected = np.array([95.0, 200.0, 20.0, -3.0])
+    for fit in fits:
+        np.testing.assert_allclose(np.asarray(fit.parameters), expected, rtol=0.02, atol=0.1)
+    ratio = np.asarray(fits[1].std_errors) / np.asarray(fits[0].std_errors)
+    # Counted as independent, four cuts would halve them (0.33 to 0.41 here); the cuts do add some
+    # information (each sample is also fitted from other start states), 0.66 to 0.83 measured.
+    assert np.all((ratio > 0.55) & (ratio < 1.2)), ratio
+    # The residual's RMS is per sample, as with one cut.
+    assert float(fits[1].residual_rms) == pytest.approx(float(fits[0].residual_rms), rel=0.3)
