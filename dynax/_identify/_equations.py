@@ -409,14 +409,7 @@ def _equations(system, trajectories, method, friction, weights, rcond):
         counts = tuple(int(p[2]) for p in parts)
         n_samples = sum(counts)
         settings = tuple(p[3] for p in parts)
-        n_joints = parts[0][0].shape[1]
-        if method.weighting == "joint" and weights is None:
-            first = least_squares(a, y, names=names, rcond=rcond)
-            residual = (a @ first.estimate - y).reshape(n_joints, -1)
-            variance = jnp.mean(residual**2, axis=1)
-            variance = jnp.where(variance > 0, variance, jnp.max(variance) + jnp.finfo(a.dtype).tiny)
-            weights = jnp.repeat(1.0 / variance, a.shape[0] // n_joints)
-        elif method.weighting not in ("none", "joint"):
+        if method.weighting not in ("none", "joint"):
             raise UsageError(f"Dynamic: `weighting` must be 'none' or 'joint', got {method.weighting!r}")
         label = "dynamic"
     elif isinstance(method, (Power, Energy)):
@@ -430,6 +423,18 @@ def _equations(system, trajectories, method, friction, weights, rcond):
             f"identify: `method` must be Dynamic(), Power(), Energy() or SimulationFit(), got {type(method).__name__}"
         )
     return system, a, y, weights, names, n_samples, label, settings, counts
+
+
+def joint_weights(a, y, names, rcond, n_joints):
+    """`Dynamic(weighting="joint")`'s row weights for equations stacked joint by joint: the inverse of
+    each joint's residual variance from an ordinary least-squares fit of `(a, y)` (Gautier's weighted
+    least squares). Pass the equations the weighted fit will solve (offsets already removed), so
+    that what the parameters cannot explain, not a record's offset, sets each joint's weight."""
+    first = least_squares(a, y, names=names, rcond=rcond)
+    residual = (a @ first.estimate - y).reshape(n_joints, -1)
+    variance = jnp.mean(residual**2, axis=1)
+    variance = jnp.where(variance > 0, variance, jnp.max(variance) + jnp.finfo(a.dtype).tiny)
+    return jnp.repeat(1.0 / variance, a.shape[0] // n_joints)
 
 
 @eqx.filter_jit

@@ -33,7 +33,7 @@ from ._consistency import (
     InconsistentEstimateWarning,
 )
 from ._defaults import choose_filter
-from ._equations import _equations, _uniform, Dynamic, Energy, Power
+from ._equations import _equations, _uniform, Dynamic, Energy, joint_weights, Power
 from ._refine import refine_by_simulation
 from ._validation import DEFAULT_HORIZONS_S, held_out_error, HeldOutError, split_for_validation
 from ._least_squares import IdentifiabilityError, least_squares, LeastSquaresFit
@@ -254,6 +254,12 @@ def _least_squares_stage(system, trajectories, method, friction, weights, rcond,
         system, trajectories, method, friction, weights, rcond
     )
     groups = _offset_rows(system, method, counts)
+    if isinstance(method, Dynamic) and method.weighting == "joint" and weights is None:
+        # Each joint's residual variance from an ordinary fit of the equations that will be solved.
+        plain = (raw_a, raw_y) if groups is None else without_offsets(raw_a, raw_y, None, groups)[:2]
+        n_joints = raw_a.shape[0] // sum(counts)  # rows stacked joint by joint, `counts` per record and joint
+        weights = joint_weights(jnp.asarray(plain[0], raw_a.dtype), jnp.asarray(plain[1], raw_y.dtype), names, rcond,
+                                n_joints)
     a, y = raw_a, raw_y
     if groups is not None:
         a, y, a_means, y_means = without_offsets(raw_a, raw_y, weights, groups)
