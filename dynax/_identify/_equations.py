@@ -79,8 +79,9 @@ class Dynamic(eqx.Module):
       for a measured force or torque sampled at $t_k$ (the EMPS reference model does this; on EMPS
       the half-sample shift between the two moves $F_v$ by 2 %).
     - `weighting`: `"none"` (ordinary least squares) or `"joint"`: weight each joint's equations
-      by the inverse of its residual variance from a first ordinary fit (Gautier's weighted least
-      squares; joints with noisier torque count less).
+      by the inverse of its residual variance from a first ordinary fit of the same equations
+      (offsets removed when they are estimated; Gautier's weighted least squares; joints with
+      noisier torque count less).
     - `offsets`: estimate, with the parameters, one constant offset of the recorded force per record
       and driven joint (a current-based torque's zero, which differs from one recording to the
       next: the "offset" term of Gautier's and the EMPS models, here per record), and fit the
