@@ -13,6 +13,9 @@ added) and still validates on the held-out run as recorded, so that the table co
 default one: a check that the defaults follow the data, not one format of it. Results in
 `experiments/results/dfki_identify_variants/VARIANT/`.
 
+`--stagger K` cuts the records into segments K times, each cut a 1/K segment after the last
+(identify's default is 4; `--stagger 1` gives the single cut used before).
+
 `--segment-band-hz F` sets the band edge that the refinement's segment length is one period of
 (default: the widest band `choose_filter` reads off the training runs), to see how much the
 segmentation alone moves a fold (docs/identification.md, "The count of cells is within what the
@@ -99,7 +102,8 @@ def main(argv=None):
     parser.add_argument("--segment-band-hz", type=float, default=None, metavar="F",
                         help="segments of 1/F s in the refinement instead of one period of the widest band's edge")
     parser.add_argument("--stagger", type=int, default=None, metavar="K",
-                        help="fit K staggered cuts of the records into segments (SimulationFit.stagger)")
+                        help="fit K staggered cuts of the records into segments (SimulationFit.stagger; default "
+                             "identify's, 4; 1 for the single cut of the table before 2026-11-26's afternoon)")
     args = parser.parse_args(argv)
     if args.segment_band_hz is not None:
         identify_module._signal_band_hz = lambda trajectories: args.segment_band_hz

@@ -31,7 +31,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float, Int
 
-from .._fit import fit_least_squares, Parameters
+from .._fit import fit_least_squares, levenberg_marquardt, Parameters
 from .._model._extensions import Extended
 from .._sim_error import window_rollouts
 from .._simulate import FixedGrid
@@ -52,7 +52,7 @@ FORWARD_GRID = FixedGrid(solver=diffrax.Tsit5(scan_kind="lax"), substeps=1)
 # thousands of residuals and a dozen parameters that QR cost more than the rollouts themselves
 # (three times the former loop's time per step); the parameters are scaled to O(1), so the squared
 # condition number is harmless.
-SOLVER = optx.LevenbergMarquardt(rtol=1e-3, atol=1e-3, norm=optx.rms_norm, linear_solver=lx.Normal(lx.Cholesky()))
+SOLVER = levenberg_marquardt(rtol=1e-3, atol=1e-3, norm=optx.rms_norm, linear_solver=lx.Normal(lx.Cholesky()))
 MAX_STEPS = 32
 
 

@@ -31,9 +31,10 @@ from jaxtyping import Array, Float, PyTree
 
 from .._progress import report
 from ._parameters import Parameters
+from ._levenberg_marquardt import levenberg_marquardt
 from ._solution import Solution
 
-DEFAULT_LEAST_SQUARES = optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8)
+DEFAULT_LEAST_SQUARES = levenberg_marquardt(rtol=1e-8, atol=1e-8)
 DEFAULT_MINIMISER = optx.BFGS(rtol=1e-8, atol=1e-8)
 
 

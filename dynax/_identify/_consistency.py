@@ -55,7 +55,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .._fit import fit_least_squares
+from .._fit import fit_least_squares, levenberg_marquardt
 from .._model._extensions import Extended
 from .._model._system import violated_bound
 
@@ -250,7 +250,7 @@ def _constrained_solve(parametrisation, reduced, projected, col_scale, phi0, max
         return reduced @ (parametrisation.theta(phi) * col_scale) - projected
 
     # The engine's fit on phi itself (unit scale), with no covariance: the projection needs only the point.
-    solver = optx.LevenbergMarquardt(rtol=1e-10, atol=1e-12)
+    solver = levenberg_marquardt(rtol=1e-10, atol=1e-12)
     solution = fit_least_squares(residuals, phi0, True, None, solver=solver, scale=jnp.ones_like(phi0),
                                  max_steps=max_steps, nonfinite=None, covariance=False)
     return solution.value, solution.result == optx.RESULTS.successful

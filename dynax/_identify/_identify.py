@@ -346,13 +346,16 @@ def _signal_band_hz(trajectories) -> float | None:
     return max(bands) if bands else None
 
 
+STAGGER = 4  # staggered cuts of the records into segments in the default refinement
+
+
 def _refinement_method(refine, system, method, trajectories):
     """The `SimulationFit` that refines the least-squares estimate, or `None`.
 
     `"auto"`: two-link arms whose velocities carry measurement noise (real data), with segments of
     one period of the signal band's edge (long enough to show the motion, short enough that a
-    chaotic run's divergence does not swamp the fit), 60 Levenberg-Marquardt steps, and 4 integrator
-    steps per sample.
+    chaotic run's divergence does not swamp the fit) in `STAGGER` staggered cuts, 60
+    Levenberg-Marquardt steps, and 4 integrator steps per sample.
     """
     if refine is None or refine is False:
         return None
@@ -371,7 +374,10 @@ def _refinement_method(refine, system, method, trajectories):
     segment = 1.0 / band if band is not None else 0.25
     # Four integrator steps per sample of the fitted grid (40 per band period): the smoothed Coulomb
     # friction (tanh at 0.01 rad/s) is stiff, and two steps left a visible bias on synthetic data.
-    return SimulationFit(segment_s=segment, fit_initial_states=False, max_steps=60, simulation=FixedGrid(substeps=4))
+    # Four staggered cuts into segments: with one, where the segments start moved a DFKI fold's
+    # held-out error by up to 5 % (segment lengths 0.154 to 0.182 s), with four by under 2 %.
+    return SimulationFit(segment_s=segment, fit_initial_states=False, max_steps=60, simulation=FixedGrid(substeps=4),
+                         stagger=STAGGER)
 
 
 def _named_parameters(system, names) -> Parameters:

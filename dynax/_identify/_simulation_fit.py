@@ -22,13 +22,12 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from jaxtyping import Array, Float, PyTree
 
 from .._data._trajectory import Trajectory
 from .._errors import DataError, UsageError
 from .._progress import bar_token, ProgressBar
-from .._fit import fit_least_squares, Parameters, Solution
+from .._fit import fit_least_squares, levenberg_marquardt, Parameters, Solution
 from .._model._system import AbstractSystem
 from .._simulate import FixedGrid, simulate
 from ._least_squares import least_squares, LeastSquaresFit
@@ -278,7 +277,7 @@ def fit_simulation_error(
     )
     p_scale = jnp.where(jnp.abs(p0) > 0, jnp.abs(p0), 1.0).astype(dtype)
     scale = jnp.concatenate([p_scale, jnp.tile(sigma, xs.shape[0])]) if fit_initial_states else p_scale
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+    solver = levenberg_marquardt(rtol=rtol, atol=atol)
     with ProgressBar(max_steps, "output-error fit", progress=progress, reduce="last") as bar:
         solution, r, r0, jac = _solve(unknowns, parameters, data, scale, solver, max_steps, simulation, fit_initial_states,
                                       bar_token(bar))

@@ -152,3 +152,27 @@ def test_a_solver_that_ends_worse_than_it_started_is_reported_as_diverged():
     assert abs(float(gauss_newton.value[0])) > 1.5  # the solver's last point is kept, for inspection
     damped = fit_least_squares(residual, start, covariance=False)
     assert damped.succeeded and abs(float(damped.value[0])) < 1e-6
+
+
+def test_the_strict_trust_region_refuses_a_rise_that_optimistix_would_accept():
+    """optimistix accepts a step when `actual <= 0.01 * predicted`; with a predicted rise of 1.5 an actual
+    rise of 0.01 passes that. The strict region refuses it and shrinks, and still takes a real decrease."""
+    import lineax as lx
+    import optimistix as optx
+
+    from dynax._fit import StrictTrustRegion
+
+    def info(residual):
+        return optx.FunctionInfo.ResidualJac(jnp.array([residual]), lx.MatrixLinearOperator(jnp.array([[1.0]])))
+
+    y, y_eval = jnp.array([0.0]), jnp.array([1.0])  # J d + r = 2: predicted change 0.5 (4 - 1) = 1.5
+    rise, fall = info(1.01), info(0.5)
+    plain, strict = optx.ClassicalTrustRegion(), StrictTrustRegion()
+    state = strict.init(y, info(1.0))
+    _, accepted, _, _ = plain.step(jnp.array(False), y, y_eval, info(1.0), rise, state)
+    assert bool(accepted)  # the flaw: a rise, accepted
+    size, accepted, _, new_state = strict.step(jnp.array(False), y, y_eval, info(1.0), rise, state)
+    assert not bool(accepted) and float(size) == float(new_state.step_size) == 0.25
+    _, accepted, _, _ = strict.step(jnp.array(False), y, jnp.array([-0.5]), info(1.0), fall, state)
+    assert bool(accepted)
+    assert bool(strict.step(jnp.array(True), y, y_eval, info(1.0), rise, state)[1])  # the first evaluation is no step

@@ -44,11 +44,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from jaxtyping import Array, Float
 
 from ..._data._trajectory import Trajectory
-from ..._fit import fit_least_squares
+from ..._fit import fit_least_squares, levenberg_marquardt
 from ..._errors import UsageError
 from ..._model._helicopter import BODY, BODY_AXES, Helicopter, LINEAR_FEATURE_NAMES
 from ._criteria import _normal_equations, _single, _solve, _with_theta, fit_one_step, VehicleFit
@@ -325,7 +324,7 @@ def _reduce_structure(theta, response_residuals, residuals, responses: _Response
     def cost(theta):
         return float(cost_jit(theta, jnp.asarray(active, theta.dtype))) / max(1, int(responses.use.sum()))
 
-    solver = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-8)
+    solver = levenberg_marquardt(rtol=1e-6, atol=1e-8)
     eliminated = []
     for _ in range(n_free + 1):  # the last pass only re-checks (at most n_free eliminations)
         act = jnp.asarray(active, theta.dtype)
