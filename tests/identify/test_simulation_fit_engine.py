@@ -23,15 +23,22 @@ def _noisy_record(system, ts, us, x0, names, noise, seed):
     return Trajectory(jnp.asarray(ts), jnp.asarray(xs), jnp.asarray(us), names, system.input_names)
 
 
-@pytest.mark.slow  # one Levenberg-Marquardt compilation (about 30 s on 2 cores)
-def test_linear_axis_named_by_tree_path_recovers_parameters_within_their_errors():
+def _axis_problem(seed):
+    """A linear axis (EMPS-sized) under a multisine force, measured with 1e-4 noise, and a start 15 to
+    25 % off: `(record, start)`."""
     truth = dynax.LinearAxis(mass=jnp.asarray(95.0), viscous=jnp.asarray(200.0), coulomb=jnp.asarray(20.0),
                              offset=jnp.asarray(-3.0))
     ts = np.arange(0.0, 4.0, 0.002)
     us = (60 * np.sin(3 * ts) + 40 * np.sin(7.1 * ts) + 25 * np.sin(13.3 * ts))[:, None]
-    data = _noisy_record(truth, ts, us, [0.0, 0.0], truth.state_names, noise=1e-4, seed=0)
+    data = _noisy_record(truth, ts, us, [0.0, 0.0], truth.state_names, noise=1e-4, seed=seed)
     start = dynax.LinearAxis(mass=jnp.asarray(80.0), viscous=jnp.asarray(240.0), coulomb=jnp.asarray(15.0),
                              offset=jnp.asarray(0.0))
+    return data, start
+
+
+@pytest.mark.slow  # one Levenberg-Marquardt compilation (about 30 s on 2 cores)
+def test_linear_axis_named_by_tree_path_recovers_parameters_within_their_errors():
+    data, start = _axis_problem(seed=0)
     result = fit_simulation_error(start, data, segment_s=1.0, max_steps=40)
     assert result.names == ("mass", "viscous", "coulomb", "offset")  # the tree paths of the default filter
     assert isinstance(result.solution, Solution)
@@ -108,13 +115,7 @@ def test_staggered_cuts_start_every_fraction_of_a_segment_and_link_only_the_firs
 def test_staggered_cuts_keep_the_standard_errors_of_one_cut():
     """Four staggered cuts repeat each sample four times; their residuals are not independent, so the
     standard errors must stay near one cut's, not halve (as counting them as independent would)."""
-    truth = dynax.LinearAxis(mass=jnp.asarray(95.0), viscous=jnp.asarray(200.0), coulomb=jnp.asarray(20.0),
-                             offset=jnp.asarray(-3.0))
-    ts = np.arange(0.0, 4.0, 0.002)
-    us = (60 * np.sin(3 * ts) + 40 * np.sin(7.1 * ts) + 25 * np.sin(13.3 * ts))[:, None]
-    data = _noisy_record(truth, ts, us, [0.0, 0.0], truth.state_names, noise=1e-4, seed=2)
-    start = dynax.LinearAxis(mass=jnp.asarray(80.0), viscous=jnp.asarray(240.0), coulomb=jnp.asarray(15.0),
-                             offset=jnp.asarray(0.0))
+    data, start = _axis_problem(seed=2)
     fits = [fit_simulation_error(start, data, segment_s=0.5, fit_initial_states=False, max_steps=40, stagger=k)
             for k in (1, 4)]
     expected = np.array([95.0, 200.0, 20.0, -3.0])
