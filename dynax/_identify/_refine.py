@@ -345,7 +345,7 @@ def refine_by_simulation(
     jac = np.asarray(jax.jacfwd(parametrisation.theta)(consistent.phi))
     phi_std = np.full(consistent.phi.shape[0], np.nan) if diverged else np.asarray(result.std_errors)[: consistent.phi.shape[0]]
     alpha = latency = None
-    if input_timing:
+    if input_timing and not diverged:  # a kept start has measured no timing
         alpha = float(jnp.clip(final.alpha, -INPUT_REACH, INPUT_REACH))
         record_dt = float(np.median([float(np.median(np.diff(np.asarray(r.ts)))) for r in records]))
         latency = 0.5 * record_dt - alpha * dt

@@ -359,6 +359,7 @@ def test_a_refinement_that_ends_worse_than_its_start_keeps_the_least_squares_mod
     for name, value in least_squares.items():
         assert result.parameters[name] == pytest.approx(value, rel=1e-9, abs=1e-12), name
     assert result.parameters["Ir2"] < 1e-4  # the rotor inertia the refinement adds, at its start (the rig: 0.0042)
+    assert stages["output_error"]["input_timing"] is None  # nothing was measured
 
 
 def test_each_records_residual_scale_is_estimated_from_its_own_residuals():
