@@ -14,7 +14,9 @@ The data it fits are the records cut to 40 samples per period of their signal ba
 steps as the motion needs, with the measured encoder positions and velocities from a local cubic
 fit of those positions: each segment starts from the measured position and a velocity about a
 hundred times less noisy than the driver's estimate, without the amplitude loss of a low-pass filter
-at the band's edge (which on a large-amplitude run distorts the very motion that is fitted). Each state's residual is divided by its measurement-noise level
+at the band's edge (which on a large-amplitude run distorts the very motion that is fitted). The
+segments are `method`'s (`identify` uses one band period, in four staggered cuts, see
+`SimulationFit.stagger`). Each state's residual is divided by its measurement-noise level
 (`measurement_noise_std`): maximum likelihood under white measurement noise, which lets the
 precise encoder positions, not the noisy velocity estimate, decide.
 
