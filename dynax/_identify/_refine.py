@@ -57,6 +57,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 
 from .._data._derivatives import butterworth_filtfilt, resample
 from .._data._trajectory import Trajectory
@@ -353,15 +354,13 @@ def refine_by_simulation(
         latency = 0.5 * record_dt - alpha * dt
     with np.errstate(invalid="ignore"):  # an unidentified direction has an infinite standard error
         std = np.sqrt(np.sum((jac * phi_std[None, :]) ** 2, axis=1))
-    if diverged:
-        return Refinement(refined, names, estimate, std, initial_rms, initial_rms, float("nan"), steps, dt,
-                          method.segment_s, result.n_samples, tuple(float(w) for w in weights), (), 0, alpha, latency,
-                          diverged=True)
-    return Refinement(refined, names, estimate, std, initial_rms, float(result.residual_rms),
-                      float(result.relative_error), steps, dt, method.segment_s, result.n_samples,
-                      tuple(float(w) for w in weights), tuple(float(v) for v in sigma), reweights, alpha, latency)
+    # A kept start: its own residual, no relative error or record scales of a fit.
+    rms, relative = (initial_rms, float("nan")) if diverged else (float(result.residual_rms), float(result.relative_error))
+    return Refinement(refined, names, estimate, std, initial_rms, rms, relative, steps, dt, method.segment_s,
+                      result.n_samples, tuple(float(w) for w in weights),
+                      () if diverged else tuple(float(v) for v in sigma), reweights, alpha, latency, diverged)
 
 
 def _ended_worse(result) -> bool:
-    """Whether an output-error fit ended with a larger (or non-finite) residual than its start."""
-    return not float(result.residual_rms) <= float(result.initial_residual_rms)
+    """Whether an output-error fit ended worse than its start, as the engine reports it."""
+    return bool(result.solution.result == optx.RESULTS.nonlinear_divergence)
