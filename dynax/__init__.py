@@ -20,6 +20,8 @@ from ._identify import (
     InconsistentEstimateWarning as InconsistentEstimateWarning,
     measurement_noise_std as measurement_noise_std,
     noise_floor_and_band as noise_floor_and_band,
+    record_friction as record_friction,
+    RecordFriction as RecordFriction,
     record_offsets as record_offsets,
     RecordOffsets as RecordOffsets,
     refine_by_simulation as refine_by_simulation,

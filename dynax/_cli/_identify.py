@@ -168,8 +168,9 @@ def run(args: argparse.Namespace) -> int:
             print("  consistency constraint active (the plain least-squares estimate broke: " + "; ".join(enforced) + ")")
         elif not consistency.violated:
             print("  physically consistent")
-    if result.record_offsets is not None and result.record_offsets.differ():
-        print("  " + result.record_offsets.note())
+    for check in (result.record_offsets, result.record_friction):
+        if check is not None and check.differ():
+            print("  " + check.note())
     fitted_offsets = (result.stages or {}).get("least_squares", {}).get("offsets")
     if fitted_offsets:
         cells = "; ".join(f"{record} " + ", ".join(f"{joint} {value:+.3g}" for joint, value in zip(fitted_offsets["joints"], row))

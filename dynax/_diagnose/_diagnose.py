@@ -20,7 +20,7 @@ import numpy as np
 
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
-from .._identify._offsets import offsets_of_records
+from .._identify._record_friction import compare_records
 from .._model._extensions import AbstractInputTerm, AbstractTerm, Extended
 from .._model._system import AbstractSystem, friction_parameter_names, size_parameter_names
 from .._precision import warn_if_float32
@@ -351,7 +351,7 @@ def _prepare(system, train, validation, candidates, mode, options: _Options) -> 
     """Step 0: records on one grid, the candidates and their identifiability, the training and held-out windows."""
     notes: list[str] = []
     train_records, validation_records, dt = _prepare_records(system, train, validation, options.holdout_fraction, notes)
-    _note_record_offsets(system, train_records + (validation_records if validation is not None else []), notes)
+    _note_record_differences(system, train_records + (validation_records if validation is not None else []), notes)
     train_records, validation_records, velocities = _velocity_estimates(system, train_records, validation_records,
                                                                         options.velocities, notes)
     candidates = tuple(default_candidates(system, train_records) if candidates is None else candidates)
@@ -979,16 +979,17 @@ def _start_value(problem: _Problem, k: int, delta_screened, start):
     return delta_screened if ok and not lagging else start
 
 
-def _note_record_offsets(system, records, notes) -> None:
+def _note_record_differences(system, records, notes) -> None:
     """Say so when the runs' recorded forces carry constant offsets that differ from run to run
     (`dynax.record_offsets`, on the inverse-dynamics equations of the nominal model's structure as
     `identify` builds them; the held-out runs too when they are the user's own): a sensor zero that
     no candidate can carry from one run to another, and that stays in each held-out run's error
-    whatever is named (the DFKI shoulder torque: 0.14 N m in run 00, 0.07 in run 01). A note only:
-    it enters no test."""
-    offsets = offsets_of_records(system, records)
-    if offsets is not None and offsets.differ():
-        notes.append(offsets.note())
+    whatever is named (the DFKI shoulder torque: 0.14 N m in run 00, 0.07 in run 01). Likewise when
+    the runs' Coulomb friction differs (`dynax.record_friction`; the DFKI elbow: 0.05 to 0.12 N m).
+    Notes only: they enter no test."""
+    for check in compare_records(system, records):
+        if check is not None and check.differ():
+            notes.append(check.note())
 
 
 def _note_held(system, family, refit_names, mode, notes) -> None:

@@ -15,6 +15,7 @@ from ._defaults import (
 from ._equations import Dynamic as Dynamic, Energy as Energy, Power as Power
 from ._identify import identify as identify, Identification as Identification
 from ._offsets import record_offsets as record_offsets, RecordOffsets as RecordOffsets
+from ._record_friction import record_friction as record_friction, RecordFriction as RecordFriction
 from ._least_squares import (
     IdentifiabilityError as IdentifiabilityError,
     least_squares as least_squares,

@@ -38,6 +38,7 @@ from ._refine import refine_by_simulation
 from ._validation import DEFAULT_HORIZONS_S, held_out_error, HeldOutError, split_for_validation
 from ._least_squares import IdentifiabilityError, least_squares, LeastSquaresFit
 from ._offsets import driven_joints, offset_groups, record_labels, record_offsets, RecordOffsets, without_offsets
+from ._record_friction import coulomb_columns, record_friction, RecordFriction
 from ._simulation_fit import fit_simulation_error, SimulationFit
 from ._regressors import (
     _positions,
@@ -86,6 +87,10 @@ class Identification(eqx.Module):
       joint's recorded force (from each half of the record too) and whether they differ between
       records (`RecordOffsets`, see `dynax._identify._offsets`): a sensor zero that changes from one
       recording to the next, which no model term carries; `None` otherwise.
+    - `record_friction`: for `Dynamic` on two records or more with `friction="coulomb"`, each
+      record's Coulomb friction coefficients (from each half of the record too) and whether they
+      differ between records (`RecordFriction`, see `dynax._identify._record_friction`): a friction
+      that changed between recordings, which a held-out record keeps as error; `None` otherwise.
 
     **Properties** in `Solution`'s spelling: `value` (= `estimate`), `covariance`; and
     `parameters` / `standard_errors` as `{name: value}` (`Solution.estimates()` /
@@ -111,6 +116,7 @@ class Identification(eqx.Module):
     stages: dict | None = None
     solution: Solution | None = None
     record_offsets: RecordOffsets | None = None
+    record_friction: RecordFriction | None = None
 
     @property
     def value(self) -> Float[Array, " n_params"]:
@@ -139,7 +145,7 @@ class Identification(eqx.Module):
 
     def to_json(self) -> dict:
         """The contract's `identify` output object, extended with `settings`, `consistency`,
-        `validation`, `stages` and `record_offsets` where they apply."""
+        `validation`, `stages`, `record_offsets` and `record_friction` where they apply."""
         out = {
             "system": self.system_name,
             "method": self.method,
@@ -159,6 +165,8 @@ class Identification(eqx.Module):
             out["stages"] = self.stages
         if self.record_offsets is not None:
             out["record_offsets"] = self.record_offsets.to_json()
+        if self.record_friction is not None:
+            out["record_friction"] = self.record_friction.to_json()
         return out
 
 
@@ -219,6 +227,7 @@ class _LeastSquaresStage(eqx.Module):
     groups: list | None = None  # rows that share one fitted offset (`Dynamic(offsets=...)`), or None
     fitted_offsets: np.ndarray | None = None  # (records, driven joints) estimated with the parameters
     driven: tuple[str, ...] = ()
+    friction: RecordFriction | None = None
 
 
 def _joint_positions(system, trajectories):
@@ -288,14 +297,18 @@ def _least_squares_stage(system, trajectories, method, friction, weights, rcond,
             warnings.warn("the constrained fit did not reach a consistent estimate: " + "; ".join(after.violated),
                           InconsistentEstimateWarning, stacklevel=3)
     joint_names = _split(system)[0].joint_names
-    offsets = record_offsets(raw_a, raw_y, counts, joint_names, record_labels(trajectories)) if counts else None
+    labels = record_labels(trajectories)
+    offsets = record_offsets(raw_a, raw_y, counts, joint_names, labels) if counts else None
+    per_record_friction = record_friction(raw_a, raw_y, counts, len(joint_names), names,
+                                          coulomb_columns(system, friction), labels) if counts else None
     fitted_offsets, driven = None, ()
     if groups is not None:
         values = y_means - a_means @ np.asarray(estimate)  # what each record's recorded force has in excess
         driven = tuple(joint_names[j] for j in driven_joints(system))  # the order of `offset_groups`
         fitted_offsets = values.reshape(len(driven), len(counts)).T
     return _LeastSquaresStage(fitted, names, estimate, fit, a, y, int(n_samples),
-                              label, settings, check, offsets, groups, fitted_offsets, driven)
+                              label, settings, check, offsets, groups, fitted_offsets, driven, per_record_friction)
+
 
 
 def _less_offsets(system, records, ls):
@@ -625,6 +638,7 @@ def identify(
         validation=final["validation"],
         stages=stages,
         record_offsets=ls.offsets,
+        record_friction=ls.friction,
     )
 
 

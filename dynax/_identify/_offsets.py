@@ -29,8 +29,6 @@ import pathlib
 
 import numpy as np
 
-from .._errors import DataError, UsageError
-from ._equations import _equations, Dynamic
 from ._regressors import _split
 
 ALPHA = 0.01  # the offsets "differ between records" below this p-value
@@ -116,14 +114,8 @@ def record_offsets(a, y, counts, joints, records=None, alpha: float = ALPHA) -> 
     # stands for what the recorded force has in excess.
     halves = by_group.reshape(n_records, 2, n_joints)
     offsets = halves.mean(axis=1)
-    between = 2 * np.sum((offsets - offsets.mean(axis=0)) ** 2, axis=0) / (n_records - 1)
-    within = np.sum((halves - offsets[:, None, :]) ** 2, axis=(0, 1)) / n_records
     # Exact equations (no residual at all) leave both at rounding level: no evidence either way, F = 0.
-    tiny = (1e-9 * float(np.sqrt(np.mean(y**2)))) ** 2
-    f = np.where(within > tiny, between / np.maximum(within, tiny), np.where(between > tiny, np.inf, 0.0))
-    import scipy.stats  # not at import time: `import dynax` stays light (tests/cli/test_packaging.py)
-
-    p = scipy.stats.f.sf(f, n_records - 1, n_records)
+    f, p = halves_anova(halves, tiny=(1e-9 * float(np.sqrt(np.mean(y**2)))) ** 2)
     relative_error = float(np.linalg.norm(residual) / np.linalg.norm(y))
     records = tuple(records) if records is not None else tuple(f"record {r}" for r in range(n_records))
     return RecordOffsets(records, tuple(joints), offsets, halves, f, p, theta, relative_error, alpha)
@@ -148,6 +140,21 @@ def offset_groups(system, counts) -> list[np.ndarray] | None:
     if driven is None:
         return None
     return [_record_rows(counts, r, j) for j in driven for r in range(len(counts))]
+
+
+def halves_anova(halves: np.ndarray, tiny: float) -> tuple[np.ndarray, np.ndarray]:
+    r"""The one-way analysis of variance of `halves` `(record, 2, k)`: per column, the records as groups
+    and each record's two halves as replicates (see the module). **Returns:** `(F, p)` on $(R-1, R)$
+    degrees of freedom. Mean squares below `tiny` (exact equations) count as none: F = 0 where both
+    are, infinite where only the within-record one is."""
+    n_records = halves.shape[0]
+    means = halves.mean(axis=1)
+    between = 2 * np.sum((means - means.mean(axis=0)) ** 2, axis=0) / (n_records - 1)
+    within = np.sum((halves - means[:, None, :]) ** 2, axis=(0, 1)) / n_records
+    f = np.where(within > tiny, between / np.maximum(within, tiny), np.where(between > tiny, np.inf, 0.0))
+    import scipy.stats  # not at import time: `import dynax` stays light (tests/cli/test_packaging.py)
+
+    return f, scipy.stats.f.sf(f, n_records - 1, n_records)
 
 
 def _record_rows(counts, record, joint):
@@ -176,21 +183,3 @@ def without_offsets(a, y, weights, groups):
 def record_labels(records) -> list[str]:
     """Each record's file name where it has one, else `record i`."""
     return [pathlib.Path(r.source).name if r.source else f"record {i}" for i, r in enumerate(records)]
-
-
-def offsets_of_records(system, records, friction="coulomb") -> RecordOffsets | None:
-    """`record_offsets` of the inverse-dynamics equations that `identify(system, records, Dynamic(),
-    friction=friction)` builds (filter settings chosen from each record's spectra).
-
-    **Returns:** `None` where the system has no such equations (it is not a two-link arm or a linear
-    axis), a record is too short for them, or there are fewer than two records.
-    """
-    records = list(records)
-    if len(records) < 2:
-        return None
-    try:
-        base = _split(system)[0]
-        _, a, y, _, _, _, _, _, counts = _equations(base, records, Dynamic(), friction, None, 1e-7)
-    except (DataError, UsageError):  # not a system least squares knows, or a record too short for its filter
-        return None
-    return record_offsets(a, y, counts, base.joint_names, record_labels(records))

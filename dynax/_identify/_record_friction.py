@@ -1,0 +1,172 @@
+r"""Per-record Coulomb friction: do the records agree on the friction, or does each have its own?
+
+Dry friction is not a constant of a machine: it changes with the lubricant's temperature, with wear,
+with the load on the bearings and from one start-up to the next (Armstrong-Hélouvry, Dupont and
+Canudas de Wit, *Automatica* 30(7), 1994, sec. 2.3). A model fitted on some records carries their
+friction to another record, and a held-out record whose friction differs keeps the difference as
+simulation error, whatever the fit. On the DFKI double pendulum the elbow's Coulomb friction is
+what separates dynax's model from the lab's on the large-amplitude run 12: the lab fitted its
+`model_3.0` on that run too (elbow 0.1225 N m against 0.093 from the five other runs), and dynax's
+own model with the lab's elbow value in it beats the lab's there
+(`experiments/dfki_record_friction.py`).
+
+`record_friction` asks the same question of the friction as `record_offsets` asks of a sensor's
+zero, on the stacked inverse-dynamics equations of `identify`'s `Dynamic()` stage: each record's
+constant offset per joint and half is removed first (Frisch-Waugh-Lovell, as there), then each
+Coulomb friction column is split into one column per record and *half* of the record (the other
+parameters stay shared), and per column a one-way analysis of variance asks whether the records'
+values differ by more than the two halves of a record do (`halves_anova`; Scheffé 1959, ch. 7).
+Two halves of one record are two measurements of the same friction under the same excitation, so
+a friction that changed between recordings passes the test. What it cannot tell apart: a model
+error that looks like $\operatorname{sign}(\dot q)$ and that differs between differently
+excited records (a wrong friction *shape*) passes it too. Either way the records disagree on the
+Coulomb coefficient, and a held-out record's value is not known from the others.
+
+Reported, not used: the model `identify` returns has one friction per joint.
+"""
+
+import dataclasses
+
+import numpy as np
+
+from .._errors import DataError, UsageError
+from .._model._extensions import CoulombFriction
+from ._equations import _equations, Dynamic
+from ._offsets import _record_rows, ALPHA, halves_anova, record_labels, record_offsets, RecordOffsets, without_offsets
+from ._regressors import _split
+
+
+@dataclasses.dataclass(frozen=True)
+class RecordFriction:
+    r"""Each record's Coulomb friction coefficients, and whether the records differ.
+
+    **Fields:** `records` (labels: file names where known), `columns` (the coefficients' names,
+    e.g. `fc1`, `fc2`), `values` `(record, column)` in the force's unit; `halves` `(record, 2,
+    column)` the same from each half of the record; `shared` `(column,)` the value one coefficient
+    for all records takes in the same equations; `f_statistic`, `p_value` `(column,)` the one-way
+    analysis of variance of the halves' values across records (see the module); `relative_error`
+    the relative equation error of the fit with a value per record and half (against
+    `shared_relative_error` with one per column); `alpha` the level at which `differ` says so.
+    """
+
+    records: tuple[str, ...]
+    columns: tuple[str, ...]
+    values: np.ndarray
+    halves: np.ndarray
+    shared: np.ndarray
+    f_statistic: np.ndarray
+    p_value: np.ndarray
+    relative_error: float
+    shared_relative_error: float
+    alpha: float = ALPHA
+
+    def differ(self) -> tuple[str, ...]:
+        """The coefficients whose records' values differ (p < `alpha`)."""
+        return tuple(c for c, p in zip(self.columns, self.p_value) if p < self.alpha)
+
+    def note(self) -> str | None:
+        """A sentence for the user where the records' friction differs; `None` where it does not."""
+        differ = self.differ()
+        if not differ:
+            return None
+        parts = []
+        for name in differ:
+            k = self.columns.index(name)
+            values = ", ".join(f"{label} {self.values[r, k]:.3g}" for r, label in enumerate(self.records))
+            parts.append(f"{name} ({values}; one for all {self.shared[k]:.3g}; F = {self.f_statistic[k]:.3g}, "
+                         f"p = {self.p_value[k]:.2g})")
+        return ("The Coulomb friction differs from record to record: " + "; ".join(parts) + ". The records differ "
+                "by more than the two halves of a record do, as a friction that changed between recordings (or a "
+                "friction whose shape the model lacks) would: a held-out record's friction is not known from the "
+                "others, and its simulation carries the difference as error.")
+
+    def to_json(self) -> dict:
+        return {"records": list(self.records), "columns": list(self.columns), "values": self.values.tolist(),
+                "halves": self.halves.tolist(), "shared": self.shared.tolist(),
+                "f_statistic": self.f_statistic.tolist(), "p_value": self.p_value.tolist(), "alpha": self.alpha,
+                "differ": list(self.differ()), "relative_equation_error": self.relative_error,
+                "shared_relative_equation_error": self.shared_relative_error, "note": self.note()}
+
+
+def record_friction(a, y, counts, n_joints, names, columns, records=None, alpha: float = ALPHA) -> RecordFriction | None:
+    """Per-record, per-half values of the Coulomb friction `columns` of stacked inverse-dynamics
+    equations, and their analysis of variance.
+
+    **Arguments:** `a`, `y` the equations stacked joint by joint (all records' rows of the first
+    joint, then of the second, ...) as `identify`'s `Dynamic()` stage builds them, before any offset
+    is removed; `counts` each record's rows per joint; `n_joints`; `names` the columns of `a`;
+    `columns` those to test (their names); `records` labels (default `record 0`, ...).
+
+    **Returns:** a `RecordFriction`, or `None` with fewer than two records, a record too short to
+    halve, or no column to test.
+    """
+    a, y = np.asarray(a, float), np.asarray(y, float)
+    names, columns = list(names), tuple(c for c in columns if c in names)
+    n_records, total = len(counts), sum(counts)
+    if n_records < 2 or min(counts) < 4 or not columns or a.shape[0] != n_joints * total:
+        return None
+    halves = [h for r in range(n_records) for h in np.array_split(_record_rows(counts, r, 0), 2)]
+    # Each record's offset per joint and half removed, as `record_offsets` does: a sensor zero is not friction.
+    groups = [rows + j * total for rows in halves for j in range(n_joints)]
+    a, y, _, _ = without_offsets(a, y, None, groups)
+    joint_of_row = np.repeat(np.arange(n_joints), total)
+    tested = [names.index(c) for c in columns]
+    kept = [i for i in range(len(names)) if i not in tested]
+    split = []  # one column per (tested column, record half): the column on that half's rows, zero elsewhere
+    for i in tested:
+        for rows in halves:
+            column = np.zeros(len(y))
+            for j in range(n_joints):
+                column[rows + j * total] = a[rows + j * total, i]
+            split.append(column)
+    shared_theta, shared_residual = _joint_weighted(a, y, joint_of_row, n_joints)
+    theta, residual = _joint_weighted(np.column_stack([a[:, kept]] + split), y, joint_of_row, n_joints)
+    by_half = theta[len(kept):].reshape(len(columns), n_records, 2).transpose(1, 2, 0)
+    f, p = halves_anova(by_half, tiny=(1e-9 * float(np.sqrt(np.mean(y**2)))) ** 2)
+    norm = float(np.linalg.norm(y))
+    records = tuple(records) if records is not None else tuple(f"record {r}" for r in range(n_records))
+    return RecordFriction(records, columns, by_half.mean(axis=1), by_half, shared_theta[tested], f, p,
+                          float(np.linalg.norm(residual)) / norm, float(np.linalg.norm(shared_residual)) / norm, alpha)
+
+
+def _joint_weighted(a, y, joint_of_row, n_joints):
+    """Least squares, unweighted and then each joint's rows by its residual scale (`Dynamic()`'s joint
+    weighting, as `record_offsets` fits): `(theta, residual)`."""
+    weights = np.ones(len(y))
+    for _ in range(2):
+        theta = np.linalg.lstsq(a * weights[:, None], y * weights, rcond=None)[0]
+        residual = y - a @ theta
+        scale = np.sqrt([np.mean(residual[joint_of_row == j] ** 2) for j in range(n_joints)])
+        weights = 1.0 / np.maximum(scale, np.finfo(float).tiny)[joint_of_row]
+    return theta, residual
+
+
+def coulomb_columns(system, friction) -> tuple[str, ...]:
+    """The names of the Coulomb friction coefficients among the equations' columns (`fc1`, `fc2` of an
+    arm, `coulomb` of a linear axis) when `friction="coulomb"`; `record_friction` keeps those present."""
+    if friction != "coulomb":
+        return ()
+    base, terms = _split(system)
+    coulomb = [t for t in tuple(base.coulomb_friction_terms()) + tuple(terms) if isinstance(t, CoulombFriction)]
+    return tuple(dict.fromkeys(t.parameter_name(base) for t in coulomb)) + ("coulomb",)
+
+
+def compare_records(system, records, friction="coulomb") -> tuple[RecordOffsets | None, RecordFriction | None]:
+    """`record_offsets` and `record_friction` of the inverse-dynamics equations that `identify(system,
+    records, Dynamic(), friction=friction)` builds (filter settings chosen from each record's spectra),
+    built once for both.
+
+    **Returns:** `(None, None)` where the system has no such equations (it is not a two-link arm or a
+    linear axis), a record is too short for them, or there are fewer than two records.
+    """
+    records = list(records)
+    if len(records) < 2:
+        return None, None
+    try:
+        base = _split(system)[0]
+        _, a, y, _, names, _, _, _, counts = _equations(base, records, Dynamic(), friction, None, 1e-7)
+    except (DataError, UsageError):  # not a system least squares knows, or a record too short for its filter
+        return None, None
+    labels = record_labels(records)
+    return (record_offsets(a, y, counts, base.joint_names, labels),
+            record_friction(a, y, counts, len(base.joint_names), names, coulomb_columns(base, friction), labels))
