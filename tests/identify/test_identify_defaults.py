@@ -310,6 +310,10 @@ def test_cli_identifies_raw_dfki_files_with_no_recipe_flags(datasets, tmp_path, 
     assert all(np.isfinite(report["validation"]["rmse"]))
     printed = capsys.readouterr().out
     assert "open-loop RMSE on validation records (output_error)" in printed
+    # The five runs disagree on the elbow's Coulomb friction (run 00 0.12 N m, the others 0.06 to 0.08 in
+    # these equations; F = 52 on (4, 5) degrees of freedom), and the user is told.
+    assert "fc2" in report["record_friction"]["differ"], report["record_friction"]
+    assert "The Coulomb friction differs from record to record: fc2 (trajectory_00.csv 0.12" in printed
 
 
 def test_the_labs_geared_rotor_with_its_coupling_is_base_parameters_plus_elbow_rotor_inertia():
