@@ -187,7 +187,22 @@ def run(args: argparse.Namespace) -> int:
         if held:
             cells = ", ".join(f"{h:g} s: {r:.4g}" for h, r in zip(held["horizons_s"], held["rmse"]))
             print(f"  open-loop RMSE on {held['source']} ({stage}): {cells}")
+    worse = _refinement_validates_worse(result.stages or {})
+    if worse:
+        print(f"  NOTE: the least-squares stage predicts the {worse} better than the refined model at every "
+              "horizon; the refined model is the one written (`--refine no` returns the least-squares model)")
     if result.validation is None:
         print("  no held-out validation (nothing held out)")
     print(f"wrote {out} in {time.perf_counter() - start:.1f} s")
     return 0
+
+
+def _refinement_validates_worse(stages: dict) -> str | None:
+    """The held-out source where the output-error stage's open-loop error is above the least-squares
+    stage's at every horizon; `None` otherwise (or when either stage has no validation)."""
+    ls, oe = (stages.get(k, {}).get("validation") for k in ("least_squares", "output_error"))
+    if not ls or not oe or all(v is None for v in ls["rmse"]):
+        return None
+    if all(o is not None and l is not None and o > l for o, l in zip(oe["rmse"], ls["rmse"])):
+        return oe["source"]
+    return None
