@@ -88,3 +88,18 @@ def test_dfki_runs_disagree_on_the_elbow_friction(datasets):
     # measured 2026-11-26: elbow 0.060 (run 02) to 0.122 N m (run 00), F = 52 on (4, 5) degrees of freedom
     assert "fc2" in found.differ(), (found.f_statistic, found.p_value)
     assert np.ptp(found.values[:, 1]) > 0.04, found.values
+
+
+def test_the_two_halves_of_the_emps_record_agree_on_its_friction(datasets):
+    # A real negative control on another machine (a linear axis, friction a base parameter): one EMPS
+    # record cut in two is two records of the same session, whose Coulomb friction must agree. Measured
+    # 2026-11-26: 19.97 and 20.01 N (the published 20.39), F = 4.6 on (1, 2) degrees of freedom, p = 0.17.
+    data = dynax.load_trajectory(datasets / "emps" / "DATA_EMPS.mat", "linear_axis", mapping={"q": "qm", "force": "vir"},
+                                 scale={"force": 35.15065188})
+    n = len(data)
+    result = identify(dynax.LinearAxis(), [data.slice(0, n // 2), data.slice(n // 2, n)], Dynamic(),
+                      friction="coulomb", holdout=0, refine=False)
+    found = result.record_friction
+    assert found is not None and found.columns == ("coulomb",)
+    assert found.differ() == (), (found.values, found.f_statistic, found.p_value)
+    np.testing.assert_allclose(found.values[:, 0], result.parameters["coulomb"], rtol=0.02)
