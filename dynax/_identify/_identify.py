@@ -310,7 +310,6 @@ def _least_squares_stage(system, trajectories, method, friction, weights, rcond,
                               label, settings, check, offsets, groups, fitted_offsets, driven, per_record_friction)
 
 
-
 def _less_offsets(system, records, ls):
     """The records with each one's fitted offsets taken off its inputs (through the input matrix), as
     the refinement fits them; the records themselves where no offsets were fitted."""

@@ -103,12 +103,8 @@ def record_offsets(a, y, counts, joints, records=None, alpha: float = ALPHA) -> 
     groups = [half for r in range(n_records) for half in np.array_split(_record_rows(counts, r, 0), 2)]
     groups = [rows + j * sum(counts) for rows in groups for j in range(n_joints)]
     a_within, y_within, a_means, y_means = without_offsets(a, y, None, groups)
-    weights = np.ones(len(y))  # constant within each group, so the group means need no weighting
-    for _ in range(2):  # unweighted, then each joint's rows by its residual scale (`Dynamic()`'s joint weighting)
-        theta = np.linalg.lstsq(a_within * weights[:, None], y_within * weights, rcond=None)[0]
-        residual = y_within - a_within @ theta
-        scale = np.sqrt([np.mean(residual[joint_of_row == j] ** 2) for j in range(n_joints)])
-        weights = 1.0 / np.maximum(scale, np.finfo(float).tiny)[joint_of_row]
+    # The weights are constant within each group, so the group means need no weighting.
+    theta, residual = joint_weighted_least_squares(a_within, y_within, joint_of_row, n_joints)
     by_group = y_means - a_means @ theta
     # The equations are model force = recorded force; an offset column fitted into the model side
     # stands for what the recorded force has in excess.
@@ -140,6 +136,18 @@ def offset_groups(system, counts) -> list[np.ndarray] | None:
     if driven is None:
         return None
     return [_record_rows(counts, r, j) for j in driven for r in range(len(counts))]
+
+
+def joint_weighted_least_squares(a, y, joint_of_row, n_joints):
+    """Least squares, unweighted and then each joint's rows by its residual scale (`Dynamic()`'s joint
+    weighting): `(theta, residual)`."""
+    weights = np.ones(len(y))
+    for _ in range(2):
+        theta = np.linalg.lstsq(a * weights[:, None], y * weights, rcond=None)[0]
+        residual = y - a @ theta
+        scale = np.sqrt([np.mean(residual[joint_of_row == j] ** 2) for j in range(n_joints)])
+        weights = 1.0 / np.maximum(scale, np.finfo(float).tiny)[joint_of_row]
+    return theta, residual
 
 
 def halves_anova(halves: np.ndarray, tiny: float) -> tuple[np.ndarray, np.ndarray]:

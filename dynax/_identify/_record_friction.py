@@ -33,7 +33,10 @@ import numpy as np
 from .._errors import DataError, UsageError
 from .._model._extensions import CoulombFriction
 from ._equations import _equations, Dynamic
-from ._offsets import _record_rows, ALPHA, halves_anova, record_labels, record_offsets, RecordOffsets, without_offsets
+from ._offsets import (
+    _record_rows, ALPHA, halves_anova, joint_weighted_least_squares, record_labels, record_offsets, RecordOffsets,
+    without_offsets,
+)
 from ._regressors import _split
 
 
@@ -120,26 +123,14 @@ def record_friction(a, y, counts, n_joints, names, columns, records=None, alpha:
             for j in range(n_joints):
                 column[rows + j * total] = a[rows + j * total, i]
             split.append(column)
-    shared_theta, shared_residual = _joint_weighted(a, y, joint_of_row, n_joints)
-    theta, residual = _joint_weighted(np.column_stack([a[:, kept]] + split), y, joint_of_row, n_joints)
+    shared_theta, shared_residual = joint_weighted_least_squares(a, y, joint_of_row, n_joints)
+    theta, residual = joint_weighted_least_squares(np.column_stack([a[:, kept]] + split), y, joint_of_row, n_joints)
     by_half = theta[len(kept):].reshape(len(columns), n_records, 2).transpose(1, 2, 0)
     f, p = halves_anova(by_half, tiny=(1e-9 * float(np.sqrt(np.mean(y**2)))) ** 2)
     norm = float(np.linalg.norm(y))
     records = tuple(records) if records is not None else tuple(f"record {r}" for r in range(n_records))
     return RecordFriction(records, columns, by_half.mean(axis=1), by_half, shared_theta[tested], f, p,
                           float(np.linalg.norm(residual)) / norm, float(np.linalg.norm(shared_residual)) / norm, alpha)
-
-
-def _joint_weighted(a, y, joint_of_row, n_joints):
-    """Least squares, unweighted and then each joint's rows by its residual scale (`Dynamic()`'s joint
-    weighting, as `record_offsets` fits): `(theta, residual)`."""
-    weights = np.ones(len(y))
-    for _ in range(2):
-        theta = np.linalg.lstsq(a * weights[:, None], y * weights, rcond=None)[0]
-        residual = y - a @ theta
-        scale = np.sqrt([np.mean(residual[joint_of_row == j] ** 2) for j in range(n_joints)])
-        weights = 1.0 / np.maximum(scale, np.finfo(float).tiny)[joint_of_row]
-    return theta, residual
 
 
 def coulomb_columns(system, friction) -> tuple[str, ...]:
