@@ -59,26 +59,32 @@ RUNS = ("00", "01", "02", "03", "05", "12")
 HORIZONS = (0.1, 0.25, 0.5)
 
 
-def lab_model(p: dict[str, float]) -> dynax.AbstractSystem:
+def lab_parameters(p: dict[str, float]) -> dict[str, float]:
     """The lab's equations in dynax's base parameters, rotor inertia with its coupling exactly.
 
     Their M11 = I1 + I2 + l1^2 m2 + 2 l1 m2 r2 cos q2 + (gr^2 + 1) Ir, M12 = I2 + l1 m2 r2 cos q2 - gr Ir,
     M22 = I2 + gr^2 Ir are dynax's M with theta1 = I1 + l1^2 m2 + (gr^2 + gr + 1) Ir,
-    theta2 = I2 - gr Ir and RotorInertia(1) = (gr^2 + gr) Ir. Friction b dq + cf atan(100 dq): viscous
-    b, Coulomb cf pi/2 tanh(100 dq) (same saturation; the slope at rest differs by pi/2).
+    theta2 = I2 - gr Ir and RotorInertia(1) = Ir2 = (gr^2 + gr) Ir. Friction b dq + cf atan(100 dq): viscous
+    b, Coulomb fc = cf pi/2 of tanh(100 dq) (same saturation; the slope at rest differs by pi/2).
     """
     gr, ir, g = p["gr"], p["Ir"], p["g"]
-    rigid = dynax.DoublePendulum.from_base_parameters(dict(
-        theta1=p["I1"] + p["l1"] ** 2 * p["m2"] + (gr**2 + gr + 1) * ir,
-        theta2=p["I2"] - gr * ir,
-        theta3=p["l1"] * p["m2"] * p["r2"],
-        theta4=g * (p["m1"] * p["r1"] + p["m2"] * p["l1"]),
-        theta5=g * p["m2"] * p["r2"],
-        theta6=p["b1"], theta7=p["b2"],
-    ))
-    terms = (dynax.CoulombFriction(0, p["cf1"] * math.pi / 2), dynax.CoulombFriction(1, p["cf2"] * math.pi / 2),
-             dynax.RotorInertia(1, (gr**2 + gr) * ir))
-    return dynax.Extended(rigid, terms)
+    return dict(theta1=p["I1"] + p["l1"] ** 2 * p["m2"] + (gr**2 + gr + 1) * ir, theta2=p["I2"] - gr * ir,
+                theta3=p["l1"] * p["m2"] * p["r2"], theta4=g * (p["m1"] * p["r1"] + p["m2"] * p["l1"]),
+                theta5=g * p["m2"] * p["r2"], theta6=p["b1"], theta7=p["b2"], fc1=p["cf1"] * math.pi / 2,
+                fc2=p["cf2"] * math.pi / 2, Ir2=(gr**2 + gr) * ir)
+
+
+def model_of(p: dict[str, float]) -> dynax.AbstractSystem:
+    """The double pendulum of base parameters `theta1..theta7`, Coulomb friction `fc1`, `fc2` and
+    elbow rotor inertia `Ir2` (what `identify` returns here, as a dict)."""
+    rigid = dynax.DoublePendulum.from_base_parameters({k: p[k] for k in (f"theta{i}" for i in range(1, 8))})
+    return dynax.Extended(rigid, (dynax.CoulombFriction(0, p["fc1"]), dynax.CoulombFriction(1, p["fc2"]),
+                                  dynax.RotorInertia(1, p["Ir2"])))
+
+
+def lab_model(p: dict[str, float]) -> dynax.AbstractSystem:
+    """The lab's `model_3.0` (its `model_parameters.yml` as a dict) as a dynax model (`lab_parameters`)."""
+    return model_of(lab_parameters(p))
 
 
 def load(run: str, variant: str = "native") -> dynax.Trajectory:

@@ -25,7 +25,6 @@ Data: DFKI RIC Underactuated Robotics Lab, `double_pendulum`, design C.0 (BSD-3-
 
 import argparse
 import json
-import math
 import pathlib
 
 import jax
@@ -42,9 +41,9 @@ import dynax  # noqa: E402
 from dynax._identify._record_friction import compare_records  # noqa: E402
 from dynax._identify._validation import held_out_error  # noqa: E402
 
-from dfki_default_identification import HORIZONS, load, RUNS  # noqa: E402  (the script's folder is on sys.path)
+from dfki_default_identification import HORIZONS, lab_parameters, load, model_of, RUNS  # noqa: E402  (the script's folder is on sys.path)
 from dfki_simulation import read_parameters  # noqa: E402
-from dfki_torque_offsets import LORO, loro_model  # noqa: E402
+from dfki_torque_offsets import LORO  # noqa: E402
 
 GROUPS = {
     "inertia (theta1, theta2, theta3, Ir2)": ("theta1", "theta2", "theta3", "Ir2"),
@@ -56,15 +55,6 @@ GROUPS = {
     "all friction": ("theta6", "theta7", "fc1", "fc2"),
     "elbow rotor Ir2": ("Ir2",),
 }
-
-
-def lab_parameters(p: dict[str, float]) -> dict[str, float]:
-    """`model_3.0` in dynax's names, as `dfki_default_identification.lab_model` maps it."""
-    gr, ir, g = p["gr"], p["Ir"], p["g"]
-    return dict(theta1=p["I1"] + p["l1"] ** 2 * p["m2"] + (gr**2 + gr + 1) * ir, theta2=p["I2"] - gr * ir,
-                theta3=p["l1"] * p["m2"] * p["r2"], theta4=g * (p["m1"] * p["r1"] + p["m2"] * p["l1"]),
-                theta5=g * p["m2"] * p["r2"], theta6=p["b1"], theta7=p["b2"], fc1=p["cf1"] * math.pi / 2,
-                fc2=p["cf2"] * math.pi / 2, Ir2=(gr**2 + gr) * ir)
 
 
 def friction_json(found) -> dict | None:
@@ -90,7 +80,7 @@ def main(argv=None):
         swapped = {}
         for name, keys in GROUPS.items():
             mixed = dict(ours, **{k: lab[k] for k in keys})
-            swapped[name] = list(held_out_error(loro_model(mixed), [records[run]], HORIZONS).rmse)
+            swapped[name] = list(held_out_error(model_of(mixed), [records[run]], HORIZONS).rmse)
         _, training = compare_records(dynax.DoublePendulum(), [records[r] for r in RUNS if r != run])
         out["folds"][run] = {"dynax": fold["dynax"], "lab_model_3.0": fold["lab_model_3.0"],
                              "dynax_with_the_labs": swapped, "training_record_friction": friction_json(training)}

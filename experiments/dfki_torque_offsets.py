@@ -40,16 +40,10 @@ from dynax._identify._least_squares import least_squares  # noqa: E402
 from dynax._identify._offsets import record_offsets  # noqa: E402
 from dynax._identify._validation import held_out_error  # noqa: E402
 
-from dfki_default_identification import HORIZONS, lab_model, load, RUNS  # noqa: E402
+from dfki_default_identification import HORIZONS, lab_model, load, model_of as loro_model, RUNS  # noqa: E402
 from dfki_simulation import read_parameters  # noqa: E402
 
 LORO = pathlib.Path(__file__).parent / "results" / "dfki_default_identification" / "results.json"
-
-
-def loro_model(p):
-    rigid = dynax.DoublePendulum.from_base_parameters({k: p[k] for k in (f"theta{i}" for i in range(1, 8))})
-    return dynax.Extended(rigid, (dynax.CoulombFriction(0, p["fc1"]), dynax.CoulombFriction(1, p["fc2"]),
-                                  dynax.RotorInertia(1, p["Ir2"])))
 
 
 def shifted(record, offset):
