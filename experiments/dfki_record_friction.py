@@ -14,8 +14,8 @@ Two measurements, about 3 minutes on 2 CPU cores:
    held-out run's error, so they are a diagnosis, not a fit anyone could make without the run.
 2. **Do the runs agree on the Coulomb friction?** `dynax.record_friction` on the inverse-dynamics
    equations of `identify`'s least-squares stage (every setting chosen from the data), on all six runs
-   and on each fold's five training runs: each run's Coulomb coefficients from each half of the run,
-   and an analysis of variance of the runs against the halves (see `dynax._identify._record_friction`).
+   and on each fold's five training runs: each run's Coulomb coefficients, from the whole run and from each of its four parts,
+   and an analysis of variance of the runs against their four parts (see `dynax._identify._record_friction`).
 
 Writes `OUT/record_friction.json` and `OUT/record_friction.png`.
 
@@ -100,8 +100,12 @@ def main(argv=None):
     if everything is not None:
         x = np.arange(len(RUNS))
         for k, (ax, column) in enumerate(zip(axes, everything.columns)):
-            for h, offset in ((0, -0.18), (1, 0.18)):
-                ax.bar(x + offset, everything.halves[:, h, k], 0.36, label=f"half {h + 1} of the run")
+            n_parts = everything.parts.shape[1]
+            width = 0.8 / n_parts
+            for h in range(n_parts):
+                ax.bar(x + (h - (n_parts - 1) / 2) * width, everything.parts[:, h, k], width, color=f"C{h}",
+                       label=f"part {h + 1} of {n_parts} of the run")
+            ax.plot(x, everything.values[:, k], "kD", label="the run's value")
             ax.axhline(everything.shared[k], color="k", lw=1, label="one value for all runs")
             ax.axhline(lab[column], color="r", ls="--", lw=1, label="lab model_3.0 (output error)")
             ax.set_xticks(x, [f"run {r}" for r in RUNS])

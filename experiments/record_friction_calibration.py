@@ -13,10 +13,10 @@ rig's noise (0.15 rad/s on the velocities, 0.02 N m on the torques, 1e-4 rad on 
   level is the false-alarm rate (1 % if the test is calibrated).
 - **different**: elbow friction 0.12, 0.14, 0.10 and 0.13 N m; the share flagged is the power.
 
-Each set is tested with each record cut into `--parts` parts (2: the halves `record_friction`
-uses; more parts give more degrees of freedom within the records, but each part's estimate is
-noisier). The equations are those of `identify`'s least-squares stage (every setting chosen from
-the data). Writes `OUT/calibration.json`. About 2 minutes on 2 CPU cores for 12 sets.
+Each set is tested with each record cut into `--parts` parts (`record_friction(..., parts=K)`;
+2 is the halves `record_offsets` uses, 4 `record_friction`'s default: more parts give more degrees
+of freedom within the records, but each part's estimate is noisier). The equations are those of `identify`'s least-squares stage (every setting chosen from
+the data). Writes `OUT/calibration.json`. About 20 s on 2 CPU cores for 36 sets, 100 s for 200.
 """
 
 import argparse
@@ -29,12 +29,11 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-import scipy.stats  # noqa: E402
 
 import dynax  # noqa: E402
 from dynax._data import Trajectory  # noqa: E402
 from dynax._identify._equations import _equations  # noqa: E402
-from dynax._identify._offsets import _record_rows, joint_weighted_least_squares, without_offsets  # noqa: E402
+from dynax._identify._record_friction import record_friction  # noqa: E402
 
 RIG = dict(theta1=0.0536, theta2=0.0533, theta3=0.0362, theta4=2.365, theta5=1.777, theta6=0.01, theta7=0.01)
 FC1, IR2 = 0.15, 0.0042
@@ -51,25 +50,8 @@ def record(fc2: float, seed: int) -> Trajectory:
 
 
 def p_value(a, y, counts, names, parts: int) -> float:
-    """The analysis of variance of `record_friction` for the elbow, with `parts` parts per record."""
-    a, y = np.asarray(a, float), np.asarray(y, float)
-    n_records, total = len(counts), sum(counts)
-    pieces = [p for r in range(n_records) for p in np.array_split(_record_rows(counts, r, 0), parts)]
-    a, y, _, _ = without_offsets(a, y, None, [rows + j * total for rows in pieces for j in range(2)])
-    i = names.index("fc2")
-    kept = [k for k in range(len(names)) if k != i]
-    split = []
-    for rows in pieces:
-        column = np.zeros(len(y))
-        for j in range(2):
-            column[rows + j * total] = a[rows + j * total, i]
-        split.append(column)
-    theta, _ = joint_weighted_least_squares(np.column_stack([a[:, kept]] + split), y, np.repeat(np.arange(2), total), 2)
-    values = theta[len(kept):].reshape(n_records, parts)
-    means = values.mean(axis=1)
-    between = parts * np.sum((means - means.mean()) ** 2) / (n_records - 1)
-    within = np.sum((values - means[:, None]) ** 2) / (n_records * (parts - 1))
-    return float(scipy.stats.f.sf(between / within, n_records - 1, n_records * (parts - 1)))
+    """`record_friction`'s p-value for the elbow with `parts` parts per record."""
+    return float(record_friction(a, y, counts, 2, names, ("fc2",), parts=parts).p_value[0])
 
 
 def main(argv=None):

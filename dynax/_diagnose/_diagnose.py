@@ -985,7 +985,7 @@ def _note_record_differences(system, records, notes) -> None:
     `identify` builds them; the held-out runs too when they are the user's own): a sensor zero that
     no candidate can carry from one run to another, and that stays in each held-out run's error
     whatever is named (the DFKI shoulder torque: 0.14 N m in run 00, 0.07 in run 01). Likewise when
-    the runs' Coulomb friction differs (`dynax.record_friction`; the DFKI elbow: 0.05 to 0.12 N m).
+    the runs' Coulomb friction differs (`dynax.record_friction`; the DFKI elbow: 0.05 to 0.13 N m).
     Notes only: they enter no test."""
     for check in compare_records(system, records):
         if check is not None and check.differ():

@@ -111,7 +111,7 @@ def record_offsets(a, y, counts, joints, records=None, alpha: float = ALPHA) -> 
     halves = by_group.reshape(n_records, 2, n_joints)
     offsets = halves.mean(axis=1)
     # Exact equations (no residual at all) leave both at rounding level: no evidence either way, F = 0.
-    f, p = halves_anova(halves, tiny=(1e-9 * float(np.sqrt(np.mean(y**2)))) ** 2)
+    f, p = parts_anova(halves, tiny=(1e-9 * float(np.sqrt(np.mean(y**2)))) ** 2)
     relative_error = float(np.linalg.norm(residual) / np.linalg.norm(y))
     records = tuple(records) if records is not None else tuple(f"record {r}" for r in range(n_records))
     return RecordOffsets(records, tuple(joints), offsets, halves, f, p, theta, relative_error, alpha)
@@ -150,19 +150,19 @@ def joint_weighted_least_squares(a, y, joint_of_row, n_joints):
     return theta, residual
 
 
-def halves_anova(halves: np.ndarray, tiny: float) -> tuple[np.ndarray, np.ndarray]:
-    r"""The one-way analysis of variance of `halves` `(record, 2, k)`: per column, the records as groups
-    and each record's two halves as replicates (see the module). **Returns:** `(F, p)` on $(R-1, R)$
-    degrees of freedom. Mean squares below `tiny` (exact equations) count as none: F = 0 where both
-    are, infinite where only the within-record one is."""
-    n_records = halves.shape[0]
-    means = halves.mean(axis=1)
-    between = 2 * np.sum((means - means.mean(axis=0)) ** 2, axis=0) / (n_records - 1)
-    within = np.sum((halves - means[:, None, :]) ** 2, axis=(0, 1)) / n_records
+def parts_anova(parts: np.ndarray, tiny: float) -> tuple[np.ndarray, np.ndarray]:
+    r"""The one-way analysis of variance of `parts` `(record, K, k)`: per column, the records as groups
+    and each record's $K$ parts as replicates (see the module; `record_offsets` uses halves, $K = 2$).
+    **Returns:** `(F, p)` on $(R-1, R(K-1))$ degrees of freedom. Mean squares below `tiny` (exact
+    equations) count as none: F = 0 where both are, infinite where only the within-record one is."""
+    n_records, k = parts.shape[:2]
+    means = parts.mean(axis=1)
+    between = k * np.sum((means - means.mean(axis=0)) ** 2, axis=0) / (n_records - 1)
+    within = np.sum((parts - means[:, None, :]) ** 2, axis=(0, 1)) / (n_records * (k - 1))
     f = np.where(within > tiny, between / np.maximum(within, tiny), np.where(between > tiny, np.inf, 0.0))
     import scipy.stats  # not at import time: `import dynax` stays light (tests/cli/test_packaging.py)
 
-    return f, scipy.stats.f.sf(f, n_records - 1, n_records)
+    return f, scipy.stats.f.sf(f, n_records - 1, n_records * (k - 1))
 
 
 def _record_rows(counts, record, joint):

@@ -5,7 +5,7 @@ with the load on the bearings and from one start-up to the next (Armstrong-Hélo
 Canudas de Wit, *Automatica* 30(7), 1994, sec. 2.3). A model fitted on some records carries their
 friction to another record, and a held-out record whose friction differs keeps the difference as
 simulation error, whatever the fit. On the DFKI double pendulum the six runs disagree on the
-elbow's Coulomb friction (0.05 to 0.12 N m in these equations, p = 0.0013), and that friction is
+elbow's Coulomb friction (0.05 to 0.13 N m in these equations, p = 3e-9), and that friction is
 what separates dynax's model from the lab's on the large-amplitude run 12: the lab fitted its
 `model_3.0` on that run too (elbow 0.1225 N m against 0.093 from the five other runs), and dynax's
 own model with the lab's elbow value in it is within 0.4 % of the lab's there at 0.1 s and below
@@ -13,12 +13,20 @@ it at 0.25 and 0.5 s (`experiments/dfki_record_friction.py`, docs/identification
 
 `record_friction` asks the same question of the friction as `record_offsets` asks of a sensor's
 zero, on the stacked inverse-dynamics equations of `identify`'s `Dynamic()` stage: each record's
-constant offset per joint and half is removed first (Frisch-Waugh-Lovell, as there), then each
-Coulomb friction column is split into one column per record and *half* of the record (the other
-parameters stay shared), and per column a one-way analysis of variance asks whether the records'
-values differ by more than the two halves of a record do (`halves_anova`; Scheffé 1959, ch. 7).
-Two halves of one record are two measurements of the same friction under the same excitation, so
-a friction that changed between recordings passes the test. What it cannot tell apart: a model
+constant offset per joint is removed first (Frisch-Waugh-Lovell, as there), then each Coulomb
+friction column is split into one column per record (the records' values) and, in a second fit,
+into one per record and *part* of the record (four consecutive parts by default; the other
+parameters stay shared in both), and per column a one-way analysis of variance asks whether the
+records' values differ by more than the parts of a record do
+(`parts_anova`, $F$ on $(R-1, R(K-1))$ degrees of freedom; Scheffé 1959, ch. 7). The parts of one
+record are measurements of the same friction under the same excitation, so a friction that changed
+between recordings passes the test. Why four parts and not the two halves `record_offsets` uses:
+on synthetic records of the rig (`experiments/record_friction_calibration.py`, 200 sets of four
+records) four parts flagged records that share one friction no more often than the level says (1
+of 200 at the 1 % level; halves 3) and saw a 0.02 N m spread between records three times as often
+(38 of 200 against 13): more degrees of freedom within the records outweigh each part's noisier
+value. The offsets are removed per record, not per part: within a part whose motion keeps one
+direction, a per-part offset would be the friction itself. What it cannot tell apart: a model
 error that looks like $\operatorname{sign}(\dot q)$ and that differs between differently
 excited records (a wrong friction *shape*) passes it too. Either way the records disagree on the
 Coulomb coefficient, and a held-out record's value is not known from the others.
@@ -34,9 +42,11 @@ from .._errors import DataError, UsageError
 from .._model._extensions import CoulombFriction
 from ._equations import _equations, Dynamic
 from ._offsets import (
-    _record_rows, ALPHA, halves_anova, joint_weighted_least_squares, record_labels, record_offsets, RecordOffsets,
+    _record_rows, ALPHA, joint_weighted_least_squares, parts_anova, record_labels, record_offsets, RecordOffsets,
     without_offsets,
 )
+
+PARTS = 4  # parts per record (see the module)
 from ._regressors import _split
 
 
@@ -45,18 +55,19 @@ class RecordFriction:
     r"""Each record's Coulomb friction coefficients, and whether the records differ.
 
     **Fields:** `records` (labels: file names where known), `columns` (the coefficients' names,
-    e.g. `fc1`, `fc2`), `values` `(record, column)` in the force's unit; `halves` `(record, 2,
-    column)` the same from each half of the record; `shared` `(column,)` the value one coefficient
-    for all records takes in the same equations; `f_statistic`, `p_value` `(column,)` the one-way
-    analysis of variance of the halves' values across records (see the module); `relative_error`
-    the relative equation error of the fit with a value per record and half (against
+    e.g. `fc1`, `fc2`), `values` `(record, column)` in the force's unit, one per record; `parts`
+    `(record, K, column)` one per each of the record's $K$ consecutive parts (what the test compares); `shared` `(column,)` the value
+    one coefficient for all records takes in the same equations; `f_statistic`, `p_value`
+    `(column,)` the one-way analysis of variance of the parts' values across records (see the
+    module); `relative_error` the relative equation error of the fit with a value per record
+    (against
     `shared_relative_error` with one per column); `alpha` the level at which `differ` says so.
     """
 
     records: tuple[str, ...]
     columns: tuple[str, ...]
     values: np.ndarray
-    halves: np.ndarray
+    parts: np.ndarray
     shared: np.ndarray
     f_statistic: np.ndarray
     p_value: np.ndarray
@@ -80,26 +91,28 @@ class RecordFriction:
             parts.append(f"{name} ({values}; one for all {self.shared[k]:.3g}; F = {self.f_statistic[k]:.3g}, "
                          f"p = {self.p_value[k]:.2g})")
         return ("The Coulomb friction differs from record to record: " + "; ".join(parts) + ". The records differ "
-                "by more than the two halves of a record do, as a friction that changed between recordings (or a "
+                "by more than the parts of a record do, as a friction that changed between recordings (or a "
                 "friction whose shape the model lacks) would: a held-out record's friction is not known from the "
                 "others, and its simulation carries the difference as error.")
 
     def to_json(self) -> dict:
         return {"records": list(self.records), "columns": list(self.columns), "values": self.values.tolist(),
-                "halves": self.halves.tolist(), "shared": self.shared.tolist(),
+                "parts": self.parts.tolist(), "shared": self.shared.tolist(),
                 "f_statistic": self.f_statistic.tolist(), "p_value": self.p_value.tolist(), "alpha": self.alpha,
                 "differ": list(self.differ()), "relative_equation_error": self.relative_error,
                 "shared_relative_equation_error": self.shared_relative_error, "note": self.note()}
 
 
-def record_friction(a, y, counts, n_joints, names, columns, records=None, alpha: float = ALPHA) -> RecordFriction | None:
-    """Per-record, per-half values of the Coulomb friction `columns` of stacked inverse-dynamics
+def record_friction(a, y, counts, n_joints, names, columns, records=None, alpha: float = ALPHA,
+                    parts: int = PARTS) -> RecordFriction | None:
+    """Per-record, per-part values of the Coulomb friction `columns` of stacked inverse-dynamics
     equations, and their analysis of variance.
 
     **Arguments:** `a`, `y` the equations stacked joint by joint (all records' rows of the first
     joint, then of the second, ...) as `identify`'s `Dynamic()` stage builds them, before any offset
     is removed; `counts` each record's rows per joint; `n_joints`; `names` the columns of `a`;
-    `columns` those to test (their names); `records` labels (default `record 0`, ...).
+    `columns` those to test (their names); `records` labels (default `record 0`, ...); `parts` per
+    record (fewer where the shortest record has under 8 rows per part, at least 2).
 
     **Returns:** a `RecordFriction`, or `None` with fewer than two records, a record too short to
     halve, or no column to test.
@@ -109,27 +122,36 @@ def record_friction(a, y, counts, n_joints, names, columns, records=None, alpha:
     n_records, total = len(counts), sum(counts)
     if n_records < 2 or min(counts) < 4 or not columns or a.shape[0] != n_joints * total:
         return None
-    halves = [h for r in range(n_records) for h in np.array_split(_record_rows(counts, r, 0), 2)]
-    # Each record's offset per joint and half removed, as `record_offsets` does: a sensor zero is not friction.
-    groups = [rows + j * total for rows in halves for j in range(n_joints)]
-    a, y, _, _ = without_offsets(a, y, None, groups)
+    k = int(max(2, min(parts, min(counts) // 8)))
+    whole = [_record_rows(counts, r, 0) for r in range(n_records)]
+    pieces = [p for rows in whole for p in np.array_split(rows, k)]
+    # Each record's offset per joint removed, as `identify` fits them: a sensor zero is not friction. (Per
+    # part it would be, within a part whose motion keeps one direction, the friction itself.)
+    a, y, _, _ = without_offsets(a, y, None, [rows + j * total for rows in whole for j in range(n_joints)])
     joint_of_row = np.repeat(np.arange(n_joints), total)
     tested = [names.index(c) for c in columns]
     kept = [i for i in range(len(names)) if i not in tested]
-    split = []  # one column per (tested column, record half): the column on that half's rows, zero elsewhere
-    for i in tested:
-        for rows in halves:
-            column = np.zeros(len(y))
-            for j in range(n_joints):
-                column[rows + j * total] = a[rows + j * total, i]
-            split.append(column)
+
+    def split(blocks):
+        """One column per (tested column, block of rows): the column on that block's rows, zero elsewhere."""
+        out = []
+        for i in tested:
+            for rows in blocks:
+                column = np.zeros(len(y))
+                for j in range(n_joints):
+                    column[rows + j * total] = a[rows + j * total, i]
+                out.append(column)
+        return np.column_stack([a[:, kept]] + out)
+
     shared_theta, shared_residual = joint_weighted_least_squares(a, y, joint_of_row, n_joints)
-    theta, residual = joint_weighted_least_squares(np.column_stack([a[:, kept]] + split), y, joint_of_row, n_joints)
-    by_half = theta[len(kept):].reshape(len(columns), n_records, 2).transpose(1, 2, 0)
-    f, p = halves_anova(by_half, tiny=(1e-9 * float(np.sqrt(np.mean(y**2)))) ** 2)
+    by_record, residual = joint_weighted_least_squares(split(whole), y, joint_of_row, n_joints)
+    by_part, _ = joint_weighted_least_squares(split(pieces), y, joint_of_row, n_joints)
+    values = by_record[len(kept):].reshape(len(columns), n_records).T
+    by_part = by_part[len(kept):].reshape(len(columns), n_records, k).transpose(1, 2, 0)
+    f, p = parts_anova(by_part, tiny=(1e-9 * float(np.sqrt(np.mean(y**2)))) ** 2)
     norm = float(np.linalg.norm(y))
     records = tuple(records) if records is not None else tuple(f"record {r}" for r in range(n_records))
-    return RecordFriction(records, columns, by_half.mean(axis=1), by_half, shared_theta[tested], f, p,
+    return RecordFriction(records, columns, values, by_part, shared_theta[tested], f, p,
                           float(np.linalg.norm(residual)) / norm, float(np.linalg.norm(shared_residual)) / norm, alpha)
 
 

@@ -148,7 +148,7 @@ def test_dfki_refit_mode_names_nothing_the_held_out_runs_reject():
     offsets = [n for n in j["notes"] if "offset that differs from record to record at q1" in n]
     assert offsets and "trajectory_00.csv +0.1" in offsets[0] and "trajectory_01.csv +0.0" in offsets[0], j["notes"]
     # And the five runs disagree on the elbow's Coulomb friction (0.05 to 0.12 N m in the least-squares
-    # equations; the two halves of each run within 0.02 of each other), which the report says too.
+    # equations; the four parts of each run agree more closely), which the report says too.
     friction = [n for n in j["notes"] if n.startswith("The Coulomb friction differs from record to record")]
     assert friction and "fc2 (trajectory_00.csv 0.1" in friction[0], j["notes"]
 

@@ -311,7 +311,7 @@ def test_cli_identifies_raw_dfki_files_with_no_recipe_flags(datasets, tmp_path, 
     printed = capsys.readouterr().out
     assert "open-loop RMSE on validation records (output_error)" in printed
     # The five runs disagree on the elbow's Coulomb friction (run 00 0.12 N m, the others 0.06 to 0.08 in
-    # these equations; F = 52 on (4, 5) degrees of freedom; the shoulder's too, F = 18), and the user is told.
+    # these equations; F = 56 on (4, 15) degrees of freedom; the shoulder's too, F = 29), and the user is told.
     assert "fc2" in report["record_friction"]["differ"], report["record_friction"]
     assert "The Coulomb friction differs from record to record: " in printed and "fc2 (trajectory_00.csv 0.12" in printed
     # The refinement predicts run 12 better than least squares here (1.06 against 1.36 rad at 0.5 s): no note.

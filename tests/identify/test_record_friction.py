@@ -39,8 +39,9 @@ def test_a_friction_that_differs_between_records_is_found(differing):
     values, truth = found.values[:, 1], np.asarray(DIFFERENT)
     assert np.max(np.abs((values - values.mean()) - (truth - truth.mean()))) < 0.015, values
     assert list(np.argsort(values)) == list(np.argsort(truth))
-    # The halves of each record agree with each other more than the records do: what F measures.
-    assert np.max(np.abs(found.halves[:, 0, 1] - found.halves[:, 1, 1])) < 0.02, found.halves[:, :, 1]
+    # The parts of each record agree with each other more than the records do: what F measures.
+    spread_within = np.sqrt(np.mean(np.var(found.parts[:, :, 1], axis=1, ddof=1)))
+    assert found.parts.shape == (4, 4, 2) and spread_within < np.std(values, ddof=1), found.parts[:, :, 1]
     assert found.relative_error < found.shared_relative_error
     note = result.to_json()["record_friction"]["note"]
     assert note is not None and "fc2" in note and "fc1 (" not in note
@@ -51,7 +52,7 @@ def test_records_that_share_their_friction_are_not_said_to_differ():
     found = identify(dynax.DoublePendulum(), same, Dynamic(), friction="coulomb", refine=False,
                      holdout=0).record_friction
     assert found.differ() == (), (found.f_statistic, found.p_value)
-    # Spread 0.015 N m (0.095 to 0.110), against 0.08 in the records above; all low by the filter's bias.
+    # Spread 0.017 N m (0.096 to 0.113), against 0.08 in the records above; all low by the filter's bias.
     assert np.ptp(found.values[:, 1]) < 0.025 and 0.09 < np.mean(found.values[:, 1]) < 0.13, found.values
     assert found.to_json()["note"] is None
 
@@ -85,15 +86,16 @@ def test_dfki_runs_disagree_on_the_elbow_friction(datasets):
     runs = [dfki(datasets, r) for r in ("00", "01", "02", "03", "05")]
     found = identify(dynax.DoublePendulum(), runs, Dynamic(), friction="coulomb", refine=False,
                      holdout=0).record_friction
-    # measured 2026-11-26: elbow 0.060 (run 02) to 0.122 N m (run 00), F = 52 on (4, 5) degrees of freedom
+    # measured 2026-11-26: elbow 0.062 (run 02) to 0.123 N m (run 00), F = 56 on (4, 15) degrees of freedom
     assert "fc2" in found.differ(), (found.f_statistic, found.p_value)
     assert np.ptp(found.values[:, 1]) > 0.04, found.values
 
 
-def test_the_two_halves_of_the_emps_record_agree_on_its_friction(datasets):
+def test_the_two_halves_of_the_emps_record_agree_on_their_friction(datasets):
     # A real negative control on another machine (a linear axis, friction a base parameter): one EMPS
     # record cut in two is two records of the same session, whose Coulomb friction must agree. Measured
-    # 2026-11-26: 19.97 and 20.01 N (the published 20.39), F = 4.6 on (1, 2) degrees of freedom, p = 0.17.
+    # 2026-11-26: 19.97 and 20.01 N (the published 20.39; the eight parts 19.86 to 20.16), F = 0.21 on (1, 6)
+    # degrees of freedom, p = 0.67.
     data = dynax.load_trajectory(datasets / "emps" / "DATA_EMPS.mat", "linear_axis", mapping={"q": "qm", "force": "vir"},
                                  scale={"force": 35.15065188})
     n = len(data)
