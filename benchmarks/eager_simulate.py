@@ -11,6 +11,9 @@ is the same and only an array leaf changes. Three paths, one process:
 - `diffrax.diffeqsolve` with the same solver at the same constant substep and `SaveAt(ts=...)` (the input looked
   up by `searchsorted`), itself `filter_jit`-compiled once.
 
+The same for `dynax.simulate_closed_loop`: the acrobot under Drake's Spong swing-up controller for
+10 s at 100 Hz, the controller's gains scaled anew each call, against its bare `lax.scan` (before).
+
 Reported: the first call (compilation included) and the median of the next `--reps` calls, and
 each path's median over `dynax.simulate`'s.
 
@@ -38,6 +41,7 @@ except ImportError:  # run from a checkout without installing it
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
     import dynax
 from dynax import _simulate  # noqa: E402
+from dynax._control import _closed_loop  # noqa: E402
 
 RIG = dict(theta1=0.0536, theta2=0.0533, theta3=0.0362, theta4=2.365, theta5=1.777, theta6=0.01, theta7=0.01)
 
@@ -98,12 +102,33 @@ def main(argv=None):
     if bare is not None:
         rows["bare lax.scan (before)"] = timed(with_bare_scan, args.reps)
     rows["diffrax.diffeqsolve"] = timed(with_diffrax, args.reps)
-    base = rows["dynax.simulate"][1]
-    print(f"{'path':26s} {'first call s':>13s} {'median next s':>14s} {'ratio to dynax':>15s}")
+
+    # Closed loop: the acrobot under Drake's Spong swing-up controller for 10 s at 100 Hz, its gains
+    # scaled by a different factor each call.
+    plant, controller = dynax.Acrobot(), dynax.SpongController()
+    times, start = jnp.arange(0.0, 10.0, 0.01), jnp.array([0.1, 0.0, 0.0, 0.0])
+
+    def with_closed_loop(k):
+        return dynax.simulate_closed_loop(plant, controller.with_params(controller.params * (1 + 0.01 * k)), start,
+                                          times).xs
+
+    bare_loop = getattr(_closed_loop._closed_loop, "__wrapped__", None)
+
+    def with_bare_closed_loop(k):
+        gains = controller.with_params(controller.params * (1 + 0.01 * k))
+        return bare_loop(plant, gains, start, times, dynax.FixedGrid(), 1e6).xs
+
+    rows["dynax.simulate_closed_loop"] = timed(with_closed_loop, args.reps)
+    if bare_loop is not None:
+        rows["closed loop, bare lax.scan (before)"] = timed(with_bare_closed_loop, args.reps)
+    def base(name):  # each path against dynax's own on the same problem
+        return rows["dynax.simulate_closed_loop" if "closed" in name else "dynax.simulate"][1]
+
+    print(f"{'path':36s} {'first call s':>13s} {'median next s':>14s} {'ratio to dynax':>15s}")
     for name, (first, median) in rows.items():
-        print(f"{name:26s} {first:13.3f} {median:14.4f} {median / base:15.1f}")
+        print(f"{name:36s} {first:13.3f} {median:14.4f} {median / base(name):15.1f}")
     if args.json:
-        args.json.write_text(json.dumps({k: {"first_s": f, "median_s": m, "ratio": m / base}
+        args.json.write_text(json.dumps({k: {"first_s": f, "median_s": m, "ratio": m / base(k)}
                                          for k, (f, m) in rows.items()}, indent=2) + "\n")
 
 
