@@ -201,8 +201,6 @@ def _refinement_validates_worse(stages: dict) -> str | None:
     """The held-out source where the output-error stage's open-loop error is above the least-squares
     stage's at every horizon; `None` otherwise (or when either stage has no validation)."""
     ls, oe = (stages.get(k, {}).get("validation") for k in ("least_squares", "output_error"))
-    if not ls or not oe or all(v is None for v in ls["rmse"]):
-        return None
-    if all(o is not None and l is not None and o > l for o, l in zip(oe["rmse"], ls["rmse"])):
+    if ls and oe and ls["rmse"] and all(o > l for o, l in zip(oe["rmse"], ls["rmse"])):
         return oe["source"]
     return None

@@ -88,7 +88,7 @@ class Identification(eqx.Module):
       records (`RecordOffsets`, see `dynax._identify._offsets`): a sensor zero that changes from one
       recording to the next, which no model term carries; `None` otherwise.
     - `record_friction`: for `Dynamic` on two records or more with `friction="coulomb"`, each
-      record's Coulomb friction coefficients (from each half of the record too) and whether they
+      record's Coulomb friction coefficients (from each of four parts of the record too) and whether they
       differ between records (`RecordFriction`, see `dynax._identify._record_friction`): a friction
       that changed between recordings, which a held-out record keeps as error; `None` otherwise.
 
