@@ -29,6 +29,8 @@ class SimulationError(eqx.Module):
     - `diverged_fraction`: fraction of windows whose rollout diverged.
     - `errors`: the raw errors, shape `(window, step, n_measured_states)` (simulated minus measured).
     - `starts`: the start indices of the windows.
+    - `window_mse`: shape `(window, horizon)`, each window's squared error at each horizon, averaged
+      over the `states` (NaN where the window diverged): what `rmse` pools, per window.
     """
 
     horizons_s: Float[Array, " horizon"]
@@ -40,6 +42,7 @@ class SimulationError(eqx.Module):
     diverged_fraction: Float[Array, ""]
     errors: Float[Array, "window step n_states"]
     starts: Array
+    window_mse: Float[Array, "window horizon"]
 
     def to_json(self) -> dict:
         """The contract's `sim_error` object: `{"horizons_s": [...], "rmse": [...]}`."""
@@ -211,6 +214,7 @@ def simulation_error(
         diverged_fraction=jnp.mean(diverged.astype(errors.dtype)),
         errors=errors,
         starts=starts,
+        window_mse=jnp.mean(at[:, :, idx] ** 2, axis=2),
     )
 
 

@@ -186,7 +186,11 @@ def run(args: argparse.Namespace) -> int:
         held = content.get("validation")
         if held:
             cells = ", ".join(f"{h:g} s: {r:.4g}" for h, r in zip(held["horizons_s"], held["rmse"]))
-            print(f"  open-loop RMSE on {held['source']} ({stage}): {cells}")
+            medians = ", ".join(f"{m:.4g}" for m in held.get("median", ()))
+            print(f"  open-loop RMSE on {held['source']} ({stage}): {cells}"
+                  + (f" (median window: {medians})" if medians else ""))
+    if result.validation is not None and result.validation.note():
+        print("  NOTE: " + result.validation.note())
     worse = _refinement_validates_worse(result.stages or {})
     if worse:
         print(f"  NOTE: the least-squares stage predicts the {worse} better than the refined model at every "
