@@ -6,9 +6,8 @@ from the rig. `held_out_error` runs `dynax.simulation_error` on records (or part
 did not enter the fit and pools the position RMSE over them; `split_for_validation` makes such a
 part when no separate record is given.
 
-An RMSE pools squared errors, so a few windows can carry it: on a record that ends with the rig
-balanced upright by its controller, every open-loop rollout started there falls off the unstable
-equilibrium, and those windows' errors of a radian or more outweigh the rest of the record. So the
+An RMSE pools squared errors, so a few windows can carry it: on a record that ends with a pendulum
+at rest upright, every open-loop rollout started there falls off the unstable equilibrium, and those windows' errors of a radian or more outweigh the rest of the record. So the
 result also gives the median window error per horizon, and names, per record and horizon, the
 windows that carry the RMSE where it is more than `CONCENTRATED` times the median window's error
 (`HeldOutError.concentrated`, `note()`): half of its squared error comes from the fewest windows
@@ -27,8 +26,9 @@ from .._sim_error import simulation_error
 DEFAULT_HORIZONS_S = (0.1, 0.25, 0.5)
 # RMSE over the median window's root-mean-square error above which a record's RMSE is said to be
 # carried by a few windows. Windows whose errors differ only by chance give about 1.2 (for a
-# Gaussian error in two positions, sqrt(2 / 1.386)); the DFKI runs give 1.1 to 1.4 except the
-# balancing end of the swing-up run (9 at 0.5 s). A ratio of 3 is a mean square 9 times the median's.
+# Gaussian error in two positions, sqrt(2 / 1.386)) to 1.7 (the true model on a noisy synthetic rig
+# record, `tests/identify/test_validation.py`); the DFKI runs give 1.1 to 1.4, except the swing-up run
+# whose end rests upright (9 at 0.5 s). A ratio of 3 is a mean square 9 times the median's.
 CONCENTRATED = 3.0
 
 
@@ -45,7 +45,8 @@ class HeldOutError:
     - `diverged_fraction`: record name -> fraction of windows whose rollout diverged.
     - `source`: `"validation records"` or `"held-out end of each record (last X %)"`.
     - `median`: per horizon, the median over every window of every record of the window's
-      root-mean-square position error (a typical window, where `rmse` weighs the worst).
+      root-mean-square position error (a typical window, where `rmse` weighs the worst), over the
+      windows that did not diverge.
     - `concentrated`: record name -> one entry per horizon at which the record's RMSE is more than
       `CONCENTRATED` times its median window error: `horizon_s`, `rmse`, `median`, `windows` (the
       fewest windows holding half of the squared error), `of` (the record's windows), `from_s`,
@@ -73,7 +74,7 @@ class HeldOutError:
                               for e in entries)
             parts.append(f"{name}: {cells}")
         return ("the open-loop RMSE is carried by a few windows, which say more about those stretches "
-                "(an unstable equilibrium held by a controller, a glitch in the data) than about the "
+                "(rest at an unstable equilibrium, a glitch in the data) than about the "
                 "record: " + ". ".join(parts))
 
     def to_json(self) -> dict:

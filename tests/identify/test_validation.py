@@ -42,9 +42,10 @@ def test_a_glitch_in_the_data_is_named_as_the_few_windows_that_carry_the_rmse():
 
 
 def test_the_balancing_end_of_the_dfki_swing_up_is_named_and_the_gentle_runs_are_not(datasets):
-    # The lab's model_3.0 (made without dynax) on real runs. Run 12 swings the pendulum up and a controller
-    # balances it from about 4.2 s; open loop, every rollout started near the top falls off it, and those
-    # windows carry the RMSE at 0.5 s (half of it from about a tenth of the windows).
+    # The lab's model_3.0 (made without dynax) on real runs. Run 12 swings the pendulum up, and from about
+    # 4.2 s it rests upright (held by friction at rest, which neither model has); open loop, every rollout
+    # started near the top falls off it, and those windows carry the RMSE at 0.5 s (half of it from about a
+    # tenth of the windows).
     lab = dynax.Extended(dynax.DoublePendulum.from_base_parameters({**RIG, "theta6": 0.001, "theta7": 0.001}),
                          (dynax.CoulombFriction(0, 0.093 * math.pi / 2), dynax.CoulombFriction(1, 0.078 * math.pi / 2),
                           dynax.RotorInertia(1, RIG_IR2)))
