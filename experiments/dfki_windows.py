@@ -9,18 +9,18 @@ without the held-out run) against the lab's `model_3.0`:
 1. **Where the error is.** Each held-out run is simulated open loop from 200 start samples (as in that
    table); `held_out_error` gives the RMSE, the median window error and the windows that carry the RMSE
    (`HeldOutError.concentrated`). On run 12 the windows are also pooled by phase: started while the
-   controller pumps energy in (before 3 s), and from the last swing on (3 s and after: the pendulum
-   reaches the top at about 4.2 s and is balanced there to the end).
-2. **What holds it there.** Over the balancing (4.75 s to the end, both joints slower than the
+   torques pump energy in (before 3 s), and from the last swing on (3 s and after: the pendulum
+   reaches the top at about 4.2 s and rests there to the end).
+2. **What holds it there.** Over the rest at the top (4.75 s to the end, both joints slower than the
    driver's velocity noise), the mean measured torque against the gravity torque the lab's model
    computes at the measured configuration: what the torque holds that gravity does not.
 3. **Another start state.** The windows start from the measured state, the driver's noisy velocity
-   included (about 0.1 rad/s at rest, where the balancing pendulum is). Started instead from the
+   included (about 0.1 rad/s where the pendulum rests). Started instead from the
    velocities of a local cubic fit of the encoder positions where that estimate is the better one
    (`with_velocities_from_positions`, what `diagnose` does by default), both models are compared
    again on every run: does the verdict hang on the start state?
 4. **A what-if, not a fit.** Both models with a static friction (a Stribeck term: the friction rises
-   from the Coulomb value to `fs` below about 0.05 rad/s) at the torques the balancing holds, read
+   from the Coulomb value to `fs` below about 0.05 rad/s) at the torques held at the top, read
    off run 12 itself. No training run rests (at most 6 % of their samples are below 0.1 rad/s, all
    of them reversals), so no fit on them could find it; it says what part of run 12's error the
    models' missing friction at rest makes.
@@ -58,7 +58,7 @@ from dfki_default_identification import HORIZONS, lab_parameters, load, model_of
 from dfki_simulation import read_parameters  # noqa: E402
 from dfki_torque_offsets import LORO  # noqa: E402
 
-PHASE_S = 3.0  # run 12: energy pumped in before; the last swing, the top and the balancing after
+PHASE_S = 3.0  # run 12: energy pumped in before; the last swing, the top and the rest after
 BALANCE_S = 4.75  # run 12: held at the top from here to the end
 STRIBECK_VELOCITY = 0.05  # rad/s, below the driver's velocity noise at rest (about 0.1 rad/s)
 
@@ -92,7 +92,7 @@ def phases(model, record) -> dict:
 
 
 def held_torque(model, record) -> dict:
-    """Mean measured torque over the balancing, the gravity torque at the measured configuration, and
+    """Mean measured torque over the rest at the top, the gravity torque at the measured configuration, and
     the torque left that gravity does not explain (per joint, N m)."""
     ts, xs, us = (np.asarray(a) for a in (record.ts, record.xs, record.us))
     rest = ts >= BALANCE_S
@@ -166,7 +166,7 @@ def main(argv=None):
     for name, p in out["run_12"]["phases"].items():
         print(f"run 12, {name}: windows before {PHASE_S:g} s " + " ".join(f"{v:.4f}" for v in p["before"])
               + f" | from {PHASE_S:g} s on " + " ".join(f"{v:.4f}" for v in p["after"]))
-    print("run 12 balancing: torque measured " + " ".join(f"{v:+.3f}" for v in held["measured"]) + " N m, gravity "
+    print("run 12 at rest at the top: torque measured " + " ".join(f"{v:+.3f}" for v in held["measured"]) + " N m, gravity "
           + " ".join(f"{v:+.3f}" for v in held["gravity"]) + " N m, speed rms " + " ".join(f"{v:.3f}" for v in held["speed_rms"])
           + " rad/s")
     for name, w in what_if.items():
