@@ -316,6 +316,12 @@ def test_cli_identifies_raw_dfki_files_with_no_recipe_flags(datasets, tmp_path, 
     assert "The Coulomb friction differs from record to record: " in printed and "fc2 (trajectory_00.csv 0.12" in printed
     # The refinement predicts run 12 better than least squares here (1.06 against 1.36 rad at 0.5 s): no note.
     assert "better than the refined model" not in printed
+    # Run 12 ends at rest upright, where every open-loop rollout falls: those windows carry the 0.5 s RMSE,
+    # and the user is told which (about 20 of 200, started from 3.5 s on; docs/identification.md, Validation).
+    (entry,) = [e for e in report["validation"]["concentrated"]["trajectory_12.csv"] if e["horizon_s"] == 0.5]
+    assert entry["windows"] < 0.15 * entry["of"] and entry["from_s"] >= 3.0, entry
+    assert report["validation"]["median"][-1] < 0.2 < report["validation"]["rmse"][-1]
+    assert "median window: " in printed and "trajectory_12.csv: at 0.5 s half of its squared error comes from" in printed
 
 
 @pytest.mark.slow  # about a minute: the refinement on two real runs
