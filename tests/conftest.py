@@ -110,6 +110,7 @@ HEAVY_MODULES = (
 )
 HEAVY_TESTS = (
     "tests/identify/test_identify_defaults.py::test_noisy_rig_data_with_defaults_give_consistent_estimates",
+    "tests/identify/test_identify_defaults.py::test_noisy_arms_of_other_sizes_give_consistent_estimates",
     "tests/identify/test_identify_defaults.py::test_dfki_least_squares_with_defaults_is_consistent_where_the_unfiltered_fit_is_not",
     "tests/diagnose/test_report_and_cli.py::test_cli_diagnose_takes_several_runs_and_keeps_them_apart",
     "tests/control/test_experiment.py::test_quick_experiment_writes_results_and_figures",
