@@ -189,6 +189,9 @@ def run(args: argparse.Namespace) -> int:
             medians = ", ".join(f"{m:.4g}" for m in held.get("median", ()))
             print(f"  open-loop RMSE on {held['source']} ({stage}): {cells}"
                   + (f" (median window: {medians})" if medians else ""))
+            if len(held["per_record"]) > 1:
+                for record, rmse in held["per_record"].items():
+                    print(f"    {record}: " + ", ".join(f"{h:g} s: {r:.4g}" for h, r in zip(held["horizons_s"], rmse)))
     if result.validation is not None and result.validation.note():
         print("  NOTE: " + result.validation.note())
     worse = _refinement_validates_worse(result.stages or {})

@@ -24,6 +24,30 @@ def test_identify_writes_the_contract_json(acrobot_csv, tmp_path, capsys):
     assert "theta3" in printed and "open-loop RMSE" in printed
 
 
+def test_identify_prints_each_validation_record_and_the_median_window(acrobot_csv, tmp_path, capsys):
+    import jax.numpy as jnp
+    import numpy as np
+
+    from dynax._data import save_trajectory, Trajectory
+
+    # two held-out records of the acrobot, one of them from another start and under another torque
+    ts = np.arange(0.0, 4.0, 0.01)
+    us = (1.5 * np.sin(2.1 * ts + 1.0))[:, None]
+    sim = dynax.simulate(dynax.Acrobot(), jnp.array([-0.3, 0.2, 0.0, 0.0]), jnp.asarray(ts), jnp.asarray(us))
+    other = tmp_path / "other.csv"
+    save_trajectory(Trajectory(jnp.asarray(ts), sim.xs, jnp.asarray(us), ("q1", "q2", "dq1", "dq2"), ("tau2",)), other)
+    out = tmp_path / "params.json"
+    assert main(["identify", "acrobot", str(acrobot_csv), "--method", "power", "--validation", str(acrobot_csv),
+                 str(other), "--out", str(out)]) == 0
+    report = json.loads(out.read_text())
+    assert list(report["validation"]["per_record"]) == ["acrobot.csv", "other.csv"]
+    assert len(report["validation"]["median"]) == 3 and report["validation"]["concentrated"] == {}
+    printed = capsys.readouterr().out
+    assert "(median window: " in printed
+    for name, rmse in report["validation"]["per_record"].items():
+        assert f"    {name}: 0.1 s: {rmse[0]:.4g}, 0.25 s: {rmse[1]:.4g}, 0.5 s: {rmse[2]:.4g}" in printed
+
+
 def test_identify_refuses_bad_input_without_writing(acrobot_csv, tmp_path, capsys):
     out = tmp_path / "params.json"
     bad = tmp_path / "bad.csv"
