@@ -38,6 +38,8 @@ from ._identify import (
     identify as identify,
     least_squares as least_squares,
     LeastSquaresFit as LeastSquaresFit,
+    poorly_determined as poorly_determined,
+    PoorlyDeterminedWarning as PoorlyDeterminedWarning,
     parameter_names as parameter_names,
     Power as Power,
     SimulationFit as SimulationFit,

@@ -168,6 +168,11 @@ def run(args: argparse.Namespace) -> int:
             print("  consistency constraint active (the plain least-squares estimate broke: " + "; ".join(enforced) + ")")
         elif not consistency.violated:
             print("  physically consistent")
+    if result.poorly_determined:
+        cells = ", ".join(f"{name} {100 * ratio:.0f} %" if ratio < float("inf") else f"{name} (estimate zero)"
+                          for name, ratio in result.poorly_determined.items())
+        print(f"  WARNING: the data determine these parameters poorly (relative standard error): {cells}; "
+              "record more motion in every joint before trusting them, or look for what the model misses")
     for check in (result.record_offsets, result.record_friction):
         if check is not None and check.differ():
             print("  " + check.note())

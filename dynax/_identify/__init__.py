@@ -20,6 +20,8 @@ from ._least_squares import (
     IdentifiabilityError as IdentifiabilityError,
     least_squares as least_squares,
     LeastSquaresFit as LeastSquaresFit,
+    poorly_determined as poorly_determined,
+    PoorlyDeterminedWarning as PoorlyDeterminedWarning,
 )
 from ._regressors import (
     dynamic_regressor as dynamic_regressor,

@@ -24,7 +24,7 @@ from .._fit import Parameters, Solution
 from .._simulate import FixedGrid
 from .._model._linear_axis import LinearAxis
 from .._model._extensions import Extended
-from .._model._system import AbstractSystem
+from .._model._system import AbstractSystem, size_parameter_names
 from .._model._two_link import Acrobot, DoublePendulum
 from ._consistency import (
     check_consistency,
@@ -36,7 +36,14 @@ from ._defaults import choose_filter
 from ._equations import _equations, _uniform, Dynamic, Energy, joint_weights, Power
 from ._refine import refine_by_simulation
 from ._validation import DEFAULT_HORIZONS_S, held_out_error, HeldOutError, split_for_validation
-from ._least_squares import IdentifiabilityError, least_squares, LeastSquaresFit
+from ._least_squares import (
+    IdentifiabilityError,
+    least_squares,
+    LeastSquaresFit,
+    POORLY_DETERMINED,
+    poorly_determined,
+    PoorlyDeterminedWarning,
+)
 from ._offsets import driven_joints, offset_groups, record_labels, record_offsets, RecordOffsets, without_offsets
 from ._record_friction import coulomb_columns, record_friction, RecordFriction
 from ._simulation_fit import fit_simulation_error, SimulationFit
@@ -91,6 +98,10 @@ class Identification(eqx.Module):
       record's Coulomb friction coefficients (from each of four parts of the record too) and whether they
       differ between records (`RecordFriction`, see `dynax._identify._record_friction`): a friction
       that changed between recordings, which a held-out record keeps as error; `None` otherwise.
+    - `poorly_determined`: the size parameters (inertias, gravity terms, mass) whose least-squares
+      relative standard error is above 25 %, name -> that ratio (`poorly_determined`; also warned
+      as a `PoorlyDeterminedWarning`): `{}` when the data determine them all, `None` for methods
+      and systems it does not apply to.
 
     **Properties** in `Solution`'s spelling: `value` (= `estimate`), `covariance`; and
     `parameters` / `standard_errors` as `{name: value}` (`Solution.estimates()` /
@@ -117,6 +128,7 @@ class Identification(eqx.Module):
     solution: Solution | None = None
     record_offsets: RecordOffsets | None = None
     record_friction: RecordFriction | None = None
+    poorly_determined: dict[str, float] | None = None
 
     @property
     def value(self) -> Float[Array, " n_params"]:
@@ -167,6 +179,8 @@ class Identification(eqx.Module):
             out["record_offsets"] = self.record_offsets.to_json()
         if self.record_friction is not None:
             out["record_friction"] = self.record_friction.to_json()
+        if self.poorly_determined is not None:
+            out["poorly_determined"] = self.poorly_determined
         return out
 
 
@@ -607,6 +621,7 @@ def identify(
         return _validated_simulation_fit(system, fitted, method, friction, consistency, validate)
 
     ls = _least_squares_stage(system, fitted, method, friction, weights, rcond, consistency)
+    poorly = _poorly_determined(system, ls)
     ls_error = _relative_equation_error(ls.a, ls.y, ls.estimate)
     ls_validation = validate(ls.system)
     std = ls.fit.std_errors
@@ -638,7 +653,31 @@ def identify(
         stages=stages,
         record_offsets=ls.offsets,
         record_friction=ls.friction,
+        poorly_determined=poorly,
     )
+
+
+def _poorly_determined(system, ls) -> dict[str, float] | None:
+    """The least-squares stage's size parameters that the data leave to the noise (`poorly_determined`),
+    with a `PoorlyDeterminedWarning` naming them; `None` for a system without size parameters."""
+    try:
+        sizes = size_parameter_names(_split(system)[0])
+    except UsageError:
+        return None
+    if not sizes:
+        return None
+    poorly = poorly_determined(ls.names, ls.estimate, ls.fit.std_errors, sizes)
+    if poorly:
+        listed = ", ".join(f"{name} ({100 * ratio:.0f} %)" if np.isfinite(ratio) else f"{name} (estimate zero)"
+                           for name, ratio in poorly.items())
+        warnings.warn(
+            f"the data determine these size parameters poorly (relative standard error above "
+            f"{100 * POORLY_DETERMINED:.0f} %): {listed}. Noise, model error or the consistency constraint, "
+            "not the motion, sets their estimates. Usually the records hardly excite them: record more motion "
+            "in every joint (larger, richer inputs, longer records) before trusting them; otherwise the model "
+            "misses something large (see the relative equation error).",
+            PoorlyDeterminedWarning, stacklevel=3)
+    return poorly
 
 
 def _has_conditions(system):

@@ -30,6 +30,39 @@ class IdentifiabilityError(DataError):
         self.rank, self.n_params, self.condition_number = rank, n_params, condition_number
 
 
+# Relative standard error above which a size parameter counts as poorly determined: its 95 % interval
+# then spans more than half of its value either way.
+POORLY_DETERMINED = 0.25
+
+
+class PoorlyDeterminedWarning(UserWarning):
+    """The data determine some of the machine's size parameters only poorly (`poorly_determined`):
+    the regressor has full rank, but noise, not the motion, sets those estimates."""
+
+
+def poorly_determined(names, estimate, std_errors, which) -> dict[str, float]:
+    r"""The parameters among `which` whose relative standard error $\sigma_i / |\hat	heta_i|$ exceeds
+    `POORLY_DETERMINED`, name -> that ratio (`inf` for an estimate of zero).
+
+    A regressor can have full numerical rank and still leave parameters to the noise: records with
+    little motion (a machine at rest, a short or gentle record, one joint barely moving) give
+    columns that are nearly zero or nearly parallel, and standard errors as large as the estimates.
+    The relative standard deviation is how identification practice reads it (Gautier, "Numerical
+    calculation of the base inertial parameters of robots", J. Robotic Systems 8(4), 1991; Swevers,
+    Verdonck and De Schutter, "Dynamic model identification for industrial robots", IEEE Control
+    Systems Magazine 27(5), 2007). Only size parameters are judged (inertias, gravity terms, mass):
+    a friction coefficient near zero has a large relative error because it is small.
+    """
+    out = {}
+    for name, value, std in zip(names, np.asarray(estimate, dtype=float), np.asarray(std_errors, dtype=float)):
+        if name not in which:
+            continue
+        ratio = float(std / abs(value)) if value != 0 else float("inf")
+        if not ratio <= POORLY_DETERMINED:  # NaN counts as poorly determined
+            out[name] = ratio
+    return out
+
+
 class LeastSquaresFit(eqx.Module):
     r"""The result of `least_squares`.
 

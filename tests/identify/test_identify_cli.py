@@ -48,6 +48,24 @@ def test_identify_prints_each_validation_record_and_the_median_window(acrobot_cs
         assert f"    {name}: 0.1 s: {rmse[0]:.4g}, 0.25 s: {rmse[1]:.4g}, 0.5 s: {rmse[2]:.4g}" in printed
 
 
+def test_identify_warns_when_the_record_hardly_moves(tmp_path, capsys):
+    import pytest
+
+    from dynax._data import save_trajectory
+    from dynax._identify._least_squares import PoorlyDeterminedWarning
+    from tests.identify.test_identify_defaults import recorded, rig_model
+
+    path = tmp_path / "still.csv"
+    save_trajectory(recorded(rig_model(), 6.0, 3, torque_scale=0.05), path)  # 3 mrad of motion
+    out = tmp_path / "params.json"
+    with pytest.warns(PoorlyDeterminedWarning):
+        assert main(["identify", "double_pendulum", str(path), "--friction", "coulomb", "--refine", "no",
+                     "--out", str(out)]) == 0
+    report = json.loads(out.read_text())
+    assert {"theta1", "theta2"} <= set(report["poorly_determined"])
+    assert "WARNING: the data determine these parameters poorly (relative standard error): theta1" in capsys.readouterr().out
+
+
 def test_identify_refuses_bad_input_without_writing(acrobot_csv, tmp_path, capsys):
     out = tmp_path / "params.json"
     bad = tmp_path / "bad.csv"
