@@ -1,6 +1,7 @@
 """The nominal model of `dynax diagnose`: from `--nominal`, or the default checked against the data."""
 
 import math
+import warnings
 
 from .._errors import DataError, UsageError
 
@@ -79,15 +80,16 @@ def nominal_from_data(system, train) -> tuple[object, str]:
     import jax.numpy as jnp
 
     from .._diagnose._diagnose import OTHER_MACHINE_FACTOR
-    from .._identify import Dynamic, identify
+    from .._identify import Dynamic, identify, poorly_determined, PoorlyDeterminedWarning
     from .._model._system import friction_parameter_names, size_parameter_names
 
     try:
-        identified = identify(system, train, Dynamic(), refine=False, holdout=0)
+        with warnings.catch_warnings():  # said in the note, at its own threshold (`LOOSE`)
+            warnings.simplefilter("ignore", PoorlyDeterminedWarning)
+            identified = identify(system, train, Dynamic(), refine=False, holdout=0)
     except DataError as e:  # too little excitation to tell: keep the default, and say so
         return system, f"No --nominal: the default {type(system).__name__} parameters (least squares could not check them: {e})."
     estimate = identified.parameters
-    spread = dict(zip(identified.names, map(float, identified.std_errors)))
     kinds = system.base_parameter_kinds()
     friction = friction_parameter_names(system)
     size = size_parameter_names(system)
@@ -106,7 +108,7 @@ def nominal_from_data(system, train) -> tuple[object, str]:
             f"(least squares: {listed}; {worst} is {far[worst]:.3g} times the default): the nominal model is "
             "the rigid body identified from the training runs by least squares, with zero friction, which "
             "the friction candidates test. Pass --nominal to diagnose against a model of your own.")
-    loose = {n: spread[n] / abs(estimate[n]) for n in size if spread.get(n, 0.0) > LOOSE * abs(estimate[n])}
+    loose = poorly_determined(identified.names, identified.estimate, identified.std_errors, size, threshold=LOOSE)
     if loose:
         note += (" Least squares determines " + ", ".join(f"{n} only to ±{r:.0%}" for n, r in loose.items())
                  + f": the training runs excite {'them' if len(loose) > 1 else 'it'} little, and the nominal model "

@@ -40,9 +40,9 @@ class PoorlyDeterminedWarning(UserWarning):
     the regressor has full rank, but noise, not the motion, sets those estimates."""
 
 
-def poorly_determined(names, estimate, std_errors, which) -> dict[str, float]:
-    r"""The parameters among `which` whose relative standard error $\sigma_i / |\hat	heta_i|$ exceeds
-    `POORLY_DETERMINED`, name -> that ratio (`inf` for an estimate of zero).
+def poorly_determined(names, estimate, std_errors, which, threshold: float = POORLY_DETERMINED) -> dict[str, float]:
+    r"""The parameters among `which` whose relative standard error $\sigma_i / |\hat\theta_i|$ exceeds
+    `threshold` (default `POORLY_DETERMINED`), name -> that ratio (`inf` for an estimate of zero).
 
     A regressor can have full numerical rank and still leave parameters to the noise: records with
     little motion (a machine at rest, a short or gentle record, one joint barely moving) give
@@ -58,7 +58,7 @@ def poorly_determined(names, estimate, std_errors, which) -> dict[str, float]:
         if name not in which:
             continue
         ratio = float(std / abs(value)) if value != 0 else float("inf")
-        if not ratio <= POORLY_DETERMINED:  # NaN counts as poorly determined
+        if not ratio <= threshold:  # NaN counts as poorly determined
             out[name] = ratio
     return out
 
