@@ -82,9 +82,8 @@ class StaticFriction(AbstractJointTerm):
         return -self.coefficient * jnp.exp(-((dq / STRIBECK_VELOCITY) ** 2)) * jnp.tanh(dq / 0.01)
 
 
-def phases(model, record) -> dict:
-    """RMSE per horizon over run 12's windows started before `PHASE_S` and from it on."""
-    error = dynax.simulation_error(model, record, HORIZONS)
+def phases(error, record) -> dict:
+    """RMSE per horizon over run 12's windows (`error`, its `simulation_error`) started before `PHASE_S` and from it on."""
     squared = np.asarray(error.window_mse)
     t0 = np.asarray(record.ts)[np.asarray(error.starts)]
     return {name: [float(v) for v in np.sqrt(squared[mask].mean(axis=0))]
@@ -117,8 +116,8 @@ def main(argv=None):
     lab_p = lab_parameters(read_parameters("model_3.0"))
     lab = model_of(lab_p)
     out = {"horizons_s": list(HORIZONS), "runs": {}}
-    for run in RUNS:
-        record = load(run)
+    records = {run: load(run) for run in RUNS}
+    for run, record in records.items():
         smoothed, _, replaced = with_velocities_from_positions(record)
         entry = {}
         for name, model in (("dynax", model_of(folds[run]["parameters"])), ("lab", lab)):
@@ -144,8 +143,10 @@ def main(argv=None):
           f"{out['velocities_from_positions']['cells_at_or_below_lab']} of {len(cells)} cells, geometric mean ratio "
           f"{out['velocities_from_positions']['geometric_mean_ratio']:.4f}")
 
-    swing_up = load("12")
+    swing_up = records["12"]
     dynax_12 = model_of(folds["12"]["parameters"])
+    windows_12 = {"dynax": dynax.simulation_error(dynax_12, swing_up, HORIZONS),
+                  "lab": dynax.simulation_error(lab, swing_up, HORIZONS)}
     held = held_torque(lab, swing_up)
     fs = [abs(v) for v in held["held"]]
     what_if = {name: {"static_friction": fs,
@@ -161,7 +162,7 @@ def main(argv=None):
             one_window[f"{start} start, static friction {friction}"] = float(
                 np.sqrt(np.mean((xs[-1, :2] - np.asarray(swing_up.xs[k + n - 1, :2])) ** 2)))
     out["run_12"] = {"one_window_from_5s": {"start_velocity": np.asarray(swing_up.xs[k, 2:]).tolist(), "error": one_window},
-                     "phases": {"dynax": phases(dynax_12, swing_up), "lab": phases(lab, swing_up)}, "phase_s": PHASE_S,
+                     "phases": {name: phases(error, swing_up) for name, error in windows_12.items()}, "phase_s": PHASE_S,
                      "balancing": held, "with_static_friction": what_if, "stribeck_velocity": STRIBECK_VELOCITY}
     for name, p in out["run_12"]["phases"].items():
         print(f"run 12, {name}: windows before {PHASE_S:g} s " + " ".join(f"{v:.4f}" for v in p["before"])
@@ -179,8 +180,7 @@ def main(argv=None):
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "windows.json").write_text(json.dumps(out, indent=2) + "\n")
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
-    for name, model in (("dynax (fitted without run 12)", dynax_12), ("lab model_3.0", lab)):
-        error = dynax.simulation_error(model, swing_up, HORIZONS)
+    for name, error in (("dynax (fitted without run 12)", windows_12["dynax"]), ("lab model_3.0", windows_12["lab"])):
         t0 = np.asarray(swing_up.ts)[np.asarray(error.starts)]
         bottom.semilogy(t0, np.sqrt(np.asarray(error.window_mse)[:, -1]), ".", label=name)
     bottom.axvline(PHASE_S, color="0.5", ls="--")

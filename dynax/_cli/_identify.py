@@ -119,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
 
     from .._data import load_trajectory
     from .._identify import identify
+    from .._identify._least_squares import describe_poorly_determined
 
     allowed = _LEAST_SQUARES[args.system] + ("simulation",)
     if args.method not in allowed:
@@ -169,8 +170,7 @@ def run(args: argparse.Namespace) -> int:
         elif not consistency.violated:
             print("  physically consistent")
     if result.poorly_determined:
-        cells = ", ".join(f"{name} {100 * ratio:.0f} %" if ratio < float("inf") else f"{name} (estimate zero)"
-                          for name, ratio in result.poorly_determined.items())
+        cells = describe_poorly_determined(result.poorly_determined)
         print(f"  WARNING: the data determine these parameters poorly (relative standard error): {cells}; "
               "record more motion in every joint before trusting them, or look for what the model misses")
     for check in (result.record_offsets, result.record_friction):
@@ -197,8 +197,9 @@ def run(args: argparse.Namespace) -> int:
             if len(held["per_record"]) > 1:
                 for record, rmse in held["per_record"].items():
                     print(f"    {record}: " + ", ".join(f"{h:g} s: {r:.4g}" for h, r in zip(held["horizons_s"], rmse)))
-    if result.validation is not None and result.validation.note():
-        print("  NOTE: " + result.validation.note())
+    concentrated = None if result.validation is None else result.validation.note()
+    if concentrated:
+        print("  NOTE: " + concentrated)
     worse = _refinement_validates_worse(result.stages or {})
     if worse:
         print(f"  NOTE: the least-squares stage predicts the {worse} better than the refined model at every "

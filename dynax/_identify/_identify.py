@@ -37,6 +37,7 @@ from ._equations import _equations, _uniform, Dynamic, Energy, joint_weights, Po
 from ._refine import refine_by_simulation
 from ._validation import DEFAULT_HORIZONS_S, held_out_error, HeldOutError, split_for_validation
 from ._least_squares import (
+    describe_poorly_determined,
     IdentifiabilityError,
     least_squares,
     LeastSquaresFit,
@@ -668,11 +669,9 @@ def _poorly_determined(system, ls) -> dict[str, float] | None:
         return None
     poorly = poorly_determined(ls.names, ls.estimate, ls.fit.std_errors, sizes)
     if poorly:
-        listed = ", ".join(f"{name} ({100 * ratio:.0f} %)" if np.isfinite(ratio) else f"{name} (estimate zero)"
-                           for name, ratio in poorly.items())
         warnings.warn(
             f"the data determine these size parameters poorly (relative standard error above "
-            f"{100 * POORLY_DETERMINED:.0f} %): {listed}. Noise, model error or the consistency constraint, "
+            f"{100 * POORLY_DETERMINED:.0f} %): {describe_poorly_determined(poorly)}. Noise, model error or the consistency constraint, "
             "not the motion, sets their estimates. Usually the records hardly excite them: record more motion "
             "in every joint (larger, richer inputs, longer records) before trusting them; otherwise the model "
             "misses something large (see the relative equation error).",

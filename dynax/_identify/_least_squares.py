@@ -63,6 +63,12 @@ def poorly_determined(names, estimate, std_errors, which, threshold: float = POO
     return out
 
 
+def describe_poorly_determined(poorly: dict[str, float]) -> str:
+    """`poorly_determined`'s result as text: `theta2 (34 %), theta1 (estimate zero)`."""
+    return ", ".join(f"{name} ({100 * ratio:.0f} %)" if np.isfinite(ratio) else f"{name} (estimate zero)"
+                     for name, ratio in poorly.items())
+
+
 class LeastSquaresFit(eqx.Module):
     r"""The result of `least_squares`.
 

@@ -45,9 +45,9 @@ from ._offsets import (
     _record_rows, ALPHA, joint_weighted_least_squares, parts_anova, record_labels, record_offsets, RecordOffsets,
     without_offsets,
 )
+from ._regressors import _split
 
 PARTS = 4  # parts per record (see the module)
-from ._regressors import _split
 
 
 @dataclasses.dataclass(frozen=True)
