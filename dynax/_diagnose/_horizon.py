@@ -5,8 +5,9 @@ measured one. Past that point (on a chaotic double pendulum within a second at l
 both models' errors saturate at the size of the motion itself and the comparison measures chaos,
 not physics. The *predictability horizon* is the longest horizon at which the nominal model's
 open-loop position error on the **training** runs is still at most `fraction` of the positions'
-spread (their standard deviation over the training runs); held-out runs are never looked at, so the
-choice cannot favour a candidate.
+spread (their standard deviation over the training runs; for an angle, about its circular mean and
+wrapped to within half a turn of it, see `position_spread`); held-out runs are never looked at, so
+the choice cannot favour a candidate.
 
 ??? cite
 
@@ -35,11 +36,31 @@ class Horizon:
                 "candidate_horizons_s": self.horizons_s, "training_relative_error": self.relative_error}
 
 
+def position_spread(positions, angles) -> np.ndarray:
+    r"""Each position's spread, the natural variability the predictability horizon is measured against.
+
+    `positions (sample, position)`; `angles` one flag per position, true for an angle (a revolute
+    joint). A linear position's spread is its standard deviation. An angle's is the standard deviation
+    of the angle wrapped to within half a turn of its circular mean $\arg \sum_t e^{i q_t}$: the same
+    number while the angle stays within half a turn of its mean, but bounded (by $\pi/\sqrt 3$, the
+    standard deviation of a uniform angle) when the joint turns over. The standard deviation of the
+    unwrapped angle grows with every turn a record makes, so it would set the horizon by how long the
+    arm kept spinning rather than by how the configuration varies, and a long horizon over which a
+    chaotic arm's windows drift apart leaves the held-out test without power.
+    """
+    q = np.asarray(positions, float)
+    spread = q.std(axis=0)
+    for k in np.flatnonzero(np.asarray(angles, bool)):
+        centre = np.angle(np.mean(np.exp(1j * q[:, k])))
+        spread[k] = np.std(np.mod(q[:, k] - centre + np.pi, 2 * np.pi) - np.pi)
+    return np.maximum(spread, 1e-12)
+
+
 def relative_position_error(errors, position_index, spread) -> np.ndarray:
     """Position RMSE over windows divided by the positions' spread, per step, RMS over positions.
 
     **Arguments:** `errors (window, step, state)` simulated minus measured; `position_index` the
-    position states; `spread` their standard deviation on the same runs.
+    position states; `spread` their spread on the same runs (`position_spread`).
     """
     e = np.asarray(errors)[:, :, position_index] / np.asarray(spread)[None, None, :]
     finite = np.isfinite(e).all(axis=(1, 2))

@@ -13,7 +13,7 @@ from .._data._derivatives import resample
 from .._data._trajectory import Trajectory
 from .._errors import DataError, UsageError
 from .._identify._defaults import position_fit_window, with_velocities_from_positions
-from ._horizon import Horizon, predictability_horizon, relative_position_error
+from ._horizon import Horizon, position_spread, predictability_horizon, relative_position_error
 from ._residuals import _sg_window
 
 
@@ -127,7 +127,7 @@ def _reference_horizon(nominal_model, train_records, candidates_s, given, fracti
         return Horizon(float(candidates_s[0]), "given (reference_horizon_s)", None, candidates_s, [np.nan])
     errors = [np.asarray(simulation_error(nominal_model, rec, candidates_s, stride=stride).errors) for rec in train_records]
     positions = np.concatenate([np.asarray(r.xs)[:, position_index] for r in train_records])
-    spread = np.maximum(positions.std(axis=0), 1e-12)
+    spread = position_spread(positions, [k in nominal_model.angle_indices for k in position_index])
     relative = relative_position_error(np.concatenate(errors), position_index, spread)
     return predictability_horizon(relative, dt, candidates_s, fraction)
 

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from dynax._diagnose._horizon import predictability_horizon, relative_position_error
+import dynax
+from dynax._diagnose._horizon import position_spread, predictability_horizon, relative_position_error
 from dynax._diagnose._probe import cross_validated_ridge, folds_by_run
 
 
@@ -61,3 +62,17 @@ def test_probe_ridge_is_strong_when_structure_does_not_transfer_across_runs():
 def test_folds_by_run():
     assert [f.tolist() for f in folds_by_run([2, 3])] == [[0, 1], [2, 3, 4]]
     assert len(folds_by_run([9])) == 3
+
+
+def test_an_angle_that_turns_over_has_a_bounded_spread():
+    rng = np.random.default_rng(0)
+    still = rng.normal(0.3, 0.4, 2000)
+    winding = still + np.linspace(0.0, 40.0, 2000)  # six turns
+    metres = 3.0 * still + np.linspace(0.0, 40.0, 2000)
+    spread = position_spread(np.stack([still, winding, metres], axis=1), [True, True, False])
+    assert spread[0] == pytest.approx(np.std(still))  # within half a turn of its mean: the standard deviation
+    assert np.std(winding) > 10 and spread[1] <= np.pi / np.sqrt(3) + 1e-9  # a uniform angle's, at most
+    assert spread[2] == pytest.approx(np.std(metres))  # a linear position: as it is
+    # An extended model answers for its system's angles.
+    extended = dynax.Extended(dynax.DoublePendulum(), (dynax.RotorInertia(1, 0.001),))
+    assert extended.angle_indices == (0, 1) and dynax.Extended(dynax.LinearAxis(), ()).angle_indices == ()

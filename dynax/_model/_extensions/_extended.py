@@ -83,6 +83,10 @@ class Extended(AbstractSystem):
         return self.system.velocity_indices
 
     @property
+    def angle_indices(self) -> tuple[int, ...]:
+        return self.system.angle_indices
+
+    @property
     def joint_terms(self) -> tuple[AbstractJointTerm, ...]:
         return tuple(t for t in self.terms if isinstance(t, AbstractJointTerm))
 
