@@ -104,11 +104,13 @@ HEAVY_MODULES = (
     "tests/diagnose/test_helicopter_candidates.py",
     "tests/diagnose/test_pure_delay.py",
     "tests/diagnose/test_discovery.py",
+    "tests/diagnose/test_mujoco_data.py",
     "tests/distributed/test_two_processes.py",
     "tests/cli/test_cache.py",
     "tests/docs/test_tutorials.py",
 )
 HEAVY_TESTS = (
+    "tests/identify/test_mujoco_data.py::test_defaults_on_mujoco_records_predict_as_well_as_mujoco_with_honest_standard_errors",
     "tests/identify/test_identify_defaults.py::test_noisy_rig_data_with_defaults_give_consistent_estimates",
     "tests/identify/test_identify_defaults.py::test_noisy_arms_of_other_sizes_give_consistent_estimates",
     "tests/identify/test_identify_defaults.py::test_dfki_least_squares_with_defaults_is_consistent_where_the_unfiltered_fit_is_not",

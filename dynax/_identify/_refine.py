@@ -166,7 +166,8 @@ def with_refinement_terms(system: AbstractSystem) -> AbstractSystem:
 @dataclasses.dataclass(frozen=True)
 class Refinement:
     r"""What `refine_by_simulation` did. Fields: `system` (refined), `names`, `estimate`,
-    `std_errors` (through the parametrisation's Jacobian, ignoring correlations: indicative), `initial_residual_rms` and `residual_rms` (scaled state residual at the start and
+    `std_errors` (the fit's covariance, cluster-robust over blocks of time, carried through the
+    parametrisation's Jacobian), `initial_residual_rms` and `residual_rms` (scaled state residual at the start and
     at the end), `steps`, `dt` and `segment_s` (the grid and segment length fitted),
     `record_weights` (the final weight of each record's residuals), `record_sigma` (each record's
     residual scale at the end, in units of the measurement noise), `reweights` (refits done), and
@@ -346,14 +347,16 @@ def refine_by_simulation(
     estimate = np.asarray(parameter_vector(refined, friction))
     # Standard errors through the parametrisation's Jacobian (delta method).
     jac = np.asarray(jax.jacfwd(parametrisation.theta)(consistent.phi))
-    phi_std = np.full(consistent.phi.shape[0], np.nan) if diverged else np.asarray(result.std_errors)[: consistent.phi.shape[0]]
+    n_phi = consistent.phi.shape[0]
+    phi_cov = np.full((n_phi, n_phi), np.nan) if diverged else np.asarray(result.solution.covariance)[:n_phi, :n_phi]
     alpha = latency = None
     if input_timing and not diverged:  # a kept start has measured no timing
         alpha = float(jnp.clip(final.alpha, -INPUT_REACH, INPUT_REACH))
         record_dt = float(np.median([float(np.median(np.diff(np.asarray(r.ts)))) for r in records]))
         latency = 0.5 * record_dt - alpha * dt
     with np.errstate(invalid="ignore"):  # an unidentified direction has an infinite standard error
-        std = np.sqrt(np.sum((jac * phi_std[None, :]) ** 2, axis=1))
+        std = np.sqrt(np.maximum(np.diag(jac @ phi_cov @ jac.T), 0.0))
+        std = np.where(np.isnan(jac @ np.sqrt(np.abs(np.diag(phi_cov)))), np.nan, std)
     # A kept start: its own residual, no relative error or record scales of a fit.
     rms, relative = (initial_rms, float("nan")) if diverged else (float(result.residual_rms), float(result.relative_error))
     return Refinement(refined, names, estimate, std, initial_rms, rms, relative, steps, dt, method.segment_s,
