@@ -35,6 +35,11 @@ def test_a_dry_friction_that_sticks_is_named_coulomb_friction_with_its_size():
     first = report["findings"][0]
     assert (first["cause"], first["where"]) == ("coulomb_friction", "q2"), report["findings"]
     assert abs(first["coefficient"] - 0.10) < 0.01, first  # measured 0.1009
+    # Its standard error is honest: the truth within 4 of it (measured 1.9; the Gauss-Newton one, which
+    # counts a window's correlated residuals as independent, was 0.00005 N m, 19 of them away) ...
+    assert abs(first["coefficient"] - 0.10) < 4 * first["std_error"], first
+    # ... and small enough to mean something.
+    assert first["std_error"] < 0.01, first
     assert report["gain"] > 0.5
 
 
@@ -56,3 +61,4 @@ def test_rotor_inertia_is_found_on_an_arm_that_turns_over():
     first = report["findings"][0]
     assert (first["cause"], first["where"]) == ("rotor_inertia", "q2"), report["findings"]
     assert abs(first["coefficient"] / 0.0036 - 1) < 0.1, first  # measured 0.00358
+    assert abs(first["coefficient"] - 0.0036) < 4 * first["std_error"] < 0.0036, first  # measured 0.7 of them
