@@ -27,8 +27,11 @@ STATES = ("q1", "q2", "dq1", "dq2")
 INPUTS = ("tau1", "tau2")
 
 
-def mjcf(p: dict, timestep: float = 0.0005) -> str:
-    """The arm as MJCF: both hinges about +y (q = 0 hangs down, q2 relative to link 1), both driven."""
+def mjcf(p: dict, timestep: float = 0.0005, inputs: tuple[str, ...] = INPUTS) -> str:
+    """The arm as MJCF: both hinges about +y (q = 0 hangs down, q2 relative to link 1), driven by
+    `inputs` (`("tau1", "tau2")`, or `("tau2",)`: the acrobot)."""
+    motors = "\n".join(f'    <motor name="{name}" joint="{joint}"/>' for name, joint in
+                       (("tau1", "shoulder"), ("tau2", "elbow")) if name in inputs)
     def joint(name, b, a, f):
         return f'<joint name="{name}" type="hinge" axis="0 1 0" damping="{b}" armature="{a}" frictionloss="{f}"/>'
 
@@ -49,8 +52,7 @@ def mjcf(p: dict, timestep: float = 0.0005) -> str:
     </body>
   </worldbody>
   <actuator>
-    <motor name="tau1" joint="shoulder"/>
-    <motor name="tau2" joint="elbow"/>
+{motors}
   </actuator>
 </mujoco>"""
 
@@ -65,7 +67,8 @@ def base_parameters(p: dict) -> dict:
 
 def multisine(ts, seed: int, scale: float = 0.6) -> np.ndarray:
     """Two torques, each five sines (0.3 to 2.3 Hz, random phases): at `scale` 0.6 about 0.45 and 0.25 N m
-    rms, swinging the arm to about 1 rad as most DFKI runs do (0.1 to 0.5 N m rms, 0.4 to 1.9 rad)."""
+    rms, swinging the arm to about 1 rad as most DFKI runs do (0.1 to 0.5 N m rms, 0.4 to 1.9 rad).
+    The acrobot's elbow torque is the second."""
     rng = np.random.default_rng(seed)
     freqs = np.array([0.3, 0.7, 1.1, 1.7, 2.3])
     out = []
@@ -77,36 +80,37 @@ def multisine(ts, seed: int, scale: float = 0.6) -> np.ndarray:
 
 
 def record(p: dict, duration: float, seed: int, *, dt: float = 0.002, scale: float = 0.6, velocity_noise: float = 0.15,
-           torque_noise: float = 0.02, position_noise: float = 1e-4):
+           torque_noise: float = 0.02, position_noise: float = 1e-4, inputs: tuple[str, ...] = INPUTS):
     """Simulate the arm from rest under `multisine` torques (held over each MuJoCo step, set at its
     midpoint) and sample every `dt`, with sensor noise at the DFKI rig's level (velocity estimate
     0.15 rad/s, current-based torque 0.02 N m, encoder 1e-4 rad, 1-sigma). The recorded torque of a
-    sample is the mean torque over the interval it starts. **Returns:** `(ts, xs, us, clean_xs)`."""
+    sample is the mean torque over the interval it starts. `inputs` as for `mjcf`.
+    **Returns:** `(ts, xs, us, clean_xs)`."""
     import mujoco
 
-    model = mujoco.MjModel.from_xml_string(mjcf(p))
+    model = mujoco.MjModel.from_xml_string(mjcf(p, inputs=inputs))
     data = mujoco.MjData(model)
     sub = int(round(dt / model.opt.timestep))
     n = int(round(duration / dt))
-    fine = multisine(model.opt.timestep * (np.arange(n * sub) + 0.5), seed, scale)
+    fine = multisine(model.opt.timestep * (np.arange(n * sub) + 0.5), seed, scale)[:, [INPUTS.index(i) for i in inputs]]
     xs = np.empty((n, 4))
     for k in range(n):
         xs[k, :2], xs[k, 2:] = data.qpos, data.qvel
         for j in range(sub):
             data.ctrl[:] = fine[k * sub + j]
             mujoco.mj_step(model, data)
-    us = fine.reshape(n, sub, 2).mean(axis=1)
+    us = fine.reshape(n, sub, len(inputs)).mean(axis=1)
     rng = np.random.default_rng(seed + 100)
     noisy = xs + np.concatenate([position_noise * rng.normal(size=(n, 2)), velocity_noise * rng.normal(size=(n, 2))], 1)
-    return dt * np.arange(n), noisy, us + torque_noise * rng.normal(size=(n, 2)), xs
+    return dt * np.arange(n), noisy, us + torque_noise * rng.normal(size=us.shape), xs
 
 
-def window_rmse(p: dict, ts, xs, us, starts, horizons_s) -> np.ndarray:
+def window_rmse(p: dict, ts, xs, us, starts, horizons_s, inputs: tuple[str, ...] = INPUTS) -> np.ndarray:
     """MuJoCo's own open-loop position RMSE (q1 and q2 pooled) at each horizon, from the measured state at each of
     `starts` under the recorded torques (held over each sample), as `dynax.simulation_error` measures a model."""
     import mujoco
 
-    model = mujoco.MjModel.from_xml_string(mjcf(p))
+    model = mujoco.MjModel.from_xml_string(mjcf(p, inputs=inputs))
     data = mujoco.MjData(model)
     dt = float(np.median(np.diff(ts)))
     sub = int(round(dt / model.opt.timestep))
