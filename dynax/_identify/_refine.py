@@ -355,8 +355,7 @@ def refine_by_simulation(
         record_dt = float(np.median([float(np.median(np.diff(np.asarray(r.ts)))) for r in records]))
         latency = 0.5 * record_dt - alpha * dt
     with np.errstate(invalid="ignore"):  # an unidentified direction has an infinite standard error
-        std = np.sqrt(np.maximum(np.diag(jac @ phi_cov @ jac.T), 0.0))
-        std = np.where(np.isnan(jac @ np.sqrt(np.abs(np.diag(phi_cov)))), np.nan, std)
+        std = np.sqrt(np.maximum(np.diag(jac @ phi_cov @ jac.T), 0.0))  # NaN stays NaN
     # A kept start: its own residual, no relative error or record scales of a fit.
     rms, relative = (initial_rms, float("nan")) if diverged else (float(result.residual_rms), float(result.relative_error))
     return Refinement(refined, names, estimate, std, initial_rms, rms, relative, steps, dt, method.segment_s,

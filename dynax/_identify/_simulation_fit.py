@@ -338,9 +338,13 @@ def fit_simulation_error(
     if not fit_initial_states:
         clustered = _clustered_covariance(np.asarray(jac), np.asarray(r), ts, owner, trajectories, segment_s)
         if clustered is not None:
-            covariance = jnp.asarray(clustered * np.asarray(scale)[:, None] * np.asarray(scale)[None, :], dtype)
-            # an unidentified direction keeps its NaN (the pseudo-inverse would give it a finite number)
-            std = jnp.where(jnp.isnan(std), jnp.nan, jnp.sqrt(jnp.maximum(jnp.diag(covariance), 0.0)))
+            # An unidentified direction keeps its NaN, in the errors and in the covariance's rows and
+            # columns (the pseudo-inverse would give it finite numbers).
+            unidentified = np.isnan(np.asarray(std))
+            clustered = clustered * np.asarray(scale)[:, None] * np.asarray(scale)[None, :]
+            clustered[unidentified, :] = clustered[:, unidentified] = np.nan
+            covariance = jnp.asarray(clustered, dtype)
+            std = jnp.sqrt(jnp.maximum(jnp.diag(covariance), 0.0))
     solution = eqx.tree_at(lambda s: (s.std_errors, s.covariance), solution, (std, covariance))
     fitted = solution.model
     return SimulationFitResult(
