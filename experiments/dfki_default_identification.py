@@ -27,6 +27,11 @@ and simulate the held-out run open loop from 200 start samples; compare the posi
 0.25 and 0.5 s with the lab's `model_3.0` on the same windows. Writes `results.json` and
 `loro.png`. Runs are resampled at their median interval (2 ms; run 12: 1.6 ms).
 
+Each cell also gets the paired test `diagnose` uses (`paired_block_test`: the flat-top HAC over the
+overlapping windows, Student's t) on the per-window log ratio of the two models' squared errors,
+one-sided each way (`paired_test` in `results.json`): whether dynax is significantly better or
+worse than the lab there, or whether the windows cannot tell them apart.
+
 Data: DFKI RIC Underactuated Robotics Lab, `double_pendulum`, design C.0 (BSD-3-Clause), read from
 ../shared/datasets.
 """
@@ -51,6 +56,7 @@ import numpy as np  # noqa: E402
 import dynax  # noqa: E402
 from dynax._identify import _identify as identify_module, _refine  # noqa: E402
 from dynax._identify._validation import held_out_error  # noqa: E402
+from dynax._diagnose._statistics import log_ratio_differences, paired_block_test  # noqa: E402
 
 from dfki_simulation import DFKI, MAPPING, read_parameters  # noqa: E402  (the script's folder is on sys.path)
 import diagnose_real_splits  # noqa: E402
@@ -93,6 +99,25 @@ def load(run: str, variant: str = "native") -> dynax.Trajectory:
         return diagnose_real_splits.load(DFKI.parent, run, variant)
     raw = dynax.load_trajectory(DFKI / "sys_id" / f"trajectory_{run}.csv", "double_pendulum", mapping=MAPPING)
     return dynax.resample(raw, raw.dt)
+
+
+def cell_tests(model, lab, record, horizons) -> list[dict]:
+    """Per horizon, the paired test of dynax's held-out window errors against the lab's on the same windows.
+
+    `d` is `log_ratio_differences(lab, dynax)` of each window's mean squared position error (positive:
+    dynax better); `ratio` is $e^{-\\bar d/2}$, dynax's error over the lab's as a geometric mean over
+    windows; `p_better` and `p_worse` are the one-sided p-values of `paired_block_test` on `d` and
+    `-d` (windows `overlap` = horizon over stride share data)."""
+    mine, theirs = (dynax.simulation_error(m, record, horizons) for m in (model, lab))
+    stride_s = float((mine.starts[1] - mine.starts[0]) * record.dt)
+    out = []
+    for k, h in enumerate(horizons):
+        d = log_ratio_differences(np.asarray(theirs.window_mse[:, k]), np.asarray(mine.window_mse[:, k]))
+        runs, overlap = np.zeros(d.size, int), math.ceil(h / stride_s - 1e-9)
+        better, worse = paired_block_test(d, runs, overlap), paired_block_test(-d, runs, overlap)
+        out.append({"horizon_s": h, "ratio": float(np.exp(-better.mean / 2)), "mean_log_ratio": better.mean,
+                    "std_error": better.std_error, "df": better.df, "p_better": better.p_value, "p_worse": worse.p_value})
+    return out
 
 
 def main(argv=None):
@@ -138,12 +163,14 @@ def main(argv=None):
                                 validation=[runs[held]], horizons_s=HORIZONS)
         seconds = time.perf_counter() - start
         lab_error = held_out_error(lab, [runs[held]], HORIZONS)
+        paired = cell_tests(result.system, lab, runs[held], HORIZONS)
         stages = result.stages
         entry = {
             "fit_seconds": seconds,
             "dynax": list(result.validation.rmse),
             "dynax_least_squares": stages["least_squares"]["validation"]["rmse"],
             "lab_model_3.0": list(lab_error.rmse),
+            "paired_test": paired,
             "parameters": result.parameters,
             "least_squares_parameters": stages["least_squares"]["parameters"],
             "consistency": result.consistency.to_json(),
@@ -164,6 +191,7 @@ def main(argv=None):
         print(f"held out {held} ({seconds:.0f} s): dynax " + " ".join(f"{v:.3f}" for v in entry["dynax"])
               + " | least squares " + " ".join(f"{v:.3f}" for v in entry["dynax_least_squares"])
               + " | lab " + " ".join(f"{v:.3f}" for v in entry["lab_model_3.0"])
+              + " | p worse/better " + " ".join(f"{c['p_worse']:.2g}/{c['p_better']:.2g}" for c in paired)
               + f" | consistent {entry['consistency']['consistent']}"
               + " | weights " + " ".join(f"{w:.2f}" for w in entry["record_weights"])
               + " | residual scale " + " ".join(f"{v:.1f}" for v in entry["record_residual_scale"])
