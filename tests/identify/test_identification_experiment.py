@@ -50,3 +50,22 @@ def test_dfki_default_identification_experiment_writes_a_consistent_fold(tmp_pat
     for key in ("dynax", "dynax_least_squares", "lab_model_3.0"):
         assert 0 < fold[key][0] < fold[key][1] < fold[key][2]
     assert (tmp_path / "loro.png").stat().st_size > 10_000
+
+
+def test_loro_cell_tests_tell_a_worse_model_from_a_better_one():
+    """The paired window test of the leave-one-run-out table (`cell_tests`) points the right way: the lab's
+    model_h1.0 (an earlier fit) against its model_3.0 on DFKI run 03, whose windows show 1.3 to 1.8 times
+    the error (geometric mean), is significantly worse, and the other way round significantly better."""
+    pytest.importorskip("yaml")
+    sys.path.insert(0, str(REPO / "experiments"))
+    try:
+        import dfki_default_identification as loro
+        from dfki_simulation import read_parameters
+    finally:
+        sys.path.remove(str(REPO / "experiments"))
+    good, bad = (loro.lab_model(read_parameters(name)) for name in ("model_3.0", "model_h1.0"))
+    record = loro.load("03")
+    worse = loro.cell_tests(bad, good, record, loro.HORIZONS)
+    better = loro.cell_tests(good, bad, record, loro.HORIZONS)
+    assert all(c["ratio"] > 1.2 and c["p_worse"] < 0.01 and c["p_better"] > 0.99 for c in worse), worse
+    assert all(c["ratio"] < 1 / 1.2 and c["p_better"] < 0.01 and c["p_worse"] > 0.99 for c in better), better
