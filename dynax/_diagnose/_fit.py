@@ -31,7 +31,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float, Int
 
-from .._fit import fit_least_squares, levenberg_marquardt, Parameters
+from .._fit import clustered_covariance, fit_least_squares, levenberg_marquardt, Parameters
 from .._model._extensions import Extended
 from .._sim_error import window_rollouts
 from .._simulate import FixedGrid
@@ -228,19 +228,15 @@ def window_clustered_std_errors(solution, windows: Windows, scale):
     and the Gauss-Newton covariance $\hat\sigma^2 (J^\top J)^{+}$, which counts them as independent,
     is too small (on MuJoCo-made data a hidden dry friction came out as 0.1009 +- 0.00005 N m for a
     true 0.10: 19 of its standard errors away). The training windows do not overlap, so each is a
-    cluster: the sandwich $A (\sum_w s_w s_w^\top) A \cdot G/(G-1)$, $A = (J^\top J)^{+}$, $s_w$ the
-    window's score $J_w^\top r_w$, $G$ the windows in the fit (Liang and Zeger 1986; see
-    `dynax._identify._simulation_fit._clustered_covariance` for the same on the refinement's
-    segments). With fewer windows than twice the free parameters, Gauss-Newton's.
+    cluster of the engine's sandwich (`dynax._fit.clustered_covariance`; a left-out window, weight 0,
+    holds no residual and does not count). With fewer windows in the fit than twice the free
+    parameters, Gauss-Newton's.
 
     `solution` is the engine's (its Jacobian in the scaled unknowns), `scale` the unknowns' scale.
     """
     jac, r = solution.jacobian, solution.residuals
-    n_windows, n = windows.ts.shape[0], jac.shape[1]
-    scores = jnp.einsum("wip,wi->wp", jac.reshape(n_windows, -1, n), r.reshape(n_windows, -1))
-    used = jnp.sum(windows.weights > 0)
-    bread = jnp.linalg.pinv(jac.T @ jac, hermitian=True)
-    covariance = bread @ (scores.T @ scores) @ bread * used / jnp.maximum(used - 1, 1)
+    n_windows = windows.ts.shape[0]
+    covariance, used = clustered_covariance(jac, r, jnp.arange(r.shape[0]) // (r.shape[0] // n_windows), n_windows)
     robust = jnp.sqrt(jnp.maximum(jnp.diag(covariance), 0.0)) * jnp.abs(scale)
     return jnp.where(used >= 2 * jnp.sum(scale != 0), robust, solution.std_errors)
 

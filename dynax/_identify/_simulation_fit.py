@@ -27,7 +27,7 @@ from jaxtyping import Array, Float, PyTree
 from .._data._trajectory import Trajectory
 from .._errors import DataError, UsageError
 from .._progress import bar_token, ProgressBar
-from .._fit import fit_least_squares, levenberg_marquardt, Parameters, Solution
+from .._fit import clustered_covariance, fit_least_squares, levenberg_marquardt, Parameters, Solution
 from .._model._system import AbstractSystem
 from .._simulate import FixedGrid, simulate
 from ._least_squares import least_squares, LeastSquaresFit
@@ -112,10 +112,8 @@ def _clustered_covariance(jac, r, ts, owner, trajectories, segment_s: float) -> 
     of the staggered cuts that overlap it and of its neighbours are correlated, and the Gauss-Newton
     covariance $\hat\sigma^2 (J^\top J)^{-1}$, which counts every residual as independent, is too
     small (6 to 9 times in the standard errors on a MuJoCo-made arm, `tests/identify/test_mujoco_data.py`).
-    The sandwich $A \big(\sum_g s_g s_g^\top\big) A \cdot G/(G-1)$, $A = (J^\top J)^{+}$, with
-    $s_g = J_g^\top r_g$ the score of cluster $g$, allows any correlation and any variance within a
-    cluster (Liang and Zeger 1986; White 1980; Cameron and Miller 2015 for the $G/(G-1)$ factor).
-    Clusters: each record cut into blocks of `CLUSTER_SEGMENTS` segment lengths, a segment in the
+    The engine's sandwich (`dynax._fit.clustered_covariance`) allows any correlation and any variance
+    within a cluster. Clusters: each record cut into blocks of `CLUSTER_SEGMENTS` segment lengths, a segment in the
     block where it starts (only the segments that straddle a block's end correlate across it). With
     fewer than twice as many blocks as unknowns, blocks of one segment length; with fewer still,
     `None` (too few clusters to estimate a covariance from: the caller keeps Gauss-Newton's). With few
@@ -134,11 +132,8 @@ def _clustered_covariance(jac, r, ts, owner, trajectories, segment_s: float) -> 
     else:
         return None
     # Without fitted initial states the residuals are the segments' states alone, segment by segment.
-    scores_segment = np.einsum("sip,si->sp", jac.reshape(n_segments, -1, n_unknowns), r.reshape(n_segments, -1))
-    scores = np.zeros((n_clusters, n_unknowns))
-    np.add.at(scores, cluster.reshape(-1), scores_segment)
-    bread = np.linalg.pinv(jac.T @ jac, hermitian=True)
-    return bread @ (scores.T @ scores) @ bread * n_clusters / (n_clusters - 1)
+    rows = np.repeat(cluster.reshape(-1), r.shape[0] // n_segments)
+    return np.asarray(clustered_covariance(jnp.asarray(jac), jnp.asarray(r), jnp.asarray(rows), n_clusters)[0])
 
 
 def _segments(trajectories, segment_s, stagger: int = 1):
