@@ -111,6 +111,7 @@ HEAVY_MODULES = (
 )
 HEAVY_TESTS = (
     "tests/identify/test_mujoco_data.py::test_defaults_on_mujoco_records_predict_as_well_as_mujoco_with_honest_standard_errors",
+    "tests/identify/test_mujoco_data.py::test_a_dry_friction_that_changes_between_recordings_is_carried_by_the_leave_one_record_out_errors",
     "tests/identify/test_mujoco_data.py::test_acrobot_defaults_on_mujoco_records_of_an_arm_driven_at_the_elbow_only",
     "tests/identify/test_identify_defaults.py::test_noisy_rig_data_with_defaults_give_consistent_estimates",
     "tests/identify/test_identify_defaults.py::test_noisy_arms_of_other_sizes_give_consistent_estimates",

@@ -153,9 +153,11 @@ def run(args: argparse.Namespace) -> int:
         f"{args.system}, {report['method']} model, {report['n_samples']} samples: "
         f"condition number {report['condition_number']:.3g}, relative equation error {float(result.relative_error):.3%}"
     )
+    between = report.get("record_std_errors") or {}
     for name, value in report["parameters"].items():
         std = report["std_errors"].get(name)
-        print(f"  {name:>8s} = {value:.6g}" + (f" +- {std:.2g}" if std is not None else ""))
+        print(f"  {name:>8s} = {value:.6g}" + (f" +- {std:.2g}" if std is not None else "")
+              + (f" (leaving one record out: +- {between[name]:.2g})" if name in between else ""))
     for settings in result.settings:
         if settings.get("chosen_from_data"):
             print(f"  settings ({settings.get('record') or 'record'}): {settings['reason']}")
@@ -173,6 +175,12 @@ def run(args: argparse.Namespace) -> int:
         cells = describe_poorly_determined(result.poorly_determined)
         print(f"  WARNING: the data determine these parameters poorly (relative standard error): {cells}; "
               "record more motion in every joint before trusting them, or look for what the model misses")
+    disagree = (result.stages or {}).get("output_error", {}).get("records_disagree")
+    if disagree:
+        cells = ", ".join(f"{n} ({r:.1f}x)" for n, r in disagree.items())
+        print(f"  NOTE: the records disagree more than their noise explains: leaving one record out moves {cells} "
+              "by that many times their standard error from within the records; read the leave-one-record-out "
+              "errors as their uncertainty")
     for check in (result.record_offsets, result.record_friction):
         if check is not None and check.differ():
             print("  " + check.note())

@@ -174,7 +174,10 @@ class Refinement:
     the input timing: `input_alpha` (steps of the fit's grid, see `TimedInputs`; `None` when not
     fitted) and `input_latency_s`, the latency $\Delta t/2 - \alpha h$ of the inputs behind their
     samples [s] (see the module's docstring); `diverged`: the fit ended worse than its start (a
-    warning said so) and `system` is the start, unrefined."""
+    warning said so) and `system` is the start, unrefined; `covariance`, the whole covariance
+    behind `std_errors`; `record_std_errors`, from the delete-one-record jackknife
+    (`SimulationFitResult.record_covariance`) through the same Jacobian: how far each parameter
+    moves when one record is left out, NaN with fewer than three records."""
 
     system: AbstractSystem
     names: tuple[str, ...]
@@ -193,6 +196,8 @@ class Refinement:
     input_alpha: float | None = None
     input_latency_s: float | None = None
     diverged: bool = False
+    covariance: np.ndarray | None = None
+    record_std_errors: np.ndarray | None = None
 
 
 def motion_records(records: list[Trajectory], *, filtered: bool | str = "positions") -> tuple[list[Trajectory], float]:
@@ -354,13 +359,18 @@ def refine_by_simulation(
         alpha = float(jnp.clip(final.alpha, -INPUT_REACH, INPUT_REACH))
         record_dt = float(np.median([float(np.median(np.diff(np.asarray(r.ts)))) for r in records]))
         latency = 0.5 * record_dt - alpha * dt
+    spread = None if diverged or result.record_covariance is None else np.asarray(result.record_covariance)[:n_phi, :n_phi]
     with np.errstate(invalid="ignore"):  # an unidentified direction has an infinite standard error
-        std = np.sqrt(np.maximum(np.diag(jac @ phi_cov @ jac.T), 0.0))  # NaN stays NaN
+        covariance = jac @ phi_cov @ jac.T
+        std = np.sqrt(np.maximum(np.diag(covariance), 0.0))  # NaN stays NaN
+        record_std = (np.full(len(names), np.nan) if spread is None
+                      else np.sqrt(np.maximum(np.diag(jac @ spread @ jac.T), 0.0)))
     # A kept start: its own residual, no relative error or record scales of a fit.
     rms, relative = (initial_rms, float("nan")) if diverged else (float(result.residual_rms), float(result.relative_error))
     return Refinement(refined, names, estimate, std, initial_rms, rms, relative, steps, dt, method.segment_s,
                       result.n_samples, tuple(float(w) for w in weights),
-                      () if diverged else tuple(float(v) for v in sigma), reweights, alpha, latency, diverged)
+                      () if diverged else tuple(float(v) for v in sigma), reweights, alpha, latency, diverged,
+                      covariance, record_std)
 
 
 def _ended_worse(result) -> bool:

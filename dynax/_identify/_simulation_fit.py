@@ -27,7 +27,7 @@ from jaxtyping import Array, Float, PyTree
 from .._data._trajectory import Trajectory
 from .._errors import DataError, UsageError
 from .._progress import bar_token, ProgressBar
-from .._fit import clustered_covariance, fit_least_squares, levenberg_marquardt, Parameters, Solution
+from .._fit import clustered_covariance, fit_least_squares, jackknife_covariance, levenberg_marquardt, Parameters, Solution
 from .._model._system import AbstractSystem
 from .._simulate import FixedGrid, simulate
 from ._least_squares import least_squares, LeastSquaresFit
@@ -70,6 +70,11 @@ class SimulationFitResult(eqx.Module):
     - `std_errors`: their standard errors, same shape: with fitted initial states the Gauss-Newton
       covariance at the solution; from measured initial states the cluster-robust one over blocks of
       time (see `fit_simulation_error`).
+    - `record_covariance`: with measured initial states and at least `MIN_RECORDS_FOR_SPREAD`
+      records, the covariance of all unknowns (scaled as `solution.covariance`) by the linearised
+      delete-one-record jackknife (`dynax._fit.jackknife_covariance`): how far the estimate moves
+      when one record is left out. It carries what differs from one record to the next (a friction
+      or offset of that day), which no error estimated within records can; else `None`.
     - `condition_number`, `rank`: of the column-scaled Jacobian of all unknowns.
     - `residual_rms`: root-mean-square of the scaled state residuals at the solution.
     - `initial_residual_rms`: the same at the starting point.
@@ -95,6 +100,7 @@ class SimulationFitResult(eqx.Module):
     n_samples: int = eqx.field(static=True)
     steps: Array
     solution: Solution | None = None
+    record_covariance: Array | None = None
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -102,6 +108,7 @@ class SimulationFitResult(eqx.Module):
 
 
 CLUSTER_SEGMENTS = 4  # segment lengths per block of the clustered covariance
+MIN_RECORDS_FOR_SPREAD = 3  # records the delete-one-record jackknife needs (two give one difference)
 
 
 def _clustered_covariance(jac, r, ts, owner, trajectories, segment_s: float) -> np.ndarray | None:
@@ -134,6 +141,15 @@ def _clustered_covariance(jac, r, ts, owner, trajectories, segment_s: float) -> 
     # Without fitted initial states the residuals are the segments' states alone, segment by segment.
     rows = np.repeat(cluster.reshape(-1), r.shape[0] // n_segments)
     return np.asarray(clustered_covariance(jnp.asarray(jac), jnp.asarray(r), jnp.asarray(rows), n_clusters)[0])
+
+
+def _record_covariance(jac, r, owner, n_records: int) -> np.ndarray | None:
+    """The delete-one-record jackknife covariance of the scaled unknowns (see `SimulationFitResult`),
+    or `None` with fewer than `MIN_RECORDS_FOR_SPREAD` records."""
+    if n_records < MIN_RECORDS_FOR_SPREAD:
+        return None
+    rows = np.repeat(np.asarray(owner), r.shape[0] // len(owner))
+    return np.asarray(jackknife_covariance(jnp.asarray(jac), jnp.asarray(r), jnp.asarray(rows), n_records)[0])
 
 
 def _segments(trajectories, segment_s, stagger: int = 1):
@@ -330,16 +346,23 @@ def fit_simulation_error(
     linearised: LeastSquaresFit = least_squares(jac, -r, names=parameters.names, allow_rank_deficient=True)
     std = linearised.std_errors * scale * np.sqrt(stagger)
     covariance = linearised.covariance * scale[:, None] * scale[None, :] * stagger
+    record_covariance = None
     if not fit_initial_states:
+        # An unidentified direction keeps its NaN, in the errors and in the covariances' rows and
+        # columns (the pseudo-inverse would give it finite numbers).
+        unidentified = np.isnan(np.asarray(std))
+
+        def unscaled(c):
+            c = c * np.asarray(scale)[:, None] * np.asarray(scale)[None, :]
+            c[unidentified, :] = c[:, unidentified] = np.nan
+            return jnp.asarray(c, dtype)
+
         clustered = _clustered_covariance(np.asarray(jac), np.asarray(r), ts, owner, trajectories, segment_s)
         if clustered is not None:
-            # An unidentified direction keeps its NaN, in the errors and in the covariance's rows and
-            # columns (the pseudo-inverse would give it finite numbers).
-            unidentified = np.isnan(np.asarray(std))
-            clustered = clustered * np.asarray(scale)[:, None] * np.asarray(scale)[None, :]
-            clustered[unidentified, :] = clustered[:, unidentified] = np.nan
-            covariance = jnp.asarray(clustered, dtype)
+            covariance = unscaled(clustered)
             std = jnp.sqrt(jnp.maximum(jnp.diag(covariance), 0.0))
+        spread = _record_covariance(np.asarray(jac), np.asarray(r), owner, len(trajectories))
+        record_covariance = None if spread is None else unscaled(spread)
     solution = eqx.tree_at(lambda s: (s.std_errors, s.covariance), solution, (std, covariance))
     fitted = solution.model
     return SimulationFitResult(
@@ -357,4 +380,5 @@ def fit_simulation_error(
         n_samples=int(n_samples),
         steps=solution.steps,
         solution=solution,
+        record_covariance=record_covariance,
     )
