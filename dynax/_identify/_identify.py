@@ -397,8 +397,8 @@ def _records_disagree(refined) -> dict[str, float]:
 
     With $G$ records that agree, $(G-1)$ times the squared ratio is about $\chi^2_{G-1}$: a ratio of
     2.5 has $p \approx 3 \cdot 10^{-4}$ per parameter with four records, 0.002 with three (measured on
-    MuJoCo records of one arm: at most 2.0 over ten parameters; with the dry friction drawn anew for
-    each record, 3.0 to 6.7 on the friction and $\theta_2$)."""
+    MuJoCo records of one arm: at most 2.0 over ten parameters; with the dry friction changed for
+    each record, 2.5 to 6.6 on the Coulomb friction, $\theta_2$ and $\theta_5$)."""
     if refined.record_std_errors is None:
         return {}
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -96,9 +96,10 @@ def test_acrobot_defaults_on_mujoco_records_of_an_arm_driven_at_the_elbow_only()
 def test_a_dry_friction_that_changes_between_recordings_is_carried_by_the_leave_one_record_out_errors():
     # Four recordings of one MuJoCo arm whose dry friction changed between them (as a rig's does from day to
     # day: 0.11 to 0.20 N m at the shoulder, 0.06 to 0.11 at the elbow). Estimated within records, the
-    # standard errors cannot see that: the truth was 3.5 to 3.6 of them from theta1, theta5 and fc1
+    # standard errors cannot see that: the truth is 3.3 to 3.5 of them from theta1, theta5 and fc1
     # (measured). The delete-one-record jackknife can: every size parameter within 3 of its
-    # `record_std_errors` (measured at most 1.9), and the warning names the parameters that moved.
+    # `record_std_errors` (measured at most 2.05), and the warning names the parameters that moved
+    # (both Coulomb coefficients, theta2 and theta5, 2.5 to 6.6 times their within-record errors).
     friction = ((0.114, 0.060), (0.139, 0.113), (0.201, 0.103), (0.125, 0.076))
     train = []
     for seed, (f1, f2) in enumerate(friction):
