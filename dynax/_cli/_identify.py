@@ -175,6 +175,15 @@ def run(args: argparse.Namespace) -> int:
         cells = describe_poorly_determined(result.poorly_determined)
         print(f"  WARNING: the data determine these parameters poorly (relative standard error): {cells}; "
               "record more motion in every joint before trusting them, or look for what the model misses")
+    if result.jointly_determined:
+        def cell(name, joint):
+            std, value = report["std_errors"].get(name), report["parameters"][name]
+            alone = f", +- {100 * std / abs(value):.2g} %" if std is not None and value else ""
+            return f"{name} with {', '.join(joint['with']) or 'the rest'} ({joint['inflation']:.0f}x{alone})"
+
+        cells = "; ".join(cell(n, j) for n, j in result.jointly_determined.items())
+        print("  NOTE: determined mostly jointly (variance inflation over 10: most of each one's error is shared "
+              f"with its partners, and a combination of them is known better than each alone): {cells}")
     disagree = (result.stages or {}).get("output_error", {}).get("records_disagree")
     if disagree:
         cells = ", ".join(f"{n} ({r:.1f}x)" for n, r in disagree.items())

@@ -38,6 +38,7 @@ from ._refine import refine_by_simulation
 from ._validation import DEFAULT_HORIZONS_S, held_out_error, HeldOutError, split_for_validation
 from ._least_squares import (
     describe_poorly_determined,
+    jointly_determined,
     IdentifiabilityError,
     least_squares,
     LeastSquaresFit,
@@ -117,6 +118,9 @@ class Identification(eqx.Module):
     - `refined_covariance`: after the output-error refinement, the whole covariance behind
       `std_errors` (`Refinement.covariance`; what `covariance` returns then), e.g. for the error of
       a combination such as $M_{22} = \theta_2 + I_{r2}$; `None` otherwise.
+    - `jointly_determined`: the parameters of the returned estimate that the data determine only in
+      combination with others (`jointly_determined`: over 99 % of their variance shared), name ->
+      `{"with": partners, "inflation": ratio}`; `{}` when none, `None` without a covariance.
 
     **Properties** in `Solution`'s spelling: `value` (= `estimate`), `covariance`; and
     `parameters` / `standard_errors` as `{name: value}` (`Solution.estimates()` /
@@ -146,6 +150,7 @@ class Identification(eqx.Module):
     poorly_determined: dict[str, float] | None = None
     record_std_errors: Float[Array, " n_params"] | None = None
     refined_covariance: Float[Array, "n_params n_params"] | None = None
+    jointly_determined: dict[str, dict] | None = None
 
     @property
     def value(self) -> Float[Array, " n_params"]:
@@ -201,6 +206,8 @@ class Identification(eqx.Module):
             out["record_friction"] = self.record_friction.to_json()
         if self.poorly_determined is not None:
             out["poorly_determined"] = self.poorly_determined
+        if self.jointly_determined is not None:
+            out["jointly_determined"] = self.jointly_determined
         if self.record_std_errors is not None:
             out["record_std_errors"] = {n: float(v) for n, v in zip(self.names, np.asarray(self.record_std_errors))}
         return out
@@ -693,6 +700,9 @@ def identify(
     if refinement is not None:
         final, stages["output_error"] = _refined_stage(ls, fitted, method, friction, rcond, consistency,
                                                        refinement, validate)
+    covariance = final.get("covariance", ls.fit.covariance)
+    jointly = (jointly_determined(final["names"], covariance)
+               if covariance is not None and np.shape(covariance)[0] == len(final["names"]) else None)
     return Identification(
         system=final["system"],
         estimate=jnp.asarray(final["estimate"]),
@@ -717,6 +727,7 @@ def identify(
         record_std_errors=None if final.get("record_std") is None or not np.any(np.isfinite(final["record_std"]))
         else jnp.asarray(final["record_std"]),
         refined_covariance=None if final.get("covariance") is None else jnp.asarray(final["covariance"]),
+        jointly_determined=jointly,
     )
 
 

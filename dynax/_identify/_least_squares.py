@@ -69,6 +69,48 @@ def describe_poorly_determined(poorly: dict[str, float]) -> str:
                      for name, ratio in poorly.items())
 
 
+# Ratio of a parameter's standard error to its error with every other parameter known, above which it
+# counts as determined mostly jointly: then over 99 % of its variance is shared with the others.
+JOINTLY_DETERMINED = 10.0
+
+
+def jointly_determined(names, covariance, which=None, threshold: float = JOINTLY_DETERMINED,
+                       partner: float = 0.9) -> dict[str, dict]:
+    r"""The parameters (among `which`, default all) that the data determine mostly in combination
+    with others: name -> `{"with": [partners], "inflation": ratio}`.
+
+    A parameter's standard error $\sigma_i$ set against its error were every other parameter known,
+    $1/\sqrt{(C^{-1})_{ii}}$, is the square root of its variance inflation factor,
+    $\sqrt{(R^{-1})_{ii}}$ with $R$ the correlation matrix (Belsley, Kuh and Welsch, *Regression
+    Diagnostics*, 1980, ch. 3). Above `threshold` (default 10: a variance inflation of 100, over
+    99 % of the variance shared; the common rule of thumb flags an inflation of 10, which a
+    two-link arm's base parameters reach routinely) the motion separates the parameter from
+    others only through a small difference: most of its error is shared with them,
+    and a combination of them is known much better than each alone. Its partners are the
+    parameters correlated with it at `partner` (0.9) or more in magnitude. Whether that matters is
+    the standard error's to say: on MuJoCo records of an arm swung to about 1 rad, $I_{r2}$ (7.5 %
+    standard error, inflation 16) is told apart from $\theta_3$ only through $\cos q_2 - 1$ and
+    came out 29 % off; on an acrobot turning over, $\theta_1$ and $\theta_3$ are correlated
+    (inflation 12 and 19) and still within 0.3 %. Parameters with an undefined variance are left out.
+    """
+    c = np.asarray(covariance, dtype=float)
+    keep = np.isfinite(np.diag(c)) & (np.diag(c) > 0)
+    sub = c[np.ix_(keep, keep)]
+    if keep.sum() < 2 or not np.all(np.isfinite(sub)):
+        return {}
+    sd = np.sqrt(np.diag(sub))
+    corr = sub / np.outer(sd, sd)
+    inflation = np.sqrt(np.maximum(np.diag(np.linalg.pinv(corr, hermitian=True)), 1.0))
+    kept = [n for n, k in zip(names, keep) if k]
+    out = {}
+    for i, name in enumerate(kept):
+        if (which is not None and name not in which) or not inflation[i] > threshold:
+            continue
+        partners = [kept[j] for j in np.argsort(-np.abs(corr[i])) if j != i and abs(corr[i, j]) >= partner]
+        out[name] = {"with": partners, "inflation": float(inflation[i])}
+    return out
+
+
 class LeastSquaresFit(eqx.Module):
     r"""The result of `least_squares`.
 

@@ -154,3 +154,27 @@ def test_weighted_rank_deficient_residual_is_that_of_the_returned_estimate():
     d = np.linalg.norm(aw, axis=0)
     reference = np.linalg.pinv(aw / d, rcond=1e-7) @ (np.sqrt(w) * y) / d
     np.testing.assert_allclose(fit.estimate, reference, rtol=1e-8, atol=1e-10)
+
+
+def test_jointly_determined_names_the_parameters_a_regression_separates_only_through_a_small_difference():
+    # Four regressors, the third almost the sum of the first two: the textbook variance inflation factor
+    # 1 / (1 - R^2), from regressing each column on the others, is what the covariance's correlations give,
+    # and the three entangled columns are named with each other, the independent fourth is not.
+    from dynax._identify._least_squares import jointly_determined
+
+    rng = np.random.default_rng(3)
+    a, b, d = rng.normal(size=(3, 500))
+    x = np.stack([a, b, a + b + 0.02 * rng.normal(size=500), d], axis=1)
+    covariance = 0.1**2 * np.linalg.inv(x.T @ x)
+    names = ("p1", "p2", "p3", "p4")
+    joint = jointly_determined(names, covariance)
+    assert set(joint) == {"p1", "p2", "p3"}, joint
+    assert set(joint["p3"]["with"]) == {"p1", "p2"}
+    for i, name in enumerate(names[:3]):
+        others = np.delete(x, i, axis=1)
+        fit = others @ np.linalg.lstsq(others, x[:, i], rcond=None)[0]
+        r2 = 1 - np.sum((x[:, i] - fit) ** 2) / np.sum((x[:, i] - x[:, i].mean()) ** 2)
+        np.testing.assert_allclose(joint[name]["inflation"], np.sqrt(1 / (1 - r2)), rtol=0.02)
+    # An undefined variance (an unidentified parameter) is left out, not propagated.
+    covariance[3, :] = covariance[:, 3] = np.nan
+    assert set(jointly_determined(names, covariance)) == {"p1", "p2", "p3"}
