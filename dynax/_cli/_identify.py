@@ -179,11 +179,13 @@ def run(args: argparse.Namespace) -> int:
         def cell(name, joint):
             std, value = report["std_errors"].get(name), report["parameters"][name]
             alone = f", +- {100 * std / abs(value):.2g} %" if std is not None and value else ""
-            return f"{name} with {', '.join(joint['with']) or 'the rest'} ({joint['inflation']:.0f}x{alone})"
+            partners = ", ".join(f"{p} ({c:+.2f})" for p, c in zip(joint["with"], joint["correlations"]))
+            return f"{name} ({joint['inflation']:.0f}x{alone}) with {partners or 'several others'}"
 
         cells = "; ".join(cell(n, j) for n, j in result.jointly_determined.items())
-        print("  NOTE: determined mostly jointly (variance inflation over 10: most of each one's error is shared "
-              f"with its partners, and a combination of them is known better than each alone): {cells}")
+        print("  NOTE: determined mostly jointly (the standard error over 10 times what it would be with every other "
+              "parameter known: most of the error is shared, and a combination of the correlated parameters is known "
+              f"better than each alone): {cells}")
     disagree = (result.stages or {}).get("output_error", {}).get("records_disagree")
     if disagree:
         cells = ", ".join(f"{n} ({r:.1f}x)" for n, r in disagree.items())

@@ -118,9 +118,10 @@ class Identification(eqx.Module):
     - `refined_covariance`: after the output-error refinement, the whole covariance behind
       `std_errors` (`Refinement.covariance`; what `covariance` returns then), e.g. for the error of
       a combination such as $M_{22} = \theta_2 + I_{r2}$; `None` otherwise.
-    - `jointly_determined`: the parameters of the returned estimate that the data determine only in
-      combination with others (`jointly_determined`: over 99 % of their variance shared), name ->
-      `{"with": partners, "inflation": ratio}`; `{}` when none, `None` without a covariance.
+    - `jointly_determined`: the parameters of the returned estimate that the data determine mostly
+      in combination with others (`jointly_determined`: over 99 % of their variance shared), name ->
+      `{"with": partners, "correlations": ..., "inflation": ratio}`; `{}` when none, `None` without
+      a covariance.
 
     **Properties** in `Solution`'s spelling: `value` (= `estimate`), `covariance`; and
     `parameters` / `standard_errors` as `{name: value}` (`Solution.estimates()` /

@@ -75,9 +75,9 @@ JOINTLY_DETERMINED = 10.0
 
 
 def jointly_determined(names, covariance, which=None, threshold: float = JOINTLY_DETERMINED,
-                       partner: float = 0.9) -> dict[str, dict]:
+                       partner: float = 0.5, max_partners: int = 3) -> dict[str, dict]:
     r"""The parameters (among `which`, default all) that the data determine mostly in combination
-    with others: name -> `{"with": [partners], "inflation": ratio}`.
+    with others: name -> `{"with": [partners], "correlations": [...], "inflation": ratio}`.
 
     A parameter's standard error $\sigma_i$ set against its error were every other parameter known,
     $1/\sqrt{(C^{-1})_{ii}}$, is the square root of its variance inflation factor,
@@ -85,13 +85,14 @@ def jointly_determined(names, covariance, which=None, threshold: float = JOINTLY
     Diagnostics*, 1980, ch. 3). Above `threshold` (default 10: a variance inflation of 100, over
     99 % of the variance shared; the common rule of thumb flags an inflation of 10, which a
     two-link arm's base parameters reach routinely) the motion separates the parameter from
-    others only through a small difference: most of its error is shared with them,
-    and a combination of them is known much better than each alone. Its partners are the
-    parameters correlated with it at `partner` (0.9) or more in magnitude. Whether that matters is
-    the standard error's to say: on MuJoCo records of an arm swung to about 1 rad, $I_{r2}$ (7.5 %
-    standard error, inflation 16) is told apart from $\theta_3$ only through $\cos q_2 - 1$ and
-    came out 29 % off; on an acrobot turning over, $\theta_1$ and $\theta_3$ are correlated
-    (inflation 12 and 19) and still within 0.3 %. Parameters with an undefined variance are left out.
+    others only through a small difference: most of its error is shared with them, and a
+    combination of them is known much better than each alone. Its partners are the (at most
+    `max_partners`) parameters most correlated with it, at `partner` (0.5) or more in magnitude;
+    `"correlations"` gives those correlations. Whether that matters is the standard error's to say:
+    on MuJoCo records of an arm swung to about 1 rad, $I_{r2}$ (7.5 % standard error, ratio 16) is
+    told apart from $\theta_3$ only through $\cos q_2 - 1$ and came out 29 % off; on an acrobot
+    turning over, $\theta_1$ and $\theta_3$ are correlated (ratios 12 and 19) and still within
+    0.3 %. Parameters with an undefined variance are left out.
     """
     c = np.asarray(covariance, dtype=float)
     keep = np.isfinite(np.diag(c)) & (np.diag(c) > 0)
@@ -106,8 +107,9 @@ def jointly_determined(names, covariance, which=None, threshold: float = JOINTLY
     for i, name in enumerate(kept):
         if (which is not None and name not in which) or not inflation[i] > threshold:
             continue
-        partners = [kept[j] for j in np.argsort(-np.abs(corr[i])) if j != i and abs(corr[i, j]) >= partner]
-        out[name] = {"with": partners, "inflation": float(inflation[i])}
+        partners = [j for j in np.argsort(-np.abs(corr[i])) if j != i and abs(corr[i, j]) >= partner][:max_partners]
+        out[name] = {"with": [kept[j] for j in partners], "correlations": [float(corr[i, j]) for j in partners],
+                     "inflation": float(inflation[i])}
     return out
 
 
