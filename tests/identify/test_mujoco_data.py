@@ -67,7 +67,8 @@ def test_defaults_on_mujoco_records_predict_as_well_as_mujoco_with_honest_standa
     assert m22_std < 0.5 * (std["theta2"] + std["Ir2"]), (m22_std, std["theta2"], std["Ir2"])
     assert abs(estimate["theta2"] + estimate["Ir2"] - truth["theta2"] - truth["Ir2"]) < 4 * m22_std
     # ... and the result says which parameters the motion tells apart only through a small difference: the
-    # elbow's rotor inertia from theta3 (variance inflation 16, correlation 0.99; 29 % off alone).
+    # elbow's rotor inertia from theta3 (its standard error 16 times what it would be with the rest known;
+    # correlation 0.99; 29 % off alone).
     assert "theta3" in result.jointly_determined["Ir2"]["with"], result.jointly_determined
 
 
@@ -89,7 +90,7 @@ def test_acrobot_defaults_on_mujoco_records_of_an_arm_driven_at_the_elbow_only()
                                rtol=0.01)
     np.testing.assert_allclose([estimate[n] for n in ("fc1", "fc2", "Ir2")], [truth[n] for n in ("fc1", "fc2", "Ir2")],
                                rtol=0.1)
-    # Turning over, the arm tells the elbow's rotor inertia apart from theta3 (variance inflation 2.3, where
+    # Turning over, the arm tells the elbow's rotor inertia apart from theta3 (standard-error ratio 2.3, where
     # the 1 rad swing of the test above leaves 16).
     assert "Ir2" not in result.jointly_determined, result.jointly_determined
     z = {n: (estimate[n] - truth[n]) / std[n] for n in truth}
