@@ -44,6 +44,11 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 
+def _scores(jac, residuals, clusters, n_clusters):
+    """Each cluster's score $s_g = J_g^\top r_g$, `(n_clusters, n)`."""
+    return jax.ops.segment_sum(jac * residuals[:, None], clusters, num_segments=n_clusters)
+
+
 def clustered_covariance(
     jac: Float[Array, "m n"], residuals: Float[Array, " m"], clusters: Int[Array, " m"], n_clusters: int
 ) -> tuple[Float[Array, "n n"], Array]:
@@ -52,7 +57,7 @@ def clustered_covariance(
 
     **Returns:** `(covariance, G)`, `G` the clusters counted (see the module).
     """
-    scores = jax.ops.segment_sum(jac * residuals[:, None], clusters, num_segments=n_clusters)
+    scores = _scores(jac, residuals, clusters, n_clusters)
     used = jnp.sum(jnp.any(scores != 0, axis=1))
     bread = jnp.linalg.pinv(jac.T @ jac, hermitian=True)
     return bread @ (scores.T @ scores) @ bread * used / jnp.maximum(used - 1, 1), used
@@ -66,7 +71,7 @@ def jackknife_covariance(
 
     **Returns:** `(covariance, G)`, `G` the clusters counted, as `clustered_covariance`'s.
     """
-    scores = jax.ops.segment_sum(jac * residuals[:, None], clusters, num_segments=n_clusters)
+    scores = _scores(jac, residuals, clusters, n_clusters)
     # One cluster's Gram matrix at a time: no (m, n, n) intermediate.
     grams = jax.lax.map(lambda g: (jac * (clusters == g)[:, None]).T @ jac, jnp.arange(n_clusters))
     held = jnp.any(scores != 0, axis=1)

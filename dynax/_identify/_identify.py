@@ -423,13 +423,6 @@ def _records_disagree(refined) -> dict[str, float]:
     return out
 
 
-def _finite_or_none(names, values) -> dict[str, float] | None:
-    """`{name: value}`, or `None` where there are no values (or none is finite)."""
-    if values is None or not np.any(np.isfinite(values)):
-        return None
-    return {n: float(v) for n, v in zip(names, np.asarray(values))}
-
-
 def _signal_band_hz(trajectories) -> float | None:
     """The widest velocity signal band over the records, or `None` when no record's velocities are noisy."""
     bands = [c.cutoff_hz for c in (choose_filter(_uniform(t)) for t in trajectories) if c.cutoff_hz is not None]
@@ -583,7 +576,8 @@ def _refined_stage(ls, fitted, method, friction, rcond, consistency, refinement,
         "simulation", refined.names, refined.estimate, refined.std_errors, error, held_out,
         consistency=check.to_json(), initial_residual_rms=refined.initial_residual_rms,
         residual_rms=refined.residual_rms, steps=refined.steps, dt=refined.dt, segment_s=refined.segment_s,
-        record_std_errors=_finite_or_none(refined.names, refined.record_std_errors),
+        record_std_errors=None if refined.record_std_errors is None
+        else {n: float(v) for n, v in zip(refined.names, refined.record_std_errors)},
         records_disagree=_records_disagree(refined),
         model="least-squares model + RotorInertia(joint=1), consistent parametrisation",
         diverged=refined.diverged,
@@ -725,8 +719,7 @@ def identify(
         record_offsets=ls.offsets,
         record_friction=ls.friction,
         poorly_determined=poorly,
-        record_std_errors=None if final.get("record_std") is None or not np.any(np.isfinite(final["record_std"]))
-        else jnp.asarray(final["record_std"]),
+        record_std_errors=None if final.get("record_std") is None else jnp.asarray(final["record_std"]),
         refined_covariance=None if final.get("covariance") is None else jnp.asarray(final["covariance"]),
         jointly_determined=jointly,
     )

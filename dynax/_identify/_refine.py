@@ -177,7 +177,7 @@ class Refinement:
     warning said so) and `system` is the start, unrefined; `covariance`, the whole covariance
     behind `std_errors`; `record_std_errors`, from the delete-one-record jackknife
     (`SimulationFitResult.record_covariance`) through the same Jacobian: how far each parameter
-    moves when one record is left out, NaN with fewer than three records."""
+    moves when one record is left out, `None` with fewer than three records."""
 
     system: AbstractSystem
     names: tuple[str, ...]
@@ -363,8 +363,7 @@ def refine_by_simulation(
     with np.errstate(invalid="ignore"):  # an unidentified direction has an infinite standard error
         covariance = jac @ phi_cov @ jac.T
         std = np.sqrt(np.maximum(np.diag(covariance), 0.0))  # NaN stays NaN
-        record_std = (np.full(len(names), np.nan) if spread is None
-                      else np.sqrt(np.maximum(np.diag(jac @ spread @ jac.T), 0.0)))
+        record_std = None if spread is None else np.sqrt(np.maximum(np.diag(jac @ spread @ jac.T), 0.0))
     # A kept start: its own residual, no relative error or record scales of a fit.
     rms, relative = (initial_rms, float("nan")) if diverged else (float(result.residual_rms), float(result.relative_error))
     return Refinement(refined, names, estimate, std, initial_rms, rms, relative, steps, dt, method.segment_s,
