@@ -58,7 +58,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     records = {r: load(r) for r in RUNS}
     # The least-squares stage `identify` builds (settings chosen from the data), with and without the offsets.
-    _, a, y, _, names, _, _, _, counts = _equations(dynax.DoublePendulum(), [records[r] for r in RUNS],
+    _, a, y, _, names, _, _, _, counts, _ = _equations(dynax.DoublePendulum(), [records[r] for r in RUNS],
                                                     dynax.Dynamic(), "coulomb", None, None)
     theta0 = np.asarray(least_squares(a, y, names=names).estimate)
     found = record_offsets(a, y, counts, ("q1", "q2"))

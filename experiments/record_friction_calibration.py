@@ -66,7 +66,7 @@ def main(argv=None):
         rows = []
         for s in range(args.sets):
             records = [record(fc2, 1000 + 10 * s + k) for k, fc2 in enumerate(frictions)]
-            _, a, y, _, names, _, _, _, counts = _equations(dynax.DoublePendulum(), records, dynax.Dynamic(), "coulomb",
+            _, a, y, _, names, _, _, _, counts, _ = _equations(dynax.DoublePendulum(), records, dynax.Dynamic(), "coulomb",
                                                             None, None)
             rows.append([p_value(a, y, counts, list(names), k) for k in parts])
             print(f"{case} set {s}: " + " ".join(f"{k} parts p = {p:.3g}" for k, p in zip(parts, rows[-1])), flush=True)

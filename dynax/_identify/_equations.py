@@ -399,8 +399,10 @@ def _energy_balance(ts, w, f, tau, dq, n_windows, window, stride, columns):
 
 
 def _equations(system, trajectories, method, friction, weights, rcond):
-    """The stacked least-squares problem `(a, y, weights, names, n_samples, label, settings, counts)`;
-    `counts` (for `Dynamic`) each record's rows per joint, else `()`."""
+    """The stacked least-squares problem `(a, y, weights, names, n_samples, label, settings, counts,
+    record_rows)`; `counts` (for `Dynamic`) each record's rows per joint, else `()`; `record_rows`
+    each record's rows per time step's block (`counts` for `Dynamic`, whose rows are stacked joint by
+    joint; each record's rows for `Power` and `Energy`, stacked record by record)."""
     system = with_friction(system, friction)
     names = parameter_names(system, friction)
     settings, counts = (), ()
@@ -413,17 +415,19 @@ def _equations(system, trajectories, method, friction, weights, rcond):
         if method.weighting not in ("none", "joint"):
             raise UsageError(f"Dynamic: `weighting` must be 'none' or 'joint', got {method.weighting!r}")
         label = "dynamic"
+        record_rows = counts
     elif isinstance(method, (Power, Energy)):
         rows, label = (_power_rows, "power") if isinstance(method, Power) else (_energy_rows, "energy")
         parts = [rows(system, t, method, friction) for t in trajectories]
         a = jnp.concatenate([p[0] for p in parts])
         y = jnp.concatenate([p[1] for p in parts])
         n_samples = sum(p[2] for p in parts)
+        record_rows = tuple(int(p[0].shape[0]) for p in parts)
     else:
         raise UsageError(
             f"identify: `method` must be Dynamic(), Power(), Energy() or SimulationFit(), got {type(method).__name__}"
         )
-    return system, a, y, weights, names, n_samples, label, settings, counts
+    return system, a, y, weights, names, n_samples, label, settings, counts, record_rows
 
 
 def joint_weights(a, y, names, rcond, n_joints):

@@ -64,9 +64,12 @@ def poorly_determined(names, estimate, std_errors, which, threshold: float = POO
 
 
 def describe_poorly_determined(poorly: dict[str, float]) -> str:
-    """`poorly_determined`'s result as text: `theta2 (34 %), theta1 (estimate zero)`."""
-    return ", ".join(f"{name} ({100 * ratio:.0f} %)" if np.isfinite(ratio) else f"{name} (estimate zero)"
-                     for name, ratio in poorly.items())
+    """`poorly_determined`'s result as text: `theta2 (34 %), theta1 (estimate zero)`; a ratio of 100 or
+    more is an estimate near zero (held at a bound), NaN one with no standard error."""
+    return ", ".join(f"{name} ({100 * ratio:.0f} %)" if ratio < 100 else
+                     f"{name} (estimate zero)" if ratio == np.inf else
+                     f"{name} (estimate near zero, standard error {ratio:.3g} times it)" if np.isfinite(ratio) else
+                     f"{name} (no standard error)" for name, ratio in poorly.items())
 
 
 # Ratio of a parameter's standard error to its error with every other parameter known, above which it

@@ -178,7 +178,7 @@ def compare_records(system, records, friction="coulomb") -> tuple[RecordOffsets 
         return None, None
     try:
         base = _split(system)[0]
-        _, a, y, _, names, _, _, _, counts = _equations(base, records, Dynamic(), friction, None, 1e-7)
+        _, a, y, _, names, _, _, _, counts, _ = _equations(base, records, Dynamic(), friction, None, 1e-7)
     except (DataError, UsageError):  # not a system least squares knows, or a record too short for its filter
         return None, None
     labels = record_labels(records)

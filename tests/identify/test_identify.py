@@ -141,6 +141,30 @@ def test_emps_reproduces_the_published_reference_model(datasets):
     assert "coulomb" not in without.parameters and float(without.system.coulomb) == 0.0
 
 
+def test_emps_standard_errors_carry_the_correlation_in_time_that_two_filter_settings_show(datasets):
+    # Real data, one record: the published recipe (100 Hz, decimated by 10) and the defaults chosen from
+    # the spectra (100 Hz, decimated by 2) fit the same equations sampled differently. Their estimates
+    # differ by 4 to 10 of the errors that count every row as independent, and those errors differ
+    # between the two settings by a factor of 2: the rows are correlated in time (the filter, and model
+    # error that follows the motion), the more so the denser they are sampled. With the errors robust
+    # to that (`serial_covariance`), both settings give the same errors (within 4 %) and the estimates
+    # lie within 1.5 of them.
+    path = datasets / "emps" / "DATA_EMPS.mat"
+    data = load_trajectory(path, "linear_axis", mapping={"q": "qm", "force": "vir"}, scale={"force": 35.15065188})
+    recipe = identify(dynax.LinearAxis(), data, Dynamic(lowpass_hz=100.0, lowpass_order=4, trim=50, decimate=10,
+                                                         inputs="sampled"), friction="coulomb", holdout=0)
+    defaults = identify(dynax.LinearAxis(), data, Dynamic(), friction="coulomb", holdout=0)
+    assert recipe.settings[0]["decimate"] != defaults.settings[0]["decimate"]
+    for name in ("viscous", "coulomb"):
+        robust = [r.standard_errors[name] for r in (recipe, defaults)]
+        independent = [r.standard_errors[name] / r.stages["least_squares"]["serial_correlation"]["inflation"][name]
+                       for r in (recipe, defaults)]
+        gap = abs(recipe.parameters[name] - defaults.parameters[name])
+        assert abs(robust[0] / robust[1] - 1) < 0.1, (name, robust)
+        assert max(independent) / min(independent) > 1.5, (name, independent)
+        assert gap > 3 * max(independent) and gap < 1.5 * max(robust), (name, gap, robust, independent)
+
+
 def test_with_measurement_noise_energy_beats_power_beats_dynamic_until_filtered(acrobot_data):
     # Encoder, velocity-estimate and torque-sensor noise (1e-3 rad, 1e-2 rad/s, 1e-2 N m) at 200 Hz.
     rng = np.random.default_rng(0)
