@@ -158,6 +158,11 @@ def run(args: argparse.Namespace) -> int:
         std = report["std_errors"].get(name)
         print(f"  {name:>8s} = {value:.6g}" + (f" +- {std:.2g}" if std is not None else "")
               + (f" (leaving one record out: +- {between[name]:.2g})" if name in between else ""))
+    serial = (result.stages or {}).get("least_squares", {}).get("serial_correlation")
+    if serial and "output_error" not in (result.stages or {}):
+        ratios = serial["inflation"].values()
+        print(f"  standard errors robust to the equations' correlation in time (over {serial['bandwidth_steps']:.0f} "
+              f"time steps): {min(ratios):.2g} to {max(ratios):.2g} times those counting every equation as independent")
     for settings in result.settings:
         if settings.get("chosen_from_data"):
             print(f"  settings ({settings.get('record') or 'record'}): {settings['reason']}")
@@ -176,13 +181,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"  WARNING: the data determine these parameters poorly (relative standard error): {cells}; "
               "record more motion in every joint before trusting them, or look for what the model misses")
     if result.jointly_determined:
-        def cell(name, joint):
-            std, value = report["std_errors"].get(name), report["parameters"][name]
-            alone = f", +- {100 * std / abs(value):.2g} %" if std is not None and value else ""
-            partners = ", ".join(f"{p} ({c:+.2f})" for p, c in zip(joint["with"], joint["correlations"]))
-            return f"{name} ({joint['inflation']:.0f}x{alone}) with {partners or 'several others'}"
-
-        cells = "; ".join(cell(n, j) for n, j in result.jointly_determined.items())
+        cells = "; ".join(_jointly_cell(n, j, report) for n, j in result.jointly_determined.items())
         print("  NOTE: determined mostly jointly (the standard error over 10 times what it would be with every other "
               "parameter known: most of the error is shared, and a combination of the correlated parameters is known "
               f"better than each alone): {cells}")
@@ -236,3 +235,18 @@ def _refinement_validates_worse(stages: dict) -> str | None:
     if ls and oe and ls["rmse"] and all(o > l for o, l in zip(oe["rmse"], ls["rmse"])):
         return oe["source"]
     return None
+
+
+def _jointly_cell(name, joint, report) -> str:
+    """One parameter of the jointly-determined NOTE: `theta1 (108x, +- 39 %) with Ir2 (-0.99), ...`;
+    an estimate its error reaches past zero (one at a bound, e.g. a friction) is given as value and
+    error, since a relative error of millions of per cent says nothing."""
+    std, value = report["std_errors"].get(name), report["parameters"][name]
+    if std is None:
+        alone = ""
+    elif value and std < abs(value):
+        alone = f", +- {100 * std / abs(value):.2g} %"
+    else:
+        alone = f", {value:.3g} +- {std:.2g}"
+    partners = ", ".join(f"{p} ({c:+.2f})" for p, c in zip(joint["with"], joint["correlations"]))
+    return f"{name} ({joint['inflation']:.0f}x{alone}) with {partners or 'several others'}"

@@ -63,7 +63,12 @@ def test_identify_warns_when_the_record_hardly_moves(tmp_path, capsys):
                      "--out", str(out)]) == 0
     report = json.loads(out.read_text())
     assert {"theta1", "theta2"} <= set(report["poorly_determined"])
-    assert "WARNING: the data determine these parameters poorly (relative standard error): theta1" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "WARNING: the data determine these parameters poorly (relative standard error): theta1" in printed
+    # the least-squares model is the answer here: the CLI says how its errors allow for the rows' correlation
+    serial = report["stages"]["least_squares"]["serial_correlation"]
+    assert serial["bandwidth_steps"] >= 1 and set(serial["inflation"]) == set(report["parameters"])
+    assert "standard errors robust to the equations' correlation in time" in printed
 
 
 def test_identify_refuses_bad_input_without_writing(acrobot_csv, tmp_path, capsys):
@@ -83,3 +88,17 @@ def test_identify_refuses_bad_input_without_writing(acrobot_csv, tmp_path, capsy
     assert main(["identify", "acrobot", str(still), "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "theta1" in err and "rank 0 of 7" in err and not out.exists()
+
+
+def test_the_jointly_determined_note_gives_an_estimate_at_its_bound_as_value_and_error():
+    # As printed for DFKI run 00 alone: theta1 is known to 39 %, while the shoulder's viscous
+    # friction sits at its bound of zero (2e-6 +- 0.037), where a relative error (1.8e6 %) says nothing.
+    from dynax._cli._identify import _jointly_cell
+
+    report = {"parameters": {"theta1": 0.0471, "theta6": 2.0e-6},
+              "std_errors": {"theta1": 0.018, "theta6": 0.037}}
+    joint = {"with": ["Ir2", "theta2"], "correlations": [-0.99, 0.95], "inflation": 108.3}
+    assert _jointly_cell("theta1", joint, report) == "theta1 (108x, +- 38 %) with Ir2 (-0.99), theta2 (+0.95)"
+    assert _jointly_cell("theta6", dict(joint, inflation=13.0), report).startswith("theta6 (13x, 2e-06 +- 0.037) with")
+    assert _jointly_cell("theta6", {"with": [], "correlations": [], "inflation": 13.0},
+                         {"parameters": {"theta6": 0.0}, "std_errors": {}}) == "theta6 (13x) with several others"
