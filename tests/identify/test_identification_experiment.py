@@ -52,6 +52,28 @@ def test_dfki_default_identification_experiment_writes_a_consistent_fold(tmp_pat
     assert (tmp_path / "loro.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow  # about 30 s: one run identified alone, then simulated on the five others
+def test_dfki_single_run_experiment_sets_one_runs_answer_against_the_lab_on_the_others(tmp_path):
+    subprocess.run(
+        [sys.executable, str(REPO / "experiments" / "dfki_single_run.py"), "--runs", "02", "--out", str(tmp_path)],
+        check=True, cwd=REPO, env={**__import__("os").environ, "PYTHONPATH": str(REPO)},
+    )
+    entry = json.loads((tmp_path / "single_run.json").read_text())["runs"]["02"]
+    assert set(entry["other_runs_rmse"]) == {"00", "01", "03", "05", "12"} == set(entry["lab_other_runs_rmse"])
+    for errors in entry["other_runs_rmse"].values():
+        assert 0 < errors[0] < errors[1] < errors[2]
+    assert entry["poorly_determined"] == {} and max(entry["relative_std_errors"].values()) < 0.25
+
+
+def test_dfki_single_run_experiment_names_a_run_that_does_not_exist(tmp_path):
+    done = subprocess.run(
+        [sys.executable, str(REPO / "experiments" / "dfki_single_run.py"), "--runs", "02,99", "--out", str(tmp_path)],
+        cwd=REPO, env={**__import__("os").environ, "PYTHONPATH": str(REPO)}, capture_output=True, text=True,
+    )
+    assert done.returncode == 2 and "no DFKI run 99" in done.stderr
+    assert not (tmp_path / "single_run.json").exists()
+
+
 def test_loro_cell_tests_tell_a_worse_model_from_a_better_one():
     """The paired window test of the leave-one-run-out table (`cell_tests`) points the right way: the lab's
     model_h1.0 (an earlier fit) against its model_3.0 on DFKI run 03, whose windows show 1.3 to 1.8 times
