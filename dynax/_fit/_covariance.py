@@ -63,8 +63,8 @@ give errors several times larger (on the EMPS benchmark's inverse-dynamics rows,
     W. K. Newey and K. D. West, "A simple, positive semi-definite, heteroskedasticity and
     autocorrelation consistent covariance matrix", Econometrica 55(3), 1987; D. W. K. Andrews,
     "Heteroskedasticity and autocorrelation consistent covariance matrix estimation",
-    Econometrica 59(3), 1991 (the AR(1) plug-in bandwidth, eq. 6.4, and the Bartlett kernel's
-    constant 1.1447).
+    Econometrica 59(3), 1991 (the automatic bandwidth: the AR(1) plug-in and the Bartlett
+    kernel's constant 1.1447).
 """
 
 import math
@@ -75,8 +75,9 @@ import numpy as np
 import scipy.fft
 from jaxtyping import Array, Float, Int
 
-# Andrews (1991): the Bartlett kernel's optimal-bandwidth constant, and the AR(1) coefficient
-# beyond which the plug-in rule is not trusted (his truncation).
+# Andrews (1991): the Bartlett kernel's optimal-bandwidth constant. The AR(1) coefficients are
+# clipped so that a near-unit root does not ask for an unbounded bandwidth (the shortest record caps
+# it in any case).
 _BARTLETT = 1.1447
 _MAX_RHO = 0.97
 
@@ -160,13 +161,13 @@ def serial_covariance(
     jac: Float[Array, "m n"], residuals: Float[Array, " m"], steps: Int[Array, " m"], record_steps: tuple[int, ...],
     bandwidth: float | None = None,
 ) -> tuple[Float[Array, "n n"], float]:
-    """The covariance of the unknowns of a least-squares fit whose residuals are correlated in time
+    r"""The covariance of the unknowns of a least-squares fit whose residuals are correlated in time
     (see the module): Bartlett-kernel sandwich over each record's time steps. Host-side (the
     bandwidth is chosen from the data).
 
     **Arguments:**
 
-    - `jac`, `residuals`: the weighted regressor $W^{1/2}A$ and residual $W^{1/2}(y - A\\hat z)$.
+    - `jac`, `residuals`: the weighted regressor $W^{1/2}A$ and residual $W^{1/2}(y - A\hat z)$.
     - `steps`: each row's time step, counted through the records (`0 <= steps < sum(record_steps)`);
       rows sharing a step (the joints of one sample) are summed into one score.
     - `record_steps`: each record's number of time steps, in order; no lag crosses a record.
