@@ -102,3 +102,15 @@ def test_the_jointly_determined_note_gives_an_estimate_at_its_bound_as_value_and
     assert _jointly_cell("theta6", dict(joint, inflation=13.0), report).startswith("theta6 (13x, 2e-06 +- 0.037) with")
     assert _jointly_cell("theta6", {"with": [], "correlations": [], "inflation": 13.0},
                          {"parameters": {"theta6": 0.0}, "std_errors": {}}) == "theta6 (13x) with several others"
+
+
+def test_identify_says_that_one_record_cannot_show_what_changes_between_recordings(acrobot_csv, tmp_path, capsys):
+    # Refined on one record, the answer's errors and validation come from within it. On the DFKI rig
+    # such answers (run 03 or 12 alone) are determined to 2 to 12 % and 2 to 4 times the lab's error
+    # on the runs whose motion they did not see (experiments/dfki_single_run.py): the CLI says so.
+    out = tmp_path / "params.json"
+    assert main(["identify", "acrobot", str(acrobot_csv), "--refine", "yes", "--out", str(out)]) == 0
+    report = json.loads(out.read_text())
+    assert "output_error" in report["stages"] and report.get("record_std_errors") is None
+    assert "NOTE: fitted on 1 record: the standard errors and the validation come from within the records" in (
+        capsys.readouterr().out)
