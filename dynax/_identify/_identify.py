@@ -388,7 +388,9 @@ def _serially_robust(fit, a, y, weights, estimate, record_rows):
     covariance, bandwidth = serial_covariance(jac, residuals, steps, tuple(record_rows))
     covariance = jnp.asarray(covariance, fit.covariance.dtype)
     std = jnp.sqrt(jnp.diag(covariance))
-    inflation = np.asarray(std) / np.asarray(fit.std_errors)
+    independent = np.asarray(fit.std_errors)
+    # an exact fit (no residual) has no error either way: nothing grew
+    inflation = np.divide(np.asarray(std), independent, out=np.ones(n), where=independent > 0)
     robust = eqx.tree_at(lambda f: (f.std_errors, f.covariance), fit, (std, covariance))
     return robust, {"bandwidth_steps": bandwidth,
                     "inflation": {name: float(v) for name, v in zip(fit.names, inflation)}}
