@@ -180,6 +180,7 @@ def serial_covariance(
     n_steps = int(sum(record_steps))
     scale = np.linalg.norm(jac, axis=0)
     scale = np.where(scale > 0, scale, 1.0)
+    # `_scores` in numpy: host-side and float64 whatever JAX's x64 setting (segment_sum would follow it)
     scores = np.zeros((n_steps, jac.shape[1]))
     np.add.at(scores, np.asarray(steps), jac / scale * residuals[:, None])
     bounds = np.cumsum((0,) + tuple(record_steps))

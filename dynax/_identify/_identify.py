@@ -728,23 +728,21 @@ def identify(
     ls_error = _relative_equation_error(ls.a, ls.y, ls.estimate)
     ls_validation = validate(ls.system)
     std = ls.fit.std_errors
+    poorly = _size_errors(system, ls.names, ls.estimate, std)  # the returned estimate's, unless refined below
     stages = {"least_squares": _stage_json(ls.label, ls.names, ls.estimate, std, ls_error, ls_validation,
                                            consistency=ls.consistency.to_json(), offsets=_offsets_json(ls, fitted),
-                                           poorly_determined=_size_errors(system, ls.names, ls.estimate, std),
-                                           serial_correlation=ls.serial)}
+                                           poorly_determined=poorly, serial_correlation=ls.serial)}
     refinement = _refinement_method(refine, ls.system, method, fitted)
     final = dict(system=ls.system, names=ls.names, estimate=ls.estimate, std=std, error=ls_error,
                  validation=ls_validation, consistency=ls.consistency, label=ls.label)
     if refinement is not None:
         final, stages["output_error"] = _refined_stage(ls, fitted, method, friction, rcond, consistency,
                                                        refinement, validate)
-    if refinement is not None:
-        stages["output_error"]["poorly_determined"] = _size_errors(system, final["names"], final["estimate"],
-                                                                   final["std"], final.get("record_std"))
-    if final.get("diverged"):  # the least-squares model kept: its own errors say how well it is determined
-        poorly = _poorly_determined(system, ls.names, ls.estimate, std)
-    else:
-        poorly = _poorly_determined(system, final["names"], final["estimate"], final["std"], final.get("record_std"))
+        refined = _size_errors(system, final["names"], final["estimate"], final["std"], final.get("record_std"))
+        stages["output_error"]["poorly_determined"] = refined
+        if not final.get("diverged"):  # a kept least-squares model is judged by its own errors
+            poorly = refined
+    _warn_poorly_determined(poorly)
     covariance = final.get("covariance", ls.fit.covariance)
     jointly = (jointly_determined(final["names"], covariance)
                if covariance is not None and np.shape(covariance)[0] == len(final["names"]) else None)
@@ -791,9 +789,9 @@ def _size_errors(system, names, estimate, std, record_std=None) -> dict[str, flo
     return poorly_determined(names, estimate, std, sizes)
 
 
-def _poorly_determined(system, names, estimate, std, record_std=None) -> dict[str, float] | None:
-    """The returned estimate's size parameters that the data leave to the noise (`_size_errors`),
-    with a `PoorlyDeterminedWarning` naming them.
+def _warn_poorly_determined(poorly: dict[str, float] | None) -> None:
+    """A `PoorlyDeterminedWarning` naming the returned estimate's size parameters that the data leave
+    to the noise (`_size_errors`).
 
     Judged on what `identify` returns: after the output-error refinement, on its standard errors
     (clustered over segments) and the leave-one-record-out ones where larger. The least-squares
@@ -801,7 +799,6 @@ def _poorly_determined(system, names, estimate, std, record_std=None) -> dict[st
     velocities bias its estimate they say nothing of it (DFKI run 00 alone: 8 to 21 % on the
     least-squares stage, whose theta5 is 46 % below the lab's; 31 and 38 % on theta2 and theta1
     after the refinement, whose estimates there are 22 and 8 % from the lab's)."""
-    poorly = _size_errors(system, names, estimate, std, record_std)
     if poorly:
         warnings.warn(
             f"the data determine these size parameters poorly (relative standard error above "
@@ -810,7 +807,6 @@ def _poorly_determined(system, names, estimate, std, record_std=None) -> dict[st
             "in every joint (larger, richer inputs, longer records, more records) before trusting them; otherwise "
             "the model misses something large (see the relative equation error).",
             PoorlyDeterminedWarning, stacklevel=3)
-    return poorly
 
 
 def _has_conditions(system):
