@@ -40,6 +40,7 @@ from ._identify import (
     LeastSquaresFit as LeastSquaresFit,
     poorly_determined as poorly_determined,
     PoorlyDeterminedWarning as PoorlyDeterminedWarning,
+    NoValidationWarning as NoValidationWarning,
     RecordsDisagreeWarning as RecordsDisagreeWarning,
     parameter_names as parameter_names,
     Power as Power,

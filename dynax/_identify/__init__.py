@@ -13,7 +13,12 @@ from ._defaults import (
     noise_floor_and_band as noise_floor_and_band,
 )
 from ._equations import Dynamic as Dynamic, Energy as Energy, Power as Power
-from ._identify import identify as identify, Identification as Identification, RecordsDisagreeWarning as RecordsDisagreeWarning
+from ._identify import (
+    identify as identify,
+    Identification as Identification,
+    NoValidationWarning as NoValidationWarning,
+    RecordsDisagreeWarning as RecordsDisagreeWarning,
+)
 from ._offsets import record_offsets as record_offsets, RecordOffsets as RecordOffsets
 from ._record_friction import record_friction as record_friction, RecordFriction as RecordFriction
 from ._least_squares import (

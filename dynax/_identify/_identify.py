@@ -60,6 +60,11 @@ from ._regressors import (
 )
 
 
+class NoValidationWarning(UserWarning):
+    """`identify` held nothing out to validate on: the records are too short for even the shortest
+    horizon, so the answer carries no open-loop error (see `Identification.validation`)."""
+
+
 class RecordsDisagreeWarning(UserWarning):
     """Leaving one record out moves some parameters much more than the standard errors estimated
     within the records allow (`Identification.record_std_errors`): the recordings differ."""
@@ -573,19 +578,35 @@ def _identify_by_simulation(system, trajectories, method: SimulationFit, frictio
 
 
 def _validation_split(system, trajectories, validation, weights, holdout, horizons_s):
-    """`(fitted, held, source)`: the records to fit, the held-out records and what they are.
+    """`(fitted, held, source, horizons)`: the records to fit, the held-out records, what they are
+    and the horizons to validate at.
 
     The `validation` records when given (all of the data is fitted); otherwise the last `holdout`
-    fraction of each record (`"auto"`: 0.2, or 0 when row weights are given: they index every row)."""
+    fraction of each record (`"auto"`: 0.2, or 0 when row weights are given: they index every row).
+    Where no record's tail is longer than the longest horizon, the horizons the longest tail holds
+    (a 1.5 s record's last 0.3 s: 0.1 and 0.25 s); where it holds none, a warning says that
+    nothing is validated and why (`source`, with `held` empty: `identify` warns it once the fit is done)."""
     if validation is not None:
         held = _as_list(validation)
         _check_data(system, held)
-        return trajectories, held, "validation records"
+        return trajectories, held, "validation records", horizons_s
     fraction = (0.0 if weights is not None else 0.2) if holdout == "auto" else float(holdout)
     if fraction <= 0:
-        return trajectories, [], ""
+        return trajectories, [], "", horizons_s
+    source = f"held-out last {fraction:.0%} of each record (not fitted)"
     fitted, held = split_for_validation(trajectories, fraction, max(horizons_s))
-    return fitted, held, f"held-out last {fraction:.0%} of each record (not fitted)"
+    if held:
+        return fitted, held, source, horizons_s
+    tails = [r.split(1 - fraction)[1] for r in trajectories]
+    longest = max((t.duration - t.dt for t in tails if len(t) > 1), default=0.0)
+    usable = tuple(h for h in horizons_s if h < longest)
+    if usable:
+        fitted, held = split_for_validation(trajectories, fraction, max(usable))
+        return fitted, held, f"{source}; horizons up to {max(usable):g} s, as long as the tails allow", usable
+    return trajectories, [], (f"nothing is held out for validation: the last {fraction:.0%} of every record is at "
+                              f"most {max(longest, 0.0):.3g} s long, shorter than the shortest horizon "
+                              f"({min(horizons_s):g} s); give a record of its own as `validation` (CLI: "
+                              "--validation), or longer records"), horizons_s
 
 
 def _validated_simulation_fit(system, fitted, method, friction, consistency, validate) -> Identification:
@@ -623,6 +644,7 @@ def _refined_stage(ls, fitted, method, friction, rcond, consistency, refinement,
         records_disagree=_records_disagree(refined),
         model="least-squares model + RotorInertia(joint=1), consistent parametrisation",
         diverged=refined.diverged,
+        diverged_segments=dict(zip(("at_end", "at_start", "segments"), refined.diverged_segments)),
         input_timing=None if refined.input_alpha is None else {
             "alpha": refined.input_alpha, "latency_s": refined.input_latency_s,
             "meaning": "the inputs that fit best act latency_s after the sample that records them "
@@ -716,13 +738,15 @@ def identify(
     if consistency not in _CONSISTENCY:
         raise UsageError(f"identify: `consistency` must be one of {_CONSISTENCY}, got {consistency!r}")
     horizons_s = tuple(float(h) for h in horizons_s)
-    fitted, held, source = _validation_split(system, trajectories, validation, weights, holdout, horizons_s)
+    fitted, held, source, horizons_s = _validation_split(system, trajectories, validation, weights, holdout, horizons_s)
 
     def validate(model):
         return held_out_error(model, held, horizons_s, source=source) if held else None
 
     if isinstance(method, SimulationFit):
-        return _validated_simulation_fit(system, fitted, method, friction, consistency, validate)
+        result = _validated_simulation_fit(system, fitted, method, friction, consistency, validate)
+        _warn_unvalidated(held, source)
+        return result
 
     ls = _least_squares_stage(system, fitted, method, friction, weights, rcond, consistency)
     ls_error = _relative_equation_error(ls.a, ls.y, ls.estimate)
@@ -743,6 +767,7 @@ def identify(
         if not final.get("diverged"):  # a kept least-squares model is judged by its own errors
             poorly = refined
     _warn_poorly_determined(poorly)
+    _warn_unvalidated(held, source)
     covariance = final.get("covariance", ls.fit.covariance)
     jointly = (jointly_determined(final["names"], covariance)
                if covariance is not None and np.shape(covariance)[0] == len(final["names"]) else None)
@@ -787,6 +812,12 @@ def _size_errors(system, names, estimate, std, record_std=None) -> dict[str, flo
     if record_std is not None:
         std = np.fmax(std, np.asarray(record_std, dtype=float))
     return poorly_determined(names, estimate, std, sizes)
+
+
+def _warn_unvalidated(held, source) -> None:
+    """`NoValidationWarning` where a holdout was asked for and nothing could be held out (`source` says why)."""
+    if not held and source:
+        warnings.warn(f"identify: {source}", NoValidationWarning, stacklevel=3)
 
 
 def _warn_poorly_determined(poorly: dict[str, float] | None) -> None:

@@ -123,7 +123,9 @@ class LeastSquaresFit(eqx.Module):
 
     - `estimate`: $\hat\theta$, shape `(n_params,)`.
     - `std_errors`: standard errors from the residual variance,
-      $\sigma^2 = \lVert r \rVert^2_W / (m - n)$, $\operatorname{cov} = \sigma^2 (A^\top W A)^{-1}$.
+      $\sigma^2 = \lVert r \rVert^2_W / (m - n)$, $\operatorname{cov} = \sigma^2 (A^\top W A)^{-1}$;
+      short of full rank (`allow_rank_deficient`), `inf` for each parameter with a part in the
+      null space (one the data leave undetermined), the pseudo-inverse's for the others.
     - `covariance`: that covariance, shape `(n_params, n_params)`.
     - `singular_values`: of the column-scaled weighted regressor, descending.
     - `directions`: right singular vectors mapped back to parameter units, as rows, each scaled to
@@ -157,6 +159,15 @@ class LeastSquaresFit(eqx.Module):
         rank = int(self.rank)
         basis = _reduced_row_echelon(np.asarray(self.directions)[rank:])
         return tuple(_combination(row, self.names) for row in basis)
+
+
+def _in_null_space(directions, rank: int, tol: float = 1e-6):
+    """Which parameters have a part in the null space spanned by `directions[rank:]` (each row
+    scaled to a largest entry of 1, as `_solve` gives them): those the data leave undetermined. A
+    parameter outside it is estimable, and its pseudo-inverse variance is its variance (Searle,
+    *Linear Models*, 1971, on estimable functions)."""
+    null = jnp.abs(jnp.asarray(directions)[rank:])
+    return jnp.any(null > tol, axis=0) if null.shape[0] else jnp.zeros(null.shape[1], bool)
 
 
 def _reduced_row_echelon(rows, tol=1e-6):
@@ -324,7 +335,9 @@ def least_squares(
         w = jnp.concatenate([w, jnp.zeros(n - m, w.dtype)])
     estimate, covariance, s, directions, cond, rank, residual_rms = _solve(a, y, w, rcond)
     rank = int(rank)
-    std = jnp.sqrt(jnp.diag(covariance)) if rank == n else jnp.full(n, jnp.inf, a.dtype)
+    std = jnp.sqrt(jnp.diag(covariance))
+    if rank < n:  # a parameter with a part in the null space is not estimable: no finite error
+        std = jnp.where(_in_null_space(directions, rank), jnp.inf, std)
     fit = LeastSquaresFit(
         estimate=estimate,
         std_errors=std,

@@ -67,7 +67,7 @@ from .._simulate import FixedGrid, simulate
 from ._consistency import consistent_parametrisation, ConsistentParametrisation
 from ._defaults import choose_filter, measurement_noise_std, velocities_from_positions
 from ._regressors import _split, parameter_vector, with_parameters
-from ._simulation_fit import _segments, fit_simulation_error, SimulationFit
+from ._simulation_fit import _segments, DIVERGED, fit_simulation_error, SimulationFit
 
 
 RECORD_WEIGHTS = ("ml", "motion", "equal")
@@ -177,7 +177,9 @@ class Refinement:
     warning said so) and `system` is the start, unrefined; `covariance`, the whole covariance
     behind `std_errors`; `record_std_errors`, from the delete-one-record jackknife
     (`SimulationFitResult.record_covariance`) through the same Jacobian: how far each parameter
-    moves when one record is left out, `None` with fewer than three records."""
+    moves when one record is left out, `None` with fewer than three records; `diverged_segments`
+    (`(at its end, at its start, segments)`) counts the segments whose rollouts diverged in the
+    last fit that ran (a fit that ends with more of them than it started with counts as worse)."""
 
     system: AbstractSystem
     names: tuple[str, ...]
@@ -198,6 +200,7 @@ class Refinement:
     diverged: bool = False
     covariance: np.ndarray | None = None
     record_std_errors: np.ndarray | None = None
+    diverged_segments: tuple[int, int, int] = (0, 0, 0)
 
 
 def motion_records(records: list[Trajectory], *, filtered: bool | str = "positions") -> tuple[list[Trajectory], float]:
@@ -236,7 +239,7 @@ def _segment_squares(system, x0, ts, xs, us, scale, simulation: FixedGrid):
     """Sum of squared scaled state residuals of each segment simulated from its initial state."""
     sims = jax.vmap(lambda x, t, u: simulate(system, x, t, u, method=simulation, throw=False).xs)(x0, ts, us)
     r = (sims - xs) / scale[None, None, :]
-    r = jnp.where(jnp.isfinite(r), r, 1e3)  # as the fit counts a diverged rollout
+    r = jnp.where(jnp.isfinite(r), r, DIVERGED)  # as the fit counts a diverged rollout
     return jnp.sum(r**2, axis=(1, 2))
 
 
@@ -323,13 +326,12 @@ def refine_by_simulation(
             max_steps=method.max_steps, simulation=method.simulation, stagger=method.stagger,
         )
 
-    result = fit(wrapped, weights)
+    result = last = fit(wrapped, weights)
     initial_rms, steps = float(result.initial_residual_rms), int(result.steps)
     diverged = _ended_worse(result)
     if diverged:  # keep the start: the least-squares model, rotor inertia at zero
-        warnings.warn(f"refine_by_simulation: the output-error fit ended worse than its start (scaled residual "
-                      f"{initial_rms:.4g} -> {float(result.residual_rms):.4g}); the least-squares model is kept",
-                      RuntimeWarning, stacklevel=2)
+        warnings.warn(f"refine_by_simulation: the output-error fit ended worse than its start ({_how_worse(result)}); "
+                      "the least-squares model is kept", RuntimeWarning, stacklevel=2)
     else:
         sigma = record_residual_scale(result.system, result.initial_states, fitted, noise, method)
     reweights = 0
@@ -339,9 +341,10 @@ def refine_by_simulation(
             break  # the weights the last fit used are (within 10 %) those its residuals imply
         refit = fit(result.system, new)
         steps += int(refit.steps)
+        last = refit
         if _ended_worse(refit):
-            warnings.warn("refine_by_simulation: a reweighted output-error fit ended worse than its start; "
-                          "the fit before it is kept", RuntimeWarning, stacklevel=2)
+            warnings.warn(f"refine_by_simulation: a reweighted output-error fit ended worse than its start "
+                          f"({_how_worse(refit)}); the fit before it is kept", RuntimeWarning, stacklevel=2)
             break
         weights, result = new, refit
         reweights += 1
@@ -369,9 +372,22 @@ def refine_by_simulation(
     return Refinement(refined, names, estimate, std, initial_rms, rms, relative, steps, dt, method.segment_s,
                       result.n_samples, tuple(float(w) for w in weights),
                       () if diverged else tuple(float(v) for v in sigma), reweights, alpha, latency, diverged,
-                      covariance, record_std)
+                      covariance, record_std,
+                      (last.diverged_segments, last.initial_diverged_segments, last.n_segments))
 
 
 def _ended_worse(result) -> bool:
-    """Whether an output-error fit ended worse than its start, as the engine reports it."""
-    return bool(result.solution.result == optx.RESULTS.nonlinear_divergence)
+    """Whether an output-error fit ended worse than its start: as the engine reports it, or with
+    the rollouts of more segments diverging than at its start. A diverged segment costs the fit a
+    fixed `DIVERGED` per residual, less than a bad enough model's finite error, so a fit from a poor
+    start (data that hardly excite the dynamics) can lower its cost by making every rollout
+    diverge: its Jacobian is then zero and it stops there."""
+    more_diverged = result.diverged_segments > result.initial_diverged_segments
+    return bool(result.solution.result == optx.RESULTS.nonlinear_divergence) or more_diverged
+
+
+def _how_worse(result) -> str:
+    if result.diverged_segments > result.initial_diverged_segments:
+        return (f"the rollouts of {result.diverged_segments} of its {result.n_segments} segments diverge, "
+                f"{result.initial_diverged_segments} at its start")
+    return f"scaled residual {float(result.initial_residual_rms):.4g} -> {float(result.residual_rms):.4g}"

@@ -80,6 +80,10 @@ class SimulationFitResult(eqx.Module):
     - `initial_residual_rms`: the same at the starting point.
     - `relative_error`: $\lVert \hat x - x \rVert / \lVert x \rVert$ over all segment samples (unscaled).
     - `n_segments`, `n_samples`, `steps`: bookkeeping.
+    - `diverged_segments`, `initial_diverged_segments`: how many segments' rollouts diverged (a
+      non-finite state) at the solution and at the start. The fit counts such a segment's residuals
+      as `DIVERGED` each, which is smaller than those of a model bad enough: a solution where more
+      segments diverge than at the start has gamed that count, not fitted the data.
     - `solution`: the engine's `Solution` over all unknowns (the system's parameters, then the
       segments' initial states when fitted), named by tree path (`theta1`, `system.theta5`,
       `terms[0].coefficient`, `initial_states[3,1]`) or by the system's `parameter_labels()`.
@@ -101,12 +105,15 @@ class SimulationFitResult(eqx.Module):
     steps: Array
     solution: Solution | None = None
     record_covariance: Array | None = None
+    diverged_segments: int = eqx.field(static=True, default=0)
+    initial_diverged_segments: int = eqx.field(static=True, default=0)
 
     @property
     def names(self) -> tuple[str, ...]:
         return self.solution.names[: self.parameters.shape[0]]
 
 
+DIVERGED = 1e3  # a diverged rollout's residual at every state and sample from the divergence on
 CLUSTER_SEGMENTS = 4  # segment lengths per block of the clustered covariance
 MIN_RECORDS_FOR_SPREAD = 3  # records the delete-one-record jackknife needs (two give one difference)
 
@@ -205,11 +212,11 @@ def _residuals(unknowns: _Unknowns, data: _Segments, *, simulation: FixedGrid, f
     model, x0 = unknowns.system, unknowns.initial_states
     sims = jax.vmap(lambda x0, t, u: simulate(model, x0, t, u, method=simulation, throw=False).xs)(x0, data.ts, data.us)
     r = (sims - data.xs) / data.sigma[None, None, :] * data.segment_weight[:, None, None]
-    r = jnp.where(jnp.isfinite(r), r, 1e3)
+    r = jnp.where(jnp.isfinite(r), r, DIVERGED)
     out = [r.reshape(-1)]
     if fit_initial_states and x0.shape[0] > 1:
         defect = (sims[:-1, -1] - x0[1:]) / data.sigma[None, :] * data.link[:, None] * jnp.sqrt(data.continuity_weight)
-        out.append(jnp.where(jnp.isfinite(defect), defect, 1e3).reshape(-1))
+        out.append(jnp.where(jnp.isfinite(defect), defect, DIVERGED).reshape(-1))
     return jnp.concatenate(out)
 
 
@@ -344,27 +351,32 @@ def fit_simulation_error(
     n_params = chosen.size
     n_state_residuals = xs.size
     linearised: LeastSquaresFit = least_squares(jac, -r, names=parameters.names, allow_rank_deficient=True)
-    std = linearised.std_errors * scale * np.sqrt(stagger)
-    covariance = linearised.covariance * scale[:, None] * scale[None, :] * stagger
+    # An unknown the data leave undetermined (a part in the Jacobian's null space: `least_squares`
+    # gives it an infinite error) has NaN in every covariance's row and column: the pseudo-inverse
+    # would give it finite numbers, zero where the Jacobian vanishes (every rollout diverged).
+    unidentified = ~np.isfinite(np.asarray(linearised.std_errors))
+
+    def unscaled(c):
+        c = np.array(c, dtype=float) * np.asarray(scale)[:, None] * np.asarray(scale)[None, :]
+        c[unidentified, :] = c[:, unidentified] = np.nan
+        return jnp.asarray(c, dtype)
+
+    covariance = unscaled(linearised.covariance * stagger)
+    std = jnp.where(unidentified, jnp.inf, jnp.sqrt(jnp.maximum(jnp.diag(covariance), 0.0)))
     record_covariance = None
     if not fit_initial_states:
-        # An unidentified direction keeps its NaN, in the errors and in the covariances' rows and
-        # columns (the pseudo-inverse would give it finite numbers).
-        unidentified = np.isnan(np.asarray(std))
-
-        def unscaled(c):
-            c = c * np.asarray(scale)[:, None] * np.asarray(scale)[None, :]
-            c[unidentified, :] = c[:, unidentified] = np.nan
-            return jnp.asarray(c, dtype)
-
         clustered = _clustered_covariance(np.asarray(jac), np.asarray(r), ts, owner, trajectories, segment_s)
         if clustered is not None:
             covariance = unscaled(clustered)
-            std = jnp.sqrt(jnp.maximum(jnp.diag(covariance), 0.0))
+            std = jnp.where(unidentified, jnp.inf, jnp.sqrt(jnp.maximum(jnp.diag(covariance), 0.0)))
         spread = _record_covariance(np.asarray(jac), np.asarray(r), owner, len(trajectories))
         record_covariance = None if spread is None else unscaled(spread)
     solution = eqx.tree_at(lambda s: (s.std_errors, s.covariance), solution, (std, covariance))
     fitted = solution.model
+    diverged, initial_diverged = (
+        int(np.sum(np.any(np.asarray(res[:n_state_residuals]).reshape(xs.shape[0], -1) == DIVERGED, axis=1)))
+        for res in (r, r0)
+    )
     return SimulationFitResult(
         system=fitted.system,
         initial_states=fitted.initial_states,
@@ -381,4 +393,6 @@ def fit_simulation_error(
         steps=solution.steps,
         solution=solution,
         record_covariance=record_covariance,
+        diverged_segments=diverged,
+        initial_diverged_segments=initial_diverged,
     )

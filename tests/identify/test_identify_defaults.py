@@ -179,6 +179,39 @@ def test_records_that_hardly_move_say_the_size_parameters_are_poorly_determined(
     assert {"theta1", "theta4"} <= set(at_rest.poorly_determined) and at_rest.consistency.consistent
 
 
+def test_a_resting_dfki_record_refined_by_default_is_still_said_to_be_poorly_determined(datasets):
+    # The last 1.4 s of DFKI run 12 (upright at rest, the driver's noise), with the refinement on as
+    # by default. The output-error fit from the degenerate least-squares start either lowers its cost
+    # by letting every rollout diverge (a diverged segment costs a fixed amount, less than the
+    # start's finite error), which must count as a failed refinement, or ends where the data say
+    # nothing of the parameters; before, it returned theta4 = 21 with standard errors of exactly 0
+    # and no warning. Either way the answer says that the data do not determine it.
+    raw = dfki(datasets, "12")
+    run = dynax.resample(raw, raw.dt)
+    rest = run.slice(int(np.searchsorted(np.asarray(run.ts), 4.6)), None)
+    with pytest.warns(PoorlyDeterminedWarning, match="theta4"):
+        result = identify(dynax.DoublePendulum(), rest, Dynamic(), friction="coulomb", holdout=0)
+    std = np.asarray(result.std_errors)
+    assert not np.any(std == 0), dict(zip(result.names, std))
+    stage = result.stages["output_error"]
+    if stage["diverged"]:  # the least-squares model is kept and judged
+        assert stage["diverged_segments"]["at_end"] > stage["diverged_segments"]["at_start"]
+    assert {"theta1", "theta4"} <= set(result.poorly_determined)
+
+
+def test_short_records_are_validated_at_the_horizons_their_tails_hold():
+    # A 1.6 s record's last 20 % (0.32 s) holds 0.1 and 0.25 s windows but not 0.5 s ones: it is
+    # validated at those two, not left unvalidated. A 0.4 s record holds none, and says so.
+    short = recorded(rig_model(), 1.6, 5)
+    result = identify(dynax.DoublePendulum(), short, Dynamic(), friction="coulomb", refine=False)
+    assert result.validation is not None and result.validation.horizons_s == (0.1, 0.25)
+    assert "as long as the tails allow" in result.validation.source and np.all(np.isfinite(result.validation.rmse))
+    with pytest.warns(dynax.NoValidationWarning, match="shorter than the shortest horizon"):
+        tiny = identify(dynax.DoublePendulum(), recorded(rig_model(), 0.4, 5), Dynamic(), friction="coulomb",
+                        refine=False)
+    assert tiny.validation is None
+
+
 def test_one_dfki_run_alone_is_said_to_determine_the_size_parameters_poorly(datasets):
     # A user with one recording: DFKI run 00 (10 s, both motors, small amplitude), defaults. The
     # least-squares stage puts theta4 and theta5 42 and 46 % below the lab's model_3.0 (2.365, 1.777),

@@ -156,6 +156,23 @@ def test_weighted_rank_deficient_residual_is_that_of_the_returned_estimate():
     np.testing.assert_allclose(fit.estimate, reference, rtol=1e-8, atol=1e-10)
 
 
+def test_rank_deficient_fit_gives_an_infinite_error_only_to_parameters_the_null_space_touches():
+    # Column 4 repeats column 1: theta1 and theta4 are known only as their sum, theta2 and theta3 as
+    # well as without the repeat. Their errors must be those of the fit that drops the repeat (not
+    # infinite for all, not zero where the pseudo-inverse would put it), the tied pair's infinite.
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(500, 3)) * np.array([1.0, 5.0, 0.2])
+    y = a @ np.array([1.0, -0.4, 2.0]) + 0.05 * rng.normal(size=500)
+    tied = least_squares(np.column_stack([a, a[:, 0]]), y, allow_rank_deficient=True)
+    alone = least_squares(a, y)
+    assert int(tied.rank) == 3 and tied.unidentified == ("p0 - p3",)
+    std = np.asarray(tied.std_errors)
+    assert np.isinf(std[0]) and np.isinf(std[3])
+    np.testing.assert_allclose(std[1:3], np.asarray(alone.std_errors)[1:3], rtol=1e-8)
+    # nothing moves at all: no parameter has an error
+    assert np.all(np.isinf(np.asarray(least_squares(np.zeros((50, 2)), np.ones(50), allow_rank_deficient=True).std_errors)))
+
+
 def test_jointly_determined_names_the_parameters_a_regression_separates_only_through_a_small_difference():
     # Four regressors, the third almost the sum of the first two: the textbook variance inflation factor
     # 1 / (1 - R^2), from regressing each column on the others, is what the covariance's correlations give,

@@ -1,6 +1,7 @@
 """The output-error fit on the engine: names from the system's tree, one `Solution` behind the
 result, and recovery from data made by another integrator with measurement noise."""
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -50,6 +51,44 @@ def test_linear_axis_named_by_tree_path_recovers_parameters_within_their_errors(
     # The covariance ignores the smoothing of the Coulomb term and the integrator's own error, so
     # allow a generous multiple; a wrong estimate (or wrong errors) is typically far outside.
     assert np.all(np.abs(estimate - expected) < 10 * std + 1e-3 * np.abs(expected)), (estimate, std)
+
+
+class _WithSpare(dynax.AbstractSystem):
+    """A linear axis with one more parameter that its dynamics never read."""
+
+    axis: dynax.LinearAxis
+    spare: jax.Array
+
+    @property
+    def state_names(self):
+        return self.axis.state_names
+
+    @property
+    def input_names(self):
+        return self.axis.input_names
+
+    def vector_field(self, t, x, u):
+        return self.axis.vector_field(t, x, u)
+
+
+@pytest.mark.slow  # one Levenberg-Marquardt compilation
+def test_a_parameter_the_rollouts_do_not_depend_on_gets_no_finite_error():
+    # Its Jacobian column is zero: the data say nothing of it, and its error must say so (infinite),
+    # not zero, which the clustered sandwich's pseudo-inverse put there; the axis' own parameters
+    # keep the errors of the fit without it.
+    data, start = _axis_problem(seed=0)
+    spared = _WithSpare(start, jnp.asarray(1.0))
+    # 0.25 s segments: 16 blocks of time, enough for the clustered covariance
+    result = fit_simulation_error(spared, data, segment_s=0.25, fit_initial_states=False, max_steps=40)
+    alone = fit_simulation_error(start, data, segment_s=0.25, fit_initial_states=False, max_steps=40)
+    std = dict(zip(result.names, np.asarray(result.std_errors)))
+    assert np.isinf(std["spare"]), std
+    np.testing.assert_allclose([std[f"axis.{n}"] for n in ("mass", "viscous", "coulomb", "offset")],
+                               np.asarray(alone.std_errors), rtol=1e-3)
+    covariance = np.asarray(result.solution.covariance)
+    k = result.names.index("spare")
+    assert np.all(np.isnan(covariance[k])) and np.all(np.isnan(covariance[:, k]))
+    assert result.diverged_segments == result.initial_diverged_segments == 0
 
 
 @pytest.mark.slow  # one Levenberg-Marquardt compilation
