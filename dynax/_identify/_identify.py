@@ -19,7 +19,7 @@ from jaxtyping import Array, Float
 
 from .._precision import warn_if_float32
 from .._data._trajectory import Trajectory
-from .._errors import UsageError
+from .._errors import DataError, UsageError
 from .._fit import Parameters, serial_covariance, Solution
 from .._simulate import FixedGrid
 from .._model._linear_axis import LinearAxis
@@ -583,13 +583,21 @@ def _validation_split(system, trajectories, validation, weights, holdout, horizo
 
     The `validation` records when given (all of the data is fitted); otherwise the last `holdout`
     fraction of each record (`"auto"`: 0.2, or 0 when row weights are given: they index every row).
-    Where no record's tail is longer than the longest horizon, the horizons the longest tail holds
+    Where no record (tail) is longer than the longest horizon, the horizons the longest one holds
     (a 1.5 s record's last 0.3 s: 0.1 and 0.25 s); where it holds none, a warning says that
     nothing is validated and why (`source`, with `held` empty: `identify` warns it once the fit is done)."""
     if validation is not None:
         held = _as_list(validation)
         _check_data(system, held)
-        return trajectories, held, "validation records", horizons_s
+        longest = max(r.duration - r.dt for r in held)
+        if longest > max(horizons_s):
+            return trajectories, held, "validation records", horizons_s
+        usable = tuple(h for h in horizons_s if h < longest)
+        if not usable:
+            lengths = ", ".join(f"{name} {r.duration:.3g} s" for name, r in zip(record_labels(held), held))
+            raise DataError(f"identify: the validation records are too short for the shortest horizon "
+                            f"({min(horizons_s):g} s): {lengths}")
+        return trajectories, held, f"validation records; horizons up to {max(usable):g} s, as long as the records allow", usable
     fraction = (0.0 if weights is not None else 0.2) if holdout == "auto" else float(holdout)
     if fraction <= 0:
         return trajectories, [], "", horizons_s

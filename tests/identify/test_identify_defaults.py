@@ -210,6 +210,14 @@ def test_short_records_are_validated_at_the_horizons_their_tails_hold():
         tiny = identify(dynax.DoublePendulum(), recorded(rig_model(), 0.4, 5), Dynamic(), friction="coulomb",
                         refine=False)
     assert tiny.validation is None
+    # the same rule for validation records given: a 0.4 s one is used at 0.1 and 0.25 s; one shorter
+    # than the shortest horizon is refused before any fit, named
+    given = identify(dynax.DoublePendulum(), short, Dynamic(), friction="coulomb", refine=False,
+                     validation=recorded(rig_model(), 0.4, 6))
+    assert given.validation.horizons_s == (0.1, 0.25) and given.validation.source.startswith("validation records")
+    with pytest.raises(dynax.DataError, match=r"too short for the shortest horizon \(0.1 s\): record 0 0.08"):
+        identify(dynax.DoublePendulum(), short, Dynamic(), friction="coulomb", refine=False,
+                 validation=recorded(rig_model(), 0.09, 6))
 
 
 def test_one_dfki_run_alone_is_said_to_determine_the_size_parameters_poorly(datasets):
