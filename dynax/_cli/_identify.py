@@ -186,10 +186,12 @@ def run(args: argparse.Namespace) -> int:
               "parameter known: most of the error is shared, and a combination of the correlated parameters is known "
               f"better than each alone): {cells}")
     if "output_error" in (result.stages or {}) and result.record_std_errors is None and len(data) < 3:
-        print(f"  NOTE: fitted on {len(data)} record{'s' if len(data) > 1 else ''}: the standard errors and the "
-              "validation come from within the records, and cannot show what changes from one recording to the next "
+        own = args.validation is None  # without --validation, the held-out part is the records' own tail
+        print(f"  NOTE: fitted on {len(data)} record{'s' if len(data) > 1 else ''}: the standard errors "
+              + ("and the validation come" if own else "come")
+              + " from within the records, and cannot show what changes from one recording to the next "
               "(friction, sensor offsets, motion a record does not contain). Give three records or more for errors "
-              "between records, and a record of its own to --validation")
+              "between records" + (", and a record of its own to --validation" if own else ""))
     disagree = (result.stages or {}).get("output_error", {}).get("records_disagree")
     if disagree:
         cells = ", ".join(f"{n} ({r:.1f}x)" for n, r in disagree.items())
