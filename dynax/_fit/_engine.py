@@ -88,6 +88,21 @@ def _report_step(token, **info):
     report(token, info["num_steps"][1], loss=info["loss_last_accepted_step"][1])
 
 
+def undetermined_unknowns(gram: Float[Array, "n n"], tol: float = 1e-6) -> tuple[Array, Array]:
+    r"""Which unknowns of a Gauss-Newton matrix $J^\top J$ have a part in its numerical null space
+    (eigenvalues at or below the pseudo-inverse's cut-off, `10 n eps` of the largest), and its rank.
+    Those unknowns the data do not determine: `fit_least_squares` gives them an infinite standard
+    error. An unknown outside the null space is estimable and its pseudo-inverse variance is its
+    variance; a null vector counts where an entry is over `tol` of its largest. Jittable.
+
+    **Returns:** `(undetermined, rank)`."""
+    n = gram.shape[0]
+    values, vectors = jnp.linalg.eigh(gram)
+    null = values <= 10.0 * n * jnp.finfo(gram.dtype).eps * jnp.max(jnp.abs(values))
+    loading = jnp.abs(vectors) / jnp.maximum(jnp.max(jnp.abs(vectors), axis=0, keepdims=True), jnp.finfo(gram.dtype).tiny)
+    return jnp.any(null[None, :] & (loading > tol), axis=1), n - jnp.sum(null)
+
+
 def fit_least_squares(
     residuals: Callable[[PyTree, Any], Float[Array, " m"]],
     model: PyTree,
@@ -177,19 +192,29 @@ def fit_least_squares(
             J = info.jac.as_matrix()
         else:
             J = jax.jacrev(fn)(z, args) if jac == "bwd" else jax.jacfwd(fn)(z, args)
-        sigma2 = jnp.sum(r**2) / max(m - n, 1)
-        cov_z = sigma2 * jnp.linalg.pinv(J.T @ J, hermitian=True)
+        gram = J.T @ J
+        # A free unknown with a part in the null space the pseudo-inverse drops is not determined
+        # by the data: no finite error (the pseudo-inverse gives it a finite one, zero where its
+        # column of J is zero). A frozen one (zero scale) has a zero column by construction. The
+        # residual variance counts the rank as the unknowns spent, neither of those.
+        undetermined, rank = undetermined_unknowns(gram)
+        undetermined = undetermined & (s != 0)
+        sigma2 = jnp.sum(r**2) / jnp.maximum(m - rank, 1)
+        cov_z = sigma2 * jnp.linalg.pinv(gram, hermitian=True)
+        cov_z = jnp.where(undetermined[:, None] | undetermined[None, :], jnp.nan, cov_z)
         cov = cov_z * s[:, None] * s[None, :]
     else:
         cov = jnp.full((n, n), jnp.nan, p0.dtype)
+        undetermined = jnp.zeros(n, bool)
     std = jnp.sqrt(jnp.maximum(jnp.diag(cov), 0.0)) if n else jnp.zeros(0, p0.dtype)
+    std = jnp.where(undetermined, jnp.inf, jnp.where(jnp.isnan(jnp.diag(cov)), jnp.nan, std)) if n else std
     value = p0 + s * z
     return Solution(
         model=parameters.with_vector(model, value),
         value=value,
         parameters=parameters,
         covariance=cov,
-        std_errors=jnp.where(jnp.isnan(jnp.diag(cov)), jnp.nan, std) if n else std,
+        std_errors=std,
         result=result,
         loss=0.5 * jnp.sum(r**2),
         initial_loss=0.5 * jnp.sum(r0**2),

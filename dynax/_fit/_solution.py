@@ -24,10 +24,13 @@ class Solution(eqx.Module):
     - `value`: the estimate, flattened in `parameters.names` order.
     - `parameters`: what was fitted (`Parameters`: names and selection).
     - `covariance`: Gauss-Newton covariance of `value`, $\hat\sigma^2 (J^\top J)^{+}$ with
-      $\hat\sigma^2 = \lVert r \rVert^2 / (m - n)$ (least squares), or the inverse Hessian
-      approximation where the solver has one; NaN where not computed. With residuals correlated in
-      time it is too small: read it as a lower bound.
-    - `std_errors`: square roots of its diagonal.
+      $\hat\sigma^2 = \lVert r \rVert^2 / (m - \operatorname{rank} J)$ (least squares), or the
+      inverse Hessian approximation where the solver has one; NaN where not computed, and in the
+      row and column of an unknown the data do not determine (a part in the null space of
+      $J^\top J$; `dynax._fit._engine.undetermined_unknowns`). With residuals correlated in time
+      it is too small: read it as a lower bound.
+    - `std_errors`: square roots of its diagonal; `inf` for an unknown the data do not determine,
+      0 for one frozen by a zero scale.
     - `result`: an `optimistix.RESULTS` code (`successful`, `max_steps_reached`, `nonlinear_divergence`, ...).
     - `loss`, `initial_loss`: $\tfrac12\lVert r\rVert^2$ (least squares) or the scalar loss, at the end and the start.
     - `steps`: iterations taken.

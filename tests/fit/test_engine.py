@@ -134,6 +134,43 @@ def test_public_engine_matches_scipy_on_a_model_of_the_users_own():
     assert abs(ref.x[1] - 0.7) < 4 * ref_std[1]  # and both found the generating decay rate
 
 
+def test_unknowns_the_residuals_do_not_determine_get_no_finite_error_and_frozen_ones_zero():
+    # The decay model of the test above with two more unknowns: `d` enters nothing, and `e` and `f`
+    # enter only as their sum. Their errors must be infinite (the pseudo-inverse put 0 on `d`, finite
+    # numbers on `e` and `f`); `a`, `b`, `c` keep the errors of the fit without them (scipy's), and
+    # `c2`, frozen by a zero scale, keeps 0.
+    import scipy.optimize
+
+    rng = np.random.default_rng(3)
+    t = np.linspace(0.0, 5.0, 200)
+    y = 2.0 * np.exp(-0.7 * t) + 0.3 + 0.02 * rng.standard_normal(t.size)
+
+    def residuals(model, data):
+        t, y = data
+        return (model["a"] * jnp.exp(-model["b"] * t) + model["c"] + model["c2"]
+                + model["e"] * t**2 + model["f"] * t**2 - y)
+
+    start = {k: jnp.asarray(v) for k, v in dict(a=1.0, b=0.2, c=0.0, c2=0.0, d=1.0, e=0.0, f=0.0).items()}
+    params = dynax.Parameters.of(start, True)
+    scale = jnp.asarray([0.0 if n == "['c2']" else 1.0 for n in params.names])
+    sol = dynax.fit_least_squares(residuals, start, params, (jnp.asarray(t), jnp.asarray(y)), scale=scale)
+    std = dict(zip(sol.names, np.asarray(sol.std_errors)))
+    assert all(np.isinf(std[f"['{k}']"]) for k in "def"), std
+    assert std["['c2']"] == 0.0
+    ref = scipy.optimize.least_squares(lambda p: p[0] * np.exp(-p[1] * t) + p[2] + p[3] * t**2 - y, [1.0, 0.2, 0.0, 0.0],
+                                       xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    sigma2 = 2 * ref.cost / (t.size - 4)
+    ref_std = np.sqrt(np.diag(sigma2 * np.linalg.inv(ref.jac.T @ ref.jac)))
+    np.testing.assert_allclose([std[f"['{k}']"] for k in "abc"], ref_std[:3], rtol=1e-3)
+    covariance = np.asarray(sol.covariance)
+    k = sol.names.index("['d']")
+    assert np.all(np.isnan(covariance[k])) and np.isfinite(covariance[0, 0])
+    # the same under vmap (the diagnosis fits its configurations so)
+    batched = jax.vmap(lambda y_: dynax.fit_least_squares(residuals, start, params, (jnp.asarray(t), y_),
+                                                          scale=scale).std_errors)(jnp.stack([jnp.asarray(y)] * 2))
+    np.testing.assert_array_equal(np.asarray(batched[0]), np.asarray(sol.std_errors))
+
+
 class _Scalar(eqx.Module):
     p: jax.Array
 
