@@ -11,11 +11,7 @@ SYSTEM_COLUMNS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
 }
 
 # State columns that may be absent from a file and are then estimated (from the named column).
-OPTIONAL_STATES: dict[str, dict[str, str]] = {
-    "linear_axis": {"dq": "q"},
-    "acrobot": {"dq1": "q1", "dq2": "q2"},
-    "double_pendulum": {"dq1": "q1", "dq2": "q2"},
-}
+OPTIONAL_STATES: dict[str, dict[str, str]] = {"linear_axis": {"dq": "q"}}
 
 
 def columns_for(system: str) -> tuple[tuple[str, ...], tuple[str, ...]]:

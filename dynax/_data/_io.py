@@ -183,9 +183,7 @@ def load_trajectory(
     `UsageError` for a `mapping`/`scale` that names no column of the system, or a zero or
     non-finite `scale` factor. A UTF-8 byte-order mark is ignored.
 
-    Velocities that are not measured are estimated from the positions by central differences
-    (`central_difference`): `dq` for `linear_axis`, `dq1` and `dq2` for `acrobot` and
-    `double_pendulum` (encoder angles alone), when the file has none of them and none is mapped.
+    For `linear_axis`, a missing `dq` column is estimated from `q` by central differences.
     """
     path = str(path)
     state_names, input_names = columns_for(system)
@@ -208,15 +206,11 @@ def load_trajectory(
         raw = _read_csv(path)
 
     optional = OPTIONAL_STATES.get(system, {})
-    # Velocities are estimated only when the file has none of them: one present and another absent
-    # is a misnamed column, not a record of positions alone.
-    if any(name in mapping or name in raw for name in optional):
-        optional = {}
     values = {}
     for name in wanted:
         column = mapping.get(name, name)
         if column not in raw:
-            if name in optional:
+            if name in optional and name not in mapping:
                 continue
             mapped = f" (mapped from '{name}')" if column != name else ""
             raise DataError(

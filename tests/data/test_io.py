@@ -120,27 +120,6 @@ def test_mat_file_with_mapping_scale_and_estimated_velocity(tmp_path):
     np.testing.assert_allclose(tr.state("dq")[1:-1], 2 * t[1:-1, 0], atol=1e-12)
 
 
-def test_arm_records_of_encoder_positions_alone_get_their_velocities_estimated(tmp_path):
-    # Many rigs log only encoder angles: dq1 and dq2 are then estimated from q1 and q2 by central
-    # differences, exact for quadratics in the interior; a dq mapped to a column that is not there
-    # is still an error, and so is a missing angle (one velocity without the other: see
-    # test_missing_column_names_file_and_column).
-    t = np.linspace(0.0, 1.0, 201)
-    q1, q2 = 0.3 * t**2 - t, -0.5 * t**2 + 0.2
-    table = "t,pos1,pos2,tau1,tau2\n" + "".join(f"{a:.17g},{b:.17g},{c:.17g},0.1,-0.1\n" for a, b, c in zip(t, q1, q2))
-    (tmp_path / "encoders.csv").write_text(table)
-    mapping = {"q1": "pos1", "q2": "pos2"}
-    run = dynax.load_trajectory(tmp_path / "encoders.csv", "double_pendulum", mapping=mapping)
-    np.testing.assert_allclose(run.state("dq1")[1:-1], (0.6 * t - 1.0)[1:-1], atol=1e-10)
-    np.testing.assert_allclose(run.state("dq2")[1:-1], -t[1:-1], atol=1e-10)
-    acrobot = dynax.load_trajectory(tmp_path / "encoders.csv", "acrobot", mapping=mapping)
-    np.testing.assert_allclose(acrobot.xs, run.xs)
-    with pytest.raises(dynax.DataError, match=r"column 'vel1': missing column \(mapped from 'dq1'\)"):
-        dynax.load_trajectory(tmp_path / "encoders.csv", "double_pendulum", mapping=dict(mapping, dq1="vel1"))
-    with pytest.raises(dynax.DataError, match="column 'q1': missing column"):
-        dynax.load_trajectory(tmp_path / "encoders.csv", "double_pendulum", mapping={"q2": "pos2"})
-
-
 def test_parse_assignments():
     assert parse_assignments("t=time, q1=pos", "--map", numeric=False) == {"t": "time", "q1": "pos"}
     assert parse_assignments("force=35.15", "--scale", numeric=True) == {"force": 35.15}
