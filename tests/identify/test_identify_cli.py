@@ -114,3 +114,9 @@ def test_identify_says_that_one_record_cannot_show_what_changes_between_recordin
     assert "output_error" in report["stages"] and report.get("record_std_errors") is None
     assert "NOTE: fitted on 1 record: the standard errors and the validation come from within the records" in (
         capsys.readouterr().out)
+    # given a record of its own to validate on, the note is about the errors alone
+    assert main(["identify", "acrobot", str(acrobot_csv), "--refine", "yes", "--validation", str(acrobot_csv),
+                 "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "NOTE: fitted on 1 record: the standard errors come from within the records" in printed
+    assert "to --validation" not in printed
