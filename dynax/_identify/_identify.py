@@ -589,10 +589,9 @@ def _validation_split(system, trajectories, validation, weights, holdout, horizo
     if validation is not None:
         held = _as_list(validation)
         _check_data(system, held)
-        longest = max(r.duration - r.dt for r in held)
-        if longest > max(horizons_s):
+        usable, _ = _horizons_held(held, horizons_s)
+        if usable == horizons_s:
             return trajectories, held, "validation records", horizons_s
-        usable = tuple(h for h in horizons_s if h < longest)
         if not usable:
             lengths = ", ".join(f"{name} {r.duration:.3g} s" for name, r in zip(record_labels(held), held))
             raise DataError(f"identify: the validation records are too short for the shortest horizon "
@@ -601,20 +600,25 @@ def _validation_split(system, trajectories, validation, weights, holdout, horizo
     fraction = (0.0 if weights is not None else 0.2) if holdout == "auto" else float(holdout)
     if fraction <= 0:
         return trajectories, [], "", horizons_s
+    usable, longest = _horizons_held([r.split(1 - fraction)[1] for r in trajectories], horizons_s)
+    if not usable:
+        return trajectories, [], (f"nothing is held out for validation: the last {fraction:.0%} of every record is at "
+                                  f"most {max(longest, 0.0):.3g} s long, shorter than the shortest horizon "
+                                  f"({min(horizons_s):g} s); give a record of its own as `validation` (CLI: "
+                                  "--validation), or longer records"), horizons_s
+    fitted, held = split_for_validation(trajectories, fraction, max(usable))
     source = f"held-out last {fraction:.0%} of each record (not fitted)"
-    fitted, held = split_for_validation(trajectories, fraction, max(horizons_s))
-    if held:
-        return fitted, held, source, horizons_s
-    tails = [r.split(1 - fraction)[1] for r in trajectories]
-    longest = max((t.duration - t.dt for t in tails if len(t) > 1), default=0.0)
-    usable = tuple(h for h in horizons_s if h < longest)
-    if usable:
-        fitted, held = split_for_validation(trajectories, fraction, max(usable))
-        return fitted, held, f"{source}; horizons up to {max(usable):g} s, as long as the tails allow", usable
-    return trajectories, [], (f"nothing is held out for validation: the last {fraction:.0%} of every record is at "
-                              f"most {max(longest, 0.0):.3g} s long, shorter than the shortest horizon "
-                              f"({min(horizons_s):g} s); give a record of its own as `validation` (CLI: "
-                              "--validation), or longer records"), horizons_s
+    if usable != horizons_s:
+        source += f"; horizons up to {max(usable):g} s, as long as the tails allow"
+    return fitted, held, source, usable
+
+
+def _horizons_held(records, horizons_s) -> tuple[tuple[float, ...], float]:
+    """`(usable, longest)`: the horizons at which `held_out_error` can validate on `records` (shorter
+    than the longest record less one interval: it skips a record no longer than its horizon and a
+    step), and that length."""
+    longest = max((r.duration - r.dt for r in records if len(r) > 1), default=0.0)
+    return tuple(h for h in horizons_s if h < longest), longest
 
 
 def _validated_simulation_fit(system, fitted, method, friction, consistency, validate) -> Identification:
