@@ -79,7 +79,7 @@ def nominal_from_data(system, train) -> tuple[object, str]:
     """
     import jax.numpy as jnp
 
-    from .._diagnose._diagnose import OTHER_MACHINE_FACTOR
+    from .._diagnose._forward import OTHER_MACHINE_FACTOR
     from .._identify import Dynamic, identify, poorly_determined, PoorlyDeterminedWarning
     from .._model._system import friction_parameter_names, size_parameter_names
 

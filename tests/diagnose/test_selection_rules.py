@@ -9,7 +9,7 @@ import pytest
 from dynax import Acrobot
 from dynax._data import Trajectory
 from dynax._diagnose._candidates import default_candidates, held_partners
-from dynax._diagnose._diagnose import _candidate_family, _refit_names, Known, Refit
+from dynax._diagnose._problem import _candidate_family, _refit_names, Known, Refit
 from dynax._diagnose._selection import judge_round, look_alike_tests, on_physical_side
 from dynax._model._extensions import CoulombFriction, InputOffset, ViscousFriction
 

@@ -1,0 +1,394 @@
+"""Forward selection, steps 1 to 3 of `diagnose`: fit the nominal model, show what is wrong, then per
+round screen every remaining candidate, refit the shortlist (cross-fitted over the training runs) and
+select the best admissible one.
+"""
+
+import dataclasses
+import time
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._model._extensions import AbstractInputTerm
+from .._model._system import AbstractSystem, size_parameter_names
+from ._fit import fit_configurations, make_windows, nominal_values, validate_configurations, Windows
+from ._horizon import Horizon
+from ._problem import _Problem
+from ._records import _reference_horizon
+from ._residuals import acceleration_residuals, Structure, structure_test
+from ._screening import screen
+from ._selection import choose_shortlist, judge_round, look_alike_tests, rank
+from ._summaries import _candidate_table, _rmse_curve, _round_summary, _window_scores
+
+
+@dataclasses.dataclass
+class _Batch:
+    """Fits of a batch of configurations: parameters, training cost, standard errors, held-out window errors, steps."""
+
+    p: np.ndarray
+    cost: np.ndarray
+    std: np.ndarray
+    errors: np.ndarray
+    steps: np.ndarray
+    # (batch, cross-fitted window, step, state): each training run's windows simulated by the
+    # configuration refitted on the other training runs; no windows without cross-fitting.
+    cv_errors: np.ndarray
+
+
+@dataclasses.dataclass
+class _Yardstick:
+    """Where held-out errors are judged: the reference horizon and the indices derived from it."""
+
+    horizon: Horizon
+    horizons: np.ndarray
+    steps: np.ndarray
+    n_ref: int
+    overlap: int
+    ref_index: int
+    # Where the paired test looks: the held-out windows, then (with cross-fitting) the training runs'
+    # windows of the reference horizon (`cv_windows`); `window_runs` labels every window's run
+    # (held-out runs first, then the training runs after them), `n_val` counts the held-out windows.
+    cv_windows: Windows | None
+    window_runs: np.ndarray
+    n_val: int
+
+
+@dataclasses.dataclass
+class _Current:
+    """The model selection has reached: selected candidates, parameters, held-out scores and errors, structure."""
+
+    slots: np.ndarray
+    p: np.ndarray
+    std: np.ndarray
+    score: np.ndarray
+    errors: np.ndarray
+    rmse: np.ndarray
+    structure: Structure
+    cv_errors: np.ndarray
+    selected: list = dataclasses.field(default_factory=list)
+    findings: list = dataclasses.field(default_factory=list)
+
+
+@dataclasses.dataclass
+class _Nominal:
+    """The fitted nominal model and what it gets wrong on held-out data."""
+
+    model: AbstractSystem
+    errors: np.ndarray
+    rmse: np.ndarray
+    structure: Structure
+    cost: float
+    cv_errors: np.ndarray
+
+
+def _fit_batch(problem: _Problem, slots, new, p_init, say) -> _Batch:
+    """Refit a batch of configurations on the training windows (one vmapped `fit_least_squares`) and
+    roll every fitted model out on the held-out windows."""
+    dtype = problem.family.neutral.dtype
+    slots, new = jnp.asarray(slots), jnp.asarray(new)
+    free = jnp.ones(problem.n_params, dtype)
+    start = time.perf_counter()
+    p, cost, std, steps = fit_configurations(problem.family, problem.train_windows, slots, new, jnp.asarray(p_init, dtype), free)
+    errors = np.asarray(validate_configurations(problem.family, problem.val_windows, slots, new, p))
+    batch = _Batch(np.asarray(p), np.asarray(cost), np.asarray(std), errors, np.asarray(steps),
+                   np.zeros(errors.shape[:1] + (0,) + errors.shape[2:]))
+    say(f"  batch of {len(batch.p)} fits done in {time.perf_counter() - start:.1f} s "
+        f"(Levenberg-Marquardt, {int(batch.steps.max())} steps for the slowest)")
+    return batch
+
+
+def _cross_fit(problem: _Problem, yard: _Yardstick, current_slots, new, batch: _Batch, say) -> _Batch:
+    """Cross-fitting: refit the batch's configurations once per training run with that run left out
+    (its fit windows at weight zero: the same compiled fit), and simulate each on the left-out run's
+    windows of the reference horizon. Each fold's fit starts from the batch's fit on all training runs.
+
+    Held-out runs are what judge a candidate, but a short or chaotic one (6 s of a large-amplitude
+    swing) tests with little power, and the training runs then hold most of the evidence: a model
+    refitted on the other runs predicts the left-out one as it would a new run. This is K-fold
+    cross-validation with the runs as folds (no window crosses a run, so the folds are independent
+    records, as the blocked cross-validation of time series asks).
+
+    Only with `MIN_CROSS_FIT_RUNS` (3) training runs or more, so that every fold still fits on two runs
+    or more: cross-validation estimates the error of a model fitted on the fold's share of the data, and
+    that estimate is pessimistic, more so for the richer model, the smaller the share (Kohavi 1995;
+    Arlot & Celisse 2010, section 5). With two runs each fold is one run: on the DFKI split S1 the two
+    held-out runs gain 43 % from Coulomb friction at the shoulder after the elbow's (p = 0.004), while
+    each single-run fold predicts the other run worse with it, and the pool rejected the lab's effect.
+
+    ??? cite
+
+        R. Kohavi, "A study of cross-validation and bootstrap for accuracy estimation and model
+        selection", IJCAI 1995. S. Arlot and A. Celisse, "A survey of cross-validation procedures
+        for model selection", Statistics Surveys 4, 2010.
+        M. Stone, "Cross-validatory choice and assessment of statistical predictions", Journal of the
+        Royal Statistical Society B 36(2), 1974. J. Racine, "Consistent cross-validatory model-selection
+        for dependent data: hv-block cross-validation", Journal of Econometrics 99(1), 2000.
+        C. Bergmeir and J. M. Benitez, "On the use of cross-validation for time series predictor
+        evaluation", Information Sciences 191, 2012.
+    """
+    if yard.cv_windows is None:
+        return batch
+    dtype = problem.family.neutral.dtype
+    start = time.perf_counter()
+    n = len(batch.p)
+    slots = jnp.asarray(np.tile(current_slots, (n, 1)))
+    new = jnp.asarray(new)
+    free = jnp.ones(problem.n_params, dtype)
+    runs = np.asarray(yard.cv_windows.starts)[:, 0]
+    cv_errors = None
+    for r in problem.folds:
+        p, _, _, _ = fit_configurations(problem.family, problem.train_windows.without_record(r), slots, new,
+                                        jnp.asarray(batch.p, dtype), free)
+        # Every training run's windows are simulated and the left-out run's kept: one shape, so one
+        # compiled rollout for all folds (the windows are one reference horizon long, so this is cheap).
+        errors = np.asarray(validate_configurations(problem.family, yard.cv_windows, slots, new, p))
+        if cv_errors is None:
+            cv_errors = np.full_like(errors, np.nan)
+        cv_errors[:, runs == r] = errors[:, runs == r]
+    say(f"  cross-fitted: the batch refitted {len(problem.folds)} times, each training run left out once "
+        f"({time.perf_counter() - start:.1f} s)")
+    return dataclasses.replace(batch, cv_errors=cv_errors)
+
+
+def _scores(problem: _Problem, yard: _Yardstick, errors, cv_errors):
+    """Each configuration's window scores: the held-out windows, then the cross-fitted ones."""
+    scores = _window_scores(errors, yard.n_ref, problem.state_scale)
+    if yard.cv_windows is None:
+        return scores
+    return np.concatenate([scores, _window_scores(cv_errors, yard.n_ref, problem.state_scale)], axis=1)
+
+
+def _screen(problem: _Problem, current_slots, current_p, remaining, round_, say):
+    """Screen: every remaining candidate's linearised held-out gain on one-step residuals; the shortlist."""
+    say(f"round {round_ + 1}: screening {len(remaining)} candidates on one-step residuals ...")
+    dtype = problem.family.neutral.dtype
+    n_nom = len(problem.names)
+    coefficients = problem.family.coefficients(jnp.asarray(current_slots), jnp.asarray(-1), jnp.asarray(current_p, dtype))
+    gains, deltas = screen(problem.family, current_p[:n_nom], np.asarray(coefficients), problem.family.refit,
+                           problem.train, problem.validation, remaining, acceleration_residuals,
+                           cross_fit=bool(problem.folds))
+    short = choose_shortlist(problem.look_alikes, remaining, gains, problem.options.shortlist)
+    return gains, deltas, short
+
+
+def _refit(problem: _Problem, current_slots, current_p, short, remaining, deltas, round_, say) -> tuple[np.ndarray, _Batch]:
+    """Refit: the current model (member 0) and each shortlisted candidate added to it, jointly with the nominal parameters."""
+    if short:
+        say(f"round {round_ + 1}: simulation-error refit of "
+            + ("the nominal model with " if round_ == 0 else "the current model with ")
+            + ", ".join(problem.candidates[k].label(problem.system) for k in short) + " (one batch) ...")
+    shortlist = problem.options.shortlist
+    new = np.asarray([-1] + short + [-1] * (shortlist - len(short)))
+    p_init = np.tile(current_p, (shortlist + 1, 1))
+    for i, k in enumerate(new):
+        if k >= 0:
+            start = problem.inits[k] - problem.neutral[k]
+            p_init[i, -1] = _start_value(problem, k, deltas[remaining.index(k)], start)
+    return new, _fit_batch(problem, np.tile(current_slots, (shortlist + 1, 1)), new, p_init, say)
+
+
+def _fit_nominal(problem: _Problem, batch: _Batch, say) -> tuple[AbstractSystem, _Yardstick]:
+    """Fit the nominal model (member 0 of the first batch) and choose the reference horizon from its training error."""
+    model = problem.model_of(-np.ones(problem.options.max_terms, int), batch.p[0]).system
+    _note_moved(problem, batch.p[0])
+    o = problem.options
+    horizon = _reference_horizon(model, problem.train, problem.candidates_s, o.reference_horizon_s, o.horizon_fraction,
+                                 problem.val_stride, problem.position_index, problem.dt)
+    horizons = problem.horizons
+    if horizon.seconds not in horizons:
+        horizons = np.sort(np.append(horizons, horizon.seconds))
+    n_ref = int(np.round(horizon.seconds / problem.dt))
+    cv_windows = make_windows(problem.train, n_ref, problem.val_stride) if problem.folds else None
+    window_runs = problem.window_runs
+    if cv_windows is not None:
+        window_runs = np.concatenate([window_runs, len(problem.validation) + np.asarray(cv_windows.starts)[:, 0]])
+    yard = _Yardstick(horizon=horizon, horizons=horizons, steps=np.maximum(np.round(horizons / problem.dt).astype(int), 1),
+                      n_ref=n_ref, overlap=max(1, int(np.ceil(n_ref / problem.val_stride))),
+                      ref_index=int(np.flatnonzero(np.isclose(horizons, horizon.seconds))[0]),
+                      cv_windows=cv_windows, window_runs=window_runs, n_val=len(problem.window_runs))
+    return model, yard
+
+
+# A size parameter (an inertia, a mass, a gravity term) off by more than this factor says the model
+# describes another machine: a hidden effect biases an estimate by percent, another machine differs by
+# an order of magnitude. Used for the refit here and for the CLI's check of its default model.
+OTHER_MACHINE_FACTOR = 2.0
+
+
+def _note_moved(problem: _Problem, p) -> None:
+    """Say so when the refit moved a size parameter (`size_parameter_names`) by more than
+    `OTHER_MACHINE_FACTOR`: the nominal model describes another machine (`DoublePendulum()`'s Drake defaults on a
+    rig 25 times lighter), and a refit from so far need not reach this one (on the DFKI rig it stopped at
+    three times its inertia) and the findings then correct the wrong machine."""
+    system, names = problem.system, problem.names
+    size = set(size_parameter_names(system))
+    given = np.asarray(nominal_values(system, names), float)
+    moved = []
+    for i, n in enumerate(names):
+        if n in size and problem.family.refit[i] > 0 and given[i] > 0:
+            ratio = float(p[i]) / given[i]
+            if not 1 / OTHER_MACHINE_FACTOR <= ratio <= OTHER_MACHINE_FACTOR:
+                moved.append(f"{n} from {given[i]:.4g} to {float(p[i]):.4g}")
+    if moved:
+        problem.notes.append(
+            "The refit moved " + ", ".join(moved) + f" (more than a factor {OTHER_MACHINE_FACTOR:g}): the nominal model "
+            "describes another machine, and a refit from that far may stop short of this one, leaving the findings "
+            "to correct the wrong model. Start from a nominal model of this machine (e.g. `identify(...).system` "
+            "with its friction set to zero; `dynax diagnose` without --nominal does this).")
+
+
+def _show_what_is_wrong(problem: _Problem, model, batch: _Batch, yard: _Yardstick, say) -> _Nominal:
+    """Show what is wrong: the nominal model's held-out simulation error and the structure left in its residuals."""
+    rmse = _rmse_curve(batch.errors[0], yard.steps, problem.position_index)
+    say(f"reference horizon {yard.horizon.seconds:g} s ({yard.horizon.rule}); nominal model: held-out position RMSE "
+        f"{rmse[yard.ref_index]:.4g} there; probing its one-step residuals for structure ...")
+    structure = structure_test(model, problem.train, problem.validation)
+    return _Nominal(model=model, errors=batch.errors[0], rmse=rmse, structure=structure, cost=float(batch.cost[0]),
+                    cv_errors=batch.cv_errors[0])
+
+
+def _select(problem: _Problem, yard: _Yardstick, current: _Current, results, scores, round_, say) -> dict | None:
+    """Select: the admissible candidate with the largest held-out gain, as a finding; `None` if none passed."""
+    admissible = [k for k in results if results[k]["significant"]]
+    if not admissible:
+        say(f"round {round_ + 1}: no candidate improves the held-out simulation significantly")
+        return None
+    best = max(admissible, key=rank(results))
+    r, term, system = results[best], problem.candidates[best], problem.system
+    ref = yard.ref_index
+    gain = float(1 - r["rmse"][ref] / current.rmse[ref]) if np.isfinite(current.rmse[ref]) else 1.0
+    alternatives = look_alike_tests(problem, yard, best, results, scores)
+    equivalent = [problem.candidates[k].label(system) for k in problem.equivalents.get(best, [])]
+    # A structural equivalent is never told apart, whatever the paired test of two fits of one model says.
+    confidence = "high" if all(a["told_apart"] for a in alternatives) else "low"
+    if equivalent:
+        refit = (f"with a refit of the nominal parameters ({', '.join(problem.refit_names)})" if problem.refit_names
+                 else "as the model is written")
+        gains = all(problem.candidates[k].cause == "input_gain" for k in [best, *problem.equivalents[best]])
+        problem.notes.append(
+            f"{term.label(system)} and {', '.join(equivalent)} are one model {refit}: any change of one is a change "
+            "of the other, so no data can tell them apart"
+            + (" (every torque-side parameter and the gains scaled by one factor leave the motion unchanged: the "
+               "data determine only the ratio of the gains)" if gains else "")
+            + f". {term.label(system)} is named because it came first; its finding lists the other as a look-alike "
+            "it cannot be told apart from.")
+    coefficient = problem.neutral[best] + r["delta"]
+    say(f"round {round_ + 1}: found {term.label(system)}, {term.parameter_name(system)} = {coefficient:.4g} "
+        f"(held-out gain {gain:.0%}, p = {r['p']:.2g}, helps on {r['runs_helped']}/{r['n_runs']} held-out runs; "
+        f"told apart from look-alikes: {confidence})")
+    return {"index": best, "cause": term.cause, "where": term.where(system), "coefficient": float(coefficient),
+            "std_error": float(r["std"]), "gain": gain, "parameter": term.parameter_name(system), "p_value": r["p"],
+            "look_alikes": alternatives, "confidence": confidence, "runs_helped": f"{r['runs_helped']}/{r['n_runs']}"}
+
+
+def _accept(problem: _Problem, current: _Current, finding: dict, results, batch: _Batch, scores, say) -> _Current:
+    """Add the selected candidate to the current model (its coefficient moves into the next free slot)."""
+    best = finding.pop("index")
+    r = results[best]
+    selected = current.selected + [best]
+    slot = len(problem.names) + len(selected) - 1
+    slots = current.slots.copy()
+    slots[len(selected) - 1] = best
+    p, std = batch.p[r["i"]].copy(), batch.std[r["i"]].copy()
+    p[slot], p[-1] = p[-1], 0.0
+    std[slot] = std[-1]
+    say("probing the extended model's residuals for structure ...")
+    structure = structure_test(problem.model_of(slots, p), problem.train, problem.validation)
+    # The probe never vetoes: selection goes on while a candidate's own held-out test passes.
+    return _Current(slots=slots, p=p, std=std, score=scores[r["i"]], errors=batch.errors[r["i"]], rmse=r["rmse"],
+                    structure=structure, cv_errors=batch.cv_errors[r["i"]], selected=selected,
+                    findings=current.findings + [finding])
+
+
+def _complete_look_alikes(problem, yard, cur_slots, cur_p, short, remaining, deltas, batch, scores, results, judge,
+                          round_, say):
+    """Refit the look-alikes of the round's best admissible candidate that screening left off the shortlist.
+
+    A finding's confidence rests on beating its look-alikes (same place, same group of causes) in the
+    held-out test; one that was never refitted cannot have been beaten. So its missing look-alikes get
+    one more batch of fits (the same compiled batch), the round is judged again over both batches
+    (Benjamini-Hochberg over the same remaining candidates: an untested one counted as p = 1 before),
+    and if the best changes, its own missing look-alikes are added once more.
+    """
+    system, candidates = problem.system, problem.candidates
+    for _ in range(2):
+        admissible = [k for k in results if results[k]["significant"]]
+        if not admissible:
+            break
+        best = max(admissible, key=rank(results))
+        missing = [k for k in problem.look_alikes(best) if k in remaining and k not in results]
+        missing = missing[: problem.options.shortlist]
+        if not missing:
+            break
+        say(f"round {round_ + 1}: {candidates[best].label(system)} leads; refitting its look-alike(s) "
+            f"{', '.join(candidates[k].label(system) for k in missing)}, which screening left out ...")
+        new, more = _refit(problem, cur_slots, cur_p, missing, remaining, deltas, round_, say)
+        more = _cross_fit(problem, yard, cur_slots, new, more, say)
+        n = 1 + len(short)
+        batch = _Batch(*(np.concatenate([getattr(batch, f.name)[:n], getattr(more, f.name)[1 : 1 + len(missing)]])
+                         for f in dataclasses.fields(_Batch)))
+        scores = _scores(problem, yard, batch.errors, batch.cv_errors)
+        short = short + missing
+        results = judge(short, batch, scores)
+    return short, batch, scores, results
+
+
+def _forward_selection(problem: _Problem, say):
+    """Fit the nominal model, show what is wrong, then per round screen, refit and select.
+
+    **Returns:** `(nominal, yardstick, current, candidate_table, last_round_results, rounds)`; `rounds`
+    one `_round_summary` per round.
+    """
+    o = problem.options
+    slots = -np.ones(o.max_terms, int)
+    p0 = np.concatenate([np.asarray(nominal_values(problem.system, problem.names), float), np.zeros(o.max_terms + 1)])
+    nominal = yard = current = None
+    table, last, rounds = [], {}, []
+    for round_ in range(o.max_terms):
+        remaining = [k for k in problem.searchable if current is None or k not in current.selected]
+        if not remaining and round_ > 0:
+            break
+        cur_slots, cur_p = (slots, p0) if current is None else (current.slots, current.p)
+        gains, deltas, short = _screen(problem, cur_slots, cur_p, remaining, round_, say) if remaining else ([], [], [])
+        new, batch = _refit(problem, cur_slots, cur_p, short, remaining, deltas, round_, say)
+        if round_ == 0:
+            model, yard = _fit_nominal(problem, batch, say)
+            batch = _cross_fit(problem, yard, cur_slots, new, batch, say)
+            nominal = _show_what_is_wrong(problem, model, batch, yard, say)
+            scores = _scores(problem, yard, batch.errors, batch.cv_errors)
+            current = _Current(slots=slots, p=batch.p[0].copy(), std=batch.std[0].copy(), score=scores[0],
+                               errors=batch.errors[0], rmse=nominal.rmse, structure=nominal.structure,
+                               cv_errors=batch.cv_errors[0])
+        else:
+            batch = _cross_fit(problem, yard, cur_slots, new, batch, say)
+            scores = _scores(problem, yard, batch.errors, batch.cv_errors)
+        if not short:
+            break
+        judge = lambda short, batch, scores: judge_round(  # noqa: E731
+            problem.physical, short, remaining, current.selected, len(problem.names), batch.p, batch.std, batch.errors,
+            scores, current.score, yard.window_runs, yard.overlap, o.alpha, o.min_gain, yard.steps,
+            problem.position_index, yard.n_val)
+        results = judge(short, batch, scores)
+        short, batch, scores, results = _complete_look_alikes(problem, yard, cur_slots, cur_p, short, remaining, deltas,
+                                                              batch, scores, results, judge, round_, say)
+        last = results
+        if round_ == 0:
+            table = _candidate_table(problem.system, problem.candidates, remaining, gains, results, problem.neutral, batch.cost)
+        finding = _select(problem, yard, current, results, scores, round_, say)
+        rounds.append(_round_summary(problem, yard, round_, current, remaining, results, finding))
+        if finding is None:
+            break
+        current = _accept(problem, current, finding, results, batch, scores, say)
+    else:
+        if rounds:
+            rounds[-1]["outcome"] += f"; max_terms = {o.max_terms} reached"
+    return nominal, yard, current, table, last, rounds
+
+
+def _start_value(problem: _Problem, k: int, delta_screened, start):
+    """A candidate's starting coefficient: the screening's step if physical and moderate, else the default start."""
+    term, scale = problem.candidates[k], problem.scales[k]
+    ok = np.isfinite(delta_screened) and problem.physical(k, delta_screened) and abs(delta_screened) < 20 * scale
+    lagging = isinstance(term, AbstractInputTerm) and term.n_hidden and delta_screened < start
+    return delta_screened if ok and not lagging else start
+

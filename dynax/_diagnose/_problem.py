@@ -1,0 +1,296 @@
+"""The problem one diagnosis solves: the modes (`Refit`, `Known`), the options, and the prepared
+records, candidate family, identifiable candidates and windows (`_prepare`, step 0 of `diagnose`).
+"""
+
+import dataclasses
+from collections.abc import Sequence
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import UsageError
+from .._identify._record_friction import compare_records
+from .._model._extensions import Extended
+from .._model._system import AbstractSystem, friction_parameter_names
+from ._candidates import (
+    candidate_scales,
+    default_candidates,
+    held_partners,
+    look_alikes,
+    sampled_sensitivities,
+    structurally_absorbed,
+    structurally_equivalent,
+)
+from ._fit import Family, make_windows, nominal_parameter_names, nominal_values, Windows
+from ._records import _fit_window, _horizon_grid, _prepare_records, _velocity_estimates
+from ._selection import on_physical_side
+
+
+# Cross-fitting needs every fold to fit two runs or more (see `_cross_fit`).
+MIN_CROSS_FIT_RUNS = 3
+
+class Refit(eqx.Module):
+    """Diagnosis mode: the nominal parameters are refitted on the training data with every candidate.
+
+    By default every nominal parameter is refitted **but the nominal model's friction** (the
+    parameters `base_parameter_meanings` puts in the group `"friction"`: `theta6`, `theta7` of a
+    two-link arm), which keeps its nominal value: friction is what the diagnosis names, and a
+    refit of it would absorb the very effects under test (a refitted viscous coefficient soaks up
+    most of a Coulomb friction's effect on short windows). The friction candidates test it
+    instead; a viscous friction candidate adds to the nominal's own coefficient and may lower it,
+    not below zero. Causes that a change of the refitted parameters reproduces exactly, alone or
+    with a change of the kept friction, are not identifiable in this mode (a rotor inertia at the
+    acrobot's shoulder adds to theta1; its input gain rescales theta1..theta5 and the friction) and
+    are reported as such.
+
+    **Arguments:** `parameters`, the names of the nominal parameters to refit (default all but the
+    friction, e.g. `theta1..theta5`; all of them, `theta1..theta7`, to let the refit absorb
+    viscous friction as before 2026-11-25; `("mass", "viscous")` for a linear axis whose nominal
+    viscous friction is not trusted).
+    """
+
+    parameters: tuple[str, ...] | None = None
+
+
+class Known(eqx.Module):
+    """Diagnosis mode: the nominal parameters are trusted (datasheet, CAD, an earlier identification) and kept.
+
+    Every candidate is identifiable; only the candidates' coefficients are fitted.
+    """
+
+
+@dataclasses.dataclass
+class _Options:
+    """The knobs of one diagnosis (see `diagnose`'s arguments)."""
+
+    horizons_s: Sequence[float]
+    reference_horizon_s: float | None
+    horizon_fraction: float
+    fit_window_s: float | None
+    max_terms: int
+    alpha: float
+    min_gain: float
+    holdout_fraction: float
+    shortlist: int
+    discovery: bool
+    velocities: str = "auto"
+    cross_fit: bool = True
+
+
+@dataclasses.dataclass
+class _Problem:
+    """Everything fixed for one diagnosis: records, candidates, the candidate family, windows."""
+
+    system: AbstractSystem
+    train: list
+    validation: list
+    dt: float
+    notes: list
+    candidates: tuple
+    refit_names: tuple
+    family: Family
+    scales: np.ndarray
+    inits: np.ndarray
+    searchable: list
+    not_identifiable: list
+    partners: list
+    fit_window_s: float
+    train_windows: Windows
+    val_windows: Windows
+    window_runs: np.ndarray
+    val_stride: int
+    horizons: np.ndarray
+    candidates_s: np.ndarray
+    options: _Options
+    velocities: str = "as measured"
+    # The training records each held out in turn (leave-one-run-out cross-fitting); empty when off.
+    folds: tuple = ()
+    # Candidates that are one model with a refit of the nominal parameters (`structurally_equivalent`).
+    equivalents: dict = dataclasses.field(default_factory=dict)
+
+    def look_alikes(self, k: int) -> list[int]:
+        """The candidates data could mistake for candidate `k`: its look-alikes and its structural equivalents."""
+        return list(dict.fromkeys(look_alikes(self.system, self.candidates[k], self.candidates)
+                                  + self.equivalents.get(k, [])))
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.family.names
+
+    @property
+    def neutral(self) -> np.ndarray:
+        return np.asarray(self.family.neutral)
+
+    @property
+    def state_scale(self) -> np.ndarray:
+        return np.asarray(self.family.state_scale)
+
+    @property
+    def position_index(self) -> list[int]:
+        return list(self.system.position_indices)
+
+    @property
+    def n_params(self) -> int:
+        return len(self.names) + self.options.max_terms + 1
+
+    def physical(self, k: int, delta: float) -> bool:
+        """Whether candidate `k` at `delta` from neutral is physical: on the physical side of neutral
+        (friction, inertia, delay), and, where it adds to a nominal parameter that is not refitted,
+        with the sum inside that parameter's consistency bound (a viscous coefficient stays non-negative)."""
+        return on_physical_side(self.candidates[k], delta, self.partners[k], self.names, self.system)
+
+    def model_of(self, slots, p):
+        """The extended model (every candidate; neutral but for `slots`) at parameters `p`."""
+        return self.family.model_for(jnp.asarray(slots), jnp.asarray(-1), jnp.asarray(p, self.family.neutral.dtype))
+
+
+def _check_arguments(system, mode, max_terms) -> None:
+    if not isinstance(system, AbstractSystem) or isinstance(system, Extended):
+        raise UsageError(f"diagnose: `system` must be a nominal dynax system, got {type(system).__name__}")
+    if not isinstance(mode, (Refit, Known)):
+        raise UsageError(f"diagnose: `mode` must be Refit() or Known(), got {type(mode).__name__}")
+    if max_terms < 1:
+        raise UsageError(f"diagnose: `max_terms` must be at least 1, got {max_terms}")
+
+
+def _refit_names(system, mode) -> tuple[str, ...]:
+    names = nominal_parameter_names(system)
+    if isinstance(mode, Known):
+        return ()
+    friction = friction_parameter_names(system)
+    refit = tuple(n for n in names if n not in friction) if mode.parameters is None else tuple(mode.parameters)
+    unknown = set(refit) - set(names)
+    if unknown:
+        raise UsageError(f"diagnose: Refit(parameters=...) names {sorted(unknown)}, not parameters of {type(system).__name__} {names}")
+    return refit
+
+
+def _candidate_family(system, candidates, refit_names, train_records):
+    """The `Family` (nominal system with every candidate at neutral), the candidates' scales and start values."""
+    names = nominal_parameter_names(system)
+    dtype = jnp.result_type(float)
+    scales, inits = candidate_scales(system, candidates, train_records)
+    p0 = np.asarray(nominal_values(system, names), float)
+    xs_train = np.concatenate([np.asarray(r.xs) for r in train_records])
+    family = Family(
+        model=Extended(system, candidates),
+        names=names,
+        refit=jnp.asarray([1.0 if n in refit_names else 0.0 for n in names], dtype),
+        nominal_scale=jnp.asarray(np.maximum(np.abs(p0), 1e-2), dtype),
+        candidate_scale=jnp.asarray(scales, dtype),
+        candidate_init=jnp.asarray(inits, dtype),
+        neutral=jnp.asarray(np.asarray([t.neutral for t in candidates], float), dtype),
+        state_scale=jnp.asarray(np.maximum(xs_train.std(axis=0), 1e-9), dtype),
+    )
+    return family, scales, inits
+
+
+def _identifiable(system, candidates, family, refit_names, partners, mode, sensitivities):
+    """`(searchable indices, not_identifiable entries)`: candidates a refit of the nominal parameters reproduces are set aside.
+
+    In `Refit` mode the kept parameters that candidates test (the nominal friction, `partners`) are not
+    trusted either: a candidate that a refit reproduces together with a change of them (the acrobot's input
+    gain: rescaling theta1..theta5 *and* the friction) cannot be told from a friction error, and is set aside
+    too. The candidates that are those parameters (viscous friction) stay.
+    """
+    refit = np.asarray(family.refit) > 0
+    absorbed = structurally_absorbed(family, refit, sensitivities=sensitivities)
+    tested = sorted({p[0] for p in partners if p is not None})
+    if isinstance(mode, Refit) and tested:
+        with_tested = refit.copy()
+        with_tested[tested] = True
+        absorbed_with_tested = structurally_absorbed(family, with_tested, sensitivities=sensitivities)
+    else:
+        absorbed_with_tested = absorbed
+    not_identifiable, searchable = [], []
+    for k, term in enumerate(candidates):
+        if absorbed[k]:
+            reason = (f"a refit of the nominal parameters ({', '.join(refit_names)}) reproduces it exactly; "
+                      "diagnose in Known() mode with trusted parameters to test it")
+        elif absorbed_with_tested[k] and partners[k] is None:
+            kept = ", ".join(family.names[i] for i in tested)
+            reason = (f"a refit of the nominal parameters ({', '.join(refit_names)}) with a change of the kept ones "
+                      f"the candidates test ({kept}) reproduces it exactly, so it cannot be told from an error in "
+                      "those; diagnose in Known() mode with trusted parameters to test it")
+        else:
+            searchable.append(k)
+            continue
+        not_identifiable.append({"cause": term.cause, "where": term.where(system), "reason": reason})
+    if not searchable:
+        raise UsageError("diagnose: no candidate is identifiable in this mode")
+    return searchable, not_identifiable
+
+
+def _prepare(system, train, validation, candidates, mode, options: _Options) -> _Problem:
+    """Step 0: records on one grid, the candidates and their identifiability, the training and held-out windows."""
+    notes: list[str] = []
+    train_records, validation_records, dt = _prepare_records(system, train, validation, options.holdout_fraction, notes)
+    _note_record_differences(system, train_records + (validation_records if validation is not None else []), notes)
+    train_records, validation_records, velocities = _velocity_estimates(system, train_records, validation_records,
+                                                                        options.velocities, notes)
+    candidates = tuple(default_candidates(system, train_records) if candidates is None else candidates)
+    if not candidates:
+        raise UsageError("diagnose: `candidates` is empty")
+    Extended(system, candidates)  # checks every candidate fits this system
+    refit_names = _refit_names(system, mode)
+    family, scales, inits = _candidate_family(system, candidates, refit_names, train_records)
+    sensitivities = sampled_sensitivities(family)  # the structural tests' one sample of the vector field's derivatives
+    partners = held_partners(family, 1.0 - np.asarray(family.refit), sensitivities=sensitivities)
+    searchable, not_identifiable = _identifiable(system, candidates, family, refit_names, partners, mode, sensitivities)
+    # Candidates that add to a held nominal parameter (viscous friction) are that parameter, not an equivalent.
+    equivalents = structurally_equivalent(family, family.refit, [k for k in searchable if partners[k] is None],
+                                          sensitivities=sensitivities)
+    _note_held(system, family, refit_names, mode, notes)
+    fit_window_s = _fit_window(system, train_records, options.fit_window_s, options.horizon_fraction, dt, notes)
+    n_fit = max(2, int(round(fit_window_s / dt)))
+    horizons, candidates_s = _horizon_grid(options.horizons_s, options.reference_horizon_s, train_records,
+                                           validation_records, notes)
+    val_stride = max(1, int(round(0.05 / dt)))
+    val_windows = make_windows(validation_records, int(round(horizons.max() / dt)), val_stride)
+    folds = tuple(range(len(train_records))) if options.cross_fit and len(train_records) >= MIN_CROSS_FIT_RUNS else ()
+    if options.cross_fit and len(train_records) == MIN_CROSS_FIT_RUNS - 1:
+        notes.append(f"Not cross-fitted: with {len(train_records)} training runs each fold would fit one run alone, and "
+                     "a model refitted on one run is judged for that run's excitation (two-fold cross-validation "
+                     "penalises every added term); the test is on the held-out runs alone. Three or more training "
+                     "runs are cross-fitted.")
+    if folds:
+        notes.append(f"Cross-fitting: besides the held-out runs, each of the {len(folds)} training runs was held out in "
+                     "turn, every configuration refitted on the other training runs (leave-one-run-out), and the test "
+                     "pools those windows with the held-out ones; the gains reported are the held-out runs' "
+                     "(cross_fit=False tests on the held-out runs alone).")
+    return _Problem(
+        system=system, train=train_records, validation=validation_records, dt=dt, notes=notes, candidates=candidates,
+        refit_names=refit_names, family=family, scales=scales, inits=inits, searchable=searchable,
+        not_identifiable=not_identifiable, partners=partners, fit_window_s=fit_window_s,
+        train_windows=make_windows(train_records, n_fit, n_fit), val_windows=val_windows,
+        window_runs=np.asarray(val_windows.starts)[:, 0], val_stride=val_stride, horizons=horizons,
+        candidates_s=candidates_s, options=options, velocities=velocities, folds=folds, equivalents=equivalents,
+    )
+
+
+def _note_record_differences(system, records, notes) -> None:
+    """Say so when the runs' recorded forces carry constant offsets that differ from run to run
+    (`dynax.record_offsets`, on the inverse-dynamics equations of the nominal model's structure as
+    `identify` builds them; the held-out runs too when they are the user's own): a sensor zero that
+    no candidate can carry from one run to another, and that stays in each held-out run's error
+    whatever is named (the DFKI shoulder torque: 0.14 N m in run 00, 0.07 in run 01). Likewise when
+    the runs' Coulomb friction differs (`dynax.record_friction`; the DFKI elbow: 0.05 to 0.13 N m).
+    Notes only: they enter no test."""
+    for check in compare_records(system, records):
+        if check is not None and check.differ():
+            notes.append(check.note())
+
+
+def _note_held(system, family, refit_names, mode, notes) -> None:
+    """Say which nominal parameters a `Refit()` keeps, and why."""
+    if not isinstance(mode, Refit):
+        return
+    held = [n for n, r in zip(family.names, np.asarray(family.refit)) if r == 0]
+    if held and mode.parameters is None:
+        values = nominal_values(system, family.names)
+        notes.append("Refit mode refits " + ", ".join(refit_names) + "; the nominal model's friction ("
+                     + ", ".join(f"{n} = {float(values[family.names.index(n)]):.4g}" for n in held)
+                     + ") keeps its value and the friction candidates test it (Refit(parameters=...) "
+                     "chooses otherwise).")
+
