@@ -138,6 +138,7 @@ from ._control import (
     wrap_angle as wrap_angle,
 )
 from ._data import (
+    backward_difference as backward_difference,
     butterworth_filtfilt as butterworth_filtfilt,
     central_difference as central_difference,
     load_trajectory as load_trajectory,

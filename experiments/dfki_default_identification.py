@@ -11,7 +11,9 @@
 first half; at 5 ms with white noise of 0.3 rad/s on the velocities and 0.03 N m on the torques
 added) and still validates on the held-out run as recorded, so that the table compares with the
 default one: a check that the defaults follow the data, not one format of it. Results in
-`experiments/results/dfki_identify_variants/VARIANT/`.
+`experiments/results/dfki_identify_variants/VARIANT/`. `--variant encoders` reads the training runs
+as encoder angles alone (the mapping without `dq1`, `dq2`: `load_trajectory` estimates them by
+backward differences) at their median interval.
 
 `--stagger K` cuts the records into segments K times, each cut a 1/K segment after the last
 (identify's default is 4; `--stagger 1` gives the single cut used before).
@@ -95,9 +97,10 @@ def lab_model(p: dict[str, float]) -> dynax.AbstractSystem:
 
 def load(run: str, variant: str = "native") -> dynax.Trajectory:
     """One run at its median interval (`native`), or changed as `diagnose_real_splits.load` says."""
-    if variant != "native":
+    if variant not in ("native", "encoders"):
         return diagnose_real_splits.load(DFKI.parent, run, variant)
-    raw = dynax.load_trajectory(DFKI / "sys_id" / f"trajectory_{run}.csv", "double_pendulum", mapping=MAPPING)
+    mapping = MAPPING if variant == "native" else {k: v for k, v in MAPPING.items() if not k.startswith("dq")}
+    raw = dynax.load_trajectory(DFKI / "sys_id" / f"trajectory_{run}.csv", "double_pendulum", mapping=mapping)
     return dynax.resample(raw, raw.dt)
 
 
@@ -128,7 +131,7 @@ def main(argv=None):
                         help="fit nothing: merge the results.json of earlier runs (e.g. folds run in parallel)")
     parser.add_argument("--record-weights", choices=_refine.RECORD_WEIGHTS, default=_refine.DEFAULT_RECORD_WEIGHTS,
                         help="weights of the records in the output-error refinement (default: %(default)s)")
-    parser.add_argument("--variant", choices=("native",) + diagnose_real_splits.VARIANTS[:1] + diagnose_real_splits.VARIANTS[2:],
+    parser.add_argument("--variant", choices=("native", "encoders") + diagnose_real_splits.VARIANTS[:1] + diagnose_real_splits.VARIANTS[2:],
                         default="native", help="how the training runs are recorded (the held-out run stays native)")
     parser.add_argument("--segment-band-hz", type=float, default=None, metavar="F",
                         help="segments of 1/F s in the refinement instead of one period of the widest band's edge")

@@ -115,6 +115,7 @@ HEAVY_TESTS = (
     "tests/identify/test_mujoco_data.py::test_acrobot_defaults_on_mujoco_records_of_an_arm_driven_at_the_elbow_only",
     "tests/identify/test_identify_defaults.py::test_noisy_rig_data_with_defaults_give_consistent_estimates",
     "tests/identify/test_identify_defaults.py::test_noisy_arms_of_other_sizes_give_consistent_estimates",
+    "tests/identify/test_identify_defaults.py::test_encoder_angles_alone_with_defaults_give_consistent_estimates",
     "tests/identify/test_identify_defaults.py::test_dfki_least_squares_with_defaults_is_consistent_where_the_unfiltered_fit_is_not",
     "tests/identify/test_identify_defaults.py::test_one_dfki_run_alone_is_said_to_determine_the_size_parameters_poorly",
     "tests/identify/test_identify_defaults.py::test_a_resting_dfki_record_refined_by_default_is_still_said_to_be_poorly_determined",

@@ -1,5 +1,6 @@
 from ._columns import columns_for as columns_for, SYSTEM_COLUMNS as SYSTEM_COLUMNS
 from ._derivatives import (
+    backward_difference as backward_difference,
     butterworth_filtfilt as butterworth_filtfilt,
     central_difference as central_difference,
     resample as resample,

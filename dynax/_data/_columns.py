@@ -10,8 +10,17 @@ SYSTEM_COLUMNS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     ),
 }
 
-# State columns that may be absent from a file and are then estimated (from the named column).
-OPTIONAL_STATES: dict[str, dict[str, str]] = {"linear_axis": {"dq": "q"}}
+# Velocity columns that may be absent from a file (encoder positions alone) and are then estimated
+# from the named position column, by the named difference (see `load_trajectory`): a two-link
+# arm's by backward differences, as a motor driver or logger computes them (the DFKI rig's logged
+# velocities are exactly that), so that `choose_filter`'s noise floor reads them as it reads a
+# rig's own; the linear axis keeps the central difference its EMPS reproduction was made with.
+# Estimated only when the file has none of a system's velocities and none is mapped.
+OPTIONAL_STATES: dict[str, dict[str, tuple[str, str]]] = {
+    "linear_axis": {"dq": ("q", "central")},
+    "acrobot": {"dq1": ("q1", "backward"), "dq2": ("q2", "backward")},
+    "double_pendulum": {"dq1": ("q1", "backward"), "dq2": ("q2", "backward")},
+}
 
 
 def columns_for(system: str) -> tuple[tuple[str, ...], tuple[str, ...]]:

@@ -1,6 +1,6 @@
 """Derivative estimation and filtering of measured signals.
 
-Central differences work on irregular grids. Savitzky-Golay and Butterworth filters assume a uniform
+Central and backward differences work on irregular grids. Savitzky-Golay and Butterworth filters assume a uniform
 grid: resample irregular records first with `resample` (they raise otherwise).
 """
 
@@ -38,6 +38,39 @@ def central_difference(ts: Float[ArrayLike, " time"], ys: Float[ArrayLike, "time
     if ts.ndim != 1 or ys.shape[:1] != ts.shape or ts.shape[0] < 3:
         raise ValueError(f"central_difference: need `ts` (time,) with time >= 3 and `ys` (time, ...); got {ts.shape}, {ys.shape}")
     return jnp.gradient(ys, ts.astype(jnp.result_type(ys, float)), axis=0)
+
+
+def backward_difference(ts: Float[ArrayLike, " time"], ys: Float[ArrayLike, "time ..."]) -> Float[Array, "time ..."]:
+    r"""Backward differences $(y_i - y_{i-1}) / (t_i - t_{i-1})$ on a possibly irregular grid.
+
+    The velocity a motor driver or logger computes from an encoder, one sample at a time: the DFKI
+    rig's logged `vel_meas` is exactly this difference of `pos_meas` on the logged time stamps (to
+    round-off, all six runs in `shared/datasets`). It is the exact derivative at the midpoint
+    $(t_{i-1} + t_i)/2$ of anything quadratic, so at $t_i$ it lags by half an interval. Its noise
+    density from white encoder noise, $4 \sin^2(\pi f \Delta t) / \Delta t^2$ times the encoder's,
+    rises to the Nyquist frequency, where a central difference's vanishes: the noise floor that
+    `choose_filter` reads from the upper half of the band is then the noise the derivative carries
+    at its largest. The first sample takes the second's value. Jittable, vmappable, differentiable;
+    concrete times are taken relative to the first sample in float64 on the host (as
+    `central_difference`).
+
+    **Arguments:**
+
+    - `ts`: sample times, shape `(time,)`, strictly increasing.
+    - `ys`: samples, shape `(time, ...)`.
+
+    **Returns:** $dy/dt$ at `ts`, same shape as `ys`.
+    """
+    ts = host_times(ts)
+    if not isinstance(ts, jax.core.Tracer):
+        ts = ts - ts[0] if ts.ndim == 1 and ts.size else ts
+    ts = jnp.asarray(ts)
+    ys = jnp.asarray(ys)
+    if ts.ndim != 1 or ys.shape[:1] != ts.shape or ts.shape[0] < 2:
+        raise ValueError(f"backward_difference: need `ts` (time,) with time >= 2 and `ys` (time, ...); got {ts.shape}, {ys.shape}")
+    dt = jnp.diff(ts.astype(jnp.result_type(ys, float)))
+    slopes = jnp.diff(ys, axis=0) / dt.reshape(dt.shape + (1,) * (ys.ndim - 1))
+    return jnp.concatenate([slopes[:1], slopes], axis=0)
 
 
 def _uniform_dt(ts, function):

@@ -202,9 +202,10 @@ def velocities_from_positions(xs: np.ndarray, dt: float, band_hz: float) -> np.n
     r"""The states (positions then velocities) with measured positions and velocities from a local cubic fit of the positions.
 
     Encoder positions are three orders of magnitude less noisy (relative to the motion) than a
-    driver's velocity estimate; the derivative of a cubic Savitzky-Golay fit over a window of
-    half a period of the band's edge passes the band (its -3 dB point lies near
-    $4 f_s / (3.2 (2m + 1))$, about 3 times the band edge) and differentiates the position noise
+    velocity differenced from them over one sample (a driver's estimate; the DFKI rig logs that);
+    the derivative of a cubic Savitzky-Golay fit over a window of half a period of the band's edge
+    passes the band (its -3 dB point lies near $4 f_s / (3.2 (2m + 1))$, about 3 times the band
+    edge) and differentiates the position noise
     into a velocity noise $\sim \sigma_q / (m^{3/2} dt)$ (Schafer, "What is a Savitzky-Golay
     filter?", IEEE Signal Processing Magazine 28(4), 2011).
     """
@@ -227,9 +228,9 @@ def with_velocities_from_positions(trajectory: Trajectory) -> tuple[Trajectory, 
     follow what changes faster than its window: a friction's kink, a delayed torque step) and far
     less noise. Their mean squared difference is about $\sigma^2 + \overline{b^2}$, so the fit is
     taken where that difference is at most $2\sigma^2$: where its bias is at most the noise it
-    removes. On a driver's velocity estimate (the DFKI rig) the difference is the noise itself; on
-    nearly clean data (simulated records with a little noise) it is many times the noise and the
-    measured velocities are kept. A record without a noise floor is returned as it is.
+    removes. On a one-sample difference of the encoder (the DFKI rig's logged velocity) the
+    difference is the noise itself; on nearly clean data (simulated records with a little noise) it
+    is many times the noise and the measured velocities are kept. A record without a noise floor is returned as it is.
 
     **Returns:** `(trajectory, choice, replaced)`, `replaced` the names of the velocities taken from positions.
     """

@@ -13,7 +13,7 @@ The data it fits are the records cut to 40 samples per period of their signal ba
 (`choose_filter`; inputs averaged over each new interval), so that the integrator takes as few
 steps as the motion needs, with the measured encoder positions and velocities from a local cubic
 fit of those positions: each segment starts from the measured position and a velocity about a
-hundred times less noisy than the driver's estimate, without the amplitude loss of a low-pass filter
+hundred times less noisy than a one-sample difference (the DFKI rig's logged velocity), without the amplitude loss of a low-pass filter
 at the band's edge (which on a large-amplitude run distorts the very motion that is fitted). The
 segments are `method`'s (`identify` uses one band period, in four staggered cuts, see
 `SimulationFit.stagger`). Each state's residual is divided by its measurement-noise level

@@ -120,6 +120,51 @@ def test_mat_file_with_mapping_scale_and_estimated_velocity(tmp_path):
     np.testing.assert_allclose(tr.state("dq")[1:-1], 2 * t[1:-1, 0], atol=1e-12)
 
 
+def test_backward_differences_are_the_derivative_half_an_interval_back_on_an_irregular_grid():
+    # On any grid the backward difference of a quadratic is its derivative at the interval's midpoint.
+    ts = np.cumsum(np.random.default_rng(3).uniform(0.001, 0.006, size=200))
+    ys = np.stack([0.7 * ts**2 - ts, -2.0 * ts**2 + 0.3], axis=1)
+    mid = 0.5 * (ts[1:] + ts[:-1])
+    v = np.asarray(dynax.backward_difference(ts, ys))
+    np.testing.assert_allclose(v[1:], np.stack([1.4 * mid - 1.0, -4.0 * mid], axis=1), rtol=1e-9, atol=1e-9)
+    np.testing.assert_array_equal(v[0], v[1])
+    with pytest.raises(ValueError, match="time >= 2"):
+        dynax.backward_difference(ts[:1], ys[:1])
+
+
+def test_arm_records_of_encoder_positions_alone_get_backward_difference_velocities(tmp_path):
+    # Many rigs log only encoder angles: dq1 and dq2 are then the backward differences of q1 and q2
+    # on the recorded (here irregular) time stamps. A dq mapped to a column that is not there is
+    # still an error, and so is one velocity without the other (test_missing_column_names_file_and_column).
+    t = np.cumsum(np.random.default_rng(4).uniform(0.002, 0.008, size=120))
+    q1, q2 = 0.3 * t**2 - t, -0.5 * t**2 + 0.2
+    table = "t,pos1,pos2,tau1,tau2\n" + "".join(f"{a:.17g},{b:.17g},{c:.17g},0.1,-0.1\n" for a, b, c in zip(t, q1, q2))
+    (tmp_path / "encoders.csv").write_text(table)
+    mapping = {"q1": "pos1", "q2": "pos2"}
+    run = dynax.load_trajectory(tmp_path / "encoders.csv", "double_pendulum", mapping=mapping)
+    mid = 0.5 * (t[1:] + t[:-1])
+    np.testing.assert_allclose(run.state("dq1")[1:], 0.6 * mid - 1.0, atol=1e-9)
+    np.testing.assert_allclose(run.state("dq2")[1:], -mid, atol=1e-9)
+    acrobot = dynax.load_trajectory(tmp_path / "encoders.csv", "acrobot", mapping=mapping)
+    np.testing.assert_allclose(acrobot.xs, run.xs)
+    with pytest.raises(dynax.DataError, match=r"column 'vel1': missing column \(mapped from 'dq1'\)"):
+        dynax.load_trajectory(tmp_path / "encoders.csv", "double_pendulum", mapping=dict(mapping, dq1="vel1"))
+    with pytest.raises(dynax.DataError, match="column 'q1': missing column"):
+        dynax.load_trajectory(tmp_path / "encoders.csv", "double_pendulum", mapping={"q2": "pos2"})
+
+
+def test_dfki_files_read_without_their_velocity_columns_give_the_logged_velocities(datasets):
+    # The rig's logger computed vel_meas from pos_meas itself: read as encoder angles alone, every
+    # run's estimated velocities are the logged ones (but the first sample's), so every DFKI
+    # result holds for files of this rig that carry no velocities.
+    positions_only = {k: v for k, v in DFKI_MAPPING.items() if not k.startswith("dq")}
+    for path in sorted((datasets / "dfki_double_pendulum" / "sys_id").glob("trajectory_*.csv")):
+        logged = dynax.load_trajectory(path, "double_pendulum", mapping=DFKI_MAPPING)
+        estimated = dynax.load_trajectory(path, "double_pendulum", mapping=positions_only)
+        scale = float(np.max(np.abs(logged.xs[:, 2:])))
+        np.testing.assert_allclose(estimated.xs[1:], logged.xs[1:], rtol=0, atol=1e-9 * scale, err_msg=path.name)
+
+
 def test_parse_assignments():
     assert parse_assignments("t=time, q1=pos", "--map", numeric=False) == {"t": "time", "q1": "pos"}
     assert parse_assignments("force=35.15", "--scale", numeric=True) == {"force": 35.15}
