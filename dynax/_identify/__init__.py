@@ -13,12 +13,7 @@ from ._defaults import (
     noise_floor_and_band as noise_floor_and_band,
 )
 from ._equations import Dynamic as Dynamic, Energy as Energy, Power as Power
-from ._identify import (
-    identify as identify,
-    Identification as Identification,
-    NoValidationWarning as NoValidationWarning,
-    RecordsDisagreeWarning as RecordsDisagreeWarning,
-)
+from ._identify import identify as identify
 from ._offsets import record_offsets as record_offsets, RecordOffsets as RecordOffsets
 from ._record_friction import record_friction as record_friction, RecordFriction as RecordFriction
 from ._least_squares import (
@@ -27,6 +22,11 @@ from ._least_squares import (
     LeastSquaresFit as LeastSquaresFit,
     poorly_determined as poorly_determined,
     PoorlyDeterminedWarning as PoorlyDeterminedWarning,
+)
+from ._result import (
+    Identification as Identification,
+    NoValidationWarning as NoValidationWarning,
+    RecordsDisagreeWarning as RecordsDisagreeWarning,
 )
 from ._regressors import (
     dynamic_regressor as dynamic_regressor,

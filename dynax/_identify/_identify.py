@@ -4,7 +4,9 @@ Three linear-in-parameter least-squares models (`Dynamic()`, `Power()`, `Energy(
 `dynax._identify._equations` builds) and one output-error fit (`SimulationFit()`: minimise the
 simulation error through `dynax.simulate`). The least-squares stage is checked for physical
 consistency (and constrained to it by default), refined by the output-error fit on real two-link
-arm data, and validated by open-loop simulation on held-out records.
+arm data, and validated by open-loop simulation on held-out records. The least-squares stage is
+`_ls_stage.py`, the refinement `_refine.py`, the validation `_validation.py` and the result
+`_result.py`; this module chooses and runs them.
 """
 
 import warnings
@@ -20,219 +22,40 @@ from jaxtyping import Array, Float
 from .._precision import warn_if_float32
 from .._data._trajectory import Trajectory
 from .._errors import DataError, UsageError
-from .._fit import Parameters, serial_covariance, Solution
+from .._fit import Parameters, Solution
 from .._simulate import FixedGrid
 from .._model._linear_axis import LinearAxis
 from .._model._extensions import Extended
 from .._model._system import AbstractSystem, size_parameter_names
 from .._model._two_link import Acrobot, DoublePendulum
-from ._consistency import (
-    check_consistency,
-    Consistency,
-    consistent_least_squares,
-    InconsistentEstimateWarning,
-)
+from ._consistency import check_consistency, Consistency
 from ._defaults import choose_filter
-from ._equations import _equations, _uniform, Dynamic, Energy, joint_weights, Power
-from ._refine import refine_by_simulation
-from ._validation import DEFAULT_HORIZONS_S, held_out_error, HeldOutError, split_for_validation
+from ._equations import _equations, _uniform, Dynamic, Energy, Power
 from ._least_squares import (
     describe_poorly_determined,
     jointly_determined,
-    IdentifiabilityError,
-    least_squares,
-    LeastSquaresFit,
     POORLY_DETERMINED,
     poorly_determined,
     PoorlyDeterminedWarning,
 )
-from ._offsets import driven_joints, offset_groups, record_labels, record_offsets, RecordOffsets, without_offsets
-from ._record_friction import coulomb_columns, record_friction, RecordFriction
-from ._simulation_fit import fit_simulation_error, SimulationFit
-from ._regressors import (
-    _positions,
-    _split,
-    Friction,
-    parameter_names,
-    parameter_vector,
-    with_friction,
-    with_parameters,
+from ._ls_stage import (
+    _fitted_system,
+    _joint_positions,
+    _least_squares_stage,
+    _less_offsets,
+    _offsets_json,
+    _relative_equation_error,
 )
+from ._offsets import record_labels, without_offsets
+from ._refine import refine_by_simulation
+from ._regressors import _split, Friction, parameter_names, parameter_vector, with_friction
+from ._result import Identification, NoValidationWarning, RecordsDisagreeWarning
+from ._simulation_fit import fit_simulation_error, SimulationFit
+from ._validation import DEFAULT_HORIZONS_S, held_out_error, split_for_validation
 
-
-class NoValidationWarning(UserWarning):
-    """`identify` held nothing out to validate on: the records are too short for even the shortest
-    horizon, so the answer carries no open-loop error (see `Identification.validation`)."""
-
-
-class RecordsDisagreeWarning(UserWarning):
-    """Leaving one record out moves some parameters much more than the standard errors estimated
-    within the records allow (`Identification.record_std_errors`): the recordings differ."""
 
 
 _SYSTEM_NAMES = {Acrobot: "acrobot", DoublePendulum: "double_pendulum", LinearAxis: "linear_axis"}
-
-
-class Identification(eqx.Module):
-    r"""The result of `identify`.
-
-    **Fields:**
-
-    - `system`: the system with the fitted parameters (for two-link arms with
-      `friction="coulomb"`, `Extended` with `CoulombFriction` at both joints; after the output-error
-      refinement also with `RotorInertia` at the elbow).
-    - `estimate`, `std_errors`: parameter values and standard errors, in the order of `names`.
-      The least-squares stage's errors are robust to rows correlated in time (`serial_covariance`;
-      `stages["least_squares"]["serial_correlation"]` says by how much they grew); the output-error
-      stage's are clustered over blocks of segments.
-    - `names`: parameter names (the contract's; `Ir2` for the elbow's rotor inertia).
-    - `condition_number`: of the column-scaled regressor (least-squares methods) or of the
-      Jacobian at the solution (`SimulationFit`).
-    - `rank`: numerical rank.
-    - `n_samples`: samples that entered the fit.
-    - `residual_rms`: root-mean-square residual of the fitted equations.
-    - `relative_error`: $\lVert A\hat\theta - y\rVert / \lVert y\rVert$ of the (unweighted)
-      equations: for `Dynamic` the relative force/torque error (EMPS reports 4.08 %); for
-      `SimulationFit` the relative simulation error of the states.
-    - `method`, `friction`, `system_name`: as in the contract's output.
-    - `fit`: the `LeastSquaresFit` (least-squares methods; its `std_errors` and `covariance` the
-      robust ones above) or `None`.
-    - `settings`: per record, the filter and derivative settings used and why (`Dynamic`).
-    - `consistency`: the `Consistency` of the returned estimate: violated conditions, and which
-      the constrained fit had to enforce.
-    - `validation`: the `HeldOutError` of the returned model (open-loop simulation error against
-      horizon on held-out data), or `None` when nothing could be held out.
-    - `stages`: per stage (`"least_squares"`, and `"output_error"` after a refinement), its
-      parameters, equation error and held-out simulation error, as a JSON-ready dict.
-    - `solution`: for the iterative method (`SimulationFit`), the engine's `Solution` this result
-      is built from (the same names, estimate, standard errors and covariance, plus the result
-      code, steps and losses); `None` for the least-squares methods, whose `fit` holds the same.
-    - `record_offsets`: for `Dynamic` on two records or more, each record's constant offset on each
-      joint's recorded force (from each half of the record too) and whether they differ between
-      records (`RecordOffsets`, see `dynax._identify._offsets`): a sensor zero that changes from one
-      recording to the next, which no model term carries; `None` otherwise.
-    - `record_friction`: for `Dynamic` on two records or more with `friction="coulomb"`, each
-      record's Coulomb friction coefficients (from each of four parts of the record too) and whether they
-      differ between records (`RecordFriction`, see `dynax._identify._record_friction`): a friction
-      that changed between recordings, which a held-out record keeps as error; `None` otherwise.
-    - `poorly_determined`: the size parameters (inertias, gravity terms, mass) of the returned
-      estimate whose relative standard error is above 25 %, name -> that ratio
-      (`poorly_determined`; also warned as a `PoorlyDeterminedWarning`): after the output-error
-      refinement judged on its standard errors, or the leave-one-record-out ones where larger
-      (each stage's own is in `stages`); `{}` when the data determine them all, `None` for
-      methods and systems it does not apply to.
-    - `record_std_errors`: after the output-error refinement on three records or more, each
-      parameter's standard error from the delete-one-record jackknife (how far it moves when one
-      record is left out; `Refinement.record_std_errors`), in the order of `names`: the spread from
-      one recording to the next (a friction or offset of that day) that `std_errors`, estimated
-      within records, cannot carry; `None` otherwise.
-    - `refined_covariance`: after the output-error refinement, the whole covariance behind
-      `std_errors` (`Refinement.covariance`; what `covariance` returns then), e.g. for the error of
-      a combination such as $M_{22} = \theta_2 + I_{r2}$; `None` otherwise.
-    - `jointly_determined`: the parameters of the returned estimate that the data determine mostly
-      in combination with others (`jointly_determined`: over 99 % of their variance shared), name ->
-      `{"with": partners, "correlations": ..., "inflation": ratio}`; `{}` when none, `None` without
-      a covariance.
-
-    **Properties** in `Solution`'s spelling: `value` (= `estimate`), `covariance`; and
-    `parameters` / `standard_errors` as `{name: value}` (`Solution.estimates()` /
-    `Solution.standard_errors()`).
-    """
-
-    system: AbstractSystem
-    estimate: Float[Array, " n_params"]
-    std_errors: Float[Array, " n_params"]
-    condition_number: Float[Array, ""]
-    rank: Array
-    residual_rms: Float[Array, ""]
-    relative_error: Float[Array, ""]
-    fit: LeastSquaresFit | None
-    names: tuple[str, ...] = eqx.field(static=True)
-    n_samples: int = eqx.field(static=True)
-    method: str = eqx.field(static=True)
-    friction: str = eqx.field(static=True)
-    system_name: str = eqx.field(static=True)
-    settings: tuple = ()
-    consistency: Consistency | None = None
-    validation: HeldOutError | None = None
-    stages: dict | None = None
-    solution: Solution | None = None
-    record_offsets: RecordOffsets | None = None
-    record_friction: RecordFriction | None = None
-    poorly_determined: dict[str, float] | None = None
-    record_std_errors: Float[Array, " n_params"] | None = None
-    refined_covariance: Float[Array, "n_params n_params"] | None = None
-    jointly_determined: dict[str, dict] | None = None
-
-    @property
-    def value(self) -> Float[Array, " n_params"]:
-        """The estimate (`Solution`'s name for it)."""
-        return self.estimate
-
-    @property
-    def covariance(self) -> Float[Array, "n_params n_params"] | None:
-        """The estimate's covariance: from the solution (iterative), the refinement (after the
-        output-error refinement: the cluster-robust one behind `std_errors`), or the least-squares
-        fit; `None` where none applies."""
-        if self.refined_covariance is not None:
-            return self.refined_covariance
-        if self.solution is not None:
-            return self.solution.covariance
-        if self.fit is not None and self.fit.covariance.shape[0] == self.estimate.shape[0] and "simulation" not in self.method:
-            return self.fit.covariance
-        return None
-
-    @property
-    def parameters(self) -> dict[str, float]:
-        """Parameter name -> value."""
-        return {n: float(v) for n, v in zip(self.names, np.asarray(self.estimate))}
-
-    @property
-    def standard_errors(self) -> dict[str, float]:
-        """Parameter name -> standard error."""
-        return {n: float(v) for n, v in zip(self.names, np.asarray(self.std_errors))}
-
-    def to_json(self) -> dict:
-        """The contract's `identify` output object, extended with `settings`, `consistency`,
-        `validation`, `stages`, `record_offsets` and `record_friction` where they apply."""
-        out = {
-            "system": self.system_name,
-            "method": self.method,
-            "friction": self.friction,
-            "parameters": self.parameters,
-            "std_errors": self.standard_errors,
-            "condition_number": float(self.condition_number),
-            "n_samples": int(self.n_samples),
-            "relative_error": float(self.relative_error),
-        }
-        if self.settings:
-            out["settings"] = [_jsonable(s) for s in self.settings]
-        if self.consistency is not None:
-            out["consistency"] = self.consistency.to_json()
-        out["validation"] = None if self.validation is None else self.validation.to_json()
-        if self.stages:
-            out["stages"] = self.stages
-        if self.record_offsets is not None:
-            out["record_offsets"] = self.record_offsets.to_json()
-        if self.record_friction is not None:
-            out["record_friction"] = self.record_friction.to_json()
-        if self.poorly_determined is not None:
-            out["poorly_determined"] = self.poorly_determined
-        if self.jointly_determined is not None:
-            out["jointly_determined"] = self.jointly_determined
-        if self.record_std_errors is not None:
-            out["record_std_errors"] = {n: float(v) for n, v in zip(self.names, np.asarray(self.record_std_errors))}
-        return out
-
-
-def _jsonable(value):
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, (np.floating, np.integer)) or (hasattr(value, "shape") and np.shape(value) == ()):
-        return float(value)
-    return value
 
 
 def _as_list(data) -> list[Trajectory]:
@@ -258,180 +81,7 @@ def _system_name(system):
     return _SYSTEM_NAMES.get(type(base), type(base).__name__)
 
 
-def _fitted_system(system, names, estimate):
-    """`system` carrying the estimate; base parameters the fitted model leaves out are as the system's
-    `with_base_parameters` sets them (a linear axis fitted without Coulomb friction gets `coulomb = 0`)."""
-    return with_parameters(system, names, jnp.asarray(estimate))
-
-
 _CONSISTENCY = ("constrain", "check", "off")
-
-
-class _LeastSquaresStage(eqx.Module):
-    system: AbstractSystem
-    names: tuple[str, ...] = eqx.field(static=True)
-    estimate: Array
-    fit: LeastSquaresFit
-    a: Array
-    y: Array
-    n_samples: int = eqx.field(static=True)
-    label: str = eqx.field(static=True)
-    settings: tuple
-    consistency: Consistency
-    offsets: RecordOffsets | None
-    groups: list | None = None  # rows that share one fitted offset (`Dynamic(offsets=...)`), or None
-    fitted_offsets: np.ndarray | None = None  # (records, driven joints) estimated with the parameters
-    driven: tuple[str, ...] = ()
-    friction: RecordFriction | None = None
-    serial: dict | None = None  # what the errors robust to serial correlation changed (`_serially_robust`)
-
-
-def _joint_positions(system, trajectories):
-    """The records' joint positions, stacked (one compiled call: slicing op by op costs more than the check)."""
-    return _stacked_positions(system, [t.xs for t in trajectories])
-
-
-@eqx.filter_jit
-def _stacked_positions(system, states):
-    return jnp.concatenate([_positions(system, xs)[0] for xs in states])
-
-
-def _offset_rows(system, method, counts):
-    """The row groups that each carry a fitted offset under `method` (see `Dynamic`'s `offsets`), or None."""
-    if not isinstance(method, Dynamic) or not counts:
-        return None
-    wanted = method.offsets
-    if isinstance(wanted, str):
-        if wanted != "auto":
-            raise UsageError(f"Dynamic: `offsets` must be True, False or 'auto', got {wanted!r}")
-        wanted = isinstance(method.lowpass_hz, str) and method.lowpass_hz == "auto"
-    if not wanted:
-        return None
-    groups = offset_groups(system, counts)
-    if groups is None and method.offsets is True:
-        raise UsageError(f"Dynamic(offsets=True): {type(_split(system)[0]).__name__} has a constant term of its own "
-                         "(or no driven joint); fit its offset as a parameter instead")
-    return groups
-
-
-def _least_squares_stage(system, trajectories, method, friction, weights, rcond, consistency):
-    system, raw_a, raw_y, weights, names, n_samples, label, settings, counts, record_rows = _equations(
-        system, trajectories, method, friction, weights, rcond
-    )
-    groups = _offset_rows(system, method, counts)
-    if isinstance(method, Dynamic) and method.weighting == "joint" and weights is None:
-        # Each joint's residual variance from an ordinary fit of the equations that will be solved.
-        plain = (raw_a, raw_y) if groups is None else without_offsets(raw_a, raw_y, None, groups)[:2]
-        n_joints = raw_a.shape[0] // sum(counts)  # rows stacked joint by joint, `counts` per record and joint
-        weights = joint_weights(jnp.asarray(plain[0], raw_a.dtype), jnp.asarray(plain[1], raw_y.dtype), names, rcond,
-                                n_joints)
-    a, y = raw_a, raw_y
-    if groups is not None:
-        a, y, a_means, y_means = without_offsets(raw_a, raw_y, weights, groups)
-        a, y = jnp.asarray(a, raw_a.dtype), jnp.asarray(y, raw_y.dtype)
-    try:
-        fit = least_squares(a, y, names=names, weights=weights, rcond=rcond)
-    except IdentifiabilityError as error:
-        if groups is None:
-            raise
-        raise IdentifiabilityError(
-            f"{error} Each record's constant force offset at the driven joints is estimated with the parameters "
-            "(a sensor's zero), so a constant force tells nothing about them; Dynamic(offsets=False) fixes the "
-            "offsets at zero.", unidentified=error.unidentified, rank=error.rank, n_params=error.n_params,
-            condition_number=error.condition_number) from None
-    estimate = fit.estimate
-    fitted = _fitted_system(system, names, estimate)
-    qs = _joint_positions(system, trajectories)
-    check = check_consistency(fitted, names, estimate, qs, warn=consistency == "check")
-    if consistency == "constrain" and check.violated:
-        estimate, _ = consistent_least_squares(system, names, a, y, weights, start=fit.estimate)
-        fitted = _fitted_system(system, names, estimate)
-        after = check_consistency(fitted, names, estimate, qs, warn=False)
-        check = Consistency(after.violated, active=check.violated, constrained=True,
-                            min_mass_eigenvalue=after.min_mass_eigenvalue)
-        if after.violated:
-            warnings.warn("the constrained fit did not reach a consistent estimate: " + "; ".join(after.violated),
-                          InconsistentEstimateWarning, stacklevel=3)
-    fit, serial = _serially_robust(fit, a, y, weights, estimate, record_rows)
-    joint_names = _split(system)[0].joint_names
-    labels = record_labels(trajectories)
-    offsets = record_offsets(raw_a, raw_y, counts, joint_names, labels) if counts else None
-    per_record_friction = record_friction(raw_a, raw_y, counts, len(joint_names), names,
-                                          coulomb_columns(system, friction), labels) if counts else None
-    fitted_offsets, driven = None, ()
-    if groups is not None:
-        values = y_means - a_means @ np.asarray(estimate)  # what each record's recorded force has in excess
-        driven = tuple(joint_names[j] for j in driven_joints(system))  # the order of `offset_groups`
-        fitted_offsets = values.reshape(len(driven), len(counts)).T
-    return _LeastSquaresStage(fitted, names, estimate, fit, a, y, int(n_samples),
-                              label, settings, check, offsets, groups, fitted_offsets, driven, per_record_friction,
-                              serial)
-
-
-def _serially_robust(fit, a, y, weights, estimate, record_rows):
-    """`fit` with its covariance and standard errors robust to residuals correlated in time
-    (`serial_covariance`: Newey-West with Andrews' bandwidth over each record's time steps), and
-    what that changed (`{"bandwidth_steps", "inflation"}`: each error over the one that counts
-    every row as independent); `fit` itself, and `None`, where the rank is short or there are no
-    records' rows to go by.
-
-    Equations sampled in time are not independent: the low-pass filter spreads each sample's noise
-    over its neighbours, and a model error follows the motion. On the EMPS benchmark's rows the
-    robust errors are 2.3 to 8.8 times the independent-row ones (the record's two filter settings,
-    the published and the default, give estimates 4 to 10 of those apart, 0.7 to 1.2 of these); on
-    one DFKI run 2.3 to 4.9 times."""
-    n = a.shape[1]
-    total = int(sum(record_rows))
-    if not total or int(fit.rank) < n or a.shape[0] % total:
-        return fit, None
-    w = np.ones(a.shape[0]) if weights is None else np.asarray(weights, dtype=float)
-    sw = np.sqrt(w)
-    a_np = np.asarray(a, dtype=float)
-    jac = a_np * sw[:, None]
-    residuals = (np.asarray(y, dtype=float) - a_np @ np.asarray(estimate, dtype=float)) * sw
-    steps = np.arange(a.shape[0]) % total  # rows are stacked in blocks (the joints), each through every record
-    covariance, bandwidth = serial_covariance(jac, residuals, steps, tuple(record_rows))
-    covariance = jnp.asarray(covariance, fit.covariance.dtype)
-    std = jnp.sqrt(jnp.diag(covariance))
-    independent = np.asarray(fit.std_errors)
-    # an exact fit (no residual) has no error either way: nothing grew
-    inflation = np.divide(np.asarray(std), independent, out=np.ones(n), where=independent > 0)
-    robust = eqx.tree_at(lambda f: (f.std_errors, f.covariance), fit, (std, covariance))
-    return robust, {"bandwidth_steps": bandwidth,
-                    "inflation": {name: float(v) for name, v in zip(fit.names, inflation)}}
-
-
-def _less_offsets(system, records, ls):
-    """The records with each one's fitted offsets taken off its inputs (through the input matrix), as
-    the refinement fits them; the records themselves where no offsets were fitted."""
-    if ls.fitted_offsets is None:
-        return records
-    base = _split(system)[0]
-    b = np.asarray(base.input_matrix())
-    to_inputs = np.linalg.pinv(b)  # joint forces -> the inputs that produce them
-    rows = [base.joint_names.index(j) for j in ls.driven]
-    out = []
-    for record, offset in zip(records, ls.fitted_offsets):
-        force = np.zeros(b.shape[0])
-        force[rows] = offset
-        shift = to_inputs @ force
-        out.append(Trajectory(record.ts, record.xs, record.us - jnp.asarray(shift, record.us.dtype)[None, :],
-                              record.state_names, record.input_names, record.system, record.source))
-    return out
-
-
-def _offsets_json(ls, trajectories):
-    if ls.fitted_offsets is None:
-        return None
-    return {"records": record_labels(trajectories), "joints": list(ls.driven),
-            "values": [[float(v) for v in row] for row in ls.fitted_offsets],
-            "meaning": "each record's constant offset of the recorded force at each driven joint, estimated with the "
-                       "parameters (a sensor's zero) and not part of the model; the output-error refinement fits the "
-                       "records less them"}
-
-
-def _relative_equation_error(a, y, estimate):
-    return jnp.linalg.norm(a @ estimate - y) / jnp.linalg.norm(y)
 
 
 def _stage_json(method, names, estimate, std, relative_error, validation, **extra):
@@ -859,3 +509,4 @@ def _has_conditions(system):
     except UsageError:
         return False
     return bool(base.base_parameter_kinds())
+
