@@ -16,6 +16,7 @@ from ._columns import columns_for, OPTIONAL_STATES
 from .._precision import check_times_for_float32
 from ._matlab import read_mat_columns
 from ._sampling import check_time_stamps, MAX_GAP, MIN_STEP
+from ._velocities import check_velocities
 from ._trajectory import Trajectory
 
 TIME = "t"
@@ -179,7 +180,10 @@ def load_trajectory(
     `DataError` naming the file, column and row for: a file that is not UTF-8 CSV, `.npz` or
     `.mat` (or is a directory), a missing or duplicated column, a non-numeric (`"1_0"` included),
     complex or non-finite value, a value beyond $10^{12}$ in magnitude (before or after `scale`),
-    time that does not strictly increase, a gap or a near-duplicate time stamp, too few samples.
+    time that does not strictly increase, a gap or a near-duplicate time stamp, too few samples,
+    a measured velocity column that is not the derivative of its position column (other units, the
+    opposite sign, another joint's column: `dynax._data._velocities`; the error names the gain and
+    the `scale` that fixes a unit).
     `UsageError` for a `mapping`/`scale` that names no column of the system, or a zero or
     non-finite `scale` factor. A UTF-8 byte-order mark is ignored.
 
@@ -255,6 +259,8 @@ def load_trajectory(
     difference = {"backward": backward_difference, "central": central_difference}
     for name, (source, how) in optional.items():
         values[name] = np.asarray(difference[how](ts, values[source]))
+    measured = {v: v[1:] for v in state_names if v.startswith("d") and v[1:] in state_names and v not in optional}
+    check_velocities(ts, values, measured, path=path, columns={n: mapping.get(n, n) for n in wanted}, scale=scale)
     xs = np.stack([values[s] for s in state_names], axis=1)
     us = np.stack([values[s] for s in input_names], axis=1)
     check_times_for_float32(ts, path)

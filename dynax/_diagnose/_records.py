@@ -11,6 +11,7 @@ import numpy as np
 
 from .._data._derivatives import resample
 from .._data._trajectory import Trajectory
+from .._data._velocities import check_trajectory_velocities
 from .._errors import DataError, UsageError
 from .._identify._defaults import position_fit_window, with_velocities_from_positions
 from ._horizon import Horizon, position_spread, predictability_horizon, relative_position_error
@@ -44,6 +45,7 @@ def _prepare_records(system, train, validation, holdout_fraction, notes):
                 f"diagnose: the record {rec.source or ''} has states {rec.state_names} and inputs {rec.input_names}, "
                 f"but {type(system).__name__} has {system.state_names} and {system.input_names}"
             )
+        check_trajectory_velocities(rec)  # a velocity in other units than its position: refused, named
     if validation is None:
         if not 0 < holdout_fraction < 1:
             raise UsageError(f"diagnose: `holdout_fraction` must be in (0, 1), got {holdout_fraction}")
@@ -53,6 +55,8 @@ def _prepare_records(system, train, validation, holdout_fraction, notes):
         )
     else:
         validation_records = _as_records(validation, "validation")
+        for rec in validation_records:
+            check_trajectory_velocities(rec)
     dt = float(np.median(np.concatenate([np.diff(np.asarray(r.ts)) for r in train_records + validation_records])))
     if not all(r.is_uniform for r in train_records + validation_records):
         train_records = [resample(r, dt) for r in train_records]

@@ -21,6 +21,7 @@ from jaxtyping import Array, Float
 
 from .._precision import warn_if_float32
 from .._data._trajectory import Trajectory
+from .._data._velocities import check_trajectory_velocities
 from .._errors import DataError, UsageError
 from .._fit import Parameters, Solution
 from .._simulate import FixedGrid
@@ -74,6 +75,7 @@ def _check_data(system, trajectories):
                 f"({traj.state_names}, {traj.input_names}) but {type(system).__name__} has "
                 f"{system.state_names} and {system.input_names}"
             )
+        check_trajectory_velocities(traj)  # a velocity in other units than its position: refused, named
 
 
 def _system_name(system):

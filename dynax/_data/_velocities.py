@@ -1,0 +1,132 @@
+r"""A check that each measured velocity column is the derivative of its position column.
+
+A velocity logged in other units than its angle (degrees per second, revolutions, rpm, the motor's
+side of a gear), with the opposite sign, or mapped from another joint's column, makes every model
+fitted to the record wrong, and nothing downstream names the cause: the least-squares fit and the
+simulation both go on. So `load_trajectory` compares them. Over blocks of about 50 ms, the mean of a
+velocity column equals the change of its position over the block divided by the block's duration
+(the secant slope) whatever the velocity's noise, filter or lag, up to the curvature inside a block.
+The gain $g$ of the block means $m$ on the secant slopes $s$ (least squares, $m \approx g s$) is 1 for
+a velocity in the position's units per second. Noise in $m$ averages out of $g$ (it is in the
+regression's output); noise in $s$ is the encoder's, divided by the block's duration (2 to 3 % of
+the motion on the DFKI rig at its 1e-4 rad even without averaging). A record is refused where $g$ is
+off by more than `MAX_GAIN_ERROR` and by more than `SIGNIFICANCE` of its own standard errors: a
+record that barely moves cannot tell, and is let through.
+"""
+
+import numpy as np
+
+from .._errors import DataError
+
+BLOCK_S = 0.05  # block duration [s]: long against the encoder noise, short against the motion
+MIN_BLOCKS = 20  # fewer blocks than this: too short to tell, no check
+MAX_GAIN_ERROR = 0.2  # |g - 1| above this (and significant) refuses the record
+SIGNIFICANCE = 5.0  # ... by this many standard errors of g
+
+# Factors a velocity's gain takes when its unit differs from its position's (velocity unit per
+# position unit per second), named in the error.
+_KNOWN_FACTORS = {
+    "degrees per second, the position in radians": 180.0 / np.pi,
+    "radians per second, the position in degrees": np.pi / 180.0,
+    "revolutions per second, the position in radians": 1.0 / (2.0 * np.pi),
+    "radians per second, the position in revolutions": 2.0 * np.pi,
+    "rpm, the position in radians": 60.0 / (2.0 * np.pi),
+    "rpm, the position in degrees": 60.0 / 360.0,
+    "millimetres per second, the position in metres": 1000.0,
+    "metres per second, the position in millimetres": 1e-3,
+    "the opposite sign (an encoder or a velocity counted the other way)": -1.0,
+}
+
+
+def _blocks(ts: np.ndarray) -> np.ndarray:
+    """Block boundaries (sample indices) of about `BLOCK_S` each, at least `MIN_BLOCKS` if the record allows."""
+    duration = float(ts[-1] - ts[0])
+    block = max(min(BLOCK_S, duration / MIN_BLOCKS), 2.0 * float(np.median(np.diff(ts))))
+    edges = np.searchsorted(ts, ts[0] + block * np.arange(int(duration / block) + 1))
+    return np.unique(edges)
+
+
+def velocity_gain(ts, q, v) -> tuple[float, float, float] | None:
+    """`(gain, std_error, correlation)` of a velocity column's block means on its position's secant
+    slopes (see the module notes), or `None` when the record has fewer than `MIN_BLOCKS` blocks
+    (of two intervals or more), or does not move."""
+    ts, q, v = (np.asarray(a, dtype=float) for a in (ts, q, v))
+    edges = _blocks(ts)
+    if len(edges) < MIN_BLOCKS + 1:
+        return None
+    start, stop = edges[:-1], edges[1:]  # block k: samples start[k] .. stop[k] (its last shared with the next)
+    slopes = (q[stop] - q[start]) / (ts[stop] - ts[start])
+    # the mean velocity over [t_start, t_stop] by the trapezoid rule on the samples
+    area = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(ts))])
+    means = (area[stop] - area[start]) / (ts[stop] - ts[start])
+    ss = float(slopes @ slopes)
+    if not ss > 0:
+        return None
+    gain = float(slopes @ means) / ss
+    residual = means - gain * slopes
+    std = float(np.sqrt(residual @ residual / max(len(slopes) - 1, 1) / ss))
+    spread = float(np.std(means)) * float(np.std(slopes))
+    corr = float(np.mean((means - means.mean()) * (slopes - slopes.mean())) / spread) if spread > 0 else 0.0
+    return gain, std, corr
+
+
+def _refused(gain: float, std: float) -> bool:
+    return abs(gain - 1.0) > MAX_GAIN_ERROR and abs(gain - 1.0) > SIGNIFICANCE * std
+
+
+def check_velocities(ts, values: dict, pairs: dict[str, str], *, path=None, columns: dict | None = None,
+                     scale: dict | None = None) -> None:
+    """Refuse a record whose velocity column is not the derivative of its position column.
+
+    **Arguments:**
+
+    - `ts`: sample times; `values`: column arrays by contract name.
+    - `pairs`: velocity name -> position name, the measured velocities to check (`{"dq1": "q1", ...}`).
+    - `path`, `columns` (contract name -> file column): named in the error.
+    - `scale`: the factors already applied (contract name -> factor), so that the `scale` the error
+      suggests replaces them.
+
+    **Raises:** `DataError` naming the file and the velocity column, its gain on the position's
+    derivative with its standard error, the unit mix-up that gain matches where one does, the
+    position column it does follow where that is another one, and the `scale` that makes it agree.
+    """
+    columns, scale = columns or {}, scale or {}
+    named = lambda n: f"'{columns.get(n, n)}'" + (f" ({n})" if columns.get(n, n) != n else "")  # noqa: E731
+    for velocity, position in pairs.items():
+        found = velocity_gain(ts, values[position], values[velocity])
+        if found is None or not _refused(found[0], found[1]):
+            continue
+        gain, std, corr = found
+        what = [f"it is not the derivative of {named(position)}: over {BLOCK_S * 1e3:g} ms blocks its mean is "
+                f"{gain:.4g} +- {std:.2g} times the position's change per second (correlation {corr:.2f}; 1 is "
+                "the same quantity in the same units)"]
+        factor = 1.0 / gain if abs(gain) > 1e-3 else None
+        for meaning, known in _KNOWN_FACTORS.items():
+            if abs(gain / known - 1.0) < (MAX_GAIN_ERROR if known < 0 else 0.03):
+                what.append(f"it reads as {meaning}" if known > 0 else f"it has {meaning}")
+                factor = 1.0 / known
+        swapped = False
+        for other_velocity, other in pairs.items():
+            if other != position:
+                match = velocity_gain(ts, values[other], values[velocity])
+                if match is not None and abs(match[0] - 1.0) <= MAX_GAIN_ERROR:
+                    swapped = True
+                    what.append(f"it is the derivative of {named(other)} (gain {match[0]:.4g}): are the columns "
+                                f"of {velocity} and {other_velocity} swapped?")
+        if not swapped and factor is not None:
+            factor *= float(scale.get(velocity, 1.0))
+            what.append(f"if so, scale it (`scale={{'{velocity}': {factor:.6g}}}`, `--scale {velocity}={factor:.6g}`)")
+        raise DataError("; ".join(what), path=path, column=columns.get(velocity, velocity))
+
+
+def check_trajectory_velocities(trajectory) -> None:
+    """`check_velocities` on a `Trajectory`'s states: each `dX` against `X` (the manipulators' and the
+    linear axis's joints; a helicopter's body-frame velocities are not derivatives of its states
+    and have no such pair). Named by the record's `source` and the contract's column names."""
+    names = tuple(trajectory.state_names)
+    pairs = {v: v[1:] for v in names if v.startswith("d") and v[1:] in names}
+    if not pairs:
+        return
+    xs = np.asarray(trajectory.xs, dtype=float)
+    values = {n: xs[:, i] for i, n in enumerate(names)}
+    check_velocities(np.asarray(trajectory.ts, dtype=float), values, pairs, path=trajectory.source or None)
