@@ -153,6 +153,31 @@ def test_an_inconsistent_estimate_warns_and_the_constrained_fit_matches_a_bounde
     assert fit is not None and abs(constrained.parameters["theta7"] - reference[6]) < 1e-3
 
 
+def test_a_reversed_torque_is_named_where_the_estimate_is_inconsistent():
+    # Records of the rig's size by scipy's DOP853 with sensor noise, the elbow's torque logged with the
+    # opposite sign (a motor mounted the other way): least squares is inconsistent and the warning
+    # names tau2 and the scale that fixes it; with both torques reversed (only the physics tells that
+    # apart from negative masses) it names both. With the torques as recorded, nothing is said.
+    model = rig_model()
+    record = recorded(model, 10.0, 21)
+
+    def fit(signs):
+        us = np.asarray(record.us) * np.asarray(signs)
+        data = Trajectory(record.ts, record.xs, jnp.asarray(us), NAMES, ("tau1", "tau2"))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            result = identify(dynax.DoublePendulum(), data, Dynamic(), friction="coulomb", refine=False, holdout=0)
+        return result, [str(w.message) for w in caught if "reversed" in str(w.message)]
+
+    plain, said = fit([1.0, 1.0])
+    assert plain.consistency.consistent and not plain.consistency.active and said == []
+    elbow, said = fit([1.0, -1.0])
+    assert elbow.consistency.active
+    assert len(said) == 1 and said[0].startswith("the recorded tau2 looks reversed") and "'tau2': -1" in said[0], said
+    both, said = fit([-1.0, -1.0])
+    assert len(said) == 1 and "tau1, tau2 look reversed" in said[0] and "--scale tau1=-1,tau2=-1" in said[0], said
+
+
 def test_records_that_hardly_move_say_the_size_parameters_are_poorly_determined(datasets):
     # Torques of 5 % of the usual multisine barely overcome the rig's friction: the arm moves by 3 mrad, the
     # regressor still has full rank, and the estimates are noise. The user is told which, and by how much.
@@ -402,15 +427,39 @@ def dfki(datasets, run):
     return dynax.load_trajectory(path, "double_pendulum", mapping=DFKI_MAPPING)
 
 
+def test_reversed_inputs_of_real_records_are_named(datasets):
+    # The DFKI elbow torque and the EMPS force, each loaded with the opposite sign.
+    from tests.conftest import DFKI_MAPPING
+
+    def reversed_said(system, records):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            identify(system, records, Dynamic(), friction="coulomb", refine=False, holdout=0)
+        return [str(w.message) for w in caught if "reversed" in str(w.message)]
+
+    folder = datasets / "dfki_double_pendulum" / "sys_id"
+    runs = [dynax.load_trajectory(folder / f"trajectory_{r}.csv", "double_pendulum", mapping=DFKI_MAPPING,
+                                  scale={"tau2": -1.0}) for r in ("00", "01", "02")]
+    said = reversed_said(dynax.DoublePendulum(), runs)
+    assert len(said) == 1 and said[0].startswith("the recorded tau2 looks reversed"), said
+    emps = dynax.load_trajectory(datasets / "emps" / "DATA_EMPS.mat", "linear_axis", mapping={"q": "qm", "force": "vir"},
+                                 scale={"force": -35.15065188})
+    said = reversed_said(dynax.LinearAxis(), emps)
+    assert len(said) == 1 and "'force': -1" in said[0], said
+
+
 def test_dfki_least_squares_with_defaults_is_consistent_where_the_unfiltered_fit_is_not(datasets):
     # The new user: six raw runs, no recipe. Without a filter the estimate is physically impossible
     # (negative gravity terms); with the defaults it is consistent, with the filter chosen near the lab's 5 Hz.
     runs = [dfki(datasets, r) for r in DFKI_RUNS]
     # the impossible fit also leaves theta1 to the noise (0.0001, relative standard error 195 %, 58 %
     # counting the rows as independent)
-    with pytest.warns(InconsistentEstimateWarning, match="theta4"), pytest.warns(PoorlyDeterminedWarning, match="theta1"):
+    with pytest.warns(InconsistentEstimateWarning, match="theta4") as caught, \
+            pytest.warns(PoorlyDeterminedWarning, match="theta1"):
         identify(dynax.DoublePendulum(), runs, UNFILTERED, friction="coulomb", consistency="check", refine=False,
                  holdout=0)
+    # noise, not a reversed torque: no sign flip of the inputs makes it consistent and halves the error
+    assert not any("reversed" in str(w.message) for w in caught)
     result = identify(dynax.DoublePendulum(), runs, Dynamic(), friction="coulomb", refine=False)
     assert result.consistency.consistent
     for settings in result.settings:
