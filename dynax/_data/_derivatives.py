@@ -30,14 +30,22 @@ def central_difference(ts: Float[ArrayLike, " time"], ys: Float[ArrayLike, "time
 
     **Returns:** $dy/dt$ at `ts`, same shape as `ys`.
     """
+    ts, ys = _times_and_samples(ts, ys, "central_difference", 3)
+    return jnp.gradient(ys, ts, axis=0)
+
+
+def _times_and_samples(ts, ys, function: str, min_samples: int):
+    """`(ts, ys)` as arrays, concrete times relative to the first sample (float64 on the host first)
+    and in the samples' float type; `ValueError` naming `function` for mismatched or too few samples."""
     ts = host_times(ts)
     if not isinstance(ts, jax.core.Tracer):
         ts = ts - ts[0] if ts.ndim == 1 and ts.size else ts
     ts = jnp.asarray(ts)
     ys = jnp.asarray(ys)
-    if ts.ndim != 1 or ys.shape[:1] != ts.shape or ts.shape[0] < 3:
-        raise ValueError(f"central_difference: need `ts` (time,) with time >= 3 and `ys` (time, ...); got {ts.shape}, {ys.shape}")
-    return jnp.gradient(ys, ts.astype(jnp.result_type(ys, float)), axis=0)
+    if ts.ndim != 1 or ys.shape[:1] != ts.shape or ts.shape[0] < min_samples:
+        raise ValueError(f"{function}: need `ts` (time,) with time >= {min_samples} and `ys` (time, ...); "
+                         f"got {ts.shape}, {ys.shape}")
+    return ts.astype(jnp.result_type(ys, float)), ys
 
 
 def backward_difference(ts: Float[ArrayLike, " time"], ys: Float[ArrayLike, "time ..."]) -> Float[Array, "time ..."]:
@@ -61,14 +69,8 @@ def backward_difference(ts: Float[ArrayLike, " time"], ys: Float[ArrayLike, "tim
 
     **Returns:** $dy/dt$ at `ts`, same shape as `ys`.
     """
-    ts = host_times(ts)
-    if not isinstance(ts, jax.core.Tracer):
-        ts = ts - ts[0] if ts.ndim == 1 and ts.size else ts
-    ts = jnp.asarray(ts)
-    ys = jnp.asarray(ys)
-    if ts.ndim != 1 or ys.shape[:1] != ts.shape or ts.shape[0] < 2:
-        raise ValueError(f"backward_difference: need `ts` (time,) with time >= 2 and `ys` (time, ...); got {ts.shape}, {ys.shape}")
-    dt = jnp.diff(ts.astype(jnp.result_type(ys, float)))
+    ts, ys = _times_and_samples(ts, ys, "backward_difference", 2)
+    dt = jnp.diff(ts)
     slopes = jnp.diff(ys, axis=0) / dt.reshape(dt.shape + (1,) * (ys.ndim - 1))
     return jnp.concatenate([slopes[:1], slopes], axis=0)
 
