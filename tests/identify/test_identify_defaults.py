@@ -167,7 +167,7 @@ def test_a_reversed_torque_is_named_where_the_estimate_is_inconsistent():
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             result = identify(dynax.DoublePendulum(), data, Dynamic(), friction="coulomb", refine=False, holdout=0)
-        return result, [str(w.message) for w in caught if "reversed" in str(w.message)]
+        return result, [str(w.message) for w in caught if "reversed" in str(w.message) or "degrees" in str(w.message)]
 
     plain, said = fit([1.0, 1.0])
     assert plain.consistency.consistent and not plain.consistency.active and said == []
@@ -427,25 +427,36 @@ def dfki(datasets, run):
     return dynax.load_trajectory(path, "double_pendulum", mapping=DFKI_MAPPING)
 
 
-def test_reversed_inputs_of_real_records_are_named(datasets):
-    # The DFKI elbow torque and the EMPS force, each loaded with the opposite sign.
+def test_reversed_inputs_and_angles_in_degrees_of_real_records_are_named(datasets):
+    # The DFKI elbow torque and the EMPS force, each loaded with the opposite sign; the DFKI angles
+    # (and their velocities, so that they still agree) loaded in degrees, both joints or the elbow's.
     from tests.conftest import DFKI_MAPPING
 
-    def reversed_said(system, records):
+    def said(system, records):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             identify(system, records, Dynamic(), friction="coulomb", refine=False, holdout=0)
-        return [str(w.message) for w in caught if "reversed" in str(w.message)]
+        return [str(w.message) for w in caught if "reversed" in str(w.message) or "degrees" in str(w.message)]
 
     folder = datasets / "dfki_double_pendulum" / "sys_id"
-    runs = [dynax.load_trajectory(folder / f"trajectory_{r}.csv", "double_pendulum", mapping=DFKI_MAPPING,
-                                  scale={"tau2": -1.0}) for r in ("00", "01", "02")]
-    said = reversed_said(dynax.DoublePendulum(), runs)
-    assert len(said) == 1 and said[0].startswith("the recorded tau2 looks reversed"), said
+
+    def dfki_runs(scale):
+        return [dynax.load_trajectory(folder / f"trajectory_{r}.csv", "double_pendulum", mapping=DFKI_MAPPING,
+                                      scale=scale) for r in ("00", "01", "02")]
+
+    hints = said(dynax.DoublePendulum(), dfki_runs({"tau2": -1.0}))
+    assert len(hints) == 1 and hints[0].startswith("the recorded tau2 looks reversed"), hints
     emps = dynax.load_trajectory(datasets / "emps" / "DATA_EMPS.mat", "linear_axis", mapping={"q": "qm", "force": "vir"},
                                  scale={"force": -35.15065188})
-    said = reversed_said(dynax.LinearAxis(), emps)
-    assert len(said) == 1 and "'force': -1" in said[0], said
+    hints = said(dynax.LinearAxis(), emps)
+    assert len(hints) == 1 and "'force': -1" in hints[0], hints
+    degrees = 180 / np.pi
+    hints = said(dynax.DoublePendulum(), dfki_runs({"q1": degrees, "dq1": degrees, "q2": degrees, "dq2": degrees}))
+    assert len(hints) == 1 and hints[0].startswith("the joint angles q1, q2 look like degrees"), hints
+    assert "'q1': 0.01745329, 'dq1': 0.01745329, 'q2': 0.01745329, 'dq2': 0.01745329" in hints[0]
+    hints = said(dynax.DoublePendulum(), dfki_runs({"q2": degrees, "dq2": degrees}))
+    assert len(hints) == 1 and hints[0].startswith("the joint angle q2 looks like degrees"), hints
+    assert said(dynax.DoublePendulum(), dfki_runs({})) == []
 
 
 def test_dfki_least_squares_with_defaults_is_consistent_where_the_unfiltered_fit_is_not(datasets):
