@@ -15,6 +15,10 @@ default one: a check that the defaults follow the data, not one format of it. Re
 as encoder angles alone (the mapping without `dq1`, `dq2`: `load_trajectory` estimates them by
 backward differences) at their median interval.
 
+`--band-from positions` takes each record's filter band from its angles' spectra (the ratio of
+signal to white noise a differentiator keeps) instead of its velocities' (docs/data.md, "Why not
+the band of the angles themselves"): `--runs 00,03,05 --band-from positions --out OUT`.
+
 `--stagger K` cuts the records into segments K times, each cut a 1/K segment after the last
 (identify's default is 4; `--stagger 1` gives the single cut used before).
 
@@ -123,6 +127,30 @@ def cell_tests(model, lab, record, horizons) -> list[dict]:
     return out
 
 
+def _band_from_positions() -> None:
+    """Patch `choose_filter` (where identify's stages import it) to read each record's band from its
+    angles' spectra: the widest angle band, with the trim and decimation that go with it."""
+    from dynax._identify import _defaults, _equations
+
+    velocity_rule = _defaults.choose_filter
+
+    def choose_filter(trajectory, *, snr=100.0):
+        choice = velocity_rule(trajectory, snr=snr)
+        if choice.cutoff_hz is None:
+            return choice
+        fs = 1.0 / trajectory.dt
+        n = len(trajectory.state_names) // 2
+        bands = {name: _defaults.noise_floor_and_band(np.asarray(trajectory.xs[:, k]), fs, snr=snr)[1]
+                 for k, name in enumerate(trajectory.state_names[n:])}
+        band = max(bands.values())
+        trim, decimate = _defaults.trim_and_decimation(fs, band, len(trajectory))
+        return dataclasses.replace(choice, cutoff_hz=band, trim=trim, decimate=decimate, band_hz=bands,
+                                   reason=f"band from the angles' spectra: {band:.3g} Hz")
+
+    for module in (_defaults, _equations, identify_module, _refine):
+        module.choose_filter = choose_filter
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", required=True, type=pathlib.Path)
@@ -138,7 +166,11 @@ def main(argv=None):
     parser.add_argument("--stagger", type=int, default=None, metavar="K",
                         help="fit K staggered cuts of the records into segments (SimulationFit.stagger; default "
                              "identify's, 4; 1 for the single cut of the table before 2026-11-26's afternoon)")
+    parser.add_argument("--band-from", choices=("velocities", "positions"), default="velocities",
+                        help="the spectra the filter band is read from (default: %(default)s, identify's)")
     args = parser.parse_args(argv)
+    if args.band_from == "positions":
+        _band_from_positions()
     if args.segment_band_hz is not None:
         identify_module._signal_band_hz = lambda trajectories: args.segment_band_hz
     if args.stagger is not None:
