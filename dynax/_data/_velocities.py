@@ -113,6 +113,9 @@ def check_velocities(ts, values: dict, pairs: dict[str, str], *, path=None, colu
                     swapped = True
                     what.append(f"it is the derivative of {named(other)} (gain {match[0]:.4g}): are the columns "
                                 f"of {velocity} and {other_velocity} swapped?")
+        if not swapped and abs(gain) < MAX_GAIN_ERROR:
+            what.append("if the record has no velocity, leave its columns out (unmapped): `load_trajectory` then "
+                        "estimates every velocity from the positions")
         if not swapped and factor is not None:
             factor *= float(scale.get(velocity, 1.0))
             what.append(f"if so, scale it (`scale={{'{velocity}': {factor:.6g}}}`, `--scale {velocity}={factor:.6g}`)")

@@ -73,6 +73,13 @@ def test_a_velocity_of_the_opposite_sign_or_in_rpm_is_refused(tmp_path):
         load(write(tmp_path, columns, "rpm.csv"))
 
 
+def test_a_placeholder_velocity_column_of_zeros_is_refused_with_the_way_out(tmp_path):
+    columns = arm_columns()
+    columns["vel1"] = np.zeros_like(columns["vel1"])
+    with pytest.raises(dynax.DataError, match=r"column 'vel1'.*its mean is 0 \+- .*leave its columns out"):
+        load(write(tmp_path, columns))
+
+
 def test_swapped_velocity_columns_are_named_as_swapped(tmp_path):
     path = write(tmp_path, arm_columns())
     with pytest.raises(dynax.DataError, match=r"column 'vel2'.*not the derivative of 'pos1'.*derivative of 'pos2' "
