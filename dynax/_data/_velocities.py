@@ -100,11 +100,11 @@ def check_velocities(ts, values: dict, pairs: dict[str, str], *, path=None, colu
         what = [f"it is not the derivative of {named(position)}: over {BLOCK_S * 1e3:g} ms blocks its mean is "
                 f"{gain:.4g} +- {std:.2g} times the position's change per second (correlation {corr:.2f}; 1 is "
                 "the same quantity in the same units)"]
-        factor = 1.0 / gain if abs(gain) > 1e-3 else None
+        factor, matched = 1.0 / gain if gain != 0 else None, False
         for meaning, known in _KNOWN_FACTORS.items():
             if abs(gain / known - 1.0) < (MAX_GAIN_ERROR if known < 0 else 0.03):
                 what.append(f"it reads as {meaning}" if known > 0 else f"it has {meaning}")
-                factor = 1.0 / known
+                factor, matched = 1.0 / known, True
         swapped = False
         for other_velocity, other in pairs.items():
             if other != position:
@@ -116,9 +116,10 @@ def check_velocities(ts, values: dict, pairs: dict[str, str], *, path=None, colu
         if not swapped and abs(gain) < MAX_GAIN_ERROR:
             what.append("if the record has no velocity, leave its columns out (unmapped): `load_trajectory` then "
                         "estimates every velocity from the positions")
-        if not swapped and factor is not None:
+        elif not swapped and factor is not None:
             factor *= float(scale.get(velocity, 1.0))
-            what.append(f"if so, scale it (`scale={{'{velocity}': {factor:.6g}}}`, `--scale {velocity}={factor:.6g}`)")
+            lead = "if so, scale it" if matched else "if that is a unit or a gear ratio, scale it"
+            what.append(f"{lead} (`scale={{'{velocity}': {factor:.6g}}}`, `--scale {velocity}={factor:.6g}`)")
         raise DataError("; ".join(what), path=path, column=columns.get(velocity, velocity))
 
 
