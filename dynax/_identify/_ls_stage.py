@@ -108,6 +108,8 @@ def _least_squares_stage(system, trajectories, method, friction, weights, rcond,
     if check.violated and consistency != "off":
         _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, estimate, trajectories)
         _warn_if_degrees(given, trajectories, float(_relative_equation_error(a, y, estimate)))
+        plain_std = _serially_robust(fit, a, y, weights, estimate, record_rows)[0].std_errors
+        _warn_if_zero_upright(fitted, names, estimate, plain_std, qs)
     if consistency == "constrain" and check.violated:
         estimate, _ = consistent_least_squares(system, names, a, y, weights, start=fit.estimate)
         fitted = _fitted_system(system, names, estimate)
@@ -312,3 +314,47 @@ def _warn_if_degrees(given, trajectories, error) -> None:
         "are radians: load the records with scale={" + ", ".join(f"'{c}': {factor}" for c in columns) + "} (`--scale "
         + ",".join(f"{c}={factor}" for c in columns) + "`).",
         InconsistentEstimateWarning, stacklevel=4)
+
+
+# Which base parameters change sign when a two-link arm's angles are measured from upright instead
+# of hanging down (q1 -> q1 + pi: sin q1 and sin(q1 + q2) flip; q2 -> q2 + pi: cos q2 and
+# sin(q1 + q2) flip; both: sin q1 and cos q2 flip, sin(q1 + q2) twice). The equations are otherwise
+# the same, so the estimate is the hanging-down one with these negated, at the same equation error.
+_UPRIGHT_SIGNS = {("q1",): ("theta4", "theta5"), ("q2",): ("theta3", "theta5"), ("q1", "q2"): ("theta3", "theta4")}
+UPRIGHT_DETERMINED = 10.0  # each negated parameter this many standard errors from zero
+
+
+def _warn_if_zero_upright(fitted, names, estimate, std, qs) -> None:
+    """Where a two-link arm's estimate is inconsistent, warn when its angles look measured from
+    upright: negating the pair of base parameters such a zero negates (`_UPRIGHT_SIGNS`) makes the
+    estimate consistent, and both are far (`UPRIGHT_DETERMINED` standard errors) from zero.
+
+    The contract's angles are 0 hanging down; a rig calibrated for balancing often reads 0 upright.
+    That is an exact change of sign of two gravity or geometry terms (on three DFKI runs with q1
+    shifted by pi: theta4 = -2.231 +- 0.027, theta5 = -1.741 +- 0.018, everything else as before),
+    so nothing in the equations tells it from a physically impossible arm; the physics does, and a
+    gravity term decided to 1 % is not noise. (The unfiltered DFKI fit, inconsistent from noise,
+    has small negative gravity terms and a negative friction as well, and is not named.)
+    """
+    from .._model._two_link import Acrobot, DoublePendulum
+
+    if not isinstance(_split(fitted)[0], (Acrobot, DoublePendulum)):
+        return
+    estimate, std = np.asarray(estimate, dtype=float), np.asarray(std, dtype=float)
+    for joints, flipped in _UPRIGHT_SIGNS.items():
+        index = [names.index(n) for n in flipped]
+        if not all(estimate[i] < 0 and abs(estimate[i]) > UPRIGHT_DETERMINED * std[i] for i in index):
+            continue
+        candidate = estimate.copy()
+        candidate[index] = -candidate[index]
+        system = _fitted_system(fitted, names, jnp.asarray(candidate))
+        if check_consistency(system, names, candidate, qs, warn=False).violated:
+            continue
+        warnings.warn(
+            f"the joint angle{'s' if len(joints) > 1 else ''} {', '.join(joints)} look{'' if len(joints) > 1 else 's'} "
+            f"measured from upright: the least-squares estimate is physically inconsistent only in the signs of "
+            f"{' and '.join(flipped)} ({', '.join(f'{n} = {estimate[i]:.4g} +- {std[i]:.2g}' for n, i in zip(flipped, index))}), "
+            f"which a zero at upright reverses exactly; with them positive it is consistent. The contract's angles are 0 "
+            f"hanging straight down: add pi to {', '.join(joints)} in the records.",
+            InconsistentEstimateWarning, stacklevel=4)
+        return

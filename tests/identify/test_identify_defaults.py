@@ -167,7 +167,7 @@ def test_a_reversed_torque_is_named_where_the_estimate_is_inconsistent():
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             result = identify(dynax.DoublePendulum(), data, Dynamic(), friction="coulomb", refine=False, holdout=0)
-        return result, [str(w.message) for w in caught if "reversed" in str(w.message) or "degrees" in str(w.message)]
+        return result, [str(w.message) for w in caught if any(k in str(w.message) for k in ("reversed", "degrees", "upright"))]
 
     plain, said = fit([1.0, 1.0])
     assert plain.consistency.consistent and not plain.consistency.active and said == []
@@ -427,16 +427,17 @@ def dfki(datasets, run):
     return dynax.load_trajectory(path, "double_pendulum", mapping=DFKI_MAPPING)
 
 
-def test_reversed_inputs_and_angles_in_degrees_of_real_records_are_named(datasets):
+def test_reversed_inputs_and_angles_in_degrees_or_from_upright_of_real_records_are_named(datasets):
     # The DFKI elbow torque and the EMPS force, each loaded with the opposite sign; the DFKI angles
-    # (and their velocities, so that they still agree) loaded in degrees, both joints or the elbow's.
+    # (and their velocities, so that they still agree) loaded in degrees, both joints or the elbow's;
+    # the DFKI angles measured from upright.
     from tests.conftest import DFKI_MAPPING
 
     def said(system, records):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             identify(system, records, Dynamic(), friction="coulomb", refine=False, holdout=0)
-        return [str(w.message) for w in caught if "reversed" in str(w.message) or "degrees" in str(w.message)]
+        return [str(w.message) for w in caught if any(k in str(w.message) for k in ("reversed", "degrees", "upright"))]
 
     folder = datasets / "dfki_double_pendulum" / "sys_id"
 
@@ -457,6 +458,17 @@ def test_reversed_inputs_and_angles_in_degrees_of_real_records_are_named(dataset
     hints = said(dynax.DoublePendulum(), dfki_runs({"q2": degrees, "dq2": degrees}))
     assert len(hints) == 1 and hints[0].startswith("the joint angle q2 looks like degrees"), hints
     assert said(dynax.DoublePendulum(), dfki_runs({})) == []
+    # Angles measured from upright (a rig calibrated for balancing): an exact change of sign of two terms.
+    for shift, joints, terms in (((np.pi, 0.0), "q1 looks", "theta4 and theta5"),
+                                 ((0.0, np.pi), "q2 looks", "theta3 and theta5"),
+                                 ((np.pi, np.pi), "q1, q2 look", "theta3 and theta4")):
+        offset = jnp.asarray([shift[0], shift[1], 0.0, 0.0])[None, :]
+        runs = [Trajectory(r.ts, r.xs + offset, r.us, r.state_names, r.input_names, r.system, r.source)
+                for r in dfki_runs({})]
+        hints = said(dynax.DoublePendulum(), runs)
+        assert len(hints) == 1 and hints[0].startswith(f"the joint angle{'s' if ',' in joints else ''} {joints} "
+                                                       "measured from upright"), hints
+        assert f"signs of {terms}" in hints[0], hints
 
 
 def test_dfki_least_squares_with_defaults_is_consistent_where_the_unfiltered_fit_is_not(datasets):
@@ -469,8 +481,8 @@ def test_dfki_least_squares_with_defaults_is_consistent_where_the_unfiltered_fit
             pytest.warns(PoorlyDeterminedWarning, match="theta1"):
         identify(dynax.DoublePendulum(), runs, UNFILTERED, friction="coulomb", consistency="check", refine=False,
                  holdout=0)
-    # noise, not a reversed torque: no sign flip of the inputs makes it consistent and halves the error
-    assert not any("reversed" in str(w.message) for w in caught)
+    # noise, not a reversed torque, degrees or a zero at upright: no hint fits it
+    assert not any(k in str(w.message) for w in caught for k in ("reversed", "degrees", "upright"))
     result = identify(dynax.DoublePendulum(), runs, Dynamic(), friction="coulomb", refine=False)
     assert result.consistency.consistent
     for settings in result.settings:
