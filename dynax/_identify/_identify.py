@@ -383,8 +383,8 @@ def identify(
       is inconsistent), `"check"` (return the plain estimate; warn with
       `InconsistentEstimateWarning` naming each violated condition) or `"off"`. With either of
       the first two, an inconsistent plain estimate is also tested for a reversed input and, on a
-      two-link arm, for angles in degrees; one that explains it is named in an
-      `InconsistentEstimateWarning` with the `scale` that fixes it.
+      two-link arm, for angles in degrees or measured from upright; one that explains it is named
+      in an `InconsistentEstimateWarning` with the fix.
     - `refine`: `"auto"` (default: refine two-link arms on noisy data), `True`, `False`, or the
       `SimulationFit` settings to refine with.
     - `validation`: held-out records; when given, all of `data` is fitted.
