@@ -22,14 +22,18 @@ REPORT_SUFFIXES = (".json", ".md", ".png", ".csv", ".npz", ".svg", ".pdf")
 
 
 def add_data_options(parser: argparse.ArgumentParser) -> None:
-    """Add the contract's `--map NAME=COLUMN,...` and `--scale NAME=FACTOR,...`."""
+    """Add the contract's `--map NAME=COLUMN,...` and `--scale NAME=FACTOR,...`, and `--offset NAME=VALUE,...`."""
     parser.add_argument("--map", default=None, help="NAME=COLUMN,... for files whose columns are named otherwise")
     parser.add_argument("--scale", default=None, help="NAME=FACTOR,... multiplied into columns (units)")
+    parser.add_argument("--offset", default=None,
+                        help="NAME=VALUE,... added to columns after --scale (an angle's zero: q1=3.14159 for a rig "
+                             "that reads 0 upright)")
 
 
-def data_options(args: argparse.Namespace) -> tuple[dict, dict]:
-    """The parsed `--map` and `--scale` (UsageError naming the malformed one)."""
-    return parse_assignments(args.map, "--map", numeric=False), parse_assignments(args.scale, "--scale", numeric=True)
+def data_options(args: argparse.Namespace) -> tuple[dict, dict, dict]:
+    """The parsed `--map`, `--scale` and `--offset` (UsageError naming the malformed one)."""
+    return (parse_assignments(args.map, "--map", numeric=False), parse_assignments(args.scale, "--scale", numeric=True),
+            parse_assignments(args.offset, "--offset", numeric=True, zero=True))
 
 
 def output_file(path: str, example: str) -> pathlib.Path:

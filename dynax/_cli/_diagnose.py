@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     from .._diagnose import diagnose, Known, Refit, write_report
     from .._diagnose._records import holdout_split
 
-    mapping, scale = data_options(args)
+    mapping, scale, offset = data_options(args)
     if args.dt is not None and not args.dt > 0:
         raise UsageError(f"--dt must be positive, got {args.dt}")
     if args.reference_horizon is not None and not args.reference_horizon > 0:
@@ -81,10 +81,11 @@ def run(args: argparse.Namespace) -> int:
             print(f"note: {set_aside}", file=sys.stderr)
             cli_notes.append(set_aside)
     # Everything that can be refused is read before anything is written.
-    train = [load_trajectory(path, args.system, mapping=mapping, scale=scale, min_samples=50) for path in args.data]
+    train = [load_trajectory(path, args.system, mapping=mapping, scale=scale, offset=offset, min_samples=50)
+             for path in args.data]
     validation = None
     if args.validation is not None:
-        validation = [load_trajectory(path, args.system, mapping=mapping, scale=scale, min_samples=50)
+        validation = [load_trajectory(path, args.system, mapping=mapping, scale=scale, offset=offset, min_samples=50)
                       for path in args.validation]
     if args.dt is not None:
         train = [resample(t, args.dt) for t in train]

@@ -78,12 +78,12 @@ def run(args: argparse.Namespace) -> int:
     if args.stride < 1:
         raise UsageError(f"--stride must be at least 1, got {args.stride}")
     out = output_file(args.out, "metrics.json")
-    mapping, scale = data_options(args)
+    mapping, scale, offset = data_options(args)
     start = time.perf_counter()
     model_obj = read_json_object(args.model, "a model file written by `dynax fit`")
     check_model_file(model_obj, args.model)
     system = model_from_json(model_obj, path=args.model)
-    data = load_helicopter_data(args.data, mapping, scale)
+    data = load_helicopter_data(args.data, mapping, scale, offset)
     n_needed = int(round(max(horizons) / data.dt)) + 1
     if len(data) < n_needed + 1:
         raise DataError(f"has {len(data)} samples; the horizon {max(horizons)} s needs at least {n_needed + 1}",

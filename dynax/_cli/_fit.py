@@ -56,7 +56,7 @@ def register(subparsers):
 QUATERNION_TOLERANCE = 0.01
 
 
-def load_helicopter_data(path, mapping=None, scale=None, *, min_samples=3):
+def load_helicopter_data(path, mapping=None, scale=None, offset=None, *, min_samples=3):
     """Load helicopter data; check the quaternion; resample jittered sampling to its median interval (and say so).
 
     Gaps and near-duplicate time stamps are refused by the loader, so resampling only evens out
@@ -67,7 +67,7 @@ def load_helicopter_data(path, mapping=None, scale=None, *, min_samples=3):
 
     from .._data import load_trajectory, resample
 
-    data = load_trajectory(path, "helicopter", mapping=mapping, scale=scale, min_samples=min_samples)
+    data = load_trajectory(path, "helicopter", mapping=mapping, scale=scale, offset=offset, min_samples=min_samples)
     quats = np.asarray(data.xs[:, 3:7])
     norms = np.linalg.norm(quats, axis=1)
     bad = np.flatnonzero(np.abs(norms - 1) > QUATERNION_TOLERANCE)
@@ -124,9 +124,9 @@ def run(args: argparse.Namespace) -> int:
     if args.max_iterations is not None and args.max_iterations < 1:
         raise UsageError(f"--max-iterations must be at least 1, got {args.max_iterations}")
     out = output_file(args.out, "model.json")
-    mapping, scale = data_options(args)
+    mapping, scale, offset = data_options(args)
     start = time.perf_counter()
-    data = load_helicopter_data(args.data, mapping, scale)
+    data = load_helicopter_data(args.data, mapping, scale, offset)
     system = initial_helicopter(args.model, args.features)
     n_needed, why = required_samples(system, args.criterion, args.horizon, data.dt)
     if len(data) < n_needed:

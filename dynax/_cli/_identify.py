@@ -128,18 +128,19 @@ def run(args: argparse.Namespace) -> int:
     if args.system == "helicopter" and args.friction is not None:
         raise UsageError("--friction does not apply to the helicopter")
     method = _method(args)
-    mapping, scale = data_options(args)
+    mapping, scale, offset = data_options(args)
     out = output_file(args.out, "parameters.json")
     if args.holdout is not None and not 0 <= args.holdout < 1:
         raise UsageError(f"--holdout must be in [0, 1), got {args.holdout}")
     if args.holdout is not None and args.validation:
         raise UsageError("give either --validation files or --holdout, not both")
     start = time.perf_counter()
-    data = [load_trajectory(path, args.system, mapping=mapping, scale=scale, min_samples=min_fit_samples()) for path in args.data]
+    data = [load_trajectory(path, args.system, mapping=mapping, scale=scale, offset=offset,
+                            min_samples=min_fit_samples()) for path in args.data]
     validation = None
     if args.validation:
-        validation = [load_trajectory(path, args.system, mapping=mapping, scale=scale, min_samples=min_fit_samples())
-                      for path in args.validation]
+        validation = [load_trajectory(path, args.system, mapping=mapping, scale=scale, offset=offset,
+                                      min_samples=min_fit_samples()) for path in args.validation]
     refine = {"auto": "auto", "yes": True, "no": False}[args.refine]
     if refine is True and args.system not in ("acrobot", "double_pendulum"):
         raise UsageError(f"--refine yes is for acrobot and double_pendulum; use --method simulation for {args.system}")

@@ -142,6 +142,7 @@ def load_trajectory(
     *,
     mapping: Mapping[str, str] | None = None,
     scale: Mapping[str, float] | None = None,
+    offset: Mapping[str, float] | None = None,
     min_samples: int = 2,
     max_gap: float | None = MAX_GAP,
     min_step: float | None = MIN_STEP,
@@ -161,6 +162,8 @@ def load_trajectory(
       `{"t": "time", "q1": "pos_meas1", ...}`. Unmapped names are looked up as they are.
     - `scale`: contract name -> factor multiplied into that column after reading (units), e.g.
       `{"force": 35.15}` when the file holds volts.
+    - `offset`: contract name -> value added to that column after `scale`, e.g. `{"q1": math.pi}`
+      for a rig whose shoulder reads 0 upright (the contract's angles are 0 hanging down).
     - `min_samples`: refuse files with fewer samples (the method's need).
     - `max_gap`: refuse a time step longer than this many median intervals (default 10): a gap
       in the record, which every method would otherwise bridge by holding or interpolating.
@@ -209,6 +212,11 @@ def load_trajectory(
     for name, factor in scale.items():
         if not (np.isfinite(factor) and factor != 0):
             raise UsageError(f"`scale` for '{name}' must be a finite non-zero factor, got {factor}")
+    offset = dict(offset or {})
+    _check_names("offset", offset, wanted, system)
+    for name, shift in offset.items():
+        if not np.isfinite(shift):
+            raise UsageError(f"`offset` for '{name}' must be finite, got {shift}")
     if not os.path.exists(path):
         raise DataError("no such file", path=path)
     suffix = pathlib.Path(path).suffix.lower()
@@ -244,6 +252,7 @@ def load_trajectory(
             with np.errstate(over="ignore"):
                 arr = arr * factor
             _check_finite(path, column, arr, f" after scaling by {factor:g}")
+        arr = arr + float(offset.get(name, 0.0))
         values[name] = arr
 
     n = values[TIME].shape[0]
@@ -289,8 +298,9 @@ def save_trajectory(trajectory: Trajectory, path: str | os.PathLike) -> None:
             tmp.unlink()
 
 
-def parse_assignments(text: str | None, argument: str, *, numeric: bool) -> dict:
-    """Parse `NAME=VALUE,NAME=VALUE` (the CLI's `--map` and `--scale`), naming what is malformed."""
+def parse_assignments(text: str | None, argument: str, *, numeric: bool, zero: bool = False) -> dict:
+    """Parse `NAME=VALUE,NAME=VALUE` (the CLI's `--map`, `--scale` and `--offset`), naming what is
+    malformed; numeric values must be finite, and non-zero unless `zero` (an offset may be 0)."""
     result = {}
     if not text:
         return result
@@ -304,12 +314,13 @@ def parse_assignments(text: str | None, argument: str, *, numeric: bool) -> dict
         if name in result:
             raise UsageError(f"{argument}: '{name}' is given twice")
         if numeric:
+            what = "value" if zero else "factor"
             if not _NUMBER.fullmatch(value):
-                raise UsageError(f"{argument}: the factor for '{name}' is not a number: '{value}'")
+                raise UsageError(f"{argument}: the {what} for '{name}' is not a number: '{value}'")
             value = float(value)
             if not np.isfinite(value):
-                raise UsageError(f"{argument}: the factor for '{name}' is not finite: '{value}'")
-            if value == 0:
+                raise UsageError(f"{argument}: the {what} for '{name}' is not finite: '{value}'")
+            if value == 0 and not zero:
                 raise UsageError(f"{argument}: the factor for '{name}' is zero, which would erase the column")
         result[name] = value
     return result

@@ -355,6 +355,8 @@ def _warn_if_zero_upright(fitted, names, estimate, std, qs) -> None:
             f"measured from upright: the least-squares estimate is physically inconsistent only in the signs of "
             f"{' and '.join(flipped)} ({', '.join(f'{n} = {estimate[i]:.4g} +- {std[i]:.2g}' for n, i in zip(flipped, index))}), "
             f"which a zero at upright reverses exactly; with them positive it is consistent. The contract's angles are 0 "
-            f"hanging straight down: add pi to {', '.join(joints)} in the records.",
+            f"hanging straight down: load the records with offset={{"
+            + ", ".join(f"'{j}': {np.pi:.6f}" for j in joints) + "} (`--offset "
+            + ",".join(f"{j}={np.pi:.6f}" for j in joints) + "`).",
             InconsistentEstimateWarning, stacklevel=4)
         return

@@ -75,7 +75,7 @@ def test_identify_succeeds_with_mapping(acrobot_csv, tmp_path):
     renamed.write_text(acrobot_csv.read_text().replace("t,q1,q2,dq1,dq2,tau2", "time,a,b,c,d,volts", 1))
     out = tmp_path / "params.json"
     code = main(["identify", "acrobot", str(renamed), "--method", "power", "--out", str(out),
-                 "--map", "t=time,q1=a,q2=b,dq1=c,dq2=d,tau2=volts", "--scale", "tau2=1.0"])
+                 "--map", "t=time,q1=a,q2=b,dq1=c,dq2=d,tau2=volts", "--scale", "tau2=1.0", "--offset", "tau2=0"])
     assert code == 0
     report = json.loads(out.read_text())
     assert report["system"] == "acrobot" and report["method"] == "power"

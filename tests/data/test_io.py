@@ -165,6 +165,18 @@ def test_dfki_files_read_without_their_velocity_columns_give_the_logged_velociti
         np.testing.assert_allclose(estimated.xs[1:], logged.xs[1:], rtol=0, atol=1e-9 * scale, err_msg=path.name)
 
 
+def test_offset_is_added_after_scale_and_checked(tmp_path):
+    path = write(tmp_path, HEADER + "\n" + good_rows())
+    run = dynax.load_trajectory(path, "acrobot", scale={"q1": 2.0}, offset={"q1": np.pi, "tau2": -0.5})
+    np.testing.assert_allclose(run.state("q1"), 2.0 * 0.1 * np.arange(5) + np.pi)
+    np.testing.assert_allclose(np.asarray(run.us)[:, 0], 0.5)
+    with pytest.raises(dynax.UsageError, match="offset.*'q9'"):
+        dynax.load_trajectory(path, "acrobot", offset={"q9": 1.0})
+    with pytest.raises(dynax.UsageError, match="`offset` for 'q1' must be finite"):
+        dynax.load_trajectory(path, "acrobot", offset={"q1": float("nan")})
+    assert parse_assignments("q1=3.141593,q2=0", "--offset", numeric=True, zero=True) == {"q1": 3.141593, "q2": 0.0}
+
+
 def test_parse_assignments():
     assert parse_assignments("t=time, q1=pos", "--map", numeric=False) == {"t": "time", "q1": "pos"}
     assert parse_assignments("force=35.15", "--scale", numeric=True) == {"force": 35.15}

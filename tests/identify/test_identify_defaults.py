@@ -462,13 +462,12 @@ def test_reversed_inputs_and_angles_in_degrees_or_from_upright_of_real_records_a
     for shift, joints, terms in (((np.pi, 0.0), "q1 looks", "theta4 and theta5"),
                                  ((0.0, np.pi), "q2 looks", "theta3 and theta5"),
                                  ((np.pi, np.pi), "q1, q2 look", "theta3 and theta4")):
-        offset = jnp.asarray([shift[0], shift[1], 0.0, 0.0])[None, :]
-        runs = [Trajectory(r.ts, r.xs + offset, r.us, r.state_names, r.input_names, r.system, r.source)
-                for r in dfki_runs({})]
+        runs = [dynax.load_trajectory(folder / f"trajectory_{r}.csv", "double_pendulum", mapping=DFKI_MAPPING,
+                                      offset={"q1": shift[0], "q2": shift[1]}) for r in ("00", "01", "02")]
         hints = said(dynax.DoublePendulum(), runs)
         assert len(hints) == 1 and hints[0].startswith(f"the joint angle{'s' if ',' in joints else ''} {joints} "
                                                        "measured from upright"), hints
-        assert f"signs of {terms}" in hints[0], hints
+        assert f"signs of {terms}" in hints[0] and "--offset q" in hints[0], hints
 
 
 def test_dfki_least_squares_with_defaults_is_consistent_where_the_unfiltered_fit_is_not(datasets):
