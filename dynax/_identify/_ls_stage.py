@@ -264,9 +264,10 @@ def _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, estimate, 
 
 
 def _warn_if_degrees(given, trajectories, error) -> None:
-    """Where the estimate is inconsistent, refit a two-link arm's records with each set of its joint
-    angles (and their velocities) read as degrees: if one gives a consistent estimate and at most
-    `REVERSED_GAIN` of the equation error, warn that those angles look like degrees.
+    """Where the estimate is inconsistent, refit the records with each set of the system's joint
+    angles (`angle_indices`; a two-link arm's both, a linear axis none) and their velocities read as
+    degrees: if one gives a consistent estimate and at most `REVERSED_GAIN` of the equation error,
+    warn that those angles look like degrees.
 
     Velocities are checked against their positions at load (`dynax._data._velocities`), but a file
     with both in degrees passes that check, and the arm's equations, whose gravity and Coriolis terms
@@ -276,14 +277,13 @@ def _warn_if_degrees(given, trajectories, error) -> None:
     """
     import itertools
 
-    from .._model._two_link import Acrobot, DoublePendulum
-
     system, method, friction, weights, rcond = given
     base = _split(system)[0]
-    if not isinstance(base, (Acrobot, DoublePendulum)):
-        return
     names = tuple(trajectories[0].state_names)
-    joints = [(names.index(q), names.index("d" + q)) for q in base.joint_names]
+    angles = [base.joint_names[k] for k in base.angle_indices if k < len(base.joint_names)]
+    if not angles or any("d" + q not in names for q in angles):
+        return
+    joints = [(names.index(q), names.index("d" + q)) for q in angles]
     best = None
     for size in range(1, len(joints) + 1):
         for chosen in itertools.combinations(range(len(joints)), size):
@@ -303,8 +303,8 @@ def _warn_if_degrees(given, trajectories, error) -> None:
                 best = (chosen, candidate_error)
     if best is None:
         return
-    which = [base.joint_names[j] for j in best[0]]
-    columns = [c for j in best[0] for c in (base.joint_names[j], "d" + base.joint_names[j])]
+    which = [angles[j] for j in best[0]]
+    columns = [c for j in best[0] for c in (angles[j], "d" + angles[j])]
     factor = f"{np.pi / 180.0:.7g}"
     warnings.warn(
         f"the joint angle{'s' if len(which) > 1 else ''} {', '.join(which)} look{'' if len(which) > 1 else 's'} "
@@ -316,18 +316,13 @@ def _warn_if_degrees(given, trajectories, error) -> None:
         InconsistentEstimateWarning, stacklevel=4)
 
 
-# Which base parameters change sign when a two-link arm's angles are measured from upright instead
-# of hanging down (q1 -> q1 + pi: sin q1 and sin(q1 + q2) flip; q2 -> q2 + pi: cos q2 and
-# sin(q1 + q2) flip; both: sin q1 and cos q2 flip, sin(q1 + q2) twice). The equations are otherwise
-# the same, so the estimate is the hanging-down one with these negated, at the same equation error.
-_UPRIGHT_SIGNS = {("q1",): ("theta4", "theta5"), ("q2",): ("theta3", "theta5"), ("q1", "q2"): ("theta3", "theta4")}
 UPRIGHT_DETERMINED = 10.0  # each negated parameter this many standard errors from zero
 
 
 def _warn_if_zero_upright(fitted, names, estimate, std, qs) -> None:
-    """Where a two-link arm's estimate is inconsistent, warn when its angles look measured from
-    upright: negating the pair of base parameters such a zero negates (`_UPRIGHT_SIGNS`) makes the
-    estimate consistent, and both are far (`UPRIGHT_DETERMINED` standard errors) from zero.
+    """Where an arm's estimate is inconsistent, warn when its angles look measured from upright:
+    negating the base parameters such a zero negates (the system's `upright_zero_signs`) makes the
+    estimate consistent, and each is far (`UPRIGHT_DETERMINED` standard errors) from zero.
 
     The contract's angles are 0 hanging down; a rig calibrated for balancing often reads 0 upright.
     That is an exact change of sign of two gravity or geometry terms (on three DFKI runs with q1
@@ -336,12 +331,11 @@ def _warn_if_zero_upright(fitted, names, estimate, std, qs) -> None:
     gravity term decided to 1 % is not noise. (The unfiltered DFKI fit, inconsistent from noise,
     has small negative gravity terms and a negative friction as well, and is not named.)
     """
-    from .._model._two_link import Acrobot, DoublePendulum
-
-    if not isinstance(_split(fitted)[0], (Acrobot, DoublePendulum)):
-        return
+    signs = _split(fitted)[0].upright_zero_signs()
     estimate, std = np.asarray(estimate, dtype=float), np.asarray(std, dtype=float)
-    for joints, flipped in _UPRIGHT_SIGNS.items():
+    for joints, flipped in signs.items():
+        if any(n not in names for n in flipped):
+            continue
         index = [names.index(n) for n in flipped]
         if not all(estimate[i] < 0 and abs(estimate[i]) > UPRIGHT_DETERMINED * std[i] for i in index):
             continue

@@ -202,6 +202,13 @@ class AbstractSystem(eqx.Module):
         Default: no conditions (an empty dict: every parameter is free)."""
         return {}
 
+    def upright_zero_signs(self) -> dict[tuple[str, ...], tuple[str, ...]]:
+        """Per set of joints, the base parameters whose sign an angle measured from the other end
+        (upright instead of hanging down: the angle shifted by pi) reverses, the equations being
+        otherwise the same; `identify` names such a zero where negating them makes an inconsistent
+        estimate consistent. Default: none."""
+        return {}
+
     def base_parameter_meanings(self) -> dict[str, tuple[str, str]]:
         """Per base parameter, the group of its consistency condition and what the bound means, e.g.
         `{"theta4": ("gravity", "hanging straight down is the stable rest")}`: the words of

@@ -182,6 +182,12 @@ class AbstractTwoLink(AbstractManipulator):
         return dict(theta1="inertia1", theta2="positive", theta3="nonnegative", theta4="positive",
                     theta5="positive", theta6="nonnegative", theta7="nonnegative")
 
+    def upright_zero_signs(self):
+        r"""$q_1 + \pi$ flips $\sin q_1$ and $\sin(q_1 + q_2)$ ($\theta_4$, $\theta_5$); $q_2 + \pi$ flips
+        $\cos q_2$ and $\sin(q_1 + q_2)$ ($\theta_3$, $\theta_5$); both flip $\sin q_1$ and $\cos q_2$
+        ($\theta_3$, $\theta_4$). Mass matrix, Coriolis and gravity are otherwise unchanged."""
+        return {("q1",): ("theta4", "theta5"), ("q2",): ("theta3", "theta5"), ("q1", "q2"): ("theta3", "theta4")}
+
     def refinement_terms(self):
         r"""The elbow motor's rotor inertia, `RotorInertia(1)` at zero: with the base parameters it is
         the whole of a geared motor's effect, diagonal and the off-diagonal coupling $-g_r I_r$."""
