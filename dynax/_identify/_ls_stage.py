@@ -21,7 +21,6 @@ from ._record_friction import coulomb_columns, record_friction, RecordFriction
 from ._regressors import _positions, _split, with_parameters
 
 
-
 def _fitted_system(system, names, estimate):
     """`system` carrying the estimate; base parameters the fitted model leaves out are as the system's
     `with_base_parameters` sets them (a linear axis fitted without Coulomb friction gets `coulomb = 0`)."""
@@ -106,8 +105,9 @@ def _least_squares_stage(system, trajectories, method, friction, weights, rcond,
     qs = _joint_positions(system, trajectories)
     check = check_consistency(fitted, names, estimate, qs, warn=consistency == "check")
     if check.violated and consistency != "off":
-        _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, estimate, trajectories)
-        _warn_if_degrees(given, trajectories, float(_relative_equation_error(a, y, estimate)))
+        error = float(_relative_equation_error(a, y, estimate))
+        _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, error, trajectories)
+        _warn_if_degrees(given, trajectories, error)
         plain_std = _serially_robust(fit, a, y, weights, estimate, record_rows)[0].std_errors
         _warn_if_zero_upright(fitted, names, estimate, plain_std, qs)
     if consistency == "constrain" and check.violated:
@@ -201,11 +201,30 @@ def _relative_equation_error(a, y, estimate):
     return jnp.linalg.norm(a @ estimate - y) / jnp.linalg.norm(y)
 
 
-
 REVERSED_GAIN = 0.5  # a sign flip must at least halve the equation error to be named
 
 
-def _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, estimate, trajectories) -> None:
+def _best_subset(n: int, refit, error: float):
+    """The subset of `n` candidates (inputs to negate, joints to read in degrees) that best explains an
+    inconsistent estimate, with its equation error, or `None`. `refit(subset)` returns `(consistent,
+    error, physics_alone)` for the records changed so, or `None` where they cannot be fitted. A subset
+    explains the estimate where the refit is consistent with at most `REVERSED_GAIN` of `error`, or
+    consistent at all where `physics_alone` (negating every input negates the estimate and keeps its
+    error)."""
+    import itertools
+
+    best = None
+    for size in range(1, n + 1):
+        for subset in itertools.combinations(range(n), size):
+            found = refit(subset)
+            if found is None or not found[0]:
+                continue
+            if (found[1] <= REVERSED_GAIN * error or found[2]) and (best is None or found[1] < best[1]):
+                best = (subset, found[1])
+    return best
+
+
+def _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, error, trajectories) -> None:
     """Where the estimate is inconsistent, try each set of the recorded inputs with its sign flipped:
     if one gives a consistent estimate and at most `REVERSED_GAIN` of the equation error, warn that
     those inputs look reversed, with the `scale` that fixes them.
@@ -217,8 +236,6 @@ def _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, estimate, 
     names no cause. Flipping an input negates the equation rows of the joint it drives, so each
     candidate is one more least-squares solve. Systems whose inputs share a joint are not probed.
     """
-    import itertools
-
     base = _split(system)[0]
     b = np.asarray(base.input_matrix())
     driven = [np.flatnonzero(np.abs(b[:, k]) > 0) for k in range(b.shape[1])]
@@ -227,28 +244,25 @@ def _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, estimate, 
             set(np.concatenate(driven).tolist())):
         return
     rows = a.shape[0] // n_joints  # rows stacked joint by joint
-    error = float(_relative_equation_error(a, y, estimate))
     inputs = tuple(trajectories[0].input_names)
-    best = None
-    for size in range(1, len(driven) + 1):
-        for flipped in itertools.combinations(range(len(driven)), size):
-            sign = np.ones(a.shape[0])
-            for k in flipped:
-                for j in driven[k]:
-                    sign[j * rows:(j + 1) * rows] = -1.0
-            y_flipped = y * jnp.asarray(sign, y.dtype)
-            try:
-                candidate = least_squares(a, y_flipped, names=names, weights=weights, rcond=rcond).estimate
-            except IdentifiabilityError:
-                continue
-            if check_consistency(_fitted_system(system, names, candidate), names, candidate, qs, warn=False).violated:
-                continue
-            flipped_error = float(_relative_equation_error(a, y_flipped, candidate))
-            # Every input negated negates the estimate and leaves the error as it is: there the physics
-            # alone (masses are positive) tells the two apart.
-            every = size == len(driven)
-            if (every or flipped_error <= REVERSED_GAIN * error) and (best is None or flipped_error < best[1]):
-                best = (flipped, flipped_error)
+
+    def refit(flipped):
+        sign = np.ones(a.shape[0])
+        for k in flipped:
+            for j in driven[k]:
+                sign[j * rows:(j + 1) * rows] = -1.0
+        y_flipped = y * jnp.asarray(sign, y.dtype)
+        try:
+            candidate = least_squares(a, y_flipped, names=names, weights=weights, rcond=rcond).estimate
+        except IdentifiabilityError:
+            return None
+        consistent = not check_consistency(_fitted_system(system, names, candidate), names, candidate, qs,
+                                           warn=False).violated
+        # Every input negated negates the estimate and leaves the error as it is: there the physics
+        # alone (masses are positive) tells the two apart.
+        return consistent, float(_relative_equation_error(a, y_flipped, candidate)), len(flipped) == len(driven)
+
+    best = _best_subset(len(driven), refit, error)
     if best is None:
         return
     which = [inputs[k] for k in best[0]]
@@ -275,8 +289,6 @@ def _warn_if_degrees(given, trajectories, error) -> None:
     of 85 % against 23 %, and an estimate of zeros with small negative terms). One more least-squares
     stage per set, built from scaled records.
     """
-    import itertools
-
     system, method, friction, weights, rcond = given
     base = _split(system)[0]
     names = tuple(trajectories[0].state_names)
@@ -284,23 +296,19 @@ def _warn_if_degrees(given, trajectories, error) -> None:
     if not angles or any("d" + q not in names for q in angles):
         return
     joints = [(names.index(q), names.index("d" + q)) for q in angles]
-    best = None
-    for size in range(1, len(joints) + 1):
-        for chosen in itertools.combinations(range(len(joints)), size):
-            columns = [c for j in chosen for c in joints[j]]
-            factor = np.ones(len(names))
-            factor[columns] = np.pi / 180.0
-            scaled = [Trajectory(t.ts, t.xs * jnp.asarray(factor, t.xs.dtype)[None, :], t.us, t.state_names,
-                                 t.input_names, t.system, t.source) for t in trajectories]
-            try:
-                stage = _least_squares_stage(system, scaled, method, friction, weights, rcond, "off")
-            except (IdentifiabilityError, UsageError):
-                continue
-            candidate_error = float(_relative_equation_error(stage.a, stage.y, stage.estimate))
-            if stage.consistency.violated or candidate_error > REVERSED_GAIN * error:
-                continue
-            if best is None or candidate_error < best[1]:
-                best = (chosen, candidate_error)
+
+    def refit(chosen):
+        factor = np.ones(len(names))
+        factor[[c for j in chosen for c in joints[j]]] = np.pi / 180.0
+        scaled = [Trajectory(t.ts, t.xs * jnp.asarray(factor, t.xs.dtype)[None, :], t.us, t.state_names,
+                             t.input_names, t.system, t.source) for t in trajectories]
+        try:
+            stage = _least_squares_stage(system, scaled, method, friction, weights, rcond, "off")
+        except (IdentifiabilityError, UsageError):
+            return None
+        return stage.consistency.consistent, float(_relative_equation_error(stage.a, stage.y, stage.estimate)), False
+
+    best = _best_subset(len(joints), refit, error)
     if best is None:
         return
     which = [angles[j] for j in best[0]]
