@@ -16,7 +16,7 @@ from ._columns import columns_for, OPTIONAL_STATES
 from .._precision import check_times_for_float32
 from ._matlab import read_mat_columns
 from ._sampling import check_time_stamps, MAX_GAP, MIN_STEP
-from ._velocities import check_velocities
+from ._velocities import check_velocities, velocity_pairs
 from ._trajectory import Trajectory
 
 TIME = "t"
@@ -268,7 +268,7 @@ def load_trajectory(
     difference = {"backward": backward_difference, "central": central_difference}
     for name, (source, how) in optional.items():
         values[name] = np.asarray(difference[how](ts, values[source]))
-    measured = {v: v[1:] for v in state_names if v.startswith("d") and v[1:] in state_names and v not in optional}
+    measured = {v: q for v, q in velocity_pairs(state_names).items() if v not in optional}
     check_velocities(ts, values, measured, path=path, columns={n: mapping.get(n, n) for n in wanted}, scale=scale)
     xs = np.stack([values[s] for s in state_names], axis=1)
     us = np.stack([values[s] for s in input_names], axis=1)

@@ -38,6 +38,12 @@ _KNOWN_FACTORS = {
 }
 
 
+def velocity_pairs(state_names) -> dict[str, str]:
+    """Velocity name -> position name for the states named `dX` beside an `X` (the manipulators' and
+    the linear axis's joints; a helicopter's body-frame velocities have no such pair)."""
+    return {v: v[1:] for v in state_names if v.startswith("d") and v[1:] in state_names}
+
+
 def _blocks(ts: np.ndarray) -> np.ndarray:
     """Block boundaries (sample indices) of about `BLOCK_S` each, at least `MIN_BLOCKS` if the record allows."""
     duration = float(ts[-1] - ts[0])
@@ -128,7 +134,7 @@ def check_trajectory_velocities(trajectory) -> None:
     linear axis's joints; a helicopter's body-frame velocities are not derivatives of its states
     and have no such pair). Named by the record's `source` and the contract's column names."""
     names = tuple(trajectory.state_names)
-    pairs = {v: v[1:] for v in names if v.startswith("d") and v[1:] in names}
+    pairs = velocity_pairs(names)
     if not pairs:
         return
     xs = np.asarray(trajectory.xs, dtype=float)
