@@ -75,8 +75,8 @@ def case(kind, value, reps, per_record, seed=0):
     steps = np.arange(4 * per_record) % (2 * per_record)
     estimates, errors = [], {"independent": [], "kernel": [], "prewhitened": []}
     for _ in range(reps):
-        x = np.concatenate([np.concatenate([np.ones((per_record, 1)), _series(rng, kind, value, (per_record, 2))], axis=1)
-                            for _ in range(2)])
+        drift = [_series(rng, kind, value, (per_record, 2)) for _ in range(2)]
+        x = np.concatenate([np.concatenate([np.ones((per_record, 1)), d], axis=1) for d in drift])
         x = np.concatenate([x, x * np.array([1.0, -1.0, 0.5])])
         e = np.concatenate([_series(rng, kind, value, (per_record,)) for _ in range(4)])
         y = x @ np.array([1.0, 2.0, -1.0]) + e
