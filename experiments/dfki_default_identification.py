@@ -166,6 +166,10 @@ def main(argv=None):
     parser.add_argument("--stagger", type=int, default=None, metavar="K",
                         help="fit K staggered cuts of the records into segments (SimulationFit.stagger; default "
                              "identify's, 4; 1 for the single cut of the table before 2026-11-26's afternoon)")
+    parser.add_argument("--offsets", choices=("auto", "force", "angles"), default="auto",
+                        help="Dynamic(offsets=...): auto (identify's default: angle zeros or force offsets per record, "
+                             "whichever explains the runs clearly better), force (force offsets, the default before "
+                             "2026-11-27) or angles")
     parser.add_argument("--band-from", choices=("velocities", "positions"), default="velocities",
                         help="the spectra the filter band is read from (default: %(default)s, identify's)")
     args = parser.parse_args(argv)
@@ -194,7 +198,8 @@ def main(argv=None):
     for held in held_out:
         train = [training[r] for r in RUNS if r != held]
         start = time.perf_counter()
-        result = dynax.identify(dynax.DoublePendulum(), train, dynax.Dynamic(), friction="coulomb",
+        offsets = {"auto": "auto", "force": True, "angles": "angles"}[args.offsets]
+        result = dynax.identify(dynax.DoublePendulum(), train, dynax.Dynamic(offsets=offsets), friction="coulomb",
                                 validation=[runs[held]], horizons_s=HORIZONS)
         seconds = time.perf_counter() - start
         lab_error = held_out_error(lab, [runs[held]], HORIZONS)
@@ -220,6 +225,8 @@ def main(argv=None):
             "record_residual_scale": list(refinements[-1].record_sigma),
             "reweights": refinements[-1].reweights,
             "input_timing": stages["output_error"].get("input_timing"),
+            "offsets": args.offsets,
+            "angle_zeros": None if result.angle_zeros is None else result.angle_zeros.to_json(),
             "settings": [{k: s[k] for k in ("lowpass_hz", "lowpass_order", "trim", "decimate")} for s in result.settings],
         }
         results["runs"][held] = entry

@@ -119,6 +119,8 @@ HEAVY_TESTS = (
     "tests/identify/test_identify_defaults.py::test_dfki_least_squares_with_defaults_is_consistent_where_the_unfiltered_fit_is_not",
     "tests/identify/test_identify_defaults.py::test_one_dfki_run_alone_is_said_to_determine_the_size_parameters_poorly",
     "tests/identify/test_identify_defaults.py::test_a_resting_dfki_record_refined_by_default_is_still_said_to_be_poorly_determined",
+    "tests/identify/test_angle_zeros.py::test_the_dfki_runs_read_their_angles_from_zeros_of_their_own",
+    "tests/identify/test_angle_zeros.py::test_encoder_zeros_that_differ_between_records_are_found_measured_and_fitted_out",
     "tests/diagnose/test_report_and_cli.py::test_cli_diagnose_takes_several_runs_and_keeps_them_apart",
     "tests/control/test_experiment.py::test_quick_experiment_writes_results_and_figures",
     "tests/vehicle/test_compiled_solvers.py::test_compiled_backprop_takes_the_python_lbfgs_steps",

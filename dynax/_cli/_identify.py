@@ -207,6 +207,8 @@ def run(args: argparse.Namespace) -> int:
         cells = "; ".join(f"{record} " + ", ".join(f"{joint} {value:+.3g}" for joint, value in zip(fitted_offsets["joints"], row))
                           for record, row in zip(fitted_offsets["records"], fitted_offsets["values"]))
         print(f"  force offsets fitted per record (not part of the model): {cells}")
+    if result.angle_zeros is not None:
+        print("  " + result.angle_zeros.note())
     timing = (result.stages or {}).get("output_error", {}).get("input_timing")
     if timing:
         latency = 1e3 * timing["latency_s"]

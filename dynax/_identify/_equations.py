@@ -90,7 +90,11 @@ class Dynamic(eqx.Module):
       `lowpass_hz`) on systems whose model has no constant term of its own (two-link arms; a linear
       axis has its `offset` parameter already). A small motion about an equilibrium that an offset
       has shifted otherwise biases the gravity terms (DFKI run 00 alone: $\theta_4$ 0.47 instead of
-      about 2.3).
+      about 2.3). On an arm whose every joint is a driven angle, `"auto"` also fits one *angle zero*
+      per record and joint instead (an encoder zeroed where the arm stood when the recording
+      began, `dynax._identify._angle_zeros`) and keeps whichever of the two leaves the smaller
+      equation error (as many unknowns); the DFKI runs choose the angle zeros. `"angles"` fits the
+      angle zeros whatever the error (such arms only); `True` the force offsets.
 
     ??? cite
 
@@ -107,7 +111,7 @@ class Dynamic(eqx.Module):
     decimate: int | Literal["auto"] = "auto"
     inputs: Literal["held", "sampled"] = "held"
     weighting: Literal["none", "joint"] = "none"
-    offsets: bool | Literal["auto"] = "auto"
+    offsets: bool | Literal["auto", "angles"] = "auto"
 
 
 class Power(eqx.Module):

@@ -9,6 +9,7 @@ arm data, and validated by open-loop simulation on held-out records. The least-s
 `_result.py`; this module chooses and runs them.
 """
 
+import dataclasses
 import warnings
 from collections.abc import Sequence
 from typing import Literal
@@ -29,6 +30,7 @@ from .._model._linear_axis import LinearAxis
 from .._model._extensions import Extended
 from .._model._system import AbstractSystem, size_parameter_names
 from .._model._two_link import Acrobot, DoublePendulum
+from ._angle_zeros import AngleZeros, applies as _angle_zeros_apply, record_angle_zeros
 from ._consistency import check_consistency, Consistency
 from ._defaults import choose_filter
 from ._equations import _equations, _uniform, Dynamic, Energy, Power
@@ -354,7 +356,9 @@ def identify(
       (`consistent_least_squares`), and `consistency.active` names what had to be enforced;
     - `Dynamic` estimates one constant offset of the recorded force per record and driven joint
       with the parameters (`Dynamic(offsets=...)`; reported in the least-squares stage, not part
-      of the model);
+      of the model), or, on an arm whose every joint is a driven angle and where they leave the
+      smaller equation error, one zero of each angle per record (`angle_zeros`: encoders zeroed
+      where the arm stood when each recording began); both stages then fit the records less them;
     - for two-link arms whose velocities carry measurement noise (real data), the least-squares
       estimate is refined by the output-error fit with the elbow motor's rotor inertia and the
       input timing, consistent by construction (`refine_by_simulation`, on the records less their
@@ -415,13 +419,19 @@ def identify(
         _warn_unvalidated(held, source)
         return result
 
+    zeros = _record_angle_zeros(system, fitted, method, friction, rcond)
+    if zeros is not None and zeros.chosen:  # both stages fit the records less their angle zeros
+        fitted = zeros.corrected(fitted, system)
+        method = dataclasses.replace(method, offsets=False)
     ls = _least_squares_stage(system, fitted, method, friction, weights, rcond, consistency)
     ls_error = _relative_equation_error(ls.a, ls.y, ls.estimate)
     ls_validation = validate(ls.system)
     std = ls.fit.std_errors
     poorly = _size_errors(system, ls.names, ls.estimate, std)  # the returned estimate's, unless refined below
     stages = {"least_squares": _stage_json(ls.label, ls.names, ls.estimate, std, ls_error, ls_validation,
-                                           consistency=ls.consistency.to_json(), offsets=_offsets_json(ls, fitted),
+                                           consistency=ls.consistency.to_json(),
+                                           offsets=_offsets_json(ls, fitted),
+                                           angle_zeros=None if zeros is None else zeros.to_json(),
                                            poorly_determined=poorly, serial_correlation=ls.serial)}
     refinement = _refinement_method(refine, ls.system, method, fitted)
     final = dict(system=ls.system, names=ls.names, estimate=ls.estimate, std=std, error=ls_error,
@@ -457,12 +467,29 @@ def identify(
         validation=final["validation"],
         stages=stages,
         record_offsets=ls.offsets,
+        angle_zeros=zeros,
         record_friction=ls.friction,
         poorly_determined=poorly,
         record_std_errors=None if final.get("record_std") is None else jnp.asarray(final["record_std"]),
         refined_covariance=None if final.get("covariance") is None else jnp.asarray(final["covariance"]),
         jointly_determined=jointly,
     )
+
+
+def _record_angle_zeros(system, records, method, friction, rcond) -> AngleZeros | None:
+    """Each record's angle zeros (`record_angle_zeros`) where `Dynamic`'s `offsets` lets them be
+    fitted on this system: `"angles"`, or `"auto"` with the settings chosen from the data on an arm
+    whose every joint is a driven angle (they are then weighed against force offsets); else `None`."""
+    if not isinstance(method, Dynamic) or not _angle_zeros_apply(system):
+        if isinstance(method, Dynamic) and method.offsets == "angles":
+            raise UsageError(f"Dynamic(offsets='angles'): {type(_split(system)[0]).__name__} is not an arm whose every "
+                             "joint is an angle that an input drives")
+        return None
+    if method.offsets == "angles":
+        return record_angle_zeros(system, records, method, friction, rcond, compare=False)
+    if method.offsets == "auto" and isinstance(method.lowpass_hz, str) and method.lowpass_hz == "auto":
+        return record_angle_zeros(system, records, method, friction, rcond)
+    return None
 
 
 def _size_errors(system, names, estimate, std, record_std=None) -> dict[str, float] | None:

@@ -62,9 +62,9 @@ def _offset_rows(system, method, counts):
         return None
     wanted = method.offsets
     if isinstance(wanted, str):
-        if wanted != "auto":
-            raise UsageError(f"Dynamic: `offsets` must be True, False or 'auto', got {wanted!r}")
-        wanted = isinstance(method.lowpass_hz, str) and method.lowpass_hz == "auto"
+        if wanted not in ("auto", "angles"):
+            raise UsageError(f"Dynamic: `offsets` must be True, False, 'auto' or 'angles', got {wanted!r}")
+        wanted = wanted == "auto" and isinstance(method.lowpass_hz, str) and method.lowpass_hz == "auto"
     if not wanted:
         return None
     groups = offset_groups(system, counts)

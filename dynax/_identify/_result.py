@@ -10,6 +10,7 @@ from .._fit import Solution
 from .._model._system import AbstractSystem
 from ._consistency import Consistency
 from ._least_squares import LeastSquaresFit
+from ._angle_zeros import AngleZeros
 from ._offsets import RecordOffsets
 from ._record_friction import RecordFriction
 from ._validation import HeldOutError
@@ -64,6 +65,11 @@ class Identification(eqx.Module):
       joint's recorded force (from each half of the record too) and whether they differ between
       records (`RecordOffsets`, see `dynax._identify._offsets`): a sensor zero that changes from one
       recording to the next, which no model term carries; `None` otherwise.
+    - `angle_zeros`: for `Dynamic` with the settings chosen from the data on an arm whose every
+      joint is a driven angle, each record's zero of each angle fitted with the parameters (an
+      encoder zeroed where the arm stood when the recording began), whether both stages fitted the
+      records less them (`chosen`: they left a smaller equation error than force offsets) and why
+      (`AngleZeros`, see `dynax._identify._angle_zeros`); `None` otherwise.
     - `record_friction`: for `Dynamic` on two records or more with `friction="coulomb"`, each
       record's Coulomb friction coefficients (from each of four parts of the record too) and whether they
       differ between records (`RecordFriction`, see `dynax._identify._record_friction`): a friction
@@ -111,6 +117,7 @@ class Identification(eqx.Module):
     stages: dict | None = None
     solution: Solution | None = None
     record_offsets: RecordOffsets | None = None
+    angle_zeros: AngleZeros | None = None
     record_friction: RecordFriction | None = None
     poorly_determined: dict[str, float] | None = None
     record_std_errors: Float[Array, " n_params"] | None = None
@@ -147,7 +154,7 @@ class Identification(eqx.Module):
 
     def to_json(self) -> dict:
         """The contract's `identify` output object, extended with `settings`, `consistency`,
-        `validation`, `stages`, `record_offsets` and `record_friction` where they apply."""
+        `validation`, `stages`, `record_offsets`, `angle_zeros` and `record_friction` where they apply."""
         out = {
             "system": self.system_name,
             "method": self.method,
@@ -167,6 +174,8 @@ class Identification(eqx.Module):
             out["stages"] = self.stages
         if self.record_offsets is not None:
             out["record_offsets"] = self.record_offsets.to_json()
+        if self.angle_zeros is not None:
+            out["angle_zeros"] = self.angle_zeros.to_json()
         if self.record_friction is not None:
             out["record_friction"] = self.record_friction.to_json()
         if self.poorly_determined is not None:
