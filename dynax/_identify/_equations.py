@@ -11,6 +11,7 @@ r"""The least-squares models of `identify` and their equations.
 and what `record_offsets` tests.
 """
 
+import dataclasses
 from typing import Literal
 
 import equinox as eqx
@@ -266,6 +267,25 @@ def _resolve_dynamic(traj, method: Dynamic) -> dict:
 
 
 def _dynamic_rows(system, traj, method: Dynamic, friction):
+    return dynamic_rows_of(system, dynamic_signals(traj, method), friction)
+
+
+@dataclasses.dataclass(frozen=True)
+class DynamicSignals:
+    """One record as the dynamic model reads it: its (filtered) states `xs`, inputs `us` and times
+    `ts`, whether the inputs are `held`, its `settings` and `trim`. A constant shift of `xs` is the
+    signals of the shifted record: the zero-phase filters pass constants unchanged."""
+
+    ts: jnp.ndarray
+    xs: jnp.ndarray
+    us: jnp.ndarray
+    held: bool
+    settings: dict
+    trim: int
+
+
+def dynamic_signals(traj, method: Dynamic) -> DynamicSignals:
+    """The record's settings (`_resolve_dynamic`) and its signals filtered by them."""
     settings = _resolve_dynamic(traj, method)
     cutoff, order, trim = settings["lowpass_hz"], settings["lowpass_order"], settings["trim"]
     _needs(traj, 2 * trim + 3, "dynamic")
@@ -284,14 +304,27 @@ def _dynamic_rows(system, traj, method: Dynamic, friction):
         held = False
     else:
         held = method.inputs == "held"
-    ys, forces = _dynamic_equations(system, traj.ts, xs, us, friction, held)
-    if settings["decimate"] > 1:
-        ys, forces = _trim_and_decimate(ys, forces, trim, settings["decimate"])
+    return DynamicSignals(traj.ts, xs, us, held, settings, trim)
+
+
+def dynamic_rows_of(system, signals: DynamicSignals, friction):
+    """`(rows, forces, count, settings, trim)` of one record's dynamic equations from its signals."""
+    s = signals
+    trim = s.trim
+    ys, forces = _dynamic_equations(system, s.ts, s.xs, s.us, friction, s.held)
+    if s.settings["decimate"] > 1:
+        ys, forces = _trim_and_decimate(ys, forces, trim, s.settings["decimate"])
         trim = 0
-    elif trim < 0 or settings["decimate"] < 1:
-        raise UsageError(f"`trim` must be >= 0 and `decimate` >= 1, got {trim}, {settings['decimate']}")
+    elif trim < 0 or s.settings["decimate"] < 1:
+        raise UsageError(f"`trim` must be >= 0 and `decimate` >= 1, got {trim}, {s.settings['decimate']}")
     # Without decimation the trim is a slice that `_joint_blocks` takes in the same compiled call.
-    return ys, forces, ys.shape[0] - 2 * trim, settings, trim
+    return ys, forces, ys.shape[0] - 2 * trim, s.settings, trim
+
+
+def stacked_dynamic_equations(parts):
+    """`(a, y, counts)`: the records' `dynamic_rows_of` parts stacked joint by joint."""
+    a, y = _joint_blocks([p[0] for p in parts], [p[1] for p in parts], tuple(p[4] for p in parts))
+    return a, y, tuple(int(p[2]) for p in parts)
 
 
 def _interval_integrals(ts, values_left, values_right):
@@ -412,8 +445,7 @@ def _equations(system, trajectories, method, friction, weights, rcond):
     settings, counts = (), ()
     if isinstance(method, Dynamic):
         parts = [_dynamic_rows(system, t, method, friction) for t in trajectories]
-        a, y = _joint_blocks([p[0] for p in parts], [p[1] for p in parts], tuple(p[4] for p in parts))
-        counts = tuple(int(p[2]) for p in parts)
+        a, y, counts = stacked_dynamic_equations(parts)
         n_samples = sum(counts)
         settings = tuple(p[3] for p in parts)
         if method.weighting not in ("none", "joint"):
