@@ -377,10 +377,15 @@ def test_encoder_angles_alone_with_defaults_give_consistent_estimates(tmp_path):
 # Arms of other sizes than the rig's (Drake's 1 m, 1 kg acrobot links; a 10 cm, 50 g desk pendulum), with
 # friction and rotor inertia in proportion and torques scaled by the gravity torque: the defaults read
 # the data, not the rig (the filter's cut-off came out 3.8 to 5.1 Hz and 8.7 to 19 Hz on five records of
-# each; the refinement within 0.1 % and 0.2 % of theta1..theta5 there).
+# each; the refinement within 0.1 % and 0.2 % of theta1..theta5 there). The desk arm's training records
+# are 6 s: its band reaches 19 Hz, so the refinement's grid is four times the big arm's, and 6 s hold
+# as many periods of its motion as 12 s of the rig's (theta1..theta5 within 0.22 % with 6 s, 0.32 % with
+# 12 s; 142 s against 254 s).
 OTHER_SIZES = {
-    "drake_1m": (dict(m1=1.0, m2=1.0, l1=1.0, lc1=0.5, lc2=1.0, Ic1=0.083, Ic2=0.33, b1=0.1, b2=0.1), (1.0, 0.8), 0.03),
-    "desk_10cm": (dict(m1=0.05, m2=0.04, l1=0.1, lc1=0.05, lc2=0.07, Ic1=4e-5, Ic2=3e-5, b1=1e-4, b2=1e-4), (0.004, 0.003), 2e-5),
+    "drake_1m": (dict(m1=1.0, m2=1.0, l1=1.0, lc1=0.5, lc2=1.0, Ic1=0.083, Ic2=0.33, b1=0.1, b2=0.1), (1.0, 0.8), 0.03,
+                 12.0),
+    "desk_10cm": (dict(m1=0.05, m2=0.04, l1=0.1, lc1=0.05, lc2=0.07, Ic1=4e-5, Ic2=3e-5, b1=1e-4, b2=1e-4), (0.004, 0.003),
+                  2e-5, 6.0),
 }
 
 
@@ -388,12 +393,12 @@ OTHER_SIZES = {
 def test_noisy_arms_of_other_sizes_give_consistent_estimates(size):
     from dynax._model._two_link import base_parameters_from_physical
 
-    physical, fc, ir2 = OTHER_SIZES[size]
+    physical, fc, ir2, duration = OTHER_SIZES[size]
     base = {k: float(v) for k, v in base_parameters_from_physical(**physical).items()}
     model = dynax.Extended(dynax.DoublePendulum.from_base_parameters(base),
                            (dynax.CoulombFriction(0, fc[0]), dynax.CoulombFriction(1, fc[1]), dynax.RotorInertia(1, ir2)))
     scale = base["theta4"] / RIG["theta4"]
-    train = [recorded(model, 12.0, seed, torque_scale=scale) for seed in (10, 11)]
+    train = [recorded(model, duration, seed, torque_scale=scale) for seed in (10, 11)]
     held = recorded(model, 4.0, 12, torque_scale=scale)
     with warnings.catch_warnings():
         warnings.simplefilter("error", InconsistentEstimateWarning)
