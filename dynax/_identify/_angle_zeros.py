@@ -120,10 +120,15 @@ def _angle_rows(system) -> tuple[int, ...]:
 
 def shifted(record: Trajectory, rows, values) -> Trajectory:
     """`record` with `values` taken off its position states `rows` (velocities unchanged)."""
-    shift = np.zeros(record.xs.shape[1])
-    shift[list(rows)] = np.asarray(values)
-    return Trajectory(record.ts, record.xs - jnp.asarray(shift, record.xs.dtype)[None, :], record.us,
+    return Trajectory(record.ts, record.xs - _shift(record.xs, rows, values), record.us,
                       record.state_names, record.input_names, record.system, record.source)
+
+
+def _shift(xs, rows, values):
+    """`(1, states)`: `values` in the position states `rows`, zero elsewhere, in `xs`'s dtype."""
+    shift = np.zeros(xs.shape[1])
+    shift[list(rows)] = np.asarray(values)
+    return jnp.asarray(shift, xs.dtype)[None, :]
 
 
 def _joint_major_columns(derivative, counts, cuts):
@@ -165,9 +170,7 @@ def record_angle_zeros(system, trajectories: list[Trajectory], method: Dynamic, 
     def equations(zeros):
         parts = []
         for s, z in zip(signals, zeros):
-            shift = np.zeros(s.xs.shape[1])
-            shift[list(rows)] = z
-            moved = dataclasses.replace(s, xs=s.xs - jnp.asarray(shift, s.xs.dtype)[None, :])
+            moved = dataclasses.replace(s, xs=s.xs - _shift(s.xs, rows, z))
             parts.append(dynamic_rows_of(system, moved, friction))
         a, y, counts = stacked_dynamic_equations(parts)
         return np.asarray(a, dtype=float), np.asarray(y, dtype=float), counts

@@ -273,7 +273,7 @@ def _dynamic_rows(system, traj, method: Dynamic, friction):
 @dataclasses.dataclass(frozen=True)
 class DynamicSignals:
     """One record as the dynamic model reads it: its (filtered) states `xs`, inputs `us` and times
-    `ts`, whether the inputs are `held`, its `settings` and `trim`. A constant shift of `xs` is the
+    `ts`, whether the inputs are `held`, and its `settings`. A constant shift of `xs` is the
     signals of the shifted record: the zero-phase filters pass constants unchanged."""
 
     ts: jnp.ndarray
@@ -281,7 +281,6 @@ class DynamicSignals:
     us: jnp.ndarray
     held: bool
     settings: dict
-    trim: int
 
 
 def dynamic_signals(traj, method: Dynamic) -> DynamicSignals:
@@ -304,13 +303,13 @@ def dynamic_signals(traj, method: Dynamic) -> DynamicSignals:
         held = False
     else:
         held = method.inputs == "held"
-    return DynamicSignals(traj.ts, xs, us, held, settings, trim)
+    return DynamicSignals(traj.ts, xs, us, held, settings)
 
 
 def dynamic_rows_of(system, signals: DynamicSignals, friction):
     """`(rows, forces, count, settings, trim)` of one record's dynamic equations from its signals."""
     s = signals
-    trim = s.trim
+    trim = s.settings["trim"]
     ys, forces = _dynamic_equations(system, s.ts, s.xs, s.us, friction, s.held)
     if s.settings["decimate"] > 1:
         ys, forces = _trim_and_decimate(ys, forces, trim, s.settings["decimate"])
