@@ -86,10 +86,13 @@ class AngleZeros:
     chosen: bool
     reason: str
 
-    def corrected(self, records: list[Trajectory], system) -> list[Trajectory]:
-        """`records` with each one's zeros taken off its angles (what the fit uses where `chosen`)."""
+    def corrected(self, records: list[Trajectory], system, owners=None) -> list[Trajectory]:
+        """`records` with each one's zeros taken off its angles (what the fit uses where `chosen`);
+        `owners[k]`, where given, is the fitted record whose zeros `records[k]` is read from (a
+        held-out tail: the same recording, so the same encoder zero)."""
         rows = _angle_rows(system)
-        return [shifted(r, rows, v) for r, v in zip(records, self.values)]
+        owners = range(len(records)) if owners is None else owners
+        return [shifted(r, rows, self.values[i]) for r, i in zip(records, owners)]
 
     def to_json(self) -> dict:
         return {"kind": "angle", "records": list(self.records), "joints": list(self.joints),

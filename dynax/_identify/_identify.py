@@ -421,6 +421,10 @@ def identify(
 
     zeros = _record_angle_zeros(system, fitted, method, friction, rcond)
     if zeros is not None and zeros.chosen:  # both stages fit the records less their angle zeros
+        if validation is None and held:  # a held-out tail is read from its record's zero: less it too
+            owners = [i for i, (whole, head) in enumerate(zip(trajectories, fitted)) if len(head) < len(whole)]
+            held = zeros.corrected(held, system, owners)
+            source += "; each tail less its record's angle zeros, fitted on its head"
         fitted = zeros.corrected(fitted, system)
         method = dataclasses.replace(method, offsets=False)
     ls = _least_squares_stage(system, fitted, method, friction, weights, rcond, consistency)

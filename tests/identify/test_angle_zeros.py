@@ -65,6 +65,22 @@ def test_encoder_zeros_that_differ_between_records_are_found_measured_and_fitted
     assert report["angle_zeros"]["chosen"] and report["stages"]["least_squares"]["offsets"] is None
 
 
+def test_held_out_tails_are_read_less_their_records_zeros(records):
+    # Validation on the last 20 % of each record: a tail is the same recording as the head its zeros are
+    # fitted on, so it is simulated less them, and the error is the model's, as on the tails read from the
+    # true zero; as recorded, the tails' gravity is that of another angle, and the error is the zeros'.
+    big = np.array([[-0.09, 0.11], [0.1, -0.08], [-0.05, 0.1]])  # [rad] as large as DFKI run 00's (-0.09, +0.11)
+    shifted = [with_zero(r, z) for r, z in zip(records, big)]
+    result = identify(dynax.DoublePendulum(), shifted, Dynamic(), friction="coulomb", refine=False)
+    assert result.angle_zeros.chosen and "angle zeros" in result.validation.source, result.validation.source
+    true_tails = dynax.split_for_validation(records, 0.2, max(result.validation.horizons_s))[1]
+    recorded_tails = dynax.split_for_validation(shifted, 0.2, max(result.validation.horizons_s))[1]
+    model = np.asarray(dynax.held_out_error(result.system, true_tails, result.validation.horizons_s).rmse)
+    as_recorded = np.asarray(dynax.held_out_error(result.system, recorded_tails, result.validation.horizons_s).rmse)
+    np.testing.assert_allclose(np.asarray(result.validation.rmse), model, rtol=0.1)
+    assert np.all(as_recorded > 1.3 * model), (as_recorded, model)
+
+
 def test_a_torque_offset_is_not_read_as_an_encoder_zero(records):
     # The shoulder's torque sensor reads high in one record, low in another (test_record_offsets' case):
     # force offsets explain the equations better, so they are what the fit uses.
