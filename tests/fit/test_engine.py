@@ -213,3 +213,32 @@ def test_the_strict_trust_region_refuses_a_rise_that_optimistix_would_accept():
     _, accepted, _, _ = strict.step(jnp.array(False), y, jnp.array([-0.5]), info(1.0), fall, state)
     assert bool(accepted)
     assert bool(strict.step(jnp.array(True), y, y_eval, info(1.0), rise, state)[1])  # the first evaluation is no step
+
+
+def test_a_fit_started_at_its_minimum_stops_at_once_and_the_answer_is_the_tightly_converged_one():
+    """MINPACK's relative-reduction test (lmder's `ftol`): from its own solution a fit takes a step or
+    two. optimistix's test alone, which waits for an accepted step that moves every residual by under
+    `atol + rtol |r|`, took 15 here (23 from the far start, against 10), each a Jacobian through the
+    rollout, while the strict trust region refused steps that raised the loss in its last digits."""
+    import optimistix as optx
+
+    from dynax._fit import StrictTrustRegion
+
+    true, ts, xs, us = _pendulum_data(jax.random.PRNGKey(0), noise=1e-2)
+    start = dynax.LinearAxis(mass=jnp.asarray(1.5), viscous=jnp.asarray(1.0), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0))
+    spec = eqx.tree_at(lambda s: (s.mass, s.viscous), jax.tree.map(lambda _: False, start), (True, True))
+
+    def residuals(model, data):
+        ts, xs, us = data
+        return (dynax.simulate(model, xs[0], ts, us, method=dynax.FixedGrid(substeps=2)).xs - xs).ravel()
+
+    fit = eqx.filter_jit(fit_least_squares)
+    first = fit(residuals, start, spec, (ts, xs, us))
+    again = fit(residuals, first.model, spec, (ts, xs, us))
+    assert first.succeeded and again.succeeded and int(again.steps) <= 3, int(again.steps)
+    # optimistix's own test alone, at 1e-12: the same estimate to a tiny fraction of its standard error
+    tight = optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12)
+    reference = fit(residuals, start, spec, (ts, xs, us), solver=eqx.tree_at(lambda s: s.search, tight, StrictTrustRegion()))
+    assert int(reference.steps) > int(first.steps)
+    for sol in (first, again):
+        np.testing.assert_array_less(np.abs(np.asarray(sol.value - reference.value)), 1e-6 * np.asarray(reference.std_errors))
