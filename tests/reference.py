@@ -40,3 +40,19 @@ def scipy_acrobot(x0, ts, us, p=DRAKE, coulomb=(0.0, 0.0), rotor=(0.0, 0.0), rto
         x = sol.y[:, -1]
         out.append(x)
     return np.asarray(out)
+
+
+def arm_reference(theta, x, tau, coulomb=(0.0, 0.0), velocity_scale=0.01, rotor=(0.0, 0.0)):
+    r"""A two-link arm hanging from its shoulder (the DFKI rig's double pendulum, both joints driven) in
+    base parameters `theta = (theta1, ..., theta7)` ($\theta_1 = I_1 + m_2 l_1^2$, $\theta_2 = I_2$, $\theta_3 = m_2 l_1 l_{c2}$, $\theta_4 = g(m_1 l_{c1} + m_2 l_1)$, $\theta_5 = g
+    m_2 l_{c2}$, viscous $\theta_6, \theta_7$), written out with numpy from the Lagrangian: a smoothed Coulomb
+    friction $-f_c \tanh(\dot q / v_s)$ at each joint and reflected rotor inertias `rotor` on the mass
+    matrix's diagonal. For data made apart from dynax's model code (a scalar-input, closed-form 2x2 solve)."""
+    t1, t2, t3, t4, t5, t6, t7 = theta
+    q1, q2, dq1, dq2 = x
+    c2, s2, s1, s12 = np.cos(q2), np.sin(q2), np.sin(q1), np.sin(q1 + q2)
+    m11, m12, m22 = t1 + t2 + 2 * t3 * c2 + rotor[0], t2 + t3 * c2, t2 + rotor[1]
+    h1 = tau[0] + t3 * s2 * (2 * dq1 * dq2 + dq2**2) - t4 * s1 - t5 * s12 - t6 * dq1 - coulomb[0] * np.tanh(dq1 / velocity_scale)
+    h2 = tau[1] - t3 * s2 * dq1**2 - t5 * s12 - t7 * dq2 - coulomb[1] * np.tanh(dq2 / velocity_scale)
+    det = m11 * m22 - m12 * m12
+    return np.array([dq1, dq2, (m22 * h1 - m12 * h2) / det, (m11 * h2 - m12 * h1) / det])

@@ -23,6 +23,7 @@ from dynax._identify._consistency import (
 from dynax._identify._defaults import choose_filter
 from dynax._identify._least_squares import POORLY_DETERMINED, PoorlyDeterminedWarning
 from dynax._identify._regressors import parameter_names
+from tests.reference import arm_reference
 
 NAMES = ("q1", "q2", "dq1", "dq2")
 UNFILTERED = Dynamic(lowpass_hz=None, trim=1, decimate=1)
@@ -38,30 +39,56 @@ def rig_model():
                                   dynax.RotorInertia(1, RIG_IR2)))
 
 
-def torques(ts, seed):
+FREQUENCIES = np.array([0.3, 0.7, 1.1, 1.7, 2.3])
+
+
+def _multisine(seed):
+    """Amplitudes and phases, `(2, 5)` each, of the two joints' multisine torques of `seed`."""
     rng = np.random.default_rng(seed)
-    freqs = np.array([0.3, 0.7, 1.1, 1.7, 2.3])
-    out = []
-    for amplitude in (0.9, 0.5):
-        phases = rng.uniform(0, 2 * np.pi, size=freqs.size)
-        out.append(sum(amplitude / (1 + k) * np.sin(2 * np.pi * f * ts + p) for k, (f, p) in enumerate(zip(freqs, phases))))
-    return np.stack(out, axis=1)
+    phases = np.stack([rng.uniform(0, 2 * np.pi, size=FREQUENCIES.size) for _ in range(2)])
+    amplitudes = np.array([[a / (1 + k) for k in range(FREQUENCIES.size)] for a in (0.9, 0.5)])
+    return amplitudes, phases
+
+
+def torques(ts, seed):
+    amplitudes, phases = _multisine(seed)
+    ts = np.asarray(ts, dtype=float)
+    return np.einsum("jk,tjk->tj", amplitudes, np.sin(2 * np.pi * FREQUENCIES * ts[:, None, None] + phases))
+
+
+def _arm(model):
+    """`arm_reference`'s description of a `rig_model()`-like arm: base parameters, Coulomb friction
+    and its velocity scale, rotor inertias."""
+    theta = [float(v) for v in model.system.base_parameters.values()]
+    coulomb, rotor, scale = [0.0, 0.0], [0.0, 0.0], 0.01
+    for term in model.terms:
+        kind = type(term).__name__
+        if kind == "CoulombFriction":
+            coulomb[term.joint], scale = float(term.coefficient), float(term.velocity_scale)
+        elif kind == "RotorInertia":
+            rotor[term.joint] = float(term.inertia())
+        else:
+            raise ValueError(f"recorded: no reference equations for {kind}")
+    return theta, tuple(coulomb), scale, tuple(rotor)
 
 
 def recorded(model, duration, seed, *, dt=0.002, velocity_noise=0.15, torque_noise=0.02, position_noise=1e-4,
              latency=0.0, torque_scale=1.0):
-    """Simulate with scipy's DOP853 (not dynax's integrator) under continuous multisine torques, then add
+    """Simulate with scipy's DOP853 (not dynax's integrator) and the arm's equations written out with numpy
+    (`tests.reference.arm_reference`, not dynax's model code) under continuous multisine torques, then add
     sensor noise at the DFKI rig's level: velocity estimate 0.15 rad/s rms, current-based torque 0.02 N m,
     encoder 1e-4 rad. The torque that acts at time t is the one recorded at t - `latency`. `torque_scale`
     multiplies the torques and their noise (for arms of other sizes)."""
-    field = jax.jit(lambda x, u: model.vector_field(0.0, x, u))
+    theta, coulomb, scale, rotor = _arm(model)
+    amplitudes, phases = _multisine(seed)
 
-    def torque(t):
-        return torque_scale * torques(np.atleast_1d(t) - latency, seed)[0]
+    def field(t, x):
+        tau = torque_scale * np.sum(amplitudes * np.sin(2 * np.pi * FREQUENCIES * (t - latency) + phases), axis=1)
+        return arm_reference(theta, x, tau, coulomb, scale, rotor)
 
     ts = np.arange(0.0, duration, dt)
-    solution = scipy.integrate.solve_ivp(lambda t, x: np.asarray(field(jnp.asarray(x), jnp.asarray(torque(t)))),
-                                         (0.0, ts[-1]), np.zeros(4), method="DOP853", t_eval=ts, rtol=1e-9, atol=1e-11)
+    solution = scipy.integrate.solve_ivp(field, (0.0, ts[-1]), np.zeros(4), method="DOP853", t_eval=ts, rtol=1e-9,
+                                         atol=1e-11)
     assert solution.success
     rng = np.random.default_rng(seed + 100)
     xs = solution.y.T + np.concatenate([position_noise * rng.normal(size=(len(ts), 2)),
