@@ -45,8 +45,9 @@ def _pendulum_data(key, noise):
     return true, ts, xs, us
 
 
-def test_least_squares_recovers_parameters_within_their_standard_errors():
-    true, ts, xs, us = _pendulum_data(jax.random.PRNGKey(0), noise=1e-3)
+def _pendulum_problem():
+    """A start far from `_pendulum_data`'s truth, the filter freeing mass and viscous friction, and the
+    residuals of a fixed-grid rollout from the first measured state."""
     start = dynax.LinearAxis(mass=jnp.asarray(1.5), viscous=jnp.asarray(1.0), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0))
     spec = eqx.tree_at(lambda s: (s.mass, s.viscous), jax.tree.map(lambda _: False, start), (True, True))
 
@@ -54,6 +55,12 @@ def test_least_squares_recovers_parameters_within_their_standard_errors():
         ts, xs, us = data
         return (dynax.simulate(model, xs[0], ts, us, method=dynax.FixedGrid(substeps=2)).xs - xs).ravel()
 
+    return start, spec, residuals
+
+
+def test_least_squares_recovers_parameters_within_their_standard_errors():
+    true, ts, xs, us = _pendulum_data(jax.random.PRNGKey(0), noise=1e-3)
+    start, spec, residuals = _pendulum_problem()
     sol = eqx.filter_jit(fit_least_squares)(residuals, start, spec, (ts, xs, us))
     assert sol.succeeded and sol.names == ("mass", "viscous")
     est, std = sol.estimates(), sol.standard_errors()
@@ -225,13 +232,7 @@ def test_a_fit_started_at_its_minimum_stops_at_once_and_the_answer_is_the_tightl
     from dynax._fit import StrictTrustRegion
 
     true, ts, xs, us = _pendulum_data(jax.random.PRNGKey(0), noise=1e-2)
-    start = dynax.LinearAxis(mass=jnp.asarray(1.5), viscous=jnp.asarray(1.0), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0))
-    spec = eqx.tree_at(lambda s: (s.mass, s.viscous), jax.tree.map(lambda _: False, start), (True, True))
-
-    def residuals(model, data):
-        ts, xs, us = data
-        return (dynax.simulate(model, xs[0], ts, us, method=dynax.FixedGrid(substeps=2)).xs - xs).ravel()
-
+    start, spec, residuals = _pendulum_problem()
     fit = eqx.filter_jit(fit_least_squares)
     first = fit(residuals, start, spec, (ts, xs, us))
     again = fit(residuals, first.model, spec, (ts, xs, us))
