@@ -234,8 +234,8 @@ def sample_interval(system, method: FixedGrid, bound):
             return y_next
 
         # The substeps in a rolled loop, not unrolled: with four Tsit5 substeps of the DFKI rig's
-        # arm, unrolling made the compiled rollout 2.1x larger to compile (2.8 s against 1.4 s) and
-        # 1.4-2.5x slower to run (one 6 s rollout 68-80 ms against 27-38 ms, 600 batched segments
+        # arm, unrolled, the rollout took 2.1x as long to compile (2.8 s against 1.4 s) and ran
+        # 1.4-2.5x slower (one 6 s rollout 68-80 ms against 27-38 ms, 600 batched segments
         # 76-80 against 54-60 ms); `identify`'s refinement compiled in 27 s instead of 42.
         x_new = substep(0, x) if n == 1 else jax.lax.fori_loop(0, n, substep, x)
         # One comparison catches NaN, inf and out-of-bound entries alike (NaN <= bound is False).

@@ -19,7 +19,7 @@ than `atol + rtol |y|` and every residual by less than `atol + rtol |r|`. At a m
 is flat to rounding, the strict region refuses every step that raises the loss in its last digits,
 and only a step shrunk to those digits is accepted: on an output-error fit of a two-link arm
 (`tests/fit/test_engine.py`, and `identify`'s refinement) a fit that had its loss to 1e-10 after 3
-steps of a warm start took 30 more, each a full Jacobian through every rollout. MINPACK's `lmder`
+steps of a warm start took 29 more, each a full Jacobian through every rollout. MINPACK's `lmder`
 (Moré, Garbow & Hillstrom, *User guide for MINPACK-1*, ANL-80-74, 1980, the `ftol` test; Moré
 1978) also stops when both the actual and the predicted relative reductions of the sum of squares
 are at most `ftol` and the actual is at most twice the predicted: the linear model promises no
