@@ -44,10 +44,11 @@ def scipy_acrobot(x0, ts, us, p=DRAKE, coulomb=(0.0, 0.0), rotor=(0.0, 0.0), rto
 
 def arm_reference(theta, x, tau, coulomb=(0.0, 0.0), velocity_scale=0.01, rotor=(0.0, 0.0)):
     r"""A two-link arm hanging from its shoulder (the DFKI rig's double pendulum, both joints driven) in
-    base parameters `theta = (theta1, ..., theta7)` ($\theta_1 = I_1 + m_2 l_1^2$, $\theta_2 = I_2$, $\theta_3 = m_2 l_1 l_{c2}$, $\theta_4 = g(m_1 l_{c1} + m_2 l_1)$, $\theta_5 = g
-    m_2 l_{c2}$, viscous $\theta_6, \theta_7$), written out with numpy from the Lagrangian: a smoothed Coulomb
-    friction $-f_c \tanh(\dot q / v_s)$ at each joint and reflected rotor inertias `rotor` on the mass
-    matrix's diagonal. For data made apart from dynax's model code (a scalar-input, closed-form 2x2 solve)."""
+    base parameters `theta = (theta1, ..., theta7)` ($\theta_1 = I_1 + m_2 l_1^2$, $\theta_2 = I_2$,
+    $\theta_3 = m_2 l_1 l_{c2}$, $\theta_4 = g(m_1 l_{c1} + m_2 l_1)$, $\theta_5 = g m_2 l_{c2}$, viscous
+    $\theta_6, \theta_7$), written out with numpy from the Lagrangian: a smoothed Coulomb friction
+    $-f_c \tanh(\dot q / v_s)$ at each joint and reflected rotor inertias `rotor` on the mass matrix's
+    diagonal. For data made apart from dynax's model code (a scalar-input, closed-form 2x2 solve)."""
     t1, t2, t3, t4, t5, t6, t7 = theta
     q1, q2, dq1, dq2 = x
     c2, s2, s1, s12 = np.cos(q2), np.sin(q2), np.sin(q1), np.sin(q1 + q2)

@@ -50,10 +50,14 @@ def _multisine(seed):
     return amplitudes, phases
 
 
-def torques(ts, seed):
-    amplitudes, phases = _multisine(seed)
+def _multisine_at(ts, amplitudes, phases):
+    """The multisine torques `(len(ts), 2)` of `_multisine`'s amplitudes and phases at the times `ts`."""
     ts = np.asarray(ts, dtype=float)
     return np.einsum("jk,tjk->tj", amplitudes, np.sin(2 * np.pi * FREQUENCIES * ts[:, None, None] + phases))
+
+
+def torques(ts, seed):
+    return _multisine_at(ts, *_multisine(seed))
 
 
 def _arm(model):
@@ -83,7 +87,7 @@ def recorded(model, duration, seed, *, dt=0.002, velocity_noise=0.15, torque_noi
     amplitudes, phases = _multisine(seed)
 
     def field(t, x):
-        tau = torque_scale * np.sum(amplitudes * np.sin(2 * np.pi * FREQUENCIES * (t - latency) + phases), axis=1)
+        tau = torque_scale * _multisine_at([t - latency], amplitudes, phases)[0]
         return arm_reference(theta, x, tau, coulomb, scale, rotor)
 
     ts = np.arange(0.0, duration, dt)
