@@ -26,6 +26,17 @@ are at most `ftol` and the actual is at most twice the predicted: the linear mod
 further decrease worth a step, and the function agrees. `levenberg_marquardt` adds that test with
 `ftol = rtol`, on accepted and refused steps alike (a refused step at the floor is the typical
 last one); the point returned is the last accepted one, as always.
+
+**The Jacobian only where a step was taken.** optimistix linearises the residuals at every trial
+point before its search decides whether to take it, so a refused step costs a whole Jacobian: on
+an output-error fit, one rollout carrying every parameter's tangent. MINPACK's `lmder` evaluates
+only the residuals at a trial point and forms the Jacobian after a successful step (Moré 1978,
+sec. 7). `levenberg_marquardt(..., jacobian="accepted")` does the same (`_JacobianOnAcceptance`):
+the trial point's residuals first, which is all the trust region reads, then `jax.jacfwd` at the
+point only when it is taken, kept as a dense matrix (a few unknowns, many residuals). The
+iterates are those of the default to rounding: same search, same descent, same Jacobian. Only
+where the solve runs unbatched: under `vmap` the branch becomes a select and both sides run, so
+the batched diagnosis keeps the default.
 """
 
 import equinox as eqx
@@ -33,7 +44,7 @@ import jax
 import jax.numpy as jnp
 import lineax as lx
 import optimistix as optx
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, Bool, Float, Int, PyTree
 
 
 class _StrictState(eqx.Module):
@@ -73,9 +84,99 @@ class _LevenbergMarquardt(optx.LevenbergMarquardt):
         return done | flat, result
 
 
+class _LazyState(eqx.Module):
+    first_step: Bool[Array, ""]
+    y_eval: Array
+    search_state: _StrictState
+    f_info: optx.FunctionInfo.ResidualJac  # at the last accepted point, its Jacobian a dense matrix
+    aux: PyTree
+    descent_state: PyTree
+    terminate: Bool[Array, ""]
+    result: optx.RESULTS
+    num_steps: Int[Array, ""]
+    num_accepted_steps: Int[Array, ""]
+
+
+def _converged(rtol, atol, norm, y, y_diff, f, f_diff):
+    """optimistix's Cauchy test: every unknown and every residual moved by under `atol + rtol |.|`."""
+    return (norm(jnp.abs(y_diff) / (atol + rtol * jnp.abs(y))) < 1) & (norm(jnp.abs(f_diff) / (atol + rtol * jnp.abs(f))) < 1)
+
+
+class _JacobianOnAcceptance(_LevenbergMarquardt):
+    """`_LevenbergMarquardt` that evaluates only the residuals at a trial point and forms the Jacobian
+    (`jax.jacfwd`, a dense matrix) once the step is taken (see the module's docstring). The unknowns
+    and the residuals are 1-D arrays, as the engine gives them."""
+
+    def init(self, fn, y, args, options, f_struct, aux_struct, tags):
+        jac = lx.MatrixLinearOperator(jnp.zeros(f_struct.shape + y.shape, f_struct.dtype))
+        f_info = optx.FunctionInfo.ResidualJac(jnp.zeros(f_struct.shape, f_struct.dtype), jac)
+        return _LazyState(
+            first_step=jnp.array(True),
+            y_eval=y,
+            search_state=self.search.init(y, f_info),
+            f_info=f_info,
+            aux=jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), aux_struct),
+            descent_state=self.descent.init(y, f_info),
+            terminate=jnp.array(False),
+            result=optx.RESULTS.successful,
+            num_steps=jnp.array(0),
+            num_accepted_steps=jnp.array(0),
+        )
+
+    def step(self, fn, y, args, options, state, tags):
+        residual, aux_eval = fn(state.y_eval, args)
+        # The trust region reads only the trial point's loss: its Jacobian is not formed yet.
+        trial = optx.FunctionInfo.ResidualJac(residual, state.f_info.jac)
+        step_size, accept, search_result, search_state = self.search.step(
+            state.first_step, y, state.y_eval, state.f_info, trial, state.search_state)
+
+        def accepted(descent_state):
+            matrix = jax.jacfwd(lambda z: fn(z, args)[0])(state.y_eval)
+            f_info = optx.FunctionInfo.ResidualJac(residual, lx.MatrixLinearOperator(matrix))
+            descent_state = self.descent.query(state.y_eval, f_info, descent_state)
+            terminate = _converged(self.rtol, self.atol, self.norm, state.y_eval, state.y_eval - y, residual,
+                                   residual - state.f_info.residual)
+            return state.y_eval, f_info, aux_eval, descent_state, terminate
+
+        def rejected(descent_state):
+            return y, state.f_info, state.aux, descent_state, jnp.array(False)
+
+        y, f_info, aux, descent_state, terminate = jax.lax.cond(accept, accepted, rejected, state.descent_state)
+        self.verbose(
+            num_steps=("Step", state.num_steps),
+            accepted_steps=("Accepted steps", state.num_accepted_steps),
+            loss_this_step=("Loss on this step", 0.5 * jnp.sum(residual**2)),
+            loss_last_accepted_step=("Loss on the last accepted step", 0.5 * jnp.sum(state.f_info.residual**2)),
+            step_size=("Step size", step_size),
+        )
+        y_descent, descent_result = self.descent.step(step_size, descent_state)
+        result = optx.RESULTS.where(search_result == optx.RESULTS.successful, descent_result, search_result)
+        new = _LazyState(
+            first_step=jnp.array(False),
+            y_eval=y + y_descent,
+            search_state=search_state,
+            f_info=f_info,
+            aux=aux,
+            descent_state=descent_state,
+            terminate=terminate,
+            result=result,
+            num_steps=state.num_steps + 1,
+            num_accepted_steps=state.num_accepted_steps + jnp.where(accept, 1, 0),
+        )
+        return y, new, jax.tree.map(lambda a, b: jnp.where(state.first_step, a, b), aux, state.aux)
+
+
 def levenberg_marquardt(rtol: float, atol: float, *, norm=optx.max_norm, linear_solver=lx.QR(),
-                        verbose=False) -> optx.LevenbergMarquardt:
+                        verbose=False, jacobian: str = "every_step") -> optx.LevenbergMarquardt:
     """`optimistix.LevenbergMarquardt(rtol, atol, ...)` with the `StrictTrustRegion` and MINPACK's
-    relative-reduction test at `ftol = rtol` (see the module's docstring); same arguments."""
-    solver = _LevenbergMarquardt(rtol=rtol, atol=atol, norm=norm, linear_solver=linear_solver, verbose=verbose)
+    relative-reduction test at `ftol = rtol` (see the module's docstring); same arguments.
+
+    `jacobian="accepted"` forms the Jacobian only at the points it takes, by `jax.jacfwd`, as
+    MINPACK does (the same iterates; for unbatched solves of 1-D unknowns and residuals: under `vmap`
+    it costs one more evaluation of the residuals a step). The default `"every_step"` is optimistix's.
+    """
+    if jacobian not in ("every_step", "accepted"):
+        raise ValueError(f"levenberg_marquardt: `jacobian` must be 'every_step' or 'accepted', got {jacobian!r}")
+    cls = _JacobianOnAcceptance if jacobian == "accepted" else _LevenbergMarquardt
+    solver = cls(rtol=rtol, atol=atol, norm=norm, linear_solver=linear_solver, verbose=verbose)
     return eqx.tree_at(lambda s: s.search, solver, StrictTrustRegion(ftol=rtol))

@@ -243,3 +243,52 @@ def test_a_fit_started_at_its_minimum_stops_at_once_and_the_answer_is_the_tightl
     assert int(reference.steps) > int(first.steps)
     for sol in (first, again):
         np.testing.assert_array_less(np.abs(np.asarray(sol.value - reference.value)), 1e-6 * np.asarray(reference.std_errors))
+
+
+def test_the_jacobian_formed_only_where_a_step_is_taken_gives_the_same_iterates_for_fewer_jacobians():
+    """MINPACK's order (residuals at the trial point, the Jacobian only once the step is taken) against
+    optimistix's (the Jacobian at every trial point): a sum of an exponential and a sine fitted from a
+    start where the trust region refuses steps. Each Jacobian is counted where it is formed (the JVP
+    rule's callback, which depends on the point only); the iterates must be the same."""
+    import optimistix as optx
+
+    from dynax._fit import levenberg_marquardt
+
+    ts = jnp.linspace(0.0, 4.0, 40)
+    data = 2.0 * jnp.exp(-1.3 * ts) + 0.5 * jnp.sin(3.0 * ts)
+    formed = []
+
+    def model(y):
+        return 100.0 * (y[0] * jnp.exp(y[1] * ts) + y[2] * jnp.sin(y[3] * ts) - data)
+
+    @jax.custom_jvp
+    def residuals(y):
+        return model(y)
+
+    @residuals.defjvp
+    def residuals_jvp(primals, tangents):
+        jax.debug.callback(lambda _: formed.append(1), primals[0][0])
+        return jax.jvp(model, primals, tangents)
+
+    start = jnp.array([3.0, -3.0, 0.1, 2.8])
+    solutions = {}
+    for jacobian in ("every_step", "accepted"):
+        formed.clear()
+        solver = levenberg_marquardt(1e-10, 1e-10, jacobian=jacobian)
+        solution = optx.least_squares(lambda y, _: residuals(y), solver, start, max_steps=100, throw=False)
+        jax.effects_barrier()
+        solutions[jacobian] = (solution, len(formed))
+    (lazy, n_lazy), (eager, n_eager) = solutions["accepted"], solutions["every_step"]
+    assert lazy.result == optx.RESULTS.successful and eager.result == optx.RESULTS.successful
+    np.testing.assert_allclose(np.asarray(lazy.value), [2.0, -1.3, 0.5, 3.0], rtol=1e-8)
+    np.testing.assert_allclose(np.asarray(lazy.value), np.asarray(eager.value), rtol=1e-12)
+    steps, accepted = int(lazy.stats["num_steps"]), int(lazy.state.num_accepted_steps)
+    assert steps == int(eager.stats["num_steps"]) and accepted < steps  # the start makes it refuse steps
+    assert n_eager == steps and n_lazy == accepted, (n_eager, n_lazy, steps, accepted)
+    # batched (the branch becomes a select): the same answers as one by one
+    starts = jnp.stack([start, jnp.array([1.0, -0.5, 0.2, 2.5])])
+    solver = levenberg_marquardt(1e-10, 1e-10, jacobian="accepted")
+    batched = jax.vmap(lambda y0: optx.least_squares(lambda y, _: model(y), solver, y0, max_steps=100, throw=False).value)(starts)
+    np.testing.assert_allclose(np.asarray(batched), np.asarray(jnp.stack([lazy.value, lazy.value])), rtol=1e-8)
+    with pytest.raises(ValueError, match="jacobian"):
+        levenberg_marquardt(1e-8, 1e-8, jacobian="sometimes")
