@@ -30,13 +30,14 @@ last one); the point returned is the last accepted one, as always.
 **The Jacobian only where a step was taken.** optimistix linearises the residuals at every trial
 point before its search decides whether to take it, so a refused step costs a whole Jacobian: on
 an output-error fit, one rollout carrying every parameter's tangent. MINPACK's `lmder` evaluates
-only the residuals at a trial point and forms the Jacobian after a successful step (Moré 1978,
-sec. 7). `levenberg_marquardt(..., jacobian="accepted")` does the same (`_JacobianOnAcceptance`):
-the trial point's residuals first, which is all the trust region reads, then `jax.jacfwd` at the
-point only when it is taken, kept as a dense matrix (a few unknowns, many residuals). The
-iterates are those of the default to rounding: same search, same descent, same Jacobian. Only
-where the solve runs unbatched: under `vmap` the branch becomes a select and both sides run, so
-the batched diagnosis keeps the default.
+only the residuals at a trial point and forms the Jacobian after a successful step (Moré, "The
+Levenberg-Marquardt algorithm: implementation and theory", 1978; the user guide above).
+`levenberg_marquardt(..., jacobian="accepted")` does the same (`_JacobianOnAcceptance`): the trial
+point's residuals first, which is all the trust region reads, then `jax.jacfwd` at the point only
+when it is taken, kept as a dense matrix (a few unknowns, many residuals). The iterates are those
+of the default to rounding: same search, same descent, same Jacobian. It pays only where the
+solve runs unbatched: under `vmap` the branch becomes a select and both sides run, so the batched
+diagnosis keeps the default.
 """
 
 import equinox as eqx
@@ -99,7 +100,8 @@ class _LazyState(eqx.Module):
 
 def _converged(rtol, atol, norm, y, y_diff, f, f_diff):
     """optimistix's Cauchy test: every unknown and every residual moved by under `atol + rtol |.|`."""
-    return (norm(jnp.abs(y_diff) / (atol + rtol * jnp.abs(y))) < 1) & (norm(jnp.abs(f_diff) / (atol + rtol * jnp.abs(f))) < 1)
+    small_step = norm(jnp.abs(y_diff) / (atol + rtol * jnp.abs(y))) < 1
+    return small_step & (norm(jnp.abs(f_diff) / (atol + rtol * jnp.abs(f))) < 1)
 
 
 class _JacobianOnAcceptance(_LevenbergMarquardt):

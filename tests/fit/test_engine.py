@@ -288,7 +288,8 @@ def test_the_jacobian_formed_only_where_a_step_is_taken_gives_the_same_iterates_
     # batched (the branch becomes a select): the same answers as one by one
     starts = jnp.stack([start, jnp.array([1.0, -0.5, 0.2, 2.5])])
     solver = levenberg_marquardt(1e-10, 1e-10, jacobian="accepted")
-    batched = jax.vmap(lambda y0: optx.least_squares(lambda y, _: model(y), solver, y0, max_steps=100, throw=False).value)(starts)
+    batched = jax.vmap(lambda y0: optx.least_squares(lambda y, _: model(y), solver, y0, max_steps=100,
+                                                     throw=False).value)(starts)
     np.testing.assert_allclose(np.asarray(batched), np.asarray(jnp.stack([lazy.value, lazy.value])), rtol=1e-8)
     with pytest.raises(ValueError, match="jacobian"):
         levenberg_marquardt(1e-8, 1e-8, jacobian="sometimes")
