@@ -38,6 +38,20 @@ when it is taken, kept as a dense matrix (a few unknowns, many residuals). The i
 of the default to rounding: same search, same descent, same Jacobian. It pays only where the
 solve runs unbatched: under `vmap` the branch becomes a select and both sides run, so the batched
 diagnosis keeps the default.
+
+**Nielsen's damping update.** optimistix's trust region keeps its size after an accepted step
+unless the loss fell by at least 99 % of what its linear model predicted, and then grows it by 3.5;
+a step that the model predicted well but not that well leaves the damping where it was (on the
+noisy rig records, 10 of the first fit's 18 accepted steps), and the fit walks down a valley in
+steps too short for it. Nielsen's rule sets the damping from the gain
+ratio $\rho$ of actual to predicted decrease after every accepted step:
+$\lambda \leftarrow \lambda \max(1/3,\, 1 - (2\rho - 1)^3)$, a third for a perfect prediction, unchanged at
+$\rho = 1/2$, up to twice for a poor one (H. B. Nielsen, "Damping parameter in Marquardt's method",
+IMM-REP-1999-05, DTU, 1999; K. Madsen, H. B. Nielsen and O. Tingleff, *Methods for non-linear least
+squares problems*, 2nd ed., 2004, eq. 3.15 and Algorithm 3.16). A refused step still shrinks the
+region by a quarter. `levenberg_marquardt(..., damping="nielsen")`; the refinement uses it with the
+Jacobian at accepted points (31 steps, 19 accepted, became 25 and 13 on those records, the same
+minimum).
 """
 
 import equinox as eqx
@@ -56,9 +70,11 @@ class _StrictState(eqx.Module):
 class StrictTrustRegion(optx.ClassicalTrustRegion):
     """`optimistix.ClassicalTrustRegion` that also refuses every step that does not lower the loss,
     and records whether the last step passed MINPACK's relative-reduction test with tolerance
-    `ftol` (default 0: never; see the module's docstring)."""
+    `ftol` (default 0: never); with `nielsen`, an accepted step sets the region by Nielsen's rule
+    (see the module's docstring)."""
 
     ftol: float = 0.0
+    nielsen: bool = False
 
     def init(self, y, f_info_struct) -> _StrictState:
         return _StrictState(jnp.array(1.0), jnp.array(False))
@@ -71,6 +87,10 @@ class StrictTrustRegion(optx.ClassicalTrustRegion):
         step_size = jnp.where(strict | ~accept, step_size, self.low_constant * state.step_size)
         predicted = -self.predict_reduction(jax.tree.map(jnp.subtract, y_eval, y), f_info)  # a decrease: positive
         actual = loss - loss_eval
+        if self.nielsen:
+            rho = actual / jnp.where(predicted > 0, predicted, 1.0)
+            grow = 1.0 / jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            step_size = jnp.where(strict & ~first_step & (predicted > 0), grow * state.step_size, step_size)
         tol = self.ftol * loss
         flat = (~first_step) & (jnp.abs(actual) <= tol) & (predicted <= tol) & (actual <= 2.0 * predicted)
         return step_size, strict, result, _StrictState(step_size, flat)
@@ -169,16 +189,20 @@ class _JacobianOnAcceptance(_LevenbergMarquardt):
 
 
 def levenberg_marquardt(rtol: float, atol: float, *, norm=optx.max_norm, linear_solver=lx.QR(),
-                        verbose=False, jacobian: str = "every_step") -> optx.LevenbergMarquardt:
+                        verbose=False, jacobian: str = "every_step", damping: str = "classical") -> optx.LevenbergMarquardt:
     """`optimistix.LevenbergMarquardt(rtol, atol, ...)` with the `StrictTrustRegion` and MINPACK's
     relative-reduction test at `ftol = rtol` (see the module's docstring); same arguments.
 
     `jacobian="accepted"` forms the Jacobian only at the points it takes, by `jax.jacfwd`, as
     MINPACK does (the same iterates; for unbatched solves of 1-D unknowns and residuals: under `vmap`
     it costs one more evaluation of the residuals a step). The default `"every_step"` is optimistix's.
+    `damping="nielsen"` sets the damping after each accepted step by Nielsen's rule; the default
+    `"classical"` is optimistix's trust-region update.
     """
     if jacobian not in ("every_step", "accepted"):
         raise ValueError(f"levenberg_marquardt: `jacobian` must be 'every_step' or 'accepted', got {jacobian!r}")
+    if damping not in ("classical", "nielsen"):
+        raise ValueError(f"levenberg_marquardt: `damping` must be 'classical' or 'nielsen', got {damping!r}")
     cls = _JacobianOnAcceptance if jacobian == "accepted" else _LevenbergMarquardt
     solver = cls(rtol=rtol, atol=atol, norm=norm, linear_solver=linear_solver, verbose=verbose)
-    return eqx.tree_at(lambda s: s.search, solver, StrictTrustRegion(ftol=rtol))
+    return eqx.tree_at(lambda s: s.search, solver, StrictTrustRegion(ftol=rtol, nielsen=damping == "nielsen"))

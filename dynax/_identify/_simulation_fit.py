@@ -343,7 +343,7 @@ def fit_simulation_error(
     )
     p_scale = jnp.where(jnp.abs(p0) > 0, jnp.abs(p0), 1.0).astype(dtype)
     scale = jnp.concatenate([p_scale, jnp.tile(sigma, xs.shape[0])]) if fit_initial_states else p_scale
-    solver = levenberg_marquardt(rtol=rtol, atol=atol, jacobian="accepted")
+    solver = levenberg_marquardt(rtol=rtol, atol=atol, jacobian="accepted", damping="nielsen")
     with ProgressBar(max_steps, "output-error fit", progress=progress, reduce="last") as bar:
         solution, r, r0, jac = _solve(unknowns, parameters, data, scale, solver, max_steps, simulation, fit_initial_states,
                                       bar_token(bar))
