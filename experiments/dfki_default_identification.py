@@ -125,11 +125,10 @@ class ArctanFriction(AbstractJointTerm):
 
 
 def lab_model_as_written(p: dict[str, float]) -> dynax.AbstractSystem:
-    """`model_3.0` with its friction as the lab writes it (`ArctanFriction`), not mapped to a tanh."""
-    theta = lab_parameters(p)
-    rigid = dynax.DoublePendulum.from_base_parameters({k: theta[k] for k in (f"theta{i}" for i in range(1, 8))})
-    return dynax.Extended(rigid, (ArctanFriction(0, p["cf1"]), ArctanFriction(1, p["cf2"]),
-                                  dynax.RotorInertia(1, theta["Ir2"])))
+    """`model_3.0` with its friction as the lab writes it (`ArctanFriction`), not mapped to a tanh:
+    `lab_model` with its two `CoulombFriction` terms replaced."""
+    mapped = lab_model(p)
+    return dynax.Extended(mapped.system, (ArctanFriction(0, p["cf1"]), ArctanFriction(1, p["cf2"]), mapped.terms[2]))
 
 
 def load(run: str, variant: str = "native") -> dynax.Trajectory:

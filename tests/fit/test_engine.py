@@ -245,6 +245,18 @@ def test_a_fit_started_at_its_minimum_stops_at_once_and_the_answer_is_the_tightl
         np.testing.assert_array_less(np.abs(np.asarray(sol.value - reference.value)), 1e-6 * np.asarray(reference.std_errors))
 
 
+def _exponential_and_sine():
+    """Residuals of a sum of an exponential and a sine (scaled by 100) against data made with
+    y = (2, -1.3, 0.5, 3): a small fit whose trust region refuses steps from some starts."""
+    ts = jnp.linspace(0.0, 4.0, 40)
+    data = 2.0 * jnp.exp(-1.3 * ts) + 0.5 * jnp.sin(3.0 * ts)
+
+    def residuals(y):
+        return 100.0 * (y[0] * jnp.exp(y[1] * ts) + y[2] * jnp.sin(y[3] * ts) - data)
+
+    return residuals
+
+
 def test_the_jacobian_formed_only_where_a_step_is_taken_gives_the_same_iterates_for_fewer_jacobians():
     """MINPACK's order (residuals at the trial point, the Jacobian only once the step is taken) against
     optimistix's (the Jacobian at every trial point): a sum of an exponential and a sine fitted from a
@@ -254,12 +266,8 @@ def test_the_jacobian_formed_only_where_a_step_is_taken_gives_the_same_iterates_
 
     from dynax._fit import levenberg_marquardt
 
-    ts = jnp.linspace(0.0, 4.0, 40)
-    data = 2.0 * jnp.exp(-1.3 * ts) + 0.5 * jnp.sin(3.0 * ts)
+    model = _exponential_and_sine()
     formed = []
-
-    def model(y):
-        return 100.0 * (y[0] * jnp.exp(y[1] * ts) + y[2] * jnp.sin(y[3] * ts) - data)
 
     @jax.custom_jvp
     def residuals(y):
@@ -304,11 +312,10 @@ def test_nielsens_damping_update_reaches_the_same_minimum_in_no_more_steps():
 
     from dynax._fit import levenberg_marquardt
 
-    ts = jnp.linspace(0.0, 4.0, 40)
-    data = 2.0 * jnp.exp(-1.3 * ts) + 0.5 * jnp.sin(3.0 * ts)
+    model = _exponential_and_sine()
 
     def residuals(y, _):
-        return 100.0 * (y[0] * jnp.exp(y[1] * ts) + y[2] * jnp.sin(y[3] * ts) - data)
+        return model(y)
 
     starts = ([3.0, -3.0, 0.1, 2.8], [1.0, -0.5, 0.2, 2.5], [1.0, -0.2, 1.0, 2.0], [2.5, -1.0, 0.3, 3.2],
               [1.5, -2.0, 0.8, 2.9])
