@@ -6,6 +6,10 @@ import os
 import subprocess
 import sys
 
+import pytest
+
+pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more
+
 
 def _identify(csv, out, cache_dir, *extra):
     env = {k: v for k, v in os.environ.items() if k != "DYNAX_NO_CACHE"}

@@ -26,6 +26,9 @@ from dynax._diagnose._discovery import propose
 from dynax.synthetic import synthetic_trajectory
 from dynax._model._extensions import AbstractJointTerm, CoulombFriction, Extended, JointSpring
 
+pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more
+
+
 ACROBOT_BASE = ("theta1", "theta2", "theta3", "theta4", "theta5", "theta6", "theta7")
 
 

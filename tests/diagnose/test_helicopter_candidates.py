@@ -23,6 +23,9 @@ from dynax._model._helicopter import Helicopter, hover_state, TEMPEST_COEFFICIEN
 from dynax.synthetic import FlightController
 
 
+pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more
+
+
 U = jnp.asarray([0.1, -0.2, 0.05, 0.3])
 
 

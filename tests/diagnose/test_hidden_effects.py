@@ -28,6 +28,9 @@ from dynax._model._extensions import (
 )
 
 
+pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more
+
+
 def _diagnose_hidden(term, seed, mode=Refit()):
     if isinstance(mode, Known):
         # The user's parameters are right; only the hidden effect is missing.

@@ -13,6 +13,9 @@ from dynax._data import Trajectory
 from dynax._diagnose import diagnose, Refit
 from tests import mujoco_rig
 
+pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more
+
+
 BASE = ("theta1", "theta2", "theta3", "theta4", "theta5", "theta6", "theta7")
 
 

@@ -18,6 +18,9 @@ from dynax._simulate import FixedGrid, simulate
 DELAY_SAMPLES, DT = 3, 0.01  # 0.03 s
 
 
+pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more
+
+
 def dead_time_run(seed: int, duration: float = 30.0):
     """The truth acrobot driven by the recorded torque three samples late (exact under the zero-order hold)."""
     truth = Acrobot.from_physical(**DEMO_TRUTH_PHYSICAL)

@@ -13,6 +13,9 @@ from dynax._data import resample
 from dynax._diagnose import diagnose, Known, Refit
 from tests.conftest import DFKI_MAPPING
 
+pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more
+
+
 DATASETS = pathlib.Path(__file__).resolve().parents[2] / ".." / "shared" / "datasets"
 
 

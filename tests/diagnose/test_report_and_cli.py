@@ -120,6 +120,7 @@ def test_cli_diagnose_helicopter_refuses_a_file_without_its_columns(offset_data,
     assert not out.exists()
 
 
+@pytest.mark.heavy
 def test_cli_diagnose_takes_several_runs_and_keeps_them_apart(offset_data, tmp_path, capsys):
     folder, train, validation = offset_data
     runs = {}

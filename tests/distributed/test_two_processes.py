@@ -17,6 +17,9 @@ import sys
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more
+
+
 WORKER = pathlib.Path(__file__).with_name("_worker.py")
 TIMEOUT_S = 600  # a loaded machine; about 30 s on an idle 2-core one
 

@@ -9,6 +9,9 @@ import pytest
 
 from tests.conftest import REPO
 
+pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more
+
+
 TUTORIALS = REPO / "docs" / "tutorials"
 _spec = importlib.util.spec_from_file_location("make_notebooks", TUTORIALS / "make_notebooks.py")
 make_notebooks = importlib.util.module_from_spec(_spec)

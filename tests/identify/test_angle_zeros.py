@@ -40,6 +40,7 @@ def _theta(result):
     return np.array([result.stages["least_squares"]["parameters"][f"theta{i}"] for i in range(1, 6)])
 
 
+@pytest.mark.heavy
 def test_encoder_zeros_that_differ_between_records_are_found_measured_and_fitted_out(records):
     shifted = [with_zero(r, z) for r, z in zip(records, ZEROS)]
     result = identify(dynax.DoublePendulum(), shifted, Dynamic(), friction="coulomb", refine=False, holdout=0)
@@ -109,6 +110,7 @@ def test_angle_zeros_apply_to_arms_whose_every_joint_is_a_driven_angle(records):
         identify(dynax.DoublePendulum(), records, Dynamic(offsets="encoder"), refine=False, holdout=0)
 
 
+@pytest.mark.heavy
 def test_the_dfki_runs_read_their_angles_from_zeros_of_their_own(datasets):
     # Every DFKI run starts at q = (0, 0), to three encoder counts (2e-4 rad each) but run 12's elbow
     # (-0.0044 rad, the arm moving): the encoders are zeroed when a recording begins.

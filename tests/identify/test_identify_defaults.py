@@ -235,6 +235,7 @@ def test_records_that_hardly_move_say_the_size_parameters_are_poorly_determined(
     assert {"theta1", "theta4"} <= set(at_rest.poorly_determined) and at_rest.consistency.consistent
 
 
+@pytest.mark.heavy
 def test_a_resting_dfki_record_refined_by_default_is_still_said_to_be_poorly_determined(datasets):
     # The last 1.4 s of DFKI run 12 (upright at rest, the driver's noise), with the refinement on as
     # by default. The output-error fit from the degenerate least-squares start either lowers its cost
@@ -276,6 +277,7 @@ def test_short_records_are_validated_at_the_horizons_their_tails_hold():
                  validation=recorded(rig_model(), 0.09, 6))
 
 
+@pytest.mark.heavy
 def test_one_dfki_run_alone_is_said_to_determine_the_size_parameters_poorly(monkeypatch, datasets):
     # A user with one recording: DFKI run 00 (10 s, both motors, small amplitude), defaults. Its angles
     # are read from zeros of their own (-0.09 and +0.12 rad, test_angle_zeros): with them fitted, as the
@@ -340,6 +342,7 @@ def test_constrained_solve_agrees_with_plain_least_squares_when_nothing_binds():
     np.testing.assert_allclose(np.asarray(estimate), np.linalg.lstsq(a, y, rcond=None)[0], rtol=1e-4, atol=1e-7)
 
 
+@pytest.mark.heavy
 def test_noisy_rig_data_with_defaults_give_consistent_estimates():
     # Two records of the rig's size, made by scipy's DOP853 with sensor noise at the rig's level:
     # identify with no settings at all: within 2 % on theta1..theta5 (issue 16). The least-squares stage
@@ -378,6 +381,7 @@ def test_noisy_rig_data_with_defaults_give_consistent_estimates():
     assert abs(report["stages"]["output_error"]["input_timing"]["latency_s"]) < 0.3e-3
 
 
+@pytest.mark.heavy
 def test_encoder_angles_alone_with_defaults_give_consistent_estimates(tmp_path):
     # The rig recorded as many rigs are logged: encoder angles (1e-4 rad noise) and torques, no
     # velocity column. `load_trajectory` differences the angles (backward, as a driver does; their
@@ -420,6 +424,7 @@ OTHER_SIZES = {
 }
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("size", sorted(OTHER_SIZES))
 def test_noisy_arms_of_other_sizes_give_consistent_estimates(size):
     from dynax._model._two_link import base_parameters_from_physical
@@ -520,6 +525,7 @@ def test_reversed_inputs_and_angles_in_degrees_or_from_upright_of_real_records_a
         assert f"signs of {terms}" in hints[0] and "--offset q" in hints[0], hints
 
 
+@pytest.mark.heavy
 def test_dfki_least_squares_with_defaults_is_consistent_where_the_unfiltered_fit_is_not(datasets):
     # The issue's new user: six raw runs, no recipe. Without a filter the estimate is physically impossible
     # (negative gravity terms); with the defaults it is consistent, with the filter chosen near the lab's 5 Hz.

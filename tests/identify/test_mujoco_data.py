@@ -34,6 +34,7 @@ def _mass_matrix_at_rest(p):
     return np.array([p["theta1"] + p["theta2"] + 2 * p["theta3"], p["theta2"] + p["theta3"], p["theta2"] + p["Ir2"]])
 
 
+@pytest.mark.heavy
 def test_defaults_on_mujoco_records_predict_as_well_as_mujoco_with_honest_standard_errors():
     train, held_out = [_record(0), _record(1)], _record(9)
     result = identify(dynax.DoublePendulum(), train, Dynamic(), friction="coulomb", validation=[held_out])
@@ -72,6 +73,7 @@ def test_defaults_on_mujoco_records_predict_as_well_as_mujoco_with_honest_standa
     assert "theta3" in result.jointly_determined["Ir2"]["with"], result.jointly_determined
 
 
+@pytest.mark.slow
 def test_acrobot_defaults_on_mujoco_records_of_an_arm_driven_at_the_elbow_only():
     # The same MuJoCo arm with its shoulder motor removed (a passive shoulder with its dry friction),
     # the elbow driven hard enough to swing the arm over the top again and again: Spong's acrobot.
@@ -100,6 +102,7 @@ def test_acrobot_defaults_on_mujoco_records_of_an_arm_driven_at_the_elbow_only()
     assert np.all(np.asarray(error.rmse) < 1.05 * floor), (np.asarray(error.rmse), floor)
 
 
+@pytest.mark.slow
 def test_a_dry_friction_that_changes_between_recordings_is_carried_by_the_leave_one_record_out_errors():
     # Four recordings of one MuJoCo arm whose dry friction changed between them (as a rig's does from day to
     # day: 0.11 to 0.20 N m at the shoulder, 0.06 to 0.11 at the elbow). Estimated within records, the
