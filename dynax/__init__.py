@@ -5,6 +5,7 @@ from ._fit import (
     fit_minimise as fit_minimise,
     Parameters as Parameters,
     Solution as Solution,
+    Statistics as Statistics,
 )
 from ._identify import (
     check_consistency as check_consistency,
@@ -37,7 +38,6 @@ from ._identify import (
     Identification as Identification,
     identify as identify,
     least_squares as least_squares,
-    LeastSquaresFit as LeastSquaresFit,
     poorly_determined as poorly_determined,
     PoorlyDeterminedWarning as PoorlyDeterminedWarning,
     NoValidationWarning as NoValidationWarning,

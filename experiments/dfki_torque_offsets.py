@@ -68,7 +68,7 @@ def main(argv=None):
     # The least-squares stage `identify` builds (settings chosen from the data), with and without the offsets.
     _, a, y, _, names, _, _, _, counts, _ = _equations(dynax.DoublePendulum(), [records[r] for r in RUNS],
                                                     dynax.Dynamic(offsets=True), "coulomb", None, None)
-    theta0 = np.asarray(least_squares(a, y, names=names).estimate)
+    theta0 = np.asarray(least_squares(a, y, names=names).value)
     found = record_offsets(a, y, counts, ("q1", "q2"))
     error0 = float(np.linalg.norm(np.asarray(a) @ theta0 - np.asarray(y)) / np.linalg.norm(np.asarray(y)))
     print("base parameters, no offsets:   " + " ".join(f"{n}={v:.4g}" for n, v in zip(names, theta0)))

@@ -9,5 +9,5 @@ from ._covariance import (
 from ._engine import fit_least_squares as fit_least_squares, fit_minimise as fit_minimise
 from ._levenberg_marquardt import levenberg_marquardt as levenberg_marquardt, StrictTrustRegion as StrictTrustRegion
 from ._parameters import Parameters as Parameters
-from ._solution import Solution as Solution
+from ._solution import Solution as Solution, Statistics as Statistics
 from ._solvers import History as History, monitor as monitor, notify as notify, OptaxLBFGS as OptaxLBFGS

@@ -8,6 +8,78 @@ from jaxtyping import Array, Float, PyTree
 from ._parameters import Parameters
 
 
+def _reduced_row_echelon(rows, tol=1e-6):
+    rows = np.array(rows, dtype=float)
+    if rows.size == 0:
+        return rows
+    rows = rows / np.max(np.abs(rows), axis=1, keepdims=True)
+    lead = 0
+    for r in range(rows.shape[0]):
+        while lead < rows.shape[1]:
+            pivot = r + int(np.argmax(np.abs(rows[r:, lead])))
+            if abs(rows[pivot, lead]) > tol:
+                break
+            lead += 1
+        else:
+            break
+        rows[[r, pivot]] = rows[[pivot, r]]
+        rows[r] = rows[r] / rows[r, lead]
+        for other in range(rows.shape[0]):
+            if other != r:
+                rows[other] = rows[other] - rows[other, lead] * rows[r]
+        lead += 1
+    rows[np.abs(rows) < tol] = 0.0
+    return rows
+
+
+def _combination(direction, names, tol=1e-3):
+    text = ""
+    for c, n in zip(direction, names):
+        if abs(c) < tol:
+            continue
+        coef = "" if np.isclose(abs(c), 1.0, rtol=1e-3) else f"{abs(c):.3g} "
+        if not text:
+            text = ("-" if c < 0 else "") + coef + n
+        else:
+            text += (" - " if c < 0 else " + ") + coef + n
+    return text or "(none)"
+
+
+class Statistics(eqx.Module):
+    r"""How well the data determine an estimate: the singular value decomposition of the column-scaled
+    (weighted) regressor or Jacobian at the solution.
+
+    **Fields:**
+
+    - `condition_number`: largest over smallest singular value.
+    - `rank`: numerical rank (singular values above `rcond` times the largest).
+    - `singular_values`: descending.
+    - `directions`: right singular vectors mapped back to parameter units, as rows, each scaled to
+      unit max-norm; row `i` belongs to `singular_values[i]`, so the rows from `rank` on span what
+      the data leave undetermined.
+    - `residual_rms`: root-mean-square of the (weighted) residual at the solution.
+    - `n_rows`: number of equations.
+    """
+
+    condition_number: Float[Array, ""]
+    rank: Array
+    singular_values: Float[Array, " n"]
+    directions: Float[Array, "n n"]
+    residual_rms: Float[Array, ""]
+    n_rows: int = eqx.field(static=True)
+
+    def unidentified(self, names: tuple[str, ...]) -> tuple[str, ...]:
+        """The parameter combinations the data leave undetermined, e.g. `("theta1 + theta2 - theta3", "theta7")`.
+
+        A basis of the null space in reduced row-echelon form, so the answer does not depend on
+        how the SVD happened to rotate a multi-dimensional null space: each combination starts
+        with a parameter of coefficient 1 that the others do not contain.
+        """
+        rank = int(self.rank)
+        basis = _reduced_row_echelon(np.asarray(self.directions)[rank:])
+        return tuple(_combination(row, names) for row in basis)
+
+
 def _result_name(result) -> str | None:
     if np.ndim(result._value) != 0:
         return None
@@ -40,6 +112,9 @@ class Solution(eqx.Module):
       (`fit_least_squares(..., covariance=True)`); `None` otherwise.
     - `residuals`, `initial_residuals`: the residual vector $r$ at the solution and at the start
       (least squares; non-finite entries already replaced as `nonfinite` says); `None` for a scalar loss.
+    - `statistics`: where the solve forms them (linear least squares; `Statistics`), the singular
+      values and directions of the scaled problem, its condition number, rank and residual RMS;
+      `None` otherwise.
     - `loss_history`, `time_history`: where the solver records them (`OptaxLBFGS`, the EM-free
       iteration): the loss after each step (entry 0 at the start) and the seconds since the start at
       which it was reached, NaN past the last step; `None` otherwise.
@@ -60,6 +135,7 @@ class Solution(eqx.Module):
     jacobian: Float[Array, "m n"] | None = None
     residuals: Float[Array, " m"] | None = None
     initial_residuals: Float[Array, " m"] | None = None
+    statistics: Statistics | None = None
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -68,6 +144,12 @@ class Solution(eqx.Module):
     @property
     def succeeded(self) -> bool:
         return bool(self.result == optx.RESULTS.successful)
+
+    @property
+    def unidentified(self) -> tuple[str, ...]:
+        """The parameter combinations the data leave undetermined (`Statistics.unidentified`); `()` when
+        the solve formed no statistics."""
+        return () if self.statistics is None else self.statistics.unidentified(self.names)
 
     def estimates(self) -> dict[str, float]:
         """`{name: value}`."""

@@ -19,7 +19,6 @@ from ._record_friction import record_friction as record_friction, RecordFriction
 from ._least_squares import (
     IdentifiabilityError as IdentifiabilityError,
     least_squares as least_squares,
-    LeastSquaresFit as LeastSquaresFit,
     poorly_determined as poorly_determined,
     PoorlyDeterminedWarning as PoorlyDeterminedWarning,
 )

@@ -471,7 +471,7 @@ def joint_weights(a, y, names, rcond, n_joints):
     least squares). Pass the equations the weighted fit will solve (offsets already removed), so
     that what the parameters cannot explain, not a record's offset, sets each joint's weight."""
     first = least_squares(a, y, names=names, rcond=rcond)
-    residual = (a @ first.estimate - y).reshape(n_joints, -1)
+    residual = (a @ first.value - y).reshape(n_joints, -1)
     variance = jnp.mean(residual**2, axis=1)
     variance = jnp.where(variance > 0, variance, jnp.max(variance) + jnp.finfo(a.dtype).tiny)
     return jnp.repeat(1.0 / variance, a.shape[0] // n_joints)

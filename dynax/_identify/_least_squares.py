@@ -8,13 +8,14 @@ Singular values below `rcond` times the largest mark directions of the (scaled) 
 that the data do not determine; they are reported by name, as linear combinations of parameters.
 """
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 from jaxtyping import Array, ArrayLike, Float
 
 from .._errors import DataError
+from .._fit import Parameters, Solution, Statistics
 
 
 class IdentifiabilityError(DataError):
@@ -116,51 +117,6 @@ def jointly_determined(names, covariance, which=None, threshold: float = JOINTLY
     return out
 
 
-class LeastSquaresFit(eqx.Module):
-    r"""The result of `least_squares`.
-
-    **Fields:**
-
-    - `estimate`: $\hat\theta$, shape `(n_params,)`.
-    - `std_errors`: standard errors from the residual variance,
-      $\sigma^2 = \lVert r \rVert^2_W / (m - n)$, $\operatorname{cov} = \sigma^2 (A^\top W A)^{-1}$;
-      short of full rank (`allow_rank_deficient`), `inf` for each parameter with a part in the
-      null space (one the data leave undetermined), the pseudo-inverse's for the others.
-    - `covariance`: that covariance, shape `(n_params, n_params)`.
-    - `singular_values`: of the column-scaled weighted regressor, descending.
-    - `directions`: right singular vectors mapped back to parameter units, as rows, each scaled to
-      unit max-norm; row `i` belongs to `singular_values[i]`.
-    - `condition_number`: largest over smallest singular value (of the column-scaled regressor).
-    - `rank`: numerical rank (singular values above `rcond` times the largest).
-    - `residual_rms`: root-mean-square of the weighted residual.
-    - `n_rows`: number of equations.
-    - `names`: parameter names (static).
-    """
-
-    estimate: Float[Array, " n_params"]
-    std_errors: Float[Array, " n_params"]
-    covariance: Float[Array, "n_params n_params"]
-    singular_values: Float[Array, " n_params"]
-    directions: Float[Array, "n_params n_params"]
-    condition_number: Float[Array, ""]
-    rank: Array
-    residual_rms: Float[Array, ""]
-    n_rows: int = eqx.field(static=True)
-    names: tuple[str, ...] = eqx.field(static=True)
-
-    @property
-    def unidentified(self) -> tuple[str, ...]:
-        """The parameter combinations the data leave undetermined, e.g. `("theta1 + theta2 - theta3", "theta7")`.
-
-        A basis of the null space in reduced row-echelon form, so the answer does not depend on
-        how the SVD happened to rotate a multi-dimensional null space: each combination starts
-        with a parameter of coefficient 1 that the others do not contain.
-        """
-        rank = int(self.rank)
-        basis = _reduced_row_echelon(np.asarray(self.directions)[rank:])
-        return tuple(_combination(row, self.names) for row in basis)
-
-
 def _in_null_space(directions, rank: int, tol: float = 1e-6):
     """Which parameters have a part in the null space spanned by `directions[rank:]` (each row
     scaled to a largest entry of 1, as `_solve` gives them): those the data leave undetermined. A
@@ -168,43 +124,6 @@ def _in_null_space(directions, rank: int, tol: float = 1e-6):
     *Linear Models*, 1971, on estimable functions)."""
     null = jnp.abs(jnp.asarray(directions)[rank:])
     return jnp.any(null > tol, axis=0) if null.shape[0] else jnp.zeros(null.shape[1], bool)
-
-
-def _reduced_row_echelon(rows, tol=1e-6):
-    rows = np.array(rows, dtype=float)
-    if rows.size == 0:
-        return rows
-    rows = rows / np.max(np.abs(rows), axis=1, keepdims=True)
-    lead = 0
-    for r in range(rows.shape[0]):
-        while lead < rows.shape[1]:
-            pivot = r + int(np.argmax(np.abs(rows[r:, lead])))
-            if abs(rows[pivot, lead]) > tol:
-                break
-            lead += 1
-        else:
-            break
-        rows[[r, pivot]] = rows[[pivot, r]]
-        rows[r] = rows[r] / rows[r, lead]
-        for other in range(rows.shape[0]):
-            if other != r:
-                rows[other] = rows[other] - rows[other, lead] * rows[r]
-        lead += 1
-    rows[np.abs(rows) < tol] = 0.0
-    return rows
-
-
-def _combination(direction, names, tol=1e-3):
-    text = ""
-    for c, n in zip(direction, names):
-        if abs(c) < tol:
-            continue
-        coef = "" if np.isclose(abs(c), 1.0, rtol=1e-3) else f"{abs(c):.3g} "
-        if not text:
-            text = ("-" if c < 0 else "") + coef + n
-        else:
-            text += (" - " if c < 0 else " + ") + coef + n
-    return text or "(none)"
 
 
 _CHUNK_ROWS = 256
@@ -288,7 +207,7 @@ def least_squares(
     weights: Float[ArrayLike, " rows"] | None = None,
     rcond: float = 1e-7,
     allow_rank_deficient: bool = False,
-) -> LeastSquaresFit:
+) -> Solution:
     r"""Solve $\min_\theta \lVert W^{1/2}(A\theta - y)\rVert^2$, with standard errors and identifiability.
 
     **Arguments:**
@@ -302,7 +221,13 @@ def least_squares(
       `IdentifiabilityError` naming the unidentified combinations; if `True` the minimum-norm
       solution (in scaled coordinates) is returned with infinite standard errors.
 
-    **Returns:** a `LeastSquaresFit`.
+    **Returns:** a `Solution` whose `model` and `value` are the estimate $\hat\theta$, with
+    `covariance` $\sigma^2 (A^\top W A)^{+}$ from the residual variance
+    $\sigma^2 = \lVert r \rVert^2_W / (m - \operatorname{rank})$ and `std_errors` its diagonal's
+    roots (short of full rank, `allow_rank_deficient`, `inf` for each parameter with a part in the
+    null space, the pseudo-inverse's for the others), and `statistics` (`dynax.Statistics`): the
+    singular values and directions of the column-scaled weighted regressor, its condition number
+    and numerical rank, the residual RMS and the row count.
 
     **Raises:** `IdentifiabilityError` (a `DataError`) when the data do not determine all
     parameters; `ValueError` on shape mismatches.
@@ -338,21 +263,31 @@ def least_squares(
     std = jnp.sqrt(jnp.diag(covariance))
     if rank < n:  # a parameter with a part in the null space is not estimable: no finite error
         std = jnp.where(_in_null_space(directions, rank), jnp.inf, std)
-    fit = LeastSquaresFit(
-        estimate=estimate,
-        std_errors=std,
-        covariance=covariance,
-        singular_values=s,
-        directions=directions,
+    statistics = Statistics(
         condition_number=cond,
         rank=jnp.asarray(rank),
+        singular_values=s,
+        directions=directions,
         residual_rms=residual_rms,
         n_rows=m,
-        names=names,
+    )
+    loss = 0.5 * m * residual_rms**2
+    fit = Solution(
+        model=estimate,
+        value=estimate,
+        parameters=Parameters.of(estimate, names=names),
+        covariance=covariance,
+        std_errors=std,
+        result=optx.RESULTS.successful,
+        loss=loss,
+        initial_loss=loss,
+        steps=jnp.asarray(0),
+        n_residuals=m,
+        statistics=statistics,
     )
     cond = float(cond)
     if rank < n and not allow_rank_deficient:
-        unidentified = fit.unidentified
+        unidentified = statistics.unidentified(names)
         listed = "; ".join(unidentified)
         raise IdentifiabilityError(
             f"the data do not identify all parameters: numerical rank {rank} of {n} "

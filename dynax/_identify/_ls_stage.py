@@ -11,11 +11,11 @@ from jaxtyping import Array
 
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
-from .._fit import serial_covariance
+from .._fit import serial_covariance, Solution
 from .._model._system import AbstractSystem
 from ._consistency import check_consistency, Consistency, consistent_least_squares, InconsistentEstimateWarning
 from ._equations import _equations, Dynamic, joint_weights
-from ._least_squares import IdentifiabilityError, least_squares, LeastSquaresFit
+from ._least_squares import IdentifiabilityError, least_squares
 from ._offsets import driven_joints, offset_groups, record_labels, record_offsets, RecordOffsets, without_offsets
 from ._record_friction import coulomb_columns, record_friction, RecordFriction
 from ._regressors import _positions, _split, with_parameters
@@ -31,7 +31,7 @@ class _LeastSquaresStage(eqx.Module):
     system: AbstractSystem
     names: tuple[str, ...] = eqx.field(static=True)
     estimate: Array
-    fit: LeastSquaresFit
+    fit: Solution
     a: Array
     y: Array
     n_samples: int = eqx.field(static=True)
@@ -100,7 +100,7 @@ def _least_squares_stage(system, trajectories, method, friction, weights, rcond,
             "(a sensor's zero), so a constant force tells nothing about them; Dynamic(offsets=False) fixes the "
             "offsets at zero.", unidentified=error.unidentified, rank=error.rank, n_params=error.n_params,
             condition_number=error.condition_number) from None
-    estimate = fit.estimate
+    estimate = fit.value
     fitted = _fitted_system(system, names, estimate)
     qs = _joint_positions(system, trajectories)
     check = check_consistency(fitted, names, estimate, qs, warn=consistency == "check")
@@ -111,7 +111,7 @@ def _least_squares_stage(system, trajectories, method, friction, weights, rcond,
         plain_std = _serially_robust(fit, a, y, weights, estimate, record_rows)[0].std_errors
         _warn_if_zero_upright(fitted, names, estimate, plain_std, qs)
     if consistency == "constrain" and check.violated:
-        estimate, _ = consistent_least_squares(system, names, a, y, weights, start=fit.estimate)
+        estimate, _ = consistent_least_squares(system, names, a, y, weights, start=fit.value)
         fitted = _fitted_system(system, names, estimate)
         after = check_consistency(fitted, names, estimate, qs, warn=False)
         check = Consistency(after.violated, active=check.violated, constrained=True,
@@ -149,7 +149,7 @@ def _serially_robust(fit, a, y, weights, estimate, record_rows):
     one DFKI run 2.3 to 4.9 times."""
     n = a.shape[1]
     total = int(sum(record_rows))
-    if not total or int(fit.rank) < n or a.shape[0] % total:
+    if not total or int(fit.statistics.rank) < n or a.shape[0] % total:
         return fit, None
     w = np.ones(a.shape[0]) if weights is None else np.asarray(weights, dtype=float)
     sw = np.sqrt(w)
@@ -253,7 +253,7 @@ def _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, error, tra
                 sign[j * rows:(j + 1) * rows] = -1.0
         y_flipped = y * jnp.asarray(sign, y.dtype)
         try:
-            candidate = least_squares(a, y_flipped, names=names, weights=weights, rcond=rcond).estimate
+            candidate = least_squares(a, y_flipped, names=names, weights=weights, rcond=rcond).value
         except IdentifiabilityError:
             return None
         consistent = not check_consistency(_fitted_system(system, names, candidate), names, candidate, qs,

@@ -9,7 +9,6 @@ from jaxtyping import Array, Float
 from .._fit import Solution
 from .._model._system import AbstractSystem
 from ._consistency import Consistency
-from ._least_squares import LeastSquaresFit
 from ._angle_zeros import AngleZeros
 from ._offsets import RecordOffsets
 from ._record_friction import RecordFriction
@@ -49,7 +48,7 @@ class Identification(eqx.Module):
       equations: for `Dynamic` the relative force/torque error (EMPS reports 4.08 %); for
       `SimulationFit` the relative simulation error of the states.
     - `method`, `friction`, `system_name`: as in the contract's output.
-    - `fit`: the `LeastSquaresFit` (least-squares methods; its `std_errors` and `covariance` the
+    - `fit`: the least-squares stage's `Solution` (least-squares methods; its `std_errors` and `covariance` the
       robust ones above) or `None`.
     - `settings`: per record, the filter and derivative settings used and why (`Dynamic`).
     - `consistency`: the `Consistency` of the returned estimate: violated conditions, and which
@@ -105,7 +104,7 @@ class Identification(eqx.Module):
     rank: Array
     residual_rms: Float[Array, ""]
     relative_error: Float[Array, ""]
-    fit: LeastSquaresFit | None
+    fit: Solution | None
     names: tuple[str, ...] = eqx.field(static=True)
     n_samples: int = eqx.field(static=True)
     method: str = eqx.field(static=True)

@@ -30,7 +30,7 @@ from .._progress import bar_token, ProgressBar
 from .._fit import clustered_covariance, fit_least_squares, jackknife_covariance, levenberg_marquardt, Parameters, Solution
 from .._model._system import AbstractSystem
 from .._simulate import FixedGrid, simulate
-from ._least_squares import least_squares, LeastSquaresFit
+from ._least_squares import least_squares
 
 class SimulationFit(eqx.Module):
     """The output-error (simulation-error) method for `identify`; see `fit_simulation_error`.
@@ -350,7 +350,7 @@ def fit_simulation_error(
         jax.block_until_ready(r)
     n_params = chosen.size
     n_state_residuals = xs.size
-    linearised: LeastSquaresFit = least_squares(jac, -r, names=parameters.names, allow_rank_deficient=True)
+    linearised = least_squares(jac, -r, names=parameters.names, allow_rank_deficient=True)
     # An unknown the data leave undetermined (a part in the Jacobian's null space: `least_squares`
     # gives it an infinite error) has NaN in every covariance's row and column: the pseudo-inverse
     # would give it finite numbers, zero where the Jacobian vanishes (every rollout diverged).
@@ -382,8 +382,8 @@ def fit_simulation_error(
         initial_states=fitted.initial_states,
         parameters=solution.value[:n_params],
         std_errors=std[:n_params],
-        condition_number=linearised.condition_number,
-        rank=linearised.rank,
+        condition_number=linearised.statistics.condition_number,
+        rank=linearised.statistics.rank,
         residual_rms=jnp.sqrt(jnp.mean(r[:n_state_residuals] ** 2) * stagger),  # undo the cuts' 1/sqrt(k)
         initial_residual_rms=jnp.sqrt(jnp.mean(r0[:n_state_residuals] ** 2) * stagger),
         relative_error=jnp.linalg.norm(r[:n_state_residuals].reshape(xs.shape) * jnp.broadcast_to(sigma, xs.shape))

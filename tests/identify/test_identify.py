@@ -223,4 +223,4 @@ def test_trimmed_dynamic_equations_drop_the_ends_of_every_record(acrobot_data):
     halves = [acrobot_data.slice(0, 1000), acrobot_data.slice(1000, 2000)]
     result = identify(dynax.Acrobot(), halves, Dynamic(lowpass_hz=None, trim=7), refine=False, holdout=0)
     assert result.n_samples == 2 * (1000 - 2 * 7)
-    assert result.fit.n_rows == 2 * result.n_samples  # two joints' equations per sample
+    assert result.fit.statistics.n_rows == 2 * result.n_samples  # two joints' equations per sample

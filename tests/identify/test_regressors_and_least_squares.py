@@ -72,10 +72,10 @@ def test_least_squares_matches_numpy_and_textbook_standard_errors():
     y = a @ theta + 0.1 * rng.normal(size=200)
     fit = least_squares(a, y, names=("a", "b", "c"))
     ref, res, *_ = np.linalg.lstsq(a, y, rcond=None)
-    np.testing.assert_allclose(fit.estimate, ref, rtol=1e-10)
+    np.testing.assert_allclose(fit.value, ref, rtol=1e-10)
     sigma2 = res[0] / (200 - 3)
     np.testing.assert_allclose(fit.std_errors, np.sqrt(np.diag(sigma2 * np.linalg.inv(a.T @ a))), rtol=1e-8)
-    assert int(fit.rank) == 3 and float(fit.condition_number) < 2  # column scaling removes the units
+    assert int(fit.statistics.rank) == 3 and float(fit.statistics.condition_number) < 2  # column scaling removes the units
 
 
 def test_rank_deficiency_names_the_unidentified_combination():
@@ -101,9 +101,9 @@ def test_float32_least_squares_is_as_accurate_as_numpy_lstsq():
     a32, y32 = a.astype(np.float32), y.astype(np.float32)
     reference = np.linalg.lstsq(a32, y32, rcond=None)[0]
     fit = dynax.least_squares(jnp.asarray(a32), jnp.asarray(y32))
-    assert fit.estimate.dtype == jnp.float32
+    assert fit.value.dtype == jnp.float32
     error_numpy = np.max(np.abs(reference - theta))
-    error_dynax = np.max(np.abs(np.asarray(fit.estimate, dtype=float) - theta))
+    error_dynax = np.max(np.abs(np.asarray(fit.value, dtype=float) - theta))
     # numpy's float32 lstsq gets the two nearly collinear coefficients to about 1e-3 here; dynax must
     # do as well (within a factor 3), where the normal equations would be off by order one
     assert error_dynax < 3 * max(error_numpy, 1e-4), (error_dynax, error_numpy)
@@ -132,9 +132,9 @@ def test_least_squares_on_many_rows_matches_scipy_lstsq():
     a = rng.normal(size=(50_001, 7)) * np.logspace(-2, 2, 7)
     y = a @ np.arange(1.0, 8.0) + rng.normal(size=50_001)
     fit = least_squares(a, y)
-    np.testing.assert_allclose(fit.estimate, scipy.linalg.lstsq(a, y)[0], rtol=1e-10)
-    residual = a @ np.asarray(fit.estimate) - y
-    np.testing.assert_allclose(float(fit.residual_rms), np.sqrt(np.mean(residual**2)), rtol=1e-10)
+    np.testing.assert_allclose(fit.value, scipy.linalg.lstsq(a, y)[0], rtol=1e-10)
+    residual = a @ np.asarray(fit.value) - y
+    np.testing.assert_allclose(float(fit.statistics.residual_rms), np.sqrt(np.mean(residual**2)), rtol=1e-10)
 
 
 def test_weighted_rank_deficient_residual_is_that_of_the_returned_estimate():
@@ -147,13 +147,13 @@ def test_weighted_rank_deficient_residual_is_that_of_the_returned_estimate():
     y = a @ np.array([1.0, 0.2, -3.0, 0.5, 0.0]) + 0.1 * rng.normal(size=3_001)
     w = rng.uniform(0.5, 2.0, size=3_001)
     fit = least_squares(a, y, weights=w, allow_rank_deficient=True)
-    assert int(fit.rank) == 4
-    residual = np.sqrt(w) * (a @ np.asarray(fit.estimate) - y)
-    np.testing.assert_allclose(float(fit.residual_rms), np.sqrt(np.mean(residual**2)), rtol=1e-9)
+    assert int(fit.statistics.rank) == 4
+    residual = np.sqrt(w) * (a @ np.asarray(fit.value) - y)
+    np.testing.assert_allclose(float(fit.statistics.residual_rms), np.sqrt(np.mean(residual**2)), rtol=1e-9)
     aw = np.sqrt(w)[:, None] * a
     d = np.linalg.norm(aw, axis=0)
     reference = np.linalg.pinv(aw / d, rcond=1e-7) @ (np.sqrt(w) * y) / d
-    np.testing.assert_allclose(fit.estimate, reference, rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(fit.value, reference, rtol=1e-8, atol=1e-10)
 
 
 def test_rank_deficient_fit_gives_an_infinite_error_only_to_parameters_the_null_space_touches():
@@ -165,7 +165,7 @@ def test_rank_deficient_fit_gives_an_infinite_error_only_to_parameters_the_null_
     y = a @ np.array([1.0, -0.4, 2.0]) + 0.05 * rng.normal(size=500)
     tied = least_squares(np.column_stack([a, a[:, 0]]), y, allow_rank_deficient=True)
     alone = least_squares(a, y)
-    assert int(tied.rank) == 3 and tied.unidentified == ("p0 - p3",)
+    assert int(tied.statistics.rank) == 3 and tied.unidentified == ("p0 - p3",)
     std = np.asarray(tied.std_errors)
     assert np.isinf(std[0]) and np.isinf(std[3])
     np.testing.assert_allclose(std[1:3], np.asarray(alone.std_errors)[1:3], rtol=1e-8)
