@@ -233,10 +233,8 @@ def sample_interval(system, method: FixedGrid, bound):
             y_next, _, _, _, _ = solver.step(term, ta, ta + h, y, u, state, made_jump=True)
             return y_next
 
-        # The substeps in a rolled loop, not unrolled: with four Tsit5 substeps of the DFKI rig's
-        # arm, unrolled, the rollout took 2.1x as long to compile (2.8 s against 1.4 s) and ran
-        # 1.4-2.5x slower (one 6 s rollout 68-80 ms against 27-38 ms, 600 batched segments
-        # 76-80 against 54-60 ms); `identify`'s refinement compiled in 27 s instead of 42.
+        # The substeps in a rolled loop, not unrolled: unrolled, four Tsit5 substeps of a two-link
+        # arm compiled about twice as long and ran slower, batched or not (docs/devdocs/code_notes.md).
         x_new = substep(0, x) if n == 1 else jax.lax.fori_loop(0, n, substep, x)
         # One comparison catches NaN, inf and out-of-bound entries alike (NaN <= bound is False).
         bad = ~jnp.all(jnp.abs(x_new) <= bound)
@@ -253,8 +251,8 @@ def mask_diverged(ts_after, xs, diverged_at):
 
 # Compiled once per system structure, method and grid shape: called eagerly (data generation, a user's
 # loop over parameter values), a bare `lax.scan` over a closure made anew on every call is compiled
-# anew on every call (0.7 s per 6 s rollout of the double pendulum, and the compiled programs pile up
-# in memory). Under an outer `jit` this is inlined as before.
+# anew on every call (most of a call's time, and the compiled programs pile up in memory; see
+# docs/benchmarks.md). Under an outer `jit` this is inlined.
 @eqx.filter_jit
 def _fixed_grid(system, x0, ts, us, method, bound):
     advance = sample_interval(system, method, bound)

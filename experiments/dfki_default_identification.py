@@ -24,7 +24,7 @@ the band of the angles themselves"): `--runs 00,03,05 --band-from positions --ou
 
 `--segment-band-hz F` sets the band edge that the refinement's segment length is one period of
 (default: the widest band `choose_filter` reads off the training runs), to see how much the
-segmentation alone moves a fold (docs/identification.md, "The count of cells is within what the
+segmentation alone moves a fold (docs/devdocs/dfki_loro.md, "The count of cells is within what the
 fit's own settings move"): `--runs 01 --segment-band-hz 5.5 --out OUT`.
 
 For each of the six `sys_id` runs: fit `identify(DoublePendulum(), other_five_runs, Dynamic(),

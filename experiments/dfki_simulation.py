@@ -46,7 +46,7 @@ def lab_model(p: dict[str, float], *, with_friction_and_rotor: bool) -> dynax.Ab
     inertia adds `gr^2 Ir + Ir` to M11, `gr^2 Ir` to M22 and `-gr Ir` to M12; dynax's `RotorInertia`
     adds to the diagonal only. The off-diagonal term is about 1 % of M12, yet on the elbow-only run 03 it
     carries most of the prediction: 0.043 rad at 0.25 s without it, 0.025 with it (mapped exactly, as
-    `dfki_default_identification.lab_model` does; docs/identification.md).
+    `dfki_default_identification.lab_model` does; docs/devdocs/dfki_loro.md).
     """
     rigid = dynax.DoublePendulum.from_physical(
         m1=p["m1"], m2=p["m2"], l1=p["l1"], lc1=p["r1"], lc2=p["r2"], I1=p["I1"], I2=p["I2"],

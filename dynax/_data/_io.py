@@ -199,7 +199,7 @@ def load_trajectory(
       logged `vel_meas` columns are exactly these differences of `pos_meas`, so its files read with
       or without them give the same velocities (but the first sample's). A central difference lags
       less but its noise vanishes at the Nyquist frequency, where `choose_filter` reads the noise
-      floor; on the DFKI runs it widened the chosen band from 4 to 6 Hz to as much as 99 Hz.
+      floor, which then lifts the chosen band far above the motion's.
     - `linear_axis`: `dq` by central differences (`central_difference`).
     """
     path = str(path)

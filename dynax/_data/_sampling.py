@@ -1,7 +1,7 @@
 """Checks on a record's time stamps: strictly increasing, no gap to interpolate over, no near-duplicates.
 
-Irregular sampling is allowed (real rigs jitter: the DFKI rig's steps range from 0.74 to 4.2 times
-its median interval). What is refused is a step so far from the typical interval that every method
+Irregular sampling is allowed (real rigs jitter: a logged step can be a fraction of the median
+interval or several times it). What is refused is a step so far from the typical interval that every method
 would silently do the wrong thing across it: a gap (a zero-order-hold input held for minutes, an
 interpolation drawn across a missing stretch, a central difference over it) or a near-duplicate
 stamp (a derivative estimated over $10^{-12}$ s amplifies measurement noise by $10^{10}$).

@@ -8,8 +8,8 @@ velocity column equals the change of its position over the block divided by the 
 (the secant slope) whatever the velocity's noise, filter or lag, up to the curvature inside a block.
 The gain $g$ of the block means $m$ on the secant slopes $s$ (least squares, $m \approx g s$) is 1 for
 a velocity in the position's units per second. Noise in $m$ averages out of $g$ (it is in the
-regression's output); noise in $s$ is the encoder's, divided by the block's duration (2 to 3 % of
-the motion on the DFKI rig at its 1e-4 rad even without averaging). A record is refused where $g$ is
+regression's output); noise in $s$ is the encoder's, divided by the block's duration (a few per cent
+of the motion for a 1e-4 rad encoder, even without averaging). A record is refused where $g$ is
 off by more than `MAX_GAIN_ERROR` and by more than `SIGNIFICANCE` of its own standard errors: a
 record that barely moves cannot tell, and is let through.
 """

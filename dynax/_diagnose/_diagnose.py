@@ -308,7 +308,7 @@ def diagnose(
       cross-validation; see `_cross_fit`). A short held-out run (a few seconds of a chaotic swing)
       then no longer decides alone; each round costs one more batch of fits per training run. The
       reported gains and error curves stay those of the held-out runs; `report.runs` lists the
-      cross-fitted runs too. `False` tests on the held-out runs alone, as before 2026-11-25.
+      cross-fitted runs too. `False` tests on the held-out runs alone.
     - `progress`: a callable is called with a line of text at each stage (e.g. `print`, or a
       `dynax.ProgressBar`'s `say`); otherwise a progress bar on stderr, one step per stage and per
       candidate batch: `True` / `False` force it on / off, `None` (default) draws it when stderr is a

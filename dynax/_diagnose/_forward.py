@@ -111,9 +111,9 @@ def _cross_fit(problem: _Problem, yard: _Yardstick, current_slots, new, batch: _
     Only with `MIN_CROSS_FIT_RUNS` (3) training runs or more, so that every fold still fits on two runs
     or more: cross-validation estimates the error of a model fitted on the fold's share of the data, and
     that estimate is pessimistic, more so for the richer model, the smaller the share (Kohavi 1995;
-    Arlot & Celisse 2010, section 5). With two runs each fold is one run: on the DFKI split S1 the two
-    held-out runs gain 43 % from Coulomb friction at the shoulder after the elbow's (p = 0.004), while
-    each single-run fold predicts the other run worse with it, and the pool rejected the lab's effect.
+    Arlot & Celisse 2010, section 5). With two runs each fold is one run, and a single-run fold can
+    predict the other run worse with a term that the held-out runs gain from, so the pool would reject
+    a real effect (measured on a real rig: docs/devdocs/code_notes.md).
 
     ??? cite
 
@@ -218,8 +218,8 @@ OTHER_MACHINE_FACTOR = 2.0
 def _note_moved(problem: _Problem, p) -> None:
     """Say so when the refit moved a size parameter (`size_parameter_names`) by more than
     `OTHER_MACHINE_FACTOR`: the nominal model describes another machine (`DoublePendulum()`'s Drake defaults on a
-    rig 25 times lighter), and a refit from so far need not reach this one (on the DFKI rig it stopped at
-    three times its inertia) and the findings then correct the wrong machine."""
+    much lighter rig), and a refit from so far need not reach this one (it can stop at several times
+    the rig's inertia) and the findings then correct the wrong machine."""
     system, names = problem.system, problem.names
     size = set(size_parameter_names(system))
     given = np.asarray(nominal_values(system, names), float)

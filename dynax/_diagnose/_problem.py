@@ -46,7 +46,7 @@ class Refit(eqx.Module):
 
     **Arguments:** `parameters`, the names of the nominal parameters to refit (default all but the
     friction, e.g. `theta1..theta5`; all of them, `theta1..theta7`, to let the refit absorb
-    viscous friction as before 2026-11-25; `("mass", "viscous")` for a linear axis whose nominal
+    viscous friction too; `("mass", "viscous")` for a linear axis whose nominal
     viscous friction is not trusted).
     """
 
@@ -274,8 +274,8 @@ def _note_record_differences(system, records, notes) -> None:
     (`dynax.record_offsets`, on the inverse-dynamics equations of the nominal model's structure as
     `identify` builds them; the held-out runs too when they are the user's own): a sensor zero that
     no candidate can carry from one run to another, and that stays in each held-out run's error
-    whatever is named (the DFKI shoulder torque: 0.14 N m in run 00, 0.07 in run 01). Likewise when
-    the runs' Coulomb friction differs (`dynax.record_friction`; the DFKI elbow: 0.05 to 0.13 N m).
+    whatever is named (a motor driver's current sensor, zeroed anew in each recording). Likewise when
+    the runs' Coulomb friction differs (`dynax.record_friction`: it changes with temperature and wear).
     Notes only: they enter no test."""
     for check in compare_records(system, records):
         if check is not None and check.differ():

@@ -75,7 +75,7 @@ class ResidualTests(eqx.Module):
 
 
 class Validation(eqx.Module):
-    """How a model does on the held-out runs in the terms system-identification users know (issue 14).
+    """How a model does on the held-out runs in the terms system-identification users know.
 
     **Fields:** `horizon_s` (the reference horizon); `fit_percent` per state: MATLAB `compare`'s
     NRMSE fit $100(1 - \\lVert y - \\hat y\\rVert / \\lVert y - \\bar y\\rVert)$ of the

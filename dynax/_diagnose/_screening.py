@@ -9,7 +9,7 @@ one linear least-squares solve each. A delay or lag at zero has no sensitivity (
 term); to first order both act as $-\tau\,\partial f/\partial u\,\dot u$. That first order holds only
 while $\omega\tau \ll 1$ for the input's frequencies: a 0.15 s lag on a helicopter collective that a
 closed-loop controller moves at a few hertz is far outside it, and the linear direction ranked it
-below a constant bias (issue 10, item 7). So a delay or lag is screened at finite sizes too: on a
+below a constant bias. So a delay or lag is screened at finite sizes too: on a
 grid of time constants $\tau_g$ (from two samples to `MAX_SCREEN_TIME` s) the direction is
 $\partial f/\partial u\,(a_{\tau_g}(t) - u(t))$, with $a_\tau$ the recorded input passed through the
 lag ($\tau \dot a = u - a$, exact for a held input) or shifted by the delay; the grid point that
@@ -117,8 +117,8 @@ def screen(family, values, coefficients, refit_mask, train, validation, candidat
     training records) also fitted on all training records but one and scored on that one, for each
     (leave-one-run-out, as `diagnose`'s held-out test does). A candidate's gain is then the mean of its
     gains on these splits: each held-out split counts once, whatever its residuals' size (summed sums of
-    squares would let the run with the largest residuals rank the candidates alone; on the DFKI rig the
-    input offsets, which one training run's fit carries over to another but not to the held-out runs).
+    squares would let the run with the largest residuals rank the candidates alone; on a real rig, for
+    example, input offsets, which one training run's fit carries over to another but not to the held-out runs).
 
     **Returns:** `(gain, delta)` arrays: the fraction by which the candidate reduces the held-out
     residual sum of squares (beyond refitting the nominal parameters), and its coefficient step

@@ -55,8 +55,8 @@ def rank(results):
     The test pools the cross-fitted training runs with the held-out runs (power), but the held-out runs,
     which no fit of the round has seen, choose among the candidates that pass: with two or three
     training runs each fold fits on one or two runs only, and its left-out run then rewards what
-    mends a poorly determined fit as much as the cause (on the DFKI rig, viscous friction where the
-    held-out runs prefer Coulomb friction). Without cross-fitting this is the pooled gain."""
+    mends a poorly determined fit as much as the cause (say, viscous friction where the held-out
+    runs prefer Coulomb friction). Without cross-fitting this is the pooled gain."""
     return lambda k: results[k]["gain_held_out"]
 
 
@@ -96,8 +96,8 @@ def judge_round(physical, short, remaining, selected, n_nom, p_j, std_j, err_j, 
     smallest gain implies it): the test pools the cross-fitted training runs' windows with the held-out runs' for
     power, and on a few training runs their evidence can outweigh the held-out runs'. The held-out runs are the
     one judge no fit has seen, and the model the diagnosis returns is the one they measure: a candidate that
-    makes their windows' error larger is not named, however much the cross-fitted folds liked it (DFKI, trained
-    on runs 00, 02 and 05: an offset on the shoulder torque, 71 % pooled, 15 % worse on held-out runs 01 and 03).
+    makes their windows' error larger is not named, however much the cross-fitted folds liked it (seen on a real
+    rig: a torque offset that the pooled windows favoured and the held-out runs did not; docs/devdocs/code_notes.md).
 
     `n_val`: how many of the windows are the held-out runs' (the rest are cross-fitted); default all."""
     n_val = len(score_cur) if n_val is None else n_val

@@ -56,7 +56,7 @@ $\alpha = \sum_a \frac{4\rho_a^2\sigma_a^4}{(1-\rho_a)^6(1+\rho_a)^2} \big/ \sum
 \frac{\sigma_a^4}{(1-\rho_a)^4}$ and $S = 1.1447\,(\alpha T)^{1/3}$ over the $T$ time steps, with
 $\rho_a$ clipped to $\pm 0.97$ and $S$ to the shortest record. Independent residuals give
 $\rho_a \approx 0$, $S$ near 1 and the usual covariance; residuals correlated over many samples
-give errors several times larger (on the EMPS benchmark's inverse-dynamics rows, 2.3 to 8.8 times).
+give errors several times larger (as a real rig's filtered inverse-dynamics rows do).
 
 ??? cite
 

@@ -6,11 +6,11 @@ optimistix's `ClassicalTrustRegion` accepts a step when the actual change of the
 `actual <= 0.01 * predicted` on the assumption that `predicted` is negative. Where the prediction
 $\tfrac12(\lVert J\delta + r\rVert^2 - \lVert r\rVert^2)$ comes out positive (it is a difference of
 two large sums, and the step and the Jacobian need not come from the same linearisation), the test
-passes for an actual increase of up to a hundred times the predicted one. dynax's output-error fit
-on real data has ended (in 3 of 18 DFKI fold runs with staggered cuts, not reproducibly) at a
-point where every rollout diverged, its loss 500 times its start, which only an accepted rise can
-do; how the rise was accepted was not pinned down. `StrictTrustRegion` adds the textbook
-condition (Nocedal & Wright, *Numerical Optimization*, 2nd ed., 2006, Algorithm 4.1: a step is
+passes for an actual increase of up to a hundred times the predicted one. An output-error fit on
+real data can then end, not reproducibly, at a point where every rollout diverged, its loss
+hundreds of times its start, which only an accepted rise can do (docs/devdocs/code_notes.md).
+`StrictTrustRegion` adds the textbook condition (Nocedal & Wright, *Numerical Optimization*, 2nd
+ed., 2006, Algorithm 4.1: a step is
 taken only when the ratio of actual to predicted reduction is positive): a step is accepted only if
 the loss does not rise, and a step refused for that shrinks the region as any refused step does.
 

@@ -3,8 +3,8 @@ r"""Per-record zeros of the angle encoders: does each record measure its angles 
 An incremental encoder counts from where the joint stood when it was powered up or reset. A rig
 that resets its encoders at the start of each recording, with the arm hanging "about" straight down,
 gives every record its own angle zero: off by however far static friction held the arm from the
-vertical, or by how much it still swung. On the DFKI double pendulum every run starts at
-$q = (0, 0)$ to within $4 \times 10^{-4}$ rad, so its encoders are zeroed at each recording's start.
+vertical, or by how much it still swung. Such a rig's records all start at $q = (0, 0)$ to within
+a few encoder counts.
 
 The measured angle of record $r$ is then $q + c_r$, and its inverse-dynamics equations are
 $\tau = Y(q_{meas} - c_r, \dot q, \ddot q)\,\theta$: an angle zero acts through the gravity terms
@@ -21,8 +21,8 @@ and $\delta$ are one linear least-squares problem, whose columns $\partial_q(Y\t
 forward differences of the equations in each record's angle (a constant shift of an angle passes
 the zero-phase filters unchanged, so each record is filtered once and only its regressor is rebuilt
 at the shifted angles), at each step (three builds of the regressor per step; a chord method that keeps the first
-step's columns settles elsewhere, 4 mrad off on DFKI run 00, since its fixed point is orthogonal to
-the wrong columns). It settles to $10^{-5}$ rad in four to six steps on the DFKI runs. It also fits the zeros of each half
+step's columns settles elsewhere, some mrad off, since its fixed point is orthogonal to
+the wrong columns). It settles to $10^{-5}$ rad in a few steps on real records. It also fits the zeros of each half
 of each record at the converged parameters: a sensor's zero is the same in both halves, where a model
 error that looks like one follows the motion.
 
@@ -59,7 +59,7 @@ CONVERGED = 1e-5  # [rad] no zero moved more than this in the last step
 LARGEST = 0.3  # [rad] zeros beyond this are not believed: a mix-up (degrees, upright) more likely
 # The zeros are chosen over force offsets where they leave an equation error at least 1 % smaller: where
 # neither explains anything (records read from their true zero, no sensor offset: 0.1300 against 0.1302 on
-# the tests' synthetic rig) the force offsets the fit used before stay; DFKI's six runs: 0.265 against 0.285.
+# the tests' synthetic rig) the force offsets stay; records with real encoder zeros gain several per cent.
 MARGIN = 0.99
 
 

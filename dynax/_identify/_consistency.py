@@ -20,7 +20,7 @@ parameters satisfy
   equations) is absorbed exactly by the base parameters: $\theta_1 \mathrel{+}= (g_r^2 + g_r + 1) I_r$,
   $\theta_2 \mathrel{-}= g_r I_r$ and $I_{r2} = (g_r^2 + g_r) I_r$ at the elbow. The conditions
   above then hold for the rigid-body-plus-coupling part as long as $g_r I_r < I_2$ (the case for
-  quasi-direct drives; on the DFKI rig $g_r I_r = 0.0006$ against $I_2 = 0.054$).
+  quasi-direct drives, whose $g_r I_r$ is about 1 % of $I_2$).
 
 On top, `check_consistency` evaluates the whole model's mass matrix (with rotor inertia) at the
 data's configurations.

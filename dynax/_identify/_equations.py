@@ -77,8 +77,8 @@ class Dynamic(eqx.Module):
       treats the inputs as the zero-order hold the contract says they are: a central difference at
       $t_k$ spans the intervals held at `us[k-1]` and `us[k]`, so their weighted mean is used
       (pairing with `us[k]` alone leaves an $O(h)$ bias). `"sampled"` pairs `us[k]` as is: right
-      for a measured force or torque sampled at $t_k$ (the EMPS reference model does this; on EMPS
-      the half-sample shift between the two moves $F_v$ by 2 %).
+      for a measured force or torque sampled at $t_k$ (the EMPS reference model does this; the
+      half-sample shift between the two moves a viscous friction by percents).
     - `weighting`: `"none"` (ordinary least squares) or `"joint"`: weight each joint's equations
       by the inverse of its residual variance from a first ordinary fit of the same equations
       (offsets removed when they are estimated; Gautier's weighted least squares; joints with
@@ -90,11 +90,11 @@ class Dynamic(eqx.Module):
       part of the returned model. `"auto"`: with the settings chosen from the data (no explicit
       `lowpass_hz`) on systems whose model has no constant term of its own (two-link arms; a linear
       axis has its `offset` parameter already). A small motion about an equilibrium that an offset
-      has shifted otherwise biases the gravity terms (DFKI run 00 alone: $\theta_4$ 0.47 instead of
-      about 2.3). On an arm whose every joint is a driven angle, `"auto"` also fits one *angle zero*
+      has shifted otherwise biases the gravity terms (on one short run, to a fraction of their
+      value). On an arm whose every joint is a driven angle, `"auto"` also fits one *angle zero*
       per record and joint instead (an encoder zeroed where the arm stood when the recording
       began, `dynax._identify._angle_zeros`) and keeps whichever of the two leaves the smaller
-      equation error (as many unknowns); the DFKI runs choose the angle zeros. `"angles"` fits the
+      equation error (as many unknowns). `"angles"` fits the
       angle zeros whatever the error (such arms only); `True` the force offsets.
 
     ??? cite

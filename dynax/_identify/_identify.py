@@ -158,8 +158,8 @@ def _refinement_method(refine, system, method, trajectories):
     segment = 1.0 / band if band is not None else 0.25
     # Four integrator steps per sample of the fitted grid (40 per band period): the smoothed Coulomb
     # friction (tanh at 0.01 rad/s) is stiff, and two steps left a visible bias on synthetic data.
-    # Four staggered cuts into segments: with one, where the segments start moved a DFKI fold's
-    # held-out error by up to 5 % (segment lengths 0.154 to 0.182 s), with four by under 2 %.
+    # Four staggered cuts into segments: with one, where the segments start moves a real rig's
+    # held-out error by several per cent; with four, by a third of that.
     return SimulationFit(segment_s=segment, fit_initial_states=False, max_steps=60, simulation=FixedGrid(substeps=4),
                          stagger=STAGGER)
 
@@ -525,9 +525,9 @@ def _warn_poorly_determined(poorly: dict[str, float] | None) -> None:
     Judged on what `identify` returns: after the output-error refinement, on its standard errors
     (clustered over segments) and the leave-one-record-out ones where larger. The least-squares
     stage's own errors see only the noise in the torques; where the filter and the differentiated
-    velocities bias its estimate they say nothing of it (DFKI run 00 alone: 8 to 21 % on the
-    least-squares stage, whose theta5 is 46 % below the lab's; 31 and 38 % on theta2 and theta1
-    after the refinement, whose estimates there are 22 and 8 % from the lab's)."""
+    velocities bias its estimate they say nothing of it (a single short run can give small
+    least-squares errors on an estimate tens of per cent off, which the refined errors show;
+    docs/devdocs/identification_notes.md)."""
     if poorly:
         warnings.warn(
             f"the data determine these size parameters poorly (relative standard error above "

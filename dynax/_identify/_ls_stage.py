@@ -143,10 +143,10 @@ def _serially_robust(fit, a, y, weights, estimate, record_rows):
     records' rows to go by.
 
     Equations sampled in time are not independent: the low-pass filter spreads each sample's noise
-    over its neighbours, and a model error follows the motion. On the EMPS benchmark's rows the
-    robust errors are 2.3 to 8.8 times the independent-row ones (the record's two filter settings,
-    the published and the default, give estimates 4 to 10 of those apart, 0.7 to 1.2 of these); on
-    one DFKI run 2.3 to 4.9 times."""
+    over its neighbours, and a model error follows the motion. On real filtered rows the robust
+    errors are several times the independent-row ones, and estimates from two filter settings lie
+    within about one robust error of each other where they lay many independent-row errors apart
+    (docs/devdocs/identification_notes.md)."""
     n = a.shape[1]
     total = int(sum(record_rows))
     if not total or int(fit.statistics.rank) < n or a.shape[0] % total:
@@ -231,9 +231,8 @@ def _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, error, tra
 
     A torque counted the other way than the model's joint angle (a motor mounted the other way, a
     current's sign) is the commonest mix-up of real data, and least squares meets it with an estimate
-    that the consistency constraint then squeezes to nothing (on three DFKI runs with the elbow torque
-    reversed: theta1..theta5 of 0.013, 0.003, 0.006, 0.58, 0 and an equation error of 94 %), which
-    names no cause. Flipping an input negates the equation rows of the joint it drives, so each
+    that the consistency constraint then squeezes to nothing (near-zero inertias and a large
+    equation error), which names no cause. Flipping an input negates the equation rows of the joint it drives, so each
     candidate is one more least-squares solve. Systems whose inputs share a joint are not probed.
     """
     base = _split(system)[0]
@@ -285,8 +284,8 @@ def _warn_if_degrees(given, trajectories, error) -> None:
 
     Velocities are checked against their positions at load (`dynax._data._velocities`), but a file
     with both in degrees passes that check, and the arm's equations, whose gravity and Coriolis terms
-    are trigonometric in the angles, then fit nothing (three DFKI runs in degrees: an equation error
-    of 85 % against 23 %, and an estimate of zeros with small negative terms). One more least-squares
+    are trigonometric in the angles, then fit nothing (a large equation error, and an estimate of
+    near-zeros with small negative terms). One more least-squares
     stage per set, built from scaled records.
     """
     system, method, friction, weights, rcond = given
@@ -333,10 +332,10 @@ def _warn_if_zero_upright(fitted, names, estimate, std, qs) -> None:
     estimate consistent, and each is far (`UPRIGHT_DETERMINED` standard errors) from zero.
 
     The contract's angles are 0 hanging down; a rig calibrated for balancing often reads 0 upright.
-    That is an exact change of sign of two gravity or geometry terms (on three DFKI runs with q1
-    shifted by pi: theta4 = -2.231 +- 0.027, theta5 = -1.741 +- 0.018, everything else as before),
+    That is an exact change of sign of two gravity or geometry terms (q1 shifted by pi negates
+    theta4 and theta5 and leaves everything else as it was),
     so nothing in the equations tells it from a physically impossible arm; the physics does, and a
-    gravity term decided to 1 % is not noise. (The unfiltered DFKI fit, inconsistent from noise,
+    gravity term decided to 1 % is not noise. (An unfiltered fit of noisy records, inconsistent from noise,
     has small negative gravity terms and a negative friction as well, and is not named.)
     """
     signs = _split(fitted)[0].upright_zero_signs()

@@ -4,8 +4,8 @@ A force or torque sensor (a motor driver's current measurement) can read a const
 too little, and by a different amount in each recording session (its zero is set at start-up, it
 drifts with temperature). No model term carries that from one record to the next: an offset fitted
 on some records is wrong on another, and a held-out record simulated with its recorded torque
-carries its offset as error. On the DFKI double pendulum the shoulder torque of run 00 reads
-0.14 N m high, of run 01 0.07 N m, of runs 02 and 03 nearly nothing (`experiments/dfki_torque_offsets.py`).
+carries its offset as error (measured on a real rig: `experiments/dfki_torque_offsets.py`,
+docs/devdocs/record_offsets.md).
 
 `record_offsets` adds to the stacked inverse-dynamics equations of `identify`'s `Dynamic()` stage one
 constant per record, joint and *half* of the record (the base parameters stay shared) and asks, per
@@ -17,7 +17,7 @@ effects model). The halves make the test honest under autocorrelated residuals: 
 offset is an average over thousands of filtered, correlated rows, whose naive standard error would be
 far too small, while two halves of one record are two independent measurements of the same sensor
 zero. An offset that is model error rather than a sensor's (it follows the motion) differs between
-the halves and weakens the test instead of passing it (the chaotic DFKI run 12: -0.05 and +0.04 N m).
+the halves and weakens the test instead of passing it (on a chaotic run its halves can differ in sign).
 
 Estimating per-experiment offsets as parameters is standard practice (Ljung, *System
 Identification*, 2nd ed., 1999, sec. 14.1). Here they are reported, not used: the model `identify`

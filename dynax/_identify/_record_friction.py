@@ -4,12 +4,9 @@ Dry friction is not a constant of a machine: it changes with the lubricant's tem
 with the load on the bearings and from one start-up to the next (Armstrong-Hélouvry, Dupont and
 Canudas de Wit, *Automatica* 30(7), 1994, sec. 2.3). A model fitted on some records carries their
 friction to another record, and a held-out record whose friction differs keeps the difference as
-simulation error, whatever the fit. On the DFKI double pendulum the six runs disagree on the
-elbow's Coulomb friction (0.05 to 0.13 N m in these equations, p = 3e-9), and that friction is
-what separates dynax's model from the lab's on the large-amplitude run 12: the lab fitted its
-`model_3.0` on that run too (elbow 0.1225 N m against 0.093 from the five other runs), and dynax's
-own model with the lab's elbow value in it is within 0.4 % of the lab's there at 0.1 s and below
-it at 0.25 and 0.5 s (`experiments/dfki_record_friction.py`, docs/identification.md).
+simulation error, whatever the fit: a model fitted on records whose friction is low predicts a
+record with a higher friction worse, and no fit on the others can know that record's value
+(measured on a real rig: `experiments/dfki_record_friction.py`, docs/devdocs/record_friction.md).
 
 `record_friction` asks the same question of the friction as `record_offsets` asks of a sensor's
 zero, on the stacked inverse-dynamics equations of `identify`'s `Dynamic()` stage: each record's

@@ -13,7 +13,7 @@ The data it fits are the records cut to 40 samples per period of their signal ba
 (`choose_filter`; inputs averaged over each new interval), so that the integrator takes as few
 steps as the motion needs, with the measured encoder positions and velocities from a local cubic
 fit of those positions: each segment starts from the measured position and a velocity about a
-hundred times less noisy than a one-sample difference (the DFKI rig's logged velocity), without the amplitude loss of a low-pass filter
+hundred times less noisy than a one-sample difference (a driver's), without the amplitude loss of a low-pass filter
 at the band's edge (which on a large-amplitude run distorts the very motion that is fitted). The
 segments are `method`'s (`identify` uses one band period, in four staggered cuts, see
 `SimulationFit.stagger`). Each state's residual is divided by its measurement-noise level
@@ -23,8 +23,8 @@ precise encoder positions, not the noisy velocity estimate, decide.
 When the torques are measurements sampled at the state samples (a motor current read with the
 encoders) rather than commands held between them, the contract's zero-order hold applies each
 sample half a step late, and a driver's latency adds to that; an output-error fit is sensitive to
-it (on the DFKI runs a half-sample shift of the torques moved a held-out prediction error at 0.5 s by
-up to 30 %), while the least-squares equations are not. So the fit also estimates the **input
+it (a half-sample shift of the torques can move a held-out prediction error by tens of per cent),
+while the least-squares equations are not. So the fit also estimates the **input
 timing**: over each interval of its grid the model is driven by the recorded input read $\alpha$
 steps later than the interval's own sample, linearly interpolated between samples (`TimedInputs`,
 $|\alpha| \le 3$; $\alpha = 0$ is the zero-order hold as recorded). It is

@@ -132,7 +132,7 @@ def _clustered_covariance(jac, r, ts, owner, trajectories, segment_s: float) -> 
     fewer than twice as many blocks as unknowns, blocks of one segment length; with fewer still,
     `None` (too few clusters to estimate a covariance from: the caller keeps Gauss-Newton's). With few
     blocks the sandwich runs low (measured on a linear model with a shock per segment: 13 % low in the
-    standard errors with 15 blocks, 2 % with 50; a DFKI fold has about 70).
+    standard errors with 15 blocks, 2 % with 50; a few 10 s records give about 70).
     """
     n_segments, n_unknowns = ts.shape[0], jac.shape[1]
     offsets = np.array([float(trajectories[o].ts[0]) for o in owner])

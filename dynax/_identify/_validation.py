@@ -27,8 +27,8 @@ DEFAULT_HORIZONS_S = (0.1, 0.25, 0.5)
 # RMSE over the median window's root-mean-square error above which a record's RMSE is said to be
 # carried by a few windows. Windows whose errors differ only by chance give about 1.2 (for a
 # Gaussian error in two positions, sqrt(2 / 1.386)) to 1.7 (the true model on a noisy synthetic rig
-# record, `tests/identify/test_validation.py`); the DFKI runs give 1.1 to 1.4, except the swing-up run
-# whose end rests upright (9 at 0.5 s). A ratio of 3 is a mean square 9 times the median's.
+# record, `tests/identify/test_validation.py`); real records give about as much, except one whose end rests
+# at an unstable equilibrium. A ratio of 3 is a mean square 9 times the median's.
 CONCENTRATED = 3.0
 
 

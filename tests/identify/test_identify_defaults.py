@@ -559,7 +559,7 @@ def test_dfki_runs_logged_at_200_and_100_hz_get_a_lower_cutoff_and_nearly_the_sa
     # above the threshold (bins 1.6 Hz apart on these records at 5 and 10 ms), it read 1.6 Hz on some runs,
     # the filter cut the motion, and the unconstrained estimate lost 15 to 24 % of theta3 and theta4 and
     # had a negative shoulder viscous friction. With the crossing interpolated between bins the estimate
-    # stays consistent with no constraint and within 10 % of the 2 ms one (docs/identification.md, "The
+    # stays consistent with no constraint and within 10 % of the 2 ms one (docs/devdocs/dfki_loro.md, "The
     # same runs recorded otherwise").
     raw = [dfki(datasets, r) for r in ("00", "02", "03", "05", "12")]
     fine = identify(dynax.DoublePendulum(), [dynax.resample(r, r.dt) for r in raw], Dynamic(), friction="coulomb",

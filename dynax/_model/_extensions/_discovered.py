@@ -111,7 +111,7 @@ class Discovered(AbstractJointTerm):
 
     Cause `discovered`. Its neutral value is all coefficients zero. `formula(system)` renders it
     in torque form (`tau_q2 += -1.49*q2`, the force balance $M\ddot q + h = Ba + f$) and
-    `acceleration_formula(system)` in the acceleration form of the issue (`ddq2 += M^-1[:,q2] (...)`).
+    `acceleration_formula(system)` in acceleration form (`ddq2 += M^-1[:,q2] (...)`).
 
     **Arguments:** `joint` (0-based coordinate), `features` (a tuple of `Feature`),
     `coefficients` (one per feature).
