@@ -26,7 +26,7 @@ from ._identify import (
     record_offsets as record_offsets,
     RecordOffsets as RecordOffsets,
     refine_by_simulation as refine_by_simulation,
-    Refinement as Refinement,
+    RefinementStatistics as RefinementStatistics,
     split_for_validation as split_for_validation,
     Dynamic as Dynamic,
     dynamic_regressor as dynamic_regressor,
@@ -36,6 +36,8 @@ from ._identify import (
     friction_power_regressor as friction_power_regressor,
     IdentifiabilityError as IdentifiabilityError,
     Identification as Identification,
+    Stage as Stage,
+    StageKind as StageKind,
     identify as identify,
     least_squares as least_squares,
     poorly_determined as poorly_determined,
@@ -45,7 +47,7 @@ from ._identify import (
     parameter_names as parameter_names,
     Power as Power,
     SimulationFit as SimulationFit,
-    SimulationFitResult as SimulationFitResult,
+    OutputErrorStatistics as OutputErrorStatistics,
     with_friction as with_friction,
 )
 from ._model._extensions import (

@@ -236,7 +236,7 @@ def main(argv=None):
         seconds = time.perf_counter() - start
         lab_error = held_out_error(lab, [runs[held]], HORIZONS)
         paired = cell_tests(result.system, lab, runs[held], HORIZONS)
-        stages = result.stages
+        stages = result.to_json()["stages"]
         entry = {
             "fit_seconds": seconds,
             "dynax": list(result.validation.rmse),
@@ -253,9 +253,9 @@ def main(argv=None):
             "segment_s": stages["output_error"].get("segment_s"),
             "stagger": args.stagger,
             "training_runs": [r for r in RUNS if r != held],
-            "record_weights": list(refinements[-1].record_weights),
-            "record_residual_scale": list(refinements[-1].record_sigma),
-            "reweights": refinements[-1].reweights,
+            "record_weights": list(refinements[-1].statistics.record_weights),
+            "record_residual_scale": list(refinements[-1].statistics.record_sigma),
+            "reweights": refinements[-1].statistics.reweights,
             "input_timing": stages["output_error"].get("input_timing"),
             "offsets": args.offsets,
             "angle_zeros": None if result.angle_zeros is None else result.angle_zeros.to_json(),

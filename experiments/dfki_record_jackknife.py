@@ -51,7 +51,7 @@ def fit(leave: str) -> dict:
             "parameters": result.parameters, "std_errors": result.standard_errors,
             "record_std_errors": None if result.record_std_errors is None else
             {n: float(v) for n, v in zip(result.names, np.asarray(result.record_std_errors))},
-            "records_disagree": (result.stages.get("output_error") or {}).get("records_disagree"),
+            "records_disagree": (result.to_json()["stages"].get("output_error") or {}).get("records_disagree"),
             "warnings": sorted({type(w.message).__name__ for w in caught})}
 
 

@@ -122,4 +122,4 @@ def test_output_error_fit_reports_each_iteration(capsys):
     result = fit_simulation_error(axis(1.5, 1.0), trajectory, segment_s=10.0, progress=True)
     err = capsys.readouterr().err
     assert "output-error fit" in err and "loss=" in err
-    assert abs(float(result.parameters[0]) - 0.8) < 1e-6  # the bar does not disturb the fit
+    assert abs(float(result.value[0]) - 0.8) < 1e-6  # the bar does not disturb the fit

@@ -120,6 +120,7 @@ def run(args: argparse.Namespace) -> int:
     from .._data import load_trajectory
     from .._identify import identify
     from .._identify._least_squares import describe_poorly_determined
+    from .._identify._result import StageKind
 
     allowed = _LEAST_SQUARES[args.system] + ("simulation",)
     if args.method not in allowed:
@@ -159,8 +160,9 @@ def run(args: argparse.Namespace) -> int:
         std = report["std_errors"].get(name)
         print(f"  {name:>8s} = {value:.6g}" + (f" +- {std:.2g}" if std is not None else "")
               + (f" (leaving one record out: +- {between[name]:.2g})" if name in between else ""))
-    serial = (result.stages or {}).get("least_squares", {}).get("serial_correlation")
-    if serial and "output_error" not in (result.stages or {}):
+    least_squares, output_error = result.stage(StageKind.LEAST_SQUARES), result.stage(StageKind.OUTPUT_ERROR)
+    serial = None if least_squares is None else least_squares.serial_correlation
+    if serial and output_error is None:
         ratios = serial["inflation"].values()
         print(f"  standard errors robust to the equations' correlation in time (over {serial['bandwidth_steps']:.0f} "
               f"time steps): {min(ratios):.2g} to {max(ratios):.2g} times those counting every equation as independent")
@@ -171,8 +173,7 @@ def run(args: argparse.Namespace) -> int:
     if consistency is not None:
         if consistency.violated:
             print("  physically INCONSISTENT: " + "; ".join(consistency.violated))
-        stages = result.stages or {}
-        enforced = stages.get("least_squares", {}).get("consistency", {}).get("active", [])
+        enforced = () if least_squares is None else least_squares.consistency.active
         if enforced:
             print("  consistency constraint active (the plain least-squares estimate broke: " + "; ".join(enforced) + ")")
         elif not consistency.violated:
@@ -186,14 +187,14 @@ def run(args: argparse.Namespace) -> int:
         print("  NOTE: determined mostly jointly (the standard error over 10 times what it would be with every other "
               "parameter known: most of the error is shared, and a combination of the correlated parameters is known "
               f"better than each alone): {cells}")
-    if "output_error" in (result.stages or {}) and result.record_std_errors is None and len(data) < 3:
+    if output_error is not None and result.record_std_errors is None and len(data) < 3:
         own = args.validation is None  # without --validation, the held-out part is the records' own tail
         print(f"  NOTE: fitted on {len(data)} record{'s' if len(data) > 1 else ''}: the standard errors "
               + ("and the validation come" if own else "come")
               + " from within the records, and cannot show what changes from one recording to the next "
               "(friction, sensor offsets, motion a record does not contain). Give three records or more for errors "
               "between records" + (", and a record of its own to --validation" if own else ""))
-    disagree = (result.stages or {}).get("output_error", {}).get("records_disagree")
+    disagree = None if output_error is None else output_error.records_disagree
     if disagree:
         cells = ", ".join(f"{n} ({r:.1f}x)" for n, r in disagree.items())
         print(f"  NOTE: the records disagree more than their noise explains: leaving one record out moves {cells} "
@@ -202,25 +203,25 @@ def run(args: argparse.Namespace) -> int:
     for check in (result.record_offsets, result.record_friction):
         if check is not None and check.differ():
             print("  " + check.note())
-    fitted_offsets = (result.stages or {}).get("least_squares", {}).get("offsets")
+    fitted_offsets = None if least_squares is None else least_squares.offsets
     if fitted_offsets:
         cells = "; ".join(f"{record} " + ", ".join(f"{joint} {value:+.3g}" for joint, value in zip(fitted_offsets["joints"], row))
                           for record, row in zip(fitted_offsets["records"], fitted_offsets["values"]))
         print(f"  force offsets fitted per record (not part of the model): {cells}")
     if result.angle_zeros is not None:
         print("  " + result.angle_zeros.note())
-    timing = (result.stages or {}).get("output_error", {}).get("input_timing")
-    if timing:
-        latency = 1e3 * timing["latency_s"]
+    timing = None if output_error is None else output_error.solution.statistics.input_latency_s
+    if timing is not None:
+        latency = 1e3 * timing
         print(f"  input timing (fitted in the refinement): the inputs act {abs(latency):.2f} ms "
               f"{'after' if latency >= 0 else 'before'} their samples (0 ms: sampled without delay; "
               "half the record's interval after: held as recorded)")
-    for stage, content in (result.stages or {}).items():
-        held = content.get("validation")
+    for stage in result.stages:
+        held = None if stage.validation is None else stage.validation.to_json()
         if held:
             cells = ", ".join(f"{h:g} s: {r:.4g}" for h, r in zip(held["horizons_s"], held["rmse"]))
             medians = ", ".join(f"{m:.4g}" for m in held.get("median", ()))
-            print(f"  open-loop RMSE on {held['source']} ({stage}): {cells}"
+            print(f"  open-loop RMSE on {held['source']} ({stage.kind}): {cells}"
                   + (f" (median window: {medians})" if medians else ""))
             if len(held["per_record"]) > 1:
                 for record, rmse in held["per_record"].items():
@@ -228,7 +229,7 @@ def run(args: argparse.Namespace) -> int:
     concentrated = None if result.validation is None else result.validation.note()
     if concentrated:
         print("  NOTE: " + concentrated)
-    worse = _refinement_validates_worse(result.stages or {})
+    worse = _refinement_validates_worse(least_squares, output_error)
     if worse:
         print(f"  NOTE: the least-squares stage predicts the {worse} better than the refined model at every "
               "horizon; the refined model is the one written (`--refine no` returns the least-squares model)")
@@ -238,12 +239,12 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _refinement_validates_worse(stages: dict) -> str | None:
+def _refinement_validates_worse(least_squares, output_error) -> str | None:
     """The held-out source where the output-error stage's open-loop error is above the least-squares
     stage's at every horizon; `None` otherwise (or when either stage has no validation)."""
-    ls, oe = (stages.get(k, {}).get("validation") for k in ("least_squares", "output_error"))
-    if ls and oe and ls["rmse"] and all(o > l for o, l in zip(oe["rmse"], ls["rmse"])):
-        return oe["source"]
+    ls, oe = (None if s is None else s.validation for s in (least_squares, output_error))
+    if ls and oe and ls.rmse and all(o > l for o, l in zip(oe.rmse, ls.rmse)):
+        return oe.source
     return None
 
 

@@ -322,7 +322,7 @@ def _fit_with(model, terms, records, refit, fit_window_s, state_scale):
     _, unravel = jax.flatten_util.ravel_pytree(fitted)
     std_tree = unravel(result.std_errors)
     stds = [np.asarray(t.coefficients) for t in std_tree.terms[len(named):]]
-    return result.system, stds
+    return result.model, stds
 
 
 def discover(

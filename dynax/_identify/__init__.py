@@ -26,6 +26,8 @@ from ._result import (
     Identification as Identification,
     NoValidationWarning as NoValidationWarning,
     RecordsDisagreeWarning as RecordsDisagreeWarning,
+    Stage as Stage,
+    StageKind as StageKind,
 )
 from ._regressors import (
     dynamic_regressor as dynamic_regressor,
@@ -37,12 +39,12 @@ from ._regressors import (
 from ._simulation_fit import (
     fit_simulation_error as fit_simulation_error,
     SimulationFit as SimulationFit,
-    SimulationFitResult as SimulationFitResult,
+    OutputErrorStatistics as OutputErrorStatistics,
 )
 from ._refine import (
     ConsistentSystem as ConsistentSystem,
     refine_by_simulation as refine_by_simulation,
-    Refinement as Refinement,
+    RefinementStatistics as RefinementStatistics,
 )
 from ._validation import (
     held_out_error as held_out_error,

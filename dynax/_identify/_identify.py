@@ -52,7 +52,7 @@ from ._ls_stage import (
 from ._offsets import record_labels, without_offsets
 from ._refine import refine_by_simulation
 from ._regressors import _split, Friction, parameter_names, parameter_vector, with_friction
-from ._result import Identification, NoValidationWarning, RecordsDisagreeWarning
+from ._result import Identification, NoValidationWarning, RecordsDisagreeWarning, Stage, StageKind
 from ._simulation_fit import fit_simulation_error, SimulationFit
 from ._validation import DEFAULT_HORIZONS_S, held_out_error, split_for_validation
 
@@ -88,15 +88,6 @@ def _system_name(system):
 _CONSISTENCY = ("constrain", "check", "off")
 
 
-def _stage_json(method, names, estimate, std, relative_error, validation, **extra):
-    out = {"method": method, "parameters": {n: float(v) for n, v in zip(names, np.asarray(estimate))},
-           "std_errors": {n: float(v) for n, v in zip(names, np.asarray(std))},
-           "relative_equation_error": None if relative_error is None else float(relative_error),
-           "validation": None if validation is None else validation.to_json()}
-    out.update(extra)
-    return out
-
-
 RECORDS_DISAGREE = 2.5  # record-jackknife over within-record standard error that says the records differ
 
 
@@ -108,10 +99,11 @@ def _records_disagree(refined) -> dict[str, float]:
     2.5 has $p \approx 3 \cdot 10^{-4}$ per parameter with four records, 0.002 with three (measured on
     MuJoCo records of one arm: at most 2.0 over ten parameters; with the dry friction changed for
     each record, 2.5 to 6.6 on the Coulomb friction, $\theta_2$ and $\theta_5$)."""
-    if refined.record_std_errors is None:
+    record_std = refined.statistics.record_std_errors
+    if record_std is None:
         return {}
     with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = np.asarray(refined.record_std_errors) / np.asarray(refined.std_errors)
+        ratio = np.asarray(record_std) / np.asarray(refined.std_errors)
     out = {n: float(r) for n, r in zip(refined.names, ratio) if np.isfinite(r) and r > RECORDS_DISAGREE}
     if out:
         cells = ", ".join(f"{n} ({r:.1f}x)" for n, r in out.items())
@@ -198,37 +190,22 @@ def _identify_by_simulation(system, trajectories, method: SimulationFit, frictio
         parameters = _named_parameters(system, names)
     else:
         parameters = Parameters.of(system)
-    result = fit_simulation_error(
+    solution = fit_simulation_error(
         system, trajectories, filter_spec=parameters, segment_s=method.segment_s,
         fit_initial_states=method.fit_initial_states, continuity_weight=method.continuity_weight,
         rtol=method.rtol, atol=method.atol, max_steps=method.max_steps, simulation=method.simulation,
         stagger=method.stagger,
     )
-    # The system's part of the engine's solution: the same names, estimate, errors and covariance.
-    n = parameters.size
-    full = result.solution
-    solution = Solution(
-        model=result.system, value=full.value[:n], parameters=parameters, covariance=full.covariance[:n, :n],
-        std_errors=full.std_errors[:n], result=full.result, loss=full.loss, initial_loss=full.initial_loss,
-        steps=full.steps, n_residuals=full.n_residuals,
-    )
-    order = np.arange(n) if names is None else np.asarray([parameters.names.index(name) for name in names])
-    return Identification(
-        system=result.system,
-        estimate=solution.value[order],
-        std_errors=solution.std_errors[order],
-        condition_number=result.condition_number,
-        rank=result.rank,
-        residual_rms=result.residual_rms,
-        relative_error=result.relative_error,
-        fit=None,
-        names=parameters.names if names is None else tuple(names),
-        n_samples=result.n_samples,
-        method="simulation",
-        friction=friction,
-        system_name=_system_name(system),
-        solution=solution,
-    )
+    if names is not None and tuple(names) != parameters.names:  # the contract's order, not the tree's
+        order = np.asarray([parameters.names.index(name) for name in names])
+        value = solution.value[order]
+        solution = eqx.tree_at(
+            lambda s: (s.value, s.parameters, s.std_errors, s.covariance), solution,
+            (value, Parameters.of(value, names=tuple(names)), solution.std_errors[order],
+             solution.covariance[np.ix_(order, order)]))
+    stage = Stage(StageKind.SIMULATION, "simulation", solution)
+    return Identification(system=solution.model, stages=(stage,), n_samples=solution.statistics.n_samples,
+                          friction=friction, system_name=_system_name(system))
 
 
 def _validation_split(system, trajectories, validation, weights, holdout, horizons_s):
@@ -282,47 +259,24 @@ def _validated_simulation_fit(system, fitted, method, friction, consistency, val
     if _has_conditions(system):
         qs = _joint_positions(result.system, fitted)
         check = check_consistency(result.system, result.names, result.estimate, qs, warn=consistency != "off")
-    held_out = validate(result.system)
-    stage = _stage_json("simulation", result.names, result.estimate, result.std_errors, None, held_out)
-    return eqx.tree_at(lambda r: (r.consistency, r.validation, r.stages), result,
-                       (check, held_out, {"simulation": stage}), is_leaf=lambda x: x is None)
+    stage = dataclasses.replace(result.stages[0], consistency=check, validation=validate(result.system))
+    return dataclasses.replace(result, stages=(stage,))
 
 
-def _refined_stage(ls, fitted, method, friction, rcond, consistency, refinement, validate):
-    """The output-error refinement from the least-squares stage `ls`: `(final, stage json)`, where
-    `final` holds what `identify` returns (system, names, estimate, standard errors, equation error
-    on the least-squares rows, validation, consistency, method label)."""
+def _refined_stage(ls, fitted, method, friction, rcond, consistency, refinement, validate) -> Stage:
+    """The output-error refinement from the least-squares stage `ls`, with its equation error on the
+    least-squares rows, consistency and validation."""
     refined = refine_by_simulation(ls.system, ls.names, _less_offsets(ls.system, fitted, ls), refinement)
-    _, a, y, _, _, _, _, _, _, _ = _equations(refined.system, fitted, method, friction, None, rcond)
+    estimate = jnp.asarray(refined.value)
+    _, a, y, _, _, _, _, _, _, _ = _equations(refined.model, fitted, method, friction, None, rcond)
     if ls.groups is not None:  # the same equations as the least-squares stage's: offsets free
         a, y, _, _ = without_offsets(a, y, None, ls.groups)
-    error = _relative_equation_error(jnp.asarray(a), jnp.asarray(y), jnp.asarray(refined.estimate))
-    qs = _joint_positions(refined.system, fitted)
-    check = check_consistency(refined.system, refined.names, refined.estimate, qs, warn=consistency != "off")
+    error = _relative_equation_error(jnp.asarray(a), jnp.asarray(y), estimate)
+    qs = _joint_positions(refined.model, fitted)
+    check = check_consistency(refined.model, refined.names, estimate, qs, warn=consistency != "off")
     check = Consistency(check.violated, active=(), constrained=True, min_mass_eigenvalue=check.min_mass_eigenvalue)
-    held_out = validate(refined.system)
-    stage = _stage_json(
-        "simulation", refined.names, refined.estimate, refined.std_errors, error, held_out,
-        consistency=check.to_json(), initial_residual_rms=refined.initial_residual_rms,
-        residual_rms=refined.residual_rms, steps=refined.steps, dt=refined.dt, segment_s=refined.segment_s,
-        record_std_errors=None if refined.record_std_errors is None
-        else {n: float(v) for n, v in zip(refined.names, refined.record_std_errors)},
-        records_disagree=_records_disagree(refined),
-        model="least-squares model + RotorInertia(joint=1), consistent parametrisation",
-        diverged=refined.diverged,
-        diverged_segments=dict(zip(("at_end", "at_start", "segments"), refined.diverged_segments)),
-        input_timing=None if refined.input_alpha is None else {
-            "alpha": refined.input_alpha, "latency_s": refined.input_latency_s,
-            "meaning": "the inputs that fit best act latency_s after the sample that records them "
-                       "(0: sampled without delay; half the record's interval: the zero-order hold as recorded)"},
-    )
-    final = dict(system=refined.system, names=refined.names, estimate=jnp.asarray(refined.estimate),
-                 std=jnp.asarray(refined.std_errors), record_std=refined.record_std_errors,
-                 covariance=refined.covariance, diverged=refined.diverged,
-                 error=error, validation=held_out, consistency=check,
-                 label=f"{ls.label}+simulation" + (" (ended worse than its start: least squares kept)"
-                                                     if refined.diverged else ""))
-    return final, stage
+    return Stage(StageKind.OUTPUT_ERROR, "simulation", refined, relative_equation_error=float(error),
+                 validation=validate(refined.model), consistency=check, records_disagree=_records_disagree(refined))
 
 
 def identify(
@@ -428,54 +382,40 @@ def identify(
         fitted = zeros.corrected(fitted, system)
         method = dataclasses.replace(method, offsets=False)
     ls = _least_squares_stage(system, fitted, method, friction, weights, rcond, consistency)
-    ls_error = _relative_equation_error(ls.a, ls.y, ls.estimate)
-    ls_validation = validate(ls.system)
-    std = ls.fit.std_errors
-    poorly = _size_errors(system, ls.names, ls.estimate, std)  # the returned estimate's, unless refined below
-    stages = {"least_squares": _stage_json(ls.label, ls.names, ls.estimate, std, ls_error, ls_validation,
-                                           consistency=ls.consistency.to_json(),
-                                           offsets=_offsets_json(ls, fitted),
-                                           angle_zeros=None if zeros is None else zeros.to_json(),
-                                           poorly_determined=poorly, serial_correlation=ls.serial)}
+    solution = eqx.tree_at(lambda s: (s.model, s.value), ls.fit, (ls.estimate, jnp.asarray(ls.estimate)))
+    poorly = _size_errors(system, ls.names, ls.estimate, ls.fit.std_errors)  # the returned estimate's, unless refined
+    stages = (Stage(StageKind.LEAST_SQUARES, ls.label, solution,
+                    relative_equation_error=float(_relative_equation_error(ls.a, ls.y, ls.estimate)),
+                    validation=validate(ls.system), consistency=ls.consistency, poorly_determined=poorly,
+                    offsets=_offsets_json(ls, fitted), angle_zeros=zeros, serial_correlation=ls.serial),)
+    system_out = ls.system
     refinement = _refinement_method(refine, ls.system, method, fitted)
-    final = dict(system=ls.system, names=ls.names, estimate=ls.estimate, std=std, error=ls_error,
-                 validation=ls_validation, consistency=ls.consistency, label=ls.label)
     if refinement is not None:
-        final, stages["output_error"] = _refined_stage(ls, fitted, method, friction, rcond, consistency,
-                                                       refinement, validate)
-        refined = _size_errors(system, final["names"], final["estimate"], final["std"], final.get("record_std"))
-        stages["output_error"]["poorly_determined"] = refined
-        if not final.get("diverged"):  # a kept least-squares model is judged by its own errors
-            poorly = refined
+        refined = _refined_stage(ls, fitted, method, friction, rcond, consistency, refinement, validate)
+        statistics = refined.solution.statistics
+        refined_poorly = _size_errors(system, refined.names, refined.solution.value, refined.solution.std_errors,
+                                      statistics.record_std_errors)
+        stages += (dataclasses.replace(refined, poorly_determined=refined_poorly),)
+        system_out = refined.solution.model
+        if not refined.kept_start:  # a kept least-squares model is judged by its own errors
+            poorly = refined_poorly
     _warn_poorly_determined(poorly)
     _warn_unvalidated(held, source)
-    covariance = final.get("covariance", ls.fit.covariance)
-    jointly = (jointly_determined(final["names"], covariance)
-               if covariance is not None and np.shape(covariance)[0] == len(final["names"]) else None)
+    final = stages[-1].solution
+    covariance = final.covariance
+    jointly = (jointly_determined(final.names, covariance)
+               if covariance is not None and np.shape(covariance)[0] == len(final.names) else None)
     return Identification(
-        system=final["system"],
-        estimate=jnp.asarray(final["estimate"]),
-        std_errors=jnp.asarray(final["std"]),
-        condition_number=ls.fit.statistics.condition_number,
-        rank=ls.fit.statistics.rank,
-        residual_rms=ls.fit.statistics.residual_rms,
-        relative_error=final["error"],
-        fit=ls.fit,
-        names=final["names"],
+        system=system_out,
+        stages=stages,
         n_samples=ls.n_samples,
-        method=final["label"],
         friction=friction,
         system_name=_system_name(system),
         settings=ls.settings,
-        consistency=final["consistency"],
-        validation=final["validation"],
-        stages=stages,
         record_offsets=ls.offsets,
         angle_zeros=zeros,
         record_friction=ls.friction,
         poorly_determined=poorly,
-        record_std_errors=None if final.get("record_std") is None else jnp.asarray(final["record_std"]),
-        refined_covariance=None if final.get("covariance") is None else jnp.asarray(final["covariance"]),
         jointly_determined=jointly,
     )
 

@@ -50,7 +50,6 @@ has a floor of 1 in the residual's unit (the noise level) and of a tenth of the 
 so that no record a short or easy one fits almost exactly takes over the fit.
 """
 
-import dataclasses
 import warnings
 
 import equinox as eqx
@@ -61,6 +60,7 @@ import optimistix as optx
 
 from .._data._derivatives import butterworth_filtfilt, resample
 from .._data._trajectory import Trajectory
+from .._fit import Parameters, Solution
 from .._model._extensions import Extended
 from .._model._system import AbstractSystem
 from .._simulate import FixedGrid, simulate
@@ -163,44 +163,44 @@ def with_refinement_terms(system: AbstractSystem) -> AbstractSystem:
     return Extended(base, terms + extra) if extra else system
 
 
-@dataclasses.dataclass(frozen=True)
-class Refinement:
-    r"""What `refine_by_simulation` did. Fields: `system` (refined), `names`, `estimate`,
-    `std_errors` (the fit's covariance, cluster-robust over blocks of time, carried through the
-    parametrisation's Jacobian), `initial_residual_rms` and `residual_rms` (scaled state residual at the start and
-    at the end), `steps`, `dt` and `segment_s` (the grid and segment length fitted),
-    `record_weights` (the final weight of each record's residuals), `record_sigma` (each record's
-    residual scale at the end, in units of the measurement noise), `reweights` (refits done), and
-    the input timing: `input_alpha` (steps of the fit's grid, see `TimedInputs`; `None` when not
-    fitted) and `input_latency_s`, the latency $\Delta t/2 - \alpha h$ of the inputs behind their
-    samples [s] (see the module's docstring); `diverged`: the fit ended worse than its start (a
-    warning said so) and `system` is the start, unrefined; `covariance`, the whole covariance
-    behind `std_errors`; `record_std_errors`, from the delete-one-record jackknife
-    (`SimulationFitResult.record_covariance`) through the same Jacobian: how far each parameter
-    moves when one record is left out, `None` with fewer than three records; `diverged_segments`
-    (`(at its end, at its start, segments)`) counts the segments whose rollouts diverged in the
-    last fit that ran (a fit that ends with more of them than it started with counts as worse)."""
+class RefinementStatistics(eqx.Module):
+    r"""What `refine_by_simulation` adds to its `Solution` (as `solution.statistics`).
 
-    system: AbstractSystem
-    names: tuple[str, ...]
-    estimate: np.ndarray
-    std_errors: np.ndarray
-    initial_residual_rms: float
-    residual_rms: float
-    relative_error: float
-    steps: int
-    dt: float
-    segment_s: float
-    n_samples: int
-    record_weights: tuple[float, ...] = ()
-    record_sigma: tuple[float, ...] = ()
-    reweights: int = 0
-    input_alpha: float | None = None
-    input_latency_s: float | None = None
-    diverged: bool = False
-    covariance: np.ndarray | None = None
+    **Fields:**
+
+    - `initial_residual_rms`, `residual_rms`: the scaled state residual at the start and at the end.
+    - `relative_error`: $\lVert \hat x - x \rVert / \lVert x \rVert$ of the states fitted (NaN for a kept start).
+    - `dt`, `segment_s`: the grid and segment length fitted.
+    - `n_samples`: samples fitted.
+    - `record_weights`: the final weight of each record's residuals; `record_sigma`: each record's
+      residual scale at the end, in units of the measurement noise; `reweights`: refits done.
+    - `input_alpha`, `input_latency_s`: the input timing, $\alpha$ in steps of the fit's grid (see
+      `TimedInputs`) and the latency $\Delta t/2 - \alpha h$ of the inputs behind their samples
+      [s] (see the module's docstring); `None` when not fitted.
+    - `kept_start`: the fit ended worse than its start (a warning said so), and the solution is the
+      start, unrefined.
+    - `record_std_errors`: from the delete-one-record jackknife (`OutputErrorStatistics.record_covariance`)
+      through the parametrisation's Jacobian: how far each parameter moves when one record is left
+      out; `None` with fewer than three records.
+    - `diverged_segments`: `(at its end, at its start, segments)`, the segments whose rollouts
+      diverged in the last fit that ran (a fit that ends with more of them than it started with
+      counts as worse).
+    """
+
+    initial_residual_rms: float = eqx.field(static=True)
+    residual_rms: float = eqx.field(static=True)
+    relative_error: float = eqx.field(static=True)
+    dt: float = eqx.field(static=True)
+    segment_s: float = eqx.field(static=True)
+    n_samples: int = eqx.field(static=True)
+    record_weights: tuple[float, ...] = eqx.field(static=True, default=())
+    record_sigma: tuple[float, ...] = eqx.field(static=True, default=())
+    reweights: int = eqx.field(static=True, default=0)
+    input_alpha: float | None = eqx.field(static=True, default=None)
+    input_latency_s: float | None = eqx.field(static=True, default=None)
+    kept_start: bool = eqx.field(static=True, default=False)
     record_std_errors: np.ndarray | None = None
-    diverged_segments: tuple[int, int, int] = (0, 0, 0)
+    diverged_segments: tuple[int, int, int] = eqx.field(static=True, default=(0, 0, 0))
 
 
 def motion_records(records: list[Trajectory], *, filtered: bool | str = "positions") -> tuple[list[Trajectory], float]:
@@ -271,7 +271,7 @@ def _ml_weights(sigma: np.ndarray) -> np.ndarray:
 def refine_by_simulation(
     system: AbstractSystem, names: tuple[str, ...], records: list[Trajectory], method: SimulationFit,
     *, filtered: bool | str = "positions", record_weights: str | None = None, input_timing: bool = True,
-) -> Refinement:
+) -> Solution:
     """Refine a two-link arm's least-squares model by the output-error fit, consistent by construction.
 
     **Arguments:** `system` (the least-squares model, carrying its estimate; rotor inertia at the
@@ -285,7 +285,10 @@ def refine_by_simulation(
     $\alpha$ (`TimedInputs`, see the module's docstring), else drive the model by the zero-order
     hold as recorded.
 
-    **Returns:** a `Refinement`.
+    **Returns:** the engine's `Solution` in the contract's base parameters: `model` the refined
+    system, `value`, `names`, `std_errors` and `covariance` (the fit's, cluster-robust over blocks
+    of time, carried through the parametrisation's Jacobian), `steps` over every refit, and
+    `statistics` a `RefinementStatistics`.
     """
     record_weights = DEFAULT_RECORD_WEIGHTS if record_weights is None else record_weights
     if record_weights not in RECORD_WEIGHTS:
@@ -327,19 +330,19 @@ def refine_by_simulation(
         )
 
     result = last = fit(wrapped, weights)
-    initial_rms, steps = float(result.initial_residual_rms), int(result.steps)
+    initial_rms, steps = float(result.statistics.initial_residual_rms), int(result.steps)
     diverged = _ended_worse(result)
     if diverged:  # keep the start: the least-squares model, rotor inertia at zero
         warnings.warn(f"refine_by_simulation: the output-error fit ended worse than its start ({_how_worse(result)}); "
                       "the least-squares model is kept", RuntimeWarning, stacklevel=2)
     else:
-        sigma = record_residual_scale(result.system, result.initial_states, fitted, noise, method)
+        sigma = record_residual_scale(result.model, result.statistics.initial_states, fitted, noise, method)
     reweights = 0
     while not diverged and record_weights == "ml" and reweights < MAX_REWEIGHTS:
         new = _ml_weights(sigma)
         if np.max(np.abs(np.log(new / weights))) < np.log1p(SETTLED):
             break  # the weights the last fit used are (within 10 %) those its residuals imply
-        refit = fit(result.system, new)
+        refit = fit(result.model, new)
         steps += int(refit.steps)
         last = refit
         if _ended_worse(refit):
@@ -348,32 +351,42 @@ def refine_by_simulation(
             break
         weights, result = new, refit
         reweights += 1
-        sigma = record_residual_scale(result.system, result.initial_states, fitted, noise, method)
-    final = wrapped if diverged else result.system
+        sigma = record_residual_scale(result.model, result.statistics.initial_states, fitted, noise, method)
+    final = wrapped if diverged else result.model
     consistent = final.system if input_timing else final
     refined = consistent.model
     estimate = np.asarray(parameter_vector(refined, friction))
     # Standard errors through the parametrisation's Jacobian (delta method).
     jac = np.asarray(jax.jacfwd(parametrisation.theta)(consistent.phi))
     n_phi = consistent.phi.shape[0]
-    phi_cov = np.full((n_phi, n_phi), np.nan) if diverged else np.asarray(result.solution.covariance)[:n_phi, :n_phi]
+    phi_cov = np.full((n_phi, n_phi), np.nan) if diverged else np.asarray(result.covariance)[:n_phi, :n_phi]
     alpha = latency = None
     if input_timing and not diverged:  # a kept start has measured no timing
         alpha = float(jnp.clip(final.alpha, -INPUT_REACH, INPUT_REACH))
         record_dt = float(np.median([float(np.median(np.diff(np.asarray(r.ts)))) for r in records]))
         latency = 0.5 * record_dt - alpha * dt
-    spread = None if diverged or result.record_covariance is None else np.asarray(result.record_covariance)[:n_phi, :n_phi]
+    spread = result.statistics.record_covariance
+    spread = None if diverged or spread is None else np.asarray(spread)[:n_phi, :n_phi]
     with np.errstate(invalid="ignore"):  # an unidentified direction has an infinite standard error
         covariance = jac @ phi_cov @ jac.T
         std = np.sqrt(np.maximum(np.diag(covariance), 0.0))  # NaN stays NaN
         record_std = None if spread is None else np.sqrt(np.maximum(np.diag(jac @ spread @ jac.T), 0.0))
     # A kept start: its own residual, no relative error or record scales of a fit.
-    rms, relative = (initial_rms, float("nan")) if diverged else (float(result.residual_rms), float(result.relative_error))
-    return Refinement(refined, names, estimate, std, initial_rms, rms, relative, steps, dt, method.segment_s,
-                      result.n_samples, tuple(float(w) for w in weights),
-                      () if diverged else tuple(float(v) for v in sigma), reweights, alpha, latency, diverged,
-                      covariance, record_std,
-                      (last.diverged_segments, last.initial_diverged_segments, last.n_segments))
+    rms, relative = (initial_rms, float("nan")) if diverged else (float(result.statistics.residual_rms),
+                                                           float(result.statistics.relative_error))
+    statistics = RefinementStatistics(
+        initial_residual_rms=initial_rms, residual_rms=rms, relative_error=relative, dt=dt, segment_s=method.segment_s,
+        n_samples=result.statistics.n_samples, record_weights=tuple(float(w) for w in weights),
+        record_sigma=() if diverged else tuple(float(v) for v in sigma), reweights=reweights, input_alpha=alpha,
+        input_latency_s=latency, kept_start=diverged, record_std_errors=record_std,
+        diverged_segments=(last.statistics.diverged_segments, last.statistics.initial_diverged_segments,
+                           last.statistics.n_segments))
+    value = jnp.asarray(estimate)
+    return Solution(
+        model=refined, value=value, parameters=Parameters.of(value, names=names), covariance=jnp.asarray(covariance),
+        std_errors=jnp.asarray(std), result=optx.RESULTS.nonlinear_divergence if diverged else optx.RESULTS.successful,
+        loss=result.initial_loss if diverged else result.loss, initial_loss=result.initial_loss,
+        steps=jnp.asarray(steps), n_residuals=result.n_residuals, statistics=statistics)
 
 
 def _ended_worse(result) -> bool:
@@ -382,12 +395,12 @@ def _ended_worse(result) -> bool:
     fixed `DIVERGED` per residual, less than a bad enough model's finite error, so a fit from a poor
     start (data that hardly excite the dynamics) can lower its cost by making every rollout
     diverge: its Jacobian is then zero and it stops there."""
-    more_diverged = result.diverged_segments > result.initial_diverged_segments
-    return bool(result.solution.result == optx.RESULTS.nonlinear_divergence) or more_diverged
+    return bool(result.result == optx.RESULTS.nonlinear_divergence) or result.statistics.ended_worse
 
 
 def _how_worse(result) -> str:
-    if result.diverged_segments > result.initial_diverged_segments:
-        return (f"the rollouts of {result.diverged_segments} of its {result.n_segments} segments diverge, "
-                f"{result.initial_diverged_segments} at its start")
-    return f"scaled residual {float(result.initial_residual_rms):.4g} -> {float(result.residual_rms):.4g}"
+    stats = result.statistics
+    if stats.ended_worse:
+        return (f"the rollouts of {stats.diverged_segments} of its {stats.n_segments} segments diverge, "
+                f"{stats.initial_diverged_segments} at its start")
+    return f"scaled residual {float(stats.initial_residual_rms):.4g} -> {float(stats.residual_rms):.4g}"

@@ -1,8 +1,10 @@
-"""What `identify` returns: `Identification` (both stages, validation, settings, the contract's JSON)
-and the warnings that qualify it."""
+"""What `identify` returns: `Identification` (the fitted system, its typed `Stage`s, validation,
+settings, the contract's JSON) and the warnings that qualify it."""
 
+import enum
 
 import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
@@ -26,102 +28,171 @@ class RecordsDisagreeWarning(UserWarning):
     within the records allow (`Identification.record_std_errors`): the recordings differ."""
 
 
+class StageKind(enum.StrEnum):
+    """The stages of `identify`: the key of each stage in the JSON output's `stages`."""
+
+    LEAST_SQUARES = "least_squares"
+    """The linear equations (`Dynamic`, `Power`, `Energy`) solved and made physically consistent."""
+    OUTPUT_ERROR = "output_error"
+    """The least-squares model refined through the integrator (`refine_by_simulation`)."""
+    SIMULATION = "simulation"
+    """An output-error fit from the system's own values (`SimulationFit`)."""
+
+
+class Stage(eqx.Module):
+    r"""One stage of `identify`: its estimate, and how that estimate fits and validates.
+
+    **Fields:**
+
+    - `kind`: a `StageKind`.
+    - `method`: the contract's name of the stage's method (`"dynamic"`, `"power"`, `"energy"`,
+      `"simulation"`).
+    - `solution`: the stage's `Solution` (`names`, `value`, `std_errors`, `covariance`); its
+      `statistics` are a `Statistics` (least squares: the regressor's singular values, condition
+      number and rank), a `RefinementStatistics` (output-error refinement) or an
+      `OutputErrorStatistics` (`SimulationFit`). The least-squares stage's errors are robust to
+      rows correlated in time (`serial_correlation` says by how much they grew); its value is the
+      constrained estimate where the plain one was inconsistent.
+    - `relative_equation_error`: $\lVert A\hat\theta - y\rVert / \lVert y\rVert$ of the
+      least-squares equations at this stage's estimate; `None` for `SimulationFit`.
+    - `validation`: the `HeldOutError` of this stage's model, or `None`.
+    - `consistency`: the `Consistency` of this stage's estimate, or `None`.
+    - `poorly_determined`: its size parameters the data determine poorly (see `poorly_determined`).
+    - `offsets`: least squares: each record's fitted force offset at each driven joint, JSON-ready
+      (`records`, `joints`, `values`), or `None`.
+    - `angle_zeros`: least squares: the records' angle zeros (`AngleZeros`), or `None`.
+    - `serial_correlation`: least squares: `{"bandwidth_steps", "inflation"}`, how much the errors
+      robust to serial correlation grew over those counting every row as independent, or `None`.
+    - `records_disagree`: output error: the parameters whose leave-one-record-out error exceeds
+      the within-record one `RECORDS_DISAGREE` times, name -> ratio.
+    """
+
+    kind: StageKind = eqx.field(static=True)
+    method: str = eqx.field(static=True)
+    solution: Solution
+    relative_equation_error: float | None = eqx.field(static=True, default=None)
+    validation: HeldOutError | None = None
+    consistency: Consistency | None = None
+    poorly_determined: dict[str, float] | None = eqx.field(static=True, default=None)
+    offsets: dict | None = eqx.field(static=True, default=None)
+    angle_zeros: AngleZeros | None = None
+    serial_correlation: dict | None = eqx.field(static=True, default=None)
+    records_disagree: dict[str, float] = eqx.field(static=True, default_factory=dict)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.solution.names
+
+    @property
+    def kept_start(self) -> bool:
+        """The output-error refinement ended worse than its start, which it returns unrefined."""
+        return self.kind == StageKind.OUTPUT_ERROR and self.solution.statistics.kept_start
+
+    def to_json(self) -> dict:
+        """The stage's entry in the JSON output's `stages`."""
+        names = self.names
+        out = {"method": self.method,
+               "parameters": {n: float(v) for n, v in zip(names, np.asarray(self.solution.value))},
+               "std_errors": {n: float(v) for n, v in zip(names, np.asarray(self.solution.std_errors))},
+               "relative_equation_error": None if self.relative_equation_error is None
+               else float(self.relative_equation_error),
+               "validation": None if self.validation is None else self.validation.to_json()}
+        if self.kind == StageKind.LEAST_SQUARES:
+            out.update(consistency=self.consistency.to_json(), offsets=self.offsets,
+                       angle_zeros=None if self.angle_zeros is None else self.angle_zeros.to_json(),
+                       poorly_determined=self.poorly_determined, serial_correlation=self.serial_correlation)
+        elif self.kind == StageKind.OUTPUT_ERROR:
+            stats = self.solution.statistics
+            out.update(
+                consistency=self.consistency.to_json(), initial_residual_rms=stats.initial_residual_rms,
+                residual_rms=stats.residual_rms, steps=int(self.solution.steps), dt=stats.dt,
+                segment_s=stats.segment_s,
+                record_std_errors=None if stats.record_std_errors is None
+                else {n: float(v) for n, v in zip(names, stats.record_std_errors)},
+                records_disagree=self.records_disagree,
+                model="least-squares model + RotorInertia(joint=1), consistent parametrisation",
+                diverged=stats.kept_start,
+                diverged_segments=dict(zip(("at_end", "at_start", "segments"), stats.diverged_segments)),
+                input_timing=None if stats.input_alpha is None else {
+                    "alpha": stats.input_alpha, "latency_s": stats.input_latency_s,
+                    "meaning": "the inputs that fit best act latency_s after the sample that records them "
+                               "(0: sampled without delay; half the record's interval: the zero-order hold as "
+                               "recorded)"},
+                poorly_determined=self.poorly_determined)
+        return out
+
+
 class Identification(eqx.Module):
-    r"""The result of `identify`.
+    r"""The result of `identify`: the fitted system, the stages that fitted it, and what qualifies it.
 
     **Fields:**
 
     - `system`: the system with the fitted parameters (for two-link arms with
       `friction="coulomb"`, `Extended` with `CoulombFriction` at both joints; after the output-error
       refinement also with `RotorInertia` at the elbow).
-    - `estimate`, `std_errors`: parameter values and standard errors, in the order of `names`.
-      The least-squares stage's errors are robust to rows correlated in time (`serial_covariance`;
-      `stages["least_squares"]["serial_correlation"]` says by how much they grew); the output-error
-      stage's are clustered over blocks of segments.
-    - `names`: parameter names (the contract's; `Ir2` for the elbow's rotor inertia).
-    - `condition_number`: of the column-scaled regressor (least-squares methods) or of the
-      Jacobian at the solution (`SimulationFit`).
-    - `rank`: numerical rank.
+    - `stages`: the `Stage`s that ran, in order (least squares, then the output-error refinement
+      where it ran; or the one `SimulationFit` stage). The last one's estimate is the result's.
     - `n_samples`: samples that entered the fit.
-    - `residual_rms`: root-mean-square residual of the fitted equations.
-    - `relative_error`: $\lVert A\hat\theta - y\rVert / \lVert y\rVert$ of the (unweighted)
-      equations: for `Dynamic` the relative force/torque error (EMPS reports 4.08 %); for
-      `SimulationFit` the relative simulation error of the states.
-    - `method`, `friction`, `system_name`: as in the contract's output.
-    - `fit`: the least-squares stage's `Solution` (least-squares methods; its `std_errors` and `covariance` the
-      robust ones above) or `None`.
+    - `friction`, `system_name`: as in the contract's output.
     - `settings`: per record, the filter and derivative settings used and why (`Dynamic`).
-    - `consistency`: the `Consistency` of the returned estimate: violated conditions, and which
-      the constrained fit had to enforce.
-    - `validation`: the `HeldOutError` of the returned model (open-loop simulation error against
-      horizon on held-out data), or `None` when nothing could be held out.
-    - `stages`: per stage (`"least_squares"`, and `"output_error"` after a refinement), its
-      parameters, equation error and held-out simulation error, as a JSON-ready dict.
-    - `solution`: for the iterative method (`SimulationFit`), the engine's `Solution` this result
-      is built from (the same names, estimate, standard errors and covariance, plus the result
-      code, steps and losses); `None` for the least-squares methods, whose `fit` holds the same.
     - `record_offsets`: for `Dynamic` on two records or more, each record's constant offset on each
       joint's recorded force (from each half of the record too) and whether they differ between
-      records (`RecordOffsets`, see `dynax._identify._offsets`): a sensor zero that changes from one
-      recording to the next, which no model term carries; `None` otherwise.
+      records (`RecordOffsets`): a sensor zero that changes from one recording to the next, which
+      no model term carries; `None` otherwise.
     - `angle_zeros`: for `Dynamic` with the settings chosen from the data on an arm whose every
-      joint is a driven angle, each record's zero of each angle fitted with the parameters (an
-      encoder zeroed where the arm stood when the recording began), whether both stages fitted the
-      records less them (`chosen`: they left a smaller equation error than force offsets) and why
-      (`AngleZeros`, see `dynax._identify._angle_zeros`); `None` otherwise.
+      joint is a driven angle, each record's zero of each angle fitted with the parameters, whether
+      both stages fitted the records less them and why (`AngleZeros`); `None` otherwise.
     - `record_friction`: for `Dynamic` on two records or more with `friction="coulomb"`, each
-      record's Coulomb friction coefficients (from each of four parts of the record too) and whether they
-      differ between records (`RecordFriction`, see `dynax._identify._record_friction`): a friction
-      that changed between recordings, which a held-out record keeps as error; `None` otherwise.
+      record's Coulomb friction coefficients and whether they differ between records
+      (`RecordFriction`); `None` otherwise.
     - `poorly_determined`: the size parameters (inertias, gravity terms, mass) of the returned
       estimate whose relative standard error is above 25 %, name -> that ratio
       (`poorly_determined`; also warned as a `PoorlyDeterminedWarning`): after the output-error
-      refinement judged on its standard errors, or the leave-one-record-out ones where larger
-      (each stage's own is in `stages`); `{}` when the data determine them all, `None` for
-      methods and systems it does not apply to.
-    - `record_std_errors`: after the output-error refinement on three records or more, each
-      parameter's standard error from the delete-one-record jackknife (how far it moves when one
-      record is left out; `Refinement.record_std_errors`), in the order of `names`: the spread from
-      one recording to the next (a friction or offset of that day) that `std_errors`, estimated
-      within records, cannot carry; `None` otherwise.
-    - `refined_covariance`: after the output-error refinement, the whole covariance behind
-      `std_errors` (`Refinement.covariance`; what `covariance` returns then), e.g. for the error of
-      a combination such as $M_{22} = \theta_2 + I_{r2}$; `None` otherwise.
+      refinement judged on its standard errors, or the leave-one-record-out ones where larger;
+      `{}` when the data determine them all, `None` for methods and systems it does not apply to.
     - `jointly_determined`: the parameters of the returned estimate that the data determine mostly
-      in combination with others (`jointly_determined`: over 99 % of their variance shared), name ->
+      in combination with others (over 99 % of their variance shared), name ->
       `{"with": partners, "correlations": ..., "inflation": ratio}`; `{}` when none, `None` without
       a covariance.
 
-    **Properties** in `Solution`'s spelling: `value` (= `estimate`), `covariance`; and
-    `parameters` / `standard_errors` as `{name: value}` (`Solution.estimates()` /
-    `Solution.standard_errors()`).
+    **Properties:** `solution` (the last stage's `Solution`), `names`, `value` (= `estimate`),
+    `std_errors`, `covariance`, `parameters` / `standard_errors` as `{name: value}`, `validation`
+    and `consistency` (the last stage's), `relative_error` (the relative equation error of the
+    returned estimate on the least-squares rows; for `SimulationFit` the relative state error),
+    `condition_number` and `rank` (of the column-scaled regressor, or for `SimulationFit` of the
+    Jacobian at the solution), `residual_rms`, `record_std_errors` (the output-error refinement's
+    delete-one-record jackknife on three records or more), `method` (the contract's label:
+    `"dynamic"`, `"dynamic+simulation"`, `"simulation"`, ...), and `stage(kind)`.
     """
 
     system: AbstractSystem
-    estimate: Float[Array, " n_params"]
-    std_errors: Float[Array, " n_params"]
-    condition_number: Float[Array, ""]
-    rank: Array
-    residual_rms: Float[Array, ""]
-    relative_error: Float[Array, ""]
-    fit: Solution | None
-    names: tuple[str, ...] = eqx.field(static=True)
+    stages: tuple[Stage, ...]
     n_samples: int = eqx.field(static=True)
-    method: str = eqx.field(static=True)
     friction: str = eqx.field(static=True)
     system_name: str = eqx.field(static=True)
     settings: tuple = ()
-    consistency: Consistency | None = None
-    validation: HeldOutError | None = None
-    stages: dict | None = None
-    solution: Solution | None = None
     record_offsets: RecordOffsets | None = None
     angle_zeros: AngleZeros | None = None
     record_friction: RecordFriction | None = None
-    poorly_determined: dict[str, float] | None = None
-    record_std_errors: Float[Array, " n_params"] | None = None
-    refined_covariance: Float[Array, "n_params n_params"] | None = None
-    jointly_determined: dict[str, dict] | None = None
+    poorly_determined: dict[str, float] | None = eqx.field(static=True, default=None)
+    jointly_determined: dict[str, dict] | None = eqx.field(static=True, default=None)
+
+    def stage(self, kind: StageKind | str) -> Stage | None:
+        """The stage of that kind, or `None` where it did not run."""
+        return next((s for s in self.stages if s.kind == kind), None)
+
+    @property
+    def solution(self) -> Solution:
+        """The returned estimate's `Solution` (the last stage's)."""
+        return self.stages[-1].solution
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.solution.names
+
+    @property
+    def estimate(self) -> Float[Array, " n_params"]:
+        return jnp.asarray(self.solution.value)
 
     @property
     def value(self) -> Float[Array, " n_params"]:
@@ -129,17 +200,68 @@ class Identification(eqx.Module):
         return self.estimate
 
     @property
-    def covariance(self) -> Float[Array, "n_params n_params"] | None:
-        """The estimate's covariance: from the solution (iterative), the refinement (after the
-        output-error refinement: the cluster-robust one behind `std_errors`), or the least-squares
-        fit; `None` where none applies."""
-        if self.refined_covariance is not None:
-            return self.refined_covariance
-        if self.solution is not None:
-            return self.solution.covariance
-        if self.fit is not None and self.fit.covariance.shape[0] == self.estimate.shape[0] and "simulation" not in self.method:
-            return self.fit.covariance
-        return None
+    def std_errors(self) -> Float[Array, " n_params"]:
+        return jnp.asarray(self.solution.std_errors)
+
+    @property
+    def covariance(self) -> Float[Array, "n_params n_params"]:
+        """The estimate's covariance: the least-squares one robust to serial correlation, the
+        refinement's cluster-robust one carried through its parametrisation, or the output-error fit's."""
+        return self.solution.covariance
+
+    @property
+    def validation(self) -> HeldOutError | None:
+        return self.stages[-1].validation
+
+    @property
+    def consistency(self) -> Consistency | None:
+        return self.stages[-1].consistency
+
+    @property
+    def fit(self) -> Solution | None:
+        """The least-squares stage's `Solution`, or `None` for `SimulationFit`."""
+        first = self.stage(StageKind.LEAST_SQUARES)
+        return None if first is None else first.solution
+
+    @property
+    def _linear_statistics(self):
+        first = self.stages[0].solution.statistics
+        return first.jacobian if self.stages[0].kind == StageKind.SIMULATION else first
+
+    @property
+    def condition_number(self) -> Float[Array, ""]:
+        return self._linear_statistics.condition_number
+
+    @property
+    def rank(self) -> Array:
+        return self._linear_statistics.rank
+
+    @property
+    def residual_rms(self) -> Float[Array, ""]:
+        first = self.stages[0].solution.statistics
+        return first.residual_rms
+
+    @property
+    def relative_error(self) -> Float[Array, ""]:
+        last = self.stages[-1]
+        if last.relative_equation_error is None:
+            return last.solution.statistics.relative_error
+        return jnp.asarray(last.relative_equation_error)
+
+    @property
+    def record_std_errors(self) -> Float[Array, " n_params"] | None:
+        last = self.stages[-1]
+        if last.kind != StageKind.OUTPUT_ERROR or last.solution.statistics.record_std_errors is None:
+            return None
+        return jnp.asarray(last.solution.statistics.record_std_errors)
+
+    @property
+    def method(self) -> str:
+        first, last = self.stages[0], self.stages[-1]
+        if last.kind != StageKind.OUTPUT_ERROR:
+            return first.method
+        return f"{first.method}+simulation" + (" (ended worse than its start: least squares kept)"
+                                               if last.kept_start else "")
 
     @property
     def parameters(self) -> dict[str, float]:
@@ -169,8 +291,7 @@ class Identification(eqx.Module):
         if self.consistency is not None:
             out["consistency"] = self.consistency.to_json()
         out["validation"] = None if self.validation is None else self.validation.to_json()
-        if self.stages:
-            out["stages"] = self.stages
+        out["stages"] = {str(s.kind): s.to_json() for s in self.stages}
         if self.record_offsets is not None:
             out["record_offsets"] = self.record_offsets.to_json()
         if self.angle_zeros is not None:

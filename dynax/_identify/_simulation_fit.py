@@ -27,7 +27,15 @@ from jaxtyping import Array, Float, PyTree
 from .._data._trajectory import Trajectory
 from .._errors import DataError, UsageError
 from .._progress import bar_token, ProgressBar
-from .._fit import clustered_covariance, fit_least_squares, jackknife_covariance, levenberg_marquardt, Parameters, Solution
+from .._fit import (
+    clustered_covariance,
+    fit_least_squares,
+    jackknife_covariance,
+    levenberg_marquardt,
+    Parameters,
+    Solution,
+    Statistics,
+)
 from .._model._system import AbstractSystem
 from .._simulate import FixedGrid, simulate
 from ._least_squares import least_squares
@@ -59,58 +67,44 @@ class SimulationFit(eqx.Module):
     stagger: int = eqx.field(static=True, default=1)
 
 
-class SimulationFitResult(eqx.Module):
-    r"""The result of `fit_simulation_error`.
+class OutputErrorStatistics(eqx.Module):
+    r"""What an output-error fit adds to its `Solution` (as `solution.statistics`).
 
     **Fields:**
 
-    - `system`: the system with the fitted leaves.
     - `initial_states`: fitted (or measured) initial state of each segment, `(segment, n_states)`.
-    - `parameters`: the fitted leaves, flattened, shape `(n_params,)`, in the order of `names`.
-    - `std_errors`: their standard errors, same shape: with fitted initial states the Gauss-Newton
-      covariance at the solution; from measured initial states the cluster-robust one over blocks of
-      time (see `fit_simulation_error`).
+    - `jacobian`: the `Statistics` of the column-scaled Jacobian of all unknowns (parameters, then
+      fitted initial states): condition number, rank, singular values and directions.
     - `record_covariance`: with measured initial states and at least `MIN_RECORDS_FOR_SPREAD`
-      records, the covariance of all unknowns (scaled as `solution.covariance`) by the linearised
-      delete-one-record jackknife (`dynax._fit.jackknife_covariance`): how far the estimate moves
-      when one record is left out. It carries what differs from one record to the next (a friction
-      or offset of that day), which no error estimated within records can; else `None`.
-    - `condition_number`, `rank`: of the column-scaled Jacobian of all unknowns.
-    - `residual_rms`: root-mean-square of the scaled state residuals at the solution.
-    - `initial_residual_rms`: the same at the starting point.
+      records, the covariance of the fitted parameters by the linearised delete-one-record
+      jackknife (`dynax._fit.jackknife_covariance`): how far the estimate moves when one record is
+      left out. It carries what differs from one record to the next (a friction or offset of that
+      day), which no error estimated within records can; else `None`.
+    - `residual_rms`, `initial_residual_rms`: root-mean-square of the scaled state residuals at
+      the solution and at the start.
     - `relative_error`: $\lVert \hat x - x \rVert / \lVert x \rVert$ over all segment samples (unscaled).
-    - `n_segments`, `n_samples`, `steps`: bookkeeping.
+    - `n_segments`, `n_samples`: bookkeeping.
     - `diverged_segments`, `initial_diverged_segments`: how many segments' rollouts diverged (a
       non-finite state) at the solution and at the start. The fit counts such a segment's residuals
       as `DIVERGED` each, which is smaller than those of a model bad enough: a solution where more
       segments diverge than at the start has gamed that count, not fitted the data.
-    - `solution`: the engine's `Solution` over all unknowns (the system's parameters, then the
-      segments' initial states when fitted), named by tree path (`theta1`, `system.theta5`,
-      `terms[0].coefficient`, `initial_states[3,1]`) or by the system's `parameter_labels()`.
-
-    **Properties:** `names`, the fitted parameters' names (the first `n_params` of the solution's).
     """
 
-    system: AbstractSystem
     initial_states: Float[Array, "segment n_states"]
-    parameters: Float[Array, " n_params"]
-    std_errors: Float[Array, " n_params"]
-    condition_number: Float[Array, ""]
-    rank: Array
+    jacobian: Statistics
     residual_rms: Float[Array, ""]
     initial_residual_rms: Float[Array, ""]
     relative_error: Float[Array, ""]
-    n_segments: int = eqx.field(static=True)
-    n_samples: int = eqx.field(static=True)
-    steps: Array
-    solution: Solution | None = None
     record_covariance: Array | None = None
+    n_segments: int = eqx.field(static=True, default=0)
+    n_samples: int = eqx.field(static=True, default=0)
     diverged_segments: int = eqx.field(static=True, default=0)
     initial_diverged_segments: int = eqx.field(static=True, default=0)
 
     @property
-    def names(self) -> tuple[str, ...]:
-        return self.solution.names[: self.parameters.shape[0]]
+    def ended_worse(self) -> bool:
+        """More segments' rollouts diverge at the solution than at the start."""
+        return self.diverged_segments > self.initial_diverged_segments
 
 
 DIVERGED = 1e3  # a diverged rollout's residual at every state and sample from the divergence on
@@ -151,7 +145,7 @@ def _clustered_covariance(jac, r, ts, owner, trajectories, segment_s: float) -> 
 
 
 def _record_covariance(jac, r, owner, n_records: int) -> np.ndarray | None:
-    """The delete-one-record jackknife covariance of the scaled unknowns (see `SimulationFitResult`),
+    """The delete-one-record jackknife covariance of the scaled unknowns (see `OutputErrorStatistics`),
     or `None` with fewer than `MIN_RECORDS_FOR_SPREAD` records."""
     if n_records < MIN_RECORDS_FOR_SPREAD:
         return None
@@ -249,7 +243,7 @@ def fit_simulation_error(
     record_weights: Float[Array, " n_records"] | None = None,
     progress: bool | None = None,
     stagger: int = 1,
-) -> SimulationFitResult:
+) -> Solution:
     r"""Fit the elements of `system` selected by `filter_spec` by minimising the simulation error.
 
     Generic over systems: any `AbstractSystem` whose `vector_field` is differentiable, with any
@@ -295,7 +289,9 @@ def fit_simulation_error(
     within a block; with too few blocks for it (fewer than twice the unknowns, even at one segment
     length each), Gauss-Newton's with the errors multiplied by $\sqrt{k}$ for the repeated samples.
 
-    **Returns:** a `SimulationFitResult` (with the engine's `Solution` as `.solution`).
+    **Returns:** the engine's `Solution`: `model` is the fitted system, `value`, `names`,
+    `covariance` and `std_errors` are the fitted parameters' (the initial states are in
+    `statistics`, an `OutputErrorStatistics`, with the fit's residual sizes and divergence counts).
 
     ??? cite
 
@@ -371,28 +367,36 @@ def fit_simulation_error(
             std = jnp.where(unidentified, jnp.inf, jnp.sqrt(jnp.maximum(jnp.diag(covariance), 0.0)))
         spread = _record_covariance(np.asarray(jac), np.asarray(r), owner, len(trajectories))
         record_covariance = None if spread is None else unscaled(spread)
-    solution = eqx.tree_at(lambda s: (s.std_errors, s.covariance), solution, (std, covariance))
     fitted = solution.model
     diverged, initial_diverged = (
         int(np.sum(np.any(np.asarray(res[:n_state_residuals]).reshape(xs.shape[0], -1) == DIVERGED, axis=1)))
         for res in (r, r0)
     )
-    return SimulationFitResult(
-        system=fitted.system,
+    statistics = OutputErrorStatistics(
         initial_states=fitted.initial_states,
-        parameters=solution.value[:n_params],
-        std_errors=std[:n_params],
-        condition_number=linearised.statistics.condition_number,
-        rank=linearised.statistics.rank,
+        jacobian=linearised.statistics,
         residual_rms=jnp.sqrt(jnp.mean(r[:n_state_residuals] ** 2) * stagger),  # undo the cuts' 1/sqrt(k)
         initial_residual_rms=jnp.sqrt(jnp.mean(r0[:n_state_residuals] ** 2) * stagger),
         relative_error=jnp.linalg.norm(r[:n_state_residuals].reshape(xs.shape) * jnp.broadcast_to(sigma, xs.shape))
         * np.sqrt(stagger) / jnp.linalg.norm(xs),
+        record_covariance=None if record_covariance is None else record_covariance[:n_params, :n_params],
         n_segments=int(xs.shape[0]),
         n_samples=int(n_samples),
-        steps=solution.steps,
-        solution=solution,
-        record_covariance=record_covariance,
         diverged_segments=diverged,
         initial_diverged_segments=initial_diverged,
+    )
+    return Solution(
+        model=fitted.system,
+        value=solution.value[:n_params],
+        parameters=chosen,
+        covariance=covariance[:n_params, :n_params],
+        std_errors=std[:n_params],
+        result=solution.result,
+        loss=solution.loss,
+        initial_loss=solution.initial_loss,
+        steps=solution.steps,
+        n_residuals=solution.n_residuals,
+        residuals=solution.residuals,
+        initial_residuals=solution.initial_residuals,
+        statistics=statistics,
     )

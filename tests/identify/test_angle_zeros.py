@@ -37,7 +37,7 @@ def with_force_offset(record, offset):
 
 
 def _theta(result):
-    return np.array([result.stages["least_squares"]["parameters"][f"theta{i}"] for i in range(1, 6)])
+    return np.array([result.to_json()["stages"]["least_squares"]["parameters"][f"theta{i}"] for i in range(1, 6)])
 
 
 @pytest.mark.heavy
@@ -61,7 +61,7 @@ def test_encoder_zeros_that_differ_between_records_are_found_measured_and_fitted
     np.testing.assert_allclose(_theta(result), _theta(truth), rtol=0.01)
     forced = identify(dynax.DoublePendulum(), shifted, Dynamic(offsets=True), friction="coulomb", refine=False,
                       holdout=0)
-    assert forced.angle_zeros is None and forced.stages["least_squares"]["offsets"] is not None
+    assert forced.angle_zeros is None and forced.to_json()["stages"]["least_squares"]["offsets"] is not None
     report = result.to_json()
     assert report["angle_zeros"]["chosen"] and report["stages"]["least_squares"]["offsets"] is None
 

@@ -157,7 +157,7 @@ def test_emps_standard_errors_carry_the_correlation_in_time_that_two_filter_sett
     assert recipe.settings[0]["decimate"] != defaults.settings[0]["decimate"]
     for name in ("viscous", "coulomb"):
         robust = [r.standard_errors[name] for r in (recipe, defaults)]
-        independent = [r.standard_errors[name] / r.stages["least_squares"]["serial_correlation"]["inflation"][name]
+        independent = [r.standard_errors[name] / r.to_json()["stages"]["least_squares"]["serial_correlation"]["inflation"][name]
                        for r in (recipe, defaults)]
         gap = abs(recipe.parameters[name] - defaults.parameters[name])
         assert abs(robust[0] / robust[1] - 1) < 0.1, (name, robust)

@@ -250,7 +250,7 @@ def test_a_resting_dfki_record_refined_by_default_is_still_said_to_be_poorly_det
         result = identify(dynax.DoublePendulum(), rest, Dynamic(), friction="coulomb", holdout=0)
     std = np.asarray(result.std_errors)
     assert not np.any(std == 0), dict(zip(result.names, std))
-    stage = result.stages["output_error"]
+    stage = result.to_json()["stages"]["output_error"]
     if stage["diverged"]:  # the least-squares model is kept and judged
         assert stage["diverged_segments"]["at_end"] > stage["diverged_segments"]["at_start"]
     assert {"theta1", "theta4"} <= set(result.poorly_determined)
@@ -305,11 +305,11 @@ def test_one_dfki_run_alone_is_said_to_determine_the_size_parameters_poorly(monk
     with pytest.warns(PoorlyDeterminedWarning, match="theta1") as caught:
         result = identify(dynax.DoublePendulum(), record, Dynamic(), friction="coulomb")
     assert "more records" in str(caught[0].message)
-    least_squares = result.stages["least_squares"]
+    least_squares = result.to_json()["stages"]["least_squares"]
     assert least_squares["poorly_determined"] == {}
     assert least_squares["parameters"]["theta5"] < 0.7 * lab["theta5"]
     assert abs(least_squares["parameters"]["theta5"] - lab["theta5"]) > 3 * least_squares["std_errors"]["theta5"]
-    assert {"theta1", "theta2"} <= set(result.poorly_determined) == set(result.stages["output_error"]["poorly_determined"])
+    assert {"theta1", "theta2"} <= set(result.poorly_determined) == set(result.to_json()["stages"]["output_error"]["poorly_determined"])
     # the returned errors cover the distance to the lab's values of the parameters they name
     for name in result.poorly_determined:
         assert abs(result.parameters[name] - lab[name]) < 2 * result.standard_errors[name], name
@@ -361,7 +361,7 @@ def test_noisy_rig_data_with_defaults_give_consistent_estimates():
     relative = np.abs(estimate - truth) / truth
     assert np.all(relative < 0.02), dict(zip(result.names, relative))
     # the least-squares stage is the biased start the refinement corrects, not the answer
-    start = np.array([result.stages["least_squares"]["parameters"][f"theta{i}"] for i in range(1, 6)])
+    start = np.array([result.to_json()["stages"]["least_squares"]["parameters"][f"theta{i}"] for i in range(1, 6)])
     assert np.max(np.abs(start - truth) / truth) > np.max(relative)
     # the motor's rotor inertia and the Coulomb friction come out too
     assert abs(result.parameters["Ir2"] / RIG_IR2 - 1) < 0.1
@@ -369,7 +369,7 @@ def test_noisy_rig_data_with_defaults_give_consistent_estimates():
     # every setting was chosen from the data, and said so
     assert all(s["lowpass_hz"] is not None and "Butterworth" in s["reason"] for s in result.settings)
     # both stages are reported, the refined one with the elbow's rotor inertia, and validated on the held-out record
-    assert set(result.stages) == {"least_squares", "output_error"} and "Ir2" in result.names
+    assert {str(s.kind) for s in result.stages} == {"least_squares", "output_error"} and "Ir2" in result.names
     # the elbow's total inertia theta2 + Ir2 is well determined even where the split is not
     total = result.parameters["theta2"] + result.parameters["Ir2"]
     assert abs(total / (RIG["theta2"] + RIG_IR2) - 1) < 0.03 and result.parameters["Ir2"] > 0
@@ -406,7 +406,7 @@ def test_encoder_angles_alone_with_defaults_give_consistent_estimates(tmp_path):
     relative = {f"theta{i}": abs(result.parameters[f"theta{i}"] / RIG[f"theta{i}"] - 1) for i in range(1, 6)}
     assert max(relative.values()) < 0.02, relative
     assert all(s["lowpass_hz"] is not None and "Butterworth" in s["reason"] for s in result.settings)
-    assert set(result.stages) == {"least_squares", "output_error"}
+    assert {str(s.kind) for s in result.stages} == {"least_squares", "output_error"}
 
 
 # Arms of other sizes than the rig's (Drake's 1 m, 1 kg acrobot links; a 10 cm, 50 g desk pendulum), with
@@ -457,7 +457,7 @@ def test_the_refinement_measures_a_torque_latency_and_is_not_biased_by_it(monkey
     train = [recorded(model, 12.0, seed, latency=0.006) for seed in (20, 21)]
     held = recorded(model, 4.0, 22, latency=0.006)
     result = identify(dynax.DoublePendulum(), train, Dynamic(), friction="coulomb", validation=[held])
-    timing = result.stages["output_error"]["input_timing"]
+    timing = result.to_json()["stages"]["output_error"]["input_timing"]
     assert abs(timing["latency_s"] - 0.006) < 0.5e-3, timing
     truth = np.array([RIG[f"theta{i}"] for i in range(1, 6)])
     relative = np.abs(np.asarray(result.estimate[:5]) - truth) / truth
@@ -467,7 +467,7 @@ def test_the_refinement_measures_a_torque_latency_and_is_not_biased_by_it(monkey
     monkeypatch.setattr(identify_module, "refine_by_simulation",
                         functools.partial(_refine.refine_by_simulation, input_timing=False))
     blind = identify(dynax.DoublePendulum(), train, Dynamic(), friction="coulomb", validation=[held])
-    assert blind.stages["output_error"]["input_timing"] is None
+    assert blind.to_json()["stages"]["output_error"]["input_timing"] is None
     blind_relative = np.abs(np.asarray(blind.estimate[:5]) - truth) / truth
     assert np.max(blind_relative) > 2 * np.max(relative), (blind_relative, relative)
 

@@ -42,9 +42,9 @@ def test_linear_axis_named_by_tree_path_recovers_parameters_within_their_errors(
     data, start = _axis_problem(seed=0)
     result = fit_simulation_error(start, data, segment_s=1.0, max_steps=40)
     assert result.names == ("mass", "viscous", "coulomb", "offset")  # the tree paths of the default filter
-    assert isinstance(result.solution, Solution)
-    assert set(result.solution.standard_errors()) >= set(result.names)
-    estimate, std = np.asarray(result.parameters), np.asarray(result.std_errors)
+    assert isinstance(result, Solution)
+    assert set(result.standard_errors()) == set(result.names)
+    estimate, std = np.asarray(result.value), np.asarray(result.std_errors)
     expected = np.array([95.0, 200.0, 20.0, -3.0])
     np.testing.assert_allclose(estimate, expected, rtol=0.02, atol=0.1)
     assert np.all(np.isfinite(std)) and np.all(std > 0)
@@ -85,10 +85,10 @@ def test_a_parameter_the_rollouts_do_not_depend_on_gets_no_finite_error():
     assert np.isinf(std["spare"]), std
     np.testing.assert_allclose([std[f"axis.{n}"] for n in ("mass", "viscous", "coulomb", "offset")],
                                np.asarray(alone.std_errors), rtol=1e-3)
-    covariance = np.asarray(result.solution.covariance)
+    covariance = np.asarray(result.covariance)
     k = result.names.index("spare")
     assert np.all(np.isnan(covariance[k])) and np.all(np.isnan(covariance[:, k]))
-    assert result.diverged_segments == result.initial_diverged_segments == 0
+    assert result.statistics.diverged_segments == result.statistics.initial_diverged_segments == 0
 
 
 @pytest.mark.slow  # one Levenberg-Marquardt compilation
@@ -159,10 +159,10 @@ def test_staggered_cuts_keep_the_standard_errors_of_one_cut():
             for k in (1, 4)]
     expected = np.array([95.0, 200.0, 20.0, -3.0])
     for fit in fits:
-        np.testing.assert_allclose(np.asarray(fit.parameters), expected, rtol=0.02, atol=0.1)
+        np.testing.assert_allclose(np.asarray(fit.value), expected, rtol=0.02, atol=0.1)
     ratio = np.asarray(fits[1].std_errors) / np.asarray(fits[0].std_errors)
     # Counted as independent, four cuts would halve them (0.33 to 0.41 here); the cuts do add some
     # information (each sample is also fitted from other start states), 0.66 to 0.83 measured.
     assert np.all((ratio > 0.55) & (ratio < 1.2)), ratio
     # The residual's RMS is per sample, as with one cut.
-    assert float(fits[1].residual_rms) == pytest.approx(float(fits[0].residual_rms), rel=0.3)
+    assert float(fits[1].statistics.residual_rms) == pytest.approx(float(fits[0].statistics.residual_rms), rel=0.3)
