@@ -179,3 +179,32 @@ from ._identify._vehicle._criteria import (
     _with_theta as with_theta,
 )
 from ._model._extensions._terms import _scalar as float_scalar
+
+# Aliased re-exports (`x as y`) count as exports only through `__all__`, so it lists every name.
+__all__ = [
+    "acceleration_residuals", "auto_stride", "backward_difference", "bar_token", "bartlett_lags",
+    "benjamini_hochberg", "build_parser", "butterworth_filtfilt", "candidate_family", "central_difference",
+    "cli_main", "clustered_covariance", "compare_records", "complete_state", "CONCENTRATED",
+    "consistency_conditions", "cross_validated_ridge", "decorrelation_lag", "dense_forward", "detectable_gain",
+    "diagnosis_summary", "DRAKE_DEFAULTS", "dynamic_regressor", "dynamic_rows", "energy_regressor",
+    "euler_from_quaternion", "exact_delays", "explicit_step", "Family", "feature_library", "fit_backprop",
+    "fit_configurations", "fit_frequency", "fit_lagged", "fit_one_step", "fit_percent", "float_scalar",
+    "folds_by_run", "friction_power_regressor", "global_array", "held_partners", "helps_on_most_runs", "holm",
+    "horizon_steps", "HOVER_DERIVATIVES", "initial_helicopter", "jackknife_covariance", "jointly_determined",
+    "jointly_determined_cell", "judge_round", "lagged_loss", "lagged_loss_gradient_norm", "lagged_loss_of",
+    "leading_sharding", "levenberg_marquardt", "log_ratio_differences", "look_alike_tests", "look_alikes",
+    "make_windows", "MAX_MAGNITUDE", "min_mass_eigenvalue", "ml_weights", "multi_process", "named_equivalent",
+    "named_parameters", "nominal_from_data", "nominal_parameter_names", "nominal_system", "normal_equations",
+    "on_physical_side", "OptaxLBFGS", "paired_block_test", "parameter_names", "parameter_vector",
+    "parse_assignments", "physical_readings", "POORLY_DETERMINED", "position_spread", "predictability_horizon",
+    "prediction_error", "progress_enabled", "PROGRESS_MODE", "progress_report", "propose", "quaternion_angle",
+    "quaternion_from_euler", "record_angle_zeros", "record_jackknife_covariance", "record_residual_scale",
+    "refit_names", "relative_position_error", "replicate", "replicate_in_jit", "resample", "residual_tests",
+    "RICH_FEATURES", "ridge_solve", "rollouts_from_starts", "savitzky_golay", "search_period",
+    "segment_clustered_covariance", "serial_bandwidth", "serial_covariance", "shifted", "simulation_segments",
+    "split_term_coefficients", "stacked_equations", "stage_log", "stage_reporter", "staged_directory",
+    "STATE_GROUPS", "stlsq", "StrictTrustRegion", "structurally_absorbed", "structurally_equivalent",
+    "TEMPEST_COEFFICIENTS", "TEMPEST_FEATURES", "tsqr_r", "valid_starts", "vehicle_rollout", "velocity_gain",
+    "window_errors", "window_rollout", "window_rollouts", "window_starts", "with_friction", "with_theta",
+    "with_velocities_from_positions", "write_json", "zoh_term"
+]

@@ -1,6 +1,5 @@
 """`dynax.synthetic`: the truth simulators and data generators, checked against independent references."""
 
-import importlib
 import pathlib
 
 import jax
@@ -21,20 +20,10 @@ PUBLIC = (
 
 @pytest.mark.parametrize("name", PUBLIC)
 def test_one_object_under_every_spelling(name):
-    # The new namespace, the top-level re-export and the old private module paths name one object
-    # (a copy would be a different object).
+    # The namespace and the top-level re-export name one object (a copy would be a different object),
+    # defined in dynax/_synthetic/.
     obj = getattr(synthetic, name)
     assert getattr(dynax, name) is obj
-    old = {
-        "HelicopterTruth": "dynax._model._helicopter_truth",
-        "FlightController": "dynax._model._helicopter_truth",
-        "generate_helicopter_flight": "dynax._model._helicopter_truth",
-        "multisine": "dynax._diagnose._synthetic",
-        "synthetic_trajectory": "dynax._diagnose._synthetic",
-        "helicopter_flight": "dynax._diagnose._synthetic",
-        "demo_data": "dynax._diagnose._demo",
-    }[name]
-    assert getattr(importlib.import_module(old), name) is obj
     assert obj.__module__.startswith("dynax._synthetic.")
 
 
