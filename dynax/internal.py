@@ -162,7 +162,7 @@ from ._cli._output import staged_directory as staged_directory, write_json as wr
 # Helpers whose private modules still spell them with an underscore: the plain name here is the one
 # their modules take once those modules are renamed (and these lines become plain re-exports).
 from ._cli._identify import _jointly_cell as jointly_determined_cell
-from ._diagnose._problem import _candidate_family as candidate_family, _refit_names as refit_names
+from ._diagnose._problem import _candidate_family as candidate_family, _refit_names as names_to_refit
 from ._identify._equations import _dynamic_rows as dynamic_rows, _equations as stacked_equations
 from ._identify._identify import _named_parameters as named_parameters
 from ._identify._least_squares import _qr_r as tsqr_r
@@ -180,6 +180,7 @@ from ._identify._vehicle._criteria import (
 )
 from ._model._extensions._terms import _scalar as float_scalar
 
+
 # Aliased re-exports (`x as y`) count as exports only through `__all__`, so it lists every name.
 __all__ = [
     "acceleration_residuals", "auto_stride", "backward_difference", "bar_token", "bartlett_lags",
@@ -194,13 +195,13 @@ __all__ = [
     "jointly_determined_cell", "judge_round", "lagged_loss", "lagged_loss_gradient_norm", "lagged_loss_of",
     "leading_sharding", "levenberg_marquardt", "log_ratio_differences", "look_alike_tests", "look_alikes",
     "make_windows", "MAX_MAGNITUDE", "min_mass_eigenvalue", "ml_weights", "multi_process", "named_equivalent",
-    "named_parameters", "nominal_from_data", "nominal_parameter_names", "nominal_system", "normal_equations",
-    "on_physical_side", "OptaxLBFGS", "paired_block_test", "parameter_names", "parameter_vector",
-    "parse_assignments", "physical_readings", "POORLY_DETERMINED", "position_spread", "predictability_horizon",
-    "prediction_error", "progress_enabled", "PROGRESS_MODE", "progress_report", "propose", "quaternion_angle",
-    "quaternion_from_euler", "record_angle_zeros", "record_jackknife_covariance", "record_residual_scale",
-    "refit_names", "relative_position_error", "replicate", "replicate_in_jit", "resample", "residual_tests",
-    "RICH_FEATURES", "ridge_solve", "rollouts_from_starts", "savitzky_golay", "search_period",
+    "named_parameters", "names_to_refit", "nominal_from_data", "nominal_parameter_names", "nominal_system",
+    "normal_equations", "on_physical_side", "OptaxLBFGS", "paired_block_test", "parameter_names",
+    "parameter_vector", "parse_assignments", "physical_readings", "POORLY_DETERMINED", "position_spread",
+    "predictability_horizon", "prediction_error", "progress_enabled", "PROGRESS_MODE", "progress_report", "propose",
+    "quaternion_angle", "quaternion_from_euler", "record_angle_zeros", "record_jackknife_covariance",
+    "record_residual_scale", "relative_position_error", "replicate", "replicate_in_jit", "resample",
+    "residual_tests", "RICH_FEATURES", "ridge_solve", "rollouts_from_starts", "savitzky_golay", "search_period",
     "segment_clustered_covariance", "serial_bandwidth", "serial_covariance", "shifted", "simulation_segments",
     "split_term_coefficients", "stacked_equations", "stage_log", "stage_reporter", "staged_directory",
     "STATE_GROUPS", "stlsq", "StrictTrustRegion", "structurally_absorbed", "structurally_equivalent",

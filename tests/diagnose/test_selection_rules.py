@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from dynax import Acrobot, CoulombFriction, default_candidates, InputOffset, Known, Refit, Trajectory, ViscousFriction
-from dynax.internal import candidate_family, held_partners, judge_round, look_alike_tests, on_physical_side, refit_names
+from dynax.internal import candidate_family, held_partners, judge_round, look_alike_tests, names_to_refit, on_physical_side
 
 
 def _round(earlier_fc1, new_delta, *, earlier=CoulombFriction(0)):
@@ -84,7 +84,7 @@ def _acrobot_family(mode):
     record = Trajectory(jnp.arange(200) * 0.01, jnp.asarray(rng.normal(size=(200, 4))), jnp.asarray(rng.normal(size=(200, 1))),
                         system.state_names, system.input_names)
     candidates = default_candidates(system)
-    refit = refit_names(system, mode)
+    refit = names_to_refit(system, mode)
     family, _, _ = candidate_family(system, candidates, refit, [record])
     return system, candidates, refit, family
 
@@ -107,8 +107,8 @@ def test_refit_keeps_the_nominal_friction_and_its_viscous_candidates_add_to_it()
 
 
 def test_all_parameters_can_still_be_refitted_and_known_mode_refits_none():
-    assert refit_names(Acrobot(), Refit(parameters=tuple(f"theta{i}" for i in range(1, 8))))[-1] == "theta7"
-    assert refit_names(Acrobot(), Known()) == ()
+    assert names_to_refit(Acrobot(), Refit(parameters=tuple(f"theta{i}" for i in range(1, 8))))[-1] == "theta7"
+    assert names_to_refit(Acrobot(), Known()) == ()
 
 
 def test_a_look_alike_is_told_apart_only_by_a_difference_that_matters():
