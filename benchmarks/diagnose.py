@@ -24,12 +24,9 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 from _device import describe, device_info  # noqa: E402
-from dynax import Acrobot  # noqa: E402
-from dynax._cli._output import write_json  # noqa: E402
-from dynax._data import load_trajectory, save_trajectory  # noqa: E402
-from dynax._diagnose import diagnose  # noqa: E402
+from dynax import Acrobot, CoulombFriction, diagnose, Extended, load_trajectory, save_trajectory  # noqa: E402
+from dynax.internal import write_json  # noqa: E402
 from dynax.synthetic import DEMO_TRUTH_PHYSICAL, synthetic_trajectory  # noqa: E402
-from dynax._model._extensions import CoulombFriction, Extended  # noqa: E402
 
 
 def main():

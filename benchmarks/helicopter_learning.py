@@ -24,19 +24,18 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 
-from dynax._cli._output import write_json  # noqa: E402
-from dynax._identify._vehicle import (  # noqa: E402
-    Backprop,
+from dynax import Backprop, Lagged  # noqa: E402
+from dynax.internal import (  # noqa: E402
     fit_backprop,
     fit_lagged,
     fit_one_step,
     initial_helicopter,
-    Lagged,
     lagged_loss,
+    valid_starts,
+    with_theta,
+    write_json,
 )
-from dynax._identify._vehicle._criteria import _with_theta  # noqa: E402
-from dynax._identify._vehicle._windows import valid_starts  # noqa: E402
-from dynax._model._helicopter_truth import generate_helicopter_flight  # noqa: E402
+from dynax.synthetic import generate_helicopter_flight  # noqa: E402
 
 
 def log(message):
@@ -49,7 +48,7 @@ def gradient_memory(system, data, horizon_s, stride, segment):
     theta = system.body_model.parameter_vector()
 
     def loss(th):
-        return lagged_loss(_with_theta(system, th), data, n_steps, starts=starts, checkpoint_segment=segment)
+        return lagged_loss(with_theta(system, th), data, n_steps, starts=starts, checkpoint_segment=segment)
 
     compiled = jax.jit(jax.grad(loss)).lower(theta).compile()
     analysis = compiled.memory_analysis()

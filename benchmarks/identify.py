@@ -25,8 +25,7 @@ import scipy.linalg  # noqa: E402
 
 import dynax  # noqa: E402
 from _device import describe, device_info  # noqa: E402
-from dynax._data import Trajectory  # noqa: E402
-from dynax._identify import Dynamic, Energy, identify, Power  # noqa: E402
+from dynax import Dynamic, Energy, identify, Power, Trajectory  # noqa: E402
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 

@@ -37,7 +37,7 @@ import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
 from _device import describe, device_info  # noqa: E402
-from dynax._fit import levenberg_marquardt  # noqa: E402
+from dynax.internal import levenberg_marquardt  # noqa: E402
 from dynax._identify import _simulation_fit  # noqa: E402
 
 REPO = pathlib.Path(__file__).resolve().parents[1]

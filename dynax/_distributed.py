@@ -70,11 +70,11 @@ def initialize_distributed(
         raise
 
 
-def _multi_process() -> bool:
+def multi_process() -> bool:
     return jax.process_count() > 1
 
 
-def _leading_sharding(n: int) -> NamedSharding | None:
+def leading_sharding(n: int) -> NamedSharding | None:
     """A sharding that splits a leading axis of length `n` across every process's devices, or `None`
     with one device or when `n` does not divide evenly."""
     devices = jax.devices()
@@ -87,16 +87,16 @@ def _replicated() -> NamedSharding:
     return NamedSharding(Mesh(np.asarray(jax.devices()), ("batch",)), PartitionSpec())
 
 
-def _global_array(value, sharding: NamedSharding) -> jax.Array:
+def global_array(value, sharding: NamedSharding) -> jax.Array:
     """A global array with `sharding` from a value every process holds in full (each process keeps
     its devices' rows)."""
     value = np.asarray(value)
     return jax.make_array_from_callback(value.shape, sharding, lambda index: value[index])
 
 
-def _replicate_in_jit(tree):
+def replicate_in_jit(tree):
     """Inside a compiled function: every output replicated on every process (a no-op in one process)."""
-    if not _multi_process():
+    if not multi_process():
         return tree
     sharding = _replicated()
     return jax.tree.map(lambda x: jax.lax.with_sharding_constraint(x, sharding) if isinstance(x, jax.Array) else x, tree)
@@ -107,10 +107,10 @@ def _gather(devices: tuple):
     return jax.jit(lambda xs: xs, out_shardings=NamedSharding(Mesh(np.asarray(devices), ("batch",)), PartitionSpec()))
 
 
-def _replicate(tree):
+def replicate(tree):
     """Outside a compiled function: gather arrays split across processes so that every process holds
     them whole (a no-op in one process)."""
-    if not _multi_process():
+    if not multi_process():
         return tree
     leaves, treedef = jax.tree.flatten(tree)
     split = [i for i, x in enumerate(leaves) if isinstance(x, jax.Array) and not x.is_fully_addressable]
@@ -119,3 +119,8 @@ def _replicate(tree):
         for i, g in zip(split, gathered):
             leaves[i] = g
     return jax.tree.unflatten(treedef, leaves)
+
+
+# Old names, still imported by `dynax/_control/_pgpe.py`; they go once it imports the plain ones.
+_multi_process = multi_process
+_replicate_in_jit = replicate_in_jit

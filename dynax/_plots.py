@@ -14,7 +14,7 @@ from jaxtyping import ArrayLike, Float
 from ._data._trajectory import Trajectory
 from ._metrics import cross_correlation_test, nrmse_fit, whiteness_test
 from ._model._system import AbstractSystem
-from ._sim_error import _complete_state
+from ._sim_error import complete_state
 from ._simulate import simulate
 
 
@@ -26,7 +26,7 @@ def _figure(rows: int, cols: int, *, width: float, height: float, **kwargs):
 
 
 def _simulate_run(system: AbstractSystem, run: Trajectory) -> np.ndarray:
-    x0 = _complete_state(system, run.xs[0], run.us[0])
+    x0 = complete_state(system, run.xs[0], run.us[0])
     sim = simulate(system, x0, run.ts, run.us, throw=False)
     return np.asarray(sim.xs)[:, : run.xs.shape[1]]
 

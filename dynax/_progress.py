@@ -31,7 +31,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Int
 
 ProgressMode = Literal["auto", "always", "never"]
-_MODE: contextvars.ContextVar[str] = contextvars.ContextVar("dynax_progress_mode", default="auto")
+PROGRESS_MODE: contextvars.ContextVar[str] = contextvars.ContextVar("dynax_progress_mode", default="auto")
 
 
 @contextlib.contextmanager
@@ -43,18 +43,18 @@ def progress_mode(mode: ProgressMode) -> Iterator[None]:
     """
     if mode not in ("auto", "always", "never"):
         raise ValueError(f"progress_mode: expected 'auto', 'always' or 'never', got {mode!r}")
-    token = _MODE.set(mode)
+    token = PROGRESS_MODE.set(mode)
     try:
         yield
     finally:
-        _MODE.reset(token)
+        PROGRESS_MODE.reset(token)
 
 
 def progress_enabled(progress: bool | None = None) -> bool:
     """Whether to draw a bar: `progress` if given, else the current `progress_mode`."""
     if progress is not None:
         return bool(progress)
-    mode = _MODE.get()
+    mode = PROGRESS_MODE.get()
     if mode != "auto":
         return mode == "always"
     isatty = getattr(sys.stderr, "isatty", None)
@@ -95,7 +95,7 @@ class ProgressBar:
         if reduce not in ("max", "min", "last"):
             raise ValueError(f"ProgressBar: `reduce` must be 'max', 'min' or 'last', got {reduce!r}")
         self.enabled = progress_enabled(progress)
-        self._lines = progress is not False and _MODE.get() != "never"  # `say` prints when no bar is drawn
+        self._lines = progress is not False and PROGRESS_MODE.get() != "never"  # `say` prints when no bar is drawn
         self.reduce = reduce
         self.values: dict[str, float] = {}
         self._bar = None

@@ -7,7 +7,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._data._trajectory import Trajectory
-from ._distributed import _global_array, _leading_sharding, _replicate
+from ._distributed import global_array, leading_sharding, replicate
 from ._errors import DataError
 from ._model._system import AbstractSystem
 from ._simulate import FixedGrid, simulate
@@ -76,7 +76,7 @@ class InputStates(AbstractSystem):
 HISTORY_GRID = FixedGrid(solver=RK4(scan_kind="lax"), substeps=2)
 
 
-def _complete_state(system, x_measured, u0, ts_before=None, us_before=None, history_method=HISTORY_GRID):
+def complete_state(system, x_measured, u0, ts_before=None, us_before=None, history_method=HISTORY_GRID):
     """The model's full initial state from a measured one.
 
     Models with internal states (an input lag or delay, see `Extended`) complete it with
@@ -103,14 +103,14 @@ def window_rollout(system, ts, xs, us, ts_before=None, us_before=None, *, method
 
     **Arguments:** `ts (step,)`, `xs (step, n_measured)`, `us (step, m)` one window of a record;
     `ts_before`, `us_before` optionally the input history before it (ending at the window's start),
-    which drives the internal states of input terms (see `_complete_state`); `method` the
+    which drives the internal states of input terms (see `complete_state`); `method` the
     integration strategy of `simulate`.
 
     **Returns:** `(errors, diverged)`: `system.state_error(simulated, measured)` for the measured
     states, shape `(step, n_measured)` (NaN past a divergence), and whether the rollout diverged.
     """
     n_measured = xs.shape[-1]
-    x0 = _complete_state(system, xs[0], us[0], ts_before, us_before, history_method)
+    x0 = complete_state(system, xs[0], us[0], ts_before, us_before, history_method)
     sim = simulate(system, x0, ts, us, method=method, throw=False)
     return system.state_error(sim.xs[:, :n_measured], xs), sim.diverged
 
@@ -133,11 +133,17 @@ def window_rollouts(system, ts, xs, us, ts_before=None, us_before=None, *, metho
 
 
 @eqx.filter_jit
-def _window_errors(system, ts, xs, us, starts, n_steps, method):
+def rollouts_from_starts(system, ts, xs, us, starts, n_steps, method):
+    """`window_rollouts` on the windows of `n_steps` steps that start at the samples `starts` of one record."""
+
     def cut(a):
         return jax.vmap(lambda k: jax.lax.dynamic_slice_in_dim(a, k, n_steps + 1))(starts)
 
     return window_rollouts(system, cut(ts), cut(xs), cut(us), method=method)
+
+
+# The old name, still imported by `dynax/_diagnose/_figures.py`; it goes once that imports the plain one.
+_window_errors = rollouts_from_starts
 
 
 def simulation_error(
@@ -219,15 +225,15 @@ def simulation_error(
 
 
 def _sharded_window_errors(system, trajectory, starts, n_steps, method):
-    """`_window_errors` with the windows split across every device (of every process), then gathered."""
+    """`rollouts_from_starts` with the windows split across every device (of every process), then gathered."""
     n_windows = starts.shape[0]
     n_devices = jax.device_count()
     if n_devices < 2:
-        return _window_errors(system, trajectory.ts, trajectory.xs, trajectory.us, starts, n_steps, method)
+        return rollouts_from_starts(system, trajectory.ts, trajectory.xs, trajectory.us, starts, n_steps, method)
     padded = -(-n_windows // n_devices) * n_devices
     host_starts = np.asarray(starts)
     host_starts = np.concatenate([host_starts, np.full(padded - n_windows, host_starts[-1])])
-    sharded = _global_array(host_starts, _leading_sharding(padded))
-    errors, diverged = _window_errors(system, trajectory.ts, trajectory.xs, trajectory.us, sharded, n_steps, method)
-    errors, diverged = _replicate((errors, diverged))
+    sharded = global_array(host_starts, leading_sharding(padded))
+    errors, diverged = rollouts_from_starts(system, trajectory.ts, trajectory.xs, trajectory.us, sharded, n_steps, method)
+    errors, diverged = replicate((errors, diverged))
     return errors[:n_windows], diverged[:n_windows]

@@ -84,7 +84,7 @@ class Simulation(eqx.Module):
         return self.diverged_at != jnp.inf
 
 
-def _zoh_term(system):
+def zoh_term(system):
     # The state's dtype rules: parameters identified in float64 must not promote a float32 rollout.
     return diffrax.ODETerm(lambda t, x, u: system.vector_field(t, x, u).astype(x.dtype))
 
@@ -150,7 +150,7 @@ def _check_arguments(system, x0, ts, us):
     return x0, ts, us
 
 
-def _explicit_step(system, solver):
+def explicit_step(system, solver):
     r"""The step of an explicit Runge-Kutta `solver` from its Butcher tableau, unrolled at trace time.
 
     On a fixed grid nothing of diffrax's per-step machinery is needed: no error estimate, no dense
@@ -217,10 +217,10 @@ def sample_interval(system, method: FixedGrid, bound):
     at the speed of a hand-written RK4 scan (`benchmarks/rollout.py`). Shared by `simulate` and the
     closed-loop rollouts of `dynax.simulate_closed_loop`.
     """
-    term = _zoh_term(system)
+    term = zoh_term(system)
     solver = method.solver
     n = method.substeps
-    explicit = _explicit_step(system, solver)
+    explicit = explicit_step(system, solver)
 
     def advance(x, diverged_at, t0, t1, dt, u):
         h = dt / n

@@ -26,10 +26,16 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from dynax._cli._output import write_json  # noqa: E402
-from dynax._identify._vehicle import fit_lagged, fit_one_step, Lagged, prediction_error, STATE_GROUPS  # noqa: E402
-from dynax._model._helicopter import AccelerationModel, Helicopter, LinearVelocityModel, RICH_FEATURES  # noqa: E402
-from dynax._model._helicopter_truth import generate_helicopter_flight  # noqa: E402
+from dynax import AccelerationModel, Helicopter, Lagged, LinearVelocityModel  # noqa: E402
+from dynax.internal import (  # noqa: E402
+    fit_lagged,
+    fit_one_step,
+    prediction_error,
+    RICH_FEATURES,
+    STATE_GROUPS,
+    write_json,
+)
+from dynax.synthetic import generate_helicopter_flight  # noqa: E402
 
 SEEDS = {"hover": (11, 12), "aerobatic": (21, 22)}  # as in helicopter_accuracy.py
 _BASE = ("u", "v", "w", "p", "q", "r", "u1", "u2", "u3", "u4", "1")

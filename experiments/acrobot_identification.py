@@ -31,17 +31,19 @@ import numpy as np  # noqa: E402
 import optax  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax._data import butterworth_filtfilt, central_difference, load_trajectory, resample, Trajectory  # noqa: E402
-from dynax._identify import (  # noqa: E402
-    dynamic_regressor,
+from dynax import (  # noqa: E402
     Dynamic,
     Energy,
+    Extended,
     IdentifiabilityError,
     identify,
+    load_trajectory,
     Power,
+    RotorInertia,
     SimulationFit,
+    Trajectory,
 )
-from dynax._model._extensions import Extended, RotorInertia  # noqa: E402
+from dynax.internal import butterworth_filtfilt, central_difference, dynamic_regressor, resample  # noqa: E402
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 # The study's numbers are the plain least-squares (or output-error) fit on the whole record: identify's
@@ -342,9 +344,9 @@ def real_data(out):
                                  "relative_force_error": 0.0408}
     # The README's "without the Coulomb term the force error rises to about 38 %": the Coulomb model
     # with its Coulomb term dropped, not refitted (refitting without it gives the "viscous" row).
-    from dynax._identify._equations import _dynamic_rows
+    from dynax.internal import dynamic_rows
 
-    rows, forces = _dynamic_rows(dynax.LinearAxis(), emps, recipe, "coulomb")[:2]  # decimated, so trimmed
+    rows, forces = dynamic_rows(dynax.LinearAxis(), emps, recipe, "coulomb")[:2]  # decimated, so trimmed
     fit = identify(dynax.LinearAxis(), emps, recipe, friction="coulomb", **AS_PUBLISHED)
     theta = np.asarray(fit.estimate) * (np.asarray(fit.names) != "coulomb")
     a, y = np.asarray(rows)[:, 0, :], np.asarray(forces)[:, 0]

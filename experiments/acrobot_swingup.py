@@ -17,7 +17,7 @@ Writes `DIR/results.json` and figures `DIR/*.png`:
    of attraction of the saturated LQR, and the pipeline identify -> tune -> evaluate on a truth
    with a hidden effect (the elbow motor gives 80 % of the commanded torque; perturbed link 2).
 
-The experiment owns no algorithm: everything comes from `dynax._control` and `dynax._identify`.
+The experiment owns no algorithm: everything comes from `dynax` (its control and identification).
 """
 
 import argparse
@@ -41,7 +41,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax._control import (  # noqa: E402
+from dynax import (  # noqa: E402
     CentredRank,
     clipup,
     DRAKE_SPONG_PARAMETERS,
@@ -357,7 +357,7 @@ def gradient_tuning(cfg, template, plant, key, held_out, evaluate):
 
     def loss(z, key):
         starts = random_starts(key, cfg["grad_batch"], dtype=jnp.float32)
-        return -jnp.mean(jax.vmap(lambda x0: dynax._control.swing_up_reward(task.rollout(z * scales, x0)))(starts))
+        return -jnp.mean(jax.vmap(lambda x0: dynax.swing_up_reward(task.rollout(z * scales, x0)))(starts))
 
     @eqx.filter_jit
     def step(z, opt_state, key):
@@ -383,7 +383,7 @@ def gradient_tuning(cfg, template, plant, key, held_out, evaluate):
 
 def pipeline(cfg, key, held_out, tuned_on_nominal):
     """Identify the acrobot from data with a hidden effect, tune on the identified model, evaluate on the truth."""
-    from dynax._identify import identify, Power
+    from dynax import identify, Power
 
     truth_core = dynax.Acrobot.from_physical(m2=1.15, lc2=0.95, b2=0.15)
     # The hidden effect: the elbow motor delivers only 80 % of the commanded torque.

@@ -63,10 +63,9 @@ import numpy as np  # noqa: E402
 import dynax  # noqa: E402
 import equinox as eqx  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
-from dynax._model._extensions._terms import AbstractJointTerm  # noqa: E402
+from dynax import AbstractJointTerm, held_out_error  # noqa: E402
 from dynax._identify import _identify as identify_module, _refine  # noqa: E402
-from dynax._identify._validation import held_out_error  # noqa: E402
-from dynax._diagnose._statistics import log_ratio_differences, paired_block_test  # noqa: E402
+from dynax.internal import log_ratio_differences, paired_block_test  # noqa: E402
 
 from dfki_simulation import DFKI, MAPPING, read_parameters  # noqa: E402  (the script's folder is on sys.path)
 import diagnose_real_splits  # noqa: E402

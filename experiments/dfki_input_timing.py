@@ -29,7 +29,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax._identify._validation import held_out_error  # noqa: E402
+from dynax import held_out_error  # noqa: E402
 
 from dfki_default_identification import HORIZONS, lab_model, load  # noqa: E402  (the script's folder is on sys.path)
 from dfki_simulation import read_parameters  # noqa: E402

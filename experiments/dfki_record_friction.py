@@ -15,7 +15,7 @@ Two measurements, about 3 minutes on 2 CPU cores:
 2. **Do the runs agree on the Coulomb friction?** `dynax.record_friction` on the inverse-dynamics
    equations of `identify`'s least-squares stage (every setting chosen from the data), on all six runs
    and on each fold's five training runs: each run's Coulomb coefficients, from the whole run and from each of its four parts,
-   and an analysis of variance of the runs against their four parts (see `dynax._identify._record_friction`).
+   and an analysis of variance of the runs against their four parts (see `dynax.record_friction`).
 
 Writes `OUT/record_friction.json` and `OUT/record_friction.png`.
 
@@ -38,8 +38,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax._identify._record_friction import compare_records  # noqa: E402
-from dynax._identify._validation import held_out_error  # noqa: E402
+from dynax import held_out_error  # noqa: E402
+from dynax.internal import compare_records  # noqa: E402
 
 from dfki_default_identification import HORIZONS, lab_parameters, load, model_of, RUNS  # noqa: E402  (the script's folder is on sys.path)
 from dfki_simulation import read_parameters  # noqa: E402

@@ -7,7 +7,7 @@
 `identify(DoublePendulum(), runs, Dynamic(), friction="coulomb", validation=[run 12])`, defaults
 otherwise, on the five runs 00, 01, 02, 03 and 05 (`all`), and again on each four of them. Its
 `record_std_errors` (the delete-one-record jackknife, linearised: one Gauss-Newton step per left-out
-record, `dynax._fit.jackknife_covariance`) are set against the jackknife of the five real refits,
+record, `dynax.internal.jackknife_covariance`) are set against the jackknife of the five real refits,
 $\\sqrt{(G-1)/G \\sum_g (\\hat\\theta_{(g)} - \\bar\\theta)^2}$, and against `std_errors` (estimated
 within the records). About 90 s per fit on the 2-core machine; run as two halves in parallel.
 

@@ -19,7 +19,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import dynax  # noqa: E402
-from dynax._identify._validation import held_out_error  # noqa: E402
+from dynax import held_out_error  # noqa: E402
 
 from dfki_default_identification import HORIZONS, lab_model, load, RUNS  # noqa: E402  (the script's folder is on sys.path)
 from dfki_simulation import read_parameters  # noqa: E402

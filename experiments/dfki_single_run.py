@@ -38,7 +38,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax._identify._validation import held_out_error  # noqa: E402
+from dynax import held_out_error  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from dfki_default_identification import HORIZONS, lab_model, lab_parameters, load, read_parameters, RUNS  # noqa: E402

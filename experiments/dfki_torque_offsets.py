@@ -7,7 +7,7 @@ The inverse-dynamics least-squares problem of `identify(DoublePendulum(), runs, 
 friction="coulomb")` (every setting chosen from the data, as `identify` chooses it) is solved on all
 six `sys_id` runs at once with one nuisance column per run, joint and half of the run: a constant
 torque that adds to what that run's recorded torque says (a sensor or current offset), the base
-parameters shared; `dynax._identify._offsets.record_offsets` does this, and `identify` reports it
+parameters shared; `dynax.record_offsets` does this, and `identify` reports it
 as `record_offsets`. An offset of the sensor stays the same within a run, model error need not.
 
 Then each run is simulated open loop (200 start samples, position RMSE at 0.1 / 0.25 / 0.5 s, as
@@ -17,7 +17,7 @@ parameters in `experiments/results/dfki_default_identification/results.json`, fi
 run). The corrected rows use the held-out run's own offset, so they are an oracle: what a model
 would gain if the run's offset were known, not something either model can predict.
 
-The same for the runs' angle zeros (`dynax._identify._angle_zeros.record_angle_zeros`, one zero per
+The same for the runs' angle zeros (`dynax.internal.record_angle_zeros`, one zero per
 run and joint fitted with the base parameters, as `identify` fits them by default): the equation
 error with them against that with the torque offsets, each half's zeros, and each run simulated
 with its angles read from its own zero (positions less the zeros, velocities and torques as
@@ -42,11 +42,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax._identify._angle_zeros import record_angle_zeros, shifted as shifted_angles  # noqa: E402
-from dynax._identify._equations import _equations  # noqa: E402
-from dynax._identify._least_squares import least_squares  # noqa: E402
-from dynax._identify._offsets import record_offsets  # noqa: E402
-from dynax._identify._validation import held_out_error  # noqa: E402
+from dynax import held_out_error, least_squares, record_offsets  # noqa: E402
+from dynax.internal import record_angle_zeros, shifted as shifted_angles, stacked_equations  # noqa: E402
 
 from dfki_default_identification import HORIZONS, lab_model, load, model_of as loro_model, RUNS  # noqa: E402
 from dfki_simulation import read_parameters  # noqa: E402
@@ -66,8 +63,8 @@ def main(argv=None):
     args = parser.parse_args(argv)
     records = {r: load(r) for r in RUNS}
     # The least-squares stage `identify` builds (settings chosen from the data), with and without the offsets.
-    _, a, y, _, names, _, _, _, counts, _ = _equations(dynax.DoublePendulum(), [records[r] for r in RUNS],
-                                                    dynax.Dynamic(offsets=True), "coulomb", None, None)
+    _, a, y, _, names, _, _, _, counts, _ = stacked_equations(
+        dynax.DoublePendulum(), [records[r] for r in RUNS], dynax.Dynamic(offsets=True), "coulomb", None, None)
     theta0 = np.asarray(least_squares(a, y, names=names).value)
     found = record_offsets(a, y, counts, ("q1", "q2"))
     error0 = float(np.linalg.norm(np.asarray(a) @ theta0 - np.asarray(y)) / np.linalg.norm(np.asarray(y)))

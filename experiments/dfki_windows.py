@@ -50,9 +50,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax._identify._defaults import with_velocities_from_positions  # noqa: E402
-from dynax._identify._validation import held_out_error  # noqa: E402
-from dynax._model._extensions._terms import _scalar, AbstractJointTerm  # noqa: E402
+from dynax import AbstractJointTerm, held_out_error  # noqa: E402
+from dynax.internal import float_scalar, with_velocities_from_positions  # noqa: E402
 
 from dfki_default_identification import HORIZONS, lab_parameters, load, model_of, RUNS  # noqa: E402  (the script's folder is on sys.path)
 from dfki_simulation import read_parameters  # noqa: E402
@@ -76,7 +75,7 @@ class StaticFriction(AbstractJointTerm):
 
     def __init__(self, joint, excess):
         self.joint = joint
-        self.coefficient = _scalar(excess)
+        self.coefficient = float_scalar(excess)
 
     def force(self, q, dq):
         return -self.coefficient * jnp.exp(-((dq / STRIBECK_VELOCITY) ** 2)) * jnp.tanh(dq / 0.01)

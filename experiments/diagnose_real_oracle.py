@@ -21,8 +21,8 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import dynax  # noqa: E402
-from dynax._diagnose import diagnose, Refit  # noqa: E402
-from dynax._identify._defaults import with_velocities_from_positions  # noqa: E402
+from dynax import diagnose, Refit  # noqa: E402
+from dynax.internal import with_velocities_from_positions  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from dfki_simulation import lab_model, read_parameters  # noqa: E402

@@ -32,10 +32,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from dynax import DoublePendulum  # noqa: E402
-from dynax._data import load_trajectory, resample  # noqa: E402
-from dynax._data._trajectory import Trajectory  # noqa: E402
-from dynax._diagnose import diagnose, Known, Refit  # noqa: E402
+from dynax import diagnose, DoublePendulum, Known, load_trajectory, Refit, Trajectory  # noqa: E402
+from dynax.internal import resample  # noqa: E402
 
 MAPPING = {"t": "time", "q1": "pos_meas1", "q2": "pos_meas2", "dq1": "vel_meas1", "dq2": "vel_meas2",
            "tau1": "tau_meas1", "tau2": "tau_meas2"}

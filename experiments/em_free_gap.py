@@ -36,16 +36,16 @@ import matplotlib  # noqa: E402
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from dynax._cli._output import write_json  # noqa: E402
-from dynax._identify._vehicle import (  # noqa: E402
+from dynax import Lagged  # noqa: E402
+from dynax.internal import (  # noqa: E402
     fit_lagged,
     fit_one_step,
     initial_helicopter,
-    Lagged,
     lagged_loss_gradient_norm,
     lagged_loss_of,
+    write_json,
 )
-from dynax._model._helicopter_truth import generate_helicopter_flight  # noqa: E402
+from dynax.synthetic import generate_helicopter_flight  # noqa: E402
 
 SEEDS = {"hover": 11, "aerobatic": 21}  # the training flights of helicopter_accuracy.py
 

@@ -24,11 +24,8 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from dynax import LinearAxis  # noqa: E402
-from dynax._cli._diagnose import summary  # noqa: E402
-from dynax._cli._output import write_json  # noqa: E402
-from dynax._data import butterworth_filtfilt, central_difference, load_trajectory, Trajectory  # noqa: E402
-from dynax._diagnose import diagnose, Refit, write_report  # noqa: E402
+from dynax import diagnose, LinearAxis, load_trajectory, Refit, Trajectory, write_report  # noqa: E402
+from dynax.internal import butterworth_filtfilt, central_difference, diagnosis_summary, write_json  # noqa: E402
 
 DATA = pathlib.Path(sys.argv[1])
 OUT = pathlib.Path(sys.argv[2])
@@ -55,7 +52,7 @@ report = diagnose(nominal, train, validation, mode=refit, reference_horizon_s=0.
                   system_name="linear_axis", progress=lambda s: print(f"[{time.perf_counter() - start:5.0f} s] {s}", flush=True))
 OUT.mkdir(parents=True, exist_ok=True)
 write_report(report, OUT, validation, write_json=write_json)
-print(summary(report))
+print(diagnosis_summary(report))
 
 # The benchmark's force error, recipe as published.
 qf = butterworth_filtfilt(raw.ts, raw.xs[:, 0], cutoff_hz=100.0)

@@ -30,23 +30,20 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from dynax._cli._output import write_json  # noqa: E402
-from dynax._data import save_trajectory  # noqa: E402
-from dynax._identify._vehicle import (  # noqa: E402
-    Backprop,
+from dynax import Backprop, FrequencyDomain, Lagged, save_trajectory  # noqa: E402
+from dynax.internal import (  # noqa: E402
     fit_backprop,
     fit_frequency,
     fit_lagged,
     fit_one_step,
-    FrequencyDomain,
     initial_helicopter,
-    Lagged,
     lagged_loss_gradient_norm,
     lagged_loss_of,
     prediction_error,
     STATE_GROUPS,
+    write_json,
 )
-from dynax._model._helicopter_truth import generate_helicopter_flight  # noqa: E402
+from dynax.synthetic import generate_helicopter_flight  # noqa: E402
 
 
 METHODS = ("linear one-step", "linear frequency", "linear lagged", "acceleration one-step", "acceleration lagged")

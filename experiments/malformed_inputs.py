@@ -41,7 +41,7 @@ def main():
 
     jax.config.update("jax_enable_x64", True)
     import dynax
-    from dynax._cli._main import main as cli_main
+    from dynax.internal import cli_main
 
     print(f"judging dynax from {pathlib.Path(dynax.__file__).parent}", file=sys.stderr)
     spec = importlib.util.spec_from_file_location("malformed_cases", REPO / "tests" / "cli" / "malformed_cases.py")

@@ -31,9 +31,8 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax._data import Trajectory  # noqa: E402
-from dynax._identify._equations import _equations  # noqa: E402
-from dynax._identify._record_friction import record_friction  # noqa: E402
+from dynax import record_friction, Trajectory  # noqa: E402
+from dynax.internal import stacked_equations  # noqa: E402
 
 RIG = dict(theta1=0.0536, theta2=0.0533, theta3=0.0362, theta4=2.365, theta5=1.777, theta6=0.01, theta7=0.01)
 FC1, IR2 = 0.15, 0.0042
@@ -66,8 +65,8 @@ def main(argv=None):
         rows = []
         for s in range(args.sets):
             records = [record(fc2, 1000 + 10 * s + k) for k, fc2 in enumerate(frictions)]
-            _, a, y, _, names, _, _, _, counts, _ = _equations(dynax.DoublePendulum(), records, dynax.Dynamic(), "coulomb",
-                                                            None, None)
+            _, a, y, _, names, _, _, _, counts, _ = stacked_equations(
+                dynax.DoublePendulum(), records, dynax.Dynamic(), "coulomb", None, None)
             rows.append([p_value(a, y, counts, list(names), k) for k in parts])
             print(f"{case} set {s}: " + " ".join(f"{k} parts p = {p:.3g}" for k, p in zip(parts, rows[-1])), flush=True)
         out["p_values"][case] = rows

@@ -19,9 +19,8 @@ jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
 
-from dynax import Acrobot  # noqa: E402
-from dynax._diagnose import diagnose, Refit  # noqa: E402
-from dynax._synthetic import demo_data, hidden_effect  # noqa: E402
+from dynax import Acrobot, diagnose, Refit  # noqa: E402
+from dynax.synthetic import demo_data, hidden_effect  # noqa: E402
 
 ALL = tuple(f"theta{i}" for i in range(1, 8))
 MODES = {"friction_kept": Refit(), "all_refitted": Refit(parameters=ALL)}

@@ -31,8 +31,7 @@ import pathlib
 import numpy as np
 import scipy.signal
 
-from dynax._fit import serial_covariance
-from dynax._fit._covariance import _bartlett_lags, serial_bandwidth
+from dynax.internal import bartlett_lags, serial_bandwidth, serial_covariance
 
 
 def prewhitened_covariance(jac, residuals, steps, record_steps, cap=0.97):
@@ -52,7 +51,7 @@ def prewhitened_covariance(jac, residuals, steps, record_steps, cap=0.97):
     bandwidth = min(serial_bandwidth(white), min(len(w) for w in white) - 1)
     meat = sum(w.T @ w for w in white)
     for w in white:
-        lagged = _bartlett_lags(w, bandwidth)
+        lagged = bartlett_lags(w, bandwidth)
         meat += lagged + lagged.T
     recolour = np.linalg.inv(np.eye(len(a)) - a)
     meat = recolour @ meat @ recolour.T

@@ -38,7 +38,7 @@ import time
 import numpy as np
 import scipy.signal
 
-from dynax._diagnose._statistics import paired_block_test
+from dynax.internal import paired_block_test
 
 
 def null_windows(rng, n_windows, overlap, process, substeps=5):
@@ -110,10 +110,8 @@ def diagnosis(seeds, runs=1):
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from dynax import Acrobot
-    from dynax._diagnose import diagnose
-    from dynax._diagnose._demo import demo_data
-    from dynax._model._extensions import CoulombFriction
+    from dynax import Acrobot, CoulombFriction, diagnose
+    from dynax.synthetic import demo_data
 
     rows = []
     for seed in range(seeds):

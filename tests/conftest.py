@@ -51,7 +51,7 @@ def datasets():
 def acrobot_csv(tmp_path_factory):
     """6 s of the default acrobot under a two-sine elbow torque, simulated and saved as a contract CSV (read-only)."""
     import dynax
-    from dynax._data import save_trajectory, Trajectory
+    from dynax import save_trajectory, Trajectory
 
     ts = np.arange(0.0, 6.0, 0.01)
     us = (2.0 * np.sin(1.3 * ts) + 1.0 * np.sin(3.7 * ts + 0.5))[:, None]

@@ -5,7 +5,8 @@ import jax.numpy as jnp
 import pytest
 
 import dynax
-from dynax._progress import bar_token, progress_enabled, progress_mode, ProgressBar, report
+from dynax import progress_mode, ProgressBar
+from dynax.internal import bar_token, progress_enabled, progress_report
 
 
 def quadratic(params, key):
@@ -49,7 +50,7 @@ def test_compiled_scan_reports_every_step_and_the_best_value(stderr):
     def loop(token, values):
         def body(carry, inputs):
             i, v = inputs
-            report(token, i, best=v)
+            progress_report(token, i, best=v)
             return carry, None
 
         return jax.lax.scan(body, 0.0, (jnp.arange(values.shape[0]), values))[0]
@@ -110,7 +111,7 @@ def test_output_error_fit_reports_each_iteration(capsys):
     """The engine's Levenberg-Marquardt reports through optimistix's verbose hook from compiled code."""
     import jax.numpy as jnp
 
-    from dynax._identify._simulation_fit import fit_simulation_error
+    from dynax import fit_simulation_error
 
     def axis(m, b):
         return dynax.LinearAxis(mass=jnp.asarray(m), viscous=jnp.asarray(b), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0))

@@ -205,17 +205,17 @@ def test_fixed_grid_explicit_step_equals_diffrax_step():
     """The fixed-grid rollout writes explicit Runge-Kutta stages out from the tableau; each method's
     step must equal diffrax's own `solver.step` (to rounding), including FSAL methods whose last
     stage is skipped, and solvers that are not explicit RK must still go through diffrax."""
-    from dynax._simulate import _explicit_step, _zoh_term
+    from dynax.internal import explicit_step, zoh_term
 
     system = dynax.Acrobot()
     x = jnp.array([0.3, -0.2, 0.5, 1.0])
     u = jnp.array([0.7])
-    term = _zoh_term(system)
+    term = zoh_term(system)
     for solver in (dynax.RK4(), diffrax.Tsit5(), diffrax.Dopri5(), diffrax.Dopri8(), diffrax.Heun(), diffrax.Bosh3()):
         ref = solver.step(term, 0.1, 0.15, x, u, solver.init(term, 0.1, 0.15, x, u), made_jump=True)[0]
-        ours = _explicit_step(system, solver)(jnp.asarray(0.1), x, u, jnp.asarray(0.05))
+        ours = explicit_step(system, solver)(jnp.asarray(0.1), x, u, jnp.asarray(0.05))
         np.testing.assert_allclose(ours, ref, rtol=1e-12, atol=1e-12, err_msg=type(solver).__name__)
-    assert _explicit_step(system, diffrax.Euler()) is None
+    assert explicit_step(system, diffrax.Euler()) is None
     # Through simulate: a rollout with Euler (diffrax's step) still integrates.
     xs = dynax.simulate(system, x, jnp.linspace(0, 0.1, 11), jnp.zeros((11, 1)), method=dynax.FixedGrid(diffrax.Euler())).xs
     assert np.all(np.isfinite(xs))

@@ -138,7 +138,7 @@ def serial_bandwidth(pieces: list[np.ndarray]) -> float:
     return float(max(_BARTLETT * (alpha * steps) ** (1 / 3), 1.0))
 
 
-def _bartlett_lags(p: np.ndarray, bandwidth: float) -> np.ndarray:
+def bartlett_lags(p: np.ndarray, bandwidth: float) -> np.ndarray:
     r"""$\sum_{l \ge 1} (1 - l/S)_+ \Gamma_l$ of one record's scores `p`, `(T, n)`, with
     $\Gamma_l[a, b] = \sum_t p_{t+l, a}\, p_{t, b}$: every lag's cross-products at once through the
     FFT (zero-padded, so not circular), $O(n^2 T \log T)$ instead of $O(n^2 T S)$."""
@@ -190,7 +190,7 @@ def serial_covariance(
         bandwidth = min(bandwidth, max(min(len(p) for p in pieces) - 1, 1) if pieces else 1.0)
     meat = scores.T @ scores
     for p in pieces:
-        lagged = _bartlett_lags(p, bandwidth)
+        lagged = bartlett_lags(p, bandwidth)
         meat += lagged + lagged.T
     scaled = jac / scale
     bread = np.linalg.pinv(scaled.T @ scaled, hermitian=True)

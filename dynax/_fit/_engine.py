@@ -51,7 +51,7 @@ def _scale(p0, scale):
     return scale
 
 
-def _dense_forward(fn: Callable[[Array, Any], Array]) -> Callable[[Array, Any], Array]:
+def dense_forward(fn: Callable[[Array, Any], Array]) -> Callable[[Array, Any], Array]:
     """`fn(z, dynamic)` with a JVP rule that forms the whole Jacobian in `z` by one `jacfwd` and
     applies it as a matrix.
 
@@ -165,7 +165,7 @@ def fit_least_squares(
             r = jnp.where(jnp.isfinite(r), r, nonfinite)
         return r
 
-    rollout = _dense_forward(evaluate) if jac == "dense" else evaluate
+    rollout = dense_forward(evaluate) if jac == "dense" else evaluate
 
     def fn(z, args):
         return rollout(z, (eqx.filter(args, eqx.is_array), closed))

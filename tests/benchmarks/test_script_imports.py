@@ -1,7 +1,7 @@
 """Every `from dynax... import name` in the benchmark and experiment scripts resolves.
 
 The scripts are not run by the suite (they take minutes), so a name moved inside the package
-(`synthetic_trajectory` went from `dynax._diagnose` to `dynax.synthetic`) would otherwise break
+(`synthetic_trajectory` went from the diagnosis package to `dynax.synthetic`) would otherwise break
 them unnoticed, as it once broke `benchmarks/diagnose.py`.
 """
 

@@ -34,8 +34,8 @@ class Case:
 def make_fixtures(root) -> dict:
     """The valid inputs that the cases corrupt: an acrobot record, a helicopter flight, a model file."""
     import dynax
-    from dynax._identify._vehicle import initial_helicopter
-    from dynax._model._helicopter import Helicopter
+    from dynax import Helicopter
+    from dynax.internal import initial_helicopter
     from dynax.synthetic import generate_helicopter_flight
 
     root = pathlib.Path(root)

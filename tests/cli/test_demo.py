@@ -5,10 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from dynax.synthetic import hidden_effect
-from dynax._cli._main import main
-from dynax._data import load_trajectory
-from dynax._diagnose._demo import DEMO_TRUTH_PHYSICAL, demo_data
+from dynax import load_trajectory
+from dynax.internal import cli_main
+from dynax.synthetic import demo_data, DEMO_TRUTH_PHYSICAL, hidden_effect
 from tests.reference import DRAKE, scipy_acrobot
 
 
@@ -40,7 +39,7 @@ def test_the_demo_data_carry_the_seeds_hidden_effect(seed):
 @pytest.mark.slow
 def test_demo_writes_data_report_and_figures(tmp_path, capsys):
     out = tmp_path / "demo"
-    assert main(["demo", "--out", str(out), "--seed", "0"]) == 0
+    assert cli_main(["demo", "--out", str(out), "--seed", "0"]) == 0
     train = load_trajectory(out / "train.csv", "acrobot")
     assert len(train) > 1000 and np.isclose(train.dt, 0.01)
     for name in ("validation.csv", "report.json", "report.md", "measured_vs_simulated.png", "sim_error.png"):
@@ -55,6 +54,6 @@ def test_demo_writes_data_report_and_figures(tmp_path, capsys):
 
 
 def test_demo_refuses_a_negative_seed(tmp_path, capsys):
-    assert main(["demo", "--out", str(tmp_path / "x"), "--seed", "-1"]) == 2
+    assert cli_main(["demo", "--out", str(tmp_path / "x"), "--seed", "-1"]) == 2
     assert "--seed" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._cli._main import main
+from dynax.internal import cli_main
 
 
 @pytest.fixture
@@ -32,10 +32,10 @@ def test_console_script_is_installed():
 
 def test_bad_usage_exits_2(capsys):
     with pytest.raises(SystemExit) as e:
-        main(["identify"])
+        cli_main(["identify"])
     assert e.value.code == 2
     with pytest.raises(SystemExit) as e:
-        main(["no-such-command"])
+        cli_main(["no-such-command"])
     assert e.value.code == 2
 
 
@@ -52,7 +52,7 @@ def test_bad_usage_exits_2(capsys):
 def test_bad_file_exits_2_names_it_and_writes_nothing(acrobot_csv, tmp_path, capsys, rewrite, message):
     acrobot_csv.write_text(rewrite(acrobot_csv.read_text()))
     out = tmp_path / "out" / "params.json"
-    code = main(["identify", "acrobot", str(acrobot_csv), "--method", "power", "--out", str(out)])
+    code = cli_main(["identify", "acrobot", str(acrobot_csv), "--method", "power", "--out", str(out)])
     err = capsys.readouterr().err
     assert code == 2
     assert str(acrobot_csv) in err and message in err
@@ -61,11 +61,11 @@ def test_bad_file_exits_2_names_it_and_writes_nothing(acrobot_csv, tmp_path, cap
 
 def test_bad_map_and_scale_exit_2(acrobot_csv, tmp_path, capsys):
     out = tmp_path / "params.json"
-    assert main(["identify", "acrobot", str(acrobot_csv), "--map", "q1", "--out", str(out)]) == 2
+    assert cli_main(["identify", "acrobot", str(acrobot_csv), "--map", "q1", "--out", str(out)]) == 2
     assert "--map: 'q1' is not of the form NAME=VALUE" in capsys.readouterr().err
-    assert main(["identify", "acrobot", str(acrobot_csv), "--scale", "tau2=abc", "--out", str(out)]) == 2
+    assert cli_main(["identify", "acrobot", str(acrobot_csv), "--scale", "tau2=abc", "--out", str(out)]) == 2
     assert "not a number" in capsys.readouterr().err
-    assert main(["identify", "acrobot", str(acrobot_csv), "--map", "tau7=x", "--out", str(out)]) == 2
+    assert cli_main(["identify", "acrobot", str(acrobot_csv), "--map", "tau7=x", "--out", str(out)]) == 2
     assert "tau7" in capsys.readouterr().err
     assert not out.exists()
 
@@ -74,8 +74,8 @@ def test_identify_succeeds_with_mapping(acrobot_csv, tmp_path):
     renamed = tmp_path / "renamed.csv"
     renamed.write_text(acrobot_csv.read_text().replace("t,q1,q2,dq1,dq2,tau2", "time,a,b,c,d,volts", 1))
     out = tmp_path / "params.json"
-    code = main(["identify", "acrobot", str(renamed), "--method", "power", "--out", str(out),
-                 "--map", "t=time,q1=a,q2=b,dq1=c,dq2=d,tau2=volts", "--scale", "tau2=1.0", "--offset", "tau2=0"])
+    code = cli_main(["identify", "acrobot", str(renamed), "--method", "power", "--out", str(out),
+                     "--map", "t=time,q1=a,q2=b,dq1=c,dq2=d,tau2=volts", "--scale", "tau2=1.0", "--offset", "tau2=0"])
     assert code == 0
     report = json.loads(out.read_text())
     assert report["system"] == "acrobot" and report["method"] == "power"

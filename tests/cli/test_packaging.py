@@ -10,7 +10,7 @@ import pytest
 
 import dynax
 from dynax._cli import _identify
-from dynax._cli._main import build_parser, main
+from dynax.internal import build_parser, cli_main
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 
@@ -46,25 +46,25 @@ def test_ctrl_c_exits_130(monkeypatch, tmp_path, capsys):
         raise KeyboardInterrupt
 
     monkeypatch.setattr(_identify, "run", interrupted)
-    assert main(["identify", "acrobot", "x.csv", "--out", str(tmp_path / "p.json")]) == 130
+    assert cli_main(["identify", "acrobot", "x.csv", "--out", str(tmp_path / "p.json")]) == 130
     assert "interrupted" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("argv, mode", [([], "auto"), (["--quiet"], "never"), (["--progress"], "always")])
 @pytest.mark.parametrize("after", [False, True])
 def test_quiet_and_progress_reach_the_sub_command(monkeypatch, tmp_path, argv, mode, after):
-    from dynax._progress import _MODE
+    from dynax.internal import PROGRESS_MODE
 
     seen = []
-    monkeypatch.setattr(_identify, "run", lambda args: seen.append(_MODE.get()) or 0)
+    monkeypatch.setattr(_identify, "run", lambda args: seen.append(PROGRESS_MODE.get()) or 0)
     command = ["identify", "acrobot", "x.csv", "--out", str(tmp_path / "p.json")]
-    assert main(command + argv if after else argv + command) == 0
+    assert cli_main(command + argv if after else argv + command) == 0
     assert seen == [mode]
 
 
 def test_quiet_and_progress_exclude_each_other(capsys):
     with pytest.raises(SystemExit) as e:
-        main(["--quiet", "--progress", "demo"])
+        cli_main(["--quiet", "--progress", "demo"])
     assert e.value.code == 2
 
 
@@ -95,10 +95,10 @@ def test_a_real_sigint_exits_130():
             # SIGINT ignored (as background jobs of a shell do), and Python then installs no handler at all.
             "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
             "from dynax._cli import _identify\n"
-            "from dynax._cli._main import main\n"
+            "from dynax.internal import cli_main\n"
             # raise_signal delivers to the main thread, as a terminal's Ctrl-C reaches Python's handler; os.kill
             # may land on a thread JAX started (the compilation cache), and the sleep would then run out.
             "_identify.run = lambda args: (signal.raise_signal(signal.SIGINT), time.sleep(30))\n"
-            "sys.exit(main(['identify', 'acrobot', 'x.csv', '--out', 'p.json']))\n")
+            "sys.exit(cli_main(['identify', 'acrobot', 'x.csv', '--out', 'p.json']))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert out.returncode == 130 and "interrupted" in out.stderr

@@ -11,8 +11,7 @@ import os
 import numpy as np
 import pytest
 
-from dynax._cli._main import main
-from dynax._cli._output import staged_directory, write_json
+from dynax.internal import cli_main, staged_directory, write_json
 from tests.cli.malformed_cases import CASES, make_fixtures, run_case, run_simulate_case, simulate_cases, superuser
 
 
@@ -25,7 +24,7 @@ def fixtures(tmp_path_factory):
 def test_malformed_input_is_refused_or_answered_correctly(case, fixtures, tmp_path):
     if case.needs_permissions and superuser():
         pytest.skip("file permissions do not bind the superuser")
-    outcome = run_case(case, tmp_path / "case", fixtures, main)
+    outcome = run_case(case, tmp_path / "case", fixtures, cli_main)
     assert outcome.verdict in ("refused correctly", "accepted correctly"), (
         f"{outcome.verdict}: exit {outcome.status}; expected message {case.message!r}; stderr:\n{outcome.stderr[-3000:]}"
     )

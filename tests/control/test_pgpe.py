@@ -13,7 +13,16 @@ import optax
 import pytest
 
 import dynax
-from dynax._control import BaselineNormalisation, CentredRank, clipup, PGPE, random_starts, run_pgpe, SpongController, SwingUpTask
+from dynax import (
+    BaselineNormalisation,
+    CentredRank,
+    clipup,
+    PGPE,
+    random_starts,
+    run_pgpe,
+    SpongController,
+    SwingUpTask,
+)
 from tests.helpers import tree_allclose
 
 TARGET = jnp.array([1.0, -2.0, 3.0, 500.0])
@@ -140,7 +149,7 @@ def test_pgpe_improves_swing_up_from_a_poor_start():
 SHARDED_SCRIPT = textwrap.dedent(
     """
     import jax, jax.numpy as jnp
-    from dynax._control import PGPE, population_sharding, run_pgpe, evaluate_population, sweep_pgpe
+    from dynax import evaluate_population, PGPE, population_sharding, run_pgpe, sweep_pgpe
     assert jax.device_count() == 2, jax.devices()
     assert population_sharding(8) is not None and population_sharding(7) is None
     target = jnp.arange(4.0)

@@ -8,7 +8,7 @@ import pytest
 import scipy.linalg
 
 import dynax
-from dynax._control import (
+from dynax import (
     is_upright,
     random_starts,
     simulate_closed_loop,

@@ -5,7 +5,7 @@ import pytest
 import scipy.io
 
 import dynax
-from dynax._data import parse_assignments
+from dynax.internal import parse_assignments
 from tests.conftest import DFKI_MAPPING
 
 HEADER = "t,q1,q2,dq1,dq2,tau2"

@@ -9,8 +9,7 @@ import pytest
 from hypothesis import given, HealthCheck, settings, strategies as st
 
 import dynax
-from dynax._data import parse_assignments
-from dynax._data._io import MAX_MAGNITUDE
+from dynax.internal import MAX_MAGNITUDE, parse_assignments
 
 NAMES = ("t", "q1", "q2", "dq1", "dq2", "tau2")
 SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])

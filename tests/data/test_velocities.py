@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._data._velocities import velocity_gain
+from dynax.internal import velocity_gain
 
 DT = 0.002
 
@@ -112,7 +112,7 @@ def test_identify_and_diagnose_check_records_built_in_python_too(tmp_path):
     # A Trajectory made from arrays (no file) gets the same check before anything is fitted.
     import jax.numpy as jnp
 
-    from dynax._data import Trajectory
+    from dynax import Trajectory
 
     columns = arm_columns()
     xs = np.column_stack([columns["pos1"], columns["pos2"], np.degrees(columns["vel1"]), columns["vel2"]])

@@ -6,11 +6,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax import Acrobot, DoublePendulum
-from dynax._model._helicopter import Helicopter
-from dynax._diagnose._candidates import default_candidates, look_alikes, structurally_absorbed, structurally_equivalent
-from dynax._diagnose._fit import Family, nominal_parameter_names
-from dynax._model._extensions import Extended
+from dynax import Acrobot, default_candidates, DoublePendulum, Extended, Helicopter
+from dynax.internal import Family, look_alikes, nominal_parameter_names, structurally_absorbed, structurally_equivalent
 from tests.reference import DRAKE, spong_reference
 
 

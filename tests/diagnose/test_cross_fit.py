@@ -5,10 +5,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax import Acrobot
-from dynax._diagnose import diagnose
-from dynax._diagnose._fit import Family, fit_configurations, make_windows
-from dynax._model._extensions import CoulombFriction, Extended, InputOffset
+from dynax import Acrobot, CoulombFriction, diagnose, Extended, InputOffset
+from dynax.internal import Family, fit_configurations, make_windows
 from dynax.synthetic import DEMO_TRUTH_PHYSICAL, synthetic_trajectory
 
 from .test_engine_rollouts_validation import _axis_record, NOMINAL

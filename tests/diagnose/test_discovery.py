@@ -16,15 +16,20 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax import Acrobot, LinearAxis
-from dynax._cli._main import main
-from dynax._data import save_trajectory, Trajectory
-from dynax._diagnose import diagnose
-from dynax._diagnose._candidates import default_candidates
-from dynax.synthetic import demo_data, DEMO_TRUTH_PHYSICAL
-from dynax._diagnose._discovery import propose
-from dynax.synthetic import synthetic_trajectory
-from dynax._model._extensions import AbstractJointTerm, CoulombFriction, Extended, JointSpring
+from dynax import (
+    AbstractJointTerm,
+    Acrobot,
+    CoulombFriction,
+    default_candidates,
+    diagnose,
+    Extended,
+    JointSpring,
+    LinearAxis,
+    save_trajectory,
+    Trajectory,
+)
+from dynax.internal import cli_main, propose
+from dynax.synthetic import demo_data, DEMO_TRUTH_PHYSICAL, synthetic_trajectory
 
 pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more
 
@@ -174,9 +179,9 @@ def periodic_files(tmp_path_factory):
 # follows, so the verdict would be `unexplained` (discovery 55 %, structure left in dq). This test is about the
 # search, so it refits the viscous coefficient with the mass, as a user who doubts it would.
 def _cli(folder, out, *extra):
-    return main(["diagnose", "linear_axis", str(folder / "run1.csv"), "--validation", str(folder / "run2.csv"),
-                 "--nominal", str(folder / "nominal.json"), "--refit", "mass,viscous", "--reference-horizon", "0.5",
-                 "--out", str(out), *extra])
+    return cli_main(["diagnose", "linear_axis", str(folder / "run1.csv"), "--validation", str(folder / "run2.csv"),
+                     "--nominal", str(folder / "nominal.json"), "--refit", "mass,viscous", "--reference-horizon", "0.5",
+                     "--out", str(out), *extra])
 
 
 def test_cli_discovers_a_position_periodic_force_with_its_period(periodic_files, tmp_path, capsys):

@@ -10,16 +10,29 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax import LinearAxis
-from dynax._data import Trajectory
-from dynax._diagnose import default_candidates
-from dynax._diagnose._diagnose import stage_reporter
-from dynax._diagnose._fit import Family, fit_configurations, make_windows, window_errors
-from dynax._diagnose._validation import fit_percent, residual_tests
-from dynax._model._extensions import CoulombFriction, Extended, InputLag, InputOffset
-from dynax._progress import progress_mode
-from dynax._sim_error import _complete_state, _window_errors, window_rollouts
-from dynax._simulate import Adaptive
+from dynax import (
+    Adaptive,
+    CoulombFriction,
+    default_candidates,
+    Extended,
+    InputLag,
+    InputOffset,
+    LinearAxis,
+    progress_mode,
+    Trajectory,
+)
+from dynax.internal import (
+    complete_state,
+    Family,
+    fit_configurations,
+    fit_percent,
+    make_windows,
+    residual_tests,
+    rollouts_from_starts,
+    stage_reporter,
+    window_errors,
+    window_rollouts,
+)
 
 
 def _axis_record(truth, *, seconds=12.0, dt=0.01, noise=1e-4, seed=0, name="run.csv"):
@@ -39,8 +52,8 @@ NOMINAL = LinearAxis(coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0))
 
 def test_window_rollouts_agree_with_an_independent_integrator():
     record = _axis_record(NOMINAL, noise=0.0)
-    errors, diverged = _window_errors(NOMINAL, record.ts, record.xs, record.us, jnp.asarray([0, 300, 700]),
-                                      100, dynax.FixedGrid())
+    errors, diverged = rollouts_from_starts(NOMINAL, record.ts, record.xs, record.us, jnp.asarray([0, 300, 700]),
+                                            100, dynax.FixedGrid())
     assert not np.any(np.asarray(diverged))
     # the record itself was made by an adaptive solver at tight tolerances: the fixed grid reproduces it
     assert np.max(np.abs(np.asarray(errors))) < 1e-5
@@ -62,7 +75,7 @@ def test_input_history_drives_a_lag_to_its_exact_state():
     window_xs = np.zeros((3, 2))
     errors, _ = window_rollouts(model, jnp.asarray(window_ts)[None], jnp.asarray(window_xs)[None],
                                 jnp.asarray(np.repeat(us[-1:], 3, axis=0))[None], jnp.asarray(ts)[None], jnp.asarray(us)[None])
-    x0 = _complete_state(model, jnp.zeros(2), jnp.asarray(us[-1]), jnp.asarray(ts), jnp.asarray(us))
+    x0 = complete_state(model, jnp.zeros(2), jnp.asarray(us[-1]), jnp.asarray(ts), jnp.asarray(us))
     assert abs(float(x0[2]) - a) < 1e-6 * max(1.0, abs(a))
     # without history the lag would start at rest under the last input, a different state
     assert abs(float(model.initial_state(jnp.zeros(2), jnp.asarray(us[-1]))[2]) - a) > 1e-3
@@ -132,7 +145,7 @@ def test_stage_reporter_follows_progress_mode(capsys):
 
 
 def test_the_cli_stage_log_prints_lines_without_a_terminal_and_nothing_when_quiet(capsys):
-    from dynax._cli._diagnose import stage_log
+    from dynax.internal import stage_log
 
     with stage_log() as say:
         say("screening")

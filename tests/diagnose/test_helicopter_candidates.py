@@ -14,13 +14,22 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax import Acrobot
-from dynax._diagnose import diagnose, Known, Refit
-from dynax._diagnose._candidates import default_candidates
-from dynax.synthetic import helicopter_flight
-from dynax._model._extensions import AbstractVehicleTerm, BodyBias, BodyQuadraticDrag, Extended, Wind
-from dynax._model._helicopter import Helicopter, hover_state, TEMPEST_COEFFICIENTS
-from dynax.synthetic import FlightController
+from dynax import (
+    AbstractVehicleTerm,
+    Acrobot,
+    BodyBias,
+    BodyQuadraticDrag,
+    default_candidates,
+    diagnose,
+    Extended,
+    Helicopter,
+    hover_state,
+    Known,
+    Refit,
+    Wind,
+)
+from dynax.internal import TEMPEST_COEFFICIENTS
+from dynax.synthetic import FlightController, helicopter_flight
 
 
 pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more
@@ -208,15 +217,16 @@ def test_hidden_effects_with_the_full_library_in_refit_mode(terms, cause, where,
 
 @pytest.mark.slow
 def test_cli_diagnose_helicopter_names_a_hidden_wind(tmp_path, capsys):
-    from dynax._cli._main import main
-    from dynax._data import save_trajectory
+    from dynax import save_trajectory
+    from dynax.internal import cli_main
 
     truth = Extended(Helicopter(), (Wind(0, 3.0),))
     save_trajectory(helicopter_flight(truth, duration=20.0, seed=8), tmp_path / "flight1.csv")
     save_trajectory(helicopter_flight(truth, duration=20.0, seed=108), tmp_path / "flight2.csv")
     out = tmp_path / "report"
-    code = main(["diagnose", "helicopter", str(tmp_path / "flight1.csv"), "--validation", str(tmp_path / "flight2.csv"),
-                 "--max-terms", "2", "--out", str(out)])
+    code = cli_main(["diagnose", "helicopter", str(tmp_path / "flight1.csv"),
+                     "--validation", str(tmp_path / "flight2.csv"),
+                     "--max-terms", "2", "--out", str(out)])
     assert code == 0
     j = json.loads((out / "report.json").read_text())
     assert j["system"] == "helicopter"
@@ -261,7 +271,7 @@ def test_a_collective_lag_screens_first_with_its_size(monkeypatch):
     (omega tau << 1) range in which a lag is -tau df/du du/dt. Screened only at first order, it ranked
     below a constant vertical bias and was not refitted in the first round; at finite sizes it leads,
     with a start value near its size."""
-    from dynax._model._extensions import InputLag
+    from dynax import InputLag
 
     seen = _round_one_screening(monkeypatch, Extended(Helicopter(), (InputLag(3, 0.15),)))
     ranked = sorted(seen, key=lambda label: -seen[label][0])

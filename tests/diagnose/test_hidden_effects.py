@@ -9,23 +9,24 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax import Acrobot
-from dynax._data import Trajectory
-from dynax._diagnose import diagnose, Known, Refit
-from dynax.synthetic import demo_data
-from dynax.synthetic import synthetic_trajectory
-from dynax._model._extensions import (
+from dynax import (
+    Acrobot,
     CoulombFriction,
+    diagnose,
     Extended,
     InputDelay,
     InputGain,
     InputLag,
     InputOffset,
     JointSpring,
+    Known,
     QuadraticDrag,
+    Refit,
     RotorInertia,
+    Trajectory,
     ViscousFriction,
 )
+from dynax.synthetic import demo_data, synthetic_trajectory
 
 
 pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more

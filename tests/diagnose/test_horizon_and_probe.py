@@ -4,8 +4,13 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._diagnose._horizon import position_spread, predictability_horizon, relative_position_error
-from dynax._diagnose._probe import cross_validated_ridge, folds_by_run
+from dynax.internal import (
+    cross_validated_ridge,
+    folds_by_run,
+    position_spread,
+    predictability_horizon,
+    relative_position_error,
+)
 
 
 def test_horizon_is_the_last_before_the_error_first_exceeds_the_fraction():

@@ -2,9 +2,8 @@
 
 import numpy as np
 
-from dynax import Acrobot, LinearAxis
-from dynax._diagnose._library import feature_library, named_equivalent, physical_readings, search_period
-from dynax._model._extensions import Discovered, Feature
+from dynax import Acrobot, Discovered, Feature, LinearAxis
+from dynax.internal import feature_library, named_equivalent, physical_readings, search_period
 
 
 def test_period_search_finds_the_period_of_a_force_periodic_in_position():

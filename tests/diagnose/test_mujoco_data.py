@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._data import Trajectory
-from dynax._diagnose import diagnose, Refit
+from dynax import diagnose, Refit, Trajectory
 from tests import mujoco_rig
 
 pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more

@@ -6,14 +6,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax import Acrobot
-from dynax._data import Trajectory
-from dynax._diagnose import diagnose, Refit
-from dynax.synthetic import DEMO_TRUTH_PHYSICAL
-from dynax._diagnose._residuals import acceleration_residuals, exact_delays
-from dynax.synthetic import multisine
-from dynax._model._extensions import Extended, InputDelay
-from dynax._simulate import FixedGrid, simulate
+from dynax import Acrobot, diagnose, Extended, FixedGrid, InputDelay, Refit, simulate, Trajectory
+from dynax.internal import acceleration_residuals, exact_delays
+from dynax.synthetic import DEMO_TRUTH_PHYSICAL, multisine
 
 DELAY_SAMPLES, DT = 3, 0.01  # 0.03 s
 

@@ -7,10 +7,8 @@ import pathlib
 import jax.numpy as jnp
 import pytest
 
-from dynax import LinearAxis
-from dynax._data import butterworth_filtfilt, central_difference, load_trajectory, Trajectory
-from dynax._data import resample
-from dynax._diagnose import diagnose, Known, Refit
+from dynax import diagnose, Known, LinearAxis, load_trajectory, Refit, Trajectory
+from dynax.internal import butterworth_filtfilt, central_difference, resample
 from tests.conftest import DFKI_MAPPING
 
 pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more
@@ -165,14 +163,14 @@ def test_dfki_cli_on_the_raw_files_with_no_nominal_and_no_resampling(tmp_path, c
     gain; docs/tutorials/real_data_diagnosis.md)."""
     import json
 
-    from dynax._cli._main import main
+    from dynax.internal import cli_main
 
     runs = DATASETS / "dfki_double_pendulum" / "sys_id"
     mapping = ",".join(f"{k}={v}" for k, v in DFKI_MAPPING.items())
     out = tmp_path / "s1"
-    code = main(["diagnose", "double_pendulum", str(runs / "trajectory_00.csv"), str(runs / "trajectory_01.csv"),
-                 "--validation", str(runs / "trajectory_02.csv"), str(runs / "trajectory_03.csv"),
-                 "--map", mapping, "--out", str(out)])
+    code = cli_main(["diagnose", "double_pendulum", str(runs / "trajectory_00.csv"), str(runs / "trajectory_01.csv"),
+                     "--validation", str(runs / "trajectory_02.csv"), str(runs / "trajectory_03.csv"),
+                     "--map", mapping, "--out", str(out)])
     err = capsys.readouterr().err
     assert code == 0, err
     assert "not the default DoublePendulum" in err
@@ -203,7 +201,7 @@ def test_dfki_nominal_from_a_run_that_hardly_moves_the_elbow_says_what_it_cannot
     but pins the elbow's gravity term theta5 poorly; the CLI's note says so rather than trusting it silently.
     On runs 00 and 01 every size parameter is determined within 10 %: no such warning."""
     from dynax import DoublePendulum
-    from dynax._cli._nominal import nominal_from_data
+    from dynax.internal import nominal_from_data
 
     nominal, note = nominal_from_data(DoublePendulum(), [_dfki("05")])
     assert "not the default DoublePendulum" in note and "theta5 only to ±" in note

@@ -5,13 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from dynax._cli._main import main
-from dynax._data import save_trajectory
-from dynax._diagnose import diagnose, write_report
+from dynax import Acrobot, diagnose, InputOffset, save_trajectory, write_report
+from dynax.internal import cli_main, write_json
 from dynax.synthetic import demo_data
-from dynax._cli._output import write_json
-from dynax._model._extensions import InputOffset
-from dynax import Acrobot
 
 CONTRACT_KEYS = ["system", "data", "nominal", "verdict", "findings", "extended", "gain", "reference_horizon_s"]
 
@@ -28,8 +24,8 @@ def offset_data(tmp_path_factory):
 def test_cli_diagnose_writes_the_contract_report(offset_data, tmp_path, capsys):
     folder, _, _ = offset_data
     out = tmp_path / "diag"
-    code = main(["diagnose", "acrobot", str(folder / "run1.csv"), "--validation", str(folder / "run2.csv"),
-                 "--out", str(out)])
+    code = cli_main(["diagnose", "acrobot", str(folder / "run1.csv"), "--validation", str(folder / "run2.csv"),
+                     "--out", str(out)])
     assert code == 0
     report = json.loads((out / "report.json").read_text())
     assert list(report)[: len(CONTRACT_KEYS)] == CONTRACT_KEYS
@@ -84,7 +80,7 @@ def test_cli_diagnose_writes_the_contract_report(offset_data, tmp_path, capsys):
 def test_cli_diagnose_without_validation_holds_out_and_says_so(offset_data, tmp_path):
     folder, _, _ = offset_data
     out = tmp_path / "diag"
-    assert main(["diagnose", "acrobot", str(folder / "run1.csv"), "--out", str(out), "--max-terms", "1"]) == 0
+    assert cli_main(["diagnose", "acrobot", str(folder / "run1.csv"), "--out", str(out), "--max-terms", "1"]) == 0
     report = json.loads((out / "report.json").read_text())
     assert "held out" in " ".join(report["notes"])
     assert report["data"]["n_train"] + report["data"]["n_validation"] == 2001
@@ -95,18 +91,18 @@ def test_cli_diagnose_refuses_bad_input_and_writes_nothing(offset_data, tmp_path
     bad = tmp_path / "bad.csv"
     bad.write_text("t,q1,q2,dq1\n0,0,0,0\n")
     out = tmp_path / "never"
-    assert main(["diagnose", "acrobot", str(bad), "--out", str(out)]) == 2
+    assert cli_main(["diagnose", "acrobot", str(bad), "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "bad.csv" in err and "dq2" in err
     assert not out.exists()
-    assert main(["diagnose", "acrobot", str(folder / "run1.csv"), "--max-terms", "0", "--out", str(out)]) == 2
+    assert cli_main(["diagnose", "acrobot", str(folder / "run1.csv"), "--max-terms", "0", "--out", str(out)]) == 2
     assert not out.exists()
     # Too short to judge: the one-step residuals drop about 0.1 s at each end (this crashed with a division by zero).
     _, train, _ = offset_data
     short = tmp_path / "short.csv"
     save_trajectory(type(train)(train.ts[:141], train.xs[:141], train.us[:141], train.state_names, train.input_names,
                                 "acrobot"), short)
-    assert main(["diagnose", "acrobot", str(short), "--out", str(out)]) == 2
+    assert cli_main(["diagnose", "acrobot", str(short), "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "short.csv" in err and "held-out part of the record" in err and "42 samples" in err and "at least 44" in err
     assert not out.exists()
@@ -115,7 +111,7 @@ def test_cli_diagnose_refuses_bad_input_and_writes_nothing(offset_data, tmp_path
 def test_cli_diagnose_helicopter_refuses_a_file_without_its_columns(offset_data, tmp_path, capsys):
     folder, _, _ = offset_data
     out = tmp_path / "heli"
-    assert main(["diagnose", "helicopter", str(folder / "run1.csv"), "--out", str(out)]) == 2
+    assert cli_main(["diagnose", "helicopter", str(folder / "run1.csv"), "--out", str(out)]) == 2
     assert "run1.csv" in capsys.readouterr().err
     assert not out.exists()
 
@@ -131,8 +127,8 @@ def test_cli_diagnose_takes_several_runs_and_keeps_them_apart(offset_data, tmp_p
                                          record.input_names, "acrobot"), path)
             runs[name + part] = (path, hi - lo)
     out = tmp_path / "multi"
-    code = main(["diagnose", "acrobot", str(runs["a1"][0]), str(runs["a2"][0]),
-                 "--validation", str(runs["b1"][0]), str(runs["b2"][0]), "--max-terms", "1", "--out", str(out)])
+    code = cli_main(["diagnose", "acrobot", str(runs["a1"][0]), str(runs["a2"][0]),
+                     "--validation", str(runs["b1"][0]), str(runs["b2"][0]), "--max-terms", "1", "--out", str(out)])
     assert code == 0
     report = json.loads((out / "report.json").read_text())
     assert [p.rsplit("/", 1)[-1] for p in report["data"]["validation_runs"]] == ["b1.csv", "b2.csv"]
@@ -166,8 +162,8 @@ def test_cli_diagnose_on_irregularly_sampled_files_without_dt(offset_data, tmp_p
     # model cannot hold: set aside, and said so on stderr and in the report.
     nominal = tmp_path / "nominal.json"
     nominal.write_text(json.dumps({"parameters": {"fc2": 0.05}}))
-    code = main(["diagnose", "acrobot", str(paths[0]), "--validation", str(paths[1]), "--max-terms", "1",
-                 "--nominal", str(nominal), "--out", str(out)])
+    code = cli_main(["diagnose", "acrobot", str(paths[0]), "--validation", str(paths[1]), "--max-terms", "1",
+                     "--nominal", str(nominal), "--out", str(out)])
     err = capsys.readouterr().err
     assert code == 0, err
     assert "fc2 = 0.05 (coulomb_friction at q2)" in err
@@ -184,8 +180,8 @@ def test_cli_nominal_sets_aside_term_coefficients_and_refuses_unknown_names():
     """`dynax identify` writes `Ir2` (its refinement's rotor inertia) and `fc1`, `fc2`; the nominal two-link
     model has no such terms. They are set aside with a note naming the cause; a name that is neither a field
     nor a term's coefficient is still refused."""
-    from dynax._cli._nominal import nominal_system, split_term_coefficients
-    from dynax._errors import UsageError
+    from dynax import UsageError
+    from dynax.internal import nominal_system, split_term_coefficients
 
     given = {"theta1": 0.05, "theta7": 0.02, "Ir2": 0.003, "fc1": 0.1}
     kept, note = split_term_coefficients("double_pendulum", given)
@@ -207,8 +203,7 @@ def test_cli_without_nominal_on_another_axis_diagnoses_against_its_identified_ri
     with their sizes. (Against the EMPS defaults the refit must first find the mass from 19 times too large.)"""
     import jax.numpy as jnp
 
-    from dynax import LinearAxis
-    from dynax._data import Trajectory
+    from dynax import LinearAxis, Trajectory
     from dynax.synthetic import synthetic_trajectory
 
     truth = LinearAxis(mass=jnp.asarray(5.0), viscous=jnp.asarray(10.0), coulomb=jnp.asarray(2.0), offset=jnp.asarray(0.3))
@@ -218,8 +213,8 @@ def test_cli_without_nominal_on_another_axis_diagnoses_against_its_identified_ri
         save_trajectory(Trajectory(run.ts[a:b], run.xs[a:b], run.us[a:b], run.state_names, run.input_names,
                                    "linear_axis"), tmp_path / f"{name}.csv")
     out = tmp_path / "axis"
-    code = main(["diagnose", "linear_axis", str(tmp_path / "train.csv"), "--validation", str(tmp_path / "held.csv"),
-                 "--out", str(out)])
+    code = cli_main(["diagnose", "linear_axis", str(tmp_path / "train.csv"), "--validation", str(tmp_path / "held.csv"),
+                     "--out", str(out)])
     err = capsys.readouterr().err
     assert code == 0, err
     assert "not the default LinearAxis" in err and "mass" in err
@@ -239,8 +234,7 @@ def test_cli_without_nominal_on_a_small_acrobot_names_every_friction_with_its_si
     frictions are the hidden effects. The third, viscous at the shoulder, is small (23 %); screening ranked
     its look-alike quadratic drag above it and left it off the shortlist, and quadratic drag was named with
     look-alikes 'told apart' although none had been refitted. The leader's look-alikes are now refitted too."""
-    from dynax._data import Trajectory
-    from dynax._model._extensions import CoulombFriction, Extended
+    from dynax import CoulombFriction, Extended, Trajectory
     from dynax.synthetic import synthetic_trajectory
 
     truth = Extended(Acrobot.from_physical(m1=0.5, m2=0.45, l1=0.3, lc1=0.15, lc2=0.16, Ic1=0.004, Ic2=0.0035,
@@ -250,8 +244,8 @@ def test_cli_without_nominal_on_a_small_acrobot_names_every_friction_with_its_si
         save_trajectory(Trajectory(run.ts[a:b], run.xs[a:b], run.us[a:b], run.state_names, run.input_names, "acrobot"),
                         tmp_path / f"{name}.csv")
     out = tmp_path / "small"
-    code = main(["diagnose", "acrobot", str(tmp_path / "train.csv"), "--validation", str(tmp_path / "held.csv"),
-                 "--out", str(out)])
+    code = cli_main(["diagnose", "acrobot", str(tmp_path / "train.csv"), "--validation", str(tmp_path / "held.csv"),
+                     "--out", str(out)])
     assert code == 0, capsys.readouterr().err
     j = json.loads((out / "report.json").read_text())
     found = {(f["cause"], f["where"]): f for f in j["findings"]}

@@ -1,4 +1,4 @@
-"""The admissibility rules of one selection round (`dynax._diagnose._selection.judge_round`): a candidate whose joint refit pushes
+"""The admissibility rules of one selection round (`dynax.internal.judge_round`): a candidate whose joint refit pushes
 an earlier finding's coefficient to an unphysical sign is not admissible, however much it helps; a
 candidate that adds to a nominal parameter the refit keeps (viscous friction) may lower it, not below zero."""
 
@@ -6,12 +6,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax import Acrobot
-from dynax._data import Trajectory
-from dynax._diagnose._candidates import default_candidates, held_partners
-from dynax._diagnose._problem import _candidate_family, _refit_names, Known, Refit
-from dynax._diagnose._selection import judge_round, look_alike_tests, on_physical_side
-from dynax._model._extensions import CoulombFriction, InputOffset, ViscousFriction
+from dynax import Acrobot, CoulombFriction, default_candidates, InputOffset, Known, Refit, Trajectory, ViscousFriction
+from dynax.internal import candidate_family, held_partners, judge_round, look_alike_tests, names_to_refit, on_physical_side
 
 
 def _round(earlier_fc1, new_delta, *, earlier=CoulombFriction(0)):
@@ -88,8 +84,8 @@ def _acrobot_family(mode):
     record = Trajectory(jnp.arange(200) * 0.01, jnp.asarray(rng.normal(size=(200, 4))), jnp.asarray(rng.normal(size=(200, 1))),
                         system.state_names, system.input_names)
     candidates = default_candidates(system)
-    refit = _refit_names(system, mode)
-    family, _, _ = _candidate_family(system, candidates, refit, [record])
+    refit = names_to_refit(system, mode)
+    family, _, _ = candidate_family(system, candidates, refit, [record])
     return system, candidates, refit, family
 
 
@@ -111,8 +107,8 @@ def test_refit_keeps_the_nominal_friction_and_its_viscous_candidates_add_to_it()
 
 
 def test_all_parameters_can_still_be_refitted_and_known_mode_refits_none():
-    assert _refit_names(Acrobot(), Refit(parameters=tuple(f"theta{i}" for i in range(1, 8))))[-1] == "theta7"
-    assert _refit_names(Acrobot(), Known()) == ()
+    assert names_to_refit(Acrobot(), Refit(parameters=tuple(f"theta{i}" for i in range(1, 8))))[-1] == "theta7"
+    assert names_to_refit(Acrobot(), Known()) == ()
 
 
 def test_a_look_alike_is_told_apart_only_by_a_difference_that_matters():

@@ -2,7 +2,8 @@
 
 import numpy as np
 
-from dynax._diagnose._sparse import sparse_search, stlsq
+from dynax import sparse_search
+from dynax.internal import stlsq
 
 
 def _design(n, m, seed, correlated=False):

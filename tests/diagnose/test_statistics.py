@@ -8,7 +8,7 @@ import pytest
 import scipy.signal
 import scipy.stats
 
-from dynax._diagnose._statistics import (
+from dynax.internal import (
     benjamini_hochberg,
     decorrelation_lag,
     detectable_gain,

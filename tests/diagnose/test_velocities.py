@@ -6,9 +6,8 @@ against the true velocities, not against what the rule itself computes."""
 import jax.numpy as jnp
 import numpy as np
 
-from dynax import Acrobot
-from dynax._identify._defaults import with_velocities_from_positions
-from dynax._model._extensions import CoulombFriction, Extended
+from dynax import Acrobot, CoulombFriction, Extended
+from dynax.internal import with_velocities_from_positions
 from dynax.synthetic import synthetic_trajectory
 
 TRUTH = Extended(Acrobot(), (CoulombFriction(1, 0.2),))

@@ -28,7 +28,7 @@ import equinox as eqx  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from dynax._data import Trajectory  # noqa: E402
+from dynax import Trajectory  # noqa: E402
 
 
 def main(out):

@@ -8,9 +8,8 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._errors import UsageError
-from dynax._fit import fit_least_squares, fit_minimise, Parameters
-from dynax._fit._engine import _dense_forward
+from dynax import fit_least_squares, fit_minimise, Parameters, UsageError
+from dynax.internal import dense_forward
 
 
 def test_parameters_names_follow_tree_paths_and_masks():
@@ -107,7 +106,7 @@ def test_dense_jacobian_gives_the_forward_mode_fit_and_differentiates_in_the_dat
     np.testing.assert_allclose(dense.initial_residuals, res(model, y), rtol=1e-12)
     # The rule itself: tangents in the unknowns and in the data give plain forward mode's directional derivatives.
     f = lambda z, d: res({"a": 1.0 + z[0], "b": 0.3 + 0.3 * z[1]}, d[0]) * d[1]  # noqa: E731
-    rule = _dense_forward(f)
+    rule = dense_forward(f)
     primals = (jnp.array([0.2, -0.1]), (y, jnp.asarray(1.5)))
     for tangents in [(jnp.array([1.0, -2.0]), (jnp.zeros(60), jnp.asarray(0.0))),
                      (jnp.zeros(2), (jnp.sin(ts), jnp.asarray(0.3))),
@@ -204,7 +203,7 @@ def test_the_strict_trust_region_refuses_a_rise_that_optimistix_would_accept():
     import lineax as lx
     import optimistix as optx
 
-    from dynax._fit import StrictTrustRegion
+    from dynax.internal import StrictTrustRegion
 
     def info(residual):
         return optx.FunctionInfo.ResidualJac(jnp.array([residual]), lx.MatrixLinearOperator(jnp.array([[1.0]])))
@@ -229,7 +228,7 @@ def test_a_fit_started_at_its_minimum_stops_at_once_and_the_answer_is_the_tightl
     rollout, while the strict trust region refused steps that raised the loss in its last digits."""
     import optimistix as optx
 
-    from dynax._fit import StrictTrustRegion
+    from dynax.internal import StrictTrustRegion
 
     true, ts, xs, us = _pendulum_data(jax.random.PRNGKey(0), noise=1e-2)
     start, spec, residuals = _pendulum_problem()
@@ -264,7 +263,7 @@ def test_the_jacobian_formed_only_where_a_step_is_taken_gives_the_same_iterates_
     rule's callback, which depends on the point only); the iterates must be the same."""
     import optimistix as optx
 
-    from dynax._fit import levenberg_marquardt
+    from dynax.internal import levenberg_marquardt
 
     model = _exponential_and_sine()
     formed = []
@@ -310,7 +309,7 @@ def test_nielsens_damping_update_reaches_the_same_minimum_in_no_more_steps():
     the path is long (29 against 37 when this was written)."""
     import optimistix as optx
 
-    from dynax._fit import levenberg_marquardt
+    from dynax.internal import levenberg_marquardt
 
     model = _exponential_and_sine()
 

@@ -3,7 +3,7 @@
 import numpy as np
 import scipy.signal
 
-from dynax._fit import serial_covariance
+from dynax.internal import serial_covariance
 
 
 def _ar1(rng, rho, shape):
@@ -80,9 +80,9 @@ def test_independent_errors_keep_the_usual_standard_errors():
 
 
 def test_the_lag_sum_through_the_fft_is_the_sum_over_lags():
-    from dynax._fit._covariance import _bartlett_lags
+    from dynax.internal import bartlett_lags
 
     p = np.random.default_rng(3).normal(size=(50, 3))
     for bandwidth in (1.0, 7.3, 80.0):  # no lag, some lags, more lags than the record has
         direct = sum((1 - lag / bandwidth) * p[lag:].T @ p[:-lag] for lag in range(1, min(int(np.ceil(bandwidth)), 50)))
-        np.testing.assert_allclose(_bartlett_lags(p, bandwidth), direct + np.zeros((3, 3)), atol=1e-12)
+        np.testing.assert_allclose(bartlett_lags(p, bandwidth), direct + np.zeros((3, 3)), atol=1e-12)

@@ -11,9 +11,8 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._data import Trajectory
-from dynax._identify import Dynamic, identify
-from dynax._identify._angle_zeros import record_angle_zeros
+from dynax import Dynamic, identify, Trajectory
+from dynax.internal import record_angle_zeros
 from tests.identify.test_identify_defaults import dfki, recorded, rig_model
 
 SEEDS = (30, 31, 32)

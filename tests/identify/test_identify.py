@@ -6,10 +6,19 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._data import load_trajectory, Trajectory
-from dynax._errors import DataError
-from dynax._identify import Dynamic, Energy, IdentifiabilityError, identify, Power, SimulationFit
-from dynax._model._extensions import CoulombFriction, Extended
+from dynax import (
+    CoulombFriction,
+    DataError,
+    Dynamic,
+    Energy,
+    Extended,
+    IdentifiabilityError,
+    identify,
+    load_trajectory,
+    Power,
+    SimulationFit,
+    Trajectory,
+)
 
 TRUE = dynax.Acrobot()  # Drake's parameters
 THETA = np.array([float(v) for v in TRUE.base_parameters.values()])

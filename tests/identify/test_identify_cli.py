@@ -3,12 +3,12 @@
 import json
 
 import dynax
-from dynax._cli._main import main
+from dynax.internal import cli_main
 
 
 def test_identify_writes_the_contract_json(acrobot_csv, tmp_path, capsys):
     out = tmp_path / "params.json"
-    assert main(["identify", "acrobot", str(acrobot_csv), "--method", "power", "--out", str(out)]) == 0
+    assert cli_main(["identify", "acrobot", str(acrobot_csv), "--method", "power", "--out", str(out)]) == 0
     report = json.loads(out.read_text())
     contract = {"system", "method", "friction", "parameters", "std_errors", "condition_number", "n_samples"}
     assert contract <= set(report)  # the contract's keys, extended with the validation and consistency
@@ -28,7 +28,7 @@ def test_identify_prints_each_validation_record_and_the_median_window(acrobot_cs
     import jax.numpy as jnp
     import numpy as np
 
-    from dynax._data import save_trajectory, Trajectory
+    from dynax import save_trajectory, Trajectory
 
     # two held-out records of the acrobot, one of them from another start and under another torque
     ts = np.arange(0.0, 4.0, 0.01)
@@ -37,8 +37,8 @@ def test_identify_prints_each_validation_record_and_the_median_window(acrobot_cs
     other = tmp_path / "other.csv"
     save_trajectory(Trajectory(jnp.asarray(ts), sim.xs, jnp.asarray(us), ("q1", "q2", "dq1", "dq2"), ("tau2",)), other)
     out = tmp_path / "params.json"
-    assert main(["identify", "acrobot", str(acrobot_csv), "--method", "power", "--validation", str(acrobot_csv),
-                 str(other), "--out", str(out)]) == 0
+    assert cli_main(["identify", "acrobot", str(acrobot_csv), "--method", "power", "--validation", str(acrobot_csv),
+                     str(other), "--out", str(out)]) == 0
     report = json.loads(out.read_text())
     assert list(report["validation"]["per_record"]) == ["acrobot.csv", "other.csv"]
     assert len(report["validation"]["median"]) == 3 and report["validation"]["concentrated"] == {}
@@ -51,16 +51,15 @@ def test_identify_prints_each_validation_record_and_the_median_window(acrobot_cs
 def test_identify_warns_when_the_record_hardly_moves(tmp_path, capsys):
     import pytest
 
-    from dynax._data import save_trajectory
-    from dynax._identify._least_squares import PoorlyDeterminedWarning
+    from dynax import PoorlyDeterminedWarning, save_trajectory
     from tests.identify.test_identify_defaults import recorded, rig_model
 
     path = tmp_path / "still.csv"
     save_trajectory(recorded(rig_model(), 6.0, 3, torque_scale=0.05), path)  # 3 mrad of motion
     out = tmp_path / "params.json"
     with pytest.warns(PoorlyDeterminedWarning):
-        assert main(["identify", "double_pendulum", str(path), "--friction", "coulomb", "--refine", "no",
-                     "--out", str(out)]) == 0
+        assert cli_main(["identify", "double_pendulum", str(path), "--friction", "coulomb", "--refine", "no",
+                         "--out", str(out)]) == 0
     report = json.loads(out.read_text())
     assert {"theta1", "theta2"} <= set(report["poorly_determined"])
     printed = capsys.readouterr().out
@@ -75,17 +74,17 @@ def test_identify_refuses_bad_input_without_writing(acrobot_csv, tmp_path, capsy
     out = tmp_path / "params.json"
     bad = tmp_path / "bad.csv"
     bad.write_text(acrobot_csv.read_text().replace("tau2", "torque"))
-    assert main(["identify", "acrobot", str(bad), "--out", str(out)]) == 2
+    assert cli_main(["identify", "acrobot", str(bad), "--out", str(out)]) == 2
     assert "tau2" in capsys.readouterr().err and not out.exists()
     # a method the system does not have
-    assert main(["identify", "linear_axis", str(acrobot_csv), "--method", "energy", "--out", str(out)]) == 2
+    assert cli_main(["identify", "linear_axis", str(acrobot_csv), "--method", "energy", "--out", str(out)]) == 2
     assert "not available" in capsys.readouterr().err and not out.exists()
     # a record that cannot determine the parameters: the arm never moves
     still = tmp_path / "still.csv"
     lines = acrobot_csv.read_text().splitlines()
     header, rows = lines[0], lines[1:40]
     still.write_text("\n".join([header] + [f"{0.01 * k},0,0,0,0,0" for k in range(len(rows))]) + "\n")
-    assert main(["identify", "acrobot", str(still), "--out", str(out)]) == 2
+    assert cli_main(["identify", "acrobot", str(still), "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "theta1" in err and "rank 0 of 7" in err and not out.exists()
 
@@ -93,15 +92,17 @@ def test_identify_refuses_bad_input_without_writing(acrobot_csv, tmp_path, capsy
 def test_the_jointly_determined_note_gives_an_estimate_at_its_bound_as_value_and_error():
     # As printed for DFKI run 00 alone: theta1 is known to 39 %, while the shoulder's viscous
     # friction sits at its bound of zero (2e-6 +- 0.037), where a relative error (1.8e6 %) says nothing.
-    from dynax._cli._identify import _jointly_cell
+    from dynax.internal import jointly_determined_cell
 
     report = {"parameters": {"theta1": 0.0471, "theta6": 2.0e-6},
               "std_errors": {"theta1": 0.018, "theta6": 0.037}}
     joint = {"with": ["Ir2", "theta2"], "correlations": [-0.99, 0.95], "inflation": 108.3}
-    assert _jointly_cell("theta1", joint, report) == "theta1 (108x, +- 38 %) with Ir2 (-0.99), theta2 (+0.95)"
-    assert _jointly_cell("theta6", dict(joint, inflation=13.0), report).startswith("theta6 (13x, 2e-06 +- 0.037) with")
-    assert _jointly_cell("theta6", {"with": [], "correlations": [], "inflation": 13.0},
-                         {"parameters": {"theta6": 0.0}, "std_errors": {}}) == "theta6 (13x) with several others"
+    assert jointly_determined_cell("theta1", joint, report) == "theta1 (108x, +- 38 %) with Ir2 (-0.99), theta2 (+0.95)"
+    cell = jointly_determined_cell("theta6", dict(joint, inflation=13.0), report)
+    assert cell.startswith("theta6 (13x, 2e-06 +- 0.037) with")
+    lone = jointly_determined_cell("theta6", {"with": [], "correlations": [], "inflation": 13.0},
+                                   {"parameters": {"theta6": 0.0}, "std_errors": {}})
+    assert lone == "theta6 (13x) with several others"
 
 
 def test_identify_says_that_one_record_cannot_show_what_changes_between_recordings(acrobot_csv, tmp_path, capsys):
@@ -109,14 +110,14 @@ def test_identify_says_that_one_record_cannot_show_what_changes_between_recordin
     # such answers (run 03 or 12 alone) are determined to 2 to 12 % and 2 to 4 times the lab's error
     # on the runs whose motion they did not see (experiments/dfki_single_run.py): the CLI says so.
     out = tmp_path / "params.json"
-    assert main(["identify", "acrobot", str(acrobot_csv), "--refine", "yes", "--out", str(out)]) == 0
+    assert cli_main(["identify", "acrobot", str(acrobot_csv), "--refine", "yes", "--out", str(out)]) == 0
     report = json.loads(out.read_text())
     assert "output_error" in report["stages"] and report.get("record_std_errors") is None
     assert "NOTE: fitted on 1 record: the standard errors and the validation come from within the records" in (
         capsys.readouterr().out)
     # given a record of its own to validate on, the note is about the errors alone
-    assert main(["identify", "acrobot", str(acrobot_csv), "--refine", "yes", "--validation", str(acrobot_csv),
-                 "--out", str(out)]) == 0
+    assert cli_main(["identify", "acrobot", str(acrobot_csv), "--refine", "yes", "--validation", str(acrobot_csv),
+                     "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "NOTE: fitted on 1 record: the standard errors come from within the records" in printed
     assert "to --validation" not in printed

@@ -12,17 +12,17 @@ import scipy.integrate
 import scipy.optimize
 
 import dynax
-from dynax._data import Trajectory
-from dynax._identify import Dynamic, identify
-from dynax._identify._consistency import (
+from dynax import (
     check_consistency,
-    consistency_conditions,
+    choose_filter,
     consistent_least_squares,
+    Dynamic,
+    identify,
     InconsistentEstimateWarning,
+    PoorlyDeterminedWarning,
+    Trajectory,
 )
-from dynax._identify._defaults import choose_filter
-from dynax._identify._least_squares import POORLY_DETERMINED, PoorlyDeterminedWarning
-from dynax._identify._regressors import parameter_names
+from dynax.internal import consistency_conditions, parameter_names, POORLY_DETERMINED
 from tests.reference import arm_reference
 
 NAMES = ("q1", "q2", "dq1", "dq2")
@@ -427,7 +427,7 @@ OTHER_SIZES = {
 @pytest.mark.heavy
 @pytest.mark.parametrize("size", sorted(OTHER_SIZES))
 def test_noisy_arms_of_other_sizes_give_consistent_estimates(size):
-    from dynax._model._two_link import base_parameters_from_physical
+    from dynax import base_parameters_from_physical
 
     physical, fc, ir2, duration = OTHER_SIZES[size]
     base = {k: float(v) for k, v in base_parameters_from_physical(**physical).items()}
@@ -580,15 +580,15 @@ def test_dfki_runs_logged_at_200_and_100_hz_get_a_lower_cutoff_and_nearly_the_sa
 def test_cli_identifies_raw_dfki_files_with_no_recipe_flags(datasets, tmp_path, capsys):
     import json
 
-    from dynax._cli._main import main
+    from dynax.internal import cli_main
     from tests.conftest import DFKI_MAPPING
 
     folder = datasets / "dfki_double_pendulum" / "sys_id"
     files = [str(folder / f"trajectory_{r}.csv") for r in DFKI_RUNS]
     mapping = ",".join(f"{k}={v}" for k, v in DFKI_MAPPING.items())
     out = tmp_path / "dfki.json"
-    code = main(["identify", "double_pendulum", *files[:5], "--validation", files[5], "--friction", "coulomb",
-                 "--map", mapping, "--out", str(out)])
+    code = cli_main(["identify", "double_pendulum", *files[:5], "--validation", files[5], "--friction", "coulomb",
+                     "--map", mapping, "--out", str(out)])
     assert code == 0
     report = json.loads(out.read_text())
     assert report["consistency"]["consistent"] and set(report["stages"]) == {"least_squares", "output_error"}
@@ -621,7 +621,7 @@ def test_cli_says_when_the_refinement_validates_worse_than_least_squares(dataset
     # refinement predicts run 01 better: 0.092 against 0.114 rad at 0.5 s, 2026-11-27.)
     import json
 
-    from dynax._cli._main import main
+    from dynax.internal import cli_main
     from dynax._identify import _identify as identify_module
     from tests.conftest import DFKI_MAPPING
 
@@ -630,9 +630,10 @@ def test_cli_says_when_the_refinement_validates_worse_than_least_squares(dataset
     folder = datasets / "dfki_double_pendulum" / "sys_id"
     mapping = ",".join(f"{k}={v}" for k, v in DFKI_MAPPING.items())
     out = tmp_path / "two.json"
-    code = main(["identify", "double_pendulum", str(folder / "trajectory_00.csv"), str(folder / "trajectory_05.csv"),
-                 "--validation", str(folder / "trajectory_01.csv"), "--friction", "coulomb", "--map", mapping,
-                 "--out", str(out)])
+    code = cli_main(["identify", "double_pendulum", str(folder / "trajectory_00.csv"),
+                     str(folder / "trajectory_05.csv"), "--validation", str(folder / "trajectory_01.csv"),
+                     "--friction", "coulomb", "--map", mapping,
+                     "--out", str(out)])
     assert code == 0
     stages = json.loads(out.read_text())["stages"]
     ls, oe = stages["least_squares"]["validation"]["rmse"], stages["output_error"]["validation"]["rmse"]
@@ -697,8 +698,8 @@ def test_each_records_residual_scale_is_estimated_from_its_own_residuals():
     # residual scale. Records made by scipy's DOP853, with white noise of a known, different level on each:
     # simulated by dynax from the true model and the true segment starts, the residual scale of each record
     # gives back its own noise level (about 2400 residuals each: within 5 %).
-    from dynax._identify._refine import _ml_weights, record_residual_scale
-    from dynax._identify._simulation_fit import SimulationFit
+    from dynax import SimulationFit
+    from dynax.internal import ml_weights, record_residual_scale
 
     model = dynax.DoublePendulum.from_base_parameters(RIG)
     field = jax.jit(lambda x, u: model.vector_field(0.0, x, u))
@@ -722,5 +723,5 @@ def test_each_records_residual_scale_is_estimated_from_its_own_residuals():
     sigma = record_residual_scale(model, jnp.asarray(np.concatenate(starts)), records, scale, method)
     np.testing.assert_allclose(sigma, levels, rtol=0.05)
     # the weights are 1 / sigma (of the residuals; 1 / sigma^2 of their squares), with a floor at the noise level
-    weights = _ml_weights(np.array([0.01, 2.0, 8.0]))
+    weights = ml_weights(np.array([0.01, 2.0, 8.0]))
     np.testing.assert_allclose(weights / weights[-1], [8.0, 4.0, 1.0])

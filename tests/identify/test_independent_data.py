@@ -21,8 +21,7 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._data import Trajectory
-from dynax._identify import Dynamic, Energy, identify, Power, SimulationFit
+from dynax import Dynamic, Energy, identify, Power, SimulationFit, Trajectory
 from tests.reference import scipy_acrobot
 
 TRUE = dynax.Acrobot()  # Drake's parameters, the same physical acrobot as tests.reference.DRAKE

@@ -8,9 +8,8 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._data import Trajectory
-from dynax._identify import Dynamic, identify
-from dynax._identify._simulation_fit import _clustered_covariance, _record_covariance
+from dynax import Dynamic, identify, Trajectory
+from dynax.internal import record_jackknife_covariance, segment_clustered_covariance
 from tests import mujoco_rig
 
 pytest.importorskip("mujoco")
@@ -151,13 +150,14 @@ def test_clustered_covariance_matches_the_spread_over_repeated_noise_where_gauss
         r = x @ beta - e
         estimates.append(beta)
         if len(clustered) < 200:
-            clustered.append(np.sqrt(np.diag(_clustered_covariance(x, r, ts, owner, [_Record(ts[0])], segment_s))))
+            covariance = segment_clustered_covariance(x, r, ts, owner, [_Record(ts[0])], segment_s)
+            clustered.append(np.sqrt(np.diag(covariance)))
             naive.append(np.sqrt(np.diag(np.sum(r**2) / (len(r) - 3) * np.linalg.inv(x.T @ x))))
     truth = np.std(estimates, axis=0)
     np.testing.assert_allclose(np.mean(clustered, axis=0), truth, rtol=0.1)
     assert np.all(np.mean(naive, axis=0) < 0.5 * truth)
     # Too few blocks for the unknowns: no estimate (the caller keeps Gauss-Newton's).
-    assert _clustered_covariance(x[:100], r[:100], ts[:5], owner[:5], [_Record(ts[0])], segment_s) is None
+    assert segment_clustered_covariance(x[:100], r[:100], ts[:5], owner[:5], [_Record(ts[0])], segment_s) is None
 
 
 def test_record_jackknife_carries_what_differs_between_records_where_blocks_of_time_do_not():
@@ -183,10 +183,10 @@ def test_record_jackknife_carries_what_differs_between_records_where_blocks_of_t
         r = x @ beta - e
         estimates.append(beta)
         if len(blocks) < 200:
-            blocks.append(np.sqrt(np.diag(_clustered_covariance(x, r, ts, owner, records, segment_s))))
-            jackknife.append(np.sqrt(np.diag(_record_covariance(x, r, owner, n_records))))
+            blocks.append(np.sqrt(np.diag(segment_clustered_covariance(x, r, ts, owner, records, segment_s))))
+            jackknife.append(np.sqrt(np.diag(record_jackknife_covariance(x, r, owner, n_records))))
     truth = np.std(estimates, axis=0)
     np.testing.assert_allclose(np.mean(jackknife, axis=0), truth, rtol=0.2)
     assert np.mean(blocks, axis=0)[1] < 0.5 * truth[1]
     # Two records are too few to say how much a third would differ.
-    assert _record_covariance(x, r, owner, 2) is None
+    assert record_jackknife_covariance(x, r, owner, 2) is None

@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._identify import Dynamic, identify
-from dynax._identify._record_friction import record_friction
+from dynax import Dynamic, identify, record_friction
 from tests.identify.test_identify_defaults import recorded, RIG, RIG_FC, RIG_IR2
 
 SEEDS = (20, 21, 22, 23)

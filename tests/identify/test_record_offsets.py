@@ -11,9 +11,7 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._data import Trajectory
-from dynax._identify import Dynamic, identify
-from dynax._identify._offsets import record_offsets
+from dynax import Dynamic, identify, record_offsets, Trajectory
 from tests.identify.test_identify_defaults import dfki, recorded, rig_model
 
 SEEDS = (20, 21, 22, 23)

@@ -6,16 +6,15 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._identify import (
+from dynax import CoulombFriction, Extended, IdentifiabilityError, least_squares, RotorInertia
+from dynax.internal import (
     dynamic_regressor,
     energy_regressor,
     friction_power_regressor,
-    IdentifiabilityError,
-    least_squares,
     parameter_names,
+    parameter_vector,
+    with_friction,
 )
-from dynax._identify._regressors import parameter_vector, with_friction
-from dynax._model._extensions import CoulombFriction, Extended, RotorInertia
 
 
 @pytest.fixture(scope="module")
@@ -114,11 +113,11 @@ def test_float32_least_squares_is_as_accurate_as_numpy_lstsq():
 @pytest.mark.parametrize("rows", [5, 700, 70_000])
 def test_tall_skinny_qr_is_householder_qr_up_to_row_signs(rows):
     # 5 rows: one plain QR; 700: one level of blocks and a remainder; 70,000: two levels.
-    from dynax._identify._least_squares import _qr_r
+    from dynax.internal import tsqr_r
 
     rng = np.random.default_rng(4)
     a = rng.normal(size=(rows, 6)) * np.array([1.0, 1e3, 1e-3, 1.0, 1.0, 1.0])
-    r = np.asarray(_qr_r(jnp.asarray(a)))
+    r = np.asarray(tsqr_r(jnp.asarray(a)))
     reference = np.linalg.qr(a, mode="r")
     assert r.shape == reference.shape
     np.testing.assert_allclose(np.abs(r), np.abs(reference), rtol=1e-9, atol=1e-9 * np.abs(reference).max())
@@ -177,7 +176,7 @@ def test_jointly_determined_names_the_parameters_a_regression_separates_only_thr
     # Four regressors, the third almost the sum of the first two: the textbook variance inflation factor
     # 1 / (1 - R^2), from regressing each column on the others, is what the covariance's correlations give,
     # and the three entangled columns are named with each other, the independent fourth is not.
-    from dynax._identify._least_squares import jointly_determined
+    from dynax.internal import jointly_determined
 
     rng = np.random.default_rng(3)
     a, b, d = rng.normal(size=(3, 500))

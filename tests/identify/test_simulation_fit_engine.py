@@ -7,12 +7,17 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._data import Trajectory
-from dynax._fit import Parameters, Solution
-from dynax._identify import identify, SimulationFit
-from dynax._identify._simulation_fit import fit_simulation_error
-from dynax._model._extensions import CoulombFriction, Extended
-from dynax._simulate import Adaptive
+from dynax import (
+    Adaptive,
+    CoulombFriction,
+    Extended,
+    fit_simulation_error,
+    identify,
+    Parameters,
+    SimulationFit,
+    Solution,
+    Trajectory,
+)
 
 
 def _noisy_record(system, ts, us, x0, names, noise, seed):
@@ -112,11 +117,11 @@ def test_identify_by_simulation_is_built_from_one_solution_with_the_contract_nam
 
 
 def test_named_parameters_pick_the_named_coefficients_of_nominal_system_and_terms():
-    from dynax._identify._identify import _named_parameters
+    from dynax.internal import named_parameters
 
     system = Extended(dynax.Acrobot(), (CoulombFriction(1, jnp.asarray(0.3)), CoulombFriction(0, jnp.asarray(0.2))))
     names = ("theta1", "theta2", "theta3", "theta4", "theta5", "theta6", "theta7", "fc2", "fc1")
-    parameters = _named_parameters(system, names)
+    parameters = named_parameters(system, names)
     assert parameters.names == names  # tree order: the nominal fields, then the terms in their order
     values = dict(zip(parameters.names, np.asarray(parameters.vector(system))))
     assert values["fc2"] == pytest.approx(0.3) and values["fc1"] == pytest.approx(0.2)
@@ -125,17 +130,17 @@ def test_named_parameters_pick_the_named_coefficients_of_nominal_system_and_term
     assert float(moved.terms[0].coefficient) == 8.0 and float(moved.system.theta7) == 7.0
     axis = Parameters.of(dynax.LinearAxis())
     assert axis.names == ("mass", "viscous", "coulomb", "offset")
-    fixed = _named_parameters(dynax.LinearAxis(), ("mass", "viscous", "offset"))
+    fixed = named_parameters(dynax.LinearAxis(), ("mass", "viscous", "offset"))
     assert fixed.names == ("mass", "viscous", "offset")  # the Coulomb term is not fitted
 
 
 def test_staggered_cuts_start_every_fraction_of_a_segment_and_link_only_the_first_cut():
-    from dynax._identify._simulation_fit import _segments
+    from dynax.internal import simulation_segments
 
     ts = np.arange(0.0, 1.0 + 1e-9, 0.01)  # 101 samples
     record = Trajectory(jnp.asarray(ts), jnp.asarray(ts[:, None]), jnp.zeros((len(ts), 1)), ("q",), ("u",))
-    one = _segments([record], 0.2)
-    four = _segments([record], 0.2, stagger=4)
+    one = simulation_segments([record], 0.2)
+    four = simulation_segments([record], 0.2, stagger=4)
     starts = lambda cut: sorted(np.round(cut[0][:, 0] / 0.01).astype(int))  # noqa: E731
     assert starts(one) == [0, 20, 40, 60, 80]
     # Segments of 21 samples starting every 5 samples, as long as they fit in the record.

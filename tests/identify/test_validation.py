@@ -6,8 +6,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import dynax
-from dynax._data import Trajectory
-from dynax._identify._validation import CONCENTRATED, held_out_error
+from dynax import held_out_error, Trajectory
+from dynax.internal import CONCENTRATED
 from tests.identify.test_identify_defaults import dfki, recorded, RIG, RIG_IR2, rig_model
 
 

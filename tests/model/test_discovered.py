@@ -8,8 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax import Acrobot, LinearAxis
-from dynax._model._extensions import AbstractJointTerm, Discovered, Extended, Feature, JointSpring, QuadraticDrag
+from dynax import AbstractJointTerm, Acrobot, Discovered, Extended, Feature, JointSpring, LinearAxis, QuadraticDrag
 
 
 class _Cogging(AbstractJointTerm):

@@ -5,9 +5,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax import Acrobot, DoublePendulum, simulate
-from dynax._model._extensions import (
+from dynax import (
+    Acrobot,
     CoulombFriction,
+    DoublePendulum,
     Extended,
     InputDelay,
     InputGain,
@@ -16,6 +17,7 @@ from dynax._model._extensions import (
     JointSpring,
     QuadraticDrag,
     RotorInertia,
+    simulate,
     ViscousFriction,
 )
 

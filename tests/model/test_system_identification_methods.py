@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._identify._consistency import min_mass_eigenvalue
+from dynax.internal import min_mass_eigenvalue
 
 THETA = dict(theta1=1.1, theta2=0.7, theta3=0.4, theta4=9.0, theta5=4.5, theta6=0.05, theta7=0.08)
 

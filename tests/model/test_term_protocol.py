@@ -8,6 +8,7 @@ import pytest
 
 import dynax
 from dynax import (
+    AbstractManipulator,
     Acrobot,
     BodyBias,
     CoulombFriction,
@@ -20,7 +21,6 @@ from dynax import (
     SpongController,
     Wind,
 )
-from dynax._model._system import AbstractManipulator
 
 
 class _Slider(AbstractManipulator):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._model._two_link import DRAKE_DEFAULTS
+from dynax.internal import DRAKE_DEFAULTS
 from tests.reference import arm_reference, spong_reference
 
 

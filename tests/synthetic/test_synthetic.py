@@ -1,6 +1,5 @@
 """`dynax.synthetic`: the truth simulators and data generators, checked against independent references."""
 
-import importlib
 import pathlib
 
 import jax
@@ -21,32 +20,21 @@ PUBLIC = (
 
 @pytest.mark.parametrize("name", PUBLIC)
 def test_one_object_under_every_spelling(name):
-    # The new namespace, the top-level re-export and the old private module paths name one object
-    # (a copy would be a different object).
+    # The namespace and the top-level re-export name one object (a copy would be a different object),
+    # defined in dynax/_synthetic/.
     obj = getattr(synthetic, name)
     assert getattr(dynax, name) is obj
-    old = {
-        "HelicopterTruth": "dynax._model._helicopter_truth",
-        "FlightController": "dynax._model._helicopter_truth",
-        "generate_helicopter_flight": "dynax._model._helicopter_truth",
-        "multisine": "dynax._diagnose._synthetic",
-        "synthetic_trajectory": "dynax._diagnose._synthetic",
-        "helicopter_flight": "dynax._diagnose._synthetic",
-        "demo_data": "dynax._diagnose._demo",
-    }[name]
-    assert getattr(importlib.import_module(old), name) is obj
     assert obj.__module__.startswith("dynax._synthetic.")
 
 
 def test_the_model_layer_does_not_import_the_synthetic_package():
     # The models are what is fitted; synthetic data sits above them: dynax/_synthetic/ imports the
-    # model layer, never the other way round (but for the one-line re-export at the old path).
+    # model layer, never the other way round (tests/test_layers.py checks every layer's imports).
     model = pathlib.Path(dynax.__file__).parent / "_model"
     importers = [
         str(path.relative_to(model)) for path in model.rglob("*.py") if "_synthetic" in path.read_text()
     ]
-    assert importers == ["_helicopter_truth.py"]
-    assert len(model.joinpath("_helicopter_truth.py").read_text().strip().splitlines()) == 3
+    assert importers == []
 
 
 def test_multisine_rms_and_band():

@@ -5,9 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from dynax._cli._main import main
-from dynax._data import save_trajectory
-from dynax._model._helicopter import Helicopter
+from dynax import Helicopter, save_trajectory
+from dynax.internal import cli_main
 from dynax.synthetic import generate_helicopter_flight
 
 GROUPS = ("velocity", "angular_rate", "position", "orientation")
@@ -22,16 +21,16 @@ def flight_csv(tmp_path_factory):
 
 def test_fit_then_evaluate(flight_csv, tmp_path, capsys):
     model = tmp_path / "model.json"
-    assert main(["fit", "helicopter", str(flight_csv), "--model", "acceleration", "--criterion", "one-step",
-                 "--out", str(model)]) == 0
+    assert cli_main(["fit", "helicopter", str(flight_csv), "--model", "acceleration", "--criterion", "one-step",
+                     "--out", str(model)]) == 0
     obj = json.loads(model.read_text())
     assert obj["system"] == "helicopter" and obj["model"] == "acceleration" and obj["criterion"] == "one-step"
     # Data flown by the Tempest model itself: the fitted roll damping is the Tempest's.
     assert obj["parameters"]["dp/p"] == pytest.approx(-12.78, rel=0.01)
 
     metrics = tmp_path / "metrics.json"
-    assert main(["evaluate", str(model), str(flight_csv), "--horizons", "0,0.1,0.5", "--stride", "10",
-                 "--out", str(metrics)]) == 0
+    assert cli_main(["evaluate", str(model), str(flight_csv), "--horizons", "0,0.1,0.5", "--stride", "10",
+                     "--out", str(metrics)]) == 0
     out = json.loads(metrics.read_text())
     assert out["horizons_s"] == [0.0, 0.1, 0.5]
     assert set(out["mse"]) == set(GROUPS)
@@ -45,8 +44,8 @@ def test_fit_then_evaluate(flight_csv, tmp_path, capsys):
 @pytest.mark.slow
 def test_fit_lagged_linear_from_the_cli(flight_csv, tmp_path):
     model = tmp_path / "model.json"
-    assert main(["fit", "helicopter", str(flight_csv), "--model", "linear", "--criterion", "lagged",
-                 "--horizon", "0.2", "--stride", "20", "--out", str(model)]) == 0
+    assert cli_main(["fit", "helicopter", str(flight_csv), "--model", "linear", "--criterion", "lagged",
+                     "--horizon", "0.2", "--stride", "20", "--out", str(model)]) == 0
     obj = json.loads(model.read_text())
     assert obj["model"] == "linear" and obj["horizon_s"] == 0.2
     assert len(obj["weights"]) == 6 and len(obj["weights"][0]) == len(obj["features"])
@@ -54,7 +53,7 @@ def test_fit_lagged_linear_from_the_cli(flight_csv, tmp_path):
 
 def test_frequency_criterion_needs_the_linear_model(flight_csv, tmp_path, capsys):
     model = tmp_path / "model.json"
-    assert main(["fit", "helicopter", str(flight_csv), "--criterion", "frequency", "--out", str(model)]) == 2
+    assert cli_main(["fit", "helicopter", str(flight_csv), "--criterion", "frequency", "--out", str(model)]) == 2
     assert "linear" in capsys.readouterr().err
     assert not model.exists()
 
@@ -66,7 +65,7 @@ def test_bad_data_is_refused_with_nothing_written(flight_csv, tmp_path, capsys):
     bad = tmp_path / "bad.csv"
     bad.write_text("\n".join(",".join(c for i, c in enumerate(l.split(",")) if i != drop) for l in lines[:50]) + "\n")
     model = tmp_path / "model.json"
-    assert main(["fit", "helicopter", str(bad), "--out", str(model)]) == 2
+    assert cli_main(["fit", "helicopter", str(bad), "--out", str(model)]) == 2
     assert "u4" in capsys.readouterr().err
     assert not model.exists()
 
@@ -75,16 +74,16 @@ def test_evaluate_refuses_a_malformed_model(flight_csv, tmp_path, capsys):
     model = tmp_path / "model.json"
     model.write_text(json.dumps({"system": "helicopter", "model": "acceleration"}))
     metrics = tmp_path / "metrics.json"
-    assert main(["evaluate", str(model), str(flight_csv), "--out", str(metrics)]) == 2
+    assert cli_main(["evaluate", str(model), str(flight_csv), "--out", str(metrics)]) == 2
     assert "features" in capsys.readouterr().err
     assert not metrics.exists()
-    assert main(["evaluate", str(model), str(flight_csv), "--horizons", "1,-2", "--out", str(metrics)]) == 2
+    assert cli_main(["evaluate", str(model), str(flight_csv), "--horizons", "1,-2", "--out", str(metrics)]) == 2
 
 
 def test_frequency_fit_reports_its_identification_statistics(flight_csv, tmp_path):
     model = tmp_path / "linear.json"
-    assert main(["fit", "helicopter", str(flight_csv), "--model", "linear", "--criterion", "frequency",
-                 "--out", str(model)]) == 0
+    assert cli_main(["fit", "helicopter", str(flight_csv), "--model", "linear", "--criterion", "frequency",
+                     "--out", str(model)]) == 0
     obj = json.loads(model.read_text())
     stats = obj["identification"]
     assert obj["criterion"] == "frequency" and stats["eliminated"] == []

@@ -3,8 +3,8 @@
 import json
 
 from dynax import Helicopter, save_trajectory
-from dynax._cli._main import main
-from dynax._model._helicopter_truth import generate_helicopter_flight
+from dynax.internal import cli_main
+from dynax.synthetic import generate_helicopter_flight
 
 
 def test_auto_stride_and_iteration_cap(tmp_path, capsys):
@@ -14,12 +14,12 @@ def test_auto_stride_and_iteration_cap(tmp_path, capsys):
     out = tmp_path / "model.json"
     command = ["fit", "helicopter", str(path), "--model", "linear", "--criterion", "lagged", "--horizon", "0.1",
                "--max-iterations", "1", "--out", str(out)]
-    assert main(command) == 0
+    assert cli_main(command) == 0
     printed = capsys.readouterr().out
     # 790 start times for a 10-sample horizon: every second one keeps 395 <= 600 (every one would be 790)
     assert "one start time in 2, 395 windows of 0.1 s" in printed
     assert json.loads(out.read_text())["criterion"] == "lagged"
-    assert main(command + ["--stride", "1"]) == 0
+    assert cli_main(command + ["--stride", "1"]) == 0
     assert "start time in" not in capsys.readouterr().out
-    assert main(command[:-2] + ["--stride", "0", "--out", str(out)]) == 2
+    assert cli_main(command[:-2] + ["--stride", "0", "--out", str(out)]) == 2
     assert "--stride" in capsys.readouterr().err

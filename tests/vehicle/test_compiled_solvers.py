@@ -12,12 +12,22 @@ import numpy as np
 import optax
 import pytest
 
-from dynax._fit import fit_minimise, OptaxLBFGS, Parameters
-from dynax._identify._vehicle import auto_stride, Backprop, fit_backprop, fit_lagged, fit_one_step, Lagged, lagged_loss
-from dynax._identify._vehicle._criteria import _normal_equations, _solve, _starts, _with_theta
-from dynax._identify._vehicle._windows import horizon_steps
-from dynax._model._helicopter import AccelerationModel, Helicopter, TEMPEST_FEATURES
-from dynax._model._helicopter_truth import generate_helicopter_flight
+from dynax import AccelerationModel, Backprop, fit_minimise, Helicopter, Lagged, Parameters
+from dynax.internal import (
+    auto_stride,
+    fit_backprop,
+    fit_lagged,
+    fit_one_step,
+    horizon_steps,
+    lagged_loss,
+    normal_equations,
+    OptaxLBFGS,
+    ridge_solve,
+    TEMPEST_FEATURES,
+    window_starts,
+    with_theta,
+)
+from dynax.synthetic import generate_helicopter_flight
 
 
 @pytest.fixture(scope="module")
@@ -35,7 +45,7 @@ def _python_em_free(system, data, criterion):
     """The paper's EM-free iteration, stepped from Python: roll out, least squares with the rollout
     states held fixed, first step size along (new - old) that lowers the lagged loss."""
     n_steps = horizon_steps(criterion.horizon, data.dt, "test")
-    starts = _starts(data, n_steps, criterion.stride)
+    starts = window_starts(data, n_steps, criterion.stride)
     w = jnp.ones(6)
 
     def loss(s):
@@ -44,12 +54,12 @@ def _python_em_free(system, data, criterion):
     current, losses = loss(system), []
     losses.append(current)
     for _ in range(criterion.max_iterations):
-        ata, atb, _ = _normal_equations(system, data, starts, n_steps, w, True, criterion.batch_size)
+        ata, atb, _ = normal_equations(system, data, starts, n_steps, w, True, criterion.batch_size)
         old = system.body_model.parameter_vector()
-        new = _solve(ata, atb, criterion.ridge)
+        new = ridge_solve(ata, atb, criterion.ridge)
         accepted = None
         for step in criterion.step_sizes:
-            candidate = _with_theta(system, old + step * (new - old))
+            candidate = with_theta(system, old + step * (new - old))
             value = loss(candidate)
             if np.isfinite(value) and value < current:
                 accepted = candidate, value
@@ -116,10 +126,10 @@ def _python_lbfgs(loss_fn, theta, steps, tolerance):
 def test_compiled_backprop_takes_the_python_lbfgs_steps(flight, start):
     criterion = Backprop(horizon=0.2, stride=8, max_steps=6)
     n_steps = horizon_steps(criterion.horizon, flight.dt, "test")
-    starts = _starts(flight, n_steps, criterion.stride)
+    starts = window_starts(flight, n_steps, criterion.stride)
 
     def loss_fn(theta):
-        return lagged_loss(_with_theta(start, theta), flight, n_steps, starts=starts)
+        return lagged_loss(with_theta(start, theta), flight, n_steps, starts=starts)
 
     theta, losses = _python_lbfgs(loss_fn, start.body_model.parameter_vector(), criterion.max_steps,
                                   criterion.tolerance)

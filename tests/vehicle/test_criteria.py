@@ -5,28 +5,30 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax._identify._vehicle import (
+from dynax import (
+    AccelerationModel,
     Backprop,
+    fit_vehicle,
+    frequency_responses,
+    FrequencyDomain,
+    Helicopter,
+    Lagged,
+    LinearVelocityModel,
+)
+from dynax.internal import (
     fit_backprop,
     fit_frequency,
     fit_lagged,
     fit_one_step,
-    fit_vehicle,
-    FrequencyDomain,
-    frequency_responses,
-    Lagged,
+    HOVER_DERIVATIVES,
     lagged_loss,
     lagged_loss_gradient_norm,
     lagged_loss_of,
-)
-from dynax._identify._vehicle._criteria import _normal_equations, _starts, _with_theta
-from dynax._identify._vehicle._frequency import HOVER_DERIVATIVES
-from dynax._model._helicopter import (
-    AccelerationModel,
-    Helicopter,
-    LinearVelocityModel,
+    normal_equations,
     TEMPEST_COEFFICIENTS,
     TEMPEST_FEATURES,
+    window_starts,
+    with_theta,
 )
 from dynax.synthetic import generate_helicopter_flight
 
@@ -135,10 +137,10 @@ def test_state_sensitivities_reach_a_stationary_point_of_the_lagged_loss(truth_d
     criterion = Lagged(horizon=0.2, stride=10, max_iterations=6, state_sensitivities=True)
     fit = fit_lagged(start, truth_data, criterion)
     assert fit.loss <= em_free.loss
-    starts = _starts(truth_data, 20, 10)
+    starts = window_starts(truth_data, 20, 10)
 
     def stationarity(system):  # |J^T W r| through the Gauss-Newton normal equations
-        ata, atb, _ = _normal_equations(system, truth_data, starts, 20, jnp.ones(6), True, 128, True)
+        ata, atb, _ = normal_equations(system, truth_data, starts, 20, jnp.ones(6), True, 128, True)
         return float(jnp.linalg.norm(ata @ system.body_model.parameter_vector() - atb))
 
     assert stationarity(fit.system) < 1e-3 * stationarity(start)
@@ -153,7 +155,7 @@ def test_backprop_gradient_matches_finite_differences(truth_data):
     theta = system.body_model.parameter_vector()
 
     def loss(th, segment):
-        return lagged_loss(_with_theta(system, th), truth_data, 8, starts=starts, checkpoint_segment=segment)
+        return lagged_loss(with_theta(system, th), truth_data, 8, starts=starts, checkpoint_segment=segment)
 
     # Checkpointed (3 segments of 3 steps, the last padded) gradient against central differences,
     # all through one compiled value-and-gradient.

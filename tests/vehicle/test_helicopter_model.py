@@ -5,16 +5,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax._identify._vehicle._windows import rollout
-from dynax._model._helicopter import (
-    AccelerationModel,
+from dynax import AccelerationModel, Helicopter, hover_state, LinearVelocityModel
+from dynax.internal import (
     euler_from_quaternion,
-    Helicopter,
-    hover_state,
-    LinearVelocityModel,
     quaternion_angle,
     quaternion_from_euler,
     TEMPEST_COEFFICIENTS,
+    vehicle_rollout,
 )
 from dynax.synthetic import HelicopterTruth
 
@@ -29,7 +26,7 @@ def _free(gravity=9.81):
 
 def _roll_out(system, x0, seconds):
     n = int(round(seconds / DT))
-    return rollout(system, jnp.asarray(x0), jnp.zeros((n, 4)), DT)
+    return vehicle_rollout(system, jnp.asarray(x0), jnp.zeros((n, 4)), DT)
 
 
 def test_pure_roll_rotates_right_wing_down():
@@ -146,7 +143,7 @@ def test_truth_hover_derivatives_match_a_quasi_steady_finite_difference():
     """`hover_derivatives` (autodiff and a Schur complement) against settling the flapping and
     differencing the accelerations; and the physics the docs describe: damped rates, the cyclic
     and pedal control powers of the Tempest's signs, and flap-back speed stability ($L_v < 0$, $M_u > 0$)."""
-    from dynax._model._helicopter_truth import FlightController
+    from dynax.synthetic import FlightController
 
     truth = HelicopterTruth()
     a, b = (np.asarray(m) for m in truth.hover_derivatives())

@@ -3,8 +3,7 @@
 import pytest
 
 from dynax import fit_vehicle, Helicopter, Lagged, save_trajectory
-from dynax._cli._main import main
-from dynax._identify._vehicle import initial_helicopter
+from dynax.internal import cli_main, initial_helicopter
 from dynax.synthetic import generate_helicopter_flight
 
 
@@ -30,6 +29,6 @@ def test_cli_fit_progress(flight, tmp_path, capsys):
     save_trajectory(flight, path)
     command = ["fit", "helicopter", str(path), "--model", "linear", "--criterion", "lagged", "--horizon", "0.1",
                "--stride", "25", "--out", str(tmp_path / "m.json")]
-    assert main(command + ["--progress"]) == 0  # (--quiet's plumbing: tests/cli/test_packaging.py)
+    assert cli_main(command + ["--progress"]) == 0  # (--quiet's plumbing: tests/cli/test_packaging.py)
     err = capsys.readouterr().err
     assert "lagged fit" in err and "loss=" in err
