@@ -194,13 +194,12 @@ def load_trajectory(
     positions, when the file has none of the system's velocities and none is mapped (one present
     and another absent is a misnamed column, and an error):
 
-    - `acrobot`, `double_pendulum`: `dq1`, `dq2` by backward differences on the recorded time
-      stamps (`backward_difference`), as a motor driver or logger computes them. The DFKI rig's
-      logged `vel_meas` columns are exactly these differences of `pos_meas`, so its files read with
-      or without them give the same velocities (but the first sample's). A central difference lags
-      less but its noise vanishes at the Nyquist frequency, where `choose_filter` reads the noise
-      floor; on the DFKI runs it widened the chosen band from 4 to 6 Hz to as much as 99 Hz.
-    - `linear_axis`: `dq` by central differences (`central_difference`).
+    - every system: by second-order central differences on the recorded time stamps
+      (`central_difference`), which do not lag; a backward difference (what a motor driver
+      logs) is the derivative half an interval earlier, which biases every parameter fitted to
+      it. `choose_filter` reads the noise floor of
+      such a velocity from the angle's backward difference, so the filter band is the one the
+      logged velocities would give.
     """
     path = str(path)
     state_names, input_names = columns_for(system)
