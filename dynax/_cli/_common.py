@@ -61,6 +61,30 @@ def _writable_folder(out: pathlib.Path) -> None:
         raise UsageError(f"--out {out}: cannot write in the folder {ancestor} ({reason})") from None
 
 
+# The temporary names written beside --out (`.NAME.staging.XXXXXXXX`, `.NAME.XXXXXXXX.tmp`) add this many
+# characters to its last component.
+_STAGING_CHARS = 24
+
+
+def _name_lengths(out: pathlib.Path) -> None:
+    """Refuse an --out whose name (or a folder's on the way) is longer than the file system allows."""
+    try:
+        name_max = os.pathconf(os.getcwd(), "PC_NAME_MAX")
+        path_max = os.pathconf(os.getcwd(), "PC_PATH_MAX")
+    except (OSError, ValueError, AttributeError):
+        name_max, path_max = 255, 4096
+    if len(os.fsencode(str(out.absolute()))) + _STAGING_CHARS > path_max:
+        raise UsageError(f"--out: the path is {len(os.fsencode(str(out.absolute())))} bytes long; the file system "
+                         f"allows {path_max} (less {_STAGING_CHARS} for the temporary name)")
+    for part in out.parts:
+        if len(os.fsencode(part)) > name_max:
+            raise UsageError(f"--out: the name '{part[:40]}...' is {len(os.fsencode(part))} bytes long; the file system "
+                             f"allows {name_max}")
+    if len(os.fsencode(out.name)) + _STAGING_CHARS > name_max:
+        raise UsageError(f"--out: the name '{out.name[:40]}...' is {len(os.fsencode(out.name))} bytes long; with the "
+                         f"temporary name it is written under first it must stay under {name_max - _STAGING_CHARS}")
+
+
 def _report_folder_replaceable(out: pathlib.Path) -> None:
     """An existing --out folder is replaced whole; refuse one that holds anything dynax did not write."""
     foreign = sorted(p.name for p in out.iterdir()
@@ -90,6 +114,7 @@ def check_output(path, *, kind: str, inputs=()) -> pathlib.Path:
     if not str(path).strip():
         raise UsageError("--out is empty")
     out = pathlib.Path(path)
+    _name_lengths(out)
     if kind == "file" and out.is_dir():
         raise UsageError(f"--out {out} is a directory; give a file name such as {out / 'result.json'}")
     if kind == "directory" and out.exists() and not out.is_dir():

@@ -7,7 +7,7 @@ import time
 
 from .._errors import UsageError
 from ._common import add_data_options, data_options, read_nominal_parameters
-from ._nominal import nominal_from_data, nominal_system, split_term_coefficients
+from ._nominal import check_nominal, nominal_from_data, nominal_system, split_term_coefficients
 from ._output import staged_directory, write_json
 
 _SYSTEMS = ("acrobot", "double_pendulum", "linear_axis", "helicopter")
@@ -81,16 +81,18 @@ def run(args: argparse.Namespace) -> int:
             print(f"note: {set_aside}", file=sys.stderr)
             cli_notes.append(set_aside)
     # Everything that can be refused is read before anything is written.
-    train = [load_trajectory(path, args.system, mapping=mapping, scale=scale, offset=offset, min_samples=50)
+    train = [load_trajectory(path, args.system, mapping=mapping, scale=scale, offset=offset, min_samples=MIN_SAMPLES)
              for path in args.data]
     validation = None
     if args.validation is not None:
-        validation = [load_trajectory(path, args.system, mapping=mapping, scale=scale, offset=offset, min_samples=50)
+        validation = [load_trajectory(path, args.system, mapping=mapping, scale=scale, offset=offset, min_samples=MIN_SAMPLES)
                       for path in args.validation]
     if args.dt is not None:
-        train = [resample(t, args.dt) for t in train]
-        validation = None if validation is None else [resample(v, args.dt) for v in validation]
+        train = [_resampled(t, args.dt) for t in train]
+        validation = None if validation is None else [_resampled(v, args.dt) for v in validation]
     system = nominal_system(args.system, parameters)
+    if args.nominal is not None:
+        check_nominal(system, args.nominal)
     if args.nominal is None and args.system != "helicopter":
         # Only what the diagnosis trains on: without --validation, the first part of each record.
         system, note = nominal_from_data(system, train if validation is not None else [holdout_split(t)[0] for t in train])
@@ -115,6 +117,21 @@ def run(args: argparse.Namespace) -> int:
     print(summary(report))
     print(f"wrote {args.out}/report.json, report.md and figures")
     return 0
+
+
+MIN_SAMPLES = 50  # the fewest samples of a record diagnose reads (before and after --dt)
+
+
+def _resampled(trajectory, dt: float):
+    """`trajectory` resampled to `dt`, refusing a `--dt` that leaves too few samples of it."""
+    from .._data import resample
+
+    n = int((trajectory.duration + 1e-9 * dt) // dt) + 1
+    if n < MIN_SAMPLES:
+        raise UsageError(f"--dt {dt:g} s leaves {n} sample(s) of the {trajectory.duration:.4g} s record "
+                         f"{trajectory.source}; at least {MIN_SAMPLES} are needed: give --dt at most "
+                         f"{trajectory.duration / (MIN_SAMPLES - 1):.4g} s (is the interval in seconds?)")
+    return resample(trajectory, dt)
 
 
 @contextlib.contextmanager
