@@ -424,6 +424,10 @@ def identify(
 
     trajectories = _as_list(data)
     _check_data(system, trajectories)
+    from .._data._sanity import check_records
+
+    # located faults (a glitch, a stuck sensor, a stretch where a velocity is not its angle's derivative): said
+    check_records(trajectories, _as_list(validation) if validation is not None else ()).warn(stacklevel=2)
     if consistency not in _CONSISTENCY:
         raise UsageError(f"identify: `consistency` must be one of {_CONSISTENCY}, got {consistency!r}")
     horizons_s = tuple(float(h) for h in horizons_s)
