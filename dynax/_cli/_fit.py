@@ -86,10 +86,6 @@ def load_helicopter_data(path, mapping=None, scale=None, offset=None, *, min_sam
         data = pieces[0]
         if len(data) < min_samples:
             raise DataError(f"has {len(data)} samples after --exclude; at least {min_samples} are needed", path=path)
-    check = check_records([data])
-    check.raise_refusals()
-    for finding in check.warnings:
-        print(f"warning: {finding.describe()}", file=sys.stderr)
     quats = np.asarray(data.xs[:, 3:7])
     norms = np.linalg.norm(quats, axis=1)
     bad = np.flatnonzero(np.abs(norms - 1) > QUATERNION_TOLERANCE)
@@ -98,6 +94,10 @@ def load_helicopter_data(path, mapping=None, scale=None, offset=None, *, min_sam
         raise DataError(f"the quaternion (qw, qx, qy, qz) has norm {norms[k]:.6g}, not 1 (tolerance "
                         f"{QUATERNION_TOLERANCE:g}; {bad.size} such rows): the contract's attitude is a unit "
                         "quaternion", path=path, column=(mapping or {}).get("qw", "qw"), row=k + 1)
+    check = check_records([data])
+    check.raise_refusals()
+    for finding in check.warnings:
+        print(f"warning: {finding.describe()}", file=sys.stderr)
     if not data.is_uniform:
         dt = data.dt
         data = resample(data, dt)

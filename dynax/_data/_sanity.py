@@ -15,7 +15,8 @@ What is checked (`Check` names them):
   460 rad/s among samples of 1). A median of seven samples follows steps and turning points, so
   motion, however sharp, is not flagged.
 - `stuck`: a state column that repeats one value exactly for a quarter of a second or more (and 25
-  samples) while other states move and the column itself moves elsewhere: a sensor that stopped
+  samples, and three times its longest other run: a quantised column repeats itself everywhere)
+  while other states move and the column itself moves elsewhere: a sensor that stopped
   updating (a joint held by friction while the others swing looks the same when its velocity is
   estimated from its angle; the message says so).
 - `wrapped`: an angle that jumps by a multiple of $2\pi$ (to 15 %) between two samples, many times its
@@ -264,9 +265,13 @@ def _stuck(tr, ts, source, names, xs, paired_estimated):
         if np.ptp(x) == 0:
             continue  # constant throughout: `_constant`
         same = np.concatenate([[False], np.diff(x) == 0])
-        for i, j in _runs(same):
-            i -= 1  # the run starts at the sample the first repeat repeats
-            if j - i + 1 < need:
+        runs = [(i - 1, j) for i, j in _runs(same)]  # a run starts at the sample its first repeat repeats
+        lengths = [j - i + 1 for i, j in runs]
+        for k, (i, j) in enumerate(runs):
+            # a quantised column (an encoder, rounded values) repeats itself everywhere: a stuck stretch is one
+            # far longer than any other run of the column
+            elsewhere = max(lengths[:k] + lengths[k + 1:], default=1)
+            if j - i + 1 < max(need, 3 * elsewhere):
                 continue
             others = [o for o in range(xs.shape[1]) if o != c and np.ptp(xs[i:j + 1, o]) > 0]
             if not others:
@@ -336,7 +341,9 @@ def _velocity_stretches(tr, ts, source, values, pairs):
         for a, b in _runs(joined):
             if bad[a:b + 1].sum() < MIN_BAD_BLOCKS or bad[a:b + 1].mean() < 0.5:
                 continue
-            i, j = int(start[a]), int(stop[b])
+            # a stretch that reaches the first or last block reaches the record's end (the blocks stop short of it)
+            i = 0 if a == 0 else int(start[a])
+            j = len(ts) - 1 if b == len(start) - 1 else int(stop[b])
             s, m = slopes[a:b + 1], means[a:b + 1]
             gain = float(s @ m / (s @ s)) if s @ s > 0 else float("nan")
             out.append(_row_time(

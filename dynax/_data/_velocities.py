@@ -92,10 +92,10 @@ def gain_holds_everywhere(ts, q, v, gain: float) -> bool:
     seen = 0
     for a, b in zip(bounds[:-1], bounds[1:]):
         found = velocity_gain(ts[a:b], q[a:b], v[a:b]) if b - a > 4 * MIN_BLOCKS else None
-        if found is None or not found[1] < MAX_GAIN_ERROR * max(abs(gain), 1e-12):
+        if found is None or not found[1] < MAX_GAIN_ERROR * max(abs(gain), 1.0):
             continue  # too short or too still to tell
         seen += 1
-        if abs(found[0] / gain - 1.0) > MAX_GAIN_ERROR:
+        if abs(found[0] - gain) > MAX_GAIN_ERROR * max(abs(gain), 1.0):
             return False
     return seen > 0
 
@@ -127,7 +127,10 @@ def check_velocities(ts, values: dict, pairs: dict[str, str], *, path=None, colu
         if found is None or not _refused(found[0], found[1]):
             continue
         gain, std, corr = found
-        if not gain_holds_everywhere(ts, values[position], values[velocity], gain):
+        follows_another = any(
+            (m := velocity_gain(ts, values[other], values[velocity])) is not None and abs(m[0] - 1.0) <= MAX_GAIN_ERROR
+            for other in pairs.values() if other != position)
+        if not follows_another and not gain_holds_everywhere(ts, values[position], values[velocity], gain):
             continue  # wrong in some stretches only: no scale is right; the sanity check names the stretch
         dt = float(np.median(np.diff(np.asarray(ts, dtype=float))))
         for factor, unit in ((1e3, "milliseconds"), (1e6, "microseconds")):

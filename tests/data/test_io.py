@@ -140,7 +140,7 @@ def test_arm_records_of_encoder_positions_alone_get_central_difference_velocitie
     # (test_missing_column_names_file_and_column).
     t = np.cumsum(np.random.default_rng(4).uniform(0.002, 0.008, size=120))
     q1, q2 = 0.3 * t**2 - t, -0.5 * t**2 + 0.2
-    table = "t,pos1,pos2,tau1,tau2\n" + "".join(f"{a:.17g},{b:.17g},{c:.17g},0.1,-0.1\n" for a, b, c in zip(t, q1, q2))
+    table = "t,pos1,pos2,tau1,tau2\n" + "".join(f"{a:.17g},{b:.17g},{c:.17g},0,-0.1\n" for a, b, c in zip(t, q1, q2))
     (tmp_path / "encoders.csv").write_text(table)
     mapping = {"q1": "pos1", "q2": "pos2"}
     run = dynax.load_trajectory(tmp_path / "encoders.csv", "double_pendulum", mapping=mapping)
