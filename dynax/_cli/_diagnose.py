@@ -67,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
     from .._diagnose import diagnose, Known, Refit, write_report
     from .._diagnose._records import holdout_split
 
-    mapping, scale, offset = data_options(args)
+    data_options(args)  # a malformed --map, --scale or --offset is refused before any work
     if args.dt is not None and not args.dt > 0:
         raise UsageError(f"--dt must be positive, got {args.dt}")
     if args.reference_horizon is not None and not args.reference_horizon > 0:

@@ -131,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
     if args.system == "helicopter" and args.friction is not None:
         raise UsageError("--friction does not apply to the helicopter")
     method = _method(args)
-    mapping, scale, offset = data_options(args)
+    data_options(args)  # a malformed --map, --scale or --offset is refused before any work
     out = output_file(args.out, "parameters.json")
     if args.holdout is not None and not 0 <= args.holdout < 1:
         raise UsageError(f"--holdout must be in [0, 1), got {args.holdout}")

@@ -40,6 +40,7 @@ scales of the record itself, never of one rig.
 
 import dataclasses
 import enum
+import itertools
 import math
 import warnings
 from collections.abc import Sequence
@@ -137,7 +138,10 @@ class DataCheck:
             first = self.refusals[0]
             text = "; ".join(f.describe() for f in self.refusals[:6])
             more = f" (and {len(self.refusals) - 6} more)" if len(self.refusals) > 6 else ""
-            raise DataError("the data cannot be fitted as they are: " + text + more)
+            error = DataError("the data cannot be fitted as they are: " + text + more)
+            error.path, error.column = first.source or None, first.column
+            error.row = None if first.rows is None else first.rows[0]
+            raise error
 
     def warn(self, stacklevel: int = 2) -> None:
         """One `DataWarning` per finding (refusals included: in Python the caller decides)."""
@@ -259,7 +263,7 @@ def _glitches(tr, ts, source, columns, positions=None):
 def _stuck(tr, ts, source, names, xs, paired_estimated):
     out = []
     dt = float(np.median(np.diff(ts)))
-    need = max(STUCK_SAMPLES, int(math.ceil(STUCK_S / dt)))
+    need = max(STUCK_SAMPLES, math.ceil(STUCK_S / dt))
     for c, name in enumerate(names):
         x = xs[:, c]
         if np.ptp(x) == 0:
@@ -332,7 +336,7 @@ def _velocity_stretches(tr, ts, source, values, pairs):
         # join bad blocks less than three blocks apart into stretches
         joined = bad.copy()
         idx = np.flatnonzero(bad)
-        for a, b in zip(idx[:-1], idx[1:]):
+        for a, b in itertools.pairwise(idx):
             if b - a <= 3:
                 joined[a:b + 1] = True
         good = ~joined

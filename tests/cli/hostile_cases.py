@@ -72,10 +72,9 @@ def _multisine(seed, amplitude=3.0):
 def make_fixtures(root) -> dict:
     """The clean records the cases corrupt: an acrobot (8 s at 100 Hz, velocities measured), a double
     pendulum (both joints driven), and a helicopter hover flight."""
+    import dynax
     from dynax._model._helicopter import Helicopter
     from dynax.synthetic import generate_helicopter_flight
-
-    import dynax
 
     root = pathlib.Path(root)
     theta = list(TRUTH.values())
