@@ -83,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
             cli_notes.append(set_aside)
     # Everything that can be refused is read before anything is written. With the parameters known, a record
     # that nothing drives is still a test of them: a zero or constant input is then said, not refused.
+    from .._data import DataWarning
     from .._data._sanity import Check
 
     lenient = (Check.ZERO, Check.CONSTANT) if args.mode == "known" else ()
@@ -98,7 +99,9 @@ def run(args: argparse.Namespace) -> int:
         check_nominal(system, args.nominal)
     if args.nominal is None and args.system != "helicopter":
         # Only what the diagnosis trains on: without --validation, the first part of each record.
-        system, note = nominal_from_data(system, train if validation is not None else [holdout_split(t)[0] for t in train])
+        with warnings.catch_warnings():  # the records' faults were refused or printed by `load_records`
+            warnings.simplefilter("ignore", DataWarning)
+            system, note = nominal_from_data(system, train if validation is not None else [holdout_split(t)[0] for t in train])
         print(f"note: {note}", file=sys.stderr)
         cli_notes.append(note)
     if args.mode == "known":
@@ -106,8 +109,6 @@ def run(args: argparse.Namespace) -> int:
     else:
         names = tuple(n.strip() for n in args.refit.split(",") if n.strip()) if args.refit else None
         mode = Refit(parameters=names)
-    from .._data import DataWarning
-
     with stage_log() as say, warnings.catch_warnings():  # the records' faults: refused or printed above
         warnings.simplefilter("ignore", DataWarning)
         report = diagnose(
