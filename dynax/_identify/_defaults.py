@@ -127,7 +127,8 @@ def measurement_noise_std(trajectory: Trajectory) -> np.ndarray:
     for k in range(trajectory.xs.shape[1]):
         column = np.asarray(trajectory.xs[:, k], dtype=float)
         position = names[k][1:] if names[k].startswith("d") else None
-        reading = column if position not in names else _noise_reading(trajectory.xs[:, names.index(position)], column, fs)
+        reading = (column if position not in names or _reads_itself(trajectory)
+                   else _noise_reading(trajectory.xs[:, names.index(position)], column, fs))
         floor, _ = noise_floor_and_band(reading, fs)
         out.append(max(np.sqrt(max(floor, 0.0) * 0.5 * fs), 1e-6 * float(np.std(column)), 1e-12))
     return np.asarray(out)
@@ -176,6 +177,12 @@ def _noise_reading(q, v, fs: float) -> np.ndarray:
     return v
 
 
+def _reads_itself(trajectory: Trajectory) -> bool:
+    """A linear axis's velocity reads its own floor, whatever it is: its central-difference estimate is the
+    one its defaults were set with (the EMPS reproduction), and only the arms' estimate changed."""
+    return trajectory.system == "linear_axis" or tuple(trajectory.state_names) == ("q", "dq")
+
+
 def choose_filter(trajectory: Trajectory, *, snr: float = 100.0) -> FilterChoice:
     """Pick the low-pass cut-off, order, trim and decimation for the dynamic model from one record.
 
@@ -195,7 +202,9 @@ def choose_filter(trajectory: Trajectory, *, snr: float = 100.0) -> FilterChoice
     velocities = names[n:]
     bands, noise = {}, {}
     for k, name in enumerate(velocities):
-        floor, band = noise_floor_and_band(_noise_reading(trajectory.xs[:, k], trajectory.xs[:, n + k], fs), fs, snr=snr)
+        reading = (np.asarray(trajectory.xs[:, n + k]) if _reads_itself(trajectory)
+                   else _noise_reading(trajectory.xs[:, k], trajectory.xs[:, n + k], fs))
+        floor, band = noise_floor_and_band(reading, fs, snr=snr)
         bands[name] = band
         noise[name] = float(np.sqrt(max(floor, 0.0) * nyquist))
     band = max(bands.values())

@@ -69,11 +69,7 @@ def _as_list(data) -> list[Trajectory]:
     raise UsageError(f"identify: `data` must be a Trajectory or a non-empty list of Trajectory, got {type(data).__name__}")
 
 
-# The fewest samples a fit is run on, over all records (as the command line's `min_fit_samples`): one
-# equation per parameter at least (nine for a two-link arm with Coulomb friction), eight more for the
-# residual's degrees of freedom, two lost to differentiation at the ends. Each record needs three,
-# the fewest a derivative is estimated from.
-MIN_SAMPLES, MIN_RECORD_SAMPLES = 19, 3
+MIN_RECORD_SAMPLES = 3  # the fewest samples a derivative is estimated from; fewer fail in every method
 
 
 def _check_data(system, trajectories):
@@ -81,13 +77,8 @@ def _check_data(system, trajectories):
         raise UsageError("identify: no records given")
     for k, traj in enumerate(trajectories):
         if len(traj) < MIN_RECORD_SAMPLES:
-            raise DataError(f"record {k} has {len(traj)} sample(s); at least {MIN_RECORD_SAMPLES} are needed",
-                            path=traj.source or None)
-    total = sum(len(t) for t in trajectories)
-    if total < MIN_SAMPLES:
-        raise DataError(f"the records hold {total} samples in all; a fit needs at least {MIN_SAMPLES} (one equation "
-                        "per parameter, and residual degrees of freedom for the standard errors)",
-                        path=trajectories[0].source or None)
+            raise DataError(f"record {k} has {len(traj)} sample(s): too few for a fit (at least {MIN_RECORD_SAMPLES} "
+                            "for a derivative, and as many equations as parameters)", path=traj.source or None)
     for k, traj in enumerate(trajectories):
         if traj.xs.shape[1] != system.n_states or traj.us.shape[1] != system.n_inputs:
             raise UsageError(
