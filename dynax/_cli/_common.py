@@ -61,6 +61,30 @@ def _writable_folder(out: pathlib.Path) -> None:
         raise UsageError(f"--out {out}: cannot write in the folder {ancestor} ({reason})") from None
 
 
+# The temporary names written beside --out (`.NAME.staging.XXXXXXXX`, `.NAME.XXXXXXXX.tmp`) add this many
+# characters to its last component.
+_STAGING_CHARS = 24
+
+
+def _name_lengths(out: pathlib.Path) -> None:
+    """Refuse an --out whose name (or a folder's on the way) is longer than the file system allows."""
+    try:
+        name_max = os.pathconf(os.getcwd(), "PC_NAME_MAX")
+        path_max = os.pathconf(os.getcwd(), "PC_PATH_MAX")
+    except (OSError, ValueError, AttributeError):
+        name_max, path_max = 255, 4096
+    if len(os.fsencode(str(out.absolute()))) + _STAGING_CHARS > path_max:
+        raise UsageError(f"--out: the path is {len(os.fsencode(str(out.absolute())))} bytes long; the file system "
+                         f"allows {path_max} (less {_STAGING_CHARS} for the temporary name)")
+    for part in out.parts:
+        if len(os.fsencode(part)) > name_max:
+            raise UsageError(f"--out: the name '{part[:40]}...' is {len(os.fsencode(part))} bytes long; the file system "
+                             f"allows {name_max}")
+    if len(os.fsencode(out.name)) + _STAGING_CHARS > name_max:
+        raise UsageError(f"--out: the name '{out.name[:40]}...' is {len(os.fsencode(out.name))} bytes long; with the "
+                         f"temporary name it is written under first it must stay under {name_max - _STAGING_CHARS}")
+
+
 def _report_folder_replaceable(out: pathlib.Path) -> None:
     """An existing --out folder is replaced whole; refuse one that holds anything dynax did not write."""
     foreign = sorted(p.name for p in out.iterdir()
@@ -90,6 +114,7 @@ def check_output(path, *, kind: str, inputs=()) -> pathlib.Path:
     if not str(path).strip():
         raise UsageError("--out is empty")
     out = pathlib.Path(path)
+    _name_lengths(out)
     if kind == "file" and out.is_dir():
         raise UsageError(f"--out {out} is a directory; give a file name such as {out / 'result.json'}")
     if kind == "directory" and out.exists() and not out.is_dir():
@@ -206,3 +231,81 @@ def finite_seconds(value: float, argument: str) -> float:
     if not (math.isfinite(value) and value > 0):
         raise UsageError(f"{argument} must be a positive finite number of seconds, got {value}")
     return value
+
+
+def add_exclude_option(parser: argparse.ArgumentParser) -> None:
+    """Add `--exclude [FILE@]T0:T1,...`: stretches of time cut out of the records before anything is fitted."""
+    parser.add_argument("--exclude", default=None, metavar="[FILE@]T0:T1,...",
+                        help="cut these stretches of time [s] out of the records before anything is fitted (an end may "
+                             "be open: 8.8: cuts from 8.8 s on; FILE@ limits a stretch to the file of that name); a cut "
+                             "inside a record leaves two records, fitted as separate runs")
+
+
+def _excluded(records, spans, what: str):
+    """Each record less the stretches of `spans` that name its file (or no file), and the notes saying so."""
+    import pathlib
+
+    from .._data import exclude_stretches
+
+    out, notes = [], []
+    for record in records:
+        mine = [(t0, t1) for where, t0, t1 in spans
+                if where is None or where in (record.source, pathlib.Path(record.source).name)]
+        pieces = exclude_stretches(record, mine)
+        if pieces != [record]:
+            kept = sum(len(p) for p in pieces)
+            notes.append(f"--exclude: {len(record) - kept} of {len(record)} samples of {record.source} left out"
+                         + (f", leaving {len(pieces)} {what}s" if len(pieces) != 1 else ""))
+        out.extend(pieces)
+    return out, notes
+
+
+def load_records(args, system: str, *, min_samples: int, lenient: tuple = ()) -> tuple[list, list | None, list[str]]:
+    """Read the command's DATA and `--validation` files, cut `--exclude`'s stretches, and check what remains.
+
+    Each record is checked for located faults (`dynax.check_records`); a fault that would make the fit
+    wrong is a refusal (`DataError`, exit status 2) naming its file, column, rows and times and the fix;
+    milder ones come back as warning lines. `lenient` names `Check` kinds that are warnings here
+    whatever their severity (e.g. a zero input when the parameters are known).
+
+    **Returns:** `(train, validation or None, notes)`.
+    """
+    import warnings
+
+    from .._data import check_records, load_trajectory, parse_exclude
+    from .._data._sanity import Severity
+
+    mapping, scale, offset = data_options(args)
+    spans = parse_exclude(getattr(args, "exclude", None))
+    known = {pathlib.Path(p).name for p in [*args.data, *(getattr(args, "validation", None) or [])]}
+    known |= set(args.data) | set(getattr(args, "validation", None) or [])
+    for where, _, _ in spans:
+        if where is not None and where not in known:
+            raise UsageError(f"--exclude names the file '{where}', which is none of the records given")
+
+    def read(paths):
+        with warnings.catch_warnings():  # the check runs below, on what --exclude leaves
+            warnings.simplefilter("ignore")
+            return [load_trajectory(p, system, mapping=mapping, scale=scale, offset=offset, min_samples=min_samples,
+                                    check=False) for p in paths]
+
+    train, notes = _excluded(read(args.data), spans, "record")
+    validation = None
+    if getattr(args, "validation", None):
+        validation, more = _excluded(read(args.validation), spans, "held-out record")
+        notes += more
+    for name, records in (("DATA", train), ("--validation", validation)):
+        if records is not None and not records:
+            raise UsageError(f"--exclude leaves nothing of the {name} records")
+        for record in records or ():
+            if len(record) < min_samples:
+                raise DataError(f"has {len(record)} samples after --exclude; at least {min_samples} are needed",
+                                path=record.source)
+    check = check_records(train, validation or ())
+    refusals = [f for f in check.refusals if f.kind not in lenient]
+    if refusals:
+        from .._data._sanity import DataCheck
+
+        DataCheck(tuple(refusals)).raise_refusals()
+    notes += [f"warning: {f.describe()}" for f in check.findings if f.severity == Severity.WARN or f.kind in lenient]
+    return train, validation, notes

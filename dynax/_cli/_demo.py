@@ -8,6 +8,9 @@ from .._errors import UsageError
 from .._synthetic import hidden_effect
 from ._output import staged_directory, write_json
 
+MAX_SEED = 2**32 - 1  # the random generators' seeds are unsigned 32-bit integers
+
+
 def register(subparsers):
     parser = subparsers.add_parser(
         "demo",
@@ -31,8 +34,8 @@ def run(args: argparse.Namespace) -> int:
     from .._diagnose._demo import run_demo
     from ._diagnose import summary
 
-    if args.seed < 0:
-        raise UsageError(f"--seed must be a non-negative integer, got {args.seed}")
+    if not 0 <= args.seed <= MAX_SEED:
+        raise UsageError(f"--seed must be an integer from 0 to {MAX_SEED}, got {args.seed}")
     start = time.perf_counter()
     out = pathlib.Path(args.out)
     with staged_directory(out) as stage:

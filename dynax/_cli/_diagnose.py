@@ -4,10 +4,11 @@ import argparse
 import contextlib
 import sys
 import time
+import warnings
 
 from .._errors import UsageError
-from ._common import add_data_options, data_options, read_nominal_parameters
-from ._nominal import nominal_from_data, nominal_system, split_term_coefficients
+from ._common import add_data_options, add_exclude_option, data_options, load_records, read_nominal_parameters
+from ._nominal import check_nominal, nominal_from_data, nominal_system, split_term_coefficients
 from ._output import staged_directory, write_json
 
 _SYSTEMS = ("acrobot", "double_pendulum", "linear_axis", "helicopter")
@@ -30,6 +31,7 @@ def register(subparsers):
                         help="training run(s): CSV, NPZ or MAT with t, the states and the inputs")
     parser.add_argument("--validation", nargs="+", default=None, metavar="VAL", help="held-out run(s) (same columns)")
     add_data_options(parser)
+    add_exclude_option(parser)
     parser.add_argument("--mode", choices=("refit", "known"), default="refit",
                         help="refit the nominal parameters on DATA (default) or trust them (known)")
     parser.add_argument("--nominal", default=None, metavar="FILE.json",
@@ -62,11 +64,10 @@ def run(args: argparse.Namespace) -> int:
 
     jax.config.update("jax_enable_x64", True)  # the CLI identifies in float64; the library does not change config
 
-    from .._data import load_trajectory, resample
     from .._diagnose import diagnose, Known, Refit, write_report
     from .._diagnose._records import holdout_split
 
-    mapping, scale, offset = data_options(args)
+    data_options(args)  # a malformed --map, --scale or --offset is refused before any work
     if args.dt is not None and not args.dt > 0:
         raise UsageError(f"--dt must be positive, got {args.dt}")
     if args.reference_horizon is not None and not args.reference_horizon > 0:
@@ -80,20 +81,27 @@ def run(args: argparse.Namespace) -> int:
         if set_aside:
             print(f"note: {set_aside}", file=sys.stderr)
             cli_notes.append(set_aside)
-    # Everything that can be refused is read before anything is written.
-    train = [load_trajectory(path, args.system, mapping=mapping, scale=scale, offset=offset, min_samples=50)
-             for path in args.data]
-    validation = None
-    if args.validation is not None:
-        validation = [load_trajectory(path, args.system, mapping=mapping, scale=scale, offset=offset, min_samples=50)
-                      for path in args.validation]
+    # Everything that can be refused is read before anything is written. With the parameters known, a record
+    # that nothing drives is still a test of them: a zero or constant input is then said, not refused.
+    from .._data import DataWarning
+    from .._data._sanity import Check
+
+    lenient = (Check.ZERO, Check.CONSTANT) if args.mode == "known" else ()
+    train, validation, data_notes = load_records(args, args.system, min_samples=MIN_SAMPLES, lenient=lenient)
+    for note in data_notes:
+        print(note, file=sys.stderr)
+        cli_notes.append(note)
     if args.dt is not None:
-        train = [resample(t, args.dt) for t in train]
-        validation = None if validation is None else [resample(v, args.dt) for v in validation]
+        train = [_resampled(t, args.dt) for t in train]
+        validation = None if validation is None else [_resampled(v, args.dt) for v in validation]
     system = nominal_system(args.system, parameters)
+    if args.nominal is not None:
+        check_nominal(system, args.nominal)
     if args.nominal is None and args.system != "helicopter":
         # Only what the diagnosis trains on: without --validation, the first part of each record.
-        system, note = nominal_from_data(system, train if validation is not None else [holdout_split(t)[0] for t in train])
+        with warnings.catch_warnings():  # the records' faults were refused or printed by `load_records`
+            warnings.simplefilter("ignore", DataWarning)
+            system, note = nominal_from_data(system, train if validation is not None else [holdout_split(t)[0] for t in train])
         print(f"note: {note}", file=sys.stderr)
         cli_notes.append(note)
     if args.mode == "known":
@@ -101,7 +109,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         names = tuple(n.strip() for n in args.refit.split(",") if n.strip()) if args.refit else None
         mode = Refit(parameters=names)
-    with stage_log() as say:
+    with stage_log() as say, warnings.catch_warnings():  # the records' faults: refused or printed above
+        warnings.simplefilter("ignore", DataWarning)
         report = diagnose(
             system, train, validation, mode=mode, reference_horizon_s=args.reference_horizon,
             max_terms=args.max_terms, system_name=args.system, discovery=not args.no_discovery,
@@ -115,6 +124,21 @@ def run(args: argparse.Namespace) -> int:
     print(summary(report))
     print(f"wrote {args.out}/report.json, report.md and figures")
     return 0
+
+
+MIN_SAMPLES = 50  # the fewest samples of a record diagnose reads (before and after --dt)
+
+
+def _resampled(trajectory, dt: float):
+    """`trajectory` resampled to `dt`, refusing a `--dt` that leaves too few samples of it."""
+    from .._data import resample
+
+    n = int((trajectory.duration + 1e-9 * dt) // dt) + 1
+    if n < MIN_SAMPLES:
+        raise UsageError(f"--dt {dt:g} s leaves {n} sample(s) of the {trajectory.duration:.4g} s record "
+                         f"{trajectory.source}; at least {MIN_SAMPLES} are needed: give --dt at most "
+                         f"{trajectory.duration / (MIN_SAMPLES - 1):.4g} s (is the interval in seconds?)")
+    return resample(trajectory, dt)
 
 
 @contextlib.contextmanager

@@ -64,6 +64,11 @@ def check_model_file(obj: dict, path) -> None:
     if bad.size:
         axis, j = bad[0]
         raise DataError(f"weight [{axis}][{j}] (feature '{features[j]}') is not a finite number", path=path)
+    if kind == "acceleration" and "gravity" in obj:
+        gravity = obj["gravity"]
+        if isinstance(gravity, bool) or not isinstance(gravity, (int, float)) or not 0 < gravity < 1e3:
+            raise DataError(f"'gravity' is {gravity!r}: a physical gravity is a positive acceleration in m/s^2 "
+                            "(9.81 on Earth)", path=path, column="gravity")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -47,6 +47,9 @@ def register(subparsers):
                              "of aerobatic flight at 100 Hz stops after 57 steps, about one CPU-minute for the whole "
                              "command")
     add_data_options(parser)
+    parser.add_argument("--exclude", default=None, metavar="T0:T1",
+                        help="cut a stretch of time [s] at the head or tail of the record before fitting (8.8: cuts "
+                             "from 8.8 s on)")
     parser.add_argument("--out", required=True, help="output model file (JSON)")
     parser.set_defaults(run=run)
 
@@ -56,7 +59,7 @@ def register(subparsers):
 QUATERNION_TOLERANCE = 0.01
 
 
-def load_helicopter_data(path, mapping=None, scale=None, offset=None, *, min_samples=3):
+def load_helicopter_data(path, mapping=None, scale=None, offset=None, *, min_samples=3, exclude=None):
     """Load helicopter data; check the quaternion; resample jittered sampling to its median interval (and say so).
 
     Gaps and near-duplicate time stamps are refused by the loader, so resampling only evens out
@@ -65,9 +68,24 @@ def load_helicopter_data(path, mapping=None, scale=None, offset=None, *, min_sam
     import jax.numpy as jnp
     import numpy as np
 
-    from .._data import load_trajectory, resample
+    import sys
+    import warnings
 
-    data = load_trajectory(path, "helicopter", mapping=mapping, scale=scale, offset=offset, min_samples=min_samples)
+    from .._data import check_records, exclude_stretches, load_trajectory, parse_exclude, resample
+
+    with warnings.catch_warnings():  # checked below, on what --exclude leaves
+        warnings.simplefilter("ignore")
+        data = load_trajectory(path, "helicopter", mapping=mapping, scale=scale, offset=offset, min_samples=min_samples,
+                               check=False)
+    spans = [(t0, t1) for _, t0, t1 in parse_exclude(exclude)]
+    if spans:
+        pieces = exclude_stretches(data, spans)
+        if len(pieces) != 1:
+            raise UsageError(f"--exclude leaves {len(pieces)} pieces of {path}; a vehicle model is fitted to one "
+                             "contiguous record: cut only its head or tail, or split the file")
+        data = pieces[0]
+        if len(data) < min_samples:
+            raise DataError(f"has {len(data)} samples after --exclude; at least {min_samples} are needed", path=path)
     quats = np.asarray(data.xs[:, 3:7])
     norms = np.linalg.norm(quats, axis=1)
     bad = np.flatnonzero(np.abs(norms - 1) > QUATERNION_TOLERANCE)
@@ -76,6 +94,10 @@ def load_helicopter_data(path, mapping=None, scale=None, offset=None, *, min_sam
         raise DataError(f"the quaternion (qw, qx, qy, qz) has norm {norms[k]:.6g}, not 1 (tolerance "
                         f"{QUATERNION_TOLERANCE:g}; {bad.size} such rows): the contract's attitude is a unit "
                         "quaternion", path=path, column=(mapping or {}).get("qw", "qw"), row=k + 1)
+    check = check_records([data])
+    check.raise_refusals()
+    for finding in check.warnings:
+        print(f"warning: {finding.describe()}", file=sys.stderr)
     if not data.is_uniform:
         dt = data.dt
         data = resample(data, dt)
@@ -126,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
     out = output_file(args.out, "model.json")
     mapping, scale, offset = data_options(args)
     start = time.perf_counter()
-    data = load_helicopter_data(args.data, mapping, scale, offset)
+    data = load_helicopter_data(args.data, mapping, scale, offset, exclude=args.exclude)
     system = initial_helicopter(args.model, args.features)
     n_needed, why = required_samples(system, args.criterion, args.horizon, data.dt)
     if len(data) < n_needed:

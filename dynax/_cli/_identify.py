@@ -6,10 +6,12 @@ fit, and the model is validated open loop on held-out data; all of it goes into 
 """
 
 import argparse
+import sys
 import time
+import warnings
 
 from .._errors import UsageError
-from ._common import add_data_options, data_options, min_fit_samples, output_file
+from ._common import add_data_options, add_exclude_option, data_options, load_records, min_fit_samples, output_file
 from ._output import write_json
 
 _SYSTEMS = ("acrobot", "double_pendulum", "linear_axis", "helicopter")
@@ -40,6 +42,7 @@ def register(subparsers):
     parser.add_argument("--friction", choices=("viscous", "coulomb"), default=None,
                         help="friction model (default: coulomb for linear_axis, viscous otherwise)")
     add_data_options(parser)
+    add_exclude_option(parser)
     parser.add_argument("--lowpass", default="auto", metavar="HZ|auto|none",
                         help="zero-phase Butterworth cut-off [Hz] applied before differentiating (dynamic), to the "
                              "equations (power) or to the states (energy); dynamic default 'auto' (the velocities' "
@@ -117,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
 
     jax.config.update("jax_enable_x64", True)  # identification in float64; the library leaves config alone
 
-    from .._data import load_trajectory
+    from .._data import DataWarning
     from .._identify import identify
     from .._identify._least_squares import describe_poorly_determined
     from .._identify._result import StageKind
@@ -129,24 +132,23 @@ def run(args: argparse.Namespace) -> int:
     if args.system == "helicopter" and args.friction is not None:
         raise UsageError("--friction does not apply to the helicopter")
     method = _method(args)
-    mapping, scale, offset = data_options(args)
+    data_options(args)  # a malformed --map, --scale or --offset is refused before any work
     out = output_file(args.out, "parameters.json")
     if args.holdout is not None and not 0 <= args.holdout < 1:
         raise UsageError(f"--holdout must be in [0, 1), got {args.holdout}")
     if args.holdout is not None and args.validation:
         raise UsageError("give either --validation files or --holdout, not both")
     start = time.perf_counter()
-    data = [load_trajectory(path, args.system, mapping=mapping, scale=scale, offset=offset,
-                            min_samples=min_fit_samples()) for path in args.data]
-    validation = None
-    if args.validation:
-        validation = [load_trajectory(path, args.system, mapping=mapping, scale=scale, offset=offset,
-                                      min_samples=min_fit_samples()) for path in args.validation]
+    data, validation, notes = load_records(args, args.system, min_samples=min_fit_samples())
+    for note in notes:
+        print(note, file=sys.stderr)
     refine = {"auto": "auto", "yes": True, "no": False}[args.refine]
     if refine is True and args.system not in ("acrobot", "double_pendulum"):
         raise UsageError(f"--refine yes is for acrobot and double_pendulum; use --method simulation for {args.system}")
-    result = identify(_system(args.system), data, method, friction=friction, consistency=args.consistency,
-                      refine=refine, validation=validation, holdout="auto" if args.holdout is None else args.holdout)
+    with warnings.catch_warnings():  # the records' faults were refused or printed by `load_records`
+        warnings.simplefilter("ignore", DataWarning)
+        result = identify(_system(args.system), data, method, friction=friction, consistency=args.consistency,
+                          refine=refine, validation=validation, holdout="auto" if args.holdout is None else args.holdout)
     report = result.to_json()
     if args.system == "helicopter":
         report.pop("friction")

@@ -38,6 +38,26 @@ def nominal_system(name: str, parameters: dict | None = None):
         raise UsageError(f"--nominal: parameters {sorted(values)} do not fit {cls.__name__}: {e}") from None
 
 
+def check_nominal(system, path) -> None:
+    """Refuse a `--nominal` model that is physically impossible, naming the file and the parameter: a
+    base parameter outside its sign bound (negative inertia, mass or gravity term, negative friction)
+    or an inconsistent mass matrix (`theta1 * theta2 < theta3^2`), by `dynax.consistency_conditions`.
+    A model whose gravity terms are negative is most often one whose angles count from upright; the
+    message says so. The helicopter's Tempest weights have no such bounds."""
+    from .._identify import consistency_conditions
+
+    if not hasattr(system, "base_parameter_kinds"):
+        return
+    names = tuple(system.base_parameter_kinds())
+    violated = consistency_conditions(system, names, [float(getattr(system, n)) for n in names])
+    if violated:
+        hint = ""
+        if any(s.startswith("gravity") for s in violated):
+            hint = ("; negative gravity terms are what a model of angles counted from upright gives: the contract's "
+                    "angles are 0 hanging down (read such a rig's data with --offset q1=3.141593)")
+        raise DataError("the nominal model is physically impossible: " + "; ".join(violated) + hint, path=path)
+
+
 def split_term_coefficients(system_name: str, parameters: dict) -> tuple[dict, str | None]:
     """`--nominal` parameters that are coefficients of the vocabulary's terms (`fc2`, `Ir2`: what `dynax
     identify --friction coulomb` and its refinement write for a two-link arm) rather than fields of the

@@ -9,3 +9,13 @@ from ._derivatives import (
 from ._io import load_trajectory as load_trajectory, parse_assignments as parse_assignments, save_trajectory as save_trajectory
 from ._trajectory import Trajectory as Trajectory
 from ._sampling import check_time_stamps as check_time_stamps, split_at_gaps as split_at_gaps
+from ._sanity import (
+    check_record as check_record,
+    check_records as check_records,
+    Check as Check,
+    DataCheck as DataCheck,
+    DataWarning as DataWarning,
+    exclude_stretches as exclude_stretches,
+    Finding as Finding,
+    parse_exclude as parse_exclude,
+)

@@ -11,15 +11,15 @@ SYSTEM_COLUMNS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
 }
 
 # Velocity columns that may be absent from a file (encoder positions alone) and are then estimated
-# from the named position column, by the named difference (see `load_trajectory`): a two-link
-# arm's by backward differences, as a motor driver or logger computes them (the DFKI rig's logged
-# velocities are exactly that), so that `choose_filter`'s noise floor reads them as it reads a
-# rig's own; the linear axis keeps the central difference its EMPS reproduction was made with.
-# Estimated only when the file has none of a system's velocities and none is mapped.
+# from the named position column, by the named difference (see `load_trajectory`): central
+# differences, which do not lag (a backward difference lags half a sample, which biases every
+# parameter fitted to it; `choose_filter` reads such a velocity's noise floor from the angle's
+# backward difference, as a logger's velocity reads). Estimated only when the file has none of a
+# system's velocities and none is mapped.
 OPTIONAL_STATES: dict[str, dict[str, tuple[str, str]]] = {
     "linear_axis": {"dq": ("q", "central")},
-    "acrobot": {"dq1": ("q1", "backward"), "dq2": ("q2", "backward")},
-    "double_pendulum": {"dq1": ("q1", "backward"), "dq2": ("q2", "backward")},
+    "acrobot": {"dq1": ("q1", "central"), "dq2": ("q2", "central")},
+    "double_pendulum": {"dq1": ("q1", "central"), "dq2": ("q2", "central")},
 }
 
 

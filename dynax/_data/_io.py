@@ -146,6 +146,7 @@ def load_trajectory(
     min_samples: int = 2,
     max_gap: float | None = MAX_GAP,
     min_step: float | None = MIN_STEP,
+    check: bool = True,
 ) -> Trajectory:
     """Load a measured data file as a `Trajectory`, checking it against the data contract.
 
@@ -170,6 +171,10 @@ def load_trajectory(
       `None` accepts gaps; then cut the record with `split_at_gaps`.
     - `min_step`: refuse a time step shorter than this fraction of the median interval (default
       0.01): a near-duplicate stamp, across which derivatives are noise. `None` accepts it.
+    - `check`: read the record for located faults (`dynax.check_records`: glitches, stuck sensors,
+      wrapped angles, stretches where a velocity is not its position's derivative, constant or zero
+      columns, time in milliseconds) and warn a `DataWarning` naming each, with its rows and times
+      (default `True`).
 
     **Returns:**
 
@@ -184,6 +189,7 @@ def load_trajectory(
     `.mat` (or is a directory), a missing or duplicated column, a non-numeric (`"1_0"` included),
     complex or non-finite value, a value beyond $10^{12}$ in magnitude (before or after `scale`),
     time that does not strictly increase, a gap or a near-duplicate time stamp, too few samples,
+    a non-zero column of an input the system ignores (`tau1` in a file read as `acrobot`),
     a measured velocity column that is not the derivative of its position column (other units, the
     opposite sign, another joint's column: `dynax._data._velocities`; the error names the gain and
     the `scale` that fixes a unit).
@@ -194,13 +200,12 @@ def load_trajectory(
     positions, when the file has none of the system's velocities and none is mapped (one present
     and another absent is a misnamed column, and an error):
 
-    - `acrobot`, `double_pendulum`: `dq1`, `dq2` by backward differences on the recorded time
-      stamps (`backward_difference`), as a motor driver or logger computes them. The DFKI rig's
-      logged `vel_meas` columns are exactly these differences of `pos_meas`, so its files read with
-      or without them give the same velocities (but the first sample's). A central difference lags
-      less but its noise vanishes at the Nyquist frequency, where `choose_filter` reads the noise
-      floor, which then lifts the chosen band far above the motion's.
-    - `linear_axis`: `dq` by central differences (`central_difference`).
+    - every system: by second-order central differences on the recorded time stamps
+      (`central_difference`), which do not lag; a backward difference (what a motor driver
+      logs) is the derivative half an interval earlier, which biases every parameter fitted to
+      it. `choose_filter` reads the noise floor of
+      such a velocity from the angle's backward difference, so the filter band is the one the
+      logged velocities would give.
     """
     path = str(path)
     state_names, input_names = columns_for(system)
@@ -255,6 +260,7 @@ def load_trajectory(
         arr = arr + float(offset.get(name, 0.0))
         values[name] = arr
 
+    _check_ignored_inputs(path, system, raw, mapping)
     n = values[TIME].shape[0]
     for name, arr in values.items():
         if arr.shape[0] != n:
@@ -273,7 +279,31 @@ def load_trajectory(
     xs = np.stack([values[s] for s in state_names], axis=1)
     us = np.stack([values[s] for s in input_names], axis=1)
     check_times_for_float32(ts, path)
-    return Trajectory(ts, jnp.asarray(xs), jnp.asarray(us), state_names, input_names, system, path)
+    trajectory = Trajectory(ts, jnp.asarray(xs), jnp.asarray(us), state_names, input_names, system, path)
+    if check:
+        from ._sanity import check_record
+
+        check_record(trajectory, estimated=tuple(optional)).warn(stacklevel=2)
+    return trajectory
+
+
+# Contract input columns a system ignores: a file that holds them non-zero was recorded on another system.
+IGNORED_INPUTS = {"acrobot": {"tau1": "double_pendulum"}}
+
+
+def _check_ignored_inputs(path, system, raw, mapping):
+    for name, other in IGNORED_INPUTS.get(system, {}).items():
+        if name not in raw or name in mapping.values():
+            continue
+        arr = _to_float(path, name, raw[name])
+        with np.errstate(invalid="ignore"):
+            nonzero = np.flatnonzero(np.isfinite(arr) & (arr != 0))
+        if nonzero.size:
+            k = int(nonzero[np.argmax(np.abs(arr[nonzero]))])
+            raise DataError(
+                f"is non-zero in {nonzero.size} of {arr.size} samples (largest {arr[k]:.4g} at row {k + 1}), but "
+                f"'{system}' has no such input: it would be dropped and its effect ascribed to the model. Read the "
+                f"file as '{other}', or zero or remove the column if it is not applied", path=path, column=name)
 
 
 def save_trajectory(trajectory: Trajectory, path: str | os.PathLike) -> None:

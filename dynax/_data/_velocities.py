@@ -80,6 +80,26 @@ def _refused(gain: float, std: float) -> bool:
     return abs(gain - 1.0) > MAX_GAIN_ERROR and abs(gain - 1.0) > SIGNIFICANCE * std
 
 
+STRETCHES = 8  # the record is cut into this many stretches to ask whether a wrong gain holds in all of them
+
+
+def gain_holds_everywhere(ts, q, v, gain: float) -> bool:
+    """Whether a velocity's gain on its position's derivative is `gain` (to `MAX_GAIN_ERROR`) in each of
+    `STRETCHES` stretches of the record that move: then it is a unit or a sign, and one `scale` fixes the
+    whole record; otherwise a stretch is at fault (`dynax._data._sanity` names it) and no scale is right."""
+    ts, q, v = (np.asarray(a, dtype=float) for a in (ts, q, v))
+    bounds = np.linspace(0, len(ts), STRETCHES + 1).astype(int)
+    seen = 0
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        found = velocity_gain(ts[a:b], q[a:b], v[a:b]) if b - a > 4 * MIN_BLOCKS else None
+        if found is None or not found[1] < MAX_GAIN_ERROR * max(abs(gain), 1.0):
+            continue  # too short or too still to tell
+        seen += 1
+        if abs(found[0] - gain) > MAX_GAIN_ERROR * max(abs(gain), 1.0):
+            return False
+    return seen > 0
+
+
 def check_velocities(ts, values: dict, pairs: dict[str, str], *, path=None, columns: dict | None = None,
                      scale: dict | None = None) -> None:
     """Refuse a record whose velocity column is not the derivative of its position column.
@@ -92,6 +112,10 @@ def check_velocities(ts, values: dict, pairs: dict[str, str], *, path=None, colu
     - `scale`: the factors already applied (contract name -> factor), so that the `scale` the error
       suggests replaces them.
 
+    A gain that is wrong in some stretches of the record only (`gain_holds_everywhere`) is no unit, and
+    is not refused here: `dynax._data._sanity` names the stretch. A gain of 1000 (or $10^6$) with a
+    median interval of 0.1 or more is time in milliseconds (microseconds), and the error says so.
+
     **Raises:** `DataError` naming the file and the velocity column, its gain on the position's
     derivative with its standard error, the unit mix-up that gain matches where one does, the
     position column it does follow where that is another one, and the `scale` that makes it agree.
@@ -103,6 +127,19 @@ def check_velocities(ts, values: dict, pairs: dict[str, str], *, path=None, colu
         if found is None or not _refused(found[0], found[1]):
             continue
         gain, std, corr = found
+        follows_another = any(
+            (m := velocity_gain(ts, values[other], values[velocity])) is not None and abs(m[0] - 1.0) <= MAX_GAIN_ERROR
+            for other in pairs.values() if other != position)
+        if not follows_another and not gain_holds_everywhere(ts, values[position], values[velocity], gain):
+            continue  # wrong in some stretches only: no scale is right; the sanity check names the stretch
+        dt = float(np.median(np.diff(np.asarray(ts, dtype=float))))
+        for factor, unit in ((1e3, "milliseconds"), (1e6, "microseconds")):
+            if abs(gain / factor - 1.0) < 0.05 and dt >= 0.1:
+                raise DataError(
+                    f"the time column reads as {unit}: the velocity {named(velocity)} is {gain:.4g} times its "
+                    f"position's change per time unit and the median interval is {dt:.6g}; scale the time, not the "
+                    f"velocity (`scale={{'t': {1 / factor:g}}}`, `--scale t={1 / factor:g}`)",
+                    path=path, column=columns.get("t", "t"))
         what = [f"it is not the derivative of {named(position)}: over {BLOCK_S * 1e3:g} ms blocks its mean is "
                 f"{gain:.4g} +- {std:.2g} times the position's change per second (correlation {corr:.2f}; 1 is "
                 "the same quantity in the same units)"]

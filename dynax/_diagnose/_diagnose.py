@@ -328,6 +328,7 @@ def diagnose(
         raise UsageError(f"diagnose: `velocities` must be 'auto' or 'measured', got {velocities!r}")
     options = _Options(horizons_s, reference_horizon_s, horizon_fraction, fit_window_s, max_terms, alpha, min_gain,
                        holdout_fraction, shortlist, discovery, velocities, cross_fit)
+    _warn_data_faults(train, validation)
     with stage_reporter(progress) as say:
         problem = _prepare(system, train, validation, candidates, mode, options)
         nominal, yard, current, table, last, rounds = _forward_selection(problem, say)
@@ -336,3 +337,11 @@ def diagnose(
         return _report(problem, nominal, yard, judgement, table, last, rounds, mode=mode, system_name=system_name,
                        train=train, validation=validation)
 
+
+def _warn_data_faults(train, validation):
+    """Located faults of the records (`dynax.check_records`) as `DataWarning`s, before any fit."""
+    from .._data import Trajectory
+    from .._data._sanity import check_records
+
+    as_list = lambda d: [] if d is None else [d] if isinstance(d, Trajectory) else list(d)  # noqa: E731
+    check_records(as_list(train), as_list(validation)).warn(stacklevel=3)

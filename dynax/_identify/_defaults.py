@@ -123,9 +123,13 @@ def measurement_noise_std(trajectory: Trajectory) -> np.ndarray:
     """
     fs = 1.0 / trajectory.dt
     out = []
+    names = tuple(trajectory.state_names)
     for k in range(trajectory.xs.shape[1]):
         column = np.asarray(trajectory.xs[:, k], dtype=float)
-        floor, _ = noise_floor_and_band(column, fs)
+        position = names[k][1:] if names[k].startswith("d") else None
+        reading = (column if position not in names or _reads_itself(trajectory)
+                   else _noise_reading(trajectory.xs[:, names.index(position)], column, fs))
+        floor, _ = noise_floor_and_band(reading, fs)
         out.append(max(np.sqrt(max(floor, 0.0) * 0.5 * fs), 1e-6 * float(np.std(column)), 1e-12))
     return np.asarray(out)
 
@@ -144,6 +148,39 @@ def trim_and_decimation(sample_rate_hz: float, cutoff_hz: float, n_samples: int)
     trim = int(min(np.ceil(sample_rate_hz / cutoff_hz), n_samples // 4))
     decimate = int(max(1, min(13, np.floor(sample_rate_hz / (4 * cutoff_hz)), (n_samples - 2 * trim) // 28)))
     return trim, decimate
+
+
+def _noise_reading(q, v, fs: float) -> np.ndarray:
+    r"""The signal whose spectrum gives a velocity channel's noise floor: the velocity itself, or, for
+    a velocity that is the central difference of its position (an encoder-only record, as
+    `load_trajectory` estimates it), the backward difference of that position.
+
+    A zero-phase derivative's noise vanishes at the Nyquist frequency (its response is odd and
+    periodic), where the floor is read: a central difference's, $\sin^2(2\pi f\Delta t)/\Delta t^2$
+    times the encoder's, reads a floor about 7 times lower than a backward difference's
+    ($4\sin^2(\pi f\Delta t)/\Delta t^2$), and motion-free bands then count as signal. Both carry the
+    same signal and the same noise in the band; the backward difference reads the floor as a logged
+    velocity's. A velocity counts as a central difference when it lies closer to the central than
+    to the backward difference of its position, and within three times their distance from each other
+    (resampling an irregular record blurs the two, so exact equality cannot be asked; a logged
+    backward difference lies closer to the backward difference, a tachometer's own noise puts it
+    far from both)."""
+    q, v = np.asarray(q, dtype=float), np.asarray(v, dtype=float)
+    if len(q) < 3:
+        return v
+    backward = np.diff(q) * fs
+    central = 0.5 * (q[2:] - q[:-2]) * fs
+    rms = lambda a: float(np.sqrt(np.mean(a**2)))  # noqa: E731
+    to_central, to_backward = rms(v[1:-1] - central), rms(v[1:-1] - backward[:-1])
+    if to_central < to_backward and to_central < 3.0 * rms(central - backward[:-1]):
+        return np.concatenate([backward[:1], backward])
+    return v
+
+
+def _reads_itself(trajectory: Trajectory) -> bool:
+    """A linear axis's velocity reads its own floor, whatever it is: its central-difference estimate is the
+    one its defaults were set with (the EMPS reproduction), and only the arms' estimate changed."""
+    return trajectory.system == "linear_axis" or tuple(trajectory.state_names) == ("q", "dq")
 
 
 def choose_filter(trajectory: Trajectory, *, snr: float = 100.0) -> FilterChoice:
@@ -165,7 +202,9 @@ def choose_filter(trajectory: Trajectory, *, snr: float = 100.0) -> FilterChoice
     velocities = names[n:]
     bands, noise = {}, {}
     for k, name in enumerate(velocities):
-        floor, band = noise_floor_and_band(np.asarray(trajectory.xs[:, n + k]), fs, snr=snr)
+        reading = (np.asarray(trajectory.xs[:, n + k]) if _reads_itself(trajectory)
+                   else _noise_reading(trajectory.xs[:, k], trajectory.xs[:, n + k], fs))
+        floor, band = noise_floor_and_band(reading, fs, snr=snr)
         bands[name] = band
         noise[name] = float(np.sqrt(max(floor, 0.0) * nyquist))
     band = max(bands.values())

@@ -69,7 +69,16 @@ def _as_list(data) -> list[Trajectory]:
     raise UsageError(f"identify: `data` must be a Trajectory or a non-empty list of Trajectory, got {type(data).__name__}")
 
 
+MIN_RECORD_SAMPLES = 3  # the fewest samples a derivative is estimated from; fewer fail in every method
+
+
 def _check_data(system, trajectories):
+    if not trajectories:
+        raise UsageError("identify: no records given")
+    for k, traj in enumerate(trajectories):
+        if len(traj) < MIN_RECORD_SAMPLES:
+            raise DataError(f"record {k} has {len(traj)} sample(s): too few for a fit (at least {MIN_RECORD_SAMPLES} "
+                            "for a derivative, and as many equations as parameters)", path=traj.source or None)
     for k, traj in enumerate(trajectories):
         if traj.xs.shape[1] != system.n_states or traj.us.shape[1] != system.n_inputs:
             raise UsageError(
@@ -360,6 +369,10 @@ def identify(
 
     trajectories = _as_list(data)
     _check_data(system, trajectories)
+    from .._data._sanity import check_records
+
+    # located faults (a glitch, a stuck sensor, a stretch where a velocity is not its angle's derivative): said
+    check_records(trajectories, _as_list(validation) if validation is not None else ()).warn(stacklevel=2)
     if consistency not in _CONSISTENCY:
         raise UsageError(f"identify: `consistency` must be one of {_CONSISTENCY}, got {consistency!r}")
     horizons_s = tuple(float(h) for h in horizons_s)

@@ -25,6 +25,35 @@ ENERGY_PARAMETER_NAMES = BASE_PARAMETER_NAMES[:5]  # theta6, theta7 (viscous fri
 DRAKE_DEFAULTS = dict(m1=1.0, m2=1.0, l1=1.0, lc1=0.5, lc2=1.0, Ic1=0.083, Ic2=0.33, b1=0.1, b2=0.1, g=9.81)
 
 
+# Physical parameters and the bound each must meet: masses, the first link's length and gravity are
+# positive; centre-of-mass distances, inertias and viscous friction cannot be negative.
+_PHYSICAL_BOUNDS = dict(m1="positive", m2="positive", l1="positive", g="positive", lc1="nonnegative",
+                        lc2="nonnegative", Ic1="nonnegative", Ic2="nonnegative", I1="positive", I2="positive",
+                        b1="nonnegative", b2="nonnegative")
+
+
+def _check_physical(**values):
+    """Refuse physically impossible parameters by name: `ValueError` for concrete values (the usual
+    call), an `eqx.error_if` runtime error for traced ones (inside `jit`, `vmap` or `grad`)."""
+    import jax
+
+    traced = []
+    for name, value in values.items():
+        if value is None:
+            continue
+        positive = _PHYSICAL_BOUNDS[name] == "positive"
+        v = jnp.asarray(value)
+        bad = ~jnp.isfinite(v) | ((v <= 0) if positive else (v < 0))
+        message = f"`{name}` is not a physical value; it must be {'positive' if positive else 'non-negative'} and finite"
+        if isinstance(bad, jax.core.Tracer):
+            traced.append((jnp.any(bad), "from_physical: " + message))
+        elif bool(jnp.any(bad)):
+            shown = value if isinstance(value, (int, float)) else (float(v) if v.ndim == 0 else v)
+            raise ValueError(f"from_physical: `{name}` = {shown} is not a physical value; it must be "
+                             f"{'positive' if positive else 'non-negative'} and finite")
+    return traced
+
+
 def base_parameters_from_physical(
     *, m1, m2, l1, lc1, lc2, Ic1=None, Ic2=None, b1, b2, g=9.81, I1=None, I2=None
 ) -> dict[str, float]:
@@ -41,7 +70,13 @@ def base_parameters_from_physical(
     are what the equations of motion depend on, while (m1, lc1, Ic1) enter only through
     $I_1 = I_{c1} + m_1 l_{c1}^2$ and $m_1 l_{c1}$, and $(m_2, l_{c2}, I_{c2})$ only through
     $m_2 l_{c2}$, $I_2$ and $m_2$ (the latter in combination with $l_1$). `l2` does not enter at all.
+
+    **Raises:** `ValueError` naming the parameter for a physically impossible value: a mass, `l1`,
+    `g`, `I1` or `I2` that is not positive, a centre-of-mass distance, `Ic1`, `Ic2` or viscous
+    friction that is negative, or any non-finite value. Traced values (inside `jit`, `vmap`, `grad`)
+    are checked by `eqx.error_if` at run time instead.
     """
+    traced = _check_physical(m1=m1, m2=m2, l1=l1, lc1=lc1, lc2=lc2, Ic1=Ic1, Ic2=Ic2, b1=b1, b2=b2, g=g, I1=I1, I2=I2)
     if (Ic1 is None) == (I1 is None) or (Ic2 is None) == (I2 is None):
         raise ValueError(
             "base_parameters_from_physical: give each link's inertia once, either `Ic1`/`Ic2` "
@@ -49,7 +84,7 @@ def base_parameters_from_physical(
         )
     I1 = Ic1 + m1 * lc1**2 if I1 is None else I1
     I2 = Ic2 + m2 * lc2**2 if I2 is None else I2
-    return dict(
+    base = dict(
         theta1=I1 + m2 * l1**2,
         theta2=I2,
         theta3=m2 * l1 * lc2,
@@ -58,6 +93,9 @@ def base_parameters_from_physical(
         theta6=b1,
         theta7=b2,
     )
+    for bad, message in traced:  # inside jit/vmap/grad: a runtime error naming the parameter, whichever is used
+        base = {k: eqx.error_if(jnp.asarray(v), bad, message) for k, v in base.items()}
+    return base
 
 
 DRAKE_BASE_PARAMETERS = base_parameters_from_physical(**DRAKE_DEFAULTS)

@@ -36,11 +36,15 @@ def test_identify_prints_each_validation_record_and_the_median_window(acrobot_cs
     sim = dynax.simulate(dynax.Acrobot(), jnp.array([-0.3, 0.2, 0.0, 0.0]), jnp.asarray(ts), jnp.asarray(us))
     other = tmp_path / "other.csv"
     save_trajectory(Trajectory(jnp.asarray(ts), sim.xs, jnp.asarray(us), ("q1", "q2", "dq1", "dq2"), ("tau2",)), other)
+    # and a second one (the training record itself would be refused: held-out error on it is in-sample)
+    sim2 = dynax.simulate(dynax.Acrobot(), jnp.array([0.1, -0.2, 0.0, 0.0]), jnp.asarray(ts), jnp.asarray(-us))
+    held = tmp_path / "held.csv"
+    save_trajectory(Trajectory(jnp.asarray(ts), sim2.xs, jnp.asarray(-us), ("q1", "q2", "dq1", "dq2"), ("tau2",)), held)
     out = tmp_path / "params.json"
-    assert cli_main(["identify", "acrobot", str(acrobot_csv), "--method", "power", "--validation", str(acrobot_csv),
-                     str(other), "--out", str(out)]) == 0
+    assert cli_main(["identify", "acrobot", str(acrobot_csv), "--method", "power", "--validation", str(held),
+                 str(other), "--out", str(out)]) == 0
     report = json.loads(out.read_text())
-    assert list(report["validation"]["per_record"]) == ["acrobot.csv", "other.csv"]
+    assert list(report["validation"]["per_record"]) == ["held.csv", "other.csv"]
     assert len(report["validation"]["median"]) == 3 and report["validation"]["concentrated"] == {}
     printed = capsys.readouterr().out
     assert "(median window: " in printed
@@ -86,7 +90,7 @@ def test_identify_refuses_bad_input_without_writing(acrobot_csv, tmp_path, capsy
     still.write_text("\n".join([header] + [f"{0.01 * k},0,0,0,0,0" for k in range(len(rows))]) + "\n")
     assert cli_main(["identify", "acrobot", str(still), "--out", str(out)]) == 2
     err = capsys.readouterr().err
-    assert "theta1" in err and "rank 0 of 7" in err and not out.exists()
+    assert "column 'q1', rows 1-39" in err and "never moves" in err and not out.exists()
 
 
 def test_the_jointly_determined_note_gives_an_estimate_at_its_bound_as_value_and_error():
@@ -116,8 +120,17 @@ def test_identify_says_that_one_record_cannot_show_what_changes_between_recordin
     assert "NOTE: fitted on 1 record: the standard errors and the validation come from within the records" in (
         capsys.readouterr().out)
     # given a record of its own to validate on, the note is about the errors alone
-    assert cli_main(["identify", "acrobot", str(acrobot_csv), "--refine", "yes", "--validation", str(acrobot_csv),
-                     "--out", str(out)]) == 0
+    import jax.numpy as jnp
+    import numpy as np
+
+    ts = np.arange(0.0, 4.0, 0.01)
+    us = (1.5 * np.sin(2.1 * ts + 1.0))[:, None]
+    sim = dynax.simulate(dynax.Acrobot(), jnp.array([-0.3, 0.2, 0.0, 0.0]), jnp.asarray(ts), jnp.asarray(us))
+    held = tmp_path / "held.csv"
+    dynax.save_trajectory(dynax.Trajectory(jnp.asarray(ts), sim.xs, jnp.asarray(us), ("q1", "q2", "dq1", "dq2"),
+                                           ("tau2",)), held)
+    assert cli_main(["identify", "acrobot", str(acrobot_csv), "--refine", "yes", "--validation", str(held),
+                 "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "NOTE: fitted on 1 record: the standard errors come from within the records" in printed
     assert "to --validation" not in printed

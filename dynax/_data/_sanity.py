@@ -1,0 +1,532 @@
+r"""Data sanity, located: what in a record would make any fit wrong, and where it is.
+
+A fit of a record with a corrupt stretch in it returns numbers, and nothing downstream says that they
+are wrong. So before any fit each record is read for the faults real logs carry, and each fault is
+reported with its column and its rows and times (`Finding`), with a fix only where the fix is right
+for the whole record (a unit that holds in every stretch); otherwise the stretch is named so that it
+can be cut (`exclude_stretches`, the command line's `--exclude t0:t1`).
+
+What is checked (`Check` names them):
+
+- `time_units`: a median sampling interval of half a second or more: no rig these models describe is
+  sampled that slowly, and an interval of 10 "seconds" is a 100 Hz record stamped in milliseconds.
+- `glitch`: samples (one to three in a row) that leave their neighbours by more than one and a half
+  times the column's (1-99 %) range and 20 times its typical sample-to-sample step: a corrupt reading
+  (a gyro sample of 460 rad/s among samples of 1). A median of seven samples follows steps and turning
+  points, so motion, however sharp, is not flagged; a velocity's spike that its position shares (a
+  difference over a short, jittered interval) is not one, and a resampled jittered record's blurred
+  spikes (up to 1.2 times the range on the DFKI runs) stay under the bound.
+- `stuck`: a state column that repeats one value exactly for a quarter of a second or more (and 25
+  samples, and three times its longest other run: a quantised column repeats itself everywhere)
+  while other states move and the column itself moves elsewhere: a sensor that stopped
+  updating (a joint held by friction while the others swing looks the same when its velocity is
+  estimated from its angle; the message says so).
+- `wrapped`: an angle that jumps by a multiple of $2\pi$ (to 15 %) between two samples, many times its
+  typical step: an angle folded into $(-\pi, \pi]$; every derivative across the jump is wrong.
+- `velocity`: a stretch where a measured velocity stops being the derivative of its position (block
+  means against secant slopes over 50 ms blocks, as `dynax._data._velocities`, but block by block):
+  a spinning link past the encoder's range, a sign that flips half way. A gain that is wrong in every
+  stretch is a unit, refused by `load_trajectory` with the `scale` that fixes it.
+- `constant`, `zero`: a column that never changes (a dead sensor, a joint that never moves) or an
+  input that is zero or constant throughout (nothing excites the dynamics, or a constant force that
+  cannot be told from the offset a fit estimates): the parameters' scale is then not determined.
+- `duplicate`: the same record given twice, or as its own validation (held-out error in-sample).
+
+Inputs the system ignores (a non-zero `tau1` in a file read as `acrobot`) are refused by
+`load_trajectory`, which alone sees the file's other columns.
+
+Each finding is `refuse` (the command line exits with status 2 and names it) or `warn` (a
+`DataWarning` in Python, a line on the command line). The thresholds are physical or statistical
+scales of the record itself, never of one rig.
+"""
+
+import dataclasses
+import enum
+import itertools
+import math
+import warnings
+from collections.abc import Sequence
+
+import numpy as np
+
+from .._errors import DataError, UsageError
+from ._trajectory import Trajectory
+from ._velocities import BLOCK_S, velocity_pairs
+
+
+class Check(enum.StrEnum):
+    """The kinds of fault `check_records` reports (see the module notes)."""
+
+    TIME_UNITS = "time_units"
+    GLITCH = "glitch"
+    STUCK = "stuck"
+    WRAPPED = "wrapped"
+    VELOCITY = "velocity"
+    CONSTANT = "constant"
+    ZERO = "zero"
+    DUPLICATE = "duplicate"
+
+
+class Severity(enum.StrEnum):
+    """`refuse`: no fit is run on the record as it is; `warn`: the fit runs and the finding is said."""
+
+    REFUSE = "refuse"
+    WARN = "warn"
+
+
+class DataWarning(UserWarning):
+    """A located finding of `check_records` in a record that was read (Python); the command line refuses
+    or prints the same findings."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Finding:
+    """One fault in one record.
+
+    **Fields:** `kind` (a `Check`), `severity` (a `Severity`), `source` (the record's file or
+    name), `column` (contract name, or `None` for the whole record), `rows` (first and last
+    1-based data row, or `None`), `times` (first and last time [s], or `None`), `message`, and
+    `fix` (what to do: an `--exclude` / `exclude_stretches` span, a `--scale` right for the whole
+    record, or `None`).
+    """
+
+    kind: Check
+    severity: Severity
+    source: str
+    column: str | None
+    rows: tuple[int, int] | None
+    times: tuple[float, float] | None
+    message: str
+    fix: str | None = None
+
+    def describe(self) -> str:
+        where = [f"file {self.source}" if self.source else "record"]
+        if self.column is not None:
+            where.append(f"column '{self.column}'")
+        if self.rows is not None:
+            a, b = self.rows
+            where.append(f"row {a}" if a == b else f"rows {a}-{b}")
+        if self.times is not None:
+            a, b = self.times
+            where.append(f"t = {a:.6g} s" if a == b else f"t = {a:.6g} to {b:.6g} s")
+        return ", ".join(where) + f": {self.message}" + (f"; fix: {self.fix}" if self.fix else "")
+
+    def to_json(self) -> dict:
+        return {"kind": str(self.kind), "severity": str(self.severity), "source": self.source, "column": self.column,
+                "rows": None if self.rows is None else list(self.rows),
+                "times": None if self.times is None else list(self.times), "message": self.message, "fix": self.fix}
+
+
+@dataclasses.dataclass(frozen=True)
+class DataCheck:
+    """The findings of `check_records`, in record order. `refusals` and `warnings` split them by severity."""
+
+    findings: tuple[Finding, ...] = ()
+
+    @property
+    def refusals(self) -> tuple[Finding, ...]:
+        return tuple(f for f in self.findings if f.severity == Severity.REFUSE)
+
+    @property
+    def warnings(self) -> tuple[Finding, ...]:
+        return tuple(f for f in self.findings if f.severity == Severity.WARN)
+
+    def __bool__(self) -> bool:
+        return bool(self.findings)
+
+    def raise_refusals(self) -> None:
+        """Raise a `DataError` naming every refused finding (the first one's file and column as its own)."""
+        if self.refusals:
+            first = self.refusals[0]
+            text = "; ".join(f.describe() for f in self.refusals[:6])
+            more = f" (and {len(self.refusals) - 6} more)" if len(self.refusals) > 6 else ""
+            error = DataError("the data cannot be fitted as they are: " + text + more)
+            error.path, error.column = first.source or None, first.column
+            error.row = None if first.rows is None else first.rows[0]
+            raise error
+
+    def warn(self, stacklevel: int = 2) -> None:
+        """One `DataWarning` per finding (refusals included: in Python the caller decides)."""
+        for f in self.findings:
+            warnings.warn(f.describe(), DataWarning, stacklevel=stacklevel + 1)
+
+    def to_json(self) -> list[dict]:
+        return [f.to_json() for f in self.findings]
+
+
+# --- thresholds (scales of the record itself) ------------------------------------------------------
+
+MAX_INTERVAL_S = 0.5  # a median sampling interval at least this long is not a record of these dynamics
+GLITCH_RANGE = 1.5  # a glitch leaves its neighbours by this multiple of the column's (1-99 %) range ...
+GLITCH_STEPS = 20.0  # ... and this many typical sample-to-sample steps
+GLITCH_WINDOW = 7  # samples of the running median a glitch is measured from (runs of up to 3 samples)
+STUCK_S, STUCK_SAMPLES = 0.25, 25  # an exactly repeated value this long (both) is a stuck sensor
+WRAP_TOLERANCE = 0.15  # a jump within this fraction of 2 pi k (k >= 1) is a wrap
+VELOCITY_ERROR = 0.25  # a block whose mean velocity misses the secant slope by this fraction ...
+VELOCITY_NOISE = 5.0  # ... and this many robust noise standard deviations ...
+VELOCITY_MOTION = 0.05  # ... and this fraction of the record's rms slope is a bad block
+MIN_BAD_BLOCKS = 3  # a stretch holds at least this many bad blocks (150 ms), at least half of its blocks
+
+
+def _row_time(ts, i, j, source, kind, severity, column, message, fix=None):
+    return Finding(kind, severity, source, column, (int(i) + 1, int(j) + 1), (float(ts[i]), float(ts[j])), message, fix)
+
+
+def _span(ts, i, j) -> str:
+    """An `--exclude` span around samples i..j: from the sample before to the sample after, open at the ends."""
+    n = len(ts)
+    a = "" if i == 0 else f"{float(ts[i - 1]):.6g}"
+    b = "" if j >= n - 1 else f"{float(ts[j + 1]):.6g}"
+    return f"--exclude {a}:{b}"
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """(first, last) index of each run of True."""
+    if not mask.any():
+        return []
+    m = np.concatenate([[False], mask, [False]]).astype(np.int8)
+    d = np.diff(m)
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1))
+
+
+def _time_units(tr, ts, source):
+    dt = float(np.median(np.diff(ts)))
+    if dt < MAX_INTERVAL_S:
+        return []
+    fix = None
+    for factor, unit in ((1e-3, "milliseconds"), (1e-6, "microseconds")):
+        if 1e-5 <= dt * factor < MAX_INTERVAL_S:
+            fix = f"--scale t={factor:g} (time in {unit}; in Python `scale={{'t': {factor:g}}}`)"
+            break
+    message = (f"the median sampling interval is {dt:.6g} s: no record of these dynamics is sampled that slowly "
+               "(a derivative over it is meaningless)"
+               + (f"; the time column reads as {unit}" if fix else "; check the time column's unit"))
+    return [Finding(Check.TIME_UNITS, Severity.REFUSE, source, "t", None, None, message, fix)]
+
+
+def _robust_range(x):
+    lo, hi = np.percentile(x, [1, 99])
+    return float(hi - lo)
+
+
+def _position_supports(ts, q, v, k, jump) -> bool:
+    """Whether the position `q` moved as the velocity sample `v[k]` says: a logged difference over a short
+    (jittered) interval spikes with its position, which a corrupt reading does not. The one-step
+    differences of the position within two samples either side are compared."""
+    lo, hi = max(k - 2, 0), min(k + 2, len(ts) - 1)
+    steps = np.diff(q[lo:hi + 1]) / np.diff(ts[lo:hi + 1])
+    return bool(steps.size) and bool(np.any(np.abs(v[k] - steps) < 0.5 * jump))
+
+
+def _glitches(tr, ts, source, columns, positions=None):
+    import scipy.signal
+
+    positions = positions or {}
+
+    out = []
+    n = len(ts)
+    if n < 2 * GLITCH_WINDOW:
+        return out
+    for name, x, is_input in columns:
+        median = scipy.signal.medfilt(x, GLITCH_WINDOW)
+        # at the ends the filter pads with zeros: measure from the nearest full window instead
+        h = GLITCH_WINDOW // 2
+        median[:h], median[-h:] = median[h], median[-h - 1]
+        residual = np.abs(x - median)
+        steps = np.abs(np.diff(x))
+        typical = float(np.median(steps)) * 1.4826 + 1e-300
+        spread = _robust_range(x)
+        threshold = max(GLITCH_RANGE * spread, GLITCH_STEPS * typical)
+        if is_input:  # inputs may legitimately step and pulse: only readings far beyond their range
+            threshold = max(threshold, 3.0 * spread)
+        if not threshold > 0:
+            continue
+        for i, j in _runs(residual > threshold):
+            if j - i >= GLITCH_WINDOW // 2:
+                continue  # a plateau of four samples or more is not a glitch (stuck or a stretch: other checks)
+            k = i + int(np.argmax(residual[i:j + 1]))
+            value, near = float(x[k]), float(median[k])
+            if name in positions and all(_position_supports(ts, positions[name], x, m, residual[m])
+                                         for m in range(i, j + 1)):
+                continue  # the position moved so too: a difference over a short interval, not a corrupt reading
+            out.append(_row_time(
+                ts, i, j, source, Check.GLITCH, Severity.REFUSE, name,
+                f"{'a sample' if i == j else f'{j - i + 1} samples'} of {value:.6g} where the neighbouring samples are "
+                f"about {near:.4g} (a jump of {abs(value - near) / max(spread, 1e-300):.3g} times the column's range "
+                "in one sample): a corrupt reading", _span(ts, i, j)))
+    return out
+
+
+def _stuck(tr, ts, source, names, xs, paired_estimated):
+    out = []
+    dt = float(np.median(np.diff(ts)))
+    need = max(STUCK_SAMPLES, math.ceil(STUCK_S / dt))
+    for c, name in enumerate(names):
+        x = xs[:, c]
+        if np.ptp(x) == 0:
+            continue  # constant throughout: `_constant`
+        same = np.concatenate([[False], np.diff(x) == 0])
+        runs = [(i - 1, j) for i, j in _runs(same)]  # a run starts at the sample its first repeat repeats
+        lengths = [j - i + 1 for i, j in runs]
+        for k, (i, j) in enumerate(runs):
+            # a quantised column (an encoder, rounded values) repeats itself everywhere: a stuck stretch is one
+            # far longer than any other run of the column
+            elsewhere = max(lengths[:k] + lengths[k + 1:], default=1)
+            if j - i + 1 < max(need, 3 * elsewhere):
+                continue
+            others = [o for o in range(xs.shape[1]) if o != c and np.ptp(xs[i:j + 1, o]) > 0]
+            if not others:
+                continue  # everything at rest: a record that holds still, not a stuck sensor
+            reason = (" (or a joint held still by friction while the others move: its velocity is estimated from "
+                      "it, so the two cannot be told apart; cut the stretch either way, a fit across it would "
+                      "read a stuck sensor as physics)" if name in paired_estimated else "")
+            out.append(_row_time(
+                ts, i, j, source, Check.STUCK, Severity.REFUSE, name,
+                f"repeats the value {float(x[i]):.6g} exactly for {j - i + 1} samples ({float(ts[j] - ts[i]):.3g} s) while "
+                f"{', '.join(names[o] for o in others[:3])} change: a sensor that stopped updating{reason}",
+                _span(ts, i, j)))
+    return out
+
+
+def _wrapped(tr, ts, source, angles):
+    out = []
+    for name, x in angles:
+        steps = np.diff(x)
+        typical = float(np.median(np.abs(steps))) + 1e-300
+        turns = np.round(steps / (2 * np.pi))
+        wraps = np.flatnonzero((turns != 0) & (np.abs(steps - 2 * np.pi * turns) < WRAP_TOLERANCE * 2 * np.pi)
+                               & (np.abs(steps) > 20.0 * typical))
+        if wraps.size:
+            k = int(wraps[0])
+            out.append(_row_time(
+                ts, k, k + 1, source, Check.WRAPPED, Severity.REFUSE, name,
+                f"jumps by {float(steps[k]):+.4g} rad ({int(turns[k]):+d} turn) from one sample to the next, "
+                f"{wraps.size} such jump(s) in the record: an angle folded into one turn, across which every "
+                "derivative is wrong",
+                "unwrap the angle before reading it (numpy.unwrap on the column): it is the same angle, counted on"))
+    return out
+
+
+def _velocity_stretches(tr, ts, source, values, pairs):
+    """Stretches of bad 50 ms blocks (see the module notes) for each measured velocity."""
+    from ._velocities import _blocks
+
+    out = []
+    edges = _blocks(ts)
+    if len(edges) < 2 * MIN_BAD_BLOCKS + 1:
+        return out
+    start, stop = edges[:-1], edges[1:]
+    for velocity, position in pairs.items():
+        q, v = values[position], values[velocity]
+        slopes = (q[stop] - q[start]) / (ts[stop] - ts[start])
+        area = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(ts))])
+        means = (area[stop] - area[start]) / (ts[stop] - ts[start])
+        residual = means - slopes
+        noise = 1.4826 * float(np.median(np.abs(residual - np.median(residual))))
+        motion = float(np.sqrt(np.mean(slopes**2)))
+        if not motion > 0:
+            continue
+        bad = ((np.abs(residual) > VELOCITY_ERROR * np.maximum(np.abs(slopes), np.abs(means)))
+               & (np.abs(residual) > VELOCITY_NOISE * noise) & (np.abs(residual) > VELOCITY_MOTION * motion))
+        if bad.mean() > 0.8:
+            continue  # wrong nearly everywhere: a unit or a column, `load_trajectory`'s global check names it
+        # join bad blocks less than three blocks apart into stretches
+        joined = bad.copy()
+        idx = np.flatnonzero(bad)
+        for a, b in itertools.pairwise(idx):
+            if b - a <= 3:
+                joined[a:b + 1] = True
+        good = ~joined
+        sg = slopes[good]
+        gain_elsewhere = float(sg @ means[good] / (sg @ sg)) if sg.size and sg @ sg > 0 else float("nan")
+        for a, b in _runs(joined):
+            if bad[a:b + 1].sum() < MIN_BAD_BLOCKS or bad[a:b + 1].mean() < 0.5:
+                continue
+            # a stretch that reaches the first or last block reaches the record's end (the blocks stop short of it)
+            i = 0 if a == 0 else int(start[a])
+            j = len(ts) - 1 if b == len(start) - 1 else int(stop[b])
+            s, m = slopes[a:b + 1], means[a:b + 1]
+            gain = float(s @ m / (s @ s)) if s @ s > 0 else float("nan")
+            out.append(_row_time(
+                ts, i, j, source, Check.VELOCITY, Severity.REFUSE, velocity,
+                f"is not the derivative of {position} in this stretch ({b - a + 1} blocks of {BLOCK_S * 1e3:g} ms; "
+                f"its mean is {gain:.3g} times the position's change per second there, {gain_elsewhere:.3g} in the "
+                "rest of the record): a fault of the stretch, not a unit, so no scale fixes it",
+                _span(ts, i, j)))
+    return out
+
+
+def _constant(tr, ts, source, system):
+    out = []
+    xs, us = np.asarray(tr.xs, dtype=float), np.asarray(tr.us, dtype=float)
+    vehicle = system == "helicopter"
+    for c, name in enumerate(tr.state_names):
+        x = xs[:, c]
+        if np.ptp(x) == 0:
+            severity = Severity.WARN if vehicle else Severity.REFUSE
+            out.append(Finding(Check.ZERO if x[0] == 0 else Check.CONSTANT, severity, source, name, (1, len(ts)),
+                               (float(ts[0]), float(ts[-1])),
+                               f"is {x[0]:.6g} in every sample: the coordinate never moves (a dead sensor, or a joint "
+                               "that is locked), so nothing in the record determines what depends on it"))
+    if us.shape[1] == 0:
+        return out
+    flat = [np.ptp(us[:, k]) == 0 for k in range(us.shape[1])]
+    zero = [flat[k] and us[0, k] == 0 for k in range(us.shape[1])]
+    for k, name in enumerate(tr.input_names):
+        if not flat[k]:
+            continue
+        if all(flat):
+            severity = Severity.WARN if vehicle else Severity.REFUSE
+            why = ("nothing drives the system, so the parameters' scale is not determined (the equations of a free "
+                   "motion are homogeneous in them)" if zero[k] else
+                   "a constant input cannot be told from a constant offset (which a fit estimates per record) and "
+                   "does not determine the parameters' scale")
+        else:
+            severity = Severity.WARN
+            why = "that input excites nothing; only the others drive the record"
+        out.append(Finding(Check.ZERO if zero[k] else Check.CONSTANT, severity, source, name, (1, len(ts)),
+                           (float(ts[0]), float(ts[-1])), f"is {us[0, k]:.6g} in every sample: {why}"))
+    return out
+
+
+def estimated_velocities(trajectory: Trajectory) -> tuple[str, ...]:
+    """The velocity columns that are the central differences of their positions (to round-off): estimated
+    from encoder angles by `load_trajectory`, not measured."""
+    ts = np.asarray(trajectory.ts, dtype=float)
+    if len(ts) < 3:
+        return ()
+    names = tuple(trajectory.state_names)
+    xs = np.asarray(trajectory.xs, dtype=float)
+    out = []
+    for v, q in velocity_pairs(names).items():
+        c = np.gradient(xs[:, names.index(q)], ts - ts[0])  # `central_difference`'s formula, on the host
+        x = xs[:, names.index(v)]
+        if np.allclose(x, c, rtol=1e-9, atol=1e-12 * (1.0 + float(np.max(np.abs(c))))):
+            out.append(v)
+    return tuple(out)
+
+
+def check_record(trajectory: Trajectory, *, estimated: Sequence[str] | None = None) -> DataCheck:
+    """The located faults of one record (see the module notes).
+
+    **Arguments:** `trajectory` (as `load_trajectory` gives it; `system` and `source` are read);
+    `estimated`: the velocity columns that were estimated from their positions rather than measured
+    (their agreement is not checked, and a stuck angle beside one is only a warning); `None` (the
+    default) finds them (`estimated_velocities`).
+
+    **Returns:** a `DataCheck`.
+    """
+    ts = np.asarray(trajectory.ts, dtype=float)
+    source = trajectory.source or ""
+    if len(ts) < 3:
+        return DataCheck()
+    if estimated is None:
+        estimated = estimated_velocities(trajectory)
+    findings = list(_time_units(trajectory, ts, source))
+    if findings:  # every other check reads the time scale
+        return DataCheck(tuple(findings))
+    names = tuple(trajectory.state_names)
+    xs = np.asarray(trajectory.xs, dtype=float)
+    us = np.asarray(trajectory.us, dtype=float)
+    values = {n: xs[:, i] for i, n in enumerate(names)}
+    pairs = velocity_pairs(names)
+    measured = {v: q for v, q in pairs.items() if v not in estimated}
+    paired_estimated = {q for v, q in pairs.items() if v in estimated}
+    findings += _constant(trajectory, ts, source, trajectory.system)
+    columns = [(n, xs[:, i], False) for i, n in enumerate(names) if n not in estimated]
+    columns += [(n, us[:, i], True) for i, n in enumerate(trajectory.input_names)]
+    glitches = _glitches(trajectory, ts, source, columns, {v: values[q] for v, q in measured.items()})
+    findings += glitches
+    angles = [(q, values[q]) for q in pairs.values()] if trajectory.system in ("acrobot", "double_pendulum") else []
+    wrapped = _wrapped(trajectory, ts, source, angles)
+    findings += wrapped
+    findings += _stuck(trajectory, ts, source, names, xs, paired_estimated)
+    if not glitches and not wrapped:  # a glitch or a wrap spoils its blocks too; said once, at its sample
+        findings += _velocity_stretches(trajectory, ts, source, values, measured)
+    return DataCheck(tuple(findings))
+
+
+def _same(a: Trajectory, b: Trajectory) -> bool:
+    return (len(a) == len(b) and a.xs.shape == b.xs.shape and a.us.shape == b.us.shape
+            and np.array_equal(np.asarray(a.ts), np.asarray(b.ts)) and np.array_equal(np.asarray(a.xs), np.asarray(b.xs))
+            and np.array_equal(np.asarray(a.us), np.asarray(b.us)))
+
+
+def check_records(records: Sequence[Trajectory], validation: Sequence[Trajectory] = (), *,
+                  estimated: Sequence[str] | None = None) -> DataCheck:
+    """`check_record` on each record and held-out record, and the same record given twice.
+
+    **Arguments:** `records` (training), `validation` (held-out; may be empty), `estimated` as in
+    `check_record`.
+
+    **Returns:** a `DataCheck` with every finding, record by record.
+    """
+    records, validation = list(records), list(validation or ())
+    findings = []
+    for r in records + validation:
+        findings += check_record(r, estimated=estimated).findings
+    everything = [("record", r) for r in records] + [("validation record", r) for r in validation]
+    for a in range(len(everything)):
+        for b in range(a + 1, len(everything)):
+            (ka, ra), (kb, rb) = everything[a], everything[b]
+            if _same(ra, rb):
+                held = ka != kb
+                message = (f"is the same data as the {ka} {ra.source or a + 1}: "
+                           + ("held-out error on the training data is in-sample, no validation"
+                              if held else "the same record counted twice doubles its weight and halves every "
+                              "standard error"))
+                findings.append(Finding(Check.DUPLICATE, Severity.REFUSE, rb.source or "", None, None, None, message,
+                                        "give a different record" + (" for validation (or none: the tail is held "
+                                                                     "out)" if held else ", or this one once")))
+    return DataCheck(tuple(findings))
+
+
+# --- cutting stretches out -----------------------------------------------------------------------
+
+
+def parse_exclude(text: str | None) -> list[tuple[str | None, float, float]]:
+    """Parse `--exclude [FILE@]T0:T1,...` into `(file or None, t0, t1)`; an empty end is open (`8.8:`)."""
+    spans = []
+    if not text:
+        return spans
+    for item in text.split(","):
+        item = item.strip()
+        if not item:
+            continue
+        where, at, span = item.rpartition("@")
+        a, colon, b = span.partition(":")
+        if not colon:
+            raise UsageError(f"--exclude: '{item}' is not of the form T0:T1 (seconds; an end may be left open: 8.8:)")
+        try:
+            t0 = -math.inf if not a.strip() else float(a)
+            t1 = math.inf if not b.strip() else float(b)
+        except ValueError:
+            raise UsageError(f"--exclude: '{item}' holds a time that is not a number") from None
+        if math.isnan(t0) or math.isnan(t1) or not t0 < t1:
+            raise UsageError(f"--exclude: '{item}' is not a stretch of time (T0 < T1)")
+        spans.append((where if at else None, t0, t1))
+    return spans
+
+
+def exclude_stretches(trajectory: Trajectory, spans: Sequence[tuple[float, float]], *,
+                      min_samples: int = 3) -> list[Trajectory]:
+    """`trajectory` without the samples in each stretch `(t0, t1)` (both ends included; `-inf`/`inf`
+    for open ends), as the records that remain between them (a cut inside a record leaves two). Pieces
+    shorter than `min_samples` are dropped. Each piece's `source` names its file and time span.
+
+    The Python equivalent of the command line's `--exclude t0:t1`.
+    """
+    ts = np.asarray(trajectory.ts, dtype=float)
+    keep = np.ones(len(ts), bool)
+    for t0, t1 in spans:
+        keep &= ~((ts >= t0) & (ts <= t1))
+    if keep.all():
+        return [trajectory]
+    pieces = []
+    for i, j in _runs(keep):
+        if j - i + 1 < min_samples:
+            continue
+        piece = trajectory.slice(int(i), int(j) + 1)
+        name = f"{trajectory.source or 'record'} [{float(ts[i]):.6g}-{float(ts[j]):.6g} s]"
+        pieces.append(Trajectory(piece.ts, piece.xs, piece.us, piece.state_names, piece.input_names, piece.system, name))
+    return pieces

@@ -1,0 +1,132 @@
+"""Hostile but ordinary inputs (`tests/cli/hostile_cases.py`) through the console script's entry point, and
+the located data checks behind them (`dynax.check_records`, `dynax.exclude_stretches`).
+
+Every case ends in a right answer, a located refusal (exit 2, one line naming column, row or time and the
+fix) or a located warning: never a traceback, never exit 0 with a wrong answer, never advice that would
+make the data worse. Cases that run a fit are `heavy`.
+"""
+
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import dynax
+from dynax.internal import cli_main as main
+from tests.cli.hostile_cases import CASES, GOOD, make_fixtures, run_case
+
+
+@pytest.fixture(scope="module")
+def fixtures(tmp_path_factory):
+    return make_fixtures(tmp_path_factory.mktemp("hostile"))
+
+
+def _params(cases):
+    return [pytest.param(c, id=c.id, marks=[pytest.mark.heavy] if c.heavy else []) for c in cases]
+
+
+@pytest.mark.parametrize("case", _params(CASES))
+def test_hostile_input_gets_a_right_answer_or_a_located_refusal(case, fixtures, tmp_path):
+    outcome = run_case(case, tmp_path / "case", fixtures, main)
+    assert outcome.verdict in GOOD, (
+        f"{outcome.verdict}: exit {outcome.status}; expected {case.expect} with {case.needles}; stderr:\n"
+        f"{outcome.stderr[-3000:]}"
+    )
+
+
+def test_the_corpus_covers_every_class_of_fault():
+    kinds = {c.kind for c in CASES}
+    assert {"glitch", "stuck", "wrapped", "velocity", "zero", "ignored_input", "time_units", "duplicate",
+            "non_finite", "time", "magnitude", "model", "args", "clean"} <= kinds
+    assert len(CASES) >= 40 and len({c.id for c in CASES}) == len(CASES)
+
+
+# --- the checks from Python ---------------------------------------------------------------------------
+
+
+def _record(ts, q, tau, system="acrobot", source="run.csv"):
+    """An acrobot record with velocities the central differences of its angles (as encoder-only files give)."""
+    dq = np.gradient(q, ts, axis=0)
+    return dynax.Trajectory(ts, np.column_stack([q, dq]), tau[:, None], ("q1", "q2", "dq1", "dq2"), ("tau2",),
+                            system, source)
+
+
+def _smooth(seed, n=600, dt=0.01):
+    rng = np.random.default_rng(seed)
+    ts = np.arange(n) * dt
+    freqs, phases = rng.uniform(0.2, 3.0, (3, 4)), rng.uniform(0, 2 * np.pi, (3, 4))
+    waves = [np.sum(rng.uniform(0.1, 1.0, 4)[:, None] * np.sin(2 * np.pi * f[:, None] * ts + p[:, None]), axis=0)
+             for f, p in zip(freqs, phases)]
+    return ts, np.column_stack(waves[:2]), waves[2]
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10_000), noise=st.sampled_from([0.0, 1e-4, 1e-3]))
+def test_smooth_records_with_or_without_noise_raise_no_alarm(seed, noise):
+    ts, q, tau = _smooth(seed)
+    q = q + noise * np.random.default_rng(seed + 1).standard_normal(q.shape)
+    assert not dynax.check_records([_record(ts, q, tau)]).findings
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10_000), row=st.integers(0, 599), size=st.floats(2.0, 1e3), column=st.sampled_from([0, 1]))
+def test_a_single_sample_glitch_is_named_at_its_row(seed, row, size, column):
+    ts, q, tau = _smooth(seed)
+    spread = np.percentile(q[:, column], 99) - np.percentile(q[:, column], 1)
+    q[row, column] += size * spread * (1 if row % 2 else -1)
+    found = dynax.check_records([_record(ts, q, tau)]).findings
+    glitches = [f for f in found if f.kind == "glitch"]
+    assert glitches and glitches[0].column == ("q1", "q2")[column] and glitches[0].rows == (row + 1, row + 1)
+    assert glitches[0].fix.startswith("--exclude")
+
+
+def test_a_velocity_wrong_in_one_stretch_is_located_and_no_scale_is_offered(tmp_path):
+    ts, q, tau = _smooth(3, n=1000)
+    record = _record(ts, q, tau)
+    xs = np.array(record.xs)
+    xs[700:, 3] *= -1.0  # dq2's sign flips at 7 s
+    path = tmp_path / "flip.csv"
+    dynax.save_trajectory(dynax.Trajectory(ts, xs, record.us, record.state_names, record.input_names), path)
+    with pytest.warns(dynax.DataWarning, match=r"column 'dq2', rows 701-1000, t = 7 to 9.99 s"):
+        loaded = dynax.load_trajectory(path, "acrobot")  # not refused with a --scale: the gain is 1 elsewhere
+    kept = dynax.exclude_stretches(loaded, [(6.99, np.inf)])
+    assert len(kept) == 1 and float(kept[0].ts[-1]) < 7.0
+    assert not dynax.check_records(kept).findings
+
+
+def test_a_cut_inside_a_record_leaves_two_named_records():
+    ts, q, tau = _smooth(4)
+    pieces = dynax.exclude_stretches(_record(ts, q, tau), [(2.0, 2.5)])
+    assert [len(p) for p in pieces] == [200, 349]
+    assert pieces[0].source == "run.csv [0-1.99 s]" and pieces[1].source.startswith("run.csv [2.51")
+
+
+def test_identify_and_diagnose_warn_of_a_glitch_before_fitting():
+    ts, q, tau = _smooth(5)
+    q[100, 1] += 50.0
+    record = _record(ts, q, tau)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check = dynax.check_records([record], [record])
+    assert {f.kind for f in check.findings} >= {"glitch", "duplicate"}
+    assert any("row 101" in f.describe() for f in check.refusals)
+    with pytest.raises(dynax.DataError, match="column 'q2', row 101"):
+        check.raise_refusals()
+    assert not caught  # check_records itself reports; warning is the loaders' and fits' job
+
+
+def test_from_physical_refuses_impossible_parameters_and_keeps_jit_and_grad():
+    import jax
+
+    with pytest.raises(ValueError, match="`I2` = -0.05"):
+        dynax.DoublePendulum.from_physical(I2=-0.05)
+    with pytest.raises(ValueError, match="`g`"):
+        dynax.Acrobot.from_physical(g=-9.81)
+    theta4 = jax.jit(lambda m: dynax.Acrobot.from_physical(m1=m).theta4)
+    assert float(theta4(1.0)) == pytest.approx(14.715)
+    assert float(jax.grad(lambda m: dynax.Acrobot.from_physical(m1=m).theta4)(1.0)) == pytest.approx(9.81 * 0.5)
+    assert np.allclose(jax.vmap(theta4)(np.array([1.0, 2.0])), [14.715, 19.62])
+    with pytest.raises(Exception, match="`m1` is not a physical value"):
+        theta4(-1.0).block_until_ready()
