@@ -309,10 +309,10 @@ def _wrapped(tr, ts, source, angles):
 
 def _velocity_stretches(tr, ts, source, values, pairs):
     """Stretches of bad 50 ms blocks (see the module notes) for each measured velocity."""
-    from ._velocities import _blocks
+    from ._velocities import stretch_edges
 
     out = []
-    edges = _blocks(ts)
+    edges = stretch_edges(ts)
     if len(edges) < 2 * MIN_BAD_BLOCKS + 1:
         return out
     start, stop = edges[:-1], edges[1:]

@@ -44,7 +44,7 @@ def velocity_pairs(state_names) -> dict[str, str]:
     return {v: v[1:] for v in state_names if v.startswith("d") and v[1:] in state_names}
 
 
-def _blocks(ts: np.ndarray) -> np.ndarray:
+def stretch_edges(ts: np.ndarray) -> np.ndarray:
     """Block boundaries (sample indices) of about `BLOCK_S` each, at least `MIN_BLOCKS` if the record allows."""
     duration = float(ts[-1] - ts[0])
     block = max(min(BLOCK_S, duration / MIN_BLOCKS), 2.0 * float(np.median(np.diff(ts))))
@@ -57,7 +57,7 @@ def velocity_gain(ts, q, v) -> tuple[float, float, float] | None:
     slopes (see the module notes), or `None` when the record has fewer than `MIN_BLOCKS` blocks
     (of two intervals or more), or does not move."""
     ts, q, v = (np.asarray(a, dtype=float) for a in (ts, q, v))
-    edges = _blocks(ts)
+    edges = stretch_edges(ts)
     if len(edges) < MIN_BLOCKS + 1:
         return None
     start, stop = edges[:-1], edges[1:]  # block k: samples start[k] .. stop[k] (its last shared with the next)
