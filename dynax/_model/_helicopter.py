@@ -171,6 +171,16 @@ FEATURES: dict[str, FeatureFunction] = {
     "pq": lambda quat, s, u: s[3] * s[4],
     "roll": _euler(0),
     "pitch": _euler(1),
+    # Multirotor motor inputs `m1..m4` (normalised, see `dynax.Quadrotor`) and the battery voltage
+    # `vbat` (the fifth input): rotor thrust and torque grow like the square of rotor speed, and a
+    # brushed motor's speed like the voltage across it (command times battery voltage).
+    **{f"m{i + 1}": (lambda i: lambda quat, s, u: u[i])(i) for i in range(4)},
+    **{f"m{i + 1}^2": (lambda i: lambda quat, s, u: u[i] ** 2)(i) for i in range(4)},
+    **{f"vbat m{i + 1}": (lambda i: lambda quat, s, u: u[4] * u[i])(i) for i in range(4)},
+    **{f"(vbat m{i + 1})^2": (lambda i: lambda quat, s, u: (u[4] * u[i]) ** 2)(i) for i in range(4)},
+    # Rotor drag: a force against the body velocity that grows with rotor speed (blade flapping
+    # and induced drag), linear in velocity times the summed motor inputs.
+    **{f"{c} sum(m)": (lambda i: lambda quat, s, u: s[i] * jnp.sum(u[:4]))(i) for i, c in enumerate(BODY_AXES[:3])},
 }
 
 
