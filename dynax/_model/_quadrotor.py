@@ -158,7 +158,7 @@ class Quadrotor(AbstractSystem):
 
     def scaled_inputs(self, u: Float[Array, "... n_inputs"]) -> Float[Array, "... n_inputs"]:
         """The inputs divided by `input_scale` (the first `u.shape[-1]` of it: `vbat` may be absent)."""
-        return u / jnp.asarray(self.input_scale[: u.shape[-1]], u.dtype)
+        return u / jnp.broadcast_to(jnp.asarray(self.input_scale[: u.shape[-1]], u.dtype), u.shape)
 
     def as_helicopter(self) -> Helicopter:
         """The same dynamics in body-frame coordinates on scaled inputs: what the criteria fit."""
