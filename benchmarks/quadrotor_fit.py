@@ -21,9 +21,9 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import dynax  # noqa: E402
-from dynax._cli._output import write_json  # noqa: E402
-from dynax._identify._vehicle import auto_stride  # noqa: E402
+import dynax
+from dynax._cli._output import write_json
+from dynax._identify._vehicle import auto_stride
 
 DATA = pathlib.Path(__file__).resolve().parents[1].parent / "shared" / "datasets" / "nanobench"
 NANOBENCH_MAP = {

@@ -27,7 +27,7 @@ FLIGHT_UNITS = {"position": "m", "velocity": "m/s", "attitude": "rad", "body_rat
 
 
 def _rk4(system, x, u, dt):
-    f = lambda y: system.vector_field(0.0, y, u)  # noqa: E731  (autonomous between samples: the input is held)
+    f = lambda y: system.vector_field(0.0, y, u)
     k1 = f(x)
     k2 = f(x + 0.5 * dt * k1)
     k3 = f(x + 0.5 * dt * k2)

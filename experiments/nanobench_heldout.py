@@ -23,10 +23,10 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-import dynax  # noqa: E402
-from dynax._cli._output import write_json  # noqa: E402
+import dynax
+from dynax._cli._output import write_json
 
 DATA = pathlib.Path(__file__).resolve().parents[1].parent / "shared" / "datasets" / "nanobench"
 # The documented map of the NanoBench logs (docs/flight_data.md).

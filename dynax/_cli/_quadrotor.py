@@ -55,9 +55,9 @@ def run_fit(args) -> int:
     out = output_file(args.out, "model.json")
     mapping, scale, offset = data_options(args)
     start = time.perf_counter()
-    runs, notes = load_flights(args.data, mapping, scale, offset, min_samples=int(round(args.horizon * 100)) + 2)
+    runs, notes = load_flights(args.data, mapping, scale, offset, min_samples=round(args.horizon * 100) + 2)
     dt = float(np.median([r.dt for r in runs]))
-    n_steps = max(int(round(args.horizon / dt)), 1)
+    n_steps = max(round(args.horizon / dt), 1)
     if args.criterion == "frequency" and len(runs) > 1:
         raise UsageError(f"--criterion frequency needs one continuous record; the data hold {len(runs)} runs of flight")
     system = initial_quadrotor(model, runs, battery=False if args.no_battery else None)
@@ -126,7 +126,7 @@ def _scores(error, metrics):
 def run_evaluate(args, system) -> int:
     """The quadrotor branch of `dynax evaluate`: flight scores per group beside constant velocity."""
     from .._model._quadrotor import ConstantVelocity
-    from .._predict import flight_error, FLIGHT_UNITS
+    from .._predict import FLIGHT_UNITS, flight_error
 
     steps = parse_steps(args.steps or "1,10,50")
     metrics = parse_metrics(args.metric)

@@ -56,17 +56,17 @@ from jaxtyping import Array, Float
 
 from .._data._trajectory import Trajectory
 from ._helicopter import (
-    AbstractBodyModel,
-    AccelerationModel,
     ANGULAR_RATE,
     BODY_AXES,
-    Helicopter,
     HELICOPTER_STATE_NAMES,
+    QUATERNION,
+    STANDARD_GRAVITY,
+    AbstractBodyModel,
+    AccelerationModel,
+    Helicopter,
     LinearVelocityModel,
     quaternion_multiply,
     quaternion_to_rotation,
-    QUATERNION,
-    STANDARD_GRAVITY,
 )
 from ._system import AbstractSystem
 

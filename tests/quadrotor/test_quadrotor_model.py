@@ -48,7 +48,7 @@ def _flight(seed, seconds=1.5, hold=5):
     every sample (so the open-loop body does not tumble), integrated by DOP853 between samples."""
     rng = np.random.default_rng(seed)
     hover = (-B + np.sqrt(B**2 + A * MASS * GRAVITY)) / (2 * A)
-    n = int(round(seconds / DT))
+    n = round(seconds / DT)
     noise = np.repeat(0.2 * rng.uniform(-1, 1, size=(n // hold + 1, 4)), hold, axis=0)[:n]
     state = np.concatenate([[0, 0, 1.0], [1.0, 0, 0, 0], rng.normal(0, 0.3, 3), rng.normal(0, 0.5, 3)])
     xs, us = [state], []
@@ -132,8 +132,9 @@ def test_predict_ahead_matches_a_rollout_by_hand(fitted, flights):
     for i in (0, 37, len(flight) - 13):
         state = xs[i]
         for h in range(1, 13):
-            sol = solve_ivp(lambda t, y: np.asarray(field(jnp.asarray(y), jnp.asarray(us[i + h - 1]))), (0, DT),
-                            state, method="DOP853", rtol=1e-12, atol=1e-14)
+            u = jnp.asarray(us[i + h - 1])
+            sol = solve_ivp(lambda t, y, u=u: np.asarray(field(jnp.asarray(y), u)), (0, DT), state, method="DOP853",
+                            rtol=1e-12, atol=1e-14)
             state = sol.y[:, -1]
             if h in steps:
                 # RK4 at the sample interval against DOP853: an error of order dt^4 per step.

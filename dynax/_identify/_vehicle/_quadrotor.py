@@ -19,7 +19,7 @@ from ..._data._trajectory import Trajectory
 from ..._errors import UsageError
 from ..._fit import Parameters, Solution
 from ..._model._quadrotor import Quadrotor, to_body_frame
-from ._criteria import _normal_equations, _starts, _weights, Backprop, Lagged, OneStep
+from ._criteria import Backprop, Lagged, OneStep, _normal_equations, _starts, _weights
 from ._fit import fit_vehicle
 from ._frequency import FrequencyDomain
 
@@ -61,7 +61,7 @@ def join_flights(system: Quadrotor, flights: Sequence[Trajectory]) -> tuple[Traj
 def fit_quadrotor(
     system: Quadrotor,
     flights: Sequence[Trajectory] | Trajectory,
-    criterion: OneStep | Lagged | Backprop | FrequencyDomain = OneStep(),
+    criterion: OneStep | Lagged | Backprop | FrequencyDomain | None = None,
     *,
     progress: bool | None = None,
     callback=None,
@@ -74,7 +74,7 @@ def fit_quadrotor(
       which weights to fit.
     - `flights`: one `Trajectory` or several, with the `quadrotor` columns, uniformly sampled
       at one interval (the usable runs of `dynax.load_flight`'s records: `dynax.usable_segments`).
-    - `criterion`: `OneStep()`, `Lagged(horizon=...)`, `Backprop(horizon=...)` (both start from the
+    - `criterion`: `OneStep()` (the default), `Lagged(horizon=...)`, `Backprop(horizon=...)` (both start from the
       one-step fit) or `FrequencyDomain()` (linear model, one continuous record).
     - `progress`, `callback`: as for `fit_vehicle`.
 
@@ -88,6 +88,7 @@ def fit_quadrotor(
         P. Abbeel, V. Ganapathi and A. Y. Ng, "Learning vehicular dynamics, with application to
         modeling helicopters", NIPS 18, 2005.
     """
+    criterion = OneStep() if criterion is None else criterion
     if isinstance(flights, Trajectory):
         flights = [flights]
     joined, breaks = join_flights(system, flights)
@@ -138,7 +139,7 @@ def quadrotor_from_json(obj: dict, path=None) -> Quadrotor:
     """The `Quadrotor` of a `MODEL.json` object (as written by `quadrotor_to_json`), checked:
     known features, a 6-row mask and weights of matching shape, finite numbers, positive scales."""
     from ..._errors import DataError
-    from ..._model._helicopter import AccelerationModel, FEATURES, LinearVelocityModel
+    from ..._model._helicopter import FEATURES, AccelerationModel, LinearVelocityModel
 
     try:
         if obj.get("system") != "quadrotor":
