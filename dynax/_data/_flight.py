@@ -11,8 +11,8 @@ criteria fit and score without a window crossing a cut.
 The thresholds are physics of small multirotors, not of one rig (`FlightChecks`):
 
 - ground: every motor input at or below `motor_off` times the median in-flight input, or the
-  vehicle within `clearance` of the floor (the median height of the motors-off samples, else the
-  record's lowest height), where the floor carries it;
+  vehicle within `clearance` of the floor (its height at the nearest motors-off sample: take-off
+  and landing spots may differ; else the record's lowest height), where the floor carries it;
 - `max_rate`: a body rate beyond the full scale of the MEMS gyros of small multirotors
   (2000 deg/s = 34.9 rad/s) is no measurement;
 - `max_input_ratio`: a motor input beyond this multiple of its median in flight: thrust grows
@@ -149,7 +149,17 @@ def inspect_flight(trajectory: Trajectory, checks: FlightChecks = FlightChecks()
     level = np.median(np.abs(motors[running]), axis=0) if running.any() else np.ones(4)
     level = np.where(level > 0, level, 1.0)
     off = np.all(np.abs(motors) <= checks.motor_off * level, axis=1)
-    floor = float(np.median(z[off])) if off.any() else float(np.min(z))
+    # The floor under the vehicle: its height at the nearest motors-off sample (take-off and landing
+    # spots differ: a pad, an uneven floor), else the record's lowest height.
+    if off.any():
+        rests = np.flatnonzero(off)
+        after = np.clip(np.searchsorted(rests, np.arange(len(z))), 0, len(rests) - 1)
+        before = np.clip(after - 1, 0, len(rests) - 1)
+        nearest = np.where(np.abs(rests[before] - np.arange(len(z))) <= np.abs(rests[after] - np.arange(len(z))),
+                           rests[before], rests[after])
+        floor = z[nearest]
+    else:
+        floor = np.full_like(z, np.min(z))
     ground = off | (z < floor + checks.clearance)
 
     flagged: list[tuple[str, str, np.ndarray, np.ndarray]] = []
