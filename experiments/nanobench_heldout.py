@@ -11,8 +11,9 @@ EM-free, H = 0.5 s) and the linear velocity-prediction baseline (one-step). Grou
 glitches are left out of both fitting and scoring (`dynax.load_flight`, `dynax.usable_segments`).
 
 Run: `python experiments/nanobench_heldout.py [--out DIR] [--quick]` (default DIR
-`experiments/results/nanobench_heldout`). Writes `DIR/heldout.json`, `DIR/horizon.png` (MAE per group
-against the horizon) and `DIR/path.png` (a held-out flight's 3-D path with 0.5 s predictions).
+`experiments/results/nanobench_heldout`). Writes `DIR/heldout.json`, `DIR/heldout.md` (MAE at h = 1 /
+10 / 50 and, in brackets, the cumulative MAE), `DIR/horizon.png` (MAE per group against the horizon)
+and `DIR/path.png` (a held-out flight's 3-D path with 0.5 s predictions).
 """
 
 import argparse
@@ -111,8 +112,22 @@ def main():
               "map": NANOBENCH_MAP, "table": table, "summary": summary,
               "notes": {"train": train_notes, "test": test_notes}}
     write_json(out / "heldout.json", result)
-    print(f"wrote {out / 'heldout.json'}")
+    (out / "heldout.md").write_text(markdown_table(table))
+    print(markdown_table(table))
+    print(f"wrote {out / 'heldout.json'} and {out / 'heldout.md'}")
     _figures(out, fitted, test)
+
+
+def markdown_table(table) -> str:
+    """MAE at h = 1, 10, 50 (0.01, 0.1, 0.5 s) and the cumulative MAE per group, one row per model."""
+    groups = ("position", "velocity", "attitude", "body_rate")
+    units = {"position": "m", "velocity": "m/s", "attitude": "rad", "body_rate": "rad/s"}
+    head = "| model | " + " | ".join(f"{g.replace('_', ' ')} [{units[g]}]" for g in groups) + " |"
+    lines = [head, "|---|" + "---|" * len(groups)]
+    for name, row in table.items():
+        cells = [" / ".join(f"{v:.3f}" for v in row["mae"][g]) + f" ({row['cumulative_mae'][g]:.3f})" for g in groups]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def _figures(out, fitted, test):
