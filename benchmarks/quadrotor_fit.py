@@ -2,7 +2,7 @@
 
 The usable runs of the 16 NanoBench flights (ground segments and glitches left out), repeated from
 the first until they hold 60 000 samples, are fitted with the acceleration model (battery-scaled
-motor features, 39 weights) by each criterion as `dynax fit quadrotor` runs it: one-step least
+motor features, 55 weights) by each criterion as `dynax fit quadrotor` runs it: one-step least
 squares, and the lagged criterion (H = 0.5 s, EM-free, from the one-step fit, every start up to the
 CLI's 600 windows: `--stride auto`). Each fit is timed cold (compilation included, as a first
 command-line run pays) and warm (compiled once already). Loading the files is timed apart.

@@ -125,7 +125,7 @@ def markdown_table(table) -> str:
     head = "| model | " + " | ".join(f"{g.replace('_', ' ')} [{units[g]}]" for g in groups) + " |"
     lines = [head, "|---|" + "---|" * len(groups)]
     for name, row in table.items():
-        cells = [" / ".join(f"{v:.3f}" for v in row["mae"][g]) + f" ({row['cumulative_mae'][g]:.3f})" for g in groups]
+        cells = [" / ".join(f"{v:.4f}" for v in row["mae"][g]) + f" ({row['cumulative_mae'][g]:.4f})" for g in groups]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
