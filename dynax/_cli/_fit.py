@@ -34,7 +34,8 @@ def register(subparsers):
                         help="body model (default acceleration); quadrotor also nominal (the rigid body)")
     parser.add_argument("--no-battery", action="store_true",
                         help="quadrotor: do not scale the motor features by vbat (default: scaled when vbat is given)")
-    parser.add_argument("--criterion", choices=_CRITERIA, default="one-step", help="learning criterion (default one-step)")
+    parser.add_argument("--criterion", choices=_CRITERIA, default="one-step",
+                        help="learning criterion (default one-step); frequency: helicopter linear model only")
     parser.add_argument("--horizon", type=float, default=1.0, metavar="SECONDS",
                         help="lagged and backprop: prediction horizon H (default 1 s)")
     parser.add_argument("--features", choices=("tempest", "rich"), default="tempest",

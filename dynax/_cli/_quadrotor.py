@@ -37,15 +37,16 @@ def run_fit(args) -> int:
 
     jax.config.update("jax_enable_x64", True)  # learning in float64; the library leaves config alone
 
-    from .._identify._vehicle import Backprop, FrequencyDomain, Lagged, OneStep
+    from .._identify._vehicle import Backprop, Lagged, OneStep
     from .._identify._vehicle._quadrotor import fit_quadrotor, quadrotor_to_json
     from .._model._quadrotor import initial_quadrotor
 
     model = args.model or "acceleration"
     if model not in QUADROTOR_MODELS:
         raise UsageError(f"--model {model} is not a quadrotor model; expected one of {list(QUADROTOR_MODELS)}")
-    if args.criterion == "frequency" and model != "linear":
-        raise UsageError("--criterion frequency fits the linear model only; use --model linear")
+    if args.criterion == "frequency":
+        raise UsageError("--criterion frequency identifies the helicopter's linear model only; for a quadrotor use "
+                         "one-step, lagged or backprop")
     if not (math.isfinite(args.horizon) and args.horizon > 0):
         raise UsageError(f"--horizon must be a positive number of seconds, got {args.horizon}")
     if args.stride != "auto" and args.stride < 1:
@@ -58,8 +59,6 @@ def run_fit(args) -> int:
     runs, notes = load_flights(args.data, mapping, scale, offset, min_samples=round(args.horizon * 100) + 2)
     dt = float(np.median([r.dt for r in runs]))
     n_steps = max(round(args.horizon / dt), 1)
-    if args.criterion == "frequency" and len(runs) > 1:
-        raise UsageError(f"--criterion frequency needs one continuous record; the data hold {len(runs)} runs of flight")
     system = initial_quadrotor(model, runs, battery=False if args.no_battery else None)
     stride = args.stride
     if stride == "auto":
@@ -71,7 +70,6 @@ def run_fit(args) -> int:
                                                     "backprop": {"max_steps": args.max_iterations}}.get(args.criterion, {})
     criterion = {
         "one-step": lambda: OneStep(),
-        "frequency": lambda: FrequencyDomain(),
         "lagged": lambda: Lagged(horizon=args.horizon, stride=stride, **limit),
         "backprop": lambda: Backprop(horizon=args.horizon, stride=stride, **limit),
     }[args.criterion]()

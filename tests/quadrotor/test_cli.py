@@ -64,7 +64,7 @@ def test_usage_errors(short_flight, tmp_path, capsys):
     assert "helicopter" in capsys.readouterr().err
     assert main(["fit", "quadrotor", str(short_flight), "--map", MAP, "--model", "acceleration",
                  "--criterion", "frequency", "--out", str(model)]) == 2
-    assert "linear" in capsys.readouterr().err
+    assert "helicopter's linear model" in capsys.readouterr().err
     assert not model.exists()
     model.write_text(json.dumps({"system": "quadrotor", "model": "acceleration", "features": ["m1"], "mask": [[1]] * 6,
                                  "weights": [[0.0]] * 6, "input_scale": [1, 1, 1, 1, 1], "gravity": -9.81}))

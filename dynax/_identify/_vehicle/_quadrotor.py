@@ -2,8 +2,9 @@ r"""`fit_quadrotor`: learn a `Quadrotor`'s body model from flights with the vehi
 
 The quadrotor's dynamics are the helicopter's in world-velocity coordinates (`dynax.Quadrotor`), so
 the fit is `fit_vehicle` on the body-frame form of the flights (`Quadrotor.as_helicopter`,
-`to_body_frame`): one-step least squares, the lagged criterion by the EM-free iteration, the same
-loss by backprop, and the frequency-domain criterion for the linear model on one continuous record.
+`to_body_frame`): one-step least squares, the lagged criterion by the EM-free iteration and the same
+loss by backprop. The frequency-domain criterion is the helicopter's alone (its CIFER structure and
+frequency responses are written in the helicopter's inputs).
 Several flights (or the runs of one flight between its ground segments and glitches) are joined
 into one record with breaks that no window crosses.
 """
@@ -74,8 +75,9 @@ def fit_quadrotor(
       which weights to fit.
     - `flights`: one `Trajectory` or several, with the `quadrotor` columns, uniformly sampled
       at one interval (the usable runs of `dynax.load_flight`'s records: `dynax.usable_segments`).
-    - `criterion`: `OneStep()` (the default), `Lagged(horizon=...)`, `Backprop(horizon=...)` (both start from the
-      one-step fit) or `FrequencyDomain()` (linear model, one continuous record).
+    - `criterion`: `OneStep()` (the default), `Lagged(horizon=...)` or `Backprop(horizon=...)` (both
+      start from the one-step fit). `FrequencyDomain()` is refused: its structure is the
+      helicopter's.
     - `progress`, `callback`: as for `fit_vehicle`.
 
     **Returns:** the engine's `Solution`: `model` the fitted `Quadrotor`, `value` its free weights
@@ -89,12 +91,15 @@ def fit_quadrotor(
         modeling helicopters", NIPS 18, 2005.
     """
     criterion = OneStep() if criterion is None else criterion
+    if isinstance(criterion, FrequencyDomain):
+        raise UsageError("fit_quadrotor: the frequency-domain criterion identifies the helicopter's linear model "
+                         "(its structure and frequency responses are written in the helicopter's inputs u1..u4); "
+                         "for a quadrotor use OneStep, Lagged or Backprop")
     if isinstance(flights, Trajectory):
         flights = [flights]
     joined, breaks = join_flights(system, flights)
     helicopter = system.as_helicopter()
-    fit = fit_vehicle(helicopter, joined, criterion, progress=progress, callback=callback,
-                      breaks=None if isinstance(criterion, FrequencyDomain) else breaks)
+    fit = fit_vehicle(helicopter, joined, criterion, progress=progress, callback=callback, breaks=breaks)
     fitted = system.with_body_model(fit.system.body_model)
     parameters = Parameters.of(fitted)
     theta = fitted.body_model.parameter_vector()
