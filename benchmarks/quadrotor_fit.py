@@ -5,7 +5,9 @@ the first until they hold 60 000 samples, are fitted with the acceleration model
 motor features, 55 weights) by each criterion as `dynax fit quadrotor` runs it: one-step least
 squares, and the lagged criterion (H = 0.5 s, EM-free, from the one-step fit, every start up to the
 CLI's 600 windows: `--stride auto`). Each fit is timed cold (compilation included, as a first
-command-line run pays) and warm (compiled once already). Loading the files is timed apart.
+command-line run pays) and warm (compiled once already). The lagged fit runs after the one-step
+one, so its cold time excludes the one-step compilation it starts from: a lagged fit from a cold
+start costs about both cold times. Loading the files is timed apart.
 
 Run: `python benchmarks/quadrotor_fit.py [--out DIR] [--samples N]` (default DIR
 `benchmarks/results`). Writes `DIR/quadrotor_fit.json`. Timings on a shared CPU are indicative; run

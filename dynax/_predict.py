@@ -78,7 +78,8 @@ def predict_ahead(
     - `trajectory`: a uniformly sampled record (the model's state and input columns).
     - `steps`: the horizons in samples (default 1, 10, 50: 0.01, 0.1 and 0.5 s at 100 Hz).
 
-    **Returns:** the predicted states, shape `(starts, len(steps), n_states)`, in the trajectory's dtype.
+    **Returns:** the predicted states, shape `(starts, len(steps), n_states)`, in the trajectory's dtype
+    (the model's arrays are cast to it: `trajectory.astype(jnp.float32)` predicts in float32).
     """
     steps = _check_steps(steps)
     if not trajectory.is_uniform:
@@ -88,7 +89,9 @@ def predict_ahead(
         raise UsageError(f"predict_ahead: the record has {len(trajectory)} samples, too few for {max(steps)} steps ahead")
     xs, us = trajectory.xs, trajectory.us
     dt = jnp.asarray(trajectory.dt, xs.dtype)
-    return _predict(model, xs, us, dt, jnp.arange(n), jnp.asarray(steps), max(steps))
+    # The model's arrays in the trajectory's dtype: a float32 record rolls out in float32.
+    model = jax.tree.map(lambda a: a.astype(xs.dtype) if eqx.is_inexact_array(a) else a, model)
+    return _predict(model, xs, us.astype(xs.dtype), dt, jnp.arange(n), jnp.asarray(steps), max(steps))
 
 
 def _group_errors(predicted, measured):

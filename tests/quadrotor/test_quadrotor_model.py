@@ -141,6 +141,15 @@ def test_predict_ahead_matches_a_rollout_by_hand(fitted, flights):
                 np.testing.assert_allclose(predicted[i, steps.index(h)], state, rtol=0, atol=1e-6)
 
 
+def test_predict_ahead_in_float32(fitted, flights):
+    flight = flights[2]
+    double = np.asarray(dynax.predict_ahead(fitted.model, flight, (1, 10)))
+    single = dynax.predict_ahead(fitted.model, flight.astype(jnp.float32), (1, 10))
+    assert single.dtype == jnp.float32
+    # float32 rounding (1e-7 relative) grown over 10 RK4 steps of a model with rates of a few rad/s.
+    np.testing.assert_allclose(np.asarray(single), double, rtol=0, atol=1e-4)
+
+
 def test_constant_velocity_baseline_moves_on_the_straight_line(flights):
     flight = flights[1]
     predicted = np.asarray(dynax.predict_ahead(dynax.ConstantVelocity(), flight, (10,)))
