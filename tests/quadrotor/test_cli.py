@@ -72,3 +72,31 @@ def test_usage_errors(short_flight, tmp_path, capsys):
     assert main(["evaluate", str(model), str(short_flight), "--map", MAP, "--steps", "0,10", "--out", str(metrics)]) == 2
     assert "--steps" in capsys.readouterr().err
     assert not metrics.exists()
+
+
+@pytest.mark.heavy  # two fits and evaluations compiled for a second input layout: 25 s of CPU
+def test_another_drone_needs_only_a_map(tmp_path, capsys):
+    """Logs of another vehicle (the rigid body of test_quadrotor_model, rotor speeds in rad/s, no
+    battery voltage, columns named its own way): the same command with a --map, no code change."""
+    from .test_quadrotor_model import _flight
+
+    flights = [_flight(seed) for seed in (11, 12)]
+    paths = []
+    for k, f in enumerate(flights):
+        table = np.column_stack([np.asarray(f.ts) + 100.0, np.asarray(f.xs), np.asarray(f.us[:, :4]) * (2500 / 4e4)])
+        names = ["time", "px", "py", "pz", "q_w", "q_x", "q_y", "q_z", "vel_x", "vel_y", "vel_z", "gyro_x", "gyro_y",
+                 "gyro_z", "omega1", "omega2", "omega3", "omega4"]
+        path = tmp_path / f"other_{k}.csv"
+        np.savetxt(path, table, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+        paths.append(str(path))
+    other_map = ("t=time,x=px,y=py,z=pz,qw=q_w,qx=q_x,qy=q_y,qz=q_z,vx=vel_x,vy=vel_y,vz=vel_z,p=gyro_x,q=gyro_y,"
+                 "r=gyro_z,m1=omega1,m2=omega2,m3=omega3,m4=omega4")
+    model = tmp_path / "model.json"
+    assert main(["fit", "quadrotor", *paths, "--map", other_map, "--model", "nominal", "--out", str(model)]) == 0
+    obj = json.loads(model.read_text())
+    assert "dw/m1^2" in obj["parameters"] and obj["input_scale"][0] == pytest.approx(2500, rel=0.1)
+    metrics = tmp_path / "metrics.json"
+    assert main(["evaluate", str(model), *paths, "--map", other_map, "--steps", "1,10", "--out", str(metrics)]) == 0
+    out = json.loads(metrics.read_text())
+    # The nominal model is this vehicle's own structure: far ahead of holding the velocity.
+    assert out["model"]["mae"]["velocity"][1] < 0.01 * out["constant_velocity"]["mae"]["velocity"][1]
