@@ -55,6 +55,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._data._trajectory import Trajectory
+from .._errors import UsageError
 from ._helicopter import (
     ANGULAR_RATE,
     BODY_AXES,
@@ -225,10 +226,10 @@ class ConstantVelocity(AbstractSystem):
 
 def _check_quadrotor_data(trajectory: Trajectory, where: str):
     if tuple(trajectory.state_names) != QUADROTOR_STATE_NAMES:
-        raise ValueError(f"{where}: the trajectory must have the quadrotor states {QUADROTOR_STATE_NAMES}, "
+        raise UsageError(f"{where}: the trajectory must have the quadrotor states {QUADROTOR_STATE_NAMES}, "
                          f"got {tuple(trajectory.state_names)}")
     if tuple(trajectory.input_names) not in (QUADROTOR_INPUT_NAMES, QUADROTOR_INPUT_NAMES[:4]):
-        raise ValueError(f"{where}: the trajectory's inputs must be {QUADROTOR_INPUT_NAMES} (vbat optional), "
+        raise UsageError(f"{where}: the trajectory's inputs must be {QUADROTOR_INPUT_NAMES} (vbat optional), "
                          f"got {tuple(trajectory.input_names)}")
 
 
@@ -257,14 +258,14 @@ def initial_quadrotor(model: str, flights, *, battery: bool | None = None) -> Qu
     """
     flights = list(flights)
     if not flights:
-        raise ValueError("initial_quadrotor: no flights given")
+        raise UsageError("initial_quadrotor: no flights given")
     for f in flights:
         _check_quadrotor_data(f, "initial_quadrotor")
     has_battery = all(len(f.input_names) == 5 for f in flights)
     if battery is None:
         battery = has_battery
     if battery and not has_battery:
-        raise ValueError("initial_quadrotor: `battery=True` needs `vbat` in every flight")
+        raise UsageError("initial_quadrotor: `battery=True` needs `vbat` in every flight")
     us = np.concatenate([np.abs(np.asarray(f.us[:, :4])) for f in flights])
     running = us[us > 0]
     m_scale = float(np.median(running)) if running.size else 1.0
@@ -280,5 +281,5 @@ def initial_quadrotor(model: str, flights, *, battery: bool | None = None) -> Qu
         body = AccelerationModel(weights=template.weights, feature_names=template.feature_names, mask=template.mask,
                                  gravity=-STANDARD_GRAVITY)
     else:
-        raise ValueError(f"initial_quadrotor: unknown model {model!r}; expected one of {QUADROTOR_MODELS}")
+        raise UsageError(f"initial_quadrotor: unknown model {model!r}; expected one of {QUADROTOR_MODELS}")
     return Quadrotor(body, scale)
