@@ -206,5 +206,16 @@ from ._distributed import initialize_distributed as initialize_distributed
 from ._sim_error import simulation_error as simulation_error, SimulationError as SimulationError
 from ._solvers import RK4 as RK4
 from ._simulate import Adaptive as Adaptive, FixedGrid as FixedGrid, Simulation as Simulation, simulate as simulate
+from ._data._flight import (
+    FlightChecks as FlightChecks,
+    FlightNotes as FlightNotes,
+    inspect_flight as inspect_flight,
+    load_flight as load_flight,
+    usable_segments as usable_segments,
+)
+from ._model._quadrotor import ConstantVelocity as ConstantVelocity, initial_quadrotor as initial_quadrotor, Quadrotor as Quadrotor
+from ._identify._vehicle._quadrotor import fit_quadrotor as fit_quadrotor
+from ._identify._vehicle._model_file import load_model as load_model, save_model as save_model
+from ._predict import flight_error as flight_error, FlightError as FlightError, predict_ahead as predict_ahead
 
 from ._version import __version__ as __version__

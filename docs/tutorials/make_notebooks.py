@@ -9,7 +9,7 @@ import pathlib
 import re
 
 HERE = pathlib.Path(__file__).resolve().parent
-EXECUTED = ("first_steps.md", "dfki_simulation.md")  # the tutorials that run in make test, top to bottom
+EXECUTED = ("first_steps.md", "dfki_simulation.md", "quadrotor_flights.md")  # the tutorials that run in make test, top to bottom
 _BLOCK = re.compile(r"^```python\n(.*?)^```\n", re.S | re.M)
 
 

@@ -19,9 +19,14 @@ def register(subparsers):
             "angular_rate, position, orientation) at each horizon to --out."
         ),
     )
-    parser.add_argument("model", help="model file written by `dynax fit helicopter`")
-    parser.add_argument("data", help="CSV or NPZ file with the contract's helicopter columns")
-    parser.add_argument("--horizons", default="0.1,0.5,1,2", help="comma-separated horizons in seconds (default 0.1,0.5,1,2)")
+    parser.add_argument("model", help="model file written by `dynax fit helicopter` or `dynax fit quadrotor`")
+    parser.add_argument("data", nargs="+", help="CSV, CSV.GZ or NPZ file(s) with the contract's columns (helicopter: one)")
+    parser.add_argument("--horizons", default="0.1,0.5,1,2", help="helicopter: comma-separated horizons in seconds (default 0.1,0.5,1,2)")
+    parser.add_argument("--steps", default=None,
+                        help="quadrotor: comma-separated horizons in samples (default 1,10,50): MAE and RMSE per group "
+                             "(position m, velocity m/s, attitude rad, body rate rad/s) and the cumulative MAE over "
+                             "1..max, beside the constant-velocity baseline")
+    parser.add_argument("--metric", default="mae,rmse", help="quadrotor: mae, rmse or mae,rmse (default both)")
     parser.add_argument("--stride", type=int, default=1, metavar="N", help="use every N-th start sample (default 1: every)")
     add_data_options(parser)
     parser.add_argument("--out", required=True, help="output metrics file (JSON)")
@@ -79,13 +84,23 @@ def run(args: argparse.Namespace) -> int:
     from .._identify._vehicle import model_from_json, prediction_error
     from ._fit import load_helicopter_data
 
+    model_obj = read_json_object(args.model, "a model file written by `dynax fit`")
+    if model_obj.get("system") == "quadrotor":
+        from .._identify._vehicle._quadrotor import quadrotor_from_json
+        from ._quadrotor import run_evaluate
+
+        return run_evaluate(args, quadrotor_from_json(model_obj, path=args.model))
+    if args.steps is not None:
+        raise UsageError("--steps applies to quadrotor models; a helicopter model takes --horizons (seconds)")
+    if len(args.data) != 1:
+        raise UsageError(f"evaluating a helicopter model takes one data file, got {len(args.data)}")
+    args.data = args.data[0]
     horizons = _horizons(args.horizons)
     if args.stride < 1:
         raise UsageError(f"--stride must be at least 1, got {args.stride}")
     out = output_file(args.out, "metrics.json")
     mapping, scale, offset = data_options(args)
     start = time.perf_counter()
-    model_obj = read_json_object(args.model, "a model file written by `dynax fit`")
     check_model_file(model_obj, args.model)
     system = model_from_json(model_obj, path=args.model)
     data = load_helicopter_data(args.data, mapping, scale, offset)

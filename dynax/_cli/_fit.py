@@ -25,10 +25,17 @@ def register(subparsers):
             "of the H-step prediction error) and backprop (the same loss by gradients through the rollouts)."
         ),
     )
-    parser.add_argument("system", choices=("helicopter",), help="the vehicle (only helicopter)")
-    parser.add_argument("data", help="CSV or NPZ file with t, x..r and u1..u4 (the contract's helicopter columns)")
-    parser.add_argument("--model", choices=_MODELS, default="acceleration", help="body model (default acceleration)")
-    parser.add_argument("--criterion", choices=_CRITERIA, default="one-step", help="learning criterion (default one-step)")
+    parser.add_argument("system", choices=("helicopter", "quadrotor"), help="the vehicle")
+    parser.add_argument("data", nargs="+",
+                        help="CSV, CSV.GZ or NPZ file(s) with the contract's columns: helicopter t, x..r, u1..u4 (one "
+                             "file); quadrotor t, x..r, m1..m4 and optional vbat (one or more flights; ground "
+                             "segments and glitches are found, noted and left out)")
+    parser.add_argument("--model", choices=(*_MODELS, "nominal"), default=None,
+                        help="body model (default acceleration); quadrotor also nominal (the rigid body)")
+    parser.add_argument("--no-battery", action="store_true",
+                        help="quadrotor: do not scale the motor features by vbat (default: scaled when vbat is given)")
+    parser.add_argument("--criterion", choices=_CRITERIA, default="one-step",
+                        help="learning criterion (default one-step); frequency: helicopter linear model only")
     parser.add_argument("--horizon", type=float, default=1.0, metavar="SECONDS",
                         help="lagged and backprop: prediction horizon H (default 1 s)")
     parser.add_argument("--features", choices=("tempest", "rich"), default="tempest",
@@ -137,6 +144,17 @@ def run(args: argparse.Namespace) -> int:
 
     from .._identify._vehicle import Backprop, FrequencyDomain, Lagged, OneStep
     from .._identify._vehicle import auto_stride, fit_vehicle, initial_helicopter, model_to_json
+
+    if args.system == "quadrotor":
+        from ._quadrotor import run_fit
+
+        return run_fit(args)
+    if len(args.data) != 1:
+        raise UsageError(f"dynax fit helicopter takes one data file, got {len(args.data)}")
+    args.data = args.data[0]
+    args.model = args.model or "acceleration"
+    if args.model not in _MODELS:
+        raise UsageError(f"--model {args.model} is not a helicopter model; expected one of {list(_MODELS)}")
 
     if args.criterion == "frequency" and args.model != "linear":
         raise UsageError("--criterion frequency fits the linear model only; use --model linear")

@@ -8,7 +8,15 @@ SYSTEM_COLUMNS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
         ("x", "y", "z", "qw", "qx", "qy", "qz", "u", "v", "w", "p", "q", "r"),
         ("u1", "u2", "u3", "u4"),
     ),
+    "quadrotor": (
+        ("x", "y", "z", "qw", "qx", "qy", "qz", "vx", "vy", "vz", "p", "q", "r"),
+        ("m1", "m2", "m3", "m4", "vbat"),
+    ),
 }
+
+# Input columns that may be absent from a file: the trajectory then has the other inputs only
+# (a quadrotor logged without its battery voltage).
+OPTIONAL_INPUTS: dict[str, tuple[str, ...]] = {"quadrotor": ("vbat",)}
 
 # Velocity columns that may be absent from a file (encoder positions alone) and are then estimated
 # from the named position column, by the named difference (see `load_trajectory`): central

@@ -1,6 +1,7 @@
 """Read and write measured data: CSV, NPZ and MATLAB `.mat` files, per the data contract."""
 
 import csv
+import gzip
 import io
 import os
 import pathlib
@@ -12,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import DataError, UsageError
-from ._columns import columns_for, OPTIONAL_STATES
+from ._columns import columns_for, OPTIONAL_INPUTS, OPTIONAL_STATES
 from .._precision import check_times_for_float32
 from ._matlab import read_mat_columns
 from ._sampling import check_time_stamps, MAX_GAP, MIN_STEP
@@ -40,6 +41,11 @@ def _open_text(path):
         raise DataError("is a directory, not a data file", path=path) from None
     except OSError as e:
         raise DataError(f"cannot be read ({e.strerror or e})", path=path) from None
+    if raw[:2] == b"\x1f\x8b":  # gzip's magic number: a compressed CSV (`.csv.gz`) reads like the CSV
+        try:
+            raw = gzip.decompress(raw)
+        except (OSError, EOFError) as e:
+            raise DataError(f"is a damaged gzip file ({e})", path=path) from None
     if b"\x00" in raw:
         line = raw.count(b"\n", 0, raw.index(b"\x00")) + 1
         raise DataError(f"is not a text CSV file (a NUL byte at line {line}); "
@@ -157,8 +163,9 @@ def load_trajectory(
     **Arguments:**
 
     - `path`: the file.
-    - `system`: `"acrobot"`, `"double_pendulum"`, `"linear_axis"` or `"helicopter"`; fixes the
-      required columns (`t`, then the states, then the inputs).
+    - `system`: `"acrobot"`, `"double_pendulum"`, `"linear_axis"`, `"helicopter"` or `"quadrotor"`;
+      fixes the required columns (`t`, then the states, then the inputs). An optional input
+      (the quadrotor's `vbat`) that the file lacks and no option names is left out of the inputs.
     - `mapping`: contract name -> column name in the file, for files named otherwise, e.g.
       `{"t": "time", "q1": "pos_meas1", ...}`. Unmapped names are looked up as they are.
     - `scale`: contract name -> factor multiplied into that column after reading (units), e.g.
@@ -232,6 +239,11 @@ def load_trajectory(
     else:
         raw = _read_csv(path)
 
+    absent_inputs = {name for name in OPTIONAL_INPUTS.get(system, ()) if mapping.get(name, name) not in raw
+                     and name not in mapping and name not in (scale or {}) and name not in offset}
+    if absent_inputs:
+        input_names = tuple(name for name in input_names if name not in absent_inputs)
+        wanted = (TIME, *state_names, *input_names)
     optional = OPTIONAL_STATES.get(system, {})
     # Velocities are estimated only when the file has none of them: one present and another absent
     # is a misnamed column, not a record of positions alone.

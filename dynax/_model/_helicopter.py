@@ -156,6 +156,26 @@ def _euler(i):
     return lambda quat, s, u: euler_from_quaternion(quat)[i]
 
 
+def _motor(i):
+    return lambda quat, s, u: u[i]
+
+
+def _motor_squared(i):
+    return lambda quat, s, u: u[i] ** 2
+
+
+def _battery_motor(i):
+    return lambda quat, s, u: u[4] * u[i]
+
+
+def _battery_motor_squared(i):
+    return lambda quat, s, u: (u[4] * u[i]) ** 2
+
+
+def _rotor_drag(i):
+    return lambda quat, s, u: s[i] * jnp.sum(u[:4])
+
+
 FeatureFunction = Callable[[Array, Array, Array], Array]
 
 #: The feature library: name -> function of (quaternion, body state (u, v, w, p, q, r), inputs).
@@ -171,6 +191,16 @@ FEATURES: dict[str, FeatureFunction] = {
     "pq": lambda quat, s, u: s[3] * s[4],
     "roll": _euler(0),
     "pitch": _euler(1),
+    # Multirotor motor inputs `m1..m4` (normalised, see `dynax.Quadrotor`) and the battery voltage
+    # `vbat` (the fifth input): rotor thrust and torque grow like the square of rotor speed, and a
+    # brushed motor's speed like the voltage across it (command times battery voltage).
+    **{f"m{i + 1}": _motor(i) for i in range(4)},
+    **{f"m{i + 1}^2": _motor_squared(i) for i in range(4)},
+    **{f"vbat m{i + 1}": _battery_motor(i) for i in range(4)},
+    **{f"(vbat m{i + 1})^2": _battery_motor_squared(i) for i in range(4)},
+    # Rotor drag: a force against the body velocity that grows with rotor speed (blade flapping
+    # and induced drag), linear in velocity times the summed motor inputs.
+    **{f"{c} sum(m)": _rotor_drag(i) for i, c in enumerate(BODY_AXES[:3])},
 }
 
 

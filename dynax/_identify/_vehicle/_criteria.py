@@ -257,20 +257,22 @@ def _solve(ata, atb, ridge):
     return jnp.linalg.solve(ata + ridge * scale * jnp.eye(ata.shape[0], dtype=ata.dtype), atb)
 
 
-def _starts(trajectory, n_steps, stride):
-    return jnp.asarray(valid_starts(len(trajectory), n_steps, stride))
+def _starts(trajectory, n_steps, stride, breaks=None):
+    return jnp.asarray(valid_starts(len(trajectory), n_steps, stride, breaks))
 
 
 def _weights(weights, dtype):
     return jnp.ones(6, dtype) if weights is None else jnp.asarray(weights, dtype)
 
 
-def fit_one_step(system: Helicopter, trajectory: Trajectory, criterion: OneStep = OneStep(), *, weights=None) -> VehicleFit:
-    """Fit by one-step least squares (see `OneStep` and the module docstring)."""
+def fit_one_step(
+    system: Helicopter, trajectory: Trajectory, criterion: OneStep = OneStep(), *, weights=None, breaks=None
+) -> VehicleFit:
+    """Fit by one-step least squares (see `OneStep` and the module docstring); `breaks`: see `fit_vehicle`."""
     check_helicopter_data(trajectory, "fit_one_step")
     t0 = time.perf_counter()
     w = _weights(weights, trajectory.xs.dtype)
-    starts = _starts(trajectory, 1, 1)
+    starts = _starts(trajectory, 1, 1, breaks)
     ata, atb, _ = _normal_equations(system, trajectory, starts, 1, w, False, 1024)
     theta = _solve(ata, atb, criterion.ridge)
     fitted = _with_theta(system, theta)
@@ -393,7 +395,8 @@ def _vehicle_solution(system, fitted, theta, solution) -> Solution:
 
 
 def fit_lagged(
-    system: Helicopter, trajectory: Trajectory, criterion: Lagged = Lagged(), *, weights=None, callback=None
+    system: Helicopter, trajectory: Trajectory, criterion: Lagged = Lagged(), *, weights=None, callback=None,
+    breaks=None,
 ) -> VehicleFit:
     """Minimise the lagged loss by the EM-free iteration with line search (see `Lagged`, `EMFree`).
 
@@ -403,7 +406,7 @@ def fit_lagged(
     """
     dt = check_helicopter_data(trajectory, "fit_lagged")
     n_steps = horizon_steps(criterion.horizon, dt, "fit_lagged")
-    starts = _starts(trajectory, n_steps, criterion.stride)
+    starts = _starts(trajectory, n_steps, criterion.stride, breaks)
     w = _weights(weights, trajectory.xs.dtype)
     with monitor(callback) as token:
         solution = _em_free(system, trajectory, starts, w, n_steps, criterion, token)
@@ -428,7 +431,8 @@ def _backprop(system, trajectory, starts, w, n_steps: int, criterion: Backprop, 
 
 
 def fit_backprop(
-    system: Helicopter, trajectory: Trajectory, criterion: Backprop = Backprop(), *, weights=None, callback=None
+    system: Helicopter, trajectory: Trajectory, criterion: Backprop = Backprop(), *, weights=None, callback=None,
+    breaks=None,
 ) -> VehicleFit:
     """Minimise the lagged loss by L-BFGS with gradients through checkpointed rollouts (see `Backprop`).
 
@@ -437,7 +441,7 @@ def fit_backprop(
     """
     dt = check_helicopter_data(trajectory, "fit_backprop")
     n_steps = horizon_steps(criterion.horizon, dt, "fit_backprop")
-    starts = _starts(trajectory, n_steps, criterion.stride)
+    starts = _starts(trajectory, n_steps, criterion.stride, breaks)
     w = _weights(weights, trajectory.xs.dtype)
     target = -jnp.inf if criterion.target_loss is None else criterion.target_loss
     with monitor(callback) as token:

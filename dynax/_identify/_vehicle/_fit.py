@@ -41,6 +41,7 @@ def fit_vehicle(
     *,
     callback=None,
     progress: bool | None = None,
+    breaks=None,
 ) -> VehicleFit:
     r"""Learn the body model of `system` from `trajectory` with a learning `criterion`.
 
@@ -57,6 +58,9 @@ def fit_vehicle(
     - `progress`: for `Lagged` and `Backprop`, a bar per iteration with the loss on stderr (an
       ETA against the iteration limit; a fit that converges early finishes early); `None` draws it
       when stderr is a terminal (see `dynax.progress_mode`).
+    - `breaks`: for a record joined from several (flights, or the runs of a flight between its
+      ground segments and glitches), the sample indices where each new one begins: no window
+      of the criteria crosses one (not for `FrequencyDomain`).
 
     **Returns:** a `VehicleFit` with the fitted `system`, the final loss and its history.
 
@@ -67,8 +71,10 @@ def fit_vehicle(
     """
     warn_if_float32("vehicle learning")
     if isinstance(criterion, OneStep):
-        return fit_one_step(system, trajectory, criterion)
+        return fit_one_step(system, trajectory, criterion, breaks=breaks)
     if isinstance(criterion, FrequencyDomain):
+        if breaks is not None and len(breaks):
+            raise UsageError("fit_vehicle: the frequency criterion needs one continuous record, not joined ones")
         return fit_frequency(system, trajectory, criterion)
     if isinstance(criterion, (Lagged, Backprop)):
         fit = fit_lagged if isinstance(criterion, Lagged) else fit_backprop
@@ -80,7 +86,8 @@ def fit_vehicle(
                 if callback is not None:
                     callback(iteration, loss)
 
-            return fit(fit_one_step(system, trajectory).system, trajectory, criterion, callback=report)
+            start = fit_one_step(system, trajectory, breaks=breaks).system
+            return fit(start, trajectory, criterion, callback=report, breaks=breaks)
     raise UsageError(f"fit_vehicle: unknown criterion {type(criterion).__name__}")
 
 

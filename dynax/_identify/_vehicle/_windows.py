@@ -78,13 +78,24 @@ def rollout(system: Helicopter, x0: Float[Array, " 13"], us: Float[Array, "lag 4
     return jnp.concatenate([x0[None], xs])
 
 
-def valid_starts(n_samples: int, n_steps: int, stride: int = 1) -> np.ndarray:
-    """Start indices of every window of `n_steps` intervals that fits in the record."""
+def valid_starts(n_samples: int, n_steps: int, stride: int = 1, breaks=None) -> np.ndarray:
+    """Start indices of every window of `n_steps` intervals that fits in the record.
+
+    `breaks` (optional): the sample indices at which a new record begins in a record made by
+    joining several; a window that would cross one is left out (every `stride`-th of the rest).
+    """
     if n_samples - 1 - n_steps < 0:
         raise UsageError(
             f"the record has {n_samples} samples, too few for a {n_steps}-step horizon"
         )
-    return np.arange(0, n_samples - n_steps, max(1, int(stride)))
+    if breaks is None or len(breaks) == 0:
+        return np.arange(0, n_samples - n_steps, max(1, int(stride)))
+    starts = np.arange(0, n_samples - n_steps)
+    record = np.searchsorted(np.asarray(breaks), np.arange(n_samples), side="right")
+    starts = starts[record[starts] == record[starts + n_steps]]
+    if starts.size == 0:
+        raise UsageError(f"no record is long enough for a {n_steps}-step horizon")
+    return starts[:: max(1, int(stride))]
 
 
 def _padded(trajectory: Trajectory, extra: int):

@@ -1,0 +1,153 @@
+"""`dynax fit quadrotor TRAIN...` and `dynax evaluate MODEL.json DATA... --steps 1,10,50`: flight logs."""
+
+import math
+import time
+
+from .._errors import DataError, UsageError
+from ._common import data_options, output_file
+from ._output import write_json
+
+QUADROTOR_MODELS = ("nominal", "acceleration", "linear")
+
+
+def load_flights(paths, mapping, scale, offset, *, min_samples: int):
+    """Each file through `load_flight`, its ground segments and glitches noted on stdout; the usable
+    runs of at least `min_samples` samples, and the notes."""
+    from .._data._flight import load_flight, usable_segments
+
+    runs, notes = [], []
+    for path in paths:
+        trajectory, found = load_flight(path, mapping=mapping, scale=scale, offset=offset)
+        for line in found.describe():
+            print(f"note: {path}: {line}")
+        kept = usable_segments(trajectory, found, min_samples)
+        if not kept:
+            raise DataError(f"has no run of flight of {min_samples} samples or more between its ground segments "
+                            "and glitches", path=path)
+        runs += kept
+        notes.append({"file": str(path), "ground_s": [list(g) for g in found.ground],
+                      "glitches": [g.describe() for g in found.glitches],
+                      "usable_samples": int(found.usable.sum()), "samples": len(trajectory)})
+    return runs, notes
+
+
+def run_fit(args) -> int:
+    import jax
+    import numpy as np
+
+    jax.config.update("jax_enable_x64", True)  # learning in float64; the library leaves config alone
+
+    from .._identify._vehicle import Backprop, Lagged, OneStep
+    from .._identify._vehicle._quadrotor import fit_quadrotor, quadrotor_to_json
+    from .._model._quadrotor import initial_quadrotor
+
+    model = args.model or "acceleration"
+    if model not in QUADROTOR_MODELS:
+        raise UsageError(f"--model {model} is not a quadrotor model; expected one of {list(QUADROTOR_MODELS)}")
+    if args.criterion == "frequency":
+        raise UsageError("--criterion frequency identifies the helicopter's linear model only; for a quadrotor use "
+                         "one-step, lagged or backprop")
+    if not (math.isfinite(args.horizon) and args.horizon > 0):
+        raise UsageError(f"--horizon must be a positive number of seconds, got {args.horizon}")
+    if args.stride != "auto" and args.stride < 1:
+        raise UsageError(f"--stride must be at least 1 or 'auto', got {args.stride}")
+    if args.max_iterations is not None and args.max_iterations < 1:
+        raise UsageError(f"--max-iterations must be at least 1, got {args.max_iterations}")
+    out = output_file(args.out, "model.json")
+    mapping, scale, offset = data_options(args)
+    start = time.perf_counter()
+    runs, notes = load_flights(args.data, mapping, scale, offset, min_samples=round(args.horizon * 100) + 2)
+    dt = float(np.median([r.dt for r in runs]))
+    n_steps = max(round(args.horizon / dt), 1)
+    system = initial_quadrotor(model, runs, battery=False if args.no_battery else None)
+    stride = args.stride
+    if stride == "auto":
+        from .._identify._vehicle import auto_stride
+        from ._fit import AUTO_WINDOWS
+
+        stride = auto_stride(sum(len(r) for r in runs), n_steps, AUTO_WINDOWS)
+    limit = {} if args.max_iterations is None else {"lagged": {"max_iterations": args.max_iterations},
+                                                    "backprop": {"max_steps": args.max_iterations}}.get(args.criterion, {})
+    criterion = {
+        "one-step": lambda: OneStep(),
+        "lagged": lambda: Lagged(horizon=args.horizon, stride=stride, **limit),
+        "backprop": lambda: Backprop(horizon=args.horizon, stride=stride, **limit),
+    }[args.criterion]()
+    solution = fit_quadrotor(system, runs, criterion)
+    weights = np.asarray(solution.model.body_model.weights)
+    loss = float(solution.loss)
+    if not (np.all(np.isfinite(weights)) and math.isfinite(loss)):
+        print(f"dynax fit: error: the fit failed numerically (loss {loss}, {int(np.sum(~np.isfinite(weights)))} "
+              "non-finite weights); nothing written", file=__import__("sys").stderr)
+        return 1
+    horizon = args.horizon if args.criterion in ("lagged", "backprop") else None
+    n_samples = sum(len(r) for r in runs)
+    write_json(out, quadrotor_to_json(solution.model, family=model, criterion=args.criterion, horizon_s=horizon,
+                                      loss=loss, n_samples=n_samples, data=notes))
+    print(f"quadrotor, {model} model, {args.criterion} criterion, {n_samples} samples in {len(runs)} runs of flight: "
+          f"loss {loss:.6g}")
+    std = solution.standard_errors()
+    for name, value in solution.estimates().items():
+        e = std.get(name, float("nan"))
+        print(f"  {name:>16s} = {value:.6g}" + (f" +- {e:.2g}" if math.isfinite(e) else ""))
+    print(f"wrote {out} in {time.perf_counter() - start:.1f} s")
+    return 0
+
+
+def parse_steps(text: str) -> tuple[int, ...]:
+    try:
+        steps = tuple(int(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise UsageError(f"--steps must be comma-separated whole numbers of samples, got {text!r}") from None
+    if not steps or min(steps) < 1:
+        raise UsageError(f"--steps must be positive numbers of samples, got {text!r}")
+    return steps
+
+
+def parse_metrics(text: str) -> tuple[str, ...]:
+    metrics = tuple(v.strip() for v in text.split(",") if v.strip())
+    bad = [m for m in metrics if m not in ("mae", "rmse")]
+    if not metrics or bad:
+        raise UsageError(f"--metric must be mae, rmse or mae,rmse, got {text!r}")
+    return metrics
+
+
+def _scores(error, metrics):
+    out = {m: error.table(m) for m in metrics}
+    out["cumulative_mae"] = {g: float(v) for g, v in zip(error.groups, error.cumulative_mae)}
+    out["n_starts"] = error.n_starts
+    if error.diverged_fraction:
+        out["diverged_fraction"] = error.diverged_fraction
+    return out
+
+
+def run_evaluate(args, system) -> int:
+    """The quadrotor branch of `dynax evaluate`: flight scores per group beside constant velocity."""
+    from .._model._quadrotor import ConstantVelocity
+    from .._predict import FLIGHT_UNITS, flight_error
+
+    steps = parse_steps(args.steps or "1,10,50")
+    metrics = parse_metrics(args.metric)
+    out = output_file(args.out, "metrics.json")
+    mapping, scale, offset = data_options(args)
+    start = time.perf_counter()
+    runs, notes = load_flights(args.data, mapping, scale, offset, min_samples=max(steps) + 2)
+    if system.uses_battery and "vbat" not in runs[0].input_names:
+        raise DataError("has no vbat column, which the model's features use (map it: --map vbat=COLUMN)",
+                        path=args.data[0])
+    model_error = flight_error(system, runs, steps)
+    baseline = flight_error(ConstantVelocity(), runs, steps)
+    result = {"steps": list(steps), "dt_s": model_error.dt, "horizons_s": [s * model_error.dt for s in steps],
+              "units": FLIGHT_UNITS, "model": _scores(model_error, metrics),
+              "constant_velocity": _scores(baseline, metrics), "data": notes}
+    write_json(out, result)
+    print(f"quadrotor model {args.model} on {len(args.data)} file(s), {model_error.n_starts} starts: open-loop error")
+    print("  " + " " * 24 + "  ".join(f"h={s:>4d}" for s in steps) + "   cum MAE")
+    for m in metrics:
+        for name, table in (("model", model_error), ("constant velocity", baseline)):
+            values = table.table(m)
+            for i, g in enumerate(table.groups):
+                row = "  ".join(f"{v:6.4f}" for v in values[g])
+                print(f"  {m} {name[:8]:>8s} {g:>10s}  {row}   {float(table.cumulative_mae[i]):.4f}")
+    print(f"wrote {out} in {time.perf_counter() - start:.1f} s")
+    return 0

@@ -1,0 +1,183 @@
+r"""Multi-step-ahead prediction from every sample, and the flight-model scores built on it.
+
+Flight models are scored as the field scores them: from every sample of a held-out flight the
+model is rolled out open loop under the recorded inputs (zero-order hold) for $h$ samples, and the
+prediction at $h$ is compared with the measurement there. `predict_ahead` gives the predicted
+states; `flight_error` the mean absolute and root-mean-square errors per group of states at each
+$h$, and the cumulative MAE over $h = 1..H$.
+
+Each rollout takes one classical Runge-Kutta step per sample interval inside a `lax.scan`, and the
+rollouts are `vmap`ped over start samples: one compiled program per (model structure, record length,
+horizon), in the dtype of the trajectory (float32 for throughput, float64 for identification).
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from ._data._trajectory import Trajectory
+from ._errors import UsageError
+from ._model._helicopter import quaternion_angle
+
+#: The state groups of `flight_error`, with their units.
+FLIGHT_GROUPS = ("position", "velocity", "attitude", "body_rate")
+FLIGHT_UNITS = {"position": "m", "velocity": "m/s", "attitude": "rad", "body_rate": "rad/s"}
+
+
+def _rk4(system, x, u, dt):
+    f = lambda y: system.vector_field(0.0, y, u)
+    k1 = f(x)
+    k2 = f(x + 0.5 * dt * k1)
+    k3 = f(x + 0.5 * dt * k2)
+    k4 = f(x + dt * k3)
+    return x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+@eqx.filter_jit
+def _predict(system, xs, us, dt, starts, lags, n_steps: int):
+    def window(k):
+        u_win = jax.lax.dynamic_slice_in_dim(us, k, n_steps)
+
+        def step(x, u):
+            x_next = _rk4(system, x, u, dt)
+            return x_next, x_next
+
+        _, path = jax.lax.scan(step, xs[k], u_win)
+        return path[lags - 1]
+
+    return jax.vmap(window)(starts)
+
+
+def _check_steps(steps) -> tuple[int, ...]:
+    try:
+        steps = tuple(int(s) for s in steps)
+    except (TypeError, ValueError):
+        raise UsageError(f"predict_ahead: `steps` must be whole numbers of samples, got {steps!r}") from None
+    if not steps or min(steps) < 1:
+        raise UsageError(f"predict_ahead: `steps` must be one or more positive numbers of samples, got {steps}")
+    return steps
+
+
+def predict_ahead(
+    model, trajectory: Trajectory, steps=(1, 10, 50)
+) -> Float[Array, "starts steps n_states"]:
+    r"""Open-loop predictions $h$ samples ahead from every sample of a record.
+
+    Row $i$ starts from the measured state at sample $i$ and rolls the model forward under the
+    recorded inputs (zero-order hold, one RK4 step per sample interval); column $j$ is the state
+    predicted `steps[j]` samples later, for comparison with `trajectory.xs[i + steps[j]]`. Starts
+    too close to the end for the longest step are left out: there are `len(trajectory) - max(steps)`
+    rows.
+
+    **Arguments:**
+
+    - `model`: any system (`vector_field(t, x, u)`) whose states are the trajectory's, e.g. a fitted
+      `Quadrotor` or the `ConstantVelocity` baseline.
+    - `trajectory`: a uniformly sampled record (the model's state and input columns).
+    - `steps`: the horizons in samples (default 1, 10, 50: 0.01, 0.1 and 0.5 s at 100 Hz).
+
+    **Returns:** the predicted states, shape `(starts, len(steps), n_states)`, in the trajectory's dtype
+    (the model's arrays are cast to it: `trajectory.astype(jnp.float32)` predicts in float32).
+    """
+    steps = _check_steps(steps)
+    if not trajectory.is_uniform:
+        raise UsageError("predict_ahead: the trajectory must be uniformly sampled; resample it first")
+    n = len(trajectory) - max(steps)
+    if n < 1:
+        raise UsageError(f"predict_ahead: the record has {len(trajectory)} samples, too few for {max(steps)} steps ahead")
+    xs, us = trajectory.xs, trajectory.us
+    dt = jnp.asarray(trajectory.dt, xs.dtype)
+    # The model's arrays in the trajectory's dtype: a float32 record rolls out in float32.
+    model = jax.tree.map(lambda a: a.astype(xs.dtype) if eqx.is_inexact_array(a) else a, model)
+    return _predict(model, xs, us.astype(xs.dtype), dt, jnp.arange(n), jnp.asarray(steps), max(steps))
+
+
+def _group_errors(predicted, measured):
+    """Per group, the size of the error at each prediction: Euclidean norms [m, m/s, rad/s] and the
+    geodesic angle between the attitudes [rad]."""
+    angle = jnp.vectorize(quaternion_angle, signature="(4),(4)->()")(predicted[..., 3:7], measured[..., 3:7])
+    return jnp.stack([
+        jnp.linalg.norm(predicted[..., 0:3] - measured[..., 0:3], axis=-1),
+        jnp.linalg.norm(predicted[..., 7:10] - measured[..., 7:10], axis=-1),
+        angle,
+        jnp.linalg.norm(predicted[..., 10:13] - measured[..., 10:13], axis=-1),
+    ], axis=-1)
+
+
+class FlightError(eqx.Module):
+    r"""Open-loop prediction error of a flight model per state group, against the horizon.
+
+    Errors are sizes: the Euclidean norm of the position [m], world-velocity [m/s] and body-rate
+    [rad/s] errors, and the geodesic angle between predicted and measured attitude [rad].
+
+    **Fields:**
+
+    - `steps`: the horizons in samples; `dt` the sample interval [s].
+    - `groups`: `FLIGHT_GROUPS` (`position`, `velocity`, `attitude`, `body_rate`).
+    - `mae`, `rmse`: shape `(group, step)`: the mean and the root-mean-square of the error size
+      over start samples (`inf` where a rollout diverged).
+    - `cumulative_mae`: shape `(group,)`: the MAE averaged over every horizon $h = 1..\max$ steps.
+    - `n_starts`: the start samples scored; `diverged_fraction`: of them, the share whose rollout
+      left the finite range by the longest horizon.
+    """
+
+    mae: Float[Array, "group step"]
+    rmse: Float[Array, "group step"]
+    cumulative_mae: Float[Array, " group"]
+    steps: tuple[int, ...] = eqx.field(static=True)
+    dt: float = eqx.field(static=True)
+    n_starts: int = eqx.field(static=True)
+    diverged_fraction: float = eqx.field(static=True, default=0.0)
+    groups: tuple[str, ...] = eqx.field(static=True, default=FLIGHT_GROUPS)
+
+    def table(self, metric: str = "mae") -> dict[str, list[float]]:
+        """`{group: [value at each step]}` of `metric` (`mae` or `rmse`)."""
+        values = {"mae": self.mae, "rmse": self.rmse}[metric]
+        return {g: [float(v) for v in np.asarray(values[i])] for i, g in enumerate(self.groups)}
+
+
+def flight_error(model, flights, steps=(1, 10, 50)) -> FlightError:
+    r"""The flight-model scores of `model` on one record or several (pooled over their start samples).
+
+    **Arguments:**
+
+    - `model`: a system with the `quadrotor` states (a fitted `Quadrotor`, `ConstantVelocity`).
+    - `flights`: a `Trajectory` or a list (e.g. the usable runs of held-out flights); a run too
+      short for the longest horizon is skipped.
+    - `steps`: the horizons in samples at which `mae` and `rmse` are reported; the cumulative MAE
+      runs over every horizon from 1 to `max(steps)`.
+
+    **Returns:** a `FlightError`.
+    """
+    steps = _check_steps(steps)
+    horizon = max(steps)
+    flights = [flights] if isinstance(flights, Trajectory) else list(flights)
+    abs_sum = sq_sum = None
+    n = diverged = 0
+    dt = None
+    for f in flights:
+        if len(f) <= horizon:
+            continue
+        predicted = predict_ahead(model, f, range(1, horizon + 1))
+        k = predicted.shape[0]
+        measured = jnp.stack([f.xs[h: h + k] for h in range(1, horizon + 1)], axis=1)
+        err = _group_errors(predicted, measured)  # (starts, horizon, group)
+        finite = jnp.all(jnp.isfinite(err), axis=(1, 2))
+        err = jnp.where(finite[:, None, None], err, jnp.inf)
+        a, s = np.asarray(jnp.sum(err, axis=0), float), np.asarray(jnp.sum(err**2, axis=0), float)
+        abs_sum = a if abs_sum is None else abs_sum + a
+        sq_sum = s if sq_sum is None else sq_sum + s
+        n += k
+        diverged += int(jnp.sum(~finite))
+        dt = f.dt if dt is None else dt
+    if n == 0:
+        raise UsageError(f"flight_error: no record is longer than the horizon of {horizon} samples")
+    mae_all, rmse_all = abs_sum / n, np.sqrt(sq_sum / n)  # (horizon, group)
+    index = np.asarray(steps) - 1
+    return FlightError(
+        mae=jnp.asarray(mae_all[index].T), rmse=jnp.asarray(rmse_all[index].T),
+        cumulative_mae=jnp.asarray(mae_all.mean(axis=0)), steps=steps, dt=float(dt), n_starts=n,
+        diverged_fraction=diverged / n,
+    )

@@ -1,0 +1,188 @@
+"""The `Quadrotor` learned back from a rigid body simulated by scipy's DOP853 (written here, independently
+of dynax's model code), `predict_ahead` against a rollout by hand, and the model file round trip."""
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+import dynax
+
+# A Crazyflie-sized X quadrotor: thrust per motor a m^2 + b m with m in PWM counts (hover near 40000).
+MASS, GRAVITY = 0.030, 9.81
+INERTIA = np.array([1.4e-5, 1.4e-5, 2.2e-5])
+ARM, YAW_ARM = 0.0325, 0.006  # moment arm of each thrust about x and y [m]; yaw torque per newton [m]
+A, B = 3.975e-11, 2.5e-7
+ROLL_SIGNS = np.array([-1.0, -1.0, 1.0, 1.0])
+PITCH_SIGNS = np.array([-1.0, 1.0, 1.0, -1.0])
+YAW_SIGNS = np.array([-1.0, 1.0, -1.0, 1.0])
+DT = 0.01
+
+
+def _rotation(q):
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def _truth(t, state, m):
+    q, v, omega = state[3:7], state[7:10], state[10:13]
+    f = A * m**2 + B * m
+    torque = np.array([ARM * ROLL_SIGNS @ f, ARM * PITCH_SIGNS @ f, YAW_ARM * YAW_SIGNS @ f])
+    w, x, y, z = q
+    p, qq, r = omega
+    dq = 0.5 * np.array([-x * p - y * qq - z * r, w * p + y * r - z * qq, w * qq + z * p - x * r, w * r + x * qq - y * p])
+    dv = _rotation(q) @ np.array([0.0, 0.0, f.sum() / MASS]) - np.array([0.0, 0.0, GRAVITY])
+    domega = (torque - np.cross(omega, INERTIA * omega)) / INERTIA
+    return np.concatenate([v, dq, dv, domega])
+
+
+def _flight(seed, seconds=1.5, hold=5):
+    """Random motor commands about hover (each held for `hold` samples) with a rate damper added at
+    every sample (so the open-loop body does not tumble), integrated by DOP853 between samples."""
+    rng = np.random.default_rng(seed)
+    hover = (-B + np.sqrt(B**2 + A * MASS * GRAVITY)) / (2 * A)
+    n = round(seconds / DT)
+    noise = np.repeat(0.2 * rng.uniform(-1, 1, size=(n // hold + 1, 4)), hold, axis=0)[:n]
+    state = np.concatenate([[0, 0, 1.0], [1.0, 0, 0, 0], rng.normal(0, 0.3, 3), rng.normal(0, 0.5, 3)])
+    xs, us = [state], []
+    for k in range(n):
+        p, q, r = xs[-1][10:13]
+        damping = 0.05 * (ROLL_SIGNS * p + PITCH_SIGNS * q + 0.3 * YAW_SIGNS * r)
+        m = hover * (1 + noise[k] - damping)
+        us.append(m)
+        if k < n - 1:
+            sol = solve_ivp(_truth, (0.0, DT), xs[-1], method="DOP853", rtol=1e-11, atol=1e-13, args=(m,))
+            xs.append(sol.y[:, -1])
+    xs, us = np.asarray(xs), np.asarray(us)
+    us = np.concatenate([us, np.full((n, 1), 3.7)], axis=1)  # a steady battery
+    return dynax.Trajectory(DT * np.arange(n), jnp.asarray(xs), jnp.asarray(us), dynax.Quadrotor.state_names,
+                            dynax.Quadrotor.input_names, "quadrotor")
+
+
+@pytest.fixture(scope="module")
+def flights():
+    return [_flight(seed) for seed in range(4)]
+
+
+@pytest.fixture(scope="module")
+def fitted(flights):
+    start = dynax.initial_quadrotor("nominal", flights, battery=False)
+    return dynax.fit_quadrotor(start, flights, dynax.OneStep())
+
+
+def test_one_step_learns_the_rigid_body_back(fitted):
+    quad = fitted.model
+    s = quad.input_scale[0]
+    estimates = fitted.estimates()
+    truth = {}
+    for i in range(4):
+        truth[f"dw/m{i + 1}^2"] = A * s**2 / MASS
+        truth[f"dw/m{i + 1}"] = B * s / MASS
+        for axis, signs, arm, inertia in (("p", ROLL_SIGNS, ARM, INERTIA[0]), ("q", PITCH_SIGNS, ARM, INERTIA[1]),
+                                          ("r", YAW_SIGNS, YAW_ARM, INERTIA[2])):
+            truth[f"d{axis}/m{i + 1}^2"] = signs[i] * arm * A * s**2 / inertia
+            truth[f"d{axis}/m{i + 1}"] = signs[i] * arm * B * s / inertia
+    truth["dp/qr"] = (INERTIA[1] - INERTIA[2]) / INERTIA[0]
+    truth["dq/pr"] = (INERTIA[2] - INERTIA[0]) / INERTIA[1]
+    truth["dr/pq"] = (INERTIA[0] - INERTIA[1]) / INERTIA[2]
+    assert set(estimates) == set(truth)
+    # Trapezoidal one-step targets from DOP853 data at 100 Hz: quadrature errors of order dt^2 of the
+    # accelerations' curvature, amplified by the near-collinearity of m^2 and m over the commands' range.
+    # The thrust and moment maps (what the model is for) are checked tightly below; each weight to 3 %
+    # of the largest weight of its axis.
+    for name, value in truth.items():
+        axis = name.split("/")[0]
+        largest = max(abs(v) for k, v in truth.items() if k.startswith(axis + "/"))
+        assert abs(estimates[name] - value) < 0.03 * largest, (name, estimates[name], value)
+    # The learned accelerations at new states and commands: within 0.2 % of their spread.
+    rng = np.random.default_rng(7)
+    errors, scales = [], []
+    for _ in range(20):
+        state = np.concatenate([rng.normal(0, 1, 3), [1.0, 0, 0, 0], rng.normal(0, 0.5, 3), rng.normal(0, 1, 3)])
+        state[3:7] = rng.normal(size=4)
+        state[3:7] /= np.linalg.norm(state[3:7])
+        m = s * (1 + 0.1 * rng.uniform(-1, 1, 4))
+        want = _truth(0.0, state, m)[7:]
+        got = np.asarray(quad.vector_field(0.0, jnp.asarray(state), jnp.asarray(np.append(m, 3.7))))[7:]
+        errors.append(got - want)
+        scales.append(want)
+    assert np.max(np.abs(errors)) < 2e-3 * np.max(np.abs(scales))
+
+
+def test_one_step_solution_carries_standard_errors(fitted):
+    std = np.asarray(fitted.std_errors)
+    assert std.shape == fitted.value.shape and np.all(np.isfinite(std)) and np.all(std > 0)
+    assert fitted.names == fitted.model.body_model.parameter_names
+
+
+def test_predict_ahead_matches_a_rollout_by_hand(fitted, flights):
+    quad, flight = fitted.model, flights[0]
+    steps = (1, 4, 12)
+    predicted = np.asarray(dynax.predict_ahead(quad, flight, steps))
+    assert predicted.shape == (len(flight) - 12, 3, 13)
+    field = jax.jit(lambda x, u: quad.vector_field(0.0, x, u))
+    xs, us = np.asarray(flight.xs), np.asarray(flight.us)
+    for i in (0, 37, len(flight) - 13):
+        state = xs[i]
+        for h in range(1, 13):
+            u = jnp.asarray(us[i + h - 1])
+            sol = solve_ivp(lambda t, y, u=u: np.asarray(field(jnp.asarray(y), u)), (0, DT), state, method="DOP853",
+                            rtol=1e-12, atol=1e-14)
+            state = sol.y[:, -1]
+            if h in steps:
+                # RK4 at the sample interval against DOP853: an error of order dt^4 per step.
+                np.testing.assert_allclose(predicted[i, steps.index(h)], state, rtol=0, atol=1e-6)
+
+
+def test_predict_ahead_in_float32(fitted, flights):
+    flight = flights[2]
+    double = np.asarray(dynax.predict_ahead(fitted.model, flight, (1, 10)))
+    single = dynax.predict_ahead(fitted.model, flight.astype(jnp.float32), (1, 10))
+    assert single.dtype == jnp.float32
+    # float32 rounding (1e-7 relative) grown over 10 RK4 steps of a model with rates of a few rad/s.
+    np.testing.assert_allclose(np.asarray(single), double, rtol=0, atol=1e-4)
+
+
+def test_constant_velocity_baseline_moves_on_the_straight_line(flights):
+    flight = flights[1]
+    predicted = np.asarray(dynax.predict_ahead(dynax.ConstantVelocity(), flight, (10,)))
+    xs = np.asarray(flight.xs)
+    np.testing.assert_allclose(predicted[:, 0, 0:3], xs[:-10, 0:3] + 10 * DT * xs[:-10, 7:10], atol=1e-12)
+    np.testing.assert_allclose(predicted[:, 0, 7:13], xs[:-10, 7:13], atol=0)
+    error = dynax.flight_error(dynax.ConstantVelocity(), flights, (1, 10))
+    assert error.mae.shape == (4, 2) and np.all(np.asarray(error.mae[:, 1]) > np.asarray(error.mae[:, 0]))
+    assert error.n_starts == sum(len(f) - 10 for f in flights)
+
+
+def test_model_file_round_trip(fitted, tmp_path):
+    path = tmp_path / "model.json"
+    dynax.save_model(fitted.model, path, criterion="one-step")
+    loaded = dynax.load_model(path)
+    assert isinstance(loaded, dynax.Quadrotor) and loaded.input_scale == fitted.model.input_scale
+    x = jnp.asarray(np.concatenate([[0, 0, 1], [0.9, 0.1, -0.2, 0.3], [0.2, -0.1, 0.3], [1.0, -2.0, 0.5]]))
+    u = jnp.asarray([4e4, 4.1e4, 3.9e4, 4e4, 3.7])
+    np.testing.assert_array_equal(np.asarray(loaded.vector_field(0.0, x, u)), np.asarray(fitted.model.vector_field(0.0, x, u)))
+    obj = json.loads(path.read_text())
+    obj["weights"][3][0] = "a lot"
+    path.write_text(json.dumps(obj))
+    with pytest.raises(dynax.DataError, match="model.json"):
+        dynax.load_model(path)
+
+
+def test_joined_flights_give_no_window_across_a_break():
+    # (fit_quadrotor joins the four flights above: a window across a join would see a jump of metres
+    # and rad/s between samples, and the rigid body would not be learned back to 0.2 %.)
+    from dynax._identify._vehicle._windows import valid_starts
+
+    # Two records of 5 and 6 samples joined: 3-step windows start at 0, 1 (first) and 5, 6, 7 (second).
+    np.testing.assert_array_equal(valid_starts(11, 3, 1, breaks=[5]), [0, 1, 5, 6, 7])
+    np.testing.assert_array_equal(valid_starts(11, 3, 2, breaks=[5]), [0, 5, 7])
+    np.testing.assert_array_equal(valid_starts(11, 3, 1), np.arange(8))  # no breaks: as before
+
