@@ -24,8 +24,8 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import dynax
-from dynax._cli._output import write_json
-from dynax._identify._vehicle import auto_stride
+from dynax.internal import write_json
+from dynax.internal import auto_stride
 
 DATA = pathlib.Path(__file__).resolve().parents[1].parent / "shared" / "datasets" / "nanobench"
 NANOBENCH_MAP = {

@@ -27,7 +27,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np
 
 import dynax
-from dynax._cli._output import write_json
+from dynax.internal import write_json
 
 DATA = pathlib.Path(__file__).resolve().parents[1].parent / "shared" / "datasets" / "nanobench"
 # The documented map of the NanoBench logs (docs/flight_data.md).

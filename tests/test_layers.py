@@ -35,6 +35,7 @@ LAYER_OF = {
     "_simulate": "simulate",
     "_solvers": "simulate",
     "_sim_error": "simulate",
+    "_predict": "simulate",
     "_fit": "fit",
     "_identify": "identify",
     "_metrics": "validate",

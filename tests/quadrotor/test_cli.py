@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from dynax._cli._main import main
+from dynax.internal import cli_main as main
 
 from .test_flight_data import NANOBENCH_MAP, STAR
 

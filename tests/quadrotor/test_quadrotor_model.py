@@ -179,7 +179,7 @@ def test_model_file_round_trip(fitted, tmp_path):
 def test_joined_flights_give_no_window_across_a_break():
     # (fit_quadrotor joins the four flights above: a window across a join would see a jump of metres
     # and rad/s between samples, and the rigid body would not be learned back to 0.2 %.)
-    from dynax._identify._vehicle._windows import valid_starts
+    from dynax.internal import valid_starts
 
     # Two records of 5 and 6 samples joined: 3-step windows start at 0, 1 (first) and 5, 6, 7 (second).
     np.testing.assert_array_equal(valid_starts(11, 3, 1, breaks=[5]), [0, 1, 5, 6, 7])
