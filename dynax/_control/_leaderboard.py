@@ -511,7 +511,7 @@ def ends_upright(xs: Float[Array, "*batch 4"], tolerance=(0.35, 0.35, 1.0, 1.0))
     e1 = jnp.mod(xs[..., 0] - jnp.pi + jnp.pi, 2 * jnp.pi) - jnp.pi
     e2 = jnp.mod(xs[..., 1] + jnp.pi, 2 * jnp.pi) - jnp.pi
     err = jnp.stack([e1, e2, xs[..., 2], xs[..., 3]], axis=-1)
-    ok = jnp.all(jnp.abs(err) < jnp.asarray(tolerance), axis=-1)
+    ok = jnp.all(jnp.abs(err) < jnp.broadcast_to(jnp.asarray(tolerance, err.dtype), err.shape), axis=-1)
     return ok & jnp.all(jnp.isfinite(xs), axis=-1)
 
 
