@@ -255,6 +255,8 @@ class SwingUpDesign(eqx.Module):
     - `starts`, `iterations` (collocation), `shooting_iterations`, `refine_iterations`,
       `learning_rate`, `seed`: the multi-start Adam searches (`optimise_swing_up`).
     - `terminal_weight`: the weight on the distance from upright at the horizon.
+    - `elbow_range` [rad]: the elbow angle the reference keeps within (a penalty beyond it), so
+      the swing-up does not turn the elbow over, which costs velocity.
     - `q_track`, `r_track`: the time-varying LQR's costs; `q_balance`, `r_balance`: the balancing LQR's.
     - `threshold`: the cost-to-go below which the balancing LQR acts after the reference.
     - `swing_up`: Spong's $(k_e, k_p, k_d)$ for recovering after a knock.
@@ -271,11 +273,12 @@ class SwingUpDesign(eqx.Module):
     learning_rate: float = 0.01
     seed: int = 0
     terminal_weight: float = 1000.0
+    elbow_range: float = 2.6
     q_track: tuple[float, ...] = (10.0, 10.0, 0.1, 0.1)
     r_track: float = 10.0
     q_balance: tuple[float, ...] = (10.0, 10.0, 0.1, 0.1)
     r_balance: float = 10.0
-    threshold: float = 50.0
+    threshold: float = 100.0
     swing_up: tuple[float, float, float] = (1.0, 20.0, 2.0)
     velocity_source: int = 1
     dt: float = 0.002
@@ -300,7 +303,7 @@ def _open_loop(plant, us, dt):
     return x_final, xs
 
 
-def _surrogate(plant, w, interp, dt, fine_dt, limit, terminal_weight):
+def _surrogate(plant, w, interp, dt, fine_dt, limit, terminal_weight, elbow_range=jnp.inf):
     """The leaderboard's smooth costs of an open-loop swing-up plus the distance from upright at its end."""
     knots = jnp.concatenate([jnp.zeros(1, w.dtype), limit * jnp.tanh(w)])
     us = interp @ knots
@@ -312,7 +315,8 @@ def _surrogate(plant, w, interp, dt, fine_dt, limit, terminal_weight):
     smooth = jnp.std(jnp.diff(us)) * fine_dt / dt
     costs = jnp.tanh(jnp.pi * jnp.stack([energy / 60, torque / 20, smooth / 0.1, velocity / 400]))
     err = jnp.stack([2 * jnp.cos(x_final[0] / 2), 2 * jnp.sin(x_final[1] / 2), 0.5 * x_final[2], 0.5 * x_final[3]])
-    return jnp.sum(costs) + terminal_weight * jnp.sum(err**2), (jnp.sum(costs), err)
+    elbow = jnp.sum(jax.nn.relu(jnp.abs(xs[:, 1]) - elbow_range) ** 2) * dt
+    return jnp.sum(costs) + terminal_weight * (jnp.sum(err**2) + elbow), (jnp.sum(costs), err)
 
 
 def _adam_search(plant, w0, interp, dt, design, iterations, ramp):
@@ -325,17 +329,18 @@ def _adam_search(plant, w0, interp, dt, design, iterations, ramp):
             w, s = carry
             weight = jnp.minimum(design.terminal_weight, 0.3 * ramp**i) if ramp > 1 else design.terminal_weight
             (loss, _), g = jax.value_and_grad(_surrogate, argnums=1, has_aux=True)(
-                plant, w, interp, dt, design.dt, design.torque_limit, weight)
+                plant, w, interp, dt, design.dt, design.torque_limit, weight, design.elbow_range)
             updates, s = opt.update(g, s)
             return (jax.tree.map(lambda a, b: a + b, w, updates), s), loss
         (w, _), losses = jax.lax.scan(it, (w0, opt.init(w0)), jnp.arange(iterations))
-        _, (cost, err) = _surrogate(plant, w, interp, dt, design.dt, design.torque_limit, design.terminal_weight)
+        _, (cost, err) = _surrogate(plant, w, interp, dt, design.dt, design.torque_limit, design.terminal_weight,
+                                    design.elbow_range)
         return w, cost, jnp.sum(err**2)
 
     return jax.vmap(one)(w0)
 
 
-def _collocation_loss(plant, z, rho, n, h, fine_dt, limit):
+def _collocation_loss(plant, z, rho, n, h, fine_dt, limit, elbow_range):
     xs = jnp.concatenate([jnp.zeros((1, 4), z.dtype), z[: 4 * n].reshape(n, 4)])
     us = limit * jnp.tanh(z[4 * n :])
     step = jax.vmap(lambda x, u: plant.rk4_step(x, jnp.stack([jnp.zeros_like(u), u]), h))
@@ -344,7 +349,8 @@ def _collocation_loss(plant, z, rho, n, h, fine_dt, limit):
     costs = jnp.stack([energy / 60, jnp.sum(us**2) * h / 20, jnp.sum(xs[:-1, 2:] ** 2) * h / 400,
                        jnp.std(jnp.diff(us)) * fine_dt / h / 0.1])
     final = xs[-1] - jnp.array([jnp.pi, 0.0, 0.0, 0.0], z.dtype)
-    return jnp.pi * jnp.sum(costs) + rho * (jnp.sum(defects**2) + jnp.sum(final**2))
+    elbow = jnp.sum(jax.nn.relu(jnp.abs(xs[:, 1]) - elbow_range) ** 2)
+    return jnp.pi * jnp.sum(costs) + rho * (jnp.sum(defects**2) + jnp.sum(final**2) + elbow)
 
 
 @eqx.filter_jit
@@ -358,7 +364,8 @@ def _collocation(plant, z0, design, n, iterations):
         def it(carry, i):
             z, s = carry
             rho = jnp.minimum(1e5, 1.0015**i)
-            g = jax.grad(_collocation_loss, argnums=1)(plant, z, rho, n, h, design.dt, design.torque_limit)
+            g = jax.grad(_collocation_loss, argnums=1)(plant, z, rho, n, h, design.dt, design.torque_limit,
+                                                      design.elbow_range)
             updates, s = opt.update(g, s)
             return (z + updates, s), None
         (z, _), _ = jax.lax.scan(it, (z0, opt.init(z0)), jnp.arange(iterations))
@@ -409,10 +416,39 @@ def optimise_swing_up(plant: LeaderboardPlant, design: SwingUpDesign = SwingUpDe
     w_best = w[best : best + 1]
     if design.refine_iterations:
         w_best, _, _ = _search(plant, w_best, fine, design.dt, design, design.refine_iterations, 1.0)
-    knots = jnp.concatenate([jnp.zeros(1), design.torque_limit * jnp.tanh(w_best[0])])
+    w_end = _end_upright(plant, w_best[0], fine, design.dt, design.torque_limit)
+    knots = jnp.concatenate([jnp.zeros(1), design.torque_limit * jnp.tanh(w_end)])
     us = fine @ knots
     _, xs = _open_loop(plant, us, design.dt)
     return xs, us
+
+
+@eqx.filter_jit
+def _end_upright(plant, w, interp, dt, limit, iterations=12):
+    """Gauss-Newton on the knots so the rollout ends exactly upright at rest (minimum-norm steps).
+
+    The four residuals are the final state minus the nearest upright rest $(\\pi + 2\\pi i, 2\\pi j, 0, 0)$;
+    each step is $\\Delta w = -J^\\top (J J^\\top + \\epsilon I)^{-1} r$, the smallest change of the
+    knots that zeroes the linearised residual, so the optimised costs barely move.
+    """
+
+    def final(w):
+        knots = jnp.concatenate([jnp.zeros(1, w.dtype), limit * jnp.tanh(w)])
+        x_final, _ = _open_loop(plant, interp @ knots, dt)
+        return x_final
+
+    x0 = final(w)
+    target = jnp.stack([jnp.pi + 2 * jnp.pi * jnp.round((x0[0] - jnp.pi) / (2 * jnp.pi)),
+                        2 * jnp.pi * jnp.round(x0[1] / (2 * jnp.pi)), 0.0, 0.0])
+
+    def it(w, _):
+        r = final(w) - target
+        j = jax.jacfwd(final)(w)
+        step = j.T @ jnp.linalg.solve(j @ j.T + 1e-9 * jnp.eye(4), r)
+        return w - step, jnp.sum(r**2)
+
+    w, _ = jax.lax.scan(it, w, None, length=iterations)
+    return w
 
 
 _search = eqx.filter_jit(_adam_search)
