@@ -223,11 +223,14 @@ def load_controller(path) -> RobotController:
     try:
         with np.load(path, allow_pickle=False) as data:
             header = json.loads(str(data["header"]))
+            if not isinstance(header, dict) or header.get("format") != FORMAT:
+                found = header.get("format") if isinstance(header, dict) else None
+                raise DataError(f"load_controller: {str(path)!r} has format {found!r}, expected {FORMAT!r}")
             arrays = {k: np.asarray(data[k]) for k in _ARRAYS}
     except (ValueError, KeyError, OSError, json.JSONDecodeError) as e:
+        if isinstance(e, DataError):
+            raise
         raise DataError(f"load_controller: {str(path)!r} is not a saved dynax controller ({e})") from None
-    if header.get("format") != FORMAT:
-        raise DataError(f"load_controller: {str(path)!r} has format {header.get('format')!r}, expected {FORMAT!r}")
     missing = [k for k in _SCALARS if k not in header]
     if missing:
         raise DataError(f"load_controller: {str(path)!r} lacks header field(s) {missing}")
