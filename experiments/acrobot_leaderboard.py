@@ -6,7 +6,8 @@
 Writes `experiments/results/leaderboard/`: `results.json` (the performance costs and score, the
 robustness per family and its score, timings), `acrobot_policy.npz` (the controller, for
 `dynax.load_controller`), `robustness.png` (success against each perturbation's size),
-`swing_up.png` (the nominal episode). The experiment owns no algorithm: the benchmark is
+`swing_up.png` (the nominal episode), and the trade-off of the controller's prediction lead
+(performance against robustness, same reference). The experiment owns no algorithm: the benchmark is
 `dynax.control.performance` / `robustness`, the design `dynax.control.design_swing_up`.
 """
 
@@ -83,6 +84,9 @@ def figures(rob, rollout, out):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--policy", default=None, help="score this saved controller instead of designing one")
+    parser.add_argument("--reference", default=None,
+                        help="design the feedback (TVLQR, LQR, lead) with the default SwingUpDesign around the "
+                             "reference of this saved controller instead of searching for a reference")
     parser.add_argument("--out", default=str(OUT))
     args = parser.parse_args(argv)
     out = pathlib.Path(args.out)
@@ -93,9 +97,14 @@ def main(argv=None):
         design = None
     else:
         design = control.SwingUpDesign()
-        print("designing the swing-up (collocation, shooting, TVLQR) ...", flush=True)
+        reference = None
+        if args.reference:
+            saved = dynax.load_controller(args.reference)
+            reference = (jax.numpy.asarray(saved.x_ref), jax.numpy.asarray(saved.u_ref))
+        print("designing the swing-up (collocation, shooting, TVLQR) ..." if reference is None else
+              f"designing the feedback around the reference of {args.reference} ...", flush=True)
         start = time.perf_counter()
-        controller = control.design_swing_up(design=design)
+        controller = control.design_swing_up(design=design, reference=reference)
         timings["design_s"] = time.perf_counter() - start
         controller.save(out / "acrobot_policy.npz")
         print(f"  {timings['design_s']:.0f} s", flush=True)
@@ -113,11 +122,23 @@ def main(argv=None):
     assert np.array_equal(again.success, rob.success)
     print("robustness", rob.score, rob.table(), timings, flush=True)
     figures(rob, rollout, out)
+    print("the prediction lead against delay: performance and robustness for other leads ...", flush=True)
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    leads = []
+    for lead in (0.0, 0.01, 0.015, 0.02, 0.03):
+        c = eqx.tree_at(lambda c: c.lead, controller, jnp.asarray(lead))
+        p, r = control.performance(c), control.robustness(c)
+        leads.append({"lead": lead, "performance": float(p.score), "robustness": r.score, "families": r.table()})
+        print(f"  lead {lead:.3f} s: performance {float(p.score):.3f}, robustness {r.score:.3f}", flush=True)
     results = {
         "performance": perf.as_dict(),
         "robustness": {"score": rob.score, "families": rob.table(), "published_best": PUBLISHED},
         "timings": timings,
+        "lead_tradeoff": leads,
         "design": None if design is None else {k: getattr(design, k) for k in design.__dataclass_fields__},
+        "reference_from": args.reference or args.policy,
         "rules": {k: getattr(control.LeaderboardRules(), k) for k in control.LeaderboardRules.__dataclass_fields__},
     }
     (out / "results.json").write_text(json.dumps(results, indent=2, default=float))

@@ -26,6 +26,7 @@ FORMAT = "dynax-acrobot-swing-up"
 VERSION = 1
 _ARRAYS = ("x_ref", "u_ref", "gains", "k_balance", "s_balance", "model", "swing_up")
 _SCALARS = ("dt", "torque_limit", "threshold", "velocity_source")
+_OPTIONAL = {"lead": 0.0}
 
 
 def _wrap(a):
@@ -41,7 +42,8 @@ class SwingUpFromRest(AbstractBenchmarkController):
     else Spong's energy-shaping swing-up $u_e + u_p$ in the controller's model
     (`SpongController.swing_up_torque`'s law with gains $(k_e, k_p, k_d)$). The torque is
     saturated at `torque_limit`. $\hat x$ is the measured state with the velocities replaced by
-    the backward difference of the measured positions when `velocity_source` is 1.
+    the backward difference of the measured positions when `velocity_source` is 1, predicted
+    `lead` seconds ahead by one Euler step of the model with the last torque (0: no prediction).
 
     **Fields:** `x_ref` `(n_ref, 4)`, `u_ref` `(n_ref,)`, `gains` `(n_ref, 4)`; `k_balance` `(4,)`
     and `s_balance` `(4, 4)` (LQR gain and cost-to-go); `model` (the controller's plant, the 16
@@ -57,6 +59,7 @@ class SwingUpFromRest(AbstractBenchmarkController):
     model: Float[Array, " 16"]
     swing_up: Float[Array, " 3"]
     threshold: Float[Array, ""]
+    lead: Float[Array, ""]
     dt: float = eqx.field(static=True)
     torque_limit: float = eqx.field(static=True)
     velocity_source: int = eqx.field(static=True, default=1)
@@ -66,13 +69,15 @@ class SwingUpFromRest(AbstractBenchmarkController):
         return LeaderboardPlant(*self.model)
 
     def init(self, x0):
-        return (x0[:2], jnp.zeros((), jnp.int32))
+        return (x0[:2], jnp.zeros((), jnp.int32), jnp.zeros((), x0.dtype))
 
     def estimate(self, state, x):
-        q_prev, k = state
+        """The state the torque is computed for: velocities from positions, then `lead` seconds ahead."""
+        q_prev, k, u_prev = state
         v_fd = (x[:2] - q_prev) / self.dt
         v = jnp.where(k > 0, v_fd, x[2:]) if self.velocity_source else x[2:]
-        return jnp.concatenate([x[:2], v])
+        xh = jnp.concatenate([x[:2], v])
+        return xh + self.lead * self.plant.vector_field(xh, jnp.stack([jnp.zeros_like(u_prev), u_prev]))
 
     def torque(self, k, x):
         """The torque at control period `k` for the estimated state `x` (unsaturated)."""
@@ -89,7 +94,7 @@ class SwingUpFromRest(AbstractBenchmarkController):
     def step(self, state, t, x):
         xh = self.estimate(state, x)
         u = jnp.clip(self.torque(state[1], xh), -self.torque_limit, self.torque_limit)
-        return (x[:2], state[1] + 1), u
+        return (x[:2], state[1] + 1, u), u
 
     # ------------------------------------------------------------ files
 
@@ -98,6 +103,7 @@ class SwingUpFromRest(AbstractBenchmarkController):
         path = pathlib.Path(path)
         header = dict(format=FORMAT, version=VERSION, **{k: float(getattr(self, k)) for k in _SCALARS})
         header["velocity_source"] = int(self.velocity_source)
+        header["lead"] = float(self.lead)
         arrays = {k: np.asarray(getattr(self, k), np.float64) for k in _ARRAYS}
         with open(path, "wb") as f:
             np.savez(f, header=np.asarray(json.dumps(header)), **arrays)
@@ -141,6 +147,7 @@ class RobotController:
         self.torque_limit = float(header["torque_limit"])
         self.threshold = float(header["threshold"])
         self.velocity_source = int(header["velocity_source"])
+        self.lead = float(header.get("lead", _OPTIONAL["lead"]))
         self.x_ref = np.ascontiguousarray(arrays["x_ref"], np.float64)
         self.u_ref = np.ascontiguousarray(arrays["u_ref"], np.float64)
         self.gains = np.ascontiguousarray(arrays["gains"], np.float64)
@@ -156,6 +163,23 @@ class RobotController:
     def reset(self) -> None:
         self._k = 0
         self._q_prev = None
+        self._u_prev = 0.0
+
+    def _acceleration(self, q1, q2, v1, v2, tau2):
+        c2, s2 = np.cos(q2), np.sin(q2)
+        s1, s12 = np.sin(q1), np.sin(q1 + q2)
+        hc = self.m2 * self.l1 * self.r2 * c2
+        gr2 = self.gr * self.gr * self.Ir
+        m00 = self.I1 + self.I2 + self.m2 * self.l1**2 + 2 * hc + gr2 + self.Ir
+        m01 = self.I2 + hc - self.gr * self.Ir
+        m11 = self.I2 + gr2
+        h = self.m2 * self.l1 * self.r2 * s2
+        g = self.g
+        rhs0 = (-self.m1 * g * self.r1 * s1 - self.m2 * g * (self.l1 * s1 + self.r2 * s12)
+                - (-2 * h * v2 * v1 - h * v2 * v2) - self.b1 * v1 - self.cf1 * np.arctan(100 * v1))
+        rhs1 = -self.m2 * g * self.r2 * s12 + tau2 - h * v1 * v1 - self.b2 * v2 - self.cf2 * np.arctan(100 * v2)
+        det = m00 * m11 - m01 * m01
+        return (m11 * rhs0 - m01 * rhs1) / det, (m00 * rhs1 - m01 * rhs0) / det
 
     def _spong(self, q1, q2, v1, v2):
         k_e, k_p, k_d = self.swing_up
@@ -184,6 +208,9 @@ class RobotController:
             v1 = (q1 - self._q_prev[0]) / self.dt
             v2 = (q2 - self._q_prev[1]) / self.dt
         self._q_prev = (q1, q2)
+        if self.lead:
+            a1, a2 = self._acceleration(q1, q2, v1, v2, self._u_prev)
+            q1, q2, v1, v2 = q1 + self.lead * v1, q2 + self.lead * v2, v1 + self.lead * a1, v2 + self.lead * a2
         k = self._k
         self._k = k + 1
         if k < self.n_ref:
@@ -197,6 +224,7 @@ class RobotController:
             else:
                 u = self._spong(q1, q2, v1, v2)
         u = min(max(u, -self.torque_limit), self.torque_limit)
+        self._u_prev = u
         return np.array([u])
 
     def to_benchmark(self) -> SwingUpFromRest:
@@ -204,7 +232,7 @@ class RobotController:
         return SwingUpFromRest(
             jnp.asarray(self.x_ref), jnp.asarray(self.u_ref), jnp.asarray(self.gains), jnp.asarray(self.k_balance),
             jnp.asarray(self.s_balance), jnp.asarray(self.model), jnp.asarray(self.swing_up),
-            jnp.asarray(self.threshold), self.dt, self.torque_limit, self.velocity_source,
+            jnp.asarray(self.threshold), jnp.asarray(self.lead), self.dt, self.torque_limit, self.velocity_source,
         )
 
 
@@ -258,12 +286,14 @@ class SwingUpDesign(eqx.Module):
     - `starts`, `iterations` (collocation), `shooting_iterations`, `refine_iterations`,
       `learning_rate`, `seed`: the multi-start Adam searches (`optimise_swing_up`).
     - `terminal_weight`: the weight on the distance from upright at the horizon.
-    - `elbow_range` [rad]: the elbow angle the reference keeps within (a penalty beyond it), so
-      the swing-up does not turn the elbow over, which costs velocity.
+    - `elbow_range` [rad]: the elbow angle the reference keeps within (a penalty beyond it; no
+      limit by default: the searches with 2.6 rad found costlier swing-ups).
     - `q_track`, `r_track`: the time-varying LQR's costs; `q_balance`, `r_balance`: the balancing LQR's.
     - `threshold`: the cost-to-go below which the balancing LQR acts after the reference.
     - `swing_up`: Spong's $(k_e, k_p, k_d)$ for recovering after a knock.
     - `velocity_source`: 1 to estimate velocities from positions, 0 to use the measured ones.
+    - `lead` [s]: how far ahead the controller predicts the estimated state (one Euler step of
+      its model with the last torque), against measurement delay.
     """
 
     horizon: float = 2.0
@@ -276,14 +306,15 @@ class SwingUpDesign(eqx.Module):
     learning_rate: float = 0.01
     seed: int = 0
     terminal_weight: float = 1000.0
-    elbow_range: float = 2.6
+    elbow_range: float = float("inf")
     q_track: tuple[float, ...] = (10.0, 10.0, 0.1, 0.1)
-    r_track: float = 10.0
+    r_track: float = 30.0
     q_balance: tuple[float, ...] = (10.0, 10.0, 0.1, 0.1)
     r_balance: float = 10.0
     threshold: float = 100.0
     swing_up: tuple[float, float, float] = (1.0, 20.0, 2.0)
     velocity_source: int = 1
+    lead: float = 0.015
     dt: float = 0.002
     torque_limit: float = 6.0
 
@@ -427,7 +458,7 @@ def optimise_swing_up(plant: LeaderboardPlant, design: SwingUpDesign = SwingUpDe
 
 
 @eqx.filter_jit
-def _end_upright(plant, w, interp, dt, limit, iterations=12):
+def _end_upright(plant, w, interp, dt, limit, iterations=20, max_step=0.5):
     """Gauss-Newton on the knots so the rollout ends exactly upright at rest (minimum-norm steps).
 
     The four residuals are the final state minus the nearest upright rest $(\\pi + 2\\pi i, 2\\pi j, 0, 0)$;
@@ -448,6 +479,8 @@ def _end_upright(plant, w, interp, dt, limit, iterations=12):
         r = final(w) - target
         j = jax.jacfwd(final)(w)
         step = j.T @ jnp.linalg.solve(j @ j.T + 1e-9 * jnp.eye(4), r)
+        norm = jnp.linalg.norm(step)
+        step = step * jnp.minimum(1.0, max_step / jnp.maximum(norm, 1e-12))  # damped far from the solution
         return w - step, jnp.sum(r**2)
 
     w, _ = jax.lax.scan(it, w, None, length=iterations)
@@ -511,4 +544,5 @@ def design_swing_up(plant: LeaderboardPlant | None = None, design: SwingUpDesign
     gains = tvlqr(plant, xs, us, design.q_track, design.r_track, s_bal, design.dt)
     model = jnp.stack([jnp.asarray(getattr(plant, k), float) for k in LeaderboardPlant.__dataclass_fields__])
     return SwingUpFromRest(xs, us, gains, k_bal, s_bal, model, jnp.asarray(design.swing_up, float),
-                           jnp.asarray(design.threshold, float), design.dt, design.torque_limit, design.velocity_source)
+                           jnp.asarray(design.threshold, float), jnp.asarray(design.lead, float), design.dt,
+                           design.torque_limit, design.velocity_source)
