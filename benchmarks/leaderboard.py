@@ -64,7 +64,7 @@ def main(argv=None):
     for k in range(550):
         x = jnp.asarray(xs[k])
         t0 = time.perf_counter_ns()
-        state, u = step(state, k * 0.002, x)
+        state, u = step(state, jnp.asarray(k * 0.002), x)
         u.block_until_ready()
         if k >= 50:
             jtimes[k - 50] = time.perf_counter_ns() - t0

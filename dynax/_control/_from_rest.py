@@ -458,10 +458,11 @@ def optimise_swing_up(plant: LeaderboardPlant, design: SwingUpDesign = SwingUpDe
 
 
 @eqx.filter_jit
-def _end_upright(plant, w, interp, dt, limit, iterations=20, max_step=0.5):
-    """Gauss-Newton on the knots so the rollout ends exactly upright at rest (minimum-norm steps).
+def _end_upright(plant, w, interp, dt, limit, iterations=30, max_step=0.5):
+    """Gauss-Newton on the knots so the rollout ends exactly upright at rest with zero torque (minimum-norm steps).
 
-    The four residuals are the final state minus the nearest upright rest $(\\pi + 2\\pi i, 2\\pi j, 0, 0)$;
+    The five residuals are the final state minus the nearest upright rest $(\\pi + 2\\pi i, 2\\pi j, 0, 0)$
+    and the last knot's torque (zero upright at rest, so the hand-over to the LQR has no jump);
     each step is $\\Delta w = -J^\\top (J J^\\top + \\epsilon I)^{-1} r$, the smallest change of the
     knots that zeroes the linearised residual, so the optimised costs barely move.
     """
@@ -469,16 +470,16 @@ def _end_upright(plant, w, interp, dt, limit, iterations=20, max_step=0.5):
     def final(w):
         knots = jnp.concatenate([jnp.zeros(1, w.dtype), limit * jnp.tanh(w)])
         x_final, _ = _open_loop(plant, interp @ knots, dt)
-        return x_final
+        return jnp.concatenate([x_final, knots[-1:]])
 
     x0 = final(w)
     target = jnp.stack([jnp.pi + 2 * jnp.pi * jnp.round((x0[0] - jnp.pi) / (2 * jnp.pi)),
-                        2 * jnp.pi * jnp.round(x0[1] / (2 * jnp.pi)), 0.0, 0.0])
+                        2 * jnp.pi * jnp.round(x0[1] / (2 * jnp.pi)), 0.0, 0.0, 0.0])
 
     def it(w, _):
         r = final(w) - target
         j = jax.jacfwd(final)(w)
-        step = j.T @ jnp.linalg.solve(j @ j.T + 1e-9 * jnp.eye(4), r)
+        step = j.T @ jnp.linalg.solve(j @ j.T + 1e-9 * jnp.eye(5), r)
         norm = jnp.linalg.norm(step)
         step = step * jnp.minimum(1.0, max_step / jnp.maximum(norm, 1e-12))  # damped far from the solution
         return w - step, jnp.sum(r**2)
@@ -488,6 +489,24 @@ def _end_upright(plant, w, interp, dt, limit, iterations=20, max_step=0.5):
 
 
 _search = eqx.filter_jit(_adam_search)
+
+
+def end_upright(plant: LeaderboardPlant, us, design: SwingUpDesign = SwingUpDesign()):
+    """Re-end a reference's torques `us` (at the control periods, piecewise linear between knots
+    `knot_spacing` apart, zero at the start) exactly upright at rest with zero final torque.
+
+    **Returns:** `(xs, us)` of the corrected reference.
+    """
+    n_steps = us.shape[0]
+    per_knot = int(round(design.knot_spacing / design.dt))
+    n_knots = n_steps // per_knot
+    knots = jnp.concatenate([us[per_knot::per_knot], us[-1:]])[:n_knots]
+    w = jnp.arctanh(jnp.clip(knots / design.torque_limit, -0.9999, 0.9999))
+    fine = _knot_matrix(n_steps, design.dt, design.knot_spacing, n_knots)
+    w = _end_upright(plant, w, fine, design.dt, design.torque_limit)
+    us = fine @ jnp.concatenate([jnp.zeros(1), design.torque_limit * jnp.tanh(w)])
+    _, xs = _open_loop(plant, us, design.dt)
+    return xs, us
 
 
 def _discrete_model(plant, dt):
