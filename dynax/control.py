@@ -25,6 +25,7 @@ from ._control import (
     discrete_lqr as discrete_lqr,
     dlqr as dlqr,
     DRAKE_SPONG_PARAMETERS as DRAKE_SPONG_PARAMETERS,
+    end_upright as end_upright,
     ends_upright as ends_upright,
     estimate_region_of_attraction as estimate_region_of_attraction,
     evaluate_population as evaluate_population,

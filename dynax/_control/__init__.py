@@ -69,6 +69,7 @@ from ._leaderboard import (
 from ._from_rest import (
     balance_lqr as balance_lqr,
     design_swing_up as design_swing_up,
+    end_upright as end_upright,
     load_controller as load_controller,
     optimise_swing_up as optimise_swing_up,
     RobotController as RobotController,
