@@ -314,7 +314,7 @@ class SwingUpDesign(eqx.Module):
     threshold: float = 100.0
     swing_up: tuple[float, float, float] = (1.0, 20.0, 2.0)
     velocity_source: int = 1
-    lead: float = 0.015
+    lead: float = 0.02
     dt: float = 0.002
     torque_limit: float = 6.0
 
