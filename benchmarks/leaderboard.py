@@ -25,13 +25,13 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import equinox as eqx  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
-import dynax  # noqa: E402
-from dynax import control  # noqa: E402
+import dynax
+from dynax import control
 
 POLICY = pathlib.Path(__file__).resolve().parents[1] / "experiments" / "results" / "leaderboard" / "acrobot_policy.npz"
 
@@ -78,7 +78,7 @@ def main(argv=None):
     warm = control.robustness(controller, cases=cases)
     results["robustness_cold_s"] = cold.seconds
     results["robustness_warm_s"] = warm.seconds
-    results["robustness_rollouts"] = int(len(cases.family))
+    results["robustness_rollouts"] = len(cases.family)
     results["ratio_jax_call_to_numpy_call"] = results["call_jax_jit_us"]["median"] / results["call_numpy_us"]["median"]
     print(json.dumps(results, indent=2))
     if args.out:

@@ -21,15 +21,15 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import matplotlib  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib
+import numpy as np
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.pyplot as plt
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
-import dynax  # noqa: E402
-from dynax import control  # noqa: E402
+import dynax
+from dynax import control
 
 OUT = pathlib.Path(__file__).resolve().parent / "results" / "leaderboard"
 PUBLISHED = {  # leaderboards v2, best published entry per family (robustness), and the top scores

@@ -52,7 +52,7 @@ def run_tune(args: argparse.Namespace) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from .._control._from_rest import design_swing_up, SwingUpDesign
+    from .._control._from_rest import SwingUpDesign, design_swing_up
 
     out = _check_out(args.out, ".npz", "--out")
     changes = {}

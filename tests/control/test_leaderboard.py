@@ -2,7 +2,7 @@
 the perturbation draws, the saved from-rest controller (swing-up, round trip) and the CLI's refusals."""
 
 import pathlib
-import jax
+
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -135,7 +135,7 @@ def test_load_save_round_trip_gives_identical_actions(tmp_path):
     # the numpy controller reproduces the JAX one on the recorded states, call by call, twice
     for c in (robot, again):
         c.reset()
-        us = np.array([c(k * 0.002, xs[k])[0] for k in range(0, 1500)])
+        us = np.array([c(k * 0.002, xs[k])[0] for k in range(1500)])
         np.testing.assert_allclose(us, np.asarray(rollout.us[:1500]), rtol=0, atol=1e-9)
     robot.reset()
     again.reset()
