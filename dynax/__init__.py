@@ -174,6 +174,9 @@ from ._diagnose import (
     structure_test as structure_test,
     write_report as write_report,
 )
+# Control beyond the pipeline verbs (the acrobot leaderboard, from-rest swing-up) lives in `dynax.control`.
+from . import control as control
+from ._control._from_rest import load_controller as load_controller
 # Synthetic data (truth simulators, data generators) lives in `dynax.synthetic`; the top-level names stay.
 from . import synthetic as synthetic
 from ._synthetic import (

@@ -19,7 +19,7 @@ from ._common import check_command_output
 
 # Each module defines `register(subparsers)`, which adds its sub-command and sets `run=...`
 # (a function `run(args) -> int`) as the parser default.
-_COMMANDS = ("_demo", "_identify", "_diagnose", "_fit", "_evaluate")
+_COMMANDS = ("_demo", "_identify", "_diagnose", "_fit", "_evaluate", "_control")
 
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, as shells report a Ctrl-C
 

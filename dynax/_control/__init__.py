@@ -41,3 +41,39 @@ from ._pgpe import (
 )
 from ._swing_up_task import random_starts as random_starts, SwingUpTask as SwingUpTask
 from ._region_of_attraction import estimate_region_of_attraction as estimate_region_of_attraction, RegionOfAttraction as RegionOfAttraction
+from ._leaderboard import (
+    AbstractBenchmarkController as AbstractBenchmarkController,
+    as_benchmark_controller as as_benchmark_controller,
+    Case as Case,
+    COST_NAMES as COST_NAMES,
+    ends_upright as ends_upright,
+    Family as Family,
+    family_scores as family_scores,
+    LeaderboardPlant as LeaderboardPlant,
+    LeaderboardRules as LeaderboardRules,
+    MODEL_PARAMETERS as MODEL_PARAMETERS,
+    NOMINAL_PLANT as NOMINAL_PLANT,
+    nominal_case as nominal_case,
+    performance as performance,
+    performance_costs as performance_costs,
+    Performance as Performance,
+    pulse_schedule as pulse_schedule,
+    robustness as robustness,
+    Robustness as Robustness,
+    robustness_cases as robustness_cases,
+    RobustnessCases as RobustnessCases,
+    Rollout as Rollout,
+    simulate_leaderboard as simulate_leaderboard,
+    Stateless as Stateless,
+)
+from ._from_rest import (
+    balance_lqr as balance_lqr,
+    design_swing_up as design_swing_up,
+    end_upright as end_upright,
+    load_controller as load_controller,
+    optimise_swing_up as optimise_swing_up,
+    RobotController as RobotController,
+    SwingUpDesign as SwingUpDesign,
+    SwingUpFromRest as SwingUpFromRest,
+    tvlqr as tvlqr,
+)

@@ -92,6 +92,12 @@ class SpongController(eqx.Module):
     are `(5, 50, 5, 1000)`. The model the controller uses (`system`) may differ from the plant
     it drives, which is how a controller tuned on an identified model is evaluated on the truth.
 
+    It does not start from the exact hanging rest $(0, 0, 0, 0)$: there the energy pumping
+    vanishes with $\dot q_2$, the partial feedback linearisation with $q_2$ and $\dot q_2$, and
+    the bias forces with the angles and rates, so the torque is exactly zero and the arm never
+    moves. Start it from a perturbed state (Drake's test starts at $(0.1, -0.1, 0, 0.02)$), or
+    use a from-rest controller (`dynax.control.SwingUpFromRest`).
+
     **Arguments:**
 
     - `system`: the acrobot model inside the controller (default: Drake's parameters).

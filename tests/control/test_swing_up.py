@@ -184,3 +184,14 @@ def test_task_reward_prefers_drake_gains_over_a_weak_pump():
     assert drake["success_rate"] > weak["success_rate"]
     assert weak["mean_time_s"] == 10.0  # a too-weak energy pump never gets up
     assert jnp.all(jnp.abs(starts[:, :2]) <= 0.5) and jnp.all(starts[:, 2:] == 0)
+
+
+def test_spong_controller_gives_zero_torque_at_the_hanging_rest():
+    # Energy pumping ~ dq2, PFL ~ (q2, dq2) and the bias forces vanish at rest: the arm never moves.
+    controller = SpongController()
+    x_rest = jnp.zeros(4)
+    assert float(controller(0.0, x_rest)[0]) == 0.0
+    loop = simulate_closed_loop(controller.system, controller, x_rest, jnp.linspace(0.0, 0.5, 26))
+    assert float(jnp.max(jnp.abs(loop.xs))) == 0.0
+    # ... while a small offset does give torque (the test can fail).
+    assert abs(float(controller(0.0, jnp.array([0.0, 0.05, 0.0, 0.0]))[0])) > 0.1

@@ -1,0 +1,167 @@
+"""The RealAIGym acrobot leaderboard: the scoring by hand on tiny cases, the plant against dynax's Acrobot,
+the perturbation draws, the saved from-rest controller (swing-up, round trip) and the CLI's refusals."""
+
+import pathlib
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import dynax
+from dynax import control
+
+POLICY = pathlib.Path(__file__).parents[2] / "experiments" / "results" / "leaderboard" / "acrobot_policy.npz"
+
+
+def _lab_swingup_time(T, up):
+    """A transcription of the lab's `get_swingup_time(method="height", has_to_stay=True)` loop."""
+    time_index = len(T) - 1
+    for i in range(len(up) - 2, 0, -1):
+        if up[i]:
+            time_index = i
+        else:
+            break
+    return T[time_index]
+
+
+def test_performance_costs_by_hand_on_a_tiny_episode():
+    plant = control.LeaderboardPlant.nominal()
+    top = 0.5 * 0.9  # 0.9 (l1 + l2)
+    # five samples: down, half, up, up, up -> up from sample 2 (sample 4 is not visited by the lab's loop)
+    q1 = np.array([0.0, 1.5, np.pi, np.pi - 0.1, 0.0])
+    q2 = np.array([0.0, 0.3, 0.1, 0.0, 0.0])
+    xs = np.stack([q1, q2, [0.0, 2.0, 1.0, -1.0, 0.5], [0.0, -1.0, 3.0, 0.0, 0.0]], axis=1)
+    us = np.array([1.0, -2.0, 0.5, 0.0])
+    ts = np.arange(5) * 0.002
+    perf = control.performance_costs(control.Rollout(jnp.asarray(ts), jnp.asarray(xs), jnp.asarray(us)), plant)
+    height = -0.2 * np.cos(q1) - 0.3 * np.cos(q1 + q2)
+    t_up = _lab_swingup_time(ts, height > top)
+    energy = np.sum(np.abs(np.diff(q2) * us))
+    torque = np.sum(us**2 * 0.002)
+    smooth = np.std(np.diff(us))
+    velocity = np.sum((xs[:-1, 2] ** 2 + xs[:-1, 3] ** 2) * 0.002)
+    np.testing.assert_allclose(np.asarray(perf.costs), [t_up, energy, torque, smooth, velocity], rtol=1e-12)
+    assert t_up == ts[2] and bool(perf.success)
+    expected = 1 - np.mean(np.tanh(np.pi * np.array([t_up / 20, energy / 60, torque / 20, smooth / 0.1, velocity / 400])))
+    assert float(perf.score) == pytest.approx(expected, rel=1e-12)
+    # down at the second-to-last sample: no success, score 0 whatever the costs
+    xs_fail = xs.copy()
+    xs_fail[3] = 0.0
+    fail = control.performance_costs(control.Rollout(jnp.asarray(ts), jnp.asarray(xs_fail), jnp.asarray(us)), plant)
+    assert not bool(fail.success) and float(fail.score) == 0.0 and float(fail.costs[0]) == ts[-1]
+
+
+def test_family_scores_by_hand():
+    rules = control.LeaderboardRules(n_sizes=3, repetitions=4, pulse_runs=2)
+    cases = control.robustness_cases(rules)
+    counts = np.bincount(cases.family, minlength=6)
+    assert list(counts) == [30, 12, 12, 3, 3, 2]
+    success = np.zeros(len(cases.family), bool)
+    success[:15] = True  # half the model cases
+    noisy = np.flatnonzero(cases.family == 1)
+    success[noisy[:4]] = True  # first size: 4 of 4
+    success[noisy[4:6]] = True  # second size: 2 of 4 (not more than half)
+    success[np.flatnonzero(cases.family == 4)[:1]] = True
+    scores = control.family_scores(cases, success)
+    np.testing.assert_allclose(scores, [0.5, 1 / 3, 0.0, 0.0, 1 / 3, 0.0])
+
+
+def test_ends_upright_wraps_angles():
+    xs = jnp.array([[np.pi + 0.3, 0.3, 0.9, -0.9], [-np.pi, 2 * np.pi, 0, 0], [3 * np.pi, 0.36, 0, 0], [np.pi, 0, 1.1, 0]])
+    assert list(np.asarray(control.ends_upright(xs))) == [True, True, False, False]
+
+
+def test_plant_matches_dynax_acrobot_without_rotor_or_friction():
+    # The leaderboard plant written from the lab's equations against dynax's base-parameter Acrobot.
+    p = control.NOMINAL_PLANT
+    acrobot = dynax.Acrobot.from_physical(m1=p["m1"], m2=p["m2"], l1=p["l1"], lc1=p["r1"], lc2=p["r2"], I1=p["I1"],
+                                          I2=p["I2"], b1=0.0, b2=0.0, g=p["g"])
+    plant = control.LeaderboardPlant.nominal()
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        x = jnp.asarray(rng.normal(size=4) * 2)
+        u = float(rng.normal())
+        np.testing.assert_allclose(plant.vector_field(x, jnp.array([0.0, u])),
+                                   acrobot.vector_field(0.0, x, jnp.array([u])), rtol=1e-10, atol=1e-12)
+
+
+def test_rotor_inertia_and_friction_enter_as_the_lab_writes_them():
+    plant = control.LeaderboardPlant.nominal(Ir=1e-4, cf1=0.1, b2=0.05)
+    x = jnp.array([0.3, -0.2, 0.5, -1.0])
+    gr, Ir = 6.0, 1e-4
+    p = control.NOMINAL_PLANT
+    c2 = np.cos(-0.2)
+    m = np.array([[p["I1"] + p["I2"] + p["m2"] * 0.04 + 2 * p["m2"] * 0.2 * p["r2"] * c2 + gr**2 * Ir + Ir,
+                   p["I2"] + p["m2"] * 0.2 * p["r2"] * c2 - gr * Ir],
+                  [p["I2"] + p["m2"] * 0.2 * p["r2"] * c2 - gr * Ir, p["I2"] + gr**2 * Ir]])
+    plain = control.LeaderboardPlant.nominal(Ir=1e-4)
+    # friction is a torque: M (a_plain - a) = F
+    diff = m @ np.asarray(plain.acceleration(x, jnp.zeros(2)) - plant.acceleration(x, jnp.zeros(2)))
+    np.testing.assert_allclose(diff, [0.1 * np.arctan(100 * 0.5), 0.05 * -1.0], rtol=1e-10)
+
+
+def test_pulses_follow_the_rules():
+    rules = control.LeaderboardRules()
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        mu, sigma, amp = control.pulse_schedule(rules, rng)
+        assert mu.shape == sigma.shape == amp.shape == (2, 3)
+        assert np.all(np.diff(np.sort(mu.ravel())) >= 1.0) and mu.min() >= 1.0 and mu.max() <= 10.0
+        assert np.all((sigma >= 0.05) & (sigma <= 0.1))
+        assert np.all((np.abs(amp) >= 0.5) & (np.abs(amp) <= 5.0))
+
+
+def test_zero_controller_never_swings_up():
+    perf = control.performance(lambda t, x: jnp.zeros(1))
+    assert not bool(perf.success) and float(perf.score) == 0.0
+
+
+def test_saved_policy_swings_up_from_rest_and_balances():
+    controller = dynax.load_controller(POLICY).to_benchmark()
+    rollout = control.simulate_leaderboard(controller)
+    perf = control.performance_costs(rollout, control.LeaderboardPlant.nominal())
+    assert bool(perf.success) and float(perf.score) > 0.3
+    assert bool(control.ends_upright(rollout.xs[-1], (0.01, 0.01, 0.05, 0.05)))
+    assert float(jnp.max(jnp.abs(rollout.us))) <= 6.0
+
+
+def test_load_save_round_trip_gives_identical_actions(tmp_path):
+    robot = dynax.load_controller(POLICY)
+    controller = robot.to_benchmark()
+    path = controller.save(tmp_path / "again.npz")
+    again = dynax.load_controller(path)
+    rollout = control.simulate_leaderboard(controller)
+    xs = np.asarray(rollout.xs)
+    # the numpy controller reproduces the JAX one on the recorded states, call by call, twice
+    for c in (robot, again):
+        c.reset()
+        us = np.array([c(k * 0.002, xs[k])[0] for k in range(1500)])
+        np.testing.assert_allclose(us, np.asarray(rollout.us[:1500]), rtol=0, atol=1e-9)
+    robot.reset()
+    again.reset()
+    assert all(robot(0.0, xs[k])[0] == again(0.0, xs[k])[0] for k in range(50))
+
+
+def test_load_controller_refuses_bad_files(tmp_path):
+    with pytest.raises(dynax._errors.UsageError):
+        dynax.load_controller(tmp_path / "missing.npz")
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, header=np.asarray('{"format": "other"}'))
+    with pytest.raises(dynax._errors.DataError, match="format"):
+        dynax.load_controller(bad)
+
+
+@pytest.mark.parametrize("argv", [["control", "evaluate", "missing.npz"], ["control", "acrobot", "--out", "policy.json"],
+                                  ["control", "acrobot", "--out", "p.npz", "--starts", "0"],
+                                  ["control", "acrobot", "--out", "no/such/dir/p.npz"], ["control"]])
+def test_cli_refuses_bad_input_with_exit_2(tmp_path, monkeypatch, capsys, argv):
+    from dynax._cli._main import main
+
+    monkeypatch.chdir(tmp_path)
+    try:
+        code = main(argv)
+    except SystemExit as e:  # argparse's own refusals
+        code = e.code
+    assert code == 2
+    assert "error" in capsys.readouterr().err
+    assert not (tmp_path / "p.npz").exists()
