@@ -155,7 +155,7 @@ def test_load_controller_refuses_bad_files(tmp_path):
                                   ["control", "acrobot", "--out", "p.npz", "--starts", "0"],
                                   ["control", "acrobot", "--out", "no/such/dir/p.npz"], ["control"]])
 def test_cli_refuses_bad_input_with_exit_2(tmp_path, monkeypatch, capsys, argv):
-    from dynax._cli._main import main
+    from dynax.internal import cli_main as main
 
     monkeypatch.chdir(tmp_path)
     try:
