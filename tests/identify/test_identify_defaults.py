@@ -677,8 +677,8 @@ def test_a_refinement_that_ends_worse_than_its_start_keeps_the_least_squares_mod
 
     def ends_worse(*args, **kwargs):
         result = real(*args, **kwargs)
-        return eqx.tree_at(lambda r: (r.residual_rms, r.solution.result), result,
-                           (2 * result.initial_residual_rms, optx.RESULTS.nonlinear_divergence))
+        return eqx.tree_at(lambda r: (r.statistics.residual_rms, r.result), result,
+                           (2 * result.statistics.initial_residual_rms, optx.RESULTS.nonlinear_divergence))
 
     monkeypatch.setattr(_refine, "fit_simulation_error", ends_worse)
     data = recorded(rig_model(), 6.0, 13)
