@@ -166,6 +166,7 @@ from ._diagnose import (
     stlsq as stlsq,
     Structure as Structure,
     structure_test as structure_test,
+    Verdict as Verdict,
     write_report as write_report,
 )
 # Synthetic data (truth simulators, data generators) lives in `dynax.synthetic`; the top-level names stay.
