@@ -99,6 +99,19 @@ def confusion(rows, path):
     return {"hidden": hidden, "verdicts": list(VERDICTS), "by_verdict": v.tolist(), "named": named, "by_named": n.tolist()}
 
 
+def markdown(c, rows) -> str:
+    """The confusion matrices as Markdown tables (for docs/calibration.md), and the cases that went wrong."""
+    lines = ["| hidden | " + " | ".join(c["verdicts"]) + " |", "|---|" + "---|" * len(c["verdicts"])]
+    lines += [f"| {h} | " + " | ".join(str(x) for x in row) + " |" for h, row in zip(c["hidden"], c["by_verdict"])]
+    lines += ["", "| hidden | " + " | ".join(c["named"]) + " |", "|---|" + "---|" * len(c["named"])]
+    lines += [f"| {h} | " + " | ".join(str(x) for x in row) + " |" for h, row in zip(c["hidden"], c["by_named"])]
+    wrong = [r for r in rows if not r["right_verdict"] or r["extra"] or r["false_claim"] or r["none_with_gain"]]
+    lines += ["", "| case | verdict | named | gain | best candidate gain |", "|---|---|---|---|---|"]
+    lines += [f"| {r['name']} | {r['verdict']} | {', '.join(r['findings']) or '-'} | {r['gain']:.0%} | "
+              f"{'-' if r['best_gain'] is None else format(r['best_gain'], '.0%')} |" for r in wrong]
+    return "\n".join(lines) + "\n"
+
+
 def main():
     args = sys.argv[1:]
     opts = {}
@@ -137,6 +150,8 @@ def main():
             bar.update(1)
     result = {"summary": summary(rows), "confusion": confusion(rows, out / "confusion.png") if rows else None}
     (out / "summary.json").write_text(json.dumps(result, indent=1))
+    if rows:
+        (out / "confusion.md").write_text(markdown(result["confusion"], rows))
     print(json.dumps(result["summary"], indent=1))
 
 

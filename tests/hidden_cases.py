@@ -1,6 +1,6 @@
 """Hidden-effect cases made outside dynax's model code, for calibrating the diagnosis's verdicts.
 
-Every case is a short record (12 s of training, 6 s held out) of a truth integrated by scipy's DOP853 at tight
+Every case is a record of one run (20 s of training, the last 10 s held out, at 100 Hz, as `dynax demo`) of a truth integrated by scipy's DOP853 at tight
 tolerance, restarted at every input switch, with the effect written out here in numpy in a form that is
 *not* dynax's term: friction as `tanh`, `arctan` or a Stribeck curve (dynax's `CoulombFriction` is a tanh of
 its own speed scale), a true dead time (the input shifted in time, not a Padé filter), a first-order lag as
@@ -21,14 +21,14 @@ from scipy.integrate import solve_ivp
 from dynax import Trajectory
 
 THETA = (1.333, 1.33, 1.0, 14.715, 9.81, 0.1, 0.1)  # the nominal two-link arm's base parameters (Acrobot())
-TRAIN_S, HELD_OUT_S, DT = 12.0, 6.0, 0.01
+TRAIN_S, HELD_OUT_S, DT = 20.0, 10.0, 0.01
 
 
 @dataclasses.dataclass(frozen=True)
 class Case:
     """One hidden-effect case. `law`: the effect's written-out form; `mode`: `refit` or `known`; `expected`:
     the `(cause, where)` a right diagnosis names first, `None` for an effect-free control; `near`: a size near
-    what the test can see in 6 s of held-out record."""
+    what the test can see in 10 s of held-out record."""
 
     name: str
     system: str

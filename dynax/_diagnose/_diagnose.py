@@ -276,10 +276,14 @@ def diagnose(
        aside as not identifiable. The residual probe never stops the search.
     4. **Extend** the model with the selected terms, refitted jointly.
     5. **Measure the gain**: held-out simulation error, nominal against extended.
-    6. **Verdict**: `none` (no candidate helps and the probe finds no structure), `explained`
-       (causes found and the extended model's residuals have no structure left), `unexplained`
-       (structure the candidates do not fully explain; partial findings are listed).
-    7. **Discover** (where the verdict would be `unexplained` or `none` and `discovery` is on): a sparse
+    6. **Verdict** (`dynax.Verdict`; the rule is `dynax._diagnose._verdict`): `explained` (causes found and
+       what the extended model leaves has no structure of practical size), `unexplained` (structure of
+       practical size the candidates do not fully explain, or a nominal model that diverges on the
+       held-out windows; partial findings are listed), `none` (nothing named, nothing of practical size
+       left, and the test had the power to see a 25 % gain), `inconclusive` (nothing named, but the test
+       could not have seen a 25 % gain, or a candidate gained that much without being established; the
+       notes name it and the held-out length that would decide).
+    7. **Discover** (where the verdict would not be `explained` and `discovery` is on): a sparse
        search for the missing term beyond the vocabulary, refitted through simulation and kept
        only if it passes the same held-out test (see `dynax._diagnose._discovery.discover`);
        findings with cause `discovered`. The verdict is then `explained` if the named and

@@ -8,9 +8,9 @@ verdict rests on an effect size, and `none` also on the test's power:
 | verdict | when |
 |---|---|
 | `explained` | causes were named, and what their extended model leaves is small in practical terms: the residual probe finds no structure, or structure a further term could remove less than `MIN_PRACTICAL_GAIN` of (see `practical_structure`) |
-| `unexplained` | structure of practical size is left that the named causes (if any) do not account for, or the nominal model cannot simulate the held-out windows at all |
+| `unexplained` | structure of practical size is left that the named causes (if any) do not account for, or the nominal model cannot simulate the held-out windows at all; with nothing named, also that no candidate would remove it (gains `MIN_PRACTICAL_GAIN`) or the test had the power to establish one that does |
 | `none` | no cause was named, no structure of practical size is left, no candidate gained `MIN_PRACTICAL_GAIN` on the held-out runs, and the test had the power (`POWER`) to detect that gain at its level: the nominal model is adequate |
-| `inconclusive` | no cause was named and nothing of practical size is seen, but the test could not have seen it: its detectable gain exceeds `MIN_PRACTICAL_GAIN`, or the best candidate gains at least that much without being significant. The report names the best candidate (gain, p) and the held-out length that would decide |
+| `inconclusive` | no cause was named, and either nothing of practical size is seen but the test could not have seen it (its detectable gain exceeds `MIN_PRACTICAL_GAIN`, or the best candidate gains at least that much without being established), or structure of practical size is left that a candidate gaining at least `MIN_PRACTICAL_GAIN` would remove but the underpowered test could not establish. The report names the best candidate (gain, p) and the held-out length that would decide |
 
 The contract's three verdicts keep their meaning; `inconclusive` is the answer the old rules gave
 as `none` where the data could not have shown an effect (one 8 s held-out run).
@@ -162,8 +162,13 @@ def decide(named: bool, left: Structure, nominal_diverged: bool, power: Power) -
     """
     if named:
         return Verdict.UNEXPLAINED if practical_structure(left) else Verdict.EXPLAINED
-    if nominal_diverged or practical_structure(left):
+    if nominal_diverged:
         return Verdict.UNEXPLAINED
+    if practical_structure(left):
+        # Structure a candidate would remove (it gains MIN_PRACTICAL_GAIN or more) but the test could not
+        # establish is not unexplained by the candidates: it is a cause not yet decided.
+        seen = power.best is not None and power.best["gain"] >= MIN_PRACTICAL_GAIN and not power.enough
+        return Verdict.INCONCLUSIVE if seen else Verdict.UNEXPLAINED
     if power.best is None and power.detectable_gain is None:
         return Verdict.NONE  # no candidate to test: the probe is the only judge, and it sees nothing of practical size
     if power.best is not None and power.best["gain"] >= MIN_PRACTICAL_GAIN:
