@@ -8,9 +8,9 @@ verdict rests on an effect size, and `none` also on the test's power:
 | verdict | when |
 |---|---|
 | `explained` | causes were named, and what their extended model leaves is small in practical terms: the residual probe finds no structure, or structure a further term could remove less than `MIN_PRACTICAL_GAIN` of (see `practical_structure`) |
-| `unexplained` | structure of practical size is left that the named causes (if any) do not account for, or the nominal model cannot simulate the held-out windows at all; with nothing named, also that no candidate would remove it (gains `MIN_PRACTICAL_GAIN`) or the test had the power to establish one that does |
+| `unexplained` | structure of practical size is left that the named causes (if any) do not account for, or the nominal model cannot simulate the held-out windows at all; with nothing named, also that no candidate would remove it (gains `MIN_PRACTICAL_GAIN` and was stopped by significance alone) |
 | `none` | no cause was named, no structure of practical size is left, no candidate gained `MIN_PRACTICAL_GAIN` on the held-out runs, and the test had the power (`POWER`) to detect that gain at its level: the nominal model is adequate |
-| `inconclusive` | no cause was named, and either nothing of practical size is seen but the test could not have seen it (its detectable gain exceeds `MIN_PRACTICAL_GAIN`, or the best candidate gains at least that much without being established), or structure of practical size is left that a candidate gaining at least `MIN_PRACTICAL_GAIN` would remove but the underpowered test could not establish. The report names the best candidate (gain, p) and the held-out length that would decide |
+| `inconclusive` | no cause was named, and either nothing of practical size is seen but the test could not have seen it (its detectable gain exceeds `MIN_PRACTICAL_GAIN`, or the best candidate gains at least that much without being established), or structure of practical size is left that a candidate gaining at least `MIN_PRACTICAL_GAIN` would remove and that only the significance test stopped (`Power.undecided`). The report names the best candidate (gain, p) and the held-out length that would decide |
 
 The contract's three verdicts keep their meaning; `inconclusive` is the answer the old rules gave
 as `none` where the data could not have shown an effect (one 8 s held-out run).
@@ -107,13 +107,21 @@ class Power:
     candidate's level; `None` without a refitted candidate); `best` (the refitted candidate with the
     largest held-out gain: `cause`, `where`, `gain`, `p_value`; `None` without one); `tested_s` (the
     record time the test's windows cover: held-out runs, and cross-fitted runs where they are pooled);
-    `needed_s` (the tested time at which `MIN_PRACTICAL_GAIN` would be detected, same power and level).
+    `needed_s` (the tested time at which `MIN_PRACTICAL_GAIN` would be detected, same power and level, with
+    window-to-window variation like the best candidate's where it gains that much, else like the median's).
     """
 
     detectable_gain: float | None
     best: dict | None
     tested_s: float
     needed_s: float | None
+
+    @property
+    def undecided(self) -> bool:
+        """The best candidate gains `MIN_PRACTICAL_GAIN` or more and only significance (and the smallest pooled
+        gain, which more data settle too) stopped it: more held-out data would decide."""
+        return (self.best is not None and self.best["gain"] >= MIN_PRACTICAL_GAIN
+                and set(self.best["stopped_by"]) <= {"significance", "min_gain"})
 
     @property
     def enough(self) -> bool:
@@ -141,11 +149,14 @@ def power_of(results: dict, labels: dict, alpha: float, tested_s: float) -> Powe
     level = alpha / max(int(first["n_tested"]), 1)
     se = float(np.median([r["test"].std_error for r in results.values()]))
     detectable = detectable_gain(se, df, level, POWER) if np.isfinite(se) else 1.0
-    needed = None
-    if np.isfinite(se) and se > 0:
-        shift = (scipy.stats.t.isf(level, df) + scipy.stats.t.ppf(POWER, df)) * se
-        needed = float(tested_s * (shift / (-2.0 * np.log(1.0 - MIN_PRACTICAL_GAIN))) ** 2)
     k = max(results, key=lambda k: results[k]["gain_held_out"])
+    # The length that would decide: with window-to-window variation like the best candidate's where it gains
+    # MIN_PRACTICAL_GAIN or more (an effect of that size varies as much as the effect seen), else the median's.
+    se_needed = float(results[k]["test"].std_error) if results[k]["gain_held_out"] >= MIN_PRACTICAL_GAIN else se
+    needed = None
+    if np.isfinite(se_needed) and se_needed > 0:
+        shift = (scipy.stats.t.isf(level, df) + scipy.stats.t.ppf(POWER, df)) * se_needed
+        needed = float(tested_s * (shift / (-2.0 * np.log(1.0 - MIN_PRACTICAL_GAIN))) ** 2)
     cause, where = labels[k]
     best = {"cause": cause, "where": where, "gain": float(results[k]["gain_held_out"]), "p_value": float(results[k]["p"]),
             "stopped_by": [name for name, ok in results[k]["rules"].items() if not ok]}
@@ -165,10 +176,9 @@ def decide(named: bool, left: Structure, nominal_diverged: bool, power: Power) -
     if nominal_diverged:
         return Verdict.UNEXPLAINED
     if practical_structure(left):
-        # Structure a candidate would remove (it gains MIN_PRACTICAL_GAIN or more) but the test could not
-        # establish is not unexplained by the candidates: it is a cause not yet decided.
-        seen = power.best is not None and power.best["gain"] >= MIN_PRACTICAL_GAIN and not power.enough
-        return Verdict.INCONCLUSIVE if seen else Verdict.UNEXPLAINED
+        # Structure a candidate would remove (it gains MIN_PRACTICAL_GAIN or more, and only the significance
+        # test stopped it) is not unexplained by the candidates: it is a cause the held-out data do not yet decide.
+        return Verdict.INCONCLUSIVE if power.undecided else Verdict.UNEXPLAINED
     if power.best is None and power.detectable_gain is None:
         return Verdict.NONE  # no candidate to test: the probe is the only judge, and it sees nothing of practical size
     if power.best is not None and power.best["gain"] >= MIN_PRACTICAL_GAIN:

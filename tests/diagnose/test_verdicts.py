@@ -63,6 +63,19 @@ def test_structure_of_practical_size_or_a_diverging_nominal_is_unexplained():
     assert decide(False, _structure(True, 0.2), False, precise) == Verdict.NONE  # significant, not of practical size
 
 
+def test_structure_a_candidate_would_remove_but_significance_alone_stopped_is_inconclusive():
+    """A rotor inertia that gains 96 % on the held-out run at p = 0.0019, short of Benjamini-Hochberg's 0.001 over
+    ten candidates, with the nominal's probe at R2 = 0.51: the candidates do explain it, the data do not yet
+    decide it; the length that would is from the candidate's own window-to-window variation."""
+    labels = {3: ("rotor_inertia", "q2")}
+    undecided = power_of(_results(0.96, 0.0019, 0.05), labels, 0.01, 10.0)
+    assert undecided.undecided and undecided.needed_s is not None
+    assert decide(False, _structure(True, 0.51), False, undecided) == Verdict.INCONCLUSIVE
+    results = _results(0.96, 0.0019, 0.05)
+    results[3]["rules"]["sign"] = False  # a negative inertia is no explanation
+    assert decide(False, _structure(True, 0.51), False, power_of(results, labels, 0.01, 10.0)) == Verdict.UNEXPLAINED
+
+
 # --- end to end, on records dynax did not make --------------------------------------------------------
 
 
