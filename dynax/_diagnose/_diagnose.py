@@ -196,7 +196,7 @@ def _report(problem, nominal, yard, judgement, table, last, rounds, *, mode, sys
         notes.append(f"The residual probe still explains {s.r2:.0%} of the held-out one-step residuals (p = {s.p_value:.2g}): "
                      f"significant, but a term capturing all of it would lower them by {1 - np.sqrt(1 - max(s.r2, 0)):.0%} "
                      f"at most, less than a structure of practical size (R2 >= {PRACTICAL_R2:.2f}; see the verdict rule).")
-    test = _test_summary(o.alpha, o.min_gain, judgement.power, verdict)
+    test = _test_summary(o.alpha, o.min_gain, judgement.power, verdict, named=bool(judgement.findings))
     test["cross_fitting"] = (f"each of the {len(problem.folds)} training runs also held out in turn, every configuration "
                              "refitted on the other training runs; its windows pooled with the held-out runs'"
                              if problem.folds else None)

@@ -131,9 +131,9 @@ def _candidate_table(system, candidates, remaining, gains_scr, results, neutral,
     return table
 
 
-def _test_summary(alpha, min_gain, power, verdict) -> dict:
-    """How candidates were judged; where nothing was named (`none`, `inconclusive`), the gain the test could
-    have detected and the `power` block (`_verdict.Power`)."""
+def _test_summary(alpha, min_gain, power, verdict, named=False) -> dict:
+    """How candidates were judged; with `none` or `inconclusive` the gain the test could have detected, and
+    wherever nothing was named the `power` block (`_verdict.Power`)."""
     detectable = None
     if verdict in ("none", "inconclusive") and power.detectable_gain is not None:
         detectable = max(power.detectable_gain, min_gain)
@@ -149,7 +149,7 @@ def _test_summary(alpha, min_gain, power, verdict) -> dict:
         "alpha": alpha,
         "min_gain": min_gain,
         "detectable_gain": detectable,
-        **({"power": power.to_json()} if verdict in ("none", "inconclusive") else {}),
+        **({"power": power.to_json()} if not named else {}),
     }
 
 

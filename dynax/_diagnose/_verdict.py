@@ -8,7 +8,7 @@ verdict rests on an effect size, and `none` also on the test's power:
 | verdict | when |
 |---|---|
 | `explained` | causes were named, and what their extended model leaves is small in practical terms: the residual probe finds no structure, or structure a further term could remove less than `MIN_PRACTICAL_GAIN` of (see `practical_structure`) |
-| `unexplained` | structure of practical size is left that the named causes (if any) do not account for, or the nominal model cannot simulate the held-out windows at all; with nothing named, also that no candidate would remove it (gains `MIN_PRACTICAL_GAIN` and was stopped by significance alone) |
+| `unexplained` | structure of practical size is left that the named causes (if any) do not account for, or the nominal model cannot simulate the held-out windows at all; with nothing named: structure of practical size that no candidate gaining `MIN_PRACTICAL_GAIN` would remove, or significant structure that only a candidate the physical rules stopped would (a hidden spring, fitted by a negative rotor inertia) |
 | `none` | no cause was named, no structure of practical size is left, no candidate gained `MIN_PRACTICAL_GAIN` on the held-out runs, and the test had the power (`POWER`) to detect that gain at its level: the nominal model is adequate |
 | `inconclusive` | no cause was named, and either nothing of practical size is seen but the test could not have seen it (its detectable gain exceeds `MIN_PRACTICAL_GAIN`, or the best candidate gains at least that much without being established), or structure of practical size is left that a candidate gaining at least `MIN_PRACTICAL_GAIN` would remove and that only the significance test stopped (`Power.undecided`). The report names the best candidate (gain, p) and the held-out length that would decide |
 
@@ -175,14 +175,18 @@ def decide(named: bool, left: Structure, nominal_diverged: bool, power: Power) -
         return Verdict.UNEXPLAINED if practical_structure(left) else Verdict.EXPLAINED
     if nominal_diverged:
         return Verdict.UNEXPLAINED
-    if practical_structure(left):
-        # Structure a candidate would remove (it gains MIN_PRACTICAL_GAIN or more, and only the significance
-        # test stopped it) is not unexplained by the candidates: it is a cause the held-out data do not yet decide.
-        return Verdict.INCONCLUSIVE if power.undecided else Verdict.UNEXPLAINED
     if power.best is None and power.detectable_gain is None:
-        return Verdict.NONE  # no candidate to test: the probe is the only judge, and it sees nothing of practical size
+        # No candidate to test: the probe is the only judge.
+        return Verdict.UNEXPLAINED if practical_structure(left) else Verdict.NONE
     if power.best is not None and power.best["gain"] >= MIN_PRACTICAL_GAIN:
-        return Verdict.INCONCLUSIVE  # an effect of practical size was seen, not established
+        if power.undecided:
+            return Verdict.INCONCLUSIVE  # a candidate of practical size that only the significance test stopped
+        # An extra degree of freedom of practical size helps, but no physical candidate: with structure in the
+        # residuals that is structure the vocabulary does not explain (a hidden spring, fitted by a negative
+        # rotor inertia); without, an effect of practical size seen and not established.
+        return Verdict.UNEXPLAINED if left.significant else Verdict.INCONCLUSIVE
+    if practical_structure(left):
+        return Verdict.UNEXPLAINED
     return Verdict.NONE if power.enough else Verdict.INCONCLUSIVE
 
 

@@ -74,6 +74,11 @@ def test_structure_a_candidate_would_remove_but_significance_alone_stopped_is_in
     results = _results(0.96, 0.0019, 0.05)
     results[3]["rules"]["sign"] = False  # a negative inertia is no explanation
     assert decide(False, _structure(True, 0.51), False, power_of(results, labels, 0.01, 10.0)) == Verdict.UNEXPLAINED
+    # A hidden joint spring: the probe's structure is significant but small (R2 = 0.22), and only a negative rotor
+    # inertia helps (39 %): structure of practical size in simulation that no physical candidate explains.
+    spring = _results(0.39, 0.09, 0.05)
+    spring[3]["rules"]["sign"] = False
+    assert decide(False, _structure(True, 0.22), False, power_of(spring, labels, 0.01, 10.0)) == Verdict.UNEXPLAINED
 
 
 # --- end to end, on records dynax did not make --------------------------------------------------------
