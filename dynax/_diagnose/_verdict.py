@@ -88,8 +88,9 @@ _TEXT = {
     "practical size, and the test had the power to see a gain of 25 % had there been one.",
     Verdict.UNEXPLAINED: "**unexplained**: the errors have structure of practical size that the candidate causes do not "
     "(fully) explain. Partial findings, if any, are listed, but they are not an explanation.",
-    Verdict.INCONCLUSIVE: "**inconclusive**: no cause passed the test, but the held-out data could not have shown one of "
-    "practical size; the best candidate and the held-out length that would decide are in the notes.",
+    Verdict.INCONCLUSIVE: "**inconclusive**: no cause passed the test, but the held-out data cannot decide: a candidate of "
+    "practical size was seen and not established, or the test could not have seen one; the notes name the best "
+    "candidate and the held-out length that would decide.",
 }
 
 
@@ -108,13 +109,16 @@ class Power:
     largest held-out gain: `cause`, `where`, `gain`, `p_value`; `None` without one); `tested_s` (the
     record time the test's windows cover: held-out runs, and cross-fitted runs where they are pooled);
     `needed_s` (the tested time at which `MIN_PRACTICAL_GAIN` would be detected, same power and level, with
-    window-to-window variation like the best candidate's where it gains that much, else like the median's).
+    window-to-window variation like the best candidate's where it gains that much, else like the median's);
+    `observed_needed_s` (where the best candidate gains that much: the tested time at which its own observed
+    mean improvement would be detected, same power and level: what would decide that candidate).
     """
 
     detectable_gain: float | None
     best: dict | None
     tested_s: float
     needed_s: float | None
+    observed_needed_s: float | None = None
 
     @property
     def undecided(self) -> bool:
@@ -130,7 +134,8 @@ class Power:
 
     def to_json(self) -> dict:
         return {"detectable_gain": self.detectable_gain, "power": POWER, "min_practical_gain": MIN_PRACTICAL_GAIN,
-                "best_candidate": self.best, "tested_s": self.tested_s, "needed_s": self.needed_s}
+                "best_candidate": self.best, "tested_s": self.tested_s, "needed_s": self.needed_s,
+                "observed_needed_s": self.observed_needed_s}
 
 
 def power_of(results: dict, labels: dict, alpha: float, tested_s: float) -> Power:
@@ -153,14 +158,17 @@ def power_of(results: dict, labels: dict, alpha: float, tested_s: float) -> Powe
     # The length that would decide: with window-to-window variation like the best candidate's where it gains
     # MIN_PRACTICAL_GAIN or more (an effect of that size varies as much as the effect seen), else the median's.
     se_needed = float(results[k]["test"].std_error) if results[k]["gain_held_out"] >= MIN_PRACTICAL_GAIN else se
-    needed = None
+    needed = observed = None
     if np.isfinite(se_needed) and se_needed > 0:
         shift = (scipy.stats.t.isf(level, df) + scipy.stats.t.ppf(POWER, df)) * se_needed
         needed = float(tested_s * (shift / (-2.0 * np.log(1.0 - MIN_PRACTICAL_GAIN))) ** 2)
+        mean = float(results[k]["test"].mean)
+        if results[k]["gain_held_out"] >= MIN_PRACTICAL_GAIN and mean > 0:
+            observed = float(tested_s * (shift / mean) ** 2)  # its own observed effect, detected with POWER
     cause, where = labels[k]
     best = {"cause": cause, "where": where, "gain": float(results[k]["gain_held_out"]), "p_value": float(results[k]["p"]),
             "stopped_by": [name for name, ok in results[k]["rules"].items() if not ok]}
-    return Power(float(detectable), best, float(tested_s), needed)
+    return Power(float(detectable), best, float(tested_s), needed, observed)
 
 
 def decide(named: bool, left: Structure, nominal_diverged: bool, power: Power) -> Verdict:
@@ -198,17 +206,18 @@ def inconclusive_note(power: Power, horizon_s: float, runs: str) -> str:
         parts.append(f"The best candidate, {b['cause']}@{b['where']}, gains {b['gain']:.0%} on the held-out runs at "
                      f"{horizon_s:g} s (p = {b['p_value']:.2g})"
                      + (f", stopped by {', '.join(b['stopped_by'])}" if b["stopped_by"] else "") + ".")
-    if power.detectable_gain is not None:
+    if power.detectable_gain is not None and not power.undecided:
         parts.append(f"With these {runs} ({power.tested_s:.3g} s of windows) the test would detect a gain of about "
-                     f"{power.detectable_gain:.0%} with {POWER:.0%} power, more than the {MIN_PRACTICAL_GAIN:.0%} that "
-                     "matters" if not power.enough else
-                     f"With these {runs} ({power.tested_s:.3g} s of windows) the test would detect a gain of about "
-                     f"{power.detectable_gain:.0%} with {POWER:.0%} power")
-        parts[-1] += "."
+                     f"{power.detectable_gain:.0%} with {POWER:.0%} power"
+                     + (f", more than the {MIN_PRACTICAL_GAIN:.0%} that matters." if not power.enough else "."))
     if power.needed_s is not None and power.needed_s > power.tested_s:
-        parts.append(f"About {power.needed_s:.3g} s of held-out record like these ({power.needed_s / power.tested_s:.2g} "
-                     f"times as much) would detect a {MIN_PRACTICAL_GAIN:.0%} gain; the verdict is left open until then.")
+        like = "its" if power.undecided else "the refitted candidates'"
+        parts.append(f"With window-to-window variation like {like}, about {power.needed_s:.3g} s of held-out record "
+                     f"({power.needed_s / power.tested_s:.2g} times as much) would detect a {MIN_PRACTICAL_GAIN:.0%} "
+                     f"gain at the test's level with {POWER:.0%} power; the verdict is left open until then.")
     elif power.best is not None:
-        parts.append("A candidate gains that much but is not established by the test (see `rounds`): more held-out "
-                     "runs, or runs that excite it differently, would decide.")
+        parts.append("More held-out runs, or runs that excite it differently, would decide.")
+    if power.undecided and power.observed_needed_s is not None:
+        parts.append(f"Its own improvement, as large as observed, would be detected with about "
+                     f"{power.observed_needed_s:.3g} s of such record.")
     return "Inconclusive: " + " ".join(parts)

@@ -70,6 +70,8 @@ def test_structure_a_candidate_would_remove_but_significance_alone_stopped_is_in
     labels = {3: ("rotor_inertia", "q2")}
     undecided = power_of(_results(0.96, 0.0019, 0.05), labels, 0.01, 10.0)
     assert undecided.undecided and undecided.needed_s is not None
+    # Its own 96 % improvement needs far less record to be established than a 25 % one would.
+    assert undecided.observed_needed_s is not None and undecided.observed_needed_s < undecided.needed_s
     assert decide(False, _structure(True, 0.51), False, undecided) == Verdict.INCONCLUSIVE
     results = _results(0.96, 0.0019, 0.05)
     results[3]["rules"]["sign"] = False  # a negative inertia is no explanation
