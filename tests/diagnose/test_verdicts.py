@@ -1,6 +1,10 @@
 """Verdicts from effect size and power (`dynax.Verdict`, the rule in `dynax._diagnose._verdict`), and a quick
 subset of the calibration battery (`tests/hidden_cases.py`: records made by scipy's DOP853 with the effects
-written out apart from dynax's terms; `experiments/calibration_battery.py` runs all of them)."""
+written out apart from dynax's terms; `experiments/calibration_battery.py` runs all of them).
+
+The rule's tests are arithmetic; of the end-to-end cases, the effect-free control and the Stribeck friction share
+one compilation (same system, mode and record lengths) and run by default; the short held-out record and the
+known-mode impossible nominal compile anew and are heavy."""
 
 import numpy as np
 import pytest
@@ -96,6 +100,7 @@ def test_effect_free_control_claims_no_cause():
     assert not o["none_with_gain"], j["candidates"][:3]
 
 
+@pytest.mark.heavy
 def test_a_short_held_out_record_is_inconclusive_not_none():
     """A Coulomb friction near the threshold, judged on 1.5 s of held-out record: the test cannot see a 25 % gain
     there, so the answer is `inconclusive` with the best candidate and the length that would decide."""
@@ -113,7 +118,6 @@ def test_a_short_held_out_record_is_inconclusive_not_none():
         assert j["findings"][0]["cause"] == "coulomb_friction", j["findings"]
 
 
-@pytest.mark.heavy
 def test_a_cause_found_with_a_leftover_probe_structure_is_explained():
     """A Stribeck friction (static level 1.5 times the Coulomb level) is named as Coulomb friction; the curve's
     hump stays in the residuals as small structure, which must not make the verdict `unexplained`."""
