@@ -50,6 +50,8 @@ def interleaved(cases):
 
 
 def summary(rows):
+    errors = [r["name"] for r in rows if "error" in r]
+    rows = [r for r in rows if "error" not in r]
     effects = [r for r in rows if r["expected"] is not None]
     controls = [r for r in rows if r["expected"] is None]
     gained = [r for r in rows if r["best_gain"] is not None and r["best_gain"] >= 0.25]
@@ -58,7 +60,7 @@ def summary(rows):
         return (sum(bool(x[key]) for x in xs) / len(xs)) if xs else None
 
     return {
-        "cases_run": len(rows), "cases_total": len(CASES), "effect_cases": len(effects), "controls": len(controls),
+        "cases_run": len(rows), "cases_total": len(CASES), "errors": errors, "effect_cases": len(effects), "controls": len(controls),
         "named_first": share(effects, "named_first"),
         "right_verdict": share(rows, "right_verdict"),
         "right_verdict_effects": share(effects, "right_verdict"),
@@ -137,7 +139,13 @@ def main():
                 bar.say(f"budget of {budget:g} s spent: stopping with {len(rows)} cases")
                 break
             t0 = time.perf_counter()
-            j = diagnose_case(case).to_json()
+            try:
+                j = diagnose_case(case).to_json()
+            except Exception as error:  # a traceback is a result too: recorded, and the battery goes on
+                rows.append({"name": case.name, "system": case.system, "cause": case.cause, "error": repr(error)[:500]})
+                path.write_text(json.dumps(rows, indent=1))
+                bar.say(f"{case.name}: ERROR {error!r}"[:300])
+                continue
             row = {"name": case.name, "system": case.system, "cause": case.cause, "where": case.where, "size": case.size,
                    "law": case.law, "mode": case.mode, "near": case.near, "seed": case.seed,
                    "expected": None if case.expected is None else "@".join(case.expected),
@@ -148,10 +156,11 @@ def main():
             bar.say(f"{case.name}: {row['verdict']} {row['findings']} gain {row['gain']:.0%} "
                     f"best {row['best_gain'] if row['best_gain'] is None else round(row['best_gain'], 2)} ({row['wall_s']:.0f} s)")
             bar.update(1)
-    result = {"summary": summary(rows), "confusion": confusion(rows, out / "confusion.png") if rows else None}
+    done = [r for r in rows if "error" not in r]
+    result = {"summary": summary(rows), "confusion": confusion(done, out / "confusion.png") if done else None}
     (out / "summary.json").write_text(json.dumps(result, indent=1))
     if rows:
-        (out / "confusion.md").write_text(markdown(result["confusion"], rows))
+        (out / "confusion.md").write_text(markdown(result["confusion"], done))
     print(json.dumps(result["summary"], indent=1))
 
 
