@@ -23,15 +23,15 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import matplotlib  # noqa: E402
+import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
-from dynax import ProgressBar  # noqa: E402
-from tests.hidden_cases import CASES, diagnose_case, outcome  # noqa: E402
+from dynax import ProgressBar
+from tests.hidden_cases import CASES, diagnose_case, outcome
 
 VERDICTS = ("explained", "unexplained", "inconclusive", "none")
 
@@ -141,7 +141,7 @@ def main():
             t0 = time.perf_counter()
             try:
                 j = diagnose_case(case).to_json()
-            except Exception as error:  # a traceback is a result too: recorded, and the battery goes on
+            except Exception as error:  # noqa: BLE001 (a traceback is a result too: recorded, and the battery goes on)
                 rows.append({"name": case.name, "system": case.system, "cause": case.cause, "error": repr(error)[:500]})
                 path.write_text(json.dumps(rows, indent=1))
                 bar.say(f"{case.name}: ERROR {error!r}"[:300])

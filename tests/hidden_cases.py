@@ -13,6 +13,7 @@ diagnosis runs in, and what the right answer is (`expected`: `(cause, where)` or
 """
 
 import dataclasses
+import itertools
 
 import jax.numpy as jnp
 import numpy as np
@@ -67,12 +68,12 @@ def integrate(rhs, x0, ts, us, delay=0.0):
     switches = np.union1d(ts, ts + delay)
     switches = switches[(switches >= ts[0]) & (switches <= ts[-1])]
     x, out, k = np.asarray(x0, float), [np.asarray(x0, float)], 1
-    for a, b in zip(switches[:-1], switches[1:]):
+    for a, b in itertools.pairwise(switches):
         if b - a < 1e-12:
             continue
         i = int(np.clip(np.floor((0.5 * (a + b) - delay - ts[0]) / DT + 1e-9), 0, len(us) - 1))
         u = us[i]
-        x = solve_ivp(lambda t, y: rhs(y, u), (a, b), x, method="DOP853", rtol=1e-10, atol=1e-11).y[:, -1]
+        x = solve_ivp(lambda t, y, u=u: rhs(y, u), (a, b), x, method="DOP853", rtol=1e-10, atol=1e-11).y[:, -1]
         while k < len(ts) and abs(ts[k] - b) < 1e-9:
             out.append(x)
             k += 1
@@ -133,7 +134,7 @@ def arm_rhs(theta, case, driven):
 
 # --- the linear axis ------------------------------------------------------------------------------------
 
-AXIS = dict(mass=95.1, viscous=200.0, offset=0.0)  # the nominal LinearAxis(coulomb=0) of the cases
+AXIS = {"mass": 95.1, "viscous": 200.0, "offset": 0.0}  # the nominal LinearAxis(coulomb=0) of the cases
 
 
 def axis_rhs(case):
@@ -152,8 +153,8 @@ def axis_rhs(case):
 
 # --- the helicopter: the Tempest hover model written out in numpy, effects in the body frame ------------
 
-TEMPEST = dict(Ax=-0.18, Ay=-0.43, Az=-0.49, Bx=-12.78, By=-10.12, Bz=-8.16, C1=33.04, C2=-33.32, C3=70.54,
-               C4=-42.15, Dv=-0.54, g=9.81)
+TEMPEST = {"Ax": -0.18, "Ay": -0.43, "Az": -0.49, "Bx": -12.78, "By": -10.12, "Bz": -8.16, "C1": 33.04, "C2": -33.32, "C3": 70.54,
+               "C4": -42.15, "Dv": -0.54, "g": 9.81}
 HOVER_U4 = TEMPEST["g"] / -TEMPEST["C4"]  # the collective that holds the weight at level attitude
 
 
@@ -198,14 +199,14 @@ def heli_rhs(case):
 # --- records ----------------------------------------------------------------------------------------------
 
 SYSTEMS = {
-    "acrobot": dict(states=("q1", "q2", "dq1", "dq2"), inputs=("tau2",), driven=(1,), rms=2.0,
-                    noise=(1e-3, 1e-3, 1e-2, 1e-2)),
-    "double_pendulum": dict(states=("q1", "q2", "dq1", "dq2"), inputs=("tau1", "tau2"), driven=(0, 1), rms=1.5,
-                            noise=(1e-3, 1e-3, 1e-2, 1e-2)),
-    "linear_axis": dict(states=("q", "dq"), inputs=("force",), rms=150.0, noise=(1e-5, 1e-4)),
-    "helicopter": dict(states=("x", "y", "z", "qw", "qx", "qy", "qz", "u", "v", "w", "p", "q", "r"),
-                       inputs=("u1", "u2", "u3", "u4"), rms=(0.02, 0.02, 0.01, 0.03),
-                       noise=(1e-3,) * 3 + (0.0,) * 4 + (1e-2,) * 3 + (3e-3,) * 3),
+    "acrobot": {"states": ("q1", "q2", "dq1", "dq2"), "inputs": ("tau2",), "driven": (1,), "rms": 2.0,
+                    "noise": (1e-3, 1e-3, 1e-2, 1e-2)},
+    "double_pendulum": {"states": ("q1", "q2", "dq1", "dq2"), "inputs": ("tau1", "tau2"), "driven": (0, 1), "rms": 1.5,
+                            "noise": (1e-3, 1e-3, 1e-2, 1e-2)},
+    "linear_axis": {"states": ("q", "dq"), "inputs": ("force",), "rms": 150.0, "noise": (1e-5, 1e-4)},
+    "helicopter": {"states": ("x", "y", "z", "qw", "qx", "qy", "qz", "u", "v", "w", "p", "q", "r"),
+                       "inputs": ("u1", "u2", "u3", "u4"), "rms": (0.02, 0.02, 0.01, 0.03),
+                       "noise": (1e-3,) * 3 + (0.0,) * 4 + (1e-2,) * 3 + (3e-3,) * 3},
 }
 
 
@@ -223,7 +224,7 @@ def truth_theta(case):
 def records(case: Case) -> tuple[Trajectory, Trajectory]:
     """The training and held-out records of `case` (one run, the last `HELD_OUT_S` held out)."""
     spec = SYSTEMS[case.system]
-    n = int(round((TRAIN_S + HELD_OUT_S) / DT)) + 1
+    n = round((TRAIN_S + HELD_OUT_S) / DT) + 1
     ts = np.arange(n) * DT
     rms = np.broadcast_to(np.asarray(spec["rms"], float), (len(spec["inputs"]),))
     us = multisine(n, len(spec["inputs"]), case.seed, 1.0) * rms
@@ -247,7 +248,7 @@ def records(case: Case) -> tuple[Trajectory, Trajectory]:
         xs[:, 3:7] /= np.linalg.norm(xs[:, 3:7], axis=1, keepdims=True)
     rng = np.random.default_rng(7919 + case.seed)
     xs = xs + np.asarray(spec["noise"]) * rng.standard_normal(xs.shape)
-    k = int(round(TRAIN_S / DT)) + 1
+    k = round(TRAIN_S / DT) + 1
 
     def record(a, b, source):
         return Trajectory(jnp.asarray(ts[a:b]), jnp.asarray(xs[a:b]), jnp.asarray(us[a:b]), spec["states"],
@@ -349,8 +350,8 @@ def diagnose_case(case: Case, records_=None):
                                    coulomb=jnp.asarray(0.0), offset=jnp.asarray(AXIS["offset"]))
     else:
         nominal = dynax.Helicopter()
-        kwargs = dict(candidates=tuple(t for t in dynax.default_candidates(nominal)
-                                       if isinstance(t, dynax.AbstractVehicleTerm)), horizons_s=(0.25, 0.5, 1.0))
+        kwargs = {"candidates": tuple(t for t in dynax.default_candidates(nominal)
+                                       if isinstance(t, dynax.AbstractVehicleTerm)), "horizons_s": (0.25, 0.5, 1.0)}
     return dynax.diagnose(nominal, train, held_out, mode=mode, max_terms=2, progress=False, **kwargs)
 
 

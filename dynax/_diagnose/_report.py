@@ -11,7 +11,6 @@ from ._residuals import acceleration_residuals, velocity_indices
 from ._verdict import Verdict
 
 
-
 def _fmt(x, digits=4):
     return "n/a" if x is None else f"{x:.{digits}g}"
 

@@ -12,7 +12,7 @@ import pytest
 import dynax
 from dynax import Structure, Verdict
 from dynax._diagnose._statistics import PairedTest
-from dynax._diagnose._verdict import decide, MIN_PRACTICAL_GAIN, power_of, PRACTICAL_R2
+from dynax._diagnose._verdict import MIN_PRACTICAL_GAIN, PRACTICAL_R2, decide, power_of
 from tests.hidden_cases import Case, diagnose_case, outcome, records
 
 
@@ -135,8 +135,8 @@ def test_known_mode_with_an_impossible_nominal_is_not_none():
     case = Case("bad-nominal", "acrobot", None, None, 0.0, "none", "known", 301)
     train, held_out = records(case)
     try:
-        nominal = dynax.Acrobot.from_base_parameters(dict(theta1=-1.333, theta2=1.33, theta3=1.0, theta4=-14.715,
-                                                          theta5=9.81, theta6=0.1, theta7=0.1))
+        nominal = dynax.Acrobot.from_base_parameters({"theta1": -1.333, "theta2": 1.33, "theta3": 1.0, "theta4": -14.715,
+                                                          "theta5": 9.81, "theta6": 0.1, "theta7": 0.1})
     except ValueError as refused:  # a located refusal of the impossible parameters is a right answer too
         assert "theta1" in str(refused) or "theta4" in str(refused), refused
         return
