@@ -172,6 +172,7 @@ from ._diagnose import (
     stlsq as stlsq,
     Structure as Structure,
     structure_test as structure_test,
+    Verdict as Verdict,
     write_report as write_report,
 )
 # Control beyond the pipeline verbs (the acrobot leaderboard, from-rest swing-up) lives in `dynax.control`.

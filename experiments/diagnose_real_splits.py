@@ -103,7 +103,15 @@ def run_split(data, name, mode_name, variant="5ms", **kwargs):
         "named_lab_effect": any(f["cause"] in LAB_EFFECTS for f in j["findings"]),
         "nominal_rmse": j["nominal"]["sim_error"], "extended_rmse": j["extended"]["sim_error"],
         "per_run": j["runs"], "detectable_gain": j["test"]["detectable_gain"], "notes": j["notes"],
-        "structure": {k: {"significant": v["significant"], "r2": v["r2"]} for k, v in j["structure"].items()},
+        "power": j["test"].get("power"),
+        "best_gain": max((c["gain"] for c in j["candidates"] if "gain" in c), default=None),
+        # The rule before verdicts weighed effect size and power, on this run's own statistics: any significant
+        # probe structure made it `unexplained`, no finding and no significant structure `none`.
+        "verdict_by_significance_alone": (("unexplained" if j["structure"]["extended"]["significant"] else "explained")
+                                          if j["findings"] else
+                                          ("unexplained" if j["structure"]["nominal"]["significant"] else "none")),
+        "structure": {k: {"significant": v["significant"], "r2": v["r2"], "p_value": v["p_value"]}
+                      for k, v in j["structure"].items()},
         "candidates": j["candidates"][:8],
         "rounds": j["rounds"],
     }

@@ -14,3 +14,4 @@ from ._result import (
     Validation as Validation,
 )
 from ._residuals import Structure as Structure, structure_test as structure_test
+from ._verdict import Verdict as Verdict

@@ -44,6 +44,7 @@ from ._summaries import (
     _window_scores,
 )
 from ._validation import validation_summary
+from ._verdict import decide, inconclusive_note, Power, power_of, PRACTICAL_R2, Verdict
 
 
 _CONTRACT_NAMES = {"Acrobot": "acrobot", "DoublePendulum": "double_pendulum", "LinearAxis": "linear_axis", "Helicopter": "helicopter"}
@@ -80,7 +81,7 @@ def _extend(problem: _Problem, current: _Current) -> tuple[Extended, list[dict]]
 class _Judgement:
     """The verdict and what it rests on: the final model, its findings, held-out errors and structure."""
 
-    verdict: str
+    verdict: Verdict
     model: AbstractSystem
     findings: list
     errors: np.ndarray
@@ -89,22 +90,30 @@ class _Judgement:
     gain: float
     discovery: dict
     cv_errors: np.ndarray  # the named causes' model on the cross-fitted windows (discovered terms are not cross-fitted)
+    power: Power
 
 
-def _judge(problem: _Problem, nominal: _Nominal, yard: _Yardstick, current: _Current, say) -> _Judgement:
-    """Judge: `explained`, `none` or `unexplained` from the findings and the structure left; then, where
-    it is not `explained` and discovery is on, search beyond the vocabulary with the same held-out test."""
+def _power(problem: _Problem, yard: _Yardstick, last: dict) -> Power:
+    """The last round's test power (`_verdict.power_of`) over the record time its windows cover."""
+    labels = {k: (problem.candidates[k].cause, problem.candidates[k].where(problem.system)) for k in last}
+    tested_s = len(yard.window_runs) * problem.val_stride * problem.dt
+    return power_of(last, labels, problem.options.alpha, tested_s)
+
+
+def _judge(problem: _Problem, nominal: _Nominal, yard: _Yardstick, current: _Current, last: dict, say) -> _Judgement:
+    """Judge: `explained`, `unexplained`, `none` or `inconclusive` from the findings, the structure left and the
+    test's power (`_verdict.decide`); then, where it is not `explained` and discovery is on, search beyond the
+    vocabulary with the same held-out test."""
     model, findings = _extend(problem, current)
-    if not current.selected:
-        verdict = "unexplained" if nominal.structure.significant else "none"
-    else:
-        verdict = "unexplained" if current.structure.significant else "explained"
+    power = _power(problem, yard, last)
+    diverged = not np.isfinite(nominal.rmse[yard.ref_index])
+    verdict = decide(bool(current.selected), current.structure, diverged, power)
     gain = _gain(current.rmse, nominal.rmse, yard.ref_index) if current.selected else 0.0
     judgement = _Judgement(verdict, model, findings, current.errors, current.rmse, current.structure, gain, {},
-                           current.cv_errors)
+                           current.cv_errors, power)
     # Beyond the vocabulary: search, refit, the same held-out test. Also after a `none`: the generic
     # probe cannot see every structure (a force periodic in position), the search's own guards can.
-    if problem.options.discovery and verdict != "explained":
+    if problem.options.discovery and verdict != Verdict.EXPLAINED:
         judgement = _discover(problem, nominal, yard, current, judgement, say)
     return judgement
 
@@ -138,10 +147,10 @@ def _discover(problem: _Problem, nominal: _Nominal, yard: _Yardstick, current: _
         errors = last_errors.get(id(found.model))
         if errors is None:
             errors = np.asarray(held_out_errors(found.model, problem.val_windows))
-        judgement = _Judgement("unexplained" if structure.significant else "explained", found.model,
+        judgement = _Judgement(decide(True, structure, False, judgement.power), found.model,
                                judgement.findings + found.findings, errors, found.held_out[1], structure,
                                _gain(found.held_out[1], nominal.rmse, yard.ref_index), judgement.discovery,
-                               judgement.cv_errors)
+                               judgement.cv_errors, judgement.power)
     return judgement
 
 
@@ -179,14 +188,22 @@ def _report(problem, nominal, yard, judgement, table, last, rounds, *, mode, sys
     """The typed `Report` that `report.json` and `report.md` are written from."""
     system, o = problem.system, problem.options
     notes = list(problem.notes)
-    if judgement.verdict == "unexplained":
+    verdict = judgement.verdict
+    if verdict == Verdict.UNEXPLAINED:
         notes.append(_unexplained_note(judgement.structure))
-    test = _test_summary(o.alpha, o.min_gain, last, judgement.verdict)
+    elif judgement.structure.significant:
+        s = judgement.structure
+        notes.append(f"The residual probe still explains {s.r2:.0%} of the held-out one-step residuals (p = {s.p_value:.2g}): "
+                     f"significant, but a term capturing all of it would lower them by {1 - np.sqrt(1 - max(s.r2, 0)):.0%} "
+                     f"at most, less than a structure of practical size (R2 >= {PRACTICAL_R2:.2f}; see the verdict rule).")
+    test = _test_summary(o.alpha, o.min_gain, judgement.power, verdict, named=bool(judgement.findings))
     test["cross_fitting"] = (f"each of the {len(problem.folds)} training runs also held out in turn, every configuration "
                              "refitted on the other training runs; its windows pooled with the held-out runs'"
                              if problem.folds else None)
-    if test["detectable_gain"] is not None:
-        runs = "held-out and cross-fitted runs" if problem.folds else "held-out runs"
+    runs = "held-out and cross-fitted runs" if problem.folds else "held-out runs"
+    if verdict == Verdict.INCONCLUSIVE:
+        notes.append(inconclusive_note(judgement.power, yard.horizon.seconds, runs))
+    elif verdict == Verdict.NONE and test["detectable_gain"] is not None:
         notes.append(f"No candidate passed the test. With these {runs} the test would have detected a gain of "
                      f"about {test['detectable_gain']:.0%} at {yard.horizon.seconds:g} s (power 80 %) if its window-to-window "
                      f"variation is like the refitted candidates'; a smaller effect, or one that varies more (friction "
@@ -198,7 +215,7 @@ def _report(problem, nominal, yard, judgement, table, last, rounds, *, mode, sys
         data=_data_summary(problem, train, validation),
         mode="refit" if isinstance(mode, Refit) else "known",
         nominal=_model_summary(problem, nominal.model, nominal.errors, nominal.rmse, yard),
-        verdict=judgement.verdict,
+        verdict=verdict,
         findings=judgement.findings,
         extended=_model_summary(problem, extended, judgement.errors, judgement.rmse, yard, terms=terms),
         gain=judgement.gain,
@@ -259,10 +276,14 @@ def diagnose(
        aside as not identifiable. The residual probe never stops the search.
     4. **Extend** the model with the selected terms, refitted jointly.
     5. **Measure the gain**: held-out simulation error, nominal against extended.
-    6. **Verdict**: `none` (no candidate helps and the probe finds no structure), `explained`
-       (causes found and the extended model's residuals have no structure left), `unexplained`
-       (structure the candidates do not fully explain; partial findings are listed).
-    7. **Discover** (where the verdict would be `unexplained` or `none` and `discovery` is on): a sparse
+    6. **Verdict** (`dynax.Verdict`; the rule is `dynax._diagnose._verdict`): `explained` (causes found and
+       what the extended model leaves has no structure of practical size), `unexplained` (structure of
+       practical size the candidates do not fully explain, or a nominal model that diverges on the
+       held-out windows; partial findings are listed), `none` (nothing named, nothing of practical size
+       left, and the test had the power to see a 25 % gain), `inconclusive` (nothing named, but the test
+       could not have seen a 25 % gain, or a candidate gained that much without being established; the
+       notes name it and the held-out length that would decide).
+    7. **Discover** (where the verdict would not be `explained` and `discovery` is on): a sparse
        search for the missing term beyond the vocabulary, refitted through simulation and kept
        only if it passes the same held-out test (see `dynax._diagnose._discovery.discover`);
        findings with cause `discovered`. The verdict is then `explained` if the named and
@@ -332,7 +353,7 @@ def diagnose(
     with stage_reporter(progress) as say:
         problem = _prepare(system, train, validation, candidates, mode, options)
         nominal, yard, current, table, last, rounds = _forward_selection(problem, say)
-        judgement = _judge(problem, nominal, yard, current, say)
+        judgement = _judge(problem, nominal, yard, current, last, say)
         say("validation: fit % and residual tests of the nominal and the extended model ...")
         return _report(problem, nominal, yard, judgement, table, last, rounds, mode=mode, system_name=system_name,
                        train=train, validation=validation)

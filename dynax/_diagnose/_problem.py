@@ -276,10 +276,53 @@ def _note_record_differences(system, records, notes) -> None:
     no candidate can carry from one run to another, and that stays in each held-out run's error
     whatever is named (a motor driver's current sensor, zeroed anew in each recording). Likewise when
     the runs' Coulomb friction differs (`dynax.record_friction`: it changes with temperature and wear).
-    Notes only: they enter no test."""
-    for check in compare_records(system, records):
-        if check is not None and check.differ():
-            notes.append(check.note())
+    Notes only: they enter no test.
+
+    Only differences that are significant after multiplicity and of practical size are noted
+    (`_record_differences_that_matter`)."""
+    offsets, friction = compare_records(system, records)
+    for check in _record_differences_that_matter(offsets, friction, records):
+        notes.append(check.note() + f" (p-values Holm-adjusted over the {_n_comparisons(offsets, friction)} "
+                     "comparisons of records; differences of practical size only.)")
+
+
+def _n_comparisons(*checks) -> int:
+    return sum(len(c.p_value) for c in checks if c is not None)
+
+
+def _record_differences_that_matter(offsets, friction, records) -> list:
+    """The checks of `compare_records` with what is not worth a note taken out, as copies whose `p_value` is
+    Holm-adjusted over every comparison made (each joint's offset, each Coulomb coefficient: several tests of one
+    family, Holm 1979) and set to 1 where the difference is not of practical size:
+
+    - a Coulomb friction whose records' values spread by less than `MIN_PRACTICAL_GAIN` (a quarter) of the
+      value one friction for all records takes, or where that value is not positive (no friction to differ);
+    - an offset whose records' values spread by less than `MIN_PRACTICAL_GAIN` of the records' largest RMS
+      recorded force (the rig's force scale: a sensor zero that small changes no simulation noticeably).
+    """
+    from ._statistics import holm_adjusted
+    from ._verdict import MIN_PRACTICAL_GAIN
+
+    checks = [c for c in (offsets, friction) if c is not None]
+    if not checks:
+        return []
+    adjusted = holm_adjusted(np.concatenate([np.asarray(c.p_value, float) for c in checks]))
+    force_scale = max((float(np.sqrt(np.mean(np.asarray(r.us, float) ** 2, axis=0)).max()) for r in records), default=0.0)
+    kept, start = [], 0
+    for c in checks:
+        p = adjusted[start : start + len(c.p_value)].copy()
+        start += len(c.p_value)
+        if c is offsets:
+            spread = np.ptp(np.asarray(c.offsets, float), axis=0)
+            p[spread < MIN_PRACTICAL_GAIN * force_scale] = 1.0
+        else:
+            spread = np.ptp(np.asarray(c.values, float), axis=0)
+            shared = np.asarray(c.shared, float)
+            p[~((shared > 0) & (spread >= MIN_PRACTICAL_GAIN * np.abs(shared)))] = 1.0
+        c = dataclasses.replace(c, p_value=p)
+        if c.differ():
+            kept.append(c)
+    return kept
 
 
 def _note_held(system, family, refit_names, mode, notes) -> None:

@@ -8,14 +8,7 @@ from .._data._derivatives import resample
 from ._discovery import discovery_markdown
 from ._figures import plot_error_vs_horizon, plot_measured_vs_simulated, plot_residuals
 from ._residuals import acceleration_residuals, velocity_indices
-
-_VERDICT_TEXT = {
-    "explained": "**explained**: the named causes (and any discovered terms) account for what the nominal model "
-    "got wrong; the extended model's residuals have no significant structure left.",
-    "none": "**none**: the nominal model's errors show no significant structure; no cause is claimed.",
-    "unexplained": "**unexplained**: the errors have significant structure that the candidate causes do not "
-    "(fully) explain. Partial findings, if any, are listed, but they are not an explanation.",
-}
+from ._verdict import Verdict
 
 
 def _fmt(x, digits=4):
@@ -25,7 +18,7 @@ def _fmt(x, digits=4):
 def report_markdown(report) -> str:
     """The report as Markdown, written for a person."""
     j = report.to_json()
-    lines = [f"# Discrepancy diagnosis: {j['system']}", "", f"Verdict: {_VERDICT_TEXT[j['verdict']]}", ""]
+    lines = [f"# Discrepancy diagnosis: {j['system']}", "", f"Verdict: {Verdict(j['verdict']).text}", ""]
     if j["findings"]:
         lines += [f"Held-out simulation error at {j['reference_horizon_s']:g} s is reduced by **{j['gain']:.0%}** by the "
                   f"extended model ({', '.join(j['extended']['terms'])}).", ""]
@@ -156,6 +149,13 @@ def _test_markdown(j: dict) -> list[str]:
     if t["detectable_gain"] is not None:
         runs = "held-out and cross-fitted runs" if t.get("cross_fitting") else "held-out runs"
         lines.append(f"- with these {runs} it would have detected a gain of about {t['detectable_gain']:.0%} (power 80 %)")
+    power = t.get("power")
+    if power and power["best_candidate"]:
+        b = power["best_candidate"]
+        lines.append(f"- best candidate: {b['cause']}@{b['where']}, held-out gain {b['gain']:.0%}, p = {b['p_value']:.2g}")
+    if power and power["needed_s"] is not None and power["needed_s"] > power["tested_s"]:
+        lines.append(f"- a {power['min_practical_gain']:.0%} gain would be detected with about {power['needed_s']:.3g} s of "
+                     f"such windows (now {power['tested_s']:.3g} s)")
     return lines + [""]
 
 

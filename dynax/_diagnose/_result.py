@@ -11,6 +11,7 @@ import numpy as np
 from .._model._system import AbstractSystem
 from ._horizon import Horizon
 from ._residuals import Structure
+from ._verdict import Verdict
 
 
 def _float_or_none(x) -> float | None:
@@ -149,13 +150,14 @@ class Report(eqx.Module):
 
     **Fields:** `system` (contract name), `data` (`DataSummary`), `mode`, `nominal` and `extended`
     (`ModelSummary`: parameters, held-out simulation error, `terms` of the extended model, and the
-    `validation` block: fit % and residual tests), `verdict` (`explained`, `none`, `unexplained`),
+    `validation` block: fit % and residual tests), `verdict` (a `Verdict`: `explained`, `unexplained`, `none`,
+    `inconclusive`; the rule is in `dynax._diagnose._verdict`),
     `findings` (most important first; dicts as in the contract, with extra keys), `gain`,
     `reference_horizon_s`, `structure` (`Structure` of the residual probe on the nominal and the
     extended model), `not_identifiable`, `candidates` (every candidate's held-out gain in the first
     round), `notes`, `horizon` (`Horizon`: the reference horizon and how it was chosen), `runs`
-    (held-out error per run), `test` (the significance test, and with verdict `none` the gain it
-    could have detected), `discovery`, the fitted models `nominal_model` and `extended_model`, and
+    (held-out error per run), `test` (the significance test, and with verdict `none` or `inconclusive`
+    the gain it could have detected, the best candidate and the held-out length that would decide), `discovery`, the fitted models `nominal_model` and `extended_model`, and
     `rounds` (each round of the forward selection: every refitted candidate's held-out gains, p, and
     `selected`, `passed` or `stopped` with the rules that stopped it).
     """
@@ -164,7 +166,7 @@ class Report(eqx.Module):
     data: DataSummary
     mode: str
     nominal: ModelSummary
-    verdict: str
+    verdict: Verdict
     findings: list
     extended: ModelSummary
     gain: float
@@ -189,7 +191,7 @@ class Report(eqx.Module):
             "system": self.system,
             "data": self.data.to_json(),
             "nominal": self.nominal.to_json(),
-            "verdict": self.verdict,
+            "verdict": str(Verdict(self.verdict)),
             "findings": self.findings,
             "extended": extended,
             "gain": self.gain,

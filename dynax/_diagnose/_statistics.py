@@ -314,6 +314,19 @@ def holm(p_values, alpha: float) -> np.ndarray:
     return rejected
 
 
+def holm_adjusted(p_values) -> np.ndarray:
+    """Holm's adjusted p-values: `holm(p, alpha)` rejects exactly those at or below `alpha`."""
+    p = np.asarray(p_values, float)
+    m = p.size
+    order = np.argsort(p)
+    adjusted = np.empty(m)
+    running = 0.0
+    for rank, i in enumerate(order):
+        running = max(running, min(1.0, (m - rank) * p[i]))
+        adjusted[i] = running
+    return adjusted
+
+
 def helps_on_most_runs(per_run: dict) -> bool:
     """A cause must help on most held-out runs: its mean improvement is positive on more than half of them."""
     values = np.asarray(list(per_run.values()), float)

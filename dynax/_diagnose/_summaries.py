@@ -9,7 +9,6 @@ simulates.
 import numpy as np
 
 from ._residuals import Structure
-from ._statistics import detectable_gain
 
 
 def _merge_repeated_causes(findings: list[dict]) -> list[dict]:
@@ -132,14 +131,12 @@ def _candidate_table(system, candidates, remaining, gains_scr, results, neutral,
     return table
 
 
-def _test_summary(alpha, min_gain, results, verdict) -> dict:
-    """How candidates were judged; with verdict `none`, the gain the test could have detected."""
+def _test_summary(alpha, min_gain, power, verdict, named=False) -> dict:
+    """How candidates were judged; with `none` or `inconclusive` the gain the test could have detected, and
+    wherever nothing was named the `power` block (`_verdict.Power`)."""
     detectable = None
-    if verdict == "none" and results:
-        first = next(iter(results.values()))
-        detectable = detectable_gain(float(np.median([r["test"].std_error for r in results.values()])),
-                                     max(first["test"].df, 1), alpha / max(first["n_tested"], 1))
-        detectable = max(detectable, min_gain)
+    if verdict in ("none", "inconclusive") and power.detectable_gain is not None:
+        detectable = max(power.detectable_gain, min_gain)
     return {
         "paired": "log ratio of each held-out window's mean squared error, nominal (or current) against extended; "
                   "HAC variance within each run (flat-top lag window over the windows' correlation length, "
@@ -152,6 +149,7 @@ def _test_summary(alpha, min_gain, results, verdict) -> dict:
         "alpha": alpha,
         "min_gain": min_gain,
         "detectable_gain": detectable,
+        **({"power": power.to_json()} if not named else {}),
     }
 
 

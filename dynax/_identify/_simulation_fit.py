@@ -204,7 +204,13 @@ class _Segments(eqx.Module):
 def _residuals(unknowns: _Unknowns, data: _Segments, *, simulation: FixedGrid, fit_initial_states: bool):
     """Scaled simulated-minus-measured states of every segment, then the weighted continuity defects."""
     model, x0 = unknowns.system, unknowns.initial_states
-    sims = jax.vmap(lambda x0, t, u: simulate(model, x0, t, u, method=simulation, throw=False).xs)(x0, data.ts, data.us)
+    n = data.xs.shape[-1]
+
+    def start(x0, u0):  # an extended model's internal states (a lag's, a delay's) start at rest under the first input
+        return model.initial_state(x0, u0) if model.n_states > x0.shape[0] else x0
+
+    sims = jax.vmap(lambda x0, t, u: simulate(model, start(x0, u[0]), t, u, method=simulation, throw=False).xs[:, :n])(
+        x0, data.ts, data.us)
     r = (sims - data.xs) / data.sigma[None, None, :] * data.segment_weight[:, None, None]
     r = jnp.where(jnp.isfinite(r), r, DIVERGED)
     out = [r.reshape(-1)]

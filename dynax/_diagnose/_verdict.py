@@ -1,0 +1,223 @@
+r"""The verdict of `diagnose`: one enumeration, and the rule that chooses it from effect size and power.
+
+A verdict is an answer to "is the nominal model adequate on these data, and if not, do the named
+causes account for what it gets wrong?". Significance alone cannot answer it: with enough held-out
+windows a negligible leftover is significant, and with too few a large effect is not. So every
+verdict rests on an effect size, and `none` also on the test's power:
+
+| verdict | when |
+|---|---|
+| `explained` | causes were named, and what their extended model leaves is small in practical terms: the residual probe finds no structure, or structure a further term could remove less than `MIN_PRACTICAL_GAIN` of (see `practical_structure`) |
+| `unexplained` | structure of practical size is left that the named causes (if any) do not account for, or the nominal model cannot simulate the held-out windows at all; with nothing named: structure of practical size that no candidate gaining `MIN_PRACTICAL_GAIN` would remove, or significant structure that only a candidate the physical rules stopped would (a hidden spring, fitted by a negative rotor inertia) |
+| `none` | no cause was named, no structure of practical size is left, no candidate gained `MIN_PRACTICAL_GAIN` on the held-out runs, and the test had the power (`POWER`) to detect that gain at its level: the nominal model is adequate |
+| `inconclusive` | no cause was named, and either nothing of practical size is seen but the test could not have seen it (its detectable gain exceeds `MIN_PRACTICAL_GAIN`, or the best candidate gains at least that much without being established), or structure of practical size is left that a candidate gaining at least `MIN_PRACTICAL_GAIN` would remove and that only the significance test stopped (`Power.undecided`). The report names the best candidate (gain, p) and the held-out length that would decide |
+
+The contract's three verdicts keep their meaning; `inconclusive` is the answer the old rules gave
+as `none` where the data could not have shown an effect (one 8 s held-out run).
+
+**The smallest gain that matters**, `MIN_PRACTICAL_GAIN` = 25 % of the held-out simulation error, is
+a practical margin in the sense of equivalence testing (Wellek 2010; Lakens 2017): a term that
+removes less than a quarter of the RMS error changes no decision a user makes with the model
+(a quarter in RMS is 44 % in mean squared error). It is not the selection's `min_gain` (5 %), the
+least gain a named cause must show to be *named*; it is the least gain whose absence the verdict
+`none` must be able to assert.
+
+**Structure of practical size.** The residual probe reports $R^2$, the share of the held-out one-step
+residual variance its fitted regression explains. A term that captured all of it would lower the
+residuals' RMS by $1 - \sqrt{1 - R^2}$; this is of practical size when it reaches
+`MIN_PRACTICAL_GAIN`, i.e. $R^2 \ge 1 - 0.75^2 = 0.4375$ (`PRACTICAL_R2`). So a Coulomb friction
+found with a 96 % held-out gain whose extended model's probe still explains 14 % of what is left
+(a 7 % RMS reduction at most) is `explained`; a nominal model whose residuals the probe explains to
+99 % is `unexplained`, whatever the candidates did.
+
+**Power and the held-out length that would decide.** The paired test's standard error $s$ (on
+the mean log ratio of window errors, with $\nu$ degrees of freedom) detects, with probability
+`POWER` at level $a$, a shift of $(t_{1-a,\nu} + t_{P,\nu})\,s$; a gain $g$ is a shift of
+$-2\log(1-g)$ (`dynax._diagnose._statistics.detectable_gain`). The standard error of a mean over
+windows of a stationary record shrinks as $1/\sqrt{T}$ with the tested length $T$, so the length at
+which `MIN_PRACTICAL_GAIN` would be detected is
+$T^\ast = T\,\big[(t_{1-a} + t_P)\,s / (-2\log 0.75)\big]^2$ (Cohen 1988, ch. 2, for the
+$1/\sqrt{n}$ power calculation). The level $a$ is the one the best candidate faced: `alpha` over the
+number of candidates tested (Benjamini-Hochberg's threshold for the smallest p-value).
+
+??? cite
+
+    J. Cohen, *Statistical Power Analysis for the Behavioral Sciences*, 2nd ed., 1988, ch. 2.
+    S. Wellek, *Testing Statistical Hypotheses of Equivalence and Noninferiority*, 2nd ed., 2010.
+    D. Lakens, "Equivalence tests: a practical primer for t tests, correlations, and meta-analyses",
+    Social Psychological and Personality Science 8(4), 2017.
+"""
+
+import dataclasses
+import enum
+
+import numpy as np
+
+from ._residuals import Structure
+from ._statistics import detectable_gain
+
+MIN_PRACTICAL_GAIN = 0.25  # the smallest held-out RMSE gain that matters (see the module)
+POWER = 0.8  # the power at which `none` must have been able to see it
+PRACTICAL_R2 = 1.0 - (1.0 - MIN_PRACTICAL_GAIN) ** 2  # probe R^2 whose removal is a MIN_PRACTICAL_GAIN RMS reduction
+
+
+class Verdict(str, enum.Enum):
+    """The verdicts of `diagnose`, in one place (see the module for the rule that chooses them).
+
+    A `str` enumeration: `Verdict.NONE == "none"`, and `report.json` writes the value.
+    """
+
+    EXPLAINED = "explained"
+    UNEXPLAINED = "unexplained"
+    NONE = "none"
+    INCONCLUSIVE = "inconclusive"
+
+    def __str__(self) -> str:
+        return self.value
+
+    @property
+    def text(self) -> str:
+        """A sentence for `report.md`."""
+        return _TEXT[self]
+
+
+_TEXT = {
+    Verdict.EXPLAINED: "**explained**: the named causes (and any discovered terms) account for what the nominal model "
+    "got wrong; what the extended model leaves has no structure of practical size.",
+    Verdict.NONE: "**none**: the nominal model is adequate: no candidate improves it, its errors show no structure of "
+    "practical size, and the test had the power to see a gain of 25 % had there been one.",
+    Verdict.UNEXPLAINED: "**unexplained**: the errors have structure of practical size that the candidate causes do not "
+    "(fully) explain. Partial findings, if any, are listed, but they are not an explanation.",
+    Verdict.INCONCLUSIVE: "**inconclusive**: no cause passed the test, but the held-out data cannot decide: a candidate of "
+    "practical size was seen and not established, or the test could not have seen one; the notes name the best "
+    "candidate and the held-out length that would decide.",
+}
+
+
+def practical_structure(structure: Structure) -> bool:
+    """Structure of practical size: significant, and a term capturing it would lower the residuals' RMS by
+    at least `MIN_PRACTICAL_GAIN` (probe $R^2 \\ge$ `PRACTICAL_R2`)."""
+    return bool(structure.significant and structure.r2 >= PRACTICAL_R2)
+
+
+@dataclasses.dataclass(frozen=True)
+class Power:
+    """What the held-out test could see where no cause was named.
+
+    **Fields:** `detectable_gain` (the held-out RMSE gain detected with probability `POWER` at the best
+    candidate's level; `None` without a refitted candidate); `best` (the refitted candidate with the
+    largest held-out gain: `cause`, `where`, `gain`, `p_value`; `None` without one); `tested_s` (the
+    record time the test's windows cover: held-out runs, and cross-fitted runs where they are pooled);
+    `needed_s` (the tested time at which `MIN_PRACTICAL_GAIN` would be detected, same power and level, with
+    window-to-window variation like the best candidate's where it gains that much, else like the median's);
+    `observed_needed_s` (where the best candidate gains that much: the tested time at which its own observed
+    mean improvement would be detected, same power and level: what would decide that candidate).
+    """
+
+    detectable_gain: float | None
+    best: dict | None
+    tested_s: float
+    needed_s: float | None
+    observed_needed_s: float | None = None
+
+    @property
+    def undecided(self) -> bool:
+        """The best candidate gains `MIN_PRACTICAL_GAIN` or more and only significance (and the smallest pooled
+        gain, which more data settle too) stopped it: more held-out data would decide."""
+        return (self.best is not None and self.best["gain"] >= MIN_PRACTICAL_GAIN
+                and set(self.best["stopped_by"]) <= {"significance", "min_gain"})
+
+    @property
+    def enough(self) -> bool:
+        """The test could have seen the smallest gain that matters."""
+        return self.detectable_gain is not None and self.detectable_gain <= MIN_PRACTICAL_GAIN
+
+    def to_json(self) -> dict:
+        return {"detectable_gain": self.detectable_gain, "power": POWER, "min_practical_gain": MIN_PRACTICAL_GAIN,
+                "best_candidate": self.best, "tested_s": self.tested_s, "needed_s": self.needed_s,
+                "observed_needed_s": self.observed_needed_s}
+
+
+def power_of(results: dict, labels: dict, alpha: float, tested_s: float) -> Power:
+    """The `Power` of a round's test from its refitted candidates (`judge_round`'s `results`).
+
+    The standard error is the median over the refitted candidates (their improvements vary from window
+    to window as an effect's would); the level is `alpha` over the candidates tested (the threshold the
+    best candidate faced). `labels` maps a candidate index to `(cause, where)`.
+    """
+    if not results:
+        return Power(None, None, tested_s, None)
+    import scipy.stats
+
+    first = next(iter(results.values()))
+    df = max(float(first["test"].df), 1.0)
+    level = alpha / max(int(first["n_tested"]), 1)
+    se = float(np.median([r["test"].std_error for r in results.values()]))
+    detectable = detectable_gain(se, df, level, POWER) if np.isfinite(se) else 1.0
+    k = max(results, key=lambda k: results[k]["gain_held_out"])
+    # The length that would decide: with window-to-window variation like the best candidate's where it gains
+    # MIN_PRACTICAL_GAIN or more (an effect of that size varies as much as the effect seen), else the median's.
+    se_needed = float(results[k]["test"].std_error) if results[k]["gain_held_out"] >= MIN_PRACTICAL_GAIN else se
+    needed = observed = None
+    if np.isfinite(se_needed) and se_needed > 0:
+        shift = (scipy.stats.t.isf(level, df) + scipy.stats.t.ppf(POWER, df)) * se_needed
+        needed = float(tested_s * (shift / (-2.0 * np.log(1.0 - MIN_PRACTICAL_GAIN))) ** 2)
+        mean = float(results[k]["test"].mean)
+        if results[k]["gain_held_out"] >= MIN_PRACTICAL_GAIN and mean > 0:
+            observed = float(tested_s * (shift / mean) ** 2)  # its own observed effect, detected with POWER
+    cause, where = labels[k]
+    best = {"cause": cause, "where": where, "gain": float(results[k]["gain_held_out"]), "p_value": float(results[k]["p"]),
+            "stopped_by": [name for name, ok in results[k]["rules"].items() if not ok]}
+    return Power(float(detectable), best, float(tested_s), needed, observed)
+
+
+def decide(named: bool, left: Structure, nominal_diverged: bool, power: Power) -> Verdict:
+    """The verdict (see the module's table).
+
+    **Arguments:** `named` whether causes were named; `left` the residual probe's `Structure` of the model
+    the verdict is about (extended where causes were named, else nominal); `nominal_diverged` whether the
+    nominal model's held-out windows diverged at the reference horizon (no simulation to compare);
+    `power` the test's `Power` where nothing was named.
+    """
+    if named:
+        return Verdict.UNEXPLAINED if practical_structure(left) else Verdict.EXPLAINED
+    if nominal_diverged:
+        return Verdict.UNEXPLAINED
+    if power.best is None and power.detectable_gain is None:
+        # No candidate to test: the probe is the only judge.
+        return Verdict.UNEXPLAINED if practical_structure(left) else Verdict.NONE
+    if power.best is not None and power.best["gain"] >= MIN_PRACTICAL_GAIN:
+        if power.undecided:
+            return Verdict.INCONCLUSIVE  # a candidate of practical size that only the significance test stopped
+        # An extra degree of freedom of practical size helps, but no physical candidate: with structure in the
+        # residuals that is structure the vocabulary does not explain (a hidden spring, fitted by a negative
+        # rotor inertia); without, an effect of practical size seen and not established.
+        return Verdict.UNEXPLAINED if left.significant else Verdict.INCONCLUSIVE
+    if practical_structure(left):
+        return Verdict.UNEXPLAINED
+    return Verdict.NONE if power.enough else Verdict.INCONCLUSIVE
+
+
+def inconclusive_note(power: Power, horizon_s: float, runs: str) -> str:
+    """What an `inconclusive` verdict rests on and what would decide it."""
+    parts = []
+    if power.best is not None:
+        b = power.best
+        parts.append(f"The best candidate, {b['cause']}@{b['where']}, gains {b['gain']:.0%} on the held-out runs at "
+                     f"{horizon_s:g} s (p = {b['p_value']:.2g})"
+                     + (f", stopped by {', '.join(b['stopped_by'])}" if b["stopped_by"] else "") + ".")
+    if power.detectable_gain is not None and not power.undecided:
+        parts.append(f"With these {runs} ({power.tested_s:.3g} s of windows) the test would detect a gain of about "
+                     f"{power.detectable_gain:.0%} with {POWER:.0%} power"
+                     + (f", more than the {MIN_PRACTICAL_GAIN:.0%} that matters." if not power.enough else "."))
+    if power.needed_s is not None and power.needed_s > power.tested_s:
+        like = "its" if power.undecided else "the refitted candidates'"
+        parts.append(f"With window-to-window variation like {like}, about {power.needed_s:.3g} s of held-out record "
+                     f"({power.needed_s / power.tested_s:.2g} times as much) would detect a {MIN_PRACTICAL_GAIN:.0%} "
+                     f"gain at the test's level with {POWER:.0%} power; the verdict is left open until then.")
+    elif power.best is not None:
+        parts.append("More held-out runs, or runs that excite it differently, would decide.")
+    if power.undecided and power.observed_needed_s is not None:
+        parts.append(f"Its own improvement, as large as observed, would be detected with about "
+                     f"{power.observed_needed_s:.3g} s of such record.")
+    return "Inconclusive: " + " ".join(parts)

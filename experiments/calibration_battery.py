@@ -1,0 +1,168 @@
+"""The verdicts' calibration battery: hidden-effect cases made outside dynax's model code, diagnosed one by one.
+
+The cases (`tests/hidden_cases.py`: 60 hidden effects over every cause of the vocabulary on the acrobot, the
+double pendulum, the linear axis and the helicopter, with friction laws of other shapes, true dead times and
+body-frame drag and wind, near-threshold sizes, and 11 effect-free controls) are integrated by scipy's DOP853.
+Each is diagnosed with its system's nominal model; the script tallies the calibration targets and draws the
+confusion matrix of the hidden cause against the verdict and the first named cause.
+
+    nice -n 5 python experiments/calibration_battery.py [OUT] [--only SUBSTRING] [--every K] [--budget-s S]
+
+OUT defaults to `experiments/results/calibration_battery`. Cases run in an order that interleaves systems and
+causes, and `OUT/cases.json` is rewritten after each (a rerun skips the cases already there), so a run cut
+short by `--budget-s` (or by hand) is a stratified subset, and the summary says how many ran. `--every K`
+runs every K-th case of that order.
+"""
+
+import json
+import pathlib
+import sys
+import time
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
+from dynax import ProgressBar
+from tests.hidden_cases import CASES, diagnose_case, outcome
+
+VERDICTS = ("explained", "unexplained", "inconclusive", "none")
+
+
+def interleaved(cases):
+    """Round-robin over (system, cause) groups, so that any prefix is a stratified subset."""
+    groups: dict = {}
+    for c in cases:
+        groups.setdefault((c.system, c.cause), []).append(c)
+    order, queues = [], list(groups.values())
+    while any(queues):
+        for q in queues:
+            if q:
+                order.append(q.pop(0))
+    return order
+
+
+def summary(rows):
+    errors = [r["name"] for r in rows if "error" in r]
+    rows = [r for r in rows if "error" not in r]
+    effects = [r for r in rows if r["expected"] is not None]
+    controls = [r for r in rows if r["expected"] is None]
+    gained = [r for r in rows if r["best_gain"] is not None and r["best_gain"] >= 0.25]
+
+    def share(xs, key):
+        return (sum(bool(x[key]) for x in xs) / len(xs)) if xs else None
+
+    return {
+        "cases_run": len(rows), "cases_total": len(CASES), "errors": errors, "effect_cases": len(effects), "controls": len(controls),
+        "named_first": share(effects, "named_first"),
+        "right_verdict": share(rows, "right_verdict"),
+        "right_verdict_effects": share(effects, "right_verdict"),
+        "right_verdict_controls": share(controls, "right_verdict"),
+        "right_verdict_effects_inconclusive_near_ok": (
+            sum(r["right_verdict"] or (r["near"] and r["verdict"] == "inconclusive") for r in effects) / len(effects)
+            if effects else None),
+        "false_claim_controls": share(controls, "false_claim"),
+        "none_where_best_gains_25": share(gained, "none_with_gain"), "cases_best_gains_25": len(gained),
+        "spurious_extra": share(effects, "extra"),
+        "targets": {"named_first": ">= 0.95", "right_verdict": ">= 0.90", "false_claim_controls": "<= 0.02",
+                    "none_where_best_gains_25": "<= 0.05", "spurious_extra": "<= 0.05"},
+    }
+
+
+def confusion(rows, path):
+    """Hidden cause (rows) against verdict and against the first named cause (columns)."""
+    hidden = sorted({r["expected_label"] for r in rows}, key=lambda s: (s == "control", s))
+    named = sorted({r["findings"][0].split("@")[0] if r["findings"] else "(nothing)" for r in rows})
+    v = np.zeros((len(hidden), len(VERDICTS)), int)
+    n = np.zeros((len(hidden), len(named)), int)
+    for r in rows:
+        i = hidden.index(r["expected_label"])
+        v[i, VERDICTS.index(r["verdict"])] += 1
+        n[i, named.index(r["findings"][0].split("@")[0] if r["findings"] else "(nothing)")] += 1
+    fig, axes = plt.subplots(1, 2, figsize=(14, 0.45 * len(hidden) + 2.5), gridspec_kw={"width_ratios": [len(VERDICTS), len(named)]})
+    for ax, m, cols, title in ((axes[0], v, VERDICTS, "verdict"), (axes[1], n, named, "first named cause")):
+        ax.imshow(m, cmap="Blues", aspect="auto")
+        for (a, b), x in np.ndenumerate(m):
+            if x:
+                ax.text(b, a, str(x), ha="center", va="center", fontsize=8)
+        ax.set_xticks(range(len(cols)), cols, rotation=45, ha="right", fontsize=8)
+        ax.set_yticks(range(len(hidden)), hidden, fontsize=8)
+        ax.set_title(f"hidden cause vs {title}")
+    fig.suptitle(f"calibration battery: {len(rows)} of {len(CASES)} cases")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    return {"hidden": hidden, "verdicts": list(VERDICTS), "by_verdict": v.tolist(), "named": named, "by_named": n.tolist()}
+
+
+def markdown(c, rows) -> str:
+    """The confusion matrices as Markdown tables (for docs/calibration.md), and the cases that went wrong."""
+    lines = ["| hidden | " + " | ".join(c["verdicts"]) + " |", "|---|" + "---|" * len(c["verdicts"])]
+    lines += [f"| {h} | " + " | ".join(str(x) for x in row) + " |" for h, row in zip(c["hidden"], c["by_verdict"])]
+    lines += ["", "| hidden | " + " | ".join(c["named"]) + " |", "|---|" + "---|" * len(c["named"])]
+    lines += [f"| {h} | " + " | ".join(str(x) for x in row) + " |" for h, row in zip(c["hidden"], c["by_named"])]
+    wrong = [r for r in rows if not r["right_verdict"] or r["extra"] or r["false_claim"] or r["none_with_gain"]]
+    lines += ["", "| case | verdict | named | gain | best candidate gain |", "|---|---|---|---|---|"]
+    lines += [f"| {r['name']} | {r['verdict']} | {', '.join(r['findings']) or '-'} | {r['gain']:.0%} | "
+              f"{'-' if r['best_gain'] is None else format(r['best_gain'], '.0%')} |" for r in wrong]
+    return "\n".join(lines) + "\n"
+
+
+def main():
+    args = sys.argv[1:]
+    opts = {}
+    for flag in ("--only", "--every", "--budget-s"):
+        if flag in args:
+            i = args.index(flag)
+            opts[flag] = args[i + 1]
+            del args[i : i + 2]
+    out = pathlib.Path(args[0] if args else "experiments/results/calibration_battery")
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "cases.json"
+    rows = json.loads(path.read_text()) if path.exists() else []
+    done = {r["name"] for r in rows}
+    cases = interleaved(CASES)[:: int(opts.get("--every", 1))]
+    if "--only" in opts:
+        cases = [c for c in cases if opts["--only"] in c.name]
+    todo = [c for c in cases if c.name not in done]
+    budget = float(opts.get("--budget-s", "inf"))
+    start = time.perf_counter()
+    with ProgressBar(len(todo), "calibration battery", progress=True, unit="case") as bar:
+        for case in todo:
+            if time.perf_counter() - start > budget:
+                bar.say(f"budget of {budget:g} s spent: stopping with {len(rows)} cases")
+                break
+            t0 = time.perf_counter()
+            try:
+                j = diagnose_case(case).to_json()
+            except Exception as error:  # noqa: BLE001 (a traceback is a result too: recorded, and the battery goes on)
+                rows.append({"name": case.name, "system": case.system, "cause": case.cause, "error": repr(error)[:500]})
+                path.write_text(json.dumps(rows, indent=1))
+                bar.say(f"{case.name}: ERROR {error!r}"[:300])
+                continue
+            row = {"name": case.name, "system": case.system, "cause": case.cause, "where": case.where, "size": case.size,
+                   "law": case.law, "mode": case.mode, "near": case.near, "seed": case.seed,
+                   "expected": None if case.expected is None else "@".join(case.expected),
+                   "expected_label": "control" if case.cause is None else f"{case.system}: {case.cause}",
+                   **outcome(case, j), "wall_s": time.perf_counter() - t0}
+            rows.append(row)
+            path.write_text(json.dumps(rows, indent=1))
+            bar.say(f"{case.name}: {row['verdict']} {row['findings']} gain {row['gain']:.0%} "
+                    f"best {row['best_gain'] if row['best_gain'] is None else round(row['best_gain'], 2)} ({row['wall_s']:.0f} s)")
+            bar.update(1)
+    done = [r for r in rows if "error" not in r]
+    result = {"summary": summary(rows), "confusion": confusion(done, out / "confusion.png") if done else None}
+    (out / "summary.json").write_text(json.dumps(result, indent=1))
+    if rows:
+        (out / "confusion.md").write_text(markdown(result["confusion"], done))
+    print(json.dumps(result["summary"], indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,144 @@
+"""Verdicts from effect size and power (`dynax.Verdict`, the rule in `dynax._diagnose._verdict`), and a quick
+subset of the calibration battery (`tests/hidden_cases.py`: records made by scipy's DOP853 with the effects
+written out apart from dynax's terms; `experiments/calibration_battery.py` runs all of them).
+
+The rule's tests are arithmetic; of the end-to-end cases, the effect-free control and the Stribeck friction share
+one compilation (same system, mode and record lengths) and run by default; the short held-out record and the
+known-mode impossible nominal compile anew and are heavy."""
+
+import numpy as np
+import pytest
+
+import dynax
+from dynax import Structure, Verdict
+from dynax._diagnose._statistics import PairedTest
+from dynax._diagnose._verdict import MIN_PRACTICAL_GAIN, PRACTICAL_R2, decide, power_of
+from tests.hidden_cases import Case, diagnose_case, outcome, records
+
+
+def _structure(significant, r2, p=1e-3):
+    return Structure(significant=significant, r2=r2, p_value=p, top_features=(), worst_times=(), by_state={})
+
+
+def _results(gain, p, std_error, df=40.0, n_tested=10):
+    """One refitted candidate as `judge_round` reports it."""
+    mean = -2.0 * np.log(1.0 - gain)  # the mean log ratio of window errors a held-out RMSE gain amounts to
+    test = PairedTest(mean, std_error, df, p, 5, {0: mean})
+    rules = {"significance": p < 0.001, "min_gain": True, "sign": True, "agreement": True, "held_out": True}
+    return {3: {"gain_held_out": gain, "p": p, "test": test, "n_tested": n_tested, "rules": rules}}
+
+
+def test_verdict_is_one_string_enumeration_with_the_contracts_names():
+    assert [v.value for v in Verdict] == ["explained", "unexplained", "none", "inconclusive"]
+    assert Verdict.NONE == "none" and str(Verdict.INCONCLUSIVE) == "inconclusive"
+
+
+def test_a_large_effect_with_a_small_significant_leftover_is_explained():
+    """A cause found with a 96 % gain whose extended model's probe still explains 14 % (p = 0.0014): a further
+    term could lower the residuals by 7 % at most, not of practical size."""
+    left = _structure(True, 0.14, p=0.0014)
+    assert decide(True, left, False, power_of({}, {}, 0.01, 10.0)) == Verdict.EXPLAINED
+    assert decide(True, _structure(True, PRACTICAL_R2 + 0.01), False, power_of({}, {}, 0.01, 10.0)) == Verdict.UNEXPLAINED
+
+
+def test_none_needs_the_power_to_see_the_smallest_gain_that_matters():
+    labels = {3: ("coulomb_friction", "q2")}
+    # A precise test (standard error 0.05 of the mean log ratio) that saw a 3 % gain: the model is adequate.
+    precise = power_of(_results(0.03, 0.4, 0.05), labels, 0.01, 20.0)
+    assert precise.enough and precise.detectable_gain < MIN_PRACTICAL_GAIN
+    assert decide(False, _structure(False, 0.0), False, precise) == Verdict.NONE
+    # The same gain seen by a test four times less precise: it could not have seen 25 %.
+    vague = power_of(_results(0.03, 0.4, 0.2), labels, 0.01, 5.0)
+    assert not vague.enough
+    assert decide(False, _structure(False, 0.0), False, vague) == Verdict.INCONCLUSIVE
+    # The held-out length that would decide: the standard error shrinks as 1/sqrt(length).
+    assert vague.needed_s > 5.0
+    at_needed = power_of(_results(0.03, 0.4, 0.2 * np.sqrt(5.0 / vague.needed_s)), labels, 0.01, vague.needed_s)
+    assert at_needed.detectable_gain == pytest.approx(MIN_PRACTICAL_GAIN, abs=0.01)
+    # A candidate that gains 59 % without being established is never `none`, however precise the test.
+    seen = power_of(_results(0.59, 0.02, 0.05), labels, 0.01, 20.0)
+    assert decide(False, _structure(False, 0.0), False, seen) == Verdict.INCONCLUSIVE
+    assert seen.best["cause"] == "coulomb_friction" and seen.best["gain"] == pytest.approx(0.59)
+
+
+def test_structure_of_practical_size_or_a_diverging_nominal_is_unexplained():
+    precise = power_of(_results(0.03, 0.4, 0.05), {3: ("input_delay", "tau2")}, 0.01, 20.0)
+    assert decide(False, _structure(True, 0.995), False, precise) == Verdict.UNEXPLAINED
+    assert decide(False, _structure(False, 0.0), True, precise) == Verdict.UNEXPLAINED
+    assert decide(False, _structure(True, 0.2), False, precise) == Verdict.NONE  # significant, not of practical size
+
+
+def test_structure_a_candidate_would_remove_but_significance_alone_stopped_is_inconclusive():
+    """A rotor inertia that gains 96 % on the held-out run at p = 0.0019, short of Benjamini-Hochberg's 0.001 over
+    ten candidates, with the nominal's probe at R2 = 0.51: the candidates do explain it, the data do not yet
+    decide it; the length that would is from the candidate's own window-to-window variation."""
+    labels = {3: ("rotor_inertia", "q2")}
+    undecided = power_of(_results(0.96, 0.0019, 0.05), labels, 0.01, 10.0)
+    assert undecided.undecided and undecided.needed_s is not None
+    # Its own 96 % improvement needs far less record to be established than a 25 % one would.
+    assert undecided.observed_needed_s is not None and undecided.observed_needed_s < undecided.needed_s
+    assert decide(False, _structure(True, 0.51), False, undecided) == Verdict.INCONCLUSIVE
+    results = _results(0.96, 0.0019, 0.05)
+    results[3]["rules"]["sign"] = False  # a negative inertia is no explanation
+    assert decide(False, _structure(True, 0.51), False, power_of(results, labels, 0.01, 10.0)) == Verdict.UNEXPLAINED
+    # A hidden joint spring: the probe's structure is significant but small (R2 = 0.22), and only a negative rotor
+    # inertia helps (39 %): structure of practical size in simulation that no physical candidate explains.
+    spring = _results(0.39, 0.09, 0.05)
+    spring[3]["rules"]["sign"] = False
+    assert decide(False, _structure(True, 0.22), False, power_of(spring, labels, 0.01, 10.0)) == Verdict.UNEXPLAINED
+
+
+# --- end to end, on records dynax did not make --------------------------------------------------------
+
+
+def test_effect_free_control_claims_no_cause():
+    case = Case("control", "acrobot", None, None, 0.0, "none", "refit", 300)
+    j = diagnose_case(case).to_json()
+    o = outcome(case, j)
+    assert not o["false_claim"], (j["verdict"], j["findings"], j["structure"])
+    assert j["verdict"] in ("none", "inconclusive")
+    assert not o["none_with_gain"], j["candidates"][:3]
+
+
+@pytest.mark.heavy
+def test_a_short_held_out_record_is_inconclusive_not_none():
+    """A Coulomb friction near the threshold, judged on 1.5 s of held-out record: the test cannot see a 25 % gain
+    there, so the answer is `inconclusive` with the best candidate and the length that would decide."""
+    case = Case("short", "acrobot", "coulomb_friction", "q2", 0.05, "tanh", "refit", 104, near=True)
+    train, held_out = records(case)
+    short = held_out.slice(0, 151)
+    j = diagnose_case(case, (train, short)).to_json()
+    assert j["verdict"] != "none", (j["verdict"], j["test"])
+    if j["verdict"] == "inconclusive":
+        power = j["test"]["power"]
+        assert power["best_candidate"] is not None
+        assert any(n.startswith("Inconclusive:") for n in j["notes"]), j["notes"]
+        assert not (power["detectable_gain"] <= MIN_PRACTICAL_GAIN and power["best_candidate"]["gain"] < MIN_PRACTICAL_GAIN)
+    else:  # found anyway: then it must be the right cause
+        assert j["findings"][0]["cause"] == "coulomb_friction", j["findings"]
+
+
+def test_a_cause_found_with_a_leftover_probe_structure_is_explained():
+    """A Stribeck friction (static level 1.5 times the Coulomb level) is named as Coulomb friction; the curve's
+    hump stays in the residuals as small structure, which must not make the verdict `unexplained`."""
+    case = Case("stribeck", "acrobot", "coulomb_friction", "q1", 0.3, "stribeck", "refit", 102)
+    j = diagnose_case(case).to_json()
+    assert (j["findings"][0]["cause"], j["findings"][0]["where"]) == ("coulomb_friction", "q1"), j["findings"]
+    assert j["verdict"] == "explained", (j["verdict"], j["structure"]["extended"])
+    assert j["gain"] > 0.5
+
+
+@pytest.mark.heavy
+def test_known_mode_with_an_impossible_nominal_is_not_none():
+    """`--mode known` with theta1 and theta4 of the wrong sign: the model cannot simulate the held-out record, and
+    the answer must say so, never `none` (model adequate)."""
+    case = Case("bad-nominal", "acrobot", None, None, 0.0, "none", "known", 301)
+    train, held_out = records(case)
+    try:
+        nominal = dynax.Acrobot.from_base_parameters({"theta1": -1.333, "theta2": 1.33, "theta3": 1.0, "theta4": -14.715,
+                                                          "theta5": 9.81, "theta6": 0.1, "theta7": 0.1})
+    except ValueError as refused:  # a located refusal of the impossible parameters is a right answer too
+        assert "theta1" in str(refused) or "theta4" in str(refused), refused
+        return
+    j = dynax.diagnose(nominal, train, held_out, mode=dynax.Known(), max_terms=2, progress=False).to_json()
+    assert j["verdict"] != "none", (j["verdict"], j["structure"]["nominal"], j["nominal"]["sim_error"])

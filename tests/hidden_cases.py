@@ -1,0 +1,384 @@
+"""Hidden-effect cases made outside dynax's model code, for calibrating the diagnosis's verdicts.
+
+Every case is a record of one run (20 s of training, the last 10 s held out, at 100 Hz, as `dynax demo`) of a truth integrated by scipy's DOP853 at tight
+tolerance, restarted at every input switch, with the effect written out here in numpy in a form that is
+*not* dynax's term: friction as `tanh`, `arctan` or a Stribeck curve (dynax's `CoulombFriction` is a tanh of
+its own speed scale), a true dead time (the input shifted in time, not a Padé filter), a first-order lag as
+its own state, quadratic drag and wind in the helicopter's body frame. Measurement noise is added as a rig's
+encoders and gyros would have it. `tests/diagnose/test_calibration_cases.py` runs a few of them;
+`experiments/calibration_battery.py` runs them all.
+
+A case is a `Case`: the system, the hidden effect (`cause`, `where`, `size`, `law`), the mode the
+diagnosis runs in, and what the right answer is (`expected`: `(cause, where)` or `None` for a control).
+"""
+
+import dataclasses
+import itertools
+
+import jax.numpy as jnp
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from dynax import Trajectory
+
+THETA = (1.333, 1.33, 1.0, 14.715, 9.81, 0.1, 0.1)  # the nominal two-link arm's base parameters (Acrobot())
+TRAIN_S, HELD_OUT_S, DT = 20.0, 10.0, 0.01
+
+
+@dataclasses.dataclass(frozen=True)
+class Case:
+    """One hidden-effect case. `law`: the effect's written-out form; `mode`: `refit` or `known`; `expected`:
+    the `(cause, where)` a right diagnosis names first, `None` for an effect-free control; `near`: a size near
+    what the test can see in 10 s of held-out record."""
+
+    name: str
+    system: str
+    cause: str | None
+    where: str | None
+    size: float
+    law: str
+    mode: str
+    seed: int
+    near: bool = False
+
+    @property
+    def expected(self):
+        return None if self.cause is None else (self.cause, self.where)
+
+
+# --- excitation and integration ----------------------------------------------------------------------
+
+
+def multisine(n_samples, n_inputs, seed, rms, band=(0.1, 2.0), dt=DT):
+    """A random-phase multisine per input (20 tones in `band`), scaled to `rms`."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n_samples) * dt
+    out = np.zeros((n_samples, n_inputs))
+    for i in range(n_inputs):
+        f = rng.uniform(*band, 20)
+        phase = rng.uniform(0, 2 * np.pi, 20)
+        s = np.sin(2 * np.pi * f[None, :] * t[:, None] + phase).sum(axis=1)
+        out[:, i] = rms * s / s.std()
+    return out
+
+
+def integrate(rhs, x0, ts, us, delay=0.0):
+    """DOP853 (rtol 1e-10) over the zero-order-hold input `us`, restarted at every switch of the applied input:
+    with `delay` the input applied at `t` is the one recorded at `t - delay` (the first held before the record)."""
+    switches = np.union1d(ts, ts + delay)
+    switches = switches[(switches >= ts[0]) & (switches <= ts[-1])]
+    x, out, k = np.asarray(x0, float), [np.asarray(x0, float)], 1
+    for a, b in itertools.pairwise(switches):
+        if b - a < 1e-12:
+            continue
+        i = int(np.clip(np.floor((0.5 * (a + b) - delay - ts[0]) / DT + 1e-9), 0, len(us) - 1))
+        u = us[i]
+        x = solve_ivp(lambda t, y, u=u: rhs(y, u), (a, b), x, method="DOP853", rtol=1e-10, atol=1e-11).y[:, -1]
+        while k < len(ts) and abs(ts[k] - b) < 1e-9:
+            out.append(x)
+            k += 1
+    return np.asarray(out)
+
+
+# --- friction laws (none of them dynax's term) -------------------------------------------------------
+
+
+def friction(law, size, v):
+    if law == "tanh":
+        return size * np.tanh(v / 0.01)
+    if law == "arctan":
+        return size * 2 / np.pi * np.arctan(v / 0.005)
+    if law == "stribeck":  # static 1.5 times the Coulomb level, falling off over 0.1 (units of v)
+        return (size + 0.5 * size * np.exp(-((v / 0.1) ** 2))) * np.tanh(v / 0.005)
+    if law == "viscous":
+        return size * v
+    raise ValueError(law)
+
+
+# --- the two-link arm (acrobot: elbow driven; double pendulum: both) ----------------------------------
+
+
+def arm_rhs(theta, case, driven):
+    t1, t2, t3, t4, t5, t6, t7 = theta
+    joint = {"q1": 0, "q2": 1, "tau1": 0, "tau2": 1}.get(case.where, None)
+    rotor = np.zeros(2)
+    if case.cause == "rotor_inertia":
+        rotor[joint] = case.size
+    n_lag = 1 if case.cause == "input_lag" else 0
+
+    def rhs(y, u):
+        q1, q2, dq1, dq2 = y[:4]
+        tau = np.zeros(2)
+        tau[list(driven)] = u
+        if case.cause == "input_gain":
+            tau[joint] *= case.size
+        elif case.cause == "input_offset":
+            tau[joint] += case.size
+        elif case.cause == "input_lag":
+            lagged = y[4]
+            dz = (tau[joint] - lagged) / case.size
+            tau[joint] = lagged
+        c2, s2, s1, s12 = np.cos(q2), np.sin(q2), np.sin(q1), np.sin(q1 + q2)
+        m11, m12, m22 = t1 + t2 + 2 * t3 * c2 + rotor[0], t2 + t3 * c2, t2 + rotor[1]
+        extra = np.zeros(2)
+        if case.cause in ("coulomb_friction", "viscous_friction"):
+            extra[joint] = friction(case.law, case.size, (dq1, dq2)[joint])
+        h1 = tau[0] + t3 * s2 * (2 * dq1 * dq2 + dq2**2) - t4 * s1 - t5 * s12 - t6 * dq1 - extra[0]
+        h2 = tau[1] - t3 * s2 * dq1**2 - t5 * s12 - t7 * dq2 - extra[1]
+        det = m11 * m22 - m12 * m12
+        d = [dq1, dq2, (m22 * h1 - m12 * h2) / det, (m11 * h2 - m12 * h1) / det]
+        return np.array(d + ([dz] if n_lag else []))
+
+    return rhs, n_lag
+
+
+# --- the linear axis ------------------------------------------------------------------------------------
+
+AXIS = {"mass": 95.1, "viscous": 200.0, "offset": 0.0}  # the nominal LinearAxis(coulomb=0) of the cases
+
+
+def axis_rhs(case):
+    def rhs(y, u):
+        v, force = y[1], u[0]
+        if case.cause == "input_gain":
+            force = case.size * force
+        dz = []
+        if case.cause == "input_lag":
+            dz, force = [(force - y[2]) / case.size], y[2]
+        f = AXIS["viscous"] * v + (friction(case.law, case.size, v) if case.cause == "coulomb_friction" else 0.0)
+        return np.array([v, (force - f) / AXIS["mass"]] + dz)
+
+    return rhs, 1 if case.cause == "input_lag" else 0
+
+
+# --- the helicopter: the Tempest hover model written out in numpy, effects in the body frame ------------
+
+TEMPEST = {"Ax": -0.18, "Ay": -0.43, "Az": -0.49, "Bx": -12.78, "By": -10.12, "Bz": -8.16, "C1": 33.04, "C2": -33.32, "C3": 70.54,
+               "C4": -42.15, "Dv": -0.54, "g": 9.81}
+HOVER_U4 = TEMPEST["g"] / -TEMPEST["C4"]  # the collective that holds the weight at level attitude
+
+
+def rotation(qw, qx, qy, qz):
+    """Body-to-world rotation of a unit quaternion."""
+    return np.array([
+        [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qw * qz), 2 * (qx * qz + qw * qy)],
+        [2 * (qx * qy + qw * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qw * qx)],
+        [2 * (qx * qz - qw * qy), 2 * (qy * qz + qw * qx), 1 - 2 * (qx * qx + qy * qy)],
+    ])
+
+
+def heli_rhs(case):
+    c = TEMPEST
+    axis = {"u": 0, "v": 1, "w": 2, "p": 3, "q": 4, "r": 5}.get(case.where)
+    wind_world = np.zeros(3)
+    if case.cause == "wind":
+        wind_world[{"north": 0, "east": 1, "down": 2}[case.law]] = case.size
+
+    def rhs(y, u):
+        quat, nu, om = y[3:7], y[7:10], y[10:13]
+        R = rotation(*quat)
+        air = nu - R.T @ wind_world  # the body moves through air that moves with the wind
+        g_body = R.T @ np.array([0.0, 0.0, c["g"]])
+        acc = -np.cross(om, nu) + g_body + np.array([c["Ax"] * air[0], c["Ay"] * air[1] + c["Dv"], c["Az"] * air[2] + c["C4"] * u[3]])
+        rates = np.array([c["Bx"] * om[0] + c["C1"] * u[0], c["By"] * om[1] + c["C2"] * u[1], c["Bz"] * om[2] + c["C3"] * u[2]])
+        body = np.concatenate([acc, rates])
+        if case.cause == "quadratic_drag":
+            body[axis] -= case.size * abs(air[axis]) * air[axis]
+        elif case.cause == "body_bias":
+            body[axis] += case.size
+        qw, qx, qy, qz = quat
+        p, q, r = om
+        dquat = 0.5 * np.array([-qx * p - qy * q - qz * r, qw * p + qy * r - qz * q, qw * q - qx * r + qz * p,
+                                qw * r + qx * q - qy * p])
+        dquat += 1.0 * (1.0 - quat @ quat) * quat  # the normalisation term dynax's model has too
+        return np.concatenate([R @ nu, dquat, body[:3], body[3:]])
+
+    return rhs, 0
+
+
+# --- records ----------------------------------------------------------------------------------------------
+
+SYSTEMS = {
+    "acrobot": {"states": ("q1", "q2", "dq1", "dq2"), "inputs": ("tau2",), "driven": (1,), "rms": 2.0,
+                    "noise": (1e-3, 1e-3, 1e-2, 1e-2)},
+    "double_pendulum": {"states": ("q1", "q2", "dq1", "dq2"), "inputs": ("tau1", "tau2"), "driven": (0, 1), "rms": 1.5,
+                            "noise": (1e-3, 1e-3, 1e-2, 1e-2)},
+    "linear_axis": {"states": ("q", "dq"), "inputs": ("force",), "rms": 150.0, "noise": (1e-5, 1e-4)},
+    "helicopter": {"states": ("x", "y", "z", "qw", "qx", "qy", "qz", "u", "v", "w", "p", "q", "r"),
+                       "inputs": ("u1", "u2", "u3", "u4"), "rms": (0.02, 0.02, 0.01, 0.03),
+                       "noise": (1e-3,) * 3 + (0.0,) * 4 + (1e-2,) * 3 + (3e-3,) * 3},
+}
+
+
+def truth_theta(case):
+    """The truth's base parameters: in refit mode 0 to 3 % from the nominal's (another copy of the rig), in
+    known mode the nominal's (the user's parameters are right; only the effect is missing)."""
+    if case.mode == "known":
+        return np.asarray(THETA)
+    rng = np.random.default_rng(1000 + case.seed)
+    theta = np.asarray(THETA) * (1 + rng.uniform(-0.03, 0.03, 7))
+    theta[5:] = THETA[5:]  # the nominal friction is the rig's: the friction candidates test what is added
+    return theta
+
+
+def records(case: Case) -> tuple[Trajectory, Trajectory]:
+    """The training and held-out records of `case` (one run, the last `HELD_OUT_S` held out)."""
+    spec = SYSTEMS[case.system]
+    n = round((TRAIN_S + HELD_OUT_S) / DT) + 1
+    ts = np.arange(n) * DT
+    rms = np.broadcast_to(np.asarray(spec["rms"], float), (len(spec["inputs"]),))
+    us = multisine(n, len(spec["inputs"]), case.seed, 1.0) * rms
+    if case.system in ("acrobot", "double_pendulum"):
+        rhs, n_hidden = arm_rhs(truth_theta(case), case, spec["driven"])
+        x0 = np.zeros(4)
+    elif case.system == "linear_axis":
+        rhs, n_hidden = axis_rhs(case)
+        x0 = np.zeros(2)
+    else:
+        us = us + np.array([0.0, 0.0, 0.0, HOVER_U4])
+        rhs, n_hidden = heli_rhs(case)
+        x0 = np.zeros(13)
+        x0[3] = 1.0
+        x0[7] = 0.5  # flying forward at 0.5 m/s: the drag and the wind act from the start
+    if n_hidden:  # a lag starts settled on the first input
+        x0 = np.concatenate([x0, [us[0, spec["inputs"].index(case.where)]]])
+    delay = case.size if case.cause == "input_delay" else 0.0
+    xs = integrate(rhs, x0, ts, us, delay)[:, : len(spec["states"])]
+    if case.system == "helicopter":
+        xs[:, 3:7] /= np.linalg.norm(xs[:, 3:7], axis=1, keepdims=True)
+    rng = np.random.default_rng(7919 + case.seed)
+    xs = xs + np.asarray(spec["noise"]) * rng.standard_normal(xs.shape)
+    k = round(TRAIN_S / DT) + 1
+
+    def record(a, b, source):
+        return Trajectory(jnp.asarray(ts[a:b]), jnp.asarray(xs[a:b]), jnp.asarray(us[a:b]), spec["states"],
+                          spec["inputs"], case.system, source)
+
+    return record(0, k, f"{case.name}-train"), record(k, n, f"{case.name}-held-out")
+
+
+def _cases():
+    rows = [  # system, cause, where, size, law, mode, near
+        ("acrobot", "coulomb_friction", "q2", 0.25, "tanh", "refit", False),
+        ("acrobot", "coulomb_friction", "q2", 0.15, "arctan", "refit", False),
+        ("acrobot", "coulomb_friction", "q1", 0.3, "stribeck", "refit", False),
+        ("acrobot", "coulomb_friction", "q1", 0.2, "arctan", "refit", False),
+        ("acrobot", "coulomb_friction", "q2", 0.05, "tanh", "refit", True),
+        ("acrobot", "viscous_friction", "q2", 0.3, "viscous", "refit", False),
+        ("acrobot", "viscous_friction", "q1", 0.1, "viscous", "refit", True),
+        ("acrobot", "rotor_inertia", "q2", 0.1, "mass matrix", "refit", False),
+        ("acrobot", "rotor_inertia", "q2", 0.03, "mass matrix", "refit", True),
+        ("acrobot", "rotor_inertia", "q1", 0.15, "mass matrix", "known", False),
+        ("acrobot", "input_delay", "tau2", 0.04, "dead time", "refit", False),
+        ("acrobot", "input_delay", "tau2", 0.025, "dead time", "refit", False),
+        ("acrobot", "input_delay", "tau2", 0.012, "dead time", "refit", True),
+        ("acrobot", "input_lag", "tau2", 0.06, "first order", "refit", False),
+        ("acrobot", "input_lag", "tau2", 0.1, "first order", "refit", False),
+        ("acrobot", "input_lag", "tau2", 0.02, "first order", "refit", True),
+        ("acrobot", "input_offset", "tau2", 0.2, "constant", "refit", False),
+        ("acrobot", "input_offset", "tau2", 0.05, "constant", "refit", True),
+        ("acrobot", "input_gain", "tau2", 1.25, "factor", "known", False),
+        ("acrobot", "input_gain", "tau2", 1.08, "factor", "known", True),
+        ("double_pendulum", "coulomb_friction", "q1", 0.2, "arctan", "refit", False),
+        ("double_pendulum", "coulomb_friction", "q2", 0.15, "stribeck", "refit", False),
+        ("double_pendulum", "coulomb_friction", "q2", 0.3, "tanh", "refit", False),
+        ("double_pendulum", "coulomb_friction", "q1", 0.05, "tanh", "refit", True),
+        ("double_pendulum", "viscous_friction", "q1", 0.25, "viscous", "refit", False),
+        ("double_pendulum", "viscous_friction", "q2", 0.1, "viscous", "refit", True),
+        ("double_pendulum", "rotor_inertia", "q2", 0.08, "mass matrix", "refit", False),
+        ("double_pendulum", "rotor_inertia", "q2", 0.025, "mass matrix", "refit", True),
+        ("double_pendulum", "rotor_inertia", "q1", 0.1, "mass matrix", "known", False),
+        ("double_pendulum", "input_delay", "tau1", 0.03, "dead time", "refit", False),
+        ("double_pendulum", "input_delay", "tau2", 0.05, "dead time", "refit", False),
+        ("double_pendulum", "input_delay", "tau1", 0.01, "dead time", "refit", True),
+        ("double_pendulum", "input_lag", "tau2", 0.05, "first order", "refit", False),
+        ("double_pendulum", "input_lag", "tau1", 0.015, "first order", "refit", True),
+        ("double_pendulum", "input_offset", "tau1", 0.15, "constant", "refit", False),
+        ("double_pendulum", "input_offset", "tau2", 0.04, "constant", "refit", True),
+        ("double_pendulum", "input_gain", "tau1", 0.8, "factor", "known", False),
+        ("linear_axis", "coulomb_friction", "q", 20.0, "tanh", "refit", False),
+        ("linear_axis", "coulomb_friction", "q", 40.0, "tanh", "refit", False),
+        ("linear_axis", "coulomb_friction", "q", 15.0, "stribeck", "refit", False),
+        ("linear_axis", "coulomb_friction", "q", 5.0, "arctan", "refit", True),
+        ("linear_axis", "viscous_friction", "q", 60.0, "viscous", "refit", False),
+        ("linear_axis", "input_delay", "force", 0.02, "dead time", "refit", False),
+        ("linear_axis", "input_delay", "force", 0.005, "dead time", "refit", True),
+        ("linear_axis", "input_lag", "force", 0.03, "first order", "refit", False),
+        ("linear_axis", "input_lag", "force", 0.01, "first order", "refit", True),
+        ("linear_axis", "input_gain", "force", 1.2, "factor", "known", False),
+        ("helicopter", "quadratic_drag", "u", 0.3, "body frame", "known", False),
+        ("helicopter", "quadratic_drag", "w", 0.5, "body frame", "known", False),
+        ("helicopter", "quadratic_drag", "u", 0.1, "body frame", "known", True),
+        ("helicopter", "wind", "world", 3.0, "north", "known", False),
+        ("helicopter", "wind", "world", -2.0, "east", "known", False),
+        ("helicopter", "wind", "world", 1.5, "down", "known", False),
+        ("helicopter", "body_bias", "v", 0.8, "constant", "known", False),
+        ("helicopter", "body_bias", "u", 0.5, "constant", "known", False),
+        ("helicopter", "body_bias", "p", 0.5, "constant", "known", False),
+        ("helicopter", "body_bias", "v", 0.2, "constant", "known", True),
+    ]
+    rows += [("acrobot", "input_delay", "tau2", 0.06, "dead time", "refit", False),
+             ("double_pendulum", "input_lag", "tau1", 0.08, "first order", "refit", False),
+             ("linear_axis", "coulomb_friction", "q", 30.0, "arctan", "refit", False)]
+    controls = [("acrobot", "refit")] * 3 + [("acrobot", "known")] + [("double_pendulum", "refit")] * 3 \
+        + [("linear_axis", "refit")] * 2 + [("helicopter", "known")] * 2
+    cases = [Case(f"{s}-{c}@{w}-{size:g}-{law.replace(' ', '_')}", s, c, w, size, law, m, 100 + i, near)
+             for i, (s, c, w, size, law, m, near) in enumerate(rows)]
+    cases += [Case(f"{s}-control-{m}-{i}", s, None, None, 0.0, "none", m, 300 + i) for i, (s, m) in enumerate(controls)]
+    return tuple(cases)
+
+
+CASES = _cases()
+
+
+# --- the diagnosis of a case, and what it got right --------------------------------------------------------
+
+
+def diagnose_case(case: Case, records_=None):
+    """`dynax.diagnose` on the case's records with the nominal model of its system (at most two causes)."""
+    import dynax
+
+    train, held_out = records(case) if records_ is None else records_
+    mode = dynax.Known() if case.mode == "known" else dynax.Refit()
+    kwargs = {}
+    if case.system == "acrobot":
+        nominal = dynax.Acrobot()
+    elif case.system == "double_pendulum":
+        nominal = dynax.DoublePendulum()
+    elif case.system == "linear_axis":
+        nominal = dynax.LinearAxis(mass=jnp.asarray(AXIS["mass"]), viscous=jnp.asarray(AXIS["viscous"]),
+                                   coulomb=jnp.asarray(0.0), offset=jnp.asarray(AXIS["offset"]))
+    else:
+        nominal = dynax.Helicopter()
+        kwargs = {"candidates": tuple(t for t in dynax.default_candidates(nominal)
+                                       if isinstance(t, dynax.AbstractVehicleTerm)), "horizons_s": (0.25, 0.5, 1.0)}
+    return dynax.diagnose(nominal, train, held_out, mode=mode, max_terms=2, progress=False, **kwargs)
+
+
+def outcome(case: Case, j: dict) -> dict:
+    """What a report (`report.json` as a dict) got right about `case`.
+
+    `named_first`: the first finding is the hidden cause at its place; `right_verdict`: `explained` for an effect
+    (`inconclusive` also counted apart for near-threshold sizes), `none` for a control; `false_claim`: a control
+    with a finding or `unexplained`; `extra`: a finding besides the hidden cause; `best_gain`: the largest
+    held-out gain of a refitted candidate in the first round; `none_with_gain`: `none` although that gain is 25 % or
+    more."""
+    findings = [(f["cause"], f["where"]) for f in j["findings"]]
+    gains = [c["gain"] for c in j["candidates"] if "gain" in c]
+    best_gain = max(gains) if gains else None
+    verdict = j["verdict"]
+    if case.expected is None:
+        right = verdict == "none"
+        named = None
+        false_claim = bool(findings) or verdict == "unexplained"
+        extra = bool(findings)
+    else:
+        named = bool(findings) and findings[0] == case.expected
+        right = verdict == "explained" and named
+        false_claim = False
+        extra = any(f != case.expected for f in findings)
+    return {"verdict": verdict, "findings": [f"{c}@{w}" for c, w in findings], "named_first": named,
+            "right_verdict": right, "false_claim": false_claim, "extra": extra, "best_gain": best_gain,
+            "none_with_gain": verdict == "none" and best_gain is not None and best_gain >= 0.25, "gain": j["gain"],
+            "structure_r2": j["structure"]["extended"]["r2"], "structure_p": j["structure"]["extended"]["p_value"],
+            "power": j["test"].get("power")}
