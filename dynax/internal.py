@@ -146,6 +146,13 @@ from ._diagnose._statistics import (
     holm as holm,
     log_ratio_differences as log_ratio_differences,
     paired_block_test as paired_block_test,
+    PairedTest as PairedTest,
+)
+from ._diagnose._verdict import (
+    decide as decide_verdict,
+    MIN_PRACTICAL_GAIN as MIN_PRACTICAL_GAIN,
+    power_of as power_of,
+    PRACTICAL_R2 as PRACTICAL_R2,
 )
 from ._diagnose._validation import fit_percent as fit_percent, residual_tests as residual_tests
 
@@ -183,6 +190,7 @@ from ._model._extensions._terms import _scalar as float_scalar
 
 # Aliased re-exports (`x as y`) count as exports only through `__all__`, so it lists every name.
 __all__ = [
+    "decide_verdict", "MIN_PRACTICAL_GAIN", "PairedTest", "power_of", "PRACTICAL_R2",
     "acceleration_residuals", "auto_stride", "backward_difference", "bar_token", "bartlett_lags",
     "benjamini_hochberg", "build_parser", "butterworth_filtfilt", "candidate_family", "central_difference",
     "cli_main", "clustered_covariance", "compare_records", "complete_state", "CONCENTRATED",

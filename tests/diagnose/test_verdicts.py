@@ -11,8 +11,7 @@ import pytest
 
 import dynax
 from dynax import Structure, Verdict
-from dynax._diagnose._statistics import PairedTest
-from dynax._diagnose._verdict import MIN_PRACTICAL_GAIN, PRACTICAL_R2, decide, power_of
+from dynax.internal import decide_verdict as decide, MIN_PRACTICAL_GAIN, PairedTest, power_of, PRACTICAL_R2
 from tests.hidden_cases import Case, diagnose_case, outcome, records
 
 
