@@ -90,6 +90,7 @@ def test_structure_a_candidate_would_remove_but_significance_alone_stopped_is_in
 # --- end to end, on records dynax did not make --------------------------------------------------------
 
 
+@pytest.mark.heavy  # an end-to-end diagnosis: in `make test`, not `make quick`
 def test_effect_free_control_claims_no_cause():
     case = Case("control", "acrobot", None, None, 0.0, "none", "refit", 300)
     j = diagnose_case(case).to_json()
@@ -117,6 +118,7 @@ def test_a_short_held_out_record_is_inconclusive_not_none():
         assert j["findings"][0]["cause"] == "coulomb_friction", j["findings"]
 
 
+@pytest.mark.heavy  # an end-to-end diagnosis: in `make test`, not `make quick`
 def test_a_cause_found_with_a_leftover_probe_structure_is_explained():
     """A Stribeck friction (static level 1.5 times the Coulomb level) is named as Coulomb friction; the curve's
     hump stays in the residuals as small structure, which must not make the verdict `unexplained`."""
