@@ -11,7 +11,7 @@ is the same and only an array leaf changes. Three paths, one process:
 - `diffrax.diffeqsolve` with the same solver at the same constant substep and `SaveAt(ts=...)` (the input looked
   up by `searchsorted`), itself `filter_jit`-compiled once.
 
-The same for `dynax.simulate_closed_loop`: the acrobot under Drake's Spong swing-up controller for
+The same for `dynax.control.simulate_closed_loop`: the acrobot under Drake's Spong swing-up controller for
 10 s at 100 Hz, the controller's gains scaled anew each call, against its bare `lax.scan` (before).
 
 Reported: the first call (compilation included) and the median of the next `--reps` calls, and
@@ -105,11 +105,11 @@ def main(argv=None):
 
     # Closed loop: the acrobot under Drake's Spong swing-up controller for 10 s at 100 Hz, its gains
     # scaled by a different factor each call.
-    plant, controller = dynax.Acrobot(), dynax.SpongController()
+    plant, controller = dynax.Acrobot(), dynax.control.SpongController()
     times, start = jnp.arange(0.0, 10.0, 0.01), jnp.array([0.1, 0.0, 0.0, 0.0])
 
     def with_closed_loop(k):
-        return dynax.simulate_closed_loop(plant, controller.with_params(controller.params * (1 + 0.01 * k)), start,
+        return dynax.control.simulate_closed_loop(plant, controller.with_params(controller.params * (1 + 0.01 * k)), start,
                                           times).xs
 
     bare_loop = getattr(_closed_loop._closed_loop, "__wrapped__", None)
@@ -118,11 +118,11 @@ def main(argv=None):
         gains = controller.with_params(controller.params * (1 + 0.01 * k))
         return bare_loop(plant, gains, start, times, dynax.FixedGrid(), 1e6).xs
 
-    rows["dynax.simulate_closed_loop"] = timed(with_closed_loop, args.reps)
+    rows["dynax.control.simulate_closed_loop"] = timed(with_closed_loop, args.reps)
     if bare_loop is not None:
         rows["closed loop, bare lax.scan (before)"] = timed(with_bare_closed_loop, args.reps)
     def base(name):  # each path against dynax's own on the same problem
-        return rows["dynax.simulate_closed_loop" if "closed" in name else "dynax.simulate"][1]
+        return rows["dynax.control.simulate_closed_loop" if "closed" in name else "dynax.simulate"][1]
 
     print(f"{'path':36s} {'first call s':>13s} {'median next s':>14s} {'ratio to dynax':>15s}")
     for name, (first, median) in rows.items():

@@ -31,7 +31,7 @@ import numpy as np
 
 import dynax
 from _device import describe, device_info
-from dynax import (
+from dynax.control import (
     CentredRank,
     clipup,
     DRAKE_SPONG_PARAMETERS,
@@ -252,7 +252,7 @@ def main(argv=None):
     x0 = random_starts(jax.random.PRNGKey(5), 8, dtype=jnp.float32)
     params = jnp.tile(start, (8, 1)) * (1 + 0.05 * jax.random.normal(jax.random.PRNGKey(6), (8, 4)))
     short = SwingUpTask(plant, controller, duration=1.0, control_rate=RATE)
-    via_jax = jax.jit(jax.vmap(lambda p, x: dynax.swing_up_reward(short.rollout(p, x))))(params, x0)
+    via_jax = jax.jit(jax.vmap(lambda p, x: dynax.control.swing_up_reward(short.rollout(p, x))))(params, x0)
     via_numpy = sim.rewards(np.asarray(params), np.asarray(x0), duration=1.0)
     results["numpy_vs_dynax_reward_max_abs_diff"] = float(np.max(np.abs(np.asarray(via_jax) - via_numpy)))
     print(f"reward agreement numpy vs dynax (8 episodes of 1 s): max |diff| = {results['numpy_vs_dynax_reward_max_abs_diff']:.2e}")

@@ -55,11 +55,11 @@ def worker(args):
         sim = dynax.simulate(arm, x0, ts, jnp.zeros((ts.shape[0], 1)), throw=False)
         return -jnp.sum((sim.xs[-1] * params) ** 2)
 
-    pgpe = dynax.PGPE(population_size=args.population, init_sigma=0.2)
+    pgpe = dynax.control.PGPE(population_size=args.population, init_sigma=0.2)
     params = jnp.ones(4)
 
     def run(seed):
-        state, _ = dynax.run_pgpe(pgpe, objective, params, jax.random.key(seed), args.generations, progress=False)
+        state, _ = dynax.control.run_pgpe(pgpe, objective, params, jax.random.key(seed), args.generations, progress=False)
         return jax.block_until_ready(state.mean)
 
     start = time.perf_counter()

@@ -215,7 +215,7 @@ def sample_interval(system, method: FixedGrid, bound):
     turns the rows at and after `diverged_at` into NaN once, after its `lax.scan`
     (`mask_diverged`): the per-step work is one comparison and one select, which keeps the rollout
     at the speed of a hand-written RK4 scan (`benchmarks/rollout.py`). Shared by `simulate` and the
-    closed-loop rollouts of `dynax.simulate_closed_loop`.
+    closed-loop rollouts of `dynax.control.simulate_closed_loop`.
     """
     term = zoh_term(system)
     solver = method.solver

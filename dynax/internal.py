@@ -188,8 +188,99 @@ from ._identify._vehicle._criteria import (
 from ._model._extensions._terms import _scalar as float_scalar
 
 
+# Helpers of the pipeline's stages (data, model, identification, validation, diagnosis).
+from ._data import split_at_gaps as split_at_gaps
+from ._data._flight import FlightNotes as FlightNotes, usable_segments as usable_segments
+from ._progress import progress_mode as progress_mode
+from ._model import (
+    base_parameters_from_physical as base_parameters_from_physical,
+    hover_state as hover_state,
+)
+from ._model._extensions import (
+    AbstractInputTerm as AbstractInputTerm,
+    AbstractVehicleTerm as AbstractVehicleTerm,
+    Discovered as Discovered,
+    Feature as Feature,
+)
+from ._identify import (
+    check_consistency as check_consistency,
+    choose_filter as choose_filter,
+    consistent_least_squares as consistent_least_squares,
+    ConsistentParametrisation as ConsistentParametrisation,
+    ConsistentSystem as ConsistentSystem,
+    FilterChoice as FilterChoice,
+    measurement_noise_std as measurement_noise_std,
+    noise_floor_and_band as noise_floor_and_band,
+    OutputErrorStatistics as OutputErrorStatistics,
+    poorly_determined as poorly_determined,
+    record_friction as record_friction,
+    record_offsets as record_offsets,
+    RecordFriction as RecordFriction,
+    RecordOffsets as RecordOffsets,
+    refine_by_simulation as refine_by_simulation,
+    RefinementStatistics as RefinementStatistics,
+    split_for_validation as split_for_validation,
+)
+from ._identify._vehicle import frequency_responses as frequency_responses
+from ._metrics import (
+    CrossCorrelationTest as CrossCorrelationTest,
+    horizon_fit as horizon_fit,
+    kfold_splits as kfold_splits,
+    leave_one_out_splits as leave_one_out_splits,
+    WhitenessTest as WhitenessTest,
+)
+from ._diagnose import (
+    LOOK_ALIKES as LOOK_ALIKES,
+    Proposal as Proposal,
+    sparse_search as sparse_search,
+    SparseFit as SparseFit,
+    Structure as Structure,
+    structure_test as structure_test,
+    write_report as write_report,
+)
+
 # Aliased re-exports (`x as y`) count as exports only through `__all__`, so it lists every name.
 __all__ = [
+    "AbstractInputTerm",
+    "AbstractVehicleTerm",
+    "check_consistency",
+    "OutputErrorStatistics",
+    "RefinementStatistics",
+    "write_report",
+    "split_at_gaps",
+    "FlightNotes",
+    "usable_segments",
+    "progress_mode",
+    "base_parameters_from_physical",
+    "hover_state",
+    "Discovered",
+    "Feature",
+    "choose_filter",
+    "consistent_least_squares",
+    "ConsistentParametrisation",
+    "ConsistentSystem",
+    "FilterChoice",
+    "measurement_noise_std",
+    "noise_floor_and_band",
+    "poorly_determined",
+    "record_friction",
+    "record_offsets",
+    "RecordFriction",
+    "RecordOffsets",
+    "refine_by_simulation",
+    "split_for_validation",
+    "frequency_responses",
+    "CrossCorrelationTest",
+    "horizon_fit",
+    "kfold_splits",
+    "leave_one_out_splits",
+    "WhitenessTest",
+    "LOOK_ALIKES",
+    "Proposal",
+    "sparse_search",
+    "SparseFit",
+    "Structure",
+    "structure_test",
     "decide_verdict", "MIN_PRACTICAL_GAIN", "PairedTest", "power_of", "PRACTICAL_R2",
     "acceleration_residuals", "auto_stride", "backward_difference", "bar_token", "bartlett_lags",
     "benjamini_hochberg", "build_parser", "butterworth_filtfilt", "candidate_family", "central_difference",

@@ -41,7 +41,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax import (  # noqa: E402
+from dynax.control import (
     CentredRank,
     clipup,
     DRAKE_SPONG_PARAMETERS,
@@ -357,7 +357,7 @@ def gradient_tuning(cfg, template, plant, key, held_out, evaluate):
 
     def loss(z, key):
         starts = random_starts(key, cfg["grad_batch"], dtype=jnp.float32)
-        return -jnp.mean(jax.vmap(lambda x0: dynax.swing_up_reward(task.rollout(z * scales, x0)))(starts))
+        return -jnp.mean(jax.vmap(lambda x0: dynax.control.swing_up_reward(task.rollout(z * scales, x0)))(starts))
 
     @eqx.filter_jit
     def step(z, opt_state, key):

@@ -12,10 +12,10 @@ Two measurements, about 3 minutes on 2 CPU cores:
    dynax's base parameters exactly, `dfki_default_identification.lab_model`). A group whose swap alone
    brings dynax's error to the lab's is where the two models differ on that run. The swaps read the
    held-out run's error, so they are a diagnosis, not a fit anyone could make without the run.
-2. **Do the runs agree on the Coulomb friction?** `dynax.record_friction` on the inverse-dynamics
+2. **Do the runs agree on the Coulomb friction?** `dynax.internal.record_friction` on the inverse-dynamics
    equations of `identify`'s least-squares stage (every setting chosen from the data), on all six runs
    and on each fold's five training runs: each run's Coulomb coefficients, from the whole run and from each of its four parts,
-   and an analysis of variance of the runs against their four parts (see `dynax.record_friction`).
+   and an analysis of variance of the runs against their four parts (see `dynax.internal.record_friction`).
 
 Writes `OUT/record_friction.json` and `OUT/record_friction.png`.
 
@@ -38,6 +38,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
+import dynax.internal  # noqa: E402
 from dynax import held_out_error  # noqa: E402
 from dynax.internal import compare_records  # noqa: E402
 

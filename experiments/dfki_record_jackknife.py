@@ -31,6 +31,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
+import dynax.internal  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from dfki_default_identification import load  # noqa: E402

@@ -7,7 +7,7 @@ The inverse-dynamics least-squares problem of `identify(DoublePendulum(), runs, 
 friction="coulomb")` (every setting chosen from the data, as `identify` chooses it) is solved on all
 six `sys_id` runs at once with one nuisance column per run, joint and half of the run: a constant
 torque that adds to what that run's recorded torque says (a sensor or current offset), the base
-parameters shared; `dynax.record_offsets` does this, and `identify` reports it
+parameters shared; `dynax.internal.record_offsets` does this, and `identify` reports it
 as `record_offsets`. An offset of the sensor stays the same within a run, model error need not.
 
 Then each run is simulated open loop (200 start samples, position RMSE at 0.1 / 0.25 / 0.5 s, as
@@ -42,7 +42,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax import held_out_error, least_squares, record_offsets  # noqa: E402
+import dynax.internal  # noqa: E402
+from dynax import held_out_error, least_squares  # noqa: E402
+from dynax.internal import record_offsets  # noqa: E402
 from dynax.internal import record_angle_zeros, shifted as shifted_angles, stacked_equations  # noqa: E402
 
 from dfki_default_identification import HORIZONS, lab_model, load, model_of as loro_model, RUNS  # noqa: E402

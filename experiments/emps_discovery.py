@@ -24,7 +24,8 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from dynax import diagnose, LinearAxis, load_trajectory, Refit, Trajectory, write_report  # noqa: E402
+from dynax import diagnose, LinearAxis, load_trajectory, Refit, Trajectory  # noqa: E402
+from dynax.internal import write_report  # noqa: E402
 from dynax.internal import butterworth_filtfilt, central_difference, diagnosis_summary, write_json  # noqa: E402
 
 DATA = pathlib.Path(sys.argv[1])

@@ -31,7 +31,8 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax import record_friction, Trajectory  # noqa: E402
+from dynax import Trajectory  # noqa: E402
+from dynax.internal import record_friction  # noqa: E402
 from dynax.internal import stacked_equations  # noqa: E402
 
 RIG = dict(theta1=0.0536, theta2=0.0533, theta3=0.0362, theta4=2.365, theta5=1.777, theta6=0.01, theta7=0.01)

@@ -337,6 +337,7 @@ CASES = _cases()
 def diagnose_case(case: Case, records_=None):
     """`dynax.diagnose` on the case's records with the nominal model of its system (at most two causes)."""
     import dynax
+    import dynax.internal
 
     train, held_out = records(case) if records_ is None else records_
     mode = dynax.Known() if case.mode == "known" else dynax.Refit()
@@ -351,7 +352,7 @@ def diagnose_case(case: Case, records_=None):
     else:
         nominal = dynax.Helicopter()
         kwargs = {"candidates": tuple(t for t in dynax.default_candidates(nominal)
-                                       if isinstance(t, dynax.AbstractVehicleTerm)), "horizons_s": (0.25, 0.5, 1.0)}
+                                       if isinstance(t, dynax.internal.AbstractVehicleTerm)), "horizons_s": (0.25, 0.5, 1.0)}
     return dynax.diagnose(nominal, train, held_out, mode=mode, max_terms=2, progress=False, **kwargs)
 
 

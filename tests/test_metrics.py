@@ -6,6 +6,7 @@ import pytest
 import scipy.stats
 
 import dynax
+import dynax.internal
 
 
 def _arx_data(n=3000, seed=0):
@@ -139,9 +140,9 @@ def test_horizon_fit_is_compare_with_a_k_step_prediction():
     truth = dynax.Acrobot()
     xs = dynax.simulate(truth, jnp.array([0.4, -0.2, 0.0, 0.0]), ts, us).xs
     run = dynax.Trajectory(jnp.asarray(ts), xs, jnp.asarray(us), ("q1", "q2", "dq1", "dq2"), ("tau2",), "acrobot")
-    assert all(v > 99.9 for v in dynax.horizon_fit(truth, run, 0.2, max_windows=8).values())
+    assert all(v > 99.9 for v in dynax.internal.horizon_fit(truth, run, 0.2, max_windows=8).values())
     wrong = dynax.Acrobot(theta4=truth.theta4 * 1.2)
-    fits = dynax.horizon_fit(wrong, run, 0.2, states=["q1"], max_windows=8)
+    fits = dynax.internal.horizon_fit(wrong, run, 0.2, states=["q1"], max_windows=8)
     error = dynax.simulation_error(wrong, run, (0.2,), max_windows=8)
     measured, predicted = [], []
     for k in np.asarray(error.starts):
@@ -151,4 +152,4 @@ def test_horizon_fit_is_compare_with_a_k_step_prediction():
     expected = float(dynax.nrmse_fit(np.array(measured), np.array(predicted))[0])
     assert fits["q1"] == pytest.approx(expected, abs=1e-6) and expected < 99
     with pytest.raises(ValueError, match="not states"):
-        dynax.horizon_fit(wrong, run, 0.2, states=["x"])
+        dynax.internal.horizon_fit(wrong, run, 0.2, states=["x"])

@@ -5,7 +5,8 @@ import jax.numpy as jnp
 import pytest
 
 import dynax
-from dynax import progress_mode, ProgressBar
+from dynax import ProgressBar
+from dynax.internal import progress_mode
 from dynax.internal import bar_token, progress_enabled, progress_report
 
 
@@ -66,11 +67,11 @@ def test_compiled_scan_reports_every_step_and_the_best_value(stderr):
 
 
 def test_run_pgpe_bar_shows_generations_and_best_reward(stderr):
-    pgpe = dynax.PGPE(population_size=8, init_sigma=0.5)
+    pgpe = dynax.control.PGPE(population_size=8, init_sigma=0.5)
     key = jax.random.PRNGKey(0)
-    quiet_state, quiet_history = dynax.run_pgpe(pgpe, quadratic, jnp.zeros(2), key, 5)
+    quiet_state, quiet_history = dynax.control.run_pgpe(pgpe, quadratic, jnp.zeros(2), key, 5)
     assert stderr.getvalue() == ""
-    state, history = dynax.run_pgpe(pgpe, quadratic, jnp.zeros(2), key, 5, progress=True)
+    state, history = dynax.control.run_pgpe(pgpe, quadratic, jnp.zeros(2), key, 5, progress=True)
     text = stderr.getvalue()
     assert "5/5" in text and f"best_reward={float(history.best_reward[-1]):.4g}" in text
     # the bar does not change the result
@@ -78,18 +79,18 @@ def test_run_pgpe_bar_shows_generations_and_best_reward(stderr):
 
 
 def test_sweep_pgpe_bar_reports_best_over_runs(stderr):
-    pgpe = dynax.PGPE(population_size=8, init_sigma=0.5)
+    pgpe = dynax.control.PGPE(population_size=8, init_sigma=0.5)
     keys = jax.random.split(jax.random.PRNGKey(1), 3)
     with progress_mode("always"):
-        states, history = dynax.sweep_pgpe(pgpe, quadratic, jnp.zeros(2), keys, 4)
+        states, history = dynax.control.sweep_pgpe(pgpe, quadratic, jnp.zeros(2), keys, 4)
     text = stderr.getvalue()
     assert "4/4" in text and f"best_reward={float(history.best_reward[:, -1].max()):.4g}" in text
 
 
 def test_no_bar_inside_a_users_jit(stderr):
-    pgpe = dynax.PGPE(population_size=8, init_sigma=0.5)
+    pgpe = dynax.control.PGPE(population_size=8, init_sigma=0.5)
     with progress_mode("always"):
-        jax.jit(lambda k: dynax.run_pgpe(pgpe, quadratic, jnp.zeros(2), k, 3))(jax.random.PRNGKey(0))
+        jax.jit(lambda k: dynax.control.run_pgpe(pgpe, quadratic, jnp.zeros(2), k, 3))(jax.random.PRNGKey(0))
     assert stderr.getvalue() == ""
 
 

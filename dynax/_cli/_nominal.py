@@ -41,7 +41,7 @@ def nominal_system(name: str, parameters: dict | None = None):
 def check_nominal(system, path) -> None:
     """Refuse a `--nominal` model that is physically impossible, naming the file and the parameter: a
     base parameter outside its sign bound (negative inertia, mass or gravity term, negative friction)
-    or an inconsistent mass matrix (`theta1 * theta2 < theta3^2`), by `dynax.consistency_conditions`.
+    or an inconsistent mass matrix (`theta1 * theta2 < theta3^2`), by `dynax.internal.consistency_conditions`.
     A model whose gravity terms are negative is most often one whose angles count from upright; the
     message says so. The helicopter's Tempest weights have no such bounds."""
     from .._identify import consistency_conditions

@@ -71,7 +71,7 @@ def lqr_matrices(
 
     $u = -Kx$ minimises $\int x^\top Q x + u^\top R u\,dt$; $K = R^{-1}B^\top S$ with $S$ the
     stabilising CARE solution; $E$ the closed-loop eigenvalues, $\operatorname{eig}(A - BK)$.
-    Reached as `dynax.lqr(A, B, Q, R)`.
+    Reached as `dynax.control.lqr(A, B, Q, R)`.
 
     **Arguments:** `a` $(n, n)$, `b` $(n, m)$, `q` $(n, n)$, `r` $(m, m)$ or a scalar for $rI$.
 

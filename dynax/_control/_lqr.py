@@ -114,7 +114,7 @@ def lqr(
 
     Also python-control's matrix form: `lqr(A, B, Q, R) -> (K, S, E)` (positional, four
     matrices) returns the gain, the Riccati solution and the closed-loop eigenvalues; see
-    `dynax.lqr_matrices`.
+    `dynax.control.lqr_matrices`.
 
     Minimises $\int_0^\infty \delta x^\top Q \delta x + \delta u^\top R \delta u \, dt$ for the
     linearisation $\delta\dot x = A \delta x + B \delta u$ (`linearise`); $K = R^{-1} B^\top S$

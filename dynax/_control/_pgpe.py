@@ -352,7 +352,7 @@ def run_pgpe(
       in a multi-process run across every process's devices; every process gets the whole result.
     - `progress`: a bar per generation with the best reward so far, on stderr, reported from
       inside the compiled scan (`jax.debug.callback`); `None` draws it when stderr is a terminal
-      (see `dynax.progress_mode`). Never drawn when called inside a user's `jit` or `vmap`.
+      (see `dynax.internal.progress_mode`). Never drawn when called inside a user's `jit` or `vmap`.
 
     **Returns:**
 

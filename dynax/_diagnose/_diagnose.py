@@ -55,7 +55,7 @@ def stage_reporter(progress: Callable[[str], None] | bool | None):
 
     A callable is used as given. Otherwise a `dynax.ProgressBar` with one step per stage and per
     candidate batch, on stderr: `True` / `False` force it on / off; `None` follows
-    `dynax.progress_mode` (a bar only when stderr is a terminal; the CLI's `--quiet` silences it).
+    `dynax.internal.progress_mode` (a bar only when stderr is a terminal; the CLI's `--quiet` silences it).
     Without a bar the library prints nothing (the CLI prints the lines as a log instead).
     """
     if callable(progress):
@@ -290,7 +290,7 @@ def diagnose(
        discovered terms leave no significant structure.
 
     Where the runs' recorded forces carry constant offsets that differ from run to run (a sensor's
-    zero, which no candidate can carry to another run; `dynax.record_offsets` on the nominal model's
+    zero, which no candidate can carry to another run; `dynax.internal.record_offsets` on the nominal model's
     inverse-dynamics equations, two-link arms and the linear axis), the report's notes say so.
 
     **Arguments:**
@@ -333,7 +333,7 @@ def diagnose(
     - `progress`: a callable is called with a line of text at each stage (e.g. `print`, or a
       `dynax.ProgressBar`'s `say`); otherwise a progress bar on stderr, one step per stage and per
       candidate batch: `True` / `False` force it on / off, `None` (default) draws it when stderr is a
-      terminal (see `dynax.progress_mode`; the CLI's `--quiet` silences it).
+      terminal (see `dynax.internal.progress_mode`; the CLI's `--quiet` silences it).
 
     **Returns:** a `Report`.
 

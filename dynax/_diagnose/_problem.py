@@ -271,11 +271,11 @@ def _prepare(system, train, validation, candidates, mode, options: _Options) -> 
 
 def _note_record_differences(system, records, notes) -> None:
     """Say so when the runs' recorded forces carry constant offsets that differ from run to run
-    (`dynax.record_offsets`, on the inverse-dynamics equations of the nominal model's structure as
+    (`dynax.internal.record_offsets`, on the inverse-dynamics equations of the nominal model's structure as
     `identify` builds them; the held-out runs too when they are the user's own): a sensor zero that
     no candidate can carry from one run to another, and that stays in each held-out run's error
     whatever is named (a motor driver's current sensor, zeroed anew in each recording). Likewise when
-    the runs' Coulomb friction differs (`dynax.record_friction`: it changes with temperature and wear).
+    the runs' Coulomb friction differs (`dynax.internal.record_friction`: it changes with temperature and wear).
     Notes only: they enter no test.
 
     Only differences that are significant after multiplicity and of practical size are noted

@@ -278,7 +278,7 @@ def fit_simulation_error(
     - `rtol`, `atol`, `max_steps`: Levenberg-Marquardt settings.
     - `simulation`: `FixedGrid` settings of the rollouts.
     - `progress`: a bar per Levenberg-Marquardt iteration with the loss on stderr (`None`: when
-      stderr is a terminal, see `dynax.progress_mode`; `False` never).
+      stderr is a terminal, see `dynax.internal.progress_mode`; `False` never).
     - `record_weights`: optional weight per trajectory multiplying its state residuals (default 1).
     - `stagger`: $k$, how many cuts of the records into segments are fitted together, each starting
       $1/k$ of a segment after the one before (default 1: one cut). A model that is not exact fits

@@ -145,7 +145,7 @@ class AbstractSystem(eqx.Module):
         column per `velocity_indices`). Returns `(columns, names)`.
 
         Default: each state $x$, $|x|x$ and a smoothed sign; manipulators and the helicopter
-        give their own (see `dynax.structure_test`).
+        give their own (see `dynax.internal.structure_test`).
         """
         names, cols = [], []
         for j, c in enumerate(self.state_names):
@@ -196,7 +196,7 @@ class AbstractSystem(eqx.Module):
         return eqx.tree_at(lambda s: [getattr(s, n) for n in names], self, [parameters[n] for n in names])
 
     def base_parameter_kinds(self) -> dict[str, str]:
-        r"""How physical consistency bounds each base parameter (`dynax.consistent_least_squares`):
+        r"""How physical consistency bounds each base parameter (`dynax.internal.consistent_least_squares`):
         `"positive"`, `"nonnegative"`, `"free"`, or `"inertia1"` ($\theta_1 \ge \theta_3^2 / \theta_2$,
         a two-link arm's Schur complement). Joint terms' coefficients are bounded by their own kind.
         Default: no conditions (an empty dict: every parameter is free)."""
@@ -217,7 +217,7 @@ class AbstractSystem(eqx.Module):
 
     def base_parameter_conditions(self, parameters: dict[str, float]) -> tuple[str, ...]:
         """The physical-consistency conditions the base parameters `parameters` (by name) violate,
-        as sentences naming them (`dynax.check_consistency`).
+        as sentences naming them (`dynax.internal.check_consistency`).
 
         Default: each given parameter against its bound in `base_parameter_kinds` (`"positive"`,
         `"nonnegative"`), in the words of `base_parameter_meanings`; a system with a coupled condition
@@ -229,7 +229,7 @@ class AbstractSystem(eqx.Module):
         return tuple(s for s in sentences if s is not None)
 
     def mass_check_configurations(self, qs: Float[Array, "time n_joints"]) -> Float[Array, "k n_joints"] | None:
-        """Where `dynax.check_consistency` evaluates the mass matrix; `None` (the default): the
+        """Where `dynax.internal.check_consistency` evaluates the mass matrix; `None` (the default): the
         system has none to check (see `AbstractManipulator.mass_check_configurations`)."""
         return None
 
@@ -275,7 +275,7 @@ class AbstractManipulator(AbstractSystem):
 
     def mass_check_configurations(self, qs: Float[Array, "time n_joints"]) -> Float[Array, "k n_joints"]:
         r"""Configurations whose mass matrices include the one with the smallest eigenvalue of
-        $M(q)$ over all of `qs` (`dynax.check_consistency` evaluates $M$ there only). Default: all
+        $M(q)$ over all of `qs` (`dynax.internal.check_consistency` evaluates $M$ there only). Default: all
         of `qs`; a system whose mass matrix has known structure returns fewer (a two-link arm two,
         with the same $M$ as the samples at the ends of the data's range of $\cos q_2$)."""
         return qs

@@ -216,7 +216,7 @@ class AbstractTwoLink(AbstractManipulator):
 
     def base_parameter_kinds(self):
         r"""$\theta_1 \ge \theta_3^2/\theta_2$; $\theta_2, \theta_4, \theta_5 > 0$; $\theta_3, \theta_6, \theta_7 \ge 0$
-        (see `dynax.consistency_conditions`)."""
+        (see `dynax.internal.consistency_conditions`)."""
         return dict(theta1="inertia1", theta2="positive", theta3="nonnegative", theta4="positive",
                     theta5="positive", theta6="nonnegative", theta7="nonnegative")
 

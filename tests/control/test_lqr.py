@@ -7,7 +7,7 @@ import pytest
 import scipy.linalg
 
 import dynax
-from dynax import discrete_lqr, linearise, lqr, solve_continuous_are, solve_discrete_are, wrap_angle
+from dynax.control import discrete_lqr, linearise, lqr, solve_continuous_are, solve_discrete_are, wrap_angle
 
 UPRIGHT = jnp.array([jnp.pi, 0.0, 0.0, 0.0])
 Q = np.diag([10.0, 10.0, 1.0, 1.0])

@@ -13,7 +13,7 @@ import optax
 import pytest
 
 import dynax
-from dynax import (
+from dynax.control import (
     BaselineNormalisation,
     CentredRank,
     clipup,

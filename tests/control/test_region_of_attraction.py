@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import dynax
-from dynax import balancing_lqr, estimate_region_of_attraction
+from dynax.control import balancing_lqr, estimate_region_of_attraction
 
 
 def test_region_of_attraction_of_the_balancing_lqr():

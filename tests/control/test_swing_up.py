@@ -8,7 +8,7 @@ import pytest
 import scipy.linalg
 
 import dynax
-from dynax import (
+from dynax.control import (
     is_upright,
     random_starts,
     simulate_closed_loop,

@@ -5,6 +5,7 @@ import pytest
 import scipy.io
 
 import dynax
+import dynax.internal
 from dynax.internal import parse_assignments
 from tests.conftest import DFKI_MAPPING
 
@@ -164,7 +165,7 @@ def test_dfki_files_read_without_their_velocity_columns_get_the_logged_filter_ba
         logged = dynax.load_trajectory(path, "double_pendulum", mapping=DFKI_MAPPING)
         estimated = dynax.load_trajectory(path, "double_pendulum", mapping=positions_only)
         np.testing.assert_allclose(estimated.xs[:, :2], logged.xs[:, :2])
-        bands = [dynax.choose_filter(dynax.resample(r, r.dt)).band_hz for r in (estimated, logged)]
+        bands = [dynax.internal.choose_filter(dynax.resample(r, r.dt)).band_hz for r in (estimated, logged)]
         for name in ("dq1", "dq2"):
             assert abs(bands[0][name] / bands[1][name] - 1) < 0.05, (path.name, name, bands)
 
@@ -212,14 +213,14 @@ def test_gap_is_refused_with_its_place_and_records_with_pauses_split_into_runs(t
     with pytest.raises(dynax.DataError, match=r"column 't', row 31: a gap in the record: time jumps from 0\.29\d* to 60\.0 s"):
         dynax.load_trajectory(path, "acrobot")
     record = dynax.load_trajectory(path, "acrobot", max_gap=None)
-    runs = dynax.split_at_gaps(record)
+    runs = dynax.internal.split_at_gaps(record)
     assert [len(r) for r in runs] == [30, 20]
     np.testing.assert_array_equal(runs[1].ts, times[30:])
     np.testing.assert_array_equal(runs[1].state("q1"), times[30:])
     # Jitter of a few intervals, as real rigs have, is neither refused nor split.
     jitter = np.cumsum(0.01 * np.r_[0, np.random.default_rng(0).uniform(0.5, 4.0, 60)])
     path = write(tmp_path, HEADER + "\n" + "\n".join(f"{t!r},0,0,0,0,1" for t in jitter.tolist()), "jitter.csv")
-    assert len(dynax.split_at_gaps(dynax.load_trajectory(path, "acrobot"))) == 1
+    assert len(dynax.internal.split_at_gaps(dynax.load_trajectory(path, "acrobot"))) == 1
 
 
 def test_near_duplicate_time_stamp_is_refused(tmp_path):

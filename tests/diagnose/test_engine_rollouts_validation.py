@@ -18,9 +18,9 @@ from dynax import (
     InputLag,
     InputOffset,
     LinearAxis,
-    progress_mode,
     Trajectory,
 )
+from dynax.internal import progress_mode
 from dynax.internal import (
     complete_state,
     Family,

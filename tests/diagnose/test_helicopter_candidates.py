@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 
 from dynax import (
-    AbstractVehicleTerm,
     Acrobot,
     BodyBias,
     BodyQuadraticDrag,
@@ -23,11 +22,11 @@ from dynax import (
     diagnose,
     Extended,
     Helicopter,
-    hover_state,
     Known,
     Refit,
     Wind,
 )
+from dynax.internal import AbstractVehicleTerm, hover_state
 from dynax.internal import TEMPEST_COEFFICIENTS
 from dynax.synthetic import FlightController, helicopter_flight
 

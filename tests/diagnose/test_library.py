@@ -2,7 +2,8 @@
 
 import numpy as np
 
-from dynax import Acrobot, Discovered, Feature, LinearAxis
+from dynax import Acrobot, LinearAxis
+from dynax.internal import Discovered, Feature
 from dynax.internal import feature_library, named_equivalent, physical_readings, search_period
 
 

@@ -5,7 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from dynax import Acrobot, diagnose, InputOffset, save_trajectory, write_report
+from dynax import Acrobot, diagnose, InputOffset, save_trajectory
+from dynax.internal import write_report
 from dynax.internal import cli_main, write_json
 from dynax.synthetic import demo_data
 

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from dynax import sparse_search
+from dynax.internal import sparse_search
 from dynax.internal import stlsq
 
 

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax import Structure, Verdict
+from dynax import Verdict
+from dynax.internal import Structure
 from dynax.internal import decide_verdict as decide, MIN_PRACTICAL_GAIN, PairedTest, power_of, PRACTICAL_R2
 from tests.hidden_cases import Case, diagnose_case, outcome, records
 

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import dynax
+import dynax.internal
 from dynax import Dynamic, identify, Trajectory
 from dynax.internal import record_angle_zeros
 from tests.identify.test_identify_defaults import dfki, recorded, rig_model
@@ -73,8 +74,8 @@ def test_held_out_tails_are_read_less_their_records_zeros(records):
     shifted = [with_zero(r, z) for r, z in zip(records, big)]
     result = identify(dynax.DoublePendulum(), shifted, Dynamic(), friction="coulomb", refine=False)
     assert result.angle_zeros.chosen and "angle zeros" in result.validation.source, result.validation.source
-    true_tails = dynax.split_for_validation(records, 0.2, max(result.validation.horizons_s))[1]
-    recorded_tails = dynax.split_for_validation(shifted, 0.2, max(result.validation.horizons_s))[1]
+    true_tails = dynax.internal.split_for_validation(records, 0.2, max(result.validation.horizons_s))[1]
+    recorded_tails = dynax.internal.split_for_validation(shifted, 0.2, max(result.validation.horizons_s))[1]
     model = np.asarray(dynax.held_out_error(result.system, true_tails, result.validation.horizons_s).rmse)
     as_recorded = np.asarray(dynax.held_out_error(result.system, recorded_tails, result.validation.horizons_s).rmse)
     np.testing.assert_allclose(np.asarray(result.validation.rmse), model, rtol=0.1)

@@ -12,16 +12,9 @@ import scipy.integrate
 import scipy.optimize
 
 import dynax
-from dynax import (
-    check_consistency,
-    choose_filter,
-    consistent_least_squares,
-    Dynamic,
-    identify,
-    InconsistentEstimateWarning,
-    PoorlyDeterminedWarning,
-    Trajectory,
-)
+import dynax.internal
+from dynax import Dynamic, identify, InconsistentEstimateWarning, PoorlyDeterminedWarning, Trajectory
+from dynax.internal import check_consistency, choose_filter, consistent_least_squares
 from dynax.internal import consistency_conditions, parameter_names, POORLY_DETERMINED
 from tests.reference import arm_reference
 
@@ -142,7 +135,7 @@ def test_the_band_edge_moves_smoothly_with_the_noise_floor_instead_of_jumping_a_
     motion = 30.0 * scipy.signal.lfilter(b, a, rng.normal(size=n + 4000))[4000:]
     noise = rng.normal(size=n)
     sigmas = 0.02 * 1.03 ** np.arange(41)  # density x 1.06 per step
-    bands = np.array([dynax.noise_floor_and_band(motion + s * noise, 1 / dt)[1] for s in sigmas])
+    bands = np.array([dynax.internal.noise_floor_and_band(motion + s * noise, 1 / dt)[1] for s in sigmas])
     assert 2.0 < bands[-1] < bands[0] < 0.25 / dt, bands
     assert np.max(np.abs(np.diff(bands))) < 0.2 * width, (np.diff(bands), width)
     # the fall over the sweep is what a (1.03^2)^40-fold floor implies at 80 dB per decade, within 25 %
@@ -173,7 +166,7 @@ def test_an_inconsistent_estimate_warns_and_the_constrained_fit_matches_a_bounde
     # computed independently by scipy's bounded solver.
     fit = plain.fit
     names = plain.names
-    a = np.asarray(dynax.dynamic_regressor(dynax.DoublePendulum(), data.xs, dynax.central_difference(data.ts, data.xs[:, 2:])))
+    a = np.asarray(dynax.internal.dynamic_regressor(dynax.DoublePendulum(), data.xs, dynax.central_difference(data.ts, data.xs[:, 2:])))
     a = np.concatenate([a[1:-1, 0], a[1:-1, 1]])
     held = np.asarray(data.us)
     h = 0.5 * (held[:-2] + held[1:-1])  # the held inputs' mean a central difference sees (uniform grid)
@@ -427,7 +420,7 @@ OTHER_SIZES = {
 @pytest.mark.heavy
 @pytest.mark.parametrize("size", sorted(OTHER_SIZES))
 def test_noisy_arms_of_other_sizes_give_consistent_estimates(size):
-    from dynax import base_parameters_from_physical
+    from dynax.internal import base_parameters_from_physical
 
     physical, fc, ir2, duration = OTHER_SIZES[size]
     base = {k: float(v) for k, v in base_parameters_from_physical(**physical).items()}

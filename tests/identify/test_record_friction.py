@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax import Dynamic, identify, record_friction
+from dynax import Dynamic, identify
+from dynax.internal import record_friction
 from tests.identify.test_identify_defaults import recorded, RIG, RIG_FC, RIG_IR2
 
 SEEDS = (20, 21, 22, 23)

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax import Dynamic, identify, record_offsets, Trajectory
+from dynax import Dynamic, identify, Trajectory
+from dynax.internal import record_offsets
 from tests.identify.test_identify_defaults import dfki, recorded, rig_model
 
 SEEDS = (20, 21, 22, 23)

@@ -8,7 +8,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax import AbstractJointTerm, Acrobot, Discovered, Extended, Feature, JointSpring, LinearAxis, QuadraticDrag
+from dynax import AbstractJointTerm, Acrobot, Extended, JointSpring, LinearAxis, QuadraticDrag
+from dynax.internal import Discovered, Feature
 
 
 class _Cogging(AbstractJointTerm):

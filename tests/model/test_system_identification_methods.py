@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import dynax
+import dynax.internal
 from dynax.internal import min_mass_eigenvalue
 
 THETA = dict(theta1=1.1, theta2=0.7, theta3=0.4, theta4=9.0, theta5=4.5, theta6=0.05, theta7=0.08)
@@ -39,7 +40,7 @@ def test_two_link_methods_are_spongs_base_parameter_model():
     terms = acrobot.coulomb_friction_terms()
     assert [(type(t), t.joint, float(t.coefficient)) for t in terms] == [(dynax.CoulombFriction, 0, 0.0),
                                                                            (dynax.CoulombFriction, 1, 0.0)]
-    assert dynax.parameter_names(acrobot, "coulomb")[-2:] == ("fc1", "fc2")
+    assert dynax.internal.parameter_names(acrobot, "coulomb")[-2:] == ("fc1", "fc2")
 
 
 def test_two_link_consistency_conditions_name_the_broken_base_parameter():
@@ -48,7 +49,7 @@ def test_two_link_consistency_conditions_name_the_broken_base_parameter():
     names = tuple(THETA)
 
     def broken(**change):
-        return dynax.consistency_conditions(arm, names, np.array([{**THETA, **change}[n] for n in names]))
+        return dynax.internal.consistency_conditions(arm, names, np.array([{**THETA, **change}[n] for n in names]))
 
     assert broken() == ()
     (theta2,) = broken(theta2=-0.1)
@@ -88,10 +89,10 @@ def test_linear_axis_methods_are_the_emps_model_with_the_exact_sign():
     assert {n: float(v) for n, v in fitted.parameters.items()} == {**estimate, "coulomb": 0.0}
     assert float(axis.with_base_parameters({"coulomb": jnp.asarray(5.0)}).coulomb) == 5.0
     names = ("mass", "viscous", "coulomb", "offset")
-    assert dynax.consistency_conditions(axis, names, np.array([-1.0, 200.0, -2.0, -50.0])) == (
+    assert dynax.internal.consistency_conditions(axis, names, np.array([-1.0, 200.0, -2.0, -50.0])) == (
         "inertia: mass = -1 must be positive", "friction: coulomb = -2 must be non-negative")
     with pytest.raises(dynax.UsageError, match="no joint terms on a LinearAxis"):
-        dynax.parameter_names(dynax.Extended(axis, (dynax.CoulombFriction(0, jnp.asarray(1.0)),)))
+        dynax.internal.parameter_names(dynax.Extended(axis, (dynax.CoulombFriction(0, jnp.asarray(1.0)),)))
 
 
 class Drifter(dynax.AbstractSystem):
@@ -107,13 +108,13 @@ class Drifter(dynax.AbstractSystem):
 
 def test_a_system_without_a_linear_model_is_refused_by_name():
     with pytest.raises(dynax.UsageError, match="got Drifter; use SimulationFit"):
-        dynax.parameter_names(Drifter())
+        dynax.internal.parameter_names(Drifter())
     for method in ("base_parameter_names", "energy_parameter_names", "coulomb_friction_terms"):
         with pytest.raises(NotImplementedError, match=f"Drifter.{method}: Drifter declares no model linear"):
             getattr(Drifter(), method)()
     # no conditions: nothing is bounded, even a name that would be a friction coefficient on an arm
     assert Drifter().base_parameter_kinds() == {}
-    assert dynax.consistency_conditions(Drifter(), ("b1",), np.array([-1.0])) == ()
+    assert dynax.internal.consistency_conditions(Drifter(), ("b1",), np.array([-1.0])) == ()
 
 
 class Oscillator(dynax.AbstractManipulator):
@@ -163,16 +164,16 @@ def test_a_new_system_is_identified_through_its_methods_alone():
     xs = jnp.asarray(rng.normal(size=(20, 2)))
     ddq = jnp.asarray(rng.normal(size=(20, 1)))
     q, dq = np.asarray(xs[:, 0]), np.asarray(xs[:, 1])
-    assert dynax.parameter_names(osc) == ("mass", "damping", "stiffness")
-    assert dynax.parameter_names(osc, "coulomb") == ("mass", "damping", "stiffness", "fc")
-    y = dynax.dynamic_regressor(osc, xs, ddq)
+    assert dynax.internal.parameter_names(osc) == ("mass", "damping", "stiffness")
+    assert dynax.internal.parameter_names(osc, "coulomb") == ("mass", "damping", "stiffness", "fc")
+    y = dynax.internal.dynamic_regressor(osc, xs, ddq)
     np.testing.assert_allclose(y[:, 0, :], np.stack([ddq[:, 0], dq, q], axis=1), rtol=1e-14)
-    w = dynax.energy_regressor(osc, xs)
+    w = dynax.internal.energy_regressor(osc, xs)
     np.testing.assert_allclose(w, np.stack([0.5 * dq**2, 0 * q, 0.5 * q**2], axis=1), rtol=1e-14)
-    f = dynax.friction_power_regressor(osc, xs)
+    f = dynax.internal.friction_power_regressor(osc, xs)
     np.testing.assert_allclose(f, np.stack([0 * q, dq**2, 0 * q], axis=1), rtol=1e-14, atol=1e-14)
-    names = dynax.parameter_names(osc, "coulomb")
-    assert dynax.consistency_conditions(osc, names, np.array([-1.0, 0.3, -5.0, -0.1])) == (
+    names = dynax.internal.parameter_names(osc, "coulomb")
+    assert dynax.internal.consistency_conditions(osc, names, np.array([-1.0, 0.3, -5.0, -0.1])) == (
         "inertia: mass must be positive", "friction: fc = -0.1 must be non-negative")
 
 

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import dynax
+import dynax.internal
 from dynax import (
     AbstractManipulator,
     Acrobot,
@@ -18,9 +19,9 @@ from dynax import (
     InputGain,
     LinearAxis,
     RotorInertia,
-    SpongController,
     Wind,
 )
+from dynax.control import SpongController
 
 
 class _Slider(AbstractManipulator):
@@ -78,7 +79,7 @@ def test_joint_terms_compose_with_any_manipulator():
 def test_vehicle_terms_act_on_the_helicopter():
     extended = Extended(Helicopter(), (Wind(1, 2.0), BodyBias(4, 0.3)))
     assert extended.labels == ("wind@world", "body_bias@q")
-    x = dynax.hover_state(dtype=jnp.float64)
+    x = dynax.internal.hover_state(dtype=jnp.float64)
     u = jnp.array([0.0, 0.0, 0.0, 0.2])
     nominal = Helicopter().vector_field(0.0, x, u)
     dx = extended.vector_field(0.0, x, u)

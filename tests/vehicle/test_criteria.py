@@ -5,16 +5,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax import (
-    AccelerationModel,
-    Backprop,
-    fit_vehicle,
-    frequency_responses,
-    FrequencyDomain,
-    Helicopter,
-    Lagged,
-    LinearVelocityModel,
-)
+from dynax import AccelerationModel, Backprop, fit_vehicle, FrequencyDomain, Helicopter, Lagged, LinearVelocityModel
+from dynax.internal import frequency_responses
 from dynax.internal import (
     fit_backprop,
     fit_frequency,

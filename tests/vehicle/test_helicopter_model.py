@@ -5,7 +5,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax import AccelerationModel, Helicopter, hover_state, LinearVelocityModel
+from dynax import AccelerationModel, Helicopter, LinearVelocityModel
+from dynax.internal import hover_state
 from dynax.internal import (
     euler_from_quaternion,
     quaternion_angle,

@@ -57,7 +57,7 @@ def fit_vehicle(
     - `callback`: `callback(iteration, loss)` after each iteration of the iterative criteria.
     - `progress`: for `Lagged` and `Backprop`, a bar per iteration with the loss on stderr (an
       ETA against the iteration limit; a fit that converges early finishes early); `None` draws it
-      when stderr is a terminal (see `dynax.progress_mode`).
+      when stderr is a terminal (see `dynax.internal.progress_mode`).
     - `breaks`: for a record joined from several (flights, or the runs of a flight between its
       ground segments and glitches), the sample indices where each new one begins: no window
       of the criteria crosses one (not for `FrequencyDomain`).
