@@ -221,6 +221,7 @@ from ._identify import (
     RefinementStatistics as RefinementStatistics,
     split_for_validation as split_for_validation,
 )
+from ._identify._refine import delta_method_covariance as delta_method_covariance
 from ._identify._vehicle import frequency_responses as frequency_responses
 from ._metrics import (
     CrossCorrelationTest as CrossCorrelationTest,
@@ -241,6 +242,7 @@ from ._diagnose import (
 
 # Aliased re-exports (`x as y`) count as exports only through `__all__`, so it lists every name.
 __all__ = [
+    "delta_method_covariance",
     "AbstractInputTerm",
     "AbstractVehicleTerm",
     "check_consistency",

@@ -367,10 +367,9 @@ def refine_by_simulation(
         latency = 0.5 * record_dt - alpha * dt
     spread = result.statistics.record_covariance
     spread = None if diverged or spread is None else np.asarray(spread)[:n_phi, :n_phi]
-    with np.errstate(invalid="ignore"):  # an unidentified direction has an infinite standard error
-        covariance = jac @ phi_cov @ jac.T
-        std = np.sqrt(np.maximum(np.diag(covariance), 0.0))  # NaN stays NaN
-        record_std = None if spread is None else np.sqrt(np.maximum(np.diag(jac @ spread @ jac.T), 0.0))
+    covariance = delta_method_covariance(jac, phi_cov)
+    std = np.sqrt(np.maximum(np.diag(covariance), 0.0))  # NaN stays NaN
+    record_std = None if spread is None else np.sqrt(np.maximum(np.diag(delta_method_covariance(jac, spread)), 0.0))
     # A kept start: its own residual, no relative error or record scales of a fit.
     rms, relative = (initial_rms, float("nan")) if diverged else (float(result.statistics.residual_rms),
                                                            float(result.statistics.relative_error))
@@ -387,6 +386,19 @@ def refine_by_simulation(
         std_errors=jnp.asarray(std), result=optx.RESULTS.nonlinear_divergence if diverged else optx.RESULTS.successful,
         loss=result.initial_loss if diverged else result.loss, initial_loss=result.initial_loss,
         steps=jnp.asarray(steps), n_residuals=result.n_residuals, statistics=statistics)
+
+
+def delta_method_covariance(jac: np.ndarray, covariance: np.ndarray) -> np.ndarray:
+    r"""$J C J^\top$, the covariance of $\theta(\varphi)$ from that of $\varphi$ (the delta method), where an
+    unknown the data do not determine has NaN in its row and column of $C$: the parameters that depend on it
+    (a non-zero column of $J$) get NaN rows and columns, and the others their finite covariance. A plain
+    product would give every parameter NaN, since $0 \cdot \mathrm{NaN}$ is NaN."""
+    undetermined = ~np.isfinite(np.diag(covariance))
+    out = jac @ np.where(np.isfinite(covariance), covariance, 0.0) @ jac.T
+    depends = np.any(jac[:, undetermined] != 0, axis=1)
+    out[depends, :] = np.nan
+    out[:, depends] = np.nan
+    return out
 
 
 def _ended_worse(result) -> bool:
