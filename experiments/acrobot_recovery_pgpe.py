@@ -5,7 +5,7 @@
 The reference of the saved controller stays; PGPE (`dynax.control.PGPE`, the population `vmap`ped)
 tunes the feedback around it: the balancing LQR's weights, the cost-to-go threshold below which it
 acts, Spong's energy-shaping recovery gains and the time-varying LQR's weights (12 numbers, searched
-in logarithms). Each candidate is scored on a batch of training episodes drawn afresh every
+in logarithms), starting from `SwingUpDesign()`'s defaults. Each candidate is scored on a batch of training episodes drawn afresh every
 generation from the six families of the rules (a model parameter off by up to 25 %, velocity and
 torque noise, a slow motor, a measurement delay, and random torque pulses drawn with another seed
 than the benchmark's), by a smooth success: $\\exp(-\\|e / tol\\|^2)$ of the final error. The mean of
@@ -69,6 +69,7 @@ def main(argv=None):
     parser.add_argument("--population", type=int, default=16)
     parser.add_argument("--episodes", type=int, default=24, help="training episodes per generation")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--sigma", type=float, default=0.3, help="initial exploration width (in logarithms)")
     parser.add_argument("--out", default=str(OUT))
     args = parser.parse_args(argv)
     out = pathlib.Path(args.out)
@@ -101,7 +102,7 @@ def main(argv=None):
         err = jnp.where(jnp.isfinite(err), err, 10.0)
         return jnp.mean(jnp.exp(-jnp.sum(err**2, axis=1)))
 
-    pgpe = control.PGPE(args.population, init_sigma=0.3, optimizer=__import__("optax").adam(0.1))
+    pgpe = control.PGPE(args.population, init_sigma=args.sigma, optimizer=__import__("optax").adam(0.1))
 
     @eqx.filter_jit
     def generation(state, key):
@@ -127,6 +128,7 @@ def main(argv=None):
     theta = pgpe.mean_params(state)
     tuned = unpack(theta, base, plant, rules.dt)
     results = {"tuning_s": tuning_s, "history": history, "settings": vars(args),
+               "initial": np.exp(np.asarray(theta0)).tolist(),
                "theta": dict(zip(["q1", "q2", "dq1", "dq2", "r", "threshold", "k_e", "k_p", "k_d", "q_track",
                                   "dq_track", "r_track"], np.exp(np.asarray(theta)).tolist()))}
     for name, c in (("before", base), ("after", tuned)):
