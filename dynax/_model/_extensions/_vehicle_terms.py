@@ -139,6 +139,40 @@ class BodyBias(AbstractVehicleTerm):
         return jnp.zeros_like(air).at[self.axis].set(self.coefficient)
 
 
+class RotorDrag(AbstractVehicleTerm):
+    r"""Rotor drag: a body-frame force linear in the velocity on one translational axis, $-d\,\nu_i$.
+
+    A spinning rotor moving edgewise through the air tilts its thrust back (blade flapping) and
+    its advancing blade meets more air than the retreating one: the net in-plane force opposes
+    the body velocity and is, to first order, proportional to it (the "rotor drag" of multirotor
+    models, a diagonal $-D\nu$). $\nu_i$ is the air-relative velocity on the axis; $d$ is per unit
+    mass [1/s]. On a helicopter it adds to a learned velocity derivative (`Xu`, `Yv`, `Zw`); on a
+    quadrotor's rigid-body model, which has none, it is the drag the rigid body lacks.
+
+    **Arguments:** `axis` (0 `u`, 1 `v`, 2 `w`), `d` [1/s].
+
+    ??? cite
+
+        R. Mahony, V. Kumar and P. Corke, "Multirotor aerial vehicles: modeling, estimation, and
+        control of quadrotor", IEEE Robotics & Automation Magazine 19(3), 2012 (rotor drag).
+    """
+
+    axis: int = eqx.field(static=True)
+    coefficient: Float[Array, ""]
+    n_axes: ClassVar[int] = 3
+    cause: ClassVar[str] = "rotor_drag"
+    prefix: ClassVar[str] = "drag"
+    neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 1
+
+    def __init__(self, axis: int, d: ArrayLike = 0.0):
+        self.axis = axis
+        self.coefficient = _scalar(d)
+
+    def acceleration(self, quat, air, u):
+        return jnp.zeros_like(air).at[self.axis].set(-self.coefficient * air[self.axis])
+
+
 class Wind(AbstractVehicleTerm):
     r"""One world-frame component of a steady wind: the air moves at $w$ in the world (NED) frame.
 
