@@ -127,6 +127,11 @@ def diagnose_quadrotor(system: Quadrotor, train, validation=None, *, diagnose, m
     from ._problem import Known, Refit
 
     refit = isinstance(mode, Refit)
+    if validation is None:  # the held-out tail of each flight stays out of the one-step fit too
+        from ._records import holdout_split
+
+        halves = [holdout_split(f, options.get("holdout_fraction", 0.3)) for f in _as_list(train, "train")]
+        train, validation = [a for a, _ in halves], [b for _, b in halves]
     body, train_b, val_b, _ = prepare_quadrotor(system, train, validation, refit=refit)
     if options.get("candidates") is None:
         options["candidates"] = quadrotor_candidates(body)
