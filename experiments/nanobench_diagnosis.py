@@ -55,6 +55,9 @@ def main():
                         help="diagnose on this many seconds from the middle of each run (default 10; 0: whole runs); "
                              "the per-group scores are on the whole held-out runs")
     parser.add_argument("--no-discovery", action="store_true", help="no search beyond the vocabulary")
+    parser.add_argument("--reference-horizon", type=float, default=0.5,
+                        help="judge the gain at this horizon [s] (default 0.5, h = 50: where flight models are scored; "
+                             "0: the predictability horizon)")
     args = parser.parse_args()
     out = pathlib.Path(args.out)
     (out / "report").mkdir(parents=True, exist_ok=True)
@@ -73,7 +76,8 @@ def main():
     print(f"diagnosing on {sum(len(r) for r in diag_train)} training and {sum(len(r) for r in diag_test)} held-out "
           "samples", flush=True)
     report = dynax.diagnose(quad, diag_train, diag_test, max_terms=args.max_terms, cross_fit=args.cross_fit,
-                            discovery=not args.no_discovery, progress=say)
+                            discovery=not args.no_discovery, progress=say,
+                            reference_horizon_s=args.reference_horizon or None)
     j = report.to_json()
     from dynax._diagnose._quadrotor import body_frame_records, quadrotor_flight_errors
 

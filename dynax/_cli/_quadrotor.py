@@ -175,6 +175,9 @@ def run_diagnose(args) -> int:
                          "median interval")
     if args.velocities != "auto":
         raise UsageError("--velocities applies to joint records; a quadrotor's velocities are used as logged")
+    if getattr(args, "exclude", None):
+        raise UsageError("--exclude does not apply to quadrotor flights: dynax.load_flight finds their glitches and "
+                         "ground segments and leaves them out")
     if args.reference_horizon is not None and not args.reference_horizon > 0:
         raise UsageError(f"--reference-horizon must be positive, got {args.reference_horizon}")
     if args.max_terms < 1:

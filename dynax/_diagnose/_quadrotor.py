@@ -10,7 +10,8 @@ is the one every other system gets.
 
 The vocabulary for a multirotor (`quadrotor_candidates`):
 
-- `rotor_drag` on `u, v, w` (`RotorDrag`): body-frame drag linear in velocity, $-d\,\nu_i$;
+- `rotor_drag` on `u` ... `r` (`RotorDrag`): body-frame drag linear in velocity, $-d\,\nu_i$, and on
+  `p, q, r` the rotors' damping of the body rates, $-d\,\omega_i$;
 - `body_bias` on `u, v, w, p, q, r` (`BodyBias`): a constant body-frame force or moment (the
   centre of mass off the thrust centre, an IMU or motion-capture frame offset, a bent arm);
 - `input_lag` per motor (`InputLag` at `m1..m4`): the motor's first-order lag behind its command;
@@ -73,9 +74,9 @@ def as_quadrotor(body: BodyFrameQuadrotor, like: Quadrotor) -> Quadrotor:
 
 
 def quadrotor_candidates(system) -> tuple:
-    """The multirotor vocabulary at neutral values (see the module docs): `rotor_drag` on `u, v, w`,
+    """The multirotor vocabulary at neutral values (see the module docs): `rotor_drag` on `u` ... `r`,
     `body_bias` on `u, v, w, p, q, r`, `input_lag` and `input_gain` at each motor `m1..m4`."""
-    terms = [RotorDrag(i) for i in range(3)]
+    terms = [RotorDrag(i) for i in range(6)]
     terms += [BodyBias(i) for i in range(6)]
     terms += [InputLag(i) for i in range(len(MOTORS))]
     terms += [InputGain(i) for i in range(len(MOTORS))]

@@ -50,8 +50,11 @@ def test_rotor_drag_is_linear_body_frame_drag_on_its_axis():
     model = Extended(heli, (RotorDrag(0, 0.3), RotorDrag(1, 0.2), BodyBias(3, 0.1)))
     assert model.labels == ("rotor_drag@u", "rotor_drag@v", "body_bias@p")
     assert set(model.parameters) == {"drag_u", "drag_v", "bias_p"}
+    for axis, rate in zip((3, 4, 5), (0.1, 0.2, -0.3)):  # on the rates: the rotors' damping of rotation
+        diff = (Extended(heli, (RotorDrag(axis, 2.0),)).vector_field(0.0, x, u) - heli.vector_field(0.0, x, u))[7:]
+        np.testing.assert_allclose(diff, -2.0 * rate * np.eye(6)[axis], atol=1e-12)
     with pytest.raises(ValueError, match="axis"):
-        RotorDrag(3)
+        RotorDrag(6)
 
 
 def test_synthetic_flight_is_bounded_and_the_drag_changes_it():
