@@ -55,6 +55,7 @@ def main():
                         help="diagnose on this many seconds from the middle of each run (default 10; 0: whole runs); "
                              "the per-group scores are on the whole held-out runs")
     parser.add_argument("--no-discovery", action="store_true", help="no search beyond the vocabulary")
+    parser.add_argument("--shortlist", type=int, default=8, help="candidates refitted by simulation error per round")
     parser.add_argument("--reference-horizon", type=float, default=0.5,
                         help="judge the gain at this horizon [s] (default 0.5, h = 50: where flight models are scored; "
                              "0: the predictability horizon)")
@@ -77,7 +78,7 @@ def main():
           "samples", flush=True)
     report = dynax.diagnose(quad, diag_train, diag_test, max_terms=args.max_terms, cross_fit=args.cross_fit,
                             discovery=not args.no_discovery, progress=say,
-                            reference_horizon_s=args.reference_horizon or None)
+                            reference_horizon_s=args.reference_horizon or None, shortlist=args.shortlist)
     j = report.to_json()
     from dynax._diagnose._quadrotor import body_frame_records, quadrotor_flight_errors
 
