@@ -16,9 +16,9 @@ The vocabulary for a multirotor (`quadrotor_candidates`):
   centre of mass off the thrust centre, an IMU or motion-capture frame offset, a bent arm);
 - `input_lag` per motor (`InputLag` at `m1..m4`): the motor's first-order lag behind its command;
 - `input_gain` per motor (`InputGain` at `m1..m4`): one motor's thrust per command off the others'.
-  The rigid body's learned map $m_i^2, m_i \mapsto$ force and moments carries any per-motor scale,
-  so with the nominal weights refitted a gain is not identifiable (the report says so); with them
-  known (`Known`) it is.
+  Tested against the held motor map; where the motor weights are refitted with it
+  (`Refit(parameters=...)` naming them) the learned map carries any per-motor scale and the report
+  lists it as not identifiable.
 
 Without a starting fit (a `Quadrotor` of zero weights from `initial_quadrotor`), the nominal
 weights start from the one-step least-squares fit on the training flights (`fit_quadrotor`).

@@ -73,7 +73,6 @@ def test_hidden_rotor_drag_is_named():
     j = _diagnose(1, drag=(0.4, 0.4, 0.1))
     first = _assert_named_first(j, "rotor_drag", ("u", "v"))
     assert first["coefficient"] == pytest.approx(0.4, rel=0.2)
-    assert any(f["cause"] == "input_gain" for f in j["not_identifiable"])  # the learned motor map carries any gain
     json.dumps(j)
 
 
