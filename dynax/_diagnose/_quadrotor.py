@@ -20,8 +20,9 @@ The vocabulary for a multirotor (`quadrotor_candidates`):
   (`Refit(parameters=...)` naming them) the learned map carries any per-motor scale and the report
   lists it as not identifiable.
 
-Without a starting fit (a `Quadrotor` of zero weights from `initial_quadrotor`), the nominal
-weights start from the one-step least-squares fit on the training flights (`fit_quadrotor`).
+In `Refit()` mode (the default) the rigid body's weights are the one-step least-squares fit of the
+given model's structure on the training flights (`fit_quadrotor`; `initial_quadrotor("nominal")`
+needs no starting values); `Known()` trusts the given weights (see `diagnose_quadrotor`).
 """
 
 import dataclasses
