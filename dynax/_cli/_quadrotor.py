@@ -158,6 +158,7 @@ def run_diagnose(args) -> int:
     and glitches left out, noted), the diagnosis of the rigid body (`--nominal MODEL.json`: a fitted quadrotor
     model, trusted with `--mode known`), the report and the per-group scores beside constant velocity."""
     import json
+    import pathlib
     import sys
     import warnings
 
@@ -193,7 +194,7 @@ def run_diagnose(args) -> int:
         validation, _ = load_flights(args.validation, mapping, scale, offset, min_samples=min_samples)
     if args.nominal is not None:
         try:
-            obj = json.loads(open(args.nominal).read())
+            obj = json.loads(pathlib.Path(args.nominal).read_text())
         except (OSError, ValueError) as e:
             raise DataError(f"cannot read the model file ({e})", path=args.nominal) from None
         system = quadrotor_from_json(obj, path=args.nominal)

@@ -72,7 +72,7 @@ def _controller(t, s, c):
 
 
 def _field(t, s, command, effects):
-    p, q, v, om = s[:3], s[3:7], s[7:10], s[10:13]
+    q, v, om = s[3:7], s[7:10], s[10:13]
     rotor = s[13:17]
     R = rotation(q)
     thrusts = KF * rotor**2
