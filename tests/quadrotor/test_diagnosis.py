@@ -105,13 +105,27 @@ def test_effect_free_flights_claim_nothing():
     assert j["verdict"] in ("none", "unexplained")  # no named cause; what the residual probe says is its own
 
 
+def _on_the_pad_first(flight, seconds=0.5):
+    """The flight's log with `seconds` on the floor before it (motors off, level, at rest), as a real log
+    starts: the loader takes the floor's height from there (without it, the flight's lowest point)."""
+    from dynax import Trajectory
+
+    n, dt = int(round(seconds / flight.dt)), flight.dt
+    xs, us = np.asarray(flight.xs), np.asarray(flight.us)
+    pad = np.zeros((n, xs.shape[1]))
+    pad[:, :2], pad[:, 3] = xs[0, :2], 1.0
+    return Trajectory(np.arange(n + len(xs)) * dt, np.concatenate([pad, xs]),
+                      np.concatenate([np.zeros((n, us.shape[1])), us]), flight.state_names, flight.input_names,
+                      "quadrotor", flight.source)
+
+
 @pytest.mark.slow
 def test_cli_diagnose_quadrotor_names_rotor_drag(tmp_path, capsys):
     from dynax import save_trajectory
     from dynax.internal import cli_main
 
-    save_trajectory(quadrotor_flight(15.0, seed=5, drag=(0.4, 0.4, 0.1)), tmp_path / "train.csv")
-    save_trajectory(quadrotor_flight(15.0, seed=105, drag=(0.4, 0.4, 0.1)), tmp_path / "val.csv")
+    save_trajectory(_on_the_pad_first(quadrotor_flight(15.0, seed=1, drag=(0.4, 0.4, 0.1))), tmp_path / "train.csv")
+    save_trajectory(_on_the_pad_first(quadrotor_flight(15.0, seed=101, drag=(0.4, 0.4, 0.1))), tmp_path / "val.csv")
     out = tmp_path / "report"
     code = cli_main(["diagnose", "quadrotor", str(tmp_path / "train.csv"), "--validation", str(tmp_path / "val.csv"),
                      "--max-terms", "1", "--no-discovery", "--out", str(out)])
