@@ -40,6 +40,7 @@ from ._model._extensions import (
     InputOffset as InputOffset,
     JointSpring as JointSpring,
     QuadraticDrag as QuadraticDrag,
+    RotorDrag as RotorDrag,
     RotorInertia as RotorInertia,
     ViscousFriction as ViscousFriction,
     Wind as Wind,

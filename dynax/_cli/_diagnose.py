@@ -11,7 +11,7 @@ from ._common import add_data_options, add_exclude_option, data_options, load_re
 from ._nominal import check_nominal, nominal_from_data, nominal_system, split_term_coefficients
 from ._output import staged_directory, write_json
 
-_SYSTEMS = ("acrobot", "double_pendulum", "linear_axis", "helicopter")
+_SYSTEMS = ("acrobot", "double_pendulum", "linear_axis", "helicopter", "quadrotor")
 
 
 def register(subparsers):
@@ -67,6 +67,10 @@ def run(args: argparse.Namespace) -> int:
     from .._diagnose import diagnose, Known, Refit, write_report
     from .._diagnose._records import holdout_split
 
+    if args.system == "quadrotor":  # flight logs: ground segments, glitches, the body frame (`_quadrotor.py`)
+        from ._quadrotor import run_diagnose
+
+        return run_diagnose(args)
     data_options(args)  # a malformed --map, --scale or --offset is refused before any work
     if args.dt is not None and not args.dt > 0:
         raise UsageError(f"--dt must be positive, got {args.dt}")
@@ -159,7 +163,7 @@ def summary(report) -> str:
     ref = j["reference_horizon_s"]
     h = j["nominal"]["sim_error"]["horizons_s"]
     i = h.index(ref) if ref in h else len(h) - 1
-    unit = "m" if j["system"] in ("linear_axis", "helicopter") else "rad"
+    unit = "m" if j["system"] in ("linear_axis", "helicopter", "quadrotor") else "rad"
     lines = [
         "What the simulation gets wrong: held-out position RMSE of the nominal model "
         + ", ".join(f"{r:.3g} {unit} at {t:g} s" for t, r in zip(h, j["nominal"]["sim_error"]["rmse"]) if r is not None) + ".",

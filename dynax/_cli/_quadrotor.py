@@ -151,3 +151,76 @@ def run_evaluate(args, system) -> int:
                 print(f"  {m} {name[:8]:>8s} {g:>10s}  {row}   {float(table.cumulative_mae[i]):.4f}")
     print(f"wrote {out} in {time.perf_counter() - start:.1f} s")
     return 0
+
+
+def run_diagnose(args) -> int:
+    """The quadrotor branch of `dynax diagnose`: flights loaded as by `dynax fit quadrotor` (ground segments
+    and glitches left out, noted), the diagnosis of the rigid body (`--nominal MODEL.json`: a fitted quadrotor
+    model, trusted with `--mode known`), the report and the per-group scores beside constant velocity."""
+    import json
+    import pathlib
+    import sys
+    import warnings
+
+    from .._data import DataWarning
+    from .._diagnose import diagnose, Known, Refit, write_report
+    from .._diagnose._quadrotor import body_frame_records, QUADROTOR_HORIZONS_S, quadrotor_flight_errors
+    from .._diagnose._records import holdout_split
+    from .._identify._vehicle._quadrotor import quadrotor_from_json
+    from .._model._quadrotor import initial_quadrotor
+    from ._diagnose import stage_log, summary
+    from ._output import staged_directory
+
+    if args.dt is not None:
+        raise UsageError("--dt does not apply to quadrotor flights: dynax.load_flight resamples each log to its "
+                         "median interval")
+    if args.velocities != "auto":
+        raise UsageError("--velocities applies to joint records; a quadrotor's velocities are used as logged")
+    if getattr(args, "exclude", None):
+        raise UsageError("--exclude does not apply to quadrotor flights: dynax.load_flight finds their glitches and "
+                         "ground segments and leaves them out")
+    if args.reference_horizon is not None and not args.reference_horizon > 0:
+        raise UsageError(f"--reference-horizon must be positive, got {args.reference_horizon}")
+    if args.max_terms < 1:
+        raise UsageError(f"--max-terms must be at least 1, got {args.max_terms}")
+    if args.mode == "known" and args.nominal is None:
+        raise UsageError("--mode known trusts a fitted model: give it with --nominal MODEL.json (dynax fit quadrotor "
+                         "--model nominal)")
+    mapping, scale, offset = data_options(args)
+    min_samples = round(max(QUADROTOR_HORIZONS_S) * 100) + 2
+    train, _ = load_flights(args.data, mapping, scale, offset, min_samples=min_samples)
+    validation = None
+    if args.validation is not None:
+        validation, _ = load_flights(args.validation, mapping, scale, offset, min_samples=min_samples)
+    if args.nominal is not None:
+        try:
+            obj = json.loads(pathlib.Path(args.nominal).read_text())
+        except (OSError, ValueError) as e:
+            raise DataError(f"cannot read the model file ({e})", path=args.nominal) from None
+        system = quadrotor_from_json(obj, path=args.nominal)
+    else:
+        system = initial_quadrotor("nominal", train)
+    if args.mode == "known":
+        mode = Known()
+    else:
+        names = tuple(n.strip() for n in args.refit.split(",") if n.strip()) if args.refit else None
+        mode = Refit(parameters=names)
+    with stage_log() as say, warnings.catch_warnings():  # the flights' faults were noted by load_flights
+        warnings.simplefilter("ignore", DataWarning)
+        report = diagnose(system, train, validation, mode=mode, reference_horizon_s=args.reference_horizon,
+                          max_terms=args.max_terms, system_name="quadrotor", discovery=not args.no_discovery,
+                          cross_fit=not args.no_cross_fit, progress=say)
+        held_out = validation if validation is not None else [holdout_split(t)[1] for t in train]
+        errors = quadrotor_flight_errors(report, system, held_out, (1, 10, 50))
+    with staged_directory(args.out) as stage:
+        write_report(report, stage, body_frame_records(system, held_out), write_json=write_json)
+        write_json(stage / "flight_error.json",
+                   {"steps": [1, 10, 50], "dt_s": errors["constant velocity"].dt,
+                    "models": {name: _scores(e, ("mae", "rmse")) for name, e in errors.items()}})
+    print(summary(report))
+    print("held-out MAE per group at h = 1 / 10 / 50 steps:")
+    for name, e in errors.items():
+        print(f"  {name:>17s}  " + "  ".join(f"{g} " + "/".join(f"{v:.4g}" for v in e.table('mae')[g])
+                                          for g in e.groups))
+    print(f"wrote {args.out}/report.json, report.md, flight_error.json and figures", file=sys.stdout)
+    return 0

@@ -26,6 +26,7 @@ LOOK_ALIKES = (
     frozenset({"coulomb_friction", "viscous_friction", "quadratic_drag"}),
     frozenset({"input_delay", "input_lag"}),
     frozenset({"wind", "body_bias"}),
+    frozenset({"rotor_drag", "quadratic_drag"}),
 )
 
 
@@ -257,6 +258,8 @@ def candidate_scales(system, candidates, trajectories) -> tuple[np.ndarray, np.n
             size = max(0.1 * float(accel[term.axis]), 1e-3)
             if term.cause == "quadratic_drag":
                 scale = size / max(float(np.mean(body[:, term.axis] ** 2)), 1e-2)
+            elif term.cause == "rotor_drag":
+                scale = size / max(float(np.sqrt(np.mean(body[:, term.axis] ** 2))), 1e-1)
             elif term.cause == "wind":
                 scale = 1.0
             else:

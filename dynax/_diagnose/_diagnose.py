@@ -22,6 +22,7 @@ import numpy as np
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
 from .._model._extensions import AbstractTerm, Extended
+from .._model._quadrotor import Quadrotor
 from .._model._system import AbstractSystem
 from .._precision import warn_if_float32
 from .._progress import ProgressBar
@@ -29,6 +30,7 @@ from ._discovery import discover
 from ._fit import nominal_values, window_errors
 from ._forward import _Current, _forward_selection, _Nominal, _Yardstick
 from ._horizon import DEFAULT_FRACTION
+from ._quadrotor import diagnose_quadrotor
 from ._problem import _check_arguments, _Options, _prepare, _Problem, Known as Known, Refit as Refit
 from ._records import _as_records, HOLDOUT_FRACTION
 from ._residuals import Structure, structure_test
@@ -344,6 +346,14 @@ def diagnose(
         Analysis*, 3rd ed., 1998, ch. 15 (forward selection).
     """
     warn_if_float32("diagnosis")  # the float64 policy: say so, once, naming the switch
+    if isinstance(system, Quadrotor):  # its body-frame form, the multirotor causes (`_quadrotor.py`)
+        return diagnose_quadrotor(
+            system, train, validation, diagnose=diagnose, candidates=candidates, mode=mode,
+            horizons_s=None if tuple(horizons_s) == (0.1, 0.25, 0.5, 1.0, 2.0) else horizons_s,
+            reference_horizon_s=reference_horizon_s, horizon_fraction=horizon_fraction, fit_window_s=fit_window_s,
+            max_terms=max_terms, alpha=alpha, min_gain=min_gain, holdout_fraction=holdout_fraction,
+            shortlist=shortlist, system_name=system_name, discovery=discovery, velocities=velocities,
+            cross_fit=cross_fit, progress=progress)
     _check_arguments(system, mode, max_terms)
     if velocities not in ("auto", "measured"):
         raise UsageError(f"diagnose: `velocities` must be 'auto' or 'measured', got {velocities!r}")

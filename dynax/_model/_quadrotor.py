@@ -237,7 +237,7 @@ def to_body_frame(system: Quadrotor, trajectory: Trajectory) -> Trajectory:
     """A quadrotor record in the helicopter's coordinates: body velocity $R^\\top v$ in place of $v$,
     inputs divided by `input_scale` (the data `system.as_helicopter()` is fitted to)."""
     _check_quadrotor_data(trajectory, "to_body_frame")
-    xs = trajectory.xs
+    xs = jnp.asarray(trajectory.xs)  # a record read into numpy arrays too
     body = jax.vmap(lambda x: _rotation_and_body(x)[1])(xs)
     xs = xs.at[:, WORLD_VELOCITY].set(body)
     return Trajectory(trajectory.ts, xs, system.scaled_inputs(trajectory.us), HELICOPTER_STATE_NAMES,

@@ -22,5 +22,6 @@ from ._vehicle_terms import (
     AbstractVehicleTerm as AbstractVehicleTerm,
     BodyBias as BodyBias,
     BodyQuadraticDrag as BodyQuadraticDrag,
+    RotorDrag as RotorDrag,
     Wind as Wind,
 )

@@ -139,6 +139,43 @@ class BodyBias(AbstractVehicleTerm):
         return jnp.zeros_like(air).at[self.axis].set(self.coefficient)
 
 
+class RotorDrag(AbstractVehicleTerm):
+    r"""Rotor drag: a body-frame force or moment linear in the velocity on one body axis, $-d\,s_i$.
+
+    A spinning rotor moving edgewise through the air tilts its thrust back (blade flapping) and
+    its advancing blade meets more air than the retreating one: the net in-plane force opposes
+    the body velocity and is, to first order, proportional to it (the "rotor drag" of multirotor
+    models, a diagonal $-D\nu$). A body rotating about a horizontal axis moves one rotor up and the
+    other down through the air, which raises the thrust of the one and lowers the other's: a moment
+    opposing the rate, to first order proportional to it (the rotors' damping of rotation, $-D_\omega
+    \omega$; about the vertical axis the rotors' drag torque does the same). On `u, v, w`, $s_i$ is the
+    air-relative velocity and $d$ is per unit mass [1/s]; on `p, q, r`, $s_i$ is the body rate and $d$ per
+    unit inertia [1/s]. On a helicopter it adds to a learned derivative (`Xu`, ..., `Lp`, ...); on a
+    quadrotor's rigid-body model, which has none, it is the drag the rigid body lacks.
+
+    **Arguments:** `axis` (0..5 for `u, v, w, p, q, r`), `d` [1/s].
+
+    ??? cite
+
+        R. Mahony, V. Kumar and P. Corke, "Multirotor aerial vehicles: modeling, estimation, and
+        control of quadrotor", IEEE Robotics & Automation Magazine 19(3), 2012 (rotor drag).
+    """
+
+    axis: int = eqx.field(static=True)
+    coefficient: Float[Array, ""]
+    cause: ClassVar[str] = "rotor_drag"
+    prefix: ClassVar[str] = "drag"
+    neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 1
+
+    def __init__(self, axis: int, d: ArrayLike = 0.0):
+        self.axis = axis
+        self.coefficient = _scalar(d)
+
+    def acceleration(self, quat, air, u):
+        return jnp.zeros_like(air).at[self.axis].set(-self.coefficient * air[self.axis])
+
+
 class Wind(AbstractVehicleTerm):
     r"""One world-frame component of a steady wind: the air moves at $w$ in the world (NED) frame.
 

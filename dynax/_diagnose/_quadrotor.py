@@ -1,0 +1,208 @@
+r"""The quadrotor's diagnosis: the rigid-body model on flight logs, the multirotor causes, the gain.
+
+A `Quadrotor` is the `Helicopter`'s dynamics in world-velocity coordinates (`dynax.Quadrotor`), so
+its diagnosis is `diagnose` on the body-frame form: the flights through `to_body_frame` (body
+velocity $R^\top v$, inputs divided by `input_scale`) and the system `BodyFrameQuadrotor` (the
+`Helicopter` of `Quadrotor.as_helicopter()` that keeps the quadrotor's input names `m1..m4, vbat`,
+so that causes at the motors are named at them). Every step of the engine (the nominal refit, the
+held-out simulation error against horizon, screening, the joint refit, the paired held-out test)
+is the one every other system gets.
+
+The vocabulary for a multirotor (`quadrotor_candidates`):
+
+- `rotor_drag` on `u` ... `r` (`RotorDrag`): body-frame drag linear in velocity, $-d\,\nu_i$, and on
+  `p, q, r` the rotors' damping of the body rates, $-d\,\omega_i$;
+- `body_bias` on `u, v, w, p, q, r` (`BodyBias`): a constant body-frame force or moment (the
+  centre of mass off the thrust centre, an IMU or motion-capture frame offset, a bent arm);
+- `input_lag` per motor (`InputLag` at `m1..m4`): the motor's first-order lag behind its command;
+- `input_gain` per motor (`InputGain` at `m1..m4`): one motor's thrust per command off the others'.
+  Tested against the held motor map; where the motor weights are refitted with it
+  (`Refit(parameters=...)` naming them) the learned map carries any per-motor scale and the report
+  lists it as not identifiable.
+
+In `Refit()` mode (the default) the rigid body's weights are the one-step least-squares fit of the
+given model's structure on the training flights (`fit_quadrotor`; `initial_quadrotor("nominal")`
+needs no starting values); `Known()` trusts the given weights (see `diagnose_quadrotor`).
+"""
+
+import dataclasses
+from collections.abc import Sequence
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._data._trajectory import Trajectory
+from .._errors import UsageError
+from .._model._extensions import InputGain, InputLag
+from .._model._extensions._vehicle_terms import BodyBias, RotorDrag
+from .._model._helicopter import ANGULAR_RATE, BODY, Helicopter, QUATERNION, quaternion_to_rotation
+from .._model._quadrotor import (
+    MOTORS,
+    QUADROTOR_INPUT_NAMES,
+    QUADROTOR_STATE_NAMES,
+    Quadrotor,
+    to_body_frame,
+    WORLD_VELOCITY,
+)
+from .._model._system import AbstractSystem
+
+#: The reference horizons of a flight diagnosis [s]: 0.1 to 0.5 s, where flight models are scored.
+QUADROTOR_HORIZONS_S = (0.1, 0.25, 0.5)
+
+
+class BodyFrameQuadrotor(Helicopter):
+    """A `Quadrotor` in the helicopter's body-frame coordinates (`Quadrotor.as_helicopter()`), its
+    inputs named as the quadrotor's (`m1..m4` and, when the flights have it, `vbat`), scaled by the
+    quadrotor's `input_scale` (`to_body_frame` scales the records)."""
+
+    inputs: tuple[str, ...] = eqx.field(static=True, default=QUADROTOR_INPUT_NAMES)
+
+    @property
+    def input_names(self) -> tuple[str, ...]:  # type: ignore[override]
+        return self.inputs
+
+
+def body_frame_system(system: Quadrotor, inputs: Sequence[str] = QUADROTOR_INPUT_NAMES) -> BodyFrameQuadrotor:
+    """The `BodyFrameQuadrotor` of `system` for flights with the inputs `inputs`."""
+    return BodyFrameQuadrotor(system.body_model, system.normalisation_gain, tuple(inputs))
+
+
+def as_quadrotor(body: BodyFrameQuadrotor, like: Quadrotor) -> Quadrotor:
+    """The world-frame `Quadrotor` of a body-frame system's (refitted) body model, `like`'s input scales."""
+    return like.with_body_model(body.body_model)
+
+
+def quadrotor_candidates(system) -> tuple:
+    """The multirotor vocabulary at neutral values (see the module docs): `rotor_drag` on `u` ... `r`,
+    `body_bias` on `u, v, w, p, q, r`, `input_lag` and `input_gain` at each motor `m1..m4`."""
+    terms = [RotorDrag(i) for i in range(6)]
+    terms += [BodyBias(i) for i in range(6)]
+    terms += [InputLag(i) for i in range(len(MOTORS))]
+    terms += [InputGain(i) for i in range(len(MOTORS))]
+    return tuple(terms)
+
+
+def _as_list(flights, where: str) -> list[Trajectory]:
+    if flights is None:
+        return []
+    if isinstance(flights, Trajectory):
+        return [flights]
+    flights = list(flights)
+    if not all(isinstance(f, Trajectory) for f in flights):
+        raise UsageError(f"diagnose: `{where}` must be quadrotor Trajectories (dynax.load_flight, dynax.usable_segments)")
+    return flights
+
+
+def prepare_quadrotor(system: Quadrotor, train, validation, *, refit: bool) -> tuple:
+    """The body-frame system and records of a quadrotor diagnosis and the nominal `Quadrotor`: with
+    `refit`, the one-step least-squares fit of `system`'s body model on `train` (`fit_quadrotor`)."""
+    from .._identify._vehicle import OneStep
+    from .._identify._vehicle._quadrotor import fit_quadrotor, join_flights
+
+    train = _as_list(train, "train")
+    held = _as_list(validation, "validation") if validation is not None else None
+    if not train:
+        raise UsageError("diagnose: no training flights given")
+    join_flights(system, train + (held or []))  # one interval, one set of inputs, vbat where the model reads it
+    if refit:
+        system = fit_quadrotor(system, train, OneStep()).model
+    elif not np.any(np.asarray(system.body_model.weights)):
+        raise UsageError("diagnose: Known() trusts the quadrotor's weights, but they are all zero; fit it first "
+                         "(dynax.fit_quadrotor) or diagnose in Refit() mode")
+    inputs = tuple(train[0].input_names)
+    body = body_frame_system(system, inputs)
+    as_body = lambda flights: [to_body_frame(system, f) for f in flights]  # noqa: E731
+    return body, as_body(train), (None if held is None else as_body(held)), system
+
+
+def diagnose_quadrotor(system: Quadrotor, train, validation=None, *, diagnose, mode, **options):
+    """`diagnose` on a `Quadrotor` (see the module docs); `options` are `diagnose`'s.
+
+    `Refit()` (all parameters): the rigid body's weights are the one-step least-squares fit on the
+    training flights and are held while the candidates' coefficients are fitted by simulation
+    error (a simulation-error refit of the dozens of collinear motor weights with every candidate
+    neither converges nor tells more); `Refit(parameters=names)`: those weights are also refitted
+    by simulation error, from the one-step fit; `Known()`: `system`'s weights are trusted as given.
+    """
+    from ._problem import Known, Refit
+
+    refit = isinstance(mode, Refit)
+    if validation is None:  # the held-out tail of each flight stays out of the one-step fit too
+        from ._records import holdout_split
+
+        halves = [holdout_split(f, options.get("holdout_fraction", 0.3)) for f in _as_list(train, "train")]
+        train, validation = [a for a, _ in halves], [b for _, b in halves]
+    body, train_b, val_b, _ = prepare_quadrotor(system, train, validation, refit=refit)
+    if options.get("candidates") is None:
+        options["candidates"] = quadrotor_candidates(body)
+    if options.get("horizons_s") is None:
+        options["horizons_s"] = QUADROTOR_HORIZONS_S
+    options["system_name"] = options.get("system_name") or "quadrotor"
+    engine_mode = mode if (refit and mode.parameters is not None) else Known()
+    report = diagnose(body, train_b, val_b, mode=engine_mode, **options)
+    if refit:
+        report.notes.append("The rigid body's weights are the one-step least-squares fit on the training flights"
+                            + (", the named ones refitted by simulation error with each candidate."
+                               if mode.parameters is not None else
+                               ", held while each candidate's coefficient is fitted by simulation error."))
+        report = dataclasses.replace(report, mode="refit")
+    return report
+
+
+class WorldFrameQuadrotor(AbstractSystem):
+    r"""A body-frame system (`BodyFrameQuadrotor`, or it `Extended` with vehicle terms) on the quadrotor's
+    world-frame states and logged inputs: what `dynax.flight_error` and `dynax.predict_ahead` score.
+
+    With body velocity $\nu = R^\top v$ and the body system's $(\dot\nu, \dot\omega)$ at the scaled
+    inputs, $\dot v = R(\dot\nu + \omega\times\nu)$ (as `Quadrotor.vector_field`). Only systems
+    without internal states (no input lag or delay) have this form.
+
+    **Fields:** `body` (the body-frame system), `input_scale` (the quadrotor's, static).
+    """
+
+    body: AbstractSystem
+    input_scale: tuple[float, ...] = eqx.field(static=True)
+
+    state_names: ClassVar[tuple[str, ...]] = QUADROTOR_STATE_NAMES
+    input_names: ClassVar[tuple[str, ...]] = QUADROTOR_INPUT_NAMES
+
+    def __check_init__(self):
+        if self.body.n_states != len(QUADROTOR_STATE_NAMES):
+            raise UsageError(f"WorldFrameQuadrotor: the body system has {self.body.n_states} states (internal "
+                             "states of an input lag or delay); only a 13-state body model has a world-frame form")
+
+    def state_error(self, simulated, measured):
+        quat = simulated[..., QUATERNION]
+        sign = jnp.where(jnp.sum(quat * measured[..., QUATERNION], axis=-1, keepdims=True) < 0, -1.0, 1.0)
+        return simulated.at[..., QUATERNION].set(sign * quat) - measured
+
+    def vector_field(self, t, x, u):
+        rotation = quaternion_to_rotation(x[QUATERNION])
+        nu, omega = rotation.T @ x[WORLD_VELOCITY], x[ANGULAR_RATE]
+        scaled = u / jnp.asarray(self.input_scale[: u.shape[-1]], u.dtype)
+        d = self.body.vector_field(t, x.at[WORLD_VELOCITY].set(nu), scaled)
+        dvel = rotation @ (d[BODY][:3] + jnp.cross(omega, nu))
+        return jnp.concatenate([x[WORLD_VELOCITY], d[QUATERNION], dvel, d[BODY][3:]])
+
+
+def quadrotor_flight_errors(report, like: Quadrotor, flights, steps=(1, 10, 50)) -> dict:
+    """The held-out scores per group (`dynax.flight_error`) of the report's nominal and extended models
+    and the constant-velocity baseline: `{name: FlightError}`; the extended model only where it has a
+    world-frame form (`WorldFrameQuadrotor`: no internal states)."""
+    from .._model._quadrotor import ConstantVelocity
+    from .._predict import flight_error
+
+    out = {"constant velocity": flight_error(ConstantVelocity(), flights, steps)}
+    for name, model in (("nominal", report.nominal_model), ("extended", report.extended_model)):
+        if model is None or model.n_states != len(QUADROTOR_STATE_NAMES):
+            continue
+        out[name] = flight_error(WorldFrameQuadrotor(model, like.input_scale), flights, steps)
+    return out
+
+
+def body_frame_records(system: Quadrotor, flights) -> list[Trajectory]:
+    """The flights in the body-frame coordinates a quadrotor diagnosis works in (`to_body_frame`): what
+    `write_report` draws the held-out figures of."""
+    return [to_body_frame(system, f) for f in _as_list(flights, "flights")]

@@ -1,0 +1,137 @@
+"""The quadrotor's diagnosis: the multirotor causes' physics, then hidden effects in synthetic flights.
+
+The flights are not made by dynax's models: `synthetic_flight.quadrotor_flight` integrates a rigid
+body with the effect written out (scipy DOP853) under a geometric controller at 100 Hz. `diagnose`
+starts from a `Quadrotor` of zero weights (`initial_quadrotor("nominal")`, no geometry given), fits
+the rigid body, and must name the hidden cause first with a significant held-out gain; on an
+effect-free flight it must claim nothing. The default suite runs rotor drag (the heavy mark: about
+two minutes on two cores); body bias, motor lag (a known shortfall), the effect-free control and the
+CLI are slow.
+"""
+
+import json
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from dynax import BodyBias, diagnose, Extended, Helicopter, initial_quadrotor, RotorDrag
+
+from .synthetic_flight import quadrotor_flight
+
+
+def _diagnose(seed, duration=15.0, **effects):
+    train = quadrotor_flight(duration, seed=seed, **effects)
+    validation = quadrotor_flight(duration, seed=seed + 100, **effects)
+    quad = initial_quadrotor("nominal", [train])
+    return diagnose(quad, train, validation, max_terms=1, discovery=False, progress=False).to_json()
+
+
+def _assert_named_first(j, cause, places):
+    assert j["system"] == "quadrotor"
+    assert j["findings"], (j["verdict"], j["candidates"])
+    first = j["findings"][0]
+    assert (first["cause"], first["where"]) in {(cause, w) for w in places}, j["findings"]
+    assert j["gain"] > 0.2 and first["p_value"] < 0.01
+    h = j["nominal"]["sim_error"]["horizons_s"].index(j["reference_horizon_s"])
+    assert j["extended"]["sim_error"]["rmse"][h] < j["nominal"]["sim_error"]["rmse"][h]
+    return first
+
+
+# --- the term ----------------------------------------------------------------------------------
+
+
+def test_rotor_drag_is_linear_body_frame_drag_on_its_axis():
+    heli = Helicopter()
+    u = jnp.asarray([0.1, -0.2, 0.05, 0.3])
+    x = jnp.asarray([0.0, 0, 0, np.cos(0.3), 0, 0, np.sin(0.3), 1.5, -0.7, 0.4, 0.1, 0.2, -0.3])
+    for axis, nu in enumerate((1.5, -0.7, 0.4)):
+        diff = (Extended(heli, (RotorDrag(axis, 0.35),)).vector_field(0.0, x, u) - heli.vector_field(0.0, x, u))[7:]
+        np.testing.assert_allclose(diff, -0.35 * nu * np.eye(6)[axis], atol=1e-12)
+    model = Extended(heli, (RotorDrag(0, 0.3), RotorDrag(1, 0.2), BodyBias(3, 0.1)))
+    assert model.labels == ("rotor_drag@u", "rotor_drag@v", "body_bias@p")
+    assert set(model.parameters) == {"drag_u", "drag_v", "bias_p"}
+    for axis, rate in zip((3, 4, 5), (0.1, 0.2, -0.3)):  # on the rates: the rotors' damping of rotation
+        diff = (Extended(heli, (RotorDrag(axis, 2.0),)).vector_field(0.0, x, u) - heli.vector_field(0.0, x, u))[7:]
+        np.testing.assert_allclose(diff, -2.0 * rate * np.eye(6)[axis], atol=1e-12)
+    with pytest.raises(ValueError, match="axis"):
+        RotorDrag(6)
+
+
+def test_synthetic_flight_is_bounded_and_the_drag_changes_it():
+    calm = quadrotor_flight(3.0, seed=0, noise=False)
+    dragged = quadrotor_flight(3.0, seed=0, noise=False, drag=(0.4, 0.4, 0.1))
+    for f in (calm, dragged):
+        assert np.all(np.isfinite(np.asarray(f.xs))) and np.abs(np.asarray(f.xs)[:, :3]).max() < 3.0
+    assert np.abs(np.asarray(dragged.us) - np.asarray(calm.us)).max() > 30  # the controller works against it
+
+
+# --- hidden effects ----------------------------------------------------------------------------
+
+
+@pytest.mark.heavy
+def test_hidden_rotor_drag_is_named():
+    j = _diagnose(1, drag=(0.4, 0.4, 0.1))
+    first = _assert_named_first(j, "rotor_drag", ("u", "v"))
+    assert first["coefficient"] == pytest.approx(0.4, rel=0.2)
+    json.dumps(j)
+
+
+@pytest.mark.slow
+def test_hidden_body_bias_is_named():
+    j = _diagnose(2, bias=(0, 0.5))  # 0.5 m/s^2 along the body x axis: a tilted thrust axis
+    first = _assert_named_first(j, "body_bias", ("u",))
+    assert first["coefficient"] == pytest.approx(0.5, rel=0.2)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(reason="known shortfall: an 80 ms lag on one motor screens first and is refitted near its size "
+                          "(0.057 s), held-out gain 15 % on 30 s flights, but p = 0.22 in the paired test: the held "
+                          "one-step motor map already takes up part of the lag, and one held-out flight's windows "
+                          "are too correlated to decide",
+                   strict=True)  # strict: the day it passes, the suite says so and the mark comes off
+def test_hidden_motor_lag_is_named_at_its_motor():
+    # Motor 3 follows its command with an 80 ms lag. The one-step fit of the motor map takes up part of
+    # it, and the windows' errors are correlated over the flight: 30 s flights give the test its power.
+    j = _diagnose(3, duration=30.0, lag=(2, 0.08))
+    first = _assert_named_first(j, "input_lag", ("m3",))
+    assert 0.02 < first["coefficient"] < 0.12
+
+
+@pytest.mark.slow
+def test_effect_free_flights_claim_nothing():
+    j = _diagnose(4)
+    assert j["findings"] == [], j["findings"]
+    assert j["verdict"] in ("none", "unexplained")  # no named cause; what the residual probe says is its own
+
+
+def _on_the_pad_first(flight, seconds=0.5):
+    """The flight's log with `seconds` on the floor before it (motors off, level, at rest), as a real log
+    starts: the loader takes the floor's height from there (without it, the flight's lowest point)."""
+    from dynax import Trajectory
+
+    n, dt = int(round(seconds / flight.dt)), flight.dt
+    xs, us = np.asarray(flight.xs), np.asarray(flight.us)
+    pad = np.zeros((n, xs.shape[1]))
+    pad[:, :2], pad[:, 3] = xs[0, :2], 1.0
+    return Trajectory(np.arange(n + len(xs)) * dt, np.concatenate([pad, xs]),
+                      np.concatenate([np.zeros((n, us.shape[1])), us]), flight.state_names, flight.input_names,
+                      "quadrotor", flight.source)
+
+
+@pytest.mark.slow
+def test_cli_diagnose_quadrotor_names_rotor_drag(tmp_path, capsys):
+    from dynax import save_trajectory
+    from dynax.internal import cli_main
+
+    save_trajectory(_on_the_pad_first(quadrotor_flight(15.0, seed=1, drag=(0.4, 0.4, 0.1))), tmp_path / "train.csv")
+    save_trajectory(_on_the_pad_first(quadrotor_flight(15.0, seed=101, drag=(0.4, 0.4, 0.1))), tmp_path / "val.csv")
+    out = tmp_path / "report"
+    code = cli_main(["diagnose", "quadrotor", str(tmp_path / "train.csv"), "--validation", str(tmp_path / "val.csv"),
+                     "--max-terms", "1", "--no-discovery", "--out", str(out)])
+    assert code == 0
+    j = json.loads((out / "report.json").read_text())
+    assert j["system"] == "quadrotor" and j["findings"][0]["cause"] == "rotor_drag"
+    groups = json.loads((out / "flight_error.json").read_text())["models"]
+    assert groups["extended"]["mae"]["velocity"][-1] < groups["nominal"]["mae"]["velocity"][-1]
+    assert "rotor_drag" in capsys.readouterr().out
