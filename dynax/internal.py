@@ -240,8 +240,27 @@ from ._diagnose import (
     write_report as write_report,
 )
 
+# Control: the leaderboard's rollout and the swing-up reference's pieces.
+from ._control._from_rest import (
+    collocation_reference as collocation_reference,
+    end_upright_residuals as end_upright_residuals,
+    knot_matrix as knot_matrix,
+    open_loop_rollout as open_loop_rollout,
+    reference_search as reference_search,
+)
+from ._control._leaderboard import leaderboard_rollout as leaderboard_rollout
+from ._diagnose._quadrotor import body_frame_records as body_frame_records, quadrotor_flight_errors as quadrotor_flight_errors
+
 # Aliased re-exports (`x as y`) count as exports only through `__all__`, so it lists every name.
 __all__ = [
+    "collocation_reference",
+    "end_upright_residuals",
+    "knot_matrix",
+    "open_loop_rollout",
+    "reference_search",
+    "leaderboard_rollout",
+    "body_frame_records",
+    "quadrotor_flight_errors",
     "delta_method_covariance",
     "AbstractInputTerm",
     "AbstractVehicleTerm",

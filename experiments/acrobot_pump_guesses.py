@@ -19,12 +19,12 @@ import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from dynax import control
-from dynax._control._from_rest import (
-    _collocation,
-    _end_upright,
-    _knot_matrix,
-    _open_loop,
-    _search,
+from dynax.internal import (
+    collocation_reference,
+    end_upright_residuals,
+    knot_matrix,
+    open_loop_rollout,
+    reference_search,
 )
 
 OUT = pathlib.Path(__file__).resolve().parent / "results" / "leaderboard" / "pump_guesses"
@@ -42,20 +42,20 @@ def design_reference(plant, design, guesses):
     n_knots = round(design.horizon / design.knot_spacing)
     coarse_steps = round(design.horizon / design.coarse_dt)
     fine_steps = round(design.horizon / design.dt)
-    coarse = _knot_matrix(coarse_steps, design.coarse_dt, design.knot_spacing, n_knots)
-    fine = _knot_matrix(fine_steps, design.dt, design.knot_spacing, n_knots)
-    z = _collocation(plant, jnp.asarray(guesses), design, n_knots, design.iterations)
-    w, cost, err = _search(plant, z[:, 4 * n_knots:], coarse, design.coarse_dt, design, design.shooting_iterations, 1.0)
+    coarse = knot_matrix(coarse_steps, design.coarse_dt, design.knot_spacing, n_knots)
+    fine = knot_matrix(fine_steps, design.dt, design.knot_spacing, n_knots)
+    z = collocation_reference(plant, jnp.asarray(guesses), design, n_knots, design.iterations)
+    w, cost, err = reference_search(plant, z[:, 4 * n_knots:], coarse, design.coarse_dt, design, design.shooting_iterations, 1.0)
     refs = []
     for j in np.argsort(np.asarray(jnp.where(err < 1e-3, cost, cost + 100 + err))):
         if float(err[j]) > 1e-2:
             continue
         wb = w[j:j + 1]
         if design.refine_iterations:
-            wb, _, _ = _search(plant, wb, fine, design.dt, design, design.refine_iterations, 1.0)
-        w_end = _end_upright(plant, wb[0], fine, design.dt, design.torque_limit)
+            wb, _, _ = reference_search(plant, wb, fine, design.dt, design, design.refine_iterations, 1.0)
+        w_end = end_upright_residuals(plant, wb[0], fine, design.dt, design.torque_limit)
         us = fine @ jnp.concatenate([jnp.zeros(1), design.torque_limit * jnp.tanh(w_end)])
-        _, xs = _open_loop(plant, us, design.dt)
+        _, xs = open_loop_rollout(plant, us, design.dt)
         refs.append((int(j), xs, us))
     return refs
 

@@ -30,8 +30,8 @@ import numpy as np
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 import dynax
 from dynax import control
-from dynax._control._from_rest import balance_lqr, tvlqr
-from dynax._control._leaderboard import _rollout
+from dynax.control import balance_lqr, tvlqr
+from dynax.internal import leaderboard_rollout
 
 OUT = pathlib.Path(__file__).resolve().parent / "results" / "leaderboard" / "recovery_pgpe"
 POLICY = pathlib.Path(__file__).resolve().parent / "results" / "leaderboard" / "acrobot_policy.npz"
@@ -94,7 +94,7 @@ def main(argv=None):
 
     def reward(theta, cases):
         c = unpack(theta, base, plant, rules.dt)
-        final = jax.vmap(lambda case: _rollout(c, case, x0, rules.dt, rules.n_steps, rules.max_delay_steps,
+        final = jax.vmap(lambda case: leaderboard_rollout(c, case, x0, rules.dt, rules.n_steps, rules.max_delay_steps,
                                                False)[0])(cases)
         e1 = jnp.mod(final[:, 0], 2 * jnp.pi) - jnp.pi
         e2 = jnp.mod(final[:, 1] + jnp.pi, 2 * jnp.pi) - jnp.pi

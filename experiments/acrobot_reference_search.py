@@ -32,7 +32,7 @@ import optax
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from dynax import control
-from dynax._control._from_rest import _knot_matrix, _open_loop
+from dynax.internal import knot_matrix, open_loop_rollout
 
 OUT = pathlib.Path(__file__).resolve().parent / "results" / "leaderboard" / "reference_search"
 NORM = np.array(control.LeaderboardRules().normalisation)
@@ -41,7 +41,7 @@ NORM = np.array(control.LeaderboardRules().normalisation)
 def smooth_costs(plant, w, interp, dt, spacing, limit, n_episode):
     knots = jnp.concatenate([jnp.zeros(1, w.dtype), limit * jnp.tanh(w), jnp.zeros(1, w.dtype)])
     us = interp @ knots
-    x_final, xs = _open_loop(plant, us, dt)
+    x_final, xs = open_loop_rollout(plant, us, dt)
     q2 = jnp.concatenate([xs[:, 1], x_final[1:2]])
     energy = jnp.sum(jnp.abs(jnp.diff(q2) * us))
     torque = jnp.sum(us**2) * dt
@@ -85,9 +85,9 @@ def polish(plant, xs, us, spacing, coarse_dt, iterations):
     knots = np.asarray(us)[per_knot:n_seg * per_knot:per_knot]  # interior knots
     w0 = jnp.asarray(np.arctanh(np.clip(knots / 6.0, -0.999, 0.999)))[None]
     coarse_steps = round(n_steps * 0.002 / coarse_dt)
-    interp = _knot_matrix(coarse_steps, coarse_dt, spacing, n_seg)
+    interp = knot_matrix(coarse_steps, coarse_dt, spacing, n_seg)
     w, _cost, _err = search(plant, w0, interp, coarse_dt, spacing, iterations, 1.0, lr=0.003, start_weight=300.0)
-    fine = np.asarray(_knot_matrix(n_steps, 0.002, spacing, n_seg))
+    fine = np.asarray(knot_matrix(n_steps, 0.002, spacing, n_seg))
     return jnp.asarray(fine @ np.concatenate([[0.0], 6.0 * np.tanh(np.asarray(w[0])), [0.0]]))
 
 

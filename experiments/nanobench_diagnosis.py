@@ -80,7 +80,7 @@ def main():
                             discovery=not args.no_discovery, progress=say,
                             reference_horizon_s=args.reference_horizon or None, shortlist=args.shortlist)
     j = report.to_json()
-    from dynax._diagnose._quadrotor import body_frame_records, quadrotor_flight_errors
+    from dynax.internal import body_frame_records, quadrotor_flight_errors
 
     nominal = dynax.fit_quadrotor(quad, diag_train).model  # the diagnosis' nominal (its input scales)
     dynax.write_report(report, out / "report", body_frame_records(nominal, diag_test), write_json=write_json)

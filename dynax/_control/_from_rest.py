@@ -324,7 +324,7 @@ class SwingUpDesign(eqx.Module):
     torque_limit: float = 6.0
 
 
-def _knot_matrix(n_steps, dt, spacing, n_knots):
+def knot_matrix(n_steps, dt, spacing, n_knots):
     """Interpolation weights (n_steps, n_knots + 1) from the knots to the step times (piecewise linear)."""
     t = np.arange(n_steps) * dt
     j = np.minimum((t // spacing).astype(int), n_knots - 1)
@@ -335,7 +335,7 @@ def _knot_matrix(n_steps, dt, spacing, n_knots):
     return jnp.asarray(w)
 
 
-def _open_loop(plant, us, dt):
+def open_loop_rollout(plant, us, dt):
     def step(x, u):
         return plant.rk4_step(x, jnp.stack([jnp.zeros_like(u), u]), dt), x
     x_final, xs = jax.lax.scan(step, jnp.zeros(4, us.dtype), us)
@@ -346,7 +346,7 @@ def _surrogate(plant, w, interp, dt, fine_dt, limit, terminal_weight, elbow_rang
     """The leaderboard's smooth costs of an open-loop swing-up plus the distance from upright at its end."""
     knots = jnp.concatenate([jnp.zeros(1, w.dtype), limit * jnp.tanh(w)])
     us = interp @ knots
-    x_final, xs = _open_loop(plant, us, dt)
+    x_final, xs = open_loop_rollout(plant, us, dt)
     q2 = jnp.concatenate([xs[:, 1], x_final[1:2]])
     energy = jnp.sum(jnp.abs(jnp.diff(q2) * us))
     torque = jnp.sum(us**2) * dt
@@ -393,7 +393,7 @@ def _collocation_loss(plant, z, rho, n, h, fine_dt, limit, elbow_range):
 
 
 @eqx.filter_jit
-def _collocation(plant, z0, design, n, iterations):
+def collocation_reference(plant, z0, design, n, iterations):
     import optax
 
     opt = optax.adam(design.learning_rate / 3)
@@ -435,8 +435,8 @@ def optimise_swing_up(plant: LeaderboardPlant, design: SwingUpDesign = SwingUpDe
     n_knots = int(round(design.horizon / design.knot_spacing))
     coarse_steps = int(round(design.horizon / design.coarse_dt))
     fine_steps = int(round(design.horizon / design.dt))
-    coarse = _knot_matrix(coarse_steps, design.coarse_dt, design.knot_spacing, n_knots)
-    fine = _knot_matrix(fine_steps, design.dt, design.knot_spacing, n_knots)
+    coarse = knot_matrix(coarse_steps, design.coarse_dt, design.knot_spacing, n_knots)
+    fine = knot_matrix(fine_steps, design.dt, design.knot_spacing, n_knots)
     # 1. collocation from guesses that turn q1 either way with different elbow oscillations
     s = np.linspace(0.0, 1.0, n_knots + 1)[1:]
     rng = np.random.default_rng(design.seed)
@@ -447,23 +447,23 @@ def optimise_swing_up(plant: LeaderboardPlant, design: SwingUpDesign = SwingUpDe
         q2 = 0.5 * np.sin(2 * np.pi * s * (1 + i // 2))
         x = np.stack([q1, q2, np.gradient(q1, design.knot_spacing), np.gradient(q2, design.knot_spacing)], axis=1)
         guesses.append(np.concatenate([x.ravel(), 0.3 * rng.normal(size=n_knots)]))
-    z = _collocation(plant, jnp.asarray(np.stack(guesses)), design, n_knots, design.iterations)
+    z = collocation_reference(plant, jnp.asarray(np.stack(guesses)), design, n_knots, design.iterations)
     # 2. shooting from the collocation torques
     w0 = z[:, 4 * n_knots :]
-    w, cost, err = _search(plant, w0, coarse, design.coarse_dt, design, design.shooting_iterations, 1.0)
+    w, cost, err = reference_search(plant, w0, coarse, design.coarse_dt, design, design.shooting_iterations, 1.0)
     best = int(jnp.argmin(jnp.where(err < 1e-3, cost, cost + 100 + err)))
     w_best = w[best : best + 1]
     if design.refine_iterations:
-        w_best, _, _ = _search(plant, w_best, fine, design.dt, design, design.refine_iterations, 1.0)
-    w_end = _end_upright(plant, w_best[0], fine, design.dt, design.torque_limit)
+        w_best, _, _ = reference_search(plant, w_best, fine, design.dt, design, design.refine_iterations, 1.0)
+    w_end = end_upright_residuals(plant, w_best[0], fine, design.dt, design.torque_limit)
     knots = jnp.concatenate([jnp.zeros(1), design.torque_limit * jnp.tanh(w_end)])
     us = fine @ knots
-    _, xs = _open_loop(plant, us, design.dt)
+    _, xs = open_loop_rollout(plant, us, design.dt)
     return xs, us
 
 
 @eqx.filter_jit
-def _end_upright(plant, w, interp, dt, limit, iterations=30, max_step=0.5):
+def end_upright_residuals(plant, w, interp, dt, limit, iterations=30, max_step=0.5):
     """Gauss-Newton on the knots so the rollout ends exactly upright at rest with zero torque (minimum-norm steps).
 
     The five residuals are the final state minus the nearest upright rest $(\\pi + 2\\pi i, 2\\pi j, 0, 0)$
@@ -474,7 +474,7 @@ def _end_upright(plant, w, interp, dt, limit, iterations=30, max_step=0.5):
 
     def final(w):
         knots = jnp.concatenate([jnp.zeros(1, w.dtype), limit * jnp.tanh(w)])
-        x_final, _ = _open_loop(plant, interp @ knots, dt)
+        x_final, _ = open_loop_rollout(plant, interp @ knots, dt)
         return jnp.concatenate([x_final, knots[-1:]])
 
     x0 = final(w)
@@ -493,7 +493,7 @@ def _end_upright(plant, w, interp, dt, limit, iterations=30, max_step=0.5):
     return w
 
 
-_search = eqx.filter_jit(_adam_search)
+reference_search = eqx.filter_jit(_adam_search)
 
 
 def end_upright(plant: LeaderboardPlant, us, design: SwingUpDesign = SwingUpDesign()):
@@ -507,10 +507,10 @@ def end_upright(plant: LeaderboardPlant, us, design: SwingUpDesign = SwingUpDesi
     n_knots = n_steps // per_knot
     knots = jnp.concatenate([us[per_knot::per_knot], us[-1:]])[:n_knots]
     w = jnp.arctanh(jnp.clip(knots / design.torque_limit, -0.9999, 0.9999))
-    fine = _knot_matrix(n_steps, design.dt, design.knot_spacing, n_knots)
-    w = _end_upright(plant, w, fine, design.dt, design.torque_limit)
+    fine = knot_matrix(n_steps, design.dt, design.knot_spacing, n_knots)
+    w = end_upright_residuals(plant, w, fine, design.dt, design.torque_limit)
     us = fine @ jnp.concatenate([jnp.zeros(1), design.torque_limit * jnp.tanh(w)])
-    _, xs = _open_loop(plant, us, design.dt)
+    _, xs = open_loop_rollout(plant, us, design.dt)
     return xs, us
 
 

@@ -273,7 +273,7 @@ class Rollout(eqx.Module):
     us: Float[Array, " steps"]
 
 
-def _rollout(controller, case, x0, dt, n_steps, max_delay, record):
+def leaderboard_rollout(controller, case, x0, dt, n_steps, max_delay, record):
     plant = case.plant
     dtype = x0.dtype
     vel_mask = jnp.array([0.0, 0.0, 1.0, 1.0], dtype)
@@ -311,14 +311,14 @@ def _rollout(controller, case, x0, dt, n_steps, max_delay, record):
 
 @eqx.filter_jit
 def _simulate(controller, case, x0, dt, n_steps, max_delay):
-    _, (xs, us) = _rollout(controller, case, x0, dt, n_steps, max_delay, True)
+    _, (xs, us) = leaderboard_rollout(controller, case, x0, dt, n_steps, max_delay, True)
     ts = jnp.arange(n_steps + 1) * dt
     return Rollout(ts, jnp.concatenate([x0[None], xs]), us)
 
 
 @eqx.filter_jit
 def _final_states(controller, cases, x0, dt, n_steps, max_delay):
-    return jax.vmap(lambda c: _rollout(controller, c, x0, dt, n_steps, max_delay, False)[0])(cases)
+    return jax.vmap(lambda c: leaderboard_rollout(controller, c, x0, dt, n_steps, max_delay, False)[0])(cases)
 
 
 def simulate_leaderboard(controller, case: Case | None = None, rules: LeaderboardRules = LeaderboardRules()) -> Rollout:
