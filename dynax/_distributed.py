@@ -119,8 +119,3 @@ def replicate(tree):
         for i, g in zip(split, gathered):
             leaves[i] = g
     return jax.tree.unflatten(treedef, leaves)
-
-
-# Old names, still imported by `dynax/_control/_pgpe.py`; they go once it imports the plain ones.
-_multi_process = multi_process
-_replicate_in_jit = replicate_in_jit

@@ -142,10 +142,6 @@ def rollouts_from_starts(system, ts, xs, us, starts, n_steps, method):
     return window_rollouts(system, cut(ts), cut(xs), cut(us), method=method)
 
 
-# The old name, still imported by `dynax/_diagnose/_figures.py`; it goes once that imports the plain one.
-_window_errors = rollouts_from_starts
-
-
 def simulation_error(
     system: AbstractSystem,
     trajectory: Trajectory,

@@ -168,24 +168,24 @@ from ._cli._output import staged_directory as staged_directory, write_json as wr
 
 # Helpers whose private modules still spell them with an underscore: the plain name here is the one
 # their modules take once those modules are renamed (and these lines become plain re-exports).
-from ._cli._identify import _jointly_cell as jointly_determined_cell
-from ._diagnose._problem import _candidate_family as candidate_family, _refit_names as names_to_refit
-from ._identify._equations import _dynamic_rows as dynamic_rows, _equations as stacked_equations
-from ._identify._identify import _named_parameters as named_parameters
-from ._identify._least_squares import _qr_r as tsqr_r
-from ._identify._refine import _ml_weights as ml_weights
+from ._cli._identify import jointly_determined_cell as jointly_determined_cell
+from ._diagnose._problem import candidate_family as candidate_family, names_to_refit as names_to_refit
+from ._identify._equations import dynamic_rows as dynamic_rows, stacked_equations as stacked_equations
+from ._identify._identify import named_parameters as named_parameters
+from ._identify._least_squares import tsqr_r as tsqr_r
+from ._identify._refine import ml_weights as ml_weights
 from ._identify._simulation_fit import (
-    _clustered_covariance as segment_clustered_covariance,
-    _record_covariance as record_jackknife_covariance,
-    _segments as simulation_segments,
+    segment_clustered_covariance as segment_clustered_covariance,
+    record_jackknife_covariance as record_jackknife_covariance,
+    simulation_segments as simulation_segments,
 )
 from ._identify._vehicle._criteria import (
-    _normal_equations as normal_equations,
-    _solve as ridge_solve,
-    _starts as window_starts,
-    _with_theta as with_theta,
+    normal_equations as normal_equations,
+    ridge_solve as ridge_solve,
+    window_starts as window_starts,
+    with_theta as with_theta,
 )
-from ._model._extensions._terms import _scalar as float_scalar
+from ._model._extensions._terms import float_scalar as float_scalar
 
 
 # Helpers of the pipeline's stages (data, model, identification, validation, diagnosis).

@@ -53,10 +53,6 @@ FACADES = {"__init__", "synthetic", "internal", "control"}
 
 # Imports that break the order today, each with the reason it stays for now: (importer, imported).
 ALLOWED: dict[tuple[str, str], str] = {
-    # The demo's driver (generate acrobot data with a hidden effect, diagnose it, write the report)
-    # lives with the diagnosis though it belongs to the command line, beside `dynax/_cli/_demo.py`;
-    # moving it touches the CLI and the diagnosis, both being extended now.
-    ("dynax._diagnose._demo", "dynax._synthetic"): "the demo's driver belongs in dynax/_cli",
 }
 
 
@@ -159,17 +155,7 @@ def test_the_checker_reads_relative_local_and_package_imports(source, expected):
 
 # Modules that still import an underscore name from another module, to be emptied by
 # tools/finish_boundary_renames.py once the branches that edit these modules are merged.
-UNDERSCORE_IMPORTERS = frozenset(
-    f"dynax/{name}.py"
-    for name in (
-        "_control/_pgpe", "_diagnose/_diagnose", "_diagnose/_discovery", "_diagnose/_figures", "_diagnose/_forward",
-        "_diagnose/_problem", "_diagnose/_records", "_diagnose/_screening", "_diagnose/_selection",
-        "_diagnose/_validation", "_identify/_angle_zeros", "_identify/_equations", "_identify/_identify",
-        "_identify/_ls_stage", "_identify/_offsets", "_identify/_record_friction", "_identify/_refine",
-        "_identify/_vehicle/_frequency", "_model/_extensions/_inputs", "_model/_extensions/_terms",
-        "_model/_extensions/_vehicle_terms", "internal",
-    )
-)
+UNDERSCORE_IMPORTERS = frozenset()
 
 
 def _underscore_imports():

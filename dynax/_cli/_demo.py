@@ -30,17 +30,34 @@ def run(args: argparse.Namespace) -> int:
 
     jax.config.update("jax_enable_x64", True)  # the CLI identifies in float64; the library does not change config
 
-    from .._data._io import save_trajectory
-    from .._diagnose._demo import run_demo
-    from ._diagnose import summary
-
     if not 0 <= args.seed <= MAX_SEED:
         raise UsageError(f"--seed must be an integer from 0 to {MAX_SEED}, got {args.seed}")
     start = time.perf_counter()
     out = pathlib.Path(args.out)
     with staged_directory(out) as stage:
-        text = run_demo(hidden_effect(args.seed), seed=args.seed, out=stage, save_trajectory=save_trajectory,
-                        write_json=write_json, summary=summary)
+        text = run_demo(hidden_effect(args.seed), seed=args.seed, out=stage)
     print(text)
     print(f"wrote {out}/ in {time.perf_counter() - start:.0f} s")
     return 0
+
+
+def run_demo(term, *, seed: int, out: pathlib.Path) -> str:
+    """Generate the data, diagnose the nominal acrobot against it, write the report; return the terminal summary."""
+    from .._data._io import save_trajectory
+    from .._diagnose import diagnose, Refit, write_report
+    from .._model._two_link import Acrobot
+    from .._progress import ProgressBar
+    from .._synthetic import demo_data
+    from ._diagnose import summary
+
+    out = pathlib.Path(out)
+    start = time.perf_counter()
+    truth, train, validation = demo_data(term, seed=seed)
+    save_trajectory(train, out / "train.csv")
+    save_trajectory(validation, out / "validation.csv")
+    with ProgressBar(None, "diagnose", unit="stage") as bar:  # stderr; a log without a terminal; --quiet: nothing
+        report = diagnose(Acrobot(), train, validation, mode=Refit(), system_name="acrobot",
+                          progress=lambda line: bar.say(f"[{time.perf_counter() - start:5.1f} s] {line}"))
+    write_report(report, out, validation, write_json=write_json)
+    hidden = f"{term.label(truth.system)}, {term.parameter_name(truth.system)} = {float(term.coefficient):.4g}"
+    return f"Hidden in the data: {hidden} (and base parameters that differ from the nominal model's).\n" + summary(report)

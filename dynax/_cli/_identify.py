@@ -185,7 +185,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"  WARNING: the data determine these parameters poorly (relative standard error): {cells}; "
               "record more motion in every joint before trusting them, or look for what the model misses")
     if result.jointly_determined:
-        cells = "; ".join(_jointly_cell(n, j, report) for n, j in result.jointly_determined.items())
+        cells = "; ".join(jointly_determined_cell(n, j, report) for n, j in result.jointly_determined.items())
         print("  NOTE: determined mostly jointly (the standard error over 10 times what it would be with every other "
               "parameter known: most of the error is shared, and a combination of the correlated parameters is known "
               f"better than each alone): {cells}")
@@ -250,7 +250,7 @@ def _refinement_validates_worse(least_squares, output_error) -> str | None:
     return None
 
 
-def _jointly_cell(name, joint, report) -> str:
+def jointly_determined_cell(name, joint, report) -> str:
     """One parameter of the jointly-determined NOTE: `theta1 (108x, +- 39 %) with Ir2 (-0.99), ...`;
     an estimate its error reaches past zero (one at a bound, e.g. a friction) is given as value and
     error, since a relative error of millions of per cent says nothing."""

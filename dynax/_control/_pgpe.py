@@ -16,7 +16,7 @@ import optax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from jaxtyping import Array, ArrayLike, Float, Int, PRNGKeyArray
 
-from .._distributed import _multi_process, _replicate_in_jit
+from .._distributed import multi_process, replicate_in_jit
 from .._progress import bar_token, progress_enabled, ProgressBar, report
 
 Objective = Callable[[Float[Array, " n_params"], PRNGKeyArray], Float[Array, ""]]
@@ -311,7 +311,7 @@ def evaluate_population(
     The rewards, shape `(population,)`.
     """
     traced = any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves((population, keys)))
-    if shard and not traced and _multi_process():
+    if shard and not traced and multi_process():
         return _evaluate_everywhere(objective, population, keys)
     return _evaluate(objective, population, keys, shard)
 
@@ -326,7 +326,7 @@ def _evaluate(objective, population, keys, shard):
 
 @eqx.filter_jit
 def _evaluate_everywhere(objective, population, keys):
-    return _replicate_in_jit(_evaluate(objective, population, keys, True))
+    return replicate_in_jit(_evaluate(objective, population, keys, True))
 
 
 def run_pgpe(
@@ -399,7 +399,7 @@ def _run_pgpe(pgpe, objective, params, key, n_iterations, shard, with_progress, 
 @eqx.filter_jit
 def _run_pgpe_jit(pgpe, objective, params, key, n_iterations, shard, with_progress, token):
     # In a multi-process run every process gets the whole result (a no-op in one process).
-    return _replicate_in_jit(_run_pgpe(pgpe, objective, params, key, n_iterations, shard, with_progress, token))
+    return replicate_in_jit(_run_pgpe(pgpe, objective, params, key, n_iterations, shard, with_progress, token))
 
 
 def sweep_pgpe(
@@ -437,4 +437,4 @@ def _sweep_pgpe_jit(pgpe, objective, params, keys, n_iterations, shard, with_pro
     out = jax.vmap(
         lambda key: _run_pgpe(pgpe, objective, params, key, n_iterations, False, with_progress, token)
     )(keys)
-    return _replicate_in_jit(out)
+    return replicate_in_jit(out)

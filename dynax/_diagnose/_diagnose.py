@@ -28,22 +28,22 @@ from .._precision import warn_if_float32
 from .._progress import ProgressBar
 from ._discovery import discover
 from ._fit import nominal_values, window_errors
-from ._forward import _Current, _forward_selection, _Nominal, _Yardstick
+from ._forward import Current, forward_selection, Nominal, Yardstick
 from ._horizon import DEFAULT_FRACTION
 from ._quadrotor import diagnose_quadrotor
-from ._problem import _check_arguments, _Options, _prepare, _Problem, Known as Known, Refit as Refit
-from ._records import _as_records, HOLDOUT_FRACTION
+from ._problem import check_arguments, Options, prepare_problem, Problem, Known as Known, Refit as Refit
+from ._records import as_records, HOLDOUT_FRACTION
 from ._residuals import Structure, structure_test
 from ._result import DataSummary, ModelSummary, Report as Report, SimErrorCurve
 from ._selection import paired_test
 from ._summaries import (
-    _gain,
-    _merge_repeated_causes,
-    _per_run_table,
-    _rmse_curve,
-    _test_summary,
-    _unexplained_note,
-    _window_scores,
+    rmse_gain,
+    merge_repeated_causes,
+    per_run_table,
+    rmse_curve,
+    test_summary,
+    unexplained_note,
+    window_scores,
 )
 from ._validation import validation_summary
 from ._verdict import decide, inconclusive_note, Power, power_of, PRACTICAL_R2, Verdict
@@ -67,7 +67,7 @@ def stage_reporter(progress: Callable[[str], None] | bool | None):
         yield bar.say if bar.enabled else (lambda _: None)
 
 
-def _extend(problem: _Problem, current: _Current) -> tuple[Extended, list[dict]]:
+def _extend(problem: Problem, current: Current) -> tuple[Extended, list[dict]]:
     """Extend: the nominal model with the selected terms, every coefficient from the final joint fit
     (earlier rounds' values move when later terms join); repeated causes merged into one finding."""
     n_nom = len(problem.names)
@@ -76,7 +76,7 @@ def _extend(problem: _Problem, current: _Current) -> tuple[Extended, list[dict]]
         finding["coefficient"] = float(problem.neutral[k] + current.p[n_nom + m])
         finding["std_error"] = float(current.std[n_nom + m])
     model = problem.model_of(current.slots, current.p)
-    return Extended(model.system, tuple(model.terms[k] for k in current.selected)), _merge_repeated_causes(findings)
+    return Extended(model.system, tuple(model.terms[k] for k in current.selected)), merge_repeated_causes(findings)
 
 
 @dataclasses.dataclass
@@ -95,14 +95,14 @@ class _Judgement:
     power: Power
 
 
-def _power(problem: _Problem, yard: _Yardstick, last: dict) -> Power:
+def _power(problem: Problem, yard: Yardstick, last: dict) -> Power:
     """The last round's test power (`_verdict.power_of`) over the record time its windows cover."""
     labels = {k: (problem.candidates[k].cause, problem.candidates[k].where(problem.system)) for k in last}
     tested_s = len(yard.window_runs) * problem.val_stride * problem.dt
     return power_of(last, labels, problem.options.alpha, tested_s)
 
 
-def _judge(problem: _Problem, nominal: _Nominal, yard: _Yardstick, current: _Current, last: dict, say) -> _Judgement:
+def _judge(problem: Problem, nominal: Nominal, yard: Yardstick, current: Current, last: dict, say) -> _Judgement:
     """Judge: `explained`, `unexplained`, `none` or `inconclusive` from the findings, the structure left and the
     test's power (`_verdict.decide`); then, where it is not `explained` and discovery is on, search beyond the
     vocabulary with the same held-out test."""
@@ -110,7 +110,7 @@ def _judge(problem: _Problem, nominal: _Nominal, yard: _Yardstick, current: _Cur
     power = _power(problem, yard, last)
     diverged = not np.isfinite(nominal.rmse[yard.ref_index])
     verdict = decide(bool(current.selected), current.structure, diverged, power)
-    gain = _gain(current.rmse, nominal.rmse, yard.ref_index) if current.selected else 0.0
+    gain = rmse_gain(current.rmse, nominal.rmse, yard.ref_index) if current.selected else 0.0
     judgement = _Judgement(verdict, model, findings, current.errors, current.rmse, current.structure, gain, {},
                            current.cv_errors, power)
     # Beyond the vocabulary: search, refit, the same held-out test. Also after a `none`: the generic
@@ -120,7 +120,7 @@ def _judge(problem: _Problem, nominal: _Nominal, yard: _Yardstick, current: _Cur
     return judgement
 
 
-def _discover(problem: _Problem, nominal: _Nominal, yard: _Yardstick, current: _Current, judgement: _Judgement, say):
+def _discover(problem: Problem, nominal: Nominal, yard: Yardstick, current: Current, judgement: _Judgement, say):
     o = problem.options
     held_out_errors = eqx.filter_jit(window_errors)
     last_errors = {}
@@ -128,8 +128,8 @@ def _discover(problem: _Problem, nominal: _Nominal, yard: _Yardstick, current: _
     def held_out(model):
         errors = np.asarray(held_out_errors(model, problem.val_windows))
         last_errors[id(model)] = errors
-        curve = _rmse_curve(errors, yard.steps, problem.position_index)
-        return _window_scores(errors[None], yard.n_ref, problem.state_scale)[0], curve, curve[yard.ref_index]
+        curve = rmse_curve(errors, yard.steps, problem.position_index)
+        return window_scores(errors[None], yard.n_ref, problem.state_scale)[0], curve, curve[yard.ref_index]
 
     system = problem.system
     found = discover(
@@ -151,12 +151,12 @@ def _discover(problem: _Problem, nominal: _Nominal, yard: _Yardstick, current: _
             errors = np.asarray(held_out_errors(found.model, problem.val_windows))
         judgement = _Judgement(decide(True, structure, False, judgement.power), found.model,
                                judgement.findings + found.findings, errors, found.held_out[1], structure,
-                               _gain(found.held_out[1], nominal.rmse, yard.ref_index), judgement.discovery,
+                               rmse_gain(found.held_out[1], nominal.rmse, yard.ref_index), judgement.discovery,
                                judgement.cv_errors, judgement.power)
     return judgement
 
 
-def _model_summary(problem: _Problem, model, errors, rmse, yard: _Yardstick, terms=None) -> ModelSummary:
+def _model_summary(problem: Problem, model, errors, rmse, yard: Yardstick, terms=None) -> ModelSummary:
     """The `nominal` / `extended` object: parameters by report name, held-out error curve, validation block."""
     system = model.system if isinstance(model, Extended) else model
     parameters = dict(zip(problem.names, map(float, nominal_values(system, problem.names))))
@@ -169,8 +169,8 @@ def _model_summary(problem: _Problem, model, errors, rmse, yard: _Yardstick, ter
                         validation=validation)
 
 
-def _data_summary(problem: _Problem, train, validation) -> DataSummary:
-    given = _as_records(train, "train")
+def _data_summary(problem: Problem, train, validation) -> DataSummary:
+    given = as_records(train, "train")
     held_out = problem.validation
     if validation is not None:
         validation_name = ", ".join(r.source or "(held out)" for r in held_out)
@@ -192,13 +192,13 @@ def _report(problem, nominal, yard, judgement, table, last, rounds, *, mode, sys
     notes = list(problem.notes)
     verdict = judgement.verdict
     if verdict == Verdict.UNEXPLAINED:
-        notes.append(_unexplained_note(judgement.structure))
+        notes.append(unexplained_note(judgement.structure))
     elif judgement.structure.significant:
         s = judgement.structure
         notes.append(f"The residual probe still explains {s.r2:.0%} of the held-out one-step residuals (p = {s.p_value:.2g}): "
                      f"significant, but a term capturing all of it would lower them by {1 - np.sqrt(1 - max(s.r2, 0)):.0%} "
                      f"at most, less than a structure of practical size (R2 >= {PRACTICAL_R2:.2f}; see the verdict rule).")
-    test = _test_summary(o.alpha, o.min_gain, judgement.power, verdict, named=bool(judgement.findings))
+    test = test_summary(o.alpha, o.min_gain, judgement.power, verdict, named=bool(judgement.findings))
     test["cross_fitting"] = (f"each of the {len(problem.folds)} training runs also held out in turn, every configuration "
                              "refitted on the other training runs; its windows pooled with the held-out runs'"
                              if problem.folds else None)
@@ -227,7 +227,7 @@ def _report(problem, nominal, yard, judgement, table, last, rounds, *, mode, sys
         candidates=table,
         notes=notes,
         horizon=yard.horizon,
-        runs=_per_run_table(problem, yard, nominal, judgement),
+        runs=per_run_table(problem, yard, nominal, judgement),
         test=test,
         nominal_model=nominal.model,
         extended_model=extended,
@@ -354,15 +354,15 @@ def diagnose(
             max_terms=max_terms, alpha=alpha, min_gain=min_gain, holdout_fraction=holdout_fraction,
             shortlist=shortlist, system_name=system_name, discovery=discovery, velocities=velocities,
             cross_fit=cross_fit, progress=progress)
-    _check_arguments(system, mode, max_terms)
+    check_arguments(system, mode, max_terms)
     if velocities not in ("auto", "measured"):
         raise UsageError(f"diagnose: `velocities` must be 'auto' or 'measured', got {velocities!r}")
-    options = _Options(horizons_s, reference_horizon_s, horizon_fraction, fit_window_s, max_terms, alpha, min_gain,
+    options = Options(horizons_s, reference_horizon_s, horizon_fraction, fit_window_s, max_terms, alpha, min_gain,
                        holdout_fraction, shortlist, discovery, velocities, cross_fit)
     _warn_data_faults(train, validation)
     with stage_reporter(progress) as say:
-        problem = _prepare(system, train, validation, candidates, mode, options)
-        nominal, yard, current, table, last, rounds = _forward_selection(problem, say)
+        problem = prepare_problem(system, train, validation, candidates, mode, options)
+        nominal, yard, current, table, last, rounds = forward_selection(problem, say)
         judgement = _judge(problem, nominal, yard, current, last, say)
         say("validation: fit % and residual tests of the nominal and the extended model ...")
         return _report(problem, nominal, yard, judgement, table, last, rounds, mode=mode, system_name=system_name,

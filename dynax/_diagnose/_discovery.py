@@ -43,7 +43,7 @@ from .._model._extensions import Discovered, Extended, Feature
 from ._fit import nominal_parameter_names
 from ._library import evaluate_features, feature_library, is_angle, named_equivalent, physical_readings, search_period
 from .._data._derivatives import savitzky_golay
-from ._residuals import _predicted_accelerations, _sg_window, acceleration_residuals, velocity_indices
+from ._residuals import predicted_accelerations, sg_window, acceleration_residuals, velocity_indices
 from ._sparse import group_cv_r2, sparse_search
 
 
@@ -94,7 +94,7 @@ def refit_spec(model: Extended, refit: Sequence[str]):
 @eqx.filter_jit
 def _acceleration_sensitivities(fitted, fixed, ts, xs_smooth, us, idx, us_before):
     p0, unravel = jax.flatten_util.ravel_pytree(fitted)
-    return jax.jacfwd(lambda p: _predicted_accelerations(eqx.combine(unravel(p), fixed), ts, xs_smooth, us, idx, us_before))(p0)
+    return jax.jacfwd(lambda p: predicted_accelerations(eqx.combine(unravel(p), fixed), ts, xs_smooth, us, idx, us_before))(p0)
 
 
 def force_residuals(model, records, refit: Sequence[str] = ()) -> tuple[np.ndarray, ...]:
@@ -120,12 +120,12 @@ def force_residuals(model, records, refit: Sequence[str] = ()) -> tuple[np.ndarr
         m = _mass_matrices(model, xs[:, :n])
         out.append(np.einsum("tij,tj->ti", m, resid))
         ts = traj.ts
-        smooth = savitzky_golay(ts, traj.xs, window=_sg_window(traj.dt), order=3)
+        smooth = savitzky_golay(ts, traj.xs, window=sg_window(traj.dt), order=3)
         us_before = jnp.concatenate([traj.us[:1], traj.us[:-1]])  # the held input's left limit, as the residuals use
         sens = np.asarray(_acceleration_sensitivities(fitted, fixed, ts, smooth, traj.us, idx, us_before))
         if sens.shape[-1]:  # the residual machinery smooths the prediction; its sensitivities alike
             flat = sens.reshape(len(ts), -1)
-            sens = np.asarray(savitzky_golay(ts, jnp.asarray(flat), window=_sg_window(traj.dt), order=3)).reshape(sens.shape)
+            sens = np.asarray(savitzky_golay(ts, jnp.asarray(flat), window=sg_window(traj.dt), order=3)).reshape(sens.shape)
         nuisance.append(-np.einsum("tij,tjp->tip", m, sens[keep]))
         xs_all.append(xs)
         us_all.append(np.asarray(traj.us)[keep])

@@ -4,7 +4,7 @@ import jax.numpy as jnp
 import numpy as np  # noqa: E402
 
 from .._simulate import FixedGrid  # noqa: E402
-from .._sim_error import _window_errors  # noqa: E402  (the one windowed rollout)
+from .._sim_error import rollouts_from_starts  # noqa: E402  (the one windowed rollout)
 
 
 def _subplots(*args, figsize, **kwargs):
@@ -43,7 +43,7 @@ def plot_measured_vs_simulated(trajectory, models: dict, path, *, segment_s: flo
     xs_pad = np.concatenate([np.asarray(trajectory.xs), np.repeat(np.asarray(trajectory.xs)[-1:], seg, axis=0)])
     us_pad = np.concatenate([np.asarray(trajectory.us), np.repeat(np.asarray(trajectory.us)[-1:], seg, axis=0)])
     for c, (label, system) in enumerate(models.items()):
-        errors, _ = _window_errors(system, jnp.asarray(ts_pad), jnp.asarray(xs_pad), jnp.asarray(us_pad),
+        errors, _ = rollouts_from_starts(system, jnp.asarray(ts_pad), jnp.asarray(xs_pad), jnp.asarray(us_pad),
                                          jnp.asarray(starts), seg, FixedGrid())
         for w, start in enumerate(starts):
             stop = min(start + seg, n - 1) + 1

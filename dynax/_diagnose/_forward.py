@@ -13,12 +13,12 @@ from .._model._extensions import AbstractInputTerm
 from .._model._system import AbstractSystem, size_parameter_names
 from ._fit import fit_configurations, make_windows, nominal_values, validate_configurations, Windows
 from ._horizon import Horizon
-from ._problem import _Problem
-from ._records import _reference_horizon
+from ._problem import Problem
+from ._records import reference_horizon
 from ._residuals import acceleration_residuals, Structure, structure_test
 from ._screening import screen
 from ._selection import choose_shortlist, judge_round, look_alike_tests, rank
-from ._summaries import _candidate_table, _rmse_curve, _round_summary, _window_scores
+from ._summaries import candidate_table, rmse_curve, round_summary, window_scores
 
 
 @dataclasses.dataclass
@@ -36,7 +36,7 @@ class _Batch:
 
 
 @dataclasses.dataclass
-class _Yardstick:
+class Yardstick:
     """Where held-out errors are judged: the reference horizon and the indices derived from it."""
 
     horizon: Horizon
@@ -54,7 +54,7 @@ class _Yardstick:
 
 
 @dataclasses.dataclass
-class _Current:
+class Current:
     """The model selection has reached: selected candidates, parameters, held-out scores and errors, structure."""
 
     slots: np.ndarray
@@ -70,7 +70,7 @@ class _Current:
 
 
 @dataclasses.dataclass
-class _Nominal:
+class Nominal:
     """The fitted nominal model and what it gets wrong on held-out data."""
 
     model: AbstractSystem
@@ -81,7 +81,7 @@ class _Nominal:
     cv_errors: np.ndarray
 
 
-def _fit_batch(problem: _Problem, slots, new, p_init, say) -> _Batch:
+def _fit_batch(problem: Problem, slots, new, p_init, say) -> _Batch:
     """Refit a batch of configurations on the training windows (one vmapped `fit_least_squares`) and
     roll every fitted model out on the held-out windows."""
     dtype = problem.family.neutral.dtype
@@ -97,7 +97,7 @@ def _fit_batch(problem: _Problem, slots, new, p_init, say) -> _Batch:
     return batch
 
 
-def _cross_fit(problem: _Problem, yard: _Yardstick, current_slots, new, batch: _Batch, say) -> _Batch:
+def _cross_fit(problem: Problem, yard: Yardstick, current_slots, new, batch: _Batch, say) -> _Batch:
     """Cross-fitting: refit the batch's configurations once per training run with that run left out
     (its fit windows at weight zero: the same compiled fit), and simulate each on the left-out run's
     windows of the reference horizon. Each fold's fit starts from the batch's fit on all training runs.
@@ -150,15 +150,15 @@ def _cross_fit(problem: _Problem, yard: _Yardstick, current_slots, new, batch: _
     return dataclasses.replace(batch, cv_errors=cv_errors)
 
 
-def _scores(problem: _Problem, yard: _Yardstick, errors, cv_errors):
+def _scores(problem: Problem, yard: Yardstick, errors, cv_errors):
     """Each configuration's window scores: the held-out windows, then the cross-fitted ones."""
-    scores = _window_scores(errors, yard.n_ref, problem.state_scale)
+    scores = window_scores(errors, yard.n_ref, problem.state_scale)
     if yard.cv_windows is None:
         return scores
-    return np.concatenate([scores, _window_scores(cv_errors, yard.n_ref, problem.state_scale)], axis=1)
+    return np.concatenate([scores, window_scores(cv_errors, yard.n_ref, problem.state_scale)], axis=1)
 
 
-def _screen(problem: _Problem, current_slots, current_p, remaining, round_, say):
+def _screen(problem: Problem, current_slots, current_p, remaining, round_, say):
     """Screen: every remaining candidate's linearised held-out gain on one-step residuals; the shortlist."""
     say(f"round {round_ + 1}: screening {len(remaining)} candidates on one-step residuals ...")
     dtype = problem.family.neutral.dtype
@@ -171,7 +171,7 @@ def _screen(problem: _Problem, current_slots, current_p, remaining, round_, say)
     return gains, deltas, short
 
 
-def _refit(problem: _Problem, current_slots, current_p, short, remaining, deltas, round_, say) -> tuple[np.ndarray, _Batch]:
+def _refit(problem: Problem, current_slots, current_p, short, remaining, deltas, round_, say) -> tuple[np.ndarray, _Batch]:
     """Refit: the current model (member 0) and each shortlisted candidate added to it, jointly with the nominal parameters."""
     if short:
         say(f"round {round_ + 1}: simulation-error refit of "
@@ -187,12 +187,12 @@ def _refit(problem: _Problem, current_slots, current_p, short, remaining, deltas
     return new, _fit_batch(problem, np.tile(current_slots, (shortlist + 1, 1)), new, p_init, say)
 
 
-def _fit_nominal(problem: _Problem, batch: _Batch, say) -> tuple[AbstractSystem, _Yardstick]:
+def _fit_nominal(problem: Problem, batch: _Batch, say) -> tuple[AbstractSystem, Yardstick]:
     """Fit the nominal model (member 0 of the first batch) and choose the reference horizon from its training error."""
     model = problem.model_of(-np.ones(problem.options.max_terms, int), batch.p[0]).system
     _note_moved(problem, batch.p[0])
     o = problem.options
-    horizon = _reference_horizon(model, problem.train, problem.candidates_s, o.reference_horizon_s, o.horizon_fraction,
+    horizon = reference_horizon(model, problem.train, problem.candidates_s, o.reference_horizon_s, o.horizon_fraction,
                                  problem.val_stride, problem.position_index, problem.dt)
     horizons = problem.horizons
     if horizon.seconds not in horizons:
@@ -202,7 +202,7 @@ def _fit_nominal(problem: _Problem, batch: _Batch, say) -> tuple[AbstractSystem,
     window_runs = problem.window_runs
     if cv_windows is not None:
         window_runs = np.concatenate([window_runs, len(problem.validation) + np.asarray(cv_windows.starts)[:, 0]])
-    yard = _Yardstick(horizon=horizon, horizons=horizons, steps=np.maximum(np.round(horizons / problem.dt).astype(int), 1),
+    yard = Yardstick(horizon=horizon, horizons=horizons, steps=np.maximum(np.round(horizons / problem.dt).astype(int), 1),
                       n_ref=n_ref, overlap=max(1, int(np.ceil(n_ref / problem.val_stride))),
                       ref_index=int(np.flatnonzero(np.isclose(horizons, horizon.seconds))[0]),
                       cv_windows=cv_windows, window_runs=window_runs, n_val=len(problem.window_runs))
@@ -215,7 +215,7 @@ def _fit_nominal(problem: _Problem, batch: _Batch, say) -> tuple[AbstractSystem,
 OTHER_MACHINE_FACTOR = 2.0
 
 
-def _note_moved(problem: _Problem, p) -> None:
+def _note_moved(problem: Problem, p) -> None:
     """Say so when the refit moved a size parameter (`size_parameter_names`) by more than
     `OTHER_MACHINE_FACTOR`: the nominal model describes another machine (`DoublePendulum()`'s Drake defaults on a
     much lighter rig), and a refit from so far need not reach this one (it can stop at several times
@@ -237,17 +237,17 @@ def _note_moved(problem: _Problem, p) -> None:
             "with its friction set to zero; `dynax diagnose` without --nominal does this).")
 
 
-def _show_what_is_wrong(problem: _Problem, model, batch: _Batch, yard: _Yardstick, say) -> _Nominal:
+def _show_what_is_wrong(problem: Problem, model, batch: _Batch, yard: Yardstick, say) -> Nominal:
     """Show what is wrong: the nominal model's held-out simulation error and the structure left in its residuals."""
-    rmse = _rmse_curve(batch.errors[0], yard.steps, problem.position_index)
+    rmse = rmse_curve(batch.errors[0], yard.steps, problem.position_index)
     say(f"reference horizon {yard.horizon.seconds:g} s ({yard.horizon.rule}); nominal model: held-out position RMSE "
         f"{rmse[yard.ref_index]:.4g} there; probing its one-step residuals for structure ...")
     structure = structure_test(model, problem.train, problem.validation)
-    return _Nominal(model=model, errors=batch.errors[0], rmse=rmse, structure=structure, cost=float(batch.cost[0]),
+    return Nominal(model=model, errors=batch.errors[0], rmse=rmse, structure=structure, cost=float(batch.cost[0]),
                     cv_errors=batch.cv_errors[0])
 
 
-def _select(problem: _Problem, yard: _Yardstick, current: _Current, results, scores, round_, say) -> dict | None:
+def _select(problem: Problem, yard: Yardstick, current: Current, results, scores, round_, say) -> dict | None:
     """Select: the admissible candidate with the largest held-out gain, as a finding; `None` if none passed."""
     admissible = [k for k in results if results[k]["significant"]]
     if not admissible:
@@ -281,7 +281,7 @@ def _select(problem: _Problem, yard: _Yardstick, current: _Current, results, sco
             "look_alikes": alternatives, "confidence": confidence, "runs_helped": f"{r['runs_helped']}/{r['n_runs']}"}
 
 
-def _accept(problem: _Problem, current: _Current, finding: dict, results, batch: _Batch, scores, say) -> _Current:
+def _accept(problem: Problem, current: Current, finding: dict, results, batch: _Batch, scores, say) -> Current:
     """Add the selected candidate to the current model (its coefficient moves into the next free slot)."""
     best = finding.pop("index")
     r = results[best]
@@ -295,7 +295,7 @@ def _accept(problem: _Problem, current: _Current, finding: dict, results, batch:
     say("probing the extended model's residuals for structure ...")
     structure = structure_test(problem.model_of(slots, p), problem.train, problem.validation)
     # The probe never vetoes: selection goes on while a candidate's own held-out test passes.
-    return _Current(slots=slots, p=p, std=std, score=scores[r["i"]], errors=batch.errors[r["i"]], rmse=r["rmse"],
+    return Current(slots=slots, p=p, std=std, score=scores[r["i"]], errors=batch.errors[r["i"]], rmse=r["rmse"],
                     structure=structure, cv_errors=batch.cv_errors[r["i"]], selected=selected,
                     findings=current.findings + [finding])
 
@@ -333,11 +333,11 @@ def _complete_look_alikes(problem, yard, cur_slots, cur_p, short, remaining, del
     return short, batch, scores, results
 
 
-def _forward_selection(problem: _Problem, say):
+def forward_selection(problem: Problem, say):
     """Fit the nominal model, show what is wrong, then per round screen, refit and select.
 
     **Returns:** `(nominal, yardstick, current, candidate_table, last_round_results, rounds)`; `rounds`
-    one `_round_summary` per round.
+    one `round_summary` per round.
     """
     o = problem.options
     slots = -np.ones(o.max_terms, int)
@@ -356,7 +356,7 @@ def _forward_selection(problem: _Problem, say):
             batch = _cross_fit(problem, yard, cur_slots, new, batch, say)
             nominal = _show_what_is_wrong(problem, model, batch, yard, say)
             scores = _scores(problem, yard, batch.errors, batch.cv_errors)
-            current = _Current(slots=slots, p=batch.p[0].copy(), std=batch.std[0].copy(), score=scores[0],
+            current = Current(slots=slots, p=batch.p[0].copy(), std=batch.std[0].copy(), score=scores[0],
                                errors=batch.errors[0], rmse=nominal.rmse, structure=nominal.structure,
                                cv_errors=batch.cv_errors[0])
         else:
@@ -373,9 +373,9 @@ def _forward_selection(problem: _Problem, say):
                                                               batch, scores, results, judge, round_, say)
         last = results
         if round_ == 0:
-            table = _candidate_table(problem.system, problem.candidates, remaining, gains, results, problem.neutral, batch.cost)
+            table = candidate_table(problem.system, problem.candidates, remaining, gains, results, problem.neutral, batch.cost)
         finding = _select(problem, yard, current, results, scores, round_, say)
-        rounds.append(_round_summary(problem, yard, round_, current, remaining, results, finding))
+        rounds.append(round_summary(problem, yard, round_, current, remaining, results, finding))
         if finding is None:
             break
         current = _accept(problem, current, finding, results, batch, scores, say)
@@ -385,7 +385,7 @@ def _forward_selection(problem: _Problem, say):
     return nominal, yard, current, table, last, rounds
 
 
-def _start_value(problem: _Problem, k: int, delta_screened, start):
+def _start_value(problem: Problem, k: int, delta_screened, start):
     """A candidate's starting coefficient: the screening's step if physical and moderate, else the default start."""
     term, scale = problem.candidates[k], problem.scales[k]
     ok = np.isfinite(delta_screened) and problem.physical(k, delta_screened) and abs(delta_screened) < 20 * scale

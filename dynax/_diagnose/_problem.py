@@ -1,5 +1,5 @@
 """The problem one diagnosis solves: the modes (`Refit`, `Known`), the options, and the prepared
-records, candidate family, identifiable candidates and windows (`_prepare`, step 0 of `diagnose`).
+records, candidate family, identifiable candidates and windows (`prepare_problem`, step 0 of `diagnose`).
 """
 
 import dataclasses
@@ -23,7 +23,7 @@ from ._candidates import (
     structurally_equivalent,
 )
 from ._fit import Family, make_windows, nominal_parameter_names, nominal_values, Windows
-from ._records import _fit_window, _horizon_grid, _prepare_records, _velocity_estimates
+from ._records import fit_window, horizon_grid, prepare_records, velocity_estimates
 from ._selection import on_physical_side
 
 
@@ -61,7 +61,7 @@ class Known(eqx.Module):
 
 
 @dataclasses.dataclass
-class _Options:
+class Options:
     """The knobs of one diagnosis (see `diagnose`'s arguments)."""
 
     horizons_s: Sequence[float]
@@ -79,7 +79,7 @@ class _Options:
 
 
 @dataclasses.dataclass
-class _Problem:
+class Problem:
     """Everything fixed for one diagnosis: records, candidates, the candidate family, windows."""
 
     system: AbstractSystem
@@ -102,7 +102,7 @@ class _Problem:
     val_stride: int
     horizons: np.ndarray
     candidates_s: np.ndarray
-    options: _Options
+    options: Options
     velocities: str = "as measured"
     # The training records each held out in turn (leave-one-run-out cross-fitting); empty when off.
     folds: tuple = ()
@@ -145,7 +145,7 @@ class _Problem:
         return self.family.model_for(jnp.asarray(slots), jnp.asarray(-1), jnp.asarray(p, self.family.neutral.dtype))
 
 
-def _check_arguments(system, mode, max_terms) -> None:
+def check_arguments(system, mode, max_terms) -> None:
     if not isinstance(system, AbstractSystem) or isinstance(system, Extended):
         raise UsageError(f"diagnose: `system` must be a nominal dynax system, got {type(system).__name__}")
     if not isinstance(mode, (Refit, Known)):
@@ -154,7 +154,7 @@ def _check_arguments(system, mode, max_terms) -> None:
         raise UsageError(f"diagnose: `max_terms` must be at least 1, got {max_terms}")
 
 
-def _refit_names(system, mode) -> tuple[str, ...]:
+def names_to_refit(system, mode) -> tuple[str, ...]:
     names = nominal_parameter_names(system)
     if isinstance(mode, Known):
         return ()
@@ -166,7 +166,7 @@ def _refit_names(system, mode) -> tuple[str, ...]:
     return refit
 
 
-def _candidate_family(system, candidates, refit_names, train_records):
+def candidate_family(system, candidates, refit_names, train_records):
     """The `Family` (nominal system with every candidate at neutral), the candidates' scales and start values."""
     names = nominal_parameter_names(system)
     dtype = jnp.result_type(float)
@@ -222,19 +222,19 @@ def _identifiable(system, candidates, family, refit_names, partners, mode, sensi
     return searchable, not_identifiable
 
 
-def _prepare(system, train, validation, candidates, mode, options: _Options) -> _Problem:
+def prepare_problem(system, train, validation, candidates, mode, options: Options) -> Problem:
     """Step 0: records on one grid, the candidates and their identifiability, the training and held-out windows."""
     notes: list[str] = []
-    train_records, validation_records, dt = _prepare_records(system, train, validation, options.holdout_fraction, notes)
+    train_records, validation_records, dt = prepare_records(system, train, validation, options.holdout_fraction, notes)
     _note_record_differences(system, train_records + (validation_records if validation is not None else []), notes)
-    train_records, validation_records, velocities = _velocity_estimates(system, train_records, validation_records,
+    train_records, validation_records, velocities = velocity_estimates(system, train_records, validation_records,
                                                                         options.velocities, notes)
     candidates = tuple(default_candidates(system, train_records) if candidates is None else candidates)
     if not candidates:
         raise UsageError("diagnose: `candidates` is empty")
     Extended(system, candidates)  # checks every candidate fits this system
-    refit_names = _refit_names(system, mode)
-    family, scales, inits = _candidate_family(system, candidates, refit_names, train_records)
+    refit_names = names_to_refit(system, mode)
+    family, scales, inits = candidate_family(system, candidates, refit_names, train_records)
     sensitivities = sampled_sensitivities(family)  # the structural tests' one sample of the vector field's derivatives
     partners = held_partners(family, 1.0 - np.asarray(family.refit), sensitivities=sensitivities)
     searchable, not_identifiable = _identifiable(system, candidates, family, refit_names, partners, mode, sensitivities)
@@ -242,9 +242,9 @@ def _prepare(system, train, validation, candidates, mode, options: _Options) -> 
     equivalents = structurally_equivalent(family, family.refit, [k for k in searchable if partners[k] is None],
                                           sensitivities=sensitivities)
     _note_held(system, family, refit_names, mode, notes)
-    fit_window_s = _fit_window(system, train_records, options.fit_window_s, options.horizon_fraction, dt, notes)
+    fit_window_s = fit_window(system, train_records, options.fit_window_s, options.horizon_fraction, dt, notes)
     n_fit = max(2, int(round(fit_window_s / dt)))
-    horizons, candidates_s = _horizon_grid(options.horizons_s, options.reference_horizon_s, train_records,
+    horizons, candidates_s = horizon_grid(options.horizons_s, options.reference_horizon_s, train_records,
                                            validation_records, notes)
     val_stride = max(1, int(round(0.05 / dt)))
     val_windows = make_windows(validation_records, int(round(horizons.max() / dt)), val_stride)
@@ -259,7 +259,7 @@ def _prepare(system, train, validation, candidates, mode, options: _Options) -> 
                      "turn, every configuration refitted on the other training runs (leave-one-run-out), and the test "
                      "pools those windows with the held-out ones; the gains reported are the held-out runs' "
                      "(cross_fit=False tests on the held-out runs alone).")
-    return _Problem(
+    return Problem(
         system=system, train=train_records, validation=validation_records, dt=dt, notes=notes, candidates=candidates,
         refit_names=refit_names, family=family, scales=scales, inits=inits, searchable=searchable,
         not_identifiable=not_identifiable, partners=partners, fit_window_s=fit_window_s,

@@ -15,7 +15,7 @@ from .._data._velocities import check_trajectory_velocities
 from .._errors import DataError, UsageError
 from .._identify._defaults import position_fit_window, with_velocities_from_positions
 from ._horizon import Horizon, position_spread, predictability_horizon, relative_position_error
-from ._residuals import _sg_window
+from ._residuals import sg_window
 
 
 MIN_BATCHES = 10  # the data-driven reference horizon leaves the paired test at least this many batches
@@ -25,7 +25,7 @@ MIN_BATCHES = 10  # the data-driven reference horizon leaves the paired test at 
 HOLDOUT_FRACTION = 0.3
 
 
-def _as_records(data, name) -> list[Trajectory]:
+def as_records(data, name) -> list[Trajectory]:
     if isinstance(data, Trajectory):
         return [data]
     if isinstance(data, Sequence) and data and all(isinstance(t, Trajectory) for t in data):
@@ -33,12 +33,12 @@ def _as_records(data, name) -> list[Trajectory]:
     raise UsageError(f"diagnose: `{name}` must be a Trajectory or a non-empty sequence of them, got {type(data).__name__}")
 
 
-def _prepare_records(system, train, validation, holdout_fraction, notes):
+def prepare_records(system, train, validation, holdout_fraction, notes):
     """The training and held-out runs, checked against `system`, on one uniform grid, in the default float type.
 
     Runs are kept apart (never concatenated): every window lies inside one run.
     """
-    train_records = _as_records(train, "train")
+    train_records = as_records(train, "train")
     for rec in train_records:
         if tuple(rec.state_names) != tuple(system.state_names) or tuple(rec.input_names) != tuple(system.input_names):
             raise UsageError(
@@ -54,7 +54,7 @@ def _prepare_records(system, train, validation, holdout_fraction, notes):
             f"No validation record was given: the last {holdout_fraction:.0%} of each training record was held out."
         )
     else:
-        validation_records = _as_records(validation, "validation")
+        validation_records = as_records(validation, "validation")
         for rec in validation_records:
             check_trajectory_velocities(rec)
     dt = float(np.median(np.concatenate([np.diff(np.asarray(r.ts)) for r in train_records + validation_records])))
@@ -64,7 +64,7 @@ def _prepare_records(system, train, validation, holdout_fraction, notes):
         notes.append(f"The sampling was irregular; the records were resampled to {dt * 1000:.3g} ms (states linearly, inputs as held).")
     # One-step residuals drop a smoothing window (about 0.1 s) at each end of a record; a record needs
     # room for that and as much again to be judged on.
-    need = 4 * _sg_window(dt)
+    need = 4 * sg_window(dt)
     for kind, records in (("training", train_records), ("held-out", validation_records)):
         for rec in records:
             if len(rec) < need:
@@ -78,7 +78,7 @@ def _prepare_records(system, train, validation, holdout_fraction, notes):
     return [_cast(r, dtype) for r in train_records], [_cast(r, dtype) for r in validation_records], dt
 
 
-def _velocity_estimates(system, train_records, validation_records, velocities, notes):
+def velocity_estimates(system, train_records, validation_records, velocities, notes):
     """With `velocities="auto"`, the records of a system with joint positions and velocities get the
     velocities of a local cubic fit of their positions wherever their measured velocities are noisy."""
     joints = tuple(system.joint_names)
@@ -102,7 +102,7 @@ def _velocity_estimates(system, train_records, validation_records, velocities, n
     return out[:n], out[n:], how
 
 
-def _horizon_grid(horizons_s, reference_horizon_s, train_records, validation_records, notes):
+def horizon_grid(horizons_s, reference_horizon_s, train_records, validation_records, notes):
     """The reported horizons (at most half the shortest held-out record) and the candidates for the reference horizon."""
     shortest = min(r.duration for r in validation_records)
     horizons = np.asarray([h for h in horizons_s if h <= 0.5 * shortest + 1e-9] or [min(horizons_s)], float)
@@ -123,7 +123,7 @@ def _horizon_grid(horizons_s, reference_horizon_s, train_records, validation_rec
     return horizons, candidates_s if candidates_s.size else np.asarray([horizons.min()])
 
 
-def _reference_horizon(nominal_model, train_records, candidates_s, given, fraction, stride, position_index, dt):
+def reference_horizon(nominal_model, train_records, candidates_s, given, fraction, stride, position_index, dt):
     """The reference horizon: `given`, or the predictability horizon of the nominal model on the training runs."""
     from .._sim_error import simulation_error  # the public rollout over windows
 
@@ -136,7 +136,7 @@ def _reference_horizon(nominal_model, train_records, candidates_s, given, fracti
     return predictability_horizon(relative, dt, candidates_s, fraction)
 
 
-def _fit_window(system, train_records, given, fraction, dt, notes) -> float:
+def fit_window(system, train_records, given, fraction, dt, notes) -> float:
     """The fit windows: `given`, or 2.5 times the starting model's predictability horizon on the training runs, in [0.25, 1] s."""
     if given is not None:
         return float(given)
@@ -144,7 +144,7 @@ def _fit_window(system, train_records, given, fraction, dt, notes) -> float:
     candidates_s = np.round(np.arange(0.1, longest + 1e-9, 0.05), 6)
     if candidates_s.size == 0:
         return longest
-    start = _reference_horizon(system, train_records, candidates_s, None, fraction, max(1, int(round(0.05 / dt))),
+    start = reference_horizon(system, train_records, candidates_s, None, fraction, max(1, int(round(0.05 / dt))),
                                list(system.position_indices), dt)
     window = float(np.clip(2.5 * start.seconds, 0.25, longest))
     if window < longest:

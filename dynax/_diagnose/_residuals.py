@@ -33,7 +33,7 @@ from .._solvers import RK4
 from ._probe import cross_validated_ridge, ridge_fit
 
 
-def _sg_window(dt: float) -> int:
+def sg_window(dt: float) -> int:
     w = int(round(0.1 / dt)) | 1
     return max(w, 7)
 
@@ -44,7 +44,7 @@ _HIDDEN_GRID = FixedGrid(solver=RK4(scan_kind="lax"), substeps=4)
 
 
 @eqx.filter_jit
-def _hidden_trajectory(model, ts, us):
+def hidden_trajectory(model, ts, us):
     """Internal states of the input terms along the recorded inputs, from rest under the first input
     (`simulate` on `InputStates`, RK4 with 4 steps per sample)."""
     n_hidden = model.n_states - model.system.n_states if isinstance(model, Extended) else 0
@@ -56,13 +56,13 @@ def _hidden_trajectory(model, ts, us):
 
 
 @eqx.filter_jit
-def _predicted_accelerations(model, ts, xs_smooth, us, idx, us_before):
+def predicted_accelerations(model, ts, xs_smooth, us, idx, us_before):
     """The model's acceleration at each sample: the mean of its left and right limits under the held input.
 
     The input is a zero-order hold, so the true acceleration jumps at every sample: at t_k it is
     the mean of the left limit (input u_{k-1}) and the right limit (u_k).
     """
-    zs = _hidden_trajectory(model, ts, us)
+    zs = hidden_trajectory(model, ts, us)
     full = jnp.concatenate([xs_smooth, zs], axis=1)
     field = jax.vmap(lambda t, x, u: model.vector_field(t, x, u))
     return 0.5 * (field(ts, full, us) + field(ts, full, us_before))[:, idx]
@@ -71,7 +71,7 @@ def _predicted_accelerations(model, ts, xs_smooth, us, idx, us_before):
 @eqx.filter_jit
 def _interval_accelerations(model, ts, xs_smooth, us, idx):
     """The model's mean acceleration over each sample interval under the held input (trapezoid rule)."""
-    zs = _hidden_trajectory(model, ts, us)
+    zs = hidden_trajectory(model, ts, us)
     full = jnp.concatenate([xs_smooth, zs], axis=1)
     field = jax.vmap(lambda t, x, u: model.vector_field(t, x, u)[idx])
     return 0.5 * (field(ts[:-1], full[:-1], us[:-1]) + field(ts[1:], full[1:], us[:-1]))
@@ -136,12 +136,12 @@ def acceleration_residuals(model, trajectory):
     nominal = model.system if isinstance(model, Extended) else model
     ts = trajectory.ts
     dt = trajectory.dt
-    w = _sg_window(dt)
+    w = sg_window(dt)
     xs_smooth = savitzky_golay(ts, trajectory.xs, window=w, order=3)
     idx = velocity_indices(nominal)
     measured = savitzky_golay(ts, trajectory.xs[:, idx], window=w, order=3, deriv=1)
     model, us, us_before = exact_delays(model, trajectory)
-    predicted = _predicted_accelerations(model, ts, xs_smooth, us, jnp.asarray(idx), us_before)
+    predicted = predicted_accelerations(model, ts, xs_smooth, us, jnp.asarray(idx), us_before)
     # The measured acceleration is a local polynomial fit; smoothing the prediction with the same
     # filter compares like with like.
     predicted = savitzky_golay(ts, predicted, window=w, order=3)

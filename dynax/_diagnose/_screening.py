@@ -31,7 +31,7 @@ import numpy as np
 
 from .._data._derivatives import savitzky_golay
 from .._model._extensions import AbstractInputTerm
-from ._residuals import _hidden_trajectory, _sg_window, velocity_indices
+from ._residuals import hidden_trajectory, sg_window, velocity_indices
 
 
 @eqx.filter_jit
@@ -59,9 +59,9 @@ def screening_data(family, values, coefficients, trajectory, residual_fn):
     model = family.build(jnp.asarray(values), jnp.asarray(coefficients))
     r, _, _, keep = residual_fn(model, trajectory)
     ts = trajectory.ts
-    w = _sg_window(trajectory.dt)
+    w = sg_window(trajectory.dt)
     xs = savitzky_golay(ts, trajectory.xs, window=w, order=3)
-    zs = _hidden_trajectory(model, ts, trajectory.us)
+    zs = hidden_trajectory(model, ts, trajectory.us)
     us = trajectory.us
     us_before = jnp.concatenate([us[:1], us[:-1]])
     J_nom, J_c, J_u = _directions(family, jnp.asarray(values), jnp.asarray(coefficients), xs, zs, us, us_before)

@@ -2,7 +2,7 @@
 whether its look-alikes are told apart.
 
 A round's shortlisted candidates are refitted (`_diagnose._refit`) and scored on held-out windows
-(`_summaries._window_scores`); `judge_round` applies the rules (significance under
+(`_summaries.window_scores`); `judge_round` applies the rules (significance under
 Benjamini-Hochberg, the smallest gain, physical signs, agreement across runs, no harm on the
 held-out runs), `rank` orders those that pass, and `look_alike_tests` says whether the named one is
 told apart from its look-alikes. The statistics themselves are in `_statistics.py`.
@@ -13,7 +13,7 @@ import numpy as np
 from .._model._system import violated_bound
 from ._fit import nominal_values
 from ._statistics import benjamini_hochberg, helps_on_most_runs, log_ratio_differences, paired_block_test
-from ._summaries import _rmse_curve
+from ._summaries import rmse_curve
 
 
 def window_gain(score_ref, score_new) -> float:
@@ -117,7 +117,7 @@ def judge_round(physical, short, remaining, selected, n_nom, p_j, std_j, err_j, 
                  "held_out": bool(gain_held_out > 0)}
         results[k] = dict(i=i, delta=delta, std=std_j[i, -1], gain_windows=gain_windows, gain_held_out=gain_held_out,
                           p=test.p_value, test=test,
-                          rmse=_rmse_curve(err_j[i], steps, position_index), physical=ok,
+                          rmse=rmse_curve(err_j[i], steps, position_index), physical=ok,
                           runs_helped=helped, n_runs=len(test.per_run), n_tested=len(remaining), rules=rules,
                           significant=all(rules.values()))
     return results

@@ -11,7 +11,7 @@ import numpy as np
 from ._residuals import Structure
 
 
-def _merge_repeated_causes(findings: list[dict]) -> list[dict]:
+def merge_repeated_causes(findings: list[dict]) -> list[dict]:
     """One finding per cause and place. The wind's north, east and down components are separate
     candidates at `world`, so a wind blowing in two directions is found in two rounds; report it
     once: `coefficient` is the wind speed (the norm of the components, its standard error
@@ -64,7 +64,7 @@ _RULE_TEXT = {
 }
 
 
-def _round_summary(problem, yard, round_, current, remaining, results, finding) -> dict:
+def round_summary(problem, yard, round_, current, remaining, results, finding) -> dict:
     """One round of the forward selection for the report: every refitted candidate's held-out gains and p,
     and whether it was selected, passed but lost to a larger held-out gain, or which rules stopped it."""
     system, o = problem.system, problem.options
@@ -76,7 +76,7 @@ def _round_summary(problem, yard, round_, current, remaining, results, finding) 
             "cause": term.cause, "where": term.where(system), "parameter": term.parameter_name(system),
             "coefficient": float(problem.neutral[k] + r["delta"]),
             "gain": float(r["gain_held_out"]), "gain_pooled": float(r["gain_windows"]),
-            "sim_error_gain": _finite_or_none(_gain(r["rmse"], current.rmse, yard.ref_index)), "p_value": float(r["p"]),
+            "sim_error_gain": _finite_or_none(rmse_gain(r["rmse"], current.rmse, yard.ref_index)), "p_value": float(r["p"]),
             "runs_helped": f"{r['runs_helped']}/{r['n_runs']}",
             "outcome": "selected" if k == selected else ("passed" if r["significant"] else "stopped"),
             "stopped_by": [_RULE_TEXT[name](r, o) for name, ok in r["rules"].items() if not ok],
@@ -97,16 +97,16 @@ def _finite_or_none(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
-def _gain(rmse, nominal_rmse, ref) -> float:
+def rmse_gain(rmse, nominal_rmse, ref) -> float:
     return float(1 - rmse[ref] / nominal_rmse[ref]) if np.isfinite(nominal_rmse[ref]) else 0.0
 
 
-def _window_scores(errors, n_ref, state_scale):  # (batch, window, step, state) -> (batch, window)
+def window_scores(errors, n_ref, state_scale):  # (batch, window, step, state) -> (batch, window)
     e = np.nan_to_num(errors[:, :, 1 : n_ref + 1] / state_scale, nan=1e3, posinf=1e3, neginf=1e3)
     return np.mean(np.minimum(e**2, 1e6), axis=(2, 3))
 
 
-def _rmse_curve(errors, steps, position_index):  # (window, step, state) -> per horizon
+def rmse_curve(errors, steps, position_index):  # (window, step, state) -> per horizon
     at = errors[:, steps][:, :, position_index]
     finite = np.isfinite(at).all(axis=(1, 2))
     if finite.mean() < 0.95:
@@ -114,7 +114,7 @@ def _rmse_curve(errors, steps, position_index):  # (window, step, state) -> per 
     return np.sqrt(np.mean(at[finite] ** 2, axis=(0, 2)))
 
 
-def _candidate_table(system, candidates, remaining, gains_scr, results, neutral, cost):
+def candidate_table(system, candidates, remaining, gains_scr, results, neutral, cost):
     """Every candidate of the first round: screening gain, and for those refitted the held-out gain, p,
     coefficient, runs helped and `training_gain` (the reduction of the training fit's cost: a candidate
     that lowers it but not the held-out error was fitted to what does not transfer)."""
@@ -131,7 +131,7 @@ def _candidate_table(system, candidates, remaining, gains_scr, results, neutral,
     return table
 
 
-def _test_summary(alpha, min_gain, power, verdict, named=False) -> dict:
+def test_summary(alpha, min_gain, power, verdict, named=False) -> dict:
     """How candidates were judged; with `none` or `inconclusive` the gain the test could have detected, and
     wherever nothing was named the `power` block (`_verdict.Power`)."""
     detectable = None
@@ -153,7 +153,7 @@ def _test_summary(alpha, min_gain, power, verdict, named=False) -> dict:
     }
 
 
-def _per_run_table(problem, yard, nominal, judgement) -> list[dict]:
+def per_run_table(problem, yard, nominal, judgement) -> list[dict]:
     """Position RMSE at the reference horizon on each held-out run, nominal and extended; with cross-fitting
     also on each training run, simulated by the models refitted without it (`held_out: "cross-fitted"`)."""
     n_ref, index = np.asarray([yard.n_ref]), problem.position_index
@@ -165,8 +165,8 @@ def _per_run_table(problem, yard, nominal, judgement) -> list[dict]:
     for kind, records, window_runs, err_nominal, err_extended, offset in parts:
         for r, rec in enumerate(records):
             mine = window_runs == r
-            nom = _rmse_curve(err_nominal[mine], n_ref, index)[0]
-            ext = _rmse_curve(err_extended[mine], n_ref, index)[0]
+            nom = rmse_curve(err_nominal[mine], n_ref, index)[0]
+            ext = rmse_curve(err_extended[mine], n_ref, index)[0]
             fine = np.isfinite(nom) and np.isfinite(ext) and nom > 0
             name = rec.source or (f"held-out run {r + 1}" if kind == "validation" else f"train run {r + 1}")
             rows.append({"run": name, "held_out": kind, "n_windows": int(mine.sum()),
@@ -176,7 +176,7 @@ def _per_run_table(problem, yard, nominal, judgement) -> list[dict]:
     return rows
 
 
-def _unexplained_note(s: Structure) -> str:
+def unexplained_note(s: Structure) -> str:
     return ("Structure is left that the candidates do not explain: the residual probe explains "
             f"{s.r2:.0%} of the held-out one-step residuals (p = {s.p_value:.2g}), mostly through "
             + ", ".join(f"{n} ({w:.0%})" for n, w in s.top_features[:3])

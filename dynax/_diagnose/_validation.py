@@ -26,7 +26,7 @@ These are reported, not used for the verdict (the held-out paired test and the p
 import numpy as np
 
 from .._metrics import cross_correlation_test, nrmse_fit, whiteness_test
-from ._residuals import _sg_window, acceleration_residuals
+from ._residuals import sg_window, acceleration_residuals
 from ._result import ResidualTests, Validation
 
 
@@ -48,7 +48,7 @@ def residual_tests(model, record, *, max_lag: int = 25, confidence: float = 0.99
     is lowered to a quarter of what is left. `None` if fewer than 20 residuals are left (or one is not finite).
     """
     residuals, _, _, keep = acceleration_residuals(model, record)
-    stride = _sg_window(record.dt)
+    stride = sg_window(record.dt)
     r = np.asarray(residuals)[::stride]
     us = np.asarray(record.us)[keep][::stride]
     n = r.shape[0]

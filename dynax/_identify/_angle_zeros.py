@@ -51,7 +51,7 @@ import numpy as np
 from .._data._trajectory import Trajectory
 from ._equations import Dynamic, dynamic_rows_of, dynamic_signals, stacked_dynamic_equations
 from ._offsets import driven_joints, offset_groups, record_labels
-from ._regressors import _split, with_friction
+from ._regressors import split_terms, with_friction
 
 STEP = 1e-4  # [rad] the forward differences' step
 MAX_STEPS = 8  # Gauss-Newton steps at most
@@ -111,14 +111,14 @@ class AngleZeros:
 
 def applies(system) -> bool:
     """Whether every joint of `system` is an angle that an input drives (a two-link arm)."""
-    base = _split(system)[0]
+    base = split_terms(system)[0]
     joints = getattr(base, "joint_names", ()) or ()
     driven = driven_joints(system)
     return bool(joints) and driven is not None and set(base.angle_indices) == set(range(len(joints))) == set(driven)
 
 
 def _angle_rows(system) -> tuple[int, ...]:
-    return tuple(_split(system)[0].angle_indices)
+    return tuple(split_terms(system)[0].angle_indices)
 
 
 def shifted(record: Trajectory, rows, values) -> Trajectory:
@@ -211,7 +211,7 @@ def record_angle_zeros(system, trajectories: list[Trajectory], method: Dynamic, 
     halves_cuts = [cut for lo, hi in records for cut in ((lo, (lo + hi) // 2), ((lo + hi) // 2, hi))]
     halves_solution, _ = _solve(a, y, _joint_major_columns(slope, counts, halves_cuts))
     halves = zeros[:, None, :] + halves_solution[n:].reshape(len(trajectories), 2, len(rows))
-    names = tuple(_split(system)[0].joint_names[i] for i in rows)
+    names = tuple(split_terms(system)[0].joint_names[i] for i in rows)
     if not converged:
         chosen, reason = False, f"Gauss-Newton did not settle in {MAX_STEPS} steps"
     elif np.max(np.abs(zeros)) > LARGEST:

@@ -7,7 +7,7 @@ r"""The least-squares models of `identify` and their equations.
 - `Energy()`: the energy model $\int_{t_a}^{t_b} \dot q^\top B u\,dt = H(t_b) - H(t_a) +
   \int_{t_a}^{t_b} \dot q^\top F\,dt$ over windows, by the trapezoid rule; no $\ddot q$.
 
-`_equations` stacks one model's rows over the records: what `identify`'s least-squares stage solves
+`stacked_equations` stacks one model's rows over the records: what `identify`'s least-squares stage solves
 and what `record_offsets` tests.
 """
 
@@ -24,7 +24,7 @@ from .._errors import DataError, UsageError
 from ._defaults import choose_filter, trim_and_decimation
 from ._least_squares import least_squares
 from ._regressors import (
-    _positions,
+    positions_and_velocities,
     column_kinds,
     dynamic_regressor,
     energy_and_friction_rows,
@@ -35,7 +35,7 @@ from ._regressors import (
 )
 
 
-def _uniform(trajectory: Trajectory) -> Trajectory:
+def uniformly_sampled(trajectory: Trajectory) -> Trajectory:
     """The record itself if uniformly sampled, else resampled at its median interval."""
     return trajectory if trajectory.is_uniform else resample(trajectory, trajectory.dt)
 
@@ -223,7 +223,7 @@ def _dynamic_equations(system, ts, xs, us, friction, held):
 def _accelerations_and_forces(system, ts, xs, us, held):
     if held:
         us = _held_input_at_samples(ts, us)
-    _, dq = _positions(system, xs)
+    _, dq = positions_and_velocities(system, xs)
     return central_difference(ts, dq), generalised_force(system, us)
 
 
@@ -240,7 +240,7 @@ def _resolve_dynamic(traj, method: Dynamic) -> dict:
         reason = f"explicit cut-off; {', '.join(auto)} at their classic values"
         auto = []
     elif auto:
-        uniform = _uniform(traj)
+        uniform = uniformly_sampled(traj)
         choice = choose_filter(uniform)
         settings["lowpass_hz"] = cutoff = choice.cutoff_hz
         if settings["lowpass_order"] == "auto":
@@ -266,7 +266,7 @@ def _resolve_dynamic(traj, method: Dynamic) -> dict:
     return settings
 
 
-def _dynamic_rows(system, traj, method: Dynamic, friction):
+def dynamic_rows(system, traj, method: Dynamic, friction):
     return dynamic_rows_of(system, dynamic_signals(traj, method), friction)
 
 
@@ -289,7 +289,7 @@ def dynamic_signals(traj, method: Dynamic) -> DynamicSignals:
     cutoff, order, trim = settings["lowpass_hz"], settings["lowpass_order"], settings["trim"]
     _needs(traj, 2 * trim + 3, "dynamic")
     if cutoff is not None:
-        traj = _uniform(traj)
+        traj = uniformly_sampled(traj)
         xs = _lowpass(traj, traj.xs, cutoff, order)
     else:
         xs = traj.xs
@@ -347,7 +347,7 @@ def _model_columns(system, xs, us, friction, columns):
     CPU backend fuses the vmapped Jacobians into every shifted slice that reads them and evaluates
     them several times (the power model ran at a quarter of numpy's speed that way).
     """
-    _, dq = _positions(system, xs)
+    _, dq = positions_and_velocities(system, xs)
     w, f = energy_and_friction_rows(system, xs, friction)
     energy, dissipative = columns
     return w[:, list(energy)], f[:, list(dissipative)], generalised_force(system, us), dq
@@ -363,7 +363,7 @@ def _integrate_intervals(ts, dq, tau, f):
 def _power_rows(system, traj, method: Power, friction):
     _needs(traj, 2 * method.trim + 3, "power")
     if method.lowpass_hz is not None:
-        traj = _uniform(traj)
+        traj = uniformly_sampled(traj)
     rows, target = _power_equations(system, traj.ts, traj.xs, traj.us, friction)
     if method.lowpass_hz is not None:
         inner = traj.slice(1, -1)
@@ -397,7 +397,7 @@ def _energy_rows(system, traj, method: Energy, friction):
     stride = method.stride or window
     _needs(traj, window + 1, "energy")
     if method.lowpass_hz is not None:
-        traj = _uniform(traj)
+        traj = uniformly_sampled(traj)
         xs = _lowpass(traj, traj.xs, method.lowpass_hz, method.lowpass_order)
     else:
         xs = traj.xs
@@ -434,7 +434,7 @@ def _energy_balance(ts, w, f, tau, dq, n_windows, window, stride, columns):
     return _joined(gained, window_sums(dissipated), columns), window_sums(work)
 
 
-def _equations(system, trajectories, method, friction, weights, rcond):
+def stacked_equations(system, trajectories, method, friction, weights, rcond):
     """The stacked least-squares problem `(a, y, weights, names, n_samples, label, settings, counts,
     record_rows)`; `counts` (for `Dynamic`) each record's rows per joint, else `()`; `record_rows`
     each record's rows per time step's block (`counts` for `Dynamic`, whose rows are stacked joint by
@@ -443,7 +443,7 @@ def _equations(system, trajectories, method, friction, weights, rcond):
     names = parameter_names(system, friction)
     settings, counts = (), ()
     if isinstance(method, Dynamic):
-        parts = [_dynamic_rows(system, t, method, friction) for t in trajectories]
+        parts = [dynamic_rows(system, t, method, friction) for t in trajectories]
         a, y, counts = stacked_dynamic_equations(parts)
         n_samples = sum(counts)
         settings = tuple(p[3] for p in parts)

@@ -33,7 +33,7 @@ from .._model._two_link import Acrobot, DoublePendulum
 from ._angle_zeros import AngleZeros, applies as _angle_zeros_apply, record_angle_zeros
 from ._consistency import check_consistency, Consistency
 from ._defaults import choose_filter
-from ._equations import _equations, _uniform, Dynamic, Energy, Power
+from ._equations import stacked_equations, uniformly_sampled, Dynamic, Energy, Power
 from ._least_squares import (
     describe_poorly_determined,
     jointly_determined,
@@ -42,16 +42,16 @@ from ._least_squares import (
     PoorlyDeterminedWarning,
 )
 from ._ls_stage import (
-    _fitted_system,
-    _joint_positions,
-    _least_squares_stage,
-    _less_offsets,
-    _offsets_json,
-    _relative_equation_error,
+    fitted_system,
+    joint_positions,
+    least_squares_stage,
+    less_offsets,
+    offsets_json,
+    relative_equation_error,
 )
 from ._offsets import record_labels, without_offsets
 from ._refine import refine_by_simulation
-from ._regressors import _split, Friction, parameter_names, parameter_vector, with_friction
+from ._regressors import split_terms, Friction, parameter_names, parameter_vector, with_friction
 from ._result import Identification, NoValidationWarning, RecordsDisagreeWarning, Stage, StageKind
 from ._simulation_fit import fit_simulation_error, SimulationFit
 from ._validation import DEFAULT_HORIZONS_S, held_out_error, split_for_validation
@@ -127,7 +127,7 @@ def _records_disagree(refined) -> dict[str, float]:
 
 def _signal_band_hz(trajectories) -> float | None:
     """The widest velocity signal band over the records, or `None` when no record's velocities are noisy."""
-    bands = [c.cutoff_hz for c in (choose_filter(_uniform(t)) for t in trajectories) if c.cutoff_hz is not None]
+    bands = [c.cutoff_hz for c in (choose_filter(uniformly_sampled(t)) for t in trajectories) if c.cutoff_hz is not None]
     return max(bands) if bands else None
 
 
@@ -144,7 +144,7 @@ def _refinement_method(refine, system, method, trajectories):
     """
     if refine is None or refine is False:
         return None
-    arm = _split(system)[0].refinement_terms() is not None
+    arm = split_terms(system)[0].refinement_terms() is not None
     if not (refine is True or isinstance(refine, SimulationFit) or (isinstance(refine, str) and refine == "auto")):
         raise UsageError(f"identify: `refine` must be 'auto', True, False or a SimulationFit(), got {refine!r}")
     if not arm:
@@ -165,10 +165,10 @@ def _refinement_method(refine, system, method, trajectories):
                          stagger=STAGGER)
 
 
-def _named_parameters(system, names) -> Parameters:
+def named_parameters(system, names) -> Parameters:
     """The `Parameters` of the named coefficients (fields of the nominal system and of its joint
     terms) of a system the regressors know, named as `parameter_names` names them, in tree order."""
-    base, terms = _split(system)
+    base, terms = split_terms(system)
     fields = [n for n in names if hasattr(base, n) and not isinstance(getattr(type(base), n, None), property)]
     named_terms = [i for i, t in enumerate(terms) if t.parameter_name(base) in names]
     labels = fields + [terms[i].parameter_name(base) for i in named_terms]
@@ -195,8 +195,8 @@ def _identify_by_simulation(system, trajectories, method: SimulationFit, frictio
     if names is not None:
         # Start from the system's values; the coefficients not in `names` (a linear axis's Coulomb
         # term under viscous friction) are fixed.
-        system = _fitted_system(system, names, parameter_vector(system, friction))
-        parameters = _named_parameters(system, names)
+        system = fitted_system(system, names, parameter_vector(system, friction))
+        parameters = named_parameters(system, names)
     else:
         parameters = Parameters.of(system)
     solution = fit_simulation_error(
@@ -266,7 +266,7 @@ def _validated_simulation_fit(system, fitted, method, friction, consistency, val
     result = _identify_by_simulation(system, fitted, method, friction)
     check = None
     if _has_conditions(system):
-        qs = _joint_positions(result.system, fitted)
+        qs = joint_positions(result.system, fitted)
         check = check_consistency(result.system, result.names, result.estimate, qs, warn=consistency != "off")
     stage = dataclasses.replace(result.stages[0], consistency=check, validation=validate(result.system))
     return dataclasses.replace(result, stages=(stage,))
@@ -275,13 +275,13 @@ def _validated_simulation_fit(system, fitted, method, friction, consistency, val
 def _refined_stage(ls, fitted, method, friction, rcond, consistency, refinement, validate) -> Stage:
     """The output-error refinement from the least-squares stage `ls`, with its equation error on the
     least-squares rows, consistency and validation."""
-    refined = refine_by_simulation(ls.system, ls.names, _less_offsets(ls.system, fitted, ls), refinement)
+    refined = refine_by_simulation(ls.system, ls.names, less_offsets(ls.system, fitted, ls), refinement)
     estimate = jnp.asarray(refined.value)
-    _, a, y, _, _, _, _, _, _, _ = _equations(refined.model, fitted, method, friction, None, rcond)
+    _, a, y, _, _, _, _, _, _, _ = stacked_equations(refined.model, fitted, method, friction, None, rcond)
     if ls.groups is not None:  # the same equations as the least-squares stage's: offsets free
         a, y, _, _ = without_offsets(a, y, None, ls.groups)
-    error = _relative_equation_error(jnp.asarray(a), jnp.asarray(y), estimate)
-    qs = _joint_positions(refined.model, fitted)
+    error = relative_equation_error(jnp.asarray(a), jnp.asarray(y), estimate)
+    qs = joint_positions(refined.model, fitted)
     check = check_consistency(refined.model, refined.names, estimate, qs, warn=consistency != "off")
     check = Consistency(check.violated, active=(), constrained=True, min_mass_eigenvalue=check.min_mass_eigenvalue)
     return Stage(StageKind.OUTPUT_ERROR, "simulation", refined, relative_equation_error=float(error),
@@ -394,13 +394,13 @@ def identify(
             source += "; each tail less its record's angle zeros, fitted on its head"
         fitted = zeros.corrected(fitted, system)
         method = dataclasses.replace(method, offsets=False)
-    ls = _least_squares_stage(system, fitted, method, friction, weights, rcond, consistency)
+    ls = least_squares_stage(system, fitted, method, friction, weights, rcond, consistency)
     solution = eqx.tree_at(lambda s: (s.model, s.value), ls.fit, (ls.estimate, jnp.asarray(ls.estimate)))
     poorly = _size_errors(system, ls.names, ls.estimate, ls.fit.std_errors)  # the returned estimate's, unless refined
     stages = (Stage(StageKind.LEAST_SQUARES, ls.label, solution,
-                    relative_equation_error=float(_relative_equation_error(ls.a, ls.y, ls.estimate)),
+                    relative_equation_error=float(relative_equation_error(ls.a, ls.y, ls.estimate)),
                     validation=validate(ls.system), consistency=ls.consistency, poorly_determined=poorly,
-                    offsets=_offsets_json(ls, fitted), angle_zeros=zeros, serial_correlation=ls.serial),)
+                    offsets=offsets_json(ls, fitted), angle_zeros=zeros, serial_correlation=ls.serial),)
     system_out = ls.system
     refinement = _refinement_method(refine, ls.system, method, fitted)
     if refinement is not None:
@@ -439,7 +439,7 @@ def _record_angle_zeros(system, records, method, friction, rcond) -> AngleZeros 
     whose every joint is a driven angle (they are then weighed against force offsets); else `None`."""
     if not isinstance(method, Dynamic) or not _angle_zeros_apply(system):
         if isinstance(method, Dynamic) and method.offsets == "angles":
-            raise UsageError(f"Dynamic(offsets='angles'): {type(_split(system)[0]).__name__} is not an arm whose every "
+            raise UsageError(f"Dynamic(offsets='angles'): {type(split_terms(system)[0]).__name__} is not an arm whose every "
                              "joint is an angle that an input drives")
         return None
     if method.offsets == "angles":
@@ -454,7 +454,7 @@ def _size_errors(system, names, estimate, std, record_std=None) -> dict[str, flo
     error and its leave-one-record-out error (`record_std`, where there is one); `None` for a system
     without size parameters."""
     try:
-        sizes = size_parameter_names(_split(system)[0])
+        sizes = size_parameter_names(split_terms(system)[0])
     except UsageError:
         return None
     if not sizes:
@@ -494,7 +494,7 @@ def _warn_poorly_determined(poorly: dict[str, float] | None) -> None:
 def _has_conditions(system):
     """Whether the least-squares models know `system` and it has physical-consistency conditions."""
     try:
-        base, _ = _split(system)
+        base, _ = split_terms(system)
     except UsageError:
         return False
     return bool(base.base_parameter_kinds())

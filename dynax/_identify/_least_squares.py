@@ -129,7 +129,7 @@ def _in_null_space(directions, rank: int, tol: float = 1e-6):
 _CHUNK_ROWS = 256
 
 
-def _qr_r(a):
+def tsqr_r(a):
     r"""The triangular factor $R$ of a tall matrix by tall-skinny QR (TSQR), without forming $Q$.
 
     The rows are split into blocks of `_CHUNK_ROWS`; each block is factored on its own (one
@@ -158,7 +158,7 @@ def _qr_r(a):
 def _solve(a, y, w, rcond):
     r"""Column-scaled weighted least squares by factoring the regressor itself (QR, then SVD of R).
 
-    $[W^{1/2} A,\ W^{1/2} y] = Q [R, c; 0, \rho]$ (Householder, as TSQR: `_qr_r`), so
+    $[W^{1/2} A,\ W^{1/2} y] = Q [R, c; 0, \rho]$ (Householder, as TSQR: `tsqr_r`), so
     $c = Q^\top W^{1/2} y$ comes with $R$ and $Q$ is never formed. The column norms $D$ of
     $W^{1/2} A$ are those of $R$, and $W^{1/2} A D^{-1} = Q (R D^{-1})$ (Householder QR commutes
     with column scaling), so no pass over the rows scales them. $R D^{-1} = U_R S V^\top$, so
@@ -175,7 +175,7 @@ def _solve(a, y, w, rcond):
         sw = jnp.sqrt(w)
         aw = a * sw[:, None]
         yw = y * sw
-    r_full = _qr_r(jnp.concatenate([aw, yw[:, None]], axis=1))
+    r_full = tsqr_r(jnp.concatenate([aw, yw[:, None]], axis=1))
     r, qty = r_full[:n, :n], r_full[:n, n]
     rho = r_full[n, n] if r_full.shape[0] > n else jnp.zeros((), a.dtype)  # m == n rows: y is in range
     scale = jnp.linalg.norm(r, axis=0)

@@ -14,14 +14,14 @@ from .._errors import UsageError
 from .._fit import serial_covariance, Solution
 from .._model._system import AbstractSystem
 from ._consistency import check_consistency, Consistency, consistent_least_squares, InconsistentEstimateWarning
-from ._equations import _equations, Dynamic, joint_weights
+from ._equations import stacked_equations, Dynamic, joint_weights
 from ._least_squares import IdentifiabilityError, least_squares
 from ._offsets import driven_joints, offset_groups, record_labels, record_offsets, RecordOffsets, without_offsets
 from ._record_friction import coulomb_columns, record_friction, RecordFriction
-from ._regressors import _positions, _split, with_parameters
+from ._regressors import positions_and_velocities, split_terms, with_parameters
 
 
-def _fitted_system(system, names, estimate):
+def fitted_system(system, names, estimate):
     """`system` carrying the estimate; base parameters the fitted model leaves out are as the system's
     `with_base_parameters` sets them (a linear axis fitted without Coulomb friction gets `coulomb = 0`)."""
     return with_parameters(system, names, jnp.asarray(estimate))
@@ -46,14 +46,14 @@ class _LeastSquaresStage(eqx.Module):
     serial: dict | None = None  # what the errors robust to serial correlation changed (`_serially_robust`)
 
 
-def _joint_positions(system, trajectories):
+def joint_positions(system, trajectories):
     """The records' joint positions, stacked (one compiled call: slicing op by op costs more than the check)."""
     return _stacked_positions(system, [t.xs for t in trajectories])
 
 
 @eqx.filter_jit
 def _stacked_positions(system, states):
-    return jnp.concatenate([_positions(system, xs)[0] for xs in states])
+    return jnp.concatenate([positions_and_velocities(system, xs)[0] for xs in states])
 
 
 def _offset_rows(system, method, counts):
@@ -69,14 +69,14 @@ def _offset_rows(system, method, counts):
         return None
     groups = offset_groups(system, counts)
     if groups is None and method.offsets is True:
-        raise UsageError(f"Dynamic(offsets=True): {type(_split(system)[0]).__name__} has a constant term of its own "
+        raise UsageError(f"Dynamic(offsets=True): {type(split_terms(system)[0]).__name__} has a constant term of its own "
                          "(or no driven joint); fit its offset as a parameter instead")
     return groups
 
 
-def _least_squares_stage(system, trajectories, method, friction, weights, rcond, consistency):
+def least_squares_stage(system, trajectories, method, friction, weights, rcond, consistency):
     given = (system, method, friction, weights, rcond)
-    system, raw_a, raw_y, weights, names, n_samples, label, settings, counts, record_rows = _equations(
+    system, raw_a, raw_y, weights, names, n_samples, label, settings, counts, record_rows = stacked_equations(
         system, trajectories, method, friction, weights, rcond
     )
     groups = _offset_rows(system, method, counts)
@@ -101,18 +101,18 @@ def _least_squares_stage(system, trajectories, method, friction, weights, rcond,
             "offsets at zero.", unidentified=error.unidentified, rank=error.rank, n_params=error.n_params,
             condition_number=error.condition_number) from None
     estimate = fit.value
-    fitted = _fitted_system(system, names, estimate)
-    qs = _joint_positions(system, trajectories)
+    fitted = fitted_system(system, names, estimate)
+    qs = joint_positions(system, trajectories)
     check = check_consistency(fitted, names, estimate, qs, warn=consistency == "check")
     if check.violated and consistency != "off":
-        error = float(_relative_equation_error(a, y, estimate))
+        error = float(relative_equation_error(a, y, estimate))
         _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, error, trajectories)
         _warn_if_degrees(given, trajectories, error)
         plain_std = _serially_robust(fit, a, y, weights, estimate, record_rows)[0].std_errors
         _warn_if_zero_upright(fitted, names, estimate, plain_std, qs)
     if consistency == "constrain" and check.violated:
         estimate, _ = consistent_least_squares(system, names, a, y, weights, start=fit.value)
-        fitted = _fitted_system(system, names, estimate)
+        fitted = fitted_system(system, names, estimate)
         after = check_consistency(fitted, names, estimate, qs, warn=False)
         check = Consistency(after.violated, active=check.violated, constrained=True,
                             min_mass_eigenvalue=after.min_mass_eigenvalue)
@@ -120,7 +120,7 @@ def _least_squares_stage(system, trajectories, method, friction, weights, rcond,
             warnings.warn("the constrained fit did not reach a consistent estimate: " + "; ".join(after.violated),
                           InconsistentEstimateWarning, stacklevel=3)
     fit, serial = _serially_robust(fit, a, y, weights, estimate, record_rows)
-    joint_names = _split(system)[0].joint_names
+    joint_names = split_terms(system)[0].joint_names
     labels = record_labels(trajectories)
     offsets = record_offsets(raw_a, raw_y, counts, joint_names, labels) if counts else None
     per_record_friction = record_friction(raw_a, raw_y, counts, len(joint_names), names,
@@ -168,12 +168,12 @@ def _serially_robust(fit, a, y, weights, estimate, record_rows):
                     "inflation": {name: float(v) for name, v in zip(fit.names, inflation)}}
 
 
-def _less_offsets(system, records, ls):
+def less_offsets(system, records, ls):
     """The records with each one's fitted offsets taken off its inputs (through the input matrix), as
     the refinement fits them; the records themselves where no offsets were fitted."""
     if ls.fitted_offsets is None:
         return records
-    base = _split(system)[0]
+    base = split_terms(system)[0]
     b = np.asarray(base.input_matrix())
     to_inputs = np.linalg.pinv(b)  # joint forces -> the inputs that produce them
     rows = [base.joint_names.index(j) for j in ls.driven]
@@ -187,7 +187,7 @@ def _less_offsets(system, records, ls):
     return out
 
 
-def _offsets_json(ls, trajectories):
+def offsets_json(ls, trajectories):
     if ls.fitted_offsets is None:
         return None
     return {"records": record_labels(trajectories), "joints": list(ls.driven),
@@ -197,7 +197,7 @@ def _offsets_json(ls, trajectories):
                        "records less them"}
 
 
-def _relative_equation_error(a, y, estimate):
+def relative_equation_error(a, y, estimate):
     return jnp.linalg.norm(a @ estimate - y) / jnp.linalg.norm(y)
 
 
@@ -235,7 +235,7 @@ def _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, error, tra
     equation error), which names no cause. Flipping an input negates the equation rows of the joint it drives, so each
     candidate is one more least-squares solve. Systems whose inputs share a joint are not probed.
     """
-    base = _split(system)[0]
+    base = split_terms(system)[0]
     b = np.asarray(base.input_matrix())
     driven = [np.flatnonzero(np.abs(b[:, k]) > 0) for k in range(b.shape[1])]
     n_joints = b.shape[0]
@@ -255,11 +255,11 @@ def _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, error, tra
             candidate = least_squares(a, y_flipped, names=names, weights=weights, rcond=rcond).value
         except IdentifiabilityError:
             return None
-        consistent = not check_consistency(_fitted_system(system, names, candidate), names, candidate, qs,
+        consistent = not check_consistency(fitted_system(system, names, candidate), names, candidate, qs,
                                            warn=False).violated
         # Every input negated negates the estimate and leaves the error as it is: there the physics
         # alone (masses are positive) tells the two apart.
-        return consistent, float(_relative_equation_error(a, y_flipped, candidate)), len(flipped) == len(driven)
+        return consistent, float(relative_equation_error(a, y_flipped, candidate)), len(flipped) == len(driven)
 
     best = _best_subset(len(driven), refit, error)
     if best is None:
@@ -289,7 +289,7 @@ def _warn_if_degrees(given, trajectories, error) -> None:
     stage per set, built from scaled records.
     """
     system, method, friction, weights, rcond = given
-    base = _split(system)[0]
+    base = split_terms(system)[0]
     names = tuple(trajectories[0].state_names)
     angles = [base.joint_names[k] for k in base.angle_indices if k < len(base.joint_names)]
     if not angles or any("d" + q not in names for q in angles):
@@ -302,10 +302,10 @@ def _warn_if_degrees(given, trajectories, error) -> None:
         scaled = [Trajectory(t.ts, t.xs * jnp.asarray(factor, t.xs.dtype)[None, :], t.us, t.state_names,
                              t.input_names, t.system, t.source) for t in trajectories]
         try:
-            stage = _least_squares_stage(system, scaled, method, friction, weights, rcond, "off")
+            stage = least_squares_stage(system, scaled, method, friction, weights, rcond, "off")
         except (IdentifiabilityError, UsageError):
             return None
-        return stage.consistency.consistent, float(_relative_equation_error(stage.a, stage.y, stage.estimate)), False
+        return stage.consistency.consistent, float(relative_equation_error(stage.a, stage.y, stage.estimate)), False
 
     best = _best_subset(len(joints), refit, error)
     if best is None:
@@ -338,7 +338,7 @@ def _warn_if_zero_upright(fitted, names, estimate, std, qs) -> None:
     gravity term decided to 1 % is not noise. (An unfiltered fit of noisy records, inconsistent from noise,
     has small negative gravity terms and a negative friction as well, and is not named.)
     """
-    signs = _split(fitted)[0].upright_zero_signs()
+    signs = split_terms(fitted)[0].upright_zero_signs()
     estimate, std = np.asarray(estimate, dtype=float), np.asarray(std, dtype=float)
     for joints, flipped in signs.items():
         if any(n not in names for n in flipped):
@@ -348,7 +348,7 @@ def _warn_if_zero_upright(fitted, names, estimate, std, qs) -> None:
             continue
         candidate = estimate.copy()
         candidate[index] = -candidate[index]
-        system = _fitted_system(fitted, names, jnp.asarray(candidate))
+        system = fitted_system(fitted, names, jnp.asarray(candidate))
         if check_consistency(system, names, candidate, qs, warn=False).violated:
             continue
         warnings.warn(

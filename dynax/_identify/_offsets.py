@@ -29,7 +29,7 @@ import pathlib
 
 import numpy as np
 
-from ._regressors import _split
+from ._regressors import split_terms
 
 ALPHA = 0.01  # the offsets "differ between records" below this p-value
 
@@ -100,7 +100,7 @@ def record_offsets(a, y, counts, joints, records=None, alpha: float = ALPHA) -> 
     # One group per (record, half, joint). Regressing on one indicator column per group is the same as
     # removing each group's mean from `a` and `y` (Frisch-Waugh-Lovell), which needs no indicator matrix.
     joint_of_row = np.repeat(np.arange(n_joints), sum(counts))
-    groups = [half for r in range(n_records) for half in np.array_split(_record_rows(counts, r, 0), 2)]
+    groups = [half for r in range(n_records) for half in np.array_split(record_rows(counts, r, 0), 2)]
     groups = [rows + j * sum(counts) for rows in groups for j in range(n_joints)]
     a_within, y_within, a_means, y_means = without_offsets(a, y, None, groups)
     # The weights are constant within each group, so the group means need no weighting.
@@ -121,7 +121,7 @@ def driven_joints(system) -> tuple[int, ...] | None:
     """The indices of the joints some input acts on (an unactuated joint's equation has no sensor to
     be off), or `None` where the system's own model has a constant term (a linear axis's `offset`)
     or drives no joint."""
-    base = _split(system)[0]
+    base = split_terms(system)[0]
     if "offset" in base.base_parameter_names("coulomb") or not hasattr(base, "input_matrix"):
         return None
     driven = np.flatnonzero(np.any(np.abs(np.asarray(base.input_matrix())) > 0, axis=1))
@@ -135,7 +135,7 @@ def offset_groups(system, counts) -> list[np.ndarray] | None:
     driven = driven_joints(system)
     if driven is None:
         return None
-    return [_record_rows(counts, r, j) for j in driven for r in range(len(counts))]
+    return [record_rows(counts, r, j) for j in driven for r in range(len(counts))]
 
 
 def joint_weighted_least_squares(a, y, joint_of_row, n_joints):
@@ -165,7 +165,7 @@ def parts_anova(parts: np.ndarray, tiny: float) -> tuple[np.ndarray, np.ndarray]
     return f, scipy.stats.f.sf(f, n_records - 1, n_records * (k - 1))
 
 
-def _record_rows(counts, record, joint):
+def record_rows(counts, record, joint):
     """The rows of `record`'s equations of `joint` in the stacked dynamic equations (joint-major:
     all records' rows of joint 0, then of joint 1, ...; `counts` rows per record)."""
     start = int(joint * sum(counts) + sum(counts[:record]))

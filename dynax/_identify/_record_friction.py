@@ -37,12 +37,12 @@ import numpy as np
 
 from .._errors import DataError, UsageError
 from .._model._extensions import CoulombFriction
-from ._equations import _equations, Dynamic
+from ._equations import stacked_equations, Dynamic
 from ._offsets import (
-    _record_rows, ALPHA, joint_weighted_least_squares, parts_anova, record_labels, record_offsets, RecordOffsets,
+    record_rows, ALPHA, joint_weighted_least_squares, parts_anova, record_labels, record_offsets, RecordOffsets,
     without_offsets,
 )
-from ._regressors import _split
+from ._regressors import split_terms
 
 PARTS = 4  # parts per record (see the module)
 
@@ -120,7 +120,7 @@ def record_friction(a, y, counts, n_joints, names, columns, records=None, alpha:
     if n_records < 2 or min(counts) < 4 or not columns or a.shape[0] != n_joints * total:
         return None
     k = int(max(2, min(parts, min(counts) // 8)))
-    whole = [_record_rows(counts, r, 0) for r in range(n_records)]
+    whole = [record_rows(counts, r, 0) for r in range(n_records)]
     pieces = [p for rows in whole for p in np.array_split(rows, k)]
     # Each record's offset per joint removed, as `identify` fits them: a sensor zero is not friction. (Per
     # part it would be, within a part whose motion keeps one direction, the friction itself.)
@@ -157,7 +157,7 @@ def coulomb_columns(system, friction) -> tuple[str, ...]:
     arm, `coulomb` of a linear axis) when `friction="coulomb"`; `record_friction` keeps those present."""
     if friction != "coulomb":
         return ()
-    base, terms = _split(system)
+    base, terms = split_terms(system)
     coulomb = [t for t in tuple(base.coulomb_friction_terms()) + tuple(terms) if isinstance(t, CoulombFriction)]
     return tuple(dict.fromkeys(t.parameter_name(base) for t in coulomb)) + ("coulomb",)
 
@@ -174,8 +174,8 @@ def compare_records(system, records, friction="coulomb") -> tuple[RecordOffsets 
     if len(records) < 2:
         return None, None
     try:
-        base = _split(system)[0]
-        _, a, y, _, names, _, _, _, counts, _ = _equations(base, records, Dynamic(), friction, None, 1e-7)
+        base = split_terms(system)[0]
+        _, a, y, _, names, _, _, _, counts, _ = stacked_equations(base, records, Dynamic(), friction, None, 1e-7)
     except (DataError, UsageError):  # not a system least squares knows, or a record too short for its filter
         return None, None
     labels = record_labels(records)

@@ -66,8 +66,8 @@ from .._model._system import AbstractSystem
 from .._simulate import FixedGrid, simulate
 from ._consistency import consistent_parametrisation, ConsistentParametrisation
 from ._defaults import choose_filter, measurement_noise_std, velocities_from_positions
-from ._regressors import _split, parameter_vector, with_parameters
-from ._simulation_fit import _segments, DIVERGED, fit_simulation_error, SimulationFit
+from ._regressors import split_terms, parameter_vector, with_parameters
+from ._simulation_fit import simulation_segments, DIVERGED, fit_simulation_error, SimulationFit
 
 
 RECORD_WEIGHTS = ("ml", "motion", "equal")
@@ -157,7 +157,7 @@ def with_neighbour_inputs(record: Trajectory, reach: int = INPUT_REACH) -> Traje
 def with_refinement_terms(system: AbstractSystem) -> AbstractSystem:
     """`system` with the terms its `refinement_terms()` names (a two-link arm's `RotorInertia(joint=1)`,
     at zero) where it has no term of that kind at that joint."""
-    base, terms = _split(system)
+    base, terms = split_terms(system)
     have = {(type(t), t.joint) for t in terms}
     extra = tuple(t for t in base.refinement_terms() if (type(t), t.joint) not in have)
     return Extended(base, terms + extra) if extra else system
@@ -250,7 +250,7 @@ def record_residual_scale(system, initial_states, records, scale, method: Simula
     same segments, `method.segment_s`); residuals are in units of `scale` (per state); $p_r$ counts
     the initial states fitted on record $r$ (none unless `method.fit_initial_states`).
     """
-    ts, xs, us, _, owner, _ = _segments(records, method.segment_s, method.stagger)
+    ts, xs, us, _, owner, _ = simulation_segments(records, method.segment_s, method.stagger)
     dtype = jnp.result_type(initial_states)
     squares = np.asarray(_segment_squares(system, initial_states, *(jnp.asarray(a, dtype) for a in (ts, xs, us)),
                                           jnp.asarray(scale, dtype), method.simulation))
@@ -260,7 +260,7 @@ def record_residual_scale(system, initial_states, records, scale, method: Simula
     return np.sqrt(ssr / np.maximum(dof, 1))
 
 
-def _ml_weights(sigma: np.ndarray) -> np.ndarray:
+def ml_weights(sigma: np.ndarray) -> np.ndarray:
     r"""Weights $1/\hat\sigma_r$ of the residuals (so $1/\hat\sigma_r^2$ of their squares), mean 1,
     with $\hat\sigma_r$ floored at the noise level (1) and at a tenth of the records' median."""
     floored = np.maximum(sigma, max(1.0, 0.1 * float(np.median(sigma))))
@@ -293,7 +293,7 @@ def refine_by_simulation(
     record_weights = DEFAULT_RECORD_WEIGHTS if record_weights is None else record_weights
     if record_weights not in RECORD_WEIGHTS:
         raise ValueError(f"refine_by_simulation: `record_weights` must be one of {RECORD_WEIGHTS}, got {record_weights!r}")
-    base = _split(system)[0]
+    base = split_terms(system)[0]
     if base.refinement_terms() is None:
         raise TypeError(f"refine_by_simulation: {type(base).__name__} names no refinement_terms(); "
                         "it refines two-link arms")
@@ -339,7 +339,7 @@ def refine_by_simulation(
         sigma = record_residual_scale(result.model, result.statistics.initial_states, fitted, noise, method)
     reweights = 0
     while not diverged and record_weights == "ml" and reweights < MAX_REWEIGHTS:
-        new = _ml_weights(sigma)
+        new = ml_weights(sigma)
         if np.max(np.abs(np.log(new / weights))) < np.log1p(SETTLED):
             break  # the weights the last fit used are (within 10 %) those its residuals imply
         refit = fit(result.model, new)

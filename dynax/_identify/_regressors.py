@@ -37,7 +37,7 @@ def _check_friction(friction):
         raise UsageError(f"`friction` must be 'viscous' or 'coulomb', got {friction!r}")
 
 
-def _split(system):
+def split_terms(system):
     """`(nominal system, joint terms)`; refuses what the linear models cannot express."""
     if isinstance(system, Extended):
         base, terms = system.system, system.terms
@@ -57,7 +57,7 @@ def with_friction(system: AbstractSystem, friction: Friction = "viscous") -> Abs
     `coulomb_friction_terms()` at every joint that has none (for a two-link arm `CoulombFriction`,
     coefficients `fc1`, `fc2`; a linear axis's Coulomb friction is a base parameter)."""
     _check_friction(friction)
-    base, terms = _split(system)
+    base, terms = split_terms(system)
     if friction == "viscous":
         return system
     have = {t.joint for t in terms if isinstance(t, CoulombFriction)}
@@ -77,14 +77,14 @@ def parameter_names(system: AbstractSystem, friction: Friction = "viscous") -> t
     **Returns:** a tuple of names, e.g. `("theta1", ..., "theta7", "fc1", "fc2")`.
     """
     system = with_friction(system, friction)
-    base, terms = _split(system)
+    base, terms = split_terms(system)
     return base.base_parameter_names(friction) + tuple(t.parameter_name(base) for t in terms)
 
 
 def energy_parameter_names(system: AbstractSystem, friction: Friction = "viscous") -> tuple[str, ...]:
     """The parameters the stored energy depends on (the rest enter through dissipation only)."""
     system = with_friction(system, friction)
-    base, terms = _split(system)
+    base, terms = split_terms(system)
     return base.energy_parameter_names() + tuple(
         t.parameter_name(base) for t in terms if isinstance(t, _CONSERVATIVE_TERMS)
     )
@@ -93,7 +93,7 @@ def energy_parameter_names(system: AbstractSystem, friction: Friction = "viscous
 def parameter_vector(system: AbstractSystem, friction: Friction = "viscous") -> Float[Array, " n_params"]:
     """The system's current parameter values as a vector, in the order of `parameter_names`."""
     system = with_friction(system, friction)
-    base, terms = _split(system)
+    base, terms = split_terms(system)
     names = parameter_names(system, friction)
     values = {n: getattr(base, n) for n in names if hasattr(base, n)}
     values.update({t.parameter_name(base): t.coefficient for t in terms})
@@ -105,7 +105,7 @@ def with_parameters(system: AbstractSystem, names: tuple[str, ...], theta: Float
     """`system` with the parameters `names` set to `theta`: fields of the nominal system (through its
     `with_base_parameters`, which says what the base parameters not named become) and coefficients
     of its joint terms."""
-    base, terms = _split(system)
+    base, terms = split_terms(system)
     if isinstance(theta, jax.Array) and theta.ndim == 1:
         theta = _entries(theta)  # one call instead of one indexing operation per parameter
     fields = [n for n in names if hasattr(base, n) and not isinstance(getattr(type(base), n, None), property)]
@@ -128,7 +128,7 @@ def _entries(theta):
 
 def _inverse_dynamics(system, names, theta, q, dq, ddq):
     """Generalised force that produces `ddq` at `(q, dq)`; linear in `theta`."""
-    base, terms = _split(with_parameters(system, names, theta))
+    base, terms = split_terms(with_parameters(system, names, theta))
     force = base.inverse_dynamics(q, dq, ddq)
     for t in terms:
         j = t.joint
@@ -137,7 +137,7 @@ def _inverse_dynamics(system, names, theta, q, dq, ddq):
 
 
 def _energy(system, names, theta, q, dq):
-    base, terms = _split(with_parameters(system, names, theta))
+    base, terms = split_terms(with_parameters(system, names, theta))
     energy = base.energy(jnp.concatenate([q, dq]))
     for t in terms:
         if isinstance(t, RotorInertia):
@@ -147,8 +147,8 @@ def _energy(system, names, theta, q, dq):
     return energy
 
 
-def _positions(system, xs):
-    base, _ = _split(system)
+def positions_and_velocities(system, xs):
+    base, _ = split_terms(system)
     n = len(base.joints)
     return xs[..., :n], xs[..., n : 2 * n]
 
@@ -167,7 +167,7 @@ def row_dot(a: Float[Array, "... n"], b: Float[Array, "... n"]) -> Float[Array, 
 
 def generalised_force(system: AbstractSystem, us: Float[Array, "time n_inputs"]) -> Float[Array, "time n_joints"]:
     r"""The measured generalised forces $B u$, one entry per joint (the acrobot's `tau1` is 0)."""
-    base, _ = _split(system)
+    base, _ = split_terms(system)
     b = base.input_matrix().astype(us.dtype)  # (joints, inputs); written out, not a batched dot
     return jnp.stack([row_dot(us, b[j]) for j in range(b.shape[0])], axis=-1)
 
@@ -201,7 +201,7 @@ def dynamic_regressor(
     system = with_friction(system, friction)
     names = parameter_names(system, friction)
     theta0 = jnp.zeros(len(names), xs.dtype)
-    q, dq = _positions(system, xs)
+    q, dq = positions_and_velocities(system, xs)
 
     def row(q, dq, ddq):
         return jax.jacrev(lambda th: _inverse_dynamics(system, names, th, q, dq, ddq))(theta0)
@@ -264,7 +264,7 @@ def energy_regressor(
         Proc. 27th IEEE Conference on Decision and Control, 1988.
     """
     system, names, theta0, _ = _rows_setup(system, xs, friction)
-    return jax.vmap(_energy_row(system, names, theta0))(*_positions(system, xs))
+    return jax.vmap(_energy_row(system, names, theta0))(*positions_and_velocities(system, xs))
 
 
 @eqx.filter_jit
@@ -282,7 +282,7 @@ def friction_power_regressor(
     **Returns:** shape `(time, n_params)`.
     """
     system, names, theta0, mask = _rows_setup(system, xs, friction)
-    return jax.vmap(_friction_row(system, names, theta0, mask))(*_positions(system, xs))
+    return jax.vmap(_friction_row(system, names, theta0, mask))(*positions_and_velocities(system, xs))
 
 
 def energy_and_friction_rows(system: AbstractSystem, xs: Float[Array, "time n_states"], friction: Friction = "viscous"):
@@ -293,11 +293,11 @@ def energy_and_friction_rows(system: AbstractSystem, xs: Float[Array, "time n_st
     """
     system, names, theta0, mask = _rows_setup(system, xs, friction)
     energy, dissipation = _energy_row(system, names, theta0), _friction_row(system, names, theta0, mask)
-    return jax.vmap(lambda q, dq: (energy(q, dq), dissipation(q, dq)))(*_positions(system, xs))
+    return jax.vmap(lambda q, dq: (energy(q, dq), dissipation(q, dq)))(*positions_and_velocities(system, xs))
 
 
 @eqx.filter_jit
 def input_power(system: AbstractSystem, xs: Float[Array, "time n_states"], us: Float[Array, "time n_inputs"]) -> Float[Array, " time"]:
     r"""The power delivered by the inputs, $\dot q^\top B u$."""
-    _, dq = _positions(system, xs)
+    _, dq = positions_and_velocities(system, xs)
     return row_dot(dq, generalised_force(system, us))

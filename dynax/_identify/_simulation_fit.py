@@ -112,7 +112,7 @@ CLUSTER_SEGMENTS = 4  # segment lengths per block of the clustered covariance
 MIN_RECORDS_FOR_SPREAD = 3  # records the delete-one-record jackknife needs (two give one difference)
 
 
-def _clustered_covariance(jac, r, ts, owner, trajectories, segment_s: float) -> np.ndarray | None:
+def segment_clustered_covariance(jac, r, ts, owner, trajectories, segment_s: float) -> np.ndarray | None:
     r"""The cluster-robust (sandwich) covariance of the scaled unknowns, clusters being blocks of time.
 
     A segment simulated from its *measured* initial state carries that state's noise all along it,
@@ -144,7 +144,7 @@ def _clustered_covariance(jac, r, ts, owner, trajectories, segment_s: float) -> 
     return np.asarray(clustered_covariance(jnp.asarray(jac), jnp.asarray(r), jnp.asarray(rows), n_clusters)[0])
 
 
-def _record_covariance(jac, r, owner, n_records: int) -> np.ndarray | None:
+def record_jackknife_covariance(jac, r, owner, n_records: int) -> np.ndarray | None:
     """The delete-one-record jackknife covariance of the scaled unknowns (see `OutputErrorStatistics`),
     or `None` with fewer than `MIN_RECORDS_FOR_SPREAD` records."""
     if n_records < MIN_RECORDS_FOR_SPREAD:
@@ -153,7 +153,7 @@ def _record_covariance(jac, r, owner, n_records: int) -> np.ndarray | None:
     return np.asarray(jackknife_covariance(jnp.asarray(jac), jnp.asarray(r), jnp.asarray(rows), n_records)[0])
 
 
-def _segments(trajectories, segment_s, stagger: int = 1):
+def simulation_segments(trajectories, segment_s, stagger: int = 1):
     """Cut every record into equal-length segments sharing their end samples.
 
     With `stagger` $k > 1$, $k$ such cuts of each record, the $j$-th starting $j/k$ of a segment
@@ -321,7 +321,7 @@ def fit_simulation_error(
     chosen = filter_spec if isinstance(filter_spec, Parameters) else Parameters.of(system, filter_spec)
     if chosen.size == 0:
         raise UsageError("fit_simulation_error: `filter_spec` selects no array leaves to fit")
-    ts, xs, us, follows, owner, n_samples = _segments(trajectories, segment_s, stagger)
+    ts, xs, us, follows, owner, n_samples = simulation_segments(trajectories, segment_s, stagger)
     p0 = chosen.vector(system)
     dtype = jnp.result_type(p0.dtype, xs.dtype)
     ts, xs, us = (jnp.asarray(a, dtype) for a in (ts, xs, us))
@@ -367,11 +367,11 @@ def fit_simulation_error(
     std = jnp.where(unidentified, jnp.inf, jnp.sqrt(jnp.maximum(jnp.diag(covariance), 0.0)))
     record_covariance = None
     if not fit_initial_states:
-        clustered = _clustered_covariance(np.asarray(jac), np.asarray(r), ts, owner, trajectories, segment_s)
+        clustered = segment_clustered_covariance(np.asarray(jac), np.asarray(r), ts, owner, trajectories, segment_s)
         if clustered is not None:
             covariance = unscaled(clustered)
             std = jnp.where(unidentified, jnp.inf, jnp.sqrt(jnp.maximum(jnp.diag(covariance), 0.0)))
-        spread = _record_covariance(np.asarray(jac), np.asarray(r), owner, len(trajectories))
+        spread = record_jackknife_covariance(np.asarray(jac), np.asarray(r), owner, len(trajectories))
         record_covariance = None if spread is None else unscaled(spread)
     fitted = solution.model
     diverged, initial_diverged = (

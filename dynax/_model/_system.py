@@ -332,11 +332,11 @@ class AbstractManipulator(AbstractSystem):
         n = self.n_joints
         q, dq = x[:n], x[n:]
         rhs = self.input_matrix() @ u - self.bias_force(q, dq)
-        ddq = _solve_spd(self.mass_matrix(q), rhs)
+        ddq = solve_spd(self.mass_matrix(q), rhs)
         return jnp.concatenate([dq, ddq])
 
 
-def _solve_spd(m, b):
+def solve_spd(m, b):
     if m.shape == (2, 2):
         # Closed-form 2x2 inverse: much cheaper than a LU call inside a vmapped scan.
         det = m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]

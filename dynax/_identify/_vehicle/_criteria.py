@@ -172,7 +172,7 @@ class VehicleFit(eqx.Module):
         return tuple((float(t), float(v)) for t, v in zip(seconds[keep], losses[keep]))
 
 
-def _single(loss, seconds):
+def one_shot_history(loss, seconds):
     """`losses`, `seconds` arrays of a one-shot criterion."""
     return jnp.asarray([loss], jnp.float64 if jax.config.jax_enable_x64 else jnp.float32), jnp.asarray([seconds])
 
@@ -180,7 +180,7 @@ def _single(loss, seconds):
 _lagged_loss_jit = eqx.filter_jit(lagged_loss)  # compiled once per (model structure, data shape, horizon)
 
 
-def _with_theta(system: Helicopter, theta) -> Helicopter:
+def with_theta(system: Helicopter, theta) -> Helicopter:
     return eqx.tree_at(lambda h: h.body_model, system, system.body_model.with_parameter_vector(theta))
 
 
@@ -206,7 +206,7 @@ def _window_prediction(system: Helicopter, theta, states, inputs, dt):
 
 
 @eqx.filter_jit
-def _normal_equations(system, trajectory, starts, n_steps, weights, use_rollout, batch_size, sensitivities=False):
+def normal_equations(system, trajectory, starts, n_steps, weights, use_rollout, batch_size, sensitivities=False):
     """Accumulate $A^\\top \\Lambda A$ and $A^\\top\\Lambda(y - c)$ over windows, in batches.
 
     With `sensitivities` (only with `use_rollout`), $A$ is the Jacobian of the rollout's body states
@@ -222,7 +222,7 @@ def _normal_equations(system, trajectory, starts, n_steps, weights, use_rollout,
         inputs = jax.lax.dynamic_slice_in_dim(trajectory.us, k, n_steps)
         target = measured[1:, BODY].reshape(-1)
         if sensitivities:
-            g = lambda th: rollout(_with_theta(system, th), measured[0], inputs, dt)[1:, BODY].reshape(-1)  # noqa: E731
+            g = lambda th: rollout(with_theta(system, th), measured[0], inputs, dt)[1:, BODY].reshape(-1)  # noqa: E731
             value, design = g(theta), jax.jacfwd(g)(theta)
             offset = value - design @ theta
             return design.T @ (w[:, None] * design), design.T @ (w * (target - offset)), jnp.sum(w * (value - target) ** 2)
@@ -252,16 +252,16 @@ def _normal_equations(system, trajectory, starts, n_steps, weights, use_rollout,
     return ata, atb, sse / (n * n_steps)
 
 
-def _solve(ata, atb, ridge):
+def ridge_solve(ata, atb, ridge):
     scale = jnp.trace(ata) / ata.shape[0]
     return jnp.linalg.solve(ata + ridge * scale * jnp.eye(ata.shape[0], dtype=ata.dtype), atb)
 
 
-def _starts(trajectory, n_steps, stride, breaks=None):
+def window_starts(trajectory, n_steps, stride, breaks=None):
     return jnp.asarray(valid_starts(len(trajectory), n_steps, stride, breaks))
 
 
-def _weights(weights, dtype):
+def state_weights(weights, dtype):
     return jnp.ones(6, dtype) if weights is None else jnp.asarray(weights, dtype)
 
 
@@ -271,13 +271,13 @@ def fit_one_step(
     """Fit by one-step least squares (see `OneStep` and the module docstring); `breaks`: see `fit_vehicle`."""
     check_helicopter_data(trajectory, "fit_one_step")
     t0 = time.perf_counter()
-    w = _weights(weights, trajectory.xs.dtype)
-    starts = _starts(trajectory, 1, 1, breaks)
-    ata, atb, _ = _normal_equations(system, trajectory, starts, 1, w, False, 1024)
-    theta = _solve(ata, atb, criterion.ridge)
-    fitted = _with_theta(system, theta)
-    _, _, loss = _normal_equations(fitted, trajectory, starts, 1, w, False, 1024)
-    losses, seconds = _single(loss, time.perf_counter() - t0)
+    w = state_weights(weights, trajectory.xs.dtype)
+    starts = window_starts(trajectory, 1, 1, breaks)
+    ata, atb, _ = normal_equations(system, trajectory, starts, 1, w, False, 1024)
+    theta = ridge_solve(ata, atb, criterion.ridge)
+    fitted = with_theta(system, theta)
+    _, _, loss = normal_equations(fitted, trajectory, starts, 1, w, False, 1024)
+    losses, seconds = one_shot_history(loss, time.perf_counter() - t0)
     return VehicleFit(fitted, losses, seconds, "one-step", len(trajectory))
 
 
@@ -330,7 +330,7 @@ class EMFree(optx.AbstractMinimiser):
 
     def step(self, fn, y, args, options, state, tags):
         ata, atb = self.linearise(y, args)
-        direction = _solve(ata, atb, self.ridge) - y
+        direction = ridge_solve(ata, atb, self.ridge) - y
         sizes = jnp.asarray(self.step_sizes, y.dtype)
         n_sizes = len(self.step_sizes)
 
@@ -360,12 +360,12 @@ class EMFree(optx.AbstractMinimiser):
 
 def _lagged_objective(theta, args, *, n_steps):
     system, trajectory, starts, w = args
-    return lagged_loss(_with_theta(system, theta), trajectory, n_steps, starts=starts, weights=w)
+    return lagged_loss(with_theta(system, theta), trajectory, n_steps, starts=starts, weights=w)
 
 
 def _em_free_normal_equations(theta, args, *, n_steps, batch_size, sensitivities):
     system, trajectory, starts, w = args
-    ata, atb, _ = _normal_equations(_with_theta(system, theta), trajectory, starts, n_steps, w, True,
+    ata, atb, _ = normal_equations(with_theta(system, theta), trajectory, starts, n_steps, w, True,
                                     batch_size, sensitivities)
     return ata, atb
 
@@ -406,12 +406,12 @@ def fit_lagged(
     """
     dt = check_helicopter_data(trajectory, "fit_lagged")
     n_steps = horizon_steps(criterion.horizon, dt, "fit_lagged")
-    starts = _starts(trajectory, n_steps, criterion.stride, breaks)
-    w = _weights(weights, trajectory.xs.dtype)
+    starts = window_starts(trajectory, n_steps, criterion.stride, breaks)
+    w = state_weights(weights, trajectory.xs.dtype)
     with monitor(callback) as token:
         solution = _em_free(system, trajectory, starts, w, n_steps, criterion, token)
     theta = solution.value
-    fitted = _with_theta(system, theta)
+    fitted = with_theta(system, theta)
     result = _vehicle_solution(system, fitted, theta, solution)
     return VehicleFit(fitted, result.loss_history, result.time_history, "lagged", len(trajectory), solution=result)
 
@@ -441,8 +441,8 @@ def fit_backprop(
     """
     dt = check_helicopter_data(trajectory, "fit_backprop")
     n_steps = horizon_steps(criterion.horizon, dt, "fit_backprop")
-    starts = _starts(trajectory, n_steps, criterion.stride, breaks)
-    w = _weights(weights, trajectory.xs.dtype)
+    starts = window_starts(trajectory, n_steps, criterion.stride, breaks)
+    w = state_weights(weights, trajectory.xs.dtype)
     target = -jnp.inf if criterion.target_loss is None else criterion.target_loss
     with monitor(callback) as token:
         solution = _backprop(system, trajectory, starts, w, n_steps, criterion, jnp.asarray(target, w.dtype), token)
@@ -461,8 +461,8 @@ def lagged_loss_of(system: Helicopter, trajectory: Trajectory, horizon: float, *
     """The lagged loss of `system` on `trajectory` over `horizon` seconds (every `stride`-th start)."""
     dt = check_helicopter_data(trajectory, "lagged_loss_of")
     n_steps = horizon_steps(horizon, dt, "lagged_loss_of")
-    starts = _starts(trajectory, n_steps, stride)
-    w = _weights(weights, trajectory.xs.dtype)
+    starts = window_starts(trajectory, n_steps, stride)
+    w = state_weights(weights, trajectory.xs.dtype)
     return float(_lagged_loss_jit(system, trajectory, n_steps, starts=starts, weights=w))
 
 
@@ -475,8 +475,8 @@ def lagged_loss_gradient_norm(
     """
     dt = check_helicopter_data(trajectory, "lagged_loss_gradient_norm")
     n_steps = horizon_steps(horizon, dt, "lagged_loss_gradient_norm")
-    starts = _starts(trajectory, n_steps, stride)
-    w = _weights(weights, trajectory.xs.dtype)
+    starts = window_starts(trajectory, n_steps, stride)
+    w = state_weights(weights, trajectory.xs.dtype)
     theta = system.body_model.parameter_vector()
-    grad = jax.jit(jax.grad(lambda t: lagged_loss(_with_theta(system, t), trajectory, n_steps, starts=starts, weights=w)))(theta)
+    grad = jax.jit(jax.grad(lambda t: lagged_loss(with_theta(system, t), trajectory, n_steps, starts=starts, weights=w)))(theta)
     return float(jnp.linalg.norm(grad))

@@ -50,7 +50,7 @@ from ..._data._trajectory import Trajectory
 from ..._fit import fit_least_squares, levenberg_marquardt
 from ..._errors import UsageError
 from ..._model._helicopter import BODY, BODY_AXES, Helicopter, LINEAR_FEATURE_NAMES
-from ._criteria import _normal_equations, _single, _solve, _with_theta, fit_one_step, VehicleFit
+from ._criteria import normal_equations, one_shot_history, ridge_solve, with_theta, fit_one_step, VehicleFit
 from ._windows import check_helicopter_data, valid_starts
 
 
@@ -352,13 +352,13 @@ def _reduce_structure(theta, response_residuals, residuals, responses: _Response
 def _refit_constants(fitted: Helicopter, trajectory: Trajectory) -> Helicopter:
     """The constant column (no frequency response) re-fitted by one-step least squares, the rest held."""
     starts = jnp.asarray(valid_starts(len(trajectory), 1))
-    ata, atb, _ = _normal_equations(fitted, trajectory, starts, 1, jnp.ones(6, trajectory.xs.dtype), False, 1024)
+    ata, atb, _ = normal_equations(fitted, trajectory, starts, 1, jnp.ones(6, trajectory.xs.dtype), False, 1024)
     theta = fitted.body_model.parameter_vector()
     bias = np.array([n.endswith("/1") for n in fitted.body_model.parameter_names])
     rest = ~bias
     rhs = atb[bias] - ata[np.ix_(bias, rest)] @ theta[rest]
-    theta = theta.at[np.nonzero(bias)[0]].set(_solve(ata[np.ix_(bias, bias)], rhs, 1e-12))
-    return _with_theta(fitted, theta)
+    theta = theta.at[np.nonzero(bias)[0]].set(ridge_solve(ata[np.ix_(bias, bias)], rhs, 1e-12))
+    return with_theta(fitted, theta)
 
 
 def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: FrequencyDomain = FrequencyDomain()) -> VehicleFit:
@@ -394,6 +394,6 @@ def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: Frequen
         (n, float(v), float(c), float(i)) for n, v, c, i in zip(kept, np.asarray(theta)[active], cramer_rao, insensitivity)
     )
     fitted = eqx.tree_at(lambda h: h.body_model.weights, initial, initial.body_model.weights.at[free].set(theta))
-    losses, seconds = _single(final_cost, time.perf_counter() - t0)
+    losses, seconds = one_shot_history(final_cost, time.perf_counter() - t0)
     return VehicleFit(_refit_constants(fitted, trajectory), losses, seconds, "frequency", len(trajectory),
                       statistics=summary, eliminated=tuple(eliminated))

@@ -20,7 +20,7 @@ from ..._data._trajectory import Trajectory
 from ..._errors import UsageError
 from ..._fit import Parameters, Solution
 from ..._model._quadrotor import Quadrotor, to_body_frame
-from ._criteria import Backprop, Lagged, OneStep, _normal_equations, _starts, _weights
+from ._criteria import Backprop, Lagged, OneStep, normal_equations, window_starts, state_weights
 from ._fit import fit_vehicle
 from ._frequency import FrequencyDomain
 
@@ -108,9 +108,9 @@ def fit_quadrotor(
     n = theta.shape[0]
     covariance = jnp.full((n, n), jnp.nan, theta.dtype)
     if isinstance(criterion, OneStep):
-        starts = _starts(joined, 1, 1, breaks)
-        w = _weights(None, joined.xs.dtype)
-        ata, _, mse = _normal_equations(fit.system, joined, starts, 1, w, False, 1024)
+        starts = window_starts(joined, 1, 1, breaks)
+        w = state_weights(None, joined.xs.dtype)
+        ata, _, mse = normal_equations(fit.system, joined, starts, 1, w, False, 1024)
         windows = int(starts.shape[0])  # `mse` is per window, its six body axes summed
         sigma2 = mse * windows / max(6 * windows - n, 1)
         covariance = sigma2 * jnp.linalg.pinv(ata)

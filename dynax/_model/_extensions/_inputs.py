@@ -6,7 +6,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._terms import _scalar, AbstractTerm
+from ._terms import float_scalar, AbstractTerm
 
 # Time constants and delays at or below this are treated as zero (the input passes through).
 _TINY_TIME = 1e-4
@@ -69,7 +69,7 @@ class InputGain(AbstractInputTerm):
 
     def __init__(self, input: int, gain: ArrayLike = 1.0):
         self.input = input
-        self.coefficient = _scalar(gain)
+        self.coefficient = float_scalar(gain)
 
     def applied(self, u, z):
         return self.coefficient * u
@@ -90,7 +90,7 @@ class InputOffset(AbstractInputTerm):
 
     def __init__(self, input: int, offset: ArrayLike = 0.0):
         self.input = input
-        self.coefficient = _scalar(offset)
+        self.coefficient = float_scalar(offset)
 
     def applied(self, u, z):
         return u + self.coefficient
@@ -115,7 +115,7 @@ class InputLag(AbstractInputTerm):
 
     def __init__(self, input: int, time_constant: ArrayLike = 0.0):
         self.input = input
-        self.coefficient = _scalar(time_constant)
+        self.coefficient = float_scalar(time_constant)
 
     def applied(self, u, z):
         return jnp.where(self.coefficient > _TINY_TIME, z[0], u)
@@ -155,7 +155,7 @@ class InputDelay(AbstractInputTerm):
 
     def __init__(self, input: int, delay: ArrayLike = 0.0):
         self.input = input
-        self.coefficient = _scalar(delay)
+        self.coefficient = float_scalar(delay)
 
     def applied(self, u, z):
         # a = u - T s F(s) u with F = 1 / (1 + sT/2 + s^2 T^2 / 12); z = (F u, s F u).

@@ -14,10 +14,10 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from .._system import _solve_spd
+from .._system import solve_spd
 
 
-def _scalar(value) -> Array:
+def float_scalar(value) -> Array:
     return jnp.asarray(value, dtype=jnp.result_type(float))
 
 
@@ -113,7 +113,7 @@ class AbstractJointTerm(AbstractTerm):
         for term in terms:
             force = force.at[term.joint].add(term.joint_force(q, dq, a))
             inertia = inertia.at[term.joint].add(term.inertia())
-        ddq = _solve_spd(system.mass_matrix(q) + jnp.diag(inertia), force)
+        ddq = solve_spd(system.mass_matrix(q) + jnp.diag(inertia), force)
         return jnp.concatenate([dq, ddq])
 
     def force(self, q: Float[Array, ""], dq: Float[Array, ""]) -> Float[Array, ""]:
@@ -159,8 +159,8 @@ class CoulombFriction(AbstractJointTerm):
 
     def __init__(self, joint: int, fc: ArrayLike = 0.0, *, velocity_scale: float = 0.01):
         self.joint = joint
-        self.coefficient = _scalar(fc)
-        self.velocity_scale = _scalar(velocity_scale)
+        self.coefficient = float_scalar(fc)
+        self.velocity_scale = float_scalar(velocity_scale)
 
     def parameter_filter(self):
         return eqx.tree_at(lambda t: t.velocity_scale, super().parameter_filter(), False)
@@ -184,7 +184,7 @@ class ViscousFriction(AbstractJointTerm):
 
     def __init__(self, joint: int, b: ArrayLike = 0.0):
         self.joint = joint
-        self.coefficient = _scalar(b)
+        self.coefficient = float_scalar(b)
 
     def force(self, q, dq):
         return -self.coefficient * dq
@@ -205,7 +205,7 @@ class QuadraticDrag(AbstractJointTerm):
 
     def __init__(self, joint: int, c: ArrayLike = 0.0):
         self.joint = joint
-        self.coefficient = _scalar(c)
+        self.coefficient = float_scalar(c)
 
     def force(self, q, dq):
         return -self.coefficient * jnp.abs(dq) * dq
@@ -234,7 +234,7 @@ class RotorInertia(AbstractJointTerm):
 
     def __init__(self, joint: int, inertia: ArrayLike = 0.0):
         self.joint = joint
-        self.coefficient = _scalar(inertia)
+        self.coefficient = float_scalar(inertia)
 
     def inertia(self):
         return self.coefficient
@@ -258,7 +258,7 @@ class JointSpring(AbstractJointTerm):
 
     def __init__(self, joint: int, k: ArrayLike = 0.0):
         self.joint = joint
-        self.coefficient = _scalar(k)
+        self.coefficient = float_scalar(k)
 
     def force(self, q, dq):
         return -self.coefficient * q

@@ -37,7 +37,7 @@ from .._helicopter import (
     quaternion_to_rotation,
     rigid_body_kinematics,
 )
-from ._terms import _scalar, AbstractTerm
+from ._terms import float_scalar, AbstractTerm
 
 WORLD_AXES = ("n", "e", "d")
 
@@ -108,7 +108,7 @@ class BodyQuadraticDrag(AbstractVehicleTerm):
 
     def __init__(self, axis: int, c: ArrayLike = 0.0):
         self.axis = axis
-        self.coefficient = _scalar(c)
+        self.coefficient = float_scalar(c)
 
     def acceleration(self, quat, air, u):
         v = air[self.axis]
@@ -133,7 +133,7 @@ class BodyBias(AbstractVehicleTerm):
 
     def __init__(self, axis: int, b: ArrayLike = 0.0):
         self.axis = axis
-        self.coefficient = _scalar(b)
+        self.coefficient = float_scalar(b)
 
     def acceleration(self, quat, air, u):
         return jnp.zeros_like(air).at[self.axis].set(self.coefficient)
@@ -170,7 +170,7 @@ class RotorDrag(AbstractVehicleTerm):
 
     def __init__(self, axis: int, d: ArrayLike = 0.0):
         self.axis = axis
-        self.coefficient = _scalar(d)
+        self.coefficient = float_scalar(d)
 
     def acceleration(self, quat, air, u):
         return jnp.zeros_like(air).at[self.axis].set(-self.coefficient * air[self.axis])
@@ -197,7 +197,7 @@ class Wind(AbstractVehicleTerm):
 
     def __init__(self, axis: int, speed: ArrayLike = 0.0):
         self.axis = axis
-        self.coefficient = _scalar(speed)
+        self.coefficient = float_scalar(speed)
 
     def where(self, system) -> str:
         super().where(system)  # checks the system
