@@ -150,6 +150,9 @@ def trim_and_decimation(sample_rate_hz: float, cutoff_hz: float, n_samples: int)
     return trim, decimate
 
 
+CENTRAL_MATCH = 0.4  # see `_noise_reading`
+
+
 def _noise_reading(q, v, fs: float) -> np.ndarray:
     r"""The signal whose spectrum gives a velocity channel's noise floor: the velocity itself, or, for
     a velocity that is the central difference of its position (an encoder-only record, as
@@ -161,10 +164,13 @@ def _noise_reading(q, v, fs: float) -> np.ndarray:
     ($4\sin^2(\pi f\Delta t)/\Delta t^2$), and motion-free bands then count as signal. Both carry the
     same signal and the same noise in the band; the backward difference reads the floor as a logged
     velocity's. A velocity counts as a central difference when it lies closer to the central than
-    to the backward difference of its position, and within three times their distance from each other
-    (resampling an irregular record blurs the two, so exact equality cannot be asked; a logged
-    backward difference lies closer to the backward difference, a tachometer's own noise puts it
-    far from both)."""
+    to the backward difference of its position, and within `CENTRAL_MATCH` (0.4) of their distance
+    from each other. Resampling an irregular record blurs the two, so exact equality cannot be asked
+    (a DFKI record read from its angles alone and resampled lies at 0.27 to 0.29); a logged backward
+    difference lies closer to the backward difference; a velocity measured apart from its position
+    differs from the central difference by at least that difference's own noise, about 0.58 of the
+    distance for white encoder noise ($\sigma f_s/\sqrt 2$ against $\sigma f_s\sqrt{3/2}$), more with
+    its own."""
     q, v = np.asarray(q, dtype=float), np.asarray(v, dtype=float)
     if len(q) < 3:
         return v
@@ -172,7 +178,7 @@ def _noise_reading(q, v, fs: float) -> np.ndarray:
     central = 0.5 * (q[2:] - q[:-2]) * fs
     rms = lambda a: float(np.sqrt(np.mean(a**2)))  # noqa: E731
     to_central, to_backward = rms(v[1:-1] - central), rms(v[1:-1] - backward[:-1])
-    if to_central < to_backward and to_central < 3.0 * rms(central - backward[:-1]):
+    if to_central < to_backward and to_central < CENTRAL_MATCH * rms(central - backward[:-1]):
         return np.concatenate([backward[:1], backward])
     return v
 

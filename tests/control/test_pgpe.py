@@ -149,7 +149,7 @@ def test_pgpe_improves_swing_up_from_a_poor_start():
 SHARDED_SCRIPT = textwrap.dedent(
     """
     import jax, jax.numpy as jnp
-    from dynax import evaluate_population, PGPE, population_sharding, run_pgpe, sweep_pgpe
+    from dynax.control import evaluate_population, PGPE, population_sharding, run_pgpe, sweep_pgpe
     assert jax.device_count() == 2, jax.devices()
     assert population_sharding(8) is not None and population_sharding(7) is None
     target = jnp.arange(4.0)
