@@ -27,7 +27,11 @@ def device_info() -> dict:
 def describe(info: dict) -> str:
     """One line for the console: on which device the absolute numbers were taken."""
     if info["accelerator"]:
-        return (f"device: {info['device_count']} x {info['device_kind']} ({info['platform']}); the absolute numbers "
-                "below are for this accelerator (numpy, MuJoCo and gymnasium references run on the host CPU)")
-    return (f"device: CPU only ({info['device_count']} XLA host device(s) on {info['host_cores']} cores of "
-            f"{info['host_cpu']}); no GPU visible to JAX, so these are CPU numbers")
+        return (
+            f"device: {info['device_count']} x {info['device_kind']} ({info['platform']}); the absolute numbers "
+            "below are for this accelerator (numpy, MuJoCo and gymnasium references run on the host CPU)"
+        )
+    return (
+        f"device: CPU only ({info['device_count']} XLA host device(s) on {info['host_cores']} cores of "
+        f"{info['host_cpu']}); no GPU visible to JAX, so these are CPU numbers"
+    )

@@ -24,6 +24,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 from _device import describe, device_info  # noqa: E402
+
 from dynax import Acrobot, CoulombFriction, diagnose, Extended, load_trajectory, save_trajectory  # noqa: E402
 from dynax.internal import write_json  # noqa: E402
 from dynax.synthetic import DEMO_TRUTH_PHYSICAL, synthetic_trajectory  # noqa: E402
@@ -38,7 +39,9 @@ def main():
     files = {}
     with tempfile.TemporaryDirectory() as folder:
         for seed in (args.seed, args.seed + 1):
-            record = synthetic_trajectory(truth, duration=40.0, dt=0.01, amplitude=2.0, seed=seed, system_name="acrobot")
+            record = synthetic_trajectory(
+                truth, duration=40.0, dt=0.01, amplitude=2.0, seed=seed, system_name="acrobot"
+            )
             path = pathlib.Path(folder) / f"acrobot_40s_{seed}.csv"
             save_trajectory(record, path)
             files[seed] = load_trajectory(path, "acrobot")
@@ -48,23 +51,47 @@ def main():
     runs = []
     # The third call is another recording of the same size (another excitation and noise): the compiled
     # fits are reused because nothing data-dependent is static (a user's second file).
-    for label, data in (("first call (with compilation)", data), ("second call (compiled)", data),
-                        ("another file of the same size", files[args.seed + 1])):
+    for label, data in (
+        ("first call (with compilation)", data),
+        ("second call (compiled)", data),
+        ("another file of the same size", files[args.seed + 1]),
+    ):
         wall, cpu = time.perf_counter(), time.process_time()
-        report = diagnose(Acrobot(), data, system_name="acrobot",
-                          progress=lambda line: print(f"  [{time.perf_counter() - wall:5.1f} s] {line}"))
+        report = diagnose(
+            Acrobot(),
+            data,
+            system_name="acrobot",
+            progress=lambda line: print(f"  [{time.perf_counter() - wall:5.1f} s] {line}"),
+        )
         wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
         j = report.to_json()
-        runs.append({"call": label, "wall_s": wall, "cpu_s": cpu, "verdict": j["verdict"],
-                     "causes": [f"{f['cause']}@{f['where']}" for f in j["findings"]], "gain": j["gain"]})
-        print(f"{label}: {wall:.1f} s wall, {cpu:.1f} s CPU; verdict {j['verdict']}, "
-              f"causes {runs[-1]['causes']}, gain {j['gain']:.0%}")
+        runs.append(
+            {
+                "call": label,
+                "wall_s": wall,
+                "cpu_s": cpu,
+                "verdict": j["verdict"],
+                "causes": [f"{f['cause']}@{f['where']}" for f in j["findings"]],
+                "gain": j["gain"],
+            }
+        )
+        print(
+            f"{label}: {wall:.1f} s wall, {cpu:.1f} s CPU; verdict {j['verdict']}, "
+            f"causes {runs[-1]['causes']}, gain {j['gain']:.0%}"
+        )
     out = pathlib.Path(args.out)
-    write_json(out / "diagnose.json", {
-        "benchmark": "diagnose: 40 s, 100 Hz acrobot file, full candidate library, last 30 % held out",
-        "n_samples": len(data), "n_candidates": 12, "target_s": 60.0, "runs": runs,
-        "cpu_count": __import__("os").cpu_count(), "device": device_info(),
-    })
+    write_json(
+        out / "diagnose.json",
+        {
+            "benchmark": "diagnose: 40 s, 100 Hz acrobot file, full candidate library, last 30 % held out",
+            "n_samples": len(data),
+            "n_candidates": 12,
+            "target_s": 60.0,
+            "runs": runs,
+            "cpu_count": __import__("os").cpu_count(),
+            "device": device_info(),
+        },
+    )
     print(f"wrote {out / 'diagnose.json'}")
 
 

@@ -47,8 +47,10 @@ RIG = dict(theta1=0.0536, theta2=0.0533, theta3=0.0362, theta4=2.365, theta5=1.7
 
 
 def arm(fc2):
-    return dynax.Extended(dynax.DoublePendulum.from_base_parameters(RIG),
-                          (dynax.CoulombFriction(0, 0.15), dynax.CoulombFriction(1, fc2), dynax.RotorInertia(1, 0.0042)))
+    return dynax.Extended(
+        dynax.DoublePendulum.from_base_parameters(RIG),
+        (dynax.CoulombFriction(0, 0.15), dynax.CoulombFriction(1, fc2), dynax.RotorInertia(1, 0.0042)),
+    )
 
 
 def _field(t, x, args):
@@ -94,9 +96,17 @@ def main(argv=None):
         return bare(arm(frictions[k]), x0, ts, us, method, 1e6)[0]
 
     def with_diffrax(k):  # the system through `args`, as diffrax's docs pass parameters: one compilation
-        return diffrax.diffeqsolve(TERM, method.solver, t0=ts[0], t1=ts[-1], dt0=dt / 4, y0=x0,
-                                   args=(arm(frictions[k]), ts, us), saveat=diffrax.SaveAt(ts=ts),
-                                   max_steps=4 * n + 8).ys
+        return diffrax.diffeqsolve(
+            TERM,
+            method.solver,
+            t0=ts[0],
+            t1=ts[-1],
+            dt0=dt / 4,
+            y0=x0,
+            args=(arm(frictions[k]), ts, us),
+            saveat=diffrax.SaveAt(ts=ts),
+            max_steps=4 * n + 8,
+        ).ys
 
     rows = {"dynax.simulate": timed(with_dynax, args.reps)}
     if bare is not None:
@@ -109,8 +119,9 @@ def main(argv=None):
     times, start = jnp.arange(0.0, 10.0, 0.01), jnp.array([0.1, 0.0, 0.0, 0.0])
 
     def with_closed_loop(k):
-        return dynax.control.simulate_closed_loop(plant, controller.with_params(controller.params * (1 + 0.01 * k)), start,
-                                          times).xs
+        return dynax.control.simulate_closed_loop(
+            plant, controller.with_params(controller.params * (1 + 0.01 * k)), start, times
+        ).xs
 
     bare_loop = getattr(_closed_loop._closed_loop, "__wrapped__", None)
 
@@ -121,6 +132,7 @@ def main(argv=None):
     rows["dynax.control.simulate_closed_loop"] = timed(with_closed_loop, args.reps)
     if bare_loop is not None:
         rows["closed loop, bare lax.scan (before)"] = timed(with_bare_closed_loop, args.reps)
+
     def base(name):  # each path against dynax's own on the same problem
         return rows["dynax.control.simulate_closed_loop" if "closed" in name else "dynax.simulate"][1]
 
@@ -128,8 +140,10 @@ def main(argv=None):
     for name, (first, median) in rows.items():
         print(f"{name:36s} {first:13.3f} {median:14.4f} {median / base(name):15.1f}")
     if args.json:
-        args.json.write_text(json.dumps({k: {"first_s": f, "median_s": m, "ratio": m / base(k)}
-                                         for k, (f, m) in rows.items()}, indent=2) + "\n")
+        args.json.write_text(
+            json.dumps({k: {"first_s": f, "median_s": m, "ratio": m / base(k)} for k, (f, m) in rows.items()}, indent=2)
+            + "\n"
+        )
 
 
 if __name__ == "__main__":

@@ -72,32 +72,48 @@ def main():
         for name, segment in (("checkpointed_bytes", None), ("plain_bytes", 0)):
             row[name] = gradient_memory(system, data, horizon, args.stride, segment)
         memory.append(row)
-        log(f"H = {horizon} s: gradient temporaries {row['checkpointed_bytes'] / 2**20:.1f} MiB checkpointed, "
-            f"{row['plain_bytes'] / 2**20:.1f} MiB without")
+        log(
+            f"H = {horizon} s: gradient temporaries {row['checkpointed_bytes'] / 2**20:.1f} MiB checkpointed, "
+            f"{row['plain_bytes'] / 2**20:.1f} MiB without"
+        )
     result = {"stride": args.stride, "n_samples": len(data), "memory": memory}
 
     if not args.skip_timing:
         t0 = time.perf_counter()
-        lagged = fit_lagged(system, data, Lagged(horizon=1.0, stride=args.stride, max_iterations=30),
-                            callback=lambda i, loss: log(f"EM-free iteration {i + 1}: {loss:.6g}"))
+        lagged = fit_lagged(
+            system,
+            data,
+            Lagged(horizon=1.0, stride=args.stride, max_iterations=30),
+            callback=lambda i, loss: log(f"EM-free iteration {i + 1}: {loss:.6g}"),
+        )
         em_time = time.perf_counter() - t0
         log(f"EM-free: loss {lagged.loss:.6g} in {em_time:.1f} s ({len(lagged.history) - 1} iterations)")
         t0 = time.perf_counter()
-        direct = fit_backprop(system, data, Backprop(horizon=1.0, stride=args.stride, max_steps=100,
-                                                     target_loss=lagged.loss),
-                              callback=lambda i, loss: log(f"backprop step {i + 1}: {loss:.6g}"))
+        direct = fit_backprop(
+            system,
+            data,
+            Backprop(horizon=1.0, stride=args.stride, max_steps=100, target_loss=lagged.loss),
+            callback=lambda i, loss: log(f"backprop step {i + 1}: {loss:.6g}"),
+        )
         bp_time = time.perf_counter() - t0
         reached = direct.loss <= lagged.loss
-        log(f"backprop: loss {direct.loss:.6g} in {bp_time:.1f} s ({len(direct.history) - 1} steps); "
-            f"{'reached' if reached else 'did not reach'} the EM-free loss")
+        log(
+            f"backprop: loss {direct.loss:.6g} in {bp_time:.1f} s ({len(direct.history) - 1} steps); "
+            f"{'reached' if reached else 'did not reach'} the EM-free loss"
+        )
         t0 = time.perf_counter()
-        newton = fit_lagged(system, data, Lagged(horizon=1.0, stride=args.stride, max_iterations=30,
-                                                 state_sensitivities=True),
-                            callback=lambda i, loss: log(f"Gauss-Newton iteration {i + 1}: {loss:.6g}"))
+        newton = fit_lagged(
+            system,
+            data,
+            Lagged(horizon=1.0, stride=args.stride, max_iterations=30, state_sensitivities=True),
+            callback=lambda i, loss: log(f"Gauss-Newton iteration {i + 1}: {loss:.6g}"),
+        )
         gn_time = time.perf_counter() - t0
         gn_reach = next((t for t, loss in newton.history if loss <= lagged.loss), None)
-        log(f"Gauss-Newton (state sensitivities): loss {newton.loss:.6g} in {gn_time:.1f} s "
-            f"({len(newton.history) - 1} iterations); EM-free loss reached after {gn_reach} s")
+        log(
+            f"Gauss-Newton (state sensitivities): loss {newton.loss:.6g} in {gn_time:.1f} s "
+            f"({len(newton.history) - 1} iterations); EM-free loss reached after {gn_reach} s"
+        )
         result["timing"] = {
             "gauss_newton_loss": newton.loss,
             "gauss_newton_seconds": gn_time,

@@ -19,12 +19,12 @@ import pathlib  # noqa: E402
 import platform  # noqa: E402
 import time  # noqa: E402
 
+from _device import describe, device_info  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import scipy.linalg  # noqa: E402
 
 import dynax  # noqa: E402
-from _device import describe, device_info  # noqa: E402
 from dynax import Dynamic, Energy, identify, Power, Trajectory  # noqa: E402
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
@@ -54,7 +54,10 @@ def numpy_dynamic(ts, xs, us):
 def _energy_columns(xs):
     q1, q2, dq1, dq2 = xs.T
     z = np.zeros_like(q1)
-    return np.stack([0.5 * dq1**2, 0.5 * (dq1 + dq2) ** 2, np.cos(q2) * (dq1**2 + dq1 * dq2), -np.cos(q1), -np.cos(q1 + q2), z, z], axis=1)
+    return np.stack(
+        [0.5 * dq1**2, 0.5 * (dq1 + dq2) ** 2, np.cos(q2) * (dq1**2 + dq1 * dq2), -np.cos(q1), -np.cos(q1 + q2), z, z],
+        axis=1,
+    )
 
 
 def _interval_integrals(ts, xs, us):
@@ -73,7 +76,12 @@ def numpy_power(ts, xs, us):
     h = np.diff(ts)
     h1, h2 = h[:-1], h[1:]
     b1, b2 = h2 / (h1 + h2) / h1, h1 / (h1 + h2) / h2
-    a = b1[:, None] * (w[1:-1] - w[:-2]) + b2[:, None] * (w[2:] - w[1:-1]) + b1[:, None] * dissipated[:-1] + b2[:, None] * dissipated[1:]
+    a = (
+        b1[:, None] * (w[1:-1] - w[:-2])
+        + b2[:, None] * (w[2:] - w[1:-1])
+        + b1[:, None] * dissipated[:-1]
+        + b2[:, None] * dissipated[1:]
+    )
     y = b1 * work[:-1] + b2 * work[1:]
     return scipy.linalg.lstsq(a, y)[0]
 
@@ -116,8 +124,12 @@ def main():
     levels = rng.uniform(-2, 2, size=args.samples // 50 + 1)
     us = np.repeat(levels, 50)[: args.samples, None]
     xs = np.asarray(dynax.simulate(system, jnp.array([0.2, 0.0, 0.0, 0.0]), jnp.asarray(ts), jnp.asarray(us)).xs)
-    data = Trajectory(jnp.asarray(ts), jnp.asarray(xs), jnp.asarray(us), ("q1", "q2", "dq1", "dq2"), ("tau2",), "acrobot")
-    print(f"{args.samples} samples of acrobot data; {platform.processor() or platform.machine()}, jax {jax.__version__}")
+    data = Trajectory(
+        jnp.asarray(ts), jnp.asarray(xs), jnp.asarray(us), ("q1", "q2", "dq1", "dq2"), ("tau2",), "acrobot"
+    )
+    print(
+        f"{args.samples} samples of acrobot data; {platform.processor() or platform.machine()}, jax {jax.__version__}"
+    )
 
     cases = {
         # No filter, trim 1, no decimation: the reference's recipe (the default `Dynamic()` chooses a
@@ -127,8 +139,13 @@ def main():
         "energy": (Energy(), numpy_energy),
     }
     print(describe(device_info()))
-    results = {"samples": args.samples, "device": device_info(), "jax": jax.__version__, "methods": {},
-               "load_average": os.getloadavg()}
+    results = {
+        "samples": args.samples,
+        "device": device_info(),
+        "jax": jax.__version__,
+        "methods": {},
+        "load_average": os.getloadavg(),
+    }
     for name, (method, reference) in cases.items():
         start = time.perf_counter()
         first = identify(system, data, method, refine=False, holdout=0, consistency="off")
@@ -140,7 +157,9 @@ def main():
         # more than once a round.
         t_dynax, t_numpy = [], []
         for _ in range(args.repeats):
-            t, result = best_time(lambda: identify(system, data, method, refine=False, holdout=0, consistency="off").estimate, 3)
+            t, result = best_time(
+                lambda: identify(system, data, method, refine=False, holdout=0, consistency="off").estimate, 3
+            )
             t_dynax.append(t)
             t, estimate = best_time(lambda: reference(ts, xs, us), 3)
             t_numpy.append(t)
@@ -153,8 +172,10 @@ def main():
             "first_call_s": compile_s,
             "max_relative_difference": agree,
         }
-        print(f"{name:>8s}: dynax {t_dynax * 1e3:8.1f} ms (first call {compile_s:.1f} s), numpy/scipy "
-              f"{t_numpy * 1e3:8.1f} ms, ratio {t_numpy / t_dynax:.2f}, estimates agree to {agree:.1e}")
+        print(
+            f"{name:>8s}: dynax {t_dynax * 1e3:8.1f} ms (first call {compile_s:.1f} s), numpy/scipy "
+            f"{t_numpy * 1e3:8.1f} ms, ratio {t_numpy / t_dynax:.2f}, estimates agree to {agree:.1e}"
+        )
         del first
     out = pathlib.Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -68,7 +68,10 @@ def main(argv=None):
         u.block_until_ready()
         if k >= 50:
             jtimes[k - 50] = time.perf_counter_ns() - t0
-    results["call_jax_jit_us"] = {"median": float(np.median(jtimes) / 1e3), "p99": float(np.percentile(jtimes, 99) / 1e3)}
+    results["call_jax_jit_us"] = {
+        "median": float(np.median(jtimes) / 1e3),
+        "p99": float(np.percentile(jtimes, 99) / 1e3),
+    }
 
     t0 = time.perf_counter()
     control.performance(controller).score.block_until_ready()

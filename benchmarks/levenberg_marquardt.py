@@ -33,17 +33,24 @@ import pathlib  # noqa: E402
 import platform  # noqa: E402
 import time  # noqa: E402
 
+from _device import describe, device_info  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from _device import describe, device_info  # noqa: E402
-from dynax.internal import levenberg_marquardt  # noqa: E402
 from dynax._identify import _simulation_fit  # noqa: E402
+from dynax.internal import levenberg_marquardt  # noqa: E402
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 DFKI = REPO.parent / "shared" / "datasets" / "dfki_double_pendulum" / "sys_id"
-MAPPING = {"t": "time", "q1": "pos_meas1", "q2": "pos_meas2", "dq1": "vel_meas1", "dq2": "vel_meas2",
-           "tau1": "tau_meas1", "tau2": "tau_meas2"}
+MAPPING = {
+    "t": "time",
+    "q1": "pos_meas1",
+    "q2": "pos_meas2",
+    "dq1": "vel_meas1",
+    "dq2": "vel_meas2",
+    "tau1": "tau_meas1",
+    "tau2": "tau_meas2",
+}
 
 
 def load(run: str) -> dynax.Trajectory:
@@ -51,9 +58,11 @@ def load(run: str) -> dynax.Trajectory:
     return dynax.resample(raw, raw.dt)
 
 
-SOLVERS = {"optimistix": dict(jacobian="every_step", damping="classical"),
-           "accepted": dict(jacobian="accepted", damping="classical"),
-           "dynax": dict(jacobian="accepted", damping="nielsen")}
+SOLVERS = {
+    "optimistix": dict(jacobian="every_step", damping="classical"),
+    "accepted": dict(jacobian="accepted", damping="classical"),
+    "dynax": dict(jacobian="accepted", damping="nielsen"),
+}
 
 
 def timed_identify(train, held, name: str) -> tuple[float, float, list[int], dict[str, float]]:
@@ -88,24 +97,42 @@ def main(argv=None):
     parser.add_argument("--train", default="00,01,02")
     parser.add_argument("--held-out", default="03")
     parser.add_argument("--repeats", type=int, default=1, help="warm calls of each (default 1)")
-    parser.add_argument("--solvers", default="optimistix,accepted,dynax",
-                        help="which to run (one alone in its own process gives its cold time without the other's "
-                             "compilation of what both share)")
+    parser.add_argument(
+        "--solvers",
+        default="optimistix,accepted,dynax",
+        help="which to run (one alone in its own process gives its cold time without the other's "
+        "compilation of what both share)",
+    )
     parser.add_argument("--json", type=pathlib.Path, default=None)
     args = parser.parse_args(argv)
     print(describe(device_info()), flush=True)
     train = [load(r) for r in args.train.split(",")]
     held = load(args.held_out)
-    out = {"device": device_info(), "machine": platform.processor() or platform.machine(),
-           "train": args.train.split(","), "held_out": args.held_out, "solvers": {}}
+    out = {
+        "device": device_info(),
+        "machine": platform.processor() or platform.machine(),
+        "train": args.train.split(","),
+        "held_out": args.held_out,
+        "solvers": {},
+    }
     for name in args.solvers.split(","):
         cold = timed_identify(train, held, name)
         warm = [timed_identify(train, held, name) for _ in range(args.repeats)]
         best = min(warm, key=lambda w: w[0])
-        out["solvers"][name] = {**SOLVERS[name], "cold_s": cold[0], "cold_fits_s": cold[1], "warm_s": best[0],
-                                "warm_fits_s": best[1], "fit_steps": best[2], "parameters": best[3]}
-        print(f"{name:10s} identify cold {cold[0]:6.1f} s (fits {cold[1]:5.1f}), warm {best[0]:6.1f} s "
-              f"(fits {best[1]:5.1f}), fit steps {best[2]}", flush=True)
+        out["solvers"][name] = {
+            **SOLVERS[name],
+            "cold_s": cold[0],
+            "cold_fits_s": cold[1],
+            "warm_s": best[0],
+            "warm_fits_s": best[1],
+            "fit_steps": best[2],
+            "parameters": best[3],
+        }
+        print(
+            f"{name:10s} identify cold {cold[0]:6.1f} s (fits {cold[1]:5.1f}), warm {best[0]:6.1f} s "
+            f"(fits {best[1]:5.1f}), fit steps {best[2]}",
+            flush=True,
+        )
     if "optimistix" not in out["solvers"]:
         return
     base = out["solvers"]["optimistix"]
@@ -113,14 +140,21 @@ def main(argv=None):
         if name == "optimistix":
             continue
         # parameters at a bound (a viscous friction at zero) agree absolutely, not relatively
-        difference = max(abs(entry["parameters"][k] - base["parameters"][k]) / max(abs(base["parameters"][k]), 1e-6)
-                         for k in base["parameters"])
-        entry.update(parameters_max_relative_difference=difference, ratio_warm_identify=base["warm_s"] / entry["warm_s"],
-                     ratio_warm_fits=base["warm_fits_s"] / entry["warm_fits_s"],
-                     ratio_cold_identify=base["cold_s"] / entry["cold_s"])
-        print(f"optimistix / {name}: identify warm {entry['ratio_warm_identify']:.2f}x, refinement fits warm "
-              f"{entry['ratio_warm_fits']:.2f}x, identify cold {entry['ratio_cold_identify']:.2f}x; parameters agree "
-              f"to {difference:.1e} (relative)")
+        difference = max(
+            abs(entry["parameters"][k] - base["parameters"][k]) / max(abs(base["parameters"][k]), 1e-6)
+            for k in base["parameters"]
+        )
+        entry.update(
+            parameters_max_relative_difference=difference,
+            ratio_warm_identify=base["warm_s"] / entry["warm_s"],
+            ratio_warm_fits=base["warm_fits_s"] / entry["warm_fits_s"],
+            ratio_cold_identify=base["cold_s"] / entry["cold_s"],
+        )
+        print(
+            f"optimistix / {name}: identify warm {entry['ratio_warm_identify']:.2f}x, refinement fits warm "
+            f"{entry['ratio_warm_fits']:.2f}x, identify cold {entry['ratio_cold_identify']:.2f}x; parameters agree "
+            f"to {difference:.1e} (relative)"
+        )
         if not np.isfinite(difference) or difference > (1e-6 if name == "accepted" else 1e-3):
             raise SystemExit(f"{name} disagrees with optimistix: parameters differ by {difference:.2e} (relative)")
     if args.json:

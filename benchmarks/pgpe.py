@@ -24,13 +24,13 @@ import os
 import sys
 import time
 
+from _device import describe, device_info
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 import dynax
-from _device import describe, device_info
 from dynax.control import (
     CentredRank,
     clipup,
@@ -71,7 +71,13 @@ class NumpySwingUp:
         m11 = p["theta1"] + p["theta2"] + 2 * p["theta3"] * c2
         m12 = p["theta2"] + p["theta3"] * c2
         m22 = p["theta2"] + 0 * c2
-        h1 = -2 * p["theta3"] * s2 * dq2 * dq1 - p["theta3"] * s2 * dq2**2 + p["theta4"] * s1 + p["theta5"] * s12 + p["theta6"] * dq1
+        h1 = (
+            -2 * p["theta3"] * s2 * dq2 * dq1
+            - p["theta3"] * s2 * dq2**2
+            + p["theta4"] * s1
+            + p["theta5"] * s12
+            + p["theta6"] * dq1
+        )
         h2 = p["theta3"] * s2 * dq1**2 + p["theta5"] * s12 + p["theta7"] * dq2
         return m11, m12, m22, h1, h2
 
@@ -84,7 +90,11 @@ class NumpySwingUp:
         m11, m12, m22, h1, h2 = self._mass_bias(self.c, q1, q2, dq1, dq2)
         det = m11 * m22 - m12 * m12
         a2, a3 = -m12 / det, m11 / det
-        energy = 0.5 * (m11 * dq1**2 + 2 * m12 * dq1 * dq2 + m22 * dq2**2) - self.c["theta4"] * np.cos(q1) - self.c["theta5"] * np.cos(q1 + q2)
+        energy = (
+            0.5 * (m11 * dq1**2 + 2 * m12 * dq1 * dq2 + m22 * dq2**2)
+            - self.c["theta4"] * np.cos(q1)
+            - self.c["theta5"] * np.cos(q1 + q2)
+        )
         u_e = -k_e * (energy - (self.c["theta4"] + self.c["theta5"])) * dq2
         y = -k_p * q2 - k_d * dq2
         u_p = (a2 * h1 + y) / a3 + h2
@@ -161,7 +171,9 @@ def main(argv=None):
     args = parser.parse_args(argv)
 
     devices = jax.devices()
-    print(f"devices: {len(devices)} x {devices[0].device_kind}; XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r}", flush=True)
+    print(
+        f"devices: {len(devices)} x {devices[0].device_kind}; XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r}", flush=True
+    )
     print(describe(device_info()), flush=True)
     jax.config.update("jax_enable_x64", True)
     controller = f32(SpongController())  # LQR in float64, then float32
@@ -169,7 +181,13 @@ def main(argv=None):
     task = SwingUpTask(plant, controller, duration=DURATION, control_rate=RATE)
     scales = jnp.asarray(DRAKE_SPONG_PARAMETERS, jnp.float32)
     start = scales
-    pgpe = PGPE(population_size=POPULATION, scales=scales, init_sigma=0.1, optimizer=clipup(0.02, max_speed=0.04), fitness_shaping=CentredRank())
+    pgpe = PGPE(
+        population_size=POPULATION,
+        scales=scales,
+        init_sigma=0.1,
+        optimizer=clipup(0.02, max_speed=0.04),
+        fitness_shaping=CentredRank(),
+    )
     state = pgpe.init(start)
     pairs = POPULATION // 2
 
@@ -181,8 +199,13 @@ def main(argv=None):
         return pgpe.tell(state, noise, rewards), rewards
 
     key = jax.random.PRNGKey(0)
-    results = {"population": POPULATION, "episode_s": DURATION, "control_hz": RATE, "devices": len(devices),
-               "device": device_info()}
+    results = {
+        "population": POPULATION,
+        "episode_s": DURATION,
+        "control_hz": RATE,
+        "devices": len(devices),
+        "device": device_info(),
+    }
     single = eqx.filter_jit(lambda s, k: dynax_generation(s, k, False))
 
     from evosax.algorithms import PGPE as EvosaxPGPE
@@ -228,11 +251,16 @@ def main(argv=None):
         results[f"{name}_s"] = float(np.median(ts))
         results[f"{name}_min_s"] = float(np.min(ts))
         results[f"{name}_all_s"] = ts
-        print(f"{name:14s} {results[f'{name}_s']:.3f} s / generation (median), {results[f'{name}_min_s']:.3f} s (min)", flush=True)
+        print(
+            f"{name:14s} {results[f'{name}_s']:.3f} s / generation (median), {results[f'{name}_min_s']:.3f} s (min)",
+            flush=True,
+        )
     if "dynax_sharded" in times:
         results["sharding_speedup"] = results["dynax_s"] / results["dynax_sharded_s"]
         results["sharding_speedup_min"] = results["dynax_min_s"] / results["dynax_sharded_min_s"]
-        print(f"sharding speedup: {results['sharding_speedup']:.2f}x (median), {results['sharding_speedup_min']:.2f}x (min)")
+        print(
+            f"sharding speedup: {results['sharding_speedup']:.2f}x (median), {results['sharding_speedup_min']:.2f}x (min)"
+        )
 
     sim = NumpySwingUp(controller, plant)
     rng = np.random.default_rng(0)
@@ -255,7 +283,9 @@ def main(argv=None):
     via_jax = jax.jit(jax.vmap(lambda p, x: dynax.control.swing_up_reward(short.rollout(p, x))))(params, x0)
     via_numpy = sim.rewards(np.asarray(params), np.asarray(x0), duration=1.0)
     results["numpy_vs_dynax_reward_max_abs_diff"] = float(np.max(np.abs(np.asarray(via_jax) - via_numpy)))
-    print(f"reward agreement numpy vs dynax (8 episodes of 1 s): max |diff| = {results['numpy_vs_dynax_reward_max_abs_diff']:.2e}")
+    print(
+        f"reward agreement numpy vs dynax (8 episodes of 1 s): max |diff| = {results['numpy_vs_dynax_reward_max_abs_diff']:.2e}"
+    )
     if args.out:
         with open(args.out, "w") as f:
             json.dump(results, f, indent=2)

@@ -24,13 +24,20 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import dynax
-from dynax.internal import write_json
-from dynax.internal import auto_stride
+from dynax.internal import auto_stride, write_json
 
 DATA = pathlib.Path(__file__).resolve().parents[1].parent / "shared" / "datasets" / "nanobench"
 NANOBENCH_MAP = {
-    "x": "px", "y": "py", "z": "pz", "p": "wx_vicon", "q": "wy_vicon", "r": "wz_vicon",
-    "m1": "motor_motor_m1", "m2": "motor_motor_m2", "m3": "motor_motor_m3", "m4": "motor_motor_m4",
+    "x": "px",
+    "y": "py",
+    "z": "pz",
+    "p": "wx_vicon",
+    "q": "wy_vicon",
+    "r": "wz_vicon",
+    "m1": "motor_motor_m1",
+    "m2": "motor_motor_m2",
+    "m3": "motor_motor_m3",
+    "m4": "motor_motor_m4",
     "vbat": "pwr_pm_vbat",
 }
 HORIZON_S = 0.5
@@ -60,8 +67,15 @@ def main():
     start_model = dynax.initial_quadrotor("acceleration", flights)
     stride = auto_stride(sum(len(f) for f in flights), int(HORIZON_S / 0.01), AUTO_WINDOWS)
     criteria = {"one-step": dynax.OneStep(), "lagged": dynax.Lagged(horizon=HORIZON_S, stride=stride)}
-    result = {"samples": sum(len(f) for f in flights), "runs": len(flights), "load_seconds": load_s,
-              "cpu_count": os.cpu_count(), "affinity": len(os.sched_getaffinity(0)), "stride": stride, "fits": {}}
+    result = {
+        "samples": sum(len(f) for f in flights),
+        "runs": len(flights),
+        "load_seconds": load_s,
+        "cpu_count": os.cpu_count(),
+        "affinity": len(os.sched_getaffinity(0)),
+        "stride": stride,
+        "fits": {},
+    }
     for name, criterion in criteria.items():
         times = []
         for _ in range(2):
@@ -69,8 +83,12 @@ def main():
             solution = dynax.fit_quadrotor(start_model, flights, criterion, progress=False)
             jax.block_until_ready(solution.value)
             times.append(time.perf_counter() - t0)
-        result["fits"][name] = {"cold_seconds": times[0], "warm_seconds": times[1], "loss": float(solution.loss),
-                                "steps": int(solution.steps)}
+        result["fits"][name] = {
+            "cold_seconds": times[0],
+            "warm_seconds": times[1],
+            "loss": float(solution.loss),
+            "steps": int(solution.steps),
+        }
         print(f"{name:10s} cold {times[0]:6.1f} s  warm {times[1]:6.1f} s  loss {float(solution.loss):.5g}", flush=True)
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

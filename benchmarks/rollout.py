@@ -56,13 +56,12 @@ if ARGS is not None and ARGS.devices > 1:
 
 import json  # noqa: E402
 
+from _device import describe, device_info  # noqa: E402
 import equinox as eqx  # noqa: E402
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
 from jax.sharding import NamedSharding, PartitionSpec  # noqa: E402
-
-from _device import describe, device_info  # noqa: E402
+import numpy as np  # noqa: E402
 
 try:
     import dynax
@@ -71,8 +70,6 @@ except ImportError:  # run from a checkout without installing it
     import dynax
 
 MJCF = pathlib.Path(__file__).resolve().parent / "acrobot.xml"
-
-
 
 
 def _problem(batch, steps, dt, seed=0):
@@ -111,8 +108,12 @@ def _compile(fn, *args):
 def _row(results, name, timing, n_steps, **extra):
     seconds, median, cpu = timing
     results[name] = dict(
-        seconds=seconds, median_seconds=median, cpu_seconds=cpu,
-        steps_per_s=n_steps / seconds, steps_per_cpu_s=n_steps / cpu, **extra
+        seconds=seconds,
+        median_seconds=median,
+        cpu_seconds=cpu,
+        steps_per_s=n_steps / seconds,
+        steps_per_cpu_s=n_steps / cpu,
+        **extra,
     )
     parts = [f"{k}={v:.2f}s" if k.endswith("_s") else f"{k}={v}" for k, v in extra.items()]
     print(
@@ -258,6 +259,7 @@ def bench_gradient(args, system, x0, us, ts, results):
         ("hand-written", hand_rollouts),
         ("hand-written + jax.checkpoint", lambda s, x: hand_rollouts(s, x, checkpoint=True)),
     ]:
+
         def loss(system, x0, rollouts=rollouts):
             return jnp.mean((rollouts(system, x0) - target) ** 2)
 
@@ -272,8 +274,10 @@ def bench_gradient(args, system, x0, us, ts, results):
         _row(results, f"{label}: loss", fwd_t, n_steps, compile_s=fwd_compile, temp_MiB=_fmt(memory[0]))
         _row(results, f"{label}: jax.grad", bwd_t, n_steps, compile_s=bwd_compile, temp_MiB=_fmt(memory[1]))
         entries[label] = dict(
-            ratio_cpu=bwd_t[2] / fwd_t[2], ratio_wall=bwd_t[0] / fwd_t[0],
-            forward_temp_MiB=memory[0], gradient_temp_MiB=memory[1],
+            ratio_cpu=bwd_t[2] / fwd_t[2],
+            ratio_wall=bwd_t[0] / fwd_t[0],
+            forward_temp_MiB=memory[0],
+            gradient_temp_MiB=memory[1],
         )
     for label, entry in entries.items():
         print(
@@ -374,7 +378,8 @@ def main(args):
         "dynax 1 device / gymnasium step loop (wall)": rate(d1) / rate(gym),
         "dynax / MuJoCo, per CPU-second": rate(d1, "steps_per_cpu_s") / rate(mj1, "steps_per_cpu_s"),
         "dynax / hand-written scan, per CPU-second": rate(d1, "steps_per_cpu_s") / rate(hand, "steps_per_cpu_s"),
-        "dynax / hand-written with grid dt, per CPU-s": rate(d1, "steps_per_cpu_s") / rate(hand_grid, "steps_per_cpu_s"),
+        "dynax / hand-written with grid dt, per CPU-s": rate(d1, "steps_per_cpu_s")
+        / rate(hand_grid, "steps_per_cpu_s"),
     }
     if n_dev > 1:
         dn = f"dynax simulate, {n_dev} devices"
@@ -392,8 +397,17 @@ def main(args):
     print(f"Load average {load_start:.1f} at the start, {os.getloadavg()[0]:.1f} at the end ({os.cpu_count()} cores).")
     if args.json is not None:
         meta = dict(
-            batch=args.batch, steps=args.steps, dt=args.dt, reps=args.reps, devices=n_dev, cpu_count=os.cpu_count(),
-            jax=jax.__version__, device=device_info(), load_average_start=load_start, load_average_end=os.getloadavg()[0], date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+            batch=args.batch,
+            steps=args.steps,
+            dt=args.dt,
+            reps=args.reps,
+            devices=n_dev,
+            cpu_count=os.cpu_count(),
+            jax=jax.__version__,
+            device=device_info(),
+            load_average_start=load_start,
+            load_average_end=os.getloadavg()[0],
+            date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         )
         args.json.write_text(json.dumps(dict(meta=meta, results=results), indent=2))
         print(f"wrote {args.json}")

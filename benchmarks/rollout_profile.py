@@ -20,9 +20,9 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
+from rollout import rollout_programs
 
 import dynax
-from rollout import rollout_programs
 
 
 def _loop_body_ops(hlo: str) -> collections.Counter:
@@ -64,16 +64,21 @@ def main():
     dynax_rollouts, hand, hand_grid = rollout_programs(system, ts, dt)
 
     print(f"{args.batch} acrobot rollouts of {args.steps} RK4 steps, float32, {jax.devices()[0].device_kind}")
-    for name, fn in (("dynax simulate", dynax_rollouts), ("hand-written, dt constant", hand),
-                     ("hand-written, dt from grid", hand_grid)):
+    for name, fn in (
+        ("dynax simulate", dynax_rollouts),
+        ("hand-written, dt constant", hand),
+        ("hand-written, dt from grid", hand_grid),
+    ):
         compiled = jax.jit(fn).lower(x0, us).compile()
         ops = _loop_body_ops(compiled.as_text())
         cost = compiled.cost_analysis()
         cost = cost[0] if isinstance(cost, list) else cost
         seconds = _best(compiled, x0, us)
         kinds = ", ".join(f"{k} {v}" for k, v in ops.most_common())
-        print(f"  {name:28s} loop body: {sum(ops.values())} instructions ({kinds}); "
-              f"program: {cost.get('bytes accessed', float('nan')) / 2**20:.1f} MiB accessed; best {1e3 * seconds:.1f} ms")
+        print(
+            f"  {name:28s} loop body: {sum(ops.values())} instructions ({kinds}); "
+            f"program: {cost.get('bytes accessed', float('nan')) / 2**20:.1f} MiB accessed; best {1e3 * seconds:.1f} ms"
+        )
 
 
 if __name__ == "__main__":

@@ -59,7 +59,9 @@ def worker(args):
     params = jnp.ones(4)
 
     def run(seed):
-        state, _ = dynax.control.run_pgpe(pgpe, objective, params, jax.random.key(seed), args.generations, progress=False)
+        state, _ = dynax.control.run_pgpe(
+            pgpe, objective, params, jax.random.key(seed), args.generations, progress=False
+        )
         return jax.block_until_ready(state.mean)
 
     start = time.perf_counter()
@@ -71,11 +73,19 @@ def worker(args):
         run(seed)
         times.append(time.perf_counter() - start)
         cpu_times.append(time.process_time() - cpu)
-    pathlib.Path(f"{args.out}.rank{args.rank}").write_text(json.dumps({
-        "best_s": min(times), "times_s": times, "cpu_s": min(cpu_times), "first_call_s": first,
-        "devices": jax.device_count(), "processes": jax.process_count(),
-        "device_kind": jax.devices()[0].device_kind,
-    }))
+    pathlib.Path(f"{args.out}.rank{args.rank}").write_text(
+        json.dumps(
+            {
+                "best_s": min(times),
+                "times_s": times,
+                "cpu_s": min(cpu_times),
+                "first_call_s": first,
+                "devices": jax.device_count(),
+                "processes": jax.process_count(),
+                "device_kind": jax.devices()[0].device_kind,
+            }
+        )
+    )
 
 
 def _free_port():
@@ -91,9 +101,28 @@ def launch(args, processes, population, tmp):
     env["PYTHONPATH"] = os.pathsep.join([str(REPO)] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
     common = ["--steps", str(args.steps), "--generations", str(args.generations), "--repeats", str(args.repeats)]
     procs = [
-        subprocess.Popen([sys.executable, __file__, "--worker", "--processes", str(processes), "--rank", str(rank),
-                          "--port", str(port), "--population", str(population), "--out", str(out), *common],
-                         env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        subprocess.Popen(
+            [
+                sys.executable,
+                __file__,
+                "--worker",
+                "--processes",
+                str(processes),
+                "--rank",
+                str(rank),
+                "--port",
+                str(port),
+                "--population",
+                str(population),
+                "--out",
+                str(out),
+                *common,
+            ],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
         for rank in range(processes)
     ]
     try:
@@ -108,8 +137,9 @@ def launch(args, processes, population, tmp):
     ranks = [json.loads(pathlib.Path(f"{out}.rank{r}").read_text()) for r in range(processes)]
     # The collectives keep the processes in step: the run takes as long as its slowest process; the
     # CPU seconds of all processes together are what the work cost, whatever else the machine runs.
-    return dict(ranks[0], best_s=max(r["best_s"] for r in ranks), cpu_s=sum(r["cpu_s"] for r in ranks),
-                per_process=ranks)
+    return dict(
+        ranks[0], best_s=max(r["best_s"] for r in ranks), cpu_s=sum(r["cpu_s"] for r in ranks), per_process=ranks
+    )
 
 
 def main():
@@ -151,24 +181,43 @@ def main():
     strong_cpu_eff = one_cpu / strong_cpu
     weak_cpu_eff = n * one_cpu / weak_cpu
     results = {
-        "processes": n, "population": args.population, "steps": args.steps, "generations": args.generations,
-        "device_kind": one["device_kind"], "cpu": platform.processor() or platform.machine(),
+        "processes": n,
+        "population": args.population,
+        "steps": args.steps,
+        "generations": args.generations,
+        "device_kind": one["device_kind"],
+        "cpu": platform.processor() or platform.machine(),
         "cores": os.cpu_count(),
-        "one_process_s": one["best_s"], "strong_s": strong["best_s"], "weak_s": weak["best_s"],
-        "strong_efficiency": strong_eff, "weak_efficiency": weak_eff,
-        "one_process_cpu_s": one_cpu, "strong_cpu_s": strong_cpu, "weak_cpu_s": weak_cpu,
-        "strong_cpu_efficiency": strong_cpu_eff, "weak_cpu_efficiency": weak_cpu_eff,
-        "loadavg_before": load_before, "loadavg_after": load_after, "rounds": args.rounds,
-        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "runs": runs,
+        "one_process_s": one["best_s"],
+        "strong_s": strong["best_s"],
+        "weak_s": weak["best_s"],
+        "strong_efficiency": strong_eff,
+        "weak_efficiency": weak_eff,
+        "one_process_cpu_s": one_cpu,
+        "strong_cpu_s": strong_cpu,
+        "weak_cpu_s": weak_cpu,
+        "strong_cpu_efficiency": strong_cpu_eff,
+        "weak_cpu_efficiency": weak_cpu_eff,
+        "loadavg_before": load_before,
+        "loadavg_after": load_after,
+        "rounds": args.rounds,
+        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "runs": runs,
     }
-    print(f"PGPE, {args.generations} generations of {args.population} acrobot rollouts of {args.steps} steps; "
-          f"one CPU core ({one['device_kind']}) per process; load average {load_before[0]:.1f} -> {load_after[0]:.1f}")
+    print(
+        f"PGPE, {args.generations} generations of {args.population} acrobot rollouts of {args.steps} steps; "
+        f"one CPU core ({one['device_kind']}) per process; load average {load_before[0]:.1f} -> {load_after[0]:.1f}"
+    )
     print(f"  1 process:            {one['best_s']:.3f} s")
-    print(f"  {n} processes, same work: {strong['best_s']:.3f} s -> strong-scaling efficiency {strong_eff:.2f} "
-          f"(speed-up {one['best_s'] / strong['best_s']:.2f}x, ideal {n})")
+    print(
+        f"  {n} processes, same work: {strong['best_s']:.3f} s -> strong-scaling efficiency {strong_eff:.2f} "
+        f"(speed-up {one['best_s'] / strong['best_s']:.2f}x, ideal {n})"
+    )
     print(f"  {n} processes, {n}x work:  {weak['best_s']:.3f} s -> weak-scaling efficiency {weak_eff:.2f}")
-    print(f"  CPU seconds (all processes): {one_cpu:.3f} / {strong_cpu:.3f} / {weak_cpu:.3f} -> CPU efficiency "
-          f"strong {strong_cpu_eff:.2f}, weak {weak_cpu_eff:.2f} (the cost of splitting, independent of the load)")
+    print(
+        f"  CPU seconds (all processes): {one_cpu:.3f} / {strong_cpu:.3f} / {weak_cpu:.3f} -> CPU efficiency "
+        f"strong {strong_cpu_eff:.2f}, weak {weak_cpu_eff:.2f} (the cost of splitting, independent of the load)"
+    )
     out = pathlib.Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(results, indent=1) + "\n")

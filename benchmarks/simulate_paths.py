@@ -64,8 +64,12 @@ def scipy_reference(system, x0, ts, us):
     for k in range(len(ts) - 1):
         u = jnp.asarray(us[k])
         sol = solve_ivp(
-            lambda t, y: np.asarray(f(t, jnp.asarray(y), u)), (ts[k], ts[k + 1]), x,
-            method="DOP853", rtol=1e-11, atol=1e-12,
+            lambda t, y: np.asarray(f(t, jnp.asarray(y), u)),
+            (ts[k], ts[k + 1]),
+            x,
+            method="DOP853",
+            rtol=1e-11,
+            atol=1e-12,
         )
         x = sol.y[:, -1]
         out.append(x)
@@ -84,8 +88,14 @@ def _diffeqsolve_stepto(system, solver, substeps):
             return system.vector_field(t, x, us[k])
 
         solution = diffrax.diffeqsolve(
-            diffrax.ODETerm(vector_field), solver, t0=ts[0], t1=ts[-1], dt0=None, y0=x0,
-            saveat=diffrax.SaveAt(ts=ts), stepsize_controller=diffrax.StepTo(ts=fine),
+            diffrax.ODETerm(vector_field),
+            solver,
+            t0=ts[0],
+            t1=ts[-1],
+            dt0=None,
+            y0=x0,
+            saveat=diffrax.SaveAt(ts=ts),
+            stepsize_controller=diffrax.StepTo(ts=fine),
             max_steps=fine.shape[0],
         )
         return solution.ys
@@ -102,8 +112,15 @@ def _diffeqsolve_per_interval(system, solver, substeps):
         def interval(x, inputs):
             t0, t1, u = inputs
             solution = diffrax.diffeqsolve(
-                term, solver, t0=t0, t1=t1, dt0=(t1 - t0) / substeps, y0=x, args=u,
-                saveat=diffrax.SaveAt(t1=True), max_steps=substeps,
+                term,
+                solver,
+                t0=t0,
+                t1=t1,
+                dt0=(t1 - t0) / substeps,
+                y0=x,
+                args=u,
+                saveat=diffrax.SaveAt(t1=True),
+                max_steps=substeps,
             )
             x = solution.ys[-1]
             return x, x
@@ -141,9 +158,7 @@ def main():
         "FixedGrid(RK4, substeps=1)": _simulate(system, dynax.FixedGrid(dynax.RK4(), substeps=1)),
         "FixedGrid(Dopri8, substeps=1)": _simulate(system, dynax.FixedGrid(diffrax.Dopri8(), substeps=1)),
         "Adaptive(Dopri8, rtol=atol=1e-10)": _simulate(system, dynax.Adaptive()),
-        "Adaptive(Tsit5, rtol=atol=1e-8)": _simulate(
-            system, dynax.Adaptive(diffrax.Tsit5(), rtol=1e-8, atol=1e-8)
-        ),
+        "Adaptive(Tsit5, rtol=atol=1e-8)": _simulate(system, dynax.Adaptive(diffrax.Tsit5(), rtol=1e-8, atol=1e-8)),
         "diffeqsolve StepTo(Tsit5, 2/sample) + SaveAt(ts)": _diffeqsolve_stepto(system, diffrax.Tsit5(), 2),
         "diffeqsolve per sample in scan (Tsit5, 2 steps)": _diffeqsolve_per_interval(system, diffrax.Tsit5(), 2),
     }
@@ -165,8 +180,11 @@ def main():
         single_wall, _, _ = _best_time(single, x0_j[0], ts_j, us_j[0], reps=args.reps)
         batch_wall, _, batch_cpu = _best_time(batched, x0_j, ts_j, us_j, reps=args.reps)
         results[name] = dict(
-            max_angle_error_rad=error, compile_s=compile_s, single_ms=single_wall * 1e3,
-            batch_ms=batch_wall * 1e3, batch_cpu_ms=batch_cpu * 1e3,
+            max_angle_error_rad=error,
+            compile_s=compile_s,
+            single_ms=single_wall * 1e3,
+            batch_ms=batch_wall * 1e3,
+            batch_cpu_ms=batch_cpu * 1e3,
         )
         print(
             f"{name:50s} {error:13.1e} {compile_s:9.2f} {single_wall * 1e3:12.2f} "
@@ -174,8 +192,14 @@ def main():
             flush=True,
         )
     if args.json is not None:
-        meta = dict(batch=args.batch, references=args.references, reps=args.reps, jax=jax.__version__,
-                    date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), cpu_count=os.cpu_count())
+        meta = dict(
+            batch=args.batch,
+            references=args.references,
+            reps=args.reps,
+            jax=jax.__version__,
+            date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+            cpu_count=os.cpu_count(),
+        )
         import json
 
         args.json.write_text(json.dumps(dict(meta=meta, results=results), indent=2))

@@ -1,125 +1,303 @@
 """dynax: differentiable dynamics, system identification, discrepancy diagnosis and control in JAX."""
 
+# Control beyond the pipeline verbs (the acrobot leaderboard, from-rest swing-up) lives in `dynax.control`.
+from . import control as control
+
+# Synthetic data (truth simulators, data generators) lives in `dynax.synthetic`; the top-level names stay.
+from . import synthetic as synthetic
+from ._control._from_rest import load_controller as load_controller
+from ._data import (
+    backward_difference as backward_difference,
+)
+from ._data import (
+    butterworth_filtfilt as butterworth_filtfilt,
+)
+from ._data import (
+    central_difference as central_difference,
+)
+from ._data import (
+    check_records as check_records,
+)
+from ._data import (
+    DataCheck as DataCheck,
+)
+from ._data import (
+    DataWarning as DataWarning,
+)
+from ._data import (
+    exclude_stretches as exclude_stretches,
+)
+from ._data import (
+    load_trajectory as load_trajectory,
+)
+from ._data import (
+    resample as resample,
+)
+from ._data import (
+    save_trajectory as save_trajectory,
+)
+from ._data import (
+    savitzky_golay as savitzky_golay,
+)
+from ._data import (
+    Trajectory as Trajectory,
+)
+from ._data._flight import (
+    FlightChecks as FlightChecks,
+)
+from ._data._flight import (
+    inspect_flight as inspect_flight,
+)
+from ._data._flight import (
+    load_flight as load_flight,
+)
+from ._data._flight import (
+    usable_segments as usable_segments,
+)
+from ._diagnose import (
+    default_candidates as default_candidates,
+)
+from ._diagnose import (
+    diagnose as diagnose,
+)
+from ._diagnose import (
+    discover as discover,
+)
+from ._diagnose import (
+    Discovery as Discovery,
+)
+from ._diagnose import (
+    Known as Known,
+)
+from ._diagnose import (
+    Refit as Refit,
+)
+from ._diagnose import (
+    Report as Report,
+)
+from ._diagnose import (
+    Verdict as Verdict,
+)
+from ._distributed import initialize_distributed as initialize_distributed
+from ._errors import DataError as DataError
+from ._errors import UsageError as UsageError
 from ._fit import (
     fit_least_squares as fit_least_squares,
+)
+from ._fit import (
     fit_minimise as fit_minimise,
+)
+from ._fit import (
     Parameters as Parameters,
+)
+from ._fit import (
     Solution as Solution,
+)
+from ._fit import (
     Statistics as Statistics,
 )
 from ._identify import (
     Consistency as Consistency,
-    held_out_error as held_out_error,
-    HeldOutError as HeldOutError,
-    InconsistentEstimateWarning as InconsistentEstimateWarning,
+)
+from ._identify import (
     Dynamic as Dynamic,
+)
+from ._identify import (
     Energy as Energy,
+)
+from ._identify import (
     fit_simulation_error as fit_simulation_error,
+)
+from ._identify import (
+    held_out_error as held_out_error,
+)
+from ._identify import (
+    HeldOutError as HeldOutError,
+)
+from ._identify import (
     IdentifiabilityError as IdentifiabilityError,
+)
+from ._identify import (
     Identification as Identification,
-    Stage as Stage,
-    StageKind as StageKind,
+)
+from ._identify import (
     identify as identify,
+)
+from ._identify import (
+    InconsistentEstimateWarning as InconsistentEstimateWarning,
+)
+from ._identify import (
     least_squares as least_squares,
-    PoorlyDeterminedWarning as PoorlyDeterminedWarning,
+)
+from ._identify import (
     NoValidationWarning as NoValidationWarning,
-    RecordsDisagreeWarning as RecordsDisagreeWarning,
+)
+from ._identify import (
+    PoorlyDeterminedWarning as PoorlyDeterminedWarning,
+)
+from ._identify import (
     Power as Power,
+)
+from ._identify import (
+    RecordsDisagreeWarning as RecordsDisagreeWarning,
+)
+from ._identify import (
     SimulationFit as SimulationFit,
 )
-from ._model._extensions import (
-    AbstractJointTerm as AbstractJointTerm,
-    AbstractTerm as AbstractTerm,
-    BodyBias as BodyBias,
-    BodyQuadraticDrag as BodyQuadraticDrag,
-    CoulombFriction as CoulombFriction,
-    Extended as Extended,
-    InputDelay as InputDelay,
-    InputGain as InputGain,
-    InputLag as InputLag,
-    InputOffset as InputOffset,
-    JointSpring as JointSpring,
-    QuadraticDrag as QuadraticDrag,
-    RotorDrag as RotorDrag,
-    RotorInertia as RotorInertia,
-    ViscousFriction as ViscousFriction,
-    Wind as Wind,
+from ._identify import (
+    Stage as Stage,
+)
+from ._identify import (
+    StageKind as StageKind,
 )
 from ._identify._vehicle import (
     Backprop as Backprop,
+)
+from ._identify._vehicle import (
     fit_vehicle as fit_vehicle,
+)
+from ._identify._vehicle import (
     FrequencyDomain as FrequencyDomain,
+)
+from ._identify._vehicle import (
     Lagged as Lagged,
+)
+from ._identify._vehicle import (
     OneStep as OneStep,
+)
+from ._identify._vehicle import (
     VehicleFit as VehicleFit,
+)
+from ._identify._vehicle._model_file import load_model as load_model
+from ._identify._vehicle._model_file import save_model as save_model
+from ._identify._vehicle._quadrotor import fit_quadrotor as fit_quadrotor
+from ._metrics import (
+    aic as aic,
+)
+from ._metrics import (
+    cross_correlation_test as cross_correlation_test,
+)
+from ._metrics import (
+    cross_validate as cross_validate,
+)
+from ._metrics import (
+    fpe as fpe,
+)
+from ._metrics import (
+    kfold_splits as kfold_splits,
+)
+from ._metrics import (
+    leave_one_out_splits as leave_one_out_splits,
+)
+from ._metrics import (
+    nrmse_fit as nrmse_fit,
+)
+from ._metrics import (
+    whiteness_test as whiteness_test,
 )
 from ._model import (
     AbstractBodyModel as AbstractBodyModel,
+)
+from ._model import (
     AbstractManipulator as AbstractManipulator,
+)
+from ._model import (
     AbstractSystem as AbstractSystem,
+)
+from ._model import (
     AccelerationModel as AccelerationModel,
+)
+from ._model import (
     Acrobot as Acrobot,
+)
+from ._model import (
     DoublePendulum as DoublePendulum,
+)
+from ._model import (
     Helicopter as Helicopter,
+)
+from ._model import (
     LinearAxis as LinearAxis,
+)
+from ._model import (
     LinearVelocityModel as LinearVelocityModel,
 )
-from ._data import (
-    backward_difference as backward_difference,
-    butterworth_filtfilt as butterworth_filtfilt,
-    central_difference as central_difference,
-    resample as resample,
-    savitzky_golay as savitzky_golay,
-    check_records as check_records,
-    DataCheck as DataCheck,
-    DataWarning as DataWarning,
-    exclude_stretches as exclude_stretches,
-    load_trajectory as load_trajectory,
-    save_trajectory as save_trajectory,
-    Trajectory as Trajectory,
+from ._model._extensions import (
+    AbstractJointTerm as AbstractJointTerm,
 )
-from ._diagnose import (
-    default_candidates as default_candidates,
-    diagnose as diagnose,
-    discover as discover,
-    Discovery as Discovery,
-    Known as Known,
-    Refit as Refit,
-    Report as Report,
-    Verdict as Verdict,
+from ._model._extensions import (
+    AbstractTerm as AbstractTerm,
 )
-# Control beyond the pipeline verbs (the acrobot leaderboard, from-rest swing-up) lives in `dynax.control`.
-from . import control as control
-from ._control._from_rest import load_controller as load_controller
-# Synthetic data (truth simulators, data generators) lives in `dynax.synthetic`; the top-level names stay.
-from . import synthetic as synthetic
-from ._metrics import (
-    kfold_splits as kfold_splits,
-    leave_one_out_splits as leave_one_out_splits,
-    aic as aic,
-    cross_correlation_test as cross_correlation_test,
-    cross_validate as cross_validate,
-    fpe as fpe,
-    nrmse_fit as nrmse_fit,
-    whiteness_test as whiteness_test,
+from ._model._extensions import (
+    BodyBias as BodyBias,
 )
-from ._plots import plot_compare as plot_compare, plot_error_horizon as plot_error_horizon, plot_residuals as plot_residuals
+from ._model._extensions import (
+    BodyQuadraticDrag as BodyQuadraticDrag,
+)
+from ._model._extensions import (
+    CoulombFriction as CoulombFriction,
+)
+from ._model._extensions import (
+    Extended as Extended,
+)
+from ._model._extensions import (
+    InputDelay as InputDelay,
+)
+from ._model._extensions import (
+    InputGain as InputGain,
+)
+from ._model._extensions import (
+    InputLag as InputLag,
+)
+from ._model._extensions import (
+    InputOffset as InputOffset,
+)
+from ._model._extensions import (
+    JointSpring as JointSpring,
+)
+from ._model._extensions import (
+    QuadraticDrag as QuadraticDrag,
+)
+from ._model._extensions import (
+    RotorDrag as RotorDrag,
+)
+from ._model._extensions import (
+    RotorInertia as RotorInertia,
+)
+from ._model._extensions import (
+    ViscousFriction as ViscousFriction,
+)
+from ._model._extensions import (
+    Wind as Wind,
+)
+from ._model._quadrotor import (
+    ConstantVelocity as ConstantVelocity,
+)
+from ._model._quadrotor import (
+    initial_quadrotor as initial_quadrotor,
+)
+from ._model._quadrotor import (
+    Quadrotor as Quadrotor,
+)
+from ._plots import (
+    plot_compare as plot_compare,
+)
+from ._plots import (
+    plot_error_horizon as plot_error_horizon,
+)
+from ._plots import (
+    plot_residuals as plot_residuals,
+)
 from ._precision import PrecisionWarning as PrecisionWarning
+from ._predict import flight_error as flight_error
+from ._predict import FlightError as FlightError
+from ._predict import predict_ahead as predict_ahead
 from ._progress import ProgressBar as ProgressBar
-from ._errors import DataError as DataError, UsageError as UsageError
-from ._distributed import initialize_distributed as initialize_distributed
-from ._sim_error import simulation_error as simulation_error, SimulationError as SimulationError
+from ._sim_error import simulation_error as simulation_error
+from ._sim_error import SimulationError as SimulationError
+from ._simulate import Adaptive as Adaptive
+from ._simulate import FixedGrid as FixedGrid
+from ._simulate import simulate as simulate
+from ._simulate import Simulation as Simulation
 from ._solvers import RK4 as RK4
-from ._simulate import Adaptive as Adaptive, FixedGrid as FixedGrid, Simulation as Simulation, simulate as simulate
-from ._data._flight import (
-    usable_segments as usable_segments,
-    FlightChecks as FlightChecks,
-    inspect_flight as inspect_flight,
-    load_flight as load_flight,
-)
-from ._model._quadrotor import ConstantVelocity as ConstantVelocity, initial_quadrotor as initial_quadrotor, Quadrotor as Quadrotor
-from ._identify._vehicle._quadrotor import fit_quadrotor as fit_quadrotor
-from ._identify._vehicle._model_file import load_model as load_model, save_model as save_model
-from ._predict import flight_error as flight_error, FlightError as FlightError, predict_ahead as predict_ahead
-
 from ._version import __version__ as __version__

@@ -16,8 +16,8 @@ devices' share, and gets the whole result back, the same as one process would co
 import functools
 
 import jax
-import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
+import numpy as np
 
 from ._errors import UsageError
 
@@ -57,15 +57,16 @@ def initialize_distributed(
         try:
             jax.config.update("jax_cpu_collectives_implementation", cpu_collectives)
         except Exception as error:  # an unknown value, or a JAX without the option
-            raise UsageError(f"initialize_distributed: `cpu_collectives={cpu_collectives!r}` is not available in "
-                             f"jax {jax.__version__}: {error}") from error
+            raise UsageError(
+                f"initialize_distributed: `cpu_collectives={cpu_collectives!r}` is not available in "
+                f"jax {jax.__version__}: {error}"
+            ) from error
     try:
         jax.distributed.initialize(coordinator_address, num_processes, process_id, local_device_ids, **kwargs)
     except RuntimeError as error:
         if "before" in str(error) or "already" in str(error):
             raise UsageError(
-                "initialize_distributed must be called before any other JAX call in the process "
-                f"(JAX said: {error})"
+                f"initialize_distributed must be called before any other JAX call in the process (JAX said: {error})"
             ) from error
         raise
 
@@ -99,7 +100,9 @@ def replicate_in_jit(tree):
     if not multi_process():
         return tree
     sharding = _replicated()
-    return jax.tree.map(lambda x: jax.lax.with_sharding_constraint(x, sharding) if isinstance(x, jax.Array) else x, tree)
+    return jax.tree.map(
+        lambda x: jax.lax.with_sharding_constraint(x, sharding) if isinstance(x, jax.Array) else x, tree
+    )
 
 
 @functools.cache

@@ -12,13 +12,13 @@ diagnostics computed once on the host (numpy), not inside a compiled loop.
     measure of lack of fit in time series models", Biometrika 65(2), 1978.
 """
 
-import math
 from collections.abc import Callable, Sequence
+import math
 from typing import Any
 
 import equinox as eqx
-import numpy as np
 from jaxtyping import ArrayLike, Float
+import numpy as np
 
 from ._data._trajectory import Trajectory
 from ._errors import UsageError
@@ -123,8 +123,12 @@ def _correlation(a: np.ndarray, b: np.ndarray, max_lag: int) -> np.ndarray:
     n = a.shape[0]
     a = a - a.mean()
     b = b - b.mean()
-    raw = np.array([np.dot(a[: n - t], b[t:]) if t >= 0 else np.dot(a[-t:], b[: n + t])
-                    for t in range(-max_lag, max_lag + 1)]) / n  # sum_t a_t b_{t+tau} / n
+    raw = (
+        np.array(
+            [np.dot(a[: n - t], b[t:]) if t >= 0 else np.dot(a[-t:], b[: n + t]) for t in range(-max_lag, max_lag + 1)]
+        )
+        / n
+    )  # sum_t a_t b_{t+tau} / n
     scale = math.sqrt(np.dot(a, a) / n * np.dot(b, b) / n)
     return raw / scale if scale > 0 else np.zeros(2 * max_lag + 1)
 
@@ -248,8 +252,9 @@ def cross_correlation_test(
     wide = min(3 * max_lag, n - 2)
     rho_e = [_correlation(e[:, i], e[:, i], max_lag) for i in range(e.shape[1])]
     rho_u = [_correlation(u[:, j], u[:, j], wide) for j in range(u.shape[1])]
-    xc = np.stack([np.stack([_correlation(u[:, j], e[:, i], max_lag) for j in range(u.shape[1])])
-                   for i in range(e.shape[1])])
+    xc = np.stack(
+        [np.stack([_correlation(u[:, j], e[:, i], max_lag) for j in range(u.shape[1])]) for i in range(e.shape[1])]
+    )
     shifts = lags[:, None] - lags[None, :]
     ks = np.arange(-max_lag, max_lag + 1)
     bound = np.zeros(xc.shape[:2])
@@ -271,8 +276,7 @@ def cross_correlation_test(
     from scipy.stats import chi2
 
     p_value = chi2.sf(q, dof)
-    return CrossCorrelationTest(lags, xc, bound, q, p_value, p_value >= 1 - confidence,
-                                confidence)
+    return CrossCorrelationTest(lags, xc, bound, q, p_value, p_value >= 1 - confidence, confidence)
 
 
 def _loss_matrix(residuals):

@@ -8,8 +8,8 @@ when dynax is imported.
 
 from collections.abc import Mapping, Sequence
 
-import numpy as np
 from jaxtyping import ArrayLike, Float
+import numpy as np
 
 from ._data._trajectory import Trajectory
 from ._metrics import cross_correlation_test, nrmse_fit, whiteness_test
@@ -137,7 +137,9 @@ def plot_residuals(
     **Returns:** a `matplotlib.figure.Figure`.
     """
     white = whiteness_test(residuals, max_lag=max_lag, confidence=confidence)
-    cross = None if inputs is None else cross_correlation_test(residuals, inputs, max_lag=max_lag, confidence=confidence)
+    cross = (
+        None if inputs is None else cross_correlation_test(residuals, inputs, max_lag=max_lag, confidence=confidence)
+    )
     n_channels = white.autocorrelation.shape[0]
     n_inputs = 0 if cross is None else cross.cross_correlation.shape[1]
     names = list(names) if names is not None else [f"e{i + 1}" for i in range(n_channels)]

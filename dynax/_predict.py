@@ -14,8 +14,8 @@ horizon), in the dtype of the trajectory (float32 for throughput, float64 for id
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float
+import numpy as np
 
 from ._data._trajectory import Trajectory
 from ._errors import UsageError
@@ -60,9 +60,7 @@ def _check_steps(steps) -> tuple[int, ...]:
     return steps
 
 
-def predict_ahead(
-    model, trajectory: Trajectory, steps=(1, 10, 50)
-) -> Float[Array, "starts steps n_states"]:
+def predict_ahead(model, trajectory: Trajectory, steps=(1, 10, 50)) -> Float[Array, "starts steps n_states"]:
     r"""Open-loop predictions $h$ samples ahead from every sample of a record.
 
     Row $i$ starts from the measured state at sample $i$ and rolls the model forward under the
@@ -86,7 +84,9 @@ def predict_ahead(
         raise UsageError("predict_ahead: the trajectory must be uniformly sampled; resample it first")
     n = len(trajectory) - max(steps)
     if n < 1:
-        raise UsageError(f"predict_ahead: the record has {len(trajectory)} samples, too few for {max(steps)} steps ahead")
+        raise UsageError(
+            f"predict_ahead: the record has {len(trajectory)} samples, too few for {max(steps)} steps ahead"
+        )
     xs, us = trajectory.xs, trajectory.us
     dt = jnp.asarray(trajectory.dt, xs.dtype)
     # The model's arrays in the trajectory's dtype: a float32 record rolls out in float32.
@@ -98,12 +98,15 @@ def _group_errors(predicted, measured):
     """Per group, the size of the error at each prediction: Euclidean norms [m, m/s, rad/s] and the
     geodesic angle between the attitudes [rad]."""
     angle = jnp.vectorize(quaternion_angle, signature="(4),(4)->()")(predicted[..., 3:7], measured[..., 3:7])
-    return jnp.stack([
-        jnp.linalg.norm(predicted[..., 0:3] - measured[..., 0:3], axis=-1),
-        jnp.linalg.norm(predicted[..., 7:10] - measured[..., 7:10], axis=-1),
-        angle,
-        jnp.linalg.norm(predicted[..., 10:13] - measured[..., 10:13], axis=-1),
-    ], axis=-1)
+    return jnp.stack(
+        [
+            jnp.linalg.norm(predicted[..., 0:3] - measured[..., 0:3], axis=-1),
+            jnp.linalg.norm(predicted[..., 7:10] - measured[..., 7:10], axis=-1),
+            angle,
+            jnp.linalg.norm(predicted[..., 10:13] - measured[..., 10:13], axis=-1),
+        ],
+        axis=-1,
+    )
 
 
 class FlightError(eqx.Module):
@@ -162,7 +165,7 @@ def flight_error(model, flights, steps=(1, 10, 50)) -> FlightError:
             continue
         predicted = predict_ahead(model, f, range(1, horizon + 1))
         k = predicted.shape[0]
-        measured = jnp.stack([f.xs[h: h + k] for h in range(1, horizon + 1)], axis=1)
+        measured = jnp.stack([f.xs[h : h + k] for h in range(1, horizon + 1)], axis=1)
         err = _group_errors(predicted, measured)  # (starts, horizon, group)
         finite = jnp.all(jnp.isfinite(err), axis=(1, 2))
         err = jnp.where(finite[:, None, None], err, jnp.inf)
@@ -177,7 +180,11 @@ def flight_error(model, flights, steps=(1, 10, 50)) -> FlightError:
     mae_all, rmse_all = abs_sum / n, np.sqrt(sq_sum / n)  # (horizon, group)
     index = np.asarray(steps) - 1
     return FlightError(
-        mae=jnp.asarray(mae_all[index].T), rmse=jnp.asarray(rmse_all[index].T),
-        cumulative_mae=jnp.asarray(mae_all.mean(axis=0)), steps=steps, dt=float(dt), n_starts=n,
+        mae=jnp.asarray(mae_all[index].T),
+        rmse=jnp.asarray(rmse_all[index].T),
+        cumulative_mae=jnp.asarray(mae_all.mean(axis=0)),
+        steps=steps,
+        dt=float(dt),
+        n_starts=n,
         diverged_fraction=diverged / n,
     )

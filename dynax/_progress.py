@@ -17,18 +17,18 @@ reused whatever bar it reports to. Under `vmap` the callback runs once per batch
 keeps the furthest step and the best (`"max"` or `"min"`) or latest value seen.
 """
 
+from collections.abc import Iterator
 import contextlib
 import contextvars
 import itertools
 import sys
 import threading
-from collections.abc import Iterator
 from typing import Literal
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, ArrayLike, Int
+import numpy as np
 
 ProgressMode = Literal["auto", "always", "never"]
 PROGRESS_MODE: contextvars.ContextVar[str] = contextvars.ContextVar("dynax_progress_mode", default="auto")
@@ -103,8 +103,9 @@ class ProgressBar:
         if self.enabled:
             from tqdm import tqdm
 
-            self._bar = tqdm(total=total, desc=description, unit=unit, file=sys.stderr, dynamic_ncols=True,
-                             leave=True, smoothing=0.1)
+            self._bar = tqdm(
+                total=total, desc=description, unit=unit, file=sys.stderr, dynamic_ncols=True, leave=True, smoothing=0.1
+            )
             with _LOCK:
                 self.token = next(_TOKENS)
                 _REGISTRY[self.token] = self

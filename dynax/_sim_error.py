@@ -3,8 +3,8 @@
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float
+import numpy as np
 
 from ._data._trajectory import Trajectory
 from ._distributed import global_array, leading_sharding, replicate
@@ -97,8 +97,9 @@ def complete_state(system, x_measured, u0, ts_before=None, us_before=None, histo
     return jnp.concatenate([x_measured, z.astype(x_measured.dtype)])
 
 
-def window_rollout(system, ts, xs, us, ts_before=None, us_before=None, *, method=FixedGrid(),
-                   history_method=HISTORY_GRID):
+def window_rollout(
+    system, ts, xs, us, ts_before=None, us_before=None, *, method=FixedGrid(), history_method=HISTORY_GRID
+):
     """One open-loop rollout of `system` from the measured state `xs[0]` under the inputs `us`.
 
     **Arguments:** `ts (step,)`, `xs (step, n_measured)`, `us (step, m)` one window of a record;
@@ -115,8 +116,9 @@ def window_rollout(system, ts, xs, us, ts_before=None, us_before=None, *, method
     return system.state_error(sim.xs[:, :n_measured], xs), sim.diverged
 
 
-def window_rollouts(system, ts, xs, us, ts_before=None, us_before=None, *, method=FixedGrid(),
-                    history_method=HISTORY_GRID):
+def window_rollouts(
+    system, ts, xs, us, ts_before=None, us_before=None, *, method=FixedGrid(), history_method=HISTORY_GRID
+):
     """`window_rollout` on stacked windows (`ts (window, step)`, `xs (window, step, n)`, ...), one `vmap`.
 
     The one windowed rollout of dynax: `simulation_error` slices its windows from a record and
@@ -127,8 +129,16 @@ def window_rollouts(system, ts, xs, us, ts_before=None, us_before=None, *, metho
     if ts_before is None:
         one = lambda t, x, u: window_rollout(system, t, x, u, method=method)  # noqa: E731
         return jax.vmap(one)(ts, xs, us)
-    one = lambda t, x, u, tb, ub: window_rollout(system, t, x, u, tb, ub, method=method,  # noqa: E731
-                                                 history_method=history_method)
+    one = lambda t, x, u, tb, ub: window_rollout(
+        system,
+        t,
+        x,
+        u,
+        tb,
+        ub,
+        method=method,  # noqa: E731
+        history_method=history_method,
+    )
     return jax.vmap(one)(ts, xs, us, ts_before, us_before)
 
 
@@ -230,6 +240,8 @@ def _sharded_window_errors(system, trajectory, starts, n_steps, method):
     host_starts = np.asarray(starts)
     host_starts = np.concatenate([host_starts, np.full(padded - n_windows, host_starts[-1])])
     sharded = global_array(host_starts, leading_sharding(padded))
-    errors, diverged = rollouts_from_starts(system, trajectory.ts, trajectory.xs, trajectory.us, sharded, n_steps, method)
+    errors, diverged = rollouts_from_starts(
+        system, trajectory.ts, trajectory.xs, trajectory.us, sharded, n_steps, method
+    )
     errors, diverged = replicate((errors, diverged))
     return errors[:n_windows], diverged[:n_windows]

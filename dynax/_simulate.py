@@ -4,8 +4,8 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, ArrayLike, Float
+import numpy as np
 
 from ._errors import UsageError
 from ._model._system import AbstractSystem
@@ -99,12 +99,16 @@ def _check_values(x0, ts, us):
         bad = np.argwhere(~np.isfinite(np.asarray(arr)))
         if bad.size:
             where = "[" + ", ".join(str(int(i)) for i in bad[0]) + "]"
-            raise UsageError(f"simulate: non-finite input: `{name}`{where} is {np.asarray(arr)[tuple(bad[0])].item()!r}")
+            raise UsageError(
+                f"simulate: non-finite input: `{name}`{where} is {np.asarray(arr)[tuple(bad[0])].item()!r}"
+            )
     ts = np.asarray(ts)
     bad = np.flatnonzero(np.diff(ts) <= 0)
     if bad.size:
         k = int(bad[0])
-        raise UsageError(f"simulate: `ts` must strictly increase; ts[{k}] = {ts[k].item()!r} then ts[{k + 1}] = {ts[k + 1].item()!r}")
+        raise UsageError(
+            f"simulate: `ts` must strictly increase; ts[{k}] = {ts[k].item()!r} then ts[{k + 1}] = {ts[k + 1].item()!r}"
+        )
 
 
 def _invalid_input(x0, ts, us):

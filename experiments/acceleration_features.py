@@ -78,7 +78,9 @@ def main():
         for name, start in models().items():
             fit = fit_lagged(fit_one_step(start, train).system, train, lagged)
             errors = prediction_error(fit.system, test, [1.0, 2.0], stride=5)
-            attitude = {k: float(v) for k, v in fit.system.body_model.parameters.items() if k.endswith(("/roll", "/pitch"))}
+            attitude = {
+                k: float(v) for k, v in fit.system.body_model.parameters.items() if k.endswith(("/roll", "/pitch"))
+            }
             results[kind][name] = {
                 "n_weights": int(fit.system.body_model.parameter_vector().shape[0]),
                 "mse_1s": {g: float(errors[g][0]) for g in STATE_GROUPS},
@@ -86,8 +88,10 @@ def main():
                 "attitude_weights": attitude,
             }
             log(f"{kind}, {name}: held-out MSE at 1 s " + ", ".join(f"{g} {errors[g][0]:.4g}" for g in STATE_GROUPS))
-            write_json(out / "features.json", {"settings": {"train_s": train_s, "test_s": test_s, "quick": args.quick},
-                                               "results": results})
+            write_json(
+                out / "features.json",
+                {"settings": {"train_s": train_s, "test_s": test_s, "quick": args.quick}, "results": results},
+            )
     log(f"wrote {out / 'features.json'}")
 
 

@@ -148,7 +148,8 @@ def plot_sweep(curves, counts, path, title):
 def table(curves, counts):
     """Median over parameters theta1..theta5 of the mean relative deviation, per method and count."""
     return {
-        name: {int(n): float(np.median(summary(d)[0][i, :5])) for i, n in enumerate(counts)} for name, d in curves.items()
+        name: {int(n): float(np.median(summary(d)[0][i, :5])) for i, n in enumerate(counts)}
+        for name, d in curves.items()
     }
 
 
@@ -203,8 +204,15 @@ def optimise_excitation(key, steps, harmonics=5, period=10.0, tau_max=2.0, q_max
 
 # ---------------------------------------------------------------------------------------- real data
 
-DFKI_MAP = {"t": "time", "q1": "pos_meas1", "q2": "pos_meas2", "dq1": "vel_meas1", "dq2": "vel_meas2",
-            "tau1": "tau_meas1", "tau2": "tau_meas2"}
+DFKI_MAP = {
+    "t": "time",
+    "q1": "pos_meas1",
+    "q2": "pos_meas2",
+    "dq1": "vel_meas1",
+    "dq2": "vel_meas2",
+    "tau1": "tau_meas1",
+    "tau2": "tau_meas2",
+}
 
 
 def lab_model(path):
@@ -259,21 +267,34 @@ def dfki_output_error(raw, trajectories, system, recipe, segment_s=0.5):
     train_ls, held_out = trajectories[:5], resample(raw[5], 0.005)
     least_squares = identify(system, train_ls, recipe, friction="coulomb", **AS_PUBLISHED)
     t0 = time.perf_counter()
-    fit = identify(least_squares.system, [resample(t, 0.005) for t in raw[:5]],
-                   SimulationFit(segment_s=segment_s, fit_initial_states=False, max_steps=30), friction="coulomb",
-                   **AS_PUBLISHED)
+    fit = identify(
+        least_squares.system,
+        [resample(t, 0.005) for t in raw[:5]],
+        SimulationFit(segment_s=segment_s, fit_initial_states=False, max_steps=30),
+        friction="coulomb",
+        **AS_PUBLISHED,
+    )
     seconds = time.perf_counter() - t0
     horizons = (0.1, 0.25, 0.5, 1.0)
-    errors = {name: np.asarray(dynax.simulation_error(model.system, held_out, horizons_s=horizons).rmse).tolist()
-              for name, model in (("least_squares", least_squares), ("output_error", fit))}
-    log(f"  DFKI output-error fit ({seconds:.0f} s): held-out position RMSE at 0.5 s "
-        f"{errors['least_squares'][2]:.3f} (least squares) -> {errors['output_error'][2]:.3f} rad")
-    return {"train_runs": [pathlib.Path(t.source).name for t in raw[:5]], "held_out_run": pathlib.Path(raw[5].source).name,
-            "segment_s": segment_s,
-            "seconds": seconds,
-            "horizons_s": list(horizons), "held_out_rmse": errors,
-            "least_squares_parameters": least_squares.parameters, "output_error_parameters": fit.parameters,
-            "output_error_std_errors": fit.standard_errors}
+    errors = {
+        name: np.asarray(dynax.simulation_error(model.system, held_out, horizons_s=horizons).rmse).tolist()
+        for name, model in (("least_squares", least_squares), ("output_error", fit))
+    }
+    log(
+        f"  DFKI output-error fit ({seconds:.0f} s): held-out position RMSE at 0.5 s "
+        f"{errors['least_squares'][2]:.3f} (least squares) -> {errors['output_error'][2]:.3f} rad"
+    )
+    return {
+        "train_runs": [pathlib.Path(t.source).name for t in raw[:5]],
+        "held_out_run": pathlib.Path(raw[5].source).name,
+        "segment_s": segment_s,
+        "seconds": seconds,
+        "horizons_s": list(horizons),
+        "held_out_rmse": errors,
+        "least_squares_parameters": least_squares.parameters,
+        "output_error_parameters": fit.parameters,
+        "output_error_std_errors": fit.standard_errors,
+    }
 
 
 def real_data(out):
@@ -286,16 +307,30 @@ def real_data(out):
     rigid = dynax.DoublePendulum()
     with_rotor = Extended(dynax.DoublePendulum(), (RotorInertia(1, 0.0),))
     methods = {
-        "dynamic": Dynamic(lowpass_hz=5.0, lowpass_order=3, lowpass_inputs=True, inputs="sampled", trim=20,
-                           weighting="joint"),
+        "dynamic": Dynamic(
+            lowpass_hz=5.0, lowpass_order=3, lowpass_inputs=True, inputs="sampled", trim=20, weighting="joint"
+        ),
         "power": Power(lowpass_hz=5.0, lowpass_order=3, trim=20),
         "energy": Energy(window=25),
     }
-    lab = lab_model(DATASETS / "dfki_double_pendulum" / "identified_parameters" / "design_C.0" / "model_3.0" / "model_parameters.yml")
+    lab = lab_model(
+        DATASETS
+        / "dfki_double_pendulum"
+        / "identified_parameters"
+        / "design_C.0"
+        / "model_3.0"
+        / "model_parameters.yml"
+    )
     lab_names = ("theta1", "theta2", "theta3", "theta4", "theta5", "theta6", "theta7", "Ir2", "fc1", "fc2")
-    results["lab_model_3.0"] = {"parameters": lab, "torque_rmse": dfki_torque_rmse(
-        Extended(dynax.DoublePendulum(), (RotorInertia(1, 0.0),)), lab_names, [lab[n] for n in lab_names], trajectories
-    ).tolist()}
+    results["lab_model_3.0"] = {
+        "parameters": lab,
+        "torque_rmse": dfki_torque_rmse(
+            Extended(dynax.DoublePendulum(), (RotorInertia(1, 0.0),)),
+            lab_names,
+            [lab[n] for n in lab_names],
+            trajectories,
+        ).tolist(),
+    }
     for model_name, system in (("rigid", rigid), ("rotor_inertia", with_rotor)):
         for method_name, method in methods.items():
             try:
@@ -332,16 +367,28 @@ def real_data(out):
     fig.savefig(out / "dfki_torque.png", dpi=110)
     plt.close(fig)
 
-    emps = load_trajectory(DATASETS / "emps" / "DATA_EMPS.mat", "linear_axis", mapping={"q": "qm", "force": "vir"},
-                           scale={"force": 35.15065188})
+    emps = load_trajectory(
+        DATASETS / "emps" / "DATA_EMPS.mat",
+        "linear_axis",
+        mapping={"q": "qm", "force": "vir"},
+        scale={"force": 35.15065188},
+    )
     recipe = Dynamic(lowpass_hz=100.0, trim=50, decimate=10, inputs="sampled")
     emps_results = {}
     for friction in ("coulomb", "viscous"):
         r = identify(dynax.LinearAxis(), emps, recipe, friction=friction, **AS_PUBLISHED)
-        emps_results[friction] = {"parameters": r.parameters, "std_errors": r.standard_errors,
-                                  "relative_force_error": float(r.relative_error)}
-    emps_results["published"] = {"mass": 95.1089, "viscous": 203.5034, "coulomb": 20.3935, "offset": -3.1648,
-                                 "relative_force_error": 0.0408}
+        emps_results[friction] = {
+            "parameters": r.parameters,
+            "std_errors": r.standard_errors,
+            "relative_force_error": float(r.relative_error),
+        }
+    emps_results["published"] = {
+        "mass": 95.1089,
+        "viscous": 203.5034,
+        "coulomb": 20.3935,
+        "offset": -3.1648,
+        "relative_force_error": 0.0408,
+    }
     # The README's "without the Coulomb term the force error rises to about 38 %": the Coulomb model
     # with its Coulomb term dropped, not refitted (refitting without it gives the "viscous" row).
     from dynax.internal import dynamic_rows
@@ -350,7 +397,9 @@ def real_data(out):
     fit = identify(dynax.LinearAxis(), emps, recipe, friction="coulomb", **AS_PUBLISHED)
     theta = np.asarray(fit.estimate) * (np.asarray(fit.names) != "coulomb")
     a, y = np.asarray(rows)[:, 0, :], np.asarray(forces)[:, 0]
-    emps_results["coulomb_term_dropped"] = {"relative_force_error": float(np.linalg.norm(a @ theta - y) / np.linalg.norm(y))}
+    emps_results["coulomb_term_dropped"] = {
+        "relative_force_error": float(np.linalg.norm(a @ theta - y) / np.linalg.norm(y))
+    }
     results["emps"] = emps_results
     log(f"  EMPS: {emps_results['coulomb']}")
     return results
@@ -364,8 +413,11 @@ def main():
     parser.add_argument("--quick", action="store_true", help="a few runs and sample counts (smoke test)")
     parser.add_argument("--runs", type=int, default=None, help="independent runs per point (default 20; quick 3)")
     parser.add_argument("--out", default=str(REPO / "experiments" / "results" / "acrobot_identification"))
-    parser.add_argument("--parts", default="study,excitation,simulation,real",
-                        help="comma-separated parts to run (default all); results.json keeps the others")
+    parser.add_argument(
+        "--parts",
+        default="study,excitation,simulation,real",
+        help="comma-separated parts to run (default all); results.json keeps the others",
+    )
     args = parser.parse_args()
     parts = set(args.parts.split(","))
     unknown = parts - {"study", "excitation", "simulation", "real"}
@@ -419,8 +471,12 @@ def study(results, out, xs, us, noisy, counts, cutoff):
         "dynamic + low-pass": Dynamic(lowpass_hz=cutoff, lowpass_inputs=True),
     }
     filter_curves = sweep(filtered, noisy, counts, "noisy, filtered")
-    plot_sweep({**noisy_curves, **filter_curves}, counts, out / "filter.png",
-               f"Measurement noise: zero-phase Butterworth at {cutoff:g} Hz (4th order)")
+    plot_sweep(
+        {**noisy_curves, **filter_curves},
+        counts,
+        out / "filter.png",
+        f"Measurement noise: zero-phase Butterworth at {cutoff:g} Hz (4th order)",
+    )
     results["noisy_filtered"] = table(filter_curves, counts)
 
 
@@ -434,17 +490,31 @@ def excitation(results, out, xs, us, noisy, x0s, counts, cutoff, k_exc, k_noise,
     us_opt = jnp.broadcast_to(u_opt, us.shape)
     xs_opt = rollouts(x0s * 0, us_opt)
     noisy_opt = jax.vmap(lambda k, x, u: add_noise(k, x, u, 1.0))(jax.random.split(k_noise, runs), xs_opt, us_opt)
-    exc_methods = {"energy": Energy(), "power + low-pass": Power(lowpass_hz=cutoff),
-                   "dynamic + low-pass": Dynamic(lowpass_hz=cutoff, lowpass_inputs=True)}
+    exc_methods = {
+        "energy": Energy(),
+        "power + low-pass": Power(lowpass_hz=cutoff),
+        "dynamic + low-pass": Dynamic(lowpass_hz=cutoff, lowpass_inputs=True),
+    }
     opt_curves = sweep(exc_methods, noisy_opt, counts, "noisy, optimised excitation")
-    baseline_methods = {"energy": Energy(), "power + low-pass": Power(lowpass_hz=cutoff),
-                        "dynamic + low-pass": Dynamic(lowpass_hz=cutoff, lowpass_inputs=True)}
+    baseline_methods = {
+        "energy": Energy(),
+        "power + low-pass": Power(lowpass_hz=cutoff),
+        "dynamic + low-pass": Dynamic(lowpass_hz=cutoff, lowpass_inputs=True),
+    }
     baseline = sweep(baseline_methods, noisy, counts, "noisy, constant torques (baseline)")
-    plot_sweep({**{f"{k} (constant torques)": v for k, v in baseline.items()},
-                **{f"{k} (D-optimal)": v for k, v in opt_curves.items()}},
-               counts, out / "excitation.png", "Measurement noise: random constant torques vs D-optimal Fourier torque")
-    random_info = [information_log_det_of(constant_torques(k, ts_exc.shape[0])[:, 0], ts_exc)
-                   for k in jax.random.split(k_torque, 5)]
+    plot_sweep(
+        {
+            **{f"{k} (constant torques)": v for k, v in baseline.items()},
+            **{f"{k} (D-optimal)": v for k, v in opt_curves.items()},
+        },
+        counts,
+        out / "excitation.png",
+        "Measurement noise: random constant torques vs D-optimal Fourier torque",
+    )
+    random_info = [
+        information_log_det_of(constant_torques(k, ts_exc.shape[0])[:, 0], ts_exc)
+        for k in jax.random.split(k_torque, 5)
+    ]
     results["excitation"] = {
         "log_det_history": history,
         "log_det_optimised": history[-1][0],
@@ -465,22 +535,34 @@ def output_error(results, out, noisy, clean_us, counts, cutoff, runs, quick):
     t0 = time.perf_counter()
     for r, (x, u) in enumerate(zip(*noisy)):
         for i, n in enumerate(sim_counts):
-            fit = identify(start, as_trajectory(x[:n], u[:n]), SimulationFit(segment_s=2.0, max_steps=50), **AS_PUBLISHED)
+            fit = identify(
+                start, as_trajectory(x[:n], u[:n]), SimulationFit(segment_s=2.0, max_steps=50), **AS_PUBLISHED
+            )
             deviations[r, i] = np.abs(np.asarray(fit.estimate) - THETA) / np.abs(THETA)
             coverage.append(np.abs(np.asarray(fit.estimate) - THETA) / np.asarray(fit.std_errors))
         log(f"  output-error fit: run {r + 1}/{runs} ({time.perf_counter() - t0:.0f} s)")
-    baseline = sweep({"energy": Energy(), "power + low-pass": Power(lowpass_hz=cutoff)}, noisy, sim_counts,
-                     "noisy, least-squares baseline")
+    baseline = sweep(
+        {"energy": Energy(), "power + low-pass": Power(lowpass_hz=cutoff)},
+        noisy,
+        sim_counts,
+        "noisy, least-squares baseline",
+    )
     curves = {**baseline, "simulation (output error)": deviations}
-    plot_sweep(curves, sim_counts, out / "simulation_fit.png",
-               "Measurement noise: output-error fit through the simulator vs the best least-squares models")
+    plot_sweep(
+        curves,
+        sim_counts,
+        out / "simulation_fit.png",
+        "Measurement noise: output-error fit through the simulator vs the best least-squares models",
+    )
     coverage = np.asarray(coverage)
     # Calibration check: the same runs with the torque recorded exactly (state noise only, which is
     # what the output-error criterion models). Standardised errors of theta1..theta5.
     exact_torque = []
     for r, (x, u) in enumerate(zip(noisy[0], clean_us)):
         for n in sim_counts:
-            fit = identify(start, as_trajectory(x[:n], u[:n]), SimulationFit(segment_s=2.0, max_steps=50), **AS_PUBLISHED)
+            fit = identify(
+                start, as_trajectory(x[:n], u[:n]), SimulationFit(segment_s=2.0, max_steps=50), **AS_PUBLISHED
+            )
             exact_torque.append((np.asarray(fit.estimate) - THETA) / np.asarray(fit.std_errors))
     exact_torque = np.asarray(exact_torque)[:, :5]
     log(f"  output-error fit, torque recorded exactly: {np.mean(np.abs(exact_torque) < 2):.0%} within 2 std errors")

@@ -33,7 +33,11 @@ from dynax import control
 
 OUT = pathlib.Path(__file__).resolve().parent / "results" / "leaderboard"
 PUBLISHED = {  # leaderboards v2, best published entry per family (robustness), and the top scores
-    "model": 0.676, "velocity_noise": 0.286, "torque_noise": 1.0, "torque_response": 1.0, "delay": 0.905,
+    "model": 0.676,
+    "velocity_noise": 0.286,
+    "torque_noise": 1.0,
+    "torque_response": 1.0,
+    "delay": 0.905,
     "perturbations": 0.78,
 }
 
@@ -57,8 +61,14 @@ def figures(rob, rollout, out):
             ax.set_xlabel("run")
         else:
             ax.plot(sizes, ok, "o-")
-            ax.set_xlabel({"velocity_noise": "sigma [rad/s]", "torque_noise": "sigma [N m]", "torque_response": "k",
-                           "delay": "delay [s]"}[fam.value])
+            ax.set_xlabel(
+                {
+                    "velocity_noise": "sigma [rad/s]",
+                    "torque_noise": "sigma [N m]",
+                    "torque_response": "k",
+                    "delay": "delay [s]",
+                }[fam.value]
+            )
         score = rob.family_scores[list(control.Family).index(fam)]
         ax.set_title(f"{fam.value} ({100 * score:.0f} %)")
         ax.set_ylim(-0.05, 1.1)
@@ -84,9 +94,12 @@ def figures(rob, rollout, out):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--policy", default=None, help="score this saved controller instead of designing one")
-    parser.add_argument("--reference", default=None,
-                        help="design the feedback (TVLQR, LQR, lead) with the default SwingUpDesign around the "
-                             "reference of this saved controller instead of searching for a reference")
+    parser.add_argument(
+        "--reference",
+        default=None,
+        help="design the feedback (TVLQR, LQR, lead) with the default SwingUpDesign around the "
+        "reference of this saved controller instead of searching for a reference",
+    )
     parser.add_argument("--out", default=str(OUT))
     args = parser.parse_args(argv)
     out = pathlib.Path(args.out)
@@ -101,8 +114,12 @@ def main(argv=None):
         if args.reference:
             saved = dynax.load_controller(args.reference)
             reference = (jax.numpy.asarray(saved.x_ref), jax.numpy.asarray(saved.u_ref))
-        print("designing the swing-up (collocation, shooting, TVLQR) ..." if reference is None else
-              f"designing the feedback around the reference of {args.reference} ...", flush=True)
+        print(
+            "designing the swing-up (collocation, shooting, TVLQR) ..."
+            if reference is None
+            else f"designing the feedback around the reference of {args.reference} ...",
+            flush=True,
+        )
         start = time.perf_counter()
         controller = control.design_swing_up(design=design, reference=reference)
         timings["design_s"] = time.perf_counter() - start

@@ -45,12 +45,14 @@ def design_reference(plant, design, guesses):
     coarse = knot_matrix(coarse_steps, design.coarse_dt, design.knot_spacing, n_knots)
     fine = knot_matrix(fine_steps, design.dt, design.knot_spacing, n_knots)
     z = collocation_reference(plant, jnp.asarray(guesses), design, n_knots, design.iterations)
-    w, cost, err = reference_search(plant, z[:, 4 * n_knots:], coarse, design.coarse_dt, design, design.shooting_iterations, 1.0)
+    w, cost, err = reference_search(
+        plant, z[:, 4 * n_knots :], coarse, design.coarse_dt, design, design.shooting_iterations, 1.0
+    )
     refs = []
     for j in np.argsort(np.asarray(jnp.where(err < 1e-3, cost, cost + 100 + err))):
         if float(err[j]) > 1e-2:
             continue
-        wb = w[j:j + 1]
+        wb = w[j : j + 1]
         if design.refine_iterations:
             wb, _, _ = reference_search(plant, wb, fine, design.dt, design, design.refine_iterations, 1.0)
         w_end = end_upright_residuals(plant, wb[0], fine, design.dt, design.torque_limit)
@@ -83,19 +85,23 @@ def main(argv=None):
                     guesses.append(pump_guess(n_knots, design.knot_spacing, pumps, elbow, sign, 2.0, rng))
                     labels.append({"horizon": horizon, "pumps": pumps, "sign": sign, "elbow": elbow})
         refs = design_reference(plant, design, np.stack(guesses))
-        print(f"horizon {horizon}: {len(refs)} feasible of {len(guesses)} [{time.perf_counter() - t0:.0f} s]", flush=True)
+        print(
+            f"horizon {horizon}: {len(refs)} feasible of {len(guesses)} [{time.perf_counter() - t0:.0f} s]", flush=True
+        )
         for j, xs, us in refs[: args.keep]:
             c = control.design_swing_up(plant, design, reference=(xs, us))
             perf = control.performance(c)
-            rec = dict(labels[j], score=float(perf.score), costs=[float(v) for v in perf.costs],
-                       final_q2=float(xs[-1, 1]))
+            rec = dict(
+                labels[j], score=float(perf.score), costs=[float(v) for v in perf.costs], final_q2=float(xs[-1, 1])
+            )
             records.append(rec)
             print(f"  {rec} [{time.perf_counter() - t0:.0f} s]", flush=True)
             if best is None or rec["score"] > best[0]["score"]:
                 best = (rec, c)
                 c.save(out / "best_policy.npz")
-        (out / "search.json").write_text(json.dumps({"best": best and best[0], "candidates": records,
-                                                     "seconds": time.perf_counter() - t0}, indent=2))
+        (out / "search.json").write_text(
+            json.dumps({"best": best and best[0], "candidates": records, "seconds": time.perf_counter() - t0}, indent=2)
+        )
 
 
 if __name__ == "__main__":

@@ -53,13 +53,24 @@ def unpack(theta, base, plant, dt):
     k_bal, s_bal = balance_lqr(plant, q_bal, r_bal, dt)
     qt = jnp.stack([q_track[0], q_track[0], q_track[1], q_track[1]])
     gains = tvlqr(plant, base.x_ref, base.u_ref, qt, r_track, s_bal, dt)
-    return eqx.tree_at(lambda c: (c.k_balance, c.s_balance, c.threshold, c.swing_up, c.gains), base,
-                       (k_bal, s_bal, threshold, swing, gains))
+    return eqx.tree_at(
+        lambda c: (c.k_balance, c.s_balance, c.threshold, c.swing_up, c.gains),
+        base,
+        (k_bal, s_bal, threshold, swing, gains),
+    )
 
 
 def initial_theta(design):
-    return np.log(np.concatenate([design.q_balance, [design.r_balance, design.threshold], design.swing_up,
-                                  [design.q_track[0], design.q_track[2], design.r_track]]))
+    return np.log(
+        np.concatenate(
+            [
+                design.q_balance,
+                [design.r_balance, design.threshold],
+                design.swing_up,
+                [design.q_track[0], design.q_track[2], design.r_track],
+            ]
+        )
+    )
 
 
 def main(argv=None):
@@ -88,14 +99,19 @@ def main(argv=None):
     def episodes(key):
         k1, k2 = jax.random.split(key)
         n = args.episodes // 2
-        i = jnp.concatenate([jax.random.choice(k1, jnp.asarray(pulse_idx), (n,), replace=False),
-                             jax.random.choice(k2, jnp.asarray(other_idx), (args.episodes - n,), replace=False)])
+        i = jnp.concatenate(
+            [
+                jax.random.choice(k1, jnp.asarray(pulse_idx), (n,), replace=False),
+                jax.random.choice(k2, jnp.asarray(other_idx), (args.episodes - n,), replace=False),
+            ]
+        )
         return jax.tree.map(lambda a: a[i], bank.cases)
 
     def reward(theta, cases):
         c = unpack(theta, base, plant, rules.dt)
-        final = jax.vmap(lambda case: leaderboard_rollout(c, case, x0, rules.dt, rules.n_steps, rules.max_delay_steps,
-                                               False)[0])(cases)
+        final = jax.vmap(
+            lambda case: leaderboard_rollout(c, case, x0, rules.dt, rules.n_steps, rules.max_delay_steps, False)[0]
+        )(cases)
         e1 = jnp.mod(final[:, 0], 2 * jnp.pi) - jnp.pi
         e2 = jnp.mod(final[:, 1] + jnp.pi, 2 * jnp.pi) - jnp.pi
         err = jnp.stack([e1, e2, final[:, 2], final[:, 3]], axis=1) / tol
@@ -120,17 +136,34 @@ def main(argv=None):
     for g in range(args.generations):
         key, sub = jax.random.split(key)
         state, mean_r, max_r = generation(state, sub)
-        history.append({"generation": g, "mean_reward": float(mean_r), "max_reward": float(max_r),
-                        "seconds": time.perf_counter() - start})
-        print(f"generation {g}: mean reward {float(mean_r):.3f}, best {float(max_r):.3f} "
-              f"[{time.perf_counter() - start:.0f} s]", flush=True)
+        history.append(
+            {
+                "generation": g,
+                "mean_reward": float(mean_r),
+                "max_reward": float(max_r),
+                "seconds": time.perf_counter() - start,
+            }
+        )
+        print(
+            f"generation {g}: mean reward {float(mean_r):.3f}, best {float(max_r):.3f} "
+            f"[{time.perf_counter() - start:.0f} s]",
+            flush=True,
+        )
     tuning_s = time.perf_counter() - start
     theta = pgpe.mean_params(state)
     tuned = unpack(theta, base, plant, rules.dt)
-    results = {"tuning_s": tuning_s, "history": history, "settings": vars(args),
-               "initial": np.exp(np.asarray(theta0)).tolist(),
-               "theta": dict(zip(["q1", "q2", "dq1", "dq2", "r", "threshold", "k_e", "k_p", "k_d", "q_track",
-                                  "dq_track", "r_track"], np.exp(np.asarray(theta)).tolist()))}
+    results = {
+        "tuning_s": tuning_s,
+        "history": history,
+        "settings": vars(args),
+        "initial": np.exp(np.asarray(theta0)).tolist(),
+        "theta": dict(
+            zip(
+                ["q1", "q2", "dq1", "dq2", "r", "threshold", "k_e", "k_p", "k_d", "q_track", "dq_track", "r_track"],
+                np.exp(np.asarray(theta)).tolist(),
+            )
+        ),
+    }
     for name, c in (("before", base), ("after", tuned)):
         perf = control.performance(c)
         rob = control.robustness(c)

@@ -82,7 +82,7 @@ def polish(plant, xs, us, spacing, coarse_dt, iterations):
     per_knot = round(spacing / 0.002)
     n_steps = us.shape[0]
     n_seg = n_steps // per_knot
-    knots = np.asarray(us)[per_knot:n_seg * per_knot:per_knot]  # interior knots
+    knots = np.asarray(us)[per_knot : n_seg * per_knot : per_knot]  # interior knots
     w0 = jnp.asarray(np.arctanh(np.clip(knots / 6.0, -0.999, 0.999)))[None]
     coarse_steps = round(n_steps * 0.002 / coarse_dt)
     interp = knot_matrix(coarse_steps, coarse_dt, spacing, n_seg)
@@ -111,8 +111,11 @@ def main(argv=None):
         perf = control.performance(c)
         rec = dict(label, score=float(perf.score), costs=[float(v) for v in perf.costs])
         records.append(rec)
-        print(f"  {label}: score {rec['score']:.3f} costs {np.round(rec['costs'], 4)} "
-              f"[{time.perf_counter() - start_all:.0f} s]", flush=True)
+        print(
+            f"  {label}: score {rec['score']:.3f} costs {np.round(rec['costs'], 4)} "
+            f"[{time.perf_counter() - start_all:.0f} s]",
+            flush=True,
+        )
         if best is None or rec["score"] > best[0]["score"]:
             best = (rec, c)
             c.save(out / "best_policy.npz")
@@ -129,9 +132,18 @@ def main(argv=None):
                     xs2, us2 = control.end_upright(plant, us2, design)
                     if np.all(np.isfinite(np.asarray(xs2))):
                         score(xs2, us2, design, dict(label, polished=True))
-                (out / "search.json").write_text(json.dumps(
-                    {"best": best[0], "candidates": records, "seconds": time.perf_counter() - start_all,
-                     "settings": vars(args)}, indent=2, default=float))
+                (out / "search.json").write_text(
+                    json.dumps(
+                        {
+                            "best": best[0],
+                            "candidates": records,
+                            "seconds": time.perf_counter() - start_all,
+                            "settings": vars(args),
+                        },
+                        indent=2,
+                        default=float,
+                    )
+                )
     print(f"best {best[0]} in {time.perf_counter() - start_all:.0f} s; wrote {out}", flush=True)
 
 

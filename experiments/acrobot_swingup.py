@@ -61,14 +61,42 @@ SCALES = np.array(DRAKE_SPONG_PARAMETERS)
 
 CONFIGS = {
     "full": dict(
-        runs=8, iterations=80, population=64, duration=20.0, rate=100.0, held_out=256, curve_starts=32,
-        eval_every=5, nm_evals=160, nm_starts=32, soft_iterations=80, grad_steps=40, grad_batch=8,
-        roa_directions=128, pipeline_iterations=60, pipeline_runs=4, excitation_s=30.0,
+        runs=8,
+        iterations=80,
+        population=64,
+        duration=20.0,
+        rate=100.0,
+        held_out=256,
+        curve_starts=32,
+        eval_every=5,
+        nm_evals=160,
+        nm_starts=32,
+        soft_iterations=80,
+        grad_steps=40,
+        grad_batch=8,
+        roa_directions=128,
+        pipeline_iterations=60,
+        pipeline_runs=4,
+        excitation_s=30.0,
     ),
     "quick": dict(
-        runs=2, iterations=3, population=8, duration=4.0, rate=50.0, held_out=8, curve_starts=4,
-        eval_every=1, nm_evals=6, nm_starts=2, soft_iterations=2, grad_steps=2, grad_batch=2,
-        roa_directions=4, pipeline_iterations=2, pipeline_runs=1, excitation_s=4.0,
+        runs=2,
+        iterations=3,
+        population=8,
+        duration=4.0,
+        rate=50.0,
+        held_out=8,
+        curve_starts=4,
+        eval_every=1,
+        nm_evals=6,
+        nm_starts=2,
+        soft_iterations=2,
+        grad_steps=2,
+        grad_batch=2,
+        roa_directions=4,
+        pipeline_iterations=2,
+        pipeline_runs=1,
+        excitation_s=4.0,
     ),
 }
 
@@ -121,8 +149,10 @@ def main(argv=None):
     parser.add_argument("--quick", action="store_true", help="tiny sizes for the test suite")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
-        "--all", action="store_true", help="with --quick, also run the parts past the study (ROA, soft hand-over, "
-        "gradient tuning, identification pipeline)"
+        "--all",
+        action="store_true",
+        help="with --quick, also run the parts past the study (ROA, soft hand-over, "
+        "gradient tuning, identification pipeline)",
     )
     args = parser.parse_args(argv)
     cfg = CONFIGS["quick" if args.quick else "full"]
@@ -142,9 +172,7 @@ def main(argv=None):
     held_out = random_starts(k_held, cfg["held_out"], dtype=jnp.float32)
     curve_starts = random_starts(k_curve, cfg["curve_starts"], dtype=jnp.float32)
     evaluate = eqx.filter_jit(lambda task, p, starts: task.evaluate(p, starts))
-    evaluate_many = eqx.filter_jit(
-        lambda task, ps, starts: jax.vmap(lambda p: task.evaluate(p, starts))(ps)
-    )
+    evaluate_many = eqx.filter_jit(lambda task, ps, starts: jax.vmap(lambda p: task.evaluate(p, starts))(ps))
     results = {"config": {**cfg, "mode": "quick" if args.quick else "full", "seed": args.seed}}
 
     # ------------------------------------------------------------------ Drake's defaults
@@ -200,13 +228,17 @@ def main(argv=None):
             ),
             wall_time_s=wall,
         )
-        log(f"PGPE {regime} held-out: {results[f'pgpe_{regime}']['success_rate']:.3f} success, "
-            f"{results[f'pgpe_{regime}']['mean_time_s']:.2f} s; over runs {sr_mean:.3f} +- {sr_half:.3f}")
+        log(
+            f"PGPE {regime} held-out: {results[f'pgpe_{regime}']['success_rate']:.3f} success, "
+            f"{results[f'pgpe_{regime}']['mean_time_s']:.2f} s; over runs {sr_mean:.3f} +- {sr_half:.3f}"
+        )
     plot_learning(curves, results, cfg, args.out)
 
     # ------------------------------------------------------------------ Nelder-Mead (scipy)
     nm_starts = random_starts(k_nm, cfg["nm_starts"], dtype=jnp.float32)
-    nm_objective = eqx.filter_jit(lambda task, z: task.evaluate(z * jnp.asarray(SCALES, jnp.float32), nm_starts)["reward"])
+    nm_objective = eqx.filter_jit(
+        lambda task, z: task.evaluate(z * jnp.asarray(SCALES, jnp.float32), nm_starts)["reward"]
+    )
     nm_objective(task_random, jnp.ones(4, jnp.float32)).block_until_ready()  # compile outside the timing
     t0 = time.perf_counter()
     nm = scipy.optimize.minimize(
@@ -218,7 +250,10 @@ def main(argv=None):
     wall = time.perf_counter() - t0
     nm_params = jnp.asarray(nm.x * SCALES, jnp.float32)
     results["nelder_mead"] = summary(
-        evaluate(task_random, nm_params, held_out), nm_params, wall_time_s=wall, evaluations=int(nm.nfev),
+        evaluate(task_random, nm_params, held_out),
+        nm_params,
+        wall_time_s=wall,
+        evaluations=int(nm.nfev),
         episodes=int(nm.nfev) * cfg["nm_starts"],
     )
     log(f"Nelder-Mead: {results['nelder_mead']}")
@@ -376,9 +411,7 @@ def gradient_tuning(cfg, template, plant, key, held_out, evaluate):
         norms.append(float(norm))
     wall = time.perf_counter() - t0
     params = z * scales
-    return summary(
-        task.evaluate(params, held_out), params, wall_time_s=wall, train_loss=losses, gradient_norm=norms
-    )
+    return summary(task.evaluate(params, held_out), params, wall_time_s=wall, train_loss=losses, gradient_norm=norms)
 
 
 def pipeline(cfg, key, held_out, tuned_on_nominal):
@@ -444,17 +477,25 @@ def plot_learning(curves, results, cfg, out):
         m, h = ci95(c["train_reward"])
         axes[0].plot(it_all, m, color="C0", label="population average (training)")
         axes[0].fill_between(it_all, m - h, m + h, color="C0", alpha=0.25)
-        for name, colour, label in (("fixed", "C1", "mean params, fixed start"), ("random", "C2", "mean params, held-out random starts")):
+        for name, colour, label in (
+            ("fixed", "C1", "mean params, fixed start"),
+            ("random", "C2", "mean params, held-out random starts"),
+        ):
             m, h = ci95(c[f"{name}_reward"])
             axes[0].plot(c["iterations"], m, color=colour, label=label)
             axes[0].fill_between(c["iterations"], m - h, m + h, color=colour, alpha=0.25)
             m, h = ci95(c[f"{name}_time"])
             axes[1].plot(c["iterations"], m, color=colour, label=label)
             axes[1].fill_between(c["iterations"], m - h, m + h, color=colour, alpha=0.25)
-        axes[1].axhline(results["drake_defaults"]["mean_time_s"], color="k", ls="--", lw=1, label="Drake defaults, held-out")
+        axes[1].axhline(
+            results["drake_defaults"]["mean_time_s"], color="k", ls="--", lw=1, label="Drake defaults, held-out"
+        )
         axes[0].set(xlabel="PGPE iteration", ylabel="average reward", title=titles[regime])
-        axes[1].set(xlabel="PGPE iteration", ylabel="swing-up time [s] (failure = episode length)",
-                    title=f"{cfg['runs']} runs, 95 % bands")
+        axes[1].set(
+            xlabel="PGPE iteration",
+            ylabel="swing-up time [s] (failure = episode length)",
+            title=f"{cfg['runs']} runs, 95 % bands",
+        )
         for ax in axes:
             ax.grid(alpha=0.3)
             ax.legend(fontsize=8)

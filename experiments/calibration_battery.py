@@ -60,19 +60,31 @@ def summary(rows):
         return (sum(bool(x[key]) for x in xs) / len(xs)) if xs else None
 
     return {
-        "cases_run": len(rows), "cases_total": len(CASES), "errors": errors, "effect_cases": len(effects), "controls": len(controls),
+        "cases_run": len(rows),
+        "cases_total": len(CASES),
+        "errors": errors,
+        "effect_cases": len(effects),
+        "controls": len(controls),
         "named_first": share(effects, "named_first"),
         "right_verdict": share(rows, "right_verdict"),
         "right_verdict_effects": share(effects, "right_verdict"),
         "right_verdict_controls": share(controls, "right_verdict"),
         "right_verdict_effects_inconclusive_near_ok": (
             sum(r["right_verdict"] or (r["near"] and r["verdict"] == "inconclusive") for r in effects) / len(effects)
-            if effects else None),
+            if effects
+            else None
+        ),
         "false_claim_controls": share(controls, "false_claim"),
-        "none_where_best_gains_25": share(gained, "none_with_gain"), "cases_best_gains_25": len(gained),
+        "none_where_best_gains_25": share(gained, "none_with_gain"),
+        "cases_best_gains_25": len(gained),
         "spurious_extra": share(effects, "extra"),
-        "targets": {"named_first": ">= 0.95", "right_verdict": ">= 0.90", "false_claim_controls": "<= 0.02",
-                    "none_where_best_gains_25": "<= 0.05", "spurious_extra": "<= 0.05"},
+        "targets": {
+            "named_first": ">= 0.95",
+            "right_verdict": ">= 0.90",
+            "false_claim_controls": "<= 0.02",
+            "none_where_best_gains_25": "<= 0.05",
+            "spurious_extra": "<= 0.05",
+        },
     }
 
 
@@ -86,7 +98,9 @@ def confusion(rows, path):
         i = hidden.index(r["expected_label"])
         v[i, VERDICTS.index(r["verdict"])] += 1
         n[i, named.index(r["findings"][0].split("@")[0] if r["findings"] else "(nothing)")] += 1
-    fig, axes = plt.subplots(1, 2, figsize=(14, 0.45 * len(hidden) + 2.5), gridspec_kw={"width_ratios": [len(VERDICTS), len(named)]})
+    fig, axes = plt.subplots(
+        1, 2, figsize=(14, 0.45 * len(hidden) + 2.5), gridspec_kw={"width_ratios": [len(VERDICTS), len(named)]}
+    )
     for ax, m, cols, title in ((axes[0], v, VERDICTS, "verdict"), (axes[1], n, named, "first named cause")):
         ax.imshow(m, cmap="Blues", aspect="auto")
         for (a, b), x in np.ndenumerate(m):
@@ -98,7 +112,13 @@ def confusion(rows, path):
     fig.suptitle(f"calibration battery: {len(rows)} of {len(CASES)} cases")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    return {"hidden": hidden, "verdicts": list(VERDICTS), "by_verdict": v.tolist(), "named": named, "by_named": n.tolist()}
+    return {
+        "hidden": hidden,
+        "verdicts": list(VERDICTS),
+        "by_verdict": v.tolist(),
+        "named": named,
+        "by_named": n.tolist(),
+    }
 
 
 def markdown(c, rows) -> str:
@@ -109,8 +129,11 @@ def markdown(c, rows) -> str:
     lines += [f"| {h} | " + " | ".join(str(x) for x in row) + " |" for h, row in zip(c["hidden"], c["by_named"])]
     wrong = [r for r in rows if not r["right_verdict"] or r["extra"] or r["false_claim"] or r["none_with_gain"]]
     lines += ["", "| case | verdict | named | gain | best candidate gain |", "|---|---|---|---|---|"]
-    lines += [f"| {r['name']} | {r['verdict']} | {', '.join(r['findings']) or '-'} | {r['gain']:.0%} | "
-              f"{'-' if r['best_gain'] is None else format(r['best_gain'], '.0%')} |" for r in wrong]
+    lines += [
+        f"| {r['name']} | {r['verdict']} | {', '.join(r['findings']) or '-'} | {r['gain']:.0%} | "
+        f"{'-' if r['best_gain'] is None else format(r['best_gain'], '.0%')} |"
+        for r in wrong
+    ]
     return "\n".join(lines) + "\n"
 
 
@@ -146,15 +169,27 @@ def main():
                 path.write_text(json.dumps(rows, indent=1))
                 bar.say(f"{case.name}: ERROR {error!r}"[:300])
                 continue
-            row = {"name": case.name, "system": case.system, "cause": case.cause, "where": case.where, "size": case.size,
-                   "law": case.law, "mode": case.mode, "near": case.near, "seed": case.seed,
-                   "expected": None if case.expected is None else "@".join(case.expected),
-                   "expected_label": "control" if case.cause is None else f"{case.system}: {case.cause}",
-                   **outcome(case, j), "wall_s": time.perf_counter() - t0}
+            row = {
+                "name": case.name,
+                "system": case.system,
+                "cause": case.cause,
+                "where": case.where,
+                "size": case.size,
+                "law": case.law,
+                "mode": case.mode,
+                "near": case.near,
+                "seed": case.seed,
+                "expected": None if case.expected is None else "@".join(case.expected),
+                "expected_label": "control" if case.cause is None else f"{case.system}: {case.cause}",
+                **outcome(case, j),
+                "wall_s": time.perf_counter() - t0,
+            }
             rows.append(row)
             path.write_text(json.dumps(rows, indent=1))
-            bar.say(f"{case.name}: {row['verdict']} {row['findings']} gain {row['gain']:.0%} "
-                    f"best {row['best_gain'] if row['best_gain'] is None else round(row['best_gain'], 2)} ({row['wall_s']:.0f} s)")
+            bar.say(
+                f"{case.name}: {row['verdict']} {row['findings']} gain {row['gain']:.0%} "
+                f"best {row['best_gain'] if row['best_gain'] is None else round(row['best_gain'], 2)} ({row['wall_s']:.0f} s)"
+            )
             bar.update(1)
     done = [r for r in rows if "error" not in r]
     result = {"summary": summary(rows), "confusion": confusion(done, out / "confusion.png") if done else None}

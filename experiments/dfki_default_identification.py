@@ -57,18 +57,18 @@ jax.config.update("jax_enable_x64", True)
 import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
+from dfki_simulation import DFKI, MAPPING, read_parameters  # noqa: E402  (the script's folder is on sys.path)
+import diagnose_real_splits  # noqa: E402
+import equinox as eqx  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-import equinox as eqx  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
 from dynax import AbstractJointTerm, held_out_error  # noqa: E402
-from dynax._identify import _identify as identify_module, _refine  # noqa: E402
+from dynax._identify import _identify as identify_module  # noqa: E402
+from dynax._identify import _refine
 from dynax.internal import log_ratio_differences, paired_block_test  # noqa: E402
-
-from dfki_simulation import DFKI, MAPPING, read_parameters  # noqa: E402  (the script's folder is on sys.path)
-import diagnose_real_splits  # noqa: E402
 
 RUNS = ("00", "01", "02", "03", "05", "12")
 HORIZONS = (0.1, 0.25, 0.5)
@@ -83,18 +83,27 @@ def lab_parameters(p: dict[str, float]) -> dict[str, float]:
     b, Coulomb fc = cf pi/2 of tanh(100 dq) (same saturation; the slope at rest differs by pi/2).
     """
     gr, ir, g = p["gr"], p["Ir"], p["g"]
-    return dict(theta1=p["I1"] + p["l1"] ** 2 * p["m2"] + (gr**2 + gr + 1) * ir, theta2=p["I2"] - gr * ir,
-                theta3=p["l1"] * p["m2"] * p["r2"], theta4=g * (p["m1"] * p["r1"] + p["m2"] * p["l1"]),
-                theta5=g * p["m2"] * p["r2"], theta6=p["b1"], theta7=p["b2"], fc1=p["cf1"] * math.pi / 2,
-                fc2=p["cf2"] * math.pi / 2, Ir2=(gr**2 + gr) * ir)
+    return dict(
+        theta1=p["I1"] + p["l1"] ** 2 * p["m2"] + (gr**2 + gr + 1) * ir,
+        theta2=p["I2"] - gr * ir,
+        theta3=p["l1"] * p["m2"] * p["r2"],
+        theta4=g * (p["m1"] * p["r1"] + p["m2"] * p["l1"]),
+        theta5=g * p["m2"] * p["r2"],
+        theta6=p["b1"],
+        theta7=p["b2"],
+        fc1=p["cf1"] * math.pi / 2,
+        fc2=p["cf2"] * math.pi / 2,
+        Ir2=(gr**2 + gr) * ir,
+    )
 
 
 def model_of(p: dict[str, float]) -> dynax.AbstractSystem:
     """The double pendulum of base parameters `theta1..theta7`, Coulomb friction `fc1`, `fc2` and
     elbow rotor inertia `Ir2` (what `identify` returns here, as a dict)."""
     rigid = dynax.DoublePendulum.from_base_parameters({k: p[k] for k in (f"theta{i}" for i in range(1, 8))})
-    return dynax.Extended(rigid, (dynax.CoulombFriction(0, p["fc1"]), dynax.CoulombFriction(1, p["fc2"]),
-                                  dynax.RotorInertia(1, p["Ir2"])))
+    return dynax.Extended(
+        rigid, (dynax.CoulombFriction(0, p["fc1"]), dynax.CoulombFriction(1, p["fc2"]), dynax.RotorInertia(1, p["Ir2"]))
+    )
 
 
 def lab_model(p: dict[str, float]) -> dynax.AbstractSystem:
@@ -153,8 +162,17 @@ def cell_tests(model, lab, record, horizons) -> list[dict]:
         d = log_ratio_differences(np.asarray(theirs.window_mse[:, k]), np.asarray(mine.window_mse[:, k]))
         runs, overlap = np.zeros(d.size, int), math.ceil(h / stride_s - 1e-9)
         better, worse = paired_block_test(d, runs, overlap), paired_block_test(-d, runs, overlap)
-        out.append({"horizon_s": h, "ratio": float(np.exp(-better.mean / 2)), "mean_log_ratio": better.mean,
-                    "std_error": better.std_error, "df": better.df, "p_better": better.p_value, "p_worse": worse.p_value})
+        out.append(
+            {
+                "horizon_s": h,
+                "ratio": float(np.exp(-better.mean / 2)),
+                "mean_log_ratio": better.mean,
+                "std_error": better.std_error,
+                "df": better.df,
+                "p_better": better.p_value,
+                "p_worse": worse.p_value,
+            }
+        )
     return out
 
 
@@ -171,12 +189,20 @@ def _band_from_positions() -> None:
             return choice
         fs = 1.0 / trajectory.dt
         n = len(trajectory.state_names) // 2
-        bands = {name: _defaults.noise_floor_and_band(np.asarray(trajectory.xs[:, k]), fs, snr=snr)[1]
-                 for k, name in enumerate(trajectory.state_names[n:])}
+        bands = {
+            name: _defaults.noise_floor_and_band(np.asarray(trajectory.xs[:, k]), fs, snr=snr)[1]
+            for k, name in enumerate(trajectory.state_names[n:])
+        }
         band = max(bands.values())
         trim, decimate = _defaults.trim_and_decimation(fs, band, len(trajectory))
-        return dataclasses.replace(choice, cutoff_hz=band, trim=trim, decimate=decimate, band_hz=bands,
-                                   reason=f"band from the angles' spectra: {band:.3g} Hz")
+        return dataclasses.replace(
+            choice,
+            cutoff_hz=band,
+            trim=trim,
+            decimate=decimate,
+            band_hz=bands,
+            reason=f"band from the angles' spectra: {band:.3g} Hz",
+        )
 
     for module in (_defaults, _equations, identify_module, _refine):
         module.choose_filter = choose_filter
@@ -186,23 +212,55 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", required=True, type=pathlib.Path)
     parser.add_argument("--runs", default=",".join(RUNS), help="held-out runs to evaluate (default all six)")
-    parser.add_argument("--merge", nargs="+", type=pathlib.Path, default=(), metavar="DIR",
-                        help="fit nothing: merge the results.json of earlier runs (e.g. folds run in parallel)")
-    parser.add_argument("--record-weights", choices=_refine.RECORD_WEIGHTS, default=_refine.DEFAULT_RECORD_WEIGHTS,
-                        help="weights of the records in the output-error refinement (default: %(default)s)")
-    parser.add_argument("--variant", choices=("native", "encoders") + diagnose_real_splits.VARIANTS[:1] + diagnose_real_splits.VARIANTS[2:],
-                        default="native", help="how the training runs are recorded (the held-out run stays native)")
-    parser.add_argument("--segment-band-hz", type=float, default=None, metavar="F",
-                        help="segments of 1/F s in the refinement instead of one period of the widest band's edge")
-    parser.add_argument("--stagger", type=int, default=None, metavar="K",
-                        help="fit K staggered cuts of the records into segments (SimulationFit.stagger; default "
-                             "identify's, 4; 1 for the single cut of the table before 2026-11-26's afternoon)")
-    parser.add_argument("--offsets", choices=("auto", "force", "angles"), default="auto",
-                        help="Dynamic(offsets=...): auto (identify's default: angle zeros or force offsets per record, "
-                             "whichever explains the runs clearly better), force (force offsets, the default before "
-                             "2026-11-27) or angles")
-    parser.add_argument("--band-from", choices=("velocities", "positions"), default="velocities",
-                        help="the spectra the filter band is read from (default: %(default)s, identify's)")
+    parser.add_argument(
+        "--merge",
+        nargs="+",
+        type=pathlib.Path,
+        default=(),
+        metavar="DIR",
+        help="fit nothing: merge the results.json of earlier runs (e.g. folds run in parallel)",
+    )
+    parser.add_argument(
+        "--record-weights",
+        choices=_refine.RECORD_WEIGHTS,
+        default=_refine.DEFAULT_RECORD_WEIGHTS,
+        help="weights of the records in the output-error refinement (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--variant",
+        choices=("native", "encoders") + diagnose_real_splits.VARIANTS[:1] + diagnose_real_splits.VARIANTS[2:],
+        default="native",
+        help="how the training runs are recorded (the held-out run stays native)",
+    )
+    parser.add_argument(
+        "--segment-band-hz",
+        type=float,
+        default=None,
+        metavar="F",
+        help="segments of 1/F s in the refinement instead of one period of the widest band's edge",
+    )
+    parser.add_argument(
+        "--stagger",
+        type=int,
+        default=None,
+        metavar="K",
+        help="fit K staggered cuts of the records into segments (SimulationFit.stagger; default "
+        "identify's, 4; 1 for the single cut of the table before 2026-11-26's afternoon)",
+    )
+    parser.add_argument(
+        "--offsets",
+        choices=("auto", "force", "angles"),
+        default="auto",
+        help="Dynamic(offsets=...): auto (identify's default: angle zeros or force offsets per record, "
+        "whichever explains the runs clearly better), force (force offsets, the default before "
+        "2026-11-27) or angles",
+    )
+    parser.add_argument(
+        "--band-from",
+        choices=("velocities", "positions"),
+        default="velocities",
+        help="the spectra the filter band is read from (default: %(default)s, identify's)",
+    )
     args = parser.parse_args(argv)
     if args.band_from == "positions":
         _band_from_positions()
@@ -210,8 +268,9 @@ def main(argv=None):
         identify_module._signal_band_hz = lambda trajectories: args.segment_band_hz
     if args.stagger is not None:
         default_method = identify_module._refinement_method
-        identify_module._refinement_method = lambda *a: (lambda m: m if m is None else dataclasses.replace(
-            m, stagger=args.stagger))(default_method(*a))
+        identify_module._refinement_method = lambda *a: (
+            lambda m: m if m is None else dataclasses.replace(m, stagger=args.stagger)
+        )(default_method(*a))
     refinements = []  # what the refinement did (record weights), seen through a thin wrapper
 
     def refine(*a, **k):
@@ -230,8 +289,14 @@ def main(argv=None):
         train = [training[r] for r in RUNS if r != held]
         start = time.perf_counter()
         offsets = {"auto": "auto", "force": True, "angles": "angles"}[args.offsets]
-        result = dynax.identify(dynax.DoublePendulum(), train, dynax.Dynamic(offsets=offsets), friction="coulomb",
-                                validation=[runs[held]], horizons_s=HORIZONS)
+        result = dynax.identify(
+            dynax.DoublePendulum(),
+            train,
+            dynax.Dynamic(offsets=offsets),
+            friction="coulomb",
+            validation=[runs[held]],
+            horizons_s=HORIZONS,
+        )
         seconds = time.perf_counter() - start
         lab_error = held_out_error(lab, [runs[held]], HORIZONS)
         paired = cell_tests(result.system, lab, runs[held], HORIZONS)
@@ -258,19 +323,33 @@ def main(argv=None):
             "input_timing": stages["output_error"].get("input_timing"),
             "offsets": args.offsets,
             "angle_zeros": None if result.angle_zeros is None else result.angle_zeros.to_json(),
-            "settings": [{k: s[k] for k in ("lowpass_hz", "lowpass_order", "trim", "decimate")} for s in result.settings],
+            "settings": [
+                {k: s[k] for k in ("lowpass_hz", "lowpass_order", "trim", "decimate")} for s in result.settings
+            ],
         }
         results["runs"][held] = entry
-        print(f"held out {held} ({seconds:.0f} s): dynax " + " ".join(f"{v:.3f}" for v in entry["dynax"])
-              + " | least squares " + " ".join(f"{v:.3f}" for v in entry["dynax_least_squares"])
-              + " | lab " + " ".join(f"{v:.3f}" for v in entry["lab_model_3.0"])
-              + " | p worse/better " + " ".join(f"{c['p_worse']:.2g}/{c['p_better']:.2g}" for c in paired)
-              + f" | consistent {entry['consistency']['consistent']}"
-              + " | weights " + " ".join(f"{w:.2f}" for w in entry["record_weights"])
-              + " | residual scale " + " ".join(f"{v:.1f}" for v in entry["record_residual_scale"])
-              + f" | {entry['reweights']} refits"
-              + ("" if entry["input_timing"] is None else f" | input latency {1e3 * entry['input_timing']['latency_s']:.2f} ms"),
-              flush=True)
+        print(
+            f"held out {held} ({seconds:.0f} s): dynax "
+            + " ".join(f"{v:.3f}" for v in entry["dynax"])
+            + " | least squares "
+            + " ".join(f"{v:.3f}" for v in entry["dynax_least_squares"])
+            + " | lab "
+            + " ".join(f"{v:.3f}" for v in entry["lab_model_3.0"])
+            + " | p worse/better "
+            + " ".join(f"{c['p_worse']:.2g}/{c['p_better']:.2g}" for c in paired)
+            + f" | consistent {entry['consistency']['consistent']}"
+            + " | weights "
+            + " ".join(f"{w:.2f}" for w in entry["record_weights"])
+            + " | residual scale "
+            + " ".join(f"{v:.1f}" for v in entry["record_residual_scale"])
+            + f" | {entry['reweights']} refits"
+            + (
+                ""
+                if entry["input_timing"] is None
+                else f" | input latency {1e3 * entry['input_timing']['latency_s']:.2f} ms"
+            ),
+            flush=True,
+        )
     # The lab's model with its own arctan friction: cheap, independent of the fits, so filled in for
     # merged folds made before it was added too.
     written = lab_model_as_written(read_parameters("model_3.0"))
@@ -285,9 +364,14 @@ def main(argv=None):
     fig, axes = plt.subplots(1, len(HORIZONS), figsize=(5 * len(HORIZONS), 4))
     x = np.arange(len(held_runs))
     for ax, (k, h) in zip(axes, enumerate(HORIZONS)):
-        for offset, (key, label) in zip((-0.27, 0.0, 0.27), (("dynax", "dynax (default)"),
-                                                              ("dynax_least_squares", "dynax least-squares stage"),
-                                                              ("lab_model_3.0", "lab model_3.0"))):
+        for offset, (key, label) in zip(
+            (-0.27, 0.0, 0.27),
+            (
+                ("dynax", "dynax (default)"),
+                ("dynax_least_squares", "dynax least-squares stage"),
+                ("lab_model_3.0", "lab model_3.0"),
+            ),
+        ):
             ax.bar(x + offset, [results["runs"][r][key][k] for r in held_runs], 0.27, label=label)
         ax.set_xticks(x, [f"run {r}" for r in held_runs])
         ax.set(yscale="log", ylabel="position RMSE [rad]", title=f"held-out run, {h:g} s open loop")

@@ -25,15 +25,14 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
+from dfki_default_identification import HORIZONS, lab_model, load  # noqa: E402  (the script's folder is on sys.path)
+from dfki_simulation import read_parameters  # noqa: E402
+from dfki_torque_offsets import LORO, loro_model  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
 from dynax import held_out_error  # noqa: E402
-
-from dfki_default_identification import HORIZONS, lab_model, load  # noqa: E402  (the script's folder is on sys.path)
-from dfki_simulation import read_parameters  # noqa: E402
-from dfki_torque_offsets import LORO, loro_model  # noqa: E402
 
 
 def read_later(record: dynax.Trajectory, latency: float) -> dynax.Trajectory:
@@ -41,8 +40,9 @@ def read_later(record: dynax.Trajectory, latency: float) -> dynax.Trajectory:
     ts, us = np.asarray(record.ts), np.asarray(record.us)
     middle = ts + 0.5 * float(np.median(np.diff(ts))) - latency
     timed = np.stack([np.interp(middle, ts, us[:, j]) for j in range(us.shape[1])], axis=1)
-    return dynax.Trajectory(record.ts, record.xs, jnp.asarray(timed), record.state_names, record.input_names,
-                            record.system, record.source)
+    return dynax.Trajectory(
+        record.ts, record.xs, jnp.asarray(timed), record.state_names, record.input_names, record.system, record.source
+    )
 
 
 def main(argv=None):
@@ -58,15 +58,22 @@ def main(argv=None):
         timed = read_later(record, latency)
         entry = {
             "latency_s": latency,
-            "dynax_recorded": [float(v) for v in held_out_error(loro_model(fold["parameters"]), [record], HORIZONS).rmse],
+            "dynax_recorded": [
+                float(v) for v in held_out_error(loro_model(fold["parameters"]), [record], HORIZONS).rmse
+            ],
             "dynax_timed": [float(v) for v in held_out_error(loro_model(fold["parameters"]), [timed], HORIZONS).rmse],
             "lab_recorded": [float(v) for v in held_out_error(lab, [record], HORIZONS).rmse],
             "lab_timed": [float(v) for v in held_out_error(lab, [timed], HORIZONS).rmse],
         }
         out["runs"][run] = entry
-        print(f"run {run}: latency {1e3 * latency:+.1f} ms | "
-              + " | ".join(f"{k} " + "/".join(f"{v:.4f}" for v in entry[k])
-                           for k in ("dynax_recorded", "dynax_timed", "lab_recorded", "lab_timed")), flush=True)
+        print(
+            f"run {run}: latency {1e3 * latency:+.1f} ms | "
+            + " | ".join(
+                f"{k} " + "/".join(f"{v:.4f}" for v in entry[k])
+                for k in ("dynax_recorded", "dynax_timed", "lab_recorded", "lab_timed")
+            ),
+            flush=True,
+        )
     helped = sum(t < r for e in out["runs"].values() for t, r in zip(e["lab_timed"], e["lab_recorded"]))
     print(f"the fitted timing lowers the lab model's error in {helped} of {3 * len(out['runs'])} cells")
     args.out.mkdir(parents=True, exist_ok=True)

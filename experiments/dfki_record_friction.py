@@ -34,17 +34,16 @@ jax.config.update("jax_enable_x64", True)
 import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
+from dfki_default_identification import HORIZONS, lab_parameters, load, model_of, RUNS  # noqa: E402  (the script's folder is on sys.path)
+from dfki_simulation import read_parameters  # noqa: E402
+from dfki_torque_offsets import LORO  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-import dynax.internal  # noqa: E402
 from dynax import held_out_error  # noqa: E402
+import dynax.internal  # noqa: E402
 from dynax.internal import compare_records  # noqa: E402
-
-from dfki_default_identification import HORIZONS, lab_parameters, load, model_of, RUNS  # noqa: E402  (the script's folder is on sys.path)
-from dfki_simulation import read_parameters  # noqa: E402
-from dfki_torque_offsets import LORO  # noqa: E402
 
 GROUPS = {
     "inertia (theta1, theta2, theta3, Ir2)": ("theta1", "theta2", "theta3", "Ir2"),
@@ -83,16 +82,30 @@ def main(argv=None):
             mixed = dict(ours, **{k: lab[k] for k in keys})
             swapped[name] = list(held_out_error(model_of(mixed), [records[run]], HORIZONS).rmse)
         _, training = compare_records(dynax.DoublePendulum(), [records[r] for r in RUNS if r != run])
-        out["folds"][run] = {"dynax": fold["dynax"], "lab_model_3.0": fold["lab_model_3.0"],
-                             "dynax_with_the_labs": swapped, "training_record_friction": friction_json(training)}
-        print(f"held out {run}: dynax " + " ".join(f"{v:.4f}" for v in fold["dynax"])
-              + " | lab " + " ".join(f"{v:.4f}" for v in fold["lab_model_3.0"]), flush=True)
+        out["folds"][run] = {
+            "dynax": fold["dynax"],
+            "lab_model_3.0": fold["lab_model_3.0"],
+            "dynax_with_the_labs": swapped,
+            "training_record_friction": friction_json(training),
+        }
+        print(
+            f"held out {run}: dynax "
+            + " ".join(f"{v:.4f}" for v in fold["dynax"])
+            + " | lab "
+            + " ".join(f"{v:.4f}" for v in fold["lab_model_3.0"]),
+            flush=True,
+        )
         for name, rmse in swapped.items():
             print(f"    with the lab's {name:40s} " + " ".join(f"{v:.4f}" for v in rmse), flush=True)
         if training is not None:
-            print("    training runs' Coulomb friction: " + "; ".join(
-                f"{c} " + ", ".join(f"{v:.3f}" for v in training.values[:, k]) + f" (p = {training.p_value[k]:.2g})"
-                for k, c in enumerate(training.columns)), flush=True)
+            print(
+                "    training runs' Coulomb friction: "
+                + "; ".join(
+                    f"{c} " + ", ".join(f"{v:.3f}" for v in training.values[:, k]) + f" (p = {training.p_value[k]:.2g})"
+                    for k, c in enumerate(training.columns)
+                ),
+                flush=True,
+            )
 
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "record_friction.json").write_text(json.dumps(out, indent=2) + "\n")
@@ -104,16 +117,25 @@ def main(argv=None):
             n_parts = everything.parts.shape[1]
             width = 0.8 / n_parts
             for h in range(n_parts):
-                ax.bar(x + (h - (n_parts - 1) / 2) * width, everything.parts[:, h, k], width, color=f"C{h}",
-                       label=f"part {h + 1} of {n_parts} of the run")
+                ax.bar(
+                    x + (h - (n_parts - 1) / 2) * width,
+                    everything.parts[:, h, k],
+                    width,
+                    color=f"C{h}",
+                    label=f"part {h + 1} of {n_parts} of the run",
+                )
             ax.plot(x, everything.values[:, k], "kD", label="the run's value")
             ax.axhline(everything.shared[k], color="k", lw=1, label="one value for all runs")
             ax.axhline(lab[column], color="r", ls="--", lw=1, label="lab model_3.0 (output error)")
             ax.set_xticks(x, [f"run {r}" for r in RUNS])
-            ax.set(ylabel=f"{column} [N m]", title=f"{column}: F = {everything.f_statistic[k]:.3g}, "
-                                                    f"p = {everything.p_value[k]:.2g}")
+            ax.set(
+                ylabel=f"{column} [N m]",
+                title=f"{column}: F = {everything.f_statistic[k]:.3g}, p = {everything.p_value[k]:.2g}",
+            )
         axes[0].legend(fontsize=8)
-    fig.suptitle("DFKI double pendulum: Coulomb friction per run, least-squares equations (DFKI RIC Underactuated Robotics Lab)")
+    fig.suptitle(
+        "DFKI double pendulum: Coulomb friction per run, least-squares equations (DFKI RIC Underactuated Robotics Lab)"
+    )
     fig.tight_layout()
     fig.savefig(args.out / "record_friction.png", dpi=110)
     print(f"wrote {args.out / 'record_friction.json'} and {args.out / 'record_friction.png'}")

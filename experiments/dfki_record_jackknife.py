@@ -46,14 +46,20 @@ def fit(leave: str) -> dict:
     start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result = dynax.identify(dynax.DoublePendulum(), train, dynax.Dynamic(), friction="coulomb",
-                                validation=[load(VALIDATION)])
-    return {"training_runs": [r for r in RUNS if r != leave], "seconds": time.perf_counter() - start,
-            "parameters": result.parameters, "std_errors": result.standard_errors,
-            "record_std_errors": None if result.record_std_errors is None else
-            {n: float(v) for n, v in zip(result.names, np.asarray(result.record_std_errors))},
-            "records_disagree": (result.to_json()["stages"].get("output_error") or {}).get("records_disagree"),
-            "warnings": sorted({type(w.message).__name__ for w in caught})}
+        result = dynax.identify(
+            dynax.DoublePendulum(), train, dynax.Dynamic(), friction="coulomb", validation=[load(VALIDATION)]
+        )
+    return {
+        "training_runs": [r for r in RUNS if r != leave],
+        "seconds": time.perf_counter() - start,
+        "parameters": result.parameters,
+        "std_errors": result.standard_errors,
+        "record_std_errors": None
+        if result.record_std_errors is None
+        else {n: float(v) for n, v in zip(result.names, np.asarray(result.record_std_errors))},
+        "records_disagree": (result.to_json()["stages"].get("output_error") or {}).get("records_disagree"),
+        "warnings": sorted({type(w.message).__name__ for w in caught}),
+    }
 
 
 def compare(fits: dict) -> dict:
@@ -65,10 +71,15 @@ def compare(fits: dict) -> dict:
         left = np.array([fits[r]["parameters"][n] for r in RUNS])
         refit = float(np.sqrt((g - 1) / g * np.sum((left - left.mean()) ** 2)))
         value = abs(full["parameters"][n])
-        out[n] = {"estimate": full["parameters"][n], "refit_jackknife": refit,
-                  "linearised_jackknife": full["record_std_errors"][n], "within_records": full["std_errors"][n],
-                  "linearised_over_refit": full["record_std_errors"][n] / refit,
-                  "refit_jackknife_relative": refit / value, "within_relative": full["std_errors"][n] / value}
+        out[n] = {
+            "estimate": full["parameters"][n],
+            "refit_jackknife": refit,
+            "linearised_jackknife": full["record_std_errors"][n],
+            "within_records": full["std_errors"][n],
+            "linearised_over_refit": full["record_std_errors"][n] / refit,
+            "refit_jackknife_relative": refit / value,
+            "within_relative": full["std_errors"][n] / value,
+        }
     return out
 
 
@@ -95,8 +106,10 @@ def main(argv=None):
         result["comparison"] = compare(fits)
         print(f"{'':8s} {'refit jackknife':>16s} {'linearised':>11s} {'within':>8s}  (relative to the estimate)")
         for n, c in result["comparison"].items():
-            print(f"{n:8s} {100 * c['refit_jackknife_relative']:15.2f}% "
-                  f"{100 * c['linearised_jackknife'] / abs(c['estimate']):10.2f}% {100 * c['within_relative']:7.2f}%")
+            print(
+                f"{n:8s} {100 * c['refit_jackknife_relative']:15.2f}% "
+                f"{100 * c['linearised_jackknife'] / abs(c['estimate']):10.2f}% {100 * c['within_relative']:7.2f}%"
+            )
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "jackknife.json").write_text(json.dumps(result, indent=1))
     print(f"wrote {args.out / 'jackknife.json'}")

@@ -18,11 +18,11 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import dynax  # noqa: E402
-from dynax import held_out_error  # noqa: E402
-
 from dfki_default_identification import HORIZONS, lab_model, load, RUNS  # noqa: E402  (the script's folder is on sys.path)
 from dfki_simulation import read_parameters  # noqa: E402
+
+import dynax  # noqa: E402
+from dynax import held_out_error  # noqa: E402
 
 
 def main(argv=None):
@@ -33,8 +33,9 @@ def main(argv=None):
     start = time.perf_counter()
     # No `validation`: identify holds out the last 20 % of each run for its own validation (the default), so
     # dynax fits 80 % of the data the lab fitted; both models are scored on the whole runs below.
-    result = dynax.identify(dynax.DoublePendulum(), [runs[r] for r in RUNS], dynax.Dynamic(), friction="coulomb",
-                            horizons_s=HORIZONS)
+    result = dynax.identify(
+        dynax.DoublePendulum(), [runs[r] for r in RUNS], dynax.Dynamic(), friction="coulomb", horizons_s=HORIZONS
+    )
     seconds = time.perf_counter() - start
     lab = lab_model(read_parameters("model_3.0"))
     rows = {}
@@ -42,12 +43,25 @@ def main(argv=None):
         ours = [float(v) for v in held_out_error(result.system, [runs[r]], HORIZONS).rmse]
         theirs = [float(v) for v in held_out_error(lab, [runs[r]], HORIZONS).rmse]
         rows[r] = {"dynax": ours, "lab_model_3.0": theirs, "ratio": [a / b for a, b in zip(ours, theirs)]}
-        print(f"run {r}: dynax " + " ".join(f"{v:.4f}" for v in ours) + " | lab " + " ".join(f"{v:.4f}" for v in theirs)
-              + " | ratio " + " ".join(f"{v:.2f}" for v in rows[r]["ratio"]), flush=True)
+        print(
+            f"run {r}: dynax "
+            + " ".join(f"{v:.4f}" for v in ours)
+            + " | lab "
+            + " ".join(f"{v:.4f}" for v in theirs)
+            + " | ratio "
+            + " ".join(f"{v:.2f}" for v in rows[r]["ratio"]),
+            flush=True,
+        )
     at_or_below = sum(x <= 1.0 for row in rows.values() for x in row["ratio"])
     print(f"dynax at or below the lab in {at_or_below} of {3 * len(RUNS)} cells (fit {seconds:.0f} s)")
-    out = {"horizons_s": list(HORIZONS), "fit_seconds": seconds, "parameters": result.parameters,
-           "consistency": result.consistency.to_json(), "runs": rows, "at_or_below_lab": at_or_below}
+    out = {
+        "horizons_s": list(HORIZONS),
+        "fit_seconds": seconds,
+        "parameters": result.parameters,
+        "consistency": result.consistency.to_json(),
+        "runs": rows,
+        "at_or_below_lab": at_or_below,
+    }
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "same_data.json").write_text(json.dumps(out, indent=2) + "\n")
 

@@ -27,8 +27,15 @@ import dynax  # noqa: E402
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 DFKI = REPO.parent / "shared" / "datasets" / "dfki_double_pendulum"
-MAPPING = {"t": "time", "q1": "pos_meas1", "q2": "pos_meas2", "dq1": "vel_meas1", "dq2": "vel_meas2",
-           "tau1": "tau_meas1", "tau2": "tau_meas2"}
+MAPPING = {
+    "t": "time",
+    "q1": "pos_meas1",
+    "q2": "pos_meas2",
+    "dq1": "vel_meas1",
+    "dq2": "vel_meas2",
+    "tau1": "tau_meas1",
+    "tau2": "tau_meas2",
+}
 HORIZONS = (0.05, 0.1, 0.25, 0.5, 1.0)
 
 
@@ -49,8 +56,16 @@ def lab_model(p: dict[str, float], *, with_friction_and_rotor: bool) -> dynax.Ab
     `dfki_default_identification.lab_model` does; docs/devdocs/dfki_loro.md).
     """
     rigid = dynax.DoublePendulum.from_physical(
-        m1=p["m1"], m2=p["m2"], l1=p["l1"], lc1=p["r1"], lc2=p["r2"], I1=p["I1"], I2=p["I2"],
-        b1=p["b1"], b2=p["b2"], g=p["g"],
+        m1=p["m1"],
+        m2=p["m2"],
+        l1=p["l1"],
+        lc1=p["r1"],
+        lc2=p["r2"],
+        I1=p["I1"],
+        I2=p["I2"],
+        b1=p["b1"],
+        b2=p["b2"],
+        g=p["g"],
     )
     if not with_friction_and_rotor:
         return rigid
@@ -72,8 +87,10 @@ def main(argv=None):
     args = parser.parse_args(argv)
 
     run = dynax.load_trajectory(DFKI / "sys_id" / f"trajectory_{args.run}.csv", "double_pendulum", mapping=MAPPING)
-    print(f"loaded {run.source}: {len(run)} samples over {run.duration:.2f} s, "
-          f"median dt {run.dt * 1e3:.2f} ms ({'uniform' if run.is_uniform else 'irregular, kept as recorded'})")
+    print(
+        f"loaded {run.source}: {len(run)} samples over {run.duration:.2f} s, "
+        f"median dt {run.dt * 1e3:.2f} ms ({'uniform' if run.is_uniform else 'irregular, kept as recorded'})"
+    )
     models = {
         "Drake defaults": dynax.DoublePendulum(),
         "DFKI model_3.1 (rigid body)": lab_model(read_parameters("model_3.1"), with_friction_and_rotor=False),
@@ -84,8 +101,11 @@ def main(argv=None):
     results, shown = {}, {}
     for name, model in models.items():
         error = dynax.simulation_error(model, run, HORIZONS)
-        results[name] = {"horizons_s": list(HORIZONS), "rmse_rad": [float(r) for r in error.rmse],
-                         "diverged_fraction": float(error.diverged_fraction)}
+        results[name] = {
+            "horizons_s": list(HORIZONS),
+            "rmse_rad": [float(r) for r in error.rmse],
+            "diverged_fraction": float(error.diverged_fraction),
+        }
         print(f"{name:38s} RMSE " + "  ".join(f"{h:g}s: {r:.3g} rad" for h, r in zip(HORIZONS, error.rmse)))
         x0 = jnp.zeros(model.n_states).at[:4].set(window.x0)
         shown[name] = dynax.simulate(model, x0, window.ts, window.us, throw=False).xs[:, :4]

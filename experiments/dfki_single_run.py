@@ -50,8 +50,9 @@ def fit_one(run, records, lab, lab_errors) -> dict:
     start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result = dynax.identify(dynax.DoublePendulum(), records[run], dynax.Dynamic(), friction="coulomb",
-                                horizons_s=HORIZONS)
+        result = dynax.identify(
+            dynax.DoublePendulum(), records[run], dynax.Dynamic(), friction="coulomb", horizons_s=HORIZONS
+        )
     seconds = time.perf_counter() - start
     others = {r: list(held_out_error(result.system, [records[r]], HORIZONS).rmse) for r in RUNS if r != run}
     return {
@@ -82,8 +83,10 @@ def figure(results, out):
             if np.isfinite(ratio[i, j]):
                 ax.text(j, i, f"{ratio[i, j]:.2g}", ha="center", va="center", fontsize=8)
     ax.set_xticks(range(len(RUNS)), [f"run {r}" for r in RUNS])
-    ax.set_yticks(range(len(runs)), [f"fit on {r}" + (" (warned)" if results["runs"][r]["poorly_determined"] else "")
-                                     for r in runs])
+    ax.set_yticks(
+        range(len(runs)),
+        [f"fit on {r}" + (" (warned)" if results["runs"][r]["poorly_determined"] else "") for r in runs],
+    )
     ax.set_xlabel("simulated open loop on")
     ax.set_title(f"one run alone: RMSE at {HORIZONS[-1]} s over the lab's model_3.0")
     fig.colorbar(image, ax=ax, label="log2 ratio")
@@ -96,8 +99,14 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", required=True, type=pathlib.Path)
     parser.add_argument("--runs", default=",".join(RUNS), help="runs to fit alone (default all six)")
-    parser.add_argument("--merge", nargs="+", type=pathlib.Path, default=(), metavar="DIR",
-                        help="fit nothing: merge the single_run.json of earlier runs")
+    parser.add_argument(
+        "--merge",
+        nargs="+",
+        type=pathlib.Path,
+        default=(),
+        metavar="DIR",
+        help="fit nothing: merge the single_run.json of earlier runs",
+    )
     args = parser.parse_args(argv)
     results = {"horizons_s": list(HORIZONS), "runs": {}}
     for part in args.merge:
@@ -114,13 +123,20 @@ def main(argv=None):
         for run in fitted:
             entry = fit_one(run, records, lab_values, lab_errors)
             results["runs"][run] = entry
-            worst = max(entry["other_runs_rmse"], key=lambda r: entry["other_runs_rmse"][r][-1]
-                        / entry["lab_other_runs_rmse"][r][-1])
-            print(f"run {run} alone ({entry['fit_seconds']:.0f} s): warned {sorted(entry['poorly_determined'])}, "
-                  f"own tail at {HORIZONS[-1]} s {entry['own_tail_rmse'][-1]:.3f} rad, other runs "
-                  + " ".join(f"{r}: {v[-1]:.3f}/{entry['lab_other_runs_rmse'][r][-1]:.3f}"
-                             for r, v in entry["other_runs_rmse"].items())
-                  + f" (dynax/lab); worst on run {worst}", flush=True)
+            worst = max(
+                entry["other_runs_rmse"],
+                key=lambda r: entry["other_runs_rmse"][r][-1] / entry["lab_other_runs_rmse"][r][-1],
+            )
+            print(
+                f"run {run} alone ({entry['fit_seconds']:.0f} s): warned {sorted(entry['poorly_determined'])}, "
+                f"own tail at {HORIZONS[-1]} s {entry['own_tail_rmse'][-1]:.3f} rad, other runs "
+                + " ".join(
+                    f"{r}: {v[-1]:.3f}/{entry['lab_other_runs_rmse'][r][-1]:.3f}"
+                    for r, v in entry["other_runs_rmse"].items()
+                )
+                + f" (dynax/lab); worst on run {worst}",
+                flush=True,
+            )
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "single_run.json").write_text(json.dumps(results, indent=1))
     if len(results["runs"]) == len(RUNS):

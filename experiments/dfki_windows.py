@@ -46,16 +46,15 @@ import jax.numpy as jnp  # noqa: E402
 import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
+from dfki_default_identification import HORIZONS, lab_parameters, load, model_of, RUNS  # noqa: E402  (the script's folder is on sys.path)
+from dfki_simulation import read_parameters  # noqa: E402
+from dfki_torque_offsets import LORO  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
 from dynax import AbstractJointTerm, held_out_error  # noqa: E402
 from dynax.internal import float_scalar, with_velocities_from_positions  # noqa: E402
-
-from dfki_default_identification import HORIZONS, lab_parameters, load, model_of, RUNS  # noqa: E402  (the script's folder is on sys.path)
-from dfki_simulation import read_parameters  # noqa: E402
-from dfki_torque_offsets import LORO  # noqa: E402
 
 PHASE_S = 3.0  # run 12: energy pumped in before; the last swing, the top and the rest after
 BALANCE_S = 4.75  # run 12: held at the top from here to the end
@@ -85,8 +84,10 @@ def phases(error, record) -> dict:
     """RMSE per horizon over run 12's windows (`error`, its `simulation_error`) started before `PHASE_S` and from it on."""
     squared = np.asarray(error.window_mse)
     t0 = np.asarray(record.ts)[np.asarray(error.starts)]
-    return {name: [float(v) for v in np.sqrt(squared[mask].mean(axis=0))]
-            for name, mask in (("before", t0 < PHASE_S), ("after", t0 >= PHASE_S))}
+    return {
+        name: [float(v) for v in np.sqrt(squared[mask].mean(axis=0))]
+        for name, mask in (("before", t0 < PHASE_S), ("after", t0 >= PHASE_S))
+    }
 
 
 def held_torque(model, record) -> dict:
@@ -96,9 +97,14 @@ def held_torque(model, record) -> dict:
     rest = ts >= BALANCE_S
     gravity = np.asarray(jax.vmap(lambda q: model.system.bias_force(q, jnp.zeros(2)))(jnp.asarray(xs[rest, :2])))
     measured = us[rest].mean(axis=0)
-    return {"measured": measured.tolist(), "gravity": gravity.mean(axis=0).tolist(),
-            "held": (measured - gravity.mean(axis=0)).tolist(), "speed_rms": np.sqrt((xs[rest, 2:] ** 2).mean(axis=0)).tolist(),
-            "from_s": BALANCE_S, "to_s": float(ts[-1])}
+    return {
+        "measured": measured.tolist(),
+        "gravity": gravity.mean(axis=0).tolist(),
+        "held": (measured - gravity.mean(axis=0)).tolist(),
+        "speed_rms": np.sqrt((xs[rest, 2:] ** 2).mean(axis=0)).tolist(),
+        "from_s": BALANCE_S,
+        "to_s": float(ts[-1]),
+    }
 
 
 def with_static_friction(p: dict, fs) -> dynax.AbstractSystem:
@@ -121,59 +127,113 @@ def main(argv=None):
         entry = {}
         for name, model in (("dynax", model_of(folds[run]["parameters"])), ("lab", lab)):
             found = held_out_error(model, [record], HORIZONS)
-            entry[name] = {"rmse": list(found.rmse), "median": list(found.median),
-                           "concentrated": found.concentrated.get(f"trajectory_{run}.csv", []),
-                           "rmse_velocities_from_positions": list(held_out_error(model, [smoothed], HORIZONS).rmse)}
+            entry[name] = {
+                "rmse": list(found.rmse),
+                "median": list(found.median),
+                "concentrated": found.concentrated.get(f"trajectory_{run}.csv", []),
+                "rmse_velocities_from_positions": list(held_out_error(model, [smoothed], HORIZONS).rmse),
+            }
         entry["velocities_from_positions"] = list(replaced)
         out["runs"][run] = entry
-        print(f"run {run}: " + " | ".join(
-            f"{k} RMSE {' '.join(f'{v:.4f}' for v in e['rmse'])} median {' '.join(f'{v:.4f}' for v in e['median'])}"
-            + "".join(f" [{c['horizon_s']:g} s: half from {c['windows']}/{c['of']} windows at {c['from_s']:.2f}-{c['to_s']:.2f} s]"
-                      for c in e["concentrated"]) for k, e in entry.items() if k in ("dynax", "lab")), flush=True)
-    cells = [(d <= b, d / b) for r in RUNS for d, b in zip(out["runs"][r]["dynax"]["rmse_velocities_from_positions"],
-                                                          out["runs"][r]["lab"]["rmse_velocities_from_positions"])]
-    out["velocities_from_positions"] = {"cells_at_or_below_lab": sum(c for c, _ in cells),
-                                        "geometric_mean_ratio": float(np.exp(np.mean(np.log([q for _, q in cells]))))}
+        print(
+            f"run {run}: "
+            + " | ".join(
+                f"{k} RMSE {' '.join(f'{v:.4f}' for v in e['rmse'])} median {' '.join(f'{v:.4f}' for v in e['median'])}"
+                + "".join(
+                    f" [{c['horizon_s']:g} s: half from {c['windows']}/{c['of']} windows at {c['from_s']:.2f}-{c['to_s']:.2f} s]"
+                    for c in e["concentrated"]
+                )
+                for k, e in entry.items()
+                if k in ("dynax", "lab")
+            ),
+            flush=True,
+        )
+    cells = [
+        (d <= b, d / b)
+        for r in RUNS
+        for d, b in zip(
+            out["runs"][r]["dynax"]["rmse_velocities_from_positions"],
+            out["runs"][r]["lab"]["rmse_velocities_from_positions"],
+        )
+    ]
+    out["velocities_from_positions"] = {
+        "cells_at_or_below_lab": sum(c for c, _ in cells),
+        "geometric_mean_ratio": float(np.exp(np.mean(np.log([q for _, q in cells])))),
+    }
     for run in RUNS:
         e = out["runs"][run]
-        print(f"run {run}, started from velocities of the positions ({', '.join(e['velocities_from_positions']) or 'none replaced'}): "
-              + " | ".join(f"{k} {' '.join(f'{v:.4f}' for v in e[k]['rmse_velocities_from_positions'])}" for k in ("dynax", "lab")))
-    print(f"started from velocities of the positions: dynax at or below the lab in "
-          f"{out['velocities_from_positions']['cells_at_or_below_lab']} of {len(cells)} cells, geometric mean ratio "
-          f"{out['velocities_from_positions']['geometric_mean_ratio']:.4f}")
+        print(
+            f"run {run}, started from velocities of the positions ({', '.join(e['velocities_from_positions']) or 'none replaced'}): "
+            + " | ".join(
+                f"{k} {' '.join(f'{v:.4f}' for v in e[k]['rmse_velocities_from_positions'])}" for k in ("dynax", "lab")
+            )
+        )
+    print(
+        f"started from velocities of the positions: dynax at or below the lab in "
+        f"{out['velocities_from_positions']['cells_at_or_below_lab']} of {len(cells)} cells, geometric mean ratio "
+        f"{out['velocities_from_positions']['geometric_mean_ratio']:.4f}"
+    )
 
     swing_up = records["12"]
     dynax_12 = model_of(folds["12"]["parameters"])
-    windows_12 = {"dynax": dynax.simulation_error(dynax_12, swing_up, HORIZONS),
-                  "lab": dynax.simulation_error(lab, swing_up, HORIZONS)}
+    windows_12 = {
+        "dynax": dynax.simulation_error(dynax_12, swing_up, HORIZONS),
+        "lab": dynax.simulation_error(lab, swing_up, HORIZONS),
+    }
     held = held_torque(lab, swing_up)
     fs = [abs(v) for v in held["held"]]
-    what_if = {name: {"static_friction": fs,
-                      "rmse": [float(v) for v in dynax.simulation_error(with_static_friction(p, fs), swing_up, HORIZONS).rmse]}
-               for name, p in (("dynax", folds["12"]["parameters"]), ("lab", lab_p))}
+    what_if = {
+        name: {
+            "static_friction": fs,
+            "rmse": [float(v) for v in dynax.simulation_error(with_static_friction(p, fs), swing_up, HORIZONS).rmse],
+        }
+        for name, p in (("dynax", folds["12"]["parameters"]), ("lab", lab_p))
+    }
     one_window = {}
     k = int(np.searchsorted(np.asarray(swing_up.ts), 5.0))
     n = int(round(HORIZONS[-1] / swing_up.dt)) + 1
     for friction, scale in (("none", 0.0), ("at the held torques", 1.0), ("at twice the held torques", 2.0)):
         model = lab if scale == 0.0 else with_static_friction(lab_p, [scale * f for f in fs])
         for start, x0 in (("measured", swing_up.xs[k]), ("at rest", swing_up.xs[k].at[2:].set(0.0))):
-            xs = np.asarray(dynax.simulate(model, x0, swing_up.ts[k:k + n], swing_up.us[k:k + n]).xs)
+            xs = np.asarray(dynax.simulate(model, x0, swing_up.ts[k : k + n], swing_up.us[k : k + n]).xs)
             one_window[f"{start} start, static friction {friction}"] = float(
-                np.sqrt(np.mean((xs[-1, :2] - np.asarray(swing_up.xs[k + n - 1, :2])) ** 2)))
-    out["run_12"] = {"one_window_from_5s": {"start_velocity": np.asarray(swing_up.xs[k, 2:]).tolist(), "error": one_window},
-                     "phases": {name: phases(error, swing_up) for name, error in windows_12.items()}, "phase_s": PHASE_S,
-                     "balancing": held, "with_static_friction": what_if, "stribeck_velocity": STRIBECK_VELOCITY}
+                np.sqrt(np.mean((xs[-1, :2] - np.asarray(swing_up.xs[k + n - 1, :2])) ** 2))
+            )
+    out["run_12"] = {
+        "one_window_from_5s": {"start_velocity": np.asarray(swing_up.xs[k, 2:]).tolist(), "error": one_window},
+        "phases": {name: phases(error, swing_up) for name, error in windows_12.items()},
+        "phase_s": PHASE_S,
+        "balancing": held,
+        "with_static_friction": what_if,
+        "stribeck_velocity": STRIBECK_VELOCITY,
+    }
     for name, p in out["run_12"]["phases"].items():
-        print(f"run 12, {name}: windows before {PHASE_S:g} s " + " ".join(f"{v:.4f}" for v in p["before"])
-              + f" | from {PHASE_S:g} s on " + " ".join(f"{v:.4f}" for v in p["after"]))
-    print("run 12 at rest at the top: torque measured " + " ".join(f"{v:+.3f}" for v in held["measured"]) + " N m, gravity "
-          + " ".join(f"{v:+.3f}" for v in held["gravity"]) + " N m, speed rms " + " ".join(f"{v:.3f}" for v in held["speed_rms"])
-          + " rad/s")
+        print(
+            f"run 12, {name}: windows before {PHASE_S:g} s "
+            + " ".join(f"{v:.4f}" for v in p["before"])
+            + f" | from {PHASE_S:g} s on "
+            + " ".join(f"{v:.4f}" for v in p["after"])
+        )
+    print(
+        "run 12 at rest at the top: torque measured "
+        + " ".join(f"{v:+.3f}" for v in held["measured"])
+        + " N m, gravity "
+        + " ".join(f"{v:+.3f}" for v in held["gravity"])
+        + " N m, speed rms "
+        + " ".join(f"{v:.3f}" for v in held["speed_rms"])
+        + " rad/s"
+    )
     for name, w in what_if.items():
-        print(f"run 12 with static friction {fs[0]:.3f}, {fs[1]:.3f} N m ({name}): " + " ".join(f"{v:.4f}" for v in w["rmse"]))
+        print(
+            f"run 12 with static friction {fs[0]:.3f}, {fs[1]:.3f} N m ({name}): "
+            + " ".join(f"{v:.4f}" for v in w["rmse"])
+        )
 
-    print(f"one window from 5.0 s, lab's model, error at {HORIZONS[-1]:g} s (measured start velocity "
-          + " ".join(f"{v:+.3f}" for v in out["run_12"]["one_window_from_5s"]["start_velocity"]) + " rad/s):")
+    print(
+        f"one window from 5.0 s, lab's model, error at {HORIZONS[-1]:g} s (measured start velocity "
+        + " ".join(f"{v:+.3f}" for v in out["run_12"]["one_window_from_5s"]["start_velocity"])
+        + " rad/s):"
+    )
     for name, value in one_window.items():
         print(f"  {name}: {value:.4f} rad")
     args.out.mkdir(parents=True, exist_ok=True)

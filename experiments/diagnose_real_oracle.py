@@ -37,16 +37,27 @@ if __name__ == "__main__":
     results = []
     for name in splits:
         train_runs, val_runs = SPLITS[name]
-        report = diagnose(nominal_model_3_1(), [load(data, r) for r in train_runs], [load(data, r) for r in val_runs],
-                          mode=Refit(), progress=False, discovery=False)
+        report = diagnose(
+            nominal_model_3_1(),
+            [load(data, r) for r in train_runs],
+            [load(data, r) for r in val_runs],
+            mode=Refit(),
+            progress=False,
+            discovery=False,
+        )
         for run in val_runs:
             record = with_velocities_from_positions(load(data, run))[0]
             refit = dynax.simulation_error(report.nominal_model, record, HORIZONS, stride=10).rmse
             ours = dynax.simulation_error(lab, record, HORIZONS, stride=10).rmse
-            row = {"split": name, "held_out": run, "reference_horizon_s": report.reference_horizon_s,
-                   "horizons_s": list(HORIZONS), "refit_rmse": [float(v) for v in refit],
-                   "lab_rmse": [float(v) for v in ours],
-                   "lab_gain_over_refit": [float(1 - a / b) for a, b in zip(ours, refit)]}
+            row = {
+                "split": name,
+                "held_out": run,
+                "reference_horizon_s": report.reference_horizon_s,
+                "horizons_s": list(HORIZONS),
+                "refit_rmse": [float(v) for v in refit],
+                "lab_rmse": [float(v) for v in ours],
+                "lab_gain_over_refit": [float(1 - a / b) for a, b in zip(ours, refit)],
+            }
             print(json.dumps(row), flush=True)
             results.append(row)
     out.mkdir(parents=True, exist_ok=True)

@@ -35,8 +35,15 @@ import numpy as np  # noqa: E402
 from dynax import diagnose, DoublePendulum, Known, load_trajectory, Refit, Trajectory  # noqa: E402
 from dynax.internal import resample  # noqa: E402
 
-MAPPING = {"t": "time", "q1": "pos_meas1", "q2": "pos_meas2", "dq1": "vel_meas1", "dq2": "vel_meas2",
-           "tau1": "tau_meas1", "tau2": "tau_meas2"}
+MAPPING = {
+    "t": "time",
+    "q1": "pos_meas1",
+    "q2": "pos_meas2",
+    "dq1": "vel_meas1",
+    "dq2": "vel_meas2",
+    "tau1": "tau_meas1",
+    "tau2": "tau_meas2",
+}
 SPLITS = {
     "S1": (("00", "01"), ("02", "03")),
     "S2": (("00", "01", "02"), ("12",)),
@@ -65,17 +72,40 @@ def load(data: pathlib.Path, run: str, variant: str = "5ms"):
     rng = np.random.default_rng(int(run))
     xs[:, 2:] += rng.normal(0.0, EXTRA_NOISE[0], xs[:, 2:].shape)
     us += rng.normal(0.0, EXTRA_NOISE[1], us.shape)
-    return Trajectory(record.ts, jnp.asarray(xs), jnp.asarray(us), record.state_names, record.input_names,
-                      record.system, record.source)
+    return Trajectory(
+        record.ts,
+        jnp.asarray(xs),
+        jnp.asarray(us),
+        record.state_names,
+        record.input_names,
+        record.system,
+        record.source,
+    )
 
 
 def nominal_model_3_1() -> DoublePendulum:
     """The lab's rigid-body model 3.1 in base parameters (I1, I2 about the joint axes)."""
-    m1, m2, l1, r1, r2, I1, I2, g = (0.6416937799349799, 0.563935954099688, 0.2, 0.2, 0.3212669909674605,
-                                     0.02671076499939512, 0.053878129629650884, 9.81)
-    return DoublePendulum.from_base_parameters(dict(
-        theta1=I1 + m2 * l1**2, theta2=I2, theta3=m2 * l1 * r2, theta4=g * (m1 * r1 + m2 * l1),
-        theta5=g * m2 * r2, theta6=0.0, theta7=0.0))
+    m1, m2, l1, r1, r2, I1, I2, g = (
+        0.6416937799349799,
+        0.563935954099688,
+        0.2,
+        0.2,
+        0.3212669909674605,
+        0.02671076499939512,
+        0.053878129629650884,
+        9.81,
+    )
+    return DoublePendulum.from_base_parameters(
+        dict(
+            theta1=I1 + m2 * l1**2,
+            theta2=I2,
+            theta3=m2 * l1 * r2,
+            theta4=g * (m1 * r1 + m2 * l1),
+            theta5=g * m2 * r2,
+            theta6=0.0,
+            theta7=0.0,
+        )
+    )
 
 
 def split_runs(name: str) -> tuple[tuple[str, ...], tuple[str, ...]]:
@@ -92,26 +122,47 @@ def run_split(data, name, mode_name, variant="5ms", **kwargs):
     validation = [load(data, r, variant) for r in val_runs]
     mode = Known() if mode_name == "known" else Refit()
     start = time.process_time()
-    report = diagnose(nominal_model_3_1(), train, validation, mode=mode, system_name="double_pendulum",
-                      progress=lambda line: print(f"  [{name} {mode_name}] {line}", flush=True), **kwargs)
+    report = diagnose(
+        nominal_model_3_1(),
+        train,
+        validation,
+        mode=mode,
+        system_name="double_pendulum",
+        progress=lambda line: print(f"  [{name} {mode_name}] {line}", flush=True),
+        **kwargs,
+    )
     j = report.to_json()
     return {
-        "split": name, "mode": mode_name, "variant": variant, "train": list(train_runs), "validation": list(val_runs),
-        "cpu_s": time.process_time() - start, "verdict": j["verdict"], "gain": j["gain"],
-        "reference_horizon_s": j["reference_horizon_s"], "horizon": j.get("horizon"),
+        "split": name,
+        "mode": mode_name,
+        "variant": variant,
+        "train": list(train_runs),
+        "validation": list(val_runs),
+        "cpu_s": time.process_time() - start,
+        "verdict": j["verdict"],
+        "gain": j["gain"],
+        "reference_horizon_s": j["reference_horizon_s"],
+        "horizon": j.get("horizon"),
         "findings": [{k: f[k] for k in ("cause", "where", "coefficient", "gain", "p_value")} for f in j["findings"]],
         "named_lab_effect": any(f["cause"] in LAB_EFFECTS for f in j["findings"]),
-        "nominal_rmse": j["nominal"]["sim_error"], "extended_rmse": j["extended"]["sim_error"],
-        "per_run": j["runs"], "detectable_gain": j["test"]["detectable_gain"], "notes": j["notes"],
+        "nominal_rmse": j["nominal"]["sim_error"],
+        "extended_rmse": j["extended"]["sim_error"],
+        "per_run": j["runs"],
+        "detectable_gain": j["test"]["detectable_gain"],
+        "notes": j["notes"],
         "power": j["test"].get("power"),
         "best_gain": max((c["gain"] for c in j["candidates"] if "gain" in c), default=None),
         # The rule before verdicts weighed effect size and power, on this run's own statistics: any significant
         # probe structure made it `unexplained`, no finding and no significant structure `none`.
-        "verdict_by_significance_alone": (("unexplained" if j["structure"]["extended"]["significant"] else "explained")
-                                          if j["findings"] else
-                                          ("unexplained" if j["structure"]["nominal"]["significant"] else "none")),
-        "structure": {k: {"significant": v["significant"], "r2": v["r2"], "p_value": v["p_value"]}
-                      for k, v in j["structure"].items()},
+        "verdict_by_significance_alone": (
+            ("unexplained" if j["structure"]["extended"]["significant"] else "explained")
+            if j["findings"]
+            else ("unexplained" if j["structure"]["nominal"]["significant"] else "none")
+        ),
+        "structure": {
+            k: {"significant": v["significant"], "r2": v["r2"], "p_value": v["p_value"]}
+            for k, v in j["structure"].items()
+        },
         "candidates": j["candidates"][:8],
         "rounds": j["rounds"],
     }
@@ -152,7 +203,24 @@ if __name__ == "__main__":
             if len(sys.argv) > 6:
                 kwargs["fit_window_s"] = float(sys.argv[6])
             r = run_split(data, s, m, variant, **kwargs)
-            print(json.dumps({k: r[k] for k in ("split", "mode", "variant", "verdict", "gain", "reference_horizon_s", "findings", "cpu_s")}), flush=True)
+            print(
+                json.dumps(
+                    {
+                        k: r[k]
+                        for k in (
+                            "split",
+                            "mode",
+                            "variant",
+                            "verdict",
+                            "gain",
+                            "reference_horizon_s",
+                            "findings",
+                            "cpu_s",
+                        )
+                    }
+                ),
+                flush=True,
+            )
             results.append(r)
     (out / "splits.json").write_text(json.dumps(results, indent=1))
     plot(results, out / "splits.png")

@@ -76,12 +76,16 @@ def measure(kind, features, horizon, train, one_step, args):
         "gauss_newton_seconds": t2 - t1,
         "relative_gap": em_free.loss / minimum - 1,
         "em_free_gradient_norm": lagged_loss_gradient_norm(em_free.system, train, horizon, stride=args.stride),
-        "gauss_newton_gradient_norm": lagged_loss_gradient_norm(gauss_newton.system, train, horizon, stride=args.stride),
+        "gauss_newton_gradient_norm": lagged_loss_gradient_norm(
+            gauss_newton.system, train, horizon, stride=args.stride
+        ),
     }
-    log(f"{kind}, {features}, H = {horizon:g} s: one-step {row['one_step_loss']:.5g}, EM-free {row['em_free_loss']:.5g} "
+    log(
+        f"{kind}, {features}, H = {horizon:g} s: one-step {row['one_step_loss']:.5g}, EM-free {row['em_free_loss']:.5g} "
         f"({row['em_free_iterations']} it), minimum {gauss_newton.loss:.5g} ({row['gauss_newton_iterations']} it): "
         f"gap {row['relative_gap']:.2%}; gradient norm {row['em_free_gradient_norm']:.2g} against "
-        f"{row['gauss_newton_gradient_norm']:.2g}")
+        f"{row['gauss_newton_gradient_norm']:.2g}"
+    )
     return row
 
 
@@ -91,10 +95,18 @@ def figure(rows, path, target):
     colours = {"tempest": "tab:blue", "rich": "tab:red"}
     for kind in styles:
         for features in colours:
-            sel = sorted((r for r in rows if r["set"] == kind and r["features"] == features), key=lambda r: r["horizon_s"])
+            sel = sorted(
+                (r for r in rows if r["set"] == kind and r["features"] == features), key=lambda r: r["horizon_s"]
+            )
             if sel:
-                ax.plot([r["horizon_s"] for r in sel], [100 * r["relative_gap"] for r in sel], marker="o",
-                        ls=styles[kind], color=colours[features], label=f"{kind}, {features} ({sel[0]['n_weights']} weights)")
+                ax.plot(
+                    [r["horizon_s"] for r in sel],
+                    [100 * r["relative_gap"] for r in sel],
+                    marker="o",
+                    ls=styles[kind],
+                    color=colours[features],
+                    label=f"{kind}, {features} ({sel[0]['n_weights']} weights)",
+                )
     ax.axhline(100 * target, color="k", lw=0.8, ls=":", label=f"{100 * target:g} % target")
     ax.set_xlabel("horizon H [s]")
     ax.set_ylabel("EM-free loss above the minimum [%]")

@@ -25,15 +25,21 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from dynax import diagnose, LinearAxis, load_trajectory, Refit, Trajectory  # noqa: E402
-from dynax.internal import write_report  # noqa: E402
-from dynax.internal import butterworth_filtfilt, central_difference, diagnosis_summary, write_json  # noqa: E402
+from dynax.internal import (  # noqa: E402
+    butterworth_filtfilt,
+    central_difference,
+    diagnosis_summary,
+    write_json,
+    write_report,  # noqa: E402
+)
 
 DATA = pathlib.Path(sys.argv[1])
 OUT = pathlib.Path(sys.argv[2])
 GTAU = 35.15065188
 
-raw = load_trajectory(DATA / "emps" / "DATA_EMPS.mat", "linear_axis",
-                      mapping={"t": "t", "q": "qm", "force": "vir"}, scale={"force": GTAU})
+raw = load_trajectory(
+    DATA / "emps" / "DATA_EMPS.mat", "linear_axis", mapping={"t": "t", "q": "qm", "force": "vir"}, scale={"force": GTAU}
+)
 # Diagnosis data: as docs/tutorials/real_data_diagnosis.md (40 Hz low-pass, central differences, 100 Hz).
 q = butterworth_filtfilt(raw.ts, raw.xs[:, 0], cutoff_hz=40.0)
 dq = central_difference(raw.ts, q)
@@ -44,13 +50,22 @@ k = int(0.7 * len(ts))
 cut = lambda a, b, name: Trajectory(ts[a:b], xs[a:b], us[a:b], raw.state_names, raw.input_names, "linear_axis", name)  # noqa: E731
 train, validation = cut(0, k, "DATA_EMPS.mat, first 70 %"), cut(k, len(ts), "DATA_EMPS.mat, last 30 %")
 VISCOUS = float(sys.argv[4]) if len(sys.argv) > 4 else 200.0  # the nominal viscous coefficient [N s/m]
-nominal = LinearAxis(mass=jnp.asarray(90.0), viscous=jnp.asarray(VISCOUS), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0))
+nominal = LinearAxis(
+    mass=jnp.asarray(90.0), viscous=jnp.asarray(VISCOUS), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0)
+)
 start = time.perf_counter()
 # Refit(): mass and offset refitted, the nominal friction (200 N s/m, no Coulomb) kept and tested by the
 # candidates (the default since 2026-11-25; REFIT=mass,viscous gives the earlier recipe).
 refit = Refit(parameters=tuple(sys.argv[3].split(","))) if len(sys.argv) > 3 and sys.argv[3] != "default" else Refit()
-report = diagnose(nominal, train, validation, mode=refit, reference_horizon_s=0.25,
-                  system_name="linear_axis", progress=lambda s: print(f"[{time.perf_counter() - start:5.0f} s] {s}", flush=True))
+report = diagnose(
+    nominal,
+    train,
+    validation,
+    mode=refit,
+    reference_horizon_s=0.25,
+    system_name="linear_axis",
+    progress=lambda s: print(f"[{time.perf_counter() - start:5.0f} s] {s}", flush=True),
+)
 OUT.mkdir(parents=True, exist_ok=True)
 write_report(report, OUT, validation, write_json=write_json)
 print(diagnosis_summary(report))
@@ -60,8 +75,12 @@ qf = butterworth_filtfilt(raw.ts, raw.xs[:, 0], cutoff_hz=100.0)
 dqf = central_difference(raw.ts, qf)
 ddqf = central_difference(raw.ts, dqf)
 rows = slice(50, len(raw) - 50, 10)
-t_id, x_id, a_id, f_id = (np.asarray(raw.ts)[rows], np.stack([np.asarray(qf), np.asarray(dqf)], 1)[rows],
-                          np.asarray(ddqf)[rows], np.asarray(raw.us)[rows, 0])
+t_id, x_id, a_id, f_id = (
+    np.asarray(raw.ts)[rows],
+    np.stack([np.asarray(qf), np.asarray(dqf)], 1)[rows],
+    np.asarray(ddqf)[rows],
+    np.asarray(raw.us)[rows, 0],
+)
 
 
 def inverse_force(model):
@@ -80,20 +99,27 @@ def force_error(model, part=slice(None)):
 
 held = t_id >= float(validation.ts[0])
 published = LinearAxis()  # M = 95.1089, Fv = 203.5034, Fc = 20.3935, offset = -3.1648
-models = {"published (Janot et al. 2019)": published, "nominal (refitted)": report.nominal_model,
-          "extended (named + discovered)": report.extended_model}
+models = {
+    "published (Janot et al. 2019)": published,
+    "nominal (refitted)": report.nominal_model,
+    "extended (named + discovered)": report.extended_model,
+}
 j = report.to_json()
 named = [f for f in j["findings"] if f["cause"] != "discovered"]
 if any(f["cause"] == "discovered" for f in j["findings"]):
     system = report.extended_model.system
     models["extended, named causes only"] = type(report.extended_model)(
-        system, tuple(t for t in report.extended_model.terms if t.cause != "discovered"))
+        system, tuple(t for t in report.extended_model.terms if t.cause != "discovered")
+    )
 errors = {name: {"whole_record": force_error(m), "held_out": force_error(m, held)} for name, m in models.items()}
 result = {
     "verdict": j["verdict"],
     "named": [{k: f[k] for k in ("cause", "where", "coefficient", "gain")} for f in named],
-    "discovered": [{k: f[k] for k in ("where", "formula", "coefficients", "std_errors", "gain", "p_value", "readings", "period")}
-                   for f in j["findings"] if f["cause"] == "discovered"],
+    "discovered": [
+        {k: f[k] for k in ("where", "formula", "coefficients", "std_errors", "gain", "p_value", "readings", "period")}
+        for f in j["findings"]
+        if f["cause"] == "discovered"
+    ],
     "discovery": j.get("discovery"),
     "structure_after": j["structure"]["extended"],
     "gain_total": j["gain"],

@@ -45,7 +45,6 @@ from dynax.internal import (  # noqa: E402
 )
 from dynax.synthetic import generate_helicopter_flight  # noqa: E402
 
-
 METHODS = ("linear one-step", "linear frequency", "linear lagged", "acceleration one-step", "acceleration lagged")
 STYLES = {
     "linear one-step": dict(color="tab:gray", ls="--"),
@@ -101,7 +100,8 @@ def run_set(kind, args, out):
     em_loss = lagged_loss_of(em_free.system, train, args.horizon, stride=check_stride)
     t0 = time.perf_counter()
     gauss_newton = fit_lagged(
-        fits["acceleration one-step"].system, train,
+        fits["acceleration one-step"].system,
+        train,
         Lagged(horizon=args.horizon, stride=check_stride, max_iterations=args.iterations, state_sensitivities=True),
     )
     gn_time = time.perf_counter() - t0
@@ -109,14 +109,18 @@ def run_set(kind, args, out):
     start = gauss_newton if gauss_newton.loss < em_loss else em_free
     t0 = time.perf_counter()
     direct = fit_backprop(
-        start.system, train, Backprop(horizon=args.horizon, stride=check_stride, max_steps=args.backprop_steps),
+        start.system,
+        train,
+        Backprop(horizon=args.horizon, stride=check_stride, max_steps=args.backprop_steps),
         callback=lambda i, loss: log(f"{kind}: backprop step {i + 1}: {loss:.6g}") if (i + 1) % 5 == 0 else None,
     )
     direct_time = time.perf_counter() - t0
     minimum = min(direct.loss, gauss_newton.loss, em_loss)
     # The gradient of the true loss at the EM-free and Gauss-Newton points (zero at a minimum).
-    grad_norm = {name: lagged_loss_gradient_norm(fit.system, train, args.horizon, stride=check_stride)
-                 for name, fit in (("em_free", em_free), ("gauss_newton", gauss_newton))}
+    grad_norm = {
+        name: lagged_loss_gradient_norm(fit.system, train, args.horizon, stride=check_stride)
+        for name, fit in (("em_free", em_free), ("gauss_newton", gauss_newton))
+    }
     check = {
         "horizon_s": args.horizon,
         "stride": check_stride,
@@ -137,16 +141,20 @@ def run_set(kind, args, out):
         "relative_gap": em_loss / minimum - 1,
         "gauss_newton_relative_gap": gauss_newton.loss / minimum - 1,
     }
-    log(f"{kind}: EM-free lagged loss {em_loss:.6g}, Gauss-Newton {gauss_newton.loss:.6g}, backprop {direct.loss:.6g}; "
-        f"EM-free gap to the minimum {check['relative_gap']:.2%}")
+    log(
+        f"{kind}: EM-free lagged loss {em_loss:.6g}, Gauss-Newton {gauss_newton.loss:.6g}, backprop {direct.loss:.6g}; "
+        f"EM-free gap to the minimum {check['relative_gap']:.2%}"
+    )
     return {
         "horizons_s": horizons.tolist(),
         "mse": mse,
         "fit_seconds": times,
         "lagged_history": {n: [h[1] for h in fits[n].history] for n in ("linear lagged", "acceleration lagged")},
         "em_free_check": check,
-        "parameters": {n: {k: float(v) for k, v in fits[n].system.body_model.parameters.items()}
-                       for n in ("acceleration one-step", "acceleration lagged")},
+        "parameters": {
+            n: {k: float(v) for k, v in fits[n].system.body_model.parameters.items()}
+            for n in ("acceleration one-step", "acceleration lagged")
+        },
     }
 
 
@@ -174,8 +182,11 @@ def figure(results, path):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="experiments/results/helicopter_accuracy")
-    parser.add_argument("--data-out", default="out/helicopter_data",
-                        help="where the generated flights are written as contract CSVs (not committed)")
+    parser.add_argument(
+        "--data-out",
+        default="out/helicopter_data",
+        help="where the generated flights are written as contract CSVs (not committed)",
+    )
     parser.add_argument("--quick", action="store_true", help="short flights, for a smoke run")
     parser.add_argument("--sets", default="hover,aerobatic")
     args = parser.parse_args()

@@ -59,10 +59,22 @@ def main():
         for k, case in enumerate(selected):
             start = time.perf_counter()
             o = cases.run_case(case, tmp / case.id, fixtures, cli_main)
-            rows.append({"id": case.id, "kind": case.kind, "expect": case.expect, "verdict": o.verdict,
-                         "status": o.status, "message": o.message[:300], "seconds": round(time.perf_counter() - start, 1)})
-            print(f"[{k + 1}/{len(selected)}] {case.id}: {o.verdict} ({o.status}) {o.message[:140]}", file=sys.stderr,
-                  flush=True)
+            rows.append(
+                {
+                    "id": case.id,
+                    "kind": case.kind,
+                    "expect": case.expect,
+                    "verdict": o.verdict,
+                    "status": o.status,
+                    "message": o.message[:300],
+                    "seconds": round(time.perf_counter() - start, 1),
+                }
+            )
+            print(
+                f"[{k + 1}/{len(selected)}] {case.id}: {o.verdict} ({o.status}) {o.message[:140]}",
+                file=sys.stderr,
+                flush=True,
+            )
     out = pathlib.Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(rows, indent=1) + "\n")
@@ -84,7 +96,11 @@ def compare(before_path, after_path):
     print("| input | class | expected | before | after |\n|---|---|---|---|---|")
     for r in after:
         b = before.get(r["id"])
-        was = "-" if b is None else _short(b["verdict"]) + (f" (exit {b['status']})" if b["status"] not in (None, 0, 2) else "")
+        was = (
+            "-"
+            if b is None
+            else _short(b["verdict"]) + (f" (exit {b['status']})" if b["status"] not in (None, 0, 2) else "")
+        )
         print(f"| `{r['id']}` | {r['kind']} | {r['expect']} | {was} | {_short(r['verdict'])} |")
     for name, rows in (("before", [before[r["id"]] for r in after if r["id"] in before]), ("after", after)):
         counts = collections.Counter(_short(r["verdict"]) for r in rows)

@@ -58,15 +58,33 @@ def main():
                 continue
             start = time.perf_counter()
             o = cases.run_case(case, tmp / case.id, fixtures, cli_main)
-            rows.append({"id": case.id, "kind": "cli", "expect": case.expect, "verdict": o.verdict, "status": o.status,
-                         "message": o.message[:200], "seconds": round(time.perf_counter() - start, 1)})
+            rows.append(
+                {
+                    "id": case.id,
+                    "kind": "cli",
+                    "expect": case.expect,
+                    "verdict": o.verdict,
+                    "status": o.status,
+                    "message": o.message[:200],
+                    "seconds": round(time.perf_counter() - start, 1),
+                }
+            )
             print(f"{case.id}: {o.verdict} ({o.status}) {o.message[:120]}", file=sys.stderr, flush=True)
         for id_, call, message in cases.simulate_cases():
             if only and id_ not in only:
                 continue
             verdict = cases.run_simulate_case(call, message)
-            rows.append({"id": f"simulate-{id_}", "kind": "simulate", "expect": "refuse", "verdict": verdict,
-                         "status": None, "message": "", "seconds": None})
+            rows.append(
+                {
+                    "id": f"simulate-{id_}",
+                    "kind": "simulate",
+                    "expect": "refuse",
+                    "verdict": verdict,
+                    "status": None,
+                    "message": "",
+                    "seconds": None,
+                }
+            )
             print(f"simulate-{id_}: {verdict}", file=sys.stderr, flush=True)
     out = pathlib.Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -40,25 +40,44 @@ def middle(run, seconds):
     if len(run) <= n:
         return run
     a = (len(run) - n) // 2
-    return dynax.Trajectory(run.ts[a:a + n], run.xs[a:a + n], run.us[a:a + n], run.state_names, run.input_names,
-                            run.system, run.source)
+    return dynax.Trajectory(
+        run.ts[a : a + n],
+        run.xs[a : a + n],
+        run.us[a : a + n],
+        run.state_names,
+        run.input_names,
+        run.system,
+        run.source,
+    )
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", default="experiments/results/nanobench_diagnosis")
     parser.add_argument("--max-terms", type=int, default=3)
-    parser.add_argument("--min-samples", type=int, default=1000,
-                        help="leave out usable runs shorter than this (the ramp's short hops between ground segments)")
+    parser.add_argument(
+        "--min-samples",
+        type=int,
+        default=1000,
+        help="leave out usable runs shorter than this (the ramp's short hops between ground segments)",
+    )
     parser.add_argument("--cross-fit", action="store_true", help="also hold out each training run in turn (slow)")
-    parser.add_argument("--slice-s", type=float, default=10.0,
-                        help="diagnose on this many seconds from the middle of each run (default 10; 0: whole runs); "
-                             "the per-group scores are on the whole held-out runs")
+    parser.add_argument(
+        "--slice-s",
+        type=float,
+        default=10.0,
+        help="diagnose on this many seconds from the middle of each run (default 10; 0: whole runs); "
+        "the per-group scores are on the whole held-out runs",
+    )
     parser.add_argument("--no-discovery", action="store_true", help="no search beyond the vocabulary")
     parser.add_argument("--shortlist", type=int, default=8, help="candidates refitted by simulation error per round")
-    parser.add_argument("--reference-horizon", type=float, default=0.5,
-                        help="judge the gain at this horizon [s] (default 0.5, h = 50: where flight models are scored; "
-                             "0: the predictability horizon)")
+    parser.add_argument(
+        "--reference-horizon",
+        type=float,
+        default=0.5,
+        help="judge the gain at this horizon [s] (default 0.5, h = 50: where flight models are scored; "
+        "0: the predictability horizon)",
+    )
     args = parser.parse_args()
     out = pathlib.Path(args.out)
     (out / "report").mkdir(parents=True, exist_ok=True)
@@ -68,17 +87,31 @@ def main():
     test, _ = flights(TEST)
     train = [r for r in train if len(r) >= args.min_samples]
     test = [r for r in test if len(r) >= args.min_samples]
-    print(f"train: {len(train)} runs, {sum(len(r) for r in train)} samples; "
-          f"test: {len(test)} runs, {sum(len(r) for r in test)} samples", flush=True)
+    print(
+        f"train: {len(train)} runs, {sum(len(r) for r in train)} samples; "
+        f"test: {len(test)} runs, {sum(len(r) for r in test)} samples",
+        flush=True,
+    )
     quad = dynax.initial_quadrotor("nominal", train)
     say = lambda line: print(f"[{time.perf_counter() - start:7.1f} s] {line}", flush=True)  # noqa: E731
     cut = lambda runs: [middle(r, args.slice_s) for r in runs] if args.slice_s > 0 else runs  # noqa: E731
     diag_train, diag_test = cut(train), cut(test)
-    print(f"diagnosing on {sum(len(r) for r in diag_train)} training and {sum(len(r) for r in diag_test)} held-out "
-          "samples", flush=True)
-    report = dynax.diagnose(quad, diag_train, diag_test, max_terms=args.max_terms, cross_fit=args.cross_fit,
-                            discovery=not args.no_discovery, progress=say,
-                            reference_horizon_s=args.reference_horizon or None, shortlist=args.shortlist)
+    print(
+        f"diagnosing on {sum(len(r) for r in diag_train)} training and {sum(len(r) for r in diag_test)} held-out "
+        "samples",
+        flush=True,
+    )
+    report = dynax.diagnose(
+        quad,
+        diag_train,
+        diag_test,
+        max_terms=args.max_terms,
+        cross_fit=args.cross_fit,
+        discovery=not args.no_discovery,
+        progress=say,
+        reference_horizon_s=args.reference_horizon or None,
+        shortlist=args.shortlist,
+    )
     j = report.to_json()
     from dynax.internal import body_frame_records, quadrotor_flight_errors
 
@@ -86,35 +119,63 @@ def main():
     dynax.write_report(report, out / "report", body_frame_records(nominal, diag_test), write_json=write_json)
     say("scoring per group against the constant-velocity baseline ...")
     errors = quadrotor_flight_errors(report, nominal, test, STEPS)
-    table = {name: {"mae": e.table("mae"), "rmse": e.table("rmse"),
-                    "cumulative_mae": {g: float(v) for g, v in zip(e.groups, e.cumulative_mae)}}
-             for name, e in errors.items()}
+    table = {
+        name: {
+            "mae": e.table("mae"),
+            "rmse": e.table("rmse"),
+            "cumulative_mae": {g: float(v) for g, v in zip(e.groups, e.cumulative_mae)},
+        }
+        for name, e in errors.items()
+    }
     result = {
-        "train": sorted({r.source for r in train}), "test": sorted({r.source for r in test}),
-        "slice_s": args.slice_s, "diagnosed_samples": {"train": sum(len(r) for r in diag_train),
-                                                       "test": sum(len(r) for r in diag_test)},
-        "verdict": j["verdict"], "reference_horizon_s": j["reference_horizon_s"], "gain": j["gain"],
-        "findings": [{k: f.get(k) for k in ("cause", "where", "parameter", "coefficient", "std_error", "gain",
-                                             "p_value", "confidence")} for f in j["findings"]],
+        "train": sorted({r.source for r in train}),
+        "test": sorted({r.source for r in test}),
+        "slice_s": args.slice_s,
+        "diagnosed_samples": {"train": sum(len(r) for r in diag_train), "test": sum(len(r) for r in diag_test)},
+        "verdict": j["verdict"],
+        "reference_horizon_s": j["reference_horizon_s"],
+        "gain": j["gain"],
+        "findings": [
+            {
+                k: f.get(k)
+                for k in ("cause", "where", "parameter", "coefficient", "std_error", "gain", "p_value", "confidence")
+            }
+            for f in j["findings"]
+        ],
         "test_summary": j.get("test"),
-        "nominal_sim_error": j["nominal"]["sim_error"], "extended_sim_error": j["extended"]["sim_error"],
+        "nominal_sim_error": j["nominal"]["sim_error"],
+        "extended_sim_error": j["extended"]["sim_error"],
         "extended_terms": j["extended"]["terms"],
         "not_identifiable": [f"{c['cause']}@{c['where']}" for c in j["not_identifiable"]],
         "candidates": j["candidates"],
-        "steps": list(STEPS), "groups": table,
+        "steps": list(STEPS),
+        "groups": table,
         "seconds": time.perf_counter() - start,
     }
     write_json(out / "diagnosis.json", result)
-    lines = [f"Verdict: {j['verdict']}; gain at {j['reference_horizon_s']:g} s: {j['gain']:.1%}", "",
-             "| cause | where | coefficient | gain | p |", "|---|---|---|---|---|"]
+    lines = [
+        f"Verdict: {j['verdict']}; gain at {j['reference_horizon_s']:g} s: {j['gain']:.1%}",
+        "",
+        "| cause | where | coefficient | gain | p |",
+        "|---|---|---|---|---|",
+    ]
     for f in result["findings"]:
-        lines.append(f"| {f['cause']} | {f['where']} | {f['coefficient']:.4g} ± {f['std_error']:.2g} | "
-                     f"{f['gain']:.1%} | {f['p_value']:.2g} |")
-    lines += ["", "MAE at h = " + " / ".join(map(str, STEPS)) + " steps (cumulative MAE over 1..50):", "",
-              "| model | position [m] | velocity [m/s] | attitude [rad] | body rate [rad/s] |", "|---|---|---|---|---|"]
+        lines.append(
+            f"| {f['cause']} | {f['where']} | {f['coefficient']:.4g} ± {f['std_error']:.2g} | "
+            f"{f['gain']:.1%} | {f['p_value']:.2g} |"
+        )
+    lines += [
+        "",
+        "MAE at h = " + " / ".join(map(str, STEPS)) + " steps (cumulative MAE over 1..50):",
+        "",
+        "| model | position [m] | velocity [m/s] | attitude [rad] | body rate [rad/s] |",
+        "|---|---|---|---|---|",
+    ]
     for name, t in table.items():
-        cells = [" / ".join(f"{v:.4f}" for v in t["mae"][g]) + f" ({t['cumulative_mae'][g]:.4f})"
-                 for g in ("position", "velocity", "attitude", "body_rate")]
+        cells = [
+            " / ".join(f"{v:.4f}" for v in t["mae"][g]) + f" ({t['cumulative_mae'][g]:.4f})"
+            for g in ("position", "velocity", "attitude", "body_rate")
+        ]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     (out / "diagnosis.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines), flush=True)

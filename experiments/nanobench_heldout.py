@@ -32,8 +32,16 @@ from dynax.internal import write_json
 DATA = pathlib.Path(__file__).resolve().parents[1].parent / "shared" / "datasets" / "nanobench"
 # The documented map of the NanoBench logs (docs/flight_data.md).
 NANOBENCH_MAP = {
-    "x": "px", "y": "py", "z": "pz", "p": "wx_vicon", "q": "wy_vicon", "r": "wz_vicon",
-    "m1": "motor_motor_m1", "m2": "motor_motor_m2", "m3": "motor_motor_m3", "m4": "motor_motor_m4",
+    "x": "px",
+    "y": "py",
+    "z": "pz",
+    "p": "wx_vicon",
+    "q": "wy_vicon",
+    "r": "wz_vicon",
+    "m1": "motor_motor_m1",
+    "m2": "motor_motor_m2",
+    "m3": "motor_motor_m3",
+    "m4": "motor_motor_m4",
     "vbat": "pwr_pm_vbat",
 }
 TRAIN = ("circle", "figure8", "helix", "linear_ramp", "lissajous")
@@ -53,9 +61,13 @@ def flights(shapes):
 
 
 def scores(error):
-    return {"mae": error.table("mae"), "rmse": error.table("rmse"),
-            "cumulative_mae": {g: float(v) for g, v in zip(error.groups, error.cumulative_mae)},
-            "n_starts": error.n_starts, "diverged_fraction": error.diverged_fraction}
+    return {
+        "mae": error.table("mae"),
+        "rmse": error.table("rmse"),
+        "cumulative_mae": {g: float(v) for g, v in zip(error.groups, error.cumulative_mae)},
+        "n_starts": error.n_starts,
+        "diverged_fraction": error.diverged_fraction,
+    }
 
 
 def main():
@@ -69,8 +81,11 @@ def main():
 
     train, train_notes = flights(TRAIN)
     test, test_notes = flights(TEST)
-    print(f"train: {len(train)} runs, {sum(len(r) for r in train)} samples; "
-          f"test: {len(test)} runs, {sum(len(r) for r in test)} samples", flush=True)
+    print(
+        f"train: {len(train)} runs, {sum(len(r) for r in train)} samples; "
+        f"test: {len(test)} runs, {sum(len(r) for r in test)} samples",
+        flush=True,
+    )
     plans = [("nominal", "one-step"), ("acceleration", "one-step"), ("linear", "one-step")]
     if not args.quick:
         plans += [("nominal", "lagged"), ("acceleration", "lagged")]
@@ -79,8 +94,11 @@ def main():
     for family, criterion in plans:
         name = f"{family} ({criterion})"
         start = time.perf_counter()
-        strategy = (dynax.OneStep() if criterion == "one-step"
-                    else dynax.Lagged(horizon=HORIZON_S, stride=args.stride, max_iterations=10))
+        strategy = (
+            dynax.OneStep()
+            if criterion == "one-step"
+            else dynax.Lagged(horizon=HORIZON_S, stride=args.stride, max_iterations=10)
+        )
         solution = dynax.fit_quadrotor(dynax.initial_quadrotor(family, train), train, strategy)
         seconds = time.perf_counter() - start
         fitted[name] = solution.model
@@ -88,9 +106,12 @@ def main():
         table[name]["fit_seconds"] = seconds
         table[name]["n_weights"] = int(solution.value.shape[0])
         mae = table[name]["mae"]
-        print(f"{name:28s} fit {seconds:6.1f} s   h=50 MAE: position {mae['position'][-1]:.4f} m, velocity "
-              f"{mae['velocity'][-1]:.4f} m/s, attitude {mae['attitude'][-1]:.4f} rad, body rate "
-              f"{mae['body_rate'][-1]:.4f} rad/s", flush=True)
+        print(
+            f"{name:28s} fit {seconds:6.1f} s   h=50 MAE: position {mae['position'][-1]:.4f} m, velocity "
+            f"{mae['velocity'][-1]:.4f} m/s, attitude {mae['attitude'][-1]:.4f} rad, body rate "
+            f"{mae['body_rate'][-1]:.4f} rad/s",
+            flush=True,
+        )
         dynax.save_model(solution.model, out / f"{family}_{criterion}.json", family=family, criterion=criterion)
 
     cv = table["constant velocity"]["mae"]
@@ -108,9 +129,16 @@ def main():
             "body_rate_gain_over_cv_h50": cv["body_rate"][-1] / mae["body_rate"][-1],
             "beats_every_nominal_everywhere": bool(beats_nominal) if not name.startswith("nominal") else None,
         }
-    result = {"train": list(TRAIN), "test": list(TEST), "steps": list(STEPS), "dt_s": 0.01,
-              "map": NANOBENCH_MAP, "table": table, "summary": summary,
-              "notes": {"train": train_notes, "test": test_notes}}
+    result = {
+        "train": list(TRAIN),
+        "test": list(TEST),
+        "steps": list(STEPS),
+        "dt_s": 0.01,
+        "map": NANOBENCH_MAP,
+        "table": table,
+        "summary": summary,
+        "notes": {"train": train_notes, "test": test_notes},
+    }
     write_json(out / "heldout.json", result)
     (out / "heldout.md").write_text(markdown_table(table))
     print(markdown_table(table))
@@ -142,8 +170,12 @@ def _figures(out, fitted, test):
     fig, axes = plt.subplots(1, 4, figsize=(16, 3.8))
     for ax, (i, group) in zip(axes, enumerate(next(iter(curves.values())).groups)):
         for name, error in curves.items():
-            ax.plot(np.asarray(horizon) * 0.01, np.asarray(error.mae[i]), label=name,
-                    ls="--" if name == "constant velocity" else "-")
+            ax.plot(
+                np.asarray(horizon) * 0.01,
+                np.asarray(error.mae[i]),
+                label=name,
+                ls="--" if name == "constant velocity" else "-",
+            )
         unit = {"position": "m", "velocity": "m/s", "attitude": "rad", "body_rate": "rad/s"}[group]
         ax.set(title=group.replace("_", " "), xlabel="horizon [s]", ylabel=f"MAE [{unit}]")
         ax.grid(alpha=0.3)
@@ -163,9 +195,19 @@ def _figures(out, fitted, test):
     ax.plot(*xs[:, :3].T, color="k", lw=1, label="measured")
     for j, k in enumerate(range(0, predicted.shape[0], 100)):
         ax.plot(*predicted[k, :, :3].T, color="tab:red", lw=1.5, label=f"{best}, 0.5 s ahead" if j == 0 else None)
-        ax.plot(*baseline[k, :, :3].T, color="tab:blue", lw=1, ls="--",
-                label="constant velocity, 0.5 s ahead" if j == 0 else None)
-    ax.set(xlabel="x [m]", ylabel="y [m]", zlabel="z [m]", title=f"{pathlib.Path(run.source).name}: predicted against measured")
+        ax.plot(
+            *baseline[k, :, :3].T,
+            color="tab:blue",
+            lw=1,
+            ls="--",
+            label="constant velocity, 0.5 s ahead" if j == 0 else None,
+        )
+    ax.set(
+        xlabel="x [m]",
+        ylabel="y [m]",
+        zlabel="z [m]",
+        title=f"{pathlib.Path(run.source).name}: predicted against measured",
+    )
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(out / "path.png", dpi=120)

@@ -32,8 +32,10 @@ import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
 from dynax import Trajectory  # noqa: E402
-from dynax.internal import record_friction  # noqa: E402
-from dynax.internal import stacked_equations  # noqa: E402
+from dynax.internal import (
+    record_friction,  # noqa: E402
+    stacked_equations,  # noqa: E402
+)
 
 RIG = dict(theta1=0.0536, theta2=0.0533, theta3=0.0362, theta4=2.365, theta5=1.777, theta6=0.01, theta7=0.01)
 FC1, IR2 = 0.15, 0.0042
@@ -41,10 +43,13 @@ CASES = {"null": (0.12, 0.12, 0.12, 0.12), "different": (0.12, 0.14, 0.10, 0.13)
 
 
 def record(fc2: float, seed: int) -> Trajectory:
-    truth = dynax.Extended(dynax.DoublePendulum.from_base_parameters(RIG),
-                           (dynax.CoulombFriction(0, FC1), dynax.CoulombFriction(1, fc2), dynax.RotorInertia(1, IR2)))
-    clean = dynax.synthetic.synthetic_trajectory(truth, duration=6.0, dt=0.002, seed=seed, amplitude=0.5,
-                                                  band_hz=(0.2, 2.5), noise=(1e-4, 1e-4, 0.15, 0.15))
+    truth = dynax.Extended(
+        dynax.DoublePendulum.from_base_parameters(RIG),
+        (dynax.CoulombFriction(0, FC1), dynax.CoulombFriction(1, fc2), dynax.RotorInertia(1, IR2)),
+    )
+    clean = dynax.synthetic.synthetic_trajectory(
+        truth, duration=6.0, dt=0.002, seed=seed, amplitude=0.5, band_hz=(0.2, 2.5), noise=(1e-4, 1e-4, 0.15, 0.15)
+    )
     torque_noise = 0.02 * np.random.default_rng(seed).normal(size=clean.us.shape)
     return Trajectory(clean.ts, clean.xs, clean.us + jnp.asarray(torque_noise), clean.state_names, clean.input_names)
 
@@ -61,19 +66,29 @@ def main(argv=None):
     parser.add_argument("--parts", default="2,3,4,6", help="parts per record to compare (2: the halves)")
     args = parser.parse_args(argv)
     parts = [int(k) for k in args.parts.split(",")]
-    out = {"alpha": 0.01, "parts": parts, "cases": {k: list(v) for k, v in CASES.items()}, "p_values": {}, "flagged": {}}
+    out = {
+        "alpha": 0.01,
+        "parts": parts,
+        "cases": {k: list(v) for k, v in CASES.items()},
+        "p_values": {},
+        "flagged": {},
+    }
     for case, frictions in CASES.items():
         rows = []
         for s in range(args.sets):
             records = [record(fc2, 1000 + 10 * s + k) for k, fc2 in enumerate(frictions)]
             _, a, y, _, names, _, _, _, counts, _ = stacked_equations(
-                dynax.DoublePendulum(), records, dynax.Dynamic(), "coulomb", None, None)
+                dynax.DoublePendulum(), records, dynax.Dynamic(), "coulomb", None, None
+            )
             rows.append([p_value(a, y, counts, list(names), k) for k in parts])
             print(f"{case} set {s}: " + " ".join(f"{k} parts p = {p:.3g}" for k, p in zip(parts, rows[-1])), flush=True)
         out["p_values"][case] = rows
         out["flagged"][case] = {str(k): int(sum(r[j] < 0.01 for r in rows)) for j, k in enumerate(parts)}
-        print(f"{case}: flagged at the 1 % level, of {args.sets} sets: "
-              + ", ".join(f"{k} parts {out['flagged'][case][str(k)]}" for k in parts), flush=True)
+        print(
+            f"{case}: flagged at the 1 % level, of {args.sets} sets: "
+            + ", ".join(f"{k} parts {out['flagged'][case][str(k)]}" for k in parts),
+            flush=True,
+        )
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "calibration.json").write_text(json.dumps(out, indent=2) + "\n")
     print(f"wrote {args.out / 'calibration.json'}")

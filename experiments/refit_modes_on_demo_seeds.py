@@ -31,11 +31,14 @@ def summary(rows):
     for mode in MODES:
         right = [r for r in rows if r[mode]["findings"] == [r["hidden"]]]
         errors = [abs(r[mode]["coefficient"] - r["size"]) / r["size"] for r in right]
-        out[mode] = {"named_exactly_the_hidden_cause": len(right), "of": len(rows),
-                     "wrong_cause_named": sum(any(f != r["hidden"] for f in r[mode]["findings"]) for r in rows),
-                     "missed": [r["seed"] for r in rows if r[mode]["findings"] != [r["hidden"]]],
-                     "coefficient_relative_error_median": float(np.median(errors)) if errors else None,
-                     "coefficient_relative_error_max": float(np.max(errors)) if errors else None}
+        out[mode] = {
+            "named_exactly_the_hidden_cause": len(right),
+            "of": len(rows),
+            "wrong_cause_named": sum(any(f != r["hidden"] for f in r[mode]["findings"]) for r in rows),
+            "missed": [r["seed"] for r in rows if r[mode]["findings"] != [r["hidden"]]],
+            "coefficient_relative_error_median": float(np.median(errors)) if errors else None,
+            "coefficient_relative_error_max": float(np.max(errors)) if errors else None,
+        }
     return out
 
 
@@ -50,8 +53,12 @@ if __name__ == "__main__":
         row = {"seed": seed, "hidden": term.label(truth.system), "size": float(term.coefficient)}
         for name, mode in MODES.items():
             j = diagnose(Acrobot(), train, validation, mode=mode, progress=False).to_json()
-            row[name] = {"verdict": j["verdict"], "findings": [f"{f['cause']}@{f['where']}" for f in j["findings"]],
-                         "coefficient": j["findings"][0]["coefficient"] if j["findings"] else None, "gain": j["gain"]}
+            row[name] = {
+                "verdict": j["verdict"],
+                "findings": [f"{f['cause']}@{f['where']}" for f in j["findings"]],
+                "coefficient": j["findings"][0]["coefficient"] if j["findings"] else None,
+                "gain": j["gain"],
+            }
         print(json.dumps(row), flush=True)
         rows.append(row)
     result = {"rows": rows, "summary": summary(rows)}

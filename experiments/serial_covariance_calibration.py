@@ -99,8 +99,15 @@ def main():
     for kind, value, per_record in cases:
         ratios = case(kind, value, args.reps, per_record)
         print(f"{kind} {value}: " + ", ".join(f"{k} {v}" for k, v in ratios.items()), flush=True)
-        out.append({"kind": kind, "value": value, "steps_per_record": per_record, "reps": args.reps,
-                    "standard_error_over_spread": ratios})
+        out.append(
+            {
+                "kind": kind,
+                "value": value,
+                "steps_per_record": per_record,
+                "reps": args.reps,
+                "standard_error_over_spread": ratios,
+            }
+        )
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "calibration.json").write_text(json.dumps(out, indent=1))
 

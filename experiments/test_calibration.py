@@ -46,11 +46,11 @@ def null_windows(rng, n_windows, overlap, process, substeps=5):
     n = (n_windows + overlap) * substeps
     kind, param = process
     if kind == "ar1":
-        e = scipy.signal.lfilter([1.0], [1.0, -param ** (1 / substeps)], rng.normal(size=n))
+        e = scipy.signal.lfilter([1.0], [1.0, -(param ** (1 / substeps))], rng.normal(size=n))
     elif kind == "ar1_t3":
-        e = scipy.signal.lfilter([1.0], [1.0, -param ** (1 / substeps)], rng.standard_t(3, size=n))
+        e = scipy.signal.lfilter([1.0], [1.0, -(param ** (1 / substeps))], rng.standard_t(3, size=n))
     elif kind == "arma":  # ARMA(1,1): AR root param, MA coefficient 0.5, at the substep level
-        e = scipy.signal.lfilter([1.0, 0.5], [1.0, -param ** (1 / substeps)], rng.normal(size=n))
+        e = scipy.signal.lfilter([1.0, 0.5], [1.0, -(param ** (1 / substeps))], rng.normal(size=n))
     elif kind == "white":
         e = rng.normal(size=n)
     else:
@@ -60,7 +60,13 @@ def null_windows(rng, n_windows, overlap, process, substeps=5):
 
 
 CONFIGS = [  # (overlap, windows per run, runs): acrobot demo, helicopter 20 s at 0.5 / 1 s, DFKI 6 s records
-    (10, 110, 1), (10, 110, 2), (20, 100, 2), (2, 400, 3), (10, 380, 1), (20, 380, 1), (10, 100, 3),
+    (10, 110, 1),
+    (10, 110, 2),
+    (20, 100, 2),
+    (2, 400, 3),
+    (10, 380, 1),
+    (20, 380, 1),
+    (10, 100, 3),
 ]
 METHODS = ("flat_top", "truncated", "obm", "nbm")
 PROCESSES = [("white", 0.0), ("ar1", 0.5), ("ar1", 0.9), ("ar1", 0.97), ("arma", 0.9), ("ar1_t3", 0.9)]
@@ -82,16 +88,25 @@ def synthetic(reps, seed=0):
                 for method in p:
                     p[method].append(paired_block_test(d, runs, overlap, method=method).p_value)
                     power[method].append(paired_block_test(d + shift, runs, overlap, method=method).p_value)
-            row = dict(overlap=overlap, windows=n_windows, runs=n_runs, process=f"{process[0]}({process[1]:g})", reps=reps)
+            row = dict(
+                overlap=overlap, windows=n_windows, runs=n_runs, process=f"{process[0]}({process[1]:g})", reps=reps
+            )
             for method in p:
                 pv, pw = np.asarray(p[method]), np.asarray(power[method])
                 for a in (0.05, 0.01, 0.001):
                     row[f"{method}_rate_{a:g}"] = float(np.mean(pv < a))
                 row[f"{method}_power_0.01"] = float(np.mean(pw < 0.01))
             rows.append(row)
-            print(f"overlap {overlap:2d} n {n_windows:3d} x {n_runs} {row['process']:>11s}: "
-                  + "  ".join(f"{m}: " + " ".join(f"{row[f'{m}_rate_{a:g}']:.4f}" for a in (0.05, 0.01, 0.001))
-                              + f" power@0.01 {row[f'{m}_power_0.01']:.2f}" for m in p), flush=True)
+            print(
+                f"overlap {overlap:2d} n {n_windows:3d} x {n_runs} {row['process']:>11s}: "
+                + "  ".join(
+                    f"{m}: "
+                    + " ".join(f"{row[f'{m}_rate_{a:g}']:.4f}" for a in (0.05, 0.01, 0.001))
+                    + f" power@0.01 {row[f'{m}_power_0.01']:.2f}"
+                    for m in p
+                ),
+                flush=True,
+            )
     summary = {}
     for m in METHODS:
         for a in (0.05, 0.01, 0.001):
@@ -99,8 +114,11 @@ def synthetic(reps, seed=0):
             summary[f"{m}_rate_{a:g}"] = dict(mean=float(np.mean(rates)), max=float(np.max(rates)))
         summary[f"{m}_power_0.01_mean"] = float(np.mean([r[f"{m}_power_0.01"] for r in rows]))
     se = {a: float(np.sqrt(a * (1 - a) / reps)) for a in (0.05, 0.01, 0.001)}
-    print("summary (mean / max over configurations; binomial s.e. of one rate:",
-          ", ".join(f"{se[a]:.4f} at {a:g}" for a in se), ")")
+    print(
+        "summary (mean / max over configurations; binomial s.e. of one rate:",
+        ", ".join(f"{se[a]:.4f} at {a:g}" for a in se),
+        ")",
+    )
     for k, v in summary.items():
         print(f"  {k}: {v}")
     return dict(rows=rows, summary=summary, binomial_se=se)
@@ -118,15 +136,23 @@ def diagnosis(seeds, runs=1):
         t0 = time.perf_counter()
         _, train, validation = demo_data(CoulombFriction(1, 0.0), seed=1000 + seed)
         if runs > 1:  # more training runs: other seeds' excitations and noise, the same truth
-            train = [train] + [demo_data(CoulombFriction(1, 0.0), seed=5000 + runs * seed + i)[1] for i in range(1, runs)]
+            train = [train] + [
+                demo_data(CoulombFriction(1, 0.0), seed=5000 + runs * seed + i)[1] for i in range(1, runs)
+            ]
         j = diagnose(Acrobot(), train, validation, discovery=False).to_json()
         tested = [c for c in j["candidates"] if c.get("p_value") is not None]
         best = min(tested, key=lambda c: c["p_value"]) if tested else None
-        row = dict(seed=1000 + seed, verdict=j["verdict"], findings=[f"{f['cause']}@{f['where']}" for f in j["findings"]],
-                   smallest_p=float(best["p_value"]) if best else None, n_tested=len(j["candidates"]),
-                   smallest_p_candidate=None if best is None else {
-                       k: best[k] for k in ("cause", "where", "gain", "coefficient", "runs_helped")},
-                   seconds=round(time.perf_counter() - t0, 1))
+        row = dict(
+            seed=1000 + seed,
+            verdict=j["verdict"],
+            findings=[f"{f['cause']}@{f['where']}" for f in j["findings"]],
+            smallest_p=float(best["p_value"]) if best else None,
+            n_tested=len(j["candidates"]),
+            smallest_p_candidate=None
+            if best is None
+            else {k: best[k] for k in ("cause", "where", "gain", "coefficient", "runs_helped")},
+            seconds=round(time.perf_counter() - t0, 1),
+        )
         rows.append(row)
         print(row, flush=True)
     claims = sum(bool(r["findings"]) for r in rows)

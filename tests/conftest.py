@@ -61,7 +61,6 @@ def acrobot_csv(tmp_path_factory):
     return path
 
 
-
 def _memory_maps() -> int:
     try:
         with open("/proc/self/maps") as f:

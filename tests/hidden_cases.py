@@ -153,18 +153,32 @@ def axis_rhs(case):
 
 # --- the helicopter: the Tempest hover model written out in numpy, effects in the body frame ------------
 
-TEMPEST = {"Ax": -0.18, "Ay": -0.43, "Az": -0.49, "Bx": -12.78, "By": -10.12, "Bz": -8.16, "C1": 33.04, "C2": -33.32, "C3": 70.54,
-               "C4": -42.15, "Dv": -0.54, "g": 9.81}
+TEMPEST = {
+    "Ax": -0.18,
+    "Ay": -0.43,
+    "Az": -0.49,
+    "Bx": -12.78,
+    "By": -10.12,
+    "Bz": -8.16,
+    "C1": 33.04,
+    "C2": -33.32,
+    "C3": 70.54,
+    "C4": -42.15,
+    "Dv": -0.54,
+    "g": 9.81,
+}
 HOVER_U4 = TEMPEST["g"] / -TEMPEST["C4"]  # the collective that holds the weight at level attitude
 
 
 def rotation(qw, qx, qy, qz):
     """Body-to-world rotation of a unit quaternion."""
-    return np.array([
-        [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qw * qz), 2 * (qx * qz + qw * qy)],
-        [2 * (qx * qy + qw * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qw * qx)],
-        [2 * (qx * qz - qw * qy), 2 * (qy * qz + qw * qx), 1 - 2 * (qx * qx + qy * qy)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qw * qz), 2 * (qx * qz + qw * qy)],
+            [2 * (qx * qy + qw * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qw * qx)],
+            [2 * (qx * qz - qw * qy), 2 * (qy * qz + qw * qx), 1 - 2 * (qx * qx + qy * qy)],
+        ]
+    )
 
 
 def heli_rhs(case):
@@ -179,8 +193,14 @@ def heli_rhs(case):
         R = rotation(*quat)
         air = nu - R.T @ wind_world  # the body moves through air that moves with the wind
         g_body = R.T @ np.array([0.0, 0.0, c["g"]])
-        acc = -np.cross(om, nu) + g_body + np.array([c["Ax"] * air[0], c["Ay"] * air[1] + c["Dv"], c["Az"] * air[2] + c["C4"] * u[3]])
-        rates = np.array([c["Bx"] * om[0] + c["C1"] * u[0], c["By"] * om[1] + c["C2"] * u[1], c["Bz"] * om[2] + c["C3"] * u[2]])
+        acc = (
+            -np.cross(om, nu)
+            + g_body
+            + np.array([c["Ax"] * air[0], c["Ay"] * air[1] + c["Dv"], c["Az"] * air[2] + c["C4"] * u[3]])
+        )
+        rates = np.array(
+            [c["Bx"] * om[0] + c["C1"] * u[0], c["By"] * om[1] + c["C2"] * u[1], c["Bz"] * om[2] + c["C3"] * u[2]]
+        )
         body = np.concatenate([acc, rates])
         if case.cause == "quadratic_drag":
             body[axis] -= case.size * abs(air[axis]) * air[axis]
@@ -188,8 +208,9 @@ def heli_rhs(case):
             body[axis] += case.size
         qw, qx, qy, qz = quat
         p, q, r = om
-        dquat = 0.5 * np.array([-qx * p - qy * q - qz * r, qw * p + qy * r - qz * q, qw * q - qx * r + qz * p,
-                                qw * r + qx * q - qy * p])
+        dquat = 0.5 * np.array(
+            [-qx * p - qy * q - qz * r, qw * p + qy * r - qz * q, qw * q - qx * r + qz * p, qw * r + qx * q - qy * p]
+        )
         dquat += 1.0 * (1.0 - quat @ quat) * quat  # the normalisation term dynax's model has too
         return np.concatenate([R @ nu, dquat, body[:3], body[3:]])
 
@@ -199,14 +220,27 @@ def heli_rhs(case):
 # --- records ----------------------------------------------------------------------------------------------
 
 SYSTEMS = {
-    "acrobot": {"states": ("q1", "q2", "dq1", "dq2"), "inputs": ("tau2",), "driven": (1,), "rms": 2.0,
-                    "noise": (1e-3, 1e-3, 1e-2, 1e-2)},
-    "double_pendulum": {"states": ("q1", "q2", "dq1", "dq2"), "inputs": ("tau1", "tau2"), "driven": (0, 1), "rms": 1.5,
-                            "noise": (1e-3, 1e-3, 1e-2, 1e-2)},
+    "acrobot": {
+        "states": ("q1", "q2", "dq1", "dq2"),
+        "inputs": ("tau2",),
+        "driven": (1,),
+        "rms": 2.0,
+        "noise": (1e-3, 1e-3, 1e-2, 1e-2),
+    },
+    "double_pendulum": {
+        "states": ("q1", "q2", "dq1", "dq2"),
+        "inputs": ("tau1", "tau2"),
+        "driven": (0, 1),
+        "rms": 1.5,
+        "noise": (1e-3, 1e-3, 1e-2, 1e-2),
+    },
     "linear_axis": {"states": ("q", "dq"), "inputs": ("force",), "rms": 150.0, "noise": (1e-5, 1e-4)},
-    "helicopter": {"states": ("x", "y", "z", "qw", "qx", "qy", "qz", "u", "v", "w", "p", "q", "r"),
-                       "inputs": ("u1", "u2", "u3", "u4"), "rms": (0.02, 0.02, 0.01, 0.03),
-                       "noise": (1e-3,) * 3 + (0.0,) * 4 + (1e-2,) * 3 + (3e-3,) * 3},
+    "helicopter": {
+        "states": ("x", "y", "z", "qw", "qx", "qy", "qz", "u", "v", "w", "p", "q", "r"),
+        "inputs": ("u1", "u2", "u3", "u4"),
+        "rms": (0.02, 0.02, 0.01, 0.03),
+        "noise": (1e-3,) * 3 + (0.0,) * 4 + (1e-2,) * 3 + (3e-3,) * 3,
+    },
 }
 
 
@@ -251,8 +285,15 @@ def records(case: Case) -> tuple[Trajectory, Trajectory]:
     k = round(TRAIN_S / DT) + 1
 
     def record(a, b, source):
-        return Trajectory(jnp.asarray(ts[a:b]), jnp.asarray(xs[a:b]), jnp.asarray(us[a:b]), spec["states"],
-                          spec["inputs"], case.system, source)
+        return Trajectory(
+            jnp.asarray(ts[a:b]),
+            jnp.asarray(xs[a:b]),
+            jnp.asarray(us[a:b]),
+            spec["states"],
+            spec["inputs"],
+            case.system,
+            source,
+        )
 
     return record(0, k, f"{case.name}-train"), record(k, n, f"{case.name}-held-out")
 
@@ -317,13 +358,22 @@ def _cases():
         ("helicopter", "body_bias", "p", 0.5, "constant", "known", False),
         ("helicopter", "body_bias", "v", 0.2, "constant", "known", True),
     ]
-    rows += [("acrobot", "input_delay", "tau2", 0.06, "dead time", "refit", False),
-             ("double_pendulum", "input_lag", "tau1", 0.08, "first order", "refit", False),
-             ("linear_axis", "coulomb_friction", "q", 30.0, "arctan", "refit", False)]
-    controls = [("acrobot", "refit")] * 3 + [("acrobot", "known")] + [("double_pendulum", "refit")] * 3 \
-        + [("linear_axis", "refit")] * 2 + [("helicopter", "known")] * 2
-    cases = [Case(f"{s}-{c}@{w}-{size:g}-{law.replace(' ', '_')}", s, c, w, size, law, m, 100 + i, near)
-             for i, (s, c, w, size, law, m, near) in enumerate(rows)]
+    rows += [
+        ("acrobot", "input_delay", "tau2", 0.06, "dead time", "refit", False),
+        ("double_pendulum", "input_lag", "tau1", 0.08, "first order", "refit", False),
+        ("linear_axis", "coulomb_friction", "q", 30.0, "arctan", "refit", False),
+    ]
+    controls = (
+        [("acrobot", "refit")] * 3
+        + [("acrobot", "known")]
+        + [("double_pendulum", "refit")] * 3
+        + [("linear_axis", "refit")] * 2
+        + [("helicopter", "known")] * 2
+    )
+    cases = [
+        Case(f"{s}-{c}@{w}-{size:g}-{law.replace(' ', '_')}", s, c, w, size, law, m, 100 + i, near)
+        for i, (s, c, w, size, law, m, near) in enumerate(rows)
+    ]
     cases += [Case(f"{s}-control-{m}-{i}", s, None, None, 0.0, "none", m, 300 + i) for i, (s, m) in enumerate(controls)]
     return tuple(cases)
 
@@ -347,12 +397,20 @@ def diagnose_case(case: Case, records_=None):
     elif case.system == "double_pendulum":
         nominal = dynax.DoublePendulum()
     elif case.system == "linear_axis":
-        nominal = dynax.LinearAxis(mass=jnp.asarray(AXIS["mass"]), viscous=jnp.asarray(AXIS["viscous"]),
-                                   coulomb=jnp.asarray(0.0), offset=jnp.asarray(AXIS["offset"]))
+        nominal = dynax.LinearAxis(
+            mass=jnp.asarray(AXIS["mass"]),
+            viscous=jnp.asarray(AXIS["viscous"]),
+            coulomb=jnp.asarray(0.0),
+            offset=jnp.asarray(AXIS["offset"]),
+        )
     else:
         nominal = dynax.Helicopter()
-        kwargs = {"candidates": tuple(t for t in dynax.default_candidates(nominal)
-                                       if isinstance(t, dynax.internal.AbstractVehicleTerm)), "horizons_s": (0.25, 0.5, 1.0)}
+        kwargs = {
+            "candidates": tuple(
+                t for t in dynax.default_candidates(nominal) if isinstance(t, dynax.internal.AbstractVehicleTerm)
+            ),
+            "horizons_s": (0.25, 0.5, 1.0),
+        }
     return dynax.diagnose(nominal, train, held_out, mode=mode, max_terms=2, progress=False, **kwargs)
 
 
@@ -378,8 +436,17 @@ def outcome(case: Case, j: dict) -> dict:
         right = verdict == "explained" and named
         false_claim = False
         extra = any(f != case.expected for f in findings)
-    return {"verdict": verdict, "findings": [f"{c}@{w}" for c, w in findings], "named_first": named,
-            "right_verdict": right, "false_claim": false_claim, "extra": extra, "best_gain": best_gain,
-            "none_with_gain": verdict == "none" and best_gain is not None and best_gain >= 0.25, "gain": j["gain"],
-            "structure_r2": j["structure"]["extended"]["r2"], "structure_p": j["structure"]["extended"]["p_value"],
-            "power": j["test"].get("power")}
+    return {
+        "verdict": verdict,
+        "findings": [f"{c}@{w}" for c, w in findings],
+        "named_first": named,
+        "right_verdict": right,
+        "false_claim": false_claim,
+        "extra": extra,
+        "best_gain": best_gain,
+        "none_with_gain": verdict == "none" and best_gain is not None and best_gain >= 0.25,
+        "gain": j["gain"],
+        "structure_r2": j["structure"]["extended"]["r2"],
+        "structure_p": j["structure"]["extended"]["p_value"],
+        "power": j["test"].get("power"),
+    }

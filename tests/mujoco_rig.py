@@ -21,8 +21,21 @@ G = 9.81
 # About the DFKI rig's size (its base parameters within 5 % of the lab's model_3.0: theta1 0.054,
 # theta2 0.054, theta3 0.036, theta4 2.36, theta5 1.78), with a geared motor's rotor inertia
 # (36 x 1e-4 kg m^2 reflected) and dry friction at each joint.
-RIG = dict(m1=0.6, l1=0.2, lc1=0.19, Ic1=0.0012, m2=0.62, lc2=0.29, Ic2=0.0015,
-           b1=0.005, b2=0.004, a1=0.0036, a2=0.0036, f1=0.15, f2=0.10)
+RIG = dict(
+    m1=0.6,
+    l1=0.2,
+    lc1=0.19,
+    Ic1=0.0012,
+    m2=0.62,
+    lc2=0.29,
+    Ic2=0.0015,
+    b1=0.005,
+    b2=0.004,
+    a1=0.0036,
+    a2=0.0036,
+    f1=0.15,
+    f2=0.10,
+)
 STATES = ("q1", "q2", "dq1", "dq2")
 INPUTS = ("tau1", "tau2")
 
@@ -30,8 +43,12 @@ INPUTS = ("tau1", "tau2")
 def mjcf(p: dict, timestep: float = 0.0005, inputs: tuple[str, ...] = INPUTS) -> str:
     """The arm as MJCF: both hinges about +y (q = 0 hangs down, q2 relative to link 1), driven by
     `inputs` (`("tau1", "tau2")`, or `("tau2",)`: the acrobot)."""
-    motors = "\n".join(f'    <motor name="{name}" joint="{joint}"/>' for name, joint in
-                       (("tau1", "shoulder"), ("tau2", "elbow")) if name in inputs)
+    motors = "\n".join(
+        f'    <motor name="{name}" joint="{joint}"/>'
+        for name, joint in (("tau1", "shoulder"), ("tau2", "elbow"))
+        if name in inputs
+    )
+
     def joint(name, b, a, f):
         return f'<joint name="{name}" type="hinge" axis="0 1 0" damping="{b}" armature="{a}" frictionloss="{f}"/>'
 
@@ -60,9 +77,18 @@ def mjcf(p: dict, timestep: float = 0.0005, inputs: tuple[str, ...] = INPUTS) ->
 def base_parameters(p: dict) -> dict:
     """The arm's parameters in dynax's names (see the module's docstring), computed here, not by dynax."""
     i1 = p["Ic1"] + p["m1"] * p["lc1"] ** 2
-    return dict(theta1=i1 + p["m2"] * p["l1"] ** 2 + p["a1"], theta2=p["Ic2"] + p["m2"] * p["lc2"] ** 2,
-                theta3=p["m2"] * p["l1"] * p["lc2"], theta4=G * (p["m1"] * p["lc1"] + p["m2"] * p["l1"]),
-                theta5=G * p["m2"] * p["lc2"], theta6=p["b1"], theta7=p["b2"], fc1=p["f1"], fc2=p["f2"], Ir2=p["a2"])
+    return dict(
+        theta1=i1 + p["m2"] * p["l1"] ** 2 + p["a1"],
+        theta2=p["Ic2"] + p["m2"] * p["lc2"] ** 2,
+        theta3=p["m2"] * p["l1"] * p["lc2"],
+        theta4=G * (p["m1"] * p["lc1"] + p["m2"] * p["l1"]),
+        theta5=G * p["m2"] * p["lc2"],
+        theta6=p["b1"],
+        theta7=p["b2"],
+        fc1=p["f1"],
+        fc2=p["f2"],
+        Ir2=p["a2"],
+    )
 
 
 def multisine(ts, seed: int, scale: float = 0.6) -> np.ndarray:
@@ -74,13 +100,27 @@ def multisine(ts, seed: int, scale: float = 0.6) -> np.ndarray:
     out = []
     for amplitude in (0.9, 0.5):
         phases = rng.uniform(0, 2 * np.pi, size=freqs.size)
-        out.append(sum(amplitude / (1 + k) * np.sin(2 * np.pi * f * np.asarray(ts) + ph)
-                       for k, (f, ph) in enumerate(zip(freqs, phases))))
+        out.append(
+            sum(
+                amplitude / (1 + k) * np.sin(2 * np.pi * f * np.asarray(ts) + ph)
+                for k, (f, ph) in enumerate(zip(freqs, phases))
+            )
+        )
     return scale * np.stack(out, axis=1)
 
 
-def record(p: dict, duration: float, seed: int, *, dt: float = 0.002, scale: float = 0.6, velocity_noise: float = 0.15,
-           torque_noise: float = 0.02, position_noise: float = 1e-4, inputs: tuple[str, ...] = INPUTS):
+def record(
+    p: dict,
+    duration: float,
+    seed: int,
+    *,
+    dt: float = 0.002,
+    scale: float = 0.6,
+    velocity_noise: float = 0.15,
+    torque_noise: float = 0.02,
+    position_noise: float = 1e-4,
+    inputs: tuple[str, ...] = INPUTS,
+):
     """Simulate the arm from rest under `multisine` torques (held over each MuJoCo step, set at its
     midpoint) and sample every `dt`, with sensor noise at the DFKI rig's level (velocity estimate
     0.15 rad/s, current-based torque 0.02 N m, encoder 1e-4 rad, 1-sigma). The recorded torque of a

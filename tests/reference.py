@@ -8,7 +8,6 @@ data made with it test identification against a different implementation and a d
 import numpy as np
 from scipy.integrate import solve_ivp
 
-
 DRAKE = dict(m1=1.0, m2=1.0, l1=1.0, lc1=0.5, lc2=1.0, Ic1=0.083, Ic2=0.33, b1=0.1, b2=0.1, g=9.81)  # Drake's defaults
 
 
@@ -16,7 +15,9 @@ def spong_reference(p, x, tau, coulomb=(0.0, 0.0), rotor=(0.0, 0.0)):
     """Drake's AcrobotPlant equations written out in physical parameters (numpy), with optional Coulomb
     friction `coulomb = (fc1, fc2)` (joint torque $-f_c\\,\\mathrm{sign}(\\dot q)$) and reflected rotor
     inertias `rotor = (Ir1, Ir2)` added to the mass matrix's diagonal."""
-    m1, m2, l1, lc1, lc2, Ic1, Ic2, b1, b2, g = (p[k] for k in ("m1", "m2", "l1", "lc1", "lc2", "Ic1", "Ic2", "b1", "b2", "g"))
+    m1, m2, l1, lc1, lc2, Ic1, Ic2, b1, b2, g = (
+        p[k] for k in ("m1", "m2", "l1", "lc1", "lc2", "Ic1", "Ic2", "b1", "b2", "g")
+    )
     q1, q2, dq1, dq2 = x
     I1, I2 = Ic1 + m1 * lc1**2, Ic2 + m2 * lc2**2
     c2, s1, s2, s12 = np.cos(q2), np.sin(q1), np.sin(q2), np.sin(q1 + q2)
@@ -35,8 +36,14 @@ def scipy_acrobot(x0, ts, us, p=DRAKE, coulomb=(0.0, 0.0), rotor=(0.0, 0.0), rto
     out = [x]
     for k in range(len(ts) - 1):
         tau = np.array([0.0, float(us[k][0])])
-        sol = solve_ivp(lambda t, y: spong_reference(p, y, tau, coulomb, rotor), (float(ts[k]), float(ts[k + 1])), x,
-                        method="DOP853", rtol=rtol, atol=atol)
+        sol = solve_ivp(
+            lambda t, y: spong_reference(p, y, tau, coulomb, rotor),
+            (float(ts[k]), float(ts[k + 1])),
+            x,
+            method="DOP853",
+            rtol=rtol,
+            atol=atol,
+        )
         x = sol.y[:, -1]
         out.append(x)
     return np.asarray(out)
@@ -53,7 +60,14 @@ def arm_reference(theta, x, tau, coulomb=(0.0, 0.0), velocity_scale=0.01, rotor=
     q1, q2, dq1, dq2 = x
     c2, s2, s1, s12 = np.cos(q2), np.sin(q2), np.sin(q1), np.sin(q1 + q2)
     m11, m12, m22 = t1 + t2 + 2 * t3 * c2 + rotor[0], t2 + t3 * c2, t2 + rotor[1]
-    h1 = tau[0] + t3 * s2 * (2 * dq1 * dq2 + dq2**2) - t4 * s1 - t5 * s12 - t6 * dq1 - coulomb[0] * np.tanh(dq1 / velocity_scale)
+    h1 = (
+        tau[0]
+        + t3 * s2 * (2 * dq1 * dq2 + dq2**2)
+        - t4 * s1
+        - t5 * s12
+        - t6 * dq1
+        - coulomb[0] * np.tanh(dq1 / velocity_scale)
+    )
     h2 = tau[1] - t3 * s2 * dq1**2 - t5 * s12 - t7 * dq2 - coulomb[1] * np.tanh(dq2 / velocity_scale)
     det = m11 * m22 - m12 * m12
     return np.array([dq1, dq2, (m22 * h1 - m12 * h2) / det, (m11 * h2 - m12 * h1) / det])

@@ -19,7 +19,16 @@ import dynax
 PACKAGE = pathlib.Path(dynax.__file__).parent
 
 LAYERS = (
-    "utilities", "data", "model", "simulate", "fit", "identify", "validate", "diagnose", "control", "synthetic",
+    "utilities",
+    "data",
+    "model",
+    "simulate",
+    "fit",
+    "identify",
+    "validate",
+    "diagnose",
+    "control",
+    "synthetic",
     "cli",
 )
 
@@ -52,8 +61,7 @@ LAYER_OF = {
 FACADES = {"__init__", "synthetic", "internal", "control"}
 
 # Imports that break the order today, each with the reason it stays for now: (importer, imported).
-ALLOWED: dict[tuple[str, str], str] = {
-}
+ALLOWED: dict[tuple[str, str], str] = {}
 
 
 def _module_name(path: pathlib.Path) -> str:
@@ -176,8 +184,10 @@ def _underscore_imports():
             if module.split(".")[0] != "dynax":
                 continue
             private = [
-                alias.name for alias in node.names
-                if alias.name.startswith("_") and not alias.name.startswith("__")
+                alias.name
+                for alias in node.names
+                if alias.name.startswith("_")
+                and not alias.name.startswith("__")
                 and not any(m.startswith(f"{module}.{alias.name}") for m in ALL_MODULES)
             ]
             if private:

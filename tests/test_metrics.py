@@ -120,7 +120,11 @@ def test_kfold_and_leave_one_out_cross_validation_with_identify():
         return dynax.identify(axis, train, dynax.Dynamic()).system
 
     def score(model, validation):
-        return float(dynax.nrmse_fit(validation.xs[:, 1], dynax.simulate(model, validation.x0, validation.ts, validation.us).xs[:, 1])[0])
+        return float(
+            dynax.nrmse_fit(
+                validation.xs[:, 1], dynax.simulate(model, validation.x0, validation.ts, validation.us).xs[:, 1]
+            )[0]
+        )
 
     scores = dynax.cross_validate(fit, score, folds)
     assert scores.shape == (3,) and np.all(scores > 95)

@@ -1,10 +1,9 @@
 """Plots return matplotlib Figures (no pyplot, no backend), drawn from the same numbers as the metrics."""
 
-
 import jax.numpy as jnp
+from matplotlib.figure import Figure
 import numpy as np
 import pytest
-from matplotlib.figure import Figure
 
 import dynax
 
@@ -14,7 +13,9 @@ def acrobot_run():
     ts = np.arange(0, 2.0, 0.01)
     us = (0.5 * np.sin(3 * ts))[:, None]
     sim = dynax.simulate(dynax.Acrobot(), jnp.array([0.3, 0.0, 0.0, 0.0]), ts, us)
-    return dynax.Trajectory(jnp.asarray(ts), sim.xs, jnp.asarray(us), ("q1", "q2", "dq1", "dq2"), ("tau2",), "acrobot", "run.csv")
+    return dynax.Trajectory(
+        jnp.asarray(ts), sim.xs, jnp.asarray(us), ("q1", "q2", "dq1", "dq2"), ("tau2",), "acrobot", "run.csv"
+    )
 
 
 def test_plot_compare_shows_the_fit_of_each_model_per_run(acrobot_run, tmp_path):

@@ -6,8 +6,7 @@ import pytest
 
 import dynax
 from dynax import ProgressBar
-from dynax.internal import progress_mode
-from dynax.internal import bar_token, progress_enabled, progress_report
+from dynax.internal import bar_token, progress_enabled, progress_mode, progress_report
 
 
 def quadratic(params, key):
@@ -115,7 +114,9 @@ def test_output_error_fit_reports_each_iteration(capsys):
     from dynax import fit_simulation_error
 
     def axis(m, b):
-        return dynax.LinearAxis(mass=jnp.asarray(m), viscous=jnp.asarray(b), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0))
+        return dynax.LinearAxis(
+            mass=jnp.asarray(m), viscous=jnp.asarray(b), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0)
+        )
 
     ts = jnp.linspace(0.0, 2.0, 201)
     us = jnp.sin(3.0 * ts)[:, None]

@@ -42,8 +42,9 @@ def test_default_is_two_tsit5_steps_per_sample_restarted_at_each_sample():
 
     @jax.jit
     def interval(x, t0, t1, u):
-        sol = diffrax.diffeqsolve(term, diffrax.Tsit5(), t0, t1, (t1 - t0) / 2, x, args=u,
-                                  stepsize_controller=diffrax.ConstantStepSize())
+        sol = diffrax.diffeqsolve(
+            term, diffrax.Tsit5(), t0, t1, (t1 - t0) / 2, x, args=u, stepsize_controller=diffrax.ConstantStepSize()
+        )
         return sol.ys[-1]
 
     x, reference = X0, [X0]
@@ -147,8 +148,12 @@ def test_gradient_through_a_divergent_rollout_stays_finite():
         xs = dynax.simulate(axis, jnp.array([0.0, 1.0], jnp.float32), ts, throw=False).xs
         return jnp.sum(jnp.where(jnp.isnan(xs), 0.0, xs) ** 2)
 
-    sim = dynax.simulate(dynax.LinearAxis(viscous=jnp.asarray(-5000.0), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0)),
-                         jnp.array([0.0, 1.0]), ts, throw=False)
+    sim = dynax.simulate(
+        dynax.LinearAxis(viscous=jnp.asarray(-5000.0), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0)),
+        jnp.array([0.0, 1.0]),
+        ts,
+        throw=False,
+    )
     assert bool(sim.diverged) and float(sim.diverged_at) < 1.0
     gradient = jax.grad(loss)(jnp.asarray(-5000.0))
     assert np.isfinite(float(gradient)) and float(gradient) != 0.0
@@ -217,5 +222,7 @@ def test_fixed_grid_explicit_step_equals_diffrax_step():
         np.testing.assert_allclose(ours, ref, rtol=1e-12, atol=1e-12, err_msg=type(solver).__name__)
     assert explicit_step(system, diffrax.Euler()) is None
     # Through simulate: a rollout with Euler (diffrax's step) still integrates.
-    xs = dynax.simulate(system, x, jnp.linspace(0, 0.1, 11), jnp.zeros((11, 1)), method=dynax.FixedGrid(diffrax.Euler())).xs
+    xs = dynax.simulate(
+        system, x, jnp.linspace(0, 0.1, 11), jnp.zeros((11, 1)), method=dynax.FixedGrid(diffrax.Euler())
+    ).xs
     assert np.all(np.isfinite(xs))

@@ -1,10 +1,11 @@
 """Property-based (hypothesis): `simulate` fed random, often malformed, arguments raises `UsageError`
 with a message, or returns the exact solution; never another exception, never silent NaN rows."""
 
+from hypothesis import given, HealthCheck, settings
+from hypothesis import strategies as st
 import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
-from hypothesis import given, HealthCheck, settings, strategies as st
 
 import dynax
 

@@ -25,15 +25,21 @@ def add_data_options(parser: argparse.ArgumentParser) -> None:
     """Add the contract's `--map NAME=COLUMN,...` and `--scale NAME=FACTOR,...`, and `--offset NAME=VALUE,...`."""
     parser.add_argument("--map", default=None, help="NAME=COLUMN,... for files whose columns are named otherwise")
     parser.add_argument("--scale", default=None, help="NAME=FACTOR,... multiplied into columns (units)")
-    parser.add_argument("--offset", default=None,
-                        help="NAME=VALUE,... added to columns after --scale (an angle's zero: q1=3.14159 for a rig "
-                             "that reads 0 upright)")
+    parser.add_argument(
+        "--offset",
+        default=None,
+        help="NAME=VALUE,... added to columns after --scale (an angle's zero: q1=3.14159 for a rig "
+        "that reads 0 upright)",
+    )
 
 
 def data_options(args: argparse.Namespace) -> tuple[dict, dict, dict]:
     """The parsed `--map`, `--scale` and `--offset` (UsageError naming the malformed one)."""
-    return (parse_assignments(args.map, "--map", numeric=False), parse_assignments(args.scale, "--scale", numeric=True),
-            parse_assignments(args.offset, "--offset", numeric=True, zero=True))
+    return (
+        parse_assignments(args.map, "--map", numeric=False),
+        parse_assignments(args.scale, "--scale", numeric=True),
+        parse_assignments(args.offset, "--offset", numeric=True, zero=True),
+    )
 
 
 def output_file(path: str, example: str) -> pathlib.Path:
@@ -74,21 +80,30 @@ def _name_lengths(out: pathlib.Path) -> None:
     except (OSError, ValueError, AttributeError):
         name_max, path_max = 255, 4096
     if len(os.fsencode(str(out.absolute()))) + _STAGING_CHARS > path_max:
-        raise UsageError(f"--out: the path is {len(os.fsencode(str(out.absolute())))} bytes long; the file system "
-                         f"allows {path_max} (less {_STAGING_CHARS} for the temporary name)")
+        raise UsageError(
+            f"--out: the path is {len(os.fsencode(str(out.absolute())))} bytes long; the file system "
+            f"allows {path_max} (less {_STAGING_CHARS} for the temporary name)"
+        )
     for part in out.parts:
         if len(os.fsencode(part)) > name_max:
-            raise UsageError(f"--out: the name '{part[:40]}...' is {len(os.fsencode(part))} bytes long; the file system "
-                             f"allows {name_max}")
+            raise UsageError(
+                f"--out: the name '{part[:40]}...' is {len(os.fsencode(part))} bytes long; the file system "
+                f"allows {name_max}"
+            )
     if len(os.fsencode(out.name)) + _STAGING_CHARS > name_max:
-        raise UsageError(f"--out: the name '{out.name[:40]}...' is {len(os.fsencode(out.name))} bytes long; with the "
-                         f"temporary name it is written under first it must stay under {name_max - _STAGING_CHARS}")
+        raise UsageError(
+            f"--out: the name '{out.name[:40]}...' is {len(os.fsencode(out.name))} bytes long; with the "
+            f"temporary name it is written under first it must stay under {name_max - _STAGING_CHARS}"
+        )
 
 
 def _report_folder_replaceable(out: pathlib.Path) -> None:
     """An existing --out folder is replaced whole; refuse one that holds anything dynax did not write."""
-    foreign = sorted(p.name for p in out.iterdir()
-                     if not (p.is_file() and not p.is_symlink() and p.suffix.lower() in REPORT_SUFFIXES))
+    foreign = sorted(
+        p.name
+        for p in out.iterdir()
+        if not (p.is_file() and not p.is_symlink() and p.suffix.lower() in REPORT_SUFFIXES)
+    )
     if foreign:
         raise UsageError(
             f"--out {out} exists and holds {foreign[:3]}{' ...' if len(foreign) > 3 else ''}, which dynax did not "
@@ -120,8 +135,10 @@ def check_output(path, *, kind: str, inputs=()) -> pathlib.Path:
     if kind == "directory" and out.exists() and not out.is_dir():
         raise UsageError(f"--out {out} is a file; give a folder for the report")
     if kind == "file" and out.exists() and not out.is_file():
-        raise UsageError(f"--out {out} is not a regular file (a device, pipe or socket); the result is written to a "
-                         "temporary file renamed into place, which would replace it: give a file path")
+        raise UsageError(
+            f"--out {out} is not a regular file (a device, pipe or socket); the result is written to a "
+            "temporary file renamed into place, which would replace it: give a file path"
+        )
     _writable_folder(out)
     target = out.resolve()
     for given in inputs:
@@ -235,10 +252,14 @@ def finite_seconds(value: float, argument: str) -> float:
 
 def add_exclude_option(parser: argparse.ArgumentParser) -> None:
     """Add `--exclude [FILE@]T0:T1,...`: stretches of time cut out of the records before anything is fitted."""
-    parser.add_argument("--exclude", default=None, metavar="[FILE@]T0:T1,...",
-                        help="cut these stretches of time [s] out of the records before anything is fitted (an end may "
-                             "be open: 8.8: cuts from 8.8 s on; FILE@ limits a stretch to the file of that name); a cut "
-                             "inside a record leaves two records, fitted as separate runs")
+    parser.add_argument(
+        "--exclude",
+        default=None,
+        metavar="[FILE@]T0:T1,...",
+        help="cut these stretches of time [s] out of the records before anything is fitted (an end may "
+        "be open: 8.8: cuts from 8.8 s on; FILE@ limits a stretch to the file of that name); a cut "
+        "inside a record leaves two records, fitted as separate runs",
+    )
 
 
 def _excluded(records, spans, what: str):
@@ -249,13 +270,18 @@ def _excluded(records, spans, what: str):
 
     out, notes = [], []
     for record in records:
-        mine = [(t0, t1) for where, t0, t1 in spans
-                if where is None or where in (record.source, pathlib.Path(record.source).name)]
+        mine = [
+            (t0, t1)
+            for where, t0, t1 in spans
+            if where is None or where in (record.source, pathlib.Path(record.source).name)
+        ]
         pieces = exclude_stretches(record, mine)
         if pieces != [record]:
             kept = sum(len(p) for p in pieces)
-            notes.append(f"--exclude: {len(record) - kept} of {len(record)} samples of {record.source} left out"
-                         + (f", leaving {len(pieces)} {what}s" if len(pieces) != 1 else ""))
+            notes.append(
+                f"--exclude: {len(record) - kept} of {len(record)} samples of {record.source} left out"
+                + (f", leaving {len(pieces)} {what}s" if len(pieces) != 1 else "")
+            )
         out.extend(pieces)
     return out, notes
 
@@ -286,8 +312,12 @@ def load_records(args, system: str, *, min_samples: int, lenient: tuple = ()) ->
     def read(paths):
         with warnings.catch_warnings():  # the check runs below, on what --exclude leaves
             warnings.simplefilter("ignore")
-            return [load_trajectory(p, system, mapping=mapping, scale=scale, offset=offset, min_samples=min_samples,
-                                    check=False) for p in paths]
+            return [
+                load_trajectory(
+                    p, system, mapping=mapping, scale=scale, offset=offset, min_samples=min_samples, check=False
+                )
+                for p in paths
+            ]
 
     train, notes = _excluded(read(args.data), spans, "record")
     validation = None
@@ -299,8 +329,9 @@ def load_records(args, system: str, *, min_samples: int, lenient: tuple = ()) ->
             raise UsageError(f"--exclude leaves nothing of the {name} records")
         for record in records or ():
             if len(record) < min_samples:
-                raise DataError(f"has {len(record)} samples after --exclude; at least {min_samples} are needed",
-                                path=record.source)
+                raise DataError(
+                    f"has {len(record)} samples after --exclude; at least {min_samples} are needed", path=record.source
+                )
     check = check_records(train, validation or ())
     refusals = [f for f in check.refusals if f.kind not in lenient]
     if refusals:

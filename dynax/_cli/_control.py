@@ -52,7 +52,7 @@ def run_tune(args: argparse.Namespace) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from .._control._from_rest import SwingUpDesign, design_swing_up
+    from .._control._from_rest import design_swing_up, SwingUpDesign
 
     out = _check_out(args.out, ".npz", "--out")
     changes = {}
@@ -89,9 +89,11 @@ def _scores(controller, robust: bool) -> dict:
 
 def _print_scores(scores: dict) -> None:
     p = scores["performance"]
-    print(f"performance {p['score']:.3f} (success {p['success']}; swing-up {p['swingup_time']:.2f} s, "
-          f"energy {p['energy']:.2f} J, torque cost {p['torque_cost']:.2f}, smoothness {p['torque_smoothness']:.4f}, "
-          f"velocity cost {p['velocity_cost']:.1f})")
+    print(
+        f"performance {p['score']:.3f} (success {p['success']}; swing-up {p['swingup_time']:.2f} s, "
+        f"energy {p['energy']:.2f} J, torque cost {p['torque_cost']:.2f}, smoothness {p['torque_smoothness']:.4f}, "
+        f"velocity cost {p['velocity_cost']:.1f})"
+    )
     if "robustness" in scores:
         r = scores["robustness"]
         table = ", ".join(f"{k} {100 * v:.1f} %" for k, v in r["families"].items())

@@ -56,8 +56,16 @@ def run_demo(term, *, seed: int, out: pathlib.Path) -> str:
     save_trajectory(train, out / "train.csv")
     save_trajectory(validation, out / "validation.csv")
     with ProgressBar(None, "diagnose", unit="stage") as bar:  # stderr; a log without a terminal; --quiet: nothing
-        report = diagnose(Acrobot(), train, validation, mode=Refit(), system_name="acrobot",
-                          progress=lambda line: bar.say(f"[{time.perf_counter() - start:5.1f} s] {line}"))
+        report = diagnose(
+            Acrobot(),
+            train,
+            validation,
+            mode=Refit(),
+            system_name="acrobot",
+            progress=lambda line: bar.say(f"[{time.perf_counter() - start:5.1f} s] {line}"),
+        )
     write_report(report, out, validation, write_json=write_json)
     hidden = f"{term.label(truth.system)}, {term.parameter_name(truth.system)} = {float(term.coefficient):.4g}"
-    return f"Hidden in the data: {hidden} (and base parameters that differ from the nominal model's).\n" + summary(report)
+    return f"Hidden in the data: {hidden} (and base parameters that differ from the nominal model's).\n" + summary(
+        report
+    )

@@ -27,34 +27,67 @@ def register(subparsers):
         ),
     )
     parser.add_argument("system", choices=_SYSTEMS, help="the system (its data columns are in the contract)")
-    parser.add_argument("data", nargs="+", metavar="DATA",
-                        help="training run(s): CSV, NPZ or MAT with t, the states and the inputs")
+    parser.add_argument(
+        "data", nargs="+", metavar="DATA", help="training run(s): CSV, NPZ or MAT with t, the states and the inputs"
+    )
     parser.add_argument("--validation", nargs="+", default=None, metavar="VAL", help="held-out run(s) (same columns)")
     add_data_options(parser)
     add_exclude_option(parser)
-    parser.add_argument("--mode", choices=("refit", "known"), default="refit",
-                        help="refit the nominal parameters on DATA (default) or trust them (known)")
-    parser.add_argument("--nominal", default=None, metavar="FILE.json",
-                        help="nominal parameters: a JSON with a 'parameters' object (e.g. the output of dynax identify)")
-    parser.add_argument("--refit", default=None, metavar="NAMES",
-                        help="comma-separated nominal parameters to refit (default all but the nominal friction, which "
-                             "the friction candidates test, e.g. theta1..theta5; for linear_axis mass and "
-                             "offset; for helicopter the Tempest weights, e.g. du/u,dv/1)")
-    parser.add_argument("--dt", type=float, default=None, metavar="SECONDS",
-                        help="resample the records to this interval first (default: as recorded)")
-    parser.add_argument("--reference-horizon", type=float, default=None, metavar="SECONDS",
-                        help="horizon at which the gain is judged (default: the predictability horizon of the "
-                             "nominal model on the training runs, see report.json 'horizon')")
+    parser.add_argument(
+        "--mode",
+        choices=("refit", "known"),
+        default="refit",
+        help="refit the nominal parameters on DATA (default) or trust them (known)",
+    )
+    parser.add_argument(
+        "--nominal",
+        default=None,
+        metavar="FILE.json",
+        help="nominal parameters: a JSON with a 'parameters' object (e.g. the output of dynax identify)",
+    )
+    parser.add_argument(
+        "--refit",
+        default=None,
+        metavar="NAMES",
+        help="comma-separated nominal parameters to refit (default all but the nominal friction, which "
+        "the friction candidates test, e.g. theta1..theta5; for linear_axis mass and "
+        "offset; for helicopter the Tempest weights, e.g. du/u,dv/1)",
+    )
+    parser.add_argument(
+        "--dt",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="resample the records to this interval first (default: as recorded)",
+    )
+    parser.add_argument(
+        "--reference-horizon",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="horizon at which the gain is judged (default: the predictability horizon of the "
+        "nominal model on the training runs, see report.json 'horizon')",
+    )
     parser.add_argument("--max-terms", type=int, default=3, help="at most this many causes (default 3)")
-    parser.add_argument("--velocities", choices=("auto", "measured"), default="auto",
-                        help="auto (default): where a joint velocity's measurement noise exceeds the bias of a local "
-                             "cubic fit of the positions, take the velocity from that fit (report.json data.velocities "
-                             "says which); measured: use the velocities as recorded")
-    parser.add_argument("--no-discovery", action="store_true",
-                        help="do not search for a term beyond the cause vocabulary when structure is left")
-    parser.add_argument("--no-cross-fit", action="store_true",
-                        help="test on the held-out runs alone; by default, with three or more training runs, each "
-                             "training run is also held out in turn (refitted on the others) and the test pools them")
+    parser.add_argument(
+        "--velocities",
+        choices=("auto", "measured"),
+        default="auto",
+        help="auto (default): where a joint velocity's measurement noise exceeds the bias of a local "
+        "cubic fit of the positions, take the velocity from that fit (report.json data.velocities "
+        "says which); measured: use the velocities as recorded",
+    )
+    parser.add_argument(
+        "--no-discovery",
+        action="store_true",
+        help="do not search for a term beyond the cause vocabulary when structure is left",
+    )
+    parser.add_argument(
+        "--no-cross-fit",
+        action="store_true",
+        help="test on the held-out runs alone; by default, with three or more training runs, each "
+        "training run is also held out in turn (refitted on the others) and the test pools them",
+    )
     parser.add_argument("--out", required=True, help="output directory")
     parser.set_defaults(run=run)
 
@@ -105,7 +138,9 @@ def run(args: argparse.Namespace) -> int:
         # Only what the diagnosis trains on: without --validation, the first part of each record.
         with warnings.catch_warnings():  # the records' faults were refused or printed by `load_records`
             warnings.simplefilter("ignore", DataWarning)
-            system, note = nominal_from_data(system, train if validation is not None else [holdout_split(t)[0] for t in train])
+            system, note = nominal_from_data(
+                system, train if validation is not None else [holdout_split(t)[0] for t in train]
+            )
         print(f"note: {note}", file=sys.stderr)
         cli_notes.append(note)
     if args.mode == "known":
@@ -116,10 +151,17 @@ def run(args: argparse.Namespace) -> int:
     with stage_log() as say, warnings.catch_warnings():  # the records' faults: refused or printed above
         warnings.simplefilter("ignore", DataWarning)
         report = diagnose(
-            system, train, validation, mode=mode, reference_horizon_s=args.reference_horizon,
-            max_terms=args.max_terms, system_name=args.system, discovery=not args.no_discovery,
+            system,
+            train,
+            validation,
+            mode=mode,
+            reference_horizon_s=args.reference_horizon,
+            max_terms=args.max_terms,
+            system_name=args.system,
+            discovery=not args.no_discovery,
             cross_fit=not args.no_cross_fit,
-            velocities=args.velocities, progress=say,
+            velocities=args.velocities,
+            progress=say,
         )
     report.notes.extend(cli_notes)
     held_out = validation if validation is not None else [holdout_split(t)[1] for t in train]
@@ -139,9 +181,11 @@ def _resampled(trajectory, dt: float):
 
     n = int((trajectory.duration + 1e-9 * dt) // dt) + 1
     if n < MIN_SAMPLES:
-        raise UsageError(f"--dt {dt:g} s leaves {n} sample(s) of the {trajectory.duration:.4g} s record "
-                         f"{trajectory.source}; at least {MIN_SAMPLES} are needed: give --dt at most "
-                         f"{trajectory.duration / (MIN_SAMPLES - 1):.4g} s (is the interval in seconds?)")
+        raise UsageError(
+            f"--dt {dt:g} s leaves {n} sample(s) of the {trajectory.duration:.4g} s record "
+            f"{trajectory.source}; at least {MIN_SAMPLES} are needed: give --dt at most "
+            f"{trajectory.duration / (MIN_SAMPLES - 1):.4g} s (is the interval in seconds?)"
+        )
     return resample(trajectory, dt)
 
 
@@ -166,12 +210,16 @@ def summary(report) -> str:
     unit = "m" if j["system"] in ("linear_axis", "helicopter", "quadrotor") else "rad"
     lines = [
         "What the simulation gets wrong: held-out position RMSE of the nominal model "
-        + ", ".join(f"{r:.3g} {unit} at {t:g} s" for t, r in zip(h, j["nominal"]["sim_error"]["rmse"]) if r is not None) + ".",
+        + ", ".join(f"{r:.3g} {unit} at {t:g} s" for t, r in zip(h, j["nominal"]["sim_error"]["rmse"]) if r is not None)
+        + ".",
     ]
     s = j["structure"]["nominal"]
     if s["significant"]:
-        lines.append(f"Its one-step residuals have structure ({max(s['r2'], 0):.0%} explained by "
-                     + ", ".join(f["feature"] for f in s["top_features"][:2]) + ").")
+        lines.append(
+            f"Its one-step residuals have structure ({max(s['r2'], 0):.0%} explained by "
+            + ", ".join(f["feature"] for f in s["top_features"][:2])
+            + ")."
+        )
     if "horizon" in j:
         lines.append(f"Reference horizon {ref:g} s: {j['horizon']['rule']}.")
     lines.append(f"Verdict: {j['verdict']}.")
@@ -179,16 +227,27 @@ def summary(report) -> str:
         lines.append(f"The test would have detected a gain of about {j['test']['detectable_gain']:.0%} at {ref:g} s.")
     for f in j["findings"]:
         if f["cause"] == "discovered":
-            lines.append(f"Discovered (beyond the vocabulary) at {f['where']}: {f['formula']}; gain {f['gain']:.0%}"
-                         + "".join(f"; {r}" for r in f["readings"]) + ".")
+            lines.append(
+                f"Discovered (beyond the vocabulary) at {f['where']}: {f['formula']}; gain {f['gain']:.0%}"
+                + "".join(f"; {r}" for r in f["readings"])
+                + "."
+            )
             continue
         components = "".join(f", {n} = {v:.4g}" for n, v in f.get("components", {}).items())
-        lines.append(f"Cause: {f['cause']} at {f['where']}, {f['parameter']} = {f['coefficient']:.4g} "
-                     f"(± {f['std_error']:.2g}{components}); gain {f['gain']:.0%}; look-alikes told apart: {f['confidence']}.")
+        lines.append(
+            f"Cause: {f['cause']} at {f['where']}, {f['parameter']} = {f['coefficient']:.4g} "
+            f"(± {f['std_error']:.2g}{components}); gain {f['gain']:.0%}; look-alikes told apart: {f['confidence']}."
+        )
     if j["findings"]:
-        lines.append(f"Gain of the extended model ({', '.join(j['extended']['terms'])}): "
-                     f"{j['gain']:.0%} less simulation error at {ref:g} s "
-                     f"({j['nominal']['sim_error']['rmse'][i]:.3g} -> {j['extended']['sim_error']['rmse'][i]:.3g} {unit}).")
+        lines.append(
+            f"Gain of the extended model ({', '.join(j['extended']['terms'])}): "
+            f"{j['gain']:.0%} less simulation error at {ref:g} s "
+            f"({j['nominal']['sim_error']['rmse'][i]:.3g} -> {j['extended']['sim_error']['rmse'][i]:.3g} {unit})."
+        )
     if j["not_identifiable"]:
-        lines.append("Not identifiable in this mode: " + ", ".join(f"{c['cause']}@{c['where']}" for c in j["not_identifiable"]) + ".")
+        lines.append(
+            "Not identifiable in this mode: "
+            + ", ".join(f"{c['cause']}@{c['where']}" for c in j["not_identifiable"])
+            + "."
+        )
     return "\n".join(lines)

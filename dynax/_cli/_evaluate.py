@@ -20,14 +20,25 @@ def register(subparsers):
         ),
     )
     parser.add_argument("model", help="model file written by `dynax fit helicopter` or `dynax fit quadrotor`")
-    parser.add_argument("data", nargs="+", help="CSV, CSV.GZ or NPZ file(s) with the contract's columns (helicopter: one)")
-    parser.add_argument("--horizons", default="0.1,0.5,1,2", help="helicopter: comma-separated horizons in seconds (default 0.1,0.5,1,2)")
-    parser.add_argument("--steps", default=None,
-                        help="quadrotor: comma-separated horizons in samples (default 1,10,50): MAE and RMSE per group "
-                             "(position m, velocity m/s, attitude rad, body rate rad/s) and the cumulative MAE over "
-                             "1..max, beside the constant-velocity baseline")
+    parser.add_argument(
+        "data", nargs="+", help="CSV, CSV.GZ or NPZ file(s) with the contract's columns (helicopter: one)"
+    )
+    parser.add_argument(
+        "--horizons",
+        default="0.1,0.5,1,2",
+        help="helicopter: comma-separated horizons in seconds (default 0.1,0.5,1,2)",
+    )
+    parser.add_argument(
+        "--steps",
+        default=None,
+        help="quadrotor: comma-separated horizons in samples (default 1,10,50): MAE and RMSE per group "
+        "(position m, velocity m/s, attitude rad, body rate rad/s) and the cumulative MAE over "
+        "1..max, beside the constant-velocity baseline",
+    )
     parser.add_argument("--metric", default="mae,rmse", help="quadrotor: mae, rmse or mae,rmse (default both)")
-    parser.add_argument("--stride", type=int, default=1, metavar="N", help="use every N-th start sample (default 1: every)")
+    parser.add_argument(
+        "--stride", type=int, default=1, metavar="N", help="use every N-th start sample (default 1: every)"
+    )
     add_data_options(parser)
     parser.add_argument("--out", required=True, help="output metrics file (JSON)")
     parser.set_defaults(run=run)
@@ -54,17 +65,24 @@ def check_model_file(obj: dict, path) -> None:
     if not isinstance(features, list) or not all(isinstance(f, str) for f in features):
         raise DataError("'features' must be a list of feature names", path=path)
     if kind == "linear" and tuple(features) != LINEAR_FEATURE_NAMES:
-        raise DataError(f"'model' is 'linear' but the features {features} are not the linear model's "
-                        f"{list(LINEAR_FEATURE_NAMES)}", path=path)
+        raise DataError(
+            f"'model' is 'linear' but the features {features} are not the linear model's {list(LINEAR_FEATURE_NAMES)}",
+            path=path,
+        )
     if kind == "acceleration" and not set(features) <= set(ACCELERATION_FEATURE_NAMES):
-        raise DataError(f"'model' is 'acceleration' but the features {sorted(set(features) - set(ACCELERATION_FEATURE_NAMES))} "
-                        "are not acceleration-model features", path=path)
+        raise DataError(
+            f"'model' is 'acceleration' but the features {sorted(set(features) - set(ACCELERATION_FEATURE_NAMES))} "
+            "are not acceleration-model features",
+            path=path,
+        )
     try:
         weights = np.asarray(obj.get("weights"), dtype=float)
     except (TypeError, ValueError):
         raise DataError("'weights' must be a 6 x n_features array of numbers", path=path) from None
     if weights.shape != (6, len(features)):
-        raise DataError(f"'weights' has shape {weights.shape}; 6 x {len(features)} (axes x features) expected", path=path)
+        raise DataError(
+            f"'weights' has shape {weights.shape}; 6 x {len(features)} (axes x features) expected", path=path
+        )
     bad = np.argwhere(~np.isfinite(weights))
     if bad.size:
         axis, j = bad[0]
@@ -72,8 +90,11 @@ def check_model_file(obj: dict, path) -> None:
     if kind == "acceleration" and "gravity" in obj:
         gravity = obj["gravity"]
         if isinstance(gravity, bool) or not isinstance(gravity, (int, float)) or not 0 < gravity < 1e3:
-            raise DataError(f"'gravity' is {gravity!r}: a physical gravity is a positive acceleration in m/s^2 "
-                            "(9.81 on Earth)", path=path, column="gravity")
+            raise DataError(
+                f"'gravity' is {gravity!r}: a physical gravity is a positive acceleration in m/s^2 (9.81 on Earth)",
+                path=path,
+                column="gravity",
+            )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -106,19 +127,25 @@ def run(args: argparse.Namespace) -> int:
     data = load_helicopter_data(args.data, mapping, scale, offset)
     n_needed = int(round(max(horizons) / data.dt)) + 1
     if len(data) < n_needed + 1:
-        raise DataError(f"has {len(data)} samples; the horizon {max(horizons)} s needs at least {n_needed + 1}",
-                        path=args.data)
+        raise DataError(
+            f"has {len(data)} samples; the horizon {max(horizons)} s needs at least {n_needed + 1}", path=args.data
+        )
     mse = prediction_error(system, data, horizons, stride=args.stride)
     diverged = [float(v) for v in mse.pop("diverged_fraction")]
     # A diverged rollout has no finite error: its horizon's mse is null, with the reason beside it.
-    metrics = {"horizons_s": horizons,
-               "mse": {name: [float(v) if math.isfinite(v) else None for v in map(float, values)]
-                       for name, values in mse.items()}}
+    metrics = {
+        "horizons_s": horizons,
+        "mse": {
+            name: [float(v) if math.isfinite(v) else None for v in map(float, values)] for name, values in mse.items()
+        },
+    }
     if any(diverged):
         metrics["diverged_fraction"] = diverged
         metrics["status"] = ["diverged" if d else "ok" for d in diverged]
-        print(f"note: {max(diverged):.1%} of the rollouts diverged; the mean squared error at those horizons is "
-              "infinite, written as null with status 'diverged'")
+        print(
+            f"note: {max(diverged):.1%} of the rollouts diverged; the mean squared error at those horizons is "
+            "infinite, written as null with status 'diverged'"
+        )
     write_json(out, metrics)
     print(f"helicopter model {args.model} on {args.data}: mean squared open-loop prediction error")
     print("  horizon [s]  " + "  ".join(f"{h:>10g}" for h in horizons))

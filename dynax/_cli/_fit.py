@@ -26,37 +26,73 @@ def register(subparsers):
         ),
     )
     parser.add_argument("system", choices=("helicopter", "quadrotor"), help="the vehicle")
-    parser.add_argument("data", nargs="+",
-                        help="CSV, CSV.GZ or NPZ file(s) with the contract's columns: helicopter t, x..r, u1..u4 (one "
-                             "file); quadrotor t, x..r, m1..m4 and optional vbat (one or more flights; ground "
-                             "segments and glitches are found, noted and left out)")
-    parser.add_argument("--model", choices=(*_MODELS, "nominal"), default=None,
-                        help="body model (default acceleration); quadrotor also nominal (the rigid body)")
-    parser.add_argument("--no-battery", action="store_true",
-                        help="quadrotor: do not scale the motor features by vbat (default: scaled when vbat is given)")
-    parser.add_argument("--criterion", choices=_CRITERIA, default="one-step",
-                        help="learning criterion (default one-step); frequency: helicopter linear model only")
-    parser.add_argument("--horizon", type=float, default=1.0, metavar="SECONDS",
-                        help="lagged and backprop: prediction horizon H (default 1 s)")
-    parser.add_argument("--features", choices=("tempest", "rich"), default="tempest",
-                        help="acceleration model: the Tempest features (default) or a richer set")
-    parser.add_argument("--stride", type=_stride, default="auto", metavar="N|auto",
-                        help="lagged and backprop: use every N-th start time. Each start costs one H-second "
-                             "rollout (and its gradient) per loss evaluation, so the fit's time grows with the "
-                             f"number of starts. Default auto: every start up to {AUTO_WINDOWS} starts, otherwise "
-                             f"the stride that keeps about {AUTO_WINDOWS} (every 10th on 60 s at 100 Hz with H = 1 s: "
-                             "windows 0.1 s apart overlap by 90 %%, and the loss over them is within 1 %% of the loss "
-                             "over every start); 1 uses every start (ten times the work on that record)")
-    parser.add_argument("--max-iterations", type=int, default=None, metavar="N",
-                        help="lagged: EM-free iterations (default 20); backprop: L-BFGS steps (default 100). Both "
-                             "also stop when an iteration lowers the loss by less than a relative 1e-4 (lagged) or "
-                             "1e-7 (backprop); a bar on stderr shows each iteration's loss. With all defaults, backprop on 60 s "
-                             "of aerobatic flight at 100 Hz stops after 57 steps, about one CPU-minute for the whole "
-                             "command")
+    parser.add_argument(
+        "data",
+        nargs="+",
+        help="CSV, CSV.GZ or NPZ file(s) with the contract's columns: helicopter t, x..r, u1..u4 (one "
+        "file); quadrotor t, x..r, m1..m4 and optional vbat (one or more flights; ground "
+        "segments and glitches are found, noted and left out)",
+    )
+    parser.add_argument(
+        "--model",
+        choices=(*_MODELS, "nominal"),
+        default=None,
+        help="body model (default acceleration); quadrotor also nominal (the rigid body)",
+    )
+    parser.add_argument(
+        "--no-battery",
+        action="store_true",
+        help="quadrotor: do not scale the motor features by vbat (default: scaled when vbat is given)",
+    )
+    parser.add_argument(
+        "--criterion",
+        choices=_CRITERIA,
+        default="one-step",
+        help="learning criterion (default one-step); frequency: helicopter linear model only",
+    )
+    parser.add_argument(
+        "--horizon",
+        type=float,
+        default=1.0,
+        metavar="SECONDS",
+        help="lagged and backprop: prediction horizon H (default 1 s)",
+    )
+    parser.add_argument(
+        "--features",
+        choices=("tempest", "rich"),
+        default="tempest",
+        help="acceleration model: the Tempest features (default) or a richer set",
+    )
+    parser.add_argument(
+        "--stride",
+        type=_stride,
+        default="auto",
+        metavar="N|auto",
+        help="lagged and backprop: use every N-th start time. Each start costs one H-second "
+        "rollout (and its gradient) per loss evaluation, so the fit's time grows with the "
+        f"number of starts. Default auto: every start up to {AUTO_WINDOWS} starts, otherwise "
+        f"the stride that keeps about {AUTO_WINDOWS} (every 10th on 60 s at 100 Hz with H = 1 s: "
+        "windows 0.1 s apart overlap by 90 %%, and the loss over them is within 1 %% of the loss "
+        "over every start); 1 uses every start (ten times the work on that record)",
+    )
+    parser.add_argument(
+        "--max-iterations",
+        type=int,
+        default=None,
+        metavar="N",
+        help="lagged: EM-free iterations (default 20); backprop: L-BFGS steps (default 100). Both "
+        "also stop when an iteration lowers the loss by less than a relative 1e-4 (lagged) or "
+        "1e-7 (backprop); a bar on stderr shows each iteration's loss. With all defaults, backprop on 60 s "
+        "of aerobatic flight at 100 Hz stops after 57 steps, about one CPU-minute for the whole "
+        "command",
+    )
     add_data_options(parser)
-    parser.add_argument("--exclude", default=None, metavar="T0:T1",
-                        help="cut a stretch of time [s] at the head or tail of the record before fitting (8.8: cuts "
-                             "from 8.8 s on)")
+    parser.add_argument(
+        "--exclude",
+        default=None,
+        metavar="T0:T1",
+        help="cut a stretch of time [s] at the head or tail of the record before fitting (8.8: cuts from 8.8 s on)",
+    )
     parser.add_argument("--out", required=True, help="output model file (JSON)")
     parser.set_defaults(run=run)
 
@@ -72,24 +108,27 @@ def load_helicopter_data(path, mapping=None, scale=None, offset=None, *, min_sam
     Gaps and near-duplicate time stamps are refused by the loader, so resampling only evens out
     jitter; it never interpolates across a missing stretch.
     """
-    import jax.numpy as jnp
-    import numpy as np
-
     import sys
     import warnings
+
+    import jax.numpy as jnp
+    import numpy as np
 
     from .._data import check_records, exclude_stretches, load_trajectory, parse_exclude, resample
 
     with warnings.catch_warnings():  # checked below, on what --exclude leaves
         warnings.simplefilter("ignore")
-        data = load_trajectory(path, "helicopter", mapping=mapping, scale=scale, offset=offset, min_samples=min_samples,
-                               check=False)
+        data = load_trajectory(
+            path, "helicopter", mapping=mapping, scale=scale, offset=offset, min_samples=min_samples, check=False
+        )
     spans = [(t0, t1) for _, t0, t1 in parse_exclude(exclude)]
     if spans:
         pieces = exclude_stretches(data, spans)
         if len(pieces) != 1:
-            raise UsageError(f"--exclude leaves {len(pieces)} pieces of {path}; a vehicle model is fitted to one "
-                             "contiguous record: cut only its head or tail, or split the file")
+            raise UsageError(
+                f"--exclude leaves {len(pieces)} pieces of {path}; a vehicle model is fitted to one "
+                "contiguous record: cut only its head or tail, or split the file"
+            )
         data = pieces[0]
         if len(data) < min_samples:
             raise DataError(f"has {len(data)} samples after --exclude; at least {min_samples} are needed", path=path)
@@ -98,9 +137,14 @@ def load_helicopter_data(path, mapping=None, scale=None, offset=None, *, min_sam
     bad = np.flatnonzero(np.abs(norms - 1) > QUATERNION_TOLERANCE)
     if bad.size:
         k = int(bad[0])
-        raise DataError(f"the quaternion (qw, qx, qy, qz) has norm {norms[k]:.6g}, not 1 (tolerance "
-                        f"{QUATERNION_TOLERANCE:g}; {bad.size} such rows): the contract's attitude is a unit "
-                        "quaternion", path=path, column=(mapping or {}).get("qw", "qw"), row=k + 1)
+        raise DataError(
+            f"the quaternion (qw, qx, qy, qz) has norm {norms[k]:.6g}, not 1 (tolerance "
+            f"{QUATERNION_TOLERANCE:g}; {bad.size} such rows): the contract's attitude is a unit "
+            "quaternion",
+            path=path,
+            column=(mapping or {}).get("qw", "qw"),
+            row=k + 1,
+        )
     check = check_records([data])
     check.raise_refusals()
     for finding in check.warnings:
@@ -142,8 +186,16 @@ def run(args: argparse.Namespace) -> int:
 
     jax.config.update("jax_enable_x64", True)  # learning in float64; the library leaves config alone
 
-    from .._identify._vehicle import Backprop, FrequencyDomain, Lagged, OneStep
-    from .._identify._vehicle import auto_stride, fit_vehicle, initial_helicopter, model_to_json
+    from .._identify._vehicle import (
+        auto_stride,
+        Backprop,
+        fit_vehicle,
+        FrequencyDomain,
+        initial_helicopter,
+        Lagged,
+        model_to_json,
+        OneStep,
+    )
 
     if args.system == "quadrotor":
         from ._quadrotor import run_fit
@@ -170,13 +222,21 @@ def run(args: argparse.Namespace) -> int:
     system = initial_helicopter(args.model, args.features)
     n_needed, why = required_samples(system, args.criterion, args.horizon, data.dt)
     if len(data) < n_needed:
-        raise DataError(f"has {len(data)} samples; the {args.model} model with the {args.criterion} criterion needs "
-                        f"at least {n_needed} ({why})", path=args.data)
+        raise DataError(
+            f"has {len(data)} samples; the {args.model} model with the {args.criterion} criterion needs "
+            f"at least {n_needed} ({why})",
+            path=args.data,
+        )
     stride, n_steps = args.stride, max(int(round(args.horizon / data.dt)), 1)
     if stride == "auto":
         stride = auto_stride(len(data), n_steps, AUTO_WINDOWS)
-    limit = {} if args.max_iterations is None else {"lagged": {"max_iterations": args.max_iterations},
-                                                    "backprop": {"max_steps": args.max_iterations}}.get(args.criterion, {})
+    limit = (
+        {}
+        if args.max_iterations is None
+        else {"lagged": {"max_iterations": args.max_iterations}, "backprop": {"max_steps": args.max_iterations}}.get(
+            args.criterion, {}
+        )
+    )
     criterion = {
         "one-step": lambda: OneStep(),
         "frequency": lambda: FrequencyDomain(),
@@ -184,14 +244,19 @@ def run(args: argparse.Namespace) -> int:
         "backprop": lambda: Backprop(horizon=args.horizon, stride=stride, **limit),
     }[args.criterion]()
     if args.criterion in ("lagged", "backprop") and stride > 1:
-        print(f"note: one start time in {stride}, {-(-(len(data) - n_steps) // stride)} windows of {args.horizon:g} s "
-              "(--stride 1 for every start)")
+        print(
+            f"note: one start time in {stride}, {-(-(len(data) - n_steps) // stride)} windows of {args.horizon:g} s "
+            "(--stride 1 for every start)"
+        )
     fit = fit_vehicle(system, data, criterion)  # a bar per iteration with the loss on stderr (see --quiet)
     horizon = args.horizon if args.criterion in ("lagged", "backprop") else None
     weights = np.asarray(fit.system.body_model.weights)
     if not (np.all(np.isfinite(weights)) and np.isfinite(fit.loss)):
-        print(f"dynax fit: error: the fit failed numerically (loss {fit.loss}, {np.sum(~np.isfinite(weights))} "
-              "non-finite weights); nothing written", file=sys.stderr)
+        print(
+            f"dynax fit: error: the fit failed numerically (loss {fit.loss}, {np.sum(~np.isfinite(weights))} "
+            "non-finite weights); nothing written",
+            file=sys.stderr,
+        )
         return 1
     write_json(out, model_to_json(fit, horizon_s=horizon))
     print(f"helicopter, {args.model} model, {args.criterion} criterion, {fit.n_samples} samples: loss {fit.loss:.6g}")

@@ -15,8 +15,12 @@ from ._common import add_data_options, add_exclude_option, data_options, load_re
 from ._output import write_json
 
 _SYSTEMS = ("acrobot", "double_pendulum", "linear_axis", "helicopter")
-_LEAST_SQUARES = {"acrobot": ("energy", "power", "dynamic"), "double_pendulum": ("energy", "power", "dynamic"),
-                  "linear_axis": ("dynamic",), "helicopter": ()}
+_LEAST_SQUARES = {
+    "acrobot": ("energy", "power", "dynamic"),
+    "double_pendulum": ("energy", "power", "dynamic"),
+    "linear_axis": ("dynamic",),
+    "helicopter": (),
+}
 
 
 def register(subparsers):
@@ -31,38 +35,87 @@ def register(subparsers):
     )
     parser.add_argument("system", choices=_SYSTEMS, help="the system (its data columns are in the contract)")
     parser.add_argument("data", nargs="+", help="CSV, NPZ or MAT file(s) with t, the states and the inputs")
-    parser.add_argument("--validation", nargs="+", default=None, metavar="DATA",
-                        help="held-out file(s) for the open-loop validation (default: the last 20 %% of each DATA "
-                             "file is held out and not fitted)")
-    parser.add_argument("--holdout", type=float, default=None, metavar="FRACTION",
-                        help="fraction of each DATA file held out when no --validation is given (default 0.2; "
-                             "0 fits everything and reports no validation)")
-    parser.add_argument("--method", choices=("energy", "power", "dynamic", "simulation"), default="dynamic",
-                        help="identification model (default dynamic)")
-    parser.add_argument("--friction", choices=("viscous", "coulomb"), default=None,
-                        help="friction model (default: coulomb for linear_axis, viscous otherwise)")
+    parser.add_argument(
+        "--validation",
+        nargs="+",
+        default=None,
+        metavar="DATA",
+        help="held-out file(s) for the open-loop validation (default: the last 20 %% of each DATA "
+        "file is held out and not fitted)",
+    )
+    parser.add_argument(
+        "--holdout",
+        type=float,
+        default=None,
+        metavar="FRACTION",
+        help="fraction of each DATA file held out when no --validation is given (default 0.2; "
+        "0 fits everything and reports no validation)",
+    )
+    parser.add_argument(
+        "--method",
+        choices=("energy", "power", "dynamic", "simulation"),
+        default="dynamic",
+        help="identification model (default dynamic)",
+    )
+    parser.add_argument(
+        "--friction",
+        choices=("viscous", "coulomb"),
+        default=None,
+        help="friction model (default: coulomb for linear_axis, viscous otherwise)",
+    )
     add_data_options(parser)
     add_exclude_option(parser)
-    parser.add_argument("--lowpass", default="auto", metavar="HZ|auto|none",
-                        help="zero-phase Butterworth cut-off [Hz] applied before differentiating (dynamic), to the "
-                             "equations (power) or to the states (energy); dynamic default 'auto' (the velocities' "
-                             "signal band, from their spectra), power and energy default none")
-    parser.add_argument("--order", default="auto", metavar="N|auto",
-                        help="dynamic model: order of one filter pass (default auto)")
-    parser.add_argument("--decimate", default="auto", metavar="N|auto",
-                        help="parallel decimation of the equations (dynamic default auto, power default 1)")
-    parser.add_argument("--trim", default="auto", metavar="N|auto",
-                        help="samples dropped at each end (dynamic default auto, power default 1)")
-    parser.add_argument("--consistency", choices=("constrain", "check", "off"), default="constrain",
-                        help="physical consistency: fit over the consistent set when needed (default), only check "
-                             "and warn, or off")
-    parser.add_argument("--refine", choices=("auto", "yes", "no"), default="auto",
-                        help="output-error refinement after least squares (default auto: two-link arms on noisy data)")
-    parser.add_argument("--inputs", choices=("held", "sampled"), default="held",
-                        help="dynamic model: inputs as a zero-order hold (default) or as sampled measurements")
-    parser.add_argument("--window", type=int, default=10, metavar="N", help="energy model: samples per window (default 10)")
-    parser.add_argument("--segment", type=float, default=1.0, metavar="SECONDS",
-                        help="simulation method: multiple-shooting segment length (default 1 s)")
+    parser.add_argument(
+        "--lowpass",
+        default="auto",
+        metavar="HZ|auto|none",
+        help="zero-phase Butterworth cut-off [Hz] applied before differentiating (dynamic), to the "
+        "equations (power) or to the states (energy); dynamic default 'auto' (the velocities' "
+        "signal band, from their spectra), power and energy default none",
+    )
+    parser.add_argument(
+        "--order", default="auto", metavar="N|auto", help="dynamic model: order of one filter pass (default auto)"
+    )
+    parser.add_argument(
+        "--decimate",
+        default="auto",
+        metavar="N|auto",
+        help="parallel decimation of the equations (dynamic default auto, power default 1)",
+    )
+    parser.add_argument(
+        "--trim",
+        default="auto",
+        metavar="N|auto",
+        help="samples dropped at each end (dynamic default auto, power default 1)",
+    )
+    parser.add_argument(
+        "--consistency",
+        choices=("constrain", "check", "off"),
+        default="constrain",
+        help="physical consistency: fit over the consistent set when needed (default), only check and warn, or off",
+    )
+    parser.add_argument(
+        "--refine",
+        choices=("auto", "yes", "no"),
+        default="auto",
+        help="output-error refinement after least squares (default auto: two-link arms on noisy data)",
+    )
+    parser.add_argument(
+        "--inputs",
+        choices=("held", "sampled"),
+        default="held",
+        help="dynamic model: inputs as a zero-order hold (default) or as sampled measurements",
+    )
+    parser.add_argument(
+        "--window", type=int, default=10, metavar="N", help="energy model: samples per window (default 10)"
+    )
+    parser.add_argument(
+        "--segment",
+        type=float,
+        default=1.0,
+        metavar="SECONDS",
+        help="simulation method: multiple-shooting segment length (default 1 s)",
+    )
     parser.add_argument("--out", required=True, help="output JSON file")
     parser.set_defaults(run=run)
 
@@ -98,8 +151,12 @@ def _method(args):
         return Dynamic(lowpass_hz=lowpass, lowpass_order=order, trim=trim, decimate=decimate, inputs=args.inputs)
     plain = lambda value, default: default if value == "auto" else value  # noqa: E731
     if args.method == "power":
-        return Power(lowpass_hz=plain(lowpass, None), lowpass_order=plain(order, 4), trim=plain(trim, 1),
-                     decimate=plain(decimate, 1))
+        return Power(
+            lowpass_hz=plain(lowpass, None),
+            lowpass_order=plain(order, 4),
+            trim=plain(trim, 1),
+            decimate=plain(decimate, 1),
+        )
     if args.method == "energy":
         return Energy(window=args.window, lowpass_hz=plain(lowpass, None), lowpass_order=plain(order, 4))
     return SimulationFit(segment_s=args.segment)
@@ -147,8 +204,16 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--refine yes is for acrobot and double_pendulum; use --method simulation for {args.system}")
     with warnings.catch_warnings():  # the records' faults were refused or printed by `load_records`
         warnings.simplefilter("ignore", DataWarning)
-        result = identify(_system(args.system), data, method, friction=friction, consistency=args.consistency,
-                          refine=refine, validation=validation, holdout="auto" if args.holdout is None else args.holdout)
+        result = identify(
+            _system(args.system),
+            data,
+            method,
+            friction=friction,
+            consistency=args.consistency,
+            refine=refine,
+            validation=validation,
+            holdout="auto" if args.holdout is None else args.holdout,
+        )
     report = result.to_json()
     if args.system == "helicopter":
         report.pop("friction")
@@ -160,14 +225,19 @@ def run(args: argparse.Namespace) -> int:
     between = report.get("record_std_errors") or {}
     for name, value in report["parameters"].items():
         std = report["std_errors"].get(name)
-        print(f"  {name:>8s} = {value:.6g}" + (f" +- {std:.2g}" if std is not None else "")
-              + (f" (leaving one record out: +- {between[name]:.2g})" if name in between else ""))
+        print(
+            f"  {name:>8s} = {value:.6g}"
+            + (f" +- {std:.2g}" if std is not None else "")
+            + (f" (leaving one record out: +- {between[name]:.2g})" if name in between else "")
+        )
     least_squares, output_error = result.stage(StageKind.LEAST_SQUARES), result.stage(StageKind.OUTPUT_ERROR)
     serial = None if least_squares is None else least_squares.serial_correlation
     if serial and output_error is None:
         ratios = serial["inflation"].values()
-        print(f"  standard errors robust to the equations' correlation in time (over {serial['bandwidth_steps']:.0f} "
-              f"time steps): {min(ratios):.2g} to {max(ratios):.2g} times those counting every equation as independent")
+        print(
+            f"  standard errors robust to the equations' correlation in time (over {serial['bandwidth_steps']:.0f} "
+            f"time steps): {min(ratios):.2g} to {max(ratios):.2g} times those counting every equation as independent"
+        )
     for settings in result.settings:
         if settings.get("chosen_from_data"):
             print(f"  settings ({settings.get('record') or 'record'}): {settings['reason']}")
@@ -177,54 +247,70 @@ def run(args: argparse.Namespace) -> int:
             print("  physically INCONSISTENT: " + "; ".join(consistency.violated))
         enforced = () if least_squares is None else least_squares.consistency.active
         if enforced:
-            print("  consistency constraint active (the plain least-squares estimate broke: " + "; ".join(enforced) + ")")
+            print(
+                "  consistency constraint active (the plain least-squares estimate broke: " + "; ".join(enforced) + ")"
+            )
         elif not consistency.violated:
             print("  physically consistent")
     if result.poorly_determined:
         cells = describe_poorly_determined(result.poorly_determined)
-        print(f"  WARNING: the data determine these parameters poorly (relative standard error): {cells}; "
-              "record more motion in every joint before trusting them, or look for what the model misses")
+        print(
+            f"  WARNING: the data determine these parameters poorly (relative standard error): {cells}; "
+            "record more motion in every joint before trusting them, or look for what the model misses"
+        )
     if result.jointly_determined:
         cells = "; ".join(jointly_determined_cell(n, j, report) for n, j in result.jointly_determined.items())
-        print("  NOTE: determined mostly jointly (the standard error over 10 times what it would be with every other "
-              "parameter known: most of the error is shared, and a combination of the correlated parameters is known "
-              f"better than each alone): {cells}")
+        print(
+            "  NOTE: determined mostly jointly (the standard error over 10 times what it would be with every other "
+            "parameter known: most of the error is shared, and a combination of the correlated parameters is known "
+            f"better than each alone): {cells}"
+        )
     if output_error is not None and result.record_std_errors is None and len(data) < 3:
         own = args.validation is None  # without --validation, the held-out part is the records' own tail
-        print(f"  NOTE: fitted on {len(data)} record{'s' if len(data) > 1 else ''}: the standard errors "
-              + ("and the validation come" if own else "come")
-              + " from within the records, and cannot show what changes from one recording to the next "
-              "(friction, sensor offsets, motion a record does not contain). Give three records or more for errors "
-              "between records" + (", and a record of its own to --validation" if own else ""))
+        print(
+            f"  NOTE: fitted on {len(data)} record{'s' if len(data) > 1 else ''}: the standard errors "
+            + ("and the validation come" if own else "come")
+            + " from within the records, and cannot show what changes from one recording to the next "
+            "(friction, sensor offsets, motion a record does not contain). Give three records or more for errors "
+            "between records" + (", and a record of its own to --validation" if own else "")
+        )
     disagree = None if output_error is None else output_error.records_disagree
     if disagree:
         cells = ", ".join(f"{n} ({r:.1f}x)" for n, r in disagree.items())
-        print(f"  NOTE: the records disagree more than their noise explains: leaving one record out moves {cells} "
-              "by that many times their standard error from within the records; read the leave-one-record-out "
-              "errors as their uncertainty")
+        print(
+            f"  NOTE: the records disagree more than their noise explains: leaving one record out moves {cells} "
+            "by that many times their standard error from within the records; read the leave-one-record-out "
+            "errors as their uncertainty"
+        )
     for check in (result.record_offsets, result.record_friction):
         if check is not None and check.differ():
             print("  " + check.note())
     fitted_offsets = None if least_squares is None else least_squares.offsets
     if fitted_offsets:
-        cells = "; ".join(f"{record} " + ", ".join(f"{joint} {value:+.3g}" for joint, value in zip(fitted_offsets["joints"], row))
-                          for record, row in zip(fitted_offsets["records"], fitted_offsets["values"]))
+        cells = "; ".join(
+            f"{record} " + ", ".join(f"{joint} {value:+.3g}" for joint, value in zip(fitted_offsets["joints"], row))
+            for record, row in zip(fitted_offsets["records"], fitted_offsets["values"])
+        )
         print(f"  force offsets fitted per record (not part of the model): {cells}")
     if result.angle_zeros is not None:
         print("  " + result.angle_zeros.note())
     timing = None if output_error is None else output_error.solution.statistics.input_latency_s
     if timing is not None:
         latency = 1e3 * timing
-        print(f"  input timing (fitted in the refinement): the inputs act {abs(latency):.2f} ms "
-              f"{'after' if latency >= 0 else 'before'} their samples (0 ms: sampled without delay; "
-              "half the record's interval after: held as recorded)")
+        print(
+            f"  input timing (fitted in the refinement): the inputs act {abs(latency):.2f} ms "
+            f"{'after' if latency >= 0 else 'before'} their samples (0 ms: sampled without delay; "
+            "half the record's interval after: held as recorded)"
+        )
     for stage in result.stages:
         held = None if stage.validation is None else stage.validation.to_json()
         if held:
             cells = ", ".join(f"{h:g} s: {r:.4g}" for h, r in zip(held["horizons_s"], held["rmse"]))
             medians = ", ".join(f"{m:.4g}" for m in held.get("median", ()))
-            print(f"  open-loop RMSE on {held['source']} ({stage.kind}): {cells}"
-                  + (f" (median window: {medians})" if medians else ""))
+            print(
+                f"  open-loop RMSE on {held['source']} ({stage.kind}): {cells}"
+                + (f" (median window: {medians})" if medians else "")
+            )
             if len(held["per_record"]) > 1:
                 for record, rmse in held["per_record"].items():
                     print(f"    {record}: " + ", ".join(f"{h:g} s: {r:.4g}" for h, r in zip(held["horizons_s"], rmse)))
@@ -233,8 +319,10 @@ def run(args: argparse.Namespace) -> int:
         print("  NOTE: " + concentrated)
     worse = _refinement_validates_worse(least_squares, output_error)
     if worse:
-        print(f"  NOTE: the least-squares stage predicts the {worse} better than the refined model at every "
-              "horizon; the refined model is the one written (`--refine no` returns the least-squares model)")
+        print(
+            f"  NOTE: the least-squares stage predicts the {worse} better than the refined model at every "
+            "horizon; the refined model is the one written (`--refine no` returns the least-squares model)"
+        )
     if result.validation is None:
         print("  no held-out validation (nothing held out)")
     print(f"wrote {out} in {time.perf_counter() - start:.1f} s")

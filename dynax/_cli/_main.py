@@ -34,19 +34,24 @@ class _Parser(argparse.ArgumentParser):
 def _add_output_options(parser: argparse.ArgumentParser, *, default) -> None:
     """`--quiet` / `--progress`, accepted before and after the sub-command."""
     group = parser.add_mutually_exclusive_group()
-    group.add_argument("-q", "--quiet", action="store_true", default=default,
-                       help="no progress bars")
-    group.add_argument("--progress", action="store_true", default=default,
-                       help="show progress bars even when stderr is not a terminal")
-    parser.add_argument("--no-cache", action="store_true", default=default,
-                        help="do not use the compilation cache (compiled code kept between runs in "
-                             "$XDG_CACHE_HOME/dynax/jax; DYNAX_NO_CACHE=1 does the same)")
+    group.add_argument("-q", "--quiet", action="store_true", default=default, help="no progress bars")
+    group.add_argument(
+        "--progress", action="store_true", default=default, help="show progress bars even when stderr is not a terminal"
+    )
+    parser.add_argument(
+        "--no-cache",
+        action="store_true",
+        default=default,
+        help="do not use the compilation cache (compiled code kept between runs in "
+        "$XDG_CACHE_HOME/dynax/jax; DYNAX_NO_CACHE=1 does the same)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
     summary, _, details = __doc__.partition("\n\n")
-    parser = _Parser(prog="dynax", description=f"{summary}\n\n{details}",
-                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = _Parser(
+        prog="dynax", description=f"{summary}\n\n{details}", formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--version", action="version", version=f"dynax {__version__}")
     _add_output_options(parser, default=False)
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)

@@ -53,8 +53,10 @@ def check_nominal(system, path) -> None:
     if violated:
         hint = ""
         if any(s.startswith("gravity") for s in violated):
-            hint = ("; negative gravity terms are what a model of angles counted from upright gives: the contract's "
-                    "angles are 0 hanging down (read such a rig's data with --offset q1=3.141593)")
+            hint = (
+                "; negative gravity terms are what a model of angles counted from upright gives: the contract's "
+                "angles are 0 hanging down (read such a rig's data with --offset q1=3.141593)"
+            )
         raise DataError("the nominal model is physically impossible: " + "; ".join(violated) + hint, path=path)
 
 
@@ -74,8 +76,10 @@ def split_term_coefficients(system_name: str, parameters: dict) -> tuple[dict, s
     if not aside:
         return parameters, None
     listed = ", ".join(f"{k} = {v:.4g} ({terms[k].cause} at {terms[k].where(system)})" for k, v in aside.items())
-    note = (f"--nominal gave {listed}; the nominal model has no such term, so the value was set aside and the "
-            f"candidates of that cause test it from zero (the diagnosis may name it again).")
+    note = (
+        f"--nominal gave {listed}; the nominal model has no such term, so the value was set aside and the "
+        f"candidates of that cause test it from zero (the diagnosis may name it again)."
+    )
     return {k: v for k, v in parameters.items() if k not in aside}, note
 
 
@@ -108,7 +112,10 @@ def nominal_from_data(system, train) -> tuple[object, str]:
             warnings.simplefilter("ignore", PoorlyDeterminedWarning)
             identified = identify(system, train, Dynamic(), refine=False, holdout=0)
     except DataError as e:  # too little excitation to tell: keep the default, and say so
-        return system, f"No --nominal: the default {type(system).__name__} parameters (least squares could not check them: {e})."
+        return (
+            system,
+            f"No --nominal: the default {type(system).__name__} parameters (least squares could not check them: {e}).",
+        )
     estimate = identified.parameters
     kinds = system.base_parameter_kinds()
     friction = friction_parameter_names(system)
@@ -118,19 +125,26 @@ def nominal_from_data(system, train) -> tuple[object, str]:
     far = {n: r for n, r in ratios.items() if not 1 / OTHER_MACHINE_FACTOR <= r <= OTHER_MACHINE_FACTOR}
     listed = ", ".join(f"{n} {estimate[n]:.4g} (default {default[n]:.4g})" for n in size)
     if not far:
-        return system, (f"No --nominal: the default {type(system).__name__} parameters, which least squares on the "
-                        f"training runs confirms within a factor {OTHER_MACHINE_FACTOR:g} ({listed}).")
+        return system, (
+            f"No --nominal: the default {type(system).__name__} parameters, which least squares on the "
+            f"training runs confirms within a factor {OTHER_MACHINE_FACTOR:g} ({listed})."
+        )
     values = {n: jnp.asarray(v) for n, v in estimate.items() if n in kinds and n not in friction}
     values.update({n: jnp.zeros_like(jnp.asarray(getattr(system, n))) for n in friction})
     nominal = system.with_base_parameters(values)
     worst = max(far, key=lambda n: abs(math.log(far[n])))
-    note = (f"No --nominal, and the training runs are not the default {type(system).__name__} "
-            f"(least squares: {listed}; {worst} is {far[worst]:.3g} times the default): the nominal model is "
-            "the rigid body identified from the training runs by least squares, with zero friction, which "
-            "the friction candidates test. Pass --nominal to diagnose against a model of your own.")
+    note = (
+        f"No --nominal, and the training runs are not the default {type(system).__name__} "
+        f"(least squares: {listed}; {worst} is {far[worst]:.3g} times the default): the nominal model is "
+        "the rigid body identified from the training runs by least squares, with zero friction, which "
+        "the friction candidates test. Pass --nominal to diagnose against a model of your own."
+    )
     loose = poorly_determined(identified.names, identified.estimate, identified.std_errors, size, threshold=LOOSE)
     if loose:
-        note += (" Least squares determines " + ", ".join(f"{n} only to ±{r:.0%}" for n, r in loose.items())
-                 + f": the training runs excite {'them' if len(loose) > 1 else 'it'} little, and the nominal model "
-                 "inherits that (train on runs that move every joint, or pass --nominal).")
+        note += (
+            " Least squares determines "
+            + ", ".join(f"{n} only to ±{r:.0%}" for n, r in loose.items())
+            + f": the training runs excite {'them' if len(loose) > 1 else 'it'} little, and the nominal model "
+            "inherits that (train on runs that move every joint, or pass --nominal)."
+        )
     return nominal, note

@@ -57,8 +57,10 @@ def write_json(path, obj) -> None:
         if isinstance(value, dict):
             value["non_finite"] = non_finite
         where = ", ".join(f"{k} ({v})" for k, v in list(non_finite.items())[:5])
-        print(f"warning: {path}: non-finite values written as null at {where}"
-              + (" ..." if len(non_finite) > 5 else ""), file=sys.stderr)
+        print(
+            f"warning: {path}: non-finite values written as null at {where}" + (" ..." if len(non_finite) > 5 else ""),
+            file=sys.stderr,
+        )
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:

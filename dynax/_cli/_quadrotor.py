@@ -22,12 +22,20 @@ def load_flights(paths, mapping, scale, offset, *, min_samples: int):
             print(f"note: {path}: {line}")
         kept = usable_segments(trajectory, found, min_samples)
         if not kept:
-            raise DataError(f"has no run of flight of {min_samples} samples or more between its ground segments "
-                            "and glitches", path=path)
+            raise DataError(
+                f"has no run of flight of {min_samples} samples or more between its ground segments and glitches",
+                path=path,
+            )
         runs += kept
-        notes.append({"file": str(path), "ground_s": [list(g) for g in found.ground],
-                      "glitches": [g.describe() for g in found.glitches],
-                      "usable_samples": int(found.usable.sum()), "samples": len(trajectory)})
+        notes.append(
+            {
+                "file": str(path),
+                "ground_s": [list(g) for g in found.ground],
+                "glitches": [g.describe() for g in found.glitches],
+                "usable_samples": int(found.usable.sum()),
+                "samples": len(trajectory),
+            }
+        )
     return runs, notes
 
 
@@ -45,8 +53,10 @@ def run_fit(args) -> int:
     if model not in QUADROTOR_MODELS:
         raise UsageError(f"--model {model} is not a quadrotor model; expected one of {list(QUADROTOR_MODELS)}")
     if args.criterion == "frequency":
-        raise UsageError("--criterion frequency identifies the helicopter's linear model only; for a quadrotor use "
-                         "one-step, lagged or backprop")
+        raise UsageError(
+            "--criterion frequency identifies the helicopter's linear model only; for a quadrotor use "
+            "one-step, lagged or backprop"
+        )
     if not (math.isfinite(args.horizon) and args.horizon > 0):
         raise UsageError(f"--horizon must be a positive number of seconds, got {args.horizon}")
     if args.stride != "auto" and args.stride < 1:
@@ -66,8 +76,13 @@ def run_fit(args) -> int:
         from ._fit import AUTO_WINDOWS
 
         stride = auto_stride(sum(len(r) for r in runs), n_steps, AUTO_WINDOWS)
-    limit = {} if args.max_iterations is None else {"lagged": {"max_iterations": args.max_iterations},
-                                                    "backprop": {"max_steps": args.max_iterations}}.get(args.criterion, {})
+    limit = (
+        {}
+        if args.max_iterations is None
+        else {"lagged": {"max_iterations": args.max_iterations}, "backprop": {"max_steps": args.max_iterations}}.get(
+            args.criterion, {}
+        )
+    )
     criterion = {
         "one-step": lambda: OneStep(),
         "lagged": lambda: Lagged(horizon=args.horizon, stride=stride, **limit),
@@ -77,15 +92,30 @@ def run_fit(args) -> int:
     weights = np.asarray(solution.model.body_model.weights)
     loss = float(solution.loss)
     if not (np.all(np.isfinite(weights)) and math.isfinite(loss)):
-        print(f"dynax fit: error: the fit failed numerically (loss {loss}, {int(np.sum(~np.isfinite(weights)))} "
-              "non-finite weights); nothing written", file=__import__("sys").stderr)
+        print(
+            f"dynax fit: error: the fit failed numerically (loss {loss}, {int(np.sum(~np.isfinite(weights)))} "
+            "non-finite weights); nothing written",
+            file=__import__("sys").stderr,
+        )
         return 1
     horizon = args.horizon if args.criterion in ("lagged", "backprop") else None
     n_samples = sum(len(r) for r in runs)
-    write_json(out, quadrotor_to_json(solution.model, family=model, criterion=args.criterion, horizon_s=horizon,
-                                      loss=loss, n_samples=n_samples, data=notes))
-    print(f"quadrotor, {model} model, {args.criterion} criterion, {n_samples} samples in {len(runs)} runs of flight: "
-          f"loss {loss:.6g}")
+    write_json(
+        out,
+        quadrotor_to_json(
+            solution.model,
+            family=model,
+            criterion=args.criterion,
+            horizon_s=horizon,
+            loss=loss,
+            n_samples=n_samples,
+            data=notes,
+        ),
+    )
+    print(
+        f"quadrotor, {model} model, {args.criterion} criterion, {n_samples} samples in {len(runs)} runs of flight: "
+        f"loss {loss:.6g}"
+    )
     std = solution.standard_errors()
     for name, value in solution.estimates().items():
         e = std.get(name, float("nan"))
@@ -124,7 +154,7 @@ def _scores(error, metrics):
 def run_evaluate(args, system) -> int:
     """The quadrotor branch of `dynax evaluate`: flight scores per group beside constant velocity."""
     from .._model._quadrotor import ConstantVelocity
-    from .._predict import FLIGHT_UNITS, flight_error
+    from .._predict import flight_error, FLIGHT_UNITS
 
     steps = parse_steps(args.steps or "1,10,50")
     metrics = parse_metrics(args.metric)
@@ -133,13 +163,20 @@ def run_evaluate(args, system) -> int:
     start = time.perf_counter()
     runs, notes = load_flights(args.data, mapping, scale, offset, min_samples=max(steps) + 2)
     if system.uses_battery and "vbat" not in runs[0].input_names:
-        raise DataError("has no vbat column, which the model's features use (map it: --map vbat=COLUMN)",
-                        path=args.data[0])
+        raise DataError(
+            "has no vbat column, which the model's features use (map it: --map vbat=COLUMN)", path=args.data[0]
+        )
     model_error = flight_error(system, runs, steps)
     baseline = flight_error(ConstantVelocity(), runs, steps)
-    result = {"steps": list(steps), "dt_s": model_error.dt, "horizons_s": [s * model_error.dt for s in steps],
-              "units": FLIGHT_UNITS, "model": _scores(model_error, metrics),
-              "constant_velocity": _scores(baseline, metrics), "data": notes}
+    result = {
+        "steps": list(steps),
+        "dt_s": model_error.dt,
+        "horizons_s": [s * model_error.dt for s in steps],
+        "units": FLIGHT_UNITS,
+        "model": _scores(model_error, metrics),
+        "constant_velocity": _scores(baseline, metrics),
+        "data": notes,
+    }
     write_json(out, result)
     print(f"quadrotor model {args.model} on {len(args.data)} file(s), {model_error.n_starts} starts: open-loop error")
     print("  " + " " * 24 + "  ".join(f"h={s:>4d}" for s in steps) + "   cum MAE")
@@ -164,7 +201,7 @@ def run_diagnose(args) -> int:
 
     from .._data import DataWarning
     from .._diagnose import diagnose, Known, Refit, write_report
-    from .._diagnose._quadrotor import body_frame_records, QUADROTOR_HORIZONS_S, quadrotor_flight_errors
+    from .._diagnose._quadrotor import body_frame_records, quadrotor_flight_errors, QUADROTOR_HORIZONS_S
     from .._diagnose._records import holdout_split
     from .._identify._vehicle._quadrotor import quadrotor_from_json
     from .._model._quadrotor import initial_quadrotor
@@ -172,20 +209,25 @@ def run_diagnose(args) -> int:
     from ._output import staged_directory
 
     if args.dt is not None:
-        raise UsageError("--dt does not apply to quadrotor flights: dynax.load_flight resamples each log to its "
-                         "median interval")
+        raise UsageError(
+            "--dt does not apply to quadrotor flights: dynax.load_flight resamples each log to its median interval"
+        )
     if args.velocities != "auto":
         raise UsageError("--velocities applies to joint records; a quadrotor's velocities are used as logged")
     if getattr(args, "exclude", None):
-        raise UsageError("--exclude does not apply to quadrotor flights: dynax.load_flight finds their glitches and "
-                         "ground segments and leaves them out")
+        raise UsageError(
+            "--exclude does not apply to quadrotor flights: dynax.load_flight finds their glitches and "
+            "ground segments and leaves them out"
+        )
     if args.reference_horizon is not None and not args.reference_horizon > 0:
         raise UsageError(f"--reference-horizon must be positive, got {args.reference_horizon}")
     if args.max_terms < 1:
         raise UsageError(f"--max-terms must be at least 1, got {args.max_terms}")
     if args.mode == "known" and args.nominal is None:
-        raise UsageError("--mode known trusts a fitted model: give it with --nominal MODEL.json (dynax fit quadrotor "
-                         "--model nominal)")
+        raise UsageError(
+            "--mode known trusts a fitted model: give it with --nominal MODEL.json (dynax fit quadrotor "
+            "--model nominal)"
+        )
     mapping, scale, offset = data_options(args)
     min_samples = round(max(QUADROTOR_HORIZONS_S) * 100) + 2
     train, _ = load_flights(args.data, mapping, scale, offset, min_samples=min_samples)
@@ -207,20 +249,35 @@ def run_diagnose(args) -> int:
         mode = Refit(parameters=names)
     with stage_log() as say, warnings.catch_warnings():  # the flights' faults were noted by load_flights
         warnings.simplefilter("ignore", DataWarning)
-        report = diagnose(system, train, validation, mode=mode, reference_horizon_s=args.reference_horizon,
-                          max_terms=args.max_terms, system_name="quadrotor", discovery=not args.no_discovery,
-                          cross_fit=not args.no_cross_fit, progress=say)
+        report = diagnose(
+            system,
+            train,
+            validation,
+            mode=mode,
+            reference_horizon_s=args.reference_horizon,
+            max_terms=args.max_terms,
+            system_name="quadrotor",
+            discovery=not args.no_discovery,
+            cross_fit=not args.no_cross_fit,
+            progress=say,
+        )
         held_out = validation if validation is not None else [holdout_split(t)[1] for t in train]
         errors = quadrotor_flight_errors(report, system, held_out, (1, 10, 50))
     with staged_directory(args.out) as stage:
         write_report(report, stage, body_frame_records(system, held_out), write_json=write_json)
-        write_json(stage / "flight_error.json",
-                   {"steps": [1, 10, 50], "dt_s": errors["constant velocity"].dt,
-                    "models": {name: _scores(e, ("mae", "rmse")) for name, e in errors.items()}})
+        write_json(
+            stage / "flight_error.json",
+            {
+                "steps": [1, 10, 50],
+                "dt_s": errors["constant velocity"].dt,
+                "models": {name: _scores(e, ("mae", "rmse")) for name, e in errors.items()},
+            },
+        )
     print(summary(report))
     print("held-out MAE per group at h = 1 / 10 / 50 steps:")
     for name, e in errors.items():
-        print(f"  {name:>17s}  " + "  ".join(f"{g} " + "/".join(f"{v:.4g}" for v in e.table('mae')[g])
-                                          for g in e.groups))
+        print(
+            f"  {name:>17s}  " + "  ".join(f"{g} " + "/".join(f"{v:.4g}" for v in e.table("mae")[g]) for g in e.groups)
+        )
     print(f"wrote {args.out}/report.json, report.md, flight_error.json and figures", file=sys.stdout)
     return 0

@@ -105,7 +105,13 @@ def _closed_loop(system, controller, x0, ts, method, divergence_bound):
 
 def upright_error(xs: Float[Array, "*batch 4"]) -> Float[Array, "*batch 4"]:
     r"""The acrobot state's deviation from upright $(\pi, 0, 0, 0)$, both angles wrapped to $[-\pi, \pi)$."""
-    return jnp.concatenate([wrap_angle(xs[..., :2] - jnp.broadcast_to(jnp.array([jnp.pi, 0.0], xs.dtype), xs[..., :2].shape)), xs[..., 2:]], axis=-1)
+    return jnp.concatenate(
+        [
+            wrap_angle(xs[..., :2] - jnp.broadcast_to(jnp.array([jnp.pi, 0.0], xs.dtype), xs[..., :2].shape)),
+            xs[..., 2:],
+        ],
+        axis=-1,
+    )
 
 
 def is_upright(

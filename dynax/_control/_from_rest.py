@@ -16,8 +16,8 @@ import pathlib
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float
+import numpy as np
 
 from .._errors import DataError, UsageError
 from ._leaderboard import AbstractBenchmarkController, LeaderboardPlant
@@ -119,8 +119,12 @@ def _spong(plant, gains, x):
     a2, a3 = -m01 / det, m00 / det
     h = plant.m2 * plant.l1 * plant.r2 * jnp.sin(q[1])
     s1, s12 = jnp.sin(q[0]), jnp.sin(q[0] + q[1])
-    bias0 = -2 * h * dq[1] * dq[0] - h * dq[1] ** 2 + plant.g * (plant.m1 * plant.r1 + plant.m2 * plant.l1) * s1 \
+    bias0 = (
+        -2 * h * dq[1] * dq[0]
+        - h * dq[1] ** 2
+        + plant.g * (plant.m1 * plant.r1 + plant.m2 * plant.l1) * s1
         + plant.g * plant.m2 * plant.r2 * s12
+    )
     bias1 = h * dq[0] ** 2 + plant.g * plant.m2 * plant.r2 * s12
     e_up = plant.g * (plant.m1 * plant.r1 + plant.m2 * (plant.l1 + plant.r2))
     u_e = -k_e * (plant.energy(x) - e_up) * dq[1]
@@ -155,8 +159,24 @@ class RobotController:
         self.s_balance = np.asarray(arrays["s_balance"], np.float64)
         self.model = [float(v) for v in arrays["model"]]
         self.swing_up = [float(v) for v in arrays["swing_up"]]
-        (self.m1, self.m2, self.l1, self.l2, self.r1, self.r2, self.I1, self.I2, self.Ir, self.gr,
-         self.b1, self.b2, self.cf1, self.cf2, self.g, _) = self.model
+        (
+            self.m1,
+            self.m2,
+            self.l1,
+            self.l2,
+            self.r1,
+            self.r2,
+            self.I1,
+            self.I2,
+            self.Ir,
+            self.gr,
+            self.b1,
+            self.b2,
+            self.cf1,
+            self.cf2,
+            self.g,
+            _,
+        ) = self.model
         self.n_ref = self.u_ref.shape[0]
         self.reset()
 
@@ -175,8 +195,13 @@ class RobotController:
         m11 = self.I2 + gr2
         h = self.m2 * self.l1 * self.r2 * s2
         g = self.g
-        rhs0 = (-self.m1 * g * self.r1 * s1 - self.m2 * g * (self.l1 * s1 + self.r2 * s12)
-                - (-2 * h * v2 * v1 - h * v2 * v2) - self.b1 * v1 - self.cf1 * np.arctan(100 * v1))
+        rhs0 = (
+            -self.m1 * g * self.r1 * s1
+            - self.m2 * g * (self.l1 * s1 + self.r2 * s12)
+            - (-2 * h * v2 * v1 - h * v2 * v2)
+            - self.b1 * v1
+            - self.cf1 * np.arctan(100 * v1)
+        )
         rhs1 = -self.m2 * g * self.r2 * s12 + tau2 - h * v1 * v1 - self.b2 * v2 - self.cf2 * np.arctan(100 * v2)
         det = m00 * m11 - m01 * m01
         return (m11 * rhs0 - m01 * rhs1) / det, (m00 * rhs1 - m01 * rhs0) / det
@@ -194,10 +219,17 @@ class RobotController:
         a2, a3 = -m01 / det, m00 / det
         h = self.m2 * self.l1 * self.r2 * s2
         g = self.g
-        bias0 = -2 * h * v2 * v1 - h * v2 * v2 + g * (self.m1 * self.r1 + self.m2 * self.l1) * s1 + g * self.m2 * self.r2 * s12
+        bias0 = (
+            -2 * h * v2 * v1
+            - h * v2 * v2
+            + g * (self.m1 * self.r1 + self.m2 * self.l1) * s1
+            + g * self.m2 * self.r2 * s12
+        )
         bias1 = h * v1 * v1 + g * self.m2 * self.r2 * s12
         kinetic = 0.5 * (m00 * v1 * v1 + 2 * m01 * v1 * v2 + m11 * v2 * v2)
-        potential = g * (self.m1 * (-self.r1 * np.cos(q1)) + self.m2 * (-self.l1 * np.cos(q1) - self.r2 * np.cos(q1 + q2)))
+        potential = g * (
+            self.m1 * (-self.r1 * np.cos(q1)) + self.m2 * (-self.l1 * np.cos(q1) - self.r2 * np.cos(q1 + q2))
+        )
         e_up = g * (self.m1 * self.r1 + self.m2 * (self.l1 + self.r2))
         u_e = -k_e * (kinetic + potential - e_up) * v2
         return u_e + (a2 * bias0 - k_p * q2 - k_d * v2) / a3 + bias1
@@ -230,9 +262,18 @@ class RobotController:
     def to_benchmark(self) -> SwingUpFromRest:
         """The same controller as a JAX `SwingUpFromRest` (for `dynax.control.performance` and `robustness`)."""
         return SwingUpFromRest(
-            jnp.asarray(self.x_ref), jnp.asarray(self.u_ref), jnp.asarray(self.gains), jnp.asarray(self.k_balance),
-            jnp.asarray(self.s_balance), jnp.asarray(self.model), jnp.asarray(self.swing_up),
-            jnp.asarray(self.threshold), jnp.asarray(self.lead), self.dt, self.torque_limit, self.velocity_source,
+            jnp.asarray(self.x_ref),
+            jnp.asarray(self.u_ref),
+            jnp.asarray(self.gains),
+            jnp.asarray(self.k_balance),
+            jnp.asarray(self.s_balance),
+            jnp.asarray(self.model),
+            jnp.asarray(self.swing_up),
+            jnp.asarray(self.threshold),
+            jnp.asarray(self.lead),
+            self.dt,
+            self.torque_limit,
+            self.velocity_source,
         )
 
 
@@ -263,9 +304,15 @@ def load_controller(path) -> RobotController:
     if missing:
         raise DataError(f"load_controller: {str(path)!r} lacks header field(s) {missing}")
     n = arrays["u_ref"].shape
-    if len(n) != 1 or arrays["x_ref"].shape != (n[0], 4) or arrays["gains"].shape != (n[0], 4) \
-            or arrays["model"].shape != (16,) or arrays["swing_up"].shape != (3,) \
-            or arrays["k_balance"].shape != (4,) or arrays["s_balance"].shape != (4, 4):
+    if (
+        len(n) != 1
+        or arrays["x_ref"].shape != (n[0], 4)
+        or arrays["gains"].shape != (n[0], 4)
+        or arrays["model"].shape != (16,)
+        or arrays["swing_up"].shape != (3,)
+        or arrays["k_balance"].shape != (4,)
+        or arrays["s_balance"].shape != (4, 4)
+    ):
         raise DataError(f"load_controller: {str(path)!r} has arrays of inconsistent shapes")
     if not all(np.all(np.isfinite(a)) for a in arrays.values()):
         raise DataError(f"load_controller: {str(path)!r} holds non-finite numbers")
@@ -338,6 +385,7 @@ def knot_matrix(n_steps, dt, spacing, n_knots):
 def open_loop_rollout(plant, us, dt):
     def step(x, u):
         return plant.rk4_step(x, jnp.stack([jnp.zeros_like(u), u]), dt), x
+
     x_final, xs = jax.lax.scan(step, jnp.zeros(4, us.dtype), us)
     return x_final, xs
 
@@ -368,12 +416,15 @@ def _adam_search(plant, w0, interp, dt, design, iterations, ramp):
             w, s = carry
             weight = jnp.minimum(design.terminal_weight, 0.3 * ramp**i) if ramp > 1 else design.terminal_weight
             (loss, _), g = jax.value_and_grad(_surrogate, argnums=1, has_aux=True)(
-                plant, w, interp, dt, design.dt, design.torque_limit, weight, design.elbow_range)
+                plant, w, interp, dt, design.dt, design.torque_limit, weight, design.elbow_range
+            )
             updates, s = opt.update(g, s)
             return (jax.tree.map(lambda a, b: a + b, w, updates), s), loss
+
         (w, _), losses = jax.lax.scan(it, (w0, opt.init(w0)), jnp.arange(iterations))
-        _, (cost, err) = _surrogate(plant, w, interp, dt, design.dt, design.torque_limit, design.terminal_weight,
-                                    design.elbow_range)
+        _, (cost, err) = _surrogate(
+            plant, w, interp, dt, design.dt, design.torque_limit, design.terminal_weight, design.elbow_range
+        )
         return w, cost, jnp.sum(err**2)
 
     return jax.vmap(one)(w0)
@@ -385,8 +436,14 @@ def _collocation_loss(plant, z, rho, n, h, fine_dt, limit, elbow_range):
     step = jax.vmap(lambda x, u: plant.rk4_step(x, jnp.stack([jnp.zeros_like(u), u]), h))
     defects = step(xs[:-1], us) - xs[1:]
     energy = jnp.sum(jnp.abs(jnp.diff(xs[:, 1]) * us))
-    costs = jnp.stack([energy / 60, jnp.sum(us**2) * h / 20, jnp.sum(xs[:-1, 2:] ** 2) * h / 400,
-                       jnp.std(jnp.diff(us)) * fine_dt / h / 0.1])
+    costs = jnp.stack(
+        [
+            energy / 60,
+            jnp.sum(us**2) * h / 20,
+            jnp.sum(xs[:-1, 2:] ** 2) * h / 400,
+            jnp.std(jnp.diff(us)) * fine_dt / h / 0.1,
+        ]
+    )
     final = xs[-1] - jnp.array([jnp.pi, 0.0, 0.0, 0.0], z.dtype)
     elbow = jnp.sum(jax.nn.relu(jnp.abs(xs[:, 1]) - elbow_range) ** 2)
     return jnp.pi * jnp.sum(costs) + rho * (jnp.sum(defects**2) + jnp.sum(final**2) + elbow)
@@ -403,10 +460,12 @@ def collocation_reference(plant, z0, design, n, iterations):
         def it(carry, i):
             z, s = carry
             rho = jnp.minimum(1e5, 1.0015**i)
-            g = jax.grad(_collocation_loss, argnums=1)(plant, z, rho, n, h, design.dt, design.torque_limit,
-                                                      design.elbow_range)
+            g = jax.grad(_collocation_loss, argnums=1)(
+                plant, z, rho, n, h, design.dt, design.torque_limit, design.elbow_range
+            )
             updates, s = opt.update(g, s)
             return (z + updates, s), None
+
         (z, _), _ = jax.lax.scan(it, (z0, opt.init(z0)), jnp.arange(iterations))
         return z
 
@@ -478,8 +537,15 @@ def end_upright_residuals(plant, w, interp, dt, limit, iterations=30, max_step=0
         return jnp.concatenate([x_final, knots[-1:]])
 
     x0 = final(w)
-    target = jnp.stack([jnp.pi + 2 * jnp.pi * jnp.round((x0[0] - jnp.pi) / (2 * jnp.pi)),
-                        2 * jnp.pi * jnp.round(x0[1] / (2 * jnp.pi)), 0.0, 0.0, 0.0])
+    target = jnp.stack(
+        [
+            jnp.pi + 2 * jnp.pi * jnp.round((x0[0] - jnp.pi) / (2 * jnp.pi)),
+            2 * jnp.pi * jnp.round(x0[1] / (2 * jnp.pi)),
+            0.0,
+            0.0,
+            0.0,
+        ]
+    )
 
     def it(w, _):
         r = final(w) - target
@@ -517,6 +583,7 @@ def end_upright(plant: LeaderboardPlant, us, design: SwingUpDesign = SwingUpDesi
 def _discrete_model(plant, dt):
     def f(x, u):
         return plant.rk4_step(x, jnp.stack([jnp.zeros_like(u), u]), dt)
+
     return f
 
 
@@ -555,8 +622,9 @@ def tvlqr(plant: LeaderboardPlant, xs, us, q, r, s_final, dt):
     return gains
 
 
-def design_swing_up(plant: LeaderboardPlant | None = None, design: SwingUpDesign = SwingUpDesign(),
-                    reference=None) -> SwingUpFromRest:
+def design_swing_up(
+    plant: LeaderboardPlant | None = None, design: SwingUpDesign = SwingUpDesign(), reference=None
+) -> SwingUpFromRest:
     """Build a `SwingUpFromRest` for `plant` (the controller's model; the benchmark's nominal by default).
 
     Optimises the reference (`optimise_swing_up`) unless `reference = (xs, us)` is given, then
@@ -567,6 +635,17 @@ def design_swing_up(plant: LeaderboardPlant | None = None, design: SwingUpDesign
     k_bal, s_bal = balance_lqr(plant, design.q_balance, design.r_balance, design.dt)
     gains = tvlqr(plant, xs, us, design.q_track, design.r_track, s_bal, design.dt)
     model = jnp.stack([jnp.asarray(getattr(plant, k), float) for k in LeaderboardPlant.__dataclass_fields__])
-    return SwingUpFromRest(xs, us, gains, k_bal, s_bal, model, jnp.asarray(design.swing_up, float),
-                           jnp.asarray(design.threshold, float), jnp.asarray(design.lead, float), design.dt,
-                           design.torque_limit, design.velocity_source)
+    return SwingUpFromRest(
+        xs,
+        us,
+        gains,
+        k_bal,
+        s_bal,
+        model,
+        jnp.asarray(design.swing_up, float),
+        jnp.asarray(design.threshold, float),
+        jnp.asarray(design.lead, float),
+        design.dt,
+        design.torque_limit,
+        design.velocity_source,
+    )

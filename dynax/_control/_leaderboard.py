@@ -25,8 +25,8 @@ import time
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
+import numpy as np
 
 # ---------------------------------------------------------------- the plant
 
@@ -64,7 +64,9 @@ class LeaderboardPlant(eqx.Module):
         values = dict(NOMINAL_PLANT)
         unknown = set(changes) - set(values)
         if unknown:
-            raise ValueError(f"LeaderboardPlant.nominal: unknown parameter(s) {sorted(unknown)}; expected {sorted(values)}")
+            raise ValueError(
+                f"LeaderboardPlant.nominal: unknown parameter(s) {sorted(unknown)}; expected {sorted(values)}"
+            )
         values.update(changes)
         return cls(**{k: jnp.asarray(v, float) for k, v in values.items()})
 
@@ -119,9 +121,22 @@ class LeaderboardPlant(eqx.Module):
 
 
 NOMINAL_PLANT = dict(
-    m1=0.5234602302310271, m2=0.6255677234174437, l1=0.2, l2=0.3, r1=0.2, r2=0.25569305436052964,
-    I1=0.031887199591513114, I2=0.05086984812807257, Ir=0.0, gr=6.0, b1=0.0, b2=0.0, cf1=0.0, cf2=0.0,
-    g=9.81, torque_limit=6.0,
+    m1=0.5234602302310271,
+    m2=0.6255677234174437,
+    l1=0.2,
+    l2=0.3,
+    r1=0.2,
+    r2=0.25569305436052964,
+    I1=0.031887199591513114,
+    I2=0.05086984812807257,
+    Ir=0.0,
+    gr=6.0,
+    b1=0.0,
+    b2=0.0,
+    cf1=0.0,
+    cf2=0.0,
+    g=9.81,
+    torque_limit=6.0,
 )
 """Design C.1, model 1.0 of the DFKI double pendulum as the acrobot leaderboards use it."""
 
@@ -163,7 +178,9 @@ def as_benchmark_controller(controller) -> AbstractBenchmarkController:
     if isinstance(controller, AbstractBenchmarkController):
         return controller
     if not callable(controller):
-        raise ValueError(f"leaderboard: a controller must be callable as controller(t, x) -> u, got {type(controller).__name__}")
+        raise ValueError(
+            f"leaderboard: a controller must be callable as controller(t, x) -> u, got {type(controller).__name__}"
+        )
     return Stateless(controller)
 
 
@@ -261,8 +278,17 @@ def nominal_case(plant: LeaderboardPlant | None = None, n_pulses: int = 3) -> Ca
     """The unperturbed case: no noise, an ideal motor, no delay, pulses of zero amplitude."""
     plant = LeaderboardPlant.nominal() if plant is None else plant
     zeros = jnp.zeros((2, n_pulses))
-    return Case(plant, jnp.asarray(0.0), jnp.asarray(0.0), jnp.asarray(1.0), jnp.asarray(0), zeros,
-                jnp.ones((2, n_pulses)), zeros, jax.random.key(0))
+    return Case(
+        plant,
+        jnp.asarray(0.0),
+        jnp.asarray(0.0),
+        jnp.asarray(1.0),
+        jnp.asarray(0),
+        zeros,
+        jnp.ones((2, n_pulses)),
+        zeros,
+        jax.random.key(0),
+    )
 
 
 class Rollout(eqx.Module):
@@ -358,7 +384,9 @@ class Performance(eqx.Module):
         return out
 
 
-def performance_costs(rollout: Rollout, plant: LeaderboardPlant, rules: LeaderboardRules = LeaderboardRules()) -> Performance:
+def performance_costs(
+    rollout: Rollout, plant: LeaderboardPlant, rules: LeaderboardRules = LeaderboardRules()
+) -> Performance:
     r"""The five leaderboard costs and the score of a recorded episode (`leaderboard.py`'s functions).
 
     With $T$, $X$ the $N + 1$ recorded times and states and $U$ the $N$ commanded torques:
@@ -391,7 +419,9 @@ def performance_costs(rollout: Rollout, plant: LeaderboardPlant, rules: Leaderbo
     return Performance(costs, success, score)
 
 
-def performance(controller, rules: LeaderboardRules = LeaderboardRules(), plant: LeaderboardPlant | None = None) -> Performance:
+def performance(
+    controller, rules: LeaderboardRules = LeaderboardRules(), plant: LeaderboardPlant | None = None
+) -> Performance:
     """Simulate the nominal episode from rest and score it (`performance_costs`)."""
     plant = LeaderboardPlant.nominal() if plant is None else plant
     return performance_costs(simulate_leaderboard(controller, nominal_case(plant), rules), plant, rules)
@@ -443,14 +473,20 @@ def pulse_schedule(rules: LeaderboardRules, rng: np.random.Generator):
     return mu, sigma, amp
 
 
-def robustness_cases(rules: LeaderboardRules = LeaderboardRules(), plant: LeaderboardPlant | None = None) -> RobustnessCases:
+def robustness_cases(
+    rules: LeaderboardRules = LeaderboardRules(), plant: LeaderboardPlant | None = None
+) -> RobustnessCases:
     """Build every robustness case of the rules (`benchmark_controller.py`'s lists) around `plant`."""
     plant = LeaderboardPlant.nominal() if plant is None else plant
     nominal = {k: float(getattr(plant, k)) for k in NOMINAL_PLANT}
     n = rules.n_sizes
     lo, hi = rules.model_range
     rows = []  # (plant dict, vnoise, tnoise, k, delay_steps, pulses, family, size, parameter, repetition)
-    none = (np.zeros((2, rules.pulses_per_joint)), np.ones((2, rules.pulses_per_joint)), np.zeros((2, rules.pulses_per_joint)))
+    none = (
+        np.zeros((2, rules.pulses_per_joint)),
+        np.ones((2, rules.pulses_per_joint)),
+        np.zeros((2, rules.pulses_per_joint)),
+    )
 
     def add(p=None, vn=0.0, tn=0.0, k=1.0, delay=0, pulses=none, family=0, size=0.0, parameter=-1, rep=0):
         rows.append((p or nominal, vn, tn, k, delay, pulses, family, size, parameter, rep))
@@ -497,13 +533,23 @@ def robustness_cases(rules: LeaderboardRules = LeaderboardRules(), plant: Leader
     plants = LeaderboardPlant(**{k: jnp.asarray([row[0][k] for row in rows], float) for k in NOMINAL_PLANT})
     keys = jax.random.split(jax.random.key(rules.seed), len(rows))
     cases = Case(
-        plants, jnp.asarray(stack(1)), jnp.asarray(stack(2)), jnp.asarray(stack(3)),
+        plants,
+        jnp.asarray(stack(1)),
+        jnp.asarray(stack(2)),
+        jnp.asarray(stack(3)),
         jnp.asarray([row[4] for row in rows], jnp.int32),
-        jnp.asarray(np.stack([row[5][0] for row in rows])), jnp.asarray(np.stack([row[5][1] for row in rows])),
-        jnp.asarray(np.stack([row[5][2] for row in rows])), keys,
+        jnp.asarray(np.stack([row[5][0] for row in rows])),
+        jnp.asarray(np.stack([row[5][1] for row in rows])),
+        jnp.asarray(np.stack([row[5][2] for row in rows])),
+        keys,
     )
-    return RobustnessCases(cases, np.asarray([r[6] for r in rows]), stack(7), np.asarray([r[8] for r in rows]),
-                           np.asarray([r[9] for r in rows]))
+    return RobustnessCases(
+        cases,
+        np.asarray([r[6] for r in rows]),
+        stack(7),
+        np.asarray([r[8] for r in rows]),
+        np.asarray([r[9] for r in rows]),
+    )
 
 
 def ends_upright(xs: Float[Array, "*batch 4"], tolerance=(0.35, 0.35, 1.0, 1.0)) -> Array:
@@ -562,8 +608,12 @@ def family_scores(cases: RobustnessCases, success: np.ndarray) -> np.ndarray:
     return np.asarray(scores)
 
 
-def robustness(controller, rules: LeaderboardRules = LeaderboardRules(), plant: LeaderboardPlant | None = None,
-               cases: RobustnessCases | None = None) -> Robustness:
+def robustness(
+    controller,
+    rules: LeaderboardRules = LeaderboardRules(),
+    plant: LeaderboardPlant | None = None,
+    cases: RobustnessCases | None = None,
+) -> Robustness:
     """Run every robustness case (one compiled, vmapped call) and score it.
 
     **Arguments:** `controller` (as `simulate_leaderboard`); `rules`; the nominal `plant` the

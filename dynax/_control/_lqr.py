@@ -140,8 +140,10 @@ def lqr(
     """
     if not isinstance(system, AbstractSystem):  # python-control's lqr(A, B, Q, R)
         if r is not None or angles:
-            raise ValueError("lqr: the matrix form is lqr(A, B, Q, R) (four matrices); the system form is "
-                             "lqr(system, x_eq, u_eq, q, r)")
+            raise ValueError(
+                "lqr: the matrix form is lqr(A, B, Q, R) (four matrices); the system form is "
+                "lqr(system, x_eq, u_eq, q, r)"
+            )
         if q is None:
             raise ValueError("lqr(A, B, Q, R): `R` is missing")
         return lqr_matrices(system, x_eq, u_eq, q)

@@ -12,9 +12,9 @@ import equinox as eqx
 import jax
 import jax.flatten_util
 import jax.numpy as jnp
-import optax
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from jaxtyping import Array, ArrayLike, Float, Int, PRNGKeyArray
+import optax
 
 from .._distributed import multi_process, replicate_in_jit
 from .._progress import bar_token, progress_enabled, ProgressBar, report
@@ -109,7 +109,9 @@ class BaselineNormalisation(AbstractFitnessShaping):
         mean_den = 2 * m - r_plus - r_minus
         sigma_den = m - b
         mean_signal = jnp.where(mean_den > 0, (r_plus - r_minus) / jnp.where(mean_den > 0, mean_den, 1.0), 0.0)
-        sigma_signal = jnp.where(sigma_den > 0, (0.5 * (r_plus + r_minus) - b) / jnp.where(sigma_den > 0, sigma_den, 1.0), 0.0)
+        sigma_signal = jnp.where(
+            sigma_den > 0, (0.5 * (r_plus + r_minus) - b) / jnp.where(sigma_den > 0, sigma_den, 1.0), 0.0
+        )
         return mean_signal, sigma_signal
 
 
@@ -208,14 +210,18 @@ class PGPE(eqx.Module):
             iteration=jnp.asarray(0),
         )
 
-    def ask(self, state: PGPEState, key: PRNGKeyArray) -> tuple[Float[Array, "population n_params"], Float[Array, "pairs n_params"]]:
+    def ask(
+        self, state: PGPEState, key: PRNGKeyArray
+    ) -> tuple[Float[Array, "population n_params"], Float[Array, "pairs n_params"]]:
         """Sample a population: `(params, noise)` with `params[:P/2] = mean + noise`, `params[P/2:] = mean - noise` (parameter units)."""
         pairs = self.population_size // 2
         noise = state.sigma[None] * jax.random.normal(key, (pairs, state.mean.shape[0]), state.mean.dtype)
         z = jnp.concatenate([state.mean[None] + noise, state.mean[None] - noise])
         return z * self._scales(state.mean)[None], noise
 
-    def tell(self, state: PGPEState, noise: Float[Array, "pairs n_params"], rewards: Float[Array, " population"]) -> PGPEState:
+    def tell(
+        self, state: PGPEState, noise: Float[Array, "pairs n_params"], rewards: Float[Array, " population"]
+    ) -> PGPEState:
         """Update the search distribution from the rewards of the population `ask` returned."""
         pairs = self.population_size // 2
         rewards = jnp.asarray(rewards, state.mean.dtype)
@@ -244,7 +250,9 @@ class PGPE(eqx.Module):
 
         sigma = state.sigma
         grad_sigma = sigma_signal @ ((noise**2 - sigma[None] ** 2) / sigma[None]) / pairs
-        step = jnp.clip(self.sigma_learning_rate * grad_sigma, -self.max_sigma_change * sigma, self.max_sigma_change * sigma)
+        step = jnp.clip(
+            self.sigma_learning_rate * grad_sigma, -self.max_sigma_change * sigma, self.max_sigma_change * sigma
+        )
         sigma = jnp.maximum(sigma + step, self.min_sigma)
 
         baseline = self.baseline_decay * baseline + (1 - self.baseline_decay) * jnp.mean(rewards)
@@ -434,7 +442,5 @@ def _sweep_pgpe_jit(pgpe, objective, params, keys, n_iterations, shard, with_pro
     sharding = population_sharding(keys.shape[0]) if shard else None
     if sharding is not None:
         keys = jax.lax.with_sharding_constraint(keys, sharding)
-    out = jax.vmap(
-        lambda key: _run_pgpe(pgpe, objective, params, key, n_iterations, False, with_progress, token)
-    )(keys)
+    out = jax.vmap(lambda key: _run_pgpe(pgpe, objective, params, key, n_iterations, False, with_progress, token))(keys)
     return replicate_in_jit(out)

@@ -156,7 +156,9 @@ class SpongController(eqx.Module):
         r"""A copy with $\theta = (k_e, k_p, k_d, \phi)$ replaced; the LQR is reused, not re-solved."""
         params = jnp.asarray(params)
         if params.shape != (4,):
-            raise ValueError(f"SpongController.with_params: `params` must have shape (4,) (k_e, k_p, k_d, phi), got {params.shape}")
+            raise ValueError(
+                f"SpongController.with_params: `params` must have shape (4,) (k_e, k_p, k_d, phi), got {params.shape}"
+            )
         return eqx.tree_at(lambda c: (c.k_e, c.k_p, c.k_d, c.phi), self, tuple(params))
 
     def desired_energy(self) -> Float[Array, ""]:

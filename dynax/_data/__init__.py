@@ -1,21 +1,53 @@
-from ._columns import columns_for as columns_for, SYSTEM_COLUMNS as SYSTEM_COLUMNS
+from ._columns import columns_for as columns_for
+from ._columns import SYSTEM_COLUMNS as SYSTEM_COLUMNS
 from ._derivatives import (
     backward_difference as backward_difference,
+)
+from ._derivatives import (
     butterworth_filtfilt as butterworth_filtfilt,
+)
+from ._derivatives import (
     central_difference as central_difference,
+)
+from ._derivatives import (
     resample as resample,
+)
+from ._derivatives import (
     savitzky_golay as savitzky_golay,
 )
-from ._io import load_trajectory as load_trajectory, parse_assignments as parse_assignments, save_trajectory as save_trajectory
-from ._trajectory import Trajectory as Trajectory
-from ._sampling import check_time_stamps as check_time_stamps, split_at_gaps as split_at_gaps
+from ._io import (
+    load_trajectory as load_trajectory,
+)
+from ._io import (
+    parse_assignments as parse_assignments,
+)
+from ._io import (
+    save_trajectory as save_trajectory,
+)
+from ._sampling import check_time_stamps as check_time_stamps
+from ._sampling import split_at_gaps as split_at_gaps
+from ._sanity import (
+    Check as Check,
+)
 from ._sanity import (
     check_record as check_record,
+)
+from ._sanity import (
     check_records as check_records,
-    Check as Check,
+)
+from ._sanity import (
     DataCheck as DataCheck,
+)
+from ._sanity import (
     DataWarning as DataWarning,
+)
+from ._sanity import (
     exclude_stretches as exclude_stretches,
+)
+from ._sanity import (
     Finding as Finding,
+)
+from ._sanity import (
     parse_exclude as parse_exclude,
 )
+from ._trajectory import Trajectory as Trajectory

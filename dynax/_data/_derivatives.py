@@ -6,8 +6,8 @@ grid: resample irregular records first with `resample` (they raise otherwise).
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, ArrayLike, Float
+import numpy as np
 
 from .._errors import UsageError
 from .._precision import host_times
@@ -43,8 +43,9 @@ def _times_and_samples(ts, ys, function: str, min_samples: int):
     ts = jnp.asarray(ts)
     ys = jnp.asarray(ys)
     if ts.ndim != 1 or ys.shape[:1] != ts.shape or ts.shape[0] < min_samples:
-        raise ValueError(f"{function}: need `ts` (time,) with time >= {min_samples} and `ys` (time, ...); "
-                         f"got {ts.shape}, {ys.shape}")
+        raise ValueError(
+            f"{function}: need `ts` (time,) with time >= {min_samples} and `ys` (time, ...); got {ts.shape}, {ys.shape}"
+        )
     return ts.astype(jnp.result_type(ys, float)), ys
 
 
@@ -162,6 +163,11 @@ def resample(trajectory: Trajectory, dt: float) -> Trajectory:
     held = np.clip(np.searchsorted(ts, grid, side="right") - 1, 0, len(ts) - 1)
     us = np.asarray(trajectory.us)[held]
     return Trajectory(
-        grid, jnp.asarray(xs), jnp.asarray(us),  # times stay float64 on the host
-        trajectory.state_names, trajectory.input_names, trajectory.system, trajectory.source,
+        grid,
+        jnp.asarray(xs),
+        jnp.asarray(us),  # times stay float64 on the host
+        trajectory.state_names,
+        trajectory.input_names,
+        trajectory.system,
+        trajectory.source,
     )

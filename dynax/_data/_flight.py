@@ -76,7 +76,9 @@ class Glitch:
     worst: float
 
     def describe(self) -> str:
-        span = f"at t = {self.start:.2f} s" if self.n_samples == 1 else f"from t = {self.start:.2f} to {self.stop:.2f} s"
+        span = (
+            f"at t = {self.start:.2f} s" if self.n_samples == 1 else f"from t = {self.start:.2f} to {self.stop:.2f} s"
+        )
         return f"{self.column}: {self.kind} {span} (row {self.row}, {self.n_samples} samples, worst {self.worst:.4g})"
 
 
@@ -124,8 +126,12 @@ def _with_onsets(mask: np.ndarray, values: np.ndarray) -> np.ndarray:
 
 
 def _column(trajectory: Trajectory, name: str) -> np.ndarray:
-    return np.asarray(trajectory.xs[:, trajectory.state_names.index(name)] if name in trajectory.state_names
-                      else trajectory.us[:, trajectory.input_names.index(name)], dtype=float)
+    return np.asarray(
+        trajectory.xs[:, trajectory.state_names.index(name)]
+        if name in trajectory.state_names
+        else trajectory.us[:, trajectory.input_names.index(name)],
+        dtype=float,
+    )
 
 
 def inspect_flight(trajectory: Trajectory, checks: FlightChecks = FlightChecks()) -> FlightNotes:
@@ -155,8 +161,11 @@ def inspect_flight(trajectory: Trajectory, checks: FlightChecks = FlightChecks()
         rests = np.flatnonzero(off)
         after = np.clip(np.searchsorted(rests, np.arange(len(z))), 0, len(rests) - 1)
         before = np.clip(after - 1, 0, len(rests) - 1)
-        nearest = np.where(np.abs(rests[before] - np.arange(len(z))) <= np.abs(rests[after] - np.arange(len(z))),
-                           rests[before], rests[after])
+        nearest = np.where(
+            np.abs(rests[before] - np.arange(len(z))) <= np.abs(rests[after] - np.arange(len(z))),
+            rests[before],
+            rests[after],
+        )
         floor = z[nearest]
     else:
         floor = np.full_like(z, np.min(z))
@@ -168,7 +177,9 @@ def inspect_flight(trajectory: Trajectory, checks: FlightChecks = FlightChecks()
         flagged.append((name, "rate_range", np.abs(col) > checks.max_rate, col))
     for i in range(4):
         col = motors[:, i]
-        flagged.append((f"m{i + 1}", "input_range", _with_onsets(np.abs(col) > checks.max_input_ratio * level[i], col), col))
+        flagged.append(
+            (f"m{i + 1}", "input_range", _with_onsets(np.abs(col) > checks.max_input_ratio * level[i], col), col)
+        )
     position = np.stack([_column(trajectory, c) for c in ("x", "y", "z")], axis=1)
     velocity = np.stack([_column(trajectory, c) for c in ("vx", "vy", "vz")], axis=1)
     dt = np.diff(ts)[:, None]
@@ -180,7 +191,7 @@ def inspect_flight(trajectory: Trajectory, checks: FlightChecks = FlightChecks()
     for column, kind, mask, values in flagged:
         bad |= mask
         for a, b in _runs(mask):
-            worst = values[a:b + 1][np.argmax(np.abs(values[a:b + 1]))]
+            worst = values[a : b + 1][np.argmax(np.abs(values[a : b + 1]))]
             glitches.append(Glitch(column, kind, float(rel[a]), float(rel[b]), a + 1, b - a + 1, float(worst)))
     glitches.sort(key=lambda g: (g.start, g.column))
     segments = tuple((float(rel[a]), float(rel[b])) for a, b in _runs(ground))
@@ -227,16 +238,29 @@ def load_flight(
     bad = np.flatnonzero(np.abs(norms - 1) > QUATERNION_TOLERANCE)
     if bad.size:
         k = int(bad[0])
-        raise DataError(f"the quaternion (qw, qx, qy, qz) has norm {norms[k]:.6g}, not 1 (tolerance "
-                        f"{QUATERNION_TOLERANCE:g}; {bad.size} such rows): the contract's attitude is a unit "
-                        "quaternion", path=path, column=(mapping or {}).get("qw", "qw"), row=k + 1)
+        raise DataError(
+            f"the quaternion (qw, qx, qy, qz) has norm {norms[k]:.6g}, not 1 (tolerance "
+            f"{QUATERNION_TOLERANCE:g}; {bad.size} such rows): the contract's attitude is a unit "
+            "quaternion",
+            path=path,
+            column=(mapping or {}).get("qw", "qw"),
+            row=k + 1,
+        )
     xs = np.asarray(data.xs, dtype=float).copy()
     xs[:, 3:7] = _continuous_quaternions(quats / norms[:, None])
-    data = Trajectory(data.ts, jnp.asarray(xs, data.xs.dtype), data.us, data.state_names, data.input_names,
-                      data.system, data.source)
+    data = Trajectory(
+        data.ts, jnp.asarray(xs, data.xs.dtype), data.us, data.state_names, data.input_names, data.system, data.source
+    )
     if not data.is_uniform:
         data = resample(data, data.dt)
         q = np.asarray(data.xs[:, 3:7])
-        data = Trajectory(data.ts, data.xs.at[:, 3:7].set(q / np.linalg.norm(q, axis=1, keepdims=True)), data.us,
-                          data.state_names, data.input_names, data.system, data.source)
+        data = Trajectory(
+            data.ts,
+            data.xs.at[:, 3:7].set(q / np.linalg.norm(q, axis=1, keepdims=True)),
+            data.us,
+            data.state_names,
+            data.input_names,
+            data.system,
+            data.source,
+        )
     return data, inspect_flight(data, checks)

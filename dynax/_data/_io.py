@@ -1,5 +1,6 @@
 """Read and write measured data: CSV, NPZ and MATLAB `.mat` files, per the data contract."""
 
+from collections.abc import Mapping
 import csv
 import gzip
 import io
@@ -7,18 +8,17 @@ import os
 import pathlib
 import re
 import zipfile
-from collections.abc import Mapping
 
 import jax.numpy as jnp
 import numpy as np
 
 from .._errors import DataError, UsageError
-from ._columns import columns_for, OPTIONAL_INPUTS, OPTIONAL_STATES
 from .._precision import check_times_for_float32
+from ._columns import columns_for, OPTIONAL_INPUTS, OPTIONAL_STATES
 from ._matlab import read_mat_columns
 from ._sampling import check_time_stamps, MAX_GAP, MIN_STEP
-from ._velocities import check_velocities, velocity_pairs
 from ._trajectory import Trajectory
+from ._velocities import check_velocities, velocity_pairs
 
 TIME = "t"
 
@@ -48,14 +48,14 @@ def _open_text(path):
             raise DataError(f"is a damaged gzip file ({e})", path=path) from None
     if b"\x00" in raw:
         line = raw.count(b"\n", 0, raw.index(b"\x00")) + 1
-        raise DataError(f"is not a text CSV file (a NUL byte at line {line}); "
-                        "give a CSV, .npz or .mat file", path=path)
+        raise DataError(f"is not a text CSV file (a NUL byte at line {line}); give a CSV, .npz or .mat file", path=path)
     try:
         return raw.decode("utf-8-sig")  # the byte-order mark spreadsheet programs write is stripped
     except UnicodeDecodeError as e:
         line = raw.count(b"\n", 0, e.start) + 1
-        raise DataError(f"is not UTF-8 text (byte 0x{raw[e.start]:02x} at line {line}); save it as UTF-8 CSV",
-                        path=path) from None
+        raise DataError(
+            f"is not UTF-8 text (byte 0x{raw[e.start]:02x} at line {line}); save it as UTF-8 CSV", path=path
+        ) from None
 
 
 def _read_csv(path):
@@ -88,8 +88,11 @@ def _check_unique(path, names):
     seen = {}
     for j, name in enumerate(names):
         if name in seen:
-            raise DataError(f"the column name appears twice (columns {seen[name] + 1} and {j + 1}); "
-                            "rename one of them", path=path, column=name)
+            raise DataError(
+                f"the column name appears twice (columns {seen[name] + 1} and {j + 1}); rename one of them",
+                path=path,
+                column=name,
+            )
         seen[name] = j
 
 
@@ -129,9 +132,13 @@ def _check_finite(path, column, arr, after):
         raise DataError(f"non-finite value {float(arr[bad[0]])}{after}", path=path, column=column, row=int(bad[0]) + 1)
     big = np.flatnonzero(np.abs(arr) > MAX_MAGNITUDE)
     if big.size:
-        raise DataError(f"value {float(arr[big[0]]):g}{after} is beyond {MAX_MAGNITUDE:g} in magnitude: no measurement "
-                        "in SI units is that large (wrong units, or a corrupt cell?)", path=path, column=column,
-                        row=int(big[0]) + 1)
+        raise DataError(
+            f"value {float(arr[big[0]]):g}{after} is beyond {MAX_MAGNITUDE:g} in magnitude: no measurement "
+            "in SI units is that large (wrong units, or a corrupt cell?)",
+            path=path,
+            column=column,
+            row=int(big[0]) + 1,
+        )
 
 
 def _check_names(argument, given, allowed, system):
@@ -239,8 +246,14 @@ def load_trajectory(
     else:
         raw = _read_csv(path)
 
-    absent_inputs = {name for name in OPTIONAL_INPUTS.get(system, ()) if mapping.get(name, name) not in raw
-                     and name not in mapping and name not in (scale or {}) and name not in offset}
+    absent_inputs = {
+        name
+        for name in OPTIONAL_INPUTS.get(system, ())
+        if mapping.get(name, name) not in raw
+        and name not in mapping
+        and name not in (scale or {})
+        and name not in offset
+    }
     if absent_inputs:
         input_names = tuple(name for name in input_names if name not in absent_inputs)
         wanted = (TIME, *state_names, *input_names)
@@ -315,7 +328,10 @@ def _check_ignored_inputs(path, system, raw, mapping):
             raise DataError(
                 f"is non-zero in {nonzero.size} of {arr.size} samples (largest {arr[k]:.4g} at row {k + 1}), but "
                 f"'{system}' has no such input: it would be dropped and its effect ascribed to the model. Read the "
-                f"file as '{other}', or zero or remove the column if it is not applied", path=path, column=name)
+                f"file as '{other}', or zero or remove the column if it is not applied",
+                path=path,
+                column=name,
+            )
 
 
 def save_trajectory(trajectory: Trajectory, path: str | os.PathLike) -> None:

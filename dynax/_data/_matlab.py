@@ -32,8 +32,9 @@ def _read_v73(path: str) -> dict:
     try:
         import h5py
     except ImportError:
-        raise DataError('is a MATLAB v7.3 (HDF5) file; reading it needs h5py: pip install "dynax[mat]"',
-                        path=path) from None
+        raise DataError(
+            'is a MATLAB v7.3 (HDF5) file; reading it needs h5py: pip install "dynax[mat]"', path=path
+        ) from None
     columns: dict = {}
     try:
         with h5py.File(path, "r") as f:

@@ -18,8 +18,9 @@ MAX_GAP = 10.0
 MIN_STEP = 0.01
 
 
-def check_time_stamps(ts, *, path=None, column="t", max_gap: float | None = MAX_GAP,
-                      min_step: float | None = MIN_STEP) -> None:
+def check_time_stamps(
+    ts, *, path=None, column="t", max_gap: float | None = MAX_GAP, min_step: float | None = MIN_STEP
+) -> None:
     """Refuse time stamps that do not strictly increase, jump across a gap or nearly repeat.
 
     **Arguments:**
@@ -38,8 +39,12 @@ def check_time_stamps(ts, *, path=None, column="t", max_gap: float | None = MAX_
     bad = np.flatnonzero(~(steps > 0))
     if bad.size:
         k = int(bad[0]) + 1
-        raise DataError(f"time does not strictly increase ({float(ts[k - 1])!r} then {float(ts[k])!r})",
-                        path=path, column=column, row=k + 1)
+        raise DataError(
+            f"time does not strictly increase ({float(ts[k - 1])!r} then {float(ts[k])!r})",
+            path=path,
+            column=column,
+            row=k + 1,
+        )
     if steps.size < 2:
         return
     median = float(np.median(steps))
@@ -51,7 +56,9 @@ def check_time_stamps(ts, *, path=None, column="t", max_gap: float | None = MAX_
                 f"a gap in the record: time jumps from {float(ts[k - 1])!r} to {float(ts[k])!r} s, {steps[k - 1] / median:.3g} times the "
                 f"median interval {median:.6g} s (more than {max_gap:g} is refused: it would be interpolated or held "
                 f"across); {gap.size} such gap(s). Split the record there into separate files",
-                path=path, column=column, row=k + 1,
+                path=path,
+                column=column,
+                row=k + 1,
             )
     if min_step is not None:
         tiny = np.flatnonzero(steps < min_step * median)
@@ -61,7 +68,9 @@ def check_time_stamps(ts, *, path=None, column="t", max_gap: float | None = MAX_
                 f"near-duplicate time stamps {float(ts[k - 1])!r} and {float(ts[k])!r}: a step of {steps[k - 1]:.3g} s is "
                 f"{steps[k - 1] / median:.2g} times the median interval {median:.6g} s (less than {min_step:g} is "
                 "refused: derivatives across it are noise)",
-                path=path, column=column, row=k + 1,
+                path=path,
+                column=column,
+                row=k + 1,
             )
 
 

@@ -40,12 +40,12 @@ Each finding is `refuse` (the command line exits with status 2 and names it) or 
 scales of the record itself, never of one rig.
 """
 
+from collections.abc import Sequence
 import dataclasses
 import enum
 import itertools
 import math
 import warnings
-from collections.abc import Sequence
 
 import numpy as np
 
@@ -112,9 +112,16 @@ class Finding:
         return ", ".join(where) + f": {self.message}" + (f"; fix: {self.fix}" if self.fix else "")
 
     def to_json(self) -> dict:
-        return {"kind": str(self.kind), "severity": str(self.severity), "source": self.source, "column": self.column,
-                "rows": None if self.rows is None else list(self.rows),
-                "times": None if self.times is None else list(self.times), "message": self.message, "fix": self.fix}
+        return {
+            "kind": str(self.kind),
+            "severity": str(self.severity),
+            "source": self.source,
+            "column": self.column,
+            "rows": None if self.rows is None else list(self.rows),
+            "times": None if self.times is None else list(self.times),
+            "message": self.message,
+            "fix": self.fix,
+        }
 
 
 @dataclasses.dataclass(frozen=True)
@@ -198,9 +205,11 @@ def _time_units(tr, ts, source):
         if 1e-5 <= dt * factor < MAX_INTERVAL_S:
             fix = f"--scale t={factor:g} (time in {unit}; in Python `scale={{'t': {factor:g}}}`)"
             break
-    message = (f"the median sampling interval is {dt:.6g} s: no record of these dynamics is sampled that slowly "
-               "(a derivative over it is meaningless)"
-               + (f"; the time column reads as {unit}" if fix else "; check the time column's unit"))
+    message = (
+        f"the median sampling interval is {dt:.6g} s: no record of these dynamics is sampled that slowly "
+        "(a derivative over it is meaningless)"
+        + (f"; the time column reads as {unit}" if fix else "; check the time column's unit")
+    )
     return [Finding(Check.TIME_UNITS, Severity.REFUSE, source, "t", None, None, message, fix)]
 
 
@@ -214,7 +223,7 @@ def _position_supports(ts, q, v, k, jump) -> bool:
     (jittered) interval spikes with its position, which a corrupt reading does not. The one-step
     differences of the position within two samples either side are compared."""
     lo, hi = max(k - 2, 0), min(k + 2, len(ts) - 1)
-    steps = np.diff(q[lo:hi + 1]) / np.diff(ts[lo:hi + 1])
+    steps = np.diff(q[lo : hi + 1]) / np.diff(ts[lo : hi + 1])
     return bool(steps.size) and bool(np.any(np.abs(v[k] - steps) < 0.5 * jump))
 
 
@@ -244,16 +253,27 @@ def _glitches(tr, ts, source, columns, positions=None):
         for i, j in _runs(residual > threshold):
             if j - i >= GLITCH_WINDOW // 2:
                 continue  # a plateau of four samples or more is not a glitch (stuck or a stretch: other checks)
-            k = i + int(np.argmax(residual[i:j + 1]))
+            k = i + int(np.argmax(residual[i : j + 1]))
             value, near = float(x[k]), float(median[k])
-            if name in positions and all(_position_supports(ts, positions[name], x, m, residual[m])
-                                         for m in range(i, j + 1)):
+            if name in positions and all(
+                _position_supports(ts, positions[name], x, m, residual[m]) for m in range(i, j + 1)
+            ):
                 continue  # the position moved so too: a difference over a short interval, not a corrupt reading
-            out.append(_row_time(
-                ts, i, j, source, Check.GLITCH, Severity.REFUSE, name,
-                f"{'a sample' if i == j else f'{j - i + 1} samples'} of {value:.6g} where the neighbouring samples are "
-                f"about {near:.4g} (a jump of {abs(value - near) / max(spread, 1e-300):.3g} times the column's range "
-                "in one sample): a corrupt reading", _span(ts, i, j)))
+            out.append(
+                _row_time(
+                    ts,
+                    i,
+                    j,
+                    source,
+                    Check.GLITCH,
+                    Severity.REFUSE,
+                    name,
+                    f"{'a sample' if i == j else f'{j - i + 1} samples'} of {value:.6g} where the neighbouring samples are "
+                    f"about {near:.4g} (a jump of {abs(value - near) / max(spread, 1e-300):.3g} times the column's range "
+                    "in one sample): a corrupt reading",
+                    _span(ts, i, j),
+                )
+            )
     return out
 
 
@@ -271,20 +291,33 @@ def _stuck(tr, ts, source, names, xs, paired_estimated):
         for k, (i, j) in enumerate(runs):
             # a quantised column (an encoder, rounded values) repeats itself everywhere: a stuck stretch is one
             # far longer than any other run of the column
-            elsewhere = max(lengths[:k] + lengths[k + 1:], default=1)
+            elsewhere = max(lengths[:k] + lengths[k + 1 :], default=1)
             if j - i + 1 < max(need, 3 * elsewhere):
                 continue
-            others = [o for o in range(xs.shape[1]) if o != c and np.ptp(xs[i:j + 1, o]) > 0]
+            others = [o for o in range(xs.shape[1]) if o != c and np.ptp(xs[i : j + 1, o]) > 0]
             if not others:
                 continue  # everything at rest: a record that holds still, not a stuck sensor
-            reason = (" (or a joint held still by friction while the others move: its velocity is estimated from "
-                      "it, so the two cannot be told apart; cut the stretch either way, a fit across it would "
-                      "read a stuck sensor as physics)" if name in paired_estimated else "")
-            out.append(_row_time(
-                ts, i, j, source, Check.STUCK, Severity.REFUSE, name,
-                f"repeats the value {float(x[i]):.6g} exactly for {j - i + 1} samples ({float(ts[j] - ts[i]):.3g} s) while "
-                f"{', '.join(names[o] for o in others[:3])} change: a sensor that stopped updating{reason}",
-                _span(ts, i, j)))
+            reason = (
+                " (or a joint held still by friction while the others move: its velocity is estimated from "
+                "it, so the two cannot be told apart; cut the stretch either way, a fit across it would "
+                "read a stuck sensor as physics)"
+                if name in paired_estimated
+                else ""
+            )
+            out.append(
+                _row_time(
+                    ts,
+                    i,
+                    j,
+                    source,
+                    Check.STUCK,
+                    Severity.REFUSE,
+                    name,
+                    f"repeats the value {float(x[i]):.6g} exactly for {j - i + 1} samples ({float(ts[j] - ts[i]):.3g} s) while "
+                    f"{', '.join(names[o] for o in others[:3])} change: a sensor that stopped updating{reason}",
+                    _span(ts, i, j),
+                )
+            )
     return out
 
 
@@ -294,16 +327,28 @@ def _wrapped(tr, ts, source, angles):
         steps = np.diff(x)
         typical = float(np.median(np.abs(steps))) + 1e-300
         turns = np.round(steps / (2 * np.pi))
-        wraps = np.flatnonzero((turns != 0) & (np.abs(steps - 2 * np.pi * turns) < WRAP_TOLERANCE * 2 * np.pi)
-                               & (np.abs(steps) > 20.0 * typical))
+        wraps = np.flatnonzero(
+            (turns != 0)
+            & (np.abs(steps - 2 * np.pi * turns) < WRAP_TOLERANCE * 2 * np.pi)
+            & (np.abs(steps) > 20.0 * typical)
+        )
         if wraps.size:
             k = int(wraps[0])
-            out.append(_row_time(
-                ts, k, k + 1, source, Check.WRAPPED, Severity.REFUSE, name,
-                f"jumps by {float(steps[k]):+.4g} rad ({int(turns[k]):+d} turn) from one sample to the next, "
-                f"{wraps.size} such jump(s) in the record: an angle folded into one turn, across which every "
-                "derivative is wrong",
-                "unwrap the angle before reading it (numpy.unwrap on the column): it is the same angle, counted on"))
+            out.append(
+                _row_time(
+                    ts,
+                    k,
+                    k + 1,
+                    source,
+                    Check.WRAPPED,
+                    Severity.REFUSE,
+                    name,
+                    f"jumps by {float(steps[k]):+.4g} rad ({int(turns[k]):+d} turn) from one sample to the next, "
+                    f"{wraps.size} such jump(s) in the record: an angle folded into one turn, across which every "
+                    "derivative is wrong",
+                    "unwrap the angle before reading it (numpy.unwrap on the column): it is the same angle, counted on",
+                )
+            )
     return out
 
 
@@ -326,8 +371,11 @@ def _velocity_stretches(tr, ts, source, values, pairs):
         motion = float(np.sqrt(np.mean(slopes**2)))
         if not motion > 0:
             continue
-        bad = ((np.abs(residual) > VELOCITY_ERROR * np.maximum(np.abs(slopes), np.abs(means)))
-               & (np.abs(residual) > VELOCITY_NOISE * noise) & (np.abs(residual) > VELOCITY_MOTION * motion))
+        bad = (
+            (np.abs(residual) > VELOCITY_ERROR * np.maximum(np.abs(slopes), np.abs(means)))
+            & (np.abs(residual) > VELOCITY_NOISE * noise)
+            & (np.abs(residual) > VELOCITY_MOTION * motion)
+        )
         if bad.mean() > 0.8:
             continue  # wrong nearly everywhere: a unit or a column, `load_trajectory`'s global check names it
         # join bad blocks less than three blocks apart into stretches
@@ -335,24 +383,33 @@ def _velocity_stretches(tr, ts, source, values, pairs):
         idx = np.flatnonzero(bad)
         for a, b in itertools.pairwise(idx):
             if b - a <= 3:
-                joined[a:b + 1] = True
+                joined[a : b + 1] = True
         good = ~joined
         sg = slopes[good]
         gain_elsewhere = float(sg @ means[good] / (sg @ sg)) if sg.size and sg @ sg > 0 else float("nan")
         for a, b in _runs(joined):
-            if bad[a:b + 1].sum() < MIN_BAD_BLOCKS or bad[a:b + 1].mean() < 0.5:
+            if bad[a : b + 1].sum() < MIN_BAD_BLOCKS or bad[a : b + 1].mean() < 0.5:
                 continue
             # a stretch that reaches the first or last block reaches the record's end (the blocks stop short of it)
             i = 0 if a == 0 else int(start[a])
             j = len(ts) - 1 if b == len(start) - 1 else int(stop[b])
-            s, m = slopes[a:b + 1], means[a:b + 1]
+            s, m = slopes[a : b + 1], means[a : b + 1]
             gain = float(s @ m / (s @ s)) if s @ s > 0 else float("nan")
-            out.append(_row_time(
-                ts, i, j, source, Check.VELOCITY, Severity.REFUSE, velocity,
-                f"is not the derivative of {position} in this stretch ({b - a + 1} blocks of {BLOCK_S * 1e3:g} ms; "
-                f"its mean is {gain:.3g} times the position's change per second there, {gain_elsewhere:.3g} in the "
-                "rest of the record): a fault of the stretch, not a unit, so no scale fixes it",
-                _span(ts, i, j)))
+            out.append(
+                _row_time(
+                    ts,
+                    i,
+                    j,
+                    source,
+                    Check.VELOCITY,
+                    Severity.REFUSE,
+                    velocity,
+                    f"is not the derivative of {position} in this stretch ({b - a + 1} blocks of {BLOCK_S * 1e3:g} ms; "
+                    f"its mean is {gain:.3g} times the position's change per second there, {gain_elsewhere:.3g} in the "
+                    "rest of the record): a fault of the stretch, not a unit, so no scale fixes it",
+                    _span(ts, i, j),
+                )
+            )
     return out
 
 
@@ -364,10 +421,18 @@ def _constant(tr, ts, source, system):
         x = xs[:, c]
         if np.ptp(x) == 0:
             severity = Severity.WARN if vehicle else Severity.REFUSE
-            out.append(Finding(Check.ZERO if x[0] == 0 else Check.CONSTANT, severity, source, name, (1, len(ts)),
-                               (float(ts[0]), float(ts[-1])),
-                               f"is {x[0]:.6g} in every sample: the coordinate never moves (a dead sensor, or a joint "
-                               "that is locked), so nothing in the record determines what depends on it"))
+            out.append(
+                Finding(
+                    Check.ZERO if x[0] == 0 else Check.CONSTANT,
+                    severity,
+                    source,
+                    name,
+                    (1, len(ts)),
+                    (float(ts[0]), float(ts[-1])),
+                    f"is {x[0]:.6g} in every sample: the coordinate never moves (a dead sensor, or a joint "
+                    "that is locked), so nothing in the record determines what depends on it",
+                )
+            )
     if us.shape[1] == 0:
         return out
     flat = [np.ptp(us[:, k]) == 0 for k in range(us.shape[1])]
@@ -377,15 +442,27 @@ def _constant(tr, ts, source, system):
             continue
         if all(flat):
             severity = Severity.WARN if vehicle else Severity.REFUSE
-            why = ("nothing drives the system, so the parameters' scale is not determined (the equations of a free "
-                   "motion are homogeneous in them)" if zero[k] else
-                   "a constant input cannot be told from a constant offset (which a fit estimates per record) and "
-                   "does not determine the parameters' scale")
+            why = (
+                "nothing drives the system, so the parameters' scale is not determined (the equations of a free "
+                "motion are homogeneous in them)"
+                if zero[k]
+                else "a constant input cannot be told from a constant offset (which a fit estimates per record) and "
+                "does not determine the parameters' scale"
+            )
         else:
             severity = Severity.WARN
             why = "that input excites nothing; only the others drive the record"
-        out.append(Finding(Check.ZERO if zero[k] else Check.CONSTANT, severity, source, name, (1, len(ts)),
-                           (float(ts[0]), float(ts[-1])), f"is {us[0, k]:.6g} in every sample: {why}"))
+        out.append(
+            Finding(
+                Check.ZERO if zero[k] else Check.CONSTANT,
+                severity,
+                source,
+                name,
+                (1, len(ts)),
+                (float(ts[0]), float(ts[-1])),
+                f"is {us[0, k]:.6g} in every sample: {why}",
+            )
+        )
     return out
 
 
@@ -447,13 +524,19 @@ def check_record(trajectory: Trajectory, *, estimated: Sequence[str] | None = No
 
 
 def _same(a: Trajectory, b: Trajectory) -> bool:
-    return (len(a) == len(b) and a.xs.shape == b.xs.shape and a.us.shape == b.us.shape
-            and np.array_equal(np.asarray(a.ts), np.asarray(b.ts)) and np.array_equal(np.asarray(a.xs), np.asarray(b.xs))
-            and np.array_equal(np.asarray(a.us), np.asarray(b.us)))
+    return (
+        len(a) == len(b)
+        and a.xs.shape == b.xs.shape
+        and a.us.shape == b.us.shape
+        and np.array_equal(np.asarray(a.ts), np.asarray(b.ts))
+        and np.array_equal(np.asarray(a.xs), np.asarray(b.xs))
+        and np.array_equal(np.asarray(a.us), np.asarray(b.us))
+    )
 
 
-def check_records(records: Sequence[Trajectory], validation: Sequence[Trajectory] = (), *,
-                  estimated: Sequence[str] | None = None) -> DataCheck:
+def check_records(
+    records: Sequence[Trajectory], validation: Sequence[Trajectory] = (), *, estimated: Sequence[str] | None = None
+) -> DataCheck:
     """`check_record` on each record and held-out record, and the same record given twice.
 
     **Arguments:** `records` (training), `validation` (held-out; may be empty), `estimated` as in
@@ -471,13 +554,24 @@ def check_records(records: Sequence[Trajectory], validation: Sequence[Trajectory
             (ka, ra), (kb, rb) = everything[a], everything[b]
             if _same(ra, rb):
                 held = ka != kb
-                message = (f"is the same data as the {ka} {ra.source or a + 1}: "
-                           + ("held-out error on the training data is in-sample, no validation"
-                              if held else "the same record counted twice doubles its weight and halves every "
-                              "standard error"))
-                findings.append(Finding(Check.DUPLICATE, Severity.REFUSE, rb.source or "", None, None, None, message,
-                                        "give a different record" + (" for validation (or none: the tail is held "
-                                                                     "out)" if held else ", or this one once")))
+                message = f"is the same data as the {ka} {ra.source or a + 1}: " + (
+                    "held-out error on the training data is in-sample, no validation"
+                    if held
+                    else "the same record counted twice doubles its weight and halves every standard error"
+                )
+                findings.append(
+                    Finding(
+                        Check.DUPLICATE,
+                        Severity.REFUSE,
+                        rb.source or "",
+                        None,
+                        None,
+                        None,
+                        message,
+                        "give a different record"
+                        + (" for validation (or none: the tail is held out)" if held else ", or this one once"),
+                    )
+                )
     return DataCheck(tuple(findings))
 
 
@@ -508,8 +602,9 @@ def parse_exclude(text: str | None) -> list[tuple[str | None, float, float]]:
     return spans
 
 
-def exclude_stretches(trajectory: Trajectory, spans: Sequence[tuple[float, float]], *,
-                      min_samples: int = 3) -> list[Trajectory]:
+def exclude_stretches(
+    trajectory: Trajectory, spans: Sequence[tuple[float, float]], *, min_samples: int = 3
+) -> list[Trajectory]:
     """`trajectory` without the samples in each stretch `(t0, t1)` (both ends included; `-inf`/`inf`
     for open ends), as the records that remain between them (a cut inside a record leaves two). Pieces
     shorter than `min_samples` are dropped. Each piece's `source` names its file and time span.
@@ -528,5 +623,7 @@ def exclude_stretches(trajectory: Trajectory, spans: Sequence[tuple[float, float
             continue
         piece = trajectory.slice(int(i), int(j) + 1)
         name = f"{trajectory.source or 'record'} [{float(ts[i]):.6g}-{float(ts[j]):.6g} s]"
-        pieces.append(Trajectory(piece.ts, piece.xs, piece.us, piece.state_names, piece.input_names, piece.system, name))
+        pieces.append(
+            Trajectory(piece.ts, piece.xs, piece.us, piece.state_names, piece.input_names, piece.system, name)
+        )
     return pieces

@@ -2,8 +2,8 @@
 
 import equinox as eqx
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float
+import numpy as np
 
 from .._errors import UsageError
 
@@ -85,7 +85,9 @@ class Trajectory(eqx.Module):
     def slice(self, start: int | None = None, stop: int | None = None) -> "Trajectory":
         """The samples `start:stop` (Python slice semantics), as a new `Trajectory`."""
         s = slice(start, stop)
-        return Trajectory(self.ts[s], self.xs[s], self.us[s], self.state_names, self.input_names, self.system, self.source)
+        return Trajectory(
+            self.ts[s], self.xs[s], self.us[s], self.state_names, self.input_names, self.system, self.source
+        )
 
     def split(self, fraction: float) -> tuple["Trajectory", "Trajectory"]:
         """Split into the first `fraction` of samples and the rest (e.g. train and held-out)."""
@@ -102,6 +104,11 @@ class Trajectory(eqx.Module):
         """
         ts = self.ts if isinstance(self.ts, np.ndarray) else jnp.asarray(self.ts, dtype)
         return Trajectory(
-            ts, jnp.asarray(self.xs, dtype), jnp.asarray(self.us, dtype),
-            self.state_names, self.input_names, self.system, self.source,
+            ts,
+            jnp.asarray(self.xs, dtype),
+            jnp.asarray(self.us, dtype),
+            self.state_names,
+            self.input_names,
+            self.system,
+            self.source,
         )

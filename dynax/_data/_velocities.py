@@ -100,8 +100,9 @@ def gain_holds_everywhere(ts, q, v, gain: float) -> bool:
     return seen > 0
 
 
-def check_velocities(ts, values: dict, pairs: dict[str, str], *, path=None, columns: dict | None = None,
-                     scale: dict | None = None) -> None:
+def check_velocities(
+    ts, values: dict, pairs: dict[str, str], *, path=None, columns: dict | None = None, scale: dict | None = None
+) -> None:
     """Refuse a record whose velocity column is not the derivative of its position column.
 
     **Arguments:**
@@ -129,7 +130,9 @@ def check_velocities(ts, values: dict, pairs: dict[str, str], *, path=None, colu
         gain, std, corr = found
         follows_another = any(
             (m := velocity_gain(ts, values[other], values[velocity])) is not None and abs(m[0] - 1.0) <= MAX_GAIN_ERROR
-            for other in pairs.values() if other != position)
+            for other in pairs.values()
+            if other != position
+        )
         if not follows_another and not gain_holds_everywhere(ts, values[position], values[velocity], gain):
             continue  # wrong in some stretches only: no scale is right; the sanity check names the stretch
         dt = float(np.median(np.diff(np.asarray(ts, dtype=float))))
@@ -139,10 +142,14 @@ def check_velocities(ts, values: dict, pairs: dict[str, str], *, path=None, colu
                     f"the time column reads as {unit}: the velocity {named(velocity)} is {gain:.4g} times its "
                     f"position's change per time unit and the median interval is {dt:.6g}; scale the time, not the "
                     f"velocity (`scale={{'t': {1 / factor:g}}}`, `--scale t={1 / factor:g}`)",
-                    path=path, column=columns.get("t", "t"))
-        what = [f"it is not the derivative of {named(position)}: over {BLOCK_S * 1e3:g} ms blocks its mean is "
-                f"{gain:.4g} +- {std:.2g} times the position's change per second (correlation {corr:.2f}; 1 is "
-                "the same quantity in the same units)"]
+                    path=path,
+                    column=columns.get("t", "t"),
+                )
+        what = [
+            f"it is not the derivative of {named(position)}: over {BLOCK_S * 1e3:g} ms blocks its mean is "
+            f"{gain:.4g} +- {std:.2g} times the position's change per second (correlation {corr:.2f}; 1 is "
+            "the same quantity in the same units)"
+        ]
         factor, matched = 1.0 / gain if gain != 0 else None, False
         for meaning, known in _KNOWN_FACTORS.items():
             if abs(gain / known - 1.0) < (MAX_GAIN_ERROR if known < 0 else 0.03):
@@ -154,11 +161,15 @@ def check_velocities(ts, values: dict, pairs: dict[str, str], *, path=None, colu
                 match = velocity_gain(ts, values[other], values[velocity])
                 if match is not None and abs(match[0] - 1.0) <= MAX_GAIN_ERROR:
                     swapped = True
-                    what.append(f"it is the derivative of {named(other)} (gain {match[0]:.4g}): are the columns "
-                                f"of {velocity} and {other_velocity} swapped?")
+                    what.append(
+                        f"it is the derivative of {named(other)} (gain {match[0]:.4g}): are the columns "
+                        f"of {velocity} and {other_velocity} swapped?"
+                    )
         if not swapped and abs(gain) < MAX_GAIN_ERROR:
-            what.append("if the record has no velocity, leave its columns out (unmapped): `load_trajectory` then "
-                        "estimates every velocity from the positions")
+            what.append(
+                "if the record has no velocity, leave its columns out (unmapped): `load_trajectory` then "
+                "estimates every velocity from the positions"
+            )
         elif not swapped and factor is not None:
             factor *= float(scale.get(velocity, 1.0))
             lead = "if so, scale it" if matched else "if that is a unit or a gear ratio, scale it"

@@ -60,8 +60,11 @@ def default_candidates(system, trajectories=None) -> tuple[AbstractTerm, ...]:
     terms: list[AbstractTerm] = []
     if system.joints:
         for j in system.joints:
-            coulomb = (CoulombFriction(j) if trajectories is None
-                       else CoulombFriction(j, velocity_scale=coulomb_velocity_scale(system, j, trajectories)))
+            coulomb = (
+                CoulombFriction(j)
+                if trajectories is None
+                else CoulombFriction(j, velocity_scale=coulomb_velocity_scale(system, j, trajectories))
+            )
             terms += [coulomb, ViscousFriction(j), QuadraticDrag(j), RotorInertia(j)]
     if system.body_axes:
         terms += [BodyQuadraticDrag(i) for i in range(3)]
@@ -95,8 +98,9 @@ def look_alikes(system, term, candidates) -> list[int]:
     ]
 
 
-def structurally_absorbed(family, refit, *, n_points: int = 64, seed: int = 0, tol: float = 1e-7,
-                          sensitivities=None) -> np.ndarray:
+def structurally_absorbed(
+    family, refit, *, n_points: int = 64, seed: int = 0, tol: float = 1e-7, sensitivities=None
+) -> np.ndarray:
     r"""For each candidate of `family`, whether refitting the nominal parameters reproduces it exactly.
 
     The test is structural, not about a data set: at random states and inputs, the derivative of
@@ -141,8 +145,9 @@ def _in_span(basis, b, tol) -> bool:
     return bool(np.linalg.norm(b - basis @ coef) <= tol * np.linalg.norm(b))
 
 
-def structurally_equivalent(family, refit, among, *, n_points: int = 64, seed: int = 0,
-                            tol: float = 1e-7, sensitivities=None) -> dict[int, list[int]]:
+def structurally_equivalent(
+    family, refit, among, *, n_points: int = 64, seed: int = 0, tol: float = 1e-7, sensitivities=None
+) -> dict[int, list[int]]:
     r"""Pairs of candidates that are one model once the nominal parameters are refitted.
 
     Candidate $k$ is equivalent to candidate $l$ when the derivative of the vector field with
@@ -175,8 +180,9 @@ def structurally_equivalent(family, refit, among, *, n_points: int = 64, seed: i
     return out
 
 
-def held_partners(family, held, *, n_points: int = 64, seed: int = 0, tol: float = 1e-7,
-                  sensitivities=None) -> list[tuple[int, float] | None]:
+def held_partners(
+    family, held, *, n_points: int = 64, seed: int = 0, tol: float = 1e-7, sensitivities=None
+) -> list[tuple[int, float] | None]:
     r"""For each candidate of `family`, the nominal parameter it adds to among those `held` (not refitted), if any.
 
     A candidate adds to nominal parameter $i$ when the derivative of the vector field with

@@ -12,9 +12,9 @@ The records (checked, on one grid, the hold-out cut, velocities, the horizons re
 runs) are prepared in `_records.py`.
 """
 
+from collections.abc import Callable, Sequence
 import contextlib
 import dataclasses
-from collections.abc import Callable, Sequence
 
 import equinox as eqx
 import numpy as np
@@ -30,17 +30,20 @@ from ._discovery import discover
 from ._fit import nominal_values, window_errors
 from ._forward import Current, forward_selection, Nominal, Yardstick
 from ._horizon import DEFAULT_FRACTION
+from ._problem import check_arguments, Options, prepare_problem, Problem
+from ._problem import Known as Known
+from ._problem import Refit as Refit
 from ._quadrotor import diagnose_quadrotor
-from ._problem import check_arguments, Options, prepare_problem, Problem, Known as Known, Refit as Refit
 from ._records import as_records, HOLDOUT_FRACTION
 from ._residuals import Structure, structure_test
-from ._result import DataSummary, ModelSummary, Report as Report, SimErrorCurve
+from ._result import DataSummary, ModelSummary, SimErrorCurve
+from ._result import Report as Report
 from ._selection import paired_test
 from ._summaries import (
-    rmse_gain,
     merge_repeated_causes,
     per_run_table,
     rmse_curve,
+    rmse_gain,
     test_summary,
     unexplained_note,
     window_scores,
@@ -48,8 +51,13 @@ from ._summaries import (
 from ._validation import validation_summary
 from ._verdict import decide, inconclusive_note, Power, power_of, PRACTICAL_R2, Verdict
 
+_CONTRACT_NAMES = {
+    "Acrobot": "acrobot",
+    "DoublePendulum": "double_pendulum",
+    "LinearAxis": "linear_axis",
+    "Helicopter": "helicopter",
+}
 
-_CONTRACT_NAMES = {"Acrobot": "acrobot", "DoublePendulum": "double_pendulum", "LinearAxis": "linear_axis", "Helicopter": "helicopter"}
 
 @contextlib.contextmanager
 def stage_reporter(progress: Callable[[str], None] | bool | None):
@@ -111,8 +119,9 @@ def _judge(problem: Problem, nominal: Nominal, yard: Yardstick, current: Current
     diverged = not np.isfinite(nominal.rmse[yard.ref_index])
     verdict = decide(bool(current.selected), current.structure, diverged, power)
     gain = rmse_gain(current.rmse, nominal.rmse, yard.ref_index) if current.selected else 0.0
-    judgement = _Judgement(verdict, model, findings, current.errors, current.rmse, current.structure, gain, {},
-                           current.cv_errors, power)
+    judgement = _Judgement(
+        verdict, model, findings, current.errors, current.rmse, current.structure, gain, {}, current.cv_errors, power
+    )
     # Beyond the vocabulary: search, refit, the same held-out test. Also after a `none`: the generic
     # probe cannot see every structure (a force periodic in position), the search's own guards can.
     if problem.options.discovery and verdict != Verdict.EXPLAINED:
@@ -133,10 +142,16 @@ def _discover(problem: Problem, nominal: Nominal, yard: Yardstick, current: Curr
 
     system = problem.system
     found = discover(
-        judgement.model if current.selected else nominal.model, problem.train, problem.validation, held_out=held_out,
+        judgement.model if current.selected else nominal.model,
+        problem.train,
+        problem.validation,
+        held_out=held_out,
         significance=lambda ref, new: paired_test(ref, new, problem.window_runs, yard.overlap).p_value,
-        refit=problem.refit_names, vocabulary=[problem.candidates[k].label(system) for k in problem.searchable],
-        absorbed=[f"{c['cause']}@{c['where']}" for c in problem.not_identifiable], alpha=o.alpha, min_gain=o.min_gain,
+        refit=problem.refit_names,
+        vocabulary=[problem.candidates[k].label(system) for k in problem.searchable],
+        absorbed=[f"{c['cause']}@{c['where']}" for c in problem.not_identifiable],
+        alpha=o.alpha,
+        min_gain=o.min_gain,
         fit_window_s=problem.fit_window_s,
         current=(current.score[: yard.n_val], current.rmse, current.rmse[yard.ref_index]),
         progress=say,
@@ -149,10 +164,18 @@ def _discover(problem: Problem, nominal: Nominal, yard: Yardstick, current: Curr
         errors = last_errors.get(id(found.model))
         if errors is None:
             errors = np.asarray(held_out_errors(found.model, problem.val_windows))
-        judgement = _Judgement(decide(True, structure, False, judgement.power), found.model,
-                               judgement.findings + found.findings, errors, found.held_out[1], structure,
-                               rmse_gain(found.held_out[1], nominal.rmse, yard.ref_index), judgement.discovery,
-                               judgement.cv_errors, judgement.power)
+        judgement = _Judgement(
+            decide(True, structure, False, judgement.power),
+            found.model,
+            judgement.findings + found.findings,
+            errors,
+            found.held_out[1],
+            structure,
+            rmse_gain(found.held_out[1], nominal.rmse, yard.ref_index),
+            judgement.discovery,
+            judgement.cv_errors,
+            judgement.power,
+        )
     return judgement
 
 
@@ -163,10 +186,12 @@ def _model_summary(problem: Problem, model, errors, rmse, yard: Yardstick, terms
     if isinstance(model, Extended):
         parameters.update({k: float(v) for t in model.terms for k, v in t.parameters(problem.system).items()})
     measured = np.asarray(problem.val_windows.xs)[:, yard.n_ref]
-    validation = validation_summary(model, problem.validation, np.asarray(errors)[:, yard.n_ref], measured,
-                                    yard.horizon.seconds)
-    return ModelSummary(parameters=parameters, sim_error=SimErrorCurve.of(yard.horizons, rmse), terms=terms,
-                        validation=validation)
+    validation = validation_summary(
+        model, problem.validation, np.asarray(errors)[:, yard.n_ref], measured, yard.horizon.seconds
+    )
+    return ModelSummary(
+        parameters=parameters, sim_error=SimErrorCurve.of(yard.horizons, rmse), terms=terms, validation=validation
+    )
 
 
 def _data_summary(problem: Problem, train, validation) -> DataSummary:
@@ -175,11 +200,15 @@ def _data_summary(problem: Problem, train, validation) -> DataSummary:
     if validation is not None:
         validation_name = ", ".join(r.source or "(held out)" for r in held_out)
     else:
-        validation_name = "last {:.0%} of {}".format(problem.options.holdout_fraction,
-                                                     ", ".join(r.source or "train" for r in given))
+        validation_name = "last {:.0%} of {}".format(
+            problem.options.holdout_fraction, ", ".join(r.source or "train" for r in given)
+        )
     return DataSummary(
-        train=", ".join(r.source or "(train)" for r in given), validation=validation_name,
-        n_train=int(sum(len(r) for r in problem.train)), n_validation=int(sum(len(r) for r in held_out)), dt=problem.dt,
+        train=", ".join(r.source or "(train)" for r in given),
+        validation=validation_name,
+        n_train=int(sum(len(r) for r in problem.train)),
+        n_validation=int(sum(len(r) for r in held_out)),
+        dt=problem.dt,
         train_runs=tuple(r.source or f"train run {i + 1}" for i, r in enumerate(problem.train)),
         validation_runs=tuple(r.source or f"held-out run {i + 1}" for i, r in enumerate(held_out)),
         velocities=problem.velocities,
@@ -195,25 +224,34 @@ def _report(problem, nominal, yard, judgement, table, last, rounds, *, mode, sys
         notes.append(unexplained_note(judgement.structure))
     elif judgement.structure.significant:
         s = judgement.structure
-        notes.append(f"The residual probe still explains {s.r2:.0%} of the held-out one-step residuals (p = {s.p_value:.2g}): "
-                     f"significant, but a term capturing all of it would lower them by {1 - np.sqrt(1 - max(s.r2, 0)):.0%} "
-                     f"at most, less than a structure of practical size (R2 >= {PRACTICAL_R2:.2f}; see the verdict rule).")
+        notes.append(
+            f"The residual probe still explains {s.r2:.0%} of the held-out one-step residuals (p = {s.p_value:.2g}): "
+            f"significant, but a term capturing all of it would lower them by {1 - np.sqrt(1 - max(s.r2, 0)):.0%} "
+            f"at most, less than a structure of practical size (R2 >= {PRACTICAL_R2:.2f}; see the verdict rule)."
+        )
     test = test_summary(o.alpha, o.min_gain, judgement.power, verdict, named=bool(judgement.findings))
-    test["cross_fitting"] = (f"each of the {len(problem.folds)} training runs also held out in turn, every configuration "
-                             "refitted on the other training runs; its windows pooled with the held-out runs'"
-                             if problem.folds else None)
+    test["cross_fitting"] = (
+        f"each of the {len(problem.folds)} training runs also held out in turn, every configuration "
+        "refitted on the other training runs; its windows pooled with the held-out runs'"
+        if problem.folds
+        else None
+    )
     runs = "held-out and cross-fitted runs" if problem.folds else "held-out runs"
     if verdict == Verdict.INCONCLUSIVE:
         notes.append(inconclusive_note(judgement.power, yard.horizon.seconds, runs))
     elif verdict == Verdict.NONE and test["detectable_gain"] is not None:
-        notes.append(f"No candidate passed the test. With these {runs} the test would have detected a gain of "
-                     f"about {test['detectable_gain']:.0%} at {yard.horizon.seconds:g} s (power 80 %) if its window-to-window "
-                     f"variation is like the refitted candidates'; a smaller effect, or one that varies more (friction "
-                     f"acting in the slow segments only), may be present.")
+        notes.append(
+            f"No candidate passed the test. With these {runs} the test would have detected a gain of "
+            f"about {test['detectable_gain']:.0%} at {yard.horizon.seconds:g} s (power 80 %) if its window-to-window "
+            f"variation is like the refitted candidates'; a smaller effect, or one that varies more (friction "
+            f"acting in the slow segments only), may be present."
+        )
     extended = judgement.model
     terms = tuple(dict.fromkeys(t.label(system) for t in extended.terms))  # wind@world once
     return Report(
-        system=system_name or problem.train[0].system or _CONTRACT_NAMES.get(type(system).__name__, type(system).__name__.lower()),
+        system=system_name
+        or problem.train[0].system
+        or _CONTRACT_NAMES.get(type(system).__name__, type(system).__name__.lower()),
         data=_data_summary(problem, train, validation),
         mode="refit" if isinstance(mode, Refit) else "known",
         nominal=_model_summary(problem, nominal.model, nominal.errors, nominal.rmse, yard),
@@ -348,25 +386,63 @@ def diagnose(
     warn_if_float32("diagnosis")  # the float64 policy: say so, once, naming the switch
     if isinstance(system, Quadrotor):  # its body-frame form, the multirotor causes (`_quadrotor.py`)
         return diagnose_quadrotor(
-            system, train, validation, diagnose=diagnose, candidates=candidates, mode=mode,
+            system,
+            train,
+            validation,
+            diagnose=diagnose,
+            candidates=candidates,
+            mode=mode,
             horizons_s=None if tuple(horizons_s) == (0.1, 0.25, 0.5, 1.0, 2.0) else horizons_s,
-            reference_horizon_s=reference_horizon_s, horizon_fraction=horizon_fraction, fit_window_s=fit_window_s,
-            max_terms=max_terms, alpha=alpha, min_gain=min_gain, holdout_fraction=holdout_fraction,
-            shortlist=shortlist, system_name=system_name, discovery=discovery, velocities=velocities,
-            cross_fit=cross_fit, progress=progress)
+            reference_horizon_s=reference_horizon_s,
+            horizon_fraction=horizon_fraction,
+            fit_window_s=fit_window_s,
+            max_terms=max_terms,
+            alpha=alpha,
+            min_gain=min_gain,
+            holdout_fraction=holdout_fraction,
+            shortlist=shortlist,
+            system_name=system_name,
+            discovery=discovery,
+            velocities=velocities,
+            cross_fit=cross_fit,
+            progress=progress,
+        )
     check_arguments(system, mode, max_terms)
     if velocities not in ("auto", "measured"):
         raise UsageError(f"diagnose: `velocities` must be 'auto' or 'measured', got {velocities!r}")
-    options = Options(horizons_s, reference_horizon_s, horizon_fraction, fit_window_s, max_terms, alpha, min_gain,
-                       holdout_fraction, shortlist, discovery, velocities, cross_fit)
+    options = Options(
+        horizons_s,
+        reference_horizon_s,
+        horizon_fraction,
+        fit_window_s,
+        max_terms,
+        alpha,
+        min_gain,
+        holdout_fraction,
+        shortlist,
+        discovery,
+        velocities,
+        cross_fit,
+    )
     _warn_data_faults(train, validation)
     with stage_reporter(progress) as say:
         problem = prepare_problem(system, train, validation, candidates, mode, options)
         nominal, yard, current, table, last, rounds = forward_selection(problem, say)
         judgement = _judge(problem, nominal, yard, current, last, say)
         say("validation: fit % and residual tests of the nominal and the extended model ...")
-        return _report(problem, nominal, yard, judgement, table, last, rounds, mode=mode, system_name=system_name,
-                       train=train, validation=validation)
+        return _report(
+            problem,
+            nominal,
+            yard,
+            judgement,
+            table,
+            last,
+            rounds,
+            mode=mode,
+            system_name=system_name,
+            train=train,
+            validation=validation,
+        )
 
 
 def _warn_data_faults(train, validation):

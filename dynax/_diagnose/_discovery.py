@@ -38,12 +38,12 @@ import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
 
+from .._data._derivatives import savitzky_golay
 from .._identify._simulation_fit import fit_simulation_error
-from .._model._extensions import Discovered, Extended, Feature
+from .._model._extensions import Discovered, Extended
 from ._fit import nominal_parameter_names
 from ._library import evaluate_features, feature_library, is_angle, named_equivalent, physical_readings, search_period
-from .._data._derivatives import savitzky_golay
-from ._residuals import predicted_accelerations, sg_window, acceleration_residuals, velocity_indices
+from ._residuals import acceleration_residuals, predicted_accelerations, sg_window, velocity_indices
 from ._sparse import group_cv_r2, sparse_search
 
 
@@ -94,7 +94,9 @@ def refit_spec(model: Extended, refit: Sequence[str]):
 @eqx.filter_jit
 def _acceleration_sensitivities(fitted, fixed, ts, xs_smooth, us, idx, us_before):
     p0, unravel = jax.flatten_util.ravel_pytree(fitted)
-    return jax.jacfwd(lambda p: predicted_accelerations(eqx.combine(unravel(p), fixed), ts, xs_smooth, us, idx, us_before))(p0)
+    return jax.jacfwd(
+        lambda p: predicted_accelerations(eqx.combine(unravel(p), fixed), ts, xs_smooth, us, idx, us_before)
+    )(p0)
 
 
 def force_residuals(model, records, refit: Sequence[str] = ()) -> tuple[np.ndarray, ...]:
@@ -125,13 +127,20 @@ def force_residuals(model, records, refit: Sequence[str] = ()) -> tuple[np.ndarr
         sens = np.asarray(_acceleration_sensitivities(fitted, fixed, ts, smooth, traj.us, idx, us_before))
         if sens.shape[-1]:  # the residual machinery smooths the prediction; its sensitivities alike
             flat = sens.reshape(len(ts), -1)
-            sens = np.asarray(savitzky_golay(ts, jnp.asarray(flat), window=sg_window(traj.dt), order=3)).reshape(sens.shape)
+            sens = np.asarray(savitzky_golay(ts, jnp.asarray(flat), window=sg_window(traj.dt), order=3)).reshape(
+                sens.shape
+            )
         nuisance.append(-np.einsum("tij,tjp->tip", m, sens[keep]))
         xs_all.append(xs)
         us_all.append(np.asarray(traj.us)[keep])
         runs.append(np.full(len(xs), r))
-    return (np.concatenate(out), np.concatenate(nuisance), np.concatenate(xs_all), np.concatenate(us_all),
-            np.concatenate(runs))
+    return (
+        np.concatenate(out),
+        np.concatenate(nuisance),
+        np.concatenate(xs_all),
+        np.concatenate(us_all),
+        np.concatenate(runs),
+    )
 
 
 def _project_out(nuisance, *arrays):
@@ -200,8 +209,11 @@ def propose(
                 deferred.append(label)
                 chosen.remove(k)
         periodic = [k for k, f in enumerate(library) if f.kind.startswith("periodic")]
-        allowed = [k for k, f in enumerate(library)
-                   if not inert[k] and k not in periodic and named_equivalent(system, f, j) not in vocabulary]
+        allowed = [
+            k
+            for k, f in enumerate(library)
+            if not inert[k] and k not in periodic and named_equivalent(system, f, j) not in vocabulary
+        ]
         chosen = _look_alike_by_cross_validation(chosen, allowed, phi, y, groups)
         if any(k in chosen for k in periodic):  # a phase needs both halves of the pair
             chosen = sorted(set(chosen) | set(periodic))
@@ -218,15 +230,17 @@ def propose(
             if deferred and fit.cv_r2 >= min_cv_r2:
                 proposals.append(Proposal(j, (), np.zeros(0), (), float(fit.cv_r2), tuple(deferred), None))
             continue
-        proposals.append(Proposal(
-            channel=j,
-            features=tuple(library[k] for k in chosen),
-            coefficients=coef,
-            frequency=tuple(float(fit.frequency[k]) for k in chosen),
-            cv_r2=float(cv_r2),
-            deferred=tuple(deferred),
-            period=period if any(library[k].kind.startswith("periodic") for k in chosen) else None,
-        ))
+        proposals.append(
+            Proposal(
+                channel=j,
+                features=tuple(library[k] for k in chosen),
+                coefficients=coef,
+                frequency=tuple(float(fit.frequency[k]) for k in chosen),
+                cv_r2=float(cv_r2),
+                deferred=tuple(deferred),
+                period=period if any(library[k].kind.startswith("periodic") for k in chosen) else None,
+            )
+        )
     proposals.sort(key=lambda p: (not p.features, -p.cv_r2))
     return proposals
 
@@ -298,13 +312,15 @@ class Discovery(eqx.Module):
             "gain": self.gain,
             "p_value": self.p_value,
             "proposals": [
-                {"where": system.state_names[p.channel],
-                 "features": [f.name(system) for f in p.features],
-                 "one_step_coefficients": [float(c) for c in p.coefficients],
-                 "selection_frequency": list(p.frequency),
-                 "cv_r2_one_step": p.cv_r2,
-                 "period": p.period,
-                 "deferred_to_named_causes": list(p.deferred)}
+                {
+                    "where": system.state_names[p.channel],
+                    "features": [f.name(system) for f in p.features],
+                    "one_step_coefficients": [float(c) for c in p.coefficients],
+                    "selection_frequency": list(p.frequency),
+                    "cv_r2_one_step": p.cv_r2,
+                    "period": p.period,
+                    "deferred_to_named_causes": list(p.deferred),
+                }
                 for p in self.proposals
             ],
         }
@@ -316,12 +332,19 @@ def _fit_with(model, terms, records, refit, fit_window_s, state_scale):
     named = model.terms if isinstance(model, Extended) else ()
     extended = Extended(system, tuple(named) + tuple(terms))
     spec = refit_spec(extended, refit)
-    result = fit_simulation_error(extended, records, filter_spec=spec, segment_s=fit_window_s, fit_initial_states=False,
-                                  state_scale=state_scale, max_steps=60)
+    result = fit_simulation_error(
+        extended,
+        records,
+        filter_spec=spec,
+        segment_s=fit_window_s,
+        fit_initial_states=False,
+        state_scale=state_scale,
+        max_steps=60,
+    )
     fitted, _ = eqx.partition(extended, spec)
     _, unravel = jax.flatten_util.ravel_pytree(fitted)
     std_tree = unravel(result.std_errors)
-    stds = [np.asarray(t.coefficients) for t in std_tree.terms[len(named):]]
+    stds = [np.asarray(t.coefficients) for t in std_tree.terms[len(named) :]]
     return result.model, stds
 
 
@@ -374,32 +397,59 @@ def discover(
     searched = propose(model, train, refit=refit, vocabulary=vocabulary, absorbed=absorbed, max_terms=max_terms)
     for p in searched:
         if p.deferred:
-            notes.append(f"The discovery search at {system.state_names[p.channel]} selected features of "
-                         f"{', '.join(p.deferred)}, which the vocabulary names and tested; the named cause wins "
-                         "over the equivalent discovered formula.")
+            notes.append(
+                f"The discovery search at {system.state_names[p.channel]} selected features of "
+                f"{', '.join(p.deferred)}, which the vocabulary names and tested; the named cause wins "
+                "over the equivalent discovered formula."
+            )
     proposals = [p for p in searched if p.features]
     if not proposals:
-        return empty("The discovery search found no stable sparse formula beyond the vocabulary for the structure left "
-                     "(no feature set selected in most subsamples and explaining a cross-validated share of the residual).",
-                     searched)
+        return empty(
+            "The discovery search found no stable sparse formula beyond the vocabulary for the structure left "
+            "(no feature set selected in most subsamples and explaining a cross-validated share of the residual).",
+            searched,
+        )
     terms = [Discovered(p.channel, p.features, p.coefficients) for p in proposals]
     say("discovery: proposed " + "; ".join(t.formula(system) for t in terms) + "; refitting through simulation ...")
     xs_train = np.concatenate([np.asarray(r.xs) for r in train])
     state_scale = np.maximum(xs_train.std(axis=0), 1e-9)
     scores_cur, _, rmse_cur = current if current is not None else held_out(model)
-    test = _refit_and_test(model, terms, proposals, train, refit, fit_window_s, state_scale, held_out, significance,
-                           scores_cur, rmse_cur, alpha, min_gain, say)
+    test = _refit_and_test(
+        model,
+        terms,
+        proposals,
+        train,
+        refit,
+        fit_window_s,
+        state_scale,
+        held_out,
+        significance,
+        scores_cur,
+        rmse_cur,
+        alpha,
+        min_gain,
+        say,
+    )
     if not test.passed:
         notes.append(
-            "The discovery search proposed " + "; ".join(t.formula(system) for t in test.terms)
+            "The discovery search proposed "
+            + "; ".join(t.formula(system) for t in test.terms)
             + f", but refitted through simulation it did not pass the held-out test (gain {test.gain:.0%}, "
             f"p = {test.p_value:.2g}); no discovered term is kept."
         )
         return Discovery(False, model, [], test.proposals, test.gain, test.p_value, None, notes)
     n_named = len(model.terms) if isinstance(model, Extended) else 0
     findings = _findings(system, test, n_named, held_out)
-    return Discovery(True, test.fitted, findings, test.proposals, test.gain, test.p_value,
-                     (test.scores, test.curve, test.rmse), notes)
+    return Discovery(
+        True,
+        test.fitted,
+        findings,
+        test.proposals,
+        test.gain,
+        test.p_value,
+        (test.scores, test.curve, test.rmse),
+        notes,
+    )
 
 
 class _Test(eqx.Module):
@@ -417,8 +467,22 @@ class _Test(eqx.Module):
     rmse: float
 
 
-def _refit_and_test(model, terms, proposals, train, refit, fit_window_s, state_scale, held_out, significance,
-                    scores_cur, rmse_cur, alpha, min_gain, say) -> _Test:
+def _refit_and_test(
+    model,
+    terms,
+    proposals,
+    train,
+    refit,
+    fit_window_s,
+    state_scale,
+    held_out,
+    significance,
+    scores_cur,
+    rmse_cur,
+    alpha,
+    min_gain,
+    say,
+) -> _Test:
     """Refit the proposed terms through simulation and test them on held-out data; where several pass together,
     drop each that does not carry its weight (dropping it costs less than `min_gain`) and refit once more."""
     n_named = len(model.terms) if isinstance(model, Extended) else 0
@@ -463,26 +527,28 @@ def _findings(system, test: _Test, n_named: int, held_out) -> list[dict]:
         coefficients = np.asarray(term.coefficients, float)
         single = len(coefficients) == 1
         names = term.feature_names(system)
-        findings.append({
-            "cause": "discovered",
-            "where": term.where(system),
-            "coefficient": float(coefficients[0]) if single else float(np.linalg.norm(coefficients)),
-            "std_error": float(std[0]) if single else float(np.linalg.norm(std)),
-            "gain": term_gain,
-            "parameter": term.parameter_names(system)[0] if single else f"|c_{term.where(system)}|",
-            "formula": term.formula(system),
-            "acceleration_formula": term.acceleration_formula(system),
-            "features": list(names),
-            "coefficients": dict(zip(names, map(float, coefficients))),
-            "std_errors": dict(zip(names, map(float, std))),
-            "readings": physical_readings(system, term),
-            "period": proposal.period,
-            "selection_frequency": dict(zip(names, proposal.frequency)),
-            "cv_r2_one_step": proposal.cv_r2,
-            "p_value": test.p_value,
-            "look_alikes": [],
-            "confidence": "high" if min(proposal.frequency) >= 0.9 else "low",
-        })
+        findings.append(
+            {
+                "cause": "discovered",
+                "where": term.where(system),
+                "coefficient": float(coefficients[0]) if single else float(np.linalg.norm(coefficients)),
+                "std_error": float(std[0]) if single else float(np.linalg.norm(std)),
+                "gain": term_gain,
+                "parameter": term.parameter_names(system)[0] if single else f"|c_{term.where(system)}|",
+                "formula": term.formula(system),
+                "acceleration_formula": term.acceleration_formula(system),
+                "features": list(names),
+                "coefficients": dict(zip(names, map(float, coefficients))),
+                "std_errors": dict(zip(names, map(float, std))),
+                "readings": physical_readings(system, term),
+                "period": proposal.period,
+                "selection_frequency": dict(zip(names, proposal.frequency)),
+                "cv_r2_one_step": proposal.cv_r2,
+                "p_value": test.p_value,
+                "look_alikes": [],
+                "confidence": "high" if min(proposal.frequency) >= 0.9 else "low",
+            }
+        )
     findings.sort(key=lambda f: -f["gain"])
     return findings
 
@@ -495,18 +561,35 @@ def discovery_markdown(j: dict) -> list[str]:
         return []
     lines = ["## Discovered terms (beyond the vocabulary)", ""]
     if found:
-        lines += ["Sparse search of the one-step force residuals, refitted through simulation and kept because it "
-                  "passed the same held-out test as a named cause:", "",
-                  "| where | formula | std. errors | gain | p | selection frequency | reading |", "|---|---|---|---|---|---|---|"]
+        lines += [
+            "Sparse search of the one-step force residuals, refitted through simulation and kept because it "
+            "passed the same held-out test as a named cause:",
+            "",
+            "| where | formula | std. errors | gain | p | selection frequency | reading |",
+            "|---|---|---|---|---|---|---|",
+        ]
         for f in found:
             stds = ", ".join(f"{n}: {v:.2g}" for n, v in f["std_errors"].items())
             freq = ", ".join(f"{n}: {v:.0%}" for n, v in f["selection_frequency"].items())
-            lines.append(f"| `{f['where']}` | `{f['formula']}` | {stds} | {f['gain']:.0%} | {f['p_value']:.2g} | {freq} | "
-                         f"{'; '.join(f['readings']) or 'no known physical reading'} |")
-        lines += ["", "A discovered term is a description of what is missing, not a named cause: read the formula "
-                  "and its reading as a lead for the model's next version.", ""]
+            lines.append(
+                f"| `{f['where']}` | `{f['formula']}` | {stds} | {f['gain']:.0%} | {f['p_value']:.2g} | {freq} | "
+                f"{'; '.join(f['readings']) or 'no known physical reading'} |"
+            )
+        lines += [
+            "",
+            "A discovered term is a description of what is missing, not a named cause: read the formula "
+            "and its reading as a lead for the model's next version.",
+            "",
+        ]
     else:
-        lines += ["The search for a term beyond the vocabulary kept nothing"
-                  + (f" (the proposal's held-out gain was {search['gain']:.0%}, p = {search['p_value']:.2g})" if search.get("tested") else "")
-                  + "; see the notes.", ""]
+        lines += [
+            "The search for a term beyond the vocabulary kept nothing"
+            + (
+                f" (the proposal's held-out gain was {search['gain']:.0%}, p = {search['p_value']:.2g})"
+                if search.get("tested")
+                else ""
+            )
+            + "; see the notes.",
+            "",
+        ]
     return lines

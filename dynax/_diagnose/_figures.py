@@ -3,8 +3,8 @@
 import jax.numpy as jnp
 import numpy as np  # noqa: E402
 
-from .._simulate import FixedGrid  # noqa: E402
 from .._sim_error import rollouts_from_starts  # noqa: E402  (the one windowed rollout)
+from .._simulate import FixedGrid  # noqa: E402
 
 
 def _subplots(*args, figsize, **kwargs):
@@ -14,8 +14,9 @@ def _subplots(*args, figsize, **kwargs):
     return fig, fig.subplots(*args, **kwargs)
 
 
-def plot_measured_vs_simulated(trajectory, models: dict, path, *, segment_s: float = 2.0, max_duration_s: float = 10.0,
-                               run_name: str | None = None):
+def plot_measured_vs_simulated(
+    trajectory, models: dict, path, *, segment_s: float = 2.0, max_duration_s: float = 10.0, run_name: str | None = None
+):
     """Measured positions against open-loop simulations restarted from the measured state every `segment_s`.
 
     **Arguments:** `trajectory` (held-out data); `models` label -> system; `path` of the PNG;
@@ -43,8 +44,9 @@ def plot_measured_vs_simulated(trajectory, models: dict, path, *, segment_s: flo
     xs_pad = np.concatenate([np.asarray(trajectory.xs), np.repeat(np.asarray(trajectory.xs)[-1:], seg, axis=0)])
     us_pad = np.concatenate([np.asarray(trajectory.us), np.repeat(np.asarray(trajectory.us)[-1:], seg, axis=0)])
     for c, (label, system) in enumerate(models.items()):
-        errors, _ = rollouts_from_starts(system, jnp.asarray(ts_pad), jnp.asarray(xs_pad), jnp.asarray(us_pad),
-                                         jnp.asarray(starts), seg, FixedGrid())
+        errors, _ = rollouts_from_starts(
+            system, jnp.asarray(ts_pad), jnp.asarray(xs_pad), jnp.asarray(us_pad), jnp.asarray(starts), seg, FixedGrid()
+        )
         for w, start in enumerate(starts):
             stop = min(start + seg, n - 1) + 1
             xs = np.asarray(errors[w, : stop - start]) + xs_pad[start:stop]
@@ -53,8 +55,10 @@ def plot_measured_vs_simulated(trajectory, models: dict, path, *, segment_s: flo
                 ax.plot(t, xs[:, i], color=colors[c % 4], lw=1.0, ls="--", label=label if start == 0 else None)
                 ax.plot(t[:1], xs[:1, i], "o", color=colors[c % 4], ms=2.5)
     axes[0, 0].legend(loc="upper right", fontsize=8)
-    axes[0, 0].set_title((f"{run_name}: " if run_name else "")
-                         + f"held-out data against open-loop simulation (restarted every {segment_s:g} s)")
+    axes[0, 0].set_title(
+        (f"{run_name}: " if run_name else "")
+        + f"held-out data against open-loop simulation (restarted every {segment_s:g} s)"
+    )
     axes[-1, 0].set_xlabel("t [s]")
     fig.tight_layout()
     fig.savefig(path, dpi=110)

@@ -26,10 +26,10 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, Float, Int
 import lineax as lx
 import numpy as np
 import optimistix as optx
-from jaxtyping import Array, Float, Int
 
 from .._fit import clustered_covariance, fit_least_squares, levenberg_marquardt, Parameters
 from .._model._extensions import Extended
@@ -71,7 +71,9 @@ def nominal_values(system, names: tuple[str, ...]) -> Float[Array, " n_nominal"]
     """The values of the parameters `names` (all of `nominal_parameter_names`) of `system`."""
     parameters = nominal_parameters(system)
     if tuple(names) != parameters.names:
-        raise ValueError(f"nominal_values: {names} are not the parameters {parameters.names} of {type(system).__name__}")
+        raise ValueError(
+            f"nominal_values: {names} are not the parameters {parameters.names} of {type(system).__name__}"
+        )
     return parameters.vector(system) if names else jnp.zeros(0)
 
 
@@ -81,7 +83,9 @@ def with_nominal_values(system, names: tuple[str, ...], values):
         return system
     parameters = nominal_parameters(system)
     if tuple(names) != parameters.names:
-        raise ValueError(f"with_nominal_values: {names} are not the parameters {parameters.names} of {type(system).__name__}")
+        raise ValueError(
+            f"with_nominal_values: {names} are not the parameters {parameters.names} of {type(system).__name__}"
+        )
     return parameters.with_vector(system, jnp.stack([jnp.asarray(v) for v in values]))
 
 
@@ -132,8 +136,15 @@ def make_windows(trajectories, n_steps: int, stride: int, *, history_s: float = 
         raise ValueError(f"the records are shorter than one window of {n_steps} samples")
     stack = lambda a: jnp.asarray(np.stack(a))  # noqa: E731
     xs_ = stack(xs)
-    return Windows(stack(ts), xs_, stack(us), stack(tb), stack(ub), np.asarray(starts, dtype=np.int64),
-                   jnp.ones(len(ts), xs_.dtype))
+    return Windows(
+        stack(ts),
+        xs_,
+        stack(us),
+        stack(tb),
+        stack(ub),
+        np.asarray(starts, dtype=np.int64),
+        jnp.ones(len(ts), xs_.dtype),
+    )
 
 
 class Family(eqx.Module):
@@ -158,7 +169,9 @@ class Family(eqx.Module):
     def n_candidates(self) -> int:
         return len(self.model.terms)
 
-    def build(self, nominal_values: Float[Array, " n_nominal"], coefficients: Float[Array, " n_candidates"]) -> Extended:
+    def build(
+        self, nominal_values: Float[Array, " n_nominal"], coefficients: Float[Array, " n_candidates"]
+    ) -> Extended:
         """The `Extended` model with these nominal parameter values and candidate coefficients."""
         model = self.model
         if self.names:
@@ -171,7 +184,10 @@ class Family(eqx.Module):
         n_nominal = len(self.names)
         n_slots = slots.shape[0]
         onehot = jax.nn.one_hot(slots, self.n_candidates, dtype=p.dtype)  # -1 gives a zero row
-        delta = onehot.T @ p[n_nominal : n_nominal + n_slots] + jax.nn.one_hot(new, self.n_candidates, dtype=p.dtype) * p[-1]
+        delta = (
+            onehot.T @ p[n_nominal : n_nominal + n_slots]
+            + jax.nn.one_hot(new, self.n_candidates, dtype=p.dtype) * p[-1]
+        )
         return self.neutral + delta
 
     def scale(self, slots, new):
@@ -186,8 +202,9 @@ class Family(eqx.Module):
 
 def window_errors(model, windows: Windows, method=FORWARD_GRID):
     """Simulated minus measured states (`state_error`) on every window, `(window, step, n_measured)`, NaN past a divergence."""
-    errors, _ = window_rollouts(model, windows.ts, windows.xs, windows.us, windows.ts_before, windows.us_before,
-                                method=method)
+    errors, _ = window_rollouts(
+        model, windows.ts, windows.xs, windows.us, windows.ts_before, windows.us_before, method=method
+    )
     return errors
 
 
@@ -201,7 +218,9 @@ def _window_residuals(p, args):
     return e.reshape(-1)
 
 
-def fit_configuration(family: Family, windows: Windows, slots, new, p_init, free, *, solver=SOLVER, max_steps: int = MAX_STEPS):
+def fit_configuration(
+    family: Family, windows: Windows, slots, new, p_init, free, *, solver=SOLVER, max_steps: int = MAX_STEPS
+):
     """The simulation-error fit of one configuration through `fit_least_squares` (vmap this over configurations).
 
     The parameter vector `p` holds the nominal values, the slot coefficients and the new term's
@@ -215,8 +234,16 @@ def fit_configuration(family: Family, windows: Windows, slots, new, p_init, free
     s = family.scale(slots, new) * free
     # jac="dense": the whole Jacobian by one `jacfwd` per step (all parameter tangents through one
     # rollout), applied as a matrix; far less compilation than linearising the rollout itself.
-    solution = fit_least_squares(_window_residuals, p_init, True, (family, windows, slots, new), solver=solver,
-                                 scale=s, max_steps=max_steps, jac="dense")
+    solution = fit_least_squares(
+        _window_residuals,
+        p_init,
+        True,
+        (family, windows, slots, new),
+        solver=solver,
+        scale=s,
+        max_steps=max_steps,
+        jac="dense",
+    )
     return solution.value, 2.0 * solution.loss, window_clustered_std_errors(solution, windows, s), solution.steps
 
 

@@ -88,12 +88,22 @@ def _fit_batch(problem: Problem, slots, new, p_init, say) -> _Batch:
     slots, new = jnp.asarray(slots), jnp.asarray(new)
     free = jnp.ones(problem.n_params, dtype)
     start = time.perf_counter()
-    p, cost, std, steps = fit_configurations(problem.family, problem.train_windows, slots, new, jnp.asarray(p_init, dtype), free)
+    p, cost, std, steps = fit_configurations(
+        problem.family, problem.train_windows, slots, new, jnp.asarray(p_init, dtype), free
+    )
     errors = np.asarray(validate_configurations(problem.family, problem.val_windows, slots, new, p))
-    batch = _Batch(np.asarray(p), np.asarray(cost), np.asarray(std), errors, np.asarray(steps),
-                   np.zeros(errors.shape[:1] + (0,) + errors.shape[2:]))
-    say(f"  batch of {len(batch.p)} fits done in {time.perf_counter() - start:.1f} s "
-        f"(Levenberg-Marquardt, {int(batch.steps.max())} steps for the slowest)")
+    batch = _Batch(
+        np.asarray(p),
+        np.asarray(cost),
+        np.asarray(std),
+        errors,
+        np.asarray(steps),
+        np.zeros(errors.shape[:1] + (0,) + errors.shape[2:]),
+    )
+    say(
+        f"  batch of {len(batch.p)} fits done in {time.perf_counter() - start:.1f} s "
+        f"(Levenberg-Marquardt, {int(batch.steps.max())} steps for the slowest)"
+    )
     return batch
 
 
@@ -137,16 +147,19 @@ def _cross_fit(problem: Problem, yard: Yardstick, current_slots, new, batch: _Ba
     runs = np.asarray(yard.cv_windows.starts)[:, 0]
     cv_errors = None
     for r in problem.folds:
-        p, _, _, _ = fit_configurations(problem.family, problem.train_windows.without_record(r), slots, new,
-                                        jnp.asarray(batch.p, dtype), free)
+        p, _, _, _ = fit_configurations(
+            problem.family, problem.train_windows.without_record(r), slots, new, jnp.asarray(batch.p, dtype), free
+        )
         # Every training run's windows are simulated and the left-out run's kept: one shape, so one
         # compiled rollout for all folds (the windows are one reference horizon long, so this is cheap).
         errors = np.asarray(validate_configurations(problem.family, yard.cv_windows, slots, new, p))
         if cv_errors is None:
             cv_errors = np.full_like(errors, np.nan)
         cv_errors[:, runs == r] = errors[:, runs == r]
-    say(f"  cross-fitted: the batch refitted {len(problem.folds)} times, each training run left out once "
-        f"({time.perf_counter() - start:.1f} s)")
+    say(
+        f"  cross-fitted: the batch refitted {len(problem.folds)} times, each training run left out once "
+        f"({time.perf_counter() - start:.1f} s)"
+    )
     return dataclasses.replace(batch, cv_errors=cv_errors)
 
 
@@ -163,20 +176,35 @@ def _screen(problem: Problem, current_slots, current_p, remaining, round_, say):
     say(f"round {round_ + 1}: screening {len(remaining)} candidates on one-step residuals ...")
     dtype = problem.family.neutral.dtype
     n_nom = len(problem.names)
-    coefficients = problem.family.coefficients(jnp.asarray(current_slots), jnp.asarray(-1), jnp.asarray(current_p, dtype))
-    gains, deltas = screen(problem.family, current_p[:n_nom], np.asarray(coefficients), problem.family.refit,
-                           problem.train, problem.validation, remaining, acceleration_residuals,
-                           cross_fit=bool(problem.folds))
+    coefficients = problem.family.coefficients(
+        jnp.asarray(current_slots), jnp.asarray(-1), jnp.asarray(current_p, dtype)
+    )
+    gains, deltas = screen(
+        problem.family,
+        current_p[:n_nom],
+        np.asarray(coefficients),
+        problem.family.refit,
+        problem.train,
+        problem.validation,
+        remaining,
+        acceleration_residuals,
+        cross_fit=bool(problem.folds),
+    )
     short = choose_shortlist(problem.look_alikes, remaining, gains, problem.options.shortlist)
     return gains, deltas, short
 
 
-def _refit(problem: Problem, current_slots, current_p, short, remaining, deltas, round_, say) -> tuple[np.ndarray, _Batch]:
+def _refit(
+    problem: Problem, current_slots, current_p, short, remaining, deltas, round_, say
+) -> tuple[np.ndarray, _Batch]:
     """Refit: the current model (member 0) and each shortlisted candidate added to it, jointly with the nominal parameters."""
     if short:
-        say(f"round {round_ + 1}: simulation-error refit of "
+        say(
+            f"round {round_ + 1}: simulation-error refit of "
             + ("the nominal model with " if round_ == 0 else "the current model with ")
-            + ", ".join(problem.candidates[k].label(problem.system) for k in short) + " (one batch) ...")
+            + ", ".join(problem.candidates[k].label(problem.system) for k in short)
+            + " (one batch) ..."
+        )
     shortlist = problem.options.shortlist
     new = np.asarray([-1] + short + [-1] * (shortlist - len(short)))
     p_init = np.tile(current_p, (shortlist + 1, 1))
@@ -192,8 +220,16 @@ def _fit_nominal(problem: Problem, batch: _Batch, say) -> tuple[AbstractSystem, 
     model = problem.model_of(-np.ones(problem.options.max_terms, int), batch.p[0]).system
     _note_moved(problem, batch.p[0])
     o = problem.options
-    horizon = reference_horizon(model, problem.train, problem.candidates_s, o.reference_horizon_s, o.horizon_fraction,
-                                 problem.val_stride, problem.position_index, problem.dt)
+    horizon = reference_horizon(
+        model,
+        problem.train,
+        problem.candidates_s,
+        o.reference_horizon_s,
+        o.horizon_fraction,
+        problem.val_stride,
+        problem.position_index,
+        problem.dt,
+    )
     horizons = problem.horizons
     if horizon.seconds not in horizons:
         horizons = np.sort(np.append(horizons, horizon.seconds))
@@ -202,10 +238,17 @@ def _fit_nominal(problem: Problem, batch: _Batch, say) -> tuple[AbstractSystem, 
     window_runs = problem.window_runs
     if cv_windows is not None:
         window_runs = np.concatenate([window_runs, len(problem.validation) + np.asarray(cv_windows.starts)[:, 0]])
-    yard = Yardstick(horizon=horizon, horizons=horizons, steps=np.maximum(np.round(horizons / problem.dt).astype(int), 1),
-                      n_ref=n_ref, overlap=max(1, int(np.ceil(n_ref / problem.val_stride))),
-                      ref_index=int(np.flatnonzero(np.isclose(horizons, horizon.seconds))[0]),
-                      cv_windows=cv_windows, window_runs=window_runs, n_val=len(problem.window_runs))
+    yard = Yardstick(
+        horizon=horizon,
+        horizons=horizons,
+        steps=np.maximum(np.round(horizons / problem.dt).astype(int), 1),
+        n_ref=n_ref,
+        overlap=max(1, int(np.ceil(n_ref / problem.val_stride))),
+        ref_index=int(np.flatnonzero(np.isclose(horizons, horizon.seconds))[0]),
+        cv_windows=cv_windows,
+        window_runs=window_runs,
+        n_val=len(problem.window_runs),
+    )
     return model, yard
 
 
@@ -231,20 +274,31 @@ def _note_moved(problem: Problem, p) -> None:
                 moved.append(f"{n} from {given[i]:.4g} to {float(p[i]):.4g}")
     if moved:
         problem.notes.append(
-            "The refit moved " + ", ".join(moved) + f" (more than a factor {OTHER_MACHINE_FACTOR:g}): the nominal model "
+            "The refit moved "
+            + ", ".join(moved)
+            + f" (more than a factor {OTHER_MACHINE_FACTOR:g}): the nominal model "
             "describes another machine, and a refit from that far may stop short of this one, leaving the findings "
             "to correct the wrong model. Start from a nominal model of this machine (e.g. `identify(...).system` "
-            "with its friction set to zero; `dynax diagnose` without --nominal does this).")
+            "with its friction set to zero; `dynax diagnose` without --nominal does this)."
+        )
 
 
 def _show_what_is_wrong(problem: Problem, model, batch: _Batch, yard: Yardstick, say) -> Nominal:
     """Show what is wrong: the nominal model's held-out simulation error and the structure left in its residuals."""
     rmse = rmse_curve(batch.errors[0], yard.steps, problem.position_index)
-    say(f"reference horizon {yard.horizon.seconds:g} s ({yard.horizon.rule}); nominal model: held-out position RMSE "
-        f"{rmse[yard.ref_index]:.4g} there; probing its one-step residuals for structure ...")
+    say(
+        f"reference horizon {yard.horizon.seconds:g} s ({yard.horizon.rule}); nominal model: held-out position RMSE "
+        f"{rmse[yard.ref_index]:.4g} there; probing its one-step residuals for structure ..."
+    )
     structure = structure_test(model, problem.train, problem.validation)
-    return Nominal(model=model, errors=batch.errors[0], rmse=rmse, structure=structure, cost=float(batch.cost[0]),
-                    cv_errors=batch.cv_errors[0])
+    return Nominal(
+        model=model,
+        errors=batch.errors[0],
+        rmse=rmse,
+        structure=structure,
+        cost=float(batch.cost[0]),
+        cv_errors=batch.cv_errors[0],
+    )
 
 
 def _select(problem: Problem, yard: Yardstick, current: Current, results, scores, round_, say) -> dict | None:
@@ -262,23 +316,43 @@ def _select(problem: Problem, yard: Yardstick, current: Current, results, scores
     # A structural equivalent is never told apart, whatever the paired test of two fits of one model says.
     confidence = "high" if all(a["told_apart"] for a in alternatives) else "low"
     if equivalent:
-        refit = (f"with a refit of the nominal parameters ({', '.join(problem.refit_names)})" if problem.refit_names
-                 else "as the model is written")
+        refit = (
+            f"with a refit of the nominal parameters ({', '.join(problem.refit_names)})"
+            if problem.refit_names
+            else "as the model is written"
+        )
         gains = all(problem.candidates[k].cause == "input_gain" for k in [best, *problem.equivalents[best]])
         problem.notes.append(
             f"{term.label(system)} and {', '.join(equivalent)} are one model {refit}: any change of one is a change "
             "of the other, so no data can tell them apart"
-            + (" (every torque-side parameter and the gains scaled by one factor leave the motion unchanged: the "
-               "data determine only the ratio of the gains)" if gains else "")
+            + (
+                " (every torque-side parameter and the gains scaled by one factor leave the motion unchanged: the "
+                "data determine only the ratio of the gains)"
+                if gains
+                else ""
+            )
             + f". {term.label(system)} is named because it came first; its finding lists the other as a look-alike "
-            "it cannot be told apart from.")
+            "it cannot be told apart from."
+        )
     coefficient = problem.neutral[best] + r["delta"]
-    say(f"round {round_ + 1}: found {term.label(system)}, {term.parameter_name(system)} = {coefficient:.4g} "
+    say(
+        f"round {round_ + 1}: found {term.label(system)}, {term.parameter_name(system)} = {coefficient:.4g} "
         f"(held-out gain {gain:.0%}, p = {r['p']:.2g}, helps on {r['runs_helped']}/{r['n_runs']} held-out runs; "
-        f"told apart from look-alikes: {confidence})")
-    return {"index": best, "cause": term.cause, "where": term.where(system), "coefficient": float(coefficient),
-            "std_error": float(r["std"]), "gain": gain, "parameter": term.parameter_name(system), "p_value": r["p"],
-            "look_alikes": alternatives, "confidence": confidence, "runs_helped": f"{r['runs_helped']}/{r['n_runs']}"}
+        f"told apart from look-alikes: {confidence})"
+    )
+    return {
+        "index": best,
+        "cause": term.cause,
+        "where": term.where(system),
+        "coefficient": float(coefficient),
+        "std_error": float(r["std"]),
+        "gain": gain,
+        "parameter": term.parameter_name(system),
+        "p_value": r["p"],
+        "look_alikes": alternatives,
+        "confidence": confidence,
+        "runs_helped": f"{r['runs_helped']}/{r['n_runs']}",
+    }
 
 
 def _accept(problem: Problem, current: Current, finding: dict, results, batch: _Batch, scores, say) -> Current:
@@ -295,13 +369,23 @@ def _accept(problem: Problem, current: Current, finding: dict, results, batch: _
     say("probing the extended model's residuals for structure ...")
     structure = structure_test(problem.model_of(slots, p), problem.train, problem.validation)
     # The probe never vetoes: selection goes on while a candidate's own held-out test passes.
-    return Current(slots=slots, p=p, std=std, score=scores[r["i"]], errors=batch.errors[r["i"]], rmse=r["rmse"],
-                    structure=structure, cv_errors=batch.cv_errors[r["i"]], selected=selected,
-                    findings=current.findings + [finding])
+    return Current(
+        slots=slots,
+        p=p,
+        std=std,
+        score=scores[r["i"]],
+        errors=batch.errors[r["i"]],
+        rmse=r["rmse"],
+        structure=structure,
+        cv_errors=batch.cv_errors[r["i"]],
+        selected=selected,
+        findings=current.findings + [finding],
+    )
 
 
-def _complete_look_alikes(problem, yard, cur_slots, cur_p, short, remaining, deltas, batch, scores, results, judge,
-                          round_, say):
+def _complete_look_alikes(
+    problem, yard, cur_slots, cur_p, short, remaining, deltas, batch, scores, results, judge, round_, say
+):
     """Refit the look-alikes of the round's best admissible candidate that screening left off the shortlist.
 
     A finding's confidence rests on beating its look-alikes (same place, same group of causes) in the
@@ -320,13 +404,19 @@ def _complete_look_alikes(problem, yard, cur_slots, cur_p, short, remaining, del
         missing = missing[: problem.options.shortlist]
         if not missing:
             break
-        say(f"round {round_ + 1}: {candidates[best].label(system)} leads; refitting its look-alike(s) "
-            f"{', '.join(candidates[k].label(system) for k in missing)}, which screening left out ...")
+        say(
+            f"round {round_ + 1}: {candidates[best].label(system)} leads; refitting its look-alike(s) "
+            f"{', '.join(candidates[k].label(system) for k in missing)}, which screening left out ..."
+        )
         new, more = _refit(problem, cur_slots, cur_p, missing, remaining, deltas, round_, say)
         more = _cross_fit(problem, yard, cur_slots, new, more, say)
         n = 1 + len(short)
-        batch = _Batch(*(np.concatenate([getattr(batch, f.name)[:n], getattr(more, f.name)[1 : 1 + len(missing)]])
-                         for f in dataclasses.fields(_Batch)))
+        batch = _Batch(
+            *(
+                np.concatenate([getattr(batch, f.name)[:n], getattr(more, f.name)[1 : 1 + len(missing)]])
+                for f in dataclasses.fields(_Batch)
+            )
+        )
         scores = _scores(problem, yard, batch.errors, batch.cv_errors)
         short = short + missing
         results = judge(short, batch, scores)
@@ -356,24 +446,49 @@ def forward_selection(problem: Problem, say):
             batch = _cross_fit(problem, yard, cur_slots, new, batch, say)
             nominal = _show_what_is_wrong(problem, model, batch, yard, say)
             scores = _scores(problem, yard, batch.errors, batch.cv_errors)
-            current = Current(slots=slots, p=batch.p[0].copy(), std=batch.std[0].copy(), score=scores[0],
-                               errors=batch.errors[0], rmse=nominal.rmse, structure=nominal.structure,
-                               cv_errors=batch.cv_errors[0])
+            current = Current(
+                slots=slots,
+                p=batch.p[0].copy(),
+                std=batch.std[0].copy(),
+                score=scores[0],
+                errors=batch.errors[0],
+                rmse=nominal.rmse,
+                structure=nominal.structure,
+                cv_errors=batch.cv_errors[0],
+            )
         else:
             batch = _cross_fit(problem, yard, cur_slots, new, batch, say)
             scores = _scores(problem, yard, batch.errors, batch.cv_errors)
         if not short:
             break
         judge = lambda short, batch, scores: judge_round(  # noqa: E731
-            problem.physical, short, remaining, current.selected, len(problem.names), batch.p, batch.std, batch.errors,
-            scores, current.score, yard.window_runs, yard.overlap, o.alpha, o.min_gain, yard.steps,
-            problem.position_index, yard.n_val)
+            problem.physical,
+            short,
+            remaining,
+            current.selected,
+            len(problem.names),
+            batch.p,
+            batch.std,
+            batch.errors,
+            scores,
+            current.score,
+            yard.window_runs,
+            yard.overlap,
+            o.alpha,
+            o.min_gain,
+            yard.steps,
+            problem.position_index,
+            yard.n_val,
+        )
         results = judge(short, batch, scores)
-        short, batch, scores, results = _complete_look_alikes(problem, yard, cur_slots, cur_p, short, remaining, deltas,
-                                                              batch, scores, results, judge, round_, say)
+        short, batch, scores, results = _complete_look_alikes(
+            problem, yard, cur_slots, cur_p, short, remaining, deltas, batch, scores, results, judge, round_, say
+        )
         last = results
         if round_ == 0:
-            table = candidate_table(problem.system, problem.candidates, remaining, gains, results, problem.neutral, batch.cost)
+            table = candidate_table(
+                problem.system, problem.candidates, remaining, gains, results, problem.neutral, batch.cost
+            )
         finding = _select(problem, yard, current, results, scores, round_, say)
         rounds.append(round_summary(problem, yard, round_, current, remaining, results, finding))
         if finding is None:
@@ -391,4 +506,3 @@ def _start_value(problem: Problem, k: int, delta_screened, start):
     ok = np.isfinite(delta_screened) and problem.physical(k, delta_screened) and abs(delta_screened) < 20 * scale
     lagging = isinstance(term, AbstractInputTerm) and term.n_hidden and delta_screened < start
     return delta_screened if ok and not lagging else start
-

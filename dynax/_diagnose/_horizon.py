@@ -32,8 +32,13 @@ class Horizon:
         self.relative_error = [float(e) if np.isfinite(e) else None for e in relative_error]
 
     def to_json(self) -> dict:
-        return {"seconds": self.seconds, "rule": self.rule, "fraction": self.fraction,
-                "candidate_horizons_s": self.horizons_s, "training_relative_error": self.relative_error}
+        return {
+            "seconds": self.seconds,
+            "rule": self.rule,
+            "fraction": self.fraction,
+            "candidate_horizons_s": self.horizons_s,
+            "training_relative_error": self.relative_error,
+        }
 
 
 def position_spread(positions, angles) -> np.ndarray:
@@ -83,9 +88,13 @@ def predictability_horizon(relative_error, dt: float, candidates_s, fraction: fl
     first_bad = np.flatnonzero(~(np.isfinite(at) & (at <= fraction)))
     last = (first_bad[0] - 1) if first_bad.size else len(at) - 1
     if last < 0 or not ok.size:
-        rule = (f"the nominal model's training error exceeds {fraction:.0%} of the position spread already at "
-                f"{candidates_s[0]:g} s: the shortest candidate horizon")
+        rule = (
+            f"the nominal model's training error exceeds {fraction:.0%} of the position spread already at "
+            f"{candidates_s[0]:g} s: the shortest candidate horizon"
+        )
         return Horizon(candidates_s[0], rule, fraction, candidates_s, at)
-    rule = (f"predictability horizon: the longest horizon at which the nominal model's open-loop position RMSE on "
-            f"the training runs is at most {fraction:.0%} of the positions' spread")
+    rule = (
+        f"predictability horizon: the longest horizon at which the nominal model's open-loop position RMSE on "
+        f"the training runs is at most {fraction:.0%} of the positions' spread"
+    )
     return Horizon(candidates_s[last], rule, fraction, candidates_s, at)

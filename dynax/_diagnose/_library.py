@@ -59,8 +59,11 @@ def feature_library(system, channel: int, xs: np.ndarray, *, period: float | Non
         Feature("position_sign", channel, velocity_scale=vs),
     ]
     for i in range(system.n_inputs):
-        library += [Feature("input", channel, input=i), Feature("input_position", channel, input=i),
-                    Feature("input_velocity", channel, input=i)]
+        library += [
+            Feature("input", channel, input=i),
+            Feature("input_position", channel, input=i),
+            Feature("input_velocity", channel, input=i),
+        ]
     library.append(Feature("constant", channel))
     if period is not None:
         library += [Feature("periodic_sin", channel, period=period), Feature("periodic_cos", channel, period=period)]
@@ -97,7 +100,9 @@ def named_equivalent(system, feature: Feature, channel: int) -> str | None:
     return None
 
 
-def search_period(q: np.ndarray, target: np.ndarray, *, p_min: float, p_max: float, n_grid: int = 400) -> tuple[float, float]:
+def search_period(
+    q: np.ndarray, target: np.ndarray, *, p_min: float, p_max: float, n_grid: int = 400
+) -> tuple[float, float]:
     r"""The period $p$ for which $a \sin(2\pi q/p) + b \cos(2\pi q/p) + c$ explains most of `target`.
 
     A periodogram in the position domain on a log-spaced grid of `n_grid` periods in
@@ -151,7 +156,9 @@ def physical_readings(system, term: Discovered) -> list[str]:
         elif f.kind == "position" and f.power == 3 and f.coordinate == term.joint:
             readings.append(f"a hardening or softening spring at {where} (cubic stiffness {-c:.4g})")
         elif f.kind == "position_sign":
-            readings.append(f"position-dependent friction at {where}: the dry friction changes by {-c:.4g} {unit_f} per {unit_q}")
+            readings.append(
+                f"position-dependent friction at {where}: the dry friction changes by {-c:.4g} {unit_f} per {unit_q}"
+            )
         elif f.kind in ("sin", "cos"):
             readings.append(f"a gravity-like torque at {where} in {f.name(system)} (a mass or balance the model lacks)")
         elif f.kind == "constant":

@@ -2,8 +2,8 @@
 records, candidate family, identifiable candidates and windows (`prepare_problem`, step 0 of `diagnose`).
 """
 
-import dataclasses
 from collections.abc import Sequence
+import dataclasses
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -26,9 +26,9 @@ from ._fit import Family, make_windows, nominal_parameter_names, nominal_values,
 from ._records import fit_window, horizon_grid, prepare_records, velocity_estimates
 from ._selection import on_physical_side
 
-
 # Cross-fitting needs every fold to fit two runs or more (see `_cross_fit`).
 MIN_CROSS_FIT_RUNS = 3
+
 
 class Refit(eqx.Module):
     """Diagnosis mode: the nominal parameters are refitted on the training data with every candidate.
@@ -111,8 +111,9 @@ class Problem:
 
     def look_alikes(self, k: int) -> list[int]:
         """The candidates data could mistake for candidate `k`: its look-alikes and its structural equivalents."""
-        return list(dict.fromkeys(look_alikes(self.system, self.candidates[k], self.candidates)
-                                  + self.equivalents.get(k, [])))
+        return list(
+            dict.fromkeys(look_alikes(self.system, self.candidates[k], self.candidates) + self.equivalents.get(k, []))
+        )
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -162,7 +163,9 @@ def names_to_refit(system, mode) -> tuple[str, ...]:
     refit = tuple(n for n in names if n not in friction) if mode.parameters is None else tuple(mode.parameters)
     unknown = set(refit) - set(names)
     if unknown:
-        raise UsageError(f"diagnose: Refit(parameters=...) names {sorted(unknown)}, not parameters of {type(system).__name__} {names}")
+        raise UsageError(
+            f"diagnose: Refit(parameters=...) names {sorted(unknown)}, not parameters of {type(system).__name__} {names}"
+        )
     return refit
 
 
@@ -206,13 +209,17 @@ def _identifiable(system, candidates, family, refit_names, partners, mode, sensi
     not_identifiable, searchable = [], []
     for k, term in enumerate(candidates):
         if absorbed[k]:
-            reason = (f"a refit of the nominal parameters ({', '.join(refit_names)}) reproduces it exactly; "
-                      "diagnose in Known() mode with trusted parameters to test it")
+            reason = (
+                f"a refit of the nominal parameters ({', '.join(refit_names)}) reproduces it exactly; "
+                "diagnose in Known() mode with trusted parameters to test it"
+            )
         elif absorbed_with_tested[k] and partners[k] is None:
             kept = ", ".join(family.names[i] for i in tested)
-            reason = (f"a refit of the nominal parameters ({', '.join(refit_names)}) with a change of the kept ones "
-                      f"the candidates test ({kept}) reproduces it exactly, so it cannot be told from an error in "
-                      "those; diagnose in Known() mode with trusted parameters to test it")
+            reason = (
+                f"a refit of the nominal parameters ({', '.join(refit_names)}) with a change of the kept ones "
+                f"the candidates test ({kept}) reproduces it exactly, so it cannot be told from an error in "
+                "those; diagnose in Known() mode with trusted parameters to test it"
+            )
         else:
             searchable.append(k)
             continue
@@ -227,8 +234,9 @@ def prepare_problem(system, train, validation, candidates, mode, options: Option
     notes: list[str] = []
     train_records, validation_records, dt = prepare_records(system, train, validation, options.holdout_fraction, notes)
     _note_record_differences(system, train_records + (validation_records if validation is not None else []), notes)
-    train_records, validation_records, velocities = velocity_estimates(system, train_records, validation_records,
-                                                                        options.velocities, notes)
+    train_records, validation_records, velocities = velocity_estimates(
+        system, train_records, validation_records, options.velocities, notes
+    )
     candidates = tuple(default_candidates(system, train_records) if candidates is None else candidates)
     if not candidates:
         raise UsageError("diagnose: `candidates` is empty")
@@ -239,33 +247,57 @@ def prepare_problem(system, train, validation, candidates, mode, options: Option
     partners = held_partners(family, 1.0 - np.asarray(family.refit), sensitivities=sensitivities)
     searchable, not_identifiable = _identifiable(system, candidates, family, refit_names, partners, mode, sensitivities)
     # Candidates that add to a held nominal parameter (viscous friction) are that parameter, not an equivalent.
-    equivalents = structurally_equivalent(family, family.refit, [k for k in searchable if partners[k] is None],
-                                          sensitivities=sensitivities)
+    equivalents = structurally_equivalent(
+        family, family.refit, [k for k in searchable if partners[k] is None], sensitivities=sensitivities
+    )
     _note_held(system, family, refit_names, mode, notes)
     fit_window_s = fit_window(system, train_records, options.fit_window_s, options.horizon_fraction, dt, notes)
     n_fit = max(2, int(round(fit_window_s / dt)))
-    horizons, candidates_s = horizon_grid(options.horizons_s, options.reference_horizon_s, train_records,
-                                           validation_records, notes)
+    horizons, candidates_s = horizon_grid(
+        options.horizons_s, options.reference_horizon_s, train_records, validation_records, notes
+    )
     val_stride = max(1, int(round(0.05 / dt)))
     val_windows = make_windows(validation_records, int(round(horizons.max() / dt)), val_stride)
     folds = tuple(range(len(train_records))) if options.cross_fit and len(train_records) >= MIN_CROSS_FIT_RUNS else ()
     if options.cross_fit and len(train_records) == MIN_CROSS_FIT_RUNS - 1:
-        notes.append(f"Not cross-fitted: with {len(train_records)} training runs each fold would fit one run alone, and "
-                     "a model refitted on one run is judged for that run's excitation (two-fold cross-validation "
-                     "penalises every added term); the test is on the held-out runs alone. Three or more training "
-                     "runs are cross-fitted.")
+        notes.append(
+            f"Not cross-fitted: with {len(train_records)} training runs each fold would fit one run alone, and "
+            "a model refitted on one run is judged for that run's excitation (two-fold cross-validation "
+            "penalises every added term); the test is on the held-out runs alone. Three or more training "
+            "runs are cross-fitted."
+        )
     if folds:
-        notes.append(f"Cross-fitting: besides the held-out runs, each of the {len(folds)} training runs was held out in "
-                     "turn, every configuration refitted on the other training runs (leave-one-run-out), and the test "
-                     "pools those windows with the held-out ones; the gains reported are the held-out runs' "
-                     "(cross_fit=False tests on the held-out runs alone).")
+        notes.append(
+            f"Cross-fitting: besides the held-out runs, each of the {len(folds)} training runs was held out in "
+            "turn, every configuration refitted on the other training runs (leave-one-run-out), and the test "
+            "pools those windows with the held-out ones; the gains reported are the held-out runs' "
+            "(cross_fit=False tests on the held-out runs alone)."
+        )
     return Problem(
-        system=system, train=train_records, validation=validation_records, dt=dt, notes=notes, candidates=candidates,
-        refit_names=refit_names, family=family, scales=scales, inits=inits, searchable=searchable,
-        not_identifiable=not_identifiable, partners=partners, fit_window_s=fit_window_s,
-        train_windows=make_windows(train_records, n_fit, n_fit), val_windows=val_windows,
-        window_runs=np.asarray(val_windows.starts)[:, 0], val_stride=val_stride, horizons=horizons,
-        candidates_s=candidates_s, options=options, velocities=velocities, folds=folds, equivalents=equivalents,
+        system=system,
+        train=train_records,
+        validation=validation_records,
+        dt=dt,
+        notes=notes,
+        candidates=candidates,
+        refit_names=refit_names,
+        family=family,
+        scales=scales,
+        inits=inits,
+        searchable=searchable,
+        not_identifiable=not_identifiable,
+        partners=partners,
+        fit_window_s=fit_window_s,
+        train_windows=make_windows(train_records, n_fit, n_fit),
+        val_windows=val_windows,
+        window_runs=np.asarray(val_windows.starts)[:, 0],
+        val_stride=val_stride,
+        horizons=horizons,
+        candidates_s=candidates_s,
+        options=options,
+        velocities=velocities,
+        folds=folds,
+        equivalents=equivalents,
     )
 
 
@@ -282,8 +314,10 @@ def _note_record_differences(system, records, notes) -> None:
     (`_record_differences_that_matter`)."""
     offsets, friction = compare_records(system, records)
     for check in _record_differences_that_matter(offsets, friction, records):
-        notes.append(check.note() + f" (p-values Holm-adjusted over the {_n_comparisons(offsets, friction)} "
-                     "comparisons of records; differences of practical size only.)")
+        notes.append(
+            check.note() + f" (p-values Holm-adjusted over the {_n_comparisons(offsets, friction)} "
+            "comparisons of records; differences of practical size only.)"
+        )
 
 
 def _n_comparisons(*checks) -> int:
@@ -307,7 +341,9 @@ def _record_differences_that_matter(offsets, friction, records) -> list:
     if not checks:
         return []
     adjusted = holm_adjusted(np.concatenate([np.asarray(c.p_value, float) for c in checks]))
-    force_scale = max((float(np.sqrt(np.mean(np.asarray(r.us, float) ** 2, axis=0)).max()) for r in records), default=0.0)
+    force_scale = max(
+        (float(np.sqrt(np.mean(np.asarray(r.us, float) ** 2, axis=0)).max()) for r in records), default=0.0
+    )
     kept, start = [], 0
     for c in checks:
         p = adjusted[start : start + len(c.p_value)].copy()
@@ -332,8 +368,11 @@ def _note_held(system, family, refit_names, mode, notes) -> None:
     held = [n for n, r in zip(family.names, np.asarray(family.refit)) if r == 0]
     if held and mode.parameters is None:
         values = nominal_values(system, family.names)
-        notes.append("Refit mode refits " + ", ".join(refit_names) + "; the nominal model's friction ("
-                     + ", ".join(f"{n} = {float(values[family.names.index(n)]):.4g}" for n in held)
-                     + ") keeps its value and the friction candidates test it (Refit(parameters=...) "
-                     "chooses otherwise).")
-
+        notes.append(
+            "Refit mode refits "
+            + ", ".join(refit_names)
+            + "; the nominal model's friction ("
+            + ", ".join(f"{n} = {float(values[family.names.index(n)]):.4g}" for n in held)
+            + ") keeps its value and the friction candidates test it (Refit(parameters=...) "
+            "chooses otherwise)."
+        )

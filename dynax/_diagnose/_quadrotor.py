@@ -25,8 +25,8 @@ given model's structure on the training flights (`fit_quadrotor`; `initial_quadr
 needs no starting values); `Known()` trusts the given weights (see `diagnose_quadrotor`).
 """
 
-import dataclasses
 from collections.abc import Sequence
+import dataclasses
 from typing import ClassVar
 
 import equinox as eqx
@@ -40,9 +40,9 @@ from .._model._extensions._vehicle_terms import BodyBias, RotorDrag
 from .._model._helicopter import ANGULAR_RATE, BODY, Helicopter, QUATERNION, quaternion_to_rotation
 from .._model._quadrotor import (
     MOTORS,
+    Quadrotor,
     QUADROTOR_INPUT_NAMES,
     QUADROTOR_STATE_NAMES,
-    Quadrotor,
     to_body_frame,
     WORLD_VELOCITY,
 )
@@ -91,7 +91,9 @@ def _as_list(flights, where: str) -> list[Trajectory]:
         return [flights]
     flights = list(flights)
     if not all(isinstance(f, Trajectory) for f in flights):
-        raise UsageError(f"diagnose: `{where}` must be quadrotor Trajectories (dynax.load_flight, dynax.usable_segments)")
+        raise UsageError(
+            f"diagnose: `{where}` must be quadrotor Trajectories (dynax.load_flight, dynax.usable_segments)"
+        )
     return flights
 
 
@@ -109,8 +111,10 @@ def prepare_quadrotor(system: Quadrotor, train, validation, *, refit: bool) -> t
     if refit:
         system = fit_quadrotor(system, train, OneStep()).model
     elif not np.any(np.asarray(system.body_model.weights)):
-        raise UsageError("diagnose: Known() trusts the quadrotor's weights, but they are all zero; fit it first "
-                         "(dynax.fit_quadrotor) or diagnose in Refit() mode")
+        raise UsageError(
+            "diagnose: Known() trusts the quadrotor's weights, but they are all zero; fit it first "
+            "(dynax.fit_quadrotor) or diagnose in Refit() mode"
+        )
     inputs = tuple(train[0].input_names)
     body = body_frame_system(system, inputs)
     as_body = lambda flights: [to_body_frame(system, f) for f in flights]  # noqa: E731
@@ -143,10 +147,14 @@ def diagnose_quadrotor(system: Quadrotor, train, validation=None, *, diagnose, m
     engine_mode = mode if (refit and mode.parameters is not None) else Known()
     report = diagnose(body, train_b, val_b, mode=engine_mode, **options)
     if refit:
-        report.notes.append("The rigid body's weights are the one-step least-squares fit on the training flights"
-                            + (", the named ones refitted by simulation error with each candidate."
-                               if mode.parameters is not None else
-                               ", held while each candidate's coefficient is fitted by simulation error."))
+        report.notes.append(
+            "The rigid body's weights are the one-step least-squares fit on the training flights"
+            + (
+                ", the named ones refitted by simulation error with each candidate."
+                if mode.parameters is not None
+                else ", held while each candidate's coefficient is fitted by simulation error."
+            )
+        )
         report = dataclasses.replace(report, mode="refit")
     return report
 
@@ -170,8 +178,10 @@ class WorldFrameQuadrotor(AbstractSystem):
 
     def __check_init__(self):
         if self.body.n_states != len(QUADROTOR_STATE_NAMES):
-            raise UsageError(f"WorldFrameQuadrotor: the body system has {self.body.n_states} states (internal "
-                             "states of an input lag or delay); only a 13-state body model has a world-frame form")
+            raise UsageError(
+                f"WorldFrameQuadrotor: the body system has {self.body.n_states} states (internal "
+                "states of an input lag or delay); only a 13-state body model has a world-frame form"
+            )
 
     def state_error(self, simulated, measured):
         quat = simulated[..., QUATERNION]

@@ -17,7 +17,6 @@ from .._identify._defaults import position_fit_window, with_velocities_from_posi
 from ._horizon import Horizon, position_spread, predictability_horizon, relative_position_error
 from ._residuals import sg_window
 
-
 MIN_BATCHES = 10  # the data-driven reference horizon leaves the paired test at least this many batches
 
 
@@ -30,7 +29,9 @@ def as_records(data, name) -> list[Trajectory]:
         return [data]
     if isinstance(data, Sequence) and data and all(isinstance(t, Trajectory) for t in data):
         return list(data)
-    raise UsageError(f"diagnose: `{name}` must be a Trajectory or a non-empty sequence of them, got {type(data).__name__}")
+    raise UsageError(
+        f"diagnose: `{name}` must be a Trajectory or a non-empty sequence of them, got {type(data).__name__}"
+    )
 
 
 def prepare_records(system, train, validation, holdout_fraction, notes):
@@ -49,7 +50,9 @@ def prepare_records(system, train, validation, holdout_fraction, notes):
     if validation is None:
         if not 0 < holdout_fraction < 1:
             raise UsageError(f"diagnose: `holdout_fraction` must be in (0, 1), got {holdout_fraction}")
-        train_records, validation_records = map(list, zip(*(holdout_split(rec, holdout_fraction) for rec in train_records)))
+        train_records, validation_records = map(
+            list, zip(*(holdout_split(rec, holdout_fraction) for rec in train_records))
+        )
         notes.append(
             f"No validation record was given: the last {holdout_fraction:.0%} of each training record was held out."
         )
@@ -61,18 +64,25 @@ def prepare_records(system, train, validation, holdout_fraction, notes):
     if not all(r.is_uniform for r in train_records + validation_records):
         train_records = [resample(r, dt) for r in train_records]
         validation_records = [resample(r, dt) for r in validation_records]
-        notes.append(f"The sampling was irregular; the records were resampled to {dt * 1000:.3g} ms (states linearly, inputs as held).")
+        notes.append(
+            f"The sampling was irregular; the records were resampled to {dt * 1000:.3g} ms (states linearly, inputs as held)."
+        )
     # One-step residuals drop a smoothing window (about 0.1 s) at each end of a record; a record needs
     # room for that and as much again to be judged on.
     need = 4 * sg_window(dt)
     for kind, records in (("training", train_records), ("held-out", validation_records)):
         for rec in records:
             if len(rec) < need:
-                what = (f"the held-out part of the record (its last {holdout_fraction:.0%})"
-                        if validation is None and kind == "held-out" else f"the {kind} record")
-                raise DataError(f"diagnose: {what} has {len(rec)} samples ({len(rec) * dt:.3g} s); "
-                                f"the diagnosis needs at least {need} ({need * dt:.3g} s) per record",
-                                path=rec.source or None)
+                what = (
+                    f"the held-out part of the record (its last {holdout_fraction:.0%})"
+                    if validation is None and kind == "held-out"
+                    else f"the {kind} record"
+                )
+                raise DataError(
+                    f"diagnose: {what} has {len(rec)} samples ({len(rec) * dt:.3g} s); "
+                    f"the diagnosis needs at least {need} ({need * dt:.3g} s) per record",
+                    path=rec.source or None,
+                )
     dtype = jnp.result_type(float)
 
     return [_cast(r, dtype) for r in train_records], [_cast(r, dtype) for r in validation_records], dt
@@ -94,10 +104,14 @@ def velocity_estimates(system, train_records, validation_records, velocities, no
             noise.append(max(choice.noise_std[name] for name in replaced))
     if not count:
         return train_records, validation_records, "as measured"
-    how = (f"from positions: the derivative of a local cubic fit (Savitzky-Golay over {min(windows) * 1000:.3g} to "
-           f"{max(windows) * 1000:.3g} ms) in {count} of {len(out)} records, whose measured velocities carry white "
-           f"noise of up to {max(noise):.3g} (state units per second) that the fit removes at a smaller bias")
-    notes.append(f"Velocities {how}; the windows start from them and are compared with them (velocities='measured' keeps them).")
+    how = (
+        f"from positions: the derivative of a local cubic fit (Savitzky-Golay over {min(windows) * 1000:.3g} to "
+        f"{max(windows) * 1000:.3g} ms) in {count} of {len(out)} records, whose measured velocities carry white "
+        f"noise of up to {max(noise):.3g} (state units per second) that the fit removes at a smaller bias"
+    )
+    notes.append(
+        f"Velocities {how}; the windows start from them and are compared with them (velocities='measured' keeps them)."
+    )
     n = len(train_records)
     return out[:n], out[n:], how
 
@@ -108,8 +122,10 @@ def horizon_grid(horizons_s, reference_horizon_s, train_records, validation_reco
     horizons = np.asarray([h for h in horizons_s if h <= 0.5 * shortest + 1e-9] or [min(horizons_s)], float)
     if reference_horizon_s is not None:
         if reference_horizon_s > horizons.max():
-            notes.append(f"The held-out record is short: the reference horizon was lowered from {reference_horizon_s:g} s "
-                         f"to {horizons.max():g} s.")
+            notes.append(
+                f"The held-out record is short: the reference horizon was lowered from {reference_horizon_s:g} s "
+                f"to {horizons.max():g} s."
+            )
             reference_horizon_s = float(horizons.max())
         if reference_horizon_s not in horizons:
             horizons = np.sort(np.append(horizons, reference_horizon_s))
@@ -129,7 +145,9 @@ def reference_horizon(nominal_model, train_records, candidates_s, given, fractio
 
     if given is not None:
         return Horizon(float(candidates_s[0]), "given (reference_horizon_s)", None, candidates_s, [np.nan])
-    errors = [np.asarray(simulation_error(nominal_model, rec, candidates_s, stride=stride).errors) for rec in train_records]
+    errors = [
+        np.asarray(simulation_error(nominal_model, rec, candidates_s, stride=stride).errors) for rec in train_records
+    ]
     positions = np.concatenate([np.asarray(r.xs)[:, position_index] for r in train_records])
     spread = position_spread(positions, [k in nominal_model.angle_indices for k in position_index])
     relative = relative_position_error(np.concatenate(errors), position_index, spread)
@@ -144,12 +162,22 @@ def fit_window(system, train_records, given, fraction, dt, notes) -> float:
     candidates_s = np.round(np.arange(0.1, longest + 1e-9, 0.05), 6)
     if candidates_s.size == 0:
         return longest
-    start = reference_horizon(system, train_records, candidates_s, None, fraction, max(1, int(round(0.05 / dt))),
-                               list(system.position_indices), dt)
+    start = reference_horizon(
+        system,
+        train_records,
+        candidates_s,
+        None,
+        fraction,
+        max(1, int(round(0.05 / dt))),
+        list(system.position_indices),
+        dt,
+    )
     window = float(np.clip(2.5 * start.seconds, 0.25, longest))
     if window < longest:
-        notes.append(f"The starting model predicts the training runs for {start.seconds:g} s only: the simulation-error "
-                     f"fits use {window:g} s windows (2.5 times that) instead of {longest:g} s.")
+        notes.append(
+            f"The starting model predicts the training runs for {start.seconds:g} s only: the simulation-error "
+            f"fits use {window:g} s windows (2.5 times that) instead of {longest:g} s."
+        )
     return window
 
 
@@ -164,5 +192,12 @@ def _slice(rec: Trajectory, a: int, b: int) -> Trajectory:
 
 
 def _cast(rec: Trajectory, dtype) -> Trajectory:
-    return Trajectory(rec.ts.astype(dtype), rec.xs.astype(dtype), rec.us.astype(dtype), rec.state_names,
-                      rec.input_names, rec.system, rec.source)
+    return Trajectory(
+        rec.ts.astype(dtype),
+        rec.xs.astype(dtype),
+        rec.us.astype(dtype),
+        rec.state_names,
+        rec.input_names,
+        rec.system,
+        rec.source,
+    )

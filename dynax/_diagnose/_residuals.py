@@ -119,7 +119,11 @@ def exact_delays(model, trajectory):
         first_on_input.setdefault(term.input, term)
     half = 0.5 * float(np.median(np.diff(ts)))
     for k, term in enumerate(model.terms):
-        if not isinstance(term, InputDelay) or first_on_input.get(term.input) is not term or not float(term.coefficient) > 0:
+        if (
+            not isinstance(term, InputDelay)
+            or first_on_input.get(term.input) is not term
+            or not float(term.coefficient) > 0
+        ):
             continue
         centre = ts - float(term.coefficient)
         mean = _held_average(ts, np.asarray(trajectory.us)[:, term.input], centre - half, centre + half)
@@ -150,7 +154,9 @@ def acceleration_residuals(model, trajectory):
         # acceleration jump at every sample, and a stiff flight controller moves the input every
         # sample): compare velocity *increments* over each interval, integrated under the held
         # input, and differentiate the accumulated difference with the same filter.
-        increments = jnp.diff(trajectory.ts)[:, None] * _interval_accelerations(model, ts, xs_smooth, us, jnp.asarray(idx))
+        increments = jnp.diff(trajectory.ts)[:, None] * _interval_accelerations(
+            model, ts, xs_smooth, us, jnp.asarray(idx)
+        )
         drift = jnp.diff(trajectory.xs[:, idx], axis=0) - increments
         accumulated = jnp.concatenate([jnp.zeros((1, len(idx)), drift.dtype), jnp.cumsum(drift, axis=0)])
         measured = predicted + savitzky_golay(ts, accumulated, window=w, order=3, deriv=1)
@@ -190,7 +196,9 @@ class Structure(eqx.Module):
     by_state: dict
 
 
-def structure_test(model, train, validation, *, alpha: float = 0.01, min_r2: float = 0.05, block_s: float = 0.25) -> Structure:
+def structure_test(
+    model, train, validation, *, alpha: float = 0.01, min_r2: float = 0.05, block_s: float = 0.25
+) -> Structure:
     """Fit the probe on the training residuals, test it on the held-out residuals (see module docs).
 
     **Arguments:** `model`; `train`, `validation` (a `Trajectory` or a list of them); `alpha` level;
@@ -207,7 +215,10 @@ def structure_test(model, train, validation, *, alpha: float = 0.01, min_r2: flo
     feats, resid, times, sizes = [], [], [], []
     for records in (train, validation):
         parts = [acceleration_residuals(model, traj) for traj in records]
-        phis = [probe_features(nominal, xs, np.asarray(traj.us)[keep], pred, traj.dt) for traj, (_, xs, pred, keep) in zip(records, parts)]
+        phis = [
+            probe_features(nominal, xs, np.asarray(traj.us)[keep], pred, traj.dt)
+            for traj, (_, xs, pred, keep) in zip(records, parts)
+        ]
         names = phis[0][1]
         feats.append(np.concatenate([phi for phi, _ in phis]))
         resid.append(np.concatenate([r for r, *_ in parts]))
@@ -239,7 +250,9 @@ def structure_test(model, train, validation, *, alpha: float = 0.01, min_r2: flo
         start += size
     b0, b1, t_blocks = np.concatenate(b0), np.concatenate(b1), np.concatenate(t_blocks)
     nb = b0.size
-    d = (b0 - b1) / b0.mean() if nb else np.zeros(0)  # per-block improvement; a log ratio would let near-empty blocks dominate
+    d = (
+        (b0 - b1) / b0.mean() if nb else np.zeros(0)
+    )  # per-block improvement; a log ratio would let near-empty blocks dominate
     if nb >= 3 and d.std(ddof=1) > 0:
         t = d.mean() / (d.std(ddof=1) / np.sqrt(nb))
         p = float(scipy.stats.t.sf(t, nb - 1))

@@ -64,12 +64,23 @@ class ResidualTests(eqx.Module):
             "lag_s": self.lag_s,
             "max_lag": self.max_lag,
             "confidence": self.confidence,
-            "whiteness": {c: {"p_value": p, "white": w, "peak_autocorrelation": r, "bound": self.autocorrelation_bound}
-                          for c, p, w, r in zip(self.channels, self.whiteness_p, self.white, self.peak_autocorrelation)},
-            "cross_correlation": {c: {u: {"p_value": p, "independent": i, "peak": r, "bound": b}
-                                      for u, p, i, r, b in zip(self.inputs, ps, ind, rs, bs)}
-                                  for c, ps, ind, rs, bs in zip(self.channels, self.cross_correlation_p, self.independent,
-                                                                self.peak_cross_correlation, self.cross_correlation_bound)},
+            "whiteness": {
+                c: {"p_value": p, "white": w, "peak_autocorrelation": r, "bound": self.autocorrelation_bound}
+                for c, p, w, r in zip(self.channels, self.whiteness_p, self.white, self.peak_autocorrelation)
+            },
+            "cross_correlation": {
+                c: {
+                    u: {"p_value": p, "independent": i, "peak": r, "bound": b}
+                    for u, p, i, r, b in zip(self.inputs, ps, ind, rs, bs)
+                }
+                for c, ps, ind, rs, bs in zip(
+                    self.channels,
+                    self.cross_correlation_p,
+                    self.independent,
+                    self.peak_cross_correlation,
+                    self.cross_correlation_bound,
+                )
+            },
             "white": all(self.white),
             "independent": all(all(row) for row in self.independent),
         }
@@ -89,8 +100,11 @@ class Validation(eqx.Module):
     residual_tests: tuple[ResidualTests, ...]
 
     def to_json(self) -> dict:
-        return {"horizon_s": self.horizon_s, "fit_percent": dict(self.fit_percent),
-                "residual_tests": [t.to_json() for t in self.residual_tests]}
+        return {
+            "horizon_s": self.horizon_s,
+            "fit_percent": dict(self.fit_percent),
+            "residual_tests": [t.to_json() for t in self.residual_tests],
+        }
 
 
 class ModelSummary(eqx.Module):
@@ -129,9 +143,16 @@ class DataSummary(eqx.Module):
     velocities: str = "as measured"  # or how they were estimated (`diagnose(velocities=...)`)
 
     def to_json(self) -> dict:
-        return {"train": self.train, "validation": self.validation, "n_train": self.n_train,
-                "n_validation": self.n_validation, "dt": self.dt, "train_runs": list(self.train_runs),
-                "validation_runs": list(self.validation_runs), "velocities": self.velocities}
+        return {
+            "train": self.train,
+            "validation": self.validation,
+            "n_train": self.n_train,
+            "n_validation": self.n_validation,
+            "dt": self.dt,
+            "train_runs": list(self.train_runs),
+            "validation_runs": list(self.validation_runs),
+            "velocities": self.velocities,
+        }
 
 
 def structure_json(s: Structure) -> dict:

@@ -77,7 +77,9 @@ def screening_data(family, values, coefficients, trajectory, residual_fn):
         if isinstance(term, AbstractInputTerm) and term.n_hidden and term.cause in ("input_lag", "input_delay"):
             J_u_k = np.asarray(J_u)[:, :, term.input]
             u = np.asarray(us)[:, term.input]
-            shifted = np.stack([_lagged(ts, u, tau) if term.cause == "input_lag" else _delayed(ts, u, tau) for tau in grid], axis=1)
+            shifted = np.stack(
+                [_lagged(ts, u, tau) if term.cause == "input_lag" else _delayed(ts, u, tau) for tau in grid], axis=1
+            )
             J_grid[k] = smooth(J_u_k[:, :, None] * (shifted - u[:, None])[:, None, :])[keep]  # (time, n_vel, n_grid)
     return r, smooth(np.asarray(J_nom))[keep], smooth(J_c)[keep], J_grid
 
@@ -109,8 +111,18 @@ def _delayed(ts, u, delay):
     return u[i]
 
 
-def screen(family, values, coefficients, refit_mask, train, validation, candidates_to_screen, residual_fn, *,
-           cross_fit: bool = False):
+def screen(
+    family,
+    values,
+    coefficients,
+    refit_mask,
+    train,
+    validation,
+    candidates_to_screen,
+    residual_fn,
+    *,
+    cross_fit: bool = False,
+):
     """Held-out equation-error gain of each candidate in `candidates_to_screen` (indices), linearised.
 
     The regression is fitted on `train` and scored on `validation`; with `cross_fit` (and two or more
@@ -124,8 +136,10 @@ def screen(family, values, coefficients, refit_mask, train, validation, candidat
     residual sum of squares (beyond refitting the nominal parameters), and its coefficient step
     (from the fit on all of `train`).
     """
-    data = {name: [screening_data(family, values, coefficients, rec, residual_fn) for rec in records]
-            for name, records in (("train", train), ("validation", validation))}
+    data = {
+        name: [screening_data(family, values, coefficients, rec, residual_fn) for rec in records]
+        for name, records in (("train", train), ("validation", validation))
+    }
     grid = screening_grid(float(np.median(np.diff(np.asarray(train[0].ts)))))
     scale = np.concatenate([d[0] for d in data["train"]]).std(axis=0) + 1e-12
     refit = np.asarray(refit_mask) > 0

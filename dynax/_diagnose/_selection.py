@@ -41,11 +41,17 @@ def look_alike_tests(problem, yard, best, results, scores):
             test = paired_test(s_k, s_best, yard.window_runs, yard.overlap)
             margin = window_gain(s_k, s_best)
             equivalent = k in problem.equivalents.get(best, [])
-            alternatives.append({"cause": problem.candidates[k].cause, "where": problem.candidates[k].where(problem.system),
-                                 "gain": float(results[k]["gain_held_out"]), "p_value": test.p_value,
-                                 "gain_over": margin,
-                                 "told_apart": bool(test.p_value < o.alpha and margin >= o.min_gain and not equivalent),
-                                 "equivalent": equivalent})
+            alternatives.append(
+                {
+                    "cause": problem.candidates[k].cause,
+                    "where": problem.candidates[k].where(problem.system),
+                    "gain": float(results[k]["gain_held_out"]),
+                    "p_value": test.p_value,
+                    "gain_over": margin,
+                    "told_apart": bool(test.p_value < o.alpha and margin >= o.min_gain and not equivalent),
+                    "equivalent": equivalent,
+                }
+            )
     return alternatives
 
 
@@ -84,8 +90,25 @@ def on_physical_side(term, delta, partner, names, system) -> bool:
     return violated_bound(names[i], value, system.base_parameter_kinds().get(names[i])) is None
 
 
-def judge_round(physical, short, remaining, selected, n_nom, p_j, std_j, err_j, scores_j, score_cur, window_runs,
-                 overlap, alpha, min_gain, steps, position_index, n_val=None):
+def judge_round(
+    physical,
+    short,
+    remaining,
+    selected,
+    n_nom,
+    p_j,
+    std_j,
+    err_j,
+    scores_j,
+    score_cur,
+    window_runs,
+    overlap,
+    alpha,
+    min_gain,
+    steps,
+    position_index,
+    n_val=None,
+):
     """Each shortlisted candidate's held-out test: paired block test, Benjamini-Hochberg over every remaining candidate
     (those not refitted count with p = 1), the smallest gain, agreement across runs, a physical sign of every
     coefficient of the joint refit: the new one's *and* those of the terms selected in earlier rounds, which the
@@ -112,12 +135,27 @@ def judge_round(physical, short, remaining, selected, n_nom, p_j, std_j, err_j, 
         ok = physical(k, delta) and all(physical(s, p_j[i, n_nom + m]) for m, s in enumerate(selected))
         helped = sum(v > 0 for v in test.per_run.values())
         agree = helps_on_most_runs(test.per_run)
-        rules = {"significance": bool(rejected[i - 1]), "min_gain": bool(gain_windows >= min_gain), "sign": bool(ok),
-                 "agreement": bool(agree),  # each rule on its own: the report says which stopped a candidate
-                 "held_out": bool(gain_held_out > 0)}
-        results[k] = dict(i=i, delta=delta, std=std_j[i, -1], gain_windows=gain_windows, gain_held_out=gain_held_out,
-                          p=test.p_value, test=test,
-                          rmse=rmse_curve(err_j[i], steps, position_index), physical=ok,
-                          runs_helped=helped, n_runs=len(test.per_run), n_tested=len(remaining), rules=rules,
-                          significant=all(rules.values()))
+        rules = {
+            "significance": bool(rejected[i - 1]),
+            "min_gain": bool(gain_windows >= min_gain),
+            "sign": bool(ok),
+            "agreement": bool(agree),  # each rule on its own: the report says which stopped a candidate
+            "held_out": bool(gain_held_out > 0),
+        }
+        results[k] = dict(
+            i=i,
+            delta=delta,
+            std=std_j[i, -1],
+            gain_windows=gain_windows,
+            gain_held_out=gain_held_out,
+            p=test.p_value,
+            test=test,
+            rmse=rmse_curve(err_j[i], steps, position_index),
+            physical=ok,
+            runs_helped=helped,
+            n_runs=len(test.per_run),
+            n_tested=len(remaining),
+            rules=rules,
+            significant=all(rules.values()),
+        )
     return results

@@ -139,8 +139,10 @@ class PairedTest:
         self.batch, self.per_run, self.method = batch, per_run, method
 
     def __repr__(self):
-        return (f"PairedTest(mean={self.mean:.4g}, std_error={self.std_error:.3g}, df={self.df:.3g}, "
-                f"p_value={self.p_value:.3g}, batch={self.batch}, method={self.method!r}, per_run={self.per_run})")
+        return (
+            f"PairedTest(mean={self.mean:.4g}, std_error={self.std_error:.3g}, df={self.df:.3g}, "
+            f"p_value={self.p_value:.3g}, batch={self.batch}, method={self.method!r}, per_run={self.per_run})"
+        )
 
 
 BATCH_OVER_CORRELATION = 2.0  # OBM/NBM batch over the correlation length
@@ -193,7 +195,9 @@ def paired_block_test(d, runs, overlap: int, batch: int | None = None, method: s
     """
     d, runs = np.asarray(d, float), np.asarray(runs)
     if d.shape != runs.shape or d.ndim != 1 or d.size == 0:
-        raise ValueError(f"paired_block_test: `d` and `runs` must be equal-length 1-D arrays, got {d.shape} and {runs.shape}")
+        raise ValueError(
+            f"paired_block_test: `d` and `runs` must be equal-length 1-D arrays, got {d.shape} and {runs.shape}"
+        )
     method = DEFAULT_METHOD if method is None else method
     if method not in ("obm", "nbm", "truncated", "flat_top"):
         raise ValueError(f"paired_block_test: `method` must be 'obm', 'nbm', 'truncated' or 'flat_top', got {method!r}")

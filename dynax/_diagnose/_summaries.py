@@ -36,31 +36,44 @@ def merge_repeated_causes(findings: list[dict]) -> list[dict]:
                 key = (alt["cause"], alt.get("where"))
                 if key not in look_alikes or weakness(alt) < weakness(look_alikes[key]):
                     look_alikes[key] = alt
-        merged.append({
-            "cause": cause,
-            "where": where,
-            "coefficient": size,
-            "std_error": std,
-            "gain": float(1 - np.prod([1 - f["gain"] for f in group])),
-            "parameter": f"{cause}_speed" if cause == "wind" else f"|{cause}|",
-            "components": {f["parameter"]: f["coefficient"] for f in group},
-            "component_std_errors": {f["parameter"]: f["std_error"] for f in group},
-            "p_value": max(f["p_value"] for f in group),
-            "look_alikes": list(look_alikes.values()),
-            "confidence": "high" if all(f["confidence"] == "high" for f in group) else "low",
-        })
+        merged.append(
+            {
+                "cause": cause,
+                "where": where,
+                "coefficient": size,
+                "std_error": std,
+                "gain": float(1 - np.prod([1 - f["gain"] for f in group])),
+                "parameter": f"{cause}_speed" if cause == "wind" else f"|{cause}|",
+                "components": {f["parameter"]: f["coefficient"] for f in group},
+                "component_std_errors": {f["parameter"]: f["std_error"] for f in group},
+                "p_value": max(f["p_value"] for f in group),
+                "look_alikes": list(look_alikes.values()),
+                "confidence": "high" if all(f["confidence"] == "high" for f in group) else "low",
+            }
+        )
     return merged
 
 
 _RULE_TEXT = {
-    "significance": lambda r, o: (f"significance: p = {r['p']:.2g} not rejected by Benjamini-Hochberg at false-discovery "
-                                  f"rate {o.alpha:g} over the {r['n_tested']} candidates remaining"),
-    "min_gain": lambda r, o: f"min_gain: the pooled window-error gain {r['gain_windows']:.1%} is below {o.min_gain:.0%}",
-    "sign": lambda r, o: "sign: a coefficient of the joint refit (this term's or an earlier finding's) is on its unphysical side",
-    "agreement": lambda r, o: (f"agreement: helps on {r['runs_helped']} of {r['n_runs']} runs, not on more than half"),
-    "held_out": lambda r, o: (f"held_out: the held-out runs' window error is {-r['gain_held_out']:.1%} larger with it"
-                              + (" (the cross-fitted runs' windows carried the pooled test)"
-                                 if r["gain_windows"] > r["gain_held_out"] else "")),
+    "significance": lambda r, o: (
+        f"significance: p = {r['p']:.2g} not rejected by Benjamini-Hochberg at false-discovery "
+        f"rate {o.alpha:g} over the {r['n_tested']} candidates remaining"
+    ),
+    "min_gain": lambda r, o: (
+        f"min_gain: the pooled window-error gain {r['gain_windows']:.1%} is below {o.min_gain:.0%}"
+    ),
+    "sign": lambda r, o: (
+        "sign: a coefficient of the joint refit (this term's or an earlier finding's) is on its unphysical side"
+    ),
+    "agreement": lambda r, o: f"agreement: helps on {r['runs_helped']} of {r['n_runs']} runs, not on more than half",
+    "held_out": lambda r, o: (
+        f"held_out: the held-out runs' window error is {-r['gain_held_out']:.1%} larger with it"
+        + (
+            " (the cross-fitted runs' windows carried the pooled test)"
+            if r["gain_windows"] > r["gain_held_out"]
+            else ""
+        )
+    ),
 }
 
 
@@ -72,15 +85,21 @@ def round_summary(problem, yard, round_, current, remaining, results, finding) -
     rows = []
     for k, r in results.items():
         term = problem.candidates[k]
-        rows.append({
-            "cause": term.cause, "where": term.where(system), "parameter": term.parameter_name(system),
-            "coefficient": float(problem.neutral[k] + r["delta"]),
-            "gain": float(r["gain_held_out"]), "gain_pooled": float(r["gain_windows"]),
-            "sim_error_gain": _finite_or_none(rmse_gain(r["rmse"], current.rmse, yard.ref_index)), "p_value": float(r["p"]),
-            "runs_helped": f"{r['runs_helped']}/{r['n_runs']}",
-            "outcome": "selected" if k == selected else ("passed" if r["significant"] else "stopped"),
-            "stopped_by": [_RULE_TEXT[name](r, o) for name, ok in r["rules"].items() if not ok],
-        })
+        rows.append(
+            {
+                "cause": term.cause,
+                "where": term.where(system),
+                "parameter": term.parameter_name(system),
+                "coefficient": float(problem.neutral[k] + r["delta"]),
+                "gain": float(r["gain_held_out"]),
+                "gain_pooled": float(r["gain_windows"]),
+                "sim_error_gain": _finite_or_none(rmse_gain(r["rmse"], current.rmse, yard.ref_index)),
+                "p_value": float(r["p"]),
+                "runs_helped": f"{r['runs_helped']}/{r['n_runs']}",
+                "outcome": "selected" if k == selected else ("passed" if r["significant"] else "stopped"),
+                "stopped_by": [_RULE_TEXT[name](r, o) for name, ok in r["rules"].items() if not ok],
+            }
+        )
     rows.sort(key=lambda e: (e["outcome"] != "selected", e["outcome"] != "passed", -e["gain"]))
     model = [problem.candidates[k].label(system) for k in current.selected]
     if finding is not None:
@@ -89,8 +108,14 @@ def round_summary(problem, yard, round_, current, remaining, results, finding) -
         outcome = "no candidate passed every rule: the selection stops"
     else:
         outcome = "no candidate left to refit: the selection stops"
-    return {"round": round_ + 1, "model": model, "screened": len(remaining), "refitted": len(results),
-            "candidates": rows, "outcome": outcome}
+    return {
+        "round": round_ + 1,
+        "model": model,
+        "screened": len(remaining),
+        "refitted": len(results),
+        "candidates": rows,
+        "outcome": outcome,
+    }
 
 
 def _finite_or_none(x: float) -> float | None:
@@ -120,12 +145,21 @@ def candidate_table(system, candidates, remaining, gains_scr, results, neutral, 
     that lowers it but not the held-out error was fitted to what does not transfer)."""
     table = []
     for i, k in enumerate(remaining):
-        entry = {"cause": candidates[k].cause, "where": candidates[k].where(system), "screening_gain": float(gains_scr[i])}
+        entry = {
+            "cause": candidates[k].cause,
+            "where": candidates[k].where(system),
+            "screening_gain": float(gains_scr[i]),
+        }
         if k in results:
             r = results[k]
-            entry.update(gain=float(r["gain_held_out"]), gain_pooled=float(r["gain_windows"]), p_value=r["p"],
-                         coefficient=float(neutral[k] + r["delta"]),
-                         runs_helped=f"{r['runs_helped']}/{r['n_runs']}", training_gain=float(1 - cost[r["i"]] / cost[0]))
+            entry.update(
+                gain=float(r["gain_held_out"]),
+                gain_pooled=float(r["gain_windows"]),
+                p_value=r["p"],
+                coefficient=float(neutral[k] + r["delta"]),
+                runs_helped=f"{r['runs_helped']}/{r['n_runs']}",
+                training_gain=float(1 - cost[r["i"]] / cost[0]),
+            )
         table.append(entry)
     table.sort(key=lambda e: (-e.get("gain", -np.inf), -e["screening_gain"]))
     return table
@@ -139,13 +173,13 @@ def test_summary(alpha, min_gain, power, verdict, named=False) -> dict:
         detectable = max(power.detectable_gain, min_gain)
     return {
         "paired": "log ratio of each held-out window's mean squared error, nominal (or current) against extended; "
-                  "HAC variance within each run (flat-top lag window over the windows' correlation length, "
-                  "corrected for centring on the run's mean), Student t with its equivalent degrees of freedom",
+        "HAC variance within each run (flat-top lag window over the windows' correlation length, "
+        "corrected for centring on the run's mean), Student t with its equivalent degrees of freedom",
         "multiple_comparisons": f"Benjamini-Hochberg over the candidates remaining in each round, false-discovery "
-                                f"rate {alpha:g} (family-wise {alpha:g} when no candidate has an effect)",
+        f"rate {alpha:g} (family-wise {alpha:g} when no candidate has an effect)",
         "run_agreement": "a cause must improve the mean window error on more than half of the held-out runs "
-                         "(cross-fitted training runs included), and must not raise the held-out runs' own "
-                         "(the cross-fitted windows add power; the runs no fit has seen keep a veto)",
+        "(cross-fitted training runs included), and must not raise the held-out runs' own "
+        "(the cross-fitted windows add power; the runs no fit has seen keep a veto)",
         "alpha": alpha,
         "min_gain": min_gain,
         "detectable_gain": detectable,
@@ -160,7 +194,9 @@ def per_run_table(problem, yard, nominal, judgement) -> list[dict]:
     parts = [("validation", problem.validation, problem.window_runs, nominal.errors, judgement.errors, 0)]
     if yard.cv_windows is not None:
         runs = np.asarray(yard.cv_windows.starts)[:, 0]
-        parts.append(("cross-fitted", problem.train, runs, nominal.cv_errors, judgement.cv_errors, len(problem.validation)))
+        parts.append(
+            ("cross-fitted", problem.train, runs, nominal.cv_errors, judgement.cv_errors, len(problem.validation))
+        )
     rows = []
     for kind, records, window_runs, err_nominal, err_extended, offset in parts:
         for r, rec in enumerate(records):
@@ -169,16 +205,25 @@ def per_run_table(problem, yard, nominal, judgement) -> list[dict]:
             ext = rmse_curve(err_extended[mine], n_ref, index)[0]
             fine = np.isfinite(nom) and np.isfinite(ext) and nom > 0
             name = rec.source or (f"held-out run {r + 1}" if kind == "validation" else f"train run {r + 1}")
-            rows.append({"run": name, "held_out": kind, "n_windows": int(mine.sum()),
-                         "nominal_rmse": float(nom) if np.isfinite(nom) else None,
-                         "extended_rmse": float(ext) if np.isfinite(ext) else None,
-                         "gain": float(1 - ext / nom) if fine else None})
+            rows.append(
+                {
+                    "run": name,
+                    "held_out": kind,
+                    "n_windows": int(mine.sum()),
+                    "nominal_rmse": float(nom) if np.isfinite(nom) else None,
+                    "extended_rmse": float(ext) if np.isfinite(ext) else None,
+                    "gain": float(1 - ext / nom) if fine else None,
+                }
+            )
     return rows
 
 
 def unexplained_note(s: Structure) -> str:
-    return ("Structure is left that the candidates do not explain: the residual probe explains "
-            f"{s.r2:.0%} of the held-out one-step residuals (p = {s.p_value:.2g}), mostly through "
-            + ", ".join(f"{n} ({w:.0%})" for n, w in s.top_features[:3])
-            + f"; largest in {', '.join(f'{k} ({v:.0%})' for k, v in s.by_state.items())}; worst around t = "
-            + ", ".join(f"{t:.1f} s" for t in s.worst_times) + " of the held-out record.")
+    return (
+        "Structure is left that the candidates do not explain: the residual probe explains "
+        f"{s.r2:.0%} of the held-out one-step residuals (p = {s.p_value:.2g}), mostly through "
+        + ", ".join(f"{n} ({w:.0%})" for n, w in s.top_features[:3])
+        + f"; largest in {', '.join(f'{k} ({v:.0%})' for k, v in s.by_state.items())}; worst around t = "
+        + ", ".join(f"{t:.1f} s" for t in s.worst_times)
+        + " of the held-out record."
+    )

@@ -124,8 +124,11 @@ class Power:
     def undecided(self) -> bool:
         """The best candidate gains `MIN_PRACTICAL_GAIN` or more and only significance (and the smallest pooled
         gain, which more data settle too) stopped it: more held-out data would decide."""
-        return (self.best is not None and self.best["gain"] >= MIN_PRACTICAL_GAIN
-                and set(self.best["stopped_by"]) <= {"significance", "min_gain"})
+        return (
+            self.best is not None
+            and self.best["gain"] >= MIN_PRACTICAL_GAIN
+            and set(self.best["stopped_by"]) <= {"significance", "min_gain"}
+        )
 
     @property
     def enough(self) -> bool:
@@ -133,9 +136,15 @@ class Power:
         return self.detectable_gain is not None and self.detectable_gain <= MIN_PRACTICAL_GAIN
 
     def to_json(self) -> dict:
-        return {"detectable_gain": self.detectable_gain, "power": POWER, "min_practical_gain": MIN_PRACTICAL_GAIN,
-                "best_candidate": self.best, "tested_s": self.tested_s, "needed_s": self.needed_s,
-                "observed_needed_s": self.observed_needed_s}
+        return {
+            "detectable_gain": self.detectable_gain,
+            "power": POWER,
+            "min_practical_gain": MIN_PRACTICAL_GAIN,
+            "best_candidate": self.best,
+            "tested_s": self.tested_s,
+            "needed_s": self.needed_s,
+            "observed_needed_s": self.observed_needed_s,
+        }
 
 
 def power_of(results: dict, labels: dict, alpha: float, tested_s: float) -> Power:
@@ -166,8 +175,13 @@ def power_of(results: dict, labels: dict, alpha: float, tested_s: float) -> Powe
         if results[k]["gain_held_out"] >= MIN_PRACTICAL_GAIN and mean > 0:
             observed = float(tested_s * (shift / mean) ** 2)  # its own observed effect, detected with POWER
     cause, where = labels[k]
-    best = {"cause": cause, "where": where, "gain": float(results[k]["gain_held_out"]), "p_value": float(results[k]["p"]),
-            "stopped_by": [name for name, ok in results[k]["rules"].items() if not ok]}
+    best = {
+        "cause": cause,
+        "where": where,
+        "gain": float(results[k]["gain_held_out"]),
+        "p_value": float(results[k]["p"]),
+        "stopped_by": [name for name, ok in results[k]["rules"].items() if not ok],
+    }
     return Power(float(detectable), best, float(tested_s), needed, observed)
 
 
@@ -203,21 +217,30 @@ def inconclusive_note(power: Power, horizon_s: float, runs: str) -> str:
     parts = []
     if power.best is not None:
         b = power.best
-        parts.append(f"The best candidate, {b['cause']}@{b['where']}, gains {b['gain']:.0%} on the held-out runs at "
-                     f"{horizon_s:g} s (p = {b['p_value']:.2g})"
-                     + (f", stopped by {', '.join(b['stopped_by'])}" if b["stopped_by"] else "") + ".")
+        parts.append(
+            f"The best candidate, {b['cause']}@{b['where']}, gains {b['gain']:.0%} on the held-out runs at "
+            f"{horizon_s:g} s (p = {b['p_value']:.2g})"
+            + (f", stopped by {', '.join(b['stopped_by'])}" if b["stopped_by"] else "")
+            + "."
+        )
     if power.detectable_gain is not None and not power.undecided:
-        parts.append(f"With these {runs} ({power.tested_s:.3g} s of windows) the test would detect a gain of about "
-                     f"{power.detectable_gain:.0%} with {POWER:.0%} power"
-                     + (f", more than the {MIN_PRACTICAL_GAIN:.0%} that matters." if not power.enough else "."))
+        parts.append(
+            f"With these {runs} ({power.tested_s:.3g} s of windows) the test would detect a gain of about "
+            f"{power.detectable_gain:.0%} with {POWER:.0%} power"
+            + (f", more than the {MIN_PRACTICAL_GAIN:.0%} that matters." if not power.enough else ".")
+        )
     if power.needed_s is not None and power.needed_s > power.tested_s:
         like = "its" if power.undecided else "the refitted candidates'"
-        parts.append(f"With window-to-window variation like {like}, about {power.needed_s:.3g} s of held-out record "
-                     f"({power.needed_s / power.tested_s:.2g} times as much) would detect a {MIN_PRACTICAL_GAIN:.0%} "
-                     f"gain at the test's level with {POWER:.0%} power; the verdict is left open until then.")
+        parts.append(
+            f"With window-to-window variation like {like}, about {power.needed_s:.3g} s of held-out record "
+            f"({power.needed_s / power.tested_s:.2g} times as much) would detect a {MIN_PRACTICAL_GAIN:.0%} "
+            f"gain at the test's level with {POWER:.0%} power; the verdict is left open until then."
+        )
     elif power.best is not None:
         parts.append("More held-out runs, or runs that excite it differently, would decide.")
     if power.undecided and power.observed_needed_s is not None:
-        parts.append(f"Its own improvement, as large as observed, would be detected with about "
-                     f"{power.observed_needed_s:.3g} s of such record.")
+        parts.append(
+            f"Its own improvement, as large as observed, would be detected with about "
+            f"{power.observed_needed_s:.3g} s of such record."
+        )
     return "Inconclusive: " + " ".join(parts)

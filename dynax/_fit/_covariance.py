@@ -71,9 +71,9 @@ import math
 
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, Float, Int
 import numpy as np
 import scipy.fft
-from jaxtyping import Array, Float, Int
 
 # Andrews (1991): the Bartlett kernel's optimal-bandwidth constant. The AR(1) coefficients are
 # clipped so that a near-unit root does not ask for an unbounded bandwidth (the shortest record caps
@@ -158,7 +158,10 @@ def bartlett_lags(p: np.ndarray, bandwidth: float) -> np.ndarray:
 
 
 def serial_covariance(
-    jac: Float[Array, "m n"], residuals: Float[Array, " m"], steps: Int[Array, " m"], record_steps: tuple[int, ...],
+    jac: Float[Array, "m n"],
+    residuals: Float[Array, " m"],
+    steps: Int[Array, " m"],
+    record_steps: tuple[int, ...],
     bandwidth: float | None = None,
 ) -> tuple[Float[Array, "n n"], float]:
     r"""The covariance of the unknowns of a least-squares fit whose residuals are correlated in time

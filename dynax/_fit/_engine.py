@@ -18,20 +18,20 @@ converged), and they never synchronise with the host.
     P. Kidger et al., optimistix, 2024.
 """
 
-import functools
 from collections.abc import Callable
+import functools
 from typing import Any
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
-import optimistix as optx
 from jax.custom_derivatives import SymbolicZero
+import jax.numpy as jnp
 from jaxtyping import Array, Float, PyTree
+import optimistix as optx
 
 from .._progress import report
-from ._parameters import Parameters
 from ._levenberg_marquardt import levenberg_marquardt
+from ._parameters import Parameters
 from ._solution import Solution
 
 DEFAULT_LEAST_SQUARES = levenberg_marquardt(rtol=1e-8, atol=1e-8)
@@ -75,8 +75,12 @@ def dense_forward(fn: Callable[[Array, Any], Array]) -> Callable[[Array, Any], A
         out = jnp.zeros_like(r) if isinstance(dz, SymbolicZero) else J @ dz
         leaves = jax.tree.leaves(ddynamic, is_leaf=lambda t: isinstance(t, SymbolicZero))
         if not all(isinstance(t, SymbolicZero) for t in leaves):
-            ddynamic = jax.tree.map(lambda t, x: jnp.zeros_like(x) if isinstance(t, SymbolicZero) else t, ddynamic,
-                                    dynamic, is_leaf=lambda t: isinstance(t, SymbolicZero))
+            ddynamic = jax.tree.map(
+                lambda t, x: jnp.zeros_like(x) if isinstance(t, SymbolicZero) else t,
+                ddynamic,
+                dynamic,
+                is_leaf=lambda t: isinstance(t, SymbolicZero),
+            )
             out = out + jax.jvp(lambda d: fn(z, d), (dynamic,), (ddynamic,))[1]
         return r, out
 
@@ -99,7 +103,9 @@ def undetermined_unknowns(gram: Float[Array, "n n"], tol: float = 1e-6) -> tuple
     n = gram.shape[0]
     values, vectors = jnp.linalg.eigh(gram)
     null = values <= 10.0 * n * jnp.finfo(gram.dtype).eps * jnp.max(jnp.abs(values))
-    loading = jnp.abs(vectors) / jnp.maximum(jnp.max(jnp.abs(vectors), axis=0, keepdims=True), jnp.finfo(gram.dtype).tiny)
+    loading = jnp.abs(vectors) / jnp.maximum(
+        jnp.max(jnp.abs(vectors), axis=0, keepdims=True), jnp.finfo(gram.dtype).tiny
+    )
     return jnp.any(null[None, :] & (loading > tol), axis=1), n - jnp.sum(null)
 
 
@@ -171,8 +177,9 @@ def fit_least_squares(
         return rollout(z, (eqx.filter(args, eqx.is_array), closed))
 
     z0 = jnp.zeros_like(p0)
-    solution = optx.least_squares(fn, solver, z0, args, options={"jac": "fwd" if jac == "dense" else jac},
-                                  max_steps=max_steps, throw=False)
+    solution = optx.least_squares(
+        fn, solver, z0, args, options={"jac": "fwd" if jac == "dense" else jac}, max_steps=max_steps, throw=False
+    )
     z = solution.value
     # A Gauss-Newton-type solver (Levenberg-Marquardt, Gauss-Newton, Dogleg) ends holding the residuals
     # and the linearisation at its last accepted point, which is `z`: reuse them instead of tracing the

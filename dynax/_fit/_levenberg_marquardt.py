@@ -57,9 +57,9 @@ minimum).
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, Int, PyTree
 import lineax as lx
 import optimistix as optx
-from jaxtyping import Array, Bool, Float, Int, PyTree
 
 
 class _StrictState(eqx.Module):
@@ -150,14 +150,22 @@ class _JacobianOnAcceptance(_LevenbergMarquardt):
         # The trust region reads only the trial point's loss: its Jacobian is not formed yet.
         trial = optx.FunctionInfo.ResidualJac(residual, state.f_info.jac)
         step_size, accept, search_result, search_state = self.search.step(
-            state.first_step, y, state.y_eval, state.f_info, trial, state.search_state)
+            state.first_step, y, state.y_eval, state.f_info, trial, state.search_state
+        )
 
         def accepted(descent_state):
             matrix = jax.jacfwd(lambda z: fn(z, args)[0])(state.y_eval)
             f_info = optx.FunctionInfo.ResidualJac(residual, lx.MatrixLinearOperator(matrix))
             descent_state = self.descent.query(state.y_eval, f_info, descent_state)
-            terminate = _converged(self.rtol, self.atol, self.norm, state.y_eval, state.y_eval - y, residual,
-                                   residual - state.f_info.residual)
+            terminate = _converged(
+                self.rtol,
+                self.atol,
+                self.norm,
+                state.y_eval,
+                state.y_eval - y,
+                residual,
+                residual - state.f_info.residual,
+            )
             return state.y_eval, f_info, aux_eval, descent_state, terminate
 
         def rejected(descent_state):
@@ -188,8 +196,16 @@ class _JacobianOnAcceptance(_LevenbergMarquardt):
         return y, new, jax.tree.map(lambda a, b: jnp.where(state.first_step, a, b), aux, state.aux)
 
 
-def levenberg_marquardt(rtol: float, atol: float, *, norm=optx.max_norm, linear_solver=lx.QR(),
-                        verbose=False, jacobian: str = "every_step", damping: str = "classical") -> optx.LevenbergMarquardt:
+def levenberg_marquardt(
+    rtol: float,
+    atol: float,
+    *,
+    norm=optx.max_norm,
+    linear_solver=lx.QR(),
+    verbose=False,
+    jacobian: str = "every_step",
+    damping: str = "classical",
+) -> optx.LevenbergMarquardt:
     """`optimistix.LevenbergMarquardt(rtol, atol, ...)` with the `StrictTrustRegion` and MINPACK's
     relative-reduction test at `ftol = rtol` (see the module's docstring); same arguments.
 

@@ -5,8 +5,8 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float, PyTree
+import numpy as np
 
 from .._errors import UsageError
 
@@ -51,7 +51,9 @@ class Parameters(eqx.Module):
     selection: tuple[tuple[int, ...], ...] = eqx.field(static=True)
 
     @classmethod
-    def of(cls, model: PyTree, filter_spec: PyTree[Any] | None = None, *, names: tuple[str, ...] | None = None) -> "Parameters":
+    def of(
+        cls, model: PyTree, filter_spec: PyTree[Any] | None = None, *, names: tuple[str, ...] | None = None
+    ) -> "Parameters":
         """The parameters of `model` selected by `filter_spec`.
 
         **Arguments:**
@@ -83,7 +85,9 @@ class Parameters(eqx.Module):
             shape = np.shape(leaf)
             if isinstance(mask, np.ndarray):
                 if mask.shape != shape:
-                    raise UsageError(f"Parameters: the mask of `{_path_name(path)}` has shape {mask.shape}, the leaf {shape}")
+                    raise UsageError(
+                        f"Parameters: the mask of `{_path_name(path)}` has shape {mask.shape}, the leaf {shape}"
+                    )
                 flat = tuple(int(i) for i in np.flatnonzero(mask.astype(bool)))
             elif mask is True:
                 flat = tuple(range(int(np.prod(shape, dtype=int))))

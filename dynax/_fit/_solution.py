@@ -1,9 +1,9 @@
 """The one result type of every fit, after optimistix's `Solution`."""
 
 import equinox as eqx
+from jaxtyping import Array, Float, PyTree
 import numpy as np
 import optimistix as optx
-from jaxtyping import Array, Float, PyTree
 
 from ._parameters import Parameters
 

@@ -8,20 +8,20 @@ array, so a new callback does not recompile anything). Each step then emits one
 `jax.debug.callback` carrying `(token, step, loss)`; the host looks the callback up by token.
 """
 
+from collections.abc import Callable, Iterator
 import contextlib
 import itertools
 import threading
 import time
-from collections.abc import Callable, Iterator
 from typing import Any
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, Int, PyTree, Scalar
 import numpy as np
 import optax
 import optimistix as optx
-from jaxtyping import Array, Bool, Float, Int, PyTree, Scalar
 
 _CALLBACKS: dict[int, Callable[[int, float], Any]] = {}
 _TOKENS = itertools.count(1)
@@ -87,8 +87,7 @@ class History(eqx.Module):
     def record(self, index: Int[Array, ""], loss: Scalar, keep: Bool[Array, ""] | bool = True) -> "History":
         """Write `loss` (and the time) at `index` when `keep`; out-of-range indices are dropped."""
         index = jnp.where(keep, index, self.losses.shape[0])  # an index past the end is dropped
-        return History(self.losses.at[index].set(loss, mode="drop"),
-                       self.times.at[index].set(clock(loss), mode="drop"))
+        return History(self.losses.at[index].set(loss, mode="drop"), self.times.at[index].set(clock(loss), mode="drop"))
 
     def stats(self) -> dict[str, Array]:
         return {"loss_history": self.losses, "time_history": self.times - self.times[0]}
@@ -143,8 +142,9 @@ class OptaxLBFGS(optx.AbstractMinimiser):
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
         f, _ = fn(y, args)
-        return _LBFGSState(jnp.array(0), f, self._optax().init(y), jnp.array(False),
-                           History.start(max(self.history, 1), f))
+        return _LBFGSState(
+            jnp.array(0), f, self._optax().init(y), jnp.array(False), History.start(max(self.history, 1), f)
+        )
 
     def step(self, fn, y, args, options, state, tags):
         def value_fn(y):

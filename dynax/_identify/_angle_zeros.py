@@ -95,17 +95,28 @@ class AngleZeros:
         return [shifted(r, rows, self.values[i]) for r, i in zip(records, owners)]
 
     def to_json(self) -> dict:
-        return {"kind": "angle", "records": list(self.records), "joints": list(self.joints),
-                "values": self.values.tolist(), "halves": self.halves.tolist(),
-                "relative_error": self.relative_error, "force_offsets_relative_error": self.force_relative_error,
-                "steps": self.steps, "converged": self.converged, "chosen": self.chosen, "reason": self.reason,
-                "meaning": "each record's zero of each angle [rad]: its measured angle less the model's (an encoder "
-                           "zeroed where the arm stood when the recording began), estimated with the parameters; "
-                           "where chosen, both stages fit the records less them; not part of the model"}
+        return {
+            "kind": "angle",
+            "records": list(self.records),
+            "joints": list(self.joints),
+            "values": self.values.tolist(),
+            "halves": self.halves.tolist(),
+            "relative_error": self.relative_error,
+            "force_offsets_relative_error": self.force_relative_error,
+            "steps": self.steps,
+            "converged": self.converged,
+            "chosen": self.chosen,
+            "reason": self.reason,
+            "meaning": "each record's zero of each angle [rad]: its measured angle less the model's (an encoder "
+            "zeroed where the arm stood when the recording began), estimated with the parameters; "
+            "where chosen, both stages fit the records less them; not part of the model",
+        }
 
     def note(self) -> str:
-        cells = "; ".join(f"{record} " + ", ".join(f"{j} {v:+.4f}" for j, v in zip(self.joints, row))
-                          for record, row in zip(self.records, self.values))
+        cells = "; ".join(
+            f"{record} " + ", ".join(f"{j} {v:+.4f}" for j, v in zip(self.joints, row))
+            for record, row in zip(self.records, self.values)
+        )
         return f"angle zeros per record [rad] ({'fitted' if self.chosen else 'not used'}: {self.reason}): {cells}"
 
 
@@ -123,8 +134,15 @@ def _angle_rows(system) -> tuple[int, ...]:
 
 def shifted(record: Trajectory, rows, values) -> Trajectory:
     """`record` with `values` taken off its position states `rows` (velocities unchanged)."""
-    return Trajectory(record.ts, record.xs - _shift(record.xs, rows, values), record.us,
-                      record.state_names, record.input_names, record.system, record.source)
+    return Trajectory(
+        record.ts,
+        record.xs - _shift(record.xs, rows, values),
+        record.us,
+        record.state_names,
+        record.input_names,
+        record.system,
+        record.source,
+    )
 
 
 def _shift(xs, rows, values):
@@ -158,8 +176,9 @@ def _solve(a, y, extra):
     return solution, float(np.linalg.norm(full @ solution - y) / np.linalg.norm(y))
 
 
-def record_angle_zeros(system, trajectories: list[Trajectory], method: Dynamic, friction, rcond,
-                       compare: bool = True) -> AngleZeros:
+def record_angle_zeros(
+    system, trajectories: list[Trajectory], method: Dynamic, friction, rcond, compare: bool = True
+) -> AngleZeros:
     """Fit each record's angle zeros with the base parameters (see the module); with `compare` they
     are chosen only where they leave a smaller equation error than force offsets, else wherever the
     fit converges to zeros below `LARGEST`."""
@@ -215,18 +234,34 @@ def record_angle_zeros(system, trajectories: list[Trajectory], method: Dynamic, 
     if not converged:
         chosen, reason = False, f"Gauss-Newton did not settle in {MAX_STEPS} steps"
     elif np.max(np.abs(zeros)) > LARGEST:
-        chosen, reason = False, (f"a zero of {np.max(np.abs(zeros)):.2f} rad is more than {LARGEST} rad: "
-                                 "more likely a mix-up (degrees, an upright zero) than an encoder's start")
+        chosen, reason = (
+            False,
+            (
+                f"a zero of {np.max(np.abs(zeros)):.2f} rad is more than {LARGEST} rad: "
+                "more likely a mix-up (degrees, an upright zero) than an encoder's start"
+            ),
+        )
     elif compare and not error < MARGIN * force_error:
-        chosen, reason = False, (f"they do not leave a clearly smaller equation error than force offsets ({error:.4f} "
-                                 f"against {force_error:.4f}; at least {1 - MARGIN:.0%} smaller is needed)")
+        chosen, reason = (
+            False,
+            (
+                f"they do not leave a clearly smaller equation error than force offsets ({error:.4f} "
+                f"against {force_error:.4f}; at least {1 - MARGIN:.0%} smaller is needed)"
+            ),
+        )
     elif compare:
-        chosen, reason = True, (f"they leave a smaller equation error than force offsets ({error:.4f} against "
-                                f"{force_error:.4f}, as many unknowns)")
+        chosen, reason = (
+            True,
+            (
+                f"they leave a smaller equation error than force offsets ({error:.4f} against "
+                f"{force_error:.4f}, as many unknowns)"
+            ),
+        )
     else:
         chosen, reason = True, "asked for (Dynamic(offsets='angles'))"
-    return AngleZeros(record_labels(trajectories), names, zeros, halves, error, force_error, steps, converged,
-                      chosen, reason)
+    return AngleZeros(
+        record_labels(trajectories), names, zeros, halves, error, force_error, steps, converged, chosen, reason
+    )
 
 
 def _group_columns(n_rows, groups):

@@ -88,9 +88,14 @@ class Consistency:
         return not self.violated
 
     def to_json(self) -> dict:
-        return {"consistent": self.consistent, "violated": list(self.violated), "constraint_active": bool(self.active),
-                "active": list(self.active), "constrained": self.constrained,
-                "min_mass_eigenvalue": self.min_mass_eigenvalue}
+        return {
+            "consistent": self.consistent,
+            "violated": list(self.violated),
+            "constraint_active": bool(self.active),
+            "active": list(self.active),
+            "constrained": self.constrained,
+            "min_mass_eigenvalue": self.min_mass_eigenvalue,
+        }
 
 
 def _base(system):
@@ -183,11 +188,14 @@ def check_consistency(system, names, theta, qs=None, *, warn: bool = True) -> Co
     if qs is not None:
         eigenvalue = min_mass_eigenvalue(system, qs)
         if eigenvalue is not None and not eigenvalue > 0:
-            violated.append(f"mass matrix: not positive definite at the data's configurations "
-                            f"(smallest eigenvalue {eigenvalue:.4g})")
+            violated.append(
+                f"mass matrix: not positive definite at the data's configurations "
+                f"(smallest eigenvalue {eigenvalue:.4g})"
+            )
     if violated and warn:
-        warnings.warn("physically inconsistent estimate: " + "; ".join(violated), InconsistentEstimateWarning,
-                      stacklevel=3)
+        warnings.warn(
+            "physically inconsistent estimate: " + "; ".join(violated), InconsistentEstimateWarning, stacklevel=3
+        )
     return Consistency(tuple(violated), min_mass_eigenvalue=eigenvalue)
 
 
@@ -251,8 +259,17 @@ def _constrained_solve(parametrisation, reduced, projected, col_scale, phi0, max
 
     # The engine's fit on phi itself (unit scale), with no covariance: the projection needs only the point.
     solver = levenberg_marquardt(rtol=1e-10, atol=1e-12)
-    solution = fit_least_squares(residuals, phi0, True, None, solver=solver, scale=jnp.ones_like(phi0),
-                                 max_steps=max_steps, nonfinite=None, covariance=False)
+    solution = fit_least_squares(
+        residuals,
+        phi0,
+        True,
+        None,
+        solver=solver,
+        scale=jnp.ones_like(phi0),
+        max_steps=max_steps,
+        nonfinite=None,
+        covariance=False,
+    )
     return solution.value, solution.result == optx.RESULTS.successful
 
 

@@ -127,8 +127,11 @@ def measurement_noise_std(trajectory: Trajectory) -> np.ndarray:
     for k in range(trajectory.xs.shape[1]):
         column = np.asarray(trajectory.xs[:, k], dtype=float)
         position = names[k][1:] if names[k].startswith("d") else None
-        reading = (column if position not in names or _reads_itself(trajectory)
-                   else _noise_reading(trajectory.xs[:, names.index(position)], column, fs))
+        reading = (
+            column
+            if position not in names or _reads_itself(trajectory)
+            else _noise_reading(trajectory.xs[:, names.index(position)], column, fs)
+        )
         floor, _ = noise_floor_and_band(reading, fs)
         out.append(max(np.sqrt(max(floor, 0.0) * 0.5 * fs), 1e-6 * float(np.std(column)), 1e-12))
     return np.asarray(out)
@@ -202,14 +205,25 @@ def choose_filter(trajectory: Trajectory, *, snr: float = 100.0) -> FilterChoice
     names = trajectory.state_names
     order = next(o for o in range(1, 9) if _tail_ratio(o) < 0.1)
     if len(trajectory) < MIN_SAMPLES:
-        return FilterChoice(None, order, 1, 1, fs, {}, {},
-                            f"{len(trajectory)} samples are too few for a spectrum (at least {MIN_SAMPLES}): no filter")
+        return FilterChoice(
+            None,
+            order,
+            1,
+            1,
+            fs,
+            {},
+            {},
+            f"{len(trajectory)} samples are too few for a spectrum (at least {MIN_SAMPLES}): no filter",
+        )
     n = len(names) // 2
     velocities = names[n:]
     bands, noise = {}, {}
     for k, name in enumerate(velocities):
-        reading = (np.asarray(trajectory.xs[:, n + k]) if _reads_itself(trajectory)
-                   else _noise_reading(trajectory.xs[:, k], trajectory.xs[:, n + k], fs))
+        reading = (
+            np.asarray(trajectory.xs[:, n + k])
+            if _reads_itself(trajectory)
+            else _noise_reading(trajectory.xs[:, k], trajectory.xs[:, n + k], fs)
+        )
         floor, band = noise_floor_and_band(reading, fs, snr=snr)
         bands[name] = band
         noise[name] = float(np.sqrt(max(floor, 0.0) * nyquist))
@@ -222,12 +236,27 @@ def choose_filter(trajectory: Trajectory, *, snr: float = 100.0) -> FilterChoice
         signal = np.sqrt(max(accel_rms**2 - noise_accel**2, 0.0))
         negligible.append(noise_accel < 0.01 * signal)
     if all(negligible):
-        return FilterChoice(None, order, 1, 1, fs, bands, noise,
-                            "velocity noise negligible (differenced into accelerations it is under 1 % of their rms): "
-                            "no filter")
+        return FilterChoice(
+            None,
+            order,
+            1,
+            1,
+            fs,
+            bands,
+            noise,
+            "velocity noise negligible (differenced into accelerations it is under 1 % of their rms): no filter",
+        )
     if band >= 0.5 * nyquist:
-        return FilterChoice(None, order, 1, 1, fs, bands, noise,
-                            f"no noise floor below {0.5 * nyquist:.3g} Hz in the velocities: no filter")
+        return FilterChoice(
+            None,
+            order,
+            1,
+            1,
+            fs,
+            bands,
+            noise,
+            f"no noise floor below {0.5 * nyquist:.3g} Hz in the velocities: no filter",
+        )
     trim, decimate = trim_and_decimation(fs, band, len(trajectory))
     worst = max(noise, key=noise.get)
     reason = (
@@ -297,5 +326,8 @@ def with_velocities_from_positions(trajectory: Trajectory) -> tuple[Trajectory, 
     if not replaced:
         return trajectory, choice, ()
     t = trajectory
-    return (Trajectory(t.ts, jnp.asarray(xs, dtype=t.xs.dtype), t.us, t.state_names, t.input_names, t.system, t.source),
-            choice, tuple(replaced))
+    return (
+        Trajectory(t.ts, jnp.asarray(xs, dtype=t.xs.dtype), t.us, t.state_names, t.input_names, t.system, t.source),
+        choice,
+        tuple(replaced),
+    )

@@ -24,12 +24,12 @@ from .._errors import DataError, UsageError
 from ._defaults import choose_filter, trim_and_decimation
 from ._least_squares import least_squares
 from ._regressors import (
-    positions_and_velocities,
     column_kinds,
     dynamic_regressor,
     energy_and_friction_rows,
     generalised_force,
     parameter_names,
+    positions_and_velocities,
     row_dot,
     with_friction,
 )
@@ -259,7 +259,9 @@ def _resolve_dynamic(traj, method: Dynamic) -> dict:
         settings["noise_std"] = choice.noise_std
         settings["band_hz"] = choice.band_hz
     if settings["lowpass_hz"] is not None and not settings["lowpass_hz"] > 0:
-        raise UsageError(f"Dynamic: `lowpass_hz` must be a positive frequency, None or 'auto', got {settings['lowpass_hz']!r}")
+        raise UsageError(
+            f"Dynamic: `lowpass_hz` must be a positive frequency, None or 'auto', got {settings['lowpass_hz']!r}"
+        )
     settings["record"] = traj.source or None
     settings["chosen_from_data"] = auto
     settings["reason"] = reason
@@ -386,7 +388,7 @@ def _power_balance(ts, w, f, tau, dq, columns):
     h = jnp.diff(ts)
     h1, h2 = h[:-1], h[1:]
     a1, a2 = h2 / (h1 + h2) / h1, h1 / (h1 + h2) / h2
-    dw = (a1[:, None] * (w[1:-1] - w[:-2]) + a2[:, None] * (w[2:] - w[1:-1]))
+    dw = a1[:, None] * (w[1:-1] - w[:-2]) + a2[:, None] * (w[2:] - w[1:-1])
     f = a1[:, None] * dissipated[:-1] + a2[:, None] * dissipated[1:]
     p = a1 * work[:-1] + a2 * work[1:]
     return _joined(dw, f, columns), p
@@ -423,6 +425,7 @@ def _energy_balance(ts, w, f, tau, dq, n_windows, window, stride, columns):
     last = (n_windows - 1) * stride  # start of the last window
     gained = w[window : last + window + 1 : stride] - w[: last + 1 : stride]  # strided slices, not gathers
     if stride == window:
+
         def window_sums(v):
             return v[: n_windows * window].reshape((n_windows, window) + v.shape[1:]).sum(axis=1)
     else:

@@ -9,31 +9,32 @@ arm data, and validated by open-loop simulation on held-out records. The least-s
 `_result.py`; this module chooses and runs them.
 """
 
-import dataclasses
-import warnings
 from collections.abc import Sequence
+import dataclasses
 from typing import Literal
+import warnings
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float
+import numpy as np
 
-from .._precision import warn_if_float32
 from .._data._trajectory import Trajectory
 from .._data._velocities import check_trajectory_velocities
 from .._errors import DataError, UsageError
-from .._fit import Parameters, Solution
-from .._simulate import FixedGrid
-from .._model._linear_axis import LinearAxis
+from .._fit import Parameters
 from .._model._extensions import Extended
+from .._model._linear_axis import LinearAxis
 from .._model._system import AbstractSystem, size_parameter_names
 from .._model._two_link import Acrobot, DoublePendulum
-from ._angle_zeros import AngleZeros, applies as _angle_zeros_apply, record_angle_zeros
+from .._precision import warn_if_float32
+from .._simulate import FixedGrid
+from ._angle_zeros import AngleZeros, record_angle_zeros
+from ._angle_zeros import applies as _angle_zeros_apply
 from ._consistency import check_consistency, Consistency
 from ._defaults import choose_filter
-from ._equations import stacked_equations, uniformly_sampled, Dynamic, Energy, Power
+from ._equations import Dynamic, Energy, Power, stacked_equations, uniformly_sampled
 from ._least_squares import (
     describe_poorly_determined,
     jointly_determined,
@@ -51,12 +52,10 @@ from ._ls_stage import (
 )
 from ._offsets import record_labels, without_offsets
 from ._refine import refine_by_simulation
-from ._regressors import split_terms, Friction, parameter_names, parameter_vector, with_friction
+from ._regressors import Friction, parameter_names, parameter_vector, split_terms, with_friction
 from ._result import Identification, NoValidationWarning, RecordsDisagreeWarning, Stage, StageKind
 from ._simulation_fit import fit_simulation_error, SimulationFit
 from ._validation import DEFAULT_HORIZONS_S, held_out_error, split_for_validation
-
-
 
 _SYSTEM_NAMES = {Acrobot: "acrobot", DoublePendulum: "double_pendulum", LinearAxis: "linear_axis"}
 
@@ -66,7 +65,9 @@ def _as_list(data) -> list[Trajectory]:
         return [data]
     if isinstance(data, Sequence) and data and all(isinstance(d, Trajectory) for d in data):
         return list(data)
-    raise UsageError(f"identify: `data` must be a Trajectory or a non-empty list of Trajectory, got {type(data).__name__}")
+    raise UsageError(
+        f"identify: `data` must be a Trajectory or a non-empty list of Trajectory, got {type(data).__name__}"
+    )
 
 
 MIN_RECORD_SAMPLES = 3  # the fewest samples a derivative is estimated from; fewer fail in every method
@@ -77,8 +78,11 @@ def _check_data(system, trajectories):
         raise UsageError("identify: no records given")
     for k, traj in enumerate(trajectories):
         if len(traj) < MIN_RECORD_SAMPLES:
-            raise DataError(f"record {k} has {len(traj)} sample(s): too few for a fit (at least {MIN_RECORD_SAMPLES} "
-                            "for a derivative, and as many equations as parameters)", path=traj.source or None)
+            raise DataError(
+                f"record {k} has {len(traj)} sample(s): too few for a fit (at least {MIN_RECORD_SAMPLES} "
+                "for a derivative, and as many equations as parameters)",
+                path=traj.source or None,
+            )
     for k, traj in enumerate(trajectories):
         if traj.xs.shape[1] != system.n_states or traj.us.shape[1] != system.n_inputs:
             raise UsageError(
@@ -121,13 +125,17 @@ def _records_disagree(refined) -> dict[str, float]:
             f"than {RECORDS_DISAGREE:g} times the standard error estimated within the records. Something changed "
             "between the recordings (friction, an offset, a payload): read `record_std_errors` as these "
             "parameters' uncertainty, and validate on a recording of another day.",
-            RecordsDisagreeWarning, stacklevel=4)
+            RecordsDisagreeWarning,
+            stacklevel=4,
+        )
     return out
 
 
 def _signal_band_hz(trajectories) -> float | None:
     """The widest velocity signal band over the records, or `None` when no record's velocities are noisy."""
-    bands = [c.cutoff_hz for c in (choose_filter(uniformly_sampled(t)) for t in trajectories) if c.cutoff_hz is not None]
+    bands = [
+        c.cutoff_hz for c in (choose_filter(uniformly_sampled(t)) for t in trajectories) if c.cutoff_hz is not None
+    ]
     return max(bands) if bands else None
 
 
@@ -150,7 +158,9 @@ def _refinement_method(refine, system, method, trajectories):
     if not arm:
         if isinstance(refine, str):
             return None
-        raise UsageError("identify: the output-error refinement is for two-link arms; use SimulationFit() as the method")
+        raise UsageError(
+            "identify: the output-error refinement is for two-link arms; use SimulationFit() as the method"
+        )
     if isinstance(refine, SimulationFit):
         return refine
     band = _signal_band_hz(trajectories)
@@ -161,8 +171,9 @@ def _refinement_method(refine, system, method, trajectories):
     # friction (tanh at 0.01 rad/s) is stiff, and two steps left a visible bias on synthetic data.
     # Four staggered cuts into segments: with one, where the segments start moves a real rig's
     # held-out error by several per cent; with four, by a third of that.
-    return SimulationFit(segment_s=segment, fit_initial_states=False, max_steps=60, simulation=FixedGrid(substeps=4),
-                         stagger=STAGGER)
+    return SimulationFit(
+        segment_s=segment, fit_initial_states=False, max_steps=60, simulation=FixedGrid(substeps=4), stagger=STAGGER
+    )
 
 
 def named_parameters(system, names) -> Parameters:
@@ -200,21 +211,39 @@ def _identify_by_simulation(system, trajectories, method: SimulationFit, frictio
     else:
         parameters = Parameters.of(system)
     solution = fit_simulation_error(
-        system, trajectories, filter_spec=parameters, segment_s=method.segment_s,
-        fit_initial_states=method.fit_initial_states, continuity_weight=method.continuity_weight,
-        rtol=method.rtol, atol=method.atol, max_steps=method.max_steps, simulation=method.simulation,
+        system,
+        trajectories,
+        filter_spec=parameters,
+        segment_s=method.segment_s,
+        fit_initial_states=method.fit_initial_states,
+        continuity_weight=method.continuity_weight,
+        rtol=method.rtol,
+        atol=method.atol,
+        max_steps=method.max_steps,
+        simulation=method.simulation,
         stagger=method.stagger,
     )
     if names is not None and tuple(names) != parameters.names:  # the contract's order, not the tree's
         order = np.asarray([parameters.names.index(name) for name in names])
         value = solution.value[order]
         solution = eqx.tree_at(
-            lambda s: (s.value, s.parameters, s.std_errors, s.covariance), solution,
-            (value, Parameters.of(value, names=tuple(names)), solution.std_errors[order],
-             solution.covariance[np.ix_(order, order)]))
+            lambda s: (s.value, s.parameters, s.std_errors, s.covariance),
+            solution,
+            (
+                value,
+                Parameters.of(value, names=tuple(names)),
+                solution.std_errors[order],
+                solution.covariance[np.ix_(order, order)],
+            ),
+        )
     stage = Stage(StageKind.SIMULATION, "simulation", solution)
-    return Identification(system=solution.model, stages=(stage,), n_samples=solution.statistics.n_samples,
-                          friction=friction, system_name=_system_name(system))
+    return Identification(
+        system=solution.model,
+        stages=(stage,),
+        n_samples=solution.statistics.n_samples,
+        friction=friction,
+        system_name=_system_name(system),
+    )
 
 
 def _validation_split(system, trajectories, validation, weights, holdout, horizons_s):
@@ -234,18 +263,32 @@ def _validation_split(system, trajectories, validation, weights, holdout, horizo
             return trajectories, held, "validation records", horizons_s
         if not usable:
             lengths = ", ".join(f"{name} {r.duration:.3g} s" for name, r in zip(record_labels(held), held))
-            raise DataError(f"identify: the validation records are too short for the shortest horizon "
-                            f"({min(horizons_s):g} s): {lengths}")
-        return trajectories, held, f"validation records; horizons up to {max(usable):g} s, as long as the records allow", usable
+            raise DataError(
+                f"identify: the validation records are too short for the shortest horizon "
+                f"({min(horizons_s):g} s): {lengths}"
+            )
+        return (
+            trajectories,
+            held,
+            f"validation records; horizons up to {max(usable):g} s, as long as the records allow",
+            usable,
+        )
     fraction = (0.0 if weights is not None else 0.2) if holdout == "auto" else float(holdout)
     if fraction <= 0:
         return trajectories, [], "", horizons_s
     usable, longest = _horizons_held([r.split(1 - fraction)[1] for r in trajectories], horizons_s)
     if not usable:
-        return trajectories, [], (f"nothing is held out for validation: the last {fraction:.0%} of every record is at "
-                                  f"most {max(longest, 0.0):.3g} s long, shorter than the shortest horizon "
-                                  f"({min(horizons_s):g} s); give a record of its own as `validation` (CLI: "
-                                  "--validation), or longer records"), horizons_s
+        return (
+            trajectories,
+            [],
+            (
+                f"nothing is held out for validation: the last {fraction:.0%} of every record is at "
+                f"most {max(longest, 0.0):.3g} s long, shorter than the shortest horizon "
+                f"({min(horizons_s):g} s); give a record of its own as `validation` (CLI: "
+                "--validation), or longer records"
+            ),
+            horizons_s,
+        )
     fitted, held = split_for_validation(trajectories, fraction, max(usable))
     source = f"held-out last {fraction:.0%} of each record (not fitted)"
     if usable != horizons_s:
@@ -284,8 +327,15 @@ def _refined_stage(ls, fitted, method, friction, rcond, consistency, refinement,
     qs = joint_positions(refined.model, fitted)
     check = check_consistency(refined.model, refined.names, estimate, qs, warn=consistency != "off")
     check = Consistency(check.violated, active=(), constrained=True, min_mass_eigenvalue=check.min_mass_eigenvalue)
-    return Stage(StageKind.OUTPUT_ERROR, "simulation", refined, relative_equation_error=float(error),
-                 validation=validate(refined.model), consistency=check, records_disagree=_records_disagree(refined))
+    return Stage(
+        StageKind.OUTPUT_ERROR,
+        "simulation",
+        refined,
+        relative_equation_error=float(error),
+        validation=validate(refined.model),
+        consistency=check,
+        records_disagree=_records_disagree(refined),
+    )
 
 
 def identify(
@@ -397,17 +447,28 @@ def identify(
     ls = least_squares_stage(system, fitted, method, friction, weights, rcond, consistency)
     solution = eqx.tree_at(lambda s: (s.model, s.value), ls.fit, (ls.estimate, jnp.asarray(ls.estimate)))
     poorly = _size_errors(system, ls.names, ls.estimate, ls.fit.std_errors)  # the returned estimate's, unless refined
-    stages = (Stage(StageKind.LEAST_SQUARES, ls.label, solution,
-                    relative_equation_error=float(relative_equation_error(ls.a, ls.y, ls.estimate)),
-                    validation=validate(ls.system), consistency=ls.consistency, poorly_determined=poorly,
-                    offsets=offsets_json(ls, fitted), angle_zeros=zeros, serial_correlation=ls.serial),)
+    stages = (
+        Stage(
+            StageKind.LEAST_SQUARES,
+            ls.label,
+            solution,
+            relative_equation_error=float(relative_equation_error(ls.a, ls.y, ls.estimate)),
+            validation=validate(ls.system),
+            consistency=ls.consistency,
+            poorly_determined=poorly,
+            offsets=offsets_json(ls, fitted),
+            angle_zeros=zeros,
+            serial_correlation=ls.serial,
+        ),
+    )
     system_out = ls.system
     refinement = _refinement_method(refine, ls.system, method, fitted)
     if refinement is not None:
         refined = _refined_stage(ls, fitted, method, friction, rcond, consistency, refinement, validate)
         statistics = refined.solution.statistics
-        refined_poorly = _size_errors(system, refined.names, refined.solution.value, refined.solution.std_errors,
-                                      statistics.record_std_errors)
+        refined_poorly = _size_errors(
+            system, refined.names, refined.solution.value, refined.solution.std_errors, statistics.record_std_errors
+        )
         stages += (dataclasses.replace(refined, poorly_determined=refined_poorly),)
         system_out = refined.solution.model
         if not refined.kept_start:  # a kept least-squares model is judged by its own errors
@@ -416,8 +477,11 @@ def identify(
     _warn_unvalidated(held, source)
     final = stages[-1].solution
     covariance = final.covariance
-    jointly = (jointly_determined(final.names, covariance)
-               if covariance is not None and np.shape(covariance)[0] == len(final.names) else None)
+    jointly = (
+        jointly_determined(final.names, covariance)
+        if covariance is not None and np.shape(covariance)[0] == len(final.names)
+        else None
+    )
     return Identification(
         system=system_out,
         stages=stages,
@@ -439,8 +503,10 @@ def _record_angle_zeros(system, records, method, friction, rcond) -> AngleZeros 
     whose every joint is a driven angle (they are then weighed against force offsets); else `None`."""
     if not isinstance(method, Dynamic) or not _angle_zeros_apply(system):
         if isinstance(method, Dynamic) and method.offsets == "angles":
-            raise UsageError(f"Dynamic(offsets='angles'): {type(split_terms(system)[0]).__name__} is not an arm whose every "
-                             "joint is an angle that an input drives")
+            raise UsageError(
+                f"Dynamic(offsets='angles'): {type(split_terms(system)[0]).__name__} is not an arm whose every "
+                "joint is an angle that an input drives"
+            )
         return None
     if method.offsets == "angles":
         return record_angle_zeros(system, records, method, friction, rcond, compare=False)
@@ -488,7 +554,9 @@ def _warn_poorly_determined(poorly: dict[str, float] | None) -> None:
             "not the motion, sets their estimates. Usually the records hardly excite them: record more motion "
             "in every joint (larger, richer inputs, longer records, more records) before trusting them; otherwise "
             "the model misses something large (see the relative equation error).",
-            PoorlyDeterminedWarning, stacklevel=3)
+            PoorlyDeterminedWarning,
+            stacklevel=3,
+        )
 
 
 def _has_conditions(system):
@@ -498,4 +566,3 @@ def _has_conditions(system):
     except UsageError:
         return False
     return bool(base.base_parameter_kinds())
-

@@ -10,9 +10,9 @@ that the data do not determine; they are reported by name, as linear combination
 
 import jax
 import jax.numpy as jnp
+from jaxtyping import ArrayLike, Float
 import numpy as np
 import optimistix as optx
-from jaxtyping import Array, ArrayLike, Float
 
 from .._errors import DataError
 from .._fit import Parameters, Solution, Statistics
@@ -67,10 +67,16 @@ def poorly_determined(names, estimate, std_errors, which, threshold: float = POO
 def describe_poorly_determined(poorly: dict[str, float]) -> str:
     """`poorly_determined`'s result as text: `theta2 (34 %), theta1 (estimate zero)`; a ratio of 100 or
     more is an estimate near zero (held at a bound), NaN one with no standard error."""
-    return ", ".join(f"{name} ({100 * ratio:.0f} %)" if ratio < 100 else
-                     f"{name} (estimate zero)" if ratio == np.inf else
-                     f"{name} (estimate near zero, standard error {ratio:.3g} times it)" if np.isfinite(ratio) else
-                     f"{name} (no standard error)" for name, ratio in poorly.items())
+    return ", ".join(
+        f"{name} ({100 * ratio:.0f} %)"
+        if ratio < 100
+        else f"{name} (estimate zero)"
+        if ratio == np.inf
+        else f"{name} (estimate near zero, standard error {ratio:.3g} times it)"
+        if np.isfinite(ratio)
+        else f"{name} (no standard error)"
+        for name, ratio in poorly.items()
+    )
 
 
 # Ratio of a parameter's standard error to its error with every other parameter known, above which it
@@ -78,8 +84,9 @@ def describe_poorly_determined(poorly: dict[str, float]) -> str:
 JOINTLY_DETERMINED = 10.0
 
 
-def jointly_determined(names, covariance, which=None, threshold: float = JOINTLY_DETERMINED,
-                       partner: float = 0.5, max_partners: int = 3) -> dict[str, dict]:
+def jointly_determined(
+    names, covariance, which=None, threshold: float = JOINTLY_DETERMINED, partner: float = 0.5, max_partners: int = 3
+) -> dict[str, dict]:
     r"""The parameters (among `which`, default all) that the data determine mostly in combination
     with others: name -> `{"with": [partners], "correlations": [...], "inflation": ratio}`.
 
@@ -112,8 +119,11 @@ def jointly_determined(names, covariance, which=None, threshold: float = JOINTLY
         if (which is not None and name not in which) or not inflation[i] > threshold:
             continue
         partners = [j for j in np.argsort(-np.abs(corr[i])) if j != i and abs(corr[i, j]) >= partner][:max_partners]
-        out[name] = {"with": [kept[j] for j in partners], "correlations": [float(corr[i, j]) for j in partners],
-                     "inflation": float(inflation[i])}
+        out[name] = {
+            "with": [kept[j] for j in partners],
+            "correlations": [float(corr[i, j]) for j in partners],
+            "inflation": float(inflation[i]),
+        }
     return out
 
 

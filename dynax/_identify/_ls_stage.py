@@ -6,15 +6,15 @@ import warnings
 
 import equinox as eqx
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array
+import numpy as np
 
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
 from .._fit import serial_covariance, Solution
 from .._model._system import AbstractSystem
 from ._consistency import check_consistency, Consistency, consistent_least_squares, InconsistentEstimateWarning
-from ._equations import stacked_equations, Dynamic, joint_weights
+from ._equations import Dynamic, joint_weights, stacked_equations
 from ._least_squares import IdentifiabilityError, least_squares
 from ._offsets import driven_joints, offset_groups, record_labels, record_offsets, RecordOffsets, without_offsets
 from ._record_friction import coulomb_columns, record_friction, RecordFriction
@@ -69,8 +69,10 @@ def _offset_rows(system, method, counts):
         return None
     groups = offset_groups(system, counts)
     if groups is None and method.offsets is True:
-        raise UsageError(f"Dynamic(offsets=True): {type(split_terms(system)[0]).__name__} has a constant term of its own "
-                         "(or no driven joint); fit its offset as a parameter instead")
+        raise UsageError(
+            f"Dynamic(offsets=True): {type(split_terms(system)[0]).__name__} has a constant term of its own "
+            "(or no driven joint); fit its offset as a parameter instead"
+        )
     return groups
 
 
@@ -84,8 +86,9 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
         # Each joint's residual variance from an ordinary fit of the equations that will be solved.
         plain = (raw_a, raw_y) if groups is None else without_offsets(raw_a, raw_y, None, groups)[:2]
         n_joints = raw_a.shape[0] // sum(counts)  # rows stacked joint by joint, `counts` per record and joint
-        weights = joint_weights(jnp.asarray(plain[0], raw_a.dtype), jnp.asarray(plain[1], raw_y.dtype), names, rcond,
-                                n_joints)
+        weights = joint_weights(
+            jnp.asarray(plain[0], raw_a.dtype), jnp.asarray(plain[1], raw_y.dtype), names, rcond, n_joints
+        )
     a, y = raw_a, raw_y
     if groups is not None:
         a, y, a_means, y_means = without_offsets(raw_a, raw_y, weights, groups)
@@ -98,8 +101,12 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
         raise IdentifiabilityError(
             f"{error} Each record's constant force offset at the driven joints is estimated with the parameters "
             "(a sensor's zero), so a constant force tells nothing about them; Dynamic(offsets=False) fixes the "
-            "offsets at zero.", unidentified=error.unidentified, rank=error.rank, n_params=error.n_params,
-            condition_number=error.condition_number) from None
+            "offsets at zero.",
+            unidentified=error.unidentified,
+            rank=error.rank,
+            n_params=error.n_params,
+            condition_number=error.condition_number,
+        ) from None
     estimate = fit.value
     fitted = fitted_system(system, names, estimate)
     qs = joint_positions(system, trajectories)
@@ -114,25 +121,47 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
         estimate, _ = consistent_least_squares(system, names, a, y, weights, start=fit.value)
         fitted = fitted_system(system, names, estimate)
         after = check_consistency(fitted, names, estimate, qs, warn=False)
-        check = Consistency(after.violated, active=check.violated, constrained=True,
-                            min_mass_eigenvalue=after.min_mass_eigenvalue)
+        check = Consistency(
+            after.violated, active=check.violated, constrained=True, min_mass_eigenvalue=after.min_mass_eigenvalue
+        )
         if after.violated:
-            warnings.warn("the constrained fit did not reach a consistent estimate: " + "; ".join(after.violated),
-                          InconsistentEstimateWarning, stacklevel=3)
+            warnings.warn(
+                "the constrained fit did not reach a consistent estimate: " + "; ".join(after.violated),
+                InconsistentEstimateWarning,
+                stacklevel=3,
+            )
     fit, serial = _serially_robust(fit, a, y, weights, estimate, record_rows)
     joint_names = split_terms(system)[0].joint_names
     labels = record_labels(trajectories)
     offsets = record_offsets(raw_a, raw_y, counts, joint_names, labels) if counts else None
-    per_record_friction = record_friction(raw_a, raw_y, counts, len(joint_names), names,
-                                          coulomb_columns(system, friction), labels) if counts else None
+    per_record_friction = (
+        record_friction(raw_a, raw_y, counts, len(joint_names), names, coulomb_columns(system, friction), labels)
+        if counts
+        else None
+    )
     fitted_offsets, driven = None, ()
     if groups is not None:
         values = y_means - a_means @ np.asarray(estimate)  # what each record's recorded force has in excess
         driven = tuple(joint_names[j] for j in driven_joints(system))  # the order of `offset_groups`
         fitted_offsets = values.reshape(len(driven), len(counts)).T
-    return _LeastSquaresStage(fitted, names, estimate, fit, a, y, int(n_samples),
-                              label, settings, check, offsets, groups, fitted_offsets, driven, per_record_friction,
-                              serial)
+    return _LeastSquaresStage(
+        fitted,
+        names,
+        estimate,
+        fit,
+        a,
+        y,
+        int(n_samples),
+        label,
+        settings,
+        check,
+        offsets,
+        groups,
+        fitted_offsets,
+        driven,
+        per_record_friction,
+        serial,
+    )
 
 
 def _serially_robust(fit, a, y, weights, estimate, record_rows):
@@ -164,8 +193,10 @@ def _serially_robust(fit, a, y, weights, estimate, record_rows):
     # an exact fit (no residual) has no error either way: nothing grew
     inflation = np.divide(np.asarray(std), independent, out=np.ones(n), where=independent > 0)
     robust = eqx.tree_at(lambda f: (f.std_errors, f.covariance), fit, (std, covariance))
-    return robust, {"bandwidth_steps": bandwidth,
-                    "inflation": {name: float(v) for name, v in zip(fit.names, inflation)}}
+    return robust, {
+        "bandwidth_steps": bandwidth,
+        "inflation": {name: float(v) for name, v in zip(fit.names, inflation)},
+    }
 
 
 def less_offsets(system, records, ls):
@@ -182,19 +213,31 @@ def less_offsets(system, records, ls):
         force = np.zeros(b.shape[0])
         force[rows] = offset
         shift = to_inputs @ force
-        out.append(Trajectory(record.ts, record.xs, record.us - jnp.asarray(shift, record.us.dtype)[None, :],
-                              record.state_names, record.input_names, record.system, record.source))
+        out.append(
+            Trajectory(
+                record.ts,
+                record.xs,
+                record.us - jnp.asarray(shift, record.us.dtype)[None, :],
+                record.state_names,
+                record.input_names,
+                record.system,
+                record.source,
+            )
+        )
     return out
 
 
 def offsets_json(ls, trajectories):
     if ls.fitted_offsets is None:
         return None
-    return {"records": record_labels(trajectories), "joints": list(ls.driven),
-            "values": [[float(v) for v in row] for row in ls.fitted_offsets],
-            "meaning": "each record's constant offset of the recorded force at each driven joint, estimated with the "
-                       "parameters (a sensor's zero) and not part of the model; the output-error refinement fits the "
-                       "records less them"}
+    return {
+        "records": record_labels(trajectories),
+        "joints": list(ls.driven),
+        "values": [[float(v) for v in row] for row in ls.fitted_offsets],
+        "meaning": "each record's constant offset of the recorded force at each driven joint, estimated with the "
+        "parameters (a sensor's zero) and not part of the model; the output-error refinement fits the "
+        "records less them",
+    }
 
 
 def relative_equation_error(a, y, estimate):
@@ -239,8 +282,11 @@ def _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, error, tra
     b = np.asarray(base.input_matrix())
     driven = [np.flatnonzero(np.abs(b[:, k]) > 0) for k in range(b.shape[1])]
     n_joints = b.shape[0]
-    if a.shape[0] % n_joints or any(len(d) == 0 for d in driven) or len(np.concatenate(driven)) != len(
-            set(np.concatenate(driven).tolist())):
+    if (
+        a.shape[0] % n_joints
+        or any(len(d) == 0 for d in driven)
+        or len(np.concatenate(driven)) != len(set(np.concatenate(driven).tolist()))
+    ):
         return
     rows = a.shape[0] // n_joints  # rows stacked joint by joint
     inputs = tuple(trajectories[0].input_names)
@@ -249,14 +295,15 @@ def _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, error, tra
         sign = np.ones(a.shape[0])
         for k in flipped:
             for j in driven[k]:
-                sign[j * rows:(j + 1) * rows] = -1.0
+                sign[j * rows : (j + 1) * rows] = -1.0
         y_flipped = y * jnp.asarray(sign, y.dtype)
         try:
             candidate = least_squares(a, y_flipped, names=names, weights=weights, rcond=rcond).value
         except IdentifiabilityError:
             return None
-        consistent = not check_consistency(fitted_system(system, names, candidate), names, candidate, qs,
-                                           warn=False).violated
+        consistent = not check_consistency(
+            fitted_system(system, names, candidate), names, candidate, qs, warn=False
+        ).violated
         # Every input negated negates the estimate and leaves the error as it is: there the physics
         # alone (masses are positive) tells the two apart.
         return consistent, float(relative_equation_error(a, y_flipped, candidate)), len(flipped) == len(driven)
@@ -265,15 +312,23 @@ def _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, error, tra
     if best is None:
         return
     which = [inputs[k] for k in best[0]]
-    change = (f"the equation error falls from {error:.0%} to {best[1]:.0%}" if best[1] < error * (1 - 1e-6) else
-              "its equation error is the same (negating every input negates the estimate: only the physics tells)")
+    change = (
+        f"the equation error falls from {error:.0%} to {best[1]:.0%}"
+        if best[1] < error * (1 - 1e-6)
+        else "its equation error is the same (negating every input negates the estimate: only the physics tells)"
+    )
     warnings.warn(
         f"the recorded {', '.join(which)} look{'s' if len(which) == 1 else ''} reversed against the model's joint "
         f"positions: the least-squares estimate is physically inconsistent, and with "
         f"{'that input' if len(which) == 1 else 'those inputs'} negated it is consistent and {change}. A motor or "
         "a current counted the other way? If so, load the records with scale={"
-        + ", ".join(f"'{n}': -1" for n in which) + "} (`--scale " + ",".join(f"{n}=-1" for n in which) + "`).",
-        InconsistentEstimateWarning, stacklevel=4)
+        + ", ".join(f"'{n}': -1" for n in which)
+        + "} (`--scale "
+        + ",".join(f"{n}=-1" for n in which)
+        + "`).",
+        InconsistentEstimateWarning,
+        stacklevel=4,
+    )
 
 
 def _warn_if_degrees(given, trajectories, error) -> None:
@@ -299,8 +354,18 @@ def _warn_if_degrees(given, trajectories, error) -> None:
     def refit(chosen):
         factor = np.ones(len(names))
         factor[[c for j in chosen for c in joints[j]]] = np.pi / 180.0
-        scaled = [Trajectory(t.ts, t.xs * jnp.asarray(factor, t.xs.dtype)[None, :], t.us, t.state_names,
-                             t.input_names, t.system, t.source) for t in trajectories]
+        scaled = [
+            Trajectory(
+                t.ts,
+                t.xs * jnp.asarray(factor, t.xs.dtype)[None, :],
+                t.us,
+                t.state_names,
+                t.input_names,
+                t.system,
+                t.source,
+            )
+            for t in trajectories
+        ]
         try:
             stage = least_squares_stage(system, scaled, method, friction, weights, rcond, "off")
         except (IdentifiabilityError, UsageError):
@@ -318,9 +383,14 @@ def _warn_if_degrees(given, trajectories, error) -> None:
         f"like degrees: the least-squares estimate is physically inconsistent, and with {'them' if len(which) > 1 else 'it'} "
         f"(and {'their' if len(which) > 1 else 'its'} velocit{'ies' if len(which) > 1 else 'y'}) read as degrees the "
         f"estimate is consistent and the equation error falls from {error:.0%} to {best[1]:.0%}. The contract's angles "
-        "are radians: load the records with scale={" + ", ".join(f"'{c}': {factor}" for c in columns) + "} (`--scale "
-        + ",".join(f"{c}={factor}" for c in columns) + "`).",
-        InconsistentEstimateWarning, stacklevel=4)
+        "are radians: load the records with scale={"
+        + ", ".join(f"'{c}': {factor}" for c in columns)
+        + "} (`--scale "
+        + ",".join(f"{c}={factor}" for c in columns)
+        + "`).",
+        InconsistentEstimateWarning,
+        stacklevel=4,
+    )
 
 
 UPRIGHT_DETERMINED = 10.0  # each negated parameter this many standard errors from zero
@@ -357,7 +427,11 @@ def _warn_if_zero_upright(fitted, names, estimate, std, qs) -> None:
             f"{' and '.join(flipped)} ({', '.join(f'{n} = {estimate[i]:.4g} +- {std[i]:.2g}' for n, i in zip(flipped, index))}), "
             f"which a zero at upright reverses exactly; with them positive it is consistent. The contract's angles are 0 "
             f"hanging straight down: load the records with offset={{"
-            + ", ".join(f"'{j}': {np.pi:.6f}" for j in joints) + "} (`--offset "
-            + ",".join(f"{j}={np.pi:.6f}" for j in joints) + "`).",
-            InconsistentEstimateWarning, stacklevel=4)
+            + ", ".join(f"'{j}': {np.pi:.6f}" for j in joints)
+            + "} (`--offset "
+            + ",".join(f"{j}={np.pi:.6f}" for j in joints)
+            + "`).",
+            InconsistentEstimateWarning,
+            stacklevel=4,
+        )
         return

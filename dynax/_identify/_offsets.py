@@ -72,16 +72,27 @@ class RecordOffsets:
             j = self.joints.index(name)
             values = ", ".join(f"{label} {self.offsets[r, j]:+.3g}" for r, label in enumerate(labels))
             parts.append(f"at {name} ({values}; F = {self.f_statistic[j]:.3g}, p = {self.p_value[j]:.2g}")
-        return ("The recorded force or torque carries an offset that differs from record to record "
-                + "; ".join(parts) + "): the records differ by more than the two halves of a record do, as a "
-                "sensor's zero would, which no model term carries to another record; a held-out record simulated "
-                "with its recorded force carries its own offset as error.")
+        return (
+            "The recorded force or torque carries an offset that differs from record to record "
+            + "; ".join(parts)
+            + "): the records differ by more than the two halves of a record do, as a "
+            "sensor's zero would, which no model term carries to another record; a held-out record simulated "
+            "with its recorded force carries its own offset as error."
+        )
 
     def to_json(self) -> dict:
-        return {"records": list(self.records), "joints": list(self.joints), "offsets": self.offsets.tolist(),
-                "halves": self.halves.tolist(), "f_statistic": self.f_statistic.tolist(),
-                "p_value": self.p_value.tolist(), "alpha": self.alpha, "differ": list(self.differ()),
-                "relative_equation_error": self.relative_error, "note": self.note()}
+        return {
+            "records": list(self.records),
+            "joints": list(self.joints),
+            "offsets": self.offsets.tolist(),
+            "halves": self.halves.tolist(),
+            "f_statistic": self.f_statistic.tolist(),
+            "p_value": self.p_value.tolist(),
+            "alpha": self.alpha,
+            "differ": list(self.differ()),
+            "relative_equation_error": self.relative_error,
+            "note": self.note(),
+        }
 
 
 def record_offsets(a, y, counts, joints, records=None, alpha: float = ALPHA) -> RecordOffsets | None:

@@ -37,9 +37,15 @@ import numpy as np
 
 from .._errors import DataError, UsageError
 from .._model._extensions import CoulombFriction
-from ._equations import stacked_equations, Dynamic
+from ._equations import Dynamic, stacked_equations
 from ._offsets import (
-    record_rows, ALPHA, joint_weighted_least_squares, parts_anova, record_labels, record_offsets, RecordOffsets,
+    ALPHA,
+    joint_weighted_least_squares,
+    parts_anova,
+    record_labels,
+    record_offsets,
+    record_rows,
+    RecordOffsets,
     without_offsets,
 )
 from ._regressors import split_terms
@@ -85,23 +91,37 @@ class RecordFriction:
         for name in differ:
             k = self.columns.index(name)
             values = ", ".join(f"{label} {self.values[r, k]:.3g}" for r, label in enumerate(self.records))
-            parts.append(f"{name} ({values}; one for all {self.shared[k]:.3g}; F = {self.f_statistic[k]:.3g}, "
-                         f"p = {self.p_value[k]:.2g})")
-        return ("The Coulomb friction differs from record to record: " + "; ".join(parts) + ". The records differ "
-                "by more than the parts of a record do, as a friction that changed between recordings (or a "
-                "friction whose shape the model lacks) would: a held-out record's friction is not known from the "
-                "others, and its simulation carries the difference as error.")
+            parts.append(
+                f"{name} ({values}; one for all {self.shared[k]:.3g}; F = {self.f_statistic[k]:.3g}, "
+                f"p = {self.p_value[k]:.2g})"
+            )
+        return (
+            "The Coulomb friction differs from record to record: " + "; ".join(parts) + ". The records differ "
+            "by more than the parts of a record do, as a friction that changed between recordings (or a "
+            "friction whose shape the model lacks) would: a held-out record's friction is not known from the "
+            "others, and its simulation carries the difference as error."
+        )
 
     def to_json(self) -> dict:
-        return {"records": list(self.records), "columns": list(self.columns), "values": self.values.tolist(),
-                "parts": self.parts.tolist(), "shared": self.shared.tolist(),
-                "f_statistic": self.f_statistic.tolist(), "p_value": self.p_value.tolist(), "alpha": self.alpha,
-                "differ": list(self.differ()), "relative_equation_error": self.relative_error,
-                "shared_relative_equation_error": self.shared_relative_error, "note": self.note()}
+        return {
+            "records": list(self.records),
+            "columns": list(self.columns),
+            "values": self.values.tolist(),
+            "parts": self.parts.tolist(),
+            "shared": self.shared.tolist(),
+            "f_statistic": self.f_statistic.tolist(),
+            "p_value": self.p_value.tolist(),
+            "alpha": self.alpha,
+            "differ": list(self.differ()),
+            "relative_equation_error": self.relative_error,
+            "shared_relative_equation_error": self.shared_relative_error,
+            "note": self.note(),
+        }
 
 
-def record_friction(a, y, counts, n_joints, names, columns, records=None, alpha: float = ALPHA,
-                    parts: int = PARTS) -> RecordFriction | None:
+def record_friction(
+    a, y, counts, n_joints, names, columns, records=None, alpha: float = ALPHA, parts: int = PARTS
+) -> RecordFriction | None:
     """Per-record, per-part values of the Coulomb friction `columns` of stacked inverse-dynamics
     equations, and their analysis of variance.
 
@@ -143,13 +163,23 @@ def record_friction(a, y, counts, n_joints, names, columns, records=None, alpha:
     shared_theta, shared_residual = joint_weighted_least_squares(a, y, joint_of_row, n_joints)
     by_record, residual = joint_weighted_least_squares(split(whole), y, joint_of_row, n_joints)
     by_part, _ = joint_weighted_least_squares(split(pieces), y, joint_of_row, n_joints)
-    values = by_record[len(kept):].reshape(len(columns), n_records).T
-    by_part = by_part[len(kept):].reshape(len(columns), n_records, k).transpose(1, 2, 0)
+    values = by_record[len(kept) :].reshape(len(columns), n_records).T
+    by_part = by_part[len(kept) :].reshape(len(columns), n_records, k).transpose(1, 2, 0)
     f, p = parts_anova(by_part, tiny=(1e-9 * float(np.sqrt(np.mean(y**2)))) ** 2)
     norm = float(np.linalg.norm(y))
     records = tuple(records) if records is not None else tuple(f"record {r}" for r in range(n_records))
-    return RecordFriction(records, columns, values, by_part, shared_theta[tested], f, p,
-                          float(np.linalg.norm(residual)) / norm, float(np.linalg.norm(shared_residual)) / norm, alpha)
+    return RecordFriction(
+        records,
+        columns,
+        values,
+        by_part,
+        shared_theta[tested],
+        f,
+        p,
+        float(np.linalg.norm(residual)) / norm,
+        float(np.linalg.norm(shared_residual)) / norm,
+        alpha,
+    )
 
 
 def coulomb_columns(system, friction) -> tuple[str, ...]:
@@ -179,5 +209,7 @@ def compare_records(system, records, friction="coulomb") -> tuple[RecordOffsets 
     except (DataError, UsageError):  # not a system least squares knows, or a record too short for its filter
         return None, None
     labels = record_labels(records)
-    return (record_offsets(a, y, counts, base.joint_names, labels),
-            record_friction(a, y, counts, len(base.joint_names), names, coulomb_columns(base, friction), labels))
+    return (
+        record_offsets(a, y, counts, base.joint_names, labels),
+        record_friction(a, y, counts, len(base.joint_names), names, coulomb_columns(base, friction), labels),
+    )

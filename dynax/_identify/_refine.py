@@ -66,9 +66,8 @@ from .._model._system import AbstractSystem
 from .._simulate import FixedGrid, simulate
 from ._consistency import consistent_parametrisation, ConsistentParametrisation
 from ._defaults import choose_filter, measurement_noise_std, velocities_from_positions
-from ._regressors import split_terms, parameter_vector, with_parameters
-from ._simulation_fit import simulation_segments, DIVERGED, fit_simulation_error, SimulationFit
-
+from ._regressors import parameter_vector, split_terms, with_parameters
+from ._simulation_fit import DIVERGED, fit_simulation_error, simulation_segments, SimulationFit
 
 RECORD_WEIGHTS = ("ml", "motion", "equal")
 DEFAULT_RECORD_WEIGHTS = "ml"  # what `identify`'s refinement uses
@@ -150,8 +149,15 @@ def with_neighbour_inputs(record: Trajectory, reach: int = INPUT_REACH) -> Traje
     us = record.us
     padded = jnp.concatenate([jnp.repeat(us[:1], reach, axis=0), us, jnp.repeat(us[-1:], reach, axis=0)])
     shifted = [padded[reach + j : reach + j + us.shape[0]] for j in range(-reach, reach + 1)]
-    return Trajectory(record.ts, record.xs, jnp.concatenate(shifted, axis=1), record.state_names,
-                      _neighbour_names(tuple(record.input_names), reach), record.system, record.source)
+    return Trajectory(
+        record.ts,
+        record.xs,
+        jnp.concatenate(shifted, axis=1),
+        record.state_names,
+        _neighbour_names(tuple(record.input_names), reach),
+        record.system,
+        record.source,
+    )
 
 
 def with_refinement_terms(system: AbstractSystem) -> AbstractSystem:
@@ -228,8 +234,17 @@ def motion_records(records: list[Trajectory], *, filtered: bool | str = "positio
             xs = np.asarray(butterworth_filtfilt(record.ts, xs, cutoff_hz=choice.cutoff_hz, order=choice.order))
         n = (len(record) // d) * d
         us = us[:n].reshape(n // d, d, -1).mean(axis=1)
-        out.append(Trajectory(jnp.asarray(np.asarray(record.ts)[:n:d]), jnp.asarray(xs[:n:d]), jnp.asarray(us),
-                              record.state_names, record.input_names, record.system, record.source))
+        out.append(
+            Trajectory(
+                jnp.asarray(np.asarray(record.ts)[:n:d]),
+                jnp.asarray(xs[:n:d]),
+                jnp.asarray(us),
+                record.state_names,
+                record.input_names,
+                record.system,
+                record.source,
+            )
+        )
         steps.append(d * record.dt)
     return out, float(np.median(steps))
 
@@ -252,8 +267,15 @@ def record_residual_scale(system, initial_states, records, scale, method: Simula
     """
     ts, xs, us, _, owner, _ = simulation_segments(records, method.segment_s, method.stagger)
     dtype = jnp.result_type(initial_states)
-    squares = np.asarray(_segment_squares(system, initial_states, *(jnp.asarray(a, dtype) for a in (ts, xs, us)),
-                                          jnp.asarray(scale, dtype), method.simulation))
+    squares = np.asarray(
+        _segment_squares(
+            system,
+            initial_states,
+            *(jnp.asarray(a, dtype) for a in (ts, xs, us)),
+            jnp.asarray(scale, dtype),
+            method.simulation,
+        )
+    )
     per_segment = xs.shape[1] * xs.shape[2] - (xs.shape[2] if method.fit_initial_states else 0)
     ssr = np.bincount(owner, weights=squares, minlength=len(records))
     dof = np.bincount(owner, minlength=len(records)) * per_segment
@@ -269,8 +291,14 @@ def ml_weights(sigma: np.ndarray) -> np.ndarray:
 
 
 def refine_by_simulation(
-    system: AbstractSystem, names: tuple[str, ...], records: list[Trajectory], method: SimulationFit,
-    *, filtered: bool | str = "positions", record_weights: str | None = None, input_timing: bool = True,
+    system: AbstractSystem,
+    names: tuple[str, ...],
+    records: list[Trajectory],
+    method: SimulationFit,
+    *,
+    filtered: bool | str = "positions",
+    record_weights: str | None = None,
+    input_timing: bool = True,
 ) -> Solution:
     """Refine a two-link arm's least-squares model by the output-error fit, consistent by construction.
 
@@ -292,11 +320,14 @@ def refine_by_simulation(
     """
     record_weights = DEFAULT_RECORD_WEIGHTS if record_weights is None else record_weights
     if record_weights not in RECORD_WEIGHTS:
-        raise ValueError(f"refine_by_simulation: `record_weights` must be one of {RECORD_WEIGHTS}, got {record_weights!r}")
+        raise ValueError(
+            f"refine_by_simulation: `record_weights` must be one of {RECORD_WEIGHTS}, got {record_weights!r}"
+        )
     base = split_terms(system)[0]
     if base.refinement_terms() is None:
-        raise TypeError(f"refine_by_simulation: {type(base).__name__} names no refinement_terms(); "
-                        "it refines two-link arms")
+        raise TypeError(
+            f"refine_by_simulation: {type(base).__name__} names no refinement_terms(); it refines two-link arms"
+        )
     model = with_refinement_terms(system)
     friction = "coulomb" if any(n.startswith("fc") for n in names) else "viscous"
     from ._regressors import parameter_names
@@ -311,30 +342,52 @@ def refine_by_simulation(
         wrapped = TimedInputs(wrapped, jnp.zeros((), jnp.result_type(wrapped.phi)))
         fitted = [with_neighbour_inputs(r) for r in fitted]
     filter_spec = jax.tree.map(lambda _: False, wrapped)
-    filter_spec = eqx.tree_at(lambda s: (s.system.phi, s.alpha) if input_timing else s.phi, filter_spec,
-                              (True, True) if input_timing else True)
+    filter_spec = eqx.tree_at(
+        lambda s: (s.system.phi, s.alpha) if input_timing else s.phi,
+        filter_spec,
+        (True, True) if input_timing else True,
+    )
     # Maximum likelihood under white measurement noise: each state weighted by its noise level.
-    noise = np.median(np.stack([measurement_noise_std(r if r.is_uniform else resample(r, r.dt)) for r in records]), axis=0)
+    noise = np.median(
+        np.stack([measurement_noise_std(r if r.is_uniform else resample(r, r.dt)) for r in records]), axis=0
+    )
     # First guess of each record's residual scale: its motion's amplitude (a large-amplitude,
     # chaotic run must not swamp the rest).
-    motion = np.array([float(np.sqrt(np.mean(np.square(np.asarray(r.xs[:, :2]) - np.mean(np.asarray(r.xs[:, :2]), 0)))))
-                       for r in fitted])
+    motion = np.array(
+        [
+            float(np.sqrt(np.mean(np.square(np.asarray(r.xs[:, :2]) - np.mean(np.asarray(r.xs[:, :2]), 0)))))
+            for r in fitted
+        ]
+    )
     weights = np.ones(len(fitted)) if record_weights == "equal" else (1.0 / motion) / np.mean(1.0 / motion)
 
     def fit(start, weights):
         return fit_simulation_error(
-            start, fitted, filter_spec=filter_spec, state_scale=jnp.asarray(noise), record_weights=weights,
-            segment_s=method.segment_s, fit_initial_states=method.fit_initial_states,
-            continuity_weight=method.continuity_weight, rtol=method.rtol, atol=method.atol,
-            max_steps=method.max_steps, simulation=method.simulation, stagger=method.stagger,
+            start,
+            fitted,
+            filter_spec=filter_spec,
+            state_scale=jnp.asarray(noise),
+            record_weights=weights,
+            segment_s=method.segment_s,
+            fit_initial_states=method.fit_initial_states,
+            continuity_weight=method.continuity_weight,
+            rtol=method.rtol,
+            atol=method.atol,
+            max_steps=method.max_steps,
+            simulation=method.simulation,
+            stagger=method.stagger,
         )
 
     result = last = fit(wrapped, weights)
     initial_rms, steps = float(result.statistics.initial_residual_rms), int(result.steps)
     diverged = _ended_worse(result)
     if diverged:  # keep the start: the least-squares model, rotor inertia at zero
-        warnings.warn(f"refine_by_simulation: the output-error fit ended worse than its start ({_how_worse(result)}); "
-                      "the least-squares model is kept", RuntimeWarning, stacklevel=2)
+        warnings.warn(
+            f"refine_by_simulation: the output-error fit ended worse than its start ({_how_worse(result)}); "
+            "the least-squares model is kept",
+            RuntimeWarning,
+            stacklevel=2,
+        )
     else:
         sigma = record_residual_scale(result.model, result.statistics.initial_states, fitted, noise, method)
     reweights = 0
@@ -346,8 +399,12 @@ def refine_by_simulation(
         steps += int(refit.steps)
         last = refit
         if _ended_worse(refit):
-            warnings.warn(f"refine_by_simulation: a reweighted output-error fit ended worse than its start "
-                          f"({_how_worse(refit)}); the fit before it is kept", RuntimeWarning, stacklevel=2)
+            warnings.warn(
+                f"refine_by_simulation: a reweighted output-error fit ended worse than its start "
+                f"({_how_worse(refit)}); the fit before it is kept",
+                RuntimeWarning,
+                stacklevel=2,
+            )
             break
         weights, result = new, refit
         reweights += 1
@@ -371,21 +428,45 @@ def refine_by_simulation(
     std = np.sqrt(np.maximum(np.diag(covariance), 0.0))  # NaN stays NaN
     record_std = None if spread is None else np.sqrt(np.maximum(np.diag(delta_method_covariance(jac, spread)), 0.0))
     # A kept start: its own residual, no relative error or record scales of a fit.
-    rms, relative = (initial_rms, float("nan")) if diverged else (float(result.statistics.residual_rms),
-                                                           float(result.statistics.relative_error))
+    rms, relative = (
+        (initial_rms, float("nan"))
+        if diverged
+        else (float(result.statistics.residual_rms), float(result.statistics.relative_error))
+    )
     statistics = RefinementStatistics(
-        initial_residual_rms=initial_rms, residual_rms=rms, relative_error=relative, dt=dt, segment_s=method.segment_s,
-        n_samples=result.statistics.n_samples, record_weights=tuple(float(w) for w in weights),
-        record_sigma=() if diverged else tuple(float(v) for v in sigma), reweights=reweights, input_alpha=alpha,
-        input_latency_s=latency, kept_start=diverged, record_std_errors=record_std,
-        diverged_segments=(last.statistics.diverged_segments, last.statistics.initial_diverged_segments,
-                           last.statistics.n_segments))
+        initial_residual_rms=initial_rms,
+        residual_rms=rms,
+        relative_error=relative,
+        dt=dt,
+        segment_s=method.segment_s,
+        n_samples=result.statistics.n_samples,
+        record_weights=tuple(float(w) for w in weights),
+        record_sigma=() if diverged else tuple(float(v) for v in sigma),
+        reweights=reweights,
+        input_alpha=alpha,
+        input_latency_s=latency,
+        kept_start=diverged,
+        record_std_errors=record_std,
+        diverged_segments=(
+            last.statistics.diverged_segments,
+            last.statistics.initial_diverged_segments,
+            last.statistics.n_segments,
+        ),
+    )
     value = jnp.asarray(estimate)
     return Solution(
-        model=refined, value=value, parameters=Parameters.of(value, names=names), covariance=jnp.asarray(covariance),
-        std_errors=jnp.asarray(std), result=optx.RESULTS.nonlinear_divergence if diverged else optx.RESULTS.successful,
-        loss=result.initial_loss if diverged else result.loss, initial_loss=result.initial_loss,
-        steps=jnp.asarray(steps), n_residuals=result.n_residuals, statistics=statistics)
+        model=refined,
+        value=value,
+        parameters=Parameters.of(value, names=names),
+        covariance=jnp.asarray(covariance),
+        std_errors=jnp.asarray(std),
+        result=optx.RESULTS.nonlinear_divergence if diverged else optx.RESULTS.successful,
+        loss=result.initial_loss if diverged else result.loss,
+        initial_loss=result.initial_loss,
+        steps=jnp.asarray(steps),
+        n_residuals=result.n_residuals,
+        statistics=statistics,
+    )
 
 
 def delta_method_covariance(jac: np.ndarray, covariance: np.ndarray) -> np.ndarray:
@@ -413,6 +494,8 @@ def _ended_worse(result) -> bool:
 def _how_worse(result) -> str:
     stats = result.statistics
     if stats.ended_worse:
-        return (f"the rollouts of {stats.diverged_segments} of its {stats.n_segments} segments diverge, "
-                f"{stats.initial_diverged_segments} at its start")
+        return (
+            f"the rollouts of {stats.diverged_segments} of its {stats.n_segments} segments diverge, "
+            f"{stats.initial_diverged_segments} at its start"
+        )
     return f"scaled residual {float(stats.initial_residual_rms):.4g} -> {float(stats.residual_rms):.4g}"

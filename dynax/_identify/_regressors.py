@@ -232,8 +232,10 @@ def column_kinds(system: AbstractSystem, friction: Friction = "viscous") -> tupl
     columns."""
     names = parameter_names(system, friction)
     energy = set(energy_parameter_names(system, friction))
-    return (tuple(i for i, n in enumerate(names) if n in energy),
-            tuple(i for i, n in enumerate(names) if n not in energy))
+    return (
+        tuple(i for i, n in enumerate(names) if n in energy),
+        tuple(i for i, n in enumerate(names) if n not in energy),
+    )
 
 
 def _rows_setup(system, xs, friction):
@@ -297,7 +299,9 @@ def energy_and_friction_rows(system: AbstractSystem, xs: Float[Array, "time n_st
 
 
 @eqx.filter_jit
-def input_power(system: AbstractSystem, xs: Float[Array, "time n_states"], us: Float[Array, "time n_inputs"]) -> Float[Array, " time"]:
+def input_power(
+    system: AbstractSystem, xs: Float[Array, "time n_states"], us: Float[Array, "time n_inputs"]
+) -> Float[Array, " time"]:
     r"""The power delivered by the inputs, $\dot q^\top B u$."""
     _, dq = positions_and_velocities(system, xs)
     return row_dot(dq, generalised_force(system, us))

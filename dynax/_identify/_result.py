@@ -5,17 +5,16 @@ import enum
 
 import equinox as eqx
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float
+import numpy as np
 
 from .._fit import Solution
 from .._model._system import AbstractSystem
-from ._consistency import Consistency
 from ._angle_zeros import AngleZeros
+from ._consistency import Consistency
 from ._offsets import RecordOffsets
 from ._record_friction import RecordFriction
 from ._validation import HeldOutError
-
 
 
 class NoValidationWarning(UserWarning):
@@ -91,34 +90,50 @@ class Stage(eqx.Module):
     def to_json(self) -> dict:
         """The stage's entry in the JSON output's `stages`."""
         names = self.names
-        out = {"method": self.method,
-               "parameters": {n: float(v) for n, v in zip(names, np.asarray(self.solution.value))},
-               "std_errors": {n: float(v) for n, v in zip(names, np.asarray(self.solution.std_errors))},
-               "relative_equation_error": None if self.relative_equation_error is None
-               else float(self.relative_equation_error),
-               "validation": None if self.validation is None else self.validation.to_json()}
+        out = {
+            "method": self.method,
+            "parameters": {n: float(v) for n, v in zip(names, np.asarray(self.solution.value))},
+            "std_errors": {n: float(v) for n, v in zip(names, np.asarray(self.solution.std_errors))},
+            "relative_equation_error": None
+            if self.relative_equation_error is None
+            else float(self.relative_equation_error),
+            "validation": None if self.validation is None else self.validation.to_json(),
+        }
         if self.kind == StageKind.LEAST_SQUARES:
-            out.update(consistency=self.consistency.to_json(), offsets=self.offsets,
-                       angle_zeros=None if self.angle_zeros is None else self.angle_zeros.to_json(),
-                       poorly_determined=self.poorly_determined, serial_correlation=self.serial_correlation)
+            out.update(
+                consistency=self.consistency.to_json(),
+                offsets=self.offsets,
+                angle_zeros=None if self.angle_zeros is None else self.angle_zeros.to_json(),
+                poorly_determined=self.poorly_determined,
+                serial_correlation=self.serial_correlation,
+            )
         elif self.kind == StageKind.OUTPUT_ERROR:
             stats = self.solution.statistics
             out.update(
-                consistency=self.consistency.to_json(), initial_residual_rms=stats.initial_residual_rms,
-                residual_rms=stats.residual_rms, steps=int(self.solution.steps), dt=stats.dt,
+                consistency=self.consistency.to_json(),
+                initial_residual_rms=stats.initial_residual_rms,
+                residual_rms=stats.residual_rms,
+                steps=int(self.solution.steps),
+                dt=stats.dt,
                 segment_s=stats.segment_s,
-                record_std_errors=None if stats.record_std_errors is None
+                record_std_errors=None
+                if stats.record_std_errors is None
                 else {n: float(v) for n, v in zip(names, stats.record_std_errors)},
                 records_disagree=self.records_disagree,
                 model="least-squares model + RotorInertia(joint=1), consistent parametrisation",
                 diverged=stats.kept_start,
                 diverged_segments=dict(zip(("at_end", "at_start", "segments"), stats.diverged_segments)),
-                input_timing=None if stats.input_alpha is None else {
-                    "alpha": stats.input_alpha, "latency_s": stats.input_latency_s,
+                input_timing=None
+                if stats.input_alpha is None
+                else {
+                    "alpha": stats.input_alpha,
+                    "latency_s": stats.input_latency_s,
                     "meaning": "the inputs that fit best act latency_s after the sample that records them "
-                               "(0: sampled without delay; half the record's interval: the zero-order hold as "
-                               "recorded)"},
-                poorly_determined=self.poorly_determined)
+                    "(0: sampled without delay; half the record's interval: the zero-order hold as "
+                    "recorded)",
+                },
+                poorly_determined=self.poorly_determined,
+            )
         return out
 
 
@@ -260,8 +275,9 @@ class Identification(eqx.Module):
         first, last = self.stages[0], self.stages[-1]
         if last.kind != StageKind.OUTPUT_ERROR:
             return first.method
-        return f"{first.method}+simulation" + (" (ended worse than its start: least squares kept)"
-                                               if last.kept_start else "")
+        return f"{first.method}+simulation" + (
+            " (ended worse than its start: least squares kept)" if last.kept_start else ""
+        )
 
     @property
     def parameters(self) -> dict[str, float]:

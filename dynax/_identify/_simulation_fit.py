@@ -15,18 +15,17 @@ right tool. What is fitted is a `Parameters` filter over `(system, initial state
 parameters carry the names of their tree paths (or the system's `parameter_labels()`).
 """
 
-import functools
 from collections.abc import Sequence
+import functools
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float, PyTree
+import numpy as np
 
 from .._data._trajectory import Trajectory
 from .._errors import DataError, UsageError
-from .._progress import bar_token, ProgressBar
 from .._fit import (
     clustered_covariance,
     fit_least_squares,
@@ -37,8 +36,10 @@ from .._fit import (
     Statistics,
 )
 from .._model._system import AbstractSystem
+from .._progress import bar_token, ProgressBar
 from .._simulate import FixedGrid, simulate
 from ._least_squares import least_squares
+
 
 class SimulationFit(eqx.Module):
     """The output-error (simulation-error) method for `identify`; see `fit_simulation_error`.
@@ -210,7 +211,8 @@ def _residuals(unknowns: _Unknowns, data: _Segments, *, simulation: FixedGrid, f
         return model.initial_state(x0, u0) if model.n_states > x0.shape[0] else x0
 
     sims = jax.vmap(lambda x0, t, u: simulate(model, start(x0, u[0]), t, u, method=simulation, throw=False).xs[:, :n])(
-        x0, data.ts, data.us)
+        x0, data.ts, data.us
+    )
     r = (sims - data.xs) / data.sigma[None, None, :] * data.segment_weight[:, None, None]
     r = jnp.where(jnp.isfinite(r), r, DIVERGED)
     out = [r.reshape(-1)]
@@ -221,13 +223,32 @@ def _residuals(unknowns: _Unknowns, data: _Segments, *, simulation: FixedGrid, f
 
 
 @eqx.filter_jit
-def _solve(unknowns, parameters: Parameters, data: _Segments, scale, solver, max_steps: int, simulation, fit_initial_states: bool,
-           token=None):
+def _solve(
+    unknowns,
+    parameters: Parameters,
+    data: _Segments,
+    scale,
+    solver,
+    max_steps: int,
+    simulation,
+    fit_initial_states: bool,
+    token=None,
+):
     """The engine's Levenberg-Marquardt, and the Jacobian (scaled unknowns) at the solution; one
     compiled program per problem shape."""
     residuals = functools.partial(_residuals, simulation=simulation, fit_initial_states=fit_initial_states)
-    solution = fit_least_squares(residuals, unknowns, parameters, data, solver=solver, scale=scale,
-                                 max_steps=max_steps, nonfinite=None, progress_token=token, jac="dense")
+    solution = fit_least_squares(
+        residuals,
+        unknowns,
+        parameters,
+        data,
+        solver=solver,
+        scale=scale,
+        max_steps=max_steps,
+        nonfinite=None,
+        progress_token=token,
+        jac="dense",
+    )
     # The engine's residuals (at the solution and at the start) and Jacobian (scaled unknowns), as it
     # formed them: no further rollout of the data to compile or run.
     return solution, solution.residuals, solution.initial_residuals, solution.jacobian
@@ -316,8 +337,10 @@ def fit_simulation_error(
     if not (isinstance(stagger, (int, np.integer)) and stagger >= 1):
         raise UsageError(f"fit_simulation_error: `stagger` must be a positive integer, got {stagger!r}")
     if stagger > 1 and fit_initial_states:
-        raise UsageError("fit_simulation_error: `stagger` > 1 needs `fit_initial_states=False` "
-                         "(staggered segments start from the measured state)")
+        raise UsageError(
+            "fit_simulation_error: `stagger` > 1 needs `fit_initial_states=False` "
+            "(staggered segments start from the measured state)"
+        )
     chosen = filter_spec if isinstance(filter_spec, Parameters) else Parameters.of(system, filter_spec)
     if chosen.size == 0:
         raise UsageError("fit_simulation_error: `filter_spec` selects no array leaves to fit")
@@ -333,8 +356,15 @@ def fit_simulation_error(
     weight = np.ones(len(trajectories)) if record_weights is None else np.asarray(record_weights, dtype=float)
     if weight.shape != (len(trajectories),) or not np.all(weight > 0):
         raise UsageError(f"fit_simulation_error: `record_weights` must be {len(trajectories)} positive numbers")
-    data = _Segments(ts, xs, us, sigma, jnp.asarray(follows[1:], dtype),  # segment s+1 continues segment s
-                     jnp.asarray(continuity_weight, dtype), jnp.asarray(weight[owner] / np.sqrt(stagger), dtype))
+    data = _Segments(
+        ts,
+        xs,
+        us,
+        sigma,
+        jnp.asarray(follows[1:], dtype),  # segment s+1 continues segment s
+        jnp.asarray(continuity_weight, dtype),
+        jnp.asarray(weight[owner] / np.sqrt(stagger), dtype),
+    )
     # The unknowns: the system's chosen elements, then (when fitted) every segment's initial state,
     # scaled by |p0| (or 1) and by the state scale.
     unknowns = _Unknowns(system, xs[:, 0])
@@ -347,8 +377,9 @@ def fit_simulation_error(
     scale = jnp.concatenate([p_scale, jnp.tile(sigma, xs.shape[0])]) if fit_initial_states else p_scale
     solver = levenberg_marquardt(rtol=rtol, atol=atol, jacobian="accepted", damping="nielsen")
     with ProgressBar(max_steps, "output-error fit", progress=progress, reduce="last") as bar:
-        solution, r, r0, jac = _solve(unknowns, parameters, data, scale, solver, max_steps, simulation, fit_initial_states,
-                                      bar_token(bar))
+        solution, r, r0, jac = _solve(
+            unknowns, parameters, data, scale, solver, max_steps, simulation, fit_initial_states, bar_token(bar)
+        )
         jax.block_until_ready(r)
     n_params = chosen.size
     n_state_residuals = xs.size
@@ -384,7 +415,8 @@ def fit_simulation_error(
         residual_rms=jnp.sqrt(jnp.mean(r[:n_state_residuals] ** 2) * stagger),  # undo the cuts' 1/sqrt(k)
         initial_residual_rms=jnp.sqrt(jnp.mean(r0[:n_state_residuals] ** 2) * stagger),
         relative_error=jnp.linalg.norm(r[:n_state_residuals].reshape(xs.shape) * jnp.broadcast_to(sigma, xs.shape))
-        * np.sqrt(stagger) / jnp.linalg.norm(xs),
+        * np.sqrt(stagger)
+        / jnp.linalg.norm(xs),
         record_covariance=None if record_covariance is None else record_covariance[:n_params, :n_params],
         n_segments=int(xs.shape[0]),
         n_samples=int(n_samples),

@@ -68,20 +68,29 @@ class HeldOutError:
             return None
         parts = []
         for name, entries in self.concentrated.items():
-            cells = "; ".join(f"at {e['horizon_s']:g} s half of its squared error comes from {e['windows']} of "
-                              f"{e['of']} windows, starting {e['from_s']:.2f} to {e['to_s']:.2f} s (RMSE "
-                              f"{e['rmse']:.3g} against a median window error of {e['median']:.3g})"
-                              for e in entries)
+            cells = "; ".join(
+                f"at {e['horizon_s']:g} s half of its squared error comes from {e['windows']} of "
+                f"{e['of']} windows, starting {e['from_s']:.2f} to {e['to_s']:.2f} s (RMSE "
+                f"{e['rmse']:.3g} against a median window error of {e['median']:.3g})"
+                for e in entries
+            )
             parts.append(f"{name}: {cells}")
-        return ("the open-loop RMSE is carried by a few windows, which say more about those stretches "
-                "(rest at an unstable equilibrium, a glitch in the data) than about the "
-                "record: " + ". ".join(parts))
+        return (
+            "the open-loop RMSE is carried by a few windows, which say more about those stretches "
+            "(rest at an unstable equilibrium, a glitch in the data) than about the "
+            "record: " + ". ".join(parts)
+        )
 
     def to_json(self) -> dict:
-        return {"horizons_s": list(self.horizons_s), "rmse": list(self.rmse),
-                "per_record": {k: list(v) for k, v in self.per_record.items()},
-                "diverged_fraction": self.diverged_fraction, "source": self.source,
-                "median": list(self.median), "concentrated": self.concentrated}
+        return {
+            "horizons_s": list(self.horizons_s),
+            "rmse": list(self.rmse),
+            "per_record": {k: list(v) for k, v in self.per_record.items()},
+            "diverged_fraction": self.diverged_fraction,
+            "source": self.source,
+            "median": list(self.median),
+            "concentrated": self.concentrated,
+        }
 
 
 def _concentrated(window_mse: np.ndarray, start_times: np.ndarray, horizons, rmse) -> list[dict]:
@@ -99,8 +108,17 @@ def _concentrated(window_mse: np.ndarray, start_times: np.ndarray, horizons, rms
         cumulative = np.cumsum(squared[finite][order])
         count = int(np.searchsorted(cumulative, 0.5 * cumulative[-1]) + 1)
         starts = start_times[finite][order[:count]]
-        entries.append({"horizon_s": float(horizon), "rmse": float(rmse[k]), "median": median, "windows": count,
-                        "of": int(finite.sum()), "from_s": float(starts.min()), "to_s": float(starts.max())})
+        entries.append(
+            {
+                "horizon_s": float(horizon),
+                "rmse": float(rmse[k]),
+                "median": median,
+                "windows": count,
+                "of": int(finite.sum()),
+                "from_s": float(starts.min()),
+                "to_s": float(starts.max()),
+            }
+        )
     return entries
 
 
@@ -109,7 +127,11 @@ def _name(record: Trajectory, k: int) -> str:
 
 
 def held_out_error(
-    system, records: list[Trajectory], horizons_s=DEFAULT_HORIZONS_S, *, source: str = "validation records",
+    system,
+    records: list[Trajectory],
+    horizons_s=DEFAULT_HORIZONS_S,
+    *,
+    source: str = "validation records",
     max_windows: int = 200,
 ) -> HeldOutError:
     """Open-loop simulation error of `system` on each of `records`, pooled over their windows.
@@ -148,10 +170,13 @@ def held_out_error(
     if count == 0:
         raise UsageError(f"held_out_error: every record is shorter than the {max(horizons):g} s horizon")
     pooled = np.concatenate(windows)
-    median = tuple(float(np.sqrt(np.nanmedian(pooled[:, k]))) if np.isfinite(pooled[:, k]).any() else float("nan")
-                   for k in range(len(horizons)))
-    return HeldOutError(horizons, tuple(float(v) for v in np.sqrt(total / count)), per_record, diverged, source,
-                        median, concentrated)
+    median = tuple(
+        float(np.sqrt(np.nanmedian(pooled[:, k]))) if np.isfinite(pooled[:, k]).any() else float("nan")
+        for k in range(len(horizons))
+    )
+    return HeldOutError(
+        horizons, tuple(float(v) for v in np.sqrt(total / count)), per_record, diverged, source, median, concentrated
+    )
 
 
 def split_for_validation(records: list[Trajectory], fraction: float, min_duration_s: float) -> tuple[list, list]:

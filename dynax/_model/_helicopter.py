@@ -36,13 +36,14 @@ fixed 0/1 mask $M$ choosing which features each axis uses. The learning criteria
     helicopters", NIPS 18, 2005.
 """
 
-from typing import Callable, ClassVar
+from collections.abc import Callable
+from typing import ClassVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, ArrayLike, Float
+import numpy as np
 
 from ._system import AbstractSystem
 
@@ -227,13 +228,13 @@ class AbstractBodyModel(eqx.Module):
     # The contract's name of the model (`MODEL.json`'s "model", the CLI's `--model`).
     kind: eqx.AbstractClassVar[str]
 
-    def known(
-        self, quat: Float[Array, "4"], s: Float[Array, "6"], u: Float[Array, "4"]
-    ) -> Float[Array, "6"]:
+    def known(self, quat: Float[Array, "4"], s: Float[Array, "6"], u: Float[Array, "4"]) -> Float[Array, "6"]:
         """The part of $(\\dot\\nu, \\dot\\omega)$ fixed by physics (zero unless overridden)."""
         return jnp.zeros_like(s)
 
-    def features(self, quat: Float[Array, "4"], s: Float[Array, "6"], u: Float[Array, "4"]) -> Float[Array, " n_features"]:
+    def features(
+        self, quat: Float[Array, "4"], s: Float[Array, "6"], u: Float[Array, "4"]
+    ) -> Float[Array, " n_features"]:
         r"""The feature vector $\phi(q, \nu, \omega, u)$, ordered as `feature_names`."""
         return jnp.stack([FEATURES[name](quat, s, u).astype(s.dtype) for name in self.feature_names])
 
@@ -305,7 +306,25 @@ RICH_FEATURES: dict[str, tuple[str, ...]] = {
     "q": ("q", "u", "u2", "pr", "1"),
     "r": ("r", "v", "w", "u3", "u4", "pq", "1"),
 }
-ACCELERATION_FEATURE_NAMES = ("u", "v", "w", "p", "q", "r", "u1", "u2", "u3", "u4", "1", "|u|u", "|v|v", "|w|w", "qr", "pr", "pq")
+ACCELERATION_FEATURE_NAMES = (
+    "u",
+    "v",
+    "w",
+    "p",
+    "q",
+    "r",
+    "u1",
+    "u2",
+    "u3",
+    "u4",
+    "1",
+    "|u|u",
+    "|v|v",
+    "|w|w",
+    "qr",
+    "pr",
+    "pq",
+)
 LINEAR_FEATURE_NAMES = ("u", "v", "w", "p", "q", "r", "roll", "pitch", "u1", "u2", "u3", "u4", "1")
 
 
@@ -314,9 +333,17 @@ def _tempest_weights(dtype=None):
     names = ACCELERATION_FEATURE_NAMES
     w = np.zeros((6, len(names)))
     entries = {
-        ("u", "u"): c["Ax"], ("v", "v"): c["Ay"], ("v", "1"): c["Dv"], ("w", "w"): c["Az"], ("w", "u4"): c["C4"],
-        ("p", "p"): c["Bx"], ("p", "u1"): c["C1"], ("q", "q"): c["By"], ("q", "u2"): c["C2"],
-        ("r", "r"): c["Bz"], ("r", "u3"): c["C3"],
+        ("u", "u"): c["Ax"],
+        ("v", "v"): c["Ay"],
+        ("v", "1"): c["Dv"],
+        ("w", "w"): c["Az"],
+        ("w", "u4"): c["C4"],
+        ("p", "p"): c["Bx"],
+        ("p", "u1"): c["C1"],
+        ("q", "q"): c["By"],
+        ("q", "u2"): c["C2"],
+        ("r", "r"): c["Bz"],
+        ("r", "u3"): c["C3"],
     }
     for (axis, name), value in entries.items():
         w[BODY_AXES.index(axis), names.index(name)] = value
@@ -416,9 +443,20 @@ def _linear_hover_weights():
     g = STANDARD_GRAVITY
     w = np.zeros((6, len(names)))
     entries = {
-        ("u", "u"): c["Ax"], ("u", "pitch"): -g, ("v", "v"): c["Ay"], ("v", "roll"): g, ("v", "1"): c["Dv"],
-        ("w", "w"): c["Az"], ("w", "u4"): c["C4"], ("w", "1"): g, ("p", "p"): c["Bx"], ("p", "u1"): c["C1"],
-        ("q", "q"): c["By"], ("q", "u2"): c["C2"], ("r", "r"): c["Bz"], ("r", "u3"): c["C3"],
+        ("u", "u"): c["Ax"],
+        ("u", "pitch"): -g,
+        ("v", "v"): c["Ay"],
+        ("v", "roll"): g,
+        ("v", "1"): c["Dv"],
+        ("w", "w"): c["Az"],
+        ("w", "u4"): c["C4"],
+        ("w", "1"): g,
+        ("p", "p"): c["Bx"],
+        ("p", "u1"): c["C1"],
+        ("q", "q"): c["By"],
+        ("q", "u2"): c["C2"],
+        ("r", "r"): c["Bz"],
+        ("r", "u3"): c["C3"],
     }
     for (axis, name), value in entries.items():
         w[BODY_AXES.index(axis), names.index(name)] = value
@@ -501,7 +539,12 @@ class Helicopter(AbstractSystem):
         rotations = np.asarray(jax.vmap(quaternion_to_rotation)(jnp.asarray(xs[:, QUATERNION])))
         for i, c in zip(range(BODY.start, BODY.stop), BODY_AXES):
             x = xs[:, i]
-            cols += [x, np.abs(x) * x, np.tanh(x / max(0.05 * float(np.std(x)), 1e-6)), accelerations[:, i - BODY.start]]
+            cols += [
+                x,
+                np.abs(x) * x,
+                np.tanh(x / max(0.05 * float(np.std(x)), 1e-6)),
+                accelerations[:, i - BODY.start],
+            ]
             names += [c, f"|{c}|{c}", f"sign({c})", f"model acceleration d{c}/dt"]
         for a, world in enumerate(("north", "east", "down")):
             for b, body in enumerate(("u", "v", "w")):
@@ -515,9 +558,7 @@ class Helicopter(AbstractSystem):
         return jnp.concatenate([dpos, dquat, dbody])
 
 
-def hover_state(
-    position: Float[ArrayLike, "3"] = (0.0, 0.0, 0.0), yaw: float = 0.0, dtype=None
-) -> Float[Array, " 13"]:
+def hover_state(position: Float[ArrayLike, "3"] = (0.0, 0.0, 0.0), yaw: float = 0.0, dtype=None) -> Float[Array, " 13"]:
     """A state at rest at `position` (NED) with level attitude and heading `yaw` [rad]."""
     dtype = jnp.result_type(float) if dtype is None else dtype
     quat = quaternion_from_euler(jnp.asarray(0.0, dtype), jnp.asarray(0.0, dtype), jnp.asarray(yaw, dtype))

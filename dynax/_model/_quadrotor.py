@@ -51,23 +51,23 @@ from typing import ClassVar
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float
+import numpy as np
 
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
 from ._helicopter import (
-    ANGULAR_RATE,
-    BODY_AXES,
-    HELICOPTER_STATE_NAMES,
-    QUATERNION,
-    STANDARD_GRAVITY,
     AbstractBodyModel,
     AccelerationModel,
+    ANGULAR_RATE,
+    BODY_AXES,
     Helicopter,
+    HELICOPTER_STATE_NAMES,
     LinearVelocityModel,
+    QUATERNION,
     quaternion_multiply,
     quaternion_to_rotation,
+    STANDARD_GRAVITY,
 )
 from ._system import AbstractSystem
 
@@ -144,13 +144,17 @@ class Quadrotor(AbstractSystem):
 
     def __check_init__(self):
         if not isinstance(self.body_model, AbstractBodyModel):
-            raise ValueError(f"Quadrotor: `body_model` must be an AccelerationModel or LinearVelocityModel, "
-                             f"got {type(self.body_model).__name__}")
+            raise ValueError(
+                f"Quadrotor: `body_model` must be an AccelerationModel or LinearVelocityModel, "
+                f"got {type(self.body_model).__name__}"
+            )
         if len(self.input_scale) != len(QUADROTOR_INPUT_NAMES) or not all(
             np.isfinite(s) and s > 0 for s in self.input_scale
         ):
-            raise ValueError(f"Quadrotor: `input_scale` must be {len(QUADROTOR_INPUT_NAMES)} positive numbers "
-                             f"(inputs {QUADROTOR_INPUT_NAMES}), got {self.input_scale}")
+            raise ValueError(
+                f"Quadrotor: `input_scale` must be {len(QUADROTOR_INPUT_NAMES)} positive numbers "
+                f"(inputs {QUADROTOR_INPUT_NAMES}), got {self.input_scale}"
+            )
 
     @property
     def uses_battery(self) -> bool:
@@ -226,11 +230,15 @@ class ConstantVelocity(AbstractSystem):
 
 def _check_quadrotor_data(trajectory: Trajectory, where: str):
     if tuple(trajectory.state_names) != QUADROTOR_STATE_NAMES:
-        raise UsageError(f"{where}: the trajectory must have the quadrotor states {QUADROTOR_STATE_NAMES}, "
-                         f"got {tuple(trajectory.state_names)}")
+        raise UsageError(
+            f"{where}: the trajectory must have the quadrotor states {QUADROTOR_STATE_NAMES}, "
+            f"got {tuple(trajectory.state_names)}"
+        )
     if tuple(trajectory.input_names) not in (QUADROTOR_INPUT_NAMES, QUADROTOR_INPUT_NAMES[:4]):
-        raise UsageError(f"{where}: the trajectory's inputs must be {QUADROTOR_INPUT_NAMES} (vbat optional), "
-                         f"got {tuple(trajectory.input_names)}")
+        raise UsageError(
+            f"{where}: the trajectory's inputs must be {QUADROTOR_INPUT_NAMES} (vbat optional), "
+            f"got {tuple(trajectory.input_names)}"
+        )
 
 
 def to_body_frame(system: Quadrotor, trajectory: Trajectory) -> Trajectory:
@@ -240,8 +248,15 @@ def to_body_frame(system: Quadrotor, trajectory: Trajectory) -> Trajectory:
     xs = jnp.asarray(trajectory.xs)  # a record read into numpy arrays too
     body = jax.vmap(lambda x: _rotation_and_body(x)[1])(xs)
     xs = xs.at[:, WORLD_VELOCITY].set(body)
-    return Trajectory(trajectory.ts, xs, system.scaled_inputs(trajectory.us), HELICOPTER_STATE_NAMES,
-                      trajectory.input_names, "helicopter", trajectory.source)
+    return Trajectory(
+        trajectory.ts,
+        xs,
+        system.scaled_inputs(trajectory.us),
+        HELICOPTER_STATE_NAMES,
+        trajectory.input_names,
+        "helicopter",
+        trajectory.source,
+    )
 
 
 def initial_quadrotor(model: str, flights, *, battery: bool | None = None) -> Quadrotor:
@@ -273,13 +288,20 @@ def initial_quadrotor(model: str, flights, *, battery: bool | None = None) -> Qu
     scale = (m_scale,) * 4 + ((v_scale if v_scale > 0 else 1.0),)
     if model == "linear":
         names = QUADROTOR_LINEAR_FEATURES
-        body = LinearVelocityModel(weights=jnp.zeros((6, len(names))), feature_names=names,
-                                   mask=tuple(tuple(True for _ in names) for _ in BODY_AXES))
+        body = LinearVelocityModel(
+            weights=jnp.zeros((6, len(names))),
+            feature_names=names,
+            mask=tuple(tuple(True for _ in names) for _ in BODY_AXES),
+        )
     elif model in ("nominal", "acceleration"):
         axes = nominal_features(battery) if model == "nominal" else acceleration_features(battery)
         template = AccelerationModel.with_features(axes)
-        body = AccelerationModel(weights=template.weights, feature_names=template.feature_names, mask=template.mask,
-                                 gravity=-STANDARD_GRAVITY)
+        body = AccelerationModel(
+            weights=template.weights,
+            feature_names=template.feature_names,
+            mask=template.mask,
+            gravity=-STANDARD_GRAVITY,
+        )
     else:
         raise UsageError(f"initial_quadrotor: unknown model {model!r}; expected one of {QUADROTOR_MODELS}")
     return Quadrotor(body, scale)

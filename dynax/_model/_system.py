@@ -6,11 +6,10 @@ from typing import Any, ClassVar, Literal
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float, PyTree
 import numpy as np
-from jaxtyping import Array, Float, ArrayLike, PyTree
 
 from .._errors import UsageError
-
 
 _BOUNDS = {"positive": ("positive", lambda v: v > 0), "nonnegative": ("non-negative", lambda v: v >= 0)}
 
@@ -22,8 +21,9 @@ def violated_bound(name: str, value: float, kind: str | None, group: str = "", m
     bound = _BOUNDS.get(kind)
     if bound is None or bound[1](value):
         return None
-    return (f"{group + ': ' if group else ''}{name} = {value:.4g} must be {bound[0]}"
-            + (f" ({meaning})" if meaning else ""))
+    return f"{group + ': ' if group else ''}{name} = {value:.4g} must be {bound[0]}" + (
+        f" ({meaning})" if meaning else ""
+    )
 
 
 def friction_parameter_names(system) -> set[str]:
@@ -36,7 +36,9 @@ def size_parameter_names(system) -> list[str]:
     """The base parameters that set the machine's size: not friction, and positive by consistency
     (`theta1`, `theta2`, `theta4`, `theta5`; the axis's `mass`). Empty for a system without kinds."""
     friction = friction_parameter_names(system)
-    return [n for n, kind in system.base_parameter_kinds().items() if kind in ("positive", "inertia1") and n not in friction]
+    return [
+        n for n, kind in system.base_parameter_kinds().items() if kind in ("positive", "inertia1") and n not in friction
+    ]
 
 
 class AbstractSystem(eqx.Module):
@@ -224,8 +226,10 @@ class AbstractSystem(eqx.Module):
         (`"inertia1"`) adds it in its override. One statement of the bounds: the consistency-constrained
         fit reads the same kinds."""
         kinds, meanings = self.base_parameter_kinds(), self.base_parameter_meanings()
-        sentences = (violated_bound(name, value, kinds.get(name), *meanings.get(name, ("", "")))
-                     for name, value in parameters.items())
+        sentences = (
+            violated_bound(name, value, kinds.get(name), *meanings.get(name, ("", "")))
+            for name, value in parameters.items()
+        )
         return tuple(s for s in sentences if s is not None)
 
     def mass_check_configurations(self, qs: Float[Array, "time n_joints"]) -> Float[Array, "k n_joints"] | None:
@@ -264,9 +268,7 @@ class AbstractManipulator(AbstractSystem):
         """The joint-space mass (inertia) matrix $M(q)$, symmetric positive definite."""
 
     @abc.abstractmethod
-    def bias_force(
-        self, q: Float[Array, " n_joints"], dq: Float[Array, " n_joints"]
-    ) -> Float[Array, " n_joints"]:
+    def bias_force(self, q: Float[Array, " n_joints"], dq: Float[Array, " n_joints"]) -> Float[Array, " n_joints"]:
         r"""$h(q, \dot q) = C(q, \dot q)\dot q - \tau_g(q) + D \dot q$: everything but inertia and input."""
 
     @abc.abstractmethod

@@ -27,9 +27,20 @@ DRAKE_DEFAULTS = dict(m1=1.0, m2=1.0, l1=1.0, lc1=0.5, lc2=1.0, Ic1=0.083, Ic2=0
 
 # Physical parameters and the bound each must meet: masses, the first link's length and gravity are
 # positive; centre-of-mass distances, inertias and viscous friction cannot be negative.
-_PHYSICAL_BOUNDS = dict(m1="positive", m2="positive", l1="positive", g="positive", lc1="nonnegative",
-                        lc2="nonnegative", Ic1="nonnegative", Ic2="nonnegative", I1="positive", I2="positive",
-                        b1="nonnegative", b2="nonnegative")
+_PHYSICAL_BOUNDS = dict(
+    m1="positive",
+    m2="positive",
+    l1="positive",
+    g="positive",
+    lc1="nonnegative",
+    lc2="nonnegative",
+    Ic1="nonnegative",
+    Ic2="nonnegative",
+    I1="positive",
+    I2="positive",
+    b1="nonnegative",
+    b2="nonnegative",
+)
 
 
 def _check_physical(**values):
@@ -44,13 +55,17 @@ def _check_physical(**values):
         positive = _PHYSICAL_BOUNDS[name] == "positive"
         v = jnp.asarray(value)
         bad = ~jnp.isfinite(v) | ((v <= 0) if positive else (v < 0))
-        message = f"`{name}` is not a physical value; it must be {'positive' if positive else 'non-negative'} and finite"
+        message = (
+            f"`{name}` is not a physical value; it must be {'positive' if positive else 'non-negative'} and finite"
+        )
         if isinstance(bad, jax.core.Tracer):
             traced.append((jnp.any(bad), "from_physical: " + message))
         elif bool(jnp.any(bad)):
             shown = value if isinstance(value, (int, float)) else (float(v) if v.ndim == 0 else v)
-            raise ValueError(f"from_physical: `{name}` = {shown} is not a physical value; it must be "
-                             f"{'positive' if positive else 'non-negative'} and finite")
+            raise ValueError(
+                f"from_physical: `{name}` = {shown} is not a physical value; it must be "
+                f"{'positive' if positive else 'non-negative'} and finite"
+            )
     return traced
 
 
@@ -115,9 +130,7 @@ def _mass_matrix(p, q):
 
 def _bias_force(p, q, dq):
     s1, s2, s12 = jnp.sin(q[0]), jnp.sin(q[1]), jnp.sin(q[0] + q[1])
-    coriolis = jnp.stack(
-        [-2 * p.theta3 * s2 * dq[1] * dq[0] - p.theta3 * s2 * dq[1] ** 2, p.theta3 * s2 * dq[0] ** 2]
-    )
+    coriolis = jnp.stack([-2 * p.theta3 * s2 * dq[1] * dq[0] - p.theta3 * s2 * dq[1] ** 2, p.theta3 * s2 * dq[0] ** 2])
     gravity = jnp.stack([-p.theta4 * s1 - p.theta5 * s12, -p.theta5 * s12])  # tau_g
     damping = jnp.stack([p.theta6 * dq[0], p.theta7 * dq[1]])
     return coriolis - gravity + damping
@@ -217,8 +230,15 @@ class AbstractTwoLink(AbstractManipulator):
     def base_parameter_kinds(self):
         r"""$\theta_1 \ge \theta_3^2/\theta_2$; $\theta_2, \theta_4, \theta_5 > 0$; $\theta_3, \theta_6, \theta_7 \ge 0$
         (see `dynax.internal.consistency_conditions`)."""
-        return dict(theta1="inertia1", theta2="positive", theta3="nonnegative", theta4="positive",
-                    theta5="positive", theta6="nonnegative", theta7="nonnegative")
+        return dict(
+            theta1="inertia1",
+            theta2="positive",
+            theta3="nonnegative",
+            theta4="positive",
+            theta5="positive",
+            theta6="nonnegative",
+            theta7="nonnegative",
+        )
 
     def upright_zero_signs(self):
         r"""$q_1 + \pi$ flips $\sin q_1$ and $\sin(q_1 + q_2)$ ($\theta_4$, $\theta_5$); $q_2 + \pi$ flips
@@ -246,10 +266,14 @@ class AbstractTwoLink(AbstractManipulator):
     def base_parameter_meanings(self):
         """The groups (rigid-body inertia, gravity, geometry, friction) and meanings of the bounds."""
         rest = "hanging straight down is the stable rest"
-        return dict(theta2=("rigid-body inertia", "I2, the inertia of link 2 about the elbow"),
-                    theta3=("geometry", "g theta3 / theta5 is the length of link 1"),
-                    theta4=("gravity", rest), theta5=("gravity", rest),
-                    theta6=("friction", "viscous, at the shoulder"), theta7=("friction", "viscous, at the elbow"))
+        return dict(
+            theta2=("rigid-body inertia", "I2, the inertia of link 2 about the elbow"),
+            theta3=("geometry", "g theta3 / theta5 is the length of link 1"),
+            theta4=("gravity", rest),
+            theta5=("gravity", rest),
+            theta6=("friction", "viscous, at the shoulder"),
+            theta7=("friction", "viscous, at the elbow"),
+        )
 
     def base_parameter_conditions(self, parameters):
         r"""Rigid-body inertia ($\theta_2 > 0$, $\theta_1\theta_2 \ge \theta_3^2$), gravity
@@ -259,8 +283,11 @@ class AbstractTwoLink(AbstractManipulator):
         t1, t2, t3 = (parameters[f"theta{i}"] for i in range(1, 4))
         out = list(super().base_parameter_conditions(parameters))
         if t2 > 0 and not t1 * t2 >= t3**2:
-            out.insert(0, f"rigid-body inertia: theta1 * theta2 = {t1 * t2:.4g} must be at least theta3^2 = {t3**2:.4g} "
-                          "(else the mass matrix is singular or indefinite at some elbow angle)")
+            out.insert(
+                0,
+                f"rigid-body inertia: theta1 * theta2 = {t1 * t2:.4g} must be at least theta3^2 = {t3**2:.4g} "
+                "(else the mass matrix is singular or indefinite at some elbow angle)",
+            )
         return tuple(out)
 
 

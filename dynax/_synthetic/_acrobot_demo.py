@@ -52,9 +52,12 @@ def demo_data(
     **Returns:** `(truth, train, validation)`.
     """
     truth = Extended(Acrobot.from_physical(**DEMO_TRUTH_PHYSICAL), (term,))
-    run = synthetic_trajectory(truth, duration=train_s + validation_s, dt=0.01, amplitude=2.0, seed=seed,
-                               system_name="acrobot")
+    run = synthetic_trajectory(
+        truth, duration=train_s + validation_s, dt=0.01, amplitude=2.0, seed=seed, system_name="acrobot"
+    )
     k = int(round(train_s / 0.01)) + 1
     train = Trajectory(run.ts[:k], run.xs[:k], run.us[:k], run.state_names, run.input_names, "acrobot", "train.csv")
-    validation = Trajectory(run.ts[k:], run.xs[k:], run.us[k:], run.state_names, run.input_names, "acrobot", "validation.csv")
+    validation = Trajectory(
+        run.ts[k:], run.xs[k:], run.us[k:], run.state_names, run.input_names, "acrobot", "validation.csv"
+    )
     return truth, train, validation

@@ -3,8 +3,8 @@
 from collections.abc import Sequence
 
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float
+import numpy as np
 
 
 def multisine(
@@ -42,9 +42,7 @@ def multisine(
     return jnp.asarray(np.stack(us, axis=1))
 
 
-def filtered_noise(
-    rng: np.random.Generator, n: int, dt: float, sigma: Sequence[float], cutoff_hz: float
-) -> np.ndarray:
+def filtered_noise(rng: np.random.Generator, n: int, dt: float, sigma: Sequence[float], cutoff_hz: float) -> np.ndarray:
     r"""First-order low-pass filtered Gaussian noise with stationary standard deviation `sigma`.
 
     $e_{k+1} = a e_k + \sqrt{1 - a^2}\,\sigma w_k$ with $a = e^{-2\pi f_c \Delta t}$, started from

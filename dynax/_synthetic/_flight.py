@@ -15,8 +15,8 @@ effects in a diagnosis.
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float
+import numpy as np
 
 from .._control._closed_loop import simulate_closed_loop
 from .._data._trajectory import Trajectory
@@ -133,7 +133,11 @@ def _references(kind, n, dt, rng, hover_collective):
             yaw_rate = 2 * np.pi / 3.0
             t = np.arange(length) * dt
             ramp = np.clip(t / 0.5, 0, 1) * np.clip((duration - t) / 0.5, 0, 1)
-            quats = np.asarray(jax.vmap(quaternion_from_euler)(jnp.asarray(tilt * ramp), jnp.zeros(length), jnp.asarray(yaw + yaw_rate * t)))
+            quats = np.asarray(
+                jax.vmap(quaternion_from_euler)(
+                    jnp.asarray(tilt * ramp), jnp.zeros(length), jnp.asarray(yaw + yaw_rate * t)
+                )
+            )
             qdot = np.gradient(quats, dt, axis=0)
             conj = quats * np.array([1, -1, -1, -1])
             omegas = 2 * _batch_qmul(conj, qdot)[:, 1:]
@@ -202,8 +206,13 @@ def generate_helicopter_flight(
     references = _references(kind, n, dt, rng, controller.hover_collective)
     x0 = jnp.concatenate([hover_state(dtype=dtype), jnp.zeros(truth.n_states - 13, dtype)])
     xs, us = fly(
-        truth, controller, x0, dt,
-        jnp.asarray(references, dtype), jnp.asarray(excitation, dtype), jnp.asarray(wind, dtype),
+        truth,
+        controller,
+        x0,
+        dt,
+        jnp.asarray(references, dtype),
+        jnp.asarray(excitation, dtype),
+        jnp.asarray(wind, dtype),
     )
     return _recorded(
         xs, us, dt, rng, measurement_noise, "generate_helicopter_flight", f"dynax truth simulator ({kind}, seed {seed})"
@@ -258,8 +267,15 @@ def helicopter_flight(
     refs[:, 3] = yaw_amplitude * np.sin(2 * np.pi * t / duration + rng.uniform(-0.3, 0.3))
     kick = filtered_noise(rng, n, dt, [excitation] * 4, cutoff_hz=3.0)
     x0 = jnp.concatenate([hover_state(yaw=float(refs[0, 3]), dtype=dtype), jnp.zeros(truth.n_states - 13, dtype)])
-    xs, us = fly(truth, FlightController() if controller is None else controller, x0, dt, jnp.asarray(refs, dtype), jnp.asarray(kick, dtype),
-                 jnp.zeros((n, 3), dtype))
+    xs, us = fly(
+        truth,
+        FlightController() if controller is None else controller,
+        x0,
+        dt,
+        jnp.asarray(refs, dtype),
+        jnp.asarray(kick, dtype),
+        jnp.zeros((n, 3), dtype),
+    )
     return _recorded(xs, us, dt, rng, noise, "helicopter_flight", source)
 
 
@@ -282,8 +298,13 @@ def _recorded(xs, us, dt, rng, noise, caller, source) -> Trajectory:
     dtype = jnp.result_type(float)
     ts = np.arange(n) * dt
     return Trajectory(
-        jnp.asarray(ts, dtype), jnp.asarray(xs, dtype), jnp.asarray(np.asarray(us), dtype),
-        HELICOPTER_STATE_NAMES, HELICOPTER_INPUT_NAMES, "helicopter", source,
+        jnp.asarray(ts, dtype),
+        jnp.asarray(xs, dtype),
+        jnp.asarray(np.asarray(us), dtype),
+        HELICOPTER_STATE_NAMES,
+        HELICOPTER_INPUT_NAMES,
+        "helicopter",
+        source,
     )
 
 

@@ -42,8 +42,8 @@ from typing import ClassVar
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array
+import numpy as np
 
 from .._model._helicopter import (
     ANGULAR_RATE,

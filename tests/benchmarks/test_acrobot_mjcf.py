@@ -19,8 +19,6 @@ import dynax
 MJCF = pathlib.Path(__file__).resolve().parents[2] / "benchmarks" / "acrobot.xml"
 
 
-
-
 @pytest.fixture(scope="module")
 def model():
     mujoco = pytest.importorskip("mujoco")
@@ -107,7 +105,8 @@ def diffrax_step_rollout(system, solver, substeps):
 
 
 @pytest.mark.parametrize(
-    "solver", [diffrax.Tsit5(), diffrax.Dopri5(), dynax.RK4(), diffrax.Euler()],
+    "solver",
+    [diffrax.Tsit5(), diffrax.Dopri5(), dynax.RK4(), diffrax.Euler()],
     ids=lambda s: type(s).__name__,
 )
 def test_fixed_grid_equals_diffrax_step(solver):

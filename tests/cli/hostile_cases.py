@@ -19,6 +19,7 @@ dynax agreeing with itself. Used by `tests/cli/test_hostile_inputs.py` and by
 `experiments/hostile_inputs.py`, which tallies the outcomes against another checkout.
 """
 
+from collections.abc import Callable
 import contextlib
 import dataclasses
 import io
@@ -26,7 +27,6 @@ import json
 import os
 import pathlib
 import traceback
-from collections.abc import Callable
 
 import numpy as np
 
@@ -58,8 +58,15 @@ def _arm(theta, duration, rate_hz, drive, x0=(0.2, 0.0, 0.0, 0.0)):
     from tests.reference import arm_reference
 
     ts = np.arange(0.0, duration + 0.5 / rate_hz, 1.0 / rate_hz)
-    sol = solve_ivp(lambda t, x: arm_reference(theta, x, drive(t)), (0.0, ts[-1]), list(x0), t_eval=ts,
-                    method="DOP853", rtol=1e-10, atol=1e-11)
+    sol = solve_ivp(
+        lambda t, x: arm_reference(theta, x, drive(t)),
+        (0.0, ts[-1]),
+        list(x0),
+        t_eval=ts,
+        method="DOP853",
+        rtol=1e-10,
+        atol=1e-11,
+    )
     return ts, sol.y.T, np.array([drive(t) for t in ts])
 
 
@@ -122,10 +129,12 @@ def _heli(folder, fx, edit, name="heli_bad.csv"):
 
 def _set(rows, column, value, header=ACROBOT):
     """An edit that sets `column` at `rows` (an index or slice) to `value` (a number, or a function of the old)."""
+
     def edit(t):
         j = header.index(column)
         t[rows, j] = value(t[rows, j]) if callable(value) else value
         return t
+
     return edit
 
 
@@ -143,10 +152,15 @@ def _diagnose(path, *extra, out="report", system="acrobot"):
 def params_close(tolerance=0.02, names=tuple(TRUTH), friction_tolerance=0.05):
     """The written parameters within `tolerance` of the truth (`friction_tolerance` for theta6, theta7: on a
     clean 8 s record at 100 Hz the dynamic model leaves them 1 to 3 % off)."""
+
     def check(out):
         obj = json.loads(pathlib.Path(out).read_text())["parameters"]
-        return all(isinstance(obj.get(n), float) and abs(obj[n] / TRUTH[n] - 1)
-                   < (friction_tolerance if n in ("theta6", "theta7") else tolerance) for n in names)
+        return all(
+            isinstance(obj.get(n), float)
+            and abs(obj[n] / TRUTH[n] - 1) < (friction_tolerance if n in ("theta6", "theta7") else tolerance)
+            for n in names
+        )
+
     return check
 
 
@@ -157,6 +171,7 @@ def _heli_fitted(out):
 
 def _python(call, exception, *needles):
     """A Python case: `call()` must raise `exception` with every needle in its message."""
+
     def run():
         try:
             call()
@@ -165,6 +180,7 @@ def _python(call, exception, *needles):
         except Exception as e:  # noqa: BLE001 - another exception is a failure of its own
             return "other exception", f"{type(e).__name__}: {e}"
         return "returned", ""
+
     run.needles = needles
     return run
 
@@ -192,9 +208,14 @@ def _model(folder, gravity):
     from dynax.internal import initial_helicopter
 
     body = initial_helicopter("acceleration").body_model
-    obj = {"system": "helicopter", "model": "acceleration", "features": list(body.feature_names),
-           "mask": [[int(v) for v in row] for row in body.mask], "weights": np.asarray(body.weights).tolist(),
-           "gravity": gravity}
+    obj = {
+        "system": "helicopter",
+        "model": "acceleration",
+        "features": list(body.feature_names),
+        "mask": [[int(v) for v in row] for row in body.mask],
+        "weights": np.asarray(body.weights).tolist(),
+        "gravity": gravity,
+    }
     (folder / "model.json").write_text(json.dumps(obj))
     return str(folder / "model.json")
 
@@ -203,6 +224,7 @@ def _tail(seconds, factor, column="dq2"):
     def edit(t):
         t[t[:, 0] > t[-1, 0] - seconds, ACROBOT.index(column)] *= factor
         return t
+
     return edit
 
 
@@ -210,6 +232,7 @@ def _shift(column, start, amount, header=ACROBOT):
     def edit(t):
         t[start:, header.index(column)] += amount
         return t
+
     return edit
 
 
@@ -217,6 +240,7 @@ def _swap_rows(a, b):
     def edit(t):
         t[[a, b]] = t[[b, a]]
         return t
+
     return edit
 
 
@@ -224,6 +248,7 @@ def _time_scale(factor):
     def edit(t):
         t[:, 0] *= factor
         return t
+
     return edit
 
 
@@ -231,12 +256,14 @@ def _heli_set(column, rows, value):
     def edit(header, t):
         t[rows, header.index(column)] = value(t[rows, header.index(column)]) if callable(value) else value
         return t
+
     return edit
 
 
 def _with_tau1(values):
     def edit(t):
         return np.column_stack([t, values(t)])
+
     return edit
 
 
@@ -245,174 +272,521 @@ def _with_tau1(values):
 C = Case
 CASES = [
     # Single-sample glitches: refused at the sample, with the stretch to cut.
-    C("glitch-dq2-460", "glitch", lambda d, fx: _identify(_acrobot(d, fx, _set(300, "dq2", 460.0))), "refuse",
-      ("column 'dq2'", "row 301", "--exclude 2.99:3.01")),
-    C("glitch-q1-jump", "glitch", lambda d, fx: _identify(_acrobot(d, fx, _set(250, "q1", lambda v: v + 40.0))), "refuse",
-      ("column 'q1'", "row 251")),
-    C("glitch-tau2-spike", "glitch", lambda d, fx: _identify(_acrobot(d, fx, _set(400, "tau2", 1e4))), "refuse",
-      ("column 'tau2'", "row 401")),
-    C("glitch-two-samples", "glitch", lambda d, fx: _identify(_acrobot(d, fx, _set(slice(500, 502), "dq1", -300.0))),
-      "refuse", ("column 'dq1'", "rows 501-502")),
-    C("glitch-first-sample", "glitch", lambda d, fx: _identify(_acrobot(d, fx, _set(0, "dq1", 500.0))), "refuse",
-      ("column 'dq1'", "row 1", "--exclude :0.01")),
-    C("glitch-last-sample", "glitch", lambda d, fx: _identify(_acrobot(d, fx, _set(-1, "q2", 99.0))), "refuse",
-      ("column 'q2'", "row 801")),
-    C("glitch-encoder-only", "glitch", lambda d, fx: _identify(_encoders(d, fx, _set(300, "q2", lambda v: v + 30.0,
-                                                                                     ENCODERS))), "refuse",
-      ("column 'q2'", "row 301")),
-    C("glitch-heli-gyro-460", "glitch", lambda d, fx: ["fit", "helicopter", _heli(d, fx, _heli_set("p", 200, 460.0)),
-                                                       "--out", "out.json"], "refuse", ("column 'p'", "row 201")),
-    C("glitch-diagnose", "glitch", lambda d, fx: _diagnose(_acrobot(d, fx, _set(350, "dq2", -460.0))), "refuse",
-      ("column 'dq2'", "row 351")),
+    C(
+        "glitch-dq2-460",
+        "glitch",
+        lambda d, fx: _identify(_acrobot(d, fx, _set(300, "dq2", 460.0))),
+        "refuse",
+        ("column 'dq2'", "row 301", "--exclude 2.99:3.01"),
+    ),
+    C(
+        "glitch-q1-jump",
+        "glitch",
+        lambda d, fx: _identify(_acrobot(d, fx, _set(250, "q1", lambda v: v + 40.0))),
+        "refuse",
+        ("column 'q1'", "row 251"),
+    ),
+    C(
+        "glitch-tau2-spike",
+        "glitch",
+        lambda d, fx: _identify(_acrobot(d, fx, _set(400, "tau2", 1e4))),
+        "refuse",
+        ("column 'tau2'", "row 401"),
+    ),
+    C(
+        "glitch-two-samples",
+        "glitch",
+        lambda d, fx: _identify(_acrobot(d, fx, _set(slice(500, 502), "dq1", -300.0))),
+        "refuse",
+        ("column 'dq1'", "rows 501-502"),
+    ),
+    C(
+        "glitch-first-sample",
+        "glitch",
+        lambda d, fx: _identify(_acrobot(d, fx, _set(0, "dq1", 500.0))),
+        "refuse",
+        ("column 'dq1'", "row 1", "--exclude :0.01"),
+    ),
+    C(
+        "glitch-last-sample",
+        "glitch",
+        lambda d, fx: _identify(_acrobot(d, fx, _set(-1, "q2", 99.0))),
+        "refuse",
+        ("column 'q2'", "row 801"),
+    ),
+    C(
+        "glitch-encoder-only",
+        "glitch",
+        lambda d, fx: _identify(_encoders(d, fx, _set(300, "q2", lambda v: v + 30.0, ENCODERS))),
+        "refuse",
+        ("column 'q2'", "row 301"),
+    ),
+    C(
+        "glitch-heli-gyro-460",
+        "glitch",
+        lambda d, fx: ["fit", "helicopter", _heli(d, fx, _heli_set("p", 200, 460.0)), "--out", "out.json"],
+        "refuse",
+        ("column 'p'", "row 201"),
+    ),
+    C(
+        "glitch-diagnose",
+        "glitch",
+        lambda d, fx: _diagnose(_acrobot(d, fx, _set(350, "dq2", -460.0))),
+        "refuse",
+        ("column 'dq2'", "row 351"),
+    ),
     # Stuck sensors.
-    C("stuck-dq1-1s", "stuck", lambda d, fx: _identify(_acrobot(d, fx, _set(slice(300, 400), "dq1", lambda v: v[0]))),
-      "refuse", ("column 'dq1'", "rows 301-400")),
-    C("stuck-q2-tail", "stuck", lambda d, fx: _identify(_acrobot(d, fx, _set(slice(600, None), "q2", lambda v: v[0]))),
-      "refuse", ("column 'q2'", "rows 601-801")),
-    C("stuck-encoder-q1", "stuck", lambda d, fx: _identify(_encoders(d, fx, _set(slice(200, 350), "q1", lambda v: v[0],
-                                                                                ENCODERS))),
-      "refuse", ("column 'q1'", "rows 201-350")),
-    C("stuck-heli-r", "stuck", lambda d, fx: ["fit", "helicopter", _heli(d, fx, _heli_set("r", slice(100, 250),
-                                                                                        lambda v: v[0])),
-                                              "--out", "out.json"], "refuse", ("column 'r'", "rows 101-250")),
+    C(
+        "stuck-dq1-1s",
+        "stuck",
+        lambda d, fx: _identify(_acrobot(d, fx, _set(slice(300, 400), "dq1", lambda v: v[0]))),
+        "refuse",
+        ("column 'dq1'", "rows 301-400"),
+    ),
+    C(
+        "stuck-q2-tail",
+        "stuck",
+        lambda d, fx: _identify(_acrobot(d, fx, _set(slice(600, None), "q2", lambda v: v[0]))),
+        "refuse",
+        ("column 'q2'", "rows 601-801"),
+    ),
+    C(
+        "stuck-encoder-q1",
+        "stuck",
+        lambda d, fx: _identify(_encoders(d, fx, _set(slice(200, 350), "q1", lambda v: v[0], ENCODERS))),
+        "refuse",
+        ("column 'q1'", "rows 201-350"),
+    ),
+    C(
+        "stuck-heli-r",
+        "stuck",
+        lambda d, fx: [
+            "fit",
+            "helicopter",
+            _heli(d, fx, _heli_set("r", slice(100, 250), lambda v: v[0])),
+            "--out",
+            "out.json",
+        ],
+        "refuse",
+        ("column 'r'", "rows 101-250"),
+    ),
     # Wrapped angles.
-    C("wrapped-q1", "wrapped", lambda d, fx: _identify(_acrobot(d, fx, _shift("q1", 400, -2 * np.pi))), "refuse",
-      ("column 'q1'", "rows 400-401", "unwrap")),
-    C("wrapped-q2-encoder-only", "wrapped", lambda d, fx: _identify(_encoders(d, fx, _shift("q2", 333, 2 * np.pi,
-                                                                                           ENCODERS))),
-      "refuse", ("column 'q2'", "rows 333-334")),
-    C("wrapped-diagnose", "wrapped", lambda d, fx: _diagnose(_acrobot(d, fx, _shift("q2", 500, 4 * np.pi))), "refuse",
-      ("column 'q2'", "unwrap")),
+    C(
+        "wrapped-q1",
+        "wrapped",
+        lambda d, fx: _identify(_acrobot(d, fx, _shift("q1", 400, -2 * np.pi))),
+        "refuse",
+        ("column 'q1'", "rows 400-401", "unwrap"),
+    ),
+    C(
+        "wrapped-q2-encoder-only",
+        "wrapped",
+        lambda d, fx: _identify(_encoders(d, fx, _shift("q2", 333, 2 * np.pi, ENCODERS))),
+        "refuse",
+        ("column 'q2'", "rows 333-334"),
+    ),
+    C(
+        "wrapped-diagnose",
+        "wrapped",
+        lambda d, fx: _diagnose(_acrobot(d, fx, _shift("q2", 500, 4 * np.pi))),
+        "refuse",
+        ("column 'q2'", "unwrap"),
+    ),
     # A velocity that stops agreeing with its position in a stretch: named, never a --scale.
-    C("velocity-tail-1.2s-x3", "velocity", lambda d, fx: _identify(_acrobot(d, fx, _tail(1.2, 3.0))), "refuse",
-      ("column 'dq2'", "--exclude 6.8"), ("--scale",)),
-    C("velocity-tail-1.2s-zero", "velocity", lambda d, fx: _identify(_acrobot(d, fx, _tail(1.2, 0.0))), "refuse",
-      ("column 'dq2'", "t = 6.8"), ("--scale",)),
-    C("velocity-sign-flips-halfway", "velocity",
-      lambda d, fx: _identify(_acrobot(d, fx, _set(slice(400, None), "dq1", lambda v: -v))), "refuse",
-      ("column 'dq1'", "t = 4"), ("--scale",)),
-    C("velocity-sign-flips-diagnose", "velocity",
-      lambda d, fx: _diagnose(_acrobot(d, fx, _set(slice(400, None), "dq2", lambda v: -v))), "refuse",
-      ("column 'dq2'",), ("--scale",)),
-    C("velocity-stretch-middle", "velocity", lambda d, fx: _identify(_acrobot(d, fx, _set(slice(300, 420), "dq2",
-                                                                                       lambda v: 2.5 * v))),
-      "refuse", ("column 'dq2'", "--exclude 2.9"), ("--scale",)),
-    C("velocity-degrees-everywhere", "velocity", lambda d, fx: _identify(_acrobot(d, fx, _set(slice(None), "dq1",
-                                                                                           lambda v: v * 180 / np.pi))),
-      "refuse", ("column 'dq1'", "--scale dq1=0.0174533")),
-    C("velocity-tail-cut-with-exclude", "velocity",
-      lambda d, fx: _identify(_acrobot(d, fx, _tail(1.2, 3.0)), "--exclude", "6.8:", method="dynamic"), "accept",
-      check=params_close(), heavy=True),
-    C("glitch-cut-with-exclude", "glitch",
-      lambda d, fx: _identify(_acrobot(d, fx, _set(300, "dq2", 460.0)), "--exclude", "2.99:3.01", method="dynamic"), "accept",
-      check=params_close(), heavy=True),
+    C(
+        "velocity-tail-1.2s-x3",
+        "velocity",
+        lambda d, fx: _identify(_acrobot(d, fx, _tail(1.2, 3.0))),
+        "refuse",
+        ("column 'dq2'", "--exclude 6.8"),
+        ("--scale",),
+    ),
+    C(
+        "velocity-tail-1.2s-zero",
+        "velocity",
+        lambda d, fx: _identify(_acrobot(d, fx, _tail(1.2, 0.0))),
+        "refuse",
+        ("column 'dq2'", "t = 6.8"),
+        ("--scale",),
+    ),
+    C(
+        "velocity-sign-flips-halfway",
+        "velocity",
+        lambda d, fx: _identify(_acrobot(d, fx, _set(slice(400, None), "dq1", lambda v: -v))),
+        "refuse",
+        ("column 'dq1'", "t = 4"),
+        ("--scale",),
+    ),
+    C(
+        "velocity-sign-flips-diagnose",
+        "velocity",
+        lambda d, fx: _diagnose(_acrobot(d, fx, _set(slice(400, None), "dq2", lambda v: -v))),
+        "refuse",
+        ("column 'dq2'",),
+        ("--scale",),
+    ),
+    C(
+        "velocity-stretch-middle",
+        "velocity",
+        lambda d, fx: _identify(_acrobot(d, fx, _set(slice(300, 420), "dq2", lambda v: 2.5 * v))),
+        "refuse",
+        ("column 'dq2'", "--exclude 2.9"),
+        ("--scale",),
+    ),
+    C(
+        "velocity-degrees-everywhere",
+        "velocity",
+        lambda d, fx: _identify(_acrobot(d, fx, _set(slice(None), "dq1", lambda v: v * 180 / np.pi))),
+        "refuse",
+        ("column 'dq1'", "--scale dq1=0.0174533"),
+    ),
+    C(
+        "velocity-tail-cut-with-exclude",
+        "velocity",
+        lambda d, fx: _identify(_acrobot(d, fx, _tail(1.2, 3.0)), "--exclude", "6.8:", method="dynamic"),
+        "accept",
+        check=params_close(),
+        heavy=True,
+    ),
+    C(
+        "glitch-cut-with-exclude",
+        "glitch",
+        lambda d, fx: _identify(_acrobot(d, fx, _set(300, "dq2", 460.0)), "--exclude", "2.99:3.01", method="dynamic"),
+        "accept",
+        check=params_close(),
+        heavy=True,
+    ),
     # Zero or constant columns.
-    C("zero-input-tau2", "zero", lambda d, fx: _identify(_acrobot(d, fx, table="free")), "refuse",
-      ("column 'tau2'", "nothing drives")),
-    C("zero-input-dynamic", "zero", lambda d, fx: _identify(_acrobot(d, fx, table="free"), method="dynamic"), "refuse",
-      ("column 'tau2'",)),
-    C("constant-input-tau2", "zero", lambda d, fx: _identify(_acrobot(d, fx, _set(slice(None), "tau2", 0.7))),
-      "refuse", ("column 'tau2'", "constant")),
-    C("locked-elbow", "zero", lambda d, fx: _identify(_acrobot(d, fx, lambda t: (t.__setitem__((slice(None), [2, 4]), 0.0),
-                                                                                 t)[1])),
-      "refuse", ("column 'q2'", "never moves")),
-    C("zero-tau1-double-pendulum", "zero",
-      lambda d, fx: _identify(_acrobot(d, fx, lambda t: np.column_stack([t[:, :5], np.zeros(len(t)), t[:, 5]]),
-                                       header=PENDULUM), system="double_pendulum", method="dynamic"),
-      "warn", ("column 'tau1'",), check=params_close(0.05, ("theta1", "theta2", "theta3", "theta4", "theta5")),
-      heavy=True),
+    C(
+        "zero-input-tau2",
+        "zero",
+        lambda d, fx: _identify(_acrobot(d, fx, table="free")),
+        "refuse",
+        ("column 'tau2'", "nothing drives"),
+    ),
+    C(
+        "zero-input-dynamic",
+        "zero",
+        lambda d, fx: _identify(_acrobot(d, fx, table="free"), method="dynamic"),
+        "refuse",
+        ("column 'tau2'",),
+    ),
+    C(
+        "constant-input-tau2",
+        "zero",
+        lambda d, fx: _identify(_acrobot(d, fx, _set(slice(None), "tau2", 0.7))),
+        "refuse",
+        ("column 'tau2'", "constant"),
+    ),
+    C(
+        "locked-elbow",
+        "zero",
+        lambda d, fx: _identify(_acrobot(d, fx, lambda t: (t.__setitem__((slice(None), [2, 4]), 0.0), t)[1])),
+        "refuse",
+        ("column 'q2'", "never moves"),
+    ),
+    C(
+        "zero-tau1-double-pendulum",
+        "zero",
+        lambda d, fx: _identify(
+            _acrobot(d, fx, lambda t: np.column_stack([t[:, :5], np.zeros(len(t)), t[:, 5]]), header=PENDULUM),
+            system="double_pendulum",
+            method="dynamic",
+        ),
+        "warn",
+        ("column 'tau1'",),
+        check=params_close(0.05, ("theta1", "theta2", "theta3", "theta4", "theta5")),
+        heavy=True,
+    ),
     # Inputs the system ignores.
-    C("ignored-tau1-acrobot", "ignored_input",
-      lambda d, fx: _identify(_acrobot(d, fx, header=PENDULUM, table="pendulum")), "refuse",
-      ("column 'tau1'", "double_pendulum")),
-    C("ignored-tau1-diagnose", "ignored_input",
-      lambda d, fx: _diagnose(_acrobot(d, fx, header=PENDULUM, table="pendulum")), "refuse", ("column 'tau1'",)),
-    C("zero-tau1-column-acrobot", "ignored_input",
-      lambda d, fx: _identify(_acrobot(d, fx, _with_tau1(lambda t: np.zeros(len(t))), header=ACROBOT + ("tau1",)), method="dynamic"),
-      "accept", check=params_close(), heavy=True),
+    C(
+        "ignored-tau1-acrobot",
+        "ignored_input",
+        lambda d, fx: _identify(_acrobot(d, fx, header=PENDULUM, table="pendulum")),
+        "refuse",
+        ("column 'tau1'", "double_pendulum"),
+    ),
+    C(
+        "ignored-tau1-diagnose",
+        "ignored_input",
+        lambda d, fx: _diagnose(_acrobot(d, fx, header=PENDULUM, table="pendulum")),
+        "refuse",
+        ("column 'tau1'",),
+    ),
+    C(
+        "zero-tau1-column-acrobot",
+        "ignored_input",
+        lambda d, fx: _identify(
+            _acrobot(d, fx, _with_tau1(lambda t: np.zeros(len(t))), header=ACROBOT + ("tau1",)), method="dynamic"
+        ),
+        "accept",
+        check=params_close(),
+        heavy=True,
+    ),
     # Time units.
-    C("time-ms-with-velocities", "time_units", lambda d, fx: _identify(_acrobot(d, fx, _time_scale(1e3))), "refuse",
-      ("--scale t=0.001",), ("dq1=0.001", "dq2=0.001")),
-    C("time-ms-encoder-only", "time_units", lambda d, fx: _identify(_encoders(d, fx, _time_scale(1e3))), "refuse",
-      ("column 't'", "--scale t=0.001")),
-    C("time-us", "time_units", lambda d, fx: _identify(_acrobot(d, fx, _time_scale(1e6))), "refuse",
-      ("t=1e-06",)),
-    C("time-ms-diagnose", "time_units", lambda d, fx: _diagnose(_acrobot(d, fx, _time_scale(1e3))), "refuse",
-      ("--scale t=0.001",)),
-    C("time-ms-scaled-back", "time_units",
-      lambda d, fx: _identify(_acrobot(d, fx, _time_scale(1e3)), "--scale", "t=0.001", method="dynamic"), "accept",
-      check=params_close(), heavy=True),
-    C("diagnose-dt-10", "time_units", lambda d, fx: _diagnose(fx["acrobot_csv"], "--dt", "10"), "refuse",
-      ("--dt 10", "at most")),
+    C(
+        "time-ms-with-velocities",
+        "time_units",
+        lambda d, fx: _identify(_acrobot(d, fx, _time_scale(1e3))),
+        "refuse",
+        ("--scale t=0.001",),
+        ("dq1=0.001", "dq2=0.001"),
+    ),
+    C(
+        "time-ms-encoder-only",
+        "time_units",
+        lambda d, fx: _identify(_encoders(d, fx, _time_scale(1e3))),
+        "refuse",
+        ("column 't'", "--scale t=0.001"),
+    ),
+    C("time-us", "time_units", lambda d, fx: _identify(_acrobot(d, fx, _time_scale(1e6))), "refuse", ("t=1e-06",)),
+    C(
+        "time-ms-diagnose",
+        "time_units",
+        lambda d, fx: _diagnose(_acrobot(d, fx, _time_scale(1e3))),
+        "refuse",
+        ("--scale t=0.001",),
+    ),
+    C(
+        "time-ms-scaled-back",
+        "time_units",
+        lambda d, fx: _identify(_acrobot(d, fx, _time_scale(1e3)), "--scale", "t=0.001", method="dynamic"),
+        "accept",
+        check=params_close(),
+        heavy=True,
+    ),
+    C(
+        "diagnose-dt-10",
+        "time_units",
+        lambda d, fx: _diagnose(fx["acrobot_csv"], "--dt", "10"),
+        "refuse",
+        ("--dt 10", "at most"),
+    ),
     # The same record twice, or as its own validation.
-    C("same-file-twice", "duplicate", lambda d, fx: ["identify", "acrobot", fx["acrobot_csv"], fx["acrobot_csv"],
-                                                     "--out", "out.json"], "refuse", ("same data",)),
-    C("copy-under-another-name", "duplicate",
-      lambda d, fx: ["identify", "acrobot", fx["acrobot_csv"], _acrobot(d, fx, name="copy.csv"), "--out", "out.json"],
-      "refuse", ("copy.csv", "same data")),
-    C("validation-is-the-data", "duplicate",
-      lambda d, fx: ["identify", "acrobot", fx["acrobot_csv"], "--validation", fx["acrobot_csv"], "--out", "out.json"],
-      "refuse", ("in-sample",)),
-    C("diagnose-validation-is-the-data", "duplicate",
-      lambda d, fx: _diagnose(fx["acrobot_csv"], "--validation", _acrobot(d, fx, name="v.csv")), "refuse",
-      ("in-sample",)),
+    C(
+        "same-file-twice",
+        "duplicate",
+        lambda d, fx: ["identify", "acrobot", fx["acrobot_csv"], fx["acrobot_csv"], "--out", "out.json"],
+        "refuse",
+        ("same data",),
+    ),
+    C(
+        "copy-under-another-name",
+        "duplicate",
+        lambda d, fx: ["identify", "acrobot", fx["acrobot_csv"], _acrobot(d, fx, name="copy.csv"), "--out", "out.json"],
+        "refuse",
+        ("copy.csv", "same data"),
+    ),
+    C(
+        "validation-is-the-data",
+        "duplicate",
+        lambda d, fx: [
+            "identify",
+            "acrobot",
+            fx["acrobot_csv"],
+            "--validation",
+            fx["acrobot_csv"],
+            "--out",
+            "out.json",
+        ],
+        "refuse",
+        ("in-sample",),
+    ),
+    C(
+        "diagnose-validation-is-the-data",
+        "duplicate",
+        lambda d, fx: _diagnose(fx["acrobot_csv"], "--validation", _acrobot(d, fx, name="v.csv")),
+        "refuse",
+        ("in-sample",),
+    ),
     # Non-finite values, unsorted time, absurd magnitudes.
-    C("nan-in-dq2", "non_finite", lambda d, fx: _identify(_acrobot(d, fx, _set(123, "dq2", np.nan))), "refuse",
-      ("column 'dq2'", "row 124")),
-    C("inf-in-tau2", "non_finite", lambda d, fx: _identify(_acrobot(d, fx, _set(77, "tau2", np.inf))), "refuse",
-      ("column 'tau2'", "row 78")),
-    C("two-rows-swapped", "time", lambda d, fx: _identify(_acrobot(d, fx, _swap_rows(200, 201))), "refuse",
-      ("column 't'", "row 202")),
-    C("time-reversed-diagnose", "time", lambda d, fx: _diagnose(_acrobot(d, fx, lambda t: t[::-1])), "refuse",
-      ("time does not strictly increase",)),
-    C("huge-value-1e13", "magnitude", lambda d, fx: _identify(_acrobot(d, fx, _set(40, "q1", 1e13))), "refuse",
-      ("column 'q1'", "row 41")),
-    C("heli-huge-gyro-1e6", "magnitude", lambda d, fx: ["fit", "helicopter", _heli(d, fx, _heli_set("q", 50, 1e6)),
-                                                        "--out", "out.json"], "refuse", ("column 'q'", "row 51")),
+    C(
+        "nan-in-dq2",
+        "non_finite",
+        lambda d, fx: _identify(_acrobot(d, fx, _set(123, "dq2", np.nan))),
+        "refuse",
+        ("column 'dq2'", "row 124"),
+    ),
+    C(
+        "inf-in-tau2",
+        "non_finite",
+        lambda d, fx: _identify(_acrobot(d, fx, _set(77, "tau2", np.inf))),
+        "refuse",
+        ("column 'tau2'", "row 78"),
+    ),
+    C(
+        "two-rows-swapped",
+        "time",
+        lambda d, fx: _identify(_acrobot(d, fx, _swap_rows(200, 201))),
+        "refuse",
+        ("column 't'", "row 202"),
+    ),
+    C(
+        "time-reversed-diagnose",
+        "time",
+        lambda d, fx: _diagnose(_acrobot(d, fx, lambda t: t[::-1])),
+        "refuse",
+        ("time does not strictly increase",),
+    ),
+    C(
+        "huge-value-1e13",
+        "magnitude",
+        lambda d, fx: _identify(_acrobot(d, fx, _set(40, "q1", 1e13))),
+        "refuse",
+        ("column 'q1'", "row 41"),
+    ),
+    C(
+        "heli-huge-gyro-1e6",
+        "magnitude",
+        lambda d, fx: ["fit", "helicopter", _heli(d, fx, _heli_set("q", 50, 1e6)), "--out", "out.json"],
+        "refuse",
+        ("column 'q'", "row 51"),
+    ),
     # Impossible models.
-    C("nominal-negative-theta1-theta4", "model",
-      lambda d, fx: _diagnose(fx["acrobot_csv"], "--mode", "known", "--nominal",
-                              _nominal(d, '{"parameters": {"theta1": -1.333, "theta4": -14.715}}')),
-      "refuse", ("theta1", "theta4", "nominal.json")),
-    C("nominal-indefinite-mass-matrix", "model",
-      lambda d, fx: _diagnose(fx["acrobot_csv"], "--nominal",
-                              _nominal(d, '{"parameters": {"theta1": 0.2, "theta2": 0.3, "theta3": 1.0}}')),
-      "refuse", ("theta1 * theta2",)),
-    C("nominal-negative-mass-axis", "model",
-      lambda d, fx: ["diagnose", "linear_axis", write_table(d / "axis.csv", ("t", "q", "force"),
-                                                            np.column_stack([fx["acrobot"][:, 0], fx["acrobot"][:, 1],
-                                                                             fx["acrobot"][:, 5]])),
-                     "--nominal", _nominal(d, '{"parameters": {"mass": -2.0}}'), "--out", "report"],
-      "refuse", ("mass",)),
-    C("model-file-negative-gravity", "model",
-      lambda d, fx: ["evaluate", _model(d, -9.81), _heli(d, fx, lambda h, t: t), "--horizons", "0.1", "--out", "m.json"],
-      "refuse", ("gravity",)),
-    C("from-physical-negative-I2", "model",
-      lambda d, fx: _python(_from_physical_negative_inertia, ValueError, "I2"), "refuse", ("I2",)),
+    C(
+        "nominal-negative-theta1-theta4",
+        "model",
+        lambda d, fx: _diagnose(
+            fx["acrobot_csv"],
+            "--mode",
+            "known",
+            "--nominal",
+            _nominal(d, '{"parameters": {"theta1": -1.333, "theta4": -14.715}}'),
+        ),
+        "refuse",
+        ("theta1", "theta4", "nominal.json"),
+    ),
+    C(
+        "nominal-indefinite-mass-matrix",
+        "model",
+        lambda d, fx: _diagnose(
+            fx["acrobot_csv"], "--nominal", _nominal(d, '{"parameters": {"theta1": 0.2, "theta2": 0.3, "theta3": 1.0}}')
+        ),
+        "refuse",
+        ("theta1 * theta2",),
+    ),
+    C(
+        "nominal-negative-mass-axis",
+        "model",
+        lambda d, fx: [
+            "diagnose",
+            "linear_axis",
+            write_table(
+                d / "axis.csv",
+                ("t", "q", "force"),
+                np.column_stack([fx["acrobot"][:, 0], fx["acrobot"][:, 1], fx["acrobot"][:, 5]]),
+            ),
+            "--nominal",
+            _nominal(d, '{"parameters": {"mass": -2.0}}'),
+            "--out",
+            "report",
+        ],
+        "refuse",
+        ("mass",),
+    ),
+    C(
+        "model-file-negative-gravity",
+        "model",
+        lambda d, fx: [
+            "evaluate",
+            _model(d, -9.81),
+            _heli(d, fx, lambda h, t: t),
+            "--horizons",
+            "0.1",
+            "--out",
+            "m.json",
+        ],
+        "refuse",
+        ("gravity",),
+    ),
+    C(
+        "from-physical-negative-I2",
+        "model",
+        lambda d, fx: _python(_from_physical_negative_inertia, ValueError, "I2"),
+        "refuse",
+        ("I2",),
+    ),
     # Bad arguments.
-    C("identify-one-sample", "args", lambda d, fx: _identify(_acrobot(d, fx, lambda t: t[:1])), "refuse",
-      ("has 1 samples",)),
-    C("python-identify-one-sample", "args",
-      lambda d, fx: _python(_identify_one_sample, ValueError, "1 sample"), "refuse", ("1 sample",)),
-    C("demo-seed-huge", "args", lambda d, fx: ["demo", "--seed", "99999999999999999999999", "--out", "demo"],
-      "refuse", ("--seed",)),
-    C("out-name-too-long", "args", lambda d, fx: _identify(fx["acrobot_csv"], out="x" * 300 + ".json"), "refuse",
-      ("--out", "bytes long")),
-    C("out-path-too-long", "args", lambda d, fx: _identify(fx["acrobot_csv"], out="x/" * 2100 + "o.json"), "refuse",
-      ("--out",)),
-    C("exclude-malformed", "args", lambda d, fx: _identify(fx["acrobot_csv"], "--exclude", "5"), "refuse",
-      ("--exclude",)),
-    C("exclude-reversed", "args", lambda d, fx: _identify(fx["acrobot_csv"], "--exclude", "5:3"), "refuse",
-      ("--exclude", "T0 < T1")),
-    C("exclude-everything", "args", lambda d, fx: _identify(fx["acrobot_csv"], "--exclude", ":"), "refuse",
-      ("--exclude leaves nothing",)),
-    C("exclude-unknown-file", "args", lambda d, fx: _identify(fx["acrobot_csv"], "--exclude", "nofile.csv@1:2"),
-      "refuse", ("nofile.csv",)),
+    C(
+        "identify-one-sample",
+        "args",
+        lambda d, fx: _identify(_acrobot(d, fx, lambda t: t[:1])),
+        "refuse",
+        ("has 1 samples",),
+    ),
+    C(
+        "python-identify-one-sample",
+        "args",
+        lambda d, fx: _python(_identify_one_sample, ValueError, "1 sample"),
+        "refuse",
+        ("1 sample",),
+    ),
+    C(
+        "demo-seed-huge",
+        "args",
+        lambda d, fx: ["demo", "--seed", "99999999999999999999999", "--out", "demo"],
+        "refuse",
+        ("--seed",),
+    ),
+    C(
+        "out-name-too-long",
+        "args",
+        lambda d, fx: _identify(fx["acrobot_csv"], out="x" * 300 + ".json"),
+        "refuse",
+        ("--out", "bytes long"),
+    ),
+    C(
+        "out-path-too-long",
+        "args",
+        lambda d, fx: _identify(fx["acrobot_csv"], out="x/" * 2100 + "o.json"),
+        "refuse",
+        ("--out",),
+    ),
+    C(
+        "exclude-malformed",
+        "args",
+        lambda d, fx: _identify(fx["acrobot_csv"], "--exclude", "5"),
+        "refuse",
+        ("--exclude",),
+    ),
+    C(
+        "exclude-reversed",
+        "args",
+        lambda d, fx: _identify(fx["acrobot_csv"], "--exclude", "5:3"),
+        "refuse",
+        ("--exclude", "T0 < T1"),
+    ),
+    C(
+        "exclude-everything",
+        "args",
+        lambda d, fx: _identify(fx["acrobot_csv"], "--exclude", ":"),
+        "refuse",
+        ("--exclude leaves nothing",),
+    ),
+    C(
+        "exclude-unknown-file",
+        "args",
+        lambda d, fx: _identify(fx["acrobot_csv"], "--exclude", "nofile.csv@1:2"),
+        "refuse",
+        ("nofile.csv",),
+    ),
     # Clean records must keep their right answers.
-    C("clean-contract-file", "clean", lambda d, fx: _identify(fx["acrobot_csv"], method="dynamic"), "accept",
-      check=params_close(), heavy=True),
-    C("clean-encoder-only", "clean", lambda d, fx: _identify(_encoders(d, fx), method="dynamic"), "accept",
-      check=params_close(), heavy=True),
+    C(
+        "clean-contract-file",
+        "clean",
+        lambda d, fx: _identify(fx["acrobot_csv"], method="dynamic"),
+        "accept",
+        check=params_close(),
+        heavy=True,
+    ),
+    C(
+        "clean-encoder-only",
+        "clean",
+        lambda d, fx: _identify(_encoders(d, fx), method="dynamic"),
+        "accept",
+        check=params_close(),
+        heavy=True,
+    ),
 ]
 
 
@@ -453,8 +827,15 @@ def run_case(case: Case, folder, fixtures, main) -> Outcome:
         if callable(built):
             result, text = built()
             ok = result == "raised" and all(n in text for n in built.needles)
-            verdict = ("refused correctly" if ok else "silent failure" if result == "returned"
-                       else "traceback" if result == "other exception" else "refused badly (message)")
+            verdict = (
+                "refused correctly"
+                if ok
+                else "silent failure"
+                if result == "returned"
+                else "traceback"
+                if result == "other exception"
+                else "refused badly (message)"
+            )
             return Outcome(case.id, result, text, verdict)
         argv = [str(a) for a in built]
         out = pathlib.Path(argv[argv.index("--out") + 1]) if "--out" in argv else folder / "dynax-demo"

@@ -14,8 +14,19 @@ pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more
 def _identify(csv, out, cache_dir, *extra):
     env = {k: v for k, v in os.environ.items() if k != "DYNAX_NO_CACHE"}
     env["DYNAX_CACHE_DIR"] = str(cache_dir)
-    cmd = [sys.executable, "-m", "dynax", "identify", "acrobot", str(csv), "--method", "simulation",
-           "--out", str(out), *extra]
+    cmd = [
+        sys.executable,
+        "-m",
+        "dynax",
+        "identify",
+        "acrobot",
+        str(csv),
+        "--method",
+        "simulation",
+        "--out",
+        str(out),
+        *extra,
+    ]
     done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     return json.loads(out.read_text())

@@ -8,10 +8,10 @@ make the data worse. Cases that run a fit are `heavy`.
 
 import warnings
 
-import numpy as np
-import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+import numpy as np
+import pytest
 
 import dynax
 from dynax.internal import cli_main as main
@@ -38,8 +38,22 @@ def test_hostile_input_gets_a_right_answer_or_a_located_refusal(case, fixtures, 
 
 def test_the_corpus_covers_every_class_of_fault():
     kinds = {c.kind for c in CASES}
-    assert {"glitch", "stuck", "wrapped", "velocity", "zero", "ignored_input", "time_units", "duplicate",
-            "non_finite", "time", "magnitude", "model", "args", "clean"} <= kinds
+    assert {
+        "glitch",
+        "stuck",
+        "wrapped",
+        "velocity",
+        "zero",
+        "ignored_input",
+        "time_units",
+        "duplicate",
+        "non_finite",
+        "time",
+        "magnitude",
+        "model",
+        "args",
+        "clean",
+    } <= kinds
     assert len(CASES) >= 40 and len({c.id for c in CASES}) == len(CASES)
 
 
@@ -49,16 +63,19 @@ def test_the_corpus_covers_every_class_of_fault():
 def _record(ts, q, tau, system="acrobot", source="run.csv"):
     """An acrobot record with velocities the central differences of its angles (as encoder-only files give)."""
     dq = np.gradient(q, ts, axis=0)
-    return dynax.Trajectory(ts, np.column_stack([q, dq]), tau[:, None], ("q1", "q2", "dq1", "dq2"), ("tau2",),
-                            system, source)
+    return dynax.Trajectory(
+        ts, np.column_stack([q, dq]), tau[:, None], ("q1", "q2", "dq1", "dq2"), ("tau2",), system, source
+    )
 
 
 def _smooth(seed, n=600, dt=0.01):
     rng = np.random.default_rng(seed)
     ts = np.arange(n) * dt
     freqs, phases = rng.uniform(0.2, 3.0, (3, 4)), rng.uniform(0, 2 * np.pi, (3, 4))
-    waves = [np.sum(rng.uniform(0.1, 1.0, 4)[:, None] * np.sin(2 * np.pi * f[:, None] * ts + p[:, None]), axis=0)
-             for f, p in zip(freqs, phases)]
+    waves = [
+        np.sum(rng.uniform(0.1, 1.0, 4)[:, None] * np.sin(2 * np.pi * f[:, None] * ts + p[:, None]), axis=0)
+        for f, p in zip(freqs, phases)
+    ]
     return ts, np.column_stack(waves[:2]), waves[2]
 
 

@@ -18,7 +18,9 @@ def acrobot_csv(tmp_path):
     us = np.sin(3 * ts)[:, None]
     sim = dynax.simulate(dynax.Acrobot(), np.array([0.3, 0.0, 0.0, 0.0]), ts, us)
     path = tmp_path / "run.csv"
-    dynax.save_trajectory(dynax.Trajectory(ts, np.asarray(sim.xs), us, ("q1", "q2", "dq1", "dq2"), ("tau2",), "acrobot"), path)
+    dynax.save_trajectory(
+        dynax.Trajectory(ts, np.asarray(sim.xs), us, ("q1", "q2", "dq1", "dq2"), ("tau2",), "acrobot"), path
+    )
     return path
 
 
@@ -43,9 +45,22 @@ def test_bad_usage_exits_2(capsys):
     "rewrite, message",
     [
         (lambda text: text.replace("dq2,", "dqX,", 1), "column 'dq2'"),
-        (lambda text: "\n".join(l if i != 7 else l.replace(l.split(",")[1], "oops", 1) for i, l in enumerate(text.splitlines())), "column 'q1', row 7: non-numeric"),
-        (lambda text: "\n".join(l if i != 9 else l.replace(l.split(",")[3], "nan", 1) for i, l in enumerate(text.splitlines())), "column 'dq1', row 9: non-finite value nan"),
-        (lambda text: "\n".join(l if i != 5 else "0.0" + l[l.index(","):] for i, l in enumerate(text.splitlines())), "column 't', row 5: time does not strictly increase"),
+        (
+            lambda text: "\n".join(
+                l if i != 7 else l.replace(l.split(",")[1], "oops", 1) for i, l in enumerate(text.splitlines())
+            ),
+            "column 'q1', row 7: non-numeric",
+        ),
+        (
+            lambda text: "\n".join(
+                l if i != 9 else l.replace(l.split(",")[3], "nan", 1) for i, l in enumerate(text.splitlines())
+            ),
+            "column 'dq1', row 9: non-finite value nan",
+        ),
+        (
+            lambda text: "\n".join(l if i != 5 else "0.0" + l[l.index(",") :] for i, l in enumerate(text.splitlines())),
+            "column 't', row 5: time does not strictly increase",
+        ),
     ],
     ids=["missing-column", "non-numeric", "non-finite", "time-order"],
 )
@@ -74,8 +89,23 @@ def test_identify_succeeds_with_mapping(acrobot_csv, tmp_path):
     renamed = tmp_path / "renamed.csv"
     renamed.write_text(acrobot_csv.read_text().replace("t,q1,q2,dq1,dq2,tau2", "time,a,b,c,d,volts", 1))
     out = tmp_path / "params.json"
-    code = cli_main(["identify", "acrobot", str(renamed), "--method", "power", "--out", str(out),
-                     "--map", "t=time,q1=a,q2=b,dq1=c,dq2=d,tau2=volts", "--scale", "tau2=1.0", "--offset", "tau2=0"])
+    code = cli_main(
+        [
+            "identify",
+            "acrobot",
+            str(renamed),
+            "--method",
+            "power",
+            "--out",
+            str(out),
+            "--map",
+            "t=time,q1=a,q2=b,dq1=c,dq2=d,tau2=volts",
+            "--scale",
+            "tau2=1.0",
+            "--offset",
+            "tau2=0",
+        ]
+    )
     assert code == 0
     report = json.loads(out.read_text())
     assert report["system"] == "acrobot" and report["method"] == "power"

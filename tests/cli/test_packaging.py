@@ -38,7 +38,9 @@ def test_help_starts_with_a_plain_description_and_has_no_literal_percent_signs(c
         help_text = sub.format_help()
         assert "%%" not in help_text, name
         assert "--quiet" in help_text and "--progress" in help_text
-    assert "last 30% of each training run" in " ".join(parser._subparsers._group_actions[0].choices["diagnose"].format_help().split())
+    assert "last 30% of each training run" in " ".join(
+        parser._subparsers._group_actions[0].choices["diagnose"].format_help().split()
+    )
 
 
 def test_ctrl_c_exits_130(monkeypatch, tmp_path, capsys):
@@ -79,26 +81,35 @@ def test_package_ships_license_types_and_changelog():
 
 
 def test_importing_dynax_sets_no_matplotlib_backend_and_skips_heavy_modules():
-    code = ("import sys, dynax; import matplotlib as m; "
-            "print('pyplot' if 'matplotlib.pyplot' in sys.modules else '', "
-            "'signal' if 'scipy.signal' in sys.modules else '', 'stats' if 'scipy.stats' in sys.modules else '', "
-            "m.rcParams._get_backend_or_none() or 'unset')")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
-                         env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "MPLBACKEND": ""})
+    code = (
+        "import sys, dynax; import matplotlib as m; "
+        "print('pyplot' if 'matplotlib.pyplot' in sys.modules else '', "
+        "'signal' if 'scipy.signal' in sys.modules else '', 'stats' if 'scipy.stats' in sys.modules else '', "
+        "m.rcParams._get_backend_or_none() or 'unset')"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "MPLBACKEND": ""},
+    )
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["unset"]
 
 
 def test_a_real_sigint_exits_130():
-    code = ("import os, signal, sys, time\n"
-            # A terminal's Python has the KeyboardInterrupt handler; a child of a test worker may have inherited
-            # SIGINT ignored (as background jobs of a shell do), and Python then installs no handler at all.
-            "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
-            "from dynax._cli import _identify\n"
-            "from dynax.internal import cli_main\n"
-            # raise_signal delivers to the main thread, as a terminal's Ctrl-C reaches Python's handler; os.kill
-            # may land on a thread JAX started (the compilation cache), and the sleep would then run out.
-            "_identify.run = lambda args: (signal.raise_signal(signal.SIGINT), time.sleep(30))\n"
-            "sys.exit(cli_main(['identify', 'acrobot', 'x.csv', '--out', 'p.json']))\n")
+    code = (
+        "import os, signal, sys, time\n"
+        # A terminal's Python has the KeyboardInterrupt handler; a child of a test worker may have inherited
+        # SIGINT ignored (as background jobs of a shell do), and Python then installs no handler at all.
+        "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
+        "from dynax._cli import _identify\n"
+        "from dynax.internal import cli_main\n"
+        # raise_signal delivers to the main thread, as a terminal's Ctrl-C reaches Python's handler; os.kill
+        # may land on a thread JAX started (the compilation cache), and the sleep would then run out.
+        "_identify.run = lambda args: (signal.raise_signal(signal.SIGINT), time.sleep(30))\n"
+        "sys.exit(cli_main(['identify', 'acrobot', 'x.csv', '--out', 'p.json']))\n"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert out.returncode == 130 and "interrupted" in out.stderr

@@ -42,7 +42,9 @@ def test_performance_costs_by_hand_on_a_tiny_episode():
     velocity = np.sum((xs[:-1, 2] ** 2 + xs[:-1, 3] ** 2) * 0.002)
     np.testing.assert_allclose(np.asarray(perf.costs), [t_up, energy, torque, smooth, velocity], rtol=1e-12)
     assert t_up == ts[2] and bool(perf.success)
-    expected = 1 - np.mean(np.tanh(np.pi * np.array([t_up / 20, energy / 60, torque / 20, smooth / 0.1, velocity / 400])))
+    expected = 1 - np.mean(
+        np.tanh(np.pi * np.array([t_up / 20, energy / 60, torque / 20, smooth / 0.1, velocity / 400]))
+    )
     assert float(perf.score) == pytest.approx(expected, rel=1e-12)
     # down at the second-to-last sample: no success, score 0 whatever the costs
     xs_fail = xs.copy()
@@ -67,22 +69,29 @@ def test_family_scores_by_hand():
 
 
 def test_ends_upright_wraps_angles():
-    xs = jnp.array([[np.pi + 0.3, 0.3, 0.9, -0.9], [-np.pi, 2 * np.pi, 0, 0], [3 * np.pi, 0.36, 0, 0], [np.pi, 0, 1.1, 0]])
+    xs = jnp.array(
+        [[np.pi + 0.3, 0.3, 0.9, -0.9], [-np.pi, 2 * np.pi, 0, 0], [3 * np.pi, 0.36, 0, 0], [np.pi, 0, 1.1, 0]]
+    )
     assert list(np.asarray(control.ends_upright(xs))) == [True, True, False, False]
 
 
 def test_plant_matches_dynax_acrobot_without_rotor_or_friction():
     # The leaderboard plant written from the lab's equations against dynax's base-parameter Acrobot.
     p = control.NOMINAL_PLANT
-    acrobot = dynax.Acrobot.from_physical(m1=p["m1"], m2=p["m2"], l1=p["l1"], lc1=p["r1"], lc2=p["r2"], I1=p["I1"],
-                                          I2=p["I2"], b1=0.0, b2=0.0, g=p["g"])
+    acrobot = dynax.Acrobot.from_physical(
+        m1=p["m1"], m2=p["m2"], l1=p["l1"], lc1=p["r1"], lc2=p["r2"], I1=p["I1"], I2=p["I2"], b1=0.0, b2=0.0, g=p["g"]
+    )
     plant = control.LeaderboardPlant.nominal()
     rng = np.random.default_rng(0)
     for _ in range(5):
         x = jnp.asarray(rng.normal(size=4) * 2)
         u = float(rng.normal())
-        np.testing.assert_allclose(plant.vector_field(x, jnp.array([0.0, u])),
-                                   acrobot.vector_field(0.0, x, jnp.array([u])), rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(
+            plant.vector_field(x, jnp.array([0.0, u])),
+            acrobot.vector_field(0.0, x, jnp.array([u])),
+            rtol=1e-10,
+            atol=1e-12,
+        )
 
 
 def test_rotor_inertia_and_friction_enter_as_the_lab_writes_them():
@@ -91,9 +100,15 @@ def test_rotor_inertia_and_friction_enter_as_the_lab_writes_them():
     gr, Ir = 6.0, 1e-4
     p = control.NOMINAL_PLANT
     c2 = np.cos(-0.2)
-    m = np.array([[p["I1"] + p["I2"] + p["m2"] * 0.04 + 2 * p["m2"] * 0.2 * p["r2"] * c2 + gr**2 * Ir + Ir,
-                   p["I2"] + p["m2"] * 0.2 * p["r2"] * c2 - gr * Ir],
-                  [p["I2"] + p["m2"] * 0.2 * p["r2"] * c2 - gr * Ir, p["I2"] + gr**2 * Ir]])
+    m = np.array(
+        [
+            [
+                p["I1"] + p["I2"] + p["m2"] * 0.04 + 2 * p["m2"] * 0.2 * p["r2"] * c2 + gr**2 * Ir + Ir,
+                p["I2"] + p["m2"] * 0.2 * p["r2"] * c2 - gr * Ir,
+            ],
+            [p["I2"] + p["m2"] * 0.2 * p["r2"] * c2 - gr * Ir, p["I2"] + gr**2 * Ir],
+        ]
+    )
     plain = control.LeaderboardPlant.nominal(Ir=1e-4)
     # friction is a torque: M (a_plain - a) = F
     diff = m @ np.asarray(plain.acceleration(x, jnp.zeros(2)) - plant.acceleration(x, jnp.zeros(2)))
@@ -151,9 +166,16 @@ def test_load_controller_refuses_bad_files(tmp_path):
         dynax.load_controller(bad)
 
 
-@pytest.mark.parametrize("argv", [["control", "evaluate", "missing.npz"], ["control", "acrobot", "--out", "policy.json"],
-                                  ["control", "acrobot", "--out", "p.npz", "--starts", "0"],
-                                  ["control", "acrobot", "--out", "no/such/dir/p.npz"], ["control"]])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["control", "evaluate", "missing.npz"],
+        ["control", "acrobot", "--out", "policy.json"],
+        ["control", "acrobot", "--out", "p.npz", "--starts", "0"],
+        ["control", "acrobot", "--out", "no/such/dir/p.npz"],
+        ["control"],
+    ],
+)
 def test_cli_refuses_bad_input_with_exit_2(tmp_path, monkeypatch, capsys, argv):
     from dynax.internal import cli_main as main
 

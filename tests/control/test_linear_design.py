@@ -27,7 +27,9 @@ def test_lqr_matrix_form_matches_scipy(seed):
     k_ref = np.linalg.solve(r, b.T @ s_ref)
     np.testing.assert_allclose(s, s_ref, rtol=1e-8, atol=1e-10)
     np.testing.assert_allclose(k, k_ref, rtol=1e-8, atol=1e-10)
-    np.testing.assert_allclose(np.sort_complex(np.asarray(e)), np.sort_complex(np.linalg.eigvals(a - b @ k_ref)), rtol=1e-7)
+    np.testing.assert_allclose(
+        np.sort_complex(np.asarray(e)), np.sort_complex(np.linalg.eigvals(a - b @ k_ref)), rtol=1e-7
+    )
     assert np.all(np.real(e) < 0)  # the closed loop is stable
 
 
@@ -98,7 +100,10 @@ def test_ctrb_and_obsv_detect_an_uncontrollable_mode():
     assert np.linalg.matrix_rank(np.asarray(dynax.control.ctrb(a, b_missing))) == 2
     c = b_missing.T
     np.testing.assert_allclose(dynax.control.obsv(a, c), np.asarray(dynax.control.ctrb(a.T, c.T)).T)  # duality
-    assert dynax.control.ctrb(a, np.ones((3, 2))).shape == (3, 6) and dynax.control.obsv(a, np.ones((2, 3))).shape == (6, 3)
+    assert dynax.control.ctrb(a, np.ones((3, 2))).shape == (3, 6) and dynax.control.obsv(a, np.ones((2, 3))).shape == (
+        6,
+        3,
+    )
     with pytest.raises(ValueError, match="`b` must have shape"):
         dynax.control.ctrb(a, np.ones((2, 1)))
 

@@ -72,7 +72,9 @@ def _paper_update(mean, sigma, best, baseline, noise, rewards, learning_rate, fi
     r_plus, r_minus = rewards[:pairs], rewards[pairs:]
     best = max(best, rewards.max())
     baseline = rewards.mean() if first else baseline
-    mean_signal = np.array([(a - b) / (2 * best - a - b) if 2 * best - a - b > 0 else 0.0 for a, b in zip(r_plus, r_minus)])
+    mean_signal = np.array(
+        [(a - b) / (2 * best - a - b) if 2 * best - a - b > 0 else 0.0 for a, b in zip(r_plus, r_minus)]
+    )
     sigma_signal = ((r_plus + r_minus) / 2 - baseline) / (best - baseline) if best > baseline else np.zeros(pairs)
     new_mean = mean + learning_rate * sum(m * e for m, e in zip(mean_signal, noise)) / pairs
     grad_sigma = sum(r * (e**2 - sigma**2) / sigma for r, e in zip(sigma_signal, noise)) / pairs
@@ -92,7 +94,9 @@ def test_tell_is_the_papers_update(key):
         state = pgpe.tell(state, noise, jnp.asarray(rewards))
         if rewards.max() > best:
             best_params = np.asarray(population[int(np.argmax(rewards))])
-        mean, sigma, best, baseline = _paper_update(mean, sigma, best, baseline, np.asarray(noise), rewards, 0.7, i == 0)
+        mean, sigma, best, baseline = _paper_update(
+            mean, sigma, best, baseline, np.asarray(noise), rewards, 0.7, i == 0
+        )
         np.testing.assert_allclose(state.mean, mean, rtol=1e-12)
         np.testing.assert_allclose(state.sigma, sigma, rtol=1e-12)
         np.testing.assert_allclose([state.best_reward, state.baseline], [best, baseline], rtol=1e-12)
@@ -176,6 +180,8 @@ SHARDED_SCRIPT = textwrap.dedent(
 
 def test_population_sharded_across_two_host_devices():
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu")
-    result = subprocess.run([sys.executable, "-c", SHARDED_SCRIPT], env=env, capture_output=True, text=True, timeout=300)
+    result = subprocess.run(
+        [sys.executable, "-c", SHARDED_SCRIPT], env=env, capture_output=True, text=True, timeout=300
+    )
     assert result.returncode == 0, result.stderr[-3000:]
     assert result.stdout.strip().endswith("ok")

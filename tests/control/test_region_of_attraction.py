@@ -25,7 +25,14 @@ def test_region_of_attraction_of_the_balancing_lqr():
     assert 0.5 <= float(roa.rho) < 1e3
     # Weaker actuation shrinks the region.
     weak = eqx.filter_jit(estimate_region_of_attraction)(
-        system, controller, jax.random.PRNGKey(0), torque_limit=2.0, levels=levels, n_directions=16, horizon=3.0, control_rate=50.0
+        system,
+        controller,
+        jax.random.PRNGKey(0),
+        torque_limit=2.0,
+        levels=levels,
+        n_directions=16,
+        horizon=3.0,
+        control_rate=50.0,
     )
     assert float(weak.rho) < float(roa.rho)
     assert np.all(np.asarray(weak.converged_fraction) <= fraction)

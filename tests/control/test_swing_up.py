@@ -32,10 +32,15 @@ def _drake_reference_torque(x, k_e=5.0, k_p=50.0, k_d=5.0, threshold=1000.0):
     M = np.array([[I1 + I2 + m2 * l1**2 + 2 * m2l1lc2 * c2, I2 + m2l1lc2 * c2], [I2 + m2l1lc2 * c2, I2]])
     bias = np.array(
         [
-            -2 * m2l1lc2 * s2 * th2d * th1d - m2l1lc2 * s2 * th2d**2 + g * m1 * lc1 * s1 + g * m2 * (l1 * s1 + lc2 * s12) + b1 * th1d,
+            -2 * m2l1lc2 * s2 * th2d * th1d
+            - m2l1lc2 * s2 * th2d**2
+            + g * m1 * lc1 * s1
+            + g * m2 * (l1 * s1 + lc2 * s12)
+            + b1 * th1d,
             m2l1lc2 * s2 * th1d**2 + g * m2 * lc2 * s12 + b2 * th2d,
         ]
     )
+
     # LQR about upright, linearised by finite differences of the same dynamics.
     def f(state, u):
         q1, q2, v1, v2 = state
@@ -43,7 +48,11 @@ def _drake_reference_torque(x, k_e=5.0, k_p=50.0, k_d=5.0, threshold=1000.0):
         M_ = np.array([[I1 + I2 + m2 * l1**2 + 2 * m2l1lc2 * c2_, I2 + m2l1lc2 * c2_], [I2 + m2l1lc2 * c2_, I2]])
         h = np.array(
             [
-                -2 * m2l1lc2 * s2_ * v2 * v1 - m2l1lc2 * s2_ * v2**2 + g * m1 * lc1 * s1_ + g * m2 * (l1 * s1_ + lc2 * s12_) + b1 * v1,
+                -2 * m2l1lc2 * s2_ * v2 * v1
+                - m2l1lc2 * s2_ * v2**2
+                + g * m1 * lc1 * s1_
+                + g * m2 * (l1 * s1_ + lc2 * s12_)
+                + b1 * v1,
                 m2l1lc2 * s2_ * v1**2 + g * m2 * lc2 * s12_ + b2 * v2,
             ]
         )
@@ -83,9 +92,13 @@ def test_torque_matches_drake_transcription(controller):
     rng = np.random.default_rng(0)
     states = np.concatenate(
         [
-            np.column_stack([rng.uniform(-np.pi, np.pi, 40), rng.uniform(-np.pi, np.pi, 40), rng.normal(0, 1, (40, 2))]),
+            np.column_stack(
+                [rng.uniform(-np.pi, np.pi, 40), rng.uniform(-np.pi, np.pi, 40), rng.normal(0, 1, (40, 2))]
+            ),
             np.column_stack([np.pi + rng.normal(0, 0.05, 20), rng.normal(0, 0.05, 20), rng.normal(0, 0.2, (20, 2))]),
-            np.column_stack([np.pi + 2 * np.pi + rng.normal(0, 0.05, 5), rng.normal(0, 0.05, 5) - 2 * np.pi, np.zeros((5, 2))]),
+            np.column_stack(
+                [np.pi + 2 * np.pi + rng.normal(0, 0.05, 5), rng.normal(0, 0.05, 5) - 2 * np.pi, np.zeros((5, 2))]
+            ),
         ]
     )
     torques = jax.jit(jax.vmap(lambda x: controller(0.0, x)))(jnp.asarray(states))[:, 0]
@@ -127,7 +140,9 @@ def test_with_params_and_switching(controller):
 def test_smooth_activation_approaches_threshold_and_is_differentiable(controller):
     sharp = eqx.tree_at(lambda c: c.switching, controller, SmoothActivation(temperature=1e-3))
     rng = np.random.default_rng(1)
-    states = jnp.asarray(np.column_stack([np.pi + rng.normal(0, 0.3, 30), rng.normal(0, 0.3, 30), rng.normal(0, 0.5, (30, 2))]))
+    states = jnp.asarray(
+        np.column_stack([np.pi + rng.normal(0, 0.3, 30), rng.normal(0, 0.3, 30), rng.normal(0, 0.5, (30, 2))])
+    )
 
     @eqx.filter_jit
     def torques(c):

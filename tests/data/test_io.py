@@ -84,7 +84,9 @@ def test_empty_and_missing_file(tmp_path):
 def test_mapping_and_scale(tmp_path):
     path = write(tmp_path, "time,a,b,c,d,volts\n" + "\n".join(f"{0.1 * i},{i},0,0,0,2" for i in range(4)))
     tr = dynax.load_trajectory(
-        path, "acrobot", mapping={"t": "time", "q1": "a", "q2": "b", "dq1": "c", "dq2": "d", "tau2": "volts"},
+        path,
+        "acrobot",
+        mapping={"t": "time", "q1": "a", "q2": "b", "dq1": "c", "dq2": "d", "tau2": "volts"},
         scale={"tau2": 1.5, "q1": 2.0},
     )
     np.testing.assert_allclose(tr.us[:, 0], 3.0)
@@ -101,8 +103,14 @@ def test_mapping_names_unknown_column(tmp_path):
 
 def test_npz_round_trip(tmp_path):
     ts = np.linspace(0, 1, 11)
-    tr = dynax.Trajectory(ts, np.random.default_rng(0).normal(size=(11, 4)), np.ones((11, 2)),
-                          ("q1", "q2", "dq1", "dq2"), ("tau1", "tau2"), "double_pendulum")
+    tr = dynax.Trajectory(
+        ts,
+        np.random.default_rng(0).normal(size=(11, 4)),
+        np.ones((11, 2)),
+        ("q1", "q2", "dq1", "dq2"),
+        ("tau1", "tau2"),
+        "double_pendulum",
+    )
     for name in ("run.npz", "run.csv"):
         dynax.save_trajectory(tr, tmp_path / name)
         back = dynax.load_trajectory(tmp_path / name, "double_pendulum")
@@ -113,8 +121,9 @@ def test_npz_round_trip(tmp_path):
 def test_mat_file_with_mapping_scale_and_estimated_velocity(tmp_path):
     t = np.linspace(0, 1, 101)[:, None]
     scipy.io.savemat(tmp_path / "axis.mat", {"time": t, "pos": t**2, "volts": np.ones_like(t), "gain": 3.0})
-    tr = dynax.load_trajectory(tmp_path / "axis.mat", "linear_axis",
-                               mapping={"t": "time", "q": "pos", "force": "volts"}, scale={"force": 35.0})
+    tr = dynax.load_trajectory(
+        tmp_path / "axis.mat", "linear_axis", mapping={"t": "time", "q": "pos", "force": "volts"}, scale={"force": 35.0}
+    )
     assert tr.state_names == ("q", "dq")
     np.testing.assert_allclose(tr.us, 35.0)
     # dq estimated from q = t^2 by central differences: exact (2t) in the interior.
@@ -193,16 +202,23 @@ def test_parse_assignments():
 
 def test_dfki_runs_load_through_mapping(datasets):
     for run in ("00", "03", "12"):
-        tr = dynax.load_trajectory(datasets / "dfki_double_pendulum" / "sys_id" / f"trajectory_{run}.csv",
-                                   "double_pendulum", mapping=DFKI_MAPPING)
+        tr = dynax.load_trajectory(
+            datasets / "dfki_double_pendulum" / "sys_id" / f"trajectory_{run}.csv",
+            "double_pendulum",
+            mapping=DFKI_MAPPING,
+        )
         assert tr.input_names == ("tau1", "tau2") and len(tr) > 3000
         assert not tr.is_uniform  # the rig jitters; it is kept as recorded
         assert np.all(np.diff(np.asarray(tr.ts)) > 0)
 
 
 def test_emps_loads_from_mat(datasets):
-    tr = dynax.load_trajectory(datasets / "emps" / "DATA_EMPS.mat", "linear_axis",
-                               mapping={"q": "qm", "force": "vir"}, scale={"force": 35.15065188})
+    tr = dynax.load_trajectory(
+        datasets / "emps" / "DATA_EMPS.mat",
+        "linear_axis",
+        mapping={"q": "qm", "force": "vir"},
+        scale={"force": 35.15065188},
+    )
     assert len(tr) == 24841
     assert abs(tr.duration - 24.84) < 0.01
 
@@ -210,7 +226,9 @@ def test_emps_loads_from_mat(datasets):
 def test_gap_is_refused_with_its_place_and_records_with_pauses_split_into_runs(tmp_path):
     times = np.r_[0.01 * np.arange(30), 60.0 + 0.01 * np.arange(20)]
     path = write(tmp_path, HEADER + "\n" + "\n".join(f"{t!r},{t},0,0,0,1" for t in times.tolist()))
-    with pytest.raises(dynax.DataError, match=r"column 't', row 31: a gap in the record: time jumps from 0\.29\d* to 60\.0 s"):
+    with pytest.raises(
+        dynax.DataError, match=r"column 't', row 31: a gap in the record: time jumps from 0\.29\d* to 60\.0 s"
+    ):
         dynax.load_trajectory(path, "acrobot")
     record = dynax.load_trajectory(path, "acrobot", max_gap=None)
     runs = dynax.internal.split_at_gaps(record)

@@ -4,9 +4,10 @@ return exactly what the file says; never another exception, never a non-finite v
 import pathlib
 import tempfile
 
+from hypothesis import given, HealthCheck, settings
+from hypothesis import strategies as st
 import numpy as np
 import pytest
-from hypothesis import given, HealthCheck, settings, strategies as st
 
 import dynax
 from dynax.internal import MAX_MAGNITUDE, parse_assignments
@@ -15,8 +16,30 @@ NAMES = ("t", "q1", "q2", "dq1", "dq2", "tau2")
 SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 numbers = st.floats(allow_nan=True, allow_infinity=True, width=64).map(repr)
-oddities = st.sampled_from(["", " ", "1_0", "nan", "-inf", "1e400", " 2.5 ", "0x1f", "1,5", "\u0662", "1e", ".", "+-1",
-                            "True", "None", "1e308", "-1e13", "\x00", "\ufeff1", "'1'"])
+oddities = st.sampled_from(
+    [
+        "",
+        " ",
+        "1_0",
+        "nan",
+        "-inf",
+        "1e400",
+        " 2.5 ",
+        "0x1f",
+        "1,5",
+        "\u0662",
+        "1e",
+        ".",
+        "+-1",
+        "True",
+        "None",
+        "1e308",
+        "-1e13",
+        "\x00",
+        "\ufeff1",
+        "'1'",
+    ]
+)
 cells = st.one_of(numbers, numbers, oddities, st.text(max_size=6))
 
 
@@ -96,8 +119,12 @@ def test_random_bytes_are_refused_with_a_message(data, name):
 
 
 arrays = st.one_of(
-    st.builds(lambda v: np.asarray(v), st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=5, max_size=5)),
-    st.builds(lambda v: np.asarray(v, dtype=complex), st.lists(st.complex_numbers(max_magnitude=10), min_size=5, max_size=5)),
+    st.builds(
+        lambda v: np.asarray(v), st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=5, max_size=5)
+    ),
+    st.builds(
+        lambda v: np.asarray(v, dtype=complex), st.lists(st.complex_numbers(max_magnitude=10), min_size=5, max_size=5)
+    ),
     st.builds(lambda v: np.asarray(v), st.lists(st.integers(-5, 5), min_size=5, max_size=5)),
     st.builds(lambda v: np.asarray(v), st.lists(st.booleans(), min_size=5, max_size=5)),
     st.builds(lambda v: np.asarray(v), st.lists(st.text(max_size=3), min_size=5, max_size=5)),

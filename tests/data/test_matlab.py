@@ -18,8 +18,17 @@ def test_v5_matrix_variables_are_mapped_by_column(tmp_path):
     t, q, dq, force = _signals()
     path = tmp_path / "iddata.mat"
     # iddata style: outputs y (N x 2), input u (N x 1); a second matrix stored transposed (2 x N).
-    scipy.io.savemat(path, {"t": t[:, None], "y": np.column_stack([q, dq]), "u": force[:, None],
-                            "yT": np.vstack([q, dq]), "Ts": 0.01, "note": "rig 3"})
+    scipy.io.savemat(
+        path,
+        {
+            "t": t[:, None],
+            "y": np.column_stack([q, dq]),
+            "u": force[:, None],
+            "yT": np.vstack([q, dq]),
+            "Ts": 0.01,
+            "note": "rig 3",
+        },
+    )
     run = dynax.load_trajectory(path, "linear_axis", mapping={"q": "y[0]", "dq": "y[1]", "force": "u"})
     np.testing.assert_array_equal(np.asarray(run.xs), np.column_stack([q, dq]))
     np.testing.assert_array_equal(np.asarray(run.us)[:, 0], force)
@@ -36,11 +45,18 @@ def _write_v73(path, variables):
             value = np.atleast_2d(np.asarray(value))
             dataset = f.create_dataset(name, data=value.T)  # MATLAB is column-major: h5py sees the transpose
             dataset.attrs["MATLAB_class"] = np.bytes_("double")
-        f.create_dataset("label", data=np.frombuffer(b"rig", dtype=np.uint8).astype(np.uint16)).attrs["MATLAB_class"] = np.bytes_("char")
+        f.create_dataset("label", data=np.frombuffer(b"rig", dtype=np.uint8).astype(np.uint16)).attrs[
+            "MATLAB_class"
+        ] = np.bytes_("char")
         f.create_group("#refs#")
     with open(path, "r+b") as f:
-        f.write(b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Mon Nov 23 12:00:00 2026 HDF5 schema 1.00 .".ljust(116)
-                + b"\0" * 8 + b"\x00\x02IM")  # subsystem offset, version 0x0200, endianness
+        f.write(
+            b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Mon Nov 23 12:00:00 2026 HDF5 schema 1.00 .".ljust(
+                116
+            )
+            + b"\0" * 8
+            + b"\x00\x02IM"
+        )  # subsystem offset, version 0x0200, endianness
 
 
 def test_v73_hdf5_file_reads_like_v5(tmp_path):
@@ -62,8 +78,12 @@ def test_a_corrupt_mat_file_is_refused_by_name(tmp_path):
 
 
 def test_the_emps_benchmark_file_still_loads(datasets):
-    run = dynax.load_trajectory(datasets / "emps" / "DATA_EMPS.mat", "linear_axis", mapping={"q": "qm", "force": "vir"},
-                                scale={"force": 35.15065188})
+    run = dynax.load_trajectory(
+        datasets / "emps" / "DATA_EMPS.mat",
+        "linear_axis",
+        mapping={"q": "qm", "force": "vir"},
+        scale={"force": 35.15065188},
+    )
     assert len(run) == 24841 and run.is_uniform
 
 

@@ -14,8 +14,13 @@ from tests.conftest import REPO
 
 def _run_float32(code: str) -> subprocess.CompletedProcess:
     """Run `code` in a fresh interpreter where JAX is in its default float32 mode."""
-    return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True,
-                          cwd=REPO, env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin", "JAX_PLATFORMS": "cpu"})
+    return subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin", "JAX_PLATFORMS": "cpu"},
+    )
 
 
 def test_a_long_record_keeps_float64_times_and_is_named_in_float32_mode(tmp_path):

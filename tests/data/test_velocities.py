@@ -18,13 +18,21 @@ def arm_columns(seed=0, seconds=8.0, rest=False):
     amplitude = 0.0 if rest else 1.0
     q1 = amplitude * (0.8 * np.sin(2 * np.pi * 0.7 * t) + 0.3 * np.sin(2 * np.pi * 1.9 * t + 1.0))
     q2 = amplitude * (1.2 * np.sin(2 * np.pi * 0.45 * t + 0.4) - 0.2 * np.cos(2 * np.pi * 2.6 * t))
-    dq1 = amplitude * (0.8 * 2 * np.pi * 0.7 * np.cos(2 * np.pi * 0.7 * t) + 0.3 * 2 * np.pi * 1.9 * np.cos(2 * np.pi * 1.9 * t + 1.0))
-    dq2 = amplitude * (1.2 * 2 * np.pi * 0.45 * np.cos(2 * np.pi * 0.45 * t + 0.4) + 0.2 * 2 * np.pi * 2.6 * np.sin(2 * np.pi * 2.6 * t))
+    dq1 = amplitude * (
+        0.8 * 2 * np.pi * 0.7 * np.cos(2 * np.pi * 0.7 * t) + 0.3 * 2 * np.pi * 1.9 * np.cos(2 * np.pi * 1.9 * t + 1.0)
+    )
+    dq2 = amplitude * (
+        1.2 * 2 * np.pi * 0.45 * np.cos(2 * np.pi * 0.45 * t + 0.4)
+        + 0.2 * 2 * np.pi * 2.6 * np.sin(2 * np.pi * 2.6 * t)
+    )
     return {
         "t": t,
-        "pos1": q1 + 1e-4 * rng.normal(size=t.size), "pos2": q2 + 1e-4 * rng.normal(size=t.size),
-        "vel1": dq1 + 0.2 * rng.normal(size=t.size), "vel2": dq2 + 0.2 * rng.normal(size=t.size),
-        "tau1": 0.1 * np.sin(t), "tau2": -0.1 * np.sin(t),
+        "pos1": q1 + 1e-4 * rng.normal(size=t.size),
+        "pos2": q2 + 1e-4 * rng.normal(size=t.size),
+        "vel1": dq1 + 0.2 * rng.normal(size=t.size),
+        "vel2": dq2 + 0.2 * rng.normal(size=t.size),
+        "tau1": 0.1 * np.sin(t),
+        "tau2": -0.1 * np.sin(t),
     }
 
 
@@ -55,8 +63,11 @@ def test_velocities_in_degrees_per_second_are_refused_with_the_scale_that_fixes_
     columns = arm_columns()
     columns["vel1"] = np.degrees(columns["vel1"])
     path = write(tmp_path, columns)
-    with pytest.raises(dynax.DataError, match=r"column 'vel1': it is not the derivative of 'pos1' \(q1\): .* 57\.[23]"
-                                              r".*degrees per second, the position in radians.*'dq1': 0\.0174533"):
+    with pytest.raises(
+        dynax.DataError,
+        match=r"column 'vel1': it is not the derivative of 'pos1' \(q1\): .* 57\.[23]"
+        r".*degrees per second, the position in radians.*'dq1': 0\.0174533",
+    ):
         load(path)
     run = load(path, scale={"dq1": np.pi / 180})  # the fix it names
     np.testing.assert_allclose(run.state("dq1"), np.radians(columns["vel1"]), rtol=1e-12)
@@ -82,8 +93,11 @@ def test_a_placeholder_velocity_column_of_zeros_is_refused_with_the_way_out(tmp_
 
 def test_swapped_velocity_columns_are_named_as_swapped(tmp_path):
     path = write(tmp_path, arm_columns())
-    with pytest.raises(dynax.DataError, match=r"column 'vel2'.*not the derivative of 'pos1'.*derivative of 'pos2' "
-                                              r"\(q2\).*columns of dq1 and dq2 swapped"):
+    with pytest.raises(
+        dynax.DataError,
+        match=r"column 'vel2'.*not the derivative of 'pos1'.*derivative of 'pos2' "
+        r"\(q2\).*columns of dq1 and dq2 swapped",
+    ):
         dynax.load_trajectory(path, "double_pendulum", mapping=dict(MAPPING, dq1="vel2", dq2="vel1"))
 
 
@@ -91,7 +105,9 @@ def test_a_linear_axis_velocity_in_millimetres_per_second_is_refused(tmp_path):
     t = np.arange(0.0, 5.0, 0.001)
     q = 0.1 * np.sin(2 * np.pi * 0.5 * t)
     table = {"t": t, "q": q, "dq": 1000 * 0.1 * 2 * np.pi * 0.5 * np.cos(2 * np.pi * 0.5 * t), "force": np.ones_like(t)}
-    with pytest.raises(dynax.DataError, match=r"column 'dq'.*millimetres per second, the position in metres.*'dq': 0\.001"):
+    with pytest.raises(
+        dynax.DataError, match=r"column 'dq'.*millimetres per second, the position in metres.*'dq': 0\.001"
+    ):
         dynax.load_trajectory(write(tmp_path, table), "linear_axis")
 
 
@@ -117,8 +133,15 @@ def test_identify_and_diagnose_check_records_built_in_python_too(tmp_path):
     columns = arm_columns()
     xs = np.column_stack([columns["pos1"], columns["pos2"], np.degrees(columns["vel1"]), columns["vel2"]])
     us = np.column_stack([columns["tau1"], columns["tau2"]])
-    run = Trajectory(columns["t"], jnp.asarray(xs), jnp.asarray(us), ("q1", "q2", "dq1", "dq2"), ("tau1", "tau2"),
-                     "double_pendulum", "arrays")
+    run = Trajectory(
+        columns["t"],
+        jnp.asarray(xs),
+        jnp.asarray(us),
+        ("q1", "q2", "dq1", "dq2"),
+        ("tau1", "tau2"),
+        "double_pendulum",
+        "arrays",
+    )
     with pytest.raises(dynax.DataError, match=r"file arrays, column 'dq1': it is not the derivative of 'q1'.*degrees"):
         dynax.identify(dynax.DoublePendulum(), run, dynax.Dynamic())
     with pytest.raises(dynax.DataError, match=r"column 'dq1'.*degrees"):

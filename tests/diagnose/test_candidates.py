@@ -16,8 +16,14 @@ def _family(system):
     names = nominal_parameter_names(system)
     n = len(candidates)
     return Family(
-        Extended(system, candidates), names, jnp.ones(len(names)), jnp.ones(len(names)), jnp.ones(n), jnp.zeros(n),
-        jnp.asarray([t.neutral for t in candidates], float), jnp.ones(system.n_states),
+        Extended(system, candidates),
+        names,
+        jnp.ones(len(names)),
+        jnp.ones(len(names)),
+        jnp.ones(n),
+        jnp.zeros(n),
+        jnp.asarray([t.neutral for t in candidates], float),
+        jnp.ones(system.n_states),
     )
 
 
@@ -29,8 +35,14 @@ def _absorbed(system, refit):
 # A non-neutral value per cause, and what it does in Drake's equations written out independently
 # (tests/reference.py): a generalised force at the joint, an inertia on the joint's diagonal, or a
 # change of the applied elbow torque.
-VALUES = {"coulomb_friction": 0.3, "viscous_friction": 0.2, "quadratic_drag": 0.15, "rotor_inertia": 0.05,
-          "input_gain": 1.3, "input_offset": 0.4}
+VALUES = {
+    "coulomb_friction": 0.3,
+    "viscous_friction": 0.2,
+    "quadratic_drag": 0.15,
+    "rotor_inertia": 0.05,
+    "input_gain": 1.3,
+    "input_offset": 0.4,
+}
 
 
 def _reference(cause, joint, value, x, tau2):
@@ -62,8 +74,9 @@ def test_every_joint_and_gain_candidate_acts_as_its_name_says(x):
         model = Extended(system, (eqx.tree_at(lambda t: t.coefficient, term, jnp.asarray(value)),))
         dx = model.vector_field(0.0, model.initial_state(jnp.asarray(x), jnp.array([0.7])), jnp.array([0.7]))
         joint = getattr(term, "joint", None)
-        np.testing.assert_allclose(dx[:4], _reference(term.cause, joint, value, x, 0.7), rtol=1e-10, atol=1e-12,
-                                   err_msg=term.label(system))
+        np.testing.assert_allclose(
+            dx[:4], _reference(term.cause, joint, value, x, 0.7), rtol=1e-10, atol=1e-12, err_msg=term.label(system)
+        )
         checked.add(term.label(system))
     assert len(checked) == 10  # four joint causes at each of the two joints, gain and offset at tau2
 
@@ -108,7 +121,9 @@ def test_look_alikes_are_at_the_same_place():
     coulomb_q2 = next(t for t in candidates if t.label(system) == "coulomb_friction@q2")
     delay = next(t for t in candidates if t.label(system) == "input_delay@tau2")
     assert {candidates[k].label(system) for k in look_alikes(system, coulomb_q2, candidates)} == {
-        "viscous_friction@q2", "quadratic_drag@q2"}
+        "viscous_friction@q2",
+        "quadratic_drag@q2",
+    }
     assert {candidates[k].label(system) for k in look_alikes(system, delay, candidates)} == {"input_lag@tau2"}
 
 
@@ -123,8 +138,11 @@ def test_gains_on_the_two_motors_are_one_model_when_the_base_parameters_are_refi
         family = _family(system)
         labels = [t.label(system) for t in family.model.terms]
         among = [k for k, a in enumerate(structurally_absorbed(family, refit)) if not a]
-        return {frozenset((labels[k], labels[l])) for k, ls in structurally_equivalent(family, refit, among).items()
-                for l in ls}
+        return {
+            frozenset((labels[k], labels[l]))
+            for k, ls in structurally_equivalent(family, refit, among).items()
+            for l in ls
+        }
 
     gains = {frozenset(("input_gain@tau1", "input_gain@tau2"))}
     assert pairs(DoublePendulum(), np.ones(7)) == gains
@@ -136,4 +154,5 @@ def test_gains_on_the_two_motors_are_one_model_when_the_base_parameters_are_refi
     # an offset on one is a constant body acceleration on its axis even with every parameter trusted.
     heli = Helicopter()
     assert pairs(heli, np.zeros(len(nominal_parameter_names(heli)))) == {
-        frozenset((f"input_offset@u{i}", f"body_bias@{axis}")) for i, axis in zip((1, 2, 3, 4), "pqrw")}
+        frozenset((f"input_offset@u{i}", f"body_bias@{axis}")) for i, axis in zip((1, 2, 3, 4), "pqrw")
+    }

@@ -13,19 +13,26 @@ from .test_engine_rollouts_validation import _axis_record, NOMINAL
 
 
 def _family(records, candidates):
-    return Family(model=Extended(NOMINAL, candidates), names=("mass", "viscous", "coulomb", "offset"),
-                  refit=jnp.asarray([1.0, 1.0, 0.0, 0.0]), nominal_scale=jnp.asarray([95.0, 200.0, 1.0, 1.0]),
-                  candidate_scale=jnp.asarray([10.0, 10.0]), candidate_init=jnp.asarray([0.0, 0.0]),
-                  neutral=jnp.asarray([0.0, 0.0]),
-                  state_scale=jnp.asarray(np.concatenate([np.asarray(r.xs) for r in records]).std(axis=0)))
+    return Family(
+        model=Extended(NOMINAL, candidates),
+        names=("mass", "viscous", "coulomb", "offset"),
+        refit=jnp.asarray([1.0, 1.0, 0.0, 0.0]),
+        nominal_scale=jnp.asarray([95.0, 200.0, 1.0, 1.0]),
+        candidate_scale=jnp.asarray([10.0, 10.0]),
+        candidate_init=jnp.asarray([0.0, 0.0]),
+        neutral=jnp.asarray([0.0, 0.0]),
+        state_scale=jnp.asarray(np.concatenate([np.asarray(r.xs) for r in records]).std(axis=0)),
+    )
 
 
 def test_a_left_out_run_weighs_nothing_in_the_fit():
     """The fit with run 1's windows at weight zero is the fit on run 0's windows alone (cut out, another shape).
     The runs differ (Coulomb friction 25 N in one, 10 N in the other), so a fit that still saw run 1 would
     land elsewhere; and a left-out run whose rollouts diverge (NaN) must not spoil the fit."""
-    runs = [_axis_record(Extended(NOMINAL, (CoulombFriction(0, 25.0, velocity_scale=0.01),)), seed=0, name="a.csv"),
-            _axis_record(Extended(NOMINAL, (CoulombFriction(0, 10.0, velocity_scale=0.01),)), seed=1, name="b.csv")]
+    runs = [
+        _axis_record(Extended(NOMINAL, (CoulombFriction(0, 25.0, velocity_scale=0.01),)), seed=0, name="a.csv"),
+        _axis_record(Extended(NOMINAL, (CoulombFriction(0, 10.0, velocity_scale=0.01),)), seed=1, name="b.csv"),
+    ]
     candidates = (CoulombFriction(0, velocity_scale=0.01), InputOffset(0))
     family = _family(runs, candidates)
     both = make_windows(runs, 50, 50)
@@ -33,12 +40,21 @@ def test_a_left_out_run_weighs_nothing_in_the_fit():
     poisoned = both.without_record(1)
     xs = np.asarray(poisoned.xs).copy()
     xs[np.asarray(poisoned.starts)[:, 0] == 1] = np.nan  # what a diverged left-out rollout would give
-    poisoned = type(poisoned)(poisoned.ts, jnp.asarray(xs), poisoned.us, poisoned.ts_before, poisoned.us_before,
-                              poisoned.starts, poisoned.weights)
+    poisoned = type(poisoned)(
+        poisoned.ts,
+        jnp.asarray(xs),
+        poisoned.us,
+        poisoned.ts_before,
+        poisoned.us_before,
+        poisoned.starts,
+        poisoned.weights,
+    )
     p0 = np.asarray([95.1089, 203.5034, 0.0, 0.0, 0.0, 1.0])
     args = (jnp.asarray([[-1]]), jnp.asarray([0]), jnp.asarray(p0[None]), jnp.ones(6))
-    fits = {name: np.asarray(fit_configurations(family, w, *args)[0])[0, -1]
-            for name, w in (("masked", poisoned), ("cut", alone), ("both", both))}
+    fits = {
+        name: np.asarray(fit_configurations(family, w, *args)[0])[0, -1]
+        for name, w in (("masked", poisoned), ("cut", alone), ("both", both))
+    }
     assert abs(fits["cut"] - 25.0) < 1.0  # run 0's friction
     assert abs(fits["masked"] - fits["cut"]) < 1e-6 * abs(fits["cut"])
     assert abs(fits["both"] - fits["cut"]) > 3.0  # run 1 pulls a fit that sees it (between 10 and 25 N)
@@ -53,8 +69,9 @@ def test_a_short_held_out_run_with_cross_fitted_training_runs_names_a_small_fric
     truth = Extended(Acrobot.from_physical(**DEMO_TRUTH_PHYSICAL), (CoulombFriction(1, 0.03),))
 
     def run(seed, seconds, name):
-        return synthetic_trajectory(truth, duration=seconds, dt=0.01, amplitude=2.0, seed=seed, system_name="acrobot",
-                                    source=name)
+        return synthetic_trajectory(
+            truth, duration=seconds, dt=0.01, amplitude=2.0, seed=seed, system_name="acrobot", source=name
+        )
 
     train = [run(s, 8.0, f"run{s}.csv") for s in (11, 12, 13)]
     validation = [run(14, 2.5, "held.csv")]

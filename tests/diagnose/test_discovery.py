@@ -58,11 +58,19 @@ AXIS = LinearAxis(coulomb=jnp.asarray(20.0), offset=jnp.asarray(-3.0))  # the EM
 
 def _axis_records(amplitude, *, period=0.05, seed=5):
     truth = Extended(AXIS, (_PositionPeriodicForce(0, jnp.asarray(amplitude), period, 0.7),))
-    run = synthetic_trajectory(truth, duration=30.0, dt=0.01, seed=seed, amplitude=60.0, noise=(1e-5, 1e-3),
-                               system_name="linear_axis")
+    run = synthetic_trajectory(
+        truth, duration=30.0, dt=0.01, seed=seed, amplitude=60.0, noise=(1e-5, 1e-3), system_name="linear_axis"
+    )
     k = 2001
-    cut = lambda a, b, name: Trajectory(run.ts[a:b], run.xs[a:b], run.us[a:b], run.state_names, run.input_names,  # noqa: E731
-                                        "linear_axis", name)
+    cut = lambda a, b, name: Trajectory(
+        run.ts[a:b],
+        run.xs[a:b],
+        run.us[a:b],
+        run.state_names,
+        run.input_names,  # noqa: E731
+        "linear_axis",
+        name,
+    )
     return cut(0, k, "run1.csv"), cut(k, len(run.ts), "run2.csv")
 
 
@@ -168,8 +176,9 @@ def periodic_files(tmp_path_factory):
     train, validation = _axis_records(10.0)
     save_trajectory(train, folder / "run1.csv")
     save_trajectory(validation, folder / "run2.csv")
-    (folder / "nominal.json").write_text(json.dumps({"parameters": {"mass": 90.0, "viscous": 190.0, "coulomb": 20.0,
-                                                                    "offset": -3.0}}))
+    (folder / "nominal.json").write_text(
+        json.dumps({"parameters": {"mass": 90.0, "viscous": 190.0, "coulomb": 20.0, "offset": -3.0}})
+    )
     return folder
 
 
@@ -179,9 +188,24 @@ def periodic_files(tmp_path_factory):
 # follows, so the verdict would be `unexplained` (discovery 55 %, structure left in dq). This test is about the
 # search, so it refits the viscous coefficient with the mass, as a user who doubts it would.
 def _cli(folder, out, *extra):
-    return cli_main(["diagnose", "linear_axis", str(folder / "run1.csv"), "--validation", str(folder / "run2.csv"),
-                     "--nominal", str(folder / "nominal.json"), "--refit", "mass,viscous", "--reference-horizon", "0.5",
-                     "--out", str(out), *extra])
+    return cli_main(
+        [
+            "diagnose",
+            "linear_axis",
+            str(folder / "run1.csv"),
+            "--validation",
+            str(folder / "run2.csv"),
+            "--nominal",
+            str(folder / "nominal.json"),
+            "--refit",
+            "mass,viscous",
+            "--reference-horizon",
+            "0.5",
+            "--out",
+            str(out),
+            *extra,
+        ]
+    )
 
 
 def test_cli_discovers_a_position_periodic_force_with_its_period(periodic_files, tmp_path, capsys):

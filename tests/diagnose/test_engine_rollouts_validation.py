@@ -20,13 +20,13 @@ from dynax import (
     LinearAxis,
     Trajectory,
 )
-from dynax.internal import progress_mode
 from dynax.internal import (
     complete_state,
     Family,
     fit_configurations,
     fit_percent,
     make_windows,
+    progress_mode,
     residual_tests,
     rollouts_from_starts,
     stage_reporter,
@@ -52,8 +52,9 @@ NOMINAL = LinearAxis(coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0))
 
 def test_window_rollouts_agree_with_an_independent_integrator():
     record = _axis_record(NOMINAL, noise=0.0)
-    errors, diverged = rollouts_from_starts(NOMINAL, record.ts, record.xs, record.us, jnp.asarray([0, 300, 700]),
-                                            100, dynax.FixedGrid())
+    errors, diverged = rollouts_from_starts(
+        NOMINAL, record.ts, record.xs, record.us, jnp.asarray([0, 300, 700]), 100, dynax.FixedGrid()
+    )
     assert not np.any(np.asarray(diverged))
     # the record itself was made by an adaptive solver at tight tolerances: the fixed grid reproduces it
     assert np.max(np.abs(np.asarray(errors))) < 1e-5
@@ -73,8 +74,14 @@ def test_input_history_drives_a_lag_to_its_exact_state():
         a = us[k, 0] + (a - us[k, 0]) * np.exp(-dt / tau)
     window_ts = ts[-1] + dt * np.arange(3)
     window_xs = np.zeros((3, 2))
-    errors, _ = window_rollouts(model, jnp.asarray(window_ts)[None], jnp.asarray(window_xs)[None],
-                                jnp.asarray(np.repeat(us[-1:], 3, axis=0))[None], jnp.asarray(ts)[None], jnp.asarray(us)[None])
+    errors, _ = window_rollouts(
+        model,
+        jnp.asarray(window_ts)[None],
+        jnp.asarray(window_xs)[None],
+        jnp.asarray(np.repeat(us[-1:], 3, axis=0))[None],
+        jnp.asarray(ts)[None],
+        jnp.asarray(us)[None],
+    )
     x0 = complete_state(model, jnp.zeros(2), jnp.asarray(us[-1]), jnp.asarray(ts), jnp.asarray(us))
     assert abs(float(x0[2]) - a) < 1e-6 * max(1.0, abs(a))
     # without history the lag would start at rest under the last input, a different state
@@ -90,17 +97,24 @@ def test_batched_engine_refits_recover_a_hidden_friction_and_converge():
     candidates = (CoulombFriction(0, velocity_scale=0.01), InputOffset(0))
     system = NOMINAL
     windows = make_windows([record], 50, 50)
-    family = Family(model=Extended(system, candidates), names=("mass", "viscous", "coulomb", "offset"),
-                    refit=jnp.asarray([1.0, 1.0, 0.0, 0.0]), nominal_scale=jnp.asarray([95.0, 200.0, 1.0, 1.0]),
-                    candidate_scale=jnp.asarray([10.0, 10.0]), candidate_init=jnp.asarray([0.0, 0.0]),
-                    neutral=jnp.asarray([0.0, 0.0]), state_scale=jnp.asarray(np.asarray(record.xs).std(axis=0)))
+    family = Family(
+        model=Extended(system, candidates),
+        names=("mass", "viscous", "coulomb", "offset"),
+        refit=jnp.asarray([1.0, 1.0, 0.0, 0.0]),
+        nominal_scale=jnp.asarray([95.0, 200.0, 1.0, 1.0]),
+        candidate_scale=jnp.asarray([10.0, 10.0]),
+        candidate_init=jnp.asarray([0.0, 0.0]),
+        neutral=jnp.asarray([0.0, 0.0]),
+        state_scale=jnp.asarray(np.asarray(record.xs).std(axis=0)),
+    )
     p0 = np.concatenate([[95.1089, 203.5034, 0.0, 0.0], [0.0, 0.0]])  # four nominal, one slot, the new term
     slots = -np.ones((3, 1), int)
     new = np.asarray([-1, 0, 1])
     p_init = np.tile(p0, (3, 1))
     p_init[1:, -1] = 1.0
-    p, cost, std, steps = fit_configurations(family, windows, jnp.asarray(slots), jnp.asarray(new), jnp.asarray(p_init),
-                                             jnp.ones(6))
+    p, cost, std, steps = fit_configurations(
+        family, windows, jnp.asarray(slots), jnp.asarray(new), jnp.asarray(p_init), jnp.ones(6)
+    )
     p, cost, steps = np.asarray(p), np.asarray(cost), np.asarray(steps)
     assert abs(p[1, -1] - 25.0) < 1.0  # Coulomb friction found (truth 25 N)
     assert cost[1] < 0.05 * cost[0]  # and it explains what the nominal model cannot
@@ -124,7 +138,9 @@ def test_fit_percent_is_matlab_compare_and_residual_tests_tell_a_wrong_model():
     wrong, right = residual_tests(NOMINAL, record), residual_tests(truth, record)
     assert wrong.channels == ("dq",) and wrong.inputs == ("force",)
     assert not all(wrong.white) or not all(all(r) for r in wrong.independent)  # the missing friction shows
-    assert all(right.white) and all(all(r) for r in right.independent)  # noise through the filter is white at its spacing
+    assert all(right.white) and all(
+        all(r) for r in right.independent
+    )  # noise through the filter is white at its spacing
     assert 0 < right.autocorrelation_bound < 1 and right.lag_s == pytest.approx(0.11)
 
 
@@ -138,7 +154,10 @@ def test_stage_reporter_follows_progress_mode(capsys):
         say("stage two")
     err = capsys.readouterr().err
     assert "stage one" in err and "diagnose" in err and "2stage" in err.replace(" ", "")
-    for mode in ("never", "auto"):  # auto: stderr is not a terminal under pytest: no bar, and the library prints nothing
+    for mode in (
+        "never",
+        "auto",
+    ):  # auto: stderr is not a terminal under pytest: no bar, and the library prints nothing
         with progress_mode(mode), stage_reporter(None) as say:
             say("hidden")
         assert capsys.readouterr().err == ""
@@ -181,16 +200,26 @@ def test_no_class_checks_on_concrete_systems_outside_their_modules():
     the consistency check, the vehicle fits) tests for a concrete system or body-model class."""
     # where each class may be checked: its own module (and, for the body models' abstract base, the
     # vehicles that hold a body model and validate the field in their `__check_init__`)
-    own = {"Helicopter": {"_helicopter.py"}, "AccelerationModel": {"_helicopter.py"},
-           "LinearVelocityModel": {"_helicopter.py"}, "AbstractBodyModel": {"_helicopter.py", "_quadrotor.py"},
-           "LinearAxis": {"_linear_axis.py"}, "Acrobot": {"_two_link.py"}, "DoublePendulum": {"_two_link.py"},
-           "AbstractTwoLink": {"_two_link.py"}, "AbstractManipulator": {"_system.py"}}
+    own = {
+        "Helicopter": {"_helicopter.py"},
+        "AccelerationModel": {"_helicopter.py"},
+        "LinearVelocityModel": {"_helicopter.py"},
+        "AbstractBodyModel": {"_helicopter.py", "_quadrotor.py"},
+        "LinearAxis": {"_linear_axis.py"},
+        "Acrobot": {"_two_link.py"},
+        "DoublePendulum": {"_two_link.py"},
+        "AbstractTwoLink": {"_two_link.py"},
+        "AbstractManipulator": {"_system.py"},
+    }
     package = pathlib.Path(dynax.__file__).parent
     found = []
     for path in package.rglob("*.py"):
         for node in ast.walk(ast.parse(path.read_text())):
             if isinstance(node, ast.Call) and getattr(node.func, "id", None) in ("isinstance", "issubclass"):
                 names = {n.id for n in ast.walk(node.args[1]) if isinstance(n, ast.Name)}
-                found += [f"{path.relative_to(package)}:{node.lineno} {n}" for n in names
-                          if n in own and path.name not in own[n]]
+                found += [
+                    f"{path.relative_to(package)}:{node.lineno} {n}"
+                    for n in names
+                    if n in own and path.name not in own[n]
+                ]
     assert found == []

@@ -26,10 +26,8 @@ from dynax import (
     Refit,
     Wind,
 )
-from dynax.internal import AbstractVehicleTerm, hover_state
-from dynax.internal import TEMPEST_COEFFICIENTS
+from dynax.internal import AbstractVehicleTerm, hover_state, TEMPEST_COEFFICIENTS
 from dynax.synthetic import FlightController, helicopter_flight
-
 
 pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more
 
@@ -130,8 +128,9 @@ def _diagnose_hidden(terms, seed, *, fast=False, mode=Known(), candidates=VEHICL
     kw = dict(spread=20.0, controller=FlightController(max_position_error=12.0)) if fast else {}
     train = helicopter_flight(truth, duration=duration, seed=seed, **kw)
     validation = helicopter_flight(truth, duration=duration, seed=seed + 100, **kw)
-    return diagnose(Helicopter(), train, validation, mode=mode, candidates=candidates, max_terms=2,
-                    horizons_s=(0.25, 0.5, 1.0)).to_json()
+    return diagnose(
+        Helicopter(), train, validation, mode=mode, candidates=candidates, max_terms=2, horizons_s=(0.25, 0.5, 1.0)
+    ).to_json()
 
 
 def _assert_found(j, cause, where):
@@ -177,11 +176,13 @@ def test_hidden_body_bias_is_named_body_bias_not_wind(bias_report):
     assert any(a["cause"] == "wind" for a in j["findings"][0]["look_alikes"])
 
 
-@pytest.mark.xfail(reason="known shortfall (issue 10): one 20 s held-out flight is too short for this effect (gain 91 %, "
-                          "p = 0.006 with the calibrated flat-top HAC test, 0.002 with the earlier batch means, "
-                          "against Benjamini-Hochberg's 0.01/12 for the best of 12 candidates): drag acts only in the "
-                          "fast segments, so the window differences vary from segment to segment",
-                   strict=True)  # strict: the day it passes, the suite says so and the mark comes off
+@pytest.mark.xfail(
+    reason="known shortfall (issue 10): one 20 s held-out flight is too short for this effect (gain 91 %, "
+    "p = 0.006 with the calibrated flat-top HAC test, 0.002 with the earlier batch means, "
+    "against Benjamini-Hochberg's 0.01/12 for the best of 12 candidates): drag acts only in the "
+    "fast segments, so the window differences vary from segment to segment",
+    strict=True,
+)  # strict: the day it passes, the suite says so and the mark comes off
 def test_hidden_quadratic_drag_on_u_is_named():
     j = _diagnose_hidden((BodyQuadraticDrag(0, 0.08),), seed=3, fast=True)
     _assert_found(j, "quadratic_drag", "u")
@@ -223,9 +224,19 @@ def test_cli_diagnose_helicopter_names_a_hidden_wind(tmp_path, capsys):
     save_trajectory(helicopter_flight(truth, duration=20.0, seed=8), tmp_path / "flight1.csv")
     save_trajectory(helicopter_flight(truth, duration=20.0, seed=108), tmp_path / "flight2.csv")
     out = tmp_path / "report"
-    code = cli_main(["diagnose", "helicopter", str(tmp_path / "flight1.csv"),
-                     "--validation", str(tmp_path / "flight2.csv"),
-                     "--max-terms", "2", "--out", str(out)])
+    code = cli_main(
+        [
+            "diagnose",
+            "helicopter",
+            str(tmp_path / "flight1.csv"),
+            "--validation",
+            str(tmp_path / "flight2.csv"),
+            "--max-terms",
+            "2",
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 0
     j = json.loads((out / "report.json").read_text())
     assert j["system"] == "helicopter"
@@ -253,7 +264,9 @@ def _round_one_screening(monkeypatch, truth):
     def spy(family, values, coefficients, refit, train, validation, remaining, residual_fn, **kwargs):
         gains, deltas = real(family, values, coefficients, refit, train, validation, remaining, residual_fn, **kwargs)
         system = family.model.system
-        seen.update({family.model.terms[k].label(system): (float(g), float(d)) for k, g, d in zip(remaining, gains, deltas)})
+        seen.update(
+            {family.model.terms[k].label(system): (float(g), float(d)) for k, g, d in zip(remaining, gains, deltas)}
+        )
         raise _ScreenedOnce
 
     monkeypatch.setattr(diagnose_module, "screen", spy)

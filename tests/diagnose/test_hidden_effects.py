@@ -5,8 +5,6 @@ vocabulary cause at its place, the look-alike pairs (Coulomb against viscous fri
 drag, delay against lag), the no-effect control and the out-of-vocabulary spring. Assertions are about the answer (verdict, cause, place, positive gain), not internal numbers.
 """
 
-import jax.numpy as jnp
-import numpy as np
 import pytest
 
 from dynax import (
@@ -27,7 +25,6 @@ from dynax import (
     ViscousFriction,
 )
 from dynax.synthetic import demo_data, synthetic_trajectory
-
 
 pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more
 
@@ -126,7 +123,9 @@ def test_a_nominal_friction_off_by_a_common_factor_is_named_as_friction_not_as_a
     """The rig's viscous friction is twice the nominal's at both joints. Refit mode keeps the nominal's and
     tests it: the answer is viscous friction (adding about 0.1 at each joint), never an input gain, which
     with theta1..theta5 rescaled would reproduce the data exactly (it is reported as not identifiable)."""
-    truth = Extended(Acrobot.from_physical(m1=1.05, m2=0.97, lc2=1.02, Ic2=0.32, b1=0.2, b2=0.2), (CoulombFriction(1, 0.0),))
+    truth = Extended(
+        Acrobot.from_physical(m1=1.05, m2=0.97, lc2=1.02, Ic2=0.32, b1=0.2, b2=0.2), (CoulombFriction(1, 0.0),)
+    )
     run = synthetic_trajectory(truth, duration=30.0, dt=0.01, amplitude=2.0, seed=3, system_name="acrobot")
     k = 2001
     train = Trajectory(run.ts[:k], run.xs[:k], run.us[:k], run.state_names, run.input_names, "acrobot")

@@ -3,8 +3,7 @@
 import numpy as np
 
 from dynax import Acrobot, LinearAxis
-from dynax.internal import Discovered, Feature
-from dynax.internal import feature_library, named_equivalent, physical_readings, search_period
+from dynax.internal import Discovered, Feature, feature_library, named_equivalent, physical_readings, search_period
 
 
 def test_period_search_finds_the_period_of_a_force_periodic_in_position():

@@ -24,7 +24,9 @@ def _diagnose(effect: dict, scale: float):
     records = []
     for seed in (0, 1, 7, 8):
         ts, xs, us, _ = mujoco_rig.record(arm, 12.0, seed, scale=scale)
-        records.append(Trajectory(jnp.asarray(ts), jnp.asarray(xs), jnp.asarray(us), mujoco_rig.STATES, mujoco_rig.INPUTS))
+        records.append(
+            Trajectory(jnp.asarray(ts), jnp.asarray(xs), jnp.asarray(us), mujoco_rig.STATES, mujoco_rig.INPUTS)
+        )
     truth = mujoco_rig.base_parameters(arm)
     nominal = dynax.DoublePendulum.from_base_parameters({n: truth[n] for n in BASE})
     report = diagnose(nominal, records[:2], records[2:], mode=Refit(), system_name="double_pendulum")

@@ -55,7 +55,9 @@ def test_pure_input_delay_is_named_and_explained():
     run = dead_time_run(seed=24)
     k = 2001
     train = Trajectory(run.ts[:k], run.xs[:k], run.us[:k], run.state_names, run.input_names, "acrobot", "train")
-    validation = Trajectory(run.ts[k:], run.xs[k:], run.us[k:], run.state_names, run.input_names, "acrobot", "validation")
+    validation = Trajectory(
+        run.ts[k:], run.xs[k:], run.us[k:], run.state_names, run.input_names, "acrobot", "validation"
+    )
     report = diagnose(Acrobot(), train, validation, mode=Refit())
     j = report.to_json()
     assert (j["findings"][0]["cause"], j["findings"][0]["where"]) == ("input_delay", "tau2"), j["findings"]

@@ -22,8 +22,12 @@ def test_emps_needs_coulomb_friction_near_the_published_value():
     Coulomb friction is named near the published value. Refitting mass and viscous instead (the earlier
     recipe) lets the viscous coefficient absorb it, and one 7.4 s held-out segment is then too little
     for the test (p = 0.046; docs/tutorials/real_data_diagnosis.md)."""
-    raw = load_trajectory(DATASETS / "emps" / "DATA_EMPS.mat", "linear_axis",
-                          mapping={"t": "t", "q": "qm", "force": "vir"}, scale={"force": 35.15065188})
+    raw = load_trajectory(
+        DATASETS / "emps" / "DATA_EMPS.mat",
+        "linear_axis",
+        mapping={"t": "t", "q": "qm", "force": "vir"},
+        scale={"force": 35.15065188},
+    )
     q = butterworth_filtfilt(raw.ts, raw.xs[:, 0], cutoff_hz=40.0)
     dq = central_difference(raw.ts, q)
     n = (len(raw) - 1) // 10 * 10
@@ -32,8 +36,9 @@ def test_emps_needs_coulomb_friction_near_the_published_value():
     k = int(0.7 * len(ts))
     train = Trajectory(ts[:k], xs[:k], us[:k], raw.state_names, raw.input_names, "linear_axis")
     validation = Trajectory(ts[k:], xs[k:], us[k:], raw.state_names, raw.input_names, "linear_axis")
-    nominal = LinearAxis(mass=jnp.asarray(90.0), viscous=jnp.asarray(200.0), coulomb=jnp.asarray(0.0),
-                         offset=jnp.asarray(0.0))
+    nominal = LinearAxis(
+        mass=jnp.asarray(90.0), viscous=jnp.asarray(200.0), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0)
+    )
     report = diagnose(nominal, train, validation, mode=Refit(), reference_horizon_s=0.25)
     causes = {(f["cause"], f["where"]): f for f in report.findings}
     assert ("coulomb_friction", "q") in causes
@@ -59,11 +64,27 @@ def _model_3_1():
     """The lab's rigid-body model 3.1 (no friction, no rotor inertia) in base parameters."""
     from dynax import DoublePendulum
 
-    m1, m2, l1, r1, r2, I1, I2, g = (0.6416937799349799, 0.563935954099688, 0.2, 0.2, 0.3212669909674605,
-                                     0.02671076499939512, 0.053878129629650884, 9.81)
-    return DoublePendulum.from_base_parameters(dict(
-        theta1=I1 + m2 * l1**2, theta2=I2, theta3=m2 * l1 * r2, theta4=g * (m1 * r1 + m2 * l1),
-        theta5=g * m2 * r2, theta6=0.0, theta7=0.0))
+    m1, m2, l1, r1, r2, I1, I2, g = (
+        0.6416937799349799,
+        0.563935954099688,
+        0.2,
+        0.2,
+        0.3212669909674605,
+        0.02671076499939512,
+        0.053878129629650884,
+        9.81,
+    )
+    return DoublePendulum.from_base_parameters(
+        dict(
+            theta1=I1 + m2 * l1**2,
+            theta2=I2,
+            theta3=m2 * l1 * r2,
+            theta4=g * (m1 * r1 + m2 * l1),
+            theta5=g * m2 * r2,
+            theta6=0.0,
+            theta7=0.0,
+        )
+    )
 
 
 def _assert_lab_effect(report, min_gain=0.25):
@@ -142,7 +163,9 @@ def test_dfki_refit_mode_names_nothing_the_held_out_runs_reject():
     for r in j["rounds"]:
         for c in r["candidates"]:
             assert c["outcome"] == "stopped" or c["gain"] > 0, (r["round"], c)
-    stopped = [c for r in j["rounds"] for c in r["candidates"] if any(t.startswith("held_out") for t in c["stopped_by"])]
+    stopped = [
+        c for r in j["rounds"] for c in r["candidates"] if any(t.startswith("held_out") for t in c["stopped_by"])
+    ]
     assert any(c["cause"] == "input_offset" and c["where"] == "tau1" for c in stopped), j["rounds"]
     # That offset is the recordings': the shoulder torque reads 0.14 N m high in run 00 and 0.07 in held-out run
     # 01, about nothing in 02 and 03 (both halves of each run agree), and the report says so.
@@ -168,9 +191,21 @@ def test_dfki_cli_on_the_raw_files_with_no_nominal_and_no_resampling(tmp_path, c
     runs = DATASETS / "dfki_double_pendulum" / "sys_id"
     mapping = ",".join(f"{k}={v}" for k, v in DFKI_MAPPING.items())
     out = tmp_path / "s1"
-    code = cli_main(["diagnose", "double_pendulum", str(runs / "trajectory_00.csv"), str(runs / "trajectory_01.csv"),
-                     "--validation", str(runs / "trajectory_02.csv"), str(runs / "trajectory_03.csv"),
-                     "--map", mapping, "--out", str(out)])
+    code = cli_main(
+        [
+            "diagnose",
+            "double_pendulum",
+            str(runs / "trajectory_00.csv"),
+            str(runs / "trajectory_01.csv"),
+            "--validation",
+            str(runs / "trajectory_02.csv"),
+            str(runs / "trajectory_03.csv"),
+            "--map",
+            mapping,
+            "--out",
+            str(out),
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 0, err
     assert "not the default DoublePendulum" in err

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from dynax import Acrobot, diagnose, InputOffset, save_trajectory
-from dynax.internal import write_report
-from dynax.internal import cli_main, write_json
+from dynax.internal import cli_main
 from dynax.synthetic import demo_data
 
 CONTRACT_KEYS = ["system", "data", "nominal", "verdict", "findings", "extended", "gain", "reference_horizon_s"]
@@ -25,8 +24,9 @@ def offset_data(tmp_path_factory):
 def test_cli_diagnose_writes_the_contract_report(offset_data, tmp_path, capsys):
     folder, _, _ = offset_data
     out = tmp_path / "diag"
-    code = cli_main(["diagnose", "acrobot", str(folder / "run1.csv"), "--validation", str(folder / "run2.csv"),
-                     "--out", str(out)])
+    code = cli_main(
+        ["diagnose", "acrobot", str(folder / "run1.csv"), "--validation", str(folder / "run2.csv"), "--out", str(out)]
+    )
     assert code == 0
     report = json.loads((out / "report.json").read_text())
     assert list(report)[: len(CONTRACT_KEYS)] == CONTRACT_KEYS
@@ -101,8 +101,10 @@ def test_cli_diagnose_refuses_bad_input_and_writes_nothing(offset_data, tmp_path
     # Too short to judge: the one-step residuals drop about 0.1 s at each end (this crashed with a division by zero).
     _, train, _ = offset_data
     short = tmp_path / "short.csv"
-    save_trajectory(type(train)(train.ts[:141], train.xs[:141], train.us[:141], train.state_names, train.input_names,
-                                "acrobot"), short)
+    save_trajectory(
+        type(train)(train.ts[:141], train.xs[:141], train.us[:141], train.state_names, train.input_names, "acrobot"),
+        short,
+    )
     assert cli_main(["diagnose", "acrobot", str(short), "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "short.csv" in err and "held-out part of the record" in err and "42 samples" in err and "at least 44" in err
@@ -124,12 +126,34 @@ def test_cli_diagnose_takes_several_runs_and_keeps_them_apart(offset_data, tmp_p
     for name, record, cut in (("a", train, 1000), ("b", validation, 500)):
         for part, (lo, hi) in zip("12", ((0, cut), (cut, len(record)))):
             path = folder / f"{name}{part}.csv"
-            save_trajectory(type(record)(record.ts[lo:hi], record.xs[lo:hi], record.us[lo:hi], record.state_names,
-                                         record.input_names, "acrobot"), path)
+            save_trajectory(
+                type(record)(
+                    record.ts[lo:hi],
+                    record.xs[lo:hi],
+                    record.us[lo:hi],
+                    record.state_names,
+                    record.input_names,
+                    "acrobot",
+                ),
+                path,
+            )
             runs[name + part] = (path, hi - lo)
     out = tmp_path / "multi"
-    code = cli_main(["diagnose", "acrobot", str(runs["a1"][0]), str(runs["a2"][0]),
-                     "--validation", str(runs["b1"][0]), str(runs["b2"][0]), "--max-terms", "1", "--out", str(out)])
+    code = cli_main(
+        [
+            "diagnose",
+            "acrobot",
+            str(runs["a1"][0]),
+            str(runs["a2"][0]),
+            "--validation",
+            str(runs["b1"][0]),
+            str(runs["b2"][0]),
+            "--max-terms",
+            "1",
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 0
     report = json.loads((out / "report.json").read_text())
     assert [p.rsplit("/", 1)[-1] for p in report["data"]["validation_runs"]] == ["b1.csv", "b2.csv"]
@@ -163,8 +187,21 @@ def test_cli_diagnose_on_irregularly_sampled_files_without_dt(offset_data, tmp_p
     # model cannot hold: set aside, and said so on stderr and in the report.
     nominal = tmp_path / "nominal.json"
     nominal.write_text(json.dumps({"parameters": {"fc2": 0.05}}))
-    code = cli_main(["diagnose", "acrobot", str(paths[0]), "--validation", str(paths[1]), "--max-terms", "1",
-                     "--nominal", str(nominal), "--out", str(out)])
+    code = cli_main(
+        [
+            "diagnose",
+            "acrobot",
+            str(paths[0]),
+            "--validation",
+            str(paths[1]),
+            "--max-terms",
+            "1",
+            "--nominal",
+            str(nominal),
+            "--out",
+            str(out),
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 0, err
     assert "fc2 = 0.05 (coulomb_friction at q2)" in err
@@ -189,7 +226,10 @@ def test_cli_nominal_sets_aside_term_coefficients_and_refuses_unknown_names():
     assert kept == {"theta1": 0.05, "theta7": 0.02}
     assert "Ir2 = 0.003 (rotor_inertia at q2)" in note and "fc1 = 0.1 (coulomb_friction at q1)" in note
     assert float(nominal_system("double_pendulum", kept).theta7) == 0.02
-    assert split_term_coefficients("linear_axis", {"mass": 90.0, "coulomb": 20.0}) == ({"mass": 90.0, "coulomb": 20.0}, None)
+    assert split_term_coefficients("linear_axis", {"mass": 90.0, "coulomb": 20.0}) == (
+        {"mass": 90.0, "coulomb": 20.0},
+        None,
+    )
     kept, note = split_term_coefficients("acrobot", {"theta1": 1.0, "Ir9": 1.0})
     assert note is None
     with pytest.raises(UsageError, match="Ir9"):
@@ -207,15 +247,29 @@ def test_cli_without_nominal_on_another_axis_diagnoses_against_its_identified_ri
     from dynax import LinearAxis, Trajectory
     from dynax.synthetic import synthetic_trajectory
 
-    truth = LinearAxis(mass=jnp.asarray(5.0), viscous=jnp.asarray(10.0), coulomb=jnp.asarray(2.0), offset=jnp.asarray(0.3))
-    run = synthetic_trajectory(truth, duration=30.0, dt=0.01, seed=5, amplitude=10.0, noise=(1e-5, 1e-3),
-                               system_name="linear_axis")
+    truth = LinearAxis(
+        mass=jnp.asarray(5.0), viscous=jnp.asarray(10.0), coulomb=jnp.asarray(2.0), offset=jnp.asarray(0.3)
+    )
+    run = synthetic_trajectory(
+        truth, duration=30.0, dt=0.01, seed=5, amplitude=10.0, noise=(1e-5, 1e-3), system_name="linear_axis"
+    )
     for name, (a, b) in (("train", (0, 2001)), ("held", (2001, len(run.ts)))):
-        save_trajectory(Trajectory(run.ts[a:b], run.xs[a:b], run.us[a:b], run.state_names, run.input_names,
-                                   "linear_axis"), tmp_path / f"{name}.csv")
+        save_trajectory(
+            Trajectory(run.ts[a:b], run.xs[a:b], run.us[a:b], run.state_names, run.input_names, "linear_axis"),
+            tmp_path / f"{name}.csv",
+        )
     out = tmp_path / "axis"
-    code = cli_main(["diagnose", "linear_axis", str(tmp_path / "train.csv"), "--validation", str(tmp_path / "held.csv"),
-                     "--out", str(out)])
+    code = cli_main(
+        [
+            "diagnose",
+            "linear_axis",
+            str(tmp_path / "train.csv"),
+            "--validation",
+            str(tmp_path / "held.csv"),
+            "--out",
+            str(out),
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 0, err
     assert "not the default LinearAxis" in err and "mass" in err
@@ -238,21 +292,39 @@ def test_cli_without_nominal_on_a_small_acrobot_names_every_friction_with_its_si
     from dynax import CoulombFriction, Extended, Trajectory
     from dynax.synthetic import synthetic_trajectory
 
-    truth = Extended(Acrobot.from_physical(m1=0.5, m2=0.45, l1=0.3, lc1=0.15, lc2=0.16, Ic1=0.004, Ic2=0.0035,
-                                           b1=0.01, b2=0.01), (CoulombFriction(1, 0.03),))
+    truth = Extended(
+        Acrobot.from_physical(m1=0.5, m2=0.45, l1=0.3, lc1=0.15, lc2=0.16, Ic1=0.004, Ic2=0.0035, b1=0.01, b2=0.01),
+        (CoulombFriction(1, 0.03),),
+    )
     run = synthetic_trajectory(truth, duration=30.0, dt=0.01, amplitude=0.15, seed=4, system_name="acrobot")
     for name, (a, b) in (("train", (0, 2001)), ("held", (2001, len(run.ts)))):
-        save_trajectory(Trajectory(run.ts[a:b], run.xs[a:b], run.us[a:b], run.state_names, run.input_names, "acrobot"),
-                        tmp_path / f"{name}.csv")
+        save_trajectory(
+            Trajectory(run.ts[a:b], run.xs[a:b], run.us[a:b], run.state_names, run.input_names, "acrobot"),
+            tmp_path / f"{name}.csv",
+        )
     out = tmp_path / "small"
-    code = cli_main(["diagnose", "acrobot", str(tmp_path / "train.csv"), "--validation", str(tmp_path / "held.csv"),
-                     "--out", str(out)])
+    code = cli_main(
+        [
+            "diagnose",
+            "acrobot",
+            str(tmp_path / "train.csv"),
+            "--validation",
+            str(tmp_path / "held.csv"),
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     j = json.loads((out / "report.json").read_text())
     found = {(f["cause"], f["where"]): f for f in j["findings"]}
-    assert set(found) == {("viscous_friction", "q1"), ("viscous_friction", "q2"), ("coulomb_friction", "q2")}, j["findings"]
-    for (cause, where), size in {("viscous_friction", "q1"): 0.01, ("viscous_friction", "q2"): 0.01,
-                                 ("coulomb_friction", "q2"): 0.03}.items():
+    assert set(found) == {("viscous_friction", "q1"), ("viscous_friction", "q2"), ("coulomb_friction", "q2")}, j[
+        "findings"
+    ]
+    for (cause, where), size in {
+        ("viscous_friction", "q1"): 0.01,
+        ("viscous_friction", "q2"): 0.01,
+        ("coulomb_friction", "q2"): 0.03,
+    }.items():
         assert abs(found[(cause, where)]["coefficient"] / size - 1) < 0.1, found[(cause, where)]
     # Every finding was compared with each of its look-alikes that could be fitted.
     shoulder = found[("viscous_friction", "q1")]
@@ -270,5 +342,7 @@ def test_a_nominal_model_of_another_machine_is_said_to_be_one(offset_data):
     moved = [n for n in report.notes if n.startswith("The refit moved")]
     assert moved and "theta1 from 5.33" in moved[0] and "another machine" in moved[0], report.notes
     # The demo's own nominal is close to its truth: no such note (the offset test above diagnoses it).
-    assert not any(n.startswith("The refit moved") for n in diagnose(Acrobot(), train, validation, max_terms=1,
-                                                                     discovery=False).notes)
+    assert not any(
+        n.startswith("The refit moved")
+        for n in diagnose(Acrobot(), train, validation, max_terms=1, discovery=False).notes
+    )

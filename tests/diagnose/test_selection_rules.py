@@ -7,7 +7,14 @@ import numpy as np
 import pytest
 
 from dynax import Acrobot, CoulombFriction, default_candidates, InputOffset, Known, Refit, Trajectory, ViscousFriction
-from dynax.internal import candidate_family, held_partners, judge_round, look_alike_tests, names_to_refit, on_physical_side
+from dynax.internal import (
+    candidate_family,
+    held_partners,
+    judge_round,
+    look_alike_tests,
+    names_to_refit,
+    on_physical_side,
+)
 
 
 def _round(earlier_fc1, new_delta, *, earlier=CoulombFriction(0)):
@@ -23,9 +30,24 @@ def _round(earlier_fc1, new_delta, *, earlier=CoulombFriction(0)):
     scores = np.stack([score_cur, 0.6 * score_cur * rng.uniform(0.9, 1.1, n_windows)])
     errors = np.ones((2, n_windows, n_steps, 4)) * np.asarray([1.0, 0.7])[:, None, None, None]
     physical = lambda k, delta: on_physical_side(candidates[k], delta, None, (), None)  # noqa: E731
-    results = judge_round(physical, [1], [1], [0], n_nom, p, np.full_like(p, 0.01), errors, scores, score_cur,
-                           np.repeat([0, 1], n_windows // 2), 1, alpha=0.01, min_gain=0.05,
-                           steps=np.asarray([5, 10]), position_index=[0, 1])
+    results = judge_round(
+        physical,
+        [1],
+        [1],
+        [0],
+        n_nom,
+        p,
+        np.full_like(p, 0.01),
+        errors,
+        scores,
+        score_cur,
+        np.repeat([0, 1], n_windows // 2),
+        1,
+        alpha=0.01,
+        min_gain=0.05,
+        steps=np.asarray([5, 10]),
+        position_index=[0, 1],
+    )
     return results[1]
 
 
@@ -41,8 +63,13 @@ def test_a_joint_refit_with_any_unphysical_coefficient_is_not_admissible(earlier
     r = _round(earlier_fc1, new_delta)
     assert r["p"] < 1e-6 and r["gain_windows"] > 0.3  # it helps ...
     assert not r["physical"] and not r["significant"]  # ... but not with a physical model
-    assert r["rules"] == {"significance": True, "min_gain": True, "sign": False, "agreement": True,
-                          "held_out": True}  # the one rule that stops it
+    assert r["rules"] == {
+        "significance": True,
+        "min_gain": True,
+        "sign": False,
+        "agreement": True,
+        "held_out": True,
+    }  # the one rule that stops it
 
 
 def test_a_candidate_the_cross_fitted_runs_carry_but_the_held_out_runs_reject_is_not_admissible():
@@ -62,12 +89,35 @@ def test_a_candidate_the_cross_fitted_runs_carry_but_the_held_out_runs_reject_is
         p[1, -1] = 0.1
         errors = np.ones((2, n_val + n_cv, 11, 4))
         physical = lambda k, delta: True  # noqa: E731
-        return judge_round(physical, [0], [0], [], 2, p, np.full_like(p, 0.01), errors, scores, score_cur, runs, 1,
-                            alpha=0.01, min_gain=0.05, steps=np.asarray([5, 10]), position_index=[0, 1], n_val=n_val)[0]
+        return judge_round(
+            physical,
+            [0],
+            [0],
+            [],
+            2,
+            p,
+            np.full_like(p, 0.01),
+            errors,
+            scores,
+            score_cur,
+            runs,
+            1,
+            alpha=0.01,
+            min_gain=0.05,
+            steps=np.asarray([5, 10]),
+            position_index=[0, 1],
+            n_val=n_val,
+        )[0]
 
     harmful = judged(1.1)
     assert harmful["gain_windows"] > 0.3 and harmful["gain_held_out"] < 0
-    assert harmful["rules"] == {"significance": True, "min_gain": True, "sign": True, "agreement": True, "held_out": False}
+    assert harmful["rules"] == {
+        "significance": True,
+        "min_gain": True,
+        "sign": True,
+        "agreement": True,
+        "held_out": False,
+    }
     assert not harmful["significant"]
     assert judged(0.97)["significant"]
 
@@ -81,8 +131,13 @@ def test_terms_of_either_sign_are_not_constrained():
 def _acrobot_family(mode):
     system = Acrobot()
     rng = np.random.default_rng(0)
-    record = Trajectory(jnp.arange(200) * 0.01, jnp.asarray(rng.normal(size=(200, 4))), jnp.asarray(rng.normal(size=(200, 1))),
-                        system.state_names, system.input_names)
+    record = Trajectory(
+        jnp.arange(200) * 0.01,
+        jnp.asarray(rng.normal(size=(200, 4))),
+        jnp.asarray(rng.normal(size=(200, 1))),
+        system.state_names,
+        system.input_names,
+    )
     candidates = default_candidates(system)
     refit = names_to_refit(system, mode)
     family, _, _ = candidate_family(system, candidates, refit, [record])
@@ -117,16 +172,19 @@ def test_a_look_alike_is_told_apart_only_by_a_difference_that_matters():
     margin any candidate must gain to count. One 30 % worse is told apart; a structural equivalent never is."""
     from types import SimpleNamespace
 
-
-
     rng = np.random.default_rng(1)
     n_windows = 240
     best = rng.uniform(1.0, 2.0, n_windows)
     worse = lambda factor: best * factor * np.exp(rng.normal(0.0, 0.002, n_windows))  # noqa: E731
     scores = np.stack([np.ones(n_windows), best, worse(1.01), worse(1.3), worse(1.3)])
     candidates = (ViscousFriction(1), CoulombFriction(1), InputOffset(0), ViscousFriction(0))
-    problem = SimpleNamespace(options=SimpleNamespace(alpha=0.01, min_gain=0.05), candidates=candidates,
-                              system=Acrobot(), look_alikes=lambda k: [1, 2, 3], equivalents={0: [3]})
+    problem = SimpleNamespace(
+        options=SimpleNamespace(alpha=0.01, min_gain=0.05),
+        candidates=candidates,
+        system=Acrobot(),
+        look_alikes=lambda k: [1, 2, 3],
+        equivalents={0: [3]},
+    )
     results = {k: {"i": k + 1, "gain_held_out": 0.5} for k in range(4)}
     yard = SimpleNamespace(window_runs=np.repeat([0, 1], n_windows // 2), overlap=1)
     tests = {a["cause"] + str(i): a for i, a in enumerate(look_alike_tests(problem, yard, 0, results, scores))}

@@ -2,8 +2,7 @@
 
 import numpy as np
 
-from dynax.internal import sparse_search
-from dynax.internal import stlsq
+from dynax.internal import sparse_search, stlsq
 
 
 def _design(n, m, seed, correlated=False):

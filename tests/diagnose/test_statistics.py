@@ -31,15 +31,22 @@ def window_differences(rng, n_windows, overlap, shift=0.0, rho=0.9, substeps=5):
 def test_false_claim_rate_on_no_effect_data_is_near_the_level(overlap, n_windows, n_runs):
     rng = np.random.default_rng(overlap + n_runs)
     runs = np.repeat(np.arange(n_runs), n_windows)
-    p = np.array([
-        paired_block_test(np.concatenate([window_differences(rng, n_windows, overlap) for _ in range(n_runs)]), runs, overlap).p_value
-        for _ in range(400)
-    ])
+    p = np.array(
+        [
+            paired_block_test(
+                np.concatenate([window_differences(rng, n_windows, overlap) for _ in range(n_runs)]), runs, overlap
+            ).p_value
+            for _ in range(400)
+        ]
+    )
     # With 400 repetitions the binomial spread is about 1.1 % at 5 % and 0.5 % at 1 %: at the level,
     # within two spreads (the earlier batch-means test reached 3 % at 1 %), not at the 10-30 % of counting windows.
     assert np.mean(p < 0.05) <= 0.05 + 0.022
     assert np.mean(p < 0.01) <= 0.01 + 0.01
-    naive = [scipy_t_naive(np.concatenate([window_differences(rng, n_windows, overlap) for _ in range(n_runs)])) for _ in range(100)]
+    naive = [
+        scipy_t_naive(np.concatenate([window_differences(rng, n_windows, overlap) for _ in range(n_runs)]))
+        for _ in range(100)
+    ]
     assert np.mean(np.asarray(naive) < 0.05) > 0.15  # counting every window as independent would claim far too much
 
 
@@ -83,8 +90,9 @@ def test_the_long_run_variance_is_unbiased_on_short_records():
     for _ in range(600):
         d = window_differences(rng, n, overlap, rho=0.0, substeps=1)
         for method in est:
-            t = paired_block_test(d, np.zeros(n, int), overlap, batch=2 * overlap if method == "obm" else overlap,
-                                  method=method)
+            t = paired_block_test(
+                d, np.zeros(n, int), overlap, batch=2 * overlap if method == "obm" else overlap, method=method
+            )
             est[method].append(t.std_error**2 * n)
     flat = np.asarray(est["flat_top"])
     assert np.mean(np.isfinite(flat)) > 0.97  # a negative estimate (p = 1) is rare

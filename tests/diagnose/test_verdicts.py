@@ -11,8 +11,8 @@ import pytest
 
 import dynax
 from dynax import Verdict
-from dynax.internal import Structure
-from dynax.internal import decide_verdict as decide, MIN_PRACTICAL_GAIN, PairedTest, power_of, PRACTICAL_R2
+from dynax.internal import decide_verdict as decide
+from dynax.internal import MIN_PRACTICAL_GAIN, PairedTest, power_of, PRACTICAL_R2, Structure
 from tests.hidden_cases import Case, diagnose_case, outcome, records
 
 
@@ -38,7 +38,9 @@ def test_a_large_effect_with_a_small_significant_leftover_is_explained():
     term could lower the residuals by 7 % at most, not of practical size."""
     left = _structure(True, 0.14, p=0.0014)
     assert decide(True, left, False, power_of({}, {}, 0.01, 10.0)) == Verdict.EXPLAINED
-    assert decide(True, _structure(True, PRACTICAL_R2 + 0.01), False, power_of({}, {}, 0.01, 10.0)) == Verdict.UNEXPLAINED
+    assert (
+        decide(True, _structure(True, PRACTICAL_R2 + 0.01), False, power_of({}, {}, 0.01, 10.0)) == Verdict.UNEXPLAINED
+    )
 
 
 def test_none_needs_the_power_to_see_the_smallest_gain_that_matters():
@@ -114,7 +116,9 @@ def test_a_short_held_out_record_is_inconclusive_not_none():
         power = j["test"]["power"]
         assert power["best_candidate"] is not None
         assert any(n.startswith("Inconclusive:") for n in j["notes"]), j["notes"]
-        assert not (power["detectable_gain"] <= MIN_PRACTICAL_GAIN and power["best_candidate"]["gain"] < MIN_PRACTICAL_GAIN)
+        assert not (
+            power["detectable_gain"] <= MIN_PRACTICAL_GAIN and power["best_candidate"]["gain"] < MIN_PRACTICAL_GAIN
+        )
     else:  # found anyway: then it must be the right cause
         assert j["findings"][0]["cause"] == "coulomb_friction", j["findings"]
 
@@ -137,8 +141,17 @@ def test_known_mode_with_an_impossible_nominal_is_not_none():
     case = Case("bad-nominal", "acrobot", None, None, 0.0, "none", "known", 301)
     train, held_out = records(case)
     try:
-        nominal = dynax.Acrobot.from_base_parameters({"theta1": -1.333, "theta2": 1.33, "theta3": 1.0, "theta4": -14.715,
-                                                          "theta5": 9.81, "theta6": 0.1, "theta7": 0.1})
+        nominal = dynax.Acrobot.from_base_parameters(
+            {
+                "theta1": -1.333,
+                "theta2": 1.33,
+                "theta3": 1.0,
+                "theta4": -14.715,
+                "theta5": 9.81,
+                "theta6": 0.1,
+                "theta7": 0.1,
+            }
+        )
     except ValueError as refused:  # a located refusal of the impossible parameters is a right answer too
         assert "theta1" in str(refused) or "theta4" in str(refused), refused
         return

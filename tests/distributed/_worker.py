@@ -43,12 +43,20 @@ def main(out):
         return -jnp.sum(sim.xs[-1] ** 2)
 
     pgpe = dynax.control.PGPE(population_size=8, init_sigma=0.3)
-    state, history = dynax.control.run_pgpe(pgpe, objective, jnp.array([0.2, 0.1]), jax.random.key(0), 2, progress=False)
+    state, history = dynax.control.run_pgpe(
+        pgpe, objective, jnp.array([0.2, 0.1]), jax.random.key(0), 2, progress=False
+    )
     population = pgpe.ask(state, jax.random.key(1))[0]
     rewards = dynax.control.evaluate_population(objective, population, jax.random.split(jax.random.key(2), 8))
     # Two runs of one generation with population 4: the runs are split across the devices.
-    sweep, _ = dynax.control.sweep_pgpe(dynax.control.PGPE(population_size=4, init_sigma=0.3), objective, jnp.array([0.2, 0.1]),
-                                jax.random.split(jax.random.key(3), 2), 1, progress=False)
+    sweep, _ = dynax.control.sweep_pgpe(
+        dynax.control.PGPE(population_size=4, init_sigma=0.3),
+        objective,
+        jnp.array([0.2, 0.1]),
+        jax.random.split(jax.random.key(3), 2),
+        1,
+        progress=False,
+    )
 
     # A record of an acrobot under a varying torque, replayed through a model with the wrong
     # damping: the errors are not zero, and 9 windows do not divide among 2 devices (padding).

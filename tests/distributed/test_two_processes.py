@@ -60,11 +60,21 @@ def test_two_processes_equal_one(tmp_path):
     single, two_devices = tmp_path / "single.npz", tmp_path / "two_devices.npz"
     commands = [[str(out), str(port), "2", str(rank)] for rank, out in enumerate(outs)] + [[str(single)]]
     # All at once (the references beside the pair): one worker compiles for about 10 s of CPU time.
-    procs = [subprocess.Popen([sys.executable, str(WORKER), *args], env=env, stdout=subprocess.PIPE,
-                              stderr=subprocess.STDOUT, text=True) for args in commands]
-    procs.append(subprocess.Popen([sys.executable, str(WORKER), str(two_devices)],
-                                  env=dict(env, DYNAX_TEST_HOST_DEVICES="2"), stdout=subprocess.PIPE,
-                                  stderr=subprocess.STDOUT, text=True))
+    procs = [
+        subprocess.Popen(
+            [sys.executable, str(WORKER), *args], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+        )
+        for args in commands
+    ]
+    procs.append(
+        subprocess.Popen(
+            [sys.executable, str(WORKER), str(two_devices)],
+            env=dict(env, DYNAX_TEST_HOST_DEVICES="2"),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+    )
     _run(procs)
 
     reference = np.load(single)

@@ -36,10 +36,14 @@ def test_system_parameters_default_and_labels():
 
 def _pendulum_data(key, noise):
     """A damped pendulum integrated with adaptive Dopri8 at tight tolerance: not the fitted integrator."""
-    true = dynax.LinearAxis(mass=jnp.asarray(0.8), viscous=jnp.asarray(0.3), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0))
+    true = dynax.LinearAxis(
+        mass=jnp.asarray(0.8), viscous=jnp.asarray(0.3), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0)
+    )
     ts = jnp.linspace(0.0, 4.0, 401)
     us = jnp.sin(3.0 * ts)[:, None] + 0.5 * jnp.cos(1.3 * ts)[:, None]
-    sol = dynax.simulate(true, jnp.array([0.0, 0.0]), ts, us, method=dynax.Adaptive(solver=diffrax.Dopri8(), rtol=1e-10, atol=1e-10))
+    sol = dynax.simulate(
+        true, jnp.array([0.0, 0.0]), ts, us, method=dynax.Adaptive(solver=diffrax.Dopri8(), rtol=1e-10, atol=1e-10)
+    )
     xs = sol.xs + noise * jax.random.normal(key, sol.xs.shape)
     return true, ts, xs, us
 
@@ -47,7 +51,9 @@ def _pendulum_data(key, noise):
 def _pendulum_problem():
     """A start far from `_pendulum_data`'s truth, the filter freeing mass and viscous friction, and the
     residuals of a fixed-grid rollout from the first measured state."""
-    start = dynax.LinearAxis(mass=jnp.asarray(1.5), viscous=jnp.asarray(1.0), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0))
+    start = dynax.LinearAxis(
+        mass=jnp.asarray(1.5), viscous=jnp.asarray(1.0), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0)
+    )
     spec = eqx.tree_at(lambda s: (s.mass, s.viscous), jax.tree.map(lambda _: False, start), (True, True))
 
     def residuals(model, data):
@@ -108,9 +114,11 @@ def test_dense_jacobian_gives_the_forward_mode_fit_and_differentiates_in_the_dat
     f = lambda z, d: res({"a": 1.0 + z[0], "b": 0.3 + 0.3 * z[1]}, d[0]) * d[1]  # noqa: E731
     rule = dense_forward(f)
     primals = (jnp.array([0.2, -0.1]), (y, jnp.asarray(1.5)))
-    for tangents in [(jnp.array([1.0, -2.0]), (jnp.zeros(60), jnp.asarray(0.0))),
-                     (jnp.zeros(2), (jnp.sin(ts), jnp.asarray(0.3))),
-                     (jnp.array([0.5, 1.0]), (jnp.cos(ts), jnp.asarray(-1.0)))]:
+    for tangents in [
+        (jnp.array([1.0, -2.0]), (jnp.zeros(60), jnp.asarray(0.0))),
+        (jnp.zeros(2), (jnp.sin(ts), jnp.asarray(0.3))),
+        (jnp.array([0.5, 1.0]), (jnp.cos(ts), jnp.asarray(-1.0))),
+    ]:
         np.testing.assert_allclose(jax.jvp(rule, primals, tangents)[1], jax.jvp(f, primals, tangents)[1], rtol=1e-12)
 
 
@@ -131,8 +139,9 @@ def test_public_engine_matches_scipy_on_a_model_of_the_users_own():
     sol = dynax.fit_least_squares(residuals, start, dynax.Parameters.of(start, True), (jnp.asarray(t), jnp.asarray(y)))
     assert isinstance(sol, dynax.Solution) and sol.names == ("['a']", "['b']", "['c']")
 
-    ref = scipy.optimize.least_squares(lambda p: p[0] * np.exp(-p[1] * t) + p[2] - y, [1.0, 0.2, 0.0],
-                                       xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    ref = scipy.optimize.least_squares(
+        lambda p: p[0] * np.exp(-p[1] * t) + p[2] - y, [1.0, 0.2, 0.0], xtol=1e-12, ftol=1e-12, gtol=1e-12
+    )
     sigma2 = 2 * ref.cost / (t.size - 3)
     ref_std = np.sqrt(np.diag(sigma2 * np.linalg.inv(ref.jac.T @ ref.jac)))
     np.testing.assert_allclose(np.asarray(sol.value), ref.x, rtol=1e-6)
@@ -153,8 +162,9 @@ def test_unknowns_the_residuals_do_not_determine_get_no_finite_error_and_frozen_
 
     def residuals(model, data):
         t, y = data
-        return (model["a"] * jnp.exp(-model["b"] * t) + model["c"] + model["c2"]
-                + model["e"] * t**2 + model["f"] * t**2 - y)
+        return (
+            model["a"] * jnp.exp(-model["b"] * t) + model["c"] + model["c2"] + model["e"] * t**2 + model["f"] * t**2 - y
+        )
 
     start = {k: jnp.asarray(v) for k, v in dict(a=1.0, b=0.2, c=0.0, c2=0.0, d=1.0, e=0.0, f=0.0).items()}
     params = dynax.Parameters.of(start, True)
@@ -163,8 +173,13 @@ def test_unknowns_the_residuals_do_not_determine_get_no_finite_error_and_frozen_
     std = dict(zip(sol.names, np.asarray(sol.std_errors)))
     assert all(np.isinf(std[f"['{k}']"]) for k in "def"), std
     assert std["['c2']"] == 0.0
-    ref = scipy.optimize.least_squares(lambda p: p[0] * np.exp(-p[1] * t) + p[2] + p[3] * t**2 - y, [1.0, 0.2, 0.0, 0.0],
-                                       xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    ref = scipy.optimize.least_squares(
+        lambda p: p[0] * np.exp(-p[1] * t) + p[2] + p[3] * t**2 - y,
+        [1.0, 0.2, 0.0, 0.0],
+        xtol=1e-12,
+        ftol=1e-12,
+        gtol=1e-12,
+    )
     sigma2 = 2 * ref.cost / (t.size - 4)
     ref_std = np.sqrt(np.diag(sigma2 * np.linalg.inv(ref.jac.T @ ref.jac)))
     np.testing.assert_allclose([std[f"['{k}']"] for k in "abc"], ref_std[:3], rtol=1e-3)
@@ -172,8 +187,9 @@ def test_unknowns_the_residuals_do_not_determine_get_no_finite_error_and_frozen_
     k = sol.names.index("['d']")
     assert np.all(np.isnan(covariance[k])) and np.isfinite(covariance[0, 0])
     # the same under vmap (the diagnosis fits its configurations so)
-    batched = jax.vmap(lambda y_: dynax.fit_least_squares(residuals, start, params, (jnp.asarray(t), y_),
-                                                          scale=scale).std_errors)(jnp.stack([jnp.asarray(y)] * 2))
+    batched = jax.vmap(
+        lambda y_: dynax.fit_least_squares(residuals, start, params, (jnp.asarray(t), y_), scale=scale).std_errors
+    )(jnp.stack([jnp.asarray(y)] * 2))
     np.testing.assert_array_equal(np.asarray(batched[0]), np.asarray(sol.std_errors))
 
 
@@ -188,8 +204,9 @@ def test_a_solver_that_ends_worse_than_it_started_is_reported_as_diverged():
 
     residual = lambda m, _: jnp.atleast_1d(jnp.arctan(m.p))  # noqa: E731
     start = _Scalar(jnp.asarray(1.5))
-    gauss_newton = fit_least_squares(residual, start, solver=optx.GaussNewton(rtol=1e-8, atol=1e-8), max_steps=4,
-                                     covariance=False)
+    gauss_newton = fit_least_squares(
+        residual, start, solver=optx.GaussNewton(rtol=1e-8, atol=1e-8), max_steps=4, covariance=False
+    )
     assert float(gauss_newton.loss) > float(gauss_newton.initial_loss)
     assert gauss_newton.result == optx.RESULTS.nonlinear_divergence and not gauss_newton.succeeded
     assert abs(float(gauss_newton.value[0])) > 1.5  # the solver's last point is kept, for inspection
@@ -238,10 +255,14 @@ def test_a_fit_started_at_its_minimum_stops_at_once_and_the_answer_is_the_tightl
     assert first.succeeded and again.succeeded and int(again.steps) <= 3, int(again.steps)
     # optimistix's own test alone, at 1e-12: the same estimate to a tiny fraction of its standard error
     tight = optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12)
-    reference = fit(residuals, start, spec, (ts, xs, us), solver=eqx.tree_at(lambda s: s.search, tight, StrictTrustRegion()))
+    reference = fit(
+        residuals, start, spec, (ts, xs, us), solver=eqx.tree_at(lambda s: s.search, tight, StrictTrustRegion())
+    )
     assert int(reference.steps) > int(first.steps)
     for sol in (first, again):
-        np.testing.assert_array_less(np.abs(np.asarray(sol.value - reference.value)), 1e-6 * np.asarray(reference.std_errors))
+        np.testing.assert_array_less(
+            np.abs(np.asarray(sol.value - reference.value)), 1e-6 * np.asarray(reference.std_errors)
+        )
 
 
 def _exponential_and_sine():
@@ -295,8 +316,9 @@ def test_the_jacobian_formed_only_where_a_step_is_taken_gives_the_same_iterates_
     # batched (the branch becomes a select): the same answers as one by one
     starts = jnp.stack([start, jnp.array([1.0, -0.5, 0.2, 2.5])])
     solver = levenberg_marquardt(1e-10, 1e-10, jacobian="accepted")
-    batched = jax.vmap(lambda y0: optx.least_squares(lambda y, _: model(y), solver, y0, max_steps=100,
-                                                     throw=False).value)(starts)
+    batched = jax.vmap(
+        lambda y0: optx.least_squares(lambda y, _: model(y), solver, y0, max_steps=100, throw=False).value
+    )(starts)
     np.testing.assert_allclose(np.asarray(batched), np.asarray(jnp.stack([lazy.value, lazy.value])), rtol=1e-8)
     with pytest.raises(ValueError, match="jacobian"):
         levenberg_marquardt(1e-8, 1e-8, jacobian="sometimes")
@@ -316,12 +338,25 @@ def test_nielsens_damping_update_reaches_the_same_minimum_in_no_more_steps():
     def residuals(y, _):
         return model(y)
 
-    starts = ([3.0, -3.0, 0.1, 2.8], [1.0, -0.5, 0.2, 2.5], [1.0, -0.2, 1.0, 2.0], [2.5, -1.0, 0.3, 3.2],
-              [1.5, -2.0, 0.8, 2.9])
+    starts = (
+        [3.0, -3.0, 0.1, 2.8],
+        [1.0, -0.5, 0.2, 2.5],
+        [1.0, -0.2, 1.0, 2.0],
+        [2.5, -1.0, 0.3, 3.2],
+        [1.5, -2.0, 0.8, 2.9],
+    )
     saved = 0
     for start in starts:
-        fits = {d: optx.least_squares(residuals, levenberg_marquardt(1e-10, 1e-10, jacobian="accepted", damping=d),
-                                      jnp.array(start), max_steps=200, throw=False) for d in ("classical", "nielsen")}
+        fits = {
+            d: optx.least_squares(
+                residuals,
+                levenberg_marquardt(1e-10, 1e-10, jacobian="accepted", damping=d),
+                jnp.array(start),
+                max_steps=200,
+                throw=False,
+            )
+            for d in ("classical", "nielsen")
+        }
         classical, nielsen = fits["classical"], fits["nielsen"]
         assert nielsen.result == optx.RESULTS.successful and classical.result == optx.RESULTS.successful
         loss = [float(jnp.sum(residuals(f.value, None) ** 2)) for f in (classical, nielsen)]

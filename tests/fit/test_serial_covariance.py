@@ -23,18 +23,22 @@ def _lowpassed(rng, wn, shape, order=3, settle=400):
 def _monte_carlo(rho, reps=300, per_record=500, n_records=2, seed=0, lowpass=None):
     rng = np.random.default_rng(seed)
     if lowpass is None:
+
         def series(shape):
             return _ar1(rng, rho, shape)
     else:
+
         def series(shape):
             return _lowpassed(rng, lowpass, np.atleast_1d(shape))
+
     steps = np.arange(2 * n_records * per_record) % (n_records * per_record)  # two rows per time step
     estimates, serial, independent, bandwidths = [], [], [], []
     for _ in range(reps):
         # Each record: two equations per time step (say, two joints) that share the step's regressors'
         # drift and each have their own AR(1) error; the records are independent of each other.
-        x = np.concatenate([np.concatenate([np.ones((per_record, 1)), series((per_record, 2))], axis=1)
-                            for _ in range(n_records)])
+        x = np.concatenate(
+            [np.concatenate([np.ones((per_record, 1)), series((per_record, 2))], axis=1) for _ in range(n_records)]
+        )
         x = np.concatenate([x, x * np.array([1.0, -1.0, 0.5])])
         e = np.concatenate([series(per_record) for _ in range(2 * n_records)])
         y = x @ np.array([1.0, 2.0, -1.0]) + e

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import dynax
-import dynax.internal
 from dynax import Dynamic, identify, Trajectory
+import dynax.internal
 from dynax.internal import record_angle_zeros
 from tests.identify.test_identify_defaults import dfki, recorded, rig_model
 
@@ -32,8 +32,9 @@ def with_zero(record, zero):
 
 
 def with_force_offset(record, offset):
-    return Trajectory(record.ts, record.xs, record.us + jnp.asarray(offset)[None, :], record.state_names,
-                      record.input_names)
+    return Trajectory(
+        record.ts, record.xs, record.us + jnp.asarray(offset)[None, :], record.state_names, record.input_names
+    )
 
 
 def _theta(result):
@@ -59,8 +60,9 @@ def test_encoder_zeros_that_differ_between_records_are_found_measured_and_fitted
     # those of force offsets in the zeros' place: near the hanging rest a zero acts as a constant torque)
     truth = identify(dynax.DoublePendulum(), records, Dynamic(), friction="coulomb", refine=False, holdout=0)
     np.testing.assert_allclose(_theta(result), _theta(truth), rtol=0.01)
-    forced = identify(dynax.DoublePendulum(), shifted, Dynamic(offsets=True), friction="coulomb", refine=False,
-                      holdout=0)
+    forced = identify(
+        dynax.DoublePendulum(), shifted, Dynamic(offsets=True), friction="coulomb", refine=False, holdout=0
+    )
     assert forced.angle_zeros is None and forced.to_json()["stages"]["least_squares"]["offsets"] is not None
     report = result.to_json()
     assert report["angle_zeros"]["chosen"] and report["stages"]["least_squares"]["offsets"] is None

@@ -27,8 +27,15 @@ def _encoder_record(path, rate_hz: float, duration_s: float = 10.0):
         return 3.0 * np.sum(np.sin(2 * np.pi * freqs * t + phases)) / np.sqrt(6)
 
     ts = np.arange(0.0, duration_s + 0.5 / rate_hz, 1.0 / rate_hz)
-    sol = solve_ivp(lambda t, x: arm_reference(theta, x, (0.0, tau(t))), (0.0, ts[-1]), [0.2, 0.0, 0.0, 0.0],
-                    t_eval=ts, method="DOP853", rtol=1e-11, atol=1e-12)
+    sol = solve_ivp(
+        lambda t, x: arm_reference(theta, x, (0.0, tau(t))),
+        (0.0, ts[-1]),
+        [0.2, 0.0, 0.0, 0.0],
+        t_eval=ts,
+        method="DOP853",
+        rtol=1e-11,
+        atol=1e-12,
+    )
     table = np.column_stack([ts, sol.y[0], sol.y[1], [tau(t) for t in ts]])
     np.savetxt(path, table, delimiter=",", header="t,q1,q2,tau2", comments="", fmt="%.17g")
     return dict(zip(dynax.Acrobot().base_parameters, theta))

@@ -36,8 +36,14 @@ def test_quick_experiment_writes_results_and_figures(tmp_path):
 @pytest.mark.slow  # about 1 to 4 minutes: one leave-one-run-out fold with the output-error refinement
 def test_dfki_default_identification_experiment_writes_a_consistent_fold(tmp_path):
     subprocess.run(
-        [sys.executable, str(REPO / "experiments" / "dfki_default_identification.py"), "--runs", "05",
-         "--out", str(tmp_path)],
+        [
+            sys.executable,
+            str(REPO / "experiments" / "dfki_default_identification.py"),
+            "--runs",
+            "05",
+            "--out",
+            str(tmp_path),
+        ],
         check=True,
         cwd=REPO,
         env={**__import__("os").environ, "PYTHONPATH": str(REPO)},
@@ -56,7 +62,9 @@ def test_dfki_default_identification_experiment_writes_a_consistent_fold(tmp_pat
 def test_dfki_single_run_experiment_sets_one_runs_answer_against_the_lab_on_the_others(tmp_path):
     subprocess.run(
         [sys.executable, str(REPO / "experiments" / "dfki_single_run.py"), "--runs", "02", "--out", str(tmp_path)],
-        check=True, cwd=REPO, env={**__import__("os").environ, "PYTHONPATH": str(REPO)},
+        check=True,
+        cwd=REPO,
+        env={**__import__("os").environ, "PYTHONPATH": str(REPO)},
     )
     entry = json.loads((tmp_path / "single_run.json").read_text())["runs"]["02"]
     assert set(entry["other_runs_rmse"]) == {"00", "01", "03", "05", "12"} == set(entry["lab_other_runs_rmse"])
@@ -68,7 +76,10 @@ def test_dfki_single_run_experiment_sets_one_runs_answer_against_the_lab_on_the_
 def test_dfki_single_run_experiment_names_a_run_that_does_not_exist(tmp_path):
     done = subprocess.run(
         [sys.executable, str(REPO / "experiments" / "dfki_single_run.py"), "--runs", "02,99", "--out", str(tmp_path)],
-        cwd=REPO, env={**__import__("os").environ, "PYTHONPATH": str(REPO)}, capture_output=True, text=True,
+        cwd=REPO,
+        env={**__import__("os").environ, "PYTHONPATH": str(REPO)},
+        capture_output=True,
+        text=True,
     )
     assert done.returncode == 2 and "no DFKI run 99" in done.stderr
     assert not (tmp_path / "single_run.json").exists()

@@ -66,7 +66,10 @@ def test_double_pendulum_with_coulomb_friction(key):
     np.testing.assert_allclose(result.parameters["fc1"], 0.3, rtol=1e-2)
     np.testing.assert_allclose(result.parameters["fc2"], 0.2, rtol=1e-2)
     np.testing.assert_allclose(np.asarray(result.estimate[:5]), THETA[:5], rtol=1e-3)
-    assert isinstance(result.system, Extended) and result.system.labels == ("coulomb_friction@q1", "coulomb_friction@q2")
+    assert isinstance(result.system, Extended) and result.system.labels == (
+        "coulomb_friction@q1",
+        "coulomb_friction@q2",
+    )
     # without the Coulomb columns the same data give a visibly worse equation fit
     viscous = identify(dynax.DoublePendulum(), data, Dynamic())
     assert float(viscous.relative_error) > 5 * float(result.relative_error)
@@ -81,7 +84,9 @@ def test_data_at_rest_name_every_unidentified_parameter():
     q12 = np.arcsin(-theta4 * np.sin(q1) / theta5)
     tau2 = theta5 * np.sin(q12)
     xs = np.tile([q1, q12 - q1, 0.0, 0.0], (len(ts), 1))
-    data = Trajectory(jnp.asarray(ts), jnp.asarray(xs), jnp.full((len(ts), 1), tau2), ("q1", "q2", "dq1", "dq2"), ("tau2",))
+    data = Trajectory(
+        jnp.asarray(ts), jnp.asarray(xs), jnp.full((len(ts), 1), tau2), ("q1", "q2", "dq1", "dq2"), ("tau2",)
+    )
     with pytest.raises(IdentifiabilityError) as info:
         identify(TRUE, data, Dynamic(offsets=False))
     # a static pose can only show gravity: theta4 and theta5 are seen, everything that needs motion is not
@@ -106,7 +111,9 @@ def test_a_locked_elbow_leaves_a_named_combination_unidentified():
     ddq1 = -3.2 * np.sin(2.0 * ts)
     xs = np.stack([q1, 0 * ts, dq1, 0 * ts], axis=1)
     ddq = np.stack([ddq1, 0 * ts], axis=1)
-    tau = jax.vmap(lambda x, a: system.mass_matrix(x[:2]) @ a + system.bias_force(x[:2], x[2:]))(jnp.asarray(xs), jnp.asarray(ddq))
+    tau = jax.vmap(lambda x, a: system.mass_matrix(x[:2]) @ a + system.bias_force(x[:2], x[2:]))(
+        jnp.asarray(xs), jnp.asarray(ddq)
+    )
     data = Trajectory(jnp.asarray(ts), jnp.asarray(xs), jnp.asarray(tau), ("q1", "q2", "dq1", "dq2"), ("tau1", "tau2"))
     with pytest.raises(IdentifiabilityError) as info:
         identify(system, data, Dynamic())
@@ -160,14 +167,21 @@ def test_emps_standard_errors_carry_the_correlation_in_time_that_two_filter_sett
     # lie within 1.5 of them.
     path = datasets / "emps" / "DATA_EMPS.mat"
     data = load_trajectory(path, "linear_axis", mapping={"q": "qm", "force": "vir"}, scale={"force": 35.15065188})
-    recipe = identify(dynax.LinearAxis(), data, Dynamic(lowpass_hz=100.0, lowpass_order=4, trim=50, decimate=10,
-                                                         inputs="sampled"), friction="coulomb", holdout=0)
+    recipe = identify(
+        dynax.LinearAxis(),
+        data,
+        Dynamic(lowpass_hz=100.0, lowpass_order=4, trim=50, decimate=10, inputs="sampled"),
+        friction="coulomb",
+        holdout=0,
+    )
     defaults = identify(dynax.LinearAxis(), data, Dynamic(), friction="coulomb", holdout=0)
     assert recipe.settings[0]["decimate"] != defaults.settings[0]["decimate"]
     for name in ("viscous", "coulomb"):
         robust = [r.standard_errors[name] for r in (recipe, defaults)]
-        independent = [r.standard_errors[name] / r.to_json()["stages"]["least_squares"]["serial_correlation"]["inflation"][name]
-                       for r in (recipe, defaults)]
+        independent = [
+            r.standard_errors[name] / r.to_json()["stages"]["least_squares"]["serial_correlation"]["inflation"][name]
+            for r in (recipe, defaults)
+        ]
         gap = abs(recipe.parameters[name] - defaults.parameters[name])
         assert abs(robust[0] / robust[1] - 1) < 0.1, (name, robust)
         assert max(independent) / min(independent) > 1.5, (name, independent)
@@ -180,8 +194,9 @@ def test_with_measurement_noise_energy_beats_power_beats_dynamic_until_filtered(
     xs = np.asarray(acrobot_data.xs)
     noise = np.concatenate([1e-3 * rng.normal(size=(len(xs), 2)), 1e-2 * rng.normal(size=(len(xs), 2))], axis=1)
     us = np.asarray(acrobot_data.us) + 1e-2 * rng.normal(size=acrobot_data.us.shape)
-    noisy = Trajectory(acrobot_data.ts, jnp.asarray(xs + noise), jnp.asarray(us), acrobot_data.state_names,
-                       acrobot_data.input_names)
+    noisy = Trajectory(
+        acrobot_data.ts, jnp.asarray(xs + noise), jnp.asarray(us), acrobot_data.state_names, acrobot_data.input_names
+    )
 
     def error(method):
         # the least-squares stage alone, fitted on the whole record (the defaults would refine and hold out)

@@ -41,8 +41,23 @@ def test_identify_prints_each_validation_record_and_the_median_window(acrobot_cs
     held = tmp_path / "held.csv"
     save_trajectory(Trajectory(jnp.asarray(ts), sim2.xs, jnp.asarray(-us), ("q1", "q2", "dq1", "dq2"), ("tau2",)), held)
     out = tmp_path / "params.json"
-    assert cli_main(["identify", "acrobot", str(acrobot_csv), "--method", "power", "--validation", str(held),
-                 str(other), "--out", str(out)]) == 0
+    assert (
+        cli_main(
+            [
+                "identify",
+                "acrobot",
+                str(acrobot_csv),
+                "--method",
+                "power",
+                "--validation",
+                str(held),
+                str(other),
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     report = json.loads(out.read_text())
     assert list(report["validation"]["per_record"]) == ["held.csv", "other.csv"]
     assert len(report["validation"]["median"]) == 3 and report["validation"]["concentrated"] == {}
@@ -62,8 +77,12 @@ def test_identify_warns_when_the_record_hardly_moves(tmp_path, capsys):
     save_trajectory(recorded(rig_model(), 6.0, 3, torque_scale=0.05), path)  # 3 mrad of motion
     out = tmp_path / "params.json"
     with pytest.warns(PoorlyDeterminedWarning):
-        assert cli_main(["identify", "double_pendulum", str(path), "--friction", "coulomb", "--refine", "no",
-                         "--out", str(out)]) == 0
+        assert (
+            cli_main(
+                ["identify", "double_pendulum", str(path), "--friction", "coulomb", "--refine", "no", "--out", str(out)]
+            )
+            == 0
+        )
     report = json.loads(out.read_text())
     assert {"theta1", "theta2"} <= set(report["poorly_determined"])
     printed = capsys.readouterr().out
@@ -98,14 +117,14 @@ def test_the_jointly_determined_note_gives_an_estimate_at_its_bound_as_value_and
     # friction sits at its bound of zero (2e-6 +- 0.037), where a relative error (1.8e6 %) says nothing.
     from dynax.internal import jointly_determined_cell
 
-    report = {"parameters": {"theta1": 0.0471, "theta6": 2.0e-6},
-              "std_errors": {"theta1": 0.018, "theta6": 0.037}}
+    report = {"parameters": {"theta1": 0.0471, "theta6": 2.0e-6}, "std_errors": {"theta1": 0.018, "theta6": 0.037}}
     joint = {"with": ["Ir2", "theta2"], "correlations": [-0.99, 0.95], "inflation": 108.3}
     assert jointly_determined_cell("theta1", joint, report) == "theta1 (108x, +- 38 %) with Ir2 (-0.99), theta2 (+0.95)"
     cell = jointly_determined_cell("theta6", dict(joint, inflation=13.0), report)
     assert cell.startswith("theta6 (13x, 2e-06 +- 0.037) with")
-    lone = jointly_determined_cell("theta6", {"with": [], "correlations": [], "inflation": 13.0},
-                                   {"parameters": {"theta6": 0.0}, "std_errors": {}})
+    lone = jointly_determined_cell(
+        "theta6", {"with": [], "correlations": [], "inflation": 13.0}, {"parameters": {"theta6": 0.0}, "std_errors": {}}
+    )
     assert lone == "theta6 (13x) with several others"
 
 
@@ -118,7 +137,8 @@ def test_identify_says_that_one_record_cannot_show_what_changes_between_recordin
     report = json.loads(out.read_text())
     assert "output_error" in report["stages"] and report.get("record_std_errors") is None
     assert "NOTE: fitted on 1 record: the standard errors and the validation come from within the records" in (
-        capsys.readouterr().out)
+        capsys.readouterr().out
+    )
     # given a record of its own to validate on, the note is about the errors alone
     import jax.numpy as jnp
     import numpy as np
@@ -127,10 +147,15 @@ def test_identify_says_that_one_record_cannot_show_what_changes_between_recordin
     us = (1.5 * np.sin(2.1 * ts + 1.0))[:, None]
     sim = dynax.simulate(dynax.Acrobot(), jnp.array([-0.3, 0.2, 0.0, 0.0]), jnp.asarray(ts), jnp.asarray(us))
     held = tmp_path / "held.csv"
-    dynax.save_trajectory(dynax.Trajectory(jnp.asarray(ts), sim.xs, jnp.asarray(us), ("q1", "q2", "dq1", "dq2"),
-                                           ("tau2",)), held)
-    assert cli_main(["identify", "acrobot", str(acrobot_csv), "--refine", "yes", "--validation", str(held),
-                 "--out", str(out)]) == 0
+    dynax.save_trajectory(
+        dynax.Trajectory(jnp.asarray(ts), sim.xs, jnp.asarray(us), ("q1", "q2", "dq1", "dq2"), ("tau2",)), held
+    )
+    assert (
+        cli_main(
+            ["identify", "acrobot", str(acrobot_csv), "--refine", "yes", "--validation", str(held), "--out", str(out)]
+        )
+        == 0
+    )
     printed = capsys.readouterr().out
     assert "NOTE: fitted on 1 record: the standard errors come from within the records" in printed
     assert "to --validation" not in printed

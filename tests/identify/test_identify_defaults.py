@@ -12,10 +12,16 @@ import scipy.integrate
 import scipy.optimize
 
 import dynax
-import dynax.internal
 from dynax import Dynamic, identify, InconsistentEstimateWarning, PoorlyDeterminedWarning, Trajectory
-from dynax.internal import check_consistency, choose_filter, consistent_least_squares
-from dynax.internal import consistency_conditions, parameter_names, POORLY_DETERMINED
+import dynax.internal
+from dynax.internal import (
+    check_consistency,
+    choose_filter,
+    consistency_conditions,
+    consistent_least_squares,
+    parameter_names,
+    POORLY_DETERMINED,
+)
 from tests.reference import arm_reference
 
 NAMES = ("q1", "q2", "dq1", "dq2")
@@ -28,8 +34,10 @@ RIG_FC = (0.15, 0.12)
 
 def rig_model():
     rigid = dynax.DoublePendulum.from_base_parameters(RIG)
-    return dynax.Extended(rigid, (dynax.CoulombFriction(0, RIG_FC[0]), dynax.CoulombFriction(1, RIG_FC[1]),
-                                  dynax.RotorInertia(1, RIG_IR2)))
+    return dynax.Extended(
+        rigid,
+        (dynax.CoulombFriction(0, RIG_FC[0]), dynax.CoulombFriction(1, RIG_FC[1]), dynax.RotorInertia(1, RIG_IR2)),
+    )
 
 
 FREQUENCIES = np.array([0.3, 0.7, 1.1, 1.7, 2.3])
@@ -69,8 +77,18 @@ def _arm(model):
     return theta, tuple(coulomb), scale, tuple(rotor)
 
 
-def recorded(model, duration, seed, *, dt=0.002, velocity_noise=0.15, torque_noise=0.02, position_noise=1e-4,
-             latency=0.0, torque_scale=1.0):
+def recorded(
+    model,
+    duration,
+    seed,
+    *,
+    dt=0.002,
+    velocity_noise=0.15,
+    torque_noise=0.02,
+    position_noise=1e-4,
+    latency=0.0,
+    torque_scale=1.0,
+):
     """Simulate with scipy's DOP853 (not dynax's integrator) and the arm's equations written out with numpy
     (`tests.reference.arm_reference`, not dynax's model code) under continuous multisine torques, then add
     sensor noise at the DFKI rig's level: velocity estimate 0.15 rad/s rms, current-based torque 0.02 N m,
@@ -84,12 +102,14 @@ def recorded(model, duration, seed, *, dt=0.002, velocity_noise=0.15, torque_noi
         return arm_reference(theta, x, tau, coulomb, scale, rotor)
 
     ts = np.arange(0.0, duration, dt)
-    solution = scipy.integrate.solve_ivp(field, (0.0, ts[-1]), np.zeros(4), method="DOP853", t_eval=ts, rtol=1e-9,
-                                         atol=1e-11)
+    solution = scipy.integrate.solve_ivp(
+        field, (0.0, ts[-1]), np.zeros(4), method="DOP853", t_eval=ts, rtol=1e-9, atol=1e-11
+    )
     assert solution.success
     rng = np.random.default_rng(seed + 100)
-    xs = solution.y.T + np.concatenate([position_noise * rng.normal(size=(len(ts), 2)),
-                                        velocity_noise * rng.normal(size=(len(ts), 2))], axis=1)
+    xs = solution.y.T + np.concatenate(
+        [position_noise * rng.normal(size=(len(ts), 2)), velocity_noise * rng.normal(size=(len(ts), 2))], axis=1
+    )
     us = torque_scale * (torques(ts, seed) + torque_noise * rng.normal(size=(len(ts), 2)))
     return Trajectory(jnp.asarray(ts), jnp.asarray(xs), jnp.asarray(us), NAMES, ("tau1", "tau2"))
 
@@ -106,8 +126,9 @@ def test_filter_choice_finds_the_noise_level_and_leaves_clean_data_alone():
     assert choose_filter(clean).cutoff_hz is None
     rng = np.random.default_rng(0)
     sigma = 0.1
-    noisy = Trajectory(clean.ts, clean.xs.at[:, 2:].add(sigma * rng.normal(size=(len(clean), 2))), clean.us,
-                       NAMES, ("tau1", "tau2"))
+    noisy = Trajectory(
+        clean.ts, clean.xs.at[:, 2:].add(sigma * rng.normal(size=(len(clean), 2))), clean.us, NAMES, ("tau1", "tau2")
+    )
     choice = choose_filter(noisy)
     # the white floor gives back the injected noise level (Welch median, within 20 %)
     for name in ("dq1", "dq2"):
@@ -153,11 +174,16 @@ def test_an_inconsistent_estimate_warns_and_the_constrained_fit_matches_a_bounde
     data = Trajectory(jnp.asarray(ts), sim.xs, jnp.asarray(us), NAMES, ("tau1", "tau2"))
     # The energy fed in spins the arm up (q2 to 278 rad); no consistent model explains it, and what least
     # squares returns leaves theta1 and theta2 at a few times 1e-5 with standard errors as large: said too.
-    with pytest.warns(InconsistentEstimateWarning, match="theta7"), pytest.warns(PoorlyDeterminedWarning, match="theta1"):
+    with (
+        pytest.warns(InconsistentEstimateWarning, match="theta7"),
+        pytest.warns(PoorlyDeterminedWarning, match="theta1"),
+    ):
         plain = identify(dynax.DoublePendulum(), data, UNFILTERED, consistency="check", holdout=0, refine=False)
     assert plain.parameters["theta7"] < 0 and plain.consistency.violated
     with warnings.catch_warnings(), pytest.warns(PoorlyDeterminedWarning):
-        warnings.simplefilter("error", InconsistentEstimateWarning)  # the default must not hand back an inconsistent set
+        warnings.simplefilter(
+            "error", InconsistentEstimateWarning
+        )  # the default must not hand back an inconsistent set
         constrained = identify(dynax.DoublePendulum(), data, UNFILTERED, holdout=0, refine=False)
     assert constrained.consistency.consistent
     assert any("theta7" in c for c in constrained.consistency.active)
@@ -166,7 +192,11 @@ def test_an_inconsistent_estimate_warns_and_the_constrained_fit_matches_a_bounde
     # computed independently by scipy's bounded solver.
     fit = plain.fit
     names = plain.names
-    a = np.asarray(dynax.internal.dynamic_regressor(dynax.DoublePendulum(), data.xs, dynax.central_difference(data.ts, data.xs[:, 2:])))
+    a = np.asarray(
+        dynax.internal.dynamic_regressor(
+            dynax.DoublePendulum(), data.xs, dynax.central_difference(data.ts, data.xs[:, 2:])
+        )
+    )
     a = np.concatenate([a[1:-1, 0], a[1:-1, 1]])
     held = np.asarray(data.us)
     h = 0.5 * (held[:-2] + held[1:-1])  # the held inputs' mean a central difference sees (uniform grid)
@@ -191,7 +221,9 @@ def test_a_reversed_torque_is_named_where_the_estimate_is_inconsistent():
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             result = identify(dynax.DoublePendulum(), data, Dynamic(), friction="coulomb", refine=False, holdout=0)
-        return result, [str(w.message) for w in caught if any(k in str(w.message) for k in ("reversed", "degrees", "upright"))]
+        return result, [
+            str(w.message) for w in caught if any(k in str(w.message) for k in ("reversed", "degrees", "upright"))
+        ]
 
     plain, said = fit([1.0, 1.0])
     assert plain.consistency.consistent and not plain.consistency.active and said == []
@@ -214,8 +246,9 @@ def test_records_that_hardly_move_say_the_size_parameters_are_poorly_determined(
     assert "record more motion" in str(caught[0].message)
     assert result.to_json()["poorly_determined"] == result.poorly_determined
     # the same rig under the usual torques (1.6 rad of motion): every size parameter to within 1.1 %
-    moving = identify(dynax.DoublePendulum(), recorded(rig_model(), 6.0, 3), Dynamic(), friction="coulomb", holdout=0,
-                      refine=False)
+    moving = identify(
+        dynax.DoublePendulum(), recorded(rig_model(), 6.0, 3), Dynamic(), friction="coulomb", holdout=0, refine=False
+    )
     assert moving.poorly_determined == {}
     # Real data: the last 1.4 s of DFKI run 12, where the pendulum rests upright (0.07 rad/s rms, the
     # driver's noise). Least squares returns a consistent set (theta2..theta5 at or near their bounds);
@@ -257,17 +290,30 @@ def test_short_records_are_validated_at_the_horizons_their_tails_hold():
     assert result.validation is not None and result.validation.horizons_s == (0.1, 0.25)
     assert "as long as the tails allow" in result.validation.source and np.all(np.isfinite(result.validation.rmse))
     with pytest.warns(dynax.NoValidationWarning, match="shorter than the shortest horizon"):
-        tiny = identify(dynax.DoublePendulum(), recorded(rig_model(), 0.4, 5), Dynamic(), friction="coulomb",
-                        refine=False)
+        tiny = identify(
+            dynax.DoublePendulum(), recorded(rig_model(), 0.4, 5), Dynamic(), friction="coulomb", refine=False
+        )
     assert tiny.validation is None
     # the same rule for validation records given: a 0.4 s one is used at 0.1 and 0.25 s; one shorter
     # than the shortest horizon is refused before any fit, named
-    given = identify(dynax.DoublePendulum(), short, Dynamic(), friction="coulomb", refine=False,
-                     validation=recorded(rig_model(), 0.4, 6))
+    given = identify(
+        dynax.DoublePendulum(),
+        short,
+        Dynamic(),
+        friction="coulomb",
+        refine=False,
+        validation=recorded(rig_model(), 0.4, 6),
+    )
     assert given.validation.horizons_s == (0.1, 0.25) and given.validation.source.startswith("validation records")
     with pytest.raises(dynax.DataError, match=r"too short for the shortest horizon \(0.1 s\): record 0 0.08"):
-        identify(dynax.DoublePendulum(), short, Dynamic(), friction="coulomb", refine=False,
-                 validation=recorded(rig_model(), 0.09, 6))
+        identify(
+            dynax.DoublePendulum(),
+            short,
+            Dynamic(),
+            friction="coulomb",
+            refine=False,
+            validation=recorded(rig_model(), 0.09, 6),
+        )
 
 
 @pytest.mark.heavy
@@ -302,7 +348,11 @@ def test_one_dfki_run_alone_is_said_to_determine_the_size_parameters_poorly(monk
     assert least_squares["poorly_determined"] == {}
     assert least_squares["parameters"]["theta5"] < 0.7 * lab["theta5"]
     assert abs(least_squares["parameters"]["theta5"] - lab["theta5"]) > 3 * least_squares["std_errors"]["theta5"]
-    assert {"theta1", "theta2"} <= set(result.poorly_determined) == set(result.to_json()["stages"]["output_error"]["poorly_determined"])
+    assert (
+        {"theta1", "theta2"}
+        <= set(result.poorly_determined)
+        == set(result.to_json()["stages"]["output_error"]["poorly_determined"])
+    )
     # the returned errors cover the distance to the lab's values of the parameters they name
     for name in result.poorly_determined:
         assert abs(result.parameters[name] - lab[name]) < 2 * result.standard_errors[name], name
@@ -385,8 +435,13 @@ def test_encoder_angles_alone_with_defaults_give_consistent_estimates(tmp_path):
     for seed, duration in ((10, 12.0), (11, 12.0), (12, 4.0)):
         record = recorded(model, duration, seed, velocity_noise=0.0)
         path = tmp_path / f"encoders_{seed}.csv"
-        np.savetxt(path, np.column_stack([record.ts, np.asarray(record.xs)[:, :2], record.us]), delimiter=",",
-                   header="t,q1,q2,tau1,tau2", comments="")
+        np.savetxt(
+            path,
+            np.column_stack([record.ts, np.asarray(record.xs)[:, :2], record.us]),
+            delimiter=",",
+            header="t,q1,q2,tau1,tau2",
+            comments="",
+        )
         paths.append(path)
         truths.append(np.asarray(record.xs)[:, 2:])
     runs = [dynax.load_trajectory(p, "double_pendulum") for p in paths]
@@ -410,10 +465,18 @@ def test_encoder_angles_alone_with_defaults_give_consistent_estimates(tmp_path):
 # as many periods of its motion as 12 s of the rig's (theta1..theta5 within 0.22 % with 6 s, 0.32 % with
 # 12 s; 142 s against 254 s).
 OTHER_SIZES = {
-    "drake_1m": (dict(m1=1.0, m2=1.0, l1=1.0, lc1=0.5, lc2=1.0, Ic1=0.083, Ic2=0.33, b1=0.1, b2=0.1), (1.0, 0.8), 0.03,
-                 12.0),
-    "desk_10cm": (dict(m1=0.05, m2=0.04, l1=0.1, lc1=0.05, lc2=0.07, Ic1=4e-5, Ic2=3e-5, b1=1e-4, b2=1e-4), (0.004, 0.003),
-                  2e-5, 6.0),
+    "drake_1m": (
+        dict(m1=1.0, m2=1.0, l1=1.0, lc1=0.5, lc2=1.0, Ic1=0.083, Ic2=0.33, b1=0.1, b2=0.1),
+        (1.0, 0.8),
+        0.03,
+        12.0,
+    ),
+    "desk_10cm": (
+        dict(m1=0.05, m2=0.04, l1=0.1, lc1=0.05, lc2=0.07, Ic1=4e-5, Ic2=3e-5, b1=1e-4, b2=1e-4),
+        (0.004, 0.003),
+        2e-5,
+        6.0,
+    ),
 }
 
 
@@ -424,8 +487,10 @@ def test_noisy_arms_of_other_sizes_give_consistent_estimates(size):
 
     physical, fc, ir2, duration = OTHER_SIZES[size]
     base = {k: float(v) for k, v in base_parameters_from_physical(**physical).items()}
-    model = dynax.Extended(dynax.DoublePendulum.from_base_parameters(base),
-                           (dynax.CoulombFriction(0, fc[0]), dynax.CoulombFriction(1, fc[1]), dynax.RotorInertia(1, ir2)))
+    model = dynax.Extended(
+        dynax.DoublePendulum.from_base_parameters(base),
+        (dynax.CoulombFriction(0, fc[0]), dynax.CoulombFriction(1, fc[1]), dynax.RotorInertia(1, ir2)),
+    )
     scale = base["theta4"] / RIG["theta4"]
     train = [recorded(model, duration, seed, torque_scale=scale) for seed in (10, 11)]
     held = recorded(model, 4.0, 12, torque_scale=scale)
@@ -455,10 +520,12 @@ def test_the_refinement_measures_a_torque_latency_and_is_not_biased_by_it(monkey
     truth = np.array([RIG[f"theta{i}"] for i in range(1, 6)])
     relative = np.abs(np.asarray(result.estimate[:5]) - truth) / truth
     assert np.all(relative < 0.02), dict(zip(result.names, relative))
-    from dynax._identify import _identify as identify_module, _refine
+    from dynax._identify import _identify as identify_module
+    from dynax._identify import _refine
 
-    monkeypatch.setattr(identify_module, "refine_by_simulation",
-                        functools.partial(_refine.refine_by_simulation, input_timing=False))
+    monkeypatch.setattr(
+        identify_module, "refine_by_simulation", functools.partial(_refine.refine_by_simulation, input_timing=False)
+    )
     blind = identify(dynax.DoublePendulum(), train, Dynamic(), friction="coulomb", validation=[held])
     assert blind.to_json()["stages"]["output_error"]["input_timing"] is None
     blind_relative = np.abs(np.asarray(blind.estimate[:5]) - truth) / truth
@@ -490,13 +557,19 @@ def test_reversed_inputs_and_angles_in_degrees_or_from_upright_of_real_records_a
     folder = datasets / "dfki_double_pendulum" / "sys_id"
 
     def dfki_runs(scale):
-        return [dynax.load_trajectory(folder / f"trajectory_{r}.csv", "double_pendulum", mapping=DFKI_MAPPING,
-                                      scale=scale) for r in ("00", "01", "02")]
+        return [
+            dynax.load_trajectory(folder / f"trajectory_{r}.csv", "double_pendulum", mapping=DFKI_MAPPING, scale=scale)
+            for r in ("00", "01", "02")
+        ]
 
     hints = said(dynax.DoublePendulum(), dfki_runs({"tau2": -1.0}))
     assert len(hints) == 1 and hints[0].startswith("the recorded tau2 looks reversed"), hints
-    emps = dynax.load_trajectory(datasets / "emps" / "DATA_EMPS.mat", "linear_axis", mapping={"q": "qm", "force": "vir"},
-                                 scale={"force": -35.15065188})
+    emps = dynax.load_trajectory(
+        datasets / "emps" / "DATA_EMPS.mat",
+        "linear_axis",
+        mapping={"q": "qm", "force": "vir"},
+        scale={"force": -35.15065188},
+    )
     hints = said(dynax.LinearAxis(), emps)
     assert len(hints) == 1 and "'force': -1" in hints[0], hints
     degrees = 180 / np.pi
@@ -507,14 +580,24 @@ def test_reversed_inputs_and_angles_in_degrees_or_from_upright_of_real_records_a
     assert len(hints) == 1 and hints[0].startswith("the joint angle q2 looks like degrees"), hints
     assert said(dynax.DoublePendulum(), dfki_runs({})) == []
     # Angles measured from upright (a rig calibrated for balancing): an exact change of sign of two terms.
-    for shift, joints, terms in (((np.pi, 0.0), "q1 looks", "theta4 and theta5"),
-                                 ((0.0, np.pi), "q2 looks", "theta3 and theta5"),
-                                 ((np.pi, np.pi), "q1, q2 look", "theta3 and theta4")):
-        runs = [dynax.load_trajectory(folder / f"trajectory_{r}.csv", "double_pendulum", mapping=DFKI_MAPPING,
-                                      offset={"q1": shift[0], "q2": shift[1]}) for r in ("00", "01", "02")]
+    for shift, joints, terms in (
+        ((np.pi, 0.0), "q1 looks", "theta4 and theta5"),
+        ((0.0, np.pi), "q2 looks", "theta3 and theta5"),
+        ((np.pi, np.pi), "q1, q2 look", "theta3 and theta4"),
+    ):
+        runs = [
+            dynax.load_trajectory(
+                folder / f"trajectory_{r}.csv",
+                "double_pendulum",
+                mapping=DFKI_MAPPING,
+                offset={"q1": shift[0], "q2": shift[1]},
+            )
+            for r in ("00", "01", "02")
+        ]
         hints = said(dynax.DoublePendulum(), runs)
-        assert len(hints) == 1 and hints[0].startswith(f"the joint angle{'s' if ',' in joints else ''} {joints} "
-                                                       "measured from upright"), hints
+        assert len(hints) == 1 and hints[0].startswith(
+            f"the joint angle{'s' if ',' in joints else ''} {joints} measured from upright"
+        ), hints
         assert f"signs of {terms}" in hints[0] and "--offset q" in hints[0], hints
 
 
@@ -525,10 +608,13 @@ def test_dfki_least_squares_with_defaults_is_consistent_where_the_unfiltered_fit
     runs = [dfki(datasets, r) for r in DFKI_RUNS]
     # the issue's impossible fit also leaves theta1 to the noise (0.0001, relative standard error 195 %, 58 %
     # counting the rows as independent)
-    with pytest.warns(InconsistentEstimateWarning, match="theta4") as caught, \
-            pytest.warns(PoorlyDeterminedWarning, match="theta1"):
-        identify(dynax.DoublePendulum(), runs, UNFILTERED, friction="coulomb", consistency="check", refine=False,
-                 holdout=0)
+    with (
+        pytest.warns(InconsistentEstimateWarning, match="theta4") as caught,
+        pytest.warns(PoorlyDeterminedWarning, match="theta1"),
+    ):
+        identify(
+            dynax.DoublePendulum(), runs, UNFILTERED, friction="coulomb", consistency="check", refine=False, holdout=0
+        )
     # noise, not a reversed torque, degrees or a zero at upright: no hint fits it
     assert not any(k in str(w.message) for w in caught for k in ("reversed", "degrees", "upright"))
     result = identify(dynax.DoublePendulum(), runs, Dynamic(), friction="coulomb", refine=False)
@@ -544,7 +630,6 @@ def test_dfki_least_squares_with_defaults_is_consistent_where_the_unfiltered_fit
     assert result.poorly_determined == {}
 
 
-
 def test_dfki_runs_logged_at_200_and_100_hz_get_a_lower_cutoff_and_nearly_the_same_consistent_estimate(datasets):
     # The same runs as a user logging at 200 or 100 Hz would have them (interpolated to 5 or 10 ms, no
     # anti-aliasing): the velocity noise above the new Nyquist frequency folds into the band, so the signal
@@ -555,18 +640,33 @@ def test_dfki_runs_logged_at_200_and_100_hz_get_a_lower_cutoff_and_nearly_the_sa
     # stays consistent with no constraint and within 10 % of the 2 ms one (docs/devdocs/dfki_loro.md, "The
     # same runs recorded otherwise").
     raw = [dfki(datasets, r) for r in ("00", "02", "03", "05", "12")]
-    fine = identify(dynax.DoublePendulum(), [dynax.resample(r, r.dt) for r in raw], Dynamic(), friction="coulomb",
-                    consistency="off", refine=False, holdout=0)
+    fine = identify(
+        dynax.DoublePendulum(),
+        [dynax.resample(r, r.dt) for r in raw],
+        Dynamic(),
+        friction="coulomb",
+        consistency="off",
+        refine=False,
+        holdout=0,
+    )
     for dt in (0.005, 0.01):
         coarse = [dynax.resample(r, dt) for r in raw]
         for record, original in zip(coarse, raw):
             # no higher than at 2 ms, up to the Welch estimate's scatter (run 02 at 5 ms: 4.65 against 4.58 Hz)
-            assert choose_filter(record).cutoff_hz <= 1.1 * choose_filter(dynax.resample(original, original.dt)).cutoff_hz
-        free = identify(dynax.DoublePendulum(), coarse, Dynamic(), friction="coulomb", consistency="off",
-                        refine=False, holdout=0)
+            assert (
+                choose_filter(record).cutoff_hz <= 1.1 * choose_filter(dynax.resample(original, original.dt)).cutoff_hz
+            )
+        free = identify(
+            dynax.DoublePendulum(), coarse, Dynamic(), friction="coulomb", consistency="off", refine=False, holdout=0
+        )
         assert not free.consistency.violated, (dt, free.consistency.violated)
         for name in ("theta1", "theta2", "theta3", "theta4", "theta5"):
-            assert abs(free.parameters[name] / fine.parameters[name] - 1) < 0.10, (dt, name, free.parameters, fine.parameters)
+            assert abs(free.parameters[name] / fine.parameters[name] - 1) < 0.10, (
+                dt,
+                name,
+                free.parameters,
+                fine.parameters,
+            )
 
 
 @pytest.mark.slow  # about 3 minutes on 2 cores: the output-error refinement on five real runs
@@ -580,8 +680,21 @@ def test_cli_identifies_raw_dfki_files_with_no_recipe_flags(datasets, tmp_path, 
     files = [str(folder / f"trajectory_{r}.csv") for r in DFKI_RUNS]
     mapping = ",".join(f"{k}={v}" for k, v in DFKI_MAPPING.items())
     out = tmp_path / "dfki.json"
-    code = cli_main(["identify", "double_pendulum", *files[:5], "--validation", files[5], "--friction", "coulomb",
-                     "--map", mapping, "--out", str(out)])
+    code = cli_main(
+        [
+            "identify",
+            "double_pendulum",
+            *files[:5],
+            "--validation",
+            files[5],
+            "--friction",
+            "coulomb",
+            "--map",
+            mapping,
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 0
     report = json.loads(out.read_text())
     assert report["consistency"]["consistent"] and set(report["stages"]) == {"least_squares", "output_error"}
@@ -593,7 +706,9 @@ def test_cli_identifies_raw_dfki_files_with_no_recipe_flags(datasets, tmp_path, 
     # The five runs disagree on the elbow's Coulomb friction (run 00 0.12 N m, the others 0.06 to 0.08 in
     # these equations; F = 56 on (4, 15) degrees of freedom; the shoulder's too, F = 29), and the user is told.
     assert "fc2" in report["record_friction"]["differ"], report["record_friction"]
-    assert "The Coulomb friction differs from record to record: " in printed and "fc2 (trajectory_00.csv 0.12" in printed
+    assert (
+        "The Coulomb friction differs from record to record: " in printed and "fc2 (trajectory_00.csv 0.12" in printed
+    )
     # The refinement predicts run 12 better than least squares here (1.06 against 1.36 rad at 0.5 s): no note.
     assert "better than the refined model" not in printed
     # Run 12 ends at rest upright, where every open-loop rollout falls: those windows carry the 0.5 s RMSE,
@@ -601,7 +716,9 @@ def test_cli_identifies_raw_dfki_files_with_no_recipe_flags(datasets, tmp_path, 
     (entry,) = [e for e in report["validation"]["concentrated"]["trajectory_12.csv"] if e["horizon_s"] == 0.5]
     assert entry["windows"] < 0.15 * entry["of"] and entry["from_s"] >= 3.0, entry
     assert report["validation"]["median"][-1] < 0.2 < report["validation"]["rmse"][-1]
-    assert "median window: " in printed and "trajectory_12.csv: at 0.5 s half of its squared error comes from" in printed
+    assert (
+        "median window: " in printed and "trajectory_12.csv: at 0.5 s half of its squared error comes from" in printed
+    )
 
 
 @pytest.mark.slow  # about a minute: the refinement on two real runs
@@ -614,8 +731,8 @@ def test_cli_says_when_the_refinement_validates_worse_than_least_squares(dataset
     # refinement predicts run 01 better: 0.092 against 0.114 rad at 0.5 s, 2026-11-27.)
     import json
 
-    from dynax.internal import cli_main
     from dynax._identify import _identify as identify_module
+    from dynax.internal import cli_main
     from tests.conftest import DFKI_MAPPING
 
     monkeypatch.setattr(identify_module, "_record_angle_zeros", lambda *args: None)
@@ -623,10 +740,22 @@ def test_cli_says_when_the_refinement_validates_worse_than_least_squares(dataset
     folder = datasets / "dfki_double_pendulum" / "sys_id"
     mapping = ",".join(f"{k}={v}" for k, v in DFKI_MAPPING.items())
     out = tmp_path / "two.json"
-    code = cli_main(["identify", "double_pendulum", str(folder / "trajectory_00.csv"),
-                     str(folder / "trajectory_05.csv"), "--validation", str(folder / "trajectory_01.csv"),
-                     "--friction", "coulomb", "--map", mapping,
-                     "--out", str(out)])
+    code = cli_main(
+        [
+            "identify",
+            "double_pendulum",
+            str(folder / "trajectory_00.csv"),
+            str(folder / "trajectory_05.csv"),
+            "--validation",
+            str(folder / "trajectory_01.csv"),
+            "--friction",
+            "coulomb",
+            "--map",
+            mapping,
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 0
     stages = json.loads(out.read_text())["stages"]
     ls, oe = stages["least_squares"]["validation"]["rmse"], stages["output_error"]["validation"]["rmse"]
@@ -639,18 +768,45 @@ def test_the_labs_geared_rotor_with_its_coupling_is_base_parameters_plus_elbow_r
     # + 2 l1 m2 r2 cos q2 + gr^2 Ir + Ir, M12 = I2 + l1 m2 r2 cos q2 - gr Ir, M22 = I2 + gr^2 Ir, Spong's C
     # and G with lc = r, viscous friction. dynax's base parameters plus RotorInertia(1) must give the same
     # inverse dynamics at random states, with the mapping the docs state.
-    m1, m2, l1, r1, r2, i1, i2, ir, gr, b1, b2, g = 0.64, 0.56, 0.2, 0.2, 0.32, 0.027, 0.054, 1e-4, 6.0, 0.01, 0.02, 9.81
-    rigid = dynax.DoublePendulum.from_base_parameters(dict(
-        theta1=i1 + l1**2 * m2 + (gr**2 + gr + 1) * ir, theta2=i2 - gr * ir, theta3=l1 * m2 * r2,
-        theta4=g * (m1 * r1 + m2 * l1), theta5=g * m2 * r2, theta6=b1, theta7=b2))
+    m1, m2, l1, r1, r2, i1, i2, ir, gr, b1, b2, g = (
+        0.64,
+        0.56,
+        0.2,
+        0.2,
+        0.32,
+        0.027,
+        0.054,
+        1e-4,
+        6.0,
+        0.01,
+        0.02,
+        9.81,
+    )
+    rigid = dynax.DoublePendulum.from_base_parameters(
+        dict(
+            theta1=i1 + l1**2 * m2 + (gr**2 + gr + 1) * ir,
+            theta2=i2 - gr * ir,
+            theta3=l1 * m2 * r2,
+            theta4=g * (m1 * r1 + m2 * l1),
+            theta5=g * m2 * r2,
+            theta6=b1,
+            theta7=b2,
+        )
+    )
     model = dynax.Extended(rigid, (dynax.RotorInertia(1, (gr**2 + gr) * ir),))
     rng = np.random.default_rng(5)
     for q1, q2, dq1, dq2, a1, a2 in rng.uniform(-3, 3, size=(20, 6)):
         c2, s2 = np.cos(q2), np.sin(q2)
-        m = np.array([[i1 + i2 + l1**2 * m2 + 2 * l1 * m2 * r2 * c2 + gr**2 * ir + ir, i2 + l1 * m2 * r2 * c2 - gr * ir],
-                      [i2 + l1 * m2 * r2 * c2 - gr * ir, i2 + gr**2 * ir]])
+        m = np.array(
+            [
+                [i1 + i2 + l1**2 * m2 + 2 * l1 * m2 * r2 * c2 + gr**2 * ir + ir, i2 + l1 * m2 * r2 * c2 - gr * ir],
+                [i2 + l1 * m2 * r2 * c2 - gr * ir, i2 + gr**2 * ir],
+            ]
+        )
         c = np.array([-2 * m2 * l1 * r2 * s2 * dq1 * dq2 - m2 * l1 * r2 * s2 * dq2**2, m2 * l1 * r2 * s2 * dq1**2])
-        grav = np.array([g * (m1 * r1 + m2 * l1) * np.sin(q1) + g * m2 * r2 * np.sin(q1 + q2), g * m2 * r2 * np.sin(q1 + q2)])
+        grav = np.array(
+            [g * (m1 * r1 + m2 * l1) * np.sin(q1) + g * m2 * r2 * np.sin(q1 + q2), g * m2 * r2 * np.sin(q1 + q2)]
+        )
         tau = m @ [a1, a2] + c + grav + [b1 * dq1, b2 * dq2]
         ddq = model.vector_field(0.0, jnp.array([q1, q2, dq1, dq2]), jnp.asarray(tau))[2:]
         np.testing.assert_allclose(np.asarray(ddq), [a1, a2], rtol=1e-9, atol=1e-9)
@@ -670,8 +826,11 @@ def test_a_refinement_that_ends_worse_than_its_start_keeps_the_least_squares_mod
 
     def ends_worse(*args, **kwargs):
         result = real(*args, **kwargs)
-        return eqx.tree_at(lambda r: (r.statistics.residual_rms, r.result), result,
-                           (2 * result.statistics.initial_residual_rms, optx.RESULTS.nonlinear_divergence))
+        return eqx.tree_at(
+            lambda r: (r.statistics.residual_rms, r.result),
+            result,
+            (2 * result.statistics.initial_residual_rms, optx.RESULTS.nonlinear_divergence),
+        )
 
     monkeypatch.setattr(_refine, "fit_simulation_error", ends_worse)
     data = recorded(rig_model(), 6.0, 13)
@@ -706,8 +865,14 @@ def test_each_records_residual_scale_is_estimated_from_its_own_residuals():
         clean = [np.zeros(4)]
         for i in range(len(ts) - 1):  # the recorded zero-order hold: one DOP853 solve per sample interval
             u = jnp.asarray(us[i])
-            step = scipy.integrate.solve_ivp(lambda t, x: np.asarray(field(jnp.asarray(x), u)), (ts[i], ts[i + 1]),
-                                             clean[-1], method="DOP853", rtol=1e-10, atol=1e-12)
+            step = scipy.integrate.solve_ivp(
+                lambda t, x: np.asarray(field(jnp.asarray(x), u)),
+                (ts[i], ts[i + 1]),
+                clean[-1],
+                method="DOP853",
+                rtol=1e-10,
+                atol=1e-12,
+            )
             clean.append(step.y[:, -1])
         clean = np.stack(clean)
         noisy = clean + level * scale * np.random.default_rng(k).normal(size=clean.shape)

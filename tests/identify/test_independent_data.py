@@ -49,8 +49,9 @@ def scipy_states():
 @pytest.fixture(scope="module")
 def noisy(scipy_states):
     rng = np.random.default_rng(11)
-    return _trajectory(scipy_states + NOISE * rng.normal(size=scipy_states.shape),
-                       US + TORQUE_NOISE * rng.normal(size=US.shape))
+    return _trajectory(
+        scipy_states + NOISE * rng.normal(size=scipy_states.shape), US + TORQUE_NOISE * rng.normal(size=US.shape)
+    )
 
 
 def _relative(result):

@@ -24,8 +24,15 @@ def _record(seed, duration=12.0, inputs=mujoco_rig.INPUTS, scale=0.6):
 
 def _floor(held_out, error, inputs=mujoco_rig.INPUTS):
     """MuJoCo's own open-loop error on `error`'s windows of `held_out`."""
-    return mujoco_rig.window_rmse(mujoco_rig.RIG, np.asarray(held_out.ts), np.asarray(held_out.xs),
-                                  np.asarray(held_out.us), np.asarray(error.starts), HORIZONS, inputs=inputs)
+    return mujoco_rig.window_rmse(
+        mujoco_rig.RIG,
+        np.asarray(held_out.ts),
+        np.asarray(held_out.xs),
+        np.asarray(held_out.us),
+        np.asarray(error.starts),
+        HORIZONS,
+        inputs=inputs,
+    )
 
 
 def _mass_matrix_at_rest(p):
@@ -87,10 +94,12 @@ def test_acrobot_defaults_on_mujoco_records_of_an_arm_driven_at_the_elbow_only()
     # Large motion determines every parameter: theta1..theta5 within 1 % (the issue asks 2 %; measured
     # 0.04 to 0.27 %), the friction and rotor inertia within 10 % (measured 0.6 to 4.6 %), all within 4 of
     # their standard errors (measured 2.0 at most).
-    np.testing.assert_allclose([estimate[f"theta{i}"] for i in range(1, 6)], [truth[f"theta{i}"] for i in range(1, 6)],
-                               rtol=0.01)
-    np.testing.assert_allclose([estimate[n] for n in ("fc1", "fc2", "Ir2")], [truth[n] for n in ("fc1", "fc2", "Ir2")],
-                               rtol=0.1)
+    np.testing.assert_allclose(
+        [estimate[f"theta{i}"] for i in range(1, 6)], [truth[f"theta{i}"] for i in range(1, 6)], rtol=0.01
+    )
+    np.testing.assert_allclose(
+        [estimate[n] for n in ("fc1", "fc2", "Ir2")], [truth[n] for n in ("fc1", "fc2", "Ir2")], rtol=0.1
+    )
     # Turning over, the arm tells the elbow's rotor inertia apart from theta3 (standard-error ratio 2.3, where
     # the 1 rad swing of the test above leaves 16).
     assert "Ir2" not in result.jointly_determined, result.jointly_determined
@@ -112,9 +121,12 @@ def test_a_dry_friction_that_changes_between_recordings_is_carried_by_the_leave_
     friction = ((0.114, 0.060), (0.139, 0.113), (0.201, 0.103), (0.125, 0.076))
     train = []
     for seed, (f1, f2) in enumerate(friction):
-        ts, xs, us, _ = mujoco_rig.record(dict(mujoco_rig.RIG, f1=f1, f2=f2), 12.0, seed, inputs=mujoco_rig.INPUTS,
-                                          scale=0.6)
-        train.append(Trajectory(jnp.asarray(ts), jnp.asarray(xs), jnp.asarray(us), mujoco_rig.STATES, mujoco_rig.INPUTS))
+        ts, xs, us, _ = mujoco_rig.record(
+            dict(mujoco_rig.RIG, f1=f1, f2=f2), 12.0, seed, inputs=mujoco_rig.INPUTS, scale=0.6
+        )
+        train.append(
+            Trajectory(jnp.asarray(ts), jnp.asarray(xs), jnp.asarray(us), mujoco_rig.STATES, mujoco_rig.INPUTS)
+        )
     with pytest.warns(dynax.RecordsDisagreeWarning) as caught:
         result = identify(dynax.DoublePendulum(), train, Dynamic(), friction="coulomb", validation=[_record(9)])
     truth = mujoco_rig.base_parameters(mujoco_rig.RIG)

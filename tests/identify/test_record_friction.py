@@ -19,8 +19,9 @@ DIFFERENT = (0.08, 0.16, 0.10, 0.13)  # elbow Coulomb friction per record, N m (
 
 def arm(fc2):
     rigid = dynax.DoublePendulum.from_base_parameters(RIG)
-    return dynax.Extended(rigid, (dynax.CoulombFriction(0, RIG_FC[0]), dynax.CoulombFriction(1, fc2),
-                                  dynax.RotorInertia(1, RIG_IR2)))
+    return dynax.Extended(
+        rigid, (dynax.CoulombFriction(0, RIG_FC[0]), dynax.CoulombFriction(1, fc2), dynax.RotorInertia(1, RIG_IR2))
+    )
 
 
 @pytest.fixture(scope="module")
@@ -49,8 +50,9 @@ def test_a_friction_that_differs_between_records_is_found(differing):
 
 def test_records_that_share_their_friction_are_not_said_to_differ():
     same = [recorded(arm(RIG_FC[1]), 6.0, seed) for seed in SEEDS]
-    found = identify(dynax.DoublePendulum(), same, Dynamic(), friction="coulomb", refine=False,
-                     holdout=0).record_friction
+    found = identify(
+        dynax.DoublePendulum(), same, Dynamic(), friction="coulomb", refine=False, holdout=0
+    ).record_friction
     assert found.differ() == (), (found.f_statistic, found.p_value)
     # Spread 0.017 N m (0.096 to 0.113), against 0.08 in the records above; all low by the filter's bias.
     assert np.ptp(found.values[:, 1]) < 0.025 and 0.09 < np.mean(found.values[:, 1]) < 0.13, found.values
@@ -84,8 +86,9 @@ def test_dfki_runs_disagree_on_the_elbow_friction(datasets):
     from tests.identify.test_identify_defaults import dfki
 
     runs = [dfki(datasets, r) for r in ("00", "01", "02", "03", "05")]
-    found = identify(dynax.DoublePendulum(), runs, Dynamic(), friction="coulomb", refine=False,
-                     holdout=0).record_friction
+    found = identify(
+        dynax.DoublePendulum(), runs, Dynamic(), friction="coulomb", refine=False, holdout=0
+    ).record_friction
     # measured 2026-11-26: elbow 0.062 (run 02) to 0.123 N m (run 00), F = 56 on (4, 15) degrees of freedom
     assert "fc2" in found.differ(), (found.f_statistic, found.p_value)
     assert np.ptp(found.values[:, 1]) > 0.04, found.values
@@ -96,11 +99,21 @@ def test_the_two_halves_of_the_emps_record_agree_on_their_friction(datasets):
     # record cut in two is two records of the same session, whose Coulomb friction must agree. Measured
     # 2026-11-26: 19.97 and 20.01 N (the published 20.39; the eight parts 19.86 to 20.16), F = 0.21 on (1, 6)
     # degrees of freedom, p = 0.67.
-    data = dynax.load_trajectory(datasets / "emps" / "DATA_EMPS.mat", "linear_axis", mapping={"q": "qm", "force": "vir"},
-                                 scale={"force": 35.15065188})
+    data = dynax.load_trajectory(
+        datasets / "emps" / "DATA_EMPS.mat",
+        "linear_axis",
+        mapping={"q": "qm", "force": "vir"},
+        scale={"force": 35.15065188},
+    )
     n = len(data)
-    result = identify(dynax.LinearAxis(), [data.slice(0, n // 2), data.slice(n // 2, n)], Dynamic(),
-                      friction="coulomb", holdout=0, refine=False)
+    result = identify(
+        dynax.LinearAxis(),
+        [data.slice(0, n // 2), data.slice(n // 2, n)],
+        Dynamic(),
+        friction="coulomb",
+        holdout=0,
+        refine=False,
+    )
     found = result.record_friction
     assert found is not None and found.columns == ("coulomb",)
     assert found.differ() == (), (found.values, found.f_statistic, found.p_value)

@@ -42,7 +42,9 @@ def test_offsets_that_differ_between_records_are_found_and_measured(records):
     # error (each half alone is within 0.02 N m of it; two halves may straddle it, -0.072 and -0.047 for -0.06)
     assert np.max(np.abs(found.halves[:, :, 0] - truth[:, None, 0])) < 0.02, found.halves[:, :, 0]
     note = result.to_json()["record_offsets"]["note"]
-    assert note is not None and "q1" in note and "q2" not in note.split("differs from record to record")[1].split(":")[0]
+    assert (
+        note is not None and "q1" in note and "q2" not in note.split("differs from record to record")[1].split(":")[0]
+    )
 
 
 def test_records_without_offsets_are_not_said_to_differ(records):
@@ -56,8 +58,9 @@ def test_records_without_offsets_are_not_said_to_differ(records):
 def test_a_common_offset_is_measured_but_does_not_differ(records):
     # The same offset in every record is a constant of the rig, not of the record: measured, not flagged.
     shifted = [with_offset(r, (0.08, 0.0)) for r in records]
-    found = identify(dynax.DoublePendulum(), shifted, Dynamic(), friction="coulomb", refine=False,
-                     holdout=0).record_offsets
+    found = identify(
+        dynax.DoublePendulum(), shifted, Dynamic(), friction="coulomb", refine=False, holdout=0
+    ).record_offsets
     assert found.differ() == ()
     np.testing.assert_allclose(found.offsets[:, 0], 0.08, atol=0.02)
 
@@ -79,8 +82,12 @@ def test_exact_equations_say_nothing_and_an_offset_on_them_is_found_exactly():
 
 
 def test_one_record_has_no_offsets_to_compare(records):
-    assert identify(dynax.DoublePendulum(), records[0], Dynamic(), friction="coulomb", refine=False,
-                    holdout=0).record_offsets is None
+    assert (
+        identify(
+            dynax.DoublePendulum(), records[0], Dynamic(), friction="coulomb", refine=False, holdout=0
+        ).record_offsets
+        is None
+    )
     assert record_offsets(np.zeros((8, 2)), np.zeros(8), (4,), ("q1", "q2")) is None
 
 
@@ -92,10 +99,13 @@ def test_dfki_runs_00_and_01_read_the_shoulder_torque_high(datasets):
     # (`offsets=True`): by default `identify` reads these runs as carrying angle zeros of their own, which
     # explain them better (test_angle_zeros), and reports the force offsets left after those.
     runs = [dynax.resample(r, r.dt) for r in (dfki(datasets, n) for n in ("00", "01", "02", "03"))]
-    found = identify(dynax.DoublePendulum(), runs, Dynamic(offsets=True), friction="coulomb", refine=False,
-                     holdout=0).record_offsets
+    found = identify(
+        dynax.DoublePendulum(), runs, Dynamic(offsets=True), friction="coulomb", refine=False, holdout=0
+    ).record_offsets
     assert found.differ() == ("q1",), (found.f_statistic, found.p_value)
-    assert found.offsets[0, 0] > 0.1 and 0.04 < found.offsets[1, 0] < 0.1 and np.all(np.abs(found.offsets[2:, 0]) < 0.03)
+    assert (
+        found.offsets[0, 0] > 0.1 and 0.04 < found.offsets[1, 0] < 0.1 and np.all(np.abs(found.offsets[2:, 0]) < 0.03)
+    )
     assert np.all(np.abs(found.halves[:, 0, 0] - found.halves[:, 1, 0]) < 0.02)
 
 
@@ -116,8 +126,9 @@ def test_joint_weights_come_from_residuals_with_the_offsets_removed(records, mon
 
     monkeypatch.setattr(identify_module, "least_squares", spy)
     shifted = [with_offset(r, o) for r, o in zip(records, ([0.3, 0.0], [-0.3, 0.0], [0.3, 0.0], [-0.3, 0.0]))]
-    result = identify(dynax.DoublePendulum(), shifted, Dynamic(weighting="joint"), friction="coulomb", refine=False,
-                      holdout=0)
+    result = identify(
+        dynax.DoublePendulum(), shifted, Dynamic(weighting="joint"), friction="coulomb", refine=False, holdout=0
+    )
     weights = np.asarray(seen[-1])
     shoulder, elbow = weights[: weights.size // 2], weights[weights.size // 2 :]
     assert np.ptp(shoulder) == 0 and np.ptp(elbow) == 0  # one weight per joint

@@ -27,7 +27,9 @@ def states():
 
 def test_dynamic_regressor_times_parameters_is_the_inverse_dynamics(states):
     xs, ddq = states
-    system = dynax.DoublePendulum.from_physical(m1=0.6, m2=0.4, l1=0.3, lc1=0.2, lc2=0.25, Ic1=0.01, Ic2=0.02, b1=0.05, b2=0.02)
+    system = dynax.DoublePendulum.from_physical(
+        m1=0.6, m2=0.4, l1=0.3, lc1=0.2, lc2=0.25, Ic1=0.01, Ic2=0.02, b1=0.05, b2=0.02
+    )
     theta = parameter_vector(system)
     ys = dynamic_regressor(dynax.DoublePendulum(), xs, ddq)  # parameter values of the model are irrelevant
     tau = jax.vmap(lambda x, a: system.mass_matrix(x[:2]) @ a + system.bias_force(x[:2], x[2:]))(xs, ddq)
@@ -74,7 +76,9 @@ def test_least_squares_matches_numpy_and_textbook_standard_errors():
     np.testing.assert_allclose(fit.value, ref, rtol=1e-10)
     sigma2 = res[0] / (200 - 3)
     np.testing.assert_allclose(fit.std_errors, np.sqrt(np.diag(sigma2 * np.linalg.inv(a.T @ a))), rtol=1e-8)
-    assert int(fit.statistics.rank) == 3 and float(fit.statistics.condition_number) < 2  # column scaling removes the units
+    assert (
+        int(fit.statistics.rank) == 3 and float(fit.statistics.condition_number) < 2
+    )  # column scaling removes the units
 
 
 def test_rank_deficiency_names_the_unidentified_combination():
@@ -169,7 +173,9 @@ def test_rank_deficient_fit_gives_an_infinite_error_only_to_parameters_the_null_
     assert np.isinf(std[0]) and np.isinf(std[3])
     np.testing.assert_allclose(std[1:3], np.asarray(alone.std_errors)[1:3], rtol=1e-8)
     # nothing moves at all: no parameter has an error
-    assert np.all(np.isinf(np.asarray(least_squares(np.zeros((50, 2)), np.ones(50), allow_rank_deficient=True).std_errors)))
+    assert np.all(
+        np.isinf(np.asarray(least_squares(np.zeros((50, 2)), np.ones(50), allow_rank_deficient=True).std_errors))
+    )
 
 
 def test_jointly_determined_names_the_parameters_a_regression_separates_only_through_a_small_difference():

@@ -32,13 +32,15 @@ def _noisy_record(system, ts, us, x0, names, noise, seed):
 def _axis_problem(seed):
     """A linear axis (EMPS-sized) under a multisine force, measured with 1e-4 noise, and a start 15 to
     25 % off: `(record, start)`."""
-    truth = dynax.LinearAxis(mass=jnp.asarray(95.0), viscous=jnp.asarray(200.0), coulomb=jnp.asarray(20.0),
-                             offset=jnp.asarray(-3.0))
+    truth = dynax.LinearAxis(
+        mass=jnp.asarray(95.0), viscous=jnp.asarray(200.0), coulomb=jnp.asarray(20.0), offset=jnp.asarray(-3.0)
+    )
     ts = np.arange(0.0, 4.0, 0.002)
     us = (60 * np.sin(3 * ts) + 40 * np.sin(7.1 * ts) + 25 * np.sin(13.3 * ts))[:, None]
     data = _noisy_record(truth, ts, us, [0.0, 0.0], truth.state_names, noise=1e-4, seed=seed)
-    start = dynax.LinearAxis(mass=jnp.asarray(80.0), viscous=jnp.asarray(240.0), coulomb=jnp.asarray(15.0),
-                             offset=jnp.asarray(0.0))
+    start = dynax.LinearAxis(
+        mass=jnp.asarray(80.0), viscous=jnp.asarray(240.0), coulomb=jnp.asarray(15.0), offset=jnp.asarray(0.0)
+    )
     return data, start
 
 
@@ -88,8 +90,9 @@ def test_a_parameter_the_rollouts_do_not_depend_on_gets_no_finite_error():
     alone = fit_simulation_error(start, data, segment_s=0.25, fit_initial_states=False, max_steps=40)
     std = dict(zip(result.names, np.asarray(result.std_errors)))
     assert np.isinf(std["spare"]), std
-    np.testing.assert_allclose([std[f"axis.{n}"] for n in ("mass", "viscous", "coulomb", "offset")],
-                               np.asarray(alone.std_errors), rtol=1e-3)
+    np.testing.assert_allclose(
+        [std[f"axis.{n}"] for n in ("mass", "viscous", "coulomb", "offset")], np.asarray(alone.std_errors), rtol=1e-3
+    )
     covariance = np.asarray(result.covariance)
     k = result.names.index("spare")
     assert np.all(np.isnan(covariance[k])) and np.all(np.isnan(covariance[:, k]))
@@ -160,8 +163,10 @@ def test_staggered_cuts_keep_the_standard_errors_of_one_cut():
     """Four staggered cuts repeat each sample four times; their residuals are not independent, so the
     standard errors must stay near one cut's, not halve (as counting them as independent would)."""
     data, start = _axis_problem(seed=2)
-    fits = [fit_simulation_error(start, data, segment_s=0.5, fit_initial_states=False, max_steps=40, stagger=k)
-            for k in (1, 4)]
+    fits = [
+        fit_simulation_error(start, data, segment_s=0.5, fit_initial_states=False, max_steps=40, stagger=k)
+        for k in (1, 4)
+    ]
     expected = np.array([95.0, 200.0, 20.0, -3.0])
     for fit in fits:
         np.testing.assert_allclose(np.asarray(fit.value), expected, rtol=0.02, atol=0.1)

@@ -46,9 +46,14 @@ def test_the_balancing_end_of_the_dfki_swing_up_is_named_and_the_gentle_runs_are
     # 4.2 s it rests upright (held by friction at rest, which neither model has); open loop, every rollout
     # started near the top falls off it, and those windows carry the RMSE at 0.5 s (half of it from about a
     # tenth of the windows).
-    lab = dynax.Extended(dynax.DoublePendulum.from_base_parameters({**RIG, "theta6": 0.001, "theta7": 0.001}),
-                         (dynax.CoulombFriction(0, 0.093 * math.pi / 2), dynax.CoulombFriction(1, 0.078 * math.pi / 2),
-                          dynax.RotorInertia(1, RIG_IR2)))
+    lab = dynax.Extended(
+        dynax.DoublePendulum.from_base_parameters({**RIG, "theta6": 0.001, "theta7": 0.001}),
+        (
+            dynax.CoulombFriction(0, 0.093 * math.pi / 2),
+            dynax.CoulombFriction(1, 0.078 * math.pi / 2),
+            dynax.RotorInertia(1, RIG_IR2),
+        ),
+    )
     runs = {r: dfki(datasets, r) for r in ("02", "12")}
     swing_up = held_out_error(lab, [runs["12"]])
     (entry,) = [e for e in swing_up.concentrated["trajectory_12.csv"] if e["horizon_s"] == 0.5]

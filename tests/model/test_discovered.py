@@ -58,8 +58,12 @@ def test_discovered_features_match_the_named_forms_they_stand_for():
     drag = Extended(Acrobot(), (QuadraticDrag(0, 0.3),))
     found = Extended(Acrobot(), (Discovered(0, (Feature("abs_velocity", 0),), [-0.3]),))
     xs, us = _random_states(16, 4, seed=2)
-    np.testing.assert_allclose(jax.vmap(lambda x, u: found.vector_field(0.0, x, u))(xs, us),
-                               jax.vmap(lambda x, u: drag.vector_field(0.0, x, u))(xs, us), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(
+        jax.vmap(lambda x, u: found.vector_field(0.0, x, u))(xs, us),
+        jax.vmap(lambda x, u: drag.vector_field(0.0, x, u))(xs, us),
+        rtol=1e-12,
+        atol=1e-12,
+    )
 
 
 def test_a_discovered_input_product_reads_the_applied_input():
@@ -76,7 +80,9 @@ def test_discovered_term_renders_its_formula_and_parameters():
     model = Extended(system, (term,))
     assert model.labels == ("discovered@q2[q2 + sin(q1)]",)
     assert set(model.parameters) == {"c_q2[q2]", "c_q2[sin(q1)]"}
-    assert LinearAxis().state_names[0] in Discovered(0, (Feature("periodic_sin", 0, period=0.05),), [1.0]).acceleration_formula(LinearAxis())
+    assert LinearAxis().state_names[0] in Discovered(
+        0, (Feature("periodic_sin", 0, period=0.05),), [1.0]
+    ).acceleration_formula(LinearAxis())
 
 
 def test_discovered_term_refuses_bad_construction():

@@ -34,8 +34,15 @@ def _rollout(system, x0=X0, us=US):
 
 def test_neutral_terms_give_the_nominal_model():
     terms = (
-        CoulombFriction(1), ViscousFriction(0), QuadraticDrag(1), RotorInertia(1), JointSpring(0),
-        InputGain(0), InputOffset(0), InputLag(0), InputDelay(0),
+        CoulombFriction(1),
+        ViscousFriction(0),
+        QuadraticDrag(1),
+        RotorInertia(1),
+        JointSpring(0),
+        InputGain(0),
+        InputOffset(0),
+        InputLag(0),
+        InputDelay(0),
     )
     extended = Extended(Acrobot(), terms)
     assert extended.state_names == ("q1", "q2", "dq1", "dq2", "tau2_lag", "tau2_delay1", "tau2_delay2")
@@ -140,5 +147,8 @@ def test_coulomb_friction_on_a_linear_axis_equals_its_own_coulomb_term():
     extended = Extended(axis, (CoulombFriction(0, 20.0),))
     assert extended.labels == ("coulomb_friction@q",) and set(extended.parameters) == {"fc"}
     for x in (jnp.array([0.1, 0.05]), jnp.array([0.0, -0.003])):
-        np.testing.assert_allclose(extended.vector_field(0.0, x, jnp.array([30.0])),
-                                   reference.vector_field(0.0, x, jnp.array([30.0])), rtol=1e-12)
+        np.testing.assert_allclose(
+            extended.vector_field(0.0, x, jnp.array([30.0])),
+            reference.vector_field(0.0, x, jnp.array([30.0])),
+            rtol=1e-12,
+        )

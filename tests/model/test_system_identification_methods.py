@@ -21,8 +21,14 @@ def _acrobot_inverse_dynamics(p, q, dq, ddq):
     """Spong's equations in base parameters, written out."""
     c2, s1, s2, s12 = np.cos(q[1]), np.sin(q[0]), np.sin(q[1]), np.sin(q[0] + q[1])
     t1, t2, t3, t4, t5, t6, t7 = (p[f"theta{i}"] for i in range(1, 8))
-    tau1 = ((t1 + t2 + 2 * t3 * c2) * ddq[0] + (t2 + t3 * c2) * ddq[1] - t3 * s2 * (2 * dq[0] * dq[1] + dq[1] ** 2)
-            + t4 * s1 + t5 * s12 + t6 * dq[0])
+    tau1 = (
+        (t1 + t2 + 2 * t3 * c2) * ddq[0]
+        + (t2 + t3 * c2) * ddq[1]
+        - t3 * s2 * (2 * dq[0] * dq[1] + dq[1] ** 2)
+        + t4 * s1
+        + t5 * s12
+        + t6 * dq[0]
+    )
     tau2 = (t2 + t3 * c2) * ddq[0] + t2 * ddq[1] + t3 * s2 * dq[0] ** 2 + t5 * s12 + t7 * dq[1]
     return np.array([tau1, tau2])
 
@@ -38,8 +44,10 @@ def test_two_link_methods_are_spongs_base_parameter_model():
         assert acrobot.base_parameter_names(friction) == tuple(f"theta{i}" for i in range(1, 8))
     assert acrobot.energy_parameter_names() == ("theta1", "theta2", "theta3", "theta4", "theta5")
     terms = acrobot.coulomb_friction_terms()
-    assert [(type(t), t.joint, float(t.coefficient)) for t in terms] == [(dynax.CoulombFriction, 0, 0.0),
-                                                                           (dynax.CoulombFriction, 1, 0.0)]
+    assert [(type(t), t.joint, float(t.coefficient)) for t in terms] == [
+        (dynax.CoulombFriction, 0, 0.0),
+        (dynax.CoulombFriction, 1, 0.0),
+    ]
     assert dynax.internal.parameter_names(acrobot, "coulomb")[-2:] == ("fc1", "fc2")
 
 
@@ -72,11 +80,14 @@ def test_two_link_consistency_conditions_name_the_broken_base_parameter():
 
 
 def test_linear_axis_methods_are_the_emps_model_with_the_exact_sign():
-    axis = dynax.LinearAxis(mass=jnp.asarray(95.0), viscous=jnp.asarray(200.0), coulomb=jnp.asarray(20.0),
-                            offset=jnp.asarray(-3.0))
-    for dq, ddq, expected in ((0.0, 2.0, 95.0 * 2.0 - 3.0),  # at rest the sign is 0, not a smoothed value
-                              (1e-6, 0.0, 200.0 * 1e-6 + 20.0 - 3.0),  # tanh(1e-6 / 1e-3) would give 0.02, not 20
-                              (-0.5, 1.0, 95.0 - 100.0 - 20.0 - 3.0)):
+    axis = dynax.LinearAxis(
+        mass=jnp.asarray(95.0), viscous=jnp.asarray(200.0), coulomb=jnp.asarray(20.0), offset=jnp.asarray(-3.0)
+    )
+    for dq, ddq, expected in (
+        (0.0, 2.0, 95.0 * 2.0 - 3.0),  # at rest the sign is 0, not a smoothed value
+        (1e-6, 0.0, 200.0 * 1e-6 + 20.0 - 3.0),  # tanh(1e-6 / 1e-3) would give 0.02, not 20
+        (-0.5, 1.0, 95.0 - 100.0 - 20.0 - 3.0),
+    ):
         force = axis.inverse_dynamics(jnp.zeros(1), jnp.array([dq]), jnp.array([ddq]))
         np.testing.assert_allclose(force, [expected], rtol=1e-14)
     np.testing.assert_allclose(axis.energy(jnp.array([0.3, -2.0])), 0.5 * 95.0 * 4.0, rtol=1e-14)
@@ -90,7 +101,9 @@ def test_linear_axis_methods_are_the_emps_model_with_the_exact_sign():
     assert float(axis.with_base_parameters({"coulomb": jnp.asarray(5.0)}).coulomb) == 5.0
     names = ("mass", "viscous", "coulomb", "offset")
     assert dynax.internal.consistency_conditions(axis, names, np.array([-1.0, 200.0, -2.0, -50.0])) == (
-        "inertia: mass = -1 must be positive", "friction: coulomb = -2 must be non-negative")
+        "inertia: mass = -1 must be positive",
+        "friction: coulomb = -2 must be non-negative",
+    )
     with pytest.raises(dynax.UsageError, match="no joint terms on a LinearAxis"):
         dynax.internal.parameter_names(dynax.Extended(axis, (dynax.CoulombFriction(0, jnp.asarray(1.0)),)))
 
@@ -174,7 +187,9 @@ def test_a_new_system_is_identified_through_its_methods_alone():
     np.testing.assert_allclose(f, np.stack([0 * q, dq**2, 0 * q], axis=1), rtol=1e-14, atol=1e-14)
     names = dynax.internal.parameter_names(osc, "coulomb")
     assert dynax.internal.consistency_conditions(osc, names, np.array([-1.0, 0.3, -5.0, -0.1])) == (
-        "inertia: mass must be positive", "friction: fc = -0.1 must be non-negative")
+        "inertia: mass must be positive",
+        "friction: fc = -0.1 must be non-negative",
+    )
 
 
 def test_two_link_mass_check_configurations_find_the_smallest_eigenvalue_over_the_data():
@@ -189,8 +204,12 @@ def test_two_link_mass_check_configurations_find_the_smallest_eigenvalue_over_th
         system = dynax.Extended(arm, (dynax.RotorInertia(1, jnp.asarray(rng.uniform(0.0, 0.2))),))
         lo, hi = np.sort(rng.uniform(-4.0, 4.0, size=2))
         qs = np.stack([rng.uniform(-3, 3, 500), rng.uniform(lo, hi, 500)], axis=1)
-        expected = min(np.linalg.eigvalsh(np.asarray(arm.mass_matrix(jnp.asarray(q))) + np.diag([0.0, float(
-            system.terms[0].coefficient)]))[0] for q in qs)
+        expected = min(
+            np.linalg.eigvalsh(
+                np.asarray(arm.mass_matrix(jnp.asarray(q))) + np.diag([0.0, float(system.terms[0].coefficient)])
+            )[0]
+            for q in qs
+        )
         got = min_mass_eigenvalue(system, jnp.asarray(qs))
         np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-12)
     assert len(arm.mass_check_configurations(jnp.asarray(qs))) == 2

@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 import dynax
-import dynax.internal
 from dynax import (
     AbstractManipulator,
     Acrobot,
@@ -22,6 +21,7 @@ from dynax import (
     Wind,
 )
 from dynax.control import SpongController
+import dynax.internal
 
 
 class _Slider(AbstractManipulator):
@@ -54,7 +54,11 @@ def test_protocol_answers():
     "system, term, message",
     [
         (Acrobot(), Wind(0, 1.0), "Wind acts on a helicopter's body axes, but Acrobot is not a Helicopter"),
-        (LinearAxis(), BodyBias(3, 0.1), "BodyBias acts on a helicopter's body axes, but LinearAxis is not a Helicopter"),
+        (
+            LinearAxis(),
+            BodyBias(3, 0.1),
+            "BodyBias acts on a helicopter's body axes, but LinearAxis is not a Helicopter",
+        ),
         (Helicopter(), CoulombFriction(0, 0.1), "CoulombFriction acts on a joint, but Helicopter is not a manipulator"),
     ],
 )

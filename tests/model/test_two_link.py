@@ -28,9 +28,13 @@ def test_vector_field_matches_reference_equations(seed):
         x = rng.normal(size=4) * 2
         tau = rng.normal(size=2)
         ref = spong_reference({**physical, "g": 9.81}, x, tau)
-        np.testing.assert_allclose(pendulum.vector_field(0.0, jnp.asarray(x), jnp.asarray(tau)), ref, rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(
+            pendulum.vector_field(0.0, jnp.asarray(x), jnp.asarray(tau)), ref, rtol=1e-10, atol=1e-10
+        )
         ref_acro = spong_reference({**physical, "g": 9.81}, x, np.array([0.0, tau[1]]))
-        np.testing.assert_allclose(acrobot.vector_field(0.0, jnp.asarray(x), jnp.asarray(tau[1:])), ref_acro, rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(
+            acrobot.vector_field(0.0, jnp.asarray(x), jnp.asarray(tau[1:])), ref_acro, rtol=1e-10, atol=1e-10
+        )
 
 
 def test_the_rig_with_friction_and_rotor_inertia_matches_the_base_parameter_reference():
@@ -39,13 +43,17 @@ def test_the_rig_with_friction_and_rotor_inertia_matches_the_base_parameter_refe
     # (tests/reference.py), at states that cross the friction's smoothing band.
     rng = np.random.default_rng(7)
     theta = dict(theta1=0.0536, theta2=0.0533, theta3=0.0362, theta4=2.365, theta5=1.777, theta6=0.01, theta7=0.02)
-    model = dynax.Extended(dynax.DoublePendulum.from_base_parameters(theta),
-                           (dynax.CoulombFriction(0, 0.15), dynax.CoulombFriction(1, 0.12), dynax.RotorInertia(1, 0.0042)))
+    model = dynax.Extended(
+        dynax.DoublePendulum.from_base_parameters(theta),
+        (dynax.CoulombFriction(0, 0.15), dynax.CoulombFriction(1, 0.12), dynax.RotorInertia(1, 0.0042)),
+    )
     for scale in (3.0, 0.01):
         x = np.concatenate([rng.uniform(-np.pi, np.pi, 2), scale * rng.normal(size=2)])
         tau = rng.normal(size=2)
         ref = arm_reference(list(theta.values()), x, tau, (0.15, 0.12), 0.01, (0.0, 0.0042))
-        np.testing.assert_allclose(model.vector_field(0.0, jnp.asarray(x), jnp.asarray(tau)), ref, rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(
+            model.vector_field(0.0, jnp.asarray(x), jnp.asarray(tau)), ref, rtol=1e-10, atol=1e-10
+        )
 
 
 def test_energy_is_linear_in_base_parameters():

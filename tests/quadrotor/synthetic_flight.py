@@ -35,11 +35,13 @@ INPUT_NAMES = ("m1", "m2", "m3", "m4")
 
 def rotation(q):
     w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def _reference(t, c):
@@ -88,12 +90,14 @@ def _field(t, s, command, effects):
     dv = R @ f_body - np.array([0.0, 0.0, G])
     dom = m_body - np.cross(om, INERTIA * om) / INERTIA
     w, x, y, z = q
-    dq = 0.5 * np.array([
-        -x * om[0] - y * om[1] - z * om[2],
-        w * om[0] + y * om[2] - z * om[1],
-        w * om[1] + z * om[0] - x * om[2],
-        w * om[2] + x * om[1] - y * om[0],
-    ])
+    dq = 0.5 * np.array(
+        [
+            -x * om[0] - y * om[1] - z * om[2],
+            w * om[0] + y * om[2] - z * om[1],
+            w * om[1] + z * om[0] - x * om[2],
+            w * om[2] + x * om[1] - y * om[0],
+        ]
+    )
     drotor = np.zeros(4)
     if "lag" in effects:
         motor, tau = effects["lag"]
@@ -104,9 +108,13 @@ def _field(t, s, command, effects):
 def quadrotor_flight(duration=20.0, seed=0, *, dt=0.01, noise=True, **effects) -> Trajectory:
     """A closed-loop flight of `duration` s sampled every `dt`, as a quadrotor `Trajectory` (PWM-like inputs)."""
     rng = np.random.default_rng(seed)
-    c = {"amplitude": np.array([1.0, 1.0, 0.3]) * rng.uniform(0.7, 1.0, 3),
-         "omega": rng.uniform(0.8, 1.6, 3), "phase": rng.uniform(0, 2 * np.pi, 3),
-         "yaw": rng.uniform(0.5, 1.0), "yaw_omega": rng.uniform(0.2, 0.5)}
+    c = {
+        "amplitude": np.array([1.0, 1.0, 0.3]) * rng.uniform(0.7, 1.0, 3),
+        "omega": rng.uniform(0.8, 1.6, 3),
+        "phase": rng.uniform(0, 2 * np.pi, 3),
+        "yaw": rng.uniform(0.5, 1.0),
+        "yaw_omega": rng.uniform(0.2, 0.5),
+    }
     pos, vel, _, yaw = _reference(0.0, c)
     s = np.concatenate([pos, [np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)], vel, np.zeros(3), np.ones(4)])
     n = int(round(duration / dt)) + 1
@@ -117,8 +125,9 @@ def quadrotor_flight(duration=20.0, seed=0, *, dt=0.01, noise=True, **effects) -
         s[13:17] = np.where(follows, command, s[13:17])  # the other rotors follow their commands at once
         xs[k], us[k] = s[:13], command
         if k + 1 < n:
-            sol = solve_ivp(_field, (k * dt, (k + 1) * dt), s, method="DOP853", rtol=1e-9, atol=1e-11,
-                            args=(command, effects))
+            sol = solve_ivp(
+                _field, (k * dt, (k + 1) * dt), s, method="DOP853", rtol=1e-9, atol=1e-11, args=(command, effects)
+            )
             s = sol.y[:, -1].copy()
             s[3:7] /= np.linalg.norm(s[3:7])
     if noise:

@@ -29,16 +29,48 @@ def short_flight(tmp_path_factory):
 
 def test_fit_then_evaluate_a_real_flight(short_flight, tmp_path, capsys):
     model = tmp_path / "model.json"
-    assert main(["fit", "quadrotor", str(short_flight), "--map", MAP, "--model", "nominal", "--criterion", "one-step",
-                 "--out", str(model)]) == 0
+    assert (
+        main(
+            [
+                "fit",
+                "quadrotor",
+                str(short_flight),
+                "--map",
+                MAP,
+                "--model",
+                "nominal",
+                "--criterion",
+                "one-step",
+                "--out",
+                str(model),
+            ]
+        )
+        == 0
+    )
     printed = capsys.readouterr().out
     assert "ground segment from t = 0.00" in printed  # the take-off is noted and left out
     obj = json.loads(model.read_text())
     assert obj["system"] == "quadrotor" and obj["family"] == "nominal" and obj["criterion"] == "one-step"
     assert "dw/(vbat m1)^2" in obj["parameters"]
     metrics = tmp_path / "metrics.json"
-    assert main(["evaluate", str(model), str(short_flight), "--map", MAP, "--steps", "1,10", "--metric", "mae",
-                 "--out", str(metrics)]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                str(model),
+                str(short_flight),
+                "--map",
+                MAP,
+                "--steps",
+                "1,10",
+                "--metric",
+                "mae",
+                "--out",
+                str(metrics),
+            ]
+        )
+        == 0
+    )
     out = json.loads(metrics.read_text())
     assert out["steps"] == [1, 10] and set(out["model"]["mae"]) == set(GROUPS) and "rmse" not in out["model"]
     for group in GROUPS:
@@ -62,14 +94,43 @@ def test_usage_errors(short_flight, tmp_path, capsys):
     model = tmp_path / "model.json"
     assert main(["fit", "helicopter", str(short_flight), "--model", "nominal", "--out", str(model)]) == 2
     assert "helicopter" in capsys.readouterr().err
-    assert main(["fit", "quadrotor", str(short_flight), "--map", MAP, "--model", "acceleration",
-                 "--criterion", "frequency", "--out", str(model)]) == 2
+    assert (
+        main(
+            [
+                "fit",
+                "quadrotor",
+                str(short_flight),
+                "--map",
+                MAP,
+                "--model",
+                "acceleration",
+                "--criterion",
+                "frequency",
+                "--out",
+                str(model),
+            ]
+        )
+        == 2
+    )
     assert "helicopter's linear model" in capsys.readouterr().err
     assert not model.exists()
-    model.write_text(json.dumps({"system": "quadrotor", "model": "acceleration", "features": ["m1"], "mask": [[1]] * 6,
-                                 "weights": [[0.0]] * 6, "input_scale": [1, 1, 1, 1, 1], "gravity": -9.81}))
+    model.write_text(
+        json.dumps(
+            {
+                "system": "quadrotor",
+                "model": "acceleration",
+                "features": ["m1"],
+                "mask": [[1]] * 6,
+                "weights": [[0.0]] * 6,
+                "input_scale": [1, 1, 1, 1, 1],
+                "gravity": -9.81,
+            }
+        )
+    )
     metrics = tmp_path / "metrics.json"
-    assert main(["evaluate", str(model), str(short_flight), "--map", MAP, "--steps", "0,10", "--out", str(metrics)]) == 2
+    assert (
+        main(["evaluate", str(model), str(short_flight), "--map", MAP, "--steps", "0,10", "--out", str(metrics)]) == 2
+    )
     assert "--steps" in capsys.readouterr().err
     assert not metrics.exists()
 
@@ -84,13 +145,33 @@ def test_another_drone_needs_only_a_map(tmp_path, capsys):
     paths = []
     for k, f in enumerate(flights):
         table = np.column_stack([np.asarray(f.ts) + 100.0, np.asarray(f.xs), np.asarray(f.us[:, :4]) * (2500 / 4e4)])
-        names = ["time", "px", "py", "pz", "q_w", "q_x", "q_y", "q_z", "vel_x", "vel_y", "vel_z", "gyro_x", "gyro_y",
-                 "gyro_z", "omega1", "omega2", "omega3", "omega4"]
+        names = [
+            "time",
+            "px",
+            "py",
+            "pz",
+            "q_w",
+            "q_x",
+            "q_y",
+            "q_z",
+            "vel_x",
+            "vel_y",
+            "vel_z",
+            "gyro_x",
+            "gyro_y",
+            "gyro_z",
+            "omega1",
+            "omega2",
+            "omega3",
+            "omega4",
+        ]
         path = tmp_path / f"other_{k}.csv"
         np.savetxt(path, table, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
         paths.append(str(path))
-    other_map = ("t=time,x=px,y=py,z=pz,qw=q_w,qx=q_x,qy=q_y,qz=q_z,vx=vel_x,vy=vel_y,vz=vel_z,p=gyro_x,q=gyro_y,"
-                 "r=gyro_z,m1=omega1,m2=omega2,m3=omega3,m4=omega4")
+    other_map = (
+        "t=time,x=px,y=py,z=pz,qw=q_w,qx=q_x,qy=q_y,qz=q_z,vx=vel_x,vy=vel_y,vz=vel_z,p=gyro_x,q=gyro_y,"
+        "r=gyro_z,m1=omega1,m2=omega2,m3=omega3,m4=omega4"
+    )
     model = tmp_path / "model.json"
     assert main(["fit", "quadrotor", *paths, "--map", other_map, "--model", "nominal", "--out", str(model)]) == 0
     obj = json.loads(model.read_text())

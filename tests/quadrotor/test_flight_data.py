@@ -14,8 +14,16 @@ STAR = NANOBENCH / "B8_star_fast_rep1.csv.gz"
 # The documented map (docs/flight_data.md): Vicon position, attitude, velocity and body rates, PWM
 # motor commands and the battery voltage.
 NANOBENCH_MAP = {
-    "x": "px", "y": "py", "z": "pz", "p": "wx_vicon", "q": "wy_vicon", "r": "wz_vicon",
-    "m1": "motor_motor_m1", "m2": "motor_motor_m2", "m3": "motor_motor_m3", "m4": "motor_motor_m4",
+    "x": "px",
+    "y": "py",
+    "z": "pz",
+    "p": "wx_vicon",
+    "q": "wy_vicon",
+    "r": "wz_vicon",
+    "m1": "motor_motor_m1",
+    "m2": "motor_motor_m2",
+    "m3": "motor_motor_m3",
+    "m4": "motor_motor_m4",
     "vbat": "pwr_pm_vbat",
 }
 

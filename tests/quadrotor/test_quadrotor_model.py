@@ -24,11 +24,13 @@ DT = 0.01
 
 def _rotation(q):
     w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def _truth(t, state, m):
@@ -37,7 +39,9 @@ def _truth(t, state, m):
     torque = np.array([ARM * ROLL_SIGNS @ f, ARM * PITCH_SIGNS @ f, YAW_ARM * YAW_SIGNS @ f])
     w, x, y, z = q
     p, qq, r = omega
-    dq = 0.5 * np.array([-x * p - y * qq - z * r, w * p + y * r - z * qq, w * qq + z * p - x * r, w * r + x * qq - y * p])
+    dq = 0.5 * np.array(
+        [-x * p - y * qq - z * r, w * p + y * r - z * qq, w * qq + z * p - x * r, w * r + x * qq - y * p]
+    )
     dv = _rotation(q) @ np.array([0.0, 0.0, f.sum() / MASS]) - np.array([0.0, 0.0, GRAVITY])
     domega = (torque - np.cross(omega, INERTIA * omega)) / INERTIA
     return np.concatenate([v, dq, dv, domega])
@@ -62,8 +66,14 @@ def _flight(seed, seconds=1.5, hold=5):
             xs.append(sol.y[:, -1])
     xs, us = np.asarray(xs), np.asarray(us)
     us = np.concatenate([us, np.full((n, 1), 3.7)], axis=1)  # a steady battery
-    return dynax.Trajectory(DT * np.arange(n), jnp.asarray(xs), jnp.asarray(us), dynax.Quadrotor.state_names,
-                            dynax.Quadrotor.input_names, "quadrotor")
+    return dynax.Trajectory(
+        DT * np.arange(n),
+        jnp.asarray(xs),
+        jnp.asarray(us),
+        dynax.Quadrotor.state_names,
+        dynax.Quadrotor.input_names,
+        "quadrotor",
+    )
 
 
 @pytest.fixture(scope="module")
@@ -85,8 +95,11 @@ def test_one_step_learns_the_rigid_body_back(fitted):
     for i in range(4):
         truth[f"dw/m{i + 1}^2"] = A * s**2 / MASS
         truth[f"dw/m{i + 1}"] = B * s / MASS
-        for axis, signs, arm, inertia in (("p", ROLL_SIGNS, ARM, INERTIA[0]), ("q", PITCH_SIGNS, ARM, INERTIA[1]),
-                                          ("r", YAW_SIGNS, YAW_ARM, INERTIA[2])):
+        for axis, signs, arm, inertia in (
+            ("p", ROLL_SIGNS, ARM, INERTIA[0]),
+            ("q", PITCH_SIGNS, ARM, INERTIA[1]),
+            ("r", YAW_SIGNS, YAW_ARM, INERTIA[2]),
+        ):
             truth[f"d{axis}/m{i + 1}^2"] = signs[i] * arm * A * s**2 / inertia
             truth[f"d{axis}/m{i + 1}"] = signs[i] * arm * B * s / inertia
     truth["dp/qr"] = (INERTIA[1] - INERTIA[2]) / INERTIA[0]
@@ -133,8 +146,14 @@ def test_predict_ahead_matches_a_rollout_by_hand(fitted, flights):
         state = xs[i]
         for h in range(1, 13):
             u = jnp.asarray(us[i + h - 1])
-            sol = solve_ivp(lambda t, y, u=u: np.asarray(field(jnp.asarray(y), u)), (0, DT), state, method="DOP853",
-                            rtol=1e-12, atol=1e-14)
+            sol = solve_ivp(
+                lambda t, y, u=u: np.asarray(field(jnp.asarray(y), u)),
+                (0, DT),
+                state,
+                method="DOP853",
+                rtol=1e-12,
+                atol=1e-14,
+            )
             state = sol.y[:, -1]
             if h in steps:
                 # RK4 at the sample interval against DOP853: an error of order dt^4 per step.
@@ -168,7 +187,9 @@ def test_model_file_round_trip(fitted, tmp_path):
     assert isinstance(loaded, dynax.Quadrotor) and loaded.input_scale == fitted.model.input_scale
     x = jnp.asarray(np.concatenate([[0, 0, 1], [0.9, 0.1, -0.2, 0.3], [0.2, -0.1, 0.3], [1.0, -2.0, 0.5]]))
     u = jnp.asarray([4e4, 4.1e4, 3.9e4, 4e4, 3.7])
-    np.testing.assert_array_equal(np.asarray(loaded.vector_field(0.0, x, u)), np.asarray(fitted.model.vector_field(0.0, x, u)))
+    np.testing.assert_array_equal(
+        np.asarray(loaded.vector_field(0.0, x, u)), np.asarray(fitted.model.vector_field(0.0, x, u))
+    )
     obj = json.loads(path.read_text())
     obj["weights"][3][0] = "a lot"
     path.write_text(json.dumps(obj))
@@ -185,4 +206,3 @@ def test_joined_flights_give_no_window_across_a_break():
     np.testing.assert_array_equal(valid_starts(11, 3, 1, breaks=[5]), [0, 1, 5, 6, 7])
     np.testing.assert_array_equal(valid_starts(11, 3, 2, breaks=[5]), [0, 5, 7])
     np.testing.assert_array_equal(valid_starts(11, 3, 1), np.arange(8))  # no breaks: as before
-

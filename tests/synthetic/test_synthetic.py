@@ -9,13 +9,18 @@ import pytest
 import scipy.integrate
 
 import dynax
-import dynax.synthetic as synthetic
 from dynax import Acrobot, CoulombFriction, Extended
 from dynax.internal import hover_state
+import dynax.synthetic as synthetic
 
 PUBLIC = (
-    "demo_data", "FlightController", "generate_helicopter_flight", "helicopter_flight", "HelicopterTruth",
-    "multisine", "synthetic_trajectory",
+    "demo_data",
+    "FlightController",
+    "generate_helicopter_flight",
+    "helicopter_flight",
+    "HelicopterTruth",
+    "multisine",
+    "synthetic_trajectory",
 )
 
 
@@ -32,9 +37,7 @@ def test_the_model_layer_does_not_import_the_synthetic_package():
     # The models are what is fitted; synthetic data sits above them: dynax/_synthetic/ imports the
     # model layer, never the other way round (tests/test_layers.py checks every layer's imports).
     model = pathlib.Path(dynax.__file__).parent / "_model"
-    importers = [
-        str(path.relative_to(model)) for path in model.rglob("*.py") if "_synthetic" in path.read_text()
-    ]
+    importers = [str(path.relative_to(model)) for path in model.rglob("*.py") if "_synthetic" in path.read_text()]
     assert importers == []
 
 
@@ -60,7 +63,9 @@ def test_filtered_noise_is_stationary_with_the_given_spread_and_correlation():
     lag1 = [np.corrcoef(e[1:, k], e[:-1, k])[0, 1] for k in range(2)]
     np.testing.assert_allclose(lag1, a, atol=0.01)
     # Stationary from the first sample: the early samples already have the full spread.
-    many = np.stack([synthetic.filtered_noise(np.random.default_rng(s), 3, dt, [1.0], cutoff)[0, 0] for s in range(4000)])
+    many = np.stack(
+        [synthetic.filtered_noise(np.random.default_rng(s), 3, dt, [1.0], cutoff)[0, 0] for s in range(4000)]
+    )
     assert 0.93 < many.std() < 1.07
 
 
@@ -105,7 +110,9 @@ def test_fly_matches_an_independent_integrator():
     excitation = synthetic.filtered_noise(rng, n, dt, [0.05] * 4, 3.0)
     wind = synthetic.filtered_noise(rng, n, dt, [0.5] * 3, 0.1)
     x0 = jnp.concatenate([hover_state(dtype=jnp.float64), jnp.zeros(2)])
-    xs, us = synthetic.fly(truth, controller, x0, dt, jnp.asarray(references), jnp.asarray(excitation), jnp.asarray(wind))
+    xs, us = synthetic.fly(
+        truth, controller, x0, dt, jnp.asarray(references), jnp.asarray(excitation), jnp.asarray(wind)
+    )
     ref_xs, ref_us = _scipy_closed_loop(truth, controller, x0, dt, jnp.asarray(references), excitation, wind)
     assert np.abs(ref_xs[-1, 0:3] - ref_xs[0, 0:3]).max() > 0.05  # it moved
     # RK4 with 4 substeps of 2.5 ms against DOP853 at 1e-11: agreement to integration error.

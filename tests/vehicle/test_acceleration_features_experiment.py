@@ -21,7 +21,9 @@ def test_quick_feature_comparison(tmp_path):
     assert set(hover) == {"rich", "full", "rich, g = 9.12", "rich + attitude", "linear"}
     assert hover["rich"]["n_weights"] == 38 and hover["full"]["n_weights"] == 72
     # Only the attitude variant learns attitude weights (the linear model's roll and pitch columns aside).
-    assert set(hover["rich + attitude"]["attitude_weights"]) == {f"d{a}/{f}" for a in "uvwpqr" for f in ("roll", "pitch")}
+    assert set(hover["rich + attitude"]["attitude_weights"]) == {
+        f"d{a}/{f}" for a in "uvwpqr" for f in ("roll", "pitch")
+    }
     assert hover["rich"]["attitude_weights"] == {}
     for entry in hover.values():
         assert all(math.isfinite(v) and v >= 0 for v in entry["mse_1s"].values())

@@ -17,7 +17,9 @@ GROUPS = ("velocity", "angular_rate", "position", "orientation")
 def test_quick_accuracy_experiment(tmp_path):
     result = subprocess.run(
         [sys.executable, str(SCRIPT), "--quick", "--out", str(tmp_path / "out"), "--data-out", str(tmp_path / "data")],
-        capture_output=True, text=True, timeout=1200,
+        capture_output=True,
+        text=True,
+        timeout=1200,
     )
     assert result.returncode == 0, result.stderr[-3000:]
     results = json.loads((tmp_path / "out" / "accuracy.json").read_text())["results"]

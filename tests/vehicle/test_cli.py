@@ -21,16 +21,44 @@ def flight_csv(tmp_path_factory):
 
 def test_fit_then_evaluate(flight_csv, tmp_path, capsys):
     model = tmp_path / "model.json"
-    assert cli_main(["fit", "helicopter", str(flight_csv), "--model", "acceleration", "--criterion", "one-step",
-                     "--out", str(model)]) == 0
+    assert (
+        cli_main(
+            [
+                "fit",
+                "helicopter",
+                str(flight_csv),
+                "--model",
+                "acceleration",
+                "--criterion",
+                "one-step",
+                "--out",
+                str(model),
+            ]
+        )
+        == 0
+    )
     obj = json.loads(model.read_text())
     assert obj["system"] == "helicopter" and obj["model"] == "acceleration" and obj["criterion"] == "one-step"
     # Data flown by the Tempest model itself: the fitted roll damping is the Tempest's.
     assert obj["parameters"]["dp/p"] == pytest.approx(-12.78, rel=0.01)
 
     metrics = tmp_path / "metrics.json"
-    assert cli_main(["evaluate", str(model), str(flight_csv), "--horizons", "0,0.1,0.5", "--stride", "10",
-                     "--out", str(metrics)]) == 0
+    assert (
+        cli_main(
+            [
+                "evaluate",
+                str(model),
+                str(flight_csv),
+                "--horizons",
+                "0,0.1,0.5",
+                "--stride",
+                "10",
+                "--out",
+                str(metrics),
+            ]
+        )
+        == 0
+    )
     out = json.loads(metrics.read_text())
     assert out["horizons_s"] == [0.0, 0.1, 0.5]
     assert set(out["mse"]) == set(GROUPS)
@@ -44,8 +72,26 @@ def test_fit_then_evaluate(flight_csv, tmp_path, capsys):
 @pytest.mark.slow
 def test_fit_lagged_linear_from_the_cli(flight_csv, tmp_path):
     model = tmp_path / "model.json"
-    assert cli_main(["fit", "helicopter", str(flight_csv), "--model", "linear", "--criterion", "lagged",
-                     "--horizon", "0.2", "--stride", "20", "--out", str(model)]) == 0
+    assert (
+        cli_main(
+            [
+                "fit",
+                "helicopter",
+                str(flight_csv),
+                "--model",
+                "linear",
+                "--criterion",
+                "lagged",
+                "--horizon",
+                "0.2",
+                "--stride",
+                "20",
+                "--out",
+                str(model),
+            ]
+        )
+        == 0
+    )
     obj = json.loads(model.read_text())
     assert obj["model"] == "linear" and obj["horizon_s"] == 0.2
     assert len(obj["weights"]) == 6 and len(obj["weights"][0]) == len(obj["features"])
@@ -82,8 +128,12 @@ def test_evaluate_refuses_a_malformed_model(flight_csv, tmp_path, capsys):
 
 def test_frequency_fit_reports_its_identification_statistics(flight_csv, tmp_path):
     model = tmp_path / "linear.json"
-    assert cli_main(["fit", "helicopter", str(flight_csv), "--model", "linear", "--criterion", "frequency",
-                     "--out", str(model)]) == 0
+    assert (
+        cli_main(
+            ["fit", "helicopter", str(flight_csv), "--model", "linear", "--criterion", "frequency", "--out", str(model)]
+        )
+        == 0
+    )
     obj = json.loads(model.read_text())
     stats = obj["identification"]
     assert obj["criterion"] == "frequency" and stats["eliminated"] == []

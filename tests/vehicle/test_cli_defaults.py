@@ -12,8 +12,21 @@ def test_auto_stride_and_iteration_cap(tmp_path, capsys):
     path = tmp_path / "flight.csv"
     save_trajectory(flight, path)
     out = tmp_path / "model.json"
-    command = ["fit", "helicopter", str(path), "--model", "linear", "--criterion", "lagged", "--horizon", "0.1",
-               "--max-iterations", "1", "--out", str(out)]
+    command = [
+        "fit",
+        "helicopter",
+        str(path),
+        "--model",
+        "linear",
+        "--criterion",
+        "lagged",
+        "--horizon",
+        "0.1",
+        "--max-iterations",
+        "1",
+        "--out",
+        str(out),
+    ]
     assert cli_main(command) == 0
     printed = capsys.readouterr().out
     # 790 start times for a 10-sample horizon: every second one keeps 395 <= 600 (every one would be 790)

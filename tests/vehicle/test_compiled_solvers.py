@@ -80,14 +80,15 @@ def test_compiled_em_free_takes_the_python_iterations_steps(flight, start):
     seen = []
     fit = fit_lagged(start, flight, criterion, callback=lambda i, loss: seen.append((i, loss)))
     reference, losses = _python_em_free(start, flight, criterion)
-    np.testing.assert_allclose(fit.system.body_model.parameter_vector(), reference.body_model.parameter_vector(),
-                               rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(
+        fit.system.body_model.parameter_vector(), reference.body_model.parameter_vector(), rtol=1e-9, atol=1e-12
+    )
     history = np.asarray([loss for _, loss in fit.history])
     np.testing.assert_allclose(history, losses, rtol=1e-10)
     assert losses[-1] < 0.9 * losses[0]  # the iteration did real work on this flight
     # the history is an array of fixed length (max_iterations + 1), NaN past the last iteration
     assert fit.losses.shape == (criterion.max_iterations + 1,) and fit.seconds.shape == fit.losses.shape
-    assert np.all(np.isnan(np.asarray(fit.losses)[len(losses):]))
+    assert np.all(np.isnan(np.asarray(fit.losses)[len(losses) :]))
     seconds = np.asarray([t for t, _ in fit.history])
     assert seconds[0] == 0 and np.all(np.diff(seconds) > 0)
     # one report per accepted iteration, from inside the compiled loop, with its loss
@@ -131,8 +132,9 @@ def test_compiled_backprop_takes_the_python_lbfgs_steps(flight, start):
     def loss_fn(theta):
         return lagged_loss(with_theta(start, theta), flight, n_steps, starts=starts)
 
-    theta, losses = _python_lbfgs(loss_fn, start.body_model.parameter_vector(), criterion.max_steps,
-                                  criterion.tolerance)
+    theta, losses = _python_lbfgs(
+        loss_fn, start.body_model.parameter_vector(), criterion.max_steps, criterion.tolerance
+    )
     fit = fit_backprop(start, flight, criterion)
     np.testing.assert_allclose(fit.system.body_model.parameter_vector(), theta, rtol=1e-7, atol=1e-10)
     np.testing.assert_allclose([loss for _, loss in fit.history], losses, rtol=1e-9)
@@ -147,23 +149,40 @@ def test_lbfgs_stopping_rules():
         return (1 - x) ** 2 + 100 * (y - x**2) ** 2 + args
 
     start = (jnp.asarray(-1.2), jnp.asarray(1.0))
-    converged = fit_minimise(rosenbrock, start, None, 1.0, solver=OptaxLBFGS(rtol=1e-12, history=201), scale=1.0,
-                             max_steps=200, covariance=False)
+    converged = fit_minimise(
+        rosenbrock,
+        start,
+        None,
+        1.0,
+        solver=OptaxLBFGS(rtol=1e-12, history=201),
+        scale=1.0,
+        max_steps=200,
+        covariance=False,
+    )
     assert converged.succeeded and float(converged.loss) == pytest.approx(1.0, abs=1e-9)
     np.testing.assert_allclose(converged.value, [1.0, 1.0], atol=1e-4)
     history = np.asarray(converged.loss_history)
     recorded = history[~np.isnan(history)]
     assert recorded.size == int(converged.steps) + 1 and recorded[-1] == pytest.approx(float(converged.loss))
-    early = fit_minimise(rosenbrock, start, None, 1.0, solver=OptaxLBFGS(rtol=1e-12, target=2.0, history=201),
-                         scale=1.0, max_steps=200, covariance=False)
+    early = fit_minimise(
+        rosenbrock,
+        start,
+        None,
+        1.0,
+        solver=OptaxLBFGS(rtol=1e-12, target=2.0, history=201),
+        scale=1.0,
+        max_steps=200,
+        covariance=False,
+    )
     assert 1.0 < float(early.loss) <= 2.0 and int(early.steps) < int(converged.steps)
 
     def cliff(model, args):  # finite only for x < 0.5: the line search walks off it
         x, y = model
         return jnp.where(x < 0.5, rosenbrock(model, args), jnp.nan)
 
-    stopped = fit_minimise(cliff, start, None, 1.0, solver=OptaxLBFGS(rtol=1e-12, history=201), scale=1.0,
-                           max_steps=200, covariance=False)
+    stopped = fit_minimise(
+        cliff, start, None, 1.0, solver=OptaxLBFGS(rtol=1e-12, history=201), scale=1.0, max_steps=200, covariance=False
+    )
     assert np.isfinite(float(stopped.loss)) and float(stopped.value[0]) < 0.5
 
 

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 from dynax import AccelerationModel, Backprop, fit_vehicle, FrequencyDomain, Helicopter, Lagged, LinearVelocityModel
-from dynax.internal import frequency_responses
 from dynax.internal import (
     fit_backprop,
     fit_frequency,
     fit_lagged,
     fit_one_step,
+    frequency_responses,
     HOVER_DERIVATIVES,
     lagged_loss,
     lagged_loss_gradient_norm,
@@ -25,8 +25,17 @@ from dynax.internal import (
 from dynax.synthetic import generate_helicopter_flight
 
 TEMPEST_NAMES = {
-    "du/u": "Ax", "dv/v": "Ay", "dw/w": "Az", "dp/p": "Bx", "dq/q": "By", "dr/r": "Bz",
-    "dp/u1": "C1", "dq/u2": "C2", "dr/u3": "C3", "dw/u4": "C4", "dv/1": "Dv",
+    "du/u": "Ax",
+    "dv/v": "Ay",
+    "dw/w": "Az",
+    "dp/p": "Bx",
+    "dq/q": "By",
+    "dr/r": "Bz",
+    "dp/u1": "C1",
+    "dq/u2": "C2",
+    "dr/u3": "C3",
+    "dw/u4": "C4",
+    "dv/1": "Dv",
 }
 
 
@@ -118,7 +127,12 @@ def test_one_step_on_a_noisy_flight_is_within_the_noise(noisy_tempest_data):
         std_errors = np.sqrt(np.diag(inverse @ (x.T @ sigma_x) @ inverse))
         for name, std_error in zip(names, std_errors):
             true = TEMPEST_COEFFICIENTS[TEMPEST_NAMES[name]]
-            assert abs(float(fitted[name]) - true) < 4 * std_error + 0.01 * abs(true), (name, float(fitted[name]), true, std_error)
+            assert abs(float(fitted[name]) - true) < 4 * std_error + 0.01 * abs(true), (
+                name,
+                float(fitted[name]),
+                true,
+                std_error,
+            )
 
 
 def test_state_sensitivities_reach_a_stationary_point_of_the_lagged_loss(truth_data, em_free_fit):

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from dynax import AccelerationModel, Helicopter, LinearVelocityModel
-from dynax.internal import hover_state
 from dynax.internal import (
     euler_from_quaternion,
+    hover_state,
     quaternion_angle,
     quaternion_from_euler,
     TEMPEST_COEFFICIENTS,

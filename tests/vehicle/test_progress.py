@@ -15,8 +15,9 @@ def flight():
 def test_lagged_fit_reports_each_iteration_with_its_loss(flight, capsys):
     seen = []
     criterion = Lagged(horizon=0.1, stride=25, max_iterations=2)
-    fit = fit_vehicle(initial_helicopter("linear"), flight, criterion, callback=lambda i, loss: seen.append(loss),
-                      progress=True)
+    fit = fit_vehicle(
+        initial_helicopter("linear"), flight, criterion, callback=lambda i, loss: seen.append(loss), progress=True
+    )
     err = capsys.readouterr().err
     assert "lagged fit" in err and f"loss={seen[-1]:.4g}" in err and f"{len(seen)}/2" in err
     assert fit.loss == seen[-1]
@@ -27,8 +28,21 @@ def test_lagged_fit_reports_each_iteration_with_its_loss(flight, capsys):
 def test_cli_fit_progress(flight, tmp_path, capsys):
     path = tmp_path / "flight.csv"
     save_trajectory(flight, path)
-    command = ["fit", "helicopter", str(path), "--model", "linear", "--criterion", "lagged", "--horizon", "0.1",
-               "--stride", "25", "--out", str(tmp_path / "m.json")]
+    command = [
+        "fit",
+        "helicopter",
+        str(path),
+        "--model",
+        "linear",
+        "--criterion",
+        "lagged",
+        "--horizon",
+        "0.1",
+        "--stride",
+        "25",
+        "--out",
+        str(tmp_path / "m.json"),
+    ]
     assert cli_main(command + ["--progress"]) == 0  # (--quiet's plumbing: tests/cli/test_packaging.py)
     err = capsys.readouterr().err
     assert "lagged fit" in err and "loss=" in err

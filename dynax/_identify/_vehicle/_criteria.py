@@ -40,20 +40,20 @@ removed exactly, and the acceleration model's known part contributes $R(\omega\t
     P. Abbeel and A. Y. Ng, "Learning first-order Markov models for control", NIPS 17, 2004.
 """
 
+from collections.abc import Callable
 import functools
 import time
-from collections.abc import Callable
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, Int, Scalar
 import numpy as np
 import optimistix as optx
-from jaxtyping import Array, Bool, Float, Int, Scalar
 
 from ..._data._trajectory import Trajectory
-from ..._model._helicopter import ANGULAR_RATE, BODY, Helicopter, QUATERNION, VELOCITY, quaternion_to_rotation
 from ..._fit import fit_minimise, History, monitor, notify, OptaxLBFGS, Parameters, Solution
+from ..._model._helicopter import ANGULAR_RATE, BODY, Helicopter, QUATERNION, quaternion_to_rotation, VELOCITY
 from ._windows import check_helicopter_data, horizon_steps, lagged_loss, rollout, valid_starts
 
 
@@ -225,13 +225,21 @@ def normal_equations(system, trajectory, starts, n_steps, weights, use_rollout, 
             g = lambda th: rollout(with_theta(system, th), measured[0], inputs, dt)[1:, BODY].reshape(-1)  # noqa: E731
             value, design = g(theta), jax.jacfwd(g)(theta)
             offset = value - design @ theta
-            return design.T @ (w[:, None] * design), design.T @ (w * (target - offset)), jnp.sum(w * (value - target) ** 2)
+            return (
+                design.T @ (w[:, None] * design),
+                design.T @ (w * (target - offset)),
+                jnp.sum(w * (value - target) ** 2),
+            )
         states = rollout(system, measured[0], inputs, dt) if use_rollout else measured
         states = jax.lax.stop_gradient(states)
         f = lambda th: _window_prediction(system, th, states, inputs, dt).reshape(-1)  # noqa: E731
         design = jax.jacfwd(f)(theta)
         offset = f(jnp.zeros_like(theta))
-        return design.T @ (w[:, None] * design), design.T @ (w * (target - offset)), jnp.sum(w * (f(theta) - target) ** 2)
+        return (
+            design.T @ (w[:, None] * design),
+            design.T @ (w * (target - offset)),
+            jnp.sum(w * (f(theta) - target) ** 2),
+        )
 
     n = starts.shape[0]
     n_batches = -(-n // batch_size)
@@ -248,7 +256,9 @@ def normal_equations(system, trajectory, starts, n_steps, weights, use_rollout, 
         ), None
 
     init = (jnp.zeros((n_params, n_params), theta.dtype), jnp.zeros(n_params, theta.dtype), jnp.zeros((), theta.dtype))
-    (ata, atb, sse), _ = jax.lax.scan(batch, init, (padded.reshape(n_batches, batch_size), mask.reshape(n_batches, batch_size)))
+    (ata, atb, sse), _ = jax.lax.scan(
+        batch, init, (padded.reshape(n_batches, batch_size), mask.reshape(n_batches, batch_size))
+    )
     return ata, atb, sse / (n * n_steps)
 
 
@@ -365,21 +375,34 @@ def _lagged_objective(theta, args, *, n_steps):
 
 def _em_free_normal_equations(theta, args, *, n_steps, batch_size, sensitivities):
     system, trajectory, starts, w = args
-    ata, atb, _ = normal_equations(with_theta(system, theta), trajectory, starts, n_steps, w, True,
-                                    batch_size, sensitivities)
+    ata, atb, _ = normal_equations(
+        with_theta(system, theta), trajectory, starts, n_steps, w, True, batch_size, sensitivities
+    )
     return ata, atb
 
 
 @eqx.filter_jit
 def _em_free(system, trajectory, starts, w, n_steps: int, criterion: Lagged, token):
-    linearise = functools.partial(_em_free_normal_equations, n_steps=n_steps, batch_size=criterion.batch_size,
-                                  sensitivities=criterion.state_sensitivities)
-    solver = EMFree(linearise, rtol=criterion.tolerance, ridge=criterion.ridge, step_sizes=criterion.step_sizes,
-                    best_step=criterion.best_step, history=criterion.max_iterations + 1, token=token)
+    linearise = functools.partial(
+        _em_free_normal_equations,
+        n_steps=n_steps,
+        batch_size=criterion.batch_size,
+        sensitivities=criterion.state_sensitivities,
+    )
+    solver = EMFree(
+        linearise,
+        rtol=criterion.tolerance,
+        ridge=criterion.ridge,
+        step_sizes=criterion.step_sizes,
+        best_step=criterion.best_step,
+        history=criterion.max_iterations + 1,
+        token=token,
+    )
     objective = functools.partial(_lagged_objective, n_steps=n_steps)
     theta0 = system.body_model.parameter_vector()
-    return optx.minimise(objective, solver, theta0, (system, trajectory, starts, w), max_steps=criterion.max_iterations,
-                         throw=False)
+    return optx.minimise(
+        objective, solver, theta0, (system, trajectory, starts, w), max_steps=criterion.max_iterations, throw=False
+    )
 
 
 def _vehicle_solution(system, fitted, theta, solution) -> Solution:
@@ -387,15 +410,27 @@ def _vehicle_solution(system, fitted, theta, solution) -> Solution:
     n = theta.shape[0]
     history = solution.stats["loss_history"]
     return Solution(
-        model=fitted, value=theta, parameters=Parameters.of(system), covariance=jnp.full((n, n), jnp.nan, theta.dtype),
-        std_errors=jnp.full(n, jnp.nan, theta.dtype), result=solution.result, loss=solution.state.f,
-        initial_loss=history[0], steps=solution.stats["num_steps"], loss_history=history,
+        model=fitted,
+        value=theta,
+        parameters=Parameters.of(system),
+        covariance=jnp.full((n, n), jnp.nan, theta.dtype),
+        std_errors=jnp.full(n, jnp.nan, theta.dtype),
+        result=solution.result,
+        loss=solution.state.f,
+        initial_loss=history[0],
+        steps=solution.stats["num_steps"],
+        loss_history=history,
         time_history=solution.stats["time_history"],
     )
 
 
 def fit_lagged(
-    system: Helicopter, trajectory: Trajectory, criterion: Lagged = Lagged(), *, weights=None, callback=None,
+    system: Helicopter,
+    trajectory: Trajectory,
+    criterion: Lagged = Lagged(),
+    *,
+    weights=None,
+    callback=None,
     breaks=None,
 ) -> VehicleFit:
     """Minimise the lagged loss by the EM-free iteration with line search (see `Lagged`, `EMFree`).
@@ -426,12 +461,25 @@ def _backprop(system, trajectory, starts, w, n_steps: int, criterion: Backprop, 
     solver = OptaxLBFGS(rtol=criterion.tolerance, target=target, history=criterion.max_steps + 1, token=token)
     loss = functools.partial(_backprop_loss, n_steps=n_steps, checkpoint_segment=criterion.checkpoint_segment)
     # Unit scale: the solver sees the weights themselves, as optax's L-BFGS always did here.
-    return fit_minimise(loss, system, Parameters.of(system), (trajectory, starts, w), solver=solver, scale=1.0,
-                        max_steps=criterion.max_steps, covariance=False)
+    return fit_minimise(
+        loss,
+        system,
+        Parameters.of(system),
+        (trajectory, starts, w),
+        solver=solver,
+        scale=1.0,
+        max_steps=criterion.max_steps,
+        covariance=False,
+    )
 
 
 def fit_backprop(
-    system: Helicopter, trajectory: Trajectory, criterion: Backprop = Backprop(), *, weights=None, callback=None,
+    system: Helicopter,
+    trajectory: Trajectory,
+    criterion: Backprop = Backprop(),
+    *,
+    weights=None,
+    callback=None,
     breaks=None,
 ) -> VehicleFit:
     """Minimise the lagged loss by L-BFGS with gradients through checkpointed rollouts (see `Backprop`).
@@ -446,8 +494,9 @@ def fit_backprop(
     target = -jnp.inf if criterion.target_loss is None else criterion.target_loss
     with monitor(callback) as token:
         solution = _backprop(system, trajectory, starts, w, n_steps, criterion, jnp.asarray(target, w.dtype), token)
-    return VehicleFit(solution.model, solution.loss_history, solution.time_history, "backprop", len(trajectory),
-                      solution=solution)
+    return VehicleFit(
+        solution.model, solution.loss_history, solution.time_history, "backprop", len(trajectory), solution=solution
+    )
 
 
 def auto_stride(n_samples: int, n_steps: int, windows: int = 600) -> int:
@@ -457,7 +506,9 @@ def auto_stride(n_samples: int, n_steps: int, windows: int = 600) -> int:
     return max(1, -(-n_starts // max(int(windows), 1)))
 
 
-def lagged_loss_of(system: Helicopter, trajectory: Trajectory, horizon: float, *, stride: int = 1, weights=None) -> float:
+def lagged_loss_of(
+    system: Helicopter, trajectory: Trajectory, horizon: float, *, stride: int = 1, weights=None
+) -> float:
     """The lagged loss of `system` on `trajectory` over `horizon` seconds (every `stride`-th start)."""
     dt = check_helicopter_data(trajectory, "lagged_loss_of")
     n_steps = horizon_steps(horizon, dt, "lagged_loss_of")
@@ -478,5 +529,7 @@ def lagged_loss_gradient_norm(
     starts = window_starts(trajectory, n_steps, stride)
     w = state_weights(weights, trajectory.xs.dtype)
     theta = system.body_model.parameter_vector()
-    grad = jax.jit(jax.grad(lambda t: lagged_loss(with_theta(system, t), trajectory, n_steps, starts=starts, weights=w)))(theta)
+    grad = jax.jit(
+        jax.grad(lambda t: lagged_loss(with_theta(system, t), trajectory, n_steps, starts=starts, weights=w))
+    )(theta)
     return float(jnp.linalg.norm(grad))

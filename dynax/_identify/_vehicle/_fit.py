@@ -7,8 +7,6 @@ import numpy as np
 
 from ..._data._trajectory import Trajectory
 from ..._errors import DataError, UsageError
-from ..._precision import warn_if_float32
-from ..._progress import ProgressBar
 from ..._model._helicopter import (
     AccelerationModel,
     Helicopter,
@@ -16,6 +14,8 @@ from ..._model._helicopter import (
     RICH_FEATURES,
     TEMPEST_FEATURES,
 )
+from ..._precision import warn_if_float32
+from ..._progress import ProgressBar
 from ._criteria import Backprop, fit_backprop, fit_lagged, fit_one_step, Lagged, OneStep, VehicleFit
 from ._frequency import fit_frequency, FrequencyDomain
 
@@ -128,7 +128,9 @@ def model_from_json(obj: dict, path=None) -> Helicopter:
         mask = tuple(tuple(bool(v) for v in row) for row in obj["mask"])
         weights = jnp.asarray(np.asarray(obj["weights"], float))
         if obj["model"] == "acceleration":
-            body = AccelerationModel(weights=weights, feature_names=features, mask=mask, gravity=float(obj.get("gravity", 9.81)))
+            body = AccelerationModel(
+                weights=weights, feature_names=features, mask=mask, gravity=float(obj.get("gravity", 9.81))
+            )
         elif obj["model"] == "linear":
             body = LinearVelocityModel(weights=weights, feature_names=features, mask=mask)
         else:

@@ -44,15 +44,13 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
 
 from ..._data._trajectory import Trajectory
-from ..._fit import fit_least_squares, levenberg_marquardt
 from ..._errors import UsageError
+from ..._fit import fit_least_squares, levenberg_marquardt
 from ..._model._helicopter import BODY, BODY_AXES, Helicopter, LINEAR_FEATURE_NAMES
-from ._criteria import normal_equations, one_shot_history, ridge_solve, with_theta, fit_one_step, VehicleFit
+from ._criteria import fit_one_step, normal_equations, one_shot_history, ridge_solve, VehicleFit, with_theta
 from ._windows import check_helicopter_data, valid_starts
-
 
 #: The derivatives of a hover model that frequency responses identify (Mettler, Tischler and
 #: Kanade 2002 use this kind of structure): on-axis damping, attitude (gravity) and rotor-tilt
@@ -108,9 +106,7 @@ class FrequencyDomain(eqx.Module):
     max_insensitivity: float = 0.1
 
 
-def frequency_responses(
-    trajectory: Trajectory, segment_s: float = 10.0
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def frequency_responses(trajectory: Trajectory, segment_s: float = 10.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Multi-input frequency responses and partial coherences of the body states to the inputs.
 
     **Returns:** `(freqs (f,), H (f, 6, 4) complex, coherence (f, 6, 4))`.
@@ -181,7 +177,9 @@ def _equation_error(weights, freqs, measured, w_gamma, dt, prior_weight, structu
         if not free_cols:
             continue
         held_cols = [c for c in state_cols + input_cols if not structure_mask[row, c]]
-        held = x[:, [(state_cols + input_cols).index(c) for c in held_cols]] @ fixed[row, held_cols] if held_cols else 0.0
+        held = (
+            x[:, [(state_cols + input_cols).index(c) for c in held_cols]] @ fixed[row, held_cols] if held_cols else 0.0
+        )
         target = (jw[:, None] * hs[:, row, :]).reshape(-1) - held
         w = np.sqrt(w_gamma[:, row, :].reshape(-1))
         if not np.any(w > 0):
@@ -262,7 +260,9 @@ def _band_responses(trajectory: Trajectory, criterion: "FrequencyDomain") -> _Re
     magnitude_db = 20 * np.log10(np.abs(measured) + 1e-300)
     use = (coherence >= criterion.min_coherence) & (magnitude_db >= magnitude_db.max(axis=2, keepdims=True) - 30.0)
     if not use.any():
-        raise UsageError("fit_frequency: no input/output pair reaches the coherence threshold; the data lack excitation")
+        raise UsageError(
+            "fit_frequency: no input/output pair reaches the coherence threshold; the data lack excitation"
+        )
     w_gamma = np.where(use, (1.58 * (1 - np.exp(-coherence))) ** 2, 0.0)
     return _Responses(freqs, measured, coherence, use, w_gamma)
 
@@ -270,7 +270,9 @@ def _band_responses(trajectory: Trajectory, criterion: "FrequencyDomain") -> _Re
 def _hover_structure(initial: Helicopter, criterion: "FrequencyDomain"):
     """`(model, mask)`: the one-step model reduced to the hover-derivative structure (the other weights
     zero, the constant column kept for its re-fit at the end), and the mask of the weights to fit."""
-    mask = np.array([[name in criterion.structure.get(axis, ()) for name in LINEAR_FEATURE_NAMES] for axis in BODY_AXES])
+    mask = np.array(
+        [[name in criterion.structure.get(axis, ()) for name in LINEAR_FEATURE_NAMES] for axis in BODY_AXES]
+    )
     mask &= np.array(initial.body_model.mask, bool)
     keep = mask.copy()
     keep[:, LINEAR_FEATURE_NAMES.index("1")] = True
@@ -329,8 +331,17 @@ def _reduce_structure(theta, response_residuals, residuals, responses: _Response
     for _ in range(n_free + 1):  # the last pass only re-checks (at most n_free eliminations)
         act = jnp.asarray(active, theta.dtype)
         if criterion.max_steps > 0:
-            solution = fit_least_squares(residuals, theta, True, act, solver=solver, scale=jnp.ones_like(theta),
-                                         max_steps=criterion.max_steps, nonfinite=None, covariance=False)
+            solution = fit_least_squares(
+                residuals,
+                theta,
+                True,
+                act,
+                solver=solver,
+                scale=jnp.ones_like(theta),
+                max_steps=criterion.max_steps,
+                nonfinite=None,
+                covariance=False,
+            )
             if np.all(np.isfinite(solution.value)) and cost(solution.value) < cost(theta):
                 theta = solution.value
         cramer_rao, insensitivity = _accuracy(
@@ -338,8 +349,11 @@ def _reduce_structure(theta, response_residuals, residuals, responses: _Response
             np.asarray(jacobian(theta, act))[np.ix_(rows, active)],
             np.asarray(theta)[active],
         )
-        dropped = _droppable(theta, active, cramer_rao, insensitivity, response_residuals, criterion) \
-            if criterion.eliminate else None
+        dropped = (
+            _droppable(theta, active, cramer_rao, insensitivity, response_residuals, criterion)
+            if criterion.eliminate
+            else None
+        )
         if dropped is None:
             break
         active[dropped] = False
@@ -361,7 +375,9 @@ def _refit_constants(fitted: Helicopter, trajectory: Trajectory) -> Helicopter:
     return with_theta(fitted, theta)
 
 
-def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: FrequencyDomain = FrequencyDomain()) -> VehicleFit:
+def fit_frequency(
+    system: Helicopter, trajectory: Trajectory, criterion: FrequencyDomain = FrequencyDomain()
+) -> VehicleFit:
     """Fit a linear velocity model by the frequency-domain criterion (see the module docstring).
 
     The steps: the one-step fit as the start, reduced to the hover-derivative structure; the
@@ -386,14 +402,25 @@ def fit_frequency(system: Helicopter, trajectory: Trajectory, criterion: Frequen
     if criterion.start == "equation-error":
         coherent = responses.coherence >= criterion.min_coherence
         w_equation = np.where(coherent, (1.58 * (1 - np.exp(-responses.coherence))) ** 2, 0.0)
-        start = _equation_error(start, responses.freqs, responses.measured, w_equation, dt, criterion.prior_weight, mask)
+        start = _equation_error(
+            start, responses.freqs, responses.measured, w_equation, dt, criterion.prior_weight, mask
+        )
     theta, active, cramer_rao, insensitivity, eliminated, final_cost = _reduce_structure(
-        start[free], response_residuals, residuals, responses, free_names, criterion)
+        start[free], response_residuals, residuals, responses, free_names, criterion
+    )
     kept = [n for n, a in zip(free_names, active) if a]
     summary = tuple(
-        (n, float(v), float(c), float(i)) for n, v, c, i in zip(kept, np.asarray(theta)[active], cramer_rao, insensitivity)
+        (n, float(v), float(c), float(i))
+        for n, v, c, i in zip(kept, np.asarray(theta)[active], cramer_rao, insensitivity)
     )
     fitted = eqx.tree_at(lambda h: h.body_model.weights, initial, initial.body_model.weights.at[free].set(theta))
     losses, seconds = one_shot_history(final_cost, time.perf_counter() - t0)
-    return VehicleFit(_refit_constants(fitted, trajectory), losses, seconds, "frequency", len(trajectory),
-                      statistics=summary, eliminated=tuple(eliminated))
+    return VehicleFit(
+        _refit_constants(fitted, trajectory),
+        losses,
+        seconds,
+        "frequency",
+        len(trajectory),
+        statistics=summary,
+        eliminated=tuple(eliminated),
+    )

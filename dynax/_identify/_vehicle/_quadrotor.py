@@ -20,7 +20,7 @@ from ..._data._trajectory import Trajectory
 from ..._errors import UsageError
 from ..._fit import Parameters, Solution
 from ..._model._quadrotor import Quadrotor, to_body_frame
-from ._criteria import Backprop, Lagged, OneStep, normal_equations, window_starts, state_weights
+from ._criteria import Backprop, Lagged, normal_equations, OneStep, state_weights, window_starts
 from ._fit import fit_vehicle
 from ._frequency import FrequencyDomain
 
@@ -37,14 +37,18 @@ def join_flights(system: Quadrotor, flights: Sequence[Trajectory]) -> tuple[Traj
     dts = []
     for i, f in enumerate(flights):
         if len(f) < 2 or not f.is_uniform:
-            raise UsageError(f"fit_quadrotor: flight {i} ({f.source or 'unnamed'}) must be uniformly sampled with at "
-                             "least 2 samples (dynax.load_flight resamples; dynax.usable_segments cuts)")
+            raise UsageError(
+                f"fit_quadrotor: flight {i} ({f.source or 'unnamed'}) must be uniformly sampled with at "
+                "least 2 samples (dynax.load_flight resamples; dynax.usable_segments cuts)"
+            )
         dts.append(f.dt)
     dt = float(np.median(dts))
     off = [i for i, d in enumerate(dts) if abs(d - dt) > 0.01 * dt]
     if off:
-        raise UsageError(f"fit_quadrotor: flight {off[0]} is sampled every {dts[off[0]]:.6g} s, the others every "
-                         f"{dt:.6g} s; resample it first")
+        raise UsageError(
+            f"fit_quadrotor: flight {off[0]} is sampled every {dts[off[0]]:.6g} s, the others every "
+            f"{dt:.6g} s; resample it first"
+        )
     inputs = {tuple(f.input_names) for f in flights}
     if len(inputs) > 1:
         raise UsageError(f"fit_quadrotor: the flights have different inputs {sorted(inputs)}")
@@ -92,9 +96,11 @@ def fit_quadrotor(
     """
     criterion = OneStep() if criterion is None else criterion
     if isinstance(criterion, FrequencyDomain):
-        raise UsageError("fit_quadrotor: the frequency-domain criterion identifies the helicopter's linear model "
-                         "(its structure and frequency responses are written in the helicopter's inputs u1..u4); "
-                         "for a quadrotor use OneStep, Lagged or Backprop")
+        raise UsageError(
+            "fit_quadrotor: the frequency-domain criterion identifies the helicopter's linear model "
+            "(its structure and frequency responses are written in the helicopter's inputs u1..u4); "
+            "for a quadrotor use OneStep, Lagged or Backprop"
+        )
     if isinstance(flights, Trajectory):
         flights = [flights]
     joined, breaks = join_flights(system, flights)
@@ -116,9 +122,19 @@ def fit_quadrotor(
         covariance = sigma2 * jnp.linalg.pinv(ata)
     std = jnp.sqrt(jnp.diag(covariance))
     loss = jnp.asarray(fit.loss, theta.dtype)
-    return Solution(model=fitted, value=theta, parameters=parameters, covariance=covariance, std_errors=std,
-                    result=optx.RESULTS.successful, loss=loss, initial_loss=jnp.asarray(jnp.nan, theta.dtype),
-                    steps=jnp.asarray(1), loss_history=fit.losses, time_history=fit.seconds)
+    return Solution(
+        model=fitted,
+        value=theta,
+        parameters=parameters,
+        covariance=covariance,
+        std_errors=std,
+        result=optx.RESULTS.successful,
+        loss=loss,
+        initial_loss=jnp.asarray(jnp.nan, theta.dtype),
+        steps=jnp.asarray(1),
+        loss_history=fit.losses,
+        time_history=fit.seconds,
+    )
 
 
 def quadrotor_to_json(system: Quadrotor, **info) -> dict:
@@ -144,7 +160,7 @@ def quadrotor_from_json(obj: dict, path=None) -> Quadrotor:
     """The `Quadrotor` of a `MODEL.json` object (as written by `quadrotor_to_json`), checked:
     known features, a 6-row mask and weights of matching shape, finite numbers, positive scales."""
     from ..._errors import DataError
-    from ..._model._helicopter import FEATURES, AccelerationModel, LinearVelocityModel
+    from ..._model._helicopter import AccelerationModel, FEATURES, LinearVelocityModel
 
     try:
         if obj.get("system") != "quadrotor":
@@ -156,19 +172,29 @@ def quadrotor_from_json(obj: dict, path=None) -> Quadrotor:
         mask = tuple(tuple(bool(v) for v in row) for row in obj["mask"])
         weights = np.asarray(obj["weights"], float)
         if weights.shape != (6, len(features)) or len(mask) != 6 or any(len(r) != len(features) for r in mask):
-            raise DataError(f"'weights' and 'mask' must be 6 x {len(features)} (axes x features), got weights of "
-                            f"shape {weights.shape}", path=path, column="weights")
+            raise DataError(
+                f"'weights' and 'mask' must be 6 x {len(features)} (axes x features), got weights of "
+                f"shape {weights.shape}",
+                path=path,
+                column="weights",
+            )
         if not np.all(np.isfinite(weights)):
             axis, j = np.argwhere(~np.isfinite(weights))[0]
-            raise DataError(f"weight [{axis}][{j}] (feature '{features[j]}') is not a finite number", path=path,
-                            column="weights")
+            raise DataError(
+                f"weight [{axis}][{j}] (feature '{features[j]}') is not a finite number", path=path, column="weights"
+            )
         scale = tuple(float(s) for s in obj["input_scale"])
         if len(scale) != 5 or not all(np.isfinite(s) and s > 0 for s in scale):
-            raise DataError(f"'input_scale' must be 5 positive numbers, got {obj['input_scale']}", path=path,
-                            column="input_scale")
+            raise DataError(
+                f"'input_scale' must be 5 positive numbers, got {obj['input_scale']}", path=path, column="input_scale"
+            )
         if obj["model"] == "acceleration":
-            body = AccelerationModel(weights=jnp.asarray(weights), feature_names=features, mask=mask,
-                                     gravity=float(obj.get("gravity", -9.81)))
+            body = AccelerationModel(
+                weights=jnp.asarray(weights),
+                feature_names=features,
+                mask=mask,
+                gravity=float(obj.get("gravity", -9.81)),
+            )
         elif obj["model"] == "linear":
             body = LinearVelocityModel(weights=jnp.asarray(weights), feature_names=features, mask=mask)
         else:

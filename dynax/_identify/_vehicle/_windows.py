@@ -13,8 +13,8 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float, Int
+import numpy as np
 
 from ..._data._trajectory import Trajectory
 from ..._errors import UsageError
@@ -85,9 +85,7 @@ def valid_starts(n_samples: int, n_steps: int, stride: int = 1, breaks=None) -> 
     joining several; a window that would cross one is left out (every `stride`-th of the rest).
     """
     if n_samples - 1 - n_steps < 0:
-        raise UsageError(
-            f"the record has {n_samples} samples, too few for a {n_steps}-step horizon"
-        )
+        raise UsageError(f"the record has {n_samples} samples, too few for a {n_steps}-step horizon")
     if breaks is None or len(breaks) == 0:
         return np.arange(0, n_samples - n_steps, max(1, int(stride)))
     starts = np.arange(0, n_samples - n_steps)
@@ -192,7 +190,9 @@ def predict_windows(
 def group_errors(predicted: Float[Array, "... 13"], measured: Float[Array, "... 13"]) -> dict[str, Array]:
     """Squared errors per state group: $\\|\\cdot\\|^2$ of the velocity, rate and position errors, and
     the squared rotation angle between the attitudes."""
-    angle = jnp.vectorize(quaternion_angle, signature="(4),(4)->()")(predicted[..., QUATERNION], measured[..., QUATERNION])
+    angle = jnp.vectorize(quaternion_angle, signature="(4),(4)->()")(
+        predicted[..., QUATERNION], measured[..., QUATERNION]
+    )
     return {
         "velocity": jnp.sum((predicted[..., VELOCITY] - measured[..., VELOCITY]) ** 2, axis=-1),
         "angular_rate": jnp.sum((predicted[..., ANGULAR_RATE] - measured[..., ANGULAR_RATE]) ** 2, axis=-1),

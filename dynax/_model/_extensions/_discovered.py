@@ -64,7 +64,9 @@ class Feature(eqx.Module):
         if self.kind.startswith("periodic") and not self.period > 0:
             raise ValueError(f"Feature: a periodic feature needs a positive `period`, got {self.period}")
 
-    def __call__(self, q: Float[Array, " n_joints"], dq: Float[Array, " n_joints"], a: Float[Array, " n_inputs"]) -> Float[Array, ""]:
+    def __call__(
+        self, q: Float[Array, " n_joints"], dq: Float[Array, " n_joints"], a: Float[Array, " n_inputs"]
+    ) -> Float[Array, ""]:
         """The feature's value at positions `q`, velocities `dq` and applied input `a`."""
         qj, vj, ai = q[self.coordinate], dq[self.coordinate], a[self.input]
         sign = jnp.tanh(vj / self.velocity_scale)

@@ -123,7 +123,9 @@ class Extended(AbstractSystem):
         dz = jnp.concatenate(dz) if dz else z[:0]
         return a, dz
 
-    def initial_state(self, x0: Float[ArrayLike, " n_measured"], u0: Float[ArrayLike, " n_inputs"]) -> Float[Array, " n_states"]:
+    def initial_state(
+        self, x0: Float[ArrayLike, " n_measured"], u0: Float[ArrayLike, " n_inputs"]
+    ) -> Float[Array, " n_states"]:
         """Complete the nominal state `x0` with internal states at rest under a constant input `u0`."""
         x0 = jnp.asarray(x0)
         a = jnp.asarray(u0, x0.dtype)

@@ -6,7 +6,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._terms import float_scalar, AbstractTerm
+from ._terms import AbstractTerm, float_scalar
 
 # Time constants and delays at or below this are treated as zero (the input passes through).
 _TINY_TIME = 1e-4
@@ -39,7 +39,9 @@ class AbstractInputTerm(AbstractTerm):
         """Names of the internal states, e.g. `tau2_lag`."""
         where = self.where(system)
         suffix = self.prefix
-        return tuple(f"{where}_{suffix}" if self.n_hidden == 1 else f"{where}_{suffix}{k + 1}" for k in range(self.n_hidden))
+        return tuple(
+            f"{where}_{suffix}" if self.n_hidden == 1 else f"{where}_{suffix}{k + 1}" for k in range(self.n_hidden)
+        )
 
     def applied(self, u: Float[Array, ""], z: Float[Array, " n_hidden"]) -> Float[Array, ""]:
         """The input that acts on the system, from the recorded one `u` and the internal states `z`."""

@@ -37,7 +37,7 @@ from .._helicopter import (
     quaternion_to_rotation,
     rigid_body_kinematics,
 )
-from ._terms import float_scalar, AbstractTerm
+from ._terms import AbstractTerm, float_scalar
 
 WORLD_AXES = ("n", "e", "d")
 
