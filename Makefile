@@ -1,12 +1,12 @@
 # Two entry points, each creating the virtual environment and installing the project first:
 #   make demo   runs the main job (`dynax demo`) on the embedded default
-#   make test   runs the test suite and builds the docs site strictly
+#   make test   checks style and types (ruff, basedpyright), runs the test suite and builds the docs site strictly
 #   make quick  the suite without the minute-long end-to-end runs (marker `heavy`), for iteration
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test quick docs bench clean
+.PHONY: demo test lint quick docs bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -23,7 +23,12 @@ $(VENV)/.installed-dev: pyproject.toml | $(BIN)/python
 demo: $(VENV)/.installed-base
 	$(BIN)/dynax demo
 
-test: $(VENV)/.installed-dev
+lint: $(VENV)/.installed-dev
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+	$(BIN)/basedpyright
+
+test: lint
 	$(BIN)/python -m pytest -n 2
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
 
