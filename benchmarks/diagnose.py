@@ -4,7 +4,8 @@ The file holds an acrobot with Coulomb friction at the elbow hidden in it (and b
 that differ from the nominal model's), under a random multisine elbow torque, with measurement
 noise; it is written as a contract CSV and read back, as a user's file would be. `diagnose` holds
 out the last 30 % (no validation file) and runs the full library of 12 candidates, 10 of them
-identifiable in refit mode (which keeps the nominal friction; 8 when theta1..theta7 are refitted). Target: under 60 s on the 2-core machine.
+identifiable in refit mode (which keeps the nominal friction; 8 when theta1..theta7 are refitted). Target: under 60 s on
+the 2-core machine.
 
 Reported: wall and CPU seconds of the first call (compilation included), of a second call on the
 same file and of a call on another file of the same size (compiled code reused in both), the
@@ -51,7 +52,7 @@ def main():
     runs = []
     # The third call is another recording of the same size (another excitation and noise): the compiled
     # fits are reused because nothing data-dependent is static (a user's second file).
-    for label, data in (
+    for label, run_data in (
         ("first call (with compilation)", data),
         ("second call (compiled)", data),
         ("another file of the same size", files[args.seed + 1]),
@@ -59,7 +60,7 @@ def main():
         wall, cpu = time.perf_counter(), time.process_time()
         report = diagnose(
             Acrobot(),
-            data,
+            run_data,
             system_name="acrobot",
             progress=lambda line: print(f"  [{time.perf_counter() - wall:5.1f} s] {line}"),
         )

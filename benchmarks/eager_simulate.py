@@ -2,8 +2,8 @@
 
 A user who generates data or sweeps a parameter calls `simulate` from Python, not under `jit`.
 Each call here simulates the DFKI-like double pendulum (Coulomb friction, rotor inertia) for 6 s at
-2 ms (3000 samples, 4 substeps each of `FixedGrid`'s default solver) with a different elbow friction, so the system's structure
-is the same and only an array leaf changes. Three paths, one process:
+2 ms (3000 samples, 4 substeps each of `FixedGrid`'s default solver) with a different elbow friction, so the system's
+structure is the same and only an array leaf changes. Three paths, one process:
 
 - `dynax.simulate` (its fixed-grid rollout compiled once per system structure and grid shape);
 - the same rollout as a bare `lax.scan`, as `simulate` ran it before 2026-11-26 (a new closure

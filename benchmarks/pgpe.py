@@ -259,7 +259,8 @@ def main(argv=None):
         results["sharding_speedup"] = results["dynax_s"] / results["dynax_sharded_s"]
         results["sharding_speedup_min"] = results["dynax_min_s"] / results["dynax_sharded_min_s"]
         print(
-            f"sharding speedup: {results['sharding_speedup']:.2f}x (median), {results['sharding_speedup_min']:.2f}x (min)"
+            f"sharding speedup: {results['sharding_speedup']:.2f}x (median), {results['sharding_speedup_min']:.2f}x "
+            "(min)"
         )
 
     sim = NumpySwingUp(controller, plant)
@@ -284,7 +285,8 @@ def main(argv=None):
     via_numpy = sim.rewards(np.asarray(params), np.asarray(x0), duration=1.0)
     results["numpy_vs_dynax_reward_max_abs_diff"] = float(np.max(np.abs(np.asarray(via_jax) - via_numpy)))
     print(
-        f"reward agreement numpy vs dynax (8 episodes of 1 s): max |diff| = {results['numpy_vs_dynax_reward_max_abs_diff']:.2e}"
+        "reward agreement numpy vs dynax (8 episodes of 1 s): max |diff| = "
+        f"{results['numpy_vs_dynax_reward_max_abs_diff']:.2e}"
     )
     if args.out:
         with open(args.out, "w") as f:

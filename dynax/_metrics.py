@@ -38,7 +38,7 @@ def _as_columns(name: str, values: ArrayLike) -> np.ndarray:
 
 
 def nrmse_fit(
-    measured: Float[ArrayLike, "time *channels"], simulated: Float[ArrayLike, "time *channels"]
+    measured: Float[ArrayLike, " time *channels"], simulated: Float[ArrayLike, " time *channels"]
 ) -> Float[np.ndarray, " channels"]:
     r"""The fit percentage of MATLAB's `compare`: $100\,(1 - \|y - \hat y\| / \|y - \bar y\|)$ per channel.
 
@@ -157,7 +157,7 @@ class WhitenessTest(eqx.Module):
 
 
 def whiteness_test(
-    residuals: Float[ArrayLike, "time *channels"], *, max_lag: int = 25, confidence: float = 0.99
+    residuals: Float[ArrayLike, " time *channels"], *, max_lag: int = 25, confidence: float = 0.99
 ) -> WhitenessTest:
     r"""Is what the model leaves unexplained white? The autocorrelation test of MATLAB's `resid`.
 
@@ -218,8 +218,8 @@ class CrossCorrelationTest(eqx.Module):
 
 
 def cross_correlation_test(
-    residuals: Float[ArrayLike, "time *channels"],
-    inputs: Float[ArrayLike, "time *n_inputs"],
+    residuals: Float[ArrayLike, " time *channels"],
+    inputs: Float[ArrayLike, " time *n_inputs"],
     *,
     max_lag: int = 25,
     confidence: float = 0.99,
@@ -288,7 +288,7 @@ def _loss_matrix(residuals):
     return n, e.shape[1], logdet
 
 
-def fpe(residuals: Float[ArrayLike, "time *channels"], n_params: int) -> float:
+def fpe(residuals: Float[ArrayLike, " time *channels"], n_params: int) -> float:
     r"""Akaike's final prediction error, as MATLAB's `fpe`: $\det(\tfrac1N E^\top E)\,\frac{1 + d/N}{1 - d/N}$.
 
     The expected prediction-error loss on fresh data; smaller is better. Compare models fitted
@@ -305,7 +305,7 @@ def fpe(residuals: Float[ArrayLike, "time *channels"], n_params: int) -> float:
     return float(np.exp(logdet) * (1 + n_params / n) / (1 - n_params / n))
 
 
-def aic(residuals: Float[ArrayLike, "time *channels"], n_params: int, *, small_sample: bool = False) -> float:
+def aic(residuals: Float[ArrayLike, " time *channels"], n_params: int, *, small_sample: bool = False) -> float:
     r"""Akaike's information criterion, as MATLAB's `aic` (raw):
     $N \log\det(\tfrac1N E^\top E) + 2d + N n_y (\log 2\pi + 1)$.
 

@@ -112,8 +112,8 @@ def plot_error_horizon(curves: Mapping[str, object], *, unit: str = ""):
 
 
 def plot_residuals(
-    residuals: Float[ArrayLike, "time *channels"],
-    inputs: Float[ArrayLike, "time *n_inputs"] | None = None,
+    residuals: Float[ArrayLike, " time *channels"],
+    inputs: Float[ArrayLike, " time *n_inputs"] | None = None,
     *,
     names: Sequence[str] | None = None,
     input_names: Sequence[str] | None = None,

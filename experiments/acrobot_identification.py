@@ -558,7 +558,7 @@ def output_error(results, out, noisy, clean_us, counts, cutoff, runs, quick):
     # Calibration check: the same runs with the torque recorded exactly (state noise only, which is
     # what the output-error criterion models). Standardised errors of theta1..theta5.
     exact_torque = []
-    for r, (x, u) in enumerate(zip(noisy[0], clean_us)):
+    for _r, (x, u) in enumerate(zip(noisy[0], clean_us)):
         for n in sim_counts:
             fit = identify(
                 start, as_trajectory(x[:n], u[:n]), SimulationFit(segment_s=2.0, max_steps=50), **AS_PUBLISHED

@@ -5,8 +5,8 @@
 The reference of the saved controller stays; PGPE (`dynax.control.PGPE`, the population `vmap`ped)
 tunes the feedback around it: the balancing LQR's weights, the cost-to-go threshold below which it
 acts, Spong's energy-shaping recovery gains and the time-varying LQR's weights (12 numbers, searched
-in logarithms), starting from `SwingUpDesign()`'s defaults. Each candidate is scored on a batch of training episodes drawn afresh every
-generation from the six families of the rules (a model parameter off by up to 25 %, velocity and
+in logarithms), starting from `SwingUpDesign()`'s defaults. Each candidate is scored on a batch of training episodes
+drawn afresh every generation from the six families of the rules (a model parameter off by up to 25 %, velocity and
 torque noise, a slow motor, a measurement delay, and random torque pulses drawn with another seed
 than the benchmark's), by a smooth success: $\\exp(-\\|e / tol\\|^2)$ of the final error. The mean of
 the search is scored by the exact rules (performance and robustness) at the end and saved when it

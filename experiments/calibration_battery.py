@@ -188,7 +188,8 @@ def main():
             path.write_text(json.dumps(rows, indent=1))
             bar.say(
                 f"{case.name}: {row['verdict']} {row['findings']} gain {row['gain']:.0%} "
-                f"best {row['best_gain'] if row['best_gain'] is None else round(row['best_gain'], 2)} ({row['wall_s']:.0f} s)"
+                f"best {row['best_gain'] if row['best_gain'] is None else round(row['best_gain'], 2)} "
+                f"({row['wall_s']:.0f} s)"
             )
             bar.update(1)
     done = [r for r in rows if "error" not in r]

@@ -1,4 +1,5 @@
-"""Where dynax's leave-one-run-out models lose to the lab's on the DFKI runs, and whether the runs agree on the friction.
+"""Where dynax's leave-one-run-out models lose to the lab's on the DFKI runs, and whether the runs agree on the
+friction.
 
     python experiments/dfki_record_friction.py --out experiments/results/dfki_record_friction
 
@@ -14,8 +15,8 @@ Two measurements, about 3 minutes on 2 CPU cores:
    held-out run's error, so they are a diagnosis, not a fit anyone could make without the run.
 2. **Do the runs agree on the Coulomb friction?** `dynax.internal.record_friction` on the inverse-dynamics
    equations of `identify`'s least-squares stage (every setting chosen from the data), on all six runs
-   and on each fold's five training runs: each run's Coulomb coefficients, from the whole run and from each of its four parts,
-   and an analysis of variance of the runs against their four parts (see `dynax.internal.record_friction`).
+   and on each fold's five training runs: each run's Coulomb coefficients, from the whole run and from each of its four
+   parts, and an analysis of variance of the runs against their four parts (see `dynax.internal.record_friction`).
 
 Writes `OUT/record_friction.json` and `OUT/record_friction.png`.
 

@@ -5,8 +5,9 @@
 The lab fitted `model_3.0` on all six runs, so in the leave-one-run-out comparison
 (`dfki_default_identification.py`) it is in-sample on every held-out run while dynax is not. Here
 dynax gets the same runs: `identify(DoublePendulum(), all_six_runs, Dynamic(), friction="coulomb")`
-with no recipe (which fits the first 80 % of each and keeps the rest for its own validation), then both models are simulated open loop on each run from the same 200 start samples
-and compared at 0.1, 0.25 and 0.5 s (position RMSE). Writes `same_data.json`.
+with no recipe (which fits the first 80 % of each and keeps the rest for its own validation), then both models are
+simulated open loop on each run from the same 200 start samples and compared at 0.1, 0.25 and 0.5 s (position RMSE).
+Writes `same_data.json`.
 """
 
 import argparse

@@ -81,7 +81,8 @@ class StaticFriction(AbstractJointTerm):
 
 
 def phases(error, record) -> dict:
-    """RMSE per horizon over run 12's windows (`error`, its `simulation_error`) started before `PHASE_S` and from it on."""
+    """RMSE per horizon over run 12's windows (`error`, its `simulation_error`) started before `PHASE_S` and from it
+    on."""
     squared = np.asarray(error.window_mse)
     t0 = np.asarray(record.ts)[np.asarray(error.starts)]
     return {
@@ -140,7 +141,8 @@ def main(argv=None):
             + " | ".join(
                 f"{k} RMSE {' '.join(f'{v:.4f}' for v in e['rmse'])} median {' '.join(f'{v:.4f}' for v in e['median'])}"
                 + "".join(
-                    f" [{c['horizon_s']:g} s: half from {c['windows']}/{c['of']} windows at {c['from_s']:.2f}-{c['to_s']:.2f} s]"
+                    f" [{c['horizon_s']:g} s: half from {c['windows']}/{c['of']} windows at "
+                    f"{c['from_s']:.2f}-{c['to_s']:.2f} s]"
                     for c in e["concentrated"]
                 )
                 for k, e in entry.items()
@@ -163,7 +165,8 @@ def main(argv=None):
     for run in RUNS:
         e = out["runs"][run]
         print(
-            f"run {run}, started from velocities of the positions ({', '.join(e['velocities_from_positions']) or 'none replaced'}): "
+            f"run {run}, started from velocities of the positions "
+            f"({', '.join(e['velocities_from_positions']) or 'none replaced'}): "
             + " | ".join(
                 f"{k} {' '.join(f'{v:.4f}' for v in e[k]['rmse_velocities_from_positions'])}" for k in ("dynax", "lab")
             )

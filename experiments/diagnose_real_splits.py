@@ -1,10 +1,11 @@
-"""Diagnose the DFKI double pendulum on several train/held-out splits of its runs, in both modes.
+r"""Diagnose the DFKI double pendulum on several train/held-out splits of its runs, in both modes.
 
 The nominal model is the lab's rigid-body `model_3.1` (no friction, no rotor inertia). Every split
 holds out runs dynax does not train on; `S2` and `S3` hold out the 6 s large-amplitude run 12.
 Writes `OUT/splits.json` (verdict, findings, gain, horizon per split and mode) and `OUT/splits.png`.
 
-    python experiments/diagnose_real_splits.py ../shared/datasets experiments/results/diagnose_real_splits [SPLITS] [MODES] [REFERENCE_HORIZON|auto] [FIT_WINDOW] [--variant V]
+    python experiments/diagnose_real_splits.py ../shared/datasets experiments/results/diagnose_real_splits \
+        [SPLITS] [MODES] [REFERENCE_HORIZON|auto] [FIT_WINDOW] [--variant V]
 
 SPLITS: comma-separated names (`S1,S3`) or ad hoc splits `TRAIN:HELD` with runs joined by `+`
 (`00+05:03+12`: train on runs 00 and 05, hold out 03 and 12).

@@ -81,7 +81,8 @@ def measure(kind, features, horizon, train, one_step, args):
         ),
     }
     log(
-        f"{kind}, {features}, H = {horizon:g} s: one-step {row['one_step_loss']:.5g}, EM-free {row['em_free_loss']:.5g} "
+        f"{kind}, {features}, H = {horizon:g} s: one-step {row['one_step_loss']:.5g}, EM-free "
+        f"{row['em_free_loss']:.5g} "
         f"({row['em_free_iterations']} it), minimum {gauss_newton.loss:.5g} ({row['gauss_newton_iterations']} it): "
         f"gap {row['relative_gap']:.2%}; gradient norm {row['em_free_gradient_norm']:.2g} against "
         f"{row['gauss_newton_gradient_norm']:.2g}"

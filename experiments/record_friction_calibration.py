@@ -15,8 +15,9 @@ rig's noise (0.15 rad/s on the velocities, 0.02 N m on the torques, 1e-4 rad on 
 
 Each set is tested with each record cut into `--parts` parts (`record_friction(..., parts=K)`;
 2 is the halves `record_offsets` uses, 4 `record_friction`'s default: more parts give more degrees
-of freedom within the records, but each part's estimate is noisier). The equations are those of `identify`'s least-squares stage (every setting chosen from
-the data). Writes `OUT/calibration.json`. About 20 s on 2 CPU cores for 36 sets, 100 s for 200.
+of freedom within the records, but each part's estimate is noisier). The equations are those of `identify`'s
+least-squares stage (every setting chosen from the data). Writes `OUT/calibration.json`. About 20 s on 2 CPU cores for
+36 sets, 100 s for 200.
 """
 
 import argparse

@@ -1,7 +1,8 @@
 """Hidden-effect cases made outside dynax's model code, for calibrating the diagnosis's verdicts.
 
-Every case is a record of one run (20 s of training, the last 10 s held out, at 100 Hz, as `dynax demo`) of a truth integrated by scipy's DOP853 at tight
-tolerance, restarted at every input switch, with the effect written out here in numpy in a form that is
+Every case is a record of one run (20 s of training, the last 10 s held out, at 100 Hz, as `dynax demo`) of a truth
+integrated by scipy's DOP853 at tight tolerance, restarted at every input switch, with the effect written out here in
+numpy in a form that is
 *not* dynax's term: friction as `tanh`, `arctan` or a Stribeck curve (dynax's `CoulombFriction` is a tanh of
 its own speed scale), a true dead time (the input shifted in time, not a Padé filter), a first-order lag as
 its own state, quadratic drag and wind in the helicopter's body frame. Measurement noise is added as a rig's

@@ -1,4 +1,5 @@
-"""`dynax identify SYSTEM DATA... [--validation DATA...] --out FILE.json`: fit a system's parameters to measured records.
+"""`dynax identify SYSTEM DATA... [--validation DATA...] --out FILE.json`: fit a system's parameters to measured
+records.
 
 With no recipe flags every filter setting is chosen from the data, the estimate is constrained to
 the physically consistent set, two-link arms on noisy (real) data are refined by the output-error

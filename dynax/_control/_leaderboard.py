@@ -34,7 +34,8 @@ import numpy as np
 class LeaderboardPlant(eqx.Module):
     r"""The double pendulum of the RealAIGym benchmark (`double_pendulum.model.plant`), in its physical parameters.
 
-    $M(q) = \begin{bmatrix} I_1 + I_2 + m_2 l_1^2 + 2 m_2 l_1 r_2 c_2 + (g_r^2 + 1) I_r & I_2 + m_2 l_1 r_2 c_2 - g_r I_r \\
+    $M(q) = \begin{bmatrix} I_1 + I_2 + m_2 l_1^2 + 2 m_2 l_1 r_2 c_2 + (g_r^2 + 1) I_r &
+    I_2 + m_2 l_1 r_2 c_2 - g_r I_r \\
     \cdot & I_2 + g_r^2 I_r\end{bmatrix}$, Coriolis and gravity of two rigid links, and friction
     $b_i \dot q_i + c_{f,i} \arctan(100 \dot q_i)$ at each joint. $I_1$, $I_2$ are about the
     joints; $I_r$ is the elbow motor's rotor inertia behind a gear of ratio $g_r$. `nominal()` is
@@ -236,7 +237,7 @@ COST_NAMES = ("swingup_time", "energy", "torque_cost", "torque_smoothness", "vel
 """The five performance costs, in the order of `Performance.costs` and `LeaderboardRules.normalisation`."""
 
 
-class Family(str, enum.Enum):
+class Family(str, enum.Enum):  # noqa: UP042 -- StrEnum would change str()/format() of members in JSON and reports
     """The six robustness families."""
 
     MODEL = "model"

@@ -213,7 +213,8 @@ class PGPE(eqx.Module):
     def ask(
         self, state: PGPEState, key: PRNGKeyArray
     ) -> tuple[Float[Array, "population n_params"], Float[Array, "pairs n_params"]]:
-        """Sample a population: `(params, noise)` with `params[:P/2] = mean + noise`, `params[P/2:] = mean - noise` (parameter units)."""
+        """Sample a population: `(params, noise)` with `params[:P/2] = mean + noise`, `params[P/2:] = mean - noise`
+        (parameter units)."""
         pairs = self.population_size // 2
         noise = state.sigma[None] * jax.random.normal(key, (pairs, state.mean.shape[0]), state.mean.dtype)
         z = jnp.concatenate([state.mean[None] + noise, state.mean[None] - noise])

@@ -53,7 +53,8 @@ def check_time_stamps(
         if gap.size:
             k = int(gap[0]) + 1
             raise DataError(
-                f"a gap in the record: time jumps from {float(ts[k - 1])!r} to {float(ts[k])!r} s, {steps[k - 1] / median:.3g} times the "
+                f"a gap in the record: time jumps from {float(ts[k - 1])!r} to {float(ts[k])!r} s, "
+                f"{steps[k - 1] / median:.3g} times the "
                 f"median interval {median:.6g} s (more than {max_gap:g} is refused: it would be interpolated or held "
                 f"across); {gap.size} such gap(s). Split the record there into separate files",
                 path=path,
@@ -65,8 +66,8 @@ def check_time_stamps(
         if tiny.size:
             k = int(tiny[0]) + 1
             raise DataError(
-                f"near-duplicate time stamps {float(ts[k - 1])!r} and {float(ts[k])!r}: a step of {steps[k - 1]:.3g} s is "
-                f"{steps[k - 1] / median:.2g} times the median interval {median:.6g} s (less than {min_step:g} is "
+                f"near-duplicate time stamps {float(ts[k - 1])!r} and {float(ts[k])!r}: a step of {steps[k - 1]:.3g} s "
+                f"is {steps[k - 1] / median:.2g} times the median interval {median:.6g} s (less than {min_step:g} is "
                 "refused: derivatives across it are noise)",
                 path=path,
                 column=column,

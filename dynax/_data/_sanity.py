@@ -268,9 +268,9 @@ def _glitches(tr, ts, source, columns, positions=None):
                     Check.GLITCH,
                     Severity.REFUSE,
                     name,
-                    f"{'a sample' if i == j else f'{j - i + 1} samples'} of {value:.6g} where the neighbouring samples are "
-                    f"about {near:.4g} (a jump of {abs(value - near) / max(spread, 1e-300):.3g} times the column's range "
-                    "in one sample): a corrupt reading",
+                    f"{'a sample' if i == j else f'{j - i + 1} samples'} of {value:.6g} where the neighbouring samples "
+                    f"are about {near:.4g} (a jump of {abs(value - near) / max(spread, 1e-300):.3g} times the column's "
+                    "range in one sample): a corrupt reading",
                     _span(ts, i, j),
                 )
             )
@@ -313,8 +313,9 @@ def _stuck(tr, ts, source, names, xs, paired_estimated):
                     Check.STUCK,
                     Severity.REFUSE,
                     name,
-                    f"repeats the value {float(x[i]):.6g} exactly for {j - i + 1} samples ({float(ts[j] - ts[i]):.3g} s) while "
-                    f"{', '.join(names[o] for o in others[:3])} change: a sensor that stopped updating{reason}",
+                    f"repeats the value {float(x[i]):.6g} exactly for {j - i + 1} samples "
+                    f"({float(ts[j] - ts[i]):.3g} s) while {', '.join(names[o] for o in others[:3])} change: "
+                    f"a sensor that stopped updating{reason}",
                     _span(ts, i, j),
                 )
             )

@@ -100,7 +100,8 @@ def _acceleration_sensitivities(fitted, fixed, ts, xs_smooth, us, idx, us_before
 
 
 def force_residuals(model, records, refit: Sequence[str] = ()) -> tuple[np.ndarray, ...]:
-    r"""Generalised-force residuals $M(q)\,(\ddot q_{meas} - \ddot q_{model})$ of `model` on `records`, and their nuisance directions.
+    r"""Generalised-force residuals $M(q)\,(\ddot q_{meas} - \ddot q_{model})$ of `model` on `records`, and their
+    nuisance directions.
 
     The nuisance directions are $-M(q)\,\partial \ddot q_{model} / \partial p$ for the refitted
     parameters $p$ (the nominal parameters `refit` and the named terms' coefficients): what a
@@ -165,7 +166,8 @@ def propose(
     n_pieces: int = 5,
     seed: int = 0,
 ) -> list[Proposal]:
-    """The discovery search on the training `records` (steps 1-3 of the module docs), one `Proposal` per coordinate that has one.
+    """The discovery search on the training `records` (steps 1-3 of the module docs), one `Proposal` per coordinate that
+    has one.
 
     **Arguments:** `model` (the current model: nominal, or `Extended` with named causes);
     `records` (training trajectories); `refit` (nominal parameters refitted with a discovered term:
@@ -365,7 +367,8 @@ def discover(
     current: tuple | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> Discovery:
-    r"""Search for the missing term, refit it through simulation with the model, keep it only if it pays on held-out data.
+    r"""Search for the missing term, refit it through simulation with the model, keep it only if it pays on held-out
+    data.
 
     See the module docs for the steps and their guards.
 

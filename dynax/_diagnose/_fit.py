@@ -201,7 +201,8 @@ class Family(eqx.Module):
 
 
 def window_errors(model, windows: Windows, method=FORWARD_GRID):
-    """Simulated minus measured states (`state_error`) on every window, `(window, step, n_measured)`, NaN past a divergence."""
+    """Simulated minus measured states (`state_error`) on every window, `(window, step, n_measured)`, NaN past a
+    divergence."""
     errors, _ = window_rollouts(
         model, windows.ts, windows.xs, windows.us, windows.ts_before, windows.us_before, method=method
     )
@@ -270,7 +271,8 @@ def window_clustered_std_errors(solution, windows: Windows, scale):
 
 @eqx.filter_jit
 def fit_configurations(family, windows, slots, new, p_init, free, *, solver=SOLVER, max_steps: int = MAX_STEPS):
-    """`fit_configuration` for a batch: `slots (batch, n_slots)`, `new (batch,)`, `p_init (batch, n_params)`, `free (n_params,)`.
+    """`fit_configuration` for a batch: `slots (batch, n_slots)`, `new (batch,)`, `p_init (batch, n_params)`, `free
+    (n_params,)`.
 
     Under `vmap` every member iterates until all have converged (a converged member's step is zero).
     """

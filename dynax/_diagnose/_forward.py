@@ -197,7 +197,8 @@ def _screen(problem: Problem, current_slots, current_p, remaining, round_, say):
 def _refit(
     problem: Problem, current_slots, current_p, short, remaining, deltas, round_, say
 ) -> tuple[np.ndarray, _Batch]:
-    """Refit: the current model (member 0) and each shortlisted candidate added to it, jointly with the nominal parameters."""
+    """Refit: the current model (member 0) and each shortlisted candidate added to it, jointly with the nominal
+    parameters."""
     if short:
         say(
             f"round {round_ + 1}: simulation-error refit of "

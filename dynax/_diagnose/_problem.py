@@ -164,7 +164,8 @@ def names_to_refit(system, mode) -> tuple[str, ...]:
     unknown = set(refit) - set(names)
     if unknown:
         raise UsageError(
-            f"diagnose: Refit(parameters=...) names {sorted(unknown)}, not parameters of {type(system).__name__} {names}"
+            f"diagnose: Refit(parameters=...) names {sorted(unknown)}, not parameters of {type(system).__name__} "
+            f"{names}"
         )
     return refit
 
@@ -190,7 +191,8 @@ def candidate_family(system, candidates, refit_names, train_records):
 
 
 def _identifiable(system, candidates, family, refit_names, partners, mode, sensitivities):
-    """`(searchable indices, not_identifiable entries)`: candidates a refit of the nominal parameters reproduces are set aside.
+    """`(searchable indices, not_identifiable entries)`: candidates a refit of the nominal parameters reproduces are set
+    aside.
 
     In `Refit` mode the kept parameters that candidates test (the nominal friction, `partners`) are not
     trusted either: a candidate that a refit reproduces together with a change of them (the acrobot's input

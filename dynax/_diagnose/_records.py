@@ -65,7 +65,8 @@ def prepare_records(system, train, validation, holdout_fraction, notes):
         train_records = [resample(r, dt) for r in train_records]
         validation_records = [resample(r, dt) for r in validation_records]
         notes.append(
-            f"The sampling was irregular; the records were resampled to {dt * 1000:.3g} ms (states linearly, inputs as held)."
+            f"The sampling was irregular; the records were resampled to {dt * 1000:.3g} ms (states linearly, inputs "
+            "as held)."
         )
     # One-step residuals drop a smoothing window (about 0.1 s) at each end of a record; a record needs
     # room for that and as much again to be judged on.
@@ -117,7 +118,8 @@ def velocity_estimates(system, train_records, validation_records, velocities, no
 
 
 def horizon_grid(horizons_s, reference_horizon_s, train_records, validation_records, notes):
-    """The reported horizons (at most half the shortest held-out record) and the candidates for the reference horizon."""
+    """The reported horizons (at most half the shortest held-out record) and the candidates for the reference
+    horizon."""
     shortest = min(r.duration for r in validation_records)
     horizons = np.asarray([h for h in horizons_s if h <= 0.5 * shortest + 1e-9] or [min(horizons_s)], float)
     if reference_horizon_s is not None:
@@ -155,7 +157,8 @@ def reference_horizon(nominal_model, train_records, candidates_s, given, fractio
 
 
 def fit_window(system, train_records, given, fraction, dt, notes) -> float:
-    """The fit windows: `given`, or 2.5 times the starting model's predictability horizon on the training runs, in [0.25, 1] s."""
+    """The fit windows: `given`, or 2.5 times the starting model's predictability horizon on the training runs, in
+    [0.25, 1] s."""
     if given is not None:
         return float(given)
     longest = min(1.0, 0.5 * min(r.duration for r in train_records))
@@ -182,7 +185,8 @@ def fit_window(system, train_records, given, fraction, dt, notes) -> float:
 
 
 def holdout_split(rec: Trajectory, fraction: float = HOLDOUT_FRACTION) -> tuple[Trajectory, Trajectory]:
-    """`(fitted, held_out)`: a record cut where `diagnose` cuts it without validation records (its last `fraction` held out)."""
+    """`(fitted, held_out)`: a record cut where `diagnose` cuts it without validation records (its last `fraction` held
+    out)."""
     k = int(round(len(rec) * (1 - fraction)))
     return _slice(rec, 0, k), _slice(rec, k, len(rec))
 

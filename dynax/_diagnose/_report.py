@@ -144,7 +144,8 @@ def _causes_markdown(j: dict) -> list[str]:
         )
         components = "".join(f"; {n} = {v:.4g}" for n, v in f.get("components", {}).items())
         lines.append(
-            f"| `{f['cause']}` | `{f['where']}` | {f['parameter']} = {f['coefficient']:.4g}{components} | {f['std_error']:.2g} | "
+            f"| `{f['cause']}` | `{f['where']}` | {f['parameter']} = {f['coefficient']:.4g}{components} | "
+            f"{f['std_error']:.2g} | "
             f"{f['gain']:.0%} | {f['p_value']:.2g} | {f['confidence']}: {alts} |"
         )
     return lines + [

@@ -178,9 +178,9 @@ class Report(eqx.Module):
     extended model), `not_identifiable`, `candidates` (every candidate's held-out gain in the first
     round), `notes`, `horizon` (`Horizon`: the reference horizon and how it was chosen), `runs`
     (held-out error per run), `test` (the significance test, and with verdict `none` or `inconclusive`
-    the gain it could have detected, the best candidate and the held-out length that would decide), `discovery`, the fitted models `nominal_model` and `extended_model`, and
-    `rounds` (each round of the forward selection: every refitted candidate's held-out gains, p, and
-    `selected`, `passed` or `stopped` with the rules that stopped it).
+    the gain it could have detected, the best candidate and the held-out length that would decide), `discovery`, the
+    fitted models `nominal_model` and `extended_model`, and `rounds` (each round of the forward selection: every
+    refitted candidate's held-out gains, p, and `selected`, `passed` or `stopped` with the rules that stopped it).
     """
 
     system: str

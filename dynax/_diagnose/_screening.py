@@ -55,7 +55,8 @@ def _directions(family, values, coefficients, xs, zs, us, us_before):
 
 
 def screening_data(family, values, coefficients, trajectory, residual_fn):
-    """Residuals and sensitivities on one record: `(r (time, n_vel), J_nominal (time, n_vel, n_nom), J_candidates (time, n_vel, n_cand))`."""
+    """Residuals and sensitivities on one record: `(r (time, n_vel), J_nominal (time, n_vel, n_nom), J_candidates (time,
+    n_vel, n_cand))`."""
     model = family.build(jnp.asarray(values), jnp.asarray(coefficients))
     r, _, _, keep = residual_fn(model, trajectory)
     ts = trajectory.ts

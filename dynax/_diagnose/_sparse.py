@@ -67,7 +67,8 @@ def _standardise(features, target):
 
 
 def group_cv_r2(features, target, groups, fit) -> tuple[float, np.ndarray]:
-    """Leave-one-group-out $R^2$ (against zero) of `fit(features, target) -> coefficients`, columns scaled on the training part.
+    """Leave-one-group-out $R^2$ (against zero) of `fit(features, target) -> coefficients`, columns scaled on the
+    training part.
 
     **Returns:** `(pooled R^2, per-group R^2)`.
     """

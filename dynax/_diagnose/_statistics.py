@@ -1,4 +1,5 @@
-r"""The held-out significance test of `diagnose`: paired window differences, a HAC variance, Benjamini-Hochberg, run agreement.
+r"""The held-out significance test of `diagnose`: paired window differences, a HAC variance, Benjamini-Hochberg, run
+agreement.
 
 Open-loop windows start every 0.05 s but run for the reference horizon, so neighbouring windows
 share most of their data and their paired error differences $d_t$ are strongly autocorrelated.
@@ -86,8 +87,8 @@ dependence) is here too. A cause must also help on most held-out runs, not on on
     strongly overlapping windows it has too few blocks to beat the t approximation here).
     D. N. Politis, "Higher-order accurate, positive semidefinite estimation of large-sample
     covariance and spectral density matrices", Econometric Theory 27(4), 2011 (flat-top estimates
-    that are not positive). Y. Benjamini and Y. Hochberg, "Controlling the false discovery rate: a practical and powerful
-    approach to multiple testing", Journal of the Royal Statistical Society B 57(1), 1995;
+    that are not positive). Y. Benjamini and Y. Hochberg, "Controlling the false discovery rate: a practical and
+    powerful approach to multiple testing", Journal of the Royal Statistical Society B 57(1), 1995;
     Y. Benjamini and D. Yekutieli, "The control of the false discovery rate in multiple testing
     under dependency", Annals of Statistics 29(4), 2001. S. Holm, "A simple sequentially
     rejective multiple test procedure", Scandinavian Journal of Statistics 6(2), 1979.
@@ -164,7 +165,8 @@ def correlation_length(d, runs, overlap: int) -> int:
 
 
 def obm_batch(d, runs, overlap: int) -> int:
-    """The batch length of the OBM test: `BATCH_OVER_CORRELATION` times `correlation_length`, at most a third of the shortest run."""
+    """The batch length of the OBM test: `BATCH_OVER_CORRELATION` times `correlation_length`, at most a third of the
+    shortest run."""
     shortest = min(int(np.sum(np.asarray(runs) == r)) for r in np.unique(runs))
     return max(1, min(int(np.ceil(BATCH_OVER_CORRELATION * correlation_length(d, runs, overlap))), shortest // 3))
 

@@ -198,7 +198,7 @@ def per_run_table(problem, yard, nominal, judgement) -> list[dict]:
             ("cross-fitted", problem.train, runs, nominal.cv_errors, judgement.cv_errors, len(problem.validation))
         )
     rows = []
-    for kind, records, window_runs, err_nominal, err_extended, offset in parts:
+    for kind, records, window_runs, err_nominal, err_extended, _offset in parts:
         for r, rec in enumerate(records):
             mine = window_runs == r
             nom = rmse_curve(err_nominal[mine], n_ref, index)[0]

@@ -5,12 +5,23 @@ causes account for what it gets wrong?". Significance alone cannot answer it: wi
 windows a negligible leftover is significant, and with too few a large effect is not. So every
 verdict rests on an effect size, and `none` also on the test's power:
 
-| verdict | when |
-|---|---|
-| `explained` | causes were named, and what their extended model leaves is small in practical terms: the residual probe finds no structure, or structure a further term could remove less than `MIN_PRACTICAL_GAIN` of (see `practical_structure`) |
-| `unexplained` | structure of practical size is left that the named causes (if any) do not account for, or the nominal model cannot simulate the held-out windows at all; with nothing named: structure of practical size that no candidate gaining `MIN_PRACTICAL_GAIN` would remove, or significant structure that only a candidate the physical rules stopped would (a hidden spring, fitted by a negative rotor inertia) |
-| `none` | no cause was named, no structure of practical size is left, no candidate gained `MIN_PRACTICAL_GAIN` on the held-out runs, and the test had the power (`POWER`) to detect that gain at its level: the nominal model is adequate |
-| `inconclusive` | no cause was named, and either nothing of practical size is seen but the test could not have seen it (its detectable gain exceeds `MIN_PRACTICAL_GAIN`, or the best candidate gains at least that much without being established), or structure of practical size is left that a candidate gaining at least `MIN_PRACTICAL_GAIN` would remove and that only the significance test stopped (`Power.undecided`). The report names the best candidate (gain, p) and the held-out length that would decide |
+- `explained`: causes were named, and what their extended model leaves is small in practical terms:
+  the residual probe finds no structure, or structure a further term could remove less than
+  `MIN_PRACTICAL_GAIN` of (see `practical_structure`)
+- `unexplained`: structure of practical size is left that the named causes (if any) do not account
+  for, or the nominal model cannot simulate the held-out windows at all; with nothing named:
+  structure of practical size that no candidate gaining `MIN_PRACTICAL_GAIN` would remove, or
+  significant structure that only a candidate the physical rules stopped would (a hidden spring,
+  fitted by a negative rotor inertia)
+- `none`: no cause was named, no structure of practical size is left, no candidate gained
+  `MIN_PRACTICAL_GAIN` on the held-out runs, and the test had the power (`POWER`) to detect that
+  gain at its level: the nominal model is adequate
+- `inconclusive`: no cause was named, and either nothing of practical size is seen but the test
+  could not have seen it (its detectable gain exceeds `MIN_PRACTICAL_GAIN`, or the best candidate
+  gains at least that much without being established), or structure of practical size is left that a
+  candidate gaining at least `MIN_PRACTICAL_GAIN` would remove and that only the significance test
+  stopped (`Power.undecided`). The report names the best candidate (gain, p) and the held-out length
+  that would decide
 
 The contract's three verdicts keep their meaning; `inconclusive` is the answer the old rules gave
 as `none` where the data could not have shown an effect (one 8 s held-out run).
@@ -61,7 +72,7 @@ POWER = 0.8  # the power at which `none` must have been able to see it
 PRACTICAL_R2 = 1.0 - (1.0 - MIN_PRACTICAL_GAIN) ** 2  # probe R^2 whose removal is a MIN_PRACTICAL_GAIN RMS reduction
 
 
-class Verdict(str, enum.Enum):
+class Verdict(str, enum.Enum):  # noqa: UP042 -- StrEnum would change str()/format() of members in JSON and reports
     """The verdicts of `diagnose`, in one place (see the module for the rule that chooses them).
 
     A `str` enumeration: `Verdict.NONE == "none"`, and `report.json` writes the value.
@@ -86,11 +97,11 @@ _TEXT = {
     "got wrong; what the extended model leaves has no structure of practical size.",
     Verdict.NONE: "**none**: the nominal model is adequate: no candidate improves it, its errors show no structure of "
     "practical size, and the test had the power to see a gain of 25 % had there been one.",
-    Verdict.UNEXPLAINED: "**unexplained**: the errors have structure of practical size that the candidate causes do not "
-    "(fully) explain. Partial findings, if any, are listed, but they are not an explanation.",
-    Verdict.INCONCLUSIVE: "**inconclusive**: no cause passed the test, but the held-out data cannot decide: a candidate of "
-    "practical size was seen and not established, or the test could not have seen one; the notes name the best "
-    "candidate and the held-out length that would decide.",
+    Verdict.UNEXPLAINED: "**unexplained**: the errors have structure of practical size that the candidate causes "
+    "do not (fully) explain. Partial findings, if any, are listed, but they are not an explanation.",
+    Verdict.INCONCLUSIVE: "**inconclusive**: no cause passed the test, but the held-out data cannot decide: "
+    "a candidate of practical size was seen and not established, or the test could not have seen one; the notes name "
+    "the best candidate and the held-out length that would decide.",
 }
 
 

@@ -268,12 +268,14 @@ def choose_filter(trajectory: Trajectory, *, snr: float = 100.0) -> FilterChoice
 
 
 def position_fit_window(band_hz: float, dt: float) -> int:
-    """Samples (odd, at least 5) of the local cubic fit in `velocities_from_positions`: half a period of the band's edge."""
+    """Samples (odd, at least 5) of the local cubic fit in `velocities_from_positions`: half a period of the band's
+    edge."""
     return max(5, int(round(0.5 / (band_hz * dt))) | 1)
 
 
 def velocities_from_positions(xs: np.ndarray, dt: float, band_hz: float) -> np.ndarray:
-    r"""The states (positions then velocities) with measured positions and velocities from a local cubic fit of the positions.
+    r"""The states (positions then velocities) with measured positions and velocities from a local cubic fit of the
+    positions.
 
     Encoder positions are three orders of magnitude less noisy (relative to the motion) than a
     velocity differenced from them over one sample (a driver's estimate; the DFKI rig logs that);

@@ -335,7 +335,8 @@ def _interval_integrals(ts, values_left, values_right):
 
 
 def _joined(energy_part, dissipative_part, columns):
-    """The rows with every column in its place: `energy_part` in the energy columns, the rest from `dissipative_part`."""
+    """The rows with every column in its place: `energy_part` in the energy columns, the rest from
+    `dissipative_part`."""
     order = np.argsort(np.asarray(columns[0] + columns[1], dtype=int))
     return jnp.concatenate([energy_part, dissipative_part], axis=-1)[..., order]
 

@@ -550,10 +550,10 @@ def _warn_poorly_determined(poorly: dict[str, float] | None) -> None:
     if poorly:
         warnings.warn(
             f"the data determine these size parameters poorly (relative standard error above "
-            f"{100 * POORLY_DETERMINED:.0f} %): {describe_poorly_determined(poorly)}. Noise, model error or the consistency constraint, "
-            "not the motion, sets their estimates. Usually the records hardly excite them: record more motion "
-            "in every joint (larger, richer inputs, longer records, more records) before trusting them; otherwise "
-            "the model misses something large (see the relative equation error).",
+            f"{100 * POORLY_DETERMINED:.0f} %): {describe_poorly_determined(poorly)}. Noise, model error or the "
+            "consistency constraint, not the motion, sets their estimates. Usually the records hardly excite them: "
+            "record more motion in every joint (larger, richer inputs, longer records, more records) before trusting "
+            "them; otherwise the model misses something large (see the relative equation error).",
             PoorlyDeterminedWarning,
             stacklevel=3,
         )

@@ -380,7 +380,8 @@ def _warn_if_degrees(given, trajectories, error) -> None:
     factor = f"{np.pi / 180.0:.7g}"
     warnings.warn(
         f"the joint angle{'s' if len(which) > 1 else ''} {', '.join(which)} look{'' if len(which) > 1 else 's'} "
-        f"like degrees: the least-squares estimate is physically inconsistent, and with {'them' if len(which) > 1 else 'it'} "
+        "like degrees: the least-squares estimate is physically inconsistent, and with "
+        f"{'them' if len(which) > 1 else 'it'} "
         f"(and {'their' if len(which) > 1 else 'its'} velocit{'ies' if len(which) > 1 else 'y'}) read as degrees the "
         f"estimate is consistent and the equation error falls from {error:.0%} to {best[1]:.0%}. The contract's angles "
         "are radians: load the records with scale={"
@@ -424,9 +425,10 @@ def _warn_if_zero_upright(fitted, names, estimate, std, qs) -> None:
         warnings.warn(
             f"the joint angle{'s' if len(joints) > 1 else ''} {', '.join(joints)} look{'' if len(joints) > 1 else 's'} "
             f"measured from upright: the least-squares estimate is physically inconsistent only in the signs of "
-            f"{' and '.join(flipped)} ({', '.join(f'{n} = {estimate[i]:.4g} +- {std[i]:.2g}' for n, i in zip(flipped, index))}), "
-            f"which a zero at upright reverses exactly; with them positive it is consistent. The contract's angles are 0 "
-            f"hanging straight down: load the records with offset={{"
+            f"{' and '.join(flipped)} "
+            f"({', '.join(f'{n} = {estimate[i]:.4g} +- {std[i]:.2g}' for n, i in zip(flipped, index))}), "
+            "which a zero at upright reverses exactly; with them positive it is consistent. The contract's angles are "
+            f"0 hanging straight down: load the records with offset={{"
             + ", ".join(f"'{j}': {np.pi:.6f}" for j in joints)
             + "} (`--offset "
             + ",".join(f"{j}={np.pi:.6f}" for j in joints)

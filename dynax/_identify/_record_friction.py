@@ -59,8 +59,8 @@ class RecordFriction:
 
     **Fields:** `records` (labels: file names where known), `columns` (the coefficients' names,
     e.g. `fc1`, `fc2`), `values` `(record, column)` in the force's unit, one per record; `parts`
-    `(record, K, column)` one per each of the record's $K$ consecutive parts (what the test compares); `shared` `(column,)` the value
-    one coefficient for all records takes in the same equations; `f_statistic`, `p_value`
+    `(record, K, column)` one per each of the record's $K$ consecutive parts (what the test compares); `shared`
+    `(column,)` the value one coefficient for all records takes in the same equations; `f_statistic`, `p_value`
     `(column,)` the one-way analysis of variance of the parts' values across records (see the
     module); `relative_error` the relative equation error of the fit with a value per record
     (against

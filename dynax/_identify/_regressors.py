@@ -2,9 +2,9 @@ r"""Linear-in-parameter regressors of the rigid-body models: dynamic, energy and
 
 Every model here is linear in its parameter vector $\theta$, so its regressor is the Jacobian of the
 model with respect to $\theta$. Nothing is expanded by hand: the dynamic regressor is the
-Jacobian (`jax.jacrev`: a model has fewer outputs than parameters) of the inverse dynamics $M(q)\ddot q + h(q, \dot q) + F(\dot q)$, the energy regressor is
-`jax.grad` of the total energy $H(q, \dot q)$ (linear in $\theta_1..\theta_5$), and the friction
-columns are the Jacobian of the friction force. What differs per system (its base parameters, its
+Jacobian (`jax.jacrev`: a model has fewer outputs than parameters) of the inverse dynamics $M(q)\ddot q + h(q, \dot q) +
+F(\dot q)$, the energy regressor is `jax.grad` of the total energy $H(q, \dot q)$ (linear in $\theta_1..\theta_5$), and
+the friction columns are the Jacobian of the friction force. What differs per system (its base parameters, its
 inverse dynamics and energy, its Coulomb friction) are methods of the system, named in the
 contract's names:
 

@@ -276,7 +276,8 @@ def fit_simulation_error(
     Generic over systems: any `AbstractSystem` whose `vector_field` is differentiable, with any
     filter of what to fit (the others stay fixed). The cost is
 
-    $$\sum_{s,k} \lVert (\hat x_s(t_k) - x(t_k)) / \sigma \rVert^2 + w \sum_s \lVert (\hat x_s(t_{end}) - x_{0,s+1}) / \sigma \rVert^2$$
+    $$\sum_{s,k} \lVert (\hat x_s(t_k) - x(t_k)) / \sigma \rVert^2
+    + w \sum_s \lVert (\hat x_s(t_{end}) - x_{0,s+1}) / \sigma \rVert^2$$
 
     over segments $s$ simulated from their initial states $x_{0,s}$, where $\sigma$ is the
     per-state scale (default: the data's standard deviation of each state). It is minimised by the

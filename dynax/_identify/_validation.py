@@ -7,10 +7,10 @@ did not enter the fit and pools the position RMSE over them; `split_for_validati
 part when no separate record is given.
 
 An RMSE pools squared errors, so a few windows can carry it: on a record that ends with a pendulum
-at rest upright, every open-loop rollout started there falls off the unstable equilibrium, and those windows' errors of a radian or more outweigh the rest of the record. So the
-result also gives the median window error per horizon, and names, per record and horizon, the
-windows that carry the RMSE where it is more than `CONCENTRATED` times the median window's error
-(`HeldOutError.concentrated`, `note()`): half of its squared error comes from the fewest windows
+at rest upright, every open-loop rollout started there falls off the unstable equilibrium, and those windows' errors of
+a radian or more outweigh the rest of the record. So the result also gives the median window error per horizon, and
+names, per record and horizon, the windows that carry the RMSE where it is more than `CONCENTRATED` times the median
+window's error (`HeldOutError.concentrated`, `note()`): half of its squared error comes from the fewest windows
 that hold it, and where they start.
 """
 

@@ -46,7 +46,8 @@ def fly(
     wind: Float[Array, "time 3"],
     substeps: int = 4,
 ) -> tuple[Float[Array, "time 15"], Float[Array, "time 4"]]:
-    """Fly `truth` in closed loop with `controller` plus additive `excitation`, with `dynax.control.simulate_closed_loop`.
+    """Fly `truth` in closed loop with `controller` plus additive `excitation`, with
+    `dynax.control.simulate_closed_loop`.
 
     `truth` is a `HelicopterTruth` or any system whose first 13 states and 4 inputs are the
     helicopter's (a `Helicopter` flies the same references in still air).

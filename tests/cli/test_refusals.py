@@ -26,7 +26,8 @@ def test_malformed_input_is_refused_or_answered_correctly(case, fixtures, tmp_pa
         pytest.skip("file permissions do not bind the superuser")
     outcome = run_case(case, tmp_path / "case", fixtures, cli_main)
     assert outcome.verdict in ("refused correctly", "accepted correctly"), (
-        f"{outcome.verdict}: exit {outcome.status}; expected message {case.message!r}; stderr:\n{outcome.stderr[-3000:]}"
+        f"{outcome.verdict}: exit {outcome.status}; expected message {case.message!r}; "
+        f"stderr:\n{outcome.stderr[-3000:]}"
     )
     if case.expect == "refuse":
         # One clear line, never a traceback.

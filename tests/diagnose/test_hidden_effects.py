@@ -2,7 +2,8 @@
 
 The whole battery runs in the default suite (`make test`, so CI runs it; issue 10, item 8): every
 vocabulary cause at its place, the look-alike pairs (Coulomb against viscous friction and quadratic
-drag, delay against lag), the no-effect control and the out-of-vocabulary spring. Assertions are about the answer (verdict, cause, place, positive gain), not internal numbers.
+drag, delay against lag), the no-effect control and the out-of-vocabulary spring. Assertions are about the answer
+(verdict, cause, place, positive gain), not internal numbers.
 """
 
 import pytest

@@ -34,7 +34,8 @@ def test_a_driver_grade_velocity_is_replaced_by_a_better_one_from_the_positions(
 
 
 def test_nearly_clean_velocities_are_kept_as_measured():
-    # With 0.01 rad/s of noise the fit's bias (Coulomb friction's kinks, the torque steps) exceeds the noise it would remove.
+    # With 0.01 rad/s of noise the fit's bias (Coulomb friction's kinks, the torque steps) exceeds the noise it would
+    # remove.
     slightly = _run((1e-3, 1e-3, 1e-2, 1e-2))
     out, _, replaced = with_velocities_from_positions(slightly)
     assert replaced == ()

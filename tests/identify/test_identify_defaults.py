@@ -633,9 +633,9 @@ def test_dfki_least_squares_with_defaults_is_consistent_where_the_unfiltered_fit
 def test_dfki_runs_logged_at_200_and_100_hz_get_a_lower_cutoff_and_nearly_the_same_consistent_estimate(datasets):
     # The same runs as a user logging at 200 or 100 Hz would have them (interpolated to 5 or 10 ms, no
     # anti-aliasing): the velocity noise above the new Nyquist frequency folds into the band, so the signal
-    # band read off the spectra ends no higher than at 2 ms (0.6 to 1.5 Hz lower at 10 ms). While the band's edge was the last Welch bin
-    # above the threshold (bins 1.6 Hz apart on these records at 5 and 10 ms), it read 1.6 Hz on some runs,
-    # the filter cut the motion, and the unconstrained estimate lost 15 to 24 % of theta3 and theta4 and
+    # band read off the spectra ends no higher than at 2 ms (0.6 to 1.5 Hz lower at 10 ms). While the band's edge was
+    # the last Welch bin above the threshold (bins 1.6 Hz apart on these records at 5 and 10 ms), it read 1.6 Hz on some
+    # runs, the filter cut the motion, and the unconstrained estimate lost 15 to 24 % of theta3 and theta4 and
     # had a negative shoulder viscous friction. With the crossing interpolated between bins the estimate
     # stays consistent with no constraint and within 10 % of the 2 ms one (docs/devdocs/dfki_loro.md, "The
     # same runs recorded otherwise").

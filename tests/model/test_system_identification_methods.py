@@ -197,7 +197,7 @@ def test_two_link_mass_check_configurations_find_the_smallest_eigenvalue_over_th
     eigenvalue over every sample (numpy's eigvalsh), for consistent and inconsistent base parameters,
     with a rotor inertia, and on data that cover only part of the elbow's range."""
     rng = np.random.default_rng(3)
-    for k in range(20):
+    for _ in range(20):
         theta = {n: v * rng.uniform(0.5, 1.5) for n, v in THETA.items()}
         theta["theta3"] = rng.uniform(-1.2, 1.2)  # |theta3| large: indefinite at some elbow angles
         arm = dynax.DoublePendulum.from_base_parameters(theta)

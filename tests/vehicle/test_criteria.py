@@ -1,4 +1,5 @@
-"""The learning criteria: coefficient recovery (noise-free and noisy), EM-free prediction on a new flight, backprop gradients."""
+"""The learning criteria: coefficient recovery (noise-free and noisy), EM-free prediction on a new flight, backprop
+gradients."""
 
 import jax
 import jax.numpy as jnp

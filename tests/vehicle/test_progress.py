@@ -1,4 +1,5 @@
-"""`fit_vehicle` and `dynax fit` show a bar per iteration with the loss, on stderr, and only when asked or on a terminal."""
+"""`fit_vehicle` and `dynax fit` show a bar per iteration with the loss, on stderr, and only when asked or on a
+terminal."""
 
 import pytest
 

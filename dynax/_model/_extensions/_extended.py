@@ -18,9 +18,9 @@ class Extended(AbstractSystem):
     $\big(M(q) + \operatorname{diag}(I_r)\big)\ddot q + h(q, \dot q) = B\,a + \sum_k f_k(q, \dot q)$,
     so they compose with any `AbstractManipulator`. Vehicle terms (`BodyQuadraticDrag`, `Wind`,
     `BodyBias`) act on a `Helicopter`'s body-frame accelerations, the body model's aerodynamic
-    features seeing the air-relative velocity (see `dynax._model._extensions._vehicle_terms`). Input terms (gain, offset, lag, delay) act on
-    any system between the recorded input $u$ and the applied input $a$; they are applied in the
-    order given, so `(InputGain(0, 2.0), InputLag(0, 0.05))` lags the doubled input. Terms whose
+    features seeing the air-relative velocity (see `dynax._model._extensions._vehicle_terms`). Input terms (gain,
+    offset, lag, delay) act on any system between the recorded input $u$ and the applied input $a$; they are applied in
+    the order given, so `(InputGain(0, 2.0), InputLag(0, 0.05))` lags the doubled input. Terms whose
     coefficients are at their neutral values leave the nominal system unchanged.
 
     The state is the nominal state followed by the terms' internal states (an input lag's output,

@@ -31,7 +31,8 @@ class AbstractInputTerm(AbstractTerm):
     def where(self, system) -> str:
         if self.input >= system.n_inputs:
             raise ValueError(
-                f"{type(self).__name__}: `input={self.input}` but {type(system).__name__} has inputs {system.input_names}"
+                f"{type(self).__name__}: `input={self.input}` but {type(system).__name__} has inputs "
+                f"{system.input_names}"
             )
         return system.input_names[self.input]
 

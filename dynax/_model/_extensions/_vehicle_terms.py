@@ -59,7 +59,8 @@ class AbstractVehicleTerm(AbstractTerm):
     def check_system(self, system) -> None:
         if not system.body_axes:
             raise ValueError(
-                f"{type(self).__name__} acts on a helicopter's body axes, but {type(system).__name__} is not a Helicopter"
+                f"{type(self).__name__} acts on a helicopter's body axes, but {type(system).__name__} is not "
+                "a Helicopter"
             )
 
     def where(self, system) -> str:
@@ -85,7 +86,8 @@ class AbstractVehicleTerm(AbstractTerm):
         return jnp.zeros(3, self.coefficient.dtype)
 
     def acceleration(self, quat: Float[Array, "4"], air: Float[Array, "6"], u: Float[Array, "4"]) -> Float[Array, "6"]:
-        """The body-frame acceleration `(du, dv, dw, dp, dq, dr)` the term adds, at the air-relative body state `air`."""
+        """The body-frame acceleration `(du, dv, dw, dp, dq, dr)` the term adds, at the air-relative body state
+        `air`."""
         return jnp.zeros_like(air)
 
 
