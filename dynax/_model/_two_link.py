@@ -14,6 +14,7 @@ from typing import ClassVar
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
+import numpy as np
 
 from ._extensions._terms import CoulombFriction, RotorInertia
 from ._system import AbstractManipulator
@@ -53,14 +54,18 @@ def _check_physical(**values):
         if value is None:
             continue
         positive = _PHYSICAL_BOUNDS[name] == "positive"
-        v = jnp.asarray(value)
-        bad = ~jnp.isfinite(v) | ((v <= 0) if positive else (v < 0))
         message = (
             f"`{name}` is not a physical value; it must be {'positive' if positive else 'non-negative'} and finite"
         )
-        if isinstance(bad, jax.core.Tracer):
+        if isinstance(value, jax.core.Tracer):
+            bad = ~jnp.isfinite(value) | ((value <= 0) if positive else (value < 0))
             traced.append((jnp.any(bad), "from_physical: " + message))
-        elif bool(jnp.any(bad)):
+            continue
+        # Concrete values are checked with NumPy: no JAX computation, so importing dynax (which builds the
+        # Drake defaults through here) leaves the backend uninitialised for `jax.distributed.initialize`.
+        v = np.asarray(value, dtype=float)
+        bad = ~np.isfinite(v) | ((v <= 0) if positive else (v < 0))
+        if bool(np.any(bad)):
             shown = value if isinstance(value, (int, float)) else (float(v) if v.ndim == 0 else v)
             raise ValueError(
                 f"from_physical: `{name}` = {shown} is not a physical value; it must be "
