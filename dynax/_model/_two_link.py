@@ -47,7 +47,7 @@ _PHYSICAL_BOUNDS = dict(
 def _check_physical(**values):
     """Refuse physically impossible parameters by name: `ValueError` for concrete values (the usual
     call), an `eqx.error_if` runtime error for traced ones (inside `jit`, `vmap` or `grad`)."""
-    import jax
+    from jax.core import Tracer
 
     traced = []
     for name, value in values.items():
@@ -57,7 +57,7 @@ def _check_physical(**values):
         message = (
             f"`{name}` is not a physical value; it must be {'positive' if positive else 'non-negative'} and finite"
         )
-        if isinstance(value, jax.core.Tracer):
+        if isinstance(value, Tracer):
             bad = ~jnp.isfinite(value) | ((value <= 0) if positive else (value < 0))
             traced.append((jnp.any(bad), "from_physical: " + message))
             continue

@@ -46,6 +46,7 @@ def test_second_run_reads_the_cache_and_answers_the_same(acrobot_csv, tmp_path):
     assert second["std_errors"] == first["std_errors"]
 
 
+@pytest.mark.slow  # about 20 s
 def test_no_cache_keeps_nothing(acrobot_csv, tmp_path):
     cache = tmp_path / "cache"
     _identify(acrobot_csv, tmp_path / "a.json", cache, "--no-cache")

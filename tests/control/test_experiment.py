@@ -27,7 +27,7 @@ def _check_entry(entry, episode_s):
     assert 0.0 <= entry["mean_time_s"] <= episode_s
 
 
-@pytest.mark.heavy
+@pytest.mark.slow  # about 40 s: the experiment script end to end
 def test_quick_experiment_writes_results_and_figures(tmp_path):
     results = _run(tmp_path)
     episode_s = results["config"]["duration"]

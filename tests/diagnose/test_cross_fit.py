@@ -60,7 +60,7 @@ def test_a_left_out_run_weighs_nothing_in_the_fit():
     assert abs(fits["both"] - fits["cut"]) > 3.0  # run 1 pulls a fit that sees it (between 10 and 25 N)
 
 
-@pytest.mark.heavy
+@pytest.mark.slow  # about 55 s
 def test_a_short_held_out_run_with_cross_fitted_training_runs_names_a_small_friction():
     """Three 8 s training runs, one 2.5 s held-out run, Coulomb friction 0.03 N m at the elbow (the demo's
     truth acrobot, simulated on a finer grid than the fits use, with measurement noise). The held-out run

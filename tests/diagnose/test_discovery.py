@@ -118,6 +118,7 @@ def test_discovered_terms_are_reported_apart_from_named_causes(spring_report):
     assert any(name.startswith("c_q2[") for name in j["extended"]["parameters"])
 
 
+@pytest.mark.slow  # about 30 s
 def test_without_discovery_the_spring_stays_unexplained(spring_report):
     # The same structure with the search switched off: the honest `unexplained` of the vocabulary alone.
     j = spring_report.to_json()
@@ -208,6 +209,7 @@ def _cli(folder, out, *extra):
     )
 
 
+@pytest.mark.slow  # about 40 s; the quick suite keeps the hidden spring's discovery
 def test_cli_discovers_a_position_periodic_force_with_its_period(periodic_files, tmp_path, capsys):
     assert _cli(periodic_files, tmp_path / "on") == 0
     report = json.loads((tmp_path / "on" / "report.json").read_text())
@@ -224,6 +226,7 @@ def test_cli_discovers_a_position_periodic_force_with_its_period(periodic_files,
     assert "## Discovered terms" in (tmp_path / "on" / "report.md").read_text()
 
 
+@pytest.mark.slow  # about 40 s
 def test_cli_no_discovery_switches_the_search_off(periodic_files, tmp_path):
     assert _cli(periodic_files, tmp_path / "off", "--no-discovery") == 0
     report = json.loads((tmp_path / "off" / "report.json").read_text())

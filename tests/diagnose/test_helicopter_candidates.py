@@ -278,6 +278,7 @@ def _round_one_screening(monkeypatch, truth):
     return seen
 
 
+@pytest.mark.slow  # about 50 s; the quick suite keeps the hidden wind and body bias
 def test_a_collective_lag_screens_first_with_its_size(monkeypatch):
     """A 0.15 s lag on u4: the controller moves the collective at a few hertz, far outside the first-order
     (omega tau << 1) range in which a lag is -tau df/du du/dt. Screened only at first order, it ranked

@@ -33,6 +33,7 @@ def _diagnose(effect: dict, scale: float):
     return report.to_json(), records
 
 
+@pytest.mark.slow  # about 90 s; the quick suite keeps the MuJoCo rotor-inertia case
 def test_a_dry_friction_that_sticks_is_named_coulomb_friction_with_its_size():
     report, _ = _diagnose({"f2": 0.10}, scale=0.6)
     assert report["verdict"] == "explained", (report["verdict"], report["findings"])
@@ -47,11 +48,13 @@ def test_a_dry_friction_that_sticks_is_named_coulomb_friction_with_its_size():
     assert report["gain"] > 0.5
 
 
+@pytest.mark.slow  # about 90 s; the quick suite keeps the verdicts' effect-free control
 def test_no_effect_gives_none():
     report, _ = _diagnose({}, scale=0.6)
     assert report["verdict"] == "none", report["findings"]
 
 
+@pytest.mark.slow  # about 2 min; the quick suite keeps hidden effects in DOP853 records (test_verdicts.py)
 def test_rotor_inertia_is_found_on_an_arm_that_turns_over():
     # At this amplitude the arm goes over the top: its angles wind up over several turns. Their spread,
     # against which the reference horizon is chosen, is taken on the circle; the unwrapped angles'

@@ -109,6 +109,7 @@ def test_dfki_known_mode_names_the_labs_effects_on_held_out_runs():
     assert all(r["gain"] > 0 for r in j["runs"])  # better on each held-out run
 
 
+@pytest.mark.slow  # about 100 s: refit mode on real runs
 def test_dfki_refit_mode_names_coulomb_friction():
     """Train on 01, 03 and the large-amplitude run 12; hold out 05 (shoulder motor only) and 02 (split S4)."""
     report = diagnose(_model_3_1(), [_dfki("01"), _dfki("03"), _dfki("12")], [_dfki("05"), _dfki("02")], mode=Refit())
@@ -120,12 +121,14 @@ def test_dfki_refit_mode_names_coulomb_friction():
     assert ("rotor_inertia", "q1") in absorbed and ("viscous_friction", "q1") not in absorbed
 
 
+@pytest.mark.slow  # about 3 min on 2 cores; the quick suite keeps the known-mode case on held-out runs
 @pytest.mark.parametrize("train, validation", [(("00", "01", "02"), ("12",)), (("02", "03", "05"), ("00", "12"))])
 def test_dfki_known_mode_with_the_large_amplitude_run_held_out(train, validation):
     report = diagnose(_model_3_1(), [_dfki(r) for r in train], [_dfki(r) for r in validation], mode=Known())
     _assert_lab_effect(report)
 
 
+@pytest.mark.slow  # about 80 s: another DFKI split
 def test_dfki_refit_mode_with_the_large_amplitude_run_and_a_small_one_held_out():
     """Train on 02, 03, 05 (two drive one motor only); hold out 00 and the large-amplitude run 12 (split S3)."""
     report = diagnose(_model_3_1(), [_dfki(r) for r in ("02", "03", "05")], [_dfki("00"), _dfki("12")], mode=Refit())
@@ -133,6 +136,7 @@ def test_dfki_refit_mode_with_the_large_amplitude_run_and_a_small_one_held_out()
     assert all(r["gain"] > 0 for r in j["runs"])  # a cause must help on each held-out run, run 12 included
 
 
+@pytest.mark.slow  # about 50 s: another DFKI split
 def test_dfki_refit_mode_with_only_the_large_amplitude_run_held_out():
     """Split S2: train on the small-amplitude runs 00, 01, 02; hold out only the 6 s large-amplitude run 12.
     Before cross-fitting, refit mode named nothing here: the one short chaotic held-out run was too little
@@ -150,6 +154,7 @@ def test_dfki_refit_mode_with_only_the_large_amplitude_run_held_out():
     assert len(cross_fitted) == 3 and all(r["gain"] > 0.25 for r in cross_fitted), j["runs"]
 
 
+@pytest.mark.slow  # about 70 s: another DFKI split
 def test_dfki_refit_mode_names_nothing_the_held_out_runs_reject():
     """Train on 00, 02 and the shoulder-only run 05; hold out 01 and the elbow-only run 03 (a split outside
     the documented four). Coulomb friction at the elbow is named (51 % at 0.1 s). Before the `held_out` rule
@@ -177,6 +182,7 @@ def test_dfki_refit_mode_names_nothing_the_held_out_runs_reject():
     assert friction and "fc2 (trajectory_00.csv 0.1" in friction[0], j["notes"]
 
 
+@pytest.mark.slow  # about 2 min: the CLI on raw DFKI files end to end
 def test_dfki_cli_on_the_raw_files_with_no_nominal_and_no_resampling(tmp_path, capsys):
     """A new user's first command: the raw recordings (irregular ~2 ms sampling), no `--nominal`, no `--dt`.
     The default DoublePendulum is another machine (theta1 1.33 against the rig's 0.047): the CLI says so and

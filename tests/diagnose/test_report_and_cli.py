@@ -119,7 +119,7 @@ def test_cli_diagnose_helicopter_refuses_a_file_without_its_columns(offset_data,
     assert not out.exists()
 
 
-@pytest.mark.heavy
+@pytest.mark.slow  # about 1 min
 def test_cli_diagnose_takes_several_runs_and_keeps_them_apart(offset_data, tmp_path, capsys):
     folder, train, validation = offset_data
     runs = {}
@@ -170,7 +170,7 @@ def test_cli_diagnose_takes_several_runs_and_keeps_them_apart(offset_data, tmp_p
     assert (report["findings"][0]["cause"], report["findings"][0]["where"]) == ("input_offset", "tau2")
 
 
-@pytest.mark.heavy  # another grid: compiles the fits again
+@pytest.mark.slow  # about 30 s: another grid compiles the fits again
 def test_cli_diagnose_on_irregularly_sampled_files_without_dt(offset_data, tmp_path, capsys):
     """Real rigs jitter (the DFKI files: 2 ms +- a few %). `diagnose` resamples them to their median interval;
     the report's figures must be drawn from the same grid, not fail on the user's unresampled records."""
@@ -236,7 +236,7 @@ def test_cli_nominal_sets_aside_term_coefficients_and_refuses_unknown_names():
         nominal_system("acrobot", kept)
 
 
-@pytest.mark.heavy  # its own record sizes: compiles the fits again
+@pytest.mark.slow  # about 35 s: its own record sizes compile the fits again
 def test_cli_without_nominal_on_another_axis_diagnoses_against_its_identified_rigid_body(tmp_path, capsys):
     """An axis of another size than the default (EMPS: 95 kg, 203.5 N s/m): 5 kg, viscous 10 N s/m, Coulomb
     2 N, offset 0.3 N. Without `--nominal` the CLI sees least squares put the mass 19 times below the
@@ -281,7 +281,7 @@ def test_cli_without_nominal_on_another_axis_diagnoses_against_its_identified_ri
     assert abs(j["extended"]["parameters"]["mass"] / 5.0 - 1) < 0.05
 
 
-@pytest.mark.heavy  # its own record sizes: compiles the fits again
+@pytest.mark.slow  # about 30 s: its own record sizes
 def test_cli_without_nominal_on_a_small_acrobot_names_every_friction_with_its_size(tmp_path, capsys):
     """A 0.3 m acrobot (not Drake's 1 m one) with viscous friction 0.01 N m s at both joints and Coulomb
     friction 0.03 N m at the elbow, 30 s under a small multisine elbow torque (the shoulder swings 0.17 rad).
@@ -331,7 +331,7 @@ def test_cli_without_nominal_on_a_small_acrobot_names_every_friction_with_its_si
     assert {a["cause"] for a in shoulder["look_alikes"]} >= {"quadratic_drag", "coulomb_friction"}
 
 
-@pytest.mark.heavy  # a diagnosis of its own (one round, no discovery)
+@pytest.mark.slow  # about 45 s: a diagnosis of its own
 def test_a_nominal_model_of_another_machine_is_said_to_be_one(offset_data):
     """Every base parameter four times the demo's (a heavier arm whose accelerations under the same torque are a
     quarter): the refit of theta1..theta5 has to move them by about 4, and the report says that the nominal

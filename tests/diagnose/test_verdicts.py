@@ -134,7 +134,7 @@ def test_a_cause_found_with_a_leftover_probe_structure_is_explained():
     assert j["gain"] > 0.5
 
 
-@pytest.mark.heavy
+@pytest.mark.slow  # about 40 s
 def test_known_mode_with_an_impossible_nominal_is_not_none():
     """`--mode known` with theta1 and theta4 of the wrong sign: the model cannot simulate the held-out record, and
     the answer must say so, never `none` (model adequate)."""

@@ -40,7 +40,11 @@ def test_notebook_matches_its_page(page):
         f"docs/tutorials/{page} changed: run python docs/tutorials/make_notebooks.py")
 
 
-@pytest.mark.parametrize("page", make_notebooks.EXECUTED)
+# The quadrotor page fits ten minutes of flight (about 50 s): it runs in the slow suite.
+@pytest.mark.parametrize(
+    "page",
+    [pytest.param(p, marks=pytest.mark.slow) if p == "quadrotor_flights.md" else p for p in make_notebooks.EXECUTED],
+)
 def test_tutorial_runs_top_to_bottom(page, datasets, monkeypatch, tmp_path):
     monkeypatch.chdir(TUTORIALS)  # where Jupyter starts the notebook; the pages find ../shared/datasets/ from there
     matplotlib.rcParams["figure.max_open_warning"] = 0
@@ -52,6 +56,7 @@ def test_tutorial_runs_top_to_bottom(page, datasets, monkeypatch, tmp_path):
             raise AssertionError(f"{page}, code block {i + 1} failed: {e!r}\n{block}") from e
 
 
+@pytest.mark.slow  # about 40 s: a Jupyter kernel; the quick suite runs the same page's code in process
 def test_notebook_runs_in_a_jupyter_kernel(datasets, tmp_path):
     """What a user does: open the notebook in Jupyter and run all cells. Executed by a real
     IPython kernel (nbclient), from the notebook's folder, with this interpreter's packages."""

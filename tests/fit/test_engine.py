@@ -238,6 +238,7 @@ def test_the_strict_trust_region_refuses_a_rise_that_optimistix_would_accept():
     assert bool(strict.step(jnp.array(True), y, y_eval, info(1.0), rise, state)[1])  # the first evaluation is no step
 
 
+@pytest.mark.slow  # about 30 s
 def test_a_fit_started_at_its_minimum_stops_at_once_and_the_answer_is_the_tightly_converged_one():
     """MINPACK's relative-reduction test (lmder's `ftol`): from its own solution a fit takes a step or
     two. optimistix's test alone, which waits for an accepted step that moves every residual by under

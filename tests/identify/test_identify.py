@@ -222,6 +222,7 @@ def test_with_measurement_noise_energy_beats_power_beats_dynamic_until_filtered(
     assert e_power_filtered < e_energy and e_dynamic_filtered < 0.1 * e_dynamic
 
 
+@pytest.mark.slow  # about 50 s
 def test_irregular_sampling_is_used_as_recorded():
     # Real rigs jitter: sample intervals 0.005 s +- 40 %. Energy and power integrate and difference on
     # the recorded grid, so they need no resampling.

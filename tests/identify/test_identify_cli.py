@@ -2,6 +2,8 @@
 
 import json
 
+import pytest
+
 import dynax
 from dynax.internal import cli_main
 
@@ -128,6 +130,7 @@ def test_the_jointly_determined_note_gives_an_estimate_at_its_bound_as_value_and
     assert lone == "theta6 (13x) with several others"
 
 
+@pytest.mark.slow  # about 45 s
 def test_identify_says_that_one_record_cannot_show_what_changes_between_recordings(acrobot_csv, tmp_path, capsys):
     # Refined on one record, the answer's errors and validation come from within it. On the DFKI rig
     # such answers (run 03 or 12 alone) are determined to 2 to 12 % and 2 to 4 times the lab's error

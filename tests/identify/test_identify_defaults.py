@@ -261,7 +261,7 @@ def test_records_that_hardly_move_say_the_size_parameters_are_poorly_determined(
     assert {"theta1", "theta4"} <= set(at_rest.poorly_determined) and at_rest.consistency.consistent
 
 
-@pytest.mark.heavy
+@pytest.mark.slow  # about 30 s with refinement
 def test_a_resting_dfki_record_refined_by_default_is_still_said_to_be_poorly_determined(datasets):
     # The last 1.4 s of DFKI run 12 (upright at rest, the driver's noise), with the refinement on as
     # by default. The output-error fit from the degenerate least-squares start either lowers its cost
@@ -316,7 +316,7 @@ def test_short_records_are_validated_at_the_horizons_their_tails_hold():
         )
 
 
-@pytest.mark.heavy
+@pytest.mark.slow  # about 80 s on real runs
 def test_one_dfki_run_alone_is_said_to_determine_the_size_parameters_poorly(monkeypatch, datasets):
     # A user with one recording: DFKI run 00 (10 s, both motors, small amplitude), defaults. Its angles
     # are read from zeros of their own (-0.09 and +0.12 rad, test_angle_zeros): with them fitted, as the
@@ -480,7 +480,7 @@ OTHER_SIZES = {
 }
 
 
-@pytest.mark.heavy
+@pytest.mark.slow  # about 1 min per arm; the quick suite keeps the rig-sized case
 @pytest.mark.parametrize("size", sorted(OTHER_SIZES))
 def test_noisy_arms_of_other_sizes_give_consistent_estimates(size):
     from dynax.internal import base_parameters_from_physical
@@ -601,7 +601,7 @@ def test_reversed_inputs_and_angles_in_degrees_or_from_upright_of_real_records_a
         assert f"signs of {terms}" in hints[0] and "--offset q" in hints[0], hints
 
 
-@pytest.mark.heavy
+@pytest.mark.slow  # about 35 s on real runs
 def test_dfki_least_squares_with_defaults_is_consistent_where_the_unfiltered_fit_is_not(datasets):
     # The new user: six raw runs, no recipe. Without a filter the estimate is physically impossible
     # (negative gravity terms); with the defaults it is consistent, with the filter chosen near the lab's 5 Hz.
@@ -812,6 +812,7 @@ def test_the_labs_geared_rotor_with_its_coupling_is_base_parameters_plus_elbow_r
         np.testing.assert_allclose(np.asarray(ddq), [a1, a2], rtol=1e-9, atol=1e-9)
 
 
+@pytest.mark.slow  # about 35 s
 def test_a_refinement_that_ends_worse_than_its_start_keeps_the_least_squares_model(monkeypatch):
     # Levenberg-Marquardt through rollouts has been seen (rarely, on real data) to end at a point worse
     # than its start. The fit below is the real one; only its result is made the engine's report of

@@ -40,7 +40,7 @@ def _mass_matrix_at_rest(p):
     return np.array([p["theta1"] + p["theta2"] + 2 * p["theta3"], p["theta2"] + p["theta3"], p["theta2"] + p["Ir2"]])
 
 
-@pytest.mark.heavy
+@pytest.mark.slow  # about 2 min: identification with refinement on four MuJoCo records
 def test_defaults_on_mujoco_records_predict_as_well_as_mujoco_with_honest_standard_errors():
     train, held_out = [_record(0), _record(1)], _record(9)
     result = identify(dynax.DoublePendulum(), train, Dynamic(), friction="coulomb", validation=[held_out])
@@ -172,6 +172,7 @@ def test_clustered_covariance_matches_the_spread_over_repeated_noise_where_gauss
     assert segment_clustered_covariance(x[:100], r[:100], ts[:5], owner[:5], [_Record(ts[0])], segment_s) is None
 
 
+@pytest.mark.slow  # about 50 s
 def test_record_jackknife_carries_what_differs_between_records_where_blocks_of_time_do_not():
     # Five records of 40 segments; each record has its own slope on the second regressor (a friction of
     # that day), on top of a shock per segment and white noise. The blocks of time within records see only

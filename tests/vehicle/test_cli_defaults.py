@@ -2,11 +2,14 @@
 
 import json
 
+import pytest
+
 from dynax import Helicopter, save_trajectory
 from dynax.internal import cli_main
 from dynax.synthetic import generate_helicopter_flight
 
 
+@pytest.mark.slow  # about 20 s
 def test_auto_stride_and_iteration_cap(tmp_path, capsys):
     flight = generate_helicopter_flight("hover", 8.0, seed=5, truth=Helicopter())  # 800 samples
     path = tmp_path / "flight.csv"

@@ -123,7 +123,7 @@ def _python_lbfgs(loss_fn, theta, steps, tolerance):
     return theta, np.asarray(losses)
 
 
-@pytest.mark.heavy
+@pytest.mark.slow  # about 55 s; the quick suite keeps the compiled EM-free case
 def test_compiled_backprop_takes_the_python_lbfgs_steps(flight, start):
     criterion = Backprop(horizon=0.2, stride=8, max_steps=6)
     n_steps = horizon_steps(criterion.horizon, flight.dt, "test")

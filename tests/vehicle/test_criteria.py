@@ -136,6 +136,7 @@ def test_one_step_on_a_noisy_flight_is_within_the_noise(noisy_tempest_data):
             )
 
 
+@pytest.mark.slow  # about 30 s
 def test_state_sensitivities_reach_a_stationary_point_of_the_lagged_loss(truth_data, em_free_fit):
     # Gauss-Newton on the true loss (the EM-free least squares with the rollout's full Jacobian):
     # at its result the true loss's gradient, J^T W r, vanishes, and the loss is no higher than
@@ -220,6 +221,7 @@ def test_frequency_domain_refuses_the_acceleration_model(truth_data):
         fit_vehicle(Helicopter(), truth_data, FrequencyDomain())
 
 
+@pytest.mark.slow  # about 70 s
 def test_frequency_structure_reduction_drops_what_the_responses_do_not_determine():
     """CIFER's elimination (insensitivity > 10 %, Cramer-Rao > 20 %) on data from the linear model itself:
     two derivatives the model does not have are dropped, the on-axis ones are kept and recovered."""
