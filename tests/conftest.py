@@ -9,7 +9,7 @@ import tempfile
 
 # JAX's persistent compilation cache, shared by the two xdist workers and the subprocesses the CLI and
 # multi-process tests start: a computation compiled once (same HLO, same JAX) is read back instead of
-# compiled again, which takes about an eighth off the suite. Set JAX_COMPILATION_CACHE_DIR to choose
+# compiled again, which takes 8 to 12 % off the suite. Set JAX_COMPILATION_CACHE_DIR to choose
 # the folder.
 os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.path.join(tempfile.gettempdir(), "dynax-tests-jax-cache"))
 os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.2")
