@@ -179,8 +179,8 @@ def _noise_reading(q, v, fs: float) -> np.ndarray:
     own; the DFKI logged velocities interpolated to 10 ms, whose noise is the 2 ms backward
     difference's, lie at 0.30 and above. A velocity whose noise does not vanish at the Nyquist
     frequency reads its floor correctly from itself, so a doubtful case costs little either way: the
-    positions-only records interpolated to 5 or 10 ms (0.17 to 0.9) are read either way within a
-    factor of 2 in noise power."""
+    positions-only records interpolated to 5 or 10 ms (0.17 to 1.9) read floors within a factor of
+    about 2 in noise power either way."""
     q, v = np.asarray(q, dtype=float), np.asarray(v, dtype=float)
     if len(q) < 3:
         return v
