@@ -2,11 +2,12 @@
 #   make demo   runs the main job (`dynax demo`) on the embedded default
 #   make test   checks style and types (ruff, basedpyright), runs the test suite and builds the docs site strictly
 #   make quick  the suite without the minute-long end-to-end runs (marker `heavy`), for iteration
+#   make slow   the longer end-to-end variants left out of both (marker `slow`)
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test lint quick docs bench clean
+.PHONY: demo test lint quick slow docs bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -34,6 +35,9 @@ test: lint
 
 quick: $(VENV)/.installed-dev
 	$(BIN)/python -m pytest -n 2 -m "not slow and not heavy"
+
+slow: $(VENV)/.installed-dev
+	$(BIN)/python -m pytest -n 2 -m slow
 
 docs: $(VENV)/.installed-dev
 	$(BIN)/mkdocs serve
