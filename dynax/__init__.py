@@ -265,6 +265,9 @@ from ._model._extensions import (
     RotorInertia as RotorInertia,
 )
 from ._model._extensions import (
+    Stiction as Stiction,
+)
+from ._model._extensions import (
     ViscousFriction as ViscousFriction,
 )
 from ._model._extensions import (

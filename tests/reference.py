@@ -71,3 +71,142 @@ def arm_reference(theta, x, tau, coulomb=(0.0, 0.0), velocity_scale=0.01, rotor=
     h2 = tau[1] - t3 * s2 * dq1**2 - t5 * s12 - t7 * dq2 - coulomb[1] * np.tanh(dq2 / velocity_scale)
     det = m11 * m22 - m12 * m12
     return np.array([dq1, dq2, (m22 * h1 - m12 * h2) / det, (m11 * h2 - m12 * h1) / det])
+
+
+def _arm_pieces(theta, x, tau, fc, fs, vst, direction):
+    """Mass matrix and the generalised force of the arm with each joint's friction as the Stribeck curve
+    $-[f_c + (f_s - f_c) e^{-(\\dot q/v_{st})^2}]\\,s$ in the direction `s` it slips (0 where it sticks)."""
+    t1, t2, t3, t4, t5, t6, t7 = theta
+    q1, q2, dq1, dq2 = x
+    c2, s2, s1, s12 = np.cos(q2), np.sin(q2), np.sin(q1), np.sin(q1 + q2)
+    mass = np.array([[t1 + t2 + 2 * t3 * c2, t2 + t3 * c2], [t2 + t3 * c2, t2]])
+    force = np.array(
+        [
+            tau[0] + t3 * s2 * (2 * dq1 * dq2 + dq2**2) - t4 * s1 - t5 * s12 - t6 * dq1,
+            tau[1] - t3 * s2 * dq1**2 - t5 * s12 - t7 * dq2,
+        ]
+    )
+    for j, v in enumerate((dq1, dq2)):
+        force[j] -= (fc[j] + (fs[j] - fc[j]) * np.exp(-((v / vst) ** 2))) * direction[j]
+    return mass, force
+
+
+def _arm_stuck(mass, force, stuck):
+    """Accelerations and the stuck joints' friction forces: solves $M\\ddot q = F + \\sum_{j \\in S} e_j f_j$
+    with $\\ddot q_j = 0$ for the stuck joints $S$."""
+    n = len(force)
+    free = [j for j in range(n) if j not in stuck]
+    a = np.zeros((n, n))
+    a[:, : len(free)] = mass[:, free]
+    for k, j in enumerate(stuck):
+        a[j, len(free) + k] = -1.0
+    z = np.linalg.solve(a, force)
+    ddq = np.zeros(n)
+    ddq[free] = z[: len(free)]
+    return ddq, dict(zip(stuck, z[len(free) :]))
+
+
+def stick_slip_arm(theta, x0, ts, us, fc=(0.0, 0.0), fs=(0.0, 0.0), vst=0.05, rtol=1e-10, atol=1e-12):
+    r"""The two-link arm of `arm_reference` (both joints driven, `us` of shape `(time, 2)`, zero-order hold) with
+    stick-slip friction made by an event-based integrator (Karnopp's switch, integrated exactly): a joint
+    at rest sticks (speed held at exactly 0) while the friction it needs stays within $\pm f_s$; it breaks
+    away when it would need more, and slips with the Stribeck friction
+    $-[f_c + (f_s - f_c) e^{-(\dot q / v_{st})^2}]\operatorname{sign}(\dot q)$ until its speed crosses zero,
+    where it sticks again if the friction can hold it. scipy's DOP853 between events (`solve_ivp` events on
+    each slipping joint's speed and each stuck joint's needed friction). Shares no code with dynax's models.
+
+    Returns the states `(time, 4)` and a boolean `(time, 2)` of the joints stuck at each sample."""
+    fc, fs = np.asarray(fc, float), np.asarray(fs, float)
+    x = np.asarray(x0, dtype=float).copy()
+    n = 2
+
+    def classify(x, tau, stuck, direction):
+        """Which joints at zero speed stick, and the slip direction of the others (from the needed force)."""
+        stuck = list(stuck)
+        for _ in range(2 * n):
+            changed = False
+            mass, force = _arm_pieces(theta, x, tau, fc, fs, vst, direction)
+            _, held = _arm_stuck(mass, force, stuck)
+            for j, f in held.items():
+                if abs(f) > fs[j] * (1 + 1e-9):
+                    stuck.remove(j)
+                    direction[j] = -np.sign(f)
+                    changed = True
+                    break
+            if changed:
+                continue
+            for j in range(n):
+                if j not in stuck and x[2 + j] == 0.0:
+                    trial = [*stuck, j]
+                    d = direction.copy()
+                    d[j] = 0.0
+                    mass, force = _arm_pieces(theta, x, tau, fc, fs, vst, d)
+                    _, held = _arm_stuck(mass, force, trial)
+                    if abs(held[j]) <= fs[j]:
+                        stuck, direction, changed = trial, d, True
+                        break
+                    direction[j] = -np.sign(held[j])
+            if not changed:
+                break
+        for j in stuck:
+            direction[j] = 0.0
+        return sorted(stuck), direction
+
+    stuck = []
+    direction = np.sign(x[2:]).astype(float)
+    for j in range(n):
+        if x[2 + j] == 0.0:
+            direction[j] = 0.0
+    out, stuck_out = [x.copy()], []
+    for k in range(len(ts) - 1):
+        tau = np.asarray(us[k], float)
+        t, t_end = float(ts[k]), float(ts[k + 1])
+        stuck, direction = classify(x, tau, stuck, direction)
+        stuck_out.append([j in stuck for j in range(n)])
+        for _ in range(1000):
+            if t >= t_end:
+                break
+
+            def rhs(_, y, stuck=tuple(stuck), direction=direction.copy()):
+                mass, force = _arm_pieces(theta, y, tau, fc, fs, vst, direction)
+                ddq, _ = _arm_stuck(mass, force, list(stuck))
+                dq = y[2:].copy()
+                dq[list(stuck)] = 0.0
+                return np.concatenate([dq, ddq])
+
+            events = []
+            for j in range(n):
+                if j in stuck:
+
+                    def breakaway(_, y, j=j, stuck=tuple(stuck), direction=direction.copy()):
+                        mass, force = _arm_pieces(theta, y, tau, fc, fs, vst, direction)
+                        return fs[j] - abs(_arm_stuck(mass, force, list(stuck))[1][j])
+
+                    events.append(breakaway)
+                else:
+
+                    def reversal(_, y, j=j):
+                        return y[2 + j]
+
+                    events.append(reversal)
+            for e in events:
+                e.terminal = True
+            sol = solve_ivp(rhs, (t, t_end), x, method="DOP853", rtol=rtol, atol=atol, events=events)
+            x = sol.y[:, -1].copy()
+            t = float(sol.t[-1])
+            if sol.status == 1:  # an event: re-classify at the event's state
+                for j, te in enumerate(sol.t_events):
+                    if len(te) and j not in stuck:
+                        x[2 + j] = 0.0
+                stuck, direction = classify(x, tau, stuck, direction)
+                # step a hair past the event, so that it does not fire again at once
+                if t < t_end:
+                    rhs_now = rhs(t, x, tuple(stuck), direction.copy())
+                    h = min(1e-9, t_end - t)
+                    x = x + h * rhs_now
+                    t += h
+        for j in stuck:
+            x[2 + j] = 0.0
+        out.append(x.copy())
+    stuck_out.append([j in stuck for j in range(n)])
+    return np.asarray(out), np.asarray(stuck_out)

@@ -79,6 +79,10 @@ class AbstractJointTerm(AbstractTerm):
     """
 
     joint: eqx.AbstractVar[int]
+    # A friction law of the joint's speed (a sticking term replaces their sum in its band).
+    friction: ClassVar[bool] = False
+    # The term holds its joint at rest (`Stiction`): it has a `holding_force`.
+    holds_at_rest: ClassVar[bool] = False
 
     def __check_init__(self):
         if not isinstance(self.joint, int) or self.joint < 0:
@@ -113,8 +117,18 @@ class AbstractJointTerm(AbstractTerm):
         for term in terms:
             force = force.at[term.joint].add(term.joint_force(q, dq, a))
             inertia = inertia.at[term.joint].add(term.inertia())
-        ddq = solve_spd(system.mass_matrix(q) + jnp.diag(inertia), force)
+        mass = system.mass_matrix(q) + jnp.diag(inertia)
+        holding = tuple(t for t in terms if t.holds_at_rest)
+        if holding:
+            force = force + type(holding[0]).holding_force(holding, terms, mass, force, q, dq)
+        ddq = solve_spd(mass, force)
         return jnp.concatenate([dq, ddq])
+
+    @staticmethod
+    def holding_force(holding, terms, mass, force, q, dq) -> Float[Array, " n_joints"]:
+        """What the terms that hold their joints at rest (`holds_at_rest`, e.g. `Stiction`) add to the generalised
+        force `force`, given all terms and the mass matrix (default none)."""
+        return jnp.zeros_like(force)
 
     def force(self, q: Float[Array, ""], dq: Float[Array, ""]) -> Float[Array, ""]:
         """Generalised force the term adds at its joint (default none)."""
@@ -154,6 +168,7 @@ class CoulombFriction(AbstractJointTerm):
     velocity_scale: Float[Array, ""]
     cause: ClassVar[str] = "coulomb_friction"
     prefix: ClassVar[str] = "fc"
+    friction: ClassVar[bool] = True
     neutral: ClassVar[float] = 0.0
     sign: ClassVar[int] = 1
 
@@ -179,6 +194,7 @@ class ViscousFriction(AbstractJointTerm):
     coefficient: Float[Array, ""]
     cause: ClassVar[str] = "viscous_friction"
     prefix: ClassVar[str] = "b"
+    friction: ClassVar[bool] = True
     neutral: ClassVar[float] = 0.0
     sign: ClassVar[int] = 0
 
