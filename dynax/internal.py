@@ -63,6 +63,8 @@ from ._data import (
 from ._data import (
     resample as resample,
 )
+from ._data import Rest as Rest
+from ._data import rest_stretches as rest_stretches
 from ._data import (
     savitzky_golay as savitzky_golay,
 )
@@ -481,6 +483,8 @@ from ._simulate import zoh_term as zoh_term
 
 # Aliased re-exports (`x as y`) count as exports only through `__all__`, so it lists every name.
 __all__ = [
+    "Rest",
+    "rest_stretches",
     "collocation_reference",
     "end_upright_residuals",
     "knot_matrix",

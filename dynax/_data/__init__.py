@@ -24,6 +24,8 @@ from ._io import (
 from ._io import (
     save_trajectory as save_trajectory,
 )
+from ._rest import Rest as Rest
+from ._rest import rest_stretches as rest_stretches
 from ._sampling import check_time_stamps as check_time_stamps
 from ._sampling import split_at_gaps as split_at_gaps
 from ._sanity import (

@@ -1,0 +1,83 @@
+r"""Where a joint rests: stretches in which its measured position stays still.
+
+A joint rests where its position moves less than `speed` times the window over every window of
+`min_duration` seconds in the stretch: the position's range, not its measured velocity, decides,
+because a velocity at rest is mostly noise (on the DFKI rig's driver about 0.1 rad/s rms while the
+encoder angle moves by 2 to 8 mrad in 0.75 s). The default `speed` 0.05 rad/s (or m/s) is slower
+than any motion a swing or a reversal makes over a quarter second; a reversal itself (zero speed
+for an instant) is no rest.
+
+Rest matters to friction: a joint at rest under a net torque is held by its static friction
+(`Stiction`), which a friction law of the speed alone cannot do.
+"""
+
+import dataclasses
+
+import numpy as np
+
+from ._trajectory import Trajectory
+
+
+@dataclasses.dataclass(frozen=True)
+class Rest:
+    """One stretch in which a joint rests.
+
+    **Fields:** `record` (the record's source, or its index as text), `joint` (0-based), `coordinate`
+    (its state name, e.g. `q2`), `start`, `stop` (rows, `stop` excluded), `start_s`, `stop_s` (times [s]).
+    """
+
+    record: str
+    joint: int
+    coordinate: str
+    start: int
+    stop: int
+    start_s: float
+    stop_s: float
+
+    @property
+    def duration(self) -> float:
+        return self.stop_s - self.start_s
+
+
+def rest_stretches(
+    trajectory: Trajectory,
+    positions: tuple[int, ...] | None = None,
+    *,
+    speed: float = 0.05,
+    min_duration: float = 0.25,
+    record: str = "",
+) -> tuple[Rest, ...]:
+    """The stretches of at least `min_duration` seconds in which a joint rests (see the module).
+
+    **Arguments:** `trajectory`; `positions`, the state columns of the joint positions (default: the
+    columns named `q`, `q1`, `q2`, ...); `speed` [rad/s or m/s]; `min_duration` [s]; `record`, the label
+    the stretches carry (default the trajectory's source).
+
+    **Returns:** a tuple of `Rest`, by joint then time.
+    """
+    if not (speed > 0 and min_duration > 0):
+        raise ValueError(f"rest_stretches: `speed` and `min_duration` must be positive, got {speed}, {min_duration}")
+    ts = np.asarray(trajectory.ts, dtype=float)
+    xs = np.asarray(trajectory.xs, dtype=float)
+    names = trajectory.state_names
+    if positions is None:
+        positions = tuple(i for i, n in enumerate(names) if n == "q" or (n.startswith("q") and n[1:].isdigit()))
+    label = record or trajectory.source
+    out = []
+    if len(ts) < 2:
+        return ()
+    dt = float(np.median(np.diff(ts)))
+    width = max(int(round(min_duration / dt)), 2)
+    if width > len(ts):
+        return ()
+    for joint, column in enumerate(positions):
+        q = xs[:, column]
+        windows = np.lib.stride_tricks.sliding_window_view(q, width)
+        still = np.ptp(windows, axis=1) <= speed * min_duration
+        resting = np.zeros(len(ts), bool)
+        for i in np.flatnonzero(still):
+            resting[i : i + width] = True
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], resting.astype(int), [0]])))
+        for start, stop in zip(edges[::2], edges[1::2]):
+            out.append(Rest(label, joint, names[column], int(start), int(stop), float(ts[start]), float(ts[stop - 1])))
+    return tuple(out)
