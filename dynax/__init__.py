@@ -229,6 +229,9 @@ from ._model._extensions import (
     AbstractTerm as AbstractTerm,
 )
 from ._model._extensions import (
+    BatterySag as BatterySag,
+)
+from ._model._extensions import (
     BodyBias as BodyBias,
 )
 from ._model._extensions import (
@@ -239,6 +242,9 @@ from ._model._extensions import (
 )
 from ._model._extensions import (
     Extended as Extended,
+)
+from ._model._extensions import (
+    GroundEffect as GroundEffect,
 )
 from ._model._extensions import (
     InputDelay as InputDelay,

@@ -148,6 +148,8 @@ from ._diagnose._problem import names_to_refit as names_to_refit
 from ._diagnose._quadrotor import (
     body_frame_records as body_frame_records,
 )
+from ._diagnose._quadrotor import body_frame_system as body_frame_system
+from ._diagnose._quadrotor import quadrotor_candidates as quadrotor_candidates
 from ._diagnose._quadrotor import (
     quadrotor_flight_errors as quadrotor_flight_errors,
 )
@@ -483,6 +485,8 @@ from ._simulate import zoh_term as zoh_term
 
 # Aliased re-exports (`x as y`) count as exports only through `__all__`, so it lists every name.
 __all__ = [
+    "body_frame_system",
+    "quadrotor_candidates",
     "Rest",
     "rest_stretches",
     "collocation_reference",

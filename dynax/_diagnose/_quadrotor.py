@@ -15,6 +15,10 @@ The vocabulary for a multirotor (`quadrotor_candidates`):
 - `body_bias` on `u, v, w, p, q, r` (`BodyBias`): a constant body-frame force or moment (the
   centre of mass off the thrust centre, an IMU or motion-capture frame offset, a bent arm);
 - `input_lag` per motor (`InputLag` at `m1..m4`): the motor's first-order lag behind its command;
+- `battery_sag` at `vbat` (`BatterySag`, where the flights log `vbat`): thrust and moments per command that
+  change with the battery voltage, which a motor map that does not read `vbat` misses;
+- `ground_effect` at `z` (`GroundEffect`): thrust that rises near the floor, the floor taken as the
+  records' lowest height (a log that starts on its pad: the pad);
 - `input_gain` per motor (`InputGain` at `m1..m4`): one motor's thrust per command off the others'.
   Tested against the held motor map; where the motor weights are refitted with it
   (`Refit(parameters=...)` naming them) the learned map carries any per-motor scale and the report
@@ -35,8 +39,8 @@ import numpy as np
 
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
-from .._model._extensions import InputGain, InputLag
-from .._model._extensions._vehicle_terms import BodyBias, RotorDrag
+from .._model._extensions import AbstractTerm, InputGain, InputLag
+from .._model._extensions._vehicle_terms import BatterySag, BodyBias, GroundEffect, RotorDrag
 from .._model._helicopter import ANGULAR_RATE, BODY, Helicopter, QUATERNION, quaternion_to_rotation
 from .._model._quadrotor import (
     MOTORS,
@@ -74,11 +78,16 @@ def as_quadrotor(body: BodyFrameQuadrotor, like: Quadrotor) -> Quadrotor:
     return like.with_body_model(body.body_model)
 
 
-def quadrotor_candidates(system) -> tuple:
+def quadrotor_candidates(system, flights=()) -> tuple:
     """The multirotor vocabulary at neutral values (see the module docs): `rotor_drag` on `u` ... `r`,
-    `body_bias` on `u, v, w, p, q, r`, `input_lag` and `input_gain` at each motor `m1..m4`."""
-    terms = [RotorDrag(i) for i in range(6)]
+    `body_bias` on `u, v, w, p, q, r`, `battery_sag` where the system has `vbat`, `ground_effect` over the
+    `flights`' lowest height (0 without flights), `input_lag` and `input_gain` at each motor `m1..m4`."""
+    terms: list[AbstractTerm] = [RotorDrag(i) for i in range(6)]
     terms += [BodyBias(i) for i in range(6)]
+    if "vbat" in tuple(system.input_names):
+        terms.append(BatterySag())
+    heights = [np.asarray(f.xs)[:, 2] for f in flights]
+    terms.append(GroundEffect(floor=float(min(h.min() for h in heights)) if heights else 0.0))
     terms += [InputLag(i) for i in range(len(MOTORS))]
     terms += [InputGain(i) for i in range(len(MOTORS))]
     return tuple(terms)
@@ -140,7 +149,7 @@ def diagnose_quadrotor(system: Quadrotor, train, validation=None, *, diagnose, m
         train, validation = [a for a, _ in halves], [b for _, b in halves]
     body, train_b, val_b, _ = prepare_quadrotor(system, train, validation, refit=refit)
     if options.get("candidates") is None:
-        options["candidates"] = quadrotor_candidates(body)
+        options["candidates"] = quadrotor_candidates(body, train_b + (val_b or []))
     if options.get("horizons_s") is None:
         options["horizons_s"] = QUADROTOR_HORIZONS_S
     options["system_name"] = options.get("system_name") or "quadrotor"

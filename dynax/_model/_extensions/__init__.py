@@ -44,10 +44,16 @@ from ._vehicle_terms import (
     AbstractVehicleTerm as AbstractVehicleTerm,
 )
 from ._vehicle_terms import (
+    BatterySag as BatterySag,
+)
+from ._vehicle_terms import (
     BodyBias as BodyBias,
 )
 from ._vehicle_terms import (
     BodyQuadraticDrag as BodyQuadraticDrag,
+)
+from ._vehicle_terms import (
+    GroundEffect as GroundEffect,
 )
 from ._vehicle_terms import (
     RotorDrag as RotorDrag,

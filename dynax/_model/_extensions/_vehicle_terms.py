@@ -40,6 +40,7 @@ from .._helicopter import (
 from ._terms import AbstractTerm, float_scalar
 
 WORLD_AXES = ("n", "e", "d")
+MULTIROTOR_MOTORS = ("m1", "m2", "m3", "m4")
 
 
 class AbstractVehicleTerm(AbstractTerm):
@@ -77,9 +78,24 @@ class AbstractVehicleTerm(AbstractTerm):
         air = s.at[:3].add(-quaternion_to_rotation(quat).T @ wind)
         dpos, dquat = rigid_body_kinematics(x, system.normalisation_gain)
         dbody = system.body_model(quat, s, u, air=air)
+        scaling = tuple(t for t in terms if t.scales_rotors)
+        if scaling:
+            # The rotors' part of the body model: what it gives minus what it gives with the motors off.
+            idle = u.at[: len(MULTIROTOR_MOTORS)].set(0.0)
+            rotors = dbody - system.body_model(quat, s, idle, air=air)
+            gain = sum((t.rotor_gain(x, u) for t in scaling), jnp.zeros((), x.dtype))
+            dbody = dbody + gain.astype(x.dtype) * rotors
         for term in terms:
             dbody = dbody + term.acceleration(quat, air, u).astype(x.dtype)
         return jnp.concatenate([dpos, dquat, dbody])
+
+    # The term scales the rotors' forces and moments (`rotor_gain`) rather than adding an acceleration.
+    scales_rotors: ClassVar[bool] = False
+
+    def rotor_gain(self, x: Float[Array, " 13"], u: Float[Array, " n_inputs"]) -> Float[Array, ""]:
+        r"""The relative change $g$ of every rotor force and moment the term makes: the body model's rotor
+        part (its output less its output with the motors off) is multiplied by $1 + \sum g$ (default none)."""
+        return jnp.zeros((), self.coefficient.dtype)
 
     def wind(self) -> Float[Array, "3"]:
         """The world-frame wind [m/s] the term contributes (default none)."""
@@ -211,3 +227,111 @@ class Wind(AbstractVehicleTerm):
 
     def wind(self):
         return jnp.zeros(3, self.coefficient.dtype).at[self.axis].set(self.coefficient)
+
+
+class _AbstractRotorTerm(AbstractVehicleTerm):
+    """A term on a multirotor's rotors (inputs `m1..m4` first): it scales their forces and moments."""
+
+    scales_rotors: ClassVar[bool] = True
+    n_axes: ClassVar[int] = 1
+
+    def check_system(self, system) -> None:
+        super().check_system(system)
+        if tuple(system.input_names[:4]) != MULTIROTOR_MOTORS:
+            raise ValueError(
+                f"{type(self).__name__} acts on a multirotor's rotors (inputs m1..m4), but "
+                f"{type(system).__name__}'s inputs are {tuple(system.input_names)}"
+            )
+
+
+class BatterySag(_AbstractRotorTerm):
+    r"""Battery sag: the rotors' thrust and moments per command change with the battery voltage.
+
+    A brushed or an ESC-driven motor turns at a speed about proportional to the voltage across it,
+    the command times the battery voltage $v_b$, and a rotor's thrust and drag torque grow like the
+    square of its speed: at one command the thrust falls as the battery discharges (about
+    $(v_b / \bar v_b)^2$). A model whose motor map does not read `vbat` carries this as a thrust
+    error that drifts over the flight. The term multiplies the model's rotor forces and moments by
+    $1 + s\,(v_b / \bar v_b - 1)$, $\bar v_b$ the model's scale of `vbat` (the training flights'
+    median, `Quadrotor.input_scale`): $s = 2$ for a model that ignores the voltage, $s = 0$ for one
+    that has the square law already. Needs `vbat` among the inputs (the fifth).
+
+    **Arguments:** `s`, the exponent's linear part (dimensionless).
+
+    ??? cite
+
+        M. Bangura and R. Mahony, "Thrust control for multirotor aerial vehicles", IEEE Transactions
+        on Robotics 33(2), 2017 (rotor speed, battery voltage and thrust).
+    """
+
+    axis: int = eqx.field(static=True)
+    coefficient: Float[Array, ""]
+    cause: ClassVar[str] = "battery_sag"
+    prefix: ClassVar[str] = "sag"
+    neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 0
+
+    def __init__(self, s: ArrayLike = 0.0):
+        self.axis = 0
+        self.coefficient = float_scalar(s)
+
+    def check_system(self, system) -> None:
+        super().check_system(system)
+        if len(system.input_names) < 5 or system.input_names[4] != "vbat":
+            raise ValueError(f"BatterySag needs `vbat` as the fifth input; {type(system).__name__} has none")
+
+    def where(self, system) -> str:
+        self.check_system(system)
+        return "vbat"
+
+    def rotor_gain(self, x, u):
+        return self.coefficient * (u[4] - 1.0)
+
+
+class GroundEffect(_AbstractRotorTerm):
+    r"""Ground effect: the rotors' thrust rises near the floor.
+
+    A rotor at a height $z$ of a few radii $R$ over the ground pushes against its own wake: at one
+    rotor speed its thrust is $T/(1 - (R/4z)^2)$ of the thrust far from the ground (Cheeseman and
+    Bennett's image-rotor model), about $1 + R^2/(16 z^2)$ above $z \approx R$. The term multiplies
+    the rotor forces and moments by $1 + c / (h + h_0)^2$, $h$ the vehicle's height over `floor`
+    (world `z` up, as motion capture logs it) and $h_0$ the rotor plane's height over the floor when the
+    vehicle stands on it; $c$ [m^2] is $R^2 / 16$ in that model.
+
+    **Arguments:** `c` [m^2]; `floor`, the floor's height in the records' frame [m] (the diagnosis takes
+    the records' lowest height); `rotor_height` $h_0$ [m] (default 0.02, a nano quadrotor's).
+
+    ??? cite
+
+        I. C. Cheeseman and W. E. Bennett, "The effect of the ground on a helicopter rotor in forward
+        flight", Aeronautical Research Council R&M 3021, 1955.
+    """
+
+    axis: int = eqx.field(static=True)
+    coefficient: Float[Array, ""]
+    # Settings held as arrays (set from the data without recompiling); not fitted.
+    floor: Float[Array, ""]
+    rotor_height: Float[Array, ""]
+    cause: ClassVar[str] = "ground_effect"
+    prefix: ClassVar[str] = "ground"
+    neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 1
+
+    def __init__(self, c: ArrayLike = 0.0, *, floor: ArrayLike = 0.0, rotor_height: ArrayLike = 0.02):
+        if isinstance(rotor_height, (int, float)) and not rotor_height > 0:
+            raise ValueError(f"GroundEffect: `rotor_height` must be positive, got {rotor_height}")
+        self.axis = 0
+        self.coefficient = float_scalar(c)
+        self.floor = float_scalar(floor)
+        self.rotor_height = float_scalar(rotor_height)
+
+    def parameter_filter(self):
+        return eqx.tree_at(lambda t: (t.floor, t.rotor_height), super().parameter_filter(), (False, False))
+
+    def where(self, system) -> str:
+        self.check_system(system)
+        return "z"
+
+    def rotor_gain(self, x, u):
+        height = jnp.maximum(x[2] - self.floor, 0.0) + self.rotor_height
+        return self.coefficient / height**2
