@@ -112,9 +112,6 @@ from ._identify import (
     held_out_error as held_out_error,
 )
 from ._identify import (
-    HeldOutError as HeldOutError,
-)
-from ._identify import (
     IdentifiabilityError as IdentifiabilityError,
 )
 from ._identify import (
@@ -290,7 +287,6 @@ from ._plots import (
 )
 from ._precision import PrecisionWarning as PrecisionWarning
 from ._predict import flight_error as flight_error
-from ._predict import FlightError as FlightError
 from ._predict import predict_ahead as predict_ahead
 from ._progress import ProgressBar as ProgressBar
 from ._sim_error import simulation_error as simulation_error

@@ -10,11 +10,11 @@ import numpy as np
 
 from .._fit import Solution
 from .._model._system import AbstractSystem
+from .._sim_error import SimulationError
 from ._angle_zeros import AngleZeros
 from ._consistency import Consistency
 from ._offsets import RecordOffsets
 from ._record_friction import RecordFriction
-from ._validation import HeldOutError
 
 
 class NoValidationWarning(UserWarning):
@@ -54,7 +54,7 @@ class Stage(eqx.Module):
       constrained estimate where the plain one was inconsistent.
     - `relative_equation_error`: $\lVert A\hat\theta - y\rVert / \lVert y\rVert$ of the
       least-squares equations at this stage's estimate; `None` for `SimulationFit`.
-    - `validation`: the `HeldOutError` of this stage's model, or `None`.
+    - `validation`: the `SimulationError` on held-out data (`held_out_error`) of this stage's model, or `None`.
     - `consistency`: the `Consistency` of this stage's estimate, or `None`.
     - `poorly_determined`: its size parameters the data determine poorly (see `poorly_determined`).
     - `offsets`: least squares: each record's fitted force offset at each driven joint, JSON-ready
@@ -70,7 +70,7 @@ class Stage(eqx.Module):
     method: str = eqx.field(static=True)
     solution: Solution
     relative_equation_error: float | None = eqx.field(static=True, default=None)
-    validation: HeldOutError | None = None
+    validation: SimulationError | None = None
     consistency: Consistency | None = None
     poorly_determined: dict[str, float] | None = eqx.field(static=True, default=None)
     offsets: dict | None = eqx.field(static=True, default=None)
@@ -225,7 +225,7 @@ class Identification(eqx.Module):
         return self.solution.covariance
 
     @property
-    def validation(self) -> HeldOutError | None:
+    def validation(self) -> SimulationError | None:
         return self.stages[-1].validation
 
     @property
