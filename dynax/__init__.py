@@ -82,6 +82,9 @@ from ._distributed import initialize_distributed as initialize_distributed
 from ._errors import DataError as DataError
 from ._errors import UsageError as UsageError
 from ._fit import (
+    AbstractStatistics as AbstractStatistics,
+)
+from ._fit import (
     fit_least_squares as fit_least_squares,
 )
 from ._fit import (
@@ -163,7 +166,7 @@ from ._identify._vehicle import (
     OneStep as OneStep,
 )
 from ._identify._vehicle import (
-    VehicleFit as VehicleFit,
+    VehicleStatistics as VehicleStatistics,
 )
 from ._identify._vehicle._model_file import load_model as load_model
 from ._identify._vehicle._model_file import save_model as save_model

@@ -8,13 +8,15 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 import numpy as np
 
-from .._fit import Solution
+from .._fit import Solution, Statistics
 from .._model._system import AbstractSystem
 from .._sim_error import SimulationError
 from ._angle_zeros import AngleZeros
 from ._consistency import Consistency
 from ._offsets import RecordOffsets
 from ._record_friction import RecordFriction
+from ._refine import RefinementStatistics
+from ._simulation_fit import OutputErrorStatistics
 
 
 class NoValidationWarning(UserWarning):
@@ -109,6 +111,7 @@ class Stage(eqx.Module):
             )
         elif self.kind == StageKind.OUTPUT_ERROR:
             stats = self.solution.statistics
+            assert isinstance(stats, RefinementStatistics)
             out.update(
                 consistency=self.consistency.to_json(),
                 initial_residual_rms=stats.initial_residual_rms,
@@ -239,9 +242,11 @@ class Identification(eqx.Module):
         return None if first is None else first.solution
 
     @property
-    def _linear_statistics(self):
+    def _linear_statistics(self) -> Statistics:
         first = self.stages[0].solution.statistics
-        return first.jacobian if self.stages[0].kind == StageKind.SIMULATION else first
+        linear = first.jacobian if isinstance(first, OutputErrorStatistics) else first
+        assert isinstance(linear, Statistics)
+        return linear
 
     @property
     def condition_number(self) -> Float[Array, ""]:
@@ -254,6 +259,7 @@ class Identification(eqx.Module):
     @property
     def residual_rms(self) -> Float[Array, ""]:
         first = self.stages[0].solution.statistics
+        assert isinstance(first, (Statistics, OutputErrorStatistics))
         return first.residual_rms
 
     @property
