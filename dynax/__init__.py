@@ -82,6 +82,9 @@ from ._distributed import initialize_distributed as initialize_distributed
 from ._errors import DataError as DataError
 from ._errors import UsageError as UsageError
 from ._fit import (
+    AbstractStatistics as AbstractStatistics,
+)
+from ._fit import (
     fit_least_squares as fit_least_squares,
 )
 from ._fit import (
@@ -110,9 +113,6 @@ from ._identify import (
 )
 from ._identify import (
     held_out_error as held_out_error,
-)
-from ._identify import (
-    HeldOutError as HeldOutError,
 )
 from ._identify import (
     IdentifiabilityError as IdentifiabilityError,
@@ -166,7 +166,7 @@ from ._identify._vehicle import (
     OneStep as OneStep,
 )
 from ._identify._vehicle import (
-    VehicleFit as VehicleFit,
+    VehicleStatistics as VehicleStatistics,
 )
 from ._identify._vehicle._model_file import load_model as load_model
 from ._identify._vehicle._model_file import save_model as save_model
@@ -299,7 +299,6 @@ from ._plots import (
 )
 from ._precision import PrecisionWarning as PrecisionWarning
 from ._predict import flight_error as flight_error
-from ._predict import FlightError as FlightError
 from ._predict import predict_ahead as predict_ahead
 from ._progress import ProgressBar as ProgressBar
 from ._sim_error import simulation_error as simulation_error

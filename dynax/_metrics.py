@@ -98,10 +98,11 @@ def horizon_fit(
     if unknown:
         raise ValueError(f"horizon_fit: {unknown} are not states of the trajectory; the states are {names}")
     error = simulation_error(system, trajectory, (horizon_s,), max_windows=max_windows, states=states)
-    k = error.errors.shape[1] - 1
+    errors = np.asarray(error.errors)
+    k = errors.shape[1] - 1
     rows = np.asarray(error.starts) + k
     measured = np.asarray(trajectory.xs)[rows]
-    predicted = measured + np.asarray(error.errors)[:, k, :]
+    predicted = measured + errors[:, k, :]
     out = {}
     for s in states:
         i = names.index(s)

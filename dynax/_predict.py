@@ -20,6 +20,7 @@ import numpy as np
 from ._data._trajectory import Trajectory
 from ._errors import UsageError
 from ._model._helicopter import quaternion_angle
+from ._sim_error import SimulationError
 
 #: The state groups of `flight_error`, with their units.
 FLIGHT_GROUPS = ("position", "velocity", "attitude", "body_rate")
@@ -109,39 +110,7 @@ def _group_errors(predicted, measured):
     )
 
 
-class FlightError(eqx.Module):
-    r"""Open-loop prediction error of a flight model per state group, against the horizon.
-
-    Errors are sizes: the Euclidean norm of the position [m], world-velocity [m/s] and body-rate
-    [rad/s] errors, and the geodesic angle between predicted and measured attitude [rad].
-
-    **Fields:**
-
-    - `steps`: the horizons in samples; `dt` the sample interval [s].
-    - `groups`: `FLIGHT_GROUPS` (`position`, `velocity`, `attitude`, `body_rate`).
-    - `mae`, `rmse`: shape `(group, step)`: the mean and the root-mean-square of the error size
-      over start samples (`inf` where a rollout diverged).
-    - `cumulative_mae`: shape `(group,)`: the MAE averaged over every horizon $h = 1..\max$ steps.
-    - `n_starts`: the start samples scored; `diverged_fraction`: of them, the share whose rollout
-      left the finite range by the longest horizon.
-    """
-
-    mae: Float[Array, "group step"]
-    rmse: Float[Array, "group step"]
-    cumulative_mae: Float[Array, " group"]
-    steps: tuple[int, ...] = eqx.field(static=True)
-    dt: float = eqx.field(static=True)
-    n_starts: int = eqx.field(static=True)
-    diverged_fraction: float = eqx.field(static=True, default=0.0)
-    groups: tuple[str, ...] = eqx.field(static=True, default=FLIGHT_GROUPS)
-
-    def table(self, metric: str = "mae") -> dict[str, list[float]]:
-        """`{group: [value at each step]}` of `metric` (`mae` or `rmse`)."""
-        values = {"mae": self.mae, "rmse": self.rmse}[metric]
-        return {g: [float(v) for v in np.asarray(values[i])] for i, g in enumerate(self.groups)}
-
-
-def flight_error(model, flights, steps=(1, 10, 50)) -> FlightError:
+def flight_error(model, flights, steps=(1, 10, 50)) -> SimulationError:
     r"""The flight-model scores of `model` on one record or several (pooled over their start samples).
 
     **Arguments:**
@@ -152,7 +121,12 @@ def flight_error(model, flights, steps=(1, 10, 50)) -> FlightError:
     - `steps`: the horizons in samples at which `mae` and `rmse` are reported; the cumulative MAE
       runs over every horizon from 1 to `max(steps)`.
 
-    **Returns:** a `FlightError`.
+    **Returns:** a `SimulationError` with the error sizes per state group (`state_names`:
+    `FLIGHT_GROUPS`): the norm of the position [m], world-velocity [m/s] and body-rate [rad/s]
+    errors and the geodesic angle between the attitudes [rad]; `mae_per_state` and
+    `rmse_per_state` of shape `(step, group)` (`inf` where a rollout diverged), `cumulative_mae`,
+    `n_windows` the start samples scored and `diverged_fraction` the share whose rollout left the
+    finite range by the longest horizon. Its `rmse` is `None`: the groups have different units.
     """
     steps = _check_steps(steps)
     horizon = max(steps)
@@ -175,16 +149,18 @@ def flight_error(model, flights, steps=(1, 10, 50)) -> FlightError:
         n += k
         diverged += int(jnp.sum(~finite))
         dt = f.dt if dt is None else dt
-    if n == 0:
+    if n == 0 or dt is None:
         raise UsageError(f"flight_error: no record is longer than the horizon of {horizon} samples")
     mae_all, rmse_all = abs_sum / n, np.sqrt(sq_sum / n)  # (horizon, group)
     index = np.asarray(steps) - 1
-    return FlightError(
-        mae=jnp.asarray(mae_all[index].T),
-        rmse=jnp.asarray(rmse_all[index].T),
-        cumulative_mae=jnp.asarray(mae_all.mean(axis=0)),
-        steps=steps,
-        dt=float(dt),
-        n_starts=n,
+    return SimulationError(
+        horizons_s=tuple(s * dt for s in steps),
+        n_windows=n,
         diverged_fraction=diverged / n,
+        state_names=FLIGHT_GROUPS,
+        rmse_per_state=jnp.asarray(rmse_all[index]),
+        steps=steps,
+        dt=dt,
+        mae_per_state=jnp.asarray(mae_all[index]),
+        cumulative_mae=jnp.asarray(mae_all.mean(axis=0)),
     )

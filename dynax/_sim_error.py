@@ -13,40 +13,175 @@ from ._model._system import AbstractSystem
 from ._simulate import FixedGrid, simulate
 from ._solvers import RK4
 
+HorizonValues = Float[Array | np.ndarray, " horizon"]
+PerState = Float[Array | np.ndarray, "horizon n_states"]
+
+
+def _cells(horizons_s, values) -> str:
+    return ", ".join(f"{h:g} s: {float(v):.4g}" for h, v in zip(horizons_s, values))
+
 
 class SimulationError(eqx.Module):
-    """Open-loop simulation error against horizon (the result of `simulation_error`).
+    r"""Open-loop prediction error against horizon: the one type for every such score in dynax.
+
+    A model is rolled out from measured states under the recorded inputs and compared with the
+    measurements a horizon later, from many start samples (windows). `simulation_error` returns
+    one for a record, `held_out_error` for held-out records (what `identify` validates with),
+    `flight_error` per state group for flight records, and `diagnose` one per model in its
+    `Report` (the contract's `sim_error`). Fields a use does not fill are `None` (or empty).
 
     **Fields:**
 
     - `horizons_s`: the horizons [s].
-    - `rmse`: root-mean-square error at each horizon over the `states` it was computed for and
-      over all start times (`inf` at a horizon where some window diverged).
-    - `rmse_per_state`: shape `(horizon, n_measured_states)`, per state column.
-    - `states`: the names the headline `rmse` pools.
-    - `state_names`: the names of the columns of `rmse_per_state`.
-    - `n_windows`: number of start times.
-    - `diverged_fraction`: fraction of windows whose rollout diverged.
+    - `n_windows`: the number of start samples scored (over every record).
+    - `diverged_fraction`: the fraction of them whose rollout diverged.
+    - `rmse`: root-mean-square error at each horizon, pooled over the windows and the `states`
+      (`inf` at a horizon where a window diverged); `None` where the columns have different
+      units (a flight's state groups).
+    - `states`: the state names `rmse` pools.
+    - `state_names`: the names of the columns of `rmse_per_state` and `mae_per_state`: states,
+      or a flight's state groups (`position`, `velocity`, `attitude`, `body_rate`).
+    - `rmse_per_state`: shape `(horizon, n_states)`, per column.
+    - `steps`, `dt`: the horizons in samples and the sample interval [s].
+
+    One record (`simulation_error`):
+
     - `errors`: the raw errors, shape `(window, step, n_measured_states)` (simulated minus measured).
     - `starts`: the start indices of the windows.
     - `window_mse`: shape `(window, horizon)`, each window's squared error at each horizon, averaged
       over the `states` (NaN where the window diverged): what `rmse` pools, per window.
+
+    Held-out records (`held_out_error`):
+
+    - `source`: `"validation records"` or `"held-out end of each record (last X %)"`.
+    - `rmse_per_record`: record name -> RMSE per horizon.
+    - `diverged_per_record`: record name -> fraction of windows whose rollout diverged.
+    - `median`: per horizon, the median over every window of every record of the window's
+      root-mean-square error (a typical window, where `rmse` weighs the worst), over the windows
+      that did not diverge.
+    - `concentrated`: record name -> one entry per horizon at which the record's RMSE is more than
+      `CONCENTRATED` times its median window error: `horizon_s`, `rmse`, `median`, `windows` (the
+      fewest windows holding half of the squared error), `of` (the record's windows), `from_s`,
+      `to_s` (the first and last of those windows' start times, in the record's time). Records
+      whose RMSE no few windows carry are absent.
+
+    Flights (`flight_error`, errors as sizes: the Euclidean norm of the position [m],
+    world-velocity [m/s] and body-rate [rad/s] errors, the geodesic angle between the attitudes
+    [rad]):
+
+    - `mae_per_state`: shape `(horizon, group)`, the mean error size over start samples;
+      `rmse_per_state` their root mean square (`inf` where a rollout diverged).
+    - `cumulative_mae`: shape `(group,)`: the MAE averaged over every horizon $h = 1..\max$ steps.
     """
 
-    horizons_s: Float[Array, " horizon"]
-    rmse: Float[Array, " horizon"]
-    rmse_per_state: Float[Array, "horizon n_states"]
-    states: tuple[str, ...] = eqx.field(static=True)
-    state_names: tuple[str, ...] = eqx.field(static=True)
+    horizons_s: tuple[float, ...] = eqx.field(static=True)
     n_windows: int = eqx.field(static=True)
-    diverged_fraction: Float[Array, ""]
-    errors: Float[Array, "window step n_states"]
-    starts: Array
-    window_mse: Float[Array, "window horizon"]
+    diverged_fraction: float = eqx.field(static=True)
+    rmse: HorizonValues | None = None
+    states: tuple[str, ...] = eqx.field(static=True, default=())
+    state_names: tuple[str, ...] = eqx.field(static=True, default=())
+    rmse_per_state: PerState | None = None
+    steps: tuple[int, ...] | None = eqx.field(static=True, default=None)
+    dt: float | None = eqx.field(static=True, default=None)
+    errors: Float[Array, "window step n_states"] | None = None
+    starts: Array | None = None
+    window_mse: Float[Array, "window horizon"] | None = None
+    source: str | None = eqx.field(static=True, default=None)
+    rmse_per_record: dict[str, tuple[float, ...]] | None = eqx.field(static=True, default=None)
+    diverged_per_record: dict[str, float] | None = eqx.field(static=True, default=None)
+    median: HorizonValues | None = None
+    concentrated: dict[str, list[dict]] = eqx.field(static=True, default_factory=dict)
+    mae_per_state: PerState | None = None
+    cumulative_mae: Float[Array | np.ndarray, " n_states"] | None = None
 
-    def to_json(self) -> dict:
-        """The contract's `sim_error` object: `{"horizons_s": [...], "rmse": [...]}`."""
-        return {"horizons_s": [float(h) for h in self.horizons_s], "rmse": [float(r) for r in self.rmse]}
+    def table(self, metric: str = "rmse") -> dict[str, list[float]]:
+        """`{column: [value at each horizon]}` of `metric` (`rmse` or, for a flight, `mae`)."""
+        values = {"mae": self.mae_per_state, "rmse": self.rmse_per_state}[metric]
+        if values is None:
+            raise ValueError(f"SimulationError.table: no per-state `{metric}` in this result")
+        values = np.asarray(values)
+        return {g: [float(v) for v in values[:, i]] for i, g in enumerate(self.state_names)}
+
+    def note(self) -> str | None:
+        """One sentence per record whose RMSE a few windows carry (`concentrated`); `None` if none."""
+        if not self.concentrated:
+            return None
+        parts = []
+        for name, entries in self.concentrated.items():
+            cells = "; ".join(
+                f"at {e['horizon_s']:g} s half of its squared error comes from {e['windows']} of "
+                f"{e['of']} windows, starting {e['from_s']:.2f} to {e['to_s']:.2f} s (RMSE "
+                f"{e['rmse']:.3g} against a median window error of {e['median']:.3g})"
+                for e in entries
+            )
+            parts.append(f"{name}: {cells}")
+        return (
+            "the open-loop RMSE is carried by a few windows, which say more about those stretches "
+            "(rest at an unstable equilibrium, a glitch in the data) than about the "
+            "record: " + ". ".join(parts)
+        )
+
+    def summary(self, label: str = "", metrics: tuple[str, ...] = ("mae", "rmse")) -> str:
+        """The error as lines of text for a person: the RMSE at each horizon (held-out records: on
+        which data, the median window and each record; a flight: `metrics` per state group and the
+        cumulative MAE). `label` names the model or stage."""
+        if self.mae_per_state is not None and self.cumulative_mae is not None:
+            steps = self.steps or ()
+            lines = [
+                f"{label + ': ' if label else ''}open-loop error over {self.n_windows} starts at h = "
+                + " / ".join(str(s) for s in steps)
+                + " steps"
+                + (f" ({self.diverged_fraction:.1%} diverged)" if self.diverged_fraction else "")
+            ]
+            for metric in metrics:
+                for i, (group, values) in enumerate(self.table(metric).items()):
+                    row = "  ".join(f"{v:6.4f}" for v in values)
+                    lines.append(f"  {metric} {group:>10s}  {row}   cum MAE {float(self.cumulative_mae[i]):.4f}")
+            return "\n".join(lines)
+        rmse = () if self.rmse is None else np.asarray(self.rmse)
+        if self.source is None:
+            pooled = f" of {', '.join(self.states)}" if self.states else ""
+            return (
+                f"open-loop RMSE{pooled}{' (' + label + ')' if label else ''}: {_cells(self.horizons_s, rmse)} "
+                f"({self.n_windows} windows, {self.diverged_fraction:.0%} diverged)"
+            )
+        medians = "" if self.median is None else ", ".join(f"{float(m):.4g}" for m in self.median)
+        lines = [
+            f"open-loop RMSE on {self.source}{' (' + label + ')' if label else ''}: {_cells(self.horizons_s, rmse)}"
+            + (f" (median window: {medians})" if medians else "")
+        ]
+        if self.rmse_per_record is not None and len(self.rmse_per_record) > 1:
+            lines += [f"  {name}: {_cells(self.horizons_s, r)}" for name, r in self.rmse_per_record.items()]
+        return "\n".join(lines)
+
+    def to_json(self, *, null_diverged: bool = False) -> dict:
+        """The contract's `sim_error` object, `{"horizons_s": [...], "rmse": [...]}`; held-out records add
+        `per_record`, `diverged_fraction` (per record), `source`, `median` and `concentrated`.
+        `null_diverged` writes a non-finite RMSE as `null` (the diagnosis report's `sim_error`)."""
+        rmse = [] if self.rmse is None else [float(r) for r in np.asarray(self.rmse)]
+        if null_diverged:
+            rmse = [r if np.isfinite(r) else None for r in rmse]
+        out: dict = {"horizons_s": list(self.horizons_s), "rmse": rmse}
+        if self.source is not None:
+            out.update(
+                per_record={k: list(v) for k, v in (self.rmse_per_record or {}).items()},
+                diverged_fraction=self.diverged_per_record,
+                source=self.source,
+                median=[] if self.median is None else [float(m) for m in np.asarray(self.median)],
+                concentrated=self.concentrated,
+            )
+        return out
+
+    def scores(self, metrics: tuple[str, ...] = ("mae", "rmse")) -> dict:
+        """A flight's scores as JSON: `metrics` per state group, `cumulative_mae`, `n_starts`, and
+        `diverged_fraction` where a rollout diverged (`dynax evaluate`'s `model` object)."""
+        out: dict = {m: self.table(m) for m in metrics}
+        cumulative = [] if self.cumulative_mae is None else np.asarray(self.cumulative_mae)
+        out["cumulative_mae"] = {g: float(v) for g, v in zip(self.state_names, cumulative)}
+        out["n_starts"] = self.n_windows
+        if self.diverged_fraction:
+            out["diverged_fraction"] = self.diverged_fraction
+        return out
 
 
 class InputStates(AbstractSystem):
@@ -217,13 +352,15 @@ def simulation_error(
     pooled = jnp.sqrt(jnp.nanmean(at[:, :, idx] ** 2, axis=(0, 2)))
     pooled = jnp.where(jnp.any(diverged), jnp.inf, pooled)
     return SimulationError(
-        horizons_s=jnp.asarray(horizons),
+        horizons_s=tuple(float(h) for h in horizons),
+        n_windows=int(starts.shape[0]),
+        diverged_fraction=float(jnp.mean(diverged.astype(errors.dtype))),
         rmse=pooled,
-        rmse_per_state=per_state,
         states=tuple(states),
         state_names=tuple(names),
-        n_windows=int(starts.shape[0]),
-        diverged_fraction=jnp.mean(diverged.astype(errors.dtype)),
+        rmse_per_state=per_state,
+        steps=tuple(int(k) for k in steps),
+        dt=float(dt),
         errors=errors,
         starts=starts,
         window_mse=jnp.mean(at[:, :, idx] ** 2, axis=2),

@@ -374,6 +374,9 @@ from ._identify._vehicle import (
     prediction_error as prediction_error,
 )
 from ._identify._vehicle import (
+    recorded_loss as recorded_loss,
+)
+from ._identify._vehicle import (
     STATE_GROUPS as STATE_GROUPS,
 )
 from ._identify._vehicle._criteria import (
@@ -596,6 +599,7 @@ __all__ = [
     "lagged_loss",
     "lagged_loss_gradient_norm",
     "lagged_loss_of",
+    "recorded_loss",
     "leading_sharding",
     "levenberg_marquardt",
     "log_ratio_differences",

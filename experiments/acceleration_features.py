@@ -76,13 +76,13 @@ def main():
         test = generate_helicopter_flight(kind, test_s, seed=SEEDS[kind][1])
         results[kind] = {}
         for name, start in models().items():
-            fit = fit_lagged(fit_one_step(start, train).system, train, lagged)
-            errors = prediction_error(fit.system, test, [1.0, 2.0], stride=5)
+            fit = fit_lagged(fit_one_step(start, train).model, train, lagged)
+            errors = prediction_error(fit.model, test, [1.0, 2.0], stride=5)
             attitude = {
-                k: float(v) for k, v in fit.system.body_model.parameters.items() if k.endswith(("/roll", "/pitch"))
+                k: float(v) for k, v in fit.model.body_model.parameters.items() if k.endswith(("/roll", "/pitch"))
             }
             results[kind][name] = {
-                "n_weights": int(fit.system.body_model.parameter_vector().shape[0]),
+                "n_weights": int(fit.model.body_model.parameter_vector().shape[0]),
                 "mse_1s": {g: float(errors[g][0]) for g in STATE_GROUPS},
                 "mse_2s": {g: float(errors[g][1]) for g in STATE_GROUPS},
                 "attitude_weights": attitude,

@@ -8,7 +8,7 @@ without the held-out run) against the lab's `model_3.0`:
 
 1. **Where the error is.** Each held-out run is simulated open loop from 200 start samples (as in that
    table); `held_out_error` gives the RMSE, the median window error and the windows that carry the RMSE
-   (`HeldOutError.concentrated`). On run 12 the windows are also pooled by phase: started while the
+   (`SimulationError.concentrated`). On run 12 the windows are also pooled by phase: started while the
    torques pump energy in (before 3 s), and from the last swing on (3 s and after: the pendulum
    reaches the top at about 4.2 s and rests there to the end).
 2. **What holds it there.** Over the rest at the top (4.75 s to the end, both joints slower than the

@@ -43,6 +43,7 @@ from dynax.internal import (  # noqa: E402
     initial_helicopter,
     lagged_loss_gradient_norm,
     lagged_loss_of,
+    recorded_loss,
     write_json,
 )
 from dynax.synthetic import generate_helicopter_flight  # noqa: E402
@@ -57,33 +58,32 @@ def log(message):
 def measure(kind, features, horizon, train, one_step, args):
     criterion = dict(horizon=horizon, stride=args.stride, max_iterations=args.iterations)
     t0 = time.perf_counter()
-    em_free = fit_lagged(one_step.system, train, Lagged(**criterion))
+    em_free = fit_lagged(one_step.model, train, Lagged(**criterion))
     t1 = time.perf_counter()
-    gauss_newton = fit_lagged(one_step.system, train, Lagged(**criterion, state_sensitivities=True))
+    gauss_newton = fit_lagged(one_step.model, train, Lagged(**criterion, state_sensitivities=True))
     t2 = time.perf_counter()
-    minimum = min(em_free.loss, gauss_newton.loss)
+    minimum = min(recorded_loss(em_free), recorded_loss(gauss_newton))
     row = {
         "set": kind,
         "features": features,
-        "n_weights": int(one_step.system.body_model.parameter_vector().shape[0]),
+        "n_weights": int(one_step.model.body_model.parameter_vector().shape[0]),
         "horizon_s": horizon,
-        "one_step_loss": lagged_loss_of(one_step.system, train, horizon, stride=args.stride),
-        "em_free_loss": em_free.loss,
+        "one_step_loss": lagged_loss_of(one_step.model, train, horizon, stride=args.stride),
+        "em_free_loss": recorded_loss(em_free),
         "em_free_iterations": len(em_free.history) - 1,
         "em_free_seconds": t1 - t0,
-        "gauss_newton_loss": gauss_newton.loss,
+        "gauss_newton_loss": recorded_loss(gauss_newton),
         "gauss_newton_iterations": len(gauss_newton.history) - 1,
         "gauss_newton_seconds": t2 - t1,
-        "relative_gap": em_free.loss / minimum - 1,
-        "em_free_gradient_norm": lagged_loss_gradient_norm(em_free.system, train, horizon, stride=args.stride),
-        "gauss_newton_gradient_norm": lagged_loss_gradient_norm(
-            gauss_newton.system, train, horizon, stride=args.stride
-        ),
+        "relative_gap": recorded_loss(em_free) / minimum - 1,
+        "em_free_gradient_norm": lagged_loss_gradient_norm(em_free.model, train, horizon, stride=args.stride),
+        "gauss_newton_gradient_norm": lagged_loss_gradient_norm(gauss_newton.model, train, horizon, stride=args.stride),
     }
     log(
         f"{kind}, {features}, H = {horizon:g} s: one-step {row['one_step_loss']:.5g}, EM-free "
         f"{row['em_free_loss']:.5g} "
-        f"({row['em_free_iterations']} it), minimum {gauss_newton.loss:.5g} ({row['gauss_newton_iterations']} it): "
+        f"({row['em_free_iterations']} it), minimum {row['gauss_newton_loss']:.5g} "
+        f"({row['gauss_newton_iterations']} it): "
         f"gap {row['relative_gap']:.2%}; gradient norm {row['em_free_gradient_norm']:.2g} against "
         f"{row['gauss_newton_gradient_norm']:.2g}"
     )

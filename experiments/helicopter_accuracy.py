@@ -40,6 +40,7 @@ from dynax.internal import (  # noqa: E402
     lagged_loss_gradient_norm,
     lagged_loss_of,
     prediction_error,
+    recorded_loss,
     STATE_GROUPS,
     write_json,
 )
@@ -80,14 +81,14 @@ def run_set(kind, args, out):
     linear, acceleration = initial_helicopter("linear"), initial_helicopter("acceleration", "rich")
     timed("linear one-step", lambda: fit_one_step(linear, train))
     timed("linear frequency", lambda: fit_frequency(linear, train, FrequencyDomain()))
-    timed("linear lagged", lambda: fit_lagged(fits["linear one-step"].system, train, lagged))
+    timed("linear lagged", lambda: fit_lagged(fits["linear one-step"].model, train, lagged))
     timed("acceleration one-step", lambda: fit_one_step(acceleration, train))
-    timed("acceleration lagged", lambda: fit_lagged(fits["acceleration one-step"].system, train, lagged))
+    timed("acceleration lagged", lambda: fit_lagged(fits["acceleration one-step"].model, train, lagged))
 
     horizons = np.round(np.arange(0, args.max_horizon + 1e-9, 0.1), 10)
     mse = {}
     for name in METHODS:
-        errors = prediction_error(fits[name].system, test, horizons, stride=args.eval_stride)
+        errors = prediction_error(fits[name].model, test, horizons, stride=args.eval_stride)
         mse[name] = {g: np.asarray(errors[g]).tolist() for g in STATE_GROUPS}
         log(f"{kind}: {name}: held-out MSE at 1 s " + ", ".join(f"{g} {mse[name][g][10]:.4g}" for g in STATE_GROUPS))
 
@@ -97,52 +98,53 @@ def run_set(kind, args, out):
     # better of the EM-free and Gauss-Newton results; the direct minimum is the lowest loss found.
     check_stride = args.check_stride
     em_free = fits["acceleration lagged"]
-    em_loss = lagged_loss_of(em_free.system, train, args.horizon, stride=check_stride)
+    em_loss = lagged_loss_of(em_free.model, train, args.horizon, stride=check_stride)
     t0 = time.perf_counter()
     gauss_newton = fit_lagged(
-        fits["acceleration one-step"].system,
+        fits["acceleration one-step"].model,
         train,
         Lagged(horizon=args.horizon, stride=check_stride, max_iterations=args.iterations, state_sensitivities=True),
     )
     gn_time = time.perf_counter() - t0
-    log(f"{kind}: Gauss-Newton lagged loss {gauss_newton.loss:.6g} in {gn_time:.1f} s")
-    start = gauss_newton if gauss_newton.loss < em_loss else em_free
+    log(f"{kind}: Gauss-Newton lagged loss {recorded_loss(gauss_newton):.6g} in {gn_time:.1f} s")
+    start = gauss_newton if recorded_loss(gauss_newton) < em_loss else em_free
     t0 = time.perf_counter()
     direct = fit_backprop(
-        start.system,
+        start.model,
         train,
         Backprop(horizon=args.horizon, stride=check_stride, max_steps=args.backprop_steps),
         callback=lambda i, loss: log(f"{kind}: backprop step {i + 1}: {loss:.6g}") if (i + 1) % 5 == 0 else None,
     )
     direct_time = time.perf_counter() - t0
-    minimum = min(direct.loss, gauss_newton.loss, em_loss)
+    minimum = min(recorded_loss(direct), recorded_loss(gauss_newton), em_loss)
     # The gradient of the true loss at the EM-free and Gauss-Newton points (zero at a minimum).
     grad_norm = {
-        name: lagged_loss_gradient_norm(fit.system, train, args.horizon, stride=check_stride)
+        name: lagged_loss_gradient_norm(fit.model, train, args.horizon, stride=check_stride)
         for name, fit in (("em_free", em_free), ("gauss_newton", gauss_newton))
     }
     check = {
         "horizon_s": args.horizon,
         "stride": check_stride,
-        "one_step_loss": lagged_loss_of(fits["acceleration one-step"].system, train, args.horizon, stride=check_stride),
+        "one_step_loss": lagged_loss_of(fits["acceleration one-step"].model, train, args.horizon, stride=check_stride),
         "em_free_loss": em_loss,
         "em_free_iterations": len(em_free.history) - 1,
         "em_free_seconds": times["acceleration lagged"],
         "em_free_gradient_norm": grad_norm["em_free"],
-        "gauss_newton_loss": gauss_newton.loss,
+        "gauss_newton_loss": recorded_loss(gauss_newton),
         "gauss_newton_iterations": len(gauss_newton.history) - 1,
         "gauss_newton_seconds": gn_time,
         "gauss_newton_gradient_norm": grad_norm["gauss_newton"],
         "backprop_start": "gauss_newton" if start is gauss_newton else "em_free",
-        "backprop_loss": direct.loss,
+        "backprop_loss": recorded_loss(direct),
         "backprop_steps": len(direct.history) - 1,
         "backprop_seconds": direct_time,
         "direct_minimum": minimum,
         "relative_gap": em_loss / minimum - 1,
-        "gauss_newton_relative_gap": gauss_newton.loss / minimum - 1,
+        "gauss_newton_relative_gap": recorded_loss(gauss_newton) / minimum - 1,
     }
     log(
-        f"{kind}: EM-free lagged loss {em_loss:.6g}, Gauss-Newton {gauss_newton.loss:.6g}, backprop {direct.loss:.6g}; "
+        f"{kind}: EM-free lagged loss {em_loss:.6g}, Gauss-Newton {check['gauss_newton_loss']:.6g}, "
+        f"backprop {check['backprop_loss']:.6g}; "
         f"EM-free gap to the minimum {check['relative_gap']:.2%}"
     )
     return {
@@ -152,7 +154,7 @@ def run_set(kind, args, out):
         "lagged_history": {n: [h[1] for h in fits[n].history] for n in ("linear lagged", "acceleration lagged")},
         "em_free_check": check,
         "parameters": {
-            n: {k: float(v) for k, v in fits[n].system.body_model.parameters.items()}
+            n: {k: float(v) for k, v in fits[n].model.body_model.parameters.items()}
             for n in ("acceleration one-step", "acceleration lagged")
         },
     }

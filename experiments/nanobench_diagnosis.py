@@ -123,7 +123,7 @@ def main():
         name: {
             "mae": e.table("mae"),
             "rmse": e.table("rmse"),
-            "cumulative_mae": {g: float(v) for g, v in zip(e.groups, e.cumulative_mae)},
+            "cumulative_mae": {g: float(v) for g, v in zip(e.state_names, e.cumulative_mae)},
         }
         for name, e in errors.items()
     }

@@ -64,8 +64,8 @@ def scores(error):
     return {
         "mae": error.table("mae"),
         "rmse": error.table("rmse"),
-        "cumulative_mae": {g: float(v) for g, v in zip(error.groups, error.cumulative_mae)},
-        "n_starts": error.n_starts,
+        "cumulative_mae": {g: float(v) for g, v in zip(error.state_names, error.cumulative_mae)},
+        "n_starts": error.n_windows,
         "diverged_fraction": error.diverged_fraction,
     }
 
@@ -168,11 +168,11 @@ def _figures(out, fitted, test):
     models = {"constant velocity": dynax.ConstantVelocity(), **fitted}
     curves = {name: dynax.flight_error(model, test, horizon) for name, model in models.items()}
     fig, axes = plt.subplots(1, 4, figsize=(16, 3.8))
-    for ax, (i, group) in zip(axes, enumerate(next(iter(curves.values())).groups)):
+    for ax, (i, group) in zip(axes, enumerate(next(iter(curves.values())).state_names)):
         for name, error in curves.items():
             ax.plot(
                 np.asarray(horizon) * 0.01,
-                np.asarray(error.mae[i]),
+                np.asarray(error.mae_per_state)[:, i],
                 label=name,
                 ls="--" if name == "constant velocity" else "-",
             )
@@ -186,7 +186,7 @@ def _figures(out, fitted, test):
     plt.close(fig)
 
     run = max(test, key=len)
-    best = min(fitted, key=lambda n: float(np.asarray(curves[n].mae[0, -1])))
+    best = min(fitted, key=lambda n: float(np.asarray(curves[n].mae_per_state)[-1, 0]))
     predicted = np.asarray(dynax.predict_ahead(fitted[best], run, range(1, max(STEPS) + 1)))
     baseline = np.asarray(dynax.predict_ahead(dynax.ConstantVelocity(), run, range(1, max(STEPS) + 1)))
     xs = np.asarray(run.xs)

@@ -195,6 +195,7 @@ def run(args: argparse.Namespace) -> int:
         Lagged,
         model_to_json,
         OneStep,
+        recorded_loss,
     )
 
     if args.system == "quadrotor":
@@ -250,17 +251,18 @@ def run(args: argparse.Namespace) -> int:
         )
     fit = fit_vehicle(system, data, criterion)  # a bar per iteration with the loss on stderr (see --quiet)
     horizon = args.horizon if args.criterion in ("lagged", "backprop") else None
-    weights = np.asarray(fit.system.body_model.weights)
-    if not (np.all(np.isfinite(weights)) and np.isfinite(fit.loss)):
+    weights = np.asarray(fit.model.body_model.weights)
+    loss = recorded_loss(fit)
+    if not (np.all(np.isfinite(weights)) and np.isfinite(loss)):
         print(
-            f"dynax fit: error: the fit failed numerically (loss {fit.loss}, {np.sum(~np.isfinite(weights))} "
+            f"dynax fit: error: the fit failed numerically (loss {loss}, {np.sum(~np.isfinite(weights))} "
             "non-finite weights); nothing written",
             file=sys.stderr,
         )
         return 1
     write_json(out, model_to_json(fit, horizon_s=horizon))
-    print(f"helicopter, {args.model} model, {args.criterion} criterion, {fit.n_samples} samples: loss {fit.loss:.6g}")
-    for name, value in fit.system.body_model.parameters.items():
+    print(f"helicopter, {args.model} model, {args.criterion} criterion, {len(data)} samples: loss {loss:.6g}")
+    for name, value in fit.model.body_model.parameters.items():
         print(f"  {name:>10s} = {float(value):.6g}")
     print(f"wrote {out} in {time.perf_counter() - start:.1f} s")
     return 0

@@ -304,17 +304,9 @@ def run(args: argparse.Namespace) -> int:
             "half the record's interval after: held as recorded)"
         )
     for stage in result.stages:
-        held = None if stage.validation is None else stage.validation.to_json()
-        if held:
-            cells = ", ".join(f"{h:g} s: {r:.4g}" for h, r in zip(held["horizons_s"], held["rmse"]))
-            medians = ", ".join(f"{m:.4g}" for m in held.get("median", ()))
-            print(
-                f"  open-loop RMSE on {held['source']} ({stage.kind}): {cells}"
-                + (f" (median window: {medians})" if medians else "")
-            )
-            if len(held["per_record"]) > 1:
-                for record, rmse in held["per_record"].items():
-                    print(f"    {record}: " + ", ".join(f"{h:g} s: {r:.4g}" for h, r in zip(held["horizons_s"], rmse)))
+        if stage.validation is not None:
+            for line in stage.validation.summary(str(stage.kind)).splitlines():
+                print("  " + line)
     concentrated = None if result.validation is None else result.validation.note()
     if concentrated:
         print("  NOTE: " + concentrated)
@@ -334,7 +326,9 @@ def _refinement_validates_worse(least_squares, output_error) -> str | None:
     """The held-out source where the output-error stage's open-loop error is above the least-squares
     stage's at every horizon; `None` otherwise (or when either stage has no validation)."""
     ls, oe = (None if s is None else s.validation for s in (least_squares, output_error))
-    if ls and oe and ls.rmse and all(o > l for o, l in zip(oe.rmse, ls.rmse)):
+    if ls is None or oe is None or ls.rmse is None or oe.rmse is None or not len(ls.rmse):
+        return None
+    if all(o > l for o, l in zip(oe.rmse, ls.rmse)):
         return oe.source
     return None
 

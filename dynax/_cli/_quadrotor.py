@@ -142,15 +142,6 @@ def parse_metrics(text: str) -> tuple[str, ...]:
     return metrics
 
 
-def _scores(error, metrics):
-    out = {m: error.table(m) for m in metrics}
-    out["cumulative_mae"] = {g: float(v) for g, v in zip(error.groups, error.cumulative_mae)}
-    out["n_starts"] = error.n_starts
-    if error.diverged_fraction:
-        out["diverged_fraction"] = error.diverged_fraction
-    return out
-
-
 def run_evaluate(args, system) -> int:
     """The quadrotor branch of `dynax evaluate`: flight scores per group beside constant velocity."""
     from .._model._quadrotor import ConstantVelocity
@@ -171,21 +162,16 @@ def run_evaluate(args, system) -> int:
     result = {
         "steps": list(steps),
         "dt_s": model_error.dt,
-        "horizons_s": [s * model_error.dt for s in steps],
+        "horizons_s": list(model_error.horizons_s),
         "units": FLIGHT_UNITS,
-        "model": _scores(model_error, metrics),
-        "constant_velocity": _scores(baseline, metrics),
+        "model": model_error.scores(metrics),
+        "constant_velocity": baseline.scores(metrics),
         "data": notes,
     }
     write_json(out, result)
-    print(f"quadrotor model {args.model} on {len(args.data)} file(s), {model_error.n_starts} starts: open-loop error")
-    print("  " + " " * 24 + "  ".join(f"h={s:>4d}" for s in steps) + "   cum MAE")
-    for m in metrics:
-        for name, table in (("model", model_error), ("constant velocity", baseline)):
-            values = table.table(m)
-            for i, g in enumerate(table.groups):
-                row = "  ".join(f"{v:6.4f}" for v in values[g])
-                print(f"  {m} {name[:8]:>8s} {g:>10s}  {row}   {float(table.cumulative_mae[i]):.4f}")
+    print(f"quadrotor model {args.model} on {len(args.data)} file(s)")
+    for name, error in (("model", model_error), ("constant velocity", baseline)):
+        print("\n".join("  " + line for line in error.summary(name, metrics).splitlines()))
     print(f"wrote {out} in {time.perf_counter() - start:.1f} s")
     return 0
 
@@ -270,14 +256,12 @@ def run_diagnose(args) -> int:
             {
                 "steps": [1, 10, 50],
                 "dt_s": errors["constant velocity"].dt,
-                "models": {name: _scores(e, ("mae", "rmse")) for name, e in errors.items()},
+                "models": {name: e.scores(("mae", "rmse")) for name, e in errors.items()},
             },
         )
     print(summary(report))
-    print("held-out MAE per group at h = 1 / 10 / 50 steps:")
+    print("held-out error per group:")
     for name, e in errors.items():
-        print(
-            f"  {name:>17s}  " + "  ".join(f"{g} " + "/".join(f"{v:.4g}" for v in e.table("mae")[g]) for g in e.groups)
-        )
+        print("\n".join("  " + line for line in e.summary(name, ("mae",)).splitlines()))
     print(f"wrote {args.out}/report.json, report.md, flight_error.json and figures", file=sys.stdout)
     return 0

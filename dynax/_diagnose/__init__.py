@@ -25,9 +25,6 @@ from ._result import (
     ResidualTests as ResidualTests,
 )
 from ._result import (
-    SimErrorCurve as SimErrorCurve,
-)
-from ._result import (
     Validation as Validation,
 )
 from ._sparse import sparse_search as sparse_search

@@ -26,6 +26,7 @@ from .._model._quadrotor import Quadrotor
 from .._model._system import AbstractSystem
 from .._precision import warn_if_float32
 from .._progress import ProgressBar
+from .._sim_error import SimulationError
 from ._discovery import discover
 from ._fit import nominal_values, window_errors
 from ._forward import Current, forward_selection, Nominal, Yardstick
@@ -36,7 +37,7 @@ from ._problem import Refit as Refit
 from ._quadrotor import diagnose_quadrotor
 from ._records import as_records, HOLDOUT_FRACTION
 from ._residuals import Structure, structure_test
-from ._result import DataSummary, ModelSummary, SimErrorCurve
+from ._result import DataSummary, ModelSummary
 from ._result import Report as Report
 from ._selection import paired_test
 from ._summaries import (
@@ -189,9 +190,17 @@ def _model_summary(problem: Problem, model, errors, rmse, yard: Yardstick, terms
     validation = validation_summary(
         model, problem.validation, np.asarray(errors)[:, yard.n_ref], measured, yard.horizon.seconds
     )
-    return ModelSummary(
-        parameters=parameters, sim_error=SimErrorCurve.of(yard.horizons, rmse), terms=terms, validation=validation
+    errors = np.asarray(errors)
+    sim_error = SimulationError(
+        horizons_s=tuple(float(h) for h in yard.horizons),
+        n_windows=errors.shape[0],
+        diverged_fraction=float(np.mean(~np.isfinite(errors).all(axis=(1, 2)))),
+        rmse=np.asarray(rmse, dtype=float),
+        states=tuple(problem.system.state_names[i] for i in problem.position_index),
+        steps=tuple(int(k) for k in yard.steps),
+        dt=float(problem.dt),
     )
+    return ModelSummary(parameters=parameters, sim_error=sim_error, terms=terms, validation=validation)
 
 
 def _data_summary(problem: Problem, train, validation) -> DataSummary:

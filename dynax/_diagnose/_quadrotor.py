@@ -208,7 +208,7 @@ class WorldFrameQuadrotor(AbstractSystem):
 
 def quadrotor_flight_errors(report, like: Quadrotor, flights, steps=(1, 10, 50)) -> dict:
     """The held-out scores per group (`dynax.flight_error`) of the report's nominal and extended models
-    and the constant-velocity baseline: `{name: FlightError}`; the extended model only where it has a
+    and the constant-velocity baseline: `{name: SimulationError}`; the extended model only where it has a
     world-frame form (`WorldFrameQuadrotor`: no internal states)."""
     from .._model._quadrotor import ConstantVelocity
     from .._predict import flight_error

@@ -6,30 +6,12 @@ everything else is an extension after them.
 """
 
 import equinox as eqx
-import numpy as np
 
 from .._model._system import AbstractSystem
+from .._sim_error import SimulationError
 from ._horizon import Horizon
 from ._residuals import Structure
 from ._verdict import Verdict
-
-
-def _float_or_none(x) -> float | None:
-    return float(x) if x is not None and np.isfinite(x) else None
-
-
-class SimErrorCurve(eqx.Module):
-    """Held-out open-loop position RMSE against horizon (the contract's `sim_error`); `None` where a window diverged."""
-
-    horizons_s: tuple[float, ...]
-    rmse: tuple[float | None, ...]
-
-    @classmethod
-    def of(cls, horizons_s, rmse) -> "SimErrorCurve":
-        return cls(tuple(float(h) for h in horizons_s), tuple(_float_or_none(r) for r in np.asarray(rmse)))
-
-    def to_json(self) -> dict:
-        return {"horizons_s": list(self.horizons_s), "rmse": list(self.rmse)}
 
 
 class ResidualTests(eqx.Module):
@@ -110,12 +92,13 @@ class Validation(eqx.Module):
 class ModelSummary(eqx.Module):
     """The contract's `nominal` / `extended` object: parameters and held-out simulation error, plus extensions.
 
-    **Fields:** `parameters` by report name; `sim_error`; `terms` (`cause@where` of an extended
+    **Fields:** `parameters` by report name; `sim_error` (a `SimulationError`: held-out open-loop
+    position RMSE against horizon, written `null` where a window diverged); `terms` (`cause@where` of an extended
     model's terms, `None` for the nominal model); `validation` (fit % and residual tests, or `None`).
     """
 
     parameters: dict[str, float]
-    sim_error: SimErrorCurve
+    sim_error: SimulationError
     terms: tuple[str, ...] | None = None
     validation: Validation | None = None
 
@@ -124,7 +107,7 @@ class ModelSummary(eqx.Module):
         if self.terms is not None:
             out["terms"] = list(self.terms)
         out["parameters"] = dict(self.parameters)
-        out["sim_error"] = self.sim_error.to_json()
+        out["sim_error"] = self.sim_error.to_json(null_diverged=True)
         if self.validation is not None:
             out["validation"] = self.validation.to_json()
         return out

@@ -15,6 +15,7 @@ from ._engine import fit_minimise as fit_minimise
 from ._levenberg_marquardt import levenberg_marquardt as levenberg_marquardt
 from ._levenberg_marquardt import StrictTrustRegion as StrictTrustRegion
 from ._parameters import Parameters as Parameters
+from ._solution import AbstractStatistics as AbstractStatistics
 from ._solution import Solution as Solution
 from ._solution import Statistics as Statistics
 from ._solvers import History as History

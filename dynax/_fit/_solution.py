@@ -45,7 +45,18 @@ def _combination(direction, names, tol=1e-3):
     return text or "(none)"
 
 
-class Statistics(eqx.Module):
+class AbstractStatistics(eqx.Module):
+    """What a solve adds to its `Solution` beyond the estimate (`solution.statistics`): `Statistics`
+    (linear least squares), and the statistics of the output-error fit, the refinement and the
+    vehicle criteria."""
+
+    def unidentified(self, names: tuple[str, ...]) -> tuple[str, ...]:
+        """The parameter combinations the data leave undetermined; `()` where the solve does not say."""
+        del names
+        return ()
+
+
+class Statistics(AbstractStatistics):
     r"""How well the data determine an estimate: the singular value decomposition of the column-scaled
     (weighted) regressor or Jacobian at the solution.
 
@@ -112,9 +123,10 @@ class Solution(eqx.Module):
       (`fit_least_squares(..., covariance=True)`); `None` otherwise.
     - `residuals`, `initial_residuals`: the residual vector $r$ at the solution and at the start
       (least squares; non-finite entries already replaced as `nonfinite` says); `None` for a scalar loss.
-    - `statistics`: where the solve forms them (linear least squares; `Statistics`), the singular
-      values and directions of the scaled problem, its condition number, rank and residual RMS;
-      `None` otherwise.
+    - `statistics`: what the solve adds (an `AbstractStatistics`): for linear least squares a
+      `Statistics` (the singular values and directions of the scaled problem, its condition number,
+      rank and residual RMS), for the output-error fit, the refinement and the vehicle criteria
+      their own; `None` otherwise.
     - `loss_history`, `time_history`: where the solver records them (`OptaxLBFGS`, the EM-free
       iteration): the loss after each step (entry 0 at the start) and the seconds since the start at
       which it was reached, NaN past the last step; `None` otherwise.
@@ -135,7 +147,7 @@ class Solution(eqx.Module):
     jacobian: Float[Array, "m n"] | None = None
     residuals: Float[Array, " m"] | None = None
     initial_residuals: Float[Array, " m"] | None = None
-    statistics: Statistics | None = None
+    statistics: AbstractStatistics | None = None
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -150,6 +162,16 @@ class Solution(eqx.Module):
         """The parameter combinations the data leave undetermined (`Statistics.unidentified`); `()` when
         the solve formed no statistics."""
         return () if self.statistics is None else self.statistics.unidentified(self.names)
+
+    @property
+    def history(self) -> tuple[tuple[float, float], ...]:
+        """`(seconds since start, loss)` at the start and after each step, where the solver records
+        them (`loss_history`, `time_history`); `()` otherwise."""
+        if self.loss_history is None or self.time_history is None:
+            return ()
+        losses, seconds = np.asarray(self.loss_history), np.asarray(self.time_history)
+        keep = ~np.isnan(losses)
+        return tuple((float(t), float(v)) for t, v in zip(seconds[keep], losses[keep]))
 
     def estimates(self) -> dict[str, float]:
         """`{name: value}`."""

@@ -100,8 +100,5 @@ from ._validation import (
     held_out_error as held_out_error,
 )
 from ._validation import (
-    HeldOutError as HeldOutError,
-)
-from ._validation import (
     split_for_validation as split_for_validation,
 )

@@ -60,14 +60,20 @@ import optimistix as optx
 
 from .._data._derivatives import butterworth_filtfilt, resample
 from .._data._trajectory import Trajectory
-from .._fit import Parameters, Solution
+from .._fit import AbstractStatistics, Parameters, Solution
 from .._model._extensions import Extended
 from .._model._system import AbstractSystem
 from .._simulate import FixedGrid, simulate
 from ._consistency import consistent_parametrisation, ConsistentParametrisation
 from ._defaults import choose_filter, measurement_noise_std, velocities_from_positions
 from ._regressors import parameter_vector, split_terms, with_parameters
-from ._simulation_fit import DIVERGED, fit_simulation_error, simulation_segments, SimulationFit
+from ._simulation_fit import (
+    DIVERGED,
+    fit_simulation_error,
+    OutputErrorStatistics,
+    simulation_segments,
+    SimulationFit,
+)
 
 RECORD_WEIGHTS = ("ml", "motion", "equal")
 DEFAULT_RECORD_WEIGHTS = "ml"  # what `identify`'s refinement uses
@@ -169,7 +175,7 @@ def with_refinement_terms(system: AbstractSystem) -> AbstractSystem:
     return Extended(base, terms + extra) if extra else system
 
 
-class RefinementStatistics(eqx.Module):
+class RefinementStatistics(AbstractStatistics):
     r"""What `refine_by_simulation` adds to its `Solution` (as `solution.statistics`).
 
     **Fields:**
@@ -428,6 +434,7 @@ def refine_by_simulation(
     std = np.sqrt(np.maximum(np.diag(covariance), 0.0))  # NaN stays NaN
     record_std = None if spread is None else np.sqrt(np.maximum(np.diag(delta_method_covariance(jac, spread)), 0.0))
     # A kept start: its own residual, no relative error or record scales of a fit.
+    assert isinstance(result.statistics, OutputErrorStatistics)
     rms, relative = (
         (initial_rms, float("nan"))
         if diverged

@@ -8,13 +8,15 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 import numpy as np
 
-from .._fit import Solution
+from .._fit import Solution, Statistics
 from .._model._system import AbstractSystem
+from .._sim_error import SimulationError
 from ._angle_zeros import AngleZeros
 from ._consistency import Consistency
 from ._offsets import RecordOffsets
 from ._record_friction import RecordFriction
-from ._validation import HeldOutError
+from ._refine import RefinementStatistics
+from ._simulation_fit import OutputErrorStatistics
 
 
 class NoValidationWarning(UserWarning):
@@ -54,7 +56,7 @@ class Stage(eqx.Module):
       constrained estimate where the plain one was inconsistent.
     - `relative_equation_error`: $\lVert A\hat\theta - y\rVert / \lVert y\rVert$ of the
       least-squares equations at this stage's estimate; `None` for `SimulationFit`.
-    - `validation`: the `HeldOutError` of this stage's model, or `None`.
+    - `validation`: the `SimulationError` on held-out data (`held_out_error`) of this stage's model, or `None`.
     - `consistency`: the `Consistency` of this stage's estimate, or `None`.
     - `poorly_determined`: its size parameters the data determine poorly (see `poorly_determined`).
     - `offsets`: least squares: each record's fitted force offset at each driven joint, JSON-ready
@@ -70,7 +72,7 @@ class Stage(eqx.Module):
     method: str = eqx.field(static=True)
     solution: Solution
     relative_equation_error: float | None = eqx.field(static=True, default=None)
-    validation: HeldOutError | None = None
+    validation: SimulationError | None = None
     consistency: Consistency | None = None
     poorly_determined: dict[str, float] | None = eqx.field(static=True, default=None)
     offsets: dict | None = eqx.field(static=True, default=None)
@@ -109,6 +111,7 @@ class Stage(eqx.Module):
             )
         elif self.kind == StageKind.OUTPUT_ERROR:
             stats = self.solution.statistics
+            assert isinstance(stats, RefinementStatistics)
             out.update(
                 consistency=self.consistency.to_json(),
                 initial_residual_rms=stats.initial_residual_rms,
@@ -225,7 +228,7 @@ class Identification(eqx.Module):
         return self.solution.covariance
 
     @property
-    def validation(self) -> HeldOutError | None:
+    def validation(self) -> SimulationError | None:
         return self.stages[-1].validation
 
     @property
@@ -239,9 +242,11 @@ class Identification(eqx.Module):
         return None if first is None else first.solution
 
     @property
-    def _linear_statistics(self):
+    def _linear_statistics(self) -> Statistics:
         first = self.stages[0].solution.statistics
-        return first.jacobian if self.stages[0].kind == StageKind.SIMULATION else first
+        linear = first.jacobian if isinstance(first, OutputErrorStatistics) else first
+        assert isinstance(linear, Statistics)
+        return linear
 
     @property
     def condition_number(self) -> Float[Array, ""]:
@@ -254,6 +259,7 @@ class Identification(eqx.Module):
     @property
     def residual_rms(self) -> Float[Array, ""]:
         first = self.stages[0].solution.statistics
+        assert isinstance(first, (Statistics, OutputErrorStatistics))
         return first.residual_rms
 
     @property

@@ -27,6 +27,7 @@ import numpy as np
 from .._data._trajectory import Trajectory
 from .._errors import DataError, UsageError
 from .._fit import (
+    AbstractStatistics,
     clustered_covariance,
     fit_least_squares,
     jackknife_covariance,
@@ -68,7 +69,7 @@ class SimulationFit(eqx.Module):
     stagger: int = eqx.field(static=True, default=1)
 
 
-class OutputErrorStatistics(eqx.Module):
+class OutputErrorStatistics(AbstractStatistics):
     r"""What an output-error fit adds to its `Solution` (as `solution.statistics`).
 
     **Fields:**

@@ -10,18 +10,16 @@ An RMSE pools squared errors, so a few windows can carry it: on a record that en
 at rest upright, every open-loop rollout started there falls off the unstable equilibrium, and those windows' errors of
 a radian or more outweigh the rest of the record. So the result also gives the median window error per horizon, and
 names, per record and horizon, the windows that carry the RMSE where it is more than `CONCENTRATED` times the median
-window's error (`HeldOutError.concentrated`, `note()`): half of its squared error comes from the fewest windows
+window's error (`SimulationError.concentrated`, `note()`): half of its squared error comes from the fewest windows
 that hold it, and where they start.
 """
-
-import dataclasses
 
 import numpy as np
 
 from .._data._derivatives import resample
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
-from .._sim_error import simulation_error
+from .._sim_error import simulation_error, SimulationError
 
 DEFAULT_HORIZONS_S = (0.1, 0.25, 0.5)
 # RMSE over the median window's root-mean-square error above which a record's RMSE is said to be
@@ -32,69 +30,8 @@ DEFAULT_HORIZONS_S = (0.1, 0.25, 0.5)
 CONCENTRATED = 3.0
 
 
-@dataclasses.dataclass(frozen=True)
-class HeldOutError:
-    """Open-loop position RMSE on held-out data (the result of `held_out_error`).
-
-    **Fields:**
-
-    - `horizons_s`: the horizons [s].
-    - `rmse`: pooled over every window of every record, per horizon [rad or m]; `inf` where a
-      rollout diverged.
-    - `per_record`: record name -> RMSE per horizon.
-    - `diverged_fraction`: record name -> fraction of windows whose rollout diverged.
-    - `source`: `"validation records"` or `"held-out end of each record (last X %)"`.
-    - `median`: per horizon, the median over every window of every record of the window's
-      root-mean-square position error (a typical window, where `rmse` weighs the worst), over the
-      windows that did not diverge.
-    - `concentrated`: record name -> one entry per horizon at which the record's RMSE is more than
-      `CONCENTRATED` times its median window error: `horizon_s`, `rmse`, `median`, `windows` (the
-      fewest windows holding half of the squared error), `of` (the record's windows), `from_s`,
-      `to_s` (the first and last of those windows' start times, in the record's time). Records
-      whose RMSE no few windows carry are absent.
-    """
-
-    horizons_s: tuple[float, ...]
-    rmse: tuple[float, ...]
-    per_record: dict[str, tuple[float, ...]]
-    diverged_fraction: dict[str, float]
-    source: str
-    median: tuple[float, ...] = ()
-    concentrated: dict[str, list[dict]] = dataclasses.field(default_factory=dict)
-
-    def note(self) -> str | None:
-        """One sentence per record whose RMSE a few windows carry (`concentrated`); `None` if none."""
-        if not self.concentrated:
-            return None
-        parts = []
-        for name, entries in self.concentrated.items():
-            cells = "; ".join(
-                f"at {e['horizon_s']:g} s half of its squared error comes from {e['windows']} of "
-                f"{e['of']} windows, starting {e['from_s']:.2f} to {e['to_s']:.2f} s (RMSE "
-                f"{e['rmse']:.3g} against a median window error of {e['median']:.3g})"
-                for e in entries
-            )
-            parts.append(f"{name}: {cells}")
-        return (
-            "the open-loop RMSE is carried by a few windows, which say more about those stretches "
-            "(rest at an unstable equilibrium, a glitch in the data) than about the "
-            "record: " + ". ".join(parts)
-        )
-
-    def to_json(self) -> dict:
-        return {
-            "horizons_s": list(self.horizons_s),
-            "rmse": list(self.rmse),
-            "per_record": {k: list(v) for k, v in self.per_record.items()},
-            "diverged_fraction": self.diverged_fraction,
-            "source": self.source,
-            "median": list(self.median),
-            "concentrated": self.concentrated,
-        }
-
-
 def _concentrated(window_mse: np.ndarray, start_times: np.ndarray, horizons, rmse) -> list[dict]:
-    """`HeldOutError.concentrated`'s entries for one record (`window_mse (window, horizon)`)."""
+    """`SimulationError.concentrated`'s entries for one record (`window_mse (window, horizon)`)."""
     entries = []
     for k, horizon in enumerate(horizons):
         squared = window_mse[:, k]
@@ -133,7 +70,7 @@ def held_out_error(
     *,
     source: str = "validation records",
     max_windows: int = 200,
-) -> HeldOutError:
+) -> SimulationError:
     """Open-loop simulation error of `system` on each of `records`, pooled over their windows.
 
     Irregular records are resampled at their median interval first. From up to `max_windows` start
@@ -143,14 +80,15 @@ def held_out_error(
     **Arguments:** `system`; `records` (held out of the fit); `horizons_s`; `source` (a label for
     reports); `max_windows` per record.
 
-    **Returns:** a `HeldOutError`, with the median window error and the records whose RMSE a few
-    windows carry (`concentrated`). A record shorter than the longest horizon is skipped.
+    **Returns:** a `SimulationError` with `source`, the RMSE per record, the median window error
+    and the records whose RMSE a few windows carry (`concentrated`). A record shorter than the
+    longest horizon is skipped.
     """
     if not records:
         raise UsageError("held_out_error: no records to validate on")
     horizons = tuple(float(h) for h in horizons_s)
-    total, count = np.zeros(len(horizons)), 0
-    per_record, diverged, concentrated, windows = {}, {}, {}, []
+    total, count, n_diverged = np.zeros(len(horizons)), 0, 0.0
+    per_record, diverged, concentrated, windows, states = {}, {}, {}, [], ()
     for k, record in enumerate(records):
         uniform = record if record.is_uniform else resample(record, record.dt)
         if uniform.duration <= max(horizons) + uniform.dt:
@@ -162,6 +100,8 @@ def held_out_error(
         diverged[name] = float(error.diverged_fraction)
         total += error.n_windows * rmse**2
         count += error.n_windows
+        n_diverged += error.n_windows * error.diverged_fraction
+        states = error.states
         window_mse = np.asarray(error.window_mse, dtype=float)
         windows.append(window_mse)
         entries = _concentrated(window_mse, np.asarray(uniform.ts)[np.asarray(error.starts)], horizons, rmse)
@@ -174,8 +114,17 @@ def held_out_error(
         float(np.sqrt(np.nanmedian(pooled[:, k]))) if np.isfinite(pooled[:, k]).any() else float("nan")
         for k in range(len(horizons))
     )
-    return HeldOutError(
-        horizons, tuple(float(v) for v in np.sqrt(total / count)), per_record, diverged, source, median, concentrated
+    return SimulationError(
+        horizons_s=horizons,
+        n_windows=count,
+        diverged_fraction=n_diverged / count,
+        rmse=np.sqrt(total / count),
+        states=states,
+        source=source,
+        rmse_per_record=per_record,
+        diverged_per_record=diverged,
+        median=np.asarray(median),
+        concentrated=concentrated,
     )
 
 

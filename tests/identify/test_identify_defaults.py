@@ -624,7 +624,7 @@ def test_dfki_least_squares_with_defaults_is_consistent_where_the_unfiltered_fit
     # the lab's model_3.0 in base parameters: theta4 = 2.365, theta5 = 1.777 (the least-squares stage is
     # within 15 %; the output-error stage, tested in the slow CLI test, moves toward them)
     assert abs(result.parameters["theta4"] / 2.365 - 1) < 0.15 and abs(result.parameters["theta5"] / 1.777 - 1) < 0.15
-    assert result.validation is not None and len(result.validation.per_record) == 6
+    assert result.validation is not None and len(result.validation.rmse_per_record) == 6
     # six runs determine every size parameter (relative standard errors of about 1 to 4 %, robust to the rows'
     # correlation in time; under 1 % counting them as independent)
     assert result.poorly_determined == {}

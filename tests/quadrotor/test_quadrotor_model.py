@@ -176,8 +176,9 @@ def test_constant_velocity_baseline_moves_on_the_straight_line(flights):
     np.testing.assert_allclose(predicted[:, 0, 0:3], xs[:-10, 0:3] + 10 * DT * xs[:-10, 7:10], atol=1e-12)
     np.testing.assert_allclose(predicted[:, 0, 7:13], xs[:-10, 7:13], atol=0)
     error = dynax.flight_error(dynax.ConstantVelocity(), flights, (1, 10))
-    assert error.mae.shape == (4, 2) and np.all(np.asarray(error.mae[:, 1]) > np.asarray(error.mae[:, 0]))
-    assert error.n_starts == sum(len(f) - 10 for f in flights)
+    mae = np.asarray(error.mae_per_state)
+    assert mae.shape == (2, 4) and np.all(mae[1] > mae[0])
+    assert error.n_windows == sum(len(f) - 10 for f in flights) and error.rmse is None
 
 
 def test_model_file_round_trip(fitted, tmp_path):

@@ -38,7 +38,7 @@ def flight():
 
 @pytest.fixture(scope="module")
 def start(flight):
-    return fit_one_step(Helicopter(AccelerationModel.with_features(TEMPEST_FEATURES)), flight).system
+    return fit_one_step(Helicopter(AccelerationModel.with_features(TEMPEST_FEATURES)), flight).model
 
 
 def _python_em_free(system, data, criterion):
@@ -81,21 +81,23 @@ def test_compiled_em_free_takes_the_python_iterations_steps(flight, start):
     fit = fit_lagged(start, flight, criterion, callback=lambda i, loss: seen.append((i, loss)))
     reference, losses = _python_em_free(start, flight, criterion)
     np.testing.assert_allclose(
-        fit.system.body_model.parameter_vector(), reference.body_model.parameter_vector(), rtol=1e-9, atol=1e-12
+        fit.model.body_model.parameter_vector(), reference.body_model.parameter_vector(), rtol=1e-9, atol=1e-12
     )
     history = np.asarray([loss for _, loss in fit.history])
     np.testing.assert_allclose(history, losses, rtol=1e-10)
     assert losses[-1] < 0.9 * losses[0]  # the iteration did real work on this flight
     # the history is an array of fixed length (max_iterations + 1), NaN past the last iteration
-    assert fit.losses.shape == (criterion.max_iterations + 1,) and fit.seconds.shape == fit.losses.shape
-    assert np.all(np.isnan(np.asarray(fit.losses)[len(losses) :]))
+    assert (
+        fit.loss_history.shape == (criterion.max_iterations + 1,) and fit.time_history.shape == fit.loss_history.shape
+    )
+    assert np.all(np.isnan(np.asarray(fit.loss_history)[len(losses) :]))
     seconds = np.asarray([t for t, _ in fit.history])
     assert seconds[0] == 0 and np.all(np.diff(seconds) > 0)
     # one report per accepted iteration, from inside the compiled loop, with its loss
     assert [i for i, _ in seen] == list(range(len(losses) - 1))
     np.testing.assert_allclose([loss for _, loss in seen], losses[1:], rtol=1e-12)
-    assert fit.solution.names == tuple(start.body_model.parameter_names)
-    assert int(fit.solution.steps) >= len(losses) - 1
+    assert fit.names == tuple(start.body_model.parameter_names)
+    assert int(fit.steps) >= len(losses) - 1
 
 
 def _python_lbfgs(loss_fn, theta, steps, tolerance):
@@ -136,7 +138,7 @@ def test_compiled_backprop_takes_the_python_lbfgs_steps(flight, start):
         loss_fn, start.body_model.parameter_vector(), criterion.max_steps, criterion.tolerance
     )
     fit = fit_backprop(start, flight, criterion)
-    np.testing.assert_allclose(fit.system.body_model.parameter_vector(), theta, rtol=1e-7, atol=1e-10)
+    np.testing.assert_allclose(fit.model.body_model.parameter_vector(), theta, rtol=1e-7, atol=1e-10)
     np.testing.assert_allclose([loss for _, loss in fit.history], losses, rtol=1e-9)
     assert losses[-1] < losses[0]
 

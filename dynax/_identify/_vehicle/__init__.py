@@ -31,7 +31,10 @@ from ._criteria import (
     OneStep as OneStep,
 )
 from ._criteria import (
-    VehicleFit as VehicleFit,
+    recorded_loss as recorded_loss,
+)
+from ._criteria import (
+    VehicleStatistics as VehicleStatistics,
 )
 from ._fit import (
     CRITERIA as CRITERIA,

@@ -47,12 +47,11 @@ import time
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Float, Int, Scalar
-import numpy as np
+from jaxtyping import Array, Bool, Int, Scalar
 import optimistix as optx
 
 from ..._data._trajectory import Trajectory
-from ..._fit import fit_minimise, History, monitor, notify, OptaxLBFGS, Parameters, Solution
+from ..._fit import AbstractStatistics, fit_minimise, History, monitor, notify, OptaxLBFGS, Parameters, Solution
 from ..._model._helicopter import ANGULAR_RATE, BODY, Helicopter, QUATERNION, quaternion_to_rotation, VELOCITY
 from ._windows import check_helicopter_data, horizon_steps, lagged_loss, rollout, valid_starts
 
@@ -126,50 +125,52 @@ class Backprop(eqx.Module):
     target_loss: float | None = None
 
 
-class VehicleFit(eqx.Module):
-    """The result of `fit_vehicle`.
+class VehicleStatistics(AbstractStatistics):
+    """What a vehicle fit (`fit_vehicle`) adds to its `Solution` (as `solution.statistics`).
 
     **Fields:**
 
-    - `system`: the fitted `Helicopter`.
-    - `losses`: the criterion's own loss at the start and after each iteration (for `lagged` and
-      `backprop` the lagged loss), NaN past the last iteration: an array of fixed length.
-    - `seconds`: the wall-clock seconds since the start of the iteration at which each entry of
-      `losses` was reached (read on the host from inside the compiled loop), same shape.
     - `criterion`: the criterion's name (`one-step`, `frequency`, `lagged`, `backprop`).
     - `n_samples`: the number of samples fitted.
-    - `statistics`: for the frequency criterion, `(name, value, Cramer-Rao bound %, insensitivity %)`
+    - `accuracy`: for the frequency criterion, `(name, value, Cramer-Rao bound %, insensitivity %)`
       of each identified weight (empty for the others).
     - `eliminated`: for the frequency criterion, the weights its structure reduction dropped, in order.
-    - `solution`: for `lagged` and `backprop`, the engine's `Solution` (weights by name, result
-      code, steps, loss history); `None` for the others.
-
-    **Properties:** `loss`, the final loss (a float), and `history`, `(seconds, loss)` pairs of
-    the recorded entries.
     """
 
-    system: Helicopter
-    losses: Float[Array, " history"]
-    seconds: Float[Array, " history"]
     criterion: str = eqx.field(static=True)
     n_samples: int = eqx.field(static=True)
-    statistics: tuple = eqx.field(static=True, default=())
+    accuracy: tuple = eqx.field(static=True, default=())
     eliminated: tuple = eqx.field(static=True, default=())
-    solution: Solution | None = None
 
-    @property
-    def loss(self) -> float:
-        """The final value of the criterion's loss."""
-        losses = np.asarray(self.losses)
-        recorded = losses[~np.isnan(losses)]
-        return float(recorded[-1]) if recorded.size else float("nan")
 
-    @property
-    def history(self) -> tuple[tuple[float, float], ...]:
-        """`(seconds since start, loss)` at the start and after each iteration."""
-        losses, seconds = np.asarray(self.losses), np.asarray(self.seconds)
-        keep = ~np.isnan(losses)
-        return tuple((float(t), float(v)) for t, v in zip(seconds[keep], losses[keep]))
+def recorded_loss(solution: Solution) -> float:
+    """The last recorded value of a vehicle fit's loss history (the criterion's own loss; for
+    `lagged` and `backprop` the lagged loss), NaN if none was recorded."""
+    history = solution.history
+    return history[-1][1] if history else float("nan")
+
+
+def vehicle_solution(
+    system: Helicopter, fitted: Helicopter, losses, seconds, statistics: VehicleStatistics
+) -> Solution:
+    """The `Solution` of a one-shot vehicle fit (one-step, frequency): the fitted body model's free
+    weights by name, no covariance (NaN), one step, the loss as recorded."""
+    theta = fitted.body_model.parameter_vector()
+    n = theta.shape[0]
+    return Solution(
+        model=fitted,
+        value=theta,
+        parameters=Parameters.of(system),
+        covariance=jnp.full((n, n), jnp.nan, theta.dtype),
+        std_errors=jnp.full(n, jnp.nan, theta.dtype),
+        result=optx.RESULTS.successful,
+        loss=losses[-1],
+        initial_loss=jnp.asarray(jnp.nan, theta.dtype),
+        steps=jnp.asarray(1),
+        loss_history=losses,
+        time_history=seconds,
+        statistics=statistics,
+    )
 
 
 def one_shot_history(loss, seconds):
@@ -277,7 +278,7 @@ def state_weights(weights, dtype):
 
 def fit_one_step(
     system: Helicopter, trajectory: Trajectory, criterion: OneStep = OneStep(), *, weights=None, breaks=None
-) -> VehicleFit:
+) -> Solution:
     """Fit by one-step least squares (see `OneStep` and the module docstring); `breaks`: see `fit_vehicle`."""
     check_helicopter_data(trajectory, "fit_one_step")
     t0 = time.perf_counter()
@@ -288,7 +289,7 @@ def fit_one_step(
     fitted = with_theta(system, theta)
     _, _, loss = normal_equations(fitted, trajectory, starts, 1, w, False, 1024)
     losses, seconds = one_shot_history(loss, time.perf_counter() - t0)
-    return VehicleFit(fitted, losses, seconds, "one-step", len(trajectory))
+    return vehicle_solution(system, fitted, losses, seconds, VehicleStatistics("one-step", len(trajectory)))
 
 
 class _EMFreeState(eqx.Module):
@@ -405,7 +406,7 @@ def _em_free(system, trajectory, starts, w, n_steps: int, criterion: Lagged, tok
     )
 
 
-def _vehicle_solution(system, fitted, theta, solution) -> Solution:
+def _vehicle_solution(system, fitted, theta, solution, statistics: VehicleStatistics) -> Solution:
     """The engine's `Solution` of an iterative vehicle fit (no covariance: NaN)."""
     n = theta.shape[0]
     history = solution.stats["loss_history"]
@@ -421,6 +422,7 @@ def _vehicle_solution(system, fitted, theta, solution) -> Solution:
         steps=solution.stats["num_steps"],
         loss_history=history,
         time_history=solution.stats["time_history"],
+        statistics=statistics,
     )
 
 
@@ -432,7 +434,7 @@ def fit_lagged(
     weights=None,
     callback=None,
     breaks=None,
-) -> VehicleFit:
+) -> Solution:
     """Minimise the lagged loss by the EM-free iteration with line search (see `Lagged`, `EMFree`).
 
     The whole iteration runs compiled (`optimistix.minimise` with the `EMFree` solver, one
@@ -447,8 +449,7 @@ def fit_lagged(
         solution = _em_free(system, trajectory, starts, w, n_steps, criterion, token)
     theta = solution.value
     fitted = with_theta(system, theta)
-    result = _vehicle_solution(system, fitted, theta, solution)
-    return VehicleFit(fitted, result.loss_history, result.time_history, "lagged", len(trajectory), solution=result)
+    return _vehicle_solution(system, fitted, theta, solution, VehicleStatistics("lagged", len(trajectory)))
 
 
 def _backprop_loss(model, args, *, n_steps, checkpoint_segment):
@@ -481,7 +482,7 @@ def fit_backprop(
     weights=None,
     callback=None,
     breaks=None,
-) -> VehicleFit:
+) -> Solution:
     """Minimise the lagged loss by L-BFGS with gradients through checkpointed rollouts (see `Backprop`).
 
     The engine's `fit_minimise` with `OptaxLBFGS` (optax's L-BFGS as an optimistix minimiser), one
@@ -494,8 +495,8 @@ def fit_backprop(
     target = -jnp.inf if criterion.target_loss is None else criterion.target_loss
     with monitor(callback) as token:
         solution = _backprop(system, trajectory, starts, w, n_steps, criterion, jnp.asarray(target, w.dtype), token)
-    return VehicleFit(
-        solution.model, solution.loss_history, solution.time_history, "backprop", len(trajectory), solution=solution
+    return eqx.tree_at(
+        lambda s: s.statistics, solution, VehicleStatistics("backprop", len(trajectory)), is_leaf=lambda x: x is None
     )
 
 

@@ -7,6 +7,7 @@ import numpy as np
 
 from ..._data._trajectory import Trajectory
 from ..._errors import DataError, UsageError
+from ..._fit import Solution
 from ..._model._helicopter import (
     AccelerationModel,
     Helicopter,
@@ -16,7 +17,16 @@ from ..._model._helicopter import (
 )
 from ..._precision import warn_if_float32
 from ..._progress import ProgressBar
-from ._criteria import Backprop, fit_backprop, fit_lagged, fit_one_step, Lagged, OneStep, VehicleFit
+from ._criteria import (
+    Backprop,
+    fit_backprop,
+    fit_lagged,
+    fit_one_step,
+    Lagged,
+    OneStep,
+    recorded_loss,
+    VehicleStatistics,
+)
 from ._frequency import fit_frequency, FrequencyDomain
 
 CRITERIA = {"one-step": OneStep, "frequency": FrequencyDomain, "lagged": Lagged, "backprop": Backprop}
@@ -42,7 +52,7 @@ def fit_vehicle(
     callback=None,
     progress: bool | None = None,
     breaks=None,
-) -> VehicleFit:
+) -> Solution:
     r"""Learn the body model of `system` from `trajectory` with a learning `criterion`.
 
     `Lagged` and `Backprop` start from the one-step fit (the paper's initialisation), so both
@@ -62,7 +72,9 @@ def fit_vehicle(
       ground segments and glitches), the sample indices where each new one begins: no window
       of the criteria crosses one (not for `FrequencyDomain`).
 
-    **Returns:** a `VehicleFit` with the fitted `system`, the final loss and its history.
+    **Returns:** a `Solution`: the fitted system as its `model`, its free weights by name, the
+    criterion's loss and its history, and a `VehicleStatistics` (the criterion, the samples, and
+    for the frequency criterion each weight's Cramer-Rao bound and the weights it eliminated).
 
     ??? cite "Reference"
 
@@ -86,35 +98,42 @@ def fit_vehicle(
                 if callback is not None:
                     callback(iteration, loss)
 
-            start = fit_one_step(system, trajectory, breaks=breaks).system
+            start = fit_one_step(system, trajectory, breaks=breaks).model
             return fit(start, trajectory, criterion, callback=report, breaks=breaks)
     raise UsageError(f"fit_vehicle: unknown criterion {type(criterion).__name__}")
 
 
-def model_to_json(fit: VehicleFit, *, horizon_s: float | None = None) -> dict:
-    """The `MODEL.json` object of a fit: model kind, features, mask, weights and named parameters."""
-    body = fit.system.body_model
+def model_to_json(fit: Solution, *, horizon_s: float | None = None) -> dict:
+    """The `MODEL.json` object of a vehicle fit (`fit_vehicle`): model kind, features, mask, weights and named
+    parameters."""
+    statistics = fit.statistics
+    if not isinstance(statistics, VehicleStatistics):
+        raise UsageError("model_to_json: not the Solution of a vehicle fit (`fit_vehicle`)")
+    body = fit.model.body_model
     kind = body.kind
     out = {
         "system": "helicopter",
         "model": kind,
-        "criterion": fit.criterion,
+        "criterion": statistics.criterion,
         "horizon_s": horizon_s,
         "features": list(body.feature_names),
         "mask": [[int(v) for v in row] for row in body.mask],
         "weights": np.asarray(body.weights).tolist(),
         "parameters": {k: float(v) for k, v in body.parameters.items()},
-        "loss": fit.loss,
-        "n_samples": fit.n_samples,
+        "loss": recorded_loss(fit),
+        "n_samples": statistics.n_samples,
     }
     if kind == "acceleration":
         out["gravity"] = body.gravity
-    if fit.statistics:  # the frequency criterion's Cramer-Rao bounds and insensitivities
+    accuracy = statistics.accuracy
+    if accuracy:  # the frequency criterion's Cramer-Rao bounds and insensitivities
         out["identification"] = {
             # null where a weight is not determined at all (an infinite bound)
-            "cramer_rao_percent": {name: cr if math.isfinite(cr) else None for name, _, cr, _ in fit.statistics},
-            "insensitivity_percent": {name: ins if math.isfinite(ins) else None for name, _, _, ins in fit.statistics},
-            "eliminated": list(fit.eliminated),
+            "cramer_rao_percent": {name: cr if math.isfinite(cr) else None for name, _, cr, _ in accuracy},
+            "insensitivity_percent": {
+                name: ins if math.isfinite(ins) else None for name, _, _, ins in statistics.accuracy
+            },
+            "eliminated": list(statistics.eliminated),
         }
     return out
 

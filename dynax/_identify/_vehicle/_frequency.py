@@ -22,7 +22,7 @@ r"""The frequency-domain criterion (CIFER-style) for the linear velocity model.
    frequency response, is then re-fitted by one-step least squares with the rest held.
 4. **Accuracy** (CIFER's): each weight's Cramer-Rao bound $\sqrt{\hat\sigma^2 (J^\top J)^{-1}_{ii}}$
    and insensitivity $\hat\sigma / \sqrt{(J^\top J)_{ii}}$, in % of the weight, from the Jacobian $J$ of
-   the weighted response residuals and their variance $\hat\sigma^2$ (`VehicleFit.statistics`).
+   the weighted response residuals and their variance $\hat\sigma^2$ (`VehicleStatistics.accuracy`).
    With `eliminate=True`, weights beyond 10 % insensitivity or 20 % bound are dropped one at a
    time and the rest refitted (the model-structure reduction of Tischler and Remple, 2012).
 
@@ -47,9 +47,17 @@ import numpy as np
 
 from ..._data._trajectory import Trajectory
 from ..._errors import UsageError
-from ..._fit import fit_least_squares, levenberg_marquardt
+from ..._fit import fit_least_squares, levenberg_marquardt, Solution
 from ..._model._helicopter import BODY, BODY_AXES, Helicopter, LINEAR_FEATURE_NAMES
-from ._criteria import fit_one_step, normal_equations, one_shot_history, ridge_solve, VehicleFit, with_theta
+from ._criteria import (
+    fit_one_step,
+    normal_equations,
+    one_shot_history,
+    ridge_solve,
+    vehicle_solution,
+    VehicleStatistics,
+    with_theta,
+)
 from ._windows import check_helicopter_data, valid_starts
 
 #: The derivatives of a hover model that frequency responses identify (Mettler, Tischler and
@@ -89,8 +97,8 @@ class FrequencyDomain(eqx.Module):
       weight's Cramer-Rao bound and insensitivity (relative to the weight); while some weight is
       more insensitive than `max_insensitivity` (10 %), drop the most insensitive one, otherwise
       while some bound is wider than `max_cramer_rao` (20 %), drop the one with the widest bound;
-      refit; repeat. Dropped weights are zero (`VehicleFit.eliminated`); the final bounds are in
-      `VehicleFit.statistics`. These are the guidelines of Tischler and Remple (2012) for a model
+      refit; repeat. Dropped weights are zero (`VehicleStatistics.eliminated`); the final bounds are in
+      `VehicleStatistics.accuracy`. These are the guidelines of Tischler and Remple (2012) for a model
       whose weights the responses determine.
     """
 
@@ -377,7 +385,7 @@ def _refit_constants(fitted: Helicopter, trajectory: Trajectory) -> Helicopter:
 
 def fit_frequency(
     system: Helicopter, trajectory: Trajectory, criterion: FrequencyDomain = FrequencyDomain()
-) -> VehicleFit:
+) -> Solution:
     """Fit a linear velocity model by the frequency-domain criterion (see the module docstring).
 
     The steps: the one-step fit as the start, reduced to the hover-derivative structure; the
@@ -386,7 +394,7 @@ def fit_frequency(
     """
     _check(system, criterion, trajectory)
     t0 = time.perf_counter()
-    initial, mask = _hover_structure(fit_one_step(system, trajectory).system, criterion)
+    initial, mask = _hover_structure(fit_one_step(system, trajectory).model, criterion)
     responses = _band_responses(trajectory, criterion)
     dt = float(trajectory.ts[1] - trajectory.ts[0])
     free = np.nonzero(mask)
@@ -415,12 +423,5 @@ def fit_frequency(
     )
     fitted = eqx.tree_at(lambda h: h.body_model.weights, initial, initial.body_model.weights.at[free].set(theta))
     losses, seconds = one_shot_history(final_cost, time.perf_counter() - t0)
-    return VehicleFit(
-        _refit_constants(fitted, trajectory),
-        losses,
-        seconds,
-        "frequency",
-        len(trajectory),
-        statistics=summary,
-        eliminated=tuple(eliminated),
-    )
+    statistics = VehicleStatistics("frequency", len(trajectory), accuracy=summary, eliminated=tuple(eliminated))
+    return vehicle_solution(system, _refit_constants(fitted, trajectory), losses, seconds, statistics)

@@ -14,7 +14,6 @@ from collections.abc import Sequence
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 
 from ..._data._trajectory import Trajectory
 from ..._errors import UsageError
@@ -106,35 +105,19 @@ def fit_quadrotor(
     joined, breaks = join_flights(system, flights)
     helicopter = system.as_helicopter()
     fit = fit_vehicle(helicopter, joined, criterion, progress=progress, callback=callback, breaks=breaks)
-    fitted = system.with_body_model(fit.system.body_model)
-    parameters = Parameters.of(fitted)
-    theta = fitted.body_model.parameter_vector()
-    if fit.solution is not None:  # lagged, backprop: the engine's Solution of the helicopter form
-        return eqx.tree_at(lambda s: (s.model, s.parameters), fit.solution, (fitted, parameters))
-    n = theta.shape[0]
-    covariance = jnp.full((n, n), jnp.nan, theta.dtype)
-    if isinstance(criterion, OneStep):
-        starts = window_starts(joined, 1, 1, breaks)
-        w = state_weights(None, joined.xs.dtype)
-        ata, _, mse = normal_equations(fit.system, joined, starts, 1, w, False, 1024)
-        windows = int(starts.shape[0])  # `mse` is per window, its six body axes summed
-        sigma2 = mse * windows / max(6 * windows - n, 1)
-        covariance = sigma2 * jnp.linalg.pinv(ata)
+    fitted = system.with_body_model(fit.model.body_model)
+    solution = eqx.tree_at(lambda s: (s.model, s.parameters), fit, (fitted, Parameters.of(fitted)))
+    if not isinstance(criterion, OneStep):  # lagged, backprop: the engine's Solution of the helicopter form
+        return solution
+    n = solution.value.shape[0]
+    starts = window_starts(joined, 1, 1, breaks)
+    w = state_weights(None, joined.xs.dtype)
+    ata, _, mse = normal_equations(fit.model, joined, starts, 1, w, False, 1024)
+    windows = int(starts.shape[0])  # `mse` is per window, its six body axes summed
+    sigma2 = mse * windows / max(6 * windows - n, 1)
+    covariance = sigma2 * jnp.linalg.pinv(ata)
     std = jnp.sqrt(jnp.diag(covariance))
-    loss = jnp.asarray(fit.loss, theta.dtype)
-    return Solution(
-        model=fitted,
-        value=theta,
-        parameters=parameters,
-        covariance=covariance,
-        std_errors=std,
-        result=optx.RESULTS.successful,
-        loss=loss,
-        initial_loss=jnp.asarray(jnp.nan, theta.dtype),
-        steps=jnp.asarray(1),
-        loss_history=fit.losses,
-        time_history=fit.seconds,
-    )
+    return eqx.tree_at(lambda s: (s.covariance, s.std_errors), solution, (covariance, std))
 
 
 def quadrotor_to_json(system: Quadrotor, **info) -> dict:
