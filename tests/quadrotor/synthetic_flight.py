@@ -9,7 +9,14 @@ effects, each written here independently of dynax:
 - `drag=(du, dv, dw)`: rotor drag, a body-frame force -m D nu (nu the body velocity);
 - `bias=(axis, b)`: a constant body-frame acceleration (axis 0..2, m/s^2) or angular acceleration
   (axis 3..5, rad/s^2);
-- `lag=(motor, tau)`: that motor's rotor command follows the logged one with a first-order lag tau [s].
+- `lag=(motor, tau)`: that motor's rotor command follows the logged one with a first-order lag tau [s];
+- `sag=(v0, v1)`: the battery voltage falls linearly from v0 to v1 [V] over the flight, logged as `vbat`
+  (with 10 mV noise), and every rotor's thrust and moment per command scale with (vbat / v0)^2 (rotor
+  speed proportional to command times voltage);
+- `ground=R`: ground effect of rotors of radius R [m] over a floor at z = 0, thrust times
+  1 / (1 - (R / 4 z_r)^2) (Cheeseman and Bennett) at the rotor plane's height z_r = z + 0.02 m; give the
+  flight a low `altitude`.
+Any flight can log `vbat=True` (a steady 4.0 V with its noise) without the effect.
 """
 
 import numpy as np
@@ -50,7 +57,7 @@ def _reference(t, c):
     pos = a * np.sin(w * t + ph)
     vel = a * w * np.cos(w * t + ph)
     acc = -a * w**2 * np.sin(w * t + ph)
-    pos = pos + np.array([0.0, 0.0, 1.0])
+    pos = pos + np.array([0.0, 0.0, c["altitude"]])
     yaw = c["yaw"] * np.sin(c["yaw_omega"] * t)
     return pos, vel, acc, yaw
 
@@ -73,11 +80,14 @@ def _controller(t, s, c):
     return np.sqrt(thrusts / KF)
 
 
-def _field(t, s, command, effects):
+def _field(t, s, command, effects, battery=1.0):
     q, v, om = s[3:7], s[7:10], s[10:13]
     rotor = s[13:17]
     R = rotation(q)
-    thrusts = KF * rotor**2
+    thrusts = KF * rotor**2 * battery
+    if "ground" in effects:
+        z_rotor = max(s[2], 0.0) + 0.02
+        thrusts = thrusts / (1.0 - (effects["ground"] / (4.0 * z_rotor)) ** 2)
     wrench = MIX @ thrusts
     nu = R.T @ v
     f_body = np.array([0.0, 0.0, wrench[0] / MASS])
@@ -105,11 +115,13 @@ def _field(t, s, command, effects):
     return np.concatenate([v, dq, dv, dom, drotor])
 
 
-def quadrotor_flight(duration=20.0, seed=0, *, dt=0.01, noise=True, **effects) -> Trajectory:
-    """A closed-loop flight of `duration` s sampled every `dt`, as a quadrotor `Trajectory` (PWM-like inputs)."""
+def quadrotor_flight(duration=20.0, seed=0, *, dt=0.01, noise=True, altitude=1.0, vbat=False, **effects) -> Trajectory:
+    """A closed-loop flight of `duration` s sampled every `dt`, as a quadrotor `Trajectory` (PWM-like inputs),
+    around `altitude` [m] (the vertical swing is up to 0.3 m, or 0.8 of a lower altitude)."""
     rng = np.random.default_rng(seed)
     c = {
-        "amplitude": np.array([1.0, 1.0, 0.3]) * rng.uniform(0.7, 1.0, 3),
+        "altitude": altitude,
+        "amplitude": np.array([1.0, 1.0, min(0.3, 0.8 * altitude)]) * rng.uniform(0.7, 1.0, 3),
         "omega": rng.uniform(0.8, 1.6, 3),
         "phase": rng.uniform(0, 2 * np.pi, 3),
         "yaw": rng.uniform(0.5, 1.0),
@@ -119,6 +131,8 @@ def quadrotor_flight(duration=20.0, seed=0, *, dt=0.01, noise=True, **effects) -
     s = np.concatenate([pos, [np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)], vel, np.zeros(3), np.ones(4)])
     n = int(round(duration / dt)) + 1
     xs, us = np.zeros((n, 13)), np.zeros((n, 4))
+    v0, v1 = effects.pop("sag", (4.0, 4.0))
+    volts = v0 + (v1 - v0) * np.arange(n) / max(n - 1, 1)
     for k in range(n):
         command = _controller(k * dt, s, c)
         follows = np.arange(4) != effects.get("lag", (-1, 0.0))[0]
@@ -126,7 +140,13 @@ def quadrotor_flight(duration=20.0, seed=0, *, dt=0.01, noise=True, **effects) -
         xs[k], us[k] = s[:13], command
         if k + 1 < n:
             sol = solve_ivp(
-                _field, (k * dt, (k + 1) * dt), s, method="DOP853", rtol=1e-9, atol=1e-11, args=(command, effects)
+                _field,
+                (k * dt, (k + 1) * dt),
+                s,
+                method="DOP853",
+                rtol=1e-9,
+                atol=1e-11,
+                args=(command, effects, (volts[k] / v0) ** 2),
             )
             s = sol.y[:, -1].copy()
             s[3:7] /= np.linalg.norm(s[3:7])
@@ -134,4 +154,7 @@ def quadrotor_flight(duration=20.0, seed=0, *, dt=0.01, noise=True, **effects) -
         xs[:, :3] += 5e-4 * rng.standard_normal((n, 3))
         xs[:, 7:10] += 5e-3 * rng.standard_normal((n, 3))
         xs[:, 10:13] += 2e-2 * rng.standard_normal((n, 3))
-    return Trajectory(np.arange(n) * dt, xs, us * PWM, STATE_NAMES, INPUT_NAMES, "quadrotor", f"synthetic seed {seed}")
+    us, names = us * PWM, INPUT_NAMES
+    if vbat or v1 != v0:
+        us, names = np.column_stack([us, volts + 0.01 * rng.standard_normal(n)]), (*INPUT_NAMES, "vbat")
+    return Trajectory(np.arange(n) * dt, xs, us, STATE_NAMES, names, "quadrotor", f"synthetic seed {seed}")
