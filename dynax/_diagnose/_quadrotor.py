@@ -17,8 +17,10 @@ The vocabulary for a multirotor (`quadrotor_candidates`):
 - `input_lag` per motor (`InputLag` at `m1..m4`): the motor's first-order lag behind its command;
 - `battery_sag` at `vbat` (`BatterySag`, where the flights log `vbat`): thrust and moments per command that
   change with the battery voltage, which a motor map that does not read `vbat` misses;
-- `ground_effect` at `z` (`GroundEffect`): thrust that rises near the floor, the floor taken as the
-  records' lowest height (a log that starts on its pad: the pad);
+- `ground_effect` at `z` (`GroundEffect`): thrust that rises near the floor, proposed only where the
+  floor's height is given (`quadrotor_candidates(..., floor=z0)`; flight segments do not show where the
+  floor is, and a floor guessed from the lowest height makes the term a thrust change at the lowest point
+  of any flight, which on real flights crowds out the candidates that are there);
 - `input_gain` per motor (`InputGain` at `m1..m4`): one motor's thrust per command off the others'.
   Tested against the held motor map; where the motor weights are refitted with it
   (`Refit(parameters=...)` naming them) the learned map carries any per-motor scale and the report
@@ -78,16 +80,16 @@ def as_quadrotor(body: BodyFrameQuadrotor, like: Quadrotor) -> Quadrotor:
     return like.with_body_model(body.body_model)
 
 
-def quadrotor_candidates(system, flights=()) -> tuple:
+def quadrotor_candidates(system, floor: float | None = None) -> tuple:
     """The multirotor vocabulary at neutral values (see the module docs): `rotor_drag` on `u` ... `r`,
-    `body_bias` on `u, v, w, p, q, r`, `battery_sag` where the system has `vbat`, `ground_effect` over the
-    `flights`' lowest height (0 without flights), `input_lag` and `input_gain` at each motor `m1..m4`."""
+    `body_bias` on `u, v, w, p, q, r`, `battery_sag` where the system has `vbat`, `ground_effect` over a
+    floor at height `floor` (world `z`) where one is given, `input_lag` and `input_gain` at each motor `m1..m4`."""
     terms: list[AbstractTerm] = [RotorDrag(i) for i in range(6)]
     terms += [BodyBias(i) for i in range(6)]
     if "vbat" in tuple(system.input_names):
         terms.append(BatterySag())
-    heights = [np.asarray(f.xs)[:, 2] for f in flights]
-    terms.append(GroundEffect(floor=float(min(h.min() for h in heights)) if heights else 0.0))
+    if floor is not None:
+        terms.append(GroundEffect(floor=float(floor)))
     terms += [InputLag(i) for i in range(len(MOTORS))]
     terms += [InputGain(i) for i in range(len(MOTORS))]
     return tuple(terms)
@@ -149,7 +151,7 @@ def diagnose_quadrotor(system: Quadrotor, train, validation=None, *, diagnose, m
         train, validation = [a for a, _ in halves], [b for _, b in halves]
     body, train_b, val_b, _ = prepare_quadrotor(system, train, validation, refit=refit)
     if options.get("candidates") is None:
-        options["candidates"] = quadrotor_candidates(body, train_b + (val_b or []))
+        options["candidates"] = quadrotor_candidates(body)
     if options.get("horizons_s") is None:
         options["horizons_s"] = QUADROTOR_HORIZONS_S
     options["system_name"] = options.get("system_name") or "quadrotor"

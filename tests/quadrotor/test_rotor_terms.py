@@ -56,14 +56,13 @@ def test_the_terms_refuse_systems_they_cannot_act_on():
         GroundEffect(rotor_height=0.0)
 
 
-def test_battery_sag_is_a_candidate_only_where_the_flights_log_vbat():
+def test_battery_sag_is_a_candidate_only_where_the_flights_log_vbat_and_ground_effect_where_the_floor_is_given():
     with_vbat = {t.cause for t in quadrotor_candidates(_body(True))}
     without = {t.cause for t in quadrotor_candidates(_body(False))}
     assert "battery_sag" in with_vbat and "battery_sag" not in without
-    assert "ground_effect" in with_vbat and "ground_effect" in without
-    low = quadrotor_flight(2.0, seed=1, noise=False, altitude=0.15)
-    (ground,) = [t for t in quadrotor_candidates(_body(False), [low]) if t.cause == "ground_effect"]
-    assert float(ground.floor) == pytest.approx(float(np.asarray(low.xs)[:, 2].min()))
+    assert "ground_effect" not in with_vbat | without  # flight segments do not show where the floor is
+    (ground,) = [t for t in quadrotor_candidates(_body(False), floor=0.05) if t.cause == "ground_effect"]
+    assert float(ground.floor) == 0.05
 
 
 def _diagnosis(train, validation, battery=None):
@@ -101,10 +100,10 @@ def test_hidden_battery_sag_is_named_where_the_motor_map_ignores_the_voltage():
 
 @pytest.mark.slow
 @pytest.mark.xfail(
-    reason="known shortfall: ground_effect screens first and gains 17 % at 0.5 s on a held-out 15 s flight "
-    "2 to 18 cm over the floor (rotors of 8 cm radius, one training flight high and one low), but p = 0.043 "
-    "against the 1 % level; the floor is taken as the records' lowest height, which is not where a real "
-    "floor is, and the fitted c is far from R^2/16. Needs the floor from the log's ground segments.",
+    reason="known shortfall: with the floor given at its true height, ground_effect screens first and gains "
+    "17 % at 0.5 s on a held-out 15 s flight 2 to 18 cm over the floor (rotors of 8 cm radius, one training "
+    "flight high and one low), but the paired test on one held-out flight does not reach the 1 % level "
+    "(p = 0.04 with the floor at the lowest height)",
     strict=True,
 )
 def test_hidden_ground_effect_is_named_low_over_the_floor():
@@ -112,8 +111,10 @@ def test_hidden_ground_effect_is_named_low_over_the_floor():
     train = [quadrotor_flight(15.0, seed=6, ground=0.08), quadrotor_flight(15.0, seed=16, altitude=0.1, ground=0.08)]
     validation = quadrotor_flight(15.0, seed=106, altitude=0.1, ground=0.08)
     quad = initial_quadrotor("nominal", train)
-    j = diagnose(quad, train, validation, max_terms=1, discovery=False, progress=False).to_json()
-    first = _named_first(j, "ground_effect")
+    body = body_frame_system(quad, train[0].input_names)
+    candidates = quadrotor_candidates(body, floor=0.0)  # the floor's height, as the user knows it
+    j = diagnose(quad, train, validation, max_terms=1, discovery=False, progress=False, candidates=candidates)
+    first = _named_first(j.to_json(), "ground_effect")
     # Cheeseman and Bennett's R^2/16 to first order; the fitted floor and rotor height differ from the truth's.
     assert 0.3 * 0.08**2 / 16 < first["coefficient"] < 3 * 0.08**2 / 16
 
@@ -122,5 +123,8 @@ def test_hidden_ground_effect_is_named_low_over_the_floor():
 def test_a_steady_battery_low_over_the_floor_names_neither():
     train = quadrotor_flight(15.0, seed=7, altitude=0.15, vbat=True)
     validation = quadrotor_flight(15.0, seed=107, altitude=0.15, vbat=True)
-    j = _diagnosis(train, validation)
+    quad = initial_quadrotor("nominal", [train])
+    candidates = quadrotor_candidates(body_frame_system(quad, train.input_names), floor=0.0)
+    j = diagnose(quad, train, validation, max_terms=1, discovery=False, progress=False, candidates=candidates)
+    j = j.to_json()
     assert not {"battery_sag", "ground_effect"} & {f["cause"] for f in j["findings"]}, j["findings"]
