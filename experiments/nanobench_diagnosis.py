@@ -26,7 +26,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np
 
 import dynax
-from dynax.internal import write_json
+from dynax.internal import write_json, write_report
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from nanobench_heldout import flights, TEST, TRAIN  # noqa: E402
@@ -116,7 +116,7 @@ def main():
     from dynax.internal import body_frame_records, quadrotor_flight_errors
 
     nominal = dynax.fit_quadrotor(quad, diag_train).model  # the diagnosis' nominal (its input scales)
-    dynax.write_report(report, out / "report", body_frame_records(nominal, diag_test), write_json=write_json)
+    write_report(report, out / "report", body_frame_records(nominal, diag_test), write_json=write_json)
     say("scoring per group against the constant-velocity baseline ...")
     errors = quadrotor_flight_errors(report, nominal, test, STEPS)
     table = {
