@@ -9,9 +9,12 @@ the level from them.
 **Where a joint rests.** `rest_stretches`: its encoder position moves less than 0.05 rad/s times
 any 0.25 s window of the stretch (the position decides; a velocity at rest is mostly noise).
 
-**Under load.** Over each rest the net torque the least-squares model leaves at the joint is
-computed from the measured torques, positions and velocities, with accelerations from a cubic
-Savitzky-Golay fit of the positions (it matters where the other joint moves). Its noise $\sigma$
+**Under load.** Over each rest, where every joint of the arm rests with it (the longest such run),
+the net torque the least-squares model leaves at the joint is computed from the measured torques and
+positions at zero speed and acceleration: $\tau_j - g_j(q)$. Where another joint moves, the torque
+its motion puts on the resting joint hangs on that joint's acceleration, which noisy records do
+not give finely enough (on the test rig's records a swinging shoulder made an elbow that creeps under
+its Coulomb level read as holding 1 N m), so such a rest is not read. Its noise $\sigma$
 has two parts: the torque's white-noise scatter within the stretch (from successive differences,
 which a slow trend does not enter) and the standard error of the model's torque at that state
 (the least-squares covariance carried through the regressor row), and it is at least `FLOOR` (1 %) of
@@ -253,6 +256,21 @@ def net_torques(system, names, estimate, covariance, record: Trajectory, still: 
     return net, std
 
 
+def _longest_run(mask: np.ndarray, start: int, stop: int) -> tuple[int, int]:
+    """The longest run `[a, b)` of `True` in `mask[start:stop]` (the last of equal ones), `(start, start)` if none."""
+    best = (start, start)
+    a = None
+    for i in range(start, stop + 1):
+        inside = i < stop and bool(mask[i])
+        if inside and a is None:
+            a = i
+        elif not inside and a is not None:
+            if i - a >= best[1] - best[0]:
+                best = (a, i)
+            a = None
+    return best
+
+
 def _value_at_end(x: np.ndarray) -> tuple[float, float]:
     """`(value, rise)`: the value at the last sample of a straight line fitted to `x`, and its rise per
     sample (the mean and 0 where too short for a line): the torque at the instant a joint leaves its
@@ -296,15 +314,20 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
             still[s.start : end, s.joint] = True
         net, std = net_torques(system, names, estimate, covariance, record, still)
         width = max(int(round(WINDOW_S / record.dt)), 1)
+        arm_still = still.all(axis=1)
         for s, end in zip(stretches, ends):
-            j, a = s.joint, s.start
-            torque = net[a:end, j]
-            noise = max(float(np.hypot(_white_noise(torque), np.median(std[a:end, j]))), float(floor[j]))
+            j = s.joint
+            a, b = _longest_run(arm_still, s.start, end)
+            torque = net[a:b, j]
+            if b - a < width:  # the other joints move throughout: the coupling is not read at rest
+                out.append(RestUnderLoad(label, j, s.coordinate, s.start_s, s.stop_s, 0.0, 0.0, 0.0, False, None))
+                continue
+            noise = max(float(np.hypot(_white_noise(torque), np.median(std[a:b, j]))), float(floor[j]))
             means = _window_means(torque, width)
             held = float(means[int(np.argmax(np.abs(means)))])
             loaded = bool(abs(held) >= LOADED * noise and abs(held) > 0.0)
             breakaway = None
-            if loaded and end < s.stop:  # it left before the stretch ended: not at the record's end
+            if loaded and b == end < s.stop:  # it left its rest (not the record's end) with the arm still
                 at_break, rise = _value_at_end(torque[-width:])
                 rising = abs(at_break) >= abs(held) - RISING * noise and np.sign(at_break) == np.sign(held)
                 if rising and abs(rise) <= RESOLUTION * abs(at_break):

@@ -90,8 +90,9 @@ def test_static_level_from_breakaways_within_ten_percent():
         assert j.kind == "breakaway" and len(j.breakaways) == 1
         np.testing.assert_allclose(j.level, FS[j.joint], rtol=0.1)
         assert j.lower_bound <= j.level + 1e-9  # what it held before it broke away
-        # Each joint also rests under the load its neighbour's swing puts on it (a fast rise: no breakaway read).
-        assert set(j.records) == {"breakaway_0.csv", "breakaway_1.csv"} and 1.0 < j.rest_s < 3.0
+        # Each joint also rests while its neighbour swings; that load is not read (the swing's coupling hangs
+        # on accelerations), so each joint's level comes from its own ramp's record.
+        assert j.records == (f"breakaway_{j.joint}.csv",) and 0.6 < j.rest_s < 1.2
     np.testing.assert_allclose([stiction_terms(result.system)[j] for j in (0, 1)], FS, rtol=0.1)
     assert found.rows_left_out > 0 and "Stiction added" in found.note
     json = result.to_json()["static_friction"]
