@@ -37,6 +37,7 @@ from ._defaults import choose_filter
 from ._equations import Dynamic, Energy, Power, stacked_equations, uniformly_sampled
 from ._least_squares import (
     describe_poorly_determined,
+    IdentifiabilityError,
     jointly_determined,
     POORLY_DETERMINED,
     poorly_determined,
@@ -447,8 +448,20 @@ def identify(
         fitted = zeros.corrected(fitted, system)
         method = dataclasses.replace(method, offsets=False)
     rests = record_rests(fitted) if _holds_at_rest(system) else None
-    ls = least_squares_stage(system, fitted, method, friction, weights, rcond, consistency, rests)
+    ls = least_squares_stage(system, fitted, method, friction, weights, rcond, consistency)
     static = _static_friction(ls, fitted, rests)
+    if static is not None and static.joints and isinstance(method, Dynamic):
+        # Refit without the rows of the rests under load (no law of the speed explains a held torque), and
+        # read the rests again with that fit's gravity. A rest that holds nothing is an equation like any other.
+        loaded = _loaded_rests(static, rests, record_labels(fitted))
+        try:
+            ls = least_squares_stage(system, fitted, method, friction, weights, rcond, consistency, loaded)
+            static = _static_friction(ls, fitted, rests)
+        except IdentifiabilityError:  # the records rest throughout: the rows at rest are all there is
+            static = dataclasses.replace(
+                static,
+                note=f"{static.note}; the dynamic rows at rest are kept: without them the records identify nothing",
+            )
     if static is not None and not static.stretches and held:
         unfitted = sum(s.duration for stretches in record_rests(held) for s in stretches)
         if unfitted:
@@ -544,6 +557,12 @@ def _static_friction(ls, records, rests) -> StaticFriction | None:
     )
     joints = joint_levels(stretches)
     return StaticFriction(stretches, joints, left_out, rows, describe(stretches, joints, left_out, rows))
+
+
+def _loaded_rests(static: StaticFriction, rests, labels):
+    """Each record's rest stretches that `static` found under load."""
+    loaded = {(s.record, s.joint, s.start_s) for s in static.stretches if s.loaded}
+    return [tuple(r for r in record if (label, r.joint, r.start_s) in loaded) for record, label in zip(rests, labels)]
 
 
 def _record_angle_zeros(system, records, method, friction, rcond) -> AngleZeros | None:

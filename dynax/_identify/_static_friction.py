@@ -44,9 +44,11 @@ level the data contradict, and hardly raise a lower bound (a level above the hel
 no simulated rest).
 
 **The least-squares rows at rest.** No friction law of the speed explains a held torque (the
-Coulomb column at rest is the sign of the velocity's noise), so `Dynamic`'s rows of a joint while it
-rests are given zero weight (`rest_row_weights`); the count is reported. On records without rest
-nothing changes. (The `Power` and `Energy` rows are not affected: at rest the friction does no work.)
+Coulomb column at rest is the sign of the velocity's noise), so where a rest is under load `identify`
+fits `Dynamic` again with the rows of that joint over that rest at zero weight (`rest_row_weights`),
+and reads the rests again with the second fit; the count is reported. A rest that holds nothing
+(an arm hanging still) is an equation like any other and stays in; on records without rest under
+load nothing changes. (The `Power` and `Energy` rows are not affected: at rest the friction does no work.)
 
 ??? cite
 
@@ -314,7 +316,7 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
             still[s.start : end, s.joint] = True
         net, std = net_torques(system, names, estimate, covariance, record, still)
         width = max(int(round(WINDOW_S / record.dt)), 1)
-        arm_still = still.all(axis=1)
+        arm_still = np.asarray(still.all(axis=1))
         for s, end in zip(stretches, ends):
             j = s.joint
             a, b = _longest_run(arm_still, s.start, end)
