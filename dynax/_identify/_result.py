@@ -121,7 +121,9 @@ class Stage(eqx.Module):
                 if stats.record_std_errors is None
                 else {n: float(v) for n, v in zip(names, stats.record_std_errors)},
                 records_disagree=self.records_disagree,
-                model="least-squares model + RotorInertia(joint=1), consistent parametrisation",
+                model="least-squares model + RotorInertia(joint=1)"
+                + "".join(f" + Stiction(joint={int(n[2:]) - 1})" for n in names if n.startswith("fs"))
+                + ", consistent parametrisation",
                 diverged=stats.kept_start,
                 diverged_segments=dict(zip(("at_end", "at_start", "segments"), stats.diverged_segments)),
                 input_timing=None
