@@ -2,7 +2,8 @@
 
     DYNAX_SHARED=/work/shared python experiments/dfki_stiction.py --out experiments/results/dfki_stiction
 
-(`--parts six,split,loro` chooses the measurements; `--folds 00,01` the LORO folds; each part writes its
+(`--parts six,split,loro` chooses the measurements, `whatif` adds a what-if on the 5.25 s split;
+`--folds 00,01` the LORO folds; each part writes its
 results into `OUT/results.json` as it finishes, so a run cut short keeps what it measured.)
 
 Three measurements, all with `identify`'s defaults (`Dynamic()`, `friction="coulomb"`, every setting
@@ -41,7 +42,7 @@ jax.config.update("jax_enable_x64", True)
 import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
-from dfki_default_identification import lab_model, load, RUNS  # noqa: E402  (the script's folder is on sys.path)
+from dfki_default_identification import lab_model, load, model_of, RUNS  # noqa: E402  (the script's folder is on sys.path)
 from dfki_simulation import read_parameters  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
@@ -144,6 +145,25 @@ def loro(runs, lab, folds, results, save):
         save()
 
 
+def whatif(runs, lab, results, save):
+    """Not a fit: the model fitted up to 5.25 s with `Stiction` put back at its least-squares levels (times
+    1 and 1.5, stick band 0.01 and 0.1 rad/s), on run 12 from 5.25 s. Read off the held-out data."""
+    entry = results["split"]["5.25"]
+    base = model_of(entry["parameters"])
+    levels = {j["joint"]: j["level"] for j in entry["static_friction"]["joints"]}
+    tail = cut(runs["12"], 5.25)[1]
+    out = {"refined": list(dynax.held_out_error(base, [tail], HORIZONS).rmse)}
+    for scale in (1.0, 1.5):
+        for band in (0.01, 0.1):
+            terms = tuple(dynax.Stiction(j, scale * f, velocity_scale=band) for j, f in levels.items())
+            model = dynax.Extended(base.system, base.terms + terms)
+            out[f"{scale:g}x_band_{band:g}"] = list(dynax.held_out_error(model, [tail], HORIZONS).rmse)
+    out["lab_model_3.0"] = list(dynax.held_out_error(lab, [tail], HORIZONS).rmse)
+    results["whatif_5.25"] = out
+    print("what-if, run 12 from 5.25 s: " + "; ".join(f"{k} {v[0]:.4f}/{v[1]:.3f}/{v[2]:.3f}" for k, v in out.items()))
+    save()
+
+
 def plot(results, out: pathlib.Path):
     fig, axes = plt.subplots(1, 2, figsize=(12, 4))
     folds = sorted(results.get("loro", {}))
@@ -197,6 +217,8 @@ def main(argv=None):
         six(runs, results, save)
     if "split" in parts:
         split(runs, lab, results, save)
+    if "whatif" in parts:
+        whatif(runs, lab, results, save)
     if "loro" in parts:
         loro(runs, lab, args.folds.split(","), results, save)
     plot(results, args.out)
