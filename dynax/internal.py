@@ -273,6 +273,9 @@ from ._identify import (
     friction_power_regressor as friction_power_regressor,
 )
 from ._identify import (
+    JointStaticFriction as JointStaticFriction,
+)
+from ._identify import (
     measurement_noise_std as measurement_noise_std,
 )
 from ._identify import (
@@ -306,7 +309,13 @@ from ._identify import (
     RefinementStatistics as RefinementStatistics,
 )
 from ._identify import (
+    RestUnderLoad as RestUnderLoad,
+)
+from ._identify import (
     split_for_validation as split_for_validation,
+)
+from ._identify import (
+    StaticFriction as StaticFriction,
 )
 from ._identify import (
     with_friction as with_friction,
@@ -527,6 +536,9 @@ __all__ = [
     "record_offsets",
     "RecordFriction",
     "RecordOffsets",
+    "JointStaticFriction",
+    "RestUnderLoad",
+    "StaticFriction",
     "refine_by_simulation",
     "split_for_validation",
     "frequency_responses",

@@ -10,6 +10,7 @@ design C.0 (BSD-3-Clause), read from ../shared/datasets.
 import argparse
 import json
 import math
+import os
 import pathlib
 
 import jax
@@ -26,7 +27,8 @@ import numpy as np  # noqa: E402
 import dynax  # noqa: E402
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
-DFKI = REPO.parent / "shared" / "datasets" / "dfki_double_pendulum"
+# `DYNAX_SHARED` names the shared folder where it is not beside the checkout (a git worktree elsewhere).
+DFKI = pathlib.Path(os.environ.get("DYNAX_SHARED", REPO.parent / "shared")) / "datasets" / "dfki_double_pendulum"
 MAPPING = {
     "t": "time",
     "q1": "pos_meas1",

@@ -295,6 +295,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"  force offsets fitted per record (not part of the model): {cells}")
     if result.angle_zeros is not None:
         print("  " + result.angle_zeros.note())
+    if result.static_friction is not None and result.static_friction.stretches:  # said where a record rests
+        print("  friction at rest: " + result.static_friction.note)
     timing = None if output_error is None else output_error.solution.statistics.input_latency_s
     if timing is not None:
         latency = 1e3 * timing

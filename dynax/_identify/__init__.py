@@ -96,6 +96,15 @@ from ._simulation_fit import (
 from ._simulation_fit import (
     SimulationFit as SimulationFit,
 )
+from ._static_friction import (
+    JointStaticFriction as JointStaticFriction,
+)
+from ._static_friction import (
+    RestUnderLoad as RestUnderLoad,
+)
+from ._static_friction import (
+    StaticFriction as StaticFriction,
+)
 from ._validation import (
     held_out_error as held_out_error,
 )

@@ -103,7 +103,7 @@ def _base(system):
 
 
 # Joint terms' coefficients that cannot be negative: Coulomb, rotor inertia, viscous, drag.
-_NON_NEGATIVE_PREFIXES = ("fc", "Ir", "b", "cd")
+_NON_NEGATIVE_PREFIXES = ("fc", "fs", "Ir", "b", "cd")
 
 
 def _kinds(system, names):

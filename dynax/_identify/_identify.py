@@ -37,6 +37,7 @@ from ._defaults import choose_filter
 from ._equations import Dynamic, Energy, Power, stacked_equations, uniformly_sampled
 from ._least_squares import (
     describe_poorly_determined,
+    IdentifiabilityError,
     jointly_determined,
     POORLY_DETERMINED,
     poorly_determined,
@@ -55,6 +56,7 @@ from ._refine import refine_by_simulation
 from ._regressors import Friction, parameter_names, parameter_vector, split_terms, with_friction
 from ._result import Identification, NoValidationWarning, RecordsDisagreeWarning, Stage, StageKind
 from ._simulation_fit import fit_simulation_error, SimulationFit
+from ._static_friction import describe, joint_levels, record_rests, rests_under_load, StaticFriction, with_stiction
 from ._validation import DEFAULT_HORIZONS_S, held_out_error, split_for_validation
 
 _SYSTEM_NAMES = {Acrobot: "acrobot", DoublePendulum: "double_pendulum", LinearAxis: "linear_axis"}
@@ -315,10 +317,11 @@ def _validated_simulation_fit(system, fitted, method, friction, consistency, val
     return dataclasses.replace(result, stages=(stage,))
 
 
-def _refined_stage(ls, fitted, method, friction, rcond, consistency, refinement, validate) -> Stage:
-    """The output-error refinement from the least-squares stage `ls`, with its equation error on the
-    least-squares rows, consistency and validation."""
-    refined = refine_by_simulation(ls.system, ls.names, less_offsets(ls.system, fitted, ls), refinement)
+def _refined_stage(ls, start, fitted, method, friction, rcond, consistency, refinement, validate) -> Stage:
+    """The output-error refinement from the least-squares stage `ls` (its model `start`, with `Stiction`
+    where the records rest under load), with its equation error on the least-squares rows, consistency
+    and validation."""
+    refined = refine_by_simulation(start, ls.names, less_offsets(ls.system, fitted, ls), refinement)
     estimate = jnp.asarray(refined.value)
     _, a, y, _, _, _, _, _, _, _ = stacked_equations(refined.model, fitted, method, friction, None, rcond)
     if ls.groups is not None:  # the same equations as the least-squares stage's: offsets free
@@ -444,7 +447,30 @@ def identify(
             source += "; each tail less its record's angle zeros, fitted on its head"
         fitted = zeros.corrected(fitted, system)
         method = dataclasses.replace(method, offsets=False)
+    rests = record_rests(fitted) if _holds_at_rest(system) else None
     ls = least_squares_stage(system, fitted, method, friction, weights, rcond, consistency)
+    static = _static_friction(ls, fitted, rests)
+    if static is not None and static.joints and isinstance(method, Dynamic):
+        # Refit without the rows of the rests under load (no law of the speed explains a held torque), and
+        # read the rests again with that fit's gravity. A rest that holds nothing is an equation like any other.
+        loaded = _loaded_rests(static, rests, record_labels(fitted))
+        try:
+            ls = least_squares_stage(system, fitted, method, friction, weights, rcond, consistency, loaded)
+            static = _static_friction(ls, fitted, rests)
+        except IdentifiabilityError:  # the records rest throughout: the rows at rest are all there is
+            static = dataclasses.replace(
+                static,
+                note=f"{static.note}; the dynamic rows at rest are kept: without them the records identify nothing",
+            )
+    if static is not None and not static.stretches and held:
+        unfitted = sum(s.duration for stretches in record_rests(held) for s in stretches)
+        if unfitted:
+            static = dataclasses.replace(
+                static,
+                note=f"{static.note}; the held-out records rest {unfitted:.2f} s, which is not fitted (fit all "
+                "of the data, or validate on other records, to read a static level from it)",
+            )
+    ls_model = with_stiction(ls.system, static.joints) if static is not None else ls.system
     solution = eqx.tree_at(lambda s: (s.model, s.value), ls.fit, (ls.estimate, jnp.asarray(ls.estimate)))
     poorly = _size_errors(system, ls.names, ls.estimate, ls.fit.std_errors)  # the returned estimate's, unless refined
     stages = (
@@ -453,7 +479,7 @@ def identify(
             ls.label,
             solution,
             relative_equation_error=float(relative_equation_error(ls.a, ls.y, ls.estimate)),
-            validation=validate(ls.system),
+            validation=validate(ls_model),
             consistency=ls.consistency,
             poorly_determined=poorly,
             offsets=offsets_json(ls, fitted),
@@ -461,10 +487,10 @@ def identify(
             serial_correlation=ls.serial,
         ),
     )
-    system_out = ls.system
+    system_out = ls_model
     refinement = _refinement_method(refine, ls.system, method, fitted)
     if refinement is not None:
-        refined = _refined_stage(ls, fitted, method, friction, rcond, consistency, refinement, validate)
+        refined = _refined_stage(ls, ls_model, fitted, method, friction, rcond, consistency, refinement, validate)
         statistics = refined.solution.statistics
         refined_poorly = _size_errors(
             system, refined.names, refined.solution.value, refined.solution.std_errors, statistics.record_std_errors
@@ -473,6 +499,12 @@ def identify(
         system_out = refined.solution.model
         if not refined.kept_start:  # a kept least-squares model is judged by its own errors
             poorly = refined_poorly
+        if static is not None and static.joints:
+            levels = dict(zip(refined.names, np.asarray(refined.solution.value)))
+            static = dataclasses.replace(
+                static,
+                joints=tuple(dataclasses.replace(j, refined=float(levels[j.name])) for j in static.joints),
+            )
     _warn_poorly_determined(poorly)
     _warn_unvalidated(held, source)
     final = stages[-1].solution
@@ -494,7 +526,43 @@ def identify(
         record_friction=ls.friction,
         poorly_determined=poorly,
         jointly_determined=jointly,
+        static_friction=static,
     )
+
+
+def _holds_at_rest(system) -> bool:
+    """Whether `identify` looks for friction at rest on `system`: the arms its refinement knows."""
+    try:
+        return split_terms(system)[0].refinement_terms() is not None
+    except UsageError:
+        return False
+
+
+def _static_friction(ls, records, rests) -> StaticFriction | None:
+    """What the records show of friction at rest (`dynax._identify._static_friction`), read with the
+    least-squares model from the records less their fitted offsets; `None` where not looked for."""
+    if rests is None:
+        return None
+    left_out, rows = ls.rest_rows
+    if not any(rests):
+        return StaticFriction((), (), left_out, rows, describe((), (), left_out, rows))
+    stretches = rests_under_load(
+        ls.system,
+        ls.names,
+        ls.estimate,
+        ls.fit.covariance,
+        less_offsets(ls.system, records, ls),
+        rests,
+        record_labels(records),
+    )
+    joints = joint_levels(stretches)
+    return StaticFriction(stretches, joints, left_out, rows, describe(stretches, joints, left_out, rows))
+
+
+def _loaded_rests(static: StaticFriction, rests, labels):
+    """Each record's rest stretches that `static` found under load."""
+    loaded = {(s.record, s.joint, s.start_s) for s in static.stretches if s.loaded}
+    return [tuple(r for r in record if (label, r.joint, r.start_s) in loaded) for record, label in zip(rests, labels)]
 
 
 def _record_angle_zeros(system, records, method, friction, rcond) -> AngleZeros | None:

@@ -19,6 +19,7 @@ from ._least_squares import IdentifiabilityError, least_squares
 from ._offsets import driven_joints, offset_groups, record_labels, record_offsets, RecordOffsets, without_offsets
 from ._record_friction import coulomb_columns, record_friction, RecordFriction
 from ._regressors import positions_and_velocities, split_terms, with_parameters
+from ._static_friction import rest_row_weights
 
 
 def fitted_system(system, names, estimate):
@@ -44,6 +45,7 @@ class _LeastSquaresStage(eqx.Module):
     driven: tuple[str, ...] = ()
     friction: RecordFriction | None = None
     serial: dict | None = None  # what the errors robust to serial correlation changed (`_serially_robust`)
+    rest_rows: tuple[int, int] = (0, 0)  # (rows at rest given zero weight, rows)
 
 
 def joint_positions(system, trajectories):
@@ -76,19 +78,32 @@ def _offset_rows(system, method, counts):
     return groups
 
 
-def least_squares_stage(system, trajectories, method, friction, weights, rcond, consistency):
+def least_squares_stage(system, trajectories, method, friction, weights, rcond, consistency, rests=None):
+    """The least-squares stage; `rests` (each record's `Rest` stretches, `Dynamic` only) gives a joint's
+    rows while it rests zero weight (`rest_row_weights`: no friction law of the speed explains them)."""
     given = (system, method, friction, weights, rcond)
     system, raw_a, raw_y, weights, names, n_samples, label, settings, counts, record_rows = stacked_equations(
         system, trajectories, method, friction, weights, rcond
     )
     groups = _offset_rows(system, method, counts)
+    keep = None
+    if rests is not None and isinstance(method, Dynamic) and counts:
+        n_joints = raw_a.shape[0] // sum(counts)
+        keep = rest_row_weights(trajectories, settings, counts, rests, n_joints)
     if isinstance(method, Dynamic) and method.weighting == "joint" and weights is None:
         # Each joint's residual variance from an ordinary fit of the equations that will be solved.
-        plain = (raw_a, raw_y) if groups is None else without_offsets(raw_a, raw_y, None, groups)[:2]
+        plain = (raw_a, raw_y) if groups is None else without_offsets(raw_a, raw_y, keep, groups)[:2]
+        if keep is not None:  # rows at rest left out of the variances too
+            plain = (np.asarray(plain[0]) * keep[:, None], np.asarray(plain[1]) * keep)
         n_joints = raw_a.shape[0] // sum(counts)  # rows stacked joint by joint, `counts` per record and joint
         weights = joint_weights(
             jnp.asarray(plain[0], raw_a.dtype), jnp.asarray(plain[1], raw_y.dtype), names, rcond, n_joints
         )
+        if keep is not None:  # the mean square over the kept rows of each joint
+            share = keep.reshape(n_joints, -1).mean(axis=1)
+            weights = weights * jnp.asarray(np.repeat(share, len(keep) // n_joints), weights.dtype)
+    if keep is not None:
+        weights = jnp.asarray(keep, raw_a.dtype) * (1.0 if weights is None else jnp.asarray(weights, raw_a.dtype))
     a, y = raw_a, raw_y
     if groups is not None:
         a, y, a_means, y_means = without_offsets(raw_a, raw_y, weights, groups)
@@ -161,6 +176,7 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
         driven,
         per_record_friction,
         serial,
+        (0 if keep is None else int(np.sum(keep == 0)), int(raw_a.shape[0])),
     )
 
 

@@ -17,6 +17,7 @@ from ._offsets import RecordOffsets
 from ._record_friction import RecordFriction
 from ._refine import RefinementStatistics
 from ._simulation_fit import OutputErrorStatistics
+from ._static_friction import StaticFriction
 
 
 class NoValidationWarning(UserWarning):
@@ -123,7 +124,9 @@ class Stage(eqx.Module):
                 if stats.record_std_errors is None
                 else {n: float(v) for n, v in zip(names, stats.record_std_errors)},
                 records_disagree=self.records_disagree,
-                model="least-squares model + RotorInertia(joint=1), consistent parametrisation",
+                model="least-squares model + RotorInertia(joint=1)"
+                + "".join(f" + Stiction(joint={int(n[2:]) - 1})" for n in names if n.startswith("fs"))
+                + ", consistent parametrisation",
                 diverged=stats.kept_start,
                 diverged_segments=dict(zip(("at_end", "at_start", "segments"), stats.diverged_segments)),
                 input_timing=None
@@ -168,6 +171,11 @@ class Identification(eqx.Module):
       (`poorly_determined`; also warned as a `PoorlyDeterminedWarning`): after the output-error
       refinement judged on its standard errors, or the leave-one-record-out ones where larger;
       `{}` when the data determine them all, `None` for methods and systems it does not apply to.
+    - `static_friction`: for two-link arms fitted by least squares, what the records show of friction
+      at rest (`StaticFriction`): the stretches where a joint rests and the net torque it holds, the
+      `Stiction` level of each joint that rests under load (which `system` then carries: a breakaway
+      torque, or a lower bound from the torques held), the dynamic rows at rest left out of the fit,
+      and a note; with no rest under load, no `Stiction` and a note saying why; `None` otherwise.
     - `jointly_determined`: the parameters of the returned estimate that the data determine mostly
       in combination with others (over 99 % of their variance shared), name ->
       `{"with": partners, "correlations": ..., "inflation": ratio}`; `{}` when none, `None` without
@@ -194,6 +202,7 @@ class Identification(eqx.Module):
     record_friction: RecordFriction | None = None
     poorly_determined: dict[str, float] | None = eqx.field(static=True, default=None)
     jointly_determined: dict[str, dict] | None = eqx.field(static=True, default=None)
+    static_friction: StaticFriction | None = eqx.field(static=True, default=None)
 
     def stage(self, kind: StageKind | str) -> Stage | None:
         """The stage of that kind, or `None` where it did not run."""
@@ -324,6 +333,8 @@ class Identification(eqx.Module):
             out["poorly_determined"] = self.poorly_determined
         if self.jointly_determined is not None:
             out["jointly_determined"] = self.jointly_determined
+        if self.static_friction is not None:
+            out["static_friction"] = self.static_friction.to_json()
         if self.record_std_errors is not None:
             out["record_std_errors"] = {n: float(v) for n, v in zip(self.names, np.asarray(self.record_std_errors))}
         return out

@@ -1,0 +1,407 @@
+r"""The static friction level read from the records: where a joint rests under load, and where it breaks away.
+
+A friction law of the speed (viscous, Coulomb smoothed through zero) holds nothing at rest, so a
+joint that stands still while the rigid-body model leaves a net torque at it,
+$\tau_j - [M(q)\ddot q + h(q, \dot q)]_j$ (at rest mostly $\tau_j - g_j(q)$), shows a friction the
+speed cannot explain: the static friction (`Stiction`). This module finds those stretches and reads
+the level from them.
+
+**Where a joint rests.** `rest_stretches`: its encoder position moves less than 0.05 rad/s times
+any 0.25 s window of the stretch (the position decides; a velocity at rest is mostly noise).
+
+**Under load.** Over each rest, where every joint of the arm rests with it (the longest such run),
+the net torque the least-squares model leaves at the joint is computed from the measured torques and
+positions at zero speed and acceleration: $\tau_j - g_j(q)$. Where another joint moves, the torque
+its motion puts on the resting joint hangs on that joint's acceleration, which noisy records do
+not give finely enough (on the test rig's records a swinging shoulder made an elbow that creeps under
+its Coulomb level read as holding 1 N m), so such a rest is not read. Its noise $\sigma$
+has two parts: the torque's white-noise scatter within the stretch (from successive differences,
+which a slow trend does not enter) and the standard error of the model's torque at that state
+(the least-squares covariance carried through the regressor row), and it is at least `FLOOR` (1 %) of
+the joint's rms recorded torque: a torque sensor or a motor current resolves little finer, and on
+noise-free simulated records a biased model (the records' offsets absorb a Stribeck curve the model
+lacks) leaves a few 1e-4 N m at a rest that holds nothing. The rest is **under load** where
+the net torque, averaged over `WINDOW_S` windows, reaches `LOADED` (3) times $\sigma$ somewhere in
+the stretch: a held torque three times the scatter of a single sample, not of a mean.
+
+**The static level.** A joint at rest holds every net torque it is under, so the largest held
+torque (the largest window average, `held`) is a **lower bound** on its static level $f_s$, not an
+estimate of it: the joint may hold much more than it was asked to. Where a rest ends while the net
+torque rises (the joint leaves its rest position with the net torque's window average at the
+stretch's largest, within $2\sigma$), the joint broke away at the torque it was under at that instant,
+which is $f_s$ itself (Karnopp's switch: the joint slips once the friction it needs exceeds $f_s$);
+the instant is the last sample the position stays within $3\sigma_q$ (its white noise, from second
+differences; at least 1e-6) of its position over the stretch's first half, and the torque is the
+value there of a straight line fitted over the `WINDOW_S` before it (a window mean would lag half a
+window under the rising torque). A breakaway counts only under a slow rise, by at most `RESOLUTION`
+(5 %) of the torque per sample: the samples then resolve the instant's torque to that; a torque that
+jumps within a few samples (a swing of the other joint) resolves nothing, and such a rest adds only
+its held torque to the lower bound. The
+**level** is then the median breakaway torque at that joint (`kind = "breakaway"`); without a
+breakaway it is the largest held torque, reported as a lower bound (`kind = "lower_bound"`). The
+output-error refinement may move the level where the rests are in its segments; it can lower a
+level the data contradict, and hardly raise a lower bound (a level above the held torque changes
+no simulated rest).
+
+**The least-squares rows at rest.** No friction law of the speed explains a held torque (the
+Coulomb column at rest is the sign of the velocity's noise), so where a rest is under load `identify`
+fits `Dynamic` again with the rows of that joint over that rest at zero weight (`rest_row_weights`),
+and reads the rests again with the second fit; the count is reported. A rest that holds nothing
+(an arm hanging still) is an equation like any other and stays in; on records without rest under
+load nothing changes. (The `Power` and `Energy` rows are not affected: at rest the friction does no work.)
+
+??? cite
+
+    B. Armstrong-Hélouvry, P. Dupont, C. Canudas de Wit, "A survey of models, analysis tools and
+    compensation methods for the control of machines with friction", Automatica 30(7), 1994 (sec.
+    2.1 and 4: breakaway force measured at the onset of motion under a slowly rising force).
+"""
+
+import dataclasses
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._data._derivatives import savitzky_golay
+from .._data._rest import Rest, rest_stretches
+from .._data._trajectory import Trajectory
+from .._model._extensions import Extended
+from .._model._extensions._stiction import Stiction
+from .._model._extensions._terms import AbstractJointTerm
+from ._equations import uniformly_sampled
+from ._regressors import dynamic_regressor, generalised_force, split_terms
+
+WINDOW_S = 0.05  # averaging window of the held torque: short against a ramp to breakaway, ten samples or more
+LOADED = 3.0  # held torque over its single-sample noise that counts as load
+RISING = 2.0  # a rest ends under a rising torque: its last window within RISING noise of the stretch's largest
+FLOOR = 0.01  # the least noise of a torque: 1 % of the joint's rms recorded torque (a sensor's resolution)
+RESOLUTION = 0.05  # a breakaway counts where the torque rises by at most 5 % of it per sample (a slow rise)
+
+
+@dataclasses.dataclass(frozen=True)
+class RestUnderLoad:
+    """One stretch in which a joint rests, and the net torque it holds there.
+
+    **Fields:** `record`, `joint` (0-based), `coordinate` (`q1`, ...), `start_s`, `stop_s` [s];
+    `held`, the largest window-averaged net torque held (signed) [N m or N]; `mean`, the mean net
+    torque over the stretch; `noise`, its single-sample noise $\\sigma$; `loaded`, whether `|held|`
+    reaches `LOADED` times `noise`; `breakaway`, the net torque at which the rest ended under a rising
+    torque (signed), or `None` (the record ends at rest, or the torque fell)."""
+
+    record: str
+    joint: int
+    coordinate: str
+    start_s: float
+    stop_s: float
+    held: float
+    mean: float
+    noise: float
+    loaded: bool
+    breakaway: float | None
+
+    @property
+    def duration(self) -> float:
+        return self.stop_s - self.start_s
+
+    def to_json(self) -> dict:
+        return {**dataclasses.asdict(self), "duration_s": self.duration}
+
+
+@dataclasses.dataclass(frozen=True)
+class JointStaticFriction:
+    """The static friction level found at one joint.
+
+    **Fields:** `joint`, `coordinate`; `level`, the level the model's `Stiction` starts from (the
+    least-squares stage's); `kind`, `"breakaway"` (the median torque at which the joint broke away)
+    or `"lower_bound"` (no breakaway in the records: the largest torque held, which the true level is
+    at least); `lower_bound`, the largest torque held at rest; `breakaways`, the torques at each
+    breakaway (magnitudes); `records`, the records it rests in under load; `rest_s`, the seconds of
+    rest under load; `refined`, the level after the output-error refinement, or `None` where it did
+    not run."""
+
+    joint: int
+    coordinate: str
+    level: float
+    kind: str
+    lower_bound: float
+    breakaways: tuple[float, ...]
+    records: tuple[str, ...]
+    rest_s: float
+    refined: float | None = None
+
+    @property
+    def name(self) -> str:
+        return f"fs{self.joint + 1}"
+
+    def to_json(self) -> dict:
+        return {**dataclasses.asdict(self), "name": self.name}
+
+
+@dataclasses.dataclass(frozen=True)
+class StaticFriction:
+    """What `identify` found of friction at rest: the rests, which of them are under load, the
+    static level of each joint that rests under load, and the least-squares rows left out.
+
+    **Fields:** `stretches` (every `RestUnderLoad`, loaded or not); `joints` (a `JointStaticFriction`
+    per joint the model got a `Stiction` at; empty where none); `rows_left_out`, the dynamic
+    least-squares rows given zero weight because their joint rests, and `rows`, all of them; `note`,
+    one sentence of what was done and why."""
+
+    stretches: tuple[RestUnderLoad, ...]
+    joints: tuple[JointStaticFriction, ...]
+    rows_left_out: int
+    rows: int
+    note: str
+
+    @property
+    def rest_s(self) -> float:
+        """Seconds of rest over every joint and record."""
+        return float(sum(s.duration for s in self.stretches))
+
+    def to_json(self) -> dict:
+        return {
+            "joints": [j.to_json() for j in self.joints],
+            "stretches": [s.to_json() for s in self.stretches],
+            "rest_s": self.rest_s,
+            "least_squares_rows_left_out": self.rows_left_out,
+            "least_squares_rows": self.rows,
+            "note": self.note,
+        }
+
+
+def record_rests(records: list[Trajectory]) -> list[tuple[Rest, ...]]:
+    """Each record's rest stretches (`rest_stretches` of the record at its median interval)."""
+    return [rest_stretches(uniformly_sampled(r), record=f"record {i}") for i, r in enumerate(records)]
+
+
+def rest_row_weights(records, settings, counts, rests, n_joints: int) -> np.ndarray | None:
+    """`Dynamic`'s row weights (stacked joint by joint, each through every record) that leave out a joint's
+    rows while it rests: 0 there, 1 elsewhere; `None` where no row rests.
+
+    Row `k` of a record is its sample `trim + k * decimate` at its median interval (the equations are
+    trimmed and then decimated, `settings`)."""
+    blocks = []
+    for joint in range(n_joints):
+        for record, setting, count, stretches in zip(records, settings, counts, rests):
+            ts = np.asarray(uniformly_sampled(record).ts if setting.get("lowpass_hz") is not None else record.ts)
+            samples = setting["trim"] + np.arange(count) * setting["decimate"]
+            t = ts[np.minimum(samples, len(ts) - 1)]
+            keep = np.ones(count)
+            for s in stretches:
+                if s.joint == joint:
+                    keep[(t >= s.start_s) & (t <= s.stop_s)] = 0.0
+            blocks.append(keep)
+    keep = np.concatenate(blocks)
+    return None if keep.all() else keep
+
+
+def _friction_columns(system, names, joint):
+    """The columns of friction terms at `joint` (their law of the speed is what rest contradicts)."""
+    base, terms = split_terms(system)
+    own = {
+        t.parameter_name(base) for t in terms if isinstance(t, AbstractJointTerm) and t.friction and t.joint == joint
+    }
+    return [i for i, n in enumerate(names) if n in own]
+
+
+def _white_noise(x: np.ndarray, order: int = 1) -> float:
+    """The white-noise standard deviation of `x` from its `order`-th differences (median absolute, Gaussian)."""
+    d = np.diff(x, n=order)
+    if d.size == 0:
+        return 0.0
+    scale = np.sqrt({1: 2.0, 2: 6.0}[order])
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / scale)
+
+
+def _window_means(x: np.ndarray, width: int) -> np.ndarray:
+    if len(x) < width:
+        return np.asarray([x.mean()])
+    return np.convolve(x, np.ones(width) / width, mode="valid")
+
+
+def net_torques(system, names, estimate, covariance, record: Trajectory, still: np.ndarray):
+    """The net torque the rigid-body model (`system` without its friction at each joint) leaves at each
+    joint over `record` (at its median interval), and its standard error from the estimate's
+    `covariance`, both `(time, joints)`.
+
+    Where a joint is `still` (a boolean `(time, joints)`) its speed and acceleration are zero; elsewhere
+    the measured speed and the acceleration of a cubic Savitzky-Golay fit of the positions over 5
+    samples or half a period of the record's band edge, whichever is longer."""
+    from ._defaults import choose_filter, position_fit_window
+
+    record = uniformly_sampled(record)
+    base, _ = split_terms(system)
+    n = len(base.joints)
+    xs = np.array(record.xs, dtype=float)
+    band = choose_filter(record).cutoff_hz
+    window = position_fit_window(band, record.dt) if band is not None else 5
+    window = min(window, len(xs) if len(xs) % 2 else len(xs) - 1)
+    if window <= 3:
+        ddq = np.zeros((len(xs), n))
+    else:
+        ddq = np.array(savitzky_golay(record.ts, jnp.asarray(xs[:, :n]), window=window, order=3, deriv=2))
+    ddq[still] = 0.0
+    xs[:, n:][still] = 0.0
+    dtype = record.xs.dtype
+    rows = np.asarray(dynamic_regressor(system, jnp.asarray(xs, dtype), jnp.asarray(ddq, dtype)), dtype=float)
+    force = np.asarray(generalised_force(system, record.us), dtype=float)
+    estimate = np.asarray(estimate, dtype=float)
+    net = np.empty((len(xs), n))
+    std = np.zeros((len(xs), n))
+    cov = None if covariance is None else np.nan_to_num(np.asarray(covariance, dtype=float))
+    for j in range(n):
+        y = rows[:, j, :].copy()
+        y[:, _friction_columns(system, names, j)] = 0.0
+        net[:, j] = force[:, j] - y @ estimate
+        if cov is not None:
+            std[:, j] = np.sqrt(np.maximum(np.einsum("tp,pq,tq->t", y, cov, y), 0.0))
+    return net, std
+
+
+def _longest_run(mask: np.ndarray, start: int, stop: int) -> tuple[int, int]:
+    """The longest run `[a, b)` of `True` in `mask[start:stop]` (the last of equal ones), `(start, start)` if none."""
+    best = (start, start)
+    a = None
+    for i in range(start, stop + 1):
+        inside = i < stop and bool(mask[i])
+        if inside and a is None:
+            a = i
+        elif not inside and a is not None:
+            if i - a >= best[1] - best[0]:
+                best = (a, i)
+            a = None
+    return best
+
+
+def _value_at_end(x: np.ndarray) -> tuple[float, float]:
+    """`(value, rise)`: the value at the last sample of a straight line fitted to `x`, and its rise per
+    sample (the mean and 0 where too short for a line): the torque at the instant a joint leaves its
+    rest, without a window mean's lag under a rising torque, and how finely the samples resolve it."""
+    if len(x) < 3:
+        return float(np.mean(x)), 0.0
+    k = np.arange(len(x), dtype=float)
+    slope, intercept = np.polyfit(k, x, 1)
+    return float(intercept + slope * k[-1]), float(slope)
+
+
+def _leaves(q: np.ndarray, a: int, b: int, n: int) -> int:
+    r"""Where a joint that rests over rows `[a, b)` of its positions `q` leaves its rest: the first row from
+    the stretch's middle on whose position is more than $3\sigma_q$ (at least 1e-6) from the median of
+    the stretch's first half; `b` for a stretch that lasts to the record's end (`n` rows), or that
+    never departs so far (the rest criterion lets a resting joint creep a little)."""
+    if b >= n:
+        return b
+    half = max((b - a) // 2, 1)
+    q_rest = float(np.median(q[a : a + half]))
+    tol = max(3.0 * _white_noise(q[a : a + half], 2), 1e-6)
+    away = np.flatnonzero(np.abs(q[a + half : b] - q_rest) > tol)
+    return a + half + int(away[0]) if away.size else b
+
+
+def rests_under_load(system, names, estimate, covariance, records, rests, labels) -> tuple[RestUnderLoad, ...]:
+    """Each rest stretch with the net torque it holds (see the module)."""
+    out = []
+    forces = np.concatenate([np.asarray(generalised_force(system, r.us), dtype=float) for r in records])
+    floor = FLOOR * np.sqrt(np.mean(forces**2, axis=0))  # per joint
+    for record, stretches, label in zip(records, rests, labels):
+        if not stretches:
+            continue
+        record = uniformly_sampled(record)
+        ts = np.asarray(record.ts, dtype=float)
+        n_joints = len(split_terms(system)[0].joints)
+        qs = np.asarray(record.xs, dtype=float)[:, :n_joints]
+        ends = [_leaves(qs[:, s.joint], s.start, s.stop, len(ts)) for s in stretches]
+        still = np.zeros((len(ts), n_joints), bool)
+        for s, end in zip(stretches, ends):
+            still[s.start : end, s.joint] = True
+        net, std = net_torques(system, names, estimate, covariance, record, still)
+        width = max(int(round(WINDOW_S / record.dt)), 1)
+        arm_still = np.asarray(still.all(axis=1))
+        for s, end in zip(stretches, ends):
+            j = s.joint
+            a, b = _longest_run(arm_still, s.start, end)
+            torque = net[a:b, j]
+            if b - a < width:  # the other joints move throughout: the coupling is not read at rest
+                out.append(RestUnderLoad(label, j, s.coordinate, s.start_s, s.stop_s, 0.0, 0.0, 0.0, False, None))
+                continue
+            noise = max(float(np.hypot(_white_noise(torque), np.median(std[a:b, j]))), float(floor[j]))
+            means = _window_means(torque, width)
+            held = float(means[int(np.argmax(np.abs(means)))])
+            loaded = bool(abs(held) >= LOADED * noise and abs(held) > 0.0)
+            breakaway = None
+            if loaded and b == end < s.stop:  # it left its rest (not the record's end) with the arm still
+                at_break, rise = _value_at_end(torque[-width:])
+                rising = abs(at_break) >= abs(held) - RISING * noise and np.sign(at_break) == np.sign(held)
+                if rising and abs(rise) <= RESOLUTION * abs(at_break):
+                    breakaway = at_break
+            out.append(
+                RestUnderLoad(
+                    label, j, s.coordinate, s.start_s, s.stop_s, held, float(torque.mean()), noise, loaded, breakaway
+                )
+            )
+    return tuple(out)
+
+
+def joint_levels(stretches: tuple[RestUnderLoad, ...]) -> tuple[JointStaticFriction, ...]:
+    """The static level of each joint that rests under load (see the module)."""
+    out = []
+    for j in sorted({s.joint for s in stretches if s.loaded}):
+        mine = [s for s in stretches if s.joint == j and s.loaded]
+        lower = max(abs(s.held) for s in mine)
+        breaks = tuple(abs(s.breakaway) for s in mine if s.breakaway is not None)
+        level, kind = (float(np.median(breaks)), "breakaway") if breaks else (lower, "lower_bound")
+        out.append(
+            JointStaticFriction(
+                j,
+                mine[0].coordinate,
+                level,
+                kind,
+                lower,
+                breaks,
+                tuple(dict.fromkeys(s.record for s in mine)),
+                float(sum(s.duration for s in mine)),
+            )
+        )
+    return tuple(out)
+
+
+def with_stiction(system, joints: tuple[JointStaticFriction, ...]):
+    """`system` extended with `Stiction` at each joint at its level (replacing one it has there)."""
+    if not joints:
+        return system
+    base, terms = split_terms(system)
+    at = {j.joint for j in joints}
+    dtype = jnp.result_type(*[t.coefficient for t in terms], float) if terms else float
+    kept = [t for t in terms if not (isinstance(t, Stiction) and t.joint in at)]
+    added = [Stiction(j.joint, jnp.asarray(j.level, dtype)) for j in joints]
+    # pyright reads the abstract state_names / input_names as fields of the generated __init__
+    return Extended(system=base, terms=tuple(kept + added))  # pyright: ignore[reportCallIssue]
+
+
+def describe(stretches, joints, rows_left_out, rows) -> str:
+    """The note of `StaticFriction`: what was found and why the model has (or has no) `Stiction`."""
+    if not stretches:
+        return (
+            "no record rests (no joint's position stays within 0.05 rad/s for 0.25 s): the data show no friction "
+            "at rest, so the model has no Stiction"
+        )
+    total = sum(s.duration for s in stretches)
+    if not joints:
+        return (
+            f"the records rest ({total:.2f} s over {len(stretches)} stretch(es)) but hold no net torque above "
+            f"{LOADED:g} times its noise: nothing to read a static level from, so the model has no Stiction"
+            + (f"; {rows_left_out} of {rows} dynamic rows at rest left out of the fit" if rows_left_out else "")
+        )
+    parts = []
+    for j in joints:
+        what = (
+            f"breakaway at {j.level:.4g} (median of {len(j.breakaways)})"
+            if j.kind == "breakaway"
+            else f"at least {j.level:.4g} (the largest torque held; no breakaway in the records)"
+        )
+        parts.append(f"{j.coordinate} rests under load {j.rest_s:.2f} s in {', '.join(j.records)}: {what}")
+    return (
+        "Stiction added: "
+        + "; ".join(parts)
+        + (f"; {rows_left_out} of {rows} dynamic rows at rest left out of the fit" if rows_left_out else "")
+    )
