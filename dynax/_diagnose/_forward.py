@@ -480,6 +480,7 @@ def forward_selection(problem: Problem, say):
             yard.steps,
             problem.position_index,
             yard.n_val,
+            problem.static_level,
         )
         results = judge(short, batch, scores)
         short, batch, scores, results = _complete_look_alikes(
