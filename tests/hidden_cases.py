@@ -512,11 +512,13 @@ def outcome(case: Case, j: dict) -> dict:
     `named_first`: the first finding is the hidden cause at its place; `right_verdict`: `explained` for an effect
     (`inconclusive` also counted apart for near-threshold sizes), `none` for a control; `false_claim`: a control
     with a finding or `unexplained`; `extra`: a finding besides the hidden cause; `best_gain`: the largest
-    held-out gain of a refitted candidate in the first round; `none_with_gain`: `none` although that gain is 25 % or
+    held-out gain of a refitted candidate in the first round (`best_candidate`, `best_coefficient`: which, and
+    its coefficient); `none_with_gain`: `none` although that gain is 25 % or
     more."""
     findings = [(f["cause"], f["where"]) for f in j["findings"]]
-    gains = [c["gain"] for c in j["candidates"] if "gain" in c]
-    best_gain = max(gains) if gains else None
+    refitted = [c for c in j["candidates"] if "gain" in c]
+    best = max(refitted, key=lambda c: c["gain"]) if refitted else None
+    best_gain = best["gain"] if best else None
     verdict = j["verdict"]
     if case.expected is None:
         right = verdict == "none"
@@ -536,6 +538,9 @@ def outcome(case: Case, j: dict) -> dict:
         "false_claim": false_claim,
         "extra": extra,
         "best_gain": best_gain,
+        # The first round's best refitted candidate and its coefficient: the level found where nothing is named.
+        "best_candidate": None if best is None else f"{best['cause']}@{best['where']}",
+        "best_coefficient": None if best is None else best.get("coefficient"),
         "none_with_gain": verdict == "none" and best_gain is not None and best_gain >= 0.25,
         "gain": j["gain"],
         "structure_r2": j["structure"]["extended"]["r2"],
