@@ -191,16 +191,18 @@ def _screen(problem: Problem, current_slots, current_p, remaining, round_, say):
         cross_fit=bool(problem.folds),
     )
     short = choose_shortlist(problem.look_alikes, remaining, gains, problem.options.shortlist)
-    return gains, deltas, with_rest_evidence(problem, remaining, gains, short)
+    return gains, deltas, with_rest_evidence(problem, remaining, gains, short) if round_ == 0 else short
 
 
 def with_rest_evidence(problem: Problem, remaining, gains, short):
-    """The shortlist with every remaining `stiction` candidate in it (at most all but the two best screened).
+    """The first round's shortlist with every `stiction` candidate in it (at most all but the two best screened).
 
     A stiction is proposed only where the records show a joint held at rest under load (`rests_under_load`): that
     evidence is its screening. The one-step screening sees it in the rests' share of the samples only, where the
     residuals of the refitted nominal model in motion dominate, and ranks it among candidates that gain nothing
-    (1 to 2 % on records that rest a sixth of the time, whose refit then gains 75 %)."""
+    (1 to 2 % on records that rest a sixth of the time, whose refit then gains 75 %). In later rounds it is
+    screened as the others are: the evidence was read against the nominal model, and a slot held for it in every
+    round would push out candidates a later round needs."""
     n = problem.options.shortlist
     static = [k for k in remaining if problem.candidates[k].cause == "stiction" and k not in short]
     static = sorted(static, key=lambda k: -gains[remaining.index(k)])[: max(n - 2, 0)]
