@@ -87,7 +87,7 @@ def default_candidates(system, trajectories=None) -> tuple[AbstractTerm, ...]:
                 else CoulombFriction(j, velocity_scale=coulomb_velocity_scale(system, j, trajectories))
             )
             terms += [coulomb, ViscousFriction(j), QuadraticDrag(j), RotorInertia(j)]
-            if rests and rests[j].loaded:
+            if rests and rests[j].loaded and not builtin_friction(system):
                 terms.append(stiction_candidate(system, rests[j], dt))
     if system.body_axes:
         terms += [BodyQuadraticDrag(i) for i in range(3)]
@@ -98,11 +98,26 @@ def default_candidates(system, trajectories=None) -> tuple[AbstractTerm, ...]:
     return tuple(terms)
 
 
+def builtin_friction(system) -> bool:
+    """Whether `system` carries its Coulomb friction as a parameter of its own (`LinearAxis`) rather than as a
+    `CoulombFriction` term, which `Stiction` composes with (its slip excess and its hold are measured from the
+    joint's friction terms)."""
+    return getattr(system, "coulomb", None) is not None
+
+
 def stiction_not_proposed(system, trajectories) -> list[dict]:
     """Where the default vocabulary leaves `stiction` out, and why: `{cause, where, reason}` per joint without a
-    rest under load in `trajectories` (see `default_candidates`)."""
+    rest under load in `trajectories`, or of a system whose Coulomb friction is its own parameter (see
+    `default_candidates`)."""
     out = []
     for rest in rests_under_load(system, trajectories):
+        if rest.loaded and builtin_friction(system):
+            why = (
+                f"the joint rests under load for {rest.rest_s:.3g} s, but {type(system).__name__}'s Coulomb friction "
+                "is a parameter of the system, which a static friction level does not compose with yet"
+            )
+            out.append({"cause": "stiction", "where": rest.coordinate, "reason": why})
+            continue
         if rest.loaded:
             continue
         if rest.all_rest_s > 0:
