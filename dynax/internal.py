@@ -84,6 +84,8 @@ from ._diagnose import (
 from ._diagnose import (
     Proposal as Proposal,
 )
+from ._diagnose import rests_under_load as rests_under_load
+from ._diagnose import RestUnderLoad as RestUnderLoad
 from ._diagnose import search_period as search_period
 from ._diagnose import (
     sparse_search as sparse_search,
@@ -549,6 +551,8 @@ __all__ = [
     "WhitenessTest",
     "LOOK_ALIKES",
     "Proposal",
+    "RestUnderLoad",
+    "rests_under_load",
     "sparse_search",
     "SparseFit",
     "Structure",

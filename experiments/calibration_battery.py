@@ -1,8 +1,10 @@
 """The verdicts' calibration battery: hidden-effect cases made outside dynax's model code, diagnosed one by one.
 
-The cases (`tests/hidden_cases.py`: 60 hidden effects over every cause of the vocabulary on the acrobot, the
+The cases (`tests/hidden_cases.py`: 64 hidden effects over every cause of the vocabulary on the acrobot, the
 double pendulum, the linear axis and the helicopter, with friction laws of other shapes, true dead times and
-body-frame drag and wind, near-threshold sizes, and 11 effect-free controls) are integrated by scipy's DOP853.
+body-frame drag and wind, near-threshold sizes, and 11 effect-free controls) are integrated by scipy's DOP853;
+the stick-slip cases (stiction, and Coulomb friction that sticks at its sliding level) by the event-based
+integrator `tests.reference.stick_slip_arm`.
 Each is diagnosed with its system's nominal model; the script tallies the calibration targets and draws the
 confusion matrix of the hidden cause against the verdict and the first named cause.
 

@@ -5,7 +5,9 @@ integrated by scipy's DOP853 at tight tolerance, restarted at every input switch
 numpy in a form that is
 *not* dynax's term: friction as `tanh`, `arctan` or a Stribeck curve (dynax's `CoulombFriction` is a tanh of
 its own speed scale), a true dead time (the input shifted in time, not a Padé filter), a first-order lag as
-its own state, quadratic drag and wind in the helicopter's body frame. Measurement noise is added as a rig's
+its own state, quadratic drag and wind in the helicopter's body frame, stick-slip friction by an event-based
+integrator (`tests.reference.stick_slip_arm`, on an arm with a damped shoulder under held, drifting torques, so
+that it comes to rest under load). Measurement noise is added as a rig's
 encoders and gyros would have it. `tests/diagnose/test_calibration_cases.py` runs a few of them;
 `experiments/calibration_battery.py` runs them all.
 
@@ -21,6 +23,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from dynax import Trajectory
+from tests.reference import stick_slip_arm
 
 THETA = (1.333, 1.33, 1.0, 14.715, 9.81, 0.1, 0.1)  # the nominal two-link arm's base parameters (Acrobot())
 TRAIN_S, HELD_OUT_S, DT = 20.0, 10.0, 0.01
@@ -218,6 +221,80 @@ def heli_rhs(case):
     return rhs, 0
 
 
+# --- friction at rest: the damped arm under held torques, stick-slip by an event-based integrator ----------------
+
+# The arm of the stick-slip cases: the shoulder damped as by a gearbox (b1 = 2 N m s), so that under held torques
+# the arm comes to rest within a second or two instead of swinging on; the nominal model has the same damping.
+DAMPED_THETA = (*THETA[:5], 2.0, THETA[6])
+# Laws of the cases run on the damped arm: the stick-slip ones (`tests.reference.stick_slip_arm`), and an input
+# offset under held torques (a constant torque at rest and in motion, the look-alike a stiction must not be).
+STICK_SLIP = {"stick-slip": "held", "stick-slip swinging": "multisine", "sticking coulomb": "held"}
+HELD_OFFSET = "constant, held"
+
+
+def held_excitation(n, seed, rms=(0.5, 1.5), slope=(0.1, 0.3), dt=DT):
+    """Both torques: a short multisine burst (0.4 to 0.8 s) that moves the arm, then its last value held for 1 to
+    2.5 s, the elbow's drifting at a random `slope` [N m/s] either way, over and over. The arm settles; with static
+    friction at a joint it rests under the held load, and the drift makes the elbow break away where the torque
+    it needs reaches the static level (a breakaway test), not at the next burst whatever the level."""
+    rng = np.random.default_rng(seed)
+    ms = multisine(n, 2, seed, 1.0, dt=dt) * np.asarray(rms)
+    us, k = np.zeros((n, 2)), 0
+    while k < n:
+        burst, hold = int(rng.uniform(0.4, 0.8) / dt), int(rng.uniform(1.0, 2.5) / dt)
+        held = slice(k + burst, min(k + burst + hold, n))
+        us[k : k + burst] = ms[k : k + burst]
+        us[held] = ms[min(k + burst, n - 1)]
+        drift = rng.choice([-1.0, 1.0]) * rng.uniform(*slope)
+        us[held, 1] += drift * dt * np.arange(held.stop - held.start)
+        k += burst + hold
+    return us
+
+
+def on_damped_arm(case) -> bool:
+    return case.law in STICK_SLIP or case.law == HELD_OFFSET
+
+
+def stick_slip_record(case, theta, ts):
+    """States and inputs of a stick-slip case: static level `size` at the joint, Coulomb level 0 (`stick-slip`:
+    a pure static friction, falling to nothing over 0.05 rad/s) or `size` too (`sticking coulomb`: Coulomb
+    friction that holds at rest up to its sliding level, no static level above it)."""
+    joint = {"q1": 0, "q2": 1}[case.where]
+    fs, fc = np.zeros(2), np.zeros(2)
+    fs[joint] = case.size
+    if case.law == "sticking coulomb":
+        fc[joint] = case.size
+    us = multisine(len(ts), 2, case.seed, 1.0) * 1.5 if STICK_SLIP[case.law] == "multisine" else None
+    if us is None:
+        us = held_excitation(len(ts), case.seed)
+    xs, _ = stick_slip_arm(theta, np.zeros(4), ts, us, fc=fc, fs=fs, vst=0.05)
+    return xs, us
+
+
+def stick_slip_runs(case, seeds, duration):
+    """Runs of `duration` seconds of the stick-slip `case`'s truth (its parameters from `case.seed`) under the held,
+    drifting torques of each of `seeds`, with the encoders' noise: more records of one rig."""
+    spec = SYSTEMS[case.system]
+    theta = truth_theta(case)
+    ts = np.arange(round(duration / DT) + 1) * DT
+    out = []
+    for seed in seeds:
+        xs, us = stick_slip_record(dataclasses.replace(case, seed=seed), theta, ts)
+        xs = xs + np.asarray(spec["noise"]) * np.random.default_rng(7919 + seed).standard_normal(xs.shape)
+        out.append(
+            Trajectory(
+                jnp.asarray(ts),
+                jnp.asarray(xs),
+                jnp.asarray(us),
+                spec["states"],
+                spec["inputs"],
+                case.system,
+                f"{case.name}-run{seed}",
+            )
+        )
+    return out
+
+
 # --- records ----------------------------------------------------------------------------------------------
 
 SYSTEMS = {
@@ -249,10 +326,11 @@ def truth_theta(case):
     """The truth's base parameters: in refit mode 0 to 3 % from the nominal's (another copy of the rig), in
     known mode the nominal's (the user's parameters are right; only the effect is missing)."""
     if case.mode == "known":
-        return np.asarray(THETA)
+        return np.asarray(DAMPED_THETA if on_damped_arm(case) else THETA)
     rng = np.random.default_rng(1000 + case.seed)
-    theta = np.asarray(THETA) * (1 + rng.uniform(-0.03, 0.03, 7))
-    theta[5:] = THETA[5:]  # the nominal friction is the rig's: the friction candidates test what is added
+    nominal = DAMPED_THETA if on_damped_arm(case) else THETA
+    theta = np.asarray(nominal) * (1 + rng.uniform(-0.03, 0.03, 7))
+    theta[5:] = nominal[5:]  # the nominal friction is the rig's: the friction candidates test what is added
     return theta
 
 
@@ -263,6 +341,8 @@ def records(case: Case) -> tuple[Trajectory, Trajectory]:
     ts = np.arange(n) * DT
     rms = np.broadcast_to(np.asarray(spec["rms"], float), (len(spec["inputs"]),))
     us = multisine(n, len(spec["inputs"]), case.seed, 1.0) * rms
+    if case.law == HELD_OFFSET:
+        us = held_excitation(n, case.seed)
     if case.system in ("acrobot", "double_pendulum"):
         rhs, n_hidden = arm_rhs(truth_theta(case), case, spec["driven"])
         x0 = np.zeros(4)
@@ -278,7 +358,10 @@ def records(case: Case) -> tuple[Trajectory, Trajectory]:
     if n_hidden:  # a lag starts settled on the first input
         x0 = np.concatenate([x0, [us[0, spec["inputs"].index(case.where)]]])
     delay = case.size if case.cause == "input_delay" else 0.0
-    xs = integrate(rhs, x0, ts, us, delay)[:, : len(spec["states"])]
+    if case.law in STICK_SLIP:
+        xs, us = stick_slip_record(case, truth_theta(case), ts)
+    else:
+        xs = integrate(rhs, x0, ts, us, delay)[:, : len(spec["states"])]
     if case.system == "helicopter":
         xs[:, 3:7] /= np.linalg.norm(xs[:, 3:7], axis=1, keepdims=True)
     rng = np.random.default_rng(7919 + case.seed)
@@ -364,6 +447,12 @@ def _cases():
         ("double_pendulum", "input_lag", "tau1", 0.08, "first order", "refit", False),
         ("linear_axis", "coulomb_friction", "q", 30.0, "arctan", "refit", False),
     ]
+    rows += [  # friction at rest (issue 48): stick-slip, its Coulomb-only control, an offset under held torques
+        ("double_pendulum", "stiction", "q2", 0.5, "stick-slip", "refit", False),
+        ("double_pendulum", "stiction", "q1", 0.8, "stick-slip", "refit", False),
+        ("double_pendulum", "coulomb_friction", "q2", 0.5, "sticking coulomb", "refit", False),
+        ("double_pendulum", "input_offset", "tau2", 0.2, HELD_OFFSET, "refit", False),
+    ]
     controls = (
         [("acrobot", "refit")] * 3
         + [("acrobot", "known")]
@@ -395,6 +484,8 @@ def diagnose_case(case: Case, records_=None):
     kwargs = {}
     if case.system == "acrobot":
         nominal = dynax.Acrobot()
+    elif case.system == "double_pendulum" and on_damped_arm(case):
+        nominal = dynax.DoublePendulum.from_base_parameters({f"theta{i + 1}": v for i, v in enumerate(DAMPED_THETA)})
     elif case.system == "double_pendulum":
         nominal = dynax.DoublePendulum()
     elif case.system == "linear_axis":
@@ -421,11 +512,13 @@ def outcome(case: Case, j: dict) -> dict:
     `named_first`: the first finding is the hidden cause at its place; `right_verdict`: `explained` for an effect
     (`inconclusive` also counted apart for near-threshold sizes), `none` for a control; `false_claim`: a control
     with a finding or `unexplained`; `extra`: a finding besides the hidden cause; `best_gain`: the largest
-    held-out gain of a refitted candidate in the first round; `none_with_gain`: `none` although that gain is 25 % or
+    held-out gain of a refitted candidate in the first round (`best_candidate`, `best_coefficient`: which, and
+    its coefficient); `none_with_gain`: `none` although that gain is 25 % or
     more."""
     findings = [(f["cause"], f["where"]) for f in j["findings"]]
-    gains = [c["gain"] for c in j["candidates"] if "gain" in c]
-    best_gain = max(gains) if gains else None
+    refitted = [c for c in j["candidates"] if "gain" in c]
+    best = max(refitted, key=lambda c: c["gain"]) if refitted else None
+    best_gain = best["gain"] if best else None
     verdict = j["verdict"]
     if case.expected is None:
         right = verdict == "none"
@@ -445,6 +538,9 @@ def outcome(case: Case, j: dict) -> dict:
         "false_claim": false_claim,
         "extra": extra,
         "best_gain": best_gain,
+        # The first round's best refitted candidate and its coefficient: the level found where nothing is named.
+        "best_candidate": None if best is None else f"{best['cause']}@{best['where']}",
+        "best_coefficient": None if best is None else best.get("coefficient"),
         "none_with_gain": verdict == "none" and best_gain is not None and best_gain >= 0.25,
         "gain": j["gain"],
         "structure_r2": j["structure"]["extended"]["r2"],

@@ -250,4 +250,10 @@ def summary(report) -> str:
             + ", ".join(f"{c['cause']}@{c['where']}" for c in j["not_identifiable"])
             + "."
         )
+    if j.get("not_proposed"):
+        lines.append(
+            "Not proposed (no rest under load in the records): "
+            + ", ".join(f"{c['cause']}@{c['where']}" for c in j["not_proposed"])
+            + "."
+        )
     return "\n".join(lines)

@@ -15,10 +15,12 @@ from .._model._extensions import (
     InputOffset,
     QuadraticDrag,
     RotorInertia,
+    Stiction,
     ViscousFriction,
 )
 from .._model._extensions._vehicle_terms import AbstractVehicleTerm, BodyBias, BodyQuadraticDrag, Wind
 from .._model._helicopter import BODY
+from ._at_rest import LOAD_FRACTION, MIN_LOADED_REST_S, MIN_REST_S, rests_under_load
 from ._fit import nominal_values
 
 # Groups of causes that look alike in data; the report says how well each finding is told apart.
@@ -27,6 +29,9 @@ LOOK_ALIKES = (
     frozenset({"input_delay", "input_lag"}),
     frozenset({"wind", "body_bias"}),
     frozenset({"rotor_drag", "quadratic_drag"}),
+    # A static level holds at rest where a Coulomb friction creeps; an offset acts at rest and in motion alike.
+    frozenset({"stiction", "coulomb_friction"}),
+    frozenset({"stiction", "input_offset"}),
 )
 
 
@@ -45,20 +50,36 @@ def coulomb_velocity_scale(system, joint: int, trajectories) -> float:
     return max(0.05 * float(np.sqrt(np.mean(dq**2))), 1e-3)
 
 
+def stiction_candidate(system, rest, dt: float) -> Stiction:
+    """The `Stiction` candidate at a joint with rests under load (`rest`, a `RestUnderLoad`), its settings from the
+    data: the band of speeds in which it sticks the velocity noise at rest (`speed_noise`), at least `Stiction`'s
+    default; its hold time two samples (the diagnosis's fixed-step rollouts take one step per sample).
+
+    A wider band holds the joint where the rig's slips slowly (the truth sticks at zero speed only), and the fit
+    then lowers the static level to let it go: on 100 Hz stick-slip records with a velocity noise of 0.012 rad/s,
+    a band of three times the noise fits the level 13 % low, one of the noise 3 % low. A window that starts at
+    rest with a noisy speed outside the band still sticks: the band's edge is smooth (`Stiction.weight`)."""
+    return Stiction(rest.joint, velocity_scale=max(rest.speed_noise, 0.01), hold_time=max(2.0 * dt, 0.01))
+
+
 def default_candidates(system, trajectories=None) -> tuple[AbstractTerm, ...]:
     """The contract's vocabulary for `system`, at neutral values.
 
     With `trajectories` (the training runs), each Coulomb friction candidate's smoothing speed is
-    set from the data (`coulomb_velocity_scale`); without, it is `CoulombFriction`'s default.
+    set from the data (`coulomb_velocity_scale`), and a `stiction` candidate is proposed at each joint
+    that the records show at rest under a net torque (`dynax.internal.rests_under_load`); without, the
+    Coulomb smoothing is `CoulombFriction`'s default and no stiction is proposed.
 
     For a manipulator, per coordinate: `coulomb_friction`, `viscous_friction`, `quadratic_drag`,
-    `rotor_inertia`; for a `Helicopter`, `quadratic_drag` on each translational body axis
-    (`u, v, w`), `wind` (its north, east and down components, each a candidate at `world`) and
-    `body_bias` on each body axis (`u, v, w, p, q, r`); for every system, per input: `input_delay`,
-    `input_lag`, `input_gain`, `input_offset`.
+    `rotor_inertia` (and `stiction` where it rests under load); for a `Helicopter`, `quadratic_drag` on each
+    translational body axis (`u, v, w`), `wind` (its north, east and down components, each a candidate at
+    `world`) and `body_bias` on each body axis (`u, v, w, p, q, r`); for every system, per input:
+    `input_delay`, `input_lag`, `input_gain`, `input_offset`.
     """
     terms: list[AbstractTerm] = []
     if system.joints:
+        rests = rests_under_load(system, trajectories) if trajectories is not None else ()
+        dt = float(np.median(np.diff(np.asarray(trajectories[0].ts, dtype=float)))) if trajectories else 0.01
         for j in system.joints:
             coulomb = (
                 CoulombFriction(j)
@@ -66,6 +87,8 @@ def default_candidates(system, trajectories=None) -> tuple[AbstractTerm, ...]:
                 else CoulombFriction(j, velocity_scale=coulomb_velocity_scale(system, j, trajectories))
             )
             terms += [coulomb, ViscousFriction(j), QuadraticDrag(j), RotorInertia(j)]
+            if rests and rests[j].loaded and not builtin_friction(system):
+                terms.append(stiction_candidate(system, rests[j], dt))
     if system.body_axes:
         terms += [BodyQuadraticDrag(i) for i in range(3)]
         terms += [Wind(i) for i in range(3)]
@@ -75,11 +98,50 @@ def default_candidates(system, trajectories=None) -> tuple[AbstractTerm, ...]:
     return tuple(terms)
 
 
+def builtin_friction(system) -> bool:
+    """Whether `system` carries its Coulomb friction as a parameter of its own (`LinearAxis`) rather than as a
+    `CoulombFriction` term, which `Stiction` composes with (its slip excess and its hold are measured from the
+    joint's friction terms)."""
+    return getattr(system, "coulomb", None) is not None
+
+
+def stiction_not_proposed(system, trajectories) -> list[dict]:
+    """Where the default vocabulary leaves `stiction` out, and why: `{cause, where, reason}` per joint without a
+    rest under load in `trajectories`, or of a system whose Coulomb friction is its own parameter (see
+    `default_candidates`)."""
+    out = []
+    for rest in rests_under_load(system, trajectories):
+        if rest.loaded and builtin_friction(system):
+            why = (
+                f"the joint rests under load for {rest.rest_s:.3g} s, but {type(system).__name__}'s Coulomb friction "
+                "is a parameter of the system, which a static friction level does not compose with yet"
+            )
+            out.append({"cause": "stiction", "where": rest.coordinate, "reason": why})
+            continue
+        if rest.loaded:
+            continue
+        if rest.all_rest_s > 0:
+            why = (
+                f"the joint rests for {rest.all_rest_s:.3g} s in the training records, but under no net torque of "
+                f"practical size for {MIN_LOADED_REST_S:g} s or more ({rest.rest_s:.2g} s where the nominal model "
+                f"needs {LOAD_FRACTION:.0%} of the joint's RMS force, {rest.force_scale:.3g}, or more to hold it), "
+                "so a static friction level has nothing to hold"
+            )
+        else:
+            why = (
+                f"the joint never rests (position still for {MIN_REST_S:g} s or more) in the training records; "
+                "a static friction level shows only at rest under load"
+            )
+        out.append({"cause": "stiction", "where": rest.coordinate, "reason": why})
+    return out
+
+
 def look_alikes(system, term, candidates) -> list[int]:
     """Indices of the candidates that look like `term` in data: same place, cause in the same group.
 
     A wind (at `world`) and a body bias on a translational axis (`u`, `v`, `w`) look alike
-    whatever their places: at a constant attitude a steady wind is a constant force on the body axes.
+    whatever their places: at a constant attitude a steady wind is a constant force on the body axes. A stiction
+    at a joint and an offset on an input that drives it look alike too: both carry a constant torque at rest.
     """
     where = term.where(system)
 
@@ -87,6 +149,10 @@ def look_alikes(system, term, candidates) -> list[int]:
         if {term.cause, other.cause} == {"wind", "body_bias"}:
             bias = term if term.cause == "body_bias" else other
             return bias.axis < 3
+        if {term.cause, other.cause} == {"stiction", "input_offset"}:
+            # An offset on an input that drives the joint (a constant torque error there).
+            static, offset = (term, other) if term.cause == "stiction" else (other, term)
+            return bool(np.asarray(system.input_matrix())[static.joint, offset.input] != 0)
         return other.where(system) == where
 
     return [
@@ -241,13 +307,15 @@ def candidate_scales(system, candidates, trajectories) -> tuple[np.ndarray, np.n
     A friction or drag term of typical size produces a tenth of the RMS input force; inertia a
     tenth of the nominal diagonal inertia; delays and lags start at two sample intervals (a
     zero delay has no gradient). On a helicopter, a body bias or a quadratic drag of typical size
-    is a tenth of the spread of the body-axis accelerations, a wind 1 m/s.
+    is a tenth of the spread of the body-axis accelerations, a wind 1 m/s. A stiction starts at the largest
+    force the records show held at rest (`rests_under_load`).
     """
     xs = np.concatenate([np.asarray(t.xs) for t in trajectories])
     us = np.concatenate([np.asarray(t.us) for t in trajectories])
     dt = float(np.median(np.concatenate([np.diff(np.asarray(t.ts)) for t in trajectories])))
     force = max(float(np.sqrt(np.mean(us**2))), 1e-6)
     scales, inits = [], []
+    rests = rests_under_load(system, trajectories) if any(t.cause == "stiction" for t in candidates) else ()
     for term in candidates:
         init = term.neutral
         if isinstance(term, AbstractInputTerm):
@@ -274,8 +342,13 @@ def candidate_scales(system, candidates, trajectories) -> tuple[np.ndarray, np.n
             j, n = term.joint, system.n_joints
             rms_q = max(float(np.sqrt(np.mean(xs[:, j] ** 2))), 1e-6)
             rms_dq = max(float(np.sqrt(np.mean(xs[:, n + j] ** 2))), 1e-6)
+            if term.cause == "stiction" and rests:
+                # A data-based start: the static level is at least the largest force held at rest (at zero the
+                # level's derivative is a tie of the clipping, half what it is above zero).
+                init = max(rests[j].held, 1e-3 * force)
             scale = {
                 "coulomb_friction": 0.1 * force,
+                "stiction": 0.1 * force,
                 "viscous_friction": 0.1 * force / rms_dq,
                 "quadratic_drag": 0.1 * force / rms_dq**2,
                 "rotor_inertia": 0.1 * float(system.mass_matrix(jnp.zeros(n))[j, j]),

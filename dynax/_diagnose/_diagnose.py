@@ -280,6 +280,7 @@ def _report(problem, nominal, yard, judgement, table, last, rounds, *, mode, sys
         extended_model=extended,
         discovery=judgement.discovery,
         rounds=rounds,
+        not_proposed=problem.not_proposed,
     )
 
 

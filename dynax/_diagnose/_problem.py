@@ -19,12 +19,17 @@ from ._candidates import (
     held_partners,
     look_alikes,
     sampled_sensitivities,
+    stiction_not_proposed,
     structurally_absorbed,
     structurally_equivalent,
 )
 from ._fit import Family, make_windows, nominal_parameter_names, nominal_values, Windows
 from ._records import fit_window, horizon_grid, prepare_records, velocity_estimates
 from ._selection import on_physical_side
+
+# A static friction level counts as stiction when it stands this share above the joint's Coulomb level (and two
+# standard errors): a breakaway within a tenth of the sliding level is not told from Coulomb friction by data.
+STATIC_MARGIN = 0.1
 
 # Cross-fitting needs every fold to fit two runs or more (see `_cross_fit`).
 MIN_CROSS_FIT_RUNS = 3
@@ -108,6 +113,8 @@ class Problem:
     folds: tuple = ()
     # Candidates that are one model with a refit of the nominal parameters (`structurally_equivalent`).
     equivalents: dict = dataclasses.field(default_factory=dict)
+    # Causes of the default vocabulary the records give no occasion to try (`stiction` without a rest under load).
+    not_proposed: list = dataclasses.field(default_factory=list)
 
     def look_alikes(self, k: int) -> list[int]:
         """The candidates data could mistake for candidate `k`: its look-alikes and its structural equivalents."""
@@ -140,6 +147,41 @@ class Problem:
         (friction, inertia, delay), and, where it adds to a nominal parameter that is not refitted,
         with the sum inside that parameter's consistency bound (a viscous coefficient stays non-negative)."""
         return on_physical_side(self.candidates[k], delta, self.partners[k], self.names, self.system)
+
+    def static_level(self, k: int, p_row, std_row, selected, round_levels=None) -> bool | None:
+        """Whether each static friction level (`stiction`) of the configuration `selected + [k]` at parameters
+        `p_row` stands above the Coulomb level at its joint by `STATIC_MARGIN` of it and by two standard errors;
+        `None` without a static level in it.
+
+        A static level at or below the Coulomb level holds the joint at rest and adds nothing in motion: it is
+        what a Coulomb friction does at rest (its force is set-valued at zero speed), not a breakaway above it,
+        and the finding would name a stiction where the rig has none (the creep of a smoothed Coulomb friction
+        is what it mends). The Coulomb level is the configuration's own; for a static level newly added (`k`) at a
+        joint without one, the level the Coulomb friction candidate there was refitted to in the same round
+        (`round_levels`: candidate index to its coefficient's step from neutral; the look-alikes of a leading
+        stiction are always refitted), else zero."""
+        n_nom = len(self.names)
+        members = [(s, n_nom + m) for m, s in enumerate(selected)] + [(k, len(p_row) - 1)]
+        levels: dict = {}
+        for c, i in members:
+            term = self.candidates[c]
+            levels.setdefault(term.cause, {})[getattr(term, "joint", None)] = (
+                float(self.neutral[c] + p_row[i]),
+                float(std_row[i]),
+            )
+        static = levels.get("stiction")
+        if not static:
+            return None
+        coulomb = {j: level for j, (level, _) in levels.get("coulomb_friction", {}).items()}
+        new = self.candidates[k]
+        if new.cause == "stiction" and new.joint not in coulomb:
+            for c, step in (round_levels or {}).items():
+                if self.candidates[c].cause == "coulomb_friction" and self.candidates[c].joint == new.joint:
+                    coulomb[new.joint] = max(float(self.neutral[c] + step), 0.0)
+        return all(
+            fs - coulomb.get(j, 0.0) > max(STATIC_MARGIN * coulomb.get(j, 0.0), 2.0 * std)
+            for j, (fs, std) in static.items()
+        )
 
     def model_of(self, slots, p):
         """The extended model (every candidate; neutral but for `slots`) at parameters `p`."""
@@ -239,6 +281,7 @@ def prepare_problem(system, train, validation, candidates, mode, options: Option
     train_records, validation_records, velocities = velocity_estimates(
         system, train_records, validation_records, options.velocities, notes
     )
+    not_proposed = stiction_not_proposed(system, train_records) if candidates is None else []
     candidates = tuple(default_candidates(system, train_records) if candidates is None else candidates)
     if not candidates:
         raise UsageError("diagnose: `candidates` is empty")
@@ -300,6 +343,7 @@ def prepare_problem(system, train, validation, candidates, mode, options: Option
         velocities=velocities,
         folds=folds,
         equivalents=equivalents,
+        not_proposed=not_proposed,
     )
 
 

@@ -172,6 +172,10 @@ def _candidates_markdown(j: dict) -> list[str]:
         lines += ["## Not identifiable in this mode", ""]
         lines += [f"- `{c['cause']}@{c['where']}`: {c['reason']}." for c in j["not_identifiable"]]
         lines.append("")
+    if j.get("not_proposed"):
+        lines += ["## Not proposed on these records", ""]
+        lines += [f"- `{c['cause']}@{c['where']}`: {c['reason']}." for c in j["not_proposed"]]
+        lines.append("")
     return lines
 
 

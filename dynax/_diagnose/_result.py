@@ -158,7 +158,9 @@ class Report(eqx.Module):
     `inconclusive`; the rule is in `dynax._diagnose._verdict`),
     `findings` (most important first; dicts as in the contract, with extra keys), `gain`,
     `reference_horizon_s`, `structure` (`Structure` of the residual probe on the nominal and the
-    extended model), `not_identifiable`, `candidates` (every candidate's held-out gain in the first
+    extended model), `not_identifiable`, `not_proposed` (causes of the default vocabulary the records give no
+    occasion to try, with the reason: a `stiction` where no joint rests under load), `candidates` (every
+    candidate's held-out gain in the first
     round), `notes`, `horizon` (`Horizon`: the reference horizon and how it was chosen), `runs`
     (held-out error per run), `test` (the significance test, and with verdict `none` or `inconclusive`
     the gain it could have detected, the best candidate and the held-out length that would decide), `discovery`, the
@@ -186,6 +188,7 @@ class Report(eqx.Module):
     extended_model: AbstractSystem
     discovery: dict = eqx.field(default_factory=dict)
     rounds: list = eqx.field(default_factory=list)
+    not_proposed: list = eqx.field(default_factory=list)
 
     def to_json(self) -> dict:
         """The contract's `report.json` (section 3), with extra keys after the contract's."""
@@ -203,6 +206,7 @@ class Report(eqx.Module):
             "mode": self.mode,
             "structure": {k: structure_json(v) for k, v in self.structure.items()},
             "not_identifiable": self.not_identifiable,
+            "not_proposed": self.not_proposed,
             "candidates": self.candidates,
             "notes": self.notes,
             "horizon": self.horizon.to_json(),

@@ -15,7 +15,10 @@ $\partial f/\partial u\,(a_{\tau_g}(t) - u(t))$, with $a_\tau$ the recorded inpu
 lag ($\tau \dot a = u - a$, exact for a held input) or shifted by the delay; the grid point that
 fits the *training* residuals best is kept, its held-out gain is the candidate's screening gain and
 its $\tau_g$ (times the fitted scale, if that is near one) the refit's start value.
-The output-error refit that follows tells a delay from a lag.
+The output-error refit that follows tells a delay from a lag. A static friction level (`stiction`) at
+neutral sits on a tie of its clipping (the joint's holding force is clipped to $\pm f_s$, and at $f_s = 0$
+both bounds meet), where its derivative is half the one above zero; it is screened on the secant to its start
+value, the largest force the records show held at rest.
 
 ??? cite
 
@@ -54,6 +57,22 @@ def _directions(family, values, coefficients, xs, zs, us, us_before):
     return jax.vmap(both)(xs, zs, us, us_before)
 
 
+@eqx.filter_jit
+def _secant(family, values, coefficients, step, xs, zs, us, us_before):
+    """`(f(c + step) - f(c)) / |step|` of the accelerations, the held input's two limits averaged."""
+    idx = jnp.asarray(velocity_indices(family.model.system))
+    size = jnp.max(jnp.abs(step))
+
+    def accel(c, x, z, u):
+        m = family.build(values, c)
+        return m.vector_field(0.0, jnp.concatenate([x, z]), u)[idx]
+
+    def both(x, z, u, ub):
+        return 0.5 * sum((accel(coefficients + step, x, z, v) - accel(coefficients, x, z, v)) / size for v in (u, ub))
+
+    return jax.vmap(both)(xs, zs, us, us_before)
+
+
 def screening_data(family, values, coefficients, trajectory, residual_fn):
     """Residuals and sensitivities on one record: `(r (time, n_vel), J_nominal (time, n_vel, n_nom), J_candidates (time,
     n_vel, n_cand))`."""
@@ -68,6 +87,16 @@ def screening_data(family, values, coefficients, trajectory, residual_fn):
     J_nom, J_c, J_u = _directions(family, jnp.asarray(values), jnp.asarray(coefficients), xs, zs, us, us_before)
     du = savitzky_golay(ts, us, window=w, order=2, deriv=1)  # (time, n_inputs)
     J_c = np.array(J_c)
+    for k, term in enumerate(family.model.terms):
+        if getattr(term, "holds_at_rest", False):
+            # A static level at neutral sits on a tie of its clipping; screen it at finite size (its start value),
+            # as delays and lags are: the secant to the data-based start.
+            size = float(family.candidate_init[k] - family.neutral[k])
+            if size > 0 and float(coefficients[k]) == float(family.neutral[k]):
+                step = jnp.zeros_like(jnp.asarray(coefficients)).at[k].set(size)
+                J_c[:, :, k] = np.asarray(
+                    _secant(family, jnp.asarray(values), jnp.asarray(coefficients), step, xs, zs, us, us_before)
+                )
     for k, term in enumerate(family.model.terms):
         if isinstance(term, AbstractInputTerm) and term.n_hidden and not np.any(J_c[:, :, k]):
             J_c[:, :, k] = -np.asarray(J_u)[:, :, term.input] * np.asarray(du)[:, None, term.input]

@@ -108,6 +108,7 @@ def judge_round(
     steps,
     position_index,
     n_val=None,
+    static_level=None,
 ):
     """Each shortlisted candidate's held-out test: paired block test, Benjamini-Hochberg over every remaining candidate
     (those not refitted count with p = 1), the smallest gain, agreement across runs, a physical sign of every
@@ -122,11 +123,16 @@ def judge_round(
     makes their windows' error larger is not named, however much the cross-fitted folds liked it (seen on a real
     rig: a torque offset that the pooled windows favoured and the held-out runs did not; docs/devdocs/code_notes.md).
 
-    `n_val`: how many of the windows are the held-out runs' (the rest are cross-fitted); default all."""
+    `n_val`: how many of the windows are the held-out runs' (the rest are cross-fitted); default all.
+
+    `static_level(k, p_row, std_row, selected, round_levels)`: `None` where the configuration has no static friction
+    level, else whether every static level in it stands above the Coulomb level at its joint (rule `above_coulomb`;
+    see `Problem.static_level`); `round_levels` maps each refitted candidate to its new coefficient."""
     n_val = len(score_cur) if n_val is None else n_val
     tests = {k: paired_test(score_cur, scores_j[i], window_runs, overlap) for i, k in enumerate(short, start=1)}
     rejected = benjamini_hochberg([tests[k].p_value for k in short] + [1.0] * (len(remaining) - len(short)), alpha)
     results = {}
+    round_levels = {k: p_j[i, -1] for i, k in enumerate(short, start=1)}  # each refitted candidate's new coefficient
     for i, k in enumerate(short, start=1):
         test = tests[k]
         delta = p_j[i, -1]
@@ -142,6 +148,9 @@ def judge_round(
             "agreement": bool(agree),  # each rule on its own: the report says which stopped a candidate
             "held_out": bool(gain_held_out > 0),
         }
+        above = None if static_level is None else static_level(k, p_j[i], std_j[i], selected, round_levels)
+        if above is not None:
+            rules["above_coulomb"] = bool(above)
         results[k] = dict(
             i=i,
             delta=delta,

@@ -65,6 +65,10 @@ _RULE_TEXT = {
     "sign": lambda r, o: (
         "sign: a coefficient of the joint refit (this term's or an earlier finding's) is on its unphysical side"
     ),
+    "above_coulomb": lambda r, o: (
+        "above_coulomb: a static friction level of the joint refit is not above the Coulomb level at its joint "
+        "(by a tenth of it and two standard errors): what it holds at rest, a Coulomb friction holds too"
+    ),
     "agreement": lambda r, o: f"agreement: helps on {r['runs_helped']} of {r['n_runs']} runs, not on more than half",
     "held_out": lambda r, o: (
         f"held_out: the held-out runs' window error is {-r['gain_held_out']:.1%} larger with it"
