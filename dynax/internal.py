@@ -78,6 +78,7 @@ from ._data._velocities import velocity_gain as velocity_gain
 
 # Diagnose: candidates, windows and refits, statistics, horizons, the sparse search.
 from ._diagnose import feature_library as feature_library
+from ._diagnose import JointRests as JointRests
 from ._diagnose import (
     LOOK_ALIKES as LOOK_ALIKES,
 )
@@ -85,7 +86,6 @@ from ._diagnose import (
     Proposal as Proposal,
 )
 from ._diagnose import rests_under_load as rests_under_load
-from ._diagnose import RestUnderLoad as RestUnderLoad
 from ._diagnose import search_period as search_period
 from ._diagnose import (
     sparse_search as sparse_search,
@@ -539,7 +539,7 @@ __all__ = [
     "RecordFriction",
     "RecordOffsets",
     "JointStaticFriction",
-    "RestUnderLoad",
+    "JointRests",
     "StaticFriction",
     "refine_by_simulation",
     "split_for_validation",

@@ -1,7 +1,7 @@
 """Discrepancy diagnosis: what a model's simulation gets wrong, the cause, the extension, the gain."""
 
+from ._at_rest import JointRests as JointRests
 from ._at_rest import rests_under_load as rests_under_load
-from ._at_rest import RestUnderLoad as RestUnderLoad
 from ._candidates import default_candidates as default_candidates
 from ._candidates import LOOK_ALIKES as LOOK_ALIKES
 from ._diagnose import diagnose as diagnose

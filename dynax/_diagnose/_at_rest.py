@@ -36,7 +36,7 @@ MIN_LOADED_REST_S = 2 * MIN_REST_S
 
 
 @dataclasses.dataclass(frozen=True)
-class RestUnderLoad:
+class JointRests:
     """The rests of one joint in the records, and the friction the nominal model needs to hold them.
 
     **Fields:** `joint` (0-based), `coordinate` (e.g. `q2`), `stretches` (`(record, start_s, stop_s, held)`
@@ -80,11 +80,11 @@ def _inverse_dynamics(system, q, dq, ddq):
     return jax.vmap(system.inverse_dynamics)(q, dq, ddq)
 
 
-def rests_under_load(system, trajectories) -> tuple[RestUnderLoad, ...]:
+def rests_under_load(system, trajectories) -> tuple[JointRests, ...]:
     """Per joint of the manipulator `system`, its rests in `trajectories` and the friction needed to hold them
     (see the module). Empty for a system without joints.
 
-    **Returns:** a `RestUnderLoad` per joint.
+    **Returns:** a `JointRests` per joint.
     """
     if not getattr(system, "joints", ()):
         return ()
@@ -128,5 +128,5 @@ def rests_under_load(system, trajectories) -> tuple[RestUnderLoad, ...]:
                     rest_s += r.duration
         # Robust: the ends of a stretch, where the joint settles or starts, are not noise.
         noise = 1.4826 * float(np.median(np.abs(np.concatenate(speeds)))) if speeds else 0.0
-        out.append(RestUnderLoad(j, system.joint_names[j], tuple(stretches), rest_s, all_s, scale, noise))
+        out.append(JointRests(j, system.joint_names[j], tuple(stretches), rest_s, all_s, scale, noise))
     return tuple(out)

@@ -51,7 +51,7 @@ def coulomb_velocity_scale(system, joint: int, trajectories) -> float:
 
 
 def stiction_candidate(system, rest, dt: float) -> Stiction:
-    """The `Stiction` candidate at a joint with rests under load (`rest`, a `RestUnderLoad`), its settings from the
+    """The `Stiction` candidate at a joint with rests under load (`rest`, a `JointRests`), its settings from the
     data: the band of speeds in which it sticks the velocity noise at rest (`speed_noise`), at least `Stiction`'s
     default; its hold time two samples (the diagnosis's fixed-step rollouts take one step per sample).
 
