@@ -53,7 +53,9 @@ class Stiction(AbstractJointTerm):
     and the friction falls from `fs` to the Coulomb level in motion (see the module for the model).
 
     With `fs = 0` (the neutral value) the term does nothing. `fs` below the joint's Coulomb level
-    holds up to `fs` at rest and adds nothing in motion.
+    holds up to `fs` at rest and adds nothing in motion. The Coulomb level it builds on is the joint's
+    `CoulombFriction` term; a Coulomb friction that is a parameter of the system itself (`LinearAxis`)
+    is not seen, so there the excess in motion is `fs` on top of it.
 
     **Arguments:**
 
