@@ -195,7 +195,8 @@ def _screen(problem: Problem, current_slots, current_p, remaining, round_, say):
 
 
 def with_rest_evidence(problem: Problem, remaining, gains, short):
-    """The first round's shortlist with every `stiction` candidate added to it (the shortlist's others kept).
+    """The first round's shortlist with every `stiction` candidate in it (at most all but the two best screened; the
+    refit's batch has the shortlist's size, so a stiction takes the place of the lowest-screened other).
 
     A stiction is proposed only where the records show a joint held at rest under load (`rests_under_load`): that
     evidence is its screening. The one-step screening sees it in the rests' share of the samples only, where the
@@ -203,8 +204,13 @@ def with_rest_evidence(problem: Problem, remaining, gains, short):
     (1 to 2 % on records that rest a sixth of the time, whose refit then gains 75 %). In later rounds it is
     screened as the others are: the evidence was read against the nominal model, and a slot held for it in every
     round would push out candidates a later round needs."""
+    n = problem.options.shortlist
     static = [k for k in remaining if problem.candidates[k].cause == "stiction" and k not in short]
-    return list(short) + sorted(static, key=lambda k: -gains[remaining.index(k)])
+    static = sorted(static, key=lambda k: -gains[remaining.index(k)])[: max(n - 2, 0)]
+    if not static:
+        return short
+    kept = [k for k in short if k not in static]
+    return kept[: max(n - len(static), 0)] + static
 
 
 def _refit(
