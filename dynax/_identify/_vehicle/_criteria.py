@@ -156,6 +156,23 @@ def vehicle_solution(
     """The `Solution` of a one-shot vehicle fit (one-step, frequency): the fitted body model's free
     weights by name, no covariance (NaN), one step, the loss as recorded."""
     theta = fitted.body_model.parameter_vector()
+    return _without_covariance(
+        system,
+        fitted,
+        theta,
+        statistics,
+        result=optx.RESULTS.successful,
+        loss=losses[-1],
+        initial_loss=jnp.asarray(jnp.nan, theta.dtype),
+        steps=jnp.asarray(1),
+        loss_history=losses,
+        time_history=seconds,
+    )
+
+
+def _without_covariance(system, fitted, theta, statistics: VehicleStatistics, **outcome) -> Solution:
+    """A vehicle fit's `Solution`: the weights `theta` by name, no covariance (NaN); `outcome` the engine's fields
+    (result, losses, steps, histories)."""
     n = theta.shape[0]
     return Solution(
         model=fitted,
@@ -163,13 +180,8 @@ def vehicle_solution(
         parameters=Parameters.of(system),
         covariance=jnp.full((n, n), jnp.nan, theta.dtype),
         std_errors=jnp.full(n, jnp.nan, theta.dtype),
-        result=optx.RESULTS.successful,
-        loss=losses[-1],
-        initial_loss=jnp.asarray(jnp.nan, theta.dtype),
-        steps=jnp.asarray(1),
-        loss_history=losses,
-        time_history=seconds,
         statistics=statistics,
+        **outcome,
     )
 
 
@@ -408,21 +420,18 @@ def _em_free(system, trajectory, starts, w, n_steps: int, criterion: Lagged, tok
 
 def _vehicle_solution(system, fitted, theta, solution, statistics: VehicleStatistics) -> Solution:
     """The engine's `Solution` of an iterative vehicle fit (no covariance: NaN)."""
-    n = theta.shape[0]
     history = solution.stats["loss_history"]
-    return Solution(
-        model=fitted,
-        value=theta,
-        parameters=Parameters.of(system),
-        covariance=jnp.full((n, n), jnp.nan, theta.dtype),
-        std_errors=jnp.full(n, jnp.nan, theta.dtype),
+    return _without_covariance(
+        system,
+        fitted,
+        theta,
+        statistics,
         result=solution.result,
         loss=solution.state.f,
         initial_loss=history[0],
         steps=solution.stats["num_steps"],
         loss_history=history,
         time_history=solution.stats["time_history"],
-        statistics=statistics,
     )
 
 
