@@ -66,17 +66,21 @@ def multisine(n_samples, n_inputs, seed, rms, band=(0.1, 2.0), dt=DT):
     return out
 
 
-def integrate(rhs, x0, ts, us, delay=0.0):
+def integrate(rhs, x0, ts, us, delay=0.0, delayed=None):
     """DOP853 (rtol 1e-10) over the zero-order-hold input `us`, restarted at every switch of the applied input:
-    with `delay` the input applied at `t` is the one recorded at `t - delay` (the first held before the record)."""
+    with `delay` the input column `delayed` (every column if `None`) applied at `t` is the one recorded at
+    `t - delay` (the first held before the record); the other columns act at once."""
     switches = np.union1d(ts, ts + delay)
     switches = switches[(switches >= ts[0]) & (switches <= ts[-1])]
     x, out, k = np.asarray(x0, float), [np.asarray(x0, float)], 1
+    columns = slice(None) if delayed is None else [delayed]
     for a, b in itertools.pairwise(switches):
         if b - a < 1e-12:
             continue
-        i = int(np.clip(np.floor((0.5 * (a + b) - delay - ts[0]) / DT + 1e-9), 0, len(us) - 1))
-        u = us[i]
+        now = int(np.clip(np.floor((0.5 * (a + b) - ts[0]) / DT + 1e-9), 0, len(us) - 1))
+        late = int(np.clip(np.floor((0.5 * (a + b) - delay - ts[0]) / DT + 1e-9), 0, len(us) - 1))
+        u = us[now].copy()
+        u[columns] = us[late][columns]
         x = solve_ivp(lambda t, y, u=u: rhs(y, u), (a, b), x, method="DOP853", rtol=1e-10, atol=1e-11).y[:, -1]
         while k < len(ts) and abs(ts[k] - b) < 1e-9:
             out.append(x)
@@ -149,7 +153,8 @@ def axis_rhs(case):
         dz = []
         if case.cause == "input_lag":
             dz, force = [(force - y[2]) / case.size], y[2]
-        f = AXIS["viscous"] * v + (friction(case.law, case.size, v) if case.cause == "coulomb_friction" else 0.0)
+        hidden = case.cause in ("coulomb_friction", "viscous_friction")
+        f = AXIS["viscous"] * v + (friction(case.law, case.size, v) if hidden else 0.0)
         return np.array([v, (force - f) / AXIS["mass"]] + dz)
 
     return rhs, 1 if case.cause == "input_lag" else 0
@@ -361,7 +366,8 @@ def records(case: Case) -> tuple[Trajectory, Trajectory]:
     if case.law in STICK_SLIP:
         xs, us = stick_slip_record(case, truth_theta(case), ts)
     else:
-        xs = integrate(rhs, x0, ts, us, delay)[:, : len(spec["states"])]
+        delayed = spec["inputs"].index(case.where) if case.cause == "input_delay" else None
+        xs = integrate(rhs, x0, ts, us, delay, delayed)[:, : len(spec["states"])]
     if case.system == "helicopter":
         xs[:, 3:7] /= np.linalg.norm(xs[:, 3:7], axis=1, keepdims=True)
     rng = np.random.default_rng(7919 + case.seed)

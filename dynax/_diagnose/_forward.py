@@ -17,7 +17,7 @@ from ._problem import Problem
 from ._records import reference_horizon
 from ._residuals import acceleration_residuals, Structure, structure_test
 from ._screening import screen
-from ._selection import choose_shortlist, judge_round, look_alike_tests, rank
+from ._selection import choose, choose_shortlist, judge_round, look_alike_tests
 from ._summaries import candidate_table, rmse_curve, round_summary, window_scores
 
 
@@ -327,8 +327,16 @@ def _select(problem: Problem, yard: Yardstick, current: Current, results, scores
     if not admissible:
         say(f"round {round_ + 1}: no candidate improves the held-out simulation significantly")
         return None
-    best = max(admissible, key=rank(results))
+    best = choose(problem, results, admissible)
     r, term, system = results[best], problem.candidates[best], problem.system
+    passed = max(admissible, key=lambda k: results[k]["gain_held_out"])
+    if best != passed:
+        problem.notes.append(
+            f"{term.label(system)} is named for its look-alike {problem.candidates[passed].label(system)}, which "
+            f"passed the test (p = {results[passed]['p']:.2g}): the two describe one effect, and "
+            f"{term.label(system)} predicts the held-out runs better ({r['gain_held_out']:.0%} against "
+            f"{results[passed]['gain_held_out']:.0%}; its own p = {r['p']:.2g})."
+        )
     ref = yard.ref_index
     gain = float(1 - r["rmse"][ref] / current.rmse[ref]) if np.isfinite(current.rmse[ref]) else 1.0
     alternatives = look_alike_tests(problem, yard, best, results, scores)
@@ -419,7 +427,7 @@ def _complete_look_alikes(
         admissible = [k for k in results if results[k]["significant"]]
         if not admissible:
             break
-        best = max(admissible, key=rank(results))
+        best = choose(problem, results, admissible)
         missing = [k for k in problem.look_alikes(best) if k in remaining and k not in results]
         missing = missing[: problem.options.shortlist]
         if not missing:

@@ -94,7 +94,7 @@ def _held_average(ts, u, a, b):
     return (integral(b) - integral(a)) / (b - a)
 
 
-def exact_delays(model, trajectory):
+def exact_delays(model, trajectory, interval: bool = False):
     """Run an active input delay as the dead time it stands for, not as its Pade filter.
 
     A model found with `input_delay` simulates it with a Pade approximant, which passes a held
@@ -105,6 +105,9 @@ def exact_delays(model, trajectory):
     `t - T` (what the left and right limits average to at `T` a whole number of samples, and
     continuous in `T` in between), and the term is set to zero delay (it then passes the shifted
     input through).
+
+    With `interval`, a delayed input is instead its mean over the sample interval that starts at
+    `t - T` (what acts over `[t, t + dt]`), for comparisons of velocity increments over the intervals.
 
     **Returns:** `(model, us, us_before)`: the model to evaluate, and the input's right and left
     limits at each sample (equal, the interval mean, for a delayed input).
@@ -125,7 +128,7 @@ def exact_delays(model, trajectory):
             or not float(term.coefficient) > 0
         ):
             continue
-        centre = ts - float(term.coefficient)
+        centre = ts - float(term.coefficient) + (half if interval else 0.0)
         mean = _held_average(ts, np.asarray(trajectory.us)[:, term.input], centre - half, centre + half)
         us[:, term.input] = us_before[:, term.input] = mean
         model = eqx.tree_at(lambda m: m.terms[k].coefficient, model, jnp.zeros_like(term.coefficient))
@@ -144,6 +147,7 @@ def acceleration_residuals(model, trajectory):
     xs_smooth = savitzky_golay(ts, trajectory.xs, window=w, order=3)
     idx = velocity_indices(nominal)
     measured = savitzky_golay(ts, trajectory.xs[:, idx], window=w, order=3, deriv=1)
+    unextended = model
     model, us, us_before = exact_delays(model, trajectory)
     predicted = predicted_accelerations(model, ts, xs_smooth, us, jnp.asarray(idx), us_before)
     # The measured acceleration is a local polynomial fit; smoothing the prediction with the same
@@ -154,8 +158,9 @@ def acceleration_residuals(model, trajectory):
         # acceleration jump at every sample, and a stiff flight controller moves the input every
         # sample): compare velocity *increments* over each interval, integrated under the held
         # input, and differentiate the accumulated difference with the same filter.
+        interval_model, interval_us, _ = exact_delays(unextended, trajectory, interval=True)
         increments = jnp.diff(trajectory.ts)[:, None] * _interval_accelerations(
-            model, ts, xs_smooth, us, jnp.asarray(idx)
+            interval_model, ts, xs_smooth, interval_us, jnp.asarray(idx)
         )
         drift = jnp.diff(trajectory.xs[:, idx], axis=0) - increments
         accumulated = jnp.concatenate([jnp.zeros((1, len(idx)), drift.dtype), jnp.cumsum(drift, axis=0)])
