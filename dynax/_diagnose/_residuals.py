@@ -68,13 +68,33 @@ def predicted_accelerations(model, ts, xs_smooth, us, idx, us_before):
     return 0.5 * (field(ts, full, us) + field(ts, full, us_before))[:, idx]
 
 
+_INTERVAL_SUBSTEPS = 4  # RK4 steps per sample interval of the one-step increments
+
+
 @eqx.filter_jit
-def _interval_accelerations(model, ts, xs_smooth, us, idx):
-    """The model's mean acceleration over each sample interval under the held input (trapezoid rule)."""
+def _interval_increments(model, ts, xs_smooth, us, idx):
+    """The model's velocity increment over each sample interval under the held input: one RK4 integration
+    (`_INTERVAL_SUBSTEPS` steps) from the smoothed state and the input terms' internal state at the interval's
+    start. Exact to the integrator's order where a trapezoid of the end accelerations is not: an input lag's
+    applied input curves within the interval, by an amount that follows the input's rate."""
     zs = hidden_trajectory(model, ts, us)
     full = jnp.concatenate([xs_smooth, zs], axis=1)
-    field = jax.vmap(lambda t, x, u: model.vector_field(t, x, u)[idx])
-    return 0.5 * (field(ts[:-1], full[:-1], us[:-1]) + field(ts[1:], full[1:], us[:-1]))
+
+    def increment(t, x, u, dt):
+        h = dt / _INTERVAL_SUBSTEPS
+
+        def rk4(carry, _):
+            s, y = carry
+            k1 = model.vector_field(s, y, u)
+            k2 = model.vector_field(s + h / 2, y + h / 2 * k1, u)
+            k3 = model.vector_field(s + h / 2, y + h / 2 * k2, u)
+            k4 = model.vector_field(s + h, y + h * k3, u)
+            return (s + h, y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)), None
+
+        (_, end), _ = jax.lax.scan(rk4, (t, x), None, length=_INTERVAL_SUBSTEPS)
+        return (end - x)[idx]
+
+    return jax.vmap(increment)(ts[:-1], full[:-1], us[:-1], jnp.diff(ts))
 
 
 def velocity_indices(system) -> list[int]:
@@ -157,11 +177,9 @@ def acceleration_residuals(model, trajectory):
         # The rates answer the inputs within a sample (a helicopter: the held input makes the
         # acceleration jump at every sample, and a stiff flight controller moves the input every
         # sample): compare velocity *increments* over each interval, integrated under the held
-        # input, and differentiate the accumulated difference with the same filter.
+        # input from the interval's start, and differentiate the accumulated difference with the same filter.
         interval_model, interval_us, _ = exact_delays(unextended, trajectory, interval=True)
-        increments = jnp.diff(trajectory.ts)[:, None] * _interval_accelerations(
-            interval_model, ts, xs_smooth, interval_us, jnp.asarray(idx)
-        )
+        increments = _interval_increments(interval_model, ts, xs_smooth, interval_us, jnp.asarray(idx))
         drift = jnp.diff(trajectory.xs[:, idx], axis=0) - increments
         accumulated = jnp.concatenate([jnp.zeros((1, len(idx)), drift.dtype), jnp.cumsum(drift, axis=0)])
         measured = predicted + savitzky_golay(ts, accumulated, window=w, order=3, deriv=1)
