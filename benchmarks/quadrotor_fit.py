@@ -7,7 +7,10 @@ squares, and the lagged criterion (H = 0.5 s, EM-free, from the one-step fit, ev
 CLI's 600 windows: `--stride auto`). Each fit is timed cold (compilation included, as a first
 command-line run pays) and warm (compiled once already). The lagged fit runs after the one-step
 one, so its cold time excludes the one-step compilation it starts from: a lagged fit from a cold
-start costs about both cold times. Loading the files is timed apart.
+start costs about both cold times. The backprop refinement (30 L-BFGS steps on the same lagged
+loss, warm-started from the lagged fit, as `experiments/nanobench_heldout.py` makes its best
+model) is timed on its own: the best model costs the lagged fit plus it. Loading the files is
+timed apart.
 
 Run: `python benchmarks/quadrotor_fit.py [--out DIR] [--samples N]` (default DIR
 `benchmarks/results`). Writes `DIR/quadrotor_fit.json`. Timings on a shared CPU are indicative; run
@@ -42,6 +45,7 @@ NANOBENCH_MAP = {
 }
 HORIZON_S = 0.5
 AUTO_WINDOWS = 600  # the CLI's --stride auto
+BACKPROP_STEPS = 30  # as experiments/nanobench_heldout.py refines its lagged fit
 
 
 def main():
@@ -66,7 +70,11 @@ def main():
     print(f"{len(flights)} runs, {sum(len(f) for f in flights)} samples; loading 16 files {load_s:.1f} s", flush=True)
     start_model = dynax.initial_quadrotor("acceleration", flights)
     stride = auto_stride(sum(len(f) for f in flights), int(HORIZON_S / 0.01), AUTO_WINDOWS)
-    criteria = {"one-step": dynax.OneStep(), "lagged": dynax.Lagged(horizon=HORIZON_S, stride=stride)}
+    criteria = {
+        "one-step": dynax.OneStep(),
+        "lagged": dynax.Lagged(horizon=HORIZON_S, stride=stride),
+        "backprop refinement": dynax.Backprop(horizon=HORIZON_S, stride=stride, max_steps=BACKPROP_STEPS),
+    }
     result = {
         "samples": sum(len(f) for f in flights),
         "runs": len(flights),
@@ -76,13 +84,19 @@ def main():
         "stride": stride,
         "fits": {},
     }
+    lagged_model = start_model
     for name, criterion in criteria.items():
         times = []
         for _ in range(2):
             t0 = time.perf_counter()
-            solution = dynax.fit_quadrotor(start_model, flights, criterion, progress=False)
+            if isinstance(criterion, dynax.Backprop):  # refines the lagged fit, as the held-out study does
+                solution = dynax.fit_quadrotor(lagged_model, flights, criterion, progress=False, warm_start=True)
+            else:
+                solution = dynax.fit_quadrotor(start_model, flights, criterion, progress=False)
             jax.block_until_ready(solution.value)
             times.append(time.perf_counter() - t0)
+        if name == "lagged":
+            lagged_model = solution.model
         result["fits"][name] = {
             "cold_seconds": times[0],
             "warm_seconds": times[1],

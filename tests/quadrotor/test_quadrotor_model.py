@@ -207,3 +207,21 @@ def test_joined_flights_give_no_window_across_a_break():
     np.testing.assert_array_equal(valid_starts(11, 3, 1, breaks=[5]), [0, 1, 5, 6, 7])
     np.testing.assert_array_equal(valid_starts(11, 3, 2, breaks=[5]), [0, 5, 7])
     np.testing.assert_array_equal(valid_starts(11, 3, 1), np.arange(8))  # no breaks: as before
+
+
+def test_backprop_warm_start_refines_the_given_weights(fitted, flights):
+    # A thrust map 20 % too strong: refined from there (warm start) the backprop fit moves it back
+    # toward the one-step fit (the truth, to its quadrature error); from the one-step fit (cold) it
+    # starts at the truth already, so its loss stays below the warm start's after the same steps.
+    body = fitted.model.body_model
+    thrust = np.asarray([name.startswith("dw/") for name in body.parameter_names])
+    truth = np.asarray(fitted.value)
+    wrong = np.where(thrust, 1.2 * truth, truth)
+    start = fitted.model.with_body_model(body.with_parameter_vector(jnp.asarray(wrong)))
+    criterion = dynax.Backprop(horizon=0.2, max_steps=8, stride=5)
+    warm = dynax.fit_quadrotor(start, flights, criterion, warm_start=True, progress=False)
+    cold = dynax.fit_quadrotor(start, flights, criterion, progress=False)
+    losses = [loss for _, loss in warm.history]
+    assert losses[-1] < losses[0] and cold.history[-1][1] < losses[-1]
+    refined = np.asarray(warm.value)
+    assert np.linalg.norm((refined - truth)[thrust]) < 0.5 * np.linalg.norm((wrong - truth)[thrust])

@@ -52,11 +52,14 @@ def fit_vehicle(
     callback=None,
     progress: bool | None = None,
     breaks=None,
+    warm_start: bool = False,
 ) -> Solution:
     r"""Learn the body model of `system` from `trajectory` with a learning `criterion`.
 
     `Lagged` and `Backprop` start from the one-step fit (the paper's initialisation), so both
-    descend the same lagged loss from the same point.
+    descend the same lagged loss from the same point; with `warm_start` they start from
+    `system`'s weights instead (e.g. `Backprop` from a `Lagged` fit: the EM-free iteration stops
+    above the lagged loss's minimum, the gradient descends the rest).
 
     **Arguments:**
 
@@ -71,6 +74,7 @@ def fit_vehicle(
     - `breaks`: for a record joined from several (flights, or the runs of a flight between its
       ground segments and glitches), the sample indices where each new one begins: no window
       of the criteria crosses one (not for `FrequencyDomain`).
+    - `warm_start`: start `Lagged` or `Backprop` from `system`'s weights, not the one-step fit.
 
     **Returns:** a `Solution`: the fitted system as its `model`, its free weights by name, the
     criterion's loss and its history, and a `VehicleStatistics` (the criterion, the samples, and
@@ -98,7 +102,7 @@ def fit_vehicle(
                 if callback is not None:
                     callback(iteration, loss)
 
-            start = fit_one_step(system, trajectory, breaks=breaks).model
+            start = system if warm_start else fit_one_step(system, trajectory, breaks=breaks).model
             return fit(start, trajectory, criterion, callback=report, breaks=breaks)
     raise UsageError(f"fit_vehicle: unknown criterion {type(criterion).__name__}")
 

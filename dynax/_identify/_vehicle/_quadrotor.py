@@ -69,6 +69,7 @@ def fit_quadrotor(
     *,
     progress: bool | None = None,
     callback=None,
+    warm_start: bool = False,
 ) -> Solution:
     r"""Learn the body model of a `Quadrotor` from flights with a vehicle criterion.
 
@@ -81,7 +82,8 @@ def fit_quadrotor(
     - `criterion`: `OneStep()` (the default), `Lagged(horizon=...)` or `Backprop(horizon=...)` (both
       start from the one-step fit). `FrequencyDomain()` is refused: its structure is the
       helicopter's.
-    - `progress`, `callback`: as for `fit_vehicle`.
+    - `progress`, `callback`, `warm_start`: as for `fit_vehicle` (`warm_start`: `Lagged` or
+      `Backprop` start from `system`'s weights, e.g. `Backprop` refining a `Lagged` fit).
 
     **Returns:** the engine's `Solution`: `model` the fitted `Quadrotor`, `value` its free weights
     named `d<axis>/<feature>`. For one-step the covariance is the least-squares one,
@@ -104,7 +106,9 @@ def fit_quadrotor(
         flights = [flights]
     joined, breaks = join_flights(system, flights)
     helicopter = system.as_helicopter()
-    fit = fit_vehicle(helicopter, joined, criterion, progress=progress, callback=callback, breaks=breaks)
+    fit = fit_vehicle(
+        helicopter, joined, criterion, progress=progress, callback=callback, breaks=breaks, warm_start=warm_start
+    )
     fitted = system.with_body_model(fit.model.body_model)
     solution = eqx.tree_at(lambda s: (s.model, s.parameters), fit, (fitted, Parameters.of(fitted)))
     if not isinstance(criterion, OneStep):  # lagged, backprop: the engine's Solution of the helicopter form
