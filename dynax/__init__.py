@@ -34,6 +34,9 @@ from ._data import (
     resample as resample,
 )
 from ._data import (
+    Sampling as Sampling,
+)
+from ._data import (
     save_trajectory as save_trajectory,
 )
 from ._data import (
@@ -89,6 +92,9 @@ from ._fit import (
 )
 from ._fit import (
     fit_minimise as fit_minimise,
+)
+from ._fit import (
+    LeastSquaresOptions as LeastSquaresOptions,
 )
 from ._fit import (
     Parameters as Parameters,
@@ -149,6 +155,9 @@ from ._identify import (
 )
 from ._identify import (
     StageKind as StageKind,
+)
+from ._identify import (
+    Validate as Validate,
 )
 from ._identify._vehicle import (
     Backprop as Backprop,

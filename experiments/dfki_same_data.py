@@ -35,7 +35,11 @@ def main(argv=None):
     # No `validation`: identify holds out the last 20 % of each run for its own validation (the default), so
     # dynax fits 80 % of the data the lab fitted; both models are scored on the whole runs below.
     result = dynax.identify(
-        dynax.DoublePendulum(), [runs[r] for r in RUNS], dynax.Dynamic(), friction="coulomb", horizons_s=HORIZONS
+        dynax.DoublePendulum(),
+        [runs[r] for r in RUNS],
+        dynax.Dynamic(),
+        friction="coulomb",
+        validation=dynax.Validate(horizons_s=HORIZONS),
     )
     seconds = time.perf_counter() - start
     lab = lab_model(read_parameters("model_3.0"))
