@@ -5,7 +5,6 @@ from . import control as control
 
 # Synthetic data (truth simulators, data generators) lives in `dynax.synthetic`; the top-level names stay.
 from . import synthetic as synthetic
-from ._control._from_rest import load_controller as load_controller
 from ._data import (
     backward_difference as backward_difference,
 )
@@ -17,9 +16,6 @@ from ._data import (
 )
 from ._data import (
     check_records as check_records,
-)
-from ._data import (
-    DataCheck as DataCheck,
 )
 from ._data import (
     DataWarning as DataWarning,
@@ -46,9 +42,6 @@ from ._data import (
     Trajectory as Trajectory,
 )
 from ._data._flight import (
-    FlightChecks as FlightChecks,
-)
-from ._data._flight import (
     inspect_flight as inspect_flight,
 )
 from ._data._flight import (
@@ -67,9 +60,6 @@ from ._diagnose import (
     discover as discover,
 )
 from ._diagnose import (
-    Discovery as Discovery,
-)
-from ._diagnose import (
     Known as Known,
 )
 from ._diagnose import (
@@ -85,9 +75,6 @@ from ._distributed import initialize_distributed as initialize_distributed
 from ._errors import DataError as DataError
 from ._errors import UsageError as UsageError
 from ._fit import (
-    AbstractStatistics as AbstractStatistics,
-)
-from ._fit import (
     fit_least_squares as fit_least_squares,
 )
 from ._fit import (
@@ -101,12 +88,6 @@ from ._fit import (
 )
 from ._fit import (
     Solution as Solution,
-)
-from ._fit import (
-    Statistics as Statistics,
-)
-from ._identify import (
-    Consistency as Consistency,
 )
 from ._identify import (
     Dynamic as Dynamic,
@@ -173,9 +154,6 @@ from ._identify._vehicle import (
 )
 from ._identify._vehicle import (
     OneStep as OneStep,
-)
-from ._identify._vehicle import (
-    VehicleStatistics as VehicleStatistics,
 )
 from ._identify._vehicle._model_file import load_model as load_model
 from ._identify._vehicle._model_file import save_model as save_model
@@ -315,6 +293,5 @@ from ._sim_error import SimulationError as SimulationError
 from ._simulate import Adaptive as Adaptive
 from ._simulate import FixedGrid as FixedGrid
 from ._simulate import simulate as simulate
-from ._simulate import Simulation as Simulation
 from ._solvers import RK4 as RK4
 from ._version import __version__ as __version__
