@@ -19,7 +19,8 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from dfki_default_identification import HORIZONS, lab_model, load, RUNS  # noqa: E402  (the script's folder is on sys.path)
+# The script's folder is on sys.path.
+from dfki_default_identification import HORIZONS, lab_model, load, RUNS
 from dfki_simulation import read_parameters  # noqa: E402
 
 import dynax  # noqa: E402
