@@ -28,7 +28,7 @@ from _device import describe, device_info  # noqa: E402
 
 from dynax import Acrobot, CoulombFriction, diagnose, Extended, load_trajectory, save_trajectory  # noqa: E402
 from dynax.internal import write_json  # noqa: E402
-from dynax.synthetic import DEMO_TRUTH_PHYSICAL, synthetic_trajectory  # noqa: E402
+from dynax.synthetic import DEMO_TRUTH_PHYSICAL, Multisine, synthetic_trajectory  # noqa: E402
 
 
 def main():
@@ -41,7 +41,7 @@ def main():
     with tempfile.TemporaryDirectory() as folder:
         for seed in (args.seed, args.seed + 1):
             record = synthetic_trajectory(
-                truth, duration=40.0, dt=0.01, amplitude=2.0, seed=seed, system_name="acrobot"
+                truth, duration=40.0, dt=0.01, excitation=Multisine(amplitude=2.0), seed=seed, system_name="acrobot"
             )
             path = pathlib.Path(folder) / f"acrobot_40s_{seed}.csv"
             save_trajectory(record, path)

@@ -148,7 +148,7 @@ def main():
     }
     for name, (method, reference) in cases.items():
         start = time.perf_counter()
-        first = identify(system, data, method, refine=False, holdout=0, consistency="off")
+        first = identify(system, data, method, refine=False, validation=dynax.Validate(holdout=0), consistency="off")
         compile_s = time.perf_counter() - start
         # Alternating rounds (3 dynax calls, then 3 numpy calls, `repeats` times), best of each: a
         # change in the machine's load touches both alike, and neither library's worker threads,
@@ -158,7 +158,12 @@ def main():
         t_dynax, t_numpy = [], []
         for _ in range(args.repeats):
             t, result = best_time(
-                lambda: identify(system, data, method, refine=False, holdout=0, consistency="off").estimate, 3
+                lambda: (
+                    identify(
+                        system, data, method, refine=False, validation=dynax.Validate(holdout=0), consistency="off"
+                    ).estimate
+                ),
+                3,
             )
             t_dynax.append(t)
             t, estimate = best_time(lambda: reference(ts, xs, us), 3)

@@ -5,7 +5,6 @@ from . import control as control
 
 # Synthetic data (truth simulators, data generators) lives in `dynax.synthetic`; the top-level names stay.
 from . import synthetic as synthetic
-from ._control._from_rest import load_controller as load_controller
 from ._data import (
     backward_difference as backward_difference,
 )
@@ -17,9 +16,6 @@ from ._data import (
 )
 from ._data import (
     check_records as check_records,
-)
-from ._data import (
-    DataCheck as DataCheck,
 )
 from ._data import (
     DataWarning as DataWarning,
@@ -34,6 +30,9 @@ from ._data import (
     resample as resample,
 )
 from ._data import (
+    Sampling as Sampling,
+)
+from ._data import (
     save_trajectory as save_trajectory,
 )
 from ._data import (
@@ -41,9 +40,6 @@ from ._data import (
 )
 from ._data import (
     Trajectory as Trajectory,
-)
-from ._data._flight import (
-    FlightChecks as FlightChecks,
 )
 from ._data._flight import (
     inspect_flight as inspect_flight,
@@ -64,9 +60,6 @@ from ._diagnose import (
     discover as discover,
 )
 from ._diagnose import (
-    Discovery as Discovery,
-)
-from ._diagnose import (
     Known as Known,
 )
 from ._diagnose import (
@@ -82,25 +75,19 @@ from ._distributed import initialize_distributed as initialize_distributed
 from ._errors import DataError as DataError
 from ._errors import UsageError as UsageError
 from ._fit import (
-    AbstractStatistics as AbstractStatistics,
-)
-from ._fit import (
     fit_least_squares as fit_least_squares,
 )
 from ._fit import (
     fit_minimise as fit_minimise,
 )
 from ._fit import (
+    LeastSquaresOptions as LeastSquaresOptions,
+)
+from ._fit import (
     Parameters as Parameters,
 )
 from ._fit import (
     Solution as Solution,
-)
-from ._fit import (
-    Statistics as Statistics,
-)
-from ._identify import (
-    Consistency as Consistency,
 )
 from ._identify import (
     Dynamic as Dynamic,
@@ -150,6 +137,9 @@ from ._identify import (
 from ._identify import (
     StageKind as StageKind,
 )
+from ._identify import (
+    Validate as Validate,
+)
 from ._identify._vehicle import (
     Backprop as Backprop,
 )
@@ -164,9 +154,6 @@ from ._identify._vehicle import (
 )
 from ._identify._vehicle import (
     OneStep as OneStep,
-)
-from ._identify._vehicle import (
-    VehicleStatistics as VehicleStatistics,
 )
 from ._identify._vehicle._model_file import load_model as load_model
 from ._identify._vehicle._model_file import save_model as save_model
@@ -306,6 +293,5 @@ from ._sim_error import SimulationError as SimulationError
 from ._simulate import Adaptive as Adaptive
 from ._simulate import FixedGrid as FixedGrid
 from ._simulate import simulate as simulate
-from ._simulate import Simulation as Simulation
 from ._solvers import RK4 as RK4
 from ._version import __version__ as __version__

@@ -57,6 +57,7 @@ from ._data import (
 from ._data import (
     central_difference as central_difference,
 )
+from ._data import DataCheck as DataCheck
 from ._data import (
     parse_assignments as parse_assignments,
 )
@@ -71,12 +72,14 @@ from ._data import (
 
 # Helpers of the pipeline's stages (data, model, identification, validation, diagnosis).
 from ._data import split_at_gaps as split_at_gaps
+from ._data._flight import FlightChecks as FlightChecks
 from ._data._flight import FlightNotes as FlightNotes
 from ._data._flight import usable_segments as usable_segments
 from ._data._io import MAX_MAGNITUDE as MAX_MAGNITUDE
 from ._data._velocities import velocity_gain as velocity_gain
 
 # Diagnose: candidates, windows and refits, statistics, horizons, the sparse search.
+from ._diagnose import Discovery as Discovery
 from ._diagnose import feature_library as feature_library
 from ._diagnose import JointRests as JointRests
 from ._diagnose import (
@@ -103,12 +106,14 @@ from ._diagnose import (
 from ._diagnose import (
     write_report as write_report,
 )
+from ._diagnose._candidates import candidate_scales as candidate_scales
 from ._diagnose._candidates import (
     held_partners as held_partners,
 )
 from ._diagnose._candidates import (
     look_alikes as look_alikes,
 )
+from ._diagnose._candidates import stiction_not_proposed as stiction_not_proposed
 from ._diagnose._candidates import (
     structurally_absorbed as structurally_absorbed,
 )
@@ -147,6 +152,7 @@ from ._diagnose._probe import cross_validated_ridge as cross_validated_ridge
 from ._diagnose._probe import folds_by_run as folds_by_run
 from ._diagnose._problem import candidate_family as candidate_family
 from ._diagnose._problem import names_to_refit as names_to_refit
+from ._diagnose._problem import Problem as Problem
 from ._diagnose._quadrotor import (
     body_frame_records as body_frame_records,
 )
@@ -220,7 +226,8 @@ from ._distributed import (
     replicate_in_jit as replicate_in_jit,
 )
 
-# Engine: solvers and covariances.
+# Engine: solvers and covariances, the statistics types.
+from ._fit import AbstractStatistics as AbstractStatistics
 from ._fit import (
     clustered_covariance as clustered_covariance,
 )
@@ -236,6 +243,7 @@ from ._fit import (
 from ._fit import (
     serial_covariance as serial_covariance,
 )
+from ._fit import Statistics as Statistics
 from ._fit import (
     StrictTrustRegion as StrictTrustRegion,
 )
@@ -248,6 +256,7 @@ from ._identify import (
 from ._identify import (
     choose_filter as choose_filter,
 )
+from ._identify import Consistency as Consistency
 
 # Identify: regressors, the stacked equations, per-record parts, the refinement's pieces.
 from ._identify import (
@@ -390,6 +399,7 @@ from ._identify._vehicle import (
 from ._identify._vehicle import (
     STATE_GROUPS as STATE_GROUPS,
 )
+from ._identify._vehicle import VehicleStatistics as VehicleStatistics
 from ._identify._vehicle._criteria import (
     normal_equations as normal_equations,
 )
@@ -495,10 +505,22 @@ from ._sim_error import (
 
 # Simulate: the fixed-grid step, rollouts of measured windows.
 from ._simulate import explicit_step as explicit_step
+from ._simulate import Simulation as Simulation
 from ._simulate import zoh_term as zoh_term
 
 # Aliased re-exports (`x as y`) count as exports only through `__all__`, so it lists every name.
 __all__ = [
+    "Simulation",
+    "candidate_scales",
+    "stiction_not_proposed",
+    "Problem",
+    "AbstractStatistics",
+    "Statistics",
+    "VehicleStatistics",
+    "FlightChecks",
+    "DataCheck",
+    "Consistency",
+    "Discovery",
     "body_frame_system",
     "quadrotor_candidates",
     "Rest",

@@ -1,5 +1,6 @@
 """Synthetic measured data: `dynax.synthetic.HelicopterTruth`, `FlightController`, `generate_helicopter_flight`,
-`helicopter_flight`, `synthetic_trajectory`, `demo_data`, `hidden_effect`, `multisine`, `filtered_noise`.
+`helicopter_flight` (and its `FlightPlan`), `synthetic_trajectory` (and its `Multisine` excitation), `demo_data`,
+`hidden_effect`, `multisine`, `filtered_noise`.
 
 Truth simulators and data generators for demos, tests and docs, kept apart from the models that are
 fitted (`dynax/_synthetic/`). The same names at the top level (`dynax.HelicopterTruth`, ...) still work.
@@ -18,6 +19,9 @@ from ._synthetic import (
     FlightController as FlightController,
 )
 from ._synthetic import (
+    FlightPlan as FlightPlan,
+)
+from ._synthetic import (
     fly as fly,
 )
 from ._synthetic import (
@@ -31,6 +35,9 @@ from ._synthetic import (
 )
 from ._synthetic import (
     hidden_effect as hidden_effect,
+)
+from ._synthetic import (
+    Multisine as Multisine,
 )
 from ._synthetic import (
     multisine as multisine,

@@ -48,7 +48,7 @@ from dynax.internal import butterworth_filtfilt, central_difference, dynamic_reg
 REPO = pathlib.Path(__file__).resolve().parents[1]
 # The study's numbers are the plain least-squares (or output-error) fit on the whole record: identify's
 # newer defaults (filters from the spectra, consistency constraint, validation hold-out, refinement) are off.
-AS_PUBLISHED = dict(refine=False, holdout=0, consistency="off")
+AS_PUBLISHED = dict(refine=False, validation=dynax.Validate(holdout=0), consistency="off")
 PLAIN_DYNAMIC = Dynamic(lowpass_hz=None, trim=1, decimate=1)
 DATASETS = REPO.parent / "shared" / "datasets"
 TRUE = dynax.Acrobot()

@@ -5,7 +5,7 @@
 
 Writes `experiments/results/leaderboard/`: `results.json` (the performance costs and score, the
 robustness per family and its score, timings), `acrobot_policy.npz` (the controller, for
-`dynax.load_controller`), `robustness.png` (success against each perturbation's size),
+`dynax.control.load_controller`), `robustness.png` (success against each perturbation's size),
 `swing_up.png` (the nominal episode), and the trade-off of the controller's prediction lead
 (performance against robustness, same reference). The experiment owns no algorithm: the benchmark is
 `dynax.control.performance` / `robustness`, the design `dynax.control.design_swing_up`.
@@ -106,13 +106,13 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     timings = {}
     if args.policy:
-        controller = dynax.load_controller(args.policy).to_benchmark()
+        controller = dynax.control.load_controller(args.policy).to_benchmark()
         design = None
     else:
         design = control.SwingUpDesign()
         reference = None
         if args.reference:
-            saved = dynax.load_controller(args.reference)
+            saved = dynax.control.load_controller(args.reference)
             reference = (jax.numpy.asarray(saved.x_ref), jax.numpy.asarray(saved.u_ref))
         print(
             "designing the swing-up (collocation, shooting, TVLQR) ..."

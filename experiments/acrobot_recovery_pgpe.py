@@ -87,7 +87,7 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     rules = control.LeaderboardRules()
     plant = control.LeaderboardPlant.nominal()
-    base = dynax.load_controller(args.policy).to_benchmark()
+    base = dynax.control.load_controller(args.policy).to_benchmark()
     design = control.SwingUpDesign()
     bank = training_bank()
     # half the episodes from the pulse runs (the weakest family), half from the other families

@@ -434,7 +434,7 @@ def pipeline(cfg, key, held_out, tuned_on_nominal):
     # A torque gain g is indistinguishable from dividing every base parameter by g: the power
     # model identifies the truth in the units of the commanded torque, which is what the
     # controller needs.
-    fit = identify(dynax.Acrobot(), record, Power(), refine=False, holdout=0)
+    fit = identify(dynax.Acrobot(), record, Power(), refine=False, validation=dynax.Validate(holdout=0))
     identified_core = fit.system
 
     truth32 = f32(truth)

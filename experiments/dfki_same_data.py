@@ -19,7 +19,8 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from dfki_default_identification import HORIZONS, lab_model, load, RUNS  # noqa: E402  (the script's folder is on sys.path)
+# The script's folder is on sys.path.
+from dfki_default_identification import HORIZONS, lab_model, load, RUNS
 from dfki_simulation import read_parameters  # noqa: E402
 
 import dynax  # noqa: E402
@@ -35,7 +36,11 @@ def main(argv=None):
     # No `validation`: identify holds out the last 20 % of each run for its own validation (the default), so
     # dynax fits 80 % of the data the lab fitted; both models are scored on the whole runs below.
     result = dynax.identify(
-        dynax.DoublePendulum(), [runs[r] for r in RUNS], dynax.Dynamic(), friction="coulomb", horizons_s=HORIZONS
+        dynax.DoublePendulum(),
+        [runs[r] for r in RUNS],
+        dynax.Dynamic(),
+        friction="coulomb",
+        validation=dynax.Validate(horizons_s=HORIZONS),
     )
     seconds = time.perf_counter() - start
     lab = lab_model(read_parameters("model_3.0"))

@@ -51,7 +51,11 @@ def fit_one(run, records, lab, lab_errors) -> dict:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         result = dynax.identify(
-            dynax.DoublePendulum(), records[run], dynax.Dynamic(), friction="coulomb", horizons_s=HORIZONS
+            dynax.DoublePendulum(),
+            records[run],
+            dynax.Dynamic(),
+            friction="coulomb",
+            validation=dynax.Validate(horizons_s=HORIZONS),
         )
     seconds = time.perf_counter() - start
     others = {r: list(held_out_error(result.system, [records[r]], HORIZONS).rmse) for r in RUNS if r != run}

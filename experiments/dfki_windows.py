@@ -46,7 +46,8 @@ import jax.numpy as jnp  # noqa: E402
 import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
-from dfki_default_identification import HORIZONS, lab_parameters, load, model_of, RUNS  # noqa: E402  (the script's folder is on sys.path)
+# The script's folder is on sys.path.
+from dfki_default_identification import HORIZONS, lab_parameters, load, model_of, RUNS
 from dfki_simulation import read_parameters  # noqa: E402
 from dfki_torque_offsets import LORO  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402

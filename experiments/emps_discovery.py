@@ -47,7 +47,12 @@ n = (len(raw) - 1) // 10 * 10
 ts, xs = raw.ts[:n:10], jnp.stack([q, dq], axis=1)[:n:10]
 us = raw.us[:n].reshape(-1, 10, 1).mean(axis=1)
 k = int(0.7 * len(ts))
-cut = lambda a, b, name: Trajectory(ts[a:b], xs[a:b], us[a:b], raw.state_names, raw.input_names, "linear_axis", name)  # noqa: E731
+
+
+def cut(a, b, name):
+    return Trajectory(ts[a:b], xs[a:b], us[a:b], raw.state_names, raw.input_names, "linear_axis", name)
+
+
 train, validation = cut(0, k, "DATA_EMPS.mat, first 70 %"), cut(k, len(ts), "DATA_EMPS.mat, last 30 %")
 VISCOUS = float(sys.argv[4]) if len(sys.argv) > 4 else 200.0  # the nominal viscous coefficient [N s/m]
 nominal = LinearAxis(

@@ -42,7 +42,7 @@ def main():
 
     jax.config.update("jax_enable_x64", True)
     import dynax
-    from dynax._cli._main import main as cli_main
+    from dynax.internal import cli_main
 
     print(f"judging dynax from {pathlib.Path(dynax.__file__).parent}", file=sys.stderr)
     sys.path.insert(1, str(REPO))  # tests.reference, for the fixtures

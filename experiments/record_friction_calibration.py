@@ -49,7 +49,12 @@ def record(fc2: float, seed: int) -> Trajectory:
         (dynax.CoulombFriction(0, FC1), dynax.CoulombFriction(1, fc2), dynax.RotorInertia(1, IR2)),
     )
     clean = dynax.synthetic.synthetic_trajectory(
-        truth, duration=6.0, dt=0.002, seed=seed, amplitude=0.5, band_hz=(0.2, 2.5), noise=(1e-4, 1e-4, 0.15, 0.15)
+        truth,
+        duration=6.0,
+        dt=0.002,
+        seed=seed,
+        excitation=dynax.synthetic.Multisine(amplitude=0.5, band_hz=(0.2, 2.5)),
+        noise=(1e-4, 1e-4, 0.15, 0.15),
     )
     torque_noise = 0.02 * np.random.default_rng(seed).normal(size=clean.us.shape)
     return Trajectory(clean.ts, clean.xs, clean.us + jnp.asarray(torque_noise), clean.state_names, clean.input_names)
@@ -57,7 +62,7 @@ def record(fc2: float, seed: int) -> Trajectory:
 
 def p_value(a, y, counts, names, parts: int) -> float:
     """`record_friction`'s p-value for the elbow with `parts` parts per record."""
-    return float(record_friction(a, y, counts, 2, names, ("fc2",), parts=parts).p_value[0])
+    return float(record_friction(a, y, counts, names, ("fc2",), parts=parts).p_value[0])
 
 
 def main(argv=None):

@@ -122,7 +122,7 @@ def test_output_error_fit_reports_each_iteration(capsys):
     us = jnp.sin(3.0 * ts)[:, None]
     xs = dynax.simulate(axis(0.8, 0.3), jnp.zeros(2), ts, us).xs
     trajectory = dynax.Trajectory(ts, xs, us, ("q", "dq"), ("F",), "linear_axis", "")
-    result = fit_simulation_error(axis(1.5, 1.0), trajectory, segment_s=10.0, progress=True)
+    result = fit_simulation_error(axis(1.5, 1.0), trajectory, dynax.SimulationFit(segment_s=10.0), progress=True)
     err = capsys.readouterr().err
     assert "output-error fit" in err and "loss=" in err
     assert abs(float(result.value[0]) - 0.8) < 1e-6  # the bar does not disturb the fit

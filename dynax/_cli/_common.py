@@ -298,7 +298,7 @@ def load_records(args, system: str, *, min_samples: int, lenient: tuple = ()) ->
     """
     import warnings
 
-    from .._data import check_records, load_trajectory, parse_exclude
+    from .._data import check_records, load_trajectory, parse_exclude, Sampling
     from .._data._sanity import Severity
 
     mapping, scale, offset = data_options(args)
@@ -314,7 +314,13 @@ def load_records(args, system: str, *, min_samples: int, lenient: tuple = ()) ->
             warnings.simplefilter("ignore")
             return [
                 load_trajectory(
-                    p, system, mapping=mapping, scale=scale, offset=offset, min_samples=min_samples, check=False
+                    p,
+                    system,
+                    mapping=mapping,
+                    scale=scale,
+                    offset=offset,
+                    sampling=Sampling(min_samples=min_samples),
+                    check=False,
                 )
                 for p in paths
             ]

@@ -114,12 +114,18 @@ def load_helicopter_data(path, mapping=None, scale=None, offset=None, *, min_sam
     import jax.numpy as jnp
     import numpy as np
 
-    from .._data import check_records, exclude_stretches, load_trajectory, parse_exclude, resample
+    from .._data import check_records, exclude_stretches, load_trajectory, parse_exclude, resample, Sampling
 
     with warnings.catch_warnings():  # checked below, on what --exclude leaves
         warnings.simplefilter("ignore")
         data = load_trajectory(
-            path, "helicopter", mapping=mapping, scale=scale, offset=offset, min_samples=min_samples, check=False
+            path,
+            "helicopter",
+            mapping=mapping,
+            scale=scale,
+            offset=offset,
+            sampling=Sampling(min_samples=min_samples),
+            check=False,
         )
     spans = [(t0, t1) for _, t0, t1 in parse_exclude(exclude)]
     if spans:

@@ -179,7 +179,7 @@ def run(args: argparse.Namespace) -> int:
     jax.config.update("jax_enable_x64", True)  # identification in float64; the library leaves config alone
 
     from .._data import DataWarning
-    from .._identify import identify
+    from .._identify import identify, Validate
     from .._identify._least_squares import describe_poorly_determined
     from .._identify._result import StageKind
 
@@ -212,8 +212,7 @@ def run(args: argparse.Namespace) -> int:
             friction=friction,
             consistency=args.consistency,
             refine=refine,
-            validation=validation,
-            holdout="auto" if args.holdout is None else args.holdout,
+            validation=Validate(validation, holdout="auto" if args.holdout is None else args.holdout),
         )
     report = result.to_json()
     if args.system == "helicopter":

@@ -92,8 +92,8 @@ def nominal_from_data(system, train) -> tuple[object, str]:
     """Without `--nominal`: the default model if the training runs agree with its size, else the rigid
     body identified from them.
 
-    Least squares (`identify(system, train, Dynamic(), refine=False, holdout=0)`: filter settings from
-    the data, consistency constrained) estimates the base parameters. If every size parameter
+    Least squares (`identify(system, train, Dynamic(), refine=False, validation=Validate(holdout=0))`:
+    filter settings from the data, consistency constrained) estimates the base parameters. If every size parameter
     (non-friction base parameters that consistency requires positive: theta1, theta2, theta4, theta5;
     the axis's mass; `size_parameter_names`) lies within `OTHER_MACHINE_FACTOR` of the default's (the
     defaults describe one machine: Drake's acrobot, the EMPS axis), the default model is kept.
@@ -104,13 +104,13 @@ def nominal_from_data(system, train) -> tuple[object, str]:
     import jax.numpy as jnp
 
     from .._diagnose._forward import OTHER_MACHINE_FACTOR
-    from .._identify import Dynamic, identify, poorly_determined, PoorlyDeterminedWarning
+    from .._identify import Dynamic, identify, poorly_determined, PoorlyDeterminedWarning, Validate
     from .._model._system import friction_parameter_names, size_parameter_names
 
     try:
         with warnings.catch_warnings():  # said in the note, at its own threshold (`LOOSE`)
             warnings.simplefilter("ignore", PoorlyDeterminedWarning)
-            identified = identify(system, train, Dynamic(), refine=False, holdout=0)
+            identified = identify(system, train, Dynamic(), refine=False, validation=Validate(holdout=0))
     except DataError as e:  # too little excitation to tell: keep the default, and say so
         return (
             system,

@@ -22,6 +22,9 @@ from ._io import (
     parse_assignments as parse_assignments,
 )
 from ._io import (
+    Sampling as Sampling,
+)
+from ._io import (
     save_trajectory as save_trajectory,
 )
 from ._rest import Rest as Rest

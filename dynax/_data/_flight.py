@@ -32,7 +32,7 @@ import numpy as np
 
 from .._errors import DataError
 from ._derivatives import resample
-from ._io import load_trajectory
+from ._io import load_trajectory, Sampling
 from ._trajectory import Trajectory
 
 #: The kinds of glitch `inspect_flight` flags (its `Glitch.kind`).
@@ -232,7 +232,7 @@ def load_flight(
     **Returns:** `(trajectory, notes)`.
     """
     path = str(path)
-    data = load_trajectory(path, "quadrotor", mapping=mapping, scale=scale, offset=offset, min_samples=3)
+    data = load_trajectory(path, "quadrotor", mapping=mapping, scale=scale, offset=offset, sampling=Sampling(3))
     quats = np.asarray(data.xs[:, 3:7], dtype=float)
     norms = np.linalg.norm(quats, axis=1)
     bad = np.flatnonzero(np.abs(norms - 1) > QUATERNION_TOLERANCE)

@@ -9,6 +9,7 @@ import pathlib
 import re
 import zipfile
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -149,6 +150,24 @@ def _check_names(argument, given, allowed, system):
         )
 
 
+class Sampling(eqx.Module):
+    """What sampling `load_trajectory` requires of a record.
+
+    **Arguments:**
+
+    - `min_samples`: refuse files with fewer samples (the method's need; default 2).
+    - `max_gap`: refuse a time step longer than this many median intervals (default 10): a gap
+      in the record, which every method would otherwise bridge by holding or interpolating.
+      `None` accepts gaps; then cut the record with `split_at_gaps`.
+    - `min_step`: refuse a time step shorter than this fraction of the median interval (default
+      0.01): a near-duplicate stamp, across which derivatives are noise. `None` accepts it.
+    """
+
+    min_samples: int = 2
+    max_gap: float | None = MAX_GAP
+    min_step: float | None = MIN_STEP
+
+
 def load_trajectory(
     path: str | os.PathLike,
     system: str,
@@ -156,9 +175,7 @@ def load_trajectory(
     mapping: Mapping[str, str] | None = None,
     scale: Mapping[str, float] | None = None,
     offset: Mapping[str, float] | None = None,
-    min_samples: int = 2,
-    max_gap: float | None = MAX_GAP,
-    min_step: float | None = MIN_STEP,
+    sampling: Sampling = Sampling(),
     check: bool = True,
 ) -> Trajectory:
     """Load a measured data file as a `Trajectory`, checking it against the data contract.
@@ -179,12 +196,10 @@ def load_trajectory(
       `{"force": 35.15}` when the file holds volts.
     - `offset`: contract name -> value added to that column after `scale`, e.g. `{"q1": math.pi}`
       for a rig whose shoulder reads 0 upright (the contract's angles are 0 hanging down).
-    - `min_samples`: refuse files with fewer samples (the method's need).
-    - `max_gap`: refuse a time step longer than this many median intervals (default 10): a gap
-      in the record, which every method would otherwise bridge by holding or interpolating.
-      `None` accepts gaps; then cut the record with `split_at_gaps`.
-    - `min_step`: refuse a time step shorter than this fraction of the median interval (default
-      0.01): a near-duplicate stamp, across which derivatives are noise. `None` accepts it.
+    - `sampling`: what the time stamps must meet, a `Sampling`: at least `min_samples` samples
+      (default 2), no step longer than `max_gap` median intervals (default 10: a gap in the record;
+      `None` accepts gaps, then cut the record with `split_at_gaps`) or shorter than `min_step` of
+      one (default 0.01: a near-duplicate stamp; `None` accepts it).
     - `check`: read the record for located faults (`dynax.check_records`: glitches, stuck sensors,
       wrapped angles, stretches where a velocity is not its position's derivative, constant or zero
       columns, time in milliseconds) and warn a `DataWarning` naming each, with its rows and times
@@ -290,10 +305,12 @@ def load_trajectory(
     for name, arr in values.items():
         if arr.shape[0] != n:
             raise DataError(f"has {arr.shape[0]} samples but time has {n}", path=path, column=mapping.get(name, name))
-    if n < max(min_samples, 2):
-        raise DataError(f"has {n} samples; at least {max(min_samples, 2)} are needed", path=path)
+    need = max(sampling.min_samples, 2)
+    if n < need:
+        raise DataError(f"has {n} samples; at least {need} are needed", path=path)
     ts = values[TIME]
-    check_time_stamps(ts, path=path, column=mapping.get(TIME, TIME), max_gap=max_gap, min_step=min_step)
+    column = mapping.get(TIME, TIME)
+    check_time_stamps(ts, path=path, column=column, max_gap=sampling.max_gap, min_step=sampling.min_step)
     from ._derivatives import backward_difference, central_difference
 
     difference = {"backward": backward_difference, "central": central_difference}

@@ -78,7 +78,7 @@ def check_time_stamps(
 def split_at_gaps(trajectory: Trajectory, max_gap: float = MAX_GAP) -> list[Trajectory]:
     """Split a record into runs at every step longer than `max_gap` median intervals.
 
-    For records with pauses in them: load with `load_trajectory(..., max_gap=None)`, then fit or
+    For records with pauses in them: load with `load_trajectory(..., sampling=Sampling(max_gap=None))`, then fit or
     diagnose each run (or only the long ones) instead of bridging the pause.
 
     **Arguments:** `trajectory`; `max_gap` in median intervals (default 10).

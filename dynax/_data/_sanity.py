@@ -175,7 +175,9 @@ VELOCITY_MOTION = 0.05  # ... and this fraction of the record's rms slope is a b
 MIN_BAD_BLOCKS = 3  # a stretch holds at least this many bad blocks (150 ms), at least half of its blocks
 
 
-def _row_time(ts, i, j, source, kind, severity, column, message, fix=None):
+def _row_time(ts, span, source, kind, severity, column, message, fix=None):
+    """A `Finding` over the samples `span = (i, j)`: rows counted from 1, and their times."""
+    i, j = span
     return Finding(kind, severity, source, column, (int(i) + 1, int(j) + 1), (float(ts[i]), float(ts[j])), message, fix)
 
 
@@ -262,8 +264,7 @@ def _glitches(tr, ts, source, columns, positions=None):
             out.append(
                 _row_time(
                     ts,
-                    i,
-                    j,
+                    (i, j),
                     source,
                     Check.GLITCH,
                     Severity.REFUSE,
@@ -307,8 +308,7 @@ def _stuck(tr, ts, source, names, xs, paired_estimated):
             out.append(
                 _row_time(
                     ts,
-                    i,
-                    j,
+                    (i, j),
                     source,
                     Check.STUCK,
                     Severity.REFUSE,
@@ -338,8 +338,7 @@ def _wrapped(tr, ts, source, angles):
             out.append(
                 _row_time(
                     ts,
-                    k,
-                    k + 1,
+                    (k, k + 1),
                     source,
                     Check.WRAPPED,
                     Severity.REFUSE,
@@ -399,8 +398,7 @@ def _velocity_stretches(tr, ts, source, values, pairs):
             out.append(
                 _row_time(
                     ts,
-                    i,
-                    j,
+                    (i, j),
                     source,
                     Check.VELOCITY,
                     Severity.REFUSE,

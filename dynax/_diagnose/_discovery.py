@@ -39,7 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._data._derivatives import savitzky_golay
-from .._identify._simulation_fit import fit_simulation_error
+from .._identify._simulation_fit import fit_simulation_error, SimulationFit
 from .._model._extensions import Discovered, Extended
 from ._fit import nominal_parameter_names
 from ._library import evaluate_features, feature_library, is_angle, named_equivalent, physical_readings, search_period
@@ -337,11 +337,9 @@ def _fit_with(model, terms, records, refit, fit_window_s, state_scale):
     result = fit_simulation_error(
         extended,
         records,
+        SimulationFit(segment_s=fit_window_s, fit_initial_states=False, max_steps=60),
         filter_spec=spec,
-        segment_s=fit_window_s,
-        fit_initial_states=False,
         state_scale=state_scale,
-        max_steps=60,
     )
     fitted, _ = eqx.partition(extended, spec)
     _, unravel = jax.flatten_util.ravel_pytree(fitted)

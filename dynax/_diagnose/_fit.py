@@ -31,7 +31,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
-from .._fit import clustered_covariance, fit_least_squares, levenberg_marquardt, Parameters
+from .._fit import clustered_covariance, fit_least_squares, LeastSquaresOptions, levenberg_marquardt, Parameters
 from .._model._extensions import Extended
 from .._sim_error import window_rollouts
 from .._simulate import FixedGrid
@@ -243,7 +243,7 @@ def fit_configuration(
         solver=solver,
         scale=s,
         max_steps=max_steps,
-        jac="dense",
+        options=LeastSquaresOptions(jac="dense"),
     )
     return solution.value, 2.0 * solution.loss, window_clustered_std_errors(solution, windows, s), solution.steps
 

@@ -12,6 +12,7 @@ from ._covariance import (
 )
 from ._engine import fit_least_squares as fit_least_squares
 from ._engine import fit_minimise as fit_minimise
+from ._engine import LeastSquaresOptions as LeastSquaresOptions
 from ._levenberg_marquardt import levenberg_marquardt as levenberg_marquardt
 from ._levenberg_marquardt import StrictTrustRegion as StrictTrustRegion
 from ._parameters import Parameters as Parameters

@@ -109,6 +109,30 @@ def undetermined_unknowns(gram: Float[Array, "n n"], tol: float = 1e-6) -> tuple
     return jnp.any(null[None, :] & (loading > tol), axis=1), n - jnp.sum(null)
 
 
+class LeastSquaresOptions(eqx.Module):
+    """How `fit_least_squares` differentiates and reads the residuals, and what it reports.
+
+    **Arguments:**
+
+    - `jac`: `"fwd"` (forward mode: few parameters, many residuals, the usual case), `"dense"`
+      (forward mode with the whole Jacobian formed by one `jacfwd` per step and applied as a matrix:
+      the same numbers, far less compilation through long rollouts) or `"bwd"`.
+    - `nonfinite`: value substituted for non-finite residuals (a diverging rollout), so the solver
+      backs away from them instead of stopping on NaN (default 1e3); `None` keeps them.
+    - `covariance`: compute the Gauss-Newton covariance at the solution (one more Jacobian; default
+      `True`).
+    - `progress_token`: a `dynax.ProgressBar`'s token (`dynax.internal.bar_token(bar)`);
+      each iteration then reports its step and loss to that bar through the solver's `verbose` hook
+      (`jax.debug.callback`), as diffrax's progress meter does. Solvers without a `verbose` field
+      report nothing.
+    """
+
+    jac: str = eqx.field(static=True, default="fwd")
+    nonfinite: float | None = 1e3
+    covariance: bool = eqx.field(static=True, default=True)
+    progress_token: Array | None = None
+
+
 def fit_least_squares(
     residuals: Callable[[PyTree, Any], Float[Array, " m"]],
     model: PyTree,
@@ -118,10 +142,7 @@ def fit_least_squares(
     solver: optx.AbstractLeastSquaresSolver = DEFAULT_LEAST_SQUARES,
     scale: Float[Array, " n"] | None = None,
     max_steps: int = 256,
-    jac: str = "fwd",
-    nonfinite: float | None = 1e3,
-    covariance: bool = True,
-    progress_token: Array | None = None,
+    options: LeastSquaresOptions = LeastSquaresOptions(),
 ) -> Solution:
     r"""Fit the free elements of `model` by minimising $\tfrac12 \lVert r(\text{model}) \rVert^2$.
 
@@ -139,19 +160,18 @@ def fit_least_squares(
     - `max_steps`: iteration budget; running out gives `result = max_steps_reached`, never an error.
       A solution whose loss is not finite or above the starting loss gets `result =
       nonlinear_divergence` (its value is still the solver's last point, for inspection).
-    - `jac`: `"fwd"` (forward mode: few parameters, many residuals, the usual case), `"dense"`
-      (forward mode with the whole Jacobian formed by one `jacfwd` per step and applied as a matrix:
-      the same numbers, far less compilation through long rollouts) or `"bwd"`.
-    - `nonfinite`: value substituted for non-finite residuals (a diverging rollout), so the solver
-      backs away from them instead of stopping on NaN; `None` keeps them.
-    - `covariance`: compute the Gauss-Newton covariance at the solution (one more Jacobian).
-    - `progress_token`: a `dynax.ProgressBar`'s token (`dynax._progress.bar_token(bar)`); each
-      iteration then reports its step and loss to that bar through the solver's `verbose` hook
-      (`jax.debug.callback`), as diffrax's progress meter does. Solvers without a `verbose` field
-      report nothing.
+    - `options`: a `LeastSquaresOptions`: the Jacobian's mode (`jac`), the value that replaces a
+      non-finite residual (`nonfinite`), whether to compute the covariance (`covariance`) and a
+      progress bar's token (`progress_token`).
 
     **Returns:** a `Solution`.
     """
+    jac, nonfinite, covariance, progress_token = (
+        options.jac,
+        options.nonfinite,
+        options.covariance,
+        options.progress_token,
+    )
     parameters = _parameters(model, parameters)
     p0 = parameters.vector(model)
     s = _scale(p0, scale)

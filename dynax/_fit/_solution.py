@@ -120,7 +120,7 @@ class Solution(eqx.Module):
     - `n_residuals`: residual count (0 for a scalar loss).
     - `jacobian`: the Jacobian of the residuals in the solver's scaled unknowns $z$ ($p = p_0 + s
       \odot z$) at the solution, where a least-squares solver of the Gauss-Newton kind holds it
-      (`fit_least_squares(..., covariance=True)`); `None` otherwise.
+      (`LeastSquaresOptions(covariance=True)`); `None` otherwise.
     - `residuals`, `initial_residuals`: the residual vector $r$ at the solution and at the start
       (least squares; non-finite entries already replaced as `nonfinite` says); `None` for a scalar loss.
     - `statistics`: what the solve adds (an `AbstractStatistics`): for linear least squares a

@@ -111,3 +111,6 @@ from ._validation import (
 from ._validation import (
     split_for_validation as split_for_validation,
 )
+from ._validation import (
+    Validate as Validate,
+)

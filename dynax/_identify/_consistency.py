@@ -55,7 +55,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .._fit import fit_least_squares, levenberg_marquardt
+from .._fit import fit_least_squares, LeastSquaresOptions, levenberg_marquardt
 from .._model._extensions import Extended
 from .._model._system import violated_bound
 
@@ -267,8 +267,7 @@ def _constrained_solve(parametrisation, reduced, projected, col_scale, phi0, max
         solver=solver,
         scale=jnp.ones_like(phi0),
         max_steps=max_steps,
-        nonfinite=None,
-        covariance=False,
+        options=LeastSquaresOptions(nonfinite=None, covariance=False),
     )
     return solution.value, solution.result == optx.RESULTS.successful
 

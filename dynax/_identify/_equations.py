@@ -96,6 +96,7 @@ class Dynamic(eqx.Module):
       began, `dynax._identify._angle_zeros`) and keeps whichever of the two leaves the smaller
       equation error (as many unknowns). `"angles"` fits the
       angle zeros whatever the error (such arms only); `True` the force offsets.
+    - `rcond`: relative singular-value threshold of the numerical rank (default 1e-7).
 
     ??? cite
 
@@ -113,6 +114,7 @@ class Dynamic(eqx.Module):
     inputs: Literal["held", "sampled"] = "held"
     weighting: Literal["none", "joint"] = "none"
     offsets: bool | Literal["auto", "angles"] = "auto"
+    rcond: float = 1e-7
 
 
 class Power(eqx.Module):
@@ -124,7 +126,8 @@ class Power(eqx.Module):
     difference (parallel filtering: the model stays exact, the noise is cut).
 
     **Arguments:** `lowpass_hz` (or `None`), `lowpass_order` (default 4), `trim` (samples dropped
-    at each end, default 1), `decimate` (parallel decimation as in `Dynamic`, default 1).
+    at each end, default 1), `decimate` (parallel decimation as in `Dynamic`, default 1), `rcond`
+    (the numerical rank's relative singular-value threshold, default 1e-7).
 
     ??? cite
 
@@ -135,6 +138,7 @@ class Power(eqx.Module):
     lowpass_order: int = 4
     trim: int = 1
     decimate: int = 1
+    rcond: float = 1e-7
 
 
 class Energy(eqx.Module):
@@ -150,6 +154,7 @@ class Energy(eqx.Module):
     - `window`: samples per window (default 10).
     - `stride`: samples between window starts (default `window`: consecutive windows).
     - `lowpass_hz`, `lowpass_order`: optional zero-phase filter of the states first.
+    - `rcond`: relative singular-value threshold of the numerical rank (default 1e-7).
 
     ??? cite
 
@@ -162,6 +167,7 @@ class Energy(eqx.Module):
     stride: int | None = None
     lowpass_hz: float | None = None
     lowpass_order: int = 4
+    rcond: float = 1e-7
 
     def __check_init__(self):
         if self.window < 1:
@@ -413,11 +419,14 @@ def _energy_equations(system, ts, xs, us, friction, n_windows, window, stride):
     """One energy-balance equation per window `[i stride, i stride + window]`, `i < n_windows`."""
     columns = column_kinds(system, friction)
     w, f, tau, dq = _model_columns(system, xs, us, friction, columns)
-    return _energy_balance(ts, w, f, tau, dq, n_windows, window, stride, columns)
+    return _energy_balance(ts, w, f, tau, dq, (n_windows, window, stride), columns)
 
 
 @eqx.filter_jit
-def _energy_balance(ts, w, f, tau, dq, n_windows, window, stride, columns):
+def _energy_balance(ts, w, f, tau, dq, windows: tuple[int, int, int], columns):
+    """The energy balance over `windows = (n_windows, window, stride)`, static integers: one window per
+    `[i stride, i stride + window]` intervals, `i < n_windows`."""
+    n_windows, window, stride = windows
     work, dissipated = _integrate_intervals(ts, dq, tau, f)
     # Each window's integrals as the sum of its `window` intervals, not as differences of running
     # sums: XLA's CPU cumsum of 100,000 rows is slow, and differences of long running sums lose

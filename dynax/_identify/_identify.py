@@ -57,7 +57,7 @@ from ._regressors import Friction, parameter_names, parameter_vector, split_term
 from ._result import Identification, NoValidationWarning, RecordsDisagreeWarning, Stage, StageKind
 from ._simulation_fit import fit_simulation_error, SimulationFit
 from ._static_friction import describe, joint_levels, record_rests, rests_under_load, StaticFriction, with_stiction
-from ._validation import DEFAULT_HORIZONS_S, held_out_error, split_for_validation
+from ._validation import held_out_error, split_for_validation, Validate
 
 _SYSTEM_NAMES = {Acrobot: "acrobot", DoublePendulum: "double_pendulum", LinearAxis: "linear_axis"}
 
@@ -215,15 +215,8 @@ def _identify_by_simulation(system, trajectories, method: SimulationFit, frictio
     solution = fit_simulation_error(
         system,
         trajectories,
+        method,
         filter_spec=parameters,
-        segment_s=method.segment_s,
-        fit_initial_states=method.fit_initial_states,
-        continuity_weight=method.continuity_weight,
-        rtol=method.rtol,
-        atol=method.atol,
-        max_steps=method.max_steps,
-        simulation=method.simulation,
-        stagger=method.stagger,
     )
     if names is not None and tuple(names) != parameters.names:  # the contract's order, not the tree's
         order = np.asarray([parameters.names.index(name) for name in names])
@@ -248,7 +241,7 @@ def _identify_by_simulation(system, trajectories, method: SimulationFit, frictio
     )
 
 
-def _validation_split(system, trajectories, validation, weights, holdout, horizons_s):
+def _validation_split(system, trajectories, settings: Validate, weights):
     """`(fitted, held, source, horizons)`: the records to fit, the held-out records, what they are
     and the horizons to validate at.
 
@@ -257,6 +250,7 @@ def _validation_split(system, trajectories, validation, weights, holdout, horizo
     Where no record (tail) is longer than the longest horizon, the horizons the longest one holds
     (a 1.5 s record's last 0.3 s: 0.1 and 0.25 s); where it holds none, a warning says that
     nothing is validated and why (`source`, with `held` empty: `identify` warns it once the fit is done)."""
+    validation, holdout, horizons_s = settings.records, settings.holdout, settings.horizons_s
     if validation is not None:
         held = _as_list(validation)
         _check_data(system, held)
@@ -317,13 +311,13 @@ def _validated_simulation_fit(system, fitted, method, friction, consistency, val
     return dataclasses.replace(result, stages=(stage,))
 
 
-def _refined_stage(ls, start, fitted, method, friction, rcond, consistency, refinement, validate) -> Stage:
+def _refined_stage(ls, start, fitted, method, friction, consistency, refinement, validate) -> Stage:
     """The output-error refinement from the least-squares stage `ls` (its model `start`, with `Stiction`
     where the records rest under load), with its equation error on the least-squares rows, consistency
     and validation."""
     refined = refine_by_simulation(start, ls.names, less_offsets(ls.system, fitted, ls), refinement)
     estimate = jnp.asarray(refined.value)
-    _, a, y, _, _, _, _, _, _, _ = stacked_equations(refined.model, fitted, method, friction, None, rcond)
+    _, a, y, _, _, _, _, _, _, _ = stacked_equations(refined.model, fitted, method, friction, None, method.rcond)
     if ls.groups is not None:  # the same equations as the least-squares stage's: offsets free
         a, y, _, _ = without_offsets(a, y, None, ls.groups)
     error = relative_equation_error(jnp.asarray(a), jnp.asarray(y), estimate)
@@ -348,12 +342,9 @@ def identify(
     *,
     friction: Friction = "viscous",
     weights: Float[Array, " rows"] | None = None,
-    rcond: float = 1e-7,
     consistency: Literal["constrain", "check", "off"] = "constrain",
     refine="auto",
-    validation: Trajectory | Sequence[Trajectory] | None = None,
-    holdout: float | Literal["auto"] = "auto",
-    horizons_s: Sequence[float] = DEFAULT_HORIZONS_S,
+    validation: Validate | Trajectory | Sequence[Trajectory] | None = None,
 ) -> Identification:
     r"""Fit the parameters of `system` to measured trajectories, and validate the result.
 
@@ -397,8 +388,8 @@ def identify(
     - `friction`: `"viscous"` (default) or `"coulomb"` (adds `fc1`, `fc2`, or the linear axis's
       `coulomb`).
     - `weights`: optional row weights for the least-squares problem, one per stacked equation
-      (for `Dynamic`, all of joint 1's equations come first, then joint 2's).
-    - `rcond`: relative singular-value threshold of the numerical rank.
+      (for `Dynamic`, all of joint 1's equations come first, then joint 2's). The numerical rank's
+      threshold is the method's `rcond`.
     - `consistency`: `"constrain"` (default: fit over the consistent set when the plain estimate
       is inconsistent), `"check"` (return the plain estimate; warn with
       `InconsistentEstimateWarning` naming each violated condition) or `"off"`. With either of
@@ -407,10 +398,10 @@ def identify(
       in an `InconsistentEstimateWarning` with the fix.
     - `refine`: `"auto"` (default: refine two-link arms on noisy data), `True`, `False`, or the
       `SimulationFit` settings to refine with.
-    - `validation`: held-out records; when given, all of `data` is fitted.
-    - `holdout`: fraction of each record held out when no `validation` is given (`"auto"`: 0.2,
-      or 0 when row `weights` are given); 0 fits everything and reports no validation.
-    - `horizons_s`: validation horizons [s] (default 0.1, 0.25, 0.5).
+    - `validation`: a `Validate`: held-out records (when given, all of `data` is fitted), or else
+      the fraction of each record held out at its end (default: the last 20 %, none with row
+      `weights`; `Validate(holdout=0)` fits everything and reports no validation), and the horizons
+      (default 0.1, 0.25, 0.5 s). Records alone are `Validate(records)`.
 
     **Returns:** an `Identification`.
 
@@ -425,11 +416,14 @@ def identify(
     from .._data._sanity import check_records
 
     # located faults (a glitch, a stuck sensor, a stretch where a velocity is not its angle's derivative): said
-    check_records(trajectories, _as_list(validation) if validation is not None else ()).warn(stacklevel=2)
+    if not isinstance(validation, Validate):  # records alone, or none
+        validation = Validate(validation)
+    check_records(trajectories, _as_list(validation.records) if validation.records is not None else ()).warn(
+        stacklevel=2
+    )
     if consistency not in _CONSISTENCY:
         raise UsageError(f"identify: `consistency` must be one of {_CONSISTENCY}, got {consistency!r}")
-    horizons_s = tuple(float(h) for h in horizons_s)
-    fitted, held, source, horizons_s = _validation_split(system, trajectories, validation, weights, holdout, horizons_s)
+    fitted, held, source, horizons_s = _validation_split(system, trajectories, validation, weights)
 
     def validate(model):
         return held_out_error(model, held, horizons_s, source=source) if held else None
@@ -439,9 +433,10 @@ def identify(
         _warn_unvalidated(held, source)
         return result
 
+    rcond = method.rcond
     zeros = _record_angle_zeros(system, fitted, method, friction, rcond)
     if zeros is not None and zeros.chosen:  # both stages fit the records less their angle zeros
-        if validation is None and held:  # a held-out tail is read from its record's zero: less it too
+        if validation.records is None and held:  # a held-out tail is read from its record's zero: less it too
             owners = [i for i, (whole, head) in enumerate(zip(trajectories, fitted)) if len(head) < len(whole)]
             held = zeros.corrected(held, system, owners)
             source += "; each tail less its record's angle zeros, fitted on its head"
@@ -490,7 +485,7 @@ def identify(
     system_out = ls_model
     refinement = _refinement_method(refine, ls.system, method, fitted)
     if refinement is not None:
-        refined = _refined_stage(ls, ls_model, fitted, method, friction, rcond, consistency, refinement, validate)
+        refined = _refined_stage(ls, ls_model, fitted, method, friction, consistency, refinement, validate)
         statistics = refined.solution.statistics
         refined_poorly = _size_errors(
             system, refined.names, refined.solution.value, refined.solution.std_errors, statistics.record_std_errors

@@ -2,6 +2,7 @@
 weights), checked for physical consistency and constrained to it, with standard errors robust to
 rows correlated in time."""
 
+import functools
 import warnings
 
 import equinox as eqx
@@ -128,7 +129,8 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
     check = check_consistency(fitted, names, estimate, qs, warn=consistency == "check")
     if check.violated and consistency != "off":
         error = float(relative_equation_error(a, y, estimate))
-        _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, error, trajectories)
+        solve = functools.partial(least_squares, a, names=names, weights=weights, rcond=rcond)
+        _warn_if_inputs_reversed(system, names, (a, y), solve, qs, error, trajectories[0].input_names)
         _warn_if_degrees(given, trajectories, error)
         plain_std = _serially_robust(fit, a, y, weights, estimate, record_rows)[0].std_errors
         _warn_if_zero_upright(fitted, names, estimate, plain_std, qs)
@@ -150,9 +152,7 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
     labels = record_labels(trajectories)
     offsets = record_offsets(raw_a, raw_y, counts, joint_names, labels) if counts else None
     per_record_friction = (
-        record_friction(raw_a, raw_y, counts, len(joint_names), names, coulomb_columns(system, friction), labels)
-        if counts
-        else None
+        record_friction(raw_a, raw_y, counts, names, coulomb_columns(system, friction), labels) if counts else None
     )
     fitted_offsets, driven = None, ()
     if groups is not None:
@@ -283,10 +283,13 @@ def _best_subset(n: int, refit, error: float):
     return best
 
 
-def _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, error, trajectories) -> None:
+def _warn_if_inputs_reversed(system, names, equations, solve, qs, error, input_names) -> None:
     """Where the estimate is inconsistent, try each set of the recorded inputs with its sign flipped:
     if one gives a consistent estimate and at most `REVERSED_GAIN` of the equation error, warn that
     those inputs look reversed, with the `scale` that fixes them.
+
+    `equations` is the stage's `(a, y)`, `solve(y)` its weighted least-squares fit of `a` to other
+    right-hand sides, `error` its relative equation error and `input_names` the records' inputs.
 
     A torque counted the other way than the model's joint angle (a motor mounted the other way, a
     current's sign) is the commonest mix-up of real data, and least squares meets it with an estimate
@@ -294,6 +297,7 @@ def _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, error, tra
     equation error), which names no cause. Flipping an input negates the equation rows of the joint it drives, so each
     candidate is one more least-squares solve. Systems whose inputs share a joint are not probed.
     """
+    a, y = equations
     base = split_terms(system)[0]
     b = np.asarray(base.input_matrix())
     driven = [np.flatnonzero(np.abs(b[:, k]) > 0) for k in range(b.shape[1])]
@@ -305,7 +309,7 @@ def _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, error, tra
     ):
         return
     rows = a.shape[0] // n_joints  # rows stacked joint by joint
-    inputs = tuple(trajectories[0].input_names)
+    inputs = tuple(input_names)
 
     def refit(flipped):
         sign = np.ones(a.shape[0])
@@ -314,7 +318,7 @@ def _warn_if_inputs_reversed(system, names, a, y, weights, rcond, qs, error, tra
                 sign[j * rows : (j + 1) * rows] = -1.0
         y_flipped = y * jnp.asarray(sign, y.dtype)
         try:
-            candidate = least_squares(a, y_flipped, names=names, weights=weights, rcond=rcond).value
+            candidate = solve(y_flipped).value
         except IdentifiabilityError:
             return None
         consistent = not check_consistency(

@@ -120,16 +120,17 @@ class RecordFriction:
 
 
 def record_friction(
-    a, y, counts, n_joints, names, columns, records=None, alpha: float = ALPHA, parts: int = PARTS
+    a, y, counts, names, columns, records=None, alpha: float = ALPHA, parts: int = PARTS
 ) -> RecordFriction | None:
     """Per-record, per-part values of the Coulomb friction `columns` of stacked inverse-dynamics
     equations, and their analysis of variance.
 
     **Arguments:** `a`, `y` the equations stacked joint by joint (all records' rows of the first
     joint, then of the second, ...) as `identify`'s `Dynamic()` stage builds them, before any offset
-    is removed; `counts` each record's rows per joint; `n_joints`; `names` the columns of `a`;
-    `columns` those to test (their names); `records` labels (default `record 0`, ...); `parts` per
-    record (fewer where the shortest record has under 8 rows per part, at least 2).
+    is removed; `counts` each record's rows per joint (`a` holds as many such blocks as joints);
+    `names` the columns of `a`; `columns` those to test (their names); `records` labels (default
+    `record 0`, ...); `parts` per record (fewer where the shortest record has under 8 rows per part,
+    at least 2).
 
     **Returns:** a `RecordFriction`, or `None` with fewer than two records, a record too short to
     halve, or no column to test.
@@ -137,8 +138,9 @@ def record_friction(
     a, y = np.asarray(a, float), np.asarray(y, float)
     names, columns = list(names), tuple(c for c in columns if c in names)
     n_records, total = len(counts), sum(counts)
-    if n_records < 2 or min(counts) < 4 or not columns or a.shape[0] != n_joints * total:
+    if n_records < 2 or min(counts) < 4 or not columns or a.shape[0] % total:
         return None
+    n_joints = a.shape[0] // total  # the rows are stacked joint by joint, `total` per joint
     k = int(max(2, min(parts, min(counts) // 8)))
     whole = [record_rows(counts, r, 0) for r in range(n_records)]
     pieces = [p for rows in whole for p in np.array_split(rows, k)]
@@ -211,5 +213,5 @@ def compare_records(system, records, friction="coulomb") -> tuple[RecordOffsets 
     labels = record_labels(records)
     return (
         record_offsets(a, y, counts, base.joint_names, labels),
-        record_friction(a, y, counts, len(base.joint_names), names, coulomb_columns(base, friction), labels),
+        record_friction(a, y, counts, names, coulomb_columns(base, friction), labels),
     )

@@ -371,17 +371,10 @@ def refine_by_simulation(
         return fit_simulation_error(
             start,
             fitted,
+            method,
             filter_spec=filter_spec,
             state_scale=jnp.asarray(noise),
             record_weights=weights,
-            segment_s=method.segment_s,
-            fit_initial_states=method.fit_initial_states,
-            continuity_weight=method.continuity_weight,
-            rtol=method.rtol,
-            atol=method.atol,
-            max_steps=method.max_steps,
-            simulation=method.simulation,
-            stagger=method.stagger,
         )
 
     result = last = fit(wrapped, weights)

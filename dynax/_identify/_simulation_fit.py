@@ -31,6 +31,7 @@ from .._fit import (
     clustered_covariance,
     fit_least_squares,
     jackknife_covariance,
+    LeastSquaresOptions,
     levenberg_marquardt,
     Parameters,
     Solution,
@@ -224,20 +225,13 @@ def _residuals(unknowns: _Unknowns, data: _Segments, *, simulation: FixedGrid, f
 
 
 @eqx.filter_jit
-def _solve(
-    unknowns,
-    parameters: Parameters,
-    data: _Segments,
-    scale,
-    solver,
-    max_steps: int,
-    simulation,
-    fit_initial_states: bool,
-    token=None,
-):
+def _solve(unknowns, parameters: Parameters, data: _Segments, scale, solver, method: "SimulationFit", token=None):
     """The engine's Levenberg-Marquardt, and the Jacobian (scaled unknowns) at the solution; one
-    compiled program per problem shape."""
-    residuals = functools.partial(_residuals, simulation=simulation, fit_initial_states=fit_initial_states)
+    compiled program per problem shape. Of `method`, the rollouts' `simulation`, `fit_initial_states`
+    and `max_steps` are read (static); the tolerances are `solver`'s."""
+    residuals = functools.partial(
+        _residuals, simulation=method.simulation, fit_initial_states=method.fit_initial_states
+    )
     solution = fit_least_squares(
         residuals,
         unknowns,
@@ -245,10 +239,8 @@ def _solve(
         data,
         solver=solver,
         scale=scale,
-        max_steps=max_steps,
-        nonfinite=None,
-        progress_token=token,
-        jac="dense",
+        max_steps=method.max_steps,
+        options=LeastSquaresOptions(jac="dense", nonfinite=None, progress_token=token),
     )
     # The engine's residuals (at the solution and at the start) and Jacobian (scaled unknowns), as it
     # formed them: no further rollout of the data to compile or run.
@@ -258,19 +250,12 @@ def _solve(
 def fit_simulation_error(
     system: AbstractSystem,
     trajectories: Trajectory | Sequence[Trajectory],
+    method: SimulationFit = SimulationFit(),
     *,
     filter_spec: PyTree[bool] | Parameters | None = None,
-    segment_s: float = 1.0,
-    fit_initial_states: bool = True,
-    continuity_weight: float = 10.0,
     state_scale: Float[Array, " n_states"] | None = None,
-    rtol: float = 1e-8,
-    atol: float = 1e-8,
-    max_steps: int = 100,
-    simulation: FixedGrid = FixedGrid(),
     record_weights: Float[Array, " n_records"] | None = None,
     progress: bool | None = None,
-    stagger: int = 1,
 ) -> Solution:
     r"""Fit the elements of `system` selected by `filter_spec` by minimising the simulation error.
 
@@ -289,21 +274,25 @@ def fit_simulation_error(
 
     - `system`: the starting model.
     - `trajectories`: a `Trajectory` or a list of them.
+    - `method`: the fit's settings, a `SimulationFit` (default `SimulationFit()`): `segment_s`,
+      `fit_initial_states`, `continuity_weight` $w$, `stagger`, the Levenberg-Marquardt `rtol`,
+      `atol` and `max_steps`, and the rollouts' `simulation` (`FixedGrid`), each described below.
     - `filter_spec`: what to fit: a filter over `system` as `dynax.Parameters.of` takes (a PyTree
       of bools or callables like `system`, with boolean arrays for single elements), or a
       `Parameters` of `system`; default the system's `parameter_filter()` (every inexact array
       leaf unless the system says otherwise), named by its `parameter_labels()` or tree paths.
-    - `segment_s`: segment length [s] for multiple shooting (a value longer than the record means
+    - `method.segment_s`: segment length [s] for multiple shooting (a value longer than the record means
       single shooting).
-    - `fit_initial_states`: also fit each segment's initial state (default `True`).
-    - `continuity_weight`: $w$, weight of the continuity defects (only with fitted initial states).
+    - `method.fit_initial_states`: also fit each segment's initial state (default `True`).
+    - `method.continuity_weight`: $w$, weight of the continuity defects (only with fitted initial
+      states).
+    - `method.rtol`, `method.atol`, `method.max_steps`: Levenberg-Marquardt settings.
+    - `method.simulation`: `FixedGrid` settings of the rollouts.
     - `state_scale`: $\sigma$, shape `(n_states,)`.
-    - `rtol`, `atol`, `max_steps`: Levenberg-Marquardt settings.
-    - `simulation`: `FixedGrid` settings of the rollouts.
     - `progress`: a bar per Levenberg-Marquardt iteration with the loss on stderr (`None`: when
       stderr is a terminal, see `dynax.internal.progress_mode`; `False` never).
     - `record_weights`: optional weight per trajectory multiplying its state residuals (default 1).
-    - `stagger`: $k$, how many cuts of the records into segments are fitted together, each starting
+    - `method.stagger`: $k$, how many cuts of the records into segments are fitted together, each starting
       $1/k$ of a segment after the one before (default 1: one cut). A model that is not exact fits
       a record differently depending on where its segments start (how far each sample is from its
       segment's initial state); $k$ cuts average that out. Each cut's residuals are weighted by
@@ -329,6 +318,7 @@ def fit_simulation_error(
         for the User*, 2nd ed., 1999, ch. 7 (output-error models); J. J. More, "The
         Levenberg-Marquardt algorithm: implementation and theory", 1978.
     """
+    segment_s, fit_initial_states, stagger = method.segment_s, method.fit_initial_states, method.stagger
     if isinstance(trajectories, Trajectory):
         trajectories = [trajectories]
     trajectories = list(trajectories)
@@ -364,7 +354,7 @@ def fit_simulation_error(
         us,
         sigma,
         jnp.asarray(follows[1:], dtype),  # segment s+1 continues segment s
-        jnp.asarray(continuity_weight, dtype),
+        jnp.asarray(method.continuity_weight, dtype),
         jnp.asarray(weight[owner] / np.sqrt(stagger), dtype),
     )
     # The unknowns: the system's chosen elements, then (when fitted) every segment's initial state,
@@ -377,11 +367,14 @@ def fit_simulation_error(
     )
     p_scale = jnp.where(jnp.abs(p0) > 0, jnp.abs(p0), 1.0).astype(dtype)
     scale = jnp.concatenate([p_scale, jnp.tile(sigma, xs.shape[0])]) if fit_initial_states else p_scale
-    solver = levenberg_marquardt(rtol=rtol, atol=atol, jacobian="accepted", damping="nielsen")
-    with ProgressBar(max_steps, "output-error fit", progress=progress, reduce="last") as bar:
-        solution, r, r0, jac = _solve(
-            unknowns, parameters, data, scale, solver, max_steps, simulation, fit_initial_states, bar_token(bar)
-        )
+    solver = levenberg_marquardt(rtol=method.rtol, atol=method.atol, jacobian="accepted", damping="nielsen")
+    # Only what shapes the compiled program is static (the continuity weight travels in `data`, the
+    # tolerances in `solver`): one compilation per problem shape, whatever the segment length.
+    program = SimulationFit(
+        fit_initial_states=fit_initial_states, max_steps=method.max_steps, simulation=method.simulation
+    )
+    with ProgressBar(method.max_steps, "output-error fit", progress=progress, reduce="last") as bar:
+        solution, r, r0, jac = _solve(unknowns, parameters, data, scale, solver, program, bar_token(bar))
         jax.block_until_ready(r)
     n_params = chosen.size
     n_state_residuals = xs.size

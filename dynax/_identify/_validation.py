@@ -14,6 +14,10 @@ window's error (`SimulationError.concentrated`, `note()`): half of its squared e
 that hold it, and where they start.
 """
 
+from collections.abc import Sequence
+from typing import Literal
+
+import equinox as eqx
 import numpy as np
 
 from .._data._derivatives import resample
@@ -22,6 +26,27 @@ from .._errors import UsageError
 from .._sim_error import simulation_error, SimulationError
 
 DEFAULT_HORIZONS_S = (0.1, 0.25, 0.5)
+
+
+class Validate(eqx.Module):
+    """How `identify` validates what it fits: on which records, or which part of each, at what horizons.
+
+    **Arguments:**
+
+    - `records`: held-out records (a `Trajectory` or a sequence of them); when given, all of the
+      data is fitted and these are simulated.
+    - `holdout`: without `records`, the fraction of each record held out at its end (`"auto"`:
+      0.2, or 0 when row `weights` are given); 0 fits everything and reports no validation.
+    - `horizons_s`: the horizons [s] of the open-loop position RMSE (default 0.1, 0.25, 0.5).
+
+    `identify(..., validation=records)` is `Validate(records)`.
+    """
+
+    records: Trajectory | Sequence[Trajectory] | None = None
+    holdout: float | Literal["auto"] = "auto"
+    horizons_s: tuple[float, ...] = eqx.field(default=DEFAULT_HORIZONS_S, converter=lambda h: tuple(map(float, h)))
+
+
 # RMSE over the median window's root-mean-square error above which a record's RMSE is said to be
 # carried by a few windows. Windows whose errors differ only by chance give about 1.2 (for a
 # Gaussian error in two positions, sqrt(2 / 1.386)) to 1.7 (the true model on a noisy synthetic rig

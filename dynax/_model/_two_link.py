@@ -9,6 +9,7 @@ $$\theta_1 = I_1 + m_2 l_1^2,\ \theta_2 = I_2,\ \theta_3 = m_2 l_1 l_{c2},\ \the
 q1 is measured from hanging straight down, q2 relative to link 1.
 """
 
+from collections.abc import Mapping
 from typing import ClassVar
 
 import equinox as eqx
@@ -74,15 +75,19 @@ def _check_physical(**values):
     return traced
 
 
-def base_parameters_from_physical(
-    *, m1, m2, l1, lc1, lc2, Ic1=None, Ic2=None, b1, b2, g=9.81, I1=None, I2=None
-) -> dict[str, float]:
+PHYSICAL_REQUIRED = ("m1", "m2", "l1", "lc1", "lc2", "b1", "b2")
+PHYSICAL_OPTIONAL = ("Ic1", "Ic2", "I1", "I2", "g")
+
+
+def base_parameters_from_physical(physical: Mapping[str, float]) -> dict[str, float]:
     r"""Map physical parameters to the base parameters theta1..theta7.
 
-    **Arguments:** masses `m1`, `m2` [kg]; length of link 1 `l1` [m]; centre-of-mass distances
-    `lc1`, `lc2` [m]; inertias `Ic1`, `Ic2` about the centres of mass [kg m^2], or instead `I1`,
-    `I2` about the pivots (as the DFKI lab's parameter files give them); viscous friction `b1`,
-    `b2` [N m s/rad]; gravity `g` [m/s^2].
+    **Arguments:** `physical`, a mapping (a dict, or a lab's parameter file as read) of: masses
+    `m1`, `m2` [kg]; length of link 1 `l1` [m]; centre-of-mass distances `lc1`, `lc2` [m]; inertias
+    `Ic1`, `Ic2` about the centres of mass [kg m^2], or instead `I1`, `I2` about the pivots (as the
+    DFKI lab's parameter files give them); viscous friction `b1`, `b2` [N m s/rad]; gravity `g`
+    [m/s^2] (default 9.81). For example Drake's acrobot: `base_parameters_from_physical(dict(m1=1.0,
+    m2=1.0, l1=1.0, lc1=0.5, lc2=1.0, Ic1=0.083, Ic2=0.33, b1=0.1, b2=0.1))`.
 
     **Returns:** a dict `theta1..theta7`.
 
@@ -93,9 +98,20 @@ def base_parameters_from_physical(
 
     **Raises:** `ValueError` naming the parameter for a physically impossible value: a mass, `l1`,
     `g`, `I1` or `I2` that is not positive, a centre-of-mass distance, `Ic1`, `Ic2` or viscous
-    friction that is negative, or any non-finite value. Traced values (inside `jit`, `vmap`, `grad`)
-    are checked by `eqx.error_if` at run time instead.
+    friction that is negative, or any non-finite value; and for a name missing or not among these.
+    Traced values (inside `jit`, `vmap`, `grad`) are checked by `eqx.error_if` at run time instead.
     """
+    unknown = sorted(set(physical) - set(PHYSICAL_REQUIRED + PHYSICAL_OPTIONAL))
+    missing = [name for name in PHYSICAL_REQUIRED if name not in physical]
+    if unknown or missing:
+        found = f"unknown parameter(s) {unknown}" if unknown else f"missing parameter(s) {missing}"
+        raise ValueError(
+            f"base_parameters_from_physical: {found}; expected {list(PHYSICAL_REQUIRED)} "
+            f"and some of {list(PHYSICAL_OPTIONAL)}"
+        )
+    values = {"Ic1": None, "Ic2": None, "I1": None, "I2": None, "g": 9.81, **physical}
+    m1, m2, l1, lc1, lc2, b1, b2, g = (values[name] for name in ("m1", "m2", "l1", "lc1", "lc2", "b1", "b2", "g"))
+    Ic1, Ic2, I1, I2 = (values[name] for name in ("Ic1", "Ic2", "I1", "I2"))
     traced = _check_physical(m1=m1, m2=m2, l1=l1, lc1=lc1, lc2=lc2, Ic1=Ic1, Ic2=Ic2, b1=b1, b2=b2, g=g, I1=I1, I2=I2)
     if (Ic1 is None) == (I1 is None) or (Ic2 is None) == (I2 is None):
         raise ValueError(
@@ -118,7 +134,7 @@ def base_parameters_from_physical(
     return base
 
 
-DRAKE_BASE_PARAMETERS = base_parameters_from_physical(**DRAKE_DEFAULTS)
+DRAKE_BASE_PARAMETERS = base_parameters_from_physical(DRAKE_DEFAULTS)
 
 
 def _field(name):
@@ -187,7 +203,7 @@ class AbstractTwoLink(AbstractManipulator):
         for pivot, centre in (("I1", "Ic1"), ("I2", "Ic2")):
             if pivot in physical:
                 defaults.pop(centre)
-        base = base_parameters_from_physical(**{**defaults, **physical})
+        base = base_parameters_from_physical({**defaults, **physical})
         return cls(**{k: jnp.asarray(v) for k, v in base.items()})
 
     @classmethod

@@ -13,7 +13,11 @@ from ._acrobot_demo import (
     hidden_effect as hidden_effect,
 )
 from ._excitation import filtered_noise as filtered_noise
+from ._excitation import Multisine as Multisine
 from ._excitation import multisine as multisine
+from ._flight import (
+    FlightPlan as FlightPlan,
+)
 from ._flight import (
     fly as fly,
 )

@@ -14,6 +14,7 @@ from .._model._extensions import (
     RotorInertia,
 )
 from .._model._two_link import Acrobot
+from ._excitation import Multisine
 from ._trajectory import synthetic_trajectory
 
 # The rig the data comes from differs a little from the datasheet model the user starts with.
@@ -53,7 +54,12 @@ def demo_data(
     """
     truth = Extended(Acrobot.from_physical(**DEMO_TRUTH_PHYSICAL), (term,))
     run = synthetic_trajectory(
-        truth, duration=train_s + validation_s, dt=0.01, amplitude=2.0, seed=seed, system_name="acrobot"
+        truth,
+        duration=train_s + validation_s,
+        dt=0.01,
+        excitation=Multisine(amplitude=2.0),
+        seed=seed,
+        system_name="acrobot",
     )
     k = int(round(train_s / 0.01)) + 1
     train = Trajectory(run.ts[:k], run.xs[:k], run.us[:k], run.state_names, run.input_names, "acrobot", "train.csv")

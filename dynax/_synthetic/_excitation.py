@@ -2,6 +2,7 @@
 
 from collections.abc import Sequence
 
+import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 import numpy as np
@@ -40,6 +41,19 @@ def multisine(
         u = np.sin(2 * np.pi * freqs[None, :] * ts[:, None] + phases[None, :]).sum(axis=1)
         us.append(amplitude * u / np.sqrt(np.mean(u**2)))
     return jnp.asarray(np.stack(us, axis=1))
+
+
+class Multisine(eqx.Module):
+    """The settings of a random-phase multisine excitation (see `multisine`): RMS `amplitude` per
+    input (default 1.5), `band_hz` (default 0.1 to 2 Hz) and `n_tones` (default 12)."""
+
+    amplitude: float = 1.5
+    band_hz: tuple[float, float] = (0.1, 2.0)
+    n_tones: int = 12
+
+    def __call__(self, ts: Float[Array, " time"], n_inputs: int, seed: int) -> Float[Array, "time n_inputs"]:
+        """The excitation at `ts` for `n_inputs` inputs, drawn with `seed`."""
+        return multisine(ts, n_inputs, seed=seed, amplitude=self.amplitude, band_hz=self.band_hz, n_tones=self.n_tones)
 
 
 def filtered_noise(rng: np.random.Generator, n: int, dt: float, sigma: Sequence[float], cutoff_hz: float) -> np.ndarray:

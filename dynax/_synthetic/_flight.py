@@ -220,15 +220,23 @@ def generate_helicopter_flight(
     )
 
 
+class FlightPlan(eqx.Module):
+    """What `helicopter_flight` flies: the heading sweep's `yaw_amplitude` [rad] (default 2.5), the
+    standard deviation of the inputs' `excitation` (default 0.08) and the waypoints' `spread` [m]
+    (default 1.0)."""
+
+    yaw_amplitude: float = 2.5
+    excitation: float = 0.08
+    spread: float = 1.0
+
+
 def helicopter_flight(
     truth: AbstractSystem,
     *,
     duration: float,
     dt: float = 0.02,
     seed: int = 0,
-    yaw_amplitude: float = 2.5,
-    excitation: float = 0.08,
-    spread: float = 1.0,
+    plan: FlightPlan = FlightPlan(),
     controller: FlightController | None = None,
     noise: bool = True,
     source: str = "",
@@ -247,7 +255,7 @@ def helicopter_flight(
 
     - `truth`: a `Helicopter` or an `Extended` helicopter (e.g. with a hidden `Wind`).
     - `duration` [s], `dt` [s], `seed`.
-    - `yaw_amplitude` [rad], `excitation`, `spread` [m].
+    - `plan`: a `FlightPlan`: `yaw_amplitude` [rad], `excitation`, `spread` [m].
     - `controller`: default `FlightController()`; a larger `max_position_error` flies faster
       between waypoints.
     - `noise`: add measurement noise (5 mm, 2 mrad, 0.02 m/s, 0.01 rad/s, as
@@ -256,6 +264,7 @@ def helicopter_flight(
 
     **Returns:** a `Trajectory` with the contract's helicopter columns.
     """
+    yaw_amplitude, excitation, spread = plan.yaw_amplitude, plan.excitation, plan.spread
     rng = np.random.default_rng(seed)
     n = int(round(duration / dt))
     dtype = jnp.result_type(float)

@@ -8,7 +8,7 @@ from .._data._trajectory import Trajectory
 from .._model._extensions import Extended
 from .._model._system import AbstractSystem
 from .._simulate import FixedGrid, simulate
-from ._excitation import multisine
+from ._excitation import Multisine
 
 
 def synthetic_trajectory(
@@ -17,12 +17,10 @@ def synthetic_trajectory(
     duration: float,
     dt: float = 0.01,
     seed: int = 0,
-    amplitude: float = 1.5,
-    band_hz: tuple[float, float] = (0.1, 2.0),
+    excitation: Multisine = Multisine(),
     noise: tuple[float, ...] | None = None,
     x0: Float[Array, " n_states"] | None = None,
     system_name: str = "",
-    source: str = "",
 ) -> Trajectory:
     """Simulate `truth` under a random multisine and record it as measured data with noise.
 
@@ -34,11 +32,12 @@ def synthetic_trajectory(
 
     - `truth`: the system that generates the data (e.g. `Extended(Acrobot(), (CoulombFriction(1, 0.2),))`).
     - `duration` [s], `dt` sample interval [s], `seed` for excitation and noise.
-    - `amplitude`: RMS of each input; `band_hz`: excitation band.
+    - `excitation`: the input, a `Multisine` (default: RMS 1.5 per input over 0.1 to 2 Hz).
     - `noise`: standard deviation per measured state (default 1e-3 for positions, 1e-2 for
       velocities).
     - `x0`: initial measured state (default at rest hanging down).
-    - `system_name`, `source`: recorded in the `Trajectory`.
+    - `system_name`: recorded in the `Trajectory` (its `source` is `""`; `dataclasses.replace` sets
+      one).
 
     **Returns:** a `Trajectory` of the measured states and the recorded inputs.
     """
@@ -46,7 +45,7 @@ def synthetic_trajectory(
     names = tuple(nominal.state_names)
     n = len(names)
     ts = jnp.arange(int(round(duration / dt)) + 1) * dt
-    us = multisine(ts, truth.n_inputs, seed=seed, amplitude=amplitude, band_hz=band_hz)
+    us = excitation(ts, truth.n_inputs, seed)
     if x0 is None:
         x0 = jnp.zeros(n)
     x0 = jnp.asarray(x0, ts.dtype)
@@ -56,4 +55,4 @@ def synthetic_trajectory(
         noise = tuple(1e-2 if s.startswith("d") else 1e-3 for s in names)
     noise = jnp.asarray(noise, xs.dtype)
     xs = xs + noise[None, :] * jax.random.normal(jax.random.PRNGKey(seed + 7919), xs.shape, xs.dtype)
-    return Trajectory(ts, xs, us, names, tuple(nominal.input_names), system_name, source)
+    return Trajectory(ts, xs, us, names, tuple(nominal.input_names), system_name)

@@ -132,7 +132,7 @@ def test_zero_controller_never_swings_up():
 
 
 def test_saved_policy_swings_up_from_rest_and_balances():
-    controller = dynax.load_controller(POLICY).to_benchmark()
+    controller = dynax.control.load_controller(POLICY).to_benchmark()
     rollout = control.simulate_leaderboard(controller)
     perf = control.performance_costs(rollout, control.LeaderboardPlant.nominal())
     assert bool(perf.success) and float(perf.score) > 0.3
@@ -141,10 +141,10 @@ def test_saved_policy_swings_up_from_rest_and_balances():
 
 
 def test_load_save_round_trip_gives_identical_actions(tmp_path):
-    robot = dynax.load_controller(POLICY)
+    robot = dynax.control.load_controller(POLICY)
     controller = robot.to_benchmark()
     path = controller.save(tmp_path / "again.npz")
-    again = dynax.load_controller(path)
+    again = dynax.control.load_controller(path)
     rollout = control.simulate_leaderboard(controller)
     xs = np.asarray(rollout.xs)
     # the numpy controller reproduces the JAX one on the recorded states, call by call, twice
@@ -159,11 +159,11 @@ def test_load_save_round_trip_gives_identical_actions(tmp_path):
 
 def test_load_controller_refuses_bad_files(tmp_path):
     with pytest.raises(dynax._errors.UsageError):
-        dynax.load_controller(tmp_path / "missing.npz")
+        dynax.control.load_controller(tmp_path / "missing.npz")
     bad = tmp_path / "bad.npz"
     np.savez(bad, header=np.asarray('{"format": "other"}'))
     with pytest.raises(dynax._errors.DataError, match="format"):
-        dynax.load_controller(bad)
+        dynax.control.load_controller(bad)
 
 
 @pytest.mark.parametrize(

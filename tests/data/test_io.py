@@ -65,7 +65,7 @@ def test_time_must_strictly_increase(tmp_path, times):
 def test_too_few_samples(tmp_path):
     path = write(tmp_path, HEADER + "\n" + good_rows(3))
     with pytest.raises(dynax.DataError, match="has 3 samples; at least 10"):
-        dynax.load_trajectory(path, "acrobot", min_samples=10)
+        dynax.load_trajectory(path, "acrobot", sampling=dynax.Sampling(min_samples=10))
 
 
 def test_ragged_row(tmp_path):
@@ -230,7 +230,7 @@ def test_gap_is_refused_with_its_place_and_records_with_pauses_split_into_runs(t
         dynax.DataError, match=r"column 't', row 31: a gap in the record: time jumps from 0\.29\d* to 60\.0 s"
     ):
         dynax.load_trajectory(path, "acrobot")
-    record = dynax.load_trajectory(path, "acrobot", max_gap=None)
+    record = dynax.load_trajectory(path, "acrobot", sampling=dynax.Sampling(max_gap=None))
     runs = dynax.internal.split_at_gaps(record)
     assert [len(r) for r in runs] == [30, 20]
     np.testing.assert_array_equal(runs[1].ts, times[30:])
@@ -246,4 +246,4 @@ def test_near_duplicate_time_stamp_is_refused(tmp_path):
     path = write(tmp_path, HEADER + "\n" + "\n".join(f"{t!r},0,0,0,0,1" for t in times.tolist()))
     with pytest.raises(dynax.DataError, match=r"row 11: near-duplicate time stamps"):
         dynax.load_trajectory(path, "acrobot")
-    assert len(dynax.load_trajectory(path, "acrobot", min_step=None)) == 21
+    assert len(dynax.load_trajectory(path, "acrobot", sampling=dynax.Sampling(min_step=None))) == 21

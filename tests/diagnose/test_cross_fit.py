@@ -1,13 +1,15 @@
 """Cross-fitting in `diagnose` (leave-one-run-out over the training runs): a left-out run's windows weigh
 nothing in the fit, the screening pools the left-out runs, and the held-out test pools their windows."""
 
+import dataclasses
+
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from dynax import Acrobot, CoulombFriction, diagnose, Extended, InputOffset
 from dynax.internal import Family, fit_configurations, make_windows
-from dynax.synthetic import DEMO_TRUTH_PHYSICAL, synthetic_trajectory
+from dynax.synthetic import DEMO_TRUTH_PHYSICAL, Multisine, synthetic_trajectory
 
 from .test_engine_rollouts_validation import _axis_record, NOMINAL
 
@@ -69,9 +71,10 @@ def test_a_short_held_out_run_with_cross_fitted_training_runs_names_a_small_fric
     truth = Extended(Acrobot.from_physical(**DEMO_TRUTH_PHYSICAL), (CoulombFriction(1, 0.03),))
 
     def run(seed, seconds, name):
-        return synthetic_trajectory(
-            truth, duration=seconds, dt=0.01, amplitude=2.0, seed=seed, system_name="acrobot", source=name
+        record = synthetic_trajectory(
+            truth, duration=seconds, dt=0.01, excitation=Multisine(amplitude=2.0), seed=seed, system_name="acrobot"
         )
+        return dataclasses.replace(record, source=name)
 
     train = [run(s, 8.0, f"run{s}.csv") for s in (11, 12, 13)]
     validation = [run(14, 2.5, "held.csv")]

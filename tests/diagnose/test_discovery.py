@@ -29,7 +29,7 @@ from dynax import (
     Trajectory,
 )
 from dynax.internal import cli_main, propose
-from dynax.synthetic import demo_data, DEMO_TRUTH_PHYSICAL, synthetic_trajectory
+from dynax.synthetic import demo_data, DEMO_TRUTH_PHYSICAL, Multisine, synthetic_trajectory
 
 pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more
 
@@ -59,7 +59,13 @@ AXIS = LinearAxis(coulomb=jnp.asarray(20.0), offset=jnp.asarray(-3.0))  # the EM
 def _axis_records(amplitude, *, period=0.05, seed=5):
     truth = Extended(AXIS, (_PositionPeriodicForce(0, jnp.asarray(amplitude), period, 0.7),))
     run = synthetic_trajectory(
-        truth, duration=30.0, dt=0.01, seed=seed, amplitude=60.0, noise=(1e-5, 1e-3), system_name="linear_axis"
+        truth,
+        duration=30.0,
+        dt=0.01,
+        seed=seed,
+        excitation=Multisine(amplitude=60.0),
+        noise=(1e-5, 1e-3),
+        system_name="linear_axis",
     )
     k = 2001
     cut = lambda a, b, name: Trajectory(

@@ -25,7 +25,7 @@ from dynax import (
     Trajectory,
     ViscousFriction,
 )
-from dynax.synthetic import demo_data, synthetic_trajectory
+from dynax.synthetic import demo_data, Multisine, synthetic_trajectory
 
 pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more
 
@@ -34,7 +34,9 @@ def _diagnose_hidden(term, seed, mode=Refit()):
     if isinstance(mode, Known):
         # The user's parameters are right; only the hidden effect is missing.
         truth = Extended(Acrobot(), (term,))
-        run = synthetic_trajectory(truth, duration=30.0, seed=seed, amplitude=2.0, system_name="acrobot")
+        run = synthetic_trajectory(
+            truth, duration=30.0, seed=seed, excitation=Multisine(amplitude=2.0), system_name="acrobot"
+        )
         k = 2001
         train = Trajectory(run.ts[:k], run.xs[:k], run.us[:k], run.state_names, run.input_names, "acrobot")
         validation = Trajectory(run.ts[k:], run.xs[k:], run.us[k:], run.state_names, run.input_names, "acrobot")
@@ -127,7 +129,9 @@ def test_a_nominal_friction_off_by_a_common_factor_is_named_as_friction_not_as_a
     truth = Extended(
         Acrobot.from_physical(m1=1.05, m2=0.97, lc2=1.02, Ic2=0.32, b1=0.2, b2=0.2), (CoulombFriction(1, 0.0),)
     )
-    run = synthetic_trajectory(truth, duration=30.0, dt=0.01, amplitude=2.0, seed=3, system_name="acrobot")
+    run = synthetic_trajectory(
+        truth, duration=30.0, dt=0.01, excitation=Multisine(amplitude=2.0), seed=3, system_name="acrobot"
+    )
     k = 2001
     train = Trajectory(run.ts[:k], run.xs[:k], run.us[:k], run.state_names, run.input_names, "acrobot")
     validation = Trajectory(run.ts[k:], run.xs[k:], run.us[k:], run.state_names, run.input_names, "acrobot")

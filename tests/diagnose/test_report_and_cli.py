@@ -245,13 +245,19 @@ def test_cli_without_nominal_on_another_axis_diagnoses_against_its_identified_ri
     import jax.numpy as jnp
 
     from dynax import LinearAxis, Trajectory
-    from dynax.synthetic import synthetic_trajectory
+    from dynax.synthetic import Multisine, synthetic_trajectory
 
     truth = LinearAxis(
         mass=jnp.asarray(5.0), viscous=jnp.asarray(10.0), coulomb=jnp.asarray(2.0), offset=jnp.asarray(0.3)
     )
     run = synthetic_trajectory(
-        truth, duration=30.0, dt=0.01, seed=5, amplitude=10.0, noise=(1e-5, 1e-3), system_name="linear_axis"
+        truth,
+        duration=30.0,
+        dt=0.01,
+        seed=5,
+        excitation=Multisine(amplitude=10.0),
+        noise=(1e-5, 1e-3),
+        system_name="linear_axis",
     )
     for name, (a, b) in (("train", (0, 2001)), ("held", (2001, len(run.ts)))):
         save_trajectory(
@@ -290,13 +296,15 @@ def test_cli_without_nominal_on_a_small_acrobot_names_every_friction_with_its_si
     its look-alike quadratic drag above it and left it off the shortlist, and quadratic drag was named with
     look-alikes 'told apart' although none had been refitted. The leader's look-alikes are now refitted too."""
     from dynax import CoulombFriction, Extended, Trajectory
-    from dynax.synthetic import synthetic_trajectory
+    from dynax.synthetic import Multisine, synthetic_trajectory
 
     truth = Extended(
         Acrobot.from_physical(m1=0.5, m2=0.45, l1=0.3, lc1=0.15, lc2=0.16, Ic1=0.004, Ic2=0.0035, b1=0.01, b2=0.01),
         (CoulombFriction(1, 0.03),),
     )
-    run = synthetic_trajectory(truth, duration=30.0, dt=0.01, amplitude=0.15, seed=4, system_name="acrobot")
+    run = synthetic_trajectory(
+        truth, duration=30.0, dt=0.01, excitation=Multisine(amplitude=0.15), seed=4, system_name="acrobot"
+    )
     for name, (a, b) in (("train", (0, 2001)), ("held", (2001, len(run.ts)))):
         save_trajectory(
             Trajectory(run.ts[a:b], run.xs[a:b], run.us[a:b], run.state_names, run.input_names, "acrobot"),

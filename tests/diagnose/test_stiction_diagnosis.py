@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._diagnose._candidates import candidate_scales, default_candidates, stiction_not_proposed
-from dynax._diagnose._problem import Problem
+from dynax import default_candidates
+from dynax.internal import candidate_scales, Problem, stiction_not_proposed
 from tests.hidden_cases import CASES, DAMPED_THETA, diagnose_case, records, stick_slip_runs
 
 NOMINAL = dynax.DoublePendulum.from_base_parameters({f"theta{i + 1}": v for i, v in enumerate(DAMPED_THETA)})

@@ -8,13 +8,15 @@ import numpy as np
 
 from dynax import Acrobot, CoulombFriction, Extended
 from dynax.internal import with_velocities_from_positions
-from dynax.synthetic import synthetic_trajectory
+from dynax.synthetic import Multisine, synthetic_trajectory
 
 TRUTH = Extended(Acrobot(), (CoulombFriction(1, 0.2),))
 
 
 def _run(noise):
-    return synthetic_trajectory(TRUTH, duration=20.0, dt=0.005, seed=3, amplitude=2.0, noise=noise)
+    return synthetic_trajectory(
+        TRUTH, duration=20.0, dt=0.005, seed=3, excitation=Multisine(amplitude=2.0), noise=noise
+    )
 
 
 def _rms(a):

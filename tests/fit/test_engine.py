@@ -100,7 +100,7 @@ def test_dense_jacobian_gives_the_forward_mode_fit_and_differentiates_in_the_dat
     model = {"a": jnp.asarray(1.0), "b": jnp.asarray(0.3)}
     res = lambda m, y: m["a"] * jnp.exp(-m["b"] * ts) - y  # noqa: E731
     fwd = fit_least_squares(res, model, None, y)
-    dense = fit_least_squares(res, model, None, y, jac="dense")
+    dense = fit_least_squares(res, model, None, y, options=dynax.LeastSquaresOptions(jac="dense"))
     np.testing.assert_allclose(dense.value, fwd.value, rtol=1e-10)
     np.testing.assert_allclose(dense.std_errors, fwd.std_errors, rtol=1e-8)
     # the Jacobian it returns is the residuals' Jacobian in the scaled unknowns (scale |p0| = (1, 0.3))
@@ -205,12 +205,16 @@ def test_a_solver_that_ends_worse_than_it_started_is_reported_as_diverged():
     residual = lambda m, _: jnp.atleast_1d(jnp.arctan(m.p))  # noqa: E731
     start = _Scalar(jnp.asarray(1.5))
     gauss_newton = fit_least_squares(
-        residual, start, solver=optx.GaussNewton(rtol=1e-8, atol=1e-8), max_steps=4, covariance=False
+        residual,
+        start,
+        solver=optx.GaussNewton(rtol=1e-8, atol=1e-8),
+        max_steps=4,
+        options=dynax.LeastSquaresOptions(covariance=False),
     )
     assert float(gauss_newton.loss) > float(gauss_newton.initial_loss)
     assert gauss_newton.result == optx.RESULTS.nonlinear_divergence and not gauss_newton.succeeded
     assert abs(float(gauss_newton.value[0])) > 1.5  # the solver's last point is kept, for inspection
-    damped = fit_least_squares(residual, start, covariance=False)
+    damped = fit_least_squares(residual, start, options=dynax.LeastSquaresOptions(covariance=False))
     assert damped.succeeded and abs(float(damped.value[0])) < 1e-6
 
 

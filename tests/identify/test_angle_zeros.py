@@ -44,7 +44,14 @@ def _theta(result):
 @pytest.mark.heavy
 def test_encoder_zeros_that_differ_between_records_are_found_measured_and_fitted_out(records):
     shifted = [with_zero(r, z) for r, z in zip(records, ZEROS)]
-    result = identify(dynax.DoublePendulum(), shifted, Dynamic(), friction="coulomb", refine=False, holdout=0)
+    result = identify(
+        dynax.DoublePendulum(),
+        shifted,
+        Dynamic(),
+        friction="coulomb",
+        refine=False,
+        validation=dynax.Validate(holdout=0),
+    )
     zeros = result.angle_zeros
     assert zeros is not None and zeros.chosen and zeros.converged, zeros.reason
     # each record's zeros within 12 mrad, where they are 20 to 60 (the elbow's are the less certain: 1 to
@@ -58,10 +65,22 @@ def test_encoder_zeros_that_differ_between_records_are_found_measured_and_fitted
     assert zeros.relative_error < 0.95 * zeros.force_relative_error, (zeros.relative_error, zeros.force_relative_error)
     # the base parameters are those of the same records read from their true zero (so are, within 0.5 %,
     # those of force offsets in the zeros' place: near the hanging rest a zero acts as a constant torque)
-    truth = identify(dynax.DoublePendulum(), records, Dynamic(), friction="coulomb", refine=False, holdout=0)
+    truth = identify(
+        dynax.DoublePendulum(),
+        records,
+        Dynamic(),
+        friction="coulomb",
+        refine=False,
+        validation=dynax.Validate(holdout=0),
+    )
     np.testing.assert_allclose(_theta(result), _theta(truth), rtol=0.01)
     forced = identify(
-        dynax.DoublePendulum(), shifted, Dynamic(offsets=True), friction="coulomb", refine=False, holdout=0
+        dynax.DoublePendulum(),
+        shifted,
+        Dynamic(offsets=True),
+        friction="coulomb",
+        refine=False,
+        validation=dynax.Validate(holdout=0),
     )
     assert forced.angle_zeros is None and forced.to_json()["stages"]["least_squares"]["offsets"] is not None
     report = result.to_json()
@@ -104,12 +123,18 @@ def test_records_read_from_their_true_zero_keep_force_offsets(records):
 def test_angle_zeros_apply_to_arms_whose_every_joint_is_a_driven_angle(records):
     # the acrobot's shoulder has no motor: its equation has no input, and is left as it is
     one = Trajectory(records[0].ts, records[0].xs, records[0].us[:, 1:], records[0].state_names, ("tau2",))
-    result = identify(dynax.Acrobot(), [one], Dynamic(), refine=False, holdout=0)
+    result = identify(dynax.Acrobot(), [one], Dynamic(), refine=False, validation=dynax.Validate(holdout=0))
     assert result.angle_zeros is None
     with pytest.raises(dynax.UsageError, match="offsets='angles'"):
-        identify(dynax.Acrobot(), [one], Dynamic(offsets="angles"), refine=False, holdout=0)
+        identify(dynax.Acrobot(), [one], Dynamic(offsets="angles"), refine=False, validation=dynax.Validate(holdout=0))
     with pytest.raises(dynax.UsageError, match="'angles'"):
-        identify(dynax.DoublePendulum(), records, Dynamic(offsets="encoder"), refine=False, holdout=0)
+        identify(
+            dynax.DoublePendulum(),
+            records,
+            Dynamic(offsets="encoder"),
+            refine=False,
+            validation=dynax.Validate(holdout=0),
+        )
 
 
 @pytest.mark.heavy

@@ -141,7 +141,9 @@ def test_emps_reproduces_the_published_reference_model(datasets):
     path = datasets / "emps" / "DATA_EMPS.mat"
     data = load_trajectory(path, "linear_axis", mapping={"q": "qm", "force": "vir"}, scale={"force": 35.15065188})
     recipe = Dynamic(lowpass_hz=100.0, lowpass_order=4, trim=50, decimate=10, inputs="sampled")
-    result = identify(dynax.LinearAxis(), data, recipe, friction="coulomb", holdout=0)  # the whole record, as published
+    result = identify(
+        dynax.LinearAxis(), data, recipe, friction="coulomb", validation=dynax.Validate(holdout=0)
+    )  # the whole record, as published
     p = result.parameters
     assert result.consistency.consistent and not result.consistency.active
     # Janot, Gautier and Brunot (2019): M = 95.1089, Fv = 203.5034, Fc = 20.3935, offset = -3.1648, 4.08 % error
@@ -150,7 +152,7 @@ def test_emps_reproduces_the_published_reference_model(datasets):
     assert abs(p["coulomb"] / 20.3935 - 1) < 0.03
     assert abs(p["offset"] / -3.1648 - 1) < 0.03
     assert 0.035 < float(result.relative_error) < 0.045
-    without = identify(dynax.LinearAxis(), data, recipe, friction="viscous", holdout=0)
+    without = identify(dynax.LinearAxis(), data, recipe, friction="viscous", validation=dynax.Validate(holdout=0))
     # The Coulomb term matters: without it the force error is 17 % here. (The paper quotes about 38 %
     # without it, which this recipe does not reproduce; see docs/identification.md.)
     assert float(without.relative_error) > 3 * float(result.relative_error)
@@ -172,9 +174,9 @@ def test_emps_standard_errors_carry_the_correlation_in_time_that_two_filter_sett
         data,
         Dynamic(lowpass_hz=100.0, lowpass_order=4, trim=50, decimate=10, inputs="sampled"),
         friction="coulomb",
-        holdout=0,
+        validation=dynax.Validate(holdout=0),
     )
-    defaults = identify(dynax.LinearAxis(), data, Dynamic(), friction="coulomb", holdout=0)
+    defaults = identify(dynax.LinearAxis(), data, Dynamic(), friction="coulomb", validation=dynax.Validate(holdout=0))
     assert recipe.settings[0]["decimate"] != defaults.settings[0]["decimate"]
     for name in ("viscous", "coulomb"):
         robust = [r.standard_errors[name] for r in (recipe, defaults)]
@@ -200,7 +202,7 @@ def test_with_measurement_noise_energy_beats_power_beats_dynamic_until_filtered(
 
     def error(method):
         # the least-squares stage alone, fitted on the whole record (the defaults would refine and hold out)
-        result = identify(TRUE, noisy, method, refine=False, holdout=0)
+        result = identify(TRUE, noisy, method, refine=False, validation=dynax.Validate(holdout=0))
         return result, float(np.median(np.abs(np.asarray(result.estimate[:5]) - THETA[:5]) / THETA[:5]))
 
     energy, e_energy = error(Energy())
@@ -240,12 +242,20 @@ def test_irregular_sampling_is_used_as_recorded():
 @pytest.mark.parametrize("settings, named", [(dict(trim=-1), "`trim`"), (dict(decimate=0), "`decimate`")])
 def test_impossible_dynamic_settings_are_refused_by_name(acrobot_data, settings, named):
     with pytest.raises(dynax.UsageError, match=named):
-        identify(dynax.Acrobot(), acrobot_data, Dynamic(lowpass_hz=None, **settings), refine=False, holdout=0)
+        identify(
+            dynax.Acrobot(),
+            acrobot_data,
+            Dynamic(lowpass_hz=None, **settings),
+            refine=False,
+            validation=dynax.Validate(holdout=0),
+        )
 
 
 def test_trimmed_dynamic_equations_drop_the_ends_of_every_record(acrobot_data):
     """The trim is taken with the stacking of the rows: each record loses `trim` samples at each end."""
     halves = [acrobot_data.slice(0, 1000), acrobot_data.slice(1000, 2000)]
-    result = identify(dynax.Acrobot(), halves, Dynamic(lowpass_hz=None, trim=7), refine=False, holdout=0)
+    result = identify(
+        dynax.Acrobot(), halves, Dynamic(lowpass_hz=None, trim=7), refine=False, validation=dynax.Validate(holdout=0)
+    )
     assert result.n_samples == 2 * (1000 - 2 * 7)
     assert result.fit.statistics.n_rows == 2 * result.n_samples  # two joints' equations per sample

@@ -178,13 +178,22 @@ def test_an_inconsistent_estimate_warns_and_the_constrained_fit_matches_a_bounde
         pytest.warns(InconsistentEstimateWarning, match="theta7"),
         pytest.warns(PoorlyDeterminedWarning, match="theta1"),
     ):
-        plain = identify(dynax.DoublePendulum(), data, UNFILTERED, consistency="check", holdout=0, refine=False)
+        plain = identify(
+            dynax.DoublePendulum(),
+            data,
+            UNFILTERED,
+            consistency="check",
+            validation=dynax.Validate(holdout=0),
+            refine=False,
+        )
     assert plain.parameters["theta7"] < 0 and plain.consistency.violated
     with warnings.catch_warnings(), pytest.warns(PoorlyDeterminedWarning):
         warnings.simplefilter(
             "error", InconsistentEstimateWarning
         )  # the default must not hand back an inconsistent set
-        constrained = identify(dynax.DoublePendulum(), data, UNFILTERED, holdout=0, refine=False)
+        constrained = identify(
+            dynax.DoublePendulum(), data, UNFILTERED, validation=dynax.Validate(holdout=0), refine=False
+        )
     assert constrained.consistency.consistent
     assert any("theta7" in c for c in constrained.consistency.active)
     assert constrained.parameters["theta7"] >= 0
@@ -220,7 +229,14 @@ def test_a_reversed_torque_is_named_where_the_estimate_is_inconsistent():
         data = Trajectory(record.ts, record.xs, jnp.asarray(us), NAMES, ("tau1", "tau2"))
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            result = identify(dynax.DoublePendulum(), data, Dynamic(), friction="coulomb", refine=False, holdout=0)
+            result = identify(
+                dynax.DoublePendulum(),
+                data,
+                Dynamic(),
+                friction="coulomb",
+                refine=False,
+                validation=dynax.Validate(holdout=0),
+            )
         return result, [
             str(w.message) for w in caught if any(k in str(w.message) for k in ("reversed", "degrees", "upright"))
         ]
@@ -240,14 +256,26 @@ def test_records_that_hardly_move_say_the_size_parameters_are_poorly_determined(
     still = recorded(rig_model(), 6.0, 3, torque_scale=0.05)
     assert float(np.abs(still.xs[:, :2]).max()) < 0.01
     with pytest.warns(PoorlyDeterminedWarning, match="theta2") as caught:
-        result = identify(dynax.DoublePendulum(), still, Dynamic(), friction="coulomb", holdout=0, refine=False)
+        result = identify(
+            dynax.DoublePendulum(),
+            still,
+            Dynamic(),
+            friction="coulomb",
+            validation=dynax.Validate(holdout=0),
+            refine=False,
+        )
     assert set(result.poorly_determined) == {"theta1", "theta2", "theta4", "theta5"}, result.poorly_determined
     assert all(ratio > POORLY_DETERMINED for ratio in result.poorly_determined.values())
     assert "record more motion" in str(caught[0].message)
     assert result.to_json()["poorly_determined"] == result.poorly_determined
     # the same rig under the usual torques (1.6 rad of motion): every size parameter to within 1.1 %
     moving = identify(
-        dynax.DoublePendulum(), recorded(rig_model(), 6.0, 3), Dynamic(), friction="coulomb", holdout=0, refine=False
+        dynax.DoublePendulum(),
+        recorded(rig_model(), 6.0, 3),
+        Dynamic(),
+        friction="coulomb",
+        validation=dynax.Validate(holdout=0),
+        refine=False,
     )
     assert moving.poorly_determined == {}
     # Real data: the last 1.4 s of DFKI run 12, where the pendulum rests upright (0.07 rad/s rms, the
@@ -257,7 +285,14 @@ def test_records_that_hardly_move_say_the_size_parameters_are_poorly_determined(
     run = dynax.resample(raw, raw.dt)
     rest = run.slice(int(np.searchsorted(np.asarray(run.ts), 4.6)), None)
     with pytest.warns(PoorlyDeterminedWarning, match="theta1"):
-        at_rest = identify(dynax.DoublePendulum(), rest, Dynamic(), friction="coulomb", holdout=0, refine=False)
+        at_rest = identify(
+            dynax.DoublePendulum(),
+            rest,
+            Dynamic(),
+            friction="coulomb",
+            validation=dynax.Validate(holdout=0),
+            refine=False,
+        )
     assert {"theta1", "theta4"} <= set(at_rest.poorly_determined) and at_rest.consistency.consistent
 
 
@@ -273,7 +308,9 @@ def test_a_resting_dfki_record_refined_by_default_is_still_said_to_be_poorly_det
     run = dynax.resample(raw, raw.dt)
     rest = run.slice(int(np.searchsorted(np.asarray(run.ts), 4.6)), None)
     with pytest.warns(PoorlyDeterminedWarning, match="theta4"):
-        result = identify(dynax.DoublePendulum(), rest, Dynamic(), friction="coulomb", holdout=0)
+        result = identify(
+            dynax.DoublePendulum(), rest, Dynamic(), friction="coulomb", validation=dynax.Validate(holdout=0)
+        )
     std = np.asarray(result.std_errors)
     assert not np.any(std == 0), dict(zip(result.names, std))
     stage = result.to_json()["stages"]["output_error"]
@@ -338,7 +375,7 @@ def test_one_dfki_run_alone_is_said_to_determine_the_size_parameters_poorly(monk
     # errors, clustered over segments, say what the run then tells: theta1 and theta2 to 38 and 31 %.
     # What `identify` returns is judged, so the user is warned; judged on the least-squares stage,
     # nothing was said.
-    from dynax._identify import _identify as identify_module
+    from dynax._identify import _identify as identify_module  # private: monkeypatched (no angle zeros)
 
     monkeypatch.setattr(identify_module, "_record_angle_zeros", lambda *args: None)
     with pytest.warns(PoorlyDeterminedWarning, match="theta1") as caught:
@@ -486,7 +523,7 @@ def test_noisy_arms_of_other_sizes_give_consistent_estimates(size):
     from dynax.internal import base_parameters_from_physical
 
     physical, fc, ir2, duration = OTHER_SIZES[size]
-    base = {k: float(v) for k, v in base_parameters_from_physical(**physical).items()}
+    base = {k: float(v) for k, v in base_parameters_from_physical(physical).items()}
     model = dynax.Extended(
         dynax.DoublePendulum.from_base_parameters(base),
         (dynax.CoulombFriction(0, fc[0]), dynax.CoulombFriction(1, fc[1]), dynax.RotorInertia(1, ir2)),
@@ -520,11 +557,11 @@ def test_the_refinement_measures_a_torque_latency_and_is_not_biased_by_it(monkey
     truth = np.array([RIG[f"theta{i}"] for i in range(1, 6)])
     relative = np.abs(np.asarray(result.estimate[:5]) - truth) / truth
     assert np.all(relative < 0.02), dict(zip(result.names, relative))
-    from dynax._identify import _identify as identify_module
-    from dynax._identify import _refine
+    from dynax._identify import _identify as identify_module  # private: monkeypatched (no input timing)
+    from dynax.internal import refine_by_simulation
 
     monkeypatch.setattr(
-        identify_module, "refine_by_simulation", functools.partial(_refine.refine_by_simulation, input_timing=False)
+        identify_module, "refine_by_simulation", functools.partial(refine_by_simulation, input_timing=False)
     )
     blind = identify(dynax.DoublePendulum(), train, Dynamic(), friction="coulomb", validation=[held])
     assert blind.to_json()["stages"]["output_error"]["input_timing"] is None
@@ -551,7 +588,7 @@ def test_reversed_inputs_and_angles_in_degrees_or_from_upright_of_real_records_a
     def said(system, records):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            identify(system, records, Dynamic(), friction="coulomb", refine=False, holdout=0)
+            identify(system, records, Dynamic(), friction="coulomb", refine=False, validation=dynax.Validate(holdout=0))
         return [str(w.message) for w in caught if any(k in str(w.message) for k in ("reversed", "degrees", "upright"))]
 
     folder = datasets / "dfki_double_pendulum" / "sys_id"
@@ -613,7 +650,13 @@ def test_dfki_least_squares_with_defaults_is_consistent_where_the_unfiltered_fit
         pytest.warns(PoorlyDeterminedWarning, match="theta1"),
     ):
         identify(
-            dynax.DoublePendulum(), runs, UNFILTERED, friction="coulomb", consistency="check", refine=False, holdout=0
+            dynax.DoublePendulum(),
+            runs,
+            UNFILTERED,
+            friction="coulomb",
+            consistency="check",
+            refine=False,
+            validation=dynax.Validate(holdout=0),
         )
     # noise, not a reversed torque, degrees or a zero at upright: no hint fits it
     assert not any(k in str(w.message) for w in caught for k in ("reversed", "degrees", "upright"))
@@ -647,7 +690,7 @@ def test_dfki_runs_logged_at_200_and_100_hz_get_a_lower_cutoff_and_nearly_the_sa
         friction="coulomb",
         consistency="off",
         refine=False,
-        holdout=0,
+        validation=dynax.Validate(holdout=0),
     )
     for dt in (0.005, 0.01):
         coarse = [dynax.resample(r, dt) for r in raw]
@@ -657,7 +700,13 @@ def test_dfki_runs_logged_at_200_and_100_hz_get_a_lower_cutoff_and_nearly_the_sa
                 choose_filter(record).cutoff_hz <= 1.1 * choose_filter(dynax.resample(original, original.dt)).cutoff_hz
             )
         free = identify(
-            dynax.DoublePendulum(), coarse, Dynamic(), friction="coulomb", consistency="off", refine=False, holdout=0
+            dynax.DoublePendulum(),
+            coarse,
+            Dynamic(),
+            friction="coulomb",
+            consistency="off",
+            refine=False,
+            validation=dynax.Validate(holdout=0),
         )
         assert not free.consistency.violated, (dt, free.consistency.violated)
         for name in ("theta1", "theta2", "theta3", "theta4", "theta5"):
@@ -731,7 +780,7 @@ def test_cli_says_when_the_refinement_validates_worse_than_least_squares(dataset
     # refinement predicts run 01 better: 0.092 against 0.114 rad at 0.5 s, 2026-11-27.)
     import json
 
-    from dynax._identify import _identify as identify_module
+    from dynax._identify import _identify as identify_module  # private: monkeypatched (no angle zeros)
     from dynax.internal import cli_main
     from tests.conftest import DFKI_MAPPING
 
@@ -821,7 +870,7 @@ def test_a_refinement_that_ends_worse_than_its_start_keeps_the_least_squares_mod
     import equinox as eqx
     import optimistix as optx
 
-    from dynax._identify import _refine
+    from dynax._identify import _refine  # private: monkeypatched (a fit that ends worse than its start)
 
     real = _refine.fit_simulation_error
 

@@ -60,7 +60,13 @@ def _relative(result):
 
 @pytest.mark.parametrize("method", [Dynamic(), Power(), Energy()], ids=["dynamic", "power", "energy"])
 def test_least_squares_on_scipy_data(scipy_states, method):
-    result = identify(dynax.Acrobot(theta1=5.0), _trajectory(scipy_states, US), method, refine=False, holdout=0)
+    result = identify(
+        dynax.Acrobot(theta1=5.0),
+        _trajectory(scipy_states, US),
+        method,
+        refine=False,
+        validation=dynax.Validate(holdout=0),
+    )
     relative = _relative(result)
     assert np.all(relative[:5] < DISCRETISATION), relative
     assert np.all(relative[5:] < 10 * DISCRETISATION), relative  # the friction columns are 10x less excited
@@ -72,7 +78,7 @@ def test_least_squares_on_scipy_data(scipy_states, method):
     ids=["dynamic", "power-filtered", "energy"],
 )
 def test_least_squares_error_is_within_its_standard_errors_under_noise(noisy, method, filter_hz):
-    result = identify(TRUE, noisy, method, refine=False, holdout=0)
+    result = identify(TRUE, noisy, method, refine=False, validation=dynax.Validate(holdout=0))
     if filter_hz == "auto":  # Dynamic chooses its low-pass from the spectra and reports it
         filter_hz = result.settings[0]["lowpass_hz"]
     inflation = 1.0 if filter_hz is None else max(1.0, np.sqrt(FS / (2 * filter_hz)))
@@ -91,14 +97,14 @@ def coulomb_data():
 @pytest.mark.parametrize("method", [Dynamic(), Power(), Energy()], ids=["dynamic", "power", "energy"])
 def test_least_squares_with_an_effect_the_model_lacks(coulomb_data, method):
     # With the Coulomb columns the structure is right again: friction and base parameters recovered.
-    right = identify(TRUE, coulomb_data, method, refine=False, holdout=0, friction="coulomb")
+    right = identify(TRUE, coulomb_data, method, refine=False, validation=dynax.Validate(holdout=0), friction="coulomb")
     assert right.names[-2:] == ("fc1", "fc2")
     np.testing.assert_allclose([right.parameters["fc1"], right.parameters["fc2"]], 0.05, rtol=0.05)
     assert np.all(_relative(right)[:5] < DISCRETISATION)
     # Without them the viscous terms absorb what they can and the rest is equation error. The
     # inertial and gravity parameters, excited far more than friction, are biased by no more than the
     # share of the equations the model cannot explain (its relative equation error).
-    wrong = identify(TRUE, coulomb_data, method, refine=False, holdout=0)
+    wrong = identify(TRUE, coulomb_data, method, refine=False, validation=dynax.Validate(holdout=0))
     unexplained = float(wrong.relative_error)
     assert unexplained > 10 * float(right.relative_error)
     assert np.all(_relative(wrong)[:5] < unexplained), (_relative(wrong), unexplained)
@@ -112,7 +118,9 @@ def test_simulation_fit_on_noisy_scipy_data(scipy_states):
     noise = np.array([1e-3, 1e-3, 1e-2, 1e-2])
     data = _trajectory(scipy_states + noise * rng.normal(size=scipy_states.shape), US).slice(0, 201)
     start = dynax.Acrobot.from_base_parameters({k: 1.1 * float(v) for k, v in TRUE.base_parameters.items()})
-    result = identify(start, data, SimulationFit(segment_s=0.25, max_steps=30), refine=False, holdout=0)
+    result = identify(
+        start, data, SimulationFit(segment_s=0.25, max_steps=30), refine=False, validation=dynax.Validate(holdout=0)
+    )
     error = np.abs(np.asarray(result.estimate) - THETA)
     std_errors = np.asarray(result.std_errors)
     assert np.all(std_errors[:5] < 0.02 * THETA[:5]), std_errors / THETA

@@ -30,7 +30,14 @@ def differing():
 
 
 def test_a_friction_that_differs_between_records_is_found(differing):
-    result = identify(dynax.DoublePendulum(), differing, Dynamic(), friction="coulomb", refine=False, holdout=0)
+    result = identify(
+        dynax.DoublePendulum(),
+        differing,
+        Dynamic(),
+        friction="coulomb",
+        refine=False,
+        validation=dynax.Validate(holdout=0),
+    )
     found = result.record_friction
     assert found is not None and found.columns == ("fc1", "fc2")
     assert found.differ() == ("fc2",), (found.f_statistic, found.p_value)
@@ -51,7 +58,7 @@ def test_a_friction_that_differs_between_records_is_found(differing):
 def test_records_that_share_their_friction_are_not_said_to_differ():
     same = [recorded(arm(RIG_FC[1]), 6.0, seed) for seed in SEEDS]
     found = identify(
-        dynax.DoublePendulum(), same, Dynamic(), friction="coulomb", refine=False, holdout=0
+        dynax.DoublePendulum(), same, Dynamic(), friction="coulomb", refine=False, validation=dynax.Validate(holdout=0)
     ).record_friction
     assert found.differ() == (), (found.f_statistic, found.p_value)
     # Spread 0.017 N m (0.096 to 0.113), against 0.08 in the records above; all low by the filter's bias.
@@ -71,15 +78,15 @@ def test_exact_equations_recover_each_records_coefficient():
         per_row[joint * n + counts[0] : joint * n + counts[0] + counts[1]] += 0.3
     y = a[:, :2] @ np.array([1.0, -2.0]) + per_row * a[:, 2]
     y[: counts[0]] += 0.5  # record 0's offset on the first joint
-    found = record_friction(a, y, counts, 2, ("t1", "t2", "fc1"), ("fc1",))
+    found = record_friction(a, y, counts, ("t1", "t2", "fc1"), ("fc1",))
     np.testing.assert_allclose(found.values[:, 0], [0.1, 0.4, 0.1], atol=1e-10)
     assert found.differ() == ("fc1",) and found.relative_error < 1e-10
 
 
 def test_nothing_to_compare_gives_none():
     a, y = np.ones((40, 2)), np.ones(40)
-    assert record_friction(a, y, (20,), 2, ("t1", "fc1"), ("fc1",)) is None  # one record
-    assert record_friction(a, y, (10, 10), 2, ("t1", "b1"), ("fc1",)) is None  # no Coulomb column
+    assert record_friction(a, y, (20,), ("t1", "fc1"), ("fc1",)) is None  # one record
+    assert record_friction(a, y, (10, 10), ("t1", "b1"), ("fc1",)) is None  # no Coulomb column
 
 
 def test_dfki_runs_disagree_on_the_elbow_friction(datasets):
@@ -87,7 +94,7 @@ def test_dfki_runs_disagree_on_the_elbow_friction(datasets):
 
     runs = [dfki(datasets, r) for r in ("00", "01", "02", "03", "05")]
     found = identify(
-        dynax.DoublePendulum(), runs, Dynamic(), friction="coulomb", refine=False, holdout=0
+        dynax.DoublePendulum(), runs, Dynamic(), friction="coulomb", refine=False, validation=dynax.Validate(holdout=0)
     ).record_friction
     # measured 2026-11-26: elbow 0.062 (run 02) to 0.123 N m (run 00), F = 56 on (4, 15) degrees of freedom
     assert "fc2" in found.differ(), (found.f_statistic, found.p_value)
@@ -111,7 +118,7 @@ def test_the_two_halves_of_the_emps_record_agree_on_their_friction(datasets):
         [data.slice(0, n // 2), data.slice(n // 2, n)],
         Dynamic(),
         friction="coulomb",
-        holdout=0,
+        validation=dynax.Validate(holdout=0),
         refine=False,
     )
     found = result.record_friction

@@ -32,7 +32,14 @@ def with_offset(record, offset):
 def test_offsets_that_differ_between_records_are_found_and_measured(records):
     truth = np.array([[0.12, 0.0], [0.0, 0.0], [-0.06, 0.0], [0.05, 0.0]])  # shoulder only, N m
     shifted = [with_offset(r, o) for r, o in zip(records, truth)]
-    result = identify(dynax.DoublePendulum(), shifted, Dynamic(), friction="coulomb", refine=False, holdout=0)
+    result = identify(
+        dynax.DoublePendulum(),
+        shifted,
+        Dynamic(),
+        friction="coulomb",
+        refine=False,
+        validation=dynax.Validate(holdout=0),
+    )
     found = result.record_offsets
     assert found is not None and found.differ() == ("q1",), (found.f_statistic, found.p_value)
     # each record's offset within 0.02 N m (the torque noise is 0.02 N m per sample; the Coulomb
@@ -48,7 +55,14 @@ def test_offsets_that_differ_between_records_are_found_and_measured(records):
 
 
 def test_records_without_offsets_are_not_said_to_differ(records):
-    result = identify(dynax.DoublePendulum(), records, Dynamic(), friction="coulomb", refine=False, holdout=0)
+    result = identify(
+        dynax.DoublePendulum(),
+        records,
+        Dynamic(),
+        friction="coulomb",
+        refine=False,
+        validation=dynax.Validate(holdout=0),
+    )
     found = result.record_offsets
     assert found is not None and found.differ() == (), (found.f_statistic, found.p_value)
     assert np.max(np.abs(found.offsets)) < 0.02
@@ -59,7 +73,12 @@ def test_a_common_offset_is_measured_but_does_not_differ(records):
     # The same offset in every record is a constant of the rig, not of the record: measured, not flagged.
     shifted = [with_offset(r, (0.08, 0.0)) for r in records]
     found = identify(
-        dynax.DoublePendulum(), shifted, Dynamic(), friction="coulomb", refine=False, holdout=0
+        dynax.DoublePendulum(),
+        shifted,
+        Dynamic(),
+        friction="coulomb",
+        refine=False,
+        validation=dynax.Validate(holdout=0),
     ).record_offsets
     assert found.differ() == ()
     np.testing.assert_allclose(found.offsets[:, 0], 0.08, atol=0.02)
@@ -84,7 +103,12 @@ def test_exact_equations_say_nothing_and_an_offset_on_them_is_found_exactly():
 def test_one_record_has_no_offsets_to_compare(records):
     assert (
         identify(
-            dynax.DoublePendulum(), records[0], Dynamic(), friction="coulomb", refine=False, holdout=0
+            dynax.DoublePendulum(),
+            records[0],
+            Dynamic(),
+            friction="coulomb",
+            refine=False,
+            validation=dynax.Validate(holdout=0),
         ).record_offsets
         is None
     )
@@ -100,7 +124,12 @@ def test_dfki_runs_00_and_01_read_the_shoulder_torque_high(datasets):
     # explain them better (test_angle_zeros), and reports the force offsets left after those.
     runs = [dynax.resample(r, r.dt) for r in (dfki(datasets, n) for n in ("00", "01", "02", "03"))]
     found = identify(
-        dynax.DoublePendulum(), runs, Dynamic(offsets=True), friction="coulomb", refine=False, holdout=0
+        dynax.DoublePendulum(),
+        runs,
+        Dynamic(offsets=True),
+        friction="coulomb",
+        refine=False,
+        validation=dynax.Validate(holdout=0),
     ).record_offsets
     assert found.differ() == ("q1",), (found.f_statistic, found.p_value)
     assert (
@@ -115,7 +144,7 @@ def test_joint_weights_come_from_residuals_with_the_offsets_removed(records, mon
     # 0.02 N m on both joints): fitted with the offsets, as the weighted fit is, the two joints' residuals
     # are alike and so are their weights; a first fit without the offsets puts the offsets' spread
     # (0.09 N m^2) into the shoulder's variance and weighted it 23 times less than the elbow (ratio 0.044).
-    from dynax._identify import _ls_stage as identify_module
+    from dynax._identify import _ls_stage as identify_module  # private: monkeypatched (a spy on least_squares)
 
     seen = []
     real = identify_module.least_squares
@@ -127,7 +156,12 @@ def test_joint_weights_come_from_residuals_with_the_offsets_removed(records, mon
     monkeypatch.setattr(identify_module, "least_squares", spy)
     shifted = [with_offset(r, o) for r, o in zip(records, ([0.3, 0.0], [-0.3, 0.0], [0.3, 0.0], [-0.3, 0.0]))]
     result = identify(
-        dynax.DoublePendulum(), shifted, Dynamic(weighting="joint"), friction="coulomb", refine=False, holdout=0
+        dynax.DoublePendulum(),
+        shifted,
+        Dynamic(weighting="joint"),
+        friction="coulomb",
+        refine=False,
+        validation=dynax.Validate(holdout=0),
     )
     weights = np.asarray(seen[-1])
     shoulder, elbow = weights[: weights.size // 2], weights[weights.size // 2 :]

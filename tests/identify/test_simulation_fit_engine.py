@@ -47,7 +47,7 @@ def _axis_problem(seed):
 @pytest.mark.slow  # one Levenberg-Marquardt compilation (about 30 s on 2 cores)
 def test_linear_axis_named_by_tree_path_recovers_parameters_within_their_errors():
     data, start = _axis_problem(seed=0)
-    result = fit_simulation_error(start, data, segment_s=1.0, max_steps=40)
+    result = fit_simulation_error(start, data, SimulationFit(segment_s=1.0, max_steps=40))
     assert result.names == ("mass", "viscous", "coulomb", "offset")  # the tree paths of the default filter
     assert isinstance(result, Solution)
     assert set(result.standard_errors()) == set(result.names)
@@ -86,8 +86,8 @@ def test_a_parameter_the_rollouts_do_not_depend_on_gets_no_finite_error():
     data, start = _axis_problem(seed=0)
     spared = _WithSpare(start, jnp.asarray(1.0))
     # 0.25 s segments: 16 blocks of time, enough for the clustered covariance
-    result = fit_simulation_error(spared, data, segment_s=0.25, fit_initial_states=False, max_steps=40)
-    alone = fit_simulation_error(start, data, segment_s=0.25, fit_initial_states=False, max_steps=40)
+    result = fit_simulation_error(spared, data, SimulationFit(segment_s=0.25, fit_initial_states=False, max_steps=40))
+    alone = fit_simulation_error(start, data, SimulationFit(segment_s=0.25, fit_initial_states=False, max_steps=40))
     std = dict(zip(result.names, np.asarray(result.std_errors)))
     assert np.isinf(std["spare"]), std
     np.testing.assert_allclose(
@@ -106,7 +106,13 @@ def test_identify_by_simulation_is_built_from_one_solution_with_the_contract_nam
     us = (2.0 * np.sin(0.7 * ts) + 1.5 * np.sin(1.9 * ts + 1) + np.sin(3.3 * ts + 2))[:, None]
     data = _noisy_record(truth, ts, us, [0.2, 0.0, 0.0, 0.0], ("q1", "q2", "dq1", "dq2"), noise=1e-5, seed=1)
     start = dynax.Acrobot.from_base_parameters({k: 1.05 * float(v) for k, v in dynax.Acrobot().base_parameters.items()})
-    result = identify(start, data, SimulationFit(segment_s=0.25, max_steps=30), friction="coulomb", holdout=0)
+    result = identify(
+        start,
+        data,
+        SimulationFit(segment_s=0.25, max_steps=30),
+        friction="coulomb",
+        validation=dynax.Validate(holdout=0),
+    )
     names = ("theta1", "theta2", "theta3", "theta4", "theta5", "theta6", "theta7", "fc1", "fc2")
     assert result.names == names and result.solution.names == names
     out = result.to_json()
@@ -153,9 +159,9 @@ def test_staggered_cuts_start_every_fraction_of_a_segment_and_link_only_the_firs
     # Only the first cut's segments continue one another (the continuity links of fitted states).
     assert list(four[3][:5]) == [False, True, True, True, True] and not np.any(four[3][5:])
     with pytest.raises(dynax.UsageError, match="stagger"):
-        fit_simulation_error(dynax.LinearAxis(), record, stagger=2)  # fitted initial states: refused
+        fit_simulation_error(dynax.LinearAxis(), record, SimulationFit(stagger=2))  # fitted initial states: refused
     with pytest.raises(dynax.UsageError, match="stagger"):
-        fit_simulation_error(dynax.LinearAxis(), record, stagger=0, fit_initial_states=False)
+        fit_simulation_error(dynax.LinearAxis(), record, SimulationFit(stagger=0, fit_initial_states=False))
 
 
 @pytest.mark.slow  # two Levenberg-Marquardt compilations
@@ -164,7 +170,9 @@ def test_staggered_cuts_keep_the_standard_errors_of_one_cut():
     standard errors must stay near one cut's, not halve (as counting them as independent would)."""
     data, start = _axis_problem(seed=2)
     fits = [
-        fit_simulation_error(start, data, segment_s=0.5, fit_initial_states=False, max_steps=40, stagger=k)
+        fit_simulation_error(
+            start, data, SimulationFit(segment_s=0.5, fit_initial_states=False, max_steps=40, stagger=k)
+        )
         for k in (1, 4)
     ]
     expected = np.array([95.0, 200.0, 20.0, -3.0])

@@ -226,4 +226,4 @@ def test_output_error_refinement_terms_are_a_method_of_the_system():
     xs = jnp.stack([0.1 * jnp.sin(3 * t), 0.3 * jnp.cos(3 * t)], axis=1)
     data = dynax.Trajectory(t, xs, jnp.sin(t)[:, None], ("q", "dq"), ("force",), "linear_axis")
     with pytest.raises(dynax.UsageError, match="two-link"):
-        dynax.identify(dynax.LinearAxis(), data, dynax.Power(), refine=True, holdout=0)
+        dynax.identify(dynax.LinearAxis(), data, dynax.Power(), refine=True, validation=dynax.Validate(holdout=0))

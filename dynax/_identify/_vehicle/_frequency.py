@@ -47,7 +47,7 @@ import numpy as np
 
 from ..._data._trajectory import Trajectory
 from ..._errors import UsageError
-from ..._fit import fit_least_squares, levenberg_marquardt, Solution
+from ..._fit import fit_least_squares, LeastSquaresOptions, levenberg_marquardt, Solution
 from ..._model._helicopter import BODY, BODY_AXES, Helicopter, LINEAR_FEATURE_NAMES
 from ._criteria import (
     fit_one_step,
@@ -347,8 +347,7 @@ def _reduce_structure(theta, response_residuals, residuals, responses: _Response
                 solver=solver,
                 scale=jnp.ones_like(theta),
                 max_steps=criterion.max_steps,
-                nonfinite=None,
-                covariance=False,
+                options=LeastSquaresOptions(nonfinite=None, covariance=False),
             )
             if np.all(np.isfinite(solution.value)) and cost(solution.value) < cost(theta):
                 theta = solution.value
