@@ -3,6 +3,7 @@ the perturbation draws, the saved from-rest controller (swing-up, round trip) an
 
 import pathlib
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -206,3 +207,49 @@ def test_cli_refuses_bad_input_with_exit_2(tmp_path, monkeypatch, capsys, argv):
     assert code == 2
     assert "error" in capsys.readouterr().err
     assert not (tmp_path / "p.npz").exists()
+
+
+def _reference_knots(spacing=0.02, dt=0.002):
+    us = dynax.load_controller(POLICY).u_ref
+    per_knot = round(spacing / dt)
+    knots = np.concatenate([us[per_knot::per_knot], us[-1:]])
+    return jnp.asarray(np.arctanh(np.clip(knots / 6.0, -0.999999, 0.999999))), len(us) * dt
+
+
+def test_score_surrogate_matches_the_reference_costs_computed_apart():
+    from dynax.internal import knot_matrix, score_surrogate
+
+    w, horizon = _reference_knots()
+    saved = dynax.load_controller(POLICY)
+    x, u = saved.x_ref, saved.u_ref  # the reference's states and torques at 2 ms, as saved
+    plant = control.LeaderboardPlant.nominal()
+    design = control.SwingUpDesign(horizon=horizon)
+    interp = knot_matrix(round(horizon / 0.002), 0.002, 0.02, w.shape[0])
+    surrogate, costs = score_surrogate(plant, w, interp, 0.002, design)
+    costs = np.asarray(costs)
+    # the costs by the lab's formulas on the saved arrays, in numpy; the episode at rest after them
+    up = -0.2 * np.cos(x[:, 0]) - 0.3 * np.cos(x[:, 0] + x[:, 1]) > 0.45
+    t_up = 0.002 * (len(up) - np.argmin(up[::-1]))  # from the last sample below the line on
+    energy = np.sum(np.abs(np.diff(x[:, 1]) * u[:-1]))
+    changes = np.concatenate([np.diff(u), np.zeros(4999 - (len(u) - 1))])
+    expected = [energy, np.sum(u**2) * 0.002, np.std(changes), np.sum(x[:, 2:] ** 2) * 0.002]
+    assert abs(costs[0] - t_up) < 0.05  # the time below the line, through a sigmoid of the height
+    np.testing.assert_allclose(costs[1:], expected, rtol=0.02)
+    terms = np.tanh(np.pi * np.array([t_up, *expected]) / np.array([20, 60, 20, 0.1, 400]))
+    assert float(surrogate) == pytest.approx(np.mean(terms), abs=0.005)
+
+
+def test_polish_on_constraint_restores_and_keeps_the_hand_over():
+    from dynax.internal import hand_over_residuals, knot_matrix, polish_on_constraint
+
+    w, horizon = _reference_knots()
+    plant = control.LeaderboardPlant.nominal()
+    design = control.SwingUpDesign(horizon=horizon, polish_feasibility=12, polish_iterations=4)
+    interp = knot_matrix(round(horizon / 0.01), 0.01, 0.02, w.shape[0])
+    # a small knock off the constraint: Gauss-Newton brings it back, the projected steps keep it there
+    w0 = jnp.stack([w, w + 0.03 * jnp.asarray(np.random.default_rng(0).normal(size=w.shape))])
+    before = np.asarray(jax.vmap(lambda v: jnp.sum(hand_over_residuals(plant, v, interp, 0.01, 6.0) ** 2))(w0))
+    _, feasible, end, _, _ = polish_on_constraint(plant, w0, interp, 0.01, design)
+    assert before[1] > 1e-4
+    assert np.all(np.asarray(feasible) < 1e-12)  # Gauss-Newton restores the constraint
+    assert np.all(np.asarray(end) < 1e-3)  # and the projected steps stay near it (each one corrected)
