@@ -151,6 +151,9 @@ from ._control import (
     RegionOfAttraction as RegionOfAttraction,
 )
 from ._control import (
+    RegionSampling as RegionSampling,
+)
+from ._control import (
     RobotController as RobotController,
 )
 from ._control import (

@@ -37,13 +37,22 @@ from ._control._from_rest import (
     end_upright_residuals as end_upright_residuals,
 )
 from ._control._from_rest import (
+    hand_over_residuals as hand_over_residuals,
+)
+from ._control._from_rest import (
     knot_matrix as knot_matrix,
 )
 from ._control._from_rest import (
     open_loop_rollout as open_loop_rollout,
 )
 from ._control._from_rest import (
+    polish_on_constraint as polish_on_constraint,
+)
+from ._control._from_rest import (
     reference_search as reference_search,
+)
+from ._control._from_rest import (
+    score_surrogate as score_surrogate,
 )
 from ._control._leaderboard import leaderboard_rollout as leaderboard_rollout
 
@@ -528,6 +537,9 @@ __all__ = [
     "collocation_reference",
     "end_upright_residuals",
     "knot_matrix",
+    "hand_over_residuals",
+    "polish_on_constraint",
+    "score_surrogate",
     "open_loop_rollout",
     "reference_search",
     "leaderboard_rollout",

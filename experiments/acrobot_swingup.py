@@ -48,6 +48,7 @@ from dynax.control import (
     estimate_region_of_attraction,
     PGPE,
     random_starts,
+    RegionSampling,
     run_pgpe,
     SmoothActivation,
     SPONG_PARAMETER_NAMES,
@@ -330,7 +331,10 @@ def evosax_baseline(cfg, task, start, pgpe, key, held_out, evaluate):
 
 def region_of_attraction(cfg, template, plant, key):
     roa = eqx.filter_jit(estimate_region_of_attraction)(
-        plant, template.balance, key, n_directions=cfg["roa_directions"], control_rate=cfg["rate"]
+        plant,
+        template.balance,
+        key,
+        sampling=RegionSampling(n_directions=cfg["roa_directions"], control_rate=cfg["rate"]),
     )
     return {
         "rho": float(roa.rho),

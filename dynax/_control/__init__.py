@@ -173,6 +173,9 @@ from ._region_of_attraction import (
 from ._region_of_attraction import (
     RegionOfAttraction as RegionOfAttraction,
 )
+from ._region_of_attraction import (
+    RegionSampling as RegionSampling,
+)
 from ._riccati import solve_continuous_are as solve_continuous_are
 from ._riccati import solve_discrete_are as solve_discrete_are
 from ._swing_up import (

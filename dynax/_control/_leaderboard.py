@@ -293,7 +293,11 @@ def nominal_case(plant: LeaderboardPlant | None = None, n_pulses: int = 3) -> Ca
 
 
 class Rollout(eqx.Module):
-    """A simulated episode: `ts` (N + 1,), true states `xs` (N + 1, 4), commanded elbow torques `us` (N,)."""
+    """A simulated episode: `ts` (N + 1,), true states `xs` (N + 1, 4), applied elbow torques `us` (N,).
+
+    `us` is the torque the plant received at each step (after the motor model, the limit and the
+    external pulses), the record the lab's simulator keeps and its scores read.
+    """
 
     ts: Float[Array, " time"]
     xs: Float[Array, "time 4"]
@@ -327,7 +331,7 @@ def leaderboard_rollout(controller, case, x0, dt, n_steps, max_delay, record):
         pulses = case.pulse_amplitude * jnp.exp(-((t - case.pulse_centre) ** 2) / (2 * case.pulse_width**2))
         tau = tau + jnp.sum(pulses, axis=1)
         x_next = plant.rk4_step(x, tau, dt)
-        out = (x_next, u) if record else None
+        out = (x_next, tau[1]) if record else None
         return (x_next, history, tau, cstate), out
 
     history = jnp.broadcast_to(x0, (max_delay + 1, 4))
@@ -350,6 +354,8 @@ def _final_states(controller, cases, x0, dt, n_steps, max_delay):
 
 def simulate_leaderboard(controller, case: Case | None = None, rules: LeaderboardRules = LeaderboardRules()) -> Rollout:
     """Simulate one benchmark episode from rest (the nominal case by default) and record it.
+
+    The record holds the applied elbow torques (`Rollout`), as the lab's simulator records them.
 
     **Arguments:**
 
@@ -390,28 +396,32 @@ def performance_costs(
 ) -> Performance:
     r"""The five leaderboard costs and the score of a recorded episode (`leaderboard.py`'s functions).
 
-    With $T$, $X$ the $N + 1$ recorded times and states and $U$ the $N$ commanded torques:
+    The lab saves the episode as rows of equal length, so it scores the first $N$ of the $N + 1$
+    recorded times and states with the $N$ applied torques $u_k$ (`save_trajectory` cuts the
+    columns to the shortest). With $T_k$, $X_k$ for $k < N$:
 
     - swing-up time: $T_i$ for the first $i \ge 1$ from which the end effector stays above
-      `height_fraction` $(l_1 + l_2)$ through sample $N - 1$, else $T_N$ (the lab's backward loop);
-      success is a time below $T_N$;
-    - energy $\sum_k |(q_{2,k+1} - q_{2,k}) u_k|$ (the shoulder's torque is zero);
-    - torque cost $\sum_k u_k^2 \Delta t$; velocity cost $\sum_{k<N} (\dot q_1^2 + \dot q_2^2)\Delta t$;
-    - torque smoothness: the standard deviation of $u_{k+1} - u_k$.
+      `height_fraction` $(l_1 + l_2)$ through sample $N - 2$, else $T_{N-1}$ (the lab's backward
+      loop); success is a time below $T_{N-1}$;
+    - energy $\sum_{k<N-1} |(q_{2,k+1} - q_{2,k}) u_k|$ (the shoulder's torque is zero);
+    - torque cost $\sum_{k<N-1} u_k^2 \Delta t_k$; velocity cost
+      $\sum_{k<N-1} (\dot q_{1,k}^2 + \dot q_{2,k}^2)\Delta t_k$;
+    - torque smoothness: the standard deviation of the $N - 1$ changes $u_{k+1} - u_k$.
     """
-    ts, xs, us = rollout.ts, rollout.xs, rollout.us
+    n_u = rollout.us.shape[0]
+    ts, xs, us = rollout.ts[:n_u], rollout.xs[:n_u], rollout.us
     dtype = xs.dtype
     up = plant.end_effector_height(xs[:, :2]) > rules.height_fraction * (plant.l1 + plant.l2)
     n = xs.shape[0]
-    inner = up[1 : n - 1]  # samples 1 .. N-1, the range the lab's loop visits
+    inner = up[1 : n - 1]  # samples 1 .. N-2, the range the lab's loop visits
     trailing = jnp.flip(jnp.cumprod(jnp.flip(inner).astype(jnp.int32))).astype(bool)
     first = jnp.argmax(trailing) + 1
     index = jnp.where(trailing[-1], first, n - 1)
     swingup_time = ts[index]
     success = index < n - 1
     dt = jnp.diff(ts)
-    energy = jnp.sum(jnp.abs(jnp.diff(xs[:, 1]) * us))
-    torque_cost = jnp.sum(us**2 * dt)
+    energy = jnp.sum(jnp.abs(jnp.diff(xs[:, 1]) * us[:-1]))
+    torque_cost = jnp.sum(us[:-1] ** 2 * dt)
     smoothness = jnp.std(jnp.diff(us))
     velocity_cost = jnp.sum(jnp.sum(xs[:-1, 2:] ** 2, axis=1) * dt)
     costs = jnp.stack([swingup_time, energy, torque_cost, smoothness, velocity_cost]).astype(dtype)
@@ -448,6 +458,22 @@ class RobustnessCases:
     repetition: np.ndarray
 
 
+@dataclasses.dataclass(frozen=True)
+class _Perturbation:
+    """What one robustness case changes from the nominal episode (`Case`'s fields, before stacking).
+
+    `plant`: the plant's parameters (a dict of `NOMINAL_PLANT`'s keys; `None`: nominal);
+    `pulses`: `(centre, width, amplitude)`, each `(2, n)` (`None`: no pulses).
+    """
+
+    plant: dict | None = None
+    velocity_noise: float = 0.0
+    torque_noise: float = 0.0
+    responsiveness: float = 1.0
+    delay_steps: int = 0
+    pulses: tuple | None = None
+
+
 def _sizes(lo, hi, n):
     return np.linspace(lo, hi, n)
 
@@ -482,15 +508,15 @@ def robustness_cases(
     nominal = {k: float(getattr(plant, k)) for k in NOMINAL_PLANT}
     n = rules.n_sizes
     lo, hi = rules.model_range
-    rows = []  # (plant dict, vnoise, tnoise, k, delay_steps, pulses, family, size, parameter, repetition)
+    rows = []
     none = (
         np.zeros((2, rules.pulses_per_joint)),
         np.ones((2, rules.pulses_per_joint)),
         np.zeros((2, rules.pulses_per_joint)),
     )
 
-    def add(p=None, vn=0.0, tn=0.0, k=1.0, delay=0, pulses=none, family=0, size=0.0, parameter=-1, rep=0):
-        rows.append((p or nominal, vn, tn, k, delay, pulses, family, size, parameter, rep))
+    def add(perturbation=_Perturbation(), *, family=0, size=0.0, parameter=-1, rep=0):
+        rows.append((perturbation.plant or nominal, perturbation, family, size, parameter, rep))
 
     lists = {
         "Ir": _sizes(0.0, rules.rotor_inertia_max, n),
@@ -513,43 +539,42 @@ def robustness_cases(
                 p["r2"] = value / p["m2"]
             else:
                 p[name] = value
-            add(p, family=0, size=value, parameter=j)
+            add(_Perturbation(plant=p), family=0, size=value, parameter=j)
     for sigma in _sizes(0.0, rules.velocity_noise_max, n):
         for r in range(rules.repetitions):
-            add(vn=sigma, family=1, size=sigma, rep=r)
+            add(_Perturbation(velocity_noise=sigma), family=1, size=sigma, rep=r)
     for sigma in _sizes(0.0, rules.torque_noise_max, n):
         for r in range(rules.repetitions):
-            add(tn=sigma, family=2, size=sigma, rep=r)
+            add(_Perturbation(torque_noise=sigma), family=2, size=sigma, rep=r)
     for k in _sizes(*rules.responsiveness_range, n):
-        add(k=k, family=3, size=k)
+        add(_Perturbation(responsiveness=k), family=3, size=k)
     for delay in _sizes(0.0, rules.delay_max, n):
-        add(delay=int(delay / rules.dt), family=4, size=delay)
+        add(_Perturbation(delay_steps=int(delay / rules.dt)), family=4, size=delay)
     rng = np.random.default_rng(rules.seed)
     for r in range(rules.pulse_runs):
-        add(pulses=pulse_schedule(rules, rng), family=5, size=float(r), rep=r)
+        add(_Perturbation(pulses=pulse_schedule(rules, rng)), family=5, size=float(r), rep=r)
 
-    def stack(i):
-        return np.asarray([row[i] for row in rows], float)
-
+    perturbations = [row[1] for row in rows]
+    pulses = [none if q.pulses is None else q.pulses for q in perturbations]
     plants = LeaderboardPlant(**{k: jnp.asarray([row[0][k] for row in rows], float) for k in NOMINAL_PLANT})
     keys = jax.random.split(jax.random.key(rules.seed), len(rows))
     cases = Case(
         plants,
-        jnp.asarray(stack(1)),
-        jnp.asarray(stack(2)),
-        jnp.asarray(stack(3)),
-        jnp.asarray([row[4] for row in rows], jnp.int32),
-        jnp.asarray(np.stack([row[5][0] for row in rows])),
-        jnp.asarray(np.stack([row[5][1] for row in rows])),
-        jnp.asarray(np.stack([row[5][2] for row in rows])),
+        jnp.asarray([q.velocity_noise for q in perturbations], float),
+        jnp.asarray([q.torque_noise for q in perturbations], float),
+        jnp.asarray([q.responsiveness for q in perturbations], float),
+        jnp.asarray([q.delay_steps for q in perturbations], jnp.int32),
+        jnp.asarray(np.stack([pl[0] for pl in pulses])),
+        jnp.asarray(np.stack([pl[1] for pl in pulses])),
+        jnp.asarray(np.stack([pl[2] for pl in pulses])),
         keys,
     )
     return RobustnessCases(
         cases,
-        np.asarray([r[6] for r in rows]),
-        stack(7),
-        np.asarray([r[8] for r in rows]),
-        np.asarray([r[9] for r in rows]),
+        np.asarray([r[2] for r in rows]),
+        np.asarray([r[3] for r in rows], float),
+        np.asarray([r[4] for r in rows]),
+        np.asarray([r[5] for r in rows]),
     )
 
 

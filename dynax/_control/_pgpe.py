@@ -7,6 +7,7 @@ exploration width and one step size. Rewards are maximised.
 
 import abc
 from collections.abc import Callable
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -367,15 +368,26 @@ def run_pgpe(
 
     `(state, history)`: the final `PGPEState` and a `PGPEHistory` with one row per iteration.
     """
-    return _with_bar(_run_pgpe_jit, "PGPE", pgpe, objective, params, key, n_iterations, shard, progress)
+    return _with_bar(_run_pgpe_jit, "PGPE", _Job(pgpe, objective, params, key, n_iterations, shard), progress)
 
 
-def _with_bar(run, description, pgpe, objective, params, key, n_iterations, shard, progress):
-    traced = any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves((params, key)))
+class _Job(NamedTuple):
+    """What one PGPE run (or sweep) is given: strategy, objective, start, key(s), generations, sharding."""
+
+    pgpe: object
+    objective: object
+    params: object
+    key: object
+    n_iterations: int
+    shard: bool
+
+
+def _with_bar(run, description, job: _Job, progress):
+    traced = any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves((job.params, job.key)))
     if traced or not progress_enabled(progress):
-        return run(pgpe, objective, params, key, n_iterations, shard, False, bar_token(None))
-    with ProgressBar(n_iterations, description, progress=True, unit="gen", reduce="max") as bar:
-        out = run(pgpe, objective, params, key, n_iterations, shard, True, bar_token(bar))
+        return run(*job, False, bar_token(None))
+    with ProgressBar(job.n_iterations, description, progress=True, unit="gen", reduce="max") as bar:
+        out = run(*job, True, bar_token(bar))
         jax.block_until_ready(out)
     return out
 
@@ -435,7 +447,7 @@ def sweep_pgpe(
 
     **Returns:** `(states, histories)` with a leading `runs` axis.
     """
-    return _with_bar(_sweep_pgpe_jit, "PGPE sweep", pgpe, objective, params, keys, n_iterations, shard, progress)
+    return _with_bar(_sweep_pgpe_jit, "PGPE sweep", _Job(pgpe, objective, params, keys, n_iterations, shard), progress)
 
 
 @eqx.filter_jit

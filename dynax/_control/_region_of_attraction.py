@@ -35,17 +35,31 @@ class RegionOfAttraction(eqx.Module):
     converged_fraction: Float[Array, " levels"]
 
 
+class RegionSampling(eqx.Module):
+    """How `estimate_region_of_attraction` samples and tests states.
+
+    **Fields:**
+
+    - `levels`: the cost-to-go levels to test (default `None`: 40 values from 1 to 1e5, geometric).
+    - `n_directions`: sampled directions per level.
+    - `horizon`, `control_rate`: the length [s] and rate [Hz] of each test rollout.
+    - `tolerance`: the cost-to-go below which a rollout counts as converged.
+    """
+
+    levels: Float[Array, " levels"] | None = None
+    n_directions: int = eqx.field(static=True, default=128)
+    horizon: float = eqx.field(static=True, default=4.0)
+    control_rate: float = eqx.field(static=True, default=100.0)
+    tolerance: float = 1e-2
+
+
 def estimate_region_of_attraction(
     plant: AbstractSystem,
     controller: LQR,
     key: PRNGKeyArray,
     *,
     torque_limit: float = 20.0,
-    levels: Float[Array, " levels"] | None = None,
-    n_directions: int = 128,
-    horizon: float = 4.0,
-    control_rate: float = 100.0,
-    tolerance: float = 1e-2,
+    sampling: RegionSampling = RegionSampling(),
     method: FixedGrid = FixedGrid(),
 ) -> RegionOfAttraction:
     r"""Estimate the largest sub-level set $\{x : V(x) < \rho\}$ of the LQR cost-to-go that the saturated loop attracts.
@@ -54,10 +68,10 @@ def estimate_region_of_attraction(
     $V(x) = (x \ominus x_{eq})^\top S (x \ominus x_{eq})$ along `n_directions` random
     directions (uniform on the unit sphere in the metric of $S$), the plant is simulated under
     the LQR torque clipped at `torque_limit` for `horizon` seconds at `control_rate`, and a
-    sample converged if it ends with $V < $ `tolerance`. $\rho$ is the largest level below which
-    every sample converged. It is an inner estimate of the true region of attraction as far as
-    sampling goes (a sampled, not a certified, estimate: compare the sums-of-squares
-    certificates of the cited chapter). All rollouts are one `vmap`.
+    sample converged if it ends with $V < $ `tolerance` (the last four in `sampling`). $\rho$ is
+    the largest level below which every sample converged. It is an inner estimate of the true
+    region of attraction as far as sampling goes (a sampled, not a certified, estimate: compare
+    the sums-of-squares certificates of the cited chapter). All rollouts are one `vmap`.
 
     **Arguments:**
 
@@ -66,10 +80,9 @@ def estimate_region_of_attraction(
     - `controller`: the `LQR` whose region is estimated.
     - `key`: PRNG key for the directions.
     - `torque_limit`: the actuator saturation.
-    - `levels`: the cost-to-go levels to test (default 40 values from 1 to 1e5, geometric).
-    - `n_directions`: sampled directions per level.
-    - `horizon`, `control_rate`: the length [s] and rate [Hz] of each test rollout.
-    - `tolerance`: the cost-to-go below which a rollout counts as converged.
+    - `sampling`: a `RegionSampling`: the levels, the directions per level, the test rollouts'
+      length and rate, and the convergence tolerance.
+    - `method`: the fixed-grid solver of the test rollouts.
 
     **Returns:** a `RegionOfAttraction` with `rho`, `levels` and `converged_fraction`.
 
@@ -81,6 +94,8 @@ def estimate_region_of_attraction(
     s = controller.cost_to_go_matrix
     dtype = s.dtype
     n = s.shape[0]
+    levels, n_directions, tolerance = sampling.levels, sampling.n_directions, sampling.tolerance
+    horizon, control_rate = sampling.horizon, sampling.control_rate
     if levels is None:
         levels = jnp.geomspace(1.0, 1e5, 40).astype(dtype)
     levels = jnp.asarray(levels, dtype)

@@ -3,6 +3,7 @@ the perturbation draws, the saved from-rest controller (swing-up, round trip) an
 
 import pathlib
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -13,44 +14,63 @@ from dynax import control
 POLICY = pathlib.Path(__file__).parents[2] / "experiments" / "results" / "leaderboard" / "acrobot_policy.npz"
 
 
-def _lab_swingup_time(T, up):
-    """A transcription of the lab's `get_swingup_time(method="height", has_to_stay=True)` loop."""
+def _lab_costs(ts, xs, us):
+    """A transcription of the lab's scoring of a simulated episode: `Simulator.simulate` records N + 1
+    times and states and N applied torques, `save_trajectory` cuts the columns to the shortest, and
+    `leaderboard.py`'s `get_swingup_time(method="height", has_to_stay=True)`, `get_energy`,
+    `get_torque_cost`, `get_tau_smoothness` and `get_velocity_cost` read the rows (torques as
+    (shoulder, elbow), the shoulder's zero)."""
+    n = min(len(ts), len(xs), len(us))
+    T, X = np.asarray(ts)[:n], np.asarray(xs)[:n]
+    U = np.stack([np.zeros(n), np.asarray(us)[:n]], axis=1)
+    up = -0.2 * np.cos(X[:, 0]) - 0.3 * np.cos(X[:, 0] + X[:, 1]) > 0.9 * (0.2 + 0.3)
     time_index = len(T) - 1
     for i in range(len(up) - 2, 0, -1):
         if up[i]:
             time_index = i
         else:
             break
-    return T[time_index]
+    energy = sum(np.sum(np.abs(np.diff(X[:, j]) * U[:-1, j])) for j in range(2))
+    delta_t = np.diff(T)
+    torque = np.einsum("ij, i, jk, ik", U[:-1], delta_t, np.eye(2), U[:-1])
+    smooth = np.std(np.diff(U[:, 0])) + np.std(np.diff(U[:, 1]))
+    velocity = np.einsum("ij, i, jk, ik", X[:-1, 2:], delta_t, np.eye(2), X[:-1, 2:])
+    return np.array([T[time_index], energy, torque, smooth, velocity]), T[time_index] < T[-1]
 
 
 def test_performance_costs_by_hand_on_a_tiny_episode():
     plant = control.LeaderboardPlant.nominal()
-    top = 0.5 * 0.9  # 0.9 (l1 + l2)
-    # five samples: down, half, up, up, up -> up from sample 2 (sample 4 is not visited by the lab's loop)
-    q1 = np.array([0.0, 1.5, np.pi, np.pi - 0.1, 0.0])
-    q2 = np.array([0.0, 0.3, 0.1, 0.0, 0.0])
-    xs = np.stack([q1, q2, [0.0, 2.0, 1.0, -1.0, 0.5], [0.0, -1.0, 3.0, 0.0, 0.0]], axis=1)
-    us = np.array([1.0, -2.0, 0.5, 0.0])
-    ts = np.arange(5) * 0.002
+    # six states, five torques: the lab scores the first five rows; down, half, up, up, up, (down)
+    # -> up from sample 2; sample 4 is not visited by the lab's loop, sample 5 not saved
+    q1 = np.array([0.0, 1.5, np.pi, np.pi - 0.1, 0.0, 0.0])
+    q2 = np.array([0.0, 0.3, 0.1, 0.0, 0.0, 0.0])
+    xs = np.stack([q1, q2, [0.0, 2.0, 1.0, -1.0, 0.5, 7.0], [0.0, -1.0, 3.0, 0.0, 0.0, 7.0]], axis=1)
+    us = np.array([1.0, -2.0, 0.5, 0.0, 4.0])
+    ts = np.arange(6) * 0.002
     perf = control.performance_costs(control.Rollout(jnp.asarray(ts), jnp.asarray(xs), jnp.asarray(us)), plant)
-    height = -0.2 * np.cos(q1) - 0.3 * np.cos(q1 + q2)
-    t_up = _lab_swingup_time(ts, height > top)
-    energy = np.sum(np.abs(np.diff(q2) * us))
-    torque = np.sum(us**2 * 0.002)
-    smooth = np.std(np.diff(us))
-    velocity = np.sum((xs[:-1, 2] ** 2 + xs[:-1, 3] ** 2) * 0.002)
-    np.testing.assert_allclose(np.asarray(perf.costs), [t_up, energy, torque, smooth, velocity], rtol=1e-12)
-    assert t_up == ts[2] and bool(perf.success)
-    expected = 1 - np.mean(
-        np.tanh(np.pi * np.array([t_up / 20, energy / 60, torque / 20, smooth / 0.1, velocity / 400]))
-    )
+    expected_costs, success = _lab_costs(ts, xs, us)
+    # and by hand: only rows 0-4 count, the last torque only in the smoothness
+    assert expected_costs[0] == ts[2] and success
+    assert expected_costs[1] == pytest.approx(0.3 * 1.0 + 0.2 * 2.0 + 0.1 * 0.5, rel=1e-12)  # |dq2 u|
+    assert expected_costs[2] == pytest.approx((1.0 + 4.0 + 0.25) * 0.002, rel=1e-12)
+    assert expected_costs[3] == pytest.approx(np.std([-3.0, 2.5, -0.5, 4.0]), rel=1e-12)
+    assert expected_costs[4] == pytest.approx((0.0 + 5.0 + 10.0 + 1.0) * 0.002, rel=1e-12)
+    np.testing.assert_allclose(np.asarray(perf.costs), expected_costs, rtol=1e-12)
+    assert bool(perf.success)
+    expected = 1 - np.mean(np.tanh(np.pi * expected_costs / np.array([20, 60, 20, 0.1, 400])))
     assert float(perf.score) == pytest.approx(expected, rel=1e-12)
-    # down at the second-to-last sample: no success, score 0 whatever the costs
+    # down at the last sample the lab's loop visits: no success, score 0 whatever the costs
     xs_fail = xs.copy()
     xs_fail[3] = 0.0
     fail = control.performance_costs(control.Rollout(jnp.asarray(ts), jnp.asarray(xs_fail), jnp.asarray(us)), plant)
-    assert not bool(fail.success) and float(fail.score) == 0.0 and float(fail.costs[0]) == ts[-1]
+    assert not _lab_costs(ts, xs_fail, us)[1]
+    assert not bool(fail.success) and float(fail.score) == 0.0 and float(fail.costs[0]) == ts[-2]
+
+
+def test_recorded_torque_is_the_applied_one():
+    # a controller asking for more than the limit: the lab records (and scores) the limited torque
+    rollout = control.simulate_leaderboard(lambda t, x: jnp.array([10.0]), rules=control.LeaderboardRules(t_final=0.01))
+    np.testing.assert_array_equal(np.asarray(rollout.us), 6.0)
 
 
 def test_family_scores_by_hand():
@@ -187,3 +207,49 @@ def test_cli_refuses_bad_input_with_exit_2(tmp_path, monkeypatch, capsys, argv):
     assert code == 2
     assert "error" in capsys.readouterr().err
     assert not (tmp_path / "p.npz").exists()
+
+
+def _reference_knots(spacing=0.02, dt=0.002):
+    us = dynax.load_controller(POLICY).u_ref
+    per_knot = round(spacing / dt)
+    knots = np.concatenate([us[per_knot::per_knot], us[-1:]])
+    return jnp.asarray(np.arctanh(np.clip(knots / 6.0, -0.999999, 0.999999))), len(us) * dt
+
+
+def test_score_surrogate_matches_the_reference_costs_computed_apart():
+    from dynax.internal import knot_matrix, score_surrogate
+
+    w, horizon = _reference_knots()
+    saved = dynax.load_controller(POLICY)
+    x, u = saved.x_ref, saved.u_ref  # the reference's states and torques at 2 ms, as saved
+    plant = control.LeaderboardPlant.nominal()
+    design = control.SwingUpDesign(horizon=horizon)
+    interp = knot_matrix(round(horizon / 0.002), 0.002, 0.02, w.shape[0])
+    surrogate, costs = score_surrogate(plant, w, interp, 0.002, design)
+    costs = np.asarray(costs)
+    # the costs by the lab's formulas on the saved arrays, in numpy; the episode at rest after them
+    up = -0.2 * np.cos(x[:, 0]) - 0.3 * np.cos(x[:, 0] + x[:, 1]) > 0.45
+    t_up = 0.002 * (len(up) - np.argmin(up[::-1]))  # from the last sample below the line on
+    energy = np.sum(np.abs(np.diff(x[:, 1]) * u[:-1]))
+    changes = np.concatenate([np.diff(u), np.zeros(4999 - (len(u) - 1))])
+    expected = [energy, np.sum(u**2) * 0.002, np.std(changes), np.sum(x[:, 2:] ** 2) * 0.002]
+    assert abs(costs[0] - t_up) < 0.05  # the time below the line, through a sigmoid of the height
+    np.testing.assert_allclose(costs[1:], expected, rtol=0.02)
+    terms = np.tanh(np.pi * np.array([t_up, *expected]) / np.array([20, 60, 20, 0.1, 400]))
+    assert float(surrogate) == pytest.approx(np.mean(terms), abs=0.005)
+
+
+def test_polish_on_constraint_restores_and_keeps_the_hand_over():
+    from dynax.internal import hand_over_residuals, knot_matrix, polish_on_constraint
+
+    w, horizon = _reference_knots()
+    plant = control.LeaderboardPlant.nominal()
+    design = control.SwingUpDesign(horizon=horizon, polish_feasibility=12, polish_iterations=4)
+    interp = knot_matrix(round(horizon / 0.01), 0.01, 0.02, w.shape[0])
+    # a small knock off the constraint: Gauss-Newton brings it back, the projected steps keep it there
+    w0 = jnp.stack([w, w + 0.03 * jnp.asarray(np.random.default_rng(0).normal(size=w.shape))])
+    before = np.asarray(jax.vmap(lambda v: jnp.sum(hand_over_residuals(plant, v, interp, 0.01, 6.0) ** 2))(w0))
+    _, feasible, end, _, _ = polish_on_constraint(plant, w0, interp, 0.01, design)
+    assert before[1] > 1e-4
+    assert np.all(np.asarray(feasible) < 1e-12)  # Gauss-Newton restores the constraint
+    assert np.all(np.asarray(end) < 1e-3)  # and the projected steps stay near it (each one corrected)

@@ -6,16 +6,15 @@ import jax.numpy as jnp
 import numpy as np
 
 import dynax
-from dynax.control import balancing_lqr, estimate_region_of_attraction
+from dynax.control import balancing_lqr, estimate_region_of_attraction, RegionSampling
 
 
 def test_region_of_attraction_of_the_balancing_lqr():
     system = dynax.Acrobot()
     controller = balancing_lqr(system)
     levels = jnp.array([0.5, 2.0, 10.0, 1e3, 1e5])
-    roa = eqx.filter_jit(estimate_region_of_attraction)(
-        system, controller, jax.random.PRNGKey(0), levels=levels, n_directions=16, horizon=3.0, control_rate=50.0
-    )
+    sampling = RegionSampling(levels=levels, n_directions=16, horizon=3.0, control_rate=50.0)
+    roa = eqx.filter_jit(estimate_region_of_attraction)(system, controller, jax.random.PRNGKey(0), sampling=sampling)
     fraction = np.asarray(roa.converged_fraction)
     # Close to upright every sampled state is caught; far away (cost-to-go 1e5) none is.
     assert fraction[0] == 1.0 and fraction[-1] == 0.0
@@ -29,10 +28,7 @@ def test_region_of_attraction_of_the_balancing_lqr():
         controller,
         jax.random.PRNGKey(0),
         torque_limit=2.0,
-        levels=levels,
-        n_directions=16,
-        horizon=3.0,
-        control_rate=50.0,
+        sampling=sampling,
     )
     assert float(weak.rho) < float(roa.rho)
     assert np.all(np.asarray(weak.converged_fraction) <= fraction)
