@@ -67,6 +67,9 @@ from ._diagnose import (
     Discovery as Discovery,
 )
 from ._diagnose import (
+    Horizons as Horizons,
+)
+from ._diagnose import (
     Known as Known,
 )
 from ._diagnose import (
@@ -74,6 +77,9 @@ from ._diagnose import (
 )
 from ._diagnose import (
     Report as Report,
+)
+from ._diagnose import (
+    Selection as Selection,
 )
 from ._diagnose import (
     Verdict as Verdict,

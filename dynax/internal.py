@@ -91,7 +91,10 @@ from ._diagnose import (
     sparse_search as sparse_search,
 )
 from ._diagnose import (
-    SparseFit as SparseFit,
+    SparseStatistics as SparseStatistics,
+)
+from ._diagnose import (
+    Stability as Stability,
 )
 from ._diagnose import stlsq as stlsq
 from ._diagnose import (
@@ -116,6 +119,8 @@ from ._diagnose._candidates import (
     structurally_equivalent as structurally_equivalent,
 )
 from ._diagnose._diagnose import stage_reporter as stage_reporter
+from ._diagnose._discovery import DiscoverySearch as DiscoverySearch
+from ._diagnose._discovery import HeldOutTest as HeldOutTest
 from ._diagnose._discovery import propose as propose
 from ._diagnose._fit import (
     Family as Family,
@@ -165,6 +170,9 @@ from ._diagnose._selection import (
 )
 from ._diagnose._selection import (
     on_physical_side as on_physical_side,
+)
+from ._diagnose._selection import (
+    Refitted as Refitted,
 )
 from ._diagnose._statistics import (
     benjamini_hochberg as benjamini_hochberg,
@@ -554,7 +562,8 @@ __all__ = [
     "RestUnderLoad",
     "rests_under_load",
     "sparse_search",
-    "SparseFit",
+    "SparseStatistics",
+    "Stability",
     "Structure",
     "structure_test",
     "decide_verdict",
@@ -612,6 +621,7 @@ __all__ = [
     "jointly_determined",
     "jointly_determined_cell",
     "judge_round",
+    "Refitted",
     "lagged_loss",
     "lagged_loss_gradient_norm",
     "lagged_loss_of",
@@ -648,6 +658,8 @@ __all__ = [
     "PROGRESS_MODE",
     "progress_report",
     "propose",
+    "DiscoverySearch",
+    "HeldOutTest",
     "quaternion_angle",
     "quaternion_from_euler",
     "record_angle_zeros",
