@@ -61,7 +61,6 @@ def main():
         report = diagnose(
             Acrobot(),
             run_data,
-            system_name="acrobot",
             progress=lambda line: print(f"  [{time.perf_counter() - wall:5.1f} s] {line}"),
         )
         wall, cpu = time.perf_counter() - wall, time.process_time() - cpu

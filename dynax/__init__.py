@@ -60,6 +60,9 @@ from ._diagnose import (
     discover as discover,
 )
 from ._diagnose import (
+    Horizons as Horizons,
+)
+from ._diagnose import (
     Known as Known,
 )
 from ._diagnose import (
@@ -67,6 +70,9 @@ from ._diagnose import (
 )
 from ._diagnose import (
     Report as Report,
+)
+from ._diagnose import (
+    Selection as Selection,
 )
 from ._diagnose import (
     Verdict as Verdict,
@@ -183,9 +189,6 @@ from ._metrics import (
     whiteness_test as whiteness_test,
 )
 from ._model import (
-    AbstractBodyModel as AbstractBodyModel,
-)
-from ._model import (
     AbstractManipulator as AbstractManipulator,
 )
 from ._model import (
@@ -287,7 +290,6 @@ from ._plots import (
 from ._precision import PrecisionWarning as PrecisionWarning
 from ._predict import flight_error as flight_error
 from ._predict import predict_ahead as predict_ahead
-from ._progress import ProgressBar as ProgressBar
 from ._sim_error import simulation_error as simulation_error
 from ._sim_error import SimulationError as SimulationError
 from ._simulate import Adaptive as Adaptive

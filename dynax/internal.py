@@ -103,7 +103,10 @@ from ._diagnose import (
     sparse_search as sparse_search,
 )
 from ._diagnose import (
-    SparseFit as SparseFit,
+    SparseStatistics as SparseStatistics,
+)
+from ._diagnose import (
+    Stability as Stability,
 )
 from ._diagnose import stlsq as stlsq
 from ._diagnose import (
@@ -130,6 +133,8 @@ from ._diagnose._candidates import (
     structurally_equivalent as structurally_equivalent,
 )
 from ._diagnose._diagnose import stage_reporter as stage_reporter
+from ._diagnose._discovery import DiscoverySearch as DiscoverySearch
+from ._diagnose._discovery import HeldOutTest as HeldOutTest
 from ._diagnose._discovery import propose as propose
 from ._diagnose._fit import (
     Family as Family,
@@ -180,6 +185,9 @@ from ._diagnose._selection import (
 )
 from ._diagnose._selection import (
     on_physical_side as on_physical_side,
+)
+from ._diagnose._selection import (
+    Refitted as Refitted,
 )
 from ._diagnose._statistics import (
     benjamini_hochberg as benjamini_hochberg,
@@ -446,6 +454,7 @@ from ._metrics import (
 from ._metrics import (
     WhitenessTest as WhitenessTest,
 )
+from ._model import AbstractBodyModel as AbstractBodyModel
 from ._model import (
     base_parameters_from_physical as base_parameters_from_physical,
 )
@@ -496,6 +505,7 @@ from ._progress import (
     PROGRESS_MODE as PROGRESS_MODE,
 )
 from ._progress import progress_mode as progress_mode
+from ._progress import ProgressBar as ProgressBar
 from ._progress import (
     report as progress_report,
 )
@@ -519,6 +529,8 @@ from ._simulate import zoh_term as zoh_term
 
 # Aliased re-exports (`x as y`) count as exports only through `__all__`, so it lists every name.
 __all__ = [
+    "AbstractBodyModel",
+    "ProgressBar",
     "Simulation",
     "candidate_scales",
     "stiction_not_proposed",
@@ -588,7 +600,8 @@ __all__ = [
     "RestUnderLoad",
     "rests_under_load",
     "sparse_search",
-    "SparseFit",
+    "SparseStatistics",
+    "Stability",
     "Structure",
     "structure_test",
     "decide_verdict",
@@ -646,6 +659,7 @@ __all__ = [
     "jointly_determined",
     "jointly_determined_cell",
     "judge_round",
+    "Refitted",
     "lagged_loss",
     "lagged_loss_gradient_norm",
     "lagged_loss_of",
@@ -682,6 +696,8 @@ __all__ = [
     "PROGRESS_MODE",
     "progress_report",
     "propose",
+    "DiscoverySearch",
+    "HeldOutTest",
     "quaternion_angle",
     "quaternion_from_euler",
     "record_angle_zeros",

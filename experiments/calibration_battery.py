@@ -32,7 +32,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
-from dynax import ProgressBar
+from dynax.internal import ProgressBar
 from tests.hidden_cases import CASES, diagnose_case, outcome
 
 VERDICTS = ("explained", "unexplained", "inconclusive", "none")

@@ -21,7 +21,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import dynax  # noqa: E402
-from dynax import diagnose, Refit  # noqa: E402
+from dynax import diagnose, Refit, Selection  # noqa: E402
 from dynax.internal import with_velocities_from_positions  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
@@ -43,7 +43,7 @@ if __name__ == "__main__":
             [load(data, r) for r in val_runs],
             mode=Refit(),
             progress=False,
-            discovery=False,
+            selection=Selection(discovery=False),
         )
         for run in val_runs:
             record = with_velocities_from_positions(load(data, run))[0]

@@ -33,7 +33,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from dynax import diagnose, DoublePendulum, Known, load_trajectory, Refit, Trajectory  # noqa: E402
+from dynax import diagnose, DoublePendulum, Horizons, Known, load_trajectory, Refit, Trajectory  # noqa: E402
 from dynax.internal import resample  # noqa: E402
 
 MAPPING = {
@@ -128,7 +128,6 @@ def run_split(data, name, mode_name, variant="5ms", **kwargs):
         train,
         validation,
         mode=mode,
-        system_name="double_pendulum",
         progress=lambda line: print(f"  [{name} {mode_name}] {line}", flush=True),
         **kwargs,
     )
@@ -200,10 +199,10 @@ if __name__ == "__main__":
     results = []
     for s in splits:
         for m in modes:
-            kwargs = {"reference_horizon_s": float(sys.argv[5])} if len(sys.argv) > 5 and sys.argv[5] != "auto" else {}
+            given = {"reference_s": float(sys.argv[5])} if len(sys.argv) > 5 and sys.argv[5] != "auto" else {}
             if len(sys.argv) > 6:
-                kwargs["fit_window_s"] = float(sys.argv[6])
-            r = run_split(data, s, m, variant, **kwargs)
+                given["fit_window_s"] = float(sys.argv[6])
+            r = run_split(data, s, m, variant, horizons=Horizons(**given))
             print(
                 json.dumps(
                     {

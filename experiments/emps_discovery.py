@@ -24,7 +24,7 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from dynax import diagnose, LinearAxis, load_trajectory, Refit, Trajectory  # noqa: E402
+from dynax import diagnose, Horizons, LinearAxis, load_trajectory, Refit, Trajectory  # noqa: E402
 from dynax.internal import (  # noqa: E402
     butterworth_filtfilt,
     central_difference,
@@ -67,8 +67,7 @@ report = diagnose(
     train,
     validation,
     mode=refit,
-    reference_horizon_s=0.25,
-    system_name="linear_axis",
+    horizons=Horizons(reference_s=0.25),
     progress=lambda s: print(f"[{time.perf_counter() - start:5.0f} s] {s}", flush=True),
 )
 OUT.mkdir(parents=True, exist_ok=True)

@@ -105,12 +105,14 @@ def main():
         quad,
         diag_train,
         diag_test,
-        max_terms=args.max_terms,
-        cross_fit=args.cross_fit,
-        discovery=not args.no_discovery,
+        selection=dynax.Selection(
+            max_terms=args.max_terms,
+            cross_fit=args.cross_fit,
+            discovery=not args.no_discovery,
+            shortlist=args.shortlist,
+        ),
+        horizons=dynax.Horizons(reference_s=args.reference_horizon or None),
         progress=say,
-        reference_horizon_s=args.reference_horizon or None,
-        shortlist=args.shortlist,
     )
     j = report.to_json()
     from dynax.internal import body_frame_records, quadrotor_flight_errors

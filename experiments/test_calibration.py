@@ -20,7 +20,7 @@ Two parts.
 3. **Several training runs, cross-fitted** (slow; `--part diagnosis-runs`). As part 2, but trained
    on three runs (the training parts of the demo runs of three seeds: other excitations, other noise)
    and held out on the first seed's validation part, so that the test pools the held-out run with
-   each training run cross-fitted (`diagnose(..., cross_fit=True)`, the default; two training runs
+   each training run cross-fitted (`diagnose(..., selection=Selection(cross_fit=True))`, the default; two training runs
    are not cross-fitted).
 
     python experiments/test_calibration.py --part synthetic --reps 600
@@ -128,7 +128,7 @@ def diagnosis(seeds, runs=1):
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from dynax import Acrobot, CoulombFriction, diagnose
+    from dynax import Acrobot, CoulombFriction, diagnose, Selection
     from dynax.synthetic import demo_data
 
     rows = []
@@ -139,7 +139,7 @@ def diagnosis(seeds, runs=1):
             train = [train] + [
                 demo_data(CoulombFriction(1, 0.0), seed=5000 + runs * seed + i)[1] for i in range(1, runs)
             ]
-        j = diagnose(Acrobot(), train, validation, discovery=False).to_json()
+        j = diagnose(Acrobot(), train, validation, selection=Selection(discovery=False)).to_json()
         tested = [c for c in j["candidates"] if c.get("p_value") is not None]
         best = min(tested, key=lambda c: c["p_value"]) if tested else None
         row = dict(

@@ -507,9 +507,11 @@ def diagnose_case(case: Case, records_=None):
             "candidates": tuple(
                 t for t in dynax.default_candidates(nominal) if isinstance(t, dynax.internal.AbstractVehicleTerm)
             ),
-            "horizons_s": (0.25, 0.5, 1.0),
+            "horizons": dynax.Horizons(horizons_s=(0.25, 0.5, 1.0)),
         }
-    return dynax.diagnose(nominal, train, held_out, mode=mode, max_terms=2, progress=False, **kwargs)
+    return dynax.diagnose(
+        nominal, train, held_out, mode=mode, selection=dynax.Selection(max_terms=2), progress=False, **kwargs
+    )
 
 
 def outcome(case: Case, j: dict) -> dict:

@@ -5,8 +5,7 @@ import jax.numpy as jnp
 import pytest
 
 import dynax
-from dynax import ProgressBar
-from dynax.internal import bar_token, progress_enabled, progress_mode, progress_report
+from dynax.internal import bar_token, progress_enabled, progress_mode, progress_report, ProgressBar
 
 
 def quadratic(params, key):

@@ -61,7 +61,6 @@ def run_demo(term, *, seed: int, out: pathlib.Path) -> str:
             train,
             validation,
             mode=Refit(),
-            system_name="acrobot",
             progress=lambda line: bar.say(f"[{time.perf_counter() - start:5.1f} s] {line}"),
         )
     write_report(report, out, validation, write_json=write_json)

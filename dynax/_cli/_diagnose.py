@@ -2,6 +2,7 @@
 
 import argparse
 import contextlib
+import dataclasses
 import sys
 import time
 import warnings
@@ -97,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
 
     jax.config.update("jax_enable_x64", True)  # the CLI identifies in float64; the library does not change config
 
-    from .._diagnose import diagnose, Known, Refit, write_report
+    from .._diagnose import diagnose, Horizons, Known, Refit, Selection, write_report
     from .._diagnose._records import holdout_split
 
     if args.system == "quadrotor":  # flight logs: ground segments, glitches, the body frame (`_quadrotor.py`)
@@ -155,14 +156,16 @@ def run(args: argparse.Namespace) -> int:
             train,
             validation,
             mode=mode,
-            reference_horizon_s=args.reference_horizon,
-            max_terms=args.max_terms,
-            system_name=args.system,
-            discovery=not args.no_discovery,
-            cross_fit=not args.no_cross_fit,
-            velocities=args.velocities,
+            horizons=Horizons(reference_s=args.reference_horizon),
+            selection=Selection(
+                max_terms=args.max_terms,
+                discovery=not args.no_discovery,
+                cross_fit=not args.no_cross_fit,
+                velocities=args.velocities,
+            ),
             progress=say,
         )
+    report = dataclasses.replace(report, system=args.system)  # the contract's name, whatever the files say
     report.notes.extend(cli_notes)
     held_out = validation if validation is not None else [holdout_split(t)[1] for t in train]
     with staged_directory(args.out) as stage:

@@ -186,7 +186,7 @@ def run_diagnose(args) -> int:
     import warnings
 
     from .._data import DataWarning
-    from .._diagnose import diagnose, Known, Refit, write_report
+    from .._diagnose import diagnose, Horizons, Known, Refit, Selection, write_report
     from .._diagnose._quadrotor import body_frame_records, quadrotor_flight_errors, QUADROTOR_HORIZONS_S
     from .._diagnose._records import holdout_split
     from .._identify._vehicle._quadrotor import quadrotor_from_json
@@ -240,11 +240,10 @@ def run_diagnose(args) -> int:
             train,
             validation,
             mode=mode,
-            reference_horizon_s=args.reference_horizon,
-            max_terms=args.max_terms,
-            system_name="quadrotor",
-            discovery=not args.no_discovery,
-            cross_fit=not args.no_cross_fit,
+            horizons=Horizons(reference_s=args.reference_horizon),
+            selection=Selection(
+                max_terms=args.max_terms, discovery=not args.no_discovery, cross_fit=not args.no_cross_fit
+            ),
             progress=say,
         )
         held_out = validation if validation is not None else [holdout_split(t)[1] for t in train]

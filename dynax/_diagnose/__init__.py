@@ -10,6 +10,8 @@ from ._diagnose import Refit as Refit
 from ._diagnose import Report as Report
 from ._discovery import discover as discover
 from ._discovery import Discovery as Discovery
+from ._discovery import DiscoverySearch as DiscoverySearch
+from ._discovery import HeldOutTest as HeldOutTest
 from ._discovery import Proposal as Proposal
 from ._discovery import propose as propose
 from ._library import feature_library as feature_library
@@ -29,7 +31,10 @@ from ._result import (
 from ._result import (
     Validation as Validation,
 )
+from ._settings import Horizons as Horizons
+from ._settings import Selection as Selection
 from ._sparse import sparse_search as sparse_search
-from ._sparse import SparseFit as SparseFit
+from ._sparse import SparseStatistics as SparseStatistics
+from ._sparse import Stability as Stability
 from ._sparse import stlsq as stlsq
 from ._verdict import Verdict as Verdict

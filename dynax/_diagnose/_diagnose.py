@@ -20,26 +20,25 @@ import equinox as eqx
 import numpy as np
 
 from .._data._trajectory import Trajectory
-from .._errors import UsageError
 from .._model._extensions import AbstractTerm, Extended
 from .._model._quadrotor import Quadrotor
 from .._model._system import AbstractSystem
 from .._precision import warn_if_float32
 from .._progress import ProgressBar
 from .._sim_error import SimulationError
-from ._discovery import discover
+from ._discovery import discover, DiscoverySearch, HeldOutTest
 from ._fit import nominal_values, window_errors
-from ._forward import Current, forward_selection, Nominal, Yardstick
-from ._horizon import DEFAULT_FRACTION
-from ._problem import check_arguments, Options, prepare_problem, Problem
+from ._forward import Current, Forward, forward_selection, Nominal, Yardstick
+from ._problem import check_arguments, prepare_problem, Problem
 from ._problem import Known as Known
 from ._problem import Refit as Refit
 from ._quadrotor import diagnose_quadrotor
-from ._records import as_records, HOLDOUT_FRACTION
+from ._records import as_records
 from ._residuals import Structure, structure_test
 from ._result import DataSummary, ModelSummary
 from ._result import Report as Report
 from ._selection import paired_test
+from ._settings import Horizons, Selection
 from ._summaries import (
     merge_repeated_causes,
     per_run_table,
@@ -64,7 +63,7 @@ _CONTRACT_NAMES = {
 def stage_reporter(progress: Callable[[str], None] | bool | None):
     """The `say(line)` a diagnosis reports its stages through.
 
-    A callable is used as given. Otherwise a `dynax.ProgressBar` with one step per stage and per
+    A callable is used as given. Otherwise a `dynax.internal.ProgressBar` with one step per stage and per
     candidate batch, on stderr: `True` / `False` force it on / off; `None` follows
     `dynax.internal.progress_mode` (a bar only when stderr is a terminal; the CLI's `--quiet` silences it).
     Without a bar the library prints nothing (the CLI prints the lines as a log instead).
@@ -108,13 +107,14 @@ def _power(problem: Problem, yard: Yardstick, last: dict) -> Power:
     """The last round's test power (`_verdict.power_of`) over the record time its windows cover."""
     labels = {k: (problem.candidates[k].cause, problem.candidates[k].where(problem.system)) for k in last}
     tested_s = len(yard.window_runs) * problem.val_stride * problem.dt
-    return power_of(last, labels, problem.options.alpha, tested_s)
+    return power_of(last, labels, problem.selection.alpha, tested_s)
 
 
-def _judge(problem: Problem, nominal: Nominal, yard: Yardstick, current: Current, last: dict, say) -> _Judgement:
+def _judge(problem: Problem, forward: Forward, say) -> _Judgement:
     """Judge: `explained`, `unexplained`, `none` or `inconclusive` from the findings, the structure left and the
     test's power (`_verdict.decide`); then, where it is not `explained` and discovery is on, search beyond the
     vocabulary with the same held-out test."""
+    nominal, yard, current, last = forward.nominal, forward.yard, forward.current, forward.last
     model, findings = _extend(problem, current)
     power = _power(problem, yard, last)
     diverged = not np.isfinite(nominal.rmse[yard.ref_index])
@@ -125,13 +125,13 @@ def _judge(problem: Problem, nominal: Nominal, yard: Yardstick, current: Current
     )
     # Beyond the vocabulary: search, refit, the same held-out test. Also after a `none`: the generic
     # probe cannot see every structure (a force periodic in position), the search's own guards can.
-    if problem.options.discovery and verdict != Verdict.EXPLAINED:
+    if problem.selection.discovery and verdict != Verdict.EXPLAINED:
         judgement = _discover(problem, nominal, yard, current, judgement, say)
     return judgement
 
 
 def _discover(problem: Problem, nominal: Nominal, yard: Yardstick, current: Current, judgement: _Judgement, say):
-    o = problem.options
+    o = problem.selection
     held_out_errors = eqx.filter_jit(window_errors)
     last_errors = {}
 
@@ -146,13 +146,17 @@ def _discover(problem: Problem, nominal: Nominal, yard: Yardstick, current: Curr
         judgement.model if current.selected else nominal.model,
         problem.train,
         problem.validation,
-        held_out=held_out,
-        significance=lambda ref, new: paired_test(ref, new, problem.window_runs, yard.overlap).p_value,
-        refit=problem.refit_names,
-        vocabulary=[problem.candidates[k].label(system) for k in problem.searchable],
-        absorbed=[f"{c['cause']}@{c['where']}" for c in problem.not_identifiable],
-        alpha=o.alpha,
-        min_gain=o.min_gain,
+        test=HeldOutTest(
+            held_out,
+            lambda ref, new: paired_test(ref, new, problem.window_runs, yard.overlap).p_value,
+            alpha=o.alpha,
+            min_gain=o.min_gain,
+        ),
+        search=DiscoverySearch(
+            refit=problem.refit_names,
+            vocabulary=[problem.candidates[k].label(system) for k in problem.searchable],
+            absorbed=[f"{c['cause']}@{c['where']}" for c in problem.not_identifiable],
+        ),
         fit_window_s=problem.fit_window_s,
         current=(current.score[: yard.n_val], current.rmse, current.rmse[yard.ref_index]),
         progress=say,
@@ -210,7 +214,7 @@ def _data_summary(problem: Problem, train, validation) -> DataSummary:
         validation_name = ", ".join(r.source or "(held out)" for r in held_out)
     else:
         validation_name = "last {:.0%} of {}".format(
-            problem.options.holdout_fraction, ", ".join(r.source or "train" for r in given)
+            problem.selection.holdout_fraction, ", ".join(r.source or "train" for r in given)
         )
     return DataSummary(
         train=", ".join(r.source or "(train)" for r in given),
@@ -224,9 +228,9 @@ def _data_summary(problem: Problem, train, validation) -> DataSummary:
     )
 
 
-def _report(problem, nominal, yard, judgement, table, last, rounds, *, mode, system_name, train, validation) -> Report:
+def _report(problem: Problem, forward: Forward, judgement, *, mode, train, validation) -> Report:
     """The typed `Report` that `report.json` and `report.md` are written from."""
-    system, o = problem.system, problem.options
+    system, o, nominal, yard = problem.system, problem.selection, forward.nominal, forward.yard
     notes = list(problem.notes)
     verdict = judgement.verdict
     if verdict == Verdict.UNEXPLAINED:
@@ -258,9 +262,7 @@ def _report(problem, nominal, yard, judgement, table, last, rounds, *, mode, sys
     extended = judgement.model
     terms = tuple(dict.fromkeys(t.label(system) for t in extended.terms))  # wind@world once
     return Report(
-        system=system_name
-        or problem.train[0].system
-        or _CONTRACT_NAMES.get(type(system).__name__, type(system).__name__.lower()),
+        system=problem.train[0].system or _CONTRACT_NAMES.get(type(system).__name__, type(system).__name__.lower()),
         data=_data_summary(problem, train, validation),
         mode="refit" if isinstance(mode, Refit) else "known",
         nominal=_model_summary(problem, nominal.model, nominal.errors, nominal.rmse, yard),
@@ -271,7 +273,7 @@ def _report(problem, nominal, yard, judgement, table, last, rounds, *, mode, sys
         reference_horizon_s=float(yard.horizon.seconds),
         structure={"nominal": nominal.structure, "extended": judgement.structure},
         not_identifiable=problem.not_identifiable,
-        candidates=table,
+        candidates=forward.table,
         notes=notes,
         horizon=yard.horizon,
         runs=per_run_table(problem, yard, nominal, judgement),
@@ -279,7 +281,7 @@ def _report(problem, nominal, yard, judgement, table, last, rounds, *, mode, sys
         nominal_model=nominal.model,
         extended_model=extended,
         discovery=judgement.discovery,
-        rounds=rounds,
+        rounds=forward.rounds,
         not_proposed=problem.not_proposed,
     )
 
@@ -291,19 +293,8 @@ def diagnose(
     *,
     candidates: Sequence[AbstractTerm] | None = None,
     mode: Refit | Known = Refit(),
-    horizons_s: Sequence[float] = (0.1, 0.25, 0.5, 1.0, 2.0),
-    reference_horizon_s: float | None = None,
-    horizon_fraction: float = DEFAULT_FRACTION,
-    fit_window_s: float | None = None,
-    max_terms: int = 3,
-    alpha: float = 0.01,
-    min_gain: float = 0.05,
-    holdout_fraction: float = HOLDOUT_FRACTION,
-    shortlist: int = 4,
-    system_name: str | None = None,
-    discovery: bool = True,
-    velocities: str = "auto",
-    cross_fit: bool = True,
+    horizons: Horizons = Horizons(),
+    selection: Selection = Selection(),
     progress: Callable[[str], None] | bool | None = None,
 ) -> Report:
     r"""Diagnose what `system` gets wrong on measured data, name the cause and measure the gain.
@@ -318,7 +309,7 @@ def diagnose(
        look-alikes jointly with the nominal parameters, and keeps the best if its held-out
        improvement at the reference horizon is significant (one-sided paired test over windows
        with their correlation estimated from the data, Benjamini-Hochberg over the candidates remaining, level
-       `alpha`; see `_statistics`), at least `min_gain`, helps on most held-out runs, and has a
+       `selection.alpha`; see `_statistics`), at least `selection.min_gain`, helps on most held-out runs, and has a
        physical sign. With three or more training runs the test also holds out each training run
        in turn (cross-fitting: every configuration refitted on the other training runs) and pools
        those windows with the held-out ones; a candidate must then still not make the held-out runs
@@ -333,7 +324,7 @@ def diagnose(
        left, and the test had the power to see a 25 % gain), `inconclusive` (nothing named, but the test
        could not have seen a 25 % gain, or a candidate gained that much without being established; the
        notes name it and the held-out length that would decide).
-    7. **Discover** (where the verdict would not be `explained` and `discovery` is on): a sparse
+    7. **Discover** (where the verdict would not be `explained` and `selection.discovery` is on): a sparse
        search for the missing term beyond the vocabulary, refitted through simulation and kept
        only if it passes the same held-out test (see `dynax._diagnose._discovery.discover`);
        findings with cause `discovered`. The verdict is then `explained` if the named and
@@ -347,41 +338,19 @@ def diagnose(
 
     - `system`: the nominal model (its parameters are the start of the fit, or trusted in `Known`).
     - `train`: the training record(s).
-    - `validation`: held-out record(s); default the last `holdout_fraction` of each training record.
+    - `validation`: held-out record(s); default the last `selection.holdout_fraction` of each training record.
     - `candidates`: terms at neutral values (default `default_candidates(system)`: the contract's
       vocabulary).
     - `mode`: `Refit()` (default) or `Known()`.
-    - `horizons_s`: where the held-out simulation error is reported.
-    - `reference_horizon_s`: where it is judged; default the *predictability horizon*: the
-      longest horizon at which the nominal model's open-loop position error on the training runs
-      is at most `horizon_fraction` of the positions' spread (see `predictability_horizon`).
-    - `fit_window_s`: window length of the simulation-error fits; default from the data: 2.5 times
-      the starting model's predictability horizon on the training runs, between 0.25 s and 1 s
-      (a fit over windows longer than the model can predict fits chaos, not physics).
-    - `max_terms`: at most this many causes are selected.
-    - `alpha`, `min_gain`: significance level and smallest held-out gain that counts.
-    - `shortlist`: candidates refitted jointly per round.
-    - `system_name`: the contract name for the report (default the records' `system`).
-    - `discovery`: search for a term beyond the vocabulary when structure is left (default on).
-    - `velocities`: `"auto"` (default): for a system whose states are joint positions and velocities,
-      each measured velocity that carries white noise larger than the bias of a local cubic fit of
-      its positions (Savitzky-Golay over half a period of the signal band's edge; see
-      `dynax._identify._defaults.with_velocities_from_positions`) is replaced by that fit's
-      derivative before anything is fitted or compared: the windows then start from better
-      velocities and are compared with them, so the held-out errors measure the model, not the
-      velocity sensor. `"measured"` keeps the records as they are. The report's
-      `data.velocities` says which was used.
-    - `cross_fit`: with three or more training runs (default on), each training run is also held out
-      in turn (with two, each fold would fit one run alone, a pessimistic judge of every added term;
-      the report's notes say so): the screening's regression and every refit of a round are repeated on the other
-      training runs, the left-out run is simulated over the reference horizon, and the paired test and
-      the run agreement pool those windows with the held-out runs' (leave-one-run-out
-      cross-validation; see `_cross_fit`). A short held-out run (a few seconds of a chaotic swing)
-      then no longer decides alone; each round costs one more batch of fits per training run. The
-      reported gains and error curves stay those of the held-out runs; `report.runs` lists the
-      cross-fitted runs too. `False` tests on the held-out runs alone.
+    - `horizons`: how far it simulates (`dynax.Horizons`): where the held-out simulation error is reported
+      (`horizons_s`) and judged (`reference_s`; default the predictability horizon of the nominal model on
+      the training runs, at `fraction` of the positions' spread), and the fit windows (`fit_window_s`).
+    - `selection`: how causes are tested and chosen (`dynax.Selection`): at most `max_terms` causes, the
+      test's level `alpha` and smallest gain `min_gain`, `shortlist` candidates refitted jointly per round,
+      `cross_fit`, `discovery`, the `holdout_fraction` held out without validation records, and the
+      `velocities` the records are compared with.
     - `progress`: a callable is called with a line of text at each stage (e.g. `print`, or a
-      `dynax.ProgressBar`'s `say`); otherwise a progress bar on stderr, one step per stage and per
+      `dynax.internal.ProgressBar`'s `say`); otherwise a progress bar on stderr, one step per stage and per
       candidate batch: `True` / `False` force it on / off, `None` (default) draws it when stderr is a
       terminal (see `dynax.internal.progress_mode`; the CLI's `--quiet` silences it).
 
@@ -394,65 +363,25 @@ def diagnose(
         Analysis*, 3rd ed., 1998, ch. 15 (forward selection).
     """
     warn_if_float32("diagnosis")  # the float64 policy: say so, once, naming the switch
+    check_arguments(system, mode, horizons, selection)
     if isinstance(system, Quadrotor):  # its body-frame form, the multirotor causes (`_quadrotor.py`)
         return diagnose_quadrotor(
             system,
             train,
             validation,
-            diagnose=diagnose,
             candidates=candidates,
             mode=mode,
-            horizons_s=None if tuple(horizons_s) == (0.1, 0.25, 0.5, 1.0, 2.0) else horizons_s,
-            reference_horizon_s=reference_horizon_s,
-            horizon_fraction=horizon_fraction,
-            fit_window_s=fit_window_s,
-            max_terms=max_terms,
-            alpha=alpha,
-            min_gain=min_gain,
-            holdout_fraction=holdout_fraction,
-            shortlist=shortlist,
-            system_name=system_name,
-            discovery=discovery,
-            velocities=velocities,
-            cross_fit=cross_fit,
+            horizons=horizons,
+            selection=selection,
             progress=progress,
         )
-    check_arguments(system, mode, max_terms)
-    if velocities not in ("auto", "measured"):
-        raise UsageError(f"diagnose: `velocities` must be 'auto' or 'measured', got {velocities!r}")
-    options = Options(
-        horizons_s,
-        reference_horizon_s,
-        horizon_fraction,
-        fit_window_s,
-        max_terms,
-        alpha,
-        min_gain,
-        holdout_fraction,
-        shortlist,
-        discovery,
-        velocities,
-        cross_fit,
-    )
     _warn_data_faults(train, validation)
     with stage_reporter(progress) as say:
-        problem = prepare_problem(system, train, validation, candidates, mode, options)
-        nominal, yard, current, table, last, rounds = forward_selection(problem, say)
-        judgement = _judge(problem, nominal, yard, current, last, say)
+        problem = prepare_problem(system, train, validation, candidates, mode, horizons, selection)
+        forward = forward_selection(problem, say)
+        judgement = _judge(problem, forward, say)
         say("validation: fit % and residual tests of the nominal and the extended model ...")
-        return _report(
-            problem,
-            nominal,
-            yard,
-            judgement,
-            table,
-            last,
-            rounds,
-            mode=mode,
-            system_name=system_name,
-            train=train,
-            validation=validation,
-        )
+        return _report(problem, forward, judgement, mode=mode, train=train, validation=validation)
 
 
 def _warn_data_faults(train, validation):

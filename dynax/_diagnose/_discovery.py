@@ -31,6 +31,7 @@ cause explains). For each coordinate of a manipulator:
 """
 
 from collections.abc import Callable, Sequence
+from typing import cast
 
 import equinox as eqx
 import jax
@@ -44,7 +45,7 @@ from .._model._extensions import Discovered, Extended
 from ._fit import nominal_parameter_names
 from ._library import evaluate_features, feature_library, is_angle, named_equivalent, physical_readings, search_period
 from ._residuals import acceleration_residuals, predicted_accelerations, sg_window, velocity_indices
-from ._sparse import group_cv_r2, sparse_search
+from ._sparse import group_cv_r2, sparse_search, SparseStatistics, Stability
 
 
 class Proposal(eqx.Module):
@@ -154,30 +155,52 @@ def _project_out(nuisance, *arrays):
     return tuple(a - Q @ (Q.T @ a) for a in arrays)
 
 
-def propose(
-    model,
-    records,
-    *,
-    refit: Sequence[str] = (),
-    vocabulary: Sequence[str] = (),
-    absorbed: Sequence[str] = (),
-    max_terms: int = 3,
-    min_cv_r2: float = 0.01,
-    n_pieces: int = 5,
-    seed: int = 0,
-) -> list[Proposal]:
+class DiscoverySearch(eqx.Module):
+    """What the discovery search knows of the diagnosis, and how it searches (steps 1-3 of the module docs).
+
+    **Fields:** `refit` (nominal parameters refitted with a discovered term: their directions are projected
+    out); `vocabulary` (labels `cause@where` of the named causes that were tested: their features are given
+    back, the named cause wins); `absorbed` (labels of named causes a refit reproduces exactly: their features
+    are left out of the library); `max_terms` (features per coordinate); `min_cv_r2` (the smallest
+    cross-validated share of the force residual a proposal must explain); `n_pieces` (a single run is cut into
+    this many contiguous pieces for cross-validation); `seed`.
+    """
+
+    refit: tuple[str, ...] = eqx.field(default=(), converter=tuple, static=True)
+    vocabulary: tuple[str, ...] = eqx.field(default=(), converter=tuple, static=True)
+    absorbed: tuple[str, ...] = eqx.field(default=(), converter=tuple, static=True)
+    max_terms: int = eqx.field(default=3, static=True)
+    min_cv_r2: float = eqx.field(default=0.01, static=True)
+    n_pieces: int = eqx.field(default=5, static=True)
+    seed: int = eqx.field(default=0, static=True)
+
+
+class HeldOutTest(eqx.Module):
+    """The held-out test a discovered term must pass: the caller's, the one its named causes passed.
+
+    **Fields:** `held_out` (`held_out(model) -> (window_scores, rmse_curve, rmse_at_reference)`, the caller's
+    held-out simulation error); `significance` (`significance(scores_reference, scores_new) -> p_value`,
+    one-sided); `alpha` and `min_gain` (the level and the smallest gain at the reference horizon).
+    """
+
+    held_out: Callable = eqx.field(static=True)
+    significance: Callable = eqx.field(static=True)
+    alpha: float = eqx.field(default=0.01, static=True)
+    min_gain: float = eqx.field(default=0.05, static=True)
+
+
+def propose(model, records, search: DiscoverySearch = DiscoverySearch()) -> list[Proposal]:
     """The discovery search on the training `records` (steps 1-3 of the module docs), one `Proposal` per coordinate that
     has one.
 
-    **Arguments:** `model` (the current model: nominal, or `Extended` with named causes);
-    `records` (training trajectories); `refit` (nominal parameters refitted with a discovered term:
-    their directions are projected out); `absorbed` (labels of named causes a refit reproduces
-    exactly: their features are left out of the library); `vocabulary` (labels `cause@where` of the named causes that
-    were tested: their features are given back); `max_terms` per coordinate; `min_cv_r2`;
-    `n_pieces` (a single run is cut into this many contiguous pieces for cross-validation); `seed`.
+    **Arguments:** `model` (the current model: nominal, or `Extended` with named causes); `records` (training
+    trajectories); `search` (a `DiscoverySearch`: what the diagnosis refits, named and set aside, and the
+    search's bounds).
 
     **Returns:** proposals, the best explained coordinate first.
     """
+    refit, vocabulary, absorbed = search.refit, search.vocabulary, search.absorbed
+    max_terms, min_cv_r2, n_pieces, seed = search.max_terms, search.min_cv_r2, search.n_pieces, search.seed
     system = model.system if isinstance(model, Extended) else model
     if not system.joints:  # forces at joints: only a manipulator has them
         return []
@@ -202,8 +225,9 @@ def propose(
         # when the mass is refitted): in simulation it is not identifiable either.
         inert |= np.asarray([named_equivalent(system, f, j) in absorbed for f in library])
         phi[:, inert] = 0.0
-        fit = sparse_search(phi, y, groups, max_terms=max_terms, block=block, seed=seed + j)
-        chosen = list(fit.selected)
+        fit = sparse_search(phi, y, groups, max_terms=max_terms, stability=Stability(block=block, seed=seed + j))
+        stats = cast(SparseStatistics, fit.statistics)
+        chosen = list(stats.selected)
         deferred = []
         for k in list(chosen):
             label = named_equivalent(system, library[k], j)
@@ -220,8 +244,8 @@ def propose(
         if any(k in chosen for k in periodic):  # a phase needs both halves of the pair
             chosen = sorted(set(chosen) | set(periodic))
         if not chosen:
-            if deferred and fit.cv_r2 >= min_cv_r2:  # the search points at a named cause: say so, propose nothing
-                proposals.append(Proposal(j, (), np.zeros(0), (), float(fit.cv_r2), tuple(deferred), None))
+            if deferred and stats.cv_r2 >= min_cv_r2:  # the search points at a named cause: say so, propose nothing
+                proposals.append(Proposal(j, (), np.zeros(0), (), float(stats.cv_r2), tuple(deferred), None))
             continue
         cols = phi[:, chosen]
         coef = np.linalg.lstsq(cols, y, rcond=None)[0]
@@ -229,15 +253,15 @@ def propose(
         cv_r2, per_group = group_cv_r2(cols, y, groups, lambda Z, t: np.linalg.lstsq(Z, t, rcond=None)[0])
         # It must predict left-out runs: overall, and in most of them (a law, not one run's accident).
         if cv_r2 < min_cv_r2 or np.mean(per_group > 0) < 0.8:
-            if deferred and fit.cv_r2 >= min_cv_r2:
-                proposals.append(Proposal(j, (), np.zeros(0), (), float(fit.cv_r2), tuple(deferred), None))
+            if deferred and stats.cv_r2 >= min_cv_r2:
+                proposals.append(Proposal(j, (), np.zeros(0), (), float(stats.cv_r2), tuple(deferred), None))
             continue
         proposals.append(
             Proposal(
                 channel=j,
                 features=tuple(library[k] for k in chosen),
                 coefficients=coef,
-                frequency=tuple(float(fit.frequency[k]) for k in chosen),
+                frequency=tuple(float(stats.frequency[k]) for k in chosen),
                 cv_r2=float(cv_r2),
                 deferred=tuple(deferred),
                 period=period if any(library[k].kind.startswith("periodic") for k in chosen) else None,
@@ -328,6 +352,19 @@ class Discovery(eqx.Module):
         }
 
 
+class _SimulationRefit(eqx.Module):
+    """The simulation refit of a model with discovered terms: on the training `records`, the nominal parameters
+    `refit`, windows `fit_window_s` long, states weighted by `state_scale`."""
+
+    records: list
+    refit: tuple
+    fit_window_s: float
+    state_scale: np.ndarray
+
+    def __call__(self, model, terms):
+        return _fit_with(model, terms, self.records, self.refit, self.fit_window_s, self.state_scale)
+
+
 def _fit_with(model, terms, records, refit, fit_window_s, state_scale):
     """Refit `model` + `terms` through simulation: refitted nominal parameters, named and discovered coefficients."""
     system = model.system if isinstance(model, Extended) else model
@@ -353,14 +390,8 @@ def discover(
     train,
     validation,
     *,
-    held_out: Callable,
-    significance: Callable,
-    refit: Sequence[str] = (),
-    vocabulary: Sequence[str] = (),
-    absorbed: Sequence[str] = (),
-    max_terms: int = 3,
-    alpha: float = 0.01,
-    min_gain: float = 0.05,
+    test: HeldOutTest,
+    search: DiscoverySearch = DiscoverySearch(),
     fit_window_s: float = 1.0,
     current: tuple | None = None,
     progress: Callable[[str], None] | None = None,
@@ -374,16 +405,13 @@ def discover(
 
     - `model`: the current model (a nominal manipulator, or `Extended` with the named causes found).
     - `train`, `validation`: lists of `Trajectory` (training: search and refit; validation: the test).
-    - `held_out`: `held_out(model) -> (window_scores, rmse_curve, rmse_at_reference)`, the
-      caller's held-out simulation error (the same one the named causes were judged by).
-    - `significance`: `significance(scores_reference, scores_new) -> p_value`, one-sided.
-    - `refit`: names of the nominal parameters refitted with the new term (as in the diagnosis mode).
-    - `vocabulary`: labels `cause@where` of the named causes tested (they win over equivalent features).
-    - `absorbed`: labels of the named causes the refit reproduces exactly (their features are left out).
-    - `max_terms`: bound on the features of each discovered term.
-    - `alpha`, `min_gain`: the held-out test's level and smallest gain.
+    - `test`: the `HeldOutTest` (the caller's held-out simulation error and significance, its level and
+      smallest gain).
+    - `search`: the `DiscoverySearch` (the nominal parameters refitted with the new term, as in the diagnosis
+      mode; the named causes tested, which win over equivalent features, and those the refit reproduces
+      exactly; the bound on the features of each discovered term).
     - `fit_window_s`: segment length of the simulation refit [s].
-    - `current`: `held_out(model)` if the caller has it already.
+    - `current`: `test.held_out(model)` if the caller has it already.
     - `progress`: called with a line of text at each stage.
 
     **Returns:** a `Discovery`.
@@ -395,7 +423,7 @@ def discover(
     if not system.joints:
         return empty(f"Discovery searches forces at the joints of a manipulator; {type(system).__name__} is not one.")
     say("discovery: sparse search of the one-step force residuals over the feature library ...")
-    searched = propose(model, train, refit=refit, vocabulary=vocabulary, absorbed=absorbed, max_terms=max_terms)
+    searched = propose(model, train, search)
     for p in searched:
         if p.deferred:
             notes.append(
@@ -414,41 +442,27 @@ def discover(
     say("discovery: proposed " + "; ".join(t.formula(system) for t in terms) + "; refitting through simulation ...")
     xs_train = np.concatenate([np.asarray(r.xs) for r in train])
     state_scale = np.maximum(xs_train.std(axis=0), 1e-9)
-    scores_cur, _, rmse_cur = current if current is not None else held_out(model)
-    test = _refit_and_test(
-        model,
-        terms,
-        proposals,
-        train,
-        refit,
-        fit_window_s,
-        state_scale,
-        held_out,
-        significance,
-        scores_cur,
-        rmse_cur,
-        alpha,
-        min_gain,
-        say,
-    )
-    if not test.passed:
+    current = current if current is not None else test.held_out(model)
+    refit = _SimulationRefit(train, search.refit, fit_window_s, state_scale)
+    outcome = _refit_and_test(model, terms, proposals, refit, test, current, say)
+    if not outcome.passed:
         notes.append(
             "The discovery search proposed "
-            + "; ".join(t.formula(system) for t in test.terms)
-            + f", but refitted through simulation it did not pass the held-out test (gain {test.gain:.0%}, "
-            f"p = {test.p_value:.2g}); no discovered term is kept."
+            + "; ".join(t.formula(system) for t in outcome.terms)
+            + f", but refitted through simulation it did not pass the held-out test (gain {outcome.gain:.0%}, "
+            f"p = {outcome.p_value:.2g}); no discovered term is kept."
         )
-        return Discovery(False, model, [], test.proposals, test.gain, test.p_value, None, notes)
+        return Discovery(False, model, [], outcome.proposals, outcome.gain, outcome.p_value, None, notes)
     n_named = len(model.terms) if isinstance(model, Extended) else 0
-    findings = _findings(system, test, n_named, held_out)
+    findings = _findings(system, outcome, n_named, test.held_out)
     return Discovery(
         True,
-        test.fitted,
+        outcome.fitted,
         findings,
-        test.proposals,
-        test.gain,
-        test.p_value,
-        (test.scores, test.curve, test.rmse),
+        outcome.proposals,
+        outcome.gain,
+        outcome.p_value,
+        (outcome.scores, outcome.curve, outcome.rmse),
         notes,
     )
 
@@ -459,7 +473,7 @@ class _Test(eqx.Module):
     passed: bool
     terms: list
     proposals: list
-    fitted: object
+    fitted: eqx.Module
     stds: list
     gain: float
     p_value: float
@@ -468,27 +482,15 @@ class _Test(eqx.Module):
     rmse: float
 
 
-def _refit_and_test(
-    model,
-    terms,
-    proposals,
-    train,
-    refit,
-    fit_window_s,
-    state_scale,
-    held_out,
-    significance,
-    scores_cur,
-    rmse_cur,
-    alpha,
-    min_gain,
-    say,
-) -> _Test:
-    """Refit the proposed terms through simulation and test them on held-out data; where several pass together,
-    drop each that does not carry its weight (dropping it costs less than `min_gain`) and refit once more."""
+def _refit_and_test(model, terms, proposals, refit: _SimulationRefit, test: HeldOutTest, current, say) -> _Test:
+    """Refit the proposed terms through simulation and test them on held-out data against `current` (the current
+    model's `test.held_out`); where several pass together, drop each that does not carry its weight (dropping it
+    costs less than `test.min_gain`) and refit once more."""
+    held_out, significance, alpha, min_gain = test.held_out, test.significance, test.alpha, test.min_gain
+    scores_cur, _, rmse_cur = current
     n_named = len(model.terms) if isinstance(model, Extended) else 0
     for _ in range(2):
-        fitted, stds = _fit_with(model, terms, train, refit, fit_window_s, state_scale)
+        fitted, stds = refit(model, terms)
         scores_new, curve_new, rmse_new = held_out(fitted)
         gain = float(1 - rmse_new / rmse_cur) if np.isfinite(rmse_cur) and rmse_cur > 0 else 0.0
         p_value = float(significance(scores_cur, scores_new))

@@ -4,6 +4,7 @@ select the best admissible one.
 """
 
 import dataclasses
+import functools
 import time
 
 import jax.numpy as jnp
@@ -17,7 +18,7 @@ from ._problem import Problem
 from ._records import reference_horizon
 from ._residuals import acceleration_residuals, Structure, structure_test
 from ._screening import screen
-from ._selection import choose, choose_shortlist, judge_round, look_alike_tests
+from ._selection import choose, choose_shortlist, judge_round, look_alike_tests, Refitted
 from ._summaries import candidate_table, rmse_curve, round_summary, window_scores
 
 
@@ -67,6 +68,18 @@ class Current:
     cv_errors: np.ndarray
     selected: list = dataclasses.field(default_factory=list)
     findings: list = dataclasses.field(default_factory=list)
+
+
+@dataclasses.dataclass(frozen=True)
+class Round:
+    """Where a round starts: its index, the current model's slots and parameters (every refit of the round starts
+    from them), the candidates remaining, and their steps from the screening."""
+
+    index: int
+    slots: np.ndarray
+    p: np.ndarray
+    remaining: list
+    deltas: np.ndarray | list
 
 
 @dataclasses.dataclass
@@ -183,14 +196,13 @@ def _screen(problem: Problem, current_slots, current_p, remaining, round_, say):
         problem.family,
         current_p[:n_nom],
         np.asarray(coefficients),
-        problem.family.refit,
         problem.train,
         problem.validation,
         remaining,
         acceleration_residuals,
         cross_fit=bool(problem.folds),
     )
-    short = choose_shortlist(problem.look_alikes, remaining, gains, problem.options.shortlist)
+    short = choose_shortlist(problem.look_alikes, remaining, gains, problem.selection.shortlist)
     return gains, deltas, with_rest_evidence(problem, remaining, gains, short) if round_ == 0 else short
 
 
@@ -204,7 +216,7 @@ def with_rest_evidence(problem: Problem, remaining, gains, short):
     (1 to 2 % on records that rest a sixth of the time, whose refit then gains 75 %). In later rounds it is
     screened as the others are: the evidence was read against the nominal model, and a slot held for it in every
     round would push out candidates a later round needs."""
-    n = problem.options.shortlist
+    n = problem.selection.shortlist
     static = [k for k in remaining if problem.candidates[k].cause == "stiction" and k not in short]
     static = sorted(static, key=lambda k: -gains[remaining.index(k)])[: max(n - 2, 0)]
     if not static:
@@ -213,39 +225,37 @@ def with_rest_evidence(problem: Problem, remaining, gains, short):
     return kept[: max(n - len(static), 0)] + static
 
 
-def _refit(
-    problem: Problem, current_slots, current_p, short, remaining, deltas, round_, say
-) -> tuple[np.ndarray, _Batch]:
+def _refit(problem: Problem, round_: Round, short, say) -> tuple[np.ndarray, _Batch]:
     """Refit: the current model (member 0) and each shortlisted candidate added to it, jointly with the nominal
     parameters."""
     if short:
         say(
-            f"round {round_ + 1}: simulation-error refit of "
-            + ("the nominal model with " if round_ == 0 else "the current model with ")
+            f"round {round_.index + 1}: simulation-error refit of "
+            + ("the nominal model with " if round_.index == 0 else "the current model with ")
             + ", ".join(problem.candidates[k].label(problem.system) for k in short)
             + " (one batch) ..."
         )
-    shortlist = problem.options.shortlist
+    shortlist = problem.selection.shortlist
     new = np.asarray([-1] + short + [-1] * (shortlist - len(short)))
-    p_init = np.tile(current_p, (shortlist + 1, 1))
+    p_init = np.tile(round_.p, (shortlist + 1, 1))
     for i, k in enumerate(new):
         if k >= 0:
             start = problem.inits[k] - problem.neutral[k]
-            p_init[i, -1] = _start_value(problem, k, deltas[remaining.index(k)], start)
-    return new, _fit_batch(problem, np.tile(current_slots, (shortlist + 1, 1)), new, p_init, say)
+            p_init[i, -1] = _start_value(problem, k, round_.deltas[round_.remaining.index(k)], start)
+    return new, _fit_batch(problem, np.tile(round_.slots, (shortlist + 1, 1)), new, p_init, say)
 
 
 def _fit_nominal(problem: Problem, batch: _Batch, say) -> tuple[AbstractSystem, Yardstick]:
     """Fit the nominal model (member 0 of the first batch) and choose the reference horizon from its training error."""
-    model = problem.model_of(-np.ones(problem.options.max_terms, int), batch.p[0]).system
+    model = problem.model_of(-np.ones(problem.selection.max_terms, int), batch.p[0]).system
     _note_moved(problem, batch.p[0])
-    o = problem.options
+    given = problem.horizon_settings
     horizon = reference_horizon(
         model,
         problem.train,
         problem.candidates_s,
-        o.reference_horizon_s,
-        o.horizon_fraction,
+        given.reference_s,
+        given.fraction,
         problem.val_stride,
         problem.position_index,
         problem.dt,
@@ -411,9 +421,7 @@ def _accept(problem: Problem, current: Current, finding: dict, results, batch: _
     )
 
 
-def _complete_look_alikes(
-    problem, yard, cur_slots, cur_p, short, remaining, deltas, batch, scores, results, judge, round_, say
-):
+def _complete_look_alikes(problem: Problem, yard: Yardstick, round_: Round, fits: Refitted, batch: _Batch, judge, say):
     """Refit the look-alikes of the round's best admissible candidate that screening left off the shortlist.
 
     A finding's confidence rests on beating its look-alikes (same place, same group of causes) in the
@@ -421,64 +429,81 @@ def _complete_look_alikes(
     one more batch of fits (the same compiled batch), the round is judged again over both batches
     (Benjamini-Hochberg over the same remaining candidates: an untested one counted as p = 1 before),
     and if the best changes, its own missing look-alikes are added once more.
+
+    **Returns:** `(fits, batch, results)`: the round's refitted configurations, their batch, and `judge(fits)`.
     """
     system, candidates = problem.system, problem.candidates
+    results = judge(fits)
     for _ in range(2):
         admissible = [k for k in results if results[k]["significant"]]
         if not admissible:
             break
         best = choose(problem, results, admissible)
-        missing = [k for k in problem.look_alikes(best) if k in remaining and k not in results]
-        missing = missing[: problem.options.shortlist]
+        missing = [k for k in problem.look_alikes(best) if k in round_.remaining and k not in results]
+        missing = missing[: problem.selection.shortlist]
         if not missing:
             break
         say(
-            f"round {round_ + 1}: {candidates[best].label(system)} leads; refitting its look-alike(s) "
+            f"round {round_.index + 1}: {candidates[best].label(system)} leads; refitting its look-alike(s) "
             f"{', '.join(candidates[k].label(system) for k in missing)}, which screening left out ..."
         )
-        new, more = _refit(problem, cur_slots, cur_p, missing, remaining, deltas, round_, say)
-        more = _cross_fit(problem, yard, cur_slots, new, more, say)
-        n = 1 + len(short)
+        new, more = _refit(problem, round_, missing, say)
+        more = _cross_fit(problem, yard, round_.slots, new, more, say)
+        n = 1 + len(fits.short)
         batch = _Batch(
             *(
                 np.concatenate([getattr(batch, f.name)[:n], getattr(more, f.name)[1 : 1 + len(missing)]])
                 for f in dataclasses.fields(_Batch)
             )
         )
-        scores = _scores(problem, yard, batch.errors, batch.cv_errors)
-        short = short + missing
-        results = judge(short, batch, scores)
-    return short, batch, scores, results
+        fits = _refitted(problem, yard, fits.short + missing, batch)
+        results = judge(fits)
+    return fits, batch, results
 
 
-def forward_selection(problem: Problem, say):
-    """Fit the nominal model, show what is wrong, then per round screen, refit and select.
+def _refitted(problem: Problem, yard: Yardstick, short, batch: _Batch) -> Refitted:
+    """The `Refitted` configurations of a batch, scored on the held-out (and cross-fitted) windows."""
+    return Refitted(short, batch.p, batch.std, batch.errors, _scores(problem, yard, batch.errors, batch.cv_errors))
 
-    **Returns:** `(nominal, yardstick, current, candidate_table, last_round_results, rounds)`; `rounds`
-    one `round_summary` per round.
-    """
-    o = problem.options
+
+@dataclasses.dataclass(frozen=True)
+class Forward:
+    """What forward selection leaves: the fitted `nominal` model, the `yard`stick, the `current` model reached, the
+    first round's candidate `table`, the `last` round's results (`judge_round`), and one `round_summary` per round."""
+
+    nominal: Nominal
+    yard: Yardstick
+    current: Current
+    table: list
+    last: dict
+    rounds: list
+
+
+def forward_selection(problem: Problem, say) -> Forward:
+    """Fit the nominal model, show what is wrong, then per round screen, refit and select."""
+    o = problem.selection
     slots = -np.ones(o.max_terms, int)
     p0 = np.concatenate([np.asarray(nominal_values(problem.system, problem.names), float), np.zeros(o.max_terms + 1)])
     nominal = yard = current = None
     table, last, rounds = [], {}, []
-    for round_ in range(o.max_terms):
+    for index in range(o.max_terms):
         remaining = [k for k in problem.searchable if current is None or k not in current.selected]
-        if not remaining and round_ > 0:
+        if not remaining and index > 0:
             break
         cur_slots, cur_p = (slots, p0) if current is None else (current.slots, current.p)
-        gains, deltas, short = _screen(problem, cur_slots, cur_p, remaining, round_, say) if remaining else ([], [], [])
-        new, batch = _refit(problem, cur_slots, cur_p, short, remaining, deltas, round_, say)
-        if round_ == 0:
+        gains, deltas, short = _screen(problem, cur_slots, cur_p, remaining, index, say) if remaining else ([], [], [])
+        round_ = Round(index, cur_slots, cur_p, remaining, deltas)
+        new, batch = _refit(problem, round_, short, say)
+        if index == 0:
             model, yard = _fit_nominal(problem, batch, say)
             batch = _cross_fit(problem, yard, cur_slots, new, batch, say)
             nominal = _show_what_is_wrong(problem, model, batch, yard, say)
-            scores = _scores(problem, yard, batch.errors, batch.cv_errors)
+            fits = _refitted(problem, yard, short, batch)
             current = Current(
                 slots=slots,
                 p=batch.p[0].copy(),
                 std=batch.std[0].copy(),
-                score=scores[0],
+                score=fits.scores[0],
                 errors=batch.errors[0],
                 rmse=nominal.rmse,
                 structure=nominal.structure,
@@ -486,47 +511,27 @@ def forward_selection(problem: Problem, say):
             )
         else:
             batch = _cross_fit(problem, yard, cur_slots, new, batch, say)
-            scores = _scores(problem, yard, batch.errors, batch.cv_errors)
+            fits = _refitted(problem, yard, short, batch)
         if not short:
             break
-        judge = lambda short, batch, scores: judge_round(  # noqa: E731
-            problem.physical,
-            short,
-            remaining,
-            current.selected,
-            len(problem.names),
-            batch.p,
-            batch.std,
-            batch.errors,
-            scores,
-            current.score,
-            yard.window_runs,
-            yard.overlap,
-            o.alpha,
-            o.min_gain,
-            yard.steps,
-            problem.position_index,
-            yard.n_val,
-            problem.static_level,
-        )
-        results = judge(short, batch, scores)
-        short, batch, scores, results = _complete_look_alikes(
-            problem, yard, cur_slots, cur_p, short, remaining, deltas, batch, scores, results, judge, round_, say
-        )
+        assert yard is not None and current is not None  # the first round sets them
+        judge = functools.partial(judge_round, problem, yard, current, remaining)
+        fits, batch, results = _complete_look_alikes(problem, yard, round_, fits, batch, judge, say)
         last = results
-        if round_ == 0:
+        if index == 0:
             table = candidate_table(
                 problem.system, problem.candidates, remaining, gains, results, problem.neutral, batch.cost
             )
-        finding = _select(problem, yard, current, results, scores, round_, say)
-        rounds.append(round_summary(problem, yard, round_, current, remaining, results, finding))
+        finding = _select(problem, yard, current, results, fits.scores, index, say)
+        rounds.append(round_summary(problem, yard, index, current, remaining, results, finding))
         if finding is None:
             break
-        current = _accept(problem, current, finding, results, batch, scores, say)
+        current = _accept(problem, current, finding, results, batch, fits.scores, say)
     else:
         if rounds:
             rounds[-1]["outcome"] += f"; max_terms = {o.max_terms} reached"
-    return nominal, yard, current, table, last, rounds
+    assert nominal is not None and yard is not None and current is not None  # the first round always runs
+    return Forward(nominal, yard, current, table, last, rounds)
 
 
 def _start_value(problem: Problem, k: int, delta_screened, start):

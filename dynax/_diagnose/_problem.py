@@ -1,8 +1,7 @@
-"""The problem one diagnosis solves: the modes (`Refit`, `Known`), the options, and the prepared
-records, candidate family, identifiable candidates and windows (`prepare_problem`, step 0 of `diagnose`).
+"""The problem one diagnosis solves: the modes (`Refit`, `Known`), the settings (`Horizons`, `Selection`), and the
+prepared records, candidate family, identifiable candidates and windows (`prepare_problem`, step 0 of `diagnose`).
 """
 
-from collections.abc import Sequence
 import dataclasses
 
 import equinox as eqx
@@ -26,6 +25,7 @@ from ._candidates import (
 from ._fit import Family, make_windows, nominal_parameter_names, nominal_values, Windows
 from ._records import fit_window, horizon_grid, prepare_records, velocity_estimates
 from ._selection import on_physical_side
+from ._settings import DEFAULT_HORIZONS_S, Horizons, Selection
 
 # A static friction level counts as stiction when it stands this share above the joint's Coulomb level (and two
 # standard errors): a breakaway within a tenth of the sliding level is not told from Coulomb friction by data.
@@ -66,24 +66,6 @@ class Known(eqx.Module):
 
 
 @dataclasses.dataclass
-class Options:
-    """The knobs of one diagnosis (see `diagnose`'s arguments)."""
-
-    horizons_s: Sequence[float]
-    reference_horizon_s: float | None
-    horizon_fraction: float
-    fit_window_s: float | None
-    max_terms: int
-    alpha: float
-    min_gain: float
-    holdout_fraction: float
-    shortlist: int
-    discovery: bool
-    velocities: str = "auto"
-    cross_fit: bool = True
-
-
-@dataclasses.dataclass
 class Problem:
     """Everything fixed for one diagnosis: records, candidates, the candidate family, windows."""
 
@@ -107,7 +89,8 @@ class Problem:
     val_stride: int
     horizons: np.ndarray
     candidates_s: np.ndarray
-    options: Options
+    horizon_settings: Horizons
+    selection: Selection
     velocities: str = "as measured"
     # The training records each held out in turn (leave-one-run-out cross-fitting); empty when off.
     folds: tuple = ()
@@ -140,7 +123,7 @@ class Problem:
 
     @property
     def n_params(self) -> int:
-        return len(self.names) + self.options.max_terms + 1
+        return len(self.names) + self.selection.max_terms + 1
 
     def physical(self, k: int, delta: float) -> bool:
         """Whether candidate `k` at `delta` from neutral is physical: on the physical side of neutral
@@ -188,13 +171,15 @@ class Problem:
         return self.family.model_for(jnp.asarray(slots), jnp.asarray(-1), jnp.asarray(p, self.family.neutral.dtype))
 
 
-def check_arguments(system, mode, max_terms) -> None:
+def check_arguments(system, mode, horizons, selection) -> None:
     if not isinstance(system, AbstractSystem) or isinstance(system, Extended):
         raise UsageError(f"diagnose: `system` must be a nominal dynax system, got {type(system).__name__}")
     if not isinstance(mode, (Refit, Known)):
         raise UsageError(f"diagnose: `mode` must be Refit() or Known(), got {type(mode).__name__}")
-    if max_terms < 1:
-        raise UsageError(f"diagnose: `max_terms` must be at least 1, got {max_terms}")
+    if not isinstance(horizons, Horizons):
+        raise UsageError(f"diagnose: `horizons` must be a dynax.Horizons, got {type(horizons).__name__}")
+    if not isinstance(selection, Selection):
+        raise UsageError(f"diagnose: `selection` must be a dynax.Selection, got {type(selection).__name__}")
 
 
 def names_to_refit(system, mode) -> tuple[str, ...]:
@@ -273,13 +258,15 @@ def _identifiable(system, candidates, family, refit_names, partners, mode, sensi
     return searchable, not_identifiable
 
 
-def prepare_problem(system, train, validation, candidates, mode, options: Options) -> Problem:
+def prepare_problem(system, train, validation, candidates, mode, horizons: Horizons, selection: Selection) -> Problem:
     """Step 0: records on one grid, the candidates and their identifiability, the training and held-out windows."""
     notes: list[str] = []
-    train_records, validation_records, dt = prepare_records(system, train, validation, options.holdout_fraction, notes)
+    train_records, validation_records, dt = prepare_records(
+        system, train, validation, selection.holdout_fraction, notes
+    )
     _note_record_differences(system, train_records + (validation_records if validation is not None else []), notes)
     train_records, validation_records, velocities = velocity_estimates(
-        system, train_records, validation_records, options.velocities, notes
+        system, train_records, validation_records, selection.velocities, notes
     )
     not_proposed = stiction_not_proposed(system, train_records) if candidates is None else []
     candidates = tuple(default_candidates(system, train_records) if candidates is None else candidates)
@@ -296,15 +283,16 @@ def prepare_problem(system, train, validation, candidates, mode, options: Option
         family, family.refit, [k for k in searchable if partners[k] is None], sensitivities=sensitivities
     )
     _note_held(system, family, refit_names, mode, notes)
-    fit_window_s = fit_window(system, train_records, options.fit_window_s, options.horizon_fraction, dt, notes)
+    fit_window_s = fit_window(system, train_records, horizons.fit_window_s, horizons.fraction, dt, notes)
     n_fit = max(2, int(round(fit_window_s / dt)))
-    horizons, candidates_s = horizon_grid(
-        options.horizons_s, options.reference_horizon_s, train_records, validation_records, notes
+    grid, candidates_s = horizon_grid(
+        horizons.reported(DEFAULT_HORIZONS_S), horizons.reference_s, train_records, validation_records, notes
     )
     val_stride = max(1, int(round(0.05 / dt)))
-    val_windows = make_windows(validation_records, int(round(horizons.max() / dt)), val_stride)
-    folds = tuple(range(len(train_records))) if options.cross_fit and len(train_records) >= MIN_CROSS_FIT_RUNS else ()
-    if options.cross_fit and len(train_records) == MIN_CROSS_FIT_RUNS - 1:
+    val_windows = make_windows(validation_records, int(round(grid.max() / dt)), val_stride)
+    cross_fit = selection.cross_fit
+    folds = tuple(range(len(train_records))) if cross_fit and len(train_records) >= MIN_CROSS_FIT_RUNS else ()
+    if cross_fit and len(train_records) == MIN_CROSS_FIT_RUNS - 1:
         notes.append(
             f"Not cross-fitted: with {len(train_records)} training runs each fold would fit one run alone, and "
             "a model refitted on one run is judged for that run's excitation (two-fold cross-validation "
@@ -316,7 +304,7 @@ def prepare_problem(system, train, validation, candidates, mode, options: Option
             f"Cross-fitting: besides the held-out runs, each of the {len(folds)} training runs was held out in "
             "turn, every configuration refitted on the other training runs (leave-one-run-out), and the test "
             "pools those windows with the held-out ones; the gains reported are the held-out runs' "
-            "(cross_fit=False tests on the held-out runs alone)."
+            "(Selection(cross_fit=False) tests on the held-out runs alone)."
         )
     return Problem(
         system=system,
@@ -337,9 +325,10 @@ def prepare_problem(system, train, validation, candidates, mode, options: Option
         val_windows=val_windows,
         window_runs=np.asarray(val_windows.starts)[:, 0],
         val_stride=val_stride,
-        horizons=horizons,
+        horizons=grid,
         candidates_s=candidates_s,
-        options=options,
+        horizon_settings=horizons,
+        selection=selection,
         velocities=velocities,
         folds=folds,
         equivalents=equivalents,

@@ -132,8 +132,10 @@ def prepare_quadrotor(system: Quadrotor, train, validation, *, refit: bool) -> t
     return body, as_body(train), (None if held is None else as_body(held)), system
 
 
-def diagnose_quadrotor(system: Quadrotor, train, validation=None, *, diagnose, mode, **options):
-    """`diagnose` on a `Quadrotor` (see the module docs); `options` are `diagnose`'s.
+def diagnose_quadrotor(system: Quadrotor, train, validation=None, *, candidates, mode, horizons, selection, progress):
+    """`diagnose` on a `Quadrotor` (see the module docs); the arguments are `diagnose`'s. Without
+    `horizons.horizons_s` the error is reported at `QUADROTOR_HORIZONS_S`; the report names the system
+    `quadrotor`.
 
     `Refit()` (all parameters): the rigid body's weights are the one-step least-squares fit on the
     training flights and are held while the candidates' coefficients are fitted by simulation
@@ -141,22 +143,32 @@ def diagnose_quadrotor(system: Quadrotor, train, validation=None, *, diagnose, m
     neither converges nor tells more); `Refit(parameters=names)`: those weights are also refitted
     by simulation error, from the one-step fit; `Known()`: `system`'s weights are trusted as given.
     """
+    from ._diagnose import diagnose  # the engine, on the body-frame form
     from ._problem import Known, Refit
 
     refit = isinstance(mode, Refit)
     if validation is None:  # the held-out tail of each flight stays out of the one-step fit too
         from ._records import holdout_split
 
-        halves = [holdout_split(f, options.get("holdout_fraction", 0.3)) for f in _as_list(train, "train")]
+        halves = [holdout_split(f, selection.holdout_fraction) for f in _as_list(train, "train")]
         train, validation = [a for a, _ in halves], [b for _, b in halves]
     body, train_b, val_b, _ = prepare_quadrotor(system, train, validation, refit=refit)
-    if options.get("candidates") is None:
-        options["candidates"] = quadrotor_candidates(body)
-    if options.get("horizons_s") is None:
-        options["horizons_s"] = QUADROTOR_HORIZONS_S
-    options["system_name"] = options.get("system_name") or "quadrotor"
+    if candidates is None:
+        candidates = quadrotor_candidates(body)
+    if horizons.horizons_s is None:
+        horizons = dataclasses.replace(horizons, horizons_s=QUADROTOR_HORIZONS_S)
     engine_mode = mode if (refit and mode.parameters is not None) else Known()
-    report = diagnose(body, train_b, val_b, mode=engine_mode, **options)
+    report = diagnose(
+        body,
+        train_b,
+        val_b,
+        candidates=candidates,
+        mode=engine_mode,
+        horizons=horizons,
+        selection=selection,
+        progress=progress,
+    )
+    report = dataclasses.replace(report, system="quadrotor")
     if refit:
         report.notes.append(
             "The rigid body's weights are the one-step least-squares fit on the training flights"

@@ -47,9 +47,7 @@ def prepare_records(system, train, validation, holdout_fraction, notes):
                 f"but {type(system).__name__} has {system.state_names} and {system.input_names}"
             )
         check_trajectory_velocities(rec)  # a velocity in other units than its position: refused, named
-    if validation is None:
-        if not 0 < holdout_fraction < 1:
-            raise UsageError(f"diagnose: `holdout_fraction` must be in (0, 1), got {holdout_fraction}")
+    if validation is None:  # `holdout_fraction` in (0, 1): `Selection` checks it
         train_records, validation_records = map(
             list, zip(*(holdout_split(rec, holdout_fraction) for rec in train_records))
         )

@@ -145,7 +145,6 @@ def screen(
     family,
     values,
     coefficients,
-    refit_mask,
     train,
     validation,
     candidates_to_screen,
@@ -153,7 +152,9 @@ def screen(
     *,
     cross_fit: bool = False,
 ):
-    """Held-out equation-error gain of each candidate in `candidates_to_screen` (indices), linearised.
+    """Held-out equation-error gain of each candidate in `candidates_to_screen` (indices), linearised at the nominal
+    parameters `values` and the candidates' `coefficients`, the family's refitted nominal parameters (`family.refit`)
+    refitted with each.
 
     The regression is fitted on `train` and scored on `validation`; with `cross_fit` (and two or more
     training records) also fitted on all training records but one and scored on that one, for each
@@ -172,7 +173,7 @@ def screen(
     }
     grid = screening_grid(float(np.median(np.diff(np.asarray(train[0].ts)))))
     scale = np.concatenate([d[0] for d in data["train"]]).std(axis=0) + 1e-12
-    refit = np.asarray(refit_mask) > 0
+    refit = np.asarray(family.refit) > 0
     # (fitted on, scored on): all training records against the validation records, then each training
     # record against the others.
     splits = [(data["train"], data["validation"])]

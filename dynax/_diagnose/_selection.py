@@ -8,6 +8,8 @@ held-out runs), `rank` orders those that pass, and `look_alike_tests` says wheth
 told apart from its look-alikes. The statistics themselves are in `_statistics.py`.
 """
 
+import dataclasses
+
 import numpy as np
 
 from .._model._system import violated_bound
@@ -34,7 +36,7 @@ def look_alike_tests(problem, yard, best, results, scores):
     at least `min_gain` below the look-alike's, the margin a candidate must gain to count at all (a practical
     margin, as in equivalence testing: with hundreds of correlated windows a 1 % difference can be significant,
     and two causes that predict within 1 % of each other are not told apart by the data in any useful sense)."""
-    o, alternatives = problem.options, []
+    o, alternatives = problem.selection, []
     for k in problem.look_alikes(best):
         if k in results:
             s_k, s_best = scores[results[k]["i"]], scores[results[best]["i"]]
@@ -116,26 +118,21 @@ def on_physical_side(term, delta, partner, names, system) -> bool:
     return violated_bound(names[i], value, system.base_parameter_kinds().get(names[i])) is None
 
 
-def judge_round(
-    physical,
-    short,
-    remaining,
-    selected,
-    n_nom,
-    p_j,
-    std_j,
-    err_j,
-    scores_j,
-    score_cur,
-    window_runs,
-    overlap,
-    alpha,
-    min_gain,
-    steps,
-    position_index,
-    n_val=None,
-    static_level=None,
-):
+@dataclasses.dataclass(frozen=True)
+class Refitted:
+    """A round's refitted configurations: the shortlisted candidates `short` (configuration `i + 1` adds
+    `short[i]` to the current model, configuration 0 is the current model), each configuration's parameters `p`,
+    standard errors `std` and held-out window errors `errors` (configuration, window, step, state), and its window
+    scores `scores` (the held-out windows, then the cross-fitted ones)."""
+
+    short: list
+    p: np.ndarray
+    std: np.ndarray
+    errors: np.ndarray
+    scores: np.ndarray
+
+
+def judge_round(problem, yard, current, remaining, fits: Refitted) -> dict:
     """Each shortlisted candidate's held-out test: paired block test, Benjamini-Hochberg over every remaining candidate
     (those not refitted count with p = 1), the smallest gain, agreement across runs, a physical sign of every
     coefficient of the joint refit: the new one's *and* those of the terms selected in earlier rounds, which the
@@ -149,14 +146,26 @@ def judge_round(
     makes their windows' error larger is not named, however much the cross-fitted folds liked it (seen on a real
     rig: a torque offset that the pooled windows favoured and the held-out runs did not; docs/devdocs/code_notes.md).
 
-    `n_val`: how many of the windows are the held-out runs' (the rest are cross-fitted); default all.
+    **Arguments:**
 
-    `static_level(k, p_row, std_row, selected, round_levels)`: `None` where the configuration has no static friction
-    level, else whether every static level in it stands above the Coulomb level at its joint (rule `above_coulomb`;
-    see `Problem.static_level`); `round_levels` maps each refitted candidate to its new coefficient."""
-    n_val = len(score_cur) if n_val is None else n_val
-    tests = {k: paired_test(score_cur, scores_j[i], window_runs, overlap) for i, k in enumerate(short, start=1)}
-    rejected = benjamini_hochberg([tests[k].p_value for k in short] + [1.0] * (len(remaining) - len(short)), alpha)
+    - `problem`: the diagnosis's `Problem`: `physical(k, delta)` (a coefficient's physical side),
+      `static_level(k, p_row, std_row, selected, round_levels)` (`None` where the configuration has no static
+      friction level, else whether every static level in it stands above the Coulomb level at its joint: rule
+      `above_coulomb`; `round_levels` maps each refitted candidate to its new coefficient), `names` (the nominal
+      parameters), `position_index`, and `selection` (`alpha`, `min_gain`).
+    - `yard`: the `Yardstick`: `window_runs`, `overlap`, `steps`, and `n_val` (how many of the windows are the
+      held-out runs'; the rest are cross-fitted).
+    - `current`: the model reached: `selected` (the candidates selected in earlier rounds) and `score` (its window
+      scores).
+    - `remaining`: the candidates not yet selected (the Benjamini-Hochberg family).
+    - `fits`: the round's `Refitted` configurations.
+    """
+    short, p_j, std_j, scores_j = fits.short, fits.p, fits.std, fits.scores
+    score_cur, selected, n_nom, n_val = current.score, current.selected, len(problem.names), yard.n_val
+    physical, rules_of = problem.physical, problem.selection
+    tests = {k: paired_test(score_cur, scores_j[i], yard.window_runs, yard.overlap) for i, k in enumerate(short, 1)}
+    p_values = [tests[k].p_value for k in short] + [1.0] * (len(remaining) - len(short))
+    rejected = benjamini_hochberg(p_values, rules_of.alpha)
     results = {}
     round_levels = {k: p_j[i, -1] for i, k in enumerate(short, start=1)}  # each refitted candidate's new coefficient
     for i, k in enumerate(short, start=1):
@@ -169,12 +178,12 @@ def judge_round(
         agree = helps_on_most_runs(test.per_run)
         rules = {
             "significance": bool(rejected[i - 1]),
-            "min_gain": bool(gain_windows >= min_gain),
+            "min_gain": bool(gain_windows >= rules_of.min_gain),
             "sign": bool(ok),
             "agreement": bool(agree),  # each rule on its own: the report says which stopped a candidate
             "held_out": bool(gain_held_out > 0),
         }
-        above = None if static_level is None else static_level(k, p_j[i], std_j[i], selected, round_levels)
+        above = problem.static_level(k, p_j[i], std_j[i], selected, round_levels)
         if above is not None:
             rules["above_coulomb"] = bool(above)
         results[k] = dict(
@@ -185,7 +194,7 @@ def judge_round(
             gain_held_out=gain_held_out,
             p=test.p_value,
             test=test,
-            rmse=rmse_curve(err_j[i], steps, position_index),
+            rmse=rmse_curve(fits.errors[i], yard.steps, problem.position_index),
             physical=ok,
             runs_helped=helped,
             n_runs=len(test.per_run),

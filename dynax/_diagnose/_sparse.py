@@ -19,8 +19,14 @@ stability selection of Meinshausen and Buehlmann), at most `max_terms` of them.
     Learning*, 2nd ed., 2009, section 7.10 (cross-validation, one-standard-error rule).
 """
 
+from collections.abc import Sequence
+
 import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
+
+from .._fit import AbstractStatistics, Parameters, Solution
 
 
 def stlsq(
@@ -85,24 +91,31 @@ def group_cv_r2(features, target, groups, fit) -> tuple[float, np.ndarray]:
     return 1 - sse / max(sst, 1e-300), np.asarray(per_group)
 
 
-class SparseFit(eqx.Module):
-    """The answer of `sparse_search`.
+class SparseStatistics(AbstractStatistics):
+    """What the sparse search adds to its `Solution` (as `solution.statistics`).
 
-    **Fields:** `selected` (indices of the kept features), `coefficients` (least-squares
-    coefficients of the kept features on the original scale; no separate intercept: a
-    constant is the library's `constant` feature),
-    `frequency` (selection frequency of every feature over the subsamples), `threshold` (chosen by
-    cross-validation), `cv_r2` (leave-one-group-out $R^2$ of the kept features), `thresholds`,
-    `cv_curve` (the cross-validated $R^2$ of each threshold).
+    **Fields:** `selected` (indices of the kept features), `frequency` (selection frequency of every feature
+    over the subsamples), `threshold` (chosen by cross-validation), `cv_r2` (leave-one-group-out $R^2$ of the
+    kept features), `thresholds`, `cv_curve` (the cross-validated $R^2$ of each threshold).
     """
 
-    selected: tuple
-    coefficients: np.ndarray
+    selected: tuple[int, ...] = eqx.field(static=True)
     frequency: np.ndarray
     threshold: float
     cv_r2: float
-    thresholds: tuple
-    cv_curve: tuple
+    thresholds: tuple[float, ...] = eqx.field(static=True)
+    cv_curve: tuple[float, ...] = eqx.field(static=True)
+
+
+class Stability(eqx.Module):
+    """The stability selection of `sparse_search` (Meinshausen and Buehlmann): `n_subsamples` random halves of the
+    blocks of `block` consecutive samples, drawn with `seed`; a feature is kept if, at some threshold between the
+    cross-validated best and the one chosen, it is selected in at least `min_frequency` of them."""
+
+    n_subsamples: int = eqx.field(default=40, static=True)
+    min_frequency: float = eqx.field(default=0.6, static=True)
+    block: int = eqx.field(default=50, static=True)
+    seed: int = eqx.field(default=0, static=True)
 
 
 def sparse_search(
@@ -112,11 +125,9 @@ def sparse_search(
     *,
     max_terms: int = 3,
     thresholds=(0.01, 0.02, 0.05, 0.08, 0.1, 0.15, 0.2, 0.3, 0.5),
-    n_subsamples: int = 40,
-    min_frequency: float = 0.6,
-    block: int = 50,
-    seed: int = 0,
-) -> SparseFit:
+    stability: Stability = Stability(),
+    names: Sequence[str] | None = None,
+) -> Solution:
     r"""Sparse model of `target` on `features`: STLSQ, threshold by cross-validation over `groups`, stability selection.
 
     **Arguments:**
@@ -126,12 +137,13 @@ def sparse_search(
       leaves one group out at a time (at least 2 groups).
     - `max_terms`: bound on the number of features kept.
     - `thresholds`: the STLSQ thresholds tried (standardised units).
-    - `n_subsamples`, `min_frequency`: stability selection over random halves of the blocks of
-      `block` consecutive samples; a feature is kept if, at some threshold between the
-      cross-validated best and the one chosen, it is selected in at least `min_frequency` of them.
-    - `seed`.
+    - `stability`: the stability selection over subsamples of blocks (`Stability`).
+    - `names`: the features' names (default `[k]`).
 
-    **Returns:** a `SparseFit`.
+    **Returns:** a `Solution`: its `model` the coefficient of every feature (zero where not kept), its `value`
+    the least-squares coefficients of the kept features on the original scale (no separate intercept: a
+    constant is the library's `constant` feature), named by feature; no covariance (NaN); `loss` and
+    `initial_loss` half the squared residual with and without them; its `statistics` a `SparseStatistics`.
     """
     features, target, groups = np.asarray(features, float), np.asarray(target, float), np.asarray(groups)
     if len(np.unique(groups)) < 2:
@@ -146,7 +158,8 @@ def sparse_search(
     # One-standard-error rule: the largest threshold (sparsest model) within one SE of the best.
     chosen = max(i for i in range(len(thresholds)) if curve[i] >= curve[best] - spread[best])
     threshold = float(thresholds[chosen])
-    rng = np.random.default_rng(seed)
+    n_subsamples, min_frequency, block = stability.n_subsamples, stability.min_frequency, stability.block
+    rng = np.random.default_rng(stability.seed)
     n_blocks = max(2, features.shape[0] // block)
     block_of = np.minimum(np.arange(features.shape[0]) // block, n_blocks - 1)
     # Meinshausen and Buehlmann take, for each feature, its largest selection frequency over a set
@@ -170,12 +183,31 @@ def sparse_search(
         beta = np.linalg.lstsq(Z, y, rcond=None)[0]
         coefficients = beta * scale / sd[: len(cols)]
         cv_r2, _ = group_cv_r2(features[:, cols], target, groups, lambda Z_, y_: np.linalg.lstsq(Z_, y_, rcond=None)[0])
-    return SparseFit(
-        selected=selected,
-        coefficients=np.asarray(coefficients, float),
-        frequency=frequency,
-        threshold=threshold,
-        cv_r2=float(cv_r2),
-        thresholds=tuple(float(t) for t in thresholds),
-        cv_curve=tuple(float(c) for c in curve),
+    coefficients = np.asarray(coefficients, float)
+    every = np.zeros(m)
+    every[list(selected)] = coefficients
+    mask = np.zeros(m, bool)
+    mask[list(selected)] = True
+    parameters = Parameters.of(every, mask, names=None if names is None else tuple(names[k] for k in selected))
+    n = len(selected)
+    residual = target - features[:, list(selected)] @ coefficients
+    return Solution(
+        model=every,
+        value=jnp.asarray(coefficients),
+        parameters=parameters,
+        covariance=jnp.full((n, n), jnp.nan),
+        std_errors=jnp.full(n, jnp.nan),
+        result=optx.RESULTS.successful,
+        loss=jnp.asarray(0.5 * float(residual @ residual)),
+        initial_loss=jnp.asarray(0.5 * float(target @ target)),
+        steps=jnp.asarray(1),
+        n_residuals=len(target),
+        statistics=SparseStatistics(
+            selected=selected,
+            frequency=frequency,
+            threshold=threshold,
+            cv_r2=float(cv_r2),
+            thresholds=tuple(float(t) for t in thresholds),
+            cv_curve=tuple(float(c) for c in curve),
+        ),
     )

@@ -84,7 +84,7 @@ _RULE_TEXT = {
 def round_summary(problem, yard, round_, current, remaining, results, finding) -> dict:
     """One round of the forward selection for the report: every refitted candidate's held-out gains and p,
     and whether it was selected, passed but lost to a larger held-out gain, or which rules stopped it."""
-    system, o = problem.system, problem.options
+    system, o = problem.system, problem.selection
     selected = finding["index"] if finding is not None else None
     rows = []
     for k, r in results.items():

@@ -121,7 +121,7 @@ class LeastSquaresOptions(eqx.Module):
       backs away from them instead of stopping on NaN (default 1e3); `None` keeps them.
     - `covariance`: compute the Gauss-Newton covariance at the solution (one more Jacobian; default
       `True`).
-    - `progress_token`: a `dynax.ProgressBar`'s token (`dynax.internal.bar_token(bar)`);
+    - `progress_token`: a `dynax.internal.ProgressBar`'s token (`dynax.internal.bar_token(bar)`);
       each iteration then reports its step and loss to that bar through the solver's `verbose` hook
       (`jax.debug.callback`), as diffrax's progress meter does. Solvers without a `verbose` field
       report nothing.

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax import Acrobot, CoulombFriction, diagnose, Extended, InputOffset
+from dynax import Acrobot, CoulombFriction, diagnose, Extended, InputOffset, Selection
 from dynax.internal import Family, fit_configurations, make_windows
 from dynax.synthetic import DEMO_TRUTH_PHYSICAL, Multisine, synthetic_trajectory
 
@@ -78,7 +78,7 @@ def test_a_short_held_out_run_with_cross_fitted_training_runs_names_a_small_fric
 
     train = [run(s, 8.0, f"run{s}.csv") for s in (11, 12, 13)]
     validation = [run(14, 2.5, "held.csv")]
-    j = diagnose(Acrobot(), train, validation, discovery=False).to_json()
+    j = diagnose(Acrobot(), train, validation, selection=Selection(discovery=False)).to_json()
     assert [(f["cause"], f["where"]) for f in j["findings"][:1]] == [("coulomb_friction", "q2")], j["findings"]
     assert abs(j["findings"][0]["coefficient"] - 0.03) < 0.003
     cross_fitted = [r for r in j["runs"] if r["held_out"] == "cross-fitted"]
@@ -86,6 +86,6 @@ def test_a_short_held_out_run_with_cross_fitted_training_runs_names_a_small_fric
     assert all(r["gain"] > 0 for r in cross_fitted), j["runs"]
     assert j["test"]["cross_fitting"] and any("Cross-fitting" in n for n in j["notes"])
     # The held-out run alone: the same candidates, no finding.
-    alone = diagnose(Acrobot(), train, validation, discovery=False, cross_fit=False).to_json()
+    alone = diagnose(Acrobot(), train, validation, selection=Selection(discovery=False, cross_fit=False)).to_json()
     assert not alone["findings"] and alone["test"]["cross_fitting"] is None
     assert all(r["held_out"] == "validation" for r in alone["runs"])

@@ -26,9 +26,10 @@ from dynax import (
     JointSpring,
     LinearAxis,
     save_trajectory,
+    Selection,
     Trajectory,
 )
-from dynax.internal import cli_main, propose
+from dynax.internal import cli_main, DiscoverySearch, propose
 from dynax.synthetic import demo_data, DEMO_TRUTH_PHYSICAL, Multisine, synthetic_trajectory
 
 pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more
@@ -130,7 +131,7 @@ def test_without_discovery_the_spring_stays_unexplained(spring_report):
     j = spring_report.to_json()
     assert j["structure"]["nominal"]["significant"]
     _, train, validation = demo_data(JointSpring(1, 1.5), seed=41, validation_s=SPRING_VALIDATION_S)
-    off = diagnose(Acrobot(), train, validation, discovery=False, max_terms=1).to_json()
+    off = diagnose(Acrobot(), train, validation, selection=Selection(discovery=False, max_terms=1)).to_json()
     assert off["verdict"] == "unexplained"
     assert not any(f["cause"] == "discovered" for f in off["findings"])
     assert "discovery" not in off
@@ -143,7 +144,7 @@ def _acrobot_search(term, seed, *, named=True, refit=ACROBOT_BASE):
     _, train, _ = demo_data(term, seed=seed)
     system = Acrobot.from_physical(**DEMO_TRUTH_PHYSICAL)
     vocabulary = [t.label(system) for t in default_candidates(system)] if named else []
-    return propose(system, [train], refit=refit, vocabulary=vocabulary)
+    return propose(system, [train], DiscoverySearch(refit=refit, vocabulary=vocabulary))
 
 
 def test_the_search_in_known_mode_with_nothing_refitted():
@@ -161,7 +162,11 @@ def test_no_hidden_effect_gives_no_proposal_on_the_acrobot(seed):
 def test_no_hidden_effect_gives_no_proposal_on_the_axis():
     train, _ = _axis_records(0.0)
     vocabulary = [t.label(AXIS) for t in default_candidates(AXIS)]
-    assert [p for p in propose(AXIS, [train], refit=("mass", "viscous"), vocabulary=vocabulary) if p.features] == []
+    assert [
+        p
+        for p in propose(AXIS, [train], DiscoverySearch(refit=("mass", "viscous"), vocabulary=vocabulary))
+        if p.features
+    ] == []
 
 
 def test_a_named_cause_wins_over_the_equivalent_discovered_formula():

@@ -22,8 +22,10 @@ from dynax import (
     diagnose,
     Extended,
     Helicopter,
+    Horizons,
     Known,
     Refit,
+    Selection,
     Wind,
 )
 from dynax.internal import AbstractVehicleTerm, hover_state, TEMPEST_COEFFICIENTS
@@ -129,7 +131,13 @@ def _diagnose_hidden(terms, seed, *, fast=False, mode=Known(), candidates=VEHICL
     train = helicopter_flight(truth, duration=duration, seed=seed, **kw)
     validation = helicopter_flight(truth, duration=duration, seed=seed + 100, **kw)
     return diagnose(
-        Helicopter(), train, validation, mode=mode, candidates=candidates, max_terms=2, horizons_s=(0.25, 0.5, 1.0)
+        Helicopter(),
+        train,
+        validation,
+        mode=mode,
+        candidates=candidates,
+        selection=Selection(max_terms=2),
+        horizons=Horizons(horizons_s=(0.25, 0.5, 1.0)),
     ).to_json()
 
 
@@ -261,8 +269,8 @@ def _round_one_screening(monkeypatch, truth):
     seen = {}
     real = diagnose_module.screen
 
-    def spy(family, values, coefficients, refit, train, validation, remaining, residual_fn, **kwargs):
-        gains, deltas = real(family, values, coefficients, refit, train, validation, remaining, residual_fn, **kwargs)
+    def spy(family, values, coefficients, train, validation, remaining, residual_fn, **kwargs):
+        gains, deltas = real(family, values, coefficients, train, validation, remaining, residual_fn, **kwargs)
         system = family.model.system
         seen.update(
             {family.model.terms[k].label(system): (float(g), float(d)) for k, g, d in zip(remaining, gains, deltas)}
@@ -274,7 +282,7 @@ def _round_one_screening(monkeypatch, truth):
     train = helicopter_flight(truth, duration=40.0, seed=11, **kw)
     validation = helicopter_flight(truth, duration=20.0, seed=111, **kw)
     with pytest.raises(_ScreenedOnce):
-        diagnose(Helicopter(), train, validation, max_terms=2)
+        diagnose(Helicopter(), train, validation, selection=Selection(max_terms=2))
     return seen
 
 

@@ -22,6 +22,7 @@ from dynax import (
     QuadraticDrag,
     Refit,
     RotorInertia,
+    Selection,
     Trajectory,
     ViscousFriction,
 )
@@ -145,7 +146,7 @@ def test_a_nominal_friction_off_by_a_common_factor_is_named_as_friction_not_as_a
 def test_out_of_vocabulary_spring_is_unexplained_not_misnamed():
     # The vocabulary alone (discovery off; tests/diagnose/test_discovery.py switches it on).
     _, train, validation = demo_data(JointSpring(1, 1.5), seed=41)
-    report = diagnose(Acrobot(), train, validation, discovery=False)
+    report = diagnose(Acrobot(), train, validation, selection=Selection(discovery=False))
     j = report.to_json()
     assert j["verdict"] == "unexplained"
     assert j["structure"]["extended"]["significant"]

@@ -29,7 +29,7 @@ def _diagnose(effect: dict, scale: float):
         )
     truth = mujoco_rig.base_parameters(arm)
     nominal = dynax.DoublePendulum.from_base_parameters({n: truth[n] for n in BASE})
-    report = diagnose(nominal, records[:2], records[2:], mode=Refit(), system_name="double_pendulum")
+    report = diagnose(nominal, records[:2], records[2:], mode=Refit())
     return report.to_json(), records
 
 

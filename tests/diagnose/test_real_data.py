@@ -7,7 +7,7 @@ import pathlib
 import jax.numpy as jnp
 import pytest
 
-from dynax import diagnose, Known, LinearAxis, load_trajectory, Refit, Trajectory
+from dynax import diagnose, Horizons, Known, LinearAxis, load_trajectory, Refit, Trajectory
 from dynax.internal import butterworth_filtfilt, central_difference, resample
 from tests.conftest import DFKI_MAPPING
 
@@ -39,7 +39,7 @@ def test_emps_needs_coulomb_friction_near_the_published_value():
     nominal = LinearAxis(
         mass=jnp.asarray(90.0), viscous=jnp.asarray(200.0), coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0)
     )
-    report = diagnose(nominal, train, validation, mode=Refit(), reference_horizon_s=0.25)
+    report = diagnose(nominal, train, validation, mode=Refit(), horizons=Horizons(reference_s=0.25))
     causes = {(f["cause"], f["where"]): f for f in report.findings}
     assert ("coulomb_friction", "q") in causes
     # Published: Fc = 20.39 N, M = 95.1 kg, Fv = 203.5 N s/m, offset -3.16 N (Janot, Gautier and Brunot 2019).

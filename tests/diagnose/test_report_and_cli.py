@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from dynax import Acrobot, diagnose, InputOffset, save_trajectory
+from dynax import Acrobot, diagnose, InputOffset, save_trajectory, Selection
 from dynax.internal import cli_main
 from dynax.synthetic import demo_data
 
@@ -346,11 +346,11 @@ def test_a_nominal_model_of_another_machine_is_said_to_be_one(offset_data):
     model describes another machine (the Python API's counterpart of the CLI's check without --nominal)."""
     _, train, validation = offset_data
     heavy = Acrobot.from_base_parameters({k: 4 * float(v) for k, v in Acrobot().base_parameters.items()})
-    report = diagnose(heavy, train, validation, max_terms=1, discovery=False)
+    report = diagnose(heavy, train, validation, selection=Selection(max_terms=1, discovery=False))
     moved = [n for n in report.notes if n.startswith("The refit moved")]
     assert moved and "theta1 from 5.33" in moved[0] and "another machine" in moved[0], report.notes
     # The demo's own nominal is close to its truth: no such note (the offset test above diagnoses it).
     assert not any(
         n.startswith("The refit moved")
-        for n in diagnose(Acrobot(), train, validation, max_terms=1, discovery=False).notes
+        for n in diagnose(Acrobot(), train, validation, selection=Selection(max_terms=1, discovery=False)).notes
     )

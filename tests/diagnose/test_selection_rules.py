@@ -2,11 +2,23 @@
 an earlier finding's coefficient to an unphysical sign is not admissible, however much it helps; a
 candidate that adds to a nominal parameter the refit keeps (viscous friction) may lower it, not below zero."""
 
+from types import SimpleNamespace
+
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax import Acrobot, CoulombFriction, default_candidates, InputOffset, Known, Refit, Trajectory, ViscousFriction
+from dynax import (
+    Acrobot,
+    CoulombFriction,
+    default_candidates,
+    InputOffset,
+    Known,
+    Refit,
+    Selection,
+    Trajectory,
+    ViscousFriction,
+)
 from dynax.internal import (
     candidate_family,
     held_partners,
@@ -14,6 +26,7 @@ from dynax.internal import (
     look_alike_tests,
     names_to_refit,
     on_physical_side,
+    Refitted,
 )
 
 
@@ -30,25 +43,25 @@ def _round(earlier_fc1, new_delta, *, earlier=CoulombFriction(0)):
     scores = np.stack([score_cur, 0.6 * score_cur * rng.uniform(0.9, 1.1, n_windows)])
     errors = np.ones((2, n_windows, n_steps, 4)) * np.asarray([1.0, 0.7])[:, None, None, None]
     physical = lambda k, delta: on_physical_side(candidates[k], delta, None, (), None)  # noqa: E731
-    results = judge_round(
-        physical,
-        [1],
-        [1],
-        [0],
-        n_nom,
-        p,
-        np.full_like(p, 0.01),
-        errors,
-        scores,
-        score_cur,
-        np.repeat([0, 1], n_windows // 2),
-        1,
-        alpha=0.01,
-        min_gain=0.05,
-        steps=np.asarray([5, 10]),
-        position_index=[0, 1],
-    )
+    results = _judge(physical, [1], [0], n_nom, p, errors, scores, score_cur, np.repeat([0, 1], n_windows // 2))
     return results[1]
+
+
+def _judge(physical, short, selected, n_nom, p, errors, scores, score_cur, runs, n_val=None):
+    """`judge_round` of one refitted batch: `short` refitted (the only candidates remaining), `selected` before it,
+    every window of `score_cur` held out unless `n_val` says how many are (the rest cross-fitted)."""
+    problem = SimpleNamespace(
+        physical=physical,
+        static_level=lambda *_: None,  # no static friction level in these configurations
+        names=tuple(f"theta{i}" for i in range(n_nom)),
+        position_index=[0, 1],
+        selection=Selection(alpha=0.01, min_gain=0.05),
+    )
+    yard = SimpleNamespace(
+        window_runs=runs, overlap=1, steps=np.asarray([5, 10]), n_val=len(score_cur) if n_val is None else n_val
+    )
+    current = SimpleNamespace(selected=selected, score=score_cur)
+    return judge_round(problem, yard, current, short, Refitted(short, p, np.full_like(p, 0.01), errors, scores))
 
 
 def test_a_candidate_that_helps_with_every_coefficient_physical_is_admissible():
@@ -89,25 +102,7 @@ def test_a_candidate_the_cross_fitted_runs_carry_but_the_held_out_runs_reject_is
         p[1, -1] = 0.1
         errors = np.ones((2, n_val + n_cv, 11, 4))
         physical = lambda k, delta: True  # noqa: E731
-        return judge_round(
-            physical,
-            [0],
-            [0],
-            [],
-            2,
-            p,
-            np.full_like(p, 0.01),
-            errors,
-            scores,
-            score_cur,
-            runs,
-            1,
-            alpha=0.01,
-            min_gain=0.05,
-            steps=np.asarray([5, 10]),
-            position_index=[0, 1],
-            n_val=n_val,
-        )[0]
+        return _judge(physical, [0], [], 2, p, errors, scores, score_cur, runs, n_val=n_val)[0]
 
     harmful = judged(1.1)
     assert harmful["gain_windows"] > 0.3 and harmful["gain_held_out"] < 0
@@ -170,8 +165,6 @@ def test_a_look_alike_is_told_apart_only_by_a_difference_that_matters():
     """A look-alike whose every held-out window is 1 % worse than the finding's is *significantly* worse
     (hundreds of windows, p far below alpha) but not told apart: the difference is below `min_gain`, the
     margin any candidate must gain to count. One 30 % worse is told apart; a structural equivalent never is."""
-    from types import SimpleNamespace
-
     rng = np.random.default_rng(1)
     n_windows = 240
     best = rng.uniform(1.0, 2.0, n_windows)
@@ -179,7 +172,7 @@ def test_a_look_alike_is_told_apart_only_by_a_difference_that_matters():
     scores = np.stack([np.ones(n_windows), best, worse(1.01), worse(1.3), worse(1.3)])
     candidates = (ViscousFriction(1), CoulombFriction(1), InputOffset(0), ViscousFriction(0))
     problem = SimpleNamespace(
-        options=SimpleNamespace(alpha=0.01, min_gain=0.05),
+        selection=Selection(alpha=0.01, min_gain=0.05),
         candidates=candidates,
         system=Acrobot(),
         look_alikes=lambda k: [1, 2, 3],

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from dynax.internal import sparse_search, stlsq
+from dynax.internal import sparse_search, Stability, stlsq
 
 
 def _design(n, m, seed, correlated=False):
@@ -33,10 +33,12 @@ def test_sparse_search_finds_the_true_term_among_correlated_ones():
     X, rng = _design(3000, 10, seed=2, correlated=True)
     y = 2.0 * X[:, 0] + 1.0 * rng.normal(size=3000)
     groups = np.repeat(np.arange(5), 600)
-    fit = sparse_search(X, y, groups, max_terms=3, block=100)
-    assert fit.selected == (0,)
-    assert abs(fit.coefficients[0] - 2.0) < 0.1
-    assert fit.cv_r2 > 0.5
+    fit = sparse_search(X, y, groups, max_terms=3, stability=Stability(block=100))
+    assert fit.statistics.selected == (0,)
+    assert abs(fit.value[0] - 2.0) < 0.1 and fit.names == ("[0]",)
+    assert fit.model[0] == fit.value[0] and not np.any(fit.model[1:])  # the coefficient of every feature
+    assert fit.statistics.cv_r2 > 0.5
+    assert fit.loss < 0.5 * fit.initial_loss
 
 
 def test_sparse_search_on_noise_keeps_nothing():
@@ -44,6 +46,7 @@ def test_sparse_search_on_noise_keeps_nothing():
     false = 0
     for seed in range(5):
         X, rng = _design(1500, 15, seed=10 + seed)
-        fit = sparse_search(X, rng.normal(size=1500), np.repeat(np.arange(5), 300), max_terms=3, block=50, seed=seed)
-        false += len(fit.selected) > 0 and fit.cv_r2 > 0.05
+        groups = np.repeat(np.arange(5), 300)
+        fit = sparse_search(X, rng.normal(size=1500), groups, max_terms=3, stability=Stability(block=50, seed=seed))
+        false += len(fit.statistics.selected) > 0 and fit.statistics.cv_r2 > 0.05
     assert false == 0

@@ -112,7 +112,7 @@ def test_hidden_stick_slip_at_the_elbow_is_named_stiction_with_its_level():
     # that every held-out run rests under load too.
     (train,) = stick_slip_runs(STICK_SLIP, [STICK_SLIP.seed], 20.0)
     held_out = stick_slip_runs(STICK_SLIP, [STICK_SLIP.seed + k for k in (1, 2, 3)], 10.0)
-    report = dynax.diagnose(NOMINAL, train, held_out, max_terms=2, progress=False)
+    report = dynax.diagnose(NOMINAL, train, held_out, selection=dynax.Selection(max_terms=2), progress=False)
     j = report.to_json()
     # The static level is fitted within 10 % and helps on every held-out run, more than any other candidate.
     row = first_round(report, "stiction", "q2")

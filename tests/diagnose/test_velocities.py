@@ -1,4 +1,4 @@
-"""Velocities from the encoder positions where the measured ones are noisy (`diagnose(velocities="auto")`).
+"""Velocities from the encoder positions where the measured ones are noisy (`Selection(velocities="auto")`).
 
 The truth is simulated without noise and the same run recorded with noise, so the estimate is scored
 against the true velocities, not against what the rule itself computes."""

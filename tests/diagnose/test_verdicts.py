@@ -155,5 +155,6 @@ def test_known_mode_with_an_impossible_nominal_is_not_none():
     except ValueError as refused:  # a located refusal of the impossible parameters is a right answer too
         assert "theta1" in str(refused) or "theta4" in str(refused), refused
         return
-    j = dynax.diagnose(nominal, train, held_out, mode=dynax.Known(), max_terms=2, progress=False).to_json()
+    selection = dynax.Selection(max_terms=2)
+    j = dynax.diagnose(nominal, train, held_out, mode=dynax.Known(), selection=selection, progress=False).to_json()
     assert j["verdict"] != "none", (j["verdict"], j["structure"]["nominal"], j["nominal"]["sim_error"])

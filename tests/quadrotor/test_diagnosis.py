@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax import BodyBias, diagnose, Extended, Helicopter, initial_quadrotor, RotorDrag
+from dynax import BodyBias, diagnose, Extended, Helicopter, initial_quadrotor, RotorDrag, Selection
 
 from .synthetic_flight import quadrotor_flight
 
@@ -24,7 +24,9 @@ def _diagnose(seed, duration=15.0, **effects):
     train = quadrotor_flight(duration, seed=seed, **effects)
     validation = quadrotor_flight(duration, seed=seed + 100, **effects)
     quad = initial_quadrotor("nominal", [train])
-    return diagnose(quad, train, validation, max_terms=1, discovery=False, progress=False).to_json()
+    return diagnose(
+        quad, train, validation, selection=Selection(max_terms=1, discovery=False), progress=False
+    ).to_json()
 
 
 def _assert_named_first(j, cause, places):

@@ -10,7 +10,17 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax import BatterySag, BodyBias, diagnose, Extended, GroundEffect, Helicopter, initial_quadrotor, RotorDrag
+from dynax import (
+    BatterySag,
+    BodyBias,
+    diagnose,
+    Extended,
+    GroundEffect,
+    Helicopter,
+    initial_quadrotor,
+    RotorDrag,
+    Selection,
+)
 from dynax.internal import body_frame_system, quadrotor_candidates
 
 from .synthetic_flight import quadrotor_flight
@@ -67,7 +77,9 @@ def test_battery_sag_is_a_candidate_only_where_the_flights_log_vbat_and_ground_e
 
 def _diagnosis(train, validation, battery=None):
     quad = initial_quadrotor("nominal", [train], battery=battery)
-    return diagnose(quad, train, validation, max_terms=1, discovery=False, progress=False).to_json()
+    return diagnose(
+        quad, train, validation, selection=Selection(max_terms=1, discovery=False), progress=False
+    ).to_json()
 
 
 def _named_first(j, cause):
@@ -113,7 +125,14 @@ def test_hidden_ground_effect_is_named_low_over_the_floor():
     quad = initial_quadrotor("nominal", train)
     body = body_frame_system(quad, train[0].input_names)
     candidates = quadrotor_candidates(body, floor=0.0)  # the floor's height, as the user knows it
-    j = diagnose(quad, train, validation, max_terms=1, discovery=False, progress=False, candidates=candidates)
+    j = diagnose(
+        quad,
+        train,
+        validation,
+        selection=Selection(max_terms=1, discovery=False),
+        progress=False,
+        candidates=candidates,
+    )
     first = _named_first(j.to_json(), "ground_effect")
     # Cheeseman and Bennett's R^2/16 to first order; the fitted floor and rotor height differ from the truth's.
     assert 0.3 * 0.08**2 / 16 < first["coefficient"] < 3 * 0.08**2 / 16
@@ -125,6 +144,13 @@ def test_a_steady_battery_low_over_the_floor_names_neither():
     validation = quadrotor_flight(15.0, seed=107, altitude=0.15, vbat=True)
     quad = initial_quadrotor("nominal", [train])
     candidates = quadrotor_candidates(body_frame_system(quad, train.input_names), floor=0.0)
-    j = diagnose(quad, train, validation, max_terms=1, discovery=False, progress=False, candidates=candidates)
+    j = diagnose(
+        quad,
+        train,
+        validation,
+        selection=Selection(max_terms=1, discovery=False),
+        progress=False,
+        candidates=candidates,
+    )
     j = j.to_json()
     assert not {"battery_sag", "ground_effect"} & {f["cause"] for f in j["findings"]}, j["findings"]
