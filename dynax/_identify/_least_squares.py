@@ -235,7 +235,7 @@ def least_squares(
     `covariance` $\sigma^2 (A^\top W A)^{+}$ from the residual variance
     $\sigma^2 = \lVert r \rVert^2_W / (m - \operatorname{rank})$ and `std_errors` its diagonal's
     roots (short of full rank, `allow_rank_deficient`, `inf` for each parameter with a part in the
-    null space, the pseudo-inverse's for the others), and `statistics` (`dynax.Statistics`): the
+    null space, the pseudo-inverse's for the others), and `statistics` (`dynax.internal.Statistics`): the
     singular values and directions of the column-scaled weighted regressor, its condition number
     and numerical rank, the residual RMS and the row count.
 

@@ -210,7 +210,7 @@ def test_cli_refuses_bad_input_with_exit_2(tmp_path, monkeypatch, capsys, argv):
 
 
 def _reference_knots(spacing=0.02, dt=0.002):
-    us = dynax.load_controller(POLICY).u_ref
+    us = dynax.control.load_controller(POLICY).u_ref
     per_knot = round(spacing / dt)
     knots = np.concatenate([us[per_knot::per_knot], us[-1:]])
     return jnp.asarray(np.arctanh(np.clip(knots / 6.0, -0.999999, 0.999999))), len(us) * dt
@@ -220,7 +220,7 @@ def test_score_surrogate_matches_the_reference_costs_computed_apart():
     from dynax.internal import knot_matrix, score_surrogate
 
     w, horizon = _reference_knots()
-    saved = dynax.load_controller(POLICY)
+    saved = dynax.control.load_controller(POLICY)
     x, u = saved.x_ref, saved.u_ref  # the reference's states and torques at 2 ms, as saved
     plant = control.LeaderboardPlant.nominal()
     design = control.SwingUpDesign(horizon=horizon)
