@@ -77,7 +77,7 @@ def seed_knots(path, horizon):
     """A saved controller's reference torque knots (`w`), stretched in time to `horizon`."""
     import dynax
 
-    us = dynax.control.load_controller(path).u_ref
+    us = control.load_controller(path).u_ref
     per_knot = int(round(SPACING / FINE))
     knots = np.concatenate([us[per_knot::per_knot], us[-1:]])
     t_old = np.arange(1, len(knots) + 1) / len(knots)
