@@ -76,6 +76,18 @@ def summary(rows):
             if effects
             else None
         ),
+        # A secondary reading, not the target's: `none` counted right on an effect whose best refitted candidate
+        # gains less than the practical margin (25 %), the rule's own answer for an effect too small to matter.
+        "right_verdict_effects_none_below_practical_ok": (
+            sum(
+                r["right_verdict"] or (r["verdict"] == "none" and (r["best_gain"] is None or r["best_gain"] < 0.25))
+                for r in effects
+            )
+            / len(effects)
+            if effects
+            else None
+        ),
+        "effects_below_practical": sum(r["best_gain"] is None or r["best_gain"] < 0.25 for r in effects),
         "false_claim_controls": share(controls, "false_claim"),
         "none_where_best_gains_25": share(gained, "none_with_gain"),
         "cases_best_gains_25": len(gained),
