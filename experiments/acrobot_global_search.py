@@ -75,8 +75,6 @@ def initial_guesses(rng, n, n_knots, horizon):
 
 def seed_knots(path, horizon):
     """A saved controller's reference torque knots (`w`), stretched in time to `horizon`."""
-    import dynax
-
     us = control.load_controller(path).u_ref
     per_knot = int(round(SPACING / FINE))
     knots = np.concatenate([us[per_knot::per_knot], us[-1:]])
