@@ -164,30 +164,6 @@ from ._identify._vehicle import (
 from ._identify._vehicle._model_file import load_model as load_model
 from ._identify._vehicle._model_file import save_model as save_model
 from ._identify._vehicle._quadrotor import fit_quadrotor as fit_quadrotor
-from ._metrics import (
-    aic as aic,
-)
-from ._metrics import (
-    cross_correlation_test as cross_correlation_test,
-)
-from ._metrics import (
-    cross_validate as cross_validate,
-)
-from ._metrics import (
-    fpe as fpe,
-)
-from ._metrics import (
-    kfold_splits as kfold_splits,
-)
-from ._metrics import (
-    leave_one_out_splits as leave_one_out_splits,
-)
-from ._metrics import (
-    nrmse_fit as nrmse_fit,
-)
-from ._metrics import (
-    whiteness_test as whiteness_test,
-)
 from ._model import (
     AbstractManipulator as AbstractManipulator,
 )
@@ -278,22 +254,46 @@ from ._model._quadrotor import (
 from ._model._quadrotor import (
     Quadrotor as Quadrotor,
 )
-from ._plots import (
-    plot_compare as plot_compare,
-)
-from ._plots import (
-    plot_error_horizon as plot_error_horizon,
-)
-from ._plots import (
-    plot_residuals as plot_residuals,
-)
 from ._precision import PrecisionWarning as PrecisionWarning
-from ._predict import flight_error as flight_error
-from ._predict import predict_ahead as predict_ahead
-from ._sim_error import simulation_error as simulation_error
-from ._sim_error import SimulationError as SimulationError
 from ._simulate import Adaptive as Adaptive
 from ._simulate import FixedGrid as FixedGrid
+from ._simulate import flight_error as flight_error
+from ._simulate import predict_ahead as predict_ahead
+from ._simulate import RK4 as RK4
 from ._simulate import simulate as simulate
-from ._solvers import RK4 as RK4
+from ._simulate import simulation_error as simulation_error
+from ._simulate import SimulationError as SimulationError
+from ._validate import (
+    aic as aic,
+)
+from ._validate import (
+    cross_correlation_test as cross_correlation_test,
+)
+from ._validate import (
+    cross_validate as cross_validate,
+)
+from ._validate import (
+    fpe as fpe,
+)
+from ._validate import (
+    kfold_splits as kfold_splits,
+)
+from ._validate import (
+    leave_one_out_splits as leave_one_out_splits,
+)
+from ._validate import (
+    nrmse_fit as nrmse_fit,
+)
+from ._validate import (
+    plot_compare as plot_compare,
+)
+from ._validate import (
+    plot_error_horizon as plot_error_horizon,
+)
+from ._validate import (
+    plot_residuals as plot_residuals,
+)
+from ._validate import (
+    whiteness_test as whiteness_test,
+)
 from ._version import __version__ as __version__

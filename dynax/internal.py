@@ -151,15 +151,6 @@ from ._diagnose._fit import (
 from ._diagnose._fit import (
     window_errors as window_errors,
 )
-from ._diagnose._horizon import (
-    position_spread as position_spread,
-)
-from ._diagnose._horizon import (
-    predictability_horizon as predictability_horizon,
-)
-from ._diagnose._horizon import (
-    relative_position_error as relative_position_error,
-)
 from ._diagnose._library import named_equivalent as named_equivalent
 from ._diagnose._library import physical_readings as physical_readings
 from ._diagnose._probe import cross_validated_ridge as cross_validated_ridge
@@ -439,21 +430,6 @@ from ._identify._vehicle._windows import (
 from ._identify._vehicle._windows import (
     valid_starts as valid_starts,
 )
-from ._metrics import (
-    CrossCorrelationTest as CrossCorrelationTest,
-)
-from ._metrics import (
-    horizon_fit as horizon_fit,
-)
-from ._metrics import (
-    kfold_splits as kfold_splits,
-)
-from ._metrics import (
-    leave_one_out_splits as leave_one_out_splits,
-)
-from ._metrics import (
-    WhitenessTest as WhitenessTest,
-)
 from ._model import AbstractBodyModel as AbstractBodyModel
 from ._model import (
     base_parameters_from_physical as base_parameters_from_physical,
@@ -509,23 +485,47 @@ from ._progress import ProgressBar as ProgressBar
 from ._progress import (
     report as progress_report,
 )
-from ._sim_error import (
+from ._simulate import (
     complete_state as complete_state,
-)
-from ._sim_error import (
-    rollouts_from_starts as rollouts_from_starts,
-)
-from ._sim_error import (
-    window_rollout as window_rollout,
-)
-from ._sim_error import (
-    window_rollouts as window_rollouts,
 )
 
 # Simulate: the fixed-grid step, rollouts of measured windows.
 from ._simulate import explicit_step as explicit_step
+from ._simulate import (
+    rollouts_from_starts as rollouts_from_starts,
+)
 from ._simulate import Simulation as Simulation
+from ._simulate import (
+    window_rollout as window_rollout,
+)
+from ._simulate import (
+    window_rollouts as window_rollouts,
+)
 from ._simulate import zoh_term as zoh_term
+from ._validate import (
+    CrossCorrelationTest as CrossCorrelationTest,
+)
+from ._validate import (
+    horizon_fit as horizon_fit,
+)
+from ._validate import (
+    kfold_splits as kfold_splits,
+)
+from ._validate import (
+    leave_one_out_splits as leave_one_out_splits,
+)
+from ._validate import (
+    position_spread as position_spread,
+)
+from ._validate import (
+    predictability_horizon as predictability_horizon,
+)
+from ._validate import (
+    relative_position_error as relative_position_error,
+)
+from ._validate import (
+    WhitenessTest as WhitenessTest,
+)
 
 # Aliased re-exports (`x as y`) count as exports only through `__all__`, so it lists every name.
 __all__ = [

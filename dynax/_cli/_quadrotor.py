@@ -145,7 +145,7 @@ def parse_metrics(text: str) -> tuple[str, ...]:
 def run_evaluate(args, system) -> int:
     """The quadrotor branch of `dynax evaluate`: flight scores per group beside constant velocity."""
     from .._model._quadrotor import ConstantVelocity
-    from .._predict import flight_error, FLIGHT_UNITS
+    from .._simulate import flight_error, FLIGHT_UNITS
 
     steps = parse_steps(args.steps or "1,10,50")
     metrics = parse_metrics(args.metric)

@@ -1,7 +1,7 @@
 """`diagnose`: show what a model's simulation gets wrong, name the cause, extend the model, measure the gain.
 
 `diagnose` is `dynax._fit.fit_least_squares` (the candidate refits, `vmap`ped over configurations,
-`_fit.py`), `dynax._sim_error.window_rollouts` (every held-out rollout), the statistics
+`_fit.py`), `dynax._simulate._sim_error.window_rollouts` (every held-out rollout), the statistics
 (`_statistics.py`) and the selection rules (`_selection.py`), in named steps, one module each:
 
 - `_problem.py`: prepare the problem (records on one grid, candidates, what is identifiable, windows);
@@ -25,7 +25,7 @@ from .._model._quadrotor import Quadrotor
 from .._model._system import AbstractSystem
 from .._precision import warn_if_float32
 from .._progress import ProgressBar
-from .._sim_error import SimulationError
+from .._simulate import SimulationError
 from ._discovery import discover, DiscoverySearch, HeldOutTest
 from ._fit import nominal_values, window_errors
 from ._forward import Current, Forward, forward_selection, Nominal, Yardstick

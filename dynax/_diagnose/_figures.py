@@ -3,8 +3,10 @@
 import jax.numpy as jnp
 import numpy as np  # noqa: E402
 
-from .._sim_error import rollouts_from_starts  # noqa: E402  (the one windowed rollout)
-from .._simulate import FixedGrid  # noqa: E402
+from .._simulate import (
+    FixedGrid,  # noqa: E402
+    rollouts_from_starts,  # noqa: E402  (the one windowed rollout)
+)
 
 
 def _subplots(*args, figsize, **kwargs):

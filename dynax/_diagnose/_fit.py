@@ -8,7 +8,7 @@ fits of all candidates of a forward-selection round are one `dynax._fit.fit_leas
 compiled once for the whole diagnosis.
 
 The nominal parameters are the system's own (`parameter_filter()` / `parameter_labels()`, read
-and written through `dynax._fit.Parameters`); the rollouts are `dynax._sim_error.window_rollouts`,
+and written through `dynax._fit.Parameters`); the rollouts are `dynax._simulate._sim_error.window_rollouts`,
 the one windowed rollout `simulation_error` uses too. The cost is the output error of open-loop
 rollouts on windows of the record, each started from the measured state (internal states of input
 terms driven by the input history before the window), scaled per state by the data's spread.
@@ -33,8 +33,7 @@ import optimistix as optx
 
 from .._fit import clustered_covariance, fit_least_squares, LeastSquaresOptions, levenberg_marquardt, Parameters
 from .._model._extensions import Extended
-from .._sim_error import window_rollouts
-from .._simulate import FixedGrid
+from .._simulate import FixedGrid, window_rollouts
 
 # The Runge-Kutta stages in a plain scan: forward-mode differentiable (the Jacobians are forward
 # mode). One step per sample keeps the batched fits cheap; at 100 Hz and above its error is far

@@ -12,8 +12,8 @@ import numpy as np
 
 from .._model._extensions import AbstractInputTerm
 from .._model._system import AbstractSystem, size_parameter_names
+from .._validate import Horizon
 from ._fit import fit_configurations, make_windows, nominal_values, validate_configurations, Windows
-from ._horizon import Horizon
 from ._problem import Problem
 from ._records import reference_horizon
 from ._residuals import acceleration_residuals, Structure, structure_test

@@ -225,7 +225,7 @@ def quadrotor_flight_errors(report, like: Quadrotor, flights, steps=(1, 10, 50))
     and the constant-velocity baseline: `{name: SimulationError}`; the extended model only where it has a
     world-frame form (`WorldFrameQuadrotor`: no internal states)."""
     from .._model._quadrotor import ConstantVelocity
-    from .._predict import flight_error
+    from .._simulate import flight_error
 
     out = {"constant velocity": flight_error(ConstantVelocity(), flights, steps)}
     for name, model in (("nominal", report.nominal_model), ("extended", report.extended_model)):

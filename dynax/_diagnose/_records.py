@@ -14,7 +14,7 @@ from .._data._trajectory import Trajectory
 from .._data._velocities import check_trajectory_velocities
 from .._errors import DataError, UsageError
 from .._identify._defaults import position_fit_window, with_velocities_from_positions
-from ._horizon import Horizon, position_spread, predictability_horizon, relative_position_error
+from .._validate import Horizon, position_spread, predictability_horizon, relative_position_error
 from ._residuals import sg_window
 
 MIN_BATCHES = 10  # the data-driven reference horizon leaves the paired test at least this many batches
@@ -141,7 +141,7 @@ def horizon_grid(horizons_s, reference_horizon_s, train_records, validation_reco
 
 def reference_horizon(nominal_model, train_records, candidates_s, given, fraction, stride, position_index, dt):
     """The reference horizon: `given`, or the predictability horizon of the nominal model on the training runs."""
-    from .._sim_error import simulation_error  # the public rollout over windows
+    from .._simulate import simulation_error  # the public rollout over windows
 
     if given is not None:
         return Horizon(float(candidates_s[0]), "given (reference_horizon_s)", None, candidates_s, [np.nan])

@@ -27,9 +27,7 @@ import numpy as np
 
 from .._data._derivatives import savitzky_golay
 from .._model._extensions import Extended, InputDelay
-from .._sim_error import InputStates
-from .._simulate import FixedGrid, simulate
-from .._solvers import RK4
+from .._simulate import FixedGrid, InputStates, RK4, simulate
 from ._probe import cross_validated_ridge, ridge_fit
 
 

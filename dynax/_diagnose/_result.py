@@ -8,8 +8,8 @@ everything else is an extension after them.
 import equinox as eqx
 
 from .._model._system import AbstractSystem
-from .._sim_error import SimulationError
-from ._horizon import Horizon
+from .._simulate import SimulationError
+from .._validate import Horizon
 from ._residuals import Structure
 from ._verdict import Verdict
 

@@ -7,7 +7,7 @@ import math
 import equinox as eqx
 
 from .._errors import UsageError
-from ._horizon import DEFAULT_FRACTION
+from .._validate import DEFAULT_FRACTION
 from ._records import HOLDOUT_FRACTION
 
 #: The horizons [s] a diagnosis reports its held-out simulation error at, unless `Horizons.horizons_s` says otherwise.

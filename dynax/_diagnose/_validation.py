@@ -25,7 +25,7 @@ These are reported, not used for the verdict (the held-out paired test and the p
 
 import numpy as np
 
-from .._metrics import cross_correlation_test, nrmse_fit, whiteness_test
+from .._validate import cross_correlation_test, nrmse_fit, whiteness_test
 from ._residuals import acceleration_residuals, sg_window
 from ._result import ResidualTests, Validation
 

@@ -10,7 +10,7 @@ import numpy as np
 
 from .._fit import Solution, Statistics
 from .._model._system import AbstractSystem
-from .._sim_error import SimulationError
+from .._simulate import SimulationError
 from ._angle_zeros import AngleZeros
 from ._consistency import Consistency
 from ._offsets import RecordOffsets

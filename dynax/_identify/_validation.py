@@ -23,7 +23,7 @@ import numpy as np
 from .._data._derivatives import resample
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
-from .._sim_error import simulation_error, SimulationError
+from .._simulate import simulation_error, SimulationError
 
 DEFAULT_HORIZONS_S = (0.1, 0.25, 0.5)
 

@@ -28,8 +28,7 @@ from .._model._helicopter import (
     quaternion_multiply,
 )
 from .._model._system import AbstractSystem
-from .._simulate import FixedGrid
-from .._solvers import RK4
+from .._simulate import FixedGrid, RK4
 from ._excitation import filtered_noise
 from ._flight_controller import FlightController
 from ._helicopter_truth import HelicopterTruth

@@ -7,8 +7,8 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 import numpy as np
 
-from ._errors import UsageError
-from ._model._system import AbstractSystem
+from .._errors import UsageError
+from .._model._system import AbstractSystem
 
 
 class FixedGrid(eqx.Module):

@@ -17,9 +17,9 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 import numpy as np
 
-from ._data._trajectory import Trajectory
-from ._errors import UsageError
-from ._model._helicopter import quaternion_angle
+from .._data._trajectory import Trajectory
+from .._errors import UsageError
+from .._model._helicopter import quaternion_angle
 from ._sim_error import SimulationError
 
 #: The state groups of `flight_error`, with their units.

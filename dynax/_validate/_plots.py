@@ -11,11 +11,10 @@ from collections.abc import Mapping, Sequence
 from jaxtyping import ArrayLike, Float
 import numpy as np
 
-from ._data._trajectory import Trajectory
+from .._data._trajectory import Trajectory
+from .._model._system import AbstractSystem
+from .._simulate import complete_state, simulate
 from ._metrics import cross_correlation_test, nrmse_fit, whiteness_test
-from ._model._system import AbstractSystem
-from ._sim_error import complete_state
-from ._simulate import simulate
 
 
 def _figure(rows: int, cols: int, *, width: float, height: float, **kwargs):

@@ -6,10 +6,10 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 import numpy as np
 
-from ._data._trajectory import Trajectory
-from ._distributed import global_array, leading_sharding, replicate
-from ._errors import DataError
-from ._model._system import AbstractSystem
+from .._data._trajectory import Trajectory
+from .._distributed import global_array, leading_sharding, replicate
+from .._errors import DataError
+from .._model._system import AbstractSystem
 from ._simulate import FixedGrid, simulate
 from ._solvers import RK4
 

@@ -20,9 +20,9 @@ import equinox as eqx
 from jaxtyping import ArrayLike, Float
 import numpy as np
 
-from ._data._trajectory import Trajectory
-from ._errors import UsageError
-from ._sim_error import simulation_error
+from .._data._trajectory import Trajectory
+from .._errors import UsageError
+from .._simulate import simulation_error
 
 
 def _as_columns(name: str, values: ArrayLike) -> np.ndarray:
