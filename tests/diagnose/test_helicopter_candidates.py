@@ -29,7 +29,7 @@ from dynax import (
     Wind,
 )
 from dynax.internal import AbstractVehicleTerm, hover_state, TEMPEST_COEFFICIENTS
-from dynax.synthetic import FlightController, helicopter_flight
+from dynax.synthetic import FlightController, FlightPlan, helicopter_flight
 
 pytestmark = pytest.mark.heavy  # end-to-end runs of a minute or more
 
@@ -127,7 +127,7 @@ VEHICLE_CANDIDATES = tuple(t for t in default_candidates(Helicopter()) if isinst
 def _diagnose_hidden(terms, seed, *, fast=False, mode=Known(), candidates=VEHICLE_CANDIDATES, duration=20.0):
     truth = Extended(Helicopter(), tuple(terms))
     # Fast flight (waypoints tens of metres apart, up to 6-7 m/s) for drag; gentle hover otherwise.
-    kw = dict(spread=20.0, controller=FlightController(max_position_error=12.0)) if fast else {}
+    kw = dict(plan=FlightPlan(spread=20.0), controller=FlightController(max_position_error=12.0)) if fast else {}
     train = helicopter_flight(truth, duration=duration, seed=seed, **kw)
     validation = helicopter_flight(truth, duration=duration, seed=seed + 100, **kw)
     return diagnose(
@@ -278,7 +278,7 @@ def _round_one_screening(monkeypatch, truth):
         raise _ScreenedOnce
 
     monkeypatch.setattr(diagnose_module, "screen", spy)
-    kw = dict(spread=20.0, controller=FlightController(max_position_error=12.0))
+    kw = dict(plan=FlightPlan(spread=20.0), controller=FlightController(max_position_error=12.0))
     train = helicopter_flight(truth, duration=40.0, seed=11, **kw)
     validation = helicopter_flight(truth, duration=20.0, seed=111, **kw)
     with pytest.raises(_ScreenedOnce):
