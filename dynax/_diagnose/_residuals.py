@@ -156,7 +156,8 @@ def exact_delays(model, trajectory, interval: bool = False):
 def acceleration_residuals(model, trajectory):
     """One-step acceleration residuals of `model` on `trajectory`.
 
-    **Returns:** `(residuals (time, n_velocities), smoothed states (time, n_states), model accelerations)`.
+    **Returns:** `(residuals (time, n_velocities), smoothed states (time, n_states), model accelerations,
+    keep)`, `keep` the slice of samples they cover (the filter's start-up and run-out left out).
     """
     nominal = model.system if isinstance(model, Extended) else model
     ts = trajectory.ts
@@ -165,7 +166,7 @@ def acceleration_residuals(model, trajectory):
     xs_smooth = savitzky_golay(ts, trajectory.xs, window=w, order=3)
     idx = velocity_indices(nominal)
     measured = savitzky_golay(ts, trajectory.xs[:, idx], window=w, order=3, deriv=1)
-    unextended = model
+    given = model  # before its delays are replaced by the shifted inputs
     model, us, us_before = exact_delays(model, trajectory)
     predicted = predicted_accelerations(model, ts, xs_smooth, us, jnp.asarray(idx), us_before)
     # The measured acceleration is a local polynomial fit; smoothing the prediction with the same
@@ -176,7 +177,7 @@ def acceleration_residuals(model, trajectory):
         # acceleration jump at every sample, and a stiff flight controller moves the input every
         # sample): compare velocity *increments* over each interval, integrated under the held
         # input from the interval's start, and differentiate the accumulated difference with the same filter.
-        interval_model, interval_us, _ = exact_delays(unextended, trajectory, interval=True)
+        interval_model, interval_us, _ = exact_delays(given, trajectory, interval=True)
         increments = _interval_increments(interval_model, ts, xs_smooth, interval_us, jnp.asarray(idx))
         drift = jnp.diff(trajectory.xs[:, idx], axis=0) - increments
         accumulated = jnp.concatenate([jnp.zeros((1, len(idx)), drift.dtype), jnp.cumsum(drift, axis=0)])
