@@ -161,7 +161,7 @@ def test_the_checker_reads_relative_local_and_package_imports(source, expected):
 UNDERSCORE_IMPORTERS = frozenset()
 
 
-def _underscore_imports():
+def underscore_imports():
     """`{file: [line, ...]}` of the statements that import an underscore name (not a module) from
     another module of dynax."""
     found = {}
@@ -197,7 +197,7 @@ ALL_MODULES = {_module_name(path) for path in MODULES}
 
 def test_no_underscore_name_is_imported_from_another_module():
     # A helper that another module needs gets a plain name inside its private module.
-    found = _underscore_imports()
+    found = underscore_imports()
     unexpected = {f: lines for f, lines in found.items() if f not in UNDERSCORE_IMPORTERS}
     assert not unexpected, unexpected
     stale = UNDERSCORE_IMPORTERS - set(found)
