@@ -502,6 +502,7 @@ from ._simulate import (
     window_rollouts as window_rollouts,
 )
 from ._simulate import zoh_term as zoh_term
+from ._simulate._predict import group_errors as group_errors
 from ._validate import (
     CrossCorrelationTest as CrossCorrelationTest,
 )
@@ -529,6 +530,7 @@ from ._validate import (
 
 # Aliased re-exports (`x as y`) count as exports only through `__all__`, so it lists every name.
 __all__ = [
+    "group_errors",
     "AbstractBodyModel",
     "ProgressBar",
     "Simulation",

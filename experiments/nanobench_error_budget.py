@@ -43,7 +43,7 @@ from scipy.signal import lfilter, savgol_filter
 from scipy.spatial.transform import Rotation
 
 import dynax
-from dynax.internal import quaternion_angle, write_json
+from dynax.internal import group_errors, write_json
 
 H = 50
 GROUPS = ("position", "velocity", "attitude", "body_rate")
@@ -82,20 +82,6 @@ def _rollouts(model, given: tuple[int, ...]):
     return run
 
 
-def _group_errors(predicted, measured):
-    # As `dynax.flight_error` sizes them: norms, and the geodesic angle for the attitude.
-    angle = jnp.vectorize(quaternion_angle, signature="(4),(4)->()")(predicted[..., 3:7], measured[..., 3:7])
-    return jnp.stack(
-        [
-            jnp.linalg.norm(predicted[..., 0:3] - measured[..., 0:3], axis=-1),
-            jnp.linalg.norm(predicted[..., 7:10] - measured[..., 7:10], axis=-1),
-            angle,
-            jnp.linalg.norm(predicted[..., 10:13] - measured[..., 10:13], axis=-1),
-        ],
-        axis=-1,
-    )
-
-
 def _smoothed(xs):
     xs = np.array(xs)
     xs[:, 7:13] = savgol_filter(xs[:, 7:13], 11, 2, axis=0)
@@ -112,7 +98,7 @@ def mae_curve(model, runs, *, given=(), smooth=False, stride=1):
         x0s = (_smoothed(xs) if smooth else xs)[starts]
         paths = run(jnp.asarray(x0s), jnp.asarray(xs), jnp.asarray(r.us), jnp.asarray(starts), r.dt)
         measured = jnp.stack([jnp.asarray(xs)[starts + h] for h in range(1, H + 1)], axis=1)
-        total = total + np.asarray(jnp.sum(_group_errors(paths, measured), axis=0))
+        total = total + np.asarray(jnp.sum(group_errors(paths, measured), axis=0))
         n += len(starts)
     return total / n, n
 

@@ -95,7 +95,7 @@ def predict_ahead(model, trajectory: Trajectory, steps=(1, 10, 50)) -> Float[Arr
     return _predict(model, xs, us.astype(xs.dtype), dt, jnp.arange(n), jnp.asarray(steps), max(steps))
 
 
-def _group_errors(predicted, measured):
+def group_errors(predicted, measured):
     """Per group, the size of the error at each prediction: Euclidean norms [m, m/s, rad/s] and the
     geodesic angle between the attitudes [rad]."""
     angle = jnp.vectorize(quaternion_angle, signature="(4),(4)->()")(predicted[..., 3:7], measured[..., 3:7])
@@ -140,7 +140,7 @@ def flight_error(model, flights, steps=(1, 10, 50)) -> SimulationError:
         predicted = predict_ahead(model, f, range(1, horizon + 1))
         k = predicted.shape[0]
         measured = jnp.stack([f.xs[h : h + k] for h in range(1, horizon + 1)], axis=1)
-        err = _group_errors(predicted, measured)  # (starts, horizon, group)
+        err = group_errors(predicted, measured)  # (starts, horizon, group)
         finite = jnp.all(jnp.isfinite(err), axis=(1, 2))
         err = jnp.where(finite[:, None, None], err, jnp.inf)
         a, s = np.asarray(jnp.sum(err, axis=0), float), np.asarray(jnp.sum(err**2, axis=0), float)
