@@ -345,19 +345,21 @@ from ._identify._consistency import min_mass_eigenvalue as min_mass_eigenvalue
 from ._identify._defaults import with_velocities_from_positions as with_velocities_from_positions
 from ._identify._equations import dynamic_rows as dynamic_rows
 from ._identify._equations import stacked_equations as stacked_equations
-from ._identify._identify import named_parameters as named_parameters
 from ._identify._least_squares import (
     jointly_determined as jointly_determined,
 )
+from ._identify._least_squares import least_squares as least_squares
 from ._identify._least_squares import (
     POORLY_DETERMINED as POORLY_DETERMINED,
 )
 from ._identify._least_squares import tsqr_r as tsqr_r
+from ._identify._method import FitSettings as FitSettings
 from ._identify._record_friction import compare_records as compare_records
 from ._identify._refine import delta_method_covariance as delta_method_covariance
 from ._identify._refine import ml_weights as ml_weights
 from ._identify._refine import record_residual_scale as record_residual_scale
 from ._identify._regressors import parameter_vector as parameter_vector
+from ._identify._simulation_fit import named_parameters as named_parameters
 from ._identify._simulation_fit import (
     record_jackknife_covariance as record_jackknife_covariance,
 )
@@ -647,6 +649,7 @@ __all__ = [
     "fit_lagged",
     "fit_one_step",
     "fit_percent",
+    "FitSettings",
     "float_scalar",
     "folds_by_run",
     "friction_power_regressor",
@@ -667,6 +670,7 @@ __all__ = [
     "lagged_loss_of",
     "recorded_loss",
     "leading_sharding",
+    "least_squares",
     "levenberg_marquardt",
     "log_ratio_differences",
     "look_alike_tests",

@@ -44,6 +44,8 @@ from ._least_squares import (
 from ._least_squares import (
     PoorlyDeterminedWarning as PoorlyDeterminedWarning,
 )
+from ._method import AbstractMethod as AbstractMethod
+from ._method import FitSettings as FitSettings
 from ._offsets import record_offsets as record_offsets
 from ._offsets import RecordOffsets as RecordOffsets
 from ._record_friction import record_friction as record_friction

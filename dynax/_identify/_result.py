@@ -39,6 +39,8 @@ class StageKind(enum.StrEnum):
     """The least-squares model refined through the integrator (`refine_by_simulation`)."""
     SIMULATION = "simulation"
     """An output-error fit from the system's own values (`SimulationFit`)."""
+    FIT = "fit"
+    """One fit by a method of another kind (an `AbstractMethod` whose `fit` is all it does)."""
 
 
 class Stage(eqx.Module):
@@ -275,7 +277,8 @@ class Identification(eqx.Module):
     def relative_error(self) -> Float[Array, ""]:
         last = self.stages[-1]
         if last.relative_equation_error is None:
-            return last.solution.statistics.relative_error
+            statistics = last.solution.statistics
+            return statistics.relative_error if isinstance(statistics, OutputErrorStatistics) else jnp.asarray(jnp.nan)
         return jnp.asarray(last.relative_equation_error)
 
     @property
