@@ -16,18 +16,6 @@ from ._consistency import (
 from ._consistency import (
     InconsistentEstimateWarning as InconsistentEstimateWarning,
 )
-from ._defaults import (
-    choose_filter as choose_filter,
-)
-from ._defaults import (
-    FilterChoice as FilterChoice,
-)
-from ._defaults import (
-    measurement_noise_std as measurement_noise_std,
-)
-from ._defaults import (
-    noise_floor_and_band as noise_floor_and_band,
-)
 from ._equations import Dynamic as Dynamic
 from ._equations import Energy as Energy
 from ._equations import Power as Power

@@ -20,10 +20,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._data._derivatives import butterworth_filtfilt, central_difference, resample
+from .._data._spectra import choose_filter, trim_and_decimation
 from .._data._trajectory import Trajectory
 from .._errors import DataError, UsageError
 from .._fit import Solution
-from ._defaults import choose_filter, trim_and_decimation
 from ._least_squares import least_squares
 from ._method import AbstractMethod, as_records, FitSettings
 from ._regressors import (

@@ -21,6 +21,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 import numpy as np
 
+from .._data._spectra import choose_filter
 from .._data._trajectory import Trajectory
 from .._data._velocities import check_trajectory_velocities
 from .._errors import DataError, UsageError
@@ -33,7 +34,6 @@ from .._simulate import FixedGrid
 from ._angle_zeros import AngleZeros, record_angle_zeros
 from ._angle_zeros import applies as _angle_zeros_apply
 from ._consistency import check_consistency, Consistency
-from ._defaults import choose_filter
 from ._equations import AbstractLeastSquares, Dynamic, stacked_equations, uniformly_sampled
 from ._least_squares import (
     describe_poorly_determined,
@@ -333,8 +333,9 @@ def identify(
     **Arguments:**
 
     - `system`: `Acrobot`, `DoublePendulum` or `LinearAxis` (least squares), or any system
-      (`SimulationFit`). Its parameter values are the starting point of `SimulationFit` and are
-      otherwise ignored.
+      (`SimulationFit`; a `Helicopter` also with a vehicle criterion, `OneStep()`, `Lagged()`, ...,
+      which then fits the one record as `fit_vehicle` does). Its parameter values are the starting
+      point of `SimulationFit` and are otherwise ignored.
     - `data`: a `Trajectory` or a list of them (same system).
     - `method`: `Dynamic()` (default), `Power()`, `Energy()`, `SimulationFit()`, or any other
       `AbstractMethod`: `identify` runs its `fit` once (with `friction` and `weights` in a

@@ -261,6 +261,11 @@ class Identification(eqx.Module):
 
     @property
     def condition_number(self) -> Float[Array, ""]:
+        """Of the column-scaled regressor (or Jacobian); NaN for a method whose fit reports none (a
+        vehicle criterion)."""
+        first = self.stages[0].solution.statistics
+        if not isinstance(first, (Statistics, OutputErrorStatistics)):
+            return jnp.asarray(jnp.nan)
         return self._linear_statistics.condition_number
 
     @property

@@ -143,6 +143,12 @@ def test_vehicle_criteria_fit_through_the_same_call():
     via = dynax.fit_vehicle(dynax.Helicopter(), flight, dynax.OneStep())
     np.testing.assert_array_equal(np.asarray(via.value), np.asarray(direct.value))
     assert direct.statistics.criterion == "one-step" and dynax.OneStep().label == "one-step"
+    # `identify` takes the vehicle and the criterion too: the same fit on the head, validated on the tail
+    result = identify(dynax.Helicopter(), flight, dynax.OneStep())
+    head = dynax.fit_vehicle(dynax.Helicopter(), flight.split(0.8)[0], dynax.OneStep())
+    np.testing.assert_array_equal(np.asarray(result.value), np.asarray(head.value))
+    assert result.method == "one-step" and result.stages[0].kind == StageKind.FIT
+    assert result.validation is not None and np.all(np.asarray(result.validation.rmse) < 0.1)
     with pytest.raises(UsageError, match="one record"):
         dynax.OneStep().fit(dynax.Helicopter(), [flight, flight])
     with pytest.raises(UsageError, match="continuous record"):
