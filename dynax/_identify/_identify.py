@@ -21,6 +21,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 import numpy as np
 
+from .._data._sampling import check_time_stamps
 from .._data._spectra import choose_filter
 from .._data._trajectory import Trajectory
 from .._data._velocities import check_trajectory_velocities
@@ -85,6 +86,14 @@ def _check_data(system, trajectories):
                 "for a derivative, and as many equations as parameters)",
                 path=traj.source or None,
             )
+        # A record built in Python has not met the loader's time checks: times that do not increase are refused
+        # here (irregular steps and gaps are the caller's to allow), before any derivative divides by a step.
+        try:
+            check_time_stamps(traj.ts, path=traj.source or None, max_gap=None, min_step=None)
+        except DataError as error:
+            if traj.source:
+                raise
+            raise UsageError(f"identify: record {k} of `data`: {error}") from None
     for k, traj in enumerate(trajectories):
         if traj.xs.shape[1] != system.n_states or traj.us.shape[1] != system.n_inputs:
             raise UsageError(
