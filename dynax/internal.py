@@ -161,6 +161,8 @@ from ._diagnose._library import physical_readings as physical_readings
 from ._diagnose._probe import cross_validated_ridge as cross_validated_ridge
 from ._diagnose._probe import folds_by_run as folds_by_run
 from ._diagnose._problem import candidate_family as candidate_family
+from ._diagnose._problem import cross_fit_folds as cross_fit_folds
+from ._diagnose._problem import Fold as Fold
 from ._diagnose._problem import names_to_refit as names_to_refit
 from ._diagnose._problem import Problem as Problem
 from ._diagnose._quadrotor import (
@@ -668,6 +670,8 @@ __all__ = [
     "look_alike_tests",
     "look_alikes",
     "make_windows",
+    "cross_fit_folds",
+    "Fold",
     "MAX_MAGNITUDE",
     "min_mass_eigenvalue",
     "ml_weights",
