@@ -23,10 +23,10 @@ class LinearAxis(AbstractManipulator):
     State `(q, dq)`, input `(force,)`. Defaults are the published EMPS values.
     """
 
-    mass: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(95.1089))
-    viscous: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(203.5034))
-    coulomb: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(20.3935))
-    offset: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(-3.1648))
+    mass: Float[Array, ""] = eqx.field(converter=jnp.asarray, default_factory=lambda: jnp.asarray(95.1089))
+    viscous: Float[Array, ""] = eqx.field(converter=jnp.asarray, default_factory=lambda: jnp.asarray(203.5034))
+    coulomb: Float[Array, ""] = eqx.field(converter=jnp.asarray, default_factory=lambda: jnp.asarray(20.3935))
+    offset: Float[Array, ""] = eqx.field(converter=jnp.asarray, default_factory=lambda: jnp.asarray(-3.1648))
     coulomb_velocity: float = eqx.field(static=True, default=1e-3)
 
     state_names: ClassVar[tuple[str, ...]] = ("q", "dq")

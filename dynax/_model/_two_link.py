@@ -138,7 +138,8 @@ DRAKE_BASE_PARAMETERS = base_parameters_from_physical(DRAKE_DEFAULTS)
 
 
 def _field(name):
-    return eqx.field(default_factory=lambda: jnp.asarray(DRAKE_BASE_PARAMETERS[name]))
+    # Converted on construction, so a Python float or a NumPy scalar is stored as the array the annotation says.
+    return eqx.field(converter=jnp.asarray, default_factory=lambda: jnp.asarray(DRAKE_BASE_PARAMETERS[name]))
 
 
 def _mass_matrix(p, q):
