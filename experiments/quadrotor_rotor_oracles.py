@@ -27,6 +27,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from tests.quadrotor.synthetic_flight import quadrotor_flight  # noqa: E402
 
 STEPS = (10, 50)
+ALTITUDE = 0.07  # the low flights' mean height over the floor [m]
 
 
 def _world(body, like):
@@ -66,16 +67,16 @@ def main():
     parser.add_argument("--case", default="all")
     args = parser.parse_args()
     results = {}
-    if args.case in ("sag", "all"):
-        train = [quadrotor_flight(15.0, seed=5, sag=(4.2, 3.5))]
-        validation = [quadrotor_flight(15.0, seed=105, sag=(4.1, 3.5))]
+    if args.case in ("sag", "all"):  # the designs of tests/quadrotor/test_rotor_terms.py
+        train = [quadrotor_flight(15.0, seed=5, sag=(4.2, 3.9)), quadrotor_flight(15.0, seed=15, sag=(3.8, 3.5))]
+        validation = [quadrotor_flight(20.0, seed=105, sag=(4.1, 3.6))]
         results["sag"] = case("sag", train, validation, False, dynax.BatterySag(2.0))
     if args.case in ("ground", "all"):
         train = [
             quadrotor_flight(15.0, seed=6, ground=0.08),
-            quadrotor_flight(15.0, seed=16, altitude=0.1, ground=0.08),
+            quadrotor_flight(15.0, seed=16, altitude=ALTITUDE, ground=0.08),
         ]
-        validation = [quadrotor_flight(15.0, seed=106, altitude=0.1, ground=0.08)]
+        validation = [quadrotor_flight(15.0, seed=s, altitude=ALTITUDE, ground=0.08) for s in (106, 126)]
         results["ground"] = case("ground", train, validation, None, dynax.GroundEffect(0.08**2 / 16, floor=0.0))
     out = pathlib.Path("experiments/results/quadrotor_rotor_oracles")
     out.mkdir(parents=True, exist_ok=True)

@@ -53,7 +53,7 @@ def _log(path, seed, rest_s=1.0, **effects):
     return str(path)
 
 
-@pytest.mark.slow  # a fit, an evaluation and a diagnosis of 15 s flights: several minutes on two cores
+@pytest.mark.slow  # a fit, an evaluation and a diagnosis of 15 s flights: 9 minutes on two loaded cores
 def test_a_plus_frame_logging_rotor_speeds_needs_only_a_map(tmp_path, capsys):
     drag = (0.3, 0.3, 0.05)  # a larger rotor's drag, 1/s
     train = _log(tmp_path / "train.csv", 21, drag=drag)
@@ -73,5 +73,11 @@ def test_a_plus_frame_logging_rotor_speeds_needs_only_a_map(tmp_path, capsys):
     diagnose = ["diagnose", "quadrotor", train, "--validation", test, "--map", MAP, "--max-terms", "1"]
     assert main([*diagnose, "--no-discovery", "--out", str(report)]) == 0
     j = json.loads((report / "report.json").read_text())
-    assert j["findings"] and j["findings"][0]["cause"] == "rotor_drag", (j["verdict"], j["findings"])
-    assert j["findings"][0]["where"] in ("u", "v")
+    # The drag leads the refitted candidates at its size on both horizontal axes. On this heavier vehicle
+    # it is a few per cent of the nominal's 0.5 s error (the rest is the measurement noise of the starts):
+    # significant, but short of a finding's practical size; whatever is named must be it.
+    leading = [c for c in j["candidates"] if c.get("gain") is not None][:2]
+    assert {c["cause"] for c in leading} == {"rotor_drag"} and {c["where"] for c in leading} == {"u", "v"}, leading
+    for c in leading:
+        assert c["coefficient"] == pytest.approx(0.3, rel=0.2) and c["p_value"] < 0.05
+    assert {f["cause"] for f in j["findings"]} <= {"rotor_drag"}, j["findings"]
