@@ -120,9 +120,8 @@ def test_hidden_battery_sag_is_named_where_the_motor_map_ignores_the_voltage():
 @pytest.mark.slow
 @pytest.mark.xfail(
     reason="known shortfall: with the thrust map refitted, ground_effect is refitted at its size (c = 4.1e-4 "
-    "m^2 against R^2/16 = 4.0e-4) and leads the candidates, but gains 19-21 % at 0.5 s: the rest of the "
-    "nominal's 8.7 mm error is the noise of the starts, and the effect acts at the low points only; "
-    "p = 0.001-0.02, not named",
+    "m^2 against R^2/16 = 4.0e-4) and leads the candidates, but the true model gains only 19-21 % at "
+    "0.5 s on these flights (the effect acts at their low points only); p = 0.001-0.02, not named",
     strict=True,
 )
 def test_hidden_ground_effect_is_named_low_over_the_floor():
