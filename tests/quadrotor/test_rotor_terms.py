@@ -78,6 +78,15 @@ def test_battery_sag_is_a_candidate_only_where_the_flights_log_vbat_and_ground_e
     assert float(ground.floor) == 0.05
 
 
+def test_thrust_parameters_are_the_thrust_axis_motor_weights():
+    flight = quadrotor_flight(0.5, seed=0, noise=False, vbat=True)
+    for battery, squared in ((False, "dw/m1^2"), (True, "dw/(vbat m1)^2")):
+        for family in ("nominal", "acceleration"):
+            names = thrust_parameters(initial_quadrotor(family, [flight], battery=battery))
+            assert len(names) == 8 and squared in names and all(n.startswith("dw/") for n in names)
+            assert "dw/w sum(m)" not in names  # rotor drag, not the thrust map
+
+
 def _diagnosis(train, validation, battery=None, floor=None):
     """`diagnose` with the thrust map refitted with each candidate (`thrust_parameters`): the held one-step
     map takes up most of a thrust-per-command change (see `dynax._diagnose._quadrotor`)."""
