@@ -173,6 +173,7 @@ from ._diagnose._quadrotor import quadrotor_candidates as quadrotor_candidates
 from ._diagnose._quadrotor import (
     quadrotor_flight_errors as quadrotor_flight_errors,
 )
+from ._diagnose._quadrotor import thrust_parameters as thrust_parameters
 from ._diagnose._residuals import acceleration_residuals as acceleration_residuals
 from ._diagnose._residuals import exact_delays as exact_delays
 from ._diagnose._selection import (
@@ -542,6 +543,7 @@ __all__ = [
     "Discovery",
     "body_frame_system",
     "quadrotor_candidates",
+    "thrust_parameters",
     "Rest",
     "rest_stretches",
     "collocation_reference",
