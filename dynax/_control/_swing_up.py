@@ -7,7 +7,6 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from .._model._system import AbstractSystem
 from .._model._two_link import Acrobot
 from ._lqr import LQR, lqr
 
@@ -124,7 +123,7 @@ class SpongController(eqx.Module):
 
     def __init__(
         self,
-        system: AbstractSystem | None = None,
+        system: Acrobot | None = None,
         k_e: ArrayLike = DRAKE_SPONG_PARAMETERS[0],
         k_p: ArrayLike = DRAKE_SPONG_PARAMETERS[1],
         k_d: ArrayLike = DRAKE_SPONG_PARAMETERS[2],

@@ -68,11 +68,11 @@ class Trajectory(eqx.Module):
         d = np.diff(np.asarray(self.ts))
         return bool(np.all(np.abs(d - np.median(d)) <= 0.01 * np.median(d)))
 
-    def state(self, name: str) -> Array:
+    def state(self, name: str) -> Array | np.ndarray:
         """The state column `name`."""
         return self.xs[:, self._index(self.state_names, name, "state")]
 
-    def input(self, name: str) -> Array:
+    def input(self, name: str) -> Array | np.ndarray:
         """The input column `name`."""
         return self.us[:, self._index(self.input_names, name, "input")]
 

@@ -367,9 +367,9 @@ class DynamicSignals:
     `ts`, whether the inputs are `held`, and its `settings`. A constant shift of `xs` is the
     signals of the shifted record: the zero-phase filters pass constants unchanged."""
 
-    ts: jnp.ndarray
-    xs: jnp.ndarray
-    us: jnp.ndarray
+    ts: jnp.ndarray | np.ndarray
+    xs: jnp.ndarray | np.ndarray
+    us: jnp.ndarray | np.ndarray
     held: bool
     settings: dict
 

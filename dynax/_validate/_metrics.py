@@ -37,9 +37,7 @@ def _as_columns(name: str, values: ArrayLike) -> np.ndarray:
     return arr
 
 
-def nrmse_fit(
-    measured: Float[ArrayLike, "..."], simulated: Float[ArrayLike, "..."]
-) -> Float[np.ndarray, " channels"]:
+def nrmse_fit(measured: Float[ArrayLike, "..."], simulated: Float[ArrayLike, "..."]) -> Float[np.ndarray, " channels"]:
     r"""The fit percentage of MATLAB's `compare`: $100\,(1 - \|y - \hat y\| / \|y - \bar y\|)$ per channel.
 
     100 % is a perfect fit; 0 % is no better than the measured mean; it is negative when worse.
