@@ -467,6 +467,12 @@ from ._model._helicopter import (
 from ._model._helicopter import (
     TEMPEST_FEATURES as TEMPEST_FEATURES,
 )
+from ._model._linear_in_parameters import (
+    AbstractLinearInParameters as AbstractLinearInParameters,
+)
+from ._model._linear_in_parameters import (
+    identification_hooks as identification_hooks,
+)
 from ._model._two_link import DRAKE_DEFAULTS as DRAKE_DEFAULTS
 from ._progress import (
     bar_token as bar_token,
@@ -647,6 +653,8 @@ __all__ = [
     "fit_percent",
     "FitSettings",
     "float_scalar",
+    "AbstractLinearInParameters",
+    "identification_hooks",
     "folds_by_run",
     "friction_power_regressor",
     "global_array",

@@ -11,7 +11,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._model._extensions import AbstractInputTerm
-from .._model._system import AbstractSystem, size_parameter_names
+from .._model._linear_in_parameters import size_parameter_names
+from .._model._system import AbstractSystem
 from .._validate import Horizon
 from ._fit import fit_configurations, make_windows, nominal_values, validate_configurations, Windows
 from ._problem import Problem

@@ -12,7 +12,8 @@ import numpy as np
 from .._errors import UsageError
 from .._identify._record_friction import compare_records
 from .._model._extensions import Extended
-from .._model._system import AbstractSystem, friction_parameter_names
+from .._model._linear_in_parameters import friction_parameter_names
+from .._model._system import AbstractSystem
 from ._candidates import (
     candidate_scales,
     default_candidates,

@@ -28,7 +28,8 @@ from .._data._velocities import check_trajectory_velocities
 from .._errors import DataError, UsageError
 from .._model._extensions import Extended
 from .._model._linear_axis import LinearAxis
-from .._model._system import AbstractSystem, size_parameter_names
+from .._model._linear_in_parameters import size_parameter_names
+from .._model._system import AbstractSystem
 from .._model._two_link import Acrobot, DoublePendulum
 from .._precision import warn_if_float32
 from .._simulate import FixedGrid

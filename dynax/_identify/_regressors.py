@@ -25,6 +25,7 @@ import numpy as np
 from .._errors import UsageError
 from .._model._extensions import CoulombFriction, Extended, JointSpring, RotorInertia
 from .._model._extensions._terms import AbstractJointTerm
+from .._model._linear_in_parameters import least_squares_system
 from .._model._system import AbstractSystem
 
 Friction = Literal["viscous", "coulomb"]
@@ -44,7 +45,7 @@ def split_terms(system):
         base, terms = system.system, system.terms
     else:
         base, terms = system, ()
-    base.check_least_squares(tuple(terms))
+    base = least_squares_system(base, tuple(terms))
     if any(not isinstance(t, AbstractJointTerm) for t in terms):
         raise UsageError(
             "least-squares identification takes joint terms (friction, drag, rotor inertia, springs) on a two-link "

@@ -7,12 +7,13 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .._errors import UsageError
+from ._linear_in_parameters import AbstractLinearInParameters
 from ._system import AbstractManipulator
 
 LINEAR_AXIS_PARAMETER_NAMES = ("mass", "viscous", "coulomb", "offset")
 
 
-class LinearAxis(AbstractManipulator):
+class LinearAxis(AbstractManipulator, AbstractLinearInParameters):
     r"""One axis: $m \ddot q = F - F_v \dot q - F_c \operatorname{sign}(\dot q) - F_0$.
 
     This is the EMPS reference model `force = M q'' + Fv q' + Fc sign(q') + offset`

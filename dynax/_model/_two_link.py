@@ -18,6 +18,7 @@ from jaxtyping import Array, ArrayLike, Float
 import numpy as np
 
 from ._extensions._terms import CoulombFriction, RotorInertia
+from ._linear_in_parameters import AbstractLinearInParameters
 from ._system import AbstractManipulator
 
 BASE_PARAMETER_NAMES = ("theta1", "theta2", "theta3", "theta4", "theta5", "theta6", "theta7")
@@ -165,7 +166,7 @@ def _energy(p, x):
     return kinetic + potential
 
 
-class AbstractTwoLink(AbstractManipulator):
+class AbstractTwoLink(AbstractManipulator, AbstractLinearInParameters):
     """Shared dynamics of `Acrobot` and `DoublePendulum`, in base parameters theta1..theta7."""
 
     theta1: Float[Array, ""] = _field("theta1")
