@@ -174,6 +174,7 @@ from ._diagnose._quadrotor import (
     quadrotor_flight_errors as quadrotor_flight_errors,
 )
 from ._diagnose._quadrotor import thrust_parameters as thrust_parameters
+from ._diagnose._quadrotor import WorldFrameQuadrotor as WorldFrameQuadrotor
 from ._diagnose._residuals import acceleration_residuals as acceleration_residuals
 from ._diagnose._residuals import exact_delays as exact_delays
 from ._diagnose._selection import (
@@ -680,6 +681,7 @@ __all__ = [
     "look_alike_tests",
     "look_alikes",
     "make_windows",
+    "WorldFrameQuadrotor",
     "cross_fit_folds",
     "Fold",
     "MAX_MAGNITUDE",

@@ -31,7 +31,7 @@ ALTITUDE = 0.07  # the low flights' mean height over the floor [m]
 
 
 def _world(body, like):
-    from dynax._diagnose._quadrotor import WorldFrameQuadrotor
+    from dynax.internal import WorldFrameQuadrotor
 
     return WorldFrameQuadrotor(body, like.input_scale)
 
