@@ -246,7 +246,7 @@ def _report(problem: Problem, forward: Forward, judgement, *, mode, train, valid
     blocks = len(problem.folds) > len(problem.train)
     test["cross_fitting"] = (
         (
-            f"the training runs cut into {len(problem.folds)} contiguous blocks, each held out in turn, every "
+            f"the training run cut into {len(problem.folds)} contiguous blocks, each held out in turn, every "
             "configuration refitted on the rest; their windows pooled with the held-out runs'"
             if blocks
             else f"each of the {len(problem.folds)} training runs also held out in turn, every configuration "
