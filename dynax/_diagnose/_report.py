@@ -133,6 +133,8 @@ def _causes_markdown(j: dict) -> list[str]:
                 + (
                     "; one model with it in this mode"
                     if a.get("equivalent")
+                    else "; not told apart: one of the two is too short for the rollouts' step to simulate"
+                    if not a.get("resolved", True)
                     else ""
                     if a["told_apart"]
                     else "; not told apart"

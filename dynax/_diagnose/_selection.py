@@ -43,6 +43,7 @@ def look_alike_tests(problem, yard, best, results, scores):
             test = paired_test(s_k, s_best, yard.window_runs, yard.overlap)
             margin = window_gain(s_k, s_best)
             equivalent = k in problem.equivalents.get(best, [])
+            resolved = _resolved(problem, (best, k), results)
             alternatives.append(
                 {
                     "cause": problem.candidates[k].cause,
@@ -50,11 +51,25 @@ def look_alike_tests(problem, yard, best, results, scores):
                     "gain": float(results[k]["gain_held_out"]),
                     "p_value": test.p_value,
                     "gain_over": margin,
-                    "told_apart": bool(test.p_value < o.alpha and margin >= o.min_gain and not equivalent),
+                    "told_apart": bool(test.p_value < o.alpha and margin >= o.min_gain and not equivalent and resolved),
                     "equivalent": equivalent,
+                    "resolved": resolved,
                 }
             )
     return alternatives
+
+
+def _resolved(problem, pair, results) -> bool:
+    """Whether the diagnosis's rollouts (one step per sample) simulate both fits of a look-alike pair faithfully.
+
+    A look-alike whose fitted size is below what its term resolves at that step (`shortest_resolved`: a dead time
+    shorter than about a sample interval, whose Padé filter is stiffer than the step) is simulated wrong, so its
+    poor held-out error is the rollout's, not evidence against it. A dead time and a lag of the same size differ
+    only at frequencies near the sampling rate's, so where either fit is that short, the pair is not told apart.
+    """
+    times = [problem.neutral[k] + results[k]["delta"] for k in pair]
+    shortest = max(problem.candidates[k].shortest_resolved(problem.dt) for k in pair)
+    return not (shortest > 0 and min(times) < shortest)
 
 
 def rank(results):

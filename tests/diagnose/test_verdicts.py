@@ -158,3 +158,17 @@ def test_known_mode_with_an_impossible_nominal_is_not_none():
     selection = dynax.Selection(max_terms=2)
     j = dynax.diagnose(nominal, train, held_out, mode=dynax.Known(), selection=selection, progress=False).to_json()
     assert j["verdict"] != "none", (j["verdict"], j["structure"]["nominal"], j["nominal"]["sim_error"])
+
+
+@pytest.mark.heavy  # an end-to-end diagnosis: in `make test`, not `make quick`
+def test_a_dead_time_shorter_than_a_sample_is_not_told_apart_from_a_lag():
+    # A 5 ms dead time at 100 Hz (DOP853, the input shifted in time): the data show it as well as a 5 ms lag, and
+    # the delay's Padé filter is too stiff for the rollouts' 10 ms step, so its poor fit is no evidence against it.
+    case = Case("short-delay", "linear_axis", "input_delay", "force", 0.005, "dead time", "refit", 136, near=True)
+    j = diagnose_case(case).to_json()
+    first = j["findings"][0]
+    assert first["cause"] in ("input_delay", "input_lag")
+    assert abs(first["coefficient"] - 0.005) < 0.002
+    other = [a for a in first["look_alikes"] if a["cause"] in ("input_delay", "input_lag")]
+    assert other and not other[0]["told_apart"] and not other[0]["resolved"]
+    assert first["confidence"] == "low"

@@ -1,5 +1,6 @@
 """Model extensions compose with a nominal system, are neutral at rest values and act as documented."""
 
+import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -10,6 +11,7 @@ from dynax import (
     CoulombFriction,
     DoublePendulum,
     Extended,
+    FixedGrid,
     InputDelay,
     InputGain,
     InputLag,
@@ -152,3 +154,24 @@ def test_coulomb_friction_on_a_linear_axis_equals_its_own_coulomb_term():
             reference.vector_field(0.0, x, jnp.array([30.0])),
             rtol=1e-12,
         )
+
+
+def test_input_delay_states_the_shortest_dead_time_a_step_resolves():
+    # One Tsit5 step per 10 ms sample, as the diagnosis's rollouts take: a dead time above the stated shortest
+    # follows the shifted input, one well below it does not (the Padé filter is stiffer than the step).
+    step, w = 0.01, 3.0
+    ts = jnp.arange(0.0, 4.0, step)
+    us = jnp.sin(w * ts)[:, None]
+    shortest = InputDelay(0).shortest_resolved(step)
+    assert step < shortest < 2 * step
+
+    def error(delay):
+        extended = Extended(Acrobot(), (InputDelay(0, delay),))
+        method = FixedGrid(solver=diffrax.Tsit5(), substeps=1)
+        xs = simulate(extended, extended.initial_state(X0, us[0]), ts, us, method=method, throw=False).xs
+        applied = jax.vmap(lambda x, u: extended.applied_input(u, x[4:])[0])(xs, us)[:, 0]
+        late = ts > 1.0
+        return float(jnp.nan_to_num(jnp.max(jnp.abs(applied[late] - jnp.sin(w * (ts[late] - delay)))), nan=jnp.inf))
+
+    assert error(1.5 * shortest) < 0.05
+    assert error(0.5 * shortest) > 0.2

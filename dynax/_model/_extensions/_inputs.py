@@ -10,6 +10,8 @@ from ._terms import AbstractTerm, float_scalar
 
 # Time constants and delays at or below this are treated as zero (the input passes through).
 _TINY_TIME = 1e-4
+# The shortest dead time `InputDelay` simulates faithfully, in fixed steps (see `InputDelay.shortest_resolved`).
+PADE_STEPS_PER_DELAY = 1.25
 
 
 class AbstractInputTerm(AbstractTerm):
@@ -159,6 +161,14 @@ class InputDelay(AbstractInputTerm):
     def __init__(self, input: int, delay: ArrayLike = 0.0):
         self.input = input
         self.coefficient = float_scalar(delay)
+
+    def shortest_resolved(self, step: float) -> float:
+        """The filter's poles lie at $|s| T = \\sqrt{12}$, 150 degrees from the positive real axis, so a fixed step
+        $h$ puts them at $|s| h = \\sqrt{12}\\,h/T$: one Tsit5 step per sample follows the delayed input for
+        $T \\ge h$ and diverges just below it (at $0.95h$). `PADE_STEPS_PER_DELAY` (1.25 steps) leaves a margin from
+        that edge. A shorter delay is simulated wrong at that step, so the shortest dead time a rollout at one step
+        per sample shows is about a sample interval."""
+        return PADE_STEPS_PER_DELAY * step
 
     def applied(self, u, z):
         # a = u - T s F(s) u with F = 1 / (1 + sT/2 + s^2 T^2 / 12); z = (F u, s F u).

@@ -58,6 +58,11 @@ class AbstractTerm(eqx.Module):
         """`cause@where`, e.g. `coulomb_friction@q2` (the contract's `extended.terms` entries)."""
         return f"{self.cause}@{self.where(system)}"
 
+    def shortest_resolved(self, step: float) -> float:
+        """The smallest coefficient a fixed-step rollout with steps of `step` seconds simulates faithfully; 0 where
+        any is (a dead time's filter sets one: `InputDelay`)."""
+        return 0.0
+
     def parameters(self, system) -> dict[str, Array]:
         """The term's coefficients by report name (one for a named cause; several for a `Discovered` term)."""
         return {self.parameter_name(system): self.coefficient}
