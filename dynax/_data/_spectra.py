@@ -211,17 +211,12 @@ def choose_filter(trajectory: Trajectory, *, snr: float = 100.0) -> FilterChoice
     nyquist = 0.5 * fs
     names = trajectory.state_names
     order = next(o for o in range(1, 9) if _tail_ratio(o) < 0.1)
+
+    def no_filter(bands, noise, why):  # the velocities pass as measured
+        return FilterChoice(None, order, 1, 1, fs, bands, noise, f"{why}: no filter")
+
     if len(trajectory) < MIN_SAMPLES:
-        return FilterChoice(
-            None,
-            order,
-            1,
-            1,
-            fs,
-            {},
-            {},
-            f"{len(trajectory)} samples are too few for a spectrum (at least {MIN_SAMPLES}): no filter",
-        )
+        return no_filter({}, {}, f"{len(trajectory)} samples are too few for a spectrum (at least {MIN_SAMPLES})")
     n = len(names) // 2
     velocities = names[n:]
     bands, noise = {}, {}
@@ -243,27 +238,11 @@ def choose_filter(trajectory: Trajectory, *, snr: float = 100.0) -> FilterChoice
         signal = np.sqrt(max(accel_rms**2 - noise_accel**2, 0.0))
         negligible.append(noise_accel < 0.01 * signal)
     if all(negligible):
-        return FilterChoice(
-            None,
-            order,
-            1,
-            1,
-            fs,
-            bands,
-            noise,
-            "velocity noise negligible (differenced into accelerations it is under 1 % of their rms): no filter",
+        return no_filter(
+            bands, noise, "velocity noise negligible (differenced into accelerations it is under 1 % of their rms)"
         )
     if band >= 0.5 * nyquist:
-        return FilterChoice(
-            None,
-            order,
-            1,
-            1,
-            fs,
-            bands,
-            noise,
-            f"no noise floor below {0.5 * nyquist:.3g} Hz in the velocities: no filter",
-        )
+        return no_filter(bands, noise, f"no noise floor below {0.5 * nyquist:.3g} Hz in the velocities")
     trim, decimate = trim_and_decimation(fs, band, len(trajectory))
     worst = max(noise, key=noise.get)
     reason = (
