@@ -1,18 +1,21 @@
 """Many-start direct collocation of the acrobot's swing-up from rest against the leaderboard's whole score.
 
     python experiments/acrobot_collocation_starts.py [--horizons 1.0 1.2 1.4 1.6] [--starts 32]
-        [--rounds 40] [--inner 300] [--keep 6] [--polish 300] [--top 3] [--seed 0] [--out DIR]
+        [--rounds 30] [--inner 200] [--lr 0.01] [--keep 6] [--polish 0] [--top 3] [--seed 0] [--skip 0]
+        [--refine POLICY --sigma 0.05] [--lead 0.02] [--out DIR]
 
 Asks what the score-optimal swing-up looks like, from many starts rather than one basin. The
 reference: elbow torque knots 20 ms apart, piecewise linear, zero at the start and at the end
 (`6 tanh(w)` within the limit). Per horizon, `--starts` initial guesses in one `vmap`: the
 shoulder turned to +pi or -pi with 0 to 2 back-swings of random size, the elbow swung 1 to 4
 half-periods with a random amplitude either way, the elbow torque of the guessed motion (its
-own equation of motion) as the first torques.
+own equation of motion) as the first torques. With `--refine POLICY`: that controller's
+reference stretched to each horizon, and perturbations of its torques.
 
 1. **Direct collocation** (states at the knots and the torques free, the end fixed upright at
-   rest): the defects of two 10 ms RK4 steps per knot interval (the shooting search's own
-   discretisation, so a collocation with zero defects is a shooting trajectory), by an
+   rest): the defects of the RK4 steps of `--sub-dt` (10 ms; 2 ms: the benchmark's own) per knot
+   interval (the shooting's discretisation, so a collocation with zero defects is a shooting
+   trajectory), by an
    augmented Lagrangian (`--rounds` multiplier updates, `--inner` Adam steps each, the penalty
    growing by 1.25 per round, the step size decaying from `--lr` to 10 % of it), then 20
    minimum-norm Gauss-Newton steps onto zero defects (full where they lower the defects, else a
@@ -71,44 +74,48 @@ def _unpack(z, n, sign):
     return xs, u
 
 
-def _intervals(plant, xs, u):
-    """Two RK4 steps of 10 ms per knot interval (torque u_k, then the mid value): the shooting's steps."""
+def _intervals(plant, xs, u, sub):
+    """RK4 steps of `sub` seconds per knot interval, the torque interpolated at each step's start
+    (the shooting's steps): the steps' start states `(n, m, 4)`, torques `(n, m)` and the interval ends."""
+    m = int(round(H / sub))
 
     def one(x, ua, ub):
-        um = 0.5 * (ua + ub)
-        x1 = plant.rk4_step(x, jnp.stack([jnp.zeros_like(ua), ua]), SUB)
-        x2 = plant.rk4_step(x1, jnp.stack([jnp.zeros_like(um), um]), SUB)
-        return x1, x2, um
+        starts, torques = [], []
+        for j in range(m):
+            uj = ua + (ub - ua) * j / m
+            starts.append(x)
+            torques.append(uj)
+            x = plant.rk4_step(x, jnp.stack([jnp.zeros_like(uj), uj]), sub)
+        return jnp.stack(starts), jnp.stack(torques), x
 
     return jax.vmap(one)(xs[:-1], u[:-1], u[1:])
 
 
-def costs_of(plant, xs, u, sharpness=0.01):
-    """The five smooth costs of a collocated trajectory (`score_surrogate`'s definitions)."""
-    mid, ends, um = _intervals(plant, xs, u)
-    starts = jnp.stack([xs[:-1], mid], axis=1).reshape(-1, 4)  # the 10 ms steps' start states
-    steps_u = jnp.stack([u[:-1], um], axis=1).reshape(-1)
-    q2_next = jnp.stack([mid[:, 1], xs[1:, 1]], axis=1).reshape(-1)
+def costs_of(plant, xs, u, sub=SUB, sharpness=0.01):
+    """The five smooth costs of a collocated trajectory (`score_surrogate`'s definitions) and its defects."""
+    starts, steps_u, ends = _intervals(plant, xs, u, sub)
+    q2_next = jnp.concatenate([starts[:, 1:, 1], xs[1:, 1:2]], axis=1).reshape(-1)
+    starts, steps_u = starts.reshape(-1, 4), steps_u.reshape(-1)
     line = RULES.height_fraction * (plant.l1 + plant.l2)
-    below = jnp.sum(jax.nn.sigmoid((line - plant.end_effector_height(starts[:, :2])) / sharpness)) * SUB
+    below = jnp.sum(jax.nn.sigmoid((line - plant.end_effector_height(starts[:, :2])) / sharpness)) * sub
     energy = jnp.sum(jnp.abs((q2_next - starts[:, 1]) * steps_u))
-    torque = jnp.sum(steps_u**2) * SUB
+    torque = jnp.sum(steps_u**2) * sub
     smooth = jnp.sqrt(jnp.sum(jnp.diff(u) ** 2) * RULES.dt / H / (RULES.n_steps - 1) + 1e-14)
-    velocity = jnp.sum(starts[:, 2:] ** 2) * SUB
+    velocity = jnp.sum(starts[:, 2:] ** 2) * sub
     c = jnp.stack([below, energy, torque, smooth, velocity])
-    defects = (ends - xs[1:]) * SCALE
+    defects = (ends - xs[1:]) * SCALE[None]
     return c, defects
 
 
 @eqx.filter_jit
-def collocate(plant, z0, signs, n, rounds, inner, lr):
+def collocate(plant, z0, signs, n, rounds, inner, lr, sub=SUB):
     """Augmented-Lagrangian collocation from each start (one `vmap`)."""
     opt = optax.adam(optax.exponential_decay(lr, rounds * inner, 0.1))
 
     def one(z0, sign):
         def lagrangian(z, lam, rho):
             xs, u = _unpack(z, n, sign)
-            c, d = costs_of(plant, xs, u)
+            c, d = costs_of(plant, xs, u, sub)
             f = jnp.mean(jnp.tanh(jnp.pi * c / NORM))
             return f + jnp.sum(lam * d) + 0.5 * rho * jnp.sum(d**2)
 
@@ -124,14 +131,14 @@ def collocate(plant, z0, signs, n, rounds, inner, lr):
 
             (z, s), _ = jax.lax.scan(step, (z, s), None, length=inner)
             xs, u = _unpack(z, n, sign)
-            _, d = costs_of(plant, xs, u)
+            _, d = costs_of(plant, xs, u, sub)
             return (z, lam + rho * d, s), jnp.max(jnp.abs(d))
 
         (z, _, _), hist = jax.lax.scan(outer, (z0, jnp.zeros((n, 4), z0.dtype), opt.init(z0)), jnp.arange(rounds))
 
         def defects(z):
             xs, u = _unpack(z, n, sign)
-            return costs_of(plant, xs, u)[1].ravel()
+            return costs_of(plant, xs, u, sub)[1].ravel()
 
         def project(z, _):  # minimum-norm Gauss-Newton steps onto zero defects
             d, j = defects(z), jax.jacfwd(defects)(z)
@@ -143,7 +150,7 @@ def collocate(plant, z0, signs, n, rounds, inner, lr):
 
         z, _ = jax.lax.scan(project, z, None, length=20)
         xs, u = _unpack(z, n, sign)
-        c, d = costs_of(plant, xs, u)
+        c, d = costs_of(plant, xs, u, sub)
         return z, c, jnp.mean(jnp.tanh(jnp.pi * c / NORM)), jnp.max(jnp.abs(d)), hist
 
     return jax.vmap(one)(z0, signs)
@@ -182,12 +189,29 @@ def initial_guesses(plant, rng, n_starts, n):
     return jnp.asarray(np.stack(zs)), jnp.asarray(signs), labels
 
 
+def refine_guesses(path, rng, n_starts, n, sigma):
+    """A saved controller's reference stretched to `n` knots, and `n_starts - 1` perturbations of its torques."""
+    saved = control.load_controller(path)
+    xs, us = saved.x_ref, saved.u_ref
+    t_old = np.arange(len(us)) / len(us)
+    s = np.arange(n + 1) / n
+    stretch = len(us) * RULES.dt / (n * H)
+    x = np.stack([np.interp(s, t_old, xs[:, i]) * (1.0 if i < 2 else stretch) for i in range(4)], axis=1)
+    u = np.interp(s, t_old, us)
+    sign = float(np.sign(xs[-1, 0]))
+    x[-1] = [sign * np.pi, 0, 0, 0]
+    w = np.arctanh(np.clip(u[1:n] / LIMIT, -0.99, 0.99))
+    zs = [np.concatenate([x[1:n].ravel(), w + sigma * (i > 0) * rng.normal(size=w.shape)]) for i in range(n_starts)]
+    labels = [dict(refined=str(path), perturbation=sigma * (i > 0)) for i in range(n_starts)]
+    return jnp.asarray(np.stack(zs)), jnp.asarray([sign] * n_starts), labels
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--horizons", type=float, nargs="+", default=[1.0, 1.2, 1.4, 1.6])
     ap.add_argument("--starts", type=int, default=32, help="collocation starts per horizon")
-    ap.add_argument("--rounds", type=int, default=40, help="augmented-Lagrangian multiplier updates")
-    ap.add_argument("--inner", type=int, default=300, help="Adam steps per round")
+    ap.add_argument("--rounds", type=int, default=30, help="augmented-Lagrangian multiplier updates")
+    ap.add_argument("--inner", type=int, default=200, help="Adam steps per round")
     ap.add_argument("--lr", type=float, default=0.01)
     ap.add_argument("--keep", type=int, default=6, help="collocations per horizon polished by shooting")
     ap.add_argument("--polish", type=int, default=0, help="projected Adam steps on the hand-over constraint (0: none)")
@@ -196,6 +220,16 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument(
         "--skip", type=int, default=0, help="discard this many starts first (a later horizon's starts of a run)"
+    )
+    ap.add_argument(
+        "--refine",
+        type=pathlib.Path,
+        default=None,
+        help="start from this saved controller's reference (stretched to each horizon) and perturbations of it",
+    )
+    ap.add_argument("--sigma", type=float, default=0.05, help="--refine's perturbations of the torques (tanh scale)")
+    ap.add_argument(
+        "--sub-dt", type=float, default=SUB, help="RK4 step within the knot intervals [s] (0.002: the benchmark's)"
     )
     ap.add_argument("--out", type=pathlib.Path, default=OUT)
     args = ap.parse_args(argv)
@@ -214,8 +248,11 @@ def main(argv=None):
     )
     for horizon in args.horizons:
         n = int(round(horizon / H))
-        z0, signs, labels = initial_guesses(plant, rng, args.starts, n)
-        z, c, f, dmax, hist = collocate(plant, z0, signs, n, args.rounds, args.inner, args.lr)
+        if args.refine is None:
+            z0, signs, labels = initial_guesses(plant, rng, args.starts, n)
+        else:
+            z0, signs, labels = refine_guesses(args.refine, rng, args.starts, n, args.sigma)
+        z, c, f, dmax, hist = collocate(plant, z0, signs, n, args.rounds, args.inner, args.lr, args.sub_dt)
         c, f, dmax = np.asarray(c), np.asarray(f), np.asarray(dmax)
         ok = dmax < 0.05
         order = np.argsort(np.where(ok, f, np.inf))
@@ -232,9 +269,9 @@ def main(argv=None):
         # shooting from the collocations' torques: w for knots 1..n (the last is driven to zero)
         u = np.asarray(jax.vmap(lambda zz, sg: _unpack(zz, n, sg)[1])(z[np.array(keep)], signs[np.array(keep)]))
         w0 = jnp.asarray(np.arctanh(np.clip(u[:, 1:] / LIMIT, -0.999999, 0.999999)))
-        interp = knot_matrix(int(round(horizon / SUB)), SUB, H, n)
+        interp = knot_matrix(int(round(horizon / args.sub_dt)), args.sub_dt, H, n)
         if args.polish:
-            w, feas, end, score, pc = polish_on_constraint(plant, w0, interp, SUB, design)
+            w, feas, end, score, pc = polish_on_constraint(plant, w0, interp, args.sub_dt, design)
         else:  # the collocations as they are (exact shooting trajectories when their defects are zero)
             w = w0
             feas = end = jnp.asarray(dmax[np.array(keep)] ** 2)
