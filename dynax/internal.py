@@ -37,6 +37,9 @@ from ._control._from_rest import (
     end_upright_residuals as end_upright_residuals,
 )
 from ._control._from_rest import (
+    estimator_view as estimator_view,
+)
+from ._control._from_rest import (
     hand_over_residuals as hand_over_residuals,
 )
 from ._control._from_rest import (
@@ -555,6 +558,7 @@ __all__ = [
     "rest_stretches",
     "collocation_reference",
     "end_upright_residuals",
+    "estimator_view",
     "knot_matrix",
     "hand_over_residuals",
     "polish_on_constraint",

@@ -30,6 +30,7 @@ import matplotlib.pyplot as plt
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 import dynax
 from dynax import control
+from dynax.internal import estimator_view
 
 OUT = pathlib.Path(__file__).resolve().parent / "results" / "leaderboard"
 PUBLISHED = {  # leaderboards v2, best published entry per family (robustness), and the top scores
@@ -146,6 +147,11 @@ def main(argv=None):
     leads = []
     for lead in (0.0, 0.01, 0.015, 0.02, 0.03):
         c = eqx.tree_at(lambda c: c.lead, controller, jnp.asarray(lead))
+        if controller.x_track is not None:  # the reference as the estimate with this lead sees it
+            view = estimator_view(
+                controller.plant, controller.x_ref, controller.u_ref, lead, controller.dt, controller.velocity_source
+            )
+            c = eqx.tree_at(lambda c: c.x_track, c, view)
         p, r = control.performance(c), control.robustness(c)
         leads.append({"lead": lead, "performance": float(p.score), "robustness": r.score, "families": r.table()})
         print(f"  lead {lead:.3f} s: performance {float(p.score):.3f}, robustness {r.score:.3f}", flush=True)

@@ -29,6 +29,11 @@ def register(subparsers):
     tune.add_argument("--iterations", type=int, default=None, help="Adam iterations per start")
     tune.add_argument("--seed", type=int, default=0, help="seed of the trajectory search (default 0)")
     tune.add_argument("--evaluate", action="store_true", help="score the result (adds about a minute)")
+    tune.add_argument(
+        "--reference",
+        default=None,
+        help="design the feedback around this saved controller's reference instead of searching for one (.npz)",
+    )
     tune.set_defaults(run=run_tune)
     evaluate = sub.add_parser("evaluate", help="score a saved controller by the leaderboard's rules")
     evaluate.add_argument("policy", help="a controller saved by `dynax control acrobot`")
@@ -52,9 +57,15 @@ def run_tune(args: argparse.Namespace) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from .._control._from_rest import design_swing_up, SwingUpDesign
+    from .._control._from_rest import design_swing_up, load_controller, SwingUpDesign
 
     out = _check_out(args.out, ".npz", "--out")
+    reference = None
+    if args.reference is not None:
+        import jax.numpy as jnp
+
+        saved = load_controller(args.reference)
+        reference = (jnp.asarray(saved.x_ref), jnp.asarray(saved.u_ref))
     changes = {}
     for name in ("horizon", "starts", "iterations"):
         value = getattr(args, name)
@@ -66,7 +77,7 @@ def run_tune(args: argparse.Namespace) -> int:
         raise UsageError(f"--seed must be a non-negative integer, got {args.seed}")
     design = SwingUpDesign(seed=args.seed, **changes)
     start = time.perf_counter()
-    controller = design_swing_up(design=design)
+    controller = design_swing_up(design=design, reference=reference)
     tmp = out.with_name(out.name + ".partial.npz")
     controller.save(tmp)
     tmp.replace(out)

@@ -27,6 +27,7 @@ VERSION = 1
 _ARRAYS = ("x_ref", "u_ref", "gains", "k_balance", "s_balance", "model", "swing_up")
 _SCALARS = ("dt", "torque_limit", "threshold", "velocity_source")
 _OPTIONAL = {"lead": 0.0}
+_OPTIONAL_ARRAYS = ("x_track",)
 
 
 def _wrap(a):
@@ -36,7 +37,11 @@ def _wrap(a):
 class SwingUpFromRest(AbstractBenchmarkController):
     r"""Trajectory + time-varying LQR from rest, then LQR balance, with energy shaping to recover.
 
-    At control period $k < $ `n_ref` the torque is $u_k - K_k (\hat x - x_k)$; afterwards it is
+    At control period $k < $ `n_ref` the torque is $u_k - K_k (\hat x - \hat x_k)$, where
+    $\hat x_k$ (`x_track`) is the reference as the estimate below sees it when the plant follows
+    the reference exactly (`estimator_view`; the reference $x_k$ itself when `x_track` is None),
+    so on the controller's model the feedback is zero and the closed loop follows the reference;
+    afterwards it is
     the balancing LQR $-K (\hat x \ominus x_{up})$ when its cost-to-go per second, $\Delta t\,\delta x^\top S \delta x$
     (the discrete Riccati solution summed at the control rate), is below `threshold`,
     else Spong's energy-shaping swing-up $u_e + u_p$ in the controller's model
@@ -48,7 +53,7 @@ class SwingUpFromRest(AbstractBenchmarkController):
     **Fields:** `x_ref` `(n_ref, 4)`, `u_ref` `(n_ref,)`, `gains` `(n_ref, 4)`; `k_balance` `(4,)`
     and `s_balance` `(4, 4)` (LQR gain and cost-to-go); `model` (the controller's plant, the 16
     `LeaderboardPlant` fields); `swing_up` $(k_e, k_p, k_d)$; `dt`, `torque_limit`, `threshold`,
-    `velocity_source` (1: from positions, 0: as measured).
+    `velocity_source` (1: from positions, 0: as measured); `x_track` `(n_ref, 4)` or None.
     """
 
     x_ref: Float[Array, "n 4"]
@@ -63,6 +68,7 @@ class SwingUpFromRest(AbstractBenchmarkController):
     dt: float = eqx.field(static=True)
     torque_limit: float = eqx.field(static=True)
     velocity_source: int = eqx.field(static=True, default=1)
+    x_track: Float[Array, "n 4"] | None = None
 
     @property
     def plant(self) -> LeaderboardPlant:
@@ -83,7 +89,8 @@ class SwingUpFromRest(AbstractBenchmarkController):
         """The torque at control period `k` for the estimated state `x` (unsaturated)."""
         n = self.u_ref.shape[0]
         i = jnp.minimum(k, n - 1)
-        u_track = self.u_ref[i] - self.gains[i] @ (x - self.x_ref[i])
+        x_track = self.x_ref if self.x_track is None else self.x_track
+        u_track = self.u_ref[i] - self.gains[i] @ (x - x_track[i])
         err = jnp.stack([_wrap(x[0] - jnp.pi), _wrap(x[1]), x[2], x[3]])
         u_lqr = -self.k_balance @ err
         v = self.dt * (err @ self.s_balance @ err)
@@ -105,6 +112,8 @@ class SwingUpFromRest(AbstractBenchmarkController):
         header["velocity_source"] = int(self.velocity_source)
         header["lead"] = float(self.lead)
         arrays = {k: np.asarray(getattr(self, k), np.float64) for k in _ARRAYS}
+        if self.x_track is not None:
+            arrays["x_track"] = np.asarray(self.x_track, np.float64)
         with open(path, "wb") as f:
             np.savez(f, header=np.asarray(json.dumps(header)), **arrays)
         return path
@@ -154,6 +163,7 @@ class RobotController:
         self.lead = float(header.get("lead", _OPTIONAL["lead"]))
         self.x_ref = np.ascontiguousarray(arrays["x_ref"], np.float64)
         self.u_ref = np.ascontiguousarray(arrays["u_ref"], np.float64)
+        self.x_track = np.ascontiguousarray(arrays.get("x_track", arrays["x_ref"]), np.float64)
         self.gains = np.ascontiguousarray(arrays["gains"], np.float64)
         self.k_balance = np.asarray(arrays["k_balance"], np.float64)
         self.s_balance = np.asarray(arrays["s_balance"], np.float64)
@@ -246,7 +256,7 @@ class RobotController:
         k = self._k
         self._k = k + 1
         if k < self.n_ref:
-            r = self.x_ref[k]
+            r = self.x_track[k]
             kk = self.gains[k]
             u = self.u_ref[k] - (kk[0] * (q1 - r[0]) + kk[1] * (q2 - r[1]) + kk[2] * (v1 - r[2]) + kk[3] * (v2 - r[3]))
         else:
@@ -274,6 +284,7 @@ class RobotController:
             self.dt,
             self.torque_limit,
             self.velocity_source,
+            jnp.asarray(self.x_track),
         )
 
 
@@ -296,6 +307,7 @@ def load_controller(path) -> RobotController:
                 found = header.get("format") if isinstance(header, dict) else None
                 raise DataError(f"load_controller: {str(path)!r} has format {found!r}, expected {FORMAT!r}")
             arrays = {k: np.asarray(data[k]) for k in _ARRAYS}
+            arrays |= {k: np.asarray(data[k]) for k in _OPTIONAL_ARRAYS if k in data.files}
     except (ValueError, KeyError, OSError, json.JSONDecodeError) as e:
         if isinstance(e, DataError):
             raise
@@ -307,6 +319,7 @@ def load_controller(path) -> RobotController:
     if (
         len(n) != 1
         or arrays["x_ref"].shape != (n[0], 4)
+        or arrays.get("x_track", arrays["x_ref"]).shape != (n[0], 4)
         or arrays["gains"].shape != (n[0], 4)
         or arrays["model"].shape != (16,)
         or arrays["swing_up"].shape != (3,)
@@ -347,6 +360,10 @@ class SwingUpDesign(eqx.Module):
     - `velocity_source`: 1 to estimate velocities from positions, 0 to use the measured ones.
     - `lead` [s]: how far ahead the controller predicts the estimated state (one Euler step of
       its model with the last torque), against measurement delay.
+    - `track_estimate`: 1 to compare the estimate with the reference as the estimate sees it
+      (`estimator_view`: no feedback while the plant follows the reference, so the nominal
+      episode is the reference and scores as it does), 0 to compare it with the reference itself
+      (the lagged, predicted estimate then differs from it by about `lead` times the velocity).
 
     The feedback defaults (`q_track` to `swing_up`) are the mean of a PGPE search over randomised
     plants, noise, delays and torque pulses (`experiments/acrobot_recovery_pgpe.py`, run twice, the
@@ -378,6 +395,7 @@ class SwingUpDesign(eqx.Module):
     polish_learning_rate: float = 0.003
     velocity_source: int = 1
     lead: float = 0.02
+    track_estimate: int = 1
     dt: float = 0.002
     torque_limit: float = 6.0
 
@@ -743,19 +761,41 @@ def tvlqr(plant: LeaderboardPlant, xs, us, q, r, s_final, dt):
     return gains
 
 
+def estimator_view(plant: LeaderboardPlant, xs, us, lead, dt, velocity_source=1):
+    r"""The reference `(xs, us)` as `SwingUpFromRest`'s estimate sees it when the plant follows it exactly.
+
+    At period $k$: the positions $q_k$, the velocities $(q_k - q_{k-1}) / \Delta t$ (the
+    measured ones at $k = 0$, or always with `velocity_source` 0), predicted `lead` seconds ahead
+    by one Euler step of `plant` with the previous torque $u_{k-1}$ ($u_{-1} = 0$).
+    """
+    xs, us = jnp.asarray(xs), jnp.asarray(us)
+    if velocity_source:
+        q_prev = jnp.concatenate([xs[:1, :2], xs[:-1, :2]])
+        first = (jnp.arange(xs.shape[0]) == 0)[:, None]
+        v = jnp.where(first, xs[:, 2:], (xs[:, :2] - q_prev) / dt)
+    else:
+        v = xs[:, 2:]
+    xh = jnp.concatenate([xs[:, :2], v], axis=1)
+    u_prev = jnp.concatenate([jnp.zeros(1, us.dtype), us[:-1]])
+    f = jax.vmap(lambda x, u: plant.vector_field(x, jnp.stack([jnp.zeros_like(u), u])))(xh, u_prev)
+    return xh + lead * f
+
+
 def design_swing_up(
     plant: LeaderboardPlant | None = None, design: SwingUpDesign = SwingUpDesign(), reference=None
 ) -> SwingUpFromRest:
     """Build a `SwingUpFromRest` for `plant` (the controller's model; the benchmark's nominal by default).
 
     Optimises the reference (`optimise_swing_up`) unless `reference = (xs, us)` is given, then
-    computes the balancing LQR and the time-varying gains that end in it.
+    computes the balancing LQR and the time-varying gains that end in it; with
+    `design.track_estimate` the feedback compares the estimate with `estimator_view` of the reference.
     """
     plant = LeaderboardPlant.nominal() if plant is None else plant
     xs, us = optimise_swing_up(plant, design) if reference is None else reference
     k_bal, s_bal = balance_lqr(plant, design.q_balance, design.r_balance, design.dt)
     gains = tvlqr(plant, xs, us, design.q_track, design.r_track, s_bal, design.dt)
     model = jnp.stack([jnp.asarray(getattr(plant, k), float) for k in LeaderboardPlant.__dataclass_fields__])
+    view = estimator_view(plant, xs, us, design.lead, design.dt, design.velocity_source)
     return SwingUpFromRest(
         xs,
         us,
@@ -769,4 +809,5 @@ def design_swing_up(
         design.dt,
         design.torque_limit,
         design.velocity_source,
+        view if design.track_estimate else None,
     )
