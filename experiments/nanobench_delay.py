@@ -78,11 +78,11 @@ def r2(x, y, coef):
     return 1.0 - np.sum(e**2, axis=0) / np.sum((y - y.mean(axis=0)) ** 2, axis=0)
 
 
-def scan(train, test):
+def scan(train, test, lags=LAGS_S):
     """Training and held-out R^2 (p, q, r) over the (k, tau) grid; coefficients from the training flights."""
-    fit_r2 = np.zeros((len(LAGS_S), len(DELAYS), 3))
+    fit_r2 = np.zeros((len(lags), len(DELAYS), 3))
     held_r2 = np.zeros_like(fit_r2)
-    for i, tau in enumerate(LAGS_S):
+    for i, tau in enumerate(lags):
         for j, k in enumerate(DELAYS):
             x, y = stack(train, k, tau)
             coef, *_ = np.linalg.lstsq(x, y, rcond=None)
