@@ -149,7 +149,7 @@ def test_a_steady_battery_low_over_the_floor_names_neither():
     assert not {"battery_sag", "ground_effect"} & {f["cause"] for f in j["findings"]}, j["findings"]
 
 
-@pytest.mark.slow  # a diagnosis with its simulation-error refits: 11 minutes on two cores under a load of 9
+@pytest.mark.slow  # a diagnosis with its simulation-error refits: 4 to 11 minutes on two shared cores
 def test_cli_diagnose_quadrotor_refits_the_thrust_map_with_each_candidate(tmp_path, capsys):
     # Short flights at two charges (the sag hidden, vbat logged) through `dynax diagnose quadrotor --refit
     # thrust`: the report says the named weights were refitted with each candidate; a name that is no
