@@ -228,6 +228,9 @@ from ._model._extensions import (
     JointSpring as JointSpring,
 )
 from ._model._extensions import (
+    MotorDelay as MotorDelay,
+)
+from ._model._extensions import (
     QuadraticDrag as QuadraticDrag,
 )
 from ._model._extensions import (

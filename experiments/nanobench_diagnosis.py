@@ -16,6 +16,7 @@ held-out gain and p-value, the per-group table), `DIR/diagnosis.md`, the diagnos
 
 import argparse
 import pathlib
+import re
 import sys
 import time
 
@@ -78,6 +79,19 @@ def main():
         help="judge the gain at this horizon [s] (default 0.5, h = 50: where flight models are scored; "
         "0: the predictability horizon)",
     )
+    parser.add_argument(
+        "--refit",
+        choices=("none", "thrust", "moments"),
+        default="none",
+        help="nominal weights refitted by simulation error with each candidate: none (the one-step map held), "
+        "the thrust map (dynax.internal.thrust_parameters) or the roll, pitch and yaw motor weights",
+    )
+    parser.add_argument(
+        "--candidates",
+        default="",
+        help="comma-separated cause@where of the vocabulary to test, e.g. 'motor_delay@motors,rotor_drag@q' "
+        "(default the whole quadrotor vocabulary)",
+    )
     args = parser.parse_args()
     out = pathlib.Path(args.out)
     (out / "report").mkdir(parents=True, exist_ok=True)
@@ -101,10 +115,26 @@ def main():
         "samples",
         flush=True,
     )
+    from dynax.internal import body_frame_system, quadrotor_candidates, thrust_parameters
+
+    candidates = quadrotor_candidates(body_frame_system(quad, train[0].input_names))
+    if args.candidates:
+        wanted = {c.strip() for c in args.candidates.split(",")}
+        body = body_frame_system(quad, train[0].input_names)
+        candidates = tuple(t for t in candidates if t.label(body) in wanted)
+        print(f"candidates: {[t.label(body) for t in candidates]}", flush=True)
+    names = quad.body_model.parameter_names
+    refit = {
+        "none": None,
+        "thrust": thrust_parameters(quad),
+        "moments": tuple(n for n in names if n[:3] in ("dp/", "dq/", "dr/") and re.search(r"m[1-4]", n)),
+    }[args.refit]
     report = dynax.diagnose(
         quad,
         diag_train,
         diag_test,
+        mode=dynax.Refit(parameters=refit),
+        candidates=candidates,
         selection=dynax.Selection(
             max_terms=args.max_terms,
             cross_fit=args.cross_fit,
@@ -133,6 +163,8 @@ def main():
         "train": sorted({r.source for r in train}),
         "test": sorted({r.source for r in test}),
         "slice_s": args.slice_s,
+        "refit": args.refit,
+        "vocabulary": args.candidates or "all",
         "diagnosed_samples": {"train": sum(len(r) for r in diag_train), "test": sum(len(r) for r in diag_test)},
         "verdict": j["verdict"],
         "reference_horizon_s": j["reference_horizon_s"],

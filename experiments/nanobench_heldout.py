@@ -62,6 +62,33 @@ def flights(shapes):
     return runs, notes
 
 
+def command_delay(option: str, train) -> int:
+    """The commands' dead time in samples: `option` seconds, or 'scan' (chosen on the training flights only)."""
+    if option != "scan":
+        return int(round(float(option) / 0.01))
+    from nanobench_delay import DELAYS, scan
+
+    runs = []
+    for r in train:
+        if len(r) >= 400:
+            rates = [r.state_names.index(n) for n in ("p", "q", "r")]
+            motors = [r.input_names.index(f"m{i}") for i in range(1, 5)]
+            runs.append((r.source, float(r.dt), np.asarray(r.us)[:, motors], np.asarray(r.xs)[:, rates]))
+    fit_r2, _ = scan(runs, runs[:1], lags=(0.0,))
+    return int(DELAYS[int(np.argmax(fit_r2[0, :, :2].mean(axis=-1)))])
+
+
+def delayed_commands(run, k: int):
+    """`run` with its motor commands applied `k` samples late (row i carries the commands of row i - k; the
+    first k rows are left out); `vbat` is left as it is."""
+    if k <= 0:
+        return run
+    us = np.asarray(run.us)[k:].copy()
+    motors = [run.input_names.index(f"m{i}") for i in range(1, 5)]
+    us[:, motors] = np.asarray(run.us)[:-k, motors]
+    return dynax.Trajectory(run.ts[k:], run.xs[k:], us, run.state_names, run.input_names, run.system, run.source)
+
+
 def scores(error):
     return {
         "mae": error.table("mae"),
@@ -78,12 +105,26 @@ def main():
     parser.add_argument("--quick", action="store_true", help="one-step fits only (minutes less)")
     parser.add_argument("--stride", type=int, default=20, help="lagged fit: every N-th start (default 20)")
     parser.add_argument("--backprop-steps", type=int, default=30, help="backprop refinement's L-BFGS steps")
+    parser.add_argument(
+        "--command-delay",
+        default="0",
+        help="apply the motor commands this many seconds late ('scan': the dead time the training flights' "
+        "commands-to-angular-acceleration scan chooses, experiments/nanobench_delay.py; default 0)",
+    )
+    parser.add_argument(
+        "--plans", default="", help="comma-separated models to fit, e.g. 'acceleration (lagged)' (default all)"
+    )
     args = parser.parse_args()
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
     train, train_notes = flights(TRAIN)
     test, test_notes = flights(TEST)
+    delay_samples = command_delay(args.command_delay, train)
+    if delay_samples:
+        train = [delayed_commands(r, delay_samples) for r in train]
+        test = [delayed_commands(r, delay_samples) for r in test]
+        print(f"motor commands applied {delay_samples} samples ({delay_samples * 10} ms) late", flush=True)
     print(
         f"train: {len(train)} runs, {sum(len(r) for r in train)} samples; "
         f"test: {len(test)} runs, {sum(len(r) for r in test)} samples",
@@ -92,6 +133,9 @@ def main():
     plans = [("nominal", "one-step"), ("acceleration", "one-step"), ("linear", "one-step")]
     if not args.quick:
         plans += [("nominal", "lagged"), ("acceleration", "lagged"), ("acceleration", "lagged + backprop")]
+    if args.plans:
+        wanted = [p.strip() for p in args.plans.split(",")]
+        plans = [(f, c) for f, c in plans if f"{f} ({c})" in wanted]
     fitted, table = {}, {}
     table["constant velocity"] = scores(dynax.flight_error(dynax.ConstantVelocity(), test, STEPS))
     for family, criterion in plans:
@@ -146,6 +190,7 @@ def main():
         "steps": list(STEPS),
         "dt_s": 0.01,
         "map": NANOBENCH_MAP,
+        "command_delay_samples": delay_samples,
         "table": table,
         "summary": summary,
         "notes": {"train": train_notes, "test": test_notes},

@@ -14,6 +14,10 @@ The vocabulary for a multirotor (`quadrotor_candidates`):
   `p, q, r` the rotors' damping of the body rates, $-d\,\omega_i$;
 - `body_bias` on `u, v, w, p, q, r` (`BodyBias`): a constant body-frame force or moment (the
   centre of mass off the thrust centre, an IMU or motion-capture frame offset, a bent arm);
+- `motor_delay` at `motors` (`MotorDelay`): one dead time between every motor's logged command and
+  its thrust (the speed controller, the motors' spin-up, the logging chain's latency); the rotors'
+  moments then answer the commands late, which a rigid body driven by the commands of the same sample
+  cannot follow;
 - `input_lag` per motor (`InputLag` at `m1..m4`): the motor's first-order lag behind its command;
 - `battery_sag` at `vbat` (`BatterySag`, where the flights log `vbat`): thrust and moments per command that
   change with the battery voltage, which a motor map that does not read `vbat` misses;
@@ -50,7 +54,7 @@ import numpy as np
 
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
-from .._model._extensions import AbstractTerm, InputGain, InputLag
+from .._model._extensions import AbstractTerm, InputGain, InputLag, MotorDelay
 from .._model._extensions._vehicle_terms import BatterySag, BodyBias, GroundEffect, RotorDrag
 from .._model._helicopter import ANGULAR_RATE, BODY, Helicopter, QUATERNION, quaternion_to_rotation
 from .._model._quadrotor import (
@@ -93,13 +97,15 @@ def as_quadrotor(body: BodyFrameQuadrotor, like: Quadrotor) -> Quadrotor:
 def quadrotor_candidates(system, floor: float | None = None) -> tuple:
     """The multirotor vocabulary at neutral values (see the module docs): `rotor_drag` on `u` ... `r`,
     `body_bias` on `u, v, w, p, q, r`, `battery_sag` where the system has `vbat`, `ground_effect` over a
-    floor at height `floor` (world `z`) where one is given, `input_lag` and `input_gain` at each motor `m1..m4`."""
+    floor at height `floor` (world `z`) where one is given, `motor_delay` on all motors, `input_lag` and
+    `input_gain` at each motor `m1..m4`."""
     terms: list[AbstractTerm] = [RotorDrag(i) for i in range(6)]
     terms += [BodyBias(i) for i in range(6)]
     if "vbat" in tuple(system.input_names):
         terms.append(BatterySag())
     if floor is not None:
         terms.append(GroundEffect(floor=float(floor)))
+    terms.append(MotorDelay(tuple(range(len(MOTORS)))))
     terms += [InputLag(i) for i in range(len(MOTORS))]
     terms += [InputGain(i) for i in range(len(MOTORS))]
     return tuple(terms)
@@ -245,16 +251,41 @@ class WorldFrameQuadrotor(AbstractSystem):
 def quadrotor_flight_errors(report, like: Quadrotor, flights, steps=(1, 10, 50)) -> dict:
     """The held-out scores per group (`dynax.flight_error`) of the report's nominal and extended models
     and the constant-velocity baseline: `{name: SimulationError}`; the extended model only where it has a
-    world-frame form (`WorldFrameQuadrotor`: no internal states)."""
+    world-frame form (`WorldFrameQuadrotor`: no internal states; a dead time on the commands is scored as the
+    commands shifted by it)."""
     from .._model._quadrotor import ConstantVelocity
     from .._simulate import flight_error
 
+    flights = _as_list(flights, "flights")
     out = {"constant velocity": flight_error(ConstantVelocity(), flights, steps)}
     for name, model in (("nominal", report.nominal_model), ("extended", report.extended_model)):
-        if model is None or model.n_states != len(QUADROTOR_STATE_NAMES):
+        if model is None:
             continue
-        out[name] = flight_error(WorldFrameQuadrotor(model, like.input_scale), flights, steps)
+        model, scored = _dead_times_as_shifted_commands(model, flights)
+        if model.n_states != len(QUADROTOR_STATE_NAMES):
+            continue
+        out[name] = flight_error(WorldFrameQuadrotor(model, like.input_scale), scored, steps)
     return out
+
+
+def _dead_times_as_shifted_commands(model, flights) -> tuple:
+    """A model whose only internal states are dead times (`motor_delay`, `input_delay`) as the model without
+    them on the flights with those commands shifted by the delay (`exact_delays`: what acts over each sample
+    interval); any other model and the flights as they are."""
+    from .._model._extensions import AbstractInputTerm, Extended
+    from ._residuals import DEAD_TIMES, exact_delays
+
+    if not isinstance(model, Extended):
+        return model, flights
+    hidden = [t for t in model.input_terms if t.n_hidden]
+    if not hidden or not all(t.cause in DEAD_TIMES for t in hidden):
+        return model, flights
+    shifted = []
+    for f in flights:
+        _, us, _ = exact_delays(model, f, interval=True)
+        shifted.append(Trajectory(f.ts, f.xs, us, f.state_names, f.input_names, f.system, f.source))
+    kept = tuple(t for t in model.terms if not (isinstance(t, AbstractInputTerm) and t.cause in DEAD_TIMES))
+    return (eqx.tree_at(lambda m: m.terms, model, kept) if kept else model.system), shifted
 
 
 def body_frame_records(system: Quadrotor, flights) -> list[Trajectory]:

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._data._derivatives import savitzky_golay
-from .._model._extensions import Extended, InputDelay
+from .._model._extensions import AbstractInputTerm, Extended
 from .._simulate import FixedGrid, InputStates, RK4, simulate
 from ._probe import cross_validated_ridge, ridge_fit
 
@@ -112,10 +112,14 @@ def _held_average(ts, u, a, b):
     return (integral(b) - integral(a)) / (b - a)
 
 
+#: The causes that are a dead time on their inputs (`InputDelay`, `MotorDelay`): run as the shifted input.
+DEAD_TIMES = ("input_delay", "motor_delay")
+
+
 def exact_delays(model, trajectory, interval: bool = False):
     """Run an active input delay as the dead time it stands for, not as its Pade filter.
 
-    A model found with `input_delay` simulates it with a Pade approximant, which passes a held
+    A model found with `input_delay` or `motor_delay` simulates it with a Pade approximant, which passes a held
     input's every step through at once (its high-frequency gain is one) and then rings. Judged on
     one-step residuals, that model would still show `du/dt` structure where the rig has a pure
     dead time. Here each delay that acts first on its input is replaced by the recorded input
@@ -137,18 +141,20 @@ def exact_delays(model, trajectory, interval: bool = False):
         return model, jnp.asarray(us), jnp.asarray(us_before)
     first_on_input = {}
     for term in model.input_terms:
-        first_on_input.setdefault(term.input, term)
+        for i in term.inputs:
+            first_on_input.setdefault(i, term)
     half = 0.5 * float(np.median(np.diff(ts)))
     for k, term in enumerate(model.terms):
         if (
-            not isinstance(term, InputDelay)
-            or first_on_input.get(term.input) is not term
+            not (isinstance(term, AbstractInputTerm) and term.cause in DEAD_TIMES)
+            or any(first_on_input.get(i) is not term for i in term.inputs)
             or not float(term.coefficient) > 0
         ):
             continue
         centre = ts - float(term.coefficient) + (half if interval else 0.0)
-        mean = _held_average(ts, np.asarray(trajectory.us)[:, term.input], centre - half, centre + half)
-        us[:, term.input] = us_before[:, term.input] = mean
+        for i in term.inputs:
+            mean = _held_average(ts, np.asarray(trajectory.us)[:, i], centre - half, centre + half)
+            us[:, i] = us_before[:, i] = mean
         model = eqx.tree_at(lambda m: m.terms[k].coefficient, model, jnp.zeros_like(term.coefficient))
     return model, jnp.asarray(us, trajectory.us.dtype), jnp.asarray(us_before, trajectory.us.dtype)
 

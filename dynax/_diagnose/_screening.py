@@ -34,7 +34,7 @@ import numpy as np
 
 from .._data._derivatives import savitzky_golay
 from .._model._extensions import AbstractInputTerm
-from ._residuals import hidden_trajectory, sg_window, velocity_indices
+from ._residuals import DEAD_TIMES, hidden_trajectory, sg_window, velocity_indices
 
 
 @eqx.filter_jit
@@ -99,18 +99,21 @@ def screening_data(family, values, coefficients, trajectory, residual_fn):
                 )
     for k, term in enumerate(family.model.terms):
         if isinstance(term, AbstractInputTerm) and term.n_hidden and not np.any(J_c[:, :, k]):
-            J_c[:, :, k] = -np.asarray(J_u)[:, :, term.input] * np.asarray(du)[:, None, term.input]
+            J_c[:, :, k] = -sum(np.asarray(J_u)[:, :, i] * np.asarray(du)[:, None, i] for i in term.inputs)
     smooth = lambda a: np.asarray(savitzky_golay(ts, a, window=w, order=3))  # noqa: E731
     grid = screening_grid(trajectory.dt)
     J_grid = {}
     for k, term in enumerate(family.model.terms):
-        if isinstance(term, AbstractInputTerm) and term.n_hidden and term.cause in ("input_lag", "input_delay"):
-            J_u_k = np.asarray(J_u)[:, :, term.input]
-            u = np.asarray(us)[:, term.input]
-            shifted = np.stack(
-                [_lagged(ts, u, tau) if term.cause == "input_lag" else _delayed(ts, u, tau) for tau in grid], axis=1
-            )
-            J_grid[k] = smooth(J_u_k[:, :, None] * (shifted - u[:, None])[:, None, :])[keep]  # (time, n_vel, n_grid)
+        if isinstance(term, AbstractInputTerm) and term.n_hidden and term.cause in DEAD_TIMES + ("input_lag",):
+            change = 0.0  # a term on several inputs moves each of them
+            for i in term.inputs:
+                J_u_k = np.asarray(J_u)[:, :, i]
+                u = np.asarray(us)[:, i]
+                shifted = np.stack(
+                    [_lagged(ts, u, tau) if term.cause == "input_lag" else _delayed(ts, u, tau) for tau in grid], axis=1
+                )
+                change = change + J_u_k[:, :, None] * (shifted - u[:, None])[:, None, :]
+            J_grid[k] = smooth(change)[keep]  # (time, n_vel, n_grid)
     return r, smooth(np.asarray(J_nom))[keep], smooth(J_c)[keep], J_grid
 
 

@@ -11,6 +11,8 @@ effects, each written here independently of dynax:
 - `bias=(axis, b)`: a constant body-frame acceleration (axis 0..2, m/s^2) or angular acceleration
   (axis 3..5, rad/s^2);
 - `lag=(motor, tau)`: that motor's rotor command follows the logged one with a first-order lag tau [s];
+- `delay=T`: every rotor receives the logged commands T seconds late (a whole number of samples: the
+  command logged at sample k acts from sample k + T / dt);
 - `sag=(v0, v1)`: the battery voltage falls linearly from v0 to v1 [V] over the flight, logged as `vbat`
   (with 10 mV noise), and every rotor's thrust and moment per command scale with (vbat / V_REF)^2 (rotor
   speed proportional to command times voltage; `V_REF` = 4 V, one voltage for every flight of the
@@ -169,10 +171,14 @@ def quadrotor_flight(
     xs, us = np.zeros((n, 13)), np.zeros((n, 4))
     v0, v1 = effects.pop("sag", (V_REF, V_REF))
     volts = v0 + (v1 - v0) * np.arange(n) / max(n - 1, 1)
+    late = int(round(effects.pop("delay", 0.0) / dt))
+    sent = []  # the commands logged so far; a delayed rotor receives the one logged `late` samples ago
     for k in range(n):
         command = _controller(k * dt, s, c, vehicle)
+        sent.append(command)
+        received = sent[max(k - late, 0)]
         follows = np.arange(4) != effects.get("lag", (-1, 0.0))[0]
-        s[13:17] = np.where(follows, command, s[13:17])  # the other rotors follow their commands at once
+        s[13:17] = np.where(follows, received, s[13:17])  # the other rotors follow their commands at once
         xs[k], us[k] = s[:13], command
         if k + 1 < n:
             sol = solve_ivp(
@@ -182,7 +188,7 @@ def quadrotor_flight(
                 method="DOP853",
                 rtol=1e-9,
                 atol=1e-11,
-                args=(command, effects, (volts[k] / V_REF) ** 2, vehicle),
+                args=(received, effects, (volts[k] / V_REF) ** 2, vehicle),
             )
             s = sol.y[:, -1].copy()
             s[3:7] /= np.linalg.norm(s[3:7])

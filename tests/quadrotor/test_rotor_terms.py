@@ -147,3 +147,27 @@ def test_a_steady_battery_low_over_the_floor_names_neither():
     validation = quadrotor_flight(15.0, seed=107, altitude=0.15, vbat=True)
     j = _diagnosis([train], [validation], battery=False, floor=0.0)
     assert not {"battery_sag", "ground_effect"} & {f["cause"] for f in j["findings"]}, j["findings"]
+
+
+@pytest.mark.slow  # a diagnosis with its simulation-error refits: 4 to 11 minutes on two shared cores
+def test_cli_diagnose_quadrotor_refits_the_thrust_map_with_each_candidate(tmp_path, capsys):
+    # Short flights at two charges (the sag hidden, vbat logged) through `dynax diagnose quadrotor --refit
+    # thrust`: the report says the named weights were refitted with each candidate; a name that is no
+    # parameter of the model is refused with exit 2 before anything is written.
+    import json
+
+    from dynax import save_trajectory
+    from dynax.internal import cli_main
+
+    save_trajectory(quadrotor_flight(5.0, seed=8, sag=(4.2, 4.0)), tmp_path / "train.csv")
+    save_trajectory(quadrotor_flight(5.0, seed=108, sag=(3.7, 3.5)), tmp_path / "val.csv")
+    common = ["diagnose", "quadrotor", str(tmp_path / "train.csv"), "--validation", str(tmp_path / "val.csv")]
+    assert cli_main([*common, "--refit", "dw/no_such_weight", "--out", str(tmp_path / "bad")]) == 2
+    assert "dw/no_such_weight" in capsys.readouterr().err and not (tmp_path / "bad").exists()
+    out = tmp_path / "report"
+    quick = ["--max-terms", "1", "--no-discovery", "--no-cross-fit"]
+    assert cli_main([*common, "--refit", "thrust", *quick, "--out", str(out)]) == 0
+    j = json.loads((out / "report.json").read_text())
+    assert j["system"] == "quadrotor" and j["mode"] == "refit"
+    assert any("the named ones refitted by simulation error with each candidate" in n for n in j["notes"]), j["notes"]
+    assert (out / "flight_error.json").exists()

@@ -18,6 +18,9 @@ from ._inputs import (
 from ._inputs import (
     InputOffset as InputOffset,
 )
+from ._inputs import (
+    MotorDelay as MotorDelay,
+)
 from ._stiction import Stiction as Stiction
 from ._terms import (
     AbstractJointTerm as AbstractJointTerm,

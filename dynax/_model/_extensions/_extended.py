@@ -115,11 +115,12 @@ class Extended(AbstractSystem):
         a = jnp.asarray(u)
         dz, offset = [], 0
         for term in self.input_terms:
-            zi = z[offset : offset + term.n_hidden]
-            offset += term.n_hidden
-            ui = a[term.input]
-            dz.append(term.hidden_derivative(ui, zi))
-            a = a.at[term.input].set(term.applied(ui, zi))
+            for i in term.inputs:  # a term on several inputs has its internal states for each
+                zi = z[offset : offset + term.n_hidden]
+                offset += term.n_hidden
+                ui = a[i]
+                dz.append(term.hidden_derivative(ui, zi))
+                a = a.at[i].set(term.applied(ui, zi))
         dz = jnp.concatenate(dz) if dz else z[:0]
         return a, dz
 
@@ -131,10 +132,11 @@ class Extended(AbstractSystem):
         a = jnp.asarray(u0, x0.dtype)
         hidden = []
         for term in self.input_terms:
-            ui = a[term.input]
-            zi = term.steady_state(ui).astype(x0.dtype)
-            hidden.append(zi)
-            a = a.at[term.input].set(term.applied(ui, zi))
+            for i in term.inputs:
+                ui = a[i]
+                zi = term.steady_state(ui).astype(x0.dtype)
+                hidden.append(zi)
+                a = a.at[i].set(term.applied(ui, zi))
         return jnp.concatenate([x0, *hidden]) if hidden else x0
 
     def vector_field(self, t, x, u):

@@ -1,4 +1,5 @@
-"""Input-side model extensions: gain, offset, first-order lag and dead time of one input."""
+"""Input-side model extensions: gain, offset, first-order lag and dead time of one input; one dead time
+shared by several inputs (a multirotor's motors)."""
 
 from typing import ClassVar
 
@@ -29,6 +30,11 @@ class AbstractInputTerm(AbstractTerm):
     def __check_init__(self):
         if not isinstance(self.input, int) or self.input < 0:
             raise ValueError(f"{type(self).__name__}: `input` must be a non-negative int index, got {self.input!r}")
+
+    @property
+    def inputs(self) -> tuple[int, ...]:
+        """The inputs the term acts on (0-based); `n_hidden` internal states each."""
+        return (self.input,)
 
     def where(self, system) -> str:
         if self.input >= system.n_inputs:
@@ -171,16 +177,87 @@ class InputDelay(AbstractInputTerm):
         return PADE_STEPS_PER_DELAY * step
 
     def applied(self, u, z):
-        # a = u - T s F(s) u with F = 1 / (1 + sT/2 + s^2 T^2 / 12); z = (F u, s F u).
-        return jnp.where(self.coefficient > _TINY_TIME, u - self.coefficient * z[1], u)
+        return _pade_applied(self.coefficient, u, z)
 
     def hidden_derivative(self, u, z):
-        active = self.coefficient > _TINY_TIME
-        T = jnp.maximum(self.coefficient, _TINY_TIME)
-        a2, a1 = T**2 / 12.0, T / 2.0
-        dz = jnp.stack([z[1], (u - z[0] - a1 * z[1]) / a2])
-        return jnp.where(active, dz, 0.0 * z)
+        return _pade_derivative(self.coefficient, u, z)
 
     def steady_state(self, u):
-        dtype = jnp.result_type(u, self.coefficient)
-        return jnp.stack([jnp.asarray(u, dtype), jnp.zeros((), dtype)])
+        return _pade_steady_state(self.coefficient, u)
+
+
+class MotorDelay(AbstractInputTerm):
+    r"""One dead time $T$ on several inputs at once, $a_i(t) = u_i(t - T)$: the latency between a
+    multirotor's logged motor commands and the rotors' thrust (the speed controller, the motor's
+    spin-up, the log's own latency), which all motors share.
+
+    Each input's delay is `InputDelay`'s (2, 2) Padé approximant, two internal states per input. A
+    per-motor `InputDelay` or `InputLag` acts on one motor; this term moves every motor's command by
+    the same time, as a latency in the command chain does.
+
+    **Arguments:** `inputs` (0-based indices, default the four motors `(0, 1, 2, 3)`), `delay` $T$ [s].
+    """
+
+    input: int = eqx.field(static=True)
+    motors: tuple[int, ...] = eqx.field(static=True)
+    coefficient: Float[Array, ""]
+    cause: ClassVar[str] = "motor_delay"
+    prefix: ClassVar[str] = "delay"
+    neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 1
+    n_hidden: ClassVar[int] = 2
+
+    def __init__(self, inputs: tuple[int, ...] = (0, 1, 2, 3), delay: ArrayLike = 0.0):
+        inputs = tuple(inputs)
+        if not inputs or len(set(inputs)) != len(inputs):
+            raise ValueError(f"MotorDelay: `inputs` must be distinct input indices, got {inputs!r}")
+        self.input = inputs[0]
+        self.motors = inputs
+        self.coefficient = float_scalar(delay)
+
+    def __check_init__(self):
+        if not all(isinstance(i, int) and i >= 0 for i in self.motors):
+            raise ValueError(f"MotorDelay: `inputs` must be non-negative int indices, got {self.motors!r}")
+
+    @property
+    def inputs(self) -> tuple[int, ...]:
+        return self.motors
+
+    def where(self, system) -> str:
+        if max(self.motors) >= system.n_inputs:
+            raise ValueError(
+                f"MotorDelay: `inputs={self.motors}` but {type(system).__name__} has inputs {system.input_names}"
+            )
+        return "motors"
+
+    def hidden_names(self, system) -> tuple[str, ...]:
+        self.where(system)
+        names = system.input_names
+        return tuple(f"{names[i]}_{self.prefix}{k + 1}" for i in self.motors for k in range(self.n_hidden))
+
+    def applied(self, u, z):
+        return _pade_applied(self.coefficient, u, z)
+
+    def hidden_derivative(self, u, z):
+        return _pade_derivative(self.coefficient, u, z)
+
+    def steady_state(self, u):
+        return _pade_steady_state(self.coefficient, u)
+
+
+# The (2, 2) Pade dead time: a = u - T s F(s) u with F = 1 / (1 + sT/2 + s^2 T^2 / 12); z = (F u, s F u).
+def _pade_applied(T, u, z):
+    return jnp.where(T > _TINY_TIME, u - T * z[1], u)
+
+
+def _pade_derivative(T, u, z):
+    active = T > _TINY_TIME
+    T = jnp.maximum(T, _TINY_TIME)
+    a2, a1 = T**2 / 12.0, T / 2.0
+    dz = jnp.stack([z[1], (u - z[0] - a1 * z[1]) / a2])
+    return jnp.where(active, dz, 0.0 * z)
+
+
+def _pade_steady_state(T, u):
+    dtype = jnp.result_type(u, T)
+    return jnp.stack([jnp.asarray(u, dtype), jnp.zeros((), dtype)])
