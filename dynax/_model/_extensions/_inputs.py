@@ -223,6 +223,10 @@ class MotorDelay(AbstractInputTerm):
     def inputs(self) -> tuple[int, ...]:
         return self.motors
 
+    def shortest_resolved(self, step: float) -> float:
+        """As `InputDelay.shortest_resolved`: the same Padé filter on each motor."""
+        return PADE_STEPS_PER_DELAY * step
+
     def where(self, system) -> str:
         if max(self.motors) >= system.n_inputs:
             raise ValueError(
