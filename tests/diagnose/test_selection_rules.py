@@ -12,6 +12,8 @@ from dynax import (
     Acrobot,
     CoulombFriction,
     default_candidates,
+    InputDelay,
+    InputLag,
     InputOffset,
     Known,
     Refit,
@@ -177,8 +179,10 @@ def test_a_look_alike_is_told_apart_only_by_a_difference_that_matters():
         system=Acrobot(),
         look_alikes=lambda k: [1, 2, 3],
         equivalents={0: [3]},
+        dt=0.01,
+        neutral=np.zeros(4),
     )
-    results = {k: {"i": k + 1, "gain_held_out": 0.5} for k in range(4)}
+    results = {k: {"i": k + 1, "gain_held_out": 0.5, "delta": 0.1} for k in range(4)}
     yard = SimpleNamespace(window_runs=np.repeat([0, 1], n_windows // 2), overlap=1)
     tests = {a["cause"] + str(i): a for i, a in enumerate(look_alike_tests(problem, yard, 0, results, scores))}
     near, far, equivalent = tests["coulomb_friction0"], tests["input_offset1"], tests["viscous_friction2"]
@@ -186,3 +190,28 @@ def test_a_look_alike_is_told_apart_only_by_a_difference_that_matters():
     assert not near["told_apart"]
     assert far["p_value"] < 1e-6 and far["gain_over"] > 0.2 and far["told_apart"]
     assert equivalent["equivalent"] and not equivalent["told_apart"]
+
+
+def test_a_dead_time_too_short_for_the_rollouts_step_is_not_told_apart_from_a_lag():
+    """A delay fitted below what one step per sample resolves (`InputDelay.shortest_resolved`) is simulated wrong, so
+    its far worse held-out error is no evidence against it: not told apart from the lag, and marked unresolved. The
+    same pair fitted at a resolvable size is told apart by the same scores."""
+    rng = np.random.default_rng(2)
+    n_windows = 240
+    best = rng.uniform(1.0, 2.0, n_windows)
+    scores = np.stack([np.ones(n_windows), best, best * 1.5 * np.exp(rng.normal(0.0, 0.002, n_windows))])
+    problem = SimpleNamespace(
+        selection=Selection(alpha=0.01, min_gain=0.05),
+        candidates=(InputLag(0), InputDelay(0)),
+        system=Acrobot(),
+        look_alikes=lambda k: [1],
+        equivalents={},
+        dt=0.01,
+        neutral=np.zeros(2),
+    )
+    yard = SimpleNamespace(window_runs=np.repeat([0, 1], n_windows // 2), overlap=1)
+    for size, resolved in ((0.005, False), (0.03, True)):
+        results = {k: {"i": k + 1, "gain_held_out": 0.5, "delta": size} for k in range(2)}
+        (delay,) = look_alike_tests(problem, yard, 0, results, scores)
+        assert delay["p_value"] < 1e-6 and delay["gain_over"] > 0.2
+        assert delay["resolved"] is resolved and delay["told_apart"] is resolved
