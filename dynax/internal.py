@@ -78,6 +78,7 @@ from ._data import rest_stretches as rest_stretches
 from ._data import (
     savitzky_golay as savitzky_golay,
 )
+from ._data import speed_noise_at_rest as speed_noise_at_rest
 
 # Helpers of the pipeline's stages (data, model, identification, validation, diagnosis).
 from ._data import split_at_gaps as split_at_gaps
@@ -341,6 +342,7 @@ from ._identify import (
 )
 from ._identify._angle_zeros import record_angle_zeros as record_angle_zeros
 from ._identify._angle_zeros import shifted as shifted
+from ._identify._consistency import consistent_parametrisation as consistent_parametrisation
 from ._identify._consistency import min_mass_eigenvalue as min_mass_eigenvalue
 from ._identify._defaults import with_velocities_from_positions as with_velocities_from_positions
 from ._identify._equations import dynamic_rows as dynamic_rows
@@ -548,6 +550,7 @@ __all__ = [
     "quadrotor_candidates",
     "Rest",
     "rest_stretches",
+    "speed_noise_at_rest",
     "collocation_reference",
     "end_upright_residuals",
     "knot_matrix",
@@ -577,6 +580,7 @@ __all__ = [
     "choose_filter",
     "consistent_least_squares",
     "ConsistentParametrisation",
+    "consistent_parametrisation",
     "ConsistentSystem",
     "FilterChoice",
     "measurement_noise_std",

@@ -78,7 +78,7 @@ def summary(result, seconds) -> dict:
         "static_friction": out.get("static_friction"),
         "validation": out["validation"],
         "stiction_terms": {
-            f"fs{t.joint + 1}": float(t.coefficient)
+            f"fs{t.joint + 1}": {"fs": float(t.coefficient), "held": float(t.held), "band": float(t.velocity_scale)}
             for t in getattr(result.system, "terms", ())
             if isinstance(t, dynax.Stiction)
         },
@@ -99,11 +99,11 @@ def six(runs, results, save):
         save()
 
 
-def split(runs, lab, results, save):
-    for at in SPLITS_S:
+def split(runs, lab, results, save, splits=SPLITS_S):
+    for at in splits:
         head, tail = cut(runs["12"], at)
         train = [runs[r] for r in RUNS if r != "12"] + [head]
-        result, seconds = fit(train, validation=[tail])
+        result, seconds = fit(train, records=[tail])
         lab_error = dynax.held_out_error(lab, [tail], HORIZONS)
         entry = summary(result, seconds) | {
             "split_s": at,
@@ -128,7 +128,7 @@ def loro(runs, lab, folds, results, save):
     today = json.loads(TODAY.read_text())["runs"]
     for held in folds:
         train = [runs[r] for r in RUNS if r != held]
-        result, seconds = fit(train, validation=[runs[held]])
+        result, seconds = fit(train, records=[runs[held]])
         before = today[held]["dynax"]
         entry = summary(result, seconds) | {
             "dynax": list(result.validation.rmse),
@@ -199,6 +199,7 @@ def main(argv=None):
     parser.add_argument("--out", required=True, type=pathlib.Path)
     parser.add_argument("--parts", default="six,split,loro")
     parser.add_argument("--folds", default="00,01,02,03,05,12")
+    parser.add_argument("--splits", default=",".join(f"{s:g}" for s in SPLITS_S), help="split times [s] of run 12")
     parser.add_argument(
         "--merge", nargs="+", type=pathlib.Path, default=(), metavar="DIR", help="merge the results.json of parts"
     )
@@ -221,7 +222,7 @@ def main(argv=None):
     if "six" in parts:
         six(runs, results, save)
     if "split" in parts:
-        split(runs, lab, results, save)
+        split(runs, lab, results, save, tuple(float(s) for s in args.splits.split(",")))
     if "whatif" in parts:
         whatif(runs, lab, results, save)
     if "loro" in parts:

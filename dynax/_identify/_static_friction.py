@@ -63,10 +63,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._data._derivatives import savitzky_golay
-from .._data._rest import Rest, rest_stretches
+from .._data._rest import Rest, rest_stretches, speed_noise_at_rest
 from .._data._trajectory import Trajectory
 from .._model._extensions import Extended
-from .._model._extensions._stiction import Stiction
+from .._model._extensions._stiction import LEAST_STICK_BAND, stick_band, Stiction
 from .._model._extensions._terms import AbstractJointTerm
 from ._equations import uniformly_sampled
 from ._regressors import dynamic_regressor, generalised_force, split_terms
@@ -86,7 +86,8 @@ class RestUnderLoad:
     `held`, the largest window-averaged net torque held (signed) [N m or N]; `mean`, the mean net
     torque over the stretch; `noise`, its single-sample noise $\\sigma$; `loaded`, whether `|held|`
     reaches `LOADED` times `noise`; `breakaway`, the net torque at which the rest ended under a rising
-    torque (signed), or `None` (the record ends at rest, or the torque fell)."""
+    torque (signed), or `None` (the record ends at rest, or the torque fell); `speed_noise`, the joint's
+    measured-speed noise at rest over all of its rests in the records (`speed_noise_at_rest`)."""
 
     record: str
     joint: int
@@ -98,6 +99,7 @@ class RestUnderLoad:
     noise: float
     loaded: bool
     breakaway: float | None
+    speed_noise: float = 0.0
 
     @property
     def duration(self) -> float:
@@ -116,8 +118,9 @@ class JointStaticFriction:
     or `"lower_bound"` (no breakaway in the records: the largest torque held, which the true level is
     at least); `lower_bound`, the largest torque held at rest; `breakaways`, the torques at each
     breakaway (magnitudes); `records`, the records it rests in under load; `rest_s`, the seconds of
-    rest under load; `refined`, the level after the output-error refinement, or `None` where it did
-    not run."""
+    rest under load; `velocity_scale`, the band of speeds its `Stiction` sticks in (`stick_band` of the
+    speed noise at rest); `refined`, the level after the output-error refinement (which keeps it at or
+    above `lower_bound` and the Coulomb level), or `None` where it did not run."""
 
     joint: int
     coordinate: str
@@ -127,6 +130,7 @@ class JointStaticFriction:
     breakaways: tuple[float, ...]
     records: tuple[str, ...]
     rest_s: float
+    velocity_scale: float = LEAST_STICK_BAND
     refined: float | None = None
 
     @property
@@ -303,6 +307,7 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
     out = []
     forces = np.concatenate([np.asarray(generalised_force(system, r.us), dtype=float) for r in records])
     floor = FLOOR * np.sqrt(np.mean(forces**2, axis=0))  # per joint
+    noise_at_rest = _speed_noise(system, records, rests)
     for record, stretches, label in zip(records, rests, labels):
         if not stretches:
             continue
@@ -322,7 +327,11 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
             a, b = _longest_run(arm_still, s.start, end)
             torque = net[a:b, j]
             if b - a < width:  # the other joints move throughout: the coupling is not read at rest
-                out.append(RestUnderLoad(label, j, s.coordinate, s.start_s, s.stop_s, 0.0, 0.0, 0.0, False, None))
+                out.append(
+                    RestUnderLoad(
+                        label, j, s.coordinate, s.start_s, s.stop_s, 0.0, 0.0, 0.0, False, None, noise_at_rest[j]
+                    )
+                )
                 continue
             noise = max(float(np.hypot(_white_noise(torque), np.median(std[a:b, j]))), float(floor[j]))
             means = _window_means(torque, width)
@@ -336,10 +345,33 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
                     breakaway = at_break
             out.append(
                 RestUnderLoad(
-                    label, j, s.coordinate, s.start_s, s.stop_s, held, float(torque.mean()), noise, loaded, breakaway
+                    label,
+                    j,
+                    s.coordinate,
+                    s.start_s,
+                    s.stop_s,
+                    held,
+                    float(torque.mean()),
+                    noise,
+                    loaded,
+                    breakaway,
+                    noise_at_rest[j],
                 )
             )
     return tuple(out)
+
+
+def _speed_noise(system, records, rests) -> list[float]:
+    """Per joint, the noise of its measured speed over all of its rests in `records` (`speed_noise_at_rest`),
+    each up to where the joint leaves it (`_leaves`: the motion after is not noise)."""
+    n = len(split_terms(system)[0].joints)
+    pooled = [[] for _ in range(n)]
+    for record, stretches in zip(records, rests):
+        xs = np.asarray(uniformly_sampled(record).xs, dtype=float)
+        for s in stretches:
+            end = _leaves(xs[:, s.joint], s.start, s.stop, len(xs))
+            pooled[s.joint].append(xs[s.start : end, n + s.joint])
+    return [speed_noise_at_rest(np.concatenate(p)) if p else 0.0 for p in pooled]
 
 
 def joint_levels(stretches: tuple[RestUnderLoad, ...]) -> tuple[JointStaticFriction, ...]:
@@ -360,6 +392,7 @@ def joint_levels(stretches: tuple[RestUnderLoad, ...]) -> tuple[JointStaticFrict
                 breaks,
                 tuple(dict.fromkeys(s.record for s in mine)),
                 float(sum(s.duration for s in mine)),
+                stick_band(mine[0].speed_noise),
             )
         )
     return tuple(out)
@@ -373,7 +406,10 @@ def with_stiction(system, joints: tuple[JointStaticFriction, ...]):
     at = {j.joint for j in joints}
     dtype = jnp.result_type(*[t.coefficient for t in terms], float) if terms else float
     kept = [t for t in terms if not (isinstance(t, Stiction) and t.joint in at)]
-    added = [Stiction(j.joint, jnp.asarray(j.level, dtype)) for j in joints]
+    added = [
+        Stiction(j.joint, jnp.asarray(j.level, dtype), velocity_scale=j.velocity_scale, held=j.lower_bound)
+        for j in joints
+    ]
     # pyright reads the abstract state_names / input_names as fields of the generated __init__
     return Extended(system=base, terms=tuple(kept + added))  # pyright: ignore[reportCallIssue]
 

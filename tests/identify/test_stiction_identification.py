@@ -8,10 +8,11 @@ import dataclasses
 
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import dynax
 from dynax._identify import _identify as identify_module  # private: monkeypatched (no rest found)
-from dynax.internal import StaticFriction
+from dynax.internal import consistent_parametrisation, parameter_names, parameter_vector, StaticFriction
 from tests.reference import stick_slip_arm
 
 ARM = dict(m1=0.642, m2=0.564, l1=0.2, lc1=0.2, lc2=0.321, I1=0.0267, I2=0.0539, b1=0.001, b2=0.001)  # DFKI-like
@@ -136,3 +137,62 @@ def test_rest_without_load_gives_no_stiction():
 def test_static_friction_fields_are_typed():
     fields = {f.name for f in dataclasses.fields(StaticFriction)}
     assert {"stretches", "joints", "rows_left_out", "rows", "note"} <= fields
+
+
+def test_stick_band_is_the_velocity_noise_at_rest():
+    # Breakaway records whose velocities carry white noise of a known size: the band Stiction sticks in is
+    # that noise (a start state measured at rest then counts as resting).
+    sigma = 0.02
+    rng = np.random.default_rng(3)
+    data = []
+    for joint in (0, 1):
+        trajectory, _ = breakaway_record(joint)
+        xs = np.asarray(trajectory.xs).copy()
+        xs[:, 2:] += sigma * rng.standard_normal(xs[:, 2:].shape)
+        data.append(dataclasses.replace(trajectory, xs=jnp.asarray(xs)))
+    result = dynax.identify(
+        dynax.DoublePendulum(),
+        data,
+        dynax.Dynamic(),
+        friction="coulomb",
+        refine=False,
+        validation=dynax.Validate(holdout=0),
+    )
+    joints = result.static_friction.joints
+    assert {j.joint for j in joints} == {0, 1}
+    for j in joints:
+        # 1.48 times the median magnitude of a few hundred samples: within about 10 % of sigma.
+        np.testing.assert_allclose(j.velocity_scale, sigma, rtol=0.1)
+    bands = {t.joint: float(t.velocity_scale) for t in result.system.terms if isinstance(t, dynax.Stiction)}
+    assert bands == {j.joint: j.velocity_scale for j in joints}
+
+
+def test_the_refinement_keeps_the_static_level_above_what_was_held_and_the_coulomb_level():
+    # The output-error refinement searches the static level through this map: wherever it goes, the level
+    # stays at or above the torque the joint held at rest and the joint's Coulomb level.
+    model = dynax.Extended(
+        dynax.DoublePendulum(),
+        (
+            dynax.CoulombFriction(0, 0.135),
+            dynax.CoulombFriction(1, 0.09),
+            dynax.Stiction(0, 0.08, held=0.08),  # held less than the Coulomb level
+            dynax.Stiction(1, 0.22, held=0.22),
+        ),
+    )
+    names = parameter_names(model, "coulomb")
+    start = jnp.asarray(parameter_vector(model, "coulomb"))
+    parametrisation = consistent_parametrisation(model, names, jnp.maximum(jnp.abs(start), 1e-3))
+    fc1, fc2, fs1, fs2 = (names.index(n) for n in ("fc1", "fc2", "fs1", "fs2"))
+    rng = np.random.default_rng(0)
+    phi0 = np.asarray(parametrisation.phi(start))
+    for _ in range(50):
+        theta = np.asarray(parametrisation.theta(jnp.asarray(phi0 + 5.0 * rng.standard_normal(phi0.shape))))
+        assert theta[fs1] >= max(theta[fc1], 0.08) and theta[fs2] >= max(theta[fc2], 0.22)
+    # The start is pushed just inside: q1's level to its Coulomb level, q2's to what it held.
+    theta = np.asarray(parametrisation.theta(parametrisation.phi(start)))
+    np.testing.assert_allclose(theta[[fs1, fs2]], [0.135, 0.22], rtol=2e-3)
+    # A level inside the set maps back to itself.
+    inside = start.at[fs1].set(0.2).at[fs2].set(0.3)
+    np.testing.assert_allclose(parametrisation.theta(parametrisation.phi(inside)), inside, rtol=1e-9)
+    with pytest.raises(ValueError, match="held"):
+        dynax.Stiction(0, 0.1, held=-0.1)

@@ -64,10 +64,14 @@ class Stiction(AbstractJointTerm):
     - `stribeck_velocity`: $v_{st}$, the speed over which the friction falls from `fs` to the Coulomb
       level [rad/s or m/s] (default 0.05).
     - `velocity_scale`: $v_b$, the band of speeds in which the joint sticks (default 0.01, the Coulomb
-      friction's smoothing). Choose it above the speed noise of the velocities a simulation starts from
-      when the start state should count as resting.
+      friction's smoothing). Choose it at the speed noise of the velocities a simulation starts from
+      (`dynax.internal.speed_noise_at_rest`), so that a start state measured at rest counts as resting:
+      `identify` and `diagnose` do so.
     - `hold_time`: $\tau_h$, the time in which a sticking joint's speed decays [s] (default 0.01);
       keep it above about two steps of a fixed-step integrator.
+    - `held`: the largest torque the records show the joint holding at rest [N m or N] (default 0: none
+      known), a lower bound on `fs`; it changes no simulation, and the output-error refinement keeps
+      `fs` at or above it (`dynax.internal.ConsistentParametrisation`).
     """
 
     joint: int = eqx.field(static=True)
@@ -76,6 +80,7 @@ class Stiction(AbstractJointTerm):
     stribeck_velocity: Float[Array, ""]
     velocity_scale: Float[Array, ""]
     hold_time: Float[Array, ""]
+    held: Float[Array, ""]
     cause: ClassVar[str] = "stiction"
     prefix: ClassVar[str] = "fs"
     neutral: ClassVar[float] = 0.0
@@ -90,6 +95,7 @@ class Stiction(AbstractJointTerm):
         stribeck_velocity: ArrayLike = 0.05,
         velocity_scale: ArrayLike = 0.01,
         hold_time: ArrayLike = 0.01,
+        held: ArrayLike = 0.0,
     ):
         for name, value in (
             ("stribeck_velocity", stribeck_velocity),
@@ -98,15 +104,20 @@ class Stiction(AbstractJointTerm):
         ):
             if isinstance(value, (int, float)) and not value > 0.0:
                 raise ValueError(f"Stiction: `{name}` must be positive, got {value}")
+        if isinstance(held, (int, float)) and not held >= 0.0:
+            raise ValueError(f"Stiction: `held` must be non-negative, got {held}")
         self.joint = joint
         self.coefficient = float_scalar(fs)
         self.stribeck_velocity = float_scalar(stribeck_velocity)
         self.velocity_scale = float_scalar(velocity_scale)
         self.hold_time = float_scalar(hold_time)
+        self.held = float_scalar(held)
 
     def parameter_filter(self):
         spec = super().parameter_filter()
-        return eqx.tree_at(lambda t: (t.stribeck_velocity, t.velocity_scale, t.hold_time), spec, (False, False, False))
+        return eqx.tree_at(
+            lambda t: (t.stribeck_velocity, t.velocity_scale, t.hold_time, t.held), spec, (False, False, False, False)
+        )
 
     def slip_force(self, dq: Float[Array, ""], coulomb: Float[Array, ""]) -> Float[Array, ""]:
         r"""The friction in motion above the Coulomb level `coulomb`:
@@ -161,6 +172,20 @@ class Stiction(AbstractJointTerm):
         out = jnp.zeros_like(force).at[idx].add(slip)
         # Measured from the friction clipped to the level: with `fs = 0` the term adds nothing.
         return out.at[idx].add(weight * (held - jnp.clip(friction, -level, level)))
+
+
+LEAST_STICK_BAND = 0.01  # Stiction's default band: the Coulomb friction's smoothing [rad/s or m/s]
+
+
+def stick_band(speed_noise: float) -> float:
+    """The band of speeds `Stiction` sticks in (`velocity_scale`) for a measured speed whose noise at rest is
+    `speed_noise` (`dynax.internal.speed_noise_at_rest`): the noise itself, at least `LEAST_STICK_BAND`.
+
+    A window that starts from a state measured at rest starts at a speed of about the noise; with a band
+    below it, the joint never sticks. A band much wider holds a joint that truly slips slowly (a band of
+    three times the noise fits the level of event-based stick-slip records 13 % low, one of the noise
+    3 % low; the band's edge is smooth, `Stiction.weight`, so a start a little outside it still sticks)."""
+    return max(float(speed_noise), LEAST_STICK_BAND)
 
 
 def _inverse(m):
