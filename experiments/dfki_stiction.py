@@ -78,7 +78,11 @@ def summary(result, seconds) -> dict:
         "static_friction": out.get("static_friction"),
         "validation": out["validation"],
         "stiction_terms": {
-            f"fs{t.joint + 1}": {"fs": float(t.coefficient), "held": float(t.held), "band": float(t.velocity_scale)}
+            f"fs{t.joint + 1}": {
+                "fs": float(t.coefficient),
+                "held": float(t.held(result.system.system)),
+                "band": float(t.velocity_scale),
+            }
             for t in getattr(result.system, "terms", ())
             if isinstance(t, dynax.Stiction)
         },

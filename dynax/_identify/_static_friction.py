@@ -38,10 +38,30 @@ window under the rising torque). A breakaway counts only under a slow rise, by a
 jumps within a few samples (a swing of the other joint) resolves nothing, and such a rest adds only
 its held torque to the lower bound. The
 **level** is then the median breakaway torque at that joint (`kind = "breakaway"`); without a
-breakaway it is the largest held torque, reported as a lower bound (`kind = "lower_bound"`). The
-output-error refinement may move the level where the rests are in its segments; it can lower a
-level the data contradict, and hardly raise a lower bound (a level above the held torque changes
-no simulated rest).
+breakaway it is the largest held torque, reported as a lower bound (`kind = "lower_bound"`).
+
+**In the refinement.** The output-error refinement fits the level with the other parameters, but
+never below the largest torque held nor below the joint's Coulomb level
+(`dynax.internal.ConsistentParametrisation`). Both are hard bounds, not estimates: the joint held
+that torque without moving, and static friction is at least the sliding friction it falls to. The
+torque held is the force applied less the gravity at the rest (`Stiction.held_force`,
+`held_position`), and the gravity is that of the rigid body being refined, not the least-squares
+one: the rest reading is only as good as the model's gravity (on a heavy arm a least-squares
+gravity a tenth low reads a joint that holds nothing as holding newton metres). Left
+free, the refinement lowers the level wherever motion dominates its segments, because a level above
+the Coulomb one makes the motion's reversals stick, which a rig's reversals mostly do not, while
+nothing pulls it up: a level above the torque held changes no simulated rest, so the rest gives no
+gradient. The level then ends where the reversals allow, below what the records show the joint
+holding; bounded, it ends at the bound where the reversals push down, and above it only where the
+data ask for more. Holding the level fixed at the reading instead would forbid the second, and a
+breakaway, measured on one or a few events, is an estimate the refinement may correct down to the
+largest torque held.
+
+**The stick band.** `Stiction` sticks inside a band of speeds (`velocity_scale`); a simulation that
+starts from a state measured at rest starts at a speed of about the velocity noise, and with a band
+below the noise it never sticks. The band is the noise of the measured speed over the joint's rests
+(`dynax.internal.speed_noise_at_rest`, up to where the joint leaves each), at least `Stiction`'s
+default (`stick_band`), as the diagnosis's `stiction` candidate chooses it.
 
 **The least-squares rows at rest.** No friction law of the speed explains a held torque (the
 Coulomb column at rest is the sign of the velocity's noise), so where a rest is under load `identify`
@@ -87,7 +107,9 @@ class RestUnderLoad:
     torque over the stretch; `noise`, its single-sample noise $\\sigma$; `loaded`, whether `|held|`
     reaches `LOADED` times `noise`; `breakaway`, the net torque at which the rest ended under a rising
     torque (signed), or `None` (the record ends at rest, or the torque fell); `speed_noise`, the joint's
-    measured-speed noise at rest over all of its rests in the records (`speed_noise_at_rest`)."""
+    measured-speed noise at rest over all of its rests in the records (`speed_noise_at_rest`);
+    `held_force`, `held_position`, the generalised force applied and the joint positions over the window
+    where the most was held (its mean): the rest the refinement bounds the level by."""
 
     record: str
     joint: int
@@ -100,6 +122,8 @@ class RestUnderLoad:
     loaded: bool
     breakaway: float | None
     speed_noise: float = 0.0
+    held_force: float = 0.0
+    held_position: tuple[float, ...] | None = None
 
     @property
     def duration(self) -> float:
@@ -119,8 +143,10 @@ class JointStaticFriction:
     at least); `lower_bound`, the largest torque held at rest; `breakaways`, the torques at each
     breakaway (magnitudes); `records`, the records it rests in under load; `rest_s`, the seconds of
     rest under load; `velocity_scale`, the band of speeds its `Stiction` sticks in (`stick_band` of the
-    speed noise at rest); `refined`, the level after the output-error refinement (which keeps it at or
-    above `lower_bound` and the Coulomb level), or `None` where it did not run."""
+    speed noise at rest); `held_force`, `held_position`, the rest where the most was held (as
+    `RestUnderLoad`'s), which the output-error refinement keeps the level above under the rigid body it
+    fits, with the Coulomb level; `refined`, the level after that refinement, or `None` where it did not
+    run."""
 
     joint: int
     coordinate: str
@@ -131,6 +157,8 @@ class JointStaticFriction:
     records: tuple[str, ...]
     rest_s: float
     velocity_scale: float = LEAST_STICK_BAND
+    held_force: float = 0.0
+    held_position: tuple[float, ...] | None = None
     refined: float | None = None
 
     @property
@@ -320,6 +348,7 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
         for s, end in zip(stretches, ends):
             still[s.start : end, s.joint] = True
         net, std = net_torques(system, names, estimate, covariance, record, still)
+        forces_of = np.asarray(generalised_force(system, record.us), dtype=float)
         width = max(int(round(WINDOW_S / record.dt)), 1)
         arm_still = np.asarray(still.all(axis=1))
         for s, end in zip(stretches, ends):
@@ -335,7 +364,11 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
                 continue
             noise = max(float(np.hypot(_white_noise(torque), np.median(std[a:b, j]))), float(floor[j]))
             means = _window_means(torque, width)
-            held = float(means[int(np.argmax(np.abs(means)))])
+            k = int(np.argmax(np.abs(means)))
+            held = float(means[k])
+            window = slice(a + k, a + k + min(width, b - a))
+            held_force = float(np.mean(forces_of[window, j]))
+            held_position = tuple(float(v) for v in np.mean(qs[window], axis=0))
             loaded = bool(abs(held) >= LOADED * noise and abs(held) > 0.0)
             breakaway = None
             if loaded and b == end < s.stop:  # it left its rest (not the record's end) with the arm still
@@ -356,6 +389,8 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
                     loaded,
                     breakaway,
                     noise_at_rest[j],
+                    held_force,
+                    held_position,
                 )
             )
     return tuple(out)
@@ -379,7 +414,8 @@ def joint_levels(stretches: tuple[RestUnderLoad, ...]) -> tuple[JointStaticFrict
     out = []
     for j in sorted({s.joint for s in stretches if s.loaded}):
         mine = [s for s in stretches if s.joint == j and s.loaded]
-        lower = max(abs(s.held) for s in mine)
+        most = max(mine, key=lambda s: abs(s.held))
+        lower = abs(most.held)
         breaks = tuple(abs(s.breakaway) for s in mine if s.breakaway is not None)
         level, kind = (float(np.median(breaks)), "breakaway") if breaks else (lower, "lower_bound")
         out.append(
@@ -393,6 +429,8 @@ def joint_levels(stretches: tuple[RestUnderLoad, ...]) -> tuple[JointStaticFrict
                 tuple(dict.fromkeys(s.record for s in mine)),
                 float(sum(s.duration for s in mine)),
                 stick_band(mine[0].speed_noise),
+                most.held_force,
+                most.held_position,
             )
         )
     return tuple(out)
@@ -407,7 +445,13 @@ def with_stiction(system, joints: tuple[JointStaticFriction, ...]):
     dtype = jnp.result_type(*[t.coefficient for t in terms], float) if terms else float
     kept = [t for t in terms if not (isinstance(t, Stiction) and t.joint in at)]
     added = [
-        Stiction(j.joint, jnp.asarray(j.level, dtype), velocity_scale=j.velocity_scale, held=j.lower_bound)
+        Stiction(
+            j.joint,
+            jnp.asarray(j.level, dtype),
+            velocity_scale=j.velocity_scale,
+            held_force=j.held_force if j.held_position is not None else j.lower_bound,
+            held_position=None if j.held_position is None else np.asarray(j.held_position),
+        )
         for j in joints
     ]
     # pyright reads the abstract state_names / input_names as fields of the generated __init__
@@ -435,7 +479,10 @@ def describe(stretches, joints, rows_left_out, rows) -> str:
             if j.kind == "breakaway"
             else f"at least {j.level:.4g} (the largest torque held; no breakaway in the records)"
         )
-        parts.append(f"{j.coordinate} rests under load {j.rest_s:.2f} s in {', '.join(j.records)}: {what}")
+        parts.append(
+            f"{j.coordinate} rests under load {j.rest_s:.2f} s in {', '.join(j.records)}: {what}; sticks below "
+            f"{j.velocity_scale:.3g} (its speed noise at rest)"
+        )
     return (
         "Stiction added: "
         + "; ".join(parts)

@@ -169,30 +169,33 @@ def test_stick_band_is_the_velocity_noise_at_rest():
 
 def test_the_refinement_keeps_the_static_level_above_what_was_held_and_the_coulomb_level():
     # The output-error refinement searches the static level through this map: wherever it goes, the level
-    # stays at or above the torque the joint held at rest and the joint's Coulomb level.
+    # stays at or above the joint's Coulomb level and the torque the joint held at rest, that is the force
+    # applied there less the gravity there of the rigid body being fitted (theta5 sin(q1 + q2) at the elbow).
+    arm = dynax.DoublePendulum()
+    rest = (0.3, 0.2)
+    force = 0.22 + float(arm.base_parameters["theta5"]) * np.sin(0.5)  # 0.22 held under the start's gravity
     model = dynax.Extended(
-        dynax.DoublePendulum(),
+        arm,
         (
             dynax.CoulombFriction(0, 0.135),
             dynax.CoulombFriction(1, 0.09),
-            dynax.Stiction(0, 0.08, held=0.08),  # held less than the Coulomb level
-            dynax.Stiction(1, 0.22, held=0.22),
+            dynax.Stiction(0, 0.08, held_force=0.08),  # held less than the Coulomb level
+            dynax.Stiction(1, 0.22, held_force=force, held_position=rest),
         ),
     )
     names = parameter_names(model, "coulomb")
     start = jnp.asarray(parameter_vector(model, "coulomb"))
     parametrisation = consistent_parametrisation(model, names, jnp.maximum(jnp.abs(start), 1e-3))
-    fc1, fc2, fs1, fs2 = (names.index(n) for n in ("fc1", "fc2", "fs1", "fs2"))
+    fc1, fc2, fs1, fs2, t5 = (names.index(n) for n in ("fc1", "fc2", "fs1", "fs2", "theta5"))
     rng = np.random.default_rng(0)
     phi0 = np.asarray(parametrisation.phi(start))
     for _ in range(50):
         theta = np.asarray(parametrisation.theta(jnp.asarray(phi0 + 5.0 * rng.standard_normal(phi0.shape))))
-        assert theta[fs1] >= max(theta[fc1], 0.08) and theta[fs2] >= max(theta[fc2], 0.22)
+        held = abs(force - theta[t5] * np.sin(0.5))
+        assert theta[fs1] >= max(theta[fc1], 0.08) and theta[fs2] >= max(theta[fc2], held) - 1e-12
     # The start is pushed just inside: q1's level to its Coulomb level, q2's to what it held.
     theta = np.asarray(parametrisation.theta(parametrisation.phi(start)))
     np.testing.assert_allclose(theta[[fs1, fs2]], [0.135, 0.22], rtol=2e-3)
     # A level inside the set maps back to itself.
     inside = start.at[fs1].set(0.2).at[fs2].set(0.3)
     np.testing.assert_allclose(parametrisation.theta(parametrisation.phi(inside)), inside, rtol=1e-9)
-    with pytest.raises(ValueError, match="held"):
-        dynax.Stiction(0, 0.1, held=-0.1)

@@ -69,9 +69,12 @@ class Stiction(AbstractJointTerm):
       `identify` and `diagnose` do so.
     - `hold_time`: $\tau_h$, the time in which a sticking joint's speed decays [s] (default 0.01);
       keep it above about two steps of a fixed-step integrator.
-    - `held`: the largest torque the records show the joint holding at rest [N m or N] (default 0: none
-      known), a lower bound on `fs`; it changes no simulation, and the output-error refinement keeps
-      `fs` at or above it (`dynax.internal.ConsistentParametrisation`).
+    - `held_force`, `held_position`: a rest the records show the joint holding, a lower bound on `fs`:
+      the generalised force applied at the joint there [N m or N] and the joint positions, so that the
+      torque held is `held_force` less the gravity at `held_position` of whatever rigid-body parameters
+      a fit tries (`held`); without a position (default) `held_force` is the torque held itself (default 0:
+      none known). They change no simulation; the output-error refinement keeps `fs` at or above the
+      torque held (`dynax.internal.ConsistentParametrisation`).
     """
 
     joint: int = eqx.field(static=True)
@@ -80,7 +83,8 @@ class Stiction(AbstractJointTerm):
     stribeck_velocity: Float[Array, ""]
     velocity_scale: Float[Array, ""]
     hold_time: Float[Array, ""]
-    held: Float[Array, ""]
+    held_force: Float[Array, ""]
+    held_position: Float[Array, " n_joints"] | None
     cause: ClassVar[str] = "stiction"
     prefix: ClassVar[str] = "fs"
     neutral: ClassVar[float] = 0.0
@@ -95,7 +99,8 @@ class Stiction(AbstractJointTerm):
         stribeck_velocity: ArrayLike = 0.05,
         velocity_scale: ArrayLike = 0.01,
         hold_time: ArrayLike = 0.01,
-        held: ArrayLike = 0.0,
+        held_force: ArrayLike = 0.0,
+        held_position: ArrayLike | None = None,
     ):
         for name, value in (
             ("stribeck_velocity", stribeck_velocity),
@@ -104,20 +109,32 @@ class Stiction(AbstractJointTerm):
         ):
             if isinstance(value, (int, float)) and not value > 0.0:
                 raise ValueError(f"Stiction: `{name}` must be positive, got {value}")
-        if isinstance(held, (int, float)) and not held >= 0.0:
-            raise ValueError(f"Stiction: `held` must be non-negative, got {held}")
         self.joint = joint
         self.coefficient = float_scalar(fs)
         self.stribeck_velocity = float_scalar(stribeck_velocity)
         self.velocity_scale = float_scalar(velocity_scale)
         self.hold_time = float_scalar(hold_time)
-        self.held = float_scalar(held)
+        self.held_force = float_scalar(held_force)
+        self.held_position = None if held_position is None else jnp.asarray(held_position, self.held_force.dtype)
 
     def parameter_filter(self):
         spec = super().parameter_filter()
-        return eqx.tree_at(
-            lambda t: (t.stribeck_velocity, t.velocity_scale, t.hold_time, t.held), spec, (False, False, False, False)
+        spec = eqx.tree_at(
+            lambda t: (t.stribeck_velocity, t.velocity_scale, t.hold_time, t.held_force),
+            spec,
+            (False, False, False, False),
         )
+        if self.held_position is not None:
+            spec = eqx.tree_at(lambda t: t.held_position, spec, False)
+        return spec
+
+    def held(self, system) -> Float[Array, ""]:
+        """The torque the joint held at rest under `system`'s rigid body (its gravity at `held_position`,
+        the speeds and accelerations zero): a lower bound on `fs`."""
+        if self.held_position is None:
+            return jnp.abs(self.held_force)
+        zeros = jnp.zeros_like(self.held_position)
+        return jnp.abs(self.held_force - system.inverse_dynamics(self.held_position, zeros, zeros)[self.joint])
 
     def slip_force(self, dq: Float[Array, ""], coulomb: Float[Array, ""]) -> Float[Array, ""]:
         r"""The friction in motion above the Coulomb level `coulomb`:
