@@ -8,7 +8,6 @@ import dataclasses
 
 import jax.numpy as jnp
 import numpy as np
-import pytest
 
 import dynax
 from dynax._identify import _identify as identify_module  # private: monkeypatched (no rest found)
