@@ -2,7 +2,8 @@
 
     DYNAX_SHARED=/work/shared python experiments/dfki_stiction.py --out experiments/results/dfki_stiction
 
-(`--parts six,split,loro` chooses the measurements, `whatif` adds a what-if on the 5.25 s split;
+(`--parts six,split,loro` chooses the measurements, `whatif` adds a what-if on the 5.25 s split,
+`bandwhatif` one on each LORO fold's held-out run (the band against the level); `--splits 5.25` the splits;
 `--folds 00,01` the LORO folds; each part writes its
 results into `OUT/results.json` as it finishes, so a run cut short keeps what it measured.)
 
@@ -173,6 +174,30 @@ def whatif(runs, lab, results, save):
     save()
 
 
+def band_whatif(runs, results, save):
+    """Not a fit: each LORO fold's refined model on its held-out run without `Stiction`, with it at a 0.01 rad/s
+    band, and with it as fitted (the band from the velocity noise at rest): which of the level and the band
+    costs a run that never rests."""
+    for held, entry in results.get("loro", {}).items():
+        if not entry.get("stiction_terms"):
+            continue
+        base = model_of(entry["parameters"])
+        out = {"without": list(dynax.held_out_error(base, [runs[held]], HORIZONS).rmse)}
+        for name, band in (("band_0.01", 0.01), ("as_fitted", None)):
+            terms = tuple(
+                dynax.Stiction(int(k[2:]) - 1, v["fs"], velocity_scale=v["band"] if band is None else band)
+                for k, v in entry["stiction_terms"].items()
+            )
+            model = dynax.Extended(base.system, base.terms + terms)
+            out[name] = list(dynax.held_out_error(model, [runs[held]], HORIZONS).rmse)
+        results.setdefault("band_whatif", {})[held] = out
+        print(
+            f"band what-if, held out {held}: "
+            + "; ".join(f"{k} {v[0]:.4f}/{v[1]:.4f}/{v[2]:.4f}" for k, v in out.items())
+        )
+        save()
+
+
 def plot(results, out: pathlib.Path):
     fig, axes = plt.subplots(1, 2, figsize=(12, 4))
     folds = sorted(results.get("loro", {}))
@@ -231,6 +256,8 @@ def main(argv=None):
         whatif(runs, lab, results, save)
     if "loro" in parts:
         loro(runs, lab, args.folds.split(","), results, save)
+    if "bandwhatif" in parts:
+        band_whatif(runs, results, save)
     plot(results, args.out)
     print(f"wrote {path} and {args.out / 'stiction.png'}", flush=True)
 
