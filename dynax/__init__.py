@@ -96,6 +96,9 @@ from ._fit import (
     Solution as Solution,
 )
 from ._identify import (
+    AbstractMethod as AbstractMethod,
+)
+from ._identify import (
     Dynamic as Dynamic,
 )
 from ._identify import (
@@ -118,9 +121,6 @@ from ._identify import (
 )
 from ._identify import (
     InconsistentEstimateWarning as InconsistentEstimateWarning,
-)
-from ._identify import (
-    least_squares as least_squares,
 )
 from ._identify import (
     NoValidationWarning as NoValidationWarning,

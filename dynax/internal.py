@@ -86,6 +86,11 @@ from ._data._flight import FlightChecks as FlightChecks
 from ._data._flight import FlightNotes as FlightNotes
 from ._data._flight import usable_segments as usable_segments
 from ._data._io import MAX_MAGNITUDE as MAX_MAGNITUDE
+from ._data._spectra import choose_filter as choose_filter
+from ._data._spectra import FilterChoice as FilterChoice
+from ._data._spectra import measurement_noise_std as measurement_noise_std
+from ._data._spectra import noise_floor_and_band as noise_floor_and_band
+from ._data._spectra import with_velocities_from_positions as with_velocities_from_positions
 from ._data._velocities import velocity_gain as velocity_gain
 
 # Diagnose: candidates, windows and refits, statistics, horizons, the sparse search.
@@ -157,6 +162,8 @@ from ._diagnose._library import physical_readings as physical_readings
 from ._diagnose._probe import cross_validated_ridge as cross_validated_ridge
 from ._diagnose._probe import folds_by_run as folds_by_run
 from ._diagnose._problem import candidate_family as candidate_family
+from ._diagnose._problem import cross_fit_folds as cross_fit_folds
+from ._diagnose._problem import Fold as Fold
 from ._diagnose._problem import names_to_refit as names_to_refit
 from ._diagnose._problem import Problem as Problem
 from ._diagnose._quadrotor import (
@@ -167,6 +174,8 @@ from ._diagnose._quadrotor import quadrotor_candidates as quadrotor_candidates
 from ._diagnose._quadrotor import (
     quadrotor_flight_errors as quadrotor_flight_errors,
 )
+from ._diagnose._quadrotor import thrust_parameters as thrust_parameters
+from ._diagnose._quadrotor import WorldFrameQuadrotor as WorldFrameQuadrotor
 from ._diagnose._residuals import acceleration_residuals as acceleration_residuals
 from ._diagnose._residuals import exact_delays as exact_delays
 from ._diagnose._selection import (
@@ -262,9 +271,6 @@ from ._fit._engine import dense_forward as dense_forward
 from ._identify import (
     check_consistency as check_consistency,
 )
-from ._identify import (
-    choose_filter as choose_filter,
-)
 from ._identify import Consistency as Consistency
 
 # Identify: regressors, the stacked equations, per-record parts, the refinement's pieces.
@@ -287,19 +293,10 @@ from ._identify import (
     energy_regressor as energy_regressor,
 )
 from ._identify import (
-    FilterChoice as FilterChoice,
-)
-from ._identify import (
     friction_power_regressor as friction_power_regressor,
 )
 from ._identify import (
     JointStaticFriction as JointStaticFriction,
-)
-from ._identify import (
-    measurement_noise_std as measurement_noise_std,
-)
-from ._identify import (
-    noise_floor_and_band as noise_floor_and_band,
 )
 from ._identify import (
     OutputErrorStatistics as OutputErrorStatistics,
@@ -344,22 +341,23 @@ from ._identify._angle_zeros import record_angle_zeros as record_angle_zeros
 from ._identify._angle_zeros import shifted as shifted
 from ._identify._consistency import consistent_parametrisation as consistent_parametrisation
 from ._identify._consistency import min_mass_eigenvalue as min_mass_eigenvalue
-from ._identify._defaults import with_velocities_from_positions as with_velocities_from_positions
 from ._identify._equations import dynamic_rows as dynamic_rows
 from ._identify._equations import stacked_equations as stacked_equations
-from ._identify._identify import named_parameters as named_parameters
 from ._identify._least_squares import (
     jointly_determined as jointly_determined,
 )
+from ._identify._least_squares import least_squares as least_squares
 from ._identify._least_squares import (
     POORLY_DETERMINED as POORLY_DETERMINED,
 )
 from ._identify._least_squares import tsqr_r as tsqr_r
+from ._identify._method import FitSettings as FitSettings
 from ._identify._record_friction import compare_records as compare_records
 from ._identify._refine import delta_method_covariance as delta_method_covariance
 from ._identify._refine import ml_weights as ml_weights
 from ._identify._refine import record_residual_scale as record_residual_scale
 from ._identify._regressors import parameter_vector as parameter_vector
+from ._identify._simulation_fit import named_parameters as named_parameters
 from ._identify._simulation_fit import (
     record_jackknife_covariance as record_jackknife_covariance,
 )
@@ -472,6 +470,12 @@ from ._model._helicopter import (
 from ._model._helicopter import (
     TEMPEST_FEATURES as TEMPEST_FEATURES,
 )
+from ._model._linear_in_parameters import (
+    AbstractLinearInParameters as AbstractLinearInParameters,
+)
+from ._model._linear_in_parameters import (
+    identification_hooks as identification_hooks,
+)
 from ._model._two_link import DRAKE_DEFAULTS as DRAKE_DEFAULTS
 from ._progress import (
     bar_token as bar_token,
@@ -548,6 +552,7 @@ __all__ = [
     "Discovery",
     "body_frame_system",
     "quadrotor_candidates",
+    "thrust_parameters",
     "Rest",
     "rest_stretches",
     "speed_noise_at_rest",
@@ -651,7 +656,10 @@ __all__ = [
     "fit_lagged",
     "fit_one_step",
     "fit_percent",
+    "FitSettings",
     "float_scalar",
+    "AbstractLinearInParameters",
+    "identification_hooks",
     "folds_by_run",
     "friction_power_regressor",
     "global_array",
@@ -671,11 +679,15 @@ __all__ = [
     "lagged_loss_of",
     "recorded_loss",
     "leading_sharding",
+    "least_squares",
     "levenberg_marquardt",
     "log_ratio_differences",
     "look_alike_tests",
     "look_alikes",
     "make_windows",
+    "WorldFrameQuadrotor",
+    "cross_fit_folds",
+    "Fold",
     "MAX_MAGNITUDE",
     "min_mass_eigenvalue",
     "ml_weights",

@@ -179,7 +179,8 @@ def cell_tests(model, lab, record, horizons) -> list[dict]:
 def _band_from_positions() -> None:
     """Patch `choose_filter` (where identify's stages import it) to read each record's band from its
     angles' spectra: the widest angle band, with the trim and decimation that go with it."""
-    from dynax._identify import _defaults, _equations  # private: patched (choose_filter where imported)
+    from dynax._data import _spectra as _defaults  # private: patched (choose_filter where imported)
+    from dynax._identify import _equations  # private: patched (choose_filter where imported)
 
     velocity_rule = _defaults.choose_filter
 

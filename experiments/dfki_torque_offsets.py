@@ -45,9 +45,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax import held_out_error, least_squares  # noqa: E402
+from dynax import held_out_error  # noqa: E402
 import dynax.internal  # noqa: E402
 from dynax.internal import (  # noqa: E402
+    least_squares,
     record_angle_zeros,
     record_offsets,  # noqa: E402
     stacked_equations,

@@ -52,7 +52,8 @@ def register(subparsers):
         metavar="NAMES",
         help="comma-separated nominal parameters to refit (default all but the nominal friction, which "
         "the friction candidates test, e.g. theta1..theta5; for linear_axis mass and "
-        "offset; for helicopter the Tempest weights, e.g. du/u,dv/1)",
+        "offset; for helicopter the Tempest weights, e.g. du/u,dv/1; for quadrotor `thrust`, the thrust "
+        "map, with which battery sag and ground effect are tested)",
     )
     parser.add_argument(
         "--dt",

@@ -159,7 +159,8 @@ def load_helicopter_data(path, mapping=None, scale=None, offset=None, *, min_sam
         dt = data.dt
         data = resample(data, dt)
         print(f"note: {path} is irregularly sampled; resampled to its median interval {dt:.6g} s")
-    xs = data.xs.at[:, 3:7].set(data.xs[:, 3:7] / jnp.linalg.norm(data.xs[:, 3:7], axis=1, keepdims=True))
+    xs = jnp.asarray(data.xs)
+    xs = xs.at[:, 3:7].set(xs[:, 3:7] / jnp.linalg.norm(xs[:, 3:7], axis=1, keepdims=True))
     return type(data)(data.ts, xs, data.us, data.state_names, data.input_names, data.system, data.source)
 
 

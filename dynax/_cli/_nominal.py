@@ -45,10 +45,9 @@ def check_nominal(system, path) -> None:
     A model whose gravity terms are negative is most often one whose angles count from upright; the
     message says so. The helicopter's Tempest weights have no such bounds."""
     from .._identify import consistency_conditions
+    from .._model._linear_in_parameters import identification_hooks
 
-    if not hasattr(system, "base_parameter_kinds"):
-        return
-    names = tuple(system.base_parameter_kinds())
+    names = tuple(identification_hooks(system).base_parameter_kinds())
     violated = consistency_conditions(system, names, [float(getattr(system, n)) for n in names])
     if violated:
         hint = ""
@@ -105,7 +104,7 @@ def nominal_from_data(system, train) -> tuple[object, str]:
 
     from .._diagnose._forward import OTHER_MACHINE_FACTOR
     from .._identify import Dynamic, identify, poorly_determined, PoorlyDeterminedWarning, Validate
-    from .._model._system import friction_parameter_names, size_parameter_names
+    from .._model._linear_in_parameters import friction_parameter_names, identification_hooks, size_parameter_names
 
     try:
         with warnings.catch_warnings():  # said in the note, at its own threshold (`LOOSE`)
@@ -117,7 +116,7 @@ def nominal_from_data(system, train) -> tuple[object, str]:
             f"No --nominal: the default {type(system).__name__} parameters (least squares could not check them: {e}).",
         )
     estimate = identified.parameters
-    kinds = system.base_parameter_kinds()
+    kinds = identification_hooks(system).base_parameter_kinds()
     friction = friction_parameter_names(system)
     size = size_parameter_names(system)
     default = {n: float(getattr(system, n)) for n in size}
@@ -131,7 +130,7 @@ def nominal_from_data(system, train) -> tuple[object, str]:
         )
     values = {n: jnp.asarray(v) for n, v in estimate.items() if n in kinds and n not in friction}
     values.update({n: jnp.zeros_like(jnp.asarray(getattr(system, n))) for n in friction})
-    nominal = system.with_base_parameters(values)
+    nominal = identification_hooks(system).with_base_parameters(values)
     worst = max(far, key=lambda n: abs(math.log(far[n])))
     note = (
         f"No --nominal, and the training runs are not the default {type(system).__name__} "

@@ -187,7 +187,12 @@ def run_diagnose(args) -> int:
 
     from .._data import DataWarning
     from .._diagnose import diagnose, Horizons, Known, Refit, Selection, write_report
-    from .._diagnose._quadrotor import body_frame_records, quadrotor_flight_errors, QUADROTOR_HORIZONS_S
+    from .._diagnose._quadrotor import (
+        body_frame_records,
+        quadrotor_flight_errors,
+        QUADROTOR_HORIZONS_S,
+        thrust_parameters,
+    )
     from .._diagnose._records import holdout_split
     from .._identify._vehicle._quadrotor import quadrotor_from_json
     from .._model._quadrotor import initial_quadrotor
@@ -232,6 +237,8 @@ def run_diagnose(args) -> int:
         mode = Known()
     else:
         names = tuple(n.strip() for n in args.refit.split(",") if n.strip()) if args.refit else None
+        if names == ("thrust",):  # the thrust map, refitted with battery sag and ground effect
+            names = thrust_parameters(system)
         mode = Refit(parameters=names)
     with stage_log() as say, warnings.catch_warnings():  # the flights' faults were noted by load_flights
         warnings.simplefilter("ignore", DataWarning)

@@ -256,7 +256,7 @@ def load_flight(
         q = np.asarray(data.xs[:, 3:7])
         data = Trajectory(
             data.ts,
-            data.xs.at[:, 3:7].set(q / np.linalg.norm(q, axis=1, keepdims=True)),
+            jnp.asarray(data.xs).at[:, 3:7].set(q / np.linalg.norm(q, axis=1, keepdims=True)),
             data.us,
             data.state_names,
             data.input_names,

@@ -195,7 +195,7 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
         return []
     m = np.concatenate([[False], mask, [False]]).astype(np.int8)
     d = np.diff(m)
-    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1))
+    return [(int(a), int(b)) for a, b in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1)]
 
 
 def _time_units(tr, ts, source):

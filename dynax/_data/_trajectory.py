@@ -26,9 +26,9 @@ class Trajectory(eqx.Module):
     - `source`: where the data came from (a file path), or `""` (static).
     """
 
-    ts: Float[Array, " time"]
-    xs: Float[Array, "time n_states"]
-    us: Float[Array, "time n_inputs"]
+    ts: Float[Array | np.ndarray, " time"]
+    xs: Float[Array | np.ndarray, "time n_states"]
+    us: Float[Array | np.ndarray, "time n_inputs"]
     state_names: tuple[str, ...] = eqx.field(static=True)
     input_names: tuple[str, ...] = eqx.field(static=True)
     system: str = eqx.field(static=True, default="")
@@ -68,11 +68,11 @@ class Trajectory(eqx.Module):
         d = np.diff(np.asarray(self.ts))
         return bool(np.all(np.abs(d - np.median(d)) <= 0.01 * np.median(d)))
 
-    def state(self, name: str) -> Array:
+    def state(self, name: str) -> Array | np.ndarray:
         """The state column `name`."""
         return self.xs[:, self._index(self.state_names, name, "state")]
 
-    def input(self, name: str) -> Array:
+    def input(self, name: str) -> Array | np.ndarray:
         """The input column `name`."""
         return self.us[:, self._index(self.input_names, name, "input")]
 
@@ -82,7 +82,7 @@ class Trajectory(eqx.Module):
             raise UsageError(f"no {kind} column '{name}'; the {kind}s are {names}")
         return names.index(name)
 
-    def slice(self, start: int | None = None, stop: int | None = None) -> "Trajectory":
+    def slice(self, start: int | np.integer | None = None, stop: int | np.integer | None = None) -> "Trajectory":
         """The samples `start:stop` (Python slice semantics), as a new `Trajectory`."""
         s = slice(start, stop)
         return Trajectory(

@@ -243,9 +243,15 @@ def _report(problem: Problem, forward: Forward, judgement, *, mode, train, valid
             f"at most, less than a structure of practical size (R2 >= {PRACTICAL_R2:.2f}; see the verdict rule)."
         )
     test = test_summary(o.alpha, o.min_gain, judgement.power, verdict, named=bool(judgement.findings))
+    blocks = len(problem.folds) > len(problem.train)
     test["cross_fitting"] = (
-        f"each of the {len(problem.folds)} training runs also held out in turn, every configuration "
-        "refitted on the other training runs; its windows pooled with the held-out runs'"
+        (
+            f"the training run cut into {len(problem.folds)} contiguous blocks, each held out in turn, every "
+            "configuration refitted on the rest; their windows pooled with the held-out runs'"
+            if blocks
+            else f"each of the {len(problem.folds)} training runs also held out in turn, every configuration "
+            "refitted on the other training runs; its windows pooled with the held-out runs'"
+        )
         if problem.folds
         else None
     )

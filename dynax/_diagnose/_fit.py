@@ -110,10 +110,13 @@ class Windows(eqx.Module):
     # compiled fit serves every fold.
     weights: Float[Array, " window"]
 
-    def without_record(self, record: int) -> "Windows":
-        """These windows with the record `record`'s weights set to zero (a cross-fitting fold)."""
-        keep = np.asarray(self.starts)[:, 0] != record
-        return eqx.tree_at(lambda w: w.weights, self, jnp.asarray(keep, self.weights.dtype) * self.weights)
+    def without_span(self, record: int, start: int, stop: int) -> "Windows":
+        """These windows with weight zero where they share a sample with `start:stop` of record `record` (a
+        cross-fitting fold; the whole record with `start = 0` and `stop` its length)."""
+        starts = np.asarray(self.starts)
+        n_steps = self.ts.shape[1] - 1
+        near = (starts[:, 0] == record) & (starts[:, 1] + n_steps >= start) & (starts[:, 1] < stop)
+        return eqx.tree_at(lambda w: w.weights, self, jnp.asarray(~near, self.weights.dtype) * self.weights)
 
 
 def make_windows(trajectories, n_steps: int, stride: int, *, history_s: float = 0.5) -> Windows:

@@ -11,7 +11,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._model._extensions import AbstractInputTerm
-from .._model._system import AbstractSystem, size_parameter_names
+from .._model._linear_in_parameters import size_parameter_names
+from .._model._system import AbstractSystem
 from .._validate import Horizon
 from ._fit import fit_configurations, make_windows, nominal_values, validate_configurations, Windows
 from ._problem import Problem
@@ -157,23 +158,33 @@ def _cross_fit(problem: Problem, yard: Yardstick, current_slots, new, batch: _Ba
     slots = jnp.asarray(np.tile(current_slots, (n, 1)))
     new = jnp.asarray(new)
     free = jnp.ones(problem.n_params, dtype)
-    runs = np.asarray(yard.cv_windows.starts)[:, 0]
+    fold_of = cv_fold_of(problem.folds, yard.cv_windows)
     cv_errors = None
-    for r in problem.folds:
-        p, _, _, _ = fit_configurations(
-            problem.family, problem.train_windows.without_record(r), slots, new, jnp.asarray(batch.p, dtype), free
-        )
-        # Every training run's windows are simulated and the left-out run's kept: one shape, so one
+    for i, fold in enumerate(problem.folds):
+        # A held-out block's test windows reach one reference horizon past it: the fit leaves out every window
+        # that shares a sample with that span (with whole runs as folds, the run).
+        left_out = problem.train_windows.without_span(fold.record, fold.start, fold.stop + yard.n_ref)
+        p, _, _, _ = fit_configurations(problem.family, left_out, slots, new, jnp.asarray(batch.p, dtype), free)
+        # Every training run's windows are simulated and the left-out fold's kept: one shape, so one
         # compiled rollout for all folds (the windows are one reference horizon long, so this is cheap).
         errors = np.asarray(validate_configurations(problem.family, yard.cv_windows, slots, new, p))
         if cv_errors is None:
             cv_errors = np.full_like(errors, np.nan)
-        cv_errors[:, runs == r] = errors[:, runs == r]
+        cv_errors[:, fold_of == i] = errors[:, fold_of == i]
     say(
         f"  cross-fitted: the batch refitted {len(problem.folds)} times, each training run left out once "
         f"({time.perf_counter() - start:.1f} s)"
     )
     return dataclasses.replace(batch, cv_errors=cv_errors)
+
+
+def cv_fold_of(folds, cv_windows: Windows) -> np.ndarray:
+    """The fold of each cross-fitted window: the one whose record and samples hold the window's start."""
+    starts = np.asarray(cv_windows.starts)
+    fold_of = np.full(len(starts), -1)
+    for i, fold in enumerate(folds):
+        fold_of[(starts[:, 0] == fold.record) & (starts[:, 1] >= fold.start) & (starts[:, 1] < fold.stop)] = i
+    return fold_of
 
 
 def _scores(problem: Problem, yard: Yardstick, errors, cv_errors):
@@ -267,7 +278,8 @@ def _fit_nominal(problem: Problem, batch: _Batch, say) -> tuple[AbstractSystem, 
     cv_windows = make_windows(problem.train, n_ref, problem.val_stride) if problem.folds else None
     window_runs = problem.window_runs
     if cv_windows is not None:
-        window_runs = np.concatenate([window_runs, len(problem.validation) + np.asarray(cv_windows.starts)[:, 0]])
+        # Each fold is a run of the test (its windows centred on their own mean, and counted in the agreement).
+        window_runs = np.concatenate([window_runs, len(problem.validation) + cv_fold_of(problem.folds, cv_windows)])
     yard = Yardstick(
         horizon=horizon,
         horizons=horizons,

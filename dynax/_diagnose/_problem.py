@@ -3,6 +3,7 @@ prepared records, candidate family, identifiable candidates and windows (`prepar
 """
 
 import dataclasses
+from typing import NamedTuple
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -11,7 +12,8 @@ import numpy as np
 from .._errors import UsageError
 from .._identify._record_friction import compare_records
 from .._model._extensions import Extended
-from .._model._system import AbstractSystem, friction_parameter_names
+from .._model._linear_in_parameters import friction_parameter_names
+from .._model._system import AbstractSystem
 from ._candidates import (
     candidate_scales,
     default_candidates,
@@ -31,8 +33,38 @@ from ._settings import DEFAULT_HORIZONS_S, Horizons, Selection
 # standard errors): a breakaway within a tenth of the sliding level is not told from Coulomb friction by data.
 STATIC_MARGIN = 0.1
 
-# Cross-fitting needs every fold to fit two runs or more (see `_cross_fit`).
+# Cross-fitting needs every fold to fit two runs or more (see `_cross_fit`); a single training run is cut into
+# this many contiguous blocks instead, each at least this many of the longest horizon long.
 MIN_CROSS_FIT_RUNS = 3
+MIN_BLOCK_HORIZONS = 8
+
+
+class Fold(NamedTuple):
+    """A cross-fitting fold: the samples `start:stop` of training record `record`, held out in turn."""
+
+    record: int
+    start: int
+    stop: int
+
+
+def cross_fit_folds(train_records, n_long: int) -> tuple[Fold, ...]:
+    """The cross-fitting folds: each training run with three or more (leave one run out), contiguous blocks of a
+    single one, none with two.
+
+    A single training run leaves no run to hold out. It is cut into `MIN_CROSS_FIT_RUNS` contiguous blocks
+    (each at least `MIN_BLOCK_HORIZONS` of the longest reference horizon `n_long` long), each held out in turn with the
+    fit's windows that share a sample with its test windows left out (`_forward._cross_fit`): the blocked
+    cross-validation of time series (Racine 2000; Bergmeir and Benitez 2012), each fold fitting two thirds of
+    the run. Two training runs are not cross-fitted (each fold would fit one run alone; see `_cross_fit`).
+    Empty where the single run is too short for such blocks.
+    """
+    sizes = [len(r) for r in train_records]
+    if len(sizes) >= MIN_CROSS_FIT_RUNS:
+        return tuple(Fold(r, 0, n) for r, n in enumerate(sizes))
+    if len(sizes) > 1 or sizes[0] < MIN_CROSS_FIT_RUNS * MIN_BLOCK_HORIZONS * n_long:
+        return ()
+    edges = np.linspace(0, sizes[0], MIN_CROSS_FIT_RUNS + 1).round().astype(int)
+    return tuple(Fold(0, int(lo), int(hi)) for lo, hi in zip(edges[:-1], edges[1:]))
 
 
 class Refit(eqx.Module):
@@ -92,8 +124,9 @@ class Problem:
     horizon_settings: Horizons
     selection: Selection
     velocities: str = "as measured"
-    # The training records each held out in turn (leave-one-run-out cross-fitting); empty when off.
-    folds: tuple = ()
+    # The cross-fitting folds (`cross_fit_folds`): training runs or blocks of them, each held out in turn;
+    # empty when off.
+    folds: tuple[Fold, ...] = ()
     # Candidates that are one model with a refit of the nominal parameters (`structurally_equivalent`).
     equivalents: dict = dataclasses.field(default_factory=dict)
     # Causes of the default vocabulary the records give no occasion to try (`stiction` without a rest under load).
@@ -291,20 +324,33 @@ def prepare_problem(system, train, validation, candidates, mode, horizons: Horiz
     val_stride = max(1, int(round(0.05 / dt)))
     val_windows = make_windows(validation_records, int(round(grid.max() / dt)), val_stride)
     cross_fit = selection.cross_fit
-    folds = tuple(range(len(train_records))) if cross_fit and len(train_records) >= MIN_CROSS_FIT_RUNS else ()
+    folds = cross_fit_folds(train_records, int(round(candidates_s.max() / dt))) if cross_fit else ()
     if cross_fit and len(train_records) == MIN_CROSS_FIT_RUNS - 1:
         notes.append(
             f"Not cross-fitted: with {len(train_records)} training runs each fold would fit one run alone, and "
             "a model refitted on one run is judged for that run's excitation (two-fold cross-validation "
             "penalises every added term); the test is on the held-out runs alone. Three or more training "
-            "runs are cross-fitted."
+            "runs are cross-fitted, and a single one by blocks."
         )
-    if folds:
+    elif cross_fit and not folds:
+        notes.append(
+            f"Not cross-fitted: the training run is too short to hold out {MIN_CROSS_FIT_RUNS} blocks of "
+            f"{MIN_BLOCK_HORIZONS} times the longest reference horizon; the test is on the held-out runs alone."
+        )
+    elif folds and len(train_records) >= MIN_CROSS_FIT_RUNS:
         notes.append(
             f"Cross-fitting: besides the held-out runs, each of the {len(folds)} training runs was held out in "
             "turn, every configuration refitted on the other training runs (leave-one-run-out), and the test "
             "pools those windows with the held-out ones; the gains reported are the held-out runs' "
             "(Selection(cross_fit=False) tests on the held-out runs alone)."
+        )
+    elif folds:
+        notes.append(
+            f"Cross-fitting: besides the held-out runs, the training run was cut into {len(folds)} contiguous "
+            "blocks, each held out in turn and every configuration refitted on the rest (the fit's windows next "
+            "to the block left out too: blocked cross-validation), and the test pools those windows with the "
+            "held-out ones; the gains reported are the held-out runs' (Selection(cross_fit=False) tests on the "
+            "held-out runs alone)."
         )
     return Problem(
         system=system,

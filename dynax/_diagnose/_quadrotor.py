@@ -29,6 +29,15 @@ The vocabulary for a multirotor (`quadrotor_candidates`):
 In `Refit()` mode (the default) the rigid body's weights are the one-step least-squares fit of the
 given model's structure on the training flights (`fit_quadrotor`; `initial_quadrotor("nominal")`
 needs no starting values); `Known()` trusts the given weights (see `diagnose_quadrotor`).
+
+Battery sag and ground effect change the thrust per command, and in a closed-loop flight the
+command follows the thrust the vehicle needs: the one-step motor map fitted without them takes up
+most of their effect (a map of $m_i^2, m_i$ bends to give the same thrust at the higher commands of
+a low battery), so that, the map held, neither term adds anything and its true size even makes the
+held-out error worse. They are tested with the thrust map refitted by simulation error with each
+candidate, `Refit(parameters=thrust_parameters(quad))` (the CLI's `--refit thrust`): then the
+term's coefficient is the physical one (the square law's 2 for a map that ignores `vbat`,
+Cheeseman and Bennett's $R^2/16$) and its held-out gain is the effect's.
 """
 
 from collections.abc import Sequence
@@ -45,6 +54,7 @@ from .._model._extensions import AbstractTerm, InputGain, InputLag
 from .._model._extensions._vehicle_terms import BatterySag, BodyBias, GroundEffect, RotorDrag
 from .._model._helicopter import ANGULAR_RATE, BODY, Helicopter, QUATERNION, quaternion_to_rotation
 from .._model._quadrotor import (
+    motor_features,
     MOTORS,
     Quadrotor,
     QUADROTOR_INPUT_NAMES,
@@ -93,6 +103,18 @@ def quadrotor_candidates(system, floor: float | None = None) -> tuple:
     terms += [InputLag(i) for i in range(len(MOTORS))]
     terms += [InputGain(i) for i in range(len(MOTORS))]
     return tuple(terms)
+
+
+def thrust_parameters(system: Quadrotor) -> tuple[str, ...]:
+    """The names of the thrust axis' motor weights of `system`'s body model (`dw/` of the motor features):
+    the nominal parameters to refit with battery sag and ground effect (`Refit(parameters=...)`)."""
+    motors = {f"dw/{name}" for battery in (False, True) for name in motor_features(battery)}
+    names = tuple(n for n in system.body_model.parameter_names if n in motors)
+    if not names:
+        raise UsageError(
+            f"thrust_parameters: {type(system.body_model).__name__} has no motor weights on the thrust axis"
+        )
+    return names
 
 
 def _as_list(flights, where: str) -> list[Trajectory]:

@@ -10,10 +10,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._data._derivatives import resample
+from .._data._spectra import position_fit_window, with_velocities_from_positions
 from .._data._trajectory import Trajectory
 from .._data._velocities import check_trajectory_velocities
 from .._errors import DataError, UsageError
-from .._identify._defaults import position_fit_window, with_velocities_from_positions
 from .._validate import Horizon, position_spread, predictability_horizon, relative_position_error
 from ._residuals import sg_window
 

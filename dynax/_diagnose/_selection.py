@@ -12,7 +12,7 @@ import dataclasses
 
 import numpy as np
 
-from .._model._system import violated_bound
+from .._model._linear_in_parameters import identification_hooks, violated_bound
 from ._fit import nominal_values
 from ._statistics import benjamini_hochberg, helps_on_most_runs, log_ratio_differences, paired_block_test
 from ._summaries import rmse_curve
@@ -115,7 +115,7 @@ def on_physical_side(term, delta, partner, names, system) -> bool:
         return True
     i, alpha = partner
     value = float(nominal_values(system, names)[i]) + alpha * float(delta)
-    return violated_bound(names[i], value, system.base_parameter_kinds().get(names[i])) is None
+    return violated_bound(names[i], value, identification_hooks(system).base_parameter_kinds().get(names[i])) is None
 
 
 @dataclasses.dataclass(frozen=True)

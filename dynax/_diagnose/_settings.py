@@ -83,7 +83,7 @@ class Selection(eqx.Module):
     - `velocities`: `"auto"` (default): for a system whose states are joint positions and velocities,
       each measured velocity that carries white noise larger than the bias of a local cubic fit of
       its positions (Savitzky-Golay over half a period of the signal band's edge; see
-      `dynax._identify._defaults.with_velocities_from_positions`) is replaced by that fit's
+      `dynax._data._spectra.with_velocities_from_positions`) is replaced by that fit's
       derivative before anything is fitted or compared: the windows then start from better
       velocities and are compared with them, so the held-out errors measure the model, not the
       velocity sensor. `"measured"` keeps the records as they are. The report's

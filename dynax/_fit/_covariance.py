@@ -158,9 +158,9 @@ def bartlett_lags(p: np.ndarray, bandwidth: float) -> np.ndarray:
 
 
 def serial_covariance(
-    jac: Float[Array, "m n"],
-    residuals: Float[Array, " m"],
-    steps: Int[Array, " m"],
+    jac: Float[Array | np.ndarray, "m n"],
+    residuals: Float[Array | np.ndarray, " m"],
+    steps: Int[Array | np.ndarray, " m"],
     record_steps: tuple[int, ...],
     bandwidth: float | None = None,
 ) -> tuple[Float[Array, "n n"], float]:

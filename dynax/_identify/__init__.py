@@ -16,18 +16,6 @@ from ._consistency import (
 from ._consistency import (
     InconsistentEstimateWarning as InconsistentEstimateWarning,
 )
-from ._defaults import (
-    choose_filter as choose_filter,
-)
-from ._defaults import (
-    FilterChoice as FilterChoice,
-)
-from ._defaults import (
-    measurement_noise_std as measurement_noise_std,
-)
-from ._defaults import (
-    noise_floor_and_band as noise_floor_and_band,
-)
 from ._equations import Dynamic as Dynamic
 from ._equations import Energy as Energy
 from ._equations import Power as Power
@@ -44,6 +32,8 @@ from ._least_squares import (
 from ._least_squares import (
     PoorlyDeterminedWarning as PoorlyDeterminedWarning,
 )
+from ._method import AbstractMethod as AbstractMethod
+from ._method import FitSettings as FitSettings
 from ._offsets import record_offsets as record_offsets
 from ._offsets import RecordOffsets as RecordOffsets
 from ._record_friction import record_friction as record_friction

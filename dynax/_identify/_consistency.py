@@ -61,7 +61,7 @@ import optimistix as optx
 
 from .._fit import fit_least_squares, LeastSquaresOptions, levenberg_marquardt
 from .._model._extensions import Extended
-from .._model._system import violated_bound
+from .._model._linear_in_parameters import identification_hooks, violated_bound
 
 
 class InconsistentEstimateWarning(UserWarning):
@@ -116,7 +116,7 @@ def _kinds(system, names):
     The system's `base_parameter_kinds()` bound its base parameters; on a system with conditions,
     the joint terms' dissipative and inertial coefficients are non-negative. A system without
     conditions leaves every parameter free."""
-    kinds = _base(system).base_parameter_kinds()
+    kinds = identification_hooks(_base(system)).base_parameter_kinds()
 
     def term_kind(n):
         return "nonnegative" if kinds and n.startswith(_NON_NEGATIVE_PREFIXES) else "free"
@@ -134,7 +134,7 @@ def consistency_conditions(system, names: tuple[str, ...], theta) -> tuple[str, 
     **Returns:** a tuple of sentences, empty when consistent. Other systems have no conditions here.
     """
     p = {n: float(v) for n, v in zip(names, np.asarray(theta))}
-    base = _base(system)
+    base = identification_hooks(_base(system))
     own = base.base_parameter_kinds()
     out = list(base.base_parameter_conditions({n: v for n, v in p.items() if n in own}))
     for n, kind in zip(names, _kinds(system, names)):
@@ -159,7 +159,7 @@ def min_mass_eigenvalue(system, qs) -> float | None:
 @eqx.filter_jit
 def _min_mass_eigenvalue(base, terms, qs):
     # Compiled: op by op, even the choice of configurations costs more than the fit's solve.
-    qs = base.mass_check_configurations(qs)
+    qs = identification_hooks(base).mass_check_configurations(qs)
     if qs is None:  # no mass matrix to check
         return None
 

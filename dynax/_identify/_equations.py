@@ -8,21 +8,24 @@ r"""The least-squares models of `identify` and their equations.
   \int_{t_a}^{t_b} \dot q^\top F\,dt$ over windows, by the trapezoid rule; no $\ddot q$.
 
 `stacked_equations` stacks one model's rows over the records: what `identify`'s least-squares stage solves
-and what `record_offsets` tests.
+and what `record_offsets` tests. Each model is an `AbstractMethod` whose `equations` builds its rows
+and whose `fit` solves them by plain (weighted) least squares.
 """
 
 import dataclasses
-from typing import Literal
+from typing import ClassVar, Literal
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
 from .._data._derivatives import butterworth_filtfilt, central_difference, resample
+from .._data._spectra import choose_filter, trim_and_decimation
 from .._data._trajectory import Trajectory
 from .._errors import DataError, UsageError
-from ._defaults import choose_filter, trim_and_decimation
+from .._fit import Solution
 from ._least_squares import least_squares
+from ._method import AbstractMethod, as_records, FitSettings
 from ._regressors import (
     column_kinds,
     dynamic_regressor,
@@ -32,6 +35,7 @@ from ._regressors import (
     positions_and_velocities,
     row_dot,
     with_friction,
+    with_parameters,
 )
 
 
@@ -44,7 +48,33 @@ def _lowpass(trajectory, ys, cutoff_hz, order):
     return butterworth_filtfilt(trajectory.ts, ys, cutoff_hz=cutoff_hz, order=order)
 
 
-class Dynamic(eqx.Module):
+class AbstractLeastSquares(AbstractMethod):
+    r"""A least-squares method: the system's equations, linear in its base parameters, stacked over the
+    records and solved by weighted least squares (QR and SVD of the column-scaled regressor).
+
+    `fit` solves the method's equations as they are; `identify` runs its least-squares stage on
+    them instead (each record's force offsets, the consistency constraint, errors robust to rows
+    correlated in time, then the output-error refinement).
+    """
+
+    rcond: eqx.AbstractVar[float]
+    least_squares_stage: ClassVar[bool] = True
+
+    def fit(self, system, records, settings: FitSettings = FitSettings()) -> Solution:
+        """The least-squares estimate of `system`'s base parameters (`parameter_names`) from `records`.
+
+        **Returns:** a `Solution` whose `model` is `system` carrying the estimate (with
+        `settings.friction="coulomb"`, extended with the Coulomb friction terms), with the
+        regressor's `Statistics`.
+        """
+        model, a, y, weights, names, _, _, _, _, _ = stacked_equations(
+            system, as_records(records), self, settings.friction, settings.weights, self.rcond
+        )
+        solution = least_squares(a, y, names=names, weights=weights, rcond=self.rcond)
+        return eqx.tree_at(lambda s: s.model, solution, with_parameters(model, names, solution.value))
+
+
+class Dynamic(AbstractLeastSquares):
     r"""The inverse-dynamics (dynamic) least-squares model.
 
     Accelerations are central differences of the velocities, after a zero-phase Butterworth
@@ -116,8 +146,39 @@ class Dynamic(eqx.Module):
     offsets: bool | Literal["auto", "angles"] = "auto"
     rcond: float = 1e-7
 
+    refits_without_loaded_rests: ClassVar[bool] = True
 
-class Power(eqx.Module):
+    @property
+    def label(self) -> str:
+        return "dynamic"
+
+    @property
+    def force_offsets(self) -> bool | str:
+        return self.offsets
+
+    @property
+    def joint_weighted(self) -> bool:
+        return self.weighting == "joint"
+
+    @property
+    def angle_zeros_mode(self) -> Literal["compare", "always"] | None:
+        if self.offsets == "angles":
+            return "always"
+        if self.offsets == "auto" and isinstance(self.lowpass_hz, str) and self.lowpass_hz == "auto":
+            return "compare"
+        return None
+
+    def equations(self, system, trajectories, friction):
+        parts = [dynamic_rows(system, t, self, friction) for t in trajectories]
+        a, y, counts = stacked_dynamic_equations(parts)
+        n_samples = sum(counts)
+        settings = tuple(p[3] for p in parts)
+        if self.weighting not in ("none", "joint"):
+            raise UsageError(f"Dynamic: `weighting` must be 'none' or 'joint', got {self.weighting!r}")
+        return a, y, n_samples, settings, counts, counts
+
+
+class Power(AbstractLeastSquares):
     r"""The power least-squares model (Gautier 1997): $\dot q^\top B u = \dot H + \dot q^\top F(\dot q)$.
 
     Each sample gives one equation. $\dot H = \dot w\,\theta$ is the central difference of the
@@ -140,8 +201,15 @@ class Power(eqx.Module):
     decimate: int = 1
     rcond: float = 1e-7
 
+    @property
+    def label(self) -> str:
+        return "power"
 
-class Energy(eqx.Module):
+    def equations(self, system, trajectories, friction):
+        return _stacked_records([power_rows(system, t, self, friction) for t in trajectories])
+
+
+class Energy(AbstractLeastSquares):
     r"""The energy least-squares model (Gautier and Khalil 1988), one equation per window.
 
     Over a window $[t_a, t_b]$: $\int \dot q^\top B u\,dt = (w(t_b) - w(t_a))\,\theta +
@@ -174,6 +242,21 @@ class Energy(eqx.Module):
             raise ValueError(f"Energy: `window` must be at least 1 sample, got {self.window}")
         if self.stride is not None and self.stride < 1:
             raise ValueError(f"Energy: `stride` must be at least 1, got {self.stride}")
+
+    @property
+    def label(self) -> str:
+        return "energy"
+
+    def equations(self, system, trajectories, friction):
+        return _stacked_records([energy_rows(system, t, self, friction) for t in trajectories])
+
+
+def _stacked_records(parts):
+    """`equations`'s tuple for rows stacked record by record (`Power`, `Energy`)."""
+    a = jnp.concatenate([p[0] for p in parts])
+    y = jnp.concatenate([p[1] for p in parts])
+    n_samples = sum(p[2] for p in parts)
+    return a, y, n_samples, (), (), tuple(int(p[0].shape[0]) for p in parts)
 
 
 def _needs(traj, n, method):
@@ -284,9 +367,9 @@ class DynamicSignals:
     `ts`, whether the inputs are `held`, and its `settings`. A constant shift of `xs` is the
     signals of the shifted record: the zero-phase filters pass constants unchanged."""
 
-    ts: jnp.ndarray
-    xs: jnp.ndarray
-    us: jnp.ndarray
+    ts: jnp.ndarray | np.ndarray
+    xs: jnp.ndarray | np.ndarray
+    us: jnp.ndarray | np.ndarray
     held: bool
     settings: dict
 
@@ -369,7 +452,7 @@ def _integrate_intervals(ts, dq, tau, f):
     return work, dissipated
 
 
-def _power_rows(system, traj, method: Power, friction):
+def power_rows(system, traj, method: Power, friction):
     _needs(traj, 2 * method.trim + 3, "power")
     if method.lowpass_hz is not None:
         traj = uniformly_sampled(traj)
@@ -401,7 +484,7 @@ def _power_balance(ts, w, f, tau, dq, columns):
     return _joined(dw, f, columns), p
 
 
-def _energy_rows(system, traj, method: Energy, friction):
+def energy_rows(system, traj, method: Energy, friction):
     window = method.window
     stride = method.stride or window
     _needs(traj, window + 1, "energy")
@@ -454,27 +537,8 @@ def stacked_equations(system, trajectories, method, friction, weights, rcond):
     joint; each record's rows for `Power` and `Energy`, stacked record by record)."""
     system = with_friction(system, friction)
     names = parameter_names(system, friction)
-    settings, counts = (), ()
-    if isinstance(method, Dynamic):
-        parts = [dynamic_rows(system, t, method, friction) for t in trajectories]
-        a, y, counts = stacked_dynamic_equations(parts)
-        n_samples = sum(counts)
-        settings = tuple(p[3] for p in parts)
-        if method.weighting not in ("none", "joint"):
-            raise UsageError(f"Dynamic: `weighting` must be 'none' or 'joint', got {method.weighting!r}")
-        label = "dynamic"
-        record_rows = counts
-    elif isinstance(method, (Power, Energy)):
-        rows, label = (_power_rows, "power") if isinstance(method, Power) else (_energy_rows, "energy")
-        parts = [rows(system, t, method, friction) for t in trajectories]
-        a = jnp.concatenate([p[0] for p in parts])
-        y = jnp.concatenate([p[1] for p in parts])
-        n_samples = sum(p[2] for p in parts)
-        record_rows = tuple(int(p[0].shape[0]) for p in parts)
-    else:
-        raise UsageError(
-            f"identify: `method` must be Dynamic(), Power(), Energy() or SimulationFit(), got {type(method).__name__}"
-        )
+    a, y, n_samples, settings, counts, record_rows = method.equations(system, trajectories, friction)
+    label = method.label
     return system, a, y, weights, names, n_samples, label, settings, counts, record_rows
 
 

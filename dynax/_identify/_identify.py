@@ -1,40 +1,42 @@
 r"""`identify(system, data, method=...)`: fit a system's parameters to measured trajectories.
 
-Three linear-in-parameter least-squares models (`Dynamic()`, `Power()`, `Energy()`, whose equations
-`dynax._identify._equations` builds) and one output-error fit (`SimulationFit()`: minimise the
-simulation error through `dynax.simulate`). The least-squares stage is checked for physical
-consistency (and constrained to it by default), refined by the output-error fit on real two-link
-arm data, and validated by open-loop simulation on held-out records. The least-squares stage is
-`_ls_stage.py`, the refinement `_refine.py`, the validation `_validation.py` and the result
-`_result.py`; this module chooses and runs them.
+`identify` is prepare -> fit -> refine -> validate, and asks the method (an `AbstractMethod`) what
+to run: a method whose `least_squares_stage` is set (`Dynamic()`, `Power()`, `Energy()`, whose
+equations `dynax._identify._equations` builds) runs the least-squares stage (`_ls_stage.py`:
+force offsets or angle zeros, checked for physical consistency and constrained to it), then on real
+two-link arm data the output-error refinement (`_refine.py`); any other method (`SimulationFit()`,
+or one of a user's own) is its `fit`, checked for consistency. Every result is validated by
+open-loop simulation on held-out records (`_validation.py`) and returned as an `Identification`
+(`_result.py`).
 """
 
 from collections.abc import Sequence
 import dataclasses
+import typing
 from typing import Literal
 import warnings
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 import numpy as np
 
+from .._data._sampling import check_time_stamps
+from .._data._spectra import choose_filter
 from .._data._trajectory import Trajectory
 from .._data._velocities import check_trajectory_velocities
 from .._errors import DataError, UsageError
-from .._fit import Parameters
 from .._model._extensions import Extended
 from .._model._linear_axis import LinearAxis
-from .._model._system import AbstractSystem, size_parameter_names
+from .._model._linear_in_parameters import size_parameter_names
+from .._model._system import AbstractSystem
 from .._model._two_link import Acrobot, DoublePendulum
 from .._precision import warn_if_float32
 from .._simulate import FixedGrid
 from ._angle_zeros import AngleZeros, record_angle_zeros
 from ._angle_zeros import applies as _angle_zeros_apply
 from ._consistency import check_consistency, Consistency
-from ._defaults import choose_filter
-from ._equations import Dynamic, Energy, Power, stacked_equations, uniformly_sampled
+from ._equations import AbstractLeastSquares, Dynamic, stacked_equations, uniformly_sampled
 from ._least_squares import (
     describe_poorly_determined,
     IdentifiabilityError,
@@ -44,18 +46,18 @@ from ._least_squares import (
     PoorlyDeterminedWarning,
 )
 from ._ls_stage import (
-    fitted_system,
     joint_positions,
     least_squares_stage,
     less_offsets,
     offsets_json,
     relative_equation_error,
 )
+from ._method import AbstractMethod, FitSettings
 from ._offsets import record_labels, without_offsets
 from ._refine import refine_by_simulation
-from ._regressors import Friction, parameter_names, parameter_vector, split_terms, with_friction
+from ._regressors import Friction, split_terms
 from ._result import Identification, NoValidationWarning, RecordsDisagreeWarning, Stage, StageKind
-from ._simulation_fit import fit_simulation_error, SimulationFit
+from ._simulation_fit import SimulationFit
 from ._static_friction import describe, joint_levels, record_rests, rests_under_load, StaticFriction, with_stiction
 from ._validation import held_out_error, split_for_validation, Validate
 
@@ -85,6 +87,14 @@ def _check_data(system, trajectories):
                 "for a derivative, and as many equations as parameters)",
                 path=traj.source or None,
             )
+        # A record built in Python has not met the loader's time checks: times that do not increase are refused
+        # here (irregular steps and gaps are the caller's to allow), before any derivative divides by a step.
+        try:
+            check_time_stamps(traj.ts, path=traj.source or None, max_gap=None, min_step=None)
+        except DataError as error:
+            if traj.source:
+                raise
+            raise UsageError(f"identify: record {k} of `data`: {error}") from None
     for k, traj in enumerate(trajectories):
         if traj.xs.shape[1] != system.n_states or traj.us.shape[1] != system.n_inputs:
             raise UsageError(
@@ -178,69 +188,6 @@ def _refinement_method(refine, system, method, trajectories):
     )
 
 
-def named_parameters(system, names) -> Parameters:
-    """The `Parameters` of the named coefficients (fields of the nominal system and of its joint
-    terms) of a system the regressors know, named as `parameter_names` names them, in tree order."""
-    base, terms = split_terms(system)
-    fields = [n for n in names if hasattr(base, n) and not isinstance(getattr(type(base), n, None), property)]
-    named_terms = [i for i, t in enumerate(terms) if t.parameter_name(base) in names]
-    labels = fields + [terms[i].parameter_name(base) for i in named_terms]
-
-    def places(tree):  # `tree` is shaped like `system` (a bare system or `Extended`)
-        nominal = tree.system if base is not system else tree
-        return [getattr(nominal, n) for n in fields] + [tree.terms[i].coefficient for i in named_terms]
-
-    spec = eqx.tree_at(places, jax.tree.map(lambda _: False, system), [True] * len(labels))
-    tags = eqx.tree_at(places, jax.tree.map(lambda _: "", system), labels)
-    selected = Parameters.of(system, spec)
-    ordered = tuple(tag for tag, chosen in zip(jax.tree.leaves(tags), selected.selection) if chosen)
-    return Parameters.of(system, spec, names=ordered)
-
-
-def _identify_by_simulation(system, trajectories, method: SimulationFit, friction) -> Identification:
-    """`identify` with `SimulationFit`: the output-error fit of the system's named coefficients
-    (the regressors' names, for the systems they know) or of its `parameter_filter()`."""
-    try:
-        system = with_friction(system, friction)
-        names = parameter_names(system, friction)
-    except UsageError:
-        names = None  # any other system: its own parameter filter, named by its labels or tree paths
-    if names is not None:
-        # Start from the system's values; the coefficients not in `names` (a linear axis's Coulomb
-        # term under viscous friction) are fixed.
-        system = fitted_system(system, names, parameter_vector(system, friction))
-        parameters = named_parameters(system, names)
-    else:
-        parameters = Parameters.of(system)
-    solution = fit_simulation_error(
-        system,
-        trajectories,
-        method,
-        filter_spec=parameters,
-    )
-    if names is not None and tuple(names) != parameters.names:  # the contract's order, not the tree's
-        order = np.asarray([parameters.names.index(name) for name in names])
-        value = solution.value[order]
-        solution = eqx.tree_at(
-            lambda s: (s.value, s.parameters, s.std_errors, s.covariance),
-            solution,
-            (
-                value,
-                Parameters.of(value, names=tuple(names)),
-                solution.std_errors[order],
-                solution.covariance[np.ix_(order, order)],
-            ),
-        )
-    stage = Stage(StageKind.SIMULATION, "simulation", solution)
-    return Identification(
-        system=solution.model,
-        stages=(stage,),
-        n_samples=solution.statistics.n_samples,
-        friction=friction,
-        system_name=_system_name(system),
-    )
-
-
 def _validation_split(system, trajectories, settings: Validate, weights):
     """`(fitted, held, source, horizons)`: the records to fit, the held-out records, what they are
     and the horizons to validate at.
@@ -300,15 +247,30 @@ def _horizons_held(records, horizons_s) -> tuple[tuple[float, ...], float]:
     return tuple(h for h in horizons_s if h < longest), longest
 
 
-def _validated_simulation_fit(system, fitted, method, friction, consistency, validate) -> Identification:
-    """`identify` by `SimulationFit`, with its consistency check and held-out validation."""
-    result = _identify_by_simulation(system, fitted, method, friction)
+def _fitted_once(system, fitted, method, settings, consistency, validate) -> Identification:
+    """`identify` by a method without a least-squares stage: its `fit`, the estimate's consistency
+    check where the system has conditions, and the held-out validation."""
+    solution = method.fit(system, fitted, settings)
     check = None
     if _has_conditions(system):
-        qs = joint_positions(result.system, fitted)
-        check = check_consistency(result.system, result.names, result.estimate, qs, warn=consistency != "off")
-    stage = dataclasses.replace(result.stages[0], consistency=check, validation=validate(result.system))
-    return dataclasses.replace(result, stages=(stage,))
+        qs = joint_positions(solution.model, fitted)
+        check = check_consistency(
+            solution.model, solution.names, jnp.asarray(solution.value), qs, warn=consistency != "off"
+        )
+    stage = Stage(
+        StageKind(method.stage_kind),
+        method.label,
+        solution,
+        consistency=check,
+        validation=validate(solution.model),
+    )
+    return Identification(
+        system=solution.model,
+        stages=(stage,),
+        n_samples=method.n_samples(solution, fitted),
+        friction=settings.friction,
+        system_name=_system_name(system),
+    )
 
 
 def _refined_stage(ls, start, fitted, method, friction, consistency, refinement, validate) -> Stage:
@@ -338,7 +300,7 @@ def _refined_stage(ls, start, fitted, method, friction, consistency, refinement,
 def identify(
     system: AbstractSystem,
     data: Trajectory | Sequence[Trajectory],
-    method: "Dynamic | Power | Energy | SimulationFit" = Dynamic(),
+    method: AbstractMethod = Dynamic(),
     *,
     friction: Friction = "viscous",
     weights: Float[Array, " rows"] | None = None,
@@ -381,10 +343,14 @@ def identify(
     **Arguments:**
 
     - `system`: `Acrobot`, `DoublePendulum` or `LinearAxis` (least squares), or any system
-      (`SimulationFit`). Its parameter values are the starting point of `SimulationFit` and are
-      otherwise ignored.
+      (`SimulationFit`; a `Helicopter` also with a vehicle criterion, `OneStep()`, `Lagged()`, ...,
+      which then fits the one record as `fit_vehicle` does). Its parameter values are the starting
+      point of `SimulationFit` and are otherwise ignored.
     - `data`: a `Trajectory` or a list of them (same system).
-    - `method`: `Dynamic()` (default), `Power()`, `Energy()` or `SimulationFit()`.
+    - `method`: `Dynamic()` (default), `Power()`, `Energy()`, `SimulationFit()`, or any other
+      `AbstractMethod`: `identify` runs its `fit` once (with `friction` and `weights` in a
+      `FitSettings`), checks the estimate's consistency where the system has conditions, and
+      validates the fitted model.
     - `friction`: `"viscous"` (default) or `"coulomb"` (adds `fc1`, `fc2`, or the linear axis's
       `coulomb`).
     - `weights`: optional row weights for the least-squares problem, one per stacked equation
@@ -410,6 +376,11 @@ def identify(
     `UsageError` for a system or method that does not fit.
     """
     warn_if_float32("identification")  # the float64 policy: say so, once, naming the switch
+    if not isinstance(method, AbstractMethod):
+        raise UsageError(
+            f"identify: `method` must be Dynamic(), Power(), Energy(), SimulationFit() or another AbstractMethod, "
+            f"got {type(method).__name__}"
+        )
 
     trajectories = _as_list(data)
     _check_data(system, trajectories)
@@ -428,11 +399,12 @@ def identify(
     def validate(model):
         return held_out_error(model, held, horizons_s, source=source) if held else None
 
-    if isinstance(method, SimulationFit):
-        result = _validated_simulation_fit(system, fitted, method, friction, consistency, validate)
+    if not method.least_squares_stage:
+        result = _fitted_once(system, fitted, method, FitSettings(friction, weights), consistency, validate)
         _warn_unvalidated(held, source)
         return result
 
+    method = typing.cast(AbstractLeastSquares, method)  # `least_squares_stage` says so
     rcond = method.rcond
     zeros = _record_angle_zeros(system, fitted, method, friction, rcond)
     if zeros is not None and zeros.chosen:  # both stages fit the records less their angle zeros
@@ -445,7 +417,7 @@ def identify(
     rests = record_rests(fitted) if _holds_at_rest(system) else None
     ls = least_squares_stage(system, fitted, method, friction, weights, rcond, consistency)
     static = _static_friction(ls, fitted, rests)
-    if static is not None and static.joints and isinstance(method, Dynamic):
+    if static is not None and static.joints and method.refits_without_loaded_rests:
         # Refit without the rows of the rests under load (no law of the speed explains a held torque), and
         # read the rests again with that fit's gravity. A rest that holds nothing is an equation like any other.
         loaded = _loaded_rests(static, rests, record_labels(fitted))
@@ -561,21 +533,21 @@ def _loaded_rests(static: StaticFriction, rests, labels):
 
 
 def _record_angle_zeros(system, records, method, friction, rcond) -> AngleZeros | None:
-    """Each record's angle zeros (`record_angle_zeros`) where `Dynamic`'s `offsets` lets them be
-    fitted on this system: `"angles"`, or `"auto"` with the settings chosen from the data on an arm
-    whose every joint is a driven angle (they are then weighed against force offsets); else `None`."""
-    if not isinstance(method, Dynamic) or not _angle_zeros_apply(system):
-        if isinstance(method, Dynamic) and method.offsets == "angles":
+    """Each record's angle zeros (`record_angle_zeros`) where the method's `angle_zeros_mode` lets them
+    be fitted on this system (`Dynamic`: `offsets="angles"`, or `"auto"` with the settings chosen from
+    the data on an arm whose every joint is a driven angle, then weighed against force offsets); else
+    `None`."""
+    mode = method.angle_zeros_mode
+    if mode is None:
+        return None
+    if not _angle_zeros_apply(system):
+        if mode == "always":
             raise UsageError(
                 f"Dynamic(offsets='angles'): {type(split_terms(system)[0]).__name__} is not an arm whose every "
                 "joint is an angle that an input drives"
             )
         return None
-    if method.offsets == "angles":
-        return record_angle_zeros(system, records, method, friction, rcond, compare=False)
-    if method.offsets == "auto" and isinstance(method.lowpass_hz, str) and method.lowpass_hz == "auto":
-        return record_angle_zeros(system, records, method, friction, rcond)
-    return None
+    return record_angle_zeros(system, records, method, friction, rcond, compare=mode == "compare")
 
 
 def _size_errors(system, names, estimate, std, record_std=None) -> dict[str, float] | None:

@@ -15,7 +15,7 @@ from .._errors import UsageError
 from .._fit import serial_covariance, Solution
 from .._model._system import AbstractSystem
 from ._consistency import check_consistency, Consistency, consistent_least_squares, InconsistentEstimateWarning
-from ._equations import Dynamic, joint_weights, stacked_equations
+from ._equations import joint_weights, stacked_equations
 from ._least_squares import IdentifiabilityError, least_squares
 from ._offsets import driven_joints, offset_groups, record_labels, record_offsets, RecordOffsets, without_offsets
 from ._record_friction import coulomb_columns, record_friction, RecordFriction
@@ -61,9 +61,9 @@ def _stacked_positions(system, states):
 
 def _offset_rows(system, method, counts):
     """The row groups that each carry a fitted offset under `method` (see `Dynamic`'s `offsets`), or None."""
-    if not isinstance(method, Dynamic) or not counts:
+    if not counts:  # rows stacked joint by joint, per record: `Dynamic`'s
         return None
-    wanted = method.offsets
+    wanted = method.force_offsets
     if isinstance(wanted, str):
         if wanted not in ("auto", "angles"):
             raise UsageError(f"Dynamic: `offsets` must be True, False, 'auto' or 'angles', got {wanted!r}")
@@ -71,7 +71,7 @@ def _offset_rows(system, method, counts):
     if not wanted:
         return None
     groups = offset_groups(system, counts)
-    if groups is None and method.offsets is True:
+    if groups is None and method.force_offsets is True:
         raise UsageError(
             f"Dynamic(offsets=True): {type(split_terms(system)[0]).__name__} has a constant term of its own "
             "(or no driven joint); fit its offset as a parameter instead"
@@ -88,10 +88,10 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
     )
     groups = _offset_rows(system, method, counts)
     keep = None
-    if rests is not None and isinstance(method, Dynamic) and counts:
+    if rests is not None and counts:  # `counts`: rows stacked joint by joint (`Dynamic`)
         n_joints = raw_a.shape[0] // sum(counts)
         keep = rest_row_weights(trajectories, settings, counts, rests, n_joints)
-    if isinstance(method, Dynamic) and method.weighting == "joint" and weights is None:
+    if method.joint_weighted and weights is None:
         # Each joint's residual variance from an ordinary fit of the equations that will be solved.
         plain = (raw_a, raw_y) if groups is None else without_offsets(raw_a, raw_y, keep, groups)[:2]
         if keep is not None:  # rows at rest left out of the variances too

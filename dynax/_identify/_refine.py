@@ -61,13 +61,13 @@ import numpy as np
 import optimistix as optx
 
 from .._data._derivatives import butterworth_filtfilt, resample
+from .._data._spectra import choose_filter, measurement_noise_std, velocities_from_positions
 from .._data._trajectory import Trajectory
 from .._fit import AbstractStatistics, Parameters, Solution
 from .._model._extensions import Extended
 from .._model._system import AbstractSystem
 from .._simulate import FixedGrid, simulate
 from ._consistency import consistent_parametrisation, ConsistentParametrisation
-from ._defaults import choose_filter, measurement_noise_std, velocities_from_positions
 from ._regressors import parameter_vector, split_terms, with_parameters
 from ._simulation_fit import (
     DIVERGED,

@@ -20,10 +20,12 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
+import numpy as np
 
 from .._errors import UsageError
 from .._model._extensions import CoulombFriction, Extended, JointSpring, RotorInertia
 from .._model._extensions._terms import AbstractJointTerm
+from .._model._linear_in_parameters import least_squares_system
 from .._model._system import AbstractSystem
 
 Friction = Literal["viscous", "coulomb"]
@@ -43,7 +45,7 @@ def split_terms(system):
         base, terms = system.system, system.terms
     else:
         base, terms = system, ()
-    base.check_least_squares(tuple(terms))
+    base = least_squares_system(base, tuple(terms))
     if any(not isinstance(t, AbstractJointTerm) for t in terms):
         raise UsageError(
             "least-squares identification takes joint terms (friction, drag, rotor inertia, springs) on a two-link "
@@ -165,11 +167,13 @@ def row_dot(a: Float[Array, "... n"], b: Float[Array, "... n"]) -> Float[Array, 
     return out
 
 
-def generalised_force(system: AbstractSystem, us: Float[Array, "time n_inputs"]) -> Float[Array, "time n_joints"]:
+def generalised_force(
+    system: AbstractSystem, us: Float[Array | np.ndarray, "time n_inputs"]
+) -> Float[Array, "time n_joints"]:
     r"""The measured generalised forces $B u$, one entry per joint (the acrobot's `tau1` is 0)."""
     base, _ = split_terms(system)
     b = base.input_matrix().astype(us.dtype)  # (joints, inputs); written out, not a batched dot
-    return jnp.stack([row_dot(us, b[j]) for j in range(b.shape[0])], axis=-1)
+    return jnp.stack([row_dot(jnp.asarray(us), b[j]) for j in range(b.shape[0])], axis=-1)
 
 
 @eqx.filter_jit

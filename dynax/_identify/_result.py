@@ -39,6 +39,8 @@ class StageKind(enum.StrEnum):
     """The least-squares model refined through the integrator (`refine_by_simulation`)."""
     SIMULATION = "simulation"
     """An output-error fit from the system's own values (`SimulationFit`)."""
+    FIT = "fit"
+    """One fit by a method of another kind (an `AbstractMethod` whose `fit` is all it does)."""
 
 
 class Stage(eqx.Module):
@@ -259,6 +261,11 @@ class Identification(eqx.Module):
 
     @property
     def condition_number(self) -> Float[Array, ""]:
+        """Of the column-scaled regressor (or Jacobian); NaN for a method whose fit reports none (a
+        vehicle criterion)."""
+        first = self.stages[0].solution.statistics
+        if not isinstance(first, (Statistics, OutputErrorStatistics)):
+            return jnp.asarray(jnp.nan)
         return self._linear_statistics.condition_number
 
     @property
@@ -275,7 +282,8 @@ class Identification(eqx.Module):
     def relative_error(self) -> Float[Array, ""]:
         last = self.stages[-1]
         if last.relative_equation_error is None:
-            return last.solution.statistics.relative_error
+            statistics = last.solution.statistics
+            return statistics.relative_error if isinstance(statistics, OutputErrorStatistics) else jnp.asarray(jnp.nan)
         return jnp.asarray(last.relative_equation_error)
 
     @property

@@ -41,10 +41,17 @@ from .._model._system import AbstractSystem
 from .._progress import bar_token, ProgressBar
 from .._simulate import FixedGrid, simulate
 from ._least_squares import least_squares
+from ._method import AbstractMethod, as_records, FitSettings
+from ._regressors import parameter_names, parameter_vector, split_terms, with_friction, with_parameters
 
 
-class SimulationFit(eqx.Module):
+class SimulationFit(AbstractMethod):
     """The output-error (simulation-error) method for `identify`; see `fit_simulation_error`.
+
+    Its `fit(system, records, settings)` fits the named coefficients the regressors know (the
+    nominal system's base parameters and its joint terms' coefficients, with
+    `settings.friction="coulomb"` the Coulomb friction too), in the contract's order, or for any
+    other system its `parameter_filter()`, starting from `system`'s values.
 
     **Arguments:**
 
@@ -68,6 +75,72 @@ class SimulationFit(eqx.Module):
     max_steps: int = eqx.field(static=True, default=100)
     simulation: FixedGrid = FixedGrid()
     stagger: int = eqx.field(static=True, default=1)
+
+    @property
+    def label(self) -> str:
+        return "simulation"
+
+    @property
+    def stage_kind(self) -> str:
+        return "simulation"
+
+    def n_samples(self, solution: Solution, records: list[Trajectory]) -> int:
+        del records
+        statistics = solution.statistics
+        assert isinstance(statistics, OutputErrorStatistics)
+        return statistics.n_samples
+
+    def fit(self, system, records, settings: FitSettings = FitSettings()) -> Solution:
+        """The output-error fit of `system`'s named coefficients (the regressors' names, for the systems
+        they know) or of its `parameter_filter()`, from `system`'s values."""
+        trajectories = as_records(records)
+        friction = settings.friction
+        try:
+            system = with_friction(system, friction)
+            names = parameter_names(system, friction)
+        except UsageError:
+            names = None  # any other system: its own parameter filter, named by its labels or tree paths
+        if names is not None:
+            # Start from the system's values; the coefficients not in `names` (a linear axis's Coulomb
+            # term under viscous friction) are fixed.
+            system = with_parameters(system, names, jnp.asarray(parameter_vector(system, friction)))
+            parameters = named_parameters(system, names)
+        else:
+            parameters = Parameters.of(system)
+        solution = fit_simulation_error(system, trajectories, self, filter_spec=parameters)
+        if names is not None and tuple(names) != parameters.names:  # the contract's order, not the tree's
+            order = np.asarray([parameters.names.index(name) for name in names])
+            value = solution.value[order]
+            solution = eqx.tree_at(
+                lambda s: (s.value, s.parameters, s.std_errors, s.covariance),
+                solution,
+                (
+                    value,
+                    Parameters.of(value, names=tuple(names)),
+                    solution.std_errors[order],
+                    solution.covariance[np.ix_(order, order)],
+                ),
+            )
+        return solution
+
+
+def named_parameters(system, names) -> Parameters:
+    """The `Parameters` of the named coefficients (fields of the nominal system and of its joint
+    terms) of a system the regressors know, named as `parameter_names` names them, in tree order."""
+    base, terms = split_terms(system)
+    fields = [n for n in names if hasattr(base, n) and not isinstance(getattr(type(base), n, None), property)]
+    named_terms = [i for i, t in enumerate(terms) if t.parameter_name(base) in names]
+    labels = fields + [terms[i].parameter_name(base) for i in named_terms]
+
+    def places(tree):  # `tree` is shaped like `system` (a bare system or `Extended`)
+        nominal = tree.system if base is not system else tree
+        return [getattr(nominal, n) for n in fields] + [tree.terms[i].coefficient for i in named_terms]
+
+    spec = eqx.tree_at(places, jax.tree.map(lambda _: False, system), [True] * len(labels))
+    tags = eqx.tree_at(places, jax.tree.map(lambda _: "", system), labels)
+    selected = Parameters.of(system, spec)
+    ordered = tuple(tag for tag, chosen in zip(jax.tree.leaves(tags), selected.selection) if chosen)
+    return Parameters.of(system, spec, names=ordered)
 
 
 class OutputErrorStatistics(AbstractStatistics):

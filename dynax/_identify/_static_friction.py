@@ -259,7 +259,7 @@ def net_torques(system, names, estimate, covariance, record: Trajectory, still: 
     Where a joint is `still` (a boolean `(time, joints)`) its speed and acceleration are zero; elsewhere
     the measured speed and the acceleration of a cubic Savitzky-Golay fit of the positions over 5
     samples or half a period of the record's band edge, whichever is longer."""
-    from ._defaults import choose_filter, position_fit_window
+    from .._data._spectra import choose_filter, position_fit_window
 
     record = uniformly_sampled(record)
     base, _ = split_terms(system)

@@ -7,12 +7,13 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .._errors import UsageError
+from ._linear_in_parameters import AbstractLinearInParameters
 from ._system import AbstractManipulator
 
 LINEAR_AXIS_PARAMETER_NAMES = ("mass", "viscous", "coulomb", "offset")
 
 
-class LinearAxis(AbstractManipulator):
+class LinearAxis(AbstractManipulator, AbstractLinearInParameters):
     r"""One axis: $m \ddot q = F - F_v \dot q - F_c \operatorname{sign}(\dot q) - F_0$.
 
     This is the EMPS reference model `force = M q'' + Fv q' + Fc sign(q') + offset`
@@ -23,10 +24,10 @@ class LinearAxis(AbstractManipulator):
     State `(q, dq)`, input `(force,)`. Defaults are the published EMPS values.
     """
 
-    mass: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(95.1089))
-    viscous: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(203.5034))
-    coulomb: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(20.3935))
-    offset: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(-3.1648))
+    mass: Float[Array, ""] = eqx.field(converter=jnp.asarray, default_factory=lambda: jnp.asarray(95.1089))
+    viscous: Float[Array, ""] = eqx.field(converter=jnp.asarray, default_factory=lambda: jnp.asarray(203.5034))
+    coulomb: Float[Array, ""] = eqx.field(converter=jnp.asarray, default_factory=lambda: jnp.asarray(20.3935))
+    offset: Float[Array, ""] = eqx.field(converter=jnp.asarray, default_factory=lambda: jnp.asarray(-3.1648))
     coulomb_velocity: float = eqx.field(static=True, default=1e-3)
 
     state_names: ClassVar[tuple[str, ...]] = ("q", "dq")

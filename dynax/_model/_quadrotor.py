@@ -161,9 +161,9 @@ class Quadrotor(AbstractSystem):
         """Whether the body model reads `vbat` (then the data must have it)."""
         return any("vbat" in name for name in self.body_model.feature_names)
 
-    def scaled_inputs(self, u: Float[Array, "... n_inputs"]) -> Float[Array, "... n_inputs"]:
+    def scaled_inputs(self, u: Float[Array | np.ndarray, "... n_inputs"]) -> Float[Array, "... n_inputs"]:
         """The inputs divided by `input_scale` (the first `u.shape[-1]` of it: `vbat` may be absent)."""
-        return u / jnp.broadcast_to(jnp.asarray(self.input_scale[: u.shape[-1]], u.dtype), u.shape)
+        return jnp.asarray(u) / jnp.broadcast_to(jnp.asarray(self.input_scale[: u.shape[-1]], u.dtype), u.shape)
 
     def as_helicopter(self) -> Helicopter:
         """The same dynamics in body-frame coordinates on scaled inputs: what the criteria fit."""

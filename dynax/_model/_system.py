@@ -1,44 +1,13 @@
 """The system abstraction: an `eqx.Module` whose dynamics is `vector_field(t, x, u)`."""
 
 import abc
-from typing import Any, ClassVar, Literal
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float, PyTree
 import numpy as np
-
-from .._errors import UsageError
-
-_BOUNDS = {"positive": ("positive", lambda v: v > 0), "nonnegative": ("non-negative", lambda v: v >= 0)}
-
-
-def violated_bound(name: str, value: float, kind: str | None, group: str = "", meaning: str = "") -> str | None:
-    """The sentence for `name = value` breaking the sign bound of its consistency `kind` (`"positive"`,
-    `"nonnegative"`; other kinds have none here), e.g. `gravity: theta4 = -0.1 must be positive (...)`;
-    `None` when it holds. One wording for base parameters and joint terms alike."""
-    bound = _BOUNDS.get(kind)
-    if bound is None or bound[1](value):
-        return None
-    return f"{group + ': ' if group else ''}{name} = {value:.4g} must be {bound[0]}" + (
-        f" ({meaning})" if meaning else ""
-    )
-
-
-def friction_parameter_names(system) -> set[str]:
-    """The base parameters `base_parameter_meanings` puts in the group `"friction"` (`theta6`, `theta7`;
-    the axis's `viscous`, `coulomb`)."""
-    return {n for n, (group, _) in system.base_parameter_meanings().items() if group == "friction"}
-
-
-def size_parameter_names(system) -> list[str]:
-    """The base parameters that set the machine's size: not friction, and positive by consistency
-    (`theta1`, `theta2`, `theta4`, `theta5`; the axis's `mass`). Empty for a system without kinds."""
-    friction = friction_parameter_names(system)
-    return [
-        n for n, kind in system.base_parameter_kinds().items() if kind in ("positive", "inertia1") and n not in friction
-    ]
 
 
 class AbstractSystem(eqx.Module):
@@ -47,6 +16,10 @@ class AbstractSystem(eqx.Module):
     Subclasses are final `eqx.Module`s whose array fields are the (physical or base) parameters.
     The state and input orders are the column orders of the data contract, named by
     `state_names` and `input_names`.
+
+    Every system is simulated, fitted by `SimulationFit` and diagnosed; one whose inverse dynamics is
+    linear in named base parameters also subclasses `dynax.internal.AbstractLinearInParameters`, whose
+    hooks the least-squares methods call.
     """
 
     state_names: eqx.AbstractClassVar[tuple[str, ...]]
@@ -158,101 +131,6 @@ class AbstractSystem(eqx.Module):
             names += [c, f"|{c}|{c}", f"sign({c})"]
         return cols, names
 
-    # What least-squares identification (`dynax.identify` with `Dynamic`, `Power` or `Energy`) needs to
-    # know about a system whose inverse dynamics is linear in named base parameters. The defaults
-    # describe a system that is not: only `SimulationFit` identifies it.
-
-    def check_least_squares(self, terms: tuple = ()) -> None:
-        """Raise a `UsageError` naming the system if the least-squares methods cannot identify it,
-        extended with the joint `terms` (`dynax.Extended`). Default: they cannot."""
-        raise UsageError(
-            f"least-squares identification supports Acrobot, DoublePendulum and LinearAxis (optionally Extended with "
-            f"joint terms), got {type(self).__name__}; use SimulationFit() for other systems"
-        )
-
-    def base_parameter_names(self, friction: Literal["viscous", "coulomb"] = "viscous") -> tuple[str, ...]:
-        """The base parameters the inverse dynamics is linear in, in the regressor's column order
-        (joint terms' coefficients follow them), for the friction model `friction`.
-
-        **Raises:** `NotImplementedError` naming the system, by default.
-        """
-        raise _no_linear_model(self, "base_parameter_names")
-
-    def energy_parameter_names(self) -> tuple[str, ...]:
-        """The base parameters the stored energy depends on (the others enter through dissipation only).
-
-        **Raises:** `NotImplementedError` naming the system, by default.
-        """
-        raise _no_linear_model(self, "energy_parameter_names")
-
-    def coulomb_friction_terms(self) -> tuple:
-        """The joint terms `friction="coulomb"` adds to the identified model, at zero (empty for a
-        system whose Coulomb friction is a base parameter).
-
-        **Raises:** `NotImplementedError` naming the system, by default.
-        """
-        raise _no_linear_model(self, "coulomb_friction_terms")
-
-    def with_base_parameters(self, parameters: dict[str, Float[ArrayLike, ""]]) -> "AbstractSystem":
-        """This system carrying the base parameters `parameters` (by name), e.g. an estimate.
-        Default: the fields of those names are replaced, the rest are kept."""
-        names = list(parameters)
-        return eqx.tree_at(lambda s: [getattr(s, n) for n in names], self, [parameters[n] for n in names])
-
-    def base_parameter_kinds(self) -> dict[str, str]:
-        r"""How physical consistency bounds each base parameter (`dynax.internal.consistent_least_squares`):
-        `"positive"`, `"nonnegative"`, `"free"`, or `"inertia1"` ($\theta_1 \ge \theta_3^2 / \theta_2$,
-        a two-link arm's Schur complement). Joint terms' coefficients are bounded by their own kind.
-        Default: no conditions (an empty dict: every parameter is free)."""
-        return {}
-
-    def upright_zero_signs(self) -> dict[tuple[str, ...], tuple[str, ...]]:
-        """Per set of joints, the base parameters whose sign an angle measured from the other end
-        (upright instead of hanging down: the angle shifted by pi) reverses, the equations being
-        otherwise the same; `identify` names such a zero where negating them makes an inconsistent
-        estimate consistent. Default: none."""
-        return {}
-
-    def base_parameter_meanings(self) -> dict[str, tuple[str, str]]:
-        """Per base parameter, the group of its consistency condition and what the bound means, e.g.
-        `{"theta4": ("gravity", "hanging straight down is the stable rest")}`: the words of
-        `base_parameter_conditions`' sentences. Default: none."""
-        return {}
-
-    def base_parameter_conditions(self, parameters: dict[str, float]) -> tuple[str, ...]:
-        """The physical-consistency conditions the base parameters `parameters` (by name) violate,
-        as sentences naming them (`dynax.internal.check_consistency`).
-
-        Default: each given parameter against its bound in `base_parameter_kinds` (`"positive"`,
-        `"nonnegative"`), in the words of `base_parameter_meanings`; a system with a coupled condition
-        (`"inertia1"`) adds it in its override. One statement of the bounds: the consistency-constrained
-        fit reads the same kinds."""
-        kinds, meanings = self.base_parameter_kinds(), self.base_parameter_meanings()
-        sentences = (
-            violated_bound(name, value, kinds.get(name), *meanings.get(name, ("", "")))
-            for name, value in parameters.items()
-        )
-        return tuple(s for s in sentences if s is not None)
-
-    def mass_check_configurations(self, qs: Float[Array, "time n_joints"]) -> Float[Array, "k n_joints"] | None:
-        """Where `dynax.internal.check_consistency` evaluates the mass matrix; `None` (the default): the
-        system has none to check (see `AbstractManipulator.mass_check_configurations`)."""
-        return None
-
-    def refinement_terms(self) -> tuple | None:
-        """The joint terms (at zero) that `identify`'s output-error refinement adds to the
-        least-squares model, e.g. a geared motor's rotor inertia; `None` (the default) when the
-        system has no output-error refinement (`identify`'s `refine="auto"` then skips it)."""
-        return None
-
-
-def _no_linear_model(system, method):
-    name = type(system).__name__
-    return NotImplementedError(
-        f"{name}.{method}: {name} declares no model linear in base parameters, so least-squares "
-        "identification cannot fit it; use SimulationFit()"
-    )
-
 
 class AbstractManipulator(AbstractSystem):
     r"""A rigid-body system $M(q)\ddot q + h(q, \dot q) = B u$ with state $x = (q, \dot q)$.
@@ -278,8 +156,9 @@ class AbstractManipulator(AbstractSystem):
         """$B$, mapping the input vector to generalised forces."""
 
     def mass_check_configurations(self, qs: Float[Array, "time n_joints"]) -> Float[Array, "k n_joints"]:
-        r"""Configurations whose mass matrices include the one with the smallest eigenvalue of
-        $M(q)$ over all of `qs` (`dynax.internal.check_consistency` evaluates $M$ there only). Default: all
+        r"""Configurations whose mass matrices include the one with the smallest eigenvalue of $M(q)$
+        over all of `qs` (`dynax.internal.check_consistency` evaluates $M$ there only; an identification
+        hook of `dynax.internal.AbstractLinearInParameters`, given here for every manipulator). Default: all
         of `qs`; a system whose mass matrix has known structure returns fewer (a two-link arm two,
         with the same $M$ as the samples at the ends of the data's range of $\cos q_2$)."""
         return qs

@@ -18,6 +18,7 @@ from jaxtyping import Array, ArrayLike, Float
 import numpy as np
 
 from ._extensions._terms import CoulombFriction, RotorInertia
+from ._linear_in_parameters import AbstractLinearInParameters
 from ._system import AbstractManipulator
 
 BASE_PARAMETER_NAMES = ("theta1", "theta2", "theta3", "theta4", "theta5", "theta6", "theta7")
@@ -138,7 +139,8 @@ DRAKE_BASE_PARAMETERS = base_parameters_from_physical(DRAKE_DEFAULTS)
 
 
 def _field(name):
-    return eqx.field(default_factory=lambda: jnp.asarray(DRAKE_BASE_PARAMETERS[name]))
+    # Converted on construction, so a Python float or a NumPy scalar is stored as the array the annotation says.
+    return eqx.field(converter=jnp.asarray, default_factory=lambda: jnp.asarray(DRAKE_BASE_PARAMETERS[name]))
 
 
 def _mass_matrix(p, q):
@@ -164,7 +166,7 @@ def _energy(p, x):
     return kinetic + potential
 
 
-class AbstractTwoLink(AbstractManipulator):
+class AbstractTwoLink(AbstractManipulator, AbstractLinearInParameters):
     """Shared dynamics of `Acrobot` and `DoublePendulum`, in base parameters theta1..theta7."""
 
     theta1: Float[Array, ""] = _field("theta1")

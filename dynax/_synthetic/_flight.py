@@ -38,13 +38,13 @@ from ._helicopter_truth import HelicopterTruth
 def fly(
     truth: AbstractSystem,
     controller: FlightController,
-    x0: Float[Array, " 15"],
+    x0: Float[Array, " n_states"],
     dt: float,
     references: Float[Array, "time 13"],
     excitation: Float[Array, "time 4"],
     wind: Float[Array, "time 3"],
     substeps: int = 4,
-) -> tuple[Float[Array, "time 15"], Float[Array, "time 4"]]:
+) -> tuple[Float[Array, "time n_states"], Float[Array, "time 4"]]:
     """Fly `truth` in closed loop with `controller` plus additive `excitation`, with
     `dynax.control.simulate_closed_loop`.
 
@@ -57,7 +57,7 @@ def fly(
     rows are `(x, y, z, yaw, qw, qx, qy, qz, p, q, r, collective, manoeuvre)`: position and heading
     for position hold, or (when `manoeuvre > 0.5`) the attitude, body-rate and collective references.
 
-    **Returns:** the states `(time, 15)` and the applied inputs `(time, 4)`.
+    **Returns:** the states `(time, n_states)` and the applied inputs `(time, 4)`.
     """
 
     n = references.shape[0]

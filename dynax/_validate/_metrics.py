@@ -37,9 +37,7 @@ def _as_columns(name: str, values: ArrayLike) -> np.ndarray:
     return arr
 
 
-def nrmse_fit(
-    measured: Float[ArrayLike, " time *channels"], simulated: Float[ArrayLike, " time *channels"]
-) -> Float[np.ndarray, " channels"]:
+def nrmse_fit(measured: Float[ArrayLike, "..."], simulated: Float[ArrayLike, "..."]) -> Float[np.ndarray, " channels"]:
     r"""The fit percentage of MATLAB's `compare`: $100\,(1 - \|y - \hat y\| / \|y - \bar y\|)$ per channel.
 
     100 % is a perfect fit; 0 % is no better than the measured mean; it is negative when worse.
@@ -220,7 +218,7 @@ class CrossCorrelationTest(eqx.Module):
 
 def cross_correlation_test(
     residuals: Float[ArrayLike, " time *channels"],
-    inputs: Float[ArrayLike, " time *n_inputs"],
+    inputs: Float[ArrayLike, "..."],
     *,
     max_lag: int = 25,
     confidence: float = 0.99,

@@ -1,5 +1,6 @@
-"""Cross-fitting in `diagnose` (leave-one-run-out over the training runs): a left-out run's windows weigh
-nothing in the fit, the screening pools the left-out runs, and the held-out test pools their windows."""
+"""Cross-fitting in `diagnose` (leave-one-run-out over the training runs, blocks of a single one): a left-out
+run's windows weigh nothing in the fit, the screening pools the left-out runs, and the held-out test pools their
+windows."""
 
 import dataclasses
 
@@ -8,7 +9,7 @@ import numpy as np
 import pytest
 
 from dynax import Acrobot, CoulombFriction, diagnose, Extended, InputOffset, Selection
-from dynax.internal import Family, fit_configurations, make_windows
+from dynax.internal import cross_fit_folds, Family, fit_configurations, Fold, make_windows
 from dynax.synthetic import DEMO_TRUTH_PHYSICAL, Multisine, synthetic_trajectory
 
 from .test_engine_rollouts_validation import _axis_record, NOMINAL
@@ -39,7 +40,7 @@ def test_a_left_out_run_weighs_nothing_in_the_fit():
     family = _family(runs, candidates)
     both = make_windows(runs, 50, 50)
     alone = make_windows(runs[:1], 50, 50)
-    poisoned = both.without_record(1)
+    poisoned = both.without_span(1, 0, len(runs[1]))
     xs = np.asarray(poisoned.xs).copy()
     xs[np.asarray(poisoned.starts)[:, 0] == 1] = np.nan  # what a diverged left-out rollout would give
     poisoned = type(poisoned)(
@@ -89,3 +90,32 @@ def test_a_short_held_out_run_with_cross_fitted_training_runs_names_a_small_fric
     alone = diagnose(Acrobot(), train, validation, selection=Selection(discovery=False, cross_fit=False)).to_json()
     assert not alone["findings"] and alone["test"]["cross_fitting"] is None
     assert all(r["held_out"] == "validation" for r in alone["runs"])
+
+
+def test_a_single_training_run_is_cross_fitted_by_blocks_and_two_runs_are_not():
+    """One run: three contiguous blocks covering it; two runs: no folds (each would fit one run alone); three: the
+    runs; a run too short for blocks of eight longest reference horizons: none."""
+    n_long = 50
+    one = [np.zeros(3000)]
+    assert cross_fit_folds(one, n_long) == (Fold(0, 0, 1000), Fold(0, 1000, 2000), Fold(0, 2000, 3000))
+    assert cross_fit_folds([np.zeros(3000)] * 2, n_long) == ()
+    assert cross_fit_folds([np.zeros(n) for n in (900, 1200, 3000)], n_long) == (
+        Fold(0, 0, 900),
+        Fold(1, 0, 1200),
+        Fold(2, 0, 3000),
+    )
+    assert cross_fit_folds([np.zeros(3 * 8 * n_long - 1)], n_long) == ()
+
+
+def test_a_held_out_block_leaves_out_every_fit_window_that_shares_a_sample_with_it():
+    """Windows of 50 steps every 10 samples; holding out samples 400:600 of record 0 zeroes exactly the windows of
+    record 0 that reach into it (start + 50 >= 400 and start < 600), and nothing of record 1."""
+    runs = [
+        _axis_record(Extended(NOMINAL, (CoulombFriction(0, 25.0, velocity_scale=0.01),)), seed=s, name=f"{s}.csv")
+        for s in (0, 1)
+    ]
+    windows = make_windows(runs, 50, 10)
+    starts, weights = np.asarray(windows.starts), np.asarray(windows.without_span(0, 400, 600).weights)
+    expected = ~((starts[:, 0] == 0) & (starts[:, 1] >= 350) & (starts[:, 1] < 600))
+    assert np.array_equal(weights == 1.0, expected) and (weights[~expected] == 0).all()
+    assert expected.sum() < len(expected) and (weights[starts[:, 0] == 1] == 1).all()

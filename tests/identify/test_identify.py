@@ -1,5 +1,7 @@
 """`identify` recovers the parameters that generated the data, and refuses data that cannot determine them."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -126,6 +128,18 @@ def test_too_few_samples_is_a_data_error(acrobot_data):
         identify(TRUE, acrobot_data.slice(0, 4), Dynamic())
     with pytest.raises(IdentifiabilityError, match="rank"):
         identify(TRUE, acrobot_data.slice(0, 5), Dynamic())  # 3 samples' rows: 6 equations for 7 parameters
+
+
+def test_records_whose_time_does_not_increase_are_refused_with_the_record_and_row(acrobot_data):
+    """A record built in Python meets no loader: times all zero (or one repeated stamp) are refused before any
+    derivative divides by a step, naming the record and the row."""
+    stuck = dataclasses.replace(acrobot_data, ts=np.zeros(len(acrobot_data)))
+    with pytest.raises(dynax.UsageError, match=r"record 1 of `data`.*row 2: time does not strictly increase"):
+        identify(TRUE, [acrobot_data, stuck], Dynamic())
+    ts = np.asarray(acrobot_data.ts).copy()
+    ts[10] = ts[9]
+    with pytest.raises(DataError, match=r"run\.csv.*row 11"):
+        identify(TRUE, dataclasses.replace(acrobot_data, ts=ts, source="run.csv"), Dynamic())
 
 
 @pytest.mark.slow  # about 25 s, nearly all of it compiling the Levenberg-Marquardt program

@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax import CoulombFriction, Extended, IdentifiabilityError, least_squares, RotorInertia
+from dynax import CoulombFriction, Extended, IdentifiabilityError, RotorInertia
 from dynax.internal import (
     dynamic_regressor,
     energy_regressor,
     friction_power_regressor,
+    least_squares,
     parameter_names,
     parameter_vector,
     with_friction,
@@ -103,7 +104,7 @@ def test_float32_least_squares_is_as_accurate_as_numpy_lstsq():
     y = a @ theta + 1e-6 * rng.normal(size=m)
     a32, y32 = a.astype(np.float32), y.astype(np.float32)
     reference = np.linalg.lstsq(a32, y32, rcond=None)[0]
-    fit = dynax.least_squares(jnp.asarray(a32), jnp.asarray(y32))
+    fit = least_squares(jnp.asarray(a32), jnp.asarray(y32))
     assert fit.value.dtype == jnp.float32
     error_numpy = np.max(np.abs(reference - theta))
     error_dynax = np.max(np.abs(np.asarray(fit.value, dtype=float) - theta))

@@ -122,15 +122,20 @@ class Drifter(dynax.AbstractSystem):
 def test_a_system_without_a_linear_model_is_refused_by_name():
     with pytest.raises(dynax.UsageError, match="got Drifter; use SimulationFit"):
         dynax.internal.parameter_names(Drifter())
+    # the hooks are not methods of a system that is not linear in its parameters; asked through
+    # `identification_hooks`, they refuse it by name
+    assert not isinstance(Drifter(), dynax.internal.AbstractLinearInParameters)
+    assert not hasattr(Drifter(), "base_parameter_names")
+    hooks = dynax.internal.identification_hooks(Drifter())
     for method in ("base_parameter_names", "energy_parameter_names", "coulomb_friction_terms"):
         with pytest.raises(NotImplementedError, match=f"Drifter.{method}: Drifter declares no model linear"):
-            getattr(Drifter(), method)()
+            getattr(hooks, method)()
     # no conditions: nothing is bounded, even a name that would be a friction coefficient on an arm
-    assert Drifter().base_parameter_kinds() == {}
+    assert hooks.base_parameter_kinds() == {} and hooks.refinement_terms() is None
     assert dynax.internal.consistency_conditions(Drifter(), ("b1",), np.array([-1.0])) == ()
 
 
-class Oscillator(dynax.AbstractManipulator):
+class Oscillator(dynax.AbstractManipulator, dynax.internal.AbstractLinearInParameters):
     r"""A mass-spring-damper $m \ddot q + c \dot q + k q = u$, linear in `(mass, damping, stiffness)`."""
 
     mass: jax.Array = eqx.field(default_factory=lambda: jnp.asarray(2.0))

@@ -2,8 +2,9 @@
 integrated by scipy's DOP853 (rtol 1e-9) under a geometric controller at 100 Hz (zero-order hold), so the
 flight stays bounded whatever the hidden effect.
 
-The vehicle is a Crazyflie-sized X quadrotor (30 g, 46 mm arms). Thrust per rotor is `KF w^2` for a
-normalised rotor command `w` (1 at hover); the log records the commands as PWM-like counts. The hidden
+The vehicle (`Vehicle`) is by default a Crazyflie-sized X quadrotor (30 g, 46 mm arms, `NANO`); `PLUS` is
+a 0.5 kg '+' quadrotor. Thrust per rotor is `kf w^2` for a normalised rotor command `w` (1 at hover); the
+log records the commands in the vehicle's unit (PWM-like counts, or rotor speeds in rad/s). The hidden
 effects, each written here independently of dynax:
 
 - `drag=(du, dv, dw)`: rotor drag, a body-frame force -m D nu (nu the body velocity);
@@ -11,30 +12,60 @@ effects, each written here independently of dynax:
   (axis 3..5, rad/s^2);
 - `lag=(motor, tau)`: that motor's rotor command follows the logged one with a first-order lag tau [s];
 - `sag=(v0, v1)`: the battery voltage falls linearly from v0 to v1 [V] over the flight, logged as `vbat`
-  (with 10 mV noise), and every rotor's thrust and moment per command scale with (vbat / v0)^2 (rotor
-  speed proportional to command times voltage);
+  (with 10 mV noise), and every rotor's thrust and moment per command scale with (vbat / V_REF)^2 (rotor
+  speed proportional to command times voltage; `V_REF` = 4 V, one voltage for every flight of the
+  vehicle, so that flights at different charges share one physics);
 - `ground=R`: ground effect of rotors of radius R [m] over a floor at z = 0, thrust times
   1 / (1 - (R / 4 z_r)^2) (Cheeseman and Bennett) at the rotor plane's height z_r = z + 0.02 m; give the
   flight a low `altitude`.
 Any flight can log `vbat=True` (a steady 4.0 V with its noise) without the effect.
 """
 
+import dataclasses
+
 import numpy as np
 from scipy.integrate import solve_ivp
 
 from dynax import Trajectory
 
-MASS, G = 0.030, 9.81
-INERTIA = np.array([1.4e-5, 1.4e-5, 2.2e-5])
-ARM = 0.046 / np.sqrt(2)
-KF = MASS * G / 4  # thrust [N] at the normalised command 1 (hover)
-KM = 0.006  # yaw moment per newton of thrust [m]
-PWM = 40000.0  # counts per normalised command in the log
-# X frame: motor positions (x, y) and spin directions.
-POSITIONS = np.array([[ARM, -ARM], [-ARM, -ARM], [-ARM, ARM], [ARM, ARM]])
-SPIN = np.array([-1.0, 1.0, -1.0, 1.0])
-MIX = np.vstack([np.ones(4), POSITIONS[:, 1], -POSITIONS[:, 0], KM * SPIN])  # [T, tx, ty, tz] = MIX @ thrusts
-UNMIX = np.linalg.inv(MIX)
+G = 9.81
+V_REF = 4.0  # the battery voltage [V] at which the normalised command 1 is the hover thrust
+
+
+@dataclasses.dataclass(frozen=True)
+class Vehicle:
+    """A quadrotor's rigid body and rotors: `mass` [kg], principal `inertia` [kg m^2], `arm` (rotor distance
+    from the centre [m]), `frame` ("x" or "+"), `km` (yaw moment per newton of thrust [m]) and `unit`
+    (what the log records per normalised command: PWM-like counts, or the rotor speed at hover [rad/s])."""
+
+    mass: float = 0.030
+    inertia: tuple[float, float, float] = (1.4e-5, 1.4e-5, 2.2e-5)
+    arm: float = 0.046
+    frame: str = "x"
+    km: float = 0.006
+    unit: float = 40000.0
+
+    @property
+    def kf(self) -> float:
+        return self.mass * G / 4  # thrust [N] per rotor at the normalised command 1 (hover)
+
+    @property
+    def mix(self) -> np.ndarray:
+        """`[T, tx, ty, tz] = mix @ thrusts`, motors numbered as the log's m1..m4."""
+        a = self.arm / np.sqrt(2) if self.frame == "x" else self.arm
+        positions = (
+            np.array([[a, -a], [-a, -a], [-a, a], [a, a]])
+            if self.frame == "x"
+            else np.array([[a, 0.0], [0.0, -a], [-a, 0.0], [0.0, a]])
+        )
+        spin = np.array([-1.0, 1.0, -1.0, 1.0])
+        return np.vstack([np.ones(4), positions[:, 1], -positions[:, 0], self.km * spin])
+
+
+#: The Crazyflie-sized X quadrotor the hidden-effect tests fly (PWM-like counts logged).
+NANO = Vehicle()
+#: A larger '+' quadrotor (0.5 kg, 17 cm arms) whose log records rotor speeds [rad/s], 600 at hover.
+PLUS = Vehicle(mass=0.5, inertia=(2.5e-3, 2.5e-3, 4.5e-3), arm=0.17, frame="+", km=0.016, unit=600.0)
 
 STATE_NAMES = ("x", "y", "z", "qw", "qx", "qy", "qz", "vx", "vy", "vz", "p", "q", "r")
 INPUT_NAMES = ("m1", "m2", "m3", "m4")
@@ -62,43 +93,46 @@ def _reference(t, c):
     return pos, vel, acc, yaw
 
 
-def _controller(t, s, c):
+def _controller(t, s, c, vehicle):
     """Geometric control (Lee, Leok and McClamroch 2010) to the reference: the normalised rotor commands."""
     p, q, v, om = s[:3], s[3:7], s[7:10], s[10:13]
     R = rotation(q)
     pos, vel, acc, yaw = _reference(t, c)
     a_des = acc + 6.0 * (pos - p) + 4.0 * (vel - v) + np.array([0.0, 0.0, G])
-    thrust = MASS * a_des @ R[:, 2]
+    inertia = np.asarray(vehicle.inertia)
+    thrust = vehicle.mass * a_des @ R[:, 2]
     b3 = a_des / np.linalg.norm(a_des)
     b2 = np.cross(b3, [np.cos(yaw), np.sin(yaw), 0.0])
     b2 /= np.linalg.norm(b2)
     Rd = np.column_stack([np.cross(b2, b3), b2, b3])
     E = 0.5 * (Rd.T @ R - R.T @ Rd)
     e_r = np.array([E[2, 1], E[0, 2], E[1, 0]])
-    torque = INERTIA * (-150.0 * e_r - 20.0 * om) + np.cross(om, INERTIA * om)
-    thrusts = np.clip(UNMIX @ np.concatenate([[thrust], torque]), 0.05 * KF, 4.0 * KF)
-    return np.sqrt(thrusts / KF)
+    torque = inertia * (-150.0 * e_r - 20.0 * om) + np.cross(om, inertia * om)
+    kf = vehicle.kf
+    thrusts = np.clip(np.linalg.solve(vehicle.mix, np.concatenate([[thrust], torque])), 0.05 * kf, 4.0 * kf)
+    return np.sqrt(thrusts / kf)
 
 
-def _field(t, s, command, effects, battery=1.0):
+def _field(t, s, command, effects, battery, vehicle):
     q, v, om = s[3:7], s[7:10], s[10:13]
     rotor = s[13:17]
     R = rotation(q)
-    thrusts = KF * rotor**2 * battery
+    inertia = np.asarray(vehicle.inertia)
+    thrusts = vehicle.kf * rotor**2 * battery
     if "ground" in effects:
         z_rotor = max(s[2], 0.0) + 0.02
         thrusts = thrusts / (1.0 - (effects["ground"] / (4.0 * z_rotor)) ** 2)
-    wrench = MIX @ thrusts
+    wrench = vehicle.mix @ thrusts
     nu = R.T @ v
-    f_body = np.array([0.0, 0.0, wrench[0] / MASS])
-    m_body = wrench[1:] / INERTIA
+    f_body = np.array([0.0, 0.0, wrench[0] / vehicle.mass])
+    m_body = wrench[1:] / inertia
     if "drag" in effects:
         f_body = f_body - np.asarray(effects["drag"]) * nu
     if "bias" in effects:
         axis, b = effects["bias"]
         (f_body if axis < 3 else m_body)[axis % 3] += b
     dv = R @ f_body - np.array([0.0, 0.0, G])
-    dom = m_body - np.cross(om, INERTIA * om) / INERTIA
+    dom = m_body - np.cross(om, inertia * om) / inertia
     w, x, y, z = q
     dq = 0.5 * np.array(
         [
@@ -115,9 +149,11 @@ def _field(t, s, command, effects, battery=1.0):
     return np.concatenate([v, dq, dv, dom, drotor])
 
 
-def quadrotor_flight(duration=20.0, seed=0, *, dt=0.01, noise=True, altitude=1.0, vbat=False, **effects) -> Trajectory:
-    """A closed-loop flight of `duration` s sampled every `dt`, as a quadrotor `Trajectory` (PWM-like inputs),
-    around `altitude` [m] (the vertical swing is up to 0.3 m, or 0.8 of a lower altitude)."""
+def quadrotor_flight(
+    duration=20.0, seed=0, *, dt=0.01, noise=True, altitude=1.0, vbat=False, vehicle=NANO, **effects
+) -> Trajectory:
+    """A closed-loop flight of `duration` s sampled every `dt`, as a quadrotor `Trajectory` (inputs in the
+    `vehicle`'s unit), around `altitude` [m] (the vertical swing is up to 0.3 m, or 0.8 of a lower altitude)."""
     rng = np.random.default_rng(seed)
     c = {
         "altitude": altitude,
@@ -131,10 +167,10 @@ def quadrotor_flight(duration=20.0, seed=0, *, dt=0.01, noise=True, altitude=1.0
     s = np.concatenate([pos, [np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)], vel, np.zeros(3), np.ones(4)])
     n = int(round(duration / dt)) + 1
     xs, us = np.zeros((n, 13)), np.zeros((n, 4))
-    v0, v1 = effects.pop("sag", (4.0, 4.0))
+    v0, v1 = effects.pop("sag", (V_REF, V_REF))
     volts = v0 + (v1 - v0) * np.arange(n) / max(n - 1, 1)
     for k in range(n):
-        command = _controller(k * dt, s, c)
+        command = _controller(k * dt, s, c, vehicle)
         follows = np.arange(4) != effects.get("lag", (-1, 0.0))[0]
         s[13:17] = np.where(follows, command, s[13:17])  # the other rotors follow their commands at once
         xs[k], us[k] = s[:13], command
@@ -146,7 +182,7 @@ def quadrotor_flight(duration=20.0, seed=0, *, dt=0.01, noise=True, altitude=1.0
                 method="DOP853",
                 rtol=1e-9,
                 atol=1e-11,
-                args=(command, effects, (volts[k] / v0) ** 2),
+                args=(command, effects, (volts[k] / V_REF) ** 2, vehicle),
             )
             s = sol.y[:, -1].copy()
             s[3:7] /= np.linalg.norm(s[3:7])
@@ -154,7 +190,7 @@ def quadrotor_flight(duration=20.0, seed=0, *, dt=0.01, noise=True, altitude=1.0
         xs[:, :3] += 5e-4 * rng.standard_normal((n, 3))
         xs[:, 7:10] += 5e-3 * rng.standard_normal((n, 3))
         xs[:, 10:13] += 2e-2 * rng.standard_normal((n, 3))
-    us, names = us * PWM, INPUT_NAMES
+    us, names = us * vehicle.unit, INPUT_NAMES
     if vbat or v1 != v0:
         us, names = np.column_stack([us, volts + 0.01 * rng.standard_normal(n)]), (*INPUT_NAMES, "vbat")
     return Trajectory(np.arange(n) * dt, xs, us, STATE_NAMES, names, "quadrotor", f"synthetic seed {seed}")

@@ -51,12 +51,28 @@ from jaxtyping import Array, Bool, Int, Scalar
 import optimistix as optx
 
 from ..._data._trajectory import Trajectory
+from ..._errors import UsageError
 from ..._fit import AbstractStatistics, fit_minimise, History, monitor, notify, OptaxLBFGS, Parameters, Solution
 from ..._model._helicopter import ANGULAR_RATE, BODY, Helicopter, QUATERNION, quaternion_to_rotation, VELOCITY
+from ..._progress import ProgressBar
+from .._method import AbstractMethod, FitSettings
 from ._windows import check_helicopter_data, horizon_steps, lagged_loss, rollout, valid_starts
 
 
-class OneStep(eqx.Module):
+def one_record(records, who: str) -> Trajectory:
+    """The one record a vehicle criterion fits (`records`: a `Trajectory`, or a list of one); flights
+    joined into one record carry `FitSettings.breaks`."""
+    if isinstance(records, Trajectory):
+        return records
+    if isinstance(records, (list, tuple)) and len(records) == 1 and isinstance(records[0], Trajectory):
+        return records[0]
+    raise UsageError(
+        f"{who}: a vehicle criterion fits one record (join flights into one and give `breaks`), got "
+        f"{type(records).__name__}" + (f" of {len(records)}" if isinstance(records, (list, tuple)) else "")
+    )
+
+
+class OneStep(AbstractMethod):
     r"""One-step least squares on accelerations (finite-difference targets, frame change removed).
 
     **Fields:** `ridge`: a small Tikhonov term on the normal equations (relative to their trace).
@@ -64,8 +80,16 @@ class OneStep(eqx.Module):
 
     ridge: float = 1e-10
 
+    @property
+    def label(self) -> str:
+        return "one-step"
 
-class Lagged(eqx.Module):
+    def fit(self, system, records, settings: FitSettings = FitSettings()) -> Solution:
+        """`fit_one_step` of `system` on the one record (`settings.breaks`: where joined flights begin)."""
+        return fit_one_step(system, one_record(records, "OneStep"), self, breaks=settings.breaks)
+
+
+class Lagged(AbstractMethod):
     r"""The lagged criterion over `horizon` seconds, minimised by the EM-free iteration.
 
     **Fields:**
@@ -103,8 +127,17 @@ class Lagged(eqx.Module):
     best_step: bool = eqx.field(static=True, default=False)
     state_sensitivities: bool = eqx.field(static=True, default=False)
 
+    @property
+    def label(self) -> str:
+        return "lagged"
 
-class Backprop(eqx.Module):
+    def fit(self, system, records, settings: FitSettings = FitSettings()) -> Solution:
+        """`fit_lagged` from the one-step fit (or, with `settings.warm_start`, from `system`), with a
+        progress bar per iteration (`settings.progress`) and `settings.callback`."""
+        return _iterated(self, fit_lagged, self.max_iterations, system, one_record(records, "Lagged"), settings)
+
+
+class Backprop(AbstractMethod):
     r"""The lagged loss minimised directly by L-BFGS (optax) through checkpointed diffrax rollouts.
 
     **Fields:**
@@ -123,6 +156,29 @@ class Backprop(eqx.Module):
     stride: int = eqx.field(static=True, default=1)
     checkpoint_segment: int | None = eqx.field(static=True, default=None)
     target_loss: float | None = None
+
+    @property
+    def label(self) -> str:
+        return "backprop"
+
+    def fit(self, system, records, settings: FitSettings = FitSettings()) -> Solution:
+        """`fit_backprop` from the one-step fit (or, with `settings.warm_start`, from `system`), with a
+        progress bar per step (`settings.progress`) and `settings.callback`."""
+        return _iterated(self, fit_backprop, self.max_steps, system, one_record(records, "Backprop"), settings)
+
+
+def _iterated(criterion, fit, limit: int, system, trajectory, settings: FitSettings) -> Solution:
+    """An iterative criterion's `fit`: from the one-step fit unless warm-started, a bar per iteration."""
+    name = f"{type(criterion).__name__.lower()} fit"
+    with ProgressBar(limit, name, progress=settings.progress, reduce="last") as bar:
+
+        def report(iteration, loss):
+            bar.reach(iteration + 1, loss=loss)
+            if settings.callback is not None:
+                settings.callback(iteration, loss)
+
+        start = system if settings.warm_start else fit_one_step(system, trajectory, breaks=settings.breaks).model
+        return fit(start, trajectory, criterion, callback=report, breaks=settings.breaks)
 
 
 class VehicleStatistics(AbstractStatistics):

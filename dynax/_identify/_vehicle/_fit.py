@@ -16,18 +16,15 @@ from ..._model._helicopter import (
     TEMPEST_FEATURES,
 )
 from ..._precision import warn_if_float32
-from ..._progress import ProgressBar
+from .._method import AbstractMethod, FitSettings
 from ._criteria import (
     Backprop,
-    fit_backprop,
-    fit_lagged,
-    fit_one_step,
     Lagged,
     OneStep,
     recorded_loss,
     VehicleStatistics,
 )
-from ._frequency import fit_frequency, FrequencyDomain
+from ._frequency import FrequencyDomain
 
 CRITERIA = {"one-step": OneStep, "frequency": FrequencyDomain, "lagged": Lagged, "backprop": Backprop}
 
@@ -86,25 +83,10 @@ def fit_vehicle(
         modeling helicopters", NIPS 18, 2005.
     """
     warn_if_float32("vehicle learning")
-    if isinstance(criterion, OneStep):
-        return fit_one_step(system, trajectory, criterion, breaks=breaks)
-    if isinstance(criterion, FrequencyDomain):
-        if breaks is not None and len(breaks):
-            raise UsageError("fit_vehicle: the frequency criterion needs one continuous record, not joined ones")
-        return fit_frequency(system, trajectory, criterion)
-    if isinstance(criterion, (Lagged, Backprop)):
-        fit = fit_lagged if isinstance(criterion, Lagged) else fit_backprop
-        limit = criterion.max_iterations if isinstance(criterion, Lagged) else criterion.max_steps
-        with ProgressBar(limit, f"{type(criterion).__name__.lower()} fit", progress=progress, reduce="last") as bar:
-
-            def report(iteration, loss):
-                bar.reach(iteration + 1, loss=loss)
-                if callback is not None:
-                    callback(iteration, loss)
-
-            start = system if warm_start else fit_one_step(system, trajectory, breaks=breaks).model
-            return fit(start, trajectory, criterion, callback=report, breaks=breaks)
-    raise UsageError(f"fit_vehicle: unknown criterion {type(criterion).__name__}")
+    if not isinstance(criterion, AbstractMethod):
+        raise UsageError(f"fit_vehicle: unknown criterion {type(criterion).__name__}")
+    settings = FitSettings(breaks=breaks, warm_start=warm_start, callback=callback, progress=progress)
+    return criterion.fit(system, trajectory, settings)
 
 
 def model_to_json(fit: Solution, *, horizon_s: float | None = None) -> dict:

@@ -49,9 +49,11 @@ from ..._data._trajectory import Trajectory
 from ..._errors import UsageError
 from ..._fit import fit_least_squares, LeastSquaresOptions, levenberg_marquardt, Solution
 from ..._model._helicopter import BODY, BODY_AXES, Helicopter, LINEAR_FEATURE_NAMES
+from .._method import AbstractMethod, FitSettings
 from ._criteria import (
     fit_one_step,
     normal_equations,
+    one_record,
     one_shot_history,
     ridge_solve,
     vehicle_solution,
@@ -73,7 +75,7 @@ HOVER_DERIVATIVES = {
 }
 
 
-class FrequencyDomain(eqx.Module):
+class FrequencyDomain(AbstractMethod):
     """The CIFER-style frequency-domain criterion (linear velocity model only).
 
     **Fields:**
@@ -112,6 +114,16 @@ class FrequencyDomain(eqx.Module):
     eliminate: bool = eqx.field(static=True, default=False)
     max_cramer_rao: float = 0.2
     max_insensitivity: float = 0.1
+
+    @property
+    def label(self) -> str:
+        return "frequency"
+
+    def fit(self, system, records, settings: FitSettings = FitSettings()) -> Solution:
+        """`fit_frequency` of `system` on one continuous record (no `settings.breaks`)."""
+        if settings.breaks is not None and len(settings.breaks):
+            raise UsageError("fit_vehicle: the frequency criterion needs one continuous record, not joined ones")
+        return fit_frequency(system, one_record(records, "FrequencyDomain"), self)
 
 
 def frequency_responses(trajectory: Trajectory, segment_s: float = 10.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

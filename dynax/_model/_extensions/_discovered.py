@@ -10,6 +10,7 @@ nominal parameters. The features are small static `Feature` values (a name, a ki
 coordinates they read); `dynax._diagnose._library` builds the library the search chooses from.
 """
 
+from collections.abc import Sequence
 from typing import ClassVar
 
 import equinox as eqx
@@ -127,7 +128,7 @@ class Discovered(AbstractJointTerm):
     neutral: ClassVar[float] = 0.0
     sign: ClassVar[int] = 0
 
-    def __init__(self, joint: int, features, coefficients: ArrayLike | None = None):
+    def __init__(self, joint: int, features, coefficients: ArrayLike | Sequence[float] | None = None):
         self.joint = joint
         self.features = tuple(features)
         if coefficients is None:

@@ -293,13 +293,15 @@ class GroundEffect(_AbstractRotorTerm):
 
     A rotor at a height $z$ of a few radii $R$ over the ground pushes against its own wake: at one
     rotor speed its thrust is $T/(1 - (R/4z)^2)$ of the thrust far from the ground (Cheeseman and
-    Bennett's image-rotor model), about $1 + R^2/(16 z^2)$ above $z \approx R$. The term multiplies
-    the rotor forces and moments by $1 + c / (h + h_0)^2$, $h$ the vehicle's height over `floor`
-    (world `z` up, as motion capture logs it) and $h_0$ the rotor plane's height over the floor when the
-    vehicle stands on it; $c$ [m^2] is $R^2 / 16$ in that model.
+    Bennett's image-rotor model). The term multiplies the rotor forces and moments by that law,
+    $1/(1 - r)$ with $r = c / (h + h_0)^2$, $h$ the vehicle's height over `floor` (world `z` up, as
+    motion capture logs it) and $h_0$ the rotor plane's height over the floor when the vehicle stands
+    on it; $c$ [m^2] is $R^2 / 16$. The image-rotor model holds down to about one rotor radius; $r$ is
+    held at 3/4 at most (four times the thrust), where the law itself has long stopped holding, so
+    that a fit cannot cross its pole.
 
-    **Arguments:** `c` [m^2]; `floor`, the floor's height in the records' frame [m] (the diagnosis takes
-    the records' lowest height); `rotor_height` $h_0$ [m] (default 0.02, a nano quadrotor's).
+    **Arguments:** `c` [m^2]; `floor`, the floor's height in the records' frame [m] (the rest height
+    of the vehicle with its motors off); `rotor_height` $h_0$ [m] (default 0.02, a nano quadrotor's).
 
     ??? cite
 
@@ -334,4 +336,5 @@ class GroundEffect(_AbstractRotorTerm):
 
     def rotor_gain(self, x, u):
         height = jnp.maximum(x[2] - self.floor, 0.0) + self.rotor_height
-        return self.coefficient / height**2
+        ratio = jnp.minimum(self.coefficient / height**2, 0.75)
+        return ratio / (1.0 - ratio)

@@ -35,7 +35,7 @@ import dataclasses
 
 import numpy as np
 
-from .._data._trajectory import Trajectory
+from ._trajectory import Trajectory
 
 
 @dataclasses.dataclass(frozen=True)
