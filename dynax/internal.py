@@ -367,6 +367,7 @@ from ._identify._simulation_fit import (
 from ._identify._simulation_fit import (
     simulation_segments as simulation_segments,
 )
+from ._identify._static_friction import speeds_zeroed_at_rest as speeds_zeroed_at_rest
 from ._identify._validation import CONCENTRATED as CONCENTRATED
 
 # Identify, vehicles: the criteria's fits and window rollouts.
@@ -556,6 +557,7 @@ __all__ = [
     "Rest",
     "rest_stretches",
     "speed_noise_at_rest",
+    "speeds_zeroed_at_rest",
     "collocation_reference",
     "end_upright_residuals",
     "knot_matrix",

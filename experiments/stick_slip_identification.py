@@ -46,7 +46,7 @@ def fit(data, **kwargs):
         result = dynax.identify(
             dynax.DoublePendulum(),
             data,
-            dynax.Dynamic(),
+            dynax.Dynamic(static_friction=True),
             friction="coulomb",
             validation=dynax.Validate(holdout=0),
             **kwargs,

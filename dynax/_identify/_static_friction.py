@@ -7,7 +7,8 @@ speed cannot explain: the static friction (`Stiction`). This module finds those 
 the level from them.
 
 **Where a joint rests.** `rest_stretches`: its encoder position moves less than 0.05 rad/s times
-any 0.25 s window of the stretch (the position decides; a velocity at rest is mostly noise).
+any 0.25 s window of the stretch (the position decides; a velocity at rest is mostly noise), and the
+stretch is no reversal (one parabola, a steady deceleration through zero speed, does not explain it).
 
 **Under load.** Over each rest, where every joint of the arm rests with it (the longest such run),
 the net torque the least-squares model leaves at the joint is computed from the measured torques and
@@ -57,11 +58,15 @@ data ask for more. Holding the level fixed at the reading instead would forbid t
 breakaway, measured on one or a few events, is an estimate the refinement may correct down to the
 largest torque held.
 
-**The stick band.** `Stiction` sticks inside a band of speeds (`velocity_scale`); a simulation that
-starts from a state measured at rest starts at a speed of about the velocity noise, and with a band
-below the noise it never sticks. The band is the noise of the measured speed over the joint's rests
-(`dynax.internal.speed_noise_at_rest`, up to where the joint leaves each), at least `Stiction`'s
-default (`stick_band`), as the diagnosis's `stiction` candidate chooses it.
+**The stick band and the start state.** Two things are kept apart. `Stiction`'s band of speeds
+(`velocity_scale`) is the friction law's stick region: a physical property, kept at `Stiction`'s
+default (the Coulomb friction's smoothing, 0.01 rad/s), so that a joint in motion passes through zero
+speed at a reversal without being caught. The measured speed at rest is another matter: there the true
+speed is zero and the record shows the sensor's noise (`dynax.internal.speed_noise_at_rest`, reported
+as `speed_noise`), and a simulation window that starts from it starts the joint moving faster than any
+narrow band holds. So the output-error refinement starts its windows at zero speed wherever a joint
+rests (`speeds_zeroed_at_rest`, over each rest stretch): the start state is
+corrected as a measurement, and the friction law is not widened to swallow the noise.
 
 **The least-squares rows at rest.** No friction law of the speed explains a held torque (the
 Coulomb column at rest is the sign of the velocity's noise), so where a rest is under load `identify`
@@ -79,6 +84,7 @@ load nothing changes. (The `Power` and `Energy` rows are not affected: at rest t
 
 import dataclasses
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -86,7 +92,7 @@ from .._data._derivatives import savitzky_golay
 from .._data._rest import Rest, rest_stretches, speed_noise_at_rest
 from .._data._trajectory import Trajectory
 from .._model._extensions import Extended
-from .._model._extensions._stiction import LEAST_STICK_BAND, stick_band, Stiction
+from .._model._extensions._stiction import LEAST_STICK_BAND, Stiction
 from .._model._extensions._terms import AbstractJointTerm
 from ._equations import uniformly_sampled
 from ._regressors import dynamic_regressor, generalised_force, split_terms
@@ -138,15 +144,17 @@ class JointStaticFriction:
     """The static friction level found at one joint.
 
     **Fields:** `joint`, `coordinate`; `level`, the level the model's `Stiction` starts from (the
-    least-squares stage's); `kind`, `"breakaway"` (the median torque at which the joint broke away)
-    or `"lower_bound"` (no breakaway in the records: the largest torque held, which the true level is
-    at least); `lower_bound`, the largest torque held at rest; `breakaways`, the torques at each
-    breakaway (magnitudes); `records`, the records it rests in under load; `rest_s`, the seconds of
-    rest under load; `velocity_scale`, the band of speeds its `Stiction` sticks in (`stick_band` of the
-    speed noise at rest); `held_force`, `held_position`, the rest where the most was held (as
-    `RestUnderLoad`'s), which the output-error refinement keeps the level above under the rigid body it
-    fits, with the Coulomb level; `refined`, the level after that refinement, or `None` where it did not
-    run."""
+    least-squares stage's); `kind`, `"breakaway"` (the median torque at which the joint broke away) or
+    `"lower_bound"` (no breakaway in the records: the largest torque held, which the true level is at
+    least); `lower_bound`, the largest torque held at rest; `breakaways`, the torques at each breakaway
+    (magnitudes); `records`, the records it rests in under load; `rest_s`, the seconds of rest under
+    load; `velocity_scale`, the band of speeds its `Stiction` sticks in (the friction law's stick
+    region, `Stiction`'s default: the Coulomb friction's smoothing); `speed_noise`, the measured speed's
+    noise at rest (the noise a window that starts at rest starts from, which the refinement takes off by
+    starting such windows at zero speed, not by widening the band); `held_force`, `held_position`, the
+    rest where the most was held (as `RestUnderLoad`'s), which the output-error refinement keeps the
+    level above under the rigid body it fits, with the Coulomb level; `refined`, the level after that
+    refinement, or `None` where it did not run."""
 
     joint: int
     coordinate: str
@@ -160,6 +168,7 @@ class JointStaticFriction:
     held_force: float = 0.0
     held_position: tuple[float, ...] | None = None
     refined: float | None = None
+    speed_noise: float = 0.0
 
     @property
     def name(self) -> str:
@@ -409,6 +418,25 @@ def _speed_noise(system, records, rests) -> list[float]:
     return [speed_noise_at_rest(np.concatenate(p)) if p else 0.0 for p in pooled]
 
 
+def speeds_zeroed_at_rest(system, records: list[Trajectory], rests) -> list[Trajectory]:
+    """`records` with each joint's measured speed set to zero over its rests (`rests`, each record's
+    `rest_stretches`: over every window of such a stretch the joint moves less than 0.05 rad/s on average).
+
+    At rest the true speed is zero and the measured one is noise (on a driver that reads zero between
+    encoder counts, some 0.1 rad/s rms): a simulation window that starts there from the measured speed
+    starts the joint moving, which no physical stick region of the friction law stops. This is the
+    start state's measurement, not the friction: the friction law keeps its narrow stick band."""
+    n = len(split_terms(system)[0].joints)
+    out = []
+    for record, stretches in zip(records, rests):
+        ts = np.asarray(record.ts, dtype=float)
+        xs = np.array(record.xs)
+        for s in stretches:
+            xs[(ts >= s.start_s) & (ts <= s.stop_s), n + s.joint] = 0.0
+        out.append(eqx.tree_at(lambda r: r.xs, record, jnp.asarray(xs, record.xs.dtype)) if stretches else record)
+    return out
+
+
 def joint_levels(stretches: tuple[RestUnderLoad, ...]) -> tuple[JointStaticFriction, ...]:
     """The static level of each joint that rests under load (see the module)."""
     out = []
@@ -428,9 +456,10 @@ def joint_levels(stretches: tuple[RestUnderLoad, ...]) -> tuple[JointStaticFrict
                 breaks,
                 tuple(dict.fromkeys(s.record for s in mine)),
                 float(sum(s.duration for s in mine)),
-                stick_band(mine[0].speed_noise),
+                LEAST_STICK_BAND,
                 most.held_force,
                 most.held_position,
+                speed_noise=mine[0].speed_noise,
             )
         )
     return tuple(out)
@@ -481,10 +510,29 @@ def describe(stretches, joints, rows_left_out, rows) -> str:
         )
         parts.append(
             f"{j.coordinate} rests under load {j.rest_s:.2f} s in {', '.join(j.records)}: {what}; sticks below "
-            f"{j.velocity_scale:.3g} (its speed noise at rest)"
+            f"{j.velocity_scale:.3g}; windows that start at rest start at zero speed (speed noise at rest "
+            f"{j.speed_noise:.3g})"
         )
     return (
         "Stiction added: "
         + "; ".join(parts)
         + (f"; {rows_left_out} of {rows} dynamic rows at rest left out of the fit" if rows_left_out else "")
+    )
+
+
+def not_added(static: StaticFriction) -> StaticFriction:
+    """`static` without its joints, for a method that leaves the model's friction as it is
+    (`adds_static_friction` false): the rests under load stay in `stretches`, and the note says where
+    the records rest under load, how long, and how to fit the static level."""
+    parts = [
+        f"{j.coordinate} {j.rest_s:.2f} s in {', '.join(j.records)} (holds at least {j.lower_bound:.3g})"
+        for j in static.joints
+    ]
+    return dataclasses.replace(
+        static,
+        joints=(),
+        note="the records rest under load ("
+        + "; ".join(parts)
+        + "), which a friction law of the speed cannot hold; the model has no Stiction "
+        "(Dynamic(static_friction=True) adds it)",
     )

@@ -51,3 +51,19 @@ def test_a_driver_that_reads_zero_between_encoder_counts():
 
 def test_no_samples_no_noise():
     assert speed_noise_at_rest(np.zeros(0)) == 0.0
+
+
+def test_a_heavy_arms_slow_reversal_is_not_a_rest_and_a_held_joint_that_drifts_is():
+    # A reversal at 0.4 rad/s^2 stays within the range test's 12.5 mrad for half a second, longer than the
+    # quarter second a rest takes; with 1 mrad of white encoder noise one parabola explains it, so it is no
+    # rest. A joint held for a second while its encoder creeps by a few mrad and steps between counts is.
+    dt = 0.005
+    t = np.arange(0, 3, dt)
+    rng = np.random.default_rng(4)
+    q1 = 0.2 * (t - 1.5) ** 2 + 1e-3 * rng.standard_normal(len(t))
+    held = 2e-3 * np.round((0.004 * (t - 1.0)) / 2e-3)  # a 4 mrad/s creep read by a 2 mrad encoder
+    q2 = np.where(t < 1.0, 0.5 * (1.0 - t) ** 2, np.where(t < 2.0, held, 0.5 * (t - 2.0) ** 2 + held[-1]))
+    q2 = q2 + 1e-3 * rng.standard_normal(len(t))
+    found = rest_stretches(record(q1, q2, dt), record="r")
+    assert [s.coordinate for s in found] == ["q2"]
+    assert found[0].duration > 0.9

@@ -64,9 +64,12 @@ class Stiction(AbstractJointTerm):
     - `stribeck_velocity`: $v_{st}$, the speed over which the friction falls from `fs` to the Coulomb
       level [rad/s or m/s] (default 0.05).
     - `velocity_scale`: $v_b$, the band of speeds in which the joint sticks (default 0.01, the Coulomb
-      friction's smoothing). Choose it at the speed noise of the velocities a simulation starts from
-      (`dynax.internal.speed_noise_at_rest`), so that a start state measured at rest counts as resting:
-      `identify` and `diagnose` do so.
+      friction's smoothing): the friction law's stick region. Keep it narrow: inside the band the
+      friction is whatever stops the joint, up to `fs`, and the band's smooth edge reaches two to three
+      times its width, so a wide band catches a joint that passes through zero speed at a reversal.
+      `identify` keeps the default and starts simulation windows at zero speed where the records rest
+      (the measured speed there is noise); `diagnose`'s `stiction` candidate, whose windows start from
+      the measured state, widens it to the speed noise at rest (`dynax.internal.speed_noise_at_rest`).
     - `hold_time`: $\tau_h$, the time in which a sticking joint's speed decays [s] (default 0.01);
       keep it above about two steps of a fixed-step integrator.
     - `held_force`, `held_position`: a rest the records show the joint holding, a lower bound on `fs`:
