@@ -108,6 +108,12 @@ def register(subparsers):
         help="dynamic model: inputs as a zero-order hold (default) or as sampled measurements",
     )
     parser.add_argument(
+        "--static-friction",
+        action="store_true",
+        help="dynamic model: add Stiction (a static friction level) at each joint that rests under load "
+        "(default: the rests are found and reported, the model keeps its friction law of the speed)",
+    )
+    parser.add_argument(
         "--window", type=int, default=10, metavar="N", help="energy model: samples per window (default 10)"
     )
     parser.add_argument(
@@ -149,7 +155,14 @@ def _method(args):
     if not args.segment > 0:
         raise UsageError(f"--segment must be positive, got {args.segment}")
     if args.method == "dynamic":
-        return Dynamic(lowpass_hz=lowpass, lowpass_order=order, trim=trim, decimate=decimate, inputs=args.inputs)
+        return Dynamic(
+            lowpass_hz=lowpass,
+            lowpass_order=order,
+            trim=trim,
+            decimate=decimate,
+            inputs=args.inputs,
+            static_friction=args.static_friction,
+        )
     plain = lambda value, default: default if value == "auto" else value  # noqa: E731
     if args.method == "power":
         return Power(
