@@ -7,6 +7,7 @@ fit, and the model is validated open loop on held-out data; all of it goes into 
 """
 
 import argparse
+import dataclasses
 import sys
 import time
 import warnings
@@ -143,6 +144,15 @@ def _setting(value, flag, *, kind=int, minimum=0, allow_none=False):
     return number
 
 
+def with_static_friction(method, args):
+    """`method` with the static level on where `--static-friction` asks (the dynamic model only)."""
+    if not args.static_friction:
+        return method
+    if args.method != "dynamic":
+        raise UsageError(f"--static-friction applies to --method dynamic, not {args.method}")
+    return dataclasses.replace(method, static_friction=True)
+
+
 def _method(args):
     from .._identify import Dynamic, Energy, Power, SimulationFit
 
@@ -155,14 +165,7 @@ def _method(args):
     if not args.segment > 0:
         raise UsageError(f"--segment must be positive, got {args.segment}")
     if args.method == "dynamic":
-        return Dynamic(
-            lowpass_hz=lowpass,
-            lowpass_order=order,
-            trim=trim,
-            decimate=decimate,
-            inputs=args.inputs,
-            static_friction=args.static_friction,
-        )
+        return Dynamic(lowpass_hz=lowpass, lowpass_order=order, trim=trim, decimate=decimate, inputs=args.inputs)
     plain = lambda value, default: default if value == "auto" else value  # noqa: E731
     if args.method == "power":
         return Power(
@@ -202,7 +205,7 @@ def run(args: argparse.Namespace) -> int:
     friction = args.friction or ("coulomb" if args.system == "linear_axis" else "viscous")
     if args.system == "helicopter" and args.friction is not None:
         raise UsageError("--friction does not apply to the helicopter")
-    method = _method(args)
+    method = with_static_friction(_method(args), args)
     data_options(args)  # a malformed --map, --scale or --offset is refused before any work
     out = output_file(args.out, "parameters.json")
     if args.holdout is not None and not 0 <= args.holdout < 1:
