@@ -81,6 +81,7 @@ from ._data import rest_stretches as rest_stretches
 from ._data import (
     savitzky_golay as savitzky_golay,
 )
+from ._data import speed_noise_at_rest as speed_noise_at_rest
 
 # Helpers of the pipeline's stages (data, model, identification, validation, diagnosis).
 from ._data import split_at_gaps as split_at_gaps
@@ -341,6 +342,7 @@ from ._identify import (
 )
 from ._identify._angle_zeros import record_angle_zeros as record_angle_zeros
 from ._identify._angle_zeros import shifted as shifted
+from ._identify._consistency import consistent_parametrisation as consistent_parametrisation
 from ._identify._consistency import min_mass_eigenvalue as min_mass_eigenvalue
 from ._identify._equations import dynamic_rows as dynamic_rows
 from ._identify._equations import stacked_equations as stacked_equations
@@ -368,6 +370,7 @@ from ._identify._simulation_fit import (
 from ._identify._simulation_fit import (
     simulation_segments as simulation_segments,
 )
+from ._identify._static_friction import speeds_zeroed_at_rest as speeds_zeroed_at_rest
 from ._identify._validation import CONCENTRATED as CONCENTRATED
 
 # Identify, vehicles: the criteria's fits and window rollouts.
@@ -556,6 +559,8 @@ __all__ = [
     "thrust_parameters",
     "Rest",
     "rest_stretches",
+    "speed_noise_at_rest",
+    "speeds_zeroed_at_rest",
     "collocation_reference",
     "end_upright_residuals",
     "estimator_view",
@@ -586,6 +591,7 @@ __all__ = [
     "choose_filter",
     "consistent_least_squares",
     "ConsistentParametrisation",
+    "consistent_parametrisation",
     "ConsistentSystem",
     "FilterChoice",
     "measurement_noise_std",

@@ -2,7 +2,8 @@
 
     DYNAX_SHARED=/work/shared python experiments/dfki_stiction.py --out experiments/results/dfki_stiction
 
-(`--parts six,split,loro` chooses the measurements, `whatif` adds a what-if on the 5.25 s split;
+(`--parts six,split,loro` chooses the measurements, `whatif` adds a what-if on the 5.25 s split,
+`bandwhatif` one on each LORO fold's held-out run (the band against the level); `--splits 5.25` the splits;
 `--folds 00,01` the LORO folds; each part writes its
 results into `OUT/results.json` as it finishes, so a run cut short keeps what it measured.)
 
@@ -49,7 +50,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax.internal import rest_stretches  # noqa: E402
+from dynax.internal import rest_stretches, speeds_zeroed_at_rest  # noqa: E402
 
 HORIZONS = (0.1, 0.25, 0.5)
 TODAY = pathlib.Path(__file__).resolve().parent / "results" / "dfki_default_identification" / "results.json"
@@ -63,7 +64,7 @@ def fit(train, **kwargs):
         result = dynax.identify(
             dynax.DoublePendulum(),
             train,
-            dynax.Dynamic(),
+            dynax.Dynamic(static_friction=True),
             friction="coulomb",
             validation=dynax.Validate(horizons_s=HORIZONS, **kwargs),
         )
@@ -78,7 +79,11 @@ def summary(result, seconds) -> dict:
         "static_friction": out.get("static_friction"),
         "validation": out["validation"],
         "stiction_terms": {
-            f"fs{t.joint + 1}": float(t.coefficient)
+            f"fs{t.joint + 1}": {
+                "fs": float(t.coefficient),
+                "held": float(t.held(result.system.system)),
+                "band": float(t.velocity_scale),
+            }
             for t in getattr(result.system, "terms", ())
             if isinstance(t, dynax.Stiction)
         },
@@ -99,11 +104,11 @@ def six(runs, results, save):
         save()
 
 
-def split(runs, lab, results, save):
-    for at in SPLITS_S:
+def split(runs, lab, results, save, splits=SPLITS_S):
+    for at in splits:
         head, tail = cut(runs["12"], at)
         train = [runs[r] for r in RUNS if r != "12"] + [head]
-        result, seconds = fit(train, validation=[tail])
+        result, seconds = fit(train, records=[tail])
         lab_error = dynax.held_out_error(lab, [tail], HORIZONS)
         entry = summary(result, seconds) | {
             "split_s": at,
@@ -112,12 +117,23 @@ def split(runs, lab, results, save):
             "lab_model_3.0": list(lab_error.rmse),
             "rest_fitted_s": {s.coordinate: s.duration for s in rest_stretches(head) if s.duration > 0},
         }
+        # The same windows started at zero speed where the held-out record rests (its measured speed there is
+        # noise): a second reading of the held-out error, for every model alike.
+        (settled,) = speeds_zeroed_at_rest(result.system, [tail], [rest_stretches(tail)])
+        entry["zero_speed_at_rest"] = {
+            "dynax": list(dynax.held_out_error(result.system, [settled], HORIZONS).rmse),
+            "lab_model_3.0": list(dynax.held_out_error(lab, [settled], HORIZONS).rmse),
+        }
         results.setdefault("split", {})[f"{at:g}"] = entry
         print(
             f"split at {at:g} s ({seconds:.0f} s): dynax "
             + " ".join(f"{v:.4f}" for v in entry["dynax"])
             + " | lab "
             + " ".join(f"{v:.4f}" for v in entry["lab_model_3.0"])
+            + " | from zero speed at rest: dynax "
+            + " ".join(f"{v:.4f}" for v in entry["zero_speed_at_rest"]["dynax"])
+            + " lab "
+            + " ".join(f"{v:.4f}" for v in entry["zero_speed_at_rest"]["lab_model_3.0"])
             + f" | {result.static_friction.note}",
             flush=True,
         )
@@ -128,7 +144,7 @@ def loro(runs, lab, folds, results, save):
     today = json.loads(TODAY.read_text())["runs"]
     for held in folds:
         train = [runs[r] for r in RUNS if r != held]
-        result, seconds = fit(train, validation=[runs[held]])
+        result, seconds = fit(train, records=[runs[held]])
         before = today[held]["dynax"]
         entry = summary(result, seconds) | {
             "dynax": list(result.validation.rmse),
@@ -169,6 +185,30 @@ def whatif(runs, lab, results, save):
     save()
 
 
+def band_whatif(runs, results, save):
+    """Not a fit: each LORO fold's refined model on its held-out run without `Stiction`, with it at a 0.01 rad/s
+    band, and with it as fitted (the band from the velocity noise at rest): which of the level and the band
+    costs a run that never rests."""
+    for held, entry in results.get("loro", {}).items():
+        if not entry.get("stiction_terms"):
+            continue
+        base = model_of(entry["parameters"])
+        out = {"without": list(dynax.held_out_error(base, [runs[held]], HORIZONS).rmse)}
+        for name, band in (("band_0.01", 0.01), ("as_fitted", None)):
+            terms = tuple(
+                dynax.Stiction(int(k[2:]) - 1, v["fs"], velocity_scale=v["band"] if band is None else band)
+                for k, v in entry["stiction_terms"].items()
+            )
+            model = dynax.Extended(base.system, base.terms + terms)
+            out[name] = list(dynax.held_out_error(model, [runs[held]], HORIZONS).rmse)
+        results.setdefault("band_whatif", {})[held] = out
+        print(
+            f"band what-if, held out {held}: "
+            + "; ".join(f"{k} {v[0]:.4f}/{v[1]:.4f}/{v[2]:.4f}" for k, v in out.items())
+        )
+        save()
+
+
 def plot(results, out: pathlib.Path):
     fig, axes = plt.subplots(1, 2, figsize=(12, 4))
     folds = sorted(results.get("loro", {}))
@@ -199,6 +239,7 @@ def main(argv=None):
     parser.add_argument("--out", required=True, type=pathlib.Path)
     parser.add_argument("--parts", default="six,split,loro")
     parser.add_argument("--folds", default="00,01,02,03,05,12")
+    parser.add_argument("--splits", default=",".join(f"{s:g}" for s in SPLITS_S), help="split times [s] of run 12")
     parser.add_argument(
         "--merge", nargs="+", type=pathlib.Path, default=(), metavar="DIR", help="merge the results.json of parts"
     )
@@ -221,11 +262,13 @@ def main(argv=None):
     if "six" in parts:
         six(runs, results, save)
     if "split" in parts:
-        split(runs, lab, results, save)
+        split(runs, lab, results, save, tuple(float(s) for s in args.splits.split(",")))
     if "whatif" in parts:
         whatif(runs, lab, results, save)
     if "loro" in parts:
         loro(runs, lab, args.folds.split(","), results, save)
+    if "bandwhatif" in parts:
+        band_whatif(runs, results, save)
     plot(results, args.out)
     print(f"wrote {path} and {args.out / 'stiction.png'}", flush=True)
 

@@ -7,6 +7,7 @@ fit, and the model is validated open loop on held-out data; all of it goes into 
 """
 
 import argparse
+import dataclasses
 import sys
 import time
 import warnings
@@ -108,6 +109,12 @@ def register(subparsers):
         help="dynamic model: inputs as a zero-order hold (default) or as sampled measurements",
     )
     parser.add_argument(
+        "--static-friction",
+        action="store_true",
+        help="dynamic model: add Stiction (a static friction level) at each joint that rests under load "
+        "(default: the rests are found and reported, the model keeps its friction law of the speed)",
+    )
+    parser.add_argument(
         "--window", type=int, default=10, metavar="N", help="energy model: samples per window (default 10)"
     )
     parser.add_argument(
@@ -135,6 +142,15 @@ def _setting(value, flag, *, kind=int, minimum=0, allow_none=False):
     if not number >= minimum or (kind is float and not number > 0):
         raise UsageError(f"{flag} must be {'positive' if kind is float else f'at least {minimum}'}, got {value}")
     return number
+
+
+def with_static_friction(method, args):
+    """`method` with the static level on where `--static-friction` asks (the dynamic model only)."""
+    if not args.static_friction:
+        return method
+    if args.method != "dynamic":
+        raise UsageError(f"--static-friction applies to --method dynamic, not {args.method}")
+    return dataclasses.replace(method, static_friction=True)
 
 
 def _method(args):
@@ -189,7 +205,7 @@ def run(args: argparse.Namespace) -> int:
     friction = args.friction or ("coulomb" if args.system == "linear_axis" else "viscous")
     if args.system == "helicopter" and args.friction is not None:
         raise UsageError("--friction does not apply to the helicopter")
-    method = _method(args)
+    method = with_static_friction(_method(args), args)
     data_options(args)  # a malformed --map, --scale or --offset is refused before any work
     out = output_file(args.out, "parameters.json")
     if args.holdout is not None and not 0 <= args.holdout < 1:

@@ -4,8 +4,18 @@ A joint rests where its position moves less than `speed` times the window over e
 `min_duration` seconds in the stretch: the position's range, not its measured velocity, decides,
 because a velocity at rest is mostly noise (on the DFKI rig's driver about 0.1 rad/s rms while the
 encoder angle moves by 2 to 8 mrad in 0.75 s). The default `speed` 0.05 rad/s (or m/s) is slower
-than any motion a swing or a reversal makes over a quarter second; a reversal itself (zero speed
-for an instant) is no rest.
+than any motion a light arm's swing or reversal makes over a quarter second.
+
+A reversal passes through zero speed under a steady deceleration $a$ and stays within the range $\delta$
+= `speed` $\cdot$ `min_duration` for $T_{rev} = 2\sqrt{2\delta/|a|}$: a heavy arm that turns slowly (0.4
+rad/s$^2$) stays half a second, longer than `min_duration`, and a range test alone reads it as a rest.
+So a stretch is a reversal, not a rest, where one parabola explains it: its residual within `EXPLAINED`
+(2) times the position's white noise (from second differences), its acceleration `CURVATURE` (3)
+standard errors from zero, its vertex inside the stretch, and the stretch lasting the $T_{rev}$ of that
+acceleration to within a factor `SCATTER` (1.5) either way (a reversal fills the range; on noisy records
+its stretch lasts 0.7 to 1.1 times $T_{rev}$, while a held joint's slight drift has a $T_{rev}$ far
+longer than its rest). A joint at rest holds a flat position (a creep is a line) as long as it is held,
+and an arm that settles into its rest leaves a curve no single parabola fits within the noise.
 
 Rest matters to friction: a joint at rest under a net torque is held by its static friction
 (`Stiction`), which a friction law of the speed alone cannot do.
@@ -16,6 +26,10 @@ import dataclasses
 import numpy as np
 
 from ._trajectory import Trajectory
+
+EXPLAINED = 2.0  # a parabola explains a stretch whose residual is within this many times the white noise
+CURVATURE = 3.0  # standard errors of the parabola's acceleration from zero: a deceleration, not noise
+SCATTER = 1.5  # a reversal's stretch lasts its stay in the range to within this factor either way
 
 
 @dataclasses.dataclass(frozen=True)
@@ -47,7 +61,8 @@ def rest_stretches(
     min_duration: float = 0.25,
     record: str = "",
 ) -> tuple[Rest, ...]:
-    """The stretches of at least `min_duration` seconds in which a joint rests (see the module).
+    """The stretches of at least `min_duration` seconds in which a joint rests: still windows, no
+    reversal (see the module).
 
     **Arguments:** `trajectory`; `positions`, the state columns of the joint positions (default: the
     columns named `q`, `q1`, `q2`, ...); `speed` [rad/s or m/s]; `min_duration` [s]; `record`, the label
@@ -79,5 +94,52 @@ def rest_stretches(
             resting[i : i + width] = True
         edges = np.flatnonzero(np.diff(np.concatenate([[0], resting.astype(int), [0]])))
         for start, stop in zip(edges[::2], edges[1::2]):
+            if _reversal(ts[start:stop], q[start:stop], speed * min_duration):
+                continue
             out.append(Rest(label, joint, names[column], int(start), int(stop), float(ts[start]), float(ts[stop - 1])))
     return tuple(out)
+
+
+def _reversal(ts: np.ndarray, q: np.ndarray, band: float) -> bool:
+    """Whether the positions `q` at times `ts` of a still stretch (range `band` over every window) are a
+    reversal: one parabola explains them (see the module)."""
+    t = ts - ts.mean()
+    if len(t) < 8:
+        return False
+    coefficients, residual, *_ = np.polyfit(t, q, 2, full=True)
+    dof = len(t) - 3
+    rms = float(np.sqrt(residual[0] / dof)) if residual.size else 0.0
+    d2 = np.diff(q, 2)
+    white = float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+    acceleration = 2.0 * float(coefficients[0])
+    p2 = t**2 - np.mean(t**2)
+    std_error = 2.0 * rms / float(np.sqrt(np.sum(p2**2)))
+    if not (acceleration != 0.0 and rms <= EXPLAINED * white and abs(acceleration) > CURVATURE * std_error):
+        return False
+    vertex = -float(coefficients[1]) / (2.0 * float(coefficients[0]))
+    stay = 2.0 * np.sqrt(2.0 * band / abs(acceleration))
+    return bool(t[0] < vertex < t[-1] and stay / SCATTER <= ts[-1] - ts[0] <= SCATTER * stay)
+
+
+ZERO_READINGS = 0.1  # share of exact zeros above which a speed is gated by its driver, not continuous noise
+
+
+def speed_noise_at_rest(speeds: np.ndarray) -> float:
+    r"""The noise of a measured speed, from its samples at rest (`speeds`, pooled over the rest stretches
+    of one joint): the velocity noise a simulation that starts from a measured state at rest starts from.
+
+    At rest the true speed is zero, so the samples are the noise. It is $1.4826\,\mathrm{median}|\dot q|$
+    (the standard deviation of Gaussian noise, robust to the settling at a stretch's ends), unless more
+    than `ZERO_READINGS` (10 %) of the samples read exactly zero: a driver that reports zero between
+    encoder counts and a difference of counts otherwise (the DFKI rig's reads zero at 57 to 60 % of its
+    samples at rest, the rest scattered to 0.24 rad/s), whose median magnitude is zero or biased low
+    while its starting states are not. There the noise is the rms of the samples.
+
+    **Returns:** the noise [rad/s or m/s]; 0 for no samples.
+    """
+    speeds = np.asarray(speeds, dtype=float).ravel()
+    if speeds.size == 0:
+        return 0.0
+    if np.mean(speeds == 0.0) > ZERO_READINGS:
+        return float(np.sqrt(np.mean(speeds**2)))
+    return 1.4826 * float(np.median(np.abs(speeds)))

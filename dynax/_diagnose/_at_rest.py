@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._data._derivatives import savitzky_golay
-from .._data._rest import rest_stretches
+from .._data._rest import rest_stretches, speed_noise_at_rest
 
 LOAD_FRACTION = 0.1  # a rest is under load when the friction needed there reaches this share of the joint's RMS force
 MIN_REST_S = 0.25  # the shortest stretch that counts as rest [s] (`rest_stretches`' `min_duration`)
@@ -42,7 +42,7 @@ class JointRests:
     **Fields:** `joint` (0-based), `coordinate` (e.g. `q2`), `stretches` (`(record, start_s, stop_s, held)`
     per rest under load, `held` the mean friction force needed there [N m or N]), `rest_s` (seconds of rest
     under load), `all_rest_s` (seconds of rest, loaded or not), `force_scale` (the joint's RMS generalised force),
-    `speed_noise` (the measured speed's spread at rest, 1.48 times its median magnitude: the velocity noise a
+    `speed_noise` (the measured speed's noise at rest, `dynax.internal.speed_noise_at_rest`: the velocity noise a
     window starts from).
     """
 
@@ -126,7 +126,6 @@ def rests_under_load(system, trajectories) -> tuple[JointRests, ...]:
                 if abs(held) >= LOAD_FRACTION * scale and scale > 0:
                     stretches.append((r.record, r.start_s, r.stop_s, held))
                     rest_s += r.duration
-        # Robust: the ends of a stretch, where the joint settles or starts, are not noise.
-        noise = 1.4826 * float(np.median(np.abs(np.concatenate(speeds)))) if speeds else 0.0
+        noise = speed_noise_at_rest(np.concatenate(speeds)) if speeds else 0.0
         out.append(JointRests(j, system.joint_names[j], tuple(stretches), rest_s, all_s, scale, noise))
     return tuple(out)

@@ -18,6 +18,7 @@ from .._model._extensions import (
     Stiction,
     ViscousFriction,
 )
+from .._model._extensions._stiction import stick_band
 from .._model._extensions._vehicle_terms import AbstractVehicleTerm, BodyBias, BodyQuadraticDrag, Wind
 from .._model._helicopter import BODY
 from ._at_rest import LOAD_FRACTION, MIN_LOADED_REST_S, MIN_REST_S, rests_under_load
@@ -52,14 +53,10 @@ def coulomb_velocity_scale(system, joint: int, trajectories) -> float:
 
 def stiction_candidate(system, rest, dt: float) -> Stiction:
     """The `Stiction` candidate at a joint with rests under load (`rest`, a `JointRests`), its settings from the
-    data: the band of speeds in which it sticks the velocity noise at rest (`speed_noise`), at least `Stiction`'s
-    default; its hold time two samples (the diagnosis's fixed-step rollouts take one step per sample).
-
-    A wider band holds the joint where the rig's slips slowly (the truth sticks at zero speed only), and the fit
-    then lowers the static level to let it go: on 100 Hz stick-slip records with a velocity noise of 0.012 rad/s,
-    a band of three times the noise fits the level 13 % low, one of the noise 3 % low. A window that starts at
-    rest with a noisy speed outside the band still sticks: the band's edge is smooth (`Stiction.weight`)."""
-    return Stiction(rest.joint, velocity_scale=max(rest.speed_noise, 0.01), hold_time=max(2.0 * dt, 0.01))
+    data: the band of speeds in which it sticks from the velocity noise at rest (`stick_band` of `speed_noise`, as
+    `identify` chooses it); its hold time two samples (the diagnosis's fixed-step rollouts take one step per
+    sample)."""
+    return Stiction(rest.joint, velocity_scale=stick_band(rest.speed_noise), hold_time=max(2.0 * dt, 0.01))
 
 
 def default_candidates(system, trajectories=None) -> tuple[AbstractTerm, ...]:

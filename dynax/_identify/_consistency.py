@@ -15,6 +15,9 @@ parameters satisfy
   \end{pmatrix}$ is positive definite;
 - **link 1 has positive length**: $\theta_3 \ge 0$, since $g\theta_3/\theta_5 = l_1$;
 - **friction dissipates**: $\theta_6, \theta_7, f_{c1}, f_{c2} \ge 0$;
+- **static friction** (`Stiction`'s `fs`): at least the joint's Coulomb level (the Stribeck curve falls
+  from the static level to the Coulomb one) and at least the largest torque the records show the
+  joint holding at rest under the rigid body's gravity (`Stiction.held`): $f_s \ge \max(f_c, f_{held})$;
 - **rotor inertia**: $I_{r} \ge 0$. A geared motor's coupling term ($M_{12} \mathrel{-}= g_r I_r$,
   $M_{11} \mathrel{+}= (g_r^2 + 1) I_r$, $M_{22} \mathrel{+}= g_r^2 I_r$, as in the DFKI lab's
   equations) is absorbed exactly by the base parameters: $\theta_1 \mathrel{+}= (g_r^2 + g_r + 1) I_r$,
@@ -30,8 +33,9 @@ data's configurations.
 **The constrained fit** (`consistent_least_squares`) minimises the same weighted least-squares cost
 over the consistent set, a convex set (a 2x2 linear matrix inequality and sign constraints, the
 two-link reduction of Wensing, Kim and Slotine's LMI), through a parametrisation that is consistent
-by construction: every non-negative parameter is $s\,\mathrm{softplus}(\phi)$, and
-$\theta_1 = \theta_3^2/\theta_2 + s_1\mathrm{softplus}(\phi_1)$ (a positive Schur complement).
+by construction: every non-negative parameter is $s\,\mathrm{softplus}(\phi)$,
+$\theta_1 = \theta_3^2/\theta_2 + s_1\mathrm{softplus}(\phi_1)$ (a positive Schur complement), and a
+static level $f_s = \max(f_c, f_{held}) + s\,\mathrm{softplus}(\phi)$.
 The map is a diffeomorphism onto the interior of the set and the cost is convex in $\theta$, so a
 stationary point in $\phi$ is the global constrained minimum. It is solved by Levenberg-Marquardt
 (optimistix) on the $n$ residuals $S V^\top D\theta - U^\top W^{1/2} y$ of the regressor's SVD,
@@ -214,6 +218,20 @@ class ConsistentParametrisation(eqx.Module):
     kinds: tuple[str, ...] = eqx.field(static=True)
     i2: int = eqx.field(static=True)
     i3: int = eqx.field(static=True)
+    # Static levels: per parameter the index of the Coulomb level it stays above (-1: none), and the rest it
+    # held: the force applied there and the gravity there, affine in theta (row and intercept; zeros elsewhere).
+    above: tuple[int, ...] = eqx.field(static=True, default=())
+    held_force: jax.Array | None = None
+    held_rows: jax.Array | None = None
+    held_intercept: jax.Array | None = None
+
+    def _static_floor(self, theta, i):
+        r"""The least value of static level `i` at `theta`: $\max(f_c, f_{held})$, with $f_{held}$ the torque
+        held at rest under the rigid body of `theta` (the force applied less the gravity there)."""
+        held = jnp.zeros_like(theta[i])
+        if self.held_force is not None and self.held_rows is not None and self.held_intercept is not None:
+            held = jnp.abs(self.held_force[i] - self.held_rows[i] @ theta - self.held_intercept[i])
+        return held if not self.above or self.above[i] < 0 else jnp.maximum(theta[self.above[i]], held)
 
     def theta(self, phi):
         values = []
@@ -223,6 +241,9 @@ class ConsistentParametrisation(eqx.Module):
         if "inertia1" in self.kinds:
             i1 = self.kinds.index("inertia1")
             theta = theta.at[i1].add(theta[self.i3] ** 2 / theta[self.i2])
+        for i, kind in enumerate(self.kinds):
+            if kind == "static":
+                theta = theta.at[i].add(self._static_floor(theta, i))
         return theta
 
     def phi(self, theta, floor=1e-3):
@@ -235,6 +256,9 @@ class ConsistentParametrisation(eqx.Module):
             t2 = jnp.maximum(theta[self.i2], floor * s[self.i2])
             t3 = jnp.maximum(theta[self.i3], floor * s[self.i3])
             lifted = lifted.at[i1].add(-(t3**2) / t2)
+        for i, kind in enumerate(self.kinds):
+            if kind == "static":
+                lifted = lifted.at[i].add(-self._static_floor(theta, i))
         out = []
         for i, kind in enumerate(self.kinds):
             if kind == "free":
@@ -249,7 +273,43 @@ def consistent_parametrisation(system, names, scale) -> ConsistentParametrisatio
     kinds = _kinds(system, names)
     i2 = names.index("theta2") if "theta2" in names else 0
     i3 = names.index("theta3") if "theta3" in names else 0
-    return ConsistentParametrisation(jnp.asarray(scale), kinds, i2, i3)
+    kinds = tuple("static" if k == "nonnegative" and n.startswith("fs") else k for k, n in zip(kinds, names))
+    above = tuple(
+        names.index(f"fc{n[2:]}") if k == "static" and f"fc{n[2:]}" in names else -1 for k, n in zip(kinds, names)
+    )
+    force, rows, intercept = _held_at_rest(system, names, jnp.result_type(jnp.asarray(scale)))
+    return ConsistentParametrisation(jnp.asarray(scale), kinds, i2, i3, above, force, rows, intercept)
+
+
+def _held_at_rest(system, names, dtype):
+    """Per parameter, the rest its `Stiction` held (`Stiction.held_force`, `held_position`): the force applied,
+    and the gravity at the joint there as an affine map of the parameters `names` (row, intercept); zeros for
+    parameters of no `Stiction`, and for one without a position (its force is then the torque held)."""
+    from .._model._extensions._stiction import Stiction
+    from ._regressors import split_terms, with_parameters
+
+    p = len(names)
+    force, rows, intercept = np.zeros(p), np.zeros((p, p)), np.zeros(p)
+    if isinstance(system, Extended):
+        for t in system.terms:
+            name = t.parameter_name(system.system)
+            if not isinstance(t, Stiction) or name not in names:
+                continue
+            i = names.index(name)
+            force[i] = float(t.held_force)
+            if t.held_position is None:
+                continue
+            q = jnp.asarray(t.held_position, dtype)
+
+            def gravity(theta, t=t, q=q):
+                base = split_terms(with_parameters(system, names, theta))[0]
+                zeros = jnp.zeros_like(q)
+                return base.inverse_dynamics(q, zeros, zeros)[t.joint]  # pyright: ignore[reportAttributeAccessIssue]
+
+            at = jnp.ones(p, dtype)
+            rows[i] = np.asarray(jax.jacfwd(gravity)(at))
+            intercept[i] = float(gravity(at)) - float(rows[i] @ np.asarray(at))
+    return jnp.asarray(force, dtype), jnp.asarray(rows, dtype), jnp.asarray(intercept, dtype)
 
 
 @eqx.filter_jit

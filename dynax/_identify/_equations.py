@@ -127,6 +127,11 @@ class Dynamic(AbstractLeastSquares):
       equation error (as many unknowns). `"angles"` fits the
       angle zeros whatever the error (such arms only); `True` the force offsets.
     - `rcond`: relative singular-value threshold of the numerical rank (default 1e-7).
+    - `static_friction`: where a joint of the records rests under load, give the model `Stiction` at
+      it, fit `Dynamic` without those rows and refine the static level with the rest (see
+      `result.static_friction`). Default `False`: the rests are found and reported, the model keeps
+      its friction law of the speed (on the DFKI rig's leave-one-run-out folds the static level costs
+      the held-out runs that never rest a few percent; see "Friction at rest" in the guide).
 
     ??? cite
 
@@ -145,8 +150,13 @@ class Dynamic(AbstractLeastSquares):
     weighting: Literal["none", "joint"] = "none"
     offsets: bool | Literal["auto", "angles"] = "auto"
     rcond: float = 1e-7
+    static_friction: bool = False
 
     refits_without_loaded_rests: ClassVar[bool] = True
+
+    @property
+    def adds_static_friction(self) -> bool:
+        return self.static_friction
 
     @property
     def label(self) -> str:

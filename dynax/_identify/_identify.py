@@ -58,7 +58,16 @@ from ._refine import refine_by_simulation
 from ._regressors import Friction, split_terms
 from ._result import Identification, NoValidationWarning, RecordsDisagreeWarning, Stage, StageKind
 from ._simulation_fit import SimulationFit
-from ._static_friction import describe, joint_levels, record_rests, rests_under_load, StaticFriction, with_stiction
+from ._static_friction import (
+    describe,
+    joint_levels,
+    not_added,
+    record_rests,
+    rests_under_load,
+    speeds_zeroed_at_rest,
+    StaticFriction,
+    with_stiction,
+)
 from ._validation import held_out_error, split_for_validation, Validate
 
 _SYSTEM_NAMES = {Acrobot: "acrobot", DoublePendulum: "double_pendulum", LinearAxis: "linear_axis"}
@@ -273,11 +282,15 @@ def _fitted_once(system, fitted, method, settings, consistency, validate) -> Ide
     )
 
 
-def _refined_stage(ls, start, fitted, method, friction, consistency, refinement, validate) -> Stage:
+def _refined_stage(ls, start, fitted, method, friction, consistency, refinement, validate, rests=None) -> Stage:
     """The output-error refinement from the least-squares stage `ls` (its model `start`, with `Stiction`
     where the records rest under load), with its equation error on the least-squares rows, consistency
-    and validation."""
-    refined = refine_by_simulation(start, ls.names, less_offsets(ls.system, fitted, ls), refinement)
+    and validation. With `rests` (each record's rest stretches) its windows that start at rest start at
+    zero speed there (`speeds_zeroed_at_rest`)."""
+    simulated = less_offsets(ls.system, fitted, ls)
+    if rests is not None:
+        simulated = speeds_zeroed_at_rest(ls.system, simulated, rests)
+    refined = refine_by_simulation(start, ls.names, simulated, refinement)
     estimate = jnp.asarray(refined.value)
     _, a, y, _, _, _, _, _, _, _ = stacked_equations(refined.model, fitted, method, friction, None, method.rcond)
     if ls.groups is not None:  # the same equations as the least-squares stage's: offsets free
@@ -417,6 +430,8 @@ def identify(
     rests = record_rests(fitted) if _holds_at_rest(system) else None
     ls = least_squares_stage(system, fitted, method, friction, weights, rcond, consistency)
     static = _static_friction(ls, fitted, rests)
+    if static is not None and static.joints and not method.adds_static_friction:
+        static = not_added(static)
     if static is not None and static.joints and method.refits_without_loaded_rests:
         # Refit without the rows of the rests under load (no law of the speed explains a held torque), and
         # read the rests again with that fit's gravity. A rest that holds nothing is an equation like any other.
@@ -457,7 +472,8 @@ def identify(
     system_out = ls_model
     refinement = _refinement_method(refine, ls.system, method, fitted)
     if refinement is not None:
-        refined = _refined_stage(ls, ls_model, fitted, method, friction, consistency, refinement, validate)
+        at_rest = rests if static is not None and static.joints else None
+        refined = _refined_stage(ls, ls_model, fitted, method, friction, consistency, refinement, validate, at_rest)
         statistics = refined.solution.statistics
         refined_poorly = _size_errors(
             system, refined.names, refined.solution.value, refined.solution.std_errors, statistics.record_std_errors

@@ -70,10 +70,17 @@ class AbstractMethod(eqx.Module):
       linear equations of `equations`) rather than calling `fit` once (default `False`).
     - `refits_without_loaded_rests`: least squares: refit without the rows where a joint rests
       under load (default `False`).
+
+    **Properties:** `adds_static_friction`, whether the model gets `Stiction` where the records rest
+    under load (default `False`: the rests are read and reported, the model is left as it is).
     """
 
     least_squares_stage: ClassVar[bool] = False
     refits_without_loaded_rests: ClassVar[bool] = False
+
+    @property
+    def adds_static_friction(self) -> bool:
+        return False
 
     @abc.abstractmethod
     def fit(self, system, records, settings: FitSettings = FitSettings()) -> Solution:

@@ -7,7 +7,9 @@ least-squares model, adds the rotor inertia of the elbow motor (`RotorInertia(1)
 contract's base parameters this is the whole of a geared motor's effect, diagonal and the
 off-diagonal coupling $-g_r I_r$, see `dynax._identify._consistency`), and fits every parameter by
 `fit_simulation_error` (Levenberg-Marquardt, optimistix) through a `ConsistentParametrisation`, so
-every iterate is physically consistent.
+every iterate is physically consistent. A `Stiction` level the least-squares stage read from a rest
+under load stays at or above the torque held there and the joint's Coulomb level (both lower bounds;
+`dynax._identify._static_friction` says why a bound and not a free or a fixed level).
 
 The data it fits are the records cut to 40 samples per period of their signal band's edge
 (`choose_filter`; inputs averaged over each new interval), so that the integrator takes as few

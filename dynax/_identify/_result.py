@@ -177,7 +177,8 @@ class Identification(eqx.Module):
       at rest (`StaticFriction`): the stretches where a joint rests and the net torque it holds, the
       `Stiction` level of each joint that rests under load (which `system` then carries: a breakaway
       torque, or a lower bound from the torques held), the dynamic rows at rest left out of the fit,
-      and a note; with no rest under load, no `Stiction` and a note saying why; `None` otherwise.
+      and a note; with no rest under load, or a method that does not add it (`Dynamic()` by default;
+      `Dynamic(static_friction=True)` does), no `Stiction` and a note saying why; `None` otherwise.
     - `jointly_determined`: the parameters of the returned estimate that the data determine mostly
       in combination with others (over 99 % of their variance shared), name ->
       `{"with": partners, "correlations": ..., "inflation": ratio}`; `{}` when none, `None` without

@@ -7,7 +7,8 @@ speed cannot explain: the static friction (`Stiction`). This module finds those 
 the level from them.
 
 **Where a joint rests.** `rest_stretches`: its encoder position moves less than 0.05 rad/s times
-any 0.25 s window of the stretch (the position decides; a velocity at rest is mostly noise).
+any 0.25 s window of the stretch (the position decides; a velocity at rest is mostly noise), and the
+stretch is no reversal (one parabola, a steady deceleration through zero speed, does not explain it).
 
 **Under load.** Over each rest, where every joint of the arm rests with it (the longest such run),
 the net torque the least-squares model leaves at the joint is computed from the measured torques and
@@ -38,10 +39,34 @@ window under the rising torque). A breakaway counts only under a slow rise, by a
 jumps within a few samples (a swing of the other joint) resolves nothing, and such a rest adds only
 its held torque to the lower bound. The
 **level** is then the median breakaway torque at that joint (`kind = "breakaway"`); without a
-breakaway it is the largest held torque, reported as a lower bound (`kind = "lower_bound"`). The
-output-error refinement may move the level where the rests are in its segments; it can lower a
-level the data contradict, and hardly raise a lower bound (a level above the held torque changes
-no simulated rest).
+breakaway it is the largest held torque, reported as a lower bound (`kind = "lower_bound"`).
+
+**In the refinement.** The output-error refinement fits the level with the other parameters, but
+never below the largest torque held nor below the joint's Coulomb level
+(`dynax.internal.ConsistentParametrisation`). Both are hard bounds, not estimates: the joint held
+that torque without moving, and static friction is at least the sliding friction it falls to. The
+torque held is the force applied less the gravity at the rest (`Stiction.held_force`,
+`held_position`), and the gravity is that of the rigid body being refined, not the least-squares
+one: the rest reading is only as good as the model's gravity (on a heavy arm a least-squares
+gravity a tenth low reads a joint that holds nothing as holding newton metres). Left
+free, the refinement lowers the level wherever motion dominates its segments, because a level above
+the Coulomb one makes the motion's reversals stick, which a rig's reversals mostly do not, while
+nothing pulls it up: a level above the torque held changes no simulated rest, so the rest gives no
+gradient. The level then ends where the reversals allow, below what the records show the joint
+holding; bounded, it ends at the bound where the reversals push down, and above it only where the
+data ask for more. Holding the level fixed at the reading instead would forbid the second, and a
+breakaway, measured on one or a few events, is an estimate the refinement may correct down to the
+largest torque held.
+
+**The stick band and the start state.** Two things are kept apart. `Stiction`'s band of speeds
+(`velocity_scale`) is the friction law's stick region: a physical property, kept at `Stiction`'s
+default (the Coulomb friction's smoothing, 0.01 rad/s), so that a joint in motion passes through zero
+speed at a reversal without being caught. The measured speed at rest is another matter: there the true
+speed is zero and the record shows the sensor's noise (`dynax.internal.speed_noise_at_rest`, reported
+as `speed_noise`), and a simulation window that starts from it starts the joint moving faster than any
+narrow band holds. So the output-error refinement starts its windows at zero speed wherever a joint
+rests (`speeds_zeroed_at_rest`, over each rest stretch): the start state is
+corrected as a measurement, and the friction law is not widened to swallow the noise.
 
 **The least-squares rows at rest.** No friction law of the speed explains a held torque (the
 Coulomb column at rest is the sign of the velocity's noise), so where a rest is under load `identify`
@@ -59,14 +84,15 @@ load nothing changes. (The `Power` and `Energy` rows are not affected: at rest t
 
 import dataclasses
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
 from .._data._derivatives import savitzky_golay
-from .._data._rest import Rest, rest_stretches
+from .._data._rest import Rest, rest_stretches, speed_noise_at_rest
 from .._data._trajectory import Trajectory
 from .._model._extensions import Extended
-from .._model._extensions._stiction import Stiction
+from .._model._extensions._stiction import LEAST_STICK_BAND, Stiction
 from .._model._extensions._terms import AbstractJointTerm
 from ._equations import uniformly_sampled
 from ._regressors import dynamic_regressor, generalised_force, split_terms
@@ -86,7 +112,10 @@ class RestUnderLoad:
     `held`, the largest window-averaged net torque held (signed) [N m or N]; `mean`, the mean net
     torque over the stretch; `noise`, its single-sample noise $\\sigma$; `loaded`, whether `|held|`
     reaches `LOADED` times `noise`; `breakaway`, the net torque at which the rest ended under a rising
-    torque (signed), or `None` (the record ends at rest, or the torque fell)."""
+    torque (signed), or `None` (the record ends at rest, or the torque fell); `speed_noise`, the joint's
+    measured-speed noise at rest over all of its rests in the records (`speed_noise_at_rest`);
+    `held_force`, `held_position`, the generalised force applied and the joint positions over the window
+    where the most was held (its mean): the rest the refinement bounds the level by."""
 
     record: str
     joint: int
@@ -98,6 +127,9 @@ class RestUnderLoad:
     noise: float
     loaded: bool
     breakaway: float | None
+    speed_noise: float = 0.0
+    held_force: float = 0.0
+    held_position: tuple[float, ...] | None = None
 
     @property
     def duration(self) -> float:
@@ -112,12 +144,17 @@ class JointStaticFriction:
     """The static friction level found at one joint.
 
     **Fields:** `joint`, `coordinate`; `level`, the level the model's `Stiction` starts from (the
-    least-squares stage's); `kind`, `"breakaway"` (the median torque at which the joint broke away)
-    or `"lower_bound"` (no breakaway in the records: the largest torque held, which the true level is
-    at least); `lower_bound`, the largest torque held at rest; `breakaways`, the torques at each
-    breakaway (magnitudes); `records`, the records it rests in under load; `rest_s`, the seconds of
-    rest under load; `refined`, the level after the output-error refinement, or `None` where it did
-    not run."""
+    least-squares stage's); `kind`, `"breakaway"` (the median torque at which the joint broke away) or
+    `"lower_bound"` (no breakaway in the records: the largest torque held, which the true level is at
+    least); `lower_bound`, the largest torque held at rest; `breakaways`, the torques at each breakaway
+    (magnitudes); `records`, the records it rests in under load; `rest_s`, the seconds of rest under
+    load; `velocity_scale`, the band of speeds its `Stiction` sticks in (the friction law's stick
+    region, `Stiction`'s default: the Coulomb friction's smoothing); `speed_noise`, the measured speed's
+    noise at rest (the noise a window that starts at rest starts from, which the refinement takes off by
+    starting such windows at zero speed, not by widening the band); `held_force`, `held_position`, the
+    rest where the most was held (as `RestUnderLoad`'s), which the output-error refinement keeps the
+    level above under the rigid body it fits, with the Coulomb level; `refined`, the level after that
+    refinement, or `None` where it did not run."""
 
     joint: int
     coordinate: str
@@ -127,7 +164,11 @@ class JointStaticFriction:
     breakaways: tuple[float, ...]
     records: tuple[str, ...]
     rest_s: float
+    velocity_scale: float = LEAST_STICK_BAND
+    held_force: float = 0.0
+    held_position: tuple[float, ...] | None = None
     refined: float | None = None
+    speed_noise: float = 0.0
 
     @property
     def name(self) -> str:
@@ -303,6 +344,7 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
     out = []
     forces = np.concatenate([np.asarray(generalised_force(system, r.us), dtype=float) for r in records])
     floor = FLOOR * np.sqrt(np.mean(forces**2, axis=0))  # per joint
+    noise_at_rest = _speed_noise(system, records, rests)
     for record, stretches, label in zip(records, rests, labels):
         if not stretches:
             continue
@@ -315,6 +357,7 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
         for s, end in zip(stretches, ends):
             still[s.start : end, s.joint] = True
         net, std = net_torques(system, names, estimate, covariance, record, still)
+        forces_of = np.asarray(generalised_force(system, record.us), dtype=float)
         width = max(int(round(WINDOW_S / record.dt)), 1)
         arm_still = np.asarray(still.all(axis=1))
         for s, end in zip(stretches, ends):
@@ -322,11 +365,19 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
             a, b = _longest_run(arm_still, s.start, end)
             torque = net[a:b, j]
             if b - a < width:  # the other joints move throughout: the coupling is not read at rest
-                out.append(RestUnderLoad(label, j, s.coordinate, s.start_s, s.stop_s, 0.0, 0.0, 0.0, False, None))
+                out.append(
+                    RestUnderLoad(
+                        label, j, s.coordinate, s.start_s, s.stop_s, 0.0, 0.0, 0.0, False, None, noise_at_rest[j]
+                    )
+                )
                 continue
             noise = max(float(np.hypot(_white_noise(torque), np.median(std[a:b, j]))), float(floor[j]))
             means = _window_means(torque, width)
-            held = float(means[int(np.argmax(np.abs(means)))])
+            k = int(np.argmax(np.abs(means)))
+            held = float(means[k])
+            window = slice(a + k, a + k + min(width, b - a))
+            held_force = float(np.mean(forces_of[window, j]))
+            held_position = tuple(float(v) for v in np.mean(qs[window], axis=0))
             loaded = bool(abs(held) >= LOADED * noise and abs(held) > 0.0)
             breakaway = None
             if loaded and b == end < s.stop:  # it left its rest (not the record's end) with the arm still
@@ -336,10 +387,54 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
                     breakaway = at_break
             out.append(
                 RestUnderLoad(
-                    label, j, s.coordinate, s.start_s, s.stop_s, held, float(torque.mean()), noise, loaded, breakaway
+                    label,
+                    j,
+                    s.coordinate,
+                    s.start_s,
+                    s.stop_s,
+                    held,
+                    float(torque.mean()),
+                    noise,
+                    loaded,
+                    breakaway,
+                    noise_at_rest[j],
+                    held_force,
+                    held_position,
                 )
             )
     return tuple(out)
+
+
+def _speed_noise(system, records, rests) -> list[float]:
+    """Per joint, the noise of its measured speed over all of its rests in `records` (`speed_noise_at_rest`),
+    each up to where the joint leaves it (`_leaves`: the motion after is not noise)."""
+    n = len(split_terms(system)[0].joints)
+    pooled = [[] for _ in range(n)]
+    for record, stretches in zip(records, rests):
+        xs = np.asarray(uniformly_sampled(record).xs, dtype=float)
+        for s in stretches:
+            end = _leaves(xs[:, s.joint], s.start, s.stop, len(xs))
+            pooled[s.joint].append(xs[s.start : end, n + s.joint])
+    return [speed_noise_at_rest(np.concatenate(p)) if p else 0.0 for p in pooled]
+
+
+def speeds_zeroed_at_rest(system, records: list[Trajectory], rests) -> list[Trajectory]:
+    """`records` with each joint's measured speed set to zero over its rests (`rests`, each record's
+    `rest_stretches`: over every window of such a stretch the joint moves less than 0.05 rad/s on average).
+
+    At rest the true speed is zero and the measured one is noise (on a driver that reads zero between
+    encoder counts, some 0.1 rad/s rms): a simulation window that starts there from the measured speed
+    starts the joint moving, which no physical stick region of the friction law stops. This is the
+    start state's measurement, not the friction: the friction law keeps its narrow stick band."""
+    n = len(split_terms(system)[0].joints)
+    out = []
+    for record, stretches in zip(records, rests):
+        ts = np.asarray(record.ts, dtype=float)
+        xs = np.array(record.xs)
+        for s in stretches:
+            xs[(ts >= s.start_s) & (ts <= s.stop_s), n + s.joint] = 0.0
+        out.append(eqx.tree_at(lambda r: r.xs, record, jnp.asarray(xs, record.xs.dtype)) if stretches else record)
+    return out
 
 
 def joint_levels(stretches: tuple[RestUnderLoad, ...]) -> tuple[JointStaticFriction, ...]:
@@ -347,7 +442,8 @@ def joint_levels(stretches: tuple[RestUnderLoad, ...]) -> tuple[JointStaticFrict
     out = []
     for j in sorted({s.joint for s in stretches if s.loaded}):
         mine = [s for s in stretches if s.joint == j and s.loaded]
-        lower = max(abs(s.held) for s in mine)
+        most = max(mine, key=lambda s: abs(s.held))
+        lower = abs(most.held)
         breaks = tuple(abs(s.breakaway) for s in mine if s.breakaway is not None)
         level, kind = (float(np.median(breaks)), "breakaway") if breaks else (lower, "lower_bound")
         out.append(
@@ -360,6 +456,10 @@ def joint_levels(stretches: tuple[RestUnderLoad, ...]) -> tuple[JointStaticFrict
                 breaks,
                 tuple(dict.fromkeys(s.record for s in mine)),
                 float(sum(s.duration for s in mine)),
+                LEAST_STICK_BAND,
+                most.held_force,
+                most.held_position,
+                speed_noise=mine[0].speed_noise,
             )
         )
     return tuple(out)
@@ -373,7 +473,16 @@ def with_stiction(system, joints: tuple[JointStaticFriction, ...]):
     at = {j.joint for j in joints}
     dtype = jnp.result_type(*[t.coefficient for t in terms], float) if terms else float
     kept = [t for t in terms if not (isinstance(t, Stiction) and t.joint in at)]
-    added = [Stiction(j.joint, jnp.asarray(j.level, dtype)) for j in joints]
+    added = [
+        Stiction(
+            j.joint,
+            jnp.asarray(j.level, dtype),
+            velocity_scale=j.velocity_scale,
+            held_force=j.held_force if j.held_position is not None else j.lower_bound,
+            held_position=None if j.held_position is None else np.asarray(j.held_position),
+        )
+        for j in joints
+    ]
     # pyright reads the abstract state_names / input_names as fields of the generated __init__
     return Extended(system=base, terms=tuple(kept + added))  # pyright: ignore[reportCallIssue]
 
@@ -399,9 +508,31 @@ def describe(stretches, joints, rows_left_out, rows) -> str:
             if j.kind == "breakaway"
             else f"at least {j.level:.4g} (the largest torque held; no breakaway in the records)"
         )
-        parts.append(f"{j.coordinate} rests under load {j.rest_s:.2f} s in {', '.join(j.records)}: {what}")
+        parts.append(
+            f"{j.coordinate} rests under load {j.rest_s:.2f} s in {', '.join(j.records)}: {what}; sticks below "
+            f"{j.velocity_scale:.3g}; windows that start at rest start at zero speed (speed noise at rest "
+            f"{j.speed_noise:.3g})"
+        )
     return (
         "Stiction added: "
         + "; ".join(parts)
         + (f"; {rows_left_out} of {rows} dynamic rows at rest left out of the fit" if rows_left_out else "")
+    )
+
+
+def not_added(static: StaticFriction) -> StaticFriction:
+    """`static` without its joints, for a method that leaves the model's friction as it is
+    (`adds_static_friction` false): the rests under load stay in `stretches`, and the note says where
+    the records rest under load, how long, and how to fit the static level."""
+    parts = [
+        f"{j.coordinate} {j.rest_s:.2f} s in {', '.join(j.records)} (holds at least {j.lower_bound:.3g})"
+        for j in static.joints
+    ]
+    return dataclasses.replace(
+        static,
+        joints=(),
+        note="the records rest under load ("
+        + "; ".join(parts)
+        + "), which a friction law of the speed cannot hold; the model has no Stiction "
+        "(Dynamic(static_friction=True) adds it)",
     )

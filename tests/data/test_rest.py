@@ -1,9 +1,10 @@
-"""`rest_stretches`: a joint held still is found with its times; a reversal or a slow swing is not rest."""
+"""`rest_stretches`: a joint held still is found with its times; a reversal or a slow swing is not rest.
+`speed_noise_at_rest`: the velocity noise at rest (`Stiction`'s stick band) on records of known noise."""
 
 import numpy as np
 
 import dynax
-from dynax.internal import rest_stretches
+from dynax.internal import rest_stretches, speed_noise_at_rest
 
 
 def record(q1, q2, dt):
@@ -27,3 +28,42 @@ def test_a_held_joint_is_found_and_a_reversal_is_not():
     # A slow swing (0.2 rad/s) is motion, not rest, whatever its velocity noise.
     slow = record(0.2 * t, 0.2 * t, dt)
     assert rest_stretches(slow) == ()
+
+
+def test_gaussian_noise_at_rest():
+    rng = np.random.default_rng(0)
+    for sigma in (0.01, 0.1):
+        speeds = sigma * rng.standard_normal(1000)
+        np.testing.assert_allclose(speed_noise_at_rest(speeds), sigma, rtol=0.1)
+
+
+def test_a_driver_that_reads_zero_between_encoder_counts():
+    # An encoder of 2 mrad resolution over a joint that jitters by 1 mrad at rest, read as the difference of
+    # counts over one sample: most samples read zero, the rest +-1 rad/s. The median magnitude is zero; the
+    # noise a state measured at rest starts from is the rms of what is read.
+    rng = np.random.default_rng(1)
+    counts = np.round((1e-3 * rng.standard_normal(2001) + 0.3e-3) / 2e-3)
+    speeds = np.diff(counts) * 2e-3 / 0.002
+    assert np.mean(speeds == 0.0) > 0.5 and np.median(np.abs(speeds)) == 0.0
+    np.testing.assert_allclose(speed_noise_at_rest(speeds), np.sqrt(np.mean(speeds**2)))
+    assert speed_noise_at_rest(speeds) > 0.3
+
+
+def test_no_samples_no_noise():
+    assert speed_noise_at_rest(np.zeros(0)) == 0.0
+
+
+def test_a_heavy_arms_slow_reversal_is_not_a_rest_and_a_held_joint_that_drifts_is():
+    # A reversal at 0.4 rad/s^2 stays within the range test's 12.5 mrad for half a second, longer than the
+    # quarter second a rest takes; with 1 mrad of white encoder noise one parabola explains it, so it is no
+    # rest. A joint held for a second while its encoder creeps by a few mrad and steps between counts is.
+    dt = 0.005
+    t = np.arange(0, 3, dt)
+    rng = np.random.default_rng(4)
+    q1 = 0.2 * (t - 1.5) ** 2 + 1e-3 * rng.standard_normal(len(t))
+    held = 2e-3 * np.round((0.004 * (t - 1.0)) / 2e-3)  # a 4 mrad/s creep read by a 2 mrad encoder
+    q2 = np.where(t < 1.0, 0.5 * (1.0 - t) ** 2, np.where(t < 2.0, held, 0.5 * (t - 2.0) ** 2 + held[-1]))
+    q2 = q2 + 1e-3 * rng.standard_normal(len(t))
+    found = rest_stretches(record(q1, q2, dt), record="r")
+    assert [s.coordinate for s in found] == ["q2"]
+    assert found[0].duration > 0.9

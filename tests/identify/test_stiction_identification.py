@@ -11,7 +11,7 @@ import numpy as np
 
 import dynax
 from dynax._identify import _identify as identify_module  # private: monkeypatched (no rest found)
-from dynax.internal import StaticFriction
+from dynax.internal import consistent_parametrisation, parameter_names, parameter_vector, StaticFriction
 from tests.reference import stick_slip_arm
 
 ARM = dict(m1=0.642, m2=0.564, l1=0.2, lc1=0.2, lc2=0.321, I1=0.0267, I2=0.0539, b1=0.001, b2=0.001)  # DFKI-like
@@ -70,9 +70,9 @@ def swinging_record(k, seconds=3.0, rest_s=0.0):
     return record(us, ts, f"swing_{k}.csv")
 
 
-def fit(records):
+def fit(records, method=dynax.Dynamic(static_friction=True)):
     return dynax.identify(
-        dynax.DoublePendulum(), records, dynax.Dynamic(), friction="coulomb", validation=dynax.Validate(holdout=0)
+        dynax.DoublePendulum(), records, method, friction="coulomb", validation=dynax.Validate(holdout=0)
     )
 
 
@@ -107,6 +107,19 @@ def test_static_level_from_breakaways_within_ten_percent():
     assert np.max(np.abs(xs[resting, 1])) < 1e-3
 
 
+def test_by_default_the_rests_under_load_are_reported_and_the_model_is_left_as_it_is(monkeypatch):
+    # `Dynamic()` finds the rests under load and says where and how long, and fits what it fits without
+    # the rest search: no Stiction, no rows left out.
+    data = [breakaway_record(j)[0] for j in (0, 1)]
+    result = fit(data, dynax.Dynamic())
+    found = result.static_friction
+    assert found.joints == () and stiction_terms(result.system) == {}
+    assert any(s.loaded for s in found.stretches)
+    assert "breakaway_0.csv" in found.note and "breakaway_1.csv" in found.note and "static_friction=True" in found.note
+    monkeypatch.setattr(identify_module, "_holds_at_rest", lambda system: False)
+    np.testing.assert_array_equal(np.asarray(result.estimate), np.asarray(fit(data, dynax.Dynamic()).estimate))
+
+
 def test_no_rest_no_stiction_and_parameters_as_without_the_rest_search(monkeypatch):
     records = [swinging_record(k) for k in range(2)]
     assert any(stuck.any() for _, stuck in records)  # reversals stick briefly: not a rest
@@ -136,3 +149,91 @@ def test_rest_without_load_gives_no_stiction():
 def test_static_friction_fields_are_typed():
     fields = {f.name for f in dataclasses.fields(StaticFriction)}
     assert {"stretches", "joints", "rows_left_out", "rows", "note"} <= fields
+
+
+def test_stick_band_stays_physical_and_the_speed_noise_at_rest_is_reported():
+    # Breakaway records whose velocities carry white noise of a known size: the noise is reported (the
+    # start states at rest are corrected for it), and the friction law's stick band stays the narrow default.
+    sigma = 0.02
+    rng = np.random.default_rng(3)
+    data = []
+    for joint in (0, 1):
+        trajectory, _ = breakaway_record(joint)
+        xs = np.asarray(trajectory.xs).copy()
+        xs[:, 2:] += sigma * rng.standard_normal(xs[:, 2:].shape)
+        data.append(dataclasses.replace(trajectory, xs=jnp.asarray(xs)))
+    result = dynax.identify(
+        dynax.DoublePendulum(),
+        data,
+        dynax.Dynamic(static_friction=True),
+        friction="coulomb",
+        refine=False,
+        validation=dynax.Validate(holdout=0),
+    )
+    joints = result.static_friction.joints
+    assert {j.joint for j in joints} == {0, 1}
+    for j in joints:
+        # 1.48 times the median magnitude of a few hundred samples: within about 10 % of sigma.
+        np.testing.assert_allclose(j.speed_noise, sigma, rtol=0.1)
+        assert j.velocity_scale == float(dynax.Stiction(0).velocity_scale)
+    bands = {t.joint: float(t.velocity_scale) for t in result.system.terms if isinstance(t, dynax.Stiction)}
+    assert bands == {j.joint: j.velocity_scale for j in joints}
+
+
+def test_the_refinement_keeps_the_static_level_above_what_was_held_and_the_coulomb_level():
+    # The output-error refinement searches the static level through this map: wherever it goes, the level
+    # stays at or above the joint's Coulomb level and the torque the joint held at rest, that is the force
+    # applied there less the gravity there of the rigid body being fitted (theta5 sin(q1 + q2) at the elbow).
+    arm = dynax.DoublePendulum()
+    rest = (0.3, 0.2)
+    force = 0.22 + float(arm.base_parameters["theta5"]) * np.sin(0.5)  # 0.22 held under the start's gravity
+    model = dynax.Extended(
+        arm,
+        (
+            dynax.CoulombFriction(0, 0.135),
+            dynax.CoulombFriction(1, 0.09),
+            dynax.Stiction(0, 0.08, held_force=0.08),  # held less than the Coulomb level
+            dynax.Stiction(1, 0.22, held_force=force, held_position=rest),
+        ),
+    )
+    names = parameter_names(model, "coulomb")
+    start = jnp.asarray(parameter_vector(model, "coulomb"))
+    parametrisation = consistent_parametrisation(model, names, jnp.maximum(jnp.abs(start), 1e-3))
+    fc1, fc2, fs1, fs2, t5 = (names.index(n) for n in ("fc1", "fc2", "fs1", "fs2", "theta5"))
+    rng = np.random.default_rng(0)
+    phi0 = np.asarray(parametrisation.phi(start))
+    for _ in range(50):
+        theta = np.asarray(parametrisation.theta(jnp.asarray(phi0 + 5.0 * rng.standard_normal(phi0.shape))))
+        held = abs(force - theta[t5] * np.sin(0.5))
+        assert theta[fs1] >= max(theta[fc1], 0.08) and theta[fs2] >= max(theta[fc2], held) - 1e-12
+    # The start is pushed just inside: q1's level to its Coulomb level, q2's to what it held.
+    theta = np.asarray(parametrisation.theta(parametrisation.phi(start)))
+    np.testing.assert_allclose(theta[[fs1, fs2]], [0.135, 0.22], rtol=2e-3)
+    # A level inside the set maps back to itself.
+    inside = start.at[fs1].set(0.2).at[fs2].set(0.3)
+    np.testing.assert_allclose(parametrisation.theta(parametrisation.phi(inside)), inside, rtol=1e-9)
+
+
+def test_windows_that_start_at_rest_start_at_zero_speed():
+    # The measured speed at rest is noise: the refinement's records read zero there, and the measured speed
+    # everywhere else (the motion, and the joint that never rests).
+    from dynax.internal import rest_stretches, speeds_zeroed_at_rest
+
+    dt = 0.005
+    t = np.arange(0, 3, dt)
+    rng = np.random.default_rng(5)
+    q1 = 0.5 * np.sin(2 * np.pi * t)
+    q2 = np.where(t < 1.0, np.sin(2 * np.pi * t), np.where(t < 2.0, 0.0, np.sin(2 * np.pi * (t - 2.0))))
+    q2 = q2 + 1e-3 * rng.standard_normal(len(t))
+    xs = np.stack([q1, q2, np.gradient(q1, dt), np.gradient(q2, dt)], 1)
+    xs[:, 2:] += 0.1 * rng.standard_normal(xs[:, 2:].shape)
+    record = dynax.Trajectory(t, xs, np.zeros((len(t), 2)), ("q1", "q2", "dq1", "dq2"), ("tau1", "tau2"))
+    rests = rest_stretches(record)
+    assert [s.coordinate for s in rests] == ["q2"]
+    (zeroed,) = speeds_zeroed_at_rest(dynax.DoublePendulum(), [record], [rests])
+    out = np.asarray(zeroed.xs)
+    inside = (t > 1.05) & (t < 1.95)
+    assert np.all(out[inside, 3] == 0.0)
+    np.testing.assert_array_equal(out[:, :3], xs[:, :3])
+    np.testing.assert_array_equal(out[t < 0.95, 3], xs[t < 0.95, 3])
+    np.testing.assert_array_equal(out[t > 2.1, 3], xs[t > 2.1, 3])

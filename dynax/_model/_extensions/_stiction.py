@@ -64,10 +64,20 @@ class Stiction(AbstractJointTerm):
     - `stribeck_velocity`: $v_{st}$, the speed over which the friction falls from `fs` to the Coulomb
       level [rad/s or m/s] (default 0.05).
     - `velocity_scale`: $v_b$, the band of speeds in which the joint sticks (default 0.01, the Coulomb
-      friction's smoothing). Choose it above the speed noise of the velocities a simulation starts from
-      when the start state should count as resting.
+      friction's smoothing): the friction law's stick region. Keep it narrow: inside the band the
+      friction is whatever stops the joint, up to `fs`, and the band's smooth edge reaches two to three
+      times its width, so a wide band catches a joint that passes through zero speed at a reversal.
+      `identify` keeps the default and starts simulation windows at zero speed where the records rest
+      (the measured speed there is noise); `diagnose`'s `stiction` candidate, whose windows start from
+      the measured state, widens it to the speed noise at rest (`dynax.internal.speed_noise_at_rest`).
     - `hold_time`: $\tau_h$, the time in which a sticking joint's speed decays [s] (default 0.01);
       keep it above about two steps of a fixed-step integrator.
+    - `held_force`, `held_position`: a rest the records show the joint holding, a lower bound on `fs`:
+      the generalised force applied at the joint there [N m or N] and the joint positions, so that the
+      torque held is `held_force` less the gravity at `held_position` of whatever rigid-body parameters
+      a fit tries (`held`); without a position (default) `held_force` is the torque held itself (default 0:
+      none known). They change no simulation; the output-error refinement keeps `fs` at or above the
+      torque held (`dynax.internal.ConsistentParametrisation`).
     """
 
     joint: int = eqx.field(static=True)
@@ -76,6 +86,8 @@ class Stiction(AbstractJointTerm):
     stribeck_velocity: Float[Array, ""]
     velocity_scale: Float[Array, ""]
     hold_time: Float[Array, ""]
+    held_force: Float[Array, ""]
+    held_position: Float[Array, " n_joints"] | None
     cause: ClassVar[str] = "stiction"
     prefix: ClassVar[str] = "fs"
     neutral: ClassVar[float] = 0.0
@@ -90,6 +102,8 @@ class Stiction(AbstractJointTerm):
         stribeck_velocity: ArrayLike = 0.05,
         velocity_scale: ArrayLike = 0.01,
         hold_time: ArrayLike = 0.01,
+        held_force: ArrayLike = 0.0,
+        held_position: ArrayLike | None = None,
     ):
         for name, value in (
             ("stribeck_velocity", stribeck_velocity),
@@ -103,10 +117,27 @@ class Stiction(AbstractJointTerm):
         self.stribeck_velocity = float_scalar(stribeck_velocity)
         self.velocity_scale = float_scalar(velocity_scale)
         self.hold_time = float_scalar(hold_time)
+        self.held_force = float_scalar(held_force)
+        self.held_position = None if held_position is None else jnp.asarray(held_position, self.held_force.dtype)
 
     def parameter_filter(self):
         spec = super().parameter_filter()
-        return eqx.tree_at(lambda t: (t.stribeck_velocity, t.velocity_scale, t.hold_time), spec, (False, False, False))
+        spec = eqx.tree_at(
+            lambda t: (t.stribeck_velocity, t.velocity_scale, t.hold_time, t.held_force),
+            spec,
+            (False, False, False, False),
+        )
+        if self.held_position is not None:
+            spec = eqx.tree_at(lambda t: t.held_position, spec, False)
+        return spec
+
+    def held(self, system) -> Float[Array, ""]:
+        """The torque the joint held at rest under `system`'s rigid body (its gravity at `held_position`,
+        the speeds and accelerations zero): a lower bound on `fs`."""
+        if self.held_position is None:
+            return jnp.abs(self.held_force)
+        zeros = jnp.zeros_like(self.held_position)
+        return jnp.abs(self.held_force - system.inverse_dynamics(self.held_position, zeros, zeros)[self.joint])
 
     def slip_force(self, dq: Float[Array, ""], coulomb: Float[Array, ""]) -> Float[Array, ""]:
         r"""The friction in motion above the Coulomb level `coulomb`:
@@ -161,6 +192,20 @@ class Stiction(AbstractJointTerm):
         out = jnp.zeros_like(force).at[idx].add(slip)
         # Measured from the friction clipped to the level: with `fs = 0` the term adds nothing.
         return out.at[idx].add(weight * (held - jnp.clip(friction, -level, level)))
+
+
+LEAST_STICK_BAND = 0.01  # Stiction's default band: the Coulomb friction's smoothing [rad/s or m/s]
+
+
+def stick_band(speed_noise: float) -> float:
+    """The band of speeds `Stiction` sticks in (`velocity_scale`) for a measured speed whose noise at rest is
+    `speed_noise` (`dynax.internal.speed_noise_at_rest`): the noise itself, at least `LEAST_STICK_BAND`.
+
+    A window that starts from a state measured at rest starts at a speed of about the noise; with a band
+    below it, the joint never sticks. A band much wider holds a joint that truly slips slowly (a band of
+    three times the noise fits the level of event-based stick-slip records 13 % low, one of the noise
+    3 % low; the band's edge is smooth, `Stiction.weight`, so a start a little outside it still sticks)."""
+    return max(float(speed_noise), LEAST_STICK_BAND)
 
 
 def _inverse(m):
