@@ -282,14 +282,12 @@ def _fitted_once(system, fitted, method, settings, consistency, validate) -> Ide
     )
 
 
-def _refined_stage(ls, start, fitted, method, friction, consistency, refinement, validate, rests=None) -> Stage:
+def _refined_stage(ls, start, records, method, friction, consistency, refinement, validate) -> Stage:
     """The output-error refinement from the least-squares stage `ls` (its model `start`, with `Stiction`
-    where the records rest under load), with its equation error on the least-squares rows, consistency
-    and validation. With `rests` (each record's rest stretches) its windows that start at rest start at
-    zero speed there (`speeds_zeroed_at_rest`)."""
-    simulated = less_offsets(ls.system, fitted, ls)
-    if rests is not None:
-        simulated = speeds_zeroed_at_rest(ls.system, simulated, rests)
+    where the records rest under load) on `records = (fitted, simulated)` (the fitted records, and as the
+    simulation sees them), with its equation error on the least-squares rows of `fitted`, consistency and
+    validation."""
+    fitted, simulated = records
     refined = refine_by_simulation(start, ls.names, simulated, refinement)
     estimate = jnp.asarray(refined.value)
     _, a, y, _, _, _, _, _, _, _ = stacked_equations(refined.model, fitted, method, friction, None, method.rcond)
@@ -472,8 +470,10 @@ def identify(
     system_out = ls_model
     refinement = _refinement_method(refine, ls.system, method, fitted)
     if refinement is not None:
-        at_rest = rests if static is not None and static.joints else None
-        refined = _refined_stage(ls, ls_model, fitted, method, friction, consistency, refinement, validate, at_rest)
+        simulated = less_offsets(ls.system, fitted, ls)
+        if static is not None and static.joints:  # windows that start at rest start at zero speed there
+            simulated = speeds_zeroed_at_rest(ls.system, simulated, rests)
+        refined = _refined_stage(ls, ls_model, (fitted, simulated), method, friction, consistency, refinement, validate)
         statistics = refined.solution.statistics
         refined_poorly = _size_errors(
             system, refined.names, refined.solution.value, refined.solution.std_errors, statistics.record_std_errors

@@ -3,8 +3,8 @@
 import pytest
 
 import dynax
+from dynax import UsageError
 from dynax._cli._identify import _method, with_static_friction  # private: the flag's effect on the method
-from dynax._errors import UsageError
 from dynax.internal import build_parser
 
 
