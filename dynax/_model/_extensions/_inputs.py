@@ -139,7 +139,37 @@ class InputLag(AbstractInputTerm):
         return jnp.reshape(u, (1,)).astype(jnp.result_type(u, self.coefficient))
 
 
-class InputDelay(AbstractInputTerm):
+class _AbstractPadeDelay(AbstractInputTerm):
+    """A dead time $T$ (the term's `coefficient`) as the (2, 2) Padé approximant, two internal states per input:
+    $a = u - T s F(s) u$ with $F = 1 / (1 + sT/2 + s^2 T^2 / 12)$, $z = (F u, s F u)$. A delay of zero passes the
+    input through."""
+
+    coefficient: eqx.AbstractVar[Float[Array, ""]]
+
+    def shortest_resolved(self, step: float) -> float:
+        """The filter's poles lie at $|s| T = \\sqrt{12}$, 150 degrees from the positive real axis, so a fixed step
+        $h$ puts them at $|s| h = \\sqrt{12}\\,h/T$: one Tsit5 step per sample follows the delayed input for
+        $T \\ge h$ and diverges just below it (at $0.95h$). `PADE_STEPS_PER_DELAY` (1.25 steps) leaves a margin from
+        that edge. A shorter delay is simulated wrong at that step, so the shortest dead time a rollout at one step
+        per sample shows is about a sample interval."""
+        return PADE_STEPS_PER_DELAY * step
+
+    def applied(self, u, z):
+        return jnp.where(self.coefficient > _TINY_TIME, u - self.coefficient * z[1], u)
+
+    def hidden_derivative(self, u, z):
+        active = self.coefficient > _TINY_TIME
+        T = jnp.maximum(self.coefficient, _TINY_TIME)
+        a2, a1 = T**2 / 12.0, T / 2.0
+        dz = jnp.stack([z[1], (u - z[0] - a1 * z[1]) / a2])
+        return jnp.where(active, dz, 0.0 * z)
+
+    def steady_state(self, u):
+        dtype = jnp.result_type(u, self.coefficient)
+        return jnp.stack([jnp.asarray(u, dtype), jnp.zeros((), dtype)])
+
+
+class InputDelay(_AbstractPadeDelay):
     r"""The input acts a dead time $T$ late, $a(t) = u(t - T)$.
 
     Represented by the (2, 2) Padé approximant
@@ -168,25 +198,8 @@ class InputDelay(AbstractInputTerm):
         self.input = input
         self.coefficient = float_scalar(delay)
 
-    def shortest_resolved(self, step: float) -> float:
-        """The filter's poles lie at $|s| T = \\sqrt{12}$, 150 degrees from the positive real axis, so a fixed step
-        $h$ puts them at $|s| h = \\sqrt{12}\\,h/T$: one Tsit5 step per sample follows the delayed input for
-        $T \\ge h$ and diverges just below it (at $0.95h$). `PADE_STEPS_PER_DELAY` (1.25 steps) leaves a margin from
-        that edge. A shorter delay is simulated wrong at that step, so the shortest dead time a rollout at one step
-        per sample shows is about a sample interval."""
-        return PADE_STEPS_PER_DELAY * step
 
-    def applied(self, u, z):
-        return _pade_applied(self.coefficient, u, z)
-
-    def hidden_derivative(self, u, z):
-        return _pade_derivative(self.coefficient, u, z)
-
-    def steady_state(self, u):
-        return _pade_steady_state(self.coefficient, u)
-
-
-class MotorDelay(AbstractInputTerm):
+class MotorDelay(_AbstractPadeDelay):
     r"""One dead time $T$ on several inputs at once, $a_i(t) = u_i(t - T)$: the latency between a
     multirotor's logged motor commands and the rotors' thrust (the speed controller, the motor's
     spin-up, the log's own latency), which all motors share.
@@ -223,10 +236,6 @@ class MotorDelay(AbstractInputTerm):
     def inputs(self) -> tuple[int, ...]:
         return self.motors
 
-    def shortest_resolved(self, step: float) -> float:
-        """As `InputDelay.shortest_resolved`: the same Padé filter on each motor."""
-        return PADE_STEPS_PER_DELAY * step
-
     def where(self, system) -> str:
         if max(self.motors) >= system.n_inputs:
             raise ValueError(
@@ -238,30 +247,3 @@ class MotorDelay(AbstractInputTerm):
         self.where(system)
         names = system.input_names
         return tuple(f"{names[i]}_{self.prefix}{k + 1}" for i in self.motors for k in range(self.n_hidden))
-
-    def applied(self, u, z):
-        return _pade_applied(self.coefficient, u, z)
-
-    def hidden_derivative(self, u, z):
-        return _pade_derivative(self.coefficient, u, z)
-
-    def steady_state(self, u):
-        return _pade_steady_state(self.coefficient, u)
-
-
-# The (2, 2) Pade dead time: a = u - T s F(s) u with F = 1 / (1 + sT/2 + s^2 T^2 / 12); z = (F u, s F u).
-def _pade_applied(T, u, z):
-    return jnp.where(T > _TINY_TIME, u - T * z[1], u)
-
-
-def _pade_derivative(T, u, z):
-    active = T > _TINY_TIME
-    T = jnp.maximum(T, _TINY_TIME)
-    a2, a1 = T**2 / 12.0, T / 2.0
-    dz = jnp.stack([z[1], (u - z[0] - a1 * z[1]) / a2])
-    return jnp.where(active, dz, 0.0 * z)
-
-
-def _pade_steady_state(T, u):
-    dtype = jnp.result_type(u, T)
-    return jnp.stack([jnp.asarray(u, dtype), jnp.zeros((), dtype)])
