@@ -52,6 +52,7 @@ import optax
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from dynax import control
 from dynax.internal import knot_matrix, polish_on_constraint
+from experiments._swing_up_search import plot_best, score_references
 
 OUT = pathlib.Path(__file__).resolve().parent / "results" / "leaderboard" / "collocation_starts"
 RULES = control.LeaderboardRules()
@@ -300,38 +301,13 @@ def main(argv=None):
         )
     feasible = sorted([f for f in found if f["end_residual"] < 1e-4], key=lambda f: -f["surrogate_score"])
     print(f"{len(feasible)} feasible; each scored by the exact rules", flush=True)
-    scored = []
-    for f in feasible:
-        n = int(round(f["horizon"] / H))
-        n_fine = int(round(f["horizon"] / RULES.dt))
+
+    def reference_of(f):
+        n, n_fine = int(round(f["horizon"] / H)), int(round(f["horizon"] / RULES.dt))
         knots = jnp.concatenate([jnp.zeros(1), LIMIT * jnp.tanh(jnp.asarray(f["w"]))])
-        us = knot_matrix(n_fine, RULES.dt, H, n) @ knots
-        d = control.SwingUpDesign(horizon=f["horizon"], lead=args.lead)
-        xs, us = control.end_upright(plant, us, d)
-        if not np.all(np.isfinite(np.asarray(xs))):
-            continue
-        controller = control.design_swing_up(plant, d, reference=(xs, us))
-        f["exact"] = control.performance(controller).as_dict()
-        f["controller"] = controller
-        scored.append(f)
-        print(
-            f"  horizon {f['horizon']:.1f} s start {f['start']}: surrogate {f['surrogate_score']:.3f}, exact "
-            f"{f['exact']['score']:.3f} {json.dumps({k: round(v, 4) for k, v in f['exact'].items()})} "
-            f"[{time.perf_counter() - t0:.0f} s]",
-            flush=True,
-        )
-    scored.sort(key=lambda f: -f["exact"]["score"])
-    for f in scored[: args.top]:
-        rob = control.robustness(f["controller"])
-        f["robustness"] = dict(score=rob.score, families=rob.table(), seconds=rob.seconds)
-        print(
-            f"  horizon {f['horizon']:.1f} s start {f['start']}: performance {f['exact']['score']:.3f}, "
-            f"robustness {rob.score:.3f} {np.round(rob.family_scores * 100, 1).tolist()} "
-            f"[{time.perf_counter() - t0:.0f} s]",
-            flush=True,
-        )
-    if scored:
-        scored[0]["controller"].save(args.out / "best_policy.npz")
+        return knot_matrix(n_fine, RULES.dt, H, n) @ knots, control.SwingUpDesign(horizon=f["horizon"], lead=args.lead)
+
+    scored = score_references(plant, feasible, reference_of, args.top, args.out, t0)
 
     def record(f):
         out = {k: v for k, v in f.items() if k not in ("w", "controller")}
@@ -370,16 +346,7 @@ def _figure(path, found, scored):
     ax[0].set(xlabel="horizon [s]", ylabel="score", title="collocation (blue), shooting (green), exact (x)")
     ax[0].legend(fontsize=8)
     if scored:
-        best = scored[0]
-        rollout = control.simulate_leaderboard(best["controller"])
-        t = np.asarray(rollout.ts)
-        keep = t <= best["horizon"] + 1.0
-        ax[1].plot(t[keep], np.asarray(rollout.xs)[keep, 0], label="q1")
-        ax[1].plot(t[keep], np.asarray(rollout.xs)[keep, 1], label="q2")
-        ax[1].set(xlabel="t [s]", ylabel="rad", title=f"best: exact score {best['exact']['score']:.3f}")
-        ax[1].legend(fontsize=8)
-        ax[2].plot(t[:-1][keep[:-1]], np.asarray(rollout.us)[keep[:-1]])
-        ax[2].set(xlabel="t [s]", ylabel="elbow torque [N m]")
+        plot_best(ax[1], ax[2], scored[0])
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)

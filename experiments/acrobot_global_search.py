@@ -46,6 +46,7 @@ import numpy as np
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from dynax import control
 from dynax.internal import knot_matrix, polish_on_constraint
+from experiments._swing_up_search import plot_best, score_references
 
 OUT = pathlib.Path(__file__).resolve().parent / "results" / "leaderboard" / "global_search"
 RULES = control.LeaderboardRules()
@@ -150,35 +151,14 @@ def main(argv=None):
         )
     feasible = sorted([f for f in found if f["end_residual"] < 1e-4], key=lambda f: -f["surrogate_score"])
     print(f"{len(feasible)} feasible; the best {min(args.keep, len(feasible))} scored by the exact rules", flush=True)
-    scored = []
-    for f in feasible[: args.keep]:
-        n_knots = int(round(f["horizon"] / SPACING))
-        n_fine = int(round(f["horizon"] / FINE))
+
+    def reference_of(f):
+        n_knots, n_fine = int(round(f["horizon"] / SPACING)), int(round(f["horizon"] / FINE))
         us = knot_matrix(n_fine, FINE, SPACING, n_knots) @ _knots(jnp.asarray(f["w"]))
-        design = control.SwingUpDesign(horizon=f["horizon"])
-        xs, us = control.end_upright(plant, us, design)
-        if not np.all(np.isfinite(np.asarray(xs))):
-            continue
-        controller = control.design_swing_up(plant, design, reference=(xs, us))
-        f["exact"] = control.performance(controller).as_dict()
-        f["controller"] = controller
-        scored.append(f)
-        print(
-            f"  horizon {f['horizon']:.1f} s start {f['start']}: surrogate {f['surrogate_score']:.3f}, "
-            f"exact {f['exact']['score']:.3f} [{time.perf_counter() - t0:.0f} s]",
-            flush=True,
-        )
-    scored.sort(key=lambda f: -f["exact"]["score"])
-    for f in scored[: args.top]:
-        rob = control.robustness(f["controller"])
-        f["robustness"] = dict(score=rob.score, families=rob.table(), seconds=rob.seconds)
-        print(
-            f"  horizon {f['horizon']:.1f} s start {f['start']}: performance {f['exact']['score']:.3f}, "
-            f"robustness {rob.score:.3f} {np.round(rob.family_scores * 100, 1).tolist()}",
-            flush=True,
-        )
+        return us, control.SwingUpDesign(horizon=f["horizon"])
+
+    scored = score_references(plant, feasible[: args.keep], reference_of, args.top, args.out, t0)
     if scored:
-        scored[0]["controller"].save(args.out / "best_policy.npz")
         print("best:", json.dumps(scored[0]["exact"]), "robustness", scored[0].get("robustness", {}).get("score"))
 
     def record(f):
@@ -194,12 +174,12 @@ def main(argv=None):
         found=[record(f) for f in found],
     )
     (args.out / "search.json").write_text(json.dumps(summary, indent=1))
-    _figure(args.out / "search.png", found, scored, plant)
+    _figure(args.out / "search.png", found, scored)
     print(f"wrote {args.out} [{time.perf_counter() - t0:.0f} s]")
     return summary
 
 
-def _figure(path, found, scored, plant):
+def _figure(path, found, scored):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -217,16 +197,7 @@ def _figure(path, found, scored, plant):
     ax[0].set(xlabel="horizon [s]", ylabel="score", title="feasible starts: surrogate (o), exact (x)")
     ax[0].legend(fontsize=8)
     if scored:
-        best = scored[0]
-        rollout = control.simulate_leaderboard(best["controller"])
-        t = np.asarray(rollout.ts)
-        keep = t <= best["horizon"] + 1.0
-        ax[1].plot(t[keep], np.asarray(rollout.xs)[keep, 0], label="q1")
-        ax[1].plot(t[keep], np.asarray(rollout.xs)[keep, 1], label="q2")
-        ax[1].set(xlabel="t [s]", ylabel="rad", title=f"best: exact score {best['exact']['score']:.3f}")
-        ax[1].legend(fontsize=8)
-        ax[2].plot(t[:-1][keep[:-1]], np.asarray(rollout.us)[keep[:-1]])
-        ax[2].set(xlabel="t [s]", ylabel="elbow torque [N m]")
+        plot_best(ax[1], ax[2], scored[0])
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
