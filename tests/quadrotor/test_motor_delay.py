@@ -34,6 +34,12 @@ def _commands(t):
     return np.stack([1.0 + 0.05 * (1.0 - np.cos(2.0 * t)) * (1 + 0.3 * k) for k in range(4)], axis=-1)
 
 
+def _dop853(rhs, x0, ts):
+    """States at `ts` from `x0` by scipy's DOP853 at tight tolerance (the reference, outside dynax's integrators)."""
+    f = lambda t, x: np.asarray(rhs(t, x))  # noqa: E731
+    return solve_ivp(f, (ts[0], ts[-1]), x0, t_eval=ts, method="DOP853", rtol=1e-10, atol=1e-12).y.T
+
+
 def test_the_motors_act_the_delay_late():
     jax.config.update("jax_enable_x64", True)
     body, delay = _body(), 0.04
@@ -42,34 +48,10 @@ def test_the_motors_act_the_delay_late():
     model = Extended(body, (MotorDelay(delay=delay),))
     field = jax.jit(lambda x, u: model.vector_field(0.0, x, u))
     z0 = np.asarray(model.initial_state(jnp.asarray(x0), jnp.asarray(_commands(0.0))))
-    ours = solve_ivp(
-        lambda t, x: np.asarray(field(jnp.asarray(x), jnp.asarray(_commands(t)))),
-        (0, 0.6),
-        z0,
-        t_eval=ts,
-        method="DOP853",
-        rtol=1e-10,
-        atol=1e-12,
-    ).y.T[:, :13]
+    ours = _dop853(lambda t, x: field(jnp.asarray(x), jnp.asarray(_commands(t))), z0, ts)[:, :13]
     nominal = jax.jit(lambda x, u: body.vector_field(0.0, x, u))
-    shifted = solve_ivp(
-        lambda t, x: np.asarray(nominal(jnp.asarray(x), jnp.asarray(_commands(t - delay)))),
-        (0, 0.6),
-        x0,
-        t_eval=ts,
-        method="DOP853",
-        rtol=1e-10,
-        atol=1e-12,
-    ).y.T
-    undelayed = solve_ivp(
-        lambda t, x: np.asarray(nominal(jnp.asarray(x), jnp.asarray(_commands(t)))),
-        (0, 0.6),
-        x0,
-        t_eval=ts,
-        method="DOP853",
-        rtol=1e-10,
-        atol=1e-12,
-    ).y.T
+    shifted = _dop853(lambda t, x: nominal(jnp.asarray(x), jnp.asarray(_commands(t - delay))), x0, ts)
+    undelayed = _dop853(lambda t, x: nominal(jnp.asarray(x), jnp.asarray(_commands(t))), x0, ts)
     error = np.abs(ours - shifted)[:, 7:].max()
     effect = np.abs(undelayed - shifted)[:, 7:].max()
     assert effect > 1e-3 and error < 0.01 * effect, (error, effect)
