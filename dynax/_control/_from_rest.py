@@ -12,6 +12,7 @@ both are saved to and loaded from one `.npz` file.
 
 import json
 import pathlib
+import zipfile
 
 import equinox as eqx
 import jax
@@ -308,7 +309,7 @@ def load_controller(path) -> RobotController:
                 raise DataError(f"load_controller: {str(path)!r} has format {found!r}, expected {FORMAT!r}")
             arrays = {k: np.asarray(data[k]) for k in _ARRAYS}
             arrays |= {k: np.asarray(data[k]) for k in _OPTIONAL_ARRAYS if k in data.files}
-    except (ValueError, KeyError, OSError, json.JSONDecodeError) as e:
+    except (ValueError, KeyError, OSError, EOFError, zipfile.BadZipFile) as e:  # a truncated or foreign file
         if isinstance(e, DataError):
             raise
         raise DataError(f"load_controller: {str(path)!r} is not a saved dynax controller ({e})") from None

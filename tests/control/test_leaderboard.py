@@ -184,6 +184,10 @@ def test_load_controller_refuses_bad_files(tmp_path):
     np.savez(bad, header=np.asarray('{"format": "other"}'))
     with pytest.raises(dynax._errors.DataError, match="format"):
         dynax.control.load_controller(bad)
+    truncated = tmp_path / "truncated.npz"  # a saved controller cut short, as by a failed copy
+    truncated.write_bytes(POLICY.read_bytes()[:300])
+    with pytest.raises(dynax._errors.DataError, match="not a saved dynax controller"):
+        dynax.control.load_controller(truncated)
 
 
 @pytest.mark.parametrize(
