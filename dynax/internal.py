@@ -181,6 +181,9 @@ from ._diagnose._quadrotor import thrust_parameters as thrust_parameters
 from ._diagnose._quadrotor import WorldFrameQuadrotor as WorldFrameQuadrotor
 from ._diagnose._residuals import acceleration_residuals as acceleration_residuals
 from ._diagnose._residuals import exact_delays as exact_delays
+from ._diagnose._rollout_screening import rankable as rankable
+from ._diagnose._rollout_screening import rollout_screen as rollout_screen
+from ._diagnose._rollout_screening import with_rollout_evidence as with_rollout_evidence
 from ._diagnose._selection import (
     judge_round as judge_round,
 )

@@ -18,6 +18,7 @@ from ._fit import fit_configurations, make_windows, nominal_values, validate_con
 from ._problem import Problem
 from ._records import reference_horizon
 from ._residuals import acceleration_residuals, Structure, structure_test
+from ._rollout_screening import rankable, rollout_screen, with_rollout_evidence
 from ._screening import screen
 from ._selection import choose, choose_shortlist, judge_round, look_alike_tests, Refitted
 from ._summaries import candidate_table, rmse_curve, round_summary, window_scores
@@ -214,7 +215,33 @@ def _screen(problem: Problem, current_slots, current_p, remaining, round_, say):
         cross_fit=bool(problem.folds),
     )
     short = choose_shortlist(problem.look_alikes, remaining, gains, problem.selection.shortlist)
-    return gains, deltas, with_rest_evidence(problem, remaining, gains, short) if round_ == 0 else short
+    if round_ == 0:
+        short = with_rest_evidence(problem, remaining, gains, short)
+    return gains, deltas, _with_rollout_evidence(problem, current_slots, current_p, remaining, gains, short, say)
+
+
+def _with_rollout_evidence(problem: Problem, current_slots, current_p, remaining, gains, short, say):
+    """The shortlist with the candidates the output-error screening ranks above shortlisted ones
+    (`with_rollout_evidence`: at most a quarter of the shortlist, at least one)."""
+    ranked = rankable(problem.family, remaining)
+    if len(ranked) <= 1 or all(k in short for k in ranked):
+        return short
+    # Held-out windows of the fit's length, as the refit's training windows: one shape, one compilation.
+    n_fit = problem.train_windows.ts.shape[1] - 1
+    held_out = make_windows(problem.validation, n_fit, n_fit)
+    rollout_gains = rollout_screen(problem.family, problem.train_windows, held_out, current_slots, current_p, ranked)
+    n_promote = max(1, problem.selection.shortlist // 4)
+    short, promoted = with_rollout_evidence(
+        problem.look_alikes, remaining, gains, short, ranked, rollout_gains, n_promote, problem.selection.min_gain
+    )
+    for k in promoted:
+        order = int(np.sum(np.asarray(gains) > gains[remaining.index(k)])) + 1
+        say(
+            f"  {problem.candidates[k].label(problem.system)} joins the shortlist: its first Gauss-Newton step "
+            f"gains {rollout_gains[ranked.index(k)]:.0%} on the held-out windows (equation-error "
+            f"screening ranked it {order} of {len(remaining)})"
+        )
+    return short
 
 
 def with_rest_evidence(problem: Problem, remaining, gains, short):
