@@ -231,15 +231,17 @@ def _with_rollout_evidence(problem: Problem, current_slots, current_p, remaining
     held_out = make_windows(problem.validation, n_fit, n_fit)
     rollout_gains = rollout_screen(problem.family, problem.train_windows, held_out, current_slots, current_p, ranked)
     n_promote = max(1, problem.selection.shortlist // 4)
+    before = list(short)
     short, promoted = with_rollout_evidence(
         problem.look_alikes, remaining, gains, short, ranked, rollout_gains, n_promote, problem.selection.min_gain
     )
+    label = lambda k: problem.candidates[k].label(problem.system)  # noqa: E731
     for k in promoted:
         order = int(np.sum(np.asarray(gains) > gains[remaining.index(k)])) + 1
         say(
-            f"  {problem.candidates[k].label(problem.system)} joins the shortlist: its first Gauss-Newton step "
-            f"gains {rollout_gains[ranked.index(k)]:.0%} on the held-out windows (equation-error "
-            f"screening ranked it {order} of {len(remaining)})"
+            f"  {label(k)} joins the shortlist in place of {label(before[short.index(k)])}: its first Gauss-Newton "
+            f"step gains {rollout_gains[ranked.index(k)]:.0%} on the held-out windows (equation-error screening "
+            f"ranked it {order} of {len(remaining)})"
         )
     return short
 
