@@ -85,6 +85,8 @@ def fit_vehicle(
     warn_if_float32("vehicle learning")
     if not isinstance(criterion, AbstractMethod):
         raise UsageError(f"fit_vehicle: unknown criterion {type(criterion).__name__}")
+    # A static field holds plain integers: an array there would be hashed by identity (and JAX warns).
+    breaks = None if breaks is None else tuple(int(b) for b in np.asarray(breaks).ravel())
     settings = FitSettings(breaks=breaks, warm_start=warm_start, callback=callback, progress=progress)
     return criterion.fit(system, trajectory, settings)
 
