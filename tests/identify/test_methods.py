@@ -1,6 +1,7 @@
 """Methods own their fit: `identify` and `fit_vehicle` call a method's `fit`, never check its class, and
 every built-in method's `fit` gives the estimate a computation outside it gives."""
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -49,24 +50,17 @@ class EngineLeastSquares(AbstractMethod):
         fitted = dynax.Acrobot.from_base_parameters(dict(zip(names, np.asarray(solution.value))))
         scaled = np.asarray(a) / np.linalg.norm(np.asarray(a), axis=0)
         _, singular, directions = np.linalg.svd(scaled, full_matrices=False)
-        return dynax.Solution(
-            model=fitted,
-            value=solution.value,
-            parameters=solution.parameters,
-            covariance=solution.covariance,
-            std_errors=solution.std_errors,
-            result=solution.result,
-            loss=solution.loss,
-            initial_loss=solution.initial_loss,
-            steps=solution.steps,
-            statistics=dynax.internal.Statistics(
-                condition_number=jnp.asarray(singular[0] / singular[-1]),
-                rank=jnp.asarray(len(names)),
-                singular_values=jnp.asarray(singular),
-                directions=jnp.asarray(directions),
-                residual_rms=jnp.sqrt(2 * solution.loss / a.shape[0]),
-                n_rows=a.shape[0],
-            ),
+        statistics = dynax.internal.Statistics(
+            condition_number=jnp.asarray(singular[0] / singular[-1]),
+            rank=jnp.asarray(len(names)),
+            singular_values=jnp.asarray(singular),
+            directions=jnp.asarray(directions),
+            residual_rms=jnp.sqrt(2 * solution.loss / a.shape[0]),
+            n_rows=a.shape[0],
+        )
+        # the engine's `Solution`, carrying the fitted system and the regressor's statistics
+        return eqx.tree_at(
+            lambda s: (s.model, s.statistics), solution, (fitted, statistics), is_leaf=lambda x: x is None
         )
 
 
