@@ -215,7 +215,7 @@ def _records_disagree(refined) -> dict[str, float]:
             "between the recordings (friction, an offset, a payload): read `record_std_errors` as these "
             "parameters' uncertainty, and validate on a recording of another day.",
             RecordsDisagreeWarning,
-            stacklevel=6,
+            stacklevel=7,
         )
     return out
 
@@ -378,7 +378,7 @@ def _warn_poorly_determined(poorly: dict[str, float] | None) -> None:
             "record more motion in every joint (larger, richer inputs, longer records, more records) before trusting "
             "them; otherwise the model misses something large (see the relative equation error).",
             PoorlyDeterminedWarning,
-            stacklevel=5,
+            stacklevel=6,
         )
 
 
