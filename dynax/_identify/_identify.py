@@ -193,9 +193,10 @@ def identify(
       point of `SimulationFit` and are otherwise ignored.
     - `data`: a `Trajectory` or a list of them (same system).
     - `method`: `Dynamic()` (default), `Power()`, `Energy()`, `SimulationFit()`, or any other
-      `AbstractMethod`: `identify` runs its `fit` once (with `friction` and `weights` in a
-      `FitSettings`), checks the estimate's consistency where the system has conditions, and
-      validates the fitted model.
+      `AbstractMethod`: `identify` asks the method for its `identification` (by default its
+      `fit` once, with `friction` and `weights` in a `FitSettings`, the estimate's consistency
+      checked where the system has conditions, and the fitted model validated; the least-squares
+      methods run the stages above).
     - `friction`: `"viscous"` (default) or `"coulomb"` (adds `fc1`, `fc2`, or the linear axis's
       `coulomb`).
     - `weights`: optional row weights for the least-squares problem, one per stacked equation

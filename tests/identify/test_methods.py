@@ -147,3 +147,33 @@ def test_vehicle_criteria_fit_through_the_same_call():
         dynax.OneStep().fit(dynax.Helicopter(), [flight, flight])
     with pytest.raises(UsageError, match="continuous record"):
         dynax.FrequencyDomain().fit(dynax.Helicopter(), flight, FitSettings(breaks=(100,)))
+
+
+def test_identify_asks_the_method_for_its_identification_with_the_job(records):
+    seen = []
+
+    class Spy(AbstractMethod):
+        def fit(self, system, records, settings=FitSettings()):
+            raise AssertionError("identify asks for the identification; only the default calls fit")
+
+        def identification(self, system, records, job):
+            seen.append(([len(r) for r in records], job))
+            return "identified"
+
+    out = identify(TRUE, records, Spy(), friction="coulomb", consistency="check", refine=False)
+    assert out == "identified"
+    lengths, job = seen[0]
+    assert all(n < len(r) for n, r in zip(lengths, records))  # the heads: the tails are held out
+    assert job.held_out.tails_of == (0, 1) and len(job.held_out.records) == 2
+    assert (job.settings.friction, job.consistency, job.refine, job.system_name) == (
+        "coulomb",
+        "check",
+        False,
+        "acrobot",
+    )
+    identify(TRUE, records[0], Spy(), validation=records[1])
+    lengths, job = seen[1]
+    assert lengths == [len(records[0])] and job.held_out.tails_of is None  # records of their own
+    assert job.held_out.validate(TRUE) is not None
+    identify(TRUE, records, Spy(), validation=Validate(holdout=0))
+    assert seen[2][1].held_out.validate(TRUE) is None  # nothing held out, nothing validated
