@@ -6,9 +6,6 @@ from . import control as control
 # Synthetic data (truth simulators, data generators) lives in `dynax.synthetic`; the top-level names stay.
 from . import synthetic as synthetic
 from ._data import (
-    backward_difference as backward_difference,
-)
-from ._data import (
     butterworth_filtfilt as butterworth_filtfilt,
 )
 from ._data import (

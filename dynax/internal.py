@@ -99,6 +99,7 @@ from ._data._velocities import velocity_gain as velocity_gain
 # Diagnose: candidates, windows and refits, statistics, horizons, the sparse search.
 from ._diagnose import Discovery as Discovery
 from ._diagnose import feature_library as feature_library
+from ._diagnose import FeatureRegression as FeatureRegression
 from ._diagnose import JointRests as JointRests
 from ._diagnose import (
     LOOK_ALIKES as LOOK_ALIKES,
@@ -111,6 +112,7 @@ from ._diagnose import search_period as search_period
 from ._diagnose import (
     sparse_search as sparse_search,
 )
+from ._diagnose import SparseSearch as SparseSearch
 from ._diagnose import (
     SparseStatistics as SparseStatistics,
 )
@@ -358,6 +360,7 @@ from ._identify._least_squares import (
 )
 from ._identify._least_squares import tsqr_r as tsqr_r
 from ._identify._method import FitSettings as FitSettings
+from ._identify._method import IdentifyJob as IdentifyJob
 from ._identify._record_friction import compare_records as compare_records
 from ._identify._refine import delta_method_covariance as delta_method_covariance
 from ._identify._refine import ml_weights as ml_weights
@@ -375,6 +378,7 @@ from ._identify._simulation_fit import (
 )
 from ._identify._static_friction import speeds_zeroed_at_rest as speeds_zeroed_at_rest
 from ._identify._validation import CONCENTRATED as CONCENTRATED
+from ._identify._validation import HeldOut as HeldOut
 
 # Identify, vehicles: the criteria's fits and window rollouts.
 from ._identify._vehicle import (
@@ -620,6 +624,8 @@ __all__ = [
     "RestUnderLoad",
     "rests_under_load",
     "sparse_search",
+    "SparseSearch",
+    "FeatureRegression",
     "SparseStatistics",
     "Stability",
     "Structure",
@@ -666,6 +672,8 @@ __all__ = [
     "fit_one_step",
     "fit_percent",
     "FitSettings",
+    "IdentifyJob",
+    "HeldOut",
     "float_scalar",
     "AbstractLinearInParameters",
     "identification_hooks",

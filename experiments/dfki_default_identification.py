@@ -66,8 +66,8 @@ import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
 from dynax import AbstractJointTerm, held_out_error  # noqa: E402
-from dynax._identify import _identify as identify_module  # noqa: E402  # private: patched (identify's variants)
 from dynax._identify import _refine  # private: patched (the refinement's record weights)
+from dynax._identify import _stages as identify_module  # noqa: E402  # private: patched (identify's variants)
 from dynax.internal import log_ratio_differences, paired_block_test  # noqa: E402
 
 RUNS = ("00", "01", "02", "03", "05", "12")

@@ -90,7 +90,7 @@ def no_rest(swinging, out):
     data = list(records(swinging))
     result, seconds = fit(data)
     terms = [t for t in getattr(result.system, "terms", ()) if isinstance(t, dynax.Stiction)]
-    from dynax._identify import _identify as identify_module  # private: patched (the rest search switched off)
+    from dynax._identify import _stages as identify_module  # private: patched (the rest search switched off)
 
     search = identify_module._holds_at_rest
     identify_module._holds_at_rest = lambda system: False

@@ -33,7 +33,9 @@ from ._result import (
 )
 from ._settings import Horizons as Horizons
 from ._settings import Selection as Selection
+from ._sparse import FeatureRegression as FeatureRegression
 from ._sparse import sparse_search as sparse_search
+from ._sparse import SparseSearch as SparseSearch
 from ._sparse import SparseStatistics as SparseStatistics
 from ._sparse import Stability as Stability
 from ._sparse import stlsq as stlsq

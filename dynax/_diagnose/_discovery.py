@@ -45,7 +45,7 @@ from .._model._extensions import Discovered, Extended
 from ._fit import nominal_parameter_names
 from ._library import evaluate_features, feature_library, is_angle, named_equivalent, physical_readings, search_period
 from ._residuals import acceleration_residuals, predicted_accelerations, sg_window, velocity_indices
-from ._sparse import group_cv_r2, sparse_search, SparseStatistics, Stability
+from ._sparse import group_cv_r2, SparseSearch, SparseStatistics, Stability
 
 
 class Proposal(eqx.Module):
@@ -225,7 +225,7 @@ def propose(model, records, search: DiscoverySearch = DiscoverySearch()) -> list
         # when the mass is refitted): in simulation it is not identifiable either.
         inert |= np.asarray([named_equivalent(system, f, j) in absorbed for f in library])
         phi[:, inert] = 0.0
-        fit = sparse_search(phi, y, groups, max_terms=max_terms, stability=Stability(block=block, seed=seed + j))
+        fit = SparseSearch(max_terms=max_terms, stability=Stability(block=block, seed=seed + j)).search(phi, y, groups)
         stats = cast(SparseStatistics, fit.statistics)
         chosen = list(stats.selected)
         deferred = []

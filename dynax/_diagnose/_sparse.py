@@ -19,14 +19,18 @@ stability selection of Meinshausen and Buehlmann), at most `max_terms` of them.
     Learning*, 2nd ed., 2009, section 7.10 (cross-validation, one-standard-error rule).
 """
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from .._errors import UsageError
 from .._fit import AbstractStatistics, Parameters, Solution
+from .._identify._method import AbstractMethod, as_records, FitSettings
+
+THRESHOLDS = (0.01, 0.02, 0.05, 0.08, 0.1, 0.15, 0.2, 0.3, 0.5)  # STLSQ thresholds tried (standardised units)
 
 
 def stlsq(
@@ -118,96 +122,164 @@ class Stability(eqx.Module):
     seed: int = eqx.field(default=0, static=True)
 
 
+class FeatureRegression(eqx.Module):
+    """What `SparseSearch.fit` fits: a target linear in candidate features, both read from a record.
+
+    **Fields:** `features` (`features(record) -> (time, n_features)`, the candidate columns),
+    `target` (`target(record) -> (time,)`), `names` (the features' names; `None`: `[k]`).
+    """
+
+    features: Callable = eqx.field(static=True)
+    target: Callable = eqx.field(static=True)
+    names: tuple[str, ...] | None = eqx.field(static=True, default=None)
+
+
+class SparseSearch(AbstractMethod):
+    r"""The sparse search as an identification method: sequentially thresholded ridge least squares
+    (STLSQ) on standardised columns, the threshold chosen by cross-validation over groups with the
+    one-standard-error rule, the features kept by stability selection over half-subsamples of blocks
+    (the module's docstring).
+
+    `fit(FeatureRegression(...), records)` searches the records' stacked rows, each record a group of
+    the cross-validation (one record: `n_pieces` contiguous pieces of it); `search(features, target,
+    groups)` does the same on arrays already stacked (what the discovery search calls, per coordinate).
+
+    **Fields:**
+
+    - `max_terms`: bound on the number of features kept (default 3).
+    - `thresholds`: the STLSQ thresholds tried (standardised units).
+    - `stability`: the stability selection over subsamples of blocks (`Stability`).
+    - `n_pieces`: the groups one record is cut into for cross-validation (default 5).
+    """
+
+    max_terms: int = eqx.field(default=3, static=True)
+    thresholds: tuple[float, ...] = eqx.field(default=THRESHOLDS, static=True, converter=tuple)
+    stability: Stability = Stability()
+    n_pieces: int = eqx.field(default=5, static=True)
+
+    @property
+    def label(self) -> str:
+        return "sparse"
+
+    def fit(self, system, records, settings: FitSettings = FitSettings()) -> Solution:
+        """The sparse model of `system.target` on `system.features` (a `FeatureRegression`) over `records`.
+
+        **Returns:** `search`'s `Solution`.
+        """
+        del settings  # nothing of a run's settings applies: the columns are the system's
+        if not isinstance(system, FeatureRegression):
+            raise UsageError(f"SparseSearch fits a FeatureRegression, got {type(system).__name__}")
+        trajectories = as_records(records)
+        features = np.concatenate([np.asarray(system.features(r), float) for r in trajectories])
+        target = np.concatenate([np.asarray(system.target(r), float).reshape(-1) for r in trajectories])
+        if len(trajectories) >= 2:
+            groups = np.concatenate([np.full(len(r), k) for k, r in enumerate(trajectories)])
+        else:
+            groups = np.minimum(np.arange(len(target)) * self.n_pieces // len(target), self.n_pieces - 1)
+        return self.search(features, target, groups, names=system.names)
+
+    def search(
+        self, features: np.ndarray, target: np.ndarray, groups: np.ndarray, *, names: Sequence[str] | None = None
+    ) -> Solution:
+        r"""Sparse model of `target` on `features`: STLSQ, threshold by cross-validation over `groups`,
+        stability selection.
+
+        **Arguments:**
+
+        - `features` `(time, n_features)`, `target` `(time,)` (not standardised).
+        - `groups` `(time,)`: the run (or contiguous piece of a run) of each sample; cross-validation
+          leaves one group out at a time (at least 2 groups).
+        - `names`: the features' names (default `[k]`).
+
+        **Returns:** a `Solution`: its `model` the coefficient of every feature (zero where not kept),
+        its `value` the least-squares coefficients of the kept features on the original scale (no
+        separate intercept: a constant is the library's `constant` feature), named by feature; no
+        covariance (NaN); `loss` and `initial_loss` half the squared residual with and without them;
+        its `statistics` a `SparseStatistics`.
+        """
+        max_terms, thresholds, stability = self.max_terms, self.thresholds, self.stability
+        features, target, groups = np.asarray(features, float), np.asarray(target, float), np.asarray(groups)
+        if len(np.unique(groups)) < 2:
+            raise ValueError("sparse_search: cross-validation by run needs at least 2 groups")
+        m = features.shape[1]
+        curve, spread = [], []
+        for thr in thresholds:
+            r2, per = group_cv_r2(features, target, groups, lambda Z, y: stlsq(Z, y, thr, max_terms=max_terms))
+            curve.append(r2)
+            spread.append(per.std(ddof=1) / np.sqrt(len(per)) if len(per) > 1 else 0.0)
+        best = int(np.argmax(curve))
+        # One-standard-error rule: the largest threshold (sparsest model) within one SE of the best.
+        chosen = max(i for i in range(len(thresholds)) if curve[i] >= curve[best] - spread[best])
+        threshold = float(thresholds[chosen])
+        n_subsamples, min_frequency, block = stability.n_subsamples, stability.min_frequency, stability.block
+        rng = np.random.default_rng(stability.seed)
+        n_blocks = max(2, features.shape[0] // block)
+        block_of = np.minimum(np.arange(features.shape[0]) // block, n_blocks - 1)
+        # Meinshausen and Buehlmann take, for each feature, its largest selection frequency over a set
+        # of regularisation levels; here the thresholds from the cross-validated best to the one chosen.
+        levels = [float(thresholds[i]) for i in range(min(best, chosen), chosen + 1)]
+        counts = np.zeros((len(levels), m))
+        for _ in range(n_subsamples):
+            half = rng.choice(n_blocks, size=n_blocks // 2, replace=False)
+            rows = np.isin(block_of, half)
+            Z, y, *_ = _standardise(features[rows], target[rows])
+            for i, level in enumerate(levels):
+                counts[i] += stlsq(Z, y, level, max_terms=max_terms) != 0
+        frequency = (counts / n_subsamples).max(axis=0)
+        stable = [int(k) for k in np.argsort(-frequency) if frequency[k] >= min_frequency][:max_terms]
+        selected = tuple(sorted(stable))
+        coefficients = np.zeros(0)
+        cv_r2 = 0.0
+        if selected:
+            cols = list(selected)
+            Z, y, mu, sd, scale = _standardise(features[:, cols], target)
+            beta = np.linalg.lstsq(Z, y, rcond=None)[0]
+            coefficients = beta * scale / sd[: len(cols)]
+            cv_r2, _ = group_cv_r2(
+                features[:, cols], target, groups, lambda Z_, y_: np.linalg.lstsq(Z_, y_, rcond=None)[0]
+            )
+        coefficients = np.asarray(coefficients, float)
+        every = np.zeros(m)
+        every[list(selected)] = coefficients
+        mask = np.zeros(m, bool)
+        mask[list(selected)] = True
+        parameters = Parameters.of(every, mask, names=None if names is None else tuple(names[k] for k in selected))
+        n = len(selected)
+        residual = target - features[:, list(selected)] @ coefficients
+        return Solution(
+            model=every,
+            value=jnp.asarray(coefficients),
+            parameters=parameters,
+            covariance=jnp.full((n, n), jnp.nan),
+            std_errors=jnp.full(n, jnp.nan),
+            result=optx.RESULTS.successful,
+            loss=jnp.asarray(0.5 * float(residual @ residual)),
+            initial_loss=jnp.asarray(0.5 * float(target @ target)),
+            steps=jnp.asarray(1),
+            n_residuals=len(target),
+            statistics=SparseStatistics(
+                selected=selected,
+                frequency=frequency,
+                threshold=threshold,
+                cv_r2=float(cv_r2),
+                thresholds=tuple(float(t) for t in thresholds),
+                cv_curve=tuple(float(c) for c in curve),
+            ),
+        )
+
+
 def sparse_search(
     features: np.ndarray,
     target: np.ndarray,
     groups: np.ndarray,
     *,
     max_terms: int = 3,
-    thresholds=(0.01, 0.02, 0.05, 0.08, 0.1, 0.15, 0.2, 0.3, 0.5),
+    thresholds=THRESHOLDS,
     stability: Stability = Stability(),
     names: Sequence[str] | None = None,
 ) -> Solution:
-    r"""Sparse model of `target` on `features`: STLSQ, threshold by cross-validation over `groups`, stability selection.
-
-    **Arguments:**
-
-    - `features` `(time, n_features)`, `target` `(time,)` (not standardised).
-    - `groups` `(time,)`: the run (or contiguous piece of a run) of each sample; cross-validation
-      leaves one group out at a time (at least 2 groups).
-    - `max_terms`: bound on the number of features kept.
-    - `thresholds`: the STLSQ thresholds tried (standardised units).
-    - `stability`: the stability selection over subsamples of blocks (`Stability`).
-    - `names`: the features' names (default `[k]`).
-
-    **Returns:** a `Solution`: its `model` the coefficient of every feature (zero where not kept), its `value`
-    the least-squares coefficients of the kept features on the original scale (no separate intercept: a
-    constant is the library's `constant` feature), named by feature; no covariance (NaN); `loss` and
-    `initial_loss` half the squared residual with and without them; its `statistics` a `SparseStatistics`.
-    """
-    features, target, groups = np.asarray(features, float), np.asarray(target, float), np.asarray(groups)
-    if len(np.unique(groups)) < 2:
-        raise ValueError("sparse_search: cross-validation by run needs at least 2 groups")
-    m = features.shape[1]
-    curve, spread = [], []
-    for thr in thresholds:
-        r2, per = group_cv_r2(features, target, groups, lambda Z, y: stlsq(Z, y, thr, max_terms=max_terms))
-        curve.append(r2)
-        spread.append(per.std(ddof=1) / np.sqrt(len(per)) if len(per) > 1 else 0.0)
-    best = int(np.argmax(curve))
-    # One-standard-error rule: the largest threshold (sparsest model) within one SE of the best.
-    chosen = max(i for i in range(len(thresholds)) if curve[i] >= curve[best] - spread[best])
-    threshold = float(thresholds[chosen])
-    n_subsamples, min_frequency, block = stability.n_subsamples, stability.min_frequency, stability.block
-    rng = np.random.default_rng(stability.seed)
-    n_blocks = max(2, features.shape[0] // block)
-    block_of = np.minimum(np.arange(features.shape[0]) // block, n_blocks - 1)
-    # Meinshausen and Buehlmann take, for each feature, its largest selection frequency over a set
-    # of regularisation levels; here the thresholds from the cross-validated best to the one chosen.
-    levels = [float(thresholds[i]) for i in range(min(best, chosen), chosen + 1)]
-    counts = np.zeros((len(levels), m))
-    for _ in range(n_subsamples):
-        half = rng.choice(n_blocks, size=n_blocks // 2, replace=False)
-        rows = np.isin(block_of, half)
-        Z, y, *_ = _standardise(features[rows], target[rows])
-        for i, level in enumerate(levels):
-            counts[i] += stlsq(Z, y, level, max_terms=max_terms) != 0
-    frequency = (counts / n_subsamples).max(axis=0)
-    stable = [int(k) for k in np.argsort(-frequency) if frequency[k] >= min_frequency][:max_terms]
-    selected = tuple(sorted(stable))
-    coefficients = np.zeros(0)
-    cv_r2 = 0.0
-    if selected:
-        cols = list(selected)
-        Z, y, mu, sd, scale = _standardise(features[:, cols], target)
-        beta = np.linalg.lstsq(Z, y, rcond=None)[0]
-        coefficients = beta * scale / sd[: len(cols)]
-        cv_r2, _ = group_cv_r2(features[:, cols], target, groups, lambda Z_, y_: np.linalg.lstsq(Z_, y_, rcond=None)[0])
-    coefficients = np.asarray(coefficients, float)
-    every = np.zeros(m)
-    every[list(selected)] = coefficients
-    mask = np.zeros(m, bool)
-    mask[list(selected)] = True
-    parameters = Parameters.of(every, mask, names=None if names is None else tuple(names[k] for k in selected))
-    n = len(selected)
-    residual = target - features[:, list(selected)] @ coefficients
-    return Solution(
-        model=every,
-        value=jnp.asarray(coefficients),
-        parameters=parameters,
-        covariance=jnp.full((n, n), jnp.nan),
-        std_errors=jnp.full(n, jnp.nan),
-        result=optx.RESULTS.successful,
-        loss=jnp.asarray(0.5 * float(residual @ residual)),
-        initial_loss=jnp.asarray(0.5 * float(target @ target)),
-        steps=jnp.asarray(1),
-        n_residuals=len(target),
-        statistics=SparseStatistics(
-            selected=selected,
-            frequency=frequency,
-            threshold=threshold,
-            cv_r2=float(cv_r2),
-            thresholds=tuple(float(t) for t in thresholds),
-            cv_curve=tuple(float(c) for c in curve),
-        ),
+    """`SparseSearch(max_terms, thresholds, stability).search(features, target, groups, names=names)`: the
+    sparse search on stacked arrays (see `SparseSearch.search`)."""
+    return SparseSearch(max_terms=max_terms, thresholds=thresholds, stability=stability).search(
+        features, target, groups, names=names
     )

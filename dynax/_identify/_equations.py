@@ -12,8 +12,9 @@ and what `record_offsets` tests. Each model is an `AbstractMethod` whose `equati
 and whose `fit` solves them by plain (weighted) least squares.
 """
 
+import abc
 import dataclasses
-from typing import ClassVar, Literal
+from typing import ClassVar, Literal, TYPE_CHECKING
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -25,7 +26,7 @@ from .._data._trajectory import Trajectory
 from .._errors import DataError, UsageError
 from .._fit import Solution
 from ._least_squares import least_squares
-from ._method import AbstractMethod, as_records, FitSettings
+from ._method import AbstractMethod, as_records, FitSettings, IdentifyJob
 from ._regressors import (
     column_kinds,
     dynamic_regressor,
@@ -37,6 +38,9 @@ from ._regressors import (
     with_friction,
     with_parameters,
 )
+
+if TYPE_CHECKING:
+    from ._result import Identification
 
 
 def uniformly_sampled(trajectory: Trajectory) -> Trajectory:
@@ -52,13 +56,45 @@ class AbstractLeastSquares(AbstractMethod):
     r"""A least-squares method: the system's equations, linear in its base parameters, stacked over the
     records and solved by weighted least squares (QR and SVD of the column-scaled regressor).
 
-    `fit` solves the method's equations as they are; `identify` runs its least-squares stage on
-    them instead (each record's force offsets, the consistency constraint, errors robust to rows
-    correlated in time, then the output-error refinement).
+    `fit` solves the method's equations as they are; its `identification` (what `identify` runs)
+    adds the least-squares stages: each record's force offsets or angle zeros, the consistency
+    constraint, errors robust to rows correlated in time, friction at rest, then the output-error
+    refinement (`dynax._identify._stages`). The hooks below say which of them apply.
+
+    **Class attributes:** `refits_without_loaded_rests`, whether the stage is refitted without the
+    rows where a joint rests under load (default `False`).
+
+    **Properties:** `adds_static_friction` (the model gets `Stiction` where the records rest under
+    load; default `False`: the rests are read and reported), `force_offsets` (each record's constant
+    force offset is fitted, `Dynamic`'s `offsets`), `joint_weighted` (each joint's equations are
+    weighted by its residual variance), `angle_zeros_mode` (each record's angle zeros are fitted
+    where every joint is a driven angle: `"compare"`, kept where they fit better than force
+    offsets; `"always"`, refused on other systems; `None`, default).
     """
 
     rcond: eqx.AbstractVar[float]
-    least_squares_stage: ClassVar[bool] = True
+    refits_without_loaded_rests: ClassVar[bool] = False
+
+    @abc.abstractmethod
+    def equations(self, system, trajectories, friction):
+        """The method's equations on `trajectories`: `(a, y, n_samples, settings, counts, record_rows)`
+        (see `stacked_equations`)."""
+
+    @property
+    def adds_static_friction(self) -> bool:
+        return False
+
+    @property
+    def force_offsets(self) -> bool | str:
+        return False
+
+    @property
+    def joint_weighted(self) -> bool:
+        return False
+
+    @property
+    def angle_zeros_mode(self) -> Literal["compare", "always"] | None:
+        return None
 
     def fit(self, system, records, settings: FitSettings = FitSettings()) -> Solution:
         """The least-squares estimate of `system`'s base parameters (`parameter_names`) from `records`.
@@ -72,6 +108,13 @@ class AbstractLeastSquares(AbstractMethod):
         )
         solution = least_squares(a, y, names=names, weights=weights, rcond=self.rcond)
         return eqx.tree_at(lambda s: s.model, solution, with_parameters(model, names, solution.value))
+
+    def identification(self, system, records: list[Trajectory], job: IdentifyJob) -> "Identification":
+        """The least-squares stages (`least_squares_identification`), then where it applies the
+        output-error refinement, each validated on `job.held_out`."""
+        from ._stages import least_squares_identification  # the stages build on the methods
+
+        return least_squares_identification(self, system, records, job)
 
 
 class Dynamic(AbstractLeastSquares):

@@ -145,7 +145,7 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
             warnings.warn(
                 "the constrained fit did not reach a consistent estimate: " + "; ".join(after.violated),
                 InconsistentEstimateWarning,
-                stacklevel=3,
+                stacklevel=6,
             )
     fit, serial = _serially_robust(fit, a, y, weights, estimate, record_rows)
     joint_names = split_terms(system)[0].joint_names
@@ -347,7 +347,7 @@ def _warn_if_inputs_reversed(system, names, equations, solve, qs, error, input_n
         + ",".join(f"{n}=-1" for n in which)
         + "`).",
         InconsistentEstimateWarning,
-        stacklevel=4,
+        stacklevel=7,
     )
 
 
@@ -410,7 +410,7 @@ def _warn_if_degrees(given, trajectories, error) -> None:
         + ",".join(f"{c}={factor}" for c in columns)
         + "`).",
         InconsistentEstimateWarning,
-        stacklevel=4,
+        stacklevel=7,
     )
 
 
@@ -454,6 +454,6 @@ def _warn_if_zero_upright(fitted, names, estimate, std, qs) -> None:
             + ",".join(f"{j}={np.pi:.6f}" for j in joints)
             + "`).",
             InconsistentEstimateWarning,
-            stacklevel=4,
+            stacklevel=7,
         )
         return

@@ -2,15 +2,16 @@ r"""`AbstractMethod`: what an identification method is, and what `identify` asks
 
 A method is a small `eqx.Module` of settings with one abstract method, `fit(system, records) ->
 Solution`, as an optimistix solver is `init`/`step`/`terminate` and a diffrax solver `step`: the
-driver (`identify`, `fit_vehicle`) calls the method and never checks its class. Everything else
-`identify` asks of a method is a method or attribute here with a default that suits a method
-which only fits: the least-squares methods (`Dynamic`, `Power`, `Energy`) override the hooks of
-the least-squares stage, `SimulationFit` how its stage is named.
+driver (`identify`, `fit_vehicle`) calls the method and never checks its class. `identify` asks
+every method for its `identification` (fit -> refine -> validate, given an `IdentifyJob`), whose
+default is the method's `fit` once, checked for consistency and validated; the least-squares
+methods (`Dynamic`, `Power`, `Energy`) override it with their stages, `SimulationFit` says how its
+stage is named.
 """
 
 import abc
 from collections.abc import Callable, Sequence
-from typing import ClassVar, Literal
+from typing import Literal, TYPE_CHECKING
 
 import equinox as eqx
 from jaxtyping import Array, Float
@@ -18,6 +19,10 @@ from jaxtyping import Array, Float
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
 from .._fit import Solution
+from ._validation import HeldOut
+
+if TYPE_CHECKING:
+    from ._result import Identification
 
 
 class FitSettings(eqx.Module):
@@ -53,6 +58,22 @@ def as_records(records) -> list[Trajectory]:
     raise UsageError(f"`records` must be a Trajectory or a non-empty list of Trajectory, got {type(records).__name__}")
 
 
+class IdentifyJob(eqx.Module):
+    """What `identify` hands a method's `identification` beyond the system and the records to fit.
+
+    **Fields:** `settings` (the `FitSettings` of the fit), `held_out` (the `HeldOut` records every
+    stage is validated on), `consistency` (`"constrain"`, `"check"` or `"off"`, as `identify` takes
+    it), `refine` (`identify`'s `refine`: `"auto"`, `True`, `False` or a `SimulationFit`; a method
+    that has no refinement ignores it), `system_name` (the contract's name of the system).
+    """
+
+    settings: FitSettings
+    held_out: HeldOut
+    consistency: Literal["constrain", "check", "off"] = "constrain"
+    refine: object = "auto"
+    system_name: str = ""
+
+
 class AbstractMethod(eqx.Module):
     """An identification method: `fit(system, records, settings) -> Solution`.
 
@@ -60,27 +81,10 @@ class AbstractMethod(eqx.Module):
     (`dynax.fit_least_squares`, `dynax.fit_minimise`, or a linear solve returning a `Solution`);
     `identify(system, records, method=YourMethod())` then runs it, checks the estimate's physical
     consistency where the system has conditions, and validates the fitted model on held-out data.
-    The hooks below have defaults for such a method; the built-in least-squares methods override
-    them to run `identify`'s least-squares stage (force offsets, angle zeros, friction at rest, the
+    The methods below have defaults for such a method; the built-in least-squares methods override
+    `identification` to run their stages (force offsets, angle zeros, friction at rest, the
     consistency constraint and the output-error refinement).
-
-    **Class attributes** (what `identify` asks):
-
-    - `least_squares_stage`: whether `identify` runs its least-squares stage (the method builds the
-      linear equations of `equations`) rather than calling `fit` once (default `False`).
-    - `refits_without_loaded_rests`: least squares: refit without the rows where a joint rests
-      under load (default `False`).
-
-    **Properties:** `adds_static_friction`, whether the model gets `Stiction` where the records rest
-    under load (default `False`: the rests are read and reported, the model is left as it is).
     """
-
-    least_squares_stage: ClassVar[bool] = False
-    refits_without_loaded_rests: ClassVar[bool] = False
-
-    @property
-    def adds_static_friction(self) -> bool:
-        return False
 
     @abc.abstractmethod
     def fit(self, system, records, settings: FitSettings = FitSettings()) -> Solution:
@@ -89,6 +93,19 @@ class AbstractMethod(eqx.Module):
         **Returns:** a `Solution` whose `model` is the fitted system and whose `names` name its
         estimate.
         """
+
+    def identification(self, system, records: list[Trajectory], job: IdentifyJob) -> "Identification":
+        """What `identify` runs on the records to fit: fit -> refine -> validate.
+
+        The default is `fit` once (with `job.settings`), the estimate's physical consistency checked
+        where the system has conditions (`job.consistency`), and the fitted model validated on
+        `job.held_out`, reported as one stage of kind `stage_kind`.
+
+        **Returns:** an `Identification`.
+        """
+        from ._stages import fit_once  # the stages build on the methods: imported where they run
+
+        return fit_once(self, system, records, job)
 
     @property
     def label(self) -> str:
@@ -104,26 +121,3 @@ class AbstractMethod(eqx.Module):
         """The samples that entered `solution` (default: every sample of `records`)."""
         del solution
         return sum(len(r) for r in records)
-
-    def equations(self, system, trajectories, friction):
-        """Least squares: the method's stacked linear equations (see `stacked_equations`)."""
-        raise UsageError(
-            f"identify: `method` must be Dynamic(), Power(), Energy() or SimulationFit(), got {type(self).__name__}"
-        )
-
-    @property
-    def force_offsets(self) -> bool | str:
-        """Least squares: whether each record's constant force offset is fitted (`Dynamic`'s `offsets`)."""
-        return False
-
-    @property
-    def joint_weighted(self) -> bool:
-        """Least squares: whether each joint's equations are weighted by its residual variance."""
-        return False
-
-    @property
-    def angle_zeros_mode(self) -> Literal["compare", "always"] | None:
-        """Least squares: whether `identify` fits each record's angle zeros where every joint of the
-        system is a driven angle: `"compare"` (kept where they fit better than force offsets),
-        `"always"` (refused on other systems) or `None` (default)."""
-        return None

@@ -171,3 +171,22 @@ def split_for_validation(records: list[Trajectory], fraction: float, min_duratio
         else:
             fit.append(record)
     return fit, held
+
+
+class HeldOut(eqx.Module):
+    """The records `identify` validates every stage of a fit on, and how (what `Validate` became once
+    the records to fit were split off).
+
+    **Fields:** `records` (the held-out records; empty: nothing is validated), `horizons_s`, `source`
+    (what they are, as the validation reports it), `tails_of` (for held-out tails, the index of the
+    fitted record each was cut from; `None` for records of their own).
+    """
+
+    records: list[Trajectory]
+    horizons_s: tuple[float, ...]
+    source: str
+    tails_of: tuple[int, ...] | None = None
+
+    def validate(self, model) -> SimulationError | None:
+        """`held_out_error` of `model` on the held-out records, or `None` where there are none."""
+        return held_out_error(model, self.records, self.horizons_s, source=self.source) if self.records else None

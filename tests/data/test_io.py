@@ -135,11 +135,11 @@ def test_backward_differences_are_the_derivative_half_an_interval_back_on_an_irr
     ts = np.cumsum(np.random.default_rng(3).uniform(0.001, 0.006, size=200))
     ys = np.stack([0.7 * ts**2 - ts, -2.0 * ts**2 + 0.3], axis=1)
     mid = 0.5 * (ts[1:] + ts[:-1])
-    v = np.asarray(dynax.backward_difference(ts, ys))
+    v = np.asarray(dynax.internal.backward_difference(ts, ys))
     np.testing.assert_allclose(v[1:], np.stack([1.4 * mid - 1.0, -4.0 * mid], axis=1), rtol=1e-9, atol=1e-9)
     np.testing.assert_array_equal(v[0], v[1])
     with pytest.raises(ValueError, match="time >= 2"):
-        dynax.backward_difference(ts[:1], ys[:1])
+        dynax.internal.backward_difference(ts[:1], ys[:1])
 
 
 def test_arm_records_of_encoder_positions_alone_get_central_difference_velocities(tmp_path):

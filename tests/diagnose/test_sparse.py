@@ -50,3 +50,35 @@ def test_sparse_search_on_noise_keeps_nothing():
         fit = sparse_search(X, rng.normal(size=1500), groups, max_terms=3, stability=Stability(block=50, seed=seed))
         false += len(fit.statistics.selected) > 0 and fit.statistics.cv_r2 > 0.05
     assert false == 0
+
+
+def test_the_sparse_search_is_a_method_that_fits_records():
+    # The correlated design above, cut into five records of 600 samples (the candidate columns as
+    # states, the target as the input): each record is a group of the cross-validation.
+    import jax.numpy as jnp
+    import pytest
+
+    import dynax
+    from dynax.internal import FeatureRegression, SparseSearch
+
+    X, rng = _design(3000, 10, seed=2, correlated=True)
+    y = 2.0 * X[:, 0] + 1.0 * rng.normal(size=3000)
+    names = tuple(f"x{k}" for k in range(10))
+    records = [
+        dynax.Trajectory(
+            jnp.arange(600) * 0.01, jnp.asarray(X[k : k + 600]), jnp.asarray(y[k : k + 600, None]), names, ("y",)
+        )
+        for k in range(0, 3000, 600)
+    ]
+    regression = FeatureRegression(lambda r: np.asarray(r.xs), lambda r: np.asarray(r.us[:, 0]), names=names)
+    method = SparseSearch(stability=Stability(block=100))
+    fit = method.fit(regression, records)
+    assert isinstance(method, dynax.AbstractMethod) and method.label == "sparse"
+    assert fit.names == ("x0",) and abs(float(fit.value[0]) - 2.0) < 0.1
+    # the search on the stacked arrays, one group per record
+    direct = sparse_search(X, y, np.repeat(np.arange(5), 600), stability=Stability(block=100))
+    np.testing.assert_array_equal(np.asarray(fit.value), np.asarray(direct.value))
+    # one record: cut into contiguous pieces for the cross-validation
+    assert method.fit(regression, records[0]).statistics.selected[:1] == (0,)
+    with pytest.raises(dynax.UsageError, match="FeatureRegression"):
+        method.fit(dynax.Acrobot(), records)

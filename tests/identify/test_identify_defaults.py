@@ -375,7 +375,7 @@ def test_one_dfki_run_alone_is_said_to_determine_the_size_parameters_poorly(monk
     # errors, clustered over segments, say what the run then tells: theta1 and theta2 to 38 and 31 %.
     # What `identify` returns is judged, so the user is warned; judged on the least-squares stage,
     # nothing was said.
-    from dynax._identify import _identify as identify_module  # private: monkeypatched (no angle zeros)
+    from dynax._identify import _stages as identify_module  # private: monkeypatched (no angle zeros)
 
     monkeypatch.setattr(identify_module, "_record_angle_zeros", lambda *args: None)
     with pytest.warns(PoorlyDeterminedWarning, match="theta1") as caught:
@@ -557,7 +557,7 @@ def test_the_refinement_measures_a_torque_latency_and_is_not_biased_by_it(monkey
     truth = np.array([RIG[f"theta{i}"] for i in range(1, 6)])
     relative = np.abs(np.asarray(result.estimate[:5]) - truth) / truth
     assert np.all(relative < 0.02), dict(zip(result.names, relative))
-    from dynax._identify import _identify as identify_module  # private: monkeypatched (no input timing)
+    from dynax._identify import _stages as identify_module  # private: monkeypatched (no input timing)
     from dynax.internal import refine_by_simulation
 
     monkeypatch.setattr(
@@ -780,7 +780,7 @@ def test_cli_says_when_the_refinement_validates_worse_than_least_squares(dataset
     # refinement predicts run 01 better: 0.092 against 0.114 rad at 0.5 s, 2026-11-27.)
     import json
 
-    from dynax._identify import _identify as identify_module  # private: monkeypatched (no angle zeros)
+    from dynax._identify import _stages as identify_module  # private: monkeypatched (no angle zeros)
     from dynax.internal import cli_main
     from tests.conftest import DFKI_MAPPING
 

@@ -1,6 +1,7 @@
 """Methods own their fit: `identify` and `fit_vehicle` call a method's `fit`, never check its class, and
 every built-in method's `fit` gives the estimate a computation outside it gives."""
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -49,24 +50,17 @@ class EngineLeastSquares(AbstractMethod):
         fitted = dynax.Acrobot.from_base_parameters(dict(zip(names, np.asarray(solution.value))))
         scaled = np.asarray(a) / np.linalg.norm(np.asarray(a), axis=0)
         _, singular, directions = np.linalg.svd(scaled, full_matrices=False)
-        return dynax.Solution(
-            model=fitted,
-            value=solution.value,
-            parameters=solution.parameters,
-            covariance=solution.covariance,
-            std_errors=solution.std_errors,
-            result=solution.result,
-            loss=solution.loss,
-            initial_loss=solution.initial_loss,
-            steps=solution.steps,
-            statistics=dynax.internal.Statistics(
-                condition_number=jnp.asarray(singular[0] / singular[-1]),
-                rank=jnp.asarray(len(names)),
-                singular_values=jnp.asarray(singular),
-                directions=jnp.asarray(directions),
-                residual_rms=jnp.sqrt(2 * solution.loss / a.shape[0]),
-                n_rows=a.shape[0],
-            ),
+        statistics = dynax.internal.Statistics(
+            condition_number=jnp.asarray(singular[0] / singular[-1]),
+            rank=jnp.asarray(len(names)),
+            singular_values=jnp.asarray(singular),
+            directions=jnp.asarray(directions),
+            residual_rms=jnp.sqrt(2 * solution.loss / a.shape[0]),
+            n_rows=a.shape[0],
+        )
+        # the engine's `Solution`, carrying the fitted system and the regressor's statistics
+        return eqx.tree_at(
+            lambda s: (s.model, s.statistics), solution, (fitted, statistics), is_leaf=lambda x: x is None
         )
 
 
@@ -153,3 +147,33 @@ def test_vehicle_criteria_fit_through_the_same_call():
         dynax.OneStep().fit(dynax.Helicopter(), [flight, flight])
     with pytest.raises(UsageError, match="continuous record"):
         dynax.FrequencyDomain().fit(dynax.Helicopter(), flight, FitSettings(breaks=(100,)))
+
+
+def test_identify_asks_the_method_for_its_identification_with_the_job(records):
+    seen = []
+
+    class Spy(AbstractMethod):
+        def fit(self, system, records, settings=FitSettings()):
+            raise AssertionError("identify asks for the identification; only the default calls fit")
+
+        def identification(self, system, records, job):
+            seen.append(([len(r) for r in records], job))
+            return "identified"
+
+    out = identify(TRUE, records, Spy(), friction="coulomb", consistency="check", refine=False)
+    assert out == "identified"
+    lengths, job = seen[0]
+    assert all(n < len(r) for n, r in zip(lengths, records))  # the heads: the tails are held out
+    assert job.held_out.tails_of == (0, 1) and len(job.held_out.records) == 2
+    assert (job.settings.friction, job.consistency, job.refine, job.system_name) == (
+        "coulomb",
+        "check",
+        False,
+        "acrobot",
+    )
+    identify(TRUE, records[0], Spy(), validation=records[1])
+    lengths, job = seen[1]
+    assert lengths == [len(records[0])] and job.held_out.tails_of is None  # records of their own
+    assert job.held_out.validate(TRUE) is not None
+    identify(TRUE, records, Spy(), validation=Validate(holdout=0))
+    assert seen[2][1].held_out.validate(TRUE) is None  # nothing held out, nothing validated

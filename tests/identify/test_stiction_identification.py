@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import dynax
-from dynax._identify import _identify as identify_module  # private: monkeypatched (no rest found)
+from dynax._identify import _stages as identify_module  # private: monkeypatched (no rest found)
 from dynax.internal import consistent_parametrisation, parameter_names, parameter_vector, StaticFriction
 from tests.reference import stick_slip_arm
 
