@@ -30,6 +30,10 @@ from ._cli._output import staged_directory as staged_directory
 from ._cli._output import write_json as write_json
 
 # Control: the leaderboard's rollout and the swing-up reference's pieces.
+from ._control._collocation import collocate as collocate
+from ._control._collocation import collocation_costs as collocation_costs
+from ._control._collocation import defect_jacobian as defect_jacobian
+from ._control._collocation import Transcription as Transcription
 from ._control._from_rest import (
     collocation_reference as collocation_reference,
 )
