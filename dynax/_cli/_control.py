@@ -14,8 +14,9 @@ def register(subparsers):
         help="tune and score acrobot swing-up controllers (RealAIGym leaderboard rules)",
         description=(
             "`dynax control acrobot --out POLICY.npz` designs a swing-up from the hanging rest for the "
-            "RealAIGym acrobot (an optimised trajectory, time-varying LQR, LQR balance with an energy-shaping "
-            "recovery) and saves it; `dynax control evaluate POLICY.npz` scores a saved controller by the "
+            "RealAIGym acrobot (a reference by many-start direct collocation against the score, time-varying "
+            "LQR, LQR balance with an energy-shaping recovery; minutes on 2 CPU cores) and saves it; "
+            "`dynax control evaluate POLICY.npz` scores a saved controller by the "
             "leaderboard's rules: the performance score on the nominal plant and the robustness score "
             "over the six perturbation families."
         ),
