@@ -545,6 +545,10 @@ from ._validate import (
 # Aliased re-exports (`x as y`) count as exports only through `__all__`, so it lists every name.
 __all__ = [
     "group_errors",
+    "collocate",
+    "collocation_costs",
+    "defect_jacobian",
+    "Transcription",
     "AbstractBodyModel",
     "ProgressBar",
     "Simulation",

@@ -327,7 +327,7 @@ def search_reference(plant: LeaderboardPlant | None = None, search: ReferenceSea
     z = jnp.asarray(z0)
     keep = np.arange(len(labels))
     t0 = time.perf_counter()
-    surrogate = defect = costs = None
+    surrogate, defect, costs = np.zeros(0), np.zeros(0), np.zeros((0, 5))
     for i, stage in enumerate(search.stages):
         if i > 0:
             ok = defect < search.feasible
@@ -351,7 +351,6 @@ def search_reference(plant: LeaderboardPlant | None = None, search: ReferenceSea
             f"best surrogate scores {np.round(np.sort(surrogate[ok])[::-1][:4], 3).tolist()} "
             f"[{time.perf_counter() - t0:.0f} s]"
         )
-    assert surrogate is not None and defect is not None and costs is not None
     order = np.argsort(np.where(defect < search.feasible, -surrogate, np.inf), kind="stable")
     return [
         dict(

@@ -799,11 +799,10 @@ def swing_up_reference(
 
     plant = LeaderboardPlant.nominal() if plant is None else plant
     search = ReferenceSearch(torque_limit=design.torque_limit) if search is None else search
-    best = search_reference(plant, search, say)[0]
-    n = best["knots"].shape[0] - 1
-    fine = knot_matrix(int(round(search.horizon / design.dt)), design.dt, search.knot_spacing, n)
+    knots = np.asarray(search_reference(plant, search, say)[0]["knots"])
+    fine = knot_matrix(int(round(search.horizon / design.dt)), design.dt, search.knot_spacing, knots.shape[0] - 1)
     knot_design = eqx.tree_at(lambda d: d.knot_spacing, design, search.knot_spacing)
-    return end_upright(plant, fine @ jnp.asarray(best["knots"]), knot_design)
+    return end_upright(plant, fine @ jnp.asarray(knots), knot_design)
 
 
 def design_swing_up(
