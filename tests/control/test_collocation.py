@@ -98,6 +98,6 @@ def test_pumping_starts_are_the_grid_and_start_at_rest():
 
 @pytest.mark.slow
 def test_the_default_search_beats_the_published_leaderboard():
-    """The whole default search (about 10 min on 2 cores): performance above every published entry."""
+    """The whole default search (about 7 min on 2 busy cores): performance above every published entry."""
     controller = control.design_swing_up()
     assert control.performance(controller).score >= 0.70
