@@ -339,6 +339,10 @@ def load_controller(path) -> RobotController:
 class SwingUpDesign(eqx.Module):
     """How `design_swing_up` builds a `SwingUpFromRest`.
 
+    `design_swing_up` finds its reference by `ReferenceSearch` (`swing_up_reference`); the search
+    fields below (`horizon` to `elbow_range`, `polish_*`) are those of `optimise_swing_up`, the
+    earlier single-basin search, and `end_upright` uses `knot_spacing`, `dt` and `torque_limit`.
+
     **Fields:**
 
     - `horizon` [s], `knot_spacing` [s]: the reference's length and the spacing of its torque
