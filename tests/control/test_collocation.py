@@ -101,3 +101,10 @@ def test_the_default_search_beats_the_published_leaderboard():
     """The whole default search (about 7 min on 2 busy cores): performance above every published entry."""
     controller = control.design_swing_up()
     assert control.performance(controller).score >= 0.70
+
+
+def test_cli_refuses_a_horizon_off_the_knot_grid(tmp_path, capsys):
+    from dynax.internal import cli_main
+
+    assert cli_main(["control", "acrobot", "--out", str(tmp_path / "p.npz"), "--horizon", "1.51"]) == 2
+    assert "--horizon" in capsys.readouterr().err and not (tmp_path / "p.npz").exists()
