@@ -3,7 +3,9 @@
 The leaderboard: `LeaderboardPlant`, `LeaderboardRules`, `simulate_leaderboard`, `performance`,
 `robustness` (with `Performance`, `Robustness`, `Family`, `robustness_cases`); the from-rest
 swing-up: `design_swing_up`, `SwingUpDesign`, `SwingUpFromRest`, `load_controller`,
-`RobotController`. The names the top level already exports (`dynax.lqr`, ...) are here too.
+`RobotController`, and its reference's search `swing_up_reference`, `search_reference`,
+`ReferenceSearch`, `PumpingStarts`, `CollocationStage`. The names the top level already exports
+(`dynax.lqr`, ...) are here too.
 """
 
 from ._control import (
@@ -39,6 +41,7 @@ from ._control import (
 from ._control import (
     ClosedLoop as ClosedLoop,
 )
+from ._control import CollocationStage as CollocationStage
 from ._control import (
     COST_NAMES as COST_NAMES,
 )
@@ -144,9 +147,11 @@ from ._control import (
 from ._control import (
     pulse_schedule as pulse_schedule,
 )
+from ._control import PumpingStarts as PumpingStarts
 from ._control import (
     random_starts as random_starts,
 )
+from ._control import ReferenceSearch as ReferenceSearch
 from ._control import (
     RegionOfAttraction as RegionOfAttraction,
 )
@@ -174,6 +179,7 @@ from ._control import (
 from ._control import (
     run_pgpe as run_pgpe,
 )
+from ._control import search_reference as search_reference
 from ._control import (
     simulate_closed_loop as simulate_closed_loop,
 )
@@ -201,6 +207,7 @@ from ._control import (
 from ._control import (
     sweep_pgpe as sweep_pgpe,
 )
+from ._control import swing_up_reference as swing_up_reference
 from ._control import (
     swing_up_reward as swing_up_reward,
 )

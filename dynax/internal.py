@@ -30,6 +30,10 @@ from ._cli._output import staged_directory as staged_directory
 from ._cli._output import write_json as write_json
 
 # Control: the leaderboard's rollout and the swing-up reference's pieces.
+from ._control._collocation import collocate as collocate
+from ._control._collocation import collocation_costs as collocation_costs
+from ._control._collocation import defect_jacobian as defect_jacobian
+from ._control._collocation import Transcription as Transcription
 from ._control._from_rest import (
     collocation_reference as collocation_reference,
 )
@@ -548,6 +552,10 @@ from ._validate import (
 # Aliased re-exports (`x as y`) count as exports only through `__all__`, so it lists every name.
 __all__ = [
     "group_errors",
+    "collocate",
+    "collocation_costs",
+    "defect_jacobian",
+    "Transcription",
     "AbstractBodyModel",
     "ProgressBar",
     "Simulation",

@@ -30,6 +30,9 @@ reference stretched to each horizon, and perturbations of its torques.
    get the default feedback (`design_swing_up(reference=...)`, lead `--lead`) and are scored by
    the exact rules; the best `--top` also for robustness.
 
+`dynax.control.ReferenceSearch` (what `dynax control acrobot` runs) folds the four runs of this
+script that found the 1.5 s reference into one call ([the dev notes](../docs/devdocs/control_notes.md)).
+
 Results: `search.json`, `search.png`, `best_policy.npz` under `--out`
 (`experiments/results/leaderboard/collocation_starts/` by default).
 """
@@ -51,7 +54,7 @@ import optax
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from dynax import control
-from dynax.internal import knot_matrix, polish_on_constraint
+from dynax.internal import collocation_costs, knot_matrix, polish_on_constraint
 from experiments._swing_up_search import plot_best, score_references
 
 OUT = pathlib.Path(__file__).resolve().parent / "results" / "leaderboard" / "collocation_starts"
@@ -75,37 +78,9 @@ def _unpack(z, n, sign):
     return xs, u
 
 
-def _intervals(plant, xs, u, sub):
-    """RK4 steps of `sub` seconds per knot interval, the torque interpolated at each step's start
-    (the shooting's steps): the steps' start states `(n, m, 4)`, torques `(n, m)` and the interval ends."""
-    m = int(round(H / sub))
-
-    def one(x, ua, ub):
-        starts, torques = [], []
-        for j in range(m):
-            uj = ua + (ub - ua) * j / m
-            starts.append(x)
-            torques.append(uj)
-            x = plant.rk4_step(x, jnp.stack([jnp.zeros_like(uj), uj]), sub)
-        return jnp.stack(starts), jnp.stack(torques), x
-
-    return jax.vmap(one)(xs[:-1], u[:-1], u[1:])
-
-
 def costs_of(plant, xs, u, sub=SUB, sharpness=0.01):
     """The five smooth costs of a collocated trajectory (`score_surrogate`'s definitions) and its defects."""
-    starts, steps_u, ends = _intervals(plant, xs, u, sub)
-    q2_next = jnp.concatenate([starts[:, 1:, 1], xs[1:, 1:2]], axis=1).reshape(-1)
-    starts, steps_u = starts.reshape(-1, 4), steps_u.reshape(-1)
-    line = RULES.height_fraction * (plant.l1 + plant.l2)
-    below = jnp.sum(jax.nn.sigmoid((line - plant.end_effector_height(starts[:, :2])) / sharpness)) * sub
-    energy = jnp.sum(jnp.abs((q2_next - starts[:, 1]) * steps_u))
-    torque = jnp.sum(steps_u**2) * sub
-    smooth = jnp.sqrt(jnp.sum(jnp.diff(u) ** 2) * RULES.dt / H / (RULES.n_steps - 1) + 1e-14)
-    velocity = jnp.sum(starts[:, 2:] ** 2) * sub
-    c = jnp.stack([below, energy, torque, smooth, velocity])
-    defects = (ends - xs[1:]) * SCALE[None]
-    return c, defects
+    return collocation_costs(plant, xs, u, H, sub, RULES, sharpness)
 
 
 @eqx.filter_jit

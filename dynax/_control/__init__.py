@@ -18,6 +18,10 @@ from ._closed_loop import (
 from ._closed_loop import (
     upright_error as upright_error,
 )
+from ._collocation import CollocationStage as CollocationStage
+from ._collocation import PumpingStarts as PumpingStarts
+from ._collocation import ReferenceSearch as ReferenceSearch
+from ._collocation import search_reference as search_reference
 from ._from_rest import (
     balance_lqr as balance_lqr,
 )
@@ -36,6 +40,7 @@ from ._from_rest import (
 from ._from_rest import (
     RobotController as RobotController,
 )
+from ._from_rest import swing_up_reference as swing_up_reference
 from ._from_rest import (
     SwingUpDesign as SwingUpDesign,
 )

@@ -339,6 +339,10 @@ def load_controller(path) -> RobotController:
 class SwingUpDesign(eqx.Module):
     """How `design_swing_up` builds a `SwingUpFromRest`.
 
+    `design_swing_up` finds its reference by `ReferenceSearch` (`swing_up_reference`); the search
+    fields below (`horizon` to `elbow_range`, `polish_*`) are those of `optimise_swing_up`, the
+    earlier single-basin search, and `end_upright` uses `knot_spacing`, `dt` and `torque_limit`.
+
     **Fields:**
 
     - `horizon` [s], `knot_spacing` [s]: the reference's length and the spacing of its torque
@@ -782,17 +786,41 @@ def estimator_view(plant: LeaderboardPlant, xs, us, lead, dt, velocity_source=1)
     return xh + lead * f
 
 
+def swing_up_reference(
+    plant: LeaderboardPlant | None = None, search=None, design: SwingUpDesign = SwingUpDesign(), say=None
+):
+    """The swing-up reference from rest by `search_reference`'s continuation of collocations.
+
+    The best collocation's knot torques (by the score's surrogate) are interpolated to the control
+    periods and re-ended exactly upright at rest at `design.dt` (`end_upright`).
+
+    **Arguments:** `plant` (the benchmark's nominal by default), `search` (a `ReferenceSearch`; its
+    defaults when None), `design` (its `dt`, `torque_limit`), `say(line)` for the stages' reports (printed by default).
+
+    **Returns:** `(xs, us)`: the reference states `(n, 4)` at the control periods and the torques `(n,)`.
+    """
+    from ._collocation import ReferenceSearch, search_reference
+
+    plant = LeaderboardPlant.nominal() if plant is None else plant
+    search = ReferenceSearch(torque_limit=design.torque_limit) if search is None else search
+    knots = np.asarray(search_reference(plant, search, say)[0]["knots"])
+    fine = knot_matrix(int(round(search.horizon / design.dt)), design.dt, search.knot_spacing, knots.shape[0] - 1)
+    knot_design = eqx.tree_at(lambda d: d.knot_spacing, design, search.knot_spacing)
+    return end_upright(plant, fine @ jnp.asarray(knots), knot_design)
+
+
 def design_swing_up(
-    plant: LeaderboardPlant | None = None, design: SwingUpDesign = SwingUpDesign(), reference=None
+    plant: LeaderboardPlant | None = None, design: SwingUpDesign = SwingUpDesign(), reference=None, search=None
 ) -> SwingUpFromRest:
     """Build a `SwingUpFromRest` for `plant` (the controller's model; the benchmark's nominal by default).
 
-    Optimises the reference (`optimise_swing_up`) unless `reference = (xs, us)` is given, then
-    computes the balancing LQR and the time-varying gains that end in it; with
-    `design.track_estimate` the feedback compares the estimate with `estimator_view` of the reference.
+    Finds the reference (`swing_up_reference` with `search`, a `ReferenceSearch`) unless
+    `reference = (xs, us)` is given, then computes the balancing LQR and the time-varying gains
+    that end in it; with `design.track_estimate` the feedback compares the estimate with
+    `estimator_view` of the reference.
     """
     plant = LeaderboardPlant.nominal() if plant is None else plant
-    xs, us = optimise_swing_up(plant, design) if reference is None else reference
+    xs, us = swing_up_reference(plant, search, design) if reference is None else reference
     k_bal, s_bal = balance_lqr(plant, design.q_balance, design.r_balance, design.dt)
     gains = tvlqr(plant, xs, us, design.q_track, design.r_track, s_bal, design.dt)
     model = jnp.stack([jnp.asarray(getattr(plant, k), float) for k in LeaderboardPlant.__dataclass_fields__])
