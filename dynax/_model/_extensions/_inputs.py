@@ -62,7 +62,7 @@ class AbstractInputTerm(AbstractTerm):
         """The internal states at rest under a constant input `u` (used to start a rollout)."""
         return jnp.zeros((self.n_hidden,), jnp.result_type(u, self.coefficient))
 
-    def shift(self, us: Float[Array, "step n_inputs"], dt: float) -> Float[Array, "step n_inputs"]:
+    def shift(self, us: Float[Array, "step n_inputs"], dt: Float[ArrayLike, ""]) -> Float[Array, "step n_inputs"]:
         """The recorded inputs `us` (zero-order hold, `dt` apart) as a windowed rollout of a record passes them on,
         before the ODE: unchanged, but for a dead time, which shifts them exactly (`InputDelay.shift`)."""
         return us
@@ -163,7 +163,7 @@ class _AbstractPadeDelay(AbstractInputTerm):
 
     coefficient: eqx.AbstractVar[Float[Array, ""]]
 
-    def shift(self, us: Float[Array, "step n_inputs"], dt: float) -> Float[Array, "step n_inputs"]:
+    def shift(self, us: Float[Array, "step n_inputs"], dt: Float[ArrayLike, ""]) -> Float[Array, "step n_inputs"]:
         r"""The recorded inputs `us` (zero-order hold, `dt` apart, the first ones history) delayed by $T$ on the
         term's inputs: over each sample interval the mean of the held input $T$ earlier,
         $a_k = (1 - f)\,u_{k-m} + f\,u_{k-m-1}$ with $T/\Delta t = m + f$, $0 \le f < 1$ (the first sample held
