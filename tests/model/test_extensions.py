@@ -189,3 +189,20 @@ def test_windowed_rollouts_shift_the_input_by_a_dead_time_of_any_size():
     xs = integrate(free, np.zeros(2), ts, us, delay=0.005, delayed=0)[n_before:]
     pade = np.nan_to_num(rmse(InputDelay(0, 0.005), xs, history=False), nan=np.inf)  # the ODE form: its Padé filter
     assert pade[1] > 10 * rmse(InputDelay(0, 0.005), xs)[1]
+
+
+def test_the_dead_time_shift_agrees_with_the_residual_probes_interval_means():
+    # Two implementations of one mean, written apart: the traced shift of the windowed rollouts
+    # (`Extended.with_shifted_inputs`) and the host-side one of the one-step residuals (`exact_delays(interval=True)`),
+    # on a record's inputs, a fraction of a sample and a sample and a half late.
+    from dynax import Trajectory
+    from dynax.internal import exact_delays
+
+    ts = jnp.arange(300) * 0.01
+    us = jnp.asarray(np.random.default_rng(4).normal(size=(300, 1)))
+    run = Trajectory(ts, jnp.zeros((300, 4)), us, ("q1", "q2", "dq1", "dq2"), ("tau2",))
+    for delay in (0.0037, 0.015):
+        model = Extended(Acrobot(), (InputDelay(0, delay),))
+        _, probe, _ = exact_delays(model, run, interval=True)
+        _, shifted = model.with_shifted_inputs(us, 0.01)
+        np.testing.assert_allclose(np.asarray(shifted)[5:], np.asarray(probe)[5:], atol=1e-12)
