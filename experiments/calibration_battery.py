@@ -9,7 +9,7 @@ Each is diagnosed with its system's nominal model; the script tallies the calibr
 confusion matrix of the hidden cause against the verdict and the first named cause.
 
     nice -n 5 python experiments/calibration_battery.py [OUT] [--only SUBSTRING] [--every K] [--budget-s S]
-        [--names NAME,NAME,...]
+        [--names "NAME;NAME;..."]
 
 OUT defaults to `experiments/results/calibration_battery`. Cases run in an order that interleaves systems and
 causes, and `OUT/cases.json` is rewritten after each (a rerun skips the cases already there), so a run cut
@@ -192,10 +192,10 @@ def main():
         cases = [c for c in cases if opts["--only"] in c.name]
     if "--names" in opts:
         by_name = {c.name: c for c in CASES}
-        unknown = [n for n in opts["--names"].split(",") if n not in by_name]
+        unknown = [n for n in opts["--names"].split(";") if n not in by_name]
         if unknown:
             raise SystemExit(f"--names: no such case: {', '.join(unknown)}")
-        cases = [by_name[n] for n in opts["--names"].split(",")]
+        cases = [by_name[n] for n in opts["--names"].split(";")]
     todo = [c for c in cases if c.name not in done]
     budget = float(opts.get("--budget-s", "inf"))
     start = time.perf_counter()
