@@ -9,11 +9,13 @@ Each is diagnosed with its system's nominal model; the script tallies the calibr
 confusion matrix of the hidden cause against the verdict and the first named cause.
 
     nice -n 5 python experiments/calibration_battery.py [OUT] [--only SUBSTRING] [--every K] [--budget-s S]
+        [--names "NAME;NAME;..."]
 
 OUT defaults to `experiments/results/calibration_battery`. Cases run in an order that interleaves systems and
 causes, and `OUT/cases.json` is rewritten after each (a rerun skips the cases already there), so a run cut
 short by `--budget-s` (or by hand) is a stratified subset, and the summary says how many ran. `--every K`
-runs every K-th case of that order.
+runs every K-th case of that order. `--names` runs the named cases in the order given (a rerun of the rows a
+change touches, most telling first).
 """
 
 import json
@@ -175,7 +177,7 @@ def markdown(c, rows) -> str:
 def main():
     args = sys.argv[1:]
     opts = {}
-    for flag in ("--only", "--every", "--budget-s"):
+    for flag in ("--only", "--every", "--budget-s", "--names"):
         if flag in args:
             i = args.index(flag)
             opts[flag] = args[i + 1]
@@ -188,6 +190,12 @@ def main():
     cases = interleaved(CASES)[:: int(opts.get("--every", 1))]
     if "--only" in opts:
         cases = [c for c in cases if opts["--only"] in c.name]
+    if "--names" in opts:
+        by_name = {c.name: c for c in CASES}
+        unknown = [n for n in opts["--names"].split(";") if n not in by_name]
+        if unknown:
+            raise SystemExit(f"--names: no such case: {', '.join(unknown)}")
+        cases = [by_name[n] for n in opts["--names"].split(";")]
     todo = [c for c in cases if c.name not in done]
     budget = float(opts.get("--budget-s", "inf"))
     start = time.perf_counter()

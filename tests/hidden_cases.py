@@ -489,34 +489,45 @@ def truth_gain(case: Case, horizon_s: float, stride_s: float = 0.05) -> float | 
     It is computed here, by fixed-step RK4 in numpy on the written-out laws (5 ms steps; 1 ms with a dead time, the
     recorded input shifted in time, so that every switch falls on a step's edge), not by dynax. In `known` mode
     the diagnosis's nominal is the truth without its effect, so this is the gain a right candidate reaches; in
-    `refit` mode the refit absorbs part of the effect, so it is an upper bound. Either way a case whose truth
-    gains less than the practical margin is an effect the record cannot show at that horizon, and `none` there
-    is the verdict rule's right answer. A lag's state starts settled on the window's first input, as the
-    diagnosis's does. `None` for the stick-slip cases (their truth is event-based)."""
+    `refit` mode the refit absorbs part of the effect, so it is an upper bound (`refit_truth_gain` is the gain
+    over the effect-free model refitted). Either way a case whose truth gains less than the practical margin is an
+    effect the record cannot show at that horizon, and `none` there is the verdict rule's right answer. A lag's
+    state starts settled on the window's first input, as the diagnosis's does. `None` for the stick-slip cases
+    (their truth is event-based)."""
     if case.cause is None:
         return 0.0
     if case.law in STICK_SLIP:
         return None
+    rhs, n_hidden = _rhs_of(case, dataclasses.replace(case, cause=None))
+    return _gain_over(case, horizon_s, stride_s, rhs, n_hidden)
+
+
+def _rhs_of(case: Case, model: Case, theta=None):
+    """`(rhs, n_hidden)` of `model` (a case read as a law: its cause, place and size) on `case`'s system, with the
+    arm's base parameters `theta` (default the truth's)."""
+    spec = SYSTEMS[case.system]
+    if case.system in ("acrobot", "double_pendulum"):
+        return arm_rhs(truth_theta(case) if theta is None else theta, model, spec["driven"])
+    if case.system == "linear_axis":
+        return axis_rhs(model)
+    return heli_rhs(model)
+
+
+def _window_scores(case: Case, horizon_s: float, stride_s: float, models) -> list[float]:
+    """The mean window score (see `truth_gain`) on `case`'s held-out record of each of `models`, `(rhs, n_hidden,
+    delay)` triples: `delay` shifts the recorded input of the case's column by that time (a true dead time)."""
     spec = SYSTEMS[case.system]
     train, held_out = records(case)
     xs, us = np.asarray(held_out.xs, float), np.asarray(held_out.us, float)
     scale = np.maximum(np.asarray(train.xs).std(axis=0), 1e-9)
-    if case.system in ("acrobot", "double_pendulum"):
-        makers = [lambda c: arm_rhs(truth_theta(case), c, spec["driven"])]
-    elif case.system == "linear_axis":
-        makers = [axis_rhs]
-    else:
-        makers = [heli_rhs]
-    free = dataclasses.replace(case, cause=None)
     column = spec["inputs"].index(case.where) if case.where in spec["inputs"] else None
-    delay = case.size if case.cause == "input_delay" else 0.0
-    substeps = 10 if delay else 2
+    substeps = 10 if any(m[2] for m in models) else 2
     n_ref, stride, h = round(horizon_s / DT), max(1, round(stride_s / DT)), DT / substeps
 
-    def rollout(rhs, n_hidden, k, delayed):
+    def rollout(rhs, n_hidden, k, delay):
         def u_at(t):  # the zero-order-hold input at time t after the window's start (a dead time shifts one column)
             u = us[min(k + int(np.floor(t / DT + 1e-9)), len(us) - 1)].copy()
-            if delayed:
+            if delay:
                 u[column] = us[max(min(k + int(np.floor((t - delay) / DT + 1e-9)), len(us) - 1), 0)][column]
             return u
 
@@ -533,14 +544,71 @@ def truth_gain(case: Case, horizon_s: float, stride_s: float = 0.05) -> float | 
                 out.append(y[: len(spec["states"])].copy())
         return np.asarray(out)
 
-    scores = {True: [], False: []}
+    scores = [[] for _ in models]
     for k in range(0, len(xs) - n_ref, stride):
-        for with_effect in (True, False):
-            rhs, n_hidden = makers[0](case if with_effect else free)
-            traj = rollout(rhs, n_hidden, k, with_effect and delay > 0)
-            e = (traj - xs[k + 1 : k + n_ref + 1]) / scale
-            scores[with_effect].append(np.mean(np.minimum(e**2, 1e6)))
-    return float(1.0 - np.mean(scores[True]) / np.mean(scores[False]))
+        for i, (rhs, n_hidden, delay) in enumerate(models):
+            e = (rollout(rhs, n_hidden, k, delay) - xs[k + 1 : k + n_ref + 1]) / scale
+            scores[i].append(np.mean(np.minimum(e**2, 1e6)))
+    return [float(np.mean(s)) for s in scores]
+
+
+def _gain_over(case: Case, horizon_s: float, stride_s: float, rhs, n_hidden: int) -> float:
+    """The truth's held-out gain over the model `(rhs, n_hidden)` (see `truth_gain`)."""
+    truth, n_truth = _rhs_of(case, case)
+    delay = case.size if case.cause == "input_delay" else 0.0
+    with_effect, without = _window_scores(case, horizon_s, stride_s, [(truth, n_truth, delay), (rhs, n_hidden, 0.0)])
+    return float(1.0 - with_effect / without)
+
+
+def refit_theta(case: Case) -> np.ndarray:
+    """The effect-free arm's base parameters theta1..theta5 fitted to `case`'s truth on its training record, as a
+    refit would (theta6, theta7 kept): least squares on the equations of motion, which are linear in them, with the
+    truth's own accelerations at the recorded states (an equation-error fit, made here in numpy, not by dynax)."""
+    spec = SYSTEMS[case.system]
+    train, _ = records(case)
+    xs, us = np.asarray(train.xs, float), np.asarray(train.us, float)
+    truth, n_hidden = _rhs_of(case, case)
+    t6, t7 = truth_theta(case)[5:]
+    rows, rhs_ = [], []
+    for x, u in zip(xs, us):
+        y = np.concatenate([x, [u[spec["inputs"].index(case.where)]] * n_hidden]) if n_hidden else x
+        ddq1, ddq2 = truth(y, u)[2:4]
+        q1, q2, dq1, dq2 = x
+        tau = np.zeros(2)
+        tau[list(spec["driven"])] = u
+        c2, s2, s1, s12 = np.cos(q2), np.sin(q2), np.sin(q1), np.sin(q1 + q2)
+        rows.append([ddq1, ddq1 + ddq2, 2 * c2 * ddq1 + c2 * ddq2 - s2 * (2 * dq1 * dq2 + dq2**2), s1, s12])
+        rhs_.append(tau[0] - t6 * dq1)
+        rows.append([0.0, ddq1 + ddq2, c2 * ddq1 + s2 * dq1**2, 0.0, s12])
+        rhs_.append(tau[1] - t7 * dq2)
+    theta = np.linalg.lstsq(np.asarray(rows), np.asarray(rhs_), rcond=None)[0]
+    return np.concatenate([theta, [t6, t7]])
+
+
+def refit_truth_gain(case: Case, horizon_s: float, stride_s: float = 0.05) -> float:
+    """For a two-link arm's case in `refit` mode: the truth's held-out gain over the effect-free arm *refitted* to it
+    (`refit_theta`), scored as `truth_gain`: what is left of the effect for a candidate to show once the refitted base
+    parameters have absorbed what they can."""
+    free = dataclasses.replace(case, cause=None)
+    rhs, n_hidden = _rhs_of(case, free, refit_theta(case))
+    return _gain_over(case, horizon_s, stride_s, rhs, n_hidden)
+
+
+def look_alike_gain(case: Case, horizon_s: float, stride_s: float = 0.05) -> tuple[float, float]:
+    """For a dead-time case: `(gain, tau)`, the truth's held-out gain over the first-order lag that comes closest to
+    it on the held-out windows themselves (`tau` by a bounded scalar search): the most that any diagnosis could find
+    between the two on this record, the look-alike a lag of that size is."""
+    from scipy.optimize import minimize_scalar
+
+    truth, n_truth = _rhs_of(case, case)
+    ref = _window_scores(case, horizon_s, stride_s, [(truth, n_truth, case.size)])[0]
+
+    def score(tau):
+        rhs, n_hidden = _rhs_of(case, dataclasses.replace(case, cause="input_lag", size=float(tau)))
+        return _window_scores(case, horizon_s, stride_s, [(rhs, n_hidden, 0.0)])[0]
+
+    best = minimize_scalar(score, bounds=(0.2 * case.size, 3.0 * case.size), method="bounded", options={"xatol": 1e-4})
+    return float(1.0 - ref / best.fun), float(best.x)
 
 
 # --- the diagnosis of a case, and what it got right --------------------------------------------------------

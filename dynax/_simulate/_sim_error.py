@@ -239,13 +239,20 @@ def window_rollout(
 
     **Arguments:** `ts (step,)`, `xs (step, n_measured)`, `us (step, m)` one window of a record;
     `ts_before`, `us_before` optionally the input history before it (ending at the window's start),
-    which drives the internal states of input terms (see `complete_state`); `method` the
-    integration strategy of `simulate`.
+    which drives the internal states of input terms (see `complete_state`) and lets a dead time
+    (`InputDelay`) act exactly, as the recorded input shifted in time (`Extended.with_shifted_inputs`),
+    instead of through its Padé filter; `method` the integration strategy of `simulate`.
 
     **Returns:** `(errors, diverged)`: `system.state_error(simulated, measured)` for the measured
     states, shape `(step, n_measured)` (NaN past a divergence), and whether the rollout diverged.
     """
     n_measured = xs.shape[-1]
+    if us_before is not None and hasattr(system, "with_shifted_inputs"):
+        # A dead time shifts the recorded inputs exactly, its history included (`Extended.with_shifted_inputs`).
+        n_before = us_before.shape[0]
+        dt = (ts[-1] - ts[0]) / (ts.shape[0] - 1)
+        system, shifted = system.with_shifted_inputs(jnp.concatenate([us_before[:-1], us]), dt)
+        us_before, us = shifted[:n_before], shifted[n_before - 1 :]
     x0 = complete_state(system, xs[0], us[0], ts_before, us_before, history_method)
     sim = simulate(system, x0, ts, us, method=method, throw=False)
     return system.state_error(sim.xs[:, :n_measured], xs), sim.diverged

@@ -192,26 +192,38 @@ def test_a_look_alike_is_told_apart_only_by_a_difference_that_matters():
     assert equivalent["equivalent"] and not equivalent["told_apart"]
 
 
-def test_a_dead_time_too_short_for_the_rollouts_step_is_not_told_apart_from_a_lag():
-    """A delay fitted below what one step per sample resolves (`InputDelay.shortest_resolved`) is simulated wrong, so
-    its far worse held-out error is no evidence against it: not told apart from the lag, and marked unresolved. The
-    same pair fitted at a resolvable size is told apart by the same scores."""
+class _CoarseLag(InputLag):
+    """A lag whose rollouts resolve it down to 1.25 steps only (a term may say so: `shortest_resolved`)."""
+
+    def shortest_resolved(self, step: float) -> float:
+        return 1.25 * step
+
+
+def test_a_look_alike_fitted_below_what_its_rollouts_resolve_is_not_told_apart():
+    """A look-alike fitted below what its term's rollouts resolve (`shortest_resolved`) is simulated wrong, so its far
+    worse held-out error is no evidence against it: not told apart, and marked unresolved. The same pair fitted at a
+    resolvable size is told apart by the same scores. A dead time resolves at any size (the windowed rollouts shift
+    the input by it), so it is told apart from a lag at half a sample."""
     rng = np.random.default_rng(2)
     n_windows = 240
     best = rng.uniform(1.0, 2.0, n_windows)
     scores = np.stack([np.ones(n_windows), best, best * 1.5 * np.exp(rng.normal(0.0, 0.002, n_windows))])
-    problem = SimpleNamespace(
-        selection=Selection(alpha=0.01, min_gain=0.05),
-        candidates=(InputLag(0), InputDelay(0)),
-        system=Acrobot(),
-        look_alikes=lambda k: [1],
-        equivalents={},
-        dt=0.01,
-        neutral=np.zeros(2),
-    )
     yard = SimpleNamespace(window_runs=np.repeat([0, 1], n_windows // 2), overlap=1)
-    for size, resolved in ((0.005, False), (0.03, True)):
+    for other, size, resolved in (
+        (_CoarseLag(0), 0.005, False),
+        (_CoarseLag(0), 0.03, True),
+        (InputLag(0), 0.005, True),
+    ):
+        problem = SimpleNamespace(
+            selection=Selection(alpha=0.01, min_gain=0.05),
+            candidates=(InputDelay(0), other),
+            system=Acrobot(),
+            look_alikes=lambda k: [1],
+            equivalents={},
+            dt=0.01,
+            neutral=np.zeros(2),
+        )
         results = {k: {"i": k + 1, "gain_held_out": 0.5, "delta": size} for k in range(2)}
-        (delay,) = look_alike_tests(problem, yard, 0, results, scores)
-        assert delay["p_value"] < 1e-6 and delay["gain_over"] > 0.2
-        assert delay["resolved"] is resolved and delay["told_apart"] is resolved
+        (lag,) = look_alike_tests(problem, yard, 0, results, scores)
+        assert lag["p_value"] < 1e-6 and lag["gain_over"] > 0.2
+        assert lag["resolved"] is resolved and lag["told_apart"] is resolved

@@ -161,14 +161,14 @@ def test_known_mode_with_an_impossible_nominal_is_not_none():
 
 
 @pytest.mark.heavy  # an end-to-end diagnosis: in `make test`, not `make quick`
-def test_a_dead_time_shorter_than_a_sample_is_not_told_apart_from_a_lag():
-    # A 5 ms dead time at 100 Hz (DOP853, the input shifted in time): the data show it as well as a 5 ms lag, and
-    # the delay's Padé filter is too stiff for the rollouts' 10 ms step, so its poor fit is no evidence against it.
+def test_a_dead_time_shorter_than_a_sample_is_named_and_told_apart_from_a_lag():
+    # A 5 ms dead time at 100 Hz (DOP853, the input shifted in time). The windowed rollouts shift the recorded input by
+    # the fitted delay, so the dead time is simulated as one at half a sample, and the record tells it from a 5 ms lag
+    # (its truth gains 95 % over the closest lag on the held-out windows: `tests.hidden_cases.look_alike_gain`).
     case = Case("short-delay", "linear_axis", "input_delay", "force", 0.005, "dead time", "refit", 136, near=True)
     j = diagnose_case(case).to_json()
     first = j["findings"][0]
-    assert first["cause"] in ("input_delay", "input_lag")
-    assert abs(first["coefficient"] - 0.005) < 0.002
-    other = [a for a in first["look_alikes"] if a["cause"] in ("input_delay", "input_lag")]
-    assert other and not other[0]["told_apart"] and not other[0]["resolved"]
-    assert first["confidence"] == "low"
+    assert (first["cause"], j["verdict"]) == ("input_delay", "explained"), (j["findings"], j["verdict"])
+    assert abs(first["coefficient"] - 0.005) < 0.0005
+    other = [a for a in first["look_alikes"] if a["cause"] == "input_lag"]
+    assert other and other[0]["told_apart"] and other[0]["resolved"]

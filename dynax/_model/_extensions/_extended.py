@@ -124,6 +124,19 @@ class Extended(AbstractSystem):
         dz = jnp.concatenate(dz) if dz else z[:0]
         return a, dz
 
+    def with_shifted_inputs(
+        self, us: Float[Array, "step n_inputs"], dt: Float[ArrayLike, ""]
+    ) -> tuple["Extended", Float[Array, "step n_inputs"]]:
+        """`(model, shifted)`: the recorded inputs `us` (zero-order hold, `dt` apart, any history first) with the
+        input terms' shifts applied (a dead time's, `InputDelay.shift`: exact at any size, a fraction of a sample
+        included), and the model without them in its ODE. The windowed rollouts of a record simulate this way. The
+        shifts act on the recorded input ahead of the other input terms, which commute with them (a gain, an
+        offset, a lag: time-invariant and linear in the input)."""
+        for term in self.input_terms:
+            us = term.shift(us, dt)
+        terms = tuple(t.after_shift() if isinstance(t, AbstractInputTerm) else t for t in self.terms)
+        return eqx.tree_at(lambda m: m.terms, self, terms), us
+
     def initial_state(
         self, x0: Float[ArrayLike, " n_measured"], u0: Float[ArrayLike, " n_inputs"]
     ) -> Float[Array, " n_states"]:

@@ -11,8 +11,6 @@ from ._terms import AbstractTerm, float_scalar
 
 # Time constants and delays at or below this are treated as zero (the input passes through).
 _TINY_TIME = 1e-4
-# The shortest dead time `InputDelay` simulates faithfully, in fixed steps (see `InputDelay.shortest_resolved`).
-PADE_STEPS_PER_DELAY = 1.25
 
 
 class AbstractInputTerm(AbstractTerm):
@@ -63,6 +61,15 @@ class AbstractInputTerm(AbstractTerm):
     def steady_state(self, u: Float[Array, ""]) -> Float[Array, " n_hidden"]:
         """The internal states at rest under a constant input `u` (used to start a rollout)."""
         return jnp.zeros((self.n_hidden,), jnp.result_type(u, self.coefficient))
+
+    def shift(self, us: Float[Array, "step n_inputs"], dt: Float[ArrayLike, ""]) -> Float[Array, "step n_inputs"]:
+        """The recorded inputs `us` (zero-order hold, `dt` apart) as a windowed rollout of a record passes them on,
+        before the ODE: unchanged, but for a dead time, which shifts them exactly (`InputDelay.shift`)."""
+        return us
+
+    def after_shift(self) -> "AbstractInputTerm":
+        """The term as it acts in the ODE once `shift` has moved the inputs: itself, but for a dead time (none left)."""
+        return self
 
 
 class InputGain(AbstractInputTerm):
@@ -140,19 +147,40 @@ class InputLag(AbstractInputTerm):
 
 
 class _AbstractPadeDelay(AbstractInputTerm):
-    """A dead time $T$ (the term's `coefficient`) as the (2, 2) Padé approximant, two internal states per input:
-    $a = u - T s F(s) u$ with $F = 1 / (1 + sT/2 + s^2 T^2 / 12)$, $z = (F u, s F u)$. A delay of zero passes the
-    input through."""
+    r"""A dead time $T$ (the term's `coefficient`), in two forms.
+
+    - In an ODE (`simulate`, the one-step residuals): the (2, 2) Padé approximant, two internal states per input,
+      $a = u - T s F(s) u$ with $F = 1 / (1 + sT/2 + s^2 T^2 / 12)$, $z = (F u, s F u)$. A delay of zero passes the
+      input through. Its poles lie at $|s| T = \sqrt{12}$, 150 degrees from the positive real axis: one Tsit5 step
+      of $h$ per sample follows the delayed input for $T \ge h$ and diverges just below it, and where it is
+      resolved it shows a dead time shorter than a sample as a first-order lag of the same size would (its
+      moments, not its shape, are the dead time's).
+    - In the windowed rollouts of a record (`dynax.internal.window_rollout` with an input history, which the
+      diagnosis fits and judges with): exactly, as the recorded zero-order-hold input shifted by $T$
+      (`shift`). Then a dead time of any size, a fraction of a sample included, is simulated right, and told from
+      a lag by what the record shows.
+    """
 
     coefficient: eqx.AbstractVar[Float[Array, ""]]
 
-    def shortest_resolved(self, step: float) -> float:
-        """The filter's poles lie at $|s| T = \\sqrt{12}$, 150 degrees from the positive real axis, so a fixed step
-        $h$ puts them at $|s| h = \\sqrt{12}\\,h/T$: one Tsit5 step per sample follows the delayed input for
-        $T \\ge h$ and diverges just below it (at $0.95h$). `PADE_STEPS_PER_DELAY` (1.25 steps) leaves a margin from
-        that edge. A shorter delay is simulated wrong at that step, so the shortest dead time a rollout at one step
-        per sample shows is about a sample interval."""
-        return PADE_STEPS_PER_DELAY * step
+    def shift(self, us: Float[Array, "step n_inputs"], dt: Float[ArrayLike, ""]) -> Float[Array, "step n_inputs"]:
+        r"""The recorded inputs `us` (zero-order hold, `dt` apart, the first ones history) delayed by $T$ on the
+        term's inputs: over each sample interval the mean of the held input $T$ earlier,
+        $a_k = (1 - f)\,u_{k-m} + f\,u_{k-m-1}$ with $T/\Delta t = m + f$, $0 \le f < 1$ (the first sample held
+        before the record). That mean is exact for what the interval's input does to the state at the interval's
+        end to first order in the step, and continuous and differentiable in $T$ within each sample (a fit moves
+        it)."""
+        s = jnp.maximum(self.coefficient, 0.0) / dt
+        m = jnp.floor(s)
+        f = (s - m).astype(us.dtype)
+        k = jnp.arange(us.shape[0]) - m.astype(jnp.int32)
+        now, before = us[jnp.maximum(k, 0)], us[jnp.maximum(k - 1, 0)]
+        columns = jnp.asarray(self.inputs)
+        return us.at[:, columns].set((1.0 - f) * now[:, columns] + f * before[:, columns])
+
+    def after_shift(self):
+        """This term with no delay left in the ODE (its `shift` moved the inputs instead)."""
+        return eqx.tree_at(lambda t: t.coefficient, self, jnp.zeros_like(self.coefficient))
 
     def applied(self, u, z):
         return jnp.where(self.coefficient > _TINY_TIME, u - self.coefficient * z[1], u)
@@ -172,11 +200,13 @@ class _AbstractPadeDelay(AbstractInputTerm):
 class InputDelay(_AbstractPadeDelay):
     r"""The input acts a dead time $T$ late, $a(t) = u(t - T)$.
 
-    Represented by the (2, 2) Padé approximant
+    In an ODE, represented by the (2, 2) Padé approximant
     $e^{-sT} \approx (1 - sT/2 + s^2T^2/12) / (1 + sT/2 + s^2T^2/12)$, two internal states,
     so that the delay is a smooth, differentiable parameter of an ODE. Accurate for input content
     below about $1/(2T)$ Hz; fixed-step simulation needs steps shorter than about $T/2$. A delay of
-    zero passes the input through.
+    zero passes the input through. The windowed rollouts of a record (with its input history, as the
+    diagnosis takes them) shift the recorded input by $T$ instead, exactly (`shift`), so a dead time
+    shorter than a sample is simulated as one.
 
     **Arguments:** `input` (0-based), `delay` $T$ [s].
 

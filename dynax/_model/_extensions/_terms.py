@@ -60,7 +60,7 @@ class AbstractTerm(eqx.Module):
 
     def shortest_resolved(self, step: float) -> float:
         """The smallest coefficient a fixed-step rollout with steps of `step` seconds simulates faithfully; 0 where
-        any is (a dead time's filter sets one: `InputDelay`)."""
+        any is (a dead time is: the windowed rollouts shift the input by it exactly, `InputDelay.shift`)."""
         return 0.0
 
     def parameters(self, system) -> dict[str, Array]:
