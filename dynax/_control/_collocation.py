@@ -223,8 +223,10 @@ def collocation_costs(plant, xs, u, h, sub_dt, rules: LeaderboardRules = Leaderb
 
 
 @eqx.filter_jit
-def _round(plant, z, lam, state, r, lr, token, tr: Transcription, stage: CollocationStage):
-    """One augmented-Lagrangian round (`inner` Adam steps, then the multiplier update) for every start."""
+def _round(plant, iterate, r, lr, token, tr: Transcription, stage: CollocationStage):
+    """One augmented-Lagrangian round (`inner` Adam steps, then the multiplier update) for every start; `iterate` is
+    `(z, lam, state)`: the decision vectors, the multipliers and Adam's state."""
+    z, lam, state = iterate
     norm = jnp.asarray(LeaderboardRules().normalisation)
     total = stage.rounds * stage.inner
     adam = optax.scale_by_adam()
@@ -296,7 +298,7 @@ def collocate(plant, z0, tr: Transcription, stage: CollocationStage, bar: Progre
     state = jax.vmap(optax.scale_by_adam().init)(z)
     lr, token = jnp.asarray(stage.learning_rate, z.dtype), bar_token(bar)
     for r in range(stage.rounds):
-        z, lam, state = _round(plant, z, lam, state, jnp.asarray(r, z.dtype), lr, token, tr, stage)
+        z, lam, state = _round(plant, (z, lam, state), jnp.asarray(r, z.dtype), lr, token, tr, stage)
     return _project(plant, z, tr, stage)
 
 
