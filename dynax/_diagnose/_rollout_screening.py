@@ -96,7 +96,8 @@ def rollout_screen(family: Family, train: Windows, validation: Windows, slots, p
 
     **Returns:** one gain per candidate: the fraction by which the step (the refitted parameters and the
     candidate's coefficient, fitted on `train`) reduces the held-out sum of squares beyond the step of the
-    refitted parameters alone. `NaN` where the sensitivities are not finite.
+    refitted parameters alone. `NaN` where the candidate has no finite direction (every window diverged, or it does
+    not move the rollouts).
     """
     dtype = family.neutral.dtype
     slots = jnp.asarray(slots)
@@ -137,9 +138,10 @@ def rollout_screen(family: Family, train: Windows, validation: Windows, slots, p
     for i in range(len(candidates)):
         column = len(free) + i
         both = np.append(base, column)
-        if not np.all(np.isfinite(J_tr[:, column])) or not np.any(J_tr[:, column]):
+        finite = np.isfinite(J_tr[:, column])
+        if not np.any(J_tr[finite, column]):  # no direction (or none that is finite)
             continue
-        # Held-out windows where a sensitivity is not finite (a diverged rollout) count for neither.
+        # Windows where a sensitivity is not finite (a diverged rollout) count for neither step or score.
         rows = np.isfinite(r_va) & np.all(np.isfinite(J_va[:, both]), axis=1)
         sse_base = held_out_sse(base, base_step, rows)
         if sse_base > 0:
