@@ -226,10 +226,9 @@ def _with_rollout_evidence(problem: Problem, current_slots, current_p, remaining
     ranked = rankable(problem.family, remaining)
     if len(ranked) <= 1 or all(k in short for k in ranked):
         return short
-    # Held-out windows of the fit's length, as the refit's training windows: one shape, one compilation.
-    n_fit = problem.train_windows.ts.shape[1] - 1
-    held_out = make_windows(problem.validation, n_fit, n_fit)
-    rollout_gains = rollout_screen(problem.family, problem.train_windows, held_out, current_slots, current_p, ranked)
+    rollout_gains = rollout_screen(
+        problem.family, problem.train_windows, problem.held_out_fit_windows, current_slots, current_p, ranked
+    )
     n_promote = max(1, problem.selection.shortlist // 4)
     before = list(short)
     short, promoted = with_rollout_evidence(

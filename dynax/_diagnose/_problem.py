@@ -3,6 +3,7 @@ prepared records, candidate family, identifiable candidates and windows (`prepar
 """
 
 import dataclasses
+import functools
 from typing import NamedTuple
 
 import equinox as eqx
@@ -137,6 +138,14 @@ class Problem:
         return list(
             dict.fromkeys(look_alikes(self.system, self.candidates[k], self.candidates) + self.equivalents.get(k, []))
         )
+
+    @functools.cached_property
+    def held_out_fit_windows(self) -> Windows:
+        """The held-out records cut as the refit's training windows (the fit's length, not overlapping): the
+        output-error screening scores its steps on them, with the training windows' shape, so one compilation
+        serves both and every round."""
+        n_fit = self.train_windows.ts.shape[1] - 1
+        return make_windows(self.validation, n_fit, n_fit)
 
     @property
     def names(self) -> tuple[str, ...]:

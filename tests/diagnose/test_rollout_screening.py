@@ -6,6 +6,7 @@ The record is made outside dynax's model code (`tests.hidden_cases`: scipy DOP85
 measurement noise), so the screening's ranking and gain are checked against data no dynax model produced, and its
 gain against the converged refit of the same candidate."""
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -51,6 +52,15 @@ def test_the_first_gauss_newton_step_ranks_the_hidden_effect_first_and_predicts_
     assert "viscous_friction@q1" in labels and "input_lag@tau1" not in labels  # a lag has no first-order direction
     gains = rollout_screen(family, train_w, held_w, slots, p0, ranked)
     assert labels[int(np.nanargmax(gains))] == "viscous_friction@q1", dict(zip(labels, np.round(gains, 3)))
+
+    # One training window whose rollout diverges (a start at an absurd speed) counts for nothing: every candidate
+    # keeps its rank and its gain, rather than the whole screening going unranked.
+    xs = np.asarray(train_w.xs).copy()
+    xs[3, 0, 2:] = 1e10  # rad/s
+    diverged = eqx.tree_at(lambda w: w.xs, train_w, jnp.asarray(xs))
+    with_diverged = rollout_screen(family, diverged, held_w, slots, p0, ranked)
+    assert np.all(np.isfinite(with_diverged)), dict(zip(labels, with_diverged))
+    np.testing.assert_allclose(with_diverged, gains, atol=0.02)
 
     # The converged refit of the nominal model alone and with the shoulder's viscous friction.
     k = ranked[labels.index("viscous_friction@q1")]
