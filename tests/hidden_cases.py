@@ -339,8 +339,11 @@ def truth_theta(case):
     return theta
 
 
-def records(case: Case) -> tuple[Trajectory, Trajectory]:
-    """The training and held-out records of `case` (one run, the last `HELD_OUT_S` held out)."""
+def records(case: Case, noise_seed: int | None = None, noise_scale: float = 1.0) -> tuple[Trajectory, Trajectory]:
+    """The training and held-out records of `case` (one run, the last `HELD_OUT_S` held out).
+
+    `noise_seed` draws the measurement noise anew (default: the case's own draw, from its seed) and `noise_scale`
+    scales it (0: the noise-free truth): other records of one rig and one run, for the spread of an estimate."""
     spec = SYSTEMS[case.system]
     n = round((TRAIN_S + HELD_OUT_S) / DT) + 1
     ts = np.arange(n) * DT
@@ -370,8 +373,8 @@ def records(case: Case) -> tuple[Trajectory, Trajectory]:
         xs = integrate(rhs, x0, ts, us, delay, delayed)[:, : len(spec["states"])]
     if case.system == "helicopter":
         xs[:, 3:7] /= np.linalg.norm(xs[:, 3:7], axis=1, keepdims=True)
-    rng = np.random.default_rng(7919 + case.seed)
-    xs = xs + np.asarray(spec["noise"]) * rng.standard_normal(xs.shape)
+    rng = np.random.default_rng(7919 + case.seed if noise_seed is None else noise_seed)
+    xs = xs + noise_scale * np.asarray(spec["noise"]) * rng.standard_normal(xs.shape)
     k = round(TRAIN_S / DT) + 1
 
     def record(a, b, source):
