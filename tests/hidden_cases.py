@@ -339,8 +339,11 @@ def truth_theta(case):
     return theta
 
 
-def records(case: Case) -> tuple[Trajectory, Trajectory]:
-    """The training and held-out records of `case` (one run, the last `HELD_OUT_S` held out)."""
+def records(case: Case, noise_seed: int | None = None, noise_scale: float = 1.0) -> tuple[Trajectory, Trajectory]:
+    """The training and held-out records of `case` (one run, the last `HELD_OUT_S` held out).
+
+    `noise_seed` draws the measurement noise anew (default: the case's own draw, from its seed) and `noise_scale`
+    scales it (0: the noise-free truth): other records of one rig and one run, for the spread of an estimate."""
     spec = SYSTEMS[case.system]
     n = round((TRAIN_S + HELD_OUT_S) / DT) + 1
     ts = np.arange(n) * DT
@@ -370,8 +373,8 @@ def records(case: Case) -> tuple[Trajectory, Trajectory]:
         xs = integrate(rhs, x0, ts, us, delay, delayed)[:, : len(spec["states"])]
     if case.system == "helicopter":
         xs[:, 3:7] /= np.linalg.norm(xs[:, 3:7], axis=1, keepdims=True)
-    rng = np.random.default_rng(7919 + case.seed)
-    xs = xs + np.asarray(spec["noise"]) * rng.standard_normal(xs.shape)
+    rng = np.random.default_rng(7919 + case.seed if noise_seed is None else noise_seed)
+    xs = xs + noise_scale * np.asarray(spec["noise"]) * rng.standard_normal(xs.shape)
     k = round(TRAIN_S / DT) + 1
 
     def record(a, b, source):
@@ -585,12 +588,56 @@ def refit_theta(case: Case) -> np.ndarray:
     return np.concatenate([theta, [t6, t7]])
 
 
-def refit_truth_gain(case: Case, horizon_s: float, stride_s: float = 0.05) -> float:
-    """For a two-link arm's case in `refit` mode: the truth's held-out gain over the effect-free arm *refitted* to it
-    (`refit_theta`), scored as `truth_gain`: what is left of the effect for a candidate to show once the refitted base
-    parameters have absorbed what they can."""
+def simulation_refit_theta(case: Case, fit_s: float = 0.75) -> np.ndarray:
+    """The effect-free arm's theta1..theta5 fitted to `case`'s training record by simulation error, as the diagnosis's
+    refit does (theta6, theta7 kept): windows of `fit_s` end to end, each simulated from its measured state (RK4, two
+    steps per sample, the recorded input held), the error of every state in units of its spread on the record,
+    minimised by scipy's trust-region least squares from `refit_theta`'s equation-error estimate. Made here, not by
+    dynax; the noisy record's own windows, so the noise each window starts from is in it as it is in the diagnosis's."""
+    from scipy.optimize import least_squares
+
+    spec = SYSTEMS[case.system]
+    train, _ = records(case)
+    xs, us = np.asarray(train.xs, float), np.asarray(train.us, float)
+    scale = np.maximum(xs.std(axis=0), 1e-9)
+    n_fit = round(fit_s / DT)
+    starts = np.arange(0, len(xs) - n_fit, n_fit)
     free = dataclasses.replace(case, cause=None)
-    rhs, n_hidden = _rhs_of(case, free, refit_theta(case))
+    t6, t7 = truth_theta(case)[5:]
+    h = DT / 2
+
+    def residuals(theta5):
+        rhs, _ = arm_rhs(np.concatenate([theta5, [t6, t7]]), free, spec["driven"])
+        out = np.empty((len(starts), n_fit, xs.shape[1]))
+        for w, k in enumerate(starts):
+            y = xs[k].copy()
+            for j in range(n_fit):
+                u = us[k + j]
+                for _ in range(2):
+                    a = rhs(y, u)
+                    b = rhs(y + 0.5 * h * a, u)
+                    c = rhs(y + 0.5 * h * b, u)
+                    y = y + h / 6 * (a + 2 * b + 2 * c + rhs(y + h * c, u))
+                out[w, j] = (y - xs[k + j + 1]) / scale
+        return out.reshape(-1)
+
+    start = refit_theta(case)[:5]
+    theta5 = least_squares(residuals, start, x_scale=np.abs(start), xtol=1e-10, ftol=1e-10).x
+    return np.concatenate([theta5, [t6, t7]])
+
+
+def refit_truth_gain(
+    case: Case, horizon_s: float, stride_s: float = 0.05, refit: str = "equation", theta=None
+) -> float:
+    """For a two-link arm's case in `refit` mode: the truth's held-out gain over the effect-free arm *refitted* to it,
+    scored as `truth_gain`: what is left of the effect for a candidate to show once the refitted base parameters have
+    absorbed what they can. `refit`: `"equation"` (`refit_theta`, equation error with the truth's accelerations) or
+    `"simulation"` (`simulation_refit_theta`, the diagnosis's kind of refit, which absorbs more); `theta` (all seven)
+    given, that refit's result already made."""
+    free = dataclasses.replace(case, cause=None)
+    if theta is None:
+        theta = refit_theta(case) if refit == "equation" else simulation_refit_theta(case)
+    rhs, n_hidden = _rhs_of(case, free, theta)
     return _gain_over(case, horizon_s, stride_s, rhs, n_hidden)
 
 

@@ -78,6 +78,27 @@ def test_rotor_inertia_adds_to_the_diagonal_of_the_mass_matrix():
     np.testing.assert_allclose(ddq, jnp.linalg.solve(M, rhs), rtol=1e-10)
 
 
+def test_rotor_inertia_is_the_calibration_generators_mass_matrix_law():
+    # The calibration battery's truth writes its rotor out in numpy from the base parameters (`tests.hidden_cases`:
+    # the inertia on M_jj alone, the coupling into M_12 of a motor carried on link 1 neglected, as `RotorInertia`
+    # neglects it). Both must be one law, or a missed rotor would be a mismatch of laws, not of the data.
+    from tests.hidden_cases import arm_rhs, Case, THETA
+
+    rng = np.random.default_rng(5)
+    theta = np.asarray(THETA) * (1 + rng.uniform(-0.03, 0.03, 7))
+    base = {f"theta{i + 1}": v for i, v in enumerate(theta)}
+    for arm, driven, where in ((Acrobot, (1,), "q2"), (DoublePendulum, (0, 1), "q2"), (DoublePendulum, (0, 1), "q1")):
+        case = Case("rotor", "x", "rotor_inertia", where, 0.04, "mass matrix", "known", 0)
+        truth, _ = arm_rhs(theta, case, driven)
+        free, _ = arm_rhs(theta, Case("free", "x", None, None, 0.0, "none", "known", 0), driven)
+        model = Extended(arm.from_base_parameters(base), (RotorInertia(int(where[1]) - 1, 0.04),))
+        for _ in range(20):
+            x, u = rng.uniform(-3, 3, 4), rng.uniform(-2, 2, len(driven))
+            ours = np.asarray(model.vector_field(0.0, jnp.asarray(x), jnp.asarray(u)))
+            np.testing.assert_allclose(ours, truth(x, u), rtol=1e-9, atol=1e-9)
+            assert np.max(np.abs(truth(x, u) - free(x, u))) > 1e-4  # the rotor does act at this state
+
+
 def test_input_gain_on_the_acrobot_equals_rescaled_base_parameters():
     # The reason an input gain is not identifiable when the base parameters are refitted.
     gain = 1.25
