@@ -186,6 +186,7 @@ from ._diagnose._quadrotor import (
 from ._diagnose._quadrotor import thrust_parameters as thrust_parameters
 from ._diagnose._quadrotor import WorldFrameQuadrotor as WorldFrameQuadrotor
 from ._diagnose._residuals import acceleration_residuals as acceleration_residuals
+from ._diagnose._residuals import applied_inputs as applied_inputs
 from ._diagnose._residuals import exact_delays as exact_delays
 from ._diagnose._rollout_screening import rankable as rankable
 from ._diagnose._rollout_screening import rollout_screen as rollout_screen
@@ -557,6 +558,7 @@ __all__ = [
     "AbstractStatistics",
     "AbstractVehicleTerm",
     "acceleration_residuals",
+    "applied_inputs",
     "auto_stride",
     "backward_difference",
     "bar_token",

@@ -381,16 +381,21 @@ def diagnose(
             selection=selection,
             progress=progress,
         )
-    _warn_data_faults(train, validation)
+    warn_data_faults(train, validation)
     with stage_reporter(progress) as say:
         problem = prepare_problem(system, train, validation, candidates, mode, horizons, selection)
-        forward = forward_selection(problem, say)
-        judgement = _judge(problem, forward, say)
-        say("validation: fit % and residual tests of the nominal and the extended model ...")
-        return _report(problem, forward, judgement, mode=mode, train=train, validation=validation)
+        return diagnose_problem(problem, mode, train, validation, say)
 
 
-def _warn_data_faults(train, validation):
+def diagnose_problem(problem: Problem, mode: Refit | Known, train, validation, say) -> Report:
+    """Steps 1 to 7 of `diagnose` on a prepared `Problem` (`prepare_problem`)."""
+    forward = forward_selection(problem, say)
+    judgement = _judge(problem, forward, say)
+    say("validation: fit % and residual tests of the nominal and the extended model ...")
+    return _report(problem, forward, judgement, mode=mode, train=train, validation=validation)
+
+
+def warn_data_faults(train, validation):
     """Located faults of the records (`dynax.check_records`) as `DataWarning`s, before any fit."""
     from .._data import Trajectory
     from .._data._sanity import check_records

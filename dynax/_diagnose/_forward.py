@@ -7,6 +7,7 @@ import dataclasses
 import functools
 import time
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -281,7 +282,55 @@ def _refit(problem: Problem, round_: Round, short, say) -> tuple[np.ndarray, _Ba
         if k >= 0:
             start = problem.inits[k] - problem.neutral[k]
             p_init[i, -1] = _start_value(problem, k, round_.deltas[round_.remaining.index(k)], start)
+            through = _nominal_through_inputs(problem, round_.slots, k, p_init[i])
+            if not np.array_equal(through, p_init[i]):
+                c = problem.neutral[k] + through[-1]
+                say(
+                    f"  {problem.candidates[k].label(problem.system)}: held map refitted one step through it at {c:.3g}"
+                )
+            p_init[i] = through
     return new, _fit_batch(problem, np.tile(round_.slots, (shortlist + 1, 1)), new, p_init, say)
+
+
+def _nominal_through_inputs(problem: Problem, slots, k: int, p: np.ndarray) -> np.ndarray:
+    """`p` with candidate `k`'s start and the nominal values refitted through it, where it has input dynamics and
+    the problem holds nominal values that a one-step fit of the recorded inputs gave (`Problem.nominal_through`).
+
+    A held motor map fitted one step at a time on commands that act through a lag or a dead time has taken up
+    part of them (the least-squares map of the command as logged is a smoothed, attenuated map of the one that
+    acts), and the term refitted against that map finds part of its size and gains part of its effect. The map is
+    instead the one-step least-squares fit of the model with the candidate (and the terms already selected with
+    internal states), jointly over the candidate's coefficient: over `THROUGH_SAMPLES` multiples of the sample
+    interval, the one whose one-step fit leaves the least residual. The candidate's simulation-error refit starts
+    there, the map held. Where no lag or delay fits the one-step criterion better than none, `p` is kept."""
+    term = problem.candidates[k]
+    if problem.nominal_through is None or not (isinstance(term, AbstractInputTerm) and term.n_hidden):
+        return p
+    n_nominal = len(problem.names)
+    held = []
+    for j, slot in enumerate(np.asarray(slots)):
+        selected = problem.candidates[slot] if slot >= 0 else None
+        if isinstance(selected, AbstractInputTerm) and selected.n_hidden:
+            held.append(_at(selected, problem.neutral[slot] + p[n_nominal + j]))
+    fits = [
+        (loss, c, values)
+        for c in problem.neutral[k] + problem.dt * np.asarray(THROUGH_SAMPLES, float)
+        for values, loss in [problem.nominal_through((*held, _at(term, c)))]
+    ]
+    loss, c, values = min(fits, key=lambda f: f[0])
+    if not c > problem.neutral[k]:
+        return p
+    p = p.copy()
+    p[:n_nominal], p[-1] = values, c - problem.neutral[k]
+    return p
+
+
+#: The lags and dead times [samples] over which a held one-step map is refitted through a candidate (`0`: none).
+THROUGH_SAMPLES = (0, 1, 2, 3, 4, 6, 8, 12)
+
+
+def _at(term, coefficient):
+    return eqx.tree_at(lambda t: t.coefficient, term, jnp.asarray(coefficient, jnp.result_type(term.coefficient)))
 
 
 def _fit_nominal(problem: Problem, batch: _Batch, say) -> tuple[AbstractSystem, Yardstick]:

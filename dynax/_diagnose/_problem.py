@@ -2,6 +2,7 @@
 prepared records, candidate family, identifiable candidates and windows (`prepare_problem`, step 0 of `diagnose`).
 """
 
+from collections.abc import Callable
 import dataclasses
 import functools
 from typing import NamedTuple
@@ -132,6 +133,10 @@ class Problem:
     equivalents: dict = dataclasses.field(default_factory=dict)
     # Causes of the default vocabulary the records give no occasion to try (`stiction` without a rest under load).
     not_proposed: list = dataclasses.field(default_factory=list)
+    # Where the held nominal values are a one-step fit of the recorded inputs (the quadrotor's motor map): that
+    # fit redone with the inputs as given terms with input dynamics pass them on (a tuple of terms at their
+    # coefficients -> (nominal values, the fit's loss)); `None` elsewhere.
+    nominal_through: Callable[[tuple], tuple[np.ndarray, float]] | None = None
 
     def look_alikes(self, k: int) -> list[int]:
         """The candidates data could mistake for candidate `k`: its look-alikes and its structural equivalents."""

@@ -44,7 +44,7 @@ term's coefficient is the physical one (the square law's 2 for a map that ignore
 Cheeseman and Bennett's $R^2/16$) and its held-out gain is the effect's.
 """
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 import dataclasses
 from typing import ClassVar
 
@@ -171,8 +171,9 @@ def diagnose_quadrotor(system: Quadrotor, train, validation=None, *, candidates,
     neither converges nor tells more); `Refit(parameters=names)`: those weights are also refitted
     by simulation error, from the one-step fit; `Known()`: `system`'s weights are trusted as given.
     """
-    from ._diagnose import diagnose  # the engine, on the body-frame form
-    from ._problem import Known, Refit
+    # The engine, on the body-frame form.
+    from ._diagnose import diagnose_problem, stage_reporter, warn_data_faults
+    from ._problem import check_arguments, Known, prepare_problem, Refit
 
     refit = isinstance(mode, Refit)
     if validation is None:  # the held-out tail of each flight stays out of the one-step fit too
@@ -186,16 +187,13 @@ def diagnose_quadrotor(system: Quadrotor, train, validation=None, *, candidates,
     if horizons.horizons_s is None:
         horizons = dataclasses.replace(horizons, horizons_s=QUADROTOR_HORIZONS_S)
     engine_mode = mode if (refit and mode.parameters is not None) else Known()
-    report = diagnose(
-        body,
-        train_b,
-        val_b,
-        candidates=candidates,
-        mode=engine_mode,
-        horizons=horizons,
-        selection=selection,
-        progress=progress,
-    )
+    check_arguments(body, engine_mode, horizons, selection)
+    warn_data_faults(train_b, val_b)
+    with stage_reporter(progress) as say:
+        problem = prepare_problem(body, train_b, val_b, candidates, engine_mode, horizons, selection)
+        if refit and mode.parameters is None:  # the held map: a one-step fit, redone through input dynamics
+            problem.nominal_through = _one_step_through(system, body, _as_list(train, "train"), problem.names)
+        report = diagnose_problem(problem, engine_mode, train_b, val_b, say)
     report = dataclasses.replace(report, system="quadrotor")
     if refit:
         report.notes.append(
@@ -203,11 +201,40 @@ def diagnose_quadrotor(system: Quadrotor, train, validation=None, *, candidates,
             + (
                 ", the named ones refitted by simulation error with each candidate."
                 if mode.parameters is not None
-                else ", held while each candidate's coefficient is fitted by simulation error."
+                else ", held while each candidate's coefficient is fitted by simulation error (for a motor lag or "
+                "dead time, the one-step fit through it at its one-step optimum)."
             )
         )
         report = dataclasses.replace(report, mode="refit")
     return report
+
+
+def _one_step_through(system: Quadrotor, body, train: list[Trajectory], names) -> Callable[[tuple], tuple]:
+    """`Problem.nominal_through` of a quadrotor diagnosis in `Refit()` mode: the one-step least-squares fit of
+    `system`'s body model (`fit_quadrotor`) on the `train`ing flights with their commands as given input terms
+    pass them on (`applied_inputs`: a motor's lag, a dead time): `(nominal values names, one-step loss)`."""
+    from .._identify._vehicle import OneStep
+    from .._identify._vehicle._quadrotor import fit_quadrotor
+    from ._fit import nominal_values
+    from ._residuals import applied_inputs
+
+    inputs = tuple(train[0].input_names)
+
+    made: dict[tuple, tuple[np.ndarray, float]] = {}
+
+    def through(terms: tuple) -> tuple[np.ndarray, float]:
+        key = tuple((type(t).__name__, t.inputs, round(float(t.coefficient), 9)) for t in terms)
+        if key not in made:  # each fit once per diagnosis: every round asks for the same ones
+            flights = [
+                Trajectory(f.ts, f.xs, applied_inputs(body, terms, f), f.state_names, f.input_names, f.system, f.source)
+                for f in train
+            ]
+            solution = fit_quadrotor(system, flights, OneStep(), progress=False)
+            values = np.asarray(nominal_values(body_frame_system(solution.model, inputs), names))
+            made[key] = (values, float(solution.loss))
+        return made[key]
+
+    return through
 
 
 class WorldFrameQuadrotor(AbstractSystem):

@@ -159,6 +159,30 @@ def exact_delays(model, trajectory, interval: bool = False):
     return model, jnp.asarray(us, trajectory.us.dtype), jnp.asarray(us_before, trajectory.us.dtype)
 
 
+def applied_inputs(system, terms, trajectory) -> np.ndarray:
+    """The inputs that act over each sample interval of `trajectory` when its recorded inputs pass through the
+    input `terms` (at their coefficients) of an `Extended(system, terms)`: a dead time as the shifted input's
+    interval mean (`exact_delays`), a lag as its output's mean over the interval (trapezoid of the internal
+    state at the interval's ends, `hidden_trajectory`). Other inputs as recorded. **Returns:** `(time, n_inputs)`."""
+    extended = Extended(system, tuple(terms))  # pyright: ignore[reportCallIssue]
+    model, us, _ = exact_delays(extended, trajectory, interval=True)
+    us = np.array(us)
+    ts = jnp.asarray(trajectory.ts, us.dtype)
+    for term in model.input_terms:
+        if not term.n_hidden or (term.cause in DEAD_TIMES and not float(term.coefficient) > 0):
+            continue
+        alone = Extended(system, (term,))  # pyright: ignore[reportCallIssue]
+        zs = np.asarray(hidden_trajectory(alone, ts, jnp.asarray(us)))
+        applied = jax.vmap(term.applied)
+        for j, i in enumerate(term.inputs):
+            z = jnp.asarray(zs[:, j * term.n_hidden : (j + 1) * term.n_hidden])
+            u = jnp.asarray(us[:, i])
+            start, end = np.asarray(applied(u, z)), np.asarray(applied(u[:-1], z[1:]))
+            us[:-1, i] = 0.5 * (start[:-1] + end)
+            us[-1, i] = start[-1]
+    return us
+
+
 def acceleration_residuals(model, trajectory):
     """One-step acceleration residuals of `model` on `trajectory`.
 
