@@ -365,7 +365,9 @@ from ._identify._least_squares import (
 )
 from ._identify._least_squares import tsqr_r as tsqr_r
 from ._identify._method import FitSettings as FitSettings
+from ._identify._method import Fitted as Fitted
 from ._identify._method import IdentifyJob as IdentifyJob
+from ._identify._method import Prepared as Prepared
 from ._identify._record_friction import compare_records as compare_records
 from ._identify._refine import delta_method_covariance as delta_method_covariance
 from ._identify._refine import ml_weights as ml_weights
@@ -623,6 +625,7 @@ __all__ = [
     "fit_one_step",
     "fit_percent",
     "FitSettings",
+    "Fitted",
     "FlightChecks",
     "FlightNotes",
     "float_scalar",
@@ -698,6 +701,7 @@ __all__ = [
     "PRACTICAL_R2",
     "predictability_horizon",
     "prediction_error",
+    "Prepared",
     "Problem",
     "progress_enabled",
     "progress_mode",

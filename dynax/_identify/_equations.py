@@ -14,7 +14,7 @@ and whose `fit` solves them by plain (weighted) least squares.
 
 import abc
 import dataclasses
-from typing import ClassVar, Literal, TYPE_CHECKING
+from typing import ClassVar, Literal
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -26,7 +26,7 @@ from .._data._trajectory import Trajectory
 from .._errors import DataError, UsageError
 from .._fit import Solution
 from ._least_squares import least_squares
-from ._method import AbstractMethod, as_records, FitSettings, IdentifyJob
+from ._method import AbstractMethod, as_records, FitSettings, Fitted, IdentifyJob, Prepared
 from ._regressors import (
     column_kinds,
     dynamic_regressor,
@@ -38,9 +38,6 @@ from ._regressors import (
     with_friction,
     with_parameters,
 )
-
-if TYPE_CHECKING:
-    from ._result import Identification
 
 
 def uniformly_sampled(trajectory: Trajectory) -> Trajectory:
@@ -56,10 +53,10 @@ class AbstractLeastSquares(AbstractMethod):
     r"""A least-squares method: the system's equations, linear in its base parameters, stacked over the
     records and solved by weighted least squares (QR and SVD of the column-scaled regressor).
 
-    `fit` solves the method's equations as they are; its `identification` (what `identify` runs)
-    adds the least-squares stages: each record's force offsets or angle zeros, the consistency
-    constraint, errors robust to rows correlated in time, friction at rest, then the output-error
-    refinement (`dynax._identify._stages`). The hooks below say which of them apply.
+    `fit` solves the method's equations as they are; its steps (what `identify` runs) add the
+    least-squares stages: `prepare`, each record's angle zeros; `fit_stage`, force offsets, the
+    consistency constraint, errors robust to rows correlated in time and friction at rest;
+    `refine`, the output-error refinement (`dynax._identify._stages`). The hooks below say which of them apply.
 
     **Class attributes:** `refits_without_loaded_rests`, whether the stage is refitted without the
     rows where a joint rests under load (default `False`).
@@ -109,12 +106,24 @@ class AbstractLeastSquares(AbstractMethod):
         solution = least_squares(a, y, names=names, weights=weights, rcond=self.rcond)
         return eqx.tree_at(lambda s: s.model, solution, with_parameters(model, names, solution.value))
 
-    def identification(self, system, records: list[Trajectory], job: IdentifyJob) -> "Identification":
-        """The least-squares stages (`least_squares_identification`), then where it applies the
-        output-error refinement, each validated on `job.held_out`."""
-        from ._stages import least_squares_identification  # the stages build on the methods
+    def prepare(self, system, records: list[Trajectory], job: IdentifyJob) -> Prepared:
+        """Each record's angle zeros where they apply, fitted out of the records and the held-out
+        tails when chosen (`least_squares_prepare`)."""
+        from ._stages import least_squares_prepare  # the stages build on the methods
 
-        return least_squares_identification(self, system, records, job)
+        return least_squares_prepare(self, system, records, job)
+
+    def fit_stage(self, system, prepared: Prepared) -> Fitted:
+        """The least-squares stage and friction at rest (`least_squares_fit`)."""
+        from ._stages import least_squares_fit
+
+        return least_squares_fit(self, system, prepared)
+
+    def refine(self, system, prepared: Prepared, fitted: Fitted) -> Fitted:
+        """The output-error refinement where it applies (`least_squares_refine`)."""
+        from ._stages import least_squares_refine
+
+        return least_squares_refine(self, system, prepared, fitted)
 
 
 class Dynamic(AbstractLeastSquares):

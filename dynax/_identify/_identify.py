@@ -3,13 +3,15 @@ r"""`identify(system, data, method=...)`: fit a system's parameters to measured 
 `identify` is prepare -> fit -> refine -> validate for every method, and asks the method (an
 `AbstractMethod`) what to run: it checks the records, splits off the held-out data and hands the
 method the rest with an `IdentifyJob` (the fit's settings, the held-out records, the consistency
-and refinement choices); the method's `identification` fits, refines and validates
-(`_stages.py`: any method's `fit` once, checked for consistency; the least-squares methods'
-angle zeros, least-squares stage, friction at rest and output-error refinement) and returns an
-`Identification` (`_result.py`).
+and refinement choices); then it calls the method's `prepare` (the records as the fit reads them),
+`fit_stage` (the first stage) and `refine` (the stages after it) in turn (`_stages.py`: any
+method's `fit` once, checked for consistency; the least-squares methods' angle zeros, least-squares
+stage with friction at rest, and output-error refinement), and validates each stage's model on the
+held-out records itself, returning an `Identification` (`_result.py`).
 """
 
 from collections.abc import Sequence
+import dataclasses
 from typing import Literal
 import warnings
 
@@ -25,7 +27,7 @@ from .._model._system import AbstractSystem
 from .._model._two_link import Acrobot, DoublePendulum
 from .._precision import warn_if_float32
 from ._equations import Dynamic
-from ._method import AbstractMethod, FitSettings, IdentifyJob
+from ._method import AbstractMethod, FitSettings, Fitted, IdentifyJob
 from ._offsets import record_labels
 from ._regressors import Friction
 from ._result import Identification, NoValidationWarning
@@ -193,10 +195,11 @@ def identify(
       point of `SimulationFit` and are otherwise ignored.
     - `data`: a `Trajectory` or a list of them (same system).
     - `method`: `Dynamic()` (default), `Power()`, `Energy()`, `SimulationFit()`, or any other
-      `AbstractMethod`: `identify` asks the method for its `identification` (by default its
-      `fit` once, with `friction` and `weights` in a `FitSettings`, the estimate's consistency
-      checked where the system has conditions, and the fitted model validated; the least-squares
-      methods run the stages above).
+      `AbstractMethod`: `identify` runs the method's `prepare`, `fit_stage` and `refine` (by
+      default the records as given, its `fit` once with `friction` and `weights` in a
+      `FitSettings` and the estimate's consistency checked where the system has conditions, and
+      nothing to refine; the least-squares methods run the stages above), then validates each
+      stage's model.
     - `friction`: `"viscous"` (default) or `"coulomb"` (adds `fc1`, `fc2`, or the linear axis's
       `coulomb`).
     - `weights`: optional row weights for the least-squares problem, one per stacked equation
@@ -255,9 +258,22 @@ def identify(
         refine=refine,
         system_name=_system_name(system),
     )
-    result = method.identification(system, fitted, job)  # the method's fit -> refine -> validate
+    prepared = method.prepare(system, fitted, job)  # the records as the method fits them
+    stages = prepared.method.fit_stage(system, prepared)
+    stages = prepared.method.refine(system, prepared, stages)
+    result = _validated(stages, prepared.job.held_out)
     _warn_unvalidated(held, source)
     return result
+
+
+def _validated(fitted: Fitted, held_out: HeldOut) -> Identification:
+    """`fitted`'s identification with each stage's model validated on the `held_out` records."""
+    identification = fitted.identification
+    stages = tuple(
+        dataclasses.replace(stage, validation=held_out.validate(model))
+        for stage, model in zip(identification.stages, fitted.models, strict=True)
+    )
+    return dataclasses.replace(identification, stages=stages)
 
 
 def _warn_unvalidated(held, source) -> None:

@@ -2,16 +2,17 @@ r"""`AbstractMethod`: what an identification method is, and what `identify` asks
 
 A method is a small `eqx.Module` of settings with one abstract method, `fit(system, records) ->
 Solution`, as an optimistix solver is `init`/`step`/`terminate` and a diffrax solver `step`: the
-driver (`identify`, `fit_vehicle`) calls the method and never checks its class. `identify` asks
-every method for its `identification` (fit -> refine -> validate, given an `IdentifyJob`), whose
-default is the method's `fit` once, checked for consistency and validated; the least-squares
-methods (`Dynamic`, `Power`, `Energy`) override it with their stages, `SimulationFit` says how its
-stage is named.
+driver (`identify`, `fit_vehicle`) calls the method and never checks its class. `identify` runs
+the same steps for every method, given an `IdentifyJob`: `prepare` (default: the records as given),
+`fit_stage` (default: the method's `fit` once, checked for consistency), `refine` (default: nothing
+to refine), then validates each stage's model itself. The least-squares methods (`Dynamic`,
+`Power`, `Energy`) override the three with their stages, `SimulationFit` says how its stage is
+named.
 """
 
 import abc
 from collections.abc import Callable, Sequence
-from typing import Literal, TYPE_CHECKING
+from typing import Any, Literal, TYPE_CHECKING
 
 import equinox as eqx
 from jaxtyping import Array, Float
@@ -59,7 +60,7 @@ def as_records(records) -> list[Trajectory]:
 
 
 class IdentifyJob(eqx.Module):
-    """What `identify` hands a method's `identification` beyond the system and the records to fit.
+    """What `identify` hands a method's steps beyond the system and the records to fit.
 
     **Fields:** `settings` (the `FitSettings` of the fit), `held_out` (the `HeldOut` records every
     stage is validated on), `consistency` (`"constrain"`, `"check"` or `"off"`, as `identify` takes
@@ -74,6 +75,29 @@ class IdentifyJob(eqx.Module):
     system_name: str = ""
 
 
+class Prepared(eqx.Module):
+    """What a method's `prepare` hands its fit: the method that fits (a least-squares method without
+    force offsets where each record's angle zeros are fitted out), the records to fit, the `job`
+    (whose `held_out` records are then read as the fit reads its own) and the `angle_zeros`
+    (`AngleZeros`, or `None` where not looked for)."""
+
+    method: "AbstractMethod"
+    records: list[Trajectory]
+    job: IdentifyJob
+    angle_zeros: Any = None
+
+
+class Fitted(eqx.Module):
+    """What a method's `fit_stage` and `refine` hand on: the `identification` so far, whose stages
+    `identify` then validates, the model of each stage it validates (`models`: the stage's model,
+    or where the least-squares stage adds friction at rest, that model with its `Stiction`), and the
+    method's own `state` between its fit and its refinement (`None` by default)."""
+
+    identification: "Identification"
+    models: tuple
+    state: Any = None
+
+
 class AbstractMethod(eqx.Module):
     """An identification method: `fit(system, records, settings) -> Solution`.
 
@@ -81,9 +105,10 @@ class AbstractMethod(eqx.Module):
     (`dynax.fit_least_squares`, `dynax.fit_minimise`, or a linear solve returning a `Solution`);
     `identify(system, records, method=YourMethod())` then runs it, checks the estimate's physical
     consistency where the system has conditions, and validates the fitted model on held-out data.
-    The methods below have defaults for such a method; the built-in least-squares methods override
-    `identification` to run their stages (force offsets, angle zeros, friction at rest, the
-    consistency constraint and the output-error refinement).
+    The steps `identify` runs (`prepare`, `fit_stage`, `refine`) and the methods below have
+    defaults for such a method; the built-in least-squares methods override the steps to run their
+    stages (angle zeros; force offsets, the consistency constraint and friction at rest; the
+    output-error refinement).
     """
 
     @abc.abstractmethod
@@ -94,18 +119,34 @@ class AbstractMethod(eqx.Module):
         estimate.
         """
 
-    def identification(self, system, records: list[Trajectory], job: IdentifyJob) -> "Identification":
-        """What `identify` runs on the records to fit: fit -> refine -> validate.
+    def prepare(self, system, records: list[Trajectory], job: IdentifyJob) -> Prepared:
+        """`identify`'s first step: the records as the fit reads them (default: as given).
 
-        The default is `fit` once (with `job.settings`), the estimate's physical consistency checked
-        where the system has conditions (`job.consistency`), and the fitted model validated on
-        `job.held_out`, reported as one stage of kind `stage_kind`.
+        **Returns:** a `Prepared`.
+        """
+        del system
+        return Prepared(self, records, job)
 
-        **Returns:** an `Identification`.
+    def fit_stage(self, system, prepared: Prepared) -> Fitted:
+        """`identify`'s second step: the first stage on `prepared.records`.
+
+        The default is `fit` once (with `prepared.job.settings`) and the estimate's physical
+        consistency checked where the system has conditions (`job.consistency`), reported as one
+        stage of kind `stage_kind`.
+
+        **Returns:** a `Fitted`, whose stages `identify` validates.
         """
         from ._stages import fit_once  # the stages build on the methods: imported where they run
 
-        return fit_once(self, system, records, job)
+        return fit_once(self, system, prepared)
+
+    def refine(self, system, prepared: Prepared, fitted: Fitted) -> Fitted:
+        """`identify`'s third step: stages after the first (default: none, `fitted` as it is).
+
+        **Returns:** a `Fitted`.
+        """
+        del system, prepared
+        return fitted
 
     @property
     def label(self) -> str:

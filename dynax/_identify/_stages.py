@@ -1,15 +1,17 @@
-r"""What `identify` runs for a method (`AbstractMethod.identification`): fit -> refine -> validate.
+r"""The stages `identify` runs for a method (`AbstractMethod`'s `prepare`, `fit_stage`, `refine`);
+`identify` validates each stage's model on the held-out records itself.
 
-- `fit_once`, every method's default: its `fit` once, the estimate's physical consistency checked
-  where the system has conditions, the fitted model validated on the held-out records.
-- `least_squares_identification`, the least-squares methods' (`Dynamic`, `Power`, `Energy`): each
-  record's angle zeros where they apply (`_angle_zeros.py`), the least-squares stage (`_ls_stage.py`:
-  force offsets, the consistency constraint, errors robust to serial correlation), what the records
-  show of friction at rest (`_static_friction.py`), then on real two-link arm data the output-error
-  refinement (`_refine.py`); each stage validated on the held-out records.
+- `fit_once`, every method's default first stage: its `fit` once, the estimate's physical
+  consistency checked where the system has conditions.
+- the least-squares methods' (`Dynamic`, `Power`, `Energy`): `least_squares_prepare`, each record's
+  angle zeros where they apply (`_angle_zeros.py`); `least_squares_fit`, the least-squares stage
+  (`_ls_stage.py`: force offsets, the consistency constraint, errors robust to serial correlation)
+  and what the records show of friction at rest (`_static_friction.py`); `least_squares_refine`, on
+  real two-link arm data the output-error refinement (`_refine.py`).
 """
 
 import dataclasses
+from typing import Any
 import warnings
 
 import equinox as eqx
@@ -39,7 +41,7 @@ from ._ls_stage import (
     offsets_json,
     relative_equation_error,
 )
-from ._method import AbstractMethod, IdentifyJob
+from ._method import AbstractMethod, Fitted, IdentifyJob, Prepared
 from ._offsets import record_labels, without_offsets
 from ._refine import refine_by_simulation, RefinementStatistics
 from ._regressors import split_terms
@@ -58,9 +60,10 @@ from ._static_friction import (
 from ._validation import HeldOut
 
 
-def fit_once(method: AbstractMethod, system, fitted, job: IdentifyJob) -> Identification:
-    """Any method's identification: its `fit` on the `fitted` records, the estimate's consistency
-    check where the system has conditions, and the held-out validation."""
+def fit_once(method: AbstractMethod, system, prepared: Prepared) -> Fitted:
+    """Any method's first stage: its `fit` on the prepared records and the estimate's consistency
+    check where the system has conditions (`identify` validates it)."""
+    job, fitted = prepared.job, prepared.records
     settings = job.settings
     solution = method.fit(system, fitted, settings)
     check = None
@@ -69,39 +72,59 @@ def fit_once(method: AbstractMethod, system, fitted, job: IdentifyJob) -> Identi
         check = check_consistency(
             solution.model, solution.names, jnp.asarray(solution.value), qs, warn=job.consistency != "off"
         )
-    stage = Stage(
-        StageKind(method.stage_kind),
-        method.label,
-        solution,
-        consistency=check,
-        validation=job.held_out.validate(solution.model),
-    )
-    return Identification(
+    stage = Stage(StageKind(method.stage_kind), method.label, solution, consistency=check)
+    identification = Identification(
         system=solution.model,
         stages=(stage,),
         n_samples=method.n_samples(solution, fitted),
         friction=settings.friction,
         system_name=job.system_name,
     )
+    return Fitted(identification, (solution.model,))
 
 
-def least_squares_identification(method: AbstractLeastSquares, system, fitted, job: IdentifyJob) -> Identification:
-    """A least-squares method's identification on the `fitted` records (the module's docstring)."""
-    friction, weights, consistency, refine = job.settings.friction, job.settings.weights, job.consistency, job.refine
-    held_out = job.held_out
+class LeastSquaresState(eqx.Module):
+    """A least-squares method's state between its fit and its refinement: the least-squares stage
+    (`ls`), what the records show of friction at rest (`static`, or `None` where not looked for) and
+    each record's rest stretches (`rests`)."""
+
+    ls: Any
+    static: StaticFriction | None
+    rests: Any
+
+
+def least_squares_prepare(method: AbstractLeastSquares, system, records, job: IdentifyJob) -> Prepared:
+    """A least-squares method's records as its stages fit them: each record's angle zeros where they
+    apply and are chosen, fitted out of the records and of the held-out tails (read from their
+    record's zero), with the method then fitting no force offsets; else the records as given."""
+    zeros = _record_angle_zeros(system, records, method, job.settings.friction, method.rcond)
+    if zeros is None or not zeros.chosen:
+        return Prepared(method, records, job, zeros)
+    held_out = job.held_out  # both stages fit the records less their angle zeros
+    if held_out.tails_of is not None and held_out.records:  # a held-out tail is read from its record's zero
+        held_out = HeldOut(
+            zeros.corrected(held_out.records, system, list(held_out.tails_of)),
+            held_out.horizons_s,
+            held_out.source + "; each tail less its record's angle zeros, fitted on its head",
+            held_out.tails_of,
+        )
+    return Prepared(
+        dataclasses.replace(method, offsets=False),
+        zeros.corrected(records, system),
+        dataclasses.replace(job, held_out=held_out),
+        zeros,
+    )
+
+
+def least_squares_fit(method: AbstractLeastSquares, system, prepared: Prepared) -> Fitted:
+    """A least-squares method's first stage on the prepared records (`_ls_stage.py`: force offsets,
+    the consistency constraint, errors robust to serial correlation) and what the records show of
+    friction at rest (`_static_friction.py`; the stage refitted without the rests under load where
+    the method says so)."""
+    fitted, job = prepared.records, prepared.job
+    friction, weights, consistency = job.settings.friction, job.settings.weights, job.consistency
+    held = job.held_out.records
     rcond = method.rcond
-    zeros = _record_angle_zeros(system, fitted, method, friction, rcond)
-    if zeros is not None and zeros.chosen:  # both stages fit the records less their angle zeros
-        if held_out.tails_of is not None and held_out.records:  # a held-out tail is read from its record's zero
-            held_out = HeldOut(
-                zeros.corrected(held_out.records, system, list(held_out.tails_of)),
-                held_out.horizons_s,
-                held_out.source + "; each tail less its record's angle zeros, fitted on its head",
-                held_out.tails_of,
-            )
-        fitted = zeros.corrected(fitted, system)
-        method = dataclasses.replace(method, offsets=False)
-    held, validate = held_out.records, held_out.validate
     rests = record_rests(fitted) if _holds_at_rest(system) else None
     ls = least_squares_stage(system, fitted, method, friction, weights, rcond, consistency)
     static = _static_friction(ls, fitted, rests)
@@ -130,33 +153,46 @@ def least_squares_identification(method: AbstractLeastSquares, system, fitted, j
     ls_model = with_stiction(ls.system, static.joints) if static is not None else ls.system
     solution = eqx.tree_at(lambda s: (s.model, s.value), ls.fit, (ls.estimate, jnp.asarray(ls.estimate)))
     poorly = _size_errors(system, ls.names, ls.estimate, ls.fit.std_errors)  # the returned estimate's, unless refined
-    stages = (
-        Stage(
-            StageKind.LEAST_SQUARES,
-            ls.label,
-            solution,
-            relative_equation_error=float(relative_equation_error(ls.a, ls.y, ls.estimate)),
-            validation=validate(ls_model),
-            consistency=ls.consistency,
-            poorly_determined=poorly,
-            offsets=offsets_json(ls, fitted),
-            angle_zeros=zeros,
-            serial_correlation=ls.serial,
-        ),
+    stage = Stage(
+        StageKind.LEAST_SQUARES,
+        ls.label,
+        solution,
+        relative_equation_error=float(relative_equation_error(ls.a, ls.y, ls.estimate)),
+        consistency=ls.consistency,
+        poorly_determined=poorly,
+        offsets=offsets_json(ls, fitted),
+        angle_zeros=prepared.angle_zeros,
+        serial_correlation=ls.serial,
     )
-    system_out = ls_model
-    refinement = _refinement_method(refine, ls.system, method, fitted)
+    state = LeastSquaresState(ls, static, rests)
+    return Fitted(_ls_identification(prepared, state, (stage,), ls_model, poorly), (ls_model,), state)
+
+
+def least_squares_refine(method: AbstractLeastSquares, system, prepared: Prepared, fitted: Fitted) -> Fitted:
+    """A least-squares method's refinement: on real two-link arm data, the output-error fit from the
+    least-squares stage (`_refine.py`), on the records less their fitted offsets; then the returned
+    estimate's poorly determined size parameters, warned."""
+    state = fitted.state
+    assert isinstance(state, LeastSquaresState)  # what `least_squares_fit` hands on
+    ls, static, rests = state.ls, state.static, state.rests
+    records, job = prepared.records, prepared.job
+    stages, models = fitted.identification.stages, fitted.models
+    system_out, poorly = fitted.identification.system, fitted.identification.poorly_determined
+    refinement = _refinement_method(job.refine, ls.system, method, records)
     if refinement is not None:
-        simulated = less_offsets(ls.system, fitted, ls)
+        simulated = less_offsets(ls.system, records, ls)
         if static is not None and static.joints:  # windows that start at rest start at zero speed there
             simulated = speeds_zeroed_at_rest(ls.system, simulated, rests)
-        refined = _refined_stage(ls, ls_model, (fitted, simulated), method, friction, consistency, refinement, validate)
+        refined = _refined_stage(
+            ls, models[0], (records, simulated), method, job.settings.friction, job.consistency, refinement
+        )
         statistics = refined.solution.statistics
         assert isinstance(statistics, RefinementStatistics)  # what `refine_by_simulation` returns
         refined_poorly = _size_errors(
             system, refined.names, refined.solution.value, refined.solution.std_errors, statistics.record_std_errors
         )
         stages += (dataclasses.replace(refined, poorly_determined=refined_poorly),)
+        models += (refined.solution.model,)
         system_out = refined.solution.model
         if not refined.kept_start:  # a kept least-squares model is judged by its own errors
             poorly = refined_poorly
@@ -167,6 +203,13 @@ def least_squares_identification(method: AbstractLeastSquares, system, fitted, j
                 joints=tuple(dataclasses.replace(j, refined=float(levels[j.name])) for j in static.joints),
             )
     _warn_poorly_determined(poorly)
+    state = LeastSquaresState(ls, static, rests)
+    return Fitted(_ls_identification(prepared, state, stages, system_out, poorly), models, state)
+
+
+def _ls_identification(prepared: Prepared, state: LeastSquaresState, stages, system_out, poorly) -> Identification:
+    """The `Identification` of the least-squares `stages` (validated by `identify`), returning
+    `system_out`."""
     final = stages[-1].solution
     covariance = final.covariance
     jointly = (
@@ -174,19 +217,20 @@ def least_squares_identification(method: AbstractLeastSquares, system, fitted, j
         if covariance is not None and np.shape(covariance)[0] == len(final.names)
         else None
     )
+    ls = state.ls
     return Identification(
         system=system_out,
         stages=stages,
         n_samples=ls.n_samples,
-        friction=friction,
-        system_name=job.system_name,
+        friction=prepared.job.settings.friction,
+        system_name=prepared.job.system_name,
         settings=ls.settings,
         record_offsets=ls.offsets,
-        angle_zeros=zeros,
+        angle_zeros=prepared.angle_zeros,
         record_friction=ls.friction,
         poorly_determined=poorly,
         jointly_determined=jointly,
-        static_friction=static,
+        static_friction=state.static,
     )
 
 
@@ -265,11 +309,11 @@ def _refinement_method(refine, system, method, trajectories):
     )
 
 
-def _refined_stage(ls, start, records, method, friction, consistency, refinement, validate) -> Stage:
+def _refined_stage(ls, start, records, method, friction, consistency, refinement) -> Stage:
     """The output-error refinement from the least-squares stage `ls` (its model `start`, with `Stiction`
     where the records rest under load) on `records = (fitted, simulated)` (the fitted records, and as the
-    simulation sees them), with its equation error on the least-squares rows of `fitted`, consistency and
-    validation."""
+    simulation sees them), with its equation error on the least-squares rows of `fitted` and consistency
+    (`identify` validates it)."""
     fitted, simulated = records
     refined = refine_by_simulation(start, ls.names, simulated, refinement)
     estimate = jnp.asarray(refined.value)
@@ -285,7 +329,6 @@ def _refined_stage(ls, start, records, method, friction, consistency, refinement
         "simulation",
         refined,
         relative_equation_error=float(error),
-        validation=validate(refined.model),
         consistency=check,
         records_disagree=_records_disagree(refined),
     )

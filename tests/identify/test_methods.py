@@ -8,7 +8,7 @@ import pytest
 
 import dynax
 from dynax import AbstractMethod, Dynamic, Energy, identify, Power, StageKind, Trajectory, UsageError, Validate
-from dynax.internal import FitSettings, stacked_equations
+from dynax.internal import FitSettings, Prepared, stacked_equations
 
 TRUE = dynax.Acrobot()
 NAMES = ("theta1", "theta2", "theta3", "theta4", "theta5", "theta6", "theta7")
@@ -149,21 +149,27 @@ def test_vehicle_criteria_fit_through_the_same_call():
         dynax.FrequencyDomain().fit(dynax.Helicopter(), flight, FitSettings(breaks=(100,)))
 
 
-def test_identify_asks_the_method_for_its_identification_with_the_job(records):
+def test_identify_runs_prepare_fit_refine_then_validates_for_a_method_of_a_users_own(records):
     seen = []
 
     class Spy(AbstractMethod):
+        def prepare(self, system, records, job):
+            seen.append(("prepare", [len(r) for r in records], job))
+            return Prepared(self, [r.slice(0, len(r) - 1) for r in records], job)  # each one sample shorter
+
         def fit(self, system, records, settings=FitSettings()):
-            raise AssertionError("identify asks for the identification; only the default calls fit")
+            seen.append(("fit", [len(r) for r in records], settings))
+            return Power().fit(system, records, settings)
 
-        def identification(self, system, records, job):
-            seen.append(([len(r) for r in records], job))
-            return "identified"
+        def refine(self, system, prepared, fitted):
+            seen.append(("refine", [len(r) for r in prepared.records], fitted.identification.validation))
+            return fitted
 
-    out = identify(TRUE, records, Spy(), friction="coulomb", consistency="check", refine=False)
-    assert out == "identified"
-    lengths, job = seen[0]
+    result = identify(TRUE, records, Spy(), friction="coulomb", consistency="check", refine=False)
+    assert [step for step, _, _ in seen] == ["prepare", "fit", "refine"]
+    (_, lengths, job), (_, fitted_lengths, settings), (_, _, unvalidated) = seen
     assert all(n < len(r) for n, r in zip(lengths, records))  # the heads: the tails are held out
+    assert fitted_lengths == [n - 1 for n in lengths] and settings == job.settings  # the prepared records
     assert job.held_out.tails_of == (0, 1) and len(job.held_out.records) == 2
     assert (job.settings.friction, job.consistency, job.refine, job.system_name) == (
         "coulomb",
@@ -171,9 +177,15 @@ def test_identify_asks_the_method_for_its_identification_with_the_job(records):
         False,
         "acrobot",
     )
+    # identify validates the stage after the refinement, on the held-out tails
+    assert unvalidated is None and result.validation is not None
+    np.testing.assert_array_equal(result.validation.rmse, job.held_out.validate(result.system).rmse)
+    assert result.method == "spy" and result.stages[0].kind == StageKind.FIT
+    assert result.n_samples == sum(fitted_lengths)
+    seen.clear()
     identify(TRUE, records[0], Spy(), validation=records[1])
-    lengths, job = seen[1]
+    _, lengths, job = seen[0]
     assert lengths == [len(records[0])] and job.held_out.tails_of is None  # records of their own
-    assert job.held_out.validate(TRUE) is not None
-    identify(TRUE, records, Spy(), validation=Validate(holdout=0))
-    assert seen[2][1].held_out.validate(TRUE) is None  # nothing held out, nothing validated
+    seen.clear()
+    result = identify(TRUE, records, Spy(), validation=Validate(holdout=0))
+    assert result.validation is None  # nothing held out, nothing validated
