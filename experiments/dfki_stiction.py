@@ -2,7 +2,8 @@
 
     DYNAX_SHARED=/work/shared python experiments/dfki_stiction.py --out experiments/results/dfki_stiction
 
-(`--parts six,split,loro` chooses the measurements, `whatif` adds a what-if on the 5.25 s split,
+(`--parts six,split,loro` chooses the measurements, `whatif` adds a what-if on the 5.25 s split, `paired` a
+paired test of each LORO fold's model against the fit without the static level on the same windows,
 `bandwhatif` one on each LORO fold's held-out run (the band against the level); `--splits 5.25` the splits;
 `--folds 00,01` the LORO folds; each part writes its
 results into `OUT/results.json` as it finishes, so a run cut short keeps what it measured.)
@@ -44,7 +45,7 @@ import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
 # The script's folder is on sys.path.
-from dfki_default_identification import lab_model, load, model_of, RUNS
+from dfki_default_identification import cell_tests, lab_model, load, model_of, RUNS
 from dfki_simulation import read_parameters  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
@@ -209,6 +210,35 @@ def band_whatif(runs, results, save):
         save()
 
 
+def stiction_model(entry) -> dynax.AbstractSystem:
+    """A fold's refined model rebuilt from its results entry: `model_of` its parameters with its `Stiction` terms."""
+    base = model_of(entry["parameters"])
+    terms = tuple(
+        dynax.Stiction(int(k[2:]) - 1, v["fs"], velocity_scale=v["band"]) for k, v in entry["stiction_terms"].items()
+    )
+    return dynax.Extended(base.system, base.terms + terms)
+
+
+def paired(runs, results, save):
+    """Not a fit: each LORO fold's model against the fit without the static level (`TODAY`'s parameters) on the
+    same held-out windows: `cell_tests`, with `ratio` this model's error over that one's (geometric mean over the
+    windows) and `p_worse` the one-sided p-value that it is worse. Also the rebuilt model's RMSE, to check the
+    rebuild against the fit's own validation."""
+    today = json.loads(TODAY.read_text())["runs"]
+    for held, entry in results.get("loro", {}).items():
+        model, before = stiction_model(entry), model_of(today[held]["parameters"])
+        entry["rebuilt_rmse"] = list(dynax.held_out_error(model, [runs[held]], HORIZONS).rmse)
+        entry["against_before"] = cell_tests(model, before, runs[held], HORIZONS)
+        print(
+            f"held out {held}: rebuilt "
+            + " ".join(f"{v:.5f}" for v in entry["rebuilt_rmse"])
+            + " | against before: "
+            + "; ".join(f"ratio {c['ratio']:.4f} p_worse {c['p_worse']:.3f}" for c in entry["against_before"]),
+            flush=True,
+        )
+        save()
+
+
 def plot(results, out: pathlib.Path):
     fig, axes = plt.subplots(1, 2, figsize=(12, 4))
     folds = sorted(results.get("loro", {}))
@@ -267,6 +297,8 @@ def main(argv=None):
         whatif(runs, lab, results, save)
     if "loro" in parts:
         loro(runs, lab, args.folds.split(","), results, save)
+    if "paired" in parts:
+        paired(runs, results, save)
     if "bandwhatif" in parts:
         band_whatif(runs, results, save)
     plot(results, args.out)
