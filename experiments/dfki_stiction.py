@@ -169,7 +169,8 @@ def loro(runs, lab, folds, results, save):
 
 def whatif(runs, lab, results, save):
     """Not a fit: the model fitted up to 5.25 s with `Stiction` put back at its least-squares levels (times
-    1 and 1.5, stick band 0.01 and 0.1 rad/s), on run 12 from 5.25 s. Read off the held-out data."""
+    1 and 1.5, stick band 0.01 and 0.1 rad/s), on run 12 from 5.25 s; and with its refined levels (times 1 and
+    1.5) on the same windows started at zero speed where the tail rests. Read off the held-out data."""
     entry = results["split"]["5.25"]
     base = model_of(entry["parameters"])
     levels = {j["joint"]: j["level"] for j in entry["static_friction"]["joints"]}
@@ -181,6 +182,13 @@ def whatif(runs, lab, results, save):
             model = dynax.Extended(base.system, base.terms + terms)
             out[f"{scale:g}x_band_{band:g}"] = list(dynax.held_out_error(model, [tail], HORIZONS).rmse)
     out["lab_model_3.0"] = list(dynax.held_out_error(lab, [tail], HORIZONS).rmse)
+    # The same from zero speed where the tail rests, at the refined levels times 1 and 1.5 (band 0.01).
+    (settled,) = speeds_zeroed_at_rest(base, [tail], [rest_stretches(tail)])
+    refined = {int(k[2:]) - 1: v["fs"] for k, v in entry["stiction_terms"].items()}
+    for scale in (1.0, 1.5):
+        terms = tuple(dynax.Stiction(j, scale * f) for j, f in refined.items())
+        model = dynax.Extended(base.system, base.terms + terms)
+        out[f"zero_start_refined_{scale:g}x"] = list(dynax.held_out_error(model, [settled], HORIZONS).rmse)
     results["whatif_5.25"] = out
     print("what-if, run 12 from 5.25 s: " + "; ".join(f"{k} {v[0]:.4f}/{v[1]:.3f}/{v[2]:.3f}" for k, v in out.items()))
     save()
