@@ -2,7 +2,8 @@
 
     DYNAX_SHARED=/work/shared python experiments/dfki_stiction.py --out experiments/results/dfki_stiction
 
-(`--parts six,split,loro` chooses the measurements, `whatif` adds a what-if on the 5.25 s split,
+(`--parts six,split,loro` chooses the measurements, `whatif` adds a what-if on the 5.25 s split, `paired` a
+paired test of each LORO fold's model against the fit without the static level on the same windows,
 `bandwhatif` one on each LORO fold's held-out run (the band against the level); `--splits 5.25` the splits;
 `--folds 00,01` the LORO folds; each part writes its
 results into `OUT/results.json` as it finishes, so a run cut short keeps what it measured.)
@@ -44,7 +45,7 @@ import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
 # The script's folder is on sys.path.
-from dfki_default_identification import lab_model, load, model_of, RUNS
+from dfki_default_identification import cell_tests, lab_model, load, model_of, RUNS
 from dfki_simulation import read_parameters  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
@@ -168,7 +169,8 @@ def loro(runs, lab, folds, results, save):
 
 def whatif(runs, lab, results, save):
     """Not a fit: the model fitted up to 5.25 s with `Stiction` put back at its least-squares levels (times
-    1 and 1.5, stick band 0.01 and 0.1 rad/s), on run 12 from 5.25 s. Read off the held-out data."""
+    1 and 1.5, stick band 0.01 and 0.1 rad/s), on run 12 from 5.25 s; and with its refined levels (times 1 and
+    1.5) on the same windows started at zero speed where the tail rests. Read off the held-out data."""
     entry = results["split"]["5.25"]
     base = model_of(entry["parameters"])
     levels = {j["joint"]: j["level"] for j in entry["static_friction"]["joints"]}
@@ -180,6 +182,13 @@ def whatif(runs, lab, results, save):
             model = dynax.Extended(base.system, base.terms + terms)
             out[f"{scale:g}x_band_{band:g}"] = list(dynax.held_out_error(model, [tail], HORIZONS).rmse)
     out["lab_model_3.0"] = list(dynax.held_out_error(lab, [tail], HORIZONS).rmse)
+    # The same from zero speed where the tail rests, at the refined levels times 1 and 1.5 (band 0.01).
+    (settled,) = speeds_zeroed_at_rest(base, [tail], [rest_stretches(tail)])
+    refined = {int(k[2:]) - 1: v["fs"] for k, v in entry["stiction_terms"].items()}
+    for scale in (1.0, 1.5):
+        terms = tuple(dynax.Stiction(j, scale * f) for j, f in refined.items())
+        model = dynax.Extended(base.system, base.terms + terms)
+        out[f"zero_start_refined_{scale:g}x"] = list(dynax.held_out_error(model, [settled], HORIZONS).rmse)
     results["whatif_5.25"] = out
     print("what-if, run 12 from 5.25 s: " + "; ".join(f"{k} {v[0]:.4f}/{v[1]:.3f}/{v[2]:.3f}" for k, v in out.items()))
     save()
@@ -205,6 +214,35 @@ def band_whatif(runs, results, save):
         print(
             f"band what-if, held out {held}: "
             + "; ".join(f"{k} {v[0]:.4f}/{v[1]:.4f}/{v[2]:.4f}" for k, v in out.items())
+        )
+        save()
+
+
+def stiction_model(entry) -> dynax.AbstractSystem:
+    """A fold's refined model rebuilt from its results entry: `model_of` its parameters with its `Stiction` terms."""
+    base = model_of(entry["parameters"])
+    terms = tuple(
+        dynax.Stiction(int(k[2:]) - 1, v["fs"], velocity_scale=v["band"]) for k, v in entry["stiction_terms"].items()
+    )
+    return dynax.Extended(base.system, base.terms + terms)
+
+
+def paired(runs, results, save):
+    """Not a fit: each LORO fold's model against the fit without the static level (`TODAY`'s parameters) on the
+    same held-out windows: `cell_tests`, with `ratio` this model's error over that one's (geometric mean over the
+    windows) and `p_worse` the one-sided p-value that it is worse. Also the rebuilt model's RMSE, to check the
+    rebuild against the fit's own validation."""
+    today = json.loads(TODAY.read_text())["runs"]
+    for held, entry in results.get("loro", {}).items():
+        model, before = stiction_model(entry), model_of(today[held]["parameters"])
+        entry["rebuilt_rmse"] = list(dynax.held_out_error(model, [runs[held]], HORIZONS).rmse)
+        entry["against_before"] = cell_tests(model, before, runs[held], HORIZONS)
+        print(
+            f"held out {held}: rebuilt "
+            + " ".join(f"{v:.5f}" for v in entry["rebuilt_rmse"])
+            + " | against before: "
+            + "; ".join(f"ratio {c['ratio']:.4f} p_worse {c['p_worse']:.3f}" for c in entry["against_before"]),
+            flush=True,
         )
         save()
 
@@ -267,6 +305,8 @@ def main(argv=None):
         whatif(runs, lab, results, save)
     if "loro" in parts:
         loro(runs, lab, args.folds.split(","), results, save)
+    if "paired" in parts:
+        paired(runs, results, save)
     if "bandwhatif" in parts:
         band_whatif(runs, results, save)
     plot(results, args.out)

@@ -16,7 +16,8 @@ fixed-step and the adaptive integrators both handle it (Karnopp's model, smoothe
 of speeds $|\dot q_j| \lesssim v_b$ (`velocity_scale`), the joint's total friction is replaced by
 the force that stops the joint within `hold_time` $\tau_h$: with $\mathcal S$ the joints that stick,
 it solves $\ddot q_{\mathcal S} = -\dot q_{\mathcal S} / \tau_h$ for their friction forces given all
-other forces, and clips each to $\pm f_s$ (a force beyond it breaks the joint away). Outside the
+other forces, and clips each to $\pm f_s$ (a force beyond it breaks the joint away) and to the side
+that opposes the motion (`Stiction.dissipative_bounds`: friction does no positive work). Outside the
 band the friction is the Stribeck curve above, the Coulomb part being the joint's `CoulombFriction`
 term (smoothed as $\tanh(\dot q / v_c)$) and the static excess $\max(f_s - f_c, 0)$ this term's.
 The two regimes are blended by a weight that is 1 in the band and
@@ -187,11 +188,29 @@ class Stiction(AbstractJointTerm):
         target = -dq[idx] / jnp.stack([t.hold_time for t in holding])
         extra = solve_spd(inverse[idx][:, idx], target - accel[idx])
         level = jnp.stack([t.coefficient for t in holding])
-        held = jnp.clip(friction + extra, -level, level)
+        lower, upper = Stiction.dissipative_bounds(holding, level, dq[idx])
+        held = jnp.clip(friction + extra, lower, upper)
         weight = jnp.stack([t.weight(dq[t.joint]) for t in holding])
         out = jnp.zeros_like(force).at[idx].add(slip)
-        # Measured from the friction clipped to the level: with `fs = 0` the term adds nothing.
-        return out.at[idx].add(weight * (held - jnp.clip(friction, -level, level)))
+        # Measured from the friction clipped to the same bounds: with `fs = 0` the term adds nothing.
+        return out.at[idx].add(weight * (held - jnp.clip(friction, lower, upper)))
+
+    @staticmethod
+    def dissipative_bounds(
+        holding: tuple["Stiction", ...], level: Float[Array, " k"], dq: Float[Array, " k"]
+    ) -> tuple[Float[Array, " k"], Float[Array, " k"]]:
+        r"""The bounds on the sticking joints' friction: $\pm f_s$, and no push along the motion.
+
+        Friction dissipates: $f\,\dot q \le 0$. The force that stops a joint within the hold time
+        opposes its speed, but one that holds its *acceleration* to $-\dot q / \tau_h$ pushes along
+        the motion wherever the other forces decelerate the joint faster than that: at every
+        reversal, in the band before the joint turns. A friction of up to $f_s$ then drives the
+        joint on towards its turning point, a force no friction has. So the bound on the side of the
+        motion shrinks smoothly from $f_s$ at rest (where the sign of the speed is noise) to 0 beyond
+        the band: $f \le f_s\,(1 - \max(\tanh(\dot q / v_b), 0))$ and
+        $f \ge -f_s\,(1 + \min(\tanh(\dot q / v_b), 0))$."""
+        side = jnp.tanh(dq / jnp.stack([t.velocity_scale for t in holding]))
+        return -level * (1.0 + jnp.minimum(side, 0.0)), level * (1.0 - jnp.maximum(side, 0.0))
 
 
 LEAST_STICK_BAND = 0.01  # Stiction's default band: the Coulomb friction's smoothing [rad/s or m/s]
