@@ -69,6 +69,7 @@ LOG_TIMES = {
         r"warm\s+(?P<warm_s>[\d.]+) s \(fits\s+(?P<warm_fits_s>[\d.]+)\)"
     ),
 }
+COLD = re.compile(r"first|compile_s|cold|with compilation")  # not "second call (compiled)"
 CONTROL_WORDS = ("numpy", "scipy", "mujoco", "gymnasium", "evosax", "hand-written", "bare", "diffeqsolve")
 TIME_SUFFIXES = ("_s", "_ms", "seconds")
 NOT_TIMES = ("target_s", "horizon_s", "episode_s", "duration_s")
@@ -110,7 +111,7 @@ def kind(path):
     """'time' (with 'cold'/'warm' and 'control'/'dynax') or 'value'."""
     key = path.rsplit("/", 1)[-1]
     if key.endswith(TIME_SUFFIXES) and key not in NOT_TIMES and "per_s" not in key:
-        phase = "cold" if any(w in path for w in ("first", "compile", "cold")) else "warm"
+        phase = "cold" if COLD.search(path) else "warm"
         owner = "control" if any(w in path.lower() for w in CONTROL_WORDS) else "dynax"
         return f"time:{phase}:{owner}"
     if any(w in key.lower() for w in NOT_VALUES) or "date" in key:
@@ -187,6 +188,42 @@ def summarise(runs):
     return metrics, values
 
 
+def resummarise(result, logs):
+    """Recompute every benchmark's kinds and headline from its stored pairs (after a change of the
+    classification), and add the times a script only printed, from the runs' logs."""
+    for name, entry in result["benchmarks"].items():
+        metrics = entry["metrics"]
+        for path, metric in metrics.items():
+            metric["kind"] = "time:cold:dynax" if path.startswith("process/") else kind(path)
+        if name in LOG_TIMES:
+            pairs = {}
+            for run in entry["runs"]:
+                text = (logs / f"{name}.{run['tree']}.{run['round']}.log").read_text()
+                for match in LOG_TIMES[name].finditer(text):
+                    fields = match.groupdict()
+                    solver = fields.pop("solver")
+                    for key, value in fields.items():
+                        by_round = pairs.setdefault(f"solvers/{solver}/{key}", {})
+                        by_round.setdefault(run["round"], {})[run["tree"]] = float(value)
+            for path, rounds in pairs.items():
+                full = [r for r in sorted(rounds) if set(rounds[r]) == {"before", "after"}]
+                if full:
+                    b = [rounds[r]["before"] for r in full]
+                    a = [rounds[r]["after"] for r in full]
+                    ratios = np.asarray(a) / np.asarray(b)
+                    metrics[path] = {
+                        "kind": kind(path),
+                        "before": b,
+                        "after": a,
+                        "ratios": ratios.tolist(),
+                        "ratio_median": float(np.median(ratios)),
+                        "ratio_min": float(ratios.min()),
+                        "ratio_max": float(ratios.max()),
+                        "ratio_of_medians": float(np.median(a) / np.median(b)),
+                    }
+        entry["headline"] = headline(metrics)
+
+
 def geomean(xs):
     return float(math.exp(np.mean(np.log(xs)))) if xs else float("nan")
 
@@ -256,12 +293,22 @@ def main():
         "--set", action="append", default=[], metavar="NAME=ARGS", help="replace a benchmark's arguments"
     )
     parser.add_argument("--keep", action="store_true", help="keep the other benchmarks' entries of results.json")
+    parser.add_argument(
+        "--resummarise", action="store_true", help="only recompute results.json's summaries and figure from its pairs"
+    )
     args = parser.parse_args()
     for item in args.set:
         name, _, rest = item.partition("=")
         BENCHMARKS[name] = (rest.split(), BENCHMARKS[name][1])
     names = args.only.split(",") if args.only else list(BENCHMARKS)
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.resummarise:
+        result = json.loads((args.out / "results.json").read_text())
+        resummarise(result, args.out / "logs")
+        (args.out / "results.json").write_text(json.dumps(result, indent=1) + "\n")
+        report(result)
+        plot(result["benchmarks"], args.out / "ratios.png")
+        return
     scratch = pathlib.Path(tempfile.mkdtemp(prefix="redesign_ab-"))
     (scratch / "shared").symlink_to(REPO.parent / "shared" if (REPO.parent / "shared").exists() else "/work/shared")
     trees = {"before": scratch / "before", "after": scratch / "after"}
@@ -317,6 +364,12 @@ def main():
             loads = [r["load_average"][0] for rs in runs.values() for r in rs] or [0.0]
             result["load_average_1min_range"] = [min(loads), max(loads)]
             (args.out / "results.json").write_text(json.dumps(result, indent=1) + "\n")
+    report(result)
+    plot(result["benchmarks"], args.out / "ratios.png")
+    shutil.rmtree(scratch)
+
+
+def report(result):
     print("\nafter / before (median over rounds; [min, max] of the rounds' geometric means):")
     for name, entry in result["benchmarks"].items():
         cells = "; ".join(
@@ -325,8 +378,6 @@ def main():
         print(f"  {name:20s} {cells}")
         for path, diff in entry["values_differing"].items():
             print(f"      value differs: {path} (relative {diff:.1e})")
-    plot(result["benchmarks"], args.out / "ratios.png")
-    shutil.rmtree(scratch)
 
 
 if __name__ == "__main__":
