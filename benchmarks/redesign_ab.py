@@ -110,11 +110,11 @@ def normalise(path):
 def kind(path):
     """'time' (with 'cold'/'warm' and 'control'/'dynax') or 'value'."""
     key = path.rsplit("/", 1)[-1]
-    if key.endswith(TIME_SUFFIXES) and key not in NOT_TIMES and "per_s" not in key:
+    if key.endswith(TIME_SUFFIXES) and key not in NOT_TIMES and "per_" not in key:  # not a rate (steps_per_cpu_s)
         phase = "cold" if COLD.search(path) else "warm"
         owner = "control" if any(w in path.lower() for w in CONTROL_WORDS) else "dynax"
         return f"time:{phase}:{owner}"
-    if any(w in key.lower() for w in NOT_VALUES) or "date" in key:
+    if any(w in key.lower() for w in NOT_VALUES) or "date" in key or "/ratios/" in path:
         return None
     return "value"
 
@@ -193,8 +193,11 @@ def resummarise(result, logs):
     classification), and add the times a script only printed, from the runs' logs."""
     for name, entry in result["benchmarks"].items():
         metrics = entry["metrics"]
-        for path, metric in metrics.items():
+        for path, metric in list(metrics.items()):
             metric["kind"] = "time:cold:dynax" if path.startswith("process/") else kind(path)
+            if not (metric["kind"] or "").startswith("time"):
+                del metrics[path]
+        entry["values_differing"] = {p: d for p, d in entry["values_differing"].items() if kind(p) == "value"}
         if name in LOG_TIMES:
             pairs = {}
             for run in entry["runs"]:
