@@ -110,7 +110,8 @@ def normalise(path):
 def kind(path):
     """'time' (with 'cold'/'warm' and 'control'/'dynax') or 'value'."""
     key = path.rsplit("/", 1)[-1]
-    if key.endswith(TIME_SUFFIXES) and key not in NOT_TIMES and "per_" not in key:  # not a rate (steps_per_cpu_s)
+    timed = key.endswith(TIME_SUFFIXES) or "_seconds_" in key  # gauss_newton_seconds_to_em_free_loss
+    if timed and key not in NOT_TIMES and "per_" not in key:  # not a rate (steps_per_cpu_s)
         phase = "cold" if COLD.search(path) else "warm"
         owner = "control" if any(w in path.lower() for w in CONTROL_WORDS) else "dynax"
         return f"time:{phase}:{owner}"
@@ -284,7 +285,9 @@ def plot(summary, path):
     ax.axhspan(0.95, 1.05, color="0.9", zorder=0)
     ax.set_xticks(range(len(names)), names, rotation=20, ha="right")
     ax.set_ylabel("after / before (time; < 1 is faster)")
-    ax.set_title("Vocabulary redesign: every benchmark after / before (ABBA rounds; bars: spread over rounds)")
+    pairs = sorted({len(summary[n]["runs"]) // 2 for n in names})
+    spread = "one pair each, no spread" if pairs == [1] else f"{pairs[0]}-{pairs[-1]} ABBA pairs; bars: spread"
+    ax.set_title(f"Vocabulary redesign: every benchmark after / before ({spread})")
     ax.legend(fontsize=8, ncol=2)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
