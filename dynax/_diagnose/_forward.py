@@ -278,55 +278,63 @@ def _refit(problem: Problem, round_: Round, short, say) -> tuple[np.ndarray, _Ba
     shortlist = problem.selection.shortlist
     new = np.asarray([-1] + short + [-1] * (shortlist - len(short)))
     p_init = np.tile(round_.p, (shortlist + 1, 1))
+    through = _through_inputs(problem, round_)
     for i, k in enumerate(new):
         if k >= 0:
             start = problem.inits[k] - problem.neutral[k]
             p_init[i, -1] = _start_value(problem, k, round_.deltas[round_.remaining.index(k)], start)
-            through = _nominal_through_inputs(problem, round_.slots, k, p_init[i])
-            if not np.array_equal(through, p_init[i]):
-                c = problem.neutral[k] + through[-1]
-                say(
-                    f"  {problem.candidates[k].label(problem.system)}: held map refitted one step through it at {c:.3g}"
-                )
-            p_init[i] = through
+            if through is not None and through[0] == k:
+                p_init[i] = through[1]
+                c = problem.neutral[k] + through[1][-1]
+                label = problem.candidates[k].label(problem.system)
+                say(f"  {label}: held map refitted one step through it at {c:.3g} (its one-step optimum)")
     return new, _fit_batch(problem, np.tile(round_.slots, (shortlist + 1, 1)), new, p_init, say)
 
 
-def _nominal_through_inputs(problem: Problem, slots, k: int, p: np.ndarray) -> np.ndarray:
-    """`p` with candidate `k`'s start and the nominal values refitted through it, where it has input dynamics and
-    the problem holds nominal values that a one-step fit of the recorded inputs gave (`Problem.nominal_through`).
+def _through_inputs(problem: Problem, round_: Round) -> tuple[int, np.ndarray] | None:
+    """The candidate with input dynamics that the held one-step map is refitted through in this round, and its
+    configuration's start: where the problem's nominal values are a one-step fit of the recorded inputs
+    (`Problem.nominal_through`), the quadrotor's motor map.
 
-    A held motor map fitted one step at a time on commands that act through a lag or a dead time has taken up
-    part of them (the least-squares map of the command as logged is a smoothed, attenuated map of the one that
-    acts), and the term refitted against that map finds part of its size and gains part of its effect. The map is
-    instead the one-step least-squares fit of the model with the candidate (and the terms already selected with
-    internal states), jointly over the candidate's coefficient: over `THROUGH_SAMPLES` multiples of the sample
-    interval, the one whose one-step fit leaves the least residual. The candidate's simulation-error refit starts
-    there, the map held. Where no lag or delay fits the one-step criterion better than none, `p` is kept."""
-    term = problem.candidates[k]
-    if problem.nominal_through is None or not (isinstance(term, AbstractInputTerm) and term.n_hidden):
-        return p
+    A map fitted one step at a time on commands that act through a lag or a dead time has taken up part of them
+    (the least-squares map of the command as logged is a smoothed, attenuated map of the one that acts), and the
+    term refitted against that map finds part of its size and gains part of its effect. The one-step criterion
+    that fitted the map chooses: each remaining candidate with internal states (a motor's lag, a dead time) at
+    `THROUGH_SAMPLES` multiples of the sample interval, with the terms already selected, and the one whose
+    one-step fit leaves the least residual, below the held map's, gets that map and starts at that coefficient;
+    the others are tested against the held map. One per round, so that a candidate's held-out gain is never a
+    refitted map's that another input's dynamics made (through the closed loop every motor's command follows the
+    others').
+
+    **Returns:** `(candidate, parameters)`, or `None` where no lag or delay fits the one-step criterion better."""
+    if problem.nominal_through is None:
+        return None
     n_nominal = len(problem.names)
     held = []
-    for j, slot in enumerate(np.asarray(slots)):
+    for j, slot in enumerate(np.asarray(round_.slots)):
         selected = problem.candidates[slot] if slot >= 0 else None
         if isinstance(selected, AbstractInputTerm) and selected.n_hidden:
-            held.append(_at(selected, problem.neutral[slot] + p[n_nominal + j]))
-    fits = [
-        (loss, c, values)
-        for c in problem.neutral[k] + problem.dt * np.asarray(THROUGH_SAMPLES, float)
-        for values, loss in [problem.nominal_through((*held, _at(term, c)))]
-    ]
-    loss, c, values = min(fits, key=lambda f: f[0])
-    if not c > problem.neutral[k]:
-        return p
-    p = p.copy()
+            held.append(_at(selected, problem.neutral[slot] + round_.p[n_nominal + j]))
+    _, held_loss = problem.nominal_through(tuple(held))
+    best = None
+    for k in round_.remaining:
+        term = problem.candidates[k]
+        if not (isinstance(term, AbstractInputTerm) and term.n_hidden):
+            continue
+        for c in problem.neutral[k] + problem.dt * np.asarray(THROUGH_SAMPLES, float):
+            values, loss = problem.nominal_through((*held, _at(term, c)))
+            if loss < held_loss and (best is None or loss < best[0]):
+                best = (loss, k, c, values)
+    if best is None:
+        return None
+    _, k, c, values = best
+    p = np.asarray(round_.p, float).copy()
     p[:n_nominal], p[-1] = values, c - problem.neutral[k]
-    return p
+    return k, p
 
 
-#: The lags and dead times [samples] over which a held one-step map is refitted through a candidate (`0`: none).
-THROUGH_SAMPLES = (0, 1, 2, 3, 4, 6, 8, 12)
+#: The lags and dead times [samples] at which the held one-step map is refitted through a candidate (`_through_inputs`).
+THROUGH_SAMPLES = (1, 2, 3, 4, 6, 8, 12)
 
 
 def _at(term, coefficient):

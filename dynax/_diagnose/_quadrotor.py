@@ -225,10 +225,16 @@ def _one_step_through(system: Quadrotor, body, train: list[Trajectory], names) -
     def through(terms: tuple) -> tuple[np.ndarray, float]:
         key = tuple((type(t).__name__, t.inputs, round(float(t.coefficient), 9)) for t in terms)
         if key not in made:  # each fit once per diagnosis: every round asks for the same ones
-            flights = [
-                Trajectory(f.ts, f.xs, applied_inputs(body, terms, f), f.state_names, f.input_names, f.system, f.source)
-                for f in train
-            ]
+            flights = (
+                [
+                    Trajectory(
+                        f.ts, f.xs, applied_inputs(body, terms, f), f.state_names, f.input_names, f.system, f.source
+                    )
+                    for f in train
+                ]
+                if terms
+                else train
+            )
             solution = fit_quadrotor(system, flights, OneStep(), progress=False)
             values = np.asarray(nominal_values(body_frame_system(solution.model, inputs), names))
             made[key] = (values, float(solution.loss))
