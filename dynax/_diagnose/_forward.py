@@ -10,6 +10,7 @@ import time
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
+from scipy.stats import chi2
 
 from .._model._extensions import AbstractInputTerm
 from .._model._linear_in_parameters import size_parameter_names
@@ -304,7 +305,8 @@ def _through_inputs(problem: Problem, round_: Round) -> tuple[int, np.ndarray] |
     one-step fit leaves the least residual, below the held map's, gets that map and starts at that coefficient;
     the others are tested against the held map. One per round, so that a candidate's held-out gain is never a
     refitted map's that another input's dynamics made (through the closed loop every motor's command follows the
-    others').
+    others'); and only where the one-step residual falls by more than chance (a likelihood-ratio test of the one
+    coefficient at the diagnosis's level, Bonferroni over the candidates and coefficients tried).
 
     **Returns:** `(candidate, parameters)`, or `None` where no lag or delay fits the one-step criterion better."""
     if problem.nominal_through is None:
@@ -315,17 +317,20 @@ def _through_inputs(problem: Problem, round_: Round) -> tuple[int, np.ndarray] |
         selected = problem.candidates[slot] if slot >= 0 else None
         if isinstance(selected, AbstractInputTerm) and selected.n_hidden:
             held.append(_at(selected, problem.neutral[slot] + round_.p[n_nominal + j]))
-    _, held_loss = problem.nominal_through(tuple(held))
+    _, held_loss, n_residuals = problem.nominal_through(tuple(held))
+    dynamic = [k for k in round_.remaining if isinstance(problem.candidates[k], AbstractInputTerm)]
+    dynamic = [k for k in dynamic if problem.candidates[k].n_hidden]
     best = None
-    for k in round_.remaining:
-        term = problem.candidates[k]
-        if not (isinstance(term, AbstractInputTerm) and term.n_hidden):
-            continue
+    for k in dynamic:
         for c in problem.neutral[k] + problem.dt * np.asarray(THROUGH_SAMPLES, float):
-            values, loss = problem.nominal_through((*held, _at(term, c)))
-            if loss < held_loss and (best is None or loss < best[0]):
+            values, loss, _ = problem.nominal_through((*held, _at(problem.candidates[k], c)))
+            if best is None or loss < best[0]:
                 best = (loss, k, c, values)
-    if best is None:
+    # The likelihood ratio of the one extra coefficient, Bonferroni over every candidate and coefficient tried:
+    # the one-step residual is mostly measurement noise, and the least of many tries is below the held map's by
+    # chance about as often as not.
+    tries = len(dynamic) * len(THROUGH_SAMPLES)
+    if best is None or not n_residuals * np.log(held_loss / best[0]) > chi2.isf(problem.selection.alpha / tries, 1):
         return None
     _, k, c, values = best
     p = np.asarray(round_.p, float).copy()

@@ -135,8 +135,8 @@ class Problem:
     not_proposed: list = dataclasses.field(default_factory=list)
     # Where the held nominal values are a one-step fit of the recorded inputs (the quadrotor's motor map): that
     # fit redone with the inputs as given terms with input dynamics pass them on (a tuple of terms at their
-    # coefficients -> (nominal values, the fit's loss)); `None` elsewhere.
-    nominal_through: Callable[[tuple], tuple[np.ndarray, float]] | None = None
+    # coefficients -> (nominal values, the fit's loss, its number of residuals)); `None` elsewhere.
+    nominal_through: Callable[[tuple], tuple[np.ndarray, float, int]] | None = None
 
     def look_alikes(self, k: int) -> list[int]:
         """The candidates data could mistake for candidate `k`: its look-alikes and its structural equivalents."""

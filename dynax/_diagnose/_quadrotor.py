@@ -212,17 +212,18 @@ def diagnose_quadrotor(system: Quadrotor, train, validation=None, *, candidates,
 def _one_step_through(system: Quadrotor, body, train: list[Trajectory], names) -> Callable[[tuple], tuple]:
     """`Problem.nominal_through` of a quadrotor diagnosis in `Refit()` mode: the one-step least-squares fit of
     `system`'s body model (`fit_quadrotor`) on the `train`ing flights with their commands as given input terms
-    pass them on (`applied_inputs`: a motor's lag, a dead time): `(nominal values names, one-step loss)`."""
+    pass them on (`applied_inputs`: a motor's lag, a dead time): `(nominal values names, one-step loss, the number of
+    one-step residuals)`."""
     from .._identify._vehicle import OneStep
     from .._identify._vehicle._quadrotor import fit_quadrotor
     from ._fit import nominal_values
     from ._residuals import applied_inputs
 
     inputs = tuple(train[0].input_names)
+    n_residuals = 6 * sum(len(f) - 1 for f in train)  # one-step predictions of the six body velocities
+    made: dict[tuple, tuple[np.ndarray, float, int]] = {}
 
-    made: dict[tuple, tuple[np.ndarray, float]] = {}
-
-    def through(terms: tuple) -> tuple[np.ndarray, float]:
+    def through(terms: tuple) -> tuple[np.ndarray, float, int]:
         key = tuple((type(t).__name__, t.inputs, round(float(t.coefficient), 9)) for t in terms)
         if key not in made:  # each fit once per diagnosis: every round asks for the same ones
             flights = (
@@ -237,7 +238,7 @@ def _one_step_through(system: Quadrotor, body, train: list[Trajectory], names) -
             )
             solution = fit_quadrotor(system, flights, OneStep(), progress=False)
             values = np.asarray(nominal_values(body_frame_system(solution.model, inputs), names))
-            made[key] = (values, float(solution.loss))
+            made[key] = (values, float(solution.loss), n_residuals)
         return made[key]
 
     return through
