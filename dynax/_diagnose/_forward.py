@@ -5,12 +5,12 @@ select the best admissible one.
 
 import dataclasses
 import functools
+from statistics import NormalDist
 import time
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from scipy.stats import chi2
 
 from .._model._extensions import AbstractInputTerm
 from .._model._linear_in_parameters import size_parameter_names
@@ -330,7 +330,8 @@ def _through_inputs(problem: Problem, round_: Round) -> tuple[int, np.ndarray] |
     # the one-step residual is mostly measurement noise, and the least of many tries is below the held map's by
     # chance about as often as not.
     tries = len(dynamic) * len(THROUGH_SAMPLES)
-    if best is None or not n_residuals * np.log(held_loss / best[0]) > chi2.isf(problem.selection.alpha / tries, 1):
+    bar = NormalDist().inv_cdf(1.0 - problem.selection.alpha / tries / 2.0) ** 2  # chi-square, 1 degree of freedom
+    if best is None or not n_residuals * np.log(held_loss / best[0]) > bar:
         return None
     _, k, c, values = best
     p = np.asarray(round_.p, float).copy()
