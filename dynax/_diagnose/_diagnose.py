@@ -32,7 +32,7 @@ from ._forward import Current, Forward, forward_selection, Nominal, Yardstick
 from ._problem import check_arguments, prepare_problem, Problem
 from ._problem import Known as Known
 from ._problem import Refit as Refit
-from ._quadrotor import diagnose_quadrotor
+from ._quadrotor import frame_quadrotor
 from ._records import as_records
 from ._residuals import Structure, structure_test
 from ._result import DataSummary, ModelSummary
@@ -370,21 +370,19 @@ def diagnose(
     """
     warn_if_float32("diagnosis")  # the float64 policy: say so, once, naming the switch
     check_arguments(system, mode, horizons, selection)
+    framed = None
     if isinstance(system, Quadrotor):  # its body-frame form, the multirotor causes (`_quadrotor.py`)
-        return diagnose_quadrotor(
-            system,
-            train,
-            validation,
-            candidates=candidates,
-            mode=mode,
-            horizons=horizons,
-            selection=selection,
-            progress=progress,
-        )
+        framed = frame_quadrotor(system, train, validation, candidates, mode, horizons, selection)
+        system, train, validation = framed.system, framed.train, framed.validation
+        candidates, mode, horizons = framed.candidates, framed.mode, framed.horizons
+        check_arguments(system, mode, horizons, selection)
     warn_data_faults(train, validation)
     with stage_reporter(progress) as say:
         problem = prepare_problem(system, train, validation, candidates, mode, horizons, selection)
-        return diagnose_problem(problem, mode, train, validation, say)
+        if framed is not None and framed.through is not None:
+            problem.nominal_through = framed.through(problem.names)
+        report = diagnose_problem(problem, mode, train, validation, say)
+    return report if framed is None else framed.finish(report)
 
 
 def diagnose_problem(problem: Problem, mode: Refit | Known, train, validation, say) -> Report:

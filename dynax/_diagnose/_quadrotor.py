@@ -32,7 +32,7 @@ The vocabulary for a multirotor (`quadrotor_candidates`):
 
 In `Refit()` mode (the default) the rigid body's weights are the one-step least-squares fit of the
 given model's structure on the training flights (`fit_quadrotor`; `initial_quadrotor("nominal")`
-needs no starting values); `Known()` trusts the given weights (see `diagnose_quadrotor`).
+needs no starting values); `Known()` trusts the given weights (see `frame_quadrotor`).
 
 Battery sag and ground effect change the thrust per command, and in a closed-loop flight the
 command follows the thrust the vehicle needs: the one-step motor map fitted without them takes up
@@ -46,7 +46,7 @@ Cheeseman and Bennett's $R^2/16$) and its held-out gain is the effect's.
 
 from collections.abc import Callable, Sequence
 import dataclasses
-from typing import ClassVar
+from typing import ClassVar, TYPE_CHECKING
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -67,6 +67,10 @@ from .._model._quadrotor import (
     WORLD_VELOCITY,
 )
 from .._model._system import AbstractSystem
+
+if TYPE_CHECKING:
+    from ._problem import Known, Refit
+    from ._settings import Horizons
 
 #: The reference horizons of a flight diagnosis [s]: 0.1 to 0.5 s, where flight models are scored.
 QUADROTOR_HORIZONS_S = (0.1, 0.25, 0.5)
@@ -137,8 +141,9 @@ def _as_list(flights, where: str) -> list[Trajectory]:
 
 
 def prepare_quadrotor(system: Quadrotor, train, validation, *, refit: bool) -> tuple:
-    """The body-frame system and records of a quadrotor diagnosis and the nominal `Quadrotor`: with
-    `refit`, the one-step least-squares fit of `system`'s body model on `train` (`fit_quadrotor`)."""
+    """The body-frame system and records of a quadrotor diagnosis, the nominal `Quadrotor` and its fit: with
+    `refit`, the one-step least-squares fit of `system`'s body model on `train` (`fit_quadrotor`; its
+    `Solution`, else `None`)."""
     from .._identify._vehicle import OneStep
     from .._identify._vehicle._quadrotor import fit_quadrotor, join_flights
 
@@ -147,8 +152,10 @@ def prepare_quadrotor(system: Quadrotor, train, validation, *, refit: bool) -> t
     if not train:
         raise UsageError("diagnose: no training flights given")
     join_flights(system, train + (held or []))  # one interval, one set of inputs, vbat where the model reads it
+    one_step = None
     if refit:
-        system = fit_quadrotor(system, train, OneStep()).model
+        one_step = fit_quadrotor(system, train, OneStep(), progress=False)
+        system = one_step.model
     elif not np.any(np.asarray(system.body_model.weights)):
         raise UsageError(
             "diagnose: Known() trusts the quadrotor's weights, but they are all zero; fit it first "
@@ -157,23 +164,53 @@ def prepare_quadrotor(system: Quadrotor, train, validation, *, refit: bool) -> t
     inputs = tuple(train[0].input_names)
     body = body_frame_system(system, inputs)
     as_body = lambda flights: [to_body_frame(system, f) for f in flights]  # noqa: E731
-    return body, as_body(train), (None if held is None else as_body(held)), system
+    return body, as_body(train), (None if held is None else as_body(held)), system, one_step
 
 
-def diagnose_quadrotor(system: Quadrotor, train, validation=None, *, candidates, mode, horizons, selection, progress):
-    """`diagnose` on a `Quadrotor` (see the module docs); the arguments are `diagnose`'s. Without
-    `horizons.horizons_s` the error is reported at `QUADROTOR_HORIZONS_S`; the report names the system
-    `quadrotor`.
+@dataclasses.dataclass(frozen=True)
+class BodyFrameDiagnosis:
+    """What `diagnose` runs its engine on for a `Quadrotor` (`frame_quadrotor`): the body-frame system,
+    records, candidates, mode and horizons, and how the held map is refitted through input dynamics
+    (`through`: the problem's nominal names -> `Problem.nominal_through`, or `None`); `finish` names the
+    report's system and mode as the user asked."""
 
-    `Refit()` (all parameters): the rigid body's weights are the one-step least-squares fit on the
-    training flights and are held while the candidates' coefficients are fitted by simulation
-    error (a simulation-error refit of the dozens of collinear motor weights with every candidate
-    neither converges nor tells more); `Refit(parameters=names)`: those weights are also refitted
-    by simulation error, from the one-step fit; `Known()`: `system`'s weights are trusted as given.
+    system: AbstractSystem
+    train: list
+    validation: list
+    candidates: tuple
+    mode: "Refit | Known"
+    horizons: "Horizons"
+    through: Callable[[tuple], Callable[[tuple], tuple]] | None
+    refit: bool
+    refit_parameters: bool
+
+    def finish(self, report):
+        report = dataclasses.replace(report, system="quadrotor")
+        if not self.refit:
+            return report
+        report.notes.append(
+            "The rigid body's weights are the one-step least-squares fit on the training flights"
+            + (
+                ", the named ones refitted by simulation error with each candidate."
+                if self.refit_parameters
+                else ", held while each candidate's coefficient is fitted by simulation error (for a motor lag or "
+                "dead time, the one-step fit through it at its one-step optimum)."
+            )
+        )
+        return dataclasses.replace(report, mode="refit")
+
+
+def frame_quadrotor(system: Quadrotor, train, validation, candidates, mode, horizons, selection) -> BodyFrameDiagnosis:
+    """`diagnose`'s arguments for a `Quadrotor` in the body frame (see the module docs): `diagnose` then runs its
+    own steps on them. Without `horizons.horizons_s` the error is reported at `QUADROTOR_HORIZONS_S`.
+
+    `Refit()` (all parameters): the rigid body's weights are the one-step least-squares fit on the training
+    flights and are held while the candidates' coefficients are fitted by simulation error (a simulation-error
+    refit of the dozens of collinear motor weights with every candidate neither converges nor tells more);
+    `Refit(parameters=names)`: those weights are also refitted by simulation error, from the one-step fit;
+    `Known()`: `system`'s weights are trusted as given.
     """
-    # The engine, on the body-frame form.
-    from ._diagnose import diagnose_problem, stage_reporter, warn_data_faults
-    from ._problem import check_arguments, Known, prepare_problem, Refit
+    from ._problem import Known, Refit
 
     refit = isinstance(mode, Refit)
     if validation is None:  # the held-out tail of each flight stays out of the one-step fit too
@@ -181,39 +218,34 @@ def diagnose_quadrotor(system: Quadrotor, train, validation=None, *, candidates,
 
         halves = [holdout_split(f, selection.holdout_fraction) for f in _as_list(train, "train")]
         train, validation = [a for a, _ in halves], [b for _, b in halves]
-    body, train_b, val_b, _ = prepare_quadrotor(system, train, validation, refit=refit)
-    if candidates is None:
-        candidates = quadrotor_candidates(body)
+    body, train_b, val_b, _, one_step = prepare_quadrotor(system, train, validation, refit=refit)
     if horizons.horizons_s is None:
         horizons = dataclasses.replace(horizons, horizons_s=QUADROTOR_HORIZONS_S)
-    engine_mode = mode if (refit and mode.parameters is not None) else Known()
-    check_arguments(body, engine_mode, horizons, selection)
-    warn_data_faults(train_b, val_b)
-    with stage_reporter(progress) as say:
-        problem = prepare_problem(body, train_b, val_b, candidates, engine_mode, horizons, selection)
-        if refit and mode.parameters is None:  # the held map: a one-step fit, redone through input dynamics
-            problem.nominal_through = _one_step_through(system, body, _as_list(train, "train"), problem.names)
-        report = diagnose_problem(problem, engine_mode, train_b, val_b, say)
-    report = dataclasses.replace(report, system="quadrotor")
-    if refit:
-        report.notes.append(
-            "The rigid body's weights are the one-step least-squares fit on the training flights"
-            + (
-                ", the named ones refitted by simulation error with each candidate."
-                if mode.parameters is not None
-                else ", held while each candidate's coefficient is fitted by simulation error (for a motor lag or "
-                "dead time, the one-step fit through it at its one-step optimum)."
-            )
-        )
-        report = dataclasses.replace(report, mode="refit")
-    return report
+    held_map = refit and mode.parameters is None
+    through = None
+    if held_map:  # the held map: a one-step fit, redone through input dynamics
+        flights = _as_list(train, "train")
+        through = lambda names: _one_step_through(system, body, flights, names, one_step)  # noqa: E731
+    return BodyFrameDiagnosis(
+        system=body,
+        train=train_b,
+        validation=val_b,
+        candidates=quadrotor_candidates(body) if candidates is None else candidates,
+        mode=mode if (refit and mode.parameters is not None) else Known(),
+        horizons=horizons,
+        through=through,
+        refit=refit,
+        refit_parameters=refit and mode.parameters is not None,
+    )
 
 
-def _one_step_through(system: Quadrotor, body, train: list[Trajectory], names) -> Callable[[tuple], tuple]:
+def _one_step_through(
+    system: Quadrotor, body, train: list[Trajectory], names, fitted=None
+) -> Callable[[tuple], tuple[np.ndarray, float, int]]:
     """`Problem.nominal_through` of a quadrotor diagnosis in `Refit()` mode: the one-step least-squares fit of
     `system`'s body model (`fit_quadrotor`) on the `train`ing flights with their commands as given input terms
     pass them on (`applied_inputs`: a motor's lag, a dead time): `(nominal values names, one-step loss, the number of
-    one-step residuals)`."""
+    one-step residuals)`. `fitted`: the fit through no term, where it is already made (`prepare_quadrotor`'s)."""
     from .._identify._vehicle import OneStep
     from .._identify._vehicle._quadrotor import fit_quadrotor
     from ._fit import nominal_values
@@ -222,6 +254,13 @@ def _one_step_through(system: Quadrotor, body, train: list[Trajectory], names) -
     inputs = tuple(train[0].input_names)
     n_residuals = 6 * sum(len(f) - 1 for f in train)  # one-step predictions of the six body velocities
     made: dict[tuple, tuple[np.ndarray, float, int]] = {}
+
+    def outcome(solution) -> tuple[np.ndarray, float, int]:
+        values = np.asarray(nominal_values(body_frame_system(solution.model, inputs), names))
+        return values, float(solution.loss), n_residuals
+
+    if fitted is not None:
+        made[()] = outcome(fitted)
 
     def through(terms: tuple) -> tuple[np.ndarray, float, int]:
         key = tuple((type(t).__name__, t.inputs, round(float(t.coefficient), 9)) for t in terms)
@@ -236,9 +275,7 @@ def _one_step_through(system: Quadrotor, body, train: list[Trajectory], names) -
                 if terms
                 else train
             )
-            solution = fit_quadrotor(system, flights, OneStep(), progress=False)
-            values = np.asarray(nominal_values(body_frame_system(solution.model, inputs), names))
-            made[key] = (values, float(solution.loss), n_residuals)
+            made[key] = outcome(fit_quadrotor(system, flights, OneStep(), progress=False))
         return made[key]
 
     return through
