@@ -29,7 +29,8 @@ if TYPE_CHECKING:
 
 class FitSettings(eqx.Module):
     """What a run of a method sets beyond the method's own settings (as diffrax's `SaveAt`: grouped,
-    so that `fit` keeps one signature for every method). A method reads what applies to it.
+    so that `fit` keeps one signature for every method, and `identify` one argument for all of them:
+    `identify(system, data, method, settings=FitSettings(...))`). A method reads what applies to it.
 
     **Fields:**
 

@@ -155,8 +155,10 @@ def test_identify_fits_a_quadrotor_and_validates_it_on_held_out_flights(flights,
         error.mae_per_state, dynax.flight_error(result.system, flights[3:], (10, 25, 50)).mae_per_state
     )
     held = dynax.flight_error(dynax.ConstantVelocity(), flights[3:], (10, 25, 50)).table("mae")
-    for group in ("position", "velocity", "body_rate"):  # the commands' effect, learned on other flights
-        assert error.table("mae")[group][-1] < 0.2 * held[group][-1], group
+    # The model family holds the truth and the weights come back within 3 % (above): 0.5 s ahead on a flight it
+    # never saw, a few per cent of what holding the velocity misses (the commands' effect) at most.
+    for group in ("position", "velocity", "attitude", "body_rate"):
+        assert error.table("mae")[group][-1] < 0.05 * held[group][-1], group
     # without validation records, each flight's last 20 % (0.3 s) is held out, at the horizons it holds
     tails = dynax.identify(start, flights, dynax.OneStep())
     assert tails.validation is not None and tails.validation.steps == (10, 25)
