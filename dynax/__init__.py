@@ -143,6 +143,7 @@ from ._identify import (
 from ._identify import (
     Validate as Validate,
 )
+from ._identify._method import FitSettings as FitSettings
 from ._identify._vehicle import (
     Backprop as Backprop,
 )

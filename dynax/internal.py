@@ -427,6 +427,9 @@ from ._identify._vehicle import (
 )
 from ._identify._vehicle import VehicleStatistics as VehicleStatistics
 from ._identify._vehicle._criteria import (
+    AbstractVehicleCriterion as AbstractVehicleCriterion,
+)
+from ._identify._vehicle._criteria import (
     normal_equations as normal_equations,
 )
 from ._identify._vehicle._criteria import (
@@ -558,6 +561,7 @@ __all__ = [
     "AbstractInputTerm",
     "AbstractLinearInParameters",
     "AbstractStatistics",
+    "AbstractVehicleCriterion",
     "AbstractVehicleTerm",
     "acceleration_residuals",
     "applied_inputs",

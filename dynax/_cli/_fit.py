@@ -1,4 +1,7 @@
-"""`dynax fit helicopter DATA --model M --criterion C [--horizon S] --out MODEL.json`: vehicle learning."""
+"""`dynax fit helicopter DATA --model M --criterion C [--horizon S] --out MODEL.json`: vehicle learning.
+
+`dynax fit` is the vehicle spelling of `identify`: the helicopter's record, or a quadrotor's flights
+(`_quadrotor.py`), fitted whole by `identify` with the vehicle criterion (`fit_everything`)."""
 
 import argparse
 import sys
@@ -178,6 +181,19 @@ def required_samples(system, criterion: str, horizon_s: float, dt: float) -> tup
     return need, why
 
 
+def fit_everything(system, records, criterion):
+    """`identify` of a vehicle on all of `records` with a vehicle `criterion` (nothing held out: `dynax
+    evaluate` scores held-out flights), the data's faults already printed by the loader: its `Solution`."""
+    import warnings
+
+    from .._data import DataWarning
+    from .._identify import identify, Validate
+
+    with warnings.catch_warnings():  # the records' faults were refused or printed when they were loaded
+        warnings.simplefilter("ignore", DataWarning)
+        return identify(system, records, criterion, consistency="off", validation=Validate(holdout=0)).solution
+
+
 def _stride(text: str):
     if text == "auto":
         return text
@@ -196,7 +212,6 @@ def run(args: argparse.Namespace) -> int:
     from .._identify._vehicle import (
         auto_stride,
         Backprop,
-        fit_vehicle,
         FrequencyDomain,
         initial_helicopter,
         Lagged,
@@ -256,7 +271,7 @@ def run(args: argparse.Namespace) -> int:
             f"note: one start time in {stride}, {-(-(len(data) - n_steps) // stride)} windows of {args.horizon:g} s "
             "(--stride 1 for every start)"
         )
-    fit = fit_vehicle(system, data, criterion)  # a bar per iteration with the loss on stderr (see --quiet)
+    fit = fit_everything(system, data, criterion)  # a bar per iteration with the loss on stderr (see --quiet)
     horizon = args.horizon if args.criterion in ("lagged", "backprop") else None
     weights = np.asarray(fit.model.body_model.weights)
     loss = recorded_loss(fit)

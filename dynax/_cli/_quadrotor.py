@@ -46,8 +46,9 @@ def run_fit(args) -> int:
     jax.config.update("jax_enable_x64", True)  # learning in float64; the library leaves config alone
 
     from .._identify._vehicle import Backprop, Lagged, OneStep
-    from .._identify._vehicle._quadrotor import fit_quadrotor, quadrotor_to_json
+    from .._identify._vehicle._quadrotor import quadrotor_to_json
     from .._model._quadrotor import initial_quadrotor
+    from ._fit import fit_everything
 
     model = args.model or "acceleration"
     if model not in QUADROTOR_MODELS:
@@ -88,7 +89,7 @@ def run_fit(args) -> int:
         "lagged": lambda: Lagged(horizon=args.horizon, stride=stride, **limit),
         "backprop": lambda: Backprop(horizon=args.horizon, stride=stride, **limit),
     }[args.criterion]()
-    solution = fit_quadrotor(system, runs, criterion)
+    solution = fit_everything(system, runs, criterion)  # `fit_quadrotor`'s call
     weights = np.asarray(solution.model.body_model.weights)
     loss = float(solution.loss)
     if not (np.all(np.isfinite(weights)) and math.isfinite(loss)):

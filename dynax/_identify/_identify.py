@@ -1,21 +1,21 @@
 r"""`identify(system, data, method=...)`: fit a system's parameters to measured trajectories.
 
-`identify` is prepare -> fit -> refine -> validate for every method, and asks the method (an
+`identify` is prepare -> fit -> refine -> validate for every method and system, vehicles included
+(`fit_vehicle`, `fit_quadrotor` and `dynax fit` are its vehicle spellings), and asks the method (an
 `AbstractMethod`) what to run: it checks the records, splits off the held-out data and hands the
 method the rest with an `IdentifyJob` (the fit's settings, the held-out records, the consistency
 and refinement choices); then it calls the method's `prepare` (the records as the fit reads them),
 `fit_stage` (the first stage) and `refine` (the stages after it) in turn (`_stages.py`: any
 method's `fit` once, checked for consistency; the least-squares methods' angle zeros, least-squares
-stage with friction at rest, and output-error refinement), and validates each stage's model on the
-held-out records itself, returning an `Identification` (`_result.py`).
+stage with friction at rest, and output-error refinement; the vehicle criteria's joined flights),
+and validates each stage's model on the held-out records itself (each as the method's `prepare` says:
+the vehicle criteria score flights by the vehicle horizon error), returning an `Identification` (`_result.py`).
 """
 
 from collections.abc import Sequence
 import dataclasses
 from typing import Literal
 import warnings
-
-from jaxtyping import Array, Float
 
 from .._data._sampling import check_time_stamps
 from .._data._trajectory import Trajectory
@@ -67,8 +67,9 @@ def _check_data(system, trajectories):
             if traj.source:
                 raise
             raise UsageError(f"identify: record {k} of `data`: {error}") from None
+    optional = len(system.optional_inputs)  # inputs a record may leave out (a quadrotor's vbat)
     for k, traj in enumerate(trajectories):
-        if traj.xs.shape[1] != system.n_states or traj.us.shape[1] != system.n_inputs:
+        if traj.xs.shape[1] != system.n_states or not system.n_inputs - optional <= traj.us.shape[1] <= system.n_inputs:
             raise UsageError(
                 f"identify: trajectory {k} has {traj.xs.shape[1]} states and {traj.us.shape[1]} inputs "
                 f"({traj.state_names}, {traj.input_names}) but {type(system).__name__} has "
@@ -149,8 +150,8 @@ def identify(
     data: Trajectory | Sequence[Trajectory],
     method: AbstractMethod = Dynamic(),
     *,
-    friction: Friction = "viscous",
-    weights: Float[Array, " rows"] | None = None,
+    friction: Friction | None = None,
+    settings: FitSettings = FitSettings(),
     consistency: Literal["constrain", "check", "off"] = "constrain",
     refine="auto",
     validation: Validate | Trajectory | Sequence[Trajectory] | None = None,
@@ -190,21 +191,26 @@ def identify(
     **Arguments:**
 
     - `system`: `Acrobot`, `DoublePendulum` or `LinearAxis` (least squares), or any system
-      (`SimulationFit`; a `Helicopter` also with a vehicle criterion, `OneStep()`, `Lagged()`, ...,
-      which then fits the one record as `fit_vehicle` does). Its parameter values are the starting
-      point of `SimulationFit` and are otherwise ignored.
-    - `data`: a `Trajectory` or a list of them (same system).
+      (`SimulationFit`); a vehicle (`Helicopter`, `Quadrotor`) with a vehicle criterion
+      (`OneStep()`, `Lagged()`, `Backprop()`, `FrequencyDomain()`: the helicopter's only). Its
+      parameter values are the starting point of `SimulationFit` and of a warm-started vehicle
+      criterion, and are otherwise ignored.
+    - `data`: a `Trajectory` or a list of them (same system). A vehicle criterion fits one record:
+      several (flights, or a flight's usable runs) are joined in the vehicle's body-frame
+      coordinates, no window crossing from one to the next (as `fit_quadrotor` does).
     - `method`: `Dynamic()` (default), `Power()`, `Energy()`, `SimulationFit()`, or any other
       `AbstractMethod`: `identify` runs the method's `prepare`, `fit_stage` and `refine` (by
-      default the records as given, its `fit` once with `friction` and `weights` in a
-      `FitSettings` and the estimate's consistency checked where the system has conditions, and
-      nothing to refine; the least-squares methods run the stages above), then validates each
-      stage's model.
-    - `friction`: `"viscous"` (default) or `"coulomb"` (adds `fc1`, `fc2`, or the linear axis's
-      `coulomb`).
-    - `weights`: optional row weights for the least-squares problem, one per stacked equation
-      (for `Dynamic`, all of joint 1's equations come first, then joint 2's). The numerical rank's
-      threshold is the method's `rcond`.
+      default the records as given, its `fit` once with `settings` and the estimate's consistency
+      checked where the system has conditions, and nothing to refine; the least-squares methods
+      run the stages above, the vehicle criteria join the flights), then validates each stage's
+      model.
+    - `friction`: `"viscous"` (the default) or `"coulomb"` (adds `fc1`, `fc2`, or the linear
+      axis's `coulomb`); the same as `settings.friction`.
+    - `settings`: a `FitSettings`, what the fit reads beyond the method's own settings: row
+      `weights` for the least-squares problem (one per stacked equation; for `Dynamic`, all of
+      joint 1's equations come first, then joint 2's; the numerical rank's threshold is the
+      method's `rcond`), and for the vehicle criteria a joined record's `breaks`, `warm_start`
+      (`Lagged`, `Backprop` start from `system`'s weights), `callback` and `progress`.
     - `consistency`: `"constrain"` (default: fit over the consistent set when the plain estimate
       is inconsistent), `"check"` (return the plain estimate; warn with
       `InconsistentEstimateWarning` naming each violated condition) or `"off"`. With either of
@@ -216,7 +222,10 @@ def identify(
     - `validation`: a `Validate`: held-out records (when given, all of `data` is fitted), or else
       the fraction of each record held out at its end (default: the last 20 %, none with row
       `weights`; `Validate(holdout=0)` fits everything and reports no validation), and the horizons
-      (default 0.1, 0.25, 0.5 s). Records alone are `Validate(records)`.
+      (default 0.1, 0.25, 0.5 s). Records alone are `Validate(records)`. A vehicle is scored by
+      the vehicle horizon error (`flight_error`: position, velocity, attitude and body-rate errors
+      at the horizons in whole samples), every other system by the open-loop position RMSE
+      (`held_out_error`).
 
     **Returns:** an `Identification`.
 
@@ -243,7 +252,8 @@ def identify(
     )
     if consistency not in _CONSISTENCY:
         raise UsageError(f"identify: `consistency` must be one of {_CONSISTENCY}, got {consistency!r}")
-    fitted, held, source, horizons_s = _validation_split(system, trajectories, validation, weights)
+    settings = _fit_settings(friction, settings)
+    fitted, held, source, horizons_s = _validation_split(system, trajectories, validation, settings.weights)
 
     # a held-out tail belongs to the record it was cut from (`None`: records of their own)
     tails_of = (
@@ -252,7 +262,7 @@ def identify(
         else None
     )
     job = IdentifyJob(
-        FitSettings(friction, weights),
+        settings,
         HeldOut(held, horizons_s, source, tails_of),
         consistency=consistency,
         refine=refine,
@@ -264,6 +274,19 @@ def identify(
     result = _validated(stages, prepared.job.held_out)
     _warn_unvalidated(held, source)
     return result
+
+
+def _fit_settings(friction, settings: FitSettings) -> FitSettings:
+    """The fit's `FitSettings`: `settings` with `friction` where given (one friction: refused where they differ)."""
+    if not isinstance(settings, FitSettings):
+        raise UsageError(f"identify: `settings` must be a FitSettings, got {type(settings).__name__}")
+    if friction is None or friction == settings.friction:
+        return settings
+    if settings.friction != FitSettings().friction:
+        raise UsageError(
+            f"identify: `friction={friction!r}` and `settings.friction={settings.friction!r}` differ; give one"
+        )
+    return dataclasses.replace(settings, friction=friction)
 
 
 def _validated(fitted: Fitted, held_out: HeldOut) -> Identification:

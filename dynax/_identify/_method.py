@@ -2,12 +2,13 @@ r"""`AbstractMethod`: what an identification method is, and what `identify` asks
 
 A method is a small `eqx.Module` of settings with one abstract method, `fit(system, records) ->
 Solution`, as an optimistix solver is `init`/`step`/`terminate` and a diffrax solver `step`: the
-driver (`identify`, `fit_vehicle`) calls the method and never checks its class. `identify` runs
+driver (`identify`, which `fit_vehicle` and `fit_quadrotor` spell for vehicles) calls the method and
+never checks its class. `identify` runs
 the same steps for every method, given an `IdentifyJob`: `prepare` (default: the records as given),
 `fit_stage` (default: the method's `fit` once, checked for consistency), `refine` (default: nothing
 to refine), then validates each stage's model itself. The least-squares methods (`Dynamic`,
 `Power`, `Energy`) override the three with their stages, `SimulationFit` says how its stage is
-named.
+named, and the vehicle criteria (`AbstractVehicleCriterion`) join a vehicle's flights in `prepare`.
 """
 
 import abc
@@ -28,7 +29,8 @@ if TYPE_CHECKING:
 
 class FitSettings(eqx.Module):
     """What a run of a method sets beyond the method's own settings (as diffrax's `SaveAt`: grouped,
-    so that `fit` keeps one signature for every method). A method reads what applies to it.
+    so that `fit` keeps one signature for every method, and `identify` one argument for all of them:
+    `identify(system, data, method, settings=FitSettings(...))`). A method reads what applies to it.
 
     **Fields:**
 

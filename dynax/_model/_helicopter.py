@@ -508,6 +508,20 @@ class Helicopter(AbstractSystem):
     def parameter_labels(self) -> tuple[str, ...]:
         return tuple(self.body_model.parameter_names)
 
+    # The vehicle protocol the vehicle criteria (`OneStep`, `Lagged`, ...) fit through: the system in
+    # body-frame coordinates, a record in them, and the system with a fitted body model.
+    def as_helicopter(self) -> "Helicopter":
+        """The form the vehicle criteria fit: the helicopter itself (`Quadrotor.as_helicopter`)."""
+        return self
+
+    def body_frame(self, record):
+        """A record in the coordinates `as_helicopter()` is fitted in: a helicopter's record as it is."""
+        return record
+
+    def with_body_model(self, body_model: AbstractBodyModel) -> "Helicopter":
+        """The same helicopter with `body_model` (a fitted one)."""
+        return eqx.tree_at(lambda h: h.body_model, self, body_model)
+
     def state_error(self, simulated, measured):
         """Simulated minus measured, with the simulated quaternion taken on the measured one's
         hemisphere: $q$ and $-q$ are one attitude."""

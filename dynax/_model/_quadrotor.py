@@ -141,6 +141,7 @@ class Quadrotor(AbstractSystem):
 
     state_names: ClassVar[tuple[str, ...]] = QUADROTOR_STATE_NAMES
     input_names: ClassVar[tuple[str, ...]] = QUADROTOR_INPUT_NAMES
+    optional_inputs: ClassVar[tuple[str, ...]] = ("vbat",)
 
     def __check_init__(self):
         if not isinstance(self.body_model, AbstractBodyModel):
@@ -169,7 +170,15 @@ class Quadrotor(AbstractSystem):
         """The same dynamics in body-frame coordinates on scaled inputs: what the criteria fit."""
         return Helicopter(self.body_model, self.normalisation_gain)
 
+    def body_frame(self, record: Trajectory) -> Trajectory:
+        """A flight in the coordinates `as_helicopter()` is fitted in (`to_body_frame`); refused where the
+        model's features read `vbat` and the flight has none."""
+        if self.uses_battery and "vbat" not in record.input_names:
+            raise UsageError("the model's features use `vbat`, which the flights do not have")
+        return to_body_frame(self, record)
+
     def with_body_model(self, body_model: AbstractBodyModel) -> "Quadrotor":
+        """The same quadrotor (input scales, normalisation) with `body_model` (a fitted one)."""
         return Quadrotor(body_model, self.input_scale, self.normalisation_gain)
 
     def parameter_filter(self):

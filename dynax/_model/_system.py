@@ -24,6 +24,9 @@ class AbstractSystem(eqx.Module):
 
     state_names: eqx.AbstractClassVar[tuple[str, ...]]
     input_names: eqx.AbstractClassVar[tuple[str, ...]]
+    #: The last of `input_names` that a record may leave out (a quadrotor's `vbat`, read only by a
+    #: model whose features use it): `identify` takes records with or without them.
+    optional_inputs: ClassVar[tuple[str, ...]] = ()
 
     @abc.abstractmethod
     def vector_field(

@@ -156,12 +156,15 @@ class SimulationError(eqx.Module):
 
     def to_json(self, *, null_diverged: bool = False) -> dict:
         """The contract's `sim_error` object, `{"horizons_s": [...], "rmse": [...]}`; held-out records add
-        `per_record`, `diverged_fraction` (per record), `source`, `median` and `concentrated`.
+        `per_record`, `diverged_fraction` (per record), `source`, `median` and `concentrated`; a flight's
+        scores (`flight_error`, whose `rmse` is empty) add `steps` and the `scores` per state group.
         `null_diverged` writes a non-finite RMSE as `null` (the diagnosis report's `sim_error`)."""
         rmse = [] if self.rmse is None else [float(r) for r in np.asarray(self.rmse)]
         if null_diverged:
             rmse = [r if np.isfinite(r) else None for r in rmse]
         out: dict = {"horizons_s": list(self.horizons_s), "rmse": rmse}
+        if self.mae_per_state is not None:
+            out.update(steps=list(self.steps or ()), scores=self.scores())
         if self.source is not None:
             out.update(
                 per_record={k: list(v) for k, v in (self.rmse_per_record or {}).items()},

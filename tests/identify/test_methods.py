@@ -2,6 +2,7 @@
 every built-in method's `fit` gives the estimate a computation outside it gives."""
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -139,14 +140,62 @@ def test_vehicle_criteria_fit_through_the_same_call():
     assert direct.statistics.criterion == "one-step" and dynax.OneStep().label == "one-step"
     # `identify` takes the vehicle and the criterion too: the same fit on the head, validated on the tail
     result = identify(dynax.Helicopter(), flight, dynax.OneStep())
-    head = dynax.fit_vehicle(dynax.Helicopter(), flight.split(0.8)[0], dynax.OneStep())
-    np.testing.assert_array_equal(np.asarray(result.value), np.asarray(head.value))
+    head, tail = flight.split(0.8)
+    assert_same_solution(result.solution, dynax.fit_vehicle(dynax.Helicopter(), head, dynax.OneStep()))
     assert result.method == "one-step" and result.stages[0].kind == StageKind.FIT
-    assert result.validation is not None and np.all(np.asarray(result.validation.rmse) < 0.1)
+    # by the vehicle horizon error: 0.1, 0.25 and 0.5 s ahead on the held-out 2.4 s
+    validation = result.validation
+    assert validation is not None and validation.steps == (10, 25, 50)
+    np.testing.assert_array_equal(
+        validation.mae_per_state, dynax.flight_error(result.system, tail, (10, 25, 50)).mae_per_state
+    )
+    # the model that flew the record, learned back: its position half a second ahead within 5 cm
+    assert validation.table("mae")["position"][-1] < 0.05
     with pytest.raises(UsageError, match="one record"):
         dynax.OneStep().fit(dynax.Helicopter(), [flight, flight])
     with pytest.raises(UsageError, match="continuous record"):
         dynax.FrequencyDomain().fit(dynax.Helicopter(), flight, FitSettings(breaks=(100,)))
+
+
+def assert_same_solution(a, b):
+    """Two vehicle fits' `Solution`s are one: the fitted model, the estimate, its covariance, the losses and
+    the criterion's statistics, bit for bit (the wall-clock history aside)."""
+    assert jax.tree.structure(a.model) == jax.tree.structure(b.model) and a.names == b.names
+    jax.tree.map(np.testing.assert_array_equal, a.model, b.model)
+    for field in ("value", "covariance", "std_errors", "loss", "initial_loss", "loss_history", "steps"):
+        np.testing.assert_array_equal(np.asarray(getattr(a, field)), np.asarray(getattr(b, field)), err_msg=field)
+    assert a.statistics == b.statistics and a.parameters == b.parameters
+
+
+def test_fit_vehicle_is_identify_fitting_the_whole_record():
+    """`fit_vehicle` is `identify` with the vehicle settings and nothing held out: the same `Solution` for an
+    iterative criterion, its breaks, warm start and callback; and the record given as two records is joined
+    again with the break where the second begins, no window crossing it."""
+    flight = dynax.synthetic.generate_helicopter_flight("hover", 6.0, seed=4)
+    lagged = dynax.Lagged(horizon=0.1, stride=4, max_iterations=3)
+    seen = []
+    settings = FitSettings(breaks=(250,), callback=lambda i, loss: seen.append(float(loss)), progress=False)
+    whole = Validate(holdout=0)
+    via = identify(dynax.Helicopter(), flight, lagged, settings=settings, validation=whole)
+    assert via.validation is None and via.method == "lagged" and via.n_samples == len(flight)
+    spelled = dynax.fit_vehicle(dynax.Helicopter(), flight, lagged, breaks=np.array([250]), progress=False)
+    assert_same_solution(via.solution, spelled)
+    assert seen and seen[-1] == float(via.solution.loss)  # called after each accepted iteration
+    # a warm start from the lagged fit, by backprop
+    backprop = dynax.Backprop(horizon=0.1, stride=4, max_steps=3)
+    warm = FitSettings(breaks=(250,), warm_start=True, progress=False)
+    assert_same_solution(
+        identify(spelled.model, flight, backprop, settings=warm, validation=whole).solution,
+        dynax.fit_vehicle(spelled.model, flight, backprop, breaks=[250], warm_start=True, progress=False),
+    )
+    # two records: joined, the second's start a break
+    two = [flight.slice(0, 250), flight.slice(250, None)]
+    joined = identify(dynax.Helicopter(), two, lagged, settings=FitSettings(progress=False), validation=whole)
+    np.testing.assert_allclose(np.asarray(joined.value), np.asarray(spelled.value), rtol=1e-9, atol=1e-12)
+    with pytest.raises(UsageError, match="breaks"):
+        identify(dynax.Helicopter(), two, lagged, settings=settings, validation=whole)
+    with pytest.raises(UsageError, match="differ"):
+        identify(dynax.Helicopter(), two, dynax.OneStep(), friction="viscous", settings=FitSettings(friction="coulomb"))
 
 
 def test_identify_runs_prepare_fit_refine_then_validates_for_a_method_of_a_users_own(records):

@@ -41,6 +41,7 @@ removed exactly, and the acceleration model's known part contributes $R(\omega\t
 """
 
 from collections.abc import Callable
+import dataclasses
 import functools
 import time
 
@@ -55,7 +56,8 @@ from ..._errors import UsageError
 from ..._fit import AbstractStatistics, fit_minimise, History, monitor, notify, OptaxLBFGS, Parameters, Solution
 from ..._model._helicopter import ANGULAR_RATE, BODY, Helicopter, QUATERNION, quaternion_to_rotation, VELOCITY
 from ..._progress import ProgressBar
-from .._method import AbstractMethod, FitSettings
+from .._method import AbstractMethod, FitSettings, IdentifyJob, Prepared
+from ._records import FlightHeldOut, vehicle_record
 from ._windows import check_helicopter_data, horizon_steps, lagged_loss, rollout, valid_starts
 
 
@@ -72,7 +74,38 @@ def one_record(records, who: str) -> Trajectory:
     )
 
 
-class OneStep(AbstractMethod):
+def in_system(system, solution: Solution) -> Solution:
+    """A criterion's `Solution` of `system.as_helicopter()` as `system`'s: the fitted body model in
+    `system` (`with_body_model`: a quadrotor keeps its input scales), its parameters named by `system`."""
+    fitted = system.with_body_model(solution.model.body_model)
+    return eqx.tree_at(lambda s: (s.model, s.parameters), solution, (fitted, Parameters.of(fitted)))
+
+
+class AbstractVehicleCriterion(AbstractMethod):
+    """A learning criterion for a vehicle's body model (`OneStep`, `Lagged`, `Backprop`,
+    `FrequencyDomain`): its `fit` learns the body model of a vehicle (a `Helicopter`, a `Quadrotor`:
+    a system with `as_helicopter`, `body_frame` and `with_body_model`) from the one record in the
+    coordinates `as_helicopter()` is fitted in, joined flights' `FitSettings.breaks` marked.
+
+    `identify` runs it as every method: `prepare` (below), `fit_stage` (the `fit` once) and the
+    validation of the fitted vehicle on the held-out flights.
+    """
+
+    def prepare(self, system, records: list[Trajectory], job: IdentifyJob) -> Prepared:
+        """The records as one record in `system`'s fitted coordinates (`system.body_frame`; several
+        flights joined, each one after the first a break: `join_flights`), and the held-out flights
+        scored by the vehicle horizon error (`flight_error`: `FlightHeldOut`)."""
+        record, breaks = vehicle_record(system, records, job.settings.breaks)
+        held = job.held_out
+        job = dataclasses.replace(
+            job,
+            settings=dataclasses.replace(job.settings, breaks=breaks),
+            held_out=FlightHeldOut(held.records, held.horizons_s, held.source, held.tails_of),
+        )
+        return Prepared(self, [record], job)
+
+
+class OneStep(AbstractVehicleCriterion):
     r"""One-step least squares on accelerations (finite-difference targets, frame change removed).
 
     **Fields:** `ridge`: a small Tikhonov term on the normal equations (relative to their trace).
@@ -86,10 +119,11 @@ class OneStep(AbstractMethod):
 
     def fit(self, system, records, settings: FitSettings = FitSettings()) -> Solution:
         """`fit_one_step` of `system` on the one record (`settings.breaks`: where joined flights begin)."""
-        return fit_one_step(system, one_record(records, "OneStep"), self, breaks=settings.breaks)
+        record = one_record(records, "OneStep")
+        return in_system(system, fit_one_step(system.as_helicopter(), record, self, breaks=settings.breaks))
 
 
-class Lagged(AbstractMethod):
+class Lagged(AbstractVehicleCriterion):
     r"""The lagged criterion over `horizon` seconds, minimised by the EM-free iteration.
 
     **Fields:**
@@ -137,7 +171,7 @@ class Lagged(AbstractMethod):
         return _iterated(self, fit_lagged, self.max_iterations, system, one_record(records, "Lagged"), settings)
 
 
-class Backprop(AbstractMethod):
+class Backprop(AbstractVehicleCriterion):
     r"""The lagged loss minimised directly by L-BFGS (optax) through checkpointed diffrax rollouts.
 
     **Fields:**
@@ -177,8 +211,10 @@ def _iterated(criterion, fit, limit: int, system, trajectory, settings: FitSetti
             if settings.callback is not None:
                 settings.callback(iteration, loss)
 
-        start = system if settings.warm_start else fit_one_step(system, trajectory, breaks=settings.breaks).model
-        return fit(start, trajectory, criterion, callback=report, breaks=settings.breaks)
+        helicopter = system.as_helicopter()
+        if not settings.warm_start:
+            helicopter = fit_one_step(helicopter, trajectory, breaks=settings.breaks).model
+        return in_system(system, fit(helicopter, trajectory, criterion, callback=report, breaks=settings.breaks))
 
 
 class VehicleStatistics(AbstractStatistics):
@@ -347,7 +383,12 @@ def state_weights(weights, dtype):
 def fit_one_step(
     system: Helicopter, trajectory: Trajectory, criterion: OneStep = OneStep(), *, weights=None, breaks=None
 ) -> Solution:
-    """Fit by one-step least squares (see `OneStep` and the module docstring); `breaks`: see `fit_vehicle`."""
+    r"""Fit by one-step least squares (see `OneStep` and the module docstring); `breaks`: see `fit_vehicle`.
+
+    The `Solution`'s covariance is the least-squares one, $\hat\sigma^2 (A^\top A)^{-1}$ with
+    $\hat\sigma^2$ the residual variance over the $6 \times$ windows residuals less the weights (a
+    lower bound: the residuals are correlated in time).
+    """
     check_helicopter_data(trajectory, "fit_one_step")
     t0 = time.perf_counter()
     w = state_weights(weights, trajectory.xs.dtype)
@@ -355,9 +396,14 @@ def fit_one_step(
     ata, atb, _ = normal_equations(system, trajectory, starts, 1, w, False, 1024)
     theta = ridge_solve(ata, atb, criterion.ridge)
     fitted = with_theta(system, theta)
-    _, _, loss = normal_equations(fitted, trajectory, starts, 1, w, False, 1024)
+    ata, _, loss = normal_equations(fitted, trajectory, starts, 1, w, False, 1024)
     losses, seconds = one_shot_history(loss, time.perf_counter() - t0)
-    return vehicle_solution(system, fitted, losses, seconds, VehicleStatistics("one-step", len(trajectory)))
+    solution = vehicle_solution(system, fitted, losses, seconds, VehicleStatistics("one-step", len(trajectory)))
+    windows = int(starts.shape[0])  # `loss` is per window, its six body axes summed
+    sigma2 = loss * windows / max(6 * windows - theta.shape[0], 1)
+    covariance = sigma2 * jnp.linalg.pinv(ata)
+    std = jnp.sqrt(jnp.diag(covariance))
+    return eqx.tree_at(lambda s: (s.covariance, s.std_errors), solution, (covariance, std))
 
 
 class _EMFreeState(eqx.Module):

@@ -1,4 +1,4 @@
-"""`fit_vehicle`: one entry point for the four criteria, and the model file (`MODEL.json`) format."""
+"""`fit_vehicle`: the vehicle spelling of `identify` for the four criteria, and the model file (`MODEL.json`) format."""
 
 import math
 
@@ -15,8 +15,9 @@ from ..._model._helicopter import (
     RICH_FEATURES,
     TEMPEST_FEATURES,
 )
-from ..._precision import warn_if_float32
+from .._identify import identify
 from .._method import AbstractMethod, FitSettings
+from .._validation import Validate
 from ._criteria import (
     Backprop,
     Lagged,
@@ -53,6 +54,10 @@ def fit_vehicle(
 ) -> Solution:
     r"""Learn the body model of `system` from `trajectory` with a learning `criterion`.
 
+    The vehicle spelling of `identify`: `identify(system, trajectory, criterion,
+    settings=FitSettings(breaks=..., warm_start=..., callback=..., progress=...),
+    validation=Validate(holdout=0))` fits the whole record, and this is its `solution`.
+
     `Lagged` and `Backprop` start from the one-step fit (the paper's initialisation), so both
     descend the same lagged loss from the same point; with `warm_start` they start from
     `system`'s weights instead (e.g. `Backprop` from a `Lagged` fit: the EM-free iteration stops
@@ -76,19 +81,28 @@ def fit_vehicle(
     **Returns:** a `Solution`: the fitted system as its `model`, its free weights by name, the
     criterion's loss and its history, and a `VehicleStatistics` (the criterion, the samples, and
     for the frequency criterion each weight's Cramer-Rao bound and the weights it eliminated).
+    For one-step the covariance is the least-squares one (a lower bound: the residuals are
+    correlated in time); for the other criteria it is NaN.
 
     ??? cite "Reference"
 
         P. Abbeel, V. Ganapathi and A. Y. Ng, "Learning vehicular dynamics, with application to
         modeling helicopters", NIPS 18, 2005.
     """
-    warn_if_float32("vehicle learning")
     if not isinstance(criterion, AbstractMethod):
         raise UsageError(f"fit_vehicle: unknown criterion {type(criterion).__name__}")
     # A static field holds plain integers: an array there would be hashed by identity (and JAX warns).
     breaks = None if breaks is None else tuple(int(b) for b in np.asarray(breaks).ravel())
     settings = FitSettings(breaks=breaks, warm_start=warm_start, callback=callback, progress=progress)
-    return criterion.fit(system, trajectory, settings)
+    return fit_all(system, trajectory, criterion, settings)
+
+
+def fit_all(system, records, criterion: AbstractMethod, settings: FitSettings) -> Solution:
+    """`identify` of `system` on all of `records` (nothing held out, nothing validated) with a vehicle
+    `criterion` and its `settings`: the `Solution` it carries (`fit_vehicle`, `fit_quadrotor`)."""
+    return identify(
+        system, records, criterion, settings=settings, consistency="off", validation=Validate(holdout=0)
+    ).solution
 
 
 def model_to_json(fit: Solution, *, horizon_s: float | None = None) -> dict:

@@ -48,10 +48,12 @@ import numpy as np
 from ..._data._trajectory import Trajectory
 from ..._errors import UsageError
 from ..._fit import fit_least_squares, LeastSquaresOptions, levenberg_marquardt, Solution
-from ..._model._helicopter import BODY, BODY_AXES, Helicopter, LINEAR_FEATURE_NAMES
-from .._method import AbstractMethod, FitSettings
+from ..._model._helicopter import BODY, BODY_AXES, Helicopter, HELICOPTER_INPUT_NAMES, LINEAR_FEATURE_NAMES
+from .._method import FitSettings
 from ._criteria import (
+    AbstractVehicleCriterion,
     fit_one_step,
+    in_system,
     normal_equations,
     one_record,
     one_shot_history,
@@ -75,7 +77,7 @@ HOVER_DERIVATIVES = {
 }
 
 
-class FrequencyDomain(AbstractMethod):
+class FrequencyDomain(AbstractVehicleCriterion):
     """The CIFER-style frequency-domain criterion (linear velocity model only).
 
     **Fields:**
@@ -120,10 +122,17 @@ class FrequencyDomain(AbstractMethod):
         return "frequency"
 
     def fit(self, system, records, settings: FitSettings = FitSettings()) -> Solution:
-        """`fit_frequency` of `system` on one continuous record (no `settings.breaks`)."""
+        """`fit_frequency` of `system` on one continuous record (no `settings.breaks`); a vehicle
+        whose inputs are not the helicopter's `u1..u4` (a quadrotor) is refused."""
+        if tuple(system.input_names) != HELICOPTER_INPUT_NAMES:
+            raise UsageError(
+                "the frequency-domain criterion identifies the helicopter's linear model (its structure and "
+                "frequency responses are written in the helicopter's inputs u1..u4); for a "
+                f"{type(system).__name__.lower()} use OneStep, Lagged or Backprop"
+            )
         if settings.breaks is not None and len(settings.breaks):
             raise UsageError("fit_vehicle: the frequency criterion needs one continuous record, not joined ones")
-        return fit_frequency(system, one_record(records, "FrequencyDomain"), self)
+        return in_system(system, fit_frequency(system.as_helicopter(), one_record(records, "FrequencyDomain"), self))
 
 
 def frequency_responses(trajectory: Trajectory, segment_s: float = 10.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

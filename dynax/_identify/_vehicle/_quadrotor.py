@@ -1,65 +1,27 @@
 r"""`fit_quadrotor`: learn a `Quadrotor`'s body model from flights with the vehicle criteria.
 
 The quadrotor's dynamics are the helicopter's in world-velocity coordinates (`dynax.Quadrotor`), so
-the fit is `fit_vehicle` on the body-frame form of the flights (`Quadrotor.as_helicopter`,
-`to_body_frame`): one-step least squares, the lagged criterion by the EM-free iteration and the same
-loss by backprop. The frequency-domain criterion is the helicopter's alone (its CIFER structure and
-frequency responses are written in the helicopter's inputs).
-Several flights (or the runs of one flight between its ground segments and glitches) are joined
+the fit is the vehicle criteria's on the body-frame form of the flights (`Quadrotor.as_helicopter`,
+`Quadrotor.body_frame`), run by `identify` as for every system: one-step least squares, the lagged
+criterion by the EM-free iteration and the same loss by backprop. The frequency-domain criterion is
+the helicopter's alone (its CIFER structure and frequency responses are written in the helicopter's
+inputs). Several flights (or the runs of one flight between its ground segments and glitches) are joined
 into one record with breaks that no window crosses.
 """
 
 from collections.abc import Sequence
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
 from ..._data._trajectory import Trajectory
-from ..._errors import UsageError
-from ..._fit import Parameters, Solution
-from ..._model._quadrotor import Quadrotor, to_body_frame
-from ._criteria import Backprop, Lagged, normal_equations, OneStep, state_weights, window_starts
-from ._fit import fit_vehicle
+from ..._fit import Solution
+from ..._model._quadrotor import Quadrotor
+from .._method import FitSettings
+from ._criteria import Backprop, Lagged, OneStep
+from ._fit import fit_all
 from ._frequency import FrequencyDomain
-
-
-def join_flights(system: Quadrotor, flights: Sequence[Trajectory]) -> tuple[Trajectory, np.ndarray]:
-    """The flights in body-frame coordinates (`to_body_frame`) joined into one uniformly sampled
-    record, and the sample indices where each flight after the first begins (the breaks).
-
-    All flights must share one sample interval (to 1 %) and one set of inputs.
-    """
-    flights = list(flights)
-    if not flights:
-        raise UsageError("fit_quadrotor: no flights given")
-    dts = []
-    for i, f in enumerate(flights):
-        if len(f) < 2 or not f.is_uniform:
-            raise UsageError(
-                f"fit_quadrotor: flight {i} ({f.source or 'unnamed'}) must be uniformly sampled with at "
-                "least 2 samples (dynax.load_flight resamples; dynax.usable_segments cuts)"
-            )
-        dts.append(f.dt)
-    dt = float(np.median(dts))
-    off = [i for i, d in enumerate(dts) if abs(d - dt) > 0.01 * dt]
-    if off:
-        raise UsageError(
-            f"fit_quadrotor: flight {off[0]} is sampled every {dts[off[0]]:.6g} s, the others every "
-            f"{dt:.6g} s; resample it first"
-        )
-    inputs = {tuple(f.input_names) for f in flights}
-    if len(inputs) > 1:
-        raise UsageError(f"fit_quadrotor: the flights have different inputs {sorted(inputs)}")
-    if system.uses_battery and "vbat" not in flights[0].input_names:
-        raise UsageError("fit_quadrotor: the model's features use `vbat`, which the flights do not have")
-    body = [to_body_frame(system, f) for f in flights]
-    lengths = np.array([len(b) for b in body])
-    xs = jnp.concatenate([b.xs for b in body])
-    us = jnp.concatenate([b.us for b in body])
-    ts = float(np.asarray(flights[0].ts)[0]) + dt * np.arange(xs.shape[0])
-    joined = Trajectory(ts, xs, us, body[0].state_names, body[0].input_names, "helicopter", "joined flights")
-    return joined, np.cumsum(lengths)[:-1]
+from ._records import join_flights as join_flights
 
 
 def fit_quadrotor(
@@ -72,6 +34,12 @@ def fit_quadrotor(
     warm_start: bool = False,
 ) -> Solution:
     r"""Learn the body model of a `Quadrotor` from flights with a vehicle criterion.
+
+    The quadrotor spelling of `identify`: `identify(system, flights, criterion,
+    settings=FitSettings(warm_start=..., callback=..., progress=...), validation=Validate(holdout=0))`
+    fits every flight (joined in body-frame coordinates, no window crossing from one to the next),
+    and this is its `solution`; `identify` with a validation holds flights out and scores the fit on
+    them by the vehicle horizon error.
 
     **Arguments:**
 
@@ -96,32 +64,8 @@ def fit_quadrotor(
         modeling helicopters", NIPS 18, 2005.
     """
     criterion = OneStep() if criterion is None else criterion
-    if isinstance(criterion, FrequencyDomain):
-        raise UsageError(
-            "fit_quadrotor: the frequency-domain criterion identifies the helicopter's linear model "
-            "(its structure and frequency responses are written in the helicopter's inputs u1..u4); "
-            "for a quadrotor use OneStep, Lagged or Backprop"
-        )
-    if isinstance(flights, Trajectory):
-        flights = [flights]
-    joined, breaks = join_flights(system, flights)
-    helicopter = system.as_helicopter()
-    fit = fit_vehicle(
-        helicopter, joined, criterion, progress=progress, callback=callback, breaks=breaks, warm_start=warm_start
-    )
-    fitted = system.with_body_model(fit.model.body_model)
-    solution = eqx.tree_at(lambda s: (s.model, s.parameters), fit, (fitted, Parameters.of(fitted)))
-    if not isinstance(criterion, OneStep):  # lagged, backprop: the engine's Solution of the helicopter form
-        return solution
-    n = solution.value.shape[0]
-    starts = window_starts(joined, 1, 1, breaks)
-    w = state_weights(None, joined.xs.dtype)
-    ata, _, mse = normal_equations(fit.model, joined, starts, 1, w, False, 1024)
-    windows = int(starts.shape[0])  # `mse` is per window, its six body axes summed
-    sigma2 = mse * windows / max(6 * windows - n, 1)
-    covariance = sigma2 * jnp.linalg.pinv(ata)
-    std = jnp.sqrt(jnp.diag(covariance))
-    return eqx.tree_at(lambda s: (s.covariance, s.std_errors), solution, (covariance, std))
+    settings = FitSettings(warm_start=warm_start, callback=callback, progress=progress)
+    return fit_all(system, flights, criterion, settings)
 
 
 def quadrotor_to_json(system: Quadrotor, **info) -> dict:
