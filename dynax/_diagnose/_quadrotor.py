@@ -47,11 +47,13 @@ Cheeseman and Bennett's $R^2/16$) and its held-out gain is the effect's.
 from collections.abc import Callable, Sequence
 import dataclasses
 from typing import ClassVar, TYPE_CHECKING
+import warnings
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._data._sanity import DataWarning
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
 from .._model._extensions import AbstractTerm, InputGain, InputLag, MotorDelay
@@ -144,8 +146,7 @@ def prepare_quadrotor(system: Quadrotor, train, validation, *, refit: bool) -> t
     """The body-frame system and records of a quadrotor diagnosis, the nominal `Quadrotor` and its fit: with
     `refit`, the one-step least-squares fit of `system`'s body model on `train` (`fit_quadrotor`; its
     `Solution`, else `None`)."""
-    from .._identify._vehicle import OneStep
-    from .._identify._vehicle._quadrotor import fit_quadrotor, join_flights
+    from .._identify._vehicle._quadrotor import join_flights
 
     train = _as_list(train, "train")
     held = _as_list(validation, "validation") if validation is not None else None
@@ -154,7 +155,7 @@ def prepare_quadrotor(system: Quadrotor, train, validation, *, refit: bool) -> t
     join_flights(system, train + (held or []))  # one interval, one set of inputs, vbat where the model reads it
     one_step = None
     if refit:
-        one_step = fit_quadrotor(system, train, OneStep(), progress=False)
+        one_step = _quiet_fit(system, train)
         system = one_step.model
     elif not np.any(np.asarray(system.body_model.weights)):
         raise UsageError(
@@ -239,6 +240,18 @@ def frame_quadrotor(system: Quadrotor, train, validation, candidates, mode, hori
     )
 
 
+def _quiet_fit(system, flights):
+    """The one-step fit of `system` on `flights` without `identify`'s data warnings: `diagnose` says what it finds
+    in the records once (`warn_data_faults`), and these fits read the same records (or their commands passed through
+    a candidate's input dynamics)."""
+    from .._identify._vehicle import OneStep
+    from .._identify._vehicle._quadrotor import fit_quadrotor
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        return fit_quadrotor(system, flights, OneStep(), progress=False)
+
+
 def _one_step_through(
     system: Quadrotor, body, train: list[Trajectory], names, fitted=None
 ) -> Callable[[tuple], tuple[np.ndarray, float, int]]:
@@ -246,8 +259,6 @@ def _one_step_through(
     `system`'s body model (`fit_quadrotor`) on the `train`ing flights with their commands as given input terms
     pass them on (`applied_inputs`: a motor's lag, a dead time): `(nominal values names, one-step loss, the number of
     one-step residuals)`. `fitted`: the fit through no term, where it is already made (`prepare_quadrotor`'s)."""
-    from .._identify._vehicle import OneStep
-    from .._identify._vehicle._quadrotor import fit_quadrotor
     from ._fit import nominal_values
     from ._residuals import applied_inputs
 
@@ -275,7 +286,7 @@ def _one_step_through(
                 if terms
                 else train
             )
-            made[key] = outcome(fit_quadrotor(system, flights, OneStep(), progress=False))
+            made[key] = outcome(_quiet_fit(system, flights))
         return made[key]
 
     return through
