@@ -4,6 +4,7 @@
 (`_quadrotor.py`), fitted whole by `identify` with the vehicle criterion (`fit_everything`)."""
 
 import argparse
+import math
 import sys
 import time
 
@@ -88,6 +89,15 @@ def register(subparsers):
         "1e-7 (backprop); a bar on stderr shows each iteration's loss. With all defaults, backprop on 60 s "
         "of aerobatic flight at 100 Hz stops after 57 steps, about one CPU-minute for the whole "
         "command",
+    )
+    parser.add_argument(
+        "--ridge",
+        type=float,
+        default=None,
+        metavar="R",
+        help="one-step and lagged: the Tikhonov term on the normal equations, relative to their trace "
+        "(default 1e-10). On flights near hover, whose motor features are nearly collinear, a larger one "
+        "keeps the map smooth (1e-3 on the NanoBench flights, chosen by cross-validation over their shapes)",
     )
     add_data_options(parser)
     parser.add_argument(
@@ -203,6 +213,16 @@ def _stride(text: str):
         raise argparse.ArgumentTypeError(f"expected a whole number or 'auto', got {text!r}") from None
 
 
+def check_ridge(args) -> None:
+    """`--ridge`: a finite number, not negative, and only with a criterion that reads it."""
+    if args.ridge is None:
+        return
+    if not (math.isfinite(args.ridge) and args.ridge >= 0):
+        raise UsageError(f"--ridge must be a finite number, at least 0, got {args.ridge}")
+    if args.criterion not in ("one-step", "lagged"):
+        raise UsageError(f"--ridge applies to --criterion one-step and lagged, not {args.criterion}")
+
+
 def run(args: argparse.Namespace) -> int:
     import jax
     import numpy as np
@@ -238,6 +258,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--stride must be at least 1 or 'auto', got {args.stride}")
     if args.max_iterations is not None and args.max_iterations < 1:
         raise UsageError(f"--max-iterations must be at least 1, got {args.max_iterations}")
+    check_ridge(args)
     out = output_file(args.out, "model.json")
     mapping, scale, offset = data_options(args)
     start = time.perf_counter()
@@ -260,10 +281,11 @@ def run(args: argparse.Namespace) -> int:
             args.criterion, {}
         )
     )
+    ridge = {} if args.ridge is None else {"ridge": args.ridge}
     criterion = {
-        "one-step": lambda: OneStep(),
+        "one-step": lambda: OneStep(**ridge),
         "frequency": lambda: FrequencyDomain(),
-        "lagged": lambda: Lagged(horizon=args.horizon, stride=stride, **limit),
+        "lagged": lambda: Lagged(horizon=args.horizon, stride=stride, **limit, **ridge),
         "backprop": lambda: Backprop(horizon=args.horizon, stride=stride, **limit),
     }[args.criterion]()
     if args.criterion in ("lagged", "backprop") and stride > 1:

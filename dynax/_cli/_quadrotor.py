@@ -64,6 +64,10 @@ def run_fit(args) -> int:
         raise UsageError(f"--stride must be at least 1 or 'auto', got {args.stride}")
     if args.max_iterations is not None and args.max_iterations < 1:
         raise UsageError(f"--max-iterations must be at least 1, got {args.max_iterations}")
+    from ._fit import check_ridge
+
+    check_ridge(args)
+    ridge = {} if args.ridge is None else {"ridge": args.ridge}
     out = output_file(args.out, "model.json")
     mapping, scale, offset = data_options(args)
     start = time.perf_counter()
@@ -85,8 +89,8 @@ def run_fit(args) -> int:
         )
     )
     criterion = {
-        "one-step": lambda: OneStep(),
-        "lagged": lambda: Lagged(horizon=args.horizon, stride=stride, **limit),
+        "one-step": lambda: OneStep(**ridge),
+        "lagged": lambda: Lagged(horizon=args.horizon, stride=stride, **limit, **ridge),
         "backprop": lambda: Backprop(horizon=args.horizon, stride=stride, **limit),
     }[args.criterion]()
     solution = fit_everything(system, runs, criterion)  # `fit_quadrotor`'s call

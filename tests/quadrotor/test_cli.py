@@ -135,6 +135,28 @@ def test_usage_errors(short_flight, tmp_path, capsys):
     assert not metrics.exists()
 
 
+def test_fit_ridge_reaches_the_criterion_and_shrinks_the_map(short_flight, tmp_path, capsys):
+    """`--ridge` is the criterion's Tikhonov term: a large one pulls the one-step weights towards zero (the
+    motor features of a flight near hover are nearly collinear, so the default fit's weights are large and
+    cancel); a negative ridge, or one with a criterion that has none, is refused before anything is written."""
+
+    def fit(*extra):
+        out = tmp_path / f"model{len(extra)}.json"
+        argv = ["fit", "quadrotor", str(short_flight), "--map", MAP, "--criterion", "one-step", "--out", str(out)]
+        assert main([*argv, *extra]) == 0
+        return np.asarray(json.loads(out.read_text())["weights"])
+
+    plain, ridged = fit(), fit("--ridge", "1e-2")
+    capsys.readouterr()
+    assert np.linalg.norm(ridged) < 0.5 * np.linalg.norm(plain)
+    model = tmp_path / "refused.json"
+    for extra in (["--ridge", "-1"], ["--ridge", "1e-3", "--criterion", "backprop"]):
+        argv = ["fit", "quadrotor", str(short_flight), "--map", MAP, "--out", str(model), *extra]
+        assert main(argv) == 2
+        assert "--ridge" in capsys.readouterr().err
+        assert not model.exists()
+
+
 @pytest.mark.heavy  # two fits and evaluations compiled for a second input layout: 25 s of CPU
 def test_another_drone_needs_only_a_map(tmp_path, capsys):
     """Logs of another vehicle (the rigid body of test_quadrotor_model, rotor speeds in rad/s, no
