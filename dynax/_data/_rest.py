@@ -89,9 +89,11 @@ def rest_stretches(
         q = xs[:, column]
         windows = np.lib.stride_tricks.sliding_window_view(q, width)
         still = np.ptp(windows, axis=1) <= speed * min_duration
-        resting = np.zeros(len(ts), bool)
-        for i in np.flatnonzero(still):
-            resting[i : i + width] = True
+        # every sample of a still window rests: window i covers samples i .. i + width - 1
+        covering = np.zeros(len(ts) + 1, int)
+        covering[: len(still)] += still
+        covering[width : width + len(still)] -= still
+        resting = np.cumsum(covering[:-1]) > 0
         edges = np.flatnonzero(np.diff(np.concatenate([[0], resting.astype(int), [0]])))
         for start, stop in zip(edges[::2], edges[1::2]):
             if _reversal(ts[start:stop], q[start:stop], speed * min_duration):

@@ -43,7 +43,6 @@ scales of the record itself, never of one rig.
 from collections.abc import Sequence
 import dataclasses
 import enum
-import itertools
 import math
 import warnings
 
@@ -379,17 +378,21 @@ def _velocity_stretches(tr, ts, source, values, pairs):
         if bad.mean() > 0.8:
             continue  # wrong nearly everywhere: a unit or a column, `load_trajectory`'s global check names it
         # join bad blocks less than three blocks apart into stretches
-        joined = bad.copy()
         idx = np.flatnonzero(bad)
-        for a, b in itertools.pairwise(idx):
-            if b - a <= 3:
-                joined[a : b + 1] = True
-        good = ~joined
-        sg = slopes[good]
-        gain_elsewhere = float(sg @ means[good] / (sg @ sg)) if sg.size and sg @ sg > 0 else float("nan")
+        close = np.diff(idx) <= 3
+        fill = np.zeros(len(bad) + 1, int)  # +1 from each of a pair of close bad blocks to after the second
+        np.add.at(fill, idx[:-1][close], 1)
+        np.add.at(fill, idx[1:][close] + 1, -1)
+        joined = bad | (np.cumsum(fill[:-1]) > 0)
+        gain_elsewhere = None  # said only where a stretch is named
         for a, b in _runs(joined):
             if bad[a : b + 1].sum() < MIN_BAD_BLOCKS or bad[a : b + 1].mean() < 0.5:
                 continue
+            if gain_elsewhere is None:
+                sg = slopes[~joined]
+                gain_elsewhere = (
+                    float(sg @ means[~joined] / (sg @ sg)) if sg.size and sg @ sg > 0 else float("nan")
+                )
             # a stretch that reaches the first or last block reaches the record's end (the blocks stop short of it)
             i = 0 if a == 0 else int(start[a])
             j = len(ts) - 1 if b == len(start) - 1 else int(stop[b])
