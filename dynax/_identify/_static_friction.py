@@ -332,17 +332,21 @@ def _leaves(q: np.ndarray, a: int, b: int, n: int) -> int:
 def rests_under_load(system, names, estimate, covariance, records, rests, labels) -> tuple[RestUnderLoad, ...]:
     """Each rest stretch with the net torque it holds (see the module)."""
     out = []
-    forces = np.concatenate([np.asarray(generalised_force(system, r.us), dtype=float) for r in records])
-    floor = FLOOR * np.sqrt(np.mean(forces**2, axis=0))  # per joint
-    noise_at_rest = _speed_noise(system, records, rests)
+    record_forces = [np.asarray(generalised_force(system, r.us), dtype=float) for r in records]
+    floor = FLOOR * np.sqrt(np.mean(np.concatenate(record_forces) ** 2, axis=0))  # per joint
     n_joints = len(split_terms(system)[0].joints)
-    for record, stretches, label in zip(records, rests, labels):
+    # each record at its median interval, and where each of its joints leaves each rest
+    sampled = [uniformly_sampled(r) if stretches else r for r, stretches in zip(records, rests)]
+    xss = [np.asarray(r.xs, dtype=float) for r in sampled]
+    leaves = [[_leaves(xs[:, s.joint], s.start, s.stop, len(xs)) for s in st] for xs, st in zip(xss, rests)]
+    noise_at_rest = _speed_noise(n_joints, xss, rests, leaves)
+    for original, record, xs, stretches, ends, label, forces_of in zip(
+        records, sampled, xss, rests, leaves, labels, record_forces
+    ):
         if not stretches:
             continue
-        record = uniformly_sampled(record)
         ts = np.asarray(record.ts, dtype=float)
-        qs = np.asarray(record.xs, dtype=float)[:, :n_joints]
-        ends = [_leaves(qs[:, s.joint], s.start, s.stop, len(ts)) for s in stretches]
+        qs = xs[:, :n_joints]
         still = np.zeros((len(ts), n_joints), bool)
         for s, end in zip(stretches, ends):
             still[s.start : end, s.joint] = True
@@ -355,7 +359,8 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
             if b - a >= width:
                 read[a:b] = True
         rows = np.flatnonzero(read)
-        forces_of = np.asarray(generalised_force(system, record.us), dtype=float)
+        if record is not original:  # resampled
+            forces_of = np.asarray(generalised_force(system, record.us), dtype=float)
         net, std = np.zeros((len(ts), n_joints)), np.zeros((len(ts), n_joints))
         if rows.size:
             net[rows], std[rows] = held_torques(system, names, estimate, covariance, record, forces_of, rows)
@@ -403,15 +408,13 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
     return tuple(out)
 
 
-def _speed_noise(system, records, rests) -> list[float]:
-    """Per joint, the noise of its measured speed over all of its rests in `records` (`speed_noise_at_rest`),
-    each up to where the joint leaves it (`_leaves`: the motion after is not noise)."""
-    n = len(split_terms(system)[0].joints)
+def _speed_noise(n: int, xss, rests, leaves) -> list[float]:
+    """Per joint (of `n`), the noise of its measured speed over all of its rests in the records' states `xss`
+    (`speed_noise_at_rest`), each up to where the joint leaves it (`leaves`, `_leaves`: the motion after is not
+    noise)."""
     pooled = [[] for _ in range(n)]
-    for record, stretches in zip(records, rests):
-        xs = np.asarray(uniformly_sampled(record).xs, dtype=float)
-        for s in stretches:
-            end = _leaves(xs[:, s.joint], s.start, s.stop, len(xs))
+    for xs, stretches, ends in zip(xss, rests, leaves):
+        for s, end in zip(stretches, ends):
             pooled[s.joint].append(xs[s.start : end, n + s.joint])
     return [speed_noise_at_rest(np.concatenate(p)) if p else 0.0 for p in pooled]
 
