@@ -238,11 +238,6 @@ def _glitches(tr, ts, source, columns, positions=None):
     if n < 2 * GLITCH_WINDOW:
         return out
     for name, x, is_input in columns:
-        median = scipy.signal.medfilt(x, GLITCH_WINDOW)
-        # at the ends the filter pads with zeros: measure from the nearest full window instead
-        h = GLITCH_WINDOW // 2
-        median[:h], median[-h:] = median[h], median[-h - 1]
-        residual = np.abs(x - median)
         steps = np.abs(np.diff(x))
         typical = float(np.median(steps)) * 1.4826 + 1e-300
         spread = _robust_range(x)
@@ -251,6 +246,14 @@ def _glitches(tr, ts, source, columns, positions=None):
             threshold = max(threshold, 3.0 * spread)
         if not threshold > 0:
             continue
+        # every running median below is a sample of `x`, so no sample leaves it by more than the column's range
+        if np.ptp(x) <= threshold:
+            continue
+        median = scipy.signal.medfilt(x, GLITCH_WINDOW)
+        # at the ends the filter pads with zeros: measure from the nearest full window instead
+        h = GLITCH_WINDOW // 2
+        median[:h], median[-h:] = median[h], median[-h - 1]
+        residual = np.abs(x - median)
         for i, j in _runs(residual > threshold):
             if j - i >= GLITCH_WINDOW // 2:
                 continue  # a plateau of four samples or more is not a glitch (stuck or a stretch: other checks)

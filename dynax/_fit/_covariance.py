@@ -124,8 +124,9 @@ def jackknife_covariance(
 def serial_bandwidth(pieces: list[np.ndarray]) -> float:
     """Andrews' AR(1) plug-in bandwidth of the Bartlett kernel (see the module) for score series
     `pieces`, one `(T_r, n)` array per record, columns on a common scale."""
-    lead = np.concatenate([p[1:] for p in pieces])
-    lag = np.concatenate([p[:-1] for p in pieces])
+    # one record's pieces are read in place (the same rows in the same order as their concatenation)
+    lead = pieces[0][1:] if len(pieces) == 1 else np.concatenate([p[1:] for p in pieces])
+    lag = pieces[0][:-1] if len(pieces) == 1 else np.concatenate([p[:-1] for p in pieces])
     norm = np.sum(lag * lag, axis=0)
     rho = np.clip(np.sum(lead * lag, axis=0) / np.where(norm > 0, norm, 1.0), -_MAX_RHO, _MAX_RHO)
     sigma2 = np.mean((lead - rho * lag) ** 2, axis=0)
