@@ -364,7 +364,7 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
         net, std = np.zeros((len(ts), n_joints)), np.zeros((len(ts), n_joints))
         if rows.size:
             net[rows], std[rows] = held_torques(system, names, estimate, covariance, record, forces_of, rows)
-        for s, (a, b) in zip(stretches, runs):
+        for s, end, (a, b) in zip(stretches, ends, runs):
             j = s.joint
             if b - a < width:  # the other joints move throughout: the coupling is not read at rest
                 out.append(
