@@ -393,9 +393,7 @@ def _velocity_stretches(tr, ts, source, values, pairs):
                 continue
             if gain_elsewhere is None:
                 sg = slopes[~joined]
-                gain_elsewhere = (
-                    float(sg @ means[~joined] / (sg @ sg)) if sg.size and sg @ sg > 0 else float("nan")
-                )
+                gain_elsewhere = float(sg @ means[~joined] / (sg @ sg)) if sg.size and sg @ sg > 0 else float("nan")
             # a stretch that reaches the first or last block reaches the record's end (the blocks stop short of it)
             i = 0 if a == 0 else int(start[a])
             j = len(ts) - 1 if b == len(start) - 1 else int(stop[b])
