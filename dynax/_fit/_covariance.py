@@ -151,7 +151,7 @@ def bartlett_lags(p: np.ndarray, bandwidth: float) -> np.ndarray:
         return np.zeros((n, n))
     size = scipy.fft.next_fast_len(n_steps + lags)
     spectrum = scipy.fft.rfft(p, n=size, axis=0)
-    conjugate = np.conj(spectrum)
+    conjugate = np.conj(np.asarray(spectrum))
     out = np.empty((n, n))
     for a in range(n):
         correlation = scipy.fft.irfft(spectrum[:, a : a + 1] * conjugate, n=size, axis=0)[:lags]
