@@ -60,6 +60,7 @@ NOT_RUN = {
     "quadrotor_fit": "not in the tree before",
     "leaderboard": "not in the tree before",
     "rollout_profile": "prints only (no JSON); its programs are rollout.py's",
+    "warm_profile": "prints only (no JSON); its workload is identify.py's",
     "scaling": "several jax.distributed processes: its scaling needs an idle machine; PGPE itself is in pgpe",
 }
 # Times a script prints but does not write (levenberg_marquardt.py writes its JSON only beside optimistix's run).

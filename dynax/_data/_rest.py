@@ -87,17 +87,32 @@ def rest_stretches(
         return ()
     for joint, column in enumerate(positions):
         q = xs[:, column]
-        windows = np.lib.stride_tricks.sliding_window_view(q, width)
-        still = np.ptp(windows, axis=1) <= speed * min_duration
-        resting = np.zeros(len(ts), bool)
-        for i in np.flatnonzero(still):
-            resting[i : i + width] = True
+        still = _window_ranges(q, width) <= speed * min_duration
+        # every sample of a still window rests: window i covers samples i .. i + width - 1
+        covering = np.zeros(len(ts) + 1, int)
+        covering[: len(still)] += still
+        covering[width : width + len(still)] -= still
+        resting = np.cumsum(covering[:-1]) > 0
         edges = np.flatnonzero(np.diff(np.concatenate([[0], resting.astype(int), [0]])))
         for start, stop in zip(edges[::2], edges[1::2]):
             if _reversal(ts[start:stop], q[start:stop], speed * min_duration):
                 continue
             out.append(Rest(label, joint, names[column], int(start), int(stop), float(ts[start]), float(ts[stop - 1])))
     return tuple(out)
+
+
+def _window_ranges(q: np.ndarray, width: int) -> np.ndarray:
+    """The range (max - min) of `q` over each window of `width` samples, `(len(q) - width + 1,)`: running
+    extrema (exact, as `np.ptp` of each window, in one pass)."""
+    if not np.all(np.isfinite(q)):  # running extrema do not carry NaN as `np.ptp` does
+        return np.ptp(np.lib.stride_tricks.sliding_window_view(q, width), axis=1)
+    import scipy.ndimage
+
+    # origin -(width // 2): the output at i is the window q[i : i + width]
+    start = -(width // 2)
+    top = scipy.ndimage.maximum_filter1d(q, width, origin=start)[: len(q) - width + 1]
+    bottom = scipy.ndimage.minimum_filter1d(q, width, origin=start)[: len(q) - width + 1]
+    return top - bottom
 
 
 def _reversal(ts: np.ndarray, q: np.ndarray, band: float) -> bool:

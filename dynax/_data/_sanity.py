@@ -43,7 +43,6 @@ scales of the record itself, never of one rig.
 from collections.abc import Sequence
 import dataclasses
 import enum
-import itertools
 import math
 import warnings
 
@@ -239,11 +238,6 @@ def _glitches(tr, ts, source, columns, positions=None):
     if n < 2 * GLITCH_WINDOW:
         return out
     for name, x, is_input in columns:
-        median = scipy.signal.medfilt(x, GLITCH_WINDOW)
-        # at the ends the filter pads with zeros: measure from the nearest full window instead
-        h = GLITCH_WINDOW // 2
-        median[:h], median[-h:] = median[h], median[-h - 1]
-        residual = np.abs(x - median)
         steps = np.abs(np.diff(x))
         typical = float(np.median(steps)) * 1.4826 + 1e-300
         spread = _robust_range(x)
@@ -252,6 +246,14 @@ def _glitches(tr, ts, source, columns, positions=None):
             threshold = max(threshold, 3.0 * spread)
         if not threshold > 0:
             continue
+        # every running median below is a sample of `x`, so no sample leaves it by more than the column's range
+        if np.ptp(x) <= threshold:
+            continue
+        median = scipy.signal.medfilt(x, GLITCH_WINDOW)
+        # at the ends the filter pads with zeros: measure from the nearest full window instead
+        h = GLITCH_WINDOW // 2
+        median[:h], median[-h:] = median[h], median[-h - 1]
+        residual = np.abs(x - median)
         for i, j in _runs(residual > threshold):
             if j - i >= GLITCH_WINDOW // 2:
                 continue  # a plateau of four samples or more is not a glitch (stuck or a stretch: other checks)
@@ -379,17 +381,19 @@ def _velocity_stretches(tr, ts, source, values, pairs):
         if bad.mean() > 0.8:
             continue  # wrong nearly everywhere: a unit or a column, `load_trajectory`'s global check names it
         # join bad blocks less than three blocks apart into stretches
-        joined = bad.copy()
         idx = np.flatnonzero(bad)
-        for a, b in itertools.pairwise(idx):
-            if b - a <= 3:
-                joined[a : b + 1] = True
-        good = ~joined
-        sg = slopes[good]
-        gain_elsewhere = float(sg @ means[good] / (sg @ sg)) if sg.size and sg @ sg > 0 else float("nan")
+        close = np.diff(idx) <= 3
+        fill = np.zeros(len(bad) + 1, int)  # +1 from each of a pair of close bad blocks to after the second
+        np.add.at(fill, idx[:-1][close], 1)
+        np.add.at(fill, idx[1:][close] + 1, -1)
+        joined = bad | (np.cumsum(fill[:-1]) > 0)
+        gain_elsewhere = None  # said only where a stretch is named
         for a, b in _runs(joined):
             if bad[a : b + 1].sum() < MIN_BAD_BLOCKS or bad[a : b + 1].mean() < 0.5:
                 continue
+            if gain_elsewhere is None:
+                sg = slopes[~joined]
+                gain_elsewhere = float(sg @ means[~joined] / (sg @ sg)) if sg.size and sg @ sg > 0 else float("nan")
             # a stretch that reaches the first or last block reaches the record's end (the blocks stop short of it)
             i = 0 if a == 0 else int(start[a])
             j = len(ts) - 1 if b == len(start) - 1 else int(stop[b])

@@ -49,15 +49,14 @@ def stretch_edges(ts: np.ndarray) -> np.ndarray:
     duration = float(ts[-1] - ts[0])
     block = max(min(BLOCK_S, duration / MIN_BLOCKS), 2.0 * float(np.median(np.diff(ts))))
     edges = np.searchsorted(ts, ts[0] + block * np.arange(int(duration / block) + 1))
-    return np.unique(edges)
+    return edges[np.concatenate([[True], np.diff(edges) != 0])]  # sorted already: `np.unique` without a sort
 
 
-def velocity_gain(ts, q, v) -> tuple[float, float, float] | None:
-    """`(gain, std_error, correlation)` of a velocity column's block means on its position's secant
-    slopes (see the module notes), or `None` when the record has fewer than `MIN_BLOCKS` blocks
-    (of two intervals or more), or does not move."""
+def _block_gain(ts, q, v, edges=None):
+    """`(gain, slopes, means, slopes @ slopes)` of `velocity_gain` (its gain alone, and what its errors are
+    computed from), or `None` as there; `edges`, the record's `stretch_edges` where already known."""
     ts, q, v = (np.asarray(a, dtype=float) for a in (ts, q, v))
-    edges = stretch_edges(ts)
+    edges = stretch_edges(ts) if edges is None else edges
     if len(edges) < MIN_BLOCKS + 1:
         return None
     start, stop = edges[:-1], edges[1:]  # block k: samples start[k] .. stop[k] (its last shared with the next)
@@ -68,7 +67,17 @@ def velocity_gain(ts, q, v) -> tuple[float, float, float] | None:
     ss = float(slopes @ slopes)
     if not ss > 0:
         return None
-    gain = float(slopes @ means) / ss
+    return float(slopes @ means) / ss, slopes, means, ss
+
+
+def velocity_gain(ts, q, v) -> tuple[float, float, float] | None:
+    """`(gain, std_error, correlation)` of a velocity column's block means on its position's secant
+    slopes (see the module notes), or `None` when the record has fewer than `MIN_BLOCKS` blocks
+    (of two intervals or more), or does not move."""
+    found = _block_gain(ts, q, v)
+    if found is None:
+        return None
+    gain, slopes, means, ss = found
     residual = means - gain * slopes
     std = float(np.sqrt(residual @ residual / max(len(slopes) - 1, 1) / ss))
     spread = float(np.std(means)) * float(np.std(slopes))
@@ -123,7 +132,12 @@ def check_velocities(
     """
     columns, scale = columns or {}, scale or {}
     named = lambda n: f"'{columns.get(n, n)}'" + (f" ({n})" if columns.get(n, n) != n else "")  # noqa: E731
+    edges = stretch_edges(np.asarray(ts, dtype=float)) if pairs else None
     for velocity, position in pairs.items():
+        # the gain alone decides where it is within `MAX_GAIN_ERROR` of 1 (never refused, whatever its error)
+        first = _block_gain(ts, values[position], values[velocity], edges)
+        if first is None or abs(first[0] - 1.0) <= MAX_GAIN_ERROR:
+            continue
         found = velocity_gain(ts, values[position], values[velocity])
         if found is None or not _refused(found[0], found[1]):
             continue

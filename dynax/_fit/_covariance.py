@@ -124,8 +124,9 @@ def jackknife_covariance(
 def serial_bandwidth(pieces: list[np.ndarray]) -> float:
     """Andrews' AR(1) plug-in bandwidth of the Bartlett kernel (see the module) for score series
     `pieces`, one `(T_r, n)` array per record, columns on a common scale."""
-    lead = np.concatenate([p[1:] for p in pieces])
-    lag = np.concatenate([p[:-1] for p in pieces])
+    # one record's pieces are read in place (the same rows in the same order as their concatenation)
+    lead = pieces[0][1:] if len(pieces) == 1 else np.concatenate([p[1:] for p in pieces])
+    lag = pieces[0][:-1] if len(pieces) == 1 else np.concatenate([p[:-1] for p in pieces])
     norm = np.sum(lag * lag, axis=0)
     rho = np.clip(np.sum(lead * lag, axis=0) / np.where(norm > 0, norm, 1.0), -_MAX_RHO, _MAX_RHO)
     sigma2 = np.mean((lead - rho * lag) ** 2, axis=0)
@@ -150,9 +151,10 @@ def bartlett_lags(p: np.ndarray, bandwidth: float) -> np.ndarray:
         return np.zeros((n, n))
     size = scipy.fft.next_fast_len(n_steps + lags)
     spectrum = scipy.fft.rfft(p, n=size, axis=0)
+    conjugate = np.conj(np.asarray(spectrum))
     out = np.empty((n, n))
     for a in range(n):
-        correlation = scipy.fft.irfft(spectrum[:, a : a + 1] * np.conj(spectrum), n=size, axis=0)[:lags]
+        correlation = scipy.fft.irfft(spectrum[:, a : a + 1] * conjugate, n=size, axis=0)[:lags]
         out[a] = weights @ correlation
     return out
 
@@ -183,9 +185,12 @@ def serial_covariance(
     n_steps = int(sum(record_steps))
     scale = np.linalg.norm(jac, axis=0)
     scale = np.where(scale > 0, scale, 1.0)
-    # `_scores` in numpy: host-side and float64 whatever JAX's x64 setting (segment_sum would follow it)
-    scores = np.zeros((n_steps, jac.shape[1]))
-    np.add.at(scores, np.asarray(steps), jac / scale * residuals[:, None])
+    scaled = jac / scale
+    # `_scores` in numpy: host-side and float64 whatever JAX's x64 setting (segment_sum would follow it);
+    # `bincount` adds each step's rows in row order, as `np.add.at` does, in one pass per column
+    steps = np.asarray(steps)
+    terms = scaled * residuals[:, None]
+    scores = np.stack([np.bincount(steps, terms[:, k], minlength=n_steps) for k in range(jac.shape[1])], axis=1)
     bounds = np.cumsum((0,) + tuple(record_steps))
     pieces = [scores[a:b] for a, b in zip(bounds[:-1], bounds[1:]) if b - a > 1]
     if bandwidth is None:
@@ -195,7 +200,6 @@ def serial_covariance(
     for p in pieces:
         lagged = bartlett_lags(p, bandwidth)
         meat += lagged + lagged.T
-    scaled = jac / scale
     bread = np.linalg.pinv(scaled.T @ scaled, hermitian=True)
     used = int(np.sum(np.any(scores != 0, axis=1)))
     n = jac.shape[1]

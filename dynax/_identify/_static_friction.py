@@ -88,7 +88,6 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._data._derivatives import savitzky_golay
 from .._data._rest import Rest, rest_stretches, speed_noise_at_rest
 from .._data._trajectory import Trajectory
 from .._model._extensions import Extended
@@ -260,41 +259,32 @@ def _window_means(x: np.ndarray, width: int) -> np.ndarray:
     return np.convolve(x, np.ones(width) / width, mode="valid")
 
 
-def net_torques(system, names, estimate, covariance, record: Trajectory, still: np.ndarray):
+def held_torques(system, names, estimate, covariance, record: Trajectory, force: np.ndarray, rows: np.ndarray):
     """The net torque the rigid-body model (`system` without its friction at each joint) leaves at each
-    joint over `record` (at its median interval), and its standard error from the estimate's
-    `covariance`, both `(time, joints)`.
-
-    Where a joint is `still` (a boolean `(time, joints)`) its speed and acceleration are zero; elsewhere
-    the measured speed and the acceleration of a cubic Savitzky-Golay fit of the positions over 5
-    samples or half a period of the record's band edge, whichever is longer."""
-    from .._data._spectra import choose_filter, position_fit_window
-
-    record = uniformly_sampled(record)
+    joint at the samples `rows` of `record` (uniformly sampled), where every joint of the arm rests
+    (zero speed and acceleration), from the generalised `force` applied, `(time, joints)`; and its
+    standard error from the estimate's `covariance`; both `(rows, joints)`."""
     base, _ = split_terms(system)
     n = len(base.joints)
+    # At rest the state is the positions alone: the regressor of the whole record at zero speed and
+    # acceleration (one compiled shape per record length), read at `rows`.
     xs = np.array(record.xs, dtype=float)
-    band = choose_filter(record).cutoff_hz
-    window = position_fit_window(band, record.dt) if band is not None else 5
-    window = min(window, len(xs) if len(xs) % 2 else len(xs) - 1)
-    if window <= 3:
-        ddq = np.zeros((len(xs), n))
-    else:
-        ddq = np.array(savitzky_golay(record.ts, jnp.asarray(xs[:, :n]), window=window, order=3, deriv=2))
-    ddq[still] = 0.0
-    xs[:, n:][still] = 0.0
+    xs[:, n:] = 0.0
     dtype = record.xs.dtype
-    rows = np.asarray(dynamic_regressor(system, jnp.asarray(xs, dtype), jnp.asarray(ddq, dtype)), dtype=float)
-    force = np.asarray(generalised_force(system, record.us), dtype=float)
+    regressor = dynamic_regressor(system, jnp.asarray(xs, dtype), jnp.zeros((len(xs), n), dtype))
+    regressor = np.asarray(regressor, dtype=float)
     estimate = np.asarray(estimate, dtype=float)
-    net = np.empty((len(xs), n))
-    std = np.zeros((len(xs), n))
+    net = np.empty((len(rows), n))
+    std = np.zeros((len(rows), n))
     cov = None if covariance is None else np.nan_to_num(np.asarray(covariance, dtype=float))
     for j in range(n):
-        y = rows[:, j, :].copy()
+        y = regressor[:, j, :].copy()
         y[:, _friction_columns(system, names, j)] = 0.0
-        net[:, j] = force[:, j] - y @ estimate
+        # the product over the whole record, then read: a matrix-vector product's rounding depends on
+        # how many rows it is given
+        net[:, j] = (force[:, j] - y @ estimate)[rows]
         if cov is not None:
+            y = y[rows]
             std[:, j] = np.sqrt(np.maximum(np.einsum("tp,pq,tq->t", y, cov, y), 0.0))
     return net, std
 
@@ -342,28 +332,40 @@ def _leaves(q: np.ndarray, a: int, b: int, n: int) -> int:
 def rests_under_load(system, names, estimate, covariance, records, rests, labels) -> tuple[RestUnderLoad, ...]:
     """Each rest stretch with the net torque it holds (see the module)."""
     out = []
-    forces = np.concatenate([np.asarray(generalised_force(system, r.us), dtype=float) for r in records])
-    floor = FLOOR * np.sqrt(np.mean(forces**2, axis=0))  # per joint
-    noise_at_rest = _speed_noise(system, records, rests)
-    for record, stretches, label in zip(records, rests, labels):
+    record_forces = [np.asarray(generalised_force(system, r.us), dtype=float) for r in records]
+    floor = FLOOR * np.sqrt(np.mean(np.concatenate(record_forces) ** 2, axis=0))  # per joint
+    n_joints = len(split_terms(system)[0].joints)
+    # each record at its median interval, and where each of its joints leaves each rest
+    sampled = [uniformly_sampled(r) if stretches else r for r, stretches in zip(records, rests)]
+    xss = [np.asarray(r.xs, dtype=float) for r in sampled]
+    leaves = [[_leaves(xs[:, s.joint], s.start, s.stop, len(xs)) for s in st] for xs, st in zip(xss, rests)]
+    noise_at_rest = _speed_noise(n_joints, xss, rests, leaves)
+    for original, record, xs, stretches, ends, label, forces_of in zip(
+        records, sampled, xss, rests, leaves, labels, record_forces
+    ):
         if not stretches:
             continue
-        record = uniformly_sampled(record)
         ts = np.asarray(record.ts, dtype=float)
-        n_joints = len(split_terms(system)[0].joints)
-        qs = np.asarray(record.xs, dtype=float)[:, :n_joints]
-        ends = [_leaves(qs[:, s.joint], s.start, s.stop, len(ts)) for s in stretches]
+        qs = xs[:, :n_joints]
         still = np.zeros((len(ts), n_joints), bool)
         for s, end in zip(stretches, ends):
             still[s.start : end, s.joint] = True
-        net, std = net_torques(system, names, estimate, covariance, record, still)
-        forces_of = np.asarray(generalised_force(system, record.us), dtype=float)
-        width = max(int(round(WINDOW_S / record.dt)), 1)
         arm_still = np.asarray(still.all(axis=1))
-        for s, end in zip(stretches, ends):
+        runs = [_longest_run(arm_still, s.start, end) for s, end in zip(stretches, ends)]
+        width = max(int(round(WINDOW_S / record.dt)), 1)
+        # the torque is read only where the whole arm rests for a window or more
+        read = np.zeros(len(ts), bool)
+        for a, b in runs:
+            if b - a >= width:
+                read[a:b] = True
+        rows = np.flatnonzero(read)
+        if record is not original:  # resampled
+            forces_of = np.asarray(generalised_force(system, record.us), dtype=float)
+        net, std = np.zeros((len(ts), n_joints)), np.zeros((len(ts), n_joints))
+        if rows.size:
+            net[rows], std[rows] = held_torques(system, names, estimate, covariance, record, forces_of, rows)
+        for s, end, (a, b) in zip(stretches, ends, runs):
             j = s.joint
-            a, b = _longest_run(arm_still, s.start, end)
-            torque = net[a:b, j]
             if b - a < width:  # the other joints move throughout: the coupling is not read at rest
                 out.append(
                     RestUnderLoad(
@@ -371,6 +373,7 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
                     )
                 )
                 continue
+            torque = net[a:b, j]
             noise = max(float(np.hypot(_white_noise(torque), np.median(std[a:b, j]))), float(floor[j]))
             means = _window_means(torque, width)
             k = int(np.argmax(np.abs(means)))
@@ -405,15 +408,13 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
     return tuple(out)
 
 
-def _speed_noise(system, records, rests) -> list[float]:
-    """Per joint, the noise of its measured speed over all of its rests in `records` (`speed_noise_at_rest`),
-    each up to where the joint leaves it (`_leaves`: the motion after is not noise)."""
-    n = len(split_terms(system)[0].joints)
+def _speed_noise(n: int, xss, rests, leaves) -> list[float]:
+    """Per joint (of `n`), the noise of its measured speed over all of its rests in the records' states `xss`
+    (`speed_noise_at_rest`), each up to where the joint leaves it (`leaves`, `_leaves`: the motion after is not
+    noise)."""
     pooled = [[] for _ in range(n)]
-    for record, stretches in zip(records, rests):
-        xs = np.asarray(uniformly_sampled(record).xs, dtype=float)
-        for s in stretches:
-            end = _leaves(xs[:, s.joint], s.start, s.stop, len(xs))
+    for xs, stretches, ends in zip(xss, rests, leaves):
+        for s, end in zip(stretches, ends):
             pooled[s.joint].append(xs[s.start : end, n + s.joint])
     return [speed_noise_at_rest(np.concatenate(p)) if p else 0.0 for p in pooled]
 

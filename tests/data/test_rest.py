@@ -67,3 +67,26 @@ def test_a_heavy_arms_slow_reversal_is_not_a_rest_and_a_held_joint_that_drifts_i
     found = rest_stretches(record(q1, q2, dt), record="r")
     assert [s.coordinate for s in found] == ["q2"]
     assert found[0].duration > 0.9
+
+
+def test_every_window_within_the_range_rests():
+    # Plateaus of random lengths (with 0.1 mrad of noise: flat, no parabola) joined by fast moves: the rests are
+    # the samples of every 0.25 s window whose range is within 0.05 rad/s times 0.25 s, counted here window by
+    # window.
+    dt, width = 0.01, 25
+    rng = np.random.default_rng(7)
+    pieces = []
+    for _ in range(12):
+        level = rng.uniform(-1, 1)
+        pieces += [np.full(int(rng.integers(5, 80)), level), level + np.linspace(0, 0.5, int(rng.integers(3, 30)))]
+    q1 = np.concatenate(pieces) + 1e-4 * rng.standard_normal(sum(len(p) for p in pieces))
+    q2 = np.sin(np.arange(len(q1)) * dt * 3.0)  # never rests
+    resting = np.zeros(len(q1), bool)
+    for i in range(len(q1) - width + 1):
+        if np.ptp(q1[i : i + width]) <= 0.05 * 0.25:
+            resting[i : i + width] = True
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], resting.astype(int), [0]])))
+    expected = list(zip(edges[::2], edges[1::2]))
+    found = rest_stretches(record(q1, q2, dt))
+    assert expected and [(s.start, s.stop) for s in found] == expected
+    assert all(s.coordinate == "q1" for s in found)

@@ -90,3 +90,32 @@ def test_the_lag_sum_through_the_fft_is_the_sum_over_lags():
     for bandwidth in (1.0, 7.3, 80.0):  # no lag, some lags, more lags than the record has
         direct = sum((1 - lag / bandwidth) * p[lag:].T @ p[:-lag] for lag in range(1, min(int(np.ceil(bandwidth)), 50)))
         np.testing.assert_allclose(bartlett_lags(p, bandwidth), direct + np.zeros((3, 3)), atol=1e-12)
+
+
+def test_the_covariance_is_the_sandwich_written_out():
+    # Rows of one time step in any order and position (here shuffled), several records: the scores of each
+    # step summed, the Bartlett lags within each record only, the bread of the column-scaled regressor.
+    rng = np.random.default_rng(5)
+    record_steps, n = (40, 25, 60), 3
+    total = sum(record_steps)
+    steps = rng.permutation(np.repeat(np.arange(total), 2))
+    jac = rng.normal(size=(len(steps), n)) * np.array([1.0, 1e-3, 1e3])
+    residuals = rng.normal(size=len(steps))
+    bandwidth = 4.5
+    covariance, chosen = serial_covariance(jac, residuals, steps, record_steps, bandwidth)
+    scale = np.sqrt(np.sum(jac**2, axis=0))
+    scores = np.zeros((total, n))
+    for row, step in enumerate(steps):
+        scores[step] += jac[row] / scale * residuals[row]
+    meat = scores.T @ scores
+    start = 0
+    for length in record_steps:
+        p = scores[start : start + length]
+        for lag in range(1, int(np.ceil(bandwidth))):
+            gamma = (1 - lag / bandwidth) * p[lag:].T @ p[:-lag]
+            meat += gamma + gamma.T
+        start += length
+    bread = np.linalg.inv((jac / scale).T @ (jac / scale))
+    expected = bread @ meat @ bread * total / (total - n) / np.outer(scale, scale)
+    assert chosen == bandwidth
+    np.testing.assert_allclose(np.asarray(covariance), expected, rtol=1e-9)
