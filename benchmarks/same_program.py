@@ -22,11 +22,9 @@ Prints one row per workload (`same` or `differs`, with the program sizes); exit 
 """
 
 import argparse
-import hashlib
 import json
 import os
 import pathlib
-import re
 import subprocess
 import sys
 import tempfile
@@ -34,7 +32,7 @@ import tempfile
 REPO = pathlib.Path(__file__).resolve().parents[1]
 
 # Run inside a tree: prints a JSON object {workload: [hash, size]}.
-PROBE = r'''
+PROBE = r"""
 import hashlib, json, re
 import jax
 jax.config.update("jax_enable_x64", True)
@@ -86,7 +84,7 @@ for dtype, tag in ((jnp.float64, "f64"), (jnp.float32, "f32")):
         xb, ub = jnp.tile(x0, (64, 1)), jnp.tile(us, (64, 1, 1))
         out["FixedGrid(RK4, 1) gradient batch 64 f64"] = jax.jit(jax.grad(loss)).lower(system, xb, ub).compile()
 print(json.dumps({k: [hashlib.sha1(normalised(c).encode()).hexdigest(), len(normalised(c))] for k, c in out.items()}))
-'''
+"""
 
 
 def export(commit, folder):
