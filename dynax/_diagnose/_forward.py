@@ -493,6 +493,18 @@ def _select(problem: Problem, yard: Yardstick, current: Current, results, scores
         "look_alikes": alternatives,
         "confidence": confidence,
         "runs_helped": f"{r['runs_helped']}/{r['n_runs']}",
+        # closed testing: the look-alike whose test established the effect, where it is not the one named
+        **(
+            {
+                "named_for": {
+                    "cause": problem.candidates[passed].cause,
+                    "where": problem.candidates[passed].where(system),
+                    "p_value": results[passed]["p"],
+                }
+            }
+            if best != passed
+            else {}
+        ),
     }
 
 

@@ -148,7 +148,7 @@ def _causes_markdown(j: dict) -> list[str]:
         lines.append(
             f"| `{f['cause']}` | `{f['where']}` | {f['parameter']} = {f['coefficient']:.4g}{components} | "
             f"{f['std_error']:.2g} | "
-            f"{f['gain']:.0%} | {f['p_value']:.2g} | {f['confidence']}: {alts} |"
+            f"{f['gain']:.0%} | {f['p_value']:.2g}{_named_for(f)} | {f['confidence']}: {alts} |"
         )
     return lines + [
         "",
@@ -335,3 +335,11 @@ def write_report(report, out_dir, validation, *, write_json) -> None:
         features={n: xs[:, i] for n, i in zip(names, idx)},
         run_name=validation.source or "held-out run 1",
     )
+
+
+def _named_for(finding) -> str:
+    """The look-alike whose test established a finding named in its place (closed testing), for the p column."""
+    other = finding.get("named_for")
+    if other is None:
+        return ""
+    return f" (effect established by `{other['cause']}@{other['where']}`, p = {other['p_value']:.2g})"

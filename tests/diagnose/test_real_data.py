@@ -115,6 +115,10 @@ def test_dfki_refit_mode_names_coulomb_friction():
     report = diagnose(_model_3_1(), [_dfki("01"), _dfki("03"), _dfki("12")], [_dfki("05"), _dfki("02")], mode=Refit())
     j = _assert_lab_effect(report)
     assert any(f["cause"] == "coulomb_friction" for f in j["findings"]), j["findings"]
+    # Every finding rests on a significant test: its own or, named for a look-alike that passed (closed testing:
+    # the shoulder's stiction here, Coulomb friction predicting the held-out runs better), that look-alike's.
+    for f in j["findings"]:
+        assert (f["named_for"]["p_value"] if "named_for" in f else f["p_value"]) < 0.01, f
     # Rotor inertia at the shoulder adds to theta1, which the refit fits: reported as absorbed. The lab's
     # rigid-body model has no friction (theta6 = theta7 = 0), which the refit keeps and the candidates test.
     absorbed = {(c["cause"], c["where"]) for c in j["not_identifiable"]}
