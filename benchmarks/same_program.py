@@ -29,7 +29,7 @@ import subprocess
 import sys
 import tempfile
 
-REPO = pathlib.Path(__file__).resolve().parents[1]
+from redesign_ab import export  # the same `git archive` of a commit (this folder is on the script's path)
 
 # Run inside a tree: prints a JSON object {workload: [hash, size]}.
 PROBE = r"""
@@ -85,14 +85,6 @@ for dtype, tag in ((jnp.float64, "f64"), (jnp.float32, "f32")):
         out["FixedGrid(RK4, 1) gradient batch 64 f64"] = jax.jit(jax.grad(loss)).lower(system, xb, ub).compile()
 print(json.dumps({k: [hashlib.sha1(normalised(c).encode()).hexdigest(), len(normalised(c))] for k, c in out.items()}))
 """
-
-
-def export(commit, folder):
-    folder.mkdir(parents=True)
-    archive = subprocess.run(["git", "-C", str(REPO), "archive", commit], check=True, capture_output=True).stdout
-    subprocess.run(["tar", "-x", "-C", str(folder)], input=archive, check=True)
-    sha = subprocess.run(["git", "-C", str(REPO), "rev-parse", commit], check=True, capture_output=True, text=True)
-    return sha.stdout.strip()
 
 
 def programs(tree):

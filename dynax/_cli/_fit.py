@@ -194,14 +194,10 @@ def required_samples(system, criterion: str, horizon_s: float, dt: float) -> tup
 def fit_everything(system, records, criterion):
     """`identify` of a vehicle on all of `records` with a vehicle `criterion` (nothing held out: `dynax
     evaluate` scores held-out flights), the data's faults already printed by the loader: its `Solution`."""
-    import warnings
+    from .._identify import FitSettings
+    from .._identify._vehicle._fit import fit_all
 
-    from .._data import DataWarning
-    from .._identify import identify, Validate
-
-    with warnings.catch_warnings():  # the records' faults were refused or printed when they were loaded
-        warnings.simplefilter("ignore", DataWarning)
-        return identify(system, records, criterion, consistency="off", validation=Validate(holdout=0)).solution
+    return fit_all(system, records, criterion, FitSettings(), warn_data=False)
 
 
 def _stride(text: str):
@@ -213,14 +209,16 @@ def _stride(text: str):
         raise argparse.ArgumentTypeError(f"expected a whole number or 'auto', got {text!r}") from None
 
 
-def check_ridge(args) -> None:
-    """`--ridge`: a finite number, not negative, and only with a criterion that reads it."""
+def ridge_option(args) -> dict:
+    """`--ridge` as the criterion's keyword (none where not given), checked: a finite number, not negative, and
+    only with a criterion that reads it."""
     if args.ridge is None:
-        return
+        return {}
     if not (math.isfinite(args.ridge) and args.ridge >= 0):
         raise UsageError(f"--ridge must be a finite number, at least 0, got {args.ridge}")
     if args.criterion not in ("one-step", "lagged"):
         raise UsageError(f"--ridge applies to --criterion one-step and lagged, not {args.criterion}")
+    return {"ridge": args.ridge}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -258,7 +256,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--stride must be at least 1 or 'auto', got {args.stride}")
     if args.max_iterations is not None and args.max_iterations < 1:
         raise UsageError(f"--max-iterations must be at least 1, got {args.max_iterations}")
-    check_ridge(args)
+    ridge = ridge_option(args)
     out = output_file(args.out, "model.json")
     mapping, scale, offset = data_options(args)
     start = time.perf_counter()
@@ -281,7 +279,6 @@ def run(args: argparse.Namespace) -> int:
             args.criterion, {}
         )
     )
-    ridge = {} if args.ridge is None else {"ridge": args.ridge}
     criterion = {
         "one-step": lambda: OneStep(**ridge),
         "frequency": lambda: FrequencyDomain(),

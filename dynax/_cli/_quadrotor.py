@@ -64,10 +64,9 @@ def run_fit(args) -> int:
         raise UsageError(f"--stride must be at least 1 or 'auto', got {args.stride}")
     if args.max_iterations is not None and args.max_iterations < 1:
         raise UsageError(f"--max-iterations must be at least 1, got {args.max_iterations}")
-    from ._fit import check_ridge
+    from ._fit import ridge_option
 
-    check_ridge(args)
-    ridge = {} if args.ridge is None else {"ridge": args.ridge}
+    ridge = ridge_option(args)
     out = output_file(args.out, "model.json")
     mapping, scale, offset = data_options(args)
     start = time.perf_counter()

@@ -47,13 +47,11 @@ Cheeseman and Bennett's $R^2/16$) and its held-out gain is the effect's.
 from collections.abc import Callable, Sequence
 import dataclasses
 from typing import ClassVar, TYPE_CHECKING
-import warnings
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._data._sanity import DataWarning
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
 from .._model._extensions import AbstractTerm, InputGain, InputLag, MotorDelay
@@ -244,12 +242,11 @@ def _quiet_fit(system, flights):
     """The one-step fit of `system` on `flights` without `identify`'s data warnings: `diagnose` says what it finds
     in the records once (`warn_data_faults`), and these fits read the same records (or their commands passed through
     a candidate's input dynamics)."""
+    from .._identify._method import FitSettings
     from .._identify._vehicle import OneStep
-    from .._identify._vehicle._quadrotor import fit_quadrotor
+    from .._identify._vehicle._fit import fit_all
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DataWarning)
-        return fit_quadrotor(system, flights, OneStep(), progress=False)
+    return fit_all(system, flights, OneStep(), FitSettings(progress=False), warn_data=False)
 
 
 def _one_step_through(

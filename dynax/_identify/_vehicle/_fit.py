@@ -1,10 +1,12 @@
 """`fit_vehicle`: the vehicle spelling of `identify` for the four criteria, and the model file (`MODEL.json`) format."""
 
 import math
+import warnings
 
 import jax.numpy as jnp
 import numpy as np
 
+from ..._data._sanity import DataWarning
 from ..._data._trajectory import Trajectory
 from ..._errors import DataError, UsageError
 from ..._fit import Solution
@@ -97,12 +99,17 @@ def fit_vehicle(
     return fit_all(system, trajectory, criterion, settings)
 
 
-def fit_all(system, records, criterion: AbstractMethod, settings: FitSettings) -> Solution:
+def fit_all(system, records, criterion: AbstractMethod, settings: FitSettings, *, warn_data: bool = True) -> Solution:
     """`identify` of `system` on all of `records` (nothing held out, nothing validated) with a vehicle
-    `criterion` and its `settings`: the `Solution` it carries (`fit_vehicle`, `fit_quadrotor`)."""
-    return identify(
-        system, records, criterion, settings=settings, consistency="off", validation=Validate(holdout=0)
-    ).solution
+    `criterion` and its `settings`: the `Solution` it carries (`fit_vehicle`, `fit_quadrotor`). Without
+    `warn_data`, `identify`'s data warnings are left out: for callers that have already said what the
+    records hold (the CLI's loader, `diagnose`)."""
+    with warnings.catch_warnings():
+        if not warn_data:
+            warnings.simplefilter("ignore", DataWarning)
+        return identify(
+            system, records, criterion, settings=settings, consistency="off", validation=Validate(holdout=0)
+        ).solution
 
 
 def model_to_json(fit: Solution, *, horizon_s: float | None = None) -> dict:
