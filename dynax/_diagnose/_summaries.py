@@ -16,7 +16,10 @@ def merge_repeated_causes(findings: list[dict]) -> list[dict]:
     candidates at `world`, so a wind blowing in two directions is found in two rounds; report it
     once: `coefficient` is the wind speed (the norm of the components, its standard error
     propagated to first order), `components` the components, `gain` the two rounds' gains
-    compounded, `p_value` the weaker round's, and `confidence` high only if every round's was."""
+    compounded, `p_value` the weaker round's, and `confidence` high only if every round's was. A round
+    named for its look-alike (closed testing, `named_for`) keeps that: `component_named_for` maps each
+    such component to the look-alike whose test established it, and `named_for` is the weaker round's
+    where it has one, so the merged finding's large `p_value` shows the test it rests on."""
     groups: dict[tuple[str, str], list[dict]] = {}
     for finding in findings:
         groups.setdefault((finding["cause"], finding["where"]), []).append(finding)
@@ -49,9 +52,19 @@ def merge_repeated_causes(findings: list[dict]) -> list[dict]:
                 "p_value": max(f["p_value"] for f in group),
                 "look_alikes": list(look_alikes.values()),
                 "confidence": "high" if all(f["confidence"] == "high" for f in group) else "low",
+                **_merged_named_for(group),
             }
         )
     return merged
+
+
+def _merged_named_for(group: list[dict]) -> dict:
+    """The `named_for` fields of a merged finding: every component's, and the weaker round's as the finding's."""
+    named = {f["parameter"]: f["named_for"] for f in group if "named_for" in f}
+    if not named:
+        return {}
+    weakest = max(group, key=lambda f: f["p_value"])
+    return {"component_named_for": named} | ({"named_for": weakest["named_for"]} if "named_for" in weakest else {})
 
 
 _RULE_TEXT = {
