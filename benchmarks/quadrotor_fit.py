@@ -68,7 +68,7 @@ def main():
         total += take
         i += 1
     print(f"{len(flights)} runs, {sum(len(f) for f in flights)} samples; loading 16 files {load_s:.1f} s", flush=True)
-    start_model = dynax.initial_quadrotor("acceleration", flights)
+    start_model = dynax.Quadrotor.from_flights("acceleration", flights)
     stride = auto_stride(sum(len(f) for f in flights), int(HORIZON_S / 0.01), AUTO_WINDOWS)
     criteria = {
         "one-step": dynax.OneStep(),

@@ -250,9 +250,6 @@ from ._model._quadrotor import (
     ConstantVelocity as ConstantVelocity,
 )
 from ._model._quadrotor import (
-    initial_quadrotor as initial_quadrotor,
-)
-from ._model._quadrotor import (
     Quadrotor as Quadrotor,
 )
 from ._precision import PrecisionWarning as PrecisionWarning

@@ -106,7 +106,7 @@ def main():
         f"test: {len(test)} runs, {sum(len(r) for r in test)} samples",
         flush=True,
     )
-    quad = dynax.initial_quadrotor("nominal", train)
+    quad = dynax.Quadrotor.from_flights("nominal", train)
     say = lambda line: print(f"[{time.perf_counter() - start:7.1f} s] {line}", flush=True)  # noqa: E731
     cut = lambda runs: [middle(r, args.slice_s) for r in runs] if args.slice_s > 0 else runs  # noqa: E731
     diag_train, diag_test = cut(train), cut(test)

@@ -151,7 +151,7 @@ def main():
                 if criterion == "one-step"
                 else dynax.Lagged(horizon=HORIZON_S, stride=args.stride, max_iterations=10)
             )
-            solution = dynax.fit_quadrotor(dynax.initial_quadrotor(family, train), train, strategy)
+            solution = dynax.fit_quadrotor(dynax.Quadrotor.from_flights(family, train), train, strategy)
             seconds = time.perf_counter() - start
         fitted[name] = solution.model
         table[name] = scores(dynax.flight_error(solution.model, test, STEPS))

@@ -39,7 +39,7 @@ from dynax.internal import write_json
 
 
 def fit(train, ridge):
-    start = dynax.initial_quadrotor("acceleration", train)
+    start = dynax.Quadrotor.from_flights("acceleration", train)
     criterion = dynax.Lagged(horizon=HORIZON_S, stride=20, max_iterations=10, ridge=ridge)
     return dynax.fit_quadrotor(start, train, criterion, progress=False).model
 

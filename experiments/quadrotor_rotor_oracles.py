@@ -45,12 +45,16 @@ def _score(model, flights):
 
 def case(name, train, validation, battery, term):
     t0 = time.perf_counter()
-    quad = dynax.fit_quadrotor(dynax.initial_quadrotor("nominal", train, battery=battery), train, dynax.OneStep()).model
+    quad = dynax.fit_quadrotor(
+        dynax.Quadrotor.from_flights("nominal", train, battery=battery), train, dynax.OneStep()
+    ).model
     body = body_frame_system(quad, train[0].input_names)
     out = {"nominal": _score(_world(body, quad), validation)}
     out["held map + true term"] = _score(_world(dynax.Extended(body, (term,)), quad), validation)
     if name == "sag":
-        oracle = dynax.fit_quadrotor(dynax.initial_quadrotor("nominal", train, battery=True), train, dynax.OneStep())
+        oracle = dynax.fit_quadrotor(
+            dynax.Quadrotor.from_flights("nominal", train, battery=True), train, dynax.OneStep()
+        )
         out["oracle (map reads vbat)"] = _score(oracle.model, validation)
     nominal = out["nominal"]["position"][-1]
     for k, v in out.items():

@@ -68,10 +68,10 @@ def save(out: str) -> None:
         runs += dynax.usable_segments(trajectory, notes, min_samples=52)
     res["quad/nruns"] = np.asarray(len(runs))
     for family in ("acceleration", "linear"):
-        quad = dynax.initial_quadrotor(family, runs)
+        quad = dynax.Quadrotor.from_flights(family, runs)
         keep(f"quad/{family}/one-step", dynax.fit_quadrotor(quad, runs, dynax.OneStep()))
         keep(f"quad/{family}/one-step-1run", dynax.fit_quadrotor(quad, runs[0], dynax.OneStep()))
-    quad = dynax.initial_quadrotor("acceleration", runs)
+    quad = dynax.Quadrotor.from_flights("acceleration", runs)
     lag = dynax.fit_quadrotor(quad, runs, dynax.Lagged(horizon=0.2, stride=20, max_iterations=3), progress=False)
     keep("quad/lagged", lag)
     refine = dynax.Backprop(horizon=0.2, stride=20, max_steps=5)

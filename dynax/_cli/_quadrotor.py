@@ -47,7 +47,7 @@ def run_fit(args) -> int:
 
     from .._identify._vehicle import Backprop, Lagged, OneStep
     from .._identify._vehicle._quadrotor import quadrotor_to_json
-    from .._model._quadrotor import initial_quadrotor
+    from .._model._quadrotor import Quadrotor
     from ._fit import fit_everything
 
     model = args.model or "acceleration"
@@ -73,7 +73,7 @@ def run_fit(args) -> int:
     runs, notes = load_flights(args.data, mapping, scale, offset, min_samples=round(args.horizon * 100) + 2)
     dt = float(np.median([r.dt for r in runs]))
     n_steps = max(round(args.horizon / dt), 1)
-    system = initial_quadrotor(model, runs, battery=False if args.no_battery else None)
+    system = Quadrotor.from_flights(model, runs, battery=False if args.no_battery else None)
     stride = args.stride
     if stride == "auto":
         from .._identify._vehicle import auto_stride
@@ -199,7 +199,7 @@ def run_diagnose(args) -> int:
     )
     from .._diagnose._records import holdout_split
     from .._identify._vehicle._quadrotor import quadrotor_from_json
-    from .._model._quadrotor import initial_quadrotor
+    from .._model._quadrotor import Quadrotor
     from ._diagnose import stage_log, summary
     from ._output import staged_directory
 
@@ -236,7 +236,7 @@ def run_diagnose(args) -> int:
             raise DataError(f"cannot read the model file ({e})", path=args.nominal) from None
         system = quadrotor_from_json(obj, path=args.nominal)
     else:
-        system = initial_quadrotor("nominal", train)
+        system = Quadrotor.from_flights("nominal", train)
     if args.mode == "known":
         mode = Known()
     else:

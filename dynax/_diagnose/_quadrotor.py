@@ -31,7 +31,7 @@ The vocabulary for a multirotor (`quadrotor_candidates`):
   lists it as not identifiable.
 
 In `Refit()` mode (the default) the rigid body's weights are the one-step least-squares fit of the
-given model's structure on the training flights (`fit_quadrotor`; `initial_quadrotor("nominal")`
+given model's structure on the training flights (`fit_quadrotor`; `Quadrotor.from_flights("nominal")`
 needs no starting values); `Known()` trusts the given weights (see `frame_quadrotor`).
 
 Battery sag and ground effect change the thrust per command, and in a closed-loop flight the

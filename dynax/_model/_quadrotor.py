@@ -9,7 +9,7 @@ State (the data contract's order) `x, y, z, qw, qx, qy, qz, vx, vy, vz, p, q, r`
 
 Inputs `m1..m4` (the motor inputs as logged: PWM commands, normalised commands or measured rotor
 speeds) and `vbat` (battery voltage [V], optional). The model divides each input by its
-`input_scale` (the median in flight of the training data, `initial_quadrotor`), so that the
+`input_scale` (the median in flight of the training data, `Quadrotor.from_flights`), so that the
 features are of order one whatever the logger's units.
 
 The dynamics are the `Helicopter`'s in other coordinates: with body velocity $\nu = R^\top v$,
@@ -23,7 +23,7 @@ and `to_body_frame` give the body-frame system and data the criteria fit. With a
 $\dot v = g + R\,W_\nu\phi$: gravity and the rotating frame are physics, only forces and moments
 per unit mass and inertia are learned.
 
-Model families (`initial_quadrotor`):
+Model families (`Quadrotor.from_flights`):
 
 - `nominal`: the rigid body. Thrust along the body $z$ axis and the three body moments are a
   learned linear map of the motor features $m_i^2, m_i$ (with `battery`, $(v_b m_i)^2, v_b m_i$),
@@ -76,7 +76,7 @@ QUADROTOR_INPUT_NAMES = ("m1", "m2", "m3", "m4", "vbat")
 WORLD_VELOCITY = slice(7, 10)
 MOTORS = tuple(f"m{i}" for i in range(1, 5))
 
-#: The model families of `initial_quadrotor` (`MODEL.json`'s "family", the CLI's `--model`).
+#: The model families of `Quadrotor.from_flights` (`MODEL.json`'s "family", the CLI's `--model`).
 QUADROTOR_MODELS = ("nominal", "acceleration", "linear")
 
 
@@ -130,7 +130,7 @@ class Quadrotor(AbstractSystem):
 
     ```python
     flights = [dynax.load_flight(path, mapping=NANOBENCH_MAP)[0] for path in paths]
-    quad = dynax.initial_quadrotor("acceleration", flights)
+    quad = dynax.Quadrotor.from_flights("acceleration", flights)
     solution = dynax.fit_quadrotor(quad, flights, dynax.OneStep())
     ```
     """
@@ -156,6 +156,54 @@ class Quadrotor(AbstractSystem):
                 f"Quadrotor: `input_scale` must be {len(QUADROTOR_INPUT_NAMES)} positive numbers "
                 f"(inputs {QUADROTOR_INPUT_NAMES}), got {self.input_scale}"
             )
+
+    @classmethod
+    def from_flights(cls, model: str, flights, *, battery: bool | None = None) -> "Quadrotor":
+        """The starting `Quadrotor` of a model family, its input scales taken from the flights.
+
+        **Arguments:**
+
+        - `model`: `"nominal"`, `"acceleration"` or `"linear"` (see the module docstring).
+        - `flights`: the training records (`Trajectory`s with the `quadrotor` columns); each input's
+          scale is the median of its magnitude over them (motors: over the samples where it runs).
+        - `battery`: scale the motor features by `vbat` (default: when every flight has `vbat`).
+
+        **Returns:** a `Quadrotor` with zero weights.
+        """
+        flights = list(flights)
+        if not flights:
+            raise UsageError("Quadrotor.from_flights: no flights given")
+        for f in flights:
+            _check_quadrotor_data(f, "Quadrotor.from_flights")
+        has_battery = all(len(f.input_names) == 5 for f in flights)
+        if battery is None:
+            battery = has_battery
+        if battery and not has_battery:
+            raise UsageError("Quadrotor.from_flights: `battery=True` needs `vbat` in every flight")
+        us = np.concatenate([np.abs(np.asarray(f.us[:, :4])) for f in flights])
+        running = us[us > 0]
+        m_scale = float(np.median(running)) if running.size else 1.0
+        v_scale = float(np.median(np.concatenate([np.asarray(f.us[:, 4]) for f in flights]))) if has_battery else 1.0
+        scale = (m_scale,) * 4 + ((v_scale if v_scale > 0 else 1.0),)
+        if model == "linear":
+            names = QUADROTOR_LINEAR_FEATURES
+            body = LinearVelocityModel(
+                weights=jnp.zeros((6, len(names))),
+                feature_names=names,
+                mask=tuple(tuple(True for _ in names) for _ in BODY_AXES),
+            )
+        elif model in ("nominal", "acceleration"):
+            axes = nominal_features(battery) if model == "nominal" else acceleration_features(battery)
+            template = AccelerationModel.with_features(axes)
+            body = AccelerationModel(
+                weights=template.weights,
+                feature_names=template.feature_names,
+                mask=template.mask,
+                gravity=-STANDARD_GRAVITY,
+            )
+        else:
+            raise UsageError(f"Quadrotor.from_flights: unknown model {model!r}; expected one of {QUADROTOR_MODELS}")
+        return cls(body, scale)
 
     @property
     def uses_battery(self) -> bool:
@@ -266,51 +314,3 @@ def to_body_frame(system: Quadrotor, trajectory: Trajectory) -> Trajectory:
         "helicopter",
         trajectory.source,
     )
-
-
-def initial_quadrotor(model: str, flights, *, battery: bool | None = None) -> Quadrotor:
-    """The starting `Quadrotor` of a model family, its input scales taken from the flights.
-
-    **Arguments:**
-
-    - `model`: `"nominal"`, `"acceleration"` or `"linear"` (see the module docstring).
-    - `flights`: the training records (`Trajectory`s with the `quadrotor` columns); each input's
-      scale is the median of its magnitude over them (motors: over the samples where it runs).
-    - `battery`: scale the motor features by `vbat` (default: when every flight has `vbat`).
-
-    **Returns:** a `Quadrotor` with zero weights.
-    """
-    flights = list(flights)
-    if not flights:
-        raise UsageError("initial_quadrotor: no flights given")
-    for f in flights:
-        _check_quadrotor_data(f, "initial_quadrotor")
-    has_battery = all(len(f.input_names) == 5 for f in flights)
-    if battery is None:
-        battery = has_battery
-    if battery and not has_battery:
-        raise UsageError("initial_quadrotor: `battery=True` needs `vbat` in every flight")
-    us = np.concatenate([np.abs(np.asarray(f.us[:, :4])) for f in flights])
-    running = us[us > 0]
-    m_scale = float(np.median(running)) if running.size else 1.0
-    v_scale = float(np.median(np.concatenate([np.asarray(f.us[:, 4]) for f in flights]))) if has_battery else 1.0
-    scale = (m_scale,) * 4 + ((v_scale if v_scale > 0 else 1.0),)
-    if model == "linear":
-        names = QUADROTOR_LINEAR_FEATURES
-        body = LinearVelocityModel(
-            weights=jnp.zeros((6, len(names))),
-            feature_names=names,
-            mask=tuple(tuple(True for _ in names) for _ in BODY_AXES),
-        )
-    elif model in ("nominal", "acceleration"):
-        axes = nominal_features(battery) if model == "nominal" else acceleration_features(battery)
-        template = AccelerationModel.with_features(axes)
-        body = AccelerationModel(
-            weights=template.weights,
-            feature_names=template.feature_names,
-            mask=template.mask,
-            gravity=-STANDARD_GRAVITY,
-        )
-    else:
-        raise UsageError(f"initial_quadrotor: unknown model {model!r}; expected one of {QUADROTOR_MODELS}")
-    return Quadrotor(body, scale)

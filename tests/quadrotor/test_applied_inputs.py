@@ -6,7 +6,7 @@ written here in numpy."""
 
 import numpy as np
 
-from dynax import initial_quadrotor, InputLag, MotorDelay
+from dynax import InputLag, MotorDelay, Quadrotor
 from dynax.internal import applied_inputs, body_frame_system
 
 from .synthetic_flight import quadrotor_flight
@@ -14,7 +14,7 @@ from .synthetic_flight import quadrotor_flight
 
 def test_a_lag_and_a_dead_time_pass_the_logged_commands_on_as_their_closed_forms():
     flight = quadrotor_flight(2.0, seed=3)
-    body = body_frame_system(initial_quadrotor("nominal", [flight]), tuple(flight.input_names))
+    body = body_frame_system(Quadrotor.from_flights("nominal", [flight]), tuple(flight.input_names))
     us, dt, tau = np.asarray(flight.us), 0.01, 0.08
 
     lagged = applied_inputs(body, (InputLag(2, tau),), flight)

@@ -2,7 +2,7 @@
 
 The flights are not made by dynax's models: `synthetic_flight.quadrotor_flight` integrates a rigid
 body with the effect written out (scipy DOP853) under a geometric controller at 100 Hz. `diagnose`
-starts from a `Quadrotor` of zero weights (`initial_quadrotor("nominal")`, no geometry given), fits
+starts from a `Quadrotor` of zero weights (`Quadrotor.from_flights("nominal")`, no geometry given), fits
 the rigid body, and must name the hidden cause first with a significant held-out gain; on an
 effect-free flight it must claim nothing. The default suite runs rotor drag (the heavy mark: about
 two minutes on two cores); body bias, motor lag, the effect-free control and the
@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax import BodyBias, diagnose, Extended, Helicopter, initial_quadrotor, RotorDrag, Selection
+from dynax import BodyBias, diagnose, Extended, Helicopter, Quadrotor, RotorDrag, Selection
 
 from .synthetic_flight import quadrotor_flight
 
@@ -23,7 +23,7 @@ from .synthetic_flight import quadrotor_flight
 def _diagnose(seed, duration=15.0, **effects):
     train = quadrotor_flight(duration, seed=seed, **effects)
     validation = quadrotor_flight(duration, seed=seed + 100, **effects)
-    quad = initial_quadrotor("nominal", [train])
+    quad = Quadrotor.from_flights("nominal", [train])
     return diagnose(
         quad, train, validation, selection=Selection(max_terms=1, discovery=False), progress=False
     ).to_json()
@@ -95,7 +95,7 @@ def test_hidden_motor_lag_is_named_at_its_motor():
     lag = (2, 0.08)
     train = quadrotor_flight(30.0, seed=3, lag=lag)
     validation = [quadrotor_flight(30.0, seed=seed, lag=lag) for seed in (103, 203, 303, 403)]
-    quad = initial_quadrotor("nominal", [train])
+    quad = Quadrotor.from_flights("nominal", [train])
     j = diagnose(quad, train, validation, selection=Selection(max_terms=1, discovery=False), progress=False).to_json()
     first = _assert_named_first(j, "input_lag", ("m3",))
     assert first["coefficient"] == pytest.approx(0.08, rel=0.1)

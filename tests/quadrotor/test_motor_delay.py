@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from dynax import diagnose, Extended, initial_quadrotor, InputDelay, MotorDelay, Selection
+from dynax import diagnose, Extended, InputDelay, MotorDelay, Quadrotor, Selection
 from dynax.internal import body_frame_system, quadrotor_candidates
 
 from .synthetic_flight import quadrotor_flight
@@ -21,7 +21,7 @@ from .synthetic_flight import quadrotor_flight
 
 def _body():
     flight = quadrotor_flight(1.0, seed=0, noise=False)
-    quad = initial_quadrotor("nominal", [flight], battery=False)
+    quad = Quadrotor.from_flights("nominal", [flight], battery=False)
     weights = jnp.asarray(np.random.default_rng(0).normal(size=quad.body_model.weights.shape))
     quad = quad.with_body_model(type(quad.body_model)(weights, quad.body_model.feature_names, quad.body_model.mask))
     return body_frame_system(quad, flight.input_names)
@@ -84,7 +84,7 @@ def test_the_motor_delay_refuses_inputs_it_cannot_act_on_and_is_a_quadrotor_cand
 def test_a_hidden_motor_delay_is_named():
     train = quadrotor_flight(15.0, seed=5, delay=0.04)
     validation = quadrotor_flight(15.0, seed=105, delay=0.04)
-    quad = initial_quadrotor("nominal", [train])
+    quad = Quadrotor.from_flights("nominal", [train])
     j = diagnose(quad, train, validation, selection=Selection(max_terms=1, discovery=False), progress=False).to_json()
     assert j["findings"], (j["verdict"], j["candidates"][:5])
     first = j["findings"][0]

@@ -83,7 +83,7 @@ def flights():
 
 @pytest.fixture(scope="module")
 def fitted(flights):
-    start = dynax.initial_quadrotor("nominal", flights, battery=False)
+    start = dynax.Quadrotor.from_flights("nominal", flights, battery=False)
     return dynax.fit_quadrotor(start, flights, dynax.OneStep())
 
 
@@ -133,7 +133,7 @@ def test_identify_fits_a_quadrotor_and_validates_it_on_held_out_flights(flights,
     """`fit_quadrotor` is `identify` with nothing held out (the same `Solution`, flights with or without
     `vbat` alike for a model that does not read it); with a flight held out, `identify` fits the others and
     scores the fitted quadrotor on it by the vehicle horizon error, ahead of holding the velocity."""
-    start = dynax.initial_quadrotor("nominal", flights, battery=False)
+    start = dynax.Quadrotor.from_flights("nominal", flights, battery=False)
     whole = dynax.identify(start, flights, dynax.OneStep(), validation=dynax.Validate(holdout=0))
     assert whole.validation is None and whole.n_samples == sum(len(f) for f in flights)
     for field in ("value", "covariance", "std_errors", "loss"):

@@ -18,7 +18,7 @@ from dynax import (
     Extended,
     GroundEffect,
     Helicopter,
-    initial_quadrotor,
+    Quadrotor,
     Refit,
     RotorDrag,
     Selection,
@@ -30,7 +30,7 @@ from .synthetic_flight import quadrotor_flight
 
 def _body(battery_inputs=True):
     flight = quadrotor_flight(1.0, seed=0, noise=False, vbat=battery_inputs)
-    quad = initial_quadrotor("nominal", [flight], battery=False)
+    quad = Quadrotor.from_flights("nominal", [flight], battery=False)
     weights = jnp.asarray(np.random.default_rng(0).normal(size=quad.body_model.weights.shape))
     quad = quad.with_body_model(type(quad.body_model)(weights, quad.body_model.feature_names, quad.body_model.mask))
     return body_frame_system(quad, flight.input_names)
@@ -82,7 +82,7 @@ def test_thrust_parameters_are_the_thrust_axis_motor_weights():
     flight = quadrotor_flight(0.5, seed=0, noise=False, vbat=True)
     for battery, squared in ((False, "dw/m1^2"), (True, "dw/(vbat m1)^2")):
         for family in ("nominal", "acceleration"):
-            names = thrust_parameters(initial_quadrotor(family, [flight], battery=battery))
+            names = thrust_parameters(Quadrotor.from_flights(family, [flight], battery=battery))
             assert len(names) == 8 and squared in names and all(n.startswith("dw/") for n in names)
             assert "dw/w sum(m)" not in names  # rotor drag, not the thrust map
 
@@ -90,7 +90,7 @@ def test_thrust_parameters_are_the_thrust_axis_motor_weights():
 def _diagnosis(train, validation, battery=None, floor=None):
     """`diagnose` with the thrust map refitted with each candidate (`thrust_parameters`): the held one-step
     map takes up most of a thrust-per-command change (see `dynax._diagnose._quadrotor`)."""
-    quad = initial_quadrotor("nominal", train, battery=battery)
+    quad = Quadrotor.from_flights("nominal", train, battery=battery)
     body = body_frame_system(quad, train[0].input_names)
     return diagnose(
         quad,

@@ -43,7 +43,7 @@ def fit_quadrotor(
 
     **Arguments:**
 
-    - `system`: the starting `Quadrotor` (`dynax.initial_quadrotor`); its body model's mask says
+    - `system`: the starting `Quadrotor` (`dynax.Quadrotor.from_flights`); its body model's mask says
       which weights to fit.
     - `flights`: one `Trajectory` or several, with the `quadrotor` columns, uniformly sampled
       at one interval (the usable runs of `dynax.load_flight`'s records: `dynax.usable_segments`).
