@@ -32,6 +32,7 @@ import numpy as np
 
 from .._errors import DataError
 from ._derivatives import resample
+from ._flight_kinematics import check_flight_kinematics, check_vertical
 from ._io import load_trajectory, Sampling
 from ._trajectory import Trajectory
 
@@ -134,6 +135,16 @@ def _column(trajectory: Trajectory, name: str) -> np.ndarray:
     )
 
 
+def _motors_off(trajectory: Trajectory, checks: FlightChecks) -> tuple[np.ndarray, np.ndarray]:
+    """Per sample, whether every motor is off (at most `motor_off` times its in-flight level: the median
+    over the samples with any motor running), and those levels."""
+    motors = np.stack([_column(trajectory, f"m{i}") for i in range(1, 5)], axis=1)
+    running = np.max(np.abs(motors), axis=1) > 0
+    level = np.median(np.abs(motors[running]), axis=0) if running.any() else np.ones(4)
+    level = np.where(level > 0, level, 1.0)
+    return np.all(np.abs(motors) <= checks.motor_off * level, axis=1), level
+
+
 def inspect_flight(trajectory: Trajectory, checks: FlightChecks = FlightChecks()) -> FlightNotes:
     """Find the ground segments and flag the glitches of a quadrotor record.
 
@@ -150,11 +161,7 @@ def inspect_flight(trajectory: Trajectory, checks: FlightChecks = FlightChecks()
     rel = ts - ts[0]
     motors = np.stack([_column(trajectory, f"m{i}") for i in range(1, 5)], axis=1)
     z = _column(trajectory, "z")
-    # In-flight input level: the median of the samples with any motor running.
-    running = np.max(np.abs(motors), axis=1) > 0
-    level = np.median(np.abs(motors[running]), axis=0) if running.any() else np.ones(4)
-    level = np.where(level > 0, level, 1.0)
-    off = np.all(np.abs(motors) <= checks.motor_off * level, axis=1)
+    off, level = _motors_off(trajectory, checks)
     # The floor under the vehicle: its height at the nearest motors-off sample (take-off and landing
     # spots differ: a pad, an uneven floor), else the record's lowest height.
     if off.any():
@@ -263,4 +270,20 @@ def load_flight(
             data.system,
             data.source,
         )
-    return data, inspect_flight(data, checks)
+    values = {n: np.asarray(data.xs[:, i], dtype=float) for i, n in enumerate(data.state_names)}
+    columns = dict(mapping or {})
+    check_vertical(np.asarray(data.ts, dtype=float), values["z"], _motors_off(data, checks)[0], path, columns)
+    notes = inspect_flight(data, checks)
+    # The columns' agreement on the longest run off the ground (glitches kept: a column in the wrong
+    # unit is flagged as glitches throughout, and the check must see it to name it).
+    rel = np.asarray(data.ts, dtype=float) - float(data.ts[0])
+    airborne = np.ones(len(rel), bool)
+    for a, b in notes.ground:
+        airborne &= (rel < a) | (rel > b)
+    runs = _runs(airborne)
+    if runs:
+        a, b = max(runs, key=lambda r: r[1] - r[0])
+        check_flight_kinematics(
+            rel[a : b + 1], {n: v[a : b + 1] for n, v in values.items()}, path=path, columns=columns, scale=scale
+        )
+    return data, notes
