@@ -15,7 +15,7 @@ record states each quantity twice, so `load_flight` compares the two:
   quaternion, $q_{i+1} = q_i \otimes \exp(\tfrac12\omega\,\Delta t)$), summed into three angles
   whose derivatives are exactly the body rates, tested as a velocity against its angle. A gyro
   read against motion capture agrees less well than a velocity with its position (on the NanoBench
-  flights its gain is 0.1-0.9, lowest about the axes that barely turn: noise in the attitude's
+  flights its gain is 0.12-0.93, lowest about the axes that barely turn: noise in the attitude's
   steps attenuates it, and the gyro lags), so only a fault of another size is refused: the opposite
   sign, a factor of 2 or more (degrees per second), or the rate of another axis (swapped columns);
 - the vertical: the contract's z is up, so with the motors running the vehicle is above where it
@@ -91,7 +91,7 @@ def _check_rate(ts, angles, k, rate, path, columns, scale) -> None:
         return
     gain, std, corr = found
     # A gyro against motion capture reads low where the axis barely turns (noise in the attitude's
-    # steps attenuates the gain) or lags: gains of 0.1-1 are seen on real flights. Only a sign, a unit
+    # steps attenuates the gain) or lags: gains of 0.12-0.93 are seen on real flights. Only a sign, a unit
     # (a factor of 2 or more) or another axis is a column fault.
     if abs(gain) <= MAX_RATE_FACTOR and (gain > 0 or abs(gain) < SIGNIFICANCE * std):
         if abs(gain) >= 1 / MAX_RATE_FACTOR:

@@ -1,0 +1,111 @@
+"""How well each NanoBench flight's columns agree with each other: the gains behind `load_flight`'s check.
+
+For every flight, read with its motion-capture rates and with its IMU gyro, the gain (and standard
+error) of each velocity on its position's derivative and of each body rate on the attitude's
+(`dynax._data._flight_kinematics`), over the longest run off the ground; then the documented
+faults injected into a copy of the star flight, and whether each is refused.
+
+    nice -n 5 python experiments/flight_kinematics.py [OUT]
+
+Writes `OUT/gains.json` (default `experiments/results/flight_kinematics`) and prints the table.
+"""
+
+import csv
+import gzip
+import pathlib
+import sys
+import tempfile
+import warnings
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import numpy as np  # noqa: E402
+
+import dynax  # noqa: E402
+from dynax._data._flight_kinematics import attitude_angles  # noqa: E402  # private: the check's own angles
+from dynax._data._velocities import velocity_gain  # noqa: E402  # private: the check's own gain
+from dynax.internal import write_json  # noqa: E402
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from nanobench_heldout import DATA, NANOBENCH_MAP  # noqa: E402
+
+GYRO_MAP = NANOBENCH_MAP | {"p": "imu_gyro_x", "q": "imu_gyro_y", "r": "imu_gyro_z"}
+COLUMNS = ("vx", "vy", "vz", "p", "q", "r")
+
+
+def gains(path, mapping):
+    trajectory, notes = dynax.load_flight(path, mapping=mapping)
+    rel = np.asarray(trajectory.ts) - float(trajectory.ts[0])
+    airborne = np.ones(len(rel), bool)
+    for a, b in notes.ground:
+        airborne &= (rel < a) | (rel > b)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], airborne.astype(int), [0]])))
+    a, b = max(zip(edges[::2], edges[1::2]), key=lambda r: r[1] - r[0])
+    ts, xs = rel[a:b], np.asarray(trajectory.xs, dtype=float)[a:b]
+    angles = attitude_angles(xs[:, 3:7])
+    positions = (xs[:, 0], xs[:, 1], xs[:, 2], angles[:, 0], angles[:, 1], angles[:, 2])
+    out = {}
+    for k, name in enumerate(COLUMNS):
+        found = velocity_gain(ts, positions[k], xs[:, 7 + k])
+        out[name] = None if found is None else {"gain": found[0], "std_error": found[1], "correlation": found[2]}
+    return out
+
+
+FAULTS = {
+    "rates in deg/s": lambda t, c: t[:, [c("wx_vicon"), c("wy_vicon"), c("wz_vicon")]] * (180 / np.pi),
+    "yaw rate sign": lambda t, c: -t[:, [c("wz_vicon")]],
+    "roll and pitch rates swapped": lambda t, c: t[:, [c("wy_vicon"), c("wx_vicon")]],
+    "velocity in mm/s": lambda t, c: t[:, [c("vx"), c("vy"), c("vz")]] * 1000,
+    "vx and vy swapped": lambda t, c: t[:, [c("vy"), c("vx")]],
+    "z down": lambda t, c: -t[:, [c("pz"), c("vz")]],
+}
+FAULT_COLUMNS = {
+    "rates in deg/s": ("wx_vicon", "wy_vicon", "wz_vicon"),
+    "yaw rate sign": ("wz_vicon",),
+    "roll and pitch rates swapped": ("wx_vicon", "wy_vicon"),
+    "velocity in mm/s": ("vx", "vy", "vz"),
+    "vx and vy swapped": ("vx", "vy"),
+    "z down": ("pz", "vz"),
+}
+
+
+def faults():
+    source = DATA / "B8_star_fast_rep1.csv.gz"
+    with gzip.open(source, "rt") as f:
+        rows = list(csv.reader(f))
+    header, table = rows[0], np.array(rows[1:], float)
+    out = {}
+    for name, fault in FAULTS.items():
+        bad = table.copy()
+        bad[:, [header.index(c) for c in FAULT_COLUMNS[name]]] = fault(table, header.index)
+        with tempfile.TemporaryDirectory() as folder:
+            path = pathlib.Path(folder) / "faulty.csv"
+            with open(path, "w", newline="") as f:
+                csv.writer(f).writerows([header, *bad.tolist()])
+            try:
+                dynax.load_flight(path, mapping=NANOBENCH_MAP)
+                out[name] = "loaded (not caught)"
+            except dynax.DataError as e:
+                out[name] = str(e).split(": ", 1)[1]
+        print(f"{name}: {out[name][:160]}", flush=True)
+    return out
+
+
+def main():
+    out = pathlib.Path(sys.argv[1] if len(sys.argv) > 1 else "experiments/results/flight_kinematics")
+    warnings.simplefilter("ignore", dynax.DataWarning)
+    table = {}
+    for path in sorted(DATA.glob("*.csv.gz")):
+        for label, mapping in (("motion capture", NANOBENCH_MAP), ("gyro", GYRO_MAP)):
+            found = gains(path, mapping)
+            table.setdefault(path.name, {})[label] = found
+            cells = " ".join(f"{name} {g['gain']:.3f}" if g else f"{name} -" for name, g in found.items())
+            print(f"{path.name:34s} {label:14s} {cells}", flush=True)
+    write_json(out / "gains.json", {"flights": table, "faults_in_star_fast": faults()})
+    print(f"written to {out / 'gains.json'}")
+
+
+if __name__ == "__main__":
+    main()
