@@ -78,24 +78,40 @@ def check_flight_kinematics(ts, values: dict, *, path=None, columns=None, scale=
     check_velocities(ts, values, {"vx": "x", "vy": "y", "vz": "z"}, path=path, columns=columns, scale=scale)
     quats = np.stack([np.asarray(values[c], dtype=float) for c in ("qw", "qx", "qy", "qz")], axis=1)
     angles = attitude_angles(quats)
+    scale = scale or {}
+    faults = {}  # rate -> (what is wrong, the factor that fixes it)
     for k, rate in enumerate(_AXES):
-        _check_rate(ts, angles, k, np.asarray(values[rate], dtype=float), path, columns, scale or {})
+        found = _rate_fault(ts, angles, k, np.asarray(values[rate], dtype=float), path, columns)
+        if found is not None:
+            faults[rate] = found
+    if faults:
+        first, (what, _, _) = next(iter(faults.items()))
+        rest = list(faults)[1:]
+        if rest:
+            what = what + [f"so are {', '.join(rest)} (gains {', '.join(f'{faults[r][2]:.4g}' for r in rest)})"]
+        fix = {r: factor * float(scale.get(r, 1.0)) for r, (_, factor, _) in faults.items()}
+        as_dict = ", ".join(f"'{r}': {f:.6g}" for r, f in fix.items())
+        as_flag = ",".join(f"{r}={f:.6g}" for r, f in fix.items())
+        what.append(f"scale {'it' if len(fix) == 1 else 'them'} (`scale={{{as_dict}}}`, `--scale {as_flag}`)")
+        raise DataError("; ".join(what), path=path, column=columns.get(first, first))
 
 
-def _check_rate(ts, angles, k, rate, path, columns, scale) -> None:
-    """Refuse body rate `k` where it is the attitude's derivative with the wrong sign, in other units, or
-    another axis's (see the module notes: only faults of that size, which hold for the whole record)."""
+def _rate_fault(ts, angles, k, rate, path, columns) -> tuple[list[str], float, float] | None:
+    """What is wrong with body rate `k`, the factor that fixes it, and its gain, where it is the
+    attitude's derivative with the wrong sign or in other units; `None` where nothing is (see the module
+    notes: only faults of that size, which hold for the whole record). **Raises:** `DataError` where
+    it is another axis's rate."""
     name = _AXES[k]
     found = velocity_gain(ts, angles[:, k], rate)
     if found is None:
-        return
+        return None
     gain, std, corr = found
     # A gyro against motion capture reads low where the axis barely turns (noise in the attitude's
     # steps attenuates the gain) or lags: gains of 0.12-0.93 are seen on real flights. Only a sign, a unit
     # (a factor of 2 or more) or another axis is a column fault.
     if abs(gain) <= MAX_RATE_FACTOR and (gain > 0 or abs(gain) < SIGNIFICANCE * std):
         if abs(gain) >= 1 / MAX_RATE_FACTOR:
-            return
+            return None
         others = [j for j in range(3) if j != k]
         follows = [
             j
@@ -103,7 +119,7 @@ def _check_rate(ts, angles, k, rate, path, columns, scale) -> None:
             if (m := velocity_gain(ts, angles[:, j], rate)) and 1 / MAX_RATE_FACTOR <= m[0] <= MAX_RATE_FACTOR
         ]
         if not follows:
-            return
+            return None
         other = _AXES[follows[0]]
         raise DataError(
             f"it is not the body rate about {_ANGLE_AXIS[k]} (gain {gain:.3g} +- {std:.2g} on the attitude's "
@@ -113,24 +129,22 @@ def _check_rate(ts, angles, k, rate, path, columns, scale) -> None:
             column=columns.get(name, name),
         )
     if abs(gain) <= SIGNIFICANCE * std:
-        return
+        return None
     what = [
         f"it is not the attitude's rate of change about {_ANGLE_AXIS[k]} (from qw, qx, qy, qz): over "
         f"{BLOCK_S * 1e3:g} ms blocks its mean is {gain:.4g} +- {std:.2g} times that rate (correlation {corr:.2f})"
     ]
     if not _fault_holds_everywhere(ts, angles[:, k], rate, gain):
-        return  # wrong in some stretches only: no unit, no scale is right
+        return None  # wrong in some stretches only: no unit, no scale is right
     if gain < 0:
         what.append(f"it has {_OPPOSITE_SIGN}")
         factor = -1.0
-    elif 0.3 * DEGREES <= gain <= 1.2 * DEGREES:  # a gyro's gain is 0.1-1 of the attitude's (above)
+    elif 0.3 * DEGREES <= gain <= 1.2 * DEGREES:  # a gyro's gain is 0.12-0.93 of the attitude's (above)
         what.append("it reads as degrees per second (the contract's rates are in rad/s)")
         factor = 1.0 / DEGREES
     else:
         factor = 1.0 / gain
-    factor *= float(scale.get(name, 1.0))
-    what.append(f"scale it (`scale={{'{name}': {factor:.6g}}}`, `--scale {name}={factor:.6g}`)")
-    raise DataError("; ".join(what), path=path, column=columns.get(name, name))
+    return what, factor, gain
 
 
 def _fault_holds_everywhere(ts, angle, rate, gain: float) -> bool:

@@ -63,7 +63,11 @@ def _faulty(tmp_path, star_table, fault):
 @pytest.mark.parametrize(
     "fault, column, says",
     [
-        ("rates in deg/s", "wx_vicon", r"degrees per second.*--scale p=0\.0174533"),
+        (
+            "rates in deg/s",
+            "wx_vicon",
+            r"degrees per second.*so are q, r .*--scale p=0\.0174533,q=0\.0174533,r=0\.0174533",
+        ),
         ("yaw rate sign", "wz_vicon", r"opposite sign.*--scale r=-1"),
         ("roll and pitch rates swapped", "wx_vicon", r"about body y: are the columns of p and q swapped"),
         ("velocity in mm/s", "vx", r"millimetres per second.*--scale vx=0\.001"),
