@@ -1,9 +1,11 @@
 """How well each NanoBench flight's columns agree with each other: the gains behind `load_flight`'s check.
 
 For every flight, read with its motion-capture rates and with its IMU gyro, the gain (and standard
-error) of each velocity on its position's derivative and of each body rate on the attitude's
-(`dynax._data._flight_kinematics`), over the longest run off the ground; then the documented
-faults injected into a copy of the star flight, and whether each is refused.
+error) of each velocity on its position's derivative and of each body rate on the attitude's, and
+the thrust's two slopes (horizontal acceleration on the lean of body z, vertical acceleration on the
+motors' thrust), over the longest run with the motors running, as `load_flight` reads them
+(`dynax._data._flight_kinematics`); then faults injected into a copy of the star flight, and
+whether each is refused.
 
     nice -n 5 python experiments/flight_kinematics.py [OUT]
 
@@ -24,7 +26,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax._data._flight_kinematics import attitude_angles  # noqa: E402  # private: the check's own angles
+from dynax._data._flight_kinematics import attitude_angles, thrust_frame_slopes  # noqa: E402  # private: the check's own
 from dynax._data._velocities import velocity_gain  # noqa: E402  # private: the check's own gain
 from dynax.internal import write_json  # noqa: E402
 
@@ -36,20 +38,23 @@ COLUMNS = ("vx", "vy", "vz", "p", "q", "r")
 
 
 def gains(path, mapping):
-    trajectory, notes = dynax.load_flight(path, mapping=mapping)
-    rel = np.asarray(trajectory.ts) - float(trajectory.ts[0])
-    airborne = np.ones(len(rel), bool)
-    for a, b in notes.ground:
-        airborne &= (rel < a) | (rel > b)
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], airborne.astype(int), [0]])))
+    trajectory, _ = dynax.load_flight(path, mapping=mapping)
+    us = np.asarray(trajectory.us[:, :4], dtype=float)
+    level = np.median(np.abs(us[np.max(np.abs(us), axis=1) > 0]), axis=0)
+    running = np.any(np.abs(us) > 0.05 * level, axis=1)  # `FlightChecks.motor_off`, as `load_flight` reads it
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], running.astype(int), [0]])))
     a, b = max(zip(edges[::2], edges[1::2]), key=lambda r: r[1] - r[0])
-    ts, xs = rel[a:b], np.asarray(trajectory.xs, dtype=float)[a:b]
+    ts = np.asarray(trajectory.ts, dtype=float)[a:b]
+    xs = np.asarray(trajectory.xs, dtype=float)[a:b]
     angles = attitude_angles(xs[:, 3:7])
     positions = (xs[:, 0], xs[:, 1], xs[:, 2], angles[:, 0], angles[:, 1], angles[:, 2])
     out = {}
     for k, name in enumerate(COLUMNS):
         found = velocity_gain(ts, positions[k], xs[:, 7 + k])
         out[name] = None if found is None else {"gain": found[0], "std_error": found[1], "correlation": found[2]}
+    values = {n: xs[:, i] for i, n in enumerate(trajectory.state_names)}
+    c, c_std, k, k_std = thrust_frame_slopes(ts, values, us[a:b])
+    out["thrust"] = {"lean_gain": c, "lean_gain_std_error": c_std, "vertical_t": k / k_std}
     return out
 
 
@@ -60,6 +65,7 @@ FAULTS = {
     "velocity in mm/s": lambda t, c: t[:, [c("vx"), c("vy"), c("vz")]] * 1000,
     "vx and vy swapped": lambda t, c: t[:, [c("vy"), c("vx")]],
     "z down": lambda t, c: -t[:, [c("pz"), c("vz")]],
+    "world-to-body quaternion": lambda t, c: -t[:, [c("qx"), c("qy"), c("qz")]],
 }
 FAULT_COLUMNS = {
     "rates in deg/s": ("wx_vicon", "wy_vicon", "wz_vicon"),
@@ -68,6 +74,7 @@ FAULT_COLUMNS = {
     "velocity in mm/s": ("vx", "vy", "vz"),
     "vx and vy swapped": ("vx", "vy"),
     "z down": ("pz", "vz"),
+    "world-to-body quaternion": ("qx", "qy", "qz"),
 }
 
 
@@ -101,7 +108,8 @@ def main():
         for label, mapping in (("motion capture", NANOBENCH_MAP), ("gyro", GYRO_MAP)):
             found = gains(path, mapping)
             table.setdefault(path.name, {})[label] = found
-            cells = " ".join(f"{name} {g['gain']:.3f}" if g else f"{name} -" for name, g in found.items())
+            cells = " ".join(f"{name} {found[name]['gain']:.3f}" if found[name] else f"{name} -" for name in COLUMNS)
+            cells += " | lean gain {lean_gain:.2f} m/s^2, vertical t {vertical_t:.1f}".format(**found["thrust"])
             print(f"{path.name:34s} {label:14s} {cells}", flush=True)
     write_json(out / "gains.json", {"flights": table, "faults_in_star_fast": faults()})
     print(f"written to {out / 'gains.json'}")

@@ -32,7 +32,7 @@ import numpy as np
 
 from .._errors import DataError
 from ._derivatives import resample
-from ._flight_kinematics import check_flight_kinematics, check_vertical
+from ._flight_kinematics import check_flight_kinematics, check_thrust_frame
 from ._io import load_trajectory, Sampling
 from ._trajectory import Trajectory
 
@@ -272,18 +272,17 @@ def load_flight(
         )
     values = {n: np.asarray(data.xs[:, i], dtype=float) for i, n in enumerate(data.state_names)}
     columns = dict(mapping or {})
-    check_vertical(np.asarray(data.ts, dtype=float), values["z"], _motors_off(data, checks)[0], path, columns)
     notes = inspect_flight(data, checks)
-    # The columns' agreement on the longest run off the ground (glitches kept: a column in the wrong
-    # unit is flagged as glitches throughout, and the check must see it to name it).
+    # The columns' agreement on the longest run with the motors running (glitches kept: a column in the
+    # wrong unit is flagged as glitches throughout, and the check must see it to name it; the height is
+    # not used, as a z axis pointing down is one of the faults).
     rel = np.asarray(data.ts, dtype=float) - float(data.ts[0])
-    airborne = np.ones(len(rel), bool)
-    for a, b in notes.ground:
-        airborne &= (rel < a) | (rel > b)
-    runs = _runs(airborne)
+    runs = _runs(~_motors_off(data, checks)[0])
     if runs:
         a, b = max(runs, key=lambda r: r[1] - r[0])
-        check_flight_kinematics(
-            rel[a : b + 1], {n: v[a : b + 1] for n, v in values.items()}, path=path, columns=columns, scale=scale
-        )
+        flown = {n: v[a : b + 1] for n, v in values.items()}
+        # the frame first: in another frame the rates disagree with the attitude too, and a scale is no fix
+        motors = np.asarray(data.us[a : b + 1, :4], dtype=float)
+        check_thrust_frame(rel[a : b + 1], flown, motors, path=path, columns=columns)
+        check_flight_kinematics(rel[a : b + 1], flown, path=path, columns=columns, scale=scale)
     return data, notes

@@ -1,5 +1,5 @@
 r"""Flight logs whose columns contradict each other: a velocity that is not its position's derivative, a
-body rate that is not its attitude's, a vertical axis that points down.
+body rate that is not its attitude's, a thrust that does not push along body z, up.
 
 Another drone's log, mapped onto the contract's `quadrotor` columns, can load and fit without a
 word while meaning something else: rates in deg/s (PX4 and Betaflight logs), velocities in mm/s, a
@@ -18,10 +18,11 @@ record states each quantity twice, so `load_flight` compares the two:
   flights its gain is 0.12-0.93, lowest about the axes that barely turn: noise in the attitude's
   steps attenuates it, and the gyro lags), so only a fault of another size is refused: the opposite
   sign, a factor of 2 or more (degrees per second), or the rate of another axis (swapped columns);
-- the vertical: the contract's z is up, so with the motors running the vehicle is above where it
-  rests with them off. A record that flies mostly *below* its motors-off height has its z axis
-  down (north-east-down or forward-right-down logs), and its attitude, rates and gravity are
-  then in another frame too: it is refused with the heights, not rescaled.
+- the thrust: a multirotor's pushes along its body z axis, up, so its horizontal acceleration follows
+  the lean of body z and its vertical acceleration rises with the motors' thrust
+  (`check_thrust_frame`). A north-east-down log, a forward-right-down body or a world-to-body
+  quaternion breaks one of the two; such a frame takes more than a scale to convert, and the error
+  says which.
 
 Only a fault that holds for the whole record is refused with a `scale` to fix it (a unit, a sign or
 a swap): a gain that is wrong in some stretches only is no unit (see `gain_holds_everywhere` in
@@ -31,14 +32,14 @@ a swap): a gain that is wrong in some stretches only is no unit (see `gain_holds
 import numpy as np
 
 from .._errors import DataError
-from ._velocities import BLOCK_S, check_velocities, MIN_BLOCKS, SIGNIFICANCE, STRETCHES, velocity_gain
+from ._velocities import BLOCK_S, check_velocities, MIN_BLOCKS, SIGNIFICANCE, stretch_edges, STRETCHES, velocity_gain
 
 _AXES = ("p", "q", "r")
 _ANGLE_AXIS = ("body x", "body y", "body z")
 MAX_RATE_FACTOR = 2.0  # a body rate's gain on its attitude's beyond this (or its inverse) is a unit or a swap
 DEGREES = 180.0 / np.pi
 _OPPOSITE_SIGN = "the opposite sign (a gyro axis counted the other way: forward-right-down against forward-left-up?)"
-MIN_FLIGHT_SHARE = 0.5  # the share of motors-running samples below the motors-off height that reads as z down
+STANDARD_GRAVITY = 9.80665
 
 
 def attitude_angles(quats: np.ndarray) -> np.ndarray:
@@ -163,30 +164,81 @@ def _fault_holds_everywhere(ts, angle, rate, gain: float) -> bool:
     return seen > 0
 
 
-def check_vertical(ts, z, off, path=None, columns=None) -> None:
-    """Refuse a record that flies below its motors-off height (`off`: per sample, every motor off): its
-    z axis points down. **Raises:** `DataError` naming the file, the z column and the first such row."""
+def thrust_frame_slopes(ts, values: dict, motors: np.ndarray) -> tuple[float, float, float, float] | None:
+    """`(c, c_std, k, k_std)` of `check_thrust_frame`: the horizontal acceleration's gain on the lean of
+    body z [m/s^2] and the vertical acceleration's slope on the motors' thrust, with standard errors;
+    `None` for a record of fewer than `MIN_BLOCKS` blocks."""
+    ts = np.asarray(ts, dtype=float)
+    edges = stretch_edges(ts)
+    if len(edges) < MIN_BLOCKS + 1:
+        return None
+    start, stop = edges[:-1], edges[1:]
+    velocity = np.stack([np.asarray(values[c], dtype=float) for c in ("vx", "vy", "vz")], axis=1)
+    acceleration = (velocity[stop] - velocity[start]) / (ts[stop] - ts[start])[:, None]
+    qw, qx, qy, qz = (np.asarray(values[c], dtype=float) for c in ("qw", "qx", "qy", "qz"))
+    lean = np.stack([2 * (qx * qz + qw * qy), 2 * (qy * qz - qw * qx)], axis=1)  # (R e_z) horizontal
+    thrust = np.sum(np.asarray(motors, dtype=float) ** 2, axis=1)
+
+    def block_mean(x):
+        area = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x[:-1], axis=0)])
+        return (area[stop] - area[start]) / (stop - start).reshape((-1,) + (1,) * (x.ndim - 1))
+
+    c, c_std = _slope(block_mean(lean).ravel(), acceleration[:, :2].ravel())
+    u = block_mean(thrust)
+    k, k_std = _slope(u - u.mean(), acceleration[:, 2] - acceleration[:, 2].mean())
+    return c, c_std, k, k_std
+
+
+def check_thrust_frame(ts, values: dict, motors: np.ndarray, *, path=None, columns=None) -> None:
+    r"""Refuse a flight record whose thrust does not act along the attitude's body z axis, up.
+
+    A multirotor's thrust pushes along its body z axis, so over blocks of `BLOCK_S` its horizontal
+    world acceleration (the velocity's change) follows the horizontal components of body z,
+    $a_h \approx c\,(R e_z)_h$ with $c \approx T/m \approx g > 0$ (6.4-9.6 m/s$^2$ on the NanoBench
+    flights, 1.2-1.5 on the two that fly straight ramps), and its vertical acceleration rises with
+    the motors' thrust ($\sum_i m_i^2$; $t$-statistics 0-17 over the whole run with the motors on,
+    above 5 on 11 of the 16 flights: the pad's spin-up and a runaway motor log dilute it, so a z axis
+    down alone is caught on those). A north-east-down log with a
+    forward-right-down body, or a world-to-body quaternion, turns $c$ negative; a z axis that points
+    down turns the vertical slope negative. Either is refused where significant (`SIGNIFICANCE`
+    standard errors, and $c$ below $-g/10$).
+
+    **Arguments:** `ts`; `values` (contract name -> column: `qw..qz`, `vx..vz`); `motors` `(n, 4)`;
+    `path`, `columns` (contract name -> file column) named in the error.
+
+    **Raises:** `DataError` naming the file and the attitude's or the height's column.
+    """
     columns = columns or {}
-    running = ~off
-    if not off.any() or running.sum() < 10:
-        return  # no rest to compare with, or no flight
-    rests = np.flatnonzero(off)
-    nearest = rests[np.clip(np.searchsorted(rests, np.flatnonzero(running)), 0, len(rests) - 1)]
-    below = z[running] - z[nearest]
-    spread = float(np.ptp(z))
-    if spread <= 0:
+    found = thrust_frame_slopes(ts, values, motors)
+    if found is None:
         return
-    # below its rest by more than a tenth of the record's height range, for most of the flight
-    down = below < -0.1 * spread
-    if down.mean() > MIN_FLIGHT_SHARE:
-        first = int(np.flatnonzero(running)[np.argmax(down)])
+    c, c_std, k, k_std = found
+    if c < -SIGNIFICANCE * c_std and c < -0.1 * STANDARD_GRAVITY:
         raise DataError(
-            f"the vehicle flies below where it rests with its motors off ({down.mean():.0%} of the samples with "
-            f"the motors running, by up to {-below.min():.3g} in z's units, first at t = {ts[first] - ts[0]:.2f} s): "
-            "the z axis points down (a north-east-down or forward-right-down log?); the contract's frame has z up, "
-            "so convert the position, velocity, attitude and body rates to a z-up frame (east-north-up, "
-            "forward-left-up) before loading",
+            f"the vehicle accelerates away from where its body z axis leans ({c:.3g} +- {c_std:.2g} m/s^2 of "
+            "horizontal acceleration per unit lean, over "
+            f"{BLOCK_S * 1e3:g} ms blocks; a multirotor's thrust along body z gives about +g): the attitude is in "
+            "another frame, a forward-right-down body in a north-east-down world or a world-to-body quaternion; "
+            "the contract's is a body-to-world quaternion with z up (forward-left-up in east-north-up)",
+            path=path,
+            column=columns.get("qw", "qw"),
+        )
+    if k < -SIGNIFICANCE * k_std:
+        raise DataError(
+            f"the vertical acceleration falls as the motors' thrust rises (slope {k / k_std:.3g} standard errors "
+            "below zero, over "
+            f"{BLOCK_S * 1e3:g} ms blocks): the z axis points down (a north-east-down log?); the contract's frame "
+            "has z up, so convert the position, velocity, attitude and body rates to a z-up frame before loading",
             path=path,
             column=columns.get("z", "z"),
-            row=first + 1,
         )
+
+
+def _slope(x, y) -> tuple[float, float]:
+    """The least-squares slope of `y` on `x` (through the origin) and its standard error."""
+    xx = float(x @ x)
+    if not xx > 0:
+        return 0.0, np.inf
+    slope = float(x @ y) / xx
+    residual = y - slope * x
+    return slope, float(np.sqrt(residual @ residual / max(len(x) - 1, 1) / xx))

@@ -55,6 +55,17 @@ def _faulty(tmp_path, star_table, fault):
         table[:, [c("vx"), c("vy"), c("vz")]] *= 1000
     elif fault == "z down":
         table[:, [c("pz"), c("vz")]] *= -1
+    elif fault == "world-to-body quaternion":
+        table[:, [c("qx"), c("qy"), c("qz")]] *= -1
+    elif fault == "north-east-down":  # the whole log in NED with a forward-right-down body, as PX4 logs it
+        enu_to_ned, frd_to_flu = np.array([[0, 1, 0], [1, 0, 0], [0, 0, -1.0]]), np.diag([1, -1, -1.0])
+        for group in (("px", "py", "pz"), ("vx", "vy", "vz")):
+            table[:, [c(g) for g in group]] = table[:, [c(g) for g in group]] @ enu_to_ned.T
+        rates = [c("wx_vicon"), c("wy_vicon"), c("wz_vicon")]
+        table[:, rates] = table[:, rates] @ frd_to_flu.T
+        xyzw = [c("qx"), c("qy"), c("qz"), c("qw")]
+        turned = enu_to_ned @ Rotation.from_quat(table[:, xyzw]).as_matrix() @ frd_to_flu
+        table[:, xyzw] = Rotation.from_matrix(turned).as_quat()
     path = tmp_path / "faulty.csv.gz"
     _write(path, header, table)
     return path, table[:, 0] - table[0, 0]
@@ -71,7 +82,9 @@ def _faulty(tmp_path, star_table, fault):
         ("yaw rate sign", "wz_vicon", r"opposite sign.*--scale r=-1"),
         ("roll and pitch rates swapped", "wx_vicon", r"about body y: are the columns of p and q swapped"),
         ("velocity in mm/s", "vx", r"millimetres per second.*--scale vx=0\.001"),
-        ("z down", "pz", r"z axis points down"),
+        ("z down", "pz", r"vertical acceleration falls as the motors' thrust rises.*z axis points down"),
+        ("north-east-down", "qw", r"accelerates away from where its body z axis leans"),
+        ("world-to-body quaternion", "qw", r"accelerates away from where its body z axis leans"),
     ],
 )
 def test_a_contradicting_column_is_refused_with_its_fix(tmp_path, star_table, fault, column, says):
