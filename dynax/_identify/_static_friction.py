@@ -590,9 +590,14 @@ def describe(stretches, joints, rows_left_out, rows) -> str:
     total = sum(s.duration for s in stretches)
     swings = _swings(stretches, joints)
     if not joints:
+        held = (
+            "no joint is held there by friction"
+            if any(s.moves for s in stretches)
+            else f"hold no net torque above {LOADED:g} times its noise"
+        )
         return (
-            f"the records rest ({total:.2f} s over {len(stretches)} stretch(es)) but hold no net torque above "
-            f"{LOADED:g} times its noise: nothing to read a static level from, so the model has no Stiction"
+            f"the records rest ({total:.2f} s over {len(stretches)} stretch(es)) but {held}: nothing to read a "
+            "static level from, so the model has no Stiction"
             + swings
             + (f"; {rows_left_out} of {rows} dynamic rows at rest left out of the fit" if rows_left_out else "")
         )
