@@ -315,7 +315,7 @@ def _arm_matrices(system, names, estimate, q: np.ndarray, dtype):
     model (`estimate`) at the positions `q`, each row `j` without the friction terms at joint `j` (as
     `held_torques`): from the regressor at unit accelerations and at speeds $\\pm\\varepsilon$."""
     n = len(q)
-    eps = 1e-6
+    eps = 1e-3  # the central difference cancels the Coriolis terms (even in a speed) exactly; float32 resolves it
     xs = np.zeros((1 + 3 * n, 2 * n))
     xs[:, :n] = q
     ddq = np.zeros((1 + 3 * n, n))
