@@ -25,6 +25,19 @@ lacks) leaves a few 1e-4 N m at a rest that holds nothing. The rest is **under l
 the net torque, averaged over `WINDOW_S` windows, reaches `LOADED` (3) times $\sigma$ somewhere in
 the stretch: a held torque three times the scatter of a single sample, not of a mean.
 
+**Held, not swinging.** Still to the range test is not at rest: a heavy, damped arm swings through
+zero speed so slowly that a joint stays in the band for a second, and the torque read at zero speed
+is then what accelerates it (on the stick-slip battery's record, a shoulder swinging with the stuck
+elbow as one body reads 0.8 N m where it holds nothing). So each loaded stretch is checked against
+the motion measured over it (`rest_motion`): the joint's equation of motion integrated twice, which
+needs the positions, not their derivatives, gives the friction $F$ the joint supplies (the net torque
+less the inertia and damping of the whole arm's measured motion), with its standard error, and the
+torque the joint's own acceleration and speed carry. The rest stays under load only where $F$ is
+`LOADED` standard errors from zero and larger than that own share: held, the friction carries the
+torque and the joint does not accelerate; free, its motion carries it. Otherwise (`moves`) the
+stretch gives no level, and the note says so with the three numbers. The level itself is still read
+as below, at zero speed.
+
 **The static level.** A joint at rest holds every net torque it is under, so the largest held
 torque (the largest window average, `held`) is a **lower bound** on its static level $f_s$, not an
 estimate of it: the joint may hold much more than it was asked to. Where a rest ends while the net
@@ -114,7 +127,11 @@ class RestUnderLoad:
     torque (signed), or `None` (the record ends at rest, or the torque fell); `speed_noise`, the joint's
     measured-speed noise at rest over all of its rests in the records (`speed_noise_at_rest`);
     `held_force`, `held_position`, the generalised force applied and the joint positions over the window
-    where the most was held (its mean): the rest the refinement bounds the level by."""
+    where the most was held (its mean): the rest the refinement bounds the level by; `friction`,
+    `friction_noise`, the friction the joint supplies over the stretch less what the measured motion
+    of the arm explains, and its standard error; `motion`, the net torque its own motion accounts for
+    (`rest_motion`); `moves`, whether that motion, not friction, carries the torque (the stretch is
+    then not under load)."""
 
     record: str
     joint: int
@@ -129,6 +146,10 @@ class RestUnderLoad:
     speed_noise: float = 0.0
     held_force: float = 0.0
     held_position: tuple[float, ...] | None = None
+    friction: float = 0.0
+    friction_noise: float = 0.0
+    motion: float = 0.0
+    moves: bool = False
 
     @property
     def duration(self) -> float:
@@ -289,6 +310,67 @@ def held_torques(system, names, estimate, covariance, record: Trajectory, force:
     return net, std
 
 
+def _arm_matrices(system, names, estimate, q: np.ndarray, dtype):
+    """The mass matrix $M(q)$ and the damping $D = \\partial h / \\partial \\dot q$ at zero speed of the
+    model (`estimate`) at the positions `q`, each row `j` without the friction terms at joint `j` (as
+    `held_torques`): from the regressor at unit accelerations and at speeds $\\pm\\varepsilon$."""
+    n = len(q)
+    eps = 1e-3  # the central difference cancels the Coriolis terms (even in a speed) exactly; float32 resolves it
+    xs = np.zeros((1 + 3 * n, 2 * n))
+    xs[:, :n] = q
+    ddq = np.zeros((1 + 3 * n, n))
+    for k in range(n):
+        ddq[1 + k, k] = 1.0
+        xs[1 + n + k, n + k] = eps
+        xs[1 + 2 * n + k, n + k] = -eps
+    y = np.asarray(dynamic_regressor(system, jnp.asarray(xs, dtype), jnp.asarray(ddq, dtype)), dtype=float)
+    mass, damping = np.empty((n, n)), np.empty((n, n))
+    for j in range(n):
+        theta = np.asarray(estimate, dtype=float).copy()
+        theta[_friction_columns(system, names, j)] = 0.0
+        row = y[:, j, :] @ theta
+        mass[j] = row[1 : 1 + n] - row[0]
+        damping[j] = (row[1 + n : 1 + 2 * n] - row[1 + 2 * n :]) / (2 * eps)
+    return mass, damping
+
+
+def rest_motion(ts: np.ndarray, qs: np.ndarray, net: np.ndarray, mass: np.ndarray, damping: np.ndarray, joint: int):
+    r"""`(friction, noise, motion)`: the friction joint `joint` supplies over a stretch where the arm
+    is still, less what the measured motion explains, its standard error, and the net torque the
+    joint's own motion accounts for.
+
+    The joint's equation of motion, $\text{net}_j(t) = \sum_k M_{jk}\ddot q_k + D_{jk}\dot q_k + f_j(t)$
+    ($\text{net}$ the torque the model leaves at zero speed and acceleration), integrated twice from
+    the stretch's start, needs no derivative of the positions:
+    $\iint \text{net}_j = \sum_k M_{jk}(q_k - q_k(0)) + D_{jk}\int (q_k - q_k(0)) + \iint f_j$ up to
+    a line in time (the start speeds). With $f_j = F + G(t - \bar t)$ the residual is fitted by
+    $c_0 + c_1 t + F t^2/2 + G(t^3/6 - \bar t t^2/2)$; $F$ is the friction at the middle of the
+    stretch, its standard error from the fit's residual. `motion` is the same coefficient of the
+    joint's own term $M_{jj}(q_j - q_j(0)) + D_{jj}\int (q_j - q_j(0))$: the torque its own
+    acceleration and speed carry. A joint at rest has $F \approx \text{net}_j$ and no motion; a slow
+    swing through zero speed (a reversal of a heavy, damped arm) has its motion carrying the torque
+    and $F$ near zero."""
+    t = ts - ts[0]
+    if len(t) < 5:  # too short to tell a rest from a swing: no friction shown
+        return 0.0, 0.0, 0.0
+    dt = np.diff(t)
+
+    def integral(x):
+        return np.concatenate([[0.0], np.cumsum(0.5 * (x[1:] + x[:-1]) * dt)])
+
+    moved = qs - qs[0]
+    swept = np.stack([integral(moved[:, k]) for k in range(qs.shape[1])], 1)
+    own = mass[joint, joint] * moved[:, joint] + damping[joint, joint] * swept[:, joint]
+    residual = integral(integral(net)) - moved @ mass[joint] - swept @ damping[joint]
+    mid = 0.5 * t[-1]
+    design = np.stack([np.ones_like(t), t, t**2 / 2, t**3 / 6 - mid * t**2 / 2], 1)
+    coefficients, *_ = np.linalg.lstsq(design, np.stack([residual, own], 1), rcond=None)
+    fitted = design @ coefficients[:, 0]
+    scatter = np.sqrt(np.sum((residual - fitted) ** 2) / max(len(t) - design.shape[1], 1))
+    covariance = np.linalg.pinv(design.T @ design)
+    return float(coefficients[2, 0]), float(scatter * np.sqrt(covariance[2, 2])), float(coefficients[2, 1])
+
+
 def _longest_run(mask: np.ndarray, start: int, stop: int) -> tuple[int, int]:
     """The longest run `[a, b)` of `True` in `mask[start:stop]` (the last of equal ones), `(start, start)` if none."""
     best = (start, start)
@@ -381,7 +463,13 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
             window = slice(a + k, a + k + min(width, b - a))
             held_force = float(np.mean(forces_of[window, j]))
             held_position = tuple(float(v) for v in np.mean(qs[window], axis=0))
+            mass, damping = _arm_matrices(system, names, estimate, np.mean(qs[a:b], axis=0), record.xs.dtype)
+            friction, friction_noise, motion = rest_motion(ts[a:b], qs[a:b], torque, mass, damping, j)
+            # held: the friction carries the torque, significantly, and more of it than the joint's own
+            # acceleration and speed do; else the joint moves under the torque, or the stretch cannot tell
+            moves = not (abs(friction) >= LOADED * friction_noise and abs(friction) > abs(motion))
             loaded = bool(abs(held) >= LOADED * noise and abs(held) > 0.0)
+            moves, loaded = loaded and moves, loaded and not moves
             breakaway = None
             if loaded and b == end < s.stop:  # it left its rest (not the record's end) with the arm still
                 at_break, rise = _value_at_end(torque[-width:])
@@ -403,6 +491,10 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
                     noise_at_rest[j],
                     held_force,
                     held_position,
+                    friction,
+                    friction_noise,
+                    motion,
+                    moves,
                 )
             )
     return tuple(out)
@@ -496,10 +588,17 @@ def describe(stretches, joints, rows_left_out, rows) -> str:
             "at rest, so the model has no Stiction"
         )
     total = sum(s.duration for s in stretches)
+    swings = _swings(stretches, joints)
     if not joints:
+        held = (
+            "no joint is held there by friction"
+            if any(s.moves for s in stretches)
+            else f"hold no net torque above {LOADED:g} times its noise"
+        )
         return (
-            f"the records rest ({total:.2f} s over {len(stretches)} stretch(es)) but hold no net torque above "
-            f"{LOADED:g} times its noise: nothing to read a static level from, so the model has no Stiction"
+            f"the records rest ({total:.2f} s over {len(stretches)} stretch(es)) but {held}: nothing to read a "
+            "static level from, so the model has no Stiction"
+            + swings
             + (f"; {rows_left_out} of {rows} dynamic rows at rest left out of the fit" if rows_left_out else "")
         )
     parts = []
@@ -517,7 +616,28 @@ def describe(stretches, joints, rows_left_out, rows) -> str:
     return (
         "Stiction added: "
         + "; ".join(parts)
+        + swings
         + (f"; {rows_left_out} of {rows} dynamic rows at rest left out of the fit" if rows_left_out else "")
+    )
+
+
+def _swings(stretches, joints) -> str:
+    """The note's part on each stretch whose torque read at zero speed the motion explains
+    (`RestUnderLoad.moves`), at a joint left without `Stiction`: the torque, how much of it the joint's own
+    motion carries, and the friction left with its standard error."""
+    added = {j.joint for j in joints}
+    parts = [
+        f"{s.coordinate} at {s.start_s:.2f} to {s.stop_s:.2f} s in {s.record} (torque {abs(s.held):.3g} read at "
+        f"zero speed; its own acceleration and speed carry {abs(s.motion):.3g}, friction {abs(s.friction):.3g} "
+        f"+- {s.friction_noise:.2g})"
+        for s in stretches
+        if s.moves and s.joint not in added
+    ]
+    if not parts:
+        return ""
+    return (
+        f"; no static level where the measured motion leaves no friction of {LOADED:g} standard errors, or its "
+        "own motion carries more of the torque than friction: " + "; ".join(parts)
     )
 
 
