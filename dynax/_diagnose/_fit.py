@@ -22,6 +22,8 @@ terms driven by the input history before the window), scaled per state by the da
     (output-error methods).
 """
 
+from collections.abc import Callable
+
 import diffrax
 import equinox as eqx
 import jax
@@ -243,6 +245,21 @@ def movable_parameters(family: Family, n_params: int) -> tuple[int, ...]:
     return tuple(int(i) for i in np.concatenate([refitted, np.arange(n_nominal, n_params)]))
 
 
+class _AsOverAll(eqx.Module):
+    """`norm` of a vector of the `n_movable` unknowns as of the whole parameter vector (`n_all` entries, the held ones'
+    zeros appended): the stopping rule of a fit over the `movable_parameters` is the one over every entry (an RMS
+    norm counts the held entries), so that the fit takes the same steps as before it left them out."""
+
+    norm: Callable = eqx.field(static=True)
+    n_movable: int = eqx.field(static=True)
+    n_all: int = eqx.field(static=True)
+
+    def __call__(self, x):
+        if jnp.ndim(x) == 1 and x.shape[0] == self.n_movable:
+            x = jnp.concatenate([x, jnp.zeros(self.n_all - self.n_movable, x.dtype)])
+        return self.norm(x)
+
+
 def fit_configuration(
     family: Family,
     windows: Windows,
@@ -269,6 +286,8 @@ def fit_configuration(
     movable = tuple(range(p_init.shape[-1])) if movable is None else tuple(movable)
     index = np.asarray(movable, int)
     s = (family.scale(slots, new) * free)[index]
+    if len(movable) < p_init.shape[-1] and hasattr(solver, "norm"):
+        solver = eqx.tree_at(lambda sv: sv.norm, solver, _AsOverAll(solver.norm, len(movable), p_init.shape[-1]))
     # jac="dense": the whole Jacobian by one `jacfwd` per step (all parameter tangents through one
     # rollout), applied as a matrix; far less compilation than linearising the rollout itself.
     solution = fit_least_squares(
