@@ -237,11 +237,12 @@ def movable_parameters(family: Family, n_params: int) -> tuple[int, ...]:
     unknown, and a quadrotor's held motor map is 35 nominal weights beside the one to four coefficients a round
     fits, so differentiating the held ones too made each Levenberg-Marquardt step about ten times the work for
     the same step (their columns are zero). All entries where `family.refit` is not concrete (traced)."""
-    refit = family.refit
-    if isinstance(refit, jax.core.Tracer):
+    try:
+        refit = np.asarray(family.refit)
+    except jax.errors.TracerArrayConversionError:
         return tuple(range(n_params))
     n_nominal = len(family.names)
-    refitted = np.flatnonzero(np.asarray(refit) > 0)
+    refitted = np.flatnonzero(refit > 0)
     return tuple(int(i) for i in np.concatenate([refitted, np.arange(n_nominal, n_params)]))
 
 

@@ -204,7 +204,8 @@ def applied_inputs(system, terms, trajectory) -> np.ndarray:
         if not term.n_hidden or (term.cause in DEAD_TIMES and not float(term.coefficient) > 0):
             continue
         alone = Extended(system, (term,))  # pyright: ignore[reportCallIssue]
-        zs = np.asarray(hidden_trajectory(alone, *padded(ts, us)))[: len(us)]  # causal: the padding changes nothing
+        ts_p, us_p = padded(ts, us)
+        zs = np.asarray(hidden_trajectory(alone, ts_p, us_p))[: len(us)]  # causal: the padding changes nothing
         applied = jax.vmap(term.applied)
         for j, i in enumerate(term.inputs):
             z = jnp.asarray(zs[:, j * term.n_hidden : (j + 1) * term.n_hidden])
@@ -231,9 +232,8 @@ def acceleration_residuals(model, trajectory):
     given = model  # before its delays are replaced by the shifted inputs
     model, us, us_before = exact_delays(model, trajectory)
     n = len(ts)  # evaluated on the padded record (one compilation for records of any length near it), cut back
-    predicted = predicted_accelerations(model, *padded(ts, xs_smooth, us), jnp.asarray(idx), padded(ts, us_before)[1])[
-        :n
-    ]
+    ts_p, xs_p, us_p, before_p = padded(ts, xs_smooth, us, us_before)
+    predicted = predicted_accelerations(model, ts_p, xs_p, us_p, jnp.asarray(idx), before_p)[:n]
     # The measured acceleration is a local polynomial fit; smoothing the prediction with the same
     # filter compares like with like.
     predicted = savitzky_golay(ts, predicted, window=w, order=3)
@@ -243,9 +243,8 @@ def acceleration_residuals(model, trajectory):
         # sample): compare velocity *increments* over each interval, integrated under the held
         # input from the interval's start, and differentiate the accumulated difference with the same filter.
         interval_model, interval_us, _ = exact_delays(given, trajectory, interval=True)
-        increments = _interval_increments(interval_model, *padded(ts, xs_smooth, interval_us), jnp.asarray(idx))[
-            : n - 1
-        ]
+        _, interval_p = padded(ts, interval_us)
+        increments = _interval_increments(interval_model, ts_p, xs_p, interval_p, jnp.asarray(idx))[: n - 1]
         drift = jnp.diff(trajectory.xs[:, idx], axis=0) - increments
         accumulated = jnp.concatenate([jnp.zeros((1, len(idx)), drift.dtype), jnp.cumsum(drift, axis=0)])
         measured = predicted + savitzky_golay(ts, accumulated, window=w, order=3, deriv=1)

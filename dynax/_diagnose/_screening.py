@@ -82,7 +82,8 @@ def screening_data(family, values, coefficients, trajectory, residual_fn):
     w = sg_window(trajectory.dt)
     xs = savitzky_golay(ts, trajectory.xs, window=w, order=3)
     n = len(ts)  # the jitted per-sample functions run on the padded record (`padded`), cut back to its samples
-    zs = hidden_trajectory(model, *padded(ts, trajectory.us))[:n]
+    ts_p, us_p = padded(ts, trajectory.us)
+    zs = hidden_trajectory(model, ts_p, us_p)[:n]
     us = trajectory.us
     us_before = jnp.concatenate([us[:1], us[:-1]])
     on_grid = padded(ts, xs, zs, us, us_before)[1:]
