@@ -161,6 +161,9 @@ from ._diagnose._fit import (
     make_windows as make_windows,
 )
 from ._diagnose._fit import (
+    movable_parameters as movable_parameters,
+)
+from ._diagnose._fit import (
     nominal_parameter_names as nominal_parameter_names,
 )
 from ._diagnose._fit import (
@@ -678,6 +681,7 @@ __all__ = [
     "min_mass_eigenvalue",
     "MIN_PRACTICAL_GAIN",
     "ml_weights",
+    "movable_parameters",
     "multi_process",
     "named_equivalent",
     "named_parameters",

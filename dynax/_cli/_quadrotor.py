@@ -258,6 +258,7 @@ def run_diagnose(args) -> int:
             progress=say,
         )
         held_out = validation if validation is not None else [holdout_split(t)[1] for t in train]
+        say("scoring the held-out flights per group, 1, 10 and 50 steps ahead from every start ...")
         errors = quadrotor_flight_errors(report, system, held_out, (1, 10, 50))
     with staged_directory(args.out) as stage:
         write_report(report, stage, body_frame_records(system, held_out), write_json=write_json)

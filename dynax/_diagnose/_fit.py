@@ -22,6 +22,8 @@ terms driven by the input history before the window), scaled per state by the da
     (output-error methods).
 """
 
+from collections.abc import Callable
+
 import diffrax
 import equinox as eqx
 import jax
@@ -221,33 +223,87 @@ def _window_residuals(p, args):
     return e.reshape(-1)
 
 
+def _movable_residuals(q, args):
+    """`_window_residuals` of the parameter vector `p` with its entries `movable` set to `q`."""
+    family, windows, slots, new, p, movable = args
+    return _window_residuals(p.at[np.asarray(movable, int)].set(q), (family, windows, slots, new))
+
+
+def movable_parameters(family: Family, n_params: int) -> tuple[int, ...]:
+    """The entries of a configuration's parameter vector that a fit can move: the refitted nominal parameters,
+    every slot and the new term (`Family.scale` is zero everywhere else, so those never move).
+
+    The fit differentiates only these: `jac="dense"` forms the Jacobian by one `jacfwd`, one tangent per
+    unknown, and a quadrotor's held motor map is 35 nominal weights beside the one to four coefficients a round
+    fits, so differentiating the held ones too made each Levenberg-Marquardt step about ten times the work for
+    the same step (their columns are zero). All entries where `family.refit` is not concrete (traced)."""
+    try:
+        refit = np.asarray(family.refit)
+    except jax.errors.TracerArrayConversionError:
+        return tuple(range(n_params))
+    n_nominal = len(family.names)
+    refitted = np.flatnonzero(refit > 0)
+    return tuple(int(i) for i in np.concatenate([refitted, np.arange(n_nominal, n_params)]))
+
+
+class _AsOverAll(eqx.Module):
+    """`norm` of a vector of the `n_movable` unknowns as of the whole parameter vector (`n_all` entries, the held ones'
+    zeros appended): the stopping rule of a fit over the `movable_parameters` is the one over every entry (an RMS
+    norm counts the held entries), so that the fit takes the same steps as before it left them out."""
+
+    norm: Callable = eqx.field(static=True)
+    n_movable: int = eqx.field(static=True)
+    n_all: int = eqx.field(static=True)
+
+    def __call__(self, x):
+        if jnp.ndim(x) == 1 and x.shape[0] == self.n_movable:
+            x = jnp.concatenate([x, jnp.zeros(self.n_all - self.n_movable, x.dtype)])
+        return self.norm(x)
+
+
 def fit_configuration(
-    family: Family, windows: Windows, slots, new, p_init, free, *, solver=SOLVER, max_steps: int = MAX_STEPS
+    family: Family,
+    windows: Windows,
+    slots,
+    new,
+    p_init,
+    free,
+    *,
+    solver=SOLVER,
+    max_steps: int = MAX_STEPS,
+    movable: tuple[int, ...] | None = None,
 ):
     """The simulation-error fit of one configuration through `fit_least_squares` (vmap this over configurations).
 
     The parameter vector `p` holds the nominal values, the slot coefficients and the new term's
     coefficient (both relative to neutral). Only the entries where `free` is 1 move (all of them
     for a joint refit; only the last to fit the new term alone), each scaled by `family.scale`
-    (a zero scale freezes a parameter in the engine).
+    (a zero scale freezes a parameter in the engine). `movable` (`movable_parameters`, default every
+    entry): the entries the engine sees as unknowns; the others are held at `p_init` (their scale is zero).
 
     **Returns:** `(p, cost, std_error, steps)`: fitted parameters, the sum of squared scaled
     residuals, standard errors (`window_clustered_std_errors`), and the solver's iterations.
     """
-    s = family.scale(slots, new) * free
+    movable = tuple(range(p_init.shape[-1])) if movable is None else tuple(movable)
+    index = np.asarray(movable, int)
+    s = (family.scale(slots, new) * free)[index]
+    if len(movable) < p_init.shape[-1] and hasattr(solver, "norm"):
+        solver = eqx.tree_at(lambda sv: sv.norm, solver, _AsOverAll(solver.norm, len(movable), p_init.shape[-1]))
     # jac="dense": the whole Jacobian by one `jacfwd` per step (all parameter tangents through one
     # rollout), applied as a matrix; far less compilation than linearising the rollout itself.
     solution = fit_least_squares(
-        _window_residuals,
-        p_init,
+        _movable_residuals,
+        p_init[index],
         True,
-        (family, windows, slots, new),
+        (family, windows, slots, new, p_init, movable),
         solver=solver,
         scale=s,
         max_steps=max_steps,
         options=LeastSquaresOptions(jac="dense"),
     )
-    return solution.value, 2.0 * solution.loss, window_clustered_std_errors(solution, windows, s), solution.steps
+    p = p_init.at[index].set(solution.value)
+    std = jnp.zeros_like(p_init).at[index].set(window_clustered_std_errors(solution, windows, s))
+    return p, 2.0 * solution.loss, std, solution.steps
 
 
 def window_clustered_std_errors(solution, windows: Windows, scale):
@@ -271,14 +327,23 @@ def window_clustered_std_errors(solution, windows: Windows, scale):
     return jnp.where(used >= 2 * jnp.sum(scale != 0), robust, solution.std_errors)
 
 
-@eqx.filter_jit
-def fit_configurations(family, windows, slots, new, p_init, free, *, solver=SOLVER, max_steps: int = MAX_STEPS):
+def fit_configurations(
+    family, windows, slots, new, p_init, free, *, solver=SOLVER, max_steps: int = MAX_STEPS, movable=None
+):
     """`fit_configuration` for a batch: `slots (batch, n_slots)`, `new (batch,)`, `p_init (batch, n_params)`, `free
-    (n_params,)`.
+    (n_params,)`; the unknowns `movable` (default `movable_parameters`: the Jacobian over what can move only).
 
     Under `vmap` every member iterates until all have converged (a converged member's step is zero).
     """
-    fit = lambda s_, n_, p_: fit_configuration(family, windows, s_, n_, p_, free, solver=solver, max_steps=max_steps)  # noqa: E731
+    movable = movable_parameters(family, p_init.shape[-1]) if movable is None else tuple(int(i) for i in movable)
+    return _fit_configurations(family, windows, slots, new, p_init, free, movable, solver=solver, max_steps=max_steps)
+
+
+@eqx.filter_jit
+def _fit_configurations(family, windows, slots, new, p_init, free, movable, *, solver, max_steps: int):
+    def fit(s_, n_, p_):
+        return fit_configuration(family, windows, s_, n_, p_, free, solver=solver, max_steps=max_steps, movable=movable)
+
     return jax.vmap(fit)(slots, new, p_init)
 
 

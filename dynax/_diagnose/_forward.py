@@ -478,8 +478,9 @@ def _select(problem: Problem, yard: Yardstick, current: Current, results, scores
     coefficient = problem.neutral[best] + r["delta"]
     say(
         f"round {round_ + 1}: found {term.label(system)}, {term.parameter_name(system)} = {coefficient:.4g} "
-        f"(held-out gain {gain:.0%}, p = {r['p']:.2g}, helps on {r['runs_helped']}/{r['n_runs']} held-out runs; "
-        f"told apart from look-alikes: {confidence})"
+        f"(held-out gain {gain:.0%} in position RMSE at {yard.horizon.seconds:g} s, {r['gain_held_out']:.0%} in the "
+        f"tested window error over every state, p = {r['p']:.2g}, helps on {r['runs_helped']}/{r['n_runs']} held-out "
+        f"runs; told apart from look-alikes: {confidence})"
     )
     return {
         "index": best,

@@ -116,6 +116,38 @@ def _held_average(ts, u, a, b):
 DEAD_TIMES = ("input_delay", "motor_delay")
 
 
+#: The fewest samples a record is padded to for the jitted per-sample functions (`padded_length`).
+MIN_PADDED = 256
+
+
+def padded_length(n: int) -> int:
+    """The samples a record of `n` samples is evaluated on by the jitted per-sample functions here
+    (`predicted_accelerations`, `_interval_increments`, `hidden_trajectory`, the screening's directions): the next
+    power of two, at least `MIN_PADDED`.
+
+    Each is compiled once per shape, and whole flight logs each have their own length: three flights cost three
+    compilations of each (tens of seconds apiece on two cores, most of a diagnosis's screening), where flights
+    padded to one length share one. Every one of these functions is per sample or causal (an integration forward
+    in time), so the first `n` samples of its result on the padded record are its result on the record: the
+    padding (`padded`) is cut off again, and no number changes."""
+    return max(MIN_PADDED, 1 << (max(int(n), 1) - 1).bit_length())
+
+
+def padded(ts, *samples) -> tuple:
+    """`ts` and the per-sample arrays `samples` (leading axis time) extended to `padded_length(len(ts))` samples:
+    the times on, at the last interval, the samples as their last value (host-side, so that the padding itself
+    compiles nothing)."""
+    ts_ = np.asarray(ts)
+    n = len(ts_)
+    extra = padded_length(n) - n
+    dt = ts_[-1] - ts_[-2] if n > 1 else 1.0
+    out = [np.concatenate([ts_, ts_[-1] + dt * np.arange(1, extra + 1, dtype=ts_.dtype)])]
+    for a in samples:
+        a = np.asarray(a)
+        out.append(np.concatenate([a, np.repeat(a[-1:], extra, axis=0)]))
+    return tuple(jnp.asarray(a) for a in out)
+
+
 def exact_delays(model, trajectory, interval: bool = False):
     """Run an active input delay as the dead time it stands for, not as its Pade filter.
 
@@ -172,7 +204,8 @@ def applied_inputs(system, terms, trajectory) -> np.ndarray:
         if not term.n_hidden or (term.cause in DEAD_TIMES and not float(term.coefficient) > 0):
             continue
         alone = Extended(system, (term,))  # pyright: ignore[reportCallIssue]
-        zs = np.asarray(hidden_trajectory(alone, ts, jnp.asarray(us)))
+        ts_p, us_p = padded(ts, us)
+        zs = np.asarray(hidden_trajectory(alone, ts_p, us_p))[: len(us)]  # causal: the padding changes nothing
         applied = jax.vmap(term.applied)
         for j, i in enumerate(term.inputs):
             z = jnp.asarray(zs[:, j * term.n_hidden : (j + 1) * term.n_hidden])
@@ -198,7 +231,9 @@ def acceleration_residuals(model, trajectory):
     measured = savitzky_golay(ts, trajectory.xs[:, idx], window=w, order=3, deriv=1)
     given = model  # before its delays are replaced by the shifted inputs
     model, us, us_before = exact_delays(model, trajectory)
-    predicted = predicted_accelerations(model, ts, xs_smooth, us, jnp.asarray(idx), us_before)
+    n = len(ts)  # evaluated on the padded record (one compilation for records of any length near it), cut back
+    ts_p, xs_p, us_p, before_p = padded(ts, xs_smooth, us, us_before)
+    predicted = predicted_accelerations(model, ts_p, xs_p, us_p, jnp.asarray(idx), before_p)[:n]
     # The measured acceleration is a local polynomial fit; smoothing the prediction with the same
     # filter compares like with like.
     predicted = savitzky_golay(ts, predicted, window=w, order=3)
@@ -208,7 +243,8 @@ def acceleration_residuals(model, trajectory):
         # sample): compare velocity *increments* over each interval, integrated under the held
         # input from the interval's start, and differentiate the accumulated difference with the same filter.
         interval_model, interval_us, _ = exact_delays(given, trajectory, interval=True)
-        increments = _interval_increments(interval_model, ts, xs_smooth, interval_us, jnp.asarray(idx))
+        _, interval_p = padded(ts, interval_us)
+        increments = _interval_increments(interval_model, ts_p, xs_p, interval_p, jnp.asarray(idx))[: n - 1]
         drift = jnp.diff(trajectory.xs[:, idx], axis=0) - increments
         accumulated = jnp.concatenate([jnp.zeros((1, len(idx)), drift.dtype), jnp.cumsum(drift, axis=0)])
         measured = predicted + savitzky_golay(ts, accumulated, window=w, order=3, deriv=1)

@@ -34,7 +34,7 @@ import numpy as np
 
 from .._data._derivatives import savitzky_golay
 from .._model._extensions import AbstractInputTerm
-from ._residuals import DEAD_TIMES, hidden_trajectory, sg_window, velocity_indices
+from ._residuals import DEAD_TIMES, hidden_trajectory, padded, sg_window, velocity_indices
 
 
 @eqx.filter_jit
@@ -81,10 +81,13 @@ def screening_data(family, values, coefficients, trajectory, residual_fn):
     ts = trajectory.ts
     w = sg_window(trajectory.dt)
     xs = savitzky_golay(ts, trajectory.xs, window=w, order=3)
-    zs = hidden_trajectory(model, ts, trajectory.us)
+    n = len(ts)  # the jitted per-sample functions run on the padded record (`padded`), cut back to its samples
+    ts_p, us_p = padded(ts, trajectory.us)
+    zs = hidden_trajectory(model, ts_p, us_p)[:n]
     us = trajectory.us
     us_before = jnp.concatenate([us[:1], us[:-1]])
-    J_nom, J_c, J_u = _directions(family, jnp.asarray(values), jnp.asarray(coefficients), xs, zs, us, us_before)
+    on_grid = padded(ts, xs, zs, us, us_before)[1:]
+    J_nom, J_c, J_u = (a[:n] for a in _directions(family, jnp.asarray(values), jnp.asarray(coefficients), *on_grid))
     du = savitzky_golay(ts, us, window=w, order=2, deriv=1)  # (time, n_inputs)
     J_c = np.array(J_c)
     for k, term in enumerate(family.model.terms):
@@ -95,8 +98,8 @@ def screening_data(family, values, coefficients, trajectory, residual_fn):
             if size > 0 and float(coefficients[k]) == float(family.neutral[k]):
                 step = jnp.zeros_like(jnp.asarray(coefficients)).at[k].set(size)
                 J_c[:, :, k] = np.asarray(
-                    _secant(family, jnp.asarray(values), jnp.asarray(coefficients), step, xs, zs, us, us_before)
-                )
+                    _secant(family, jnp.asarray(values), jnp.asarray(coefficients), step, *on_grid)
+                )[:n]
     for k, term in enumerate(family.model.terms):
         if isinstance(term, AbstractInputTerm) and term.n_hidden and not np.any(J_c[:, :, k]):
             J_c[:, :, k] = -sum(np.asarray(J_u)[:, :, i] * np.asarray(du)[:, None, i] for i in term.inputs)

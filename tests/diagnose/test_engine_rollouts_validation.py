@@ -26,6 +26,7 @@ from dynax.internal import (
     fit_configurations,
     fit_percent,
     make_windows,
+    movable_parameters,
     progress_mode,
     residual_tests,
     rollouts_from_starts,
@@ -121,6 +122,16 @@ def test_batched_engine_refits_recover_a_hidden_friction_and_converge():
     assert cost[1] < cost[2]  # better than the wrong candidate (an offset)
     assert np.all(steps < 32)  # converged, not stopped by the step budget
     assert np.all(np.asarray(std)[1, :2] > 0) and np.asarray(std)[1, 2] == 0  # frozen parameters have no error
+    # The Jacobian is formed over what can move (the refitted mass and viscous friction, the slot, the new term):
+    # differentiating every entry as well (the frozen ones give zero columns) fits the same, in the same steps.
+    assert movable_parameters(family, 6) == (0, 1, 4, 5)
+    every = fit_configurations(
+        family, windows, jnp.asarray(slots), jnp.asarray(new), jnp.asarray(p_init), jnp.ones(6), movable=range(6)
+    )
+    np.testing.assert_allclose(np.asarray(every[0]), p, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(every[2]), np.asarray(std), rtol=1e-6, atol=1e-12)
+    np.testing.assert_array_equal(np.asarray(every[3]), steps)
+    assert np.all(np.asarray(std)[:, 2:4] == 0)
 
 
 def test_fit_percent_is_matlab_compare_and_residual_tests_tell_a_wrong_model():

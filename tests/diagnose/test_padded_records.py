@@ -1,0 +1,71 @@
+"""Whole records of other lengths share the compiled one-step residuals, and the padding that does it changes no
+number: the jitted per-sample functions run on each record padded to a power of two and are cut back (see
+`dynax._diagnose._residuals.padded_length`). Without it each flight log of its own length compiled the screening and
+the structure probe anew: most of a whole-flight quadrotor diagnosis's first minutes."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import dynax
+from dynax import Extended, InputLag, LinearAxis, Trajectory
+from dynax._diagnose._residuals import (  # private: the unpadded evaluation the padded one must reproduce
+    _interval_increments,
+    predicted_accelerations,
+    sg_window,
+)
+from dynax.internal import acceleration_residuals, savitzky_golay
+
+MODEL = Extended(LinearAxis(coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0)), (InputLag(0, 0.04),))
+
+
+def _record(n: int, seed: int) -> Trajectory:
+    """`n` samples of a linear axis whose force acts through a 40 ms lag, under a multisine, measured with noise
+    (an adaptive solver, not the fixed grid of the residuals)."""
+    rng = np.random.default_rng(seed)
+    ts = 0.01 * np.arange(n)
+    freqs = rng.uniform(0.3, 2.0, 5)
+    us = (40.0 * np.sum(np.sin(2 * np.pi * freqs[None] * ts[:, None] + rng.uniform(0, 6.28, 5)), axis=1))[:, None]
+    x0 = MODEL.initial_state(jnp.zeros(2), jnp.asarray(us[0]))
+    sim = dynax.simulate(MODEL, x0, jnp.asarray(ts), jnp.asarray(us), method=dynax.Adaptive(rtol=1e-9, atol=1e-11))
+    xs = np.asarray(sim.xs)[:, :2] + 1e-5 * rng.standard_normal((n, 2))
+    return Trajectory(jnp.asarray(ts), jnp.asarray(xs), jnp.asarray(us), ("q", "dq"), ("force",), "linear_axis")
+
+
+def test_records_of_other_lengths_share_one_compilation_and_keep_their_residuals():
+    compiled = []
+
+    def listen(event, duration, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiled.append(str(kwargs.get("fun_name", "")))
+
+    records = [_record(300, 0), _record(437, 1)]  # both pad to 512 samples
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        results = [acceleration_residuals(MODEL, rec) for rec in records]
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    # Unpadded, each length compiled its own (two each); padded, at most one (none if another test made it).
+    assert sum("predicted_accelerations" in name for name in compiled) <= 1, compiled
+    assert sum("_interval_increments" in name for name in compiled) <= 1, compiled
+
+    for rec, (residuals, _, predicted, keep) in zip(records, results):
+        n = len(rec)
+        assert residuals.shape == (n - 2 * sg_window(rec.dt), 1) and keep == slice(
+            sg_window(rec.dt), n - sg_window(rec.dt)
+        )
+        ts, w, idx = rec.ts, sg_window(rec.dt), jnp.asarray([1])
+        smooth = savitzky_golay(ts, rec.xs, window=w, order=3)
+        us_before = jnp.concatenate([rec.us[:1], rec.us[:-1]])
+        reference = savitzky_golay(
+            ts, predicted_accelerations(MODEL, ts, smooth, rec.us, idx, us_before), window=w, order=3
+        )
+        np.testing.assert_allclose(predicted, np.asarray(reference)[keep], rtol=1e-12, atol=1e-12)
+        # The velocity increments (the residuals of a system whose rates answer the input within a sample).
+        increments = _interval_increments(MODEL, ts, smooth, rec.us, idx)
+        drift = jnp.diff(rec.xs[:, 1:], axis=0) - increments
+        accumulated = jnp.concatenate([jnp.zeros((1, 1)), jnp.cumsum(drift, axis=0)])
+        measured = reference + savitzky_golay(ts, accumulated, window=w, order=3, deriv=1)
+        np.testing.assert_allclose(residuals, np.asarray(measured - reference)[keep], rtol=1e-10, atol=1e-10)
+        # The lag is in the model: its residuals are the measurement noise's, far below the acceleration's.
+        assert np.std(residuals) < 0.05 * np.std(predicted)
