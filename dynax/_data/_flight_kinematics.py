@@ -15,7 +15,7 @@ record states each quantity twice, so `load_flight` compares the two:
   quaternion, $q_{i+1} = q_i \otimes \exp(\tfrac12\omega\,\Delta t)$), summed into three angles
   whose derivatives are exactly the body rates, tested as a velocity against its angle. A gyro
   read against motion capture agrees less well than a velocity with its position (on the NanoBench
-  flights its gain is 0.12-0.93, lowest about the axes that barely turn: noise in the attitude's
+  flights its gain is 0.16-0.85, lowest about the axes that barely turn: noise in the attitude's
   steps attenuates it, and the gyro lags), so only a fault of another size is refused: the opposite
   sign, a factor of 2 or more (degrees per second), or the rate of another axis (swapped columns);
 - the thrust: a multirotor's pushes along its body z axis, up, so its horizontal acceleration follows
@@ -108,7 +108,7 @@ def _rate_fault(ts, angles, k, rate, path, columns) -> tuple[list[str], float, f
         return None
     gain, std, corr = found
     # A gyro against motion capture reads low where the axis barely turns (noise in the attitude's
-    # steps attenuates the gain) or lags: gains of 0.12-0.93 are seen on real flights. Only a sign, a unit
+    # steps attenuates the gain) or lags: gains of 0.16-0.85 are seen on real flights. Only a sign, a unit
     # (a factor of 2 or more) or another axis is a column fault.
     if abs(gain) <= MAX_RATE_FACTOR and (gain > 0 or abs(gain) < SIGNIFICANCE * std):
         if abs(gain) >= 1 / MAX_RATE_FACTOR:
@@ -140,10 +140,10 @@ def _rate_fault(ts, angles, k, rate, path, columns) -> tuple[list[str], float, f
     if gain < 0:
         what.append(f"it has {_OPPOSITE_SIGN}")
         factor = -1.0
-    elif 0.3 * DEGREES <= gain <= 1.2 * DEGREES:  # a gyro's gain is 0.12-0.93 of the attitude's (above)
+    elif 0.1 * DEGREES <= gain <= 1.2 * DEGREES:  # a gyro's gain is 0.16-0.85 of the attitude's (above)
         what.append("it reads as degrees per second (the contract's rates are in rad/s)")
         factor = 1.0 / DEGREES
-    else:
+    else:  # no unit of rates known to dynax: the factor that makes it agree
         factor = 1.0 / gain
     return what, factor, gain
 
