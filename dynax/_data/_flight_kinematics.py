@@ -183,9 +183,16 @@ def thrust_frame_slopes(ts, values: dict, motors: np.ndarray) -> tuple[float, fl
         area = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x[:-1], axis=0)])
         return (area[stop] - area[start]) / (stop - start).reshape((-1,) + (1,) * (x.ndim - 1))
 
-    c, c_std = _slope(block_mean(lean).ravel(), acceleration[:, :2].ravel())
+    # Flight only: not the spin-up on the pad (thrust rising, the floor holding the vehicle) nor a motor log
+    # that runs away (an input beyond 3x its level, 9x the thrust: `FlightChecks.max_input_ratio`).
     u = block_mean(thrust)
-    k, k_std = _slope(u - u.mean(), acceleration[:, 2] - acceleration[:, 2].mean())
+    level = float(np.median(u))
+    flying = (u >= 0.5 * level) & (u <= 9.0 * level)
+    if flying.sum() < MIN_BLOCKS:
+        return None
+    c, c_std = _slope(block_mean(lean)[flying].ravel(), acceleration[flying, :2].ravel())
+    u, a_z = u[flying], acceleration[flying, 2]
+    k, k_std = _slope(u - u.mean(), a_z - a_z.mean())
     return c, c_std, k, k_std
 
 
@@ -194,11 +201,11 @@ def check_thrust_frame(ts, values: dict, motors: np.ndarray, *, path=None, colum
 
     A multirotor's thrust pushes along its body z axis, so over blocks of `BLOCK_S` its horizontal
     world acceleration (the velocity's change) follows the horizontal components of body z,
-    $a_h \approx c\,(R e_z)_h$ with $c \approx T/m \approx g > 0$ (6.4-9.6 m/s$^2$ on the NanoBench
+    $a_h \approx c\,(R e_z)_h$ with $c \approx T/m \approx g > 0$ (6.5-9.6 m/s$^2$ on the NanoBench
     flights, 1.2-1.5 on the two that fly straight ramps), and its vertical acceleration rises with
-    the motors' thrust ($\sum_i m_i^2$; $t$-statistics 0-17 over the whole run with the motors on,
-    above 5 on 11 of the 16 flights: the pad's spin-up and a runaway motor log dilute it, so a z axis
-    down alone is caught on those). A north-east-down log with a
+    the motors' thrust ($\sum_i m_i^2$; $t$-statistics 0-17 over the blocks in flight, at 0.5 to 9 times
+    the median thrust, above 5 on 11 of the 16 flights: where the vehicle barely climbs, as on a ramp
+    skimming the pad, the slope is weak, and a z axis down alone is caught on those 11). A north-east-down log with a
     forward-right-down body, or a world-to-body quaternion, turns $c$ negative; a z axis that points
     down turns the vertical slope negative. Either is refused where significant (`SIGNIFICANCE`
     standard errors, and $c$ below $-g/10$).
