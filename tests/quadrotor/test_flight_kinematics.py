@@ -53,6 +53,8 @@ def _faulty(tmp_path, star_table, fault):
         table[:, [c("wx_vicon"), c("wy_vicon")]] = table[:, [c("wy_vicon"), c("wx_vicon")]]
     elif fault == "velocity in mm/s":
         table[:, [c("vx"), c("vy"), c("vz")]] *= 1000
+    elif fault == "vx and vy swapped":
+        table[:, [c("vx"), c("vy")]] = table[:, [c("vy"), c("vx")]]
     elif fault == "z down":
         table[:, [c("pz"), c("vz")]] *= -1
     elif fault == "world-to-body quaternion":
@@ -82,6 +84,7 @@ def _faulty(tmp_path, star_table, fault):
         ("yaw rate sign", "wz_vicon", r"opposite sign.*--scale r=-1"),
         ("roll and pitch rates swapped", "wx_vicon", r"about body y: are the columns of p and q swapped"),
         ("velocity in mm/s", "vx", r"millimetres per second.*--scale vx=0\.001"),
+        ("vx and vy swapped", "vx", r"derivative of 'py' \(y\).*are the columns of vx and vy swapped"),
         ("z down", "pz", r"vertical acceleration falls as the motors' thrust rises.*z axis points down"),
         ("north-east-down", "qw", r"accelerates away from where its body z axis leans"),
         ("world-to-body quaternion", "qw", r"accelerates away from where its body z axis leans"),
