@@ -26,6 +26,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
+from dynax._data._flight import motors_running_run  # noqa: E402  # private: the stretch the check reads
 from dynax._data._flight_kinematics import attitude_angles, thrust_frame_slopes  # noqa: E402  # private: the check's own
 from dynax._data._velocities import velocity_gain  # noqa: E402  # private: the check's own gain
 from dynax.internal import write_json  # noqa: E402
@@ -40,10 +41,8 @@ COLUMNS = ("vx", "vy", "vz", "p", "q", "r")
 def gains(path, mapping):
     trajectory, _ = dynax.load_flight(path, mapping=mapping)
     us = np.asarray(trajectory.us[:, :4], dtype=float)
-    level = np.median(np.abs(us[np.max(np.abs(us), axis=1) > 0]), axis=0)
-    running = np.any(np.abs(us) > 0.05 * level, axis=1)  # `FlightChecks.motor_off`, as `load_flight` reads it
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], running.astype(int), [0]])))
-    a, b = max(zip(edges[::2], edges[1::2]), key=lambda r: r[1] - r[0])
+    first, last = motors_running_run(trajectory)  # the stretch `load_flight` checks
+    a, b = first, last + 1
     ts = np.asarray(trajectory.ts, dtype=float)[a:b]
     xs = np.asarray(trajectory.xs, dtype=float)[a:b]
     angles = attitude_angles(xs[:, 3:7])

@@ -145,6 +145,13 @@ def _motors_off(trajectory: Trajectory, checks: FlightChecks) -> tuple[np.ndarra
     return np.all(np.abs(motors) <= checks.motor_off * level, axis=1), level
 
 
+def motors_running_run(trajectory: Trajectory, checks: FlightChecks = FlightChecks()) -> tuple[int, int] | None:
+    """`(first, last)` sample indices of the longest run with any motor running (`_motors_off` negated),
+    or `None` where the motors never run: the stretch `load_flight` checks the columns' agreement on."""
+    runs = _runs(~_motors_off(trajectory, checks)[0])
+    return max(runs, key=lambda r: r[1] - r[0]) if runs else None
+
+
 def inspect_flight(trajectory: Trajectory, checks: FlightChecks = FlightChecks()) -> FlightNotes:
     """Find the ground segments and flag the glitches of a quadrotor record.
 
@@ -277,9 +284,9 @@ def load_flight(
     # wrong unit is flagged as glitches throughout, and the check must see it to name it; the height is
     # not used, as a z axis pointing down is one of the faults).
     rel = np.asarray(data.ts, dtype=float) - float(data.ts[0])
-    runs = _runs(~_motors_off(data, checks)[0])
-    if runs:
-        a, b = max(runs, key=lambda r: r[1] - r[0])
+    run = motors_running_run(data, checks)
+    if run is not None:
+        a, b = run
         flown = {n: v[a : b + 1] for n, v in values.items()}
         # the frame first: in another frame the rates disagree with the attitude too, and a scale is no fix
         motors = np.asarray(data.us[a : b + 1, :4], dtype=float)

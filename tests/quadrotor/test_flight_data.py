@@ -30,13 +30,6 @@ NANOBENCH_MAP = {
 pytestmark = pytest.mark.skipif(not STAR.exists(), reason="the NanoBench flights are not in ../shared/datasets")
 
 
-@pytest.fixture(scope="module")
-def star_table():
-    with gzip.open(STAR, "rt") as f:
-        header = f.readline().strip().split(",")
-    return header, np.loadtxt(STAR, delimiter=",", skiprows=1)
-
-
 def _write(path, header, table):
     with gzip.open(path, "wt") as f:
         f.write(",".join(header) + "\n")

@@ -3,8 +3,6 @@ deg/s or counted the other way, swapped axes, velocities in mm/s, a z axis that 
 faults are injected into a copy of a real NanoBench flight; the clean flight, read with either its
 motion-capture rates or its IMU gyro, loads."""
 
-import gzip
-
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -17,13 +15,6 @@ from .test_flight_data import _write, NANOBENCH_MAP, STAR
 GYRO_MAP = NANOBENCH_MAP | {"p": "imu_gyro_x", "q": "imu_gyro_y", "r": "imu_gyro_z"}
 
 pytestmark = pytest.mark.skipif(not STAR.exists(), reason="the NanoBench flights are not in ../shared/datasets")
-
-
-@pytest.fixture(scope="module")
-def star_table():
-    with gzip.open(STAR, "rt") as f:
-        header = f.readline().strip().split(",")
-    return header, np.loadtxt(STAR, delimiter=",", skiprows=1)
 
 
 def test_attitude_angles_are_the_integral_of_the_body_rates():
