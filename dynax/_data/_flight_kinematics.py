@@ -32,7 +32,15 @@ a swap): a gain that is wrong in some stretches only is no unit (see `gain_holds
 import numpy as np
 
 from .._errors import DataError
-from ._velocities import BLOCK_S, check_velocities, MIN_BLOCKS, SIGNIFICANCE, stretch_edges, STRETCHES, velocity_gain
+from ._velocities import (
+    BLOCK_S,
+    check_velocities,
+    MIN_BLOCKS,
+    SIGNIFICANCE,
+    stretch_edges,
+    stretch_gains,
+    velocity_gain,
+)
 
 _AXES = ("p", "q", "r")
 _ANGLE_AXIS = ("body x", "body y", "body z")
@@ -152,10 +160,8 @@ def _fault_holds_everywhere(ts, angle, rate, gain: float) -> bool:
     """Whether the rate's fault (the opposite sign, or a gain above `MAX_RATE_FACTOR`) is seen in each of
     `STRETCHES` stretches that move: the rates' gains vary between stretches more than a velocity's
     (above), so the fault, not the gain to 20 %, must hold."""
-    bounds = np.linspace(0, len(ts), STRETCHES + 1).astype(int)
     seen = 0
-    for a, b in zip(bounds[:-1], bounds[1:]):
-        found = velocity_gain(ts[a:b], angle[a:b], rate[a:b]) if b - a > 4 * MIN_BLOCKS else None
+    for found in stretch_gains(ts, angle, rate):
         if found is None or not abs(found[0]) > SIGNIFICANCE * found[1]:
             continue  # too short or too still to tell
         seen += 1

@@ -92,15 +92,21 @@ def _refused(gain: float, std: float) -> bool:
 STRETCHES = 8  # the record is cut into this many stretches to ask whether a wrong gain holds in all of them
 
 
+def stretch_gains(ts, q, v):
+    """`velocity_gain` in each of `STRETCHES` stretches of the record in turn (`None` for a stretch too short
+    to tell), lazily: the callers stop at the first stretch that disagrees."""
+    ts, q, v = (np.asarray(a, dtype=float) for a in (ts, q, v))
+    bounds = np.linspace(0, len(ts), STRETCHES + 1).astype(int)
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        yield velocity_gain(ts[a:b], q[a:b], v[a:b]) if b - a > 4 * MIN_BLOCKS else None
+
+
 def gain_holds_everywhere(ts, q, v, gain: float) -> bool:
     """Whether a velocity's gain on its position's derivative is `gain` (to `MAX_GAIN_ERROR`) in each of
     `STRETCHES` stretches of the record that move: then it is a unit or a sign, and one `scale` fixes the
     whole record; otherwise a stretch is at fault (`dynax._data._sanity` names it) and no scale is right."""
-    ts, q, v = (np.asarray(a, dtype=float) for a in (ts, q, v))
-    bounds = np.linspace(0, len(ts), STRETCHES + 1).astype(int)
     seen = 0
-    for a, b in zip(bounds[:-1], bounds[1:]):
-        found = velocity_gain(ts[a:b], q[a:b], v[a:b]) if b - a > 4 * MIN_BLOCKS else None
+    for found in stretch_gains(ts, q, v):
         if found is None or not found[1] < MAX_GAIN_ERROR * max(abs(gain), 1.0):
             continue  # too short or too still to tell
         seen += 1
