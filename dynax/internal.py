@@ -533,6 +533,7 @@ from ._simulate import (
 )
 from ._simulate import zoh_term as zoh_term
 from ._simulate._predict import group_errors as group_errors
+from ._simulate._predict import stable_substeps as stable_substeps
 from ._validate import (
     CrossCorrelationTest as CrossCorrelationTest,
 )
@@ -766,6 +767,7 @@ __all__ = [
     "split_for_validation",
     "split_term_coefficients",
     "Stability",
+    "stable_substeps",
     "stacked_equations",
     "stage_log",
     "stage_reporter",

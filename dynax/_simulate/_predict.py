@@ -9,6 +9,24 @@ $h$, and the cumulative MAE over $h = 1..H$.
 Each rollout takes one classical Runge-Kutta step per sample interval inside a `lax.scan`, and the
 rollouts are `vmap`ped over start samples: one compiled program per (model structure, record length,
 horizon), in the dtype of the trajectory (float32 for throughput, float64 for identification).
+
+**Steps the model's fastest mode needs.** A fixed-step method is stable only while $h\lambda$ stays in
+its stability region for every eigenvalue $\lambda$ of the model's Jacobian; RK4's contains the
+left half-disk $|h\lambda| \le 2.6$ (its real-axis limit is 2.785; Hairer and Wanner 1996, sec. IV.2).
+A fitted model can have a mode faster than the sample rate resolves (a rate damping of 341 1/s at
+100 Hz is $h\lambda = -3.4$), and its rollout then diverges through the integrator, not through
+the model; inside the region but near its edge it is stable and wrong (at $h\lambda = -2$ RK4
+multiplies by 0.33 where the mode decays by 0.14). So `predict_ahead` reads the model's Jacobian at
+up to `_JACOBIAN_SAMPLES` of the record's samples and splits each sample interval into as many equal
+RK4 substeps as keep $|h\lambda| \le$ `_RK4_RADIUS` (1) at the fastest of them, where RK4's factor
+is within 2 % of $e^{h\lambda}$ on the negative real axis; a model whose modes are all slower
+(every fitted NanoBench flight model: $|\lambda| \le 14$ 1/s at 100 Hz) keeps one step per
+sample, so its scores do not change.
+
+??? cite
+
+    E. Hairer, G. Wanner, *Solving Ordinary Differential Equations II: Stiff and
+    Differential-Algebraic Problems*, 2nd ed., Springer 1996, sec. IV.2.
 """
 
 import equinox as eqx
@@ -27,6 +45,11 @@ FLIGHT_GROUPS = ("position", "velocity", "attitude", "body_rate")
 FLIGHT_UNITS = {"position": "m", "velocity": "m/s", "attitude": "rad", "body_rate": "rad/s"}
 
 
+_RK4_RADIUS = 1.0  # |h lambda| at which RK4 follows a decaying mode to 2 % per step (stable to 2.6)
+_JACOBIAN_SAMPLES = 64  # the record's samples at which the model's fastest mode is read
+_MAX_SUBSTEPS = 64  # beyond this the model is stiff for any explicit method: it diverges and is reported
+
+
 def _rk4(system, x, u, dt):
     f = lambda y: system.vector_field(0.0, y, u)
     k1 = f(x)
@@ -37,18 +60,45 @@ def _rk4(system, x, u, dt):
 
 
 @eqx.filter_jit
-def _predict(system, xs, us, dt, starts, lags, n_steps: int):
+def _predict(system, xs, us, dt, starts, lags, n_steps: int, substeps: int):
+    h = dt / substeps
+
     def window(k):
         u_win = jax.lax.dynamic_slice_in_dim(us, k, n_steps)
 
         def step(x, u):
-            x_next = _rk4(system, x, u, dt)
+            x_next = jax.lax.fori_loop(0, substeps, lambda _, y: _rk4(system, y, u, h), x)
             return x_next, x_next
 
         _, path = jax.lax.scan(step, xs[k], u_win)
         return path[lags - 1]
 
     return jax.vmap(window)(starts)
+
+
+@eqx.filter_jit
+def _jacobians(system, xs, us):
+    return jax.vmap(lambda x, u: jax.jacfwd(lambda y: system.vector_field(0.0, y, u))(x))(xs, us)
+
+
+def stable_substeps(model, trajectory: Trajectory) -> int:
+    r"""The RK4 substeps per sample interval that keep `model`'s fastest mode stable on `trajectory`.
+
+    The largest eigenvalue modulus $\rho$ of the model's Jacobian $\partial f/\partial x$ at up to
+    `_JACOBIAN_SAMPLES` evenly spaced samples (with their inputs) gives
+    $\lceil \rho\,\Delta t / 1 \rceil$ substeps, at least 1 and at most `_MAX_SUBSTEPS`. A
+    Jacobian that is not finite at some sample gives 1 there: the rollout reports it as diverged.
+    """
+    n = len(trajectory)
+    index = np.unique(np.linspace(0, n - 1, min(n, _JACOBIAN_SAMPLES)).round().astype(int))
+    xs, us = trajectory.xs[index], trajectory.us[index]
+    model = jax.tree.map(lambda a: a.astype(xs.dtype) if eqx.is_inexact_array(a) else a, model)
+    jac = np.asarray(_jacobians(model, xs, us.astype(xs.dtype)), float)
+    finite = np.all(np.isfinite(jac), axis=(1, 2))
+    if not finite.any():
+        return 1
+    rho = float(np.max(np.abs(np.linalg.eigvals(jac[finite]))))
+    return int(min(max(1, np.ceil(rho * float(trajectory.dt) / _RK4_RADIUS)), _MAX_SUBSTEPS))
 
 
 def _check_steps(steps) -> tuple[int, ...]:
@@ -61,11 +111,14 @@ def _check_steps(steps) -> tuple[int, ...]:
     return steps
 
 
-def predict_ahead(model, trajectory: Trajectory, steps=(1, 10, 50)) -> Float[Array, "starts steps n_states"]:
+def predict_ahead(
+    model, trajectory: Trajectory, steps=(1, 10, 50), substeps: int | None = None
+) -> Float[Array, "starts steps n_states"]:
     r"""Open-loop predictions $h$ samples ahead from every sample of a record.
 
     Row $i$ starts from the measured state at sample $i$ and rolls the model forward under the
-    recorded inputs (zero-order hold, one RK4 step per sample interval); column $j$ is the state
+    recorded inputs (zero-order hold, one RK4 step per sample interval, or more where the model's
+    fastest mode needs them: see the module); column $j$ is the state
     predicted `steps[j]` samples later, for comparison with `trajectory.xs[i + steps[j]]`. Starts
     too close to the end for the longest step are left out: there are `len(trajectory) - max(steps)`
     rows.
@@ -76,6 +129,8 @@ def predict_ahead(model, trajectory: Trajectory, steps=(1, 10, 50)) -> Float[Arr
       `Quadrotor` or the `ConstantVelocity` baseline.
     - `trajectory`: a uniformly sampled record (the model's state and input columns).
     - `steps`: the horizons in samples (default 1, 10, 50: 0.01, 0.1 and 0.5 s at 100 Hz).
+    - `substeps`: RK4 steps per sample interval; `None` (default) chooses them from the model's
+      fastest mode on this record (`stable_substeps`: 1 for a model the sample rate resolves).
 
     **Returns:** the predicted states, shape `(starts, len(steps), n_states)`, in the trajectory's dtype
     (the model's arrays are cast to it: `trajectory.astype(jnp.float32)` predicts in float32).
@@ -88,11 +143,16 @@ def predict_ahead(model, trajectory: Trajectory, steps=(1, 10, 50)) -> Float[Arr
         raise UsageError(
             f"predict_ahead: the record has {len(trajectory)} samples, too few for {max(steps)} steps ahead"
         )
+    if substeps is None:
+        substeps = stable_substeps(model, trajectory)
+    elif isinstance(substeps, bool) or not isinstance(substeps, int | np.integer) or substeps < 1:
+        raise UsageError(f"predict_ahead: `substeps` must be a positive whole number or None, got {substeps!r}")
     xs, us = trajectory.xs, trajectory.us
     dt = jnp.asarray(trajectory.dt, xs.dtype)
     # The model's arrays in the trajectory's dtype: a float32 record rolls out in float32.
     model = jax.tree.map(lambda a: a.astype(xs.dtype) if eqx.is_inexact_array(a) else a, model)
-    return _predict(model, xs, us.astype(xs.dtype), dt, jnp.arange(n), jnp.asarray(steps), max(steps))
+    starts, lags = jnp.arange(n), jnp.asarray(steps)
+    return _predict(model, xs, us.astype(xs.dtype), dt, starts, lags, max(steps), int(substeps))
 
 
 def group_errors(predicted, measured):

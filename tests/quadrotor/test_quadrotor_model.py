@@ -3,6 +3,7 @@ of dynax's model code), `predict_ahead` against a rollout by hand, and the model
 
 import json
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -10,6 +11,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import dynax
+from dynax.internal import stable_substeps
 
 # A Crazyflie-sized X quadrotor: thrust per motor a m^2 + b m with m in PWM counts (hover near 40000).
 MASS, GRAVITY = 0.030, 9.81
@@ -196,6 +198,46 @@ def test_predict_ahead_matches_a_rollout_by_hand(fitted, flights):
             if h in steps:
                 # RK4 at the sample interval against DOP853: an error of order dt^4 per step.
                 np.testing.assert_allclose(predicted[i, steps.index(h)], state, rtol=0, atol=1e-6)
+
+
+class _RateDamped(eqx.Module):
+    """A fitted quadrotor with a rate damping faster than the sample rate resolves (as a refit can give)."""
+
+    body: eqx.Module
+    damping: float
+
+    def vector_field(self, t, x, u):
+        return self.body.vector_field(t, x, u).at[10:13].add(-self.damping * x[10:13])
+
+
+def test_predict_ahead_resolves_a_mode_faster_than_the_sample_rate(fitted, flights):
+    # 341 1/s at 100 Hz: h * lambda = -3.4, outside RK4's stability region (real-axis limit 2.785), so one
+    # step per sample diverges; the chosen substeps follow the stiff reference (Radau) instead.
+    stiff, flight = _RateDamped(fitted.model, 341.0), flights[0]
+    assert stable_substeps(fitted.model, flight) == 1
+    assert stable_substeps(stiff, flight) == 4
+    one_step = np.asarray(dynax.predict_ahead(stiff, flight, (50,), substeps=1))
+    assert not np.all(np.isfinite(one_step)) or np.max(np.abs(one_step[:, 0, 10:13])) > 1e3
+    predicted = np.asarray(dynax.predict_ahead(stiff, flight, (1, 50)))
+    field = jax.jit(lambda x, u: stiff.vector_field(0.0, x, u))
+    xs, us = np.asarray(flight.xs), np.asarray(flight.us)
+    for i in (0, 91):
+        state = xs[i]
+        for h in range(1, 51):
+            u = jnp.asarray(us[i + h - 1])
+            sol = solve_ivp(
+                lambda t, y, u=u: np.asarray(field(jnp.asarray(y), u)),
+                (0, DT),
+                state,
+                method="Radau",
+                rtol=1e-10,
+                atol=1e-12,
+            )
+            state = sol.y[:, -1]
+        # Four RK4 steps of 2.5 ms on a mode of 341 1/s: R(h lambda) = 0.4296 against the exact 0.4263 per step,
+        # so the fast transient decays as it should: the rates within 1e-3 of about 0.6 rad/s after 0.5 s (two
+        # steps of 5 ms, stable but at h lambda = -1.7, are 0.027 off).
+        np.testing.assert_allclose(predicted[i, 1], state, rtol=0, atol=1e-3)
 
 
 def test_predict_ahead_in_float32(fitted, flights):
