@@ -186,6 +186,7 @@ from ._diagnose._quadrotor import quadrotor_candidates as quadrotor_candidates
 from ._diagnose._quadrotor import (
     quadrotor_flight_errors as quadrotor_flight_errors,
 )
+from ._diagnose._quadrotor import short_horizon_note as short_horizon_note
 from ._diagnose._quadrotor import thrust_parameters as thrust_parameters
 from ._diagnose._quadrotor import WorldFrameQuadrotor as WorldFrameQuadrotor
 from ._diagnose._residuals import acceleration_residuals as acceleration_residuals
@@ -757,6 +758,7 @@ __all__ = [
     "serial_covariance",
     "shifted",
     "Simulation",
+    "short_horizon_note",
     "simulation_segments",
     "sparse_search",
     "SparseSearch",

@@ -144,13 +144,18 @@ def main():
         horizons=dynax.Horizons(reference_s=args.reference_horizon or None),
         progress=say,
     )
-    j = report.to_json()
-    from dynax.internal import body_frame_records, quadrotor_flight_errors
+    import equinox as eqx
+
+    from dynax.internal import body_frame_records, quadrotor_flight_errors, short_horizon_note
 
     nominal = dynax.fit_quadrotor(quad, diag_train).model  # the diagnosis' nominal (its input scales)
-    write_report(report, out / "report", body_frame_records(nominal, diag_test), write_json=write_json)
     say("scoring per group against the constant-velocity baseline ...")
     errors = quadrotor_flight_errors(report, nominal, test, STEPS)
+    note = short_horizon_note(errors, [f"{f['cause']}@{f['where']}" for f in report.findings])
+    if note is not None:
+        report = eqx.tree_at(lambda r: r.notes, report, [*report.notes, note])
+    j = report.to_json()
+    write_report(report, out / "report", body_frame_records(nominal, diag_test), write_json=write_json)
     table = {
         name: {
             "mae": e.table("mae"),
@@ -184,6 +189,7 @@ def main():
         "candidates": j["candidates"],
         "steps": list(STEPS),
         "groups": table,
+        "short_horizon_note": note,
         "seconds": time.perf_counter() - start,
     }
     write_json(out / "diagnosis.json", result)
@@ -211,6 +217,8 @@ def main():
             for g in ("position", "velocity", "attitude", "body_rate")
         ]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    if note is not None:
+        lines += ["", note]
     (out / "diagnosis.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines), flush=True)
 

@@ -189,11 +189,14 @@ def run_diagnose(args) -> int:
     import sys
     import warnings
 
+    import equinox as eqx
+
     from .._data import DataWarning
     from .._diagnose import diagnose, Horizons, Known, Refit, Selection, write_report
     from .._diagnose._quadrotor import (
         body_frame_records,
         quadrotor_flight_errors,
+        short_horizon_note,
         QUADROTOR_HORIZONS_S,
         thrust_parameters,
     )
@@ -260,6 +263,9 @@ def run_diagnose(args) -> int:
         held_out = validation if validation is not None else [holdout_split(t)[1] for t in train]
         say("scoring the held-out flights per group, 1, 10 and 50 steps ahead from every start ...")
         errors = quadrotor_flight_errors(report, system, held_out, (1, 10, 50))
+        note = short_horizon_note(errors, [f"{f['cause']}@{f['where']}" for f in report.findings])
+        if note is not None:  # the report says it too, not only the terminal
+            report = eqx.tree_at(lambda r: r.notes, report, [*report.notes, note])
     with staged_directory(args.out) as stage:
         write_report(report, stage, body_frame_records(system, held_out), write_json=write_json)
         write_json(

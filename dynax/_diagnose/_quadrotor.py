@@ -347,6 +347,54 @@ def quadrotor_flight_errors(report, like: Quadrotor, flights, steps=(1, 10, 50))
     return out
 
 
+def short_horizon_note(errors: dict, causes: Sequence[str] = ()) -> str | None:
+    r"""A note where the extended model predicts some group worse than the nominal model one step ahead.
+
+    `errors` is `quadrotor_flight_errors`'s `{name: SimulationError}`; `causes` the named causes' labels.
+    A physical effect of a term's form acts at every time scale, so its extended model should predict
+    the next sample at least as well as the nominal one. A term refitted to the long-horizon error can
+    instead stand in for motion the vocabulary lacks (on a closed-loop vehicle, a rate damping of hundreds
+    of 1/s can take the place of the rate controller acting between the logged commands): it gains
+    over the reference horizon and makes the next sample's prediction worse. The note is given where
+    some group's MAE at the first step grows by the inverse of the smallest gain that matters, a factor
+    $1/(1 - $`MIN_PRACTICAL_GAIN`$)$ = 4/3, and by at least `MIN_PRACTICAL_GAIN` of the constant-velocity
+    baseline's MAE there (where `errors` has it: on noise-free data a ratio of two tiny errors is no loss),
+    and says which group and by how much. `None` otherwise.
+    """
+    from ._verdict import MIN_PRACTICAL_GAIN
+
+    nominal, extended = errors.get("nominal"), errors.get("extended")
+    if nominal is None or extended is None or nominal.mae_per_state is None or extended.mae_per_state is None:
+        return None
+    from .._simulate import FLIGHT_UNITS
+
+    baseline = errors.get("constant velocity")
+    worse = []
+    for j, group in enumerate(nominal.state_names):
+        a, b = float(nominal.mae_per_state[0, j]), float(extended.mae_per_state[0, j])
+        # and on the scale of holding the state: a billionth of a metre against a thousandth is no practical loss
+        scale = (
+            float(baseline.mae_per_state[0, j]) if baseline is not None and baseline.mae_per_state is not None else 0
+        )
+        if (
+            np.isfinite(a)
+            and a > 0
+            and not b * (1.0 - MIN_PRACTICAL_GAIN) < a
+            and not b - a < MIN_PRACTICAL_GAIN * scale
+        ):
+            worse.append(f"{group} {b:.3g} against {a:.3g} {FLIGHT_UNITS[group]} ({b / a:.1f}x)")
+    if not worse:
+        return None
+    named = ", ".join(causes) if causes else "the discovered terms"
+    return (
+        f"One step ahead ({nominal.horizons_s[0]:g} s) the extended model predicts worse than the nominal model: "
+        f"{'; '.join(worse)}. A physical effect of the form of {named} would act at every time scale; these gain over "
+        "the reference horizon at the cost of the next sample, so they stand in for motion the candidates do not "
+        "model (on a closed-loop vehicle, for example the rate controller acting between the logged commands) "
+        "rather than measure the named causes."
+    )
+
+
 def _dead_times_as_shifted_commands(model, flights) -> tuple:
     """A model whose only internal states are dead times (`motor_delay`, `input_delay`) as the model without
     them on the flights with those commands shifted by the delay (`exact_delays`: what acts over each sample

@@ -11,7 +11,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import dynax
-from dynax.internal import stable_substeps
+from dynax.internal import short_horizon_note, stable_substeps
 
 # A Crazyflie-sized X quadrotor: thrust per motor a m^2 + b m with m in PWM counts (hover near 40000).
 MASS, GRAVITY = 0.030, 9.81
@@ -238,6 +238,23 @@ def test_predict_ahead_resolves_a_mode_faster_than_the_sample_rate(fitted, fligh
         # so the fast transient decays as it should: the rates within 1e-3 of about 0.6 rad/s after 0.5 s (two
         # steps of 5 ms, stable but at h lambda = -1.7, are 0.027 off).
         np.testing.assert_allclose(predicted[i, 1], state, rtol=0, atol=1e-3)
+
+
+def test_a_term_that_spoils_the_next_sample_is_noted(fitted, flights):
+    # The flights are a rigid body without rate damping: a damping of 341 1/s (what the joint refit gave on whole
+    # NanoBench flights) pulls every predicted rate towards zero within a sample, a physical 2 1/s barely moves it.
+    def errors(damping):
+        return {
+            "constant velocity": dynax.flight_error(dynax.ConstantVelocity(), flights, (1, 10)),
+            "nominal": dynax.flight_error(fitted.model, flights, (1, 10)),
+            "extended": dynax.flight_error(_RateDamped(fitted.model, damping), flights, (1, 10)),
+        }
+
+    note = short_horizon_note(errors(341.0), ["rotor_drag@p"])
+    assert note is not None and "body_rate" in note and "rotor_drag@p" in note
+    # (the position's first step moves by a micrometre against a sample's 0.1 mm of constant-velocity error)
+    assert "position" not in note
+    assert short_horizon_note(errors(2.0), ["rotor_drag@p"]) is None
 
 
 def test_predict_ahead_in_float32(fitted, flights):
