@@ -196,8 +196,8 @@ def run_diagnose(args) -> int:
     from .._diagnose._quadrotor import (
         body_frame_records,
         quadrotor_flight_errors,
-        short_horizon_note,
         QUADROTOR_HORIZONS_S,
+        short_horizon_note,
         thrust_parameters,
     )
     from .._diagnose._records import holdout_split
