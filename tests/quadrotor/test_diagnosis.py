@@ -155,4 +155,6 @@ def test_cli_diagnose_quadrotor_names_rotor_drag(tmp_path, capsys):
     assert j["system"] == "quadrotor" and j["findings"][0]["cause"] == "rotor_drag"
     groups = json.loads((out / "flight_error.json").read_text())["models"]
     assert groups["extended"]["mae"]["velocity"][-1] < groups["nominal"]["mae"]["velocity"][-1]
+    # A physical drag helps at every time scale: no note that the term spoils the next sample.
+    assert not any(note.startswith("One step ahead") for note in j["notes"])
     assert "rotor_drag" in capsys.readouterr().out
