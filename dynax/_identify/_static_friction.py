@@ -597,7 +597,7 @@ def breakaway_from_positions(ts, q, load, inertia, sigma_q) -> tuple[float, floa
     $9\sigma_q^2$ in the sum of squares, three standard errors of one parameter), the level is `LOADED`
     standard errors from zero, and the load rises by at most `RESOLUTION` of the level per sample where the
     joint first slips (a torque that jumps past the level resolves nothing)."""
-    if len(ts) < 5:
+    if len(ts) < 5 or not np.all(inertia > 0.0):  # a mass matrix that is not positive moves nothing physically
         return None
     dt = np.diff(ts, prepend=ts[0])
     top = float(np.max(np.abs(load)))
