@@ -6,9 +6,10 @@ The records are the hidden-effect battery's stick-slip cases (`tests/hidden_case
 integrated by scipy's DOP853 with events, outside dynax's model code, with the encoders' noise of 1 mrad
 and 0.01 rad/s): a static level of 0.5 N m at the elbow and no Coulomb level, under held, drifting torques
 that rest the elbow under load and break it away (`stiction@q2`), and the same truth swung by a multisine,
-which never rests (`swinging`); and a static level of 0.8 N m at the shoulder instead (`shoulder`, the
-battery's `stiction@q1`). `identify` runs with its defaults and the static level on
-(`Dynamic(static_friction=True)`, `friction="coulomb"`, the
+which never rests (`swinging`); a static level of 0.8 N m at the shoulder instead (`shoulder`, the
+battery's `stiction@q1`); and a sticking Coulomb friction of 0.5 N m at the elbow, static and sliding level
+alike (`coulomb`, the battery's `coulomb_friction@q2-0.5-sticking_coulomb`). `identify` runs with its
+defaults and the static level on (`Dynamic(static_friction=True)`, `friction="coulomb"`, the
 refinement where the velocities are noisy) on all of the data (`holdout=0`). Reported: the level read from
 the rests (and its kind), the band, the refined level, each against the truth, and each still stretch under a
 torque with the friction its measured motion leaves (`moves`: it gives no level); on the swinging records,
@@ -63,7 +64,8 @@ def main(argv=None):
     parser.add_argument(
         "--parts",
         default="stick,swinging",
-        help="stick: the stick-slip records; shoulder: the same at the shoulder; swinging: no rest",
+        help="stick: the stick-slip records; shoulder: the same at the shoulder; coulomb: a sticking Coulomb "
+        "friction at the elbow; swinging: no rest",
     )
     args = parser.parse_args(argv)
     parts = args.parts.split(",")
@@ -77,6 +79,10 @@ def main(argv=None):
         shoulder = case("double_pendulum-stiction@q1-0.8-stick-slip")
         out["truth_shoulder"] = {"joint": "q1", "fs": shoulder.size, "fc": 0.0}
         stick_slip(shoulder, out, "shoulder")
+    if "coulomb" in parts:
+        coulomb = case("double_pendulum-coulomb_friction@q2-0.5-sticking_coulomb")
+        out["truth_coulomb"] = {"joint": "q2", "fs": coulomb.size, "fc": coulomb.size}
+        stick_slip(coulomb, out, "coulomb")
     if "swinging" in parts:
         no_rest(swinging, out)
     (args.out / "results.json").write_text(json.dumps(out, indent=2) + "\n")

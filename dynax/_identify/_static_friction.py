@@ -38,21 +38,27 @@ torque and the joint does not accelerate; free, its motion carries it. Otherwise
 stretch gives no level, and the note says so with the three numbers. The level itself is still read
 as below, at zero speed.
 
-**The static level.** A joint at rest holds every net torque it is under, so the largest held
-torque (the largest window average, `held`) is a **lower bound** on its static level $f_s$, not an
-estimate of it: the joint may hold much more than it was asked to. Where a rest ends while the net
-torque rises (the joint leaves its rest position with the net torque's window average at the
-stretch's largest, within $2\sigma$), the joint broke away at the torque it was under at that instant,
-which is $f_s$ itself (Karnopp's switch: the joint slips once the friction it needs exceeds $f_s$);
-the instant is the last sample the position stays within $3\sigma_q$ (its white noise, from second
-differences; at least 1e-6) of its position over the stretch's first half, and the torque is the
-value there of a straight line fitted over the `WINDOW_S` before it (a window mean would lag half a
-window under the rising torque). A breakaway counts only under a slow rise, by at most `RESOLUTION`
-(5 %) of the torque per sample: the samples then resolve the instant's torque to that; a torque that
-jumps within a few samples (a swing of the other joint) resolves nothing, and such a rest adds only
-its held torque to the lower bound. The
-**level** is then the median breakaway torque at that joint (`kind = "breakaway"`); without a
-breakaway it is the largest held torque, reported as a lower bound (`kind = "lower_bound"`).
+**The static level.** Which stretches are under load is decided as above; the level is read from them
+again with the rest of the arm free (`needed_friction`): the friction the joint needs to stay put while
+the joints not held by friction move as the model's equations say (Karnopp's constraint force, no
+acceleration read off the positions), where the zero-speed reading takes what accelerates them for
+friction. On the stick-slip battery's heavy arm, read with the truth's rigid body, the elbow drifting
+inside the still band puts 0.2 N m on the resting shoulder, and the largest window mean at zero speed
+and acceleration reads 0.93 for a level of 0.8 and 0.70 for a sticking Coulomb level of 0.5: above what
+static friction can hold. A joint at rest holds every torque it is under, so the largest
+held (`held`, the largest `WINDOW_S` mean over the arm-still run, the last window before the joint is
+seen to leave left out) is a **lower bound** on $f_s$, not an estimate: the joint may hold much more
+than it was asked to. Where the joint leaves its rest before the record's end, the **breakaway** is the
+level at which the joint's own stick-slip under that load matches its positions
+(`breakaway_from_positions`): that is $f_s$ itself, read where it slipped, not where the encoder first
+sees it move ($3\sigma_q$ later, while the load goes on rising: 0.92 where the shoulder broke away at
+0.80), and it finds a slip inside the still band too. It counts where the slip is significant in the
+positions, the level three standard errors from zero, and the load rose through it by at most
+`RESOLUTION` (5 %) per sample (a torque that jumps resolves nothing). With the truth's rigid body the
+battery's two breakaways read 0.7995 (0.8) and 0.5023 (0.5). The **level** is then the median
+breakaway at that joint (`kind = "breakaway"`); without one it is the largest held torque, reported as
+a lower bound (`kind = "lower_bound"`). The reading is as good as the model's gravity and force
+offsets: with the least-squares model, some 10 % low on that arm, the same breakaways read 0.875 and 0.562.
 
 **In the refinement.** The output-error refinement fits the level with the other parameters, but
 never below the largest torque held nor below the joint's Coulomb level
@@ -111,9 +117,8 @@ from ._regressors import dynamic_regressor, generalised_force, split_terms
 
 WINDOW_S = 0.05  # averaging window of the held torque: short against a ramp to breakaway, ten samples or more
 LOADED = 3.0  # held torque over its single-sample noise that counts as load
-RISING = 2.0  # a rest ends under a rising torque: its last window within RISING noise of the stretch's largest
 FLOOR = 0.01  # the least noise of a torque: 1 % of the joint's rms recorded torque (a sensor's resolution)
-RESOLUTION = 0.05  # a breakaway counts where the torque rises by at most 5 % of it per sample (a slow rise)
+RESOLUTION = 0.05  # a breakaway counts where the load rises by at most 5 % of it per sample (a slow rise)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -121,11 +126,13 @@ class RestUnderLoad:
     """One stretch in which a joint rests, and the net torque it holds there.
 
     **Fields:** `record`, `joint` (0-based), `coordinate` (`q1`, ...), `start_s`, `stop_s` [s];
-    `held`, the largest window-averaged net torque held (signed) [N m or N]; `mean`, the mean net
-    torque over the stretch; `noise`, its single-sample noise $\\sigma$; `loaded`, whether `|held|`
-    reaches `LOADED` times `noise`; `breakaway`, the net torque at which the rest ended under a rising
-    torque (signed), or `None` (the record ends at rest, or the torque fell); `speed_noise`, the joint's
-    measured-speed noise at rest over all of its rests in the records (`speed_noise_at_rest`);
+    `held`, the largest window-averaged net torque held (signed) [N m or N], for a loaded stretch the
+    friction needed with the rest of the arm free (`needed_friction`); `mean`, the mean net torque over
+    the stretch; `noise`, its single-sample noise $\\sigma$; `loaded`, whether `|held|`
+    reaches `LOADED` times `noise`; `breakaway`, the level at which the joint slipped under a slowly
+    rising load (signed, `breakaway_from_positions`), or `None` (the record ends at rest, or no slip is
+    resolved); `speed_noise`, the joint's measured-speed noise at rest over all of its rests in the
+    records (`speed_noise_at_rest`);
     `held_force`, `held_position`, the generalised force applied and the joint positions over the window
     where the most was held (its mean): the rest the refinement bounds the level by; `friction`,
     `friction_noise`, the friction the joint supplies over the stretch less what the measured motion
@@ -386,17 +393,6 @@ def _longest_run(mask: np.ndarray, start: int, stop: int) -> tuple[int, int]:
     return best
 
 
-def _value_at_end(x: np.ndarray) -> tuple[float, float]:
-    """`(value, rise)`: the value at the last sample of a straight line fitted to `x`, and its rise per
-    sample (the mean and 0 where too short for a line): the torque at the instant a joint leaves its
-    rest, without a window mean's lag under a rising torque, and how finely the samples resolve it."""
-    if len(x) < 3:
-        return float(np.mean(x)), 0.0
-    k = np.arange(len(x), dtype=float)
-    slope, intercept = np.polyfit(k, x, 1)
-    return float(intercept + slope * k[-1]), float(slope)
-
-
 def _leaves(q: np.ndarray, a: int, b: int, n: int) -> int:
     r"""Where a joint that rests over rows `[a, b)` of its positions `q` leaves its rest: the first row from
     the stretch's middle on whose position is more than $3\sigma_q$ (at least 1e-6) from the median of
@@ -446,10 +442,11 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
         net, std = np.zeros((len(ts), n_joints)), np.zeros((len(ts), n_joints))
         if rows.size:
             net[rows], std[rows] = held_torques(system, names, estimate, covariance, record, forces_of, rows)
-        for s, end, (a, b) in zip(stretches, ends, runs):
+        found = []
+        for s, (a, b) in zip(stretches, runs):
             j = s.joint
             if b - a < width:  # the other joints move throughout: the coupling is not read at rest
-                out.append(
+                found.append(
                     RestUnderLoad(
                         label, j, s.coordinate, s.start_s, s.stop_s, 0.0, 0.0, 0.0, False, None, noise_at_rest[j]
                     )
@@ -470,13 +467,8 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
             moves = not (abs(friction) >= LOADED * friction_noise and abs(friction) > abs(motion))
             loaded = bool(abs(held) >= LOADED * noise and abs(held) > 0.0)
             moves, loaded = loaded and moves, loaded and not moves
-            breakaway = None
-            if loaded and b == end < s.stop:  # it left its rest (not the record's end) with the arm still
-                at_break, rise = _value_at_end(torque[-width:])
-                rising = abs(at_break) >= abs(held) - RISING * noise and np.sign(at_break) == np.sign(held)
-                if rising and abs(rise) <= RESOLUTION * abs(at_break):
-                    breakaway = at_break
-            out.append(
+            breakaway = None  # a loaded stretch's level is read again with the arm free, below
+            found.append(
                 RestUnderLoad(
                     label,
                     j,
@@ -497,7 +489,165 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
                     moves,
                 )
             )
+        out += _levels_with_the_arm_free(system, names, estimate, record, forces_of, stretches, ends, runs, found)
     return tuple(out)
+
+
+def _levels_with_the_arm_free(system, names, estimate, record, force, stretches, ends, runs, found):
+    """`found` (one `RestUnderLoad` per stretch of `stretches`) with the level of each loaded stretch read again
+    from the friction the joint needs to stay put while the joints not held move as the model says
+    (`needed_friction`): `breakaway`, where the joint leaves its rest before the record's end, the level at
+    which it slipped (`breakaway_from_positions`, over the whole rest to where it is seen to leave, `ends`);
+    `held`, the largest window mean of that friction over the arm-still run (`runs`) before it slipped. Where
+    another joint moves, its friction law at a measured speed near zero (noise, on a driver that reads zero
+    between counts) sets the load, so the largest held is read only where the whole arm is still (on run 12
+    of the DFKI records 0.21 N m at q1 over the 0.13 s before the elbow rests, against 0.080 where both
+    rest). Which stretches are under load, and the torque the refinement bounds the level by (`held_force`,
+    at the arm-still window), are as read at zero speed (see the module)."""
+    loaded = [(s, end) for s, end, f in zip(stretches, ends, found) if f.loaded]
+    if not loaded:
+        return found
+    n = len(split_terms(system)[0].joints)
+    held_by_friction = np.zeros((len(record.ts), n), bool)
+    for s, end in loaded:  # to the sample it is first seen to have left, which the breakaway's fit reads
+        held_by_friction[s.start : end + 1, s.joint] = True
+    still = np.zeros((len(record.ts), n), bool)
+    for s, end in zip(stretches, ends):
+        still[s.start : end, s.joint] = True
+    needed, inertia = needed_friction(system, names, estimate, record, force, still, held_by_friction)
+    ts = np.asarray(record.ts, dtype=float)
+    qs = np.asarray(record.xs, dtype=float)[:, :n]
+    width = max(int(round(WINDOW_S / record.dt)), 1)
+    out = list(found)
+    for i, f in enumerate(found):
+        if not f.loaded:
+            continue
+        (s, end, (a, b)), j = (stretches[i], ends[i], runs[i]), stretches[i].joint
+        # the encoder sees a joint leave some samples after it did (3 sigma_q of creep; under a torque that
+        # jumps, some 0.05 s): the last window before the departure is not read as held
+        stuck = b if end >= s.stop else min(b, max(end - width, a + 1))
+        breakaway = None
+        if end < s.stop:  # it left its rest before the record's end
+            half = max((end - s.start) // 2, 1)
+            sigma_q = max(_white_noise(qs[s.start : s.start + half, j], 2), 1e-6)
+            rows = slice(s.start, end + 1)  # to the sample it is first seen to have left
+            fitted = breakaway_from_positions(ts[rows], qs[rows, j], needed[rows, j], inertia[rows, j], sigma_q)
+            if fitted is not None and np.sign(fitted[0]) == np.sign(f.held):
+                breakaway, stuck = fitted[0], min(stuck, max(s.start + fitted[2], a + 1))
+        means = _window_means(needed[a:stuck, j], width)
+        held = float(means[int(np.argmax(np.abs(means)))])
+        out[i] = dataclasses.replace(f, held=held, breakaway=breakaway)
+    return out
+
+
+def needed_friction(system, names, estimate, record: Trajectory, force, still, held) -> tuple[np.ndarray, np.ndarray]:
+    r"""`(friction, inertia)`, each `(time, joints)`: at each sample, the friction each joint needs to stay at
+    rest (Karnopp's constraint force) while the joints not `held` move as the model says, from the generalised
+    `force` applied; and the inertia that the excess of its load over its friction accelerates it through.
+
+    With the arm's equations $M\ddot q = b - f$ ($b = \tau - h(q, \dot q)$ without the joint's own friction
+    law), joint $j$ held ($\ddot q_j = 0$) and the free joints $F$ obeying theirs with their friction law of the
+    speed, $\ddot q_F = M_{FF}^{-1} b_F$ and $f_j = b_j - M_{jF} M_{FF}^{-1} b_F$: no acceleration is read off
+    the positions (a noisy encoder does not resolve it; on the stick-slip battery's heavy arm the acceleration
+    of an elbow that drifts inside the still band put 0.2 N m on the resting shoulder), the free joints' is the
+    one their torques give. Where the joint does move, $(M_{jj} - M_{jF} M_{FF}^{-1} M_{Fj})\,\ddot q_j = f_j -
+    \text{friction}$: that Schur complement is `inertia`. The speeds are the measured ones, zero where a joint
+    is `still` (there the measured speed is noise); a joint `held` by its own friction is held in the others'
+    equations too."""
+    base, _ = split_terms(system)
+    n = len(base.joints)
+    xs = np.array(record.xs, dtype=float)
+    xs[:, n:] = np.where(still, 0.0, xs[:, n:])
+    dtype = record.xs.dtype
+    estimate = np.asarray(estimate, dtype=float)
+    rows = [
+        np.asarray(dynamic_regressor(system, jnp.asarray(xs, dtype), jnp.asarray(ddq, dtype)), dtype=float)
+        for ddq in [np.zeros((len(xs), n))] + [np.tile(np.eye(n)[k], (len(xs), 1)) for k in range(n)]
+    ]
+    h = rows[0] @ estimate  # (time, joints): every joint's friction law in its own row
+    mass = np.stack([r @ estimate - h for r in rows[1:]], -1)  # (time, row, column)
+    friction, inertia = np.zeros((len(xs), n)), np.zeros((len(xs), n))
+    for j in range(n):
+        theta = estimate.copy()
+        theta[_friction_columns(system, names, j)] = 0.0
+        b = force - h
+        b[:, j] = force[:, j] - rows[0][:, j, :] @ theta
+        for t in np.flatnonzero(held[:, j]):
+            free = [k for k in range(n) if k != j and not held[t, k]]
+            gain = np.linalg.solve(mass[t][np.ix_(free, free)], mass[t, free, j]) if free else np.zeros(0)
+            friction[t, j] = b[t, j] - gain @ b[t, free]
+            inertia[t, j] = mass[t, j, j] - gain @ mass[t, free, j]
+    return friction, inertia
+
+
+def breakaway_from_positions(ts, q, load, inertia, sigma_q) -> tuple[float, float, int] | None:
+    r"""`(level, standard error, row)`: the static level at which a joint that rests over `ts` slipped, and the
+    first row where it did; `None` where its positions show no slip, or do not resolve the level.
+
+    Karnopp's stick, run on the joint alone under the `load` it is under (`needed_friction`): it sticks while
+    $|f_j| \le f_s$; once the load exceeds the level the excess accelerates it through its `inertia` $m$,
+    against a friction of $f_s$ (the top of the Stribeck curve, where a creep stays), until its speed crosses
+    zero under a load it holds. $f_s$ is the value whose simulated positions match the measured ones (least
+    squares over a grid, then a finer one, the rest position fitted); its standard error is the position noise
+    `sigma_q` over the norm of $\partial q / \partial f_s$ there. The encoder shows a slip only once the joint
+    has crept some $3\sigma_q$, and the load goes on rising meanwhile: the largest load before that reads the
+    rise as level (on the stick-slip battery's shoulder 0.92 N m where it broke away at 0.80; a sticking
+    Coulomb elbow that slipped 1.4 mrad inside its still band read 0.67 for 0.5). A slip counts where the fit
+    leaves less than the standstill's misfit by more than the positions' noise explains (a drop of
+    $9\sigma_q^2$ in the sum of squares, three standard errors of one parameter), the level is `LOADED`
+    standard errors from zero, and the load rises by at most `RESOLUTION` of the level per sample where the
+    joint first slips (a torque that jumps past the level resolves nothing)."""
+    if len(ts) < 5 or not np.all(inertia > 0.0):  # a mass matrix that is not positive moves nothing physically
+        return None
+    dt = np.diff(ts, prepend=ts[0])
+    top = float(np.max(np.abs(load)))
+    if top <= 0.0:
+        return None
+
+    def simulated(levels):
+        """Positions at each level, and the row where the slip began that first moves the joint by `sigma_q`."""
+        x, v = np.zeros_like(levels), np.zeros_like(levels)
+        stuck = np.ones(levels.shape, bool)
+        began, first = np.zeros(levels.shape, int), np.full(levels.shape, -1)
+        out = np.zeros((len(ts), len(levels)))
+        for k in range(len(ts)):
+            f, m = load[k], inertia[k]
+            breaks = stuck & (abs(f) > levels)
+            began = np.where(breaks, k, began)
+            stuck = stuck & ~breaks
+            direction = np.where(v != 0.0, np.sign(v), np.sign(f))
+            w = np.where(stuck, 0.0, v + dt[k] * (f - levels * direction) / m)
+            sticks = ~stuck & (np.sign(w) != direction) & (abs(f) <= levels)
+            stuck = stuck | sticks
+            v = np.where(stuck, 0.0, w)
+            x = x + dt[k] * v
+            first = np.where((first < 0) & (abs(x) > sigma_q), began, first)
+            out[k] = x
+        return out, first
+
+    def misfits(levels):
+        xs, first = simulated(levels)
+        r = q[:, None] - xs
+        return np.sum((r - r.mean(axis=0)) ** 2, axis=0), xs, first
+
+    grid = np.linspace(0.0, top, 201)
+    sse, _, _ = misfits(grid)
+    k = int(np.argmin(sse))
+    fine = np.linspace(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)], 41)
+    fine_sse, xs, first = misfits(fine)
+    best = int(np.argmin(fine_sse))
+    level, row = float(fine[best]), int(first[best])
+    standstill = float(np.sum((q - q.mean()) ** 2))
+    if row < 1 or standstill - fine_sse[best] < 9.0 * sigma_q**2:
+        return None
+    step = top / 200
+    around, _ = simulated(np.asarray([level - step, level + step]))
+    sensitivity = (around[:, 1] - around[:, 0]) / (2 * step)
+    error = sigma_q / max(float(np.linalg.norm(sensitivity - sensitivity.mean())), 1e-300)
+    rise = abs(load[row] - load[row - 1])
+    if level < LOADED * error or rise > RESOLUTION * level:
+        return None
+    return float(np.sign(load[row]) * level), error, row
 
 
 def _speed_noise(n: int, xss, rests, leaves) -> list[float]:
