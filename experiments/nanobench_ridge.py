@@ -16,10 +16,14 @@ the constant-velocity baseline's on the same starts (every group and horizon cou
 held-out table is read). The chosen ridge is then fitted on all training shapes and scored on the star,
 trefoil and oval flights, beside the default ridge.
 
-Run: `nice -n 5 python experiments/nanobench_ridge.py [--ridges 1e-10,1e-3,1e-2] [--out DIR]` (about
-15 fits of a minute or more each). Writes `DIR/ridge.json` (default `experiments/results/nanobench_ridge`)
-and the chosen fit as `DIR/acceleration_lagged_ridge.json`; `--chosen R` scores a ridge already chosen
-without the cross-validation.
+`--lag-weights relative` runs the same choice with `Lagged(lag_weights="relative")` (each lag's residual
+divided by that lag's typical error on the fitted flights, see `dynax.Lagged`) instead of the paper's
+uniform sum over lags; `--lag-weights 0.5` divides it by the square root of that error.
+
+Run: `nice -n 5 python experiments/nanobench_ridge.py [--ridges 1e-10,1e-3,1e-2] [--lag-weights uniform]
+[--out DIR]` (about 15 fits of a minute or more each). Writes `DIR/ridge.json` (default
+`experiments/results/nanobench_ridge`) and the chosen fit as `DIR/acceleration_lagged_ridge.json`;
+`--chosen R` scores a ridge already chosen without the cross-validation.
 """
 
 import argparse
@@ -38,9 +42,9 @@ import dynax
 from dynax.internal import write_json
 
 
-def fit(train, ridge):
+def fit(train, ridge, lag_weights="uniform"):
     start = dynax.Quadrotor.from_flights("acceleration", train)
-    criterion = dynax.Lagged(horizon=HORIZON_S, stride=20, max_iterations=10, ridge=ridge)
+    criterion = dynax.Lagged(horizon=HORIZON_S, stride=20, max_iterations=10, ridge=ridge, lag_weights=lag_weights)
     return dynax.fit_quadrotor(start, train, criterion, progress=False).model
 
 
@@ -54,13 +58,15 @@ def main():
     parser.add_argument("--ridges", default="1e-10,1e-3,1e-2")
     parser.add_argument("--out", default=str(pathlib.Path(__file__).parent / "results" / "nanobench_ridge"))
     parser.add_argument("--chosen", type=float, help="skip the cross-validation: score this ridge (and the first)")
+    parser.add_argument("--lag-weights", default="uniform", help="uniform, relative or a power from 0 to 1")
     args = parser.parse_args()
+    lag_weights = args.lag_weights if args.lag_weights in ("uniform", "relative") else float(args.lag_weights)
     ridges = [float(r) for r in args.ridges.split(",")]
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
     if args.chosen is not None:  # the held-out part alone, with a ridge already chosen
-        table = held_out_scores(ridges[0], args.chosen, out)
+        table = held_out_scores(ridges[0], args.chosen, lag_weights, out)
         found = out / "ridge.json"
         result = json.loads(found.read_text()) if found.exists() else {}
         write_json(found, {**result, "held_out": table})
@@ -74,7 +80,7 @@ def main():
         folds[left_out] = {"constant velocity": baseline}
         for ridge in ridges:
             start = time.perf_counter()
-            mae = scores(dynax.flight_error(fit(train, ridge), held, STEPS))["mae"]
+            mae = scores(dynax.flight_error(fit(train, ridge, lag_weights), held, STEPS))["mae"]
             folds[left_out][str(ridge)] = {"mae": mae, "relative": relative(mae, baseline)}
             score = np.mean([v for row in relative(mae, baseline).values() for v in row])
             print(
@@ -92,23 +98,24 @@ def main():
         out / "ridge.json",
         {
             "ridges": ridges,
+            "lag_weights": lag_weights,
             "steps": list(STEPS),
             "folds": folds,
             "cv_score": cv_score,
             "chosen": chosen,
-            "held_out": held_out_scores(ridges[0], chosen, out),
+            "held_out": held_out_scores(ridges[0], chosen, lag_weights, out),
         },
     )
 
 
-def held_out_scores(default: float, chosen: float, out: pathlib.Path) -> dict:
+def held_out_scores(default: float, chosen: float, lag_weights, out: pathlib.Path) -> dict:
     """Fit on every training shape with the `default` and the `chosen` ridge, score on the held-out shapes (MAE,
     RMSE and cumulative MAE, as `nanobench_heldout.py`); the chosen fit is saved as a model file."""
     train, _ = flights(TRAIN)
     test, _ = flights(TEST)
     table = {"constant velocity": scores(dynax.flight_error(dynax.ConstantVelocity(), test, STEPS))}
     for ridge in sorted({default, chosen}):
-        model = fit(train, ridge)
+        model = fit(train, ridge, lag_weights)
         table[str(ridge)] = scores(dynax.flight_error(model, test, STEPS))
         print(f"held-out flights, ridge {ridge:g}: {table[str(ridge)]['mae']}", flush=True)
         if ridge == chosen:

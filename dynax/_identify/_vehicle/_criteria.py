@@ -44,6 +44,7 @@ from collections.abc import Callable
 import dataclasses
 import functools
 import time
+from typing import Literal
 
 import equinox as eqx
 import jax
@@ -144,11 +145,24 @@ class Lagged(AbstractVehicleCriterion):
       the true lagged loss, whose fixed point is a stationary point of that loss. The paper's
       EM-free iteration holds the predicted states fixed, so its fixed point is stationary for a
       slightly different problem (see `docs/helicopter.md`, "The EM-free approximation").
+    - `lag_weights`: how the lags $1..H$ count in the loss. `"uniform"` (the default, the paper's
+      loss): every lag's squared error alike. `"relative"`: each lag's residual of each body state
+      divided by that lag's typical error, $\sigma_{h,s}$, the RMS change of the state over $h$
+      samples on the fitted record (the error of holding the state; for the body rates, the
+      constant-velocity baseline's), so the loss is $\frac{1}{|T|H}\sum_t\sum_h\sum_s
+      \Lambda_s(\hat s_{t+h|t,s} - s_{t+h,s})^2/\sigma_{h,s}^2$ and holding the state scores 1 per
+      state at every lag. An error one step ahead is tens of times smaller than one $H$ ahead, so
+      uniformly summed the long lags outweigh the short ones; flight models are scored at each
+      horizon relative to a baseline, and the relative weights count every lag as that score does.
+      A number $p$ between 0 and 1 divides each residual by $\sigma_{h,s}^p$ instead: 0 is
+      `"uniform"`, 1 is `"relative"`, and values between give the short
+      lags part of the weight. The scales come from the record being fitted (the training flights)
+      and stay fixed over the iteration.
 
     ??? cite "Reference"
 
         P. Abbeel, V. Ganapathi and A. Y. Ng, "Learning vehicular dynamics, with application to
-        modeling helicopters", NIPS 18, 2005 (Section 4, the EM-free algorithm).
+        modeling helicopters", NIPS 18, 2005 (Section 4, the EM-free algorithm; the uniform loss).
     """
 
     horizon: float = 1.0
@@ -160,6 +174,15 @@ class Lagged(AbstractVehicleCriterion):
     step_sizes: tuple[float, ...] = eqx.field(static=True, default=(1.0, 0.5, 0.25, 0.125, 0.0625, 0.03125))
     best_step: bool = eqx.field(static=True, default=False)
     state_sensitivities: bool = eqx.field(static=True, default=False)
+    lag_weights: Literal["uniform", "relative"] | float = eqx.field(static=True, default="uniform")
+
+    def __check_init__(self):
+        if self.lag_weights in ("uniform", "relative"):
+            return
+        if isinstance(self.lag_weights, str) or not 0.0 <= float(self.lag_weights) <= 1.0:
+            raise UsageError(
+                f"Lagged: lag_weights is 'uniform', 'relative' or a number from 0 to 1, not {self.lag_weights!r}"
+            )
 
     @property
     def label(self) -> str:
@@ -320,7 +343,7 @@ def normal_equations(system, trajectory, starts, n_steps, weights, use_rollout, 
     theta = system.body_model.parameter_vector()
     dt = trajectory.ts[1] - trajectory.ts[0]
     n_params = theta.shape[0]
-    w = jnp.tile(weights, n_steps)
+    w = weights.reshape(-1) if weights.ndim == 2 else jnp.tile(weights, n_steps)  # lag-major, as `target`
 
     def window(k):
         measured = jax.lax.dynamic_slice_in_dim(trajectory.xs, k, n_steps + 1)
@@ -378,6 +401,18 @@ def window_starts(trajectory, n_steps, stride, breaks=None):
 
 def state_weights(weights, dtype):
     return jnp.ones(6, dtype) if weights is None else jnp.asarray(weights, dtype)
+
+
+def relative_lag_weights(trajectory: Trajectory, starts, n_steps: int, weights, power: float = 1.0):
+    r"""`Lagged(lag_weights="relative")`'s weights, shape `(n_steps, 6)`: $\Lambda_s / \sigma_{h,s}^{2p}$
+    (`power` $p$), with $\sigma_{h,s}^2$ the mean square change of body state $s$ over $h$ samples from
+    the windows' `starts` (the error of holding the state; floored at $10^{-12}$ of the largest, for a
+    state that never moves)."""
+    body = trajectory.xs[:, BODY]
+    ahead = body[starts[:, None] + jnp.arange(1, n_steps + 1)[None, :]]
+    square = jnp.mean((ahead - body[starts][:, None, :]) ** 2, axis=0)
+    square = jnp.maximum(square, 1e-12 * jnp.max(square))
+    return weights[None, :] / square**power
 
 
 def fit_one_step(
@@ -556,6 +591,9 @@ def fit_lagged(
     n_steps = horizon_steps(criterion.horizon, dt, "fit_lagged")
     starts = window_starts(trajectory, n_steps, criterion.stride, breaks)
     w = state_weights(weights, trajectory.xs.dtype)
+    if criterion.lag_weights != "uniform":
+        power = 1.0 if criterion.lag_weights == "relative" else float(criterion.lag_weights)
+        w = relative_lag_weights(trajectory, starts, n_steps, w, power)
     with monitor(callback) as token:
         solution = _em_free(system, trajectory, starts, w, n_steps, criterion, token)
     theta = solution.value

@@ -110,7 +110,7 @@ def lagged_loss(
     n_steps: int,
     *,
     starts: Int[Array, " window"] | None = None,
-    weights: Float[Array, "6"] | None = None,
+    weights: Float[Array, "6"] | Float[Array, "lag 6"] | None = None,
     checkpoint_segment: int | None = None,
 ) -> Float[Array, ""]:
     r"""The lagged (H-step) criterion: the mean squared open-loop prediction error of the body
@@ -131,7 +131,8 @@ def lagged_loss(
     - `trajectory`: uniformly sampled helicopter data.
     - `n_steps`: the horizon $H$ in samples.
     - `starts`: the start indices (default: every start with a full window).
-    - `weights`: $\Lambda$, per body state (default ones).
+    - `weights`: $\Lambda$, per body state (default ones), or per lag and body state (shape `(n_steps, 6)`,
+      row $h-1$ weighting lag $h$: `Lagged(lag_weights="relative")`).
     - `checkpoint_segment`: steps per checkpointed segment; `0` turns checkpointing off.
 
     **Returns:** the scalar loss.
@@ -150,16 +151,21 @@ def lagged_loss(
     padded = n_segments * segment
     xs, us = _padded(trajectory, padded - n_steps)
     lag_mask = (jnp.arange(1, padded + 1) <= n_steps).astype(xs.dtype).reshape(n_segments, segment)
+    if weights.ndim == 2:  # one row per lag (padded lags are masked out)
+        weights = jnp.concatenate([weights, jnp.ones((padded - n_steps, 6), weights.dtype)])
+        lag_weights = weights.reshape(n_segments, segment, 6)
+    else:
+        lag_weights = jnp.broadcast_to(weights, (n_segments, segment, 6))
 
     def window(k):
         u_win = jax.lax.dynamic_slice_in_dim(us, k, padded).reshape(n_segments, segment, -1)
         s_win = jax.lax.dynamic_slice_in_dim(xs, k + 1, padded)[:, BODY].reshape(n_segments, segment, 6)
 
         def inner(x, row):
-            u, s, m = row
+            u, s, m, w = row
             x_next = _solver_step(system, x, u, dt)
             e = x_next[BODY] - s
-            return x_next, m * (e * e) @ weights
+            return x_next, m * (e * e) @ w
 
         def outer(x, rows):
             x_end, errs = jax.lax.scan(inner, x, rows)
@@ -167,7 +173,7 @@ def lagged_loss(
 
         if segment < n_steps:
             outer = jax.checkpoint(outer)
-        _, totals = jax.lax.scan(outer, xs[k], (u_win, s_win, lag_mask))
+        _, totals = jax.lax.scan(outer, xs[k], (u_win, s_win, lag_mask, lag_weights))
         return jnp.sum(totals)
 
     return jnp.mean(jax.vmap(window)(starts)) / n_steps
