@@ -413,15 +413,16 @@ def _velocity_stretches(tr, ts, source, values, pairs, dt):
         area = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(ts))])
         means = (area[stop] - area[start]) / (ts[stop] - ts[start])
         residual = means - slopes
-        noise = 1.4826 * float(np.median(np.abs(residual - np.median(residual))))
         motion = float(np.sqrt(np.mean(slopes**2)))
         if not motion > 0:
             continue
-        bad = (
-            (np.abs(residual) > VELOCITY_ERROR * np.maximum(np.abs(slopes), np.abs(means)))
-            & (np.abs(residual) > VELOCITY_NOISE * noise)
-            & (np.abs(residual) > VELOCITY_MOTION * motion)
+        off = (np.abs(residual) > VELOCITY_ERROR * np.maximum(np.abs(slopes), np.abs(means))) & (
+            np.abs(residual) > VELOCITY_MOTION * motion
         )
+        if not off.any():
+            continue  # no block is bad whatever the noise: its two medians are not needed
+        noise = 1.4826 * float(np.median(np.abs(residual - np.median(residual))))
+        bad = off & (np.abs(residual) > VELOCITY_NOISE * noise)
         if bad.mean() > 0.8:
             continue  # wrong nearly everywhere: a unit or a column, `load_trajectory`'s global check names it
         # join bad blocks less than three blocks apart into stretches
