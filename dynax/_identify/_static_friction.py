@@ -292,9 +292,7 @@ def held_torques(system, names, estimate, covariance, record: Trajectory, force:
     xs = np.array(record.xs, dtype=float)
     xs[:, n:] = 0.0
     dtype = record.xs.dtype
-    # the zero accelerations as a numpy array: the same traced input (and compiled program) as `jnp.zeros`,
-    # without an eager XLA call (and its compilation) to make them
-    regressor = dynamic_regressor(system, jnp.asarray(xs, dtype), np.zeros((len(xs), n), dtype))
+    regressor = dynamic_regressor(system, jnp.asarray(xs, dtype), jnp.zeros((len(xs), n), dtype))
     regressor = np.asarray(regressor, dtype=float)
     estimate = np.asarray(estimate, dtype=float)
     net = np.empty((len(rows), n))
