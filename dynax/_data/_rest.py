@@ -124,12 +124,14 @@ def _reversal(ts: np.ndarray, q: np.ndarray, band: float) -> bool:
     coefficients, residual, *_ = np.polyfit(t, q, 2, full=True)
     dof = len(t) - 3
     rms = float(np.sqrt(residual[0] / dof)) if residual.size else 0.0
-    d2 = np.diff(q, 2)
-    white = float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
     acceleration = 2.0 * float(coefficients[0])
     p2 = t**2 - np.mean(t**2)
     std_error = 2.0 * rms / float(np.sqrt(np.sum(p2**2)))
-    if not (acceleration != 0.0 and rms <= EXPLAINED * white and abs(acceleration) > CURVATURE * std_error):
+    if not (acceleration != 0.0 and abs(acceleration) > CURVATURE * std_error):
+        return False
+    d2 = np.diff(q, 2)  # the white noise (two medians) only where the curvature has not already said no
+    white = float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+    if not rms <= EXPLAINED * white:
         return False
     vertex = -float(coefficients[1]) / (2.0 * float(coefficients[0]))
     stay = 2.0 * np.sqrt(2.0 * band / abs(acceleration))

@@ -197,8 +197,7 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1)]
 
 
-def _time_units(tr, ts, source):
-    dt = float(np.median(np.diff(ts)))
+def _time_units(tr, ts, source, dt):
     if dt < MAX_INTERVAL_S:
         return []
     fix = None
@@ -228,6 +227,36 @@ def _position_supports(ts, q, v, k, jump) -> bool:
     return bool(steps.size) and bool(np.any(np.abs(v[k] - steps) < 0.5 * jump))
 
 
+def median_reach(x: np.ndarray, window: int, steps: np.ndarray | None = None) -> float:
+    """The most any sample of `x` can lie from `_glitches`' running median of `window` (odd) samples: the
+    median of a full window is one of its samples, so a sample in the middle of it lies from it by at most
+    its largest difference to a sample `window // 2` or fewer steps away; the first and last `window // 2`
+    samples are measured from the median of the first and last full window, so by at most that window's
+    range. Exact in floating point (each difference is the one rounded subtraction the median's residual
+    makes, or a range at least as wide); NaN where `x` holds a NaN. `steps`: `np.abs(np.diff(x))` where
+    already known."""
+    h = window // 2
+    if len(x) < window:
+        return float(np.ptp(x)) if len(x) else 0.0
+    steps = np.abs(np.diff(x)) if steps is None else steps
+    reaches = [np.max(steps), np.ptp(x[:window]), np.ptp(x[-window:])]
+    reaches += [np.max(np.abs(x[d:] - x[:-d])) for d in range(2, h + 1)]
+    return float(np.max(reaches))  # numpy's maximum carries a NaN through (Python's `max` may drop it)
+
+
+def _typical_step_covers(steps: np.ndarray, reach: float) -> bool:
+    """Whether `reach <= GLITCH_STEPS * typical` with `_glitches`' typical step (1.4826 times `np.median(steps)`)
+    holds, decided without the median where a count can: numpy's median is the middle sorted value or the
+    mean of the two middle ones, so it is at least `low` where at most `(len - 1) // 2` steps are below `low`,
+    and the typical step's floating-point formula is monotone in the median. `False` where it cannot tell."""
+    if not (np.isfinite(reach) and steps.size):
+        return False
+    low = reach / (GLITCH_STEPS * 1.4826) * (1.0 + 1e-9)
+    if not GLITCH_STEPS * (low * 1.4826 + 1e-300) >= reach:
+        return False
+    return int(np.count_nonzero(steps < low)) <= (steps.size - 1) // 2
+
+
 def _glitches(tr, ts, source, columns, positions=None):
     import scipy.signal
 
@@ -239,7 +268,15 @@ def _glitches(tr, ts, source, columns, positions=None):
         return out
     for name, x, is_input in columns:
         steps = np.abs(np.diff(x))
+        # the threshold is at least GLITCH_STEPS typical steps: a column whose samples stay that close to
+        # their neighbours within the running median's reach has no glitch, whatever its range; a count
+        # says whether the median step is large enough for that before the median itself is taken
+        reach = median_reach(x, GLITCH_WINDOW, steps)
+        if _typical_step_covers(steps, reach):
+            continue
         typical = float(np.median(steps)) * 1.4826 + 1e-300
+        if reach <= GLITCH_STEPS * typical:
+            continue
         spread = _robust_range(x)
         threshold = max(GLITCH_RANGE * spread, GLITCH_STEPS * typical)
         if is_input:  # inputs may legitimately step and pulse: only readings far beyond their range
@@ -247,7 +284,7 @@ def _glitches(tr, ts, source, columns, positions=None):
         if not threshold > 0:
             continue
         # every running median below is a sample of `x`, so no sample leaves it by more than the column's range
-        if np.ptp(x) <= threshold:
+        if np.ptp(x) <= threshold or reach <= threshold:
             continue
         median = scipy.signal.medfilt(x, GLITCH_WINDOW)
         # at the ends the filter pads with zeros: measure from the nearest full window instead
@@ -280,9 +317,8 @@ def _glitches(tr, ts, source, columns, positions=None):
     return out
 
 
-def _stuck(tr, ts, source, names, xs, paired_estimated):
+def _stuck(tr, ts, source, names, xs, paired_estimated, dt):
     out = []
-    dt = float(np.median(np.diff(ts)))
     need = max(STUCK_SAMPLES, math.ceil(STUCK_S / dt))
     for c, name in enumerate(names):
         x = xs[:, c]
@@ -324,10 +360,18 @@ def _stuck(tr, ts, source, names, xs, paired_estimated):
     return out
 
 
+def _under_half_turn(steps: np.ndarray) -> bool:
+    """Whether every step is well under half a turn (`False` for a NaN): then none rounds to a whole turn, and
+    `_wrapped` finds no wrap (a wrap is a step within `WRAP_TOLERANCE` of one or more whole turns)."""
+    return bool(float(np.max(np.abs(steps), initial=0.0)) < 0.9 * np.pi)
+
+
 def _wrapped(tr, ts, source, angles):
     out = []
     for name, x in angles:
         steps = np.diff(x)
+        if _under_half_turn(steps):
+            continue
         typical = float(np.median(np.abs(steps))) + 1e-300
         turns = np.round(steps / (2 * np.pi))
         wraps = np.flatnonzero(
@@ -354,12 +398,12 @@ def _wrapped(tr, ts, source, angles):
     return out
 
 
-def _velocity_stretches(tr, ts, source, values, pairs):
+def _velocity_stretches(tr, ts, source, values, pairs, dt):
     """Stretches of bad 50 ms blocks (see the module notes) for each measured velocity."""
     from ._velocities import stretch_edges
 
     out = []
-    edges = stretch_edges(ts)
+    edges = stretch_edges(ts, dt)
     if len(edges) < 2 * MIN_BAD_BLOCKS + 1:
         return out
     start, stop = edges[:-1], edges[1:]
@@ -369,15 +413,16 @@ def _velocity_stretches(tr, ts, source, values, pairs):
         area = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(ts))])
         means = (area[stop] - area[start]) / (ts[stop] - ts[start])
         residual = means - slopes
-        noise = 1.4826 * float(np.median(np.abs(residual - np.median(residual))))
         motion = float(np.sqrt(np.mean(slopes**2)))
         if not motion > 0:
             continue
-        bad = (
-            (np.abs(residual) > VELOCITY_ERROR * np.maximum(np.abs(slopes), np.abs(means)))
-            & (np.abs(residual) > VELOCITY_NOISE * noise)
-            & (np.abs(residual) > VELOCITY_MOTION * motion)
+        off = (np.abs(residual) > VELOCITY_ERROR * np.maximum(np.abs(slopes), np.abs(means))) & (
+            np.abs(residual) > VELOCITY_MOTION * motion
         )
+        if not off.any():
+            continue  # no block is bad whatever the noise: its two medians are not needed
+        noise = 1.4826 * float(np.median(np.abs(residual - np.median(residual))))
+        bad = off & (np.abs(residual) > VELOCITY_NOISE * noise)
         if bad.mean() > 0.8:
             continue  # wrong nearly everywhere: a unit or a column, `load_trajectory`'s global check names it
         # join bad blocks less than three blocks apart into stretches
@@ -502,7 +547,8 @@ def check_record(trajectory: Trajectory, *, estimated: Sequence[str] | None = No
         return DataCheck()
     if estimated is None:
         estimated = estimated_velocities(trajectory)
-    findings = list(_time_units(trajectory, ts, source))
+    dt = float(np.median(np.diff(ts)))  # the median interval, read by several checks
+    findings = list(_time_units(trajectory, ts, source, dt))
     if findings:  # every other check reads the time scale
         return DataCheck(tuple(findings))
     names = tuple(trajectory.state_names)
@@ -520,9 +566,9 @@ def check_record(trajectory: Trajectory, *, estimated: Sequence[str] | None = No
     angles = [(q, values[q]) for q in pairs.values()] if trajectory.system in ("acrobot", "double_pendulum") else []
     wrapped = _wrapped(trajectory, ts, source, angles)
     findings += wrapped
-    findings += _stuck(trajectory, ts, source, names, xs, paired_estimated)
+    findings += _stuck(trajectory, ts, source, names, xs, paired_estimated, dt)
     if not glitches and not wrapped:  # a glitch or a wrap spoils its blocks too; said once, at its sample
-        findings += _velocity_stretches(trajectory, ts, source, values, measured)
+        findings += _velocity_stretches(trajectory, ts, source, values, measured, dt)
     return DataCheck(tuple(findings))
 
 

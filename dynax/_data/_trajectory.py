@@ -66,7 +66,8 @@ class Trajectory(eqx.Module):
     def is_uniform(self) -> bool:
         """Whether the sampling is uniform to within 1 % of the median interval."""
         d = np.diff(np.asarray(self.ts))
-        return bool(np.all(np.abs(d - np.median(d)) <= 0.01 * np.median(d)))
+        median = np.median(d)
+        return bool(np.all(np.abs(d - median) <= 0.01 * median))
 
     def state(self, name: str) -> Array | np.ndarray:
         """The state column `name`."""
