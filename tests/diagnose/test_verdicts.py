@@ -25,7 +25,9 @@ def _results(gain, p, std_error, df=40.0, n_tested=10):
     mean = -2.0 * np.log(1.0 - gain)  # the mean log ratio of window errors a held-out RMSE gain amounts to
     test = PairedTest(mean, std_error, df, p, 5, {0: mean})
     rules = {"significance": p < 0.001, "min_gain": True, "sign": True, "agreement": True, "held_out": True}
-    return {3: {"gain_held_out": gain, "p": p, "test": test, "n_tested": n_tested, "rules": rules}}
+    return {
+        3: {"gain_held_out": gain, "gain_typical": gain, "p": p, "test": test, "n_tested": n_tested, "rules": rules}
+    }
 
 
 def test_verdict_is_one_string_enumeration_with_the_contracts_names():
