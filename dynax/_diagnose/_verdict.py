@@ -13,9 +13,9 @@ verdict rests on an effect size, and `none` also on the test's power:
   structure of practical size that no candidate gaining `MIN_PRACTICAL_GAIN` would remove, or
   significant structure that only a candidate the physical rules stopped would (a hidden spring,
   fitted by a negative rotor inertia)
-- `none`: no cause was named, no structure of practical size is left, no candidate gained
-  `MIN_PRACTICAL_GAIN` on the held-out runs, and the test had the power (`POWER`) to detect that
-  gain at its level: the nominal model is adequate
+- `none`: no cause was named, no structure of practical size is left, no candidate's typical window
+  gained `MIN_PRACTICAL_GAIN` (see below), and the test had the power (`POWER`) to detect that gain at
+  its level: the nominal model is adequate
 - `inconclusive`: no cause was named, and either nothing of practical size is seen but the test
   could not have seen it (its detectable gain exceeds `MIN_PRACTICAL_GAIN`, or the best candidate
   gains at least that much without being established), or structure of practical size is left that a
@@ -34,16 +34,17 @@ least gain a named cause must show to be *named*; it is the least gain whose abs
 `none` must be able to assert.
 
 **Which gain is of practical size.** A candidate gains `MIN_PRACTICAL_GAIN` when its typical window does
-(`typical_gain`: one minus the geometric mean of the windows' error ratios, the gain the paired test's mean
-log ratio implies) and it does not make the held-out runs' pooled window error larger. The pooled gain
-(one minus the ratio of mean errors) weighs windows by their error, so where runs differ in error scale it
+(`typical_gain`: one minus the geometric mean of the test's windows' error ratios, the gain the paired
+test's mean log ratio implies, in mean squared window error like the pooled gain). The pooled gain (one
+minus the ratio of mean errors) weighs windows by their error, so where runs differ in error scale it
 reads the largest run's scale: a Coulomb friction that gains 75 % and 32 % on two held-out runs gains 3 %
 pooled beside a run whose windows score ten times theirs, and a term that mends a few windows of very large
-error gains much pooled and nothing on the typical window. The typical gain answers the same question the
-test does; the condition on the pooled error keeps a term that wins on a run of small error and loses more
-on one of large error from counting as a practical gain. The best candidate (`Power.best`) is the one
-with the largest typical gain, among those of practical size where there are any; the report gives its
-pooled held-out `gain` beside it.
+error gains much pooled and nothing on the typical window. The typical gain answers the question the test
+does. The other way round, a term that wins big on runs of small error and loses on one of large error has
+a typical gain of practical size and a pooled loss: the selection's `held_out` and `agreement` rules keep
+it from being named, and the verdict does not call the nominal model adequate (`none`) beside it, but
+`inconclusive` (an effect of practical size seen, not established), naming it with both gains. The best
+candidate (`Power.best`) is the one with the largest typical gain.
 
 **Structure of practical size.** The residual probe reports $R^2$, the share of the held-out one-step
 residual variance its fitted regression explains. A term that captured all of it would lower the
@@ -117,12 +118,6 @@ _TEXT = {
 }
 
 
-def practical_gain(gain_typical: float, gain_held_out: float) -> bool:
-    """A candidate's gain is of practical size: its typical window gains `MIN_PRACTICAL_GAIN` or more and the
-    held-out runs' pooled window error does not grow (see the module)."""
-    return bool(gain_typical >= MIN_PRACTICAL_GAIN and gain_held_out > 0)
-
-
 def practical_structure(structure: Structure) -> bool:
     """Structure of practical size: significant, and a term capturing it would lower the residuals' RMS by
     at least `MIN_PRACTICAL_GAIN` (probe $R^2 \\ge$ `PRACTICAL_R2`)."""
@@ -133,13 +128,11 @@ def practical_structure(structure: Structure) -> bool:
 class Power:
     """What the held-out test could see where no cause was named.
 
-    **Fields:** `detectable_gain` (the held-out RMSE gain detected with probability `POWER` at the best
-    candidate's level; `None` without a refitted candidate); `best` (the refitted candidate with the
-    largest typical gain, among those of practical size (`practical_gain`) where there are any: `cause`,
-    `where`, `gain` (the held-out runs' pooled), `gain_typical`, `p_value`, `stopped_by`; `None` without one);
-    `tested_s` (the
-    record time the test's windows cover: held-out runs, and cross-fitted runs where they are pooled);
-    `needed_s` (the tested time at which `MIN_PRACTICAL_GAIN` would be detected, same power and level, with
+    **Fields:** `detectable_gain` (the held-out RMSE gain detected with probability `POWER` at the best candidate's
+    level; `None` without a refitted candidate); `best` (the refitted candidate with the largest typical gain:
+    `cause`, `where`, `gain` (the held-out runs' pooled), `gain_typical`, `p_value`, `stopped_by`; `None` without
+    one); `tested_s` (the record time the test's windows cover: held-out runs, and cross-fitted runs where they are
+    pooled); `needed_s` (the tested time at which `MIN_PRACTICAL_GAIN` would be detected, same power and level, with
     window-to-window variation like the best candidate's where it gains that much, else like the median's);
     `observed_needed_s` (where the best candidate gains that much: the tested time at which its own observed
     mean improvement would be detected, same power and level: what would decide that candidate).
@@ -153,8 +146,8 @@ class Power:
 
     @property
     def practical(self) -> bool:
-        """The best candidate's gain is of practical size (`practical_gain`)."""
-        return self.best is not None and practical_gain(self.best["gain_typical"], self.best["gain"])
+        """The best candidate's typical gain is of practical size (see the module)."""
+        return self.best is not None and self.best["gain_typical"] >= MIN_PRACTICAL_GAIN
 
     @property
     def undecided(self) -> bool:
@@ -195,9 +188,8 @@ def power_of(results: dict, labels: dict, alpha: float, tested_s: float) -> Powe
     level = alpha / max(int(first["n_tested"]), 1)
     se = float(np.median([r["test"].std_error for r in results.values()]))
     detectable = detectable_gain(se, df, level, POWER) if np.isfinite(se) else 1.0
-    of_size = {k: practical_gain(r["gain_typical"], r["gain_held_out"]) for k, r in results.items()}
-    k = max(results, key=lambda k: (of_size[k], results[k]["gain_typical"]))
-    practical = of_size[k]
+    k = max(results, key=lambda k: results[k]["gain_typical"])
+    practical = results[k]["gain_typical"] >= MIN_PRACTICAL_GAIN
     # The length that would decide: with window-to-window variation like the best candidate's where it gains
     # MIN_PRACTICAL_GAIN or more (an effect of that size varies as much as the effect seen), else the median's.
     se_needed = float(results[k]["test"].std_error) if practical else se
