@@ -485,6 +485,18 @@ class _Test(eqx.Module):
     rmse: float
 
 
+def _weak_terms(held_out, fitted, n_terms: int, n_named: int, scores_new, min_gain: float) -> list[int]:
+    """The discovered terms that do not carry their weight: dropped one at a time (no refit), the typical window's
+    RMS error grows by less than `min_gain`."""
+    weak = []
+    for k in range(n_terms):
+        others = tuple(t for i, t in enumerate(fitted.terms) if i != n_named + k)
+        scores_without, _, _ = held_out(type(fitted)(fitted.system, others))
+        if typical_gain(scores_without, scores_new, rms=True) < min_gain:
+            weak.append(k)
+    return weak
+
+
 def _refit_and_test(model, terms, proposals, refit: _SimulationRefit, test: HeldOutTest, current, say) -> _Test:
     """Refit the proposed terms through simulation and test them on held-out data against `current` (the current
     model's `test.held_out`); where several pass together, drop each that does not carry its weight (dropping it
@@ -501,13 +513,7 @@ def _refit_and_test(model, terms, proposals, refit: _SimulationRefit, test: Held
         say(f"discovery: held-out gain {gain:.0%}, p = {p_value:.2g}" + ("" if passed else " (not kept)"))
         if not passed or len(terms) == 1:
             break
-        # Each term must carry its weight: drop one at a time (no refit) and see what is lost.
-        weak = []
-        for k in range(len(terms)):
-            others = tuple(t for i, t in enumerate(fitted.terms) if i != n_named + k)
-            scores_without, _, _ = held_out(Extended(fitted.system, others))
-            if typical_gain(scores_without, scores_new, rms=True) < min_gain:
-                weak.append(k)
+        weak = _weak_terms(held_out, fitted, len(terms), n_named, scores_new, min_gain)
         if not weak:
             break
         terms = [t for k, t in enumerate(terms) if k not in weak]
