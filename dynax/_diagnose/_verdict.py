@@ -43,8 +43,11 @@ error gains much pooled and nothing on the typical window. The typical gain answ
 does. The other way round, a term that wins big on runs of small error and loses on one of large error has
 a typical gain of practical size and a pooled loss: the selection's `held_out` and `agreement` rules keep
 it from being named, and the verdict does not call the nominal model adequate (`none`) beside it, but
-`inconclusive` (an effect of practical size seen, not established), naming it with both gains. The best
-candidate (`Power.best`) is the one with the largest typical gain.
+`inconclusive` (an effect of practical size seen, not established; `unexplained` where the residuals keep
+significant structure), naming it with both gains. The best
+candidate (`Power.best`) is the one with the largest typical gain. The power below speaks in RMS, the
+candidates' gains in mean squared error: `none` asks for the power to see a 25 % RMS gain and for no
+candidate gaining 25 % in mean squared window error.
 
 **Structure of practical size.** The residual probe reports $R^2$, the share of the held-out one-step
 residual variance its fitted regression explains. A term that captured all of it would lower the
