@@ -16,7 +16,7 @@ cross-fitted run's windows score ten times the others' and the friction barely c
 gain reads that one run's scale, not the effect, and the smallest-gain rule would stop an effect the test
 establishes. The other way round, a term that mends a few windows of large error (a stretch the
 nominal model loses) gains much pooled and nothing on the typical window, and a significant test on it is
-not a practical effect. Either way the rule and the test now speak of one quantity. Harm stays judged in
+not a practical effect. Either way the rule and the test speak of one quantity. Harm stays judged in
 the error itself: a term that wins big on a run of small error and loses on one of large error has a
 typical gain but makes the held-out runs' pooled error larger or helps on too few runs, and the
 `held_out` and `agreement` rules stop it. The pooled gains are still reported (`gain`, `gain_pooled`),
