@@ -17,9 +17,11 @@ cause explains). For each coordinate of a manipulator:
    simulation (`fit_simulation_error`, Levenberg-Marquardt in optimistix) jointly with the refitted
    nominal parameters and the named causes' coefficients, on the training windows.
 5. **Held-out test.** It is kept only if it passes the same test as a named cause: a significant
-   improvement of the held-out simulation error (the caller's `significance`, level `alpha`) of at
-   least `min_gain` at the reference horizon. With several coordinates, each term must also carry
-   its weight (dropping it must cost at least `min_gain`).
+   improvement of the held-out simulation error (the caller's `significance`, level `alpha`) whose
+   typical window gains at least `min_gain` in RMS (`typical_gain`: the geometric mean of the windows'
+   error ratios, the test's own measure, not the pooled error, which one run of large error carries),
+   and no larger pooled error at the reference horizon. With several coordinates, each term must also
+   carry its weight (dropping it must cost the typical window at least `min_gain`).
 
 ??? cite
 
@@ -46,6 +48,7 @@ from ._fit import nominal_parameter_names
 from ._library import evaluate_features, feature_library, is_angle, named_equivalent, physical_readings, search_period
 from ._residuals import acceleration_residuals, predicted_accelerations, sg_window, velocity_indices
 from ._sparse import group_cv_r2, SparseSearch, SparseStatistics, Stability
+from ._statistics import typical_gain
 
 
 class Proposal(eqx.Module):
@@ -180,7 +183,7 @@ class HeldOutTest(eqx.Module):
 
     **Fields:** `held_out` (`held_out(model) -> (window_scores, rmse_curve, rmse_at_reference)`, the caller's
     held-out simulation error); `significance` (`significance(scores_reference, scores_new) -> p_value`,
-    one-sided); `alpha` and `min_gain` (the level and the smallest gain at the reference horizon).
+    one-sided); `alpha` and `min_gain` (the level and the smallest typical gain of a window's RMS error).
     """
 
     held_out: Callable = eqx.field(static=True)
@@ -482,10 +485,22 @@ class _Test(eqx.Module):
     rmse: float
 
 
+def _weak_terms(held_out, fitted, n_terms: int, n_named: int, scores_new, min_gain: float) -> list[int]:
+    """The discovered terms that do not carry their weight: dropped one at a time (no refit), the typical window's
+    RMS error grows by less than `min_gain`."""
+    weak = []
+    for k in range(n_terms):
+        others = tuple(t for i, t in enumerate(fitted.terms) if i != n_named + k)
+        scores_without, _, _ = held_out(type(fitted)(fitted.system, others))
+        if typical_gain(scores_without, scores_new, rms=True) < min_gain:
+            weak.append(k)
+    return weak
+
+
 def _refit_and_test(model, terms, proposals, refit: _SimulationRefit, test: HeldOutTest, current, say) -> _Test:
     """Refit the proposed terms through simulation and test them on held-out data against `current` (the current
     model's `test.held_out`); where several pass together, drop each that does not carry its weight (dropping it
-    costs less than `test.min_gain`) and refit once more."""
+    costs the typical window less than `test.min_gain`) and refit once more."""
     held_out, significance, alpha, min_gain = test.held_out, test.significance, test.alpha, test.min_gain
     scores_cur, _, rmse_cur = current
     n_named = len(model.terms) if isinstance(model, Extended) else 0
@@ -494,17 +509,11 @@ def _refit_and_test(model, terms, proposals, refit: _SimulationRefit, test: Held
         scores_new, curve_new, rmse_new = held_out(fitted)
         gain = float(1 - rmse_new / rmse_cur) if np.isfinite(rmse_cur) and rmse_cur > 0 else 0.0
         p_value = float(significance(scores_cur, scores_new))
-        passed = p_value < alpha and gain >= min_gain
+        passed = p_value < alpha and typical_gain(scores_cur, scores_new, rms=True) >= min_gain and gain > 0
         say(f"discovery: held-out gain {gain:.0%}, p = {p_value:.2g}" + ("" if passed else " (not kept)"))
         if not passed or len(terms) == 1:
             break
-        # Each term must carry its weight: drop one at a time (no refit) and see what is lost.
-        weak = []
-        for k in range(len(terms)):
-            others = tuple(t for i, t in enumerate(fitted.terms) if i != n_named + k)
-            _, _, rmse_without = held_out(Extended(fitted.system, others))
-            if 1 - rmse_new / rmse_without < min_gain:
-                weak.append(k)
+        weak = _weak_terms(held_out, fitted, len(terms), n_named, scores_new, min_gain)
         if not weak:
             break
         terms = [t for k, t in enumerate(terms) if k not in weak]

@@ -241,7 +241,9 @@ def _test_markdown(j: dict) -> list[str]:
     if power and power["best_candidate"]:
         b = power["best_candidate"]
         lines.append(
-            f"- best candidate: {b['cause']}@{b['where']}, held-out gain {b['gain']:.0%}, p = {b['p_value']:.2g}"
+            f"- best candidate: {b['cause']}@{b['where']}, held-out gain {b['gain']:.0%}"
+            + (f" ({b['gain_typical']:.0%} on the typical window)" if b.get("gain_typical") is not None else "")
+            + f", p = {b['p_value']:.2g}"
         )
     if power and power["needed_s"] is not None and power["needed_s"] > power["tested_s"]:
         lines.append(

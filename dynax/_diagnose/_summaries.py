@@ -73,7 +73,7 @@ _RULE_TEXT = {
         f"rate {o.alpha:g} over the {r['n_tested']} candidates remaining"
     ),
     "min_gain": lambda r, o: (
-        f"min_gain: the pooled window-error gain {r['gain_windows']:.1%} is below {o.min_gain:.0%}"
+        f"min_gain: the typical window-error gain {r['gain_typical']:.1%} is below {o.min_gain:.0%}"
     ),
     "sign": lambda r, o: (
         "sign: a coefficient of the joint refit (this term's or an earlier finding's) is on its unphysical side"
@@ -110,6 +110,7 @@ def round_summary(problem, yard, round_, current, remaining, results, finding) -
                 "coefficient": float(problem.neutral[k] + r["delta"]),
                 "gain": float(r["gain_held_out"]),
                 "gain_pooled": float(r["gain_windows"]),
+                "gain_typical": float(r["gain_typical"]),
                 "sim_error_gain": _finite_or_none(rmse_gain(r["rmse"], current.rmse, yard.ref_index)),
                 "p_value": float(r["p"]),
                 "runs_helped": f"{r['runs_helped']}/{r['n_runs']}",
@@ -172,6 +173,7 @@ def candidate_table(system, candidates, remaining, gains_scr, results, neutral, 
             entry.update(
                 gain=float(r["gain_held_out"]),
                 gain_pooled=float(r["gain_windows"]),
+                gain_typical=float(r["gain_typical"]),
                 p_value=r["p"],
                 coefficient=float(neutral[k] + r["delta"]),
                 runs_helped=f"{r['runs_helped']}/{r['n_runs']}",

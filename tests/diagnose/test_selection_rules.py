@@ -119,6 +119,67 @@ def test_a_candidate_the_cross_fitted_runs_carry_but_the_held_out_runs_reject_is
     assert judged(0.97)["significant"]
 
 
+def _runs_of_scale(scales, factors, n=60, seed=3):
+    """Held-out windows of runs whose nominal window error has the scale `scales[r]`, and a candidate that multiplies
+    run `r`'s window errors by `factors[r]` (5 % window-to-window noise): the effect on each run is made here, not
+    read from any rule."""
+    rng = np.random.default_rng(seed)
+    runs = np.repeat(np.arange(len(scales)), n)
+    score_cur = rng.uniform(1.0, 2.0, runs.size) * np.asarray(scales, float)[runs]
+    return runs, score_cur, score_cur * np.asarray(factors, float)[runs] * rng.uniform(0.95, 1.05, runs.size)
+
+
+def _judged_alone(runs, score_cur, score_new, n_val=None):
+    """`judge_round` of one physical candidate whose window scores are `score_new`."""
+    p = np.zeros((2, 3))
+    p[1, -1] = 0.1
+    errors = np.ones((2, runs.size, 11, 4))
+    scores = np.stack([score_cur, score_new])
+    return _judge(lambda k, delta: True, [0], [], 2, p, errors, scores, score_cur, runs, n_val=n_val)[0]
+
+
+def _pooled(score_cur, score_new):
+    return 1.0 - float(np.sum(score_new) / np.sum(score_cur))
+
+
+def test_an_effect_on_every_run_is_not_stopped_by_the_run_of_largest_error():
+    """Two held-out runs whose window error the candidate cuts by 60 % and 40 %, and a cross-fitted run whose windows
+    score thirty times theirs and which it helps by 1 % (a real rig's elbow friction beside a run it barely changes):
+    the pooled gain, below 5 %, reads that run's scale; the test and the smallest-gain rule read the typical window,
+    and the effect, real on every run, is admissible."""
+    runs, score_cur, score_new = _runs_of_scale((1.0, 1.0, 30.0), (0.4, 0.6, 0.99))
+    assert all(_pooled(score_cur[runs == r], score_new[runs == r]) > 0 for r in range(3))  # real on each run
+    r = _judged_alone(runs, score_cur, score_new, n_val=120)
+    assert r["gain_windows"] == pytest.approx(_pooled(score_cur, score_new)) and r["gain_windows"] < 0.05
+    assert all(r["rules"].values()) and r["significant"] and r["p"] < 1e-6
+    assert r["gain_held_out"] > 0.4 and r["gain_typical"] > 0.25
+
+
+def test_a_pooled_gain_from_a_few_windows_of_large_error_is_no_practical_effect():
+    """The nominal model loses one stretch (four windows score a hundred times the rest); the candidate mends that
+    stretch and makes every other window 12 % worse. Pooled, it gains more than half; on the typical window it gains
+    nothing, and the smallest-gain rule stops it."""
+    runs, score_cur, score_new = _runs_of_scale((1.0, 1.0), (1.12, 1.12))
+    stretch = slice(20, 24)
+    score_cur[stretch] *= 100.0
+    score_new[stretch] = score_cur[stretch] * 0.1
+    assert _pooled(score_cur, score_new) > 0.5
+    assert np.mean(np.log(score_cur / score_new)) < 0  # the geometric mean of the windows' ratios: worse
+    r = _judged_alone(runs, score_cur, score_new)
+    assert not r["rules"]["min_gain"] and not r["significant"]
+    assert r["gain_windows"] > 0.5 and r["gain_typical"] < 0.05
+
+
+def test_a_term_that_wins_on_runs_of_small_error_and_loses_on_the_largest_is_not_named():
+    """The other way round: two runs whose error the candidate cuts by 70 % and one whose windows score thirty times
+    theirs and which it makes 15 % worse. Its typical window gains, its pooled held-out error grows: the `held_out`
+    rule stops it (it helps on two runs of three, which the agreement rule allows)."""
+    runs, score_cur, score_new = _runs_of_scale((1.0, 1.0, 30.0), (0.3, 0.3, 1.15))
+    r = _judged_alone(runs, score_cur, score_new)
+    assert r["rules"]["agreement"] and not r["rules"]["held_out"] and not r["significant"]
+    assert r["gain_typical"] > 0.25 and r["gain_held_out"] < 0
+
+
 def test_terms_of_either_sign_are_not_constrained():
     """An input offset may be negative: a joint refit that moves it there is admissible."""
     r = _round(earlier_fc1=-0.3, new_delta=0.1, earlier=InputOffset(0))
