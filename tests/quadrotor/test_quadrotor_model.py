@@ -175,29 +175,26 @@ def test_one_step_solution_carries_standard_errors(fitted):
     assert fitted.names == fitted.model.body_model.parameter_names
 
 
+def _by_hand(model, flight, start, n, **solver):
+    """The states 1..n samples after `start`, each interval integrated by scipy under its held input."""
+    field = jax.jit(lambda x, u: model.vector_field(0.0, x, u))
+    state, us, path = np.asarray(flight.xs[start]), np.asarray(flight.us), []
+    for h in range(n):
+        u = jnp.asarray(us[start + h])
+        state = solve_ivp(lambda t, y, u=u: np.asarray(field(jnp.asarray(y), u)), (0, DT), state, **solver).y[:, -1]
+        path.append(state)
+    return np.asarray(path)
+
+
 def test_predict_ahead_matches_a_rollout_by_hand(fitted, flights):
     quad, flight = fitted.model, flights[0]
     steps = (1, 4, 12)
     predicted = np.asarray(dynax.predict_ahead(quad, flight, steps))
     assert predicted.shape == (len(flight) - 12, 3, 13)
-    field = jax.jit(lambda x, u: quad.vector_field(0.0, x, u))
-    xs, us = np.asarray(flight.xs), np.asarray(flight.us)
     for i in (0, 37, len(flight) - 13):
-        state = xs[i]
-        for h in range(1, 13):
-            u = jnp.asarray(us[i + h - 1])
-            sol = solve_ivp(
-                lambda t, y, u=u: np.asarray(field(jnp.asarray(y), u)),
-                (0, DT),
-                state,
-                method="DOP853",
-                rtol=1e-12,
-                atol=1e-14,
-            )
-            state = sol.y[:, -1]
-            if h in steps:
-                # RK4 at the sample interval against DOP853: an error of order dt^4 per step.
-                np.testing.assert_allclose(predicted[i, steps.index(h)], state, rtol=0, atol=1e-6)
+        path = _by_hand(quad, flight, i, 12, method="DOP853", rtol=1e-12, atol=1e-14)
+        # RK4 at the sample interval against DOP853: an error of order dt^4 per step.
+        np.testing.assert_allclose(predicted[i], path[np.asarray(steps) - 1], rtol=0, atol=1e-6)
 
 
 class _RateDamped(eqx.Module):
@@ -219,21 +216,8 @@ def test_predict_ahead_resolves_a_mode_faster_than_the_sample_rate(fitted, fligh
     one_step = np.asarray(dynax.predict_ahead(stiff, flight, (50,), substeps=1))
     assert not np.all(np.isfinite(one_step)) or np.max(np.abs(one_step[:, 0, 10:13])) > 1e3
     predicted = np.asarray(dynax.predict_ahead(stiff, flight, (1, 50)))
-    field = jax.jit(lambda x, u: stiff.vector_field(0.0, x, u))
-    xs, us = np.asarray(flight.xs), np.asarray(flight.us)
     for i in (0, 91):
-        state = xs[i]
-        for h in range(1, 51):
-            u = jnp.asarray(us[i + h - 1])
-            sol = solve_ivp(
-                lambda t, y, u=u: np.asarray(field(jnp.asarray(y), u)),
-                (0, DT),
-                state,
-                method="Radau",
-                rtol=1e-10,
-                atol=1e-12,
-            )
-            state = sol.y[:, -1]
+        state = _by_hand(stiff, flight, i, 50, method="Radau", rtol=1e-10, atol=1e-12)[-1]
         # Four RK4 steps of 2.5 ms on a mode of 341 1/s: R(h lambda) = 0.4296 against the exact 0.4263 per step,
         # so the fast transient decays as it should: the rates within 1e-3 of about 0.6 rad/s after 0.5 s (two
         # steps of 5 ms, stable but at h lambda = -1.7, are 0.027 off).
