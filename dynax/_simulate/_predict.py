@@ -82,11 +82,11 @@ def _jacobians(system, xs, us):
 
 
 def stable_substeps(model, trajectory: Trajectory) -> int:
-    r"""The RK4 substeps per sample interval that keep `model`'s fastest mode stable on `trajectory`.
+    r"""The RK4 substeps per sample interval that resolve `model`'s fastest mode on `trajectory`.
 
     The largest eigenvalue modulus $\rho$ of the model's Jacobian $\partial f/\partial x$ at up to
     `_JACOBIAN_SAMPLES` evenly spaced samples (with their inputs) gives
-    $\lceil \rho\,\Delta t / 1 \rceil$ substeps, at least 1 and at most `_MAX_SUBSTEPS`. A
+    $\lceil \rho\,\Delta t / r \rceil$ substeps, $r$ = `_RK4_RADIUS` = 1, at least 1 and at most `_MAX_SUBSTEPS`. A
     Jacobian that is not finite at some sample gives 1 there: the rollout reports it as diverged.
     """
     n = len(trajectory)
