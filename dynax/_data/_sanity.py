@@ -283,8 +283,8 @@ def _glitches(tr, ts, source, columns, positions=None):
             threshold = max(threshold, 3.0 * spread)
         if not threshold > 0:
             continue
-        # every running median below is a sample of `x`, so no sample leaves it by more than the column's range
-        if np.ptp(x) <= threshold or reach <= threshold:
+        # no sample leaves the running median below by more than `reach` (at most the column's range)
+        if reach <= threshold:
             continue
         median = scipy.signal.medfilt(x, GLITCH_WINDOW)
         # at the ends the filter pads with zeros: measure from the nearest full window instead

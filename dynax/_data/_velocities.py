@@ -72,7 +72,11 @@ def _block_slopes(ts, q, v, edges=None):
 def _block_gain(ts, q, v, edges=None):
     """`(gain, slopes, means, slopes @ slopes)` of `velocity_gain` (its gain alone, and what its errors are
     computed from), or `None` as there; `edges`, the record's `stretch_edges` where already known."""
-    blocks = _block_slopes(ts, q, v, edges)
+    return _gain_of(_block_slopes(ts, q, v, edges))
+
+
+def _gain_of(blocks):
+    """`_block_gain` from `_block_slopes`' `(slopes, means)` (or its `None`)."""
     if blocks is None:
         return None
     slopes, means = blocks
@@ -175,7 +179,7 @@ def check_velocities(
         blocks = _block_slopes(ts, values[position], values[velocity], edges)
         if blocks is None or _surely_within(*blocks, MAX_GAIN_ERROR):
             continue
-        first = _block_gain(ts, values[position], values[velocity], edges)
+        first = _gain_of(blocks)
         if first is None or abs(first[0] - 1.0) <= MAX_GAIN_ERROR:
             continue
         found = velocity_gain(ts, values[position], values[velocity])
