@@ -81,11 +81,11 @@ import enum
 import numpy as np
 
 from ._residuals import Structure
-from ._statistics import detectable_gain
+from ._statistics import detectable_gain, detectable_shift
 
-MIN_PRACTICAL_GAIN = 0.25  # the smallest held-out RMSE gain that matters (see the module)
+MIN_PRACTICAL_GAIN = 0.25  # the smallest gain in mean squared window error that matters (see the module)
 POWER = 0.8  # the power at which `none` must have been able to see it
-PRACTICAL_R2 = 1.0 - (1.0 - MIN_PRACTICAL_GAIN) ** 2  # probe R^2 whose removal is a MIN_PRACTICAL_GAIN RMS reduction
+PRACTICAL_R2 = MIN_PRACTICAL_GAIN  # probe R^2: the share of the residuals' mean square a term capturing it removes
 
 
 class Verdict(str, enum.Enum):  # noqa: UP042 -- StrEnum would change str()/format() of members in JSON and reports
@@ -184,8 +184,6 @@ def power_of(results: dict, labels: dict, alpha: float, tested_s: float) -> Powe
     """
     if not results:
         return Power(None, None, tested_s, None)
-    import scipy.stats
-
     first = next(iter(results.values()))
     df = max(float(first["test"].df), 1.0)
     level = alpha / max(int(first["n_tested"]), 1)
@@ -198,8 +196,8 @@ def power_of(results: dict, labels: dict, alpha: float, tested_s: float) -> Powe
     se_needed = float(results[k]["test"].std_error) if practical else se
     needed = observed = None
     if np.isfinite(se_needed) and se_needed > 0:
-        shift = (scipy.stats.t.isf(level, df) + scipy.stats.t.ppf(POWER, df)) * se_needed
-        needed = float(tested_s * (shift / (-2.0 * np.log(1.0 - MIN_PRACTICAL_GAIN))) ** 2)
+        shift = detectable_shift(se_needed, df, level, POWER)
+        needed = float(tested_s * (shift / -np.log1p(-MIN_PRACTICAL_GAIN)) ** 2)  # a gain g is a shift -log(1 - g)
         mean = float(results[k]["test"].mean)
         if practical and mean > 0:
             observed = float(tested_s * (shift / mean) ** 2)  # its own observed effect, detected with POWER
