@@ -358,7 +358,7 @@ def detectable_gain(std_error: float, df: float, alpha: float, power: float = 0.
 
     `std_error` is that of the mean log ratio $\bar d$ of mean squared window errors; a gain $g$ is a shift of
     $-\log(1 - g)$ in it, so the shift `detectable_shift` finds is the gain $1 - e^{-\text{shift}}$ in mean squared
-    window error: the unit of `typical_gain` and of every gain the rules read and the report gives.
+    window error: the unit of `typical_gain` and of the candidates' gains the rules read and the report gives.
     """
     if not np.isfinite(std_error) or std_error <= 0:
         return 0.0

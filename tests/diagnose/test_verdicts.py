@@ -13,8 +13,15 @@ import scipy.stats
 import dynax
 from dynax import Verdict
 from dynax.internal import decide_verdict as decide
-from dynax.internal import log_ratio_differences, MIN_PRACTICAL_GAIN, paired_block_test, PairedTest, power_of
-from dynax.internal import PRACTICAL_R2, Structure
+from dynax.internal import (
+    log_ratio_differences,
+    MIN_PRACTICAL_GAIN,
+    paired_block_test,
+    PairedTest,
+    power_of,
+    PRACTICAL_R2,
+    Structure,
+)
 from tests.hidden_cases import Case, diagnose_case, outcome, records
 
 
