@@ -386,4 +386,5 @@ def detectable_shift(std_error: float, df: float, alpha: float, power: float = 0
 
     while short(hi) < 0.0:
         hi *= 2.0
-    return float(scipy.optimize.brentq(short, 0.0, hi, xtol=1e-10, rtol=1e-10)) * std_error
+    root = scipy.optimize.root_scalar(short, bracket=(0.0, hi), method="brentq", xtol=1e-12)
+    return float(root.root) * std_error
