@@ -266,7 +266,7 @@ def inconclusive_note(power: Power, horizon_s: float, runs: str) -> str:
         like = "its" if power.undecided else "the refitted candidates'"
         parts.append(
             f"With window-to-window variation like {like}, about {power.needed_s:.3g} s of held-out record "
-            f"({power.needed_s / power.tested_s:.2g} times as much) would detect a {MIN_PRACTICAL_GAIN:.0%} "
+            f"({power.needed_s / power.tested_s:.3g} times as much) would detect a {MIN_PRACTICAL_GAIN:.0%} "
             f"gain at the test's level with {POWER:.0%} power; the verdict is left open until then."
         )
     elif power.best is not None:
