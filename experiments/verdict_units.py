@@ -1,5 +1,8 @@
 """What the verdict's one unit moves, read from the stored results (nothing is diagnosed again).
 
+It reads every stored power block as written before 2026-11-29 (an RMS reading); rows stored since speak mean
+squared error already, and the DFKI rows this change moved are stored with their new verdicts.
+
 Until 2026-11-29 the verdict's power (`test.power.detectable_gain`, `needed_s`) read the paired test's detectable
 shift $\\Delta$ of the mean log ratio of mean squared window errors as an RMS gain, $1 - e^{-\\Delta/2}$, from the
 shortcut $\\Delta = (t_{1-a} + t_{0.8})\\,s$; and the probe's structure was of practical size at $R^2 \\ge 0.4375$
