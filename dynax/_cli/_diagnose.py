@@ -240,7 +240,10 @@ def summary(report) -> str:
         lines.append(f"Reference horizon {ref:g} s: {j['horizon']['rule']}.")
     lines.append(f"Verdict: {j['verdict']}.")
     if j.get("test", {}).get("detectable_gain") is not None:
-        lines.append(f"The test would have detected a gain of about {j['test']['detectable_gain']:.0%} at {ref:g} s.")
+        lines.append(
+            f"The test would have detected a gain of about {j['test']['detectable_gain']:.0%} in mean squared window "
+            f"error at {ref:g} s."
+        )
     for f in j["findings"]:
         if f["cause"] == "discovered":
             lines.append(

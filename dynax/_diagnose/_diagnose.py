@@ -238,9 +238,9 @@ def _report(problem: Problem, forward: Forward, judgement, *, mode, train, valid
     elif judgement.structure.significant:
         s = judgement.structure
         notes.append(
-            f"The residual probe still explains {s.r2:.0%} of the held-out one-step residuals (p = {s.p_value:.2g}): "
-            f"significant, but a term capturing all of it would lower them by {1 - np.sqrt(1 - max(s.r2, 0)):.0%} "
-            f"at most, less than a structure of practical size (R2 >= {PRACTICAL_R2:.2f}; see the verdict rule)."
+            f"The residual probe still explains {s.r2:.0%} of the held-out one-step residuals' mean square "
+            f"(p = {s.p_value:.2g}): significant, but a term capturing all of it would lower it by that much at most, "
+            f"less than a structure of practical size (R2 >= {PRACTICAL_R2:.2f}; see the verdict rule)."
         )
     test = test_summary(o.alpha, o.min_gain, judgement.power, verdict, named=bool(judgement.findings))
     blocks = len(problem.folds) > len(problem.train)
@@ -261,7 +261,8 @@ def _report(problem: Problem, forward: Forward, judgement, *, mode, train, valid
     elif verdict == Verdict.NONE and test["detectable_gain"] is not None:
         notes.append(
             f"No candidate passed the test. With these {runs} the test would have detected a gain of "
-            f"about {test['detectable_gain']:.0%} at {yard.horizon.seconds:g} s (power 80 %) if its window-to-window "
+            f"about {test['detectable_gain']:.0%} in mean squared window error at {yard.horizon.seconds:g} s "
+            f"(power 80 %) if its window-to-window "
             f"variation is like the refitted candidates'; a smaller effect, or one that varies more (friction "
             f"acting in the slow segments only), may be present."
         )

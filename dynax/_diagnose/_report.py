@@ -235,7 +235,8 @@ def _test_markdown(j: dict) -> list[str]:
     if t["detectable_gain"] is not None:
         runs = "held-out and cross-fitted runs" if t.get("cross_fitting") else "held-out runs"
         lines.append(
-            f"- with these {runs} it would have detected a gain of about {t['detectable_gain']:.0%} (power 80 %)"
+            f"- with these {runs} it would have detected a gain of about {t['detectable_gain']:.0%} "
+            "in mean squared window error, like the candidates' gains (power 80 %)"
         )
     power = t.get("power")
     if power and power["best_candidate"]:
@@ -247,8 +248,8 @@ def _test_markdown(j: dict) -> list[str]:
         )
     if power and power["needed_s"] is not None and power["needed_s"] > power["tested_s"]:
         lines.append(
-            f"- a {power['min_practical_gain']:.0%} gain would be detected with about {power['needed_s']:.3g} s of "
-            f"such windows (now {power['tested_s']:.3g} s)"
+            f"- a {power['min_practical_gain']:.0%} gain (same unit) would be detected with about "
+            f"{power['needed_s']:.3g} s of such windows (now {power['tested_s']:.3g} s)"
         )
     return lines + [""]
 

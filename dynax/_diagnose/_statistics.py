@@ -354,14 +354,37 @@ def helps_on_most_runs(per_run: dict) -> bool:
 
 
 def detectable_gain(std_error: float, df: float, alpha: float, power: float = 0.8) -> float:
-    """The smallest held-out RMSE gain the test would detect with probability `power` at level `alpha`.
+    r"""The smallest typical gain the test would detect with probability `power` at level `alpha`.
 
-    `std_error` is that of the mean log ratio of mean squared window errors; a gain $g$ in RMSE is a
-    log ratio of $-2\\log(1 - g)$.
+    `std_error` is that of the mean log ratio $\bar d$ of mean squared window errors; a gain $g$ is a shift of
+    $-\log(1 - g)$ in it, so the shift `detectable_shift` finds is the gain $1 - e^{-\text{shift}}$ in mean squared
+    window error: the unit of `typical_gain` and of the candidates' gains the rules read and the report gives.
     """
     if not np.isfinite(std_error) or std_error <= 0:
         return 0.0
+    return float(-np.expm1(-detectable_shift(std_error, df, alpha, power)))
+
+
+def detectable_shift(std_error: float, df: float, alpha: float, power: float = 0.8) -> float:
+    r"""The mean log ratio the one-sided paired t-test (level `alpha`, `df` degrees of freedom, standard error
+    `std_error`) detects with probability `power`: the noncentrality $\delta$ at which the noncentral t exceeds
+    $t_{1-\alpha,\nu}$ with that probability, times $s$ (Cohen 1988, ch. 2). The usual shortcut
+    $(t_{1-\alpha,\nu} + t_{\text{power},\nu})\,s$ understates it where $\nu$ is small and $\alpha$ too: by 7 % at
+    $\nu = 5$, $\alpha = 0.001$ (power 73 %, not 80 %), 1 % at $\nu = 20$ and the same level."""
+    import warnings
+
+    import scipy.optimize
     import scipy.stats
 
-    shift = (scipy.stats.t.isf(alpha, df) + scipy.stats.t.ppf(power, df)) * std_error
-    return float(1.0 - np.exp(-shift / 2.0))
+    t = float(scipy.stats.t.isf(alpha, df))
+    hi = 2.0 * (t + float(scipy.stats.t.ppf(power, df))) + 1.0
+
+    def short(delta: float) -> float:
+        with warnings.catch_warnings():  # the series converges slowly at one degree of freedom; the root is found
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return float(scipy.stats.nct.sf(t, df, delta)) - power
+
+    while short(hi) < 0.0:
+        hi *= 2.0
+    root = scipy.optimize.root_scalar(short, bracket=(0.0, hi), method="brentq", xtol=1e-12)
+    return float(root.root) * std_error

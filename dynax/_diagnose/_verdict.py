@@ -26,12 +26,14 @@ verdict rests on an effect size, and `none` also on the test's power:
 The contract's three verdicts keep their meaning; `inconclusive` is the answer the old rules gave
 as `none` where the data could not have shown an effect (one 8 s held-out run).
 
-**The smallest gain that matters**, `MIN_PRACTICAL_GAIN` = 25 % of the held-out simulation error, is
-a practical margin in the sense of equivalence testing (Wellek 2010; Lakens 2017): a term that
-removes less than a quarter of the RMS error changes no decision a user makes with the model
-(a quarter in RMS is 44 % in mean squared error). It is not the selection's `min_gain` (5 %), the
-least gain a named cause must show to be *named*; it is the least gain whose absence the verdict
-`none` must be able to assert.
+**The smallest gain that matters**, `MIN_PRACTICAL_GAIN` = 25 % of the held-out windows' mean squared
+simulation error (13 % of its RMS), is a practical margin in the sense of equivalence testing (Wellek 2010;
+Lakens 2017): a term that removes less than a quarter of the mean squared error changes no decision a user
+makes with the model. Every part of the rule reads it in that one unit: the candidates' gains, the power, the
+held-out length that would decide and the probe's $R^2$ (the report's headline `gain`, of the position RMSE
+at the reference horizon, is another measure). It is not the selection's `min_gain` (5 %), the least gain a
+named cause must show to be *named*; it is the least gain whose absence the verdict `none` must be able to
+assert.
 
 **Which gain is of practical size.** A candidate gains `MIN_PRACTICAL_GAIN` when its typical window does
 (`typical_gain`: one minus the geometric mean of the test's windows' error ratios, the gain the paired
@@ -45,27 +47,28 @@ a typical gain of practical size and a pooled loss: the selection's `held_out` a
 it from being named, and the verdict does not call the nominal model adequate (`none`) beside it, but
 `inconclusive` (an effect of practical size seen, not established; `unexplained` where the residuals keep
 significant structure), naming it with both gains. The best
-candidate (`Power.best`) is the one with the largest typical gain. The power below speaks in RMS, the
-candidates' gains in mean squared error: `none` asks for the power to see a 25 % RMS gain and for no
-candidate gaining 25 % in mean squared window error.
+candidate (`Power.best`) is the one with the largest typical gain. The power below speaks the same unit:
+`none` asks for the power to see a 25 % gain in mean squared window error and for no candidate gaining as
+much.
 
-**Structure of practical size.** The residual probe reports $R^2$, the share of the held-out one-step
-residual variance its fitted regression explains. A term that captured all of it would lower the
-residuals' RMS by $1 - \sqrt{1 - R^2}$; this is of practical size when it reaches
-`MIN_PRACTICAL_GAIN`, i.e. $R^2 \ge 1 - 0.75^2 = 0.4375$ (`PRACTICAL_R2`). So a Coulomb friction
-found with a 96 % held-out gain whose extended model's probe still explains 14 % of what is left
-(a 7 % RMS reduction at most) is `explained`; a nominal model whose residuals the probe explains to
-99 % is `unexplained`, whatever the candidates did.
+**Structure of practical size.** The residual probe reports $R^2 = 1 - \text{SSE}/\text{SS}_0$, the share of the
+held-out one-step residuals' mean square its fitted regression removes: itself a gain in mean squared error.
+A term that captured all of it would lower the residuals' mean square by $R^2$; this is of practical size
+when it reaches `MIN_PRACTICAL_GAIN`, $R^2 \ge 0.25$ (`PRACTICAL_R2`). So a Coulomb friction found with a
+96 % held-out gain whose extended model's probe still explains 14 % of what is left is `explained`; a nominal
+model whose residuals the probe explains to 99 % is `unexplained`, whatever the candidates did.
 
 **Power and the held-out length that would decide.** The paired test's standard error $s$ (on
 the mean log ratio of window errors, with $\nu$ degrees of freedom) detects, with probability
-`POWER` at level $a$, a shift of $(t_{1-a,\nu} + t_{P,\nu})\,s$; a gain $g$ is a shift of
-$-2\log(1-g)$ (`dynax._diagnose._statistics.detectable_gain`). The standard error of a mean over
+`POWER` at level $a$, a shift of $\delta\,s$, where the noncentral t with noncentrality $\delta$ exceeds
+$t_{1-a,\nu}$ with probability `POWER` (`dynax._diagnose._statistics.detectable_shift`; the shortcut
+$\delta \approx t_{1-a,\nu} + t_{P,\nu}$ promises 80 % where 73 % is true at $\nu = 5$, $a = 0.001$). A gain $g$
+in mean squared window error is a shift of $-\log(1-g)$ (`detectable_gain`). The standard error of a mean over
 windows of a stationary record shrinks as $1/\sqrt{T}$ with the tested length $T$, so the length at
-which `MIN_PRACTICAL_GAIN` would be detected is
-$T^\ast = T\,\big[(t_{1-a} + t_P)\,s / (-2\log 0.75)\big]^2$ (Cohen 1988, ch. 2, for the
-$1/\sqrt{n}$ power calculation). The level $a$ is the one the best candidate faced: `alpha` over the
-number of candidates tested (Benjamini-Hochberg's threshold for the smallest p-value).
+which `MIN_PRACTICAL_GAIN` would be detected is $T^\ast = T\,\big[\delta\,s / (-\log 0.75)\big]^2$ (Cohen 1988,
+ch. 2, for the $1/\sqrt{n}$ power calculation; $\nu$ held, which errs towards more record). The level $a$ is
+the one the best candidate faced: `alpha` over the number of candidates tested (Benjamini-Hochberg's
+threshold for the smallest p-value).
 
 ??? cite
 
@@ -81,11 +84,11 @@ import enum
 import numpy as np
 
 from ._residuals import Structure
-from ._statistics import detectable_gain
+from ._statistics import detectable_gain, detectable_shift
 
-MIN_PRACTICAL_GAIN = 0.25  # the smallest held-out RMSE gain that matters (see the module)
+MIN_PRACTICAL_GAIN = 0.25  # the smallest gain in mean squared window error that matters (see the module)
 POWER = 0.8  # the power at which `none` must have been able to see it
-PRACTICAL_R2 = 1.0 - (1.0 - MIN_PRACTICAL_GAIN) ** 2  # probe R^2 whose removal is a MIN_PRACTICAL_GAIN RMS reduction
+PRACTICAL_R2 = MIN_PRACTICAL_GAIN  # probe R^2: the share of the residuals' mean square a term capturing it removes
 
 
 class Verdict(str, enum.Enum):  # noqa: UP042 -- StrEnum would change str()/format() of members in JSON and reports
@@ -122,8 +125,8 @@ _TEXT = {
 
 
 def practical_structure(structure: Structure) -> bool:
-    """Structure of practical size: significant, and a term capturing it would lower the residuals' RMS by
-    at least `MIN_PRACTICAL_GAIN` (probe $R^2 \\ge$ `PRACTICAL_R2`)."""
+    """Structure of practical size: significant, and a term capturing it would lower the residuals' mean square
+    by at least `MIN_PRACTICAL_GAIN` (probe $R^2 \\ge$ `PRACTICAL_R2`)."""
     return bool(structure.significant and structure.r2 >= PRACTICAL_R2)
 
 
@@ -131,7 +134,9 @@ def practical_structure(structure: Structure) -> bool:
 class Power:
     """What the held-out test could see where no cause was named.
 
-    **Fields:** `detectable_gain` (the held-out RMSE gain detected with probability `POWER` at the best candidate's
+    Every gain here is in mean squared window error, the unit of the candidates' gains.
+
+    **Fields:** `detectable_gain` (the typical gain detected with probability `POWER` at the best candidate's
     level; `None` without a refitted candidate); `best` (the refitted candidate with the largest typical gain:
     `cause`, `where`, `gain` (the held-out runs' pooled), `gain_typical`, `p_value`, `stopped_by`; `None` without
     one); `tested_s` (the record time the test's windows cover: held-out runs, and cross-fitted runs where they are
@@ -184,8 +189,6 @@ def power_of(results: dict, labels: dict, alpha: float, tested_s: float) -> Powe
     """
     if not results:
         return Power(None, None, tested_s, None)
-    import scipy.stats
-
     first = next(iter(results.values()))
     df = max(float(first["test"].df), 1.0)
     level = alpha / max(int(first["n_tested"]), 1)
@@ -198,8 +201,8 @@ def power_of(results: dict, labels: dict, alpha: float, tested_s: float) -> Powe
     se_needed = float(results[k]["test"].std_error) if practical else se
     needed = observed = None
     if np.isfinite(se_needed) and se_needed > 0:
-        shift = (scipy.stats.t.isf(level, df) + scipy.stats.t.ppf(POWER, df)) * se_needed
-        needed = float(tested_s * (shift / (-2.0 * np.log(1.0 - MIN_PRACTICAL_GAIN))) ** 2)
+        shift = detectable_shift(se_needed, df, level, POWER)
+        needed = float(tested_s * (shift / -np.log1p(-MIN_PRACTICAL_GAIN)) ** 2)  # a gain g is a shift -log(1 - g)
         mean = float(results[k]["test"].mean)
         if practical and mean > 0:
             observed = float(tested_s * (shift / mean) ** 2)  # its own observed effect, detected with POWER
@@ -256,14 +259,14 @@ def inconclusive_note(power: Power, horizon_s: float, runs: str) -> str:
     if power.detectable_gain is not None and not power.undecided:
         parts.append(
             f"With these {runs} ({power.tested_s:.3g} s of windows) the test would detect a gain of about "
-            f"{power.detectable_gain:.0%} with {POWER:.0%} power"
+            f"{power.detectable_gain:.0%} in mean squared window error with {POWER:.0%} power"
             + (f", more than the {MIN_PRACTICAL_GAIN:.0%} that matters." if not power.enough else ".")
         )
     if power.needed_s is not None and power.needed_s > power.tested_s:
         like = "its" if power.undecided else "the refitted candidates'"
         parts.append(
             f"With window-to-window variation like {like}, about {power.needed_s:.3g} s of held-out record "
-            f"({power.needed_s / power.tested_s:.2g} times as much) would detect a {MIN_PRACTICAL_GAIN:.0%} "
+            f"({power.needed_s / power.tested_s:.3g} times as much) would detect a {MIN_PRACTICAL_GAIN:.0%} "
             f"gain at the test's level with {POWER:.0%} power; the verdict is left open until then."
         )
     elif power.best is not None:

@@ -49,9 +49,18 @@ def test_a_dry_friction_that_sticks_is_named_coulomb_friction_with_its_size():
 
 
 @pytest.mark.slow  # about 90 s; the quick suite keeps the verdicts' effect-free control
-def test_no_effect_gives_none():
+def test_no_effect_claims_no_cause():
+    """Nothing named; `none`, or `inconclusive` only for want of power, never for a candidate of practical size.
+    Measured: no candidate gains 3 % on the typical window, and the two 12 s held-out runs (20 s of windows) let
+    the test see 25.5 % in mean squared window error with 80 % power (noncentral t on the test's few degrees of
+    freedom), just over the 25 % that matters: `inconclusive`, asking for 21 s."""
     report, _ = _diagnose({}, scale=0.6)
-    assert report["verdict"] == "none", report["findings"]
+    assert report["findings"] == [], report["findings"]
+    assert report["verdict"] in ("none", "inconclusive"), report["verdict"]
+    power = report["test"]["power"]
+    assert power["best_candidate"]["gain_typical"] < power["min_practical_gain"], power
+    if report["verdict"] == "inconclusive":
+        assert power["detectable_gain"] > power["min_practical_gain"], power
 
 
 @pytest.mark.slow  # about 2 min; the quick suite keeps hidden effects in DOP853 records (test_verdicts.py)

@@ -150,9 +150,20 @@ def test_a_cause_must_help_on_most_runs():
 def test_detectable_gain_shrinks_with_the_standard_error():
     big, small = detectable_gain(0.2, 20, 0.01), detectable_gain(0.05, 20, 0.01)
     assert 0 < small < big < 1
-    # The detectable log ratio of mean squares is (t_alpha + t_power) * se; the RMSE gain is half of it.
-    shift = (scipy.stats.t.isf(0.01, 20) + scipy.stats.t.ppf(0.8, 20)) * 0.05
-    assert small == pytest.approx(1 - np.exp(-shift / 2))
+
+
+@pytest.mark.parametrize("n, alpha", [(6, 0.001), (21, 0.01)])
+def test_detectable_gain_is_detected_with_the_power_it_claims(n, alpha):
+    r"""Simulated: `n` independent windows whose log ratios of mean squared error shift by the detectable gain
+    ($-\log(1 - g)$, a gain in mean squared error like every gain reported) are detected by the one-sided t-test on
+    `n - 1` degrees of freedom at `alpha` in 80 % of 40,000 draws. At 5 degrees of freedom and 0.001 the shortcut
+    $(t_{1-\alpha} + t_{0.8})\,s$ reaches 73 %; read as an RMS gain ($-2\log(1 - g)$) far less."""
+    sd = 0.4
+    se = sd / np.sqrt(n)
+    g = detectable_gain(se, n - 1, alpha)
+    d = np.random.default_rng(n).normal(-np.log(1 - g), sd, (40_000, n))
+    t = d.mean(axis=1) / (d.std(axis=1, ddof=1) / np.sqrt(n))
+    assert np.mean(t > scipy.stats.t.isf(alpha, n - 1)) == pytest.approx(0.8, abs=0.01)
 
 
 def test_bad_input_is_refused():

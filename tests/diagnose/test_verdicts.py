@@ -8,11 +8,20 @@ known-mode impossible nominal compile anew and are heavy."""
 
 import numpy as np
 import pytest
+import scipy.stats
 
 import dynax
 from dynax import Verdict
 from dynax.internal import decide_verdict as decide
-from dynax.internal import MIN_PRACTICAL_GAIN, PairedTest, power_of, PRACTICAL_R2, Structure
+from dynax.internal import (
+    log_ratio_differences,
+    MIN_PRACTICAL_GAIN,
+    paired_block_test,
+    PairedTest,
+    power_of,
+    PRACTICAL_R2,
+    Structure,
+)
 from tests.hidden_cases import Case, diagnose_case, outcome, records
 
 
@@ -112,6 +121,56 @@ def test_none_needs_the_power_to_see_the_smallest_gain_that_matters():
     seen = power_of(_results(0.59, 0.02, 0.05), labels, 0.01, 20.0)
     assert decide(False, _structure(False, 0.0), False, seen) == Verdict.INCONCLUSIVE
     assert seen.best["cause"] == "coulomb_friction" and seen.best["gain"] == pytest.approx(0.59)
+
+
+def test_the_power_speaks_the_unit_of_the_gains():
+    """Held-out window log ratios (60 windows of one run, made here) whose best candidate gains 3 % on the typical
+    window, and whose standard error lets the test see a gain of about 30 % in mean squared window error: a
+    25 % gain (the unit of every reported gain) could have gone unseen, so the answer is `inconclusive`, not
+    `none`. Read as an RMS gain the same power is about 17 %, under 25 %: the reading that let `none` through."""
+    rng = np.random.default_rng(2)
+    ref = rng.lognormal(0.0, 0.5, 60)
+    new = ref * np.exp(rng.normal(-0.03, 0.85, 60))
+    d = log_ratio_differences(ref, new)
+    test = paired_block_test(d, np.zeros(60, int), 1)
+    results = _results(0.03, test.p_value, test.std_error, df=test.df, typical=1 - float(np.exp(-np.mean(d))))
+    results[3]["test"] = test
+    power = power_of(results, {3: ("coulomb_friction", "q2")}, 0.01, 10.0)
+    assert power.best["gain_typical"] < MIN_PRACTICAL_GAIN and not power.practical
+    # the gain the test sees with 80 % power, in mean squared error, from the shift -log(1 - g) of the mean log ratio
+    assert MIN_PRACTICAL_GAIN < power.detectable_gain < 1 - (1 - MIN_PRACTICAL_GAIN) ** 2
+    assert 1 - np.sqrt(1 - power.detectable_gain) < MIN_PRACTICAL_GAIN  # what the RMS reading would have said
+    assert not power.enough
+    assert decide(False, _structure(False, 0.0), False, power) == Verdict.INCONCLUSIVE
+    # With the power to see 25 % it is `none`: the same windows four times as many times over.
+    more = paired_block_test(np.tile(d, 4), np.zeros(240, int), 1)
+    results[3]["test"] = more
+    enough = power_of(results, {3: ("coulomb_friction", "q2")}, 0.01, 40.0)
+    assert enough.enough and decide(False, _structure(False, 0.0), False, enough) == Verdict.NONE
+
+
+def test_the_length_that_would_decide_gives_the_power_it_promises():
+    """`needed_s` checked by simulating the test it speaks of, not by its formula: windows at the needed length
+    whose log ratios shift by a 25 % gain in mean squared error, tested one-sided at the best candidate's level
+    (0.01 over 10 candidates) on as many batch means as the test had degrees of freedom (21: 20 degrees), are
+    detected in 80 % of 20,000 draws. Half the length (the RMS reading asked for a quarter) does not suffice."""
+    se, df, tested_s = 0.2, 20.0, 5.0
+    power = power_of(_results(0.03, 0.4, se, df=df), {3: ("coulomb_friction", "q2")}, 0.01, tested_s)
+    assert power.needed_s is not None and power.needed_s > tested_s
+    level, shift = 0.01 / 10, -np.log(1 - MIN_PRACTICAL_GAIN)
+    rng = np.random.default_rng(7)
+    batches = int(df) + 1
+
+    def detected(length_s):
+        # the overall mean's standard error shrinks as 1/sqrt(length); each of `batches` equal batch means has
+        # sqrt(batches) times it
+        sd = se * np.sqrt(tested_s / length_s) * np.sqrt(batches)
+        means = rng.normal(shift, sd, (20_000, batches))
+        t = means.mean(axis=1) / (means.std(axis=1, ddof=1) / np.sqrt(batches))
+        return float(np.mean(t > scipy.stats.t.isf(level, batches - 1)))
+
+    assert detected(power.needed_s) == pytest.approx(0.8, abs=0.015)  # the power `none` asks for
+    assert detected(power.needed_s / 2) < 0.5
 
 
 def test_structure_of_practical_size_or_a_diverging_nominal_is_unexplained():
