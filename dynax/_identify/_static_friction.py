@@ -93,15 +93,16 @@ fits `Dynamic` again with the rows of that joint over that rest at zero weight (
 and reads the rests again with the second fit; the count is reported. A rest that holds nothing
 (an arm hanging still) is an equation like any other and stays in; on records without rest under
 load nothing changes. (The `Power` and `Energy` rows are not affected: at rest the friction does no work.)
-The refit also leaves out each joint's rows at low speed (`slow_row_weights`): below `SLOW` (3) times the
-larger of the Coulomb law's smoothing speed and the speed's measured noise. A joint that sticks or
-slides slowly there has a friction the smoothed law does not follow (sticking at zero speed, the full
-level however slowly it slides), and the misfit, of one sign over a record, went into that record's
-force offset and from it into the level: on the stick-slip battery's sticking elbow the offsets the
-truth's own parameters need were +0.048 and -0.026 N m, +0.038 and -0.024 of them from rows under
-0.01 rad/s, and the breakaway read 0.562 for 0.5; without those rows 0.544 (0.875 to 0.851 for 0.8
-at the shoulder). A Coulomb and viscous law does not describe friction at low speed (stiction, the
-Stribeck curve, presliding: Armstrong-Hélouvry et al. 1994, sec. 2), so its rows there are not its data.
+The refit also leaves out each joint's rows at low speed (`slow_row_weights`): below `SLOW` (3) times
+the Coulomb law's smoothing speed (0.03 rad/s for the default 0.01), the speed as the equations read it.
+A joint that sticks or slides slowly there has a friction the smoothed law does not follow (sticking at
+zero speed, the full level however slowly it slides), and the misfit, of one sign over a record, went
+into that record's force offset and from it into the level: on the stick-slip battery's sticking elbow
+the offsets the truth's own parameters need were +0.048 and -0.026 N m, +0.038 and -0.024 of them from
+rows under 0.01 rad/s, and the breakaway read 0.562 for 0.5; without those rows 0.544 (0.875 to 0.851
+for 0.8 at the shoulder). A Coulomb and viscous law does not describe friction at low speed (stiction,
+the Stribeck curve, presliding: Armstrong-Hélouvry et al. 1994, sec. 2), so its rows there are not its
+data.
 
 ??? cite
 
@@ -129,7 +130,7 @@ WINDOW_S = 0.05  # averaging window of the held torque: short against a ramp to 
 LOADED = 3.0  # held torque over its single-sample noise that counts as load
 FLOOR = 0.01  # the least noise of a torque: 1 % of the joint's rms recorded torque (a sensor's resolution)
 RESOLUTION = 0.05  # a breakaway counts where the load rises by at most 5 % of it per sample (a slow rise)
-SLOW = 3.0  # a row is slow below 3 smoothing widths (the law within 0.5 % of its level) or 3 noise deviations
+SLOW = 3.0  # a row is slow below 3 widths of the Coulomb law's smoothing (tanh(3): within 0.5 % of its level)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -277,9 +278,10 @@ def rest_row_weights(records, settings, counts, rests, n_joints: int) -> np.ndar
 
 def slow_row_weights(keep, system, records, settings, counts, n_joints: int) -> np.ndarray | None:
     """`keep` (`rest_row_weights`'s, or `None`) with each joint's rows at low speed also at 0: where its speed,
-    as the equations read it (the record filtered by its `settings`), is below `SLOW` times the larger of the
-    Coulomb law's smoothing speed at the joint and the speed's measured noise (`settings["noise_std"]`):
-    there the law is not at its level, or the sign of the speed is not resolved. `None` where every row is kept."""
+    as the equations read it (the record filtered by its `settings`), is below `SLOW` times the smoothing
+    speed $v_s$ of its Coulomb law (`CoulombFriction.velocity_scale`): there the smoothed sign is short of the
+    level by more than 0.5 %, where a joint that sticks or slides slowly has a friction it does not follow.
+    A joint without Coulomb friction keeps its rows. `None` where every row is kept."""
     _, terms = split_terms(system)
     smoothing = {t.joint: float(t.velocity_scale) for t in terms if isinstance(t, CoulombFriction)}
     keep = np.ones(n_joints * sum(counts)) if keep is None else np.array(keep, dtype=float)
@@ -295,9 +297,8 @@ def slow_row_weights(keep, system, records, settings, counts, n_joints: int) -> 
             )
         samples = np.minimum(setting["trim"] + np.arange(count) * setting["decimate"], len(xs) - 1)
         speeds = np.asarray(positions_and_velocities(system, jnp.asarray(xs))[1])[samples]
-        noise = setting.get("noise_std") or {}
         for joint in range(n_joints):
-            band = SLOW * max(smoothing.get(joint, 0.0), noise.get(record.state_names[n_joints + joint], 0.0))
+            band = SLOW * smoothing.get(joint, 0.0)
             rows = joint * sum(counts) + offset[r] + np.arange(count)
             keep[rows[np.abs(speeds[:, joint]) < band]] = 0.0
     return None if keep.all() else keep
