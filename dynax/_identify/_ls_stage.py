@@ -79,12 +79,11 @@ def _offset_rows(system, method, counts):
     return groups
 
 
-def least_squares_stage(
-    system, trajectories, method, friction, weights, rcond, consistency, rests=None, sliding_only=False
-):
-    """The least-squares stage; `rests` (each record's `Rest` stretches, `Dynamic` only) gives a joint's
-    rows while it rests zero weight (`rest_row_weights`: no friction law of the speed explains them), and
-    with `sliding_only` also its rows at low speed (`slow_row_weights`)."""
+def least_squares_stage(system, trajectories, method, friction, weights, rcond, consistency, rests=None):
+    """The least-squares stage; `rests` (each record's `Rest` stretches, `Dynamic` only: the refit once a
+    static level is read) gives a joint's rows while it rests zero weight (`rest_row_weights`: no friction law
+    of the speed explains them), and its rows at low speed too (`slow_row_weights`: the Coulomb law's
+    smoothing, which such a joint's friction does not follow)."""
     given = (system, method, friction, weights, rcond)
     system, raw_a, raw_y, weights, names, n_samples, label, settings, counts, record_rows = stacked_equations(
         system, trajectories, method, friction, weights, rcond
@@ -94,8 +93,7 @@ def least_squares_stage(
     if rests is not None and counts:  # `counts`: rows stacked joint by joint (`Dynamic`)
         n_joints = raw_a.shape[0] // sum(counts)
         keep = rest_row_weights(trajectories, settings, counts, rests, n_joints)
-        if sliding_only:
-            keep = slow_row_weights(keep, system, trajectories, settings, counts, n_joints)
+        keep = slow_row_weights(keep, system, trajectories, settings, counts, n_joints)
     if method.joint_weighted and weights is None:
         # Each joint's residual variance from an ordinary fit of the equations that will be solved.
         plain = (raw_a, raw_y) if groups is None else without_offsets(raw_a, raw_y, keep, groups)[:2]

@@ -137,9 +137,7 @@ def least_squares_fit(method: AbstractLeastSquares, system, prepared: Prepared) 
         # with that fit. A rest that holds nothing is an equation like any other.
         loaded = _loaded_rests(static, rests, record_labels(fitted))
         try:
-            ls = least_squares_stage(
-                system, fitted, method, friction, weights, rcond, consistency, loaded, sliding_only=True
-            )
+            ls = least_squares_stage(system, fitted, method, friction, weights, rcond, consistency, loaded)
             static = _static_friction(ls, fitted, rests)
         except IdentifiabilityError:  # the records rest throughout: the rows at rest are all there is
             static = dataclasses.replace(
