@@ -58,7 +58,7 @@ positions, the level three standard errors from zero, and the load rose through 
 battery's two breakaways read 0.7995 (0.8) and 0.5023 (0.5). The **level** is then the median
 breakaway at that joint (`kind = "breakaway"`); without one it is the largest held torque, reported as
 a lower bound (`kind = "lower_bound"`). The reading is as good as the model's gravity and force
-offsets: with the least-squares model, its gravity 5 to 9 % low on that arm, the same breakaways read 0.851
+offsets: with the least-squares model, its gravity 4 to 9 % low on that arm, the same breakaways read 0.851
 and 0.544 (the refit's rows at low speed left out, below).
 
 **In the refinement.** The output-error refinement fits the level with the other parameters, but
