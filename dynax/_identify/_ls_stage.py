@@ -20,7 +20,7 @@ from ._least_squares import IdentifiabilityError, least_squares
 from ._offsets import driven_joints, offset_groups, record_labels, record_offsets, RecordOffsets, without_offsets
 from ._record_friction import coulomb_columns, record_friction, RecordFriction
 from ._regressors import positions_and_velocities, split_terms, with_parameters
-from ._static_friction import rest_row_weights
+from ._static_friction import rest_row_weights, slow_row_weights
 
 
 def fitted_system(system, names, estimate):
@@ -80,8 +80,10 @@ def _offset_rows(system, method, counts):
 
 
 def least_squares_stage(system, trajectories, method, friction, weights, rcond, consistency, rests=None):
-    """The least-squares stage; `rests` (each record's `Rest` stretches, `Dynamic` only) gives a joint's
-    rows while it rests zero weight (`rest_row_weights`: no friction law of the speed explains them)."""
+    """The least-squares stage; `rests` (each record's `Rest` stretches, `Dynamic` only: the refit once a
+    static level is read) gives a joint's rows while it rests zero weight (`rest_row_weights`: no friction law
+    of the speed explains them), and its rows at low speed too (`slow_row_weights`: the Coulomb law's
+    smoothing, which such a joint's friction does not follow)."""
     given = (system, method, friction, weights, rcond)
     system, raw_a, raw_y, weights, names, n_samples, label, settings, counts, record_rows = stacked_equations(
         system, trajectories, method, friction, weights, rcond
@@ -91,6 +93,7 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
     if rests is not None and counts:  # `counts`: rows stacked joint by joint (`Dynamic`)
         n_joints = raw_a.shape[0] // sum(counts)
         keep = rest_row_weights(trajectories, settings, counts, rests, n_joints)
+        keep = slow_row_weights(keep, system, trajectories, settings, counts, n_joints)
     if method.joint_weighted and weights is None:
         # Each joint's residual variance from an ordinary fit of the equations that will be solved.
         plain = (raw_a, raw_y) if groups is None else without_offsets(raw_a, raw_y, keep, groups)[:2]

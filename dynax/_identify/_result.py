@@ -176,7 +176,7 @@ class Identification(eqx.Module):
     - `static_friction`: for two-link arms fitted by least squares, what the records show of friction
       at rest (`StaticFriction`): the stretches where a joint rests and the net torque it holds, the
       `Stiction` level of each joint that rests under load (which `system` then carries: a breakaway
-      torque, or a lower bound from the torques held), the dynamic rows at rest left out of the fit,
+      torque, or a lower bound from the torques held), the dynamic rows at rest or at low speed left out of the fit,
       and a note; with no rest under load, or a method that does not add it (`Dynamic()` by default;
       `Dynamic(static_friction=True)` does), no `Stiction` and a note saying why; `None` otherwise.
     - `jointly_determined`: the parameters of the returned estimate that the data determine mostly

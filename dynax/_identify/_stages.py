@@ -131,8 +131,10 @@ def least_squares_fit(method: AbstractLeastSquares, system, prepared: Prepared) 
     if static is not None and static.joints and not method.adds_static_friction:
         static = not_added(static)
     if static is not None and static.joints and method.refits_without_loaded_rests:
-        # Refit without the rows of the rests under load (no law of the speed explains a held torque), and
-        # read the rests again with that fit's gravity. A rest that holds nothing is an equation like any other.
+        # Refit without the rows of the rests under load (no law of the speed explains a held torque), nor
+        # those inside the Coulomb law's smoothing band (a joint that sticks there has a friction no law of
+        # the speed follows, and one record's sign of misfit goes into its offset), and read the rests again
+        # with that fit. A rest that holds nothing is an equation like any other.
         loaded = _loaded_rests(static, rests, record_labels(fitted))
         try:
             ls = least_squares_stage(system, fitted, method, friction, weights, rcond, consistency, loaded)
