@@ -418,17 +418,20 @@ def score_flights(report, like: Quadrotor, flights, steps=FLIGHT_STEPS, say=lamb
     predicts some group much worse one step ahead, `short_horizon_note` added to its notes. Flights too short for
     the longest step are left out; `report` as it is where none is long enough.
 
-    **Why a note and not a rule of the selection.** The note is kept out of the forward selection for three
-    reasons. It can be read only for an extended model with a world-frame form (`WorldFrameQuadrotor`): a motor lag
-    has internal states and is never scored, so a rule on it would judge some candidates and not others. It is
-    read once, after the selection, on the same held-out flights the paired test used, so a second criterion on
-    them would make the test's level no longer hold. And the gain a refitted term buys at the reference horizon is
-    real on those flights (on whole NanoBench flights `rotor_drag@q` at 341 1/s halves the 0.5 s attitude and
-    body-rate error); what the note questions is what the coefficient means, not whether the model predicts
-    better where it is judged. On the synthetic hidden-effect flights (`tests/quadrotor/test_diagnosis.py`: rotor
-    drag, body bias, motor lag, the effect-free control; the CLI's rotor drag) the physical terms that are named
-    leave the note out, so stopping such terms would name no more real effects there, and no fewer has not been
-    shown on real flights; the note tells the reader instead.
+    **Why a note and not a rule of the selection.** The forward selection does not act on it:
+
+    - it can be read only for an extended model with a world-frame form (`WorldFrameQuadrotor`): a motor lag has
+      internal states and is never scored, so a rule on it would judge some candidates and not others;
+    - it is read after the selection, on the held-out flights the paired test has already used: a second
+      criterion on them is outside the test's level;
+    - the gain the term buys at the reference horizon is real on those flights (on the NanoBench slices of
+      `experiments/nanobench_diagnosis.py`, `rotor_drag@q` and `@p` halve the 0.5 s attitude and body-rate
+      error); what the note questions is what the coefficient means, not whether the model predicts better
+      where it is judged;
+    - the hidden-effect flights cannot show that stopping such a term helps: there the named physical terms
+      (rotor drag, body bias; `tests/quadrotor/test_diagnosis.py`, the CLI's rotor drag) leave no note, the motor
+      lag cannot have one and the effect-free flights name nothing, so a stopping rule would change none of them.
+      Of the diagnoses run here it would change only NanoBench's, where it would drop both findings.
     """
     flights = [f for f in _as_list(flights, "flights") if len(f) > max(steps)]
     if not flights:
