@@ -124,7 +124,7 @@ def _flight_markdown(j: dict) -> list[str]:
         return []
     f = j["flight_error"]
     groups, steps = list(FLIGHT_UNITS), f["steps"]
-    seconds = " / ".join(f"{s * f['dt_s']:g}" for s in steps)
+    seconds = " / ".join(f"{s * f['dt_s']:.3g}" for s in steps)
     lines = [
         "## Held-out error per group",
         "",
