@@ -186,6 +186,7 @@ from ._diagnose._quadrotor import quadrotor_candidates as quadrotor_candidates
 from ._diagnose._quadrotor import (
     quadrotor_flight_errors as quadrotor_flight_errors,
 )
+from ._diagnose._quadrotor import score_flights as score_flights
 from ._diagnose._quadrotor import short_horizon_note as short_horizon_note
 from ._diagnose._quadrotor import thrust_parameters as thrust_parameters
 from ._diagnose._quadrotor import WorldFrameQuadrotor as WorldFrameQuadrotor
@@ -751,6 +752,7 @@ __all__ = [
     "rollout_screen",
     "rollouts_from_starts",
     "savitzky_golay",
+    "score_flights",
     "score_surrogate",
     "search_period",
     "segment_clustered_covariance",

@@ -5,8 +5,8 @@ on the circle, figure-eight, helix, linear-ramp and lissajous flights, and diagn
 star, trefoil and oval flights (`../shared/datasets/nanobench`), as `dynax diagnose quadrotor` does:
 held-out simulation error against horizon, screening of the multirotor causes (rotor drag, body
 bias, motor lag and gain per motor), the candidates' simulation-error fits, and the paired held-out
-test. Then scores the nominal and extended models per group (position, velocity, attitude, body rate)
-at h = 1, 10, 50 steps beside the constant-velocity baseline (`dynax.flight_error`).
+test, and the nominal and extended models' held-out scores per group (position, velocity, attitude, body
+rate) at h = 1, 10, 50 steps beside the constant-velocity baseline (the report's `flight_error`).
 
 Run: `python experiments/nanobench_diagnosis.py [--out DIR] [--max-terms N] [--min-samples N]`
 (default DIR `experiments/results/nanobench_diagnosis`). Writes `DIR/diagnosis.json` (findings with
@@ -31,8 +31,6 @@ from dynax.internal import write_json, write_report
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from nanobench_heldout import flights, TEST, TRAIN  # noqa: E402
-
-STEPS = (1, 10, 50)
 
 
 def middle(run, seconds):
@@ -68,7 +66,7 @@ def main():
         type=float,
         default=10.0,
         help="diagnose on this many seconds from the middle of each run (default 10; 0: whole runs); "
-        "the per-group scores are on the whole held-out runs",
+        "the diagnosis scores the same held-out stretches per group",
     )
     parser.add_argument("--no-discovery", action="store_true", help="no search beyond the vocabulary")
     parser.add_argument("--shortlist", type=int, default=8, help="candidates refitted by simulation error per round")
@@ -144,18 +142,12 @@ def main():
         horizons=dynax.Horizons(reference_s=args.reference_horizon or None),
         progress=say,
     )
-    import equinox as eqx
+    from dynax.internal import body_frame_records
 
-    from dynax.internal import body_frame_records, quadrotor_flight_errors, short_horizon_note
-
-    nominal = dynax.fit_quadrotor(quad, diag_train).model  # the diagnosis' nominal (its input scales)
-    say("scoring per group against the constant-velocity baseline ...")
-    errors = quadrotor_flight_errors(report, nominal, test, STEPS)
-    note = short_horizon_note(errors, [f"{f['cause']}@{f['where']}" for f in report.findings])
-    if note is not None:
-        report = eqx.tree_at(lambda r: r.notes, report, [*report.notes, note])
+    errors, note = report.flight_error.models, report.flight_error.note  # scored by the diagnosis
     j = report.to_json()
-    write_report(report, out / "report", body_frame_records(nominal, diag_test), write_json=write_json)
+    steps, dt = j["flight_error"]["steps"], j["flight_error"]["dt_s"]
+    write_report(report, out / "report", body_frame_records(quad, diag_test), write_json=write_json)
     table = {
         name: {
             "mae": e.table("mae"),
@@ -187,7 +179,7 @@ def main():
         "extended_terms": j["extended"]["terms"],
         "not_identifiable": [f"{c['cause']}@{c['where']}" for c in j["not_identifiable"]],
         "candidates": j["candidates"],
-        "steps": list(STEPS),
+        "steps": steps,
         "groups": table,
         "short_horizon_note": note,
         "seconds": time.perf_counter() - start,
@@ -206,7 +198,7 @@ def main():
         )
     lines += [
         "",
-        "MAE at h = " + " / ".join(map(str, STEPS)) + " steps (cumulative MAE over 1..50):",
+        "MAE at h = " + " / ".join(map(str, steps)) + f" steps (cumulative MAE over 1..{max(steps)}):",
         "",
         "| model | position [m] | velocity [m/s] | attitude [rad] | body rate [rad/s] |",
         "|---|---|---|---|---|",
@@ -230,7 +222,7 @@ def main():
     fig, axes = plt.subplots(1, 4, figsize=(14, 3.2))
     for ax, g in zip(axes, ("position", "velocity", "attitude", "body_rate")):
         for name, t in table.items():
-            ax.plot(np.asarray(STEPS) * 0.01, t["mae"][g], "o-", label=name)
+            ax.plot(np.asarray(steps) * dt, t["mae"][g], "o-", label=name)
         ax.set_title(g)
         ax.set_xlabel("horizon [s]")
         ax.set_yscale("log")

@@ -278,4 +278,9 @@ def summary(report) -> str:
             + ", ".join(f"{c['cause']}@{c['where']}" for c in j["not_proposed"])
             + "."
         )
+    flights = getattr(report, "flight_error", None)
+    if flights is not None:  # a flight diagnosis: the held-out scores per group, and what they note
+        lines.append(flights.summary())
+        if flights.note is not None:
+            lines.append(f"Note: {flights.note}")
     return "\n".join(lines)

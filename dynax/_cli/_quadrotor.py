@@ -183,23 +183,16 @@ def run_evaluate(args, system) -> int:
 def run_diagnose(args) -> int:
     """The quadrotor branch of `dynax diagnose`: flights loaded as by `dynax fit quadrotor` (ground segments
     and glitches left out, noted), the diagnosis of the rigid body (`--nominal MODEL.json`: a fitted quadrotor
-    model, trusted with `--mode known`), the report and the per-group scores beside constant velocity."""
+    model, trusted with `--mode known`), the report and its per-group scores beside constant velocity
+    (`Report.flight_error`, also written as `flight_error.json`)."""
     import json
     import pathlib
     import sys
     import warnings
 
-    import equinox as eqx
-
     from .._data import DataWarning
     from .._diagnose import diagnose, Horizons, Known, Refit, Selection, write_report
-    from .._diagnose._quadrotor import (
-        body_frame_records,
-        quadrotor_flight_errors,
-        QUADROTOR_HORIZONS_S,
-        short_horizon_note,
-        thrust_parameters,
-    )
+    from .._diagnose._quadrotor import body_frame_records, QUADROTOR_HORIZONS_S, thrust_parameters
     from .._diagnose._records import holdout_split
     from .._identify._vehicle._quadrotor import quadrotor_from_json
     from .._model._quadrotor import Quadrotor
@@ -260,25 +253,11 @@ def run_diagnose(args) -> int:
             ),
             progress=say,
         )
-        held_out = validation if validation is not None else [holdout_split(t)[1] for t in train]
-        say("scoring the held-out flights per group, 1, 10 and 50 steps ahead from every start ...")
-        errors = quadrotor_flight_errors(report, system, held_out, (1, 10, 50))
-        note = short_horizon_note(errors, [f"{f['cause']}@{f['where']}" for f in report.findings])
-        if note is not None:  # the report says it too, not only the terminal
-            report = eqx.tree_at(lambda r: r.notes, report, [*report.notes, note])
+    held_out = validation if validation is not None else [holdout_split(t)[1] for t in train]
     with staged_directory(args.out) as stage:
         write_report(report, stage, body_frame_records(system, held_out), write_json=write_json)
-        write_json(
-            stage / "flight_error.json",
-            {
-                "steps": [1, 10, 50],
-                "dt_s": errors["constant velocity"].dt,
-                "models": {name: e.scores(("mae", "rmse")) for name, e in errors.items()},
-            },
-        )
-    print(summary(report))
-    print("held-out error per group:")
-    for name, e in errors.items():
-        print("\n".join("  " + line for line in e.summary(name, ("mae",)).splitlines()))
+        if report.flight_error is not None:
+            write_json(stage / "flight_error.json", report.flight_error.to_json())
+    print(summary(report))  # with the per-group scores and their note
     print(f"wrote {args.out}/report.json, report.md, flight_error.json and figures", file=sys.stdout)
     return 0

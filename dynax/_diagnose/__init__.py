@@ -23,6 +23,9 @@ from ._result import (
     DataSummary as DataSummary,
 )
 from ._result import (
+    FlightScores as FlightScores,
+)
+from ._result import (
     ModelSummary as ModelSummary,
 )
 from ._result import (

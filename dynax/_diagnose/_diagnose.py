@@ -361,7 +361,9 @@ def diagnose(
       candidate batch: `True` / `False` force it on / off, `None` (default) draws it when stderr is a
       terminal (see `dynax.internal.progress_mode`; the CLI's `--quiet` silences it).
 
-    **Returns:** a `Report`.
+    **Returns:** a `Report`. For a `Quadrotor` it also scores the held-out flights per group (position, velocity,
+    attitude, body rate) at 1, 10 and 50 steps, nominal and extended beside constant velocity (`Report.flight_error`),
+    and notes an extended model that predicts a group much worse one step ahead (`dynax.internal.score_flights`).
 
     ??? cite
 
@@ -383,7 +385,9 @@ def diagnose(
         if framed is not None and framed.through is not None:
             problem.nominal_through = framed.through(problem.names)
         report = diagnose_problem(problem, mode, train, validation, say)
-    return report if framed is None else framed.finish(report)
+        if framed is not None:  # the quadrotor's names, and its held-out flights scored per group
+            report = framed.finish(report, say)
+    return report
 
 
 def diagnose_problem(problem: Problem, mode: Refit | Known, train, validation, say) -> Report:

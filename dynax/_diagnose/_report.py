@@ -25,7 +25,7 @@ def report_markdown(report) -> str:
             f"extended model ({', '.join(j['extended']['terms'])}).",
             "",
         ]
-    lines += _data_markdown(j) + _error_markdown(j) + _validation_markdown(j)
+    lines += _data_markdown(j) + _error_markdown(j) + _flight_markdown(j) + _validation_markdown(j)
     lines += [
         "![measured against simulated](measured_vs_simulated.png)",
         "",
@@ -114,6 +114,32 @@ def _error_markdown(j: dict) -> list[str]:
         "",
     ]
     return lines
+
+
+def _flight_markdown(j: dict) -> list[str]:
+    """A flight diagnosis' held-out MAE per group beside constant velocity (`flight_error`), where there is one."""
+    from .._simulate import FLIGHT_UNITS
+
+    if "flight_error" not in j:
+        return []
+    f = j["flight_error"]
+    groups, steps = list(FLIGHT_UNITS), f["steps"]
+    seconds = " / ".join(f"{s * f['dt_s']:.3g}" for s in steps)
+    lines = [
+        "## Held-out error per group",
+        "",
+        f"MAE of the open-loop prediction from every held-out sample at h = {' / '.join(map(str, steps))} steps "
+        f"({seconds} s), the cumulative MAE over 1..{max(steps)} in brackets:",
+        "",
+        "| model | " + " | ".join(f"{g} [{FLIGHT_UNITS[g]}]" for g in groups) + " |",
+        "|---|" + "---|" * len(groups),
+    ]
+    for name, m in f["models"].items():
+        cells = [" / ".join(f"{v:.4g}" for v in m["mae"][g]) + f" ({m['cumulative_mae'][g]:.4g})" for g in groups]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    if f["note"]:
+        lines += ["", "One step ahead the extended model predicts some group worse than the nominal: see the notes."]
+    return lines + [""]
 
 
 def _causes_markdown(j: dict) -> list[str]:

@@ -149,6 +149,37 @@ def structure_json(s: Structure) -> dict:
     }
 
 
+class FlightScores(eqx.Module):
+    """A flight diagnosis' held-out scores per state group beside constant velocity, and what they note.
+
+    **Fields:** `models`: `{name: SimulationError}` of `dynax.flight_error` (position, velocity, attitude and body
+    rate; MAE and RMSE at each step, the cumulative MAE) for `constant velocity`, `nominal` and, where it has a
+    world-frame form, `extended`; `note`: the short-horizon note (`dynax.internal.short_horizon_note`: the extended
+    model predicts a group much worse than the nominal one step ahead), or `None`.
+    """
+
+    models: dict[str, SimulationError]
+    note: str | None = None
+
+    def to_json(self) -> dict:
+        """`report.json`'s `flight_error` (and the CLI's `flight_error.json`): `steps`, `dt_s`, the `models`' MAE
+        and RMSE per group (`SimulationError.scores`), and the `note` (`null` where there is none)."""
+        first = next(iter(self.models.values()))
+        return {
+            "steps": list(first.steps or ()),
+            "dt_s": first.dt,
+            "models": {name: e.scores(("mae", "rmse")) for name, e in self.models.items()},
+            "note": self.note,
+        }
+
+    def summary(self, metrics: tuple[str, ...] = ("mae",)) -> str:
+        """The scores as lines of text for a person, one block per model (`SimulationError.summary`)."""
+        lines = ["held-out error per group:"]
+        for name, e in self.models.items():
+            lines += ["  " + line for line in e.summary(name, metrics).splitlines()]
+        return "\n".join(lines)
+
+
 class Report(eqx.Module):
     """The result of `diagnose`. `to_json()` is the contract's `report.json`; `to_markdown()` is for a person.
 
@@ -165,7 +196,9 @@ class Report(eqx.Module):
     (held-out error per run), `test` (the significance test, and with verdict `none` or `inconclusive`
     the gain it could have detected, the best candidate and the held-out length that would decide), `discovery`, the
     fitted models `nominal_model` and `extended_model`, and `rounds` (each round of the forward selection: every
-    refitted candidate's held-out gains, p, and `selected`, `passed` or `stopped` with the rules that stopped it).
+    refitted candidate's held-out gains, p, and `selected`, `passed` or `stopped` with the rules that stopped it);
+    for a quadrotor `flight_error` (`FlightScores`: the held-out scores per group of the nominal and extended models
+    and of constant velocity, and the short-horizon note, which `notes` carries too), else `None`.
     """
 
     system: str
@@ -189,6 +222,7 @@ class Report(eqx.Module):
     discovery: dict = eqx.field(default_factory=dict)
     rounds: list = eqx.field(default_factory=list)
     not_proposed: list = eqx.field(default_factory=list)
+    flight_error: FlightScores | None = None
 
     def to_json(self) -> dict:
         """The contract's `report.json` (section 3), with extra keys after the contract's."""
@@ -214,6 +248,7 @@ class Report(eqx.Module):
             "test": self.test,
             **({"discovery": self.discovery} if self.discovery else {}),
             "rounds": self.rounds,
+            **({"flight_error": self.flight_error.to_json()} if self.flight_error is not None else {}),
         }
 
     def to_markdown(self) -> str:

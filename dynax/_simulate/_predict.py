@@ -187,30 +187,45 @@ def flight_error(model, flights, steps=(1, 10, 50)) -> SimulationError:
     `rmse_per_state` of shape `(step, group)` (`inf` where a rollout diverged), `cumulative_mae`,
     `n_windows` the start samples scored and `diverged_fraction` the share whose rollout left the
     finite range by the longest horizon. Its `rmse` is `None`: the groups have different units.
+
+    Each start is rolled out as `predict_ahead` rolls it out (its record's substeps). The runs that share a
+    sample interval, a dtype and substeps are joined into one array and their starts scored in chunks of at
+    most `_CHUNK` (windows never cross from one run into the next): one compiled program per model, whatever
+    the number and lengths of the runs, and memory bounded by a chunk.
     """
     steps = _check_steps(steps)
     horizon = max(steps)
     flights = [flights] if isinstance(flights, Trajectory) else list(flights)
-    abs_sum = sq_sum = None
-    n = diverged = 0
-    dt = None
+    runs: dict[tuple, list[Trajectory]] = {}
     for f in flights:
         if len(f) <= horizon:
             continue
-        predicted = predict_ahead(model, f, range(1, horizon + 1))
-        k = predicted.shape[0]
-        measured = jnp.stack([f.xs[h : h + k] for h in range(1, horizon + 1)], axis=1)
-        err = group_errors(predicted, measured)  # (starts, horizon, group)
-        finite = jnp.all(jnp.isfinite(err), axis=(1, 2))
-        err = jnp.where(finite[:, None, None], err, jnp.inf)
-        a, s = np.asarray(jnp.sum(err, axis=0), float), np.asarray(jnp.sum(err**2, axis=0), float)
-        abs_sum = a if abs_sum is None else abs_sum + a
-        sq_sum = s if sq_sum is None else sq_sum + s
-        n += k
-        diverged += int(jnp.sum(~finite))
-        dt = f.dt if dt is None else dt
-    if n == 0 or dt is None:
+        if not f.is_uniform:
+            raise UsageError("predict_ahead: the trajectory must be uniformly sampled; resample it first")
+        # (the intervals to 12 digits: the median steps of runs on one grid can differ in their last bits)
+        runs.setdefault((float(f"{f.dt:.12g}"), f.xs.dtype, stable_substeps(model, f)), []).append(f)
+    if not runs:
         raise UsageError(f"flight_error: no record is longer than the horizon of {horizon} samples")
+    abs_sum = np.zeros((horizon, len(FLIGHT_GROUPS)))
+    sq_sum = np.zeros((horizon, len(FLIGHT_GROUPS)))
+    n = diverged = 0
+    for (dt, dtype, substeps), group in runs.items():
+        xs = jnp.concatenate([f.xs for f in group])
+        us = jnp.concatenate([f.us for f in group]).astype(dtype)
+        offsets = np.cumsum([0] + [len(f) for f in group])[:-1]
+        starts = np.concatenate([o + np.arange(len(f) - horizon) for o, f in zip(offsets, group)])
+        cast = jax.tree.map(lambda a: a.astype(dtype) if eqx.is_inexact_array(a) else a, model)
+        size = min(_CHUNK, len(starts))  # every chunk this size (the last one padded): one compiled program
+        for c in range(0, len(starts), size):
+            chunk = starts[c : c + size]
+            padded = np.concatenate([chunk, np.full(size - len(chunk), chunk[-1])])
+            valid = np.arange(size) < len(chunk)
+            a, s, d = _error_sums(cast, xs, us, jnp.asarray(dt, dtype), jnp.asarray(padded), valid, horizon, substeps)
+            abs_sum += np.asarray(a, float)
+            sq_sum += np.asarray(s, float)
+            diverged += int(d)
+        n += len(starts)
+    dt = float(next(f for f in flights if len(f) > horizon).dt)
     mae_all, rmse_all = abs_sum / n, np.sqrt(sq_sum / n)  # (horizon, group)
     index = np.asarray(steps) - 1
     return SimulationError(
@@ -223,4 +238,24 @@ def flight_error(model, flights, steps=(1, 10, 50)) -> SimulationError:
         dt=dt,
         mae_per_state=jnp.asarray(mae_all[index]),
         cumulative_mae=jnp.asarray(mae_all.mean(axis=0)),
+    )
+
+
+_CHUNK = 2048  # starts per call of `_error_sums` in `flight_error`: a chunk x horizon x 13 rollout in memory
+
+
+@eqx.filter_jit
+def _error_sums(system, xs, us, dt, starts, valid, horizon: int, substeps: int):
+    """Over the `valid` ones of `starts`, the sums of the per-group errors and of their squares at each step
+    1..`horizon` (`inf` where a rollout left the finite range), and the number of such rollouts."""
+    lags = jnp.arange(1, horizon + 1)
+    predicted = _predict(system, xs, us, dt, starts, lags, horizon, substeps)
+    err = group_errors(predicted, xs[starts[:, None] + lags[None, :]])  # (starts, horizon, group)
+    finite = jnp.all(jnp.isfinite(err), axis=(1, 2))
+    err = jnp.where(finite[:, None, None], err, jnp.inf)
+    kept = valid[:, None, None]
+    return (
+        jnp.sum(jnp.where(kept, err, 0.0), axis=0),
+        jnp.sum(jnp.where(kept, err**2, 0.0), axis=0),
+        jnp.sum(valid & ~finite),
     )

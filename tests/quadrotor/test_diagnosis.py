@@ -37,6 +37,9 @@ def _assert_named_first(j, cause, places):
     assert j["gain"] > 0.2 and first["p_value"] < 0.01
     h = j["nominal"]["sim_error"]["horizons_s"].index(j["reference_horizon_s"])
     assert j["extended"]["sim_error"]["rmse"][h] < j["nominal"]["sim_error"]["rmse"][h]
+    # A physical effect helps at every time scale: the report scores the held-out flights per group and has no
+    # note that the named term predicts some group worse one step ahead.
+    assert set(j["flight_error"]["models"]) >= {"constant velocity", "nominal"} and j["flight_error"]["note"] is None
     return first
 
 
@@ -153,8 +156,11 @@ def test_cli_diagnose_quadrotor_names_rotor_drag(tmp_path, capsys):
     assert code == 0
     j = json.loads((out / "report.json").read_text())
     assert j["system"] == "quadrotor" and j["findings"][0]["cause"] == "rotor_drag"
-    groups = json.loads((out / "flight_error.json").read_text())["models"]
+    scores = json.loads((out / "flight_error.json").read_text())
+    assert scores == j["flight_error"]  # the report's scores, written as they are
+    groups = scores["models"]
     assert groups["extended"]["mae"]["velocity"][-1] < groups["nominal"]["mae"]["velocity"][-1]
     # A physical drag helps at every time scale: no note that the term spoils the next sample.
-    assert not any(note.startswith("One step ahead") for note in j["notes"])
-    assert "rotor_drag" in capsys.readouterr().out
+    assert scores["note"] is None and not any(note.startswith("One step ahead") for note in j["notes"])
+    printed = capsys.readouterr().out
+    assert "rotor_drag" in printed and "held-out error per group" in printed

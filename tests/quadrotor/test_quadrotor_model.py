@@ -11,7 +11,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import dynax
-from dynax.internal import short_horizon_note, stable_substeps
+from dynax.internal import body_frame_records, score_flights, stable_substeps, write_json, write_report
 
 # A Crazyflie-sized X quadrotor: thrust per motor a m^2 + b m with m in PWM counts (hover near 40000).
 MASS, GRAVITY = 0.030, 9.81
@@ -224,21 +224,68 @@ def test_predict_ahead_resolves_a_mode_faster_than_the_sample_rate(fitted, fligh
         np.testing.assert_allclose(predicted[i, 1], state, rtol=0, atol=1e-3)
 
 
-def test_a_term_that_spoils_the_next_sample_is_noted(fitted, flights):
-    # The flights are a rigid body without rate damping: a damping of 341 1/s (what the joint refit gave on whole
-    # NanoBench flights) pulls every predicted rate towards zero within a sample, a physical 2 1/s barely moves it.
-    def errors(damping):
-        return {
-            "constant velocity": dynax.flight_error(dynax.ConstantVelocity(), flights, (1, 10)),
-            "nominal": dynax.flight_error(fitted.model, flights, (1, 10)),
-            "extended": dynax.flight_error(_RateDamped(fitted.model, damping), flights, (1, 10)),
-        }
+@pytest.fixture(scope="module")
+def diagnosed(fitted, flights):
+    """`dynax.diagnose` of the fitted rigid body, trusted as given, on two of the rigid-body flights held out; rate
+    damping on `p` its one candidate (what the refit on whole NanoBench flights names on `q`)."""
+    return dynax.diagnose(
+        fitted.model,
+        flights[:2],
+        flights[2:],
+        mode=dynax.Known(),
+        candidates=(dynax.RotorDrag(3),),
+        selection=dynax.Selection(max_terms=1, discovery=False, cross_fit=False),
+        progress=False,
+    )
 
-    note = short_horizon_note(errors(341.0), ["rotor_drag@p"])
+
+def _with_rate_damping(report, fitted, flights, damping):
+    """`report` with a rotor drag of `damping` on `p` as its finding, its held-out flights scored again as `diagnose`
+    scores them (`score_flights`)."""
+    import dataclasses
+
+    extended = dynax.Extended(report.nominal_model, (dynax.RotorDrag(3, damping),))
+    finding = {  # as the report lists a finding (its test's numbers are not what is scored here)
+        "cause": "rotor_drag",
+        "where": "p",
+        "parameter": "drag_p",
+        "coefficient": damping,
+        "std_error": float("nan"),
+        "gain": float("nan"),
+        "p_value": float("nan"),
+        "confidence": "not tested",
+        "look_alikes": [],
+    }
+    named = dataclasses.replace(report, extended_model=extended, findings=[finding], flight_error=None)
+    return score_flights(named, fitted.model, flights[2:])
+
+
+def test_a_term_that_spoils_the_next_sample_is_noted_in_the_report(diagnosed, fitted, flights, tmp_path):
+    # The flights are a rigid body without rate damping. The report scores its held-out flights per group beside
+    # constant velocity. A damping of 341 1/s (what the joint refit gave on whole NanoBench flights) pulls every
+    # predicted rate towards zero within a sample, and the report notes it; a physical 2 1/s barely moves it.
+    j = diagnosed.to_json()
+    assert set(j["flight_error"]["models"]) == {"constant velocity", "nominal", "extended"}
+    assert j["flight_error"]["steps"] == [1, 10, 50] and j["flight_error"]["note"] is None
+    groups = j["flight_error"]["models"]
+    assert groups["nominal"]["mae"]["position"][-1] < groups["constant velocity"]["mae"]["position"][-1]
+
+    stiff = _with_rate_damping(diagnosed, fitted, flights, 341.0)
+    note = stiff.flight_error.note
     assert note is not None and "body_rate" in note and "rotor_drag@p" in note
     # (the position's first step moves by a micrometre against a sample's 0.1 mm of constant-velocity error)
     assert "position" not in note
-    assert short_horizon_note(errors(2.0), ["rotor_drag@p"]) is None
+    assert note in stiff.notes
+    gentle = _with_rate_damping(diagnosed, fitted, flights, 2.0)
+    assert gentle.flight_error.note is None and gentle.notes == diagnosed.notes
+
+    # One source: report.json, report.md and the CLI's summary carry the report's note as it is.
+    from dynax._cli._diagnose import summary  # private: the terminal summary `dynax diagnose` prints
+
+    write_report(stiff, tmp_path, body_frame_records(fitted.model, flights[2:]), write_json=write_json)
+    written = json.loads((tmp_path / "report.json").read_text())
+    assert written["flight_error"]["note"] == note and note in written["notes"]
+    assert note in (tmp_path / "report.md").read_text() and note in summary(stiff)
 
 
 def test_predict_ahead_in_float32(fitted, flights):
