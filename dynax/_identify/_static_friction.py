@@ -104,6 +104,7 @@ load nothing changes. (The `Power` and `Energy` rows are not affected: at rest t
 import dataclasses
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -113,7 +114,7 @@ from .._model._extensions import Extended
 from .._model._extensions._stiction import LEAST_STICK_BAND, Stiction
 from .._model._extensions._terms import AbstractJointTerm
 from ._equations import uniformly_sampled
-from ._regressors import dynamic_regressor, generalised_force, split_terms
+from ._regressors import dynamic_regressor, row_dot, split_terms
 
 WINDOW_S = 0.05  # averaging window of the held torque: short against a ramp to breakaway, ten samples or more
 LOADED = 3.0  # held torque over its single-sample noise that counts as load
@@ -263,6 +264,16 @@ def rest_row_weights(records, settings, counts, rests, n_joints: int) -> np.ndar
     return None if keep.all() else keep
 
 
+def applied_force(system, us) -> np.ndarray:
+    """`generalised_force` (`B u`, `(time, joints)`) on the host, in float: the same products summed in the same
+    order (`row_dot`), each a rounded IEEE operation in numpy as in JAX, so the same numbers; without compiling
+    each small array operation of JAX's for the record's length."""
+    base, _ = split_terms(system)
+    us = np.asarray(us)
+    b = np.asarray(base.input_matrix()).astype(us.dtype)
+    return np.stack([row_dot(us, b[j]) for j in range(b.shape[0])], axis=-1).astype(float)
+
+
 def _friction_columns(system, names, joint):
     """The columns of friction terms at `joint` (their law of the speed is what rest contradicts)."""
     base, terms = split_terms(system)
@@ -299,7 +310,7 @@ def held_torques(system, names, estimate, covariance, record: Trajectory, force:
     xs = np.array(record.xs, dtype=float)
     xs[:, n:] = 0.0
     dtype = record.xs.dtype
-    regressor = dynamic_regressor(system, jnp.asarray(xs, dtype), jnp.zeros((len(xs), n), dtype))
+    regressor = dynamic_regressor(system, jnp.asarray(xs, dtype), jax.device_put(np.zeros((len(xs), n), dtype)))
     regressor = np.asarray(regressor, dtype=float)
     estimate = np.asarray(estimate, dtype=float)
     net = np.empty((len(rows), n))
@@ -410,7 +421,7 @@ def _leaves(q: np.ndarray, a: int, b: int, n: int) -> int:
 def rests_under_load(system, names, estimate, covariance, records, rests, labels) -> tuple[RestUnderLoad, ...]:
     """Each rest stretch with the net torque it holds (see the module)."""
     out = []
-    record_forces = [np.asarray(generalised_force(system, r.us), dtype=float) for r in records]
+    record_forces = [applied_force(system, r.us) for r in records]
     floor = FLOOR * np.sqrt(np.mean(np.concatenate(record_forces) ** 2, axis=0))  # per joint
     n_joints = len(split_terms(system)[0].joints)
     # each record at its median interval, and where each of its joints leaves each rest
@@ -438,7 +449,7 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
                 read[a:b] = True
         rows = np.flatnonzero(read)
         if record is not original:  # resampled
-            forces_of = np.asarray(generalised_force(system, record.us), dtype=float)
+            forces_of = applied_force(system, record.us)
         net, std = np.zeros((len(ts), n_joints)), np.zeros((len(ts), n_joints))
         if rows.size:
             net[rows], std[rows] = held_torques(system, names, estimate, covariance, record, forces_of, rows)
