@@ -145,7 +145,7 @@ def make_windows(trajectories, n_steps: int, stride: int, *, history_s: float = 
             starts.append((r, k))
     if not ts:
         raise ValueError(f"the records are shorter than one window of {n_steps} samples")
-    stack = lambda a: jnp.asarray(np.stack(a))  # noqa: E731
+    stack = lambda a: jax.device_put(np.stack(a))  # noqa: E731  # `jnp.asarray` would compile a copy per shape
     xs_ = stack(xs)
     return Windows(
         stack(ts),
