@@ -4,7 +4,7 @@ The workload is `benchmarks/diagnose.py`'s (a 40 s, 100 Hz acrobot file with Cou
 the elbow; the full candidate library; the last 30 % held out), a first call and a call on another file
 of the same size. For each call: its CPU time, the CPU time inside the cross-fitting (`_cross_fit`), and
 within it the fold fits (`fit_configurations`) and the rollouts of the cross-fitted windows
-(`validate_configurations`), with how many of the simulated windows each fold keeps.
+(`validate_configurations`), with how many of the windows it simulates each fold keeps.
 
     python benchmarks/crossfit_profile.py
 
@@ -44,6 +44,7 @@ def records():
 def main():
     seconds: dict[str, float] = {}
     kept: list[float] = []
+    simulated: list[int] = []  # windows each fold's rollout simulates
     fit, validate, cross_fit, fold_of = (
         forward.fit_configurations,
         forward.validate_configurations,
@@ -54,6 +55,8 @@ def main():
 
     def timed(name, f):
         def call(*args, **kwargs):
+            if inside[0] and name == "validate_configurations":
+                simulated.append(args[1].ts.shape[0])
             start = time.process_time()
             out = jax.block_until_ready(f(*args, **kwargs))
             key = f"{name} ({'cross-fit' if inside[0] else 'batch'})"
@@ -63,13 +66,14 @@ def main():
         return call
 
     def timed_cross_fit(problem, yard, *args, **kwargs):
-        if yard.cv_windows is not None:
-            folds = fold_of(problem.folds, yard.cv_windows)
-            kept.extend(float(np.mean(folds == i)) for i in range(len(problem.folds)))
         start, inside[0] = time.process_time(), True
+        simulated.clear()
         try:
             return cross_fit(problem, yard, *args, **kwargs)
         finally:
+            if yard.cv_windows is not None:
+                folds = fold_of(problem.folds, yard.cv_windows)
+                kept.extend(float(np.sum(folds == i)) / n for i, n in enumerate(simulated))
             inside[0] = False
             seconds["cross-fit, all"] = seconds.get("cross-fit, all", 0.0) + time.process_time() - start
 

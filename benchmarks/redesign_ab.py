@@ -62,6 +62,7 @@ NOT_RUN = {
     "rollout_profile": "prints only (no JSON); its programs are rollout.py's",
     "warm_profile": "prints only (no JSON); its workload is identify.py's",
     "crossfit_profile": "prints only (no JSON); its workload is diagnose.py's",
+    "same_results": "compares results, times nothing; not in the tree before",
     "scaling": "several jax.distributed processes: its scaling needs an idle machine; PGPE itself is in pgpe",
 }
 # Times a script prints but does not write (levenberg_marquardt.py writes its JSON only beside optimistix's run).

@@ -114,7 +114,7 @@ def savitzky_golay(
     import scipy.signal  # lazily: keeps `import dynax` light
 
     out = scipy.signal.savgol_filter(np.asarray(ys), window, order, deriv=deriv, delta=dt, axis=0, mode="interp")
-    return jnp.asarray(out)
+    return jax.device_put(out)  # not `jnp.asarray`: that compiles a copy for every new shape
 
 
 def butterworth_filtfilt(

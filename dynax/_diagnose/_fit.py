@@ -120,6 +120,13 @@ class Windows(eqx.Module):
         near = (starts[:, 0] == record) & (starts[:, 1] + n_steps >= start) & (starts[:, 1] < stop)
         return eqx.tree_at(lambda w: w.weights, self, jnp.asarray(~near, self.weights.dtype) * self.weights)
 
+    def take(self, index) -> "Windows":
+        """The windows at `index` (host integers), in that order; gathered on the host, so no compiled gather."""
+        index = np.asarray(index)
+        return jax.tree.map(
+            lambda a: jax.device_put(np.asarray(a)[index]) if isinstance(a, jax.Array) else a[index], self
+        )
+
 
 def make_windows(trajectories, n_steps: int, stride: int, *, history_s: float = 0.5) -> Windows:
     """Cut records into windows of `n_steps + 1` samples every `stride` samples, with `history_s` of input history."""
@@ -138,7 +145,7 @@ def make_windows(trajectories, n_steps: int, stride: int, *, history_s: float = 
             starts.append((r, k))
     if not ts:
         raise ValueError(f"the records are shorter than one window of {n_steps} samples")
-    stack = lambda a: jnp.asarray(np.stack(a))  # noqa: E731
+    stack = lambda a: jax.device_put(np.stack(a))  # noqa: E731  # `jnp.asarray` would compile a copy per shape
     xs_ = stack(xs)
     return Windows(
         stack(ts),

@@ -145,7 +145,7 @@ def padded(ts, *samples) -> tuple:
     for a in samples:
         a = np.asarray(a)
         out.append(np.concatenate([a, np.repeat(a[-1:], extra, axis=0)]))
-    return tuple(jnp.asarray(a) for a in out)
+    return tuple(jax.device_put(a) for a in out)  # not `jnp.asarray`: that compiles a copy for every new shape
 
 
 def exact_delays(model, trajectory, interval: bool = False):

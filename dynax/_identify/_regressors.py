@@ -176,7 +176,6 @@ def generalised_force(
     return jnp.stack([row_dot(jnp.asarray(us), b[j]) for j in range(b.shape[0])], axis=-1)
 
 
-@eqx.filter_jit
 def dynamic_regressor(
     system: AbstractSystem,
     xs: Float[Array, "time n_states"],
@@ -202,6 +201,24 @@ def dynamic_regressor(
         M. Gautier and W. Khalil, "Direct calculation of minimum set of inertial parameters of
         serial robots", IEEE Transactions on Robotics and Automation 6(3), 1990.
     """
+    # One compiled program per shape, whoever calls: `filter_jit` keys its cache on how the arguments are spelled
+    # (`friction` always by position here) and on whether each array is weakly typed (a model made from Python
+    # floats has weak parameters, a fitted one strong). Where every array is of one dtype, weak or strong gives the
+    # same types throughout, so the same program.
+    return _dynamic_regressor(_strongly_typed(system, xs.dtype), xs, ddq, friction)
+
+
+def _strongly_typed(tree, dtype):
+    """`tree` with its weakly typed arrays of `dtype` strongly typed (through the host: no compiled conversion)."""
+
+    def strong(a):
+        return jax.device_put(np.asarray(a)) if isinstance(a, jax.Array) and a.weak_type and a.dtype == dtype else a
+
+    return jax.tree.map(strong, tree)
+
+
+@eqx.filter_jit
+def _dynamic_regressor(system, xs, ddq, friction):
     system = with_friction(system, friction)
     names = parameter_names(system, friction)
     theta0 = jnp.zeros(len(names), xs.dtype)

@@ -113,8 +113,10 @@ data.
 """
 
 import dataclasses
+from typing import cast
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -124,8 +126,9 @@ from .._data._trajectory import Trajectory
 from .._model._extensions import CoulombFriction, Extended
 from .._model._extensions._stiction import LEAST_STICK_BAND, Stiction
 from .._model._extensions._terms import AbstractJointTerm
+from .._model._system import AbstractManipulator, AbstractSystem
 from ._equations import uniformly_sampled
-from ._regressors import dynamic_regressor, generalised_force, positions_and_velocities, split_terms
+from ._regressors import dynamic_regressor, positions_and_velocities, split_terms
 
 WINDOW_S = 0.05  # averaging window of the held torque: short against a ramp to breakaway, ten samples or more
 LOADED = 3.0  # held torque over its single-sample noise that counts as load
@@ -305,6 +308,22 @@ def slow_row_weights(keep, system, records, settings, counts, n_joints: int) -> 
     return None if keep.all() else keep
 
 
+def applied_force(system: AbstractSystem, us) -> np.ndarray:
+    """`generalised_force` (`B u`, `(time, joints)`) on the host, in float: the same products summed in the same
+    order as its `row_dot`, each a rounded IEEE operation in numpy as in JAX, so the same numbers; without compiling
+    each small array operation of JAX's for the record's length."""
+    base = cast(AbstractManipulator, split_terms(system)[0])  # the linear models are manipulators
+    us = np.asarray(us)
+    b = np.asarray(base.input_matrix()).astype(us.dtype)
+    columns = []
+    for j in range(b.shape[0]):
+        out = us[:, 0] * b[j, 0]
+        for k in range(1, us.shape[-1]):
+            out = out + us[:, k] * b[j, k]
+        columns.append(out)
+    return np.stack(columns, axis=-1).astype(float)
+
+
 def _friction_columns(system, names, joint):
     """The columns of friction terms at `joint` (their law of the speed is what rest contradicts)."""
     base, terms = split_terms(system)
@@ -341,7 +360,7 @@ def held_torques(system, names, estimate, covariance, record: Trajectory, force:
     xs = np.array(record.xs, dtype=float)
     xs[:, n:] = 0.0
     dtype = record.xs.dtype
-    regressor = dynamic_regressor(system, jnp.asarray(xs, dtype), jnp.zeros((len(xs), n), dtype))
+    regressor = dynamic_regressor(system, jnp.asarray(xs, dtype), jax.device_put(np.zeros((len(xs), n), dtype)))
     regressor = np.asarray(regressor, dtype=float)
     estimate = np.asarray(estimate, dtype=float)
     net = np.empty((len(rows), n))
@@ -452,7 +471,7 @@ def _leaves(q: np.ndarray, a: int, b: int, n: int) -> int:
 def rests_under_load(system, names, estimate, covariance, records, rests, labels) -> tuple[RestUnderLoad, ...]:
     """Each rest stretch with the net torque it holds (see the module)."""
     out = []
-    record_forces = [np.asarray(generalised_force(system, r.us), dtype=float) for r in records]
+    record_forces = [applied_force(system, r.us) for r in records]
     floor = FLOOR * np.sqrt(np.mean(np.concatenate(record_forces) ** 2, axis=0))  # per joint
     n_joints = len(split_terms(system)[0].joints)
     # each record at its median interval, and where each of its joints leaves each rest
@@ -480,7 +499,7 @@ def rests_under_load(system, names, estimate, covariance, records, rests, labels
                 read[a:b] = True
         rows = np.flatnonzero(read)
         if record is not original:  # resampled
-            forces_of = np.asarray(generalised_force(system, record.us), dtype=float)
+            forces_of = applied_force(system, record.us)
         net, std = np.zeros((len(ts), n_joints)), np.zeros((len(ts), n_joints))
         if rows.size:
             net[rows], std[rows] = held_torques(system, names, estimate, covariance, record, forces_of, rows)
