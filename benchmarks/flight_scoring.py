@@ -48,7 +48,10 @@ def main():
     parser.add_argument("--drag-p", type=float, default=65.88, help="the extended model's rate damping on p [1/s]")
     parser.add_argument("--out", default="benchmarks/results")
     args = parser.parse_args()
-    cut = lambda runs: [middle(r, args.slice_s) if args.slice_s > 0 else r for r in runs if len(r) >= 1000]  # noqa: E731
+
+    def cut(runs):
+        return [middle(r, args.slice_s) if args.slice_s > 0 else r for r in runs if len(r) >= 1000]
+
     train, test = cut(flights(TRAIN)[0]), cut(flights(TEST)[0])
     quad = dynax.fit_quadrotor(dynax.Quadrotor.from_flights("nominal", train), train).model
     body = body_frame_system(quad, train[0].input_names)
