@@ -333,7 +333,7 @@ class WorldFrameQuadrotor(AbstractSystem):
         return jnp.concatenate([x[WORLD_VELOCITY], d[QUATERNION], dvel, d[BODY][3:]])
 
 
-def quadrotor_flight_errors(report, like: Quadrotor, flights, steps=(1, 10, 50)) -> dict:
+def quadrotor_flight_errors(report, like: Quadrotor, flights, steps=FLIGHT_STEPS) -> dict:
     """The held-out scores per group (`dynax.flight_error`) of the report's nominal and extended models
     and the constant-velocity baseline: `{name: SimulationError}`; the extended model only where it has a
     world-frame form (`WorldFrameQuadrotor`: no internal states; a dead time on the commands is scored as the

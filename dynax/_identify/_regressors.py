@@ -14,7 +14,7 @@ contract's names:
   $F = M \ddot q + F_v \dot q + F_c \operatorname{sign}(\dot q) + F_0$).
 """
 
-from typing import Literal
+from typing import cast, Literal, TypeVar
 
 import equinox as eqx
 import jax
@@ -26,7 +26,7 @@ from .._errors import UsageError
 from .._model._extensions import CoulombFriction, Extended, JointSpring, RotorInertia
 from .._model._extensions._terms import AbstractJointTerm
 from .._model._linear_in_parameters import least_squares_system
-from .._model._system import AbstractSystem
+from .._model._system import AbstractManipulator, AbstractSystem
 
 Friction = Literal["viscous", "coulomb"]
 
@@ -155,12 +155,16 @@ def positions_and_velocities(system, xs):
     return xs[..., :n], xs[..., n : 2 * n]
 
 
-def row_dot(a: Float[Array, "... n"], b: Float[Array, "... n"]) -> Float[Array, "..."]:
+_Rows = TypeVar("_Rows", Array, np.ndarray)
+
+
+def row_dot(a: _Rows, b: _Rows) -> _Rows:
     """`sum(a * b, axis=-1)` for a short last axis (joints, inputs), written out term by term.
 
     XLA's CPU backend reduces a minor axis of two or three entries far slower than it adds the
     terms: on 100,000 samples of two joints the work integrand took 2.8 ms as a `jnp.sum` and 0.2 ms
-    written out."""
+    written out. `a` and `b` of shape `(..., n)`, the result `(...)`: JAX arrays in, JAX out; numpy in, numpy
+    out (`applied_force`)."""
     out = a[..., 0] * b[..., 0]
     for k in range(1, a.shape[-1]):
         out = out + a[..., k] * b[..., k]
@@ -174,6 +178,16 @@ def generalised_force(
     base, _ = split_terms(system)
     b = base.input_matrix().astype(us.dtype)  # (joints, inputs); written out, not a batched dot
     return jnp.stack([row_dot(jnp.asarray(us), b[j]) for j in range(b.shape[0])], axis=-1)
+
+
+def applied_force(system: AbstractSystem, us) -> np.ndarray:
+    """`generalised_force` on the host, in float: `row_dot` on numpy arrays does the same products and sums in the
+    same order, each a rounded IEEE operation as in JAX, so the same numbers, without compiling each small JAX
+    operation for the record's length."""
+    base = cast(AbstractManipulator, split_terms(system)[0])  # the linear models are manipulators
+    us = np.asarray(us)
+    b = np.asarray(base.input_matrix()).astype(us.dtype)
+    return np.stack([row_dot(us, b[j]) for j in range(b.shape[0])], axis=-1).astype(float)
 
 
 def dynamic_regressor(

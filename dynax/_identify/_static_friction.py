@@ -113,7 +113,6 @@ data.
 """
 
 import dataclasses
-from typing import cast
 
 import equinox as eqx
 import jax
@@ -126,9 +125,8 @@ from .._data._trajectory import Trajectory
 from .._model._extensions import CoulombFriction, Extended
 from .._model._extensions._stiction import LEAST_STICK_BAND, Stiction
 from .._model._extensions._terms import AbstractJointTerm
-from .._model._system import AbstractManipulator, AbstractSystem
 from ._equations import uniformly_sampled
-from ._regressors import dynamic_regressor, positions_and_velocities, split_terms
+from ._regressors import applied_force, dynamic_regressor, positions_and_velocities, split_terms
 
 WINDOW_S = 0.05  # averaging window of the held torque: short against a ramp to breakaway, ten samples or more
 LOADED = 3.0  # held torque over its single-sample noise that counts as load
@@ -306,22 +304,6 @@ def slow_row_weights(keep, system, records, settings, counts, n_joints: int) -> 
             rows = joint * sum(counts) + offset[r] + np.arange(count)
             keep[rows[np.abs(speeds[:, joint]) < band]] = 0.0
     return None if keep.all() else keep
-
-
-def applied_force(system: AbstractSystem, us) -> np.ndarray:
-    """`generalised_force` (`B u`, `(time, joints)`) on the host, in float: the same products summed in the same
-    order as its `row_dot`, each a rounded IEEE operation in numpy as in JAX, so the same numbers; without compiling
-    each small array operation of JAX's for the record's length."""
-    base = cast(AbstractManipulator, split_terms(system)[0])  # the linear models are manipulators
-    us = np.asarray(us)
-    b = np.asarray(base.input_matrix()).astype(us.dtype)
-    columns = []
-    for j in range(b.shape[0]):
-        out = us[:, 0] * b[j, 0]
-        for k in range(1, us.shape[-1]):
-            out = out + us[:, k] * b[j, k]
-        columns.append(out)
-    return np.stack(columns, axis=-1).astype(float)
 
 
 def _friction_columns(system, names, joint):
