@@ -111,6 +111,12 @@ def _check_steps(steps) -> tuple[int, ...]:
     return steps
 
 
+def _check_uniform(trajectory: Trajectory, caller: str) -> None:
+    if not trajectory.is_uniform:
+        where = f" ({trajectory.source})" if trajectory.source else ""
+        raise UsageError(f"{caller}: the trajectory{where} must be uniformly sampled; resample it first")
+
+
 def predict_ahead(
     model, trajectory: Trajectory, steps=(1, 10, 50), substeps: int | None = None
 ) -> Float[Array, "starts steps n_states"]:
@@ -136,8 +142,7 @@ def predict_ahead(
     (the model's arrays are cast to it: `trajectory.astype(jnp.float32)` predicts in float32).
     """
     steps = _check_steps(steps)
-    if not trajectory.is_uniform:
-        raise UsageError("predict_ahead: the trajectory must be uniformly sampled; resample it first")
+    _check_uniform(trajectory, "predict_ahead")
     n = len(trajectory) - max(steps)
     if n < 1:
         raise UsageError(
@@ -200,8 +205,7 @@ def flight_error(model, flights, steps=(1, 10, 50)) -> SimulationError:
     for f in flights:
         if len(f) <= horizon:
             continue
-        if not f.is_uniform:
-            raise UsageError("predict_ahead: the trajectory must be uniformly sampled; resample it first")
+        _check_uniform(f, "flight_error")
         # (the intervals to 12 digits: the median steps of runs on one grid can differ in their last bits)
         runs.setdefault((float(f"{f.dt:.12g}"), f.xs.dtype, stable_substeps(model, f)), []).append(f)
     if not runs:

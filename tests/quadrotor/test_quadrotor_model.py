@@ -288,6 +288,25 @@ def test_a_term_that_spoils_the_next_sample_is_noted_in_the_report(diagnosed, fi
     assert note in (tmp_path / "report.md").read_text() and note in summary(stiff)
 
 
+def test_unevenly_sampled_flights_are_refused_by_name(fitted, flights):
+    # one sample dropped in the middle: no fixed-step rollout fits it, and each entry point says which it is
+    flight = flights[0]
+    keep = np.r_[0:40, 41 : len(flight)]
+    gappy = dynax.Trajectory(
+        flight.ts[keep],
+        flight.xs[keep],
+        flight.us[keep],
+        flight.state_names,
+        flight.input_names,
+        flight.system,
+        "gappy.csv",
+    )
+    with pytest.raises(dynax.UsageError, match=r"predict_ahead: the trajectory \(gappy.csv\) must be uniformly"):
+        dynax.predict_ahead(fitted.model, gappy, (1, 10))
+    with pytest.raises(dynax.UsageError, match=r"flight_error: the trajectory \(gappy.csv\) must be uniformly"):
+        dynax.flight_error(fitted.model, [flights[1], gappy], (1, 10))
+
+
 def test_predict_ahead_in_float32(fitted, flights):
     flight = flights[2]
     double = np.asarray(dynax.predict_ahead(fitted.model, flight, (1, 10)))
