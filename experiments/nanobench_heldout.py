@@ -78,15 +78,21 @@ def command_delay(option: str, train) -> int:
     return int(DELAYS[int(np.argmax(fit_r2[0, :, :2].mean(axis=-1)))])
 
 
-def delayed_commands(run, k: int):
-    """`run` with its motor commands applied `k` samples late (row i carries the commands of row i - k; the
-    first k rows are left out); `vbat` is left as it is."""
-    if k <= 0:
+def delayed_commands(run, k: int, first: int | None = None):
+    """`run` with its motor commands applied `k` samples late (row i carries the commands of row i - k) from row
+    `first` on (default k: the rows without commands that early are left out; a larger `first` lines up runs
+    delayed by different times on the same rows); `vbat` is left as it is."""
+    first = k if first is None else first
+    if first < k:
+        raise ValueError(f"delayed_commands: row {first} has no commands {k} samples earlier")
+    if first == 0:
         return run
-    us = np.asarray(run.us)[k:].copy()
+    us = np.asarray(run.us)[first:].copy()
     motors = [run.input_names.index(f"m{i}") for i in range(1, 5)]
-    us[:, motors] = np.asarray(run.us)[:-k, motors]
-    return dynax.Trajectory(run.ts[k:], run.xs[k:], us, run.state_names, run.input_names, run.system, run.source)
+    us[:, motors] = np.asarray(run.us)[first - k : len(run) - k, motors]
+    return dynax.Trajectory(
+        run.ts[first:], run.xs[first:], us, run.state_names, run.input_names, run.system, run.source
+    )
 
 
 def scores(error):
@@ -167,7 +173,9 @@ def main():
             flush=True,
         )
         file = f"{family}_{criterion.replace(' + ', '_')}.json"
-        dynax.save_model(solution.model, out / file, family=family, criterion=criterion)
+        dynax.save_model(
+            solution.model, out / file, family=family, criterion=criterion, command_delay_s=delay_samples * 0.01
+        )
 
     cv = table["constant velocity"]["mae"]
     nominal_names = [n for n in table if n.startswith("nominal")]

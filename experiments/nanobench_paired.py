@@ -14,11 +14,16 @@ predictions, a slowly varying flight) is kept: blocks of `--block` starts (defau
 longest horizon). It reports the mean difference, its share of the nominal model's MAE, the 95 % percentile
 interval, and the share of the four held-out flights whose own mean difference has the same sign.
 
-    python experiments/nanobench_paired.py [--out DIR] [--block 100] [--reps 2000]
+    python experiments/nanobench_paired.py [--best MODEL.json] [--against MODEL.json,...] [--out DIR]
+        [--block 100] [--reps 2000]
 
 Models are read from `experiments/results/nanobench_heldout/nominal_one-step.json` (and `nominal_lagged.json`)
-and `experiments/results/nanobench_ridge/acceleration_lagged_ridge.json`. Writes `DIR/paired.json` and
-`DIR/paired.md` (default DIR `experiments/results/nanobench_paired`).
+and `experiments/results/nanobench_ridge/acceleration_lagged_ridge.json`, or from the files `--best` and
+`--against` name. A model file that records a command dead time (`command_delay_s`, written by
+`nanobench_heldout.py --command-delay` and `nanobench_ridge.py --command-delays`) is scored with the held-out
+flights' motor commands applied that late; where any model has one, every model is scored from the same row of
+each run on (the longest delay's), so the starts stay paired. Writes `DIR/paired.json` and `DIR/paired.md`
+(default DIR `experiments/results/nanobench_paired`).
 
 ??? cite
 
@@ -27,6 +32,7 @@ and `experiments/results/nanobench_ridge/acceleration_lagged_ridge.json`. Writes
 """
 
 import argparse
+import json
 import pathlib
 import sys
 import time
@@ -42,23 +48,40 @@ import dynax
 from dynax.internal import group_errors, write_json
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from nanobench_heldout import flights, STEPS, TEST  # noqa: E402
+from nanobench_heldout import delayed_commands, flights, STEPS, TEST  # noqa: E402
 
 RESULTS = pathlib.Path(__file__).resolve().parent / "results"
-MODELS = {
-    "nominal (one-step)": RESULTS / "nanobench_heldout" / "nominal_one-step.json",
-    "nominal (lagged)": RESULTS / "nanobench_heldout" / "nominal_lagged.json",
-    "best: acceleration (lagged, ridge 1e-3)": RESULTS / "nanobench_ridge" / "acceleration_lagged_ridge.json",
-}
+BEST = RESULTS / "nanobench_ridge" / "acceleration_lagged_ridge.json"
+NOMINALS = (
+    RESULTS / "nanobench_heldout" / "nominal_one-step.json",
+    RESULTS / "nanobench_heldout" / "nominal_lagged.json",
+)
 
 
-def per_start_errors(model, runs):
-    """Per run, the error sizes `(starts, len(STEPS), groups)` at STEPS."""
+def command_delay(path: pathlib.Path) -> int:
+    """The dead time of the motor commands a model file records (`command_delay_s`), in 10 ms samples."""
+    return round(float(json.loads(path.read_text()).get("command_delay_s", 0.0)) / 0.01)
+
+
+def model_name(path: pathlib.Path) -> str:
+    """`family (criterion)`, with the commands' delay where the file has one; the ridge study's model as
+    `best: acceleration (lagged, ridge 1e-3)`."""
+    info = json.loads(path.read_text())
+    k = command_delay(path)
+    late = f", commands {10 * k} ms late" if k else ""
+    if path.name == BEST.name:
+        return f"best: acceleration (lagged, ridge 1e-3{late})"
+    return f"{info.get('family', info['model'])} ({info.get('criterion', '?')}{late})"
+
+
+def per_start_errors(model, runs, k: int = 0, first: int = 0):
+    """Per run, the error sizes `(starts, len(STEPS), groups)` at STEPS, the motor commands `k` samples late,
+    each run from row `first` on."""
     out = []
-    for run in runs:
+    for run in (delayed_commands(r, k, first) for r in runs):
         predicted = dynax.predict_ahead(model, run, STEPS)
-        k = predicted.shape[0]
-        measured = jnp.stack([run.xs[h : h + k] for h in STEPS], axis=1)
+        n = predicted.shape[0]
+        measured = jnp.stack([run.xs[h : h + n] for h in STEPS], axis=1)
         out.append(np.asarray(group_errors(predicted, measured)))
     return out
 
@@ -84,6 +107,10 @@ def block_bootstrap_mean(diffs, block, reps, rng):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--best", default=str(BEST), help="the best model's file (default: the ridge study's)")
+    parser.add_argument(
+        "--against", default=",".join(map(str, NOMINALS)), help="comma-separated model files to pair it with"
+    )
     parser.add_argument("--out", default=str(RESULTS / "nanobench_paired"))
     parser.add_argument("--block", type=int, default=100, help="bootstrap block length in starts (default 100)")
     parser.add_argument("--reps", type=int, default=2000)
@@ -91,18 +118,25 @@ def main():
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
+    best_path = pathlib.Path(args.best).resolve()
+    best = model_name(best_path)
+    models = {best: best_path} | {model_name(p): p for p in map(pathlib.Path, args.against.split(","))}
+    models = {name: path.resolve() for name, path in models.items()}
+    delays = {name: command_delay(path) for name, path in models.items()}
+    first = max(delays.values())  # every model scored on the same starts
     test, _ = flights(TEST)
-    test = [r for r in test if len(r) > max(STEPS)]
-    errors = {name: per_start_errors(dynax.load_model(path), test) for name, path in MODELS.items()}
-    errors["constant velocity"] = per_start_errors(dynax.ConstantVelocity(), test)
+    test = [r for r in test if len(r) > max(STEPS) + first]
+    errors = {
+        name: per_start_errors(dynax.load_model(path), test, delays[name], first) for name, path in models.items()
+    }
+    errors["constant velocity"] = per_start_errors(dynax.ConstantVelocity(), test, 0, first)
     n_starts = sum(len(e) for e in errors["constant velocity"])
-    print(f"{len(test)} held-out runs, {n_starts} starts", flush=True)
+    print(f"{len(test)} held-out runs, {n_starts} starts (each run from row {first})", flush=True)
     groups = dynax.flight_error(dynax.ConstantVelocity(), test[0], STEPS).state_names  # the groups' order
     rng = np.random.default_rng(0)
     flight_of = [r.source for r in test]
-    best = "best: acceleration (lagged, ridge 1e-3)"
     rows = {}
-    for nominal in ("nominal (one-step)", "nominal (lagged)"):
+    for nominal in (name for name in models if name != best):
         diffs = [b - a for b, a in zip(errors[best], errors[nominal])]
         mean = sum(d.sum(axis=0) for d in diffs) / n_starts
         mae_nominal = sum(e.sum(axis=0) for e in errors[nominal]) / n_starts
@@ -146,7 +180,9 @@ def main():
     write_json(
         out / "paired.json",
         {
-            "models": {k: str(v.relative_to(RESULTS.parent.parent)) for k, v in MODELS.items()},
+            "models": {k: str(v.relative_to(RESULTS.parent.parent)) for k, v in models.items()},
+            "command_delay_samples": delays,
+            "first_row": first,
             "test": list(TEST),
             "steps": list(STEPS),
             "block": args.block,

@@ -16,14 +16,22 @@ the constant-velocity baseline's on the same starts (every group and horizon cou
 held-out table is read). The chosen ridge is then fitted on all training shapes and scored on the star,
 trefoil and oval flights, beside the default ridge.
 
+`--command-delays 0,0.02,0.03,0.04` chooses the motor commands' dead time the same way, with the ridge: every
+(ridge, delay) pair is fitted on four training shapes with the commands applied that late
+(`nanobench_heldout.delayed_commands`, what `dynax.MotorDelay`'s exact shift does for a whole number of samples)
+and scored on the fifth with them; every delay of the grid is scored on the same starts (each run from the
+longest delay's row on). The chosen delay is a property of the model: its file records it (`command_delay_s`),
+and the held-out flights are scored with their commands applied that late.
+
 `--lag-weights relative` runs the same choice with `Lagged(lag_weights="relative")` (each lag's residual
 divided by that lag's typical error on the fitted flights, see `dynax.Lagged`) instead of the paper's
 uniform sum over lags; `--lag-weights 0.5` divides it by the square root of that error.
 
-Run: `nice -n 5 python experiments/nanobench_ridge.py [--ridges 1e-10,1e-3,1e-2] [--lag-weights uniform]
-[--out DIR]` (about 15 fits of a minute or more each). Writes `DIR/ridge.json` (default
-`experiments/results/nanobench_ridge`) and the chosen fit as `DIR/acceleration_lagged_ridge.json`;
-`--chosen R` scores a ridge already chosen without the cross-validation.
+Run: `nice -n 5 python experiments/nanobench_ridge.py [--ridges 1e-10,1e-3,1e-2] [--command-delays 0]
+[--lag-weights uniform] [--out DIR]` (5 fits per (ridge, delay) pair, a minute or more each). Writes
+`DIR/ridge.json` (default `experiments/results/nanobench_ridge`) and the chosen fit as
+`DIR/acceleration_lagged_ridge.json`; `--chosen R` (and `--chosen-delay D`) scores a ridge (and delay) already
+chosen without the cross-validation.
 """
 
 import argparse
@@ -35,7 +43,7 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from nanobench_heldout import flights, HORIZON_S, scores, STEPS, TEST, TRAIN
+from nanobench_heldout import delayed_commands, flights, HORIZON_S, scores, STEPS, TEST, TRAIN
 import numpy as np
 
 import dynax
@@ -53,73 +61,101 @@ def relative(mae, baseline):
     return {g: [m / b for m, b in zip(mae[g], baseline[g])] for g in mae}
 
 
+def delayed(runs, delay: float, first: int):
+    """`runs` with their motor commands `delay` seconds late, each from row `first` on."""
+    return [delayed_commands(r, round(delay / 0.01), first) for r in runs]
+
+
+def label(ridge: float, delay: float) -> str:
+    """A (ridge, delay) pair's key in `ridge.json`: the ridge alone where the commands are not delayed."""
+    return str(ridge) if delay == 0 else f"{ridge}, delay {delay:g} s"
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--ridges", default="1e-10,1e-3,1e-2")
+    parser.add_argument("--command-delays", default="0", help="the commands' dead times to choose from [s]")
     parser.add_argument("--out", default=str(pathlib.Path(__file__).parent / "results" / "nanobench_ridge"))
     parser.add_argument("--chosen", type=float, help="skip the cross-validation: score this ridge (and the first)")
+    parser.add_argument("--chosen-delay", type=float, default=0.0, help="with --chosen: the commands' dead time [s]")
     parser.add_argument("--lag-weights", default="uniform", help="uniform, relative or a power from 0 to 1")
     args = parser.parse_args()
     lag_weights = args.lag_weights if args.lag_weights in ("uniform", "relative") else float(args.lag_weights)
     ridges = [float(r) for r in args.ridges.split(",")]
+    delays = [float(d) for d in args.command_delays.split(",")]
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
     if args.chosen is not None:  # the held-out part alone, with a ridge already chosen
-        table = held_out_scores(ridges[0], args.chosen, lag_weights, out)
+        table = held_out_scores(ridges[0], args.chosen, lag_weights, out, args.chosen_delay)
         found = out / "ridge.json"
         result = json.loads(found.read_text()) if found.exists() else {}
         write_json(found, {**result, "held_out": table})
         return
+    first = round(max(delays) / 0.01)  # every delay scored on the same rows
     by_shape = {shape: flights((shape,))[0] for shape in TRAIN}
     folds = {}
     for left_out in TRAIN:
-        train = [r for shape in TRAIN if shape != left_out for r in by_shape[shape]]
-        held = by_shape[left_out]
-        baseline = scores(dynax.flight_error(dynax.ConstantVelocity(), held, STEPS))["mae"]
-        folds[left_out] = {"constant velocity": baseline}
-        for ridge in ridges:
-            start = time.perf_counter()
-            mae = scores(dynax.flight_error(fit(train, ridge, lag_weights), held, STEPS))["mae"]
-            folds[left_out][str(ridge)] = {"mae": mae, "relative": relative(mae, baseline)}
-            score = np.mean([v for row in relative(mae, baseline).values() for v in row])
-            print(
-                f"left out {left_out:12s} ridge {ridge:8.0e}: mean MAE / constant velocity {score:.4f} "
-                f"({time.perf_counter() - start:.0f} s)",
-                flush=True,
-            )
+        baseline = scores(dynax.flight_error(dynax.ConstantVelocity(), delayed(by_shape[left_out], 0, first), STEPS))
+        folds[left_out] = {"constant velocity": baseline["mae"]}
+        for delay in delays:
+            train = delayed([r for shape in TRAIN if shape != left_out for r in by_shape[shape]], delay, first)
+            held = delayed(by_shape[left_out], delay, first)
+            for ridge in ridges:
+                start = time.perf_counter()
+                mae = scores(dynax.flight_error(fit(train, ridge, lag_weights), held, STEPS))["mae"]
+                rel = relative(mae, baseline["mae"])
+                folds[left_out][label(ridge, delay)] = {"mae": mae, "relative": rel}
+                print(
+                    f"left out {left_out:12s} ridge {ridge:8.0e} delay {delay:5.3f} s: mean MAE / constant velocity "
+                    f"{np.mean([v for row in rel.values() for v in row]):.4f} ({time.perf_counter() - start:.0f} s)",
+                    flush=True,
+                )
+    pairs = [(r, d) for d in delays for r in ridges]
     cv_score = {
-        str(r): float(np.mean([v for f in folds.values() for row in f[str(r)]["relative"].values() for v in row]))
-        for r in ridges
+        label(r, d): float(
+            np.mean([v for f in folds.values() for row in f[label(r, d)]["relative"].values() for v in row])
+        )
+        for r, d in pairs
     }
-    chosen = min(ridges, key=lambda r: cv_score[str(r)])
-    print(f"cross-validated scores {cv_score}; chosen ridge {chosen:g}", flush=True)
+    chosen, chosen_delay = min(pairs, key=lambda p: cv_score[label(*p)])
+    print(f"cross-validated scores {cv_score}; chosen ridge {chosen:g}, delay {chosen_delay:g} s", flush=True)
     write_json(
         out / "ridge.json",
         {
             "ridges": ridges,
+            "command_delays_s": delays,
             "lag_weights": lag_weights,
             "steps": list(STEPS),
             "folds": folds,
             "cv_score": cv_score,
             "chosen": chosen,
-            "held_out": held_out_scores(ridges[0], chosen, lag_weights, out),
+            "chosen_delay_s": chosen_delay,
+            "held_out": held_out_scores(ridges[0], chosen, lag_weights, out, chosen_delay),
         },
     )
 
 
-def held_out_scores(default: float, chosen: float, lag_weights, out: pathlib.Path) -> dict:
-    """Fit on every training shape with the `default` and the `chosen` ridge, score on the held-out shapes (MAE,
-    RMSE and cumulative MAE, as `nanobench_heldout.py`); the chosen fit is saved as a model file."""
-    train, _ = flights(TRAIN)
-    test, _ = flights(TEST)
+def held_out_scores(default: float, chosen: float, lag_weights, out: pathlib.Path, delay: float = 0.0) -> dict:
+    """Fit on every training shape with the `default` and the `chosen` ridge (the commands `delay` seconds late),
+    score on the held-out shapes (MAE, RMSE and cumulative MAE, as `nanobench_heldout.py`); the chosen fit is
+    saved as a model file, with its delay."""
+    k = round(delay / 0.01)
+    train = delayed(flights(TRAIN)[0], delay, k)
+    test = delayed(flights(TEST)[0], delay, k)
     table = {"constant velocity": scores(dynax.flight_error(dynax.ConstantVelocity(), test, STEPS))}
     for ridge in sorted({default, chosen}):
         model = fit(train, ridge, lag_weights)
-        table[str(ridge)] = scores(dynax.flight_error(model, test, STEPS))
-        print(f"held-out flights, ridge {ridge:g}: {table[str(ridge)]['mae']}", flush=True)
+        table[label(ridge, delay)] = scores(dynax.flight_error(model, test, STEPS))
+        print(f"held-out flights, {label(ridge, delay)}: {table[label(ridge, delay)]['mae']}", flush=True)
         if ridge == chosen:
-            dynax.save_model(model, out / "acceleration_lagged_ridge.json", family="acceleration", criterion="lagged")
+            dynax.save_model(
+                model,
+                out / "acceleration_lagged_ridge.json",
+                family="acceleration",
+                criterion="lagged",
+                command_delay_s=k * 0.01,
+            )
     return table
 
 
