@@ -5,10 +5,12 @@ body rate (`experiments/nanobench_paired.py`). Its angular acceleration at a sta
 map (the $m_i^2$, $m_i$ features), the rate damping (the $p, q, r$ features on their own axes), and the rest (the
 constant moment, the gyroscopic products, rotor drag on $u, v$). Over one sample each part moves the predicted rate
 by $\\Delta t$ times its share. This scores, on the held-out flights (star, trefoil, oval; each model with its
-commands as late as its file records), the one-step body-rate MAE of the model as fitted and with each part
-removed (`dynax.predict_ahead`, one step), and the least-squares scale of each part that the measured one-step
-change of the rates asks for (the change regressed on the three parts times $\\Delta t$, pooled over axes and
-starts): a part the first sample follows has a scale near 1, one it does not near 0.
+commands as late as its file records, every model on the same starts: those `flight_error` scores), the one-step
+body-rate MAE of the model as fitted and with each part removed (`dynax.predict_ahead`), and the least-squares
+scale of each part that the measured one-step change of the rates asks for (the change regressed on the three
+parts times $\\Delta t$, pooled over axes and starts): a part the first sample follows has a scale near 1, one it
+does not near 0.
+
 
     python experiments/nanobench_first_step.py [MODEL.json ...] [--out FILE]
 
@@ -34,7 +36,7 @@ import dynax
 from dynax.internal import write_json
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from nanobench_heldout import delayed_commands, flights, TEST  # noqa: E402
+from nanobench_heldout import delayed_commands, flights, STEPS, TEST  # noqa: E402
 
 RESULTS = pathlib.Path(__file__).resolve().parent / "results"
 DEFAULT = (
@@ -61,9 +63,10 @@ def without(model, columns: np.ndarray):
 
 
 def one_step_mae(model, runs) -> float:
+    """The body-rate MAE one step ahead, on the starts `flight_error` scores (the last `max(STEPS)` left out)."""
     total, n = 0.0, 0
     for run in runs:
-        predicted = np.asarray(dynax.predict_ahead(model, run, (1,)))[:, 0, RATES]
+        predicted = np.asarray(dynax.predict_ahead(model, run, (1, max(STEPS))))[:, 0, RATES]
         measured = np.asarray(run.xs)[1 : 1 + len(predicted), RATES]
         total += np.linalg.norm(predicted - measured, axis=-1).sum()
         n += len(predicted)
@@ -77,12 +80,13 @@ def shares(model, runs, masks):
     x_parts, changes = [], []
     for run in runs:
         frame = model.body_frame(run)
-        xs, us = frame.xs[:-1], frame.us[:-1]
+        n = len(run) - max(STEPS)  # the starts `one_step_mae` scores
+        xs, us = frame.xs[:n], frame.us[:n]
         phi = np.asarray(jax.vmap(lambda x, u: body.features(x[3:7], x[7:13], u))(xs, us))  # (starts, features)
         dt = float(run.dt)
         x_parts.append(np.stack([dt * phi[:, m] @ w[:, m].T for m in masks.values()], axis=-1))  # (starts, 3, parts)
         rates = np.asarray(run.xs)[:, RATES]
-        changes.append(rates[1:] - rates[:-1])
+        changes.append(rates[1 : n + 1] - rates[:n])
     return np.concatenate(x_parts), np.concatenate(changes)
 
 
@@ -93,9 +97,11 @@ def main():
     args = parser.parse_args()
     test = flights(TEST)[0]
     out = {}
-    for path in map(pathlib.Path, args.models):
-        k = round(float(json.loads(path.read_text()).get("command_delay_s", 0.0)) / 0.01)
-        runs = [delayed_commands(r, k) for r in test if len(r) > 2 + k]
+    paths = [pathlib.Path(m).resolve() for m in args.models]
+    delays = [round(float(json.loads(p.read_text()).get("command_delay_s", 0.0)) / 0.01) for p in paths]
+    first = max(delays)  # every model scored on the same starts
+    for path, k in zip(paths, delays):
+        runs = [delayed_commands(r, k, first) for r in test if len(r) > max(STEPS) + first]
         model = dynax.load_model(path)
         masks = parts(model.body_model)
         row = {"command_delay_samples": k, "as fitted": one_step_mae(model, runs)}
