@@ -75,6 +75,12 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--ridges", default="1e-10,1e-3,1e-2")
     parser.add_argument("--command-delays", default="0", help="the commands' dead times to choose from [s]")
+    parser.add_argument(
+        "--score-from-delay",
+        type=float,
+        help="score each run from the row this delay [s] needs (default the longest of --command-delays): a grid run "
+        "in parts scores every part on the same starts",
+    )
     parser.add_argument("--out", default=str(pathlib.Path(__file__).parent / "results" / "nanobench_ridge"))
     parser.add_argument("--chosen", type=float, help="skip the cross-validation: score this ridge (and the first)")
     parser.add_argument("--chosen-delay", type=float, default=0.0, help="with --chosen: the commands' dead time [s]")
@@ -92,7 +98,7 @@ def main():
         result = json.loads(found.read_text()) if found.exists() else {}
         write_json(found, {**result, "held_out": table})
         return
-    first = round(max(delays) / 0.01)  # every delay scored on the same rows
+    first = round(max(delays if args.score_from_delay is None else [*delays, args.score_from_delay]) / 0.01)
     by_shape = {shape: flights((shape,))[0] for shape in TRAIN}
     folds = {}
     for left_out in TRAIN:
