@@ -275,6 +275,25 @@ def _as_cut_before_the_runaway(out, fx):
 
 _as_cut_before_the_runaway.with_fixtures = True
 
+
+def _scores_as_on_the_clean_flight(out, fx):
+    """`evaluate`'s scores on a held-out flight with a glitch left out: within 5 % of the clean flight's."""
+    scores, clean = json.loads(pathlib.Path(out).read_text())["model"]["mae"], fx["clean_scores"]
+    return all(abs(scores[g][k] / clean[g][k] - 1) < 0.05 for g in GROUPS for k in range(2))
+
+
+_scores_as_on_the_clean_flight.with_fixtures = True
+
+
+def _validation(folder, fx, edit):
+    table = edit(np.array(fx["validation"], copy=True))
+    return write_table(pathlib.Path(folder) / "validation.csv", FLIGHT, table)
+
+
+def _clean_model(fx):
+    return str(pathlib.Path(fx["train_csv"]).parent / "clean.json")
+
+
 # --- the cases ------------------------------------------------------------------------------------------
 
 C = Case
@@ -316,6 +335,32 @@ CASES = [
         "warn",
         ("m1: ", "31.27"),
         check=_as_cut_before_the_runaway,
+        heavy=True,  # two fits and two evaluations of 28 s of flight
+    ),
+    C(
+        "evaluate-gyro-glitch",
+        "glitch",
+        lambda d, fx: [
+            "evaluate",
+            _clean_model(fx),
+            _validation(d, fx, _set(["r"], 300, -300.0)),
+            "--steps",
+            "1,10",
+            "--metric",
+            "mae",
+            "--out",
+            "metrics.json",
+        ],
+        "warn",
+        ("r: ", "t = 3.00", "row 301"),
+        check=_scores_as_on_the_clean_flight,
+    ),
+    C(
+        "flight-motor-nan",
+        "glitch",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["m4"], 800, np.nan))),
+        "refuse",
+        ("column 'm4'", "row 801"),
     ),
     # Motion-capture dropouts.
     C(
@@ -637,6 +682,7 @@ CASES = [
         lambda d, fx: _fit_argv(fx["star_gz"], *_MAP),
         "accept",
         check=_beats_constant_velocity_on_star,
+        heavy=True,  # a fit and an evaluation compiled for the real flight's layout
     ),
 ]
 
