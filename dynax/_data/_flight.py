@@ -52,7 +52,7 @@ from ._flight_kinematics import (
     check_velocity_frame,
 )
 from ._io import load_trajectory, MAX_GAP, Sampling
-from ._sanity import _glitches, _stuck, _velocity_stretches, Check
+from ._sanity import Check, glitch_findings, stuck_findings, velocity_stretch_findings
 from ._trajectory import Trajectory
 from ._velocities import stretch_edges
 
@@ -245,7 +245,7 @@ def inspect_flight(trajectory: Trajectory, checks: FlightChecks = FlightChecks()
         for a, b in _runs(mask):
             worst = values[a : b + 1][np.argmax(np.abs(values[a : b + 1]))]
             glitches.append(Glitch(column, kind, float(rel[a]), float(rel[b]), a + 1, b - a + 1, float(worst)))
-    for glitch, (a, b) in _record_glitches(trajectory, ts, flagged):
+    for glitch, (a, b) in _record_glitches(trajectory, ts, flagged, ground):
         bad[a : b + 1] = True
         glitches.append(glitch)
     glitches.sort(key=lambda g: (g.start, g.column))
@@ -253,10 +253,14 @@ def inspect_flight(trajectory: Trajectory, checks: FlightChecks = FlightChecks()
     return FlightNotes(segments, tuple(glitches), ~ground & ~bad, trajectory.source)
 
 
-def _record_glitches(trajectory: Trajectory, ts: np.ndarray, flagged) -> list[tuple[Glitch, tuple[int, int]]]:
+def _record_glitches(
+    trajectory: Trajectory, ts: np.ndarray, flagged, ground: np.ndarray
+) -> list[tuple[Glitch, tuple[int, int]]]:
     """The record's statistical glitches (see the module notes) as `(Glitch, (first, last))`: spikes, stuck
     columns and velocity stretches, from `dynax.check_records`' located checks, less what the physical
-    ranges flagged already; a run found in `x`, `y` and `z` alike is one motion-capture glitch, `x,y,z`."""
+    ranges flagged already and what lies on the `ground` (a touch-down jolts the gyro: motion the flight's
+    statistics do not describe, left out as ground already); a run found in `x`, `y` and `z` alike is one
+    motion-capture glitch, `x,y,z`."""
     rel = ts - ts[0]
     names = tuple(trajectory.state_names)
     xs, us = np.asarray(trajectory.xs, dtype=float), np.asarray(trajectory.us, dtype=float)
@@ -265,9 +269,9 @@ def _record_glitches(trajectory: Trajectory, ts: np.ndarray, flagged) -> list[tu
     columns = [(n, xs[:, i], False) for i, n in enumerate(names)]
     columns += [(n, us[:, i], True) for i, n in enumerate(trajectory.input_names)]
     pairs = {v: q for v, q in WORLD_VELOCITIES.items() if v in values and q in values}
-    findings = _glitches(trajectory, ts, "", columns, {v: values[q] for v, q in pairs.items()})
-    findings += _stuck(trajectory, ts, "", names, xs, set(), dt)
-    findings += _velocity_stretches(trajectory, ts, "", values, pairs, dt)
+    findings = glitch_findings(trajectory, ts, "", columns, {v: values[q] for v, q in pairs.items()})
+    findings += stuck_findings(trajectory, ts, "", names, xs, set(), dt)
+    findings += velocity_stretch_findings(trajectory, ts, "", values, pairs, dt)
     covered = {column: mask for column, _, mask, _ in flagged}
     position_faults = [
         (f.column, f.rows[0] - 1, f.rows[1] - 1)
@@ -281,8 +285,8 @@ def _record_glitches(trajectory: Trajectory, ts: np.ndarray, flagged) -> list[tu
         a, b = f.rows[0] - 1, f.rows[1] - 1
         if f.kind == Check.STUCK:
             a += 1  # the samples that repeat the last good one
-        if f.column in covered and covered[f.column][a : b + 1].all():
-            continue  # beyond the sensor's range: said once, as that
+        if ground[a : b + 1].all() or (f.column in covered and covered[f.column][a : b + 1].all()):
+            continue  # on the floor, or beyond the sensor's range: said once, as that
         if f.kind == Check.VELOCITY and any(
             c == pairs.get(f.column) and i <= b and j >= a for c, i, j in position_faults
         ):
