@@ -294,6 +294,19 @@ def _clean_model(fx):
     return str(pathlib.Path(fx["train_csv"]).parent / "clean.json")
 
 
+def _model_with(folder, fx, edit):
+    """The unfaulted fit's model file with `edit(obj)` applied."""
+    obj = edit(json.loads(pathlib.Path(_clean_model(fx)).read_text()))
+    path = pathlib.Path(folder) / "model_edited.json"
+    path.write_text(json.dumps(obj))
+    return str(path)
+
+
+def _nan_weights(obj):
+    obj["weights"][0][0] = float("nan")
+    return obj
+
+
 # --- the cases ------------------------------------------------------------------------------------------
 
 C = Case
@@ -387,6 +400,13 @@ CASES = [
         check=_CLOSE,
     ),
     # Time.
+    C(
+        "flight-short-gap",
+        "dropout",
+        lambda d, fx: _fit_argv(_flight(d, fx, _drop_rows(600, 4))),
+        "accept",
+        check=_CLOSE,
+    ),
     C(
         "flight-repeated-timestamp",
         "time",
@@ -581,6 +601,40 @@ CASES = [
         lambda d, fx: _fit_argv(fx["train_csv"]),
         "accept",
         check=_no_ground_claimed,
+    ),
+    C(
+        "flight-motors-normalised",
+        "motors",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["m1", "m2", "m3", "m4"], slice(None), lambda v: v / 65535.0))),
+        "accept",
+        check=_SAME,
+    ),
+    C(
+        "flight-vbat-millivolts",
+        "motors",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["vbat"], slice(None), lambda v: 1e3 * v))),
+        "accept",
+        check=_SAME,  # the motor map is fitted on the voltage relative to its median: any unit
+    ),
+    C(
+        "evaluate-model-needs-vbat",
+        "model",
+        lambda d, fx: [
+            "evaluate",
+            _clean_model(fx),
+            _flight(d, fx, _without("vbat")),
+            "--out",
+            "m.json",
+        ],
+        "refuse",
+        ("vbat", "--map vbat="),
+    ),
+    C(
+        "evaluate-model-nan-weight",
+        "model",
+        lambda d, fx: ["evaluate", _model_with(d, fx, _nan_weights), fx["validation_csv"], "--out", "m.json"],
+        "refuse",
+        ("model_edited.json", "weights"),
     ),
     # Files, models and arguments.
     C(
