@@ -146,6 +146,16 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 
 SPIKE_SAMPLES = 3  # a flagged run this short is a corrupt sample or three, not a log that runs away
+IDLE_S = 0.5  # every motor below half its level this long, where none stops, is the vehicle idling on its pad
+
+
+def _lasting(mask: np.ndarray, rel: np.ndarray, seconds: float) -> np.ndarray:
+    """`mask` with only its runs that last `seconds` or more."""
+    out = np.zeros_like(mask)
+    for a, b in _runs(mask):
+        if rel[b] - rel[a] >= seconds:
+            out[a : b + 1] = True
+    return out
 
 
 def _with_onsets(mask: np.ndarray, values: np.ndarray) -> np.ndarray:
@@ -208,8 +218,9 @@ def inspect_flight(trajectory: Trajectory, checks: FlightChecks = FlightChecks()
     off, level = _motors_off(trajectory, checks)
     # The floor under the vehicle: its height at the nearest motors-off sample (take-off and landing
     # spots differ: a pad, an uneven floor), else at the nearest sample with every motor idling (below half
-    # its level). A log with neither (started in the air) shows no floor: its lowest pass is flight.
-    idle = off if off.any() else np.all(np.abs(motors) < 0.5 * level, axis=1)
+    # its level for `IDLE_S` or more: not a dive). A log with neither (started in the air) shows no floor:
+    # its lowest pass is flight.
+    idle = off if off.any() else _lasting(np.all(np.abs(motors) < 0.5 * level, axis=1), rel, IDLE_S)
     if idle.any():
         rests = np.flatnonzero(idle)
         after = np.clip(np.searchsorted(rests, np.arange(len(z))), 0, len(rests) - 1)
@@ -346,17 +357,17 @@ def _continuous_quaternions(quats: np.ndarray) -> np.ndarray:
 
 
 def _with_gaps(notes: FlightNotes, ts: np.ndarray, gaps) -> FlightNotes:
-    """`notes` with each gap `(t_before, t_after, file_row)` of the recorded times noted as a `gap` glitch, its
-    interpolated samples left out."""
+    """`notes` with each gap `(t_before, t_after)` of the recorded times noted as a `gap` glitch, the samples
+    resampling interpolated inside it (on the grid `ts`) left out."""
     if not gaps:
         return notes
     usable, found = np.array(notes.usable), list(notes.glitches)
-    for before, after, _ in gaps:
+    for before, after in gaps:
         inside = np.flatnonzero((ts > before) & (ts < after))
         if inside.size:
             usable[inside] = False
-            row = int(inside[0]) + 1
-            found.append(Glitch("t", "gap", before - ts[0], after - ts[0], row, int(inside.size), after - before))
+            start, stop, n = float(before - ts[0]), float(after - ts[0]), int(inside.size)
+            found.append(Glitch("t", "gap", start, stop, int(inside[0]) + 1, n, float(after - before)))
     found.sort(key=lambda g: (g.start, g.column))
     return FlightNotes(notes.ground, tuple(found), usable, notes.source)
 
@@ -457,7 +468,7 @@ def load_flight(
     if not data.is_uniform:
         recorded = np.asarray(data.ts, dtype=float)
         long = np.flatnonzero(np.diff(recorded) > MAX_GAP * data.dt)
-        gaps = [(recorded[k], recorded[k + 1], k + 1) for k in long]
+        gaps = [(recorded[k], recorded[k + 1]) for k in long]
         data = resample(data, data.dt)
         q = np.asarray(data.xs[:, 3:7])
         data = Trajectory(
