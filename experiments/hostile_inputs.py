@@ -9,10 +9,15 @@ against the truth the record was made from), silent failure (exit 0 with a wrong
 call that returns), misleading (advice that would make the data worse), traceback, refused badly
 (exit 2 but the message misses the location), wrongly refused.
 
-Run from the repository root: `python experiments/hostile_inputs.py [--code PATH] [--out FILE]`.
+`--flights` runs the flight-log corpus instead (`tests/cli/hostile_flights.py`: glitches, motion-capture
+dropouts, time units, quaternion signs and order, frames and units, motor and battery columns, files and
+arguments of `dynax fit quadrotor` and `dynax evaluate`), judged by the same rules.
+
+Run from the repository root: `python experiments/hostile_inputs.py [--flights] [--code PATH] [--out FILE]`.
 `--code` puts another checkout's `dynax` first on the path (the code before the data checks) so that
 the same cases judge it. Writes a JSON list of outcomes (default
-`experiments/results/hostile_inputs/after.json`) and prints a Markdown table and the counts.
+`experiments/results/hostile_inputs/after.json`, `flights_after.json` with `--flights`) and prints a
+Markdown table and the counts.
 `--compare BEFORE.json AFTER.json` prints the two side by side instead of running anything.
 """
 
@@ -31,7 +36,10 @@ REPO = pathlib.Path(__file__).resolve().parents[1]
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--code", default=str(REPO), help="checkout whose dynax is judged (default: this one)")
-    parser.add_argument("--out", default=str(REPO / "experiments" / "results" / "hostile_inputs" / "after.json"))
+    parser.add_argument("--flights", action="store_true", help="the flight-log corpus (tests/cli/hostile_flights.py)")
+    parser.add_argument(
+        "--out", default=None, help="results file (default results/hostile_inputs/[flights_]after.json)"
+    )
     parser.add_argument("--only", default=None, help="comma-separated case ids")
     parser.add_argument("--compare", nargs=2, default=None, metavar=("BEFORE", "AFTER"))
     args = parser.parse_args()
@@ -46,19 +54,30 @@ def main():
 
     print(f"judging dynax from {pathlib.Path(dynax.__file__).parent}", file=sys.stderr)
     sys.path.insert(1, str(REPO))  # tests.reference, for the fixtures
-    spec = importlib.util.spec_from_file_location("hostile_cases", REPO / "tests" / "cli" / "hostile_cases.py")
-    cases = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(cases)
+    if args.flights:
+        from tests.cli import hostile_cases
+        from tests.cli import hostile_flights as cases
+
+        run_case = hostile_cases.run_case
+    else:
+        spec = importlib.util.spec_from_file_location("hostile_cases", REPO / "tests" / "cli" / "hostile_cases.py")
+        cases = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(cases)
+        run_case = cases.run_case
+    name = "flights_after.json" if args.flights else "after.json"
+    args.out = args.out or str(REPO / "experiments" / "results" / "hostile_inputs" / name)
 
     only = set(args.only.split(",")) if args.only else None
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = pathlib.Path(tmp)
-        fixtures = cases.make_fixtures(tmp)
+        fixtures = cases.make_fixtures(tmp, cli_main) if args.flights else cases.make_fixtures(tmp)
         selected = [c for c in cases.CASES if not only or c.id in only]
+        if args.flights and "star" not in fixtures:  # the NanoBench flights are not here
+            selected = [c for c in selected if c.id not in cases.NEEDS_NANOBENCH]
         for k, case in enumerate(selected):
             start = time.perf_counter()
-            o = cases.run_case(case, tmp / case.id, fixtures, cli_main)
+            o = run_case(case, tmp / case.id, fixtures, cli_main)
             rows.append(
                 {
                     "id": case.id,

@@ -8,6 +8,7 @@ import json
 import math
 import os
 import pathlib
+import re
 import tempfile
 
 from .._data import parse_assignments
@@ -166,9 +167,17 @@ def check_command_output(args: argparse.Namespace) -> None:
     check_output(args.out, kind=kind, inputs=inputs)
 
 
-def _refuse_constant(what, path):
+def _refuse_constant(what, path, text=""):
+    """`json.loads`' `parse_constant`: refuse `NaN` and `Infinity`, naming the key they stand under and the line."""
+
     def refuse(name):
-        raise DataError(f"holds {name}, which is not a JSON number; {what} must hold finite numbers", path=path)
+        where = ""
+        found = re.search(rf"(?<![\w\"]){re.escape(name)}(?![\w\"])", text)
+        if found:
+            keys = re.findall(r'"((?:[^"\\]|\\.)*)"\s*:', text[: found.start()])
+            line = text.count("\n", 0, found.start()) + 1
+            where = f" in '{keys[-1]}' (line {line})" if keys else f" (line {line})"
+        raise DataError(f"holds {name}{where}, which is not a JSON number; {what} must hold finite numbers", path=path)
 
     return refuse
 
@@ -195,7 +204,8 @@ def read_json_object(path, what: str) -> dict:
         return value
 
     try:
-        obj = json.loads(raw.decode("utf-8-sig"), parse_float=number, parse_constant=_refuse_constant(what, path))
+        text = raw.decode("utf-8-sig")
+        obj = json.loads(text, parse_float=number, parse_constant=_refuse_constant(what, path, text))
     except UnicodeDecodeError:
         raise DataError(f"is not UTF-8 text (a binary file?); {what} is JSON", path=path) from None
     except json.JSONDecodeError as e:

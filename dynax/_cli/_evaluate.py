@@ -97,6 +97,27 @@ def check_model_file(obj: dict, path) -> None:
             )
 
 
+def _refuse_a_flight_log(args, model_obj, mapping) -> None:
+    """Name the mismatch where a helicopter model is given a quadrotor flight log (the file reads with the
+    quadrotor's columns): the missing helicopter column alone would send the user to `--map`."""
+    import warnings
+
+    from .._data import load_trajectory
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            load_trajectory(args.data, "quadrotor", mapping=mapping, check=False)
+    except (DataError, UsageError):
+        return
+    raise DataError(
+        f"is a {model_obj.get('system', 'helicopter')} model, and {args.data} is a quadrotor flight log (it has "
+        "the quadrotor's columns): evaluate a quadrotor model on it (`dynax fit quadrotor`), or this model on "
+        "its own system's data",
+        path=args.model,
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     import jax
 
@@ -124,7 +145,11 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     check_model_file(model_obj, args.model)
     system = model_from_json(model_obj, path=args.model)
-    data = load_helicopter_data(args.data, mapping, scale, offset)
+    try:
+        data = load_helicopter_data(args.data, mapping, scale, offset)
+    except DataError:
+        _refuse_a_flight_log(args, model_obj, mapping)
+        raise
     n_needed = int(round(max(horizons) / data.dt)) + 1
     if len(data) < n_needed + 1:
         raise DataError(

@@ -10,23 +10,49 @@ from ._output import write_json
 QUADROTOR_MODELS = ("nominal", "acceleration", "linear")
 
 
-def load_flights(paths, mapping, scale, offset, *, min_samples: int):
+def load_flights(paths, mapping, scale, offset, *, min_samples: int, needs: str = "", training=None):
     """Each file through `load_flight`, its ground segments and glitches noted on stdout; the usable
-    runs of at least `min_samples` samples, and the notes."""
+    runs of at least `min_samples` samples (`needs`: the option that asks for that many, named in the
+    refusal), and the notes. A flight given twice is refused, and one that is also a `training` flight
+    (`{path: trajectory}` of those loaded before) is no validation. `training`, where given, gains the
+    flights loaded here."""
+    import numpy as np
+
     from .._data._flight import load_flight, usable_segments
 
-    runs, notes = [], []
+    runs, notes, seen = [], [], {}
     for path in paths:
         trajectory, found = load_flight(path, mapping=mapping, scale=scale, offset=offset)
+        for earlier, other in [*seen.items(), *(training or {}).items()]:
+            if trajectory.xs.shape == other.xs.shape and all(
+                np.array_equal(np.asarray(a), np.asarray(b))
+                for a, b in ((trajectory.ts, other.ts), (trajectory.xs, other.xs), (trajectory.us, other.us))
+            ):
+                held = earlier not in seen
+                raise DataError(
+                    f"is the same data as the {'training ' if held else ''}flight {earlier}: "
+                    + (
+                        "held-out error on the training data is in-sample, no validation; give another flight"
+                        if held
+                        else "the same flight counted twice doubles its weight and halves every standard error; "
+                        "give it once"
+                    ),
+                    path=path,
+                )
+        seen[str(path)] = trajectory
         for line in found.describe():
             print(f"note: {path}: {line}")
         kept = usable_segments(trajectory, found, min_samples)
         if not kept:
+            longest = max((b - a for a, b in _usable_runs(found.usable)), default=0)
             raise DataError(
-                f"has no run of flight of {min_samples} samples or more between its ground segments and glitches",
+                f"has no run of flight of {min_samples} samples or more between its ground segments and glitches "
+                f"(the longest has {longest})" + (f", which {needs} needs" if needs else ""),
                 path=path,
             )
         runs += kept
+        if training is not None:
+            training[str(path)] = trajectory
         notes.append(
             {
                 "file": str(path),
@@ -37,6 +63,14 @@ def load_flights(paths, mapping, scale, offset, *, min_samples: int):
             }
         )
     return runs, notes
+
+
+def _usable_runs(usable):
+    """`(start, stop)` of each run of usable samples (stop exclusive)."""
+    import numpy as np
+
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], np.asarray(usable, dtype=np.int8), [0]])))
+    return list(zip(edges[::2], edges[1::2]))
 
 
 def run_fit(args) -> int:
@@ -70,7 +104,14 @@ def run_fit(args) -> int:
     out = output_file(args.out, "model.json")
     mapping, scale, offset = data_options(args)
     start = time.perf_counter()
-    runs, notes = load_flights(args.data, mapping, scale, offset, min_samples=round(args.horizon * 100) + 2)
+    runs, notes = load_flights(
+        args.data,
+        mapping,
+        scale,
+        offset,
+        min_samples=round(args.horizon * 100) + 2,
+        needs=f"--horizon {args.horizon:g}",
+    )
     dt = float(np.median([r.dt for r in runs]))
     n_steps = max(round(args.horizon / dt), 1)
     system = Quadrotor.from_flights(model, runs, battery=False if args.no_battery else None)
@@ -156,7 +197,9 @@ def run_evaluate(args, system) -> int:
     out = output_file(args.out, "metrics.json")
     mapping, scale, offset = data_options(args)
     start = time.perf_counter()
-    runs, notes = load_flights(args.data, mapping, scale, offset, min_samples=max(steps) + 2)
+    runs, notes = load_flights(
+        args.data, mapping, scale, offset, min_samples=max(steps) + 2, needs=f"--steps {max(steps)}"
+    )
     if system.uses_battery and "vbat" not in runs[0].input_names:
         raise DataError(
             "has no vbat column, which the model's features use (map it: --map vbat=COLUMN)", path=args.data[0]
@@ -221,10 +264,11 @@ def run_diagnose(args) -> int:
         )
     mapping, scale, offset = data_options(args)
     min_samples = round(max(QUADROTOR_HORIZONS_S) * 100) + 2
-    train, _ = load_flights(args.data, mapping, scale, offset, min_samples=min_samples)
+    loaded: dict = {}
+    train, _ = load_flights(args.data, mapping, scale, offset, min_samples=min_samples, training=loaded)
     validation = None
     if args.validation is not None:
-        validation, _ = load_flights(args.validation, mapping, scale, offset, min_samples=min_samples)
+        validation, _ = load_flights(args.validation, mapping, scale, offset, min_samples=min_samples, training=loaded)
     if args.nominal is not None:
         try:
             obj = json.loads(pathlib.Path(args.nominal).read_text())

@@ -22,6 +22,18 @@ The thresholds are physics of small multirotors, not of one rig (`FlightChecks`)
   sample before it that is not below the next);
 - `max_jump`: a position step that the recorded velocity does not explain by more than this
   [m] in one sample (a motion-capture marker swap or a lost frame).
+
+Beside these, the record's own statistics (the located checks of `dynax.check_records`, with the
+velocities `vx, vy, vz` paired with `x, y, z`): a `spike`, up to three samples that leave the
+column's running median by more than 1.5 times its 1-99 % range and 20 typical steps (a gyro
+sample of 15 rad/s in a flight whose rates span 3 is no measurement, though within the gyro's
+range); `stuck`, a value repeated exactly for 0.25 s and 25 samples or more while other columns
+change (motion capture that lost the vehicle and holds its last position); `velocity`, a stretch
+of 150 ms or more where a velocity's block means are off its position's change by a factor of 2
+or more, or of the other sign (the rates' rule in `_flight_kinematics`: a motion-capture velocity
+filter lags its position by up to a third in sharp turns, which is no fault). `load_flight` adds
+`gap`: a stretch of more than `MAX_GAP` median intervals with no sample, interpolated when the
+record is resampled and left out.
 """
 
 import dataclasses
@@ -32,12 +44,23 @@ import numpy as np
 
 from .._errors import DataError
 from ._derivatives import resample
-from ._flight_kinematics import check_flight_kinematics, check_thrust_frame
-from ._io import load_trajectory, Sampling
+from ._flight_kinematics import (
+    check_flight_kinematics,
+    check_position_units,
+    check_quaternion_order,
+    check_thrust_frame,
+    check_velocity_frame,
+)
+from ._io import load_trajectory, MAX_GAP, Sampling
+from ._sanity import Check, glitch_findings, stuck_findings, velocity_stretch_findings
 from ._trajectory import Trajectory
+from ._velocities import stretch_edges
 
-#: The kinds of glitch `inspect_flight` flags (its `Glitch.kind`).
-GLITCH_KINDS = ("rate_range", "input_range", "position_jump")
+#: The kinds of glitch `inspect_flight` flags (its `Glitch.kind`), and `load_flight`'s `gap`.
+GLITCH_KINDS = ("rate_range", "input_range", "position_jump", "spike", "stuck", "velocity", "gap")
+_RECORD_KINDS = {Check.GLITCH: "spike", Check.STUCK: "stuck", Check.VELOCITY: "velocity"}
+WORLD_VELOCITIES = {"vx": "x", "vy": "y", "vz": "z"}
+STRETCH_FACTOR = 2.0  # a velocity off its position's change by this factor in a stretch (or of the other sign)
 
 # A body-to-world quaternion further than this from unit norm is not an attitude measurement.
 QUATERNION_TOLERANCE = 0.01
@@ -63,9 +86,11 @@ class FlightChecks:
 class Glitch:
     """A run of flagged samples in one column.
 
-    **Fields:** `column` (the contract's name), `kind` (one of `GLITCH_KINDS`), `start`, `stop`
-    (seconds from the record's first sample, first and last flagged sample), `row` (the first
-    flagged sample's 1-based data row), `n_samples`, `worst` (the most extreme flagged value).
+    **Fields:** `column` (the contract's name; `x,y,z` for the three at once), `kind` (one of
+    `GLITCH_KINDS`), `start`, `stop` (seconds from the record's first sample, first and last flagged
+    sample; for a `gap`, the samples either side of it), `row` (the first flagged sample's 1-based
+    data row), `n_samples`, `worst` (the most extreme flagged value; for a `velocity` stretch, its
+    gain on the position's change; for a `gap`, its length in seconds).
     """
 
     column: str
@@ -77,10 +102,16 @@ class Glitch:
     worst: float
 
     def describe(self) -> str:
+        if self.kind == "gap":
+            return (
+                f"{self.column}: gap, no sample from t = {self.start:.2f} to {self.stop:.2f} s (row {self.row}, "
+                f"{self.n_samples} samples interpolated)"
+            )
         span = (
             f"at t = {self.start:.2f} s" if self.n_samples == 1 else f"from t = {self.start:.2f} to {self.stop:.2f} s"
         )
-        return f"{self.column}: {self.kind} {span} (row {self.row}, {self.n_samples} samples, worst {self.worst:.4g})"
+        worst = "gain" if self.kind == "velocity" else "worst"
+        return f"{self.column}: {self.kind} {span} (row {self.row}, {self.n_samples} samples, {worst} {self.worst:.4g})"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -114,11 +145,27 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return [(int(a), int(b) - 1) for a, b in zip(edges[::2], edges[1::2])]
 
 
+SPIKE_SAMPLES = 3  # a flagged run this short is a corrupt sample or three, not a log that runs away
+IDLE_S = 0.5  # every motor below half its level this long, where none stops, is the vehicle idling on its pad
+
+
+def _lasting(mask: np.ndarray, rel: np.ndarray, seconds: float) -> np.ndarray:
+    """`mask` with only its runs that last `seconds` or more."""
+    out = np.zeros_like(mask)
+    for a, b in _runs(mask):
+        if rel[b] - rel[a] >= seconds:
+            out[a : b + 1] = True
+    return out
+
+
 def _with_onsets(mask: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """`mask` with each run extended back over the monotonic climb that leads into it."""
+    """`mask` with each run longer than `SPIKE_SAMPLES` (a log that runs away) extended back over the
+    monotonic climb that leads into it; a spike has no climb (a smooth command's rise before it is flight)."""
     mask = mask.copy()
     magnitude = np.abs(values)
-    for a, _ in _runs(mask):
+    for a, b in _runs(mask):
+        if b - a + 1 <= SPIKE_SAMPLES:
+            continue
         k = a
         while k > 0 and magnitude[k - 1] < magnitude[k]:
             k -= 1
@@ -170,9 +217,12 @@ def inspect_flight(trajectory: Trajectory, checks: FlightChecks = FlightChecks()
     z = _column(trajectory, "z")
     off, level = _motors_off(trajectory, checks)
     # The floor under the vehicle: its height at the nearest motors-off sample (take-off and landing
-    # spots differ: a pad, an uneven floor), else the record's lowest height.
-    if off.any():
-        rests = np.flatnonzero(off)
+    # spots differ: a pad, an uneven floor), else at the nearest sample with every motor idling (below half
+    # its level for `IDLE_S` or more: not a dive). A log with neither (started in the air) shows no floor:
+    # its lowest pass is flight.
+    idle = off if off.any() else _lasting(np.all(np.abs(motors) < 0.5 * level, axis=1), rel, IDLE_S)
+    if idle.any():
+        rests = np.flatnonzero(idle)
         after = np.clip(np.searchsorted(rests, np.arange(len(z))), 0, len(rests) - 1)
         before = np.clip(after - 1, 0, len(rests) - 1)
         nearest = np.where(
@@ -180,10 +230,9 @@ def inspect_flight(trajectory: Trajectory, checks: FlightChecks = FlightChecks()
             rests[before],
             rests[after],
         )
-        floor = z[nearest]
+        ground = off | (z < z[nearest] + checks.clearance)
     else:
-        floor = np.full_like(z, np.min(z))
-    ground = off | (z < floor + checks.clearance)
+        ground = off
 
     flagged: list[tuple[str, str, np.ndarray, np.ndarray]] = []
     for name in ("p", "q", "r"):
@@ -207,9 +256,90 @@ def inspect_flight(trajectory: Trajectory, checks: FlightChecks = FlightChecks()
         for a, b in _runs(mask):
             worst = values[a : b + 1][np.argmax(np.abs(values[a : b + 1]))]
             glitches.append(Glitch(column, kind, float(rel[a]), float(rel[b]), a + 1, b - a + 1, float(worst)))
+    for glitch, (a, b) in _record_glitches(trajectory, ts, flagged, ground):
+        bad[a : b + 1] = True
+        glitches.append(glitch)
     glitches.sort(key=lambda g: (g.start, g.column))
     segments = tuple((float(rel[a]), float(rel[b])) for a, b in _runs(ground))
     return FlightNotes(segments, tuple(glitches), ~ground & ~bad, trajectory.source)
+
+
+def _record_glitches(
+    trajectory: Trajectory, ts: np.ndarray, flagged, ground: np.ndarray
+) -> list[tuple[Glitch, tuple[int, int]]]:
+    """The record's statistical glitches (see the module notes) as `(Glitch, (first, last))`: spikes, stuck
+    columns and velocity stretches, from `dynax.check_records`' located checks, less what the physical
+    ranges flagged already and what lies on the `ground` (a touch-down jolts the gyro: motion the flight's
+    statistics do not describe, left out as ground already); a run found in `x`, `y` and `z` alike is one
+    motion-capture glitch, `x,y,z`."""
+    rel = ts - ts[0]
+    names = tuple(trajectory.state_names)
+    xs, us = np.asarray(trajectory.xs, dtype=float), np.asarray(trajectory.us, dtype=float)
+    values = {n: xs[:, i] for i, n in enumerate(names)}
+    dt = float(np.median(np.diff(ts))) if len(ts) > 1 else 1.0
+    columns = [(n, xs[:, i], False) for i, n in enumerate(names)]
+    columns += [(n, us[:, i], True) for i, n in enumerate(trajectory.input_names)]
+    pairs = {v: q for v, q in WORLD_VELOCITIES.items() if v in values and q in values}
+    findings = glitch_findings(trajectory, ts, "", columns, {v: values[q] for v, q in pairs.items()})
+    findings += stuck_findings(trajectory, ts, "", names, xs, set(), dt)
+    findings += velocity_stretch_findings(trajectory, ts, "", values, pairs, dt)
+    covered = {column: mask for column, _, mask, _ in flagged}
+    position_faults = [
+        (f.column, f.rows[0] - 1, f.rows[1] - 1)
+        for f in findings
+        if f.kind in (Check.STUCK, Check.GLITCH) and f.column in ("x", "y", "z") and f.rows is not None
+    ]
+    spans: dict[tuple[str, int, int], list[str]] = {}
+    for f in findings:
+        if f.rows is None or f.column is None or f.kind not in _RECORD_KINDS:
+            continue
+        a, b = f.rows[0] - 1, f.rows[1] - 1
+        if f.kind == Check.STUCK:
+            a += 1  # the samples that repeat the last good one
+        if ground[a : b + 1].all() or (f.column in covered and covered[f.column][a : b + 1].all()):
+            continue  # on the floor, or beyond the sensor's range: said once, as that
+        if f.kind == Check.VELOCITY and any(
+            c == pairs.get(f.column) and i <= b and j >= a for c, i, j in position_faults
+        ):
+            continue  # the velocity misses a position that stuck or spiked: said once, as the position's
+        spans.setdefault((_RECORD_KINDS[f.kind], a, b), []).append(f.column)
+    out = []
+    for (kind, a, b), found in spans.items():
+        if kind == "velocity":
+            found = [v for v in found if _stretch_is_a_fault(ts, values[pairs[v]], values[v], a, b)]
+        position = {"x", "y", "z"} <= set(found) and kind != "velocity"
+        groups = [[c] for c in found if not (position and c in ("x", "y", "z"))]
+        groups += [["x", "y", "z"]] if position else []
+        for group in groups:
+            col = _column(trajectory, group[0])
+            if kind == "velocity":
+                worst = _stretch_gain(ts, values[pairs[group[0]]], col, a, b)
+            else:
+                seg = col[a : b + 1]
+                worst = float(seg[np.argmax(np.abs(seg))])
+            glitch = Glitch(",".join(group), kind, float(rel[a]), float(rel[b]), a + 1, b - a + 1, worst)
+            out.append((glitch, (a, b)))
+    return out
+
+
+def _stretch_gain(ts, position, velocity, a, b) -> float:
+    """A velocity's gain on its position's change over the 50 ms blocks of samples `a..b`."""
+    edges = stretch_edges(ts)
+    edges = edges[(edges >= a) & (edges <= b)]
+    if len(edges) < 2:
+        edges = np.array([a, b])
+    start, stop = edges[:-1], edges[1:]
+    slopes = (position[stop] - position[start]) / (ts[stop] - ts[start])
+    area = np.concatenate([[0.0], np.cumsum(0.5 * (velocity[1:] + velocity[:-1]) * np.diff(ts))])
+    means = (area[stop] - area[start]) / (ts[stop] - ts[start])
+    return float(slopes @ means / (slopes @ slopes)) if slopes @ slopes > 0 else float("nan")
+
+
+def _stretch_is_a_fault(ts, position, velocity, a, b) -> bool:
+    """Whether a velocity stretch is off by `STRETCH_FACTOR` or more, or of the other sign (a filter's lag is
+    not: see the module notes)."""
+    gain = _stretch_gain(ts, position, velocity, a, b)
+    return not (1.0 / STRETCH_FACTOR < gain < STRETCH_FACTOR)
 
 
 def usable_segments(trajectory: Trajectory, notes: FlightNotes, min_samples: int = 2) -> list[Trajectory]:
@@ -226,6 +356,66 @@ def _continuous_quaternions(quats: np.ndarray) -> np.ndarray:
     return out * sign[:, None]
 
 
+def _with_gaps(notes: FlightNotes, ts: np.ndarray, gaps) -> FlightNotes:
+    """`notes` with each gap `(t_before, t_after)` of the recorded times noted as a `gap` glitch, the samples
+    resampling interpolated inside it (on the grid `ts`) left out."""
+    if not gaps:
+        return notes
+    usable, found = np.array(notes.usable), list(notes.glitches)
+    for before, after in gaps:
+        inside = np.flatnonzero((ts > before) & (ts < after))
+        if inside.size:
+            usable[inside] = False
+            start, stop, n = float(before - ts[0]), float(after - ts[0]), int(inside.size)
+            found.append(Glitch("t", "gap", start, stop, int(inside[0]) + 1, n, float(after - before)))
+    found.sort(key=lambda g: (g.start, g.column))
+    return FlightNotes(notes.ground, tuple(found), usable, notes.source)
+
+
+def check_input_columns(data: Trajectory, *, path=None, columns=None) -> None:
+    """Refuse motor and battery columns that no flight logs: a motor zero while the others run, constant, or the
+    copy of another motor, throughout; a battery at 0 V or below throughout. Each makes the motor map's
+    features collinear or void, so a fit returns numbers that mean nothing.
+
+    **Raises:** `DataError` naming the file and the column (as the file names it)."""
+    columns = columns or {}
+    named = lambda n: columns.get(n, n)  # noqa: E731
+    motors = {f"m{i}": _column(data, f"m{i}") for i in range(1, 5)}
+    for name, m in motors.items():
+        others = [o for o, v in motors.items() if o != name and np.any(v != 0)]
+        if not np.any(m != 0) and others:
+            raise DataError(
+                f"is zero in every row while {', '.join(named(o) for o in others)} run: a motor that never turns "
+                "lifts nothing, so this is not its log; map the motor's own column",
+                path=path,
+                column=named(name),
+            )
+        if np.any(m != 0) and np.ptp(m) == 0:
+            raise DataError(
+                f"is constant ({m[0]:.6g}) in every row: a flying multirotor's motor commands or speeds move with "
+                "every correction of its attitude; map the motor's own column",
+                path=path,
+                column=named(name),
+            )
+        for other in list(motors)[: list(motors).index(name)]:
+            if np.any(m != 0) and np.array_equal(m, motors[other]):
+                raise DataError(
+                    f"is the same as column '{named(other)}' in every row: one motor's log mapped twice? Map "
+                    f"{name} to the motor's own column",
+                    path=path,
+                    column=named(name),
+                )
+    if "vbat" in data.input_names:
+        vbat = _column(data, "vbat")
+        if np.max(vbat) <= 0:
+            raise DataError(
+                f"is {np.max(vbat):.4g} V or below in every row: no battery that flies reads that; map vbat to the "
+                "battery voltage's column (`--map vbat=COLUMN`), or leave the column out of the file",
+                path=path,
+                column=named("vbat"),
+            )
+
+
 def load_flight(
     path: str | os.PathLike,
     *,
@@ -237,16 +427,25 @@ def load_flight(
     """Load a quadrotor flight log: the contract's `quadrotor` columns, on a uniform grid, with notes.
 
     Reads the file (`load_trajectory(path, "quadrotor", ...)`, `.csv.gz` included), refuses a
-    quaternion that is not of unit norm (tolerance 0.01, naming the row), makes the quaternion's
-    sign continuous, resamples a record with missed frames onto its median interval (states
-    interpolated, inputs held), normalises the quaternions and runs `inspect_flight`.
+    quaternion that is not of unit norm (tolerance 0.01, naming the row) and a motor or battery
+    column that no flight logs (a motor zero, constant or another motor's copy throughout, a
+    battery at 0 V or below), makes the quaternion's sign continuous, resamples a record with
+    missed frames onto its median interval (states interpolated, inputs held; the samples inside a
+    gap of more than `MAX_GAP` intervals are noted as a `gap` and left out), normalises the
+    quaternions, runs `inspect_flight`, and refuses columns that contradict each other
+    (`dynax._data._flight_kinematics`).
 
     **Arguments:** `path`; `mapping`, `scale`, `offset` as for `load_trajectory`; `checks`.
 
     **Returns:** `(trajectory, notes)`.
     """
     path = str(path)
-    data = load_trajectory(path, "quadrotor", mapping=mapping, scale=scale, offset=offset, sampling=Sampling(3))
+    # gaps are kept (and left out below), and the located checks are `inspect_flight`'s, said once as notes
+    sampling = Sampling(3, max_gap=None)
+    data = load_trajectory(
+        path, "quadrotor", mapping=mapping, scale=scale, offset=offset, sampling=sampling, check=False
+    )
+    check_input_columns(data, path=path, columns=dict(mapping or {}))
     quats = np.asarray(data.xs[:, 3:7], dtype=float)
     norms = np.linalg.norm(quats, axis=1)
     bad = np.flatnonzero(np.abs(norms - 1) > QUATERNION_TOLERANCE)
@@ -265,7 +464,11 @@ def load_flight(
     data = Trajectory(
         data.ts, jnp.asarray(xs, data.xs.dtype), data.us, data.state_names, data.input_names, data.system, data.source
     )
+    gaps = []
     if not data.is_uniform:
+        recorded = np.asarray(data.ts, dtype=float)
+        long = np.flatnonzero(np.diff(recorded) > MAX_GAP * data.dt)
+        gaps = [(recorded[k], recorded[k + 1]) for k in long]
         data = resample(data, data.dt)
         q = np.asarray(data.xs[:, 3:7])
         data = Trajectory(
@@ -279,7 +482,7 @@ def load_flight(
         )
     values = {n: np.asarray(data.xs[:, i], dtype=float) for i, n in enumerate(data.state_names)}
     columns = dict(mapping or {})
-    notes = inspect_flight(data, checks)
+    notes = _with_gaps(inspect_flight(data, checks), np.asarray(data.ts, dtype=float), gaps)
     # The columns' agreement on the longest run with the motors running (glitches kept: a column in the
     # wrong unit is flagged as glitches throughout, and the check must see it to name it; the height is
     # not used, as a z axis pointing down is one of the faults).
@@ -290,6 +493,9 @@ def load_flight(
         flown = {n: v[a : b + 1] for n, v in values.items()}
         # the frame first: in another frame the rates disagree with the attitude too, and a scale is no fix
         motors = np.asarray(data.us[a : b + 1, :4], dtype=float)
+        check_quaternion_order(rel[a : b + 1], flown, path=path, columns=columns)
+        check_velocity_frame(rel[a : b + 1], flown, path=path, columns=columns)
+        check_position_units(rel[a : b + 1], flown, motors, path=path, columns=columns, scale=scale)
         check_thrust_frame(rel[a : b + 1], flown, motors, path=path, columns=columns)
         check_flight_kinematics(rel[a : b + 1], flown, path=path, columns=columns, scale=scale)
     return data, notes

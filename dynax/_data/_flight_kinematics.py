@@ -35,6 +35,7 @@ from .._errors import DataError
 from ._velocities import (
     BLOCK_S,
     check_velocities,
+    MAX_GAIN_ERROR,
     MIN_BLOCKS,
     SIGNIFICANCE,
     stretch_edges,
@@ -255,3 +256,134 @@ def _slope(x, y) -> tuple[float, float]:
     slope = float(x @ y) / xx
     residual = y - slope * x
     return slope, float(np.sqrt(residual @ residual / max(len(x) - 1, 1) / xx))
+
+
+# The order loggers write a quaternion in besides the contract's (qw, qx, qy, qz), scalar last (ROS, Eigen's
+# coefficients, scipy, NanoBench): `QUATERNION_READINGS[name]` are the indices into the columns read as
+# (qw, qx, qy, qz) of its w, x, y and z components.
+QUATERNION_READINGS = {"scalar last, (x, y, z, w)": (3, 0, 1, 2)}
+_QUATERNION = ("qw", "qx", "qy", "qz")
+
+
+def _rates_agree(ts, quats, rates) -> int:
+    """How many of the body rates `p, q, r` follow the attitude's rate of change about their axes within
+    `MAX_RATE_FACTOR` (a gyro's gain on motion capture; see the module notes)."""
+    angles = attitude_angles(quats)
+    agree = 0
+    for k in range(3):
+        found = velocity_gain(ts, angles[:, k], rates[k])
+        if found is not None and 1 / MAX_RATE_FACTOR <= found[0] <= MAX_RATE_FACTOR:
+            agree += 1
+    return agree
+
+
+def check_quaternion_order(ts, values: dict, *, path=None, columns=None) -> None:
+    """Refuse a quaternion whose components are read in another order than they were written: a scalar-last
+    quaternion `(x, y, z, w)` mapped as the contract's scalar-first `(qw, qx, qy, qz)`. Read so, it is still a
+    unit quaternion, but of another attitude, and the body rates stop being its rate of change; read in the
+    order it was written, all three are. Refused where the columns' own order leaves a rate that does not
+    follow the attitude and another order has all three follow it.
+
+    **Raises:** `DataError` naming the file and the column read as `qw`, the order the quaternion reads in,
+    and the `--map` that reads it right.
+    """
+    columns = columns or {}
+    ts = np.asarray(ts, dtype=float)
+    quats = np.stack([np.asarray(values[c], dtype=float) for c in _QUATERNION], axis=1)
+    rates = [np.asarray(values[c], dtype=float) for c in _AXES]
+    if _rates_agree(ts, quats, rates) == 3:
+        return
+    for order, index in QUATERNION_READINGS.items():
+        if _rates_agree(ts, quats[:, index], rates) == 3:
+            remap = ",".join(f"{c}={columns.get(_QUATERNION[i], _QUATERNION[i])}" for c, i in zip(_QUATERNION, index))
+            raise DataError(
+                f"the quaternion reads as {order}: the body rates p, q, r follow its rate of change "
+                "only with the components in that order, while the contract's is scalar first (qw, qx, qy, qz); "
+                f"map them in the order they were written (`--map {remap}`)",
+                path=path,
+                column=columns.get("qw", "qw"),
+            )
+
+
+def check_position_units(ts, values: dict, motors, *, path=None, columns=None, scale=None) -> None:
+    """Refuse a position in millimetres beside a velocity in metres per second. The velocity's comparison
+    with the position's change (`check_velocities`) says only that the two differ by a factor of 1000; gravity
+    says which is wrong: a multirotor's horizontal acceleration follows the lean of its body z axis at about
+    $g$ per unit lean (`thrust_frame_slopes`), so a velocity whose change does that is in m/s.
+
+    **Raises:** `DataError` naming the file and the column read as `x`, and the `scale` of the position.
+    """
+    columns, scale = columns or {}, scale or {}
+    ts = np.asarray(ts, dtype=float)
+    gains = [velocity_gain(ts, values[p], values[v]) for v, p in (("vx", "x"), ("vy", "y"), ("vz", "z"))]
+    moving = [g[0] for g in gains if g is not None and abs(g[0]) > SIGNIFICANCE * g[1]]
+    if not moving or not all(abs(g / 1e-3 - 1) < 0.05 for g in moving):
+        return
+    slopes = thrust_frame_slopes(ts, values, motors)
+    if slopes is None or not 0.1 * STANDARD_GRAVITY < slopes[0] < 3 * STANDARD_GRAVITY:
+        return  # the velocity's own unit is not pinned: `check_velocities` names the disagreement
+    fix = {c: 1e-3 * float(scale.get(c, 1.0)) for c in ("x", "y", "z")}
+    raise DataError(
+        f"the position reads as millimetres: vx, vy, vz are {np.median(moving):.4g} times its change per second, "
+        f"and their change follows the lean of body z at {slopes[0]:.3g} m/s^2 per unit lean (about g: they are "
+        "in m/s); scale the position, not the velocity "
+        f"(`scale={{{', '.join(f'{c!r}: {f:g}' for c, f in fix.items())}}}`, "
+        f"`--scale {','.join(f'{c}={f:g}' for c, f in fix.items())}`)",
+        path=path,
+        column=columns.get("x", "x"),
+    )
+
+
+def _rotated(quats, vectors, inverse=False):
+    """Each vector rotated by its body-to-world quaternion `(qw, qx, qy, qz)` (by its inverse with `inverse`)."""
+    w, x, y, z = (quats[:, i] for i in range(4))
+    r = np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
+        ],
+        axis=-2,
+    )
+    return np.einsum("nji,nj->ni" if inverse else "nij,nj->ni", r, vectors)
+
+
+def _misfit(ts, position, velocity) -> float | None:
+    """The velocity's block means against the position's secant slopes, over all three axes: the residual's
+    root mean square relative to the slopes' (0 where they agree); `None` for a record too short or still."""
+    edges = stretch_edges(ts)
+    if len(edges) < MIN_BLOCKS + 1:
+        return None
+    start, stop = edges[:-1], edges[1:]
+    slopes = (position[stop] - position[start]) / (ts[stop] - ts[start])[:, None]
+    area = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * (velocity[1:] + velocity[:-1]) * np.diff(ts)[:, None], 0)])
+    means = (area[stop] - area[start]) / (ts[stop] - ts[start])[:, None]
+    motion = float(np.sqrt(np.mean(slopes**2)))
+    return float(np.sqrt(np.mean((means - slopes) ** 2))) / motion if motion > 0 else None
+
+
+def check_velocity_frame(ts, values: dict, *, path=None, columns=None) -> None:
+    """Refuse a velocity logged in the body frame where the contract's is the world frame's: `vx, vy, vz`
+    miss the position's change by more than `MAX_GAIN_ERROR` of its size, and rotated into the world by the
+    attitude they follow it at least twice as closely.
+
+    **Raises:** `DataError` naming the file and the column read as `vx`.
+    """
+    columns = columns or {}
+    ts = np.asarray(ts, dtype=float)
+    position = np.stack([np.asarray(values[c], dtype=float) for c in ("x", "y", "z")], axis=1)
+    velocity = np.stack([np.asarray(values[c], dtype=float) for c in ("vx", "vy", "vz")], axis=1)
+    quats = np.stack([np.asarray(values[c], dtype=float) for c in _QUATERNION], axis=1)
+    as_world = _misfit(ts, position, velocity)
+    if as_world is None or as_world <= MAX_GAIN_ERROR:
+        return
+    as_body = _misfit(ts, position, _rotated(quats, velocity))
+    if as_body is not None and as_body < 0.5 * as_world:
+        raise DataError(
+            f"vx, vy, vz are the body frame's velocity: as logged they miss the position's change by {as_world:.0%} "
+            f"of its size over {BLOCK_S * 1e3:g} ms blocks, rotated by the attitude into the world frame by "
+            f"{as_body:.0%}; the contract's velocity is the world frame's: rotate it before loading "
+            "(v_world = R(q) v_body)",
+            path=path,
+            column=columns.get("vx", "vx"),
+        )

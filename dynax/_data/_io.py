@@ -8,6 +8,7 @@ import os
 import pathlib
 import re
 import zipfile
+import zlib
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -45,7 +46,15 @@ def _open_text(path):
     if raw[:2] == b"\x1f\x8b":  # gzip's magic number: a compressed CSV (`.csv.gz`) reads like the CSV
         try:
             raw = gzip.decompress(raw)
-        except (OSError, EOFError) as e:
+        except EOFError:  # cut short (a copy or a download that stopped): say how far it reads
+            read = zlib.decompressobj(wbits=16 + zlib.MAX_WBITS).decompress(raw)
+            lines = read.count(b"\n")
+            raise DataError(
+                f"is truncated: its gzip stream stops in line {lines + 1} (data row {lines}) without its end "
+                "marker; copy or download the file again",
+                path=path,
+            ) from None
+        except (OSError, zlib.error) as e:
             raise DataError(f"is a damaged gzip file ({e})", path=path) from None
     if b"\x00" in raw:
         line = raw.count(b"\n", 0, raw.index(b"\x00")) + 1

@@ -228,7 +228,7 @@ def _position_supports(ts, q, v, k, jump) -> bool:
 
 
 def median_reach(x: np.ndarray, window: int, steps: np.ndarray | None = None) -> float:
-    """The most any sample of `x` can lie from `_glitches`' running median of `window` (odd) samples: the
+    """The most any sample of `x` can lie from `glitch_findings`' running median of `window` (odd) samples: the
     median of a full window is one of its samples, so a sample in the middle of it lies from it by at most
     its largest difference to a sample `window // 2` or fewer steps away; the first and last `window // 2`
     samples are measured from the median of the first and last full window, so by at most that window's
@@ -245,7 +245,7 @@ def median_reach(x: np.ndarray, window: int, steps: np.ndarray | None = None) ->
 
 
 def _typical_step_covers(steps: np.ndarray, reach: float) -> bool:
-    """Whether `reach <= GLITCH_STEPS * typical` with `_glitches`' typical step (1.4826 times `np.median(steps)`)
+    """Whether `reach <= GLITCH_STEPS * typical` with `glitch_findings`' typical step (1.4826 times `np.median(steps)`)
     holds, decided without the median where a count can: numpy's median is the middle sorted value or the
     mean of the two middle ones, so it is at least `low` where at most `(len - 1) // 2` steps are below `low`,
     and the typical step's floating-point formula is monotone in the median. `False` where it cannot tell."""
@@ -257,7 +257,7 @@ def _typical_step_covers(steps: np.ndarray, reach: float) -> bool:
     return int(np.count_nonzero(steps < low)) <= (steps.size - 1) // 2
 
 
-def _glitches(tr, ts, source, columns, positions=None):
+def glitch_findings(tr, ts, source, columns, positions=None):
     import scipy.signal
 
     positions = positions or {}
@@ -317,7 +317,7 @@ def _glitches(tr, ts, source, columns, positions=None):
     return out
 
 
-def _stuck(tr, ts, source, names, xs, paired_estimated, dt):
+def stuck_findings(tr, ts, source, names, xs, paired_estimated, dt):
     out = []
     need = max(STUCK_SAMPLES, math.ceil(STUCK_S / dt))
     for c, name in enumerate(names):
@@ -398,7 +398,7 @@ def _wrapped(tr, ts, source, angles):
     return out
 
 
-def _velocity_stretches(tr, ts, source, values, pairs, dt):
+def velocity_stretch_findings(tr, ts, source, values, pairs, dt):
     """Stretches of bad 50 ms blocks (see the module notes) for each measured velocity."""
     from ._velocities import stretch_edges
 
@@ -561,14 +561,14 @@ def check_record(trajectory: Trajectory, *, estimated: Sequence[str] | None = No
     findings += _constant(trajectory, ts, source, trajectory.system)
     columns = [(n, xs[:, i], False) for i, n in enumerate(names) if n not in estimated]
     columns += [(n, us[:, i], True) for i, n in enumerate(trajectory.input_names)]
-    glitches = _glitches(trajectory, ts, source, columns, {v: values[q] for v, q in measured.items()})
+    glitches = glitch_findings(trajectory, ts, source, columns, {v: values[q] for v, q in measured.items()})
     findings += glitches
     angles = [(q, values[q]) for q in pairs.values()] if trajectory.system in ("acrobot", "double_pendulum") else []
     wrapped = _wrapped(trajectory, ts, source, angles)
     findings += wrapped
-    findings += _stuck(trajectory, ts, source, names, xs, paired_estimated, dt)
+    findings += stuck_findings(trajectory, ts, source, names, xs, paired_estimated, dt)
     if not glitches and not wrapped:  # a glitch or a wrap spoils its blocks too; said once, at its sample
-        findings += _velocity_stretches(trajectory, ts, source, values, measured, dt)
+        findings += velocity_stretch_findings(trajectory, ts, source, values, measured, dt)
     return DataCheck(tuple(findings))
 
 

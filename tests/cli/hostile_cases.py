@@ -809,6 +809,7 @@ class Outcome:
     status: object
     stderr: str
     verdict: str = ""
+    stdout: str = ""
 
     @property
     def message(self) -> str:
@@ -853,13 +854,16 @@ def run_case(case: Case, folder, fixtures, main) -> Outcome:
         changed = _snapshot(out) != before
         check_ok = None
         if status == 0 and case.check is not None:
-            try:
-                check_ok = bool(case.check(out))
+            try:  # a check marked `with_fixtures` compares with the unfaulted records' answers
+                with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+                    check_ok = bool(
+                        case.check(out, fixtures) if getattr(case.check, "with_fixtures", False) else case.check(out)
+                    )
             except Exception:  # noqa: BLE001 - an unreadable output fails the check
                 check_ok = False
     finally:
         os.chdir(cwd)
-    outcome = Outcome(case.id, status, stderr.getvalue())
+    outcome = Outcome(case.id, status, stderr.getvalue(), stdout=stdout.getvalue())
     outcome.verdict = judge(case, outcome, changed, check_ok)
     return outcome
 
@@ -884,7 +888,9 @@ def judge(case: Case, o: Outcome, changed: bool, check_ok) -> str:
     if not check_ok:
         return "silent failure"
     if case.expect == "warn":
+        # a warning on stderr, or a flight's note on stdout (what `load_flight` found and left out)
         warned = [l for l in o.stderr.splitlines() if "warning" in l.lower()]
+        warned += [l for l in o.stdout.splitlines() if l.startswith("note: ")]
         return "warned correctly" if any(all(n in l for n in case.needles) for l in warned) else "silent failure"
     return "accepted correctly"
 

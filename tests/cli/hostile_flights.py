@@ -1,0 +1,752 @@
+"""Hostile flight logs, of the kinds real multirotor logs carry, and what dynax must do with each.
+
+The flight path (`dynax fit quadrotor`, `dynax evaluate`, `dynax diagnose quadrotor`, `dynax.load_flight`)
+is fed logs with one fault each: a gyro or motor glitch, a motion-capture dropout (position frozen, rows
+of NaN, a gap in time), repeated or unsorted time, time in ms or us, quaternion sign flips (the same
+attitude: accepted), an unnormalised quaternion or one read in the wrong component order, z down,
+position in mm, rates in deg/s, a body-frame velocity or one wrong in a stretch, a motor column zero,
+constant, duplicated or swapped, `vbat` zero or absent, a flight that never leaves the floor, a record
+given twice, a truncated `.csv.gz`, another system's model, bad `--steps`; and clean flights that must
+keep their right answers. Each `Case` (`tests/cli/hostile_cases.py`, judged by the same `run_case`) has
+one acceptable outcome written before it was run:
+
+- `refuse`: exit status 2, one line naming the column and the row or time (or the argument) and the fix,
+  nothing written;
+- `warn`: exit status 0, a located note or warning (the column, the row or time, what was left out), and
+  a right answer;
+- `accept`: exit status 0 and a right answer.
+
+A right answer is checked apart from the code under test: the synthetic flights are made by scipy's DOP853
+from a rigid body written with numpy (`tests/quadrotor/synthetic_flight.py`), and a model fitted to a
+faulted log must predict a clean held-out flight of the same vehicle as well as the model fitted to the
+unfaulted log does (within 10 %, one and ten steps ahead), or, where the fault changes nothing the model
+can see (a quaternion's sign, the motors' order), reach the unfaulted fit's loss. The NanoBench cases
+(`../shared/datasets/nanobench`, read in place, derived files written to the case's folder) are skipped
+where those files are absent. Used by `tests/cli/test_hostile_flights.py` and by
+`experiments/hostile_inputs.py --flights`.
+"""
+
+import gzip
+import json
+import pathlib
+
+import numpy as np
+
+from tests.cli.hostile_cases import Case, write_table
+
+NANOBENCH = pathlib.Path(__file__).resolve().parents[2] / ".." / "shared" / "datasets" / "nanobench"
+STAR = NANOBENCH / "B8_star_fast_rep1.csv.gz"
+RUNAWAY = NANOBENCH / "B2_circle_medium_rep3.csv.gz"  # its m1, m2 log runs away from 31.27 s
+NANOBENCH_MAP = (
+    "x=px,y=py,z=pz,p=wx_vicon,q=wy_vicon,r=wz_vicon,m1=motor_motor_m1,m2=motor_motor_m2,"
+    "m3=motor_motor_m3,m4=motor_motor_m4,vbat=pwr_pm_vbat"
+)
+FLIGHT = ("t", "x", "y", "z", "qw", "qx", "qy", "qz", "vx", "vy", "vz", "p", "q", "r", "m1", "m2", "m3", "m4", "vbat")
+GROUPS = ("velocity", "attitude", "body_rate")  # position one step ahead is the measurement noise
+SECONDS = 12.0
+
+
+def _column(name):
+    return FLIGHT.index(name)
+
+
+def _synthetic(seed):
+    from tests.quadrotor.synthetic_flight import quadrotor_flight
+
+    f = quadrotor_flight(SECONDS, seed=seed, vbat=True)  # logged in the air, as an onboard log started late
+    return np.column_stack([np.asarray(f.ts), np.asarray(f.xs), np.asarray(f.us)])
+
+
+def _fit_argv(path, *extra, out="model.json"):
+    return ["fit", "quadrotor", str(path), "--model", "nominal", "--criterion", "one-step", *extra, "--out", out]
+
+
+def _scores(main, model, data, folder, *extra):
+    """`dynax evaluate`'s MAE per group at 1 and 10 steps of `model` on `data`, and constant velocity's."""
+    out = pathlib.Path(folder) / "scores.json"
+    status = main(["evaluate", str(model), str(data), *extra, "--steps", "1,10", "--metric", "mae", "--out", str(out)])
+    if status != 0:
+        raise RuntimeError(f"evaluate exited {status}")
+    obj = json.loads(out.read_text())
+    return obj["model"]["mae"], obj["constant_velocity"]["mae"]
+
+
+def make_fixtures(root, main) -> dict:
+    """A 12 s training and a 12 s held-out synthetic flight (the contract's columns, `vbat` logged), the
+    nominal one-step model fitted to the training flight through `main` and its held-out scores; the
+    NanoBench star flight's first 9 s (3 s on the floor, 6 s of flight) where the data are present."""
+    import contextlib
+    import io
+
+    root = pathlib.Path(root)
+    fx = {"train": _synthetic(3), "validation": _synthetic(4), "main": main}
+    fx["train_csv"] = write_table(root / "train.csv", FLIGHT, fx["train"])
+    fx["validation_csv"] = write_table(root / "validation.csv", FLIGHT, fx["validation"])
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main(_fit_argv(fx["train_csv"], out=str(root / "clean.json"))) == 0
+        fx["clean_loss"] = json.loads((root / "clean.json").read_text())["loss"]
+        fx["clean_scores"], baseline = _scores(main, root / "clean.json", fx["validation_csv"], root)
+    # the unfaulted fit is a right answer: far ahead of holding the velocity 0.1 s ahead
+    assert fx["clean_scores"]["velocity"][1] < 0.3 * baseline["velocity"][1], (fx["clean_scores"], baseline)
+    if STAR.exists():
+        with gzip.open(STAR, "rt") as f:
+            lines = [next(f) for _ in range(901)]
+        fx["star_header"] = lines[0].strip().split(",")
+        fx["star"] = np.array([[float(v) for v in line.split(",")] for line in lines[1:]])
+        fx["star_gz"] = str(root / "star_9s.csv.gz")
+        with gzip.open(fx["star_gz"], "wt") as f:
+            f.writelines(lines)
+    return fx
+
+
+# --- building a faulted log ---------------------------------------------------------------------------
+
+
+def _flight(folder, fx, edit=None, name="flight.csv", header=FLIGHT):
+    table = np.array(fx["train"], copy=True)
+    out = edit(table) if edit else table
+    header, out = out if isinstance(out, tuple) else (header, out)
+    return write_table(pathlib.Path(folder) / name, header, out)
+
+
+def _star(folder, fx, edit, name="star.csv.gz"):
+    """The 9 s NanoBench cut with `edit(header, table)` applied, written gzip-compressed."""
+    header = list(fx["star_header"])
+    table = edit(header, np.array(fx["star"], copy=True))
+    path = pathlib.Path(folder) / name
+    with gzip.open(path, "wt") as f:
+        f.write(",".join(header) + "\n")
+        f.writelines(",".join(f"{v:.17g}" for v in row) + "\n" for row in table)
+    return str(path)
+
+
+def _set(columns, rows, value):
+    """Set `columns` (names) at `rows` (an index or a slice) to `value` (a number, an array, or a function of
+    the old values)."""
+
+    def edit(t):
+        idx = [_column(c) for c in columns]
+        old = t[rows, idx]
+        new = np.asarray(value(old) if callable(value) else value)
+        t[rows, idx] = new[:, None] if new.ndim == 1 and old.ndim == 2 else new
+        return t
+
+    return edit
+
+
+def _frozen(columns, first, n):
+    """`columns` held at the sample before `first` for `n` samples (a motion-capture dropout)."""
+
+    def edit(t):
+        idx = [_column(c) for c in columns]
+        t[first : first + n, idx] = t[first - 1, idx]
+        return t
+
+    return edit
+
+
+def _drop_rows(first, n):
+    return lambda t: np.delete(t, np.arange(first, first + n), axis=0)
+
+
+def _swap_columns(a, b):
+    def edit(t):
+        t[:, [_column(a), _column(b)]] = t[:, [_column(b), _column(a)]]
+        return t
+
+    return edit
+
+
+def _body_velocity(t):
+    from tests.quadrotor.synthetic_flight import rotation
+
+    q = t[:, [_column(c) for c in ("qw", "qx", "qy", "qz")]]
+    v = t[:, [_column(c) for c in ("vx", "vy", "vz")]]
+    t[:, [_column(c) for c in ("vx", "vy", "vz")]] = np.stack([rotation(qi).T @ vi for qi, vi in zip(q, v)])
+    return t
+
+
+def _without(column):
+    def edit(t):
+        keep = [c for c in FLIGHT if c != column]
+        return tuple(keep), t[:, [_column(c) for c in keep]]
+
+    return edit
+
+
+def _truncated_gz(folder, fx):
+    raw = gzip.compress(pathlib.Path(fx["train_csv"]).read_bytes())
+    path = pathlib.Path(folder) / "flight.csv.gz"
+    path.write_bytes(raw[: len(raw) // 2])
+    return str(path)
+
+
+def _helicopter_model(folder):
+    from dynax.internal import initial_helicopter
+
+    body = initial_helicopter("acceleration").body_model
+    obj = {
+        "system": "helicopter",
+        "model": "acceleration",
+        "features": list(body.feature_names),
+        "mask": [[int(v) for v in row] for row in body.mask],
+        "weights": np.asarray(body.weights).tolist(),
+        "gravity": 9.81,
+    }
+    path = pathlib.Path(folder) / "heli_model.json"
+    path.write_text(json.dumps(obj))
+    return str(path)
+
+
+def _star_edit(columns, value):
+    def edit(header, t):
+        for c in columns:
+            t[:, header.index(c)] = value(t[:, header.index(c)])
+        return t
+
+    return edit
+
+
+# --- checks of an answer ----------------------------------------------------------------------------
+
+
+def _predicts_as_well(tolerance=0.10):
+    """The written model predicts the clean held-out flight within `tolerance` of the unfaulted fit's MAE
+    (velocity, attitude and body rate, 1 and 10 steps ahead)."""
+
+    def check(out, fx):
+        scores, _ = _scores(fx["main"], out, fx["validation_csv"], pathlib.Path(out).parent)
+        clean = fx["clean_scores"]
+        return all(
+            np.isfinite(scores[g][k]) and scores[g][k] <= (1 + tolerance) * clean[g][k] + 1e-4
+            for g in GROUPS
+            for k in range(2)
+        )
+
+    check.with_fixtures = True
+    return check
+
+
+def _same_loss(out, fx):
+    """The unfaulted fit's loss (a fault the model cannot see: the quaternion's sign, the motors' order)."""
+    return abs(json.loads(pathlib.Path(out).read_text())["loss"] / fx["clean_loss"] - 1) < 1e-6
+
+
+_same_loss.with_fixtures = True
+
+
+def _no_ground_claimed(out, fx):
+    """A clean log started in the air: no ground segment claimed (nothing shows where the floor is), no
+    glitch (a false alarm leaves good flight out), and the model as good as the unfaulted fit."""
+    data = json.loads(pathlib.Path(out).read_text())["data"]
+    return all(not d["ground_s"] and not d["glitches"] for d in data) and _predicts_as_well()(out, fx)
+
+
+_no_ground_claimed.with_fixtures = True
+
+
+def _beats_constant_velocity_on_star(out, fx):
+    """The real flight's fitted model: ahead of holding the velocity 0.1 s ahead on its own flight (as in
+    `tests/quadrotor/test_cli.py`), every score finite, and no glitch claimed in this clean flight."""
+    if any(d["glitches"] for d in json.loads(pathlib.Path(out).read_text())["data"]):
+        return False
+    scores, baseline = _scores(fx["main"], out, fx["star_gz"], pathlib.Path(out).parent, "--map", NANOBENCH_MAP)
+    finite = all(np.isfinite(v) for g in scores.values() for v in g)
+    return finite and scores["velocity"][1] < baseline["velocity"][1]
+
+
+_beats_constant_velocity_on_star.with_fixtures = True
+
+
+def _as_cut_before_the_runaway(out, fx):
+    """The runaway flight's model predicts the star flight as well as the model fitted to the same log cut
+    before the runaway (within 10 %, as `_predicts_as_well`)."""
+    folder = pathlib.Path(out).parent
+    with gzip.open(RUNAWAY, "rt") as f:
+        lines = [next(f) for _ in range(3101)]  # to 31.0 s, before the log runs away at 31.27 s
+    cut = folder / "cut.csv.gz"
+    with gzip.open(cut, "wt") as f:
+        f.writelines(lines)
+    assert fx["main"](_fit_argv(cut, *_MAP, out=str(folder / "cut.json"))) == 0
+    scores, _ = _scores(fx["main"], out, fx["star_gz"], folder, *_MAP)
+    reference, _ = _scores(fx["main"], folder / "cut.json", fx["star_gz"], folder, *_MAP)
+    return all(
+        np.isfinite(scores[g][k]) and scores[g][k] <= 1.1 * reference[g][k] + 1e-4 for g in GROUPS for k in range(2)
+    )
+
+
+_as_cut_before_the_runaway.with_fixtures = True
+
+
+def _scores_as_on_the_clean_flight(out, fx):
+    """`evaluate`'s scores on a held-out flight with a glitch left out: within 5 % of the clean flight's."""
+    scores, clean = json.loads(pathlib.Path(out).read_text())["model"]["mae"], fx["clean_scores"]
+    return all(abs(scores[g][k] / clean[g][k] - 1) < 0.05 for g in GROUPS for k in range(2))
+
+
+_scores_as_on_the_clean_flight.with_fixtures = True
+
+
+def _validation(folder, fx, edit):
+    table = edit(np.array(fx["validation"], copy=True))
+    return write_table(pathlib.Path(folder) / "validation.csv", FLIGHT, table)
+
+
+def _clean_model(fx):
+    return str(pathlib.Path(fx["train_csv"]).parent / "clean.json")
+
+
+def _model_with(folder, fx, edit):
+    """The unfaulted fit's model file with `edit(obj)` applied."""
+    obj = edit(json.loads(pathlib.Path(_clean_model(fx)).read_text()))
+    path = pathlib.Path(folder) / "model_edited.json"
+    path.write_text(json.dumps(obj))
+    return str(path)
+
+
+def _nan_weights(obj):
+    obj["weights"][0][0] = float("nan")
+    return obj
+
+
+# --- the cases ------------------------------------------------------------------------------------------
+
+C = Case
+_SAME = _same_loss
+_CLOSE = _predicts_as_well()
+_MAP = ("--map", NANOBENCH_MAP)
+_NOT_VELOCITY_SCALE = ("vx=", "vy=", "vz=", "p=", "q=", "r=")
+
+CASES = [
+    # Sensor glitches: the samples left out with a located note, the rest fitted.
+    C(
+        "flight-gyro-460",
+        "glitch",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["p"], 500, 460.0))),
+        "warn",
+        ("p: ", "t = 5.00", "row 501"),
+        check=_CLOSE,
+    ),
+    C(
+        "flight-gyro-15-in-range",
+        "glitch",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["q"], 700, lambda v: v + 15.0))),
+        "warn",
+        ("q: ", "t = 7.00", "row 701"),
+        check=_CLOSE,
+    ),
+    C(
+        "flight-motor-spike",
+        "glitch",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["m3"], 400, lambda v: 10 * v))),
+        "warn",
+        ("m3: ", "row 401"),
+        check=_CLOSE,
+    ),
+    C(
+        "nanobench-motor-log-runaway",
+        "glitch",
+        lambda d, fx: _fit_argv(RUNAWAY, *_MAP),
+        "warn",
+        ("m1: ", "31.27"),
+        check=_as_cut_before_the_runaway,
+        heavy=True,  # two fits and two evaluations of 28 s of flight
+    ),
+    C(
+        "evaluate-gyro-glitch",
+        "glitch",
+        lambda d, fx: [
+            "evaluate",
+            _clean_model(fx),
+            _validation(d, fx, _set(["r"], 300, -300.0)),
+            "--steps",
+            "1,10",
+            "--metric",
+            "mae",
+            "--out",
+            "metrics.json",
+        ],
+        "warn",
+        ("r: ", "t = 3.00", "row 301"),
+        check=_scores_as_on_the_clean_flight,
+    ),
+    C(
+        "flight-motor-nan",
+        "glitch",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["m4"], 800, np.nan))),
+        "refuse",
+        ("column 'm4'", "row 801"),
+    ),
+    # Motion-capture dropouts.
+    C(
+        "flight-mocap-frozen",
+        "dropout",
+        lambda d, fx: _fit_argv(_flight(d, fx, _frozen(["x", "y", "z"], 600, 30))),
+        "warn",
+        ("x,y,z: ", "t = 6.00", "row 601"),
+        check=_CLOSE,
+    ),
+    C(
+        "flight-mocap-nan-rows",
+        "dropout",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(list(FLIGHT[1:14]), slice(600, 610), np.nan))),
+        "refuse",
+        ("column 'x'", "row 601"),
+    ),
+    C(
+        "flight-time-gap",
+        "dropout",
+        lambda d, fx: _fit_argv(_flight(d, fx, _drop_rows(600, 30))),
+        "warn",
+        ("gap", "t = 5.99 to 6.30"),
+        check=_CLOSE,
+    ),
+    # Time.
+    C(
+        "flight-short-gap",
+        "dropout",
+        lambda d, fx: _fit_argv(_flight(d, fx, _drop_rows(600, 4))),
+        "accept",
+        check=_CLOSE,
+    ),
+    C(
+        "flight-repeated-timestamp",
+        "time",
+        lambda d, fx: _fit_argv(_flight(d, fx, lambda t: np.insert(t, 301, t[300], axis=0))),
+        "refuse",
+        ("column 't'", "row 302"),
+    ),
+    C(
+        "flight-rows-swapped",
+        "time",
+        lambda d, fx: _fit_argv(_flight(d, fx, lambda t: t[np.r_[0:300, 301, 300, 302 : len(t)]])),
+        "refuse",
+        ("column 't'", "row 302"),
+    ),
+    C(
+        "flight-time-ms",
+        "time_units",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["t"], slice(None), lambda v: 1e3 * v))),
+        "refuse",
+        ("column 't'", "--scale t=0.001"),
+        _NOT_VELOCITY_SCALE,
+    ),
+    C(
+        "flight-time-us",
+        "time_units",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["t"], slice(None), lambda v: 1e6 * v))),
+        "refuse",
+        ("column 't'", "--scale t=1e-06"),
+        _NOT_VELOCITY_SCALE,
+    ),
+    # Quaternions: q and -q are one attitude (accepted as the unfaulted log); a wrong one is refused.
+    C(
+        "flight-quat-sign-flips",
+        "quaternion",
+        lambda d, fx: _fit_argv(
+            _flight(
+                d,
+                fx,
+                lambda t: _set(["qw", "qx", "qy", "qz"], slice(900, 1100), lambda v: -v)(
+                    _set(["qw", "qx", "qy", "qz"], slice(300, 600), lambda v: -v)(t)
+                ),
+            )
+        ),
+        "accept",
+        check=_SAME,
+    ),
+    C(
+        "flight-quat-qw-negative",
+        "quaternion",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["qw", "qx", "qy", "qz"], slice(None), lambda v: -v))),
+        "accept",
+        check=_SAME,
+    ),
+    C(
+        "flight-quat-norm-1.004",
+        "quaternion",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["qw", "qx", "qy", "qz"], slice(None), lambda v: 1.004 * v))),
+        "accept",
+        check=_SAME,
+    ),
+    C(
+        "flight-quat-unnormalised",
+        "quaternion",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["qw", "qx", "qy", "qz"], slice(500, None), lambda v: 1.5 * v))),
+        "refuse",
+        ("column 'qw'", "row 501"),
+    ),
+    C(
+        "nanobench-quat-xyzw-read-as-wxyz",
+        "quaternion",
+        lambda d, fx: _fit_argv(STAR, "--map", NANOBENCH_MAP + ",qw=qx,qx=qy,qy=qz,qz=qw"),
+        "refuse",
+        ("column 'qx'", "scalar last", "qw=qw,qx=qx,qy=qy,qz=qz"),
+    ),
+    C(
+        "flight-quat-xyzw-read-as-wxyz",
+        "quaternion",
+        lambda d, fx: _fit_argv(
+            _flight(d, fx, lambda t: (FLIGHT, t[:, [*range(4), 5, 6, 7, 4, *range(8, len(FLIGHT))]]))
+        ),
+        "refuse",
+        ("column 'qw'", "scalar last"),
+    ),
+    # Frames and units.
+    C(
+        "flight-z-down",
+        "frame",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["z", "vz"], slice(None), lambda v: -v))),
+        "refuse",
+        ("column 'z'", "z up"),
+        ("--scale",),
+    ),
+    C(
+        "flight-position-mm",
+        "units",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["x", "y", "z"], slice(None), lambda v: 1e3 * v))),
+        "refuse",
+        ("column 'x'", "x=0.001"),
+        ("vx=1000",),
+    ),
+    C(
+        "nanobench-position-mm",
+        "units",
+        lambda d, fx: _fit_argv(_star(d, fx, _star_edit(["px", "py", "pz"], lambda v: 1e3 * v)), *_MAP),
+        "refuse",
+        ("column 'px'", "x=0.001"),
+        ("vx=1000",),
+    ),
+    C(
+        "flight-rates-deg",
+        "units",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["p", "q", "r"], slice(None), np.degrees))),
+        "refuse",
+        ("column 'p'", "p=0.0174533"),
+    ),
+    C(
+        "flight-body-velocity",
+        "velocity",
+        lambda d, fx: _fit_argv(_flight(d, fx, _body_velocity)),
+        "refuse",
+        ("column 'v", "body"),
+        ("--scale",),
+    ),
+    C(
+        "flight-velocity-stretch-x3",
+        "velocity",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["vx"], slice(500, 700), lambda v: 3 * v))),
+        "warn",
+        ("vx: ", "t = 5.00"),
+        ("--scale",),
+        check=_CLOSE,
+    ),
+    # Motors and battery.
+    C(
+        "flight-motor-zero",
+        "motors",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["m2"], slice(None), 0.0))),
+        "refuse",
+        ("column 'm2'",),
+    ),
+    C(
+        "flight-motor-constant",
+        "motors",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["m3"], slice(None), 40000.0))),
+        "refuse",
+        ("column 'm3'", "constant"),
+    ),
+    C(
+        "flight-motor-duplicated",
+        "motors",
+        lambda d, fx: _fit_argv(_flight(d, fx, lambda t: _set(["m4"], slice(None), t[:, _column("m1")].copy())(t))),
+        "refuse",
+        ("column 'm4'", "m1"),
+    ),
+    C(
+        "flight-motors-swapped",
+        "motors",
+        lambda d, fx: _fit_argv(_flight(d, fx, _swap_columns("m1", "m2"))),
+        "accept",
+        check=_SAME,
+    ),
+    C(
+        "flight-vbat-zero",
+        "motors",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["vbat"], slice(None), 0.0))),
+        "refuse",
+        ("column 'vbat'",),
+    ),
+    C(
+        "flight-vbat-absent",
+        "motors",
+        lambda d, fx: _fit_argv(_flight(d, fx, _without("vbat"))),
+        "accept",
+        check=_CLOSE,
+    ),
+    C(
+        "flight-all-ground",
+        "ground",
+        lambda d, fx: _fit_argv(
+            _flight(
+                d,
+                fx,
+                lambda t: _set(["m1", "m2", "m3", "m4"], slice(None), 0.0)(_frozen(FLIGHT[1:14], 1, len(t) - 1)(t)),
+            )
+        ),
+        "refuse",
+        ("no run of flight",),
+    ),
+    C(
+        "flight-logged-airborne",
+        "ground",
+        lambda d, fx: _fit_argv(fx["train_csv"]),
+        "accept",
+        check=_no_ground_claimed,
+    ),
+    C(
+        "flight-motors-normalised",
+        "motors",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["m1", "m2", "m3", "m4"], slice(None), lambda v: v / 65535.0))),
+        "accept",
+        check=_SAME,
+    ),
+    C(
+        "flight-vbat-millivolts",
+        "motors",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["vbat"], slice(None), lambda v: 1e3 * v))),
+        "accept",
+        check=_SAME,  # the motor map is fitted on the voltage relative to its median: any unit
+    ),
+    C(
+        "evaluate-model-needs-vbat",
+        "model",
+        lambda d, fx: [
+            "evaluate",
+            _clean_model(fx),
+            _flight(d, fx, _without("vbat")),
+            "--out",
+            "m.json",
+        ],
+        "refuse",
+        ("vbat", "--map vbat="),
+    ),
+    C(
+        "evaluate-model-nan-weight",
+        "model",
+        lambda d, fx: ["evaluate", _model_with(d, fx, _nan_weights), fx["validation_csv"], "--out", "m.json"],
+        "refuse",
+        ("model_edited.json", "weights"),
+    ),
+    # Files, models and arguments.
+    C(
+        "flight-same-file-twice",
+        "duplicate",
+        lambda d, fx: [
+            "fit",
+            "quadrotor",
+            fx["train_csv"],
+            fx["train_csv"],
+            "--model",
+            "nominal",
+            "--criterion",
+            "one-step",
+            "--out",
+            "model.json",
+        ],
+        "refuse",
+        ("same data",),
+    ),
+    C(
+        "flight-diagnose-validation-is-the-data",
+        "duplicate",
+        lambda d, fx: [
+            "diagnose",
+            "quadrotor",
+            fx["train_csv"],
+            "--validation",
+            _flight(d, fx, name="copy.csv"),
+            "--out",
+            "report",
+        ],
+        "refuse",
+        ("in-sample",),
+    ),
+    C(
+        "flight-truncated-gz",
+        "file",
+        lambda d, fx: _fit_argv(_truncated_gz(d, fx)),
+        "refuse",
+        ("flight.csv.gz", "truncated: ", "data row"),
+    ),
+    C(
+        "evaluate-helicopter-model-on-a-flight",
+        "model",
+        lambda d, fx: ["evaluate", _helicopter_model(d), fx["train_csv"], "--out", "m.json"],
+        "refuse",
+        ("heli_model.json", "helicopter"),
+    ),
+    C(
+        "evaluate-steps-0",
+        "args",
+        lambda d, fx: [
+            "evaluate",
+            str(pathlib.Path(fx["train_csv"]).parent / "clean.json"),
+            fx["train_csv"],
+            "--steps",
+            "0",
+            "--out",
+            "m.json",
+        ],
+        "refuse",
+        ("--steps",),
+    ),
+    C(
+        "evaluate-steps-negative",
+        "args",
+        lambda d, fx: [
+            "evaluate",
+            str(pathlib.Path(fx["train_csv"]).parent / "clean.json"),
+            fx["train_csv"],
+            "--steps=-5",
+            "--out",
+            "m.json",
+        ],
+        "refuse",
+        ("--steps",),
+    ),
+    C(
+        "evaluate-steps-longer-than-the-flight",
+        "args",
+        lambda d, fx: [
+            "evaluate",
+            str(pathlib.Path(fx["train_csv"]).parent / "clean.json"),
+            fx["train_csv"],
+            "--steps",
+            "5000",
+            "--out",
+            "m.json",
+        ],
+        "refuse",
+        ("--steps", "5000"),
+    ),
+    # Clean flights keep their right answers.
+    C(
+        "flight-clean-synthetic",
+        "clean",
+        lambda d, fx: _fit_argv(fx["validation_csv"]),  # the other flight: no alarm on either
+        "accept",
+        check=_no_ground_claimed,
+    ),
+    C(
+        "nanobench-clean-star",
+        "clean",
+        lambda d, fx: _fit_argv(fx["star_gz"], *_MAP),
+        "accept",
+        check=_beats_constant_velocity_on_star,
+        heavy=True,  # a fit and an evaluation compiled for the real flight's layout
+    ),
+]
+
+#: Cases that read the NanoBench files (skipped where they are absent).
+NEEDS_NANOBENCH = frozenset(c.id for c in CASES if c.id.startswith("nanobench-"))
