@@ -204,7 +204,9 @@ def _nominal(folder, text, name="nominal.json"):
     return str(folder / name)
 
 
-def _model(folder, gravity):
+def helicopter_model_file(folder, gravity):
+    """A helicopter acceleration model file (`model.json` in `folder`) with the given `gravity`: the model JSON
+    a user hands `evaluate` or `simulate`, written out by hand."""
     from dynax.internal import initial_helicopter
 
     body = initial_helicopter("acceleration").body_model
@@ -689,7 +691,7 @@ CASES = [
         "model",
         lambda d, fx: [
             "evaluate",
-            _model(d, -9.81),
+            helicopter_model_file(d, -9.81),
             _heli(d, fx, lambda h, t: t),
             "--horizons",
             "0.1",

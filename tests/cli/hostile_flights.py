@@ -32,7 +32,7 @@ import pathlib
 
 import numpy as np
 
-from tests.cli.hostile_cases import Case, write_table
+from tests.cli.hostile_cases import Case, helicopter_model_file, write_table
 
 NANOBENCH = pathlib.Path(__file__).resolve().parents[2] / ".." / "shared" / "datasets" / "nanobench"
 STAR = NANOBENCH / "B8_star_fast_rep1.csv.gz"
@@ -182,20 +182,8 @@ def _truncated_gz(folder, fx):
 
 
 def _helicopter_model(folder):
-    from dynax.internal import initial_helicopter
-
-    body = initial_helicopter("acceleration").body_model
-    obj = {
-        "system": "helicopter",
-        "model": "acceleration",
-        "features": list(body.feature_names),
-        "mask": [[int(v) for v in row] for row in body.mask],
-        "weights": np.asarray(body.weights).tolist(),
-        "gravity": 9.81,
-    }
-    path = pathlib.Path(folder) / "heli_model.json"
-    path.write_text(json.dumps(obj))
-    return str(path)
+    """A helicopter acceleration model file (the arm corpus's), given where a flight log's model belongs."""
+    return helicopter_model_file(pathlib.Path(folder), 9.81)
 
 
 def _star_edit(columns, value):
@@ -684,7 +672,7 @@ CASES = [
         "model",
         lambda d, fx: ["evaluate", _helicopter_model(d), fx["train_csv"], "--out", "m.json"],
         "refuse",
-        ("heli_model.json", "helicopter"),
+        ("model.json", "helicopter"),
     ),
     C(
         "evaluate-steps-0",
