@@ -110,11 +110,6 @@ def register(subparsers):
     parser.set_defaults(run=run)
 
 
-# A body-to-world quaternion further than this from unit norm is not an attitude measurement
-# (wrong column, wrong scaling); closer than it, rounding in the file is normalised away.
-QUATERNION_TOLERANCE = 0.01
-
-
 def load_helicopter_data(path, mapping=None, scale=None, offset=None, *, min_samples=3, exclude=None):
     """Load helicopter data; check the quaternion; resample jittered sampling to its median interval (and say so).
 
@@ -128,6 +123,7 @@ def load_helicopter_data(path, mapping=None, scale=None, offset=None, *, min_sam
     import numpy as np
 
     from .._data import check_records, exclude_stretches, load_trajectory, parse_exclude, resample, Sampling
+    from .._data._flight import check_unit_quaternions
 
     with warnings.catch_warnings():  # checked below, on what --exclude leaves
         warnings.simplefilter("ignore")
@@ -151,19 +147,7 @@ def load_helicopter_data(path, mapping=None, scale=None, offset=None, *, min_sam
         data = pieces[0]
         if len(data) < min_samples:
             raise DataError(f"has {len(data)} samples after --exclude; at least {min_samples} are needed", path=path)
-    quats = np.asarray(data.xs[:, 3:7])
-    norms = np.linalg.norm(quats, axis=1)
-    bad = np.flatnonzero(np.abs(norms - 1) > QUATERNION_TOLERANCE)
-    if bad.size:
-        k = int(bad[0])
-        raise DataError(
-            f"the quaternion (qw, qx, qy, qz) has norm {norms[k]:.6g}, not 1 (tolerance "
-            f"{QUATERNION_TOLERANCE:g}; {bad.size} such rows): the contract's attitude is a unit "
-            "quaternion",
-            path=path,
-            column=(mapping or {}).get("qw", "qw"),
-            row=k + 1,
-        )
+    check_unit_quaternions(np.asarray(data.xs[:, 3:7]), path, mapping)
     check = check_records([data])
     check.raise_refusals()
     for finding in check.warnings:

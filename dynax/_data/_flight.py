@@ -66,6 +66,24 @@ STRETCH_FACTOR = 2.0  # a velocity off its position's change by this factor in a
 QUATERNION_TOLERANCE = 0.01
 
 
+def check_unit_quaternions(quats, path, mapping=None) -> np.ndarray:
+    """The norms of a record's body-to-world quaternions (rows `qw, qx, qy, qz`); a `DataError` naming the file,
+    the column (as `mapping` maps it) and the first row where one is further than `QUATERNION_TOLERANCE` from 1."""
+    norms = np.linalg.norm(quats, axis=1)
+    bad = np.flatnonzero(np.abs(norms - 1) > QUATERNION_TOLERANCE)
+    if bad.size:
+        k = int(bad[0])
+        raise DataError(
+            f"the quaternion (qw, qx, qy, qz) has norm {norms[k]:.6g}, not 1 (tolerance "
+            f"{QUATERNION_TOLERANCE:g}; {bad.size} such rows): the contract's attitude is a unit "
+            "quaternion",
+            path=path,
+            column=(mapping or {}).get("qw", "qw"),
+            row=k + 1,
+        )
+    return norms
+
+
 @dataclasses.dataclass(frozen=True)
 class FlightChecks:
     """The thresholds of `inspect_flight` (see the module docstring for their physics).
@@ -447,18 +465,7 @@ def load_flight(
     )
     check_input_columns(data, path=path, columns=dict(mapping or {}))
     quats = np.asarray(data.xs[:, 3:7], dtype=float)
-    norms = np.linalg.norm(quats, axis=1)
-    bad = np.flatnonzero(np.abs(norms - 1) > QUATERNION_TOLERANCE)
-    if bad.size:
-        k = int(bad[0])
-        raise DataError(
-            f"the quaternion (qw, qx, qy, qz) has norm {norms[k]:.6g}, not 1 (tolerance "
-            f"{QUATERNION_TOLERANCE:g}; {bad.size} such rows): the contract's attitude is a unit "
-            "quaternion",
-            path=path,
-            column=(mapping or {}).get("qw", "qw"),
-            row=k + 1,
-        )
+    norms = check_unit_quaternions(quats, path, mapping)
     xs = np.asarray(data.xs, dtype=float).copy()
     xs[:, 3:7] = _continuous_quaternions(quats / norms[:, None])
     data = Trajectory(
