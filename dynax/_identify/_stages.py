@@ -18,6 +18,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._data._rest import speeds_zeroed_at_rest
 from .._data._spectra import choose_filter
 from .._errors import UsageError
 from .._model._linear_in_parameters import size_parameter_names
@@ -53,7 +54,6 @@ from ._static_friction import (
     not_added,
     record_rests,
     rests_under_load,
-    speeds_zeroed_at_rest,
     StaticFriction,
     with_stiction,
 )
@@ -183,8 +183,8 @@ def least_squares_refine(method: AbstractLeastSquares, system, prepared: Prepare
     refinement = _refinement_method(job.refine, ls.system, method, records)
     if refinement is not None:
         simulated = less_offsets(ls.system, records, ls)
-        if static is not None and static.joints:  # windows that start at rest start at zero speed there
-            simulated = speeds_zeroed_at_rest(ls.system, simulated, rests)
+        if static is not None and static.joints:  # a speed within the noise at rest starts at zero (as validated)
+            simulated = speeds_zeroed_at_rest(simulated, rests)
         refined = _refined_stage(
             ls, models[0], (records, simulated), method, job.settings.friction, job.consistency, refinement
         )

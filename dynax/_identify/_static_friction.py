@@ -84,9 +84,11 @@ default (the Coulomb friction's smoothing, 0.01 rad/s), so that a joint in motio
 speed at a reversal without being caught. The measured speed at rest is another matter: there the true
 speed is zero and the record shows the sensor's noise (`dynax.internal.speed_noise_at_rest`, reported
 as `speed_noise`), and a simulation window that starts from it starts the joint moving faster than any
-narrow band holds. So the output-error refinement starts its windows at zero speed wherever a joint
-rests (`speeds_zeroed_at_rest`, over each rest stretch): the start state is
-corrected as a measurement, and the friction law is not widened to swallow the noise.
+narrow band holds. So where the model has `Stiction` the output-error refinement and the validation
+start their windows by one rule (`speeds_zeroed_at_rest`): over each rest stretch of a record, a joint's
+measured speed within three times that record's own noise at rest reads zero; beyond it (the joint
+arriving or leaving) it stays as measured. The start state is corrected as a measurement, and the
+friction law is not widened to swallow the noise.
 
 **The least-squares rows at rest.** No friction law of the speed explains a held torque (the
 Coulomb column at rest is the sign of the velocity's noise), so where a rest is under load `identify`
@@ -702,25 +704,6 @@ def _speed_noise(n: int, xss, rests, leaves) -> list[float]:
         for s, end in zip(stretches, ends):
             pooled[s.joint].append(xs[s.start : end, n + s.joint])
     return [speed_noise_at_rest(np.concatenate(p)) if p else 0.0 for p in pooled]
-
-
-def speeds_zeroed_at_rest(system, records: list[Trajectory], rests) -> list[Trajectory]:
-    """`records` with each joint's measured speed set to zero over its rests (`rests`, each record's
-    `rest_stretches`: over every window of such a stretch the joint moves less than 0.05 rad/s on average).
-
-    At rest the true speed is zero and the measured one is noise (on a driver that reads zero between
-    encoder counts, some 0.1 rad/s rms): a simulation window that starts there from the measured speed
-    starts the joint moving, which no physical stick region of the friction law stops. This is the
-    start state's measurement, not the friction: the friction law keeps its narrow stick band."""
-    n = len(split_terms(system)[0].joints)
-    out = []
-    for record, stretches in zip(records, rests):
-        ts = np.asarray(record.ts, dtype=float)
-        xs = np.array(record.xs)
-        for s in stretches:
-            xs[(ts >= s.start_s) & (ts <= s.stop_s), n + s.joint] = 0.0
-        out.append(eqx.tree_at(lambda r: r.xs, record, jnp.asarray(xs, record.xs.dtype)) if stretches else record)
-    return out
 
 
 def joint_levels(stretches: tuple[RestUnderLoad, ...]) -> tuple[JointStaticFriction, ...]:
