@@ -98,7 +98,11 @@ def speeds_zeroed_everywhere_at_rest(record: dynax.Trajectory) -> tuple[dynax.Tr
     ts = np.asarray(record.ts)
     for s in rest_stretches(record):
         xs[(ts >= s.start_s) & (ts <= s.stop_s), 2 + s.joint] = 0.0
-    return (dynax.Trajectory(record.ts, xs, record.us, record.state_names, record.input_names, record.system, record.source),)
+    return (
+        dynax.Trajectory(
+            record.ts, xs, record.us, record.state_names, record.input_names, record.system, record.source
+        ),
+    )
 
 
 def cut(record: dynax.Trajectory, seconds: float):

@@ -207,5 +207,6 @@ def speeds_zeroed_at_rest(records: list[Trajectory], rests=None) -> list[Traject
             noise = speed_noise_at_rest(xs[resting, column])
             within = resting & (np.abs(xs[:, column]) <= WITHIN_NOISE * noise)
             xs[within, column] = 0.0
-        out.append(eqx.tree_at(lambda r: r.xs, record, jnp.asarray(xs, record.xs.dtype)))
+        xs = xs.astype(record.xs.dtype) if isinstance(record.xs, np.ndarray) else jnp.asarray(xs, record.xs.dtype)
+        out.append(eqx.tree_at(lambda r: r.xs, record, xs))
     return out
