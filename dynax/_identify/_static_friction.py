@@ -121,7 +121,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._data._derivatives import butterworth_filtfilt
-from .._data._rest import Rest, rest_stretches, speed_noise_at_rest
+from .._data._rest import Rest, rest_stretches, speed_noise_at_rest, WITHIN_NOISE
 from .._data._trajectory import Trajectory
 from .._model._extensions import CoulombFriction, Extended
 from .._model._extensions._stiction import LEAST_STICK_BAND, Stiction
@@ -786,8 +786,8 @@ def describe(stretches, joints, rows_left_out, rows) -> str:
         )
         parts.append(
             f"{j.coordinate} rests under load {j.rest_s:.2f} s in {', '.join(j.records)}: {what}; sticks below "
-            f"{j.velocity_scale:.3g}; windows that start at rest start at zero speed (speed noise at rest "
-            f"{j.speed_noise:.3g})"
+            f"{j.velocity_scale:.3g}; a window that starts at rest starts at zero speed where the measured one is "
+            f"within {WITHIN_NOISE:g} times its record's noise at rest (pooled over the records: {j.speed_noise:.3g})"
         )
     return "Stiction added: " + "; ".join(parts) + swings + left_out
 
