@@ -168,8 +168,8 @@ WITHIN_NOISE = 3.0  # a speed at rest within this many times its noise at rest i
 
 
 def speeds_zeroed_at_rest(records: list[Trajectory], rests=None) -> list[Trajectory]:
-    r"""`records` with each joint's measured speed set to zero where the joint rests and the speed is noise:
-    the start states of simulation windows, corrected as measurements.
+    r"""`records` with each joint's measured speed set to zero where the joint rests and the speed is noise
+    (`resting_speeds`): the start states of simulation windows, corrected as measurements.
 
     A joint rests over the stretches of `rests` (each record's `rest_stretches`, found where `None`): its
     position moves less than 0.05 rad/s on average over every quarter second. There its true speed is zero
@@ -182,10 +182,10 @@ def speeds_zeroed_at_rest(records: list[Trajectory], rests=None) -> list[Traject
     arrives at 0.3 to 0.4 rad/s inside the stretch the positions call still). Where the noise is zero
     (a record whose speed at rest reads exactly zero) nothing changes.
 
-    `identify` applies it to the windows of its output-error refinement and of its validation where the
-    fitted model holds at rest (`Stiction`); `held_out_error(..., start_at_rest=True)` applies it to any
-    model. The velocity of joint `q2` is the column named `dq2` where there is one, else the one as many
-    columns after the positions as there are joints.
+    `identify` applies it where the fitted model holds at rest (`Stiction`): to the windows of its
+    validation, and in its output-error refinement to the velocities that refinement starts from (its own
+    local fit of the positions, `refine_by_simulation(..., rests=...)`), at the samples this rule picks on
+    the measured record. `held_out_error(..., start_at_rest=True)` applies it to any model.
     """
     out = []
     for k, record in enumerate(records):
@@ -193,20 +193,35 @@ def speeds_zeroed_at_rest(records: list[Trajectory], rests=None) -> list[Traject
         if not stretches:
             out.append(record)
             continue
-        names = record.state_names
-        positions = [i for i, n in enumerate(names) if n == "q" or (n.startswith("q") and n[1:].isdigit())]
-        ts, xs = np.asarray(record.ts, dtype=float), np.array(record.xs)
-        for joint in sorted({s.joint for s in stretches}):
-            name = names[positions[joint]]
-            column = names.index("d" + name) if "d" + name in names else len(positions) + joint
-            # by time, not row: the stretches may be read on the record resampled at its median interval
-            resting = np.zeros(len(ts), bool)
-            for s in stretches:
-                if s.joint == joint:
-                    resting |= (ts >= s.start_s) & (ts <= s.stop_s)
-            noise = speed_noise_at_rest(xs[resting, column])
-            within = resting & (np.abs(xs[:, column]) <= WITHIN_NOISE * noise)
-            xs[within, column] = 0.0
+        xs, columns = np.array(record.xs), speed_columns(record)
+        xs[:, columns] = np.where(resting_speeds(record, stretches), 0.0, xs[:, columns])
         xs = xs.astype(record.xs.dtype) if isinstance(record.xs, np.ndarray) else jnp.asarray(xs, record.xs.dtype)
         out.append(eqx.tree_at(lambda r: r.xs, record, xs))
+    return out
+
+
+def speed_columns(record: Trajectory) -> list[int]:
+    """The state columns of the joints' speeds, joint by joint: `dq2` for `q2` where there is such a column, else
+    the one as many columns after the positions as there are joints."""
+    names = record.state_names
+    positions = [i for i, n in enumerate(names) if n == "q" or (n.startswith("q") and n[1:].isdigit())]
+    return [
+        names.index("d" + names[p]) if "d" + names[p] in names else len(positions) + j for j, p in enumerate(positions)
+    ]
+
+
+def resting_speeds(record: Trajectory, stretches) -> np.ndarray:
+    """`(time, joints)`: where a joint of `record` rests (over `stretches`, its `rest_stretches`) and its measured
+    speed is within `WITHIN_NOISE` times that record's noise at rest (`speeds_zeroed_at_rest`'s rule).
+    Stretches are matched by time, not row: they may be read on the record resampled at its median interval."""
+    ts, xs, columns = np.asarray(record.ts, dtype=float), np.asarray(record.xs), speed_columns(record)
+    out = np.zeros((len(ts), len(columns)), bool)
+    for joint in sorted({s.joint for s in stretches}):
+        resting = np.zeros(len(ts), bool)
+        for s in stretches:
+            if s.joint == joint:
+                resting |= (ts >= s.start_s) & (ts <= s.stop_s)
+        speed = xs[:, columns[joint]]
+        noise = speed_noise_at_rest(speed[resting])
+        out[:, joint] = resting & (np.abs(speed) <= WITHIN_NOISE * noise)
     return out

@@ -18,7 +18,6 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._data._rest import speeds_zeroed_at_rest
 from .._data._spectra import choose_filter
 from .._errors import UsageError
 from .._model._linear_in_parameters import size_parameter_names
@@ -183,10 +182,10 @@ def least_squares_refine(method: AbstractLeastSquares, system, prepared: Prepare
     refinement = _refinement_method(job.refine, ls.system, method, records)
     if refinement is not None:
         simulated = less_offsets(ls.system, records, ls)
-        if static is not None and static.joints:  # a speed within the noise at rest starts at zero (as validated)
-            simulated = speeds_zeroed_at_rest(simulated, rests)
+        # where the model holds at rest, a window whose joint rests within its speed noise starts at zero (as validated)
+        at_rest = rests if static is not None and static.joints else None
         refined = _refined_stage(
-            ls, models[0], (records, simulated), method, job.settings.friction, job.consistency, refinement
+            ls, models[0], (records, simulated), method, job.settings.friction, job.consistency, refinement, at_rest
         )
         statistics = refined.solution.statistics
         assert isinstance(statistics, RefinementStatistics)  # what `refine_by_simulation` returns
@@ -311,13 +310,14 @@ def _refinement_method(refine, system, method, trajectories):
     )
 
 
-def _refined_stage(ls, start, records, method, friction, consistency, refinement) -> Stage:
+def _refined_stage(ls, start, records, method, friction, consistency, refinement, rests=None) -> Stage:
     """The output-error refinement from the least-squares stage `ls` (its model `start`, with `Stiction`
     where the records rest under load) on `records = (fitted, simulated)` (the fitted records, and as the
-    simulation sees them), with its equation error on the least-squares rows of `fitted` and consistency
+    simulation sees them; with `rests`, its windows start at zero speed where a joint rests within its
+    noise), with its equation error on the least-squares rows of `fitted` and consistency
     (`identify` validates it)."""
     fitted, simulated = records
-    refined = refine_by_simulation(start, ls.names, simulated, refinement)
+    refined = refine_by_simulation(start, ls.names, simulated, refinement, rests=rests)
     estimate = jnp.asarray(refined.value)
     _, a, y, _, _, _, _, _, _, _ = stacked_equations(refined.model, fitted, method, friction, None, method.rcond)
     if ls.groups is not None:  # the same equations as the least-squares stage's: offsets free
