@@ -277,6 +277,30 @@ def test_a_speed_within_its_records_noise_at_rest_starts_at_zero():
     np.testing.assert_array_equal(np.asarray(speeds_zeroed_at_rest([clean])[0].xs), quiet_true)
 
 
+def test_the_refinements_windows_at_rest_start_at_zero_speed_by_the_same_rule():
+    # The refinement starts its windows from its own velocities (a local cubic fit of the positions, which at rest
+    # reads the position noise, not zero); with the rests the same rule sets them to zero where the measured speed
+    # is within the noise, and leaves every other sample as the fit gives it.
+    from dynax._identify._refine import (
+        motion_records,
+    )  # private: the refinement's start states, returned by no public call
+    from dynax.internal import rest_stretches, speeds_zeroed_at_rest
+
+    t, _, record = resting_elbow_record(0.1, 7)
+    rests = [rest_stretches(record)]
+    (fitted,), _ = motion_records([record])
+    (started,), _ = motion_records([record], rests=rests)
+    (zeroed,) = speeds_zeroed_at_rest([record], rests)
+    ts = np.asarray(fitted.ts)
+    rule = (
+        np.isin(np.asarray(record.ts), ts) & (np.asarray(zeroed.xs)[:, 3] == 0.0) & (np.asarray(record.xs)[:, 3] != 0.0)
+    )
+    at = np.isin(ts, np.asarray(record.ts)[rule])
+    before, after = np.asarray(fitted.xs), np.asarray(started.xs)
+    assert at.sum() > 20 and np.all(np.abs(before[at, 3]) > 0.0) and np.all(after[at, 3] == 0.0)
+    np.testing.assert_array_equal(after[~at], before[~at])
+
+
 def with_speed(record, row, column, value):
     xs = np.array(record.xs)
     xs[row, column] = value
