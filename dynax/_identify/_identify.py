@@ -291,8 +291,8 @@ def _fit_settings(friction, settings: FitSettings) -> FitSettings:
 
 def _validated(fitted: Fitted, held_out: HeldOut) -> Identification:
     """`fitted`'s identification with each stage's model validated on the `held_out` records: where the fit
-    added `Stiction`, from windows that start at zero speed where a joint rests within the noise (the rule the
-    refinement's windows start by, `speeds_zeroed_at_rest`)."""
+    added `Stiction`, from windows that start at zero speed where a joint rests within the noise
+    (`speeds_zeroed_at_rest`)."""
     identification = fitted.identification
     static = identification.static_friction
     if static is not None and static.joints and held_out.records:

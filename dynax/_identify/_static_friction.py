@@ -84,14 +84,14 @@ default (the Coulomb friction's smoothing, 0.01 rad/s), so that a joint in motio
 speed at a reversal without being caught. The measured speed at rest is another matter: there the true
 speed is zero and the record shows the sensor's noise (`dynax.internal.speed_noise_at_rest`, reported
 as `speed_noise`), and a simulation window that starts from it starts the joint moving faster than any
-narrow band holds. So where the model has `Stiction` the output-error refinement and the validation
-start their windows by one rule (`speeds_zeroed_at_rest`): over each rest stretch of a record, where a
-joint's measured speed is within three times that record's own noise at rest, the window starts at zero
-speed; beyond it (the joint arriving or leaving) it starts from the speed it would otherwise. The
-validation starts from the measured speed, the refinement from its own local fit of the positions
-(`motion_records`: on run 12's rests 0.01 to 0.04 rad/s rms, up to 0.14, where the band is 0.01);
-both read zero where the rule says. The start state is corrected as a measurement, and the friction
-law is not widened to swallow the noise.
+narrow band holds. So where the model has `Stiction` the validation starts its windows by a rule
+(`speeds_zeroed_at_rest`): over each rest stretch of a record, where a joint's measured speed is
+within three times that record's own noise at rest, the window starts at zero speed; beyond it (the
+joint arriving or leaving) from the measured speed. The start state is corrected as a measurement,
+and the friction law is not widened to swallow the noise. The output-error refinement starts from its
+own local fit of the positions instead of the measured speed (`motion_records`: on run 12's rests
+0.01 to 0.04 rad/s rms, up to 0.14); the same rule there (`refine_by_simulation(..., rests=...)`)
+is opt-in: on DFKI it fitted the held-out runs, which never rest, worse in 5 of 9 cells.
 
 **The least-squares rows at rest.** No friction law of the speed explains a held torque (the
 Coulomb column at rest is the sign of the velocity's noise), so where a rest is under load `identify`
