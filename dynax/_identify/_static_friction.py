@@ -789,8 +789,9 @@ def describe(stretches, joints, rows_left_out, rows) -> str:
         )
         parts.append(
             f"{j.coordinate} rests under load {j.rest_s:.2f} s in {', '.join(j.records)}: {what}; sticks below "
-            f"{j.velocity_scale:.3g}; a window that starts at rest starts at zero speed where the measured one is "
-            f"within {WITHIN_NOISE:g} times its record's noise at rest (pooled over the records: {j.speed_noise:.3g})"
+            f"{j.velocity_scale:.3g}; a validation window that starts at rest starts at zero speed where the measured "
+            f"one is within {WITHIN_NOISE:g} times its record's noise at rest (pooled over the records: "
+            f"{j.speed_noise:.3g})"
         )
     return "Stiction added: " + "; ".join(parts) + swings + left_out
 
