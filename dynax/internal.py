@@ -86,6 +86,7 @@ from ._data import (
     savitzky_golay as savitzky_golay,
 )
 from ._data import speed_noise_at_rest as speed_noise_at_rest
+from ._data import speeds_zeroed_at_rest as speeds_zeroed_at_rest
 
 # Helpers of the pipeline's stages (data, model, identification, validation, diagnosis).
 from ._data import split_at_gaps as split_at_gaps
@@ -388,7 +389,6 @@ from ._identify._simulation_fit import (
 from ._identify._simulation_fit import (
     simulation_segments as simulation_segments,
 )
-from ._identify._static_friction import speeds_zeroed_at_rest as speeds_zeroed_at_rest
 from ._identify._validation import CONCENTRATED as CONCENTRATED
 from ._identify._validation import HeldOut as HeldOut
 

@@ -30,6 +30,7 @@ from ._io import (
 from ._rest import Rest as Rest
 from ._rest import rest_stretches as rest_stretches
 from ._rest import speed_noise_at_rest as speed_noise_at_rest
+from ._rest import speeds_zeroed_at_rest as speeds_zeroed_at_rest
 from ._sampling import check_time_stamps as check_time_stamps
 from ._sampling import split_at_gaps as split_at_gaps
 from ._sanity import (

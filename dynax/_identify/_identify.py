@@ -290,8 +290,17 @@ def _fit_settings(friction, settings: FitSettings) -> FitSettings:
 
 
 def _validated(fitted: Fitted, held_out: HeldOut) -> Identification:
-    """`fitted`'s identification with each stage's model validated on the `held_out` records."""
+    """`fitted`'s identification with each stage's model validated on the `held_out` records: where the fit
+    added `Stiction`, from windows that start at zero speed where a joint rests within the noise
+    (`speeds_zeroed_at_rest`)."""
     identification = fitted.identification
+    static = identification.static_friction
+    if static is not None and static.joints and held_out.records:
+        held_out = dataclasses.replace(
+            held_out,
+            source=held_out.source + "; a joint at rest starts at zero speed where its speed is within the noise",
+            start_at_rest=True,
+        )
     stages = tuple(
         dataclasses.replace(stage, validation=held_out.validate(model))
         for stage, model in zip(identification.stages, fitted.models, strict=True)

@@ -61,6 +61,7 @@ import numpy as np
 import optimistix as optx
 
 from .._data._derivatives import butterworth_filtfilt, resample
+from .._data._rest import resting_speeds, speed_columns
 from .._data._spectra import choose_filter, measurement_noise_std, velocities_from_positions
 from .._data._trajectory import Trajectory
 from .._fit import AbstractStatistics, Parameters, Solution
@@ -217,7 +218,9 @@ class RefinementStatistics(AbstractStatistics):
     diverged_segments: tuple[int, int, int] = eqx.field(static=True, default=(0, 0, 0))
 
 
-def motion_records(records: list[Trajectory], *, filtered: bool | str = "positions") -> tuple[list[Trajectory], float]:
+def motion_records(
+    records: list[Trajectory], *, filtered: bool | str = "positions", rests=None
+) -> tuple[list[Trajectory], float]:
     """The records on a grid of about 40 samples per period of their signal band's edge.
 
     Each record (resampled at its median interval if irregular) is cut to every `d`-th sample,
@@ -225,7 +228,10 @@ def motion_records(records: list[Trajectory], *, filtered: bool | str = "positio
     samples (the same impulse as the recorded zero-order hold, without aliasing the torque noise);
     its states are, with `filtered="positions"` (default), the measured positions and the
     velocities of a local cubic fit of them (`velocities_from_positions`); with `True`, the
-    states low-passed at their signal band (`choose_filter`); with `False`, as measured.
+    states low-passed at their signal band (`choose_filter`); with `False`, as measured. With `rests`
+    (each record's `rest_stretches`), the velocities are zero where a joint rests and its measured speed
+    is within the noise (`dynax.internal.speeds_zeroed_at_rest`'s rule, read on the measured record):
+    the start state of a window at rest, as `identify` validates it.
 
     **Returns:** `(records, dt)`.
     """
@@ -233,13 +239,16 @@ def motion_records(records: list[Trajectory], *, filtered: bool | str = "positio
     choices = [choose_filter(r) for r in uniform]
     bands = [c.cutoff_hz for c in choices if c.cutoff_hz is not None]
     out, steps = [], []
-    for record, choice in zip(uniform, choices):
+    for k, (record, choice) in enumerate(zip(uniform, choices)):
         d = max(1, int(round(1.0 / (SAMPLES_PER_PERIOD * max(bands)) / record.dt))) if bands else 1
         xs, us = np.asarray(record.xs), np.asarray(record.us)
         if filtered == "positions" and choice.cutoff_hz is not None:
             xs = velocities_from_positions(xs, record.dt, choice.cutoff_hz)
         elif filtered and choice.cutoff_hz is not None:
             xs = np.asarray(butterworth_filtfilt(record.ts, xs, cutoff_hz=choice.cutoff_hz, order=choice.order))
+        if rests is not None and rests[k]:
+            xs, columns = np.array(xs), speed_columns(record)
+            xs[:, columns] = np.where(resting_speeds(record, rests[k]), 0.0, xs[:, columns])
         n = (len(record) // d) * d
         us = us[:n].reshape(n // d, d, -1).mean(axis=1)
         out.append(
@@ -307,6 +316,7 @@ def refine_by_simulation(
     filtered: bool | str = "positions",
     record_weights: str | None = None,
     input_timing: bool = True,
+    rests=None,
 ) -> Solution:
     """Refine a two-link arm's least-squares model by the output-error fit, consistent by construction.
 
@@ -319,7 +329,8 @@ def refine_by_simulation(
     amplitude (RMS of the joint positions about their mean), `"equal"` all alike; `None`:
     `DEFAULT_RECORD_WEIGHTS` (`"ml"`); `input_timing` (default `True`): also fit the input timing
     $\alpha$ (`TimedInputs`, see the module's docstring), else drive the model by the zero-order
-    hold as recorded.
+    hold as recorded; `rests` (each record's `rest_stretches`): windows start at zero speed where a joint
+    rests within its record's speed noise (`motion_records`).
 
     **Returns:** the engine's `Solution` in the contract's base parameters: `model` the refined
     system, `value`, `names`, `std_errors` and `covariance` (the fit's, cluster-robust over blocks
@@ -345,7 +356,7 @@ def refine_by_simulation(
     scale = jnp.maximum(jnp.abs(start), 1e-3 * jnp.max(jnp.abs(start[:5])))
     parametrisation = consistent_parametrisation(model, names, scale)
     wrapped = ConsistentSystem(parametrisation.phi(start), model, parametrisation, names)
-    fitted, dt = motion_records(records, filtered=filtered)
+    fitted, dt = motion_records(records, filtered=filtered, rests=rests)
     if input_timing:
         wrapped = TimedInputs(wrapped, jnp.zeros((), jnp.result_type(wrapped.phi)))
         fitted = [with_neighbour_inputs(r) for r in fitted]

@@ -21,6 +21,7 @@ import equinox as eqx
 import numpy as np
 
 from .._data._derivatives import resample
+from .._data._rest import speeds_zeroed_at_rest
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
 from .._simulate import simulation_error, SimulationError
@@ -95,6 +96,7 @@ def held_out_error(
     *,
     source: str = "validation records",
     max_windows: int = 200,
+    start_at_rest: bool = False,
 ) -> SimulationError:
     """Open-loop simulation error of `system` on each of `records`, pooled over their windows.
 
@@ -103,7 +105,9 @@ def held_out_error(
     (`dynax.simulation_error`) and compared with the measured positions at each horizon.
 
     **Arguments:** `system`; `records` (held out of the fit); `horizons_s`; `source` (a label for
-    reports); `max_windows` per record.
+    reports); `max_windows` per record; `start_at_rest`: start a joint that rests at zero speed where
+    its measured speed is within the noise at rest (`dynax.internal.speeds_zeroed_at_rest`: the record's
+    own noise; `identify` validates so where its model has `Stiction`).
 
     **Returns:** a `SimulationError` with `source`, the RMSE per record, the median window error
     and the records whose RMSE a few windows carry (`concentrated`). A record shorter than the
@@ -118,6 +122,8 @@ def held_out_error(
         uniform = record if record.is_uniform else resample(record, record.dt)
         if uniform.duration <= max(horizons) + uniform.dt:
             continue
+        if start_at_rest:
+            (uniform,) = speeds_zeroed_at_rest([uniform])
         error = simulation_error(system, uniform, horizons, max_windows=max_windows)
         rmse = np.asarray(error.rmse, dtype=float)
         name = _name(record, k)
@@ -179,14 +185,20 @@ class HeldOut(eqx.Module):
 
     **Fields:** `records` (the held-out records; empty: nothing is validated), `horizons_s`, `source`
     (what they are, as the validation reports it), `tails_of` (for held-out tails, the index of the
-    fitted record each was cut from; `None` for records of their own).
+    fitted record each was cut from; `None` for records of their own), `start_at_rest` (windows whose
+    joint rests start at zero speed where the measured one is within the noise: `held_out_error`).
     """
 
     records: list[Trajectory]
     horizons_s: tuple[float, ...]
     source: str
     tails_of: tuple[int, ...] | None = None
+    start_at_rest: bool = eqx.field(default=False, static=True)
 
     def validate(self, model) -> SimulationError | None:
         """`held_out_error` of `model` on the held-out records, or `None` where there are none."""
-        return held_out_error(model, self.records, self.horizons_s, source=self.source) if self.records else None
+        if not self.records:
+            return None
+        return held_out_error(
+            model, self.records, self.horizons_s, source=self.source, start_at_rest=self.start_at_rest
+        )

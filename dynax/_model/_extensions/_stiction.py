@@ -68,9 +68,15 @@ class Stiction(AbstractJointTerm):
       friction's smoothing): the friction law's stick region. Keep it narrow: inside the band the
       friction is whatever stops the joint, up to `fs`, and the band's smooth edge reaches two to three
       times its width, so a wide band catches a joint that passes through zero speed at a reversal.
-      `identify` keeps the default and starts simulation windows at zero speed where the records rest
-      (the measured speed there is noise); `diagnose`'s `stiction` candidate, whose windows start from
-      the measured state, widens it to the speed noise at rest (`dynax.internal.speed_noise_at_rest`).
+      The measured speed at rest is the start state's business, not the band's: there the true speed
+      is zero and the record shows its sensor's noise (on the DFKI rig some 0.1 rad/s, ten times this
+      band), so a window started from it starts the joint moving. `identify` keeps the default band
+      and validates from windows that start at zero speed where a joint rests and its measured speed
+      is within three times that record's own noise at rest (`dynax.internal.speeds_zeroed_at_rest`,
+      `held_out_error(..., start_at_rest=True)`); its refinement starts from its own fit of the
+      positions (the same rule there is `refine_by_simulation(..., rests=...)`, opt-in);
+      `dynax.simulate` starts where it is told. `diagnose`'s `stiction` candidate, whose windows start from the
+      measured state, widens the band to the speed noise at rest (`dynax.internal.speed_noise_at_rest`).
     - `hold_time`: $\tau_h$, the time in which a sticking joint's speed decays [s] (default 0.01);
       keep it above about two steps of a fixed-step integrator.
     - `held_force`, `held_position`: a rest the records show the joint holding, a lower bound on `fs`:
