@@ -84,6 +84,14 @@ def test_synthetic_flight_is_bounded_and_the_drag_changes_it():
     assert np.abs(np.asarray(dragged.us) - np.asarray(calm.us)).max() > 30  # the controller works against it
 
 
+def test_synthetic_flight_with_a_weak_motor_commands_it_harder():
+    # The controller does not know: to hold the same thrust, motor 2's command rises by 1 / sqrt(0.85) on average
+    # (thrust is k kf w^2), the others' hardly move.
+    calm = np.asarray(quadrotor_flight(3.0, seed=0, noise=False).us).mean(axis=0)
+    weak = np.asarray(quadrotor_flight(3.0, seed=0, noise=False, gain=(1, 0.85)).us).mean(axis=0)
+    np.testing.assert_allclose(weak / calm, [1.0, 1 / np.sqrt(0.85), 1.0, 1.0], rtol=0.01)
+
+
 # --- hidden effects ----------------------------------------------------------------------------
 
 
