@@ -8,8 +8,8 @@ effect-free flight it must claim nothing. The default suite runs rotor drag (the
 two minutes on two cores); body bias, motor lag, the effect-free control and the
 CLI are slow. A motor's gain is hidden the way it happens: the model is fitted on flights of the healthy
 vehicle, a propeller is chipped afterwards, and the later flights are diagnosed against the trusted model
-(`Known()`); a map refitted on the later flights would carry the gain itself (slow too: about 100 s of CPU
-each, 10 s flights).
+(`Known()`); a map refitted on the later flights would carry the gain itself (slow too, 10 s flights:
+about 100 s of CPU each, 25 s with the compiled code in the suite's cache).
 """
 
 import json
