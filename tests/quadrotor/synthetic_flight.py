@@ -17,6 +17,8 @@ effects, each written here independently of dynax:
   (with 10 mV noise), and every rotor's thrust and moment per command scale with (vbat / V_REF)^2 (rotor
   speed proportional to command times voltage; `V_REF` = 4 V, one voltage for every flight of the
   vehicle, so that flights at different charges share one physics);
+- `gain=(motor, k)`: that motor's thrust and yaw moment per command are k times the others' (a chipped or
+  bent propeller, a weak motor): thrust `k kf w^2` for its command `w`; the controller does not know;
 - `ground=R`: ground effect of rotors of radius R [m] over a floor at z = 0, thrust times
   1 / (1 - (R / 4 z_r)^2) (Cheeseman and Bennett) at the rotor plane's height z_r = z + 0.02 m; give the
   flight a low `altitude`.
@@ -121,6 +123,9 @@ def _field(t, s, command, effects, battery, vehicle):
     R = rotation(q)
     inertia = np.asarray(vehicle.inertia)
     thrusts = vehicle.kf * rotor**2 * battery
+    if "gain" in effects:
+        motor, k = effects["gain"]
+        thrusts[motor] *= k  # the yaw moment is km times the thrust: it scales with it
     if "ground" in effects:
         z_rotor = max(s[2], 0.0) + 0.02
         thrusts = thrusts / (1.0 - (effects["ground"] / (4.0 * z_rotor)) ** 2)
