@@ -281,9 +281,7 @@ def test_the_refinements_windows_at_rest_start_at_zero_speed_by_the_same_rule():
     # The refinement starts its windows from its own velocities (a local cubic fit of the positions, which at rest
     # reads the position noise, not zero); with the rests the same rule sets them to zero where the measured speed
     # is within the noise, and leaves every other sample as the fit gives it.
-    from dynax._identify._refine import (
-        motion_records,
-    )  # private: the refinement's start states, returned by no public call
+    from dynax._identify._refine import motion_records  # private: the refinement's start states, no public call
     from dynax.internal import rest_stretches, speeds_zeroed_at_rest
 
     t, _, record = resting_elbow_record(0.1, 7)
