@@ -196,7 +196,7 @@ def structurally_absorbed(
         elif np.linalg.norm(b) == 0:
             out.append(True)
         else:
-            out.append(_in_span(A, b, tol))
+            out.append(_in_span(A, b, _structural_tol(tol)))
     return np.asarray(out)
 
 
@@ -231,7 +231,7 @@ def structurally_equivalent(
     ks = [k for k in among if not (isinstance(terms[k], AbstractInputTerm) and terms[k].n_hidden)]
 
     def in_span(k, *others):
-        return _in_span(np.concatenate([A, J_c[:, list(others)]], axis=1), J_c[:, k], tol)
+        return _in_span(np.concatenate([A, J_c[:, list(others)]], axis=1), J_c[:, k], _structural_tol(tol))
 
     ks = [k for k in ks if not in_span(k)]  # one the refit reproduces alone is absorbed, not equivalent
     out: dict[int, list[int]] = {}
@@ -266,7 +266,7 @@ def held_partners(
             if np.linalg.norm(a) == 0 or np.linalg.norm(b) == 0:
                 continue
             alpha = float(a @ b / (a @ a))
-            if np.linalg.norm(b - alpha * a) <= tol * np.linalg.norm(b):
+            if np.linalg.norm(b - alpha * a) <= _structural_tol(tol) * np.linalg.norm(b):
                 partner = (int(i), alpha)
                 break
         out.append(partner)
@@ -283,7 +283,23 @@ def sampled_sensitivities(family, n_points: int = 64, seed: int = 0) -> tuple[np
     us = rng.normal(0.0, 1.0, (n_points, n_u))
     values = jnp.asarray(nominal_values(system, family.names), float)
     J_nom, J_c = _sensitivities(family, values, family.neutral, jnp.asarray(xs), jnp.asarray(us))
-    return np.asarray(J_nom).reshape(-1, len(family.names)), np.asarray(J_c).reshape(-1, len(family.model.terms))
+    J_nom = np.asarray(J_nom, dtype=np.float64).reshape(-1, len(family.names))  # host least squares in float64
+    J_c = np.asarray(J_c, dtype=np.float64).reshape(-1, len(family.model.terms))
+    for J, of in ((J_nom, family.names), (J_c, [t.label(system) for t in family.model.terms])):
+        bad = np.flatnonzero(~np.all(np.isfinite(J), axis=0))
+        if bad.size:
+            raise FloatingPointError(
+                f"the derivative of the vector field with respect to {', '.join(of[i] for i in bad)} is not finite at "
+                f"sampled states and inputs ({jnp.zeros(()).dtype}): the diagnosis cannot tell which candidates the "
+                "refit absorbs"
+            )
+    return J_nom, J_c
+
+
+def _structural_tol(tol: float) -> float:
+    """`tol`, or 100 times the machine epsilon of JAX's float where that is larger: derivatives computed in float32
+    (JAX's float64 mode off) carry relative rounding of some 1e-7, which a test at 1e-7 would read as structure."""
+    return max(tol, 100 * float(jnp.finfo(jnp.zeros(()).dtype).eps))
 
 
 @eqx.filter_jit
