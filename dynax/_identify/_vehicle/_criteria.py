@@ -50,12 +50,14 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Int, Scalar
+import numpy as np
 import optimistix as optx
 
 from ..._data._trajectory import Trajectory
 from ..._errors import UsageError
 from ..._fit import AbstractStatistics, fit_minimise, History, monitor, notify, OptaxLBFGS, Parameters, Solution
 from ..._model._helicopter import ANGULAR_RATE, BODY, Helicopter, QUATERNION, quaternion_to_rotation, VELOCITY
+from ..._precision import ENABLE_X64
 from ..._progress import ProgressBar
 from .._method import AbstractMethod, FitSettings, IdentifyJob, Prepared
 from ._records import FlightHeldOut, vehicle_record
@@ -395,6 +397,23 @@ def ridge_solve(ata, atb, ridge):
     return jnp.linalg.solve(ata + ridge * scale * jnp.eye(ata.shape[0], dtype=ata.dtype), atb)
 
 
+def _check_solvable(ata, ridge, theta, where: str) -> None:
+    """Raise where the least-squares weights cannot be trusted: not finite, or normal equations (with the ridge
+    `ridge_solve` adds) singular to the precision they were solved in (condition number times machine epsilon of at
+    least 1; float32 with JAX's float64 mode off, on nearly collinear motor features). In float64 the relative ridge
+    keeps the condition number far below that, so this never stops a float64 fit."""
+    regularised = np.asarray(ata, dtype=np.float64)
+    regularised = regularised + ridge * np.trace(regularised) / regularised.shape[0] * np.eye(regularised.shape[0])
+    condition = float(np.linalg.cond(regularised))
+    if bool(jnp.all(jnp.isfinite(theta))) and condition * float(jnp.finfo(ata.dtype).eps) < 1:
+        return
+    fix = f"call {ENABLE_X64} first, or " if ata.dtype == jnp.float32 else ""
+    raise FloatingPointError(
+        f"{where}: the least-squares weights cannot be trusted: the normal equations ({ata.dtype}, condition number "
+        f"{condition:.3g}) are singular at that precision; {fix}raise the criterion's `ridge`"
+    )
+
+
 def window_starts(trajectory, n_steps, stride, breaks=None):
     return jnp.asarray(valid_starts(len(trajectory), n_steps, stride, breaks))
 
@@ -430,6 +449,7 @@ def fit_one_step(
     starts = window_starts(trajectory, 1, 1, breaks)
     ata, atb, _ = normal_equations(system, trajectory, starts, 1, w, False, 1024)
     theta = ridge_solve(ata, atb, criterion.ridge)
+    _check_solvable(ata, criterion.ridge, theta, "fit_one_step")
     fitted = with_theta(system, theta)
     ata, _, loss = normal_equations(fitted, trajectory, starts, 1, w, False, 1024)
     losses, seconds = one_shot_history(loss, time.perf_counter() - t0)
