@@ -188,7 +188,8 @@ def exact_delays(model, trajectory, interval: bool = False):
             mean = _held_average(ts, np.asarray(trajectory.us)[:, i], centre - half, centre + half)
             us[:, i] = us_before[:, i] = mean
         model = eqx.tree_at(lambda m: m.terms[k].coefficient, model, jnp.zeros_like(term.coefficient))
-    return model, jnp.asarray(us, trajectory.us.dtype), jnp.asarray(us_before, trajectory.us.dtype)
+    dtype = jax.dtypes.canonicalize_dtype(trajectory.us.dtype)  # float32 where JAX's float64 mode is off, silently
+    return model, jnp.asarray(us, dtype), jnp.asarray(us_before, dtype)
 
 
 def applied_inputs(system, terms, trajectory) -> np.ndarray:

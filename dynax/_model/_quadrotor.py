@@ -212,7 +212,8 @@ class Quadrotor(AbstractSystem):
 
     def scaled_inputs(self, u: Float[Array | np.ndarray, "... n_inputs"]) -> Float[Array, "... n_inputs"]:
         """The inputs divided by `input_scale` (the first `u.shape[-1]` of it: `vbat` may be absent)."""
-        return jnp.asarray(u) / jnp.broadcast_to(jnp.asarray(self.input_scale[: u.shape[-1]], u.dtype), u.shape)
+        dtype = jax.dtypes.canonicalize_dtype(u.dtype)  # float32 where JAX's float64 mode is off, silently
+        return jnp.asarray(u) / jnp.broadcast_to(jnp.asarray(self.input_scale[: u.shape[-1]], dtype), u.shape)
 
     def as_helicopter(self) -> Helicopter:
         """The same dynamics in body-frame coordinates on scaled inputs: what the criteria fit."""

@@ -387,3 +387,15 @@ def test_a_one_step_fit_singular_in_float32_is_refused_not_returned():
         with pytest.raises(FloatingPointError, match=r"fit_one_step: .*float32, condition number .*jax_enable_x64"):
             dynax.fit_quadrotor(start, flight.astype(jnp.float32), dynax.OneStep(), progress=False)
     assert np.all(np.isfinite(np.asarray(dynax.fit_quadrotor(start, flight, progress=False).value)))
+
+
+def test_scaled_inputs_of_a_float64_log_in_float32_mode_say_nothing(flights):
+    """A log read as numpy float64 while JAX's float64 mode is off is scaled in float32 without JAX's "float64
+    requested ... truncated" warning on every call (a float32 diagnosis printed it dozens of times)."""
+    import warnings
+
+    quad = dynax.Quadrotor.from_flights("nominal", flights, battery=False)
+    with jax.enable_x64(False), warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        scaled = quad.scaled_inputs(np.asarray(flights[0].us, dtype=np.float64))
+    assert scaled.dtype == jnp.float32
