@@ -78,7 +78,7 @@ def rest_stretches(
     xs = np.asarray(trajectory.xs, dtype=float)
     names = trajectory.state_names
     if positions is None:
-        positions = tuple(i for i, n in enumerate(names) if n == "q" or (n.startswith("q") and n[1:].isdigit()))
+        positions = position_columns(names)
     label = record or trajectory.source
     out = []
     if len(ts) < 2:
@@ -195,18 +195,30 @@ def speeds_zeroed_at_rest(records: list[Trajectory], rests=None) -> list[Traject
         if not stretches:
             out.append(record)
             continue
-        xs, columns = np.array(record.xs), speed_columns(record)
-        xs[:, columns] = np.where(resting_speeds(record, stretches), 0.0, xs[:, columns])
+        xs = zeroed_at_rest(record.xs, record, stretches)
         xs = xs.astype(record.xs.dtype) if isinstance(record.xs, np.ndarray) else jnp.asarray(xs, record.xs.dtype)
         out.append(eqx.tree_at(lambda r: r.xs, record, xs))
     return out
+
+
+def zeroed_at_rest(xs, record: Trajectory, stretches) -> np.ndarray:
+    """A copy of the states `xs` (the record's own, or states estimated on its samples) with the joints' speeds
+    zero where `resting_speeds` says the measured `record` rests within its noise."""
+    xs, columns = np.array(xs), speed_columns(record)
+    xs[:, columns] = np.where(resting_speeds(record, stretches), 0.0, xs[:, columns])
+    return xs
+
+
+def position_columns(names) -> tuple[int, ...]:
+    """The state columns named `q`, `q1`, `q2`, ...: the joints' positions."""
+    return tuple(i for i, n in enumerate(names) if n == "q" or (n.startswith("q") and n[1:].isdigit()))
 
 
 def speed_columns(record: Trajectory) -> list[int]:
     """The state columns of the joints' speeds, joint by joint: `dq2` for `q2` where there is such a column, else
     the one as many columns after the positions as there are joints."""
     names = record.state_names
-    positions = [i for i, n in enumerate(names) if n == "q" or (n.startswith("q") and n[1:].isdigit())]
+    positions = position_columns(names)
     return [
         names.index("d" + names[p]) if "d" + names[p] in names else len(positions) + j for j, p in enumerate(positions)
     ]

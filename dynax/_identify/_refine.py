@@ -61,7 +61,7 @@ import numpy as np
 import optimistix as optx
 
 from .._data._derivatives import butterworth_filtfilt, resample
-from .._data._rest import resting_speeds, speed_columns
+from .._data._rest import zeroed_at_rest
 from .._data._spectra import choose_filter, measurement_noise_std, velocities_from_positions
 from .._data._trajectory import Trajectory
 from .._fit import AbstractStatistics, Parameters, Solution
@@ -247,8 +247,7 @@ def motion_records(
         elif filtered and choice.cutoff_hz is not None:
             xs = np.asarray(butterworth_filtfilt(record.ts, xs, cutoff_hz=choice.cutoff_hz, order=choice.order))
         if rests is not None and rests[k]:
-            xs, columns = np.array(xs), speed_columns(record)
-            xs[:, columns] = np.where(resting_speeds(record, rests[k]), 0.0, xs[:, columns])
+            xs = zeroed_at_rest(xs, record, rests[k])
         n = (len(record) // d) * d
         us = us[:n].reshape(n // d, d, -1).mean(axis=1)
         out.append(
