@@ -54,7 +54,7 @@ from ._flight_kinematics import (
 from ._io import load_trajectory, MAX_GAP, Sampling
 from ._sanity import Check, glitch_findings, stuck_findings, velocity_stretch_findings
 from ._trajectory import Trajectory
-from ._velocities import stretch_edges
+from ._velocities import block_slopes, stretch_edges
 
 #: The kinds of glitch `inspect_flight` flags (its `Glitch.kind`), and `load_flight`'s `gap`.
 GLITCH_KINDS = ("rate_range", "input_range", "position_jump", "spike", "stuck", "velocity", "gap")
@@ -323,17 +323,18 @@ def _record_glitches(
         spans.setdefault((_RECORD_KINDS[f.kind], a, b), []).append(f.column)
     out = []
     for (kind, a, b), found in spans.items():
-        if kind == "velocity":
-            found = [v for v in found if _stretch_is_a_fault(ts, values[pairs[v]], values[v], a, b)]
+        gains = {}
+        if kind == "velocity":  # a fault where off by `STRETCH_FACTOR` or more, or of the other sign (a lag is not)
+            gains = {v: _stretch_gain(ts, values[pairs[v]], values[v], a, b) for v in found}
+            found = [v for v in found if not (1.0 / STRETCH_FACTOR < gains[v] < STRETCH_FACTOR)]
         position = {"x", "y", "z"} <= set(found) and kind != "velocity"
         groups = [[c] for c in found if not (position and c in ("x", "y", "z"))]
         groups += [["x", "y", "z"]] if position else []
         for group in groups:
-            col = _column(trajectory, group[0])
             if kind == "velocity":
-                worst = _stretch_gain(ts, values[pairs[group[0]]], col, a, b)
+                worst = gains[group[0]]
             else:
-                seg = col[a : b + 1]
+                seg = _column(trajectory, group[0])[a : b + 1]
                 worst = float(seg[np.argmax(np.abs(seg))])
             glitch = Glitch(",".join(group), kind, float(rel[a]), float(rel[b]), a + 1, b - a + 1, worst)
             out.append((glitch, (a, b)))
@@ -346,18 +347,8 @@ def _stretch_gain(ts, position, velocity, a, b) -> float:
     edges = edges[(edges >= a) & (edges <= b)]
     if len(edges) < 2:
         edges = np.array([a, b])
-    start, stop = edges[:-1], edges[1:]
-    slopes = (position[stop] - position[start]) / (ts[stop] - ts[start])
-    area = np.concatenate([[0.0], np.cumsum(0.5 * (velocity[1:] + velocity[:-1]) * np.diff(ts))])
-    means = (area[stop] - area[start]) / (ts[stop] - ts[start])
+    slopes, means = block_slopes(ts, position, velocity, edges)
     return float(slopes @ means / (slopes @ slopes)) if slopes @ slopes > 0 else float("nan")
-
-
-def _stretch_is_a_fault(ts, position, velocity, a, b) -> bool:
-    """Whether a velocity stretch is off by `STRETCH_FACTOR` or more, or of the other sign (a filter's lag is
-    not: see the module notes)."""
-    gain = _stretch_gain(ts, position, velocity, a, b)
-    return not (1.0 / STRETCH_FACTOR < gain < STRETCH_FACTOR)
 
 
 def usable_segments(trajectory: Trajectory, notes: FlightNotes, min_samples: int = 2) -> list[Trajectory]:

@@ -61,9 +61,14 @@ def _block_slopes(ts, q, v, edges=None):
     edges = stretch_edges(ts) if edges is None else edges
     if len(edges) < MIN_BLOCKS + 1:
         return None
+    return block_slopes(ts, q, v, edges)
+
+
+def block_slopes(ts, q, v, edges) -> tuple[np.ndarray, np.ndarray]:
+    """`(slopes, means)`: the secant slopes of the position `q` and the mean velocities `v` (trapezoid rule on the
+    samples) over the blocks between consecutive sample indices `edges`, however few."""
     start, stop = edges[:-1], edges[1:]  # block k: samples start[k] .. stop[k] (its last shared with the next)
     slopes = (q[stop] - q[start]) / (ts[stop] - ts[start])
-    # the mean velocity over [t_start, t_stop] by the trapezoid rule on the samples
     area = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(ts))])
     means = (area[stop] - area[start]) / (ts[stop] - ts[start])
     return slopes, means
