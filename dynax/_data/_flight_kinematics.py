@@ -34,6 +34,7 @@ import numpy as np
 from .._errors import DataError
 from ._velocities import (
     BLOCK_S,
+    block_slopes,
     check_velocities,
     MAX_GAIN_ERROR,
     MIN_BLOCKS,
@@ -354,10 +355,8 @@ def _misfit(ts, position, velocity) -> float | None:
     edges = stretch_edges(ts)
     if len(edges) < MIN_BLOCKS + 1:
         return None
-    start, stop = edges[:-1], edges[1:]
-    slopes = (position[stop] - position[start]) / (ts[stop] - ts[start])[:, None]
-    area = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * (velocity[1:] + velocity[:-1]) * np.diff(ts)[:, None], 0)])
-    means = (area[stop] - area[start]) / (ts[stop] - ts[start])[:, None]
+    blocks = [block_slopes(ts, position[:, i], velocity[:, i], edges) for i in range(3)]
+    slopes, means = (np.stack([b[k] for b in blocks], axis=1) for k in (0, 1))
     motion = float(np.sqrt(np.mean(slopes**2)))
     return float(np.sqrt(np.mean((means - slopes) ** 2))) / motion if motion > 0 else None
 
