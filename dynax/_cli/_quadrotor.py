@@ -16,18 +16,15 @@ def load_flights(paths, mapping, scale, offset, *, min_samples: int, needs: str 
     refusal), and the notes. A flight given twice is refused, and one that is also a `training` flight
     (`{path: trajectory}` of those loaded before) is no validation. `training`, where given, gains the
     flights loaded here."""
-    import numpy as np
 
     from .._data._flight import load_flight, usable_segments
+    from .._data._sanity import same_data
 
     runs, notes, seen = [], [], {}
     for path in paths:
         trajectory, found = load_flight(path, mapping=mapping, scale=scale, offset=offset)
         for earlier, other in [*seen.items(), *(training or {}).items()]:
-            if trajectory.xs.shape == other.xs.shape and all(
-                np.array_equal(np.asarray(a), np.asarray(b))
-                for a, b in ((trajectory.ts, other.ts), (trajectory.xs, other.xs), (trajectory.us, other.us))
-            ):
+            if same_data(trajectory, other):
                 held = earlier not in seen
                 raise DataError(
                     f"is the same data as the {'training ' if held else ''}flight {earlier}: "
@@ -44,7 +41,7 @@ def load_flights(paths, mapping, scale, offset, *, min_samples: int, needs: str 
             print(f"note: {path}: {line}")
         kept = usable_segments(trajectory, found, min_samples)
         if not kept:
-            longest = max((b - a for a, b in _usable_runs(found.usable)), default=0)
+            longest = max((len(run) for run in usable_segments(trajectory, found, 1)), default=0)
             raise DataError(
                 f"has no run of flight of {min_samples} samples or more between its ground segments and glitches "
                 f"(the longest has {longest})" + (f", which {needs} needs" if needs else ""),
@@ -63,14 +60,6 @@ def load_flights(paths, mapping, scale, offset, *, min_samples: int, needs: str 
             }
         )
     return runs, notes
-
-
-def _usable_runs(usable):
-    """`(start, stop)` of each run of usable samples (stop exclusive)."""
-    import numpy as np
-
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], np.asarray(usable, dtype=np.int8), [0]])))
-    return list(zip(edges[::2], edges[1::2]))
 
 
 def run_fit(args) -> int:

@@ -572,7 +572,8 @@ def check_record(trajectory: Trajectory, *, estimated: Sequence[str] | None = No
     return DataCheck(tuple(findings))
 
 
-def _same(a: Trajectory, b: Trajectory) -> bool:
+def same_data(a: Trajectory, b: Trajectory) -> bool:
+    """Whether two records hold the same times, states and inputs, sample for sample."""
     return (
         len(a) == len(b)
         and a.xs.shape == b.xs.shape
@@ -601,7 +602,7 @@ def check_records(
     for a in range(len(everything)):
         for b in range(a + 1, len(everything)):
             (ka, ra), (kb, rb) = everything[a], everything[b]
-            if _same(ra, rb):
+            if same_data(ra, rb):
                 held = ka != kb
                 message = f"is the same data as the {ka} {ra.source or a + 1}: " + (
                     "held-out error on the training data is in-sample, no validation"
