@@ -49,7 +49,7 @@ from typing import Literal
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Int, Scalar
+from jaxtyping import Array, Bool, Float, Int, Scalar
 import numpy as np
 import optimistix as optx
 
@@ -466,6 +466,7 @@ class _EMFreeState(eqx.Module):
     f: Scalar
     terminate: Bool[Array, ""]
     history: History
+    normal: Float[Array, "n n"]  # the last step's normal equations, for the precision check after the loop
 
 
 class EMFree(optx.AbstractMinimiser):
@@ -506,7 +507,8 @@ class EMFree(optx.AbstractMinimiser):
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
         f, _ = fn(y, args)
-        return _EMFreeState(jnp.array(0), f, jnp.array(False), History.start(max(self.history, 1), f))
+        normal = jnp.zeros((y.shape[0], y.shape[0]), y.dtype)
+        return _EMFreeState(jnp.array(0), f, jnp.array(False), History.start(max(self.history, 1), f), normal)
 
     def step(self, fn, y, args, options, state, tags):
         ata, atb = self.linearise(y, args)
@@ -529,7 +531,7 @@ class EMFree(optx.AbstractMinimiser):
         terminate = ~accepted | ((state.f - new_f) / state.f < self.rtol)
         notify(self.token, state.step, new_f, accepted)
         history = state.history.record(state.step + 1, new_f, accepted)
-        return new_y, _EMFreeState(state.step + 1, new_f, terminate, history), None
+        return new_y, _EMFreeState(state.step + 1, new_f, terminate, history, ata), None
 
     def terminate(self, fn, y, args, options, state, tags):
         return state.terminate, optx.RESULTS.successful
@@ -617,6 +619,8 @@ def fit_lagged(
     with monitor(callback) as token:
         solution = _em_free(system, trajectory, starts, w, n_steps, criterion, token)
     theta = solution.value
+    if int(solution.stats["num_steps"]) > 0:  # each step solved normal equations as ill-conditioned as the last
+        _check_solvable(solution.state.normal, criterion.ridge, theta, "fit_lagged")
     fitted = with_theta(system, theta)
     return _vehicle_solution(system, fitted, theta, solution, VehicleStatistics("lagged", len(trajectory)))
 
