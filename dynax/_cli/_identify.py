@@ -177,6 +177,7 @@ def _method(args):
     if not args.segment > 0:
         raise UsageError(f"--segment must be positive, got {args.segment}")
     if args.method == "dynamic":
+        assert order is not None and trim is not None and decimate is not None  # `none` is refused for these three
         return Dynamic(
             lowpass_hz=lowpass,
             lowpass_order=order,
