@@ -40,8 +40,8 @@ try:
 except ImportError:  # run from a checkout without installing it
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
     import dynax
-from dynax._control import _closed_loop  # noqa: E402  # private: reads the un-jitted closed loop, likewise
-from dynax._simulate import _simulate  # noqa: E402  # private: reads the un-jitted rollout, to time it eagerly
+from dynax._control import _closed_loop  # noqa: E402  # private: likewise
+from dynax._simulate import _simulate  # noqa: E402  # private: un-jitted; dynax's is jitted
 
 RIG = dict(theta1=0.0536, theta2=0.0533, theta3=0.0362, theta4=2.365, theta5=1.777, theta6=0.01, theta7=0.01)
 

@@ -37,7 +37,7 @@ from _device import describe, device_info  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax._identify import _simulation_fit  # noqa: E402  # private: patched (the solver, a timed solve)
+from dynax._identify import _simulation_fit  # noqa: E402  # private: solver swapped, timed; no setting
 from dynax.internal import levenberg_marquardt  # noqa: E402
 
 REPO = pathlib.Path(__file__).resolve().parents[1]

@@ -30,8 +30,8 @@ import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
 from dynax import Dynamic, Energy, identify, Power, Trajectory  # noqa: E402
-from dynax._data import _sanity as sanity  # noqa: E402  # private: switched off to price the data checks
-from dynax._identify import _stages as stages  # noqa: E402  # private: switched off to price the rest search
+from dynax._data import _sanity as sanity  # noqa: E402  # private: checks off, priced; no setting
+from dynax._identify import _stages as stages  # noqa: E402  # private: rest search off, priced; no setting
 
 METHODS = {"dynamic": Dynamic(lowpass_hz=None), "power": Power(), "energy": Energy()}
 

@@ -92,7 +92,10 @@ from ._data import speeds_zeroed_at_rest as speeds_zeroed_at_rest
 from ._data import split_at_gaps as split_at_gaps
 from ._data._flight import FlightChecks as FlightChecks
 from ._data._flight import FlightNotes as FlightNotes
+from ._data._flight import motors_running_run as motors_running_run
 from ._data._flight import usable_segments as usable_segments
+from ._data._flight_kinematics import attitude_angles as attitude_angles
+from ._data._flight_kinematics import thrust_frame_slopes as thrust_frame_slopes
 from ._data._io import MAX_MAGNITUDE as MAX_MAGNITUDE
 from ._data._spectra import choose_filter as choose_filter
 from ._data._spectra import FilterChoice as FilterChoice
@@ -377,6 +380,7 @@ from ._identify._method import Prepared as Prepared
 from ._identify._record_friction import compare_records as compare_records
 from ._identify._refine import delta_method_covariance as delta_method_covariance
 from ._identify._refine import ml_weights as ml_weights
+from ._identify._refine import motion_records as motion_records
 from ._identify._refine import record_residual_scale as record_residual_scale
 from ._identify._regressors import parameter_vector as parameter_vector
 from ._identify._simulation_fit import named_parameters as named_parameters
@@ -389,6 +393,9 @@ from ._identify._simulation_fit import (
 from ._identify._simulation_fit import (
     simulation_segments as simulation_segments,
 )
+from ._identify._static_friction import joint_levels as joint_levels
+from ._identify._static_friction import record_rests as record_rests
+from ._identify._static_friction import rests_under_load as static_friction_rests  # diagnose's takes the plain name
 from ._identify._validation import CONCENTRATED as CONCENTRATED
 from ._identify._validation import HeldOut as HeldOut
 
@@ -571,6 +578,7 @@ __all__ = [
     "AbstractVehicleTerm",
     "acceleration_residuals",
     "applied_inputs",
+    "attitude_angles",
     "auto_stride",
     "backward_difference",
     "bar_token",
@@ -659,6 +667,7 @@ __all__ = [
     "IdentifyJob",
     "initial_helicopter",
     "jackknife_covariance",
+    "joint_levels",
     "jointly_determined",
     "jointly_determined_cell",
     "JointRests",
@@ -684,6 +693,8 @@ __all__ = [
     "min_mass_eigenvalue",
     "MIN_PRACTICAL_GAIN",
     "ml_weights",
+    "motion_records",
+    "motors_running_run",
     "movable_parameters",
     "multi_process",
     "named_equivalent",
@@ -731,6 +742,7 @@ __all__ = [
     "record_jackknife_covariance",
     "record_offsets",
     "record_residual_scale",
+    "record_rests",
     "recorded_loss",
     "RecordFriction",
     "RecordOffsets",
@@ -777,6 +789,7 @@ __all__ = [
     "stage_reporter",
     "staged_directory",
     "STATE_GROUPS",
+    "static_friction_rests",
     "StaticFriction",
     "Statistics",
     "stiction_not_proposed",
@@ -788,6 +801,7 @@ __all__ = [
     "structure_test",
     "TEMPEST_COEFFICIENTS",
     "TEMPEST_FEATURES",
+    "thrust_frame_slopes",
     "thrust_parameters",
     "Transcription",
     "tsqr_r",

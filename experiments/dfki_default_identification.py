@@ -66,8 +66,8 @@ import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
 from dynax import AbstractJointTerm, held_out_error  # noqa: E402
-from dynax._identify import _refine  # private: patched (the refinement's record weights)
-from dynax._identify import _stages as identify_module  # noqa: E402  # private: patched (identify's variants)
+from dynax._identify import _refine  # private: record weights, which no setting chooses
+from dynax._identify import _stages as identify_module  # noqa: E402  # private: variants no setting chooses
 from dynax.internal import log_ratio_differences, paired_block_test  # noqa: E402
 
 RUNS = ("00", "01", "02", "03", "05", "12")
@@ -179,8 +179,8 @@ def cell_tests(model, lab, record, horizons) -> list[dict]:
 def _band_from_positions() -> None:
     """Patch `choose_filter` (where identify's stages import it) to read each record's band from its
     angles' spectra: the widest angle band, with the trim and decimation that go with it."""
-    from dynax._data import _spectra as _defaults  # private: patched (choose_filter where imported)
-    from dynax._identify import _equations  # private: patched (choose_filter where imported)
+    from dynax._data import _spectra as _defaults  # private: a band rule no setting chooses
+    from dynax._identify import _equations  # private: likewise
 
     velocity_rule = _defaults.choose_filter
 

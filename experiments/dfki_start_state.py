@@ -23,9 +23,9 @@ from dfki_default_identification import load, RUNS
 from dfki_stiction import cut, speeds_zeroed_everywhere_at_rest
 import numpy as np  # noqa: E402
 
-from dynax._identify._refine import motion_records  # noqa: E402  # private: the refinement's start states
 from dynax.internal import (  # noqa: E402
     measurement_noise_std,
+    motion_records,
     resample,
     rest_stretches,
     speed_noise_at_rest,

@@ -4,8 +4,8 @@ For every flight, read with its motion-capture rates and with its IMU gyro, the 
 error) of each velocity on its position's derivative and of each body rate on the attitude's, and
 the thrust's two slopes (horizontal acceleration on the lean of body z, vertical acceleration on the
 motors' thrust), over the longest run with the motors running, as `load_flight` reads them
-(`dynax._data._flight_kinematics`); then faults injected into a copy of the star flight, and
-whether each is refused.
+(`dynax.internal`'s `attitude_angles`, `thrust_frame_slopes`, `velocity_gain`); then faults injected
+into a copy of the star flight, and whether each is refused.
 
     nice -n 5 python experiments/flight_kinematics.py [OUT]
 
@@ -26,10 +26,13 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax._data._flight import motors_running_run  # noqa: E402  # private: the stretch the check reads
-from dynax._data._flight_kinematics import attitude_angles, thrust_frame_slopes  # noqa: E402  # private: the check's own
-from dynax._data._velocities import velocity_gain  # noqa: E402  # private: the check's own gain
-from dynax.internal import write_json  # noqa: E402
+from dynax.internal import (  # noqa: E402
+    attitude_angles,
+    motors_running_run,
+    thrust_frame_slopes,
+    velocity_gain,
+    write_json,
+)
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from nanobench_heldout import DATA, NANOBENCH_MAP  # noqa: E402

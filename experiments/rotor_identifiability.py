@@ -147,7 +147,7 @@ def draw(case, noise_seed=None, noise_scale=1.0, stride_fraction=1.0, starts=())
 
 
 def overlapping_diagnosis(out, start, name="double_pendulum-rotor_inertia@q2-0.025-mass_matrix", div=4):
-    import dynax._diagnose._problem as problem  # private: patches the window cutter to try overlapping windows
+    import dynax._diagnose._problem as problem  # private: overlapping windows, which no setting makes
     from tests.hidden_cases import diagnose_case, outcome
 
     plain = problem.make_windows

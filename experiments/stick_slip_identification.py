@@ -114,7 +114,7 @@ def no_rest(swinging, out):
     data = list(records(swinging))
     result, seconds = fit(data)
     terms = [t for t in getattr(result.system, "terms", ()) if isinstance(t, dynax.Stiction)]
-    from dynax._identify import _stages as identify_module  # private: patched (the rest search switched off)
+    from dynax._identify import _stages as identify_module  # private: the rest search off; no setting does
 
     search = identify_module._holds_at_rest
     identify_module._holds_at_rest = lambda system: False

@@ -7,7 +7,7 @@
 `friction="coulomb"`, refinement on, `holdout=0`) on the battery's records with a rest that ends in a breakaway:
 stiction of 0.8 N m at the shoulder (`shoulder`) and a sticking Coulomb friction of 0.5 N m at the elbow
 (`coulomb`). The least-squares stage and the records the refinement fitted are kept, and the rests are read again
-(the same `rests_under_load`, `joint_levels`) with the least-squares rigid body, with the refined one (in the
+(the same `static_friction_rests`, `joint_levels`) with the least-squares rigid body, with the refined one (in the
 refinement's terms, rotor inertia at the elbow included, its `Stiction` left out), and with the truth's; each on
 the records less the least-squares stage's per-record force offsets (as the refinement sees them, and as the
 level is read) and on the records as recorded (the truth has no offsets). Then the parameter groups (inertia,
@@ -30,14 +30,15 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax._identify import _stages  # noqa: E402  # private: spied on (the stages' inner values) and patched
-from dynax._identify._ls_stage import less_offsets  # noqa: E402  # private: the records as the refinement sees them
-from dynax._identify._static_friction import (  # noqa: E402  # private: the level read again with another rigid body
+from dynax._identify import _stages  # noqa: E402  # private: a spy: no result carries them
+from dynax._identify._ls_stage import less_offsets  # noqa: E402  # private: no public call returns them
+from dynax.internal import (  # noqa: E402
     joint_levels,
+    parameter_names,
     record_rests,
-    rests_under_load,
+    static_friction_rests,
+    with_friction,
 )
-from dynax.internal import parameter_names, with_friction  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from tests.hidden_cases import CASES, records, truth_theta  # noqa: E402
@@ -64,7 +65,7 @@ def read(values: dict, data, rests, covariance=None) -> dict:
     names = parameter_names(system, "coulomb")
     estimate = np.asarray([values.get(n, 0.0) for n in names])
     labels = [pathlib.Path(r.source).name for r in data]
-    levels = joint_levels(rests_under_load(system, names, estimate, covariance, data, rests, labels))
+    levels = joint_levels(static_friction_rests(system, names, estimate, covariance, data, rests, labels))
     return {j.name: {"level": j.level, "kind": j.kind, "lower_bound": j.lower_bound} for j in levels}
 
 

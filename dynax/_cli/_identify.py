@@ -109,6 +109,15 @@ def register(subparsers):
         help="dynamic model: inputs as a zero-order hold (default) or as sampled measurements",
     )
     parser.add_argument(
+        "--offsets",
+        choices=("auto", "forces", "angles", "none"),
+        default="auto",
+        help="dynamic model: what each record may be off by: one force offset per record and driven joint "
+        "(forces), one zero per record and angle (angles, double_pendulum), none, or auto (default: with the "
+        "filter settings chosen from the data, force offsets, or on double_pendulum the angle zeros where they "
+        "fit the records clearly better; none with an explicit --lowpass)",
+    )
+    parser.add_argument(
         "--static-friction",
         action="store_true",
         help="dynamic model: add Stiction (a static friction level) at each joint that rests under load "
@@ -153,6 +162,9 @@ def with_static_friction(method, args):
     return dataclasses.replace(method, static_friction=True)
 
 
+_OFFSETS = {"auto": "auto", "forces": True, "angles": "angles", "none": False}  # --offsets as `Dynamic(offsets=...)`
+
+
 def _method(args):
     from .._identify import Dynamic, Energy, Power, SimulationFit
 
@@ -165,7 +177,17 @@ def _method(args):
     if not args.segment > 0:
         raise UsageError(f"--segment must be positive, got {args.segment}")
     if args.method == "dynamic":
-        return Dynamic(lowpass_hz=lowpass, lowpass_order=order, trim=trim, decimate=decimate, inputs=args.inputs)
+        assert order is not None and trim is not None and decimate is not None  # `none` is refused for these three
+        return Dynamic(
+            lowpass_hz=lowpass,
+            lowpass_order=order,
+            trim=trim,
+            decimate=decimate,
+            inputs=args.inputs,
+            offsets=_OFFSETS[args.offsets],
+        )
+    if args.offsets != "auto":
+        raise UsageError(f"--offsets applies to --method dynamic, not {args.method}")
     plain = lambda value, default: default if value == "auto" else value  # noqa: E731
     if args.method == "power":
         return Power(

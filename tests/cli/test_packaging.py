@@ -9,7 +9,7 @@ import tomllib
 import pytest
 
 import dynax
-from dynax._cli import _identify  # private: monkeypatched (a run interrupted by Ctrl-C)
+from dynax._cli import _identify  # private: `run` replaced: a Ctrl-C, a spy; no public route
 from dynax.internal import build_parser, cli_main
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]

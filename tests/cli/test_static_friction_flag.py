@@ -1,20 +1,30 @@
-"""`dynax identify --static-friction` turns the static level on in the dynamic model; off by default."""
+"""`dynax identify --static-friction` turns the static level on in the dynamic model, off by default;
+`--offsets` chooses the dynamic model's per-record offsets, `Dynamic(offsets=...)`."""
 
 import pytest
 
 import dynax
 from dynax import UsageError
-from dynax._cli._identify import _method, with_static_friction  # private: the flag's effect on the method
+from dynax._cli._identify import _method, with_static_friction  # private: no public call returns the flags' method
 from dynax.internal import build_parser
+
+COMMON = ["identify", "double_pendulum", "run.csv", "--out", "out.json"]
 
 
 def test_the_flag_turns_the_static_level_on():
     parser = build_parser()
-    common = ["identify", "double_pendulum", "run.csv", "--out", "out.json"]
-    off = parser.parse_args([*common, "--method", "dynamic"])
-    on = parser.parse_args([*common, "--method", "dynamic", "--static-friction"])
+    off = parser.parse_args([*COMMON, "--method", "dynamic"])
+    on = parser.parse_args([*COMMON, "--method", "dynamic", "--static-friction"])
     assert with_static_friction(_method(off), off) == dynax.Dynamic()
     assert with_static_friction(_method(on), on) == dynax.Dynamic(static_friction=True)
-    power = parser.parse_args([*common, "--method", "power", "--static-friction"])
+    power = parser.parse_args([*COMMON, "--method", "power", "--static-friction"])
     with pytest.raises(UsageError, match="--static-friction"):
         with_static_friction(_method(power), power)
+
+
+@pytest.mark.parametrize("flag, offsets", [("auto", "auto"), ("forces", True), ("angles", "angles"), ("none", False)])
+def test_the_offsets_flag_chooses_the_dynamic_models_offsets(flag, offsets):
+    parser = build_parser()
+    assert _method(parser.parse_args([*COMMON, "--offsets", flag])) == dynax.Dynamic(offsets=offsets)
+    with pytest.raises(UsageError, match="--offsets"):
+        _method(parser.parse_args([*COMMON, "--method", "power", "--offsets", flag if flag != "auto" else "none"]))

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._data import _sanity, _velocities  # private: the screens are switched off to compare with the full pass
+from dynax._data import _sanity, _velocities  # private: screens off, which no setting does
 
 
 def _running_median(x, window=7):

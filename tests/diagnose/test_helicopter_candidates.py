@@ -264,7 +264,7 @@ class _ScreenedOnce(Exception):
 
 def _round_one_screening(monkeypatch, truth):
     """`diagnose`'s first-round screening of the full vocabulary on 40 s of aggressive flight, 20 s held out."""
-    import dynax._diagnose._forward as diagnose_module  # private: monkeypatched (a spy on the screening)
+    import dynax._diagnose._forward as diagnose_module  # private: a spy stopping diagnose at its first screening
 
     seen = {}
     real = diagnose_module.screen

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from dynax._diagnose._summaries import merge_repeated_causes  # private: the merge is the report's own step
+from dynax._diagnose._summaries import merge_repeated_causes  # private: a step no public call runs alone
 
 
 def _finding(parameter, coefficient, p_value, named_for=None):

@@ -9,7 +9,7 @@ import numpy as np
 
 import dynax
 from dynax import Extended, InputLag, LinearAxis, Trajectory
-from dynax._diagnose._residuals import (  # private: the unpadded evaluation the padded one must reproduce
+from dynax._diagnose._residuals import (  # private: unpadded pieces, no public call
     _interval_increments,
     predicted_accelerations,
     sg_window,

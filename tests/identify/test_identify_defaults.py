@@ -354,7 +354,7 @@ def test_short_records_are_validated_at_the_horizons_their_tails_hold():
 
 
 @pytest.mark.slow  # about 80 s on real runs
-def test_one_dfki_run_alone_is_said_to_determine_the_size_parameters_poorly(monkeypatch, datasets):
+def test_one_dfki_run_alone_is_said_to_determine_the_size_parameters_poorly(datasets):
     # A user with one recording: DFKI run 00 (10 s, both motors, small amplitude), defaults. Its angles
     # are read from zeros of their own (-0.09 and +0.12 rad, test_angle_zeros): with them fitted, as the
     # defaults do, the refined theta1, theta2, theta4 and theta5 are those of the lab's model_3.0 within
@@ -375,11 +375,9 @@ def test_one_dfki_run_alone_is_said_to_determine_the_size_parameters_poorly(monk
     # errors, clustered over segments, say what the run then tells: theta1 and theta2 to 38 and 31 %.
     # What `identify` returns is judged, so the user is warned; judged on the least-squares stage,
     # nothing was said.
-    from dynax._identify import _stages as identify_module  # private: monkeypatched (no angle zeros)
-
-    monkeypatch.setattr(identify_module, "_record_angle_zeros", lambda *args: None)
     with pytest.warns(PoorlyDeterminedWarning, match="theta1") as caught:
-        result = identify(dynax.DoublePendulum(), record, Dynamic(), friction="coulomb")
+        result = identify(dynax.DoublePendulum(), record, Dynamic(offsets=True), friction="coulomb")
+    assert result.angle_zeros is None
     assert "more records" in str(caught[0].message)
     least_squares = result.to_json()["stages"]["least_squares"]
     assert least_squares["poorly_determined"] == {}
@@ -557,7 +555,7 @@ def test_the_refinement_measures_a_torque_latency_and_is_not_biased_by_it(monkey
     truth = np.array([RIG[f"theta{i}"] for i in range(1, 6)])
     relative = np.abs(np.asarray(result.estimate[:5]) - truth) / truth
     assert np.all(relative < 0.02), dict(zip(result.names, relative))
-    from dynax._identify import _stages as identify_module  # private: monkeypatched (no input timing)
+    from dynax._identify import _stages as identify_module  # private: no setting drops the input timing
     from dynax.internal import refine_by_simulation
 
     monkeypatch.setattr(
@@ -771,7 +769,7 @@ def test_cli_identifies_raw_dfki_files_with_no_recipe_flags(datasets, tmp_path, 
 
 
 @pytest.mark.slow  # about a minute: the refinement on two real runs
-def test_cli_says_when_the_refinement_validates_worse_than_least_squares(datasets, tmp_path, capsys, monkeypatch):
+def test_cli_says_when_the_refinement_validates_worse_than_least_squares(datasets, tmp_path, capsys):
     # Runs 00 and 05 (05 drives the shoulder only; 00's shoulder torque reads 0.14 N m high), validated on
     # run 01, read with torque offsets (the default before the angle zeros, forced here): the refinement
     # drives Ir2 to zero and theta5 to 2.1 (the lab's 1.78), and predicts run 01 worse than the
@@ -780,11 +778,8 @@ def test_cli_says_when_the_refinement_validates_worse_than_least_squares(dataset
     # refinement predicts run 01 better: 0.092 against 0.114 rad at 0.5 s, 2026-11-27.)
     import json
 
-    from dynax._identify import _stages as identify_module  # private: monkeypatched (no angle zeros)
     from dynax.internal import cli_main
     from tests.conftest import DFKI_MAPPING
-
-    monkeypatch.setattr(identify_module, "_record_angle_zeros", lambda *args: None)
 
     folder = datasets / "dfki_double_pendulum" / "sys_id"
     mapping = ",".join(f"{k}={v}" for k, v in DFKI_MAPPING.items())
@@ -799,6 +794,8 @@ def test_cli_says_when_the_refinement_validates_worse_than_least_squares(dataset
             str(folder / "trajectory_01.csv"),
             "--friction",
             "coulomb",
+            "--offsets",
+            "forces",
             "--map",
             mapping,
             "--out",
@@ -807,6 +804,7 @@ def test_cli_says_when_the_refinement_validates_worse_than_least_squares(dataset
     )
     assert code == 0
     stages = json.loads(out.read_text())["stages"]
+    assert stages["least_squares"]["offsets"] and stages["least_squares"]["angle_zeros"] is None
     ls, oe = stages["least_squares"]["validation"]["rmse"], stages["output_error"]["validation"]["rmse"]
     assert all(o > l for o, l in zip(oe, ls)), (ls, oe)
     assert "predicts the validation records better than the refined model at every horizon" in capsys.readouterr().out
@@ -870,7 +868,7 @@ def test_a_refinement_that_ends_worse_than_its_start_keeps_the_least_squares_mod
     import equinox as eqx
     import optimistix as optx
 
-    from dynax._identify import _refine  # private: monkeypatched (a fit that ends worse than its start)
+    from dynax._identify import _refine  # private: a failure no input forces
 
     real = _refine.fit_simulation_error
 

@@ -144,7 +144,7 @@ def test_joint_weights_come_from_residuals_with_the_offsets_removed(records, mon
     # 0.02 N m on both joints): fitted with the offsets, as the weighted fit is, the two joints' residuals
     # are alike and so are their weights; a first fit without the offsets puts the offsets' spread
     # (0.09 N m^2) into the shoulder's variance and weighted it 23 times less than the elbow (ratio 0.044).
-    from dynax._identify import _ls_stage as identify_module  # private: monkeypatched (a spy on least_squares)
+    from dynax._identify import _ls_stage as identify_module  # private: a spy: no result carries the weights
 
     seen = []
     real = identify_module.least_squares

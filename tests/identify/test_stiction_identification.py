@@ -11,16 +11,14 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._identify import _stages as identify_module  # private: monkeypatched (no rest found)
-from dynax._identify._static_friction import (  # private: the level read with the truth's rigid body
-    joint_levels,
-    record_rests,
-    rests_under_load,
-)
+from dynax._identify import _stages as identify_module  # private: the rest search off, which no setting does
 from dynax.internal import (
     consistent_parametrisation,
+    joint_levels,
     parameter_names,
     parameter_vector,
+    record_rests,
+    static_friction_rests,
     StaticFriction,
     with_friction,
 )
@@ -281,8 +279,7 @@ def test_the_refinements_windows_at_rest_start_at_zero_speed_by_the_same_rule():
     # The refinement starts its windows from its own velocities (a local cubic fit of the positions, which at rest
     # reads the position noise, not zero); with the rests the same rule sets them to zero where the measured speed
     # is within the noise, and leaves every other sample as the fit gives it.
-    from dynax._identify._refine import motion_records  # private: the refinement's start states, no public call
-    from dynax.internal import rest_stretches, speeds_zeroed_at_rest
+    from dynax.internal import motion_records, rest_stretches, speeds_zeroed_at_rest
 
     t, _, record = resting_elbow_record(0.1, 7)
     rests = [rest_stretches(record)]
@@ -387,7 +384,7 @@ def test_the_breakaway_is_read_with_the_rest_of_the_arm_free(name, joint):
     names = parameter_names(system, "coulomb")
     estimate = np.concatenate([truth_theta(case), np.zeros(len(names) - 7)])
     labels = [r.source for r in data]
-    (level,) = joint_levels(rests_under_load(system, names, estimate, None, data, record_rests(data), labels))
+    (level,) = joint_levels(static_friction_rests(system, names, estimate, None, data, record_rests(data), labels))
     np.testing.assert_allclose(level.level, case.size, rtol=0.1)
     assert level.joint == joint and level.kind == "breakaway"
     assert level.lower_bound <= level.level  # held before it broke away

@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import dynax
-from dynax._data._flight_kinematics import attitude_angles  # private: the attitude's angles are the check's core
+from dynax.internal import attitude_angles
 
 from .test_flight_data import _write, NANOBENCH_MAP, STAR
 

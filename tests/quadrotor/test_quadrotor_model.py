@@ -11,7 +11,14 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import dynax
-from dynax.internal import body_frame_records, score_flights, stable_substeps, write_json, write_report
+from dynax.internal import (
+    body_frame_records,
+    diagnosis_summary,
+    score_flights,
+    stable_substeps,
+    write_json,
+    write_report,
+)
 
 # A Crazyflie-sized X quadrotor: thrust per motor a m^2 + b m with m in PWM counts (hover near 40000).
 MASS, GRAVITY = 0.030, 9.81
@@ -280,12 +287,10 @@ def test_a_term_that_spoils_the_next_sample_is_noted_in_the_report(diagnosed, fi
     assert gentle.flight_error.note is None and gentle.notes == diagnosed.notes
 
     # One source: report.json, report.md and the CLI's summary carry the report's note as it is.
-    from dynax._cli._diagnose import summary  # private: the terminal summary `dynax diagnose` prints
-
     write_report(stiff, tmp_path, body_frame_records(fitted.model, flights[2:]), write_json=write_json)
     written = json.loads((tmp_path / "report.json").read_text())
     assert written["flight_error"]["note"] == note and note in written["notes"]
-    assert note in (tmp_path / "report.md").read_text() and note in summary(stiff)
+    assert note in (tmp_path / "report.md").read_text() and note in diagnosis_summary(stiff)
 
 
 def test_unevenly_sampled_flights_are_refused_by_name(fitted, flights):
