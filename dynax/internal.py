@@ -94,6 +94,11 @@ from ._data._flight import FlightChecks as FlightChecks
 from ._data._flight import FlightNotes as FlightNotes
 from ._data._flight import usable_segments as usable_segments
 from ._data._io import MAX_MAGNITUDE as MAX_MAGNITUDE
+from ._data._motor_order import flight_signature as flight_signature
+from ._data._motor_order import motor_order as motor_order
+from ._data._motor_order import motor_signature as motor_signature
+from ._data._motor_order import order_text as order_text
+from ._data._motor_order import PERMUTATIONS as PERMUTATIONS
 from ._data._spectra import choose_filter as choose_filter
 from ._data._spectra import FilterChoice as FilterChoice
 from ._data._spectra import measurement_noise_std as measurement_noise_std
@@ -636,6 +641,7 @@ __all__ = [
     "fit_percent",
     "FitSettings",
     "Fitted",
+    "flight_signature",
     "FlightChecks",
     "FlightNotes",
     "float_scalar",
@@ -684,6 +690,8 @@ __all__ = [
     "min_mass_eigenvalue",
     "MIN_PRACTICAL_GAIN",
     "ml_weights",
+    "motor_order",
+    "motor_signature",
     "movable_parameters",
     "multi_process",
     "named_equivalent",
@@ -697,12 +705,14 @@ __all__ = [
     "on_physical_side",
     "open_loop_rollout",
     "OptaxLBFGS",
+    "order_text",
     "OutputErrorStatistics",
     "paired_block_test",
     "PairedTest",
     "parameter_names",
     "parameter_vector",
     "parse_assignments",
+    "PERMUTATIONS",
     "physical_readings",
     "polish_on_constraint",
     "POORLY_DETERMINED",

@@ -10,17 +10,32 @@ from ._output import write_json
 QUADROTOR_MODELS = ("nominal", "acceleration", "linear")
 
 
-def load_flights(paths, mapping, scale, offset, *, min_samples: int, needs: str = "", training=None):
+def load_flights(
+    paths,
+    mapping,
+    scale,
+    offset,
+    *,
+    min_samples: int,
+    needs: str = "",
+    training=None,
+    signatures=None,
+    reference=None,
+    reference_name: str = "the training flights",
+):
     """Each file through `load_flight`, its ground segments and glitches noted on stdout; the usable
     runs of at least `min_samples` samples (`needs`: the option that asks for that many, named in the
     refusal), and the notes. A flight given twice is refused, and one that is also a `training` flight
     (`{path: trajectory}` of those loaded before) is no validation. `training`, where given, gains the
-    flights loaded here."""
+    flights loaded here. A flight whose motors are numbered otherwise is refused (`check_motor_order`):
+    otherwise than the `reference` signature (named `reference_name`) where given, else than the flights
+    before it; `signatures`, where given, gains the flights' motor signatures."""
 
     from .._data._flight import load_flight, usable_segments
+    from .._data._motor_order import check_motor_order
     from .._data._sanity import same_data
 
-    runs, notes, seen = [], [], {}
+    runs, notes, seen, found_signatures = [], [], {}, []
     for path in paths:
         trajectory, found = load_flight(path, mapping=mapping, scale=scale, offset=offset)
         for earlier, other in [*seen.items(), *(training or {}).items()]:
@@ -39,6 +54,15 @@ def load_flights(paths, mapping, scale, offset, *, min_samples: int, needs: str 
         seen[str(path)] = trajectory
         for line in found.describe():
             print(f"note: {path}: {line}")
+        found_signatures += check_motor_order(
+            [trajectory],
+            [found.usable],
+            [path],
+            earlier=found_signatures,
+            reference=reference,
+            reference_name=reference_name,
+            columns=dict(mapping or {}),
+        )
         kept = usable_segments(trajectory, found, min_samples)
         if not kept:
             longest = max((len(run) for run in usable_segments(trajectory, found, 1)), default=0)
@@ -59,6 +83,8 @@ def load_flights(paths, mapping, scale, offset, *, min_samples: int, needs: str 
                 "samples": len(trajectory),
             }
         )
+    if signatures is not None:
+        signatures += found_signatures
     return runs, notes
 
 
@@ -93,6 +119,7 @@ def run_fit(args) -> int:
     out = output_file(args.out, "model.json")
     mapping, scale, offset = data_options(args)
     start = time.perf_counter()
+    signatures: list = []
     runs, notes = load_flights(
         args.data,
         mapping,
@@ -100,6 +127,7 @@ def run_fit(args) -> int:
         offset,
         min_samples=round(args.horizon * 100) + 2,
         needs=f"--horizon {args.horizon:g}",
+        signatures=signatures,
     )
     dt = float(np.median([r.dt for r in runs]))
     n_steps = max(round(args.horizon / dt), 1)
@@ -144,6 +172,7 @@ def run_fit(args) -> int:
             loss=loss,
             n_samples=n_samples,
             data=notes,
+            **_signature_entry(signatures),
         ),
     )
     print(
@@ -156,6 +185,15 @@ def run_fit(args) -> int:
         print(f"  {name:>16s} = {value:.6g}" + (f" +- {e:.2g}" if math.isfinite(e) else ""))
     print(f"wrote {out} in {time.perf_counter() - start:.1f} s")
     return 0
+
+
+def _signature_entry(signatures) -> dict:
+    """The model file's `motor_signature` (the training flights' motors, which `dynax evaluate` and `dynax
+    diagnose --nominal` test other flights against), where the flights give one."""
+    from .._data._motor_order import motor_signature
+
+    reference = motor_signature(signatures)
+    return {} if reference is None else {"motor_signature": reference.to_json()}
 
 
 def parse_steps(text: str) -> tuple[int, ...]:
@@ -176,8 +214,9 @@ def parse_metrics(text: str) -> tuple[str, ...]:
     return metrics
 
 
-def run_evaluate(args, system) -> int:
-    """The quadrotor branch of `dynax evaluate`: flight scores per group beside constant velocity."""
+def run_evaluate(args, system, reference=None) -> int:
+    """The quadrotor branch of `dynax evaluate`: flight scores per group beside constant velocity; `reference`,
+    the model's training flights' motor signature, where its file has one."""
     from .._model._quadrotor import ConstantVelocity
     from .._simulate import flight_error, FLIGHT_UNITS
 
@@ -187,7 +226,14 @@ def run_evaluate(args, system) -> int:
     mapping, scale, offset = data_options(args)
     start = time.perf_counter()
     runs, notes = load_flights(
-        args.data, mapping, scale, offset, min_samples=max(steps) + 2, needs=f"--steps {max(steps)}"
+        args.data,
+        mapping,
+        scale,
+        offset,
+        min_samples=max(steps) + 2,
+        needs=f"--steps {max(steps)}",
+        reference=reference,
+        reference_name=f"the training flights of {args.model}",
     )
     if system.uses_battery and "vbat" not in runs[0].input_names:
         raise DataError(
@@ -223,6 +269,7 @@ def run_diagnose(args) -> int:
     import warnings
 
     from .._data import DataWarning
+    from .._data._motor_order import motor_signature, MotorSignature
     from .._diagnose import diagnose, Horizons, Known, Refit, Selection, write_report
     from .._diagnose._quadrotor import body_frame_records, QUADROTOR_HORIZONS_S, thrust_parameters
     from .._diagnose._records import holdout_split
@@ -253,16 +300,40 @@ def run_diagnose(args) -> int:
         )
     mapping, scale, offset = data_options(args)
     min_samples = round(max(QUADROTOR_HORIZONS_S) * 100) + 2
-    loaded: dict = {}
-    train, _ = load_flights(args.data, mapping, scale, offset, min_samples=min_samples, training=loaded)
-    validation = None
-    if args.validation is not None:
-        validation, _ = load_flights(args.validation, mapping, scale, offset, min_samples=min_samples, training=loaded)
+    obj = None
     if args.nominal is not None:
         try:
             obj = json.loads(pathlib.Path(args.nominal).read_text())
         except (OSError, ValueError) as e:
             raise DataError(f"cannot read the model file ({e})", path=args.nominal) from None
+    # the motors' numbering: the nominal model's training flights' where its file says, else the first flight's
+    reference = MotorSignature.from_json(obj.get("motor_signature")) if isinstance(obj, dict) else None
+    loaded: dict = {}
+    signatures: list = []
+    train, _ = load_flights(
+        args.data,
+        mapping,
+        scale,
+        offset,
+        min_samples=min_samples,
+        training=loaded,
+        signatures=signatures,
+        reference=reference,
+        reference_name=f"the training flights of {args.nominal}",
+    )
+    validation = None
+    if args.validation is not None:
+        validation, _ = load_flights(
+            args.validation,
+            mapping,
+            scale,
+            offset,
+            min_samples=min_samples,
+            training=loaded,
+            reference=reference or motor_signature(signatures),
+            reference_name=f"the training flights of {args.nominal}" if reference else "the training flights",
+        )
+    if obj is not None:
         system = quadrotor_from_json(obj, path=args.nominal)
     else:
         system = Quadrotor.from_flights("nominal", train)
