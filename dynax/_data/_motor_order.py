@@ -240,14 +240,17 @@ def order_text(order: Sequence[int]) -> str:
 def order_error(found: MotorOrder, path, reference: str, columns=None) -> DataError:
     """The refusal of a flight whose motors `found` says are in another order than the `reference`'s (words)."""
     columns = columns or {}
-    named = [order_text(o) for o in found.named]
-    inverse = np.argsort(found.best)
-    fix = ",".join(f"m{int(inverse[j]) + 1}={columns.get(f'm{j + 1}', f'm{j + 1}')}" for j in range(4))
-    alike = f" (or like {named[1]}: this flight does not tell the two apart)" if len(named) > 1 else ""
+    inverse = np.argsort(found.best)  # the file's motor j is the reference's motor inverse[j]
+    fix = ",".join(sorted(f"m{int(inverse[j]) + 1}={columns.get(f'm{j + 1}', f'm{j + 1}')}" for j in range(4)))
+    gap = lambda order: (found.chi2[PERMUTATIONS.index(order)] - found.chi2[0]) / found.scale  # noqa: E731
+    alike = ""
+    if len(found.named) > 1:
+        other = found.named[1]
+        alike = f", or like {order_text(other)} ({-gap(other):.1f}: this flight does not tell the two apart)"
     return DataError(
-        f"m1,m2,m3,m4 read like {named[0]} of {reference}{alike}: the body rates answer the motors as in "
-        f"{reference} only in that order (chi-square {found.chi2[0]:.1f} as given, {min(found.chi2):.1f} so; a gap "
-        f"of {THRESHOLD:.1f} decides); the motors are numbered otherwise: fix the --map ({fix})",
+        f"m1,m2,m3,m4 read like {order_text(found.best)} of {reference}: the body rates answer the motors as there "
+        f"only in that order (ahead of the order as logged by {-gap(found.best):.1f} in chi-square; {THRESHOLD:.1f} "
+        f"decides){alike}; the motors are numbered otherwise than there: fix the --map ({fix})",
         path=path,
     )
 
