@@ -8,25 +8,38 @@ each body axis is a signed combination of the motors' thrusts, different for eve
 or a + frame no two motors push the same way about all three axes), and the attitude controller
 that flies the vehicle raises a motor against the rates it must stop, the same way in every flight.
 
-**A flight's signature** (`flight_signature`): the correlation of each motor's input above the
-mean of the four (the differential commands that turn the vehicle) with the change of each body
-rate over the next `WINDOW_S` (long against the motors' lag and the logging chain's delay, 40 ms on
-the NanoBench Crazyflie; short against a manoeuvre): a 4 x 3 table, free of units and of the frame's
-size, with its standard error from chunks of `CHUNK_S` (long against the windows' overlap and the
-controller's cycle). On the 16 NanoBench flights each entry is about 0.15-0.2 in size, in the signs
-of the X frame's mix, and varies by 0.08 (one standard deviation) from flight to flight.
+**A flight's signature** (`flight_signature`) has two 4 x 3 tables (motor column x body axis) of
+each motor's input above the mean of the four (the differential commands that turn the vehicle)
+against the change of each body rate over the next `WINDOW_S` (long against the motors' lag and the
+logging chain's delay, 40 ms on the NanoBench Crazyflie; short against a manoeuvre):
+
+- their correlations, free of units and of the frame's size. On the 16 NanoBench flights each entry
+  is 0.1-0.2 in size, in the signs of the X frame's mix, and varies by about 0.08 (one standard
+  deviation) from flight to flight; it carries the controller's feedback as well as the physics, and
+  depends on how a flight excites each axis;
+- the least-squares map of the mean angular acceleration on the inputs over their median level
+  (rad/s^2 per relative command; the minimum-norm solution, as the four sum to zero): the vehicle's
+  moments where the commands cause the motion, muddied by feedback where a controller answers the
+  rates (each table alone fails where the other holds: `docs/devdocs/quadrotor_notes.md`).
+
+Each entry has its standard error from chunks of `CHUNK_S` (long against the windows' overlap and
+the controller's cycle): of the correlations' chunk means, and of the map by deleting one chunk at
+a time (the jackknife).
 
 **The test** (`motor_order`) of a flight against a reference (the signatures of other flights,
 `motor_signature`): for each of the 24 orders of the flight's motor columns, the $\chi^2$ distance
 of its rows, so reordered, from the reference's mean, each entry weighed by its variance: the
 flight's own standard error squared, the reference mean's, and the spread between flights beyond
 their standard errors (estimated from three reference flights or more, as the random effect of a
-meta-analysis; none from fewer). Under Gaussian errors, $\tfrac12[\chi^2(\text{given}) - \chi^2(P)]$
-is the log likelihood ratio of order $P$ against the given one, so the given order loses where the
-best other order $P^*$ beats it by `THRESHOLD` $= 2\ln(23/\alpha)$ (`ALPHA` = 0.001, Bonferroni
-over the 23 other orders). $P^*$ is named; a runner-up within `THRESHOLD` of it (motors the flight
-does not tell apart: a near-hover flight, a yaw axis that barely moves) is named beside it. A flight
-whose motors barely differ (near hover) moves every $\chi^2$ alike and is said nothing of.
+meta-analysis; none from fewer). Where even the best order's $\chi^2$ exceeds its degrees of
+freedom, the flight differs from the reference by more than these variances say (a reference of one
+flight, a flight of another kind), and every gap is divided by that ratio (Birge's). Under Gaussian
+errors, $\tfrac12[\chi^2(\text{given}) - \chi^2(P)]$ is the log likelihood ratio of order $P$
+against the given one, so the given order loses where the best order $P^*$ beats it by `THRESHOLD`
+$= 2\ln(23/\alpha)$ (`ALPHA` = 0.001, Bonferroni over the 23 other orders). $P^*$ is named; a
+runner-up within `THRESHOLD` of it (motors the flight does not tell apart: a yaw axis that barely
+moves) is named beside it. A flight whose rates barely answer its motors (near hover) moves every
+$\chi^2$ alike and is said nothing of.
 
 Fewer than `MIN_CHUNKS` chunks of usable flight: no signature, no test.
 """
@@ -53,8 +66,9 @@ DEGREES_OF_FREEDOM = 18  # 2 tables x 3 axes x 3: the four differential inputs s
 
 @dataclasses.dataclass(frozen=True)
 class FlightSignature:
-    """One flight's signature (see the module notes). **Fields:** `pattern` (4 x 3: motor column x body
-    axis), `variance` (its entries' squared standard errors), `n_chunks`, `source`."""
+    """One flight's signature (see the module notes). **Fields:** `pattern` (4 x 6: motor column x the
+    correlations' and the map's three body axes), `variance` (its entries' squared standard errors),
+    `n_chunks`, `source`."""
 
     pattern: np.ndarray
     variance: np.ndarray
@@ -65,7 +79,7 @@ class FlightSignature:
 @dataclasses.dataclass(frozen=True)
 class MotorSignature:
     """The reference of `motor_order`: the mean signature of `n_flights` flights (`pattern`), the mean of
-    their squared standard errors (`noise`) and the spread between them beyond it (`spread`), each 4 x 3.
+    their squared standard errors (`noise`) and the spread between them beyond it (`spread`), each 4 x 6.
     Written into a fitted quadrotor model (`to_json`) so that `dynax evaluate` can test another flight."""
 
     pattern: np.ndarray

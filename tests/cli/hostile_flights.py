@@ -5,10 +5,11 @@ is fed logs with one fault each: a gyro or motor glitch, a motion-capture dropou
 of NaN, a gap in time), repeated or unsorted time, time in ms or us, quaternion sign flips (the same
 attitude: accepted), an unnormalised quaternion or one read in the wrong component order, z down,
 position in mm, rates in deg/s, a body-frame velocity or one wrong in a stretch, a motor column zero,
-constant, duplicated or swapped, `vbat` zero or absent, a flight that never leaves the floor, a record
-given twice, a truncated `.csv.gz`, another system's model, bad `--steps`; and clean flights that must
-keep their right answers. Each `Case` (`tests/cli/hostile_cases.py`, judged by the same `run_case`) has
-one acceptable outcome written before it was run:
+constant, duplicated or swapped, motors numbered otherwise than in the other logs or the model's, `vbat`
+zero or absent, a flight that never leaves the floor, a record given twice, a truncated `.csv.gz`, another
+system's model, bad `--steps`; and clean flights that must keep their right answers. Each `Case`
+(`tests/cli/hostile_cases.py`, judged by the same `run_case`) has one acceptable outcome written before it
+was run:
 
 - `refuse`: exit status 2, one line naming the column and the row or time (or the argument) and the fix,
   nothing written;
