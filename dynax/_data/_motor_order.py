@@ -220,7 +220,7 @@ def flight_signature(flight: Trajectory, usable: np.ndarray | None = None) -> Fl
     )
 
 
-def motor_signature(signatures: Sequence[FlightSignature]) -> MotorSignature | None:
+def motor_signature(signatures: Sequence[FlightSignature | None]) -> MotorSignature | None:
     """The reference of the flights' `signatures` (those that are `None` left out); `None` where none is left."""
     found = [s for s in signatures if s is not None]
     if not found:
