@@ -97,6 +97,8 @@ from ._data._io import MAX_MAGNITUDE as MAX_MAGNITUDE
 from ._data._motor_order import flight_signature as flight_signature
 from ._data._motor_order import motor_order as motor_order
 from ._data._motor_order import motor_signature as motor_signature
+from ._data._motor_order import MotorNumbering as MotorNumbering
+from ._data._motor_order import MotorSignature as MotorSignature
 from ._data._motor_order import order_text as order_text
 from ._data._motor_order import PERMUTATIONS as PERMUTATIONS
 from ._data._spectra import choose_filter as choose_filter
@@ -692,6 +694,8 @@ __all__ = [
     "ml_weights",
     "motor_order",
     "motor_signature",
+    "MotorNumbering",
+    "MotorSignature",
     "movable_parameters",
     "multi_process",
     "named_equivalent",

@@ -19,23 +19,21 @@ def load_flights(
     min_samples: int,
     needs: str = "",
     training=None,
-    signatures=None,
-    reference=None,
-    reference_name: str = "the training flights",
+    numbering=None,
 ):
     """Each file through `load_flight`, its ground segments and glitches noted on stdout; the usable
     runs of at least `min_samples` samples (`needs`: the option that asks for that many, named in the
     refusal), and the notes. A flight given twice is refused, and one that is also a `training` flight
     (`{path: trajectory}` of those loaded before) is no validation. `training`, where given, gains the
-    flights loaded here. A flight whose motors are numbered otherwise is refused (`check_motor_order`):
-    otherwise than the `reference` signature (named `reference_name`) where given, else than the flights
-    before it; `signatures`, where given, gains the flights' motor signatures."""
+    flights loaded here. A flight whose motors are numbered otherwise than `numbering` holds them to (a
+    `MotorNumbering`: a model's training flights, or the flights before it) is refused."""
 
     from .._data._flight import load_flight, usable_segments
-    from .._data._motor_order import check_motor_order
+    from .._data._motor_order import MotorNumbering
     from .._data._sanity import same_data
 
-    runs, notes, seen, found_signatures = [], [], {}, []
+    runs, notes, seen = [], [], {}
+    numbering = MotorNumbering() if numbering is None else numbering
     for path in paths:
         trajectory, found = load_flight(path, mapping=mapping, scale=scale, offset=offset)
         for earlier, other in [*seen.items(), *(training or {}).items()]:
@@ -54,15 +52,7 @@ def load_flights(
         seen[str(path)] = trajectory
         for line in found.describe():
             print(f"note: {path}: {line}")
-        found_signatures += check_motor_order(
-            [trajectory],
-            [found.usable],
-            [path],
-            earlier=found_signatures,
-            reference=reference,
-            reference_name=reference_name,
-            columns=dict(mapping or {}),
-        )
+        numbering.check(trajectory, found.usable, path, dict(mapping or {}))
         kept = usable_segments(trajectory, found, min_samples)
         if not kept:
             longest = max((len(run) for run in usable_segments(trajectory, found, 1)), default=0)
@@ -83,8 +73,6 @@ def load_flights(
                 "samples": len(trajectory),
             }
         )
-    if signatures is not None:
-        signatures += found_signatures
     return runs, notes
 
 
@@ -119,7 +107,9 @@ def run_fit(args) -> int:
     out = output_file(args.out, "model.json")
     mapping, scale, offset = data_options(args)
     start = time.perf_counter()
-    signatures: list = []
+    from .._data._motor_order import MotorNumbering
+
+    numbering = MotorNumbering()
     runs, notes = load_flights(
         args.data,
         mapping,
@@ -127,7 +117,7 @@ def run_fit(args) -> int:
         offset,
         min_samples=round(args.horizon * 100) + 2,
         needs=f"--horizon {args.horizon:g}",
-        signatures=signatures,
+        numbering=numbering,
     )
     dt = float(np.median([r.dt for r in runs]))
     n_steps = max(round(args.horizon / dt), 1)
@@ -172,7 +162,7 @@ def run_fit(args) -> int:
             loss=loss,
             n_samples=n_samples,
             data=notes,
-            **_signature_entry(signatures),
+            **_signature_entry(numbering.signature()),
         ),
     )
     print(
@@ -187,12 +177,9 @@ def run_fit(args) -> int:
     return 0
 
 
-def _signature_entry(signatures) -> dict:
+def _signature_entry(reference) -> dict:
     """The model file's `motor_signature` (the training flights' motors, which `dynax evaluate` and `dynax
     diagnose --nominal` test other flights against), where the flights give one."""
-    from .._data._motor_order import motor_signature
-
-    reference = motor_signature(signatures)
     return {} if reference is None else {"motor_signature": reference.to_json()}
 
 
@@ -217,6 +204,7 @@ def parse_metrics(text: str) -> tuple[str, ...]:
 def run_evaluate(args, system, reference=None) -> int:
     """The quadrotor branch of `dynax evaluate`: flight scores per group beside constant velocity; `reference`,
     the model's training flights' motor signature, where its file has one."""
+    from .._data._motor_order import MotorNumbering
     from .._model._quadrotor import ConstantVelocity
     from .._simulate import flight_error, FLIGHT_UNITS
 
@@ -232,8 +220,7 @@ def run_evaluate(args, system, reference=None) -> int:
         offset,
         min_samples=max(steps) + 2,
         needs=f"--steps {max(steps)}",
-        reference=reference,
-        reference_name=f"the training flights of {args.model}",
+        numbering=MotorNumbering(reference, f"the training flights of {args.model}"),
     )
     if system.uses_battery and "vbat" not in runs[0].input_names:
         raise DataError(
@@ -269,7 +256,7 @@ def run_diagnose(args) -> int:
     import warnings
 
     from .._data import DataWarning
-    from .._data._motor_order import motor_signature, MotorSignature
+    from .._data._motor_order import MotorNumbering, MotorSignature
     from .._diagnose import diagnose, Horizons, Known, Refit, Selection, write_report
     from .._diagnose._quadrotor import body_frame_records, QUADROTOR_HORIZONS_S, thrust_parameters
     from .._diagnose._records import holdout_split
@@ -309,29 +296,16 @@ def run_diagnose(args) -> int:
     # the motors' numbering: the nominal model's training flights' where its file says, else the first flight's
     reference = MotorSignature.from_json(obj.get("motor_signature")) if isinstance(obj, dict) else None
     loaded: dict = {}
-    signatures: list = []
+    numbering = MotorNumbering(reference, f"the training flights of {args.nominal}")
     train, _ = load_flights(
-        args.data,
-        mapping,
-        scale,
-        offset,
-        min_samples=min_samples,
-        training=loaded,
-        signatures=signatures,
-        reference=reference,
-        reference_name=f"the training flights of {args.nominal}",
+        args.data, mapping, scale, offset, min_samples=min_samples, training=loaded, numbering=numbering
     )
     validation = None
     if args.validation is not None:
+        if reference is None:  # held to the training flights' numbering, said as theirs
+            numbering = MotorNumbering(numbering.signature())
         validation, _ = load_flights(
-            args.validation,
-            mapping,
-            scale,
-            offset,
-            min_samples=min_samples,
-            training=loaded,
-            reference=reference or motor_signature(signatures),
-            reference_name=f"the training flights of {args.nominal}" if reference else "the training flights",
+            args.validation, mapping, scale, offset, min_samples=min_samples, training=loaded, numbering=numbering
         )
     if obj is not None:
         system = quadrotor_from_json(obj, path=args.nominal)

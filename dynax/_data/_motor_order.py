@@ -269,38 +269,35 @@ def order_error(found: MotorOrder, path, reference: str, columns=None) -> DataEr
     )
 
 
-def check_motor_order(
-    flights: Sequence[Trajectory],
-    usables: Sequence[np.ndarray],
-    paths: Sequence,
-    *,
-    earlier: Sequence[FlightSignature | None] = (),
-    reference: MotorSignature | None = None,
-    reference_name: str = "the training flights",
-    columns=None,
-) -> list[FlightSignature | None]:
-    """Refuse a flight whose motors are numbered otherwise than the reference's, or than the flights before it.
+@dataclasses.dataclass
+class MotorNumbering:
+    """The motors' numbering that flights loaded one at a time are held to (`check`): the `reference`
+    signature's (a model's training flights', named `name` in the refusal) where given, else that of the
+    flights checked before (`seen`; the first flight sets it and is not tested)."""
 
-    Each flight is tested against `reference` (named `reference_name` in the refusal) where given, else
-    against the flights before it: the `earlier` signatures and those of `flights` before it (the first
-    flight sets the numbering and is not tested). A flight whose evidence is too weak is let through.
+    reference: MotorSignature | None = None
+    name: str = "the training flights"
+    seen: list[FlightSignature | None] = dataclasses.field(default_factory=list)
 
-    **Returns:** the flights' signatures (`motor_signature` of them is the reference of a model fitted to them).
+    def check(self, flight: Trajectory, usable: np.ndarray, path, columns=None) -> MotorOrder | None:
+        """Refuse `flight` (its `usable` samples; `path` and `columns`, contract name -> file column, for the
+        message) where its motors are numbered otherwise (see the module notes); let it through, and count it
+        among `seen`, where they are not or it cannot tell. **Returns:** the evidence (`None`: no test).
 
-    **Raises:** `DataError` naming the file, the order its columns read like and the `--map` that fixes it.
-    """
-    before = list(earlier)
-    signatures: list[FlightSignature | None] = []
-    for flight, usable, path in zip(flights, usables, paths):
+        **Raises:** `DataError` naming the file, the order its columns read like and the `--map` that fixes it.
+        """
         signature = flight_signature(flight, usable)
-        against, name = reference, reference_name
-        if reference is None:
-            against = motor_signature(before)
-            tested = [s.source for s in before if s is not None]
+        against, name = self.reference, self.name
+        if against is None:
+            against = motor_signature(self.seen)
+            tested = [s.source for s in self.seen if s is not None]
             name = ", ".join(tested[:3]) + (f" and {len(tested) - 3} more" if len(tested) > 3 else "")
         found = motor_order(signature, against)
         if found is not None and found.permuted:
             raise order_error(found, path, name, columns)
-        signatures.append(signature)
-        before.append(signature)
-    return signatures
+        self.seen.append(signature)
+        return found
+
+    def signature(self) -> MotorSignature | None:
+        """The reference of a model fitted to the flights seen (`MODEL.json`'s `motor_signature`)."""
+        return motor_signature(self.seen)

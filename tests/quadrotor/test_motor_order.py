@@ -12,7 +12,15 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax.internal import flight_signature, motor_order, motor_signature, order_text, PERMUTATIONS
+from dynax.internal import (
+    flight_signature,
+    motor_order,
+    motor_signature,
+    MotorNumbering,
+    MotorSignature,
+    order_text,
+    PERMUTATIONS,
+)
 from tests.quadrotor.synthetic_flight import PLUS, quadrotor_flight
 from tests.quadrotor.test_flight_data import NANOBENCH, NANOBENCH_MAP, STAR
 
@@ -50,24 +58,23 @@ def test_a_synthetic_flight_numbered_otherwise_is_named_and_never_misnamed(fligh
 
 
 def test_the_refusal_names_the_file_the_order_and_the_map(flights):
-    from dynax._data._motor_order import check_motor_order  # private: the loader's check, called as the CLI does
-
     usable = [np.ones(len(f.ts), bool) for f in flights]
     turned = _reordered(flights[1], (1, 2, 3, 0))
-    signatures = check_motor_order(flights, usable, ["a.csv", "b.csv"])  # as logged: nothing said
-    assert len(signatures) == 2
+    numbering = MotorNumbering()  # as the loader holds flights given one after another
+    assert numbering.check(flights[0], usable[0], "a.csv") is None  # the first sets the numbering
+    assert not numbering.check(flights[1], usable[1], "b.csv").permuted  # as logged: nothing said
     columns = {"m1": "motor_a", "m2": "motor_b", "m3": "motor_c", "m4": "motor_d"}
+    numbering = MotorNumbering()
+    numbering.check(flights[0], usable[0], "a.csv")
     with pytest.raises(dynax.DataError) as refusal:
-        check_motor_order([flights[0], turned], usable, ["a.csv", "b.csv"], columns=columns)
+        numbering.check(turned, usable[1], "b.csv", columns)
     text = str(refusal.value)
-    assert text.startswith("file b.csv: m1,m2,m3,m4 read like m2,m3,m4,m1"), text
+    assert text.startswith("file b.csv: m1,m2,m3,m4 read like m2,m3,m4,m1 of synthetic seed 3"), text
     # the fix maps each motor to the file's column that holds it
     assert "fix the --map (m1=motor_d,m2=motor_a,m3=motor_b,m4=motor_c)" in text, text
-    reference = motor_signature(signatures[:1])
+    model = MotorNumbering(numbering.signature(), "the training flights of model.json")
     with pytest.raises(dynax.DataError, match="of the training flights of model.json"):
-        check_motor_order(
-            [turned], usable[:1], ["b.csv"], reference=reference, reference_name="the training flights of model.json"
-        )
+        model.check(turned, usable[1], "b.csv")
 
 
 def test_body_rates_that_do_not_answer_the_motors_name_no_order(flights):
@@ -83,8 +90,6 @@ def test_body_rates_that_do_not_answer_the_motors_name_no_order(flights):
 
 
 def test_the_signature_goes_through_a_model_file_and_a_broken_one_is_no_test(flights):
-    from dynax._data._motor_order import MotorSignature  # private: the model file's entry
-
     reference = motor_signature([flight_signature(f) for f in flights])
     back = MotorSignature.from_json(json.loads(json.dumps(reference.to_json())))
     assert back is not None and np.allclose(back.pattern, reference.pattern) and back.n_flights == 2
@@ -103,10 +108,9 @@ def test_the_nanobench_flights_as_logged_are_never_refused_and_a_turned_one_is_n
         others = motor_signature([s for j, s in enumerate(signatures) if j != k])
         assert not motor_order(signatures[k], others).permuted, paths[k].name
         assert not motor_order(signatures[k], motor_signature(signatures[k - 1 : k] or signatures[-1:])).permuted
-    # every flight through the loader's check in the order given, as `dynax fit quadrotor` meets them
-    from dynax._data._motor_order import check_motor_order  # private: the loader's check
-
-    check_motor_order([t for t, _ in loaded], [n.usable for _, n in loaded], paths)
+    numbering = MotorNumbering()  # every flight in the order given, as `dynax fit quadrotor` meets them
+    for path, (trajectory, notes) in zip(paths, loaded):
+        numbering.check(trajectory, notes.usable, path)
     star = paths.index(STAR)
     others = motor_signature([s for j, s in enumerate(signatures) if j != star])
     trajectory, notes = loaded[star]
