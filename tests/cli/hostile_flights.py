@@ -620,6 +620,23 @@ CASES = [
         ("validation.csv", "read like m2,m3,m4,m1", "--map"),
     ),
     C(
+        "diagnose-nominal-motors-numbered-otherwise",
+        "motors",
+        lambda d, fx: [
+            "diagnose",
+            "quadrotor",
+            _validation(d, fx, _motors_turned),
+            "--nominal",
+            _clean_model(fx),
+            "--mode",
+            "known",
+            "--out",
+            "report",
+        ],
+        "refuse",
+        ("validation.csv", "read like m2,m3,m4,m1", "of the training flights of", "clean.json"),
+    ),
+    C(
         "nanobench-fit-motors-numbered-otherwise",
         "motors",
         lambda d, fx: [
