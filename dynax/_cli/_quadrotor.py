@@ -82,6 +82,7 @@ def run_fit(args) -> int:
 
     jax.config.update("jax_enable_x64", True)  # learning in float64; the library leaves config alone
 
+    from .._data._motor_order import MotorNumbering
     from .._identify._vehicle import Backprop, Lagged, OneStep
     from .._identify._vehicle._quadrotor import quadrotor_to_json
     from .._model._quadrotor import Quadrotor
@@ -107,9 +108,7 @@ def run_fit(args) -> int:
     out = output_file(args.out, "model.json")
     mapping, scale, offset = data_options(args)
     start = time.perf_counter()
-    from .._data._motor_order import MotorNumbering
-
-    numbering = MotorNumbering()
+    numbering = MotorNumbering()  # the first flight's; written into the model for `evaluate` to hold flights to
     runs, notes = load_flights(
         args.data,
         mapping,
