@@ -97,6 +97,13 @@ from ._data._flight import usable_segments as usable_segments
 from ._data._flight_kinematics import attitude_angles as attitude_angles
 from ._data._flight_kinematics import thrust_frame_slopes as thrust_frame_slopes
 from ._data._io import MAX_MAGNITUDE as MAX_MAGNITUDE
+from ._data._motor_order import flight_signature as flight_signature
+from ._data._motor_order import motor_order as motor_order
+from ._data._motor_order import motor_signature as motor_signature
+from ._data._motor_order import MotorNumbering as MotorNumbering
+from ._data._motor_order import MotorSignature as MotorSignature
+from ._data._motor_order import order_text as order_text
+from ._data._motor_order import PERMUTATIONS as PERMUTATIONS
 from ._data._spectra import choose_filter as choose_filter
 from ._data._spectra import FilterChoice as FilterChoice
 from ._data._spectra import measurement_noise_std as measurement_noise_std
@@ -644,6 +651,7 @@ __all__ = [
     "fit_percent",
     "FitSettings",
     "Fitted",
+    "flight_signature",
     "FlightChecks",
     "FlightNotes",
     "float_scalar",
@@ -694,7 +702,11 @@ __all__ = [
     "MIN_PRACTICAL_GAIN",
     "ml_weights",
     "motion_records",
+    "motor_order",
+    "motor_signature",
+    "MotorNumbering",
     "motors_running_run",
+    "MotorSignature",
     "movable_parameters",
     "multi_process",
     "named_equivalent",
@@ -708,12 +720,14 @@ __all__ = [
     "on_physical_side",
     "open_loop_rollout",
     "OptaxLBFGS",
+    "order_text",
     "OutputErrorStatistics",
     "paired_block_test",
     "PairedTest",
     "parameter_names",
     "parameter_vector",
     "parse_assignments",
+    "PERMUTATIONS",
     "physical_readings",
     "polish_on_constraint",
     "POORLY_DETERMINED",
@@ -771,8 +785,8 @@ __all__ = [
     "serial_bandwidth",
     "serial_covariance",
     "shifted",
-    "Simulation",
     "short_horizon_note",
+    "Simulation",
     "simulation_segments",
     "sparse_search",
     "SparseSearch",

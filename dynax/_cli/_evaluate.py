@@ -128,10 +128,12 @@ def run(args: argparse.Namespace) -> int:
 
     model_obj = read_json_object(args.model, "a model file written by `dynax fit`")
     if model_obj.get("system") == "quadrotor":
+        from .._data._motor_order import MotorSignature
         from .._identify._vehicle._quadrotor import quadrotor_from_json
         from ._quadrotor import run_evaluate
 
-        return run_evaluate(args, quadrotor_from_json(model_obj, path=args.model))
+        reference = MotorSignature.from_json(model_obj.get("motor_signature"))
+        return run_evaluate(args, quadrotor_from_json(model_obj, path=args.model), reference)
     if args.steps is not None:
         raise UsageError("--steps applies to quadrotor models; a helicopter model takes --horizons (seconds)")
     if len(args.data) != 1:

@@ -10,17 +10,30 @@ from ._output import write_json
 QUADROTOR_MODELS = ("nominal", "acceleration", "linear")
 
 
-def load_flights(paths, mapping, scale, offset, *, min_samples: int, needs: str = "", training=None):
+def load_flights(
+    paths,
+    mapping,
+    scale,
+    offset,
+    *,
+    min_samples: int,
+    needs: str = "",
+    training=None,
+    numbering=None,
+):
     """Each file through `load_flight`, its ground segments and glitches noted on stdout; the usable
     runs of at least `min_samples` samples (`needs`: the option that asks for that many, named in the
     refusal), and the notes. A flight given twice is refused, and one that is also a `training` flight
     (`{path: trajectory}` of those loaded before) is no validation. `training`, where given, gains the
-    flights loaded here."""
+    flights loaded here. A flight whose motors are numbered otherwise than `numbering` holds them to (a
+    `MotorNumbering`: a model's training flights, or the flights before it) is refused."""
 
     from .._data._flight import load_flight, usable_segments
+    from .._data._motor_order import MotorNumbering
     from .._data._sanity import same_data
 
     runs, notes, seen = [], [], {}
+    numbering = MotorNumbering() if numbering is None else numbering
     for path in paths:
         trajectory, found = load_flight(path, mapping=mapping, scale=scale, offset=offset)
         for earlier, other in [*seen.items(), *(training or {}).items()]:
@@ -39,6 +52,7 @@ def load_flights(paths, mapping, scale, offset, *, min_samples: int, needs: str 
         seen[str(path)] = trajectory
         for line in found.describe():
             print(f"note: {path}: {line}")
+        numbering.check(trajectory, found.usable, path, dict(mapping or {}))
         kept = usable_segments(trajectory, found, min_samples)
         if not kept:
             longest = max((len(run) for run in usable_segments(trajectory, found, 1)), default=0)
@@ -68,6 +82,7 @@ def run_fit(args) -> int:
 
     jax.config.update("jax_enable_x64", True)  # learning in float64; the library leaves config alone
 
+    from .._data._motor_order import MotorNumbering
     from .._identify._vehicle import Backprop, Lagged, OneStep
     from .._identify._vehicle._quadrotor import quadrotor_to_json
     from .._model._quadrotor import Quadrotor
@@ -93,6 +108,7 @@ def run_fit(args) -> int:
     out = output_file(args.out, "model.json")
     mapping, scale, offset = data_options(args)
     start = time.perf_counter()
+    numbering = MotorNumbering()  # the first flight's; written into the model for `evaluate` to hold flights to
     runs, notes = load_flights(
         args.data,
         mapping,
@@ -100,6 +116,7 @@ def run_fit(args) -> int:
         offset,
         min_samples=round(args.horizon * 100) + 2,
         needs=f"--horizon {args.horizon:g}",
+        numbering=numbering,
     )
     dt = float(np.median([r.dt for r in runs]))
     n_steps = max(round(args.horizon / dt), 1)
@@ -144,6 +161,7 @@ def run_fit(args) -> int:
             loss=loss,
             n_samples=n_samples,
             data=notes,
+            **_signature_entry(numbering.signature()),
         ),
     )
     print(
@@ -156,6 +174,12 @@ def run_fit(args) -> int:
         print(f"  {name:>16s} = {value:.6g}" + (f" +- {e:.2g}" if math.isfinite(e) else ""))
     print(f"wrote {out} in {time.perf_counter() - start:.1f} s")
     return 0
+
+
+def _signature_entry(reference) -> dict:
+    """The model file's `motor_signature` (the training flights' motors, which `dynax evaluate` and `dynax
+    diagnose --nominal` test other flights against), where the flights give one."""
+    return {} if reference is None else {"motor_signature": reference.to_json()}
 
 
 def parse_steps(text: str) -> tuple[int, ...]:
@@ -176,8 +200,10 @@ def parse_metrics(text: str) -> tuple[str, ...]:
     return metrics
 
 
-def run_evaluate(args, system) -> int:
-    """The quadrotor branch of `dynax evaluate`: flight scores per group beside constant velocity."""
+def run_evaluate(args, system, reference=None) -> int:
+    """The quadrotor branch of `dynax evaluate`: flight scores per group beside constant velocity; `reference`,
+    the model's training flights' motor signature, where its file has one."""
+    from .._data._motor_order import MotorNumbering
     from .._model._quadrotor import ConstantVelocity
     from .._simulate import flight_error, FLIGHT_UNITS
 
@@ -187,7 +213,13 @@ def run_evaluate(args, system) -> int:
     mapping, scale, offset = data_options(args)
     start = time.perf_counter()
     runs, notes = load_flights(
-        args.data, mapping, scale, offset, min_samples=max(steps) + 2, needs=f"--steps {max(steps)}"
+        args.data,
+        mapping,
+        scale,
+        offset,
+        min_samples=max(steps) + 2,
+        needs=f"--steps {max(steps)}",
+        numbering=MotorNumbering(reference, f"the training flights of {args.model}"),
     )
     if system.uses_battery and "vbat" not in runs[0].input_names:
         raise DataError(
@@ -223,6 +255,7 @@ def run_diagnose(args) -> int:
     import warnings
 
     from .._data import DataWarning
+    from .._data._motor_order import MotorNumbering, MotorSignature
     from .._diagnose import diagnose, Horizons, Known, Refit, Selection, write_report
     from .._diagnose._quadrotor import body_frame_records, QUADROTOR_HORIZONS_S, thrust_parameters
     from .._diagnose._records import holdout_split
@@ -253,16 +286,27 @@ def run_diagnose(args) -> int:
         )
     mapping, scale, offset = data_options(args)
     min_samples = round(max(QUADROTOR_HORIZONS_S) * 100) + 2
-    loaded: dict = {}
-    train, _ = load_flights(args.data, mapping, scale, offset, min_samples=min_samples, training=loaded)
-    validation = None
-    if args.validation is not None:
-        validation, _ = load_flights(args.validation, mapping, scale, offset, min_samples=min_samples, training=loaded)
+    obj = None
     if args.nominal is not None:
         try:
             obj = json.loads(pathlib.Path(args.nominal).read_text())
         except (OSError, ValueError) as e:
             raise DataError(f"cannot read the model file ({e})", path=args.nominal) from None
+    # the motors' numbering: the nominal model's training flights' where its file says, else the first flight's
+    reference = MotorSignature.from_json(obj.get("motor_signature")) if isinstance(obj, dict) else None
+    loaded: dict = {}
+    numbering = MotorNumbering(reference, f"the training flights of {args.nominal}")
+    train, _ = load_flights(
+        args.data, mapping, scale, offset, min_samples=min_samples, training=loaded, numbering=numbering
+    )
+    validation = None
+    if args.validation is not None:
+        if reference is None:  # held to the training flights' numbering, said as theirs
+            numbering = MotorNumbering(numbering.signature())
+        validation, _ = load_flights(
+            args.validation, mapping, scale, offset, min_samples=min_samples, training=loaded, numbering=numbering
+        )
+    if obj is not None:
         system = quadrotor_from_json(obj, path=args.nominal)
     else:
         system = Quadrotor.from_flights("nominal", train)

@@ -5,10 +5,11 @@ is fed logs with one fault each: a gyro or motor glitch, a motion-capture dropou
 of NaN, a gap in time), repeated or unsorted time, time in ms or us, quaternion sign flips (the same
 attitude: accepted), an unnormalised quaternion or one read in the wrong component order, z down,
 position in mm, rates in deg/s, a body-frame velocity or one wrong in a stretch, a motor column zero,
-constant, duplicated or swapped, `vbat` zero or absent, a flight that never leaves the floor, a record
-given twice, a truncated `.csv.gz`, another system's model, bad `--steps`; and clean flights that must
-keep their right answers. Each `Case` (`tests/cli/hostile_cases.py`, judged by the same `run_case`) has
-one acceptable outcome written before it was run:
+constant, duplicated or swapped, motors numbered otherwise than in the other logs or the model's, `vbat`
+zero or absent, a flight that never leaves the floor, a record given twice, a truncated `.csv.gz`, another
+system's model, bad `--steps`; and clean flights that must keep their right answers. Each `Case`
+(`tests/cli/hostile_cases.py`, judged by the same `run_case`) has one acceptable outcome written before it
+was run:
 
 - `refuse`: exit status 2, one line naming the column and the row or time (or the argument) and the fix,
   nothing written;
@@ -37,6 +38,7 @@ from tests.cli.hostile_cases import Case, helicopter_model_file, write_table
 NANOBENCH = pathlib.Path(__file__).resolve().parents[2] / ".." / "shared" / "datasets" / "nanobench"
 STAR = NANOBENCH / "B8_star_fast_rep1.csv.gz"
 RUNAWAY = NANOBENCH / "B2_circle_medium_rep3.csv.gz"  # its m1, m2 log runs away from 31.27 s
+TREFOIL = NANOBENCH / "B9_trefoil_medium_rep2.csv.gz"
 NANOBENCH_MAP = (
     "x=px,y=py,z=pz,p=wx_vicon,q=wy_vicon,r=wz_vicon,m1=motor_motor_m1,m2=motor_motor_m2,"
     "m3=motor_motor_m3,m4=motor_motor_m4,vbat=pwr_pm_vbat"
@@ -155,6 +157,27 @@ def _swap_columns(a, b):
         return t
 
     return edit
+
+
+def _motors_turned(t):
+    """The motors numbered from the next arm: the log's m1 holds the motor the other logs call m2, and so on
+    (another logger's convention); each log is right for itself."""
+    idx = [_column(f"m{i}") for i in range(1, 5)]
+    t[:, idx] = t[:, idx[1:] + idx[:1]]
+    return t
+
+
+def _nanobench_motors_turned(folder, source):
+    """A whole NanoBench flight with its motor columns renamed as `_motors_turned` numbers them."""
+    with gzip.open(source, "rt") as f:
+        header, rest = f.readline(), f.read()
+    names = header.strip().split(",")
+    motors = [f"motor_motor_m{i}" for i in range(1, 5)]
+    renamed = {motors[(i + 1) % 4]: motors[i] for i in range(4)}  # the column of m2 is read as m1, ...
+    path = pathlib.Path(folder) / source.name
+    with gzip.open(path, "wt") as f:
+        f.write(",".join(renamed.get(n, n) for n in names) + "\n" + rest)
+    return str(path)
 
 
 def _body_velocity(t):
@@ -557,6 +580,73 @@ CASES = [
         lambda d, fx: _fit_argv(_flight(d, fx, _swap_columns("m1", "m2"))),
         "accept",
         check=_SAME,
+    ),
+    # Motors numbered otherwise in one log than in the others (each log is right for itself): refused where
+    # the body rates tell which order the log's columns are in, naming it and the --map that fixes it.
+    C(
+        "flight-fit-motors-numbered-otherwise",
+        "motors",
+        lambda d, fx: [*_fit_argv(fx["train_csv"])[:3], _validation(d, fx, _motors_turned), *_fit_argv("")[3:]],
+        "refuse",
+        ("validation.csv", "read like m2,m3,m4,m1", "--map"),
+    ),
+    C(
+        "flight-fit-two-flights-numbered-alike",
+        "clean",
+        lambda d, fx: [*_fit_argv(fx["train_csv"])[:3], fx["validation_csv"], *_fit_argv("")[3:]],
+        "accept",
+        check=_CLOSE,
+    ),
+    C(
+        "evaluate-motors-numbered-otherwise",
+        "motors",
+        lambda d, fx: ["evaluate", _clean_model(fx), _validation(d, fx, _motors_turned), "--out", "m.json"],
+        "refuse",
+        ("validation.csv", "read like m2,m3,m4,m1", "clean.json", "--map"),
+    ),
+    C(
+        "diagnose-validation-motors-numbered-otherwise",
+        "motors",
+        lambda d, fx: [
+            "diagnose",
+            "quadrotor",
+            fx["train_csv"],
+            "--validation",
+            _validation(d, fx, _motors_turned),
+            "--out",
+            "report",
+        ],
+        "refuse",
+        ("validation.csv", "read like m2,m3,m4,m1", "--map"),
+    ),
+    C(
+        "diagnose-nominal-motors-numbered-otherwise",
+        "motors",
+        lambda d, fx: [
+            "diagnose",
+            "quadrotor",
+            _validation(d, fx, _motors_turned),
+            "--nominal",
+            _clean_model(fx),
+            "--mode",
+            "known",
+            "--out",
+            "report",
+        ],
+        "refuse",
+        ("validation.csv", "read like m2,m3,m4,m1", "of the training flights of", "clean.json"),
+    ),
+    C(
+        "nanobench-fit-motors-numbered-otherwise",
+        "motors",
+        lambda d, fx: [
+            *_fit_argv(STAR)[:3],
+            _nanobench_motors_turned(d, TREFOIL),
+            *_MAP,
+            *_fit_argv("")[3:],
+        ],
+        "refuse",
+        ("B9_trefoil", "read like m2,m3,m4,m1", "--map"),
     ),
     C(
         "flight-vbat-zero",

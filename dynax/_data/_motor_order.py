@@ -1,0 +1,303 @@
+r"""Motors numbered one way in one flight log and another way in the next.
+
+A multirotor's motor map is learned per motor: `m1` is the motor the training logs call `m1`. A log
+whose columns are numbered otherwise (another logger's convention, a `--map` written for another
+airframe) loads, fits and scores without a word, and every prediction on it is wrong: each log is
+right for itself, so only a comparison between logs can tell. The body rates can: the moment about
+each body axis is a signed combination of the motors' thrusts, different for every motor (on an X
+or a + frame no two motors push the same way about all three axes), and the attitude controller
+that flies the vehicle raises a motor against the rates it must stop, the same way in every flight.
+
+**A flight's signature** (`flight_signature`) has two 4 x 3 tables (motor column x body axis) of
+each motor's input above the mean of the four (the differential commands that turn the vehicle)
+against the change of each body rate over the next `WINDOW_S` (long against the motors' lag and the
+logging chain's delay, 40 ms on the NanoBench Crazyflie; short against a manoeuvre):
+
+- their correlations, free of units and of the frame's size. On the 16 NanoBench flights each entry
+  is 0.1-0.2 in size, in the signs of the X frame's mix, and varies by about 0.08 (one standard
+  deviation) from flight to flight; it carries the controller's feedback as well as the physics, and
+  depends on how a flight excites each axis;
+- the least-squares map of the mean angular acceleration on the inputs over their median level
+  (rad/s^2 per relative command; the minimum-norm solution, as the four sum to zero): the vehicle's
+  moments where the commands cause the motion, muddied by feedback where a controller answers the
+  rates (each table alone fails where the other holds: `docs/devdocs/quadrotor_notes.md`).
+
+Each entry has its standard error from chunks of `CHUNK_S` (long against the windows' overlap and
+the controller's cycle): of the correlations' chunk means, and of the map by deleting one chunk at
+a time (the jackknife).
+
+**The test** (`motor_order`) of a flight against a reference (the signatures of other flights,
+`motor_signature`): for each of the 24 orders of the flight's motor columns, the $\chi^2$ distance
+of its rows, so reordered, from the reference's mean, each entry weighed by its variance: the
+flight's own standard error squared, the reference mean's, and the spread between flights beyond
+their standard errors (estimated from three reference flights or more, as the random effect of a
+meta-analysis; none from fewer). Where even the best order's $\chi^2$ exceeds its degrees of
+freedom, the flight differs from the reference by more than these variances say (a reference of one
+flight, a flight of another kind), and every gap is divided by that ratio (Birge's). Under Gaussian
+errors, $\tfrac12[\chi^2(\text{given}) - \chi^2(P)]$ is the log likelihood ratio of order $P$
+against the given one, so the given order loses where the best order $P^*$ beats it by `THRESHOLD`
+$= 2\ln(23/\alpha)$ (`ALPHA` = 0.001, Bonferroni over the 23 other orders). $P^*$ is named; a
+runner-up within `THRESHOLD` of it (motors the flight does not tell apart: a yaw axis that barely
+moves) is named beside it. A flight whose rates barely answer its motors (near hover) moves every
+$\chi^2$ alike and is said nothing of.
+
+Fewer than `MIN_CHUNKS` chunks of usable flight: no signature, no test.
+"""
+
+from collections.abc import Sequence
+import dataclasses
+import itertools
+import math
+
+import numpy as np
+
+from .._errors import DataError
+from ._trajectory import Trajectory
+
+#: The 24 orders of four motor columns, the given one first: order `P` reads logged column `P[k]` as motor k.
+PERMUTATIONS = tuple(itertools.permutations(range(4)))
+WINDOW_S = 0.12  # the rates' change is taken over this [s]
+CHUNK_S = 0.5  # the standard error's chunks [s]
+MIN_CHUNKS = 10  # fewer chunks of usable flight than this: no signature
+ALPHA = 1e-3
+THRESHOLD = 2.0 * math.log((len(PERMUTATIONS) - 1) / ALPHA)  # 20.1: the chi-square gap that decides
+DEGREES_OF_FREEDOM = 18  # 2 tables x 3 axes x 3: the four differential inputs sum to zero
+
+
+@dataclasses.dataclass(frozen=True)
+class FlightSignature:
+    """One flight's signature (see the module notes). **Fields:** `pattern` (4 x 6: motor column x the
+    correlations' and the map's three body axes), `variance` (its entries' squared standard errors),
+    `n_chunks`, `source`."""
+
+    pattern: np.ndarray
+    variance: np.ndarray
+    n_chunks: int
+    source: str = ""
+
+
+@dataclasses.dataclass(frozen=True)
+class MotorSignature:
+    """The reference of `motor_order`: the mean signature of `n_flights` flights (`pattern`), the mean of
+    their squared standard errors (`noise`) and the spread between them beyond it (`spread`), each 4 x 6.
+    Written into a fitted quadrotor model (`to_json`) so that `dynax evaluate` can test another flight."""
+
+    pattern: np.ndarray
+    noise: np.ndarray
+    spread: np.ndarray
+    n_flights: int
+    sources: tuple[str, ...] = ()
+
+    def variance(self, flight: FlightSignature) -> np.ndarray:
+        """The variance of `flight.pattern - self.pattern` where the flight is numbered like the reference."""
+        return flight.variance + self.noise / self.n_flights + self.spread * (1 + 1 / self.n_flights)
+
+    def to_json(self) -> dict:
+        return {
+            "pattern": self.pattern.tolist(),
+            "noise": self.noise.tolist(),
+            "spread": self.spread.tolist(),
+            "n_flights": self.n_flights,
+            "window_s": WINDOW_S,
+        }
+
+    @classmethod
+    def from_json(cls, obj) -> "MotorSignature | None":
+        """The signature of `to_json`'s object; `None` where it is absent or malformed (a model written before
+        the check, or edited: no test rather than a wrong one)."""
+        try:
+            arrays = [np.asarray(obj[k], dtype=float) for k in ("pattern", "noise", "spread")]
+            n = int(obj["n_flights"])
+            same_window = math.isclose(float(obj["window_s"]), WINDOW_S)
+        except (KeyError, TypeError, ValueError):
+            return None
+        if not same_window or n < 1 or any(a.shape != (4, 6) or not np.all(np.isfinite(a)) for a in arrays):
+            return None
+        if np.any(arrays[1] < 0) or np.any(arrays[2] < 0):
+            return None
+        return cls(*arrays, n_flights=n)
+
+
+@dataclasses.dataclass(frozen=True)
+class MotorOrder:
+    """The evidence of one flight on its motors' order (`motor_order`).
+
+    **Fields:** `chi2` (the 24 orders' distance from the reference, in `PERMUTATIONS`' order), `best` (the
+    nearest order), `runner_up` (the next nearest other than the given one), `n_chunks`.
+    """
+
+    chi2: tuple[float, ...]
+    best: tuple[int, ...]
+    runner_up: tuple[int, ...]
+    n_chunks: int
+
+    @property
+    def scale(self) -> float:
+        """The best order's $\\chi^2$ per degree of freedom where above 1 (Birge's ratio): the flight differs from
+        the reference by more than the variances say (flights of another kind, a reference of one or two
+        flights, which shows no spread between flights), and every gap is divided by it."""
+        return max(1.0, min(self.chi2) / DEGREES_OF_FREEDOM)
+
+    @property
+    def evidence(self) -> float:
+        """$\\chi^2$ of the given order less that of the best, over `scale`: twice the log likelihood ratio."""
+        return (self.chi2[0] - min(self.chi2)) / self.scale
+
+    @property
+    def margin(self) -> float:
+        """$\\chi^2$ of the best other order less that of the given one, over `scale` (positive: the given order
+        fits best)."""
+        return (min(self.chi2[1:]) - self.chi2[0]) / self.scale
+
+    @property
+    def permuted(self) -> bool:
+        return self.best != PERMUTATIONS[0] and self.evidence >= THRESHOLD
+
+    @property
+    def named(self) -> tuple[tuple[int, ...], ...]:
+        """The orders named where `permuted`: the best, and the runner-up where within `THRESHOLD` of it."""
+        if not self.permuted:
+            return ()
+        close = (self.chi2[PERMUTATIONS.index(self.runner_up)] - min(self.chi2)) / self.scale < THRESHOLD
+        return (self.best, self.runner_up) if close else (self.best,)
+
+
+def _runs_ok(usable: np.ndarray, width: int) -> np.ndarray:
+    """The samples `k` whose window `k..k+width` is usable throughout."""
+    bad = np.concatenate([[0], np.cumsum(~np.asarray(usable, bool))])
+    k = np.arange(max(len(usable) - width, 0))
+    return k[(bad[k + width + 1] - bad[k]) == 0]
+
+
+def flight_signature(flight: Trajectory, usable: np.ndarray | None = None) -> FlightSignature | None:
+    """The signature of a quadrotor record over its `usable` samples (default: all); `None` where it has
+    fewer than `MIN_CHUNKS` chunks of usable flight or a motor or rate that does not move there."""
+    ts = np.asarray(flight.ts, dtype=float)
+    if len(ts) < 3:
+        return None
+    usable = np.ones(len(ts), bool) if usable is None else np.asarray(usable, bool)
+    width = max(round(WINDOW_S / float(np.median(np.diff(ts)))), 1)
+    k = _runs_ok(usable, width)
+    if k.size < 2:
+        return None
+    _, index, counts = np.unique(
+        np.floor((ts[k] - ts[0]) / CHUNK_S).astype(int), return_inverse=True, return_counts=True
+    )
+    if len(counts) < MIN_CHUNKS:
+        return None
+    motors = np.asarray(flight.us[:, :4], dtype=float)
+    rates = np.asarray(flight.xs[:, 10:13], dtype=float)
+    d = (motors - motors.mean(axis=1, keepdims=True))[k]  # the differential inputs
+    change = rates[k + width] - rates[k]
+    sd_d, sd_c = d.std(axis=0), change.std(axis=0)
+    if np.any(sd_d == 0) or np.any(sd_c == 0):
+        return None
+    # the correlations: chunk means of the standardised products, their weighted mean and its standard error
+    products = (
+        ((d - d.mean(axis=0)) / sd_d)[:, :, None] * ((change - change.mean(axis=0)) / sd_c)[:, None, :]
+    ).reshape(len(k), 12)
+    per_chunk = np.stack([np.bincount(index, weights=products[:, j]) for j in range(12)], axis=1) / counts[:, None]
+    weights = counts / counts.sum()
+    correlation = weights @ per_chunk
+    n = len(counts)
+    correlation_variance = np.sum(weights[:, None] ** 2 * (per_chunk - correlation) ** 2, axis=0) * n / (n - 1)
+    # the map: least squares of the mean angular acceleration on the differential inputs over their median
+    # level (the minimum-norm solution: the four sum to zero), its variance by deleting one chunk at a time
+    x = d / (float(np.median(np.abs(motors[k]))) or 1.0)
+    y = change / (width * float(np.median(np.diff(ts))))
+    xx, xy = np.zeros((n, 4, 4)), np.zeros((n, 4, 3))
+    np.add.at(xx, index, x[:, :, None] * x[:, None, :])
+    np.add.at(xy, index, x[:, :, None] * y[:, None, :])
+    total_xx, total_xy = xx.sum(axis=0), xy.sum(axis=0)
+    gains = np.linalg.pinv(total_xx, rcond=1e-10) @ total_xy
+    left_out = np.linalg.pinv(total_xx[None] - xx, rcond=1e-10) @ (total_xy[None] - xy)
+    gains_variance = (n - 1) / n * np.sum((left_out - left_out.mean(axis=0)) ** 2, axis=0)
+    return FlightSignature(
+        np.concatenate([correlation.reshape(4, 3), gains], axis=1),
+        np.concatenate([correlation_variance.reshape(4, 3), gains_variance], axis=1),
+        n,
+        flight.source,
+    )
+
+
+def motor_signature(signatures: Sequence[FlightSignature | None]) -> MotorSignature | None:
+    """The reference of the flights' `signatures` (those that are `None` left out); `None` where none is left."""
+    found = [s for s in signatures if s is not None]
+    if not found:
+        return None
+    patterns = np.stack([s.pattern for s in found])
+    noise = np.mean([s.variance for s in found], axis=0)
+    spread = np.zeros_like(noise)
+    if len(found) >= 3:  # the between-flight variance beyond the flights' own standard errors
+        spread = np.maximum(patterns.var(axis=0, ddof=1) - noise, 0.0)
+    return MotorSignature(patterns.mean(axis=0), noise, spread, len(found), tuple(s.source for s in found))
+
+
+def motor_order(flight: FlightSignature | None, reference: MotorSignature | None) -> MotorOrder | None:
+    """The evidence of a flight's signature on its motors' order against a `reference` (see the module notes);
+    `None` where either is missing."""
+    if flight is None or reference is None:
+        return None
+    variance = reference.variance(flight)
+    chi2 = [float(np.sum((flight.pattern[list(p)] - reference.pattern) ** 2 / variance)) for p in PERMUTATIONS]
+    ranked = [int(i) for i in np.argsort(chi2, kind="stable")]
+    runner = next(i for i in ranked if i not in (0, ranked[0]))
+    return MotorOrder(tuple(chi2), PERMUTATIONS[ranked[0]], PERMUTATIONS[runner], flight.n_chunks)
+
+
+def order_text(order: Sequence[int]) -> str:
+    """The reference's motor names that the logged columns `m1..m4` read like under `order`."""
+    inverse = np.argsort(order)
+    return ",".join(f"m{int(inverse[j]) + 1}" for j in range(4))
+
+
+def order_error(found: MotorOrder, path, reference: str, columns=None) -> DataError:
+    """The refusal of a flight whose motors `found` says are in another order than the `reference`'s (words)."""
+    columns = columns or {}
+    inverse = np.argsort(found.best)  # the file's motor j is the reference's motor inverse[j]
+    fix = ",".join(sorted(f"m{int(inverse[j]) + 1}={columns.get(f'm{j + 1}', f'm{j + 1}')}" for j in range(4)))
+    gap = lambda order: (found.chi2[PERMUTATIONS.index(order)] - found.chi2[0]) / found.scale  # noqa: E731
+    alike = ""
+    if len(found.named) > 1:
+        other = found.named[1]
+        alike = f", or like {order_text(other)} ({-gap(other):.1f}: this flight does not tell the two apart)"
+    return DataError(
+        f"m1,m2,m3,m4 read like {order_text(found.best)} of {reference}: the body rates answer the motors as there "
+        f"only in that order (ahead of the order as logged by {-gap(found.best):.1f} in chi-square; {THRESHOLD:.1f} "
+        f"decides){alike}; the motors are numbered otherwise than there: fix the --map ({fix})",
+        path=path,
+    )
+
+
+@dataclasses.dataclass
+class MotorNumbering:
+    """The motors' numbering that flights loaded one at a time are held to (`check`): the `reference`
+    signature's (a model's training flights', named `name` in the refusal) where given, else that of the
+    flights checked before (`seen`; the first flight sets it and is not tested)."""
+
+    reference: MotorSignature | None = None
+    name: str = "the training flights"
+    seen: list[FlightSignature | None] = dataclasses.field(default_factory=list)
+
+    def check(self, flight: Trajectory, usable: np.ndarray, path, columns=None) -> MotorOrder | None:
+        """Refuse `flight` (its `usable` samples; `path` and `columns`, contract name -> file column, for the
+        message) where its motors are numbered otherwise (see the module notes); let it through, and count it
+        among `seen`, where they are not or it cannot tell. **Returns:** the evidence (`None`: no test).
+
+        **Raises:** `DataError` naming the file, the order its columns read like and the `--map` that fixes it.
+        """
+        signature = flight_signature(flight, usable)
+        against, name = self.reference, self.name
+        if against is None:
+            against = motor_signature(self.seen)
+            tested = [s.source for s in self.seen if s is not None]
+            name = ", ".join(tested[:3]) + (f" and {len(tested) - 3} more" if len(tested) > 3 else "")
+        found = motor_order(signature, against)
+        if found is not None and found.permuted:
+            raise order_error(found, path, name, columns)
+        self.seen.append(signature)
+        return found
+
+    def signature(self) -> MotorSignature | None:
+        """The reference of a model fitted to the flights seen (`MODEL.json`'s `motor_signature`)."""
+        return motor_signature(self.seen)

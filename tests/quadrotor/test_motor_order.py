@@ -1,0 +1,118 @@
+"""Motors numbered one way in one flight log and another in the next: found by the body rates, named, or left alone.
+
+The permuted flights are the synthetic flights of `tests/quadrotor/synthetic_flight.py` (scipy's DOP853 under a
+geometric controller, no dynax model code) and the 16 NanoBench flights, their motor columns reordered here;
+the check (`dynax._data._motor_order`, through `dynax.internal`) must name the order they were put in, or say
+nothing, and must say nothing of the flights as logged.
+"""
+
+import json
+
+import numpy as np
+import pytest
+
+import dynax
+from dynax.internal import (
+    flight_signature,
+    motor_order,
+    motor_signature,
+    MotorNumbering,
+    MotorSignature,
+    order_text,
+    PERMUTATIONS,
+)
+from tests.quadrotor.synthetic_flight import PLUS, quadrotor_flight
+from tests.quadrotor.test_flight_data import NANOBENCH, NANOBENCH_MAP, STAR
+
+SECONDS = 12.0  # as the hostile flight corpus's synthetic flights
+
+
+def _reordered(trajectory, order):
+    """The record with its column j holding motor `order[j]` (another logger's numbering)."""
+    us = np.asarray(trajectory.us).copy()
+    us[:, :4] = us[:, list(order)]
+    return dynax.Trajectory(
+        trajectory.ts, trajectory.xs, us, trajectory.state_names, trajectory.input_names, trajectory.system
+    )
+
+
+@pytest.fixture(scope="module", params=["x", "+"])
+def flights(request):
+    vehicle = {} if request.param == "x" else {"vehicle": PLUS}
+    return [quadrotor_flight(SECONDS, seed=seed, vbat=True, **vehicle) for seed in (3, 4)]
+
+
+def test_a_synthetic_flight_numbered_otherwise_is_named_and_never_misnamed(flights):
+    reference = motor_signature([flight_signature(flights[0])])
+    honest = motor_order(flight_signature(flights[1]), reference)
+    assert not honest.permuted and honest.margin > 0, honest
+    caught = {}
+    for order in PERMUTATIONS[1:]:
+        found = motor_order(flight_signature(_reordered(flights[1], order)), reference)
+        truth = order_text(np.argsort(order))
+        named = [order_text(o) for o in found.named]
+        assert not named or truth in named, (truth, named, found)
+        caught[truth] = found.permuted
+    assert caught["m2,m3,m4,m1"], caught  # a turn by one arm (the hostile corpus's case)
+    assert sum(caught.values()) >= 18, caught  # 12 s of flight: the weakest orders may be let through
+
+
+def test_the_refusal_names_the_file_the_order_and_the_map(flights):
+    usable = [np.ones(len(f.ts), bool) for f in flights]
+    turned = _reordered(flights[1], (1, 2, 3, 0))
+    numbering = MotorNumbering()  # as the loader holds flights given one after another
+    assert numbering.check(flights[0], usable[0], "a.csv") is None  # the first sets the numbering
+    assert not numbering.check(flights[1], usable[1], "b.csv").permuted  # as logged: nothing said
+    columns = {"m1": "motor_a", "m2": "motor_b", "m3": "motor_c", "m4": "motor_d"}
+    numbering = MotorNumbering()
+    numbering.check(flights[0], usable[0], "a.csv")
+    with pytest.raises(dynax.DataError) as refusal:
+        numbering.check(turned, usable[1], "b.csv", columns)
+    text = str(refusal.value)
+    assert text.startswith("file b.csv: m1,m2,m3,m4 read like m2,m3,m4,m1 of synthetic seed 3"), text
+    # the fix maps each motor to the file's column that holds it
+    assert "fix the --map (m1=motor_d,m2=motor_a,m3=motor_b,m4=motor_c)" in text, text
+    model = MotorNumbering(numbering.signature(), "the training flights of model.json")
+    with pytest.raises(dynax.DataError, match="of the training flights of model.json"):
+        model.check(turned, usable[1], "b.csv")
+
+
+def test_body_rates_that_do_not_answer_the_motors_name_no_order(flights):
+    """No evidence (rates that are noise, as a near-hover flight's barely answer): nothing is said in any order."""
+    reference = motor_signature([flight_signature(flights[0])])
+    rng = np.random.default_rng(0)
+    quiet = flights[1]
+    xs = np.asarray(quiet.xs).copy()
+    xs[:, 10:13] = 0.05 * rng.standard_normal((len(xs), 3))
+    quiet = dynax.Trajectory(quiet.ts, xs, quiet.us, quiet.state_names, quiet.input_names, quiet.system)
+    for order in PERMUTATIONS:
+        assert not motor_order(flight_signature(_reordered(quiet, order)), reference).permuted
+
+
+def test_the_signature_goes_through_a_model_file_and_a_broken_one_is_no_test(flights):
+    reference = motor_signature([flight_signature(f) for f in flights])
+    back = MotorSignature.from_json(json.loads(json.dumps(reference.to_json())))
+    assert back is not None and np.allclose(back.pattern, reference.pattern) and back.n_flights == 2
+    broken = reference.to_json() | {"pattern": [[1.0, 2.0]]}
+    assert MotorSignature.from_json(broken) is None
+    assert MotorSignature.from_json(None) is None
+    assert MotorSignature.from_json(reference.to_json() | {"window_s": 0.5}) is None
+
+
+@pytest.mark.skipif(not STAR.exists(), reason="the NanoBench flights are not in ../shared/datasets")
+def test_the_nanobench_flights_as_logged_are_never_refused_and_a_turned_one_is_named():
+    paths = sorted(NANOBENCH.glob("*.csv.gz"))
+    loaded = [dynax.load_flight(p, mapping=NANOBENCH_MAP) for p in paths]
+    signatures = [flight_signature(t, n.usable) for t, n in loaded]
+    for k in range(len(paths)):
+        others = motor_signature([s for j, s in enumerate(signatures) if j != k])
+        assert not motor_order(signatures[k], others).permuted, paths[k].name
+        assert not motor_order(signatures[k], motor_signature(signatures[k - 1 : k] or signatures[-1:])).permuted
+    numbering = MotorNumbering()  # every flight in the order given, as `dynax fit quadrotor` meets them
+    for path, (trajectory, notes) in zip(paths, loaded):
+        numbering.check(trajectory, notes.usable, path)
+    star = paths.index(STAR)
+    others = motor_signature([s for j, s in enumerate(signatures) if j != star])
+    trajectory, notes = loaded[star]
+    found = motor_order(flight_signature(_reordered(trajectory, (1, 2, 3, 0)), notes.usable), others)
+    assert found.permuted and order_text(found.named[0]) == "m2,m3,m4,m1", found
