@@ -27,18 +27,20 @@ from ._candidates import (
     structurally_equivalent,
 )
 from ._fit import Family, make_windows, nominal_parameter_names, nominal_values, Windows
-from ._records import fit_window, horizon_grid, prepare_records, velocity_estimates
+from ._records import (
+    fit_window,
+    horizon_grid,
+    MIN_BLOCK_HORIZONS,
+    MIN_CROSS_FIT_RUNS,
+    prepare_records,
+    velocity_estimates,
+)
 from ._selection import on_physical_side
 from ._settings import DEFAULT_HORIZONS_S, Horizons, Selection
 
 # A static friction level counts as stiction when it stands this share above the joint's Coulomb level (and two
 # standard errors): a breakaway within a tenth of the sliding level is not told from Coulomb friction by data.
 STATIC_MARGIN = 0.1
-
-# Cross-fitting needs every fold to fit two runs or more (see `_cross_fit`); a single training run is cut into
-# this many contiguous blocks instead, each at least this many of the longest horizon long.
-MIN_CROSS_FIT_RUNS = 3
-MIN_BLOCK_HORIZONS = 8
 
 
 class Fold(NamedTuple):
@@ -333,7 +335,12 @@ def prepare_problem(system, train, validation, candidates, mode, horizons: Horiz
     fit_window_s = fit_window(system, train_records, horizons.fit_window_s, horizons.fraction, dt, notes)
     n_fit = max(2, int(round(fit_window_s / dt)))
     grid, candidates_s = horizon_grid(
-        horizons.reported(DEFAULT_HORIZONS_S), horizons.reference_s, train_records, validation_records, notes
+        horizons.reported(DEFAULT_HORIZONS_S),
+        horizons.reference_s,
+        train_records,
+        validation_records,
+        notes,
+        cross_fit=selection.cross_fit,
     )
     val_stride = max(1, int(round(0.05 / dt)))
     val_windows = make_windows(validation_records, int(round(grid.max() / dt)), val_stride)

@@ -8,8 +8,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax import Acrobot, CoulombFriction, diagnose, Extended, InputOffset, Selection
-from dynax.internal import cross_fit_folds, Family, fit_configurations, Fold, make_windows
+from dynax import Acrobot, CoulombFriction, diagnose, Extended, InputOffset, Selection, Trajectory
+from dynax.internal import cross_fit_folds, Family, fit_configurations, Fold, horizon_grid, make_windows
 from dynax.synthetic import DEMO_TRUTH_PHYSICAL, Multisine, synthetic_trajectory
 
 from .test_engine_rollouts_validation import _axis_record, NOMINAL
@@ -105,6 +105,28 @@ def test_a_single_training_run_is_cross_fitted_by_blocks_and_two_runs_are_not():
         Fold(2, 0, 3000),
     )
     assert cross_fit_folds([np.zeros(3 * 8 * n_long - 1)], n_long) == ()
+
+
+def _still(seconds, dt=0.01):
+    n = int(round(seconds / dt)) + 1
+    return Trajectory(np.arange(n) * dt, np.zeros((n, 2)), np.zeros((n, 1)), ("q", "dq"), ("force",))
+
+
+def test_the_candidate_horizons_stop_where_a_single_training_run_can_still_be_cross_fitted():
+    """A 20 s run beside a 20 s held-out one: the held-out time alone would allow 1 s (a twentieth of it), which
+    would leave the run too short for three blocks of eight horizons; the candidates stop at 0.8 s, where they fit.
+    Where the held-out time is the shorter cap (the calibration battery's 10 s), two runs are not cross-fitted, or
+    cross-fitting is off, the candidates are what they were."""
+    horizons = (0.1, 0.25, 0.5, 1.0, 2.0)
+
+    def longest(train, held_out, cross_fit=True):
+        return float(horizon_grid(horizons, None, train, held_out, [], cross_fit=cross_fit)[1].max())
+
+    assert longest([_still(20.0)], [_still(20.0)]) == pytest.approx(0.8)
+    assert cross_fit_folds([np.zeros(2001)], 80) and not cross_fit_folds([np.zeros(2001)], 100)
+    assert longest([_still(20.0)], [_still(20.0)], cross_fit=False) == pytest.approx(1.0)
+    assert longest([_still(20.0)], [_still(10.0)]) == pytest.approx(0.5)
+    assert longest([_still(20.0)] * 2, [_still(20.0)]) == pytest.approx(1.0)
 
 
 def test_a_held_out_block_leaves_out_every_fit_window_that_shares_a_sample_with_it():
