@@ -148,7 +148,7 @@ def _after_a_chipped_propeller(seed, duration=10.0, **effects):
 def test_a_motor_that_lost_thrust_after_the_fit_is_named_at_its_motor():
     # Motor 2's thrust and yaw moment per command fall to 0.85 of the others' (a chipped propeller). The trusted map
     # is quadratic in the command and `InputGain` scales the command, so the gain to find is sqrt(0.85) = 0.922.
-    # Measured: 0.922 at a held-out gain of 90 % (0.15 s), p = 2e-10.
+    # Measured: 0.922 at a held-out gain of 90 % (0.15 s), p = 7e-16 (cross-fitted).
     j = _after_a_chipped_propeller(20, gain=(1, 0.85))
     first = _assert_named_first(j, "input_gain", ("m2",))
     assert 1.0 - first["coefficient"] == pytest.approx(1.0 - np.sqrt(0.85), rel=0.2)
