@@ -52,8 +52,10 @@ def _jacobian(family: Family, windows: Windows, slots, p, tangents_p, tangents_c
         return jnp.where(windows.weights[:, None, None] > 0, e, 0.0).reshape(-1)
 
     zeros = jnp.zeros(family.n_candidates, p.dtype)
-    derivative = lambda tp, tc: jax.jvp(residuals, (p, zeros), (tp, tc))[1]  # noqa: E731
-    return residuals(p, zeros), jax.vmap(derivative)(tangents_p, tangents_c)
+    # The residuals are the primal of the same forward-mode rollout (not batched over the directions): a separate
+    # rollout for them would be a second loop in the program, compiled on its own.
+    derivative = lambda tp, tc: jax.jvp(residuals, (p, zeros), (tp, tc))  # noqa: E731
+    return jax.vmap(derivative, out_axes=(None, 0))(tangents_p, tangents_c)
 
 
 def _chunks(windows: Windows):
@@ -63,9 +65,11 @@ def _chunks(windows: Windows):
     index = np.concatenate([np.arange(n), np.zeros(pad, int)])
     weight = np.concatenate([np.ones(n), np.zeros(pad)])
     for lo in range(0, n + pad, CHUNK):
-        take = jnp.asarray(index[lo : lo + CHUNK])
-        chunk = jax.tree_util.tree_map(lambda a: a[take], windows)
-        yield eqx.tree_at(lambda w: w.weights, chunk, chunk.weights * jnp.asarray(weight[lo : lo + CHUNK]))
+        # Gathered and weighted on the host: a gather or product in JAX would compile a program for each window set.
+        chunk = windows.take(index[lo : lo + CHUNK])
+        weights = np.asarray(chunk.weights)
+        weights = weights * weight[lo : lo + CHUNK].astype(weights.dtype)
+        yield eqx.tree_at(lambda w: w.weights, chunk, jax.device_put(weights))
 
 
 def _sensitivities(family: Family, windows: Windows, slots, p, tangents_p, tangents_c):
