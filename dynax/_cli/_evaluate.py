@@ -132,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
         from .._identify._vehicle._quadrotor import quadrotor_from_json
         from ._quadrotor import run_evaluate
 
-        reference = MotorSignature.from_json(model_obj.get("motor_signature"))
+        reference = MotorSignature.from_json(model_obj.get("motor_signature"), args.model)
         return run_evaluate(args, quadrotor_from_json(model_obj, path=args.model), reference)
     if args.steps is not None:
         raise UsageError("--steps applies to quadrotor models; a helicopter model takes --horizons (seconds)")

@@ -293,7 +293,7 @@ def run_diagnose(args) -> int:
         except (OSError, ValueError) as e:
             raise DataError(f"cannot read the model file ({e})", path=args.nominal) from None
     # the motors' numbering: the nominal model's training flights' where its file says, else the first flight's
-    reference = MotorSignature.from_json(obj.get("motor_signature")) if isinstance(obj, dict) else None
+    reference = MotorSignature.from_json(obj.get("motor_signature"), args.nominal) if isinstance(obj, dict) else None
     loaded: dict = {}
     numbering = MotorNumbering(reference, f"the training flights of {args.nominal}")
     train, _ = load_flights(

@@ -102,19 +102,38 @@ class MotorSignature:
         }
 
     @classmethod
-    def from_json(cls, obj) -> "MotorSignature | None":
-        """The signature of `to_json`'s object; `None` where it is absent or malformed (a model written before
-        the check, or edited: no test rather than a wrong one)."""
+    def from_json(cls, obj, path=None) -> "MotorSignature | None":
+        """The signature of `to_json`'s object; `None` where it is absent (a model written before the check).
+        A malformed one (an edited file) raises `DataError` naming `path` and the key: the check is not
+        switched off without a word."""
+        if obj is None:
+            return None
+
+        def refuse(what: str):
+            return DataError(
+                f"the model file's `motor_signature` {what}; delete the key to use the model without the motor-order "
+                "check, or fit the model again",
+                path=path,
+            )
+
         try:
             arrays = [np.asarray(obj[k], dtype=float) for k in ("pattern", "noise", "spread")]
             n = int(obj["n_flights"])
-            same_window = math.isclose(float(obj["window_s"]), WINDOW_S)
-        except (KeyError, TypeError, ValueError):
-            return None
-        if not same_window or n < 1 or any(a.shape != (4, 6) or not np.all(np.isfinite(a)) for a in arrays):
-            return None
-        if np.any(arrays[1] < 0) or np.any(arrays[2] < 0):
-            return None
+            window = float(obj["window_s"])
+        except KeyError as e:
+            raise refuse(f"lacks {e}") from None
+        except (TypeError, ValueError) as e:
+            raise refuse(f"cannot be read ({e})") from None
+        if not math.isclose(window, WINDOW_S):
+            raise refuse(f"has window_s = {window:g}, where this version of dynax reads {WINDOW_S:g} s")
+        if n < 1:
+            raise refuse(f"has n_flights = {n}")
+        for key, a in zip(("pattern", "noise", "spread"), arrays):
+            if a.shape != (4, 6) or not np.all(np.isfinite(a)):
+                raise refuse(f"has a `{key}` that is not 4 x 6 finite numbers (shape {a.shape})")
+        for key, a in zip(("noise", "spread"), arrays[1:]):
+            if np.any(a < 0):
+                raise refuse(f"has a negative `{key}`")
         return cls(*arrays, n_flights=n)
 
 

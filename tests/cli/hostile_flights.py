@@ -320,6 +320,11 @@ def _nan_weights(obj):
     return obj
 
 
+def _short_signature(obj):
+    obj["motor_signature"]["pattern"] = obj["motor_signature"]["pattern"][:2]
+    return obj
+
+
 # --- the cases ------------------------------------------------------------------------------------------
 
 C = Case
@@ -715,6 +720,13 @@ CASES = [
         lambda d, fx: ["evaluate", _model_with(d, fx, _nan_weights), fx["validation_csv"], "--out", "m.json"],
         "refuse",
         ("model_edited.json", "weights"),
+    ),
+    C(
+        "evaluate-model-motor-signature-edited",
+        "model",
+        lambda d, fx: ["evaluate", _model_with(d, fx, _short_signature), fx["validation_csv"], "--out", "m.json"],
+        "refuse",
+        ("model_edited.json", "motor_signature", "pattern"),
     ),
     # Files, models and arguments.
     C(

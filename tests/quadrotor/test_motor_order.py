@@ -89,14 +89,23 @@ def test_body_rates_that_do_not_answer_the_motors_name_no_order(flights):
         assert not motor_order(flight_signature(_reordered(quiet, order)), reference).permuted
 
 
-def test_the_signature_goes_through_a_model_file_and_a_broken_one_is_no_test(flights):
+def test_the_signature_goes_through_a_model_file_and_a_broken_one_is_refused_by_key(flights):
     reference = motor_signature([flight_signature(f) for f in flights])
     back = MotorSignature.from_json(json.loads(json.dumps(reference.to_json())))
     assert back is not None and np.allclose(back.pattern, reference.pattern) and back.n_flights == 2
-    broken = reference.to_json() | {"pattern": [[1.0, 2.0]]}
-    assert MotorSignature.from_json(broken) is None
-    assert MotorSignature.from_json(None) is None
-    assert MotorSignature.from_json(reference.to_json() | {"window_s": 0.5}) is None
+    assert MotorSignature.from_json(None) is None  # a model written before the check: no test, no error
+    edits = {
+        "pattern": ({"pattern": [[1.0, 2.0]]}, r"has a `pattern` that is not 4 x 6"),
+        "window": ({"window_s": 0.5}, r"has window_s = 0\.5"),
+        "noise": ({"noise": (-np.ones((4, 6))).tolist()}, r"has a negative `noise`"),
+        "text": ({"n_flights": "two"}, r"cannot be read"),
+    }
+    for edit, message in edits.values():
+        with pytest.raises(dynax.DataError, match=rf"file model\.json: the model file's `motor_signature` {message}"):
+            MotorSignature.from_json(reference.to_json() | edit, "model.json")
+    lacking = {k: v for k, v in reference.to_json().items() if k != "spread"}
+    with pytest.raises(dynax.DataError, match=r"lacks 'spread'; delete the key"):
+        MotorSignature.from_json(lacking, "model.json")
 
 
 @pytest.mark.skipif(not STAR.exists(), reason="the NanoBench flights are not in ../shared/datasets")
