@@ -86,10 +86,11 @@ def main(argv=None):
     loading = time.perf_counter()
     flights = [dynax.load_flight(p, mapping=NANOBENCH_MAP) for p in paths]
     loading = (time.perf_counter() - loading) / len(paths)
-    checking = time.perf_counter()  # the loader's check, as `dynax fit quadrotor` meets the flights in turn
+    checking = time.perf_counter()  # the loader's check, as `dynax fit quadrotor` meets the flights
     numbering = MotorNumbering()
     for path, (trajectory, notes) in zip(paths, flights):
         numbering.check(trajectory, notes.usable, path)
+    numbering.settle()  # each flight against the other 15
     checking = (time.perf_counter() - checking) / len(paths)
     signatures = [flight_signature(t, n.usable) for t, n in flights]
     rows = []

@@ -26,7 +26,8 @@ def load_flights(
     refusal), and the notes. A flight given twice is refused, and one that is also a `training` flight
     (`{path: trajectory}` of those loaded before) is no validation. `training`, where given, gains the
     flights loaded here. A flight whose motors are numbered otherwise than `numbering` holds them to (a
-    `MotorNumbering`: a model's training flights, or the flights before it) is refused."""
+    `MotorNumbering`: a model's training flights, or the consensus of the flights it has seen, these among
+    them) is refused."""
 
     from .._data._flight import load_flight, usable_segments
     from .._data._motor_order import MotorNumbering
@@ -73,6 +74,7 @@ def load_flights(
                 "samples": len(trajectory),
             }
         )
+    numbering.settle()
     return runs, notes
 
 
@@ -108,7 +110,7 @@ def run_fit(args) -> int:
     out = output_file(args.out, "model.json")
     mapping, scale, offset = data_options(args)
     start = time.perf_counter()
-    numbering = MotorNumbering()  # the first flight's; written into the model for `evaluate` to hold flights to
+    numbering = MotorNumbering()  # the flights' consensus; written into the model for `evaluate` to hold flights to
     runs, notes = load_flights(
         args.data,
         mapping,
@@ -292,7 +294,8 @@ def run_diagnose(args) -> int:
             obj = json.loads(pathlib.Path(args.nominal).read_text())
         except (OSError, ValueError) as e:
             raise DataError(f"cannot read the model file ({e})", path=args.nominal) from None
-    # the motors' numbering: the nominal model's training flights' where its file says, else the first flight's
+    # the motors' numbering: the nominal model's training flights' where its file says, else the consensus of
+    # the flights given, training and validation together
     reference = MotorSignature.from_json(obj.get("motor_signature"), args.nominal) if isinstance(obj, dict) else None
     loaded: dict = {}
     numbering = MotorNumbering(reference, f"the training flights of {args.nominal}")
@@ -301,8 +304,6 @@ def run_diagnose(args) -> int:
     )
     validation = None
     if args.validation is not None:
-        if reference is None:  # held to the training flights' numbering, said as theirs
-            numbering = MotorNumbering(numbering.signature())
         validation, _ = load_flights(
             args.validation, mapping, scale, offset, min_samples=min_samples, training=loaded, numbering=numbering
         )

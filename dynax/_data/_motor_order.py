@@ -41,6 +41,13 @@ runner-up within `THRESHOLD` of it (motors the flight does not tell apart: a yaw
 moves) is named beside it. A flight whose rates barely answer its motors (near hover) moves every
 $\chi^2$ alike and is said nothing of.
 
+**The reference** (`MotorNumbering`): a model's training flights' signature where one is given (`dynax
+evaluate`, `diagnose --nominal`), each flight tested as it is loaded; else the consensus of the flights
+given, once all are loaded (`settle`; each signature computed once): each flight against all the others
+(leave one out), so that a misnumbered flight is named wherever it stands in the list, the first
+included. Of three flights or more, those that disagree with the rest are named; two flights that
+disagree are both named, neither blamed: two cannot tell which is numbered right.
+
 Fewer than `MIN_CHUNKS` chunks of usable flight: no signature, no test.
 """
 
@@ -270,8 +277,9 @@ def order_text(order: Sequence[int]) -> str:
     return ",".join(f"m{int(inverse[j]) + 1}" for j in range(4))
 
 
-def order_error(found: MotorOrder, path, reference: str, columns=None) -> DataError:
-    """The refusal of a flight whose motors `found` says are in another order than the `reference`'s (words)."""
+def order_error(found: MotorOrder, path, reference: str, columns=None, also: str = "") -> DataError:
+    """The refusal of a flight whose motors `found` says are in another order than the `reference`'s (words);
+    `also`, words added at the end."""
     columns = columns or {}
     inverse = np.argsort(found.best)  # the file's motor j is the reference's motor inverse[j]
     fix = ",".join(sorted(f"m{int(inverse[j]) + 1}={columns.get(f'm{j + 1}', f'm{j + 1}')}" for j in range(4)))
@@ -283,39 +291,84 @@ def order_error(found: MotorOrder, path, reference: str, columns=None) -> DataEr
     return DataError(
         f"m1,m2,m3,m4 read like {order_text(found.best)} of {reference}: the body rates answer the motors as there "
         f"only in that order (ahead of the order as logged by {-gap(found.best):.1f} in chi-square; {THRESHOLD:.1f} "
-        f"decides){alike}; the motors are numbered otherwise than there: fix the --map ({fix})",
+        f"decides){alike}; the motors are numbered otherwise than there: fix the --map ({fix}){also}",
         path=path,
+    )
+
+
+def _names(paths) -> str:
+    shown = [str(p) for p in paths]
+    return ", ".join(shown[:3]) + (f" and {len(shown) - 3} more" if len(shown) > 3 else "")
+
+
+def pair_error(found: MotorOrder, first, second) -> DataError:
+    """The refusal of two flights whose motors `found` (the `second` against the `first`) says are numbered
+    otherwise: two flights cannot say which of them is right, so neither is blamed."""
+    gap = (found.chi2[0] - found.chi2[PERMUTATIONS.index(found.best)]) / found.scale
+    return DataError(
+        f"files {first} and {second} disagree on the motors' numbering: {second}'s m1,m2,m3,m4 read like "
+        f"{order_text(found.best)} of {first} (ahead of the order as logged by {gap:.1f} in chi-square; "
+        f"{THRESHOLD:.1f} decides), and two flights cannot tell which of them is numbered right: check each "
+        "log's motor columns and fix the --map of the wrong one, or give a third flight"
     )
 
 
 @dataclasses.dataclass
 class MotorNumbering:
-    """The motors' numbering that flights loaded one at a time are held to (`check`): the `reference`
-    signature's (a model's training flights', named `name` in the refusal) where given, else that of the
-    flights checked before (`seen`; the first flight sets it and is not tested)."""
+    """The motors' numbering that flights are held to: the `reference` signature's (a model's training
+    flights', named `name` in the refusal) where given, each flight as it is `check`ed; else the consensus
+    of the flights checked (`seen`), settled once they are all in (`settle`): each against all the others."""
 
     reference: MotorSignature | None = None
     name: str = "the training flights"
     seen: list[FlightSignature | None] = dataclasses.field(default_factory=list)
+    files: list[tuple[object, dict]] = dataclasses.field(default_factory=list)
 
     def check(self, flight: Trajectory, usable: np.ndarray, path, columns=None) -> MotorOrder | None:
-        """Refuse `flight` (its `usable` samples; `path` and `columns`, contract name -> file column, for the
-        message) where its motors are numbered otherwise (see the module notes); let it through, and count it
-        among `seen`, where they are not or it cannot tell. **Returns:** the evidence (`None`: no test).
+        """Count `flight` (its `usable` samples; `path` and `columns`, contract name -> file column, for the
+        message) among `seen`; where a `reference` is given, refuse it first if its motors are numbered
+        otherwise (see the module notes). **Returns:** the evidence against the reference (`None`: no
+        reference, or no test).
 
         **Raises:** `DataError` naming the file, the order its columns read like and the `--map` that fixes it.
         """
         signature = flight_signature(flight, usable)
-        against, name = self.reference, self.name
-        if against is None:
-            against = motor_signature(self.seen)
-            tested = [s.source for s in self.seen if s is not None]
-            name = ", ".join(tested[:3]) + (f" and {len(tested) - 3} more" if len(tested) > 3 else "")
-        found = motor_order(signature, against)
+        found = motor_order(signature, self.reference)
         if found is not None and found.permuted:
-            raise order_error(found, path, name, columns)
+            raise order_error(found, path, self.name, columns)
         self.seen.append(signature)
+        self.files.append((path, dict(columns or {})))
         return found
+
+    def settle(self) -> None:
+        """Without a `reference`, test each flight seen against the signature of all the others (their
+        consensus: a misnumbered flight is found wherever it stands in the list). Of three flights or more,
+        refuse naming those that disagree with the rest; of two that disagree, refuse naming both, blaming
+        neither.
+
+        **Raises:** `DataError` as `check`'s, or naming the two flights of a pair that disagree."""
+        if self.reference is not None:
+            return
+        tested = [(s, path, columns) for s, (path, columns) in zip(self.seen, self.files) if s is not None]
+        if len(tested) == 2:
+            (first, a, _), (second, b, _) = tested
+            found = motor_order(second, motor_signature([first]))
+            if found is not None and found.permuted:
+                raise pair_error(found, a, b)
+            return
+        wrong = []
+        for k, (signature, path, columns) in enumerate(tested):
+            others = [s for j, (s, _, _) in enumerate(tested) if j != k]
+            found = motor_order(signature, motor_signature(others))
+            if found is not None and found.permuted:
+                wrong.append((found, path, columns))
+        if wrong:
+            found, path, columns = wrong[0]
+            rest = [p for _, p, _ in tested if p != path]
+            also = "".join(
+                f"; {p} also disagrees with the rest (reads like {order_text(f.best)})" for f, p, _ in wrong[1:]
+            )
+            raise order_error(found, path, f"the other {len(rest)} flights ({_names(rest)})", columns, also)
 
     def signature(self) -> MotorSignature | None:
         """The reference of a model fitted to the flights seen (`MODEL.json`'s `motor_signature`)."""

@@ -167,6 +167,12 @@ def _motors_turned(t):
     return t
 
 
+def _first_turned(folder):
+    """A third synthetic flight (seed 5) numbered as `_motors_turned`, to be given first: the numbering is the
+    consensus of the flights given, not the first one's."""
+    return write_table(pathlib.Path(folder) / "first.csv", FLIGHT, _motors_turned(_synthetic(5)))
+
+
 def _nanobench_motors_turned(folder, source):
     """A whole NanoBench flight with its motor columns renamed as `_motors_turned` numbers them."""
     with gzip.open(source, "rt") as f:
@@ -587,13 +593,21 @@ CASES = [
         check=_SAME,
     ),
     # Motors numbered otherwise in one log than in the others (each log is right for itself): refused where
-    # the body rates tell which order the log's columns are in, naming it and the --map that fixes it.
+    # the body rates tell which order the log's columns are in, naming it and the --map that fixes it (of
+    # three flights or more, the one against the rest wherever it stands; of two, both, neither blamed).
     C(
         "flight-fit-motors-numbered-otherwise",
         "motors",
         lambda d, fx: [*_fit_argv(fx["train_csv"])[:3], _validation(d, fx, _motors_turned), *_fit_argv("")[3:]],
         "refuse",
         ("validation.csv", "read like m2,m3,m4,m1", "--map"),
+    ),
+    C(
+        "flight-fit-first-of-three-motors-numbered-otherwise",
+        "motors",
+        lambda d, fx: [*_fit_argv(_first_turned(d))[:3], fx["train_csv"], fx["validation_csv"], *_fit_argv("")[3:]],
+        "refuse",
+        ("first.csv", "read like m2,m3,m4,m1", "of the other 2 flights", "--map"),
     ),
     C(
         "flight-fit-two-flights-numbered-alike",

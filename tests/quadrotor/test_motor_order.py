@@ -39,7 +39,7 @@ def _reordered(trajectory, order):
 @pytest.fixture(scope="module", params=["x", "+"])
 def flights(request):
     vehicle = {} if request.param == "x" else {"vehicle": PLUS}
-    return [quadrotor_flight(SECONDS, seed=seed, vbat=True, **vehicle) for seed in (3, 4)]
+    return [quadrotor_flight(SECONDS, seed=seed, vbat=True, **vehicle) for seed in (3, 4, 5)]
 
 
 def test_a_synthetic_flight_numbered_otherwise_is_named_and_never_misnamed(flights):
@@ -57,24 +57,51 @@ def test_a_synthetic_flight_numbered_otherwise_is_named_and_never_misnamed(fligh
     assert sum(caught.values()) >= 18, caught  # 12 s of flight: the weakest orders may be let through
 
 
-def test_the_refusal_names_the_file_the_order_and_the_map(flights):
-    usable = [np.ones(len(f.ts), bool) for f in flights]
-    turned = _reordered(flights[1], (1, 2, 3, 0))
-    numbering = MotorNumbering()  # as the loader holds flights given one after another
-    assert numbering.check(flights[0], usable[0], "a.csv") is None  # the first sets the numbering
-    assert not numbering.check(flights[1], usable[1], "b.csv").permuted  # as logged: nothing said
-    columns = {"m1": "motor_a", "m2": "motor_b", "m3": "motor_c", "m4": "motor_d"}
+def _settled(flights, names):
+    """The numbering of `flights` loaded as `dynax fit quadrotor` meets them (their consensus), settled."""
     numbering = MotorNumbering()
-    numbering.check(flights[0], usable[0], "a.csv")
+    for flight, name in zip(flights, names):
+        assert numbering.check(flight, np.ones(len(flight.ts), bool), name) is None  # no reference: no test yet
+    numbering.settle()
+    return numbering
+
+
+def test_the_refusal_names_the_file_the_order_and_the_map(flights):
+    turned = _reordered(flights[1], (1, 2, 3, 0))
+    _settled(flights[:2], ["a.csv", "b.csv"])  # as logged: nothing said
+    # two flights that disagree: both named, neither blamed, and the order that maps one to the other
     with pytest.raises(dynax.DataError) as refusal:
-        numbering.check(turned, usable[1], "b.csv", columns)
+        _settled([flights[0], turned], ["a.csv", "b.csv"])
     text = str(refusal.value)
-    assert text.startswith("file b.csv: m1,m2,m3,m4 read like m2,m3,m4,m1 of synthetic seed 3"), text
+    assert text.startswith(
+        "files a.csv and b.csv disagree on the motors' numbering: b.csv's m1,m2,m3,m4 read like m2,m3,m4,m1 of a.csv"
+    ), text
+    assert "cannot tell which of them is numbered right" in text, text
+    columns = {"m1": "motor_a", "m2": "motor_b", "m3": "motor_c", "m4": "motor_d"}
+    model = MotorNumbering(motor_signature([flight_signature(flights[0])]), "the training flights of model.json")
+    with pytest.raises(dynax.DataError) as refusal:  # against a model's signature: refused as it is checked
+        model.check(turned, np.ones(len(turned.ts), bool), "b.csv", columns)
+    text = str(refusal.value)
+    assert text.startswith("file b.csv: m1,m2,m3,m4 read like m2,m3,m4,m1 of the training flights of model.json"), text
     # the fix maps each motor to the file's column that holds it
     assert "fix the --map (m1=motor_d,m2=motor_a,m3=motor_b,m4=motor_c)" in text, text
-    model = MotorNumbering(numbering.signature(), "the training flights of model.json")
-    with pytest.raises(dynax.DataError, match="of the training flights of model.json"):
-        model.check(turned, usable[1], "b.csv")
+
+
+def test_of_three_flights_the_one_that_disagrees_with_the_rest_is_named_wherever_it_stands(flights):
+    """The first flight misnumbered: the consensus of the other two names it, not the correct ones after it."""
+    three, names = flights, ["a.csv", "b.csv", "c.csv"]
+    _settled(three, names)  # all honest: nothing said
+    for k in range(3):
+        turned = list(three)
+        turned[k] = _reordered(three[k], (1, 2, 3, 0))
+        with pytest.raises(dynax.DataError) as refusal:
+            _settled(turned, names)
+        text = str(refusal.value)
+        rest = ", ".join(n for j, n in enumerate(names) if j != k)
+        assert text.startswith(f"file {names[k]}: m1,m2,m3,m4 read like m2,m3,m4,m1 of the other 2 flights ({rest})"), (
+            text
+        )
+        assert "also disagrees" not in text, text
 
 
 def test_body_rates_that_do_not_answer_the_motors_name_no_order(flights):
@@ -90,7 +117,7 @@ def test_body_rates_that_do_not_answer_the_motors_name_no_order(flights):
 
 
 def test_the_signature_goes_through_a_model_file_and_a_broken_one_is_refused_by_key(flights):
-    reference = motor_signature([flight_signature(f) for f in flights])
+    reference = motor_signature([flight_signature(f) for f in flights[:2]])
     back = MotorSignature.from_json(json.loads(json.dumps(reference.to_json())))
     assert back is not None and np.allclose(back.pattern, reference.pattern) and back.n_flights == 2
     assert MotorSignature.from_json(None) is None  # a model written before the check: no test, no error
@@ -120,6 +147,14 @@ def test_the_nanobench_flights_as_logged_are_never_refused_and_a_turned_one_is_n
     numbering = MotorNumbering()  # every flight in the order given, as `dynax fit quadrotor` meets them
     for path, (trajectory, notes) in zip(paths, loaded):
         numbering.check(trajectory, notes.usable, path)
+    numbering.settle()  # their consensus: none disagrees with the rest
+    numbering = MotorNumbering()  # the first flight turned: it is named, not the 15 after it
+    for k, (path, (trajectory, notes)) in enumerate(zip(paths, loaded)):
+        numbering.check(_reordered(trajectory, (1, 2, 3, 0)) if k == 0 else trajectory, notes.usable, path.name)
+    with pytest.raises(
+        dynax.DataError, match=rf"^file {paths[0].name}: m1,m2,m3,m4 read like m2,m3,m4,m1 of the other 15"
+    ):
+        numbering.settle()
     star = paths.index(STAR)
     others = motor_signature([s for j, s in enumerate(signatures) if j != star])
     trajectory, notes = loaded[star]
