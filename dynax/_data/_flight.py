@@ -21,7 +21,13 @@ The thresholds are physics of small multirotors, not of one rig (`FlightChecks`)
   last good value, so the flagged run is extended back to where its climb began (the last
   sample before it that is not below the next);
 - `max_jump`: a position step that the recorded velocity does not explain by more than this
-  [m] in one sample (a motion-capture marker swap or a lost frame).
+  [m] in one sample (a motion-capture marker swap or a lost frame);
+- a frozen position: `x`, `y` and `z` all repeated exactly for `FREEZE_SAMPLES` samples or more
+  while the logged velocity moves the vehicle by more than `FREEZE_NOISE` times the position's
+  noise over them (the robust scale of the step the velocity does not explain). Honest motion
+  capture never repeats all three while the vehicle moves (the 16 NanoBench flights: not once in
+  flight; a single repeat on the floor), so a freeze too short for `stuck` and with a catch-up
+  below `max_jump` is still a fault, noted as `stuck` in `x,y,z`.
 
 Beside these, the record's own statistics (the located checks of `dynax.check_records`, with the
 velocities `vx, vy, vz` paired with `x, y, z`): a `spike`, up to three samples that leave the
@@ -32,8 +38,11 @@ change (motion capture that lost the vehicle and holds its last position); `velo
 of 150 ms or more where a velocity's block means are off its position's change by a factor of 2
 or more, or of the other sign (the rates' rule in `_flight_kinematics`: a motion-capture velocity
 filter lags its position by up to a third in sharp turns, which is no fault). `load_flight` adds
-`gap`: a stretch of more than `MAX_GAP` median intervals with no sample, interpolated when the
-record is resampled and left out.
+`gap`: a stretch of more than `MAX_FLIGHT_GAP` median intervals with no sample, interpolated when
+the record is resampled and left out. A flight's body rates change within a few samples: interpolated
+across 4 intervals, the NanoBench flights' rates miss the recorded ones by 3 times their noise, across
+3 by 2 times (`experiments/flight_freezes_and_gaps.py`); the logger's occasional 20-30 ms gaps (2-3
+intervals) are bridged.
 """
 
 import dataclasses
@@ -51,7 +60,7 @@ from ._flight_kinematics import (
     check_thrust_frame,
     check_velocity_frame,
 )
-from ._io import load_trajectory, MAX_GAP, Sampling
+from ._io import load_trajectory, Sampling
 from ._sanity import Check, glitch_findings, stuck_findings, velocity_stretch_findings
 from ._trajectory import Trajectory
 from ._velocities import block_slopes, stretch_edges
@@ -61,6 +70,9 @@ GLITCH_KINDS = ("rate_range", "input_range", "position_jump", "spike", "stuck", 
 _RECORD_KINDS = {Check.GLITCH: "spike", Check.STUCK: "stuck", Check.VELOCITY: "velocity"}
 WORLD_VELOCITIES = {"vx": "x", "vy": "y", "vz": "z"}
 STRETCH_FACTOR = 2.0  # a velocity off its position's change by this factor in a stretch (or of the other sign)
+
+# A gap of more than this many sample intervals is noted and its interpolated samples left out (module notes).
+MAX_FLIGHT_GAP = 3
 
 # A body-to-world quaternion further than this from unit norm is not an attitude measurement.
 QUATERNION_TOLERANCE = 0.01
@@ -163,6 +175,8 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return [(int(a), int(b) - 1) for a, b in zip(edges[::2], edges[1::2])]
 
 
+FREEZE_SAMPLES = 2  # repeated samples (three identical rows): one repeat is a frame logged twice, as on the floor
+FREEZE_NOISE = 10.0  # the displacement a freeze hides, in the position's noise, beyond any chance of noise
 SPIKE_SAMPLES = 3  # a flagged run this short is a corrupt sample or three, not a log that runs away
 IDLE_S = 0.5  # every motor below half its level this long, where none stops, is the vehicle idling on its pad
 
@@ -264,7 +278,8 @@ def inspect_flight(trajectory: Trajectory, checks: FlightChecks = FlightChecks()
     position = np.stack([_column(trajectory, c) for c in ("x", "y", "z")], axis=1)
     velocity = np.stack([_column(trajectory, c) for c in ("vx", "vy", "vz")], axis=1)
     dt = np.diff(ts)[:, None]
-    unexplained = np.linalg.norm(np.diff(position, axis=0) - 0.5 * (velocity[1:] + velocity[:-1]) * dt, axis=1)
+    residual = np.diff(position, axis=0) - 0.5 * (velocity[1:] + velocity[:-1]) * dt
+    unexplained = np.linalg.norm(residual, axis=1)
     jump = np.concatenate([[False], unexplained > checks.max_jump])
     flagged.append(("x,y,z", "position_jump", jump, np.concatenate([[0.0], unexplained])))
 
@@ -274,7 +289,8 @@ def inspect_flight(trajectory: Trajectory, checks: FlightChecks = FlightChecks()
         for a, b in _runs(mask):
             worst = values[a : b + 1][np.argmax(np.abs(values[a : b + 1]))]
             glitches.append(Glitch(column, kind, float(rel[a]), float(rel[b]), a + 1, b - a + 1, float(worst)))
-    for glitch, (a, b) in _record_glitches(trajectory, ts, flagged, ground):
+    frozen = _frozen_positions(ts, position, velocity, residual)
+    for glitch, (a, b) in _record_glitches(trajectory, ts, flagged, ground, frozen):
         bad[a : b + 1] = True
         glitches.append(glitch)
     glitches.sort(key=lambda g: (g.start, g.column))
@@ -282,14 +298,34 @@ def inspect_flight(trajectory: Trajectory, checks: FlightChecks = FlightChecks()
     return FlightNotes(segments, tuple(glitches), ~ground & ~bad, trajectory.source)
 
 
+def _frozen_positions(ts, position, velocity, residual) -> list[tuple[int, int]]:
+    """`(first, last)` of each run of `FREEZE_SAMPLES` or more samples repeating `x, y, z` exactly (from
+    the first repeat) over which the logged velocity moves the vehicle more than
+    `FREEZE_NOISE` times the position's noise (1.4826 times the median absolute unexplained step, per axis;
+    the largest)."""
+    if len(ts) < 3:
+        return []
+    noise = float(np.max(1.4826 * np.median(np.abs(residual), axis=0)))
+    repeated = np.concatenate([[False], np.all(position[1:] == position[:-1], axis=1)])
+    out = []
+    for a, b in _runs(repeated):
+        if b - a + 1 < FREEZE_SAMPLES:
+            continue
+        steps = 0.5 * (velocity[a : b + 1] + velocity[a - 1 : b]) * np.diff(ts[a - 1 : b + 1])[:, None]
+        moved = float(np.linalg.norm(np.sum(steps, axis=0)))
+        if moved > FREEZE_NOISE * noise:
+            out.append((a, b))
+    return out
+
+
 def _record_glitches(
-    trajectory: Trajectory, ts: np.ndarray, flagged, ground: np.ndarray
+    trajectory: Trajectory, ts: np.ndarray, flagged, ground: np.ndarray, frozen=()
 ) -> list[tuple[Glitch, tuple[int, int]]]:
     """The record's statistical glitches (see the module notes) as `(Glitch, (first, last))`: spikes, stuck
     columns and velocity stretches, from `dynax.check_records`' located checks, less what the physical
     ranges flagged already and what lies on the `ground` (a touch-down jolts the gyro: motion the flight's
     statistics do not describe, left out as ground already); a run found in `x`, `y` and `z` alike is one
-    motion-capture glitch, `x,y,z`."""
+    motion-capture glitch, `x,y,z`, as is each `frozen` run `(first, last)` of `_frozen_positions`."""
     rel = ts - ts[0]
     names = tuple(trajectory.state_names)
     xs, us = np.asarray(trajectory.xs, dtype=float), np.asarray(trajectory.us, dtype=float)
@@ -307,6 +343,7 @@ def _record_glitches(
         for f in findings
         if f.kind in (Check.STUCK, Check.GLITCH) and f.column in ("x", "y", "z") and f.rows is not None
     ]
+    position_faults += [(c, a, b) for a, b in frozen for c in ("x", "y", "z")]
     spans: dict[tuple[str, int, int], list[str]] = {}
     for f in findings:
         if f.rows is None or f.column is None or f.kind not in _RECORD_KINDS:
@@ -321,6 +358,10 @@ def _record_glitches(
         ):
             continue  # the velocity misses a position that stuck or spiked: said once, as the position's
         spans.setdefault((_RECORD_KINDS[f.kind], a, b), []).append(f.column)
+    stuck = [(a, b) for (kind, a, b), found in spans.items() if kind == "stuck" and "x" in found]
+    for a, b in frozen:  # too short for `stuck`'s rule, or said by it already
+        if not ground[a : b + 1].all() and not any(i <= b and j >= a for i, j in stuck):
+            spans.setdefault(("stuck", a, b), []).extend(["x", "y", "z"])
     out = []
     for (kind, a, b), found in spans.items():
         gains = {}
@@ -371,8 +412,9 @@ def _with_gaps(notes: FlightNotes, ts: np.ndarray, gaps) -> FlightNotes:
     if not gaps:
         return notes
     usable, found = np.array(notes.usable), list(notes.glitches)
+    tolerance = 1e-3 * float(np.median(np.diff(ts)))  # the grid's times and the recorded ones differ in the last bits
     for before, after in gaps:
-        inside = np.flatnonzero((ts > before) & (ts < after))
+        inside = np.flatnonzero((ts > before + tolerance) & (ts < after - tolerance))
         if inside.size:
             usable[inside] = False
             start, stop, n = float(before - ts[0]), float(after - ts[0]), int(inside.size)
@@ -440,7 +482,7 @@ def load_flight(
     column that no flight logs (a motor zero, constant or another motor's copy throughout, a
     battery at 0 V or below), makes the quaternion's sign continuous, resamples a record with
     missed frames onto its median interval (states interpolated, inputs held; the samples inside a
-    gap of more than `MAX_GAP` intervals are noted as a `gap` and left out), normalises the
+    gap of more than `MAX_FLIGHT_GAP` intervals are noted as a `gap` and left out), normalises the
     quaternions, runs `inspect_flight`, and refuses columns that contradict each other
     (`dynax._data._flight_kinematics`).
 
@@ -465,7 +507,7 @@ def load_flight(
     gaps = []
     if not data.is_uniform:
         recorded = np.asarray(data.ts, dtype=float)
-        long = np.flatnonzero(np.diff(recorded) > MAX_GAP * data.dt)
+        long = np.flatnonzero(np.rint(np.diff(recorded) / data.dt) > MAX_FLIGHT_GAP)  # whole intervals: jitter aside
         gaps = [(recorded[k], recorded[k + 1]) for k in long]
         data = resample(data, data.dt)
         q = np.asarray(data.xs[:, 3:7])

@@ -95,3 +95,38 @@ def test_the_loader_names_a_missing_column(tmp_path, star_table):
     _write(path, header, table[:50])
     with pytest.raises(dynax.DataError, match="motor_speed_1"):
         dynax.load_trajectory(path, "quadrotor", mapping={**NANOBENCH_MAP, "m1": "motor_speed_1"})
+
+
+def test_a_short_freeze_in_flight_is_noted_whatever_the_catch_up(tmp_path, star_table):
+    # Honest motion capture never repeats px, py, pz while the vehicle moves; 0.12 s held (too short for
+    # `stuck`'s 0.25 s) and eased back in steps below `max_jump` is still a fault, said once, as x,y,z.
+    header, table = star_table
+    table = table.copy()
+    idx = [header.index(c) for c in ("px", "py", "pz")]
+    k, n = 2000, 12
+    held = table[k - 1, idx].copy()
+    table[k : k + n, idx] = held
+    for j in range(3):
+        table[k + n + j, idx] = held + (table[k + n + j, idx] - held) * (j + 1) / 4
+    assert np.max(np.linalg.norm(np.diff(table[k - 1 : k + n + 5, idx], axis=0), axis=1)) < 0.05
+    path = tmp_path / "frozen.csv.gz"
+    _write(path, header, table)
+    trajectory, notes = dynax.load_flight(path, mapping=NANOBENCH_MAP)
+    (frozen,) = [g for g in notes.glitches if g.kind == "stuck"]
+    assert frozen.column == "x,y,z" and frozen.n_samples == n
+    assert frozen.start == pytest.approx(table[k, 0] - table[0, 0], abs=0.011)
+    assert not [g for g in notes.glitches if g.kind == "velocity"]  # the position is named, not its velocity
+    i = int(np.argmin(np.abs(np.asarray(trajectory.ts) - table[k, 0])))
+    assert not np.asarray(notes.usable)[i : i + n].any() and np.asarray(notes.usable)[i - 5]
+
+
+def test_a_frame_logged_twice_is_no_freeze(tmp_path, star_table):
+    # one repeat of the three columns (a frame logged twice, as on the floor of two NanoBench flights) says
+    # nothing: the rule needs two repeats while the vehicle moves
+    header, table = star_table
+    table = table.copy()
+    idx = [header.index(c) for c in ("px", "py", "pz")]
+    table[2000, idx] = table[1999, idx]
+    path = tmp_path / "twice.csv.gz"
+    _write(path, header, table)
+    assert not dynax.load_flight(path, mapping=NANOBENCH_MAP)[1].glitches
