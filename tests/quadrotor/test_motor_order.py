@@ -160,3 +160,17 @@ def test_the_nanobench_flights_as_logged_are_never_refused_and_a_turned_one_is_n
     trajectory, notes = loaded[star]
     found = motor_order(flight_signature(_reordered(trajectory, (1, 2, 3, 0)), notes.usable), others)
     assert found.permuted and order_text(found.named[0]) == "m2,m3,m4,m1", found
+
+
+def test_fit_quadrotor_warns_where_one_of_its_flights_is_numbered_otherwise(flights):
+    """The Python fit holds flights given together to their consensus too, with a warning (the CLI refuses): the
+    first of three flights turned by one arm is named; the three as made say nothing."""
+    import warnings
+
+    start = dynax.Quadrotor.from_flights("nominal", flights)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", dynax.DataWarning)
+        dynax.fit_quadrotor(start, flights, progress=False)
+    turned = [_reordered(flights[0], (1, 2, 3, 0)), *flights[1:]]
+    with pytest.warns(dynax.DataWarning, match=r"\(flights\[0\]\): m1,m2,m3,m4 read like .* of the other 2 flights"):
+        dynax.fit_quadrotor(start, turned, progress=False)
