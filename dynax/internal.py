@@ -104,6 +104,7 @@ from ._data._motor_order import MotorNumbering as MotorNumbering
 from ._data._motor_order import MotorSignature as MotorSignature
 from ._data._motor_order import order_text as order_text
 from ._data._motor_order import PERMUTATIONS as PERMUTATIONS
+from ._data._motor_order import warn_if_numbered_otherwise as warn_if_numbered_otherwise
 from ._data._spectra import choose_filter as choose_filter
 from ._data._spectra import FilterChoice as FilterChoice
 from ._data._spectra import measurement_noise_std as measurement_noise_std
@@ -826,6 +827,7 @@ __all__ = [
     "vehicle_rollout",
     "VehicleStatistics",
     "velocity_gain",
+    "warn_if_numbered_otherwise",
     "WhitenessTest",
     "window_errors",
     "window_rollout",

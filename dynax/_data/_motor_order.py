@@ -55,10 +55,12 @@ from collections.abc import Sequence
 import dataclasses
 import itertools
 import math
+import warnings
 
 import numpy as np
 
 from .._errors import DataError
+from ._sanity import DataWarning
 from ._trajectory import Trajectory
 
 #: The 24 orders of four motor columns, the given one first: order `P` reads logged column `P[k]` as motor k.
@@ -373,3 +375,20 @@ class MotorNumbering:
     def signature(self) -> MotorSignature | None:
         """The reference of a model fitted to the flights seen (`MODEL.json`'s `motor_signature`)."""
         return motor_signature(self.seen)
+
+
+def warn_if_numbered_otherwise(flights: Sequence[Trajectory] | Trajectory, stacklevel: int = 3) -> None:
+    """Warn (`DataWarning`) where the motors of the flights given together read as numbered otherwise in one of
+    them than in the rest, by the consensus `dynax fit quadrotor` refuses on (`MotorNumbering`;
+    flights too short for a signature are not tested). A warning here, not a refusal: a Python caller may give
+    runs of one record, or flights it has checked otherwise."""
+    if isinstance(flights, Trajectory) or len(flights) < 2:
+        return
+    numbering = MotorNumbering()
+    for i, flight in enumerate(flights):
+        numbering.check(flight, np.ones(len(flight), bool), f"{flight.source or 'flight'} (flights[{i}])")
+    try:
+        numbering.settle()
+    except DataError as e:
+        fix = " (from Python: the `mapping=` given to `dynax.load_flight`)"
+        warnings.warn(f"{e}{fix}", DataWarning, stacklevel=stacklevel)

@@ -52,6 +52,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._data._motor_order import warn_if_numbered_otherwise
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
 from .._model._extensions import AbstractTerm, InputGain, InputLag, MotorDelay
@@ -216,6 +217,8 @@ def frame_quadrotor(system: Quadrotor, train, validation, candidates, mode, hori
     from ._problem import Known, Refit
 
     refit = isinstance(mode, Refit)
+    given = _as_list(train, "train") + ([] if validation is None else _as_list(validation, "validation"))
+    warn_if_numbered_otherwise(given, stacklevel=4)  # `diagnose`'s caller
     if validation is None:  # the held-out tail of each flight stays out of the one-step fit too
         from ._records import holdout_split
 

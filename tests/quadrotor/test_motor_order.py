@@ -174,3 +174,21 @@ def test_fit_quadrotor_warns_where_one_of_its_flights_is_numbered_otherwise(flig
     turned = [_reordered(flights[0], (1, 2, 3, 0)), *flights[1:]]
     with pytest.warns(dynax.DataWarning, match=r"\(flights\[0\]\): m1,m2,m3,m4 read like .* of the other 2 flights"):
         dynax.fit_quadrotor(start, turned, progress=False)
+
+
+def test_the_quadrotor_diagnosis_warns_where_one_of_its_flights_is_numbered_otherwise(flights):
+    """`diagnose` on a `Quadrotor` holds its training and validation flights to their consensus as the fit does
+    (stopped at the warning: the diagnosis itself is not what is tested here)."""
+    import warnings
+
+    from dynax.internal import warn_if_numbered_otherwise
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", dynax.DataWarning)
+        warn_if_numbered_otherwise(flights)
+    start = dynax.Quadrotor.from_flights("nominal", flights)
+    turned = _reordered(flights[2], (1, 2, 3, 0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", dynax.DataWarning)
+        with pytest.raises(dynax.DataWarning, match=r"\(flights\[2\]\): m1,m2,m3,m4 read like"):
+            dynax.diagnose(start, flights[:2], turned, progress=False)

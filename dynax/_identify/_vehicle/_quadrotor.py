@@ -10,15 +10,12 @@ into one record with breaks that no window crosses.
 """
 
 from collections.abc import Sequence
-import warnings
 
 import jax.numpy as jnp
 import numpy as np
 
-from ..._data._motor_order import MotorNumbering
-from ..._data._sanity import DataWarning
+from ..._data._motor_order import warn_if_numbered_otherwise
 from ..._data._trajectory import Trajectory
-from ..._errors import DataError
 from ..._fit import Solution
 from ..._model._quadrotor import Quadrotor
 from .._method import FitSettings
@@ -71,22 +68,6 @@ def fit_quadrotor(
     settings = FitSettings(warm_start=warm_start, callback=callback, progress=progress)
     warn_if_numbered_otherwise(flights)
     return fit_all(system, flights, criterion, settings)
-
-
-def warn_if_numbered_otherwise(flights: Sequence[Trajectory] | Trajectory) -> None:
-    """Warn (`DataWarning`) where the motors of the flights given together read as numbered otherwise in one of
-    them than in the rest, by the consensus `dynax fit quadrotor` refuses on (`dynax.internal.MotorNumbering`;
-    flights too short for a signature are not tested). A warning here, not a refusal: a Python caller may give
-    runs of one record, or flights it has checked otherwise."""
-    if isinstance(flights, Trajectory) or len(flights) < 2:
-        return
-    numbering = MotorNumbering()
-    for i, flight in enumerate(flights):
-        numbering.check(flight, np.ones(len(flight), bool), f"{flight.source or 'flight'} (flights[{i}])")
-    try:
-        numbering.settle()
-    except DataError as e:
-        warnings.warn(f"{e} (from Python: the `mapping=` given to `dynax.load_flight`)", DataWarning, stacklevel=3)
 
 
 def quadrotor_to_json(system: Quadrotor, **info) -> dict:
