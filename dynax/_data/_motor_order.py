@@ -285,14 +285,14 @@ def order_error(found: MotorOrder, path, reference: str, columns=None, also: str
     columns = columns or {}
     inverse = np.argsort(found.best)  # the file's motor j is the reference's motor inverse[j]
     fix = ",".join(sorted(f"m{int(inverse[j]) + 1}={columns.get(f'm{j + 1}', f'm{j + 1}')}" for j in range(4)))
-    gap = lambda order: (found.chi2[PERMUTATIONS.index(order)] - found.chi2[0]) / found.scale  # noqa: E731
     alike = ""
     if len(found.named) > 1:
         other = found.named[1]
-        alike = f", or like {order_text(other)} ({-gap(other):.1f}: this flight does not tell the two apart)"
+        ahead = (found.chi2[0] - found.chi2[PERMUTATIONS.index(other)]) / found.scale
+        alike = f", or like {order_text(other)} ({ahead:.1f}: this flight does not tell the two apart)"
     return DataError(
         f"m1,m2,m3,m4 read like {order_text(found.best)} of {reference}: the body rates answer the motors as there "
-        f"only in that order (ahead of the order as logged by {-gap(found.best):.1f} in chi-square; {THRESHOLD:.1f} "
+        f"only in that order (ahead of the order as logged by {found.evidence:.1f} in chi-square; {THRESHOLD:.1f} "
         f"decides){alike}; the motors are numbered otherwise than there: fix the --map ({fix}){also}",
         path=path,
     )
@@ -306,10 +306,9 @@ def _names(paths) -> str:
 def pair_error(found: MotorOrder, first, second) -> DataError:
     """The refusal of two flights whose motors `found` (the `second` against the `first`) says are numbered
     otherwise: two flights cannot say which of them is right, so neither is blamed."""
-    gap = (found.chi2[0] - found.chi2[PERMUTATIONS.index(found.best)]) / found.scale
     return DataError(
         f"files {first} and {second} disagree on the motors' numbering: {second}'s m1,m2,m3,m4 read like "
-        f"{order_text(found.best)} of {first} (ahead of the order as logged by {gap:.1f} in chi-square; "
+        f"{order_text(found.best)} of {first} (ahead of the order as logged by {found.evidence:.1f} in chi-square; "
         f"{THRESHOLD:.1f} decides), and two flights cannot tell which of them is numbered right: check each "
         "log's motor columns and fix the --map of the wrong one, or give a third flight"
     )
