@@ -75,6 +75,11 @@ def load_flights(
             }
         )
     numbering.settle()
+    for note in notes:  # what the motor-numbering test could see for each file (nothing: it saw all it could)
+        said = numbering.notes.get(note["file"], "")
+        if said:
+            print(f"note: {note['file']}: {said}")
+        note["motor_numbering"] = said or ("checked" if str(note["file"]) in numbering.notes else "not compared")
     return runs, notes
 
 

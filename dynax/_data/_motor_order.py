@@ -39,7 +39,7 @@ against the given one, so the given order loses where the best order $P^*$ beats
 $= 2\ln(23/\alpha)$ (`ALPHA` = 0.001, Bonferroni over the 23 other orders). $P^*$ is named; a
 runner-up within `THRESHOLD` of it (motors the flight does not tell apart: a yaw axis that barely
 moves) is named beside it. A flight whose rates barely answer its motors (near hover) moves every
-$\chi^2$ alike and is said nothing of.
+$\chi^2$ alike: it passes, and its note names the orders it could not tell from the logged one.
 
 **The reference** (`MotorNumbering`): a model's training flights' signature where one is given (`dynax
 evaluate`, `diagnose --nominal`), each flight tested as it is loaded; else the consensus of the flights
@@ -48,7 +48,9 @@ given, once all are loaded (`settle`; each signature computed once): each flight
 included. Of three flights or more, those that disagree with the rest are named; two flights that
 disagree are both named, neither blamed: two cannot tell which is numbered right.
 
-Fewer than `MIN_CHUNKS` chunks of usable flight: no signature, no test.
+Fewer than `MIN_CHUNKS` chunks of usable flight: no signature, no test. What each flight's test could see is
+kept as a note (`MotorNumbering.notes`, `power_note`): not checked (too short), or checked in part (the
+other orders within `THRESHOLD` of the one as logged: columns numbered that way would have passed).
 """
 
 from collections.abc import Sequence
@@ -97,9 +99,11 @@ class MotorSignature:
     n_flights: int
     sources: tuple[str, ...] = ()
 
-    def variance(self, flight: FlightSignature) -> np.ndarray:
-        """The variance of `flight.pattern - self.pattern` where the flight is numbered like the reference."""
-        return flight.variance + self.noise / self.n_flights + self.spread * (1 + 1 / self.n_flights)
+    def variance(self, flight: FlightSignature, order: Sequence[int] = (0, 1, 2, 3)) -> np.ndarray:
+        """The variance of `flight.pattern[order] - self.pattern` where the flight's columns read in `order`
+        are numbered like the reference (the flight's own standard errors travel with its columns)."""
+        own = flight.variance[list(order)]
+        return own + self.noise / self.n_flights + self.spread * (1 + 1 / self.n_flights)
 
     def to_json(self) -> dict:
         return {
@@ -189,6 +193,14 @@ class MotorOrder:
         close = (self.chi2[PERMUTATIONS.index(self.runner_up)] - min(self.chi2)) / self.scale < THRESHOLD
         return (self.best, self.runner_up) if close else (self.best,)
 
+    @property
+    def untold(self) -> tuple[tuple[int, ...], ...]:
+        """The other orders this flight does not tell from the one as logged (within `THRESHOLD` of it, nearest
+        first): had its columns been numbered by one of these, the test would have passed them. Empty where
+        the test had the power to see every misnumbering."""
+        gaps = [((c - self.chi2[0]) / self.scale, p) for c, p in zip(self.chi2[1:], PERMUTATIONS[1:])]
+        return tuple(p for gap, p in sorted(gaps) if gap < THRESHOLD)
+
 
 def _runs_ok(usable: np.ndarray, width: int) -> np.ndarray:
     """The samples `k` whose window `k..k+width` is usable throughout."""
@@ -266,11 +278,30 @@ def motor_order(flight: FlightSignature | None, reference: MotorSignature | None
     `None` where either is missing."""
     if flight is None or reference is None:
         return None
-    variance = reference.variance(flight)
-    chi2 = [float(np.sum((flight.pattern[list(p)] - reference.pattern) ** 2 / variance)) for p in PERMUTATIONS]
+    chi2 = [
+        float(np.sum((flight.pattern[list(p)] - reference.pattern) ** 2 / reference.variance(flight, p)))
+        for p in PERMUTATIONS
+    ]
     ranked = [int(i) for i in np.argsort(chi2, kind="stable")]
     runner = next(i for i in ranked if i not in (0, ranked[0]))
     return MotorOrder(tuple(chi2), PERMUTATIONS[ranked[0]], PERMUTATIONS[runner], flight.n_chunks)
+
+
+def power_note(found: MotorOrder | None, reference: str) -> str:
+    """What the test of one flight against the `reference` (words) could see, for the notes: `""` where it
+    could see every misnumbering (or found one: that is refused, not noted)."""
+    if found is None:
+        return (
+            f"motors' numbering not checked against {reference}: under {MIN_CHUNKS * CHUNK_S:g} s of usable flight, "
+            "or a motor or body rate that does not move"
+        )
+    if found.permuted or not found.untold:
+        return ""
+    shown = ", ".join(order_text(p) for p in found.untold[:2])
+    return (
+        f"motors' numbering checked in part against {reference}: the body rates do not tell the order as logged "
+        f"from {len(found.untold)} of the 23 others (such as {shown}), so columns numbered that way would pass"
+    )
 
 
 def order_text(order: Sequence[int]) -> str:
@@ -283,19 +314,31 @@ def order_error(found: MotorOrder, path, reference: str, columns=None, also: str
     """The refusal of a flight whose motors `found` says are in another order than the `reference`'s (words);
     `also`, words added at the end."""
     columns = columns or {}
-    inverse = np.argsort(found.best)  # the file's motor j is the reference's motor inverse[j]
-    fix = ",".join(sorted(f"m{int(inverse[j]) + 1}={columns.get(f'm{j + 1}', f'm{j + 1}')}" for j in range(4)))
-    alike = ""
-    if len(found.named) > 1:
+
+    def fix(order) -> str:
+        inverse = np.argsort(order)  # the file's motor j is the reference's motor inverse[j]
+        return ",".join(sorted(f"m{int(inverse[j]) + 1}={columns.get(f'm{j + 1}', f'm{j + 1}')}" for j in range(4)))
+
+    fixes = f"fix the --map ({fix(found.best)})"
+    if len(found.named) > 1:  # two orders the flight does not tell apart: both fixes, the choice left to the user
         other = found.named[1]
-        ahead = (found.chi2[0] - found.chi2[PERMUTATIONS.index(other)]) / found.scale
-        alike = f", or like {order_text(other)} ({ahead:.1f}: this flight does not tell the two apart)"
+        fixes += f", or ({fix(other)}) for {order_text(other)}; the body rates cannot say which: check the airframe"
     return DataError(
         f"m1,m2,m3,m4 read like {order_text(found.best)} of {reference}: the body rates answer the motors as there "
-        f"only in that order (ahead of the order as logged by {found.evidence:.1f} in chi-square; {THRESHOLD:.1f} "
-        f"decides){alike}; the motors are numbered otherwise than there: fix the --map ({fix}){also}",
+        f"{'only ' if len(found.named) < 2 else ''}in that order (ahead of the order as logged by "
+        f"{found.evidence:.1f} in chi-square; {THRESHOLD:.1f} decides){_alike(found)}; the motors are numbered "
+        f"otherwise than there: {fixes}{also}",
         path=path,
     )
+
+
+def _alike(found: MotorOrder) -> str:
+    """The look-alike of a refusal's order, where the flight does not tell the two apart (`MotorOrder.named`)."""
+    if len(found.named) < 2:
+        return ""
+    other = found.named[1]
+    ahead = (found.chi2[0] - found.chi2[PERMUTATIONS.index(other)]) / found.scale
+    return f", or like {order_text(other)} ({ahead:.1f}: this flight does not tell the two apart)"
 
 
 def _names(paths) -> str:
@@ -309,8 +352,8 @@ def pair_error(found: MotorOrder, first, second) -> DataError:
     return DataError(
         f"files {first} and {second} disagree on the motors' numbering: {second}'s m1,m2,m3,m4 read like "
         f"{order_text(found.best)} of {first} (ahead of the order as logged by {found.evidence:.1f} in chi-square; "
-        f"{THRESHOLD:.1f} decides), and two flights cannot tell which of them is numbered right: check each "
-        "log's motor columns and fix the --map of the wrong one, or give a third flight"
+        f"{THRESHOLD:.1f} decides){_alike(found)}, and two flights cannot tell which of them is numbered right: "
+        "check each log's motor columns and fix the --map of the wrong one, or give a third flight"
     )
 
 
@@ -324,6 +367,7 @@ class MotorNumbering:
     name: str = "the training flights"
     seen: list[FlightSignature | None] = dataclasses.field(default_factory=list)
     files: list[tuple[object, dict]] = dataclasses.field(default_factory=list)
+    notes: dict[str, str] = dataclasses.field(default_factory=dict)
 
     def check(self, flight: Trajectory, usable: np.ndarray, path, columns=None) -> MotorOrder | None:
         """Count `flight` (its `usable` samples; `path` and `columns`, contract name -> file column, for the
@@ -337,6 +381,8 @@ class MotorNumbering:
         found = motor_order(signature, self.reference)
         if found is not None and found.permuted:
             raise order_error(found, path, self.name, columns)
+        if self.reference is not None:
+            self.notes[str(path)] = power_note(found, self.name)
         self.seen.append(signature)
         self.files.append((path, dict(columns or {})))
         return found
@@ -350,12 +396,18 @@ class MotorNumbering:
         **Raises:** `DataError` as `check`'s, or naming the two flights of a pair that disagree."""
         if self.reference is not None:
             return
+        if len(self.files) >= 2:  # what each flight's test could see (`notes`); a single flight has nothing to hold
+            for signature, (path, _) in zip(self.seen, self.files):
+                if signature is None:
+                    self.notes[str(path)] = power_note(None, "the other flights")
         tested = [(s, path, columns) for s, (path, columns) in zip(self.seen, self.files) if s is not None]
         if len(tested) == 2:
             (first, a, _), (second, b, _) = tested
             found = motor_order(second, motor_signature([first]))
             if found is not None and found.permuted:
                 raise pair_error(found, a, b)
+            for path, other in ((a, b), (b, a)):  # the pair's test is symmetric in what it can see
+                self.notes[str(path)] = power_note(found, f"{other}")
             return
         wrong = []
         for k, (signature, path, columns) in enumerate(tested):
@@ -363,6 +415,7 @@ class MotorNumbering:
             found = motor_order(signature, motor_signature(others))
             if found is not None and found.permuted:
                 wrong.append((found, path, columns))
+            self.notes[str(path)] = power_note(found, "the other flights")
         if wrong:
             found, path, columns = wrong[0]
             rest = [p for _, p, _ in tested if p != path]
