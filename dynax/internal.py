@@ -245,6 +245,7 @@ from ._diagnose._statistics import (
 from ._diagnose._statistics import (
     PairedTest as PairedTest,
 )
+from ._diagnose._summaries import merge_repeated_causes as merge_repeated_causes
 from ._diagnose._validation import fit_percent as fit_percent
 from ._diagnose._validation import residual_tests as residual_tests
 from ._diagnose._verdict import (
@@ -701,6 +702,7 @@ __all__ = [
     "make_windows",
     "MAX_MAGNITUDE",
     "measurement_noise_std",
+    "merge_repeated_causes",
     "min_mass_eigenvalue",
     "MIN_PRACTICAL_GAIN",
     "ml_weights",
