@@ -206,6 +206,10 @@ from ._diagnose._records import horizon_grid as horizon_grid
 from ._diagnose._residuals import acceleration_residuals as acceleration_residuals
 from ._diagnose._residuals import applied_inputs as applied_inputs
 from ._diagnose._residuals import exact_delays as exact_delays
+from ._diagnose._residuals import interval_increments as interval_increments
+from ._diagnose._residuals import padded_length as padded_length
+from ._diagnose._residuals import predicted_accelerations as predicted_accelerations
+from ._diagnose._residuals import sg_window as sg_window
 from ._diagnose._rollout_screening import rankable as rankable
 from ._diagnose._rollout_screening import rollout_screen as rollout_screen
 from ._diagnose._rollout_screening import with_rollout_evidence as with_rollout_evidence
@@ -678,6 +682,7 @@ __all__ = [
     "identification_hooks",
     "IdentifyJob",
     "initial_helicopter",
+    "interval_increments",
     "jackknife_covariance",
     "joint_levels",
     "jointly_determined",
@@ -727,6 +732,7 @@ __all__ = [
     "OptaxLBFGS",
     "order_text",
     "OutputErrorStatistics",
+    "padded_length",
     "paired_block_test",
     "PairedTest",
     "parameter_names",
@@ -741,6 +747,7 @@ __all__ = [
     "power_of",
     "PRACTICAL_R2",
     "predictability_horizon",
+    "predicted_accelerations",
     "prediction_error",
     "Prepared",
     "Problem",
@@ -789,6 +796,7 @@ __all__ = [
     "segment_clustered_covariance",
     "serial_bandwidth",
     "serial_covariance",
+    "sg_window",
     "shifted",
     "short_horizon_note",
     "Simulation",
