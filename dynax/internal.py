@@ -15,6 +15,7 @@ from ._cli._diagnose import summary as diagnosis_summary
 # Helpers whose private modules still spell them with an underscore: the plain name here is the one
 # their modules take once those modules are renamed (and these lines become plain re-exports).
 from ._cli._identify import jointly_determined_cell as jointly_determined_cell
+from ._cli._identify import method_from_args as method_from_args
 from ._cli._main import build_parser as build_parser
 from ._cli._main import main as cli_main
 from ._cli._nominal import (
@@ -708,6 +709,7 @@ __all__ = [
     "MAX_MAGNITUDE",
     "measurement_noise_std",
     "merge_repeated_causes",
+    "method_from_args",
     "min_mass_eigenvalue",
     "MIN_PRACTICAL_GAIN",
     "ml_weights",
