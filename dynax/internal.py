@@ -106,11 +106,18 @@ from ._data._motor_order import MotorSignature as MotorSignature
 from ._data._motor_order import order_text as order_text
 from ._data._motor_order import PERMUTATIONS as PERMUTATIONS
 from ._data._motor_order import warn_if_numbered_otherwise as warn_if_numbered_otherwise
+from ._data._sanity import GLITCH_STEPS as GLITCH_STEPS
+from ._data._sanity import median_reach as median_reach
+from ._data._sanity import typical_step_covers as typical_step_covers
+from ._data._screens import screens_off as screens_off
 from ._data._spectra import choose_filter as choose_filter
 from ._data._spectra import FilterChoice as FilterChoice
 from ._data._spectra import measurement_noise_std as measurement_noise_std
 from ._data._spectra import noise_floor_and_band as noise_floor_and_band
 from ._data._spectra import with_velocities_from_positions as with_velocities_from_positions
+from ._data._velocities import check_trajectory_velocities as check_trajectory_velocities
+from ._data._velocities import gain_surely_within as gain_surely_within
+from ._data._velocities import MAX_GAIN_ERROR as MAX_VELOCITY_GAIN_ERROR
 from ._data._velocities import velocity_gain as velocity_gain
 
 # Diagnose: candidates, windows and refits, statistics, horizons, the sparse search.
@@ -608,6 +615,7 @@ __all__ = [
     "candidate_scales",
     "central_difference",
     "check_consistency",
+    "check_trajectory_velocities",
     "choose_filter",
     "cli_main",
     "clustered_covariance",
@@ -667,6 +675,8 @@ __all__ = [
     "folds_by_run",
     "frequency_responses",
     "friction_power_regressor",
+    "gain_surely_within",
+    "GLITCH_STEPS",
     "global_array",
     "group_errors",
     "hand_over_residuals",
@@ -707,7 +717,9 @@ __all__ = [
     "LOOK_ALIKES",
     "make_windows",
     "MAX_MAGNITUDE",
+    "MAX_VELOCITY_GAIN_ERROR",
     "measurement_noise_std",
+    "median_reach",
     "merge_repeated_causes",
     "method_from_args",
     "min_mass_eigenvalue",
@@ -794,6 +806,7 @@ __all__ = [
     "savitzky_golay",
     "score_flights",
     "score_surrogate",
+    "screens_off",
     "search_period",
     "segment_clustered_covariance",
     "serial_bandwidth",
@@ -834,6 +847,7 @@ __all__ = [
     "thrust_parameters",
     "Transcription",
     "tsqr_r",
+    "typical_step_covers",
     "usable_segments",
     "valid_starts",
     "vehicle_rollout",
