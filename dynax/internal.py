@@ -415,6 +415,7 @@ from ._identify._simulation_fit import (
 from ._identify._simulation_fit import (
     simulation_segments as simulation_segments,
 )
+from ._identify._stages import rest_search_off as rest_search_off
 from ._identify._static_friction import joint_levels as joint_levels
 from ._identify._static_friction import record_rests as record_rests
 from ._identify._static_friction import rests_under_load as static_friction_rests  # diagnose's takes the plain name
@@ -796,6 +797,7 @@ __all__ = [
     "resample",
     "residual_tests",
     "Rest",
+    "rest_search_off",
     "rest_stretches",
     "rests_under_load",
     "RestUnderLoad",

@@ -10,6 +10,8 @@ r"""The stages `identify` runs for a method (`AbstractMethod`'s `prepare`, `fit_
   real two-link arm data the output-error refinement (`_refine.py`).
 """
 
+import contextlib
+import contextvars
 import dataclasses
 from typing import Any
 import warnings
@@ -336,8 +338,26 @@ def _refined_stage(ls, start, records, method, friction, consistency, refinement
     )
 
 
+REST_SEARCH = contextvars.ContextVar("dynax_rest_search", default=True)  # False: `rest_search_off`
+
+
+@contextlib.contextmanager
+def rest_search_off():
+    """Within the block, `identify` does not look for friction at rest (`result.static_friction` is `None`,
+    no rows are left out, no `Stiction` is added): the least-squares fit as it is without the rest search,
+    for comparing with it and for pricing the search."""
+    token = REST_SEARCH.set(False)
+    try:
+        yield
+    finally:
+        REST_SEARCH.reset(token)
+
+
 def _holds_at_rest(system) -> bool:
-    """Whether `identify` looks for friction at rest on `system`: the arms its refinement knows."""
+    """Whether `identify` looks for friction at rest on `system`: the arms its refinement knows (unless
+    `rest_search_off`)."""
+    if not REST_SEARCH.get():
+        return False
     try:
         return split_terms(system)[0].refinement_terms() is not None
     except UsageError:
