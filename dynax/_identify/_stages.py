@@ -166,6 +166,7 @@ def least_squares_fit(method: AbstractLeastSquares, system, prepared: Prepared) 
         offsets=offsets_json(ls, fitted),
         angle_zeros=prepared.angle_zeros,
         serial_correlation=ls.serial,
+        joint_weights=ls.joint_weights,
     )
     state = LeastSquaresState(ls, static, rests)
     return Fitted(_ls_identification(prepared, state, (stage,), ls_model, poorly), (ls_model,), state)
