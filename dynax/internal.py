@@ -111,9 +111,11 @@ from ._data._sanity import median_reach as median_reach
 from ._data._sanity import typical_step_covers as typical_step_covers
 from ._data._screens import screens_off as screens_off
 from ._data._spectra import choose_filter as choose_filter
+from ._data._spectra import filter_rule as filter_rule
 from ._data._spectra import FilterChoice as FilterChoice
 from ._data._spectra import measurement_noise_std as measurement_noise_std
 from ._data._spectra import noise_floor_and_band as noise_floor_and_band
+from ._data._spectra import trim_and_decimation as trim_and_decimation
 from ._data._spectra import with_velocities_from_positions as with_velocities_from_positions
 from ._data._velocities import check_trajectory_velocities as check_trajectory_velocities
 from ._data._velocities import gain_surely_within as gain_surely_within
@@ -400,10 +402,13 @@ from ._identify._method import Fitted as Fitted
 from ._identify._method import IdentifyJob as IdentifyJob
 from ._identify._method import Prepared as Prepared
 from ._identify._record_friction import compare_records as compare_records
+from ._identify._refine import DEFAULT_RECORD_WEIGHTS as DEFAULT_RECORD_WEIGHTS
 from ._identify._refine import delta_method_covariance as delta_method_covariance
 from ._identify._refine import ml_weights as ml_weights
 from ._identify._refine import motion_records as motion_records
 from ._identify._refine import record_residual_scale as record_residual_scale
+from ._identify._refine import RECORD_WEIGHTS as RECORD_WEIGHTS
+from ._identify._refine import refinement_options as refinement_options
 from ._identify._regressors import parameter_vector as parameter_vector
 from ._identify._simulation_fit import named_parameters as named_parameters
 from ._identify._simulation_fit import (
@@ -415,6 +420,7 @@ from ._identify._simulation_fit import (
 from ._identify._simulation_fit import (
     simulation_segments as simulation_segments,
 )
+from ._identify._stages import refinement_method as refinement_method
 from ._identify._stages import rest_search_off as rest_search_off
 from ._identify._static_friction import joint_levels as joint_levels
 from ._identify._static_friction import record_rests as record_rests
@@ -638,6 +644,7 @@ __all__ = [
     "DataCheck",
     "decide_verdict",
     "decorrelation_lag",
+    "DEFAULT_RECORD_WEIGHTS",
     "defect_jacobian",
     "delta_method_covariance",
     "dense_forward",
@@ -659,6 +666,7 @@ __all__ = [
     "Feature",
     "feature_library",
     "FeatureRegression",
+    "filter_rule",
     "FilterChoice",
     "fit_backprop",
     "fit_configurations",
@@ -784,11 +792,14 @@ __all__ = [
     "record_offsets",
     "record_residual_scale",
     "record_rests",
+    "RECORD_WEIGHTS",
     "recorded_loss",
     "RecordFriction",
     "RecordOffsets",
     "reference_search",
     "refine_by_simulation",
+    "refinement_method",
+    "refinement_options",
     "RefinementStatistics",
     "Refitted",
     "relative_position_error",
@@ -848,6 +859,7 @@ __all__ = [
     "thrust_frame_slopes",
     "thrust_parameters",
     "Transcription",
+    "trim_and_decimation",
     "tsqr_r",
     "typical_step_covers",
     "usable_segments",

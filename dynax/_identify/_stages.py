@@ -45,7 +45,7 @@ from ._ls_stage import (
 )
 from ._method import AbstractMethod, Fitted, IdentifyJob, Prepared
 from ._offsets import record_labels, without_offsets
-from ._refine import refine_by_simulation, RefinementStatistics
+from ._refine import refine_by_simulation, REFINEMENT_OPTIONS, RefinementStatistics
 from ._regressors import split_terms
 from ._result import Identification, RecordsDisagreeWarning, Stage, StageKind
 from ._simulation_fit import SimulationFit
@@ -182,7 +182,7 @@ def least_squares_refine(method: AbstractLeastSquares, system, prepared: Prepare
     records, job = prepared.records, prepared.job
     stages, models = fitted.identification.stages, fitted.models
     system_out, poorly = fitted.identification.system, fitted.identification.poorly_determined
-    refinement = _refinement_method(job.refine, ls.system, method, records)
+    refinement = refinement_method(job.refine, ls.system, method, records)
     if refinement is not None:
         # The windows start from the refinement's own velocities (a local fit of the positions), also at rest:
         # zeroed there by the validation's rule (`refine_by_simulation(..., rests=...)`) the held-out runs that
@@ -280,7 +280,7 @@ def _signal_band_hz(trajectories) -> float | None:
 STAGGER = 4  # staggered cuts of the records into segments in the default refinement
 
 
-def _refinement_method(refine, system, method, trajectories):
+def refinement_method(refine, system, method, trajectories):
     """The `SimulationFit` that refines the least-squares estimate, or `None`.
 
     `"auto"`: two-link arms whose velocities carry measurement noise (real data), with segments of
@@ -320,7 +320,7 @@ def _refined_stage(ls, start, records, method, friction, consistency, refinement
     simulation sees them), with its equation error on the least-squares rows of `fitted` and consistency
     (`identify` validates it)."""
     fitted, simulated = records
-    refined = refine_by_simulation(start, ls.names, simulated, refinement)
+    refined = refine_by_simulation(start, ls.names, simulated, refinement, **(REFINEMENT_OPTIONS.get() or {}))
     estimate = jnp.asarray(refined.value)
     _, a, y, _, _, _, _, _, _, _ = stacked_equations(refined.model, fitted, method, friction, None, method.rcond)
     if ls.groups is not None:  # the same equations as the least-squares stage's: offsets free
