@@ -29,6 +29,7 @@ from ._cli._nominal import (
 )
 from ._cli._output import staged_directory as staged_directory
 from ._cli._output import write_json as write_json
+from ._control._closed_loop import closed_loop_rollout as closed_loop_rollout
 
 # Control: the leaderboard's rollout and the swing-up reference's pieces.
 from ._control._collocation import collocate as collocate
@@ -572,6 +573,7 @@ from ._simulate import (
 from ._simulate import zoh_term as zoh_term
 from ._simulate._predict import group_errors as group_errors
 from ._simulate._predict import stable_substeps as stable_substeps
+from ._simulate._simulate import fixed_grid_rollout as fixed_grid_rollout
 from ._validate import (
     CrossCorrelationTest as CrossCorrelationTest,
 )
@@ -625,6 +627,7 @@ __all__ = [
     "check_trajectory_velocities",
     "choose_filter",
     "cli_main",
+    "closed_loop_rollout",
     "clustered_covariance",
     "collocate",
     "collocation_costs",
@@ -676,6 +679,7 @@ __all__ = [
     "fit_percent",
     "FitSettings",
     "Fitted",
+    "fixed_grid_rollout",
     "flight_signature",
     "FlightChecks",
     "FlightNotes",
