@@ -200,6 +200,7 @@ from ._diagnose._problem import candidate_family as candidate_family
 from ._diagnose._problem import cross_fit_folds as cross_fit_folds
 from ._diagnose._problem import Fold as Fold
 from ._diagnose._problem import names_to_refit as names_to_refit
+from ._diagnose._problem import overlapping_fit_windows as overlapping_fit_windows
 from ._diagnose._problem import Problem as Problem
 from ._diagnose._quadrotor import (
     body_frame_records as body_frame_records,
@@ -759,6 +760,7 @@ __all__ = [
     "OptaxLBFGS",
     "order_text",
     "OutputErrorStatistics",
+    "overlapping_fit_windows",
     "padded_length",
     "paired_block_test",
     "PairedTest",
