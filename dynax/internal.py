@@ -399,6 +399,7 @@ from ._identify._least_squares import (
     POORLY_DETERMINED as POORLY_DETERMINED,
 )
 from ._identify._least_squares import tsqr_r as tsqr_r
+from ._identify._ls_stage import records_less_offsets as records_less_offsets
 from ._identify._method import FitSettings as FitSettings
 from ._identify._method import Fitted as Fitted
 from ._identify._method import IdentifyJob as IdentifyJob
@@ -422,6 +423,7 @@ from ._identify._simulation_fit import (
 from ._identify._simulation_fit import (
     simulation_segments as simulation_segments,
 )
+from ._identify._stages import all_rests_left_out as all_rests_left_out
 from ._identify._stages import refinement_method as refinement_method
 from ._identify._stages import rest_search_off as rest_search_off
 from ._identify._static_friction import joint_levels as joint_levels
@@ -609,6 +611,7 @@ __all__ = [
     "AbstractVehicleCriterion",
     "AbstractVehicleTerm",
     "acceleration_residuals",
+    "all_rests_left_out",
     "applied_inputs",
     "attitude_angles",
     "auto_stride",
@@ -802,6 +805,7 @@ __all__ = [
     "recorded_loss",
     "RecordFriction",
     "RecordOffsets",
+    "records_less_offsets",
     "reference_search",
     "refine_by_simulation",
     "refinement_method",

@@ -228,12 +228,19 @@ def less_offsets(system, records, ls):
     the refinement fits them; the records themselves where no offsets were fitted."""
     if ls.fitted_offsets is None:
         return records
+    return records_less_offsets(system, records, ls.driven, ls.fitted_offsets)
+
+
+def records_less_offsets(system, records, joints, offsets):
+    """`records` with each one's force offsets taken off its inputs (through `system`'s input matrix), as the
+    output-error refinement fits them: `offsets[r][k]` the offset of record `r`'s recorded force at the driven
+    joint `joints[k]` (the least-squares stage's `offsets`, `values` at `joints`)."""
     base = split_terms(system)[0]
     b = np.asarray(base.input_matrix())
     to_inputs = np.linalg.pinv(b)  # joint forces -> the inputs that produce them
-    rows = [base.joint_names.index(j) for j in ls.driven]
+    rows = [base.joint_names.index(j) for j in joints]
     out = []
-    for record, offset in zip(records, ls.fitted_offsets):
+    for record, offset in zip(records, offsets):
         force = np.zeros(b.shape[0])
         force[rows] = offset
         shift = to_inputs @ force

@@ -136,7 +136,7 @@ def least_squares_fit(method: AbstractLeastSquares, system, prepared: Prepared) 
         # those inside the Coulomb law's smoothing band (a joint that sticks there has a friction no law of
         # the speed follows, and one record's sign of misfit goes into its offset), and read the rests again
         # with that fit. A rest that holds nothing is an equation like any other.
-        loaded = _loaded_rests(static, rests, record_labels(fitted))
+        loaded = rests if EVERY_REST_OUT.get() else _loaded_rests(static, rests, record_labels(fitted))
         try:
             ls = least_squares_stage(system, fitted, method, friction, weights, rcond, consistency, loaded)
             static = _static_friction(ls, fitted, rests)
@@ -352,6 +352,21 @@ def rest_search_off():
         yield
     finally:
         REST_SEARCH.reset(token)
+
+
+EVERY_REST_OUT = contextvars.ContextVar("dynax_every_rest_out", default=False)  # True: `all_rests_left_out`
+
+
+@contextlib.contextmanager
+def all_rests_left_out():
+    """Within the block, the least-squares refit that `Dynamic(static_friction=True)` makes where a joint rests
+    under load leaves out the rows of every rest, loaded or not, instead of the loaded ones only: a what-if for
+    comparing the static level read either way."""
+    token = EVERY_REST_OUT.set(True)
+    try:
+        yield
+    finally:
+        EVERY_REST_OUT.reset(token)
 
 
 def _holds_at_rest(system) -> bool:
