@@ -192,6 +192,7 @@ from ._diagnose._fit import (
 from ._diagnose._fit import (
     window_errors as window_errors,
 )
+from ._diagnose._forward import first_screening as first_screening
 from ._diagnose._library import named_equivalent as named_equivalent
 from ._diagnose._library import physical_readings as physical_readings
 from ._diagnose._probe import cross_validated_ridge as cross_validated_ridge
@@ -201,6 +202,7 @@ from ._diagnose._problem import cross_fit_folds as cross_fit_folds
 from ._diagnose._problem import Fold as Fold
 from ._diagnose._problem import names_to_refit as names_to_refit
 from ._diagnose._problem import overlapping_fit_windows as overlapping_fit_windows
+from ._diagnose._problem import prepare_problem as prepare_problem
 from ._diagnose._problem import Problem as Problem
 from ._diagnose._quadrotor import (
     body_frame_records as body_frame_records,
@@ -675,6 +677,7 @@ __all__ = [
     "FeatureRegression",
     "filter_rule",
     "FilterChoice",
+    "first_screening",
     "fit_backprop",
     "fit_configurations",
     "fit_frequency",
@@ -781,6 +784,7 @@ __all__ = [
     "predictability_horizon",
     "predicted_accelerations",
     "prediction_error",
+    "prepare_problem",
     "Prepared",
     "Problem",
     "progress_enabled",
