@@ -315,9 +315,10 @@ _OPTIONS = ("filtered", "fit", "input_timing", "record_weights", "rests")
 @contextlib.contextmanager
 def refinement_options(**options):
     """Within the block, `identify`'s output-error refinement calls `refine_by_simulation` with these keyword
-    arguments: `record_weights`, `input_timing`, `filtered`, `rests` or `fit` (see there). For comparing the
-    refinement with a variant of it inside the whole pipeline (another record weighting, no input timing), and
-    for driving its handling of a fit that ends worse than its start, which no known input forces."""
+    arguments (`record_weights`, `input_timing`, `filtered`, `rests`; see there), and `fit`, where given, in place
+    of `fit_simulation_error` (called alike, returning its `Solution`). For comparing the refinement with a
+    variant of it inside the whole pipeline (another record weighting, no input timing, another solver), and for
+    driving its handling of a fit that ends worse than its start, which no known input forces."""
     unknown = sorted(set(options) - set(_OPTIONS))
     if unknown:
         raise TypeError(f"refinement_options: unknown option(s) {unknown}; choose from {list(_OPTIONS)}")
@@ -338,7 +339,6 @@ def refine_by_simulation(
     record_weights: str | None = None,
     input_timing: bool = True,
     rests=None,
-    fit=None,
 ) -> Solution:
     """Refine a two-link arm's least-squares model by the output-error fit, consistent by construction.
 
@@ -352,9 +352,8 @@ def refine_by_simulation(
     `DEFAULT_RECORD_WEIGHTS` (`"ml"`); `input_timing` (default `True`): also fit the input timing
     $\alpha$ (`TimedInputs`, see the module's docstring), else drive the model by the zero-order
     hold as recorded; `rests` (each record's `rest_stretches`): windows start at zero speed where a joint
-    rests within its record's speed noise (`motion_records`); `fit`: called in place of
-    `fit_simulation_error` (same arguments, returns its `Solution`; default that one), a seam for
-    checking how a fit that ends worse than its start is handled.
+    rests within its record's speed noise (`motion_records`). Inside `refinement_options(fit=...)`, that
+    function is called in place of `fit_simulation_error`.
 
     **Returns:** the engine's `Solution` in the contract's base parameters: `model` the refined
     system, `value`, `names`, `std_errors` and `covariance` (the fit's, cluster-robust over blocks
@@ -404,7 +403,7 @@ def refine_by_simulation(
     )
     weights = np.ones(len(fitted)) if record_weights == "equal" else (1.0 / motion) / np.mean(1.0 / motion)
 
-    output_error = fit_simulation_error if fit is None else fit
+    output_error = (REFINEMENT_OPTIONS.get() or {}).get("fit", fit_simulation_error)
 
     def fit_with(start, weights):
         return output_error(

@@ -320,7 +320,8 @@ def _refined_stage(ls, start, records, method, friction, consistency, refinement
     simulation sees them), with its equation error on the least-squares rows of `fitted` and consistency
     (`identify` validates it)."""
     fitted, simulated = records
-    refined = refine_by_simulation(start, ls.names, simulated, refinement, **(REFINEMENT_OPTIONS.get() or {}))
+    options = {k: v for k, v in (REFINEMENT_OPTIONS.get() or {}).items() if k != "fit"}  # `fit`: read there
+    refined = refine_by_simulation(start, ls.names, simulated, refinement, **options)
     estimate = jnp.asarray(refined.value)
     _, a, y, _, _, _, _, _, _, _ = stacked_equations(refined.model, fitted, method, friction, None, method.rcond)
     if ls.groups is not None:  # the same equations as the least-squares stage's: offsets free
