@@ -24,7 +24,7 @@ each of the four cases:
 - `overlapping-diagnosis` (`--part overlapping-diagnosis`, run apart): the battery's whole diagnosis of the missed case
   (`tests.hidden_cases.diagnose_case`) with every window the diagnosis cuts end to end (the fits' training windows,
   and the output-error screening's held-out windows of the fit's length) started every quarter window instead: a
-  what-if, made by wrapping `dynax._diagnose._problem.make_windows` for this run only (no setting exposes it).
+  what-if, run inside `dynax.internal.overlapping_fit_windows(4)` (no setting of `diagnose` makes it).
 
     nice -n 5 python experiments/rotor_identifiability.py [OUT] [--draws N] [--part independent|overlapping-diagnosis]
 
