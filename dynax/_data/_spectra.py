@@ -31,6 +31,7 @@ the spectral tail of the motion itself).
     decimation).
 """
 
+from collections.abc import Callable
 import contextlib
 import contextvars
 import dataclasses
@@ -201,7 +202,8 @@ def _reads_itself(trajectory: Trajectory) -> bool:
     return trajectory.system == "linear_axis" or tuple(trajectory.state_names) == ("q", "dq")
 
 
-FILTER_RULE = contextvars.ContextVar("dynax_filter_rule", default=None)  # `filter_rule`'s rule, or None
+# `filter_rule`'s rule, or None
+FILTER_RULE: contextvars.ContextVar[Callable | None] = contextvars.ContextVar("dynax_filter_rule", default=None)
 
 
 @contextlib.contextmanager

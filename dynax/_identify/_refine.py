@@ -308,7 +308,9 @@ def ml_weights(sigma: np.ndarray) -> np.ndarray:
     return weights / np.mean(weights)
 
 
-REFINEMENT_OPTIONS = contextvars.ContextVar("dynax_refinement_options", default=None)
+REFINEMENT_OPTIONS: contextvars.ContextVar[dict | None] = contextvars.ContextVar(
+    "dynax_refinement_options", default=None
+)
 _OPTIONS = ("filtered", "fit", "input_timing", "record_weights", "rests")
 
 
