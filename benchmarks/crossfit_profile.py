@@ -22,7 +22,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 from dynax import Acrobot, CoulombFriction, diagnose, Extended, load_trajectory, save_trajectory  # noqa: E402
-from dynax._diagnose import _forward as forward  # noqa: E402  # private: inner calls timed; none public
+from dynax._diagnose import _forward as forward  # noqa: E402  # private: inner calls wrapped, timed
 from dynax.synthetic import DEMO_TRUTH_PHYSICAL, Multisine, synthetic_trajectory  # noqa: E402
 
 

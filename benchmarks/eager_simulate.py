@@ -40,8 +40,7 @@ try:
 except ImportError:  # run from a checkout without installing it
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
     import dynax
-from dynax._control import _closed_loop  # noqa: E402  # private: likewise
-from dynax._simulate import _simulate  # noqa: E402  # private: un-jitted; dynax's is jitted
+from dynax.internal import closed_loop_rollout, fixed_grid_rollout  # noqa: E402
 
 RIG = dict(theta1=0.0536, theta2=0.0533, theta3=0.0362, theta4=2.365, theta5=1.777, theta6=0.01, theta7=0.01)
 
@@ -90,7 +89,7 @@ def main(argv=None):
     def with_dynax(k):
         return dynax.simulate(arm(frictions[k]), x0, ts, us, method=method).xs
 
-    bare = getattr(_simulate._fixed_grid, "__wrapped__", None)
+    bare = getattr(fixed_grid_rollout, "__wrapped__", None)
 
     def with_bare_scan(k):
         return bare(arm(frictions[k]), x0, ts, us, method, 1e6)[0]
@@ -123,7 +122,7 @@ def main(argv=None):
             plant, controller.with_params(controller.params * (1 + 0.01 * k)), start, times
         ).xs
 
-    bare_loop = getattr(_closed_loop._closed_loop, "__wrapped__", None)
+    bare_loop = getattr(closed_loop_rollout, "__wrapped__", None)
 
     def with_bare_closed_loop(k):
         gains = controller.with_params(controller.params * (1 + 0.01 * k))

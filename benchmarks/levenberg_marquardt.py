@@ -1,7 +1,8 @@
 """The refinement's Levenberg-Marquardt against optimistix's: `dynax.identify` on real DFKI runs with
 default settings, whose output-error refinement is the fit in question.
 
-Three solvers, each selected by patching the one `fit_simulation_error` builds, nothing else:
+Three solvers, each given to the refinement's fits (`fit_simulation_error(..., solver=...)`, through
+`dynax.internal.refinement_options(fit=...)`), nothing else changed:
 
 - `optimistix`: optimistix's order, the Jacobian at every trial point, its damping update
   (`levenberg_marquardt(..., jacobian="every_step", damping="classical")`);
@@ -37,8 +38,7 @@ from _device import describe, device_info  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax._identify import _simulation_fit  # noqa: E402  # private: solver swapped, timed; no setting
-from dynax.internal import levenberg_marquardt  # noqa: E402
+from dynax.internal import levenberg_marquardt, refinement_options  # noqa: E402
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 DFKI = REPO.parent / "shared" / "datasets" / "dfki_double_pendulum" / "sys_id"
@@ -67,28 +67,23 @@ SOLVERS = {
 
 def timed_identify(train, held, name: str) -> tuple[float, float, list[int], dict[str, float]]:
     """One `identify` call with the refinement's solver `SOLVERS[name]`: (total seconds, seconds in
-    the refinement's fits, their step counts, the parameters)."""
+    the refinement's fits (each `fit_simulation_error` call whole: its segments, the solve, the covariance),
+    their step counts, the parameters)."""
     fits, steps = [], []
-    solve = _simulation_fit._solve
 
-    def solver(**kwargs):
-        return levenberg_marquardt(**{**kwargs, **SOLVERS[name]})
-
-    def timed_solve(*args, **kwargs):
+    def timed_fit(system, records, method, **kwargs):
+        solver = levenberg_marquardt(rtol=method.rtol, atol=method.atol, **SOLVERS[name])
         start = time.perf_counter()
-        out = solve(*args, **kwargs)
-        jax.block_until_ready(out[1])
+        out = dynax.fit_simulation_error(system, records, method, solver=solver, **kwargs)
+        jax.block_until_ready(out.value)
         fits.append(time.perf_counter() - start)
-        steps.append(int(out[0].steps))
+        steps.append(int(out.steps))
         return out
 
-    _simulation_fit.levenberg_marquardt, _simulation_fit._solve = solver, timed_solve
-    try:
+    with refinement_options(fit=timed_fit):
         start = time.perf_counter()
         result = dynax.identify(dynax.DoublePendulum(), train, dynax.Dynamic(), friction="coulomb", validation=[held])
         total = time.perf_counter() - start
-    finally:
-        _simulation_fit.levenberg_marquardt, _simulation_fit._solve = levenberg_marquardt, solve
     return total, sum(fits), steps, {k: float(v) for k, v in result.parameters.items()}
 
 

@@ -2,11 +2,11 @@
 
 The workload is `benchmarks/identify.py`'s (100,000 acrobot samples, float64; `Dynamic(lowpass_hz=None)`,
 `Power()`, `Energy()`, no refinement, nothing held out, consistency off). For each method, after two
-calls that compile: the best CPU and wall time of `--calls` warm calls, alternately with the data
-sanity checks (`check_records`) and the rest search (`record_rests`, `rests_under_load`) switched off
-in the process (they then find nothing), so that their price is read on the same machine at the same
-load; then a cProfile of `--calls` warm calls with the checks on, by cumulative time in dynax's
-functions.
+calls that compile: the best CPU and wall time of `--calls` warm calls, alternately with the rest search
+(`record_rests`, `rests_under_load`) switched off (`dynax.internal.rest_search_off`), and of `--calls` calls
+of the data sanity checks alone (`check_records` on the record, as `identify` calls it), so that their price
+is read on the same machine at the same load; then a cProfile of `--calls` warm calls with everything on,
+by cumulative time in dynax's functions.
 
     python benchmarks/warm_profile.py [--methods dynamic,power,energy] [--calls 5] [--rows 30]
 
@@ -19,7 +19,6 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import argparse  # noqa: E402
-import contextlib  # noqa: E402
 import cProfile  # noqa: E402
 import io  # noqa: E402
 import pstats  # noqa: E402
@@ -30,8 +29,7 @@ import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
 from dynax import Dynamic, Energy, identify, Power, Trajectory  # noqa: E402
-from dynax._data import _sanity as sanity  # noqa: E402  # private: checks off, priced; no setting
-from dynax._identify import _stages as stages  # noqa: E402  # private: rest search off, priced; no setting
+from dynax.internal import rest_search_off  # noqa: E402
 
 METHODS = {"dynamic": Dynamic(lowpass_hz=None), "power": Power(), "energy": Energy()}
 
@@ -46,23 +44,11 @@ def workload(samples: int) -> Trajectory:
     return Trajectory(jnp.asarray(ts), jnp.asarray(xs), jnp.asarray(us), ("q1", "q2", "dq1", "dq2"), ("tau2",))
 
 
-@contextlib.contextmanager
-def checks_off():
-    """`identify` without the data sanity checks and without looking for rests."""
-    check_records, holds_at_rest = sanity.check_records, stages._holds_at_rest
-    sanity.check_records = lambda *args, **kwargs: sanity.DataCheck()
-    stages._holds_at_rest = lambda system: False
-    try:
-        yield
-    finally:
-        sanity.check_records, stages._holds_at_rest = check_records, holds_at_rest
-
-
 def best_times(call, calls: int) -> tuple[float, float]:
     cpu, wall = [], []
     for _ in range(calls):
         c, w = time.process_time(), time.perf_counter()
-        jax.block_until_ready(call().estimate)
+        jax.block_until_ready(call())
         cpu.append(time.process_time() - c)
         wall.append(time.perf_counter() - w)
     return min(cpu), min(wall)
@@ -80,23 +66,27 @@ def main():
         method = METHODS[name]
 
         def call():
-            return identify(system, data, method, refine=False, validation=dynax.Validate(holdout=0), consistency="off")
+            result = identify(
+                system, data, method, refine=False, validation=dynax.Validate(holdout=0), consistency="off"
+            )
+            return result.estimate
 
         call()
         call()
         for _ in range(2):  # on, off, on, off: the same load for both
             on = best_times(call, args.calls)
-            with checks_off():
+            with rest_search_off():
                 off = best_times(call, args.calls)
+            checks = best_times(lambda: len(dynax.check_records([data]).findings), args.calls)
             print(
-                f"{name}: warm CPU {on[0]:.3f} s (wall {on[1]:.3f} s); without the data checks and the rest search "
-                f"{off[0]:.3f} s (wall {off[1]:.3f} s)",
+                f"{name}: warm CPU {on[0]:.3f} s (wall {on[1]:.3f} s); without the rest search {off[0]:.3f} s "
+                f"(wall {off[1]:.3f} s); the data checks alone {checks[0]:.3f} s (wall {checks[1]:.3f} s)",
                 flush=True,
             )
         profile = cProfile.Profile()
         profile.enable()
         for _ in range(args.calls):
-            jax.block_until_ready(call().estimate)
+            jax.block_until_ready(call())
         profile.disable()
         out = io.StringIO()
         pstats.Stats(profile, stream=out).sort_stats("cumulative").print_stats(r"dynax/", args.rows)

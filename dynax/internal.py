@@ -15,6 +15,7 @@ from ._cli._diagnose import summary as diagnosis_summary
 # Helpers whose private modules still spell them with an underscore: the plain name here is the one
 # their modules take once those modules are renamed (and these lines become plain re-exports).
 from ._cli._identify import jointly_determined_cell as jointly_determined_cell
+from ._cli._identify import method_from_args as method_from_args
 from ._cli._main import build_parser as build_parser
 from ._cli._main import main as cli_main
 from ._cli._nominal import (
@@ -28,6 +29,7 @@ from ._cli._nominal import (
 )
 from ._cli._output import staged_directory as staged_directory
 from ._cli._output import write_json as write_json
+from ._control._closed_loop import closed_loop_rollout as closed_loop_rollout
 
 # Control: the leaderboard's rollout and the swing-up reference's pieces.
 from ._control._collocation import collocate as collocate
@@ -105,11 +107,20 @@ from ._data._motor_order import MotorSignature as MotorSignature
 from ._data._motor_order import order_text as order_text
 from ._data._motor_order import PERMUTATIONS as PERMUTATIONS
 from ._data._motor_order import warn_if_numbered_otherwise as warn_if_numbered_otherwise
+from ._data._sanity import GLITCH_STEPS as GLITCH_STEPS
+from ._data._sanity import median_reach as median_reach
+from ._data._sanity import typical_step_covers as typical_step_covers
+from ._data._screens import screens_off as screens_off
 from ._data._spectra import choose_filter as choose_filter
+from ._data._spectra import filter_rule as filter_rule
 from ._data._spectra import FilterChoice as FilterChoice
 from ._data._spectra import measurement_noise_std as measurement_noise_std
 from ._data._spectra import noise_floor_and_band as noise_floor_and_band
+from ._data._spectra import trim_and_decimation as trim_and_decimation
 from ._data._spectra import with_velocities_from_positions as with_velocities_from_positions
+from ._data._velocities import check_trajectory_velocities as check_trajectory_velocities
+from ._data._velocities import gain_surely_within as gain_surely_within
+from ._data._velocities import MAX_GAIN_ERROR as MAX_VELOCITY_GAIN_ERROR
 from ._data._velocities import velocity_gain as velocity_gain
 
 # Diagnose: candidates, windows and refits, statistics, horizons, the sparse search.
@@ -181,6 +192,7 @@ from ._diagnose._fit import (
 from ._diagnose._fit import (
     window_errors as window_errors,
 )
+from ._diagnose._forward import first_screening as first_screening
 from ._diagnose._library import named_equivalent as named_equivalent
 from ._diagnose._library import physical_readings as physical_readings
 from ._diagnose._probe import cross_validated_ridge as cross_validated_ridge
@@ -189,6 +201,8 @@ from ._diagnose._problem import candidate_family as candidate_family
 from ._diagnose._problem import cross_fit_folds as cross_fit_folds
 from ._diagnose._problem import Fold as Fold
 from ._diagnose._problem import names_to_refit as names_to_refit
+from ._diagnose._problem import overlapping_fit_windows as overlapping_fit_windows
+from ._diagnose._problem import prepare_problem as prepare_problem
 from ._diagnose._problem import Problem as Problem
 from ._diagnose._quadrotor import (
     body_frame_records as body_frame_records,
@@ -206,6 +220,10 @@ from ._diagnose._records import horizon_grid as horizon_grid
 from ._diagnose._residuals import acceleration_residuals as acceleration_residuals
 from ._diagnose._residuals import applied_inputs as applied_inputs
 from ._diagnose._residuals import exact_delays as exact_delays
+from ._diagnose._residuals import interval_increments as interval_increments
+from ._diagnose._residuals import padded_length as padded_length
+from ._diagnose._residuals import predicted_accelerations as predicted_accelerations
+from ._diagnose._residuals import sg_window as sg_window
 from ._diagnose._rollout_screening import rankable as rankable
 from ._diagnose._rollout_screening import rollout_screen as rollout_screen
 from ._diagnose._rollout_screening import with_rollout_evidence as with_rollout_evidence
@@ -245,6 +263,7 @@ from ._diagnose._statistics import (
 from ._diagnose._statistics import (
     PairedTest as PairedTest,
 )
+from ._diagnose._summaries import merge_repeated_causes as merge_repeated_causes
 from ._diagnose._validation import fit_percent as fit_percent
 from ._diagnose._validation import residual_tests as residual_tests
 from ._diagnose._verdict import (
@@ -382,15 +401,19 @@ from ._identify._least_squares import (
     POORLY_DETERMINED as POORLY_DETERMINED,
 )
 from ._identify._least_squares import tsqr_r as tsqr_r
+from ._identify._ls_stage import records_less_offsets as records_less_offsets
 from ._identify._method import FitSettings as FitSettings
 from ._identify._method import Fitted as Fitted
 from ._identify._method import IdentifyJob as IdentifyJob
 from ._identify._method import Prepared as Prepared
 from ._identify._record_friction import compare_records as compare_records
+from ._identify._refine import DEFAULT_RECORD_WEIGHTS as DEFAULT_RECORD_WEIGHTS
 from ._identify._refine import delta_method_covariance as delta_method_covariance
 from ._identify._refine import ml_weights as ml_weights
 from ._identify._refine import motion_records as motion_records
 from ._identify._refine import record_residual_scale as record_residual_scale
+from ._identify._refine import RECORD_WEIGHTS as RECORD_WEIGHTS
+from ._identify._refine import refinement_options as refinement_options
 from ._identify._regressors import parameter_vector as parameter_vector
 from ._identify._simulation_fit import named_parameters as named_parameters
 from ._identify._simulation_fit import (
@@ -402,6 +425,9 @@ from ._identify._simulation_fit import (
 from ._identify._simulation_fit import (
     simulation_segments as simulation_segments,
 )
+from ._identify._stages import all_rests_left_out as all_rests_left_out
+from ._identify._stages import refinement_method as refinement_method
+from ._identify._stages import rest_search_off as rest_search_off
 from ._identify._static_friction import joint_levels as joint_levels
 from ._identify._static_friction import record_rests as record_rests
 from ._identify._static_friction import rests_under_load as static_friction_rests  # diagnose's takes the plain name
@@ -552,6 +578,7 @@ from ._simulate import (
 from ._simulate import zoh_term as zoh_term
 from ._simulate._predict import group_errors as group_errors
 from ._simulate._predict import stable_substeps as stable_substeps
+from ._simulate._simulate import fixed_grid_rollout as fixed_grid_rollout
 from ._validate import (
     CrossCorrelationTest as CrossCorrelationTest,
 )
@@ -586,6 +613,7 @@ __all__ = [
     "AbstractVehicleCriterion",
     "AbstractVehicleTerm",
     "acceleration_residuals",
+    "all_rests_left_out",
     "applied_inputs",
     "attitude_angles",
     "auto_stride",
@@ -602,8 +630,10 @@ __all__ = [
     "candidate_scales",
     "central_difference",
     "check_consistency",
+    "check_trajectory_velocities",
     "choose_filter",
     "cli_main",
+    "closed_loop_rollout",
     "clustered_covariance",
     "collocate",
     "collocation_costs",
@@ -623,6 +653,7 @@ __all__ = [
     "DataCheck",
     "decide_verdict",
     "decorrelation_lag",
+    "DEFAULT_RECORD_WEIGHTS",
     "defect_jacobian",
     "delta_method_covariance",
     "dense_forward",
@@ -644,7 +675,9 @@ __all__ = [
     "Feature",
     "feature_library",
     "FeatureRegression",
+    "filter_rule",
     "FilterChoice",
+    "first_screening",
     "fit_backprop",
     "fit_configurations",
     "fit_frequency",
@@ -653,6 +686,7 @@ __all__ = [
     "fit_percent",
     "FitSettings",
     "Fitted",
+    "fixed_grid_rollout",
     "flight_signature",
     "FlightChecks",
     "FlightNotes",
@@ -661,6 +695,8 @@ __all__ = [
     "folds_by_run",
     "frequency_responses",
     "friction_power_regressor",
+    "gain_surely_within",
+    "GLITCH_STEPS",
     "global_array",
     "group_errors",
     "hand_over_residuals",
@@ -677,6 +713,7 @@ __all__ = [
     "identification_hooks",
     "IdentifyJob",
     "initial_helicopter",
+    "interval_increments",
     "jackknife_covariance",
     "joint_levels",
     "jointly_determined",
@@ -700,7 +737,11 @@ __all__ = [
     "LOOK_ALIKES",
     "make_windows",
     "MAX_MAGNITUDE",
+    "MAX_VELOCITY_GAIN_ERROR",
     "measurement_noise_std",
+    "median_reach",
+    "merge_repeated_causes",
+    "method_from_args",
     "min_mass_eigenvalue",
     "MIN_PRACTICAL_GAIN",
     "ml_weights",
@@ -725,6 +766,8 @@ __all__ = [
     "OptaxLBFGS",
     "order_text",
     "OutputErrorStatistics",
+    "overlapping_fit_windows",
+    "padded_length",
     "paired_block_test",
     "PairedTest",
     "parameter_names",
@@ -739,7 +782,9 @@ __all__ = [
     "power_of",
     "PRACTICAL_R2",
     "predictability_horizon",
+    "predicted_accelerations",
     "prediction_error",
+    "prepare_problem",
     "Prepared",
     "Problem",
     "progress_enabled",
@@ -760,11 +805,15 @@ __all__ = [
     "record_offsets",
     "record_residual_scale",
     "record_rests",
+    "RECORD_WEIGHTS",
     "recorded_loss",
     "RecordFriction",
     "RecordOffsets",
+    "records_less_offsets",
     "reference_search",
     "refine_by_simulation",
+    "refinement_method",
+    "refinement_options",
     "RefinementStatistics",
     "Refitted",
     "relative_position_error",
@@ -773,6 +822,7 @@ __all__ = [
     "resample",
     "residual_tests",
     "Rest",
+    "rest_search_off",
     "rest_stretches",
     "rests_under_load",
     "RestUnderLoad",
@@ -783,10 +833,12 @@ __all__ = [
     "savitzky_golay",
     "score_flights",
     "score_surrogate",
+    "screens_off",
     "search_period",
     "segment_clustered_covariance",
     "serial_bandwidth",
     "serial_covariance",
+    "sg_window",
     "shifted",
     "short_horizon_note",
     "Simulation",
@@ -821,7 +873,9 @@ __all__ = [
     "thrust_frame_slopes",
     "thrust_parameters",
     "Transcription",
+    "trim_and_decimation",
     "tsqr_r",
+    "typical_step_covers",
     "usable_segments",
     "valid_starts",
     "vehicle_rollout",

@@ -66,9 +66,18 @@ import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
 from dynax import AbstractJointTerm, held_out_error  # noqa: E402
-from dynax._identify import _refine  # private: record weights, which no setting chooses
-from dynax._identify import _stages as identify_module  # noqa: E402  # private: variants no setting chooses
-from dynax.internal import log_ratio_differences, paired_block_test  # noqa: E402
+from dynax.internal import (  # noqa: E402
+    DEFAULT_RECORD_WEIGHTS,
+    filter_rule,
+    log_ratio_differences,
+    noise_floor_and_band,
+    paired_block_test,
+    RECORD_WEIGHTS,
+    refinement_method,
+    refinement_options,
+    RefinementStatistics,
+    trim_and_decimation,
+)
 
 RUNS = ("00", "01", "02", "03", "05", "12")
 HORIZONS = (0.1, 0.25, 0.5)
@@ -176,37 +185,27 @@ def cell_tests(model, lab, record, horizons) -> list[dict]:
     return out
 
 
-def _band_from_positions() -> None:
-    """Patch `choose_filter` (where identify's stages import it) to read each record's band from its
-    angles' spectra: the widest angle band, with the trim and decimation that go with it."""
-    from dynax._data import _spectra as _defaults  # private: a band rule no setting chooses
-    from dynax._identify import _equations  # private: likewise
-
-    velocity_rule = _defaults.choose_filter
-
-    def choose_filter(trajectory, *, snr=100.0):
-        choice = velocity_rule(trajectory, snr=snr)
-        if choice.cutoff_hz is None:
-            return choice
-        fs = 1.0 / trajectory.dt
-        n = len(trajectory.state_names) // 2
-        bands = {
-            name: _defaults.noise_floor_and_band(np.asarray(trajectory.xs[:, k]), fs, snr=snr)[1]
-            for k, name in enumerate(trajectory.state_names[n:])
-        }
-        band = max(bands.values())
-        trim, decimate = _defaults.trim_and_decimation(fs, band, len(trajectory))
-        return dataclasses.replace(
-            choice,
-            cutoff_hz=band,
-            trim=trim,
-            decimate=decimate,
-            band_hz=bands,
-            reason=f"band from the angles' spectra: {band:.3g} Hz",
-        )
-
-    for module in (_defaults, _equations, identify_module, _refine):
-        module.choose_filter = choose_filter
+def band_from_positions(trajectory, choice, *, snr=100.0):
+    """A `filter_rule`: each record's band read from its angles' spectra instead of its velocities' (the widest
+    angle band, with the trim and decimation that go with it), where the velocities' rule filters at all."""
+    if choice.cutoff_hz is None:
+        return choice
+    fs = 1.0 / trajectory.dt
+    n = len(trajectory.state_names) // 2
+    bands = {
+        name: noise_floor_and_band(np.asarray(trajectory.xs[:, k]), fs, snr=snr)[1]
+        for k, name in enumerate(trajectory.state_names[n:])
+    }
+    band = max(bands.values())
+    trim, decimate = trim_and_decimation(fs, band, len(trajectory))
+    return dataclasses.replace(
+        choice,
+        cutoff_hz=band,
+        trim=trim,
+        decimate=decimate,
+        band_hz=bands,
+        reason=f"band from the angles' spectra: {band:.3g} Hz",
+    )
 
 
 def main(argv=None):
@@ -223,8 +222,8 @@ def main(argv=None):
     )
     parser.add_argument(
         "--record-weights",
-        choices=_refine.RECORD_WEIGHTS,
-        default=_refine.DEFAULT_RECORD_WEIGHTS,
+        choices=RECORD_WEIGHTS,
+        default=DEFAULT_RECORD_WEIGHTS,
         help="weights of the records in the output-error refinement (default: %(default)s)",
     )
     parser.add_argument(
@@ -263,22 +262,26 @@ def main(argv=None):
         help="the spectra the filter band is read from (default: %(default)s, identify's)",
     )
     args = parser.parse_args(argv)
-    if args.band_from == "positions":
-        _band_from_positions()
+    with filter_rule(band_from_positions if args.band_from == "positions" else None):
+        with refinement_options(record_weights=args.record_weights):
+            fit_folds(args)
+
+
+def refinement(train, method, args):
+    """identify's default refinement of `train` (`"auto"`), with `--segment-band-hz` and `--stagger` applied."""
+    if args.segment_band_hz is None and args.stagger is None:
+        return "auto"
+    default = refinement_method("auto", dynax.DoublePendulum(), method, train)
+    if default is None:
+        return False
     if args.segment_band_hz is not None:
-        identify_module._signal_band_hz = lambda trajectories: args.segment_band_hz
+        default = dataclasses.replace(default, segment_s=1.0 / args.segment_band_hz)
     if args.stagger is not None:
-        default_method = identify_module._refinement_method
-        identify_module._refinement_method = lambda *a: (
-            lambda m: m if m is None else dataclasses.replace(m, stagger=args.stagger)
-        )(default_method(*a))
-    refinements = []  # what the refinement did (record weights), seen through a thin wrapper
+        default = dataclasses.replace(default, stagger=args.stagger)
+    return default
 
-    def refine(*a, **k):
-        refinements.append(_refine.refine_by_simulation(*a, record_weights=args.record_weights, **k))
-        return refinements[-1]
 
-    identify_module.refine_by_simulation = refine
+def fit_folds(args):
     results = {"horizons_s": list(HORIZONS), "runs": {}}
     for part in args.merge:
         results["runs"].update(json.loads((part / "results.json").read_text())["runs"])
@@ -290,13 +293,17 @@ def main(argv=None):
         train = [training[r] for r in RUNS if r != held]
         start = time.perf_counter()
         offsets = {"auto": "auto", "force": True, "angles": "angles"}[args.offsets]
+        method = dynax.Dynamic(offsets=offsets)
         result = dynax.identify(
             dynax.DoublePendulum(),
             train,
-            dynax.Dynamic(offsets=offsets),
+            method,
             friction="coulomb",
+            refine=refinement(train, method, args),
             validation=dynax.Validate([runs[held]], horizons_s=HORIZONS),
         )
+        refined = result.stages[-1].solution.statistics  # the output-error refinement's
+        assert isinstance(refined, RefinementStatistics)
         seconds = time.perf_counter() - start
         lab_error = held_out_error(lab, [runs[held]], HORIZONS)
         paired = cell_tests(result.system, lab, runs[held], HORIZONS)
@@ -317,9 +324,9 @@ def main(argv=None):
             "segment_s": stages["output_error"].get("segment_s"),
             "stagger": args.stagger,
             "training_runs": [r for r in RUNS if r != held],
-            "record_weights": list(refinements[-1].statistics.record_weights),
-            "record_residual_scale": list(refinements[-1].statistics.record_sigma),
-            "reweights": refinements[-1].statistics.reweights,
+            "record_weights": list(refined.record_weights),
+            "record_residual_scale": list(refined.record_sigma),
+            "reweights": refined.reweights,
             "input_timing": stages["output_error"].get("input_timing"),
             "offsets": args.offsets,
             "angle_zeros": None if result.angle_zeros is None else result.angle_zeros.to_json(),

@@ -24,7 +24,7 @@ each of the four cases:
 - `overlapping-diagnosis` (`--part overlapping-diagnosis`, run apart): the battery's whole diagnosis of the missed case
   (`tests.hidden_cases.diagnose_case`) with every window the diagnosis cuts end to end (the fits' training windows,
   and the output-error screening's held-out windows of the fit's length) started every quarter window instead: a
-  what-if, made by wrapping `dynax._diagnose._problem.make_windows` for this run only (no setting exposes it).
+  what-if, run inside `dynax.internal.overlapping_fit_windows(4)` (no setting of `diagnose` makes it).
 
     nice -n 5 python experiments/rotor_identifiability.py [OUT] [--draws N] [--part independent|overlapping-diagnosis]
 
@@ -147,20 +147,12 @@ def draw(case, noise_seed=None, noise_scale=1.0, stride_fraction=1.0, starts=())
 
 
 def overlapping_diagnosis(out, start, name="double_pendulum-rotor_inertia@q2-0.025-mass_matrix", div=4):
-    import dynax._diagnose._problem as problem  # private: overlapping windows, which no setting makes
+    from dynax.internal import overlapping_fit_windows
     from tests.hidden_cases import diagnose_case, outcome
 
-    plain = problem.make_windows
-
-    def quarter(trajectories, n_steps, stride, **kw):  # the training windows (end to end) only
-        return plain(trajectories, n_steps, max(1, n_steps // div) if stride == n_steps > 1 else stride, **kw)
-
-    problem.make_windows = quarter
-    try:
+    with overlapping_fit_windows(div):  # the fit windows (end to end) start every 1/div of a window instead
         case = {c.name: c for c in CASES}[name]
         j = diagnose_case(case).to_json()
-    finally:
-        problem.make_windows = plain
     o = outcome(case, j)
     refitted = [c for c in j["candidates"] if "gain" in c]
     stopped = {f"{c['cause']}@{c['where']}": c.get("stopped_by") for c in j["rounds"][0]["candidates"]}

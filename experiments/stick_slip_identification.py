@@ -33,6 +33,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
+from dynax.internal import rest_search_off  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from tests.hidden_cases import CASES, records  # noqa: E402
@@ -114,14 +115,8 @@ def no_rest(swinging, out):
     data = list(records(swinging))
     result, seconds = fit(data)
     terms = [t for t in getattr(result.system, "terms", ()) if isinstance(t, dynax.Stiction)]
-    from dynax._identify import _stages as identify_module  # private: the rest search off; no setting does
-
-    search = identify_module._holds_at_rest
-    identify_module._holds_at_rest = lambda system: False
-    try:
+    with rest_search_off():
         before, _ = fit(data)
-    finally:
-        identify_module._holds_at_rest = search
     out["swinging"] = {
         "fit_seconds": seconds,
         "stiction_terms": len(terms),

@@ -6,7 +6,7 @@
 `identify` runs as in `experiments/stick_slip_identification.py` (defaults, `Dynamic(static_friction=True)`,
 `friction="coulomb"`, refinement on, `holdout=0`) on the battery's records with a rest that ends in a breakaway:
 stiction of 0.8 N m at the shoulder (`shoulder`) and a sticking Coulomb friction of 0.5 N m at the elbow
-(`coulomb`). The least-squares stage and the records the refinement fitted are kept, and the rests are read again
+(`coulomb`). The least-squares stage and the refined one are kept, and the rests are read again
 (the same `static_friction_rests`, `joint_levels`) with the least-squares rigid body, with the refined one (in the
 refinement's terms, rotor inertia at the elbow included, its `Stiction` left out), and with the truth's; each on
 the records less the least-squares stage's per-record force offsets (as the refinement sees them, and as the
@@ -19,6 +19,7 @@ or not) instead of only the loaded ones, and the level read with it. Writes `OUT
 """
 
 import argparse
+import contextlib
 import json
 import pathlib
 import sys
@@ -30,12 +31,12 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax._identify import _stages  # noqa: E402  # private: a spy: no result carries them
-from dynax._identify._ls_stage import less_offsets  # noqa: E402  # private: no public call returns them
 from dynax.internal import (  # noqa: E402
+    all_rests_left_out,
     joint_levels,
     parameter_names,
     record_rests,
+    records_less_offsets,
     static_friction_rests,
     with_friction,
 )
@@ -69,35 +70,20 @@ def read(values: dict, data, rests, covariance=None) -> dict:
     return {j.name: {"level": j.level, "kind": j.kind, "lower_bound": j.lower_bound} for j in levels}
 
 
-def fit(data, refine="auto"):
-    """`identify` as the stick-slip experiment runs it, with the least-squares stage, the records fitted and the
-    refined solution caught on their way through."""
-    caught = {}
-    original = _stages._refined_stage
-
-    def spy(ls, start, fitted_and_simulated, *rest):
-        stage = original(ls, start, fitted_and_simulated, *rest)
-        caught.update(ls=ls, fitted=fitted_and_simulated[0], solution=stage.solution)
-        return stage
-
-    _stages._refined_stage = spy
-    try:
-        result, seconds = identify_as_stick_slip(data, refine=refine)
-    finally:
-        _stages._refined_stage = original
-    return result, caught, seconds
-
-
 def reread(part: str) -> dict:
     (case,) = [c for c in CASES if c.name == CASE_NAMES[part]]
-    data = list(records(case))
-    result, caught, seconds = fit(data)
-    ls, fitted, solution = caught["ls"], caught["fitted"], caught["solution"]
+    fitted = list(records(case))  # `holdout=0`: every record is fitted, as it is
+    result, seconds = identify_as_stick_slip(fitted)
+    ls, refined = result.stages[0], result.stages[-1]
+    assert ls.kind == dynax.StageKind.LEAST_SQUARES and refined.kind == dynax.StageKind.OUTPUT_ERROR
     rests = record_rests(fitted)
-    seen = less_offsets(ls.system, fitted, ls)
+    offsets = ls.offsets  # each record's force offsets at the driven joints, fitted with the parameters
+    seen = (
+        fitted if offsets is None else records_less_offsets(result.system, fitted, offsets["joints"], offsets["values"])
+    )
     fits = {
-        "least squares": {n: float(v) for n, v in zip(ls.names, np.asarray(ls.estimate))},
-        "refined": {n: float(v) for n, v in zip(solution.names, np.asarray(solution.value))},
+        "least squares": {n: float(v) for n, v in zip(ls.names, np.asarray(ls.solution.value))},
+        "refined": {n: float(v) for n, v in zip(refined.names, np.asarray(refined.solution.value))},
     }
     truth = dict(zip(parameter_names(with_friction(dynax.DoublePendulum(), "coulomb"), "coulomb"), truth_theta(case)))
     truth = {n: float(v) for n, v in truth.items()}
@@ -105,12 +91,9 @@ def reread(part: str) -> dict:
         "fit_seconds": seconds,
         "truth": {"fs": case.size, "joint": case.where},
         "returned": {j.name: {"level": j.level, "refined": j.refined} for j in result.static_friction.joints},
-        "offsets": {"records": [r.source for r in fitted], "joints": list(ls.driven)}
-        | {"values": np.asarray(ls.fitted_offsets).tolist()},
+        "offsets": {"records": [r.source for r in fitted]}
+        | ({"joints": [], "values": None} if offsets is None else {k: offsets[k] for k in ("joints", "values")}),
         "parameters": fits | {"truth": truth},
-        "records the same as recorded": all(
-            np.array_equal(f.xs, d.xs) and np.array_equal(f.us, d.us) for f, d in zip(fitted, data)
-        ),
     }
     read_with = {}
     for name, values in {**fits, "truth": truth}.items():
@@ -133,13 +116,8 @@ def every_rest_out(part: str) -> dict:
     data = list(records(case))
     row = {}
     for label, everything in (("loaded rests out", False), ("every rest out", True)):
-        original = _stages._loaded_rests
-        if everything:
-            _stages._loaded_rests = lambda static, rests, labels: rests
-        try:
-            result, _, _ = fit(data, refine=False)
-        finally:
-            _stages._loaded_rests = original
+        with all_rests_left_out() if everything else contextlib.nullcontext():
+            result, _ = identify_as_stick_slip(data, refine=False)
         row[label] = {
             "levels": {j.name: {"level": j.level, "kind": j.kind} for j in result.static_friction.joints},
             "rows_left_out": result.static_friction.rows_left_out,

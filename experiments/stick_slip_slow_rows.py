@@ -39,7 +39,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax._identify import _ls_stage, _stages  # noqa: E402  # private: rows caught, reweighted; no setting
+from dynax._identify import _ls_stage, _stages  # noqa: E402  # private: rows caught, rule swapped
 from dynax.internal import parameter_names, with_friction  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))

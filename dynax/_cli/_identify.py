@@ -201,6 +201,13 @@ def _method(args):
     return SimulationFit(segment_s=args.segment)
 
 
+def method_from_args(args):
+    """The identification method that parsed `dynax identify` arguments choose: `--method` with its filter
+    settings and `--offsets`, and the static level where `--static-friction` asks. Raises `UsageError` for a
+    setting out of range or a flag that does not apply to the method."""
+    return with_static_friction(_method(args), args)
+
+
 def _system(name):
     from .._model import Acrobot, DoublePendulum, LinearAxis
 
@@ -227,7 +234,7 @@ def run(args: argparse.Namespace) -> int:
     friction = args.friction or ("coulomb" if args.system == "linear_axis" else "viscous")
     if args.system == "helicopter" and args.friction is not None:
         raise UsageError("--friction does not apply to the helicopter")
-    method = with_static_friction(_method(args), args)
+    method = method_from_args(args)
     data_options(args)  # a malformed --map, --scale or --offset is refused before any work
     out = output_file(args.out, "parameters.json")
     if args.holdout is not None and not 0 <= args.holdout < 1:

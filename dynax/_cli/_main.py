@@ -64,7 +64,15 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv=None) -> int:
+def main(argv=None, *, run=None) -> int:
+    """The `dynax` command: parse `argv` (default `sys.argv[1:]`), check the output path, turn on the compilation
+    cache, run the sub-command under the progress mode `--quiet`/`--progress` choose, and map what it raises to
+    the exit status (2 bad input or usage, 130 interrupted, 1 internal failure).
+
+    `run`: a function `run(args) -> int` called in place of the sub-command's own, with everything around it
+    as it is: for checking what `main` does around a command (the progress mode it runs under, the status of
+    what it raises) without the command's work.
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
     from .._progress import progress_mode
@@ -74,7 +82,7 @@ def main(argv=None) -> int:
         check_command_output(args)  # before any work: a bad --out costs a second, not a fit
         enable_compilation_cache(disabled=args.no_cache)
         with progress_mode(mode):
-            return int(args.run(args) or 0)
+            return int((run or args.run)(args) or 0)
     except (DataError, UsageError) as e:
         print(f"dynax {args.command}: error: {e}", file=sys.stderr)
         return 2

@@ -78,13 +78,15 @@ def simulate_closed_loop(
     if ts.ndim != 1 or ts.shape[0] < 2:
         raise ValueError(f"simulate_closed_loop: `ts` must be 1-d with at least 2 samples, got shape {ts.shape}")
     dtype = jnp.result_type(x0, ts, float)
-    return _closed_loop(system, controller, x0.astype(dtype), ts.astype(dtype), method, divergence_bound)
+    return closed_loop_rollout(system, controller, x0.astype(dtype), ts.astype(dtype), method, divergence_bound)
 
 
 # Compiled once per plant and controller structure, method and grid shape (as `simulate`'s rollout):
 # called eagerly, a bare `lax.scan` over a closure made anew on every call is compiled on every call.
 @eqx.filter_jit
-def _closed_loop(system, controller, x0, ts, method, divergence_bound):
+def closed_loop_rollout(system, controller, x0, ts, method, divergence_bound):
+    """`simulate_closed_loop`'s rollout: `controller(t, x)` held over each interval of `ts` as the input of
+    `system` from `x0`. Compiled (`filter_jit`); its `__wrapped__` is the bare `lax.scan`."""
     dtype = x0.dtype
     advance = sample_interval(system, method, divergence_bound)
 

@@ -49,6 +49,7 @@ import warnings
 import numpy as np
 
 from .._errors import DataError, UsageError
+from ._screens import SCREENS
 from ._trajectory import Trajectory
 from ._velocities import BLOCK_S, velocity_pairs
 
@@ -244,7 +245,7 @@ def median_reach(x: np.ndarray, window: int, steps: np.ndarray | None = None) ->
     return float(np.max(reaches))  # numpy's maximum carries a NaN through (Python's `max` may drop it)
 
 
-def _typical_step_covers(steps: np.ndarray, reach: float) -> bool:
+def typical_step_covers(steps: np.ndarray, reach: float) -> bool:
     """Whether `reach <= GLITCH_STEPS * typical` with `glitch_findings`' typical step (1.4826 times `np.median(steps)`)
     holds, decided without the median where a count can: numpy's median is the middle sorted value or the
     mean of the two middle ones, so it is at least `low` where at most `(len - 1) // 2` steps are below `low`,
@@ -266,13 +267,15 @@ def glitch_findings(tr, ts, source, columns, positions=None):
     n = len(ts)
     if n < 2 * GLITCH_WINDOW:
         return out
+    screened = SCREENS.get()
     for name, x, is_input in columns:
         steps = np.abs(np.diff(x))
         # the threshold is at least GLITCH_STEPS typical steps: a column whose samples stay that close to
         # their neighbours within the running median's reach has no glitch, whatever its range; a count
         # says whether the median step is large enough for that before the median itself is taken
-        reach = median_reach(x, GLITCH_WINDOW, steps)
-        if _typical_step_covers(steps, reach):
+        # (screens off: no reach is known, and every column is searched)
+        reach = median_reach(x, GLITCH_WINDOW, steps) if screened else math.inf
+        if typical_step_covers(steps, reach):
             continue
         typical = float(np.median(steps)) * 1.4826 + 1e-300
         if reach <= GLITCH_STEPS * typical:
@@ -368,9 +371,10 @@ def _under_half_turn(steps: np.ndarray) -> bool:
 
 def _wrapped(tr, ts, source, angles):
     out = []
+    screened = SCREENS.get()
     for name, x in angles:
         steps = np.diff(x)
-        if _under_half_turn(steps):
+        if screened and _under_half_turn(steps):
             continue
         typical = float(np.median(np.abs(steps))) + 1e-300
         turns = np.round(steps / (2 * np.pi))

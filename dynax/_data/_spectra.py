@@ -31,6 +31,9 @@ the spectral tail of the motion itself).
     decimation).
 """
 
+from collections.abc import Callable
+import contextlib
+import contextvars
 import dataclasses
 
 import numpy as np
@@ -199,14 +202,38 @@ def _reads_itself(trajectory: Trajectory) -> bool:
     return trajectory.system == "linear_axis" or tuple(trajectory.state_names) == ("q", "dq")
 
 
+# `filter_rule`'s rule, or None
+FILTER_RULE: contextvars.ContextVar[Callable | None] = contextvars.ContextVar("dynax_filter_rule", default=None)
+
+
+@contextlib.contextmanager
+def filter_rule(rule):
+    """Within the block, every filter dynax chooses from the data (`choose_filter`: the dynamic model's
+    `"auto"` settings, the refinement's segments and filtered positions) is `rule(trajectory, choice, snr=snr)`:
+    the `FilterChoice` read from the velocities' spectra handed to `rule`, which returns the one to use. For
+    trying another band rule through the whole pipeline."""
+    token = FILTER_RULE.set(rule)
+    try:
+        yield
+    finally:
+        FILTER_RULE.reset(token)
+
+
 def choose_filter(trajectory: Trajectory, *, snr: float = 100.0) -> FilterChoice:
     """Pick the low-pass cut-off, order, trim and decimation for the dynamic model from one record.
 
     **Arguments:** `trajectory` (resampled to its median interval first if irregular), `snr` as in
     `noise_floor_and_band`.
 
-    **Returns:** a `FilterChoice` (see the module notes for the rules).
+    **Returns:** a `FilterChoice` (see the module notes for the rules; inside `filter_rule`, that rule's).
     """
+    choice = _spectral_choice(trajectory, snr)
+    rule = FILTER_RULE.get()
+    return choice if rule is None else rule(trajectory, choice, snr=snr)
+
+
+def _spectral_choice(trajectory: Trajectory, snr: float) -> FilterChoice:
+    """`choose_filter`'s choice from the velocities' spectra."""
     fs = 1.0 / trajectory.dt
     nyquist = 0.5 * fs
     names = trajectory.state_names

@@ -17,6 +17,7 @@ record that barely moves cannot tell, and is let through.
 import numpy as np
 
 from .._errors import DataError
+from ._screens import SCREENS
 
 BLOCK_S = 0.05  # block duration [s]: long against the encoder noise, short against the motion
 MIN_BLOCKS = 20  # fewer blocks than this: too short to tell, no check
@@ -91,7 +92,7 @@ def _gain_of(blocks):
     return float(slopes @ means) / ss, slopes, means, ss
 
 
-def _surely_within(slopes: np.ndarray, means: np.ndarray, error: float) -> bool:
+def gain_surely_within(slopes: np.ndarray, means: np.ndarray, error: float) -> bool:
     r"""Whether `_block_gain`'s gain `float(slopes @ means) / float(slopes @ slopes)` is surely within `error`
     of 1, read from numpy's sums of the products instead of the two BLAS dot products (on a record of
     100,000 samples these wake BLAS's threads, which cost more than the rest of the check): any order of
@@ -179,10 +180,11 @@ def check_velocities(
     columns, scale = columns or {}, scale or {}
     named = lambda n: f"'{columns.get(n, n)}'" + (f" ({n})" if columns.get(n, n) != n else "")  # noqa: E731
     edges = stretch_edges(np.asarray(ts, dtype=float)) if pairs else None
+    screened = SCREENS.get()
     for velocity, position in pairs.items():
         # the gain alone decides where it is within `MAX_GAIN_ERROR` of 1 (never refused, whatever its error)
         blocks = _block_slopes(ts, values[position], values[velocity], edges)
-        if blocks is None or _surely_within(*blocks, MAX_GAIN_ERROR):
+        if blocks is None or (screened and gain_surely_within(*blocks, MAX_GAIN_ERROR)):
             continue
         first = _gain_of(blocks)
         if first is None or abs(first[0] - 1.0) <= MAX_GAIN_ERROR:

@@ -213,15 +213,23 @@ def _scores(problem: Problem, yard: Yardstick, errors, cv_errors):
     return np.concatenate([scores, window_scores(cv_errors, yard.n_ref, problem.state_scale)], axis=1)
 
 
-def _screen(problem: Problem, current_slots, current_p, remaining, round_, say):
-    """Screen: every remaining candidate's linearised held-out gain on one-step residuals; the shortlist."""
-    say(f"round {round_ + 1}: screening {len(remaining)} candidates on one-step residuals ...")
+def _starting_point(problem: Problem):
+    """The first round's configuration: no candidate in any slot, the nominal parameters, every coefficient zero."""
+    o = problem.selection
+    slots = -np.ones(o.max_terms, int)
+    p0 = np.concatenate([np.asarray(nominal_values(problem.system, problem.names), float), np.zeros(o.max_terms + 1)])
+    return slots, p0
+
+
+def _screened(problem: Problem, current_slots, current_p, remaining):
+    """Each of `remaining`'s linearised held-out gain on one-step residuals and its step (`screen`), from the
+    configuration `current_slots`, `current_p`."""
     dtype = problem.family.neutral.dtype
     n_nom = len(problem.names)
     coefficients = problem.family.coefficients(
         jnp.asarray(current_slots), jnp.asarray(-1), jnp.asarray(current_p, dtype)
     )
-    gains, deltas = screen(
+    return screen(
         problem.family,
         current_p[:n_nom],
         np.asarray(coefficients),
@@ -231,6 +239,23 @@ def _screen(problem: Problem, current_slots, current_p, remaining, round_, say):
         acceleration_residuals,
         cross_fit=bool(problem.folds),
     )
+
+
+def first_screening(problem: Problem) -> dict[str, tuple[float, float]]:
+    """`diagnose`'s first-round screening of a prepared `problem` (`prepare_problem`): for every searchable
+    candidate, by its label, its linearised held-out gain on one-step residuals and the coefficient step the
+    screening estimates (the start its refit takes where that is physical and moderate)."""
+    slots, p0 = _starting_point(problem)
+    gains, deltas = _screened(problem, slots, p0, list(problem.searchable))
+    system = problem.family.model.system
+    labels = [problem.family.model.terms[k].label(system) for k in problem.searchable]
+    return {label: (float(g), float(d)) for label, g, d in zip(labels, gains, deltas)}
+
+
+def _screen(problem: Problem, current_slots, current_p, remaining, round_, say):
+    """Screen: every remaining candidate's linearised held-out gain on one-step residuals; the shortlist."""
+    say(f"round {round_ + 1}: screening {len(remaining)} candidates on one-step residuals ...")
+    gains, deltas = _screened(problem, current_slots, current_p, remaining)
     short = choose_shortlist(problem.look_alikes, remaining, gains, problem.selection.shortlist)
     if round_ == 0:
         short = with_rest_evidence(problem, remaining, gains, short)
@@ -613,8 +638,7 @@ class Forward:
 def forward_selection(problem: Problem, say) -> Forward:
     """Fit the nominal model, show what is wrong, then per round screen, refit and select."""
     o = problem.selection
-    slots = -np.ones(o.max_terms, int)
-    p0 = np.concatenate([np.asarray(nominal_values(problem.system, problem.names), float), np.zeros(o.max_terms + 1)])
+    slots, p0 = _starting_point(problem)
     nominal = yard = current = None
     table, last, rounds = [], {}, []
     for index in range(o.max_terms):

@@ -3,6 +3,8 @@ prepared records, candidate family, identifiable candidates and windows (`prepar
 """
 
 from collections.abc import Callable
+import contextlib
+import contextvars
 import dataclasses
 import functools
 from typing import NamedTuple
@@ -41,6 +43,30 @@ from ._settings import DEFAULT_HORIZONS_S, Horizons, Selection
 # A static friction level counts as stiction when it stands this share above the joint's Coulomb level (and two
 # standard errors): a breakaway within a tenth of the sliding level is not told from Coulomb friction by data.
 STATIC_MARGIN = 0.1
+
+
+FIT_WINDOW_STARTS = contextvars.ContextVar("dynax_fit_window_starts", default=1)  # `overlapping_fit_windows`
+
+
+@contextlib.contextmanager
+def overlapping_fit_windows(starts: int):
+    """Within the block, `diagnose` cuts its records into fit windows that start every `1 / starts` of a window
+    (the training windows, and the held-out runs cut alike for the output-error screening) instead of end to
+    end: each sample then enters `starts` windows. For trying whether overlapping windows determine more."""
+    if not (isinstance(starts, int) and starts >= 1):
+        raise UsageError(f"overlapping_fit_windows: `starts` must be a positive integer, got {starts!r}")
+    token = FIT_WINDOW_STARTS.set(starts)
+    try:
+        yield
+    finally:
+        FIT_WINDOW_STARTS.reset(token)
+
+
+def fit_windows(records, n_fit: int) -> Windows:
+    """`records` cut into the fit's windows of `n_fit` steps: end to end (inside `overlapping_fit_windows`,
+    overlapping)."""
+    stride = max(1, n_fit // FIT_WINDOW_STARTS.get()) if n_fit > 1 else n_fit
+    return make_windows(records, n_fit, stride)
 
 
 class Fold(NamedTuple):
@@ -152,7 +178,7 @@ class Problem:
         output-error screening scores its steps on them, with the training windows' shape, so one compilation
         serves both and every round."""
         n_fit = self.train_windows.ts.shape[1] - 1
-        return make_windows(self.validation, n_fit, n_fit)
+        return fit_windows(self.validation, n_fit)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -388,7 +414,7 @@ def prepare_problem(system, train, validation, candidates, mode, horizons: Horiz
         not_identifiable=not_identifiable,
         partners=partners,
         fit_window_s=fit_window_s,
-        train_windows=make_windows(train_records, n_fit, n_fit),
+        train_windows=fit_windows(train_records, n_fit),
         val_windows=val_windows,
         window_runs=np.asarray(val_windows.starts)[:, 0],
         val_stride=val_stride,

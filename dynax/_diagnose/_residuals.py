@@ -32,6 +32,8 @@ from ._probe import cross_validated_ridge, ridge_fit
 
 
 def sg_window(dt: float) -> int:
+    """The Savitzky-Golay window (samples: odd, at least 7, about 0.1 s) that smooths a record sampled every `dt`
+    for its one-step residuals."""
     w = int(round(0.1 / dt)) | 1
     return max(w, 7)
 
@@ -70,7 +72,7 @@ _INTERVAL_SUBSTEPS = 4  # RK4 steps per sample interval of the one-step incremen
 
 
 @eqx.filter_jit
-def _interval_increments(model, ts, xs_smooth, us, idx):
+def interval_increments(model, ts, xs_smooth, us, idx):
     """The model's velocity increment over each sample interval under the held input: one RK4 integration
     (`_INTERVAL_SUBSTEPS` steps) from the smoothed state and the input terms' internal state at the interval's
     start. Exact to the integrator's order where a trapezoid of the end accelerations is not: an input lag's
@@ -122,7 +124,7 @@ MIN_PADDED = 256
 
 def padded_length(n: int) -> int:
     """The samples a record of `n` samples is evaluated on by the jitted per-sample functions here
-    (`predicted_accelerations`, `_interval_increments`, `hidden_trajectory`, the screening's directions): the next
+    (`predicted_accelerations`, `interval_increments`, `hidden_trajectory`, the screening's directions): the next
     power of two, at least `MIN_PADDED`.
 
     Each is compiled once per shape, and whole flight logs each have their own length: three flights cost three
@@ -245,7 +247,7 @@ def acceleration_residuals(model, trajectory):
         # input from the interval's start, and differentiate the accumulated difference with the same filter.
         interval_model, interval_us, _ = exact_delays(given, trajectory, interval=True)
         _, interval_p = padded(ts, interval_us)
-        increments = _interval_increments(interval_model, ts_p, xs_p, interval_p, jnp.asarray(idx))[: n - 1]
+        increments = interval_increments(interval_model, ts_p, xs_p, interval_p, jnp.asarray(idx))[: n - 1]
         drift = jnp.diff(trajectory.xs[:, idx], axis=0) - increments
         accumulated = jnp.concatenate([jnp.zeros((1, len(idx)), drift.dtype), jnp.cumsum(drift, axis=0)])
         measured = predicted + savitzky_golay(ts, accumulated, window=w, order=3, deriv=1)

@@ -47,6 +47,7 @@ class _LeastSquaresStage(eqx.Module):
     friction: RecordFriction | None = None
     serial: dict | None = None  # what the errors robust to serial correlation changed (`_serially_robust`)
     rest_rows: tuple[int, int] = (0, 0)  # (rows at rest given zero weight, rows)
+    joint_weights: dict | None = eqx.field(static=True, default=None)  # `Dynamic(weighting="joint")`: joint -> weight
 
 
 def joint_positions(system, trajectories):
@@ -94,6 +95,7 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
         n_joints = raw_a.shape[0] // sum(counts)
         keep = rest_row_weights(trajectories, settings, counts, rests, n_joints)
         keep = slow_row_weights(keep, system, trajectories, settings, counts, n_joints)
+    joint_weight = None
     if method.joint_weighted and weights is None:
         # Each joint's residual variance from an ordinary fit of the equations that will be solved.
         plain = (raw_a, raw_y) if groups is None else without_offsets(raw_a, raw_y, keep, groups)[:2]
@@ -106,6 +108,8 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
         if keep is not None:  # the mean square over the kept rows of each joint
             share = keep.reshape(n_joints, -1).mean(axis=1)
             weights = weights * jnp.asarray(np.repeat(share, len(keep) // n_joints), weights.dtype)
+        per_joint = np.asarray(weights).reshape(n_joints, -1)[:, 0]  # one weight for each joint's block of rows
+        joint_weight = dict(zip(split_terms(system)[0].joint_names, map(float, per_joint)))
     if keep is not None:
         weights = jnp.asarray(keep, raw_a.dtype) * (1.0 if weights is None else jnp.asarray(weights, raw_a.dtype))
     a, y = raw_a, raw_y
@@ -180,6 +184,7 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
         per_record_friction,
         serial,
         (0 if keep is None else int(np.sum(keep == 0)), int(raw_a.shape[0])),
+        joint_weight,
     )
 
 
@@ -223,12 +228,19 @@ def less_offsets(system, records, ls):
     the refinement fits them; the records themselves where no offsets were fitted."""
     if ls.fitted_offsets is None:
         return records
+    return records_less_offsets(system, records, ls.driven, ls.fitted_offsets)
+
+
+def records_less_offsets(system, records, joints, offsets):
+    """`records` with each one's force offsets taken off its inputs (through `system`'s input matrix), as the
+    output-error refinement fits them: `offsets[r][k]` the offset of record `r`'s recorded force at the driven
+    joint `joints[k]` (the least-squares stage's `offsets`, `values` at `joints`)."""
     base = split_terms(system)[0]
     b = np.asarray(base.input_matrix())
     to_inputs = np.linalg.pinv(b)  # joint forces -> the inputs that produce them
-    rows = [base.joint_names.index(j) for j in ls.driven]
+    rows = [base.joint_names.index(j) for j in joints]
     out = []
-    for record, offset in zip(records, ls.fitted_offsets):
+    for record, offset in zip(records, offsets):
         force = np.zeros(b.shape[0])
         force[rows] = offset
         shift = to_inputs @ force

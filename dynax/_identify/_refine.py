@@ -52,6 +52,8 @@ has a floor of 1 in the residual's unit (the noise level) and of a tenth of the 
 so that no record a short or easy one fits almost exactly takes over the fit.
 """
 
+import contextlib
+import contextvars
 import warnings
 
 import equinox as eqx
@@ -306,6 +308,29 @@ def ml_weights(sigma: np.ndarray) -> np.ndarray:
     return weights / np.mean(weights)
 
 
+REFINEMENT_OPTIONS: contextvars.ContextVar[dict | None] = contextvars.ContextVar(
+    "dynax_refinement_options", default=None
+)
+_OPTIONS = ("filtered", "fit", "input_timing", "record_weights", "rests")
+
+
+@contextlib.contextmanager
+def refinement_options(**options):
+    """Within the block, `identify`'s output-error refinement calls `refine_by_simulation` with these keyword
+    arguments (`record_weights`, `input_timing`, `filtered`, `rests`; see there), and `fit`, where given, in place
+    of `fit_simulation_error` (called alike, returning its `Solution`). For comparing the refinement with a
+    variant of it inside the whole pipeline (another record weighting, no input timing, another solver), and for
+    driving its handling of a fit that ends worse than its start, which no known input forces."""
+    unknown = sorted(set(options) - set(_OPTIONS))
+    if unknown:
+        raise TypeError(f"refinement_options: unknown option(s) {unknown}; choose from {list(_OPTIONS)}")
+    token = REFINEMENT_OPTIONS.set(options)
+    try:
+        yield
+    finally:
+        REFINEMENT_OPTIONS.reset(token)
+
+
 def refine_by_simulation(
     system: AbstractSystem,
     names: tuple[str, ...],
@@ -329,7 +354,8 @@ def refine_by_simulation(
     `DEFAULT_RECORD_WEIGHTS` (`"ml"`); `input_timing` (default `True`): also fit the input timing
     $\alpha$ (`TimedInputs`, see the module's docstring), else drive the model by the zero-order
     hold as recorded; `rests` (each record's `rest_stretches`): windows start at zero speed where a joint
-    rests within its record's speed noise (`motion_records`).
+    rests within its record's speed noise (`motion_records`). Inside `refinement_options(fit=...)`, that
+    function is called in place of `fit_simulation_error`.
 
     **Returns:** the engine's `Solution` in the contract's base parameters: `model` the refined
     system, `value`, `names`, `std_errors` and `covariance` (the fit's, cluster-robust over blocks
@@ -379,8 +405,10 @@ def refine_by_simulation(
     )
     weights = np.ones(len(fitted)) if record_weights == "equal" else (1.0 / motion) / np.mean(1.0 / motion)
 
-    def fit(start, weights):
-        return fit_simulation_error(
+    output_error = (REFINEMENT_OPTIONS.get() or {}).get("fit", fit_simulation_error)
+
+    def fit_with(start, weights):
+        return output_error(
             start,
             fitted,
             method,
@@ -389,7 +417,7 @@ def refine_by_simulation(
             record_weights=weights,
         )
 
-    result = last = fit(wrapped, weights)
+    result = last = fit_with(wrapped, weights)
     initial_rms, steps = float(result.statistics.initial_residual_rms), int(result.steps)
     diverged = _ended_worse(result)
     if diverged:  # keep the start: the least-squares model, rotor inertia at zero
@@ -406,7 +434,7 @@ def refine_by_simulation(
         new = ml_weights(sigma)
         if np.max(np.abs(np.log(new / weights))) < np.log1p(SETTLED):
             break  # the weights the last fit used are (within 10 %) those its residuals imply
-        refit = fit(result.model, new)
+        refit = fit_with(result.model, new)
         steps += int(refit.steps)
         last = refit
         if _ended_worse(refit):

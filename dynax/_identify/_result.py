@@ -69,6 +69,8 @@ class Stage(eqx.Module):
       robust to serial correlation grew over those counting every row as independent, or `None`.
     - `records_disagree`: output error: the parameters whose leave-one-record-out error exceeds
       the within-record one `RECORDS_DISAGREE` times, name -> ratio.
+    - `joint_weights`: least squares with `Dynamic(weighting="joint")`: the weight of each joint's
+      equations (the inverse of its residual variance from a first ordinary fit), joint -> weight; else `None`.
     """
 
     kind: StageKind = eqx.field(static=True)
@@ -82,6 +84,7 @@ class Stage(eqx.Module):
     angle_zeros: AngleZeros | None = None
     serial_correlation: dict | None = eqx.field(static=True, default=None)
     records_disagree: dict[str, float] = eqx.field(static=True, default_factory=dict)
+    joint_weights: dict[str, float] | None = eqx.field(static=True, default=None)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -111,6 +114,7 @@ class Stage(eqx.Module):
                 angle_zeros=None if self.angle_zeros is None else self.angle_zeros.to_json(),
                 poorly_determined=self.poorly_determined,
                 serial_correlation=self.serial_correlation,
+                joint_weights=self.joint_weights,
             )
         elif self.kind == StageKind.OUTPUT_ERROR:
             stats = self.solution.statistics

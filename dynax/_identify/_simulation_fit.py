@@ -329,6 +329,7 @@ def fit_simulation_error(
     state_scale: Float[Array, " n_states"] | None = None,
     record_weights: Float[Array, " n_records"] | None = None,
     progress: bool | None = None,
+    solver=None,
 ) -> Solution:
     r"""Fit the elements of `system` selected by `filter_spec` by minimising the simulation error.
 
@@ -365,6 +366,9 @@ def fit_simulation_error(
     - `progress`: a bar per Levenberg-Marquardt iteration with the loss on stderr (`None`: when
       stderr is a terminal, see `dynax.internal.progress_mode`; `False` never).
     - `record_weights`: optional weight per trajectory multiplying its state residuals (default 1).
+    - `solver`: the Levenberg-Marquardt to minimise with, as `dynax.internal.levenberg_marquardt` builds it
+      (its tolerances then replace `method.rtol` and `method.atol`); default the engine's,
+      `levenberg_marquardt(rtol=method.rtol, atol=method.atol, jacobian="accepted", damping="nielsen")`.
     - `method.stagger`: $k$, how many cuts of the records into segments are fitted together, each starting
       $1/k$ of a segment after the one before (default 1: one cut). A model that is not exact fits
       a record differently depending on where its segments start (how far each sample is from its
@@ -440,7 +444,8 @@ def fit_simulation_error(
     )
     p_scale = jnp.where(jnp.abs(p0) > 0, jnp.abs(p0), 1.0).astype(dtype)
     scale = jnp.concatenate([p_scale, jnp.tile(sigma, xs.shape[0])]) if fit_initial_states else p_scale
-    solver = levenberg_marquardt(rtol=method.rtol, atol=method.atol, jacobian="accepted", damping="nielsen")
+    if solver is None:
+        solver = levenberg_marquardt(rtol=method.rtol, atol=method.atol, jacobian="accepted", damping="nielsen")
     # Only what shapes the compiled program is static (the continuity weight travels in `data`, the
     # tolerances in `solver`): one compilation per problem shape, whatever the segment length.
     program = SimulationFit(

@@ -10,6 +10,8 @@ r"""The stages `identify` runs for a method (`AbstractMethod`'s `prepare`, `fit_
   real two-link arm data the output-error refinement (`_refine.py`).
 """
 
+import contextlib
+import contextvars
 import dataclasses
 from typing import Any
 import warnings
@@ -43,7 +45,7 @@ from ._ls_stage import (
 )
 from ._method import AbstractMethod, Fitted, IdentifyJob, Prepared
 from ._offsets import record_labels, without_offsets
-from ._refine import refine_by_simulation, RefinementStatistics
+from ._refine import refine_by_simulation, REFINEMENT_OPTIONS, RefinementStatistics
 from ._regressors import split_terms
 from ._result import Identification, RecordsDisagreeWarning, Stage, StageKind
 from ._simulation_fit import SimulationFit
@@ -134,7 +136,7 @@ def least_squares_fit(method: AbstractLeastSquares, system, prepared: Prepared) 
         # those inside the Coulomb law's smoothing band (a joint that sticks there has a friction no law of
         # the speed follows, and one record's sign of misfit goes into its offset), and read the rests again
         # with that fit. A rest that holds nothing is an equation like any other.
-        loaded = _loaded_rests(static, rests, record_labels(fitted))
+        loaded = rests if EVERY_REST_OUT.get() else _loaded_rests(static, rests, record_labels(fitted))
         try:
             ls = least_squares_stage(system, fitted, method, friction, weights, rcond, consistency, loaded)
             static = _static_friction(ls, fitted, rests)
@@ -164,6 +166,7 @@ def least_squares_fit(method: AbstractLeastSquares, system, prepared: Prepared) 
         offsets=offsets_json(ls, fitted),
         angle_zeros=prepared.angle_zeros,
         serial_correlation=ls.serial,
+        joint_weights=ls.joint_weights,
     )
     state = LeastSquaresState(ls, static, rests)
     return Fitted(_ls_identification(prepared, state, (stage,), ls_model, poorly), (ls_model,), state)
@@ -179,7 +182,7 @@ def least_squares_refine(method: AbstractLeastSquares, system, prepared: Prepare
     records, job = prepared.records, prepared.job
     stages, models = fitted.identification.stages, fitted.models
     system_out, poorly = fitted.identification.system, fitted.identification.poorly_determined
-    refinement = _refinement_method(job.refine, ls.system, method, records)
+    refinement = refinement_method(job.refine, ls.system, method, records)
     if refinement is not None:
         # The windows start from the refinement's own velocities (a local fit of the positions), also at rest:
         # zeroed there by the validation's rule (`refine_by_simulation(..., rests=...)`) the held-out runs that
@@ -277,7 +280,7 @@ def _signal_band_hz(trajectories) -> float | None:
 STAGGER = 4  # staggered cuts of the records into segments in the default refinement
 
 
-def _refinement_method(refine, system, method, trajectories):
+def refinement_method(refine, system, method, trajectories):
     """The `SimulationFit` that refines the least-squares estimate, or `None`.
 
     `"auto"`: two-link arms whose velocities carry measurement noise (real data), with segments of
@@ -317,7 +320,8 @@ def _refined_stage(ls, start, records, method, friction, consistency, refinement
     simulation sees them), with its equation error on the least-squares rows of `fitted` and consistency
     (`identify` validates it)."""
     fitted, simulated = records
-    refined = refine_by_simulation(start, ls.names, simulated, refinement)
+    options = {k: v for k, v in (REFINEMENT_OPTIONS.get() or {}).items() if k != "fit"}  # `fit`: read there
+    refined = refine_by_simulation(start, ls.names, simulated, refinement, **options)
     estimate = jnp.asarray(refined.value)
     _, a, y, _, _, _, _, _, _, _ = stacked_equations(refined.model, fitted, method, friction, None, method.rcond)
     if ls.groups is not None:  # the same equations as the least-squares stage's: offsets free
@@ -336,8 +340,41 @@ def _refined_stage(ls, start, records, method, friction, consistency, refinement
     )
 
 
+REST_SEARCH = contextvars.ContextVar("dynax_rest_search", default=True)  # False: `rest_search_off`
+
+
+@contextlib.contextmanager
+def rest_search_off():
+    """Within the block, `identify` does not look for friction at rest (`result.static_friction` is `None`,
+    no rows are left out, no `Stiction` is added): the least-squares fit as it is without the rest search,
+    for comparing with it and for pricing the search."""
+    token = REST_SEARCH.set(False)
+    try:
+        yield
+    finally:
+        REST_SEARCH.reset(token)
+
+
+EVERY_REST_OUT = contextvars.ContextVar("dynax_every_rest_out", default=False)  # True: `all_rests_left_out`
+
+
+@contextlib.contextmanager
+def all_rests_left_out():
+    """Within the block, the least-squares refit that `Dynamic(static_friction=True)` makes where a joint rests
+    under load leaves out the rows of every rest, loaded or not, instead of the loaded ones only: a what-if for
+    comparing the static level read either way."""
+    token = EVERY_REST_OUT.set(True)
+    try:
+        yield
+    finally:
+        EVERY_REST_OUT.reset(token)
+
+
 def _holds_at_rest(system) -> bool:
-    """Whether `identify` looks for friction at rest on `system`: the arms its refinement knows."""
+    """Whether `identify` looks for friction at rest on `system`: the arms its refinement knows (unless
+    `rest_search_off`)."""
+    if not REST_SEARCH.get():
+        return False
     try:
         return split_terms(system)[0].refinement_terms() is not None
     except UsageError:

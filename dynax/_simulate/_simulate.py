@@ -258,7 +258,10 @@ def mask_diverged(ts_after, xs, diverged_at):
 # anew on every call (most of a call's time, and the compiled programs pile up in memory; see
 # docs/benchmarks.md). Under an outer `jit` this is inlined.
 @eqx.filter_jit
-def _fixed_grid(system, x0, ts, us, method, bound):
+def fixed_grid_rollout(system, x0, ts, us, method, bound):
+    """`simulate`'s `FixedGrid` rollout: the states at `ts` from `x0` under the zero-order hold `us`, each state
+    past the time the rollout leaves `bound` masked, and that time (`inf` if never). Compiled (`filter_jit`);
+    its `__wrapped__` is the bare `lax.scan`, which an eager call compiles anew each time."""
     advance = sample_interval(system, method, bound)
 
     def interval(carry, inputs):
@@ -347,7 +350,7 @@ def simulate(
             x0, invalid, "simulate: non-finite input (`x0`, `ts` or `us`) or `ts` not strictly increasing"
         )
     if isinstance(method, FixedGrid):
-        xs, diverged_at = _fixed_grid(system, x0, ts, us, method, divergence_bound)
+        xs, diverged_at = fixed_grid_rollout(system, x0, ts, us, method, divergence_bound)
     elif isinstance(method, Adaptive):
         xs, diverged_at = _adaptive(system, x0, ts, us, method, divergence_bound)
     else:

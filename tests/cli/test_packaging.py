@@ -1,15 +1,18 @@
 """What a user meets first: version, `python -m dynax`, help text, Ctrl-C, the installed metadata."""
 
+import errno
+import os
 import pathlib
 import re
+import signal
 import subprocess
 import sys
+import time
 import tomllib
 
 import pytest
 
 import dynax
-from dynax._cli import _identify  # private: `run` replaced: a Ctrl-C, a spy; no public route
 from dynax.internal import build_parser, cli_main
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
@@ -43,24 +46,14 @@ def test_help_starts_with_a_plain_description_and_has_no_literal_percent_signs(c
     )
 
 
-def test_ctrl_c_exits_130(monkeypatch, tmp_path, capsys):
-    def interrupted(args):
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(_identify, "run", interrupted)
-    assert cli_main(["identify", "acrobot", "x.csv", "--out", str(tmp_path / "p.json")]) == 130
-    assert "interrupted" in capsys.readouterr().err
-
-
 @pytest.mark.parametrize("argv, mode", [([], "auto"), (["--quiet"], "never"), (["--progress"], "always")])
 @pytest.mark.parametrize("after", [False, True])
-def test_quiet_and_progress_reach_the_sub_command(monkeypatch, tmp_path, argv, mode, after):
+def test_quiet_and_progress_reach_the_sub_command(tmp_path, argv, mode, after):
     from dynax.internal import PROGRESS_MODE
 
     seen = []
-    monkeypatch.setattr(_identify, "run", lambda args: seen.append(PROGRESS_MODE.get()) or 0)
     command = ["identify", "acrobot", "x.csv", "--out", str(tmp_path / "p.json")]
-    assert cli_main(command + argv if after else argv + command) == 0
+    assert cli_main(command + argv if after else argv + command, run=lambda args: seen.append(PROGRESS_MODE.get())) == 0
     assert seen == [mode]
 
 
@@ -98,18 +91,40 @@ def test_importing_dynax_sets_no_matplotlib_backend_and_skips_heavy_modules():
     assert out.stdout.split() == ["unset"]
 
 
-def test_a_real_sigint_exits_130():
+def test_a_real_sigint_exits_130(tmp_path):
+    # `dynax identify` reads its record from a named pipe, so that it waits, mid-command, for data: a real Ctrl-C
+    # then interrupts real work, and the command says so and exits 130.
+    pipe = tmp_path / "run.csv"
+    os.mkfifo(pipe)
     code = (
-        "import os, signal, sys, time\n"
+        "import signal, sys\n"
         # A terminal's Python has the KeyboardInterrupt handler; a child of a test worker may have inherited
         # SIGINT ignored (as background jobs of a shell do), and Python then installs no handler at all.
         "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
-        "from dynax._cli import _identify\n"
         "from dynax.internal import cli_main\n"
-        # raise_signal delivers to the main thread, as a terminal's Ctrl-C reaches Python's handler; os.kill
-        # may land on a thread JAX started (the compilation cache), and the sleep would then run out.
-        "_identify.run = lambda args: (signal.raise_signal(signal.SIGINT), time.sleep(30))\n"
-        "sys.exit(cli_main(['identify', 'acrobot', 'x.csv', '--out', 'p.json']))\n"
+        f"sys.exit(cli_main(['identify', 'acrobot', {str(pipe)!r}, '--out', {str(tmp_path / 'p.json')!r}]))\n"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
-    assert out.returncode == 130 and "interrupted" in out.stderr
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    child = subprocess.Popen([sys.executable, "-c", code], stderr=subprocess.PIPE, text=True, cwd=ROOT, env=env)
+    try:
+        while True:  # until the command opens the pipe to read its record
+            try:
+                writer = os.open(pipe, os.O_WRONLY | os.O_NONBLOCK)
+                break
+            except OSError as e:
+                assert e.errno == errno.ENXIO and child.poll() is None, child.stderr.read() if child.stderr else e
+                time.sleep(0.05)
+        child.send_signal(signal.SIGINT)
+        try:
+            status = child.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            # The signal reached a thread JAX started while the main thread waits in `read`: the handler has
+            # run, and the end of the record lets the main thread see it.
+            os.close(writer)
+            writer = None
+            status = child.wait(timeout=120)
+        if writer is not None:
+            os.close(writer)
+    finally:
+        child.kill()
+    assert status == 130 and "interrupted" in child.communicate()[1]

@@ -5,8 +5,7 @@ import pytest
 
 import dynax
 from dynax import UsageError
-from dynax._cli._identify import _method, with_static_friction  # private: no public call returns the flags' method
-from dynax.internal import build_parser
+from dynax.internal import build_parser, method_from_args
 
 COMMON = ["identify", "double_pendulum", "run.csv", "--out", "out.json"]
 
@@ -15,16 +14,18 @@ def test_the_flag_turns_the_static_level_on():
     parser = build_parser()
     off = parser.parse_args([*COMMON, "--method", "dynamic"])
     on = parser.parse_args([*COMMON, "--method", "dynamic", "--static-friction"])
-    assert with_static_friction(_method(off), off) == dynax.Dynamic()
-    assert with_static_friction(_method(on), on) == dynax.Dynamic(static_friction=True)
+    assert method_from_args(off) == dynax.Dynamic()
+    assert method_from_args(on) == dynax.Dynamic(static_friction=True)
     power = parser.parse_args([*COMMON, "--method", "power", "--static-friction"])
     with pytest.raises(UsageError, match="--static-friction"):
-        with_static_friction(_method(power), power)
+        method_from_args(power)
 
 
 @pytest.mark.parametrize("flag, offsets", [("auto", "auto"), ("forces", True), ("angles", "angles"), ("none", False)])
 def test_the_offsets_flag_chooses_the_dynamic_models_offsets(flag, offsets):
     parser = build_parser()
-    assert _method(parser.parse_args([*COMMON, "--offsets", flag])) == dynax.Dynamic(offsets=offsets)
+    assert method_from_args(parser.parse_args([*COMMON, "--offsets", flag])) == dynax.Dynamic(offsets=offsets)
     with pytest.raises(UsageError, match="--offsets"):
-        _method(parser.parse_args([*COMMON, "--method", "power", "--offsets", flag if flag != "auto" else "none"]))
+        method_from_args(
+            parser.parse_args([*COMMON, "--method", "power", "--offsets", flag if flag != "auto" else "none"])
+        )

@@ -178,15 +178,15 @@ def test_load_save_round_trip_gives_identical_actions(tmp_path):
 
 
 def test_load_controller_refuses_bad_files(tmp_path):
-    with pytest.raises(dynax._errors.UsageError):
+    with pytest.raises(dynax.UsageError):
         dynax.control.load_controller(tmp_path / "missing.npz")
     bad = tmp_path / "bad.npz"
     np.savez(bad, header=np.asarray('{"format": "other"}'))
-    with pytest.raises(dynax._errors.DataError, match="format"):
+    with pytest.raises(dynax.DataError, match="format"):
         dynax.control.load_controller(bad)
     truncated = tmp_path / "truncated.npz"  # a saved controller cut short, as by a failed copy
     truncated.write_bytes(POLICY.read_bytes()[:300])
-    with pytest.raises(dynax._errors.DataError, match="not a saved dynax controller"):
+    with pytest.raises(dynax.DataError, match="not a saved dynax controller"):
         dynax.control.load_controller(truncated)
 
 

@@ -10,7 +10,15 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._data import _sanity, _velocities  # private: screens off, which no setting does
+from dynax.internal import (
+    check_trajectory_velocities,
+    gain_surely_within,
+    GLITCH_STEPS,
+    MAX_VELOCITY_GAIN_ERROR,
+    median_reach,
+    screens_off,
+    typical_step_covers,
+)
 
 
 def _running_median(x, window=7):
@@ -39,8 +47,8 @@ def test_median_reach_bounds_every_residual(seed, n, kind):
         "ends": np.concatenate([[rng.uniform(-50, 50)], np.sin(t[1:-1]), [rng.uniform(-50, 50)]]),
     }[kind]
     residual = np.abs(x - _running_median(x))
-    assert _sanity.median_reach(x, 7) >= residual.max()
-    assert np.isnan(_sanity.median_reach(np.where(np.arange(n) == n // 2, np.nan, x), 7))
+    assert median_reach(x, 7) >= residual.max()
+    assert np.isnan(median_reach(np.where(np.arange(n) == n // 2, np.nan, x), 7))
 
 
 @settings(max_examples=60, deadline=None)
@@ -51,12 +59,12 @@ def test_the_count_says_yes_only_where_the_median_step_covers_the_reach(seed, n,
     if seed % 3 == 0:
         steps[: n // 2] = 0.0  # an exact tie at zero below the median
     typical = float(np.median(steps)) * 1.4826 + 1e-300
-    reach = factor * _sanity.GLITCH_STEPS * typical  # at the bound, either side
-    if _sanity._typical_step_covers(steps, reach):
-        assert reach <= _sanity.GLITCH_STEPS * typical
+    reach = factor * GLITCH_STEPS * typical  # at the bound, either side
+    if typical_step_covers(steps, reach):
+        assert reach <= GLITCH_STEPS * typical
     lower_middle = np.sort(steps)[(n - 1) // 2]  # the count's criterion: the median is at least this
     if factor < 0.9999 and np.median(steps) > 0 and lower_middle >= 0.99995 * np.median(steps):
-        assert _sanity._typical_step_covers(steps, reach)  # not a screen that never says yes
+        assert typical_step_covers(steps, reach)  # not a screen that never says yes
 
 
 @pytest.mark.parametrize("n", [40, 2000, 20_000, 50_000])  # beyond 10,000 entries BLAS's dot is threaded
@@ -69,8 +77,8 @@ def test_the_numpy_gain_says_within_only_where_the_blas_gain_is(n, gain):
         if trial % 4 == 0:
             slopes[rng.random(n) < 0.5] = 0.0
         blas = float(slopes @ means) / float(slopes @ slopes)
-        if _velocities._surely_within(slopes, means, _velocities.MAX_GAIN_ERROR):
-            assert abs(blas - 1.0) <= _velocities.MAX_GAIN_ERROR
+        if gain_surely_within(slopes, means, MAX_VELOCITY_GAIN_ERROR):
+            assert abs(blas - 1.0) <= MAX_VELOCITY_GAIN_ERROR
         elif abs(gain - 1.0) < 0.1:
             pytest.fail("a gain of 1 within the noise was not screened")
 
@@ -121,12 +129,11 @@ def _faulty(kind, seed):
 
 @pytest.mark.parametrize("kind", ["clean", "glitch", "glitch_at_end", "glitch_input", "stuck", "wrapped", "velocity"])
 @pytest.mark.parametrize("seed", range(6))
-def test_each_fault_is_found_alike_with_and_without_the_screens(kind, seed, monkeypatch):
+def test_each_fault_is_found_alike_with_and_without_the_screens(kind, seed):
     record = _faulty(kind, seed)
     screened = dynax.check_records([record], estimated=()).to_json()
-    monkeypatch.setattr(_sanity, "median_reach", lambda *args, **kwargs: float("inf"))  # no glitch screen
-    monkeypatch.setattr(_sanity, "_under_half_turn", lambda steps: False)  # no wrap screen
-    full = dynax.check_records([record], estimated=()).to_json()
+    with screens_off():  # no glitch screen, no wrap screen
+        full = dynax.check_records([record], estimated=()).to_json()
     assert screened == full
     if kind not in ("clean", "glitch", "glitch_at_end"):  # a small glitch may stay under the threshold
         assert screened, f"the {kind} fault was not found"
@@ -134,17 +141,18 @@ def test_each_fault_is_found_alike_with_and_without_the_screens(kind, seed, monk
 
 @pytest.mark.parametrize("kind", ["clean", "velocity", "unit"])
 @pytest.mark.parametrize("seed", range(4))
-def test_the_velocity_unit_check_refuses_alike_with_and_without_the_screen(kind, seed, monkeypatch):
+def test_the_velocity_unit_check_refuses_alike_with_and_without_the_screen(kind, seed):
     record = _faulty(kind, seed)
 
     def outcome():
         try:
-            _velocities.check_trajectory_velocities(record)
+            check_trajectory_velocities(record)
         except dynax.DataError as error:
             return str(error)
         return None
 
     screened = outcome()
-    monkeypatch.setattr(_velocities, "_surely_within", lambda *args: False)
-    assert screened == outcome()
+    with screens_off():
+        full = outcome()
+    assert screened == full
     assert (screened is not None) == (kind == "unit")

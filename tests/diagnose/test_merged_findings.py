@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from dynax._diagnose._summaries import merge_repeated_causes  # private: a step no public call runs alone
+from dynax.internal import merge_repeated_causes
 
 
 def _finding(parameter, coefficient, p_value, named_for=None):

@@ -1,6 +1,6 @@
 """Whole records of other lengths share the compiled one-step residuals, and the padding that does it changes no
 number: the jitted per-sample functions run on each record padded to a power of two and are cut back (see
-`dynax._diagnose._residuals.padded_length`). Without it each flight log of its own length compiled the screening and
+`dynax.internal.padded_length`). Without it each flight log of its own length compiled the screening and
 the structure probe anew: most of a whole-flight quadrotor diagnosis's first minutes."""
 
 import jax
@@ -9,12 +9,13 @@ import numpy as np
 
 import dynax
 from dynax import Extended, InputLag, LinearAxis, Trajectory
-from dynax._diagnose._residuals import (  # private: unpadded pieces, no public call
-    _interval_increments,
+from dynax.internal import (
+    acceleration_residuals,
+    interval_increments,
     predicted_accelerations,
+    savitzky_golay,
     sg_window,
 )
-from dynax.internal import acceleration_residuals, savitzky_golay
 
 MODEL = Extended(LinearAxis(coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0)), (InputLag(0, 0.04),))
 
@@ -47,7 +48,7 @@ def test_records_of_other_lengths_share_one_compilation_and_keep_their_residuals
         jax.monitoring.unregister_event_duration_listener(listen)
     # Unpadded, each length compiled its own (two each); padded, at most one (none if another test made it).
     assert sum("predicted_accelerations" in name for name in compiled) <= 1, compiled
-    assert sum("_interval_increments" in name for name in compiled) <= 1, compiled
+    assert sum("interval_increments" in name for name in compiled) <= 1, compiled
 
     for rec, (residuals, _, predicted, keep) in zip(records, results):
         n = len(rec)
@@ -62,7 +63,7 @@ def test_records_of_other_lengths_share_one_compilation_and_keep_their_residuals
         )
         np.testing.assert_allclose(predicted, np.asarray(reference)[keep], rtol=1e-12, atol=1e-12)
         # The velocity increments (the residuals of a system whose rates answer the input within a sample).
-        increments = _interval_increments(MODEL, ts, smooth, rec.us, idx)
+        increments = interval_increments(MODEL, ts, smooth, rec.us, idx)
         drift = jnp.diff(rec.xs[:, 1:], axis=0) - increments
         accumulated = jnp.concatenate([jnp.zeros((1, 1)), jnp.cumsum(drift, axis=0)])
         measured = reference + savitzky_golay(ts, accumulated, window=w, order=3, deriv=1)

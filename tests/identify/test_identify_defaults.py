@@ -1,7 +1,6 @@
 """Identification with default settings: filters chosen from the spectra, physically consistent estimates,
 output-error refinement and held-out validation, on data made independently of the code under test."""
 
-import functools
 import warnings
 
 import jax
@@ -542,7 +541,7 @@ def test_noisy_arms_of_other_sizes_give_consistent_estimates(size):
 
 
 @pytest.mark.slow  # about 2 minutes on 2 cores: two output-error refinements on synthetic records
-def test_the_refinement_measures_a_torque_latency_and_is_not_biased_by_it(monkeypatch):
+def test_the_refinement_measures_a_torque_latency_and_is_not_biased_by_it():
     # The torque that acts is the one recorded 6 ms earlier (a driver's latency), which neither the least-squares
     # equations nor the contract's zero-order hold know. The refinement fits the input timing with the model:
     # it measures the 6 ms and keeps theta1..theta5 within 2 %; without it the same fit is biased.
@@ -555,13 +554,10 @@ def test_the_refinement_measures_a_torque_latency_and_is_not_biased_by_it(monkey
     truth = np.array([RIG[f"theta{i}"] for i in range(1, 6)])
     relative = np.abs(np.asarray(result.estimate[:5]) - truth) / truth
     assert np.all(relative < 0.02), dict(zip(result.names, relative))
-    from dynax._identify import _stages as identify_module  # private: no setting drops the input timing
-    from dynax.internal import refine_by_simulation
+    from dynax.internal import refinement_options
 
-    monkeypatch.setattr(
-        identify_module, "refine_by_simulation", functools.partial(refine_by_simulation, input_timing=False)
-    )
-    blind = identify(dynax.DoublePendulum(), train, Dynamic(), friction="coulomb", validation=[held])
+    with refinement_options(input_timing=False):
+        blind = identify(dynax.DoublePendulum(), train, Dynamic(), friction="coulomb", validation=[held])
     assert blind.to_json()["stages"]["output_error"]["input_timing"] is None
     blind_relative = np.abs(np.asarray(blind.estimate[:5]) - truth) / truth
     assert np.max(blind_relative) > 2 * np.max(relative), (blind_relative, relative)
@@ -860,7 +856,7 @@ def test_the_labs_geared_rotor_with_its_coupling_is_base_parameters_plus_elbow_r
 
 
 @pytest.mark.slow  # about 35 s
-def test_a_refinement_that_ends_worse_than_its_start_keeps_the_least_squares_model(monkeypatch):
+def test_a_refinement_that_ends_worse_than_its_start_keeps_the_least_squares_model():
     # Levenberg-Marquardt through rollouts has been seen (rarely, on real data) to end at a point worse
     # than its start. The fit below is the real one; only its result is made the engine's report of
     # that (`nonlinear_divergence`, its residual above its start's), to drive the refinement's
@@ -868,21 +864,18 @@ def test_a_refinement_that_ends_worse_than_its_start_keeps_the_least_squares_mod
     import equinox as eqx
     import optimistix as optx
 
-    from dynax._identify import _refine  # private: a failure no input forces
-
-    real = _refine.fit_simulation_error
+    from dynax.internal import refinement_options
 
     def ends_worse(*args, **kwargs):
-        result = real(*args, **kwargs)
+        result = dynax.fit_simulation_error(*args, **kwargs)
         return eqx.tree_at(
             lambda r: (r.statistics.residual_rms, r.result),
             result,
             (2 * result.statistics.initial_residual_rms, optx.RESULTS.nonlinear_divergence),
         )
 
-    monkeypatch.setattr(_refine, "fit_simulation_error", ends_worse)
     data = recorded(rig_model(), 6.0, 13)
-    with pytest.warns(RuntimeWarning, match="ended worse than its start"):
+    with pytest.warns(RuntimeWarning, match="ended worse than its start"), refinement_options(fit=ends_worse):
         result = identify(dynax.DoublePendulum(), data, Dynamic(), friction="coulomb", refine=True)
     stages = result.to_json()["stages"]
     assert stages["output_error"]["diverged"] is True and "least squares kept" in result.method

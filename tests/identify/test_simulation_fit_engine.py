@@ -60,6 +60,20 @@ def test_linear_axis_named_by_tree_path_recovers_parameters_within_their_errors(
     assert np.all(np.abs(estimate - expected) < 10 * std + 1e-3 * np.abs(expected)), (estimate, std)
 
 
+@pytest.mark.slow  # one Levenberg-Marquardt compilation (the tolerances travel in the solver)
+def test_a_solver_given_replaces_the_engines():
+    # The engine's Levenberg-Marquardt with tolerances a million times looser stops sooner, near the same minimum.
+    from dynax.internal import levenberg_marquardt
+
+    data, start = _axis_problem(seed=0)
+    method = SimulationFit(segment_s=1.0, max_steps=40)
+    default = fit_simulation_error(start, data, method)
+    loose = levenberg_marquardt(rtol=1e-2, atol=1e-2, jacobian="accepted", damping="nielsen")
+    stopped = fit_simulation_error(start, data, method, solver=loose)
+    assert int(stopped.steps) < int(default.steps), (int(stopped.steps), int(default.steps))
+    np.testing.assert_allclose(np.asarray(stopped.value), np.asarray(default.value), rtol=0.05)
+
+
 class _WithSpare(dynax.AbstractSystem):
     """A linear axis with one more parameter that its dynamics never read."""
 

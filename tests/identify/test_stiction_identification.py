@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax._identify import _stages as identify_module  # private: the rest search off, which no setting does
 from dynax.internal import (
     consistent_parametrisation,
     joint_levels,
     parameter_names,
     parameter_vector,
     record_rests,
+    rest_search_off,
     static_friction_rests,
     StaticFriction,
     with_friction,
@@ -117,7 +117,7 @@ def test_static_level_from_breakaways_within_ten_percent():
     assert np.max(np.abs(xs[resting, 1])) < 1e-3
 
 
-def test_by_default_the_rests_under_load_are_reported_and_the_model_is_left_as_it_is(monkeypatch):
+def test_by_default_the_rests_under_load_are_reported_and_the_model_is_left_as_it_is():
     # `Dynamic()` finds the rests under load and says where and how long, and fits what it fits without
     # the rest search: no Stiction, no rows left out.
     data = [breakaway_record(j)[0] for j in (0, 1)]
@@ -126,11 +126,13 @@ def test_by_default_the_rests_under_load_are_reported_and_the_model_is_left_as_i
     assert found.joints == () and stiction_terms(result.system) == {}
     assert any(s.loaded for s in found.stretches)
     assert "breakaway_0.csv" in found.note and "breakaway_1.csv" in found.note and "static_friction=True" in found.note
-    monkeypatch.setattr(identify_module, "_holds_at_rest", lambda system: False)
-    np.testing.assert_array_equal(np.asarray(result.estimate), np.asarray(fit(data, dynax.Dynamic()).estimate))
+    with rest_search_off():
+        before = fit(data, dynax.Dynamic())
+    assert before.static_friction is None
+    np.testing.assert_array_equal(np.asarray(result.estimate), np.asarray(before.estimate))
 
 
-def test_no_rest_no_stiction_and_parameters_as_without_the_rest_search(monkeypatch):
+def test_no_rest_no_stiction_and_parameters_as_without_the_rest_search():
     records = [swinging_record(k) for k in range(2)]
     assert any(stuck.any() for _, stuck in records)  # reversals stick briefly: not a rest
     data = [r for r, _ in records]
@@ -139,8 +141,8 @@ def test_no_rest_no_stiction_and_parameters_as_without_the_rest_search(monkeypat
     assert result.static_friction.rows_left_out == 0 and "no record rests" in result.static_friction.note
     assert stiction_terms(result.system) == {}
     # The parameters are the ones the fit gives with the rest search switched off (today's).
-    monkeypatch.setattr(identify_module, "_holds_at_rest", lambda system: False)
-    before = fit(data)
+    with rest_search_off():
+        before = fit(data)
     assert before.static_friction is None
     assert result.names == before.names
     np.testing.assert_array_equal(np.asarray(result.estimate), np.asarray(before.estimate))
