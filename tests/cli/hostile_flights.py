@@ -4,10 +4,12 @@ The flight path (`dynax fit quadrotor`, `dynax evaluate`, `dynax diagnose quadro
 is fed logs with one fault each: a gyro or motor glitch, a motion-capture dropout (position frozen, rows
 of NaN, a gap in time), repeated or unsorted time, time in ms or us, quaternion sign flips (the same
 attitude: accepted), an unnormalised quaternion or one read in the wrong component order, z down,
-position in mm, rates in deg/s, a body-frame velocity or one wrong in a stretch, a motor column zero,
-constant, duplicated or swapped, motors numbered otherwise than in the other logs or the model's, `vbat`
-zero or absent, a flight that never leaves the floor, a record given twice, a truncated `.csv.gz`, another
-system's model, bad `--steps`; and clean flights that must keep their right answers. Each `Case`
+position in mm, rates in deg/s, a world-to-body quaternion or body rates in world axes at a heading
+where the per-axis check reads them as a sign or a swap, a body-frame velocity or one wrong in a stretch, a
+motor column zero, constant, duplicated or swapped, motors numbered otherwise than in the other logs or the
+model's, motors or `vbat` in another unit than the other flights' or the model's, `vbat` zero or absent,
+a flight that never leaves the floor, a record given twice, a truncated `.csv.gz`, another system's model,
+bad `--steps`; and clean flights that must keep their right answers. Each `Case`
 (`tests/cli/hostile_cases.py`, judged by the same `run_case`) has one acceptable outcome written before it
 was run:
 
