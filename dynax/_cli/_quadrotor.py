@@ -188,10 +188,11 @@ def run_fit(args) -> int:
 
 def training_levels(system) -> dict[str, float]:
     """The levels in flight (`dynax._data._flight.input_levels`) of a fitted quadrotor's training flights: its
-    `input_scale`, the median of each input in flight (the motors' averaged; the battery's where it uses one)."""
+    `input_scale`, the median of each input in flight (the motors' averaged; the battery's where it uses one).
+    A scale of exactly 1, `Quadrotor`'s default for a model built without flights, records no level."""
     scale = [float(s) for s in system.input_scale]
-    out = {"m1": sum(scale[:4]) / 4}
-    if system.uses_battery and len(scale) > 4:
+    out = {} if all(s == 1.0 for s in scale[:4]) else {"m1": sum(scale[:4]) / 4}
+    if system.uses_battery and len(scale) > 4 and scale[4] != 1.0:
         out["vbat"] = scale[4]
     return out
 

@@ -47,6 +47,7 @@ intervals) are bridged.
 
 import dataclasses
 import os
+import warnings
 
 import jax.numpy as jnp
 import numpy as np
@@ -62,7 +63,7 @@ from ._flight_kinematics import (
     check_velocity_frame,
 )
 from ._io import load_trajectory, Sampling
-from ._sanity import Check, glitch_findings, stuck_findings, velocity_stretch_findings
+from ._sanity import Check, DataWarning, glitch_findings, stuck_findings, velocity_stretch_findings
 from ._trajectory import Trajectory
 from ._velocities import block_slopes, stretch_edges
 
@@ -533,6 +534,22 @@ def check_input_levels(levels: dict, *, columns=None, reference=None, reference_
             path=paths[worst],
             column=columns.get(key, key),
         )
+
+
+def warn_if_units_differ(flights, stacklevel: int = 3) -> None:
+    """Warn (`DataWarning`) where the flights given together log their motors or battery in different units, by
+    `check_input_levels` (every sample of each flight taken as flown: the usable runs `dynax.usable_segments`
+    gives). A warning here, not the command line's refusal: a Python caller may have reasons of its own."""
+    if isinstance(flights, Trajectory) or len(flights) < 2:
+        return
+    levels = {
+        f"{flight.source or 'flight'} (flights[{i}])": input_levels(flight, np.ones(len(flight), bool))
+        for i, flight in enumerate(flights)
+    }
+    try:
+        check_input_levels(levels)
+    except DataError as e:
+        warnings.warn(str(e), DataWarning, stacklevel=stacklevel)
 
 
 def load_flight(
