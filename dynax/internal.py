@@ -92,11 +92,14 @@ from ._data import speeds_zeroed_at_rest as speeds_zeroed_at_rest
 
 # Helpers of the pipeline's stages (data, model, identification, validation, diagnosis).
 from ._data import split_at_gaps as split_at_gaps
+from ._data._flight import check_input_levels as check_input_levels
 from ._data._flight import FlightChecks as FlightChecks
 from ._data._flight import FlightNotes as FlightNotes
+from ._data._flight import input_levels as input_levels
 from ._data._flight import motors_running_run as motors_running_run
 from ._data._flight import usable_segments as usable_segments
 from ._data._flight_kinematics import attitude_angles as attitude_angles
+from ._data._flight_kinematics import rate_frame_misfits as rate_frame_misfits
 from ._data._flight_kinematics import thrust_frame_slopes as thrust_frame_slopes
 from ._data._io import MAX_MAGNITUDE as MAX_MAGNITUDE
 from ._data._motor_order import flight_signature as flight_signature
@@ -630,6 +633,7 @@ __all__ = [
     "candidate_scales",
     "central_difference",
     "check_consistency",
+    "check_input_levels",
     "check_trajectory_velocities",
     "choose_filter",
     "cli_main",
@@ -713,6 +717,7 @@ __all__ = [
     "identification_hooks",
     "IdentifyJob",
     "initial_helicopter",
+    "input_levels",
     "interval_increments",
     "jackknife_covariance",
     "joint_levels",
@@ -799,6 +804,7 @@ __all__ = [
     "quaternion_angle",
     "quaternion_from_euler",
     "rankable",
+    "rate_frame_misfits",
     "record_angle_zeros",
     "record_friction",
     "record_jackknife_covariance",

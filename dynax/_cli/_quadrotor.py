@@ -20,6 +20,8 @@ def load_flights(
     needs: str = "",
     training=None,
     numbering=None,
+    levels=None,
+    reference=None,
 ):
     """Each file through `load_flight`, its ground segments and glitches noted on stdout; the usable
     runs of at least `min_samples` samples (`needs`: the option that asks for that many, named in the
@@ -27,13 +29,16 @@ def load_flights(
     (`{path: trajectory}` of those loaded before) is no validation. `training`, where given, gains the
     flights loaded here. A flight whose motors are numbered otherwise than `numbering` holds them to (a
     `MotorNumbering`: a model's training flights, or the consensus of the flights it has seen, these among
-    them) is refused."""
+    them) is refused, and so are flights whose motors or battery are logged in another unit than the others'
+    (`levels`, `{path: input_levels}` of the flights loaded before, gains these) or than a model's training
+    flights (`reference`: `(levels, name)`)."""
 
-    from .._data._flight import load_flight, usable_segments
+    from .._data._flight import check_input_levels, input_levels, load_flight, usable_segments
     from .._data._motor_order import MotorNumbering
     from .._data._sanity import same_data
 
     runs, notes, seen = [], [], {}
+    levels = {} if levels is None else levels
     numbering = MotorNumbering() if numbering is None else numbering
     for path in paths:
         trajectory, found = load_flight(path, mapping=mapping, scale=scale, offset=offset)
@@ -54,6 +59,7 @@ def load_flights(
         for line in found.describe():
             print(f"note: {path}: {line}")
         numbering.check(trajectory, found.usable, path, dict(mapping or {}))
+        levels[str(path)] = input_levels(trajectory, found.usable)
         kept = usable_segments(trajectory, found, min_samples)
         if not kept:
             longest = max((len(run) for run in usable_segments(trajectory, found, 1)), default=0)
@@ -75,6 +81,8 @@ def load_flights(
             }
         )
     numbering.settle()
+    given, name = reference or ({}, "")
+    check_input_levels(levels, columns=dict(mapping or {}), reference=given, reference_name=name)
     for note in notes:  # what the motor-numbering test could see for each file (nothing: it saw all it could)
         said = numbering.notes.get(note["file"], "")
         if said:
@@ -183,6 +191,17 @@ def run_fit(args) -> int:
     return 0
 
 
+def training_levels(system) -> dict[str, float]:
+    """The levels in flight (`dynax._data._flight.input_levels`) of a fitted quadrotor's training flights: its
+    `input_scale`, the median of each input in flight (the motors' averaged; the battery's where it uses one).
+    A scale of exactly 1, `Quadrotor`'s default for a model built without flights, records no level."""
+    scale = [float(s) for s in system.input_scale]
+    out = {} if all(s == 1.0 for s in scale[:4]) else {"m1": sum(scale[:4]) / 4}
+    if system.uses_battery and len(scale) > 4 and scale[4] != 1.0:
+        out["vbat"] = scale[4]
+    return out
+
+
 def _signature_entry(reference) -> dict:
     """The model file's `motor_signature` (the training flights' motors, which `dynax evaluate` and `dynax
     diagnose --nominal` test other flights against), where the flights give one."""
@@ -227,6 +246,7 @@ def run_evaluate(args, system, reference=None) -> int:
         min_samples=max(steps) + 2,
         needs=f"--steps {max(steps)}",
         numbering=MotorNumbering(reference, f"the training flights of {args.model}"),
+        reference=(training_levels(system), f"the training flights of {args.model}"),
     )
     if system.uses_battery and "vbat" not in runs[0].input_names:
         raise DataError(
@@ -304,16 +324,35 @@ def run_diagnose(args) -> int:
     reference = MotorSignature.from_json(obj.get("motor_signature"), args.nominal) if isinstance(obj, dict) else None
     loaded: dict = {}
     numbering = MotorNumbering(reference, f"the training flights of {args.nominal}")
+    nominal = quadrotor_from_json(obj, path=args.nominal) if obj is not None else None
+    levels: dict = {}  # training and validation flights together, or each against the nominal model's
+    given = None if nominal is None else (training_levels(nominal), f"the training flights of {args.nominal}")
     train, _ = load_flights(
-        args.data, mapping, scale, offset, min_samples=min_samples, training=loaded, numbering=numbering
+        args.data,
+        mapping,
+        scale,
+        offset,
+        min_samples=min_samples,
+        training=loaded,
+        numbering=numbering,
+        levels=levels,
+        reference=given,
     )
     validation = None
     if args.validation is not None:
         validation, _ = load_flights(
-            args.validation, mapping, scale, offset, min_samples=min_samples, training=loaded, numbering=numbering
+            args.validation,
+            mapping,
+            scale,
+            offset,
+            min_samples=min_samples,
+            training=loaded,
+            numbering=numbering,
+            levels=levels,
+            reference=given,
         )
-    if obj is not None:
-        system = quadrotor_from_json(obj, path=args.nominal)
+    if nominal is not None:
+        system = nominal
     else:
         system = Quadrotor.from_flights("nominal", train)
     if args.mode == "known":

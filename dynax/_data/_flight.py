@@ -47,6 +47,7 @@ intervals) are bridged.
 
 import dataclasses
 import os
+import warnings
 
 import jax.numpy as jnp
 import numpy as np
@@ -57,11 +58,12 @@ from ._flight_kinematics import (
     check_flight_kinematics,
     check_position_units,
     check_quaternion_order,
+    check_rate_frame,
     check_thrust_frame,
     check_velocity_frame,
 )
 from ._io import load_trajectory, Sampling
-from ._sanity import Check, glitch_findings, stuck_findings, velocity_stretch_findings
+from ._sanity import Check, DataWarning, glitch_findings, stuck_findings, velocity_stretch_findings
 from ._trajectory import Trajectory
 from ._velocities import block_slopes, stretch_edges
 
@@ -467,6 +469,89 @@ def check_input_columns(data: Trajectory, *, path=None, columns=None) -> None:
             )
 
 
+# Flights of one vehicle given together whose in-flight motor or battery levels differ by more than this factor
+# are in different units: the 16 NanoBench flights' median motor levels lie within 6 % of their median (battery
+# charge and manoeuvre), their batteries' within 13 % (`experiments/flight_input_levels.py`); twice the hover
+# command would be four times the hover thrust.
+MAX_INPUT_LEVEL_RATIO = 2.0
+_LEVEL_WHAT = {  # contract column -> (what, its verbs, a likely pair of units)
+    "m1": ("motor inputs", "run at", "are", "percent against 0-65535, a normalised command against PWM counts?"),
+    "vbat": ("battery voltage", "reads", "is", "millivolts against volts?"),
+}
+
+
+def input_levels(trajectory: Trajectory, usable) -> dict[str, float]:
+    """A flight's levels in flight (over the `usable` samples): `"m1"`, the median of the mean motor input `m1..m4`
+    (its hover command), and `"vbat"`, the battery voltage's median, where the flight logs it."""
+    keep = np.asarray(usable, bool)
+    us = np.asarray(trajectory.us, dtype=float)[keep]
+    if not len(us):
+        return {}
+    out = {"m1": float(np.median(us[:, :4].mean(axis=1)))}
+    if "vbat" in trajectory.input_names:
+        out["vbat"] = float(np.median(us[:, trajectory.input_names.index("vbat")]))
+    return out
+
+
+def check_input_levels(levels: dict, *, columns=None, reference=None, reference_name: str = "") -> None:
+    """Refuse flights given together whose motors or battery voltage are logged in different units: one flight's
+    level in flight (`input_levels`) beyond `MAX_INPUT_LEVEL_RATIO` times, or below its inverse, the median of all
+    (of two flights, the other's), or the `reference` where given (a model's training flights', `reference_name`).
+    One motor map is fitted to all of them (or the model's is applied), so such a mix runs without a word and
+    predicts nothing: a percent command among 0-65535 ones, a normalised one among PWM counts, millivolts among
+    volts.
+
+    **Arguments:** `levels`, file -> `input_levels`; `columns` (contract name -> file column) named in the error;
+    `reference` (`{"m1": level, "vbat": level}`), `reference_name`.
+
+    **Raises:** `DataError` naming the file and the column read as `m1` (or `vbat`).
+    """
+    columns, reference = columns or {}, reference or {}
+    for key, (what, verb, be, guess) in _LEVEL_WHAT.items():
+        found = {p: v[key] for p, v in levels.items() if key in v and np.isfinite(v[key]) and v[key] > 0}
+        paths, values = list(found), np.array(list(found.values()))
+        if key in reference and reference[key] > 0:
+            ref = np.full(len(values), float(reference[key]))
+            against = reference_name
+        elif len(values) >= 2:
+            # two flights: each against the other; more: against the median of all, which one odd flight cannot move
+            ref = values[::-1] if len(values) == 2 else np.full(len(values), float(np.median(values)))
+            against = "the other flight" if len(values) == 2 else "the median of the flights given together"
+        else:
+            continue
+        if not len(values):
+            continue
+        ratio = values / ref
+        worst = int(np.argmax(np.abs(np.log(ratio))))
+        if 1 / MAX_INPUT_LEVEL_RATIO <= ratio[worst] <= MAX_INPUT_LEVEL_RATIO:
+            continue
+        where = "one of the two" if against == "the other flight" else "this flight"
+        raise DataError(
+            f"its {what} {verb} a median of {values[worst]:.4g} in flight, {ratio[worst]:.3g} times that of {against} "
+            f"({ref[worst]:.4g}; flights of one vehicle agree to within {MAX_INPUT_LEVEL_RATIO:g} times): the {what} "
+            f"{be} logged in another unit in {where} ({guess}); convert to one unit before "
+            f"{'using the model' if key in reference else 'fitting the flights together'}",
+            path=paths[worst],
+            column=columns.get(key, key),
+        )
+
+
+def warn_if_units_differ(flights, stacklevel: int = 3) -> None:
+    """Warn (`DataWarning`) where the flights given together log their motors or battery in different units, by
+    `check_input_levels` (every sample of each flight taken as flown: the usable runs `dynax.usable_segments`
+    gives). A warning here, not the command line's refusal: a Python caller may have reasons of its own."""
+    if isinstance(flights, Trajectory) or len(flights) < 2:
+        return
+    levels = {
+        f"{flight.source or 'flight'} (flights[{i}])": input_levels(flight, np.ones(len(flight), bool))
+        for i, flight in enumerate(flights)
+    }
+    try:
+        check_input_levels(levels)
+    except DataError as e:
+        warnings.warn(str(e), DataWarning, stacklevel=stacklevel)
+
+
 def load_flight(
     path: str | os.PathLike,
     *,
@@ -534,6 +619,7 @@ def load_flight(
         # the frame first: in another frame the rates disagree with the attitude too, and a scale is no fix
         motors = np.asarray(data.us[a : b + 1, :4], dtype=float)
         check_quaternion_order(rel[a : b + 1], flown, path=path, columns=columns)
+        check_rate_frame(rel[a : b + 1], flown, path=path, columns=columns, scale=scale)
         check_velocity_frame(rel[a : b + 1], flown, path=path, columns=columns)
         check_position_units(rel[a : b + 1], flown, motors, path=path, columns=columns, scale=scale)
         check_thrust_frame(rel[a : b + 1], flown, motors, path=path, columns=columns)

@@ -18,6 +18,10 @@ record states each quantity twice, so `load_flight` compares the two:
   flights its gain is 0.16-0.85, lowest about the axes that barely turn: noise in the attitude's
   steps attenuates it, and the gyro lags), so only a fault of another size is refused: the opposite
   sign, a factor of 2 or more (degrees per second), or the rate of another axis (swapped columns);
+- the rates' frame and the quaternion's direction (`check_rate_frame`, before the per-axis rates): the
+  rates against the attitude's rate of change read as the body frame's, as world axes' and as that of a
+  world-to-body quaternion. Away from a heading along the world x axis, per-axis gains mistake either
+  fault for a sign or a swap of axes whose `scale` loads a record still wrong;
 - the thrust: a multirotor's pushes along its body z axis, up, so its horizontal acceleration follows
   the lean of body z and its vertical acceleration rises with the motors' thrust
   (`check_thrust_frame`). A north-east-down log, a forward-right-down body or a world-to-body
@@ -52,19 +56,21 @@ _OPPOSITE_SIGN = "the opposite sign (a gyro axis counted the other way: forward-
 STANDARD_GRAVITY = 9.80665
 
 
-def attitude_angles(quats: np.ndarray) -> np.ndarray:
+def attitude_angles(quats: np.ndarray, *, world: bool = False) -> np.ndarray:
     """The cumulative body-frame rotation of a body-to-world quaternion series `(n, 4)` as `(qw, qx, qy,
     qz)`: `(n, 3)` angles [rad] whose derivatives are the body rates `p, q, r` (the first row zero).
 
     Each step $q_i^{-1} \\otimes q_{i+1}$ is turned into its rotation vector; the quaternions' signs
-    are made continuous first ($q$ and $-q$ are one attitude)."""
+    are made continuous first ($q$ and $-q$ are one attitude). With `world`, the steps are the world
+    frame's, $q_{i+1} \\otimes q_i^{-1}$: angles whose derivatives are the angular velocity in world axes,
+    $R\\,\\omega$."""
     q = np.asarray(quats, dtype=float)
     q = q / np.linalg.norm(q, axis=1, keepdims=True)
     a, b = q[:-1], q[1:]
     b = np.where(np.sum(a * b, axis=1, keepdims=True) < 0, -b, b)
     aw, av, bw, bv = a[:, :1], a[:, 1:], b[:, :1], b[:, 1:]
-    w = aw * bw + np.sum(av * bv, axis=1, keepdims=True)  # conj(a) (x) b
-    v = aw * bv - bw * av - np.cross(av, bv)
+    w = aw * bw + np.sum(av * bv, axis=1, keepdims=True)  # conj(a) (x) b, or b (x) conj(a)
+    v = aw * bv - bw * av + (1.0 if world else -1.0) * np.cross(av, bv)
     norm = np.linalg.norm(v, axis=1, keepdims=True)
     angle = 2.0 * np.arctan2(norm, w)
     step = np.where(norm > 0, v * angle / np.where(norm > 0, norm, 1.0), 2.0 * v)
@@ -304,6 +310,96 @@ def check_quaternion_order(ts, values: dict, *, path=None, columns=None) -> None
                 path=path,
                 column=columns.get("qw", "qw"),
             )
+
+
+# The body rates' misfit on the attitude's rate of change (`_axis_misfit`) below which the rates are taken as the
+# body frame's whatever else fits, and the factor by which another reading must fit better to be named instead.
+# On the 16 NanoBench flights, at headings of 0, 90 and 180 degrees, the body frame's misfit is 0.09-0.23 (motion
+# capture's rates) and 0.51-0.84 (the gyro), every other reading's at least 0.99 times it; with either fault at 90
+# or 180 degrees, or a conjugated quaternion at 0, the matching reading's is at most 0.29 times the body frame's
+# with motion capture's rates (80 of 80 named) and 0.80 with the gyro's (74 of 75; the trefoil's conjugated
+# quaternion at 180 degrees reads 0.82, and is refused as a yaw rate of the opposite sign)
+# (`experiments/flight_rate_frames.py`).
+RATE_FRAME_MISFIT = 0.3
+RATE_FRAME_RATIO = 0.8
+
+
+def rate_frame_misfits(ts, quats, rates) -> dict[str, float] | None:
+    """The body rates' misfit (`_misfit`: relative root-mean-square difference of block means from the angles'
+    secant slopes, 0 where they agree) on the attitude's rate of change read three ways: `"body"`, the
+    contract's (body-frame steps of a body-to-world quaternion); `"world"`, rates logged in world axes (the
+    world frame's steps); `"world_to_body"`, a world-to-body quaternion logged as body-to-world (its body rate
+    is minus the logged quaternion's world-frame one). `None` for a record too short or still to tell."""
+    ts = np.asarray(ts, dtype=float)
+    rates = np.stack([np.asarray(r, dtype=float) for r in rates], axis=1)
+    world = attitude_angles(quats, world=True)
+    body = _axis_misfit(ts, attitude_angles(quats), rates)
+    in_world = _axis_misfit(ts, world, rates)
+    world_to_body = _axis_misfit(ts, -world, rates)
+    if body is None or in_world is None or world_to_body is None:
+        return None
+    return {"body": body, "world": in_world, "world_to_body": world_to_body}
+
+
+def _axis_misfit(ts, angles, rates) -> float | None:
+    """`_misfit` per axis (each relative to its own angle's slopes, so that yaw, which barely turns, counts as
+    much as roll and pitch: 0 where they agree, 2 where a rate has the opposite sign), averaged over the three;
+    `None` for a record too short or still."""
+    edges = stretch_edges(ts)
+    if len(edges) < MIN_BLOCKS + 1:
+        return None
+    out = []
+    for k in range(3):
+        slopes, means = block_slopes(ts, angles[:, k], rates[:, k], edges)
+        motion = float(np.sqrt(np.mean(slopes**2)))
+        if not motion > 0:
+            return None
+        out.append(float(np.sqrt(np.mean((means - slopes) ** 2))) / motion)
+    return float(np.mean(out))
+
+
+def check_rate_frame(ts, values: dict, *, path=None, columns=None, scale=None) -> None:
+    r"""Refuse body rates and an attitude of another convention than the contract's: a world-to-body quaternion
+    (the inverse of the contract's body-to-world one), or rates $p, q, r$ logged in world axes. Either makes the
+    rates miss the attitude's body-frame rate of change by more than `RATE_FRAME_MISFIT` of its size, and the
+    reading that matches follows it `RATE_FRAME_RATIO` times as closely or better (`rate_frame_misfits`). The
+    per-axis check (`check_flight_kinematics`) would name a sign or a swap of axes here, whose `scale` loads a
+    record that is still wrong: at a heading of 180 degrees a conjugated quaternion reads as a yaw rate of the
+    opposite sign, at 90 degrees as roll and pitch swapped. Where the vehicle holds its heading near that of the
+    world's x axis and flies level, world axes are body axes and nothing is refused (nor much wrong).
+
+    **Raises:** `DataError` naming the file and the column read as `qw` (the quaternion: conjugate it, the
+    `scale` given) or `p` (the rates: rotate them into the body frame before loading).
+    """
+    columns, scale = columns or {}, scale or {}
+    quats = np.stack([np.asarray(values[c], dtype=float) for c in _QUATERNION], axis=1)
+    found = rate_frame_misfits(ts, quats, [values[c] for c in _AXES])
+    if found is None or found["body"] <= RATE_FRAME_MISFIT:
+        return
+    reading = min(("world_to_body", "world"), key=found.__getitem__)
+    if not found[reading] <= RATE_FRAME_RATIO * found["body"]:
+        return
+    how = (
+        f"p, q, r miss the attitude's rate of change by {found['body']:.0%} of its size over {BLOCK_S * 1e3:g} ms "
+        f"blocks, and by {found[reading]:.0%}"
+    )
+    if reading == "world_to_body":
+        fix = {c: -1.0 * float(scale.get(c, 1.0)) for c in _QUATERNION[1:]}
+        raise DataError(
+            f"the quaternion is world-to-body, the inverse of the contract's body-to-world attitude: {how} with its "
+            "vector part negated; conjugate it "
+            f"(`scale={{{', '.join(f'{c!r}: {f:g}' for c, f in fix.items())}}}`, "
+            f"`--scale {','.join(f'{c}={f:g}' for c, f in fix.items())}`)",
+            path=path,
+            column=columns.get("qw", "qw"),
+        )
+    raise DataError(
+        f"p, q, r are the angular velocity in world axes, not the body rates: {how} as the world frame's rate of "
+        "change; the contract's rates are the body frame's: rotate them before loading "
+        "(omega_body = R(q)^T omega_world)",
+        path=path,
+        column=columns.get("p", "p"),
+    )
 
 
 def check_position_units(ts, values: dict, motors, *, path=None, columns=None, scale=None) -> None:

@@ -52,6 +52,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._data._flight import warn_if_units_differ
 from .._data._motor_order import warn_if_numbered_otherwise
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
@@ -219,6 +220,7 @@ def frame_quadrotor(system: Quadrotor, train, validation, candidates, mode, hori
     refit = isinstance(mode, Refit)
     given = _as_list(train, "train") + ([] if validation is None else _as_list(validation, "validation"))
     warn_if_numbered_otherwise(given, stacklevel=4)  # `diagnose`'s caller
+    warn_if_units_differ(given, stacklevel=4)
     if validation is None:  # the held-out tail of each flight stays out of the one-step fit too
         from ._records import holdout_split
 

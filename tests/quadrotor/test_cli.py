@@ -203,3 +203,21 @@ def test_another_drone_needs_only_a_map(tmp_path, capsys):
     out = json.loads(metrics.read_text())
     # The nominal model is this vehicle's own structure: far ahead of holding the velocity.
     assert out["model"]["mae"]["velocity"][1] < 0.01 * out["constant_velocity"]["mae"]["velocity"][1]
+
+
+def test_flights_whose_motors_are_in_different_units_are_refused_together(tmp_path, capsys):
+    # one flight's motors in percent of the 16-bit range among flights logged in counts: one motor map fitted
+    # to all three predicted none of them, with exit status 0
+    from tests.cli.hostile_cases import write_table
+    from tests.quadrotor.synthetic_flight import quadrotor_flight
+
+    paths = []
+    for seed, factor in ((1, 1.0), (2, 1.0), (3, 100.0 / 65535.0)):
+        f = quadrotor_flight(6.0, seed=seed)
+        table = np.column_stack([np.asarray(f.ts), np.asarray(f.xs), factor * np.asarray(f.us)])
+        paths.append(str(write_table(tmp_path / f"flight{seed}.csv", ("t", *f.state_names, *f.input_names), table)))
+    argv = ["fit", "quadrotor", "--model", "nominal", "--criterion", "one-step", "--out", str(tmp_path / "m.json")]
+    assert main([*argv[:2], *paths, *argv[2:]]) == 2
+    err = capsys.readouterr().err
+    assert "flight3.csv" in err and "column 'm1'" in err and "another unit" in err
+    assert main([*argv[:2], *paths[:2], *argv[2:]]) == 0

@@ -14,6 +14,7 @@ from collections.abc import Sequence
 import jax.numpy as jnp
 import numpy as np
 
+from ..._data._flight import warn_if_units_differ
 from ..._data._motor_order import warn_if_numbered_otherwise
 from ..._data._trajectory import Trajectory
 from ..._fit import Solution
@@ -67,6 +68,7 @@ def fit_quadrotor(
     criterion = OneStep() if criterion is None else criterion
     settings = FitSettings(warm_start=warm_start, callback=callback, progress=progress)
     warn_if_numbered_otherwise(flights)
+    warn_if_units_differ(flights)
     return fit_all(system, flights, criterion, settings)
 
 
