@@ -111,6 +111,8 @@ from ._data._spectra import measurement_noise_std as measurement_noise_std
 from ._data._spectra import noise_floor_and_band as noise_floor_and_band
 from ._data._spectra import with_velocities_from_positions as with_velocities_from_positions
 from ._data._velocities import velocity_gain as velocity_gain
+from ._data._velocities import velocity_lag as velocity_lag
+from ._data._velocities import VelocityLag as VelocityLag
 
 # Diagnose: candidates, windows and refits, statistics, horizons, the sparse search.
 from ._diagnose import Discovery as Discovery
@@ -827,6 +829,8 @@ __all__ = [
     "vehicle_rollout",
     "VehicleStatistics",
     "velocity_gain",
+    "velocity_lag",
+    "VelocityLag",
     "warn_if_numbered_otherwise",
     "WhitenessTest",
     "window_errors",

@@ -34,6 +34,16 @@ def add_data_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_velocity_option(parser: argparse.ArgumentParser) -> None:
+    """Add `--estimate-velocities` (the arms' and the linear axis's commands)."""
+    parser.add_argument(
+        "--estimate-velocities",
+        action="store_true",
+        help="leave the files' velocity columns unread and estimate the velocities from the positions "
+        "(central differences, which do not lag): for a logged velocity that lags its angle",
+    )
+
+
 def data_options(args: argparse.Namespace) -> tuple[dict, dict, dict]:
     """The parsed `--map`, `--scale` and `--offset` (UsageError naming the malformed one)."""
     return (
@@ -331,6 +341,7 @@ def load_records(args, system: str, *, min_samples: int, lenient: tuple = ()) ->
                     offset=offset,
                     sampling=Sampling(min_samples=min_samples),
                     check=False,
+                    estimate_velocities=getattr(args, "estimate_velocities", False),
                 )
                 for p in paths
             ]

@@ -8,7 +8,14 @@ import time
 import warnings
 
 from .._errors import UsageError
-from ._common import add_data_options, add_exclude_option, data_options, load_records, read_nominal_parameters
+from ._common import (
+    add_data_options,
+    add_exclude_option,
+    add_velocity_option,
+    data_options,
+    load_records,
+    read_nominal_parameters,
+)
 from ._nominal import check_nominal, nominal_from_data, nominal_system, split_term_coefficients
 from ._output import staged_directory, write_json
 
@@ -34,6 +41,7 @@ def register(subparsers):
     parser.add_argument("--validation", nargs="+", default=None, metavar="VAL", help="held-out run(s) (same columns)")
     add_data_options(parser)
     add_exclude_option(parser)
+    add_velocity_option(parser)
     parser.add_argument(
         "--mode",
         choices=("refit", "known"),

@@ -186,6 +186,7 @@ def load_trajectory(
     offset: Mapping[str, float] | None = None,
     sampling: Sampling = Sampling(),
     check: bool = True,
+    estimate_velocities: bool = False,
 ) -> Trajectory:
     """Load a measured data file as a `Trajectory`, checking it against the data contract.
 
@@ -210,9 +211,12 @@ def load_trajectory(
       `None` accepts gaps, then cut the record with `split_at_gaps`) or shorter than `min_step` of
       one (default 0.01: a near-duplicate stamp; `None` accepts it).
     - `check`: read the record for located faults (`dynax.check_records`: glitches, stuck sensors,
-      wrapped angles, stretches where a velocity is not its position's derivative, constant or zero
-      columns, time in milliseconds) and warn a `DataWarning` naming each, with its rows and times
+      wrapped angles, stretches where a velocity is not its position's derivative, a velocity that
+      lags its angle, constant or zero columns, time in milliseconds) and warn a `DataWarning` naming each, with its rows and times
       (default `True`).
+    - `estimate_velocities`: leave the file's velocity columns unread and estimate every velocity
+      from the positions, as for a file of positions alone (below): the fix for a logged velocity
+      that lags its angle (a driver's filter or backward difference; the `lag` check names it).
 
     **Returns:**
 
@@ -284,11 +288,15 @@ def load_trajectory(
     optional = OPTIONAL_STATES.get(system, {})
     # Velocities are estimated only when the file has none of them: one present and another absent
     # is a misnamed column, not a record of positions alone.
-    if any(name in mapping or name in raw for name in optional):
+    if any(name in mapping or name in raw for name in optional) and not estimate_velocities:
         optional = {}
+    if estimate_velocities and not optional:
+        raise UsageError(f"`estimate_velocities`: '{system}' has no velocity that is estimated from a position")
     values = {}
     for name in wanted:
         column = mapping.get(name, name)
+        if name in optional and estimate_velocities:
+            continue
         if column not in raw:
             if name in optional:
                 continue
