@@ -10,7 +10,7 @@ by the backward difference of the noisy angle (what a driver logs).
     python experiments/velocity_lag.py [--quick] [--seeds 10] [--out experiments/results/velocity_lag.json]
 
 Prints (1) the bias of `identify` (default `Dynamic`, Python API, the check's warning ignored) on a clean 100 Hz
-record and on each fault, and with the velocities estimated from the angles instead (`estimate_velocities`);
+record and on each fault, and with the velocities estimated from the angles instead (`velocities="positions"`);
 (2) the check on clean records (100 Hz to 1 kHz, three noise levels, uniform or jittered time, seeds): how often
 it fires (false alarms), and the largest |lag| / std error and phase it read; (3) how often it fires on each fault;
 (4) the six DFKI runs' logged velocities (their backward differences, exactly).

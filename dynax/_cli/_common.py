@@ -35,12 +35,14 @@ def add_data_options(parser: argparse.ArgumentParser) -> None:
 
 
 def add_velocity_option(parser: argparse.ArgumentParser) -> None:
-    """Add `--estimate-velocities` (the arms' and the linear axis's commands)."""
+    """Add `--velocities measured|positions` (`identify`; `diagnose` has its own, with `auto`)."""
     parser.add_argument(
-        "--estimate-velocities",
-        action="store_true",
-        help="leave the files' velocity columns unread and estimate the velocities from the positions "
-        "(central differences, which do not lag): for a logged velocity that lags its angle",
+        "--velocities",
+        choices=("measured", "positions"),
+        default="measured",
+        help="measured (default): the files' velocity columns as recorded; positions: leave them unread "
+        "and estimate the velocities from the positions (central differences, which do not lag): for a "
+        "logged velocity that lags its angle",
     )
 
 
@@ -341,7 +343,7 @@ def load_records(args, system: str, *, min_samples: int, lenient: tuple = ()) ->
                     offset=offset,
                     sampling=Sampling(min_samples=min_samples),
                     check=False,
-                    estimate_velocities=getattr(args, "estimate_velocities", False),
+                    velocities="positions" if getattr(args, "velocities", None) == "positions" else "measured",
                 )
                 for p in paths
             ]

@@ -11,7 +11,6 @@ from .._errors import UsageError
 from ._common import (
     add_data_options,
     add_exclude_option,
-    add_velocity_option,
     data_options,
     load_records,
     read_nominal_parameters,
@@ -41,7 +40,6 @@ def register(subparsers):
     parser.add_argument("--validation", nargs="+", default=None, metavar="VAL", help="held-out run(s) (same columns)")
     add_data_options(parser)
     add_exclude_option(parser)
-    add_velocity_option(parser)
     parser.add_argument(
         "--mode",
         choices=("refit", "known"),
@@ -81,11 +79,12 @@ def register(subparsers):
     parser.add_argument("--max-terms", type=int, default=3, help="at most this many causes (default 3)")
     parser.add_argument(
         "--velocities",
-        choices=("auto", "measured"),
+        choices=("auto", "measured", "positions"),
         default="auto",
         help="auto (default): where a joint velocity's measurement noise exceeds the bias of a local "
         "cubic fit of the positions, take the velocity from that fit (report.json data.velocities "
-        "says which); measured: use the velocities as recorded",
+        "says which); measured: use the velocities as recorded; positions: leave the files' velocity "
+        "columns unread and estimate them from the positions (for a logged velocity that lags its angle)",
     )
     parser.add_argument(
         "--no-discovery",
@@ -170,7 +169,7 @@ def run(args: argparse.Namespace) -> int:
                 max_terms=args.max_terms,
                 discovery=not args.no_discovery,
                 cross_fit=not args.no_cross_fit,
-                velocities=args.velocities,
+                velocities="auto" if args.velocities == "positions" else args.velocities,
             ),
             progress=say,
         )

@@ -526,8 +526,8 @@ def lag_findings(tr, ts, source, values, pairs, dt):
                 f"{read.frequency / (2 * np.pi):.2g} Hz): "
                 "a driver's filter or backward difference, whose error follows the acceleration, so a fit trades "
                 "damping for inertia (one sample at 100 Hz halves a fitted damping)",
-                "--estimate-velocities (dynax differentiates the angles by central differences, which do not lag; "
-                "in Python `load_trajectory(..., estimate_velocities=True)`)",
+                "--velocities positions (dynax differentiates the angles by central differences, which do not "
+                "lag; in Python `load_trajectory(..., velocities='positions')`)",
             )
         )
     return out

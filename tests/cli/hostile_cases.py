@@ -1,7 +1,8 @@
 """Hostile but ordinary inputs, of the kinds real logs contain, and what dynax must do with each.
 
 Grown from the classes of faults a careful user meets: single-sample glitches, stuck sensors, wrapped
-angles, stretches where a velocity stops agreeing with its position, sign flips, zero or constant
+angles, stretches where a velocity stops agreeing with its position, sign flips, a velocity that lags its
+angle (a driver's filter or backward difference), one joint's or motor's columns read as the other's, zero or constant
 columns, inputs the system ignores, time in milliseconds, the same record twice, non-finite values,
 unsorted time, absurd magnitudes, impossible models and bad arguments. Each `Case` builds its inputs in a
 folder and names the command line (or a Python call) and the one acceptable outcome:
@@ -26,7 +27,9 @@ import io
 import json
 import os
 import pathlib
+import sys
 import traceback
+import warnings
 
 import numpy as np
 
@@ -839,7 +842,7 @@ CASES = [
         "velocity_lag",
         lambda d, fx: _identify(_acrobot(d, fx, _lagged(1))),
         "refuse",
-        ("column 'dq1'", "lags q1 by 9.9", "--estimate-velocities"),
+        ("column 'dq1'", "lags q1 by 9.9", "--velocities positions"),
         ("--scale",),
     ),
     C(
@@ -847,21 +850,21 @@ CASES = [
         "velocity_lag",
         lambda d, fx: _identify(_acrobot(d, fx, _backward_differences)),
         "refuse",
-        ("column 'dq1'", "lags q1 by 5", "--estimate-velocities"),
+        ("column 'dq1'", "lags q1 by 5", "--velocities positions"),
     ),
     C(
         "velocity-lag-low-pass-10ms",
         "velocity_lag",
         lambda d, fx: _identify(_acrobot(d, fx, _low_passed(0.01))),
         "refuse",
-        ("column 'dq1'", "lags q1", "--estimate-velocities"),
+        ("column 'dq1'", "lags q1", "--velocities positions"),
     ),
     C(
         "velocity-lag-elbow-only",
         "velocity_lag",
         lambda d, fx: _identify(_acrobot(d, fx, _lagged(2, ("dq2",)))),
         "refuse",
-        ("column 'dq2'", "lags q2 by 20", "--estimate-velocities"),
+        ("column 'dq2'", "lags q2 by 20", "--velocities positions"),
     ),
     C(
         "velocity-lag-second-half",
@@ -875,12 +878,12 @@ CASES = [
         "velocity_lag",
         lambda d, fx: _diagnose(_acrobot(d, fx, _lagged(1))),
         "refuse",
-        ("column 'dq1'", "lags q1", "--estimate-velocities"),
+        ("column 'dq1'", "lags q1", "--velocities positions"),
     ),
     C(
         "velocity-lag-estimated-instead",
         "velocity_lag",
-        lambda d, fx: _identify(_acrobot(d, fx, _lagged(1)), "--estimate-velocities", method="dynamic"),
+        lambda d, fx: _identify(_acrobot(d, fx, _lagged(1)), "--velocities", "positions", method="dynamic"),
         "accept",
         check=params_close(),
         heavy=True,
@@ -985,6 +988,10 @@ class Outcome:
         return lines[-1] if lines else (self.stderr.strip().splitlines() or [""])[-1]
 
 
+def _warning_to_stderr(message, category, filename, lineno, file=None, line=None):
+    sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+
 def run_case(case: Case, folder, fixtures, main) -> Outcome:
     """Run `case` in `folder` through `main(argv)` (or its Python call), and judge it (`Outcome.verdict`)."""
     folder = pathlib.Path(folder)
@@ -1011,7 +1018,10 @@ def run_case(case: Case, folder, fixtures, main) -> Outcome:
         out = out if out.is_absolute() else folder / out
         before = _snapshot(out)
         stdout, stderr = io.StringIO(), io.StringIO()
-        with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr), warnings.catch_warnings():
+            # as the console script shows them: every Python warning on stderr (pytest would record them instead)
+            warnings.simplefilter("always")
+            warnings.showwarning = _warning_to_stderr
             try:
                 status = main(argv)
             except SystemExit as e:

@@ -1,6 +1,6 @@
 """A logged velocity that lags its angle (a driver's causal filter, a backward difference, a velocity stamped
 late) is read by `velocity_lag` and named by the `lag` data check with its column, its lag in milliseconds, the
-stretch it holds in and the fix (`--estimate-velocities`); clean records, noisy or jittered, raise nothing.
+stretch it holds in and the fix (`--velocities positions`); clean records, noisy or jittered, raise nothing.
 
 The records are sums of sines written out here, with their exact derivatives: nothing of dynax's model."""
 
@@ -64,7 +64,7 @@ def test_a_velocity_a_sample_late_is_refused_with_its_lag_and_the_fix():
     f = found[0]
     assert (f.column, f.severity, f.rows) == ("dq1", "refuse", (1, len(ts)))
     assert "lags q1 by 10 ms" in f.message and "every stretch" in f.message
-    assert f.fix.startswith("--estimate-velocities")
+    assert f.fix.startswith("--velocities positions")
 
 
 def test_a_lag_from_part_way_through_is_located_in_its_stretch():
@@ -91,7 +91,7 @@ def test_clean_records_with_noise_or_jitter_raise_no_lag(seed, rate_hz, noise, j
     assert not _lags(dynax.check_records([_record(ts, q, dq)], estimated=()))
 
 
-def test_estimate_velocities_reads_the_angles_and_leaves_the_logged_column(tmp_path):
+def test_velocities_from_positions_reads_the_angles_and_leaves_the_logged_column(tmp_path):
     ts, q, dq = _motion(3)
     late = np.concatenate([dq[:1], dq[:-1]])
     path = tmp_path / "late.csv"
@@ -101,8 +101,8 @@ def test_estimate_velocities_reads_the_angles_and_leaves_the_logged_column(tmp_p
         dynax.load_trajectory(path, "acrobot")
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # the angles' central differences do not lag: nothing to warn of
-        record = dynax.load_trajectory(path, "acrobot", estimate_velocities=True)
+        record = dynax.load_trajectory(path, "acrobot", velocities="positions")
     central = np.gradient(q, ts, axis=0)
     assert np.allclose(np.asarray(record.xs)[:, 2:], central, rtol=0, atol=1e-9)
-    with pytest.raises(dynax.UsageError, match="estimate_velocities"):
-        dynax.load_trajectory(path, "helicopter", estimate_velocities=True)
+    with pytest.raises(dynax.UsageError, match="positions"):
+        dynax.load_trajectory(path, "helicopter", velocities="positions")
