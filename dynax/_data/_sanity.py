@@ -510,6 +510,7 @@ def lag_findings(tr, ts, source, values, pairs, dt):
         if phase < LAG_PHASE_WARN:
             continue
         i, j = int(read.bounds[held[0]]), int(read.bounds[held[-1] + 1]) - 1
+        intervals = f"{abs(lag) / dt:.2g}"
         where = (
             "in every stretch" if held.size == len(z) else f"in {held.size} of {len(z)} stretches, all in these rows"
         )
@@ -521,8 +522,8 @@ def lag_findings(tr, ts, source, values, pairs, dt):
                 Check.LAG,
                 Severity.REFUSE if phase >= LAG_PHASE_REFUSE else Severity.WARN,
                 velocity,
-                f"{'lags' if lag > 0 else 'leads'} {position} by {abs(lag) * 1e3:.3g} ms ({abs(lag) / dt:.2g} "
-                f"sampling intervals, {where}; a phase error of {phase:.2g} rad at the motion's "
+                f"{'lags' if lag > 0 else 'leads'} {position} by {abs(lag) * 1e3:.3g} ms ({intervals} sampling "
+                f"interval{'' if intervals == '1' else 's'}, {where}; a phase error of {phase:.2g} rad at the motion's "
                 f"{read.frequency / (2 * np.pi):.2g} Hz): "
                 "a driver's filter or backward difference, whose error follows the acceleration, so a fit trades "
                 "damping for inertia (one sample at 100 Hz halves a fitted damping)",
