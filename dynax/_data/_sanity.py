@@ -494,26 +494,31 @@ def lag_findings(tr, ts, source, values, pairs, dt):
         z = np.nan_to_num(read.stretch_lags / read.stretch_errors)
         if abs(read.lag) > LAG_SIGNIFICANCE * read.std_error:
             sign = np.sign(read.lag)
+            # it spans the record but for stretches that read no lag and differ from the record's (its start
+            # or end before a filter was switched on or off); a stretch too still to tell is not one
+            off = np.nan_to_num(np.abs(read.stretch_lags - read.lag) / read.stretch_errors)
+            free = (np.abs(z) < LAG_STRETCH_SIGNIFICANCE) & (off >= LAG_STRETCH_SIGNIFICANCE)
+            span = np.flatnonzero(~free)
         else:  # a lag in a run of stretches only (a filter switched on part way): each one far from zero
             strong = np.abs(z) >= LAG_RUN_SIGNIFICANCE
             runs = [(a, b) for a, b in _runs(strong) if b > a and len(set(np.sign(z[a : b + 1]))) == 1]
             if not runs:
                 continue
             sign = np.sign(z[runs[0][0]])
-        # the stretches it holds in: a lag of the same sign, LAG_STRETCH_SIGNIFICANCE errors from zero there
+            span = None
+        # the stretches it is read in: a lag of the same sign, LAG_STRETCH_SIGNIFICANCE errors from zero there
         held = np.flatnonzero(z * sign >= LAG_STRETCH_SIGNIFICANCE)
         if not held.size:
             continue
+        span = held if span is None or not span.size else span
         weight = 1.0 / read.stretch_errors[held] ** 2
         lag = float(np.sum(weight * read.stretch_lags[held]) / np.sum(weight))
         phase = abs(lag) * read.frequency
         if phase < LAG_PHASE_WARN:
             continue
-        i, j = int(read.bounds[held[0]]), int(read.bounds[held[-1] + 1]) - 1
+        i, j = int(read.bounds[span[0]]), int(read.bounds[span[-1] + 1]) - 1
         intervals = f"{abs(lag) / dt:.2g}"
-        where = (
-            "in every stretch" if held.size == len(z) else f"in {held.size} of {len(z)} stretches, all in these rows"
-        )
+        where = "read in every stretch" if held.size == len(z) else f"read in {held.size} of {len(z)} stretches"
         out.append(
             _row_time(
                 ts,

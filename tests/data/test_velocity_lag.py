@@ -63,7 +63,7 @@ def test_a_velocity_a_sample_late_is_refused_with_its_lag_and_the_fix():
     assert len(found) == 1, found
     f = found[0]
     assert (f.column, f.severity, f.rows) == ("dq1", "refuse", (1, len(ts)))
-    assert "lags q1 by 10 ms" in f.message and "every stretch" in f.message
+    assert "lags q1 by 10 ms" in f.message and "read in every stretch" in f.message
     assert f.fix.startswith("--velocities positions")
 
 
