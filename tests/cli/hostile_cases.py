@@ -912,6 +912,18 @@ CASES = [
         heavy=True,
     ),
     C(
+        "swapped-torques-diagnose",
+        "swapped",
+        lambda d, fx: _diagnose(
+            _acrobot(d, fx, _swapped(("tau1", "tau2"), header=PENDULUM), header=PENDULUM, table="pendulum"),
+            system="double_pendulum",
+        ),
+        "warn",
+        ("tau1, tau2", "look swapped", "--map tau1=tau2,tau2=tau1"),
+        check=lambda out: isinstance(json.loads((pathlib.Path(out) / "report.json").read_text())["verdict"], str),
+        heavy=True,
+    ),
+    C(
         "swapped-joints-mapped-back",
         "swapped",
         lambda d, fx: _identify(
