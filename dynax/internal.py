@@ -125,6 +125,8 @@ from ._data._velocities import check_trajectory_velocities as check_trajectory_v
 from ._data._velocities import gain_surely_within as gain_surely_within
 from ._data._velocities import MAX_GAIN_ERROR as MAX_VELOCITY_GAIN_ERROR
 from ._data._velocities import velocity_gain as velocity_gain
+from ._data._velocities import velocity_lag as velocity_lag
+from ._data._velocities import VelocityLag as VelocityLag
 
 # Diagnose: candidates, windows and refits, statistics, horizons, the sparse search.
 from ._diagnose import Discovery as Discovery
@@ -887,6 +889,8 @@ __all__ = [
     "vehicle_rollout",
     "VehicleStatistics",
     "velocity_gain",
+    "velocity_lag",
+    "VelocityLag",
     "warn_if_numbered_otherwise",
     "WhitenessTest",
     "window_errors",

@@ -34,6 +34,18 @@ def add_data_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_velocity_option(parser: argparse.ArgumentParser) -> None:
+    """Add `--velocities measured|positions` (`identify`; `diagnose` has its own, with `auto`)."""
+    parser.add_argument(
+        "--velocities",
+        choices=("measured", "positions"),
+        default="measured",
+        help="measured (default): the files' velocity columns as recorded; positions: leave them unread "
+        "and estimate the velocities from the positions (central differences, which do not lag): for a "
+        "logged velocity that lags its angle",
+    )
+
+
 def data_options(args: argparse.Namespace) -> tuple[dict, dict, dict]:
     """The parsed `--map`, `--scale` and `--offset` (UsageError naming the malformed one)."""
     return (
@@ -331,6 +343,7 @@ def load_records(args, system: str, *, min_samples: int, lenient: tuple = ()) ->
                     offset=offset,
                     sampling=Sampling(min_samples=min_samples),
                     check=False,
+                    velocities="positions" if getattr(args, "velocities", None) == "positions" else "measured",
                 )
                 for p in paths
             ]

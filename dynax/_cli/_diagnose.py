@@ -8,7 +8,13 @@ import time
 import warnings
 
 from .._errors import UsageError
-from ._common import add_data_options, add_exclude_option, data_options, load_records, read_nominal_parameters
+from ._common import (
+    add_data_options,
+    add_exclude_option,
+    data_options,
+    load_records,
+    read_nominal_parameters,
+)
 from ._nominal import check_nominal, nominal_from_data, nominal_system, split_term_coefficients
 from ._output import staged_directory, write_json
 
@@ -73,11 +79,12 @@ def register(subparsers):
     parser.add_argument("--max-terms", type=int, default=3, help="at most this many causes (default 3)")
     parser.add_argument(
         "--velocities",
-        choices=("auto", "measured"),
+        choices=("auto", "measured", "positions"),
         default="auto",
         help="auto (default): where a joint velocity's measurement noise exceeds the bias of a local "
         "cubic fit of the positions, take the velocity from that fit (report.json data.velocities "
-        "says which); measured: use the velocities as recorded",
+        "says which); measured: use the velocities as recorded; positions: leave the files' velocity "
+        "columns unread and estimate them from the positions (for a logged velocity that lags its angle)",
     )
     parser.add_argument(
         "--no-discovery",
@@ -162,7 +169,7 @@ def run(args: argparse.Namespace) -> int:
                 max_terms=args.max_terms,
                 discovery=not args.no_discovery,
                 cross_fit=not args.no_cross_fit,
-                velocities=args.velocities,
+                velocities="auto" if args.velocities == "positions" else args.velocities,
             ),
             progress=say,
         )

@@ -13,7 +13,15 @@ import time
 import warnings
 
 from .._errors import UsageError
-from ._common import add_data_options, add_exclude_option, data_options, load_records, min_fit_samples, output_file
+from ._common import (
+    add_data_options,
+    add_exclude_option,
+    add_velocity_option,
+    data_options,
+    load_records,
+    min_fit_samples,
+    output_file,
+)
 from ._output import write_json
 
 _SYSTEMS = ("acrobot", "double_pendulum", "linear_axis", "helicopter")
@@ -67,6 +75,7 @@ def register(subparsers):
     )
     add_data_options(parser)
     add_exclude_option(parser)
+    add_velocity_option(parser)
     parser.add_argument(
         "--lowpass",
         default="auto",

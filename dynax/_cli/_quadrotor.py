@@ -12,9 +12,7 @@ QUADROTOR_MODELS = ("nominal", "acceleration", "linear")
 
 def load_flights(
     paths,
-    mapping,
-    scale,
-    offset,
+    options,
     *,
     min_samples: int,
     needs: str = "",
@@ -23,7 +21,8 @@ def load_flights(
     levels=None,
     reference=None,
 ):
-    """Each file through `load_flight`, its ground segments and glitches noted on stdout; the usable
+    """Each file through `load_flight` (`options`: its `mapping`, `scale` and `offset`, as `data_options` reads
+    them), its ground segments and glitches noted on stdout; the usable
     runs of at least `min_samples` samples (`needs`: the option that asks for that many, named in the
     refusal), and the notes. A flight given twice is refused, and one that is also a `training` flight
     (`{path: trajectory}` of those loaded before) is no validation. `training`, where given, gains the
@@ -37,6 +36,7 @@ def load_flights(
     from .._data._motor_order import MotorNumbering
     from .._data._sanity import same_data
 
+    mapping, scale, offset = options
     runs, notes, seen = [], [], {}
     levels = {} if levels is None else levels
     numbering = MotorNumbering() if numbering is None else numbering
@@ -126,9 +126,7 @@ def run_fit(args) -> int:
     numbering = MotorNumbering()  # the flights' consensus; written into the model for `evaluate` to hold flights to
     runs, notes = load_flights(
         args.data,
-        mapping,
-        scale,
-        offset,
+        (mapping, scale, offset),
         min_samples=round(args.horizon * 100) + 2,
         needs=f"--horizon {args.horizon:g}",
         numbering=numbering,
@@ -240,9 +238,7 @@ def run_evaluate(args, system, reference=None) -> int:
     start = time.perf_counter()
     runs, notes = load_flights(
         args.data,
-        mapping,
-        scale,
-        offset,
+        (mapping, scale, offset),
         min_samples=max(steps) + 2,
         needs=f"--steps {max(steps)}",
         numbering=MotorNumbering(reference, f"the training flights of {args.model}"),
@@ -329,9 +325,7 @@ def run_diagnose(args) -> int:
     given = None if nominal is None else (training_levels(nominal), f"the training flights of {args.nominal}")
     train, _ = load_flights(
         args.data,
-        mapping,
-        scale,
-        offset,
+        (mapping, scale, offset),
         min_samples=min_samples,
         training=loaded,
         numbering=numbering,
@@ -342,9 +336,7 @@ def run_diagnose(args) -> int:
     if args.validation is not None:
         validation, _ = load_flights(
             args.validation,
-            mapping,
-            scale,
-            offset,
+            (mapping, scale, offset),
             min_samples=min_samples,
             training=loaded,
             numbering=numbering,

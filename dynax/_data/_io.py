@@ -7,6 +7,7 @@ import io
 import os
 import pathlib
 import re
+from typing import Literal
 import zipfile
 import zlib
 
@@ -186,6 +187,7 @@ def load_trajectory(
     offset: Mapping[str, float] | None = None,
     sampling: Sampling = Sampling(),
     check: bool = True,
+    velocities: Literal["measured", "positions"] = "measured",
 ) -> Trajectory:
     """Load a measured data file as a `Trajectory`, checking it against the data contract.
 
@@ -210,9 +212,13 @@ def load_trajectory(
       `None` accepts gaps, then cut the record with `split_at_gaps`) or shorter than `min_step` of
       one (default 0.01: a near-duplicate stamp; `None` accepts it).
     - `check`: read the record for located faults (`dynax.check_records`: glitches, stuck sensors,
-      wrapped angles, stretches where a velocity is not its position's derivative, constant or zero
-      columns, time in milliseconds) and warn a `DataWarning` naming each, with its rows and times
-      (default `True`).
+      wrapped angles, stretches where a velocity is not its position's derivative, a velocity that
+      lags its angle, constant or zero columns, time in milliseconds) and warn a `DataWarning`
+      naming each, with its rows and times (default `True`).
+    - `velocities`: `"measured"` (default) reads the file's velocity columns; `"positions"` leaves them
+      unread and estimates every velocity from the positions, as for a file of positions alone
+      (below): the fix for a logged velocity that lags its angle (a driver's filter or backward
+      difference; the `lag` check names it).
 
     **Returns:**
 
@@ -284,11 +290,18 @@ def load_trajectory(
     optional = OPTIONAL_STATES.get(system, {})
     # Velocities are estimated only when the file has none of them: one present and another absent
     # is a misnamed column, not a record of positions alone.
-    if any(name in mapping or name in raw for name in optional):
+    if velocities not in ("measured", "positions"):
+        raise UsageError(f"`velocities` must be 'measured' or 'positions', got {velocities!r}")
+    from_positions = velocities == "positions"
+    if any(name in mapping or name in raw for name in optional) and not from_positions:
         optional = {}
+    if from_positions and not optional:
+        raise UsageError(f"`velocities='positions'`: '{system}' has no velocity that is estimated from a position")
     values = {}
     for name in wanted:
         column = mapping.get(name, name)
+        if name in optional and from_positions:
+            continue
         if column not in raw:
             if name in optional:
                 continue

@@ -27,6 +27,9 @@ What is checked (`Check` names them):
   means against secant slopes over 50 ms blocks, as `dynax._data._velocities`, but block by block):
   a spinning link past the encoder's range, a sign that flips half way. A gain that is wrong in every
   stretch is a unit, refused by `load_trajectory` with the `scale` that fixes it.
+- `lag`: a measured velocity that lags (or leads) its position throughout or in a run of stretches (a
+  driver's causal filter or backward difference): its error follows the acceleration, and a fit trades
+  damping for inertia (`lag_findings`).
 - `constant`, `zero`: a column that never changes (a dead sensor, a joint that never moves) or an
   input that is zero or constant throughout (nothing excites the dynamics, or a constant force that
   cannot be told from the offset a fit estimates): the parameters' scale is then not determined.
@@ -65,6 +68,7 @@ class Check(enum.StrEnum):
     CONSTANT = "constant"
     ZERO = "zero"
     DUPLICATE = "duplicate"
+    LAG = "lag"
 
 
 class Severity(enum.StrEnum):
@@ -173,6 +177,11 @@ VELOCITY_ERROR = 0.25  # a block whose mean velocity misses the secant slope by 
 VELOCITY_NOISE = 5.0  # ... and this many robust noise standard deviations ...
 VELOCITY_MOTION = 0.05  # ... and this fraction of the record's rms slope is a bad block
 MIN_BAD_BLOCKS = 3  # a stretch holds at least this many bad blocks (150 ms), at least half of its blocks
+LAG_SIGNIFICANCE = 8.0  # a velocity's lag is read as one when it is this many standard errors from zero ...
+LAG_STRETCH_SIGNIFICANCE = 3.0  # ... and the stretches it holds in, this many of their own
+LAG_RUN_SIGNIFICANCE = 8.0  # or two neighbouring stretches or more, each this many of their own
+LAG_PHASE_WARN = 0.004  # ... and its phase error at the motion's frequency (lag times frequency) is this [rad]
+LAG_PHASE_REFUSE = 0.02  # ... a refusal from this phase error [rad] (see `lag_findings`)
 
 
 def _row_time(ts, span, source, kind, severity, column, message, fix=None):
@@ -465,6 +474,75 @@ def velocity_stretch_findings(tr, ts, source, values, pairs, dt):
     return out
 
 
+def lag_findings(tr, ts, source, values, pairs, dt):
+    r"""A measured velocity that lags (or leads) its position (`velocity_lag`): a driver's causal filter, a
+    backward difference, a velocity stamped later than its angle. The lag's error in the velocity is
+    about $-d\,\ddot q$, so a fit that reads damping from velocities against inertia from accelerations
+    trades one for the other: the damping it reads is short by about $M d \omega^2$, a fraction
+    $|d|\,\omega \cdot M\omega / b$ of it, which no data check can know ($M\omega/b$ is the system's).
+    On the acrobot at 100 Hz one sample (10 ms, a phase error of 0.05 rad) takes 55-60 % off both
+    dampings, a backward difference (5 ms, 0.024 rad) 27-30 %, with standard errors that exclude the
+    truth (`experiments/velocity_lag.py`). So the check reads the phase error $|d|\,\omega$ at the
+    motion's frequency: a lag `LAG_SIGNIFICANCE` standard errors from zero (or, in a run of stretches
+    only, `LAG_RUN_SIGNIFICANCE` of their own in each) is a warning from `LAG_PHASE_WARN` (the DFKI rig's
+    logged backward differences, half of its 2 ms interval, read 0.005 to 0.010 rad and move its fitted
+    parameters by less than their standard errors) and a refusal from `LAG_PHASE_REFUSE`. The fix is
+    to let dynax estimate the velocities from the angles by central differences, which do not lag."""
+    from ._velocities import velocity_lag
+
+    out = []
+    for velocity, position in pairs.items():
+        read = velocity_lag(ts, values[position], values[velocity])
+        if read is None:
+            continue
+        z = np.nan_to_num(read.stretch_lags / read.stretch_errors)
+        if abs(read.lag) > LAG_SIGNIFICANCE * read.std_error:
+            sign = np.sign(read.lag)
+            # it spans the record but for stretches that read no lag and differ from the record's (its start
+            # or end before a filter was switched on or off); a stretch too still to tell is not one
+            off = np.nan_to_num(np.abs(read.stretch_lags - read.lag) / read.stretch_errors)
+            free = (np.abs(z) < LAG_STRETCH_SIGNIFICANCE) & (off >= LAG_STRETCH_SIGNIFICANCE)
+            span = np.flatnonzero(~free)
+        else:  # a lag in a run of stretches only (a filter switched on part way): each one far from zero
+            strong = np.abs(z) >= LAG_RUN_SIGNIFICANCE
+            runs = [(a, b) for a, b in _runs(strong) if b > a and len(set(np.sign(z[a : b + 1]))) == 1]
+            if not runs:
+                continue
+            sign = np.sign(z[runs[0][0]])
+            span = None
+        # the stretches it is read in: a lag of the same sign, LAG_STRETCH_SIGNIFICANCE errors from zero there
+        held = np.flatnonzero(z * sign >= LAG_STRETCH_SIGNIFICANCE)
+        if not held.size:
+            continue
+        span = held if span is None or not span.size else span
+        weight = 1.0 / read.stretch_errors[held] ** 2
+        lag = float(np.sum(weight * read.stretch_lags[held]) / np.sum(weight))
+        phase = abs(lag) * read.frequency
+        if phase < LAG_PHASE_WARN:
+            continue
+        i, j = int(read.bounds[span[0]]), int(read.bounds[span[-1] + 1]) - 1
+        intervals = f"{abs(lag) / dt:.2g}"
+        where = "read in every stretch" if held.size == len(z) else f"read in {held.size} of {len(z)} stretches"
+        out.append(
+            _row_time(
+                ts,
+                (i, j),
+                source,
+                Check.LAG,
+                Severity.REFUSE if phase >= LAG_PHASE_REFUSE else Severity.WARN,
+                velocity,
+                f"{'lags' if lag > 0 else 'leads'} {position} by {abs(lag) * 1e3:.3g} ms ({intervals} sampling "
+                f"interval{'' if intervals == '1' else 's'}, {where}; a phase error of {phase:.2g} rad at the motion's "
+                f"{read.frequency / (2 * np.pi):.2g} Hz): "
+                "a driver's filter or backward difference, whose error follows the acceleration, so a fit trades "
+                "damping for inertia (one sample at 100 Hz halves a fitted damping)",
+                "--velocities positions (dynax differentiates the angles by central differences, which do not "
+                "lag; in Python `load_trajectory(..., velocities='positions')`)",
+            )
+        )
+    return out
+
+
 def _constant(tr, ts, source, system):
     out = []
     xs, us = np.asarray(tr.xs, dtype=float), np.asarray(tr.us, dtype=float)
@@ -572,7 +650,12 @@ def check_record(trajectory: Trajectory, *, estimated: Sequence[str] | None = No
     findings += wrapped
     findings += stuck_findings(trajectory, ts, source, names, xs, paired_estimated, dt)
     if not glitches and not wrapped:  # a glitch or a wrap spoils its blocks too; said once, at its sample
-        findings += velocity_stretch_findings(trajectory, ts, source, values, measured, dt)
+        stretches = velocity_stretch_findings(trajectory, ts, source, values, measured, dt)
+        findings += stretches
+        wrong = {f.column for f in stretches}  # a velocity wrong in a stretch has no one lag: said once
+        findings += lag_findings(
+            trajectory, ts, source, values, {v: q for v, q in measured.items() if v not in wrong}, dt
+        )
     return DataCheck(tuple(findings))
 
 

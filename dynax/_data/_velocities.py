@@ -14,6 +14,8 @@ off by more than `MAX_GAIN_ERROR` and by more than `SIGNIFICANCE` of its own sta
 record that barely moves cannot tell, and is let through.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .._errors import DataError
@@ -253,3 +255,104 @@ def check_trajectory_velocities(trajectory) -> None:
     xs = np.asarray(trajectory.xs, dtype=float)
     values = {n: xs[:, i] for i, n in enumerate(names)}
     check_velocities(np.asarray(trajectory.ts, dtype=float), values, pairs, path=trajectory.source or None)
+
+
+LAG_WINDOW_S = 0.5  # windows whose offset and drift are taken out before the lag is read [s]
+LAG_STRETCHES = 16  # the record is cut into this many stretches, each with its own lag and standard error
+MIN_LAG_WINDOWS = 16  # fewer windows than this (of 4 samples or more): too short to tell
+
+
+class VelocityLag(NamedTuple):
+    """`velocity_lag`'s reading. `lag` [s] (positive: the velocity is late) and its `std_error` [s] over
+    the whole record; `frequency` [rad/s], the motion's typical angular frequency (so that `lag * frequency` is
+    the phase error the lag makes); `stretch_lags`, `stretch_errors` [s], the same in each of `LAG_STRETCHES` stretches
+    (NaN where one is too still to tell), whose sample indices are `bounds[k]` to `bounds[k + 1] - 1`."""
+
+    lag: float
+    std_error: float
+    frequency: float
+    stretch_lags: np.ndarray
+    stretch_errors: np.ndarray
+    bounds: np.ndarray
+
+
+def _window_residuals(ts: np.ndarray, window: np.ndarray, count: int, columns) -> list[np.ndarray]:
+    """Each of `columns` less its own straight line in `ts` within each window (`window`: the window index
+    of each sample, `count` windows): an integrated velocity's offset and its drift (a velocity's bias
+    integrates to one) leave the regression."""
+    n = np.bincount(window, minlength=count).astype(float)
+    tc = ts - (np.bincount(window, ts, count) / np.maximum(n, 1.0))[window]
+    tt = np.bincount(window, tc * tc, count)
+    out = []
+    for x in columns:
+        mean = np.bincount(window, x, count) / np.maximum(n, 1.0)
+        slope = np.bincount(window, tc * x, count) / np.where(tt > 0, tt, 1.0)
+        out.append(x - mean[window] - slope[window] * tc)
+    return out
+
+
+def _lag_of(sums: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    r"""`(lag, information)` of the regression $q \approx a V + b v$ from its sums (rows: $VV, Vv, vv, Vq, vq$;
+    any trailing shape): $b / a$, and $a^2 / (S^{-1})_{bb}$, the inverse of its variance per unit noise
+    variance (0 where the window is too still or $a \le 0$)."""
+    svv, svd, sdd, svq, sdq = sums
+    det = svv * sdd - svd * svd
+    ok = (det > 1e-9 * svv * sdd) & (svv > 0)
+    det = np.where(ok, det, 1.0)
+    a, b = (sdd * svq - svd * sdq) / det, (svv * sdq - svd * svq) / det
+    ok &= a > 0
+    lag = np.where(ok, b / np.where(ok, a, 1.0), np.nan)
+    return lag, np.where(ok, a * a * det / np.where(svv > 0, svv, 1.0), 0.0)
+
+
+def velocity_lag(ts, q, v) -> VelocityLag | None:
+    r"""How far a measured velocity column lags its position column (a `VelocityLag`), or `None` for a
+    record too short or too still to tell.
+
+    A velocity late by $d$ integrates to the position late by $d$: $V(t) = \int v = q(t - d) + c$, so
+    $q(t) \approx a\,V(t) + b\,v(t)$ with $b / a = d$ (to first order in $d$; $a$ absorbs a gain). The
+    regression runs in windows of `LAG_WINDOW_S` (at least `MIN_LAG_WINDOWS` of them), each less its own
+    offset and drift, so a velocity's bias (which integrates to a drift) and the integration constant
+    leave it. Noise in $q$ is the regression's output noise; noise in $v$ is smoothed by the integral in
+    $V$ and only shrinks $b$ (towards no lag: never a false lag). A gain error does not move $d$; a
+    causal first-order filter of time constant $\tau$ reads as a lag of about $\tau$, a backward
+    difference as half an interval.
+
+    Each stretch's own lag $d_k$, with an information $I_k$ (its inverse variance per unit noise
+    variance), has the standard error $\sigma / \sqrt{I_k}$, $\sigma$ the rms of the differences of
+    neighbouring stretches' lags, each divided by its own standard deviation, less the largest one: a
+    lag that starts part way through the record moves one difference, not the scale. The record's lag
+    has the larger of two standard errors: $\sigma / \sqrt{\sum I_k}$ and the jackknife over the
+    stretches left out in turn (robust to the noise's colour: an integrated velocity's noise is a random
+    walk, smooth within a window); either alone is, now and then, several times too small. The frequency is
+    $\sqrt{\sum v_r^2 / \sum V_r^2}$ over the windows' residuals: a ratio of velocity to position,
+    which the velocity's noise hardly moves (an acceleration's would)."""
+    ts, q, v = (np.asarray(a, dtype=float) for a in (ts, q, v))
+    duration = float(ts[-1] - ts[0]) if len(ts) > 1 else 0.0
+    width = min(LAG_WINDOW_S, duration / MIN_LAG_WINDOWS)
+    if len(ts) < 4 * MIN_LAG_WINDOWS or not width > 0:
+        return None
+    count = int(duration / width)
+    window = np.minimum(((ts - ts[0]) / width).astype(int), count - 1)
+    V = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(ts))])
+    qr, Vr, vr = _window_residuals(ts, window, count, (q, V, v))
+    pairs = ((Vr, Vr), (Vr, vr), (vr, vr), (Vr, qr), (vr, qr))
+    stretch = np.minimum(window * LAG_STRETCHES // count, LAG_STRETCHES - 1)
+    sums = np.stack([np.bincount(stretch, x * y, LAG_STRETCHES) for x, y in pairs])  # (5, stretches)
+    total = sums.sum(axis=1)
+    lag = float(_lag_of(total)[0])
+    left_out = _lag_of(total[:, None] - sums)[0]
+    per, info = _lag_of(sums)
+    if not (np.isfinite(lag) and np.all(np.isfinite(left_out))) or np.sum(info > 0) < LAG_STRETCHES // 2:
+        return None
+    jackknife = float(np.sqrt((LAG_STRETCHES - 1) / LAG_STRETCHES * np.sum((left_out - left_out.mean()) ** 2)))
+    used = info > 0
+    d, i = per[used], info[used]
+    scaled = np.sort(np.abs(np.diff(d)) / np.sqrt(1.0 / i[1:] + 1.0 / i[:-1]))
+    sigma = float(np.sqrt(np.mean(scaled[:-1] ** 2)))  # the largest left out: a lag that starts part way
+    std = max(jackknife, sigma / float(np.sqrt(i.sum())))  # two estimates of one error: the larger
+    errors = np.where(used, sigma / np.sqrt(np.where(used, info, 1.0)), np.nan)
+    first = np.searchsorted(stretch, np.arange(LAG_STRETCHES))
+    bounds = np.concatenate([first, [len(ts)]])
+    frequency = float(np.sqrt(total[2] / total[0]))
+    return VelocityLag(lag, std, frequency, per, errors, bounds)

@@ -139,6 +139,7 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
         solve = functools.partial(least_squares, a, names=names, weights=weights, rcond=rcond)
         _warn_if_inputs_reversed(system, names, (a, y), solve, qs, error, trajectories[0].input_names)
         _warn_if_degrees(given, trajectories, error)
+        _warn_if_swapped(given, trajectories, error)
         plain_std = _serially_robust(fit, a, y, weights, estimate, record_rows)[0].std_errors
         _warn_if_zero_upright(fitted, names, estimate, plain_std, qs)
     if consistency == "constrain" and check.violated:
@@ -424,6 +425,63 @@ def _warn_if_degrees(given, trajectories, error) -> None:
         + "} (`--scale "
         + ",".join(f"{c}={factor}" for c in columns)
         + "`).",
+        InconsistentEstimateWarning,
+        stacklevel=7,
+    )
+
+
+def _warn_if_swapped(given, trajectories, error) -> None:
+    """Where the estimate is inconsistent, refit the records with the two joints' columns swapped (`q1, dq1`
+    for `q2, dq2`) and, where there are two inputs, with the inputs swapped (`tau1` for `tau2`), and with both
+    (the joints numbered the other way round): if one gives
+    a consistent estimate and at most `REVERSED_GAIN` of the equation error, warn that those columns look
+    swapped, with the `--map` that swaps them back.
+
+    A mapping that reads one motor's or encoder's column as the other's passes every check of the data
+    (each column is a fine signal, each velocity the derivative of its angle) and least squares meets it
+    with an estimate the consistency constraint squeezes towards zero, which names no cause. One more
+    least-squares stage per candidate, built from the swapped records.
+    """
+    system, method, friction, weights, rcond = given
+    names, inputs = tuple(trajectories[0].state_names), tuple(trajectories[0].input_names)
+    states, same_inputs = list(range(len(names))), list(range(len(inputs)))
+    candidates = []
+    if len(inputs) == 2:
+        candidates.append(((inputs[0], inputs[1]), states, [1, 0]))
+    if all(n in names for n in ("q1", "q2", "dq1", "dq2")):
+        order = list(states)
+        for a, b in (("q1", "q2"), ("dq1", "dq2")):
+            order[names.index(a)], order[names.index(b)] = names.index(b), names.index(a)
+        candidates.append((("q1", "q2", "dq1", "dq2"), order, same_inputs))
+        if len(inputs) == 2:  # the joints named the other way round, motors and all
+            candidates.append((("q1", "q2", "dq1", "dq2", inputs[0], inputs[1]), order, [1, 0]))
+
+    found = []
+    for columns, state_order, input_order in candidates:
+        swapped = [
+            Trajectory(
+                t.ts, t.xs[:, state_order], t.us[:, input_order], t.state_names, t.input_names, t.system, t.source
+            )
+            for t in trajectories
+        ]
+        try:
+            stage = least_squares_stage(system, swapped, method, friction, weights, rcond, "off")
+        except (IdentifiabilityError, UsageError):
+            continue
+        refit = float(relative_equation_error(stage.a, stage.y, stage.estimate))
+        if stage.consistency.consistent and refit <= REVERSED_GAIN * error:
+            found.append((refit, columns))
+    if not found:
+        return
+    refit, columns = min(found)
+    pairs = list(zip(columns[0::2], columns[1::2]))
+    mapping = ",".join(f"{a}={b},{b}={a}" for a, b in pairs)
+    warnings.warn(
+        f"the columns read as {' and '.join(f'{a}, {b}' for a, b in pairs)} look swapped: the least-squares "
+        f"estimate is physically inconsistent, and with each pair swapped it is consistent and the equation error "
+        f"falls from {error:.0%} to {refit:.0%}. A mapping that reads one joint's (or motor's) column as the "
+        f"other's? If so, swap them back (`--map {mapping}` for a file with the contract's names; in Python "
+        "`mapping=`).",
         InconsistentEstimateWarning,
         stacklevel=7,
     )

@@ -1,7 +1,8 @@
 """Hostile but ordinary inputs, of the kinds real logs contain, and what dynax must do with each.
 
 Grown from the classes of faults a careful user meets: single-sample glitches, stuck sensors, wrapped
-angles, stretches where a velocity stops agreeing with its position, sign flips, zero or constant
+angles, stretches where a velocity stops agreeing with its position, sign flips, a velocity that lags its
+angle (a driver's filter or backward difference), one joint's or motor's columns read as the other's, zero or constant
 columns, inputs the system ignores, time in milliseconds, the same record twice, non-finite values,
 unsorted time, absurd magnitudes, impossible models and bad arguments. Each `Case` builds its inputs in a
 folder and names the command line (or a Python call) and the one acceptable outcome:
@@ -26,7 +27,9 @@ import io
 import json
 import os
 import pathlib
+import sys
 import traceback
+import warnings
 
 import numpy as np
 
@@ -254,6 +257,16 @@ def _time_scale(factor):
     return edit
 
 
+def _time_offset(seconds):
+    """Time stamps that start at `seconds` (a clock's epoch) rather than 0."""
+
+    def edit(t):
+        t[:, 0] += seconds
+        return t
+
+    return edit
+
+
 def _heli_set(column, rows, value):
     def edit(header, t):
         t[rows, header.index(column)] = value(t[rows, header.index(column)]) if callable(value) else value
@@ -267,6 +280,57 @@ def _with_tau1(values):
         return np.column_stack([t, values(t)])
 
     return edit
+
+
+def _lagged(samples, columns=("dq1", "dq2"), start=0, header=ACROBOT):
+    """A velocity logged `samples` late (a driver's delay) from row `start` on."""
+
+    def edit(t):
+        for c in columns:
+            j = header.index(c)
+            t[start + samples :, j] = t[start:-samples, j].copy()
+        return t
+
+    return edit
+
+
+def _low_passed(tau, columns=("dq1", "dq2")):
+    """A velocity through a causal first-order low-pass of time constant `tau` (a driver's filter)."""
+
+    def edit(t):
+        for c in columns:
+            j = ACROBOT.index(c)
+            y = t[0, j]
+            for i in range(len(t)):
+                a = (t[i, 0] - t[i - 1, 0]) / (tau + t[i, 0] - t[i - 1, 0]) if i else 1.0
+                y += a * (t[i, j] - y)
+                t[i, j] = y
+        return t
+
+    return edit
+
+
+def _backward_differences(t):
+    """The velocities a driver logs: each angle's backward difference (the DFKI rig's `vel_meas`)."""
+    t[1:, 3:5] = np.diff(t[:, 1:3], axis=0) / np.diff(t[:, :1], axis=0)
+    t[0, 3:5] = t[1, 3:5]
+    return t
+
+
+def _swapped(*pairs, header=ACROBOT):
+    def edit(t):
+        for a, b in pairs:
+            i, j = header.index(a), header.index(b)
+            t[:, [i, j]] = t[:, [j, i]]
+        return t
+
+    return edit
+
+
+def _written(out):
+    """The output is there and holds finite parameters (for a warned case whose data are mislabelled)."""
+    obj = json.loads(pathlib.Path(out).read_text())["parameters"]
+    return all(isinstance(v, float) and np.isfinite(v) for v in obj.values())
 
 
 # --- the cases ---------------------------------------------------------------------------------
@@ -772,6 +836,123 @@ CASES = [
         "refuse",
         ("nofile.csv",),
     ),
+    # A logged velocity that lags its angle (a driver's filter or backward difference): named with the lag.
+    C(
+        "velocity-lag-one-sample",
+        "velocity_lag",
+        lambda d, fx: _identify(_acrobot(d, fx, _lagged(1))),
+        "refuse",
+        ("column 'dq1'", "lags q1 by 9.9", "--velocities positions"),
+        ("--scale",),
+    ),
+    C(
+        "velocity-lag-backward-difference",
+        "velocity_lag",
+        lambda d, fx: _identify(_acrobot(d, fx, _backward_differences)),
+        "refuse",
+        ("column 'dq1'", "lags q1 by 5", "--velocities positions"),
+    ),
+    C(
+        "velocity-lag-low-pass-10ms",
+        "velocity_lag",
+        lambda d, fx: _identify(_acrobot(d, fx, _low_passed(0.01))),
+        "refuse",
+        ("column 'dq1'", "lags q1", "--velocities positions"),
+    ),
+    C(
+        "velocity-lag-elbow-only",
+        "velocity_lag",
+        lambda d, fx: _identify(_acrobot(d, fx, _lagged(2, ("dq2",)))),
+        "refuse",
+        ("column 'dq2'", "lags q2 by 20", "--velocities positions"),
+    ),
+    C(
+        "velocity-lag-second-half",
+        "velocity_lag",
+        lambda d, fx: _identify(_acrobot(d, fx, _lagged(1, start=400))),
+        "refuse",
+        ("column 'dq1'", "t = 4 to 8 s", "lags q1"),
+    ),
+    C(
+        "velocity-lag-diagnose",
+        "velocity_lag",
+        lambda d, fx: _diagnose(_acrobot(d, fx, _lagged(1))),
+        "refuse",
+        ("column 'dq1'", "lags q1", "--velocities positions"),
+    ),
+    C(
+        "velocity-lag-estimated-instead",
+        "velocity_lag",
+        lambda d, fx: _identify(_acrobot(d, fx, _lagged(1)), "--velocities", "positions", method="dynamic"),
+        "accept",
+        check=params_close(),
+        heavy=True,
+    ),
+    # Columns mapped to the wrong joint or motor: every column is a fine signal, so only the fit can tell.
+    C(
+        "swapped-torques-double-pendulum",
+        "swapped",
+        lambda d, fx: _identify(
+            _acrobot(d, fx, _swapped(("tau1", "tau2"), header=PENDULUM), header=PENDULUM, table="pendulum"),
+            system="double_pendulum",
+            method="dynamic",
+        ),
+        "warn",
+        ("tau1, tau2", "look swapped", "--map tau1=tau2,tau2=tau1"),
+        check=_written,
+        heavy=True,
+    ),
+    C(
+        "swapped-joints-acrobot",
+        "swapped",
+        lambda d, fx: _identify(_acrobot(d, fx, _swapped(("q1", "q2"), ("dq1", "dq2"))), method="dynamic"),
+        "warn",
+        ("q1, q2 and dq1, dq2", "look swapped", "--map q1=q2,q2=q1,dq1=dq2,dq2=dq1"),
+        check=_written,
+        heavy=True,
+    ),
+    C(
+        "swapped-torques-diagnose",
+        "swapped",
+        lambda d, fx: _diagnose(
+            _acrobot(d, fx, _swapped(("tau1", "tau2"), header=PENDULUM), header=PENDULUM, table="pendulum"),
+            system="double_pendulum",
+        ),
+        "warn",
+        ("tau1, tau2", "look swapped", "--map tau1=tau2,tau2=tau1"),
+        check=lambda out: isinstance(json.loads((pathlib.Path(out) / "report.json").read_text())["verdict"], str),
+        heavy=True,
+    ),
+    C(
+        "swapped-joints-mapped-back",
+        "swapped",
+        lambda d, fx: _identify(
+            _acrobot(d, fx, _swapped(("q1", "q2"), ("dq1", "dq2"))),
+            "--map",
+            "q1=q2,q2=q1,dq1=dq2,dq2=dq1",
+            method="dynamic",
+        ),
+        "accept",
+        check=params_close(),
+        heavy=True,
+    ),
+    C(
+        "reversed-torque-acrobot",
+        "swapped",
+        lambda d, fx: _identify(_acrobot(d, fx, _set(slice(None), "tau2", lambda v: -v)), method="dynamic"),
+        "warn",
+        ("tau2 looks reversed", "--scale tau2=-1"),
+        check=_written,
+        heavy=True,
+    ),
+    C(
+        "time-epoch-offset",
+        "clean",
+        lambda d, fx: _identify(_acrobot(d, fx, _time_offset(1.7e9)), method="dynamic"),
+        "accept",
+        check=params_close(),
+        heavy=True,
+    ),
     # Clean records must keep their right answers.
     C(
         "clean-contract-file",
@@ -819,6 +1000,10 @@ class Outcome:
         return lines[-1] if lines else (self.stderr.strip().splitlines() or [""])[-1]
 
 
+def _warning_to_stderr(message, category, filename, lineno, file=None, line=None):
+    sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+
 def run_case(case: Case, folder, fixtures, main) -> Outcome:
     """Run `case` in `folder` through `main(argv)` (or its Python call), and judge it (`Outcome.verdict`)."""
     folder = pathlib.Path(folder)
@@ -845,7 +1030,10 @@ def run_case(case: Case, folder, fixtures, main) -> Outcome:
         out = out if out.is_absolute() else folder / out
         before = _snapshot(out)
         stdout, stderr = io.StringIO(), io.StringIO()
-        with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr), warnings.catch_warnings():
+            # as the console script shows them: every Python warning on stderr (pytest would record them instead)
+            warnings.simplefilter("always")
+            warnings.showwarning = _warning_to_stderr
             try:
                 status = main(argv)
             except SystemExit as e:

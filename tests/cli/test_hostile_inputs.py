@@ -43,6 +43,8 @@ def test_the_corpus_covers_every_class_of_fault():
         "stuck",
         "wrapped",
         "velocity",
+        "velocity_lag",
+        "swapped",
         "zero",
         "ignored_input",
         "time_units",

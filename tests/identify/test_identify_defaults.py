@@ -249,6 +249,41 @@ def test_a_reversed_torque_is_named_where_the_estimate_is_inconsistent():
     assert len(said) == 1 and "tau1, tau2 look reversed" in said[0] and "--scale tau1=-1,tau2=-1" in said[0], said
 
 
+def test_columns_mapped_to_the_other_joint_are_named_where_the_estimate_is_inconsistent():
+    # The same records with the torques read the other way round (a mapping that takes one motor's column
+    # for the other's), with the joints' angles and velocities swapped, and with both (the joints numbered
+    # the other way): every column is a fine signal, so only the fit can tell. Least squares is
+    # inconsistent and the warning names the columns and the `--map` that swaps them back; as recorded,
+    # nothing is said.
+    model = rig_model()
+    record = recorded(model, 10.0, 21)
+    xs, us = np.asarray(record.xs), np.asarray(record.us)
+
+    def fit(state_order, input_order):
+        data = Trajectory(
+            record.ts, jnp.asarray(xs[:, state_order]), jnp.asarray(us[:, input_order]), NAMES, ("tau1", "tau2")
+        )
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            identify(
+                dynax.DoublePendulum(),
+                data,
+                Dynamic(),
+                friction="coulomb",
+                refine=False,
+                validation=dynax.Validate(holdout=0),
+            )
+        return [str(w.message) for w in caught if "swapped" in str(w.message)]
+
+    assert fit([0, 1, 2, 3], [0, 1]) == []
+    said = fit([0, 1, 2, 3], [1, 0])
+    assert len(said) == 1 and "tau1, tau2 look swapped" in said[0] and "--map tau1=tau2,tau2=tau1" in said[0], said
+    said = fit([1, 0, 3, 2], [0, 1])
+    assert len(said) == 1 and "q1, q2 and dq1, dq2 look swapped" in said[0], said
+    said = fit([1, 0, 3, 2], [1, 0])
+    assert len(said) == 1 and "q1, q2 and dq1, dq2 and tau1, tau2 look swapped" in said[0], said
+
+
 def test_records_that_hardly_move_say_the_size_parameters_are_poorly_determined(datasets):
     # Torques of 5 % of the usual multisine barely overcome the rig's friction: the arm moves by 3 mrad, the
     # regressor still has full rank, and the estimates are noise. The user is told which, and by how much.
