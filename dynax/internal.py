@@ -549,6 +549,9 @@ from ._simulate import (
 from ._simulate import (
     window_rollouts as window_rollouts,
 )
+from ._simulate import (
+    window_simulation_errors as window_simulation_errors,
+)
 from ._simulate import zoh_term as zoh_term
 from ._simulate._predict import group_errors as group_errors
 from ._simulate._predict import stable_substeps as stable_substeps
@@ -832,6 +835,7 @@ __all__ = [
     "window_errors",
     "window_rollout",
     "window_rollouts",
+    "window_simulation_errors",
     "window_starts",
     "with_friction",
     "with_rollout_evidence",

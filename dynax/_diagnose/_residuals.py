@@ -240,12 +240,13 @@ def acceleration_residuals(model, trajectory, *, length: int = 0):
     w = sg_window(dt)
     xs_smooth = savitzky_golay(ts, trajectory.xs, window=w, order=3)
     idx = velocity_indices(nominal)
-    measured = savitzky_golay(ts, trajectory.xs[:, idx], window=w, order=3, deriv=1)
+    measured = savitzky_golay(ts, np.asarray(trajectory.xs)[:, idx], window=w, order=3, deriv=1)
     given = model  # before its delays are replaced by the shifted inputs
     model, us, us_before = exact_delays(model, trajectory)
     n = len(ts)  # evaluated on the padded record (one compilation for records of any length near it), cut back
     ts_p, xs_p, us_p, before_p = padded(ts, xs_smooth, us, us_before, length=length)
-    predicted = predicted_accelerations(model, ts_p, xs_p, us_p, jnp.asarray(idx), before_p)[:n]
+    # Cut on the host (in JAX the slice compiles a program per record length).
+    predicted = np.asarray(predicted_accelerations(model, ts_p, xs_p, us_p, jnp.asarray(idx), before_p))[:n]
     # The measured acceleration is a local polynomial fit; smoothing the prediction with the same
     # filter compares like with like.
     predicted = savitzky_golay(ts, predicted, window=w, order=3)
@@ -262,7 +263,8 @@ def acceleration_residuals(model, trajectory, *, length: int = 0):
         measured = predicted + savitzky_golay(ts, accumulated, window=w, order=3, deriv=1)
     # The filter's start-up and run-out samples are not trusted.
     keep = slice(w, len(ts) - w)
-    return np.asarray(measured - predicted)[keep], np.asarray(xs_smooth)[keep], np.asarray(predicted)[keep], keep
+    residuals = np.asarray(measured) - np.asarray(predicted)  # numpy's subtraction is XLA's, without a compilation
+    return residuals[keep], np.asarray(xs_smooth)[keep], np.asarray(predicted)[keep], keep
 
 
 def probe_features(system, xs, us, predicted, dt) -> tuple[np.ndarray, list[str]]:

@@ -83,11 +83,14 @@ def screening_data(family, values, coefficients, trajectory, residual_fn, length
     xs = savitzky_golay(ts, trajectory.xs, window=w, order=3)
     n = len(ts)  # the jitted per-sample functions run on the padded record (`padded`), cut back to its samples
     ts_p, us_p = padded(ts, trajectory.us, length=length)
-    zs = hidden_trajectory(model, ts_p, us_p)[:n]
+    # Cut and shifted on the host: in JAX each slice would compile a program for its record's length.
+    zs = np.asarray(hidden_trajectory(model, ts_p, us_p))[:n]
     us = trajectory.us
-    us_before = jnp.concatenate([us[:1], us[:-1]])
+    us_host = np.asarray(us)
+    us_before = np.concatenate([us_host[:1], us_host[:-1]])
     on_grid = padded(ts, xs, zs, us, us_before, length=length)[1:]
-    J_nom, J_c, J_u = (a[:n] for a in _directions(family, jnp.asarray(values), jnp.asarray(coefficients), *on_grid))
+    directions = _directions(family, jnp.asarray(values), jnp.asarray(coefficients), *on_grid)
+    J_nom, J_c, J_u = (np.asarray(a)[:n] for a in directions)
     du = savitzky_golay(ts, us, window=w, order=2, deriv=1)  # (time, n_inputs)
     J_c = np.array(J_c)
     for k, term in enumerate(family.model.terms):
