@@ -206,6 +206,7 @@ from ._diagnose._records import horizon_grid as horizon_grid
 from ._diagnose._residuals import acceleration_residuals as acceleration_residuals
 from ._diagnose._residuals import applied_inputs as applied_inputs
 from ._diagnose._residuals import exact_delays as exact_delays
+from ._diagnose._residuals import shared_length as shared_length
 from ._diagnose._rollout_screening import rankable as rankable
 from ._diagnose._rollout_screening import rollout_screen as rollout_screen
 from ._diagnose._rollout_screening import with_rollout_evidence as with_rollout_evidence
@@ -790,6 +791,7 @@ __all__ = [
     "segment_clustered_covariance",
     "serial_bandwidth",
     "serial_covariance",
+    "shared_length",
     "shifted",
     "short_horizon_note",
     "Simulation",

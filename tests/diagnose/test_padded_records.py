@@ -13,9 +13,8 @@ from dynax._diagnose._residuals import (  # private: unpadded pieces, no public 
     _interval_increments,
     predicted_accelerations,
     sg_window,
-    shared_length,
 )
-from dynax.internal import acceleration_residuals, savitzky_golay
+from dynax.internal import acceleration_residuals, savitzky_golay, shared_length
 
 MODEL = Extended(LinearAxis(coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0)), (InputLag(0, 0.04),))
 
