@@ -229,6 +229,7 @@ from ._diagnose._residuals import interval_increments as interval_increments
 from ._diagnose._residuals import padded_length as padded_length
 from ._diagnose._residuals import predicted_accelerations as predicted_accelerations
 from ._diagnose._residuals import sg_window as sg_window
+from ._diagnose._residuals import shared_length as shared_length
 from ._diagnose._rollout_screening import rankable as rankable
 from ._diagnose._rollout_screening import rollout_screen as rollout_screen
 from ._diagnose._rollout_screening import with_rollout_evidence as with_rollout_evidence
@@ -580,6 +581,9 @@ from ._simulate import (
 from ._simulate import (
     window_rollouts as window_rollouts,
 )
+from ._simulate import (
+    window_simulation_errors as window_simulation_errors,
+)
 from ._simulate import zoh_term as zoh_term
 from ._simulate._predict import group_errors as group_errors
 from ._simulate._predict import stable_substeps as stable_substeps
@@ -847,6 +851,7 @@ __all__ = [
     "serial_bandwidth",
     "serial_covariance",
     "sg_window",
+    "shared_length",
     "shifted",
     "short_horizon_note",
     "Simulation",
@@ -896,6 +901,7 @@ __all__ = [
     "window_errors",
     "window_rollout",
     "window_rollouts",
+    "window_simulation_errors",
     "window_starts",
     "with_friction",
     "with_rollout_evidence",

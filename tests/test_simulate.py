@@ -206,6 +206,26 @@ def test_simulation_error_starts_internal_states_at_rest():
     assert float(jnp.max(error.rmse)) < 0.2 * float(jnp.max(zero_start.rmse))
 
 
+def test_window_simulation_errors_are_simulation_errors_errors():
+    """`window_simulation_errors` (what `diagnose` reads its horizons from) is `simulation_error(...).errors` bit for
+    bit: the same windows, the same compiled rollouts, the summaries left out."""
+    from dynax.internal import window_simulation_errors
+
+    ts = jnp.arange(0.0, 3.0, 0.01)
+    us = (0.8 * jnp.sin(2.0 * ts) + 0.3 * jnp.sin(7.0 * ts))[:, None]
+    xs = dynax.simulate(dynax.Acrobot(), jnp.array([0.3, -0.2, 0.0, 0.5]), ts, us).xs
+    noisy = xs + 1e-3 * jax.random.normal(jax.random.PRNGKey(0), xs.shape)
+    data = dynax.Trajectory(ts, noisy, us, ("q1", "q2", "dq1", "dq2"), ("tau2",), "acrobot")
+    model = dynax.Acrobot.from_physical(m1=1.1)  # another model than the data's: errors that grow with the horizon
+    for horizons, stride in (((0.2, 0.5), 7), ((0.1, 0.3, 0.45), None)):
+        errors = np.asarray(window_simulation_errors(model, data, horizons, stride=stride))
+        np.testing.assert_array_equal(
+            errors, np.asarray(dynax.simulation_error(model, data, horizons, stride=stride).errors)
+        )
+        assert errors.shape[1] == round(max(horizons) / 0.01) + 1 and np.all(np.isfinite(errors))
+        assert float(np.abs(errors[:, -1]).max()) > 1e-2
+
+
 def test_fixed_grid_explicit_step_equals_diffrax_step():
     """The fixed-grid rollout writes explicit Runge-Kutta stages out from the tableau; each method's
     step must equal diffrax's own `solver.step` (to rounding), including FSAL methods whose last

@@ -34,7 +34,7 @@ from ._problem import Known as Known
 from ._problem import Refit as Refit
 from ._quadrotor import frame_quadrotor
 from ._records import as_records
-from ._residuals import Structure, structure_test
+from ._residuals import shared_length, Structure, structure_test
 from ._result import DataSummary, ModelSummary
 from ._result import Report as Report
 from ._selection import paired_test
@@ -192,7 +192,12 @@ def _model_summary(problem: Problem, model, errors, rmse, yard: Yardstick, terms
         parameters.update({k: float(v) for t in model.terms for k, v in t.parameters(problem.system).items()})
     measured = np.asarray(problem.val_windows.xs)[:, yard.n_ref]
     validation = validation_summary(
-        model, problem.validation, np.asarray(errors)[:, yard.n_ref], measured, yard.horizon.seconds
+        model,
+        problem.validation,
+        np.asarray(errors)[:, yard.n_ref],
+        measured,
+        yard.horizon.seconds,
+        length=shared_length(problem.train + problem.validation),
     )
     errors = np.asarray(errors)
     sim_error = SimulationError(

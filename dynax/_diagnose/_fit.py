@@ -154,7 +154,7 @@ def make_windows(trajectories, n_steps: int, stride: int, *, history_s: float = 
         stack(tb),
         stack(ub),
         np.asarray(starts, dtype=np.int64),
-        jnp.ones(len(ts), xs_.dtype),
+        jax.device_put(np.ones(len(ts), xs_.dtype)),
     )
 
 
@@ -205,6 +205,14 @@ class Family(eqx.Module):
         """Per-parameter scale of a configuration (zero for parameters that are not fitted)."""
         cand = lambda i: jnp.where(i >= 0, self.candidate_scale[jnp.maximum(i, 0)], 0.0)  # noqa: E731
         return jnp.concatenate([self.refit * self.nominal_scale, jax.vmap(cand)(slots), cand(new)[None]])
+
+    def host_scale(self, slots, new: int) -> np.ndarray:
+        """`scale` computed by numpy (the same products), for the host: called eagerly, `scale`'s operations
+        compile a small program each."""
+        slots = np.asarray(slots)
+        candidate_scale = np.asarray(self.candidate_scale)
+        cand = lambda i: np.where(i >= 0, candidate_scale[np.maximum(i, 0)], 0.0)  # noqa: E731
+        return np.concatenate([np.asarray(self.refit) * np.asarray(self.nominal_scale), cand(slots), [cand(new)]])
 
     def model_for(self, slots, new, p):
         n_nominal = len(self.names)

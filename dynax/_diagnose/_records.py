@@ -6,6 +6,7 @@ held-out runs' errors.
 
 from collections.abc import Sequence
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -155,12 +156,12 @@ def horizon_grid(horizons_s, reference_horizon_s, train_records, validation_reco
 
 def reference_horizon(nominal_model, train_records, candidates_s, given, fraction, stride, position_index, dt):
     """The reference horizon: `given`, or the predictability horizon of the nominal model on the training runs."""
-    from .._simulate import simulation_error  # the public rollout over windows
+    from .._simulate import window_simulation_errors  # `simulation_error`'s rollouts, without its summaries
 
     if given is not None:
         return Horizon(float(candidates_s[0]), "given (reference_horizon_s)", None, candidates_s, [np.nan])
     errors = [
-        np.asarray(simulation_error(nominal_model, rec, candidates_s, stride=stride).errors) for rec in train_records
+        np.asarray(window_simulation_errors(nominal_model, rec, candidates_s, stride=stride)) for rec in train_records
     ]
     positions = np.concatenate([np.asarray(r.xs)[:, position_index] for r in train_records])
     spread = position_spread(positions, [k in nominal_model.angle_indices for k in position_index])
@@ -204,7 +205,9 @@ def holdout_split(rec: Trajectory, fraction: float = HOLDOUT_FRACTION) -> tuple[
 
 
 def _slice(rec: Trajectory, a: int, b: int) -> Trajectory:
-    return Trajectory(rec.ts[a:b], rec.xs[a:b], rec.us[a:b], rec.state_names, rec.input_names, rec.system, rec.source)
+    # Cut on the host: a slice in JAX compiles a program for each record's length.
+    cut = lambda v: jax.device_put(np.asarray(v)[a:b])  # noqa: E731
+    return Trajectory(cut(rec.ts), cut(rec.xs), cut(rec.us), rec.state_names, rec.input_names, rec.system, rec.source)
 
 
 def _cast(rec: Trajectory, dtype) -> Trajectory:

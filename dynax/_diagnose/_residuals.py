@@ -135,13 +135,23 @@ def padded_length(n: int) -> int:
     return max(MIN_PADDED, 1 << (max(int(n), 1) - 1).bit_length())
 
 
-def padded(ts, *samples) -> tuple:
-    """`ts` and the per-sample arrays `samples` (leading axis time) extended to `padded_length(len(ts))` samples:
-    the times on, at the last interval, the samples as their last value (host-side, so that the padding itself
-    compiles nothing)."""
+def shared_length(records) -> int:
+    """The length every one of `records` is padded to (`padded`'s `length`): `padded_length` of the longest.
+
+    A diagnosis's training and held-out records differ in length (70 and 30 % of one file: two powers of two), and
+    each length compiled the per-sample functions of every model anew; padded to the longest, they share one
+    compilation of each (about 3 s of a first diagnosis), and the per-sample work of the held-out records grows
+    by less than it takes to compile."""
+    return padded_length(max(len(r) for r in records))
+
+
+def padded(ts, *samples, length: int = 0) -> tuple:
+    """`ts` and the per-sample arrays `samples` (leading axis time) extended to `padded_length(len(ts))` samples,
+    or to `length` where that is more (`shared_length`): the times on, at the last interval, the samples as their
+    last value (host-side, so that the padding itself compiles nothing)."""
     ts_ = np.asarray(ts)
     n = len(ts_)
-    extra = padded_length(n) - n
+    extra = max(padded_length(n), int(length)) - n
     dt = ts_[-1] - ts_[-2] if n > 1 else 1.0
     out = [np.concatenate([ts_, ts_[-1] + dt * np.arange(1, extra + 1, dtype=ts_.dtype)])]
     for a in samples:
@@ -219,8 +229,9 @@ def applied_inputs(system, terms, trajectory) -> np.ndarray:
     return us
 
 
-def acceleration_residuals(model, trajectory):
-    """One-step acceleration residuals of `model` on `trajectory`.
+def acceleration_residuals(model, trajectory, *, length: int = 0):
+    """One-step acceleration residuals of `model` on `trajectory` (its per-sample functions run on the record
+    padded to `length` samples where that is more than its own `padded_length`: see `shared_length`).
 
     **Returns:** `(residuals (time, n_velocities), smoothed states (time, n_states), model accelerations,
     keep)`, `keep` the slice of samples they cover (the filter's start-up and run-out left out).
@@ -231,12 +242,13 @@ def acceleration_residuals(model, trajectory):
     w = sg_window(dt)
     xs_smooth = savitzky_golay(ts, trajectory.xs, window=w, order=3)
     idx = velocity_indices(nominal)
-    measured = savitzky_golay(ts, trajectory.xs[:, idx], window=w, order=3, deriv=1)
+    measured = savitzky_golay(ts, np.asarray(trajectory.xs)[:, idx], window=w, order=3, deriv=1)
     given = model  # before its delays are replaced by the shifted inputs
     model, us, us_before = exact_delays(model, trajectory)
     n = len(ts)  # evaluated on the padded record (one compilation for records of any length near it), cut back
-    ts_p, xs_p, us_p, before_p = padded(ts, xs_smooth, us, us_before)
-    predicted = predicted_accelerations(model, ts_p, xs_p, us_p, jnp.asarray(idx), before_p)[:n]
+    ts_p, xs_p, us_p, before_p = padded(ts, xs_smooth, us, us_before, length=length)
+    # Cut on the host (in JAX the slice compiles a program per record length).
+    predicted = np.asarray(predicted_accelerations(model, ts_p, xs_p, us_p, jnp.asarray(idx), before_p))[:n]
     # The measured acceleration is a local polynomial fit; smoothing the prediction with the same
     # filter compares like with like.
     predicted = savitzky_golay(ts, predicted, window=w, order=3)
@@ -246,14 +258,15 @@ def acceleration_residuals(model, trajectory):
         # sample): compare velocity *increments* over each interval, integrated under the held
         # input from the interval's start, and differentiate the accumulated difference with the same filter.
         interval_model, interval_us, _ = exact_delays(given, trajectory, interval=True)
-        _, interval_p = padded(ts, interval_us)
+        _, interval_p = padded(ts, interval_us, length=length)
         increments = interval_increments(interval_model, ts_p, xs_p, interval_p, jnp.asarray(idx))[: n - 1]
         drift = jnp.diff(trajectory.xs[:, idx], axis=0) - increments
         accumulated = jnp.concatenate([jnp.zeros((1, len(idx)), drift.dtype), jnp.cumsum(drift, axis=0)])
         measured = predicted + savitzky_golay(ts, accumulated, window=w, order=3, deriv=1)
     # The filter's start-up and run-out samples are not trusted.
     keep = slice(w, len(ts) - w)
-    return np.asarray(measured - predicted)[keep], np.asarray(xs_smooth)[keep], np.asarray(predicted)[keep], keep
+    residuals = np.asarray(measured) - np.asarray(predicted)  # numpy's subtraction is XLA's, without a compilation
+    return residuals[keep], np.asarray(xs_smooth)[keep], np.asarray(predicted)[keep], keep
 
 
 def probe_features(system, xs, us, predicted, dt) -> tuple[np.ndarray, list[str]]:
@@ -304,8 +317,9 @@ def structure_test(
     train = list(train) if isinstance(train, (list, tuple)) else [train]
     validation = list(validation) if isinstance(validation, (list, tuple)) else [validation]
     feats, resid, times, sizes = [], [], [], []
+    length = shared_length(train + validation)
     for records in (train, validation):
-        parts = [acceleration_residuals(model, traj) for traj in records]
+        parts = [acceleration_residuals(model, traj, length=length) for traj in records]
         phis = [
             probe_features(nominal, xs, np.asarray(traj.us)[keep], pred, traj.dt)
             for traj, (_, xs, pred, keep) in zip(records, parts)

@@ -111,7 +111,7 @@ def rollout_screen(family: Family, train: Windows, validation: Windows, slots, p
     # every candidate. Their number is fixed for a diagnosis, so every round reuses one compilation.
     refitted = np.flatnonzero(np.asarray(family.refit) > 0)
     along_p = np.concatenate([refitted, n_nominal + np.arange(n_slots)])
-    scale = np.asarray(family.scale(slots, jnp.asarray(-1)))[:-1]
+    scale = family.host_scale(slots, -1)[:-1]
     tp = np.zeros((len(along_p) + n_c, len(p)))
     tp[np.arange(len(along_p)), along_p] = scale[along_p]
     tc = np.zeros((len(along_p) + n_c, n_c))

@@ -34,7 +34,7 @@ import numpy as np
 
 from .._data._derivatives import savitzky_golay
 from .._model._extensions import AbstractInputTerm
-from ._residuals import DEAD_TIMES, hidden_trajectory, padded, sg_window, velocity_indices
+from ._residuals import DEAD_TIMES, hidden_trajectory, padded, sg_window, shared_length, velocity_indices
 
 
 @eqx.filter_jit
@@ -73,21 +73,24 @@ def _secant(family, values, coefficients, step, xs, zs, us, us_before):
     return jax.vmap(both)(xs, zs, us, us_before)
 
 
-def screening_data(family, values, coefficients, trajectory, residual_fn):
+def screening_data(family, values, coefficients, trajectory, residual_fn, length: int = 0):
     """Residuals and sensitivities on one record: `(r (time, n_vel), J_nominal (time, n_vel, n_nom), J_candidates (time,
-    n_vel, n_cand))`."""
+    n_vel, n_cand))`; the per-sample functions run on the record padded to `length` samples or more (`padded`)."""
     model = family.build(jnp.asarray(values), jnp.asarray(coefficients))
-    r, _, _, keep = residual_fn(model, trajectory)
+    r, _, _, keep = residual_fn(model, trajectory, length=length)
     ts = trajectory.ts
     w = sg_window(trajectory.dt)
     xs = savitzky_golay(ts, trajectory.xs, window=w, order=3)
     n = len(ts)  # the jitted per-sample functions run on the padded record (`padded`), cut back to its samples
-    ts_p, us_p = padded(ts, trajectory.us)
-    zs = hidden_trajectory(model, ts_p, us_p)[:n]
+    ts_p, us_p = padded(ts, trajectory.us, length=length)
+    # Cut and shifted on the host: in JAX each slice would compile a program for its record's length.
+    zs = np.asarray(hidden_trajectory(model, ts_p, us_p))[:n]
     us = trajectory.us
-    us_before = jnp.concatenate([us[:1], us[:-1]])
-    on_grid = padded(ts, xs, zs, us, us_before)[1:]
-    J_nom, J_c, J_u = (a[:n] for a in _directions(family, jnp.asarray(values), jnp.asarray(coefficients), *on_grid))
+    us_host = np.asarray(us)
+    us_before = np.concatenate([us_host[:1], us_host[:-1]])
+    on_grid = padded(ts, xs, zs, us, us_before, length=length)[1:]
+    directions = _directions(family, jnp.asarray(values), jnp.asarray(coefficients), *on_grid)
+    J_nom, J_c, J_u = (np.asarray(a)[:n] for a in directions)
     du = savitzky_golay(ts, us, window=w, order=2, deriv=1)  # (time, n_inputs)
     J_c = np.array(J_c)
     for k, term in enumerate(family.model.terms):
@@ -173,8 +176,9 @@ def screen(
     residual sum of squares (beyond refitting the nominal parameters), and its coefficient step
     (from the fit on all of `train`).
     """
+    length = shared_length(list(train) + list(validation))  # one compilation for the training and held-out records
     data = {
-        name: [screening_data(family, values, coefficients, rec, residual_fn) for rec in records]
+        name: [screening_data(family, values, coefficients, rec, residual_fn, length) for rec in records]
         for name, records in (("train", train), ("validation", validation))
     }
     grid = screening_grid(float(np.median(np.diff(np.asarray(train[0].ts)))))

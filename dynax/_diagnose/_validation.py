@@ -41,13 +41,16 @@ def fit_percent(errors, measured, state_names) -> dict[str, float | None]:
     return out
 
 
-def residual_tests(model, record, *, max_lag: int = 25, confidence: float = 0.99) -> ResidualTests | None:
+def residual_tests(
+    model, record, *, max_lag: int = 25, confidence: float = 0.99, length: int = 0
+) -> ResidualTests | None:
     """Whiteness and input cross-correlation tests of `model`'s one-step residuals on one held-out `record`.
 
     The residuals are read every `w` samples (`w` the filter window; see the module docs); `max_lag`
     is lowered to a quarter of what is left. `None` if fewer than 20 residuals are left (or one is not finite).
+    `length`: the samples the per-sample functions run on at least (`acceleration_residuals`).
     """
-    residuals, _, _, keep = acceleration_residuals(model, record)
+    residuals, _, _, keep = acceleration_residuals(model, record, length=length)
     stride = sg_window(record.dt)
     r = np.asarray(residuals)[::stride]
     us = np.asarray(record.us)[keep][::stride]
@@ -76,14 +79,17 @@ def residual_tests(model, record, *, max_lag: int = 25, confidence: float = 0.99
     )
 
 
-def validation_summary(model, records, errors_at_horizon, measured_at_horizon, horizon_s: float) -> Validation:
+def validation_summary(
+    model, records, errors_at_horizon, measured_at_horizon, horizon_s: float, *, length: int = 0
+) -> Validation:
     """The `validation` block of one model: fit % at the reference horizon over every held-out window and
     the residual tests on each held-out run.
 
     **Arguments:** `model`; `records` the held-out runs; `errors_at_horizon (window, state)` the
     model's simulated-minus-measured states `horizon_s` after each window's start, and
-    `measured_at_horizon` the measured states there.
+    `measured_at_horizon` the measured states there; `length` the samples the residuals' per-sample functions run
+    on at least (a diagnosis passes its records' `shared_length`, so that they reuse the screening's compilations).
     """
     names = tuple(records[0].state_names)
-    tests = tuple(t for t in (residual_tests(model, rec) for rec in records) if t is not None)
+    tests = tuple(t for t in (residual_tests(model, rec, length=length) for rec in records) if t is not None)
     return Validation(float(horizon_s), fit_percent(errors_at_horizon, measured_at_horizon, names), tests)

@@ -11,6 +11,7 @@ from ._sim_error import simulation_error as simulation_error
 from ._sim_error import SimulationError as SimulationError
 from ._sim_error import window_rollout as window_rollout
 from ._sim_error import window_rollouts as window_rollouts
+from ._sim_error import window_simulation_errors as window_simulation_errors
 from ._simulate import Adaptive as Adaptive
 from ._simulate import explicit_step as explicit_step
 from ._simulate import FixedGrid as FixedGrid

@@ -333,27 +333,10 @@ def simulation_error(
     **Returns:** a `SimulationError`.
     """
     names = trajectory.state_names
-    if tuple(system.state_names[: len(names)]) != tuple(names):
-        raise ValueError(
-            f"simulation_error: the trajectory's states {names} are not the first states of "
-            f"{type(system).__name__} {system.state_names}"
-        )
-    horizons = np.asarray(horizons_s, dtype=float)
+    horizons, steps, n_starts, stride = _starts(system, trajectory, horizons_s, stride, max_windows)
     dt = trajectory.dt
-    steps = np.maximum(np.round(horizons / dt).astype(int), 1)
-    n_steps = int(steps.max())
-    n = len(trajectory)
-    if n < n_steps + 1:
-        raise DataError(
-            f"has {n} samples, too few for a {horizons.max():g} s horizon at {dt:g} s sampling "
-            f"(need at least {n_steps + 1})",
-            path=trajectory.source or None,
-        )
-    n_starts = n - n_steps
-    if stride is None:
-        stride = max(1, int(np.ceil(n_starts / max_windows)))
     starts = jnp.arange(0, n_starts, stride)
-    errors, diverged = _sharded_window_errors(system, trajectory, starts, n_steps, method)
+    errors, diverged = _sharded_window_errors(system, trajectory, starts, int(steps.max()), method)
     at = errors[:, steps, :]  # (window, horizon, state)
     if states is None:
         states = tuple(s for s in names if not s.startswith("d"))
@@ -375,6 +358,47 @@ def simulation_error(
         starts=starts,
         window_mse=jnp.mean(at[:, :, idx] ** 2, axis=2),
     )
+
+
+def _starts(system, trajectory, horizons_s, stride, max_windows):
+    """`simulation_error`'s windows: `(horizons, steps, n_starts, stride)`, the record checked against them."""
+    names = trajectory.state_names
+    if tuple(system.state_names[: len(names)]) != tuple(names):
+        raise ValueError(
+            f"simulation_error: the trajectory's states {names} are not the first states of "
+            f"{type(system).__name__} {system.state_names}"
+        )
+    horizons = np.asarray(horizons_s, dtype=float)
+    dt = trajectory.dt
+    steps = np.maximum(np.round(horizons / dt).astype(int), 1)
+    n_steps = int(steps.max())
+    n = len(trajectory)
+    if n < n_steps + 1:
+        raise DataError(
+            f"has {n} samples, too few for a {horizons.max():g} s horizon at {dt:g} s sampling "
+            f"(need at least {n_steps + 1})",
+            path=trajectory.source or None,
+        )
+    n_starts = n - n_steps
+    if stride is None:
+        stride = max(1, int(np.ceil(n_starts / max_windows)))
+    return horizons, steps, n_starts, stride
+
+
+def window_simulation_errors(
+    system: AbstractSystem,
+    trajectory: Trajectory,
+    horizons_s=(0.5, 1.0, 2.0),
+    *,
+    stride: int | None = None,
+    max_windows: int = 200,
+    method=FixedGrid(),
+) -> Float[Array, "window step n_measured"]:
+    """`simulation_error(...).errors` alone: the windows' simulated-minus-measured states, the same rollouts
+    (the same compiled program), without the summaries over windows, each an operation compiled for its shape."""
+    _, steps, n_starts, stride = _starts(system, trajectory, horizons_s, stride, max_windows)
+    starts = np.arange(0, n_starts, stride)
+    return _sharded_window_errors(system, trajectory, starts, int(steps.max()), method)[0]
 
 
 def _sharded_window_errors(system, trajectory, starts, n_steps, method):

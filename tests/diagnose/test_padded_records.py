@@ -15,6 +15,7 @@ from dynax.internal import (
     predicted_accelerations,
     savitzky_golay,
     sg_window,
+    shared_length,
 )
 
 MODEL = Extended(LinearAxis(coulomb=jnp.asarray(0.0), offset=jnp.asarray(0.0)), (InputLag(0, 0.04),))
@@ -70,3 +71,30 @@ def test_records_of_other_lengths_share_one_compilation_and_keep_their_residuals
         np.testing.assert_allclose(residuals, np.asarray(measured - reference)[keep], rtol=1e-10, atol=1e-10)
         # The lag is in the model: its residuals are the measurement noise's, far below the acceleration's.
         assert np.std(residuals) < 0.05 * np.std(predicted)
+
+
+def test_a_diagnosis_records_padded_to_their_longest_share_one_compilation_and_keep_every_bit():
+    """`shared_length`: a diagnosis's training and held-out records (here 1,200 and 300 samples, which pad to 2,048
+    and 512 on their own) run on one length, so each model's per-sample functions compile once for both, and a
+    record's residuals on the longer padding are its own, bit for bit."""
+    records = [_record(1200, 2), _record(300, 3)]
+    length = shared_length(records)
+    assert length == 2048
+    compiled = []
+
+    def listen(event, duration, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiled.append(str(kwargs.get("fun_name", "")))
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        shared = [acceleration_residuals(MODEL, rec, length=length) for rec in records]
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    assert sum("predicted_accelerations" in name for name in compiled) <= 1, compiled
+    assert sum("_interval_increments" in name for name in compiled) <= 1, compiled
+    for rec, padded_shared in zip(records, shared):
+        own = acceleration_residuals(MODEL, rec)
+        for a, b in zip(padded_shared[:3], own[:3]):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+        assert padded_shared[3] == own[3]
