@@ -95,14 +95,17 @@ def check_flight_kinematics(ts, values: dict, *, path=None, columns=None, scale=
     check_velocities(ts, values, {"vx": "x", "vy": "y", "vz": "z"}, path=path, columns=columns, scale=scale)
     quats = np.stack([np.asarray(values[c], dtype=float) for c in ("qw", "qx", "qy", "qz")], axis=1)
     angles = attitude_angles(quats)
+    rates = np.stack([np.asarray(values[r], dtype=float) for r in _AXES], axis=1)
     scale = scale or {}
     faults = {}  # rate -> (what is wrong, the factor that fixes it)
     for k, rate in enumerate(_AXES):
-        found = _rate_fault(ts, angles, k, np.asarray(values[rate], dtype=float), path, columns)
+        found = _rate_fault(ts, angles, k, rates[:, k], path, columns, quats, rates)
         if found is not None:
             faults[rate] = found
     if faults:
         first, (what, _, _) = next(iter(faults.items()))
+        fixed = rates * np.array([faults[r][1] if r in faults else 1.0 for r in _AXES])
+        _refuse_unless_consistent(ts, quats, rates, fixed, what, path=path, column=columns.get(first, first))
         rest = list(faults)[1:]
         if rest:
             what = what + [f"so are {', '.join(rest)} (gains {', '.join(f'{faults[r][2]:.4g}' for r in rest)})"]
@@ -113,11 +116,11 @@ def check_flight_kinematics(ts, values: dict, *, path=None, columns=None, scale=
         raise DataError("; ".join(what), path=path, column=columns.get(first, first))
 
 
-def _rate_fault(ts, angles, k, rate, path, columns) -> tuple[list[str], float, float] | None:
+def _rate_fault(ts, angles, k, rate, path, columns, quats, rates) -> tuple[list[str], float, float] | None:
     """What is wrong with body rate `k`, the factor that fixes it, and its gain, where it is the
     attitude's derivative with the wrong sign or in other units; `None` where nothing is (see the module
     notes: only faults of that size, which hold for the whole record). **Raises:** `DataError` where
-    it is another axis's rate."""
+    it is another axis's rate (`quats`, `rates`: the record's, to check that the swap makes it consistent)."""
     name = _AXES[k]
     found = velocity_gain(ts, angles[:, k], rate)
     if found is None:
@@ -138,12 +141,15 @@ def _rate_fault(ts, angles, k, rate, path, columns) -> tuple[list[str], float, f
         if not follows:
             return None
         other = _AXES[follows[0]]
-        raise DataError(
+        what = (
             f"it is not the body rate about {_ANGLE_AXIS[k]} (gain {gain:.3g} +- {std:.2g} on the attitude's "
-            f"rate of change about that axis) but about {_ANGLE_AXIS[follows[0]]}: are the columns of {name} and "
-            f"{other} swapped?",
-            path=path,
-            column=columns.get(name, name),
+            f"rate of change about that axis) but about {_ANGLE_AXIS[follows[0]]}"
+        )
+        swapped = rates.copy()
+        swapped[:, [k, follows[0]]] = rates[:, [follows[0], k]]
+        _refuse_unless_consistent(ts, quats, rates, swapped, [what], path=path, column=columns.get(name, name))
+        raise DataError(
+            f"{what}: are the columns of {name} and {other} swapped?", path=path, column=columns.get(name, name)
         )
     if abs(gain) <= SIGNIFICANCE * std:
         return None
@@ -162,6 +168,50 @@ def _rate_fault(ts, angles, k, rate, path, columns) -> tuple[list[str], float, f
     else:  # no unit of rates known to dynax: the factor that makes it agree
         factor = 1.0 / gain
     return what, factor, gain
+
+
+def _refuse_unless_consistent(ts, quats, rates, fixed, what: list[str], *, path, column) -> None:
+    """Refuse, without a fix, a per-axis fix of the rates (`fixed`: `p, q, r` as a sign, a unit or a swap would
+    make them) that would load a record still wrong: the fixed rates miss the attitude's body-frame rate of
+    change by more than `RATE_CONSISTENT_MISFIT`, or another frame convention explains the rates as they are
+    (`rate_frame_misfits`: a world-to-body quaternion, rates in world axes) within `RATE_FRAME_RATIO` of the
+    fix. At a heading of 180 degrees a conjugated quaternion and a yaw rate of the opposite sign read alike on a
+    level flight, and only one of them is the log's; nothing here says which. Returns where the fix reads
+    consistent, or where the record is too short or still to tell.
+
+    **Raises:** `DataError` naming `column`, what is wrong (`what`), and the conventions to check."""
+    after = rate_frame_misfits(ts, quats, fixed.T)
+    before = rate_frame_misfits(ts, quats, rates.T)
+    if after is None or before is None:
+        return
+    frame = min(("world_to_body", "world"), key=before.__getitem__)
+    if after["body"] <= RATE_CONSISTENT_MISFIT and after["body"] <= RATE_FRAME_RATIO * before[frame]:
+        return
+    if after["body"] > RATE_CONSISTENT_MISFIT:
+        why = (
+            f"no scale or swap of the rates is right for the whole record: fixed so, p, q, r would still miss "
+            f"the attitude's rate of change by {after['body']:.0%} of its size over {BLOCK_S * 1e3:g} ms blocks "
+            f"(a consistent record: {RATE_CONSISTENT_MISFIT:.0%} at most)"
+        )
+    else:
+        reading = "a world-to-body quaternion" if frame == "world_to_body" else "rates in world axes"
+        why = (
+            f"no scale or swap of the rates is suggested: read as {reading} the record fits as well "
+            f"(p, q, r miss the attitude's rate of change by {before[frame]:.0%}, and by {after['body']:.0%} "
+            "with that fix)"
+        )
+    raise DataError(
+        "; ".join(
+            [
+                *what,
+                why,
+                "check the conventions: the quaternion body-to-world, p, q, r the body frame's (x forward, "
+                "z up), each column's sign and axis",
+            ]
+        ),
+        path=path,
+        column=column,
+    )
 
 
 def _fault_holds_everywhere(ts, angle, rate, gain: float) -> bool:
@@ -322,6 +372,9 @@ def check_quaternion_order(ts, values: dict, *, path=None, columns=None) -> None
 # (`experiments/flight_rate_frames.py`).
 RATE_FRAME_MISFIT = 0.3
 RATE_FRAME_RATIO = 0.8
+# The body reading's misfit up to which rates that a per-axis fix (a sign, a unit, a swap) changes read consistent
+# after it: above the 16 clean NanoBench flights' 0.09-0.84, either rates (`_refuse_unless_consistent`).
+RATE_CONSISTENT_MISFIT = 1.0
 
 
 def rate_frame_misfits(ts, quats, rates) -> dict[str, float] | None:
