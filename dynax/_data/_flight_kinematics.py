@@ -33,6 +33,8 @@ a swap): a gain that is wrong in some stretches only is no unit (see `gain_holds
 `dynax._data._velocities`).
 """
 
+import itertools
+
 import numpy as np
 
 from .._errors import DataError
@@ -171,34 +173,49 @@ def _rate_fault(ts, angles, k, rate, path, columns, quats, rates) -> tuple[list[
 
 
 def _refuse_unless_consistent(ts, quats, rates, fixed, what: list[str], *, path, column) -> None:
-    """Refuse, without a fix, a per-axis fix of the rates (`fixed`: `p, q, r` as a sign, a unit or a swap would
-    make them) that would load a record still wrong: the fixed rates miss the attitude's body-frame rate of
-    change by more than `RATE_CONSISTENT_MISFIT`, or another frame convention explains the rates as they are
-    (`rate_frame_misfits`: a world-to-body quaternion, rates in world axes) within `RATE_FRAME_RATIO` of the
-    fix. At a heading of 180 degrees a conjugated quaternion and a yaw rate of the opposite sign read alike on a
-    level flight, and only one of them is the log's; nothing here says which. Returns where the fix reads
+    """Refuse, without a fix, a per-axis fix of the rates that would load a record still wrong. `fixed` holds
+    `p, q, r` as the fix (a sign, a unit, a swap) makes them; it reads consistent where they miss the attitude's
+    body-frame rate of change by `RATE_CONSISTENT_MISFIT` at most and `RATE_FRAME_RATIO` times as closely as every
+    other reading: the record as it is with a world-to-body quaternion or rates in world axes
+    (`rate_frame_misfits`), and the fixed rates in another order or with other signs (`_signed_misfits`, compared
+    on the axes they read otherwise). On a level flight at a heading of 180 degrees a conjugated quaternion and a
+    yaw rate of the opposite sign read alike, and a swap of roll and pitch rates reads as both of their signs
+    flipped on some paths: a fix is named only where the record tells them apart. Returns where the fix reads
     consistent, or where the record is too short or still to tell.
 
-    **Raises:** `DataError` naming `column`, what is wrong (`what`), and the conventions to check."""
-    after = rate_frame_misfits(ts, quats, fixed.T)
-    before = rate_frame_misfits(ts, quats, rates.T)
-    if after is None or before is None:
+    **Raises:** `DataError` naming `column`, what is wrong (`what`), the reading that fits as well, and the
+    conventions to check."""
+    frames = rate_frame_misfits(ts, quats, rates.T)
+    misfit = _signed_misfits(ts, attitude_angles(quats), fixed)
+    if frames is None or misfit is None:
         return
-    frame = min(("world_to_body", "world"), key=before.__getitem__)
-    if after["body"] <= RATE_CONSISTENT_MISFIT and after["body"] <= RATE_FRAME_RATIO * before[frame]:
+    own = misfit[[0, 1, 2], [0, 1, 2], 0]  # each axis's misfit with the fix
+    after = float(np.mean(own))
+    # another order or other signs of the fixed rates, compared on the axes it reads otherwise
+    ratios = {
+        "a world-to-body quaternion": after / frames["world_to_body"],
+        "rates in world axes": after / frames["world"],
+    }
+    for order in itertools.permutations(range(3)):
+        for signs in itertools.product((0, 1), repeat=3):
+            moved = [k for k in range(3) if order[k] != k or signs[k]]
+            if moved:
+                other = float(np.mean([misfit[k, order[k], signs[k]] for k in moved]))
+                taken = ", ".join("+-"[signs[k]] + _AXES[order[k]] for k in range(3))
+                ratios[f"p, q, r taken as {taken} after that fix"] = float(np.mean(own[moved])) / other
+    rival = max(ratios, key=ratios.__getitem__)
+    if after <= RATE_CONSISTENT_MISFIT and ratios[rival] <= RATE_FRAME_RATIO:
         return
-    if after["body"] > RATE_CONSISTENT_MISFIT:
+    if after > RATE_CONSISTENT_MISFIT:
         why = (
             f"no scale or swap of the rates is right for the whole record: fixed so, p, q, r would still miss "
-            f"the attitude's rate of change by {after['body']:.0%} of its size over {BLOCK_S * 1e3:g} ms blocks "
+            f"the attitude's rate of change by {after:.0%} of its size over {BLOCK_S * 1e3:g} ms blocks "
             f"(a consistent record: {RATE_CONSISTENT_MISFIT:.0%} at most)"
         )
     else:
-        reading = "a world-to-body quaternion" if frame == "world_to_body" else "rates in world axes"
         why = (
-            f"no scale or swap of the rates is suggested: read as {reading} the record fits as well "
-            f"(p, q, r miss the attitude's rate of change by {before[frame]:.0%}, and by {after['body']:.0%} "
-            "with that fix)"
+            f"no scale or swap of the rates is suggested: read as {rival} the record fits nearly as well or better "
+            f"(its misfit on the attitude's rate of change {1 / ratios[rival]:.2f} times that with the fix)"
         )
     raise DataError(
         "; ".join(
@@ -212,6 +229,24 @@ def _refuse_unless_consistent(ts, quats, rates, fixed, what: list[str], *, path,
         path=path,
         column=column,
     )
+
+
+def _signed_misfits(ts, angles, rates) -> np.ndarray | None:
+    """`(3, 3, 2)`: the misfit (as `_axis_misfit`'s per axis) of body axis `k`'s angle read from rate column `j`
+    with sign `+` (0) or `-` (1). `None` for a record too short or still."""
+    edges = stretch_edges(ts)
+    if len(edges) < MIN_BLOCKS + 1:
+        return None
+    misfit = np.empty((3, 3, 2))
+    for k in range(3):
+        for j in range(3):
+            slopes, means = block_slopes(ts, angles[:, k], rates[:, j], edges)
+            motion = float(np.sqrt(np.mean(slopes**2)))
+            if not motion > 0:
+                return None
+            for i, sign in enumerate((1.0, -1.0)):
+                misfit[k, j, i] = float(np.sqrt(np.mean((sign * means - slopes) ** 2))) / motion
+    return misfit
 
 
 def _fault_holds_everywhere(ts, angle, rate, gain: float) -> bool:
