@@ -3,6 +3,8 @@ deg/s or counted the other way, swapped axes, velocities in mm/s, a z axis that 
 faults are injected into a copy of a real NanoBench flight; the clean flight, read with either its
 motion-capture rates or its IMU gyro, loads."""
 
+import gzip
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -158,3 +160,29 @@ def test_a_clean_flight_loads_at_any_heading(tmp_path, star_table, mapping, degr
     _write(path, header, _turned(header, table, degrees))
     trajectory, notes = dynax.load_flight(path, mapping=mapping)
     assert trajectory.is_uniform and not notes.glitches
+
+
+TREFOIL = STAR.parent / "B9_trefoil_medium_rep2.csv.gz"
+
+
+@pytest.mark.skipif(not TREFOIL.exists(), reason="the NanoBench trefoil flight is not in ../shared/datasets")
+def test_no_rate_scale_where_a_frame_convention_reads_as_well(tmp_path):
+    # the trefoil's gyro with a world-to-body quaternion at a heading of 180 degrees: the frame check misses it
+    # (its gyro reads the conjugate only 0.82 times as far off), and the per-axis check read it as a yaw rate of
+    # the opposite sign, whose `--scale r=-1` loaded a record still wrong. Read with the quaternion conjugated the
+    # record fits as well as with r negated, so no fix of the rates is named.
+    with gzip.open(TREFOIL, "rt") as f:
+        header = f.readline().strip().split(",")
+    conjugated = _turned(header, np.loadtxt(TREFOIL, delimiter=",", skiprows=1), 180)
+    conjugated[:, [header.index(n) for n in ("qx", "qy", "qz")]] *= -1
+    path = tmp_path / "conjugated.csv.gz"
+    _write(path, header, conjugated)
+    with pytest.raises(dynax.DataError, match=r"no scale or swap of the rates.*world-to-body quaternion") as refused:
+        dynax.load_flight(path, mapping=GYRO_MAP)
+    assert refused.value.column == "imu_gyro_z" and "--scale" not in str(refused.value)
+    # the same flight with its gyro's yaw rate genuinely negated, at the heading it was flown, keeps its fix
+    flipped = np.loadtxt(TREFOIL, delimiter=",", skiprows=1)
+    flipped[:, header.index("imu_gyro_z")] *= -1
+    _write(path, header, flipped)
+    with pytest.raises(dynax.DataError, match=r"opposite sign.*--scale r=-1"):
+        dynax.load_flight(path, mapping=NANOBENCH_MAP | {"p": "wx_vicon", "q": "wy_vicon", "r": "imu_gyro_z"})
