@@ -30,7 +30,8 @@ record states each quantity twice, so `load_flight` compares the two:
 
 Only a fault that holds for the whole record is refused with a `scale` to fix it (a unit, a sign or
 a swap): a gain that is wrong in some stretches only is no unit (see `gain_holds_everywhere` in
-`dynax._data._velocities`).
+`dynax._data._velocities`), and a fix of the rates is named only where the record it makes reads
+consistent and no other frame, order or sign of the rates reads nearly as well (`_refuse_unless_consistent`).
 """
 
 import itertools
@@ -403,7 +404,7 @@ def check_quaternion_order(ts, values: dict, *, path=None, columns=None) -> None
 # capture's rates) and 0.51-0.84 (the gyro), every other reading's at least 0.99 times it; with either fault at 90
 # or 180 degrees, or a conjugated quaternion at 0, the matching reading's is at most 0.29 times the body frame's
 # with motion capture's rates (80 of 80 named) and 0.80 with the gyro's (74 of 75; the trefoil's conjugated
-# quaternion at 180 degrees reads 0.82, and is refused as a yaw rate of the opposite sign)
+# quaternion at 180 degrees reads 0.82, and is refused without a fix: `_refuse_unless_consistent`)
 # (`experiments/flight_rate_frames.py`).
 RATE_FRAME_MISFIT = 0.3
 RATE_FRAME_RATIO = 0.8
