@@ -19,6 +19,12 @@ backward differences) at their median interval.
 signal to white noise a differentiator keeps) instead of its velocities' (docs/data.md, "Why not
 the band of the angles themselves"): `--runs 00,03,05 --band-from positions --out OUT`.
 
+`--velocities positions` reads every run's velocities from its angles (`load_trajectory(velocities=
+"positions")`, as `dynax identify --velocities positions` does) instead of the logged columns, which lag
+the angles by half a 2 ms interval (the `lag` data check); each fold is scored from both kinds of start
+state, for dynax's fit and for the lab's model (`by_start_velocities` in `results.json`):
+`--runs 03 --velocities positions --out OUT`.
+
 `--stagger K` cuts the records into segments K times, each cut a 1/K segment after the last
 (identify's default is 4; `--stagger 1` gives the single cut used before).
 
@@ -148,12 +154,15 @@ def lab_model_as_written(p: dict[str, float]) -> dynax.AbstractSystem:
     return dynax.Extended(mapped.system, (ArctanFriction(0, p["cf1"]), ArctanFriction(1, p["cf2"]), mapped.terms[2]))
 
 
-def load(run: str, variant: str = "native") -> dynax.Trajectory:
-    """One run at its median interval (`native`), or changed as `diagnose_real_splits.load` says."""
+def load(run: str, variant: str = "native", velocities: str = "measured") -> dynax.Trajectory:
+    """One run at its median interval (`native`), or changed as `diagnose_real_splits.load` says; `velocities`
+    as `load_trajectory` takes it (`"positions"`: estimated from the angles, not the logged columns)."""
     if variant not in ("native", "encoders"):
         return diagnose_real_splits.load(DFKI.parent, run, variant)
     mapping = MAPPING if variant == "native" else {k: v for k, v in MAPPING.items() if not k.startswith("dq")}
-    raw = dynax.load_trajectory(DFKI / "sys_id" / f"trajectory_{run}.csv", "double_pendulum", mapping=mapping)
+    raw = dynax.load_trajectory(
+        DFKI / "sys_id" / f"trajectory_{run}.csv", "double_pendulum", mapping=mapping, velocities=velocities
+    )
     return dynax.resample(raw, raw.dt)
 
 
@@ -261,6 +270,14 @@ def main(argv=None):
         default="velocities",
         help="the spectra the filter band is read from (default: %(default)s, identify's)",
     )
+    parser.add_argument(
+        "--velocities",
+        choices=("measured", "positions"),
+        default="measured",
+        help="the velocities of every run, training and held out: the logged columns (measured, the default) "
+        "or estimated from the angles (load_trajectory(velocities='positions'), `dynax identify --velocities "
+        "positions`); each fold is also scored from both kinds of start state (`by_start_velocities`)",
+    )
     args = parser.parse_args(argv)
     with filter_rule(band_from_positions if args.band_from == "positions" else None):
         with refinement_options(record_weights=args.record_weights):
@@ -286,8 +303,10 @@ def fit_folds(args):
     for part in args.merge:
         results["runs"].update(json.loads((part / "results.json").read_text())["runs"])
     held_out = [] if args.merge else args.runs.split(",")
-    runs = {r: load(r) for r in RUNS} if held_out else {}
-    training = {r: load(r, args.variant) for r in RUNS} if held_out else {}
+    runs = {r: load(r, velocities=args.velocities) for r in RUNS} if held_out else {}
+    training = {r: load(r, args.variant, args.velocities) for r in RUNS} if held_out else {}
+    # The held-out runs both ways: the windows' start states from the logged velocities or from the angles.
+    starts = {v: {r: load(r, velocities=v) for r in held_out} for v in ("measured", "positions")}
     lab = lab_model(read_parameters("model_3.0")) if held_out else None
     for held in held_out:
         train = [training[r] for r in RUNS if r != held]
@@ -308,7 +327,16 @@ def fit_folds(args):
         lab_error = held_out_error(lab, [runs[held]], HORIZONS)
         paired = cell_tests(result.system, lab, runs[held], HORIZONS)
         stages = result.to_json()["stages"]
+        by_start = {
+            v: {
+                "dynax": list(held_out_error(result.system, [starts[v][held]], HORIZONS).rmse),
+                "lab_model_3.0": list(held_out_error(lab, [starts[v][held]], HORIZONS).rmse),
+            }
+            for v in starts
+        }
         entry = {
+            "velocities": args.velocities,
+            "by_start_velocities": by_start,
             "fit_seconds": seconds,
             "dynax": list(result.validation.rmse),
             "dynax_least_squares": stages["least_squares"]["validation"]["rmse"],
@@ -344,6 +372,13 @@ def fit_folds(args):
             + " ".join(f"{v:.3f}" for v in entry["lab_model_3.0"])
             + " | p worse/better "
             + " ".join(f"{c['p_worse']:.2g}/{c['p_better']:.2g}" for c in paired)
+            + "".join(
+                f" | starts {v}: dynax "
+                + " ".join(f"{x:.4f}" for x in by_start[v]["dynax"])
+                + " lab "
+                + " ".join(f"{x:.4f}" for x in by_start[v]["lab_model_3.0"])
+                for v in by_start
+            )
             + f" | consistent {entry['consistency']['consistent']}"
             + " | weights "
             + " ".join(f"{w:.2f}" for w in entry["record_weights"])
