@@ -534,7 +534,12 @@ def lag_findings(tr, ts, source, values, pairs, dt):
                 f"{'lags' if lag > 0 else 'leads'} {position} by {abs(lag) * 1e3:.3g} ms ({intervals} sampling "
                 f"interval{'' if intervals == '1' else 's'}, {where}; a phase error of {phase:.2g} rad at the motion's "
                 f"{read.frequency / (2 * np.pi):.2g} Hz): "
-                "a driver's filter or backward difference, whose error follows the acceleration, so a fit trades "
+                + (
+                    "a driver's filter or backward difference"
+                    if lag > 0
+                    else "a forward difference, or a velocity stamped ahead of its angle"
+                )
+                + ", whose error follows the acceleration, so a fit trades "
                 "damping for inertia (one sample at 100 Hz halves a fitted damping)",
                 "--velocities positions (dynax differentiates the angles by central differences, which do not "
                 "lag; in Python `load_trajectory(..., velocities='positions')`)",

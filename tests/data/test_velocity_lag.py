@@ -67,6 +67,15 @@ def test_a_velocity_a_sample_late_is_refused_with_its_lag_and_the_fix():
     assert f.fix.startswith("--velocities positions")
 
 
+def test_a_velocity_that_leads_is_named_as_leading_not_as_a_filter():
+    ts, q, dq = _motion(1)
+    early = dq.copy()
+    early[:-1, 0] = dq[1:, 0]  # a forward difference's place: one sample ahead
+    (f,) = _lags(dynax.check_records([_record(ts, q, early)], estimated=()))
+    assert "leads q1 by 10 ms" in f.message and "stamped ahead" in f.message, f.message
+    assert "driver's filter" not in f.message, f.message
+
+
 def test_a_lag_from_part_way_through_is_located_in_its_stretch():
     ts, q, dq = _motion(2, seconds=10.0)
     late = dq.copy()
