@@ -30,6 +30,8 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Int
 import numpy as np
 
+from ._context import set_within
+
 ProgressMode = Literal["auto", "always", "never"]
 PROGRESS_MODE: contextvars.ContextVar[str] = contextvars.ContextVar("dynax_progress_mode", default="auto")
 
@@ -43,11 +45,8 @@ def progress_mode(mode: ProgressMode) -> Iterator[None]:
     """
     if mode not in ("auto", "always", "never"):
         raise ValueError(f"progress_mode: expected 'auto', 'always' or 'never', got {mode!r}")
-    token = PROGRESS_MODE.set(mode)
-    try:
+    with set_within(PROGRESS_MODE, mode):
         yield
-    finally:
-        PROGRESS_MODE.reset(token)
 
 
 def progress_enabled(progress: bool | None = None) -> bool:

@@ -38,6 +38,7 @@ LAYER_OF = {
     "_errors": "utilities",
     "_precision": "utilities",
     "_progress": "utilities",
+    "_context": "utilities",
     "_distributed": "utilities",
     "_data": "data",
     "_model": "model",

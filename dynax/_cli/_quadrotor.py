@@ -323,19 +323,10 @@ def run_diagnose(args) -> int:
     nominal = quadrotor_from_json(obj, path=args.nominal) if obj is not None else None
     levels: dict = {}  # training and validation flights together, or each against the nominal model's
     given = None if nominal is None else (training_levels(nominal), f"the training flights of {args.nominal}")
-    train, _ = load_flights(
-        args.data,
-        (mapping, scale, offset),
-        min_samples=min_samples,
-        training=loaded,
-        numbering=numbering,
-        levels=levels,
-        reference=given,
-    )
-    validation = None
-    if args.validation is not None:
-        validation, _ = load_flights(
-            args.validation,
+
+    def load(paths):  # training, then validation flights: one numbering, one level check, each seen once
+        runs, _ = load_flights(
+            paths,
             (mapping, scale, offset),
             min_samples=min_samples,
             training=loaded,
@@ -343,6 +334,10 @@ def run_diagnose(args) -> int:
             levels=levels,
             reference=given,
         )
+        return runs
+
+    train = load(args.data)
+    validation = None if args.validation is None else load(args.validation)
     if nominal is not None:
         system = nominal
     else:

@@ -11,6 +11,8 @@ from collections.abc import Iterator
 import contextlib
 import contextvars
 
+from .._context import set_within
+
 SCREENS = contextvars.ContextVar("dynax_data_check_screens", default=True)  # False: every search in full
 
 
@@ -19,8 +21,5 @@ def screens_off() -> Iterator[None]:
     """Within the block, the data checks (`check_records`, `check_trajectory_velocities`) run every glitch,
     wrap and velocity-gain search in full, without the screens that skip the ones whose answer is proven.
     The findings do not change; the time does."""
-    token = SCREENS.set(False)
-    try:
+    with set_within(SCREENS, False):
         yield
-    finally:
-        SCREENS.reset(token)

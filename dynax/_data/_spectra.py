@@ -38,6 +38,7 @@ import dataclasses
 
 import numpy as np
 
+from .._context import set_within
 from ._trajectory import Trajectory
 
 
@@ -212,11 +213,8 @@ def filter_rule(rule):
     `"auto"` settings, the refinement's segments and filtered positions) is `rule(trajectory, choice, snr=snr)`:
     the `FilterChoice` read from the velocities' spectra handed to `rule`, which returns the one to use. For
     trying another band rule through the whole pipeline."""
-    token = FILTER_RULE.set(rule)
-    try:
+    with set_within(FILTER_RULE, rule):
         yield
-    finally:
-        FILTER_RULE.reset(token)
 
 
 def choose_filter(trajectory: Trajectory, *, snr: float = 100.0) -> FilterChoice:

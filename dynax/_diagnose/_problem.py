@@ -13,6 +13,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._context import set_within
 from .._errors import UsageError
 from .._identify._record_friction import compare_records
 from .._model._extensions import Extended
@@ -55,11 +56,8 @@ def overlapping_fit_windows(starts: int):
     end: each sample then enters `starts` windows. For trying whether overlapping windows determine more."""
     if not (isinstance(starts, int) and starts >= 1):
         raise UsageError(f"overlapping_fit_windows: `starts` must be a positive integer, got {starts!r}")
-    token = FIT_WINDOW_STARTS.set(starts)
-    try:
+    with set_within(FIT_WINDOW_STARTS, starts):
         yield
-    finally:
-        FIT_WINDOW_STARTS.reset(token)
 
 
 def fit_windows(records, n_fit: int) -> Windows:

@@ -62,6 +62,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from .._context import set_within
 from .._data._derivatives import butterworth_filtfilt, resample
 from .._data._rest import zeroed_at_rest
 from .._data._spectra import choose_filter, measurement_noise_std, velocities_from_positions
@@ -324,11 +325,8 @@ def refinement_options(**options):
     unknown = sorted(set(options) - set(_OPTIONS))
     if unknown:
         raise TypeError(f"refinement_options: unknown option(s) {unknown}; choose from {list(_OPTIONS)}")
-    token = REFINEMENT_OPTIONS.set(options)
-    try:
+    with set_within(REFINEMENT_OPTIONS, options):
         yield
-    finally:
-        REFINEMENT_OPTIONS.reset(token)
 
 
 def refine_by_simulation(

@@ -20,6 +20,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._context import set_within
 from .._data._spectra import choose_filter
 from .._errors import UsageError
 from .._model._linear_in_parameters import size_parameter_names
@@ -348,11 +349,8 @@ def rest_search_off():
     """Within the block, `identify` does not look for friction at rest (`result.static_friction` is `None`,
     no rows are left out, no `Stiction` is added): the least-squares fit as it is without the rest search,
     for comparing with it and for pricing the search."""
-    token = REST_SEARCH.set(False)
-    try:
+    with set_within(REST_SEARCH, False):
         yield
-    finally:
-        REST_SEARCH.reset(token)
 
 
 EVERY_REST_OUT = contextvars.ContextVar("dynax_every_rest_out", default=False)  # True: `all_rests_left_out`
@@ -363,11 +361,8 @@ def all_rests_left_out():
     """Within the block, the least-squares refit that `Dynamic(static_friction=True)` makes where a joint rests
     under load leaves out the rows of every rest, loaded or not, instead of the loaded ones only: a what-if for
     comparing the static level read either way."""
-    token = EVERY_REST_OUT.set(True)
-    try:
+    with set_within(EVERY_REST_OUT, True):
         yield
-    finally:
-        EVERY_REST_OUT.reset(token)
 
 
 def _holds_at_rest(system) -> bool:
