@@ -215,6 +215,22 @@ def test_an_inconsistent_estimate_warns_and_the_constrained_fit_matches_a_bounde
     assert fit is not None and abs(constrained.parameters["theta7"] - reference[6]) < 1e-3
 
 
+def _least_squares_with_warnings(data):
+    """The double pendulum's least-squares fit of `data` (Coulomb friction, no refinement, nothing held out) and
+    the messages of every warning it gave."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = identify(
+            dynax.DoublePendulum(),
+            data,
+            Dynamic(),
+            friction="coulomb",
+            refine=False,
+            validation=dynax.Validate(holdout=0),
+        )
+    return result, [str(w.message) for w in caught]
+
+
 def test_a_reversed_torque_is_named_where_the_estimate_is_inconsistent():
     # Records of the rig's size by scipy's DOP853 with sensor noise, the elbow's torque logged with the
     # opposite sign (a motor mounted the other way): least squares is inconsistent and the warning
@@ -226,19 +242,8 @@ def test_a_reversed_torque_is_named_where_the_estimate_is_inconsistent():
     def fit(signs):
         us = np.asarray(record.us) * np.asarray(signs)
         data = Trajectory(record.ts, record.xs, jnp.asarray(us), NAMES, ("tau1", "tau2"))
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            result = identify(
-                dynax.DoublePendulum(),
-                data,
-                Dynamic(),
-                friction="coulomb",
-                refine=False,
-                validation=dynax.Validate(holdout=0),
-            )
-        return result, [
-            str(w.message) for w in caught if any(k in str(w.message) for k in ("reversed", "degrees", "upright"))
-        ]
+        result, said = _least_squares_with_warnings(data)
+        return result, [m for m in said if any(k in m for k in ("reversed", "degrees", "upright"))]
 
     plain, said = fit([1.0, 1.0])
     assert plain.consistency.consistent and not plain.consistency.active and said == []
@@ -263,17 +268,7 @@ def test_columns_mapped_to_the_other_joint_are_named_where_the_estimate_is_incon
         data = Trajectory(
             record.ts, jnp.asarray(xs[:, state_order]), jnp.asarray(us[:, input_order]), NAMES, ("tau1", "tau2")
         )
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            identify(
-                dynax.DoublePendulum(),
-                data,
-                Dynamic(),
-                friction="coulomb",
-                refine=False,
-                validation=dynax.Validate(holdout=0),
-            )
-        return [str(w.message) for w in caught if "swapped" in str(w.message)]
+        return [m for m in _least_squares_with_warnings(data)[1] if "swapped" in m]
 
     assert fit([0, 1, 2, 3], [0, 1]) == []
     said = fit([0, 1, 2, 3], [1, 0])
