@@ -407,6 +407,7 @@ from ._identify._least_squares import (
     POORLY_DETERMINED as POORLY_DETERMINED,
 )
 from ._identify._least_squares import tsqr_r as tsqr_r
+from ._identify._ls_stage import least_squares_seen as least_squares_seen
 from ._identify._ls_stage import records_less_offsets as records_less_offsets
 from ._identify._method import FitSettings as FitSettings
 from ._identify._method import Fitted as Fitted
@@ -437,6 +438,7 @@ from ._identify._stages import rest_search_off as rest_search_off
 from ._identify._static_friction import joint_levels as joint_levels
 from ._identify._static_friction import record_rests as record_rests
 from ._identify._static_friction import rests_under_load as static_friction_rests  # diagnose's takes the plain name
+from ._identify._static_friction import slow_rows as slow_rows
 from ._identify._validation import CONCENTRATED as CONCENTRATED
 from ._identify._validation import HeldOut as HeldOut
 
@@ -740,12 +742,13 @@ __all__ = [
     "leaderboard_rollout",
     "leading_sharding",
     "least_squares",
+    "least_squares_seen",
     "leave_one_out_splits",
     "levenberg_marquardt",
     "log_ratio_differences",
     "look_alike_tests",
-    "look_alikes",
     "LOOK_ALIKES",
+    "look_alikes",
     "make_windows",
     "MAX_MAGNITUDE",
     "MAX_VELOCITY_GAIN_ERROR",
@@ -799,8 +802,8 @@ __all__ = [
     "Prepared",
     "Problem",
     "progress_enabled",
-    "progress_mode",
     "PROGRESS_MODE",
+    "progress_mode",
     "progress_report",
     "ProgressBar",
     "Proposal",
@@ -856,6 +859,7 @@ __all__ = [
     "short_horizon_note",
     "Simulation",
     "simulation_segments",
+    "slow_rows",
     "sparse_search",
     "SparseSearch",
     "SparseStatistics",

@@ -12,9 +12,11 @@ battery's stick-slip records: stiction of 0.8 N m at the shoulder (`shoulder`), 
 0.5 N m at the elbow (`coulomb`), stiction of 0.5 N m at the elbow (`elbow`). The truth has no force offsets.
 
 For each band of speeds (`--bands`, rad/s) the refit without the loaded rests (`identify`'s second least-squares
-fit) also gives zero weight to each joint's dynamic rows whose speed (as the regressor reads it: the viscous
-column) is below the band, with `identify`'s own slow-row rule (`slow_row_weights`) switched off, so band 0 is
-`identify` as it was before that rule; `--both-fits` applies the band to the first fit too. Reported per band:
+fit) also gives zero weight to each joint's dynamic rows whose speed (as `identify`'s slow-row rule reads it: the
+record filtered by its chosen settings) is below the band, in place of the rule's own band
+(`dynax.internal.slow_rows`), so band 0 is `identify` as it was before that rule and band 0.03 is the rule;
+`--both-fits` applies the band to the first fit too. The stages' equations and row weights are read with
+`dynax.internal.least_squares_seen`; the rows' speed bins below read the regressor's viscous column. Reported per band:
 the level read, the fitted offsets, their standard errors (batch means of the fit's residuals over 20 contiguous
 batches of each record's kept rows, robust to the serial correlation, and the parameters' share through the
 group means), and, with the truth's parameters, the offset each record needs (the mean of its rows' residual)
@@ -39,8 +41,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax._identify import _ls_stage, _stages  # noqa: E402  # private: rows caught, rule swapped
-from dynax.internal import parameter_names, with_friction  # noqa: E402
+from dynax.internal import least_squares_seen, parameter_names, slow_rows, with_friction  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from tests.hidden_cases import CASES, records, truth_theta  # noqa: E402
@@ -68,70 +69,35 @@ def row_speeds(raw_a, names, n_joints):
 
 
 def fit(data, band: float, offsets="auto", both=False, rule=False):
-    caught = {}
-    stacked, weights, stage = _ls_stage.stacked_equations, _ls_stage.rest_row_weights, _stages.least_squares_stage
-    slow = _ls_stage.slow_row_weights
-
-    def spy_stacked(*args, **kwargs):
-        out = stacked(*args, **kwargs)
-        if caught.get("equations") is None:  # the stage's own (its warnings may stack other equations after)
-            caught["equations"] = out
-        return out
-
-    def slow_rows_out(records_, settings, counts, rests, n_joints):
-        keep = weights(records_, settings, counts, rests, n_joints)
-        _, raw_a, _, _, names, *_ = caught["equations"]
-        slow = np.abs(row_speeds(raw_a, list(names), n_joints)) < band
-        keep = (np.ones(raw_a.shape[0]) if keep is None else keep) * ~slow
-        caught["keep"] = keep
-        return None if keep.all() else keep
-
-    def spy_stage(system, fitted, method, friction, weights_, rcond, consistency, rests=None, **kwargs):
-        caught["keep"], caught["equations"] = None, None
-        if rests is None and both:  # the first fit too, as if it had rests to leave out
-            rests = [() for _ in fitted]
-        ls = stage(system, fitted, method, friction, weights_, rcond, consistency, rests, **kwargs)
-        caught["ls"], caught["last equations"], caught["last keep"] = ls, caught["equations"], caught["keep"]
-        return ls
-
-    _ls_stage.stacked_equations, _ls_stage.rest_row_weights, _stages.least_squares_stage = (
-        spy_stacked,
-        slow_rows_out,
-        spy_stage,
-    )
-
-    def spy_slow(keep, *args):
-        caught["keep"] = slow(keep, *args)
-        return caught["keep"]
-
-    # Without the rule, the refit as before it: only the loaded rests out, then this band.
-    _ls_stage.slow_row_weights = spy_slow if rule else lambda keep, *args: keep
+    """`identify` as the experiment runs it, and what its least-squares stages solved (`least_squares_seen`): the
+    last stage's equations and row weights, and the stage itself. Without `rule`, the refit leaves out the rows
+    under `band` (`slow_rows(band)`; 0: none, the refit as it was before `identify`'s slow-row rule); with it,
+    `identify`'s own rule. `both`: the first fit leaves them out too."""
     start = time.perf_counter()
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            result = dynax.identify(
-                dynax.DoublePendulum(),
-                data,
-                dynax.Dynamic(static_friction=True, offsets=offsets),
-                friction="coulomb",
-                refine=False,
-                validation=dynax.Validate(holdout=0),
-            )
-    finally:
-        _ls_stage.stacked_equations, _ls_stage.rest_row_weights, _stages.least_squares_stage = stacked, weights, stage
-        _ls_stage.slow_row_weights = slow
-    return result, caught, time.perf_counter() - start
+    with warnings.catch_warnings(), least_squares_seen() as seen, slow_rows(None if rule else band, first_fit=both):
+        warnings.simplefilter("ignore")
+        result = dynax.identify(
+            dynax.DoublePendulum(),
+            data,
+            dynax.Dynamic(static_friction=True, offsets=offsets),
+            friction="coulomb",
+            refine=False,
+            validation=dynax.Validate(holdout=0),
+        )
+    return result, seen[-1], time.perf_counter() - start
 
 
 def offsets_taken_apart(caught, truth: np.ndarray) -> dict:
     """The fitted offsets with their standard errors, and the offset the truth's parameters need, by row speed."""
-    ls = caught["ls"]
-    _, raw_a, raw_y, _, names, _, _, _, counts, _ = caught["last equations"]
-    names = list(names)
-    raw_a, raw_y = np.asarray(raw_a), np.asarray(raw_y)
+    ls, raw_a, raw_y, names, counts, keep = (
+        caught.stage,
+        caught.a,
+        caught.y,
+        list(caught.names),
+        caught.counts,
+        caught.keep,
+    )
     n_joints = raw_a.shape[0] // sum(counts)
-    keep = caught["last keep"]
     keep = np.ones(len(raw_y)) if keep is None else np.asarray(keep)
     speeds = row_speeds(raw_a, names, n_joints)
     estimate = np.asarray(ls.estimate)
@@ -196,7 +162,7 @@ def run(part: str, bands, no_offsets: bool, both: bool) -> dict:
             "level_error": {j.name: j.level / case.size - 1 for j in sf.joints},
             "rows_left_out": sf.rows_left_out,
             "rows": sf.rows,
-            "estimate": dict(zip(caught["ls"].names, np.asarray(caught["ls"].estimate).tolist())),
+            "estimate": dict(zip(caught.stage.names, np.asarray(caught.stage.estimate).tolist())),
             "offsets_taken_apart": offsets_taken_apart(caught, truth),
             "note": sf.note,
         }

@@ -2,7 +2,10 @@
 weights), checked for physical consistency and constrained to it, with standard errors robust to
 rows correlated in time."""
 
+import contextlib
+import contextvars
 import functools
+from typing import NamedTuple
 import warnings
 
 import equinox as eqx
@@ -10,6 +13,7 @@ import jax.numpy as jnp
 from jaxtyping import Array
 import numpy as np
 
+from .._context import set_within
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
 from .._fit import serial_covariance, Solution
@@ -21,6 +25,33 @@ from ._offsets import driven_joints, offset_groups, record_labels, record_offset
 from ._record_friction import coulomb_columns, record_friction, RecordFriction
 from ._regressors import positions_and_velocities, split_terms, with_parameters
 from ._static_friction import rest_row_weights, slow_row_weights
+
+SEEN: contextvars.ContextVar[list | None] = contextvars.ContextVar(
+    "dynax_least_squares_seen", default=None
+)  # `least_squares_seen`'s list
+
+
+class SeenStage(NamedTuple):
+    """One least-squares stage as `least_squares_seen` shows it: the stacked equations as built (`a`, `y`, the
+    columns' `names`, each record's rows per joint `counts`), before any force offset is taken out, the rows'
+    weights from the rests and slow rows left out (`keep`, `None` where every row counts) and the stage."""
+
+    a: np.ndarray
+    y: np.ndarray
+    names: tuple[str, ...]
+    counts: tuple[int, ...]
+    keep: np.ndarray | None
+    stage: "_LeastSquaresStage"
+
+
+@contextlib.contextmanager
+def least_squares_seen():
+    """Within the block, each least-squares stage `identify` runs (the first fit, and the refit without the
+    loaded rests) appends a `SeenStage` to the list the block is given, in the order they run; the refits
+    that only test a warning's explanation (columns swapped or reversed) are not shown."""
+    seen: list[SeenStage] = []
+    with set_within(SEEN, seen):
+        yield seen
 
 
 def fitted_system(system, names, estimate):
@@ -167,7 +198,7 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
         values = y_means - a_means @ np.asarray(estimate)  # what each record's recorded force has in excess
         driven = tuple(joint_names[j] for j in driven_joints(system))  # the order of `offset_groups`
         fitted_offsets = values.reshape(len(driven), len(counts)).T
-    return _LeastSquaresStage(
+    stage = _LeastSquaresStage(
         fitted,
         names,
         estimate,
@@ -187,6 +218,9 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
         (0 if keep is None else int(np.sum(keep == 0)), int(raw_a.shape[0])),
         joint_weight,
     )
+    if (seen := SEEN.get()) is not None:
+        seen.append(SeenStage(np.asarray(raw_a), np.asarray(raw_y), tuple(names), tuple(counts or ()), keep, stage))
+    return stage
 
 
 def _serially_robust(fit, a, y, weights, estimate, record_rows):
@@ -403,7 +437,8 @@ def _warn_if_degrees(given, trajectories, error) -> None:
             for t in trajectories
         ]
         try:
-            stage = least_squares_stage(system, scaled, method, friction, weights, rcond, "off")
+            with set_within(SEEN, None):
+                stage = least_squares_stage(system, scaled, method, friction, weights, rcond, "off")
         except (IdentifiabilityError, UsageError):
             return None
         return stage.consistency.consistent, float(relative_equation_error(stage.a, stage.y, stage.estimate)), False
@@ -465,7 +500,8 @@ def _warn_if_swapped(given, trajectories, error) -> None:
             for t in trajectories
         ]
         try:
-            stage = least_squares_stage(system, swapped, method, friction, weights, rcond, "off")
+            with set_within(SEEN, None):
+                stage = least_squares_stage(system, swapped, method, friction, weights, rcond, "off")
         except (IdentifiabilityError, UsageError):
             continue
         refit = float(relative_equation_error(stage.a, stage.y, stage.estimate))

@@ -56,6 +56,7 @@ from ._static_friction import (
     not_added,
     record_rests,
     rests_under_load,
+    SLOW_ROWS,
     StaticFriction,
     with_stiction,
 )
@@ -128,7 +129,8 @@ def least_squares_fit(method: AbstractLeastSquares, system, prepared: Prepared) 
     held = job.held_out.records
     rcond = method.rcond
     rests = record_rests(fitted) if _holds_at_rest(system) else None
-    ls = least_squares_stage(system, fitted, method, friction, weights, rcond, consistency)
+    first = [() for _ in fitted] if SLOW_ROWS.get()[1] else None  # `slow_rows(first_fit=True)`: no rest, slow rows
+    ls = least_squares_stage(system, fitted, method, friction, weights, rcond, consistency, first)
     static = _static_friction(ls, fitted, rests)
     if static is not None and static.joints and not method.adds_static_friction:
         static = not_added(static)

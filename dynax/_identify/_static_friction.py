@@ -117,12 +117,15 @@ data.
     2.1 and 4: breakaway force measured at the onset of motion under a slowly rising force).
 """
 
+import contextlib
+import contextvars
 import dataclasses
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._context import set_within
 from .._data._derivatives import butterworth_filtfilt
 from .._data._rest import Rest, rest_stretches, speed_noise_at_rest, WITHIN_NOISE
 from .._data._trajectory import Trajectory
@@ -137,6 +140,20 @@ LOADED = 3.0  # held torque over its single-sample noise that counts as load
 FLOOR = 0.01  # the least noise of a torque: 1 % of the joint's rms recorded torque (a sensor's resolution)
 RESOLUTION = 0.05  # a breakaway counts where the load rises by at most 5 % of it per sample (a slow rise)
 SLOW = 3.0  # a row is slow below 3 widths of the Coulomb law's smoothing (tanh(3): within 0.5 % of its level)
+SLOW_ROWS: contextvars.ContextVar[tuple[float | None, bool]] = contextvars.ContextVar(
+    "dynax_slow_rows", default=(None, False)
+)  # `slow_rows`: (band, first fit)
+
+
+@contextlib.contextmanager
+def slow_rows(band: float | None = None, *, first_fit: bool = False):
+    """Within the block, the least-squares refit without the loaded rests leaves out each joint's rows whose speed
+    (as the equations read it) is below `band` rad/s, whatever the joint's friction law, instead of below `SLOW`
+    times its Coulomb law's smoothing (`band=None`: that rule); `band=0` leaves out no slow row (the refit as it
+    was before the rule). `first_fit=True`: the first least-squares fit leaves out the same rows too. A what-if
+    for taking apart where the fitted force offsets and the static level come from."""
+    with set_within(SLOW_ROWS, (band, first_fit)):
+        yield
 
 
 @dataclasses.dataclass(frozen=True)
@@ -292,6 +309,7 @@ def slow_row_weights(keep, system, records, settings, counts, n_joints: int) -> 
     smoothing = {t.joint: float(t.velocity_scale) for t in terms if isinstance(t, CoulombFriction)}
     keep = np.ones(n_joints * sum(counts)) if keep is None else np.array(keep, dtype=float)
     offset = np.concatenate([[0], np.cumsum(counts)])
+    chosen = SLOW_ROWS.get()[0]
     for r, (record, setting, count) in enumerate(zip(records, settings, counts)):
         xs = np.asarray(record.xs)
         if setting.get("lowpass_hz") is not None:
@@ -304,7 +322,7 @@ def slow_row_weights(keep, system, records, settings, counts, n_joints: int) -> 
         samples = np.minimum(setting["trim"] + np.arange(count) * setting["decimate"], len(xs) - 1)
         speeds = np.asarray(positions_and_velocities(system, jnp.asarray(xs))[1])[samples]
         for joint in range(n_joints):
-            band = SLOW * smoothing.get(joint, 0.0)
+            band = SLOW * smoothing.get(joint, 0.0) if chosen is None else chosen
             rows = joint * sum(counts) + offset[r] + np.arange(count)
             keep[rows[np.abs(speeds[:, joint]) < band]] = 0.0
     return None if keep.all() else keep

@@ -421,3 +421,37 @@ def test_the_least_squares_level_is_read_without_the_slow_rows(name, joint):
     assert level.joint == joint and level.kind == "breakaway"
     np.testing.assert_allclose(level.level, case.size, rtol=0.1)
     assert result.static_friction.rows_left_out > 0 and "at low speed" in result.static_friction.note
+
+
+def test_the_slow_row_switch_restores_the_refit_before_the_rule_and_the_stages_show_their_rows():
+    # `dynax.internal.slow_rows` and `least_squares_seen`, as `experiments/stick_slip_slow_rows.py` uses them. On
+    # the sticking elbow, the refit with no slow row left out (band 0) reads the level as before the rule, 12 %
+    # high (0.5623 for 0.5: the rows under the Coulomb law's smoothing, one sign of misfit per record); the
+    # stages each show the rows they weighed: the first fit all of them, the refit those left out.
+    from dynax.internal import least_squares_seen, slow_rows
+    from tests.hidden_cases import CASES, records
+
+    (case,) = [c for c in CASES if c.name == "double_pendulum-coulomb_friction@q2-0.5-sticking_coulomb"]
+
+    def identify(**switch):
+        with least_squares_seen() as seen, slow_rows(**switch):
+            result = dynax.identify(
+                dynax.DoublePendulum(),
+                list(records(case)),
+                dynax.Dynamic(static_friction=True),
+                friction="coulomb",
+                refine=False,
+                validation=dynax.Validate(holdout=0),
+            )
+        return result.static_friction, seen
+
+    static, seen = identify(band=0.0)
+    (level,) = static.joints
+    assert level.level > 1.1 * case.size  # outside the 10 % the rule reaches (the test above)
+    first, refit = seen
+    assert first.keep is None and refit.keep is not None
+    assert int(np.sum(refit.keep == 0)) == static.rows_left_out
+    assert refit.a.shape[0] == len(refit.y) == len(refit.keep) == 2 * sum(refit.counts)
+    static, seen = identify(first_fit=True)  # the rule's band, in the first fit too
+    assert seen[0].keep is not None and int(np.sum(seen[0].keep == 0)) > 0
+    np.testing.assert_allclose(static.joints[0].level, case.size, rtol=0.1)
