@@ -102,24 +102,38 @@ def check_flight_kinematics(ts, values: dict, *, path=None, columns=None, scale=
     scale = scale or {}
     faults = {}  # rate -> (what is wrong, the factor that fixes it)
     for k, rate in enumerate(_AXES):
-        found = _rate_fault(ts, angles, k, rates[:, k], path, columns, quats, rates)
+        found = _rate_fault(ts, angles, k, rates[:, k], path, columns, quats, rates, scale)
         if found is not None:
             faults[rate] = found
+    if not faults:
+        _refuse_other_reading(ts, quats, rates, path=path, columns=columns, scale=scale)
     if faults:
         first, (what, _, _) = next(iter(faults.items()))
         fixed = rates * np.array([faults[r][1] if r in faults else 1.0 for r in _AXES])
-        _refuse_unless_consistent(ts, quats, rates, fixed, what, path=path, column=columns.get(first, first))
-        rest = list(faults)[1:]
-        if rest:
-            what = what + [f"so are {', '.join(rest)} (gains {', '.join(f'{faults[r][2]:.4g}' for r in rest)})"]
         fix = {r: factor * float(scale.get(r, 1.0)) for r, (_, factor, _) in faults.items()}
         as_dict = ", ".join(f"'{r}': {f:.6g}" for r, f in fix.items())
         as_flag = ",".join(f"{r}={f:.6g}" for r, f in fix.items())
-        what.append(f"scale {'it' if len(fix) == 1 else 'them'} (`scale={{{as_dict}}}`, `--scale {as_flag}`)")
+        scaled = f"scale {'it' if len(fix) == 1 else 'them'} (`scale={{{as_dict}}}`, `--scale {as_flag}`)"
+        _refuse_unless_consistent(
+            ts,
+            quats,
+            rates,
+            fixed,
+            what,
+            scaled,
+            path=path,
+            column=columns.get(first, first),
+            columns=columns,
+            scale=scale,
+        )
+        rest = list(faults)[1:]
+        if rest:
+            what = what + [f"so are {', '.join(rest)} (gains {', '.join(f'{faults[r][2]:.4g}' for r in rest)})"]
+        what.append(scaled)
         raise DataError("; ".join(what), path=path, column=columns.get(first, first))
 
 
-def _rate_fault(ts, angles, k, rate, path, columns, quats, rates) -> tuple[list[str], float, float] | None:
+def _rate_fault(ts, angles, k, rate, path, columns, quats, rates, scale) -> tuple[list[str], float, float] | None:
     """What is wrong with body rate `k`, the factor that fixes it, and its gain, where it is the
     attitude's derivative with the wrong sign or in other units; `None` where nothing is (see the module
     notes: only faults of that size, which hold for the whole record). **Raises:** `DataError` where
@@ -150,7 +164,21 @@ def _rate_fault(ts, angles, k, rate, path, columns, quats, rates) -> tuple[list[
         )
         swapped = rates.copy()
         swapped[:, [k, follows[0]]] = rates[:, [follows[0], k]]
-        _refuse_unless_consistent(ts, quats, rates, swapped, [what], path=path, column=columns.get(name, name))
+        order = list(range(3))
+        order[k], order[follows[0]] = follows[0], k
+        remap = signed_reading_fix(tuple(order), (0, 0, 0), columns, scale)[1]
+        _refuse_unless_consistent(
+            ts,
+            quats,
+            rates,
+            swapped,
+            [what],
+            f"swap them (`{remap}`)",
+            path=path,
+            column=columns.get(name, name),
+            columns=columns,
+            scale=scale,
+        )
         raise DataError(
             f"{what}: are the columns of {name} and {other} swapped?", path=path, column=columns.get(name, name)
         )
@@ -173,7 +201,9 @@ def _rate_fault(ts, angles, k, rate, path, columns, quats, rates) -> tuple[list[
     return what, factor, gain
 
 
-def _refuse_unless_consistent(ts, quats, rates, fixed, what: list[str], *, path, column) -> None:
+def _refuse_unless_consistent(
+    ts, quats, rates, fixed, what: list[str], fix: str, *, path, column, columns, scale
+) -> None:
     """Refuse, without a fix, a per-axis fix of the rates that would load a record still wrong. `fixed` holds
     `p, q, r` as the fix (a sign, a unit, a swap) makes them; it reads consistent where they miss the attitude's
     body-frame rate of change by `RATE_CONSISTENT_MISFIT` at most and `RATE_FRAME_RATIO` times as closely as every
@@ -207,6 +237,25 @@ def _refuse_unless_consistent(ts, quats, rates, fixed, what: list[str], *, path,
     rival = max(ratios, key=ratios.__getitem__)
     if after <= RATE_CONSISTENT_MISFIT and ratios[rival] <= RATE_FRAME_RATIO:
         return
+    frame = {"a world-to-body quaternion": "world_to_body", "rates in world axes": "world"}.get(rival)
+    if after <= RATE_CONSISTENT_MISFIT and frame is not None and ratios[rival] * RATE_FRAME_RATIO <= 1.0:
+        # a frame of the record as logged fits about as well as the fix, not clearly better: both are named
+        raise DataError(
+            "; ".join(
+                [
+                    *what,
+                    f"{fix}, or read {_reading_words(frame, columns, scale)}: {_reading_fix(frame, columns, scale)}; "
+                    f"the record cannot tell which holds (misfit on the attitude's rate of change {after:.0%} with "
+                    f"the fix, {frames[frame]:.0%} so; at one heading, flown nearly level, the two read alike): check "
+                    "the logger's documentation of its frames and signs, or give a stretch flown at another heading",
+                ]
+            ),
+            path=path,
+            column=column,
+        )
+    # the record as logged may read clearly best in another order or sign than the fix makes (a roll rate that
+    # follows pitch, its gain on roll negative where roll and pitch turn against each other, is no sign fault)
+    _refuse_other_reading(ts, quats, rates, path=path, columns=columns, scale=scale)
     if after > RATE_CONSISTENT_MISFIT:
         why = (
             f"no scale or swap of the rates is right for the whole record: fixed so, p, q, r would still miss "
@@ -229,6 +278,30 @@ def _refuse_unless_consistent(ts, quats, rates, fixed, what: list[str], *, path,
         ),
         path=path,
         column=column,
+    )
+
+
+def _refuse_other_reading(ts, quats, rates, *, path, columns, scale) -> None:
+    """Refuse rates that another order or sign of their columns reads clearly better than the record as logged
+    and every other reading of `rate_readings` (`RATE_FRAME_MISFIT` and `RATE_FRAME_RATIO`, as `check_rate_frame`
+    names a frame), where no column's gain named it: a roll rate that follows pitch while roll and pitch move
+    against each other (the star flight's) has a negative gain on its own axis that holds in some stretches only.
+    Two readings within `RATE_FRAME_RATIO` of each other are both named."""
+    found = rate_readings(ts, quats, rates.T)
+    if found is None or found["body"] <= RATE_FRAME_MISFIT:
+        return
+    best, second = sorted((k for k in found if k != "body"), key=found.__getitem__)[:2]
+    if not isinstance(best, tuple) or not found[best] <= RATE_FRAME_RATIO * found["body"]:
+        return
+    if found[best] > RATE_FRAME_RATIO * found[second]:
+        raise _alike_error(found, best, second, path=path, columns=columns, scale=scale)
+    words, fix = signed_reading_fix(*best, columns, scale)
+    raise DataError(
+        f"p, q, r read as {words}: so they miss the attitude's rate of change by {found[best]:.0%} of its size over "
+        f"{BLOCK_S * 1e3:g} ms blocks, as logged by {found['body']:.0%}, in any other order, sign or frame by "
+        f"{found[second]:.0%} or more; load them so (`{fix}`)",
+        path=path,
+        column=columns.get(*[_AXES[k] for k in range(3) if best[0][k] != k or best[1][k]][:1] * 2),
     )
 
 
@@ -430,6 +503,50 @@ def rate_frame_misfits(ts, quats, rates) -> dict[str, float] | None:
     return {"body": body, "world": in_world, "world_to_body": world_to_body}
 
 
+def signed_reading_misfits(ts, quats, rates) -> dict[tuple[tuple[int, ...], tuple[int, ...]], float] | None:
+    """The body rates' misfit (as `rate_frame_misfits`'s `"body"`) with the columns `p, q, r` read in another order
+    or with other signs, each a per-axis fault of the log (a sign, a swap): keyed by `(order, signs)`, body axis `k`
+    read from column `order[k]` with the sign `-` where `signs[k]` is 1; the record as logged left out. `None`
+    for a record too short or still to tell."""
+    ts = np.asarray(ts, dtype=float)
+    rates = np.stack([np.asarray(r, dtype=float) for r in rates], axis=1)
+    misfit = _signed_misfits(ts, attitude_angles(quats), rates)
+    if misfit is None:
+        return None
+    return {
+        (order, signs): float(np.mean([misfit[k, order[k], signs[k]] for k in range(3)]))
+        for order in itertools.permutations(range(3))
+        for signs in itertools.product((0, 1), repeat=3)
+        if order != (0, 1, 2) or any(signs)
+    }
+
+
+def signed_reading_fix(order, signs, columns=None, scale=None) -> tuple[str, str]:
+    """What a signed reading `(order, signs)` of `signed_reading_misfits` says of the columns `p, q, r`, and the
+    `--map`/`--scale` that loads them so (`columns`: contract name -> file column; `scale`, the factors given)."""
+    columns, scale = columns or {}, scale or {}
+    moved = [k for k in range(3) if order[k] != k]
+    flipped = [_AXES[k] for k in range(3) if signs[k]]
+    words = []
+    if len(moved) == 2:
+        words.append(f"the columns of {_AXES[moved[0]]} and {_AXES[moved[1]]} swapped")
+    elif moved:
+        words.append(f"p, q, r in the columns of {', '.join(_AXES[order[k]] for k in range(3))}")
+    if flipped:
+        words.append(f"{', '.join(flipped)} of the opposite sign{'s' if len(flipped) > 1 else ''}")
+    flags = []
+    if moved:
+        flags.append("--map " + ",".join(f"{_AXES[k]}={columns.get(_AXES[order[k]], _AXES[order[k]])}" for k in moved))
+    factors = {
+        _AXES[k]: (-1.0 if signs[k] else 1.0) * float(scale.get(_AXES[order[k]], 1.0))
+        for k in range(3)
+        if signs[k] or (order[k] != k and scale.get(_AXES[order[k]], 1.0) != scale.get(_AXES[k], 1.0))
+    }
+    if factors:
+        flags.append("--scale " + ",".join(f"{r}={f:.6g}" for r, f in factors.items()))
+    return " and ".join(words), " ".join(flags)
+
+
 def _axis_misfit(ts, angles, rates) -> float | None:
     """`_misfit` per axis (each relative to its own angle's slopes, so that yaw, which barely turns, counts as
     much as roll and pitch: 0 where they agree, 2 where a rate has the opposite sign), averaged over the three;
@@ -447,7 +564,7 @@ def _axis_misfit(ts, angles, rates) -> float | None:
     return float(np.mean(out))
 
 
-def check_rate_frame(ts, values: dict, *, path=None, columns=None, scale=None) -> None:
+def check_rate_frame(ts, values: dict, motors=None, *, path=None, columns=None, scale=None) -> None:
     r"""Refuse body rates and an attitude of another convention than the contract's: a world-to-body quaternion
     (the inverse of the contract's body-to-world one), or rates $p, q, r$ logged in world axes. Either makes the
     rates miss the attitude's body-frame rate of change by more than `RATE_FRAME_MISFIT` of its size, and the
@@ -462,32 +579,95 @@ def check_rate_frame(ts, values: dict, *, path=None, columns=None, scale=None) -
     """
     columns, scale = columns or {}, scale or {}
     quats = np.stack([np.asarray(values[c], dtype=float) for c in _QUATERNION], axis=1)
-    found = rate_frame_misfits(ts, quats, [values[c] for c in _AXES])
+    found = rate_readings(ts, quats, [values[c] for c in _AXES])
     if found is None or found["body"] <= RATE_FRAME_MISFIT:
         return
     reading = min(("world_to_body", "world"), key=found.__getitem__)
     if not found[reading] <= RATE_FRAME_RATIO * found["body"]:
         return
+    signed = min((k for k in found if isinstance(k, tuple)), key=found.__getitem__)
+    if found[signed] <= RATE_FRAME_RATIO * found[reading]:
+        return  # a sign or an order of the rate columns fits clearly better: the per-axis check names it
+    if found[reading] > RATE_FRAME_RATIO * found[signed] and not _attitude_against_thrust(ts, values, motors, reading):
+        raise _alike_error(found, reading, signed, path=path, columns=columns, scale=scale)
     how = (
         f"p, q, r miss the attitude's rate of change by {found['body']:.0%} of its size over {BLOCK_S * 1e3:g} ms "
         f"blocks, and by {found[reading]:.0%}"
     )
     if reading == "world_to_body":
-        fix = {c: -1.0 * float(scale.get(c, 1.0)) for c in _QUATERNION[1:]}
         raise DataError(
             f"the quaternion is world-to-body, the inverse of the contract's body-to-world attitude: {how} with its "
-            "vector part negated; conjugate it "
-            f"(`scale={{{', '.join(f'{c!r}: {f:g}' for c, f in fix.items())}}}`, "
-            f"`--scale {','.join(f'{c}={f:g}' for c, f in fix.items())}`)",
+            f"vector part negated; {_reading_fix(reading, columns, scale)}",
             path=path,
             column=columns.get("qw", "qw"),
         )
     raise DataError(
         f"p, q, r are the angular velocity in world axes, not the body rates: {how} as the world frame's rate of "
-        "change; the contract's rates are the body frame's: rotate them before loading "
-        "(omega_body = R(q)^T omega_world)",
+        f"change; the contract's rates are the body frame's: {_reading_fix(reading, columns, scale)}",
         path=path,
         column=columns.get("p", "p"),
+    )
+
+
+def _attitude_against_thrust(ts, values, motors, reading) -> bool:
+    """Whether gravity rules out every reading that keeps the attitude as logged where `reading` is the
+    world-to-body quaternion's: the vehicle accelerates away from the lean of its body z axis
+    (`check_thrust_frame`'s test). A conjugated quaternion does so near a heading along the world x axis, where it
+    reads as all three rates of the opposite sign; at 180 degrees it leans as the true attitude does, and gravity
+    cannot tell (nor is this taken as evidence for the attitude)."""
+    if reading != "world_to_body" or motors is None:
+        return False
+    found = thrust_frame_slopes(ts, values, motors)
+    return found is not None and found[0] < -SIGNIFICANCE * found[1] and found[0] < -0.1 * STANDARD_GRAVITY
+
+
+def rate_readings(ts, quats, rates) -> dict | None:
+    """Every reading of the body rates `p, q, r` and the attitude that `check_rate_frame` weighs, with its misfit:
+    the contract's (`"body"`), the two other frames (`"world"`, `"world_to_body"`: `rate_frame_misfits`), and each
+    other order or sign of the rate columns (keyed by `(order, signs)`: `signed_reading_misfits`). `None` for a
+    record too short or still to tell."""
+    frames = rate_frame_misfits(ts, quats, rates)
+    signed = signed_reading_misfits(ts, quats, rates)
+    if frames is None or signed is None:
+        return None
+    return {**frames, **signed}
+
+
+def _reading_words(reading, columns, scale) -> str:
+    """What a reading of `rate_readings` (not the body frame's) says of the record."""
+    if reading == "world_to_body":
+        return "the quaternion world-to-body (the inverse of the contract's body-to-world attitude)"
+    if reading == "world":
+        return "p, q, r the angular velocity in world axes"
+    return signed_reading_fix(*reading, columns, scale)[0]
+
+
+def _reading_fix(reading, columns, scale) -> str:
+    """The fix that loads the record as `reading` reads it."""
+    if reading == "world_to_body":
+        fix = {c: -1.0 * float(scale.get(c, 1.0)) for c in _QUATERNION[1:]}
+        return (
+            f"conjugate it (`scale={{{', '.join(f'{c!r}: {f:g}' for c, f in fix.items())}}}`, "
+            f"`--scale {','.join(f'{c}={f:g}' for c, f in fix.items())}`)"
+        )
+    if reading == "world":
+        return "rotate them before loading (omega_body = R(q)^T omega_world)"
+    return f"`{signed_reading_fix(*reading, columns, scale)[1]}`"
+
+
+def _alike_error(found, first, second, *, path, columns, scale) -> DataError:
+    """The refusal of a record that two readings of `rate_readings` (`first`, `second`) fit within
+    `RATE_FRAME_RATIO` of each other: both named with their fixes, neither advised."""
+    a, b = sorted((first, second), key=found.__getitem__)
+    each = [f"{_reading_words(r, columns, scale)} ({found[r]:.0%}; {_reading_fix(r, columns, scale)})" for r in (a, b)]
+    quaternion = "world_to_body" in (a, b)
+    return DataError(
+        f"p, q, r miss the attitude's rate of change by {found['body']:.0%} of its size over {BLOCK_S * 1e3:g} ms "
+        f"blocks; two readings fit about as well, and the record cannot tell which holds: {each[0]}, or {each[1]}; "
+        "at one heading, flown nearly level, the two read alike: check the logger's documentation of its frames "
+        "and signs, or give a stretch flown at another heading",
+        path=path,
+        column=columns.get("qw", "qw") if quaternion else columns.get("p", "p"),
     )
 
 
