@@ -237,7 +237,7 @@ def readings(file, mapping):
     best = min(signed, key=signed.__getitem__)
     return frames | {
         "best signed": signed[best],
-        "best signed reading": internal.signed_reading_fix(*best)[0],
+        "best signed reading": internal.signed_reading_fix(best)[0],
         "r flipped": signed[((0, 1, 2), (0, 0, 1))],
         "p, q swapped": signed[((1, 0, 2), (0, 0, 0))],
     }

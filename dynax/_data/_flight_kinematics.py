@@ -20,8 +20,10 @@ record states each quantity twice, so `load_flight` compares the two:
   sign, a factor of 2 or more (degrees per second), or the rate of another axis (swapped columns);
 - the rates' frame and the quaternion's direction (`check_rate_frame`, before the per-axis rates): the
   rates against the attitude's rate of change read as the body frame's, as world axes' and as that of a
-  world-to-body quaternion. Away from a heading along the world x axis, per-axis gains mistake either
-  fault for a sign or a swap of axes whose `scale` loads a record still wrong;
+  world-to-body quaternion, and as every other order and sign of the rate columns. Away from a heading along
+  the world x axis, per-axis gains mistake either fault for a sign or a swap of axes whose `scale` loads a
+  record still wrong, and flown level at one heading the two read alike: where they fit about as well, both
+  are named and neither advised;
 - the thrust: a multirotor's pushes along its body z axis, up, so its horizontal acceleration follows
   the lean of body z and its vertical acceleration rises with the motors' thrust
   (`check_thrust_frame`). A north-east-down log, a forward-right-down body or a world-to-body
@@ -30,8 +32,10 @@ record states each quantity twice, so `load_flight` compares the two:
 
 Only a fault that holds for the whole record is refused with a `scale` to fix it (a unit, a sign or
 a swap): a gain that is wrong in some stretches only is no unit (see `gain_holds_everywhere` in
-`dynax._data._velocities`), and a fix of the rates is named only where the record it makes reads
-consistent and no other frame, order or sign of the rates reads nearly as well (`_refuse_unless_consistent`).
+`dynax._data._velocities`), and a fix of the rates is named alone only where the record it makes reads
+consistent and no other frame, order or sign of the rates reads nearly as well (`_refuse_unless_consistent`);
+a frame that reads as well is named beside it. An order or sign of the rate columns that reads clearly best
+is named where no column's gain shows it (`_refuse_other_reading`).
 """
 
 import itertools
@@ -166,7 +170,7 @@ def _rate_fault(ts, angles, k, rate, path, columns, quats, rates, scale) -> tupl
         swapped[:, [k, follows[0]]] = rates[:, [follows[0], k]]
         order = list(range(3))
         order[k], order[follows[0]] = follows[0], k
-        remap = signed_reading_fix(tuple(order), (0, 0, 0), columns, scale)[1]
+        remap = signed_reading_fix((tuple(order), (0, 0, 0)), columns, scale)[1]
         _refuse_unless_consistent(
             ts,
             quats,
@@ -211,11 +215,13 @@ def _refuse_unless_consistent(
     (`rate_frame_misfits`), and the fixed rates in another order or with other signs (`_signed_misfits`, compared
     on the axes they read otherwise). On a level flight at a heading of 180 degrees a conjugated quaternion and a
     yaw rate of the opposite sign read alike, and a swap of roll and pitch rates reads as both of their signs
-    flipped on some paths: a fix is named only where the record tells them apart. Returns where the fix reads
-    consistent, or where the record is too short or still to tell.
+    flipped on some paths: a fix is named alone only where the record tells them apart. Returns where the fix
+    reads consistent, or where the record is too short or still to tell.
 
-    **Raises:** `DataError` naming `column`, what is wrong (`what`), the reading that fits as well, and the
-    conventions to check."""
+    **Raises:** `DataError` naming `column`, what is wrong (`what`): with the fix (`fix`, words) beside a frame
+    that fits within `RATE_FRAME_RATIO` of it, neither advised; else with the order or sign of the columns that
+    reads clearly best (`_refuse_other_reading`); else without a fix, naming the reading that fits as well and
+    the conventions to check."""
     frames = rate_frame_misfits(ts, quats, rates.T)
     misfit = _signed_misfits(ts, attitude_angles(quats), fixed)
     if frames is None or misfit is None:
@@ -295,13 +301,14 @@ def _refuse_other_reading(ts, quats, rates, *, path, columns, scale) -> None:
         return
     if found[best] > RATE_FRAME_RATIO * found[second]:
         raise _alike_error(found, best, second, path=path, columns=columns, scale=scale)
-    words, fix = signed_reading_fix(*best, columns, scale)
+    words, fix = signed_reading_fix(best, columns, scale)
+    first = _AXES[next(k for k in range(3) if best[0][k] != k or best[1][k])]
     raise DataError(
         f"p, q, r read as {words}: so they miss the attitude's rate of change by {found[best]:.0%} of its size over "
         f"{BLOCK_S * 1e3:g} ms blocks, as logged by {found['body']:.0%}, in any other order, sign or frame by "
         f"{found[second]:.0%} or more; load them so (`{fix}`)",
         path=path,
-        column=columns.get(*[_AXES[k] for k in range(3) if best[0][k] != k or best[1][k]][:1] * 2),
+        column=columns.get(first, first),
     )
 
 
@@ -478,7 +485,10 @@ def check_quaternion_order(ts, values: dict, *, path=None, columns=None) -> None
 # or 180 degrees, or a conjugated quaternion at 0, the matching reading's is at most 0.29 times the body frame's
 # with motion capture's rates (80 of 80 named) and 0.80 with the gyro's (74 of 75; the trefoil's conjugated
 # quaternion at 180 degrees reads 0.82, and is refused without a fix: `_refuse_unless_consistent`)
-# (`experiments/flight_rate_frames.py`).
+# (`experiments/flight_rate_frames.py`). The same factor separates a frame from an order or sign of the rate
+# columns: closer than it, both are named. Look-alike pairs (a conjugate and a yaw rate flipped at 180 degrees)
+# come as close as 0.96 (the frame the truth) and 1.04 (the columns) with motion capture's rates; with the gyro's
+# the wrong one fits up to 1.6 % better (`experiments/flight_rate_frames.py --loads`).
 RATE_FRAME_MISFIT = 0.3
 RATE_FRAME_RATIO = 0.8
 # The body reading's misfit up to which rates that a per-axis fix (a sign, a unit, a swap) changes read consistent
@@ -521,9 +531,10 @@ def signed_reading_misfits(ts, quats, rates) -> dict[tuple[tuple[int, ...], tupl
     }
 
 
-def signed_reading_fix(order, signs, columns=None, scale=None) -> tuple[str, str]:
+def signed_reading_fix(reading, columns=None, scale=None) -> tuple[str, str]:
     """What a signed reading `(order, signs)` of `signed_reading_misfits` says of the columns `p, q, r`, and the
     `--map`/`--scale` that loads them so (`columns`: contract name -> file column; `scale`, the factors given)."""
+    order, signs = reading
     columns, scale = columns or {}, scale or {}
     moved = [k for k in range(3) if order[k] != k]
     flipped = [_AXES[k] for k in range(3) if signs[k]]
@@ -571,11 +582,18 @@ def check_rate_frame(ts, values: dict, motors=None, *, path=None, columns=None, 
     reading that matches follows it `RATE_FRAME_RATIO` times as closely or better (`rate_frame_misfits`). The
     per-axis check (`check_flight_kinematics`) would name a sign or a swap of axes here, whose `scale` loads a
     record that is still wrong: at a heading of 180 degrees a conjugated quaternion reads as a yaw rate of the
-    opposite sign, at 90 degrees as roll and pitch swapped. Where the vehicle holds its heading near that of the
-    world's x axis and flies level, world axes are body axes and nothing is refused (nor much wrong).
+    opposite sign, at 90 degrees as roll and pitch swapped. So the frame is weighed against the order or sign of the
+    rate columns that fits best (`signed_reading_misfits`): one `RATE_FRAME_RATIO` times as far off as the other
+    or less is named alone (the frame here, the columns by the per-axis check); two closer than that are both
+    named and neither advised, unless gravity rules out the attitude as logged (`motors`, `(n, 4)`: the vehicle
+    accelerates away from the lean of its body z axis, as `check_thrust_frame` tests; a conjugated quaternion
+    does so near a heading of 0 degrees, where it reads as all three rates of the opposite sign). Where the
+    vehicle holds its heading near that of the world's x axis and flies level, world axes are body axes and
+    nothing is refused (nor much wrong).
 
     **Raises:** `DataError` naming the file and the column read as `qw` (the quaternion: conjugate it, the
-    `scale` given) or `p` (the rates: rotate them into the body frame before loading).
+    `scale` given) or `p` (the rates: rotate them into the body frame before loading); for two readings alike,
+    both fixes.
     """
     columns, scale = columns or {}, scale or {}
     quats = np.stack([np.asarray(values[c], dtype=float) for c in _QUATERNION], axis=1)
@@ -639,7 +657,7 @@ def _reading_words(reading, columns, scale) -> str:
         return "the quaternion world-to-body (the inverse of the contract's body-to-world attitude)"
     if reading == "world":
         return "p, q, r the angular velocity in world axes"
-    return signed_reading_fix(*reading, columns, scale)[0]
+    return signed_reading_fix(reading, columns, scale)[0]
 
 
 def _reading_fix(reading, columns, scale) -> str:
@@ -652,7 +670,7 @@ def _reading_fix(reading, columns, scale) -> str:
         )
     if reading == "world":
         return "rotate them before loading (omega_body = R(q)^T omega_world)"
-    return f"`{signed_reading_fix(*reading, columns, scale)[1]}`"
+    return f"`{signed_reading_fix(reading, columns, scale)[1]}`"
 
 
 def _alike_error(found, first, second, *, path, columns, scale) -> DataError:
