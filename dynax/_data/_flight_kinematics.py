@@ -290,15 +290,18 @@ def _refuse_unless_consistent(
 def _refuse_other_reading(ts, quats, rates, *, path, columns, scale) -> None:
     """Refuse rates that another order or sign of their columns reads clearly better than the record as logged
     and every other reading of `rate_readings` (`RATE_FRAME_MISFIT` and `RATE_FRAME_RATIO`, as `check_rate_frame`
-    names a frame), where no column's gain named it: a roll rate that follows pitch while roll and pitch move
-    against each other (the star flight's) has a negative gain on its own axis that holds in some stretches only.
-    Two readings within `RATE_FRAME_RATIO` of each other are both named."""
+    names a frame) and makes read consistent (`RATE_CONSISTENT_MISFIT`), where no column's gain named it: a roll
+    rate that follows pitch while roll and pitch move against each other (the star flight's) has a negative gain
+    on its own axis that holds in some stretches only. Two readings within `RATE_FRAME_RATIO` of each other are
+    both named."""
     found = rate_readings(ts, quats, rates.T)
     if found is None or found["body"] <= RATE_FRAME_MISFIT:
         return
     best, second = sorted((k for k in found if k != "body"), key=found.__getitem__)[:2]
     if not isinstance(best, tuple) or not found[best] <= RATE_FRAME_RATIO * found["body"]:
         return
+    if not found[best] <= RATE_CONSISTENT_MISFIT:
+        return  # no reading makes the record consistent (a spike in one rate sample moves every reading's misfit)
     if found[best] > RATE_FRAME_RATIO * found[second]:
         raise _alike_error(found, best, second, path=path, columns=columns, scale=scale)
     words, fix = signed_reading_fix(best, columns, scale)
