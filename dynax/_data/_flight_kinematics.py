@@ -39,6 +39,7 @@ is named where no column's gain shows it (`_refuse_other_reading`).
 """
 
 import itertools
+from typing import NamedTuple
 
 import numpy as np
 
@@ -61,6 +62,18 @@ MAX_RATE_FACTOR = 2.0  # a body rate's gain on its attitude's beyond this (or it
 DEGREES = 180.0 / np.pi
 _OPPOSITE_SIGN = "the opposite sign (a gyro axis counted the other way: forward-right-down against forward-left-up?)"
 STANDARD_GRAVITY = 9.80665
+
+
+class _RateRecord(NamedTuple):
+    """What the per-axis rate checks weigh and name: the times, the quaternions `(n, 4)` and the rates `(n, 3)`
+    as logged, and the file, its columns (contract name -> file column) and the factors already applied."""
+
+    ts: np.ndarray
+    quats: np.ndarray
+    rates: np.ndarray
+    path: object
+    columns: dict
+    scale: dict
 
 
 def attitude_angles(quats: np.ndarray, *, world: bool = False) -> np.ndarray:
@@ -104,13 +117,14 @@ def check_flight_kinematics(ts, values: dict, *, path=None, columns=None, scale=
     angles = attitude_angles(quats)
     rates = np.stack([np.asarray(values[r], dtype=float) for r in _AXES], axis=1)
     scale = scale or {}
+    record = _RateRecord(ts, quats, rates, path, columns, scale)
     faults = {}  # rate -> (what is wrong, the factor that fixes it)
     for k, rate in enumerate(_AXES):
-        found = _rate_fault(ts, angles, k, rates[:, k], path, columns, quats, rates, scale)
+        found = _rate_fault(record, angles, k)
         if found is not None:
             faults[rate] = found
     if not faults:
-        _refuse_other_reading(ts, quats, rates, path=path, columns=columns, scale=scale)
+        _refuse_other_reading(record)
     if faults:
         first, (what, _, _) = next(iter(faults.items()))
         fixed = rates * np.array([faults[r][1] if r in faults else 1.0 for r in _AXES])
@@ -118,18 +132,7 @@ def check_flight_kinematics(ts, values: dict, *, path=None, columns=None, scale=
         as_dict = ", ".join(f"'{r}': {f:.6g}" for r, f in fix.items())
         as_flag = ",".join(f"{r}={f:.6g}" for r, f in fix.items())
         scaled = f"scale {'it' if len(fix) == 1 else 'them'} (`scale={{{as_dict}}}`, `--scale {as_flag}`)"
-        _refuse_unless_consistent(
-            ts,
-            quats,
-            rates,
-            fixed,
-            what,
-            scaled,
-            path=path,
-            column=columns.get(first, first),
-            columns=columns,
-            scale=scale,
-        )
+        _refuse_unless_consistent(record, fixed, what, scaled, columns.get(first, first))
         rest = list(faults)[1:]
         if rest:
             what = what + [f"so are {', '.join(rest)} (gains {', '.join(f'{faults[r][2]:.4g}' for r in rest)})"]
@@ -137,12 +140,13 @@ def check_flight_kinematics(ts, values: dict, *, path=None, columns=None, scale=
         raise DataError("; ".join(what), path=path, column=columns.get(first, first))
 
 
-def _rate_fault(ts, angles, k, rate, path, columns, quats, rates, scale) -> tuple[list[str], float, float] | None:
-    """What is wrong with body rate `k`, the factor that fixes it, and its gain, where it is the
-    attitude's derivative with the wrong sign or in other units; `None` where nothing is (see the module
-    notes: only faults of that size, which hold for the whole record). **Raises:** `DataError` where
-    it is another axis's rate (`quats`, `rates`: the record's, to check that the swap makes it consistent)."""
-    name = _AXES[k]
+def _rate_fault(record: _RateRecord, angles, k) -> tuple[list[str], float, float] | None:
+    """What is wrong with body rate `k` of `record`, the factor that fixes it, and its gain, where it is the
+    attitude's derivative (`angles`, `attitude_angles`) with the wrong sign or in other units; `None` where
+    nothing is (see the module notes: only faults of that size, which hold for the whole record). **Raises:**
+    `DataError` where it is another axis's rate (the swap checked to make the record consistent)."""
+    ts, rates, columns = record.ts, record.rates, record.columns
+    name, rate = _AXES[k], rates[:, k]
     found = velocity_gain(ts, angles[:, k], rate)
     if found is None:
         return None
@@ -170,21 +174,10 @@ def _rate_fault(ts, angles, k, rate, path, columns, quats, rates, scale) -> tupl
         swapped[:, [k, follows[0]]] = rates[:, [follows[0], k]]
         order = list(range(3))
         order[k], order[follows[0]] = follows[0], k
-        remap = signed_reading_fix((tuple(order), (0, 0, 0)), columns, scale)[1]
-        _refuse_unless_consistent(
-            ts,
-            quats,
-            rates,
-            swapped,
-            [what],
-            f"swap them (`{remap}`)",
-            path=path,
-            column=columns.get(name, name),
-            columns=columns,
-            scale=scale,
-        )
+        remap = signed_reading_fix((tuple(order), (0, 0, 0)), columns, record.scale)[1]
+        _refuse_unless_consistent(record, swapped, [what], f"swap them (`{remap}`)", columns.get(name, name))
         raise DataError(
-            f"{what}: are the columns of {name} and {other} swapped?", path=path, column=columns.get(name, name)
+            f"{what}: are the columns of {name} and {other} swapped?", path=record.path, column=columns.get(name, name)
         )
     if abs(gain) <= SIGNIFICANCE * std:
         return None
@@ -205,9 +198,7 @@ def _rate_fault(ts, angles, k, rate, path, columns, quats, rates, scale) -> tupl
     return what, factor, gain
 
 
-def _refuse_unless_consistent(
-    ts, quats, rates, fixed, what: list[str], fix: str, *, path, column, columns, scale
-) -> None:
+def _refuse_unless_consistent(record: _RateRecord, fixed, what: list[str], fix: str, column) -> None:
     """Refuse, without a fix, a per-axis fix of the rates that would load a record still wrong. `fixed` holds
     `p, q, r` as the fix (a sign, a unit, a swap) makes them; it reads consistent where they miss the attitude's
     body-frame rate of change by `RATE_CONSISTENT_MISFIT` at most and `RATE_FRAME_RATIO` times as closely as every
@@ -222,7 +213,8 @@ def _refuse_unless_consistent(
     that fits within `RATE_FRAME_RATIO` of it, neither advised; else with the order or sign of the columns that
     reads clearly best (`_refuse_other_reading`); else without a fix, naming the reading that fits as well and
     the conventions to check."""
-    frames = rate_frame_misfits(ts, quats, rates.T)
+    ts, quats, columns, scale, path = record.ts, record.quats, record.columns, record.scale, record.path
+    frames = rate_frame_misfits(ts, quats, record.rates.T)
     misfit = _signed_misfits(ts, attitude_angles(quats), fixed)
     if frames is None or misfit is None:
         return
@@ -261,7 +253,7 @@ def _refuse_unless_consistent(
         )
     # the record as logged may read clearly best in another order or sign than the fix makes (a roll rate that
     # follows pitch, its gain on roll negative where roll and pitch turn against each other, is no sign fault)
-    _refuse_other_reading(ts, quats, rates, path=path, columns=columns, scale=scale)
+    _refuse_other_reading(record)
     if after > RATE_CONSISTENT_MISFIT:
         why = (
             f"no scale or swap of the rates is right for the whole record: fixed so, p, q, r would still miss "
@@ -287,14 +279,15 @@ def _refuse_unless_consistent(
     )
 
 
-def _refuse_other_reading(ts, quats, rates, *, path, columns, scale) -> None:
+def _refuse_other_reading(record: _RateRecord) -> None:
     """Refuse rates that another order or sign of their columns reads clearly better than the record as logged
     and every other reading of `rate_readings` (`RATE_FRAME_MISFIT` and `RATE_FRAME_RATIO`, as `check_rate_frame`
     names a frame) and makes read consistent (`RATE_CONSISTENT_MISFIT`), where no column's gain named it: a roll
     rate that follows pitch while roll and pitch move against each other (the star flight's) has a negative gain
     on its own axis that holds in some stretches only. Two readings within `RATE_FRAME_RATIO` of each other are
     both named."""
-    found = rate_readings(ts, quats, rates.T)
+    path, columns, scale = record.path, record.columns, record.scale
+    found = rate_readings(record.ts, record.quats, record.rates.T)
     if found is None or found["body"] <= RATE_FRAME_MISFIT:
         return
     best, second = sorted((k for k in found if k != "body"), key=found.__getitem__)[:2]
