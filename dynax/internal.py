@@ -100,6 +100,8 @@ from ._data._flight import motors_running_run as motors_running_run
 from ._data._flight import usable_segments as usable_segments
 from ._data._flight_kinematics import attitude_angles as attitude_angles
 from ._data._flight_kinematics import rate_frame_misfits as rate_frame_misfits
+from ._data._flight_kinematics import signed_reading_fix as signed_reading_fix
+from ._data._flight_kinematics import signed_reading_misfits as signed_reading_misfits
 from ._data._flight_kinematics import thrust_frame_slopes as thrust_frame_slopes
 from ._data._io import MAX_MAGNITUDE as MAX_MAGNITUDE
 from ._data._motor_order import flight_signature as flight_signature
@@ -857,6 +859,8 @@ __all__ = [
     "shared_length",
     "shifted",
     "short_horizon_note",
+    "signed_reading_fix",
+    "signed_reading_misfits",
     "Simulation",
     "simulation_segments",
     "slow_rows",

@@ -619,7 +619,7 @@ def load_flight(
         # the frame first: in another frame the rates disagree with the attitude too, and a scale is no fix
         motors = np.asarray(data.us[a : b + 1, :4], dtype=float)
         check_quaternion_order(rel[a : b + 1], flown, path=path, columns=columns)
-        check_rate_frame(rel[a : b + 1], flown, path=path, columns=columns, scale=scale)
+        check_rate_frame(rel[a : b + 1], flown, motors, path=path, columns=columns, scale=scale)
         check_velocity_frame(rel[a : b + 1], flown, path=path, columns=columns)
         check_position_units(rel[a : b + 1], flown, motors, path=path, columns=columns, scale=scale)
         check_thrust_frame(rel[a : b + 1], flown, motors, path=path, columns=columns)

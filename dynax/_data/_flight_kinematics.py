@@ -20,8 +20,10 @@ record states each quantity twice, so `load_flight` compares the two:
   sign, a factor of 2 or more (degrees per second), or the rate of another axis (swapped columns);
 - the rates' frame and the quaternion's direction (`check_rate_frame`, before the per-axis rates): the
   rates against the attitude's rate of change read as the body frame's, as world axes' and as that of a
-  world-to-body quaternion. Away from a heading along the world x axis, per-axis gains mistake either
-  fault for a sign or a swap of axes whose `scale` loads a record still wrong;
+  world-to-body quaternion, and as every other order and sign of the rate columns. Away from a heading along
+  the world x axis, per-axis gains mistake either fault for a sign or a swap of axes whose `scale` loads a
+  record still wrong, and flown level at one heading the two read alike: where they fit about as well, both
+  are named and neither advised;
 - the thrust: a multirotor's pushes along its body z axis, up, so its horizontal acceleration follows
   the lean of body z and its vertical acceleration rises with the motors' thrust
   (`check_thrust_frame`). A north-east-down log, a forward-right-down body or a world-to-body
@@ -30,11 +32,14 @@ record states each quantity twice, so `load_flight` compares the two:
 
 Only a fault that holds for the whole record is refused with a `scale` to fix it (a unit, a sign or
 a swap): a gain that is wrong in some stretches only is no unit (see `gain_holds_everywhere` in
-`dynax._data._velocities`), and a fix of the rates is named only where the record it makes reads
-consistent and no other frame, order or sign of the rates reads nearly as well (`_refuse_unless_consistent`).
+`dynax._data._velocities`), and a fix of the rates is named alone only where the record it makes reads
+consistent and no other frame, order or sign of the rates reads nearly as well (`_refuse_unless_consistent`);
+a frame that reads as well is named beside it. An order or sign of the rate columns that reads clearly best
+is named where no column's gain shows it (`_refuse_other_reading`).
 """
 
 import itertools
+from typing import NamedTuple
 
 import numpy as np
 
@@ -57,6 +62,18 @@ MAX_RATE_FACTOR = 2.0  # a body rate's gain on its attitude's beyond this (or it
 DEGREES = 180.0 / np.pi
 _OPPOSITE_SIGN = "the opposite sign (a gyro axis counted the other way: forward-right-down against forward-left-up?)"
 STANDARD_GRAVITY = 9.80665
+
+
+class _RateRecord(NamedTuple):
+    """What the per-axis rate checks weigh and name: the times, the quaternions `(n, 4)` and the rates `(n, 3)`
+    as logged, and the file, its columns (contract name -> file column) and the factors already applied."""
+
+    ts: np.ndarray
+    quats: np.ndarray
+    rates: np.ndarray
+    path: object
+    columns: dict
+    scale: dict
 
 
 def attitude_angles(quats: np.ndarray, *, world: bool = False) -> np.ndarray:
@@ -100,31 +117,36 @@ def check_flight_kinematics(ts, values: dict, *, path=None, columns=None, scale=
     angles = attitude_angles(quats)
     rates = np.stack([np.asarray(values[r], dtype=float) for r in _AXES], axis=1)
     scale = scale or {}
+    record = _RateRecord(ts, quats, rates, path, columns, scale)
     faults = {}  # rate -> (what is wrong, the factor that fixes it)
     for k, rate in enumerate(_AXES):
-        found = _rate_fault(ts, angles, k, rates[:, k], path, columns, quats, rates)
+        found = _rate_fault(record, angles, k)
         if found is not None:
             faults[rate] = found
+    if not faults:
+        _refuse_other_reading(record)
     if faults:
         first, (what, _, _) = next(iter(faults.items()))
         fixed = rates * np.array([faults[r][1] if r in faults else 1.0 for r in _AXES])
-        _refuse_unless_consistent(ts, quats, rates, fixed, what, path=path, column=columns.get(first, first))
-        rest = list(faults)[1:]
-        if rest:
-            what = what + [f"so are {', '.join(rest)} (gains {', '.join(f'{faults[r][2]:.4g}' for r in rest)})"]
         fix = {r: factor * float(scale.get(r, 1.0)) for r, (_, factor, _) in faults.items()}
         as_dict = ", ".join(f"'{r}': {f:.6g}" for r, f in fix.items())
         as_flag = ",".join(f"{r}={f:.6g}" for r, f in fix.items())
-        what.append(f"scale {'it' if len(fix) == 1 else 'them'} (`scale={{{as_dict}}}`, `--scale {as_flag}`)")
+        scaled = f"scale {'it' if len(fix) == 1 else 'them'} (`scale={{{as_dict}}}`, `--scale {as_flag}`)"
+        _refuse_unless_consistent(record, fixed, what, scaled, columns.get(first, first))
+        rest = list(faults)[1:]
+        if rest:
+            what = what + [f"so are {', '.join(rest)} (gains {', '.join(f'{faults[r][2]:.4g}' for r in rest)})"]
+        what.append(scaled)
         raise DataError("; ".join(what), path=path, column=columns.get(first, first))
 
 
-def _rate_fault(ts, angles, k, rate, path, columns, quats, rates) -> tuple[list[str], float, float] | None:
-    """What is wrong with body rate `k`, the factor that fixes it, and its gain, where it is the
-    attitude's derivative with the wrong sign or in other units; `None` where nothing is (see the module
-    notes: only faults of that size, which hold for the whole record). **Raises:** `DataError` where
-    it is another axis's rate (`quats`, `rates`: the record's, to check that the swap makes it consistent)."""
-    name = _AXES[k]
+def _rate_fault(record: _RateRecord, angles, k) -> tuple[list[str], float, float] | None:
+    """What is wrong with body rate `k` of `record`, the factor that fixes it, and its gain, where it is the
+    attitude's derivative (`angles`, `attitude_angles`) with the wrong sign or in other units; `None` where
+    nothing is (see the module notes: only faults of that size, which hold for the whole record). **Raises:**
+    `DataError` where it is another axis's rate (the swap checked to make the record consistent)."""
+    ts, rates, columns = record.ts, record.rates, record.columns
+    name, rate = _AXES[k], rates[:, k]
     found = velocity_gain(ts, angles[:, k], rate)
     if found is None:
         return None
@@ -150,9 +172,12 @@ def _rate_fault(ts, angles, k, rate, path, columns, quats, rates) -> tuple[list[
         )
         swapped = rates.copy()
         swapped[:, [k, follows[0]]] = rates[:, [follows[0], k]]
-        _refuse_unless_consistent(ts, quats, rates, swapped, [what], path=path, column=columns.get(name, name))
+        order = list(range(3))
+        order[k], order[follows[0]] = follows[0], k
+        remap = signed_reading_fix((tuple(order), (0, 0, 0)), columns, record.scale)[1]
+        _refuse_unless_consistent(record, swapped, [what], f"swap them (`{remap}`)", columns.get(name, name))
         raise DataError(
-            f"{what}: are the columns of {name} and {other} swapped?", path=path, column=columns.get(name, name)
+            f"{what}: are the columns of {name} and {other} swapped?", path=record.path, column=columns.get(name, name)
         )
     if abs(gain) <= SIGNIFICANCE * std:
         return None
@@ -173,7 +198,7 @@ def _rate_fault(ts, angles, k, rate, path, columns, quats, rates) -> tuple[list[
     return what, factor, gain
 
 
-def _refuse_unless_consistent(ts, quats, rates, fixed, what: list[str], *, path, column) -> None:
+def _refuse_unless_consistent(record: _RateRecord, fixed, what: list[str], fix: str, column) -> None:
     """Refuse, without a fix, a per-axis fix of the rates that would load a record still wrong. `fixed` holds
     `p, q, r` as the fix (a sign, a unit, a swap) makes them; it reads consistent where they miss the attitude's
     body-frame rate of change by `RATE_CONSISTENT_MISFIT` at most and `RATE_FRAME_RATIO` times as closely as every
@@ -181,12 +206,15 @@ def _refuse_unless_consistent(ts, quats, rates, fixed, what: list[str], *, path,
     (`rate_frame_misfits`), and the fixed rates in another order or with other signs (`_signed_misfits`, compared
     on the axes they read otherwise). On a level flight at a heading of 180 degrees a conjugated quaternion and a
     yaw rate of the opposite sign read alike, and a swap of roll and pitch rates reads as both of their signs
-    flipped on some paths: a fix is named only where the record tells them apart. Returns where the fix reads
-    consistent, or where the record is too short or still to tell.
+    flipped on some paths: a fix is named alone only where the record tells them apart. Returns where the fix
+    reads consistent, or where the record is too short or still to tell.
 
-    **Raises:** `DataError` naming `column`, what is wrong (`what`), the reading that fits as well, and the
-    conventions to check."""
-    frames = rate_frame_misfits(ts, quats, rates.T)
+    **Raises:** `DataError` naming `column`, what is wrong (`what`): with the fix (`fix`, words) beside a frame
+    that fits within `RATE_FRAME_RATIO` of it, neither advised; else with the order or sign of the columns that
+    reads clearly best (`_refuse_other_reading`); else without a fix, naming the reading that fits as well and
+    the conventions to check."""
+    ts, quats, columns, scale, path = record.ts, record.quats, record.columns, record.scale, record.path
+    frames = rate_frame_misfits(ts, quats, record.rates.T)
     misfit = _signed_misfits(ts, attitude_angles(quats), fixed)
     if frames is None or misfit is None:
         return
@@ -207,6 +235,25 @@ def _refuse_unless_consistent(ts, quats, rates, fixed, what: list[str], *, path,
     rival = max(ratios, key=ratios.__getitem__)
     if after <= RATE_CONSISTENT_MISFIT and ratios[rival] <= RATE_FRAME_RATIO:
         return
+    frame = {"a world-to-body quaternion": "world_to_body", "rates in world axes": "world"}.get(rival)
+    if after <= RATE_CONSISTENT_MISFIT and frame is not None and ratios[rival] * RATE_FRAME_RATIO <= 1.0:
+        # a frame of the record as logged fits about as well as the fix, not clearly better: both are named
+        raise DataError(
+            "; ".join(
+                [
+                    *what,
+                    f"{fix}, or read {_reading_words(frame, columns, scale)}: {_reading_fix(frame, columns, scale)}; "
+                    f"the record cannot tell which holds (misfit on the attitude's rate of change {after:.0%} with "
+                    f"the fix, {frames[frame]:.0%} so; at one heading, flown nearly level, the two read alike): check "
+                    "the logger's documentation of its frames and signs, or give a stretch flown at another heading",
+                ]
+            ),
+            path=path,
+            column=column,
+        )
+    # the record as logged may read clearly best in another order or sign than the fix makes (a roll rate that
+    # follows pitch, its gain on roll negative where roll and pitch turn against each other, is no sign fault)
+    _refuse_other_reading(record)
     if after > RATE_CONSISTENT_MISFIT:
         why = (
             f"no scale or swap of the rates is right for the whole record: fixed so, p, q, r would still miss "
@@ -229,6 +276,35 @@ def _refuse_unless_consistent(ts, quats, rates, fixed, what: list[str], *, path,
         ),
         path=path,
         column=column,
+    )
+
+
+def _refuse_other_reading(record: _RateRecord) -> None:
+    """Refuse rates that another order or sign of their columns reads clearly better than the record as logged
+    and every other reading of `rate_readings` (`RATE_FRAME_MISFIT` and `RATE_FRAME_RATIO`, as `check_rate_frame`
+    names a frame) and makes read consistent (`RATE_CONSISTENT_MISFIT`), where no column's gain named it: a roll
+    rate that follows pitch while roll and pitch move against each other (the star flight's) has a negative gain
+    on its own axis that holds in some stretches only. Two readings within `RATE_FRAME_RATIO` of each other are
+    both named."""
+    path, columns, scale = record.path, record.columns, record.scale
+    found = rate_readings(record.ts, record.quats, record.rates.T)
+    if found is None or found["body"] <= RATE_FRAME_MISFIT:
+        return
+    best, second = sorted((k for k in found if k != "body"), key=found.__getitem__)[:2]
+    if not isinstance(best, tuple) or not found[best] <= RATE_FRAME_RATIO * found["body"]:
+        return
+    if not found[best] <= RATE_CONSISTENT_MISFIT:
+        return  # no reading makes the record consistent (a spike in one rate sample moves every reading's misfit)
+    if found[best] > RATE_FRAME_RATIO * found[second]:
+        raise _alike_error(found, best, second, path=path, columns=columns, scale=scale)
+    words, fix = signed_reading_fix(best, columns, scale)
+    first = _AXES[next(k for k in range(3) if best[0][k] != k or best[1][k])]
+    raise DataError(
+        f"p, q, r read as {words}: so they miss the attitude's rate of change by {found[best]:.0%} of its size over "
+        f"{BLOCK_S * 1e3:g} ms blocks, as logged by {found['body']:.0%}, in any other order, sign or frame by "
+        f"{found[second]:.0%} or more; load them so (`{fix}`)",
+        path=path,
+        column=columns.get(first, first),
     )
 
 
@@ -405,7 +481,10 @@ def check_quaternion_order(ts, values: dict, *, path=None, columns=None) -> None
 # or 180 degrees, or a conjugated quaternion at 0, the matching reading's is at most 0.29 times the body frame's
 # with motion capture's rates (80 of 80 named) and 0.80 with the gyro's (74 of 75; the trefoil's conjugated
 # quaternion at 180 degrees reads 0.82, and is refused without a fix: `_refuse_unless_consistent`)
-# (`experiments/flight_rate_frames.py`).
+# (`experiments/flight_rate_frames.py`). The same factor separates a frame from an order or sign of the rate
+# columns: closer than it, both are named. Look-alike pairs (a conjugate and a yaw rate flipped at 180 degrees)
+# come as close as 0.96 (the frame the truth) and 1.04 (the columns) with motion capture's rates; with the gyro's
+# the wrong one fits up to 1.6 % better (`experiments/flight_rate_frames.py --loads`).
 RATE_FRAME_MISFIT = 0.3
 RATE_FRAME_RATIO = 0.8
 # The body reading's misfit up to which rates that a per-axis fix (a sign, a unit, a swap) changes read consistent
@@ -430,6 +509,51 @@ def rate_frame_misfits(ts, quats, rates) -> dict[str, float] | None:
     return {"body": body, "world": in_world, "world_to_body": world_to_body}
 
 
+def signed_reading_misfits(ts, quats, rates) -> dict[tuple[tuple[int, ...], tuple[int, ...]], float] | None:
+    """The body rates' misfit (as `rate_frame_misfits`'s `"body"`) with the columns `p, q, r` read in another order
+    or with other signs, each a per-axis fault of the log (a sign, a swap): keyed by `(order, signs)`, body axis `k`
+    read from column `order[k]` with the sign `-` where `signs[k]` is 1; the record as logged left out. `None`
+    for a record too short or still to tell."""
+    ts = np.asarray(ts, dtype=float)
+    rates = np.stack([np.asarray(r, dtype=float) for r in rates], axis=1)
+    misfit = _signed_misfits(ts, attitude_angles(quats), rates)
+    if misfit is None:
+        return None
+    return {
+        (order, signs): float(np.mean([misfit[k, order[k], signs[k]] for k in range(3)]))
+        for order in itertools.permutations(range(3))
+        for signs in itertools.product((0, 1), repeat=3)
+        if order != (0, 1, 2) or any(signs)
+    }
+
+
+def signed_reading_fix(reading, columns=None, scale=None) -> tuple[str, str]:
+    """What a signed reading `(order, signs)` of `signed_reading_misfits` says of the columns `p, q, r`, and the
+    `--map`/`--scale` that loads them so (`columns`: contract name -> file column; `scale`, the factors given)."""
+    order, signs = reading
+    columns, scale = columns or {}, scale or {}
+    moved = [k for k in range(3) if order[k] != k]
+    flipped = [_AXES[k] for k in range(3) if signs[k]]
+    words = []
+    if len(moved) == 2:
+        words.append(f"the columns of {_AXES[moved[0]]} and {_AXES[moved[1]]} swapped")
+    elif moved:
+        words.append(f"p, q, r in the columns of {', '.join(_AXES[order[k]] for k in range(3))}")
+    if flipped:
+        words.append(f"{', '.join(flipped)} of the opposite sign{'s' if len(flipped) > 1 else ''}")
+    flags = []
+    if moved:
+        flags.append("--map " + ",".join(f"{_AXES[k]}={columns.get(_AXES[order[k]], _AXES[order[k]])}" for k in moved))
+    factors = {
+        _AXES[k]: (-1.0 if signs[k] else 1.0) * float(scale.get(_AXES[order[k]], 1.0))
+        for k in range(3)
+        if signs[k] or (order[k] != k and scale.get(_AXES[order[k]], 1.0) != scale.get(_AXES[k], 1.0))
+    }
+    if factors:
+        flags.append("--scale " + ",".join(f"{r}={f:.6g}" for r, f in factors.items()))
+    return " and ".join(words), " ".join(flags)
+
+
 def _axis_misfit(ts, angles, rates) -> float | None:
     """`_misfit` per axis (each relative to its own angle's slopes, so that yaw, which barely turns, counts as
     much as roll and pitch: 0 where they agree, 2 where a rate has the opposite sign), averaged over the three;
@@ -447,47 +571,117 @@ def _axis_misfit(ts, angles, rates) -> float | None:
     return float(np.mean(out))
 
 
-def check_rate_frame(ts, values: dict, *, path=None, columns=None, scale=None) -> None:
+def check_rate_frame(ts, values: dict, motors=None, *, path=None, columns=None, scale=None) -> None:
     r"""Refuse body rates and an attitude of another convention than the contract's: a world-to-body quaternion
     (the inverse of the contract's body-to-world one), or rates $p, q, r$ logged in world axes. Either makes the
     rates miss the attitude's body-frame rate of change by more than `RATE_FRAME_MISFIT` of its size, and the
     reading that matches follows it `RATE_FRAME_RATIO` times as closely or better (`rate_frame_misfits`). The
     per-axis check (`check_flight_kinematics`) would name a sign or a swap of axes here, whose `scale` loads a
     record that is still wrong: at a heading of 180 degrees a conjugated quaternion reads as a yaw rate of the
-    opposite sign, at 90 degrees as roll and pitch swapped. Where the vehicle holds its heading near that of the
-    world's x axis and flies level, world axes are body axes and nothing is refused (nor much wrong).
+    opposite sign, at 90 degrees as roll and pitch swapped. So the frame is weighed against the order or sign of the
+    rate columns that fits best (`signed_reading_misfits`): one `RATE_FRAME_RATIO` times as far off as the other
+    or less is named alone (the frame here, the columns by the per-axis check); two closer than that are both
+    named and neither advised, unless gravity rules out the attitude as logged (`motors`, `(n, 4)`: the vehicle
+    accelerates away from the lean of its body z axis, as `check_thrust_frame` tests; a conjugated quaternion
+    does so near a heading of 0 degrees, where it reads as all three rates of the opposite sign). Where the
+    vehicle holds its heading near that of the world's x axis and flies level, world axes are body axes and
+    nothing is refused (nor much wrong).
 
     **Raises:** `DataError` naming the file and the column read as `qw` (the quaternion: conjugate it, the
-    `scale` given) or `p` (the rates: rotate them into the body frame before loading).
+    `scale` given) or `p` (the rates: rotate them into the body frame before loading); for two readings alike,
+    both fixes.
     """
     columns, scale = columns or {}, scale or {}
     quats = np.stack([np.asarray(values[c], dtype=float) for c in _QUATERNION], axis=1)
-    found = rate_frame_misfits(ts, quats, [values[c] for c in _AXES])
+    found = rate_readings(ts, quats, [values[c] for c in _AXES])
     if found is None or found["body"] <= RATE_FRAME_MISFIT:
         return
     reading = min(("world_to_body", "world"), key=found.__getitem__)
     if not found[reading] <= RATE_FRAME_RATIO * found["body"]:
         return
+    signed = min((k for k in found if isinstance(k, tuple)), key=found.__getitem__)
+    if found[signed] <= RATE_FRAME_RATIO * found[reading]:
+        return  # a sign or an order of the rate columns fits clearly better: the per-axis check names it
+    if found[reading] > RATE_FRAME_RATIO * found[signed] and not _attitude_against_thrust(ts, values, motors, reading):
+        raise _alike_error(found, reading, signed, path=path, columns=columns, scale=scale)
     how = (
         f"p, q, r miss the attitude's rate of change by {found['body']:.0%} of its size over {BLOCK_S * 1e3:g} ms "
         f"blocks, and by {found[reading]:.0%}"
     )
     if reading == "world_to_body":
-        fix = {c: -1.0 * float(scale.get(c, 1.0)) for c in _QUATERNION[1:]}
         raise DataError(
             f"the quaternion is world-to-body, the inverse of the contract's body-to-world attitude: {how} with its "
-            "vector part negated; conjugate it "
-            f"(`scale={{{', '.join(f'{c!r}: {f:g}' for c, f in fix.items())}}}`, "
-            f"`--scale {','.join(f'{c}={f:g}' for c, f in fix.items())}`)",
+            f"vector part negated; {_reading_fix(reading, columns, scale)}",
             path=path,
             column=columns.get("qw", "qw"),
         )
     raise DataError(
         f"p, q, r are the angular velocity in world axes, not the body rates: {how} as the world frame's rate of "
-        "change; the contract's rates are the body frame's: rotate them before loading "
-        "(omega_body = R(q)^T omega_world)",
+        f"change; the contract's rates are the body frame's: {_reading_fix(reading, columns, scale)}",
         path=path,
         column=columns.get("p", "p"),
+    )
+
+
+def _attitude_against_thrust(ts, values, motors, reading) -> bool:
+    """Whether gravity rules out every reading that keeps the attitude as logged where `reading` is the
+    world-to-body quaternion's: the vehicle accelerates away from the lean of its body z axis
+    (`check_thrust_frame`'s test). A conjugated quaternion does so near a heading along the world x axis, where it
+    reads as all three rates of the opposite sign; at 180 degrees it leans as the true attitude does, and gravity
+    cannot tell (nor is this taken as evidence for the attitude)."""
+    if reading != "world_to_body" or motors is None:
+        return False
+    found = thrust_frame_slopes(ts, values, motors)
+    return found is not None and found[0] < -SIGNIFICANCE * found[1] and found[0] < -0.1 * STANDARD_GRAVITY
+
+
+def rate_readings(ts, quats, rates) -> dict | None:
+    """Every reading of the body rates `p, q, r` and the attitude that `check_rate_frame` weighs, with its misfit:
+    the contract's (`"body"`), the two other frames (`"world"`, `"world_to_body"`: `rate_frame_misfits`), and each
+    other order or sign of the rate columns (keyed by `(order, signs)`: `signed_reading_misfits`). `None` for a
+    record too short or still to tell."""
+    frames = rate_frame_misfits(ts, quats, rates)
+    signed = signed_reading_misfits(ts, quats, rates)
+    if frames is None or signed is None:
+        return None
+    return {**frames, **signed}
+
+
+def _reading_words(reading, columns, scale) -> str:
+    """What a reading of `rate_readings` (not the body frame's) says of the record."""
+    if reading == "world_to_body":
+        return "the quaternion world-to-body (the inverse of the contract's body-to-world attitude)"
+    if reading == "world":
+        return "p, q, r the angular velocity in world axes"
+    return signed_reading_fix(reading, columns, scale)[0]
+
+
+def _reading_fix(reading, columns, scale) -> str:
+    """The fix that loads the record as `reading` reads it."""
+    if reading == "world_to_body":
+        fix = {c: -1.0 * float(scale.get(c, 1.0)) for c in _QUATERNION[1:]}
+        return (
+            f"conjugate it (`scale={{{', '.join(f'{c!r}: {f:g}' for c, f in fix.items())}}}`, "
+            f"`--scale {','.join(f'{c}={f:g}' for c, f in fix.items())}`)"
+        )
+    if reading == "world":
+        return "rotate them before loading (omega_body = R(q)^T omega_world)"
+    return f"`{signed_reading_fix(reading, columns, scale)[1]}`"
+
+
+def _alike_error(found, first, second, *, path, columns, scale) -> DataError:
+    """The refusal of a record that two readings of `rate_readings` (`first`, `second`) fit within
+    `RATE_FRAME_RATIO` of each other: both named with their fixes, neither advised."""
+    a, b = sorted((first, second), key=found.__getitem__)
+    each = [f"{_reading_words(r, columns, scale)} ({found[r]:.0%}; {_reading_fix(r, columns, scale)})" for r in (a, b)]
+    quaternion = "world_to_body" in (a, b)
+    return DataError(
+        f"p, q, r miss the attitude's rate of change by {found['body']:.0%} of its size over {BLOCK_S * 1e3:g} ms "
+        f"blocks; two readings fit about as well, and the record cannot tell which holds: {each[0]}, or {each[1]}; "
+        "at one heading, flown nearly level, the two read alike: check the logger's documentation of its frames "
+        "and signs, or give a stretch flown at another heading",
+        path=path,
+        column=columns.get("qw", "qw") if quaternion else columns.get("p", "p"),
     )
 
 

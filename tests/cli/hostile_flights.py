@@ -634,6 +634,16 @@ CASES = [
         ("column 'p'", "world axes"),
         ("p=-1", "--scale"),
     ),
+    # A genuine yaw rate of the opposite sign at a heading of 180 degrees: the frame check named the conjugated
+    # quaternion alone (its misfit 0.33 of the rates' against 0.74 as logged), a fix that loads a record still wrong.
+    C(
+        "flight-yaw-rate-flipped-heading-180",
+        "frame",
+        lambda d, fx: _fit_argv(_flight(d, fx, lambda t: _set(["r"], slice(None), lambda v: -v)(_turned(180)(t)))),
+        "refuse",
+        ("column 'r'", "--scale r=-1"),
+        ("world-to-body",),
+    ),
     C(
         "flight-clean-heading-180",
         "clean",
