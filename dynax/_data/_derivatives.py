@@ -119,9 +119,9 @@ def sample_times_from_positions(
     r"""The record's time stamps, with each stamp that disagrees with its positions replaced by the time they imply.
 
     A logger that reads the encoders, then stalls (a write, a scheduler), then reads the clock stamps the
-    angles late: the DFKI rig's run 12 has 43 such rows, each 1 to 4 ms late at a 1.6 ms median interval
-    (runs 00 to 02: 14 rows, about 3 ms late at 2 ms). Differences of the angles divide by the wrong interval
-    there: during a 12 rad/s spin a central difference reads 22 rad/s and the backward difference 3.9 then
+    angles late: the DFKI rig's run 12 has 43 such rows, each 0.5 to 4.1 ms late at a 1.6 ms median interval
+    (runs 00 to 02: 14 rows, most about 3 ms late at 2 ms). Differences of the angles divide by the wrong interval
+    there: during a 12 rad/s spin central differences read 27 and 23 rad/s, the backward differences 3.9 then
     34 rad/s. Here each interior sample's positions are compared with the cubic through its four neighbours
     on their stamps; a disagreement along the motion, $r = q_i - p(t_i)$, is read as a time shift
     $s = \dot p \cdot r / |\dot p|^2$. It is taken where it is `STAMP_SIGNIFICANCE` errors from zero and at

@@ -88,7 +88,7 @@ def _arm_record(times):
 
 def test_stamps_taken_late_leave_the_velocities_from_the_angles_right_in_every_stretch(tmp_path):
     """A logger that stalls between reading the encoders and reading the clock (the DFKI rig's run 12: 43
-    rows stamped 1 to 4 ms late): central differences on the stamps read such a row's velocity up to 18 rad/s
+    rows stamped 0.5 to 4.1 ms late): central differences on the stamps read such a row's velocity up to 18 rad/s
     off in a fast spin (rms 0.87 rad/s over the spin, 0.38 over the settling); on the times the angles imply
     they are as right as on the true times, in the spin, the settling and the rest.
     """
