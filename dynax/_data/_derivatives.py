@@ -144,11 +144,11 @@ def sample_times_from_positions(
 
     **Returns:** `(times, rows)`: the times, and the 0-based rows whose stamp was replaced.
     """
-    ts = np.asarray(ts, dtype=float)
-    qs = np.asarray(qs, dtype=float).reshape(len(ts), -1)
-    times, moved = ts.copy(), set()
-    if len(ts) < 7:
-        return times, np.zeros(0, int)
+    stamps = np.asarray(ts, dtype=float)
+    qs = np.asarray(qs, dtype=float).reshape(len(stamps), -1)
+    if len(stamps) < 7:
+        return stamps.copy(), np.zeros(0, int)
+    times, moved = stamps - stamps[0], set()  # relative to the first: an epoch's seconds keep their digits
     interval = float(np.median(np.diff(ts)))
     interior = np.arange(2, len(ts) - 2)
     cubic, *_ = _interpolants(times, qs, interior, times[interior])
@@ -180,7 +180,15 @@ def sample_times_from_positions(
         times[rows] = at
         if not pick.any():
             break
-    return times, np.array(sorted(moved), dtype=int)
+    # two stamps moved side by side may have crossed: such a pair keeps its stamps
+    while (crossed := np.flatnonzero(np.diff(times) <= 0)).size:
+        pair = np.union1d(crossed, crossed + 1)
+        times[pair] = stamps[pair] - stamps[0]
+        moved -= set(pair.tolist())
+    rows = np.array(sorted(moved), dtype=int)
+    sampled = stamps.copy()  # every other stamp exactly as given
+    sampled[rows] = times[rows] + stamps[0]
+    return sampled, rows
 
 
 def _uniform_dt(ts, function):
