@@ -45,9 +45,10 @@ from dfki_simulation import DFKI, MAPPING, read_parameters  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-
-# private: the refinement's own start-state estimate, compared here as one kind of start
-from dynax._data._spectra import position_fit_window, velocities_from_positions  # noqa: E402
+from dynax._data._spectra import (  # noqa: E402  # private: the refinement's start states, one kind compared
+    position_fit_window,
+    velocities_from_positions,
+)
 from dynax.internal import choose_filter, sample_times_from_positions  # noqa: E402
 
 STRETCHES = {
