@@ -149,8 +149,8 @@ def sample_times_from_positions(
     if len(stamps) < 7:
         return stamps.copy(), np.zeros(0, int)
     times, moved = stamps - stamps[0], set()  # relative to the first: an epoch's seconds keep their digits
-    interval = float(np.median(np.diff(ts)))
-    interior = np.arange(2, len(ts) - 2)
+    interval = float(np.median(np.diff(stamps)))
+    interior = np.arange(2, len(stamps) - 2)
     cubic, *_ = _interpolants(times, qs, interior, times[interior])
     residual = qs[interior] - cubic
     spread = 1.4826 * np.median(np.abs(residual - np.median(residual, axis=0)), axis=0)
