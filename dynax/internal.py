@@ -92,6 +92,7 @@ from ._data import speeds_zeroed_at_rest as speeds_zeroed_at_rest
 
 # Helpers of the pipeline's stages (data, model, identification, validation, diagnosis).
 from ._data import split_at_gaps as split_at_gaps
+from ._data._derivatives import sample_times_from_positions as sample_times_from_positions
 from ._data._flight import check_input_levels as check_input_levels
 from ._data._flight import FlightChecks as FlightChecks
 from ._data._flight import FlightNotes as FlightNotes
@@ -847,6 +848,7 @@ __all__ = [
     "ridge_solve",
     "rollout_screen",
     "rollouts_from_starts",
+    "sample_times_from_positions",
     "savitzky_golay",
     "score_flights",
     "score_surrogate",

@@ -41,7 +41,8 @@ def add_velocity_option(parser: argparse.ArgumentParser) -> None:
         choices=("measured", "positions"),
         default="measured",
         help="measured (default): the files' velocity columns as recorded; positions: leave them unread "
-        "and estimate the velocities from the positions (central differences, which do not lag): for a "
+        "and estimate the velocities from the positions (central differences, which do not lag, on the times "
+        "the positions imply where a time stamp disagrees with them): for a "
         "logged velocity that lags its angle",
     )
 

@@ -19,11 +19,11 @@ SYSTEM_COLUMNS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
 OPTIONAL_INPUTS: dict[str, tuple[str, ...]] = {"quadrotor": ("vbat",)}
 
 # Velocity columns that may be absent from a file (encoder positions alone) and are then estimated
-# from the named position column, by the named difference (see `load_trajectory`): central
-# differences, which do not lag (a backward difference lags half a sample, which biases every
-# parameter fitted to it; `choose_filter` reads such a velocity's noise floor from the angle's
-# backward difference, as a logger's velocity reads). Estimated only when the file has none of a
-# system's velocities and none is mapped.
+# from the named position column, by the named difference (see `load_trajectory`) on the times the
+# positions were read at (`sample_times_from_positions`): central differences, which do not lag (a
+# backward difference lags half a sample, which biases every parameter fitted to it; `choose_filter`
+# reads such a velocity's noise floor from the angle's backward difference, as a logger's velocity
+# reads). Estimated only when the file has none of a system's velocities and none is mapped.
 OPTIONAL_STATES: dict[str, dict[str, tuple[str, str]]] = {
     "linear_axis": {"dq": ("q", "central")},
     "acrobot": {"dq1": ("q1", "central"), "dq2": ("q2", "central")},

@@ -244,12 +244,13 @@ def load_trajectory(
     positions, when the file has none of the system's velocities and none is mapped (one present
     and another absent is a misnamed column, and an error):
 
-    - every system: by second-order central differences on the recorded time stamps
-      (`central_difference`), which do not lag; a backward difference (what a motor driver
-      logs) is the derivative half an interval earlier, which biases every parameter fitted to
-      it. `choose_filter` reads the noise floor of
-      such a velocity from the angle's backward difference, so the filter band is the one the
-      logged velocities would give.
+    - every system: by second-order central differences (`central_difference`), which do not lag, on
+      the recorded time stamps but where a stamp disagrees with the positions (a logger that stalls
+      between reading the encoders and the clock stamps them late): there on the time the positions
+      imply (`sample_times_from_positions`; the returned times stay as recorded). A backward
+      difference (what a motor driver logs) is the derivative half an interval earlier, which biases
+      every parameter fitted to it. `choose_filter` reads the noise floor of such a velocity from
+      the angle's backward difference, so the filter band is the one the logged velocities would give.
     """
     path = str(path)
     state_names, input_names = columns_for(system)
@@ -333,11 +334,15 @@ def load_trajectory(
     ts = values[TIME]
     column = mapping.get(TIME, TIME)
     check_time_stamps(ts, path=path, column=column, max_gap=sampling.max_gap, min_step=sampling.min_step)
-    from ._derivatives import backward_difference, central_difference
+    from ._derivatives import backward_difference, central_difference, sample_times_from_positions
 
     difference = {"backward": backward_difference, "central": central_difference}
+    # differenced on the times the positions were read at: a stamp taken late (a logger's stall between
+    # reading the encoders and the clock) would divide their steps by the wrong intervals
+    sources = [values[source] for source, _ in optional.values()]
+    sampled = sample_times_from_positions(ts, np.stack(sources, 1))[0] if sources else ts
     for name, (source, how) in optional.items():
-        values[name] = np.asarray(difference[how](ts, values[source]))
+        values[name] = np.asarray(difference[how](sampled, values[source]))
     measured = {v: q for v, q in velocity_pairs(state_names).items() if v not in optional}
     check_velocities(ts, values, measured, path=path, columns={n: mapping.get(n, n) for n in wanted}, scale=scale)
     xs = np.stack([values[s] for s in state_names], axis=1)

@@ -487,7 +487,8 @@ def lag_findings(tr, ts, source, values, pairs, dt):
     only, `LAG_RUN_SIGNIFICANCE` of their own in each) is a warning from `LAG_PHASE_WARN` (the DFKI rig's
     logged backward differences, half of its 2 ms interval, read 0.005 to 0.010 rad and move its fitted
     parameters by less than their standard errors) and a refusal from `LAG_PHASE_REFUSE`. The fix is
-    to let dynax estimate the velocities from the angles by central differences, which do not lag."""
+    to let dynax estimate the velocities from the angles by central differences, which do not lag (on the
+    times the angles imply where a stamp disagrees with them: `sample_times_from_positions`)."""
     from ._velocities import velocity_lag
 
     out = []
@@ -542,7 +543,8 @@ def lag_findings(tr, ts, source, values, pairs, dt):
                 + ", whose error follows the acceleration, so a fit trades "
                 "damping for inertia (one sample at 100 Hz halves a fitted damping)",
                 "--velocities positions (dynax differentiates the angles by central differences, which do not "
-                "lag; in Python `load_trajectory(..., velocities='positions')`)",
+                "lag, on the times the angles imply where a time stamp disagrees with them; in Python "
+                "`load_trajectory(..., velocities='positions')`)",
             )
         )
     return out
