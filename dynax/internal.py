@@ -122,7 +122,9 @@ from ._data._spectra import filter_rule as filter_rule
 from ._data._spectra import FilterChoice as FilterChoice
 from ._data._spectra import measurement_noise_std as measurement_noise_std
 from ._data._spectra import noise_floor_and_band as noise_floor_and_band
+from ._data._spectra import position_fit_window as position_fit_window
 from ._data._spectra import trim_and_decimation as trim_and_decimation
+from ._data._spectra import velocities_from_positions as velocities_from_positions
 from ._data._spectra import with_velocities_from_positions as with_velocities_from_positions
 from ._data._velocities import check_trajectory_velocities as check_trajectory_velocities
 from ._data._velocities import gain_surely_within as gain_surely_within
@@ -750,8 +752,8 @@ __all__ = [
     "levenberg_marquardt",
     "log_ratio_differences",
     "look_alike_tests",
-    "LOOK_ALIKES",
     "look_alikes",
+    "LOOK_ALIKES",
     "make_windows",
     "MAX_MAGNITUDE",
     "MAX_VELOCITY_GAIN_ERROR",
@@ -793,8 +795,9 @@ __all__ = [
     "PERMUTATIONS",
     "physical_readings",
     "polish_on_constraint",
-    "POORLY_DETERMINED",
     "poorly_determined",
+    "POORLY_DETERMINED",
+    "position_fit_window",
     "position_spread",
     "power_of",
     "PRACTICAL_R2",
@@ -903,6 +906,7 @@ __all__ = [
     "valid_starts",
     "vehicle_rollout",
     "VehicleStatistics",
+    "velocities_from_positions",
     "velocity_gain",
     "velocity_lag",
     "VelocityLag",

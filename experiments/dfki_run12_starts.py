@@ -45,11 +45,12 @@ from dfki_simulation import DFKI, MAPPING, read_parameters  # noqa: E402
 import numpy as np  # noqa: E402
 
 import dynax  # noqa: E402
-from dynax._data._spectra import (  # noqa: E402  # private: the refinement's start states, one kind compared
+from dynax.internal import (  # noqa: E402
+    choose_filter,
     position_fit_window,
+    sample_times_from_positions,
     velocities_from_positions,
 )
-from dynax.internal import choose_filter, sample_times_from_positions  # noqa: E402
 
 STRETCHES = {
     "12": {"pumping": (0.0, 3.4), "spin": (3.4, 4.1), "swing down": (4.1, 5.0), "rest": (5.0, 6.1)},
