@@ -86,14 +86,11 @@ def _arm_record(times):
     return sol.y.T
 
 
-def test_stamps_taken_late_leave_the_velocities_from_the_angles_right_in_every_stretch(tmp_path):
-    """A logger that stalls between reading the encoders and reading the clock (the DFKI rig's run 12: 43
-    rows stamped 0.5 to 4.1 ms late): central differences on the stamps read such a row's velocity up to 18 rad/s
-    off in a fast spin (rms 0.87 rad/s over the spin, 0.38 over the settling); on the times the angles imply
-    they are as right as on the true times, in the spin, the settling and the rest.
-    """
-    rng = np.random.default_rng(3)
-    n = 2500
+def _stalled_record(n=2500, seed=3):
+    """The arm's record on jittered 1.6 ms steps with a stall every 40 rows or so: 3.3 ms added to the interval
+    after the stalled row, whose stamp is taken 60 to 95 % of that late. (true times, stamps, stalled rows, the
+    true states, the angles on the encoder's counts, the torques)."""
+    rng = np.random.default_rng(seed)
     steps = rng.uniform(1.2e-3, 2.2e-3, n - 1)  # jittered, as the rig's 1.6 ms run
     stalls = np.arange(20, n - 20, 40) + rng.integers(-5, 6, len(range(20, n - 20, 40)))
     stalled = np.zeros(n, bool)
@@ -103,6 +100,16 @@ def test_stamps_taken_late_leave_the_velocities_from_the_angles_right_in_every_s
     stamps = true + np.where(stalled, rng.uniform(0.6, 0.95, n) * 3.3e-3, 0.0)
     q = np.round(x[:, :2] / ENCODER_COUNT) * ENCODER_COUNT
     us = np.array([_arm_torque(t, s) for t, s in zip(true, x)])
+    return true, stamps, stalled, x, q, us
+
+
+def test_stamps_taken_late_leave_the_velocities_from_the_angles_right_in_every_stretch(tmp_path):
+    """A logger that stalls between reading the encoders and reading the clock (the DFKI rig's run 12: 43
+    rows stamped 0.5 to 4.1 ms late): central differences on the stamps read such a row's velocity up to 18 rad/s
+    off in a fast spin (rms 0.87 rad/s over the spin, 0.38 over the settling); on the times the angles imply
+    they are as right as on the true times, in the spin, the settling and the rest.
+    """
+    true, stamps, _, x, q, us = _stalled_record()
     path = tmp_path / "spin.csv"
     np.savetxt(path, np.column_stack([stamps, q, us]), delimiter=",", header="t,q1,q2,tau1,tau2", comments="")
     loaded = dynax.load_trajectory(path, "double_pendulum", check=False)
@@ -131,3 +138,30 @@ def test_clean_records_move_no_stamp(rate_hz):
         for q in (x[:, :2], np.round(x[:, :2] / ENCODER_COUNT) * ENCODER_COUNT):
             sampled, rows = sample_times_from_positions(times, q)
             assert rows.size == 0 and np.array_equal(sampled, times)
+
+
+def test_stamps_that_disagree_with_the_angles_are_named_at_their_rows_with_the_logged_velocities_harm(tmp_path):
+    """The stalled logger's record with its velocities logged as the rig's are (backward differences on the
+    stamps): a `stamps` warning names the late rows (those the angles can time: the arm moving) and no other,
+    how late, what the logged velocities miss there, and the fix; the same record stamped on its true times
+    gets none."""
+    true, stamps, stalled, x, q, us = _stalled_record()
+    for times, late in ((stamps, True), (true, False)):
+        dq = np.r_[[[0.0, 0.0]], np.diff(q, axis=0) / np.diff(times)[:, None]]
+        path = tmp_path / f"logged_{late}.csv"
+        header = "t,q1,q2,dq1,dq2,tau1,tau2"
+        np.savetxt(path, np.column_stack([times, q, dq, us]), delimiter=",", header=header, comments="")
+        loaded = dynax.load_trajectory(path, "double_pendulum", check=False)
+        found = [f for f in dynax.check_records([loaded]).findings if f.kind == "stamps"]
+        if not late:
+            assert not found
+            continue
+        (finding,) = found
+        assert finding.severity == "warn" and finding.column == "t"
+        assert finding.fix.startswith("--velocities positions")
+        rows = [int(r) for r in finding.message.split("(rows ")[1].split(" and ")[0].split(", ")]
+        assert all(stalled[r - 1] for r in rows)  # the rows shown are late ones, 1-based
+        count = int(finding.message.split(" time stamps")[0])
+        moving = np.abs(x[:, 2:]).max(axis=1) > 2.0
+        assert 0.8 * np.sum(stalled & moving) <= count <= np.sum(stalled)
+        assert "ms late against a" in finding.message
