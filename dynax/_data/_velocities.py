@@ -385,8 +385,10 @@ def lag_change_point(ts, q, v, lo: int, hi: int, lagging_after: bool = True) -> 
         coef, *_ = np.linalg.lstsq(columns, qr, rcond=None)
         return float(np.sum((qr - columns @ coef) ** 2))
 
-    # every `stride`-th candidate, then every sample around the best: at most a few hundred fits however fast
+    # every `stride`-th candidate, then every sample around the best: at most a few hundred fits however fast;
+    # the range's far edge is one (the lag holds through the range: a stretch that read no lag only by chance)
+    first, last = (0, n - 2) if lagging_after else (2, n)
     stride = max(1, n // 200)
-    coarse = min(range(2, n - 2, stride), key=rss)
-    fine = min(range(max(2, coarse - stride), min(n - 2, coarse + stride + 1)), key=rss)
+    coarse = min([*range(first, last, stride), last], key=rss)
+    fine = min(range(max(first, coarse - stride), min(last, coarse + stride) + 1), key=rss)
     return lo + fine
