@@ -245,7 +245,8 @@ def controls(out):
 def edges(out, draws=60):
     """Where the check places the start of a lag that begins part way: the arm's record (8 s, encoder noise) at
     100 and 500 Hz, its velocities 10 ms late from a time drawn uniformly in 2 to 5 s; the distance from the
-    start the finding names to the true one, signed (the 0.5 s stretches alone place it to their edges)."""
+    start the finding names to the true one, signed (the 0.5 s stretches alone place it to their edges); and the
+    rows the DFKI runs' lag warnings name."""
     rng = np.random.default_rng(7)
     found = {}
     for rate in (100.0, 500.0):
@@ -272,6 +273,8 @@ def edges(out, draws=60):
             "within_0.05_s": int(np.sum(np.abs(e) <= 0.05)),
         }
         print(f"{rate:g} Hz: {found[f'{rate:g} Hz']}", flush=True)
+    # the DFKI runs' velocities lag throughout (backward differences): the rows each warning names
+    found["dfki"] = [{"run": r["run"], "column": r["column"], "warned": r["warned"]} for r in dfki()]
     pathlib.Path(out).write_text(json.dumps(found, indent=1) + "\n")
 
 
