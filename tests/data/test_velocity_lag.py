@@ -97,7 +97,7 @@ def test_a_lag_that_starts_part_way_is_placed_to_a_few_samples(seed, start_s, ra
     late[start:, 0] = dq[start - k : len(ts) - k, 0]
     found = _lags(dynax.check_records([_record(ts, q, late)], estimated=()))
     assume(found)
-    assert abs(found[0].times[0] - ts[start]) <= 0.1 and found[0].times[1] == pytest.approx(ts[-1]), found[0].times
+    assert abs(found[0].times[0] - ts[start]) <= 0.1 and found[0].times[1] >= ts[-1] - 0.1, found[0].times
 
 
 @settings(max_examples=20, deadline=None)
