@@ -493,8 +493,11 @@ def lag_findings(tr, ts, source, values, pairs, dt):
     logged backward differences, half of its 2 ms interval, read 0.005 to 0.010 rad and move its fitted
     parameters by less than their standard errors) and a refusal from `LAG_PHASE_REFUSE`. The fix is
     to let dynax estimate the velocities from the angles by central differences, which do not lag (on the
-    times the angles imply where a stamp disagrees with them: `sample_times_from_positions`)."""
-    from ._velocities import velocity_lag
+    times the angles imply where a stamp disagrees with them: `sample_times_from_positions`). A lag
+    read in some stretches only has its start and end placed inside the stretches to a few samples
+    (`lag_change_point`; on 116 arm records lagged from 2 to 5 s at 100 and 500 Hz, 115 within 0.05 s and none
+    placed more than 0.05 s late, `experiments/velocity_lag.py --edges`)."""
+    from ._velocities import lag_change_point, velocity_lag
 
     out = []
     for velocity, position in pairs.items():
@@ -527,6 +530,18 @@ def lag_findings(tr, ts, source, values, pairs, dt):
         if phase < LAG_PHASE_WARN:
             continue
         i, j = int(read.bounds[span[0]]), int(read.bounds[span[-1] + 1]) - 1
+        # a lag that starts or ends part way: placed to a few samples between two stretches before the span
+        # (a stretch the change falls in reads a lag of neither sign) and the first stretch it is read in (the
+        # span may begin at one too still to tell), and likewise at its end
+        q, v = values[position], values[velocity]
+        if span[0] > 0:
+            lo, hi = int(read.bounds[max(span[0] - 2, 0)]), int(read.bounds[max(held[0], span[0]) + 1])
+            i = lag_change_point(ts, q, v, lo, hi)
+        if span[-1] < len(z) - 1:
+            lo, hi = int(read.bounds[min(held[-1], span[-1])]), int(read.bounds[min(span[-1] + 3, len(z))])
+            j = lag_change_point(ts, q, v, lo, hi, lagging_after=False) - 1
+        if i > j:  # placed past each other (a lag of a stretch or two, and still): the stretches' edges
+            i, j = int(read.bounds[span[0]]), int(read.bounds[span[-1] + 1]) - 1
         intervals = f"{abs(lag) / dt:.2g}"
         where = "read in every stretch" if held.size == len(z) else f"read in {held.size} of {len(z)} stretches"
         out.append(

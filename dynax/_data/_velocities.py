@@ -356,3 +356,39 @@ def velocity_lag(ts, q, v) -> VelocityLag | None:
     bounds = np.concatenate([first, [len(ts)]])
     frequency = float(np.sqrt(total[2] / total[0]))
     return VelocityLag(lag, std, frequency, per, errors, bounds)
+
+
+def lag_change_point(ts, q, v, lo: int, hi: int, lagging_after: bool = True) -> int:
+    r"""The sample in `lo .. hi - 1` from which a velocity lags its position (`lagging_after`; else the first
+    sample where it no longer does): a lag read in whole stretches of `velocity_lag` (0.5 s or more) starts
+    somewhere inside the stretch at its edge, and this places it to a few samples.
+
+    Over the samples `lo .. hi - 1` the position is regressed, as in `velocity_lag`, on the integrated
+    velocity $V$, each `LAG_WINDOW_S` window less its own line in time, and on two columns of a candidate
+    change point: $v\,H$ and $H$, $H$ the step that is 1 from the candidate on (before it, when not
+    `lagging_after`), each less its windows' lines too. $b\,v H$ is the lag's term where it holds, $c\,H$
+    the offset the lag leaves in $V$ from there on (a velocity late by $d$ integrates to $q(t - d) +
+    d\,\dot q(t_0)$ from the $t_0$ it starts at). The candidate whose fit leaves the least residual sum of
+    squares is the change point (one three-column fit per sample of the range; called only for a lag found)."""
+    ts, q, v = (np.asarray(a, dtype=float)[lo:hi] for a in (ts, q, v))
+    n = len(ts)
+    if n < 8:
+        return lo
+    V = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(ts))])
+    count = max(int((ts[-1] - ts[0]) / LAG_WINDOW_S), 1)
+    window = np.minimum(((ts - ts[0]) / LAG_WINDOW_S).astype(int), count - 1)
+    qr, Vr = _window_residuals(ts, window, count, (q, V))
+
+    def rss(k):
+        step = (np.arange(n) >= k) if lagging_after else (np.arange(n) < k)
+        columns = np.column_stack([Vr, *_window_residuals(ts, window, count, (v * step, step.astype(float)))])
+        coef, *_ = np.linalg.lstsq(columns, qr, rcond=None)
+        return float(np.sum((qr - columns @ coef) ** 2))
+
+    # every `stride`-th candidate, then every sample around the best: at most a few hundred fits however fast;
+    # the range's far edge is one (the lag holds through the range: a stretch that read no lag only by chance)
+    first, last = (0, n - 2) if lagging_after else (2, n)
+    stride = max(1, n // 200)
+    coarse = min([*range(first, last, stride), last], key=rss)
+    fine = min(range(max(first, coarse - stride), min(last, coarse + stride) + 1), key=rss)
+    return lo + fine

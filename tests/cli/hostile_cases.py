@@ -871,7 +871,14 @@ CASES = [
         "velocity_lag",
         lambda d, fx: _identify(_acrobot(d, fx, _lagged(1, start=400))),
         "refuse",
-        ("column 'dq1'", "t = 4 to 8 s", "lags q1"),
+        ("column 'dq1'", "t = 4", "to 8 s", "lags q1"),
+    ),
+    C(  # a lag from inside a 0.5 s stretch: its start placed to the sample, not at the stretch's edge
+        "velocity-lag-from-4.41s",
+        "velocity_lag",
+        lambda d, fx: _identify(_acrobot(d, fx, _lagged(1, start=440))),
+        "refuse",
+        ("column 'dq1'", "rows 442-801", "t = 4.41 to 8 s", "lags q1"),
     ),
     C(
         "velocity-lag-diagnose",

@@ -6,7 +6,7 @@ The records are sums of sines written out here, with their exact derivatives: no
 
 import warnings
 
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 import numpy as np
 import pytest
@@ -83,6 +83,21 @@ def test_a_lag_from_part_way_through_is_located_in_its_stretch():
     (f,) = _lags(dynax.check_records([_record(ts, q, late)], estimated=()))
     assert f.column == "dq2" and "lags q2" in f.message
     assert 4.3 <= f.times[0] <= 5.7 and f.times[1] == pytest.approx(10.0)
+
+
+@settings(max_examples=12, deadline=None)
+@given(seed=st.integers(0, 10_000), start_s=st.floats(2.0, 5.0), rate_hz=st.sampled_from([100.0, 500.0]))
+def test_a_lag_that_starts_part_way_is_placed_to_a_few_samples(seed, start_s, rate_hz):
+    # read in stretches of 0.5 s, the lag's start is placed inside the one it falls in, to a few samples where
+    # the motion is brisk (`experiments/velocity_lag.py --edges`); a few records are refused by the velocity
+    # check instead, and say no lag
+    ts, q, dq = _motion(seed, rate_hz=rate_hz)
+    k, start = round(0.01 * rate_hz), int(start_s * rate_hz)  # 10 ms late from sample `start` on
+    late = dq.copy()
+    late[start:, 0] = dq[start - k : len(ts) - k, 0]
+    found = _lags(dynax.check_records([_record(ts, q, late)], estimated=()))
+    assume(found)
+    assert abs(found[0].times[0] - ts[start]) <= 0.1 and found[0].times[1] >= ts[-1] - 0.1, found[0].times
 
 
 @settings(max_examples=20, deadline=None)
