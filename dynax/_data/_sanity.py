@@ -505,25 +505,32 @@ def lag_findings(tr, ts, source, values, pairs, dt):
         if read is None:
             continue
         z = np.nan_to_num(read.stretch_lags / read.stretch_errors)
+        free = np.zeros(len(z), bool)
         if abs(read.lag) > LAG_SIGNIFICANCE * read.std_error:
             sign = np.sign(read.lag)
             # it spans the record but for stretches that read no lag and differ from the record's (its start
             # or end before a filter was switched on or off); a stretch too still to tell is not one
             off = np.nan_to_num(np.abs(read.stretch_lags - read.lag) / read.stretch_errors)
             free = (np.abs(z) < LAG_STRETCH_SIGNIFICANCE) & (off >= LAG_STRETCH_SIGNIFICANCE)
-            span = np.flatnonzero(~free)
+            spread = True
         else:  # a lag in a run of stretches only (a filter switched on part way): each one far from zero
             strong = np.abs(z) >= LAG_RUN_SIGNIFICANCE
             runs = [(a, b) for a, b in _runs(strong) if b > a and len(set(np.sign(z[a : b + 1]))) == 1]
             if not runs:
                 continue
-            sign = np.sign(z[runs[0][0]])
-            span = None
+            sign, spread = np.sign(z[runs[0][0]]), False
         # the stretches it is read in: a lag of the same sign, LAG_STRETCH_SIGNIFICANCE errors from zero there
         held = np.flatnonzero(z * sign >= LAG_STRETCH_SIGNIFICANCE)
         if not held.size:
             continue
-        span = held if span is None or not span.size else span
+        # read over the whole record: the stretches around those it is read in, up to one that reads no lag (a
+        # stretch too still to tell beyond such a one is not joined to it)
+        a, b = int(held[0]), int(held[-1])
+        while spread and a > 0 and not free[a - 1]:
+            a -= 1
+        while spread and b < len(z) - 1 and not free[b + 1]:
+            b += 1
+        span = np.arange(a, b + 1) if spread else held
         weight = 1.0 / read.stretch_errors[held] ** 2
         lag = float(np.sum(weight * read.stretch_lags[held]) / np.sum(weight))
         phase = abs(lag) * read.frequency
@@ -603,17 +610,26 @@ def stamp_findings(tr, ts, source, values, pairs, measured):
         message = message.replace(f"{low:.2g} to {high:.2g} ms", f"{high:.2g} ms")
     fix = None
     if measured:
-        touched = np.unique(np.clip(np.concatenate([rows - 1, rows, rows + 1]), 0, len(ts) - 1))
-        worst = {
-            v: float(np.max(np.abs(values[v][touched] - np.gradient(values[q], times)[touched])))
-            for v, q in measured.items()
-        }
+        touched = np.zeros(len(ts), bool)
+        touched[np.clip(np.concatenate([rows - 1, rows, rows + 1]), 0, len(ts) - 1)] = True
+        misses = {v: np.abs(values[v] - np.gradient(values[q], times)) for v, q in measured.items()}
+        worst = {v: float(np.max(m[touched])) for v, m in misses.items()}
         column = max(worst, key=worst.__getitem__)
-        message += (
-            f"; the logged velocities there miss the positions' rate of change on the times they imply by up to "
-            f"{worst[column]:.3g} in {column}'s unit"
-        )
-        fix = "--velocities positions (central differences of the angles on the times they imply)"
+        # the logged velocities are harmed where they miss there by more than twice their worst elsewhere (a
+        # logger that differences its stamps); read with the angles, they agree there as anywhere else
+        harmed = {v for v, m in misses.items() if worst[v] > 2.0 * float(np.percentile(m[~touched], 99))}
+        if harmed:
+            column = max(harmed, key=worst.__getitem__)
+            message += (
+                f"; the logged velocities there miss the positions' rate of change on the times they imply by up "
+                f"to {worst[column]:.3g} in {column}'s unit"
+            )
+            fix = "--velocities positions (central differences of the angles on the times they imply)"
+        else:
+            message += (
+                "; the logged velocities agree with the positions there (read with them: only the stamps are "
+                "off), and the positions are resampled from the stamps as logged"
+            )
     return [_row_time(ts, (int(rows[0]), int(rows[-1])), source, Check.STAMPS, Severity.WARN, "t", message, fix)]
 
 

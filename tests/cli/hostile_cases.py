@@ -294,6 +294,16 @@ def _lagged(samples, columns=("dq1", "dq2"), start=0, header=ACROBOT):
     return edit
 
 
+def _stamped_late(rows, fraction=0.7):
+    """Rows whose time stamp is taken `fraction` of an interval late (their angles and velocities as read)."""
+
+    def edit(t):
+        t[list(rows), 0] += fraction * float(np.median(np.diff(t[:, 0])))
+        return t
+
+    return edit
+
+
 def _low_passed(tau, columns=("dq1", "dq2")):
     """A velocity through a causal first-order low-pass of time constant `tau` (a driver's filter)."""
 
@@ -879,6 +889,17 @@ CASES = [
         lambda d, fx: _identify(_acrobot(d, fx, _lagged(1, start=440))),
         "refuse",
         ("column 'dq1'", "rows 442-801", "t = 4.41 to 8 s", "lags q1"),
+    ),
+    C(  # four rows stamped 0.7 of an interval late (a logger that stalls between its sensors and its clock), the
+        # velocities read with the angles: the stamps are named, and no velocity fix is offered (none is needed)
+        "late-stamps",
+        "stamps",
+        lambda d, fx: _identify(_acrobot(d, fx, _stamped_late((150, 320, 480, 650)))),
+        "warn",
+        ("column 't'", "rows 151, 321, 481, 651", "ms late", "only the stamps are off"),
+        forbidden=("--velocities positions",),
+        check=params_close(0.05, ("theta1", "theta2", "theta3", "theta4", "theta5")),
+        heavy=True,
     ),
     C(
         "velocity-lag-diagnose",

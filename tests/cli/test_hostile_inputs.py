@@ -44,6 +44,7 @@ def test_the_corpus_covers_every_class_of_fault():
         "wrapped",
         "velocity",
         "velocity_lag",
+        "stamps",
         "swapped",
         "zero",
         "ignored_input",

@@ -6,7 +6,7 @@ The records are sums of sines written out here, with their exact derivatives: no
 
 import warnings
 
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 import numpy as np
 import pytest
@@ -87,6 +87,7 @@ def test_a_lag_from_part_way_through_is_located_in_its_stretch():
 
 @settings(max_examples=12, deadline=None)
 @given(seed=st.integers(0, 10_000), start_s=st.floats(2.0, 5.0), rate_hz=st.sampled_from([100.0, 500.0]))
+@example(seed=2859, start_s=2.25, rate_hz=500.0)  # its first stretch too unsure to call lag-free, the next three free
 def test_a_lag_that_starts_part_way_is_placed_to_a_few_samples(seed, start_s, rate_hz):
     # read in stretches of 0.5 s, the lag's start is placed inside the one it falls in, to a few samples where
     # the motion is brisk (`experiments/velocity_lag.py --edges`); a few records are refused by the velocity
