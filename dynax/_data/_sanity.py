@@ -493,7 +493,9 @@ def lag_findings(tr, ts, source, values, pairs, dt):
     logged backward differences, half of its 2 ms interval, read 0.005 to 0.010 rad and move its fitted
     parameters by less than their standard errors) and a refusal from `LAG_PHASE_REFUSE`. The fix is
     to let dynax estimate the velocities from the angles by central differences, which do not lag (on the
-    times the angles imply where a stamp disagrees with them: `sample_times_from_positions`). A lag
+    times the angles imply where a stamp disagrees with them: `sample_times_from_positions`); on 12 to 16-bit counts
+    at 100 Hz to 1 kHz it is right or even, since a central and a backward difference of the same counts carry the
+    same noise in the band `identify` keeps (`experiments/velocity_advice.py`). A lag
     read in some stretches only has its start and end placed inside the stretches to a few samples
     (`lag_change_point`; on 116 arm records lagged from 2 to 5 s at 100 and 500 Hz, 115 within 0.05 s and none
     placed more than 0.05 s late, `experiments/velocity_lag.py --edges`)."""
