@@ -66,6 +66,7 @@ matplotlib.use("Agg")
 from dfki_simulation import DFKI, MAPPING, read_parameters  # noqa: E402  (the script's folder is on sys.path)
 import diagnose_real_splits  # noqa: E402
 import equinox as eqx  # noqa: E402
+from input_resampling import resample_with  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
@@ -154,7 +155,10 @@ def lab_model_as_written(p: dict[str, float]) -> dynax.AbstractSystem:
     return dynax.Extended(mapped.system, (ArctanFriction(0, p["cf1"]), ArctanFriction(1, p["cf2"]), mapped.terms[2]))
 
 
-def load(run: str, variant: str = "native", velocities: str = "measured") -> dynax.Trajectory:
+INPUTS = ["hold", "hold"]  # --inputs, --score-inputs: how `load` resamples the training and held-out runs' inputs
+
+
+def load(run: str, variant: str = "native", velocities: str = "measured", held_out: bool = True) -> dynax.Trajectory:
     """One run at its median interval (`native`), or changed as `diagnose_real_splits.load` says; `velocities`
     as `load_trajectory` takes it (`"positions"`: estimated from the angles, not the logged columns)."""
     if variant not in ("native", "encoders"):
@@ -163,7 +167,7 @@ def load(run: str, variant: str = "native", velocities: str = "measured") -> dyn
     raw = dynax.load_trajectory(
         DFKI / "sys_id" / f"trajectory_{run}.csv", "double_pendulum", mapping=mapping, velocities=velocities
     )
-    return dynax.resample(raw, raw.dt)
+    return resample_with(raw, raw.dt, INPUTS[not held_out])
 
 
 def cell_tests(model, lab, record, horizons) -> list[dict]:
@@ -278,7 +282,22 @@ def main(argv=None):
         "or estimated from the angles (load_trajectory(velocities='positions'), `dynax identify --velocities "
         "positions`); each fold is also scored from both kinds of start state (`by_start_velocities`)",
     )
+    parser.add_argument(
+        "--inputs",
+        choices=("hold", "average", "linear"),
+        default="hold",
+        help="how each run's inputs are put on its uniform grid (experiments/input_resampling.py; default: "
+        "%(default)s, dynax.resample's)",
+    )
+    parser.add_argument(
+        "--score-inputs",
+        choices=("hold", "average", "linear"),
+        default=None,
+        help="how the held-out run's inputs are resampled for scoring (default: as --inputs): `--inputs average "
+        "--score-inputs hold` scores a fit to averaged inputs on today's held-out records",
+    )
     args = parser.parse_args(argv)
+    INPUTS[:] = [args.inputs if args.score_inputs is None else args.score_inputs, args.inputs]
     with filter_rule(band_from_positions if args.band_from == "positions" else None):
         with refinement_options(record_weights=args.record_weights):
             fit_folds(args)
@@ -304,7 +323,7 @@ def fit_folds(args):
         results["runs"].update(json.loads((part / "results.json").read_text())["runs"])
     held_out = [] if args.merge else args.runs.split(",")
     runs = {r: load(r, velocities=args.velocities) for r in RUNS} if held_out else {}
-    training = {r: load(r, args.variant, args.velocities) for r in RUNS} if held_out else {}
+    training = {r: load(r, args.variant, args.velocities, held_out=False) for r in RUNS} if held_out else {}
     # The held-out runs both ways: the windows' start states from the logged velocities or from the angles.
     starts = {v: {r: load(r, velocities=v) for r in held_out} for v in ("measured", "positions")}
     lab = lab_model(read_parameters("model_3.0")) if held_out else None
