@@ -92,6 +92,7 @@ from ._data import speeds_zeroed_at_rest as speeds_zeroed_at_rest
 
 # Helpers of the pipeline's stages (data, model, identification, validation, diagnosis).
 from ._data import split_at_gaps as split_at_gaps
+from ._data._derivatives import input_resampling as input_resampling
 from ._data._derivatives import sample_times_from_positions as sample_times_from_positions
 from ._data._flight import check_input_levels as check_input_levels
 from ._data._flight import FlightChecks as FlightChecks
@@ -731,6 +732,7 @@ __all__ = [
     "IdentifyJob",
     "initial_helicopter",
     "input_levels",
+    "input_resampling",
     "interval_increments",
     "jackknife_covariance",
     "joint_levels",

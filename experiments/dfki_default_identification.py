@@ -66,7 +66,6 @@ matplotlib.use("Agg")
 from dfki_simulation import DFKI, MAPPING, read_parameters  # noqa: E402  (the script's folder is on sys.path)
 import diagnose_real_splits  # noqa: E402
 import equinox as eqx  # noqa: E402
-from input_resampling import resample_with  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
@@ -167,7 +166,7 @@ def load(run: str, variant: str = "native", velocities: str = "measured", held_o
     raw = dynax.load_trajectory(
         DFKI / "sys_id" / f"trajectory_{run}.csv", "double_pendulum", mapping=mapping, velocities=velocities
     )
-    return resample_with(raw, raw.dt, INPUTS[not held_out])
+    return dynax.resample(raw, raw.dt, inputs=INPUTS[not held_out])
 
 
 def cell_tests(model, lab, record, horizons) -> list[dict]:

@@ -8,8 +8,9 @@ half the inputs then come from a whole interval earlier. Alternatives, with the 
   `u_k` back where the grid meets the stamps, and keeps the input's integral where it does not);
 - `linear`: the inputs interpolated linearly (right for measured torques, which are continuous signals).
 
-Records are resampled here, before `identify` (which then finds them uniform and resamples nothing); `hold`
-is checked against `dynax.resample` itself.
+Records are resampled here by `dynax.resample(..., inputs=...)`, before `identify` (which then finds them uniform
+and resamples nothing); `--inside` gives `identify` the raw record and sets its own resampling's rule with
+`dynax.internal.input_resampling`.
 
     python experiments/input_resampling.py --synthetic [--rates 100,1000] [--seeds 0,1] [--jitters 0.1,0.3]
     python experiments/input_resampling.py --synthetic --inside --out FILE.json
@@ -30,57 +31,13 @@ import pathlib
 import sys
 import warnings
 
-import numpy as np
-
 REPO = pathlib.Path(__file__).resolve().parents[1]
 HOWS = ("hold", "average", "linear")
 
 
-def resample_with(record, dt, how, resample=None):
-    """`record` on `dynax.resample`'s grid and states, its inputs resampled `how`."""
-    import dynax
-
-    uniform = (resample or dynax.resample)(record, dt)
-    if how == "hold":
-        return uniform
-    ts, us, grid = np.asarray(record.ts), np.asarray(record.us), np.asarray(uniform.ts)
-    if how == "linear":
-        new = np.stack([np.interp(grid, ts, col) for col in us.T], axis=1)
-    elif how == "average":
-        # the recorded hold's integral, exact between stamps (piecewise linear), held on past the last stamp
-        ends = np.append(ts, max(ts[-1], grid[-1]) + dt)
-        integral = np.vstack([np.zeros(us.shape[1]), np.cumsum(us * np.diff(ends)[:, None], axis=0)])
-        at = lambda t: np.stack([np.interp(t, ends, col) for col in integral.T], axis=1)  # noqa: E731
-        new = (at(grid + dt) - at(grid)) / dt
-    else:
-        raise ValueError(how)
-    return dynax.Trajectory(grid, uniform.xs, new, record.state_names, record.input_names, record.system, record.source)
-
-
-@contextlib.contextmanager
-def inputs_inside_identify(how):
-    """`identify`'s own resampling of an irregular record (`resample`, as its stages import it) with the inputs
-    resampled `how`: the path a raw irregular record takes, which differs from resampling it beforehand."""
-    import importlib
-
-    import dynax
-
-    original = dynax.resample
-    stages = [
-        importlib.import_module(f"dynax._identify.{m}")  # private: swap the resampler identify's stages call
-        for m in ("_equations", "_refine", "_validation")
-    ]
-    for module in stages:
-        module.resample = lambda record, dt: resample_with(record, dt, how, original)
-    try:
-        yield
-    finally:
-        for module in stages:
-            module.resample = original
-
-
 def synthetic(args):
     import dynax
+    from dynax.internal import input_resampling
 
     sys.path.insert(0, str(REPO / "experiments"))
     from time_jitter import jittered_record, NAMES, TRUTH
@@ -95,9 +52,9 @@ def synthetic(args):
                 )
                 for how in HOWS if jitter_ms > 0 else ("none",):
                     if args.inside:  # the raw record, resampled by identify's stages
-                        data, inside = record, inputs_inside_identify("hold" if how == "none" else how)
+                        data, inside = record, input_resampling("hold" if how == "none" else how)
                     else:
-                        data = record if how == "none" else resample_with(record, record.dt, how)
+                        data = record if how == "none" else dynax.resample(record, record.dt, inputs=how)
                         inside = contextlib.nullcontext()
                     with warnings.catch_warnings(), inside:
                         warnings.simplefilter("ignore")
@@ -131,7 +88,7 @@ def dfki(args):
             warnings.simplefilter("ignore")
             raw = dynax.load_trajectory(folder / f"trajectory_{n}.csv", "double_pendulum", mapping=DFKI_MAPPING)
         for how in HOWS:
-            data = resample_with(raw, raw.dt, how)
+            data = dynax.resample(raw, raw.dt, inputs=how)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 fit = dynax.identify(dynax.DoublePendulum(), [data], dynax.Dynamic(), friction="coulomb", refine=False)

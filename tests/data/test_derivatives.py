@@ -165,3 +165,27 @@ def test_stamps_that_disagree_with_the_angles_are_named_at_their_rows_with_the_l
         moving = np.abs(x[:, 2:]).max(axis=1) > 2.0
         assert 0.8 * np.sum(stalled & moving) <= count <= np.sum(stalled)
         assert "ms late against a" in finding.message
+
+
+def test_resample_puts_inputs_on_the_grid_by_the_rule_asked():
+    # a zero-order hold logged at irregular stamps: the hold takes the value in force at each grid time, the
+    # average keeps the hold's integral over each new interval, linear interpolates; the switch sets the default
+    from dynax.internal import input_resampling
+
+    ts = np.array([0.0, 0.011, 0.019, 0.031, 0.040, 0.049])
+    us = np.array([0.0, 1.0, 2.0, 3.0, 4.0, 5.0])[:, None]
+    xs = np.column_stack([ts, np.ones_like(ts)])
+    record = dynax.Trajectory(ts, xs, us, ("x", "v"), ("u",))
+    held = dynax.resample(record, 0.01)
+    np.testing.assert_allclose(np.asarray(held.ts), [0.0, 0.01, 0.02, 0.03, 0.04])
+    np.testing.assert_allclose(np.asarray(held.us)[:, 0], [0.0, 0.0, 2.0, 2.0, 4.0])
+    averaged = np.asarray(dynax.resample(record, 0.01, inputs="average").us)[:, 0]
+    # [0.02, 0.03): 2 until 0.031 -> 2 throughout; [0.01, 0.02): 0 to 0.011, 1 to 0.019, 2 after
+    np.testing.assert_allclose(averaged[1:3], [(0.001 * 0 + 0.008 * 1 + 0.001 * 2) / 0.01, 2.0])
+    linear = np.asarray(dynax.resample(record, 0.01, inputs="linear").us)[:, 0]
+    np.testing.assert_allclose(linear, np.interp([0.0, 0.01, 0.02, 0.03, 0.04], ts, us[:, 0]))
+    with input_resampling("linear"):
+        np.testing.assert_allclose(np.asarray(dynax.resample(record, 0.01).us)[:, 0], linear)
+    np.testing.assert_allclose(np.asarray(dynax.resample(record, 0.01).us)[:, 0], [0.0, 0.0, 2.0, 2.0, 4.0])
+    with pytest.raises(dynax.UsageError, match="inputs"):
+        dynax.resample(record, 0.01, inputs="cubic")
