@@ -245,12 +245,9 @@ def _spectral_choice(trajectory: Trajectory, snr: float) -> FilterChoice:
     n = len(names) // 2
     velocities = names[n:]
     bands, noise = {}, {}
+    xs = np.asarray(trajectory.xs)  # columns cut on the host: a slice of a JAX array compiles a program per shape
     for k, name in enumerate(velocities):
-        reading = (
-            np.asarray(trajectory.xs[:, n + k])
-            if _reads_itself(trajectory)
-            else _noise_reading(trajectory.xs[:, k], trajectory.xs[:, n + k], fs)
-        )
+        reading = xs[:, n + k] if _reads_itself(trajectory) else _noise_reading(xs[:, k], xs[:, n + k], fs)
         floor, band = noise_floor_and_band(reading, fs, snr=snr)
         bands[name] = band
         noise[name] = float(np.sqrt(max(floor, 0.0) * nyquist))

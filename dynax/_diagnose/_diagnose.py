@@ -187,7 +187,7 @@ def _discover(problem: Problem, nominal: Nominal, yard: Yardstick, current: Curr
 def _model_summary(problem: Problem, model, errors, rmse, yard: Yardstick, terms=None) -> ModelSummary:
     """The `nominal` / `extended` object: parameters by report name, held-out error curve, validation block."""
     system = model.system if isinstance(model, Extended) else model
-    parameters = dict(zip(problem.names, map(float, nominal_values(system, problem.names))))
+    parameters = dict(zip(problem.names, map(float, np.asarray(nominal_values(system, problem.names)))))
     if isinstance(model, Extended):
         parameters.update({k: float(v) for t in model.terms for k, v in t.parameters(problem.system).items()})
     measured = np.asarray(problem.val_windows.xs)[:, yard.n_ref]

@@ -118,7 +118,9 @@ class Windows(eqx.Module):
         starts = np.asarray(self.starts)
         n_steps = self.ts.shape[1] - 1
         near = (starts[:, 0] == record) & (starts[:, 1] + n_steps >= start) & (starts[:, 1] < stop)
-        return eqx.tree_at(lambda w: w.weights, self, jnp.asarray(~near, self.weights.dtype) * self.weights)
+        # On the host (a product by 0 or 1 is exact in numpy as in XLA): eagerly, each would compile a program.
+        weights = np.asarray(self.weights)
+        return eqx.tree_at(lambda w: w.weights, self, jax.device_put(np.asarray(~near, weights.dtype) * weights))
 
     def take(self, index) -> "Windows":
         """The windows at `index` (host integers), in that order; gathered on the host, so no compiled gather."""
@@ -181,14 +183,19 @@ class Family(eqx.Module):
         return len(self.model.terms)
 
     def build(
-        self, nominal_values: Float[Array, " n_nominal"], coefficients: Float[Array, " n_candidates"]
+        self, nominal_values: Float[Array, " n_nominal"], coefficients: Float[Array, " n_candidates"] | np.ndarray
     ) -> Extended:
-        """The `Extended` model with these nominal parameter values and candidate coefficients."""
+        """The `Extended` model with these nominal parameter values and candidate coefficients (a numpy array of
+        them is moved to the device as one scalar each)."""
         model = self.model
         if self.names:
             system = nominal_parameters(model.system).with_vector(model.system, nominal_values)
             model = eqx.tree_at(lambda m: m.system, model, system)
-        return eqx.tree_at(lambda m: [t.coefficient for t in m.terms], model, [c for c in coefficients])
+        if isinstance(coefficients, np.ndarray):  # from the host: each on the device, no compiled unstacking
+            each = [jax.device_put(c) for c in coefficients]
+        else:
+            each = [c for c in coefficients]
+        return eqx.tree_at(lambda m: [t.coefficient for t in m.terms], model, each)
 
     def coefficients(self, slots: Int[Array, " n_slots"], new: Int[Array, ""], p: Float[Array, " n_params"]):
         """All candidates' coefficients for a configuration: neutral except the slots and the new term."""
@@ -200,6 +207,21 @@ class Family(eqx.Module):
             + jax.nn.one_hot(new, self.n_candidates, dtype=p.dtype) * p[-1]
         )
         return self.neutral + delta
+
+    def host_coefficients(self, slots, new: int, p) -> np.ndarray:
+        """`coefficients` computed by numpy, for the host. `coefficients`' one-hot product adds to each candidate
+        at most one parameter and products of zero, so placing that parameter is the same number (a zero's sign
+        aside, which the neutral value's sum settles alike: no neutral value is -0); called eagerly,
+        `coefficients`' operations compile a small program each."""
+        n_nominal = len(self.names)
+        slots, p = np.asarray(slots), np.asarray(p, self.neutral.dtype)
+        delta = np.zeros(self.n_candidates, p.dtype)
+        for i, k in enumerate(slots):
+            if k >= 0:
+                delta[k] += p[n_nominal + i]
+        if new >= 0:
+            delta[new] += p[-1]
+        return np.asarray(self.neutral) + delta
 
     def scale(self, slots, new):
         """Per-parameter scale of a configuration (zero for parameters that are not fitted)."""

@@ -9,6 +9,7 @@ from statistics import NormalDist
 import time
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -105,11 +106,12 @@ def _fit_batch(problem: Problem, slots, new, p_init, say) -> _Batch:
     """Refit a batch of configurations on the training windows (one vmapped `fit_least_squares`) and
     roll every fitted model out on the held-out windows."""
     dtype = problem.family.neutral.dtype
-    slots, new = jnp.asarray(slots), jnp.asarray(new)
-    free = jnp.ones(problem.n_params, dtype)
+    # Host arrays moved by `device_put`: `jnp.asarray` and `jnp.ones` compile a small program for each new shape.
+    slots, new = _on_device(slots), _on_device(new)
+    free = _on_device(np.ones(problem.n_params, dtype))
     start = time.perf_counter()
     p, cost, std, steps = fit_configurations(
-        problem.family, problem.train_windows, slots, new, jnp.asarray(p_init, dtype), free
+        problem.family, problem.train_windows, slots, new, _on_device(p_init, dtype), free
     )
     errors = np.asarray(validate_configurations(problem.family, problem.val_windows, slots, new, p))
     batch = _Batch(
@@ -125,6 +127,12 @@ def _fit_batch(problem: Problem, slots, new, p_init, say) -> _Batch:
         f"(Levenberg-Marquardt, {int(batch.steps.max())} steps for the slowest)"
     )
     return batch
+
+
+def _on_device(a, dtype=None) -> jax.Array:
+    """The host array `a` (as `dtype`) on the device: the same values and dtype as `jnp.asarray(a, dtype)` (strong
+    types both), without the copy program that `jnp.asarray` and `jnp.ones` compile for every new shape."""
+    return jax.device_put(np.asarray(a, dtype))
 
 
 def _cross_fit(problem: Problem, yard: Yardstick, current_slots, new, batch: _Batch, say) -> _Batch:
@@ -161,9 +169,9 @@ def _cross_fit(problem: Problem, yard: Yardstick, current_slots, new, batch: _Ba
     dtype = problem.family.neutral.dtype
     start = time.perf_counter()
     n = len(batch.p)
-    slots = jnp.asarray(np.tile(current_slots, (n, 1)))
-    new = jnp.asarray(new)
-    free = jnp.ones(problem.n_params, dtype)
+    slots = _on_device(np.tile(current_slots, (n, 1)))
+    new = _on_device(new)
+    free = _on_device(np.ones(problem.n_params, dtype))
     fold_of = cv_fold_of(problem.folds, yard.cv_windows)
     # Each fold's refit simulates the span of windows that holds the left-out fold's (a third of them with three
     # runs, not all), every span as long as the longest: one shape, so one compiled rollout for all folds. A span
@@ -184,7 +192,7 @@ def _cross_fit(problem: Problem, yard: Yardstick, current_slots, new, batch: _Ba
         # A held-out block's test windows reach one reference horizon past it: the fit leaves out every window
         # that shares a sample with that span (with whole runs as folds, the run).
         left_out = problem.train_windows.without_span(fold.record, fold.start, fold.stop + yard.n_ref)
-        p, _, _, _ = fit_configurations(problem.family, left_out, slots, new, jnp.asarray(batch.p, dtype), free)
+        p, _, _, _ = fit_configurations(problem.family, left_out, slots, new, _on_device(batch.p, dtype), free)
         first = min(first, total - width)
         span = yard.cv_windows.take(np.arange(first, first + width))
         errors = np.asarray(validate_configurations(problem.family, span, slots, new, p))
@@ -224,15 +232,11 @@ def _starting_point(problem: Problem):
 def _screened(problem: Problem, current_slots, current_p, remaining):
     """Each of `remaining`'s linearised held-out gain on one-step residuals and its step (`screen`), from the
     configuration `current_slots`, `current_p`."""
-    dtype = problem.family.neutral.dtype
     n_nom = len(problem.names)
-    coefficients = problem.family.coefficients(
-        jnp.asarray(current_slots), jnp.asarray(-1), jnp.asarray(current_p, dtype)
-    )
     return screen(
         problem.family,
         current_p[:n_nom],
-        np.asarray(coefficients),
+        problem.family.host_coefficients(current_slots, -1, current_p),
         problem.train,
         problem.validation,
         remaining,
@@ -439,9 +443,10 @@ def _note_moved(problem: Problem, p) -> None:
     system, names = problem.system, problem.names
     size = set(size_parameter_names(system))
     given = np.asarray(nominal_values(system, names), float)
+    refit = np.asarray(problem.family.refit)  # read on the host: indexing the array compiles a comparison
     moved = []
     for i, n in enumerate(names):
-        if n in size and problem.family.refit[i] > 0 and given[i] > 0:
+        if n in size and refit[i] > 0 and given[i] > 0:
             ratio = float(p[i]) / given[i]
             if not 1 / OTHER_MACHINE_FACTOR <= ratio <= OTHER_MACHINE_FACTOR:
                 moved.append(f"{n} from {given[i]:.4g} to {float(p[i]):.4g}")

@@ -10,6 +10,7 @@ import functools
 from typing import NamedTuple
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -241,7 +242,11 @@ class Problem:
 
     def model_of(self, slots, p):
         """The extended model (every candidate; neutral but for `slots`) at parameters `p`."""
-        return self.family.model_for(jnp.asarray(slots), jnp.asarray(-1), jnp.asarray(p, self.family.neutral.dtype))
+        # The coefficients on the host (`Family.host_coefficients`): eagerly, `model_for`'s one-hot product and the
+        # unstacking of the coefficients compile a program each.
+        p = np.asarray(p, self.family.neutral.dtype)
+        values = jax.device_put(p[: len(self.names)])
+        return self.family.build(values, self.family.host_coefficients(slots, -1, p))
 
 
 def check_arguments(system, mode, horizons, selection) -> None:
@@ -493,7 +498,7 @@ def _note_held(system, family, refit_names, mode, notes) -> None:
         return
     held = [n for n, r in zip(family.names, np.asarray(family.refit)) if r == 0]
     if held and mode.parameters is None:
-        values = nominal_values(system, family.names)
+        values = np.asarray(nominal_values(system, family.names))
         notes.append(
             "Refit mode refits "
             + ", ".join(refit_names)

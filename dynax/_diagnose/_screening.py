@@ -76,7 +76,10 @@ def _secant(family, values, coefficients, step, xs, zs, us, us_before):
 def screening_data(family, values, coefficients, trajectory, residual_fn, length: int = 0):
     """Residuals and sensitivities on one record: `(r (time, n_vel), J_nominal (time, n_vel, n_nom), J_candidates (time,
     n_vel, n_cand))`; the per-sample functions run on the record padded to `length` samples or more (`padded`)."""
-    model = family.build(jnp.asarray(values), jnp.asarray(coefficients))
+    # Moved by `device_put` and, the coefficients, as one scalar each (`Family.build`): `jnp.asarray` of a host array
+    # and the unstacking of a device one compile a program each.
+    values, coefficients = jax.device_put(np.asarray(values)), np.asarray(coefficients)
+    model = family.build(values, coefficients)
     r, _, _, keep = residual_fn(model, trajectory, length=length)
     ts = trajectory.ts
     w = sg_window(trajectory.dt)
@@ -89,7 +92,7 @@ def screening_data(family, values, coefficients, trajectory, residual_fn, length
     us_host = np.asarray(us)
     us_before = np.concatenate([us_host[:1], us_host[:-1]])
     on_grid = padded(ts, xs, zs, us, us_before, length=length)[1:]
-    directions = _directions(family, jnp.asarray(values), jnp.asarray(coefficients), *on_grid)
+    directions = _directions(family, values, jax.device_put(coefficients), *on_grid)
     J_nom, J_c, J_u = (np.asarray(a)[:n] for a in directions)
     du = savitzky_golay(ts, us, window=w, order=2, deriv=1)  # (time, n_inputs)
     J_c = np.array(J_c)

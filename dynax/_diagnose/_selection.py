@@ -154,7 +154,7 @@ def on_physical_side(term, delta, partner, names, system) -> bool:
     if partner is None:
         return True
     i, alpha = partner
-    value = float(nominal_values(system, names)[i]) + alpha * float(delta)
+    value = float(np.asarray(nominal_values(system, names))[i]) + alpha * float(delta)
     return violated_bound(names[i], value, identification_hooks(system).base_parameter_kinds().get(names[i])) is None
 
 

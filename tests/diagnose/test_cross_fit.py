@@ -141,3 +141,37 @@ def test_a_held_out_block_leaves_out_every_fit_window_that_shares_a_sample_with_
     expected = ~((starts[:, 0] == 0) & (starts[:, 1] >= 350) & (starts[:, 1] < 600))
     assert np.array_equal(weights == 1.0, expected) and (weights[~expected] == 0).all()
     assert expected.sum() < len(expected) and (weights[starts[:, 0] == 1] == 1).all()
+
+
+def test_the_host_coefficients_are_the_compiled_ones_bit_for_bit():
+    """`Family.host_coefficients` (numpy, for the host) gives `Family.coefficients`' numbers for every configuration:
+    each slot, the new term, none, negative and zero parameters, zero and nonzero neutral values; and a model built
+    from them has the same leaves as one built from the compiled coefficients."""
+    import equinox as eqx
+    import jax
+
+    record = _axis_record(NOMINAL, seed=0, name="a.csv")
+    family = _family([record], (CoulombFriction(0, velocity_scale=0.01), InputOffset(0)))
+    rng = np.random.default_rng(0)
+    checked = 0
+    for neutral in ([0.0, 0.0], [1.0, 0.0], [0.0, -2.5]):
+        fam = eqx.tree_at(lambda f: f.neutral, family, jnp.asarray(neutral))
+        for slots in ([-1, -1], [0, -1], [1, -1], [1, 0], [-1, 1]):
+            for new in (-1, 0, 1):
+                if new >= 0 and new in slots:
+                    continue
+                for p in (rng.normal(size=7), -np.abs(rng.normal(size=7)), np.zeros(7), -np.zeros(7)):
+                    compiled = fam.coefficients(jnp.asarray(slots), jnp.asarray(new), jnp.asarray(p))
+                    host = fam.host_coefficients(np.asarray(slots), new, p)
+                    np.testing.assert_array_equal(host, np.asarray(compiled))
+                    assert np.array_equal(np.signbit(host), np.signbit(np.asarray(compiled)))
+                    checked += 1
+    assert checked == 3 * 10 * 4
+    values = jnp.asarray(np.asarray([95.0, 200.0, 1.0, 1.0]))
+    coefficients = np.asarray([0.3, -0.0])
+    by_host = jax.tree.leaves(family.build(values, coefficients))
+    by_device = jax.tree.leaves(family.build(values, jnp.asarray(coefficients)))
+    assert len(by_host) == len(by_device)
+    for a, b in zip(by_host, by_device):
+        assert isinstance(a, jax.Array) and a.dtype == b.dtype and a.weak_type == b.weak_type
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
