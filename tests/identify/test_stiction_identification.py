@@ -86,6 +86,18 @@ def fit(records, method=dynax.Dynamic(static_friction=True)):
     )
 
 
+def least_squares_only(records):
+    """`identify` with friction at rest read by the least-squares stage alone (no refinement, nothing held out)."""
+    return dynax.identify(
+        dynax.DoublePendulum(),
+        records,
+        dynax.Dynamic(static_friction=True),
+        friction="coulomb",
+        refine=False,
+        validation=dynax.Validate(holdout=0),
+    )
+
+
 def stiction_terms(system):
     terms = system.terms if isinstance(system, dynax.Extended) else ()
     return {t.joint: float(t.coefficient) for t in terms if isinstance(t, dynax.Stiction)}
@@ -409,14 +421,7 @@ def test_the_least_squares_level_is_read_without_the_slow_rows(name, joint):
     from tests.hidden_cases import CASES, records
 
     (case,) = [c for c in CASES if c.name == name]
-    result = dynax.identify(
-        dynax.DoublePendulum(),
-        list(records(case)),
-        dynax.Dynamic(static_friction=True),
-        friction="coulomb",
-        refine=False,
-        validation=dynax.Validate(holdout=0),
-    )
+    result = least_squares_only(list(records(case)))
     (level,) = result.static_friction.joints
     assert level.joint == joint and level.kind == "breakaway"
     np.testing.assert_allclose(level.level, case.size, rtol=0.1)
@@ -435,14 +440,7 @@ def test_the_slow_row_switch_restores_the_refit_before_the_rule_and_the_stages_s
 
     def identify(**switch):
         with least_squares_seen() as seen, slow_rows(**switch):
-            result = dynax.identify(
-                dynax.DoublePendulum(),
-                list(records(case)),
-                dynax.Dynamic(static_friction=True),
-                friction="coulomb",
-                refine=False,
-                validation=dynax.Validate(holdout=0),
-            )
+            result = least_squares_only(list(records(case)))
         return result.static_friction, seen
 
     static, seen = identify(band=0.0)
