@@ -604,7 +604,8 @@ def stamp_findings(tr, ts, source, values, pairs, measured):
     sense = "late" if np.all(shifts > 0) else "early" if np.all(shifts < 0) else "late or early"
     message = (
         f"{rows.size} time stamp{'s' if rows.size > 1 else ''} (row{'s' if rows.size > 1 else ''} {shown}) "
-        f"disagree{'' if rows.size > 1 else 's'} with the positions read at them: {low:.2g} to {high:.2g} ms "
+        f"disagree{'' if rows.size > 1 else 's'} with the positions read at {'them' if rows.size > 1 else 'it'}: "
+        f"{low:.2g} to {high:.2g} ms "
         f"{sense} against a {dt * 1e3:.3g} ms median interval (a logger that stalls between reading its sensors "
         "and its clock)"
     )
