@@ -584,10 +584,11 @@ def stamp_findings(tr, ts, source, values, pairs, measured):
     cubic through its four neighbours along the motion, by `STAMP_SIGNIFICANCE` errors and a quarter of the
     median interval in time (`sample_times_from_positions`; clean records, jittered or not, move none). A
     logger that reads its encoders, stalls, then reads its clock stamps the angles late (the DFKI rig's run 12:
-    43 rows, 0.5 to 4.1 ms late at a 1.6 ms median interval). A warning: the finding names the rows, how late,
-    and what the measured velocities (`measured`: velocity -> position) read wrong there against central
-    differences on the times the positions imply, the fix (`--velocities positions`) that differentiates the
-    angles on those times; the positions themselves stay on their stamps."""
+    43 rows, 0.5 to 4.1 ms late at a 1.6 ms median interval). A warning: the finding names the rows and how late;
+    where the measured velocities (`measured`: velocity -> position) miss there by more than twice their worst
+    elsewhere against central differences on the times the positions imply (a logger that differences its
+    stamps), by how much, with the fix (`--velocities positions`) that differentiates the angles on those times;
+    else that they agree (read with the angles). The positions themselves stay on their stamps."""
     from ._derivatives import sample_times_from_positions
 
     positions = list(dict.fromkeys(pairs.values()))
@@ -617,7 +618,6 @@ def stamp_findings(tr, ts, source, values, pairs, measured):
         touched[np.clip(np.concatenate([rows - 1, rows, rows + 1]), 0, len(ts) - 1)] = True
         misses = {v: np.abs(values[v] - np.gradient(values[q], times)) for v, q in measured.items()}
         worst = {v: float(np.max(m[touched])) for v, m in misses.items()}
-        column = max(worst, key=worst.__getitem__)
         # the logged velocities are harmed where they miss there by more than twice their worst elsewhere (a
         # logger that differences its stamps); read with the angles, they agree there as anywhere else
         harmed = {v for v, m in misses.items() if worst[v] > 2.0 * float(np.percentile(m[~touched], 99))}
