@@ -186,14 +186,7 @@ def test_stick_band_stays_physical_and_the_speed_noise_at_rest_is_reported():
         xs = np.asarray(trajectory.xs).copy()
         xs[:, 2:] += sigma * rng.standard_normal(xs[:, 2:].shape)
         data.append(dataclasses.replace(trajectory, xs=jnp.asarray(xs)))
-    result = dynax.identify(
-        dynax.DoublePendulum(),
-        data,
-        dynax.Dynamic(static_friction=True),
-        friction="coulomb",
-        refine=False,
-        validation=dynax.Validate(holdout=0),
-    )
+    result = least_squares_only(data)
     joints = result.static_friction.joints
     assert {j.joint for j in joints} == {0, 1}
     for j in joints:
@@ -353,14 +346,7 @@ def test_static_friction_at_one_joint_adds_no_static_level_at_the_other(name):
     (case,) = [c for c in CASES if c.name == name]
     truth = {"q1": 0, "q2": 1}[case.where]
     train, _ = records(case)
-    result = dynax.identify(
-        dynax.DoublePendulum(),
-        [train],
-        dynax.Dynamic(static_friction=True),
-        friction="coulomb",
-        refine=False,
-        validation=dynax.Validate(holdout=0),
-    )
+    result = least_squares_only([train])
     found = result.static_friction
     assert {j.joint for j in found.joints} <= {truth} and set(stiction_terms(result.system)) <= {truth}
     other = [s for s in found.stretches if s.joint != truth and s.held != 0.0]
