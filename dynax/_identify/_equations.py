@@ -45,6 +45,18 @@ def uniformly_sampled(trajectory: Trajectory) -> Trajectory:
     return trajectory if trajectory.is_uniform else resample(trajectory, trajectory.dt)
 
 
+def row_times(records, settings, counts) -> list[np.ndarray]:
+    """Each record's time of each of its equation rows (`Dynamic`'s, one block per joint): row `k` of a
+    record is its sample `trim + k * decimate` at its median interval (the equations are trimmed and then
+    decimated, `settings`; a record is resampled uniformly where it is low-passed)."""
+    out = []
+    for record, setting, count in zip(records, settings, counts):
+        ts = np.asarray(uniformly_sampled(record).ts if setting.get("lowpass_hz") is not None else record.ts)
+        samples = setting["trim"] + np.arange(count) * setting["decimate"]
+        out.append(ts[np.minimum(samples, len(ts) - 1)])
+    return out
+
+
 def _lowpass(trajectory, ys, cutoff_hz, order):
     return butterworth_filtfilt(trajectory.ts, ys, cutoff_hz=cutoff_hz, order=order)
 

@@ -19,7 +19,7 @@ from .._errors import UsageError
 from .._fit import serial_covariance, Solution
 from .._model._system import AbstractSystem
 from ._consistency import check_consistency, Consistency, consistent_least_squares, InconsistentEstimateWarning
-from ._equations import joint_weights, stacked_equations
+from ._equations import joint_weights, row_times, stacked_equations
 from ._least_squares import IdentifiabilityError, least_squares
 from ._offsets import driven_joints, offset_groups, record_labels, record_offsets, RecordOffsets, without_offsets
 from ._record_friction import coulomb_columns, record_friction, RecordFriction
@@ -165,14 +165,27 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
     fitted = fitted_system(system, names, estimate)
     qs = joint_positions(system, trajectories)
     check = check_consistency(fitted, names, estimate, qs, warn=consistency == "check")
+    reversed_named = False
     if check.violated and consistency != "off":
         error = float(relative_equation_error(a, y, estimate))
         solve = functools.partial(least_squares, a, names=names, weights=weights, rcond=rcond)
-        _warn_if_inputs_reversed(system, names, (a, y), solve, qs, error, trajectories[0].input_names)
+        reversed_named = _warn_if_inputs_reversed(system, names, (a, y), solve, qs, error, trajectories[0].input_names)
         _warn_if_degrees(given, trajectories, error)
         _warn_if_swapped(given, trajectories, error)
         plain_std = _serially_robust(fit, a, y, weights, estimate, record_rows)[0].std_errors
         _warn_if_zero_upright(fitted, names, estimate, plain_std, qs)
+    if counts and consistency != "off" and rests is None and not reversed_named:  # not a refit of this stage
+
+        def fit_rows(ys):  # `a` has its offsets taken out already; `ys` the same way, column by column
+            w = np.ones(len(ys)) if weights is None else np.asarray(weights, dtype=float)
+            for rows in groups or ():
+                ys[rows] -= w[rows] @ ys[rows] / max(float(np.sum(w[rows])), np.finfo(float).tiny)
+            return np.asarray(a, dtype=float), ys, w
+
+        error = float(relative_equation_error(a, y, estimate))
+        _warn_if_input_flips_partway(
+            system, names, (raw_a, raw_y), fit_rows, qs, (error, bool(check.violated)), trajectories, settings, counts
+        )
     if consistency == "constrain" and check.violated:
         estimate, _ = consistent_least_squares(system, names, a, y, weights, start=fit.value)
         fitted = fitted_system(system, names, estimate)
@@ -333,13 +346,14 @@ def _best_subset(n: int, refit, error: float):
     return best
 
 
-def _warn_if_inputs_reversed(system, names, equations, solve, qs, error, input_names) -> None:
+def _warn_if_inputs_reversed(system, names, equations, solve, qs, error, input_names) -> bool:
     """Where the estimate is inconsistent, try each set of the recorded inputs with its sign flipped:
     if one gives a consistent estimate and at most `REVERSED_GAIN` of the equation error, warn that
     those inputs look reversed, with the `scale` that fixes them.
 
     `equations` is the stage's `(a, y)`, `solve(y)` its weighted least-squares fit of `a` to other
     right-hand sides, `error` its relative equation error and `input_names` the records' inputs.
+    Returns whether it warned.
 
     A torque counted the other way than the model's joint angle (a motor mounted the other way, a
     current's sign) is the commonest mix-up of real data, and least squares meets it with an estimate
@@ -348,17 +362,10 @@ def _warn_if_inputs_reversed(system, names, equations, solve, qs, error, input_n
     candidate is one more least-squares solve. Systems whose inputs share a joint are not probed.
     """
     a, y = equations
-    base = split_terms(system)[0]
-    b = np.asarray(base.input_matrix())
-    driven = [np.flatnonzero(np.abs(b[:, k]) > 0) for k in range(b.shape[1])]
-    n_joints = b.shape[0]
-    if (
-        a.shape[0] % n_joints
-        or any(len(d) == 0 for d in driven)
-        or len(np.concatenate(driven)) != len(set(np.concatenate(driven).tolist()))
-    ):
-        return
-    rows = a.shape[0] // n_joints  # rows stacked joint by joint
+    driven = _driven_joints(system, a.shape[0])
+    if driven is None:
+        return False
+    rows = a.shape[0] // len(split_terms(system)[0].joint_names)  # rows stacked joint by joint
     inputs = tuple(input_names)
 
     def refit(flipped):
@@ -380,7 +387,7 @@ def _warn_if_inputs_reversed(system, names, equations, solve, qs, error, input_n
 
     best = _best_subset(len(driven), refit, error)
     if best is None:
-        return
+        return False
     which = [inputs[k] for k in best[0]]
     change = (
         f"the equation error falls from {error:.0%} to {best[1]:.0%}"
@@ -399,6 +406,144 @@ def _warn_if_inputs_reversed(system, names, equations, solve, qs, error, input_n
         InconsistentEstimateWarning,
         stacklevel=7,
     )
+    return True
+
+
+def _driven_joints(system, n_rows: int) -> list[np.ndarray] | None:
+    """The joints each input drives (the base system's input matrix), or `None` where a sign flip of an input
+    is not one of its joints' equation rows: inputs that share a joint, an input that drives none, or rows
+    that are not stacked joint by joint."""
+    base = split_terms(system)[0]
+    b = np.asarray(base.input_matrix())
+    driven = [np.flatnonzero(np.abs(b[:, k]) > 0) for k in range(b.shape[1])]
+    if (
+        n_rows % b.shape[0]
+        or any(len(d) == 0 for d in driven)
+        or len(np.concatenate(driven)) != len(set(np.concatenate(driven).tolist()))
+    ):
+        return None
+    return driven
+
+
+FLIP_STRETCHES = 16  # where a record's input may turn its sign: at each sixteenth of it, then refined row by row
+FLIP_GAIN = 0.5  # negating the stretch must remove at least half of the squared equation error
+
+
+def _warn_if_input_flips_partway(system, names, raw, fit_rows, qs, fitted, trajectories, settings, counts) -> None:
+    r"""Look for an input whose sign turns part way through a record (unless an input is reversed throughout):
+    negate it from each of `FLIP_STRETCHES - 1` cuts of each record to the record's end, or from its start to
+    the cut, solve again, and refine the best cut row by row. If one such record stretch gives a consistent
+    estimate whose squared equation error is at most `FLIP_GAIN` of the stage's, warn with the record, the
+    input and the time, and the `--exclude` that leaves the stretch out: no `scale` is right for the whole
+    record.
+
+    `raw` is the stage's equations `(a, y)` as built (before force offsets are taken out), `fit_rows(y)` the
+    stage's equations for other right-hand sides `y` (columns), as solved (offsets taken out) with the rows'
+    weights, `fitted = (error, inconsistent)` the stage's relative equation error and whether its estimate
+    is physically inconsistent, and `counts` each record's rows per joint.
+
+    On a record whose inputs are right, negating a stretch of one adds error wherever the motion is, and noise
+    does not change with a sign: on the six DFKI runs and the EMPS record the best stretch leaves 1.00 to
+    9.95 times the squared error (a sliver at an end changes nothing), where a faulted stretch of the rig's
+    size, under its noise, leaves 0.27. So the search runs on every `Dynamic` fit: a consistent estimate
+    may hide the fault too (a record with both joints driven and `tau2` negated for its second half fits
+    consistently, with 94 % equation error).
+
+    A motor's direction or a current's sign that changes while recording (a controller's mode, a driver
+    reconfigured, or between two recordings) leaves each stretch a fine signal; least squares then fits the
+    two stretches' contradiction (a DFKI record with `tau2` negated from its middle on: equation error 85 %
+    where the record as logged leaves 19 %, and an output-error refinement that fits inertias a thousand times
+    too large). All candidates are one batched least-squares solve (numpy); the consistency of the best few
+    is checked.
+    """
+    a_raw, y_raw = (np.asarray(v, dtype=float) for v in raw)
+    error, inconsistent = fitted
+    driven = _driven_joints(system, a_raw.shape[0])
+    if driven is None or not counts:
+        return
+    total = sum(counts)
+    starts = np.concatenate([[0], np.cumsum(counts)])
+
+    def signs(record, k, cut, after):
+        sign = np.ones(len(y_raw))
+        span = slice(cut, counts[record]) if after else slice(0, cut)
+        for j in driven[k]:
+            first = j * total + starts[record]
+            sign[first + span.start : first + span.stop] = -1.0
+        return sign
+
+    a_fit, _, w_fit = fit_rows(y_raw[:, None].copy())
+
+    def errors(candidates):
+        a, ys, w = fit_rows(np.stack([y_raw * signs(*c) for c in candidates], axis=1))
+        sw = np.sqrt(w)[:, None]
+        estimates = np.linalg.lstsq(a * sw, ys * sw, rcond=None)[0]
+        return estimates, np.linalg.norm(a @ estimates - ys, axis=0) / np.linalg.norm(ys, axis=0)
+
+    first = 0 if len(counts) > 1 else 1  # of several records, one may be reversed throughout (cut 0)
+    coarse = [
+        (r, k, cut, after)
+        for r, count in enumerate(counts)
+        if count >= 2 * FLIP_STRETCHES
+        for k in range(len(driven))
+        for cut in sorted({int(c) for c in np.linspace(0, count, FLIP_STRETCHES + 1)[first:-1]})
+        for after in (True, False)
+    ]
+    if not coarse:
+        return
+    _, found = errors(coarse)
+    enough = np.sqrt(FLIP_GAIN) * error
+    order = [i for i in np.argsort(found) if found[i] <= enough]
+    if not order:
+        return
+    r, k, cut, _ = coarse[order[0]]
+    step = counts[r] // FLIP_STRETCHES  # refine the cut row by row between its neighbours
+    # both sides: where every input's equations are this input's (an acrobot's), negating one side is negating
+    # the other and the whole input, which only the consistency of the estimate tells apart
+    fine = [
+        (r, k, c, side) for c in range(max(first, cut - step), min(counts[r], cut + step + 1)) for side in (True, False)
+    ]
+    estimates, found = errors(fine)
+    ys = fit_rows(np.stack([y_raw * signs(*c) for c in fine], axis=1))[1]
+    for i in np.argsort(found)[:4]:  # the best few: consistency is the costly check
+        if found[i] > enough:
+            break
+        candidate = jnp.asarray(estimates[:, i])
+        if check_consistency(fitted_system(system, names, candidate), names, candidate, qs, warn=False).violated:
+            # short of consistency (a friction level a little below zero, as a clean record's own estimate may
+            # be): judged by the consistent estimate's equation error, as the stage will fit it
+            candidate = consistent_least_squares(system, names, a_fit, ys[:, i], w_fit, start=candidate)[0]
+            found[i] = float(relative_equation_error(jnp.asarray(a_fit), jnp.asarray(ys[:, i]), candidate))
+            if found[i] > enough:
+                continue
+        at, after = fine[i][2:]  # the sign turns between rows `at - 1` and `at`: the span to leave out holds both
+        label, input_name = record_labels(trajectories)[r], trajectories[0].input_names[k]
+        if at == 0:
+            where, fix = (
+                "throughout",
+                "the other records agree with the model: correct its sign in that file, or leave it out",
+            )
+        else:
+            times = row_times(trajectories[r : r + 1], settings[r : r + 1], counts[r : r + 1])[0]
+            t = float(times[at - 1] if after else times[at])
+            where = (
+                f"from about t = {t:.4g} s to the record's end" if after else f"from its start to about t = {t:.4g} s"
+            )
+            span = f"{label}@{t:.6g}:" if after else f"{label}@:{t:.6g}"
+            fix = (
+                f"no scale is right for the whole record: leave the stretch out (`--exclude {span}`; in Python "
+                "`exclude_stretches`), or correct its sign in the file"
+            )
+        inconsistency = " and is physically inconsistent" if inconsistent else ""
+        warnings.warn(
+            f"file {label}: the recorded {input_name} looks reversed {where} (and agrees with the model's joint "
+            f"positions elsewhere): the least-squares estimate leaves an equation error of {error:.0%}{inconsistency}, "
+            f"and with {input_name} negated there a consistent estimate's falls to {found[i]:.0%}. A motor's "
+            f"direction or a current's sign that changed while recording? If so, {fix}.",
+            InconsistentEstimateWarning,
+            stacklevel=7,
+        )
+        return
 
 
 def _warn_if_degrees(given, trajectories, error) -> None:

@@ -132,7 +132,7 @@ from .._data._trajectory import Trajectory
 from .._model._extensions import CoulombFriction, Extended
 from .._model._extensions._stiction import LEAST_STICK_BAND, Stiction
 from .._model._extensions._terms import AbstractJointTerm
-from ._equations import uniformly_sampled
+from ._equations import row_times, uniformly_sampled
 from ._regressors import applied_force, dynamic_regressor, positions_and_velocities, split_terms
 
 WINDOW_S = 0.05  # averaging window of the held torque: short against a ramp to breakaway, ten samples or more
@@ -282,14 +282,11 @@ def rest_row_weights(records, settings, counts, rests, n_joints: int) -> np.ndar
     """`Dynamic`'s row weights (stacked joint by joint, each through every record) that leave out a joint's
     rows while it rests: 0 there, 1 elsewhere; `None` where no row rests.
 
-    Row `k` of a record is its sample `trim + k * decimate` at its median interval (the equations are
-    trimmed and then decimated, `settings`)."""
+    Each row's time is `row_times`'."""
     blocks = []
+    times = row_times(records, settings, counts)
     for joint in range(n_joints):
-        for record, setting, count, stretches in zip(records, settings, counts, rests):
-            ts = np.asarray(uniformly_sampled(record).ts if setting.get("lowpass_hz") is not None else record.ts)
-            samples = setting["trim"] + np.arange(count) * setting["decimate"]
-            t = ts[np.minimum(samples, len(ts) - 1)]
+        for t, count, stretches in zip(times, counts, rests):
             keep = np.ones(count)
             for s in stretches:
                 if s.joint == joint:

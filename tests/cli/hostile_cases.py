@@ -973,6 +973,34 @@ CASES = [
         check=_written,
         heavy=True,
     ),
+    # A sign that turns part way through the record (a motor's direction reconfigured while recording): no
+    # scale is right for the whole record, so the stretch is named with the --exclude that leaves it out.
+    C(
+        "torque-sign-flips-partway",
+        "swapped",
+        lambda d, fx: _identify(
+            _acrobot(
+                d, fx, _set(slice(400, None), "tau2", lambda v: -v, header=PENDULUM), header=PENDULUM, table="pendulum"
+            ),
+            system="double_pendulum",
+            method="dynamic",
+        ),
+        "warn",
+        ("run.csv: the recorded tau2 looks reversed from about t = 4 s", "--exclude run.csv@4:"),
+        ("--scale tau2=-1",),
+        check=_written,
+        heavy=True,
+    ),
+    C(
+        "torque-sign-flips-partway-acrobot",
+        "swapped",
+        lambda d, fx: _identify(_acrobot(d, fx, _set(slice(None, 300), "tau2", lambda v: -v)), method="dynamic"),
+        "warn",
+        ("run.csv: the recorded tau2 looks reversed from its start to about t = 3", "--exclude run.csv@:3"),
+        ("--scale tau2=-1",),
+        check=_written,
+        heavy=True,
+    ),
     C(
         "time-epoch-offset",
         "clean",

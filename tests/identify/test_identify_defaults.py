@@ -254,6 +254,40 @@ def test_a_reversed_torque_is_named_where_the_estimate_is_inconsistent():
     assert len(said) == 1 and "tau1, tau2 look reversed" in said[0] and "--scale tau1=-1,tau2=-1" in said[0], said
 
 
+def test_a_torque_reversed_part_way_is_located_and_cutting_it_out_fits_the_truth():
+    # The same records with the elbow's torque negated from 6.3 s on (a driver reconfigured while recording):
+    # no scale is right for the whole record, so the warning names the record, the input and the time, and the
+    # `--exclude` that leaves the stretch out; following it fits what the record's first 6.3 s fit. Of two
+    # records, one with its shoulder torque negated throughout is named as that record.
+    model = rig_model()
+    record = recorded(model, 10.0, 21)
+    us = np.asarray(record.us).copy()
+    late = np.asarray(record.ts) >= 6.3
+    us[late, 1] *= -1.0
+    flipped = Trajectory(record.ts, record.xs, jnp.asarray(us), NAMES, ("tau1", "tau2"), source="rig.csv")
+    _, said = _least_squares_with_warnings(flipped)
+    said = [m for m in said if "reversed" in m]
+    assert len(said) == 1 and said[0].startswith("file rig.csv: the recorded tau2 looks reversed from about t = "), said
+    t = float(said[0].split("from about t = ")[1].split(" s")[0])
+    assert 6.25 <= t <= 6.3, said  # the stretch to leave out starts at the row before the turn, or at it
+    assert f"--exclude rig.csv@{t:.6g}:" in said[0] and "--scale" not in said[0], said
+    kept = dynax.exclude_stretches(flipped, [(t, np.inf)])
+    assert len(kept) == 1
+    cut, said = _least_squares_with_warnings(kept[0])
+    head, _ = _least_squares_with_warnings(dynax.exclude_stretches(record, [(t, np.inf)])[0])
+    assert not [m for m in said if "reversed" in m], said
+    np.testing.assert_allclose(np.asarray(cut.solution.value), np.asarray(head.solution.value), rtol=1e-9)
+
+    other = recorded(model, 10.0, 22)
+    turned = Trajectory(
+        other.ts, other.xs, other.us * jnp.asarray([[-1.0, 1.0]]), NAMES, ("tau1", "tau2"), source="second.csv"
+    )
+    first = Trajectory(record.ts, record.xs, record.us, NAMES, ("tau1", "tau2"), source="first.csv")
+    _, said = _least_squares_with_warnings([first, turned])
+    said = [m for m in said if "reversed" in m]
+    assert len(said) == 1 and said[0].startswith("file second.csv: the recorded tau1 looks reversed throughout"), said
+
+
 def test_columns_mapped_to_the_other_joint_are_named_where_the_estimate_is_inconsistent():
     # The same records with the torques read the other way round (a mapping that takes one motor's column
     # for the other's), with the joints' angles and velocities swapped, and with both (the joints numbered
