@@ -17,10 +17,11 @@ from .._context import set_within
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
 from .._fit import serial_covariance, Solution
+from .._model._linear_in_parameters import size_parameter_names
 from .._model._system import AbstractSystem
 from ._consistency import check_consistency, Consistency, consistent_least_squares, InconsistentEstimateWarning
 from ._equations import joint_weights, row_times, stacked_equations
-from ._least_squares import IdentifiabilityError, least_squares
+from ._least_squares import IdentifiabilityError, least_squares, poorly_determined
 from ._offsets import driven_joints, offset_groups, record_labels, record_offsets, RecordOffsets, without_offsets
 from ._record_friction import coulomb_columns, record_friction, RecordFriction
 from ._regressors import positions_and_velocities, split_terms, with_parameters
@@ -184,7 +185,15 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
 
         error = float(relative_equation_error(a, y, estimate))
         _warn_if_input_flips_partway(
-            system, names, (raw_a, raw_y), fit_rows, qs, (error, bool(check.violated)), trajectories, settings, counts
+            system,
+            names,
+            (raw_a, raw_y),
+            (fit_rows, functools.partial(least_squares, a, names=names, weights=weights, rcond=rcond), record_rows),
+            qs,
+            (error, bool(check.violated)),
+            trajectories,
+            settings,
+            counts,
         )
     if consistency == "constrain" and check.violated:
         estimate, _ = consistent_least_squares(system, names, a, y, weights, start=fit.value)
@@ -429,25 +438,29 @@ FLIP_STRETCHES = 16  # where a record's input may turn its sign: at each sixteen
 FLIP_GAIN = 0.5  # negating the stretch must remove at least half of the squared equation error
 
 
-def _warn_if_input_flips_partway(system, names, raw, fit_rows, qs, fitted, trajectories, settings, counts) -> None:
+def _warn_if_input_flips_partway(system, names, raw, solvers, qs, fitted, trajectories, settings, counts) -> None:
     r"""Look for an input whose sign turns part way through a record (unless an input is reversed throughout):
     negate it from each of `FLIP_STRETCHES - 1` cuts of each record to the record's end, or from its start to
     the cut, solve again, and refine the best cut row by row. If one such record stretch gives a consistent
-    estimate whose squared equation error is at most `FLIP_GAIN` of the stage's, warn with the record, the
-    input and the time, and the `--exclude` that leaves the stretch out: no `scale` is right for the whole
-    record.
+    estimate whose squared equation error is at most `FLIP_GAIN` of the stage's, and whose size parameters
+    the records determine (relative standard errors robust to serial correlation under `POORLY_DETERMINED`),
+    warn with the record, the input and the time, and the `--exclude` that leaves the stretch out: no
+    `scale` is right for the whole record.
 
-    `raw` is the stage's equations `(a, y)` as built (before force offsets are taken out), `fit_rows(y)` the
-    stage's equations for other right-hand sides `y` (columns), as solved (offsets taken out) with the rows'
-    weights, `fitted = (error, inconsistent)` the stage's relative equation error and whether its estimate
-    is physically inconsistent, and `counts` each record's rows per joint.
+    `raw` is the stage's equations `(a, y)` as built (before force offsets are taken out); `solvers` holds
+    `fit_rows(y)`, the stage's equations for other right-hand sides `y` (columns) as solved (offsets taken
+    out) with the rows' weights, `solve(y)`, the stage's least-squares fit to one of them, and each record's
+    rows per joint; `fitted = (error, inconsistent)` is the stage's relative equation error and whether its
+    estimate is physically inconsistent, and `counts` each record's rows per joint.
 
-    On a record whose inputs are right, negating a stretch of one adds error wherever the motion is, and noise
-    does not change with a sign: on the six DFKI runs and the EMPS record the best stretch leaves 1.00 to
-    9.95 times the squared error (a sliver at an end changes nothing), where a faulted stretch of the rig's
-    size, under its noise, leaves 0.27. So the search runs on every `Dynamic` fit: a consistent estimate
-    may hide the fault too (a record with both joints driven and `tau2` negated for its second half fits
-    consistently, with 94 % equation error).
+    On a record whose inputs are right, negating a stretch of one adds error wherever the motion is: on the
+    six DFKI runs and the EMPS record the best stretch leaves 1.00 to 9.95 times the squared error (a sliver
+    at an end changes nothing), where a faulted stretch of the rig's size, under its noise, leaves 0.27.
+    Where the motion is too small to determine the model, the error is the model's misfit, which a sign
+    can move (a rig held by its friction, moving 3 mrad: a stretch negated leaves 0.4 of it): such a fit
+    names nothing, as its size parameters are left to the noise. So the search runs on every `Dynamic`
+    fit: a consistent estimate may hide the fault too (a record with both joints driven and `tau2` negated
+    for its second half fits consistently, with 94 % equation error).
 
     A motor's direction or a current's sign that changes while recording (a controller's mode, a driver
     reconfigured, or between two recordings) leaves each stretch a fine signal; least squares then fits the
@@ -457,6 +470,7 @@ def _warn_if_input_flips_partway(system, names, raw, fit_rows, qs, fitted, traje
     is checked.
     """
     a_raw, y_raw = (np.asarray(v, dtype=float) for v in raw)
+    fit_rows, solve, record_rows = solvers
     error, inconsistent = fitted
     driven = _driven_joints(system, a_raw.shape[0])
     if driven is None or not counts:
@@ -516,6 +530,8 @@ def _warn_if_input_flips_partway(system, names, raw, fit_rows, qs, fitted, traje
             found[i] = float(relative_equation_error(jnp.asarray(a_fit), jnp.asarray(ys[:, i]), candidate))
             if found[i] > enough:
                 continue
+        if _leaves_sizes_to_noise(system, names, (a_fit, ys[:, i], w_fit), solve, candidate, record_rows):
+            continue
         at, after = fine[i][2:]  # the sign turns between rows `at - 1` and `at`: the span to leave out holds both
         label, input_name = record_labels(trajectories)[r], trajectories[0].input_names[k]
         if at == 0:
@@ -544,6 +560,20 @@ def _warn_if_input_flips_partway(system, names, raw, fit_rows, qs, fitted, traje
             stacklevel=7,
         )
         return
+
+
+def _leaves_sizes_to_noise(system, names, equations, solve, estimate, record_rows) -> bool:
+    """Whether the least-squares fit of `equations = (a, y, weights)` (by `solve(y)`) leaves a size parameter
+    of `estimate` to the noise: a relative standard error, robust to serial correlation, above
+    `POORLY_DETERMINED`."""
+    a, y, weights = equations
+    try:
+        sizes = size_parameter_names(split_terms(system)[0])
+        fit = solve(jnp.asarray(y))
+    except (UsageError, IdentifiabilityError):
+        return True
+    std = _serially_robust(fit, a, y, weights, estimate, record_rows)[0].std_errors
+    return bool(poorly_determined(names, np.asarray(estimate), np.asarray(std), sizes)) if sizes else False
 
 
 def _warn_if_degrees(given, trajectories, error) -> None:
