@@ -454,11 +454,11 @@ def _warn_if_input_flips_partway(system, names, raw, solvers, qs, fitted, trajec
     estimate is physically inconsistent, and `counts` each record's rows per joint.
 
     On a record whose inputs are right, negating a stretch of one adds error wherever the motion is: on the
-    six DFKI runs and the EMPS record the best stretch leaves 1.00 to 9.95 times the squared error (a sliver
-    at an end changes nothing), where a faulted stretch of the rig's size, under its noise, leaves 0.27.
-    Where the motion is too small to determine the model, the error is the model's misfit, which a sign
-    can move (a rig held by its friction, moving 3 mrad: a stretch negated leaves 0.4 of it): such a fit
-    names nothing, as its size parameters are left to the noise. So the search runs on every `Dynamic`
+    six DFKI runs the best stretch leaves 1.00 to 2.35 times the squared error, on the EMPS record 99 (a
+    sliver at an end changes nothing), where a faulted stretch of the rig's size, under its noise, leaves
+    0.27. Where the motion is too small to determine the model, the error is the model's misfit, which a
+    sign can move as much (a rig held by its friction, moving 3 mrad: 0.32): such a fit names nothing, as
+    its size parameters are left to the noise. So the search runs on every `Dynamic`
     fit: a consistent estimate may hide the fault too (a record with both joints driven and `tau2` negated
     for its second half fits consistently, with 94 % equation error).
 
