@@ -8,6 +8,10 @@ bias, motor lag and gain per motor), the candidates' simulation-error fits, and 
 test, and the nominal and extended models' held-out scores per group (position, velocity, attitude, body
 rate) at h = 1, 10, 50 steps beside the constant-velocity baseline (the report's `flight_error`).
 
+`--nominal lagged` diagnoses instead the rigid body fitted by the lagged criterion at the reference horizon,
+trusted (`Known()`): the map a 0.5 s judgement calls for, where the one-step map of a closed-loop flight predicts
+the rates 0.5 s ahead worse than holding them.
+
 Run: `python experiments/nanobench_diagnosis.py [--out DIR] [--max-terms N] [--min-samples N]`
 (default DIR `experiments/results/nanobench_diagnosis`). Writes `DIR/diagnosis.json` (findings with
 held-out gain and p-value, the per-group table), `DIR/diagnosis.md`, the diagnosis report
@@ -85,6 +89,14 @@ def main():
         "the thrust map (dynax.internal.thrust_parameters) or the roll, pitch and yaw motor weights",
     )
     parser.add_argument(
+        "--nominal",
+        choices=("one-step", "lagged"),
+        default="one-step",
+        help="the rigid body diagnosed: 'one-step' (Refit() mode: the one-step fit, its weights held or refitted as "
+        "--refit says) or 'lagged' (fitted by the lagged criterion at the reference horizon on the same "
+        "training stretches, then trusted: Known() mode)",
+    )
+    parser.add_argument(
         "--candidates",
         default="",
         help="comma-separated cause@where of the vocabulary to test, e.g. 'motor_delay@motors,rotor_drag@q' "
@@ -127,11 +139,19 @@ def main():
         "thrust": thrust_parameters(quad),
         "moments": tuple(n for n in names if n[:3] in ("dp/", "dq/", "dr/") and re.search(r"m[1-4]", n)),
     }[args.refit]
+    mode = dynax.Refit(parameters=refit)
+    if args.nominal == "lagged":
+        if refit is not None:
+            parser.error("--nominal lagged trusts the fitted weights: it takes no --refit")
+        lagged = dynax.Lagged(horizon=args.reference_horizon or 0.5, stride=20, max_iterations=10)
+        quad = dynax.fit_quadrotor(quad, diag_train, lagged).model
+        say(f"nominal fitted by the lagged criterion (H = {lagged.horizon:g} s)")
+        mode = dynax.Known()
     report = dynax.diagnose(
         quad,
         diag_train,
         diag_test,
-        mode=dynax.Refit(parameters=refit),
+        mode=mode,
         candidates=candidates,
         selection=dynax.Selection(
             max_terms=args.max_terms,
@@ -161,6 +181,7 @@ def main():
         "test": sorted({r.source for r in test}),
         "slice_s": args.slice_s,
         "refit": args.refit,
+        "nominal": args.nominal,
         "vocabulary": args.candidates or "all",
         "diagnosed_samples": {"train": sum(len(r) for r in diag_train), "test": sum(len(r) for r in diag_test)},
         "verdict": j["verdict"],
