@@ -130,7 +130,7 @@ from .._data._derivatives import butterworth_filtfilt
 from .._data._rest import Rest, rest_stretches, speed_noise_at_rest, WITHIN_NOISE
 from .._data._trajectory import Trajectory
 from .._model._extensions import CoulombFriction, Extended
-from .._model._extensions._stiction import LEAST_STICK_BAND, Stiction
+from .._model._extensions._stiction import LEAST_STICK_BAND, REST_DWELL_TIME, Stiction
 from .._model._extensions._terms import AbstractJointTerm
 from ._equations import uniformly_sampled
 from ._regressors import applied_force, dynamic_regressor, positions_and_velocities, split_terms
@@ -769,6 +769,7 @@ def with_stiction(system, joints: tuple[JointStaticFriction, ...]):
             velocity_scale=j.velocity_scale,
             held_force=j.held_force if j.held_position is not None else j.lower_bound,
             held_position=None if j.held_position is None else np.asarray(j.held_position),
+            dwell_time=REST_DWELL_TIME,
         )
         for j in joints
     ]
