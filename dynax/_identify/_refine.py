@@ -116,6 +116,10 @@ class ConsistentSystem(AbstractSystem):
     def vector_field(self, t, x, u):
         return self.model.vector_field(t, x, u)
 
+    def initial_state(self, x0, u0):
+        """The model's full state from a measured one (its internal states: `Extended.initial_state`)."""
+        return self.model.initial_state(x0, u0)
+
 
 INPUT_REACH = 3  # samples of the fit's grid either side that the input timing may reach
 
@@ -149,6 +153,12 @@ class TimedInputs(AbstractSystem):
         i = jnp.clip(jnp.floor(position), 0, 2 * self.reach - 1).astype(int)
         f = position - i
         return self.system.vector_field(t, x, (1 - f) * stencil[..., i, :] + f * stencil[..., i + 1, :])
+
+    def initial_state(self, x0, u0):
+        """`system`'s full state from a measured one, under the input recorded at the start (the stencil's
+        centre)."""
+        n = u0.shape[-1] // (2 * self.reach + 1)
+        return self.system.initial_state(x0, u0[..., self.reach * n : (self.reach + 1) * n])
 
 
 def _neighbour_names(names, reach):
