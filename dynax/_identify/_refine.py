@@ -281,7 +281,14 @@ def motion_records(
 @eqx.filter_jit
 def _segment_squares(system, x0, ts, xs, us, scale, simulation: FixedGrid):
     """Sum of squared scaled state residuals of each segment simulated from its initial state."""
-    sims = jax.vmap(lambda x, t, u: simulate(system, x, t, u, method=simulation, throw=False).xs)(x0, ts, us)
+    n = xs.shape[-1]
+
+    def start(x, u0):  # an extended model's internal states start as `Extended.initial_state` completes them
+        return system.initial_state(x, u0) if system.n_states > x.shape[0] else x
+
+    sims = jax.vmap(lambda x, t, u: simulate(system, start(x, u[0]), t, u, method=simulation, throw=False).xs[:, :n])(
+        x0, ts, us
+    )
     r = (sims - xs) / scale[None, None, :]
     r = jnp.where(jnp.isfinite(r), r, DIVERGED)  # as the fit counts a diverged rollout
     return jnp.sum(r**2, axis=(1, 2))

@@ -33,10 +33,11 @@ level a joint resting for a second has. With `dwell_time` $T_d$ the term carries
 its memory of rest $m \in [0, 1]$, which scales everything it adds (the hold in the band and the
 static excess in motion): with $w$ the band's weight below,
 
-$$\dot m = w(\dot q)\,\frac{1 - m}{T_d} - \big(1 - w(\dot q)\big)\,\frac{|\dot q|\,m}{d_s},$$
+$$\dot m = w(\dot q)\,\frac{1 - m}{T_d} - \big(1 - w(\dot q)\big)\,\frac{|\dot q|\,m}{d_s + |\dot q|\,\tau_h},$$
 
 so it builds over $T_d$ while the joint is in the band and is erased over a slip of $d_s$
-(`slip_distance`) once it slides: the contact's age, built at rest and worn by sliding, as in the
+(`slip_distance`) once it slides, and no faster than the hold time $\tau_h$ (so that a fast slip
+does not make the state stiff for a fixed-step integrator): the contact's age, built at rest and worn by sliding, as in the
 rate-and-state laws' ageing of contacts (Dieterich 1979; Ruina 1983), with the level linear in it. At $m = 0$ the joint has the friction of its other terms alone (the model without this term);
 at $m = 1$ the term acts as without a dwell. A state measured at rest starts with its memory built
 ($m_0 = w(\dot q_0)$, `Extended.initial_state`): a joint whose start speed is in the band is taken
@@ -180,10 +181,12 @@ class Stiction(AbstractJointTerm):
         return self.weight(dq)
 
     def memory_derivative(self, dq: Float[Array, ""], memory: Float[Array, ""]) -> Float[Array, ""]:
-        r"""$\dot m = w\,(1 - m) / T_d - (1 - w)\,|\dot q|\,m / d_s$: built in the band over the dwell time,
-        erased over the slip distance in motion."""
+        r"""$\dot m = w\,(1 - m) / T_d - (1 - w)\,|\dot q|\,m / (d_s + |\dot q|\,\tau_h)$: built in the band over
+        the dwell time, erased over the slip distance in motion, and no faster than the hold time."""
         w = self.weight(dq)
-        return w * (1.0 - memory) / self.dwell_time - (1.0 - w) * jnp.abs(dq) * memory / self.slip_distance
+        speed = jnp.abs(dq)
+        wear = speed / (self.slip_distance + speed * self.hold_time)
+        return w * (1.0 - memory) / self.dwell_time - (1.0 - w) * wear * memory
 
     def parameter_filter(self):
         spec = super().parameter_filter()
