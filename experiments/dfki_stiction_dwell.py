@@ -58,7 +58,8 @@ def score(models, record, lab=None) -> dict:
         for name, m in models.items()
     }
     if lab is not None:
-        out["lab_model_3.0"] = [float(v) for v in dynax.held_out_error(lab, [record], HORIZONS, start_at_rest=True).rmse]
+        lab_error = dynax.held_out_error(lab, [record], HORIZONS, start_at_rest=True)
+        out["lab_model_3.0"] = [float(v) for v in lab_error.rmse]
     for name, r in out.items():
         print(f"  {name}: " + " / ".join(f"{v:.5f}" for v in r), flush=True)
     return out
@@ -91,9 +92,11 @@ def main(argv=None):
             name: [100.0 * (a / b - 1.0) for a, b in zip(r, before, strict=True)] for name, r in entry.items()
         }
         entry["without_stiction_fit"] = before
-        print("  change [%]: " + "; ".join(
-            f"{k} " + "/".join(f"{v:+.2f}" for v in c) for k, c in entry["change_percent"].items()
-        ), flush=True)
+        print(
+            "  change [%]: "
+            + "; ".join(f"{k} " + "/".join(f"{v:+.2f}" for v in c) for k, c in entry["change_percent"].items()),
+            flush=True,
+        )
         results["loro"][held] = entry
         save()
     print(f"wrote {args.out / 'results.json'}", flush=True)

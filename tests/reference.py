@@ -130,8 +130,10 @@ def stick_slip_arm(
     each slipping joint's speed and each stuck joint's needed friction). Shares no code with dynax's models.
 
     With `dwell` (rising static friction) each joint carries a memory of rest $m$ (from `memory0`): it grows as
-    $\dot m = (1 - m) / T_d$ while the joint is stuck and falls as $\dot m = -|\dot q|\,m / (d_s + |\dot q|\,\tau_h)$
-    while it slips (over a slip of `slip_distance` $d_s$, no faster than `hold_time` $\tau_h$), and the static level is $f_c + m (f_s - f_c)$, in the breakaway test and in the Stribeck curve.
+    $\dot m = (1 - m) / T_d$ while the joint is stuck and falls as
+    $\dot m = -|\dot q|\,m / (d_s + |\dot q|\,\tau_h)$ while it slips (over a slip of `slip_distance` $d_s$, no
+    faster than `hold_time` $\tau_h$), and the static level is $f_c + m (f_s - f_c)$, in the breakaway test and in
+    the Stribeck curve.
 
     Returns the states `(time, 4)` (`(time, 6)` with a `dwell`: the memories after the speeds) and a boolean
     `(time, 2)` of the joints stuck at each sample."""
@@ -201,7 +203,8 @@ def stick_slip_arm(
                 if dwell is None:
                     return np.concatenate([dq, ddq])
                 m = y[4:]
-                dm = np.where([j in stuck for j in range(n)], (1.0 - m) / dwell, -np.abs(dq) * m / (slip_distance + np.abs(dq) * hold_time))
+                wear = np.abs(dq) / (slip_distance + np.abs(dq) * hold_time)
+                dm = np.where([j in stuck for j in range(n)], (1.0 - m) / dwell, -wear * m)
                 return np.concatenate([dq, ddq, dm])
 
             events = []

@@ -118,7 +118,7 @@ class ConsistentSystem(AbstractSystem):
 
     def initial_state(self, x0, u0):
         """The model's full state from a measured one (its internal states: `Extended.initial_state`)."""
-        return self.model.initial_state(x0, u0)
+        return self.model.initial_state(x0, u0)  # pyright: ignore[reportAttributeAccessIssue] (called where it has one)
 
 
 INPUT_REACH = 3  # samples of the fit's grid either side that the input timing may reach
@@ -158,7 +158,8 @@ class TimedInputs(AbstractSystem):
         """`system`'s full state from a measured one, under the input recorded at the start (the stencil's
         centre)."""
         n = u0.shape[-1] // (2 * self.reach + 1)
-        return self.system.initial_state(x0, u0[..., self.reach * n : (self.reach + 1) * n])
+        centre = u0[..., self.reach * n : (self.reach + 1) * n]
+        return self.system.initial_state(x0, centre)  # pyright: ignore[reportAttributeAccessIssue] (where it has one)
 
 
 def _neighbour_names(names, reach):

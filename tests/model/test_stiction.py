@@ -161,7 +161,8 @@ def test_with_a_dwell_it_follows_the_event_based_rising_static_friction(arm):
     start = model.initial_state(jnp.asarray(x0), jnp.zeros(2))
     np.testing.assert_allclose(start[4:], [0.0, 1.0], atol=1e-12)  # the shoulder moving, the elbow at rest
     xs = dynax.simulate(model, start, ts, us, method=dynax.Adaptive(rtol=1e-9, atol=1e-9)).xs
-    without = dynax.simulate(with_friction(arm), jnp.asarray(x0), ts, us, method=dynax.Adaptive(rtol=1e-9, atol=1e-9)).xs
+    adaptive = dynax.Adaptive(rtol=1e-9, atol=1e-9)
+    without = dynax.simulate(with_friction(arm), jnp.asarray(x0), ts, us, method=adaptive).xs
     assert rmse(xs, aged) < 0.6 * apart and rmse(without, aged) > 0.9 * apart
     # The shoulder's passages through zero speed leave little memory of rest: it never stuck.
     assert float(jnp.max(xs[:, 4])) < 0.1

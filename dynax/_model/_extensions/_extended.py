@@ -7,6 +7,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from .._system import AbstractSystem
 from ._inputs import AbstractInputTerm
+from ._stiction import Stiction
 from ._terms import AbstractJointTerm, AbstractTerm
 from ._vehicle_terms import AbstractVehicleTerm
 
@@ -92,10 +93,10 @@ class Extended(AbstractSystem):
         return tuple(t for t in self.terms if isinstance(t, AbstractJointTerm))
 
     @property
-    def remembering_terms(self) -> tuple[AbstractJointTerm, ...]:
+    def remembering_terms(self) -> tuple[Stiction, ...]:
         """The joint terms with internal states (`Stiction` with a `dwell_time`: its memory of rest), whose
         states follow the input terms' in the state."""
-        return tuple(t for t in self.joint_terms if getattr(t, "n_hidden", 0))
+        return tuple(t for t in self.joint_terms if isinstance(t, Stiction) and t.n_hidden)
 
     @property
     def vehicle_terms(self) -> tuple[AbstractVehicleTerm, ...]:
@@ -159,7 +160,8 @@ class Extended(AbstractSystem):
                 hidden.append(zi)
                 a = a.at[i].set(term.applied(ui, zi))
         for term in self.remembering_terms:  # a joint measured in the band is taken to have rested there
-            hidden.append(jnp.atleast_1d(term.initial_memory(x0[self.system.n_joints + term.joint])).astype(x0.dtype))
+            speed = x0[self.system.velocity_indices[term.joint]]
+            hidden.append(jnp.atleast_1d(term.initial_memory(speed)).astype(x0.dtype))
         return jnp.concatenate([x0, *hidden]) if hidden else x0
 
     def vector_field(self, t, x, u):
@@ -185,6 +187,6 @@ class Extended(AbstractSystem):
         holding = tuple(t for t in self.joint_terms if t.holds_at_rest)
         levels = jnp.stack([memory.get(id(t), jnp.ones_like(z[0])) for t in holding])
         dx = AbstractJointTerm.extended_vector_field(self.system, self.joint_terms, x, a, levels)
-        dq = x[self.system.n_joints :]
-        dm = jnp.stack([t.memory_derivative(dq[t.joint], memory[id(t)]) for t in remembering])
+        speeds = self.system.velocity_indices
+        dm = jnp.stack([t.memory_derivative(x[speeds[t.joint]], memory[id(t)]) for t in remembering])
         return dx, dz.at[dz.shape[0] - len(remembering) :].set(dm)

@@ -37,8 +37,10 @@ $$\dot m = w(\dot q)\,\frac{1 - m}{T_d} - \big(1 - w(\dot q)\big)\,\frac{|\dot q
 
 so it builds over $T_d$ while the joint is in the band and is erased over a slip of $d_s$
 (`slip_distance`) once it slides, and no faster than the hold time $\tau_h$ (so that a fast slip
-does not make the state stiff for a fixed-step integrator): the contact's age, built at rest and worn by sliding, as in the
-rate-and-state laws' ageing of contacts (Dieterich 1979; Ruina 1983), with the level linear in it. At $m = 0$ the joint has the friction of its other terms alone (the model without this term);
+does not make the state stiff for a fixed-step integrator): the contact's age, built at rest and
+worn by sliding, as in the rate-and-state laws' ageing of contacts (Dieterich 1979; Ruina 1983),
+with the level linear in it. At $m = 0$ the joint has the friction of its other terms alone (the
+model without this term);
 at $m = 1$ the term acts as without a dwell. A state measured at rest starts with its memory built
 ($m_0 = w(\dot q_0)$, `Extended.initial_state`): a joint whose start speed is in the band is taken
 to have rested there for long (a window that starts at a reversal's turning point is taken for one
@@ -106,7 +108,8 @@ class Stiction(AbstractJointTerm):
       rest (named `fs{j}_rest`; see the module for the model), so a joint that only passes through
       zero speed at a reversal (inside the band for a few milliseconds) has little of it, and one
       that rests has it all. Choose it well above the time a reversal spends in the band and below the
-      rests the records show.
+      rests the records show (`identify` uses 0.1 s). A model with it has more states than those measured:
+      complete a measured one with `Extended.initial_state` before `dynax.simulate`.
     - `slip_distance`: $d_s$, the slip over which sliding erases the memory of rest [rad or m] (default
       0.005; used with a `dwell_time` only). A time would erase it under any jolt past the band; a
       distance erases it once the joint has truly slid.
@@ -183,6 +186,8 @@ class Stiction(AbstractJointTerm):
     def memory_derivative(self, dq: Float[Array, ""], memory: Float[Array, ""]) -> Float[Array, ""]:
         r"""$\dot m = w\,(1 - m) / T_d - (1 - w)\,|\dot q|\,m / (d_s + |\dot q|\,\tau_h)$: built in the band over
         the dwell time, erased over the slip distance in motion, and no faster than the hold time."""
+        if self.dwell_time is None:
+            raise ValueError("Stiction.memory_derivative: the term has no `dwell_time`")
         w = self.weight(dq)
         speed = jnp.abs(dq)
         wear = speed / (self.slip_distance + speed * self.hold_time)
