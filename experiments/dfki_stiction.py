@@ -84,6 +84,7 @@ def summary(result, seconds) -> dict:
                 "fs": float(t.coefficient),
                 "held": float(t.held(result.system.system)),
                 "band": float(t.velocity_scale),
+                "dwell_s": None if t.dwell_time is None else float(t.dwell_time),
             }
             for t in getattr(result.system, "terms", ())
             if isinstance(t, dynax.Stiction)
@@ -247,7 +248,8 @@ def stiction_model(entry) -> dynax.AbstractSystem:
     """A fold's refined model rebuilt from its results entry: `model_of` its parameters with its `Stiction` terms."""
     base = model_of(entry["parameters"])
     terms = tuple(
-        dynax.Stiction(int(k[2:]) - 1, v["fs"], velocity_scale=v["band"]) for k, v in entry["stiction_terms"].items()
+        dynax.Stiction(int(k[2:]) - 1, v["fs"], velocity_scale=v["band"], dwell_time=v.get("dwell_s"))
+        for k, v in entry["stiction_terms"].items()
     )
     return dynax.Extended(base.system, base.terms + terms)
 

@@ -106,7 +106,21 @@ def _arm_stuck(mass, force, stuck):
     return ddq, dict(zip(stuck, z[len(free) :]))
 
 
-def stick_slip_arm(theta, x0, ts, us, fc=(0.0, 0.0), fs=(0.0, 0.0), vst=0.05, rtol=1e-10, atol=1e-12):
+def stick_slip_arm(
+    theta,
+    x0,
+    ts,
+    us,
+    fc=(0.0, 0.0),
+    fs=(0.0, 0.0),
+    vst=0.05,
+    rtol=1e-10,
+    atol=1e-12,
+    dwell=None,
+    slip_distance=0.005,
+    hold_time=0.01,
+    memory0=(1.0, 1.0),
+):
     r"""The two-link arm of `arm_reference` (both joints driven, `us` of shape `(time, 2)`, zero-order hold) with
     stick-slip friction made by an event-based integrator (Karnopp's switch, integrated exactly): a joint
     at rest sticks (speed held at exactly 0) while the friction it needs stays within $\pm f_s$; it breaks
@@ -115,17 +129,31 @@ def stick_slip_arm(theta, x0, ts, us, fc=(0.0, 0.0), fs=(0.0, 0.0), vst=0.05, rt
     where it sticks again if the friction can hold it. scipy's DOP853 between events (`solve_ivp` events on
     each slipping joint's speed and each stuck joint's needed friction). Shares no code with dynax's models.
 
-    Returns the states `(time, 4)` and a boolean `(time, 2)` of the joints stuck at each sample."""
-    fc, fs = np.asarray(fc, float), np.asarray(fs, float)
-    x = np.asarray(x0, dtype=float).copy()
+    With `dwell` (rising static friction) each joint carries a memory of rest $m$ (from `memory0`): it grows as
+    $\dot m = (1 - m) / T_d$ while the joint is stuck and falls as
+    $\dot m = -|\dot q|\,m / (d_s + |\dot q|\,\tau_h)$ while it slips (over a slip of `slip_distance` $d_s$, no
+    faster than `hold_time` $\tau_h$), and the static level is $f_c + m (f_s - f_c)$, in the breakaway test and in
+    the Stribeck curve.
+
+    Returns the states `(time, 4)` (`(time, 6)` with a `dwell`: the memories after the speeds) and a boolean
+    `(time, 2)` of the joints stuck at each sample."""
+    fc, fs_full = np.asarray(fc, float), np.asarray(fs, float)
     n = 2
+    x = np.asarray(x0, dtype=float).copy()
+    if dwell is not None:
+        x = np.concatenate([x, np.asarray(memory0, float)])
+
+    def level(y):
+        """The static level: with a dwell, as far as the memory of rest has built it."""
+        return fs_full if dwell is None else fc + y[4:] * (fs_full - fc)
 
     def classify(x, tau, stuck, direction):
         """Which joints at zero speed stick, and the slip direction of the others (from the needed force)."""
         stuck = list(stuck)
+        fs = level(x)
         for _ in range(2 * n):
             changed = False
-            mass, force = _arm_pieces(theta, x, tau, fc, fs, vst, direction)
+            mass, force = _arm_pieces(theta, x[:4], tau, fc, fs, vst, direction)
             _, held = _arm_stuck(mass, force, stuck)
             for j, f in held.items():
                 if abs(f) > fs[j] * (1 + 1e-9):
@@ -140,7 +168,7 @@ def stick_slip_arm(theta, x0, ts, us, fc=(0.0, 0.0), fs=(0.0, 0.0), vst=0.05, rt
                     trial = [*stuck, j]
                     d = direction.copy()
                     d[j] = 0.0
-                    mass, force = _arm_pieces(theta, x, tau, fc, fs, vst, d)
+                    mass, force = _arm_pieces(theta, x[:4], tau, fc, fs, vst, d)
                     _, held = _arm_stuck(mass, force, trial)
                     if abs(held[j]) <= fs[j]:
                         stuck, direction, changed = trial, d, True
@@ -153,7 +181,7 @@ def stick_slip_arm(theta, x0, ts, us, fc=(0.0, 0.0), fs=(0.0, 0.0), vst=0.05, rt
         return sorted(stuck), direction
 
     stuck = []
-    direction = np.sign(x[2:]).astype(float)
+    direction = np.sign(x[2:4]).astype(float)
     for j in range(n):
         if x[2 + j] == 0.0:
             direction[j] = 0.0
@@ -168,18 +196,24 @@ def stick_slip_arm(theta, x0, ts, us, fc=(0.0, 0.0), fs=(0.0, 0.0), vst=0.05, rt
                 break
 
             def rhs(_, y, stuck=tuple(stuck), direction=direction.copy()):
-                mass, force = _arm_pieces(theta, y, tau, fc, fs, vst, direction)
+                mass, force = _arm_pieces(theta, y[:4], tau, fc, level(y), vst, direction)
                 ddq, _ = _arm_stuck(mass, force, list(stuck))
-                dq = y[2:].copy()
+                dq = y[2:4].copy()
                 dq[list(stuck)] = 0.0
-                return np.concatenate([dq, ddq])
+                if dwell is None:
+                    return np.concatenate([dq, ddq])
+                m = y[4:]
+                wear = np.abs(dq) / (slip_distance + np.abs(dq) * hold_time)
+                dm = np.where([j in stuck for j in range(n)], (1.0 - m) / dwell, -wear * m)
+                return np.concatenate([dq, ddq, dm])
 
             events = []
             for j in range(n):
                 if j in stuck:
 
                     def breakaway(_, y, j=j, stuck=tuple(stuck), direction=direction.copy()):
-                        mass, force = _arm_pieces(theta, y, tau, fc, fs, vst, direction)
+                        fs = level(y)
+                        mass, force = _arm_pieces(theta, y[:4], tau, fc, fs, vst, direction)
                         return fs[j] - abs(_arm_stuck(mass, force, list(stuck))[1][j])
 
                     events.append(breakaway)

@@ -116,6 +116,10 @@ class ConsistentSystem(AbstractSystem):
     def vector_field(self, t, x, u):
         return self.model.vector_field(t, x, u)
 
+    def initial_state(self, x0, u0):
+        """The model's full state from a measured one (its internal states: `Extended.initial_state`)."""
+        return self.model.initial_state(x0, u0)  # pyright: ignore[reportAttributeAccessIssue] (called where it has one)
+
 
 INPUT_REACH = 3  # samples of the fit's grid either side that the input timing may reach
 
@@ -149,6 +153,13 @@ class TimedInputs(AbstractSystem):
         i = jnp.clip(jnp.floor(position), 0, 2 * self.reach - 1).astype(int)
         f = position - i
         return self.system.vector_field(t, x, (1 - f) * stencil[..., i, :] + f * stencil[..., i + 1, :])
+
+    def initial_state(self, x0, u0):
+        """`system`'s full state from a measured one, under the input recorded at the start (the stencil's
+        centre)."""
+        n = u0.shape[-1] // (2 * self.reach + 1)
+        centre = u0[..., self.reach * n : (self.reach + 1) * n]
+        return self.system.initial_state(x0, centre)  # pyright: ignore[reportAttributeAccessIssue] (where it has one)
 
 
 def _neighbour_names(names, reach):
@@ -271,7 +282,14 @@ def motion_records(
 @eqx.filter_jit
 def _segment_squares(system, x0, ts, xs, us, scale, simulation: FixedGrid):
     """Sum of squared scaled state residuals of each segment simulated from its initial state."""
-    sims = jax.vmap(lambda x, t, u: simulate(system, x, t, u, method=simulation, throw=False).xs)(x0, ts, us)
+    n = xs.shape[-1]
+
+    def start(x, u0):  # an extended model's internal states start as `Extended.initial_state` completes them
+        return system.initial_state(x, u0) if system.n_states > x.shape[0] else x
+
+    sims = jax.vmap(lambda x, t, u: simulate(system, start(x, u[0]), t, u, method=simulation, throw=False).xs[:, :n])(
+        x0, ts, us
+    )
     r = (sims - xs) / scale[None, None, :]
     r = jnp.where(jnp.isfinite(r), r, DIVERGED)  # as the fit counts a diverged rollout
     return jnp.sum(r**2, axis=(1, 2))

@@ -93,6 +93,15 @@ own local fit of the positions instead of the measured speed (`motion_records`: 
 0.01 to 0.04 rad/s rms, up to 0.14); the same rule there (`refine_by_simulation(..., rests=...)`)
 is opt-in: on DFKI it fitted the held-out runs, which never rest, worse in 5 of 9 cells.
 
+**The memory of rest.** A rest of a second is not a reversal's passage through zero speed: the static
+level a contact holds grows with the time it has rested (rising static friction). On DFKI the level the
+rest of run 12 shows cost the runs that never rest at their reversals, where it made the joint hold or
+brake, which their records do not show. So `Stiction` is added with a dwell time (`dwell_time`,
+`REST_DWELL_TIME` = 0.1 s: 92 % built over the shortest rest the search accepts, 0.25 s, a few % over a
+reversal's few milliseconds in the band): its level builds while the joint is in the band and wears off
+once it slides. A window that starts at rest starts with it built (`Extended.initial_state`), one that
+starts in motion without it.
+
 **The least-squares rows at rest.** No friction law of the speed explains a held torque (the
 Coulomb column at rest is the sign of the velocity's noise), so where a rest is under load `identify`
 fits `Dynamic` again with the rows of that joint over that rest at zero weight (`rest_row_weights`),
@@ -130,7 +139,7 @@ from .._data._derivatives import butterworth_filtfilt
 from .._data._rest import Rest, rest_stretches, speed_noise_at_rest, WITHIN_NOISE
 from .._data._trajectory import Trajectory
 from .._model._extensions import CoulombFriction, Extended
-from .._model._extensions._stiction import LEAST_STICK_BAND, Stiction
+from .._model._extensions._stiction import LEAST_STICK_BAND, REST_DWELL_TIME, Stiction
 from .._model._extensions._terms import AbstractJointTerm
 from ._equations import row_times, uniformly_sampled
 from ._regressors import applied_force, dynamic_regressor, positions_and_velocities, split_terms
@@ -766,6 +775,7 @@ def with_stiction(system, joints: tuple[JointStaticFriction, ...]):
             velocity_scale=j.velocity_scale,
             held_force=j.held_force if j.held_position is not None else j.lower_bound,
             held_position=None if j.held_position is None else np.asarray(j.held_position),
+            dwell_time=REST_DWELL_TIME,
         )
         for j in joints
     ]
@@ -804,7 +814,8 @@ def describe(stretches, joints, rows_left_out, rows) -> str:
         )
         parts.append(
             f"{j.coordinate} rests under load {j.rest_s:.2f} s in {', '.join(j.records)}: {what}; sticks below "
-            f"{j.velocity_scale:.3g}; a validation window that starts at rest starts at zero speed where the measured "
+            f"{j.velocity_scale:.3g}, its level built over {REST_DWELL_TIME:g} s there and worn off by a slip; a "
+            f"validation window that starts at rest starts at zero speed where the measured "
             f"one is within {WITHIN_NOISE:g} times its record's noise at rest (pooled over the records: "
             f"{j.speed_noise:.3g})"
         )

@@ -123,8 +123,11 @@ def test_static_level_from_breakaways_within_ten_percent():
     assert json["joints"][0]["name"] == "fs1" and json["least_squares_rows_left_out"] == found.rows_left_out
     # The model holds the rest it was fitted on: simulated from the start, the elbow stays put while the
     # torque ramps below its level and leaves near the recorded breakaway.
+    # Its `Stiction` carries a memory of rest (`dwell_time`), an internal state: the measured state is completed.
     trajectory, stuck = records[1]
-    xs = np.asarray(dynax.simulate(result.system, trajectory.xs[0], trajectory.ts, trajectory.us).xs)
+    assert result.system.state_names[4:] == ("fs1_rest", "fs2_rest")
+    x0 = result.system.initial_state(trajectory.xs[0], trajectory.us[0])
+    xs = np.asarray(dynax.simulate(result.system, x0, trajectory.ts, trajectory.us).xs)
     resting = np.asarray(trajectory.ts) < 0.6
     assert np.max(np.abs(xs[resting, 1])) < 1e-3
 

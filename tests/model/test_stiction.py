@@ -132,3 +132,64 @@ def test_the_holding_force_never_pushes_along_the_motion(arm):
     gravity = arm.inverse_dynamics(q, jnp.zeros(2), jnp.zeros(2))
     held = friction(0.0, float(gravity[1]) + 0.9 * FS[1])
     np.testing.assert_allclose(held[1], -0.9 * FS[1], rtol=1e-6)
+
+
+def with_dwell(arm, dwell=0.1, scale=0.01, fs=FS):
+    terms = tuple(dynax.CoulombFriction(j, FC[j], velocity_scale=scale) for j in range(2))
+    terms += tuple(dynax.Stiction(j, fs[j], velocity_scale=scale, dwell_time=dwell) for j in range(2))
+    return dynax.Extended(arm, terms)
+
+
+def test_with_a_dwell_it_follows_the_event_based_rising_static_friction(arm):
+    # A free swing that decays: the shoulder only passes through zero speed (its reversals never stick), the elbow
+    # starts at rest and sticks and slips. The reference ages each contact while it sticks and wears it off by
+    # sliding (`stick_slip_arm(dwell=...)`); without ageing (the static level there at once) it swings otherwise.
+    ts = np.arange(0.0, 3.0, DT)
+    us = np.zeros((len(ts), 2))
+    x0 = np.array([0.8, -0.5, 0.5, 0.0])
+    theta = [float(v) for v in arm.base_parameters.values()]
+    aged, stuck = stick_slip_arm(theta, x0, ts, us, fc=FC, fs=FS, dwell=0.1, memory0=(0.0, 1.0))
+    at_once, _ = stick_slip_arm(theta, x0, ts, us, fc=FC, fs=FS)
+    assert not stuck[:, 0].any() and stuck[:, 1].mean() > 0.2
+
+    def rmse(xs, reference):
+        return float(np.sqrt(np.mean((np.asarray(xs)[:, :2] - reference[:, :2]) ** 2)))
+
+    apart = rmse(at_once, aged)
+    model = with_dwell(arm)
+    assert model.state_names[4:] == ("fs1_rest", "fs2_rest")
+    start = model.initial_state(jnp.asarray(x0), jnp.zeros(2))
+    np.testing.assert_allclose(start[4:], [0.0, 1.0], atol=1e-12)  # the shoulder moving, the elbow at rest
+    xs = dynax.simulate(model, start, ts, us, method=dynax.Adaptive(rtol=1e-9, atol=1e-9)).xs
+    adaptive = dynax.Adaptive(rtol=1e-9, atol=1e-9)
+    without = dynax.simulate(with_friction(arm), jnp.asarray(x0), ts, us, method=adaptive).xs
+    assert rmse(xs, aged) < 0.6 * apart and rmse(without, aged) > 0.9 * apart
+    # The shoulder's passages through zero speed leave little memory of rest: it never stuck.
+    assert float(jnp.max(xs[:, 4])) < 0.1
+    # A fixed-step rollout agrees with the adaptive one (the memory is not stiff: its wear is capped by the hold time).
+    # This swing's elbow is fast for the default grid with or without the dwell, hence eight steps per sample.
+    fixed = dynax.simulate(model, start, ts, us, method=dynax.FixedGrid(substeps=8)).xs
+    assert float(jnp.max(jnp.abs(fixed - xs)[:, :2])) < 1e-4
+
+
+def test_with_a_dwell_the_memory_builds_at_rest_and_a_rest_holds_as_without(arm):
+    # At rest (hanging, no torque) the memory builds as 1 - exp(-t / T_d) from zero.
+    ts = np.arange(0.0, 0.3, DT)
+    us = np.zeros((len(ts), 2))
+    model = with_dwell(arm, dwell=0.1)
+    start = model.initial_state(jnp.zeros(4), jnp.zeros(2)).at[4:].set(0.0)
+    xs = np.asarray(dynax.simulate(model, start, ts, us, method=dynax.Adaptive(rtol=1e-10, atol=1e-10)).xs)
+    np.testing.assert_allclose(xs[:, 4], 1.0 - np.exp(-ts / 0.1), atol=1e-6)
+    # From a rest with its memory built, the elbow holds and breaks away at the event-based integrator's torque.
+    ts = np.arange(0.0, 4.0, DT)
+    tau2 = np.interp(ts, [0.0, 0.5, 2.5, 4.0], [0.0, 0.9 * FS[1], 0.9 * FS[1], 1.3 * FS[1]])
+    us = np.stack([np.zeros_like(ts), tau2], 1)
+    theta = [float(v) for v in arm.base_parameters.values()]
+    _, stuck = stick_slip_arm(theta, np.zeros(4), ts, us, fc=FC, fs=(0.5, FS[1]), dwell=0.1)
+    model = with_dwell(arm, fs=(0.5, FS[1]))
+    xs = np.asarray(dynax.simulate(model, model.initial_state(jnp.zeros(4), us[0]), ts, us).xs)
+    breakaway = ts[np.argmax(~stuck[:, 1])]
+    assert np.max(np.abs(xs[ts < breakaway - 0.05, :2])) < 1e-4
+    np.testing.assert_allclose(tau2[np.argmax(np.abs(xs[:, 3]) > 0.01)], tau2[np.argmax(~stuck[:, 1])], rtol=0.03)
+    with pytest.raises(ValueError, match="dwell_time"):
+        dynax.Stiction(1, 0.2, dwell_time=0.0)

@@ -7,6 +7,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from .._system import AbstractSystem
 from ._inputs import AbstractInputTerm
+from ._stiction import Stiction
 from ._terms import AbstractJointTerm, AbstractTerm
 from ._vehicle_terms import AbstractVehicleTerm
 
@@ -59,7 +60,8 @@ class Extended(AbstractSystem):
     @property
     def state_names(self) -> tuple[str, ...]:
         hidden = tuple(n for t in self.input_terms for n in t.hidden_names(self.system))
-        return tuple(self.system.state_names) + hidden
+        memory = tuple(n for t in self.remembering_terms for n in t.hidden_names(self.system))
+        return tuple(self.system.state_names) + hidden + memory
 
     @property
     def input_names(self) -> tuple[str, ...]:
@@ -89,6 +91,12 @@ class Extended(AbstractSystem):
     @property
     def joint_terms(self) -> tuple[AbstractJointTerm, ...]:
         return tuple(t for t in self.terms if isinstance(t, AbstractJointTerm))
+
+    @property
+    def remembering_terms(self) -> tuple[Stiction, ...]:
+        """The joint terms with internal states (`Stiction` with a `dwell_time`: its memory of rest), whose
+        states follow the input terms' in the state."""
+        return tuple(t for t in self.joint_terms if isinstance(t, Stiction) and t.n_hidden)
 
     @property
     def vehicle_terms(self) -> tuple[AbstractVehicleTerm, ...]:
@@ -122,7 +130,8 @@ class Extended(AbstractSystem):
                 dz.append(term.hidden_derivative(ui, zi))
                 a = a.at[i].set(term.applied(ui, zi))
         dz = jnp.concatenate(dz) if dz else z[:0]
-        return a, dz
+        # The joint terms' states (after the input terms') do not move with the input alone.
+        return a, jnp.concatenate([dz, jnp.zeros_like(z[offset:])])
 
     def with_shifted_inputs(
         self, us: Float[Array, "step n_inputs"], dt: Float[ArrayLike, ""]
@@ -150,6 +159,9 @@ class Extended(AbstractSystem):
                 zi = term.steady_state(ui).astype(x0.dtype)
                 hidden.append(zi)
                 a = a.at[i].set(term.applied(ui, zi))
+        for term in self.remembering_terms:  # a joint measured in the band is taken to have rested there
+            speed = x0[self.system.velocity_indices[term.joint]]
+            hidden.append(jnp.atleast_1d(term.initial_memory(speed)).astype(x0.dtype))
         return jnp.concatenate([x0, *hidden]) if hidden else x0
 
     def vector_field(self, t, x, u):
@@ -159,8 +171,22 @@ class Extended(AbstractSystem):
         # The terms that change the nominal dynamics (not just its input) say how, per kind.
         if self.vehicle_terms:
             dx = AbstractVehicleTerm.extended_vector_field(self.system, self.vehicle_terms, x_nominal, a)
+        elif self.remembering_terms:
+            dx, dz = self._with_memory(x_nominal, a, z, dz)
         elif self.joint_terms:
             dx = AbstractJointTerm.extended_vector_field(self.system, self.joint_terms, x_nominal, a)
         else:
             dx = self.system.vector_field(t, x_nominal, a)
         return jnp.concatenate([dx, dz])
+
+    def _with_memory(self, x, a, z, dz):
+        """The joint dynamics and the state derivative when joint terms carry a memory of rest (`Stiction`'s
+        `dwell_time`): its state is the last of `z`, one per such term; `dz` the input terms' part, padded."""
+        remembering = self.remembering_terms
+        memory = dict(zip((id(t) for t in remembering), z[z.shape[0] - len(remembering) :], strict=True))
+        holding = tuple(t for t in self.joint_terms if t.holds_at_rest)
+        levels = jnp.stack([memory.get(id(t), jnp.ones_like(z[0])) for t in holding])
+        dx = AbstractJointTerm.extended_vector_field(self.system, self.joint_terms, x, a, levels)
+        speeds = self.system.velocity_indices
+        dm = jnp.stack([t.memory_derivative(x[speeds[t.joint]], memory[id(t)]) for t in remembering])
+        return dx, dz.at[dz.shape[0] - len(remembering) :].set(dm)

@@ -111,10 +111,16 @@ class AbstractJointTerm(AbstractTerm):
 
     @staticmethod
     def extended_vector_field(
-        system, terms: tuple["AbstractJointTerm", ...], x: Float[Array, " n_states"], a: Float[Array, " n_inputs"]
+        system,
+        terms: tuple["AbstractJointTerm", ...],
+        x: Float[Array, " n_states"],
+        a: Float[Array, " n_inputs"],
+        memory: Float[Array, " k"] | None = None,
     ) -> Float[Array, " n_states"]:
         r"""The manipulator's $\dot x$ with joint terms acting on its pieces (used by `Extended`):
-        $\big(M(q) + \operatorname{diag}(I_r)\big)\ddot q + h(q, \dot q) = B\,a + \sum_k f_k(q, \dot q)$."""
+        $\big(M(q) + \operatorname{diag}(I_r)\big)\ddot q + h(q, \dot q) = B\,a + \sum_k f_k(q, \dot q)$.
+        `memory`: the memory of rest of each term that holds its joint at rest, in order (`Stiction`'s
+        `dwell_time`; default none: each holds fully)."""
         k = system.n_joints
         q, dq = x[:k], x[k:]
         force = system.input_matrix() @ a - system.bias_force(q, dq)
@@ -125,12 +131,12 @@ class AbstractJointTerm(AbstractTerm):
         mass = system.mass_matrix(q) + jnp.diag(inertia)
         holding = tuple(t for t in terms if t.holds_at_rest)
         if holding:
-            force = force + type(holding[0]).holding_force(holding, terms, mass, force, q, dq)
+            force = force + type(holding[0]).holding_force(holding, terms, mass, force, q, dq, memory)
         ddq = solve_spd(mass, force)
         return jnp.concatenate([dq, ddq])
 
     @staticmethod
-    def holding_force(holding, terms, mass, force, q, dq) -> Float[Array, " n_joints"]:
+    def holding_force(holding, terms, mass, force, q, dq, memory=None) -> Float[Array, " n_joints"]:
         """What the terms that hold their joints at rest (`holds_at_rest`, e.g. `Stiction`) add to the generalised
         force `force`, given all terms and the mass matrix (default none)."""
         return jnp.zeros_like(force)
