@@ -219,10 +219,12 @@ from ._diagnose._quadrotor import (
     body_frame_records as body_frame_records,
 )
 from ._diagnose._quadrotor import body_frame_system as body_frame_system
+from ._diagnose._quadrotor import moment_parameters as moment_parameters
 from ._diagnose._quadrotor import quadrotor_candidates as quadrotor_candidates
 from ._diagnose._quadrotor import (
     quadrotor_flight_errors as quadrotor_flight_errors,
 )
+from ._diagnose._quadrotor import quadrotor_refit_names as quadrotor_refit_names
 from ._diagnose._quadrotor import score_flights as score_flights
 from ._diagnose._quadrotor import short_horizon_note as short_horizon_note
 from ._diagnose._quadrotor import thrust_parameters as thrust_parameters
@@ -766,6 +768,7 @@ __all__ = [
     "min_mass_eigenvalue",
     "MIN_PRACTICAL_GAIN",
     "ml_weights",
+    "moment_parameters",
     "motion_records",
     "motor_order",
     "motor_signature",
@@ -818,6 +821,7 @@ __all__ = [
     "propose",
     "quadrotor_candidates",
     "quadrotor_flight_errors",
+    "quadrotor_refit_names",
     "quaternion_angle",
     "quaternion_from_euler",
     "rankable",

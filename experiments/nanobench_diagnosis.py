@@ -20,7 +20,6 @@ held-out gain and p-value, the per-group table), `DIR/diagnosis.md`, the diagnos
 
 import argparse
 import pathlib
-import re
 import sys
 import time
 
@@ -125,7 +124,7 @@ def main():
         "samples",
         flush=True,
     )
-    from dynax.internal import body_frame_system, quadrotor_candidates, thrust_parameters
+    from dynax.internal import body_frame_system, moment_parameters, quadrotor_candidates, thrust_parameters
 
     candidates = quadrotor_candidates(body_frame_system(quad, train[0].input_names))
     if args.candidates:
@@ -133,11 +132,10 @@ def main():
         body = body_frame_system(quad, train[0].input_names)
         candidates = tuple(t for t in candidates if t.label(body) in wanted)
         print(f"candidates: {[t.label(body) for t in candidates]}", flush=True)
-    names = quad.body_model.parameter_names
     refit = {
         "none": None,
         "thrust": thrust_parameters(quad),
-        "moments": tuple(n for n in names if n[:3] in ("dp/", "dq/", "dr/") and re.search(r"m[1-4]", n)),
+        "moments": moment_parameters(quad),
     }[args.refit]
     mode = dynax.Refit(parameters=refit)
     if args.nominal == "lagged":

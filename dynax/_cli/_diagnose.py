@@ -59,7 +59,8 @@ def register(subparsers):
         help="comma-separated nominal parameters to refit (default all but the nominal friction, which "
         "the friction candidates test, e.g. theta1..theta5; for linear_axis mass and "
         "offset; for helicopter the Tempest weights, e.g. du/u,dv/1; for quadrotor `thrust`, the thrust "
-        "map, with which battery sag and ground effect are tested)",
+        "map, with which battery sag and ground effect are tested, and `moments`, the roll, pitch and yaw motor "
+        "weights, with which rate damping is)",
     )
     parser.add_argument(
         "--dt",

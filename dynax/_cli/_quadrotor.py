@@ -280,7 +280,7 @@ def run_diagnose(args) -> int:
     from .._data import DataWarning
     from .._data._motor_order import MotorNumbering, MotorSignature
     from .._diagnose import diagnose, Horizons, Known, Refit, Selection, write_report
-    from .._diagnose._quadrotor import body_frame_records, QUADROTOR_HORIZONS_S, thrust_parameters
+    from .._diagnose._quadrotor import body_frame_records, QUADROTOR_HORIZONS_S, quadrotor_refit_names
     from .._diagnose._records import holdout_split
     from .._identify._vehicle._quadrotor import quadrotor_from_json
     from .._model._quadrotor import Quadrotor
@@ -345,10 +345,9 @@ def run_diagnose(args) -> int:
     if args.mode == "known":
         mode = Known()
     else:
-        names = tuple(n.strip() for n in args.refit.split(",") if n.strip()) if args.refit else None
-        if names == ("thrust",):  # the thrust map, refitted with battery sag and ground effect
-            names = thrust_parameters(system)
-        mode = Refit(parameters=names)
+        # `thrust`: the thrust map, refitted with battery sag and ground effect; `moments`: the moment map, with
+        # rate damping
+        mode = Refit(parameters=quadrotor_refit_names(system, args.refit))
     with stage_log() as say, warnings.catch_warnings():  # the flights' faults were noted by load_flights
         warnings.simplefilter("ignore", DataWarning)
         report = diagnose(

@@ -131,6 +131,36 @@ def thrust_parameters(system: Quadrotor) -> tuple[str, ...]:
     return names
 
 
+def moment_parameters(system: Quadrotor) -> tuple[str, ...]:
+    """The names of the roll, pitch and yaw axes' motor weights of `system`'s body model (`dp/`, `dq/`, `dr/` of
+    the motor features): the nominal parameters to refit with rate damping (`rotor_drag` at `p, q, r`). A moment
+    map fitted one step at a time on commands that a closed loop sets takes up part of the vehicle's damping of
+    its rates, as the thrust map takes up a battery's sag (`thrust_parameters`)."""
+    motors = {
+        f"{axis}/{name}" for axis in ("dp", "dq", "dr") for battery in (False, True) for name in motor_features(battery)
+    }
+    names = tuple(n for n in system.body_model.parameter_names if n in motors)
+    if not names:
+        raise UsageError(
+            f"moment_parameters: {type(system.body_model).__name__} has no motor weights on the roll, pitch and yaw "
+            "axes"
+        )
+    return names
+
+
+def quadrotor_refit_names(system: Quadrotor, text: str | None) -> tuple[str, ...] | None:
+    """The command line's `--refit` for a quadrotor: comma-separated parameter names, where `thrust` stands for
+    `thrust_parameters` and `moments` for `moment_parameters`; `None` where nothing is given."""
+    if not text:
+        return None
+    groups = {"thrust": thrust_parameters, "moments": moment_parameters}
+    names: list[str] = []
+    for item in (n.strip() for n in text.split(",")):
+        if item:
+            names += groups[item](system) if item in groups else [item]
+    return tuple(dict.fromkeys(names)) or None
+
+
 def _as_list(flights, where: str) -> list[Trajectory]:
     if flights is None:
         return []

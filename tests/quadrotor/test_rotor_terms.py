@@ -23,7 +23,13 @@ from dynax import (
     RotorDrag,
     Selection,
 )
-from dynax.internal import body_frame_system, quadrotor_candidates, thrust_parameters
+from dynax.internal import (
+    body_frame_system,
+    moment_parameters,
+    quadrotor_candidates,
+    quadrotor_refit_names,
+    thrust_parameters,
+)
 
 from .synthetic_flight import quadrotor_flight
 
@@ -85,6 +91,20 @@ def test_thrust_parameters_are_the_thrust_axis_motor_weights():
             names = thrust_parameters(Quadrotor.from_flights(family, [flight], battery=battery))
             assert len(names) == 8 and squared in names and all(n.startswith("dw/") for n in names)
             assert "dw/w sum(m)" not in names  # rotor drag, not the thrust map
+
+
+def test_moment_parameters_are_the_moment_axes_motor_weights_and_the_command_line_expands_both_groups():
+    flight = quadrotor_flight(0.5, seed=0, noise=False, vbat=True)
+    for battery, squared in ((False, "dq/m1^2"), (True, "dq/(vbat m1)^2")):
+        for family in ("nominal", "acceleration"):
+            names = moment_parameters(Quadrotor.from_flights(family, [flight], battery=battery))
+            assert len(names) == 24 and squared in names and {n[:3] for n in names} == {"dp/", "dq/", "dr/"}, names
+            # neither the gyroscopic products nor the acceleration model's rate damping: the commands' map only
+            assert not {"dp/qr", "dq/pr", "dr/pq", "dp/p", "dq/q", "dr/r"} & set(names)
+    quad = Quadrotor.from_flights("nominal", [flight])
+    assert quadrotor_refit_names(quad, "thrust, moments") == thrust_parameters(quad) + moment_parameters(quad)
+    assert quadrotor_refit_names(quad, "moments,dw/m1^2") == moment_parameters(quad) + ("dw/m1^2",)
+    assert quadrotor_refit_names(quad, "") is None
 
 
 def _diagnosis(train, validation, battery=None, floor=None):
