@@ -246,3 +246,17 @@ def test_fixed_grid_explicit_step_equals_diffrax_step():
         system, x, jnp.linspace(0, 0.1, 11), jnp.zeros((11, 1)), method=dynax.FixedGrid(diffrax.Euler())
     ).xs
     assert np.all(np.isfinite(xs))
+
+
+def test_a_measured_state_of_a_model_with_internal_states_is_refused_with_how_to_complete_it():
+    # A `Stiction` with a dwell time carries a memory of rest: a measured state (positions and velocities)
+    # is short of it, and the refusal says how to complete it; so completed, the joint at rest holds.
+    model = dynax.Extended(dynax.DoublePendulum(), (dynax.Stiction(1, 0.3, dwell_time=0.1),))
+    ts, us = jnp.linspace(0.0, 1.0, 101), jnp.zeros((101, 2))
+    measured = jnp.array([0.1, 0.0, 0.0, 0.0])
+    with pytest.raises(dynax.UsageError, match=r"4 entries but Extended has 5 states.*initial_state\(x0, u0\)"):
+        dynax.simulate(model, measured, ts, us)
+    x0 = model.initial_state(measured, us[0])
+    assert x0.shape == (5,) and float(x0[4]) == 1.0  # measured at rest: rested long
+    xs = dynax.simulate(model, x0, ts, us).xs
+    assert float(jnp.max(jnp.abs(xs[:, 1]))) < 1e-6  # the elbow, held by its static level under the swing

@@ -127,9 +127,15 @@ def _check_arguments(system, x0, ts, us):
     if x0.ndim != 1:
         raise UsageError(f"simulate: `x0` must be a 1-d state vector, got shape {x0.shape}")
     if x0.shape[0] != system.n_states:
+        internal = (
+            "; its states beyond the measured ones are internal (an input lag, a memory of rest): complete a "
+            "measured state with `system.initial_state(x0, u0)`"
+            if x0.shape[0] < system.n_states and hasattr(system, "initial_state")
+            else ""
+        )
         raise UsageError(
             f"simulate: `x0` has {x0.shape[0]} entries but {type(system).__name__} has "
-            f"{system.n_states} states {system.state_names}"
+            f"{system.n_states} states {system.state_names}{internal}"
         )
     dtype = jnp.result_type(x0, ts)
     if not jnp.issubdtype(dtype, jnp.floating):
