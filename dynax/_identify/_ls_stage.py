@@ -191,9 +191,7 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
             (fit_rows, functools.partial(least_squares, a, names=names, weights=weights, rcond=rcond), record_rows),
             qs,
             (error, bool(check.violated)),
-            trajectories,
-            settings,
-            counts,
+            (trajectories, settings, counts),
         )
     if consistency == "constrain" and check.violated:
         estimate, _ = consistent_least_squares(system, names, a, y, weights, start=fit.value)
@@ -438,7 +436,7 @@ FLIP_STRETCHES = 16  # where a record's input may turn its sign: at each sixteen
 FLIP_GAIN = 0.5  # negating the stretch must remove at least half of the squared equation error
 
 
-def _warn_if_input_flips_partway(system, names, raw, solvers, qs, fitted, trajectories, settings, counts) -> None:
+def _warn_if_input_flips_partway(system, names, raw, solvers, qs, fitted, records) -> None:
     r"""Look for an input whose sign turns part way through a record (unless an input is reversed throughout):
     negate it from each of `FLIP_STRETCHES - 1` cuts of each record to the record's end, or from its start to
     the cut, solve again, and refine the best cut row by row. If one such record stretch gives a consistent
@@ -451,7 +449,8 @@ def _warn_if_input_flips_partway(system, names, raw, solvers, qs, fitted, trajec
     `fit_rows(y)`, the stage's equations for other right-hand sides `y` (columns) as solved (offsets taken
     out) with the rows' weights, `solve(y)`, the stage's least-squares fit to one of them, and each record's
     rows per joint; `fitted = (error, inconsistent)` is the stage's relative equation error and whether its
-    estimate is physically inconsistent, and `counts` each record's rows per joint.
+    estimate is physically inconsistent, and `records = (trajectories, settings, counts)` the records, their
+    equations' settings and each one's rows per joint.
 
     On a record whose inputs are right, negating a stretch of one adds error wherever the motion is: on the
     six DFKI runs the best stretch leaves 1.00 to 2.35 times the squared error, on the EMPS record 99 (a
@@ -472,6 +471,7 @@ def _warn_if_input_flips_partway(system, names, raw, solvers, qs, fitted, trajec
     a_raw, y_raw = (np.asarray(v, dtype=float) for v in raw)
     fit_rows, solve, record_rows = solvers
     error, inconsistent = fitted
+    trajectories, settings, counts = records
     driven = _driven_joints(system, a_raw.shape[0])
     if driven is None or not counts:
         return
