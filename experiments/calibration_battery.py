@@ -36,6 +36,7 @@ import numpy as np
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from dynax.internal import ProgressBar
 from tests.hidden_cases import CASES, diagnose_case, outcome, truth_gain
+from tests.hidden_flights import truth_gains
 
 VERDICTS = ("explained", "unexplained", "inconclusive", "none")
 
@@ -228,6 +229,12 @@ def main():
                 "reference_s": j["reference_horizon_s"],
                 # What the effect itself is worth there (numpy, outside dynax): exact in known mode, a bound in refit.
                 "truth_gain": truth_gain(case, j["reference_horizon_s"]),
+                # A flight's also in the report's own unit, the position RMSE at the reference horizon.
+                **(
+                    {"truth_gain_position": truth_gains(case, j["reference_horizon_s"])[1]}
+                    if case.system == "quadrotor"
+                    else {}
+                ),
                 "wall_s": time.perf_counter() - t0,
             }
             rows.append(row)
