@@ -351,7 +351,10 @@ def records(case: Case, noise_seed: int | None = None, noise_scale: float = 1.0)
     """The training and held-out records of `case` (one run, the last `HELD_OUT_S` held out).
 
     `noise_seed` draws the measurement noise anew (default: the case's own draw, from its seed) and `noise_scale`
-    scales it (0: the noise-free truth): other records of one rig and one run, for the spread of an estimate."""
+    scales it (0: the noise-free truth): other records of one rig and one run, for the spread of an estimate.
+    A quadrotor case has flights instead (`tests.hidden_flights.flights`)."""
+    if case.system == "quadrotor":
+        raise ValueError(f"{case.name}: a quadrotor case is flown, not recorded: tests.hidden_flights.flights")
     spec = SYSTEMS[case.system]
     n = round((TRAIN_S + HELD_OUT_S) / DT) + 1
     ts = np.arange(n) * DT
