@@ -8,7 +8,8 @@ its own speed scale), a true dead time (the input shifted in time, not a Padé f
 its own state, quadratic drag and wind in the helicopter's body frame, stick-slip friction by an event-based
 integrator (`tests.reference.stick_slip_arm`, on an arm with a damped shoulder under held, drifting torques, so
 that it comes to rest under load). Measurement noise is added as a rig's
-encoders and gyros would have it. `tests/diagnose/test_calibration_cases.py` runs a few of them;
+encoders and gyros would have it. The quadrotor's cases are closed-loop flights instead (`tests.hidden_flights`,
+flown by `tests/quadrotor/synthetic_flight.py`). `tests/diagnose/test_calibration_cases.py` runs a few of them;
 `experiments/calibration_battery.py` runs them all.
 
 A case is a `Case`: the system, the hidden effect (`cause`, `where`, `size`, `law`), the mode the
