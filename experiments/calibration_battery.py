@@ -1,10 +1,11 @@
 """The verdicts' calibration battery: hidden-effect cases made outside dynax's model code, diagnosed one by one.
 
-The cases (`tests/hidden_cases.py`: 64 hidden effects over every cause of the vocabulary on the acrobot, the
-double pendulum, the linear axis and the helicopter, with friction laws of other shapes, true dead times and
-body-frame drag and wind, near-threshold sizes, and 11 effect-free controls) are integrated by scipy's DOP853;
-the stick-slip cases (stiction, and Coulomb friction that sticks at its sliding level) by the event-based
-integrator `tests.reference.stick_slip_arm`.
+The cases (`tests/hidden_cases.py`: 76 hidden effects over every cause of the vocabulary on the acrobot, the
+double pendulum, the linear axis, the helicopter and the quadrotor, with friction laws of other shapes, true dead
+times and body-frame drag and wind, near-threshold sizes, and 15 effect-free controls) are integrated by scipy's
+DOP853; the stick-slip cases (stiction, and Coulomb friction that sticks at its sliding level) by the event-based
+integrator `tests.reference.stick_slip_arm`; the quadrotor's are closed-loop flights (`tests/hidden_flights.py`,
+flown by `tests/quadrotor/synthetic_flight.py`), a few minutes each (`--only quadrotor` runs them alone).
 Each is diagnosed with its system's nominal model; the script tallies the calibration targets and draws the
 confusion matrix of the hidden cause against the verdict and the first named cause.
 
@@ -36,6 +37,7 @@ import numpy as np
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from dynax.internal import ProgressBar
 from tests.hidden_cases import CASES, diagnose_case, outcome, truth_gain
+from tests.hidden_flights import truth_gains
 
 VERDICTS = ("explained", "unexplained", "inconclusive", "none")
 
@@ -171,6 +173,25 @@ def markdown(c, rows) -> str:
         f"{'-' if r.get('truth_gain') is None else format(r['truth_gain'], '.0%')} at {r.get('reference_s', '-')} s |"
         for r in wrong
     ]
+    flights = [r for r in rows if r["system"] == "quadrotor"]
+    lines += [
+        "",
+        "| quadrotor case | verdict | named | gain | best candidate (coefficient): gain | truth's gain: window score, "
+        "position RMSE |",
+        "|---|---|---|---|---|---|",
+    ]
+    lines += [
+        f"| {r['name'].removeprefix('quadrotor-')} | {r['verdict']} | {', '.join(r['findings']) or '-'} | "
+        f"{r['gain']:.0%} | "
+        + (
+            "-"
+            if r["best_gain"] is None
+            else f"{r['best_candidate']} ({r['best_coefficient']:.3g}): {r['best_gain']:.0%}"
+        )
+        + " | "
+        f"{r['truth_gain']:.0%}, {r['truth_gain_position']:.0%} at {r['reference_s']} s |"
+        for r in flights
+    ]
     return "\n".join(lines) + "\n"
 
 
@@ -228,6 +249,12 @@ def main():
                 "reference_s": j["reference_horizon_s"],
                 # What the effect itself is worth there (numpy, outside dynax): exact in known mode, a bound in refit.
                 "truth_gain": truth_gain(case, j["reference_horizon_s"]),
+                # A flight's also in the report's own unit, the position RMSE at the reference horizon.
+                **(
+                    {"truth_gain_position": truth_gains(case, j["reference_horizon_s"])[1]}
+                    if case.system == "quadrotor"
+                    else {}
+                ),
                 "wall_s": time.perf_counter() - t0,
             }
             rows.append(row)

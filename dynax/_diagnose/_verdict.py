@@ -190,9 +190,13 @@ def power_of(results: dict, labels: dict, alpha: float, tested_s: float) -> Powe
     if not results:
         return Power(None, None, tested_s, None)
     first = next(iter(results.values()))
-    df = max(float(first["test"].df), 1.0)
     level = alpha / max(int(first["n_tested"]), 1)
-    se = float(np.median([r["test"].std_error for r in results.values()]))
+    # A candidate whose windows all score as the nominal's (refitted to its neutral value: a delay or lag of 0)
+    # has no variance to test, and its test says so (an infinite standard error, no degrees of freedom): it says
+    # nothing about how the windows vary, so the median is over the candidates whose test is defined.
+    defined = [r["test"] for r in results.values() if np.isfinite(r["test"].std_error) and r["test"].df > 0]
+    df = max(float((defined[0] if defined else first["test"]).df), 1.0)
+    se = float(np.median([t.std_error for t in defined])) if defined else np.inf
     detectable = detectable_gain(se, df, level, POWER) if np.isfinite(se) else 1.0
     k = max(results, key=lambda k: results[k]["gain_typical"])
     practical = results[k]["gain_typical"] >= MIN_PRACTICAL_GAIN

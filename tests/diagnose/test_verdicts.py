@@ -173,6 +173,26 @@ def test_the_length_that_would_decide_gives_the_power_it_promises():
     assert detected(power.needed_s / 2) < 0.5
 
 
+def test_the_power_leaves_out_candidates_whose_test_is_undefined():
+    """A candidate refitted to its neutral value (a motor delay of 0 on a quadrotor flight) scores every window as
+    the nominal does: its paired test has no variance (infinite standard error, no degrees of freedom, p = 1). It
+    says nothing about how the windows vary, so the power is the defined candidates' alone; with it in the median,
+    half such candidates made every test powerless (detectable gain 100 %) and an effect-free control
+    `inconclusive`. With no defined test at all there is no power."""
+    flat = _structure(False, 0.0)
+    labels = {i: ("input_lag", f"m{i + 1}") for i in range(4)}
+    defined = {**_results(0.01, 0.8, 0.011, df=14.0), 4: _results(0.0, 0.9, 8e-5, df=14.0)[3]}
+    undefined = _results(0.0, 1.0, np.inf, df=0.0)[3]
+    alone = power_of({3: defined[3], 4: defined[4]}, labels | {4: ("body_bias", "w")}, 0.01, 19.2)
+    both = power_of(
+        {0: undefined, 1: undefined, 3: defined[3], 4: defined[4]}, labels | {4: ("body_bias", "w")}, 0.01, 19.2
+    )
+    assert both.detectable_gain == pytest.approx(alone.detectable_gain) and both.detectable_gain < MIN_PRACTICAL_GAIN
+    assert decide(False, flat, False, both) == Verdict.NONE
+    nothing = power_of({0: undefined, 1: undefined}, labels, 0.01, 19.2)
+    assert nothing.detectable_gain == 1.0 and decide(False, flat, False, nothing) == Verdict.INCONCLUSIVE
+
+
 def test_structure_of_practical_size_or_a_diverging_nominal_is_unexplained():
     precise = power_of(_results(0.03, 0.4, 0.05), {3: ("input_delay", "tau2")}, 0.01, 20.0)
     assert decide(False, _structure(True, 0.995), False, precise) == Verdict.UNEXPLAINED
