@@ -146,7 +146,8 @@ def _rollout(x0, commands, late, effects_, battery, rotor0, n_steps, substeps=1,
         received = commands[j]
         s[13:17] = np.where(np.arange(4) != lagged, received, s[13:17])
         for _ in range(substeps):
-            f = lambda y: sf._field(0.0, y, received, effects_, battery[j], vehicle)  # noqa: E731  # private: the generator's own law
+            # private: the generator's own law (tests/quadrotor/synthetic_flight.py, not dynax)
+            f = lambda y: sf._field(0.0, y, received, effects_, battery[j], vehicle)  # noqa: E731
             a = f(s)
             b = f(s + 0.5 * h * a)
             c = f(s + 0.5 * h * b)
