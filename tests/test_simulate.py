@@ -260,3 +260,8 @@ def test_a_measured_state_of_a_model_with_internal_states_is_refused_with_how_to
     assert x0.shape == (5,) and float(x0[4]) == 1.0  # measured at rest: rested long
     xs = dynax.simulate(model, x0, ts, us).xs
     assert float(jnp.max(jnp.abs(xs[:, 1]))) < 1e-6  # the elbow, held by its static level under the swing
+    # a state short of the measured ones is refused without that advice
+    with pytest.raises(
+        dynax.UsageError, match=r"has 2 entries but Extended has 5 states \('q1', 'q2', 'dq1', 'dq2', 'fs2_rest'\)$"
+    ):
+        dynax.simulate(model, measured[:2], ts, us)

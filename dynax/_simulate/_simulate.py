@@ -127,10 +127,11 @@ def _check_arguments(system, x0, ts, us):
     if x0.ndim != 1:
         raise UsageError(f"simulate: `x0` must be a 1-d state vector, got shape {x0.shape}")
     if x0.shape[0] != system.n_states:
+        measured = getattr(getattr(system, "system", None), "n_states", 0)  # an `Extended`'s base system's
         internal = (
             "; its states beyond the measured ones are internal (an input lag, a memory of rest): complete a "
             "measured state with `system.initial_state(x0, u0)`"
-            if x0.shape[0] < system.n_states and hasattr(system, "initial_state")
+            if hasattr(system, "initial_state") and measured == x0.shape[0]
             else ""
         )
         raise UsageError(
