@@ -122,13 +122,7 @@ def quadrotor_candidates(system, floor: float | None = None) -> tuple:
 def thrust_parameters(system: Quadrotor) -> tuple[str, ...]:
     """The names of the thrust axis' motor weights of `system`'s body model (`dw/` of the motor features):
     the nominal parameters to refit with battery sag and ground effect (`Refit(parameters=...)`)."""
-    motors = {f"dw/{name}" for battery in (False, True) for name in motor_features(battery)}
-    names = tuple(n for n in system.body_model.parameter_names if n in motors)
-    if not names:
-        raise UsageError(
-            f"thrust_parameters: {type(system.body_model).__name__} has no motor weights on the thrust axis"
-        )
-    return names
+    return _motor_weights(system, ("dw",), "thrust_parameters", "the thrust axis")
 
 
 def moment_parameters(system: Quadrotor) -> tuple[str, ...]:
@@ -136,15 +130,16 @@ def moment_parameters(system: Quadrotor) -> tuple[str, ...]:
     the motor features): the nominal parameters to refit with rate damping (`rotor_drag` at `p, q, r`). A moment
     map fitted one step at a time on commands that a closed loop sets takes up part of the vehicle's damping of
     its rates, as the thrust map takes up a battery's sag (`thrust_parameters`)."""
-    motors = {
-        f"{axis}/{name}" for axis in ("dp", "dq", "dr") for battery in (False, True) for name in motor_features(battery)
-    }
+    return _motor_weights(system, ("dp", "dq", "dr"), "moment_parameters", "the roll, pitch and yaw axes")
+
+
+def _motor_weights(system: Quadrotor, axes: tuple[str, ...], caller: str, where: str) -> tuple[str, ...]:
+    """The body model's weights of the motor features (with or without `vbat`) on `axes`, in its order."""
+    features = {name for battery in (False, True) for name in motor_features(battery)}
+    motors = {f"{axis}/{name}" for axis in axes for name in features}
     names = tuple(n for n in system.body_model.parameter_names if n in motors)
     if not names:
-        raise UsageError(
-            f"moment_parameters: {type(system.body_model).__name__} has no motor weights on the roll, pitch and yaw "
-            "axes"
-        )
+        raise UsageError(f"{caller}: {type(system.body_model).__name__} has no motor weights on {where}")
     return names
 
 

@@ -167,8 +167,8 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
     qs = joint_positions(system, trajectories)
     check = check_consistency(fitted, names, estimate, qs, warn=consistency == "check")
     reversed_named = False
+    error = float(relative_equation_error(a, y, estimate))
     if check.violated and consistency != "off":
-        error = float(relative_equation_error(a, y, estimate))
         solve = functools.partial(least_squares, a, names=names, weights=weights, rcond=rcond)
         reversed_named = _warn_if_inputs_reversed(system, names, (a, y), solve, qs, error, trajectories[0].input_names)
         _warn_if_degrees(given, trajectories, error)
@@ -183,7 +183,6 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
                 ys[rows] -= w[rows] @ ys[rows] / max(float(np.sum(w[rows])), np.finfo(float).tiny)
             return np.asarray(a, dtype=float), ys, w
 
-        error = float(relative_equation_error(a, y, estimate))
         _warn_if_input_flips_partway(
             system,
             names,
@@ -489,23 +488,24 @@ def _warn_if_input_flips_partway(system, names, raw, solvers, qs, fitted, record
     a_fit, _, w_fit = fit_rows(y_raw[:, None].copy())
 
     def errors(candidates):
+        """Each candidate's right-hand side as solved, least-squares estimate and relative equation error."""
         a, ys, w = fit_rows(np.stack([y_raw * signs(*c) for c in candidates], axis=1))
         sw = np.sqrt(w)[:, None]
         estimates = np.linalg.lstsq(a * sw, ys * sw, rcond=None)[0]
-        return estimates, np.linalg.norm(a @ estimates - ys, axis=0) / np.linalg.norm(ys, axis=0)
+        return ys, estimates, np.linalg.norm(a @ estimates - ys, axis=0) / np.linalg.norm(ys, axis=0)
 
-    first = 0 if len(counts) > 1 else 1  # of several records, one may be reversed throughout (cut 0)
+    lowest_cut = 0 if len(counts) > 1 else 1  # of several records, one may be reversed throughout (cut 0)
     coarse = [
         (r, k, cut, after)
         for r, count in enumerate(counts)
         if count >= 2 * FLIP_STRETCHES
         for k in range(len(driven))
-        for cut in sorted({int(c) for c in np.linspace(0, count, FLIP_STRETCHES + 1)[first:-1]})
+        for cut in sorted({int(c) for c in np.linspace(0, count, FLIP_STRETCHES + 1)[lowest_cut:-1]})
         for after in (True, False)
     ]
     if not coarse:
         return
-    _, found = errors(coarse)
+    *_, found = errors(coarse)
     enough = np.sqrt(FLIP_GAIN) * error
     order = [i for i in np.argsort(found) if found[i] <= enough]
     if not order:
@@ -515,10 +515,11 @@ def _warn_if_input_flips_partway(system, names, raw, solvers, qs, fitted, record
     # both sides: where every input's equations are this input's (an acrobot's), negating one side is negating
     # the other and the whole input, which only the consistency of the estimate tells apart
     fine = [
-        (r, k, c, side) for c in range(max(first, cut - step), min(counts[r], cut + step + 1)) for side in (True, False)
+        (r, k, c, side)
+        for c in range(max(lowest_cut, cut - step), min(counts[r], cut + step + 1))
+        for side in (True, False)
     ]
-    estimates, found = errors(fine)
-    ys = fit_rows(np.stack([y_raw * signs(*c) for c in fine], axis=1))[1]
+    ys, estimates, found = errors(fine)
     for i in np.argsort(found)[:4]:  # the best few: consistency is the costly check
         if found[i] > enough:
             break
