@@ -23,6 +23,11 @@ What is checked (`Check` names them):
   estimated from its angle; the message says so).
 - `wrapped`: an angle that jumps by a multiple of $2\pi$ (to 15 %) between two samples, many times its
   typical step: an angle folded into $(-\pi, \pi]$; every derivative across the jump is wrong.
+- `jump`: a position that leaps from one sample to the next, not as a wrap and not out and back: 20
+  times the largest step within three samples either side, 10 of its smallest steps, 5 % of its range, and
+  more than its measured velocity moves it: a break in the record (a logger that dropped, replayed or
+  spliced rows; an encoder re-zeroed), across which every derivative is wrong. Motion cannot do it: a
+  rigid body's position steps change smoothly, so a real step has neighbours of its own size.
 - `velocity`: a stretch where a measured velocity stops being the derivative of its position (block
   means against secant slopes over 50 ms blocks, as `dynax._data._velocities`, but block by block):
   a spinning link past the encoder's range, a sign that flips half way. A gain that is wrong in every
@@ -74,6 +79,7 @@ class Check(enum.StrEnum):
     DUPLICATE = "duplicate"
     LAG = "lag"
     STAMPS = "stamps"
+    JUMP = "jump"
 
 
 class Severity(enum.StrEnum):
@@ -178,6 +184,9 @@ GLITCH_STEPS = 20.0  # ... and this many typical sample-to-sample steps
 GLITCH_WINDOW = 7  # samples of the running median a glitch is measured from (runs of up to 3 samples)
 STUCK_S, STUCK_SAMPLES = 0.25, 25  # an exactly repeated value this long (both) is a stuck sensor
 WRAP_TOLERANCE = 0.15  # a jump within this fraction of 2 pi k (k >= 1) is a wrap
+JUMP_STEPS = 20.0  # a break's step is this many times its neighbours' largest ...
+JUMP_NEIGHBOURS = 3  # ... the neighbours: this many steps either side (a glitch of up to 3 samples returns within them)
+JUMP_RANGE = 0.05  # ... and this fraction of the position's (1-99 %) range
 VELOCITY_ERROR = 0.25  # a block whose mean velocity misses the secant slope by this fraction ...
 VELOCITY_NOISE = 5.0  # ... and this many robust noise standard deviations ...
 VELOCITY_MOTION = 0.05  # ... and this fraction of the record's rms slope is a bad block
@@ -413,6 +422,70 @@ def _wrapped(tr, ts, source, angles):
                     "unwrap the angle before reading it (numpy.unwrap on the column): it is the same angle, counted on",
                 )
             )
+    return out
+
+
+def _wraps(steps: np.ndarray) -> np.ndarray:
+    """Where a step is a whole number of turns (to `WRAP_TOLERANCE`): `_wrapped`'s test without its size."""
+    turns = np.round(steps / (2 * np.pi))
+    return (turns != 0) & (np.abs(steps - 2 * np.pi * turns) < WRAP_TOLERANCE * 2 * np.pi)
+
+
+def jump_findings(tr, ts, source, values, pairs, measured, dt):
+    """Breaks in each position (see the module notes): one finding per sample a position leaps at, naming
+    every position that leaps there."""
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    if len(ts) < 2 * JUMP_NEIGHBOURS + 2:
+        return []
+    dts = np.diff(ts)
+    velocity_of = {q: v for v, q in measured.items()}
+    angles = tr.system in ("acrobot", "double_pendulum")
+    at: dict[int, list[tuple[str, float, float, float | None]]] = {}
+    for q in dict.fromkeys(pairs.values()):
+        x = values[q]
+        steps = np.diff(x)
+        size = np.abs(steps)
+        floor = JUMP_RANGE * _robust_range(x)
+        if not floor > 0 or not np.any(size > floor):
+            continue  # no step reaches 5 % of the range: nothing to read further
+        h = JUMP_NEIGHBOURS
+        around = sliding_window_view(np.pad(size, h), 2 * h + 1).copy()
+        around[:, h] = 0.0
+        near = around.max(axis=1)
+        quantum = float(np.min(size[size > 0]))  # an encoder's count: a flicker of one count is no break
+        leap = (size > floor) & (size > JUMP_STEPS * near) & (size > 10.0 * quantum) & (dts < 1.5 * dt)
+        if angles:
+            leap &= ~_wraps(steps)  # `wrapped` names those
+        v = velocity_of.get(q)
+        moved = None
+        if v is not None:
+            moved = 0.5 * (values[v][1:] + values[v][:-1]) * dts
+            leap &= ~(np.abs(steps - moved) < 0.5 * size)  # its velocity moves it so: motion, however fast
+        for k in np.flatnonzero(leap):
+            at.setdefault(int(k), []).append(
+                (q, float(steps[k]), float(steps[k] / near[k]), None if moved is None else float(moved[k]))
+            )
+    out = []
+    for k, leaps in sorted(at.items()):
+        q, step, ratio, moved = leaps[0]
+        said = f" while {velocity_of[q]} moves it by {moved:+.3g}" if moved is not None else ""
+        others = "".join(f"; {o} leaps there too, by {s:+.4g}" for o, s, _, _ in leaps[1:])
+        out.append(
+            _row_time(
+                ts,
+                (k, k + 1),
+                source,
+                Check.JUMP,
+                Severity.REFUSE,
+                q,
+                f"leaps by {step:+.4g} from one sample to the next, {abs(ratio):.3g} times its largest step within "
+                f"{JUMP_NEIGHBOURS} samples either side{said}{others}: a break in the record (a logger that dropped, "
+                "replayed or spliced rows; an encoder re-zeroed), across which every derivative is wrong; cut there, "
+                "and the pieces either side are fitted as separate records",
+                _span(ts, k, k + 1),
+            )
+        )
     return out
 
 
@@ -741,8 +814,10 @@ def check_record(trajectory: Trajectory, *, estimated: Sequence[str] | None = No
     angles = [(q, values[q]) for q in pairs.values()] if trajectory.system in ("acrobot", "double_pendulum") else []
     wrapped = _wrapped(trajectory, ts, source, angles)
     findings += wrapped
+    jumps = [] if wrapped else jump_findings(trajectory, ts, source, values, pairs, measured, dt)
+    findings += jumps
     findings += stuck_findings(trajectory, ts, source, names, xs, paired_estimated, dt)
-    if not glitches and not wrapped:  # a glitch or a wrap spoils its blocks too; said once, at its sample
+    if not glitches and not wrapped and not jumps:  # each spoils its blocks too; said once, at its sample
         stretches = velocity_stretch_findings(trajectory, ts, source, values, measured, dt)
         findings += stretches
         wrong = {f.column for f in stretches}  # a velocity wrong in a stretch has no one lag: said once

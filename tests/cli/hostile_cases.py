@@ -241,6 +241,16 @@ def _shift(column, start, amount, header=ACROBOT):
     return edit
 
 
+def _replayed(start, source, n, header=ACROBOT):
+    """A logger that writes rows `source..source+n` again at `start..start+n`, under the later rows' times."""
+
+    def edit(t):
+        t[start : start + n, 1:] = t[source : source + n, 1:]
+        return t
+
+    return edit
+
+
 def _swap_rows(a, b):
     def edit(t):
         t[[a, b]] = t[[b, a]]
@@ -467,6 +477,28 @@ CASES = [
         lambda d, fx: _diagnose(_acrobot(d, fx, _shift("q2", 500, 4 * np.pi))),
         "refuse",
         ("column 'q2'", "unwrap"),
+    ),
+    # A position that leaps and stays (an encoder re-zeroed, rows dropped or replayed): cut at the leap.
+    C(
+        "jump-q1-encoder-rezeroed",
+        "jump",
+        lambda d, fx: _identify(_acrobot(d, fx, _shift("q1", 400, 0.8))),
+        "refuse",
+        ("column 'q1'", "rows 400-401", "--exclude"),
+    ),
+    C(
+        "jump-q2-encoder-only",
+        "jump",
+        lambda d, fx: _identify(_encoders(d, fx, _shift("q2", 333, -0.5, ENCODERS))),
+        "refuse",
+        ("column 'q2'", "rows 333-334", "--exclude"),
+    ),
+    C(
+        "logger-replays-a-stretch",
+        "jump",
+        lambda d, fx: _identify(_acrobot(d, fx, _replayed(300, 100, 150))),
+        "refuse",
+        ("rows 300-301", "rows 450-451", "--exclude"),
     ),
     # A velocity that stops agreeing with its position in a stretch: named, never a --scale.
     C(

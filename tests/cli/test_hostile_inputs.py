@@ -8,7 +8,7 @@ make the data worse. Cases that run a fit are `heavy`.
 
 import warnings
 
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 import numpy as np
 import pytest
@@ -42,6 +42,7 @@ def test_the_corpus_covers_every_class_of_fault():
         "glitch",
         "stuck",
         "wrapped",
+        "jump",
         "velocity",
         "velocity_lag",
         "stamps",
@@ -100,6 +101,43 @@ def test_a_single_sample_glitch_is_named_at_its_row(seed, row, size, column):
     glitches = [f for f in found if f.kind == "glitch"]
     assert glitches and glitches[0].column == ("q1", "q2")[column] and glitches[0].rows == (row + 1, row + 1)
     assert glitches[0].fix.startswith("--exclude")
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    row=st.integers(4, 595),
+    fraction=st.floats(0.1, 0.8),
+    column=st.sampled_from([0, 1]),
+    sign=st.sampled_from([-1.0, 1.0]),
+)
+def test_a_position_that_leaps_and_stays_is_named_at_its_row(seed, row, fraction, column, sign):
+    ts, q, tau = _smooth(seed)
+    spread = np.percentile(q[:, column], 99) - np.percentile(q[:, column], 1)
+    # an encoder re-zeroed (or rows dropped) at `row`: a leap of a tenth of the range or more, and beyond any step
+    # the motion makes (at 100 Hz a fast stretch steps a tenth of the range itself)
+    leap = max(fraction * spread, 40.0 * float(np.max(np.abs(np.diff(q[:, column])))))
+    assume(abs(leap - 2 * np.pi * round(leap / (2 * np.pi))) > 0.2 * 2 * np.pi)  # a whole turn is `wrapped`'s
+    q[row:, column] += sign * leap
+    found = dynax.check_records([_record(ts, q, tau)]).findings
+    jumps = [f for f in found if f.kind == "jump"]
+    assert jumps and jumps[0].column == ("q1", "q2")[column] and jumps[0].rows == (row, row + 1)
+    assert jumps[0].fix == f"--exclude {ts[row - 2]:.6g}:{ts[row + 1]:.6g}"
+    assert not [f for f in found if f.kind == "glitch"]  # not out and back
+
+
+@pytest.mark.parametrize("rate_hz", [100, 1000])
+def test_an_encoder_that_rests_and_then_moves_raises_no_alarm(rate_hz):
+    # counts of a 4096-line encoder: at rest one count flickers, then the joint breaks away (stick-slip)
+    ts = np.arange(0.0, 4.0, 1.0 / rate_hz)
+    count = 2 * np.pi / 4096
+    moving = np.clip(ts - 1.5, 0.0, None)
+    q1 = 0.8 * np.sin(2.0 * np.pi * 0.7 * moving) + 1.5 * moving**2 * (ts < 1.7)
+    q2 = np.where(ts < 2.0, 0.3, 0.3 + 0.5 * np.sin(2.0 * np.pi * 1.3 * (ts - 2.0)))
+    rng = np.random.default_rng(0)
+    q = np.round(np.column_stack([q1, q2]) / count + rng.integers(0, 2, (len(ts), 2))) * count
+    tau = np.sin(2.0 * np.pi * 0.5 * ts)
+    assert not [f for f in dynax.check_records([_record(ts, q, tau)]).findings if f.kind == "jump"]
 
 
 def test_a_velocity_wrong_in_one_stretch_is_located_and_no_scale_is_offered(tmp_path):
