@@ -558,8 +558,8 @@ def _warn_if_input_scaled_partway(system, names, raw, solvers, qs, fitted, recor
         return
     found = errors(coarse)[-1]
     enough = np.sqrt(FLIP_GAIN) * error
-    watching = PARTWAY_SEEN.get()
-    if not found.min() <= enough and watching is None:
+    watching, passed = PARTWAY_SEEN.get(), bool(found.min() <= enough)
+    if not passed and watching is None:
         return
     r, k, cut, _ = coarse[int(np.argmin(found))]
     step = counts[r] // FLIP_STRETCHES  # refine the cut row by row between its neighbours
@@ -584,6 +584,8 @@ def _warn_if_input_scaled_partway(system, names, raw, solvers, qs, fitted, recor
                 float(found[best] / error) ** 2 if error > 0 else np.inf,
             )
         )
+        if not passed:  # watched, as it would run unwatched
+            return
     for i in np.argsort(found)[:4]:  # the best few: consistency is the costly check
         if found[i] > enough:
             break
