@@ -416,6 +416,8 @@ from ._identify._least_squares import (
 )
 from ._identify._least_squares import tsqr_r as tsqr_r
 from ._identify._ls_stage import least_squares_seen as least_squares_seen
+from ._identify._ls_stage import partway_search_seen as partway_search_seen
+from ._identify._ls_stage import PartwayStretch as PartwayStretch
 from ._identify._ls_stage import records_less_offsets as records_less_offsets
 from ._identify._method import FitSettings as FitSettings
 from ._identify._method import Fitted as Fitted
@@ -430,6 +432,7 @@ from ._identify._refine import record_residual_scale as record_residual_scale
 from ._identify._refine import RECORD_WEIGHTS as RECORD_WEIGHTS
 from ._identify._refine import refinement_options as refinement_options
 from ._identify._regressors import parameter_vector as parameter_vector
+from ._identify._result import warn_if_refinement_left_equations as warn_if_refinement_left_equations
 from ._identify._simulation_fit import named_parameters as named_parameters
 from ._identify._simulation_fit import (
     record_jackknife_covariance as record_jackknife_covariance,
@@ -797,6 +800,8 @@ __all__ = [
     "parameter_names",
     "parameter_vector",
     "parse_assignments",
+    "partway_search_seen",
+    "PartwayStretch",
     "PERMUTATIONS",
     "physical_readings",
     "polish_on_constraint",
@@ -917,6 +922,7 @@ __all__ = [
     "velocity_lag",
     "VelocityLag",
     "warn_if_numbered_otherwise",
+    "warn_if_refinement_left_equations",
     "WhitenessTest",
     "window_errors",
     "window_rollout",

@@ -30,7 +30,7 @@ from ._equations import Dynamic
 from ._method import AbstractMethod, FitSettings, Fitted, IdentifyJob
 from ._offsets import record_labels
 from ._regressors import Friction
-from ._result import Identification, NoValidationWarning
+from ._result import Identification, NoValidationWarning, warn_if_refinement_left_equations
 from ._validation import HeldOut, split_for_validation, Validate
 
 _SYSTEM_NAMES = {Acrobot: "acrobot", DoublePendulum: "double_pendulum", LinearAxis: "linear_axis"}
@@ -272,6 +272,7 @@ def identify(
     stages = prepared.method.fit_stage(system, prepared)
     stages = prepared.method.refine(system, prepared, stages)
     result = _validated(stages, prepared.job.held_out)
+    warn_if_refinement_left_equations(result)  # a refinement that left the equations: said, with what moved
     _warn_unvalidated(held, source)
     return result
 

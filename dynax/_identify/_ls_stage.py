@@ -183,7 +183,7 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
                 ys[rows] -= w[rows] @ ys[rows] / max(float(np.sum(w[rows])), np.finfo(float).tiny)
             return np.asarray(a, dtype=float), ys, w
 
-        _warn_if_input_flips_partway(
+        _warn_if_input_scaled_partway(
             system,
             names,
             (raw_a, raw_y),
@@ -431,18 +431,54 @@ def _driven_joints(system, n_rows: int) -> list[np.ndarray] | None:
     return driven
 
 
-FLIP_STRETCHES = 16  # where a record's input may turn its sign: at each sixteenth of it, then refined row by row
-FLIP_GAIN = 0.5  # negating the stretch must remove at least half of the squared equation error
+class PartwayStretch(NamedTuple):
+    """The best stretch of one `_warn_if_input_scaled_partway` search, as `partway_search_seen` shows it: the
+    record's label, the input, the cut row (among the record's equation rows per joint) and whether the stretch
+    runs from it to the end (`after`) or from the start to it, the stretch's gain fitted with the parameters, and
+    the squared equation error it keeps over the stage's (`ratio`, before any gate: a stretch is named at
+    `FLIP_GAIN` or less, with a consistent estimate, a determined gain and determined size parameters)."""
+
+    record: str
+    input: str
+    row: int
+    after: bool
+    gain: float
+    ratio: float
 
 
-def _warn_if_input_flips_partway(system, names, raw, solvers, qs, fitted, records) -> None:
-    r"""Look for an input whose sign turns part way through a record (unless an input is reversed throughout):
-    negate it from each of `FLIP_STRETCHES - 1` cuts of each record to the record's end, or from its start to
-    the cut, solve again, and refine the best cut row by row. If one such record stretch gives a consistent
-    estimate whose squared equation error is at most `FLIP_GAIN` of the stage's, and whose size parameters
-    the records determine (relative standard errors robust to serial correlation under `POORLY_DETERMINED`),
-    warn with the record, the input and the time, and the `--exclude` that leaves the stretch out: no
-    `scale` is right for the whole record.
+PARTWAY_SEEN: contextvars.ContextVar[list | None] = contextvars.ContextVar("dynax_partway_seen", default=None)
+
+
+@contextlib.contextmanager
+def partway_search_seen():
+    """Within the block, each search for an input whose gain changes part way through a record (one per
+    `Dynamic` least-squares stage that runs it) appends its best stretch (`PartwayStretch`) to the list the block
+    is given, whether or not a warning names it: how near a clean record comes to being named, how far a faulted
+    one is past the gate."""
+    seen: list[PartwayStretch] = []
+    with set_within(PARTWAY_SEEN, seen):
+        yield seen
+
+
+FLIP_STRETCHES = 16  # where a record's input may change its gain: at each sixteenth of it, then refined row by row
+FLIP_GAIN = 0.5  # the stretch's gain must remove at least half of the squared equation error
+SIGN_TURN = 0.25  # a stretch gain within this of -1 reads as a sign that turned
+GAIN_DETERMINED = 3.0  # the stretch's gain this many standard errors (robust to serial correlation) from no change
+
+
+def _warn_if_input_scaled_partway(system, names, raw, solvers, qs, fitted, records) -> None:
+    r"""Look for an input whose gain changes part way through a record (a sign that turns, a current limit, a unit,
+    a gear or a torque constant changed while recording): for each input and each of `FLIP_STRETCHES - 1` cuts of
+    each record, add the input's rows from the cut to the record's end (or from its start to the cut) as one more
+    regressor column, and refine the best cut row by row. The input enters the equations linearly
+    ($Y\theta = u$): where the stretch's logged input is $g$ times what acts, $Y\theta + c\,u_s = u$ with
+    $c = 1 - 1/g$, so one least-squares solve per candidate estimates the parameters and the stretch's gain
+    together. If one such stretch keeps at most `FLIP_GAIN` of the stage's squared equation error, with a
+    consistent estimate for the input so corrected, a gain `GAIN_DETERMINED` standard errors from 1 (as $g$ and
+    as $c$) and size parameters the records determine (relative standard errors robust to serial correlation
+    under `POORLY_DETERMINED`), warn with the record, the input, the time and the gain (a gain near -1, within
+    `SIGN_TURN`, as a sign that turned), and the `--exclude` that leaves the stretch out: no `scale` is right
+    for the whole record.
 
     `raw` is the stage's equations `(a, y)` as built (before force offsets are taken out); `solvers` holds
     `fit_rows(y)`, the stage's equations for other right-hand sides `y` (columns) as solved (offsets taken
@@ -451,21 +487,21 @@ def _warn_if_input_flips_partway(system, names, raw, solvers, qs, fitted, record
     estimate is physically inconsistent, and `records = (trajectories, settings, counts)` the records, their
     equations' settings and each one's rows per joint.
 
-    On a record whose inputs are right, negating a stretch of one adds error wherever the motion is: on the
-    six DFKI runs the best stretch leaves 1.00 to 2.35 times the squared error, on the EMPS record 99 (a
-    sliver at an end changes nothing), where a faulted stretch of the rig's size, under its noise, leaves
-    0.27. Where the motion is too small to determine the model, the error is the model's misfit, which a
-    sign can move as much (a rig held by its friction, moving 3 mrad: 0.32): such a fit names nothing, as
-    its size parameters are left to the noise. So the search runs on every `Dynamic`
-    fit: a consistent estimate may hide the fault too (a record with both joints driven and `tau2` negated
-    for its second half fits consistently, with 94 % equation error).
+    On a record whose inputs are right, a free gain on a stretch takes up little of the model's misfit: the best
+    stretch keeps 0.66 to 0.99 of the squared error on the DFKI runs alone, 0.99 on them together, 0.98 on EMPS
+    (docs/devdocs/identification_notes.md), where a gain of 2 from mid-record keeps 0.30 (DFKI run 00) and a sign
+    turn 0.07. A gain between 0.7 and 1.5 is not named there: it adds less error than the model's misfit. Where
+    the motion is too small to determine the model, the error is the model's misfit, which a gain can move as
+    much (a rig held by its friction, moving 3 mrad): such a fit names nothing, as its size parameters are left
+    to the noise.
+    So the search runs on every `Dynamic` fit: a consistent estimate may hide the fault too (a record with
+    both joints driven and `tau2` negated for its second half fits consistently, with 94 % equation error).
 
-    A motor's direction or a current's sign that changes while recording (a controller's mode, a driver
-    reconfigured, or between two recordings) leaves each stretch a fine signal; least squares then fits the
-    two stretches' contradiction (a DFKI record with `tau2` negated from its middle on: equation error 85 %
-    where the record as logged leaves 19 %, and an output-error refinement that fits inertias a thousand times
-    too large). All candidates are one batched least-squares solve (numpy); the consistency of the best few
-    is checked.
+    A motor's direction, a current's scale or a unit that changes while recording leaves each stretch a fine
+    signal; least squares then fits the two stretches' contradiction (a DFKI record with `tau2` negated from
+    its middle on: equation error 85 % where the record as logged leaves 19 %, and an output-error refinement
+    that fits inertias a thousand times too large). All candidates are one batched least-squares solve
+    (numpy); the consistency of the best few is checked.
     """
     a_raw, y_raw = (np.asarray(v, dtype=float) for v in raw)
     fit_rows, solve, record_rows = solvers
@@ -477,24 +513,41 @@ def _warn_if_input_flips_partway(system, names, raw, solvers, qs, fitted, record
     total = sum(counts)
     starts = np.concatenate([[0], np.cumsum(counts)])
 
-    def signs(record, k, cut, after):
-        sign = np.ones(len(y_raw))
+    def stretch(record, k, cut, after):
+        inside = np.zeros(len(y_raw))
         span = slice(cut, counts[record]) if after else slice(0, cut)
         for j in driven[k]:
             first = j * total + starts[record]
-            sign[first + span.start : first + span.stop] = -1.0
-        return sign
+            inside[first + span.start : first + span.stop] = 1.0
+        return inside
 
-    a_fit, _, w_fit = fit_rows(y_raw[:, None].copy())
+    a_fit, y_fit, w_fit = fit_rows(y_raw[:, None].copy())
+    y_fit = y_fit[:, 0]
+    sw = np.sqrt(w_fit)
+    u, s, _ = np.linalg.svd(a_fit * sw[:, None], full_matrices=False)
+    basis = u[:, s > s[0] * max(a_fit.shape) * np.finfo(float).eps] if s.size and s[0] > 0 else u[:, :0]
+    stage_left = sw * y_fit - basis @ (basis.T @ (sw * y_fit))  # the stage's weighted residual
+    scale = max(float(np.linalg.norm(y_fit)), np.finfo(float).tiny)
 
     def errors(candidates):
-        """Each candidate's right-hand side as solved, least-squares estimate and relative equation error."""
-        a, ys, w = fit_rows(np.stack([y_raw * signs(*c) for c in candidates], axis=1))
-        sw = np.sqrt(w)[:, None]
-        estimates = np.linalg.lstsq(a * sw, ys * sw, rcond=None)[0]
-        return ys, estimates, np.linalg.norm(a @ estimates - ys, axis=0) / np.linalg.norm(ys, axis=0)
+        """Each candidate's stretch column as solved, its coefficient `c` ($1 - 1/g$), the right-hand side with
+        the stretch's input so corrected, its least-squares estimate and its error: the joint fit's residual over
+        the stage's right-hand side or over the corrected one, whichever is larger (a gain that shrinks the
+        stretch's input to nothing leaves a small residual of a right-hand side it has emptied: where one input
+        drives everything, an acrobot's, a stretch over most of the record would fit nothing)."""
+        columns = fit_rows(np.stack([y_raw * stretch(*c) for c in candidates], axis=1))[1]
+        weighted = columns * sw[:, None]
+        apart = weighted - basis @ (basis.T @ weighted)  # each column less what the parameters' columns explain
+        size = np.sum(apart * apart, axis=0)
+        usable = size > 1e-12 * np.maximum(np.sum(weighted * weighted, axis=0), np.finfo(float).tiny)
+        c = np.where(usable, (apart.T @ stage_left) / np.where(usable, size, 1.0), 0.0)
+        ys = y_fit[:, None] - columns * c[None, :]
+        estimates = np.linalg.lstsq(a_fit * sw[:, None], ys * sw[:, None], rcond=None)[0]
+        left = np.linalg.norm(a_fit @ estimates - ys, axis=0)
+        left = left / np.minimum(scale, np.maximum(np.linalg.norm(ys, axis=0), np.finfo(float).tiny))
+        return columns, c, ys, estimates, np.where(usable, left, np.inf)
 
-    lowest_cut = 0 if len(counts) > 1 else 1  # of several records, one may be reversed throughout (cut 0)
+    lowest_cut = 0 if len(counts) > 1 else 1  # of several records, one may be scaled throughout (cut 0)
     coarse = [
         (r, k, cut, after)
         for r, count in enumerate(counts)
@@ -505,62 +558,129 @@ def _warn_if_input_flips_partway(system, names, raw, solvers, qs, fitted, record
     ]
     if not coarse:
         return
-    *_, found = errors(coarse)
+    found = errors(coarse)[-1]
     enough = np.sqrt(FLIP_GAIN) * error
-    order = [i for i in np.argsort(found) if found[i] <= enough]
-    if not order:
+    watching, passed = PARTWAY_SEEN.get(), bool(found.min() <= enough)
+    if not passed and watching is None:
         return
-    r, k, cut, _ = coarse[order[0]]
+    r, k, cut, _ = coarse[int(np.argmin(found))]
     step = counts[r] // FLIP_STRETCHES  # refine the cut row by row between its neighbours
-    # both sides: where every input's equations are this input's (an acrobot's), negating one side is negating
-    # the other and the whole input, which only the consistency of the estimate tells apart
+    # both sides: where every input's equations are this input's (an acrobot's), a gain on one side is its
+    # inverse on the other and the whole input's scale, which only the consistency of the estimate tells apart
     fine = [
         (r, k, c, side)
         for c in range(max(lowest_cut, cut - step), min(counts[r], cut + step + 1))
         for side in (True, False)
     ]
-    ys, estimates, found = errors(fine)
+    columns, coefficients, ys, estimates, found = errors(fine)
+    if watching is not None:  # `partway_search_seen`: the best stretch, whatever the gates say of it
+        best = int(np.argmin(found))
+        c = float(coefficients[best])
+        watching.append(
+            PartwayStretch(
+                record_labels(trajectories)[r],
+                trajectories[0].input_names[k],
+                fine[best][2],
+                fine[best][3],
+                1.0 / (1.0 - c) if c != 1.0 else np.inf,
+                float(found[best] / error) ** 2 if error > 0 else np.inf,
+            )
+        )
+        if not passed:  # watched, as it would run unwatched
+            return
     for i in np.argsort(found)[:4]:  # the best few: consistency is the costly check
         if found[i] > enough:
             break
-        candidate = jnp.asarray(estimates[:, i])
+        candidate, kept = jnp.asarray(estimates[:, i]), float(found[i])
         if check_consistency(fitted_system(system, names, candidate), names, candidate, qs, warn=False).violated:
             # short of consistency (a friction level a little below zero, as a clean record's own estimate may
             # be): judged by the consistent estimate's equation error, as the stage will fit it
             candidate = consistent_least_squares(system, names, a_fit, ys[:, i], w_fit, start=candidate)[0]
-            found[i] = float(relative_equation_error(jnp.asarray(a_fit), jnp.asarray(ys[:, i]), candidate))
-            if found[i] > enough:
+            kept = float(
+                np.linalg.norm(a_fit @ np.asarray(candidate) - ys[:, i]) / min(scale, np.linalg.norm(ys[:, i]))
+            )
+            if kept > enough:
                 continue
         if _leaves_sizes_to_noise(system, names, (a_fit, ys[:, i], w_fit), solve, candidate, record_rows):
             continue
-        at, after = fine[i][2:]  # the sign turns between rows `at - 1` and `at`: the span to leave out holds both
-        label, input_name = record_labels(trajectories)[r], trajectories[0].input_names[k]
-        if at == 0:
-            where, fix = (
-                "throughout",
-                "the other records agree with the model: correct its sign in that file, or leave it out",
-            )
-        else:
-            times = row_times(trajectories[r : r + 1], settings[r : r + 1], counts[r : r + 1])[0]
-            t = float(times[at - 1] if after else times[at])
-            where = (
-                f"from about t = {t:.4g} s to the record's end" if after else f"from its start to about t = {t:.4g} s"
-            )
-            span = f"{label}@{t:.6g}:" if after else f"{label}@:{t:.6g}"
-            fix = (
-                f"no scale is right for the whole record: leave the stretch out (`--exclude {span}`; in Python "
-                "`exclude_stretches`), or correct its sign in the file"
-            )
-        inconsistency = " and is physically inconsistent" if inconsistent else ""
-        warnings.warn(
-            f"file {label}: the recorded {input_name} looks reversed {where} (and agrees with the model's joint "
-            f"positions elsewhere): the least-squares estimate leaves an equation error of {error:.0%}{inconsistency}, "
-            f"and with {input_name} negated there a consistent estimate's falls to {found[i]:.0%}. A motor's "
-            f"direction or a current's sign that changed while recording? If so, {fix}.",
-            InconsistentEstimateWarning,
-            stacklevel=7,
+        c = float(coefficients[i])
+        c_std = _coefficient_std(a_fit, columns[:, i], y_fit, w_fit, record_rows)
+        if not abs(c) > GAIN_DETERMINED * c_std:
+            continue
+        gain = 1.0 / (1.0 - c) if c != 1.0 else np.inf
+        gain_std = gain**2 * c_std  # g = 1 / (1 - c): dg/dc = g^2
+        if not abs(gain - 1.0) > GAIN_DETERMINED * gain_std:  # determined as the gain too, not only as `c`
+            continue
+        corrected = float(relative_equation_error(jnp.asarray(a_fit), jnp.asarray(ys[:, i]), candidate))
+        _warn_scaled_stretch(
+            (record_labels(trajectories)[r], trajectories[0].input_names[k], fine[i][2:]),
+            (gain, gain_std),
+            (error, inconsistent, corrected, kept),
+            (trajectories[r : r + 1], settings[r : r + 1], counts[r : r + 1]),
         )
         return
+
+
+def _coefficient_std(a, column, y, weights, record_rows) -> float:
+    """The standard error, robust to serial correlation, of the coefficient of `column` fitted with `a`'s
+    columns to `y` (weighted least squares, `weights` per row)."""
+    sw = np.sqrt(np.asarray(weights, dtype=float))
+    jac = np.column_stack([a, column]) * sw[:, None]
+    z = np.linalg.lstsq(jac, y * sw, rcond=None)[0]
+    total = int(sum(record_rows))
+    if not total or jac.shape[0] % total:
+        return float("inf")
+    steps = np.arange(jac.shape[0]) % total
+    covariance, _ = serial_covariance(jac, y * sw - jac @ z, steps, tuple(record_rows))
+    return float(np.sqrt(max(float(np.asarray(covariance)[-1, -1]), 0.0)))
+
+
+def _warn_scaled_stretch(where, gain, errors, record) -> None:
+    """The warning of `_warn_if_input_scaled_partway`: `where = (file label, input, (cut row, after))`,
+    `gain = (g, its standard error)`, `errors = (the stage's relative equation error, whether its estimate is
+    inconsistent, the corrected equations' error, the
+    joint fit's residual over the stage's right-hand side)` and `record = (trajectories, settings, counts)` of the one
+    record."""
+    label, input_name, (at, after) = where
+    g, g_std = gain
+    error, inconsistent, corrected, _ = errors
+    turned = abs(g + 1.0) <= SIGN_TURN
+    if at == 0:
+        where_text = "throughout"
+        fix = (
+            f"the other records agree with the model: correct its {'sign' if turned else 'scale'} in that file"
+            + ("" if turned else f" (multiply its {input_name} by {1.0 / g:.4g})")
+            + ", or leave it out"
+        )
+    else:
+        times = row_times(*record)[0]
+        t = float(times[at - 1] if after else times[at])  # the span to leave out holds both rows of the change
+        where_text = (
+            f"from about t = {t:.4g} s to the record's end" if after else f"from its start to about t = {t:.4g} s"
+        )
+        span = f"{label}@{t:.6g}:" if after else f"{label}@:{t:.6g}"
+        fix = (
+            f"no scale is right for the whole record: leave the stretch out (`--exclude {span}`; in Python "
+            f"`exclude_stretches`), or correct its {'sign' if turned else 'scale'} in the file"
+        )
+    inconsistency = " and is physically inconsistent" if inconsistent else ""
+    if turned:
+        text = (
+            f"file {label}: the recorded {input_name} looks reversed {where_text} (and agrees with the model's joint "
+            f"positions elsewhere; gain {g:.3g} +- {g_std:.2g}): the least-squares estimate leaves an equation error "
+            f"of {error:.0%}{inconsistency}, and with {input_name} negated there a consistent estimate's falls to "
+            f"{corrected:.0%}. A motor's direction or a current's sign that changed while recording? If so, {fix}."
+        )
+    else:
+        against = "the other records" if at == 0 else "the rest of the record"
+        text = (
+            f"file {label}: the recorded {input_name} looks scaled by {g:.3g} +- {g_std:.2g} {where_text} against "
+            f"{against} (it reads {g:.3g} times what the model's joint positions need there): the least-squares "
+            f"estimate leaves an equation error of {error:.0%}{inconsistency}, and with {input_name} divided by "
+            f"{g:.3g} there a consistent estimate's falls to {corrected:.0%}. A current limit, a unit, a gear or a "
+            f"torque constant that changed while recording? If so, {fix}."
+        )
+    warnings.warn(text, InconsistentEstimateWarning, stacklevel=8)
 
 
 def _leaves_sizes_to_noise(system, names, equations, solve, estimate, record_rows) -> bool:

@@ -1,8 +1,10 @@
 """Identification with default settings: filters chosen from the spectra, physically consistent estimates,
 output-error refinement and held-out validation, on data made independently of the code under test."""
 
+import dataclasses
 import warnings
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -243,7 +245,7 @@ def test_a_reversed_torque_is_named_where_the_estimate_is_inconsistent():
         us = np.asarray(record.us) * np.asarray(signs)
         data = Trajectory(record.ts, record.xs, jnp.asarray(us), NAMES, ("tau1", "tau2"))
         result, said = _least_squares_with_warnings(data)
-        return result, [m for m in said if any(k in m for k in ("reversed", "degrees", "upright"))]
+        return result, [m for m in said if any(k in m for k in ("reversed", "scaled", "degrees", "upright"))]
 
     plain, said = fit([1.0, 1.0])
     assert plain.consistency.consistent and not plain.consistency.active and said == []
@@ -286,6 +288,88 @@ def test_a_torque_reversed_part_way_is_located_and_cutting_it_out_fits_the_truth
     _, said = _least_squares_with_warnings([first, turned])
     said = [m for m in said if "reversed" in m]
     assert len(said) == 1 and said[0].startswith("file second.csv: the recorded tau1 looks reversed throughout"), said
+
+
+def _stated_gain(message):
+    """The gain and standard error a partway-scale warning states ("looks scaled by G +- S ...")."""
+    gain, std = message.split("looks scaled by ")[1].split(" ")[0:3:2]
+    return float(gain), float(std)
+
+
+def test_a_torque_whose_scale_changes_part_way_is_located_with_its_gain():
+    # The rig's records with the elbow's torque logged at three times its size from 6.3 s on (a current scale
+    # reconfigured while recording): each stretch is a fine signal and no scale is right for the whole record, so
+    # the warning names the record, the input, the time and the gain with its standard error, and the `--exclude`
+    # that leaves the stretch out, never a `--scale`. Of two records, one whose shoulder torque is logged at
+    # twice its size throughout is named as that record, with the factor that corrects it. As recorded: silent.
+    model = rig_model()
+    record = recorded(model, 10.0, 21)
+    us = np.asarray(record.us).copy()
+    us[np.asarray(record.ts) >= 6.3, 1] *= 3.0
+    halved = Trajectory(record.ts, record.xs, jnp.asarray(us), NAMES, ("tau1", "tau2"), source="rig.csv")
+    _, said = _least_squares_with_warnings(halved)
+    said = [m for m in said if "looks scaled" in m or "looks reversed" in m]
+    assert len(said) == 1 and said[0].startswith("file rig.csv: the recorded tau2 looks scaled by "), said
+    gain, std = _stated_gain(said[0])
+    assert abs(gain - 3.0) <= max(3 * std, 0.3) and std < 0.5, said
+    t = float(said[0].split("from about t = ")[1].split(" s")[0])
+    assert 6.25 <= t <= 6.3, said
+    assert f"--exclude rig.csv@{t:.6g}:" in said[0] and "--scale" not in said[0], said
+
+    first = Trajectory(record.ts, record.xs, record.us, NAMES, ("tau1", "tau2"), source="first.csv")
+    other = recorded(model, 10.0, 22)
+    doubled = Trajectory(
+        other.ts, other.xs, other.us * jnp.asarray([[2.0, 1.0]]), NAMES, ("tau1", "tau2"), source="second.csv"
+    )
+    _, said = _least_squares_with_warnings([first, doubled])
+    said = [m for m in said if "looks scaled" in m or "looks reversed" in m]
+    assert len(said) == 1 and said[0].startswith("file second.csv: the recorded tau1 looks scaled by "), said
+    assert "throughout" in said[0] and "--scale" not in said[0], said
+    gain, std = _stated_gain(said[0])
+    assert abs(gain - 2.0) <= max(3 * std, 0.1), said
+    with dynax.internal.partway_search_seen() as seen:
+        _, said = _least_squares_with_warnings(
+            [first, Trajectory(other.ts, other.xs, other.us, NAMES, ("tau1", "tau2"))]
+        )
+    assert not [m for m in said if "looks scaled" in m or "looks reversed" in m], said
+    assert len(seen) == 1 and seen[0].ratio > 0.5, seen  # the best stretch of clean records keeps most of the error
+
+
+def test_a_refinement_that_leaves_the_equations_is_named_with_what_moved():
+    # A least-squares fit of the rig's records, given an output-error stage whose estimate has theta5 a thousand
+    # times the least-squares one (what a refinement of a record whose elbow torque turns part way ends at) and an
+    # equation error thousands of times the stage's: the warning names theta5, both values and the standard
+    # errors it moved by, and what to check. A stage that ends near its start (the clean case), or one that kept
+    # its start, is not named.
+    model = rig_model()
+    ls, _ = _least_squares_with_warnings(recorded(model, 10.0, 21))
+    stage = ls.stages[0]
+    names = stage.names
+
+    def refined(scale5, error_ratio, kept_start=False):
+        value = np.asarray(stage.solution.value).copy()
+        value[names.index("theta5")] *= scale5
+        statistics = dynax.internal.RefinementStatistics(1.0, 1.0, 0.1, 0.01, 1.0, 100, kept_start=kept_start)
+        solution = eqx.tree_at(lambda s: (s.value, s.statistics), stage.solution, (jnp.asarray(value), statistics))
+        oe = dataclasses.replace(
+            stage,
+            kind=dynax.StageKind.OUTPUT_ERROR,
+            method="simulation",
+            solution=solution,
+            relative_equation_error=stage.relative_equation_error * error_ratio,
+        )
+        result = dataclasses.replace(ls, stages=(stage, oe))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            dynax.internal.warn_if_refinement_left_equations(result)
+        return [str(w.message) for w in caught]
+
+    said = refined(1000.0, 5000.0)
+    assert len(said) == 1 and said[0].startswith("the output-error refinement ended where the equations"), said
+    assert "it moved theta5 from " in said[0] and "times the least-squares stage's" in said[0], said
+    assert refined(1.0, 8.0) and refined(1000.0, 1.0), "either sign alone is named"
+    assert refined(1.05, 1.2) == []  # the DFKI runs' refinements: 0.99 to 1.23 times the equation error
+    assert refined(1000.0, 5000.0, kept_start=True) == []
 
 
 def test_columns_mapped_to_the_other_joint_are_named_where_the_estimate_is_inconsistent():
