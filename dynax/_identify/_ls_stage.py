@@ -487,20 +487,18 @@ def _warn_if_input_scaled_partway(system, names, raw, solvers, qs, fitted, recor
     estimate is physically inconsistent, and `records = (trajectories, settings, counts)` the records, their
     equations' settings and each one's rows per joint.
 
-    On a record whose inputs are right, a free gain on a stretch takes up little of the model's misfit: the best
-    stretch keeps 0.66 to 0.99 of the squared error on the DFKI runs alone, 0.99 on them together, 0.98 on EMPS
-    (docs/devdocs/identification_notes.md), where a gain of 2 from mid-record keeps 0.30 (DFKI run 00) and a sign
-    turn 0.07. A gain between 0.7 and 1.5 is not named there: it adds less error than the model's misfit. Where
-    the motion is too small to determine the model, the error is the model's misfit, which a gain can move as
-    much (a rig held by its friction, moving 3 mrad): such a fit names nothing, as its size parameters are left
-    to the noise.
-    So the search runs on every `Dynamic` fit: a consistent estimate may hide the fault too (a record with
-    both joints driven and `tau2` negated for its second half fits consistently, with 94 % equation error).
+    On a record whose inputs are right, a free gain on a stretch takes up little of the model's misfit (the
+    measurements on real and synthetic records are in docs/devdocs/identification_notes.md), where a gain of 2
+    from mid-record or a sign turn takes up most of it. A gain between 0.7 and 1.5 is not named: it adds less
+    error than the model's misfit. Where the motion is too small to determine the model, the error is the
+    model's misfit, which a gain can move as much (an arm held by its friction): such a fit names nothing, as
+    its size parameters are left to the noise. So the search runs on every `Dynamic` fit: a consistent
+    estimate may hide the fault too (both joints driven and one torque negated for the second half fits
+    consistently, with most of the equation error left).
 
     A motor's direction, a current's scale or a unit that changes while recording leaves each stretch a fine
-    signal; least squares then fits the two stretches' contradiction (a DFKI record with `tau2` negated from
-    its middle on: equation error 85 % where the record as logged leaves 19 %, and an output-error refinement
-    that fits inertias a thousand times too large). All candidates are one batched least-squares solve
+    signal; least squares then fits the two stretches' contradiction, and an output-error refinement may fit
+    inertias a thousand times too large. All candidates are one batched least-squares solve
     (numpy); the consistency of the best few is checked.
     """
     a_raw, y_raw = (np.asarray(v, dtype=float) for v in raw)

@@ -376,11 +376,10 @@ def warn_if_refinement_left_equations(identification: Identification) -> None:
     names what moved, by how much, and what to check.
 
     The refinement fits the simulated motion, which a model far from the physics may still follow over short
-    windows: a DFKI record whose elbow torque is negated from its middle on refines to $\theta_5$ a thousand
-    times the rig's, with an equation error of 487 451 % (the least-squares stage's: 85 %), and simulates the
-    held-out tail better than the least-squares model. On clean records the refinement keeps the equations:
-    its equation error is 0.99 to 1.23 times the least-squares stage's over the DFKI runs and splits
-    (docs/devdocs/identification_notes.md). A refinement that kept its start (`kept_start`) is not judged."""
+    windows: a record whose torque is negated part way can refine to a gravity term a thousand times the
+    machine's and still simulate the held-out tail well. On clean records the refinement keeps the equations
+    (measurements in docs/devdocs/identification_notes.md). A refinement that kept its start (`kept_start`) is
+    not judged."""
     import warnings
 
     from .._model._linear_in_parameters import size_parameter_names
