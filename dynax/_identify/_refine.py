@@ -70,7 +70,7 @@ from .._data._trajectory import Trajectory
 from .._fit import AbstractStatistics, Parameters, Solution
 from .._model._extensions import Extended
 from .._model._system import AbstractSystem
-from .._simulate import FixedGrid, simulate
+from .._simulate import complete_state, FixedGrid, simulate
 from ._consistency import consistent_parametrisation, ConsistentParametrisation
 from ._regressors import parameter_vector, split_terms, with_parameters
 from ._simulation_fit import (
@@ -284,12 +284,10 @@ def _segment_squares(system, x0, ts, xs, us, scale, simulation: FixedGrid):
     """Sum of squared scaled state residuals of each segment simulated from its initial state."""
     n = xs.shape[-1]
 
-    def start(x, u0):  # an extended model's internal states start as `Extended.initial_state` completes them
-        return system.initial_state(x, u0) if system.n_states > x.shape[0] else x
+    def rollout(x, t, u):  # the model's internal states, if any, start as `complete_state` completes them
+        return simulate(system, complete_state(system, x, u[0]), t, u, method=simulation, throw=False).xs[:, :n]
 
-    sims = jax.vmap(lambda x, t, u: simulate(system, start(x, u[0]), t, u, method=simulation, throw=False).xs[:, :n])(
-        x0, ts, us
-    )
+    sims = jax.vmap(rollout)(x0, ts, us)
     r = (sims - xs) / scale[None, None, :]
     r = jnp.where(jnp.isfinite(r), r, DIVERGED)  # as the fit counts a diverged rollout
     return jnp.sum(r**2, axis=(1, 2))

@@ -39,7 +39,7 @@ from .._fit import (
 )
 from .._model._system import AbstractSystem
 from .._progress import bar_token, ProgressBar
-from .._simulate import FixedGrid, simulate
+from .._simulate import complete_state, FixedGrid, simulate
 from ._least_squares import least_squares
 from ._method import AbstractMethod, as_records, FitSettings
 from ._regressors import parameter_names, parameter_vector, split_terms, with_friction, with_parameters
@@ -282,12 +282,10 @@ def _residuals(unknowns: _Unknowns, data: _Segments, *, simulation: FixedGrid, f
     model, x0 = unknowns.system, unknowns.initial_states
     n = data.xs.shape[-1]
 
-    def start(x0, u0):  # an extended model's internal states (a lag's, a delay's) start at rest under the first input
-        return model.initial_state(x0, u0) if model.n_states > x0.shape[0] else x0
+    def rollout(x0, t, u):  # the model's internal states, if any, start as `complete_state` completes them
+        return simulate(model, complete_state(model, x0, u[0]), t, u, method=simulation, throw=False).xs[:, :n]
 
-    sims = jax.vmap(lambda x0, t, u: simulate(model, start(x0, u[0]), t, u, method=simulation, throw=False).xs[:, :n])(
-        x0, data.ts, data.us
-    )
+    sims = jax.vmap(rollout)(x0, data.ts, data.us)
     r = (sims - data.xs) / data.sigma[None, None, :] * data.segment_weight[:, None, None]
     r = jnp.where(jnp.isfinite(r), r, DIVERGED)
     out = [r.reshape(-1)]

@@ -222,12 +222,15 @@ def complete_state(system, x_measured, u0, ts_before=None, us_before=None, histo
     (`ts_before`, `us_before`: the samples up to and including the start), the internal states
     start at rest under its first input and are integrated along it (`simulate` on `InputStates`),
     so a window starts with the internal state the inputs before it imply. Otherwise internal
-    states beyond the measured ones start at zero.
+    states beyond the measured ones start at zero. A model with no states beyond the measured ones
+    starts from the measured state as it is.
     """
+    if system.n_states == x_measured.shape[0]:
+        return x_measured
     initial_state = getattr(system, "initial_state", None)
     if initial_state is None:
         return jnp.zeros(system.n_states, x_measured.dtype).at[: x_measured.shape[0]].set(x_measured)
-    if ts_before is None or system.n_states == x_measured.shape[0]:
+    if ts_before is None:
         return initial_state(x_measured, u0)
     n = x_measured.shape[0]
     z0 = initial_state(x_measured, us_before[0])[n:]

@@ -2,12 +2,16 @@
 
 from typing import ClassVar
 
+import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from scipy.linalg import expm
 
 import dynax
 from dynax import (
+    AbstractJointTerm,
     AbstractManipulator,
     Acrobot,
     BodyBias,
@@ -16,12 +20,14 @@ from dynax import (
     Extended,
     Helicopter,
     InputGain,
+    InputLag,
     LinearAxis,
     RotorInertia,
     Wind,
 )
 from dynax.control import SpongController
 import dynax.internal
+from dynax.internal import AbstractVehicleTerm
 
 
 class _Slider(AbstractManipulator):
@@ -98,3 +104,85 @@ def test_vehicle_terms_act_on_the_helicopter():
 def test_spong_controller_needs_an_acrobot(system):
     with pytest.raises(ValueError, match="SpongController: `system` must be an Acrobot"):
         SpongController(system)
+
+
+class _LaggedDamping(AbstractJointTerm):
+    """Damping on a lagged speed, $-b z$ with $\\tau \\dot z = \\dot q_j - z$: a joint term with an internal state of
+    its own, written for this test only (`Extended` knows nothing of it)."""
+
+    joint: int = eqx.field(static=True)
+    coefficient: jax.Array
+    time_constant: float = eqx.field(static=True)
+    cause: ClassVar[str] = "lagged_damping"
+    prefix: ClassVar[str] = "bl"
+    neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 1
+
+    def hidden_names(self, system):
+        return (f"{self.parameter_name(system)}_speed",)
+
+    def initial_hidden(self, system, x, a):  # the lag at rest: it follows a speed held long
+        return x[system.velocity_indices[self.joint]][None]
+
+    def hidden_vector_field(self, system, x, a, z):
+        return (x[system.velocity_indices[self.joint]] - z) / self.time_constant
+
+    def joint_force(self, q, dq, a, z=None):
+        assert z is not None
+        return -self.coefficient * z[0]
+
+
+class _LaggedBias(AbstractVehicleTerm):
+    """A body-axis acceleration $z$ that approaches $c$ as $\\tau \\dot z = c - z$ (for this test only)."""
+
+    axis: int = eqx.field(static=True)
+    coefficient: jax.Array
+    cause: ClassVar[str] = "lagged_bias"
+    prefix: ClassVar[str] = "lb"
+    neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 0
+
+    def hidden_names(self, system):
+        return (f"{self.parameter_name(system)}_now",)
+
+    def hidden_vector_field(self, system, x, a, z):
+        return (self.coefficient - z) / 0.5
+
+    def acceleration(self, quat, air, u, z=None):
+        assert z is not None
+        return jnp.zeros_like(air).at[self.axis].set(z[0])
+
+
+def test_a_term_with_an_internal_state_of_its_own_simulates_through_extended():
+    # The slider (unit mass, spring 4) under a lagged drive force a (InputLag, 0.1 s) and a lagged damping: the linear
+    # ODE x'' = a - 4 x - b z, 0.1 a' = u - a, 0.3 z' = x' - z, solved exactly by the matrix exponential.
+    b, tau, lag = 0.8, 0.3, 0.1
+    model = Extended(_Slider(), (_LaggedDamping(0, jnp.asarray(b), tau), InputLag(0, lag)))
+    assert model.state_names == ("x", "dx", "f_lag", "bl_x_speed")  # the input terms' states first, then the others'
+    x0 = model.initial_state(jnp.array([0.3, -0.5]), jnp.array([0.0]))
+    np.testing.assert_allclose(x0, [0.3, -0.5, 0.0, -0.5], rtol=1e-15)
+    A = np.array([[0, 1, 0, 0], [-4, 0, 1, -b], [0, 0, -1 / lag, 0], [0, 1 / tau, 0, -1 / tau]])
+    B = np.array([0.0, 0.0, 1 / lag, 0.0])
+    u = 1.5
+    ts = np.linspace(0.0, 3.0, 61)
+    # Constant input: x(t) = e^{At} x0 + A^{-1} (e^{At} - I) B u.
+    exact = np.stack([expm(A * t) @ x0 + np.linalg.solve(A, (expm(A * t) - np.eye(4)) @ B * u) for t in ts])
+    us = np.full((len(ts), 1), u)
+    xs = dynax.simulate(model, x0, ts, us, method=dynax.Adaptive(rtol=1e-10, atol=1e-10)).xs
+    np.testing.assert_allclose(xs, exact, atol=1e-8)
+    # The measured state completes the same way in a windowed rollout's start (its history moves input states only).
+    start = dynax.internal.complete_state(model, jnp.array([0.3, -0.5]), jnp.array([0.0]))
+    np.testing.assert_array_equal(start, x0)
+
+
+def test_a_vehicle_term_with_an_internal_state_reads_it():
+    model = Extended(Helicopter(), (_LaggedBias(4, jnp.asarray(0.3)),))
+    assert model.state_names[-1] == "lb_now"
+    x = dynax.internal.hover_state(dtype=jnp.float64)
+    u = jnp.array([0.0, 0.0, 0.0, 0.2])
+    z = 0.12
+    dx = model.vector_field(0.0, jnp.concatenate([x, jnp.array([z])]), u)
+    nominal = Helicopter().vector_field(0.0, x, u)
+    np.testing.assert_allclose(dx[11] - nominal[11], z, rtol=1e-12)  # the bias acts as far as it has built up
+    np.testing.assert_allclose(dx[-1], (0.3 - z) / 0.5, rtol=1e-12)
+    np.testing.assert_array_equal(model.initial_state(x, u)[-1], 0.0)  # the default start: zero

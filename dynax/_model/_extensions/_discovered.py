@@ -149,7 +149,7 @@ class Discovered(AbstractJointTerm):
         """The size of the term, $\\lVert c \\rVert_2$ (the coefficients themselves are `coefficients`)."""
         return jnp.linalg.norm(self.coefficients)
 
-    def joint_force(self, q, dq, a):
+    def joint_force(self, q, dq, a, z=None):
         values = jnp.stack([f(q, dq, a) for f in self.features])
         return jnp.dot(self.coefficients, values)
 

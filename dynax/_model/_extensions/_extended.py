@@ -7,7 +7,6 @@ from jaxtyping import Array, ArrayLike, Float
 
 from .._system import AbstractSystem
 from ._inputs import AbstractInputTerm
-from ._stiction import Stiction
 from ._terms import AbstractJointTerm, AbstractTerm
 from ._vehicle_terms import AbstractVehicleTerm
 
@@ -24,9 +23,11 @@ class Extended(AbstractSystem):
     the order given, so `(InputGain(0, 2.0), InputLag(0, 0.05))` lags the doubled input. Terms whose
     coefficients are at their neutral values leave the nominal system unchanged.
 
-    The state is the nominal state followed by the terms' internal states (an input lag's output,
-    a delay's filter states), named in `state_names`. `initial_state(x0, u0)` completes a measured
-    state with internal states at rest.
+    The state is the nominal state followed by the terms' internal states, named in `state_names`: the
+    input terms' first (a lag's output, a delay's filter states: they move with the recorded input
+    alone), then every other term's in the order given (`AbstractTerm.hidden_names`, e.g. `Stiction`'s
+    memory of rest), each read by its own term. `initial_state(x0, u0)` completes a measured state
+    with them (the input terms' at rest under `u0`, the others' `AbstractTerm.initial_hidden`).
 
     **Arguments:**
 
@@ -59,9 +60,9 @@ class Extended(AbstractSystem):
 
     @property
     def state_names(self) -> tuple[str, ...]:
-        hidden = tuple(n for t in self.input_terms for n in t.hidden_names(self.system))
-        memory = tuple(n for t in self.remembering_terms for n in t.hidden_names(self.system))
-        return tuple(self.system.state_names) + hidden + memory
+        inputs = tuple(n for t in self.input_terms for n in t.hidden_names(self.system))
+        others = tuple(n for t in self.state_terms for n in t.hidden_names(self.system))
+        return tuple(self.system.state_names) + inputs + others
 
     @property
     def input_names(self) -> tuple[str, ...]:
@@ -93,10 +94,10 @@ class Extended(AbstractSystem):
         return tuple(t for t in self.terms if isinstance(t, AbstractJointTerm))
 
     @property
-    def remembering_terms(self) -> tuple[Stiction, ...]:
-        """The joint terms with internal states (`Stiction` with a `dwell_time`: its memory of rest), whose
-        states follow the input terms' in the state."""
-        return tuple(t for t in self.joint_terms if isinstance(t, Stiction) and t.n_hidden)
+    def state_terms(self) -> tuple[AbstractTerm, ...]:
+        """The terms other than input terms that carry internal states (`AbstractTerm.hidden_names`), whose
+        states follow the input terms' in the state, in this order."""
+        return tuple(t for t in self.terms if not isinstance(t, AbstractInputTerm) and t.hidden_names(self.system))
 
     @property
     def vehicle_terms(self) -> tuple[AbstractVehicleTerm, ...]:
@@ -159,34 +160,47 @@ class Extended(AbstractSystem):
                 zi = term.steady_state(ui).astype(x0.dtype)
                 hidden.append(zi)
                 a = a.at[i].set(term.applied(ui, zi))
-        for term in self.remembering_terms:  # a joint measured in the band is taken to have rested there
-            speed = x0[self.system.velocity_indices[term.joint]]
-            hidden.append(jnp.atleast_1d(term.initial_memory(speed)).astype(x0.dtype))
+        for term in self.state_terms:
+            hidden.append(term.initial_hidden(self.system, x0, a).astype(x0.dtype))
         return jnp.concatenate([x0, *hidden]) if hidden else x0
 
     def vector_field(self, t, x, u):
         n = self.system.n_states
         x_nominal, z = x[:n], x[n:]
         a, dz = self.applied_input(u, z)
+        hidden = self._hidden_of_terms(z)
         # The terms that change the nominal dynamics (not just its input) say how, per kind.
         if self.vehicle_terms:
-            dx = AbstractVehicleTerm.extended_vector_field(self.system, self.vehicle_terms, x_nominal, a)
-        elif self.remembering_terms:
-            dx, dz = self._with_memory(x_nominal, a, z, dz)
+            dx = AbstractVehicleTerm.extended_vector_field(
+                self.system,  # pyright: ignore[reportArgumentType] (a vehicle: the terms' `check_system` said so)
+                self.vehicle_terms,
+                x_nominal,
+                a,
+                self._of_kind(hidden, AbstractVehicleTerm),
+            )
         elif self.joint_terms:
-            dx = AbstractJointTerm.extended_vector_field(self.system, self.joint_terms, x_nominal, a)
+            dx = AbstractJointTerm.extended_vector_field(
+                self.system, self.joint_terms, x_nominal, a, self._of_kind(hidden, AbstractJointTerm)
+            )
         else:
             dx = self.system.vector_field(t, x_nominal, a)
+        states = [(term, zt) for term, zt in zip(self.terms, hidden) if zt.shape[0]]
+        if states:  # the other terms' states follow the input terms' (whose part `applied_input` gave)
+            own = sum(zt.shape[0] for _, zt in states)
+            moving = [term.hidden_vector_field(self.system, x_nominal, a, zt) for term, zt in states]
+            dz = jnp.concatenate([dz[: dz.shape[0] - own], *moving])
         return jnp.concatenate([dx, dz])
 
-    def _with_memory(self, x, a, z, dz):
-        """The joint dynamics and the state derivative when joint terms carry a memory of rest (`Stiction`'s
-        `dwell_time`): its state is the last of `z`, one per such term; `dz` the input terms' part, padded."""
-        remembering = self.remembering_terms
-        memory = dict(zip((id(t) for t in remembering), z[z.shape[0] - len(remembering) :], strict=True))
-        holding = tuple(t for t in self.joint_terms if t.holds_at_rest)
-        levels = jnp.stack([memory.get(id(t), jnp.ones_like(z[0])) for t in holding])
-        dx = AbstractJointTerm.extended_vector_field(self.system, self.joint_terms, x, a, levels)
-        speeds = self.system.velocity_indices
-        dm = jnp.stack([t.memory_derivative(x[speeds[t.joint]], memory[id(t)]) for t in remembering])
-        return dx, dz.at[dz.shape[0] - len(remembering) :].set(dm)
+    def _hidden_of_terms(self, z: Float[Array, " n_hidden"]) -> tuple[Float[Array, " _"], ...]:
+        """Each term's internal states in `z`, in the order of `terms`: empty for an input term (the input chain reads
+        its own, `applied_input`) and for a term without."""
+        offset = z.shape[0] - sum(len(t.hidden_names(self.system)) for t in self.state_terms)
+        hidden = []
+        for term in self.terms:
+            size = 0 if isinstance(term, AbstractInputTerm) else len(term.hidden_names(self.system))
+            hidden.append(z[offset : offset + size])
+            offset += size
+        return tuple(hidden)
+
+    def _of_kind(self, hidden, kind) -> tuple[Float[Array, " _"], ...]:
+        return tuple(zt for term, zt in zip(self.terms, hidden) if isinstance(term, kind))

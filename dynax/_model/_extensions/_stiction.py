@@ -178,10 +178,18 @@ class Stiction(AbstractJointTerm):
         """The memory of rest's state name, `fs{j}_rest` (none without a `dwell_time`)."""
         return () if self.dwell_time is None else (f"{self.parameter_name(system)}_rest",)
 
-    def initial_memory(self, dq: Float[Array, ""]) -> Float[Array, ""]:
-        """The memory of rest of a joint measured at speed `dq`: the band's weight (1 in the band: a joint
-        measured at rest is taken to have rested long)."""
-        return self.weight(dq)
+    def initial_hidden(self, system, x, a):
+        """The memory of rest of a joint measured at the state `x`: the band's weight at its speed (1 in the band: a
+        joint measured at rest is taken to have rested long); none without a `dwell_time`."""
+        if self.dwell_time is None:
+            return x[:0]
+        return jnp.atleast_1d(self.weight(x[system.velocity_indices[self.joint]]))
+
+    def hidden_vector_field(self, system, x, a, z):
+        """The memory of rest's rate (`memory_derivative`) at the joint's speed in `x`."""
+        if self.dwell_time is None:
+            return jnp.zeros_like(z)
+        return jnp.atleast_1d(self.memory_derivative(x[system.velocity_indices[self.joint]], z[0]))
 
     def memory_derivative(self, dq: Float[Array, ""], memory: Float[Array, ""]) -> Float[Array, ""]:
         r"""$\dot m = w\,(1 - m) / T_d - (1 - w)\,|\dot q|\,m / (d_s + |\dot q|\,\tau_h)$: built in the band over
@@ -235,12 +243,18 @@ class Stiction(AbstractJointTerm):
         force: Float[Array, " n"],
         q: Float[Array, " n"],
         dq: Float[Array, " n"],
-        memory: Float[Array, " k"] | None = None,
+        hidden: tuple[Float[Array, " _"], ...] | None = None,
     ) -> Float[Array, " n"]:
         r"""What the sticking joints add to the generalised force `force` (all other terms included) for
         the mass matrix `mass` (rotor inertias included): each term's slip excess, and in its band the
         clipped holding force in place of the friction the joint has (both clipped to $\pm f_s$), each
-        scaled by its term's memory of rest `memory` (one per term in `holding`; default 1: no dwell)."""
+        scaled by its term's memory of rest, its internal state in `hidden` (one per term in `holding`;
+        1 for a term without a `dwell_time`; default none)."""
+        memory = None
+        remembered = [z for z in hidden or () if z.shape[0]]
+        if remembered:
+            ones = jnp.ones_like(remembered[0][0])
+            memory = jnp.stack([z[0] if z.shape[0] else ones for z in hidden or ()])
         joints = [t.joint for t in holding]
         coulomb = {t.joint: t.coefficient for t in terms if isinstance(t, CoulombFriction)}
         # The friction each sticking joint has from its other friction terms, and this term's excess.

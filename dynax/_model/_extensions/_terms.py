@@ -22,7 +22,7 @@ def float_scalar(value) -> Array:
 
 
 class AbstractTerm(eqx.Module):
-    """A model extension: one physical effect with one fitted `coefficient`.
+    r"""A model extension: one physical effect with one fitted `coefficient`.
 
     **Class attributes:**
 
@@ -31,6 +31,14 @@ class AbstractTerm(eqx.Module):
     - `neutral`: the coefficient value at which the term does nothing.
     - `sign`: +1 when only deviations above `neutral` are physical (friction, inertia, delay),
       0 when both signs are.
+
+    **Internal states.** A term may carry states of its own (a memory of rest, a filter, a
+    temperature), which `Extended` appends to the nominal state: `hidden_names` names them,
+    `initial_hidden` completes a measured state with them and `hidden_vector_field` is their
+    $\dot z$; the term's force reads them as its last argument (`AbstractJointTerm.joint_force`,
+    `AbstractVehicleTerm.acceleration`, ...). Input terms (`AbstractInputTerm`) carry theirs through
+    the input chain instead (`applied`, `hidden_derivative`, `steady_state`): they move with the
+    recorded input alone, and come first in the state.
     """
 
     coefficient: eqx.AbstractVar[Float[Array, ""]]
@@ -66,6 +74,23 @@ class AbstractTerm(eqx.Module):
     def parameters(self, system) -> dict[str, Array]:
         """The term's coefficients by report name (one for a named cause; several for a `Discovered` term)."""
         return {self.parameter_name(system): self.coefficient}
+
+    def hidden_names(self, system) -> tuple[str, ...]:
+        """The names of the term's internal states, its part of `Extended.state_names` (default none)."""
+        return ()
+
+    def initial_hidden(
+        self, system, x: Float[Array, " n_measured"], a: Float[Array, " n_inputs"]
+    ) -> Float[Array, " n_hidden"]:
+        """The internal states a rollout from the measured nominal state `x` starts with, under the applied
+        input `a` (`Extended.initial_state`; default zero)."""
+        return jnp.zeros((len(self.hidden_names(system)),), x.dtype)
+
+    def hidden_vector_field(
+        self, system, x: Float[Array, " n_measured"], a: Float[Array, " n_inputs"], z: Float[Array, " n_hidden"]
+    ) -> Float[Array, " n_hidden"]:
+        r"""$\dot z$ of the internal states `z` at the nominal state `x` under the applied input `a` (default zero)."""
+        return jnp.zeros_like(z)
 
     def parameter_filter(self):
         """What a fit of an `Extended` model moves in this term (a filter for `dynax.Parameters`):
@@ -115,30 +140,32 @@ class AbstractJointTerm(AbstractTerm):
         terms: tuple["AbstractJointTerm", ...],
         x: Float[Array, " n_states"],
         a: Float[Array, " n_inputs"],
-        memory: Float[Array, " k"] | None = None,
+        hidden: tuple[Float[Array, " _"], ...] | None = None,
     ) -> Float[Array, " n_states"]:
         r"""The manipulator's $\dot x$ with joint terms acting on its pieces (used by `Extended`):
-        $\big(M(q) + \operatorname{diag}(I_r)\big)\ddot q + h(q, \dot q) = B\,a + \sum_k f_k(q, \dot q)$.
-        `memory`: the memory of rest of each term that holds its joint at rest, in order (`Stiction`'s
-        `dwell_time`; default none: each holds fully)."""
+        $\big(M(q) + \operatorname{diag}(I_r)\big)\ddot q + h(q, \dot q) = B\,a + \sum_k f_k(q, \dot q, z_k)$.
+        `hidden`: each term's internal states `z_k` (`AbstractTerm.hidden_names`), in order (default none)."""
         k = system.n_joints
         q, dq = x[:k], x[k:]
+        if hidden is None:
+            hidden = tuple(x[:0] for _ in terms)
         force = system.input_matrix() @ a - system.bias_force(q, dq)
         inertia = jnp.zeros(k, force.dtype)
-        for term in terms:
-            force = force.at[term.joint].add(term.joint_force(q, dq, a))
+        for term, z in zip(terms, hidden, strict=True):
+            force = force.at[term.joint].add(term.joint_force(q, dq, a, z))
             inertia = inertia.at[term.joint].add(term.inertia())
         mass = system.mass_matrix(q) + jnp.diag(inertia)
-        holding = tuple(t for t in terms if t.holds_at_rest)
+        holding = tuple((t, z) for t, z in zip(terms, hidden) if t.holds_at_rest)
         if holding:
-            force = force + type(holding[0]).holding_force(holding, terms, mass, force, q, dq, memory)
+            terms_held, hidden_held = zip(*holding)
+            force = force + type(terms_held[0]).holding_force(terms_held, terms, mass, force, q, dq, hidden_held)
         ddq = solve_spd(mass, force)
         return jnp.concatenate([dq, ddq])
 
     @staticmethod
-    def holding_force(holding, terms, mass, force, q, dq, memory=None) -> Float[Array, " n_joints"]:
+    def holding_force(holding, terms, mass, force, q, dq, hidden=None) -> Float[Array, " n_joints"]:
         """What the terms that hold their joints at rest (`holds_at_rest`, e.g. `Stiction`) add to the generalised
-        force `force`, given all terms and the mass matrix (default none)."""
+        force `force`, given all terms, the mass matrix and the holding terms' internal states (default none)."""
         return jnp.zeros_like(force)
 
     def force(self, q: Float[Array, ""], dq: Float[Array, ""]) -> Float[Array, ""]:
@@ -146,9 +173,14 @@ class AbstractJointTerm(AbstractTerm):
         return jnp.zeros_like(dq)
 
     def joint_force(
-        self, q: Float[Array, " n_joints"], dq: Float[Array, " n_joints"], a: Float[Array, " n_inputs"]
+        self,
+        q: Float[Array, " n_joints"],
+        dq: Float[Array, " n_joints"],
+        a: Float[Array, " n_inputs"],
+        z: Float[Array, " n_hidden"] | None = None,
     ) -> Float[Array, ""]:
-        """Generalised force at its joint from the whole state and applied input (default `force(q_j, dq_j)`)."""
+        """Generalised force at its joint from the whole state, the applied input and the term's internal states
+        `z` (`hidden_names`; default `force(q_j, dq_j)`)."""
         return self.force(q[self.joint], dq[self.joint])
 
     def inertia(self) -> Float[Array, ""]:

@@ -70,38 +70,54 @@ class AbstractVehicleTerm(AbstractTerm):
 
     @staticmethod
     def extended_vector_field(
-        system: Helicopter, terms: tuple["AbstractVehicleTerm", ...], x: Float[Array, " 13"], u: Float[Array, "4"]
+        system: Helicopter,
+        terms: tuple["AbstractVehicleTerm", ...],
+        x: Float[Array, " 13"],
+        u: Float[Array, "4"],
+        hidden: tuple[Float[Array, " _"], ...] | None = None,
     ) -> Float[Array, " 13"]:
-        """The helicopter's vector field with vehicle terms added (see the module docs; used by `Extended`)."""
+        """The helicopter's vector field with vehicle terms added (see the module docs; used by `Extended`).
+        `hidden`: each term's internal states (`AbstractTerm.hidden_names`), in order (default none)."""
+        if hidden is None:
+            hidden = tuple(x[:0] for _ in terms)
         quat, s = x[QUATERNION], x[BODY]
-        wind = sum((t.wind() for t in terms), jnp.zeros(3, x.dtype)).astype(x.dtype)
+        wind = sum((t.wind(z) for t, z in zip(terms, hidden, strict=True)), jnp.zeros(3, x.dtype)).astype(x.dtype)
         air = s.at[:3].add(-quaternion_to_rotation(quat).T @ wind)
         dpos, dquat = rigid_body_kinematics(x, system.normalisation_gain)
         dbody = system.body_model(quat, s, u, air=air)
-        scaling = tuple(t for t in terms if t.scales_rotors)
+        scaling = tuple((t, z) for t, z in zip(terms, hidden) if t.scales_rotors)
         if scaling:
             # The rotors' part of the body model: what it gives minus what it gives with the motors off.
             idle = u.at[: len(MULTIROTOR_MOTORS)].set(0.0)
             rotors = dbody - system.body_model(quat, s, idle, air=air)
-            gain = sum((t.rotor_gain(x, u) for t in scaling), jnp.zeros((), x.dtype))
+            gain = sum((t.rotor_gain(x, u, z) for t, z in scaling), jnp.zeros((), x.dtype))
             dbody = dbody + gain.astype(x.dtype) * rotors
-        for term in terms:
-            dbody = dbody + term.acceleration(quat, air, u).astype(x.dtype)
+        for term, z in zip(terms, hidden):
+            dbody = dbody + term.acceleration(quat, air, u, z).astype(x.dtype)
         return jnp.concatenate([dpos, dquat, dbody])
 
     # The term scales the rotors' forces and moments (`rotor_gain`) rather than adding an acceleration.
     scales_rotors: ClassVar[bool] = False
 
-    def rotor_gain(self, x: Float[Array, " 13"], u: Float[Array, " n_inputs"]) -> Float[Array, ""]:
+    def rotor_gain(
+        self, x: Float[Array, " 13"], u: Float[Array, " n_inputs"], z: Float[Array, " n_hidden"] | None = None
+    ) -> Float[Array, ""]:
         r"""The relative change $g$ of every rotor force and moment the term makes: the body model's rotor
-        part (its output less its output with the motors off) is multiplied by $1 + \sum g$ (default none)."""
+        part (its output less its output with the motors off) is multiplied by $1 + \sum g$ (default none).
+        `z`: the term's internal states (`hidden_names`), here and in `wind` and `acceleration`."""
         return jnp.zeros((), self.coefficient.dtype)
 
-    def wind(self) -> Float[Array, "3"]:
+    def wind(self, z: Float[Array, " n_hidden"] | None = None) -> Float[Array, "3"]:
         """The world-frame wind [m/s] the term contributes (default none)."""
         return jnp.zeros(3, self.coefficient.dtype)
 
-    def acceleration(self, quat: Float[Array, "4"], air: Float[Array, "6"], u: Float[Array, "4"]) -> Float[Array, "6"]:
+    def acceleration(
+        self,
+        quat: Float[Array, "4"],
+        air: Float[Array, "6"],
+        u: Float[Array, "4"],
+        z: Float[Array, " n_hidden"] | None = None,
+    ) -> Float[Array, "6"]:
         """The body-frame acceleration `(du, dv, dw, dp, dq, dr)` the term adds, at the air-relative body state
         `air`."""
         return jnp.zeros_like(air)
@@ -128,7 +144,7 @@ class BodyQuadraticDrag(AbstractVehicleTerm):
         self.axis = axis
         self.coefficient = float_scalar(c)
 
-    def acceleration(self, quat, air, u):
+    def acceleration(self, quat, air, u, z=None):
         v = air[self.axis]
         return jnp.zeros_like(air).at[self.axis].set(-self.coefficient * jnp.abs(v) * v)
 
@@ -153,7 +169,7 @@ class BodyBias(AbstractVehicleTerm):
         self.axis = axis
         self.coefficient = float_scalar(b)
 
-    def acceleration(self, quat, air, u):
+    def acceleration(self, quat, air, u, z=None):
         return jnp.zeros_like(air).at[self.axis].set(self.coefficient)
 
 
@@ -190,7 +206,7 @@ class RotorDrag(AbstractVehicleTerm):
         self.axis = axis
         self.coefficient = float_scalar(d)
 
-    def acceleration(self, quat, air, u):
+    def acceleration(self, quat, air, u, z=None):
         return jnp.zeros_like(air).at[self.axis].set(-self.coefficient * air[self.axis])
 
 
@@ -225,7 +241,7 @@ class Wind(AbstractVehicleTerm):
         """`wind_n`, `wind_e` or `wind_d`."""
         return f"{self.prefix}_{WORLD_AXES[self.axis]}"
 
-    def wind(self):
+    def wind(self, z=None):
         return jnp.zeros(3, self.coefficient.dtype).at[self.axis].set(self.coefficient)
 
 
@@ -284,7 +300,7 @@ class BatterySag(_AbstractRotorTerm):
         self.check_system(system)
         return "vbat"
 
-    def rotor_gain(self, x, u):
+    def rotor_gain(self, x, u, z=None):
         return self.coefficient * (u[4] - 1.0)
 
 
@@ -334,7 +350,7 @@ class GroundEffect(_AbstractRotorTerm):
         self.check_system(system)
         return "z"
 
-    def rotor_gain(self, x, u):
+    def rotor_gain(self, x, u, z=None):
         height = jnp.maximum(x[2] - self.floor, 0.0) + self.rotor_height
         ratio = jnp.minimum(self.coefficient / height**2, 0.75)
         return ratio / (1.0 - ratio)
