@@ -229,6 +229,7 @@ from ._diagnose._quadrotor import score_flights as score_flights
 from ._diagnose._quadrotor import short_horizon_note as short_horizon_note
 from ._diagnose._quadrotor import thrust_parameters as thrust_parameters
 from ._diagnose._quadrotor import WorldFrameQuadrotor as WorldFrameQuadrotor
+from ._diagnose._records import horizon_errors as horizon_errors
 from ._diagnose._records import horizon_grid as horizon_grid
 from ._diagnose._residuals import acceleration_residuals as acceleration_residuals
 from ._diagnose._residuals import applied_inputs as applied_inputs
@@ -728,6 +729,7 @@ __all__ = [
     "HeldOutTest",
     "helps_on_most_runs",
     "holm",
+    "horizon_errors",
     "horizon_fit",
     "horizon_grid",
     "horizon_steps",

@@ -24,7 +24,22 @@ from .._model._extensions._stiction import stick_band
 from .._model._extensions._vehicle_terms import AbstractVehicleTerm, BodyBias, BodyQuadraticDrag, Wind
 from .._model._helicopter import BODY
 from ._at_rest import LOAD_FRACTION, MIN_LOADED_REST_S, MIN_REST_S, rests_under_load
-from ._fit import nominal_values
+from ._fit import nominal_parameters, nominal_values
+
+
+def host_nominal_values(system, names: tuple[str, ...]) -> np.ndarray:
+    """`nominal_values(system, names)` read on the host: the same numbers (a gather of each leaf's entries), without
+    the eager gathers and concatenation that `nominal_values` runs (each dispatched as a JAX operation, about 50 ms
+    a call that a diagnosis makes a dozen times)."""
+    parameters = nominal_parameters(system)
+    if tuple(names) != parameters.names:
+        raise ValueError(
+            f"nominal_values: {names} are not the parameters {parameters.names} of {type(system).__name__}"
+        )
+    leaves = jax.tree.leaves(system)
+    parts = [np.ravel(np.asarray(leaf))[list(idx)] for leaf, idx in zip(leaves, parameters.selection) if idx]
+    return np.concatenate(parts) if parts else np.zeros(0)
+
 
 # Groups of causes that look alike in data; the report says how well each finding is told apart.
 LOOK_ALIKES = (

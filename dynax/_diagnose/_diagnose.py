@@ -26,8 +26,9 @@ from .._model._system import AbstractSystem
 from .._precision import warn_if_float32
 from .._progress import ProgressBar
 from .._simulate import SimulationError
+from ._candidates import host_nominal_values
 from ._discovery import discover, DiscoverySearch, HeldOutTest
-from ._fit import nominal_values, window_errors
+from ._fit import window_errors
 from ._forward import Current, Forward, forward_selection, Nominal, Yardstick
 from ._problem import check_arguments, prepare_problem, Problem
 from ._problem import Known as Known
@@ -187,7 +188,7 @@ def _discover(problem: Problem, nominal: Nominal, yard: Yardstick, current: Curr
 def _model_summary(problem: Problem, model, errors, rmse, yard: Yardstick, terms=None) -> ModelSummary:
     """The `nominal` / `extended` object: parameters by report name, held-out error curve, validation block."""
     system = model.system if isinstance(model, Extended) else model
-    parameters = dict(zip(problem.names, map(float, np.asarray(nominal_values(system, problem.names)))))
+    parameters = dict(zip(problem.names, map(float, host_nominal_values(system, problem.names))))
     if isinstance(model, Extended):
         parameters.update({k: float(v) for t in model.terms for k, v in t.parameters(problem.system).items()})
     measured = np.asarray(problem.val_windows.xs)[:, yard.n_ref]

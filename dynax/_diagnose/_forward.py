@@ -17,7 +17,8 @@ from .._model._extensions import AbstractInputTerm
 from .._model._linear_in_parameters import size_parameter_names
 from .._model._system import AbstractSystem
 from .._validate import Horizon
-from ._fit import fit_configurations, make_windows, nominal_values, validate_configurations, Windows
+from ._candidates import host_nominal_values
+from ._fit import fit_configurations, make_windows, validate_configurations, Windows
 from ._problem import Problem
 from ._records import reference_horizon
 from ._residuals import acceleration_residuals, Structure, structure_test
@@ -225,7 +226,8 @@ def _starting_point(problem: Problem):
     """The first round's configuration: no candidate in any slot, the nominal parameters, every coefficient zero."""
     o = problem.selection
     slots = -np.ones(o.max_terms, int)
-    p0 = np.concatenate([np.asarray(nominal_values(problem.system, problem.names), float), np.zeros(o.max_terms + 1)])
+    given = np.asarray(host_nominal_values(problem.system, problem.names), float)
+    p0 = np.concatenate([given, np.zeros(o.max_terms + 1)])
     return slots, p0
 
 
@@ -442,7 +444,7 @@ def _note_moved(problem: Problem, p) -> None:
     the rig's inertia) and the findings then correct the wrong machine."""
     system, names = problem.system, problem.names
     size = set(size_parameter_names(system))
-    given = np.asarray(nominal_values(system, names), float)
+    given = np.asarray(host_nominal_values(system, names), float)
     refit = np.asarray(problem.family.refit)  # read on the host: indexing the array compiles a comparison
     moved = []
     for i, n in enumerate(names):

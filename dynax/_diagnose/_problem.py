@@ -24,13 +24,14 @@ from ._candidates import (
     candidate_scales,
     default_candidates,
     held_partners,
+    host_nominal_values,
     look_alikes,
     sampled_sensitivities,
     stiction_not_proposed,
     structurally_absorbed,
     structurally_equivalent,
 )
-from ._fit import Family, make_windows, nominal_parameter_names, nominal_values, Windows
+from ._fit import Family, make_windows, nominal_parameter_names, Windows
 from ._records import (
     fit_window,
     horizon_grid,
@@ -280,7 +281,7 @@ def candidate_family(system, candidates, refit_names, train_records):
     names = nominal_parameter_names(system)
     dtype = jnp.result_type(float)
     scales, inits = candidate_scales(system, candidates, train_records)
-    p0 = np.asarray(nominal_values(system, names), float)
+    p0 = np.asarray(host_nominal_values(system, names), float)
     xs_train = np.concatenate([np.asarray(r.xs) for r in train_records])
     family = Family(
         model=Extended(system, candidates),
@@ -498,7 +499,7 @@ def _note_held(system, family, refit_names, mode, notes) -> None:
         return
     held = [n for n, r in zip(family.names, np.asarray(family.refit)) if r == 0]
     if held and mode.parameters is None:
-        values = np.asarray(nominal_values(system, family.names))
+        values = host_nominal_values(system, family.names)
         notes.append(
             "Refit mode refits "
             + ", ".join(refit_names)

@@ -156,17 +156,60 @@ def horizon_grid(horizons_s, reference_horizon_s, train_records, validation_reco
 
 def reference_horizon(nominal_model, train_records, candidates_s, given, fraction, stride, position_index, dt):
     """The reference horizon: `given`, or the predictability horizon of the nominal model on the training runs."""
-    from .._simulate import window_simulation_errors  # `simulation_error`'s rollouts, without its summaries
-
     if given is not None:
         return Horizon(float(candidates_s[0]), "given (reference_horizon_s)", None, candidates_s, [np.nan])
-    errors = [
-        np.asarray(window_simulation_errors(nominal_model, rec, candidates_s, stride=stride)) for rec in train_records
-    ]
+    errors = [horizon_errors(nominal_model, rec, candidates_s, stride, dt) for rec in train_records]
     positions = np.concatenate([np.asarray(r.xs)[:, position_index] for r in train_records])
     spread = position_spread(positions, [k in nominal_model.angle_indices for k in position_index])
     relative = relative_position_error(np.concatenate(errors), position_index, spread)
     return predictability_horizon(relative, dt, candidates_s, fraction)
+
+
+# The longest fit window [s] (`fit_window`): the horizons' rollouts run at least this many steps, so that the fit
+# window's and the reference horizon's share one compiled program (`horizon_errors`).
+LONGEST_FIT_WINDOW_S = 1.0
+
+
+def horizon_errors(model, rec: Trajectory, candidates_s, stride: int, dt: float) -> np.ndarray:
+    """`window_simulation_errors(model, rec, candidates_s, stride=stride)`, the same rollouts and numbers, through one
+    compiled program for the fit window and the reference horizon of a record.
+
+    `window_simulation_errors` compiles `rollouts_from_starts` for each step count and number of starts: the fit
+    window's (1 s) and the reference horizon's (a few tenths of a second) were two programs of the same rollout.
+    Here every call rolls out `LONGEST_FIT_WINDOW_S` (or the longest candidate, if longer) from a start every
+    `stride` samples of the whole record, padded past its end (the last sample repeated), and keeps the windows and
+    steps `window_simulation_errors` has: a rollout is causal, so its first steps do not read the padding, and each
+    window keeps its index (its place in XLA's vector loop)."""
+    from .._simulate import FixedGrid, rollouts_from_starts, window_simulation_errors
+
+    n, steps = len(rec), int(np.max(np.maximum(np.round(np.asarray(candidates_s, float) / dt).astype(int), 1)))
+    if jax.device_count() > 1 or n < steps + 1:  # sharded (or too short, for its error): as it was
+        return np.asarray(window_simulation_errors(model, rec, candidates_s, stride=stride))
+    n_program = max(steps, int(round(LONGEST_FIT_WINDOW_S / dt)))
+    kept = len(range(0, n - steps, stride))
+    starts = np.arange(0, n - 1, stride)
+    ts, xs, us = (np.asarray(a) for a in (rec.ts, rec.xs, rec.us))
+    # `filter_jit` keys its cache on weak types too: the starting model (made from Python floats) has weak parameters,
+    # the fitted nominal strong ones. Where every array has the record's dtype, weak or strong gives the same types
+    # throughout, so the same program; strongly typed through the host (no compiled conversion).
+    strong = lambda a: jax.device_put(np.asarray(a)) if _weak(a, xs.dtype) else a  # noqa: E731
+    model = jax.tree.map(strong, model)
+    pad = lambda a: np.concatenate([a, np.repeat(a[-1:], n_program, axis=0)])  # noqa: E731
+    ts_pad = np.concatenate([ts, ts[-1] + (ts[-1] - ts[-2]) * np.arange(1, n_program + 1)])
+    errors, _ = rollouts_from_starts(
+        model,
+        jax.device_put(ts_pad),
+        jax.device_put(pad(xs)),
+        jax.device_put(pad(us)),
+        starts,
+        n_program,
+        FixedGrid(),
+    )
+    return np.asarray(errors)[:kept, : steps + 1]
+
+
+def _weak(a, dtype) -> bool:
+    return isinstance(a, jax.Array) and a.weak_type and a.dtype == dtype
 
 
 def fit_window(system, train_records, given, fraction, dt, notes) -> float:

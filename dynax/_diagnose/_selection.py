@@ -29,7 +29,7 @@ import dataclasses
 import numpy as np
 
 from .._model._linear_in_parameters import identification_hooks, violated_bound
-from ._fit import nominal_values
+from ._candidates import host_nominal_values
 from ._statistics import benjamini_hochberg, helps_on_most_runs, log_ratio_differences, paired_block_test, typical_gain
 from ._summaries import rmse_curve
 
@@ -154,7 +154,7 @@ def on_physical_side(term, delta, partner, names, system) -> bool:
     if partner is None:
         return True
     i, alpha = partner
-    value = float(np.asarray(nominal_values(system, names))[i]) + alpha * float(delta)
+    value = float(host_nominal_values(system, names)[i]) + alpha * float(delta)
     return violated_bound(names[i], value, identification_hooks(system).base_parameter_kinds().get(names[i])) is None
 
 

@@ -1,5 +1,6 @@
 """The predictability horizon and the cross-validated residual probe, on data made without them."""
 
+import jax
 import numpy as np
 import pytest
 
@@ -7,9 +8,11 @@ import dynax
 from dynax.internal import (
     cross_validated_ridge,
     folds_by_run,
+    horizon_errors,
     position_spread,
     predictability_horizon,
     relative_position_error,
+    window_simulation_errors,
 )
 
 
@@ -81,3 +84,18 @@ def test_an_angle_that_turns_over_has_a_bounded_spread():
     # An extended model answers for its system's angles.
     extended = dynax.Extended(dynax.DoublePendulum(), (dynax.RotorInertia(1, 0.001),))
     assert extended.angle_indices == (0, 1) and dynax.Extended(dynax.LinearAxis(), ()).angle_indices == ()
+
+
+def test_horizon_errors_are_window_simulation_errors():
+    """The fit window's and the reference horizon's rollouts through one padded program: the windows and numbers of
+    `window_simulation_errors`, bit for bit, for a model with weakly typed parameters (made from Python floats) and
+    for a strongly typed one (as a fit leaves it)."""
+    record = dynax.synthetic.synthetic_trajectory(
+        dynax.Acrobot(), duration=3.0, dt=0.01, excitation=dynax.synthetic.Multisine(amplitude=2.0), seed=3
+    )
+    strong = jax.tree.map(lambda a: jax.device_put(np.asarray(a)) if isinstance(a, jax.Array) else a, dynax.Acrobot())
+    for model in (dynax.Acrobot(), strong):
+        for longest in (1.0, 0.55):
+            candidates = np.round(np.arange(0.1, longest + 1e-9, 0.05), 6)
+            expected = np.asarray(window_simulation_errors(model, record, candidates, stride=5))
+            np.testing.assert_array_equal(horizon_errors(model, record, candidates, 5, 0.01), expected)
