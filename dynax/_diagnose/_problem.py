@@ -321,9 +321,9 @@ def flight_state_scale(system, train_records, horizon_s: float, dt: float, group
     reference horizon).
 
     Within a group the error keeps its units (a position error is a distance whatever the axis); across groups
-    each counts alike relative to what the starting model misses there, so the window score's gain is the mean of
-    the four groups' gains, and the refit weighs each group by its error variance (the diagonal weighting of
-    feasible generalised least squares, by group). The training spread instead puts the position in metres
+    each counts alike relative to what the starting model misses there, so the window score's gain is about the
+    mean of the four groups' gains, and the refit weighs each group by its error variance (the diagonal weighting
+    of feasible generalised least squares, by group). The training spread instead puts the position in metres
     against centimetres of error over half a second, and the rates' gyro noise, carried open loop, then carries
     the score (a rotor drag that changes the position at 0.4 s by 76 % moved it by 3 %). `None` where too few
     windows stay finite (the spread is used)."""
