@@ -57,5 +57,6 @@ def test_a_side_force_shows_in_the_flight_score_not_in_the_spread():
     assert _gain(truth, free, scale) > 0.2  # the flight score reads it
 
 
-def test_a_manipulator_has_no_vehicle_groups():
+def test_a_manipulator_and_the_helicopter_keep_the_spread():
     assert dynax.internal.vehicle_state_groups(dynax.Acrobot()) == ()
+    assert dynax.internal.vehicle_state_groups(dynax.Helicopter()) == ()
