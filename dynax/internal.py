@@ -210,11 +210,13 @@ from ._diagnose._probe import cross_validated_ridge as cross_validated_ridge
 from ._diagnose._probe import folds_by_run as folds_by_run
 from ._diagnose._problem import candidate_family as candidate_family
 from ._diagnose._problem import cross_fit_folds as cross_fit_folds
+from ._diagnose._problem import flight_state_scale as flight_state_scale
 from ._diagnose._problem import Fold as Fold
 from ._diagnose._problem import names_to_refit as names_to_refit
 from ._diagnose._problem import overlapping_fit_windows as overlapping_fit_windows
 from ._diagnose._problem import prepare_problem as prepare_problem
 from ._diagnose._problem import Problem as Problem
+from ._diagnose._problem import vehicle_state_groups as vehicle_state_groups
 from ._diagnose._quadrotor import (
     body_frame_records as body_frame_records,
 )
@@ -712,6 +714,7 @@ __all__ = [
     "Fitted",
     "fixed_grid_rollout",
     "flight_signature",
+    "flight_state_scale",
     "FlightChecks",
     "FlightNotes",
     "float_scalar",
@@ -918,6 +921,7 @@ __all__ = [
     "usable_segments",
     "valid_starts",
     "vehicle_rollout",
+    "vehicle_state_groups",
     "VehicleStatistics",
     "velocities_from_positions",
     "velocity_gain",

@@ -18,6 +18,7 @@ from tests.quadrotor import synthetic_flight as sf
 FLIGHT_S = 10.0  # every training and held-out flight, unless a case says otherwise (its `flight`)
 BODY_AXES = ("u", "v", "w", "p", "q", "r")
 MOTORS = ("m1", "m2", "m3", "m4")
+GROUPS = ((0, 1, 2), (3, 4, 5, 6), (7, 8, 9), (10, 11, 12))  # position, attitude, body velocity, rates
 DRAG_W = 10.31 / 9.18  # rotor drag on w per drag on u and v: the Crazyflie 2.0's (Foerster 2015)
 
 
@@ -161,8 +162,10 @@ def truth_gain(case, horizon_s: float, stride_s: float = 0.05) -> float:
     """The truth's held-out gain over the truth without its effect, scored as the diagnosis scores a candidate: on
     every held-out flight a window every `stride_s`, started from the measured state (the body velocity in place of
     the world velocity, as the diagnosis's coordinates), rolled out `horizon_s` under the logged commands; the mean
-    over steps and states of the squared error in units of each state's spread on the training flights; gain = 1 -
-    mean score with the effect / mean score without. A lagged motor's rotor starts settled on the window's first
+    over steps and states of the squared error with each group of states (position, attitude, body velocity, rates)
+    in units of the effect-free law's RMS error of that group on these windows, as the diagnosis scales a vehicle by
+    its starting model's (`dynax.internal.flight_state_scale`); gain = 1 - mean score with the effect / mean score
+    without, the mean of the four groups' gains. A lagged motor's rotor starts settled on the window's first
     command. Without the effect a sagging battery is held at the training flights' median voltage (what a map of
     the commands alone is fitted to). Exact in `known` mode; in refit mode, where the refit absorbs part of the
     effect, an upper bound. `truth_gains` also gives the same windows' position RMSE gain (the report's `gain`)."""
@@ -176,13 +179,12 @@ def truth_gains(case, horizon_s: float, stride_s: float = 0.05) -> tuple[float, 
     if case.cause is None:
         return 0.0, 0.0
     p = plan(case)
-    _, train, validation = flights(case)
-    scale = np.maximum(np.concatenate([_body_states(f.xs) for f in train]).std(axis=0), 1e-9)
+    _, _, validation = flights(case)
     truth = effects(case)
     late = int(round(truth.pop("delay", 0.0) / 0.01))
     median_v = float(np.median(np.concatenate([_volts(kw) for kw in p["train"]])))
     n_ref, stride = round(horizon_s / 0.01), max(1, round(stride_s / 0.01))
-    scores, ends = ([], []), ([], [])
+    errors = ([], [])
     for kw, flight in zip(p["validation"], validation):
         xs, commands = np.asarray(flight.xs, float), np.asarray(flight.us, float)[:, :4] / sf.NANO.unit
         measured = _body_states(xs)
@@ -193,11 +195,16 @@ def truth_gains(case, horizon_s: float, stride_s: float = 0.05) -> tuple[float, 
             models = ((commands[k - late : k - late + n_ref], truth, factor), (commands[k : k + n_ref], {}, held))
             for i, (u, eff, bat) in enumerate(models):
                 sim = _body_states(_rollout(xs[k], u, 0, eff, bat, u[0].copy(), n_ref))
-                target = measured[k + 1 : k + n_ref + 1]
-                scores[i].append(np.mean(np.minimum(((sim - target) / scale) ** 2, 1e6)))
-                ends[i].append(np.sum((sim[-1, :3] - target[-1, :3]) ** 2))
-    gain = 1.0 - np.mean(scores[0]) / np.mean(scores[1])
-    position = 1.0 - np.sqrt(np.mean(ends[0]) / np.mean(ends[1]))
+                errors[i].append(sim - measured[k + 1 : k + n_ref + 1])
+    with_effect, without = (np.asarray(e) for e in errors)  # (window, step, state)
+    mse = np.mean(without**2, axis=(0, 1))
+    scale = np.empty(mse.size)
+    for group in GROUPS:
+        scale[list(group)] = np.sqrt(np.sum(mse[list(group)]))
+    score = lambda e: np.mean(np.minimum((e / scale) ** 2, 1e6))  # noqa: E731
+    gain = 1.0 - score(with_effect) / score(without)
+    end = lambda e: np.mean(np.sum(e[:, -1, :3] ** 2, axis=-1))  # noqa: E731
+    position = 1.0 - np.sqrt(end(with_effect) / end(without))
     return float(gain), float(position)
 
 

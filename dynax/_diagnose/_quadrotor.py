@@ -86,6 +86,8 @@ class BodyFrameQuadrotor(Helicopter):
     quadrotor's `input_scale` (`to_body_frame` scales the records)."""
 
     inputs: tuple[str, ...] = eqx.field(static=True, default=QUADROTOR_INPUT_NAMES)
+    # Its window score and refits weigh position, attitude, body velocity, rates alike (`flight_state_scale`).
+    score_by_group: ClassVar[bool] = True
 
     @property
     def input_names(self) -> tuple[str, ...]:  # type: ignore[override]
