@@ -401,11 +401,7 @@ def _wrapped(tr, ts, source, angles):
             continue
         typical = float(np.median(np.abs(steps))) + 1e-300
         turns = np.round(steps / (2 * np.pi))
-        wraps = np.flatnonzero(
-            (turns != 0)
-            & (np.abs(steps - 2 * np.pi * turns) < WRAP_TOLERANCE * 2 * np.pi)
-            & (np.abs(steps) > 20.0 * typical)
-        )
+        wraps = np.flatnonzero(_wraps(steps) & (np.abs(steps) > 20.0 * typical))
         if wraps.size:
             k = int(wraps[0])
             out.append(
