@@ -30,7 +30,7 @@ lint: $(VENV)/.installed-dev
 	$(BIN)/basedpyright --project pyproject.toml
 
 test: lint
-	$(BIN)/python -m pytest -n 2
+	$(BIN)/python -m pytest -n 2 --durations=30
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
 
 quick: $(VENV)/.installed-dev
