@@ -18,6 +18,16 @@ MAX_GAP = 10.0
 MIN_STEP = 0.01
 
 
+def time_label(t: float, resolution: float, digits: int = 6) -> str:
+    """`t` [s] written short (`digits` significant digits) where that is within `resolution` of it, else in
+    fixed point to `resolution`: a Unix time stamp (1.77e9 s) keeps its milliseconds, so a message or an
+    `--exclude` span names the sample meant and not a time thousands of seconds away."""
+    short = f"{t:.{digits}g}"
+    if abs(float(short) - t) <= resolution:
+        return short
+    return f"{t:.{max(0, int(np.ceil(-np.log10(resolution))))}f}"
+
+
 def check_time_stamps(
     ts, *, path=None, column="t", max_gap: float | None = MAX_GAP, min_step: float | None = MIN_STEP
 ) -> None:

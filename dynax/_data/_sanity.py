@@ -61,6 +61,7 @@ import warnings
 import numpy as np
 
 from .._errors import DataError, UsageError
+from ._sampling import time_label
 from ._screens import SCREENS
 from ._trajectory import Trajectory
 from ._velocities import BLOCK_S, velocity_pairs
@@ -123,7 +124,8 @@ class Finding:
             where.append(f"row {a}" if a == b else f"rows {a}-{b}")
         if self.times is not None:
             a, b = self.times
-            where.append(f"t = {a:.6g} s" if a == b else f"t = {a:.6g} to {b:.6g} s")
+            a, b = time_label(a, 1e-4), time_label(b, 1e-4)
+            where.append(f"t = {a} s" if a == b else f"t = {a} to {b} s")
         return ", ".join(where) + f": {self.message}" + (f"; fix: {self.fix}" if self.fix else "")
 
     def to_json(self) -> dict:
@@ -207,8 +209,9 @@ def _row_time(ts, span, source, kind, severity, column, message, fix=None):
 def _span(ts, i, j) -> str:
     """An `--exclude` span around samples i..j: from the sample before to the sample after, open at the ends."""
     n = len(ts)
-    a = "" if i == 0 else f"{float(ts[i - 1]):.6g}"
-    b = "" if j >= n - 1 else f"{float(ts[j + 1]):.6g}"
+    resolution = float(np.median(np.diff(ts))) / 10 if n > 1 else 1e-4
+    a = "" if i == 0 else time_label(float(ts[i - 1]), resolution)
+    b = "" if j >= n - 1 else time_label(float(ts[j + 1]), resolution)
     return f"--exclude {a}:{b}"
 
 
@@ -924,7 +927,7 @@ def exclude_stretches(
         if j - i + 1 < min_samples:
             continue
         piece = trajectory.slice(int(i), int(j) + 1)
-        name = f"{trajectory.source or 'record'} [{float(ts[i]):.6g}-{float(ts[j]):.6g} s]"
+        name = f"{trajectory.source or 'record'} [{time_label(float(ts[i]), 1e-3)}-{time_label(float(ts[j]), 1e-3)} s]"
         pieces.append(
             Trajectory(piece.ts, piece.xs, piece.us, piece.state_names, piece.input_names, piece.system, name)
         )

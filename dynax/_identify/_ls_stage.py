@@ -14,6 +14,7 @@ from jaxtyping import Array
 import numpy as np
 
 from .._context import set_within
+from .._data._sampling import time_label
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
 from .._fit import serial_covariance, Solution
@@ -653,10 +654,12 @@ def _warn_scaled_stretch(where, gain, errors, record) -> None:
     else:
         times = row_times(*record)[0]
         t = float(times[at - 1] if after else times[at])  # the span to leave out holds both rows of the change
+        about = time_label(t, 0.05, digits=4)
         where_text = (
-            f"from about t = {t:.4g} s to the record's end" if after else f"from its start to about t = {t:.4g} s"
+            f"from about t = {about} s to the record's end" if after else f"from its start to about t = {about} s"
         )
-        span = f"{label}@{t:.6g}:" if after else f"{label}@:{t:.6g}"
+        cut = time_label(t, float(np.median(np.diff(times))) / 10)
+        span = f"{label}@{cut}:" if after else f"{label}@:{cut}"
         fix = (
             f"no scale is right for the whole record: leave the stretch out (`--exclude {span}`; in Python "
             f"`exclude_stretches`), or correct its {'sign' if turned else 'scale'} in the file"

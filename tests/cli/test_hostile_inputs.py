@@ -6,6 +6,7 @@ fix) or a located warning: never a traceback, never exit 0 with a wrong answer, 
 make the data worse. Cases that run a fit are `heavy`.
 """
 
+import re
 import warnings
 
 from hypothesis import assume, given, settings
@@ -101,6 +102,24 @@ def test_a_single_sample_glitch_is_named_at_its_row(seed, row, size, column):
     glitches = [f for f in found if f.kind == "glitch"]
     assert glitches and glitches[0].column == ("q1", "q2")[column] and glitches[0].rows == (row + 1, row + 1)
     assert glitches[0].fix.startswith("--exclude")
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10_000), row=st.integers(1, 598), start=st.sampled_from([0.0, 86_400.0, 1.772681685527e9]))
+def test_the_cut_a_glitch_is_given_leaves_out_that_sample_whatever_the_clock(seed, row, start):
+    # A logger's clock may be Unix time (1.77e9 s): the offered `--exclude` must still name the glitch's
+    # neighbours to the sample, not a time rounded to six digits (thousands of seconds away, or T0 == T1).
+    ts, q, tau = _smooth(seed)
+    ts = ts + start
+    spread = np.percentile(q[:, 0], 99) - np.percentile(q[:, 0], 1)
+    q[row, 0] += 50 * spread
+    record = _record(ts, q, tau)
+    glitch = next(f for f in dynax.check_records([record]).findings if f.kind == "glitch")
+    a, b = glitch.fix.removeprefix("--exclude ").split(":")  # both ends included, as `exclude_stretches` reads them
+    left_out = ts[(ts >= float(a)) & (ts <= float(b))]
+    assert ts[row] in left_out and len(left_out) <= 3 and np.all(np.abs(left_out - ts[row]) <= 0.011)
+    said = re.search(r"t = (\S+) s", glitch.describe())
+    assert said is not None and abs(float(said.group(1)) - ts[row]) < 1e-3
 
 
 @settings(max_examples=25, deadline=None)
