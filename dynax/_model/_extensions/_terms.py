@@ -40,13 +40,13 @@ class AbstractTerm(eqx.Module):
     the input chain instead (`applied`, `hidden_derivative`, `steady_state`): they move with the
     recorded input alone, and come first in the state.
 
-    **What the diagnosis reads** (`dynax.diagnose`; nothing else about a term's class): `hidden_names`, and
-    `smooth_at_neutral`. An input term with states (a lag, a dead time) has a time for its coefficient and no
-    derivative at zero (the input passes through): it is screened at finite sizes. Any other term's states are
-    integrated along the measured states (`hidden_vector_field`) for the one-step screening and start from
-    `initial_hidden` in the windowed rollouts. A term that is not `smooth_at_neutral` is screened on the secant to
-    its start value; neither kind is ranked by the first Gauss-Newton step of its refit, which reads the derivative
-    at neutral.
+    **In the diagnosis** (`dynax.diagnose`) whether a term has states, and how it is screened, follows from
+    `hidden_names` and `smooth_at_neutral` alone. An input term with states has a time for its coefficient and no
+    derivative at zero (the input passes through): it is screened through its first-order effect on the input (a
+    lag or dead time also at finite sizes). Any other term's states are integrated along the measured states
+    (`hidden_vector_field`) for the one-step screening and start from `initial_hidden` in the windowed rollouts. A
+    term that is not `smooth_at_neutral` is screened on the secant to its start value. Neither of these two kinds is
+    ranked by the first Gauss-Newton step of its refit, which reads the derivative at neutral.
     """
 
     coefficient: eqx.AbstractVar[Float[Array, ""]]
