@@ -72,8 +72,8 @@ def hidden_trajectory(model, ts, us, xs=None):
     from rest under the first input (`simulate` on `InputStates`); where any other term has states of its own
     (`Extended.state_terms`), every state along the measured states `xs` (required then), from
     `Extended.initial_state` at the first sample."""
-    n_hidden = model.n_states - model.system.n_states if isinstance(model, Extended) else 0
-    if n_hidden == 0:
+    n_extra = model.n_states - model.system.n_states if isinstance(model, Extended) else 0
+    if n_extra == 0:
         return jnp.zeros((ts.shape[0], 0), us.dtype)
     n = model.system.n_states
     if model.state_terms:
