@@ -25,6 +25,7 @@ from .._model._extensions._vehicle_terms import AbstractVehicleTerm, BodyBias, B
 from .._model._helicopter import BODY
 from ._at_rest import LOAD_FRACTION, MIN_LOADED_REST_S, MIN_REST_S, rests_under_load
 from ._fit import nominal_parameters, nominal_values
+from ._residuals import input_dynamics
 
 
 def host_nominal_values(system, names: tuple[str, ...]) -> np.ndarray:
@@ -208,7 +209,7 @@ def structurally_absorbed(
     out = []
     for k, term in enumerate(family.model.terms):
         b = J_c[:, k]
-        if isinstance(term, AbstractInputTerm) and term.n_hidden:
+        if input_dynamics(term, family.model.system):
             out.append(False)
         elif np.linalg.norm(b) == 0:
             out.append(True)
@@ -245,7 +246,7 @@ def structurally_equivalent(
     J_nom, J_c = sensitivities or sampled_sensitivities(family, n_points, seed)
     A = J_nom[:, refit]
     terms = family.model.terms
-    ks = [k for k in among if not (isinstance(terms[k], AbstractInputTerm) and terms[k].n_hidden)]
+    ks = [k for k in among if not input_dynamics(terms[k], family.model.system)]
 
     def in_span(k, *others):
         return _in_span(np.concatenate([A, J_c[:, list(others)]], axis=1), J_c[:, k], _structural_tol(tol))
@@ -352,7 +353,7 @@ def candidate_scales(system, candidates, trajectories) -> tuple[np.ndarray, np.n
         init = term.neutral
         if isinstance(term, AbstractInputTerm):
             rms_u = max(float(np.sqrt(np.mean(us[:, term.input] ** 2))), 1e-6)
-            if term.n_hidden:
+            if input_dynamics(term, system):
                 scale = init = 2.0 * dt
             elif term.cause == "input_gain":
                 scale = 0.1

@@ -13,7 +13,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._model._extensions import AbstractInputTerm
 from .._model._linear_in_parameters import size_parameter_names
 from .._model._system import AbstractSystem
 from .._validate import Horizon
@@ -21,7 +20,7 @@ from ._candidates import host_nominal_values
 from ._fit import fit_configurations, make_windows, validate_configurations, Windows
 from ._problem import Problem
 from ._records import reference_horizon
-from ._residuals import acceleration_residuals, Structure, structure_test
+from ._residuals import acceleration_residuals, input_dynamics, Structure, structure_test
 from ._rollout_screening import rankable, rollout_screen, with_rollout_evidence
 from ._screening import screen
 from ._selection import choose, choose_shortlist, judge_round, look_alike_tests, Refitted
@@ -361,11 +360,10 @@ def _through_inputs(problem: Problem, round_: Round) -> tuple[int, np.ndarray] |
     held = []
     for j, slot in enumerate(np.asarray(round_.slots)):
         selected = problem.candidates[slot] if slot >= 0 else None
-        if isinstance(selected, AbstractInputTerm) and selected.n_hidden:
+        if selected is not None and input_dynamics(selected, problem.system):
             held.append(_at(selected, problem.neutral[slot] + round_.p[n_nominal + j]))
     _, held_loss, n_residuals = problem.nominal_through(tuple(held))
-    dynamic = [k for k in round_.remaining if isinstance(problem.candidates[k], AbstractInputTerm)]
-    dynamic = [k for k in dynamic if problem.candidates[k].n_hidden]
+    dynamic = [k for k in round_.remaining if input_dynamics(problem.candidates[k], problem.system)]
     best = None
     for k in dynamic:
         for c in problem.neutral[k] + problem.dt * np.asarray(THROUGH_SAMPLES, float):
@@ -700,5 +698,5 @@ def _start_value(problem: Problem, k: int, delta_screened, start):
     """A candidate's starting coefficient: the screening's step if physical and moderate, else the default start."""
     term, scale = problem.candidates[k], problem.scales[k]
     ok = np.isfinite(delta_screened) and problem.physical(k, delta_screened) and abs(delta_screened) < 20 * scale
-    lagging = isinstance(term, AbstractInputTerm) and term.n_hidden and delta_screened < start
+    lagging = input_dynamics(term, problem.system) and delta_screened < start
     return delta_screened if ok and not lagging else start

@@ -486,7 +486,7 @@ def _dead_times_as_shifted_commands(model, flights) -> tuple:
 
     if not isinstance(model, Extended):
         return model, flights
-    hidden = [t for t in model.input_terms if t.n_hidden]
+    hidden = [t for t in model.input_terms if t.hidden_names(model.system)]
     if not hidden or not all(t.cause in DEAD_TIMES for t in hidden):
         return model, flights
     shifted = []

@@ -1,8 +1,8 @@
 r"""Residual analysis of one-step accelerations, and a probe for structure left in them.
 
 The measured acceleration is the Savitzky-Golay derivative of the measured velocities; the
-model's is its vector field at the (equally smoothed) measured state, with the internal states of
-input terms driven by the recorded inputs. What is left,
+model's is its vector field at the (equally smoothed) measured state, with the terms' internal states
+driven along the record (`hidden_trajectory`). What is left,
 $r_k = \dot v_k^{\text{meas}} - f_v(x_k, u_k)$, should be noise if the model is right.
 
 The *structure probe* regresses the residuals of the training record on a generic library of
@@ -23,10 +23,12 @@ vocabulary does not cover (a spring at a joint) and tells `none` from `unexplain
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, Float
 import numpy as np
 
 from .._data._derivatives import savitzky_golay
 from .._model._extensions import AbstractInputTerm, Extended
+from .._model._system import AbstractSystem
 from .._simulate import FixedGrid, InputStates, RK4, simulate
 from ._probe import cross_validated_ridge, ridge_fit
 
@@ -43,14 +45,43 @@ def sg_window(dt: float) -> int:
 _HIDDEN_GRID = FixedGrid(solver=RK4(scan_kind="lax"), substeps=4)
 
 
+class _AlongStates(AbstractSystem):
+    r"""A model's internal states as a system of their own, the nominal states read from a record (`xs` at `ts`,
+    linear between samples): $\dot z$ of `Extended.vector_field` there."""
+
+    model: Extended
+    ts: Float[Array, " time"]
+    xs: Float[Array, "time n_measured"]
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return tuple(self.model.state_names[self.model.system.n_states :])
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return tuple(self.model.input_names)
+
+    def vector_field(self, t, z, u):
+        x = jax.vmap(lambda column: jnp.interp(t, self.ts, column), in_axes=1)(self.xs)
+        return self.model.vector_field(t, jnp.concatenate([x, z]), u)[self.xs.shape[1] :]
+
+
 @eqx.filter_jit
-def hidden_trajectory(model, ts, us):
-    """Internal states of the input terms along the recorded inputs, from rest under the first input
-    (`simulate` on `InputStates`, RK4 with 4 steps per sample)."""
-    n_hidden = model.n_states - model.system.n_states if isinstance(model, Extended) else 0
-    if n_hidden == 0:
+def hidden_trajectory(model, ts, us, xs=None):
+    """Internal states of the model's terms along the recorded inputs (RK4 with 4 steps per sample): the input terms'
+    from rest under the first input (`simulate` on `InputStates`); where any other term has states of its own
+    (`Extended.state_terms`), every state along the measured states `xs` (required then), from
+    `Extended.initial_state` at the first sample."""
+    n_extra = model.n_states - model.system.n_states if isinstance(model, Extended) else 0
+    if n_extra == 0:
         return jnp.zeros((ts.shape[0], 0), us.dtype)
     n = model.system.n_states
+    if model.state_terms:
+        if xs is None:
+            raise ValueError("hidden_trajectory: a model with states of terms other than input terms needs `xs`")
+        z0 = model.initial_state(xs[0], us[0])[n:]
+        along = _AlongStates(model, ts, xs)  # pyright: ignore[reportCallIssue]
+        return simulate(along, z0, ts, us, method=_HIDDEN_GRID, throw=False).xs
     z0 = model.initial_state(jnp.zeros(n, us.dtype), us[0])[n:]
     return simulate(InputStates(model), z0, ts, us, method=_HIDDEN_GRID, throw=False).xs
 
@@ -62,7 +93,7 @@ def predicted_accelerations(model, ts, xs_smooth, us, idx, us_before):
     The input is a zero-order hold, so the true acceleration jumps at every sample: at t_k it is
     the mean of the left limit (input u_{k-1}) and the right limit (u_k).
     """
-    zs = hidden_trajectory(model, ts, us)
+    zs = hidden_trajectory(model, ts, us, xs_smooth)
     full = jnp.concatenate([xs_smooth, zs], axis=1)
     field = jax.vmap(lambda t, x, u: model.vector_field(t, x, u))
     return 0.5 * (field(ts, full, us) + field(ts, full, us_before))[:, idx]
@@ -77,7 +108,7 @@ def interval_increments(model, ts, xs_smooth, us, idx):
     (`_INTERVAL_SUBSTEPS` steps) from the smoothed state and the input terms' internal state at the interval's
     start. Exact to the integrator's order where a trapezoid of the end accelerations is not: an input lag's
     applied input curves within the interval, by an amount that follows the input's rate."""
-    zs = hidden_trajectory(model, ts, us)
+    zs = hidden_trajectory(model, ts, us, xs_smooth)
     full = jnp.concatenate([xs_smooth, zs], axis=1)
 
     def increment(t, x, u, dt):
@@ -116,6 +147,12 @@ def _held_average(ts, u, a, b):
 
 #: The causes that are a dead time on their inputs (`InputDelay`, `MotorDelay`): run as the shifted input.
 DEAD_TIMES = ("input_delay", "motor_delay")
+
+
+def input_dynamics(term, system) -> bool:
+    """Whether `term` is an input term with internal states (`AbstractTerm.hidden_names`): a lag or a dead time,
+    whose coefficient is a time of the input's dynamics and has no derivative at zero (the input passes through)."""
+    return isinstance(term, AbstractInputTerm) and bool(term.hidden_names(system))
 
 
 #: The fewest samples a record is padded to for the jitted per-sample functions (`padded_length`).
@@ -214,14 +251,14 @@ def applied_inputs(system, terms, trajectory) -> np.ndarray:
     us = np.array(us)
     ts = jnp.asarray(trajectory.ts, us.dtype)
     for term in model.input_terms:
-        if not term.n_hidden or (term.cause in DEAD_TIMES and not float(term.coefficient) > 0):
+        if not input_dynamics(term, system) or (term.cause in DEAD_TIMES and not float(term.coefficient) > 0):
             continue
         alone = Extended(system, (term,))  # pyright: ignore[reportCallIssue]
         ts_p, us_p = padded(ts, us)
         zs = np.asarray(hidden_trajectory(alone, ts_p, us_p))[: len(us)]  # causal: the padding changes nothing
         applied = jax.vmap(term.applied)
-        for j, i in enumerate(term.inputs):
-            z = jnp.asarray(zs[:, j * term.n_hidden : (j + 1) * term.n_hidden])
+        for i, z in zip(term.inputs, np.split(zs, len(term.inputs), axis=1)):  # each input's states in turn
+            z = jnp.asarray(z)
             u = jnp.asarray(us[:, i])
             start, end = np.asarray(applied(u, z)), np.asarray(applied(u[:-1], z[1:]))
             us[:-1, i] = 0.5 * (start[:-1] + end)

@@ -15,8 +15,9 @@ $\min \lVert r + J_\theta\Delta\theta + j_c\Delta c\rVert$ on the training windo
 Gauss-Newton step of the candidate's simulation-error refit; its held-out gain is the fraction by
 which that step reduces the held-out windows' sum of squares beyond the step of $\theta$ alone.
 
-Candidates with internal states (delays, lags) have no first-order sensitivity at their neutral
-value; they keep their finite-size equation-error screening and are not ranked here.
+An input's dynamics (a delay, a lag) has no first-order sensitivity at its neutral value, and a term
+not `smooth_at_neutral` (a static level) none that shows it; they keep their finite-size
+equation-error screening and are not ranked here. A term with states of its own is ranked as any.
 
 ??? cite
 
@@ -32,6 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._fit import Family, window_errors, Windows
+from ._residuals import input_dynamics
 
 # Windows per compiled call: every call has this shape (the last chunk padded with left-out windows), so the
 # training and held-out windows of one fit-window length share one compilation across all rounds.
@@ -83,12 +85,11 @@ def _sensitivities(family: Family, windows: Windows, slots, p, tangents_p, tange
 
 
 def rankable(family: Family, remaining) -> list[int]:
-    """The candidates of `remaining` this screening ranks: those without internal states (delays, lags) and
-    without a static level (which sits on a tie of its clipping at neutral)."""
-    terms = family.model.terms
-    return [
-        k for k in remaining if not getattr(terms[k], "n_hidden", 0) and not getattr(terms[k], "holds_at_rest", False)
-    ]
+    """The candidates of `remaining` this screening ranks: those whose derivative at neutral shows them, neither an
+    input's dynamics (a delay, a lag: `input_dynamics`) nor a term not `smooth_at_neutral` (a static level, which
+    sits on a tie of its clipping there)."""
+    terms, system = family.model.terms, family.model.system
+    return [k for k in remaining if not input_dynamics(terms[k], system) and terms[k].smooth_at_neutral]
 
 
 def rollout_screen(family: Family, train: Windows, validation: Windows, slots, p, candidates) -> np.ndarray:

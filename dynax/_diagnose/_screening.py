@@ -15,10 +15,10 @@ $\partial f/\partial u\,(a_{\tau_g}(t) - u(t))$, with $a_\tau$ the recorded inpu
 lag ($\tau \dot a = u - a$, exact for a held input) or shifted by the delay; the grid point that
 fits the *training* residuals best is kept, its held-out gain is the candidate's screening gain and
 its $\tau_g$ (times the fitted scale, if that is near one) the refit's start value.
-The output-error refit that follows tells a delay from a lag. A static friction level (`stiction`) at
-neutral sits on a tie of its clipping (the joint's holding force is clipped to $\pm f_s$, and at $f_s = 0$
-both bounds meet), where its derivative is half the one above zero; it is screened on the secant to its start
-value, the largest force the records show held at rest.
+The output-error refit that follows tells a delay from a lag. A term not `smooth_at_neutral` is screened on
+the secant to its start value: a static friction level (`stiction`) at neutral sits on a tie of its clipping
+(the joint's holding force is clipped to $\pm f_s$, and at $f_s = 0$ both bounds meet), where its derivative
+is half the one above zero; its start is the largest force the records show held at rest.
 
 ??? cite
 
@@ -33,8 +33,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._data._derivatives import savitzky_golay
-from .._model._extensions import AbstractInputTerm
-from ._residuals import DEAD_TIMES, hidden_trajectory, padded, sg_window, shared_length, velocity_indices
+from ._residuals import (
+    DEAD_TIMES,
+    hidden_trajectory,
+    input_dynamics,
+    padded,
+    sg_window,
+    shared_length,
+    velocity_indices,
+)
 
 
 @eqx.filter_jit
@@ -85,9 +92,9 @@ def screening_data(family, values, coefficients, trajectory, residual_fn, length
     w = sg_window(trajectory.dt)
     xs = savitzky_golay(ts, trajectory.xs, window=w, order=3)
     n = len(ts)  # the jitted per-sample functions run on the padded record (`padded`), cut back to its samples
-    ts_p, us_p = padded(ts, trajectory.us, length=length)
+    ts_p, us_p, xs_p = padded(ts, trajectory.us, xs, length=length)
     # Cut and shifted on the host: in JAX each slice would compile a program for its record's length.
-    zs = np.asarray(hidden_trajectory(model, ts_p, us_p))[:n]
+    zs = np.asarray(hidden_trajectory(model, ts_p, us_p, xs_p))[:n]
     us = trajectory.us
     us_host = np.asarray(us)
     us_before = np.concatenate([us_host[:1], us_host[:-1]])
@@ -96,10 +103,11 @@ def screening_data(family, values, coefficients, trajectory, residual_fn, length
     J_nom, J_c, J_u = (np.asarray(a)[:n] for a in directions)
     du = savitzky_golay(ts, us, window=w, order=2, deriv=1)  # (time, n_inputs)
     J_c = np.array(J_c)
+    system = family.model.system
     for k, term in enumerate(family.model.terms):
-        if getattr(term, "holds_at_rest", False):
-            # A static level at neutral sits on a tie of its clipping; screen it at finite size (its start value),
-            # as delays and lags are: the secant to the data-based start.
+        if not term.smooth_at_neutral:
+            # The derivative at neutral does not show it (a static level sits on a tie of its clipping there); screen
+            # it at finite size (its start value), as delays and lags are: the secant to the data-based start.
             size = float(family.candidate_init[k] - family.neutral[k])
             if size > 0 and float(coefficients[k]) == float(family.neutral[k]):
                 step = jnp.zeros_like(jnp.asarray(coefficients)).at[k].set(size)
@@ -107,13 +115,13 @@ def screening_data(family, values, coefficients, trajectory, residual_fn, length
                     _secant(family, jnp.asarray(values), jnp.asarray(coefficients), step, *on_grid)
                 )[:n]
     for k, term in enumerate(family.model.terms):
-        if isinstance(term, AbstractInputTerm) and term.n_hidden and not np.any(J_c[:, :, k]):
+        if input_dynamics(term, system) and not np.any(J_c[:, :, k]):
             J_c[:, :, k] = -sum(np.asarray(J_u)[:, :, i] * np.asarray(du)[:, None, i] for i in term.inputs)
     smooth = lambda a: np.asarray(savitzky_golay(ts, a, window=w, order=3))  # noqa: E731
     grid = screening_grid(trajectory.dt)
     J_grid = {}
     for k, term in enumerate(family.model.terms):
-        if isinstance(term, AbstractInputTerm) and term.n_hidden and term.cause in DEAD_TIMES + ("input_lag",):
+        if input_dynamics(term, system) and term.cause in DEAD_TIMES + ("input_lag",):
             change = 0.0  # a term on several inputs moves each of them
             for i in term.inputs:
                 J_u_k = np.asarray(J_u)[:, :, i]

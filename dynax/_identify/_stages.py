@@ -128,7 +128,7 @@ def least_squares_fit(method: AbstractLeastSquares, system, prepared: Prepared) 
     friction, weights, consistency = job.settings.friction, job.settings.weights, job.consistency
     held = job.held_out.records
     rcond = method.rcond
-    rests = record_rests(fitted) if _holds_at_rest(system) else None
+    rests = record_rests(fitted) if _looks_for_rests(system) else None
     first = [() for _ in fitted] if SLOW_ROWS.get()[1] else None  # `slow_rows(first_fit=True)`: no rest, slow rows
     ls = least_squares_stage(system, fitted, method, friction, weights, rcond, consistency, first)
     static = _static_friction(ls, fitted, rests)
@@ -367,7 +367,7 @@ def all_rests_left_out():
         yield
 
 
-def _holds_at_rest(system) -> bool:
+def _looks_for_rests(system) -> bool:
     """Whether `identify` looks for friction at rest on `system`: the arms its refinement knows (unless
     `rest_search_off`)."""
     if not REST_SEARCH.get():

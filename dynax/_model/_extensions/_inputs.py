@@ -16,8 +16,9 @@ _TINY_TIME = 1e-4
 class AbstractInputTerm(AbstractTerm):
     r"""A term acting on one input channel between the recorded and the applied input.
 
-    It may carry `n_hidden` internal states $z$ (the lag's output, the delay's filter states),
-    which depend on the input only: $\dot z = g(u_i, z)$, applied input $a(u_i, z)$.
+    It may carry `n_hidden` internal states $z$ per input (the lag's output, the delay's filter states),
+    which depend on the input only: $\dot z = g(u_i, z)$, applied input $a(u_i, z)$. The rest of dynax
+    counts them by `hidden_names`, the protocol every term has (`AbstractTerm`).
 
     **Fields:** `input`, the 0-based index of the input (static).
     """

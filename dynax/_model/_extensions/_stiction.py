@@ -136,6 +136,7 @@ class Stiction(AbstractJointTerm):
     neutral: ClassVar[float] = 0.0
     sign: ClassVar[int] = 1
     holds_at_rest: ClassVar[bool] = True
+    smooth_at_neutral: ClassVar[bool] = False
 
     def __init__(
         self,
@@ -168,11 +169,6 @@ class Stiction(AbstractJointTerm):
         self.held_position = None if held_position is None else jnp.asarray(held_position, self.held_force.dtype)
         self.dwell_time = None if dwell_time is None else float_scalar(dwell_time)
         self.slip_distance = float_scalar(slip_distance)
-
-    @property
-    def n_hidden(self) -> int:
-        """Internal states: one (the memory of rest) with a `dwell_time`, none without."""
-        return 0 if self.dwell_time is None else 1
 
     def hidden_names(self, system) -> tuple[str, ...]:
         """The memory of rest's state name, `fs{j}_rest` (none without a `dwell_time`)."""

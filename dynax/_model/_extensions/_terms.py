@@ -39,6 +39,14 @@ class AbstractTerm(eqx.Module):
     `AbstractVehicleTerm.acceleration`, ...). Input terms (`AbstractInputTerm`) carry theirs through
     the input chain instead (`applied`, `hidden_derivative`, `steady_state`): they move with the
     recorded input alone, and come first in the state.
+
+    **In the diagnosis** (`dynax.diagnose`) whether a term has states, and how it is screened, follows from
+    `hidden_names` and `smooth_at_neutral` alone. An input term with states has a time for its coefficient and no
+    derivative at zero (the input passes through): it is screened through its first-order effect on the input (a
+    lag or dead time also at finite sizes). Any other term's states are integrated along the measured states
+    (`hidden_vector_field`) for the one-step screening and start from `initial_hidden` in the windowed rollouts. A
+    term that is not `smooth_at_neutral` is screened on the secant to its start value. Neither of these two kinds is
+    ranked by the first Gauss-Newton step of its refit, which reads the derivative at neutral.
     """
 
     coefficient: eqx.AbstractVar[Float[Array, ""]]
@@ -46,6 +54,9 @@ class AbstractTerm(eqx.Module):
     prefix: eqx.AbstractClassVar[str]
     neutral: eqx.AbstractClassVar[float]
     sign: eqx.AbstractClassVar[int]
+    # The term's effect is differentiable in its coefficient at `neutral`, so that the derivative there shows it
+    # (not `Stiction`'s: at zero its level sits on a tie of its clipping, where the derivative is half the one above).
+    smooth_at_neutral: ClassVar[bool] = True
 
     def check_system(self, system) -> None:
         """Raise a `ValueError` naming the term and the system if the term cannot act on `system`
@@ -111,7 +122,7 @@ class AbstractJointTerm(AbstractTerm):
     joint: eqx.AbstractVar[int]
     # A friction law of the joint's speed (a sticking term replaces their sum in its band).
     friction: ClassVar[bool] = False
-    # The term holds its joint at rest (`Stiction`): it has a `holding_force`.
+    # The term holds its joint at rest (`Stiction`): the model adds its `holding_force` (no diagnosis reads it).
     holds_at_rest: ClassVar[bool] = False
 
     def __check_init__(self):

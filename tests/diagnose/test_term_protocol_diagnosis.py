@@ -1,0 +1,115 @@
+"""The diagnosis reads a candidate term through the term protocol (`AbstractTerm.hidden_names`, `initial_hidden`,
+`hidden_vector_field`, `smooth_at_neutral`) and nothing else of its class: a term written here, which dynax has never
+heard of, is screened as its protocol says.
+
+The record is made outside dynax's model code: the linear axis with a lagged damping, a linear ODE under a held
+force, stepped exactly by the matrix exponential of its zero-order-hold discretisation (scipy)."""
+
+from typing import ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy.linalg import expm
+
+from dynax import AbstractJointTerm, Horizons, InputLag, LinearAxis, Refit, Selection, Trajectory, ViscousFriction
+from dynax.internal import candidate_family, first_screening, names_to_refit, prepare_problem, rankable
+
+MASS, VISCOUS, OFFSET = 95.0, 200.0, -3.0  # the linear axis, without Coulomb friction (a linear ODE)
+B, TAU = 300.0, 0.2  # the lagged damping: force -B z, TAU z' = dq - z
+DT = 0.01
+
+
+class _LaggedDamping(AbstractJointTerm):
+    """Damping on a lagged speed, $-b z$ with $\\tau \\dot z = \\dot q_j - z$: a joint term with an internal state of
+    its own, which the diagnosis knows only through the protocol."""
+
+    joint: int = eqx.field(static=True)
+    coefficient: jax.Array
+    time_constant: float = eqx.field(static=True)
+    cause: ClassVar[str] = "lagged_damping"
+    prefix: ClassVar[str] = "bl"
+    neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 1
+
+    def hidden_names(self, system):
+        return (f"{self.parameter_name(system)}_speed",)
+
+    def initial_hidden(self, system, x, a):  # the lag at rest: it follows a speed held long
+        return x[system.velocity_indices[self.joint]][None]
+
+    def hidden_vector_field(self, system, x, a, z):
+        return (x[system.velocity_indices[self.joint]] - z) / self.time_constant
+
+    def joint_force(self, q, dq, a, z=None):
+        assert z is not None
+        return -self.coefficient * z[0]
+
+
+class _Kinked(AbstractJointTerm):
+    """A dead band of half-width `coefficient` on the speed's damping, $-d\\,(\\dot q - \\mathrm{clip}(\\dot q, -c,
+    c))$: at $c = 0$ not differentiable in $c$ (`smooth_at_neutral` false), and no `Stiction`."""
+
+    joint: int = eqx.field(static=True)
+    coefficient: jax.Array
+    cause: ClassVar[str] = "dead_band"
+    prefix: ClassVar[str] = "db"
+    neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 1
+    smooth_at_neutral: ClassVar[bool] = False
+
+    def force(self, q, dq):
+        return 50.0 * jnp.clip(dq, -self.coefficient, self.coefficient)
+
+
+def _record(seed: int, duration: float, name: str) -> Trajectory:
+    """The axis with the lagged damping under a multisine force held between samples, stepped exactly."""
+    rng = np.random.default_rng(seed)
+    ts = np.arange(int(round(duration / DT)) + 1) * DT
+    freqs = np.geomspace(0.2, 4.0, 8)
+    us = sum(120.0 * np.sin(2 * np.pi * f * ts + rng.uniform(0, 2 * np.pi)) for f in freqs)[:, None]
+    # x = (q, dq, z), input (u, 1) (the constant 1 carries the offset)
+    A = np.array([[0, 1, 0], [0, -VISCOUS / MASS, -B / MASS], [0, 1 / TAU, -1 / TAU]])
+    Bu = np.array([[0, 0], [1 / MASS, -OFFSET / MASS], [0, 0]])
+    block = expm(np.block([[A, Bu], [np.zeros((2, 5))]]) * DT)
+    Ad, Bd = block[:3, :3], block[:3, 3:]
+    x = np.zeros(3)
+    xs = [x]
+    for u in us[:-1, 0]:
+        x = Ad @ x + Bd @ np.array([u, 1.0])
+        xs.append(x)
+    xs = np.asarray(xs)[:, :2] + rng.normal(0.0, [1e-5, 1e-4], (len(ts), 2))  # encoder and speed noise
+    return Trajectory(jnp.asarray(ts), jnp.asarray(xs), jnp.asarray(us), ("q", "dq"), ("force",), "linear_axis", name)
+
+
+NOMINAL = LinearAxis(mass=MASS, viscous=VISCOUS, coulomb=0.0, offset=OFFSET)
+
+
+def test_the_rollout_screening_ranks_what_the_protocol_says_has_a_derivative_at_neutral():
+    # The lag (an input's dynamics) and the dead band (not smooth at neutral) have no informative derivative there;
+    # the viscous friction and the lagged damping (a state of its own, its force linear in its coefficient) have.
+    candidates = (
+        ViscousFriction(0),
+        InputLag(0),
+        _Kinked(0, jnp.asarray(0.0)),
+        _LaggedDamping(0, jnp.asarray(0.0), TAU),
+    )
+    train = _record(1, 5.0, "train")
+    family, _, _ = candidate_family(NOMINAL, candidates, names_to_refit(NOMINAL, Refit()), [train])
+    ranked = [candidates[k].cause for k in rankable(family, range(len(candidates)))]
+    assert ranked == ["viscous_friction", "lagged_damping"]
+
+
+def test_a_term_with_a_state_of_its_own_is_screened_along_the_measured_states():
+    # The one-step screening reads the lagged damping's state integrated along the measured speeds
+    # (`hidden_vector_field` from `initial_hidden`): its direction is the lagged speed, and it explains the record
+    # far better than a damping on the speed itself.
+    train, held_out = _record(2, 20.0, "train"), _record(3, 10.0, "held_out")
+    candidates = (ViscousFriction(0), _LaggedDamping(0, jnp.asarray(0.0), TAU))
+    problem = prepare_problem(NOMINAL, train, [held_out], candidates, Refit(), Horizons(), Selection(max_terms=1))
+    screened = first_screening(problem)
+    gain, delta = screened["lagged_damping@q"]
+    assert gain > 0.9, screened
+    assert gain > screened["viscous_friction@q"][0] + 0.2, screened
+    assert abs(delta - B) < 0.05 * B, screened  # the screening's step is about the damping's size
