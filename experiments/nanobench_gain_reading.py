@@ -82,7 +82,10 @@ class Reader:
     def __init__(self, body, train_records, n_ref, position, groups):
         self.n_ref, self.position, self.groups = n_ref, position, groups
         dt = float(train_records[0].dt)
-        self.group_scale = flight_state_scale(body, train_records, HORIZON_S, dt, groups)
+        scale = flight_state_scale(body, train_records, HORIZON_S, dt, groups)
+        if scale is None:
+            raise SystemExit("the starting model diverges on most training windows: no group scale")
+        self.group_scale = scale
         self.spread_scale = np.maximum(np.concatenate([np.asarray(r.xs) for r in train_records]).std(axis=0), 1e-9)
 
     def window_scores(self, e, scale):
@@ -133,7 +136,7 @@ def extended(body, axes, d):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     parser.add_argument("--out", default="experiments/results/nanobench_gain_reading")
     parser.add_argument("--slice-s", type=float, default=8.0)
     parser.add_argument("--min-samples", type=int, default=1000)
