@@ -354,7 +354,8 @@ def _through_inputs(problem: Problem, round_: Round) -> tuple[int, np.ndarray] |
     coefficient at the diagnosis's level, Bonferroni over the candidates and coefficients tried).
 
     **Returns:** `(candidate, parameters)`, or `None` where no lag or delay fits the one-step criterion better."""
-    if problem.nominal_through is None:
+    dynamic = [k for k in round_.remaining if input_dynamics(problem.candidates[k], problem.system)]
+    if problem.nominal_through is None or not dynamic:
         return None
     n_nominal = len(problem.names)
     held = []
@@ -363,7 +364,6 @@ def _through_inputs(problem: Problem, round_: Round) -> tuple[int, np.ndarray] |
         if selected is not None and input_dynamics(selected, problem.system):
             held.append(_at(selected, problem.neutral[slot] + round_.p[n_nominal + j]))
     _, held_loss, n_residuals = problem.nominal_through(tuple(held))
-    dynamic = [k for k in round_.remaining if input_dynamics(problem.candidates[k], problem.system)]
     best = None
     for k in dynamic:
         for c in problem.neutral[k] + problem.dt * np.asarray(THROUGH_SAMPLES, float):
