@@ -48,10 +48,12 @@ class RunNotes:
             self.entries.append(entry)
         return entry
 
-    def note(self, kind: str, message: str, *, line: str | None = None, stream=None, **where) -> None:
+    def note(
+        self, kind: str, message: str, *, line: str | None = None, stream=None, category: str = "note", **where
+    ) -> None:
         """Print `line` (default `note: MESSAGE`) to `stream` (default stderr) and keep the note."""
         print(f"note: {message}" if line is None else line, file=sys.stderr if stream is None else stream)
-        self.add(kind, message, **where)
+        self.add(kind, message, category=category, **where)
 
     def finding(self, finding, *, line: str | None = None, stream=None, file=None, rows=None) -> None:
         """Print a data check's `Finding` (`warning: ...` on stderr) and keep it with its location (`file`, `rows`:
@@ -92,7 +94,7 @@ def current() -> RunNotes:
 
 def dynax_warning_classes() -> tuple[type[Warning], ...]:
     """The warning classes dynax defines (every subclass of `Warning` whose module is dynax's)."""
-    import dynax  # noqa: F401 - loads the modules that define them
+    from .. import _data, _diagnose, _identify, _precision  # noqa: F401 - the packages that define them, loaded
 
     found, todo = [], [Warning]
     while todo:

@@ -96,11 +96,19 @@ def _note_flight(path, found) -> None:
     """Print (stdout) and keep the ground segments and glitches `load_flight` found in `path` and left out."""
     said = current()
     for line, (t0, t1) in zip(found.describe(), found.ground):
-        said.note("ground", f"{path}: {line}", file=path, t0=t0, t1=t1, stream=sys.stdout)
+        said.note("ground", f"{path}: {line}", file=path, t0=t0, t1=t1, stream=sys.stdout, category="data")
     for line, g in zip(found.describe()[len(found.ground) :], found.glitches):
         rows = None if g.kind == "gap" else (g.row, g.row + max(g.n_samples, 1) - 1)  # a gap: no rows of its own
         said.note(
-            g.kind, f"{path}: {line}", file=path, column=g.column, rows=rows, t0=g.start, t1=g.stop, stream=sys.stdout
+            g.kind,
+            f"{path}: {line}",
+            file=path,
+            column=g.column,
+            rows=rows,
+            t0=g.start,
+            t1=g.stop,
+            stream=sys.stdout,
+            category="data",
         )
 
 

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import dynax
-from dynax.internal import cli_main
+from dynax.internal import cli_main, command_warnings
 from tests.cli.hostile_cases import _arm, _multisine, _stamped_late, ACROBOT, PENDULUM, TRUTH, write_table
 
 # --- the collector ------------------------------------------------------------------------------------
@@ -27,12 +27,10 @@ def _to_stderr(message, category, filename, lineno, file=None, line=None):
 
 
 def test_a_dynax_warning_is_kept_and_shown_once_even_where_python_filters_hide_it(capsys):
-    from dynax._cli._notes import collecting
-
     with warnings.catch_warnings():
         warnings.simplefilter("default")
         warnings.showwarning = _to_stderr  # as the console script shows them (pytest would record them instead)
-        with collecting() as said:
+        with command_warnings() as said:
             for _ in range(2):  # the same warning twice: shown once, as Python's "default" shows it, kept once
                 warnings.warn("the records disagree", dynax.DataWarning, stacklevel=1)
             warnings.warn("something else", UserWarning, stacklevel=1)
@@ -42,7 +40,7 @@ def test_a_dynax_warning_is_kept_and_shown_once_even_where_python_filters_hide_i
         ]
         assert capsys.readouterr().err.count("DataWarning: the records disagree") == 1
         warnings.simplefilter("ignore")  # a script that silences the terminal
-        with collecting() as said:
+        with command_warnings() as said:
             warnings.warn("the records disagree", dynax.DataWarning, stacklevel=1)
             warnings.warn("not dynax's", UserWarning, stacklevel=1)
         assert [e["kind"] for e in said.to_json()] == ["DataWarning"]  # dynax's own kept; the rest as filtered
