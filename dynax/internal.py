@@ -27,6 +27,7 @@ from ._cli._nominal import (
 from ._cli._nominal import (
     split_term_coefficients as split_term_coefficients,
 )
+from ._cli._notes import collecting as command_warnings
 from ._cli._output import staged_directory as staged_directory
 from ._cli._output import write_json as write_json
 from ._control._closed_loop import closed_loop_rollout as closed_loop_rollout
@@ -664,6 +665,7 @@ __all__ = [
     "collocate",
     "collocation_costs",
     "collocation_reference",
+    "command_warnings",
     "compare_records",
     "complete_state",
     "CONCENTRATED",

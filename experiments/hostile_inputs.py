@@ -53,7 +53,9 @@ def main():
     from dynax.internal import cli_main
 
     print(f"judging dynax from {pathlib.Path(dynax.__file__).parent}", file=sys.stderr)
-    sys.path.insert(1, str(REPO))  # tests.reference, for the fixtures
+    # this checkout's tests (the corpus, its judge, tests.reference for the fixtures) ahead of --code's: the same
+    # cases and rules judge either; dynax itself stays the one imported above
+    sys.path.insert(0, str(REPO))
     if args.flights:
         from tests.cli import hostile_cases
         from tests.cli import hostile_flights as cases

@@ -13,6 +13,7 @@ import tempfile
 
 from .._data import parse_assignments
 from .._errors import DataError, UsageError
+from ._notes import current
 
 # What each sub-command writes to --out.
 OUTPUT_KIND = {"demo": "directory", "diagnose": "directory", "identify": "file", "fit": "file", "evaluate": "file"}
@@ -285,9 +286,12 @@ def add_exclude_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _excluded(records, spans, what: str):
-    """Each record less the stretches of `spans` that name its file (or no file), and the notes saying so."""
+def _excluded(records, spans, what: str, origins: dict):
+    """Each record less the stretches of `spans` that name its file (or no file), and the notes saying so;
+    `origins` gains each piece's file and the file's row before its first (`{piece source: (file, rows)}`)."""
     import pathlib
+
+    import numpy as np
 
     from .._data import exclude_stretches
 
@@ -302,9 +306,14 @@ def _excluded(records, spans, what: str):
         if pieces != [record]:
             kept = sum(len(p) for p in pieces)
             notes.append(
-                f"--exclude: {len(record) - kept} of {len(record)} samples of {record.source} left out"
-                + (f", leaving {len(pieces)} {what}s" if len(pieces) != 1 else "")
+                (
+                    f"--exclude: {len(record) - kept} of {len(record)} samples of {record.source} left out"
+                    + (f", leaving {len(pieces)} {what}s" if len(pieces) != 1 else ""),
+                    record.source,
+                )
             )
+            for piece in pieces:
+                origins[piece.source] = (record.source, int(np.searchsorted(np.asarray(record.ts), piece.ts[0])))
         out.extend(pieces)
     return out, notes
 
@@ -314,10 +323,11 @@ def load_records(args, system: str, *, min_samples: int, lenient: tuple = ()) ->
 
     Each record is checked for located faults (`dynax.check_records`); a fault that would make the fit
     wrong is a refusal (`DataError`, exit status 2) naming its file, column, rows and times and the fix;
-    milder ones come back as warning lines. `lenient` names `Check` kinds that are warnings here
-    whatever their severity (e.g. a zero input when the parameters are known).
+    milder ones are printed as `warning:` lines on stderr, and so are the notes of `--exclude`; each is kept
+    for the JSON's `warnings` (`_notes.py`). `lenient` names `Check` kinds that are warnings here whatever
+    their severity (e.g. a zero input when the parameters are known).
 
-    **Returns:** `(train, validation or None, notes)`.
+    **Returns:** `(train, validation or None, notes)`: the lines printed, for a report's notes.
     """
     import warnings
 
@@ -349,10 +359,11 @@ def load_records(args, system: str, *, min_samples: int, lenient: tuple = ()) ->
                 for p in paths
             ]
 
-    train, notes = _excluded(read(args.data), spans, "record")
+    origins: dict = {}  # a piece --exclude left: its file, and the rows before it there (for `warnings`)
+    train, notes = _excluded(read(args.data), spans, "record", origins)
     validation = None
     if getattr(args, "validation", None):
-        validation, more = _excluded(read(args.validation), spans, "held-out record")
+        validation, more = _excluded(read(args.validation), spans, "held-out record", origins)
         notes += more
     for name, records in (("DATA", train), ("--validation", validation)):
         if records is not None and not records:
@@ -368,5 +379,15 @@ def load_records(args, system: str, *, min_samples: int, lenient: tuple = ()) ->
         from .._data._sanity import DataCheck
 
         DataCheck(tuple(refusals)).raise_refusals()
-    notes += [f"warning: {f.describe()}" for f in check.findings if f.severity == Severity.WARN or f.kind in lenient]
-    return train, validation, notes
+    said = current()
+    lines = []
+    for text, source in notes:
+        said.note("exclude", text, file=source)
+        lines.append(text)
+    for finding in check.findings:
+        if finding.severity == Severity.WARN or finding.kind in lenient:
+            file, before = origins.get(finding.source, (finding.source, 0))
+            rows = None if finding.rows is None else tuple(r + before for r in finding.rows)
+            said.finding(finding, file=file, rows=rows)  # the file's rows, where the message counts the piece's
+            lines.append(f"warning: {finding.describe()}")
+    return train, validation, lines

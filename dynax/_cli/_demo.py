@@ -1,11 +1,13 @@
 """`dynax demo`: the main job on the embedded default, an acrobot with an effect hidden in its data."""
 
 import argparse
+import dataclasses
 import pathlib
 import time
 
 from .._errors import UsageError
 from .._synthetic import hidden_effect
+from ._notes import current
 from ._output import staged_directory, write_json
 
 MAX_SEED = 2**32 - 1  # the random generators' seeds are unsigned 32-bit integers
@@ -63,6 +65,7 @@ def run_demo(term, *, seed: int, out: pathlib.Path) -> str:
             mode=Refit(),
             progress=lambda line: bar.say(f"[{time.perf_counter() - start:5.1f} s] {line}"),
         )
+    report = dataclasses.replace(report, warnings=current().to_json())  # report.json's `warnings`
     write_report(report, out, validation, write_json=write_json)
     hidden = f"{term.label(truth.system)}, {term.parameter_name(truth.system)} = {float(term.coefficient):.4g}"
     return f"Hidden in the data: {hidden} (and base parameters that differ from the nominal model's).\n" + summary(

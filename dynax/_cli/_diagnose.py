@@ -3,7 +3,6 @@
 import argparse
 import contextlib
 import dataclasses
-import sys
 import time
 import warnings
 
@@ -16,6 +15,7 @@ from ._common import (
     read_nominal_parameters,
 )
 from ._nominal import check_nominal, nominal_from_data, nominal_system, split_term_coefficients
+from ._notes import current
 from ._output import staged_directory, write_json
 
 _SYSTEMS = ("acrobot", "double_pendulum", "linear_axis", "helicopter", "quadrotor")
@@ -126,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
         parameters = read_nominal_parameters(args.nominal)
         parameters, set_aside = split_term_coefficients(args.system, parameters)
         if set_aside:
-            print(f"note: {set_aside}", file=sys.stderr)
+            current().note("nominal_terms_set_aside", set_aside, file=args.nominal)
             cli_notes.append(set_aside)
     # Everything that can be refused is read before anything is written. With the parameters known, a record
     # that nothing drives is still a test of them: a zero or constant input is then said, not refused.
@@ -135,9 +135,7 @@ def run(args: argparse.Namespace) -> int:
 
     lenient = (Check.ZERO, Check.CONSTANT) if args.mode == "known" else ()
     train, validation, data_notes = load_records(args, args.system, min_samples=MIN_SAMPLES, lenient=lenient)
-    for note in data_notes:
-        print(note, file=sys.stderr)
-        cli_notes.append(note)
+    cli_notes += data_notes  # printed and kept for `warnings` by `load_records`; in the report's notes too
     if args.dt is not None:
         train = [_resampled(t, args.dt) for t in train]
         validation = None if validation is None else [_resampled(v, args.dt) for v in validation]
@@ -151,7 +149,7 @@ def run(args: argparse.Namespace) -> int:
             system, note = nominal_from_data(
                 system, train if validation is not None else [holdout_split(t)[0] for t in train]
             )
-        print(f"note: {note}", file=sys.stderr)
+        current().note("nominal_from_data", note)
         cli_notes.append(note)
     if args.mode == "known":
         mode = Known()
@@ -174,8 +172,9 @@ def run(args: argparse.Namespace) -> int:
             ),
             progress=say,
         )
-    report = dataclasses.replace(report, system=args.system)  # the contract's name, whatever the files say
     report.notes.extend(cli_notes)
+    # the contract's name, whatever the files say; what the run warned of and noted, for report.json's `warnings`
+    report = dataclasses.replace(report, system=args.system, warnings=current().to_json())
     held_out = validation if validation is not None else [holdout_split(t)[1] for t in train]
     with staged_directory(args.out) as stage:
         write_report(report, stage, held_out, write_json=write_json)

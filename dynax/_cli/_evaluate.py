@@ -2,10 +2,12 @@
 
 import argparse
 import math
+import sys
 import time
 
 from .._errors import DataError, UsageError
 from ._common import add_data_options, data_options, output_file, read_json_object
+from ._notes import current, with_warnings
 from ._output import write_json
 
 
@@ -169,11 +171,13 @@ def run(args: argparse.Namespace) -> int:
     if any(diverged):
         metrics["diverged_fraction"] = diverged
         metrics["status"] = ["diverged" if d else "ok" for d in diverged]
-        print(
-            f"note: {max(diverged):.1%} of the rollouts diverged; the mean squared error at those horizons is "
-            "infinite, written as null with status 'diverged'"
+        current().note(
+            "diverged",
+            f"{max(diverged):.1%} of the rollouts diverged; the mean squared error at those horizons is "
+            "infinite, written as null with status 'diverged'",
+            stream=sys.stdout,
         )
-    write_json(out, metrics)
+    write_json(out, with_warnings(metrics))
     print(f"helicopter model {args.model} on {args.data}: mean squared open-loop prediction error")
     print("  horizon [s]  " + "  ".join(f"{h:>10g}" for h in horizons))
     for name, values in metrics["mse"].items():

@@ -10,6 +10,7 @@ import time
 
 from .._errors import DataError, UsageError
 from ._common import add_data_options, data_options, finite_seconds, min_fit_samples, MIN_RESIDUAL_DOF, output_file
+from ._notes import current, with_warnings
 from ._output import write_json
 
 _MODELS = ("acceleration", "linear")
@@ -150,12 +151,18 @@ def load_helicopter_data(path, mapping=None, scale=None, offset=None, *, min_sam
     check_unit_quaternions(np.asarray(data.xs[:, 3:7]), path, mapping)
     check = check_records([data])
     check.raise_refusals()
+    said = current()
     for finding in check.warnings:
-        print(f"warning: {finding.describe()}", file=sys.stderr)
+        said.finding(finding)
     if not data.is_uniform:
         dt = data.dt
         data = resample(data, dt)
-        print(f"note: {path} is irregularly sampled; resampled to its median interval {dt:.6g} s")
+        said.note(
+            "resampled",
+            f"{path} is irregularly sampled; resampled to its median interval {dt:.6g} s",
+            file=path,
+            stream=sys.stdout,
+        )
     xs = jnp.asarray(data.xs)
     xs = xs.at[:, 3:7].set(xs[:, 3:7] / jnp.linalg.norm(xs[:, 3:7], axis=1, keepdims=True))
     return type(data)(data.ts, xs, data.us, data.state_names, data.input_names, data.system, data.source)
@@ -270,9 +277,11 @@ def run(args: argparse.Namespace) -> int:
         "backprop": lambda: Backprop(horizon=args.horizon, stride=stride, **limit),
     }[args.criterion]()
     if args.criterion in ("lagged", "backprop") and stride > 1:
-        print(
-            f"note: one start time in {stride}, {-(-(len(data) - n_steps) // stride)} windows of {args.horizon:g} s "
-            "(--stride 1 for every start)"
+        current().note(
+            "stride",
+            f"one start time in {stride}, {-(-(len(data) - n_steps) // stride)} windows of {args.horizon:g} s "
+            "(--stride 1 for every start)",
+            stream=sys.stdout,
         )
     fit = fit_everything(system, data, criterion)  # a bar per iteration with the loss on stderr (see --quiet)
     horizon = args.horizon if args.criterion in ("lagged", "backprop") else None
@@ -285,7 +294,7 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 1
-    write_json(out, model_to_json(fit, horizon_s=horizon))
+    write_json(out, with_warnings(model_to_json(fit, horizon_s=horizon)))
     print(f"helicopter, {args.model} model, {args.criterion} criterion, {len(data)} samples: loss {loss:.6g}")
     for name, value in fit.model.body_model.parameters.items():
         print(f"  {name:>10s} = {float(value):.6g}")

@@ -8,7 +8,6 @@ fit, and the model is validated open loop on held-out data; all of it goes into 
 
 import argparse
 import dataclasses
-import sys
 import time
 import warnings
 
@@ -22,6 +21,7 @@ from ._common import (
     min_fit_samples,
     output_file,
 )
+from ._notes import current, with_warnings
 from ._output import write_json
 
 _SYSTEMS = ("acrobot", "double_pendulum", "linear_axis", "helicopter")
@@ -251,9 +251,7 @@ def run(args: argparse.Namespace) -> int:
     if args.holdout is not None and args.validation:
         raise UsageError("give either --validation files or --holdout, not both")
     start = time.perf_counter()
-    data, validation, notes = load_records(args, args.system, min_samples=min_fit_samples())
-    for note in notes:
-        print(note, file=sys.stderr)
+    data, validation, _ = load_records(args, args.system, min_samples=min_fit_samples())  # its notes: printed, kept
     refine = {"auto": "auto", "yes": True, "no": False}[args.refine]
     if refine is True and args.system not in ("acrobot", "double_pendulum"):
         raise UsageError(f"--refine yes is for acrobot and double_pendulum; use --method simulation for {args.system}")
@@ -271,15 +269,22 @@ def run(args: argparse.Namespace) -> int:
     report = result.to_json()
     if args.system == "helicopter":
         report.pop("friction")
-    write_json(out, report)
-    print(
+    said, lines = current(), []
+
+    def say(line: str, kind: str | None = None) -> None:
+        """A line of the summary; with `kind`, a note the JSON's `warnings` keeps too."""
+        lines.append(line)
+        if kind is not None:
+            said.add(kind, line.strip().removeprefix("WARNING: ").removeprefix("NOTE: "))
+
+    say(
         f"{args.system}, {report['method']} model, {report['n_samples']} samples: "
         f"condition number {report['condition_number']:.3g}, relative equation error {float(result.relative_error):.3%}"
     )
     between = report.get("record_std_errors") or {}
     for name, value in report["parameters"].items():
         std = report["std_errors"].get(name)
-        print(
+        say(
             f"  {name:>8s} = {value:.6g}"
             + (f" +- {std:.2g}" if std is not None else "")
             + (f" (leaving one record out: +- {between[name]:.2g})" if name in between else "")
@@ -288,72 +293,74 @@ def run(args: argparse.Namespace) -> int:
     serial = None if least_squares is None else least_squares.serial_correlation
     if serial and output_error is None:
         ratios = serial["inflation"].values()
-        print(
+        say(
             f"  standard errors robust to the equations' correlation in time (over {serial['bandwidth_steps']:.0f} "
             f"time steps): {min(ratios):.2g} to {max(ratios):.2g} times those counting every equation as independent"
         )
     for settings in result.settings:
         if settings.get("chosen_from_data"):
-            print(f"  settings ({settings.get('record') or 'record'}): {settings['reason']}")
+            say(f"  settings ({settings.get('record') or 'record'}): {settings['reason']}")
     consistency = result.consistency
     if consistency is not None:
         if consistency.violated:
-            print("  physically INCONSISTENT: " + "; ".join(consistency.violated))
+            say("  physically INCONSISTENT: " + "; ".join(consistency.violated), "inconsistent")
         enforced = () if least_squares is None else least_squares.consistency.active
         if enforced:
-            print(
-                "  consistency constraint active (the plain least-squares estimate broke: " + "; ".join(enforced) + ")"
-            )
+            say("  consistency constraint active (the plain least-squares estimate broke: " + "; ".join(enforced) + ")")
         elif not consistency.violated:
-            print("  physically consistent")
+            say("  physically consistent")
     if result.poorly_determined:
         cells = describe_poorly_determined(result.poorly_determined)
-        print(
+        say(
             f"  WARNING: the data determine these parameters poorly (relative standard error): {cells}; "
-            "record more motion in every joint before trusting them, or look for what the model misses"
+            "record more motion in every joint before trusting them, or look for what the model misses",
+            "poorly_determined",
         )
     if result.jointly_determined:
         cells = "; ".join(jointly_determined_cell(n, j, report) for n, j in result.jointly_determined.items())
-        print(
+        say(
             "  NOTE: determined mostly jointly (the standard error over 10 times what it would be with every other "
             "parameter known: most of the error is shared, and a combination of the correlated parameters is known "
-            f"better than each alone): {cells}"
+            f"better than each alone): {cells}",
+            "jointly_determined",
         )
     if output_error is not None and result.record_std_errors is None and len(data) < 3:
         own = args.validation is None  # without --validation, the held-out part is the records' own tail
-        print(
+        say(
             f"  NOTE: fitted on {len(data)} record{'s' if len(data) > 1 else ''}: the standard errors "
             + ("and the validation come" if own else "come")
             + " from within the records, and cannot show what changes from one recording to the next "
             "(friction, sensor offsets, motion a record does not contain). Give three records or more for errors "
-            "between records" + (", and a record of its own to --validation" if own else "")
+            "between records" + (", and a record of its own to --validation" if own else ""),
+            "few_records",
         )
     disagree = None if output_error is None else output_error.records_disagree
     if disagree:
         cells = ", ".join(f"{n} ({r:.1f}x)" for n, r in disagree.items())
-        print(
+        say(
             f"  NOTE: the records disagree more than their noise explains: leaving one record out moves {cells} "
             "by that many times their standard error from within the records; read the leave-one-record-out "
-            "errors as their uncertainty"
+            "errors as their uncertainty",
+            "records_disagree",
         )
     for check in (result.record_offsets, result.record_friction):
         if check is not None and check.differ():
-            print("  " + check.note())
+            say(f"  {check.note()}", "records_differ")  # differ(): a note
     fitted_offsets = None if least_squares is None else least_squares.offsets
     if fitted_offsets:
         cells = "; ".join(
             f"{record} " + ", ".join(f"{joint} {value:+.3g}" for joint, value in zip(fitted_offsets["joints"], row))
             for record, row in zip(fitted_offsets["records"], fitted_offsets["values"])
         )
-        print(f"  force offsets fitted per record (not part of the model): {cells}")
+        say(f"  force offsets fitted per record (not part of the model): {cells}")
     if result.angle_zeros is not None:
-        print("  " + result.angle_zeros.note())
+        say("  " + result.angle_zeros.note())
     if result.static_friction is not None and result.static_friction.stretches:  # said where a record rests
-        print("  friction at rest: " + result.static_friction.note)
+        say("  friction at rest: " + result.static_friction.note)
     timing = None if output_error is None else output_error.solution.statistics.input_latency_s
     if timing is not None:
         latency = 1e3 * timing
-        print(
+        say(
             f"  input timing (fitted in the refinement): the inputs act {abs(latency):.2f} ms "
             f"{'after' if latency >= 0 else 'before'} their samples (0 ms: sampled without delay; "
             "half the record's interval after: held as recorded)"
@@ -361,18 +368,21 @@ def run(args: argparse.Namespace) -> int:
     for stage in result.stages:
         if stage.validation is not None:
             for line in stage.validation.summary(str(stage.kind)).splitlines():
-                print("  " + line)
+                say("  " + line)
     concentrated = None if result.validation is None else result.validation.note()
     if concentrated:
-        print("  NOTE: " + concentrated)
+        say("  NOTE: " + concentrated, "validation_concentrated")
     worse = _refinement_validates_worse(least_squares, output_error)
     if worse:
-        print(
+        say(
             f"  NOTE: the least-squares stage predicts the {worse} better than the refined model at every "
-            "horizon; the refined model is the one written (`--refine no` returns the least-squares model)"
+            "horizon; the refined model is the one written (`--refine no` returns the least-squares model)",
+            "refinement_validates_worse",
         )
     if result.validation is None:
-        print("  no held-out validation (nothing held out)")
+        say("  no held-out validation (nothing held out)", "no_validation")
+    write_json(out, with_warnings(report))
+    print("\n".join(lines))
     print(f"wrote {out} in {time.perf_counter() - start:.1f} s")
     return 0
 

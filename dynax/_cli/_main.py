@@ -16,6 +16,7 @@ from .._errors import DataError, UsageError
 from .._version import __version__
 from ._cache import enable_compilation_cache
 from ._common import check_command_output
+from ._notes import collecting
 
 # Each module defines `register(subparsers)`, which adds its sub-command and sets `run=...`
 # (a function `run(args) -> int`) as the parser default.
@@ -81,7 +82,7 @@ def main(argv=None, *, run=None) -> int:
     try:
         check_command_output(args)  # before any work: a bad --out costs a second, not a fit
         enable_compilation_cache(disabled=args.no_cache)
-        with progress_mode(mode):
+        with progress_mode(mode), collecting():  # the warnings and notes the written JSON carries (`_notes.py`)
             return int((run or args.run)(args) or 0)
     except (DataError, UsageError) as e:
         print(f"dynax {args.command}: error: {e}", file=sys.stderr)

@@ -1,10 +1,12 @@
 """`dynax fit quadrotor TRAIN...` and `dynax evaluate MODEL.json DATA... --steps 1,10,50`: flight logs."""
 
 import math
+import sys
 import time
 
 from .._errors import DataError, UsageError
 from ._common import data_options, output_file
+from ._notes import current, with_warnings
 from ._output import write_json
 
 QUADROTOR_MODELS = ("nominal", "acceleration", "linear")
@@ -56,8 +58,7 @@ def load_flights(
                     path=path,
                 )
         seen[str(path)] = trajectory
-        for line in found.describe():
-            print(f"note: {path}: {line}")
+        _note_flight(path, found)
         numbering.check(trajectory, found.usable, path, dict(mapping or {}))
         levels[str(path)] = input_levels(trajectory, found.usable)
         kept = usable_segments(trajectory, found, min_samples)
@@ -86,9 +87,29 @@ def load_flights(
     for note in notes:  # what the motor-numbering test could see for each file (nothing: it saw all it could)
         said = numbering.notes.get(note["file"], "")
         if said:
-            print(f"note: {note['file']}: {said}")
+            current().note("motor_numbering", f"{note['file']}: {said}", file=note["file"], stream=sys.stdout)
         note["motor_numbering"] = said or ("checked" if str(note["file"]) in numbering.notes else "not compared")
     return runs, notes
+
+
+def _note_flight(path, found) -> None:
+    """Print (stdout) and keep the ground segments and glitches `load_flight` found in `path` and left out."""
+    said = current()
+    for line, (t0, t1) in zip(found.describe(), found.ground):
+        said.note("ground", f"{path}: {line}", file=path, t0=t0, t1=t1, stream=sys.stdout, category="data")
+    for line, g in zip(found.describe()[len(found.ground) :], found.glitches):
+        rows = None if g.kind == "gap" else (g.row, g.row + max(g.n_samples, 1) - 1)  # a gap: no rows of its own
+        said.note(
+            g.kind,
+            f"{path}: {line}",
+            file=path,
+            column=g.column,
+            rows=rows,
+            t0=g.start,
+            t1=g.stop,
+            stream=sys.stdout,
+            category="data",
+        )
 
 
 def run_fit(args) -> int:
@@ -159,22 +180,24 @@ def run_fit(args) -> int:
         print(
             f"dynax fit: error: the fit failed numerically (loss {loss}, {int(np.sum(~np.isfinite(weights)))} "
             "non-finite weights); nothing written",
-            file=__import__("sys").stderr,
+            file=sys.stderr,
         )
         return 1
     horizon = args.horizon if args.criterion in ("lagged", "backprop") else None
     n_samples = sum(len(r) for r in runs)
     write_json(
         out,
-        quadrotor_to_json(
-            solution.model,
-            family=model,
-            criterion=args.criterion,
-            horizon_s=horizon,
-            loss=loss,
-            n_samples=n_samples,
-            data=notes,
-            **_signature_entry(numbering.signature()),
+        with_warnings(
+            quadrotor_to_json(
+                solution.model,
+                family=model,
+                criterion=args.criterion,
+                horizon_s=horizon,
+                loss=loss,
+                n_samples=n_samples,
+                data=notes,
+                **_signature_entry(numbering.signature()),
+            )
         ),
     )
     print(
@@ -259,7 +282,7 @@ def run_evaluate(args, system, reference=None) -> int:
         "constant_velocity": baseline.scores(metrics),
         "data": notes,
     }
-    write_json(out, result)
+    write_json(out, with_warnings(result))
     print(f"quadrotor model {args.model} on {len(args.data)} file(s)")
     for name, error in (("model", model_error), ("constant velocity", baseline)):
         print("\n".join("  " + line for line in error.summary(name, metrics).splitlines()))
@@ -272,9 +295,9 @@ def run_diagnose(args) -> int:
     and glitches left out, noted), the diagnosis of the rigid body (`--nominal MODEL.json`: a fitted quadrotor
     model, trusted with `--mode known`), the report and its per-group scores beside constant velocity
     (`Report.flight_error`, also written as `flight_error.json`)."""
+    import dataclasses
     import json
     import pathlib
-    import sys
     import warnings
 
     from .._data import DataWarning
@@ -362,10 +385,11 @@ def run_diagnose(args) -> int:
             progress=say,
         )
     held_out = validation if validation is not None else [holdout_split(t)[1] for t in train]
+    report = dataclasses.replace(report, warnings=current().to_json())  # report.json's `warnings`
     with staged_directory(args.out) as stage:
         write_report(report, stage, body_frame_records(system, held_out), write_json=write_json)
         if report.flight_error is not None:
-            write_json(stage / "flight_error.json", report.flight_error.to_json())
+            write_json(stage / "flight_error.json", report.flight_error.to_json())  # report.json has the warnings
     print(summary(report))  # with the per-group scores and their note
     print(f"wrote {args.out}/report.json, report.md, flight_error.json and figures", file=sys.stdout)
     return 0

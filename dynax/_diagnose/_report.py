@@ -40,6 +40,10 @@ def report_markdown(report) -> str:
     lines += (
         _causes_markdown(j) + discovery_markdown(j) + _candidates_markdown(j) + _rounds_markdown(j) + _test_markdown(j)
     )
+    said = set(j["notes"]) | {f"warning: {n}" for n in j["notes"]}  # the notes name what the command line noted
+    warned = [w for w in j.get("warnings") or () if w["message"] not in said and f"warning: {w['message']}" not in said]
+    if warned:  # what the run warned of besides (report.json's `warnings`, written by the command line)
+        lines += ["## Warnings", ""] + [f"- {w['category']}: {w['message']}" for w in warned] + [""]
     if j["notes"]:
         lines += ["## Notes", ""] + [f"- {n}" for n in j["notes"]] + [""]
     lines += ["## Parameters", "", "| parameter | nominal | extended |", "|---|---|---|"]

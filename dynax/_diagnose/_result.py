@@ -198,7 +198,9 @@ class Report(eqx.Module):
     fitted models `nominal_model` and `extended_model`, and `rounds` (each round of the forward selection: every
     refitted candidate's held-out gains, p, and `selected`, `passed` or `stopped` with the rules that stopped it);
     for a quadrotor `flight_error` (`FlightScores`: the held-out scores per group of the nominal and extended models
-    and of constant velocity, and the short-horizon note, which `notes` carries too), else `None`.
+    and of constant velocity, and the short-horizon note, which `notes` carries too), else `None`; `warnings`: the
+    command line's list of what the run warned of and noted (`report.json`'s `warnings`, see docs/cli.md), `None`
+    from Python, whose caller receives them as Python warnings.
     """
 
     system: str
@@ -223,6 +225,7 @@ class Report(eqx.Module):
     rounds: list = eqx.field(default_factory=list)
     not_proposed: list = eqx.field(default_factory=list)
     flight_error: FlightScores | None = None
+    warnings: list | None = None
 
     def to_json(self) -> dict:
         """The contract's `report.json` (section 3), with extra keys after the contract's."""
@@ -249,6 +252,7 @@ class Report(eqx.Module):
             **({"discovery": self.discovery} if self.discovery else {}),
             "rounds": self.rounds,
             **({"flight_error": self.flight_error.to_json()} if self.flight_error is not None else {}),
+            **({"warnings": self.warnings} if self.warnings is not None else {}),
         }
 
     def to_markdown(self) -> str:

@@ -16,7 +16,7 @@ import numpy as np
 from .._context import set_within
 from .._data._sampling import time_label
 from .._data._trajectory import Trajectory
-from .._errors import UsageError
+from .._errors import located, UsageError
 from .._fit import serial_covariance, Solution
 from .._model._linear_in_parameters import size_parameter_names
 from .._model._system import AbstractSystem
@@ -681,7 +681,10 @@ def _warn_scaled_stretch(where, gain, errors, record) -> None:
             f"{g:.3g} there a consistent estimate's falls to {corrected:.0%}. A current limit, a unit, a gear or a "
             f"torque constant that changed while recording? If so, {fix}."
         )
-    warnings.warn(text, InconsistentEstimateWarning, stacklevel=8)
+    span = None if at == 0 else (t, None) if after else (None, t)  # the open end: the record's (its held-out part too)
+    warnings.warn(  # located: the command line writes the file, the input and the stretch into its JSON
+        located(InconsistentEstimateWarning(text), file=label, column=input_name, times=span, fix=fix), stacklevel=8
+    )
 
 
 def _leaves_sizes_to_noise(system, names, equations, solve, estimate, record_rows) -> bool:

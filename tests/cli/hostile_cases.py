@@ -10,7 +10,9 @@ folder and names the command line (or a Python call) and the one acceptable outc
 - `refuse`: exit status 2, a one-line message holding every string of `needles` (the column, the row
   or time, the fix), no traceback, nothing written to `--out`; and no string of `forbidden` (advice
   that would make the data worse, such as a `--scale` for a stretch's fault);
-- `warn`: exit status 0, a warning line holding `needles`, and an output that passes `check`;
+- `warn`: exit status 0, a warning line holding `needles` on the terminal and an entry of the written JSON's
+  `warnings` list whose message holds them too (what a script reading the answer sees), and an output that
+  passes `check`;
 - `accept`: exit status 0 and an output that passes `check` (a right answer, checked against the
   truth the record was made from).
 
@@ -1111,6 +1113,7 @@ class Outcome:
     stderr: str
     verdict: str = ""
     stdout: str = ""
+    warnings: list | None = None  # the written JSON's `warnings` list (None: no JSON, or none in it)
 
     @property
     def message(self) -> str:
@@ -1172,8 +1175,21 @@ def run_case(case: Case, folder, fixtures, main) -> Outcome:
     finally:
         os.chdir(cwd)
     outcome = Outcome(case.id, status, stderr.getvalue(), stdout=stdout.getvalue())
+    if status == 0:
+        outcome.warnings = written_warnings(out)
     outcome.verdict = judge(case, outcome, changed, check_ok)
     return outcome
+
+
+def written_warnings(out) -> list | None:
+    """The `warnings` list of the JSON a command wrote at `out` (a file, or a report folder's `report.json`)."""
+    out = pathlib.Path(out)
+    path = out / "report.json" if out.is_dir() else out
+    try:
+        found = json.loads(path.read_text()).get("warnings")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return found if isinstance(found, list) else None
 
 
 def judge(case: Case, o: Outcome, changed: bool, check_ok) -> str:
@@ -1199,7 +1215,13 @@ def judge(case: Case, o: Outcome, changed: bool, check_ok) -> str:
         # a warning on stderr, or a flight's note on stdout (what `load_flight` found and left out)
         warned = [l for l in o.stderr.splitlines() if "warning" in l.lower()]
         warned += [l for l in o.stdout.splitlines() if l.startswith("note: ")]
-        return "warned correctly" if any(all(n in l for n in case.needles) for l in warned) else "silent failure"
+        if not any(all(n in l for n in case.needles) for l in warned):
+            return "silent failure"
+        # ... and the same in the answer's own `warnings`, where a script reading the JSON looks
+        kept = [str(w.get("message", "")) for w in o.warnings or () if isinstance(w, dict)]
+        if not any(all(n in m for n in case.needles) for m in kept):
+            return "silent failure (warned on the terminal only)"
+        return "warned correctly"
     return "accepted correctly"
 
 
