@@ -540,6 +540,9 @@ from ._model._extensions import (
 from ._model._extensions import (
     Feature as Feature,
 )
+from ._model._extensions import (
+    PlanarRotorDrag as PlanarRotorDrag,
+)
 from ._model._extensions._terms import float_scalar as float_scalar
 
 # Model: constants and frame helpers of the systems.
@@ -811,6 +814,7 @@ __all__ = [
     "PartwayStretch",
     "PERMUTATIONS",
     "physical_readings",
+    "PlanarRotorDrag",
     "polish_on_constraint",
     "poorly_determined",
     "POORLY_DETERMINED",

@@ -498,7 +498,9 @@ def _quadrotor_cases():
     """The quadrotor's cases (flown by `tests.hidden_flights`), sizes a Crazyflie-sized vehicle can have: rotor
     drag of 0.2 1/s (the Crazyflie 2.0's coefficient, Foerster 2015, 9.2e-7 kg/rad times the rotor speeds' sum at
     this vehicle's hover, over its mass; on w 1.12 times that); a thrust axis 3 degrees off the body's (0.5 m/s^2)
-    and 0.6 degrees (0.1 m/s^2); a centre of mass 0.25 mm off the thrust centre (5 rad/s^2 on p); 40 and 20 ms from
+    and 0.6 degrees (0.1 m/s^2); a centre of mass 0.25 mm off the thrust centre (5 rad/s^2 on p: moved after the model
+    was fitted, as a re-seated battery moves it, and diagnosed against that model; a motor map refitted on the
+    flights carries it, a moment that grows with the thrust as the map's weights on m_i^2 do); 40 and 20 ms from
     the logged command to the rotors; one motor lagging its command by 80 ms (a worn motor); one propeller giving 85
     and 95 % of the others' thrust; a 1S pack flown from 4.2 to 3.5 V over a session and from 4.2 to 4.0 V;
     Cheeseman and Bennett's ground effect of the 45 mm propellers (R = 22.5 mm) on flights around 3 cm over the
@@ -512,7 +514,7 @@ def _quadrotor_cases():
         ("rotor_drag", "u+v+w", 0.2, "body frame", "refit", False, ()),
         ("body_bias", "u", 0.5, "constant", "refit", False, ()),
         ("body_bias", "v", 0.1, "constant", "refit", True, ()),
-        ("body_bias", "p", 5.0, "constant", "refit", False, ()),
+        ("body_bias", "p", 5.0, "constant", "known", False, ()),
         ("motor_delay", "motors", 0.04, "dead time", "refit", False, ()),
         ("motor_delay", "motors", 0.02, "dead time", "refit", True, ()),
         ("input_lag", "m3", 0.08, "first order", "refit", False, long),
@@ -793,6 +795,9 @@ def outcome(case: Case, j: dict) -> dict:
     held-out gain of a refitted candidate in the first round (`best_candidate`, `best_coefficient`: which, and
     its coefficient); `none_with_gain`: `none` although that gain is 25 % or
     more."""
+    # A finding at several places at once (`rotor_drag@u+v`, the rotor plane's drag) is the hidden effect where
+    # every place is one of the effect's.
+    hidden = lambda f: all((f[0], w) in case.accepted for w in f[1].split("+"))  # noqa: E731
     findings = [(f["cause"], f["where"]) for f in j["findings"]]
     refitted = [c for c in j["candidates"] if "gain" in c]
     best = max(refitted, key=lambda c: c["gain"]) if refitted else None
@@ -804,10 +809,10 @@ def outcome(case: Case, j: dict) -> dict:
         false_claim = bool(findings) or verdict == "unexplained"
         extra = bool(findings)
     else:
-        named = bool(findings) and findings[0] in case.accepted
+        named = bool(findings) and hidden(findings[0])
         right = verdict == "explained" and named
         false_claim = False
-        extra = any(f not in case.accepted for f in findings)
+        extra = not all(hidden(f) for f in findings)
     return {
         "verdict": verdict,
         "findings": [f"{c}@{w}" for c, w in findings],

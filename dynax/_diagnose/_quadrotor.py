@@ -11,7 +11,9 @@ is the one every other system gets.
 The vocabulary for a multirotor (`quadrotor_candidates`):
 
 - `rotor_drag` on `u` ... `r` (`RotorDrag`): body-frame drag linear in velocity, $-d\,\nu_i$, and on
-  `p, q, r` the rotors' damping of the body rates, $-d\,\omega_i$;
+  `p, q, r` the rotors' damping of the body rates, $-d\,\omega_i$; and at `u+v` (`PlanarRotorDrag`) one
+  coefficient on both axes of the rotor plane, as a vehicle symmetric in $x$ and $y$ has it: flown forwards
+  and sideways alike, each horizontal axis alone shows only its part of the drag;
 - `body_bias` on `u, v, w, p, q, r` (`BodyBias`): a constant body-frame force or moment (the
   centre of mass off the thrust centre, an IMU or motion-capture frame offset, a bent arm);
 - `motor_delay` at `motors` (`MotorDelay`): one dead time between every motor's logged command and
@@ -57,7 +59,7 @@ from .._data._motor_order import warn_if_numbered_otherwise
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
 from .._model._extensions import AbstractTerm, InputGain, InputLag, MotorDelay
-from .._model._extensions._vehicle_terms import BatterySag, BodyBias, GroundEffect, RotorDrag
+from .._model._extensions._vehicle_terms import BatterySag, BodyBias, GroundEffect, PlanarRotorDrag, RotorDrag
 from .._model._helicopter import ANGULAR_RATE, BODY, Helicopter, QUATERNION, quaternion_to_rotation
 from .._model._quadrotor import (
     motor_features,
@@ -105,11 +107,12 @@ def as_quadrotor(body: BodyFrameQuadrotor, like: Quadrotor) -> Quadrotor:
 
 
 def quadrotor_candidates(system, floor: float | None = None) -> tuple:
-    """The multirotor vocabulary at neutral values (see the module docs): `rotor_drag` on `u` ... `r`,
+    """The multirotor vocabulary at neutral values (see the module docs): `rotor_drag` on `u` ... `r` and `u+v`,
     `body_bias` on `u, v, w, p, q, r`, `battery_sag` where the system has `vbat`, `ground_effect` over a
     floor at height `floor` (world `z`) where one is given, `motor_delay` on all motors, `input_lag` and
     `input_gain` at each motor `m1..m4`."""
     terms: list[AbstractTerm] = [RotorDrag(i) for i in range(6)]
+    terms.append(PlanarRotorDrag())  # u and v as one: the drag of the rotor plane
     terms += [BodyBias(i) for i in range(6)]
     if "vbat" in tuple(system.input_names):
         terms.append(BatterySag())

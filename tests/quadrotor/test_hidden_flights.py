@@ -54,6 +54,11 @@ def test_a_rotor_drag_named_on_any_body_axis_is_the_hidden_one():
     assert row["named_first"] and row["right_verdict"] and not row["extra"]
     report["findings"].append({"cause": "rotor_drag", "where": "q"})  # the rates' damping was not hidden
     assert outcome(case, report)["extra"]
+    report["findings"] = [{"cause": "rotor_drag", "where": "u+v"}]  # the rotor plane's drag, both axes as one
+    row = outcome(case, report)
+    assert row["named_first"] and row["right_verdict"] and not row["extra"]
+    report["findings"] = [{"cause": "rotor_drag", "where": "u+p"}]  # one place of two is not the hidden effect
+    assert not outcome(case, report)["named_first"]
 
 
 def test_every_quadrotor_case_flies_its_plan():

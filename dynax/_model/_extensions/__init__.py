@@ -59,6 +59,9 @@ from ._vehicle_terms import (
     GroundEffect as GroundEffect,
 )
 from ._vehicle_terms import (
+    PlanarRotorDrag as PlanarRotorDrag,
+)
+from ._vehicle_terms import (
     RotorDrag as RotorDrag,
 )
 from ._vehicle_terms import (
