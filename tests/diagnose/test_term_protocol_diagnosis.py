@@ -15,36 +15,11 @@ from scipy.linalg import expm
 
 from dynax import AbstractJointTerm, Horizons, InputLag, LinearAxis, Refit, Selection, Trajectory, ViscousFriction
 from dynax.internal import candidate_family, first_screening, names_to_refit, prepare_problem, rankable
+from tests.stateful_terms import LaggedDamping
 
 MASS, VISCOUS, OFFSET = 95.0, 200.0, -3.0  # the linear axis, without Coulomb friction (a linear ODE)
 B, TAU = 300.0, 0.2  # the lagged damping: force -B z, TAU z' = dq - z
 DT = 0.01
-
-
-class _LaggedDamping(AbstractJointTerm):
-    """Damping on a lagged speed, $-b z$ with $\\tau \\dot z = \\dot q_j - z$: a joint term with an internal state of
-    its own, which the diagnosis knows only through the protocol."""
-
-    joint: int = eqx.field(static=True)
-    coefficient: jax.Array
-    time_constant: float = eqx.field(static=True)
-    cause: ClassVar[str] = "lagged_damping"
-    prefix: ClassVar[str] = "bl"
-    neutral: ClassVar[float] = 0.0
-    sign: ClassVar[int] = 1
-
-    def hidden_names(self, system):
-        return (f"{self.parameter_name(system)}_speed",)
-
-    def initial_hidden(self, system, x, a):  # the lag at rest: it follows a speed held long
-        return x[system.velocity_indices[self.joint]][None]
-
-    def hidden_vector_field(self, system, x, a, z):
-        return (x[system.velocity_indices[self.joint]] - z) / self.time_constant
-
-    def joint_force(self, q, dq, a, z=None):
-        assert z is not None
-        return -self.coefficient * z[0]
 
 
 class _Kinked(AbstractJointTerm):
@@ -93,7 +68,7 @@ def test_the_rollout_screening_ranks_what_the_protocol_says_has_a_derivative_at_
         ViscousFriction(0),
         InputLag(0),
         _Kinked(0, jnp.asarray(0.0)),
-        _LaggedDamping(0, jnp.asarray(0.0), TAU),
+        LaggedDamping(0, jnp.asarray(0.0), TAU),
     )
     train = _record(1, 5.0, "train")
     family, _, _ = candidate_family(NOMINAL, candidates, names_to_refit(NOMINAL, Refit()), [train])
@@ -106,7 +81,7 @@ def test_a_term_with_a_state_of_its_own_is_screened_along_the_measured_states():
     # (`hidden_vector_field` from `initial_hidden`): its direction is the lagged speed, and it explains the record
     # far better than a damping on the speed itself.
     train, held_out = _record(2, 20.0, "train"), _record(3, 10.0, "held_out")
-    candidates = (ViscousFriction(0), _LaggedDamping(0, jnp.asarray(0.0), TAU))
+    candidates = (ViscousFriction(0), LaggedDamping(0, jnp.asarray(0.0), TAU))
     problem = prepare_problem(NOMINAL, train, [held_out], candidates, Refit(), Horizons(), Selection(max_terms=1))
     screened = first_screening(problem)
     gain, delta = screened["lagged_damping@q"]

@@ -11,7 +11,6 @@ from scipy.linalg import expm
 
 import dynax
 from dynax import (
-    AbstractJointTerm,
     AbstractManipulator,
     Acrobot,
     BodyBias,
@@ -28,6 +27,7 @@ from dynax import (
 from dynax.control import SpongController
 import dynax.internal
 from dynax.internal import AbstractVehicleTerm
+from tests.stateful_terms import LaggedDamping
 
 
 class _Slider(AbstractManipulator):
@@ -106,32 +106,6 @@ def test_spong_controller_needs_an_acrobot(system):
         SpongController(system)
 
 
-class _LaggedDamping(AbstractJointTerm):
-    """Damping on a lagged speed, $-b z$ with $\\tau \\dot z = \\dot q_j - z$: a joint term with an internal state of
-    its own, written for this test only (`Extended` knows nothing of it)."""
-
-    joint: int = eqx.field(static=True)
-    coefficient: jax.Array
-    time_constant: float = eqx.field(static=True)
-    cause: ClassVar[str] = "lagged_damping"
-    prefix: ClassVar[str] = "bl"
-    neutral: ClassVar[float] = 0.0
-    sign: ClassVar[int] = 1
-
-    def hidden_names(self, system):
-        return (f"{self.parameter_name(system)}_speed",)
-
-    def initial_hidden(self, system, x, a):  # the lag at rest: it follows a speed held long
-        return x[system.velocity_indices[self.joint]][None]
-
-    def hidden_vector_field(self, system, x, a, z):
-        return (x[system.velocity_indices[self.joint]] - z) / self.time_constant
-
-    def joint_force(self, q, dq, a, z=None):
-        assert z is not None
-        return -self.coefficient * z[0]
-
-
 class _LaggedBias(AbstractVehicleTerm):
     """A body-axis acceleration $z$ that approaches $c$ as $\\tau \\dot z = c - z$ (for this test only)."""
 
@@ -157,7 +131,7 @@ def test_a_term_with_an_internal_state_of_its_own_simulates_through_extended():
     # The slider (unit mass, spring 4) under a lagged drive force a (InputLag, 0.1 s) and a lagged damping: the linear
     # ODE x'' = a - 4 x - b z, 0.1 a' = u - a, 0.3 z' = x' - z, solved exactly by the matrix exponential.
     b, tau, lag = 0.8, 0.3, 0.1
-    model = Extended(_Slider(), (_LaggedDamping(0, jnp.asarray(b), tau), InputLag(0, lag)))
+    model = Extended(_Slider(), (LaggedDamping(0, jnp.asarray(b), tau), InputLag(0, lag)))
     assert model.state_names == ("x", "dx", "f_lag", "bl_x_speed")  # the input terms' states first, then the others'
     x0 = model.initial_state(jnp.array([0.3, -0.5]), jnp.array([0.0]))
     np.testing.assert_allclose(x0, [0.3, -0.5, 0.0, -0.5], rtol=1e-15)
