@@ -28,7 +28,6 @@ import numpy as np
 
 from .._data._derivatives import savitzky_golay
 from .._model._extensions import AbstractInputTerm, Extended
-from .._model._system import AbstractSystem
 from .._simulate import FixedGrid, InputStates, RK4, simulate
 from ._probe import cross_validated_ridge, ridge_fit
 
@@ -45,21 +44,12 @@ def sg_window(dt: float) -> int:
 _HIDDEN_GRID = FixedGrid(solver=RK4(scan_kind="lax"), substeps=4)
 
 
-class _AlongStates(AbstractSystem):
-    r"""A model's internal states as a system of their own, the nominal states read from a record (`xs` at `ts`,
-    linear between samples): $\dot z$ of `Extended.vector_field` there."""
+class _AlongStates(InputStates):
+    r"""A model's internal states as a system of their own (named as `InputStates` names them), the nominal states
+    read from a record (`xs` at `ts`, linear between samples): $\dot z$ of `Extended.vector_field` there."""
 
-    model: Extended
     ts: Float[Array, " time"]
     xs: Float[Array, "time n_measured"]
-
-    @property
-    def state_names(self) -> tuple[str, ...]:
-        return tuple(self.model.state_names[self.model.system.n_states :])
-
-    @property
-    def input_names(self) -> tuple[str, ...]:
-        return tuple(self.model.input_names)
 
     def vector_field(self, t, z, u):
         x = jax.vmap(lambda column: jnp.interp(t, self.ts, column), in_axes=1)(self.xs)
