@@ -52,6 +52,7 @@ class Case:
     forbidden: tuple = ()  # strings it must not hold (advice that corrupts)
     check: Callable | None = None  # check(out_path) -> bool, for "warn" and "accept"
     heavy: bool = False  # runs a fit (seconds to a minute): `@pytest.mark.heavy` in the test
+    slow: bool = False  # repeats a kept case's check through a longer run: `@pytest.mark.slow` (`make slow`)
 
 
 # --- records made apart from dynax's model code ---------------------------------------------------
@@ -984,6 +985,9 @@ CASES = [
         ("tau1, tau2", "look swapped", "--map tau1=tau2,tau2=tau1"),
         check=lambda out: isinstance(json.loads((pathlib.Path(out) / "report.json").read_text())["verdict"], str),
         heavy=True,
+        # The swap check is the one `identify` runs in `swapped-torques-double-pendulum`; here a whole double
+        # pendulum diagnosis follows it (about 3 minutes of compilation and fitting on two cores).
+        slow=True,
     ),
     C(
         "swapped-joints-mapped-back",

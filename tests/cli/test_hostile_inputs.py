@@ -3,7 +3,8 @@ the located data checks behind them (`dynax.check_records`, `dynax.exclude_stret
 
 Every case ends in a right answer, a located refusal (exit 2, one line naming column, row or time and the
 fix) or a located warning: never a traceback, never exit 0 with a wrong answer, never advice that would
-make the data worse. Cases that run a fit are `heavy`.
+make the data worse. Cases that run a fit are `heavy`; those that repeat a kept case's check through a longer run
+are `slow`.
 """
 
 import re
@@ -25,7 +26,10 @@ def fixtures(tmp_path_factory):
 
 
 def _params(cases):
-    return [pytest.param(c, id=c.id, marks=[pytest.mark.heavy] if c.heavy else []) for c in cases]
+    def marks(c):
+        return [mark for mark, on in ((pytest.mark.heavy, c.heavy), (pytest.mark.slow, c.slow)) if on]
+
+    return [pytest.param(c, id=c.id, marks=marks(c)) for c in cases]
 
 
 @pytest.mark.parametrize("case", _params(CASES))
