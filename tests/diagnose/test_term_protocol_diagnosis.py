@@ -134,7 +134,7 @@ def test_a_window_starts_a_terms_own_state_where_the_record_puts_it():
     assert off < 0.1 * lag, (off, lag)  # half a second of history forgets all but e^(-0.5 / TAU) = 8 % of a start
 
 
-@pytest.mark.slow  # about 50 s
+@pytest.mark.slow  # about 55 s of CPU
 def test_the_diagnosis_names_a_lagged_damping_at_its_size():
     # With each window's lagged speed started where the record puts it, the simulation-error refit names the
     # damping at its size and the held-out gain is nearly all of the error. Started at rest at each window's first
