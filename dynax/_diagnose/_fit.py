@@ -11,7 +11,8 @@ The nominal parameters are the system's own (`parameter_filter()` / `parameter_l
 and written through `dynax._fit.Parameters`); the rollouts are `dynax._simulate._sim_error.window_rollouts`,
 the one windowed rollout `simulation_error` uses too. The cost is the output error of open-loop
 rollouts on windows of the record, each started from the measured state (internal states of input
-terms driven by the input history before the window), scaled per state by the data's spread.
+terms driven by the input history before the window, a candidate's states of its own by the measured
+states and inputs there), scaled per state by the data's spread.
 
 ??? cite
 
@@ -96,7 +97,9 @@ class Windows(eqx.Module):
     `ts_before`, `us_before` hold the `n_before` samples of input history before each window (the
     first input repeated where the record has none): internal states of input terms (a lag's output,
     a delay's filter) are driven through them, so each window starts with the internal state the
-    input history implies rather than at rest.
+    input history implies rather than at rest. `xs_before` holds the measured states there (the first
+    state repeated where the record has none): a candidate term's states of its own (a lagged speed) are
+    integrated along them and the inputs (`complete_state`), so they too start where the record puts them.
     """
 
     ts: Float[Array, "window step"]
@@ -104,6 +107,7 @@ class Windows(eqx.Module):
     us: Float[Array, "window step n_inputs"]
     ts_before: Float[Array, "window before"]
     us_before: Float[Array, "window before n_inputs"]
+    xs_before: Float[Array, "window before n_states"]
     # (record index, start sample) per window, read on the host only. An array, not a static
     # field: a static field would compile every fit anew for records cut at other places.
     starts: Int[Array, "window 2"]
@@ -131,8 +135,9 @@ class Windows(eqx.Module):
 
 
 def make_windows(trajectories, n_steps: int, stride: int, *, history_s: float = 0.5) -> Windows:
-    """Cut records into windows of `n_steps + 1` samples every `stride` samples, with `history_s` of input history."""
-    ts, xs, us, tb, ub, starts = [], [], [], [], [], []
+    """Cut records into windows of `n_steps + 1` samples every `stride` samples, with `history_s` of input (and
+    measured state) history."""
+    ts, xs, us, tb, ub, xb, starts = [], [], [], [], [], [], []
     for r, traj in enumerate(trajectories):
         t_all, x_all, u_all = np.asarray(traj.ts), np.asarray(traj.xs), np.asarray(traj.us)
         dt = float(np.median(np.diff(t_all)))
@@ -144,6 +149,7 @@ def make_windows(trajectories, n_steps: int, stride: int, *, history_s: float = 
             idx = np.arange(k - n_before, k + 1)
             tb.append(t_all[k] + dt * (idx - k))
             ub.append(u_all[np.maximum(idx, 0)])
+            xb.append(x_all[np.maximum(idx, 0)])
             starts.append((r, k))
     if not ts:
         raise ValueError(f"the records are shorter than one window of {n_steps} samples")
@@ -155,6 +161,7 @@ def make_windows(trajectories, n_steps: int, stride: int, *, history_s: float = 
         stack(us),
         stack(tb),
         stack(ub),
+        stack(xb),
         np.asarray(starts, dtype=np.int64),
         jax.device_put(np.ones(len(ts), xs_.dtype)),
     )
@@ -243,9 +250,16 @@ class Family(eqx.Module):
 
 def window_errors(model, windows: Windows, method=FORWARD_GRID):
     """Simulated minus measured states (`state_error`) on every window, `(window, step, n_measured)`, NaN past a
-    divergence."""
+    divergence. Every internal state starts where the history before the window puts it (`complete_state`)."""
     errors, _ = window_rollouts(
-        model, windows.ts, windows.xs, windows.us, windows.ts_before, windows.us_before, method=method
+        model,
+        windows.ts,
+        windows.xs,
+        windows.us,
+        windows.ts_before,
+        windows.us_before,
+        windows.xs_before,
+        method=method,
     )
     return errors
 

@@ -23,12 +23,11 @@ vocabulary does not cover (a spring at a joint) and tells `none` from `unexplain
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float
 import numpy as np
 
 from .._data._derivatives import savitzky_golay
 from .._model._extensions import AbstractInputTerm, Extended
-from .._simulate import FixedGrid, InputStates, RK4, simulate
+from .._simulate import AlongStates, FixedGrid, InputStates, RK4, simulate
 from ._probe import cross_validated_ridge, ridge_fit
 
 
@@ -42,18 +41,6 @@ def sg_window(dt: float) -> int:
 # Four RK4 steps per sample interval: the one-step residuals compare accelerations, so the input
 # terms' states must be accurate at every sample, not only at a window's end.
 _HIDDEN_GRID = FixedGrid(solver=RK4(scan_kind="lax"), substeps=4)
-
-
-class _AlongStates(InputStates):
-    r"""A model's internal states as a system of their own (named as `InputStates` names them), the nominal states
-    read from a record (`xs` at `ts`, linear between samples): $\dot z$ of `Extended.vector_field` there."""
-
-    ts: Float[Array, " time"]
-    xs: Float[Array, "time n_measured"]
-
-    def vector_field(self, t, z, u):
-        x = jax.vmap(lambda column: jnp.interp(t, self.ts, column), in_axes=1)(self.xs)
-        return self.model.vector_field(t, jnp.concatenate([x, z]), u)[self.xs.shape[1] :]
 
 
 @eqx.filter_jit
@@ -70,7 +57,7 @@ def hidden_trajectory(model, ts, us, xs=None):
         if xs is None:
             raise ValueError("hidden_trajectory: a model with states of terms other than input terms needs `xs`")
         z0 = model.initial_state(xs[0], us[0])[n:]
-        along = _AlongStates(model, ts, xs)  # pyright: ignore[reportCallIssue]
+        along = AlongStates(model, ts, xs)  # pyright: ignore[reportCallIssue]
         return simulate(along, z0, ts, us, method=_HIDDEN_GRID, throw=False).xs
     z0 = model.initial_state(jnp.zeros(n, us.dtype), us[0])[n:]
     return simulate(InputStates(model), z0, ts, us, method=_HIDDEN_GRID, throw=False).xs

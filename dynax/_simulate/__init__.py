@@ -4,6 +4,7 @@ starts and the error against horizon (`simulation_error`, `SimulationError`), pr
 from ._predict import flight_error as flight_error
 from ._predict import FLIGHT_UNITS as FLIGHT_UNITS
 from ._predict import predict_ahead as predict_ahead
+from ._sim_error import AlongStates as AlongStates
 from ._sim_error import complete_state as complete_state
 from ._sim_error import InputStates as InputStates
 from ._sim_error import rollouts_from_starts as rollouts_from_starts

@@ -208,13 +208,31 @@ class InputStates(AbstractSystem):
         return self.model.applied_input(u, z)[1]
 
 
+class AlongStates(InputStates):
+    r"""A model's internal states as a system of their own (named as `InputStates` names them), the nominal states
+    read from a record (`xs` at `ts`, linear between samples): $\dot z$ of `Extended.vector_field` there.
+
+    Every internal state moves, the input terms' with the recorded input and every other term's
+    (`AbstractTerm.hidden_vector_field`, e.g. a lagged speed) with the measured states: the diagnosis's one-step
+    residuals integrate them along a record, and its windowed rollouts along the measured states before each
+    window (`complete_state`'s `xs_before`).
+    """
+
+    ts: Float[Array, " time"]
+    xs: Float[Array, "time n_measured"]
+
+    def vector_field(self, t, z, u):
+        x = jax.vmap(lambda column: jnp.interp(t, self.ts, column), in_axes=1)(self.xs)
+        return self.model.vector_field(t, jnp.concatenate([x, z]), u)[self.xs.shape[1] :]
+
+
 # The input-term states change slowly next to the sample rate (lags and delays of tens of
 # milliseconds at 100 Hz and above); two RK4 steps per sample interval are far below noise. The
 # "lax" scan keeps the whole rollout forward-mode differentiable.
 HISTORY_GRID = FixedGrid(solver=RK4(scan_kind="lax"), substeps=2)
 
 
-def complete_state(system, x_measured, u0, ts_before=None, us_before=None, history_method=HISTORY_GRID):
+def complete_state(system, x_measured, u0, ts_before=None, us_before=None, history_method=HISTORY_GRID, xs_before=None):
     """The model's full initial state from a measured one.
 
     Models with internal states (an input lag or delay, see `Extended`) complete it with
@@ -224,6 +242,14 @@ def complete_state(system, x_measured, u0, ts_before=None, us_before=None, histo
     so a window starts with the internal state the inputs before it imply. Otherwise internal
     states beyond the measured ones start at zero. A model with no states beyond the measured ones
     starts from the measured state as it is.
+
+    A term's states that are not an input's (`Extended.state_terms`, e.g. a damping on a lagged speed) move with
+    the nominal states, not the input alone. With the measured states of the history too (`xs_before`, at
+    `ts_before`), every internal state starts at the history's first sample as `initial_state` puts it there and
+    is integrated along the measured states and inputs (`simulate` on `AlongStates`): a window starts with the lag
+    the record implies, not at rest at its first state. Such states forget their start over the history (a lag
+    over its time constant, `Stiction`'s memory of rest over its dwell time or a slip); without `xs_before` they
+    start at `AbstractTerm.initial_hidden` of `x_measured`.
     """
     if system.n_states == x_measured.shape[0]:
         return x_measured
@@ -232,14 +258,29 @@ def complete_state(system, x_measured, u0, ts_before=None, us_before=None, histo
         return jnp.zeros(system.n_states, x_measured.dtype).at[: x_measured.shape[0]].set(x_measured)
     if ts_before is None:
         return initial_state(x_measured, u0)
+    assert us_before is not None, "complete_state: `ts_before` without `us_before`"
     n = x_measured.shape[0]
+    if xs_before is not None and getattr(system, "state_terms", ()):
+        z0 = initial_state(xs_before[0], us_before[0])[n:]
+        along = AlongStates(system, ts_before, xs_before)  # pyright: ignore[reportCallIssue]
+        z = simulate(along, z0, ts_before, us_before, method=history_method, throw=False).xs[-1]
+        return jnp.concatenate([x_measured, z.astype(x_measured.dtype)])
     z0 = initial_state(x_measured, us_before[0])[n:]
     z = simulate(InputStates(system), z0, ts_before, us_before, method=history_method, throw=False).xs[-1]
     return jnp.concatenate([x_measured, z.astype(x_measured.dtype)])
 
 
 def window_rollout(
-    system, ts, xs, us, ts_before=None, us_before=None, *, method=FixedGrid(), history_method=HISTORY_GRID
+    system,
+    ts,
+    xs,
+    us,
+    ts_before=None,
+    us_before=None,
+    xs_before=None,
+    *,
+    method=FixedGrid(),
+    history_method=HISTORY_GRID,
 ):
     """One open-loop rollout of `system` from the measured state `xs[0]` under the inputs `us`.
 
@@ -247,7 +288,9 @@ def window_rollout(
     `ts_before`, `us_before` optionally the input history before it (ending at the window's start),
     which drives the internal states of input terms (see `complete_state`) and lets a dead time
     (`InputDelay`) act exactly, as the recorded input shifted in time (`Extended.with_shifted_inputs`),
-    instead of through its Padé filter; `method` the integration strategy of `simulate`.
+    instead of through its Padé filter; `xs_before` optionally the measured states there too, along which
+    the states of the other terms with states are integrated (`complete_state`); `method` the integration
+    strategy of `simulate`.
 
     **Returns:** `(errors, diverged)`: `system.state_error(simulated, measured)` for the measured
     states, shape `(step, n_measured)` (NaN past a divergence), and whether the rollout diverged.
@@ -259,33 +302,41 @@ def window_rollout(
         dt = (ts[-1] - ts[0]) / (ts.shape[0] - 1)
         system, shifted = system.with_shifted_inputs(jnp.concatenate([us_before[:-1], us]), dt)
         us_before, us = shifted[:n_before], shifted[n_before - 1 :]
-    x0 = complete_state(system, xs[0], us[0], ts_before, us_before, history_method)
+    x0 = complete_state(system, xs[0], us[0], ts_before, us_before, history_method, xs_before)
     sim = simulate(system, x0, ts, us, method=method, throw=False)
     return system.state_error(sim.xs[:, :n_measured], xs), sim.diverged
 
 
 def window_rollouts(
-    system, ts, xs, us, ts_before=None, us_before=None, *, method=FixedGrid(), history_method=HISTORY_GRID
+    system,
+    ts,
+    xs,
+    us,
+    ts_before=None,
+    us_before=None,
+    xs_before=None,
+    *,
+    method=FixedGrid(),
+    history_method=HISTORY_GRID,
 ):
     """`window_rollout` on stacked windows (`ts (window, step)`, `xs (window, step, n)`, ...), one `vmap`.
 
     The one windowed rollout of dynax: `simulation_error` slices its windows from a record and
-    calls it, `diagnose` fits and judges candidate models through it.
+    calls it, `diagnose` fits and judges candidate models through it. `xs_before (window, before, n)`
+    is read only by a model whose terms have states of their own besides the input terms' (`complete_state`).
 
     **Returns:** `(errors (window, step, n_measured), diverged (window,))`.
     """
     if ts_before is None:
         one = lambda t, x, u: window_rollout(system, t, x, u, method=method)  # noqa: E731
         return jax.vmap(one)(ts, xs, us)
-    one = lambda t, x, u, tb, ub: window_rollout(
-        system,
-        t,
-        x,
-        u,
-        tb,
-        ub,
-        method=method,  # noqa: E731
-        history_method=history_method,
+    if xs_before is not None and getattr(system, "state_terms", ()):
+        along = lambda t, x, u, tb, ub, xb: window_rollout(  # noqa: E731
+            system, t, x, u, tb, ub, xb, method=method, history_method=history_method
+        )
+        return jax.vmap(along)(ts, xs, us, ts_before, us_before, xs_before)
+    one = lambda t, x, u, tb, ub: window_rollout(  # noqa: E731
+        system, t, x, u, tb, ub, method=method, history_method=history_method
     )
     return jax.vmap(one)(ts, xs, us, ts_before, us_before)
 

@@ -44,9 +44,13 @@ class AbstractTerm(eqx.Module):
     `hidden_names` and `smooth_at_neutral` alone. An input term with states has a time for its coefficient and no
     derivative at zero (the input passes through): it is screened through its first-order effect on the input (a
     lag or dead time also at finite sizes). Any other term's states are integrated along the measured states
-    (`hidden_vector_field`) for the one-step screening and start from `initial_hidden` in the windowed rollouts. A
-    term that is not `smooth_at_neutral` is screened on the secant to its start value. Neither of these two kinds is
-    ranked by the first Gauss-Newton step of its refit, which reads the derivative at neutral.
+    (`hidden_vector_field`): for the one-step screening from `initial_hidden` at a record's first sample, and for
+    the windowed rollouts (the refit, the held-out score) from `initial_hidden` at the first sample of the half
+    second of history before each window, so that a window starts them where the record puts them. A state that
+    forgets its start (a lag, `Stiction`'s memory of rest) has forgotten `initial_hidden`'s guess by then; one that
+    keeps it (an integral of the speed) keeps the guess's error. A term that is not `smooth_at_neutral` is screened
+    on the secant to its start value. Neither of these two kinds is ranked by the first Gauss-Newton step of its
+    refit, which reads the derivative at neutral.
     """
 
     coefficient: eqx.AbstractVar[Float[Array, ""]]
