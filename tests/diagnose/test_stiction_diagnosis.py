@@ -117,7 +117,9 @@ def test_hidden_stick_slip_at_the_elbow_is_named_stiction_with_its_level():
     # The static level is fitted within 10 % and helps on every held-out run, more than any other candidate.
     row = first_round(report, "stiction", "q2")
     assert abs(row["coefficient"] - STICK_SLIP.size) <= 0.1 * STICK_SLIP.size, row
-    assert row["runs_helped"] == "3/3" and row["gain"] > 0.25, row
+    # Every run of the test: the three held out and the training run's cross-fitted blocks.
+    helped, runs = (int(n) for n in row["runs_helped"].split("/"))
+    assert helped == runs >= 3 and row["gain"] > 0.25, row
     others = [c for c in j["rounds"][0]["candidates"] if (c["cause"], c["where"]) != ("stiction", "q2")]
     assert all(c["gain"] < row["gain"] for c in others), others
     named = findings(report)
