@@ -1,15 +1,15 @@
 """The quadrotor's diagnosis: the multirotor causes' physics, then hidden effects in synthetic flights.
 
-The flights are not made by dynax's models: `synthetic_flight.quadrotor_flight` integrates a rigid
-body with the effect written out (scipy DOP853) under a geometric controller at 100 Hz. `diagnose`
-starts from a `Quadrotor` of zero weights (`Quadrotor.from_flights("nominal")`, no geometry given), fits
-the rigid body, and must name the hidden cause first with a significant held-out gain; on an
-effect-free flight it must claim nothing. The default suite runs rotor drag (the heavy mark: about
-two minutes on two cores); body bias, motor lag, the effect-free control and the
-CLI are slow. A motor's gain is hidden the way it happens: the model is fitted on flights of the healthy
-vehicle, a propeller is chipped afterwards, and the later flights are diagnosed against the trusted model
-(`Known()`); a map refitted on the later flights would carry the gain itself (slow too, 10 s flights:
-about 100 s of CPU each, 25 s with the compiled code in the suite's cache).
+The flights are not made by dynax's models: `synthetic_flight.quadrotor_flight` integrates a rigid body with the
+effect written out (scipy DOP853) under a geometric controller at 100 Hz. `diagnose` starts from a `Quadrotor` of
+zero weights (`Quadrotor.from_flights("nominal")`, no geometry given), fits the rigid body, and must name the
+hidden cause first with a significant held-out gain; on an effect-free flight it must claim nothing. The default
+suite runs the Crazyflie's rotor drag and a dead time's place on the shortlist (the heavy mark: a few minutes on
+two cores); twice that drag, body bias, motor lag, the effect-free control and the CLI are slow. A motor's gain is
+hidden the way it happens: the model is fitted on flights of the healthy vehicle, a propeller is chipped
+afterwards, and the later flights are diagnosed against the trusted model (`Known()`); a map refitted on the later
+flights would carry the gain itself (slow too, 10 s flights: about 100 s of CPU each, 25 s with the compiled code
+in the suite's cache).
 """
 
 import json
@@ -106,7 +106,7 @@ def test_synthetic_flight_with_a_weak_motor_commands_it_harder():
 # --- hidden effects ----------------------------------------------------------------------------
 
 
-@pytest.mark.heavy
+@pytest.mark.slow  # twice the Crazyflie's drag (the heavy test below): its easier case, about 4 minutes
 def test_hidden_rotor_drag_is_named():
     # A drag the same on both axes of the rotor plane, as an X quadrotor's: named there as one cause.
     j = _diagnose(1, drag=(0.4, 0.4, 0.1))
