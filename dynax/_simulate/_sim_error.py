@@ -280,7 +280,6 @@ def window_rollout(
     xs_before=None,
     *,
     method=FixedGrid(),
-    history_method=HISTORY_GRID,
 ):
     """One open-loop rollout of `system` from the measured state `xs[0]` under the inputs `us`.
 
@@ -289,8 +288,8 @@ def window_rollout(
     which drives the internal states of input terms (see `complete_state`) and lets a dead time
     (`InputDelay`) act exactly, as the recorded input shifted in time (`Extended.with_shifted_inputs`),
     instead of through its Padé filter; `xs_before` optionally the measured states there too, along which
-    the states of the other terms with states are integrated (`complete_state`); `method` the integration
-    strategy of `simulate`.
+    the states of the other terms with states are integrated (`complete_state`, on `HISTORY_GRID`); `method`
+    the integration strategy of `simulate`.
 
     **Returns:** `(errors, diverged)`: `system.state_error(simulated, measured)` for the measured
     states, shape `(step, n_measured)` (NaN past a divergence), and whether the rollout diverged.
@@ -302,7 +301,7 @@ def window_rollout(
         dt = (ts[-1] - ts[0]) / (ts.shape[0] - 1)
         system, shifted = system.with_shifted_inputs(jnp.concatenate([us_before[:-1], us]), dt)
         us_before, us = shifted[:n_before], shifted[n_before - 1 :]
-    x0 = complete_state(system, xs[0], us[0], ts_before, us_before, history_method, xs_before)
+    x0 = complete_state(system, xs[0], us[0], ts_before, us_before, HISTORY_GRID, xs_before)
     sim = simulate(system, x0, ts, us, method=method, throw=False)
     return system.state_error(sim.xs[:, :n_measured], xs), sim.diverged
 
@@ -317,7 +316,6 @@ def window_rollouts(
     xs_before=None,
     *,
     method=FixedGrid(),
-    history_method=HISTORY_GRID,
 ):
     """`window_rollout` on stacked windows (`ts (window, step)`, `xs (window, step, n)`, ...), one `vmap`.
 
@@ -331,13 +329,9 @@ def window_rollouts(
         one = lambda t, x, u: window_rollout(system, t, x, u, method=method)  # noqa: E731
         return jax.vmap(one)(ts, xs, us)
     if xs_before is not None and getattr(system, "state_terms", ()):
-        along = lambda t, x, u, tb, ub, xb: window_rollout(  # noqa: E731
-            system, t, x, u, tb, ub, xb, method=method, history_method=history_method
-        )
+        along = lambda t, x, u, tb, ub, xb: window_rollout(system, t, x, u, tb, ub, xb, method=method)  # noqa: E731
         return jax.vmap(along)(ts, xs, us, ts_before, us_before, xs_before)
-    one = lambda t, x, u, tb, ub: window_rollout(  # noqa: E731
-        system, t, x, u, tb, ub, method=method, history_method=history_method
-    )
+    one = lambda t, x, u, tb, ub: window_rollout(system, t, x, u, tb, ub, method=method)  # noqa: E731
     return jax.vmap(one)(ts, xs, us, ts_before, us_before)
 
 
