@@ -11,12 +11,15 @@ confusion matrix of the hidden cause against the verdict and the first named cau
 
     nice -n 5 python experiments/calibration_battery.py [OUT] [--only SUBSTRING] [--every K] [--budget-s S]
         [--names "NAME;NAME;..."]
+    python experiments/calibration_battery.py OUT --reruns "DIR;DIR;..."
 
 OUT defaults to `experiments/results/calibration_battery`. Cases run in an order that interleaves systems and
 causes, and `OUT/cases.json` is rewritten after each (a rerun skips the cases already there), so a run cut
 short by `--budget-s` (or by hand) is a stratified subset, and the summary says how many ran. `--every K`
 runs every K-th case of that order. `--names` runs the named cases in the order given (a rerun of the rows a
-change touches, most telling first).
+change touches, most telling first). `--reruns` runs nothing: it tallies OUT's rows with those of the named
+folders' `cases.json` in place of the rows of the same name (later folders win) into `OUT/with_reruns/`
+(`summary.json`, `confusion.png`, `confusion.md`): the stored battery with the rows a change made run again.
 """
 
 import json
@@ -198,7 +201,7 @@ def markdown(c, rows) -> str:
 def main():
     args = sys.argv[1:]
     opts = {}
-    for flag in ("--only", "--every", "--budget-s", "--names"):
+    for flag in ("--only", "--every", "--budget-s", "--names", "--reruns"):
         if flag in args:
             i = args.index(flag)
             opts[flag] = args[i + 1]
@@ -207,6 +210,9 @@ def main():
     out.mkdir(parents=True, exist_ok=True)
     path = out / "cases.json"
     rows = json.loads(path.read_text()) if path.exists() else []
+    if "--reruns" in opts:
+        _write_with_reruns(out, rows, [pathlib.Path(d) for d in opts["--reruns"].split(";")])
+        return
     done = {r["name"] for r in rows}
     cases = interleaved(CASES)[:: int(opts.get("--every", 1))]
     if "--only" in opts:
@@ -265,12 +271,34 @@ def main():
                 f"({row['wall_s']:.0f} s)"
             )
             bar.update(1)
+    _write_tally(out, rows)
+
+
+def _write_tally(out: pathlib.Path, rows):
+    """`summary.json`, `confusion.png` and `confusion.md` of these rows in `out`; the summary printed."""
     done = [r for r in rows if "error" not in r]
     result = {"summary": summary(rows), "confusion": confusion(done, out / "confusion.png") if done else None}
     (out / "summary.json").write_text(json.dumps(result, indent=1))
     if rows:
         (out / "confusion.md").write_text(markdown(result["confusion"], done))
     print(json.dumps(result["summary"], indent=1))
+
+
+def _write_with_reruns(out: pathlib.Path, rows, folders):
+    """The stored rows with each rerun folder's rows in place of those of the same name, tallied in
+    `out/with_reruns`."""
+    by_name = {r["name"]: r for r in rows}
+    for folder in folders:
+        path = folder / "cases.json"
+        if not path.exists():
+            raise SystemExit(f"--reruns: {path} does not exist")
+        for r in json.loads(path.read_text()):
+            if r["name"] not in by_name:
+                raise SystemExit(f"--reruns: {path} has a case the stored battery does not: {r['name']}")
+            by_name[r["name"]] = r
+    merged = out / "with_reruns"
+    merged.mkdir(exist_ok=True)
+    _write_tally(merged, [by_name[r["name"]] for r in rows])
 
 
 if __name__ == "__main__":
