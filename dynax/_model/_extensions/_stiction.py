@@ -45,7 +45,7 @@ at $m = 1$ the term acts as without a dwell. A state measured at rest starts wit
 ($m_0 = w(\dot q_0)$, `Extended.initial_state`): a joint whose start speed is in the band is taken
 to have rested there for long (a window that starts at a reversal's turning point is taken for one
 that starts at rest, as a speed alone cannot tell them apart). The memory forgets that start (it is built over
-$T_d$ and erased over $d_s$), so the diagnosis's windowed rollouts start it so half a second before each window
+$T_d$ and erased over $d_s$), so the diagnosis's windowed rollouts start it half a second before each window
 and integrate it along the measured speeds there (`dynax.internal.complete_state` with the states before the
 window), which tells a turning point from a rest; `diagnose`'s own `stiction` candidate has no `dwell_time`, so
 no state.
