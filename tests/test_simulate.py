@@ -229,7 +229,8 @@ def test_window_simulation_errors_are_simulation_errors_errors():
 def test_fixed_grid_explicit_step_equals_diffrax_step():
     """The fixed-grid rollout writes explicit Runge-Kutta stages out from the tableau; each method's
     step must equal diffrax's own `solver.step` (to rounding), including FSAL methods whose last
-    stage is skipped, and solvers that are not explicit RK must still go through diffrax."""
+    stage is skipped, and solvers that are not explicit RK must still go through diffrax. The rolled
+    stages (one vector field in a loop) too, and their forward-mode derivative (the diagnosis's fits)."""
     from dynax.internal import explicit_step, zoh_term
 
     system = dynax.Acrobot()
@@ -238,9 +239,20 @@ def test_fixed_grid_explicit_step_equals_diffrax_step():
     term = zoh_term(system)
     for solver in (dynax.RK4(), diffrax.Tsit5(), diffrax.Dopri5(), diffrax.Dopri8(), diffrax.Heun(), diffrax.Bosh3()):
         ref = solver.step(term, 0.1, 0.15, x, u, solver.init(term, 0.1, 0.15, x, u), made_jump=True)[0]
-        ours = explicit_step(system, solver)(jnp.asarray(0.1), x, u, jnp.asarray(0.05))
-        np.testing.assert_allclose(ours, ref, rtol=1e-12, atol=1e-12, err_msg=type(solver).__name__)
+        for rolled in (False, True):
+            ours = explicit_step(system, solver, rolled)(jnp.asarray(0.1), x, u, jnp.asarray(0.05))
+            np.testing.assert_allclose(ours, ref, rtol=1e-12, atol=1e-12, err_msg=f"{type(solver).__name__} {rolled}")
     assert explicit_step(system, diffrax.Euler()) is None
+    assert explicit_step(system, diffrax.Euler(), rolled=True) is None
+
+    # Forward mode through the rolled loop against the written-out stages (each checked against diffrax above).
+    def end(x0, rolled):
+        grid = dynax.FixedGrid(diffrax.Tsit5(scan_kind="lax"), substeps=3, roll_stages=rolled)
+        return dynax.simulate(system, x0, jnp.linspace(0, 0.2, 5), jnp.full((5, 1), 0.7), method=grid).xs[-1]
+
+    jac_rolled = jax.jacfwd(lambda x0: end(x0, True))(x)
+    np.testing.assert_allclose(jac_rolled, jax.jacfwd(lambda x0: end(x0, False))(x), rtol=1e-10, atol=1e-12)
+    assert float(np.abs(jac_rolled - np.eye(4)).max()) > 1e-2
     # Through simulate: a rollout with Euler (diffrax's step) still integrates.
     xs = dynax.simulate(
         system, x, jnp.linspace(0, 0.1, 11), jnp.zeros((11, 1)), method=dynax.FixedGrid(diffrax.Euler())

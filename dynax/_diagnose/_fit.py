@@ -38,10 +38,11 @@ from .._fit import clustered_covariance, fit_least_squares, LeastSquaresOptions,
 from .._model._extensions import Extended
 from .._simulate import FixedGrid, window_rollouts
 
-# The Runge-Kutta stages in a plain scan: forward-mode differentiable (the Jacobians are forward
-# mode). One step per sample keeps the batched fits cheap; at 100 Hz and above its error is far
-# below measurement noise for these models.
-FORWARD_GRID = FixedGrid(solver=diffrax.Tsit5(scan_kind="lax"), substeps=1)
+# Forward-mode differentiable (the Jacobians are forward mode). One step per sample keeps the
+# batched fits cheap; at 100 Hz and above its error is far below measurement noise for these models.
+# The stages rolled: the family's vector field holds every candidate term, and written out six times
+# per step it made the fit, screening and validation programs most of a diagnosis's compile time.
+FORWARD_GRID = FixedGrid(solver=diffrax.Tsit5(scan_kind="lax"), substeps=1, roll_stages=True)
 
 # Levenberg-Marquardt's stopping rule (optimistix's Cauchy test on an RMS norm): the scaled
 # parameters are O(1) (see `Family.scale`) and the residuals are in units of each state's spread, so

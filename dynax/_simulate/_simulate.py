@@ -27,6 +27,11 @@ class FixedGrid(eqx.Module):
       differentiable in forward and reverse mode). Pass `scan_kind="bounded"` to other
       Runge-Kutta solvers too if you need forward-mode derivatives.
     - `substeps`: steps per sample interval (default 2).
+    - `roll_stages`: evaluate the Runge-Kutta stages in a `lax.fori_loop` that holds one copy of the
+      vector field, instead of writing each stage out (default `False`). Written out, a step runs
+      fastest; rolled, it compiles faster where the vector field is large (the diagnosis's family of
+      candidate terms: its largest programs compile in about 28 % less time), with results equal to
+      rounding (the last digits move: XLA contracts a different program's multiply-adds).
     """
 
     # "bounded": diffrax's stage loop then supports forward mode (`jax.jvp`, `jax.jacfwd`, used by
@@ -34,6 +39,7 @@ class FixedGrid(eqx.Module):
     # which supports reverse mode only.
     solver: diffrax.AbstractSolver = diffrax.Tsit5(scan_kind="bounded")
     substeps: int = eqx.field(static=True, default=2)
+    roll_stages: bool = eqx.field(static=True, default=False)
 
     def __check_init__(self):
         if self.substeps < 1:
@@ -161,16 +167,18 @@ def _check_arguments(system, x0, ts, us):
     return x0, ts, us
 
 
-def explicit_step(system, solver):
-    r"""The step of an explicit Runge-Kutta `solver` from its Butcher tableau, unrolled at trace time.
+def explicit_step(system, solver, rolled: bool = False):
+    r"""The step of an explicit Runge-Kutta `solver` from its Butcher tableau.
 
     On a fixed grid nothing of diffrax's per-step machinery is needed: no error estimate, no dense
-    output, no stage buffers. diffrax evaluates the stages in a loop over a square tableau (so that
-    one implementation serves every Runge-Kutta family and adaptive stepping); here the stages are
-    written out with the tableau's nonzero coefficients as constants,
-    $k_i = f(t_0 + c_i h, y_0 + h \sum_{j<i} a_{ij} k_j)$, $y_1 = y_0 + h \sum_i b_i k_i$,
-    which is the same arithmetic as `solver.step` (equal to rounding) at the cost of a hand-written
-    step. Returns `None` for other solvers, which then take diffrax's `step`.
+    output, no stage buffers over the full square tableau. The step is
+    $k_i = f(t_0 + c_i h, y_0 + h \sum_{j<i} a_{ij} k_j)$, $y_1 = y_0 + h \sum_i b_i k_i$ with the
+    tableau's nonzero coefficients as constants, the same arithmetic as `solver.step` (equal to
+    rounding). By default the stages are written out at trace time (fastest to run); with `rolled`
+    they are evaluated in a `lax.fori_loop` over the needed stages, each stage's input chosen by a
+    `lax.switch` over the tableau's rows, so the program holds one copy of the vector field instead
+    of one per stage (fastest to compile when the vector field is large). Returns `None` for other
+    solvers, which then take diffrax's `step`.
     """
     tableau = getattr(solver, "tableau", None)
     if not isinstance(solver, diffrax.AbstractERK) or not isinstance(tableau, diffrax.ButcherTableau):
@@ -192,6 +200,8 @@ def explicit_step(system, solver):
     needed = [False] * len(b)
     for i in reversed(range(len(b))):
         needed[i] = b[i] != 0 or any(needed[j] and a[j][i] != 0 for j in range(i + 1, len(b)))
+    stages = [i for i in range(len(b)) if needed[i]]
+    slot = {i: n for n, i in enumerate(stages)}
 
     # The stages a combination uses are stacked and contracted with their coefficients in one dot,
     # not summed term by term: with chains of scaled adds XLA:CPU made a batched closed-loop Tsit5
@@ -202,16 +212,26 @@ def explicit_step(system, solver):
         if not used:
             return y
         w = jnp.asarray([float(coefficients[j]) for j in used], y.dtype)
-        return y + h * jnp.tensordot(w, jnp.stack([ks[j] for j in used]), axes=1)
+        return y + h * jnp.tensordot(w, jnp.stack([ks[slot[j]] for j in used]), axes=1)
 
-    def step(t0, y0, u, h):
-        ks = {}
-        for i in range(len(b)):
-            if needed[i]:
-                ks[i] = field(t0 + float(c[i]) * h, combine(y0, h, a[i], ks), u)
+    def written_out(t0, y0, u, h):
+        ks = []
+        for i in stages:
+            ks.append(field(t0 + float(c[i]) * h, combine(y0, h, a[i], ks), u))
         return combine(y0, h, b, ks)
 
-    return step
+    def rolled_step(t0, y0, u, h):
+        inputs = [lambda ks, h, i=i: combine(y0, h, a[i], ks) for i in stages]
+        cs = jnp.asarray([float(c[i]) for i in stages], h.dtype)
+
+        def stage(n, ks):
+            y = jax.lax.switch(n, inputs, ks, h)
+            return ks.at[n].set(field(t0 + cs[n] * h, y, u))
+
+        ks = jax.lax.fori_loop(0, len(stages), stage, jnp.zeros((len(stages),) + y0.shape, y0.dtype))
+        return combine(y0, h, b, ks)
+
+    return rolled_step if rolled else written_out
 
 
 def sample_interval(system, method: FixedGrid, bound):
@@ -231,7 +251,7 @@ def sample_interval(system, method: FixedGrid, bound):
     term = zoh_term(system)
     solver = method.solver
     n = method.substeps
-    explicit = explicit_step(system, solver)
+    explicit = explicit_step(system, solver, method.roll_stages)
 
     def advance(x, diverged_at, t0, t1, dt, u):
         h = dt / n
