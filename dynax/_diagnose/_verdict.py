@@ -149,9 +149,11 @@ class Power:
     candidate with the largest typical gain: `cause`, `where`, `gain` (the held-out runs' pooled), `gain_typical`,
     `p_value`, `stopped_by`; `None` without one); `tested_s` (the record time the test's windows cover: held-out
     runs, and cross-fitted runs where they are pooled); `needed_s` (the tested time at which `MIN_PRACTICAL_GAIN`
-    would be detected, same power, level and window-to-window variation as `detectable_gain`); `observed_needed_s`
-    (where the best candidate gains that much: the tested time at which its own observed
-    mean improvement would be detected, same power and level: what would decide that candidate).
+    would be detected, same power, level and window-to-window variation as `detectable_gain`); `variation` (whose
+    window-to-window variation that is), `level` (the threshold the best candidate's p-value faced) and `df` (the
+    degrees of freedom the power is computed with); `observed_needed_s` (where the best candidate gains that much:
+    the tested time at which its own observed mean improvement would be detected, same power and level: what would
+    decide that candidate).
     """
 
     detectable_gain: float | None
@@ -159,6 +161,9 @@ class Power:
     tested_s: float
     needed_s: float | None
     observed_needed_s: float | None = None
+    variation: str = "the refitted candidates'"  # whose window-to-window variation: or "the best candidate's"
+    level: float | None = None  # the threshold the best candidate's p-value faced
+    df: float | None = None  # the degrees of freedom of the test the power is computed for
 
     @property
     def practical(self) -> bool:
@@ -185,6 +190,9 @@ class Power:
             "tested_s": self.tested_s,
             "needed_s": self.needed_s,
             "observed_needed_s": self.observed_needed_s,
+            "variation": self.variation,
+            "level": self.level,
+            "df": self.df,
         }
 
 
@@ -224,6 +232,9 @@ def power_of(results: dict, labels: dict, alpha: float, tested_s: float) -> Powe
     ):
         se, df = float(own.std_error), max(float(own.df), 1.0)
         detectable = detectable_gain(se, df, level, POWER)
+        variation = "the best candidate's"
+    else:
+        variation = "the refitted candidates'"
     se_needed = se  # the length that would decide: with that same window-to-window variation
     needed = observed = None
     if np.isfinite(se_needed) and se_needed > 0:
@@ -241,7 +252,7 @@ def power_of(results: dict, labels: dict, alpha: float, tested_s: float) -> Powe
         "p_value": float(results[k]["p"]),
         "stopped_by": [name for name, ok in results[k]["rules"].items() if not ok],
     }
-    return Power(float(detectable), best, float(tested_s), needed, observed)
+    return Power(float(detectable), best, float(tested_s), needed, observed, variation, level, df)
 
 
 def decide(named: bool, left: Structure, nominal_diverged: bool, power: Power) -> Verdict:
@@ -282,14 +293,17 @@ def inconclusive_note(power: Power, horizon_s: float, runs: str) -> str:
             + (f", stopped by {', '.join(b['stopped_by'])}" if b["stopped_by"] else "")
             + "."
         )
-    if power.detectable_gain is not None and not power.undecided:
+    if power.detectable_gain is not None:
+        bar = "" if power.level is None else f" (p <= {power.level:.2g}"
+        bar += "" if power.df is None or not bar else f", {power.df:.3g} degrees of freedom"
         parts.append(
             f"With these {runs} ({power.tested_s:.3g} s of windows) the test would detect a gain of about "
-            f"{power.detectable_gain:.0%} in mean squared window error with {POWER:.0%} power"
+            f"{power.detectable_gain:.0%} in mean squared window error with {POWER:.0%} power at the level the best "
+            f"candidate faced{bar + ')' if bar else ''}, with window-to-window variation like {power.variation}"
             + (f", more than the {MIN_PRACTICAL_GAIN:.0%} that matters." if not power.enough else ".")
         )
     if power.needed_s is not None and power.needed_s > power.tested_s:
-        like = "its" if power.undecided else "the refitted candidates'"
+        like = "its" if power.undecided else power.variation
         parts.append(
             f"With window-to-window variation like {like}, about {power.needed_s:.3g} s of held-out record "
             f"({power.needed_s / power.tested_s:.3g} times as much) would detect a {MIN_PRACTICAL_GAIN:.0%} "
