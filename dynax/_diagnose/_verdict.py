@@ -72,9 +72,9 @@ threshold for the smallest p-value). The standard error and degrees of freedom a
 (their improvements vary from window to window as an effect's would), except where the best candidate itself shows
 how an effect of the size in question varies: where it gains `MIN_PRACTICAL_GAIN`, or gains as much as the median's
 test would detect and significance refused it, they are its own test's. Otherwise the statement could contradict
-the test: on a quadrotor's battery sag whose typical window gains 50 % at p = 0.0024 (refused at 0.01 over 22
+the test: on a quadrotor's battery sag whose typical window gains 50 % at p = 0.0024 (refused at 0.01 over 23
 candidates), the median of candidates that change little claimed a detectable gain of 46 %; the candidate's own
-test detects 70 %, and at its threshold no refused gain can lie below what it detects with 80 % power.
+test detects 71 %, and at its threshold no refused gain can lie below what it detects with 80 % power.
 
 ??? cite
 
