@@ -60,6 +60,10 @@ def test_a_refused_gain_of_practical_size_is_never_below_the_stated_detectable_g
     assert found["cause"] == "battery_sag" and power.undecided and needed_s is not None
     assert detectable > found["gain_typical"]
     assert decide(False, FLAT, False, power) == Verdict.INCONCLUSIVE
+    # The report names the bar and whose variation the statement assumes.
+    stated = power.to_json()
+    assert stated["level"] == pytest.approx(0.01 / n) and stated["df"] == pytest.approx(df)
+    assert stated["variation"] == "the best candidate's"
     # The stated gain is detected with the stated power by the test that refused the candidate, at its threshold.
     shift = -np.log1p(-detectable)
     assert _detected(shift, 0.23, df, 0.01 / n) == pytest.approx(0.8, abs=0.015)
@@ -96,4 +100,4 @@ def test_a_gain_below_what_the_median_test_detects_keeps_the_median():
     detectable, found, _ = _known(with_noisy)
     assert found["cause"] == "body_bias" and found["where"] == "w"
     assert detectable == pytest.approx(_known(power_of(others, labels, 0.01, 30.0))[0])
-    assert with_noisy.enough
+    assert with_noisy.enough and with_noisy.variation == "the refitted candidates'"
