@@ -269,7 +269,7 @@ def _report(problem: Problem, forward: Forward, judgement, *, mode, train, valid
             f"No candidate passed the test. With these {runs} the test would have detected a gain of "
             f"about {test['detectable_gain']:.0%} in mean squared window error at {yard.horizon.seconds:g} s "
             f"(power 80 %) if its window-to-window "
-            f"variation is like the refitted candidates'; a smaller effect, or one that varies more (friction "
+            f"variation is like {judgement.power.variation}; a smaller effect, or one that varies more (friction "
             f"acting in the slow segments only), may be present."
         )
     extended = judgement.model

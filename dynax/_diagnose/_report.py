@@ -264,9 +264,12 @@ def _test_markdown(j: dict) -> list[str]:
         lines.append(f"- cross-fitting: {t['cross_fitting']}")
     if t["detectable_gain"] is not None:
         runs = "held-out and cross-fitted runs" if t.get("cross_fitting") else "held-out runs"
+        variation = (t.get("power") or {}).get("variation")
         lines.append(
             f"- with these {runs} it would have detected a gain of about {t['detectable_gain']:.0%} "
-            "in mean squared window error, like the candidates' gains (power 80 %)"
+            "in mean squared window error, like the candidates' gains (power 80 %, at the best candidate's level"
+            + (f", window-to-window variation like {variation}" if variation else "")
+            + ")"
         )
     power = t.get("power")
     if power and power["best_candidate"]:

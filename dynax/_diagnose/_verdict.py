@@ -68,7 +68,13 @@ windows of a stationary record shrinks as $1/\sqrt{T}$ with the tested length $T
 which `MIN_PRACTICAL_GAIN` would be detected is $T^\ast = T\,\big[\delta\,s / (-\log 0.75)\big]^2$ (Cohen 1988,
 ch. 2, for the $1/\sqrt{n}$ power calculation; $\nu$ held, which errs towards more record). The level $a$ is
 the one the best candidate faced: `alpha` over the number of candidates tested (Benjamini-Hochberg's
-threshold for the smallest p-value).
+threshold for the smallest p-value). The standard error and degrees of freedom are the refitted candidates' median
+(their improvements vary from window to window as an effect's would), except where the best candidate itself shows
+how an effect of the size in question varies: where it gains `MIN_PRACTICAL_GAIN`, or gains as much as the median's
+test would detect and significance refused it, they are its own test's. Otherwise the statement could contradict
+the test: on a quadrotor's battery sag whose typical window gains 50 % at p = 0.0024 (refused at 0.01 over 23
+candidates), the median of candidates that change little claimed a detectable gain of 46 %; the candidate's own
+test detects 71 %, and at its threshold no refused gain can lie below what it detects with 80 % power.
 
 ??? cite
 
@@ -137,13 +143,17 @@ class Power:
     Every gain here is in mean squared window error, the unit of the candidates' gains.
 
     **Fields:** `detectable_gain` (the typical gain detected with probability `POWER` at the best candidate's
-    level; `None` without a refitted candidate); `best` (the refitted candidate with the largest typical gain:
-    `cause`, `where`, `gain` (the held-out runs' pooled), `gain_typical`, `p_value`, `stopped_by`; `None` without
-    one); `tested_s` (the record time the test's windows cover: held-out runs, and cross-fitted runs where they are
-    pooled); `needed_s` (the tested time at which `MIN_PRACTICAL_GAIN` would be detected, same power and level, with
-    window-to-window variation like the best candidate's where it gains that much, else like the median's);
-    `observed_needed_s` (where the best candidate gains that much: the tested time at which its own observed
-    mean improvement would be detected, same power and level: what would decide that candidate).
+    level, with window-to-window variation like the refitted candidates' median, or like the best candidate's own
+    where it gains `MIN_PRACTICAL_GAIN` or as much as the median's test detects without being established: never
+    a gain at or below one the same test refused; `None` without a refitted candidate); `best` (the refitted
+    candidate with the largest typical gain: `cause`, `where`, `gain` (the held-out runs' pooled), `gain_typical`,
+    `p_value`, `stopped_by`; `None` without one); `tested_s` (the record time the test's windows cover: held-out
+    runs, and cross-fitted runs where they are pooled); `needed_s` (the tested time at which `MIN_PRACTICAL_GAIN`
+    would be detected, same power, level and window-to-window variation as `detectable_gain`); `variation` (whose
+    window-to-window variation that is), `level` (the threshold the best candidate's p-value faced) and `df` (the
+    degrees of freedom the power is computed with); `observed_needed_s` (where the best candidate gains that much:
+    the tested time at which its own observed mean improvement would be detected, same power and level: what would
+    decide that candidate).
     """
 
     detectable_gain: float | None
@@ -151,6 +161,9 @@ class Power:
     tested_s: float
     needed_s: float | None
     observed_needed_s: float | None = None
+    variation: str = "the refitted candidates'"  # whose window-to-window variation: or "the best candidate's"
+    level: float | None = None  # the threshold the best candidate's p-value faced
+    df: float | None = None  # the degrees of freedom of the test the power is computed for
 
     @property
     def practical(self) -> bool:
@@ -177,6 +190,9 @@ class Power:
             "tested_s": self.tested_s,
             "needed_s": self.needed_s,
             "observed_needed_s": self.observed_needed_s,
+            "variation": self.variation,
+            "level": self.level,
+            "df": self.df,
         }
 
 
@@ -184,8 +200,9 @@ def power_of(results: dict, labels: dict, alpha: float, tested_s: float) -> Powe
     """The `Power` of a round's test from its refitted candidates (`judge_round`'s `results`).
 
     The standard error is the median over the refitted candidates (their improvements vary from window
-    to window as an effect's would); the level is `alpha` over the candidates tested (the threshold the
-    best candidate faced). `labels` maps a candidate index to `(cause, where)`.
+    to window as an effect's would), or the best candidate's own test's where it gains `MIN_PRACTICAL_GAIN` or as
+    much as the median's test detects without being established (see the module); the level is `alpha` over the
+    candidates tested (the threshold the best candidate faced). `labels` maps a candidate index to `(cause, where)`.
     """
     if not results:
         return Power(None, None, tested_s, None)
@@ -200,9 +217,25 @@ def power_of(results: dict, labels: dict, alpha: float, tested_s: float) -> Powe
     detectable = detectable_gain(se, df, level, POWER) if np.isfinite(se) else 1.0
     k = max(results, key=lambda k: results[k]["gain_typical"])
     practical = results[k]["gain_typical"] >= MIN_PRACTICAL_GAIN
-    # The length that would decide: with window-to-window variation like the best candidate's where it gains
-    # MIN_PRACTICAL_GAIN or more (an effect of that size varies as much as the effect seen), else the median's.
-    se_needed = float(results[k]["test"].std_error) if practical else se
+    # An effect as large as the best candidate's varies from window to window as the one seen does: where it gains
+    # MIN_PRACTICAL_GAIN or more, or as much as the median's test would detect while significance refused it, the
+    # power is its own test's (standard error and degrees of freedom), the test it was refused by. The median's
+    # would claim a detectable gain smaller than one the test just refused (a quadrotor's battery sag: 46 % stated,
+    # 50 % on the typical window refused).
+    own = results[k]["test"]
+    refused = not results[k]["rules"].get("significance", True)
+    if (
+        np.isfinite(own.std_error)
+        and own.std_error > 0
+        and own.df > 0
+        and (practical or (refused and results[k]["gain_typical"] >= detectable))
+    ):
+        se, df = float(own.std_error), max(float(own.df), 1.0)
+        detectable = detectable_gain(se, df, level, POWER)
+        variation = "the best candidate's"
+    else:
+        variation = "the refitted candidates'"
+    se_needed = se  # the length that would decide: with that same window-to-window variation
     needed = observed = None
     if np.isfinite(se_needed) and se_needed > 0:
         shift = detectable_shift(se_needed, df, level, POWER)
@@ -219,7 +252,7 @@ def power_of(results: dict, labels: dict, alpha: float, tested_s: float) -> Powe
         "p_value": float(results[k]["p"]),
         "stopped_by": [name for name, ok in results[k]["rules"].items() if not ok],
     }
-    return Power(float(detectable), best, float(tested_s), needed, observed)
+    return Power(float(detectable), best, float(tested_s), needed, observed, variation, level, df)
 
 
 def decide(named: bool, left: Structure, nominal_diverged: bool, power: Power) -> Verdict:
@@ -260,14 +293,17 @@ def inconclusive_note(power: Power, horizon_s: float, runs: str) -> str:
             + (f", stopped by {', '.join(b['stopped_by'])}" if b["stopped_by"] else "")
             + "."
         )
-    if power.detectable_gain is not None and not power.undecided:
+    if power.detectable_gain is not None:
+        bar = "" if power.level is None else f" (p <= {power.level:.2g}"
+        bar += "" if power.df is None or not bar else f", {power.df:.3g} degrees of freedom"
         parts.append(
             f"With these {runs} ({power.tested_s:.3g} s of windows) the test would detect a gain of about "
-            f"{power.detectable_gain:.0%} in mean squared window error with {POWER:.0%} power"
+            f"{power.detectable_gain:.0%} in mean squared window error with {POWER:.0%} power at the level the best "
+            f"candidate faced{bar + ')' if bar else ''}, with window-to-window variation like {power.variation}"
             + (f", more than the {MIN_PRACTICAL_GAIN:.0%} that matters." if not power.enough else ".")
         )
     if power.needed_s is not None and power.needed_s > power.tested_s:
-        like = "its" if power.undecided else "the refitted candidates'"
+        like = "its" if power.undecided else power.variation
         parts.append(
             f"With window-to-window variation like {like}, about {power.needed_s:.3g} s of held-out record "
             f"({power.needed_s / power.tested_s:.3g} times as much) would detect a {MIN_PRACTICAL_GAIN:.0%} "
