@@ -6,6 +6,8 @@ augmented linear system). Scored by the true lagged model, a window whose lag st
 force starts with the wrong applied force; started along the half second before it, with the right one.
 """
 
+import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from scipy.linalg import expm
@@ -62,3 +64,17 @@ def test_a_lagged_model_starts_each_window_with_the_lag_the_record_implies():
     assert np.array_equal(np.asarray(plain.starts), starts)
     # The nominal (no lag) is far off at the start: the measure above can fail.
     assert np.sqrt(np.mean(np.asarray(plain.errors)[:, 1:11, 1] ** 2)) > 10 * rest
+
+
+def test_the_output_error_fit_starts_each_segment_with_the_lag_the_record_implies():
+    record = lagged_axis_record()
+    start = dynax.Extended(  # pyright: ignore[reportCallIssue]
+        dynax.LinearAxis(mass=1.5, viscous=1.0, coulomb=0.0, offset=0.0), (dynax.InputLag(0, TAU),)
+    )
+    spec = jax.tree.map(lambda _: False, start)
+    spec = eqx.tree_at(lambda s: (s.system.mass, s.system.viscous), spec, (True, True))
+    method = dynax.SimulationFit(segment_s=0.3, fit_initial_states=False)
+    solution = dynax.fit_simulation_error(start, record, method, filter_spec=spec, progress=False)
+    # Each 0.3 s segment's lag started at rest under its first input took the fit to a mass of 1.9 and a damping of
+    # 2.1 (truth 1 and 2); started along the half second before the segment, 0.9994 and 2.012.
+    np.testing.assert_allclose(np.asarray(solution.value), [MASS, VISCOUS], rtol=0.02)
