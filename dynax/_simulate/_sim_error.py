@@ -335,14 +335,50 @@ def window_rollouts(
     return jax.vmap(one)(ts, xs, us, ts_before, us_before)
 
 
+# The history [s] before each window along which `simulation_error` starts a model's internal states, as the
+# diagnosis's windows have it (`make_windows`): a lag forgets all but exp(-0.5 / tau) of the history's start.
+HISTORY_S = 0.5
+
+
+def history_steps(system, n_measured: int, dt: float) -> int:
+    """The samples of history `simulation_error` gives each window: `HISTORY_S` of them for a model with internal
+    states that `complete_state` can integrate along a record (an `Extended` with a lag, a delay or a term's own
+    states), else 0 (the model starts from the measured state as before: the same compiled program)."""
+    if system.n_states == n_measured or not hasattr(system, "applied_input"):
+        return 0
+    return max(1, int(round(HISTORY_S / dt)))
+
+
+def with_history(ts, xs, us, n_before: int, dt: float):
+    """`ts, xs, us` of a record (numpy) with `n_before` samples put before its start: the first state and input
+    repeated, at `dt` before its first time (as `make_windows` pads a window's history)."""
+    ts, xs, us = np.asarray(ts), np.asarray(xs), np.asarray(us)
+    if n_before == 0:
+        return ts, xs, us
+    first = lambda a: np.repeat(a[:1], n_before, axis=0)  # noqa: E731
+    before = ts[0] + dt * np.arange(-n_before, 0, dtype=ts.dtype)
+    return np.concatenate([before, ts]), np.concatenate([first(xs), xs]), np.concatenate([first(us), us])
+
+
 @eqx.filter_jit
-def rollouts_from_starts(system, ts, xs, us, starts, n_steps, method):
-    """`window_rollouts` on the windows of `n_steps` steps that start at the samples `starts` of one record."""
+def rollouts_from_starts(system, ts, xs, us, starts, n_steps, method, n_before: int = 0):
+    """`window_rollouts` on the windows of `n_steps` steps that start at the samples `starts` of one record.
 
-    def cut(a):
-        return jax.vmap(lambda k: jax.lax.dynamic_slice_in_dim(a, k, n_steps + 1))(starts)
+    With `n_before` > 0 the record's arrays carry `n_before` samples of history before its first sample
+    (`with_history`) and `starts` count from the record's own first sample: each window gets the `n_before`
+    samples before it as `ts_before`, `us_before` and `xs_before` (`window_rollouts`), along which the model's
+    internal states start (`complete_state`)."""
 
-    return window_rollouts(system, cut(ts), cut(xs), cut(us), method=method)
+    def cut(a, n=n_steps + 1, offset=0):
+        return jax.vmap(lambda k: jax.lax.dynamic_slice_in_dim(a, k + offset, n))(starts)
+
+    if n_before == 0:
+        return window_rollouts(system, cut(ts), cut(xs), cut(us), method=method)
+    window = lambda a: cut(a, offset=n_before)  # noqa: E731
+    before = lambda a: cut(a, n_before + 1)  # noqa: E731  # the history ends at the window's first sample
+    return window_rollouts(
+        system, window(ts), window(xs), window(us), before(ts), before(us), before(xs), method=method
+    )
 
 
 def simulation_error(
@@ -364,8 +400,15 @@ def simulation_error(
 
     **Arguments:**
 
-    - `system`: the model. Internal states beyond the measured ones (an input lag or delay) start
-      at rest under the input in force (`Extended.initial_state`), or at zero for other systems.
+    - `system`: the model. Internal states beyond the measured ones (an input lag or delay, a term's
+      own states such as a lagged speed or `Stiction`'s memory of rest) start where the record puts
+      them: at rest under the input `HISTORY_S` (0.5 s) before the window (`Extended.initial_state`, the
+      record's first sample repeated before its start) and integrated along the recorded inputs and
+      measured states up to the window's start (`complete_state` with `xs_before`), as the diagnosis's
+      windows start them; a dead time shifts the recorded input exactly (`Extended.with_shifted_inputs`).
+      A model without internal states starts from the measured state (no history is cut: the same
+      compiled program as before); a system with internal states but no `applied_input` (not an
+      `Extended`) starts them as its `initial_state` completes the measured state.
     - `trajectory`: the measured record (its `state_names` must be the system's first states).
     - `horizons_s`: horizons [s].
     - `stride`: samples between start times; default spreads at most `max_windows` windows over
@@ -450,17 +493,22 @@ def window_simulation_errors(
 
 
 def _sharded_window_errors(system, trajectory, starts, n_steps, method):
-    """`rollouts_from_starts` with the windows split across every device (of every process), then gathered."""
+    """`rollouts_from_starts` with the windows split across every device (of every process), then gathered.
+
+    A model with internal states (`history_steps`) gets `HISTORY_S` of the record before each window (the first
+    sample repeated before the record's start), along which they start."""
     n_windows = starts.shape[0]
     n_devices = jax.device_count()
+    n_before = history_steps(system, len(trajectory.state_names), float(trajectory.dt))
+    ts, xs, us = trajectory.ts, trajectory.xs, trajectory.us
+    if n_before:
+        ts, xs, us = (jax.device_put(a) for a in with_history(ts, xs, us, n_before, float(trajectory.dt)))
     if n_devices < 2:
-        return rollouts_from_starts(system, trajectory.ts, trajectory.xs, trajectory.us, starts, n_steps, method)
+        return rollouts_from_starts(system, ts, xs, us, starts, n_steps, method, n_before)
     padded = -(-n_windows // n_devices) * n_devices
     host_starts = np.asarray(starts)
     host_starts = np.concatenate([host_starts, np.full(padded - n_windows, host_starts[-1])])
     sharded = global_array(host_starts, leading_sharding(padded))
-    errors, diverged = rollouts_from_starts(
-        system, trajectory.ts, trajectory.xs, trajectory.us, sharded, n_steps, method
-    )
+    errors, diverged = rollouts_from_starts(system, ts, xs, us, sharded, n_steps, method, n_before)
     errors, diverged = replicate((errors, diverged))
     return errors[:n_windows], diverged[:n_windows]
