@@ -242,6 +242,9 @@ def test_fixed_grid_explicit_step_equals_diffrax_step():
         for rolled in (False, True):
             ours = explicit_step(system, solver, rolled)(jnp.asarray(0.1), x, u, jnp.asarray(0.05))
             np.testing.assert_allclose(ours, ref, rtol=1e-12, atol=1e-12, err_msg=f"{type(solver).__name__} {rolled}")
+            # times and step as Python floats, as a caller outside a rollout may pass them
+            plain = explicit_step(system, solver, rolled)(0.1, x, u, 0.05)
+            np.testing.assert_allclose(plain, ref, rtol=1e-12, atol=1e-12, err_msg=f"{type(solver).__name__} {rolled}")
     assert explicit_step(system, diffrax.Euler()) is None
     assert explicit_step(system, diffrax.Euler(), rolled=True) is None
 

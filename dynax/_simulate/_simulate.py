@@ -222,7 +222,7 @@ def explicit_step(system, solver, rolled: bool = False):
 
     def rolled_step(t0, y0, u, h):
         inputs = [lambda ks, h, i=i: combine(y0, h, a[i], ks) for i in stages]
-        cs = jnp.asarray([float(c[i]) for i in stages], h.dtype)
+        cs = jnp.asarray([float(c[i]) for i in stages], jnp.result_type(h))  # `h` may be a Python float
 
         def stage(n, ks):
             y = jax.lax.switch(n, inputs, ks, h)
