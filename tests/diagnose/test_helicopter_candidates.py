@@ -184,6 +184,7 @@ def test_hidden_body_bias_is_named_body_bias_not_wind(bias_report):
     assert any(a["cause"] == "wind" for a in j["findings"][0]["look_alikes"])
 
 
+@pytest.mark.slow  # about 45 s; the suite hides a wind and a body bias in the helicopter
 def test_hidden_quadratic_drag_on_u_is_named():
     # Drag acts only in the fast segments, so the window differences vary from segment to segment: on the 20 s
     # held-out flight alone the test missed it (gain 91 %, p = 0.006 at 0.95 s against Benjamini-Hochberg's 0.01/12

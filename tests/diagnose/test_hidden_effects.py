@@ -109,6 +109,7 @@ def test_hidden_effect_is_named(term, cause, where, seed):
     "term, cause, where",
     [(ViscousFriction(1, 0.3), "viscous_friction", "q2"), (InputGain(0, 1.25), "input_gain", "tau2")],
 )
+@pytest.mark.slow  # about 80 s each; the suite's refit-mode viscous friction test below stays
 def test_known_parameters_make_viscous_friction_and_input_gain_identifiable(term, cause, where):
     report, _, _ = _diagnose_hidden(term, seed=31, mode=Known())
     assert report.not_identifiable == []
@@ -123,6 +124,7 @@ def test_refit_mode_names_a_viscous_friction_the_nominal_model_lacks():
     assert abs(report.findings[0]["coefficient"] - 0.3) < 0.05
 
 
+@pytest.mark.slow  # about 2 min
 def test_a_nominal_friction_off_by_a_common_factor_is_named_as_friction_not_as_an_input_gain():
     """The rig's viscous friction is twice the nominal's at both joints. Refit mode keeps the nominal's and
     tests it: the answer is viscous friction (adding about 0.1 at each joint), never an input gain, which

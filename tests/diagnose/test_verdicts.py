@@ -233,7 +233,7 @@ def test_effect_free_control_claims_no_cause():
     assert not o["none_with_gain"], j["candidates"][:3]
 
 
-@pytest.mark.heavy  # an end-to-end diagnosis (vehicle candidates, known mode): in `make test`, not `make quick`
+@pytest.mark.slow  # about 3 min; the suite's helicopter control: test_helicopter_candidates.py
 def test_a_helicopter_control_claims_no_cause():
     case = next(c for c in CASES if c.name == "helicopter-control-known-9")
     j = diagnose_case(case).to_json()
@@ -317,7 +317,7 @@ def test_known_mode_with_an_impossible_nominal_is_not_none():
     assert j["verdict"] != "none", (j["verdict"], j["structure"]["nominal"], j["nominal"]["sim_error"])
 
 
-@pytest.mark.heavy  # an end-to-end diagnosis: in `make test`, not `make quick`
+@pytest.mark.slow  # about 3 min; the suite hides delay and lag in test_hidden_effects.py
 def test_a_dead_time_shorter_than_a_sample_is_named_and_told_apart_from_a_lag():
     # A 5 ms dead time at 100 Hz (DOP853, the input shifted in time). The windowed rollouts shift the recorded input by
     # the fitted delay, so the dead time is simulated as one at half a sample, and the record tells it from a 5 ms lag

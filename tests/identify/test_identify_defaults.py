@@ -606,7 +606,7 @@ def test_noisy_rig_data_with_defaults_give_consistent_estimates():
     assert abs(report["stages"]["output_error"]["input_timing"]["latency_s"]) < 0.3e-3
 
 
-@pytest.mark.heavy
+@pytest.mark.slow  # about 70 s; the suite's encoder-only records: test_encoder_only.py
 def test_encoder_angles_alone_with_defaults_give_consistent_estimates(tmp_path):
     # The rig recorded as many rigs are logged: encoder angles (1e-4 rad noise) and torques, no
     # velocity column. `load_trajectory` differences the angles (backward, as a driver does; their

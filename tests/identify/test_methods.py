@@ -167,6 +167,7 @@ def assert_same_solution(a, b):
     assert a.statistics == b.statistics and a.parameters == b.parameters
 
 
+@pytest.mark.slow  # about 1 min
 def test_fit_vehicle_is_identify_fitting_the_whole_record():
     """`fit_vehicle` is `identify` with the vehicle settings and nothing held out: the same `Solution` for an
     iterative criterion, its breaks, warm start and callback; and the record given as two records is joined

@@ -166,7 +166,7 @@ def _first_refit(train, validation) -> str:
     return "\n".join(lines)
 
 
-@pytest.mark.heavy
+@pytest.mark.slow  # about 80 s; the suite hides the Crazyflie's rotor drag
 def test_a_dead_time_the_held_map_hides_reaches_the_shortlist():
     # 40 ms from every logged command to its rotor, on the calibration battery's 10 s flights (its row
     # `quadrotor-motor_delay@motors-0.04-dead_time`: these seeds). Screened against the held one-step motor map,

@@ -267,6 +267,7 @@ def _with_rate_damping(report, fitted, flights, damping):
     return score_flights(named, fitted.model, flights[2:])
 
 
+@pytest.mark.slow  # about 4 min, the diagnosis in its fixture
 def test_a_term_that_spoils_the_next_sample_is_noted_in_the_report(diagnosed, fitted, flights, tmp_path):
     # The flights are a rigid body without rate damping. The report scores its held-out flights per group beside
     # constant velocity. A damping of 341 1/s (what the joint refit gave on whole NanoBench flights) pulls every
@@ -394,6 +395,7 @@ def test_a_one_step_fit_singular_in_float32_is_refused_not_returned():
     assert np.all(np.isfinite(np.asarray(dynax.fit_quadrotor(start, flight, progress=False).value)))
 
 
+@pytest.mark.slow  # about 1 min; the suite keeps the one-step fit's refusal
 def test_a_lagged_fit_singular_in_float32_is_refused_not_returned():
     """The lagged (EM-free) iteration solves normal equations as collinear as the one-step fit's at every step. Warm
     started in float32 from a float64 one-step fit, it used to stop after one step and return weights 93 % off the
