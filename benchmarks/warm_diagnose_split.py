@@ -54,9 +54,9 @@ def records():
         from dynax.synthetic import DEMO_TRUTH_PHYSICAL, Multisine, synthetic_trajectory
 
         excitation: dict[str, Any] = {"excitation": Multisine(amplitude=2.0)}
-    except ImportError:  # the tree before the redesign
-        from dynax._data import load_trajectory, save_trajectory  # type: ignore[no-redef]
-        from dynax._model._extensions import CoulombFriction, Extended  # type: ignore[no-redef]
+    except ImportError:  # the tree before the redesign, which exported these from private modules only
+        from dynax._data import load_trajectory, save_trajectory  # type: ignore[no-redef]  # private: old tree
+        from dynax._model._extensions import CoulombFriction, Extended  # type: ignore[no-redef]  # private: old tree
         from dynax.synthetic import DEMO_TRUTH_PHYSICAL, synthetic_trajectory
 
         excitation = {"amplitude": 2.0}
@@ -75,7 +75,7 @@ def _diagnose():
     """This tree's `diagnose(system, data)`."""
     if hasattr(dynax, "diagnose"):
         return lambda data: dynax.diagnose(dynax.Acrobot(), data)
-    from dynax._diagnose import diagnose  # the tree before the redesign
+    from dynax._diagnose import diagnose  # private: the tree before the redesign
 
     return lambda data: diagnose(dynax.Acrobot(), data, system_name="acrobot")  # pyright: ignore[reportCallIssue]
 
