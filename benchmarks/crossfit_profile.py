@@ -20,36 +20,23 @@ import collections
 import cProfile
 import pathlib
 import pstats
-import tempfile
+import sys
 import time
 
 import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from dynax import Acrobot, CoulombFriction, diagnose, Extended, load_trajectory, save_trajectory  # noqa: E402
-from dynax.synthetic import DEMO_TRUTH_PHYSICAL, Multisine, synthetic_trajectory  # noqa: E402
+from dynax import Acrobot, diagnose  # noqa: E402
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from warm_diagnose_split import records  # noqa: E402  # benchmarks/diagnose.py's two files, written and read back
 
 # (file, function) of the callers and callees read from the profile; a compiled call is equinox's `__call__`.
 BATCH = ("_forward.py", "_fit_batch")
 CROSS_FIT = ("_forward.py", "_cross_fit")
 FIT = ("_fit.py", "fit_configurations")
 COMPILED = ("_jit.py", "__call__")
-
-
-def records():
-    """`benchmarks/diagnose.py`'s two files, written as contract CSVs and read back."""
-    truth = Extended(Acrobot.from_physical(**DEMO_TRUTH_PHYSICAL), (CoulombFriction(1, 0.25),))
-    out = []
-    with tempfile.TemporaryDirectory() as folder:
-        for seed in (0, 1):
-            record = synthetic_trajectory(
-                truth, duration=40.0, dt=0.01, excitation=Multisine(amplitude=2.0), seed=seed, system_name="acrobot"
-            )
-            path = pathlib.Path(folder) / f"acrobot_40s_{seed}.csv"
-            save_trajectory(record, path)
-            out.append(load_trajectory(path, "acrobot"))
-    return out
 
 
 def _matches(func, key) -> bool:
