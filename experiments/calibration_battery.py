@@ -63,6 +63,15 @@ def _truth_below(row) -> bool:
     return row.get("truth_gain") is not None and row["truth_gain"] < 0.25
 
 
+def _named_as_inconclusive_best(row) -> bool:
+    """An `inconclusive` verdict whose best candidate (the report's `test.power.best_candidate`, which its note
+    names with its gain, p-value and the held-out length that would decide) is the hidden cause at its place."""
+    best = (row.get("power") or {}).get("best_candidate")
+    if row["verdict"] != "inconclusive" or best is None:
+        return False
+    return f"{best['cause']}@{best['where']}" == row["expected"]
+
+
 def summary(rows):
     errors = [r["name"] for r in rows if "error" in r]
     rows = [r for r in rows if "error" not in r]
@@ -105,6 +114,17 @@ def summary(rows):
         # `inconclusive` is right there, and the named-first share is also given over the effects the record can show.
         "effects_truth_below_practical": [r["name"] for r in effects if _truth_below(r)],
         "named_first_where_truth_gains_25": share([r for r in effects if not _truth_below(r)], "named_first"),
+        # Another secondary reading: the right cause first in the findings, or as the best candidate that an
+        # `inconclusive` verdict names (it names one, with its gain and p-value, where it claims nothing).
+        "named_first_or_inconclusive_best": (
+            sum(bool(r["named_first"]) or _named_as_inconclusive_best(r) for r in effects) / len(effects)
+            if effects
+            else None
+        ),
+        "named_first_or_inconclusive_best_where_truth_gains_25": (
+            sum(bool(r["named_first"]) or _named_as_inconclusive_best(r) for r in effects if not _truth_below(r))
+            / max(1, sum(not _truth_below(r) for r in effects))
+        ),
         "right_verdict_truth_aware": (
             sum(r["right_verdict"] or (_truth_below(r) and r["verdict"] in ("none", "inconclusive")) for r in rows)
             / len(rows)
