@@ -95,7 +95,8 @@ class ConsistentSystem(AbstractSystem):
 
     Its only inexact leaf is `phi`; `model` is the system it stands for, with
     $\theta = \theta(\phi)$ in the parameters `names`. Fitting `phi` (e.g. with
-    `fit_simulation_error`) searches the consistent set only.
+    `fit_simulation_error`) searches the consistent set only. Its internal states, if `model` has any, start as
+    `model`'s do (`applied_input`, `state_terms`, `nominal_n_states` pass them on to `complete_state`).
     """
 
     phi: jax.Array
@@ -149,7 +150,9 @@ class TimedInputs(AbstractSystem):
     (`with_neighbour_inputs`, $R$ = `reach`); over the interval that starts at sample $k$ it applies
     the recorded input linearly interpolated at $k + \alpha$, with $\alpha$ clipped to $[-R, R]$:
     $\alpha = 0$ is the zero-order hold as recorded, $\alpha = 1/2$ the interval's mean of a signal
-    sampled at the samples, $\alpha > 0$ an input that acts before the sample that records it.
+    sampled at the samples, $\alpha > 0$ an input that acts before the sample that records it. `system`'s internal
+    states, if any, start along a record's history under the input read alike (`applied_input`, as
+    `complete_state` reads it).
     """
 
     system: AbstractSystem
@@ -434,6 +437,11 @@ def refine_by_simulation(
     hold as recorded; `rests` (each record's `rest_stretches`): windows start at zero speed where a joint
     rests within its record's speed noise (`motion_records`). Inside `refinement_options(fit=...)`, that
     function is called in place of `fit_simulation_error`.
+
+    A model with internal states (`Stiction` with a `dwell_time`, its memory of rest, as `identify` adds it) starts
+    them along the record before each segment, as `fit_simulation_error` starts a bare model's (`history_steps`,
+    `segment_histories`): `ConsistentSystem` and `TimedInputs` pass on what `complete_state` reads. So do the
+    record weights' residual scales (`record_residual_scale`). A model without takes the programs it always took.
 
     **Returns:** the engine's `Solution` in the contract's base parameters: `model` the refined
     system, `value`, `names`, `std_errors` and `covariance` (the fit's, cluster-robust over blocks
