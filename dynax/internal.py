@@ -435,6 +435,8 @@ from ._identify._refine import motion_records as motion_records
 from ._identify._refine import record_residual_scale as record_residual_scale
 from ._identify._refine import RECORD_WEIGHTS as RECORD_WEIGHTS
 from ._identify._refine import refinement_options as refinement_options
+from ._identify._refine import TimedInputs as TimedInputs
+from ._identify._refine import with_neighbour_inputs as with_neighbour_inputs
 from ._identify._regressors import parameter_vector as parameter_vector
 from ._identify._result import warn_if_refinement_left_equations as warn_if_refinement_left_equations
 from ._identify._simulation_fit import named_parameters as named_parameters
@@ -920,6 +922,7 @@ __all__ = [
     "TEMPEST_FEATURES",
     "thrust_frame_slopes",
     "thrust_parameters",
+    "TimedInputs",
     "Transcription",
     "trim_and_decimation",
     "tsqr_r",
@@ -942,6 +945,7 @@ __all__ = [
     "window_simulation_errors",
     "window_starts",
     "with_friction",
+    "with_neighbour_inputs",
     "with_rollout_evidence",
     "with_theta",
     "with_velocities_from_positions",

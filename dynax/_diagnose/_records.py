@@ -179,8 +179,13 @@ def horizon_errors(model, rec: Trajectory, candidates_s, stride: int, dt: float)
     Here every call rolls out `LONGEST_FIT_WINDOW_S` (or the longest candidate, if longer) from a start every
     `stride` samples of the whole record, padded past its end (the last sample repeated), and keeps the windows and
     steps `window_simulation_errors` has: a rollout is causal, so its first steps do not read the padding, and each
-    window keeps its index (its place in XLA's vector loop)."""
+    window keeps its index (its place in XLA's vector loop).
+
+    A model with internal states (`history_steps`: an input lag's or delay's filter, `Stiction`'s memory) starts them
+    along the `HISTORY_S` of record before each window, the record's first sample repeated before its start
+    (`with_history`), as `window_simulation_errors` does; one without takes the program it always took."""
     from .._simulate import FixedGrid, rollouts_from_starts, window_simulation_errors
+    from .._simulate._sim_error import history_steps, with_history
 
     n, steps = len(rec), int(np.max(np.maximum(np.round(np.asarray(candidates_s, float) / dt).astype(int), 1)))
     if jax.device_count() > 1 or n < steps + 1:  # sharded (or too short, for its error): as it was
@@ -196,14 +201,21 @@ def horizon_errors(model, rec: Trajectory, candidates_s, stride: int, dt: float)
     model = jax.tree.map(strong, model)
     pad = lambda a: np.concatenate([a, np.repeat(a[-1:], n_program, axis=0)])  # noqa: E731
     ts_pad = np.concatenate([ts, ts[-1] + (ts[-1] - ts[-2]) * np.arange(1, n_program + 1)])
+    ts_pad, xs_pad, us_pad = ts_pad, pad(xs), pad(us)
+    n_before = history_steps(model, len(rec.state_names), float(rec.dt))
+    history = ()
+    if n_before:  # the history before each window, as `window_simulation_errors` puts it there
+        ts_pad, xs_pad, us_pad = with_history(ts_pad, xs_pad, us_pad, n_before, float(rec.dt))
+        history = (n_before,)
     errors, _ = rollouts_from_starts(
         model,
         jax.device_put(ts_pad),
-        jax.device_put(pad(xs)),
-        jax.device_put(pad(us)),
+        jax.device_put(xs_pad),
+        jax.device_put(us_pad),
         starts,
         n_program,
         FixedGrid(),
+        *history,
     )
     return np.asarray(errors)[:kept, : steps + 1]
 

@@ -71,12 +71,14 @@ from .._fit import AbstractStatistics, Parameters, Solution
 from .._model._extensions import Extended
 from .._model._system import AbstractSystem
 from .._simulate import complete_state, FixedGrid, simulate
+from .._simulate._sim_error import HISTORY_GRID, history_steps
 from ._consistency import consistent_parametrisation, ConsistentParametrisation
 from ._regressors import parameter_vector, split_terms, with_parameters
 from ._simulation_fit import (
     DIVERGED,
     fit_simulation_error,
     OutputErrorStatistics,
+    segment_histories,
     simulation_segments,
     SimulationFit,
 )
@@ -93,7 +95,8 @@ class ConsistentSystem(AbstractSystem):
 
     Its only inexact leaf is `phi`; `model` is the system it stands for, with
     $\theta = \theta(\phi)$ in the parameters `names`. Fitting `phi` (e.g. with
-    `fit_simulation_error`) searches the consistent set only.
+    `fit_simulation_error`) searches the consistent set only. Its internal states, if `model` has any, start as
+    `model`'s do (`applied_input`, `state_terms`, `nominal_n_states` pass them on to `complete_state`).
     """
 
     phi: jax.Array
@@ -120,6 +123,22 @@ class ConsistentSystem(AbstractSystem):
         """The model's full state from a measured one (its internal states: `Extended.initial_state`)."""
         return self.model.initial_state(x0, u0)  # pyright: ignore[reportAttributeAccessIssue] (called where it has one)
 
+    # What `complete_state` reads to start the model's internal states along the record before a segment, as
+    # `fit_simulation_error` does for the model itself (`history_steps`; called only where it has internal states).
+    def applied_input(self, u, z):
+        """The model's applied input and its input terms' state derivative (`Extended.applied_input`)."""
+        return self.model.applied_input(u, z)  # pyright: ignore[reportAttributeAccessIssue] (called where it has one)
+
+    @property
+    def state_terms(self) -> tuple:
+        """The model's terms with states of their own besides the input terms' (`Extended.state_terms`)."""
+        return getattr(self.template, "state_terms", ())
+
+    @property
+    def nominal_n_states(self) -> int:
+        """The measured states; the rest are the model's internal states."""
+        return _nominal_n_states(self.template)
+
 
 INPUT_REACH = 3  # samples of the fit's grid either side that the input timing may reach
 
@@ -131,7 +150,9 @@ class TimedInputs(AbstractSystem):
     (`with_neighbour_inputs`, $R$ = `reach`); over the interval that starts at sample $k$ it applies
     the recorded input linearly interpolated at $k + \alpha$, with $\alpha$ clipped to $[-R, R]$:
     $\alpha = 0$ is the zero-order hold as recorded, $\alpha = 1/2$ the interval's mean of a signal
-    sampled at the samples, $\alpha > 0$ an input that acts before the sample that records it.
+    sampled at the samples, $\alpha > 0$ an input that acts before the sample that records it. `system`'s internal
+    states, if any, start along a record's history under the input read alike (`applied_input`, as
+    `complete_state` reads it).
     """
 
     system: AbstractSystem
@@ -147,12 +168,31 @@ class TimedInputs(AbstractSystem):
         return _neighbour_names(self.system.input_names, self.reach)
 
     def vector_field(self, t, x, u):
+        return self.system.vector_field(t, x, self._timed(u))
+
+    def _timed(self, u):
+        """The recorded input read `alpha` steps later, from the stencil `u` of its samples."""
         n = u.shape[-1] // (2 * self.reach + 1)
         stencil = u.reshape(u.shape[:-1] + (2 * self.reach + 1, n))
         position = jnp.clip(self.alpha, -self.reach, self.reach) + self.reach
         i = jnp.clip(jnp.floor(position), 0, 2 * self.reach - 1).astype(int)
         f = position - i
-        return self.system.vector_field(t, x, (1 - f) * stencil[..., i, :] + f * stencil[..., i + 1, :])
+        return (1 - f) * stencil[..., i, :] + f * stencil[..., i + 1, :]
+
+    # As `ConsistentSystem`'s: what `complete_state` reads to start `system`'s internal states along the record.
+    def applied_input(self, u, z):
+        """`system`'s applied input and input terms' state derivative, under the input read `alpha` steps later."""
+        return self.system.applied_input(self._timed(u), z)  # pyright: ignore[reportAttributeAccessIssue]
+
+    @property
+    def state_terms(self) -> tuple:
+        """`system`'s terms with states of their own besides the input terms' (`Extended.state_terms`)."""
+        return getattr(self.system, "state_terms", ())
+
+    @property
+    def nominal_n_states(self) -> int:
+        """The measured states; the rest are `system`'s internal states."""
+        return _nominal_n_states(self.system)
 
     def initial_state(self, x0, u0):
         """`system`'s full state from a measured one, under the input recorded at the start (the stencil's
@@ -160,6 +200,14 @@ class TimedInputs(AbstractSystem):
         n = u0.shape[-1] // (2 * self.reach + 1)
         centre = u0[..., self.reach * n : (self.reach + 1) * n]
         return self.system.initial_state(x0, centre)  # pyright: ignore[reportAttributeAccessIssue] (where it has one)
+
+
+def _nominal_n_states(system) -> int:
+    """The measured states of `system`: a wrapper's `nominal_n_states`, an `Extended`'s system's, else all."""
+    n = getattr(system, "nominal_n_states", None)
+    if n is not None:
+        return n
+    return system.system.n_states if isinstance(system, Extended) else system.n_states
 
 
 def _neighbour_names(names, reach):
@@ -280,14 +328,20 @@ def motion_records(
 
 
 @eqx.filter_jit
-def _segment_squares(system, x0, ts, xs, us, scale, simulation: FixedGrid):
-    """Sum of squared scaled state residuals of each segment simulated from its initial state."""
+def _segment_squares(system, x0, ts, xs, us, scale, simulation: FixedGrid, history=None):
+    """Sum of squared scaled state residuals of each segment simulated from its initial state, its internal states
+    (if any) started along `history` (`segment_histories`' `(ts_before, xs_before, us_before)`) as the output-error
+    fit starts them; without one (a model without internal states), as `complete_state` of the first state."""
     n = xs.shape[-1]
 
     def rollout(x, t, u):  # the model's internal states, if any, start as `complete_state` completes them
         return simulate(system, complete_state(system, x, u[0]), t, u, method=simulation, throw=False).xs[:, :n]
 
-    sims = jax.vmap(rollout)(x0, ts, us)
+    def along(x, t, u, tb, xb, ub):  # ... along the record before the segment
+        start = complete_state(system, x, u[0], tb, ub, HISTORY_GRID, xb)
+        return simulate(system, start, t, u, method=simulation, throw=False).xs[:, :n]
+
+    sims = jax.vmap(rollout)(x0, ts, us) if history is None else jax.vmap(along)(x0, ts, us, *history)
     r = (sims - xs) / scale[None, None, :]
     r = jnp.where(jnp.isfinite(r), r, DIVERGED)  # as the fit counts a diverged rollout
     return jnp.sum(r**2, axis=(1, 2))
@@ -299,9 +353,21 @@ def record_residual_scale(system, initial_states, records, scale, method: Simula
     `system` and `initial_states` are a `fit_simulation_error` solution on `records` (cut into the
     same segments, `method.segment_s`); residuals are in units of `scale` (per state); $p_r$ counts
     the initial states fitted on record $r$ (none unless `method.fit_initial_states`).
+
+    The segments are simulated as the fit simulated them: a model with internal states (`history_steps`: an input
+    lag's or delay's filter, `Stiction`'s memory of rest) starts them along the `HISTORY_S` of record before each
+    segment (`segment_histories`, `complete_state` with `xs_before`), so $\hat\sigma_r$ is the fit's own residual
+    scale; one without takes the same program as before. (Started at rest under each segment's first input, a true
+    lagged axis's scale was the lag's start error, not the noise: `tests/identify/test_lag_history.py`.)
     """
     ts, xs, us, _, owner, _ = simulation_segments(records, method.segment_s, method.stagger)
     dtype = jnp.result_type(initial_states)
+    n_before = history_steps(system, xs.shape[-1], float(records[0].dt))
+    history = None
+    if n_before:  # as `fit_simulation_error` cuts it
+        history = tuple(
+            jnp.asarray(a, dtype) for a in segment_histories(records, method.segment_s, method.stagger, n_before)
+        )
     squares = np.asarray(
         _segment_squares(
             system,
@@ -309,6 +375,7 @@ def record_residual_scale(system, initial_states, records, scale, method: Simula
             *(jnp.asarray(a, dtype) for a in (ts, xs, us)),
             jnp.asarray(scale, dtype),
             method.simulation,
+            history=history,
         )
     )
     per_segment = xs.shape[1] * xs.shape[2] - (xs.shape[2] if method.fit_initial_states else 0)
@@ -370,6 +437,11 @@ def refine_by_simulation(
     hold as recorded; `rests` (each record's `rest_stretches`): windows start at zero speed where a joint
     rests within its record's speed noise (`motion_records`). Inside `refinement_options(fit=...)`, that
     function is called in place of `fit_simulation_error`.
+
+    A model with internal states (`Stiction` with a `dwell_time`, its memory of rest, as `identify` adds it) starts
+    them along the record before each segment, as `fit_simulation_error` starts a bare model's (`history_steps`,
+    `segment_histories`): `ConsistentSystem` and `TimedInputs` pass on what `complete_state` reads. So do the
+    record weights' residual scales (`record_residual_scale`). A model without takes the programs it always took.
 
     **Returns:** the engine's `Solution` in the contract's base parameters: `model` the refined
     system, `value`, `names`, `std_errors` and `covariance` (the fit's, cluster-robust over blocks

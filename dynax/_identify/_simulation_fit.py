@@ -421,8 +421,9 @@ def fit_simulation_error(
     (`segment_histories`, `complete_state` with `xs_before`), as `simulation_error` and the diagnosis's windows
     do; at rest under the segment's first input, a 0.1 s lag biased a mass fitted on 0.3 s segments by 90 %
     (`tests/identify/test_lag_history.py`). The nominal part of the start is the fitted (or measured) initial
-    state. Other systems (a bare one, `refine_by_simulation`'s `ConsistentSystem`) start as before
-    (`complete_state` of the first state): the same compiled program.
+    state. `refine_by_simulation`'s wrappers of such a model (`ConsistentSystem`, `TimedInputs`) expose what this
+    reads (`applied_input`, `state_terms`, `nominal_n_states`) and start alike. A model without internal states
+    starts as before (`complete_state` of the first state): the same compiled program.
 
     **Standard errors.** With fitted initial states, and white measurement noise, the residuals are
     independent and the Gauss-Newton covariance $\hat\sigma^2 (J^\top J)^{-1}$ is the right one.

@@ -187,6 +187,13 @@ class SimulationError(eqx.Module):
         return out
 
 
+def nominal_states(model) -> int:
+    """How many of a model's states are nominal (measured), the rest internal: an `Extended`'s system's, or what a
+    wrapper of one names (`nominal_n_states`: `refine_by_simulation`'s `ConsistentSystem` and `TimedInputs`)."""
+    n = getattr(model, "nominal_n_states", None)
+    return model.system.n_states if n is None else n
+
+
 class InputStates(AbstractSystem):
     r"""The internal states of a model's input terms (a lag's output, a delay's filter) as a system of their own.
 
@@ -198,7 +205,7 @@ class InputStates(AbstractSystem):
 
     @property
     def state_names(self) -> tuple[str, ...]:
-        return tuple(self.model.state_names[self.model.system.n_states :])
+        return tuple(self.model.state_names[nominal_states(self.model) :])
 
     @property
     def input_names(self) -> tuple[str, ...]:
