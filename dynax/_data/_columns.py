@@ -33,6 +33,12 @@ OPTIONAL_STATES: dict[str, dict[str, tuple[str, str]]] = {
 
 def columns_for(system: str) -> tuple[tuple[str, ...], tuple[str, ...]]:
     """State and input column names of a system named as in the contract."""
+    if not isinstance(system, str):  # a system instance (`Acrobot()`) is unhashable: name it instead
+        from .._errors import UsageError
+
+        raise UsageError(
+            f"`system` must be a system's name (one of {sorted(SYSTEM_COLUMNS)}), got {type(system).__name__}"
+        )
     if system not in SYSTEM_COLUMNS:
         from .._errors import UsageError
 

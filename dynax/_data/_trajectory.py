@@ -1,11 +1,12 @@
 """`Trajectory`: measured (or simulated) times, states and inputs with their names."""
 
 import equinox as eqx
+from jax.core import Tracer
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 import numpy as np
 
-from .._errors import UsageError
+from .._errors import DataError, UsageError
 
 
 class Trajectory(eqx.Module):
@@ -35,13 +36,33 @@ class Trajectory(eqx.Module):
     source: str = eqx.field(static=True, default="")
 
     def __check_init__(self):
+        # Shapes, dtypes and names only (host metadata, nothing computed): a record built in a script is refused
+        # here, by argument, rather than deep inside a fit. Values (NaN, times that do not increase) are the
+        # consumers' to refuse (`identify`, `diagnose`, `simulate` name the row), as this runs under `jit` too.
+        for name in ("ts", "xs", "us"):
+            arr = getattr(self, name)
+            if not hasattr(arr, "ndim") or not hasattr(arr, "dtype"):
+                raise UsageError(
+                    f"Trajectory: `{name}` must be an array (numpy or JAX; `np.asarray` a list), "
+                    f"got {type(arr).__name__}"
+                )
+            if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+                raise UsageError(f"Trajectory: `{name}` must hold real numbers, got dtype {arr.dtype}")
+        for name in ("state_names", "input_names"):
+            names = getattr(self, name)
+            if isinstance(names, str) or not all(isinstance(n, str) for n in names):
+                raise UsageError(f"Trajectory: `{name}` must be a tuple of column names (str), got {names!r}")
+            repeated = sorted({n for n in names if list(names).count(n) > 1})
+            if repeated:
+                raise UsageError(f"Trajectory: `{name}` names {repeated} more than once: {tuple(names)}")
         if self.ts.ndim != 1:
-            raise ValueError(f"Trajectory: `ts` must be 1-d, got shape {self.ts.shape}")
+            raise UsageError(f"Trajectory: `ts` must be 1-d, got shape {self.ts.shape}")
         n = self.ts.shape[0]
         for name, arr, names in (("xs", self.xs, self.state_names), ("us", self.us, self.input_names)):
             if arr.ndim != 2 or arr.shape != (n, len(names)):
-                raise ValueError(
-                    f"Trajectory: `{name}` must have shape ({n}, {len(names)}) for columns {names}, got {arr.shape}"
+                raise UsageError(
+                    f"Trajectory: `{name}` must have shape ({n}, {len(names)}) for columns {tuple(names)}, "
+                    f"got {arr.shape}"
                 )
 
     def __len__(self) -> int:
@@ -114,3 +135,32 @@ class Trajectory(eqx.Module):
             self.system,
             self.source,
         )
+
+
+def check_record_values(record: Trajectory, caller: str, label: str) -> None:
+    """Refuse a record a fit cannot read: states or inputs that are not floating point, or a NaN or an infinity
+    in them (named by column, row and time). On the host, with NumPy: nothing compiled, and a traced record
+    (under `jit`) is left alone. `label` names the record in the message (`"record 0 of `data`"`).
+    """
+    for name in ("xs", "us"):
+        arr = getattr(record, name)
+        if not np.issubdtype(arr.dtype, np.floating):
+            raise UsageError(
+                f"{caller}: {label}: `{name}` holds {arr.dtype}, not floating point; give float arrays "
+                "(`trajectory.astype(jnp.float64)`)"
+            )
+    if any(isinstance(a, Tracer) for a in (record.xs, record.us)):
+        return
+    for arr, names in ((record.xs, record.state_names), (record.us, record.input_names)):
+        values = np.asarray(arr)
+        bad = np.argwhere(~np.isfinite(values))
+        if bad.size:
+            row, col = (int(i) for i in bad[0])
+            t = np.asarray(record.ts)[row]
+            raise DataError(
+                f"{caller}: {label}: a sample of {values[row, col].item()!r} at t = {float(t):g} s "
+                f"({len(bad)} non-finite sample(s) in all); cut the stretch (`dynax.exclude_stretches`) or fill it",
+                path=record.source or None,
+                column=names[col],
+                row=row + 1,
+            )

@@ -19,7 +19,8 @@ import dataclasses
 import equinox as eqx
 import numpy as np
 
-from .._data._trajectory import Trajectory
+from .._data._trajectory import check_record_values, Trajectory
+from .._errors import DataError, UsageError
 from .._model._extensions import AbstractTerm, Extended
 from .._model._quadrotor import Quadrotor
 from .._model._system import AbstractSystem
@@ -379,6 +380,7 @@ def diagnose(
     """
     warn_if_float32("diagnosis")  # the float64 policy: say so, once, naming the switch
     check_arguments(system, mode, horizons, selection)
+    _check_record_values(system, train, validation)
     framed = None
     if isinstance(system, Quadrotor):  # its body-frame form, the multirotor causes (`_quadrotor.py`)
         framed = frame_quadrotor(system, train, validation, candidates, mode, horizons, selection)
@@ -394,6 +396,37 @@ def diagnose(
         if framed is not None:  # the quadrotor's names, and its held-out flights scored per group
             report = framed.finish(report, say)
     return report
+
+
+def _check_record_values(system, train, validation):
+    """Records a fit cannot read (not Trajectories, another system's columns, fewer than 3 samples, integer
+    columns, a NaN or an infinity) refused before the data checks and any fit, naming the argument, the column
+    and the row; `prepare_records` checks the lengths the windows need."""
+    for argument, records in (("train", train), ("validation", validation)):
+        if records is None and argument == "validation":
+            continue
+        listed = [records] if isinstance(records, Trajectory) else records
+        if not isinstance(listed, (list, tuple)) or not listed:
+            raise UsageError(
+                f"diagnose: `{argument}` must be a Trajectory or a non-empty list of them, got {type(records).__name__}"
+            )
+        for k, record in enumerate(listed):
+            if not isinstance(record, Trajectory):
+                raise UsageError(f"diagnose: `{argument}` record {k} must be a Trajectory, got {type(record).__name__}")
+            others = [n for n in record.input_names if n not in system.input_names]
+            if tuple(record.state_names) != tuple(system.state_names) or others:
+                raise UsageError(
+                    f"diagnose: `{argument}` record {k} has columns {tuple(record.state_names)}, "
+                    f"{tuple(record.input_names)} but {type(system).__name__} has {system.state_names} and "
+                    f"{system.input_names}"
+                )
+            if len(record) < 3:
+                raise DataError(
+                    f"diagnose: `{argument}` record {k} has {len(record)} sample(s): too few for a derivative, "
+                    "let alone a fit window",
+                    path=record.source or None,
+                )
+            check_record_values(record, "diagnose", f"`{argument}` record {k}")
 
 
 def diagnose_problem(problem: Problem, mode: Refit | Known, train, validation, say) -> Report:

@@ -18,7 +18,7 @@ from typing import Literal
 import warnings
 
 from .._data._sampling import check_time_stamps
-from .._data._trajectory import Trajectory
+from .._data._trajectory import check_record_values, Trajectory
 from .._data._velocities import check_trajectory_velocities
 from .._errors import DataError, UsageError
 from .._model._extensions import Extended
@@ -50,9 +50,13 @@ MIN_RECORD_SAMPLES = 3  # the fewest samples a derivative is estimated from; few
 
 
 def _check_data(system, trajectories):
+    if not isinstance(system, AbstractSystem):
+        raise UsageError(f"identify: `system` must be a dynax system instance (e.g. `Acrobot()`), got {system!r:.80}")
     if not trajectories:
         raise UsageError("identify: no records given")
     for k, traj in enumerate(trajectories):
+        if not isinstance(traj, Trajectory):
+            raise UsageError(f"identify: record {k} must be a Trajectory, got {type(traj).__name__}")
         if len(traj) < MIN_RECORD_SAMPLES:
             raise DataError(
                 f"record {k} has {len(traj)} sample(s): too few for a fit (at least {MIN_RECORD_SAMPLES} "
@@ -75,6 +79,15 @@ def _check_data(system, trajectories):
                 f"({traj.state_names}, {traj.input_names}) but {type(system).__name__} has "
                 f"{system.state_names} and {system.input_names}"
             )
+        # Columns of the right count but other names (another system's record, columns in another order) would
+        # be fitted as this system's: refused by name before any fit.
+        others = [n for n in traj.input_names if n not in system.input_names]
+        if tuple(traj.state_names) != tuple(system.state_names) or others:
+            raise UsageError(
+                f"identify: trajectory {k} has columns {tuple(traj.state_names)}, {tuple(traj.input_names)} but "
+                f"{type(system).__name__} has {system.state_names} and {system.input_names}"
+            )
+        check_record_values(traj, "identify", f"record {k}")
         check_trajectory_velocities(traj)  # a velocity in other units than its position: refused, named
 
 
@@ -230,8 +243,9 @@ def identify(
     **Returns:** an `Identification`.
 
     **Raises:** `IdentifiabilityError` (a `DataError`) when the data do not determine all
-    parameters, naming the unidentified combinations; `DataError` when a record is too short;
-    `UsageError` for a system or method that does not fit.
+    parameters, naming the unidentified combinations; `DataError` when a record is too short or holds a
+    NaN or an infinity (naming the column and row); `UsageError` for a system or method that does not fit,
+    or a record of other columns or of integers.
     """
     warn_if_float32("identification")  # the float64 policy: say so, once, naming the switch
     if not isinstance(method, AbstractMethod):

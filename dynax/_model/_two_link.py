@@ -17,6 +17,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 import numpy as np
 
+from .._errors import UsageError
 from ._extensions._terms import CoulombFriction, RotorInertia
 from ._linear_in_parameters import AbstractLinearInParameters
 from ._system import AbstractManipulator
@@ -47,7 +48,7 @@ _PHYSICAL_BOUNDS = dict(
 
 
 def _check_physical(**values):
-    """Refuse physically impossible parameters by name: `ValueError` for concrete values (the usual
+    """Refuse physically impossible parameters by name: `UsageError` (a `ValueError`) for concrete values (the usual
     call), an `eqx.error_if` runtime error for traced ones (inside `jit`, `vmap` or `grad`)."""
     from jax.core import Tracer
 
@@ -56,6 +57,13 @@ def _check_physical(**values):
         if value is None:
             continue
         positive = _PHYSICAL_BOUNDS[name] == "positive"
+        kind = getattr(value, "dtype", None)
+        if (
+            isinstance(value, str | bool | np.bool_)
+            or (kind is None and not isinstance(value, int | float | np.number))
+            or (kind is not None and not (np.issubdtype(kind, np.floating) or np.issubdtype(kind, np.integer)))
+        ):  # NumPy would read "1" as 1.0, and the formulas then fail on the string itself
+            raise UsageError(f"from_physical: `{name}` must be a real number, got {value!r}")
         message = (
             f"`{name}` is not a physical value; it must be {'positive' if positive else 'non-negative'} and finite"
         )
@@ -69,7 +77,7 @@ def _check_physical(**values):
         bad = ~np.isfinite(v) | ((v <= 0) if positive else (v < 0))
         if bool(np.any(bad)):
             shown = value if isinstance(value, (int, float)) else (float(v) if v.ndim == 0 else v)
-            raise ValueError(
+            raise UsageError(
                 f"from_physical: `{name}` = {shown} is not a physical value; it must be "
                 f"{'positive' if positive else 'non-negative'} and finite"
             )
@@ -198,7 +206,7 @@ class AbstractTwoLink(AbstractManipulator, AbstractLinearInParameters):
         allowed = set(DRAKE_DEFAULTS) | {"I1", "I2"}
         unknown = set(physical) - allowed
         if unknown:
-            raise ValueError(
+            raise UsageError(
                 f"{cls.__name__}.from_physical: unknown parameter(s) {sorted(unknown)}; expected {sorted(allowed)}"
             )
         defaults = dict(DRAKE_DEFAULTS)

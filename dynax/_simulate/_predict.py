@@ -102,13 +102,36 @@ def stable_substeps(model, trajectory: Trajectory) -> int:
 
 
 def _check_steps(steps) -> tuple[int, ...]:
-    try:
-        steps = tuple(int(s) for s in steps)
-    except (TypeError, ValueError):
-        raise UsageError(f"predict_ahead: `steps` must be whole numbers of samples, got {steps!r}") from None
+    if isinstance(steps, str) or not hasattr(steps, "__iter__"):
+        raise UsageError(f"predict_ahead: `steps` must be a sequence of whole numbers of samples, got {steps!r}")
+    steps = tuple(steps)
+    # a fraction (2.5) would be truncated to another horizon, a bool read as 1: neither is a number of samples
+    if not all(isinstance(s, int | np.integer) and not isinstance(s, bool | np.bool_) for s in steps):
+        raise UsageError(f"predict_ahead: `steps` must be whole numbers of samples, got {steps!r}")
+    steps = tuple(int(s) for s in steps)
     if not steps or min(steps) < 1:
         raise UsageError(f"predict_ahead: `steps` must be one or more positive numbers of samples, got {steps}")
     return steps
+
+
+def _check_columns(model, trajectory: Trajectory) -> None:
+    """The record's states must be the model's (where the model names them): another system's record would be
+    rolled out as this model's states."""
+    if not isinstance(trajectory, Trajectory):
+        raise UsageError(f"predict_ahead: `trajectory` must be a Trajectory, got {type(trajectory).__name__}")
+    names = getattr(model, "state_names", None)
+    if names is not None and tuple(trajectory.state_names) != tuple(names):
+        raise UsageError(
+            f"predict_ahead: the trajectory's states {tuple(trajectory.state_names)} are not "
+            f"{type(model).__name__}'s {tuple(names)}"
+        )
+    n_inputs = getattr(model, "n_inputs", None)
+    optional = len(getattr(model, "optional_inputs", ()))  # inputs a record may leave out (a quadrotor's vbat)
+    if n_inputs is not None and not n_inputs - optional <= trajectory.us.shape[1] <= n_inputs:
+        raise UsageError(
+            f"predict_ahead: the trajectory has {trajectory.us.shape[1]} inputs {tuple(trajectory.input_names)} but "
+            f"{type(model).__name__} has {n_inputs}"
+        )
 
 
 def _check_uniform(trajectory: Trajectory, caller: str) -> None:
@@ -142,6 +165,7 @@ def predict_ahead(
     (the model's arrays are cast to it: `trajectory.astype(jnp.float32)` predicts in float32).
     """
     steps = _check_steps(steps)
+    _check_columns(model, trajectory)
     _check_uniform(trajectory, "predict_ahead")
     n = len(trajectory) - max(steps)
     if n < 1:

@@ -123,11 +123,19 @@ def _invalid_input(x0, ts, us):
     return ~finite | ~jnp.all(jnp.diff(ts) > 0)
 
 
+def _check_real(name, arr):
+    # a complex array would lose its imaginary part in the cast to the rollout's dtype, silently
+    if jnp.issubdtype(arr.dtype, jnp.complexfloating):
+        raise UsageError(f"simulate: `{name}` must be real, got dtype {arr.dtype}")
+
+
 def _check_arguments(system, x0, ts, us):
     if not isinstance(system, AbstractSystem):
         raise UsageError(f"simulate: `system` must be a dynax system (AbstractSystem), got {type(system).__name__}")
     x0 = jnp.asarray(x0)
     ts = jnp.asarray(ts)
+    _check_real("x0", x0)
+    _check_real("ts", ts)
     if ts.ndim != 1 or ts.shape[0] < 2:
         raise UsageError(f"simulate: `ts` must be a 1-d array of at least 2 sample times, got shape {ts.shape}")
     if x0.ndim != 1:
@@ -150,6 +158,7 @@ def _check_arguments(system, x0, ts, us):
     if us is None:
         us = jnp.zeros((ts.shape[0], system.n_inputs), dtype)
     us = jnp.asarray(us)
+    _check_real("us", us)
     if us.ndim == 1 and system.n_inputs == 1:
         us = us[:, None]
     if us.ndim != 2 or us.shape[1] != system.n_inputs:
