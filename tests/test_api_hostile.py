@@ -179,6 +179,31 @@ FIXED = [
         r"`system` must be a system's name",
         {},
     ),
+    # simulation_error: a horizon of zero, below zero or not a number was scored as one sample; none or a bare
+    # number ended in a numpy or JAX error from inside.
+    *[
+        (
+            f"simulation-error-horizons-{name}",
+            (lambda h: lambda: dynax.simulation_error(dynax.Acrobot(), _record(), h))(horizons),
+            UsageError,
+            r"`horizons_s` must be a non-empty sequence of positive, finite seconds",
+            {},
+        )
+        for name, horizons in (
+            ("negative", (-0.1,)),
+            ("zero", (0.0,)),
+            ("nan", (float("nan"),)),
+            ("empty", ()),
+            ("scalar", 0.5),
+        )
+    ],
+    (
+        "simulation-error-stride-zero",
+        lambda: dynax.simulation_error(dynax.Acrobot(), _record(), (0.1,), stride=0),
+        UsageError,
+        r"`stride` must be a positive whole number",
+        {},
+    ),
 ]
 
 BEHAVED = [

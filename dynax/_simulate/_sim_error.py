@@ -8,7 +8,7 @@ import numpy as np
 
 from .._data._trajectory import Trajectory
 from .._distributed import global_array, leading_sharding, replicate
-from .._errors import DataError
+from .._errors import DataError, UsageError
 from .._model._system import AbstractSystem
 from ._simulate import FixedGrid, simulate
 from ._solvers import RK4
@@ -462,11 +462,21 @@ def _starts(system, trajectory, horizons_s, stride, max_windows):
     """`simulation_error`'s windows: `(horizons, steps, n_starts, stride)`, the record checked against them."""
     names = trajectory.state_names
     if tuple(system.state_names[: len(names)]) != tuple(names):
-        raise ValueError(
+        raise UsageError(
             f"simulation_error: the trajectory's states {names} are not the first states of "
             f"{type(system).__name__} {system.state_names}"
         )
-    horizons = np.asarray(horizons_s, dtype=float)
+    try:
+        horizons = np.asarray(horizons_s, dtype=float)
+    except (TypeError, ValueError):
+        horizons = np.asarray([np.nan])
+    if horizons.ndim != 1 or horizons.size == 0 or not np.all(np.isfinite(horizons)) or np.any(horizons <= 0):
+        raise UsageError(
+            "simulation_error: `horizons_s` must be a non-empty sequence of positive, finite seconds, "
+            f"got {horizons_s!r}"
+        )
+    if stride is not None and (isinstance(stride, bool) or not isinstance(stride, (int, np.integer)) or stride < 1):
+        raise UsageError(f"simulation_error: `stride` must be a positive whole number of samples, got {stride!r}")
     dt = trajectory.dt
     steps = np.maximum(np.round(horizons / dt).astype(int), 1)
     n_steps = int(steps.max())
