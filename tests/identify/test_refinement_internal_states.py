@@ -32,7 +32,8 @@ def test_the_refinements_wrappers_start_the_memory_of_rest_along_the_record():
     names = parameter_names(model, "coulomb")
     start = jnp.asarray(parameter_vector(model, "coulomb"))
     parametrisation = consistent_parametrisation(model, names, jnp.maximum(jnp.abs(start), 1e-3))
-    consistent = ConsistentSystem(parametrisation.phi(start), model, parametrisation, names)  # pyright: ignore[reportCallIssue]
+    phi = parametrisation.phi(start)
+    consistent = ConsistentSystem(phi, model, parametrisation, names)  # pyright: ignore[reportCallIssue]
     timed = TimedInputs(consistent, jnp.zeros((), jnp.result_type(consistent.phi)))  # pyright: ignore[reportCallIssue]
     # Half a second of history: the elbow swings, then rests for its last 50 ms (the memory builds to about
     # 1 - exp(-0.05 / 0.1) = 39 % of its level; `initial_state` of the resting end would say 100 %).
