@@ -349,6 +349,17 @@ def test_model_file_round_trip(fitted, tmp_path):
     path.write_text(json.dumps(obj))
     with pytest.raises(dynax.DataError, match="model.json"):
         dynax.load_model(path)
+    obj["weights"][3][0] = 0.0
+    obj["mask"][2][1] = 7  # not a mask entry: an edited file, not read as True
+    path.write_text(json.dumps(obj))
+    with pytest.raises(dynax.DataError, match=r"mask \[2\]\[1\] is 7"):
+        dynax.load_model(path)
+    # A folder that does not exist: refused naming the user's path and the folder (was a FileNotFoundError naming a
+    # temporary file beside it), and nothing is written.
+    missing = tmp_path / "no-such-folder" / "model.json"
+    with pytest.raises(dynax.UsageError, match="no-such-folder.*does not exist"):
+        dynax.save_model(fitted.model, missing)
+    assert not missing.parent.exists()
 
 
 def test_joined_flights_give_no_window_across_a_break():

@@ -19,11 +19,16 @@ def save_model(model: Quadrotor, path: str | os.PathLike, **info) -> None:
         raise UsageError(f"save_model: expected a Quadrotor, got {type(model).__name__}")
     path = str(path)
     text = json.dumps(quadrotor_to_json(model, **info), indent=2, allow_nan=False)
-    tmp = os.path.join(os.path.dirname(os.path.abspath(path)), f".{os.path.basename(path)}.tmp")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise UsageError(f"save_model: cannot write {path}: the folder {folder} does not exist")
+    tmp = os.path.join(folder, f".{os.path.basename(path)}.tmp")
     try:
         with open(tmp, "w", encoding="utf-8") as f:
             f.write(text + "\n")
         os.replace(tmp, path)
+    except OSError as e:  # no permission, a name over the file system's limit, a full disk: the user's path named
+        raise UsageError(f"save_model: cannot write {path} ({e.strerror or e})") from None
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)

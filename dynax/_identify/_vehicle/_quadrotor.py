@@ -104,6 +104,12 @@ def quadrotor_from_json(obj: dict, path=None) -> Quadrotor:
         unknown = [f for f in features if not isinstance(f, str) or f not in FEATURES]
         if unknown:
             raise DataError(f"unknown features {unknown}", path=path, column="features")
+        bad = [(i, j) for i, row in enumerate(obj["mask"]) for j, v in enumerate(row) if v not in (True, False)]
+        if bad:  # a mask is written as true/false (or 1/0): anything else is an edited or foreign file, not a mask
+            i, j = bad[0]
+            raise DataError(
+                f"mask [{i}][{j}] is {obj['mask'][i][j]!r}: a mask entry is true or false", path=path, column="mask"
+            )
         mask = tuple(tuple(bool(v) for v in row) for row in obj["mask"])
         weights = np.asarray(obj["weights"], float)
         if weights.shape != (6, len(features)) or len(mask) != 6 or any(len(r) != len(features) for r in mask):
