@@ -477,6 +477,7 @@ def _starts(system, trajectory, horizons_s, stride, max_windows):
         )
     if stride is not None and (isinstance(stride, bool) or not isinstance(stride, (int, np.integer)) or stride < 1):
         raise UsageError(f"simulation_error: `stride` must be a positive whole number of samples, got {stride!r}")
+    stride = None if stride is None else int(stride)
     dt = trajectory.dt
     steps = np.maximum(np.round(horizons / dt).astype(int), 1)
     n_steps = int(steps.max())
