@@ -256,6 +256,14 @@ BEHAVED = [
         r"`x0`\[1\] is nan",
         {},
     ),
+    (
+        # a model with an internal state (a lag): an IndexError from inside before
+        "predict-internal-states",
+        lambda: dynax.predict_ahead(dynax.Extended(dynax.Acrobot(), (dynax.InputLag(0, 0.03),)), _record(), (1,)),
+        UsageError,
+        r"internal states \('tau2_lag',\).*simulation_error",
+        {},
+    ),
     ("predict-zero", _predict(steps=(0,)), UsageError, r"positive numbers of samples", {}),
     ("predict-negative", _predict(steps=(-3,)), UsageError, r"positive numbers of samples", {}),
     ("predict-too-long", _predict(steps=(500,)), UsageError, r"too few for 500 steps ahead", {}),

@@ -120,7 +120,14 @@ def _check_columns(model, trajectory: Trajectory) -> None:
     if not isinstance(trajectory, Trajectory):
         raise UsageError(f"predict_ahead: `trajectory` must be a Trajectory, got {type(trajectory).__name__}")
     names = getattr(model, "state_names", None)
-    if names is not None and tuple(trajectory.state_names) != tuple(names):
+    measured = tuple(trajectory.state_names)
+    if names is not None and len(names) > len(measured) and tuple(names[: len(measured)]) == measured:
+        raise UsageError(
+            f"predict_ahead: {type(model).__name__} has internal states {tuple(names[len(measured) :])} that a "
+            "record does not hold, and predict_ahead starts every prediction from a measured sample; score such a "
+            "model with `dynax.simulation_error`, which starts them along the record"
+        )
+    if names is not None and measured != tuple(names):
         raise UsageError(
             f"predict_ahead: the trajectory's states {tuple(trajectory.state_names)} are not "
             f"{type(model).__name__}'s {tuple(names)}"
