@@ -71,7 +71,7 @@ from .._fit import AbstractStatistics, Parameters, Solution
 from .._model._extensions import Extended
 from .._model._system import AbstractSystem
 from .._simulate import complete_state, FixedGrid, simulate
-from .._simulate._sim_error import HISTORY_GRID, history_steps
+from .._simulate._sim_error import HISTORY_GRID, history_steps, nominal_states
 from ._consistency import consistent_parametrisation, ConsistentParametrisation
 from ._regressors import parameter_vector, split_terms, with_parameters
 from ._simulation_fit import (
@@ -137,7 +137,7 @@ class ConsistentSystem(AbstractSystem):
     @property
     def nominal_n_states(self) -> int:
         """The measured states; the rest are the model's internal states."""
-        return _nominal_n_states(self.template)
+        return nominal_states(self.template)
 
 
 INPUT_REACH = 3  # samples of the fit's grid either side that the input timing may reach
@@ -192,7 +192,7 @@ class TimedInputs(AbstractSystem):
     @property
     def nominal_n_states(self) -> int:
         """The measured states; the rest are `system`'s internal states."""
-        return _nominal_n_states(self.system)
+        return nominal_states(self.system)
 
     def initial_state(self, x0, u0):
         """`system`'s full state from a measured one, under the input recorded at the start (the stencil's
@@ -200,14 +200,6 @@ class TimedInputs(AbstractSystem):
         n = u0.shape[-1] // (2 * self.reach + 1)
         centre = u0[..., self.reach * n : (self.reach + 1) * n]
         return self.system.initial_state(x0, centre)  # pyright: ignore[reportAttributeAccessIssue] (where it has one)
-
-
-def _nominal_n_states(system) -> int:
-    """The measured states of `system`: a wrapper's `nominal_n_states`, an `Extended`'s system's, else all."""
-    n = getattr(system, "nominal_n_states", None)
-    if n is not None:
-        return n
-    return system.system.n_states if isinstance(system, Extended) else system.n_states
 
 
 def _neighbour_names(names, reach):

@@ -188,10 +188,14 @@ class SimulationError(eqx.Module):
 
 
 def nominal_states(model) -> int:
-    """How many of a model's states are nominal (measured), the rest internal: an `Extended`'s system's, or what a
-    wrapper of one names (`nominal_n_states`: `refine_by_simulation`'s `ConsistentSystem` and `TimedInputs`)."""
+    """How many of a model's states are nominal (measured), the rest internal: what a wrapper names
+    (`nominal_n_states`: `refine_by_simulation`'s `ConsistentSystem` and `TimedInputs`), an `Extended`'s system's,
+    else all of a plain system's."""
     n = getattr(model, "nominal_n_states", None)
-    return model.system.n_states if n is None else n
+    if n is not None:
+        return n
+    inner = getattr(model, "system", None)
+    return model.n_states if inner is None else inner.n_states
 
 
 class InputStates(AbstractSystem):
