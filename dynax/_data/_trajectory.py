@@ -137,6 +137,20 @@ class Trajectory(eqx.Module):
         )
 
 
+def check_record_columns(record: Trajectory, system, caller: str, label: str) -> None:
+    """Refuse a record whose columns are not `system`'s: state names other than the system's, in its order, or an
+    input the system does not have (a record may leave out an optional input, as a quadrotor's `vbat`). Another
+    system's record, or columns in another order, would otherwise be fitted as this system's. `system` is read
+    for `state_names` and `input_names` only; `label` names the record in the message.
+    """
+    others = [n for n in record.input_names if n not in system.input_names]
+    if tuple(record.state_names) != tuple(system.state_names) or others:
+        raise UsageError(
+            f"{caller}: {label} has columns {tuple(record.state_names)}, {tuple(record.input_names)} but "
+            f"{type(system).__name__} has {tuple(system.state_names)} and {tuple(system.input_names)}"
+        )
+
+
 def check_record_values(record: Trajectory, caller: str, label: str) -> None:
     """Refuse a record a fit cannot read: states or inputs that are not floating point, or a NaN or an infinity
     in them (named by column, row and time). On the host, with NumPy: nothing compiled, and a traced record

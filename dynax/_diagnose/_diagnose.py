@@ -19,7 +19,7 @@ import dataclasses
 import equinox as eqx
 import numpy as np
 
-from .._data._trajectory import check_record_values, Trajectory
+from .._data._trajectory import check_record_columns, check_record_values, Trajectory
 from .._errors import DataError, UsageError
 from .._model._extensions import AbstractTerm, Extended
 from .._model._quadrotor import Quadrotor
@@ -413,13 +413,7 @@ def _check_record_values(system, train, validation):
         for k, record in enumerate(listed):
             if not isinstance(record, Trajectory):
                 raise UsageError(f"diagnose: `{argument}` record {k} must be a Trajectory, got {type(record).__name__}")
-            others = [n for n in record.input_names if n not in system.input_names]
-            if tuple(record.state_names) != tuple(system.state_names) or others:
-                raise UsageError(
-                    f"diagnose: `{argument}` record {k} has columns {tuple(record.state_names)}, "
-                    f"{tuple(record.input_names)} but {type(system).__name__} has {system.state_names} and "
-                    f"{system.input_names}"
-                )
+            check_record_columns(record, system, "diagnose", f"`{argument}` record {k}")
             if len(record) < 3:
                 raise DataError(
                     f"diagnose: `{argument}` record {k} has {len(record)} sample(s): too few for a derivative, "

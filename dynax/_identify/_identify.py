@@ -18,7 +18,7 @@ from typing import Literal
 import warnings
 
 from .._data._sampling import check_time_stamps
-from .._data._trajectory import check_record_values, Trajectory
+from .._data._trajectory import check_record_columns, check_record_values, Trajectory
 from .._data._velocities import check_trajectory_velocities
 from .._errors import DataError, UsageError
 from .._model._extensions import Extended
@@ -79,14 +79,7 @@ def _check_data(system, trajectories):
                 f"({traj.state_names}, {traj.input_names}) but {type(system).__name__} has "
                 f"{system.state_names} and {system.input_names}"
             )
-        # Columns of the right count but other names (another system's record, columns in another order) would
-        # be fitted as this system's: refused by name before any fit.
-        others = [n for n in traj.input_names if n not in system.input_names]
-        if tuple(traj.state_names) != tuple(system.state_names) or others:
-            raise UsageError(
-                f"identify: trajectory {k} has columns {tuple(traj.state_names)}, {tuple(traj.input_names)} but "
-                f"{type(system).__name__} has {system.state_names} and {system.input_names}"
-            )
+        check_record_columns(traj, system, "identify", f"trajectory {k}")
         check_record_values(traj, "identify", f"record {k}")
         check_trajectory_velocities(traj)  # a velocity in other units than its position: refused, named
 

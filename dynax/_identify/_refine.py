@@ -52,6 +52,7 @@ has a floor of 1 in the residual's unit (the noise level) and of a tenth of the 
 so that no record a short or easy one fits almost exactly takes over the fit.
 """
 
+import abc
 import contextlib
 import contextvars
 import warnings
@@ -90,7 +91,31 @@ SETTLED = 0.1  # weights settled: no record's weight changed by more than 10 %
 SAMPLES_PER_PERIOD = 40.0  # grid of the fit: samples per period of the signal band's edge
 
 
-class ConsistentSystem(AbstractSystem):
+class AbstractWrapper(AbstractSystem):
+    """A system that stands for another one (`wrapped`: its terms, whatever its parameter values) during a fit.
+
+    It passes on what `complete_state` reads to start the wrapped model's internal states along the record
+    (`state_terms`, `nominal_n_states`; each wrapper gives `applied_input` under its own inputs), so a fit through
+    the wrapper starts them as `fit_simulation_error` does for the model itself (`history_steps`).
+    """
+
+    @property
+    @abc.abstractmethod
+    def wrapped(self) -> AbstractSystem:
+        """The model the wrapper stands for (its structure; parameter values may be the wrapper's to set)."""
+
+    @property
+    def state_terms(self) -> tuple:
+        """The wrapped model's terms with states of their own besides the input terms' (`Extended.state_terms`)."""
+        return getattr(self.wrapped, "state_terms", ())
+
+    @property
+    def nominal_n_states(self) -> int:
+        """The measured states; the rest are the wrapped model's internal states."""
+        return nominal_states(self.wrapped)
+
+
+class ConsistentSystem(AbstractWrapper):
     r"""A system whose parameters are a point $\phi$ of a `ConsistentParametrisation`.
 
     Its only inexact leaf is `phi`; `model` is the system it stands for, with
@@ -130,20 +155,14 @@ class ConsistentSystem(AbstractSystem):
         return self.model.applied_input(u, z)  # pyright: ignore[reportAttributeAccessIssue] (called where it has one)
 
     @property
-    def state_terms(self) -> tuple:
-        """The model's terms with states of their own besides the input terms' (`Extended.state_terms`)."""
-        return getattr(self.template, "state_terms", ())
-
-    @property
-    def nominal_n_states(self) -> int:
-        """The measured states; the rest are the model's internal states."""
-        return nominal_states(self.template)
+    def wrapped(self) -> AbstractSystem:
+        return self.template
 
 
 INPUT_REACH = 3  # samples of the fit's grid either side that the input timing may reach
 
 
-class TimedInputs(AbstractSystem):
+class TimedInputs(AbstractWrapper):
     r"""`system` driven by its input read `alpha` steps of the grid later than each interval's sample.
 
     Its inputs are, per sample $k$, the samples $u_{k-R}, \dots, u_{k+R}$ of `system`'s inputs
@@ -185,14 +204,8 @@ class TimedInputs(AbstractSystem):
         return self.system.applied_input(self._timed(u), z)  # pyright: ignore[reportAttributeAccessIssue]
 
     @property
-    def state_terms(self) -> tuple:
-        """`system`'s terms with states of their own besides the input terms' (`Extended.state_terms`)."""
-        return getattr(self.system, "state_terms", ())
-
-    @property
-    def nominal_n_states(self) -> int:
-        """The measured states; the rest are `system`'s internal states."""
-        return nominal_states(self.system)
+    def wrapped(self) -> AbstractSystem:
+        return self.system
 
     def initial_state(self, x0, u0):
         """`system`'s full state from a measured one, under the input recorded at the start (the stencil's
