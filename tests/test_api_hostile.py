@@ -39,6 +39,20 @@ def _record(n=N, edit=None, **fields):
     return Trajectory(**args)
 
 
+def _flight(n=400):
+    """A quadrotor record in hover with small sines on every state and motor (NumPy, no dynamics: the refusals
+    come before any fit reads it as a flight)."""
+    ts = np.arange(n) * 0.01
+    wave = lambda k: 0.01 * np.sin((1 + 0.37 * k) * 3 * ts + k)  # noqa: E731
+    xs = np.stack([wave(k) for k in range(13)], axis=1)
+    xs[:, 2] += 1.0
+    xs[:, 3:7] = np.array([1.0, 0, 0, 0]) + xs[:, 3:7]
+    xs[:, 3:7] /= np.linalg.norm(xs[:, 3:7], axis=1, keepdims=True)
+    us = 0.6 + np.stack([wave(13 + k) for k in range(4)], axis=1)
+    states = ("x", "y", "z", "qw", "qx", "qy", "qz", "vx", "vy", "vz", "p", "q", "r")
+    return Trajectory(ts, xs, us, states, ("m1", "m2", "m3", "m4"), "quadrotor")
+
+
 def _nan_at_q2_row_101(ts, xs, us):
     xs[100, 1] = np.nan
 
@@ -197,6 +211,25 @@ FIXED = [
             ("scalar", 0.5),
         )
     ],
+    # a delay or time constant below zero (an input acting before its command, an unstable filter) or NaN was
+    # accepted and simulated; a term's or `Extended`'s refusal was a ValueError (exit 1 on the command line)
+    *[
+        (f"{name}-{label}", (lambda make, v: lambda: make(v))(make, value), UsageError, pattern, {})
+        for name, make, pattern in (
+            ("input-delay", lambda v: dynax.InputDelay(0, v), r"InputDelay: `delay` must be a time >= 0"),
+            ("input-lag", lambda v: dynax.InputLag(0, v), r"InputLag: `time_constant` must be a time >= 0"),
+            ("motor-delay", lambda v: dynax.MotorDelay(delay=v), r"MotorDelay: `delay` must be a time >= 0"),
+        )
+        for label, value in (("negative", -0.02), ("nan", float("nan")))
+    ],
+    # a flight of 8 samples gave 7 one-step equations per axis for up to 9 weights an axis: fitted without a word
+    (
+        "fit-quadrotor-eight-samples",
+        lambda: dynax.fit_quadrotor(dynax.Quadrotor.from_flights("nominal", [_flight()]), _flight(8), progress=False),
+        DataError,
+        r"7 one-step equation\(s\) per body axis, fewer than the 9 weights the model fits on `p`",
+        {},
+    ),
     (
         "simulation-error-stride-zero",
         lambda: dynax.simulation_error(dynax.Acrobot(), _record(), (0.1,), stride=0),
@@ -271,22 +304,22 @@ BEHAVED = [
     (
         "coulomb-joint-out-of-range",
         lambda: dynax.Extended(dynax.Acrobot(), (dynax.CoulombFriction(5, 0.1),)),
-        ValueError,
+        UsageError,
         r"`joint=5` but Acrobot has 2 joint",
         {},
     ),
-    ("coulomb-joint-negative", lambda: dynax.CoulombFriction(-1, 0.1), ValueError, r"non-negative int index", {}),
+    ("coulomb-joint-negative", lambda: dynax.CoulombFriction(-1, 0.1), UsageError, r"non-negative int index", {}),
     (
         "delay-input-out-of-range",
         lambda: dynax.Extended(dynax.Acrobot(), (dynax.InputDelay(3, 0.01),)),
-        ValueError,
+        UsageError,
         r"`input=3` but Acrobot has inputs",
         {},
     ),
     (
         "extended-terms-not-tuple",
         lambda: dynax.Extended(dynax.Acrobot(), dynax.CoulombFriction(1, 0.1)),  # pyright: ignore[reportArgumentType]
-        ValueError,
+        UsageError,
         r"`terms` must be a tuple",
         {},
     ),

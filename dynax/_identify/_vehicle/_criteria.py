@@ -54,9 +54,17 @@ import numpy as np
 import optimistix as optx
 
 from ..._data._trajectory import Trajectory
-from ..._errors import UsageError
+from ..._errors import DataError, UsageError
 from ..._fit import AbstractStatistics, fit_minimise, History, monitor, notify, OptaxLBFGS, Parameters, Solution
-from ..._model._helicopter import ANGULAR_RATE, BODY, Helicopter, QUATERNION, quaternion_to_rotation, VELOCITY
+from ..._model._helicopter import (
+    ANGULAR_RATE,
+    BODY,
+    BODY_AXES,
+    Helicopter,
+    QUATERNION,
+    quaternion_to_rotation,
+    VELOCITY,
+)
 from ..._precision import ENABLE_X64
 from ..._progress import ProgressBar
 from .._method import AbstractMethod, FitSettings, IdentifyJob, Prepared
@@ -414,6 +422,20 @@ def _check_solvable(ata, ridge, theta, where: str) -> None:
     )
 
 
+def _check_equations(system, windows: int, where: str, path) -> None:
+    """Refuse a record that gives fewer one-step equations on a body axis than the weights the model fits there
+    (its mask's row): the ridge, not the data, would set the rest, and the weights would be returned as if fitted."""
+    free = np.asarray(system.body_model.mask, bool).sum(axis=1)
+    axis = int(np.argmax(free))
+    if windows < free[axis]:
+        raise DataError(
+            f"{where}: the record gives {windows} one-step equation(s) per body axis, fewer than the {int(free[axis])} "
+            f"weights the model fits on `{BODY_AXES[axis]}`: give a longer flight (or fit fewer weights: the model's "
+            "mask)",
+            path=path or None,
+        )
+
+
 def window_starts(trajectory, n_steps, stride, breaks=None):
     return jnp.asarray(valid_starts(len(trajectory), n_steps, stride, breaks))
 
@@ -447,6 +469,7 @@ def fit_one_step(
     t0 = time.perf_counter()
     w = state_weights(weights, trajectory.xs.dtype)
     starts = window_starts(trajectory, 1, 1, breaks)
+    _check_equations(system, int(starts.shape[0]), "fit_one_step", trajectory.source)
     ata, atb, _ = normal_equations(system, trajectory, starts, 1, w, False, 1024)
     theta = ridge_solve(ata, atb, criterion.ridge)
     _check_solvable(ata, criterion.ridge, theta, "fit_one_step")

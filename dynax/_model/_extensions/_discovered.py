@@ -17,6 +17,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from ..._errors import UsageError
 from ._terms import AbstractJointTerm
 
 # kind -> (arity over coordinates / inputs, what it reads)
@@ -61,9 +62,9 @@ class Feature(eqx.Module):
 
     def __check_init__(self):
         if self.kind not in FEATURE_KINDS:
-            raise ValueError(f"Feature: `kind` must be one of {FEATURE_KINDS}, got {self.kind!r}")
+            raise UsageError(f"Feature: `kind` must be one of {FEATURE_KINDS}, got {self.kind!r}")
         if self.kind.startswith("periodic") and not self.period > 0:
-            raise ValueError(f"Feature: a periodic feature needs a positive `period`, got {self.period}")
+            raise UsageError(f"Feature: a periodic feature needs a positive `period`, got {self.period}")
 
     def __call__(
         self, q: Float[Array, " n_joints"], dq: Float[Array, " n_joints"], a: Float[Array, " n_inputs"]
@@ -138,9 +139,9 @@ class Discovered(AbstractJointTerm):
     def __check_init__(self):
         super().__check_init__()
         if not self.features or not all(isinstance(f, Feature) for f in self.features):
-            raise ValueError("Discovered: `features` must be a non-empty tuple of Feature")
+            raise UsageError("Discovered: `features` must be a non-empty tuple of Feature")
         if self.coefficients.shape != (len(self.features),):
-            raise ValueError(
+            raise UsageError(
                 f"Discovered: `coefficients` must have shape ({len(self.features)},), got {self.coefficients.shape}"
             )
 

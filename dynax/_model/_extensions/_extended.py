@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from ..._errors import UsageError
 from .._system import AbstractSystem
 from ._inputs import AbstractInputTerm
 from ._terms import AbstractJointTerm, AbstractTerm
@@ -40,23 +41,23 @@ class Extended(AbstractSystem):
 
     def __check_init__(self):
         if not isinstance(self.system, AbstractSystem):
-            raise ValueError(f"Extended: `system` must be a dynax system, got {type(self.system).__name__}")
+            raise UsageError(f"Extended: `system` must be a dynax system, got {type(self.system).__name__}")
         if isinstance(self.system, Extended):
-            raise ValueError("Extended: `system` is already Extended; pass all terms in one tuple")
+            raise UsageError("Extended: `system` is already Extended; pass all terms in one tuple")
         if not isinstance(self.terms, tuple) or not all(isinstance(t, AbstractTerm) for t in self.terms):
-            raise ValueError("Extended: `terms` must be a tuple of model extension terms (e.g. CoulombFriction)")
+            raise UsageError("Extended: `terms` must be a tuple of model extension terms (e.g. CoulombFriction)")
         labels = []
         for term in self.terms:
             # Each term knows what it acts on (a manipulator's joints, a vehicle's body axes, an input).
             try:
                 term.check_system(self.system)
             except ValueError as e:
-                raise ValueError(f"Extended: {e}") from None
+                raise UsageError(f"Extended: {e}") from None
             # `label` also checks the joint / input index; wind components share `wind@world`
             labels.append(f"{term.label(self.system)} ({term.parameter_name(self.system)})")
         duplicates = sorted({label for label in labels if labels.count(label) > 1})
         if duplicates:
-            raise ValueError(f"Extended: the same term is given twice: {duplicates}")
+            raise UsageError(f"Extended: the same term is given twice: {duplicates}")
 
     @property
     def state_names(self) -> tuple[str, ...]:

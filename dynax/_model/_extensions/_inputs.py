@@ -6,11 +6,22 @@ from typing import ClassVar
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
+import numpy as np
 
+from ..._errors import UsageError
 from ._terms import AbstractTerm, float_scalar
 
 # Time constants and delays at or below this are treated as zero (the input passes through).
 _TINY_TIME = 1e-4
+
+
+def _time(term: str, name: str, value: ArrayLike) -> Array:
+    """A time constant or dead time given as a number: refused unless it is a time >= 0 (a negative delay would
+    act before the command, a negative time constant is an unstable filter; NaN is no time). Arrays and traced
+    values pass unchecked (a fit sets them)."""
+    if isinstance(value, (int, float, np.integer, np.floating)) and not value >= 0.0:
+        raise UsageError(f"{term}: `{name}` must be a time >= 0 [s], got {value}")
+    return float_scalar(value)
 
 
 class AbstractInputTerm(AbstractTerm):
@@ -28,7 +39,7 @@ class AbstractInputTerm(AbstractTerm):
 
     def __check_init__(self):
         if not isinstance(self.input, int) or self.input < 0:
-            raise ValueError(f"{type(self).__name__}: `input` must be a non-negative int index, got {self.input!r}")
+            raise UsageError(f"{type(self).__name__}: `input` must be a non-negative int index, got {self.input!r}")
 
     @property
     def inputs(self) -> tuple[int, ...]:
@@ -37,7 +48,7 @@ class AbstractInputTerm(AbstractTerm):
 
     def where(self, system) -> str:
         if self.input >= system.n_inputs:
-            raise ValueError(
+            raise UsageError(
                 f"{type(self).__name__}: `input={self.input}` but {type(system).__name__} has inputs "
                 f"{system.input_names}"
             )
@@ -134,7 +145,7 @@ class InputLag(AbstractInputTerm):
 
     def __init__(self, input: int, time_constant: ArrayLike = 0.0):
         self.input = input
-        self.coefficient = float_scalar(time_constant)
+        self.coefficient = _time("InputLag", "time_constant", time_constant)
 
     def applied(self, u, z):
         return jnp.where(self.coefficient > _TINY_TIME, z[0], u)
@@ -227,7 +238,7 @@ class InputDelay(_AbstractPadeDelay):
 
     def __init__(self, input: int, delay: ArrayLike = 0.0):
         self.input = input
-        self.coefficient = float_scalar(delay)
+        self.coefficient = _time("InputDelay", "delay", delay)
 
 
 class MotorDelay(_AbstractPadeDelay):
@@ -254,14 +265,14 @@ class MotorDelay(_AbstractPadeDelay):
     def __init__(self, inputs: tuple[int, ...] = (0, 1, 2, 3), delay: ArrayLike = 0.0):
         inputs = tuple(inputs)
         if not inputs or len(set(inputs)) != len(inputs):
-            raise ValueError(f"MotorDelay: `inputs` must be distinct input indices, got {inputs!r}")
+            raise UsageError(f"MotorDelay: `inputs` must be distinct input indices, got {inputs!r}")
         self.input = inputs[0]
         self.motors = inputs
-        self.coefficient = float_scalar(delay)
+        self.coefficient = _time("MotorDelay", "delay", delay)
 
     def __check_init__(self):
         if not all(isinstance(i, int) and i >= 0 for i in self.motors):
-            raise ValueError(f"MotorDelay: `inputs` must be non-negative int indices, got {self.motors!r}")
+            raise UsageError(f"MotorDelay: `inputs` must be non-negative int indices, got {self.motors!r}")
 
     @property
     def inputs(self) -> tuple[int, ...]:
@@ -269,7 +280,7 @@ class MotorDelay(_AbstractPadeDelay):
 
     def where(self, system) -> str:
         if max(self.motors) >= system.n_inputs:
-            raise ValueError(
+            raise UsageError(
                 f"MotorDelay: `inputs={self.motors}` but {type(system).__name__} has inputs {system.input_names}"
             )
         return "motors"

@@ -73,6 +73,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from ..._errors import UsageError
 from .._system import solve_spd
 from ._terms import AbstractJointTerm, CoulombFriction, float_scalar
 
@@ -163,7 +164,7 @@ class Stiction(AbstractJointTerm):
             ("slip_distance", slip_distance),
         ):
             if isinstance(value, (int, float)) and not value > 0.0:
-                raise ValueError(f"Stiction: `{name}` must be positive, got {value}")
+                raise UsageError(f"Stiction: `{name}` must be positive, got {value}")
         self.joint = joint
         self.coefficient = float_scalar(fs)
         self.stribeck_velocity = float_scalar(stribeck_velocity)
@@ -195,7 +196,7 @@ class Stiction(AbstractJointTerm):
         r"""$\dot m = w\,(1 - m) / T_d - (1 - w)\,|\dot q|\,m / (d_s + |\dot q|\,\tau_h)$: built in the band over
         the dwell time, erased over the slip distance in motion, and no faster than the hold time."""
         if self.dwell_time is None:
-            raise ValueError("Stiction.memory_derivative: the term has no `dwell_time`")
+            raise UsageError("Stiction.memory_derivative: the term has no `dwell_time`")
         w = self.weight(dq)
         speed = jnp.abs(dq)
         wear = speed / (self.slip_distance + speed * self.hold_time)

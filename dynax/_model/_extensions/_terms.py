@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from ..._errors import UsageError
 from .._system import solve_spd
 
 
@@ -131,11 +132,11 @@ class AbstractJointTerm(AbstractTerm):
 
     def __check_init__(self):
         if not isinstance(self.joint, int) or self.joint < 0:
-            raise ValueError(f"{type(self).__name__}: `joint` must be a non-negative int index, got {self.joint!r}")
+            raise UsageError(f"{type(self).__name__}: `joint` must be a non-negative int index, got {self.joint!r}")
 
     def check_system(self, system) -> None:
         if not system.joint_names:
-            raise ValueError(
+            raise UsageError(
                 f"{type(self).__name__} acts on a joint, but {type(system).__name__} is not a manipulator "
                 "(it has no mass matrix and bias force to extend)"
             )
@@ -144,7 +145,7 @@ class AbstractJointTerm(AbstractTerm):
         self.check_system(system)
         joints = system.joint_names
         if self.joint >= len(joints):
-            raise ValueError(
+            raise UsageError(
                 f"{type(self).__name__}: `joint={self.joint}` but {type(system).__name__} has {len(joints)} joint(s)"
             )
         return joints[self.joint]

@@ -30,6 +30,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from ..._errors import UsageError
 from .._helicopter import (
     BODY,
     Helicopter,
@@ -55,11 +56,11 @@ class AbstractVehicleTerm(AbstractTerm):
 
     def __check_init__(self):
         if not isinstance(self.axis, int) or not 0 <= self.axis < self.n_axes:
-            raise ValueError(f"{type(self).__name__}: `axis` must be an int in [0, {self.n_axes}), got {self.axis!r}")
+            raise UsageError(f"{type(self).__name__}: `axis` must be an int in [0, {self.n_axes}), got {self.axis!r}")
 
     def check_system(self, system) -> None:
         if not system.body_axes:
-            raise ValueError(
+            raise UsageError(
                 f"{type(self).__name__} acts on a helicopter's body axes, but {type(system).__name__} is not "
                 "a Helicopter"
             )
@@ -291,7 +292,7 @@ class _AbstractRotorTerm(AbstractVehicleTerm):
     def check_system(self, system) -> None:
         super().check_system(system)
         if tuple(system.input_names[:4]) != MULTIROTOR_MOTORS:
-            raise ValueError(
+            raise UsageError(
                 f"{type(self).__name__} acts on a multirotor's rotors (inputs m1..m4), but "
                 f"{type(system).__name__}'s inputs are {tuple(system.input_names)}"
             )
@@ -331,7 +332,7 @@ class BatterySag(_AbstractRotorTerm):
     def check_system(self, system) -> None:
         super().check_system(system)
         if len(system.input_names) < 5 or system.input_names[4] != "vbat":
-            raise ValueError(f"BatterySag needs `vbat` as the fifth input; {type(system).__name__} has none")
+            raise UsageError(f"BatterySag needs `vbat` as the fifth input; {type(system).__name__} has none")
 
     def where(self, system) -> str:
         self.check_system(system)
@@ -374,7 +375,7 @@ class GroundEffect(_AbstractRotorTerm):
 
     def __init__(self, c: ArrayLike = 0.0, *, floor: ArrayLike = 0.0, rotor_height: ArrayLike = 0.02):
         if isinstance(rotor_height, (int, float)) and not rotor_height > 0:
-            raise ValueError(f"GroundEffect: `rotor_height` must be positive, got {rotor_height}")
+            raise UsageError(f"GroundEffect: `rotor_height` must be positive, got {rotor_height}")
         self.axis = 0
         self.coefficient = float_scalar(c)
         self.floor = float_scalar(floor)
