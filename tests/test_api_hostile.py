@@ -377,3 +377,27 @@ def test_valid_records_keep_their_answers():
         return Trajectory(t, x, u, STATES, INPUTS).xs.sum()
 
     assert np.isfinite(float(length(ts, xs, us)))
+
+
+@pytest.mark.parametrize(
+    "edit, pattern",
+    [
+        (lambda obj: obj["mask"][2].__setitem__(1, 7), r"mask \[2\]\[1\] is 7"),
+        (lambda obj: obj["weights"][3].__setitem__(0, float("nan")), r"weight \[3\]\[0\] .* not a finite number"),
+        (lambda obj: obj["features"].__setitem__(0, "thrust"), r"unknown features \['thrust'\]"),
+        (lambda obj: obj["weights"].pop(), r"must be 6 x 11 .*shape \(5, 11\)"),
+    ],
+    ids=["mask-entry-7", "nan-weight", "unknown-feature", "five-rows"],
+)
+def test_load_model_checks_a_helicopter_file_as_a_quadrotor_file(tmp_path, edit, pattern):
+    # A helicopter MODEL.json was read without the quadrotor file's checks: a mask entry of 7 as True, a NaN weight
+    # as a model that predicts NaN, an unknown feature or five rows of weights as a KeyError or a shape error later.
+    from tests.cli.hostile_cases import helicopter_model_file
+
+    path = helicopter_model_file(tmp_path, 9.81)
+    assert isinstance(dynax.load_model(path), dynax.Helicopter)  # the file as written loads
+    obj = json.loads(open(path).read())
+    edit(obj)
+    open(path, "w").write(json.dumps(obj))
+    with pytest.raises(DataError, match=pattern):
+        dynax.load_model(path)

@@ -200,6 +200,35 @@ def _stride(text: str):
         raise argparse.ArgumentTypeError(f"expected a whole number or 'auto', got {text!r}") from None
 
 
+def check_iterative_options(args) -> None:
+    """`--horizon`, `--stride` and `--max-iterations` of `dynax fit`, checked alike for every vehicle."""
+    finite_seconds(args.horizon, "--horizon")
+    if args.stride != "auto" and args.stride < 1:
+        raise UsageError(f"--stride must be at least 1 or 'auto', got {args.stride}")
+    if args.max_iterations is not None and args.max_iterations < 1:
+        raise UsageError(f"--max-iterations must be at least 1, got {args.max_iterations}")
+
+
+def vehicle_criterion(args, stride: int, ridge: dict):
+    """The criterion `--criterion` names, with `--horizon`, the `stride`, `--max-iterations` and the `ridge`
+    keyword (`ridge_option`)."""
+    from .._identify._vehicle import Backprop, FrequencyDomain, Lagged, OneStep
+
+    limit = (
+        {}
+        if args.max_iterations is None
+        else {"lagged": {"max_iterations": args.max_iterations}, "backprop": {"max_steps": args.max_iterations}}.get(
+            args.criterion, {}
+        )
+    )
+    return {
+        "one-step": lambda: OneStep(**ridge),
+        "frequency": lambda: FrequencyDomain(),
+        "lagged": lambda: Lagged(horizon=args.horizon, stride=stride, **limit, **ridge),
+        "backprop": lambda: Backprop(horizon=args.horizon, stride=stride, **limit),
+    }[args.criterion]()
+
+
 def ridge_option(args) -> dict:
     """`--ridge` as the criterion's keyword (none where not given), checked: a finite number, not negative, and
     only with a criterion that reads it."""
@@ -220,12 +249,8 @@ def run(args: argparse.Namespace) -> int:
 
     from .._identify._vehicle import (
         auto_stride,
-        Backprop,
-        FrequencyDomain,
         initial_helicopter,
-        Lagged,
         model_to_json,
-        OneStep,
         recorded_loss,
     )
 
@@ -242,11 +267,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.criterion == "frequency" and args.model != "linear":
         raise UsageError("--criterion frequency fits the linear model only; use --model linear")
-    finite_seconds(args.horizon, "--horizon")
-    if args.stride != "auto" and args.stride < 1:
-        raise UsageError(f"--stride must be at least 1 or 'auto', got {args.stride}")
-    if args.max_iterations is not None and args.max_iterations < 1:
-        raise UsageError(f"--max-iterations must be at least 1, got {args.max_iterations}")
+    check_iterative_options(args)
     ridge = ridge_option(args)
     out = output_file(args.out, "model.json")
     mapping, scale, offset = data_options(args)
@@ -263,19 +284,7 @@ def run(args: argparse.Namespace) -> int:
     stride, n_steps = args.stride, max(int(round(args.horizon / data.dt)), 1)
     if stride == "auto":
         stride = auto_stride(len(data), n_steps, AUTO_WINDOWS)
-    limit = (
-        {}
-        if args.max_iterations is None
-        else {"lagged": {"max_iterations": args.max_iterations}, "backprop": {"max_steps": args.max_iterations}}.get(
-            args.criterion, {}
-        )
-    )
-    criterion = {
-        "one-step": lambda: OneStep(**ridge),
-        "frequency": lambda: FrequencyDomain(),
-        "lagged": lambda: Lagged(horizon=args.horizon, stride=stride, **limit, **ridge),
-        "backprop": lambda: Backprop(horizon=args.horizon, stride=stride, **limit),
-    }[args.criterion]()
+    criterion = vehicle_criterion(args, stride, ridge)
     if args.criterion in ("lagged", "backprop") and stride > 1:
         current().note(
             "stride",

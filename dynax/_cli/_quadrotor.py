@@ -119,7 +119,6 @@ def run_fit(args) -> int:
     jax.config.update("jax_enable_x64", True)  # learning in float64; the library leaves config alone
 
     from .._data._motor_order import MotorNumbering
-    from .._identify._vehicle import Backprop, Lagged, OneStep
     from .._identify._vehicle._quadrotor import quadrotor_to_json
     from .._model._quadrotor import Quadrotor
     from ._fit import fit_everything
@@ -132,14 +131,9 @@ def run_fit(args) -> int:
             "--criterion frequency identifies the helicopter's linear model only; for a quadrotor use "
             "one-step, lagged or backprop"
         )
-    if not (math.isfinite(args.horizon) and args.horizon > 0):
-        raise UsageError(f"--horizon must be a positive number of seconds, got {args.horizon}")
-    if args.stride != "auto" and args.stride < 1:
-        raise UsageError(f"--stride must be at least 1 or 'auto', got {args.stride}")
-    if args.max_iterations is not None and args.max_iterations < 1:
-        raise UsageError(f"--max-iterations must be at least 1, got {args.max_iterations}")
-    from ._fit import ridge_option
+    from ._fit import check_iterative_options, ridge_option, vehicle_criterion
 
+    check_iterative_options(args)
     ridge = ridge_option(args)
     out = output_file(args.out, "model.json")
     mapping, scale, offset = data_options(args)
@@ -161,18 +155,7 @@ def run_fit(args) -> int:
         from ._fit import AUTO_WINDOWS
 
         stride = auto_stride(sum(len(r) for r in runs), n_steps, AUTO_WINDOWS)
-    limit = (
-        {}
-        if args.max_iterations is None
-        else {"lagged": {"max_iterations": args.max_iterations}, "backprop": {"max_steps": args.max_iterations}}.get(
-            args.criterion, {}
-        )
-    )
-    criterion = {
-        "one-step": lambda: OneStep(**ridge),
-        "lagged": lambda: Lagged(horizon=args.horizon, stride=stride, **limit, **ridge),
-        "backprop": lambda: Backprop(horizon=args.horizon, stride=stride, **limit),
-    }[args.criterion]()
+    criterion = vehicle_criterion(args, stride, ridge)
     solution = fit_everything(system, runs, criterion)  # `fit_quadrotor`'s call
     weights = np.asarray(solution.model.body_model.weights)
     loss = float(solution.loss)

@@ -3,7 +3,6 @@
 import math
 import warnings
 
-import jax.numpy as jnp
 import numpy as np
 
 from ..._data._sanity import DataWarning
@@ -20,6 +19,7 @@ from ..._model._helicopter import (
 from .._identify import identify
 from .._method import AbstractMethod, FitSettings
 from .._validation import Validate
+from ._body_file import body_from_json, body_to_json
 from ._criteria import (
     Backprop,
     Lagged,
@@ -118,22 +118,18 @@ def model_to_json(fit: Solution, *, horizon_s: float | None = None) -> dict:
     statistics = fit.statistics
     if not isinstance(statistics, VehicleStatistics):
         raise UsageError("model_to_json: not the Solution of a vehicle fit (`fit_vehicle`)")
-    body = fit.model.body_model
-    kind = body.kind
+    body = body_to_json(fit.model.body_model)
+    gravity = {"gravity": body.pop("gravity")} if "gravity" in body else {}
     out = {
         "system": "helicopter",
-        "model": kind,
+        "model": body.pop("model"),
         "criterion": statistics.criterion,
         "horizon_s": horizon_s,
-        "features": list(body.feature_names),
-        "mask": [[int(v) for v in row] for row in body.mask],
-        "weights": np.asarray(body.weights).tolist(),
-        "parameters": {k: float(v) for k, v in body.parameters.items()},
+        **body,
         "loss": recorded_loss(fit),
         "n_samples": statistics.n_samples,
+        **gravity,
     }
-    if kind == "acceleration":
-        out["gravity"] = body.gravity
     accuracy = statistics.accuracy
     if accuracy:  # the frequency criterion's Cramer-Rao bounds and insensitivities
         out["identification"] = {
@@ -152,17 +148,7 @@ def model_from_json(obj: dict, path=None) -> Helicopter:
     try:
         if obj.get("system") != "helicopter":
             raise DataError(f"not a helicopter model file (system = {obj.get('system')!r})", path=path)
-        features = tuple(obj["features"])
-        mask = tuple(tuple(bool(v) for v in row) for row in obj["mask"])
-        weights = jnp.asarray(np.asarray(obj["weights"], float))
-        if obj["model"] == "acceleration":
-            body = AccelerationModel(
-                weights=weights, feature_names=features, mask=mask, gravity=float(obj.get("gravity", 9.81))
-            )
-        elif obj["model"] == "linear":
-            body = LinearVelocityModel(weights=weights, feature_names=features, mask=mask)
-        else:
-            raise DataError(f"unknown model kind {obj['model']!r}", path=path, column="model")
+        body = body_from_json(obj, path, gravity=9.81)
     except KeyError as e:
         raise DataError(f"the model file lacks the field {e.args[0]!r}", path=path) from None
     except (TypeError, ValueError) as e:

@@ -11,15 +11,16 @@ into one record with breaks that no window crosses.
 
 from collections.abc import Sequence
 
-import jax.numpy as jnp
 import numpy as np
 
 from ..._data._flight import warn_if_units_differ
 from ..._data._motor_order import warn_if_numbered_otherwise
 from ..._data._trajectory import Trajectory
+from ..._errors import DataError
 from ..._fit import Solution
 from ..._model._quadrotor import Quadrotor
 from .._method import FitSettings
+from ._body_file import body_from_json, body_to_json
 from ._criteria import Backprop, Lagged, OneStep
 from ._fit import fit_all
 from ._frequency import FrequencyDomain
@@ -75,71 +76,25 @@ def fit_quadrotor(
 def quadrotor_to_json(system: Quadrotor, **info) -> dict:
     """The `MODEL.json` object of a `Quadrotor`: body model kind, features, mask, weights, input
     scales and named parameters, with `info` (criterion, horizon, loss, ...) beside them."""
-    body = system.body_model
-    out = {
-        "system": "quadrotor",
-        "model": body.kind,
-        **info,
-        "features": list(body.feature_names),
-        "mask": [[int(v) for v in row] for row in body.mask],
-        "weights": np.asarray(body.weights).tolist(),
-        "input_scale": [float(s) for s in system.input_scale],
-        "parameters": {k: float(v) for k, v in body.parameters.items()},
-    }
-    if body.kind == "acceleration":
-        out["gravity"] = body.gravity
-    return out
+    body = body_to_json(system.body_model)
+    out = {"system": "quadrotor", "model": body.pop("model"), **info}
+    for key in ("features", "mask", "weights"):
+        out[key] = body.pop(key)
+    return {**out, "input_scale": [float(s) for s in system.input_scale], **body}  # then parameters, gravity
 
 
 def quadrotor_from_json(obj: dict, path=None) -> Quadrotor:
     """The `Quadrotor` of a `MODEL.json` object (as written by `quadrotor_to_json`), checked:
     known features, a 6-row mask and weights of matching shape, finite numbers, positive scales."""
-    from ..._errors import DataError
-    from ..._model._helicopter import AccelerationModel, FEATURES, LinearVelocityModel
-
     try:
         if obj.get("system") != "quadrotor":
             raise DataError(f"not a quadrotor model file (system = {obj.get('system')!r})", path=path)
-        features = tuple(obj["features"])
-        unknown = [f for f in features if not isinstance(f, str) or f not in FEATURES]
-        if unknown:
-            raise DataError(f"unknown features {unknown}", path=path, column="features")
-        bad = [(i, j) for i, row in enumerate(obj["mask"]) for j, v in enumerate(row) if v not in (True, False)]
-        if bad:  # a mask is written as true/false (or 1/0): anything else is an edited or foreign file, not a mask
-            i, j = bad[0]
-            raise DataError(
-                f"mask [{i}][{j}] is {obj['mask'][i][j]!r}: a mask entry is true or false", path=path, column="mask"
-            )
-        mask = tuple(tuple(bool(v) for v in row) for row in obj["mask"])
-        weights = np.asarray(obj["weights"], float)
-        if weights.shape != (6, len(features)) or len(mask) != 6 or any(len(r) != len(features) for r in mask):
-            raise DataError(
-                f"'weights' and 'mask' must be 6 x {len(features)} (axes x features), got weights of "
-                f"shape {weights.shape}",
-                path=path,
-                column="weights",
-            )
-        if not np.all(np.isfinite(weights)):
-            axis, j = np.argwhere(~np.isfinite(weights))[0]
-            raise DataError(
-                f"weight [{axis}][{j}] (feature '{features[j]}') is not a finite number", path=path, column="weights"
-            )
+        body = body_from_json(obj, path, gravity=-9.81)
         scale = tuple(float(s) for s in obj["input_scale"])
         if len(scale) != 5 or not all(np.isfinite(s) and s > 0 for s in scale):
             raise DataError(
                 f"'input_scale' must be 5 positive numbers, got {obj['input_scale']}", path=path, column="input_scale"
             )
-        if obj["model"] == "acceleration":
-            body = AccelerationModel(
-                weights=jnp.asarray(weights),
-                feature_names=features,
-                mask=mask,
-                gravity=float(obj.get("gravity", -9.81)),
-            )
-        elif obj["model"] == "linear":
-            body = LinearVelocityModel(weights=jnp.asarray(weights), feature_names=features, mask=mask)
-        else:
-            raise DataError(f"unknown model kind {obj['model']!r}", path=path, column="model")
     except KeyError as e:
         raise DataError(f"the model file lacks the field {e.args[0]!r}", path=path) from None
     except (TypeError, ValueError) as e:
