@@ -1,6 +1,8 @@
 """A vehicle's body model (`AccelerationModel`, `LinearVelocityModel`) to and from the fields of its `MODEL.json`:
 what a helicopter's and a quadrotor's model files share."""
 
+import contextlib
+
 import jax.numpy as jnp
 import numpy as np
 
@@ -61,3 +63,17 @@ def body_from_json(obj: dict, path, gravity: float) -> AccelerationModel | Linea
     if obj["model"] == "linear":
         return LinearVelocityModel(weights=jnp.asarray(weights), feature_names=features, mask=mask)
     raise DataError(f"unknown model kind {obj['model']!r}", path=path, column="model")
+
+
+@contextlib.contextmanager
+def model_file_fields(path):
+    """Reading a `MODEL.json` object's fields: a missing field or a value of the wrong type becomes a `DataError`
+    naming the file (a `DataError` raised inside passes as it is)."""
+    try:
+        yield
+    except KeyError as e:
+        raise DataError(f"the model file lacks the field {e.args[0]!r}", path=path) from None
+    except (TypeError, ValueError) as e:
+        if isinstance(e, DataError):
+            raise
+        raise DataError(f"malformed model file ({e})", path=path) from None

@@ -19,7 +19,7 @@ from ..._model._helicopter import (
 from .._identify import identify
 from .._method import AbstractMethod, FitSettings
 from .._validation import Validate
-from ._body_file import body_from_json, body_to_json
+from ._body_file import body_from_json, body_to_json, model_file_fields
 from ._criteria import (
     Backprop,
     Lagged,
@@ -145,14 +145,8 @@ def model_to_json(fit: Solution, *, horizon_s: float | None = None) -> dict:
 
 def model_from_json(obj: dict, path=None) -> Helicopter:
     """The `Helicopter` described by a `MODEL.json` object (as written by `model_to_json`)."""
-    try:
+    with model_file_fields(path):
         if obj.get("system") != "helicopter":
             raise DataError(f"not a helicopter model file (system = {obj.get('system')!r})", path=path)
         body = body_from_json(obj, path, gravity=9.81)
-    except KeyError as e:
-        raise DataError(f"the model file lacks the field {e.args[0]!r}", path=path) from None
-    except (TypeError, ValueError) as e:
-        if isinstance(e, DataError):
-            raise
-        raise DataError(f"malformed model file ({e})", path=path) from None
     return Helicopter(body)

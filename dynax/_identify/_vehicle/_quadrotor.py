@@ -20,7 +20,7 @@ from ..._errors import DataError
 from ..._fit import Solution
 from ..._model._quadrotor import Quadrotor
 from .._method import FitSettings
-from ._body_file import body_from_json, body_to_json
+from ._body_file import body_from_json, body_to_json, model_file_fields
 from ._criteria import Backprop, Lagged, OneStep
 from ._fit import fit_all
 from ._frequency import FrequencyDomain
@@ -86,7 +86,7 @@ def quadrotor_to_json(system: Quadrotor, **info) -> dict:
 def quadrotor_from_json(obj: dict, path=None) -> Quadrotor:
     """The `Quadrotor` of a `MODEL.json` object (as written by `quadrotor_to_json`), checked:
     known features, a 6-row mask and weights of matching shape, finite numbers, positive scales."""
-    try:
+    with model_file_fields(path):
         if obj.get("system") != "quadrotor":
             raise DataError(f"not a quadrotor model file (system = {obj.get('system')!r})", path=path)
         body = body_from_json(obj, path, gravity=-9.81)
@@ -95,10 +95,4 @@ def quadrotor_from_json(obj: dict, path=None) -> Quadrotor:
             raise DataError(
                 f"'input_scale' must be 5 positive numbers, got {obj['input_scale']}", path=path, column="input_scale"
             )
-    except KeyError as e:
-        raise DataError(f"the model file lacks the field {e.args[0]!r}", path=path) from None
-    except (TypeError, ValueError) as e:
-        if isinstance(e, DataError):
-            raise
-        raise DataError(f"malformed model file ({e})", path=path) from None
     return Quadrotor(body, scale)
