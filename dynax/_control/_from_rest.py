@@ -196,14 +196,17 @@ class RobotController:
         self._q_prev = None
         self._u_prev = 0.0
 
-    def _acceleration(self, q1, q2, v1, v2, tau2):
-        c2, s2 = np.cos(q2), np.sin(q2)
-        s1, s12 = np.sin(q1), np.sin(q1 + q2)
+    def _mass_matrix(self, c2):
+        """The arm's mass matrix entries (rotor inertia through the gear ratio included) at `cos(q2)` = `c2`."""
         hc = self.m2 * self.l1 * self.r2 * c2
         gr2 = self.gr * self.gr * self.Ir
         m00 = self.I1 + self.I2 + self.m2 * self.l1**2 + 2 * hc + gr2 + self.Ir
-        m01 = self.I2 + hc - self.gr * self.Ir
-        m11 = self.I2 + gr2
+        return m00, self.I2 + hc - self.gr * self.Ir, self.I2 + gr2
+
+    def _acceleration(self, q1, q2, v1, v2, tau2):
+        c2, s2 = np.cos(q2), np.sin(q2)
+        s1, s12 = np.sin(q1), np.sin(q1 + q2)
+        m00, m01, m11 = self._mass_matrix(c2)
         h = self.m2 * self.l1 * self.r2 * s2
         g = self.g
         rhs0 = (
@@ -221,11 +224,7 @@ class RobotController:
         k_e, k_p, k_d = self.swing_up
         c2, s2 = np.cos(q2), np.sin(q2)
         s1, s12 = np.sin(q1), np.sin(q1 + q2)
-        hc = self.m2 * self.l1 * self.r2 * c2
-        gr2 = self.gr * self.gr * self.Ir
-        m00 = self.I1 + self.I2 + self.m2 * self.l1**2 + 2 * hc + gr2 + self.Ir
-        m01 = self.I2 + hc - self.gr * self.Ir
-        m11 = self.I2 + gr2
+        m00, m01, m11 = self._mass_matrix(c2)
         det = m00 * m11 - m01 * m01
         a2, a3 = -m01 / det, m00 / det
         h = self.m2 * self.l1 * self.r2 * s2
