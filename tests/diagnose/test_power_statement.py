@@ -22,7 +22,7 @@ def _candidate(typical, std_error, df, n_tested, alpha=0.01):
     p = float(scipy.stats.t.sf(mean / std_error, df))
     rules = {"significance": p <= alpha / n_tested, "min_gain": typical >= 0.05, "sign": True, "agreement": True}
     rules["held_out"] = typical > 0
-    test = PairedTest(mean, std_error, df, p, 10, {0: mean})
+    test = PairedTest(mean, std_error, df, p, 10, {0: mean}, "nbm", 1.0)  # df + 1 batch means
     gains = {"gain_held_out": typical, "gain_typical": typical}
     return {**gains, "p": p, "test": test, "n_tested": n_tested, "rules": rules}
 
@@ -69,9 +69,11 @@ def test_a_refused_gain_of_practical_size_is_never_below_the_stated_detectable_g
     assert _detected(shift, 0.23, df, 0.01 / n) == pytest.approx(0.8, abs=0.015)
     # The median's test (what was stated before) would detect the refused 50 % gain far more often than not.
     assert _detected(-np.log1p(-0.50), 0.05, df, 0.01 / n) > 0.99
-    # The length that would decide speaks of the same test: at it, a 25 % gain is detected with the same power.
-    shrunk = 0.23 * np.sqrt(14.55 / needed_s)
-    assert _detected(-np.log1p(-MIN_PRACTICAL_GAIN), shrunk, df, 0.01 / n) == pytest.approx(0.8, abs=0.015)
+    # The length that would decide speaks of the same test: at it, with as many more batches as the record is
+    # longer, a 25 % gain is detected with the same power.
+    r = needed_s / 14.55
+    shrunk, longer = 0.23 / np.sqrt(r), r * (df + 1) - 1
+    assert _detected(-np.log1p(-MIN_PRACTICAL_GAIN), shrunk, longer, 0.01 / n) == pytest.approx(0.8, abs=0.015)
 
 
 def test_a_small_refused_gain_is_never_below_the_stated_detectable_gain_either():

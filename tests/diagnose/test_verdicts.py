@@ -31,10 +31,11 @@ def _structure(significant, r2, p=1e-3):
 
 def _results(gain, p, std_error, df=40.0, n_tested=10, typical=None):
     """One refitted candidate as `judge_round` reports it: `gain` the held-out runs' pooled, `typical` the typical
-    window's (by default the same: an effect alike on every window)."""
+    window's (by default the same: an effect alike on every window). The test is batch means' on one run:
+    `df + 1` batches, one degree of freedom lost to the mean whatever the length (`df_offset`)."""
     typical = gain if typical is None else typical
     mean = -np.log(1.0 - typical)  # the mean log ratio of window errors
-    test = PairedTest(mean, std_error, df, p, 5, {0: mean})
+    test = PairedTest(mean, std_error, df, p, 5, {0: mean}, "nbm", 1.0)
     rules = {"significance": p < 0.001, "min_gain": True, "sign": True, "agreement": True, "held_out": gain > 0}
     return {
         3: {"gain_held_out": gain, "gain_typical": typical, "p": p, "test": test, "n_tested": n_tested, "rules": rules}
@@ -113,9 +114,10 @@ def test_none_needs_the_power_to_see_the_smallest_gain_that_matters():
     vague = power_of(_results(0.03, 0.4, 0.2), labels, 0.01, 5.0)
     assert not vague.enough
     assert decide(False, _structure(False, 0.0), False, vague) == Verdict.INCONCLUSIVE
-    # The held-out length that would decide: the standard error shrinks as 1/sqrt(length).
+    # The held-out length that would decide: the standard error shrinks as 1/sqrt(length), the batches grow with it.
     assert vague.needed_s > 5.0
-    at_needed = power_of(_results(0.03, 0.4, 0.2 * np.sqrt(5.0 / vague.needed_s)), labels, 0.01, vague.needed_s)
+    r = vague.needed_s / 5.0
+    at_needed = power_of(_results(0.03, 0.4, 0.2 / np.sqrt(r), df=r * 41.0 - 1.0), labels, 0.01, vague.needed_s)
     assert at_needed.detectable_gain == pytest.approx(MIN_PRACTICAL_GAIN, abs=0.01)
     # A candidate that gains 59 % without being established is never `none`, however precise the test.
     seen = power_of(_results(0.59, 0.02, 0.05), labels, 0.01, 20.0)
@@ -152,18 +154,19 @@ def test_the_power_speaks_the_unit_of_the_gains():
 def test_the_length_that_would_decide_gives_the_power_it_promises():
     """`needed_s` checked by simulating the test it speaks of, not by its formula: windows at the needed length
     whose log ratios shift by a 25 % gain in mean squared error, tested one-sided at the best candidate's level
-    (0.01 over 10 candidates) on as many batch means as the test had degrees of freedom (21: 20 degrees), are
-    detected in 80 % of 20,000 draws. Half the length (the RMS reading asked for a quarter) does not suffice."""
-    se, df, tested_s = 0.2, 20.0, 5.0
+    (0.01 over 10 candidates) on batch means of the length the test had (6 batches, 5 degrees of freedom, in the
+    tested 5 s; as many more as the record is longer), are detected in 80 % of 20,000 draws. Holding the degrees
+    of freedom at 5 stated 3.1 times that length; half the length does not suffice."""
+    se, df, tested_s = 0.2, 5.0, 5.0
     power = power_of(_results(0.03, 0.4, se, df=df), {3: ("coulomb_friction", "q2")}, 0.01, tested_s)
     assert power.needed_s is not None and power.needed_s > tested_s
     level, shift = 0.01 / 10, -np.log(1 - MIN_PRACTICAL_GAIN)
     rng = np.random.default_rng(7)
-    batches = int(df) + 1
 
     def detected(length_s):
-        # the overall mean's standard error shrinks as 1/sqrt(length); each of `batches` equal batch means has
-        # sqrt(batches) times it
+        # batches of the tested length, as many as fit; the overall mean's standard error shrinks as
+        # 1/sqrt(length), and each of the equal batch means has sqrt(batches) times it
+        batches = int(round((df + 1) * length_s / tested_s))
         sd = se * np.sqrt(tested_s / length_s) * np.sqrt(batches)
         means = rng.normal(shift, sd, (20_000, batches))
         t = means.mean(axis=1) / (means.std(axis=1, ddof=1) / np.sqrt(batches))
