@@ -117,7 +117,7 @@ def rate_mae(model, runs, past, rates=False, steps=PREDICT_STEPS, every=5):
     return float(np.mean(np.concatenate(errors)))
 
 
-def direct_rows(runs, past, steps=PREDICT_STEPS, every=2):
+def direct_rows(runs, past, steps=PREDICT_STEPS, every=2, quadratic=False):
     """Rows for the direct regression of the rate change `steps` samples ahead: the features of the commands from
     `past` samples before the start to the last one before the end (all recorded: the protocol predicts open loop
     under the recorded inputs), the start rate and a constant; targets the change and the start rate."""
@@ -129,23 +129,29 @@ def direct_rows(runs, past, steps=PREDICT_STEPS, every=2):
         starts = np.arange(reach, len(m) - reach - steps, every)
         f = features(m)
         window = np.concatenate([f[starts + j] for j in range(-past, steps)], axis=1)
-        xs.append(np.concatenate([window, w[starts], np.ones((len(starts), 1))], axis=1))
+        extra = []
+        if quadratic:  # the start rate's products with itself and with the window's mean features
+            rate = w[starts]
+            mean = np.mean([f[starts + j] for j in range(steps)], axis=0)
+            extra = [rate[:, i : i + 1] * rate[:, i:] for i in range(3)]
+            extra += [rate[:, i : i + 1] * mean for i in range(3)]
+        xs.append(np.concatenate([window, *extra, w[starts], np.ones((len(starts), 1))], axis=1))
         ys.append(w[starts + steps] - w[starts])
         w0.append(w[starts])
     return np.concatenate(xs), np.concatenate(ys), np.concatenate(w0)
 
 
-def direct_mae(train, test, past):
+def direct_mae(train, test, past, quadratic=False):
     """Body-rate MAE at 0.5 s of the best linear predictor of the rate change from the commands over the window
     (and `past` samples before it) and the start rate, fitted on `train` with the ridge, scored on `test`."""
-    x, y, _ = direct_rows(train, past)
+    x, y, _ = direct_rows(train, past, quadratic=quadratic)
     mu, sd = x.mean(axis=0), x.std(axis=0)
     mu[-1], sd[-1] = 0.0, 1.0
     sd[sd == 0] = 1.0
     z = (x - mu) / sd
     gram = z.T @ z
     coef = np.linalg.solve(gram + RIDGE * np.trace(gram) / len(gram) * np.eye(len(gram)), z.T @ y)
-    xt, yt, _ = direct_rows(test, past)
+    xt, yt, _ = direct_rows(test, past, quadratic=quadratic)
     fitted = np.mean(np.linalg.norm(y - z @ coef, axis=1))
     return float(fitted), float(np.mean(np.linalg.norm(yt - (xt - mu) / sd @ coef, axis=1)))
 
@@ -192,6 +198,13 @@ def main():
             f"{k * 10} ms before: body-rate MAE at 0.5 s {held:.4f} held out ({fitted:.4f} training)",
             flush=True,
         )
+    fitted, held = direct_mae(train, test, 0, quadratic=True)
+    direct.append({"past_samples": 0, "quadratic": True, "rate_mae_train": fitted, "rate_mae_heldout": held})
+    print(
+        f"[{time.perf_counter() - start:6.1f} s] direct, with the start rate's products (with itself and the window's "
+        f"mean features): body-rate MAE at 0.5 s {held:.4f} held out ({fitted:.4f} training)",
+        flush=True,
+    )
     result["direct"] = direct
     result["seconds"] = time.perf_counter() - start
     write_json(out / "history.json", result)
@@ -214,7 +227,11 @@ def main():
     axes[0].legend(fontsize=8)
     bars = {"hold the start rate": hold}
     bars["integrate the causal FIR (best history)"] = min(r["rate_mae_0.5s"] for r in result["causal"])
-    bars |= {f"direct 0.5 s regression, {d['past_samples'] * 10} ms before": d["rate_mae_heldout"] for d in direct}
+    bars |= {
+        f"direct 0.5 s regression, {d['past_samples'] * 10} ms before"
+        + (", quadratic" if d.get("quadratic") else ""): d["rate_mae_heldout"]
+        for d in direct
+    }
     axes[3].barh(list(bars), list(bars.values()))
     axes[3].axvline(hold / 2, color="k", ls="--", lw=0.8)
     axes[3].set_xlabel("body-rate MAE at 0.5 s [rad/s]")
