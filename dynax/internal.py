@@ -267,10 +267,16 @@ from ._diagnose._statistics import (
     detectable_gain as detectable_gain,
 )
 from ._diagnose._statistics import (
+    detectable_shift as detectable_shift,
+)
+from ._diagnose._statistics import (
     helps_on_most_runs as helps_on_most_runs,
 )
 from ._diagnose._statistics import (
     holm as holm,
+)
+from ._diagnose._statistics import (
+    length_for_shift as length_for_shift,
 )
 from ._diagnose._statistics import (
     log_ratio_differences as log_ratio_differences,
@@ -691,6 +697,7 @@ __all__ = [
     "delta_method_covariance",
     "dense_forward",
     "detectable_gain",
+    "detectable_shift",
     "diagnosis_summary",
     "Discovered",
     "Discovery",
@@ -769,6 +776,7 @@ __all__ = [
     "least_squares_seen",
     "leave_one_out_splits",
     "levenberg_marquardt",
+    "length_for_shift",
     "log_ratio_differences",
     "look_alike_tests",
     "look_alikes",

@@ -19,7 +19,7 @@ import pathlib
 
 import numpy as np
 
-from dynax._diagnose._statistics import detectable_shift, length_for_shift, paired_block_test
+from dynax.internal import detectable_shift, length_for_shift, paired_block_test
 
 OUT = pathlib.Path(__file__).parent / "results" / "power_length"
 PHI, SIGMA, LAGS, POWER = 0.5, 1.0, 4, 0.8

@@ -4,7 +4,7 @@ for about `POWER` of the time, on records drawn independently of the diagnosis (
 import numpy as np
 import scipy.stats
 
-from dynax._diagnose._statistics import length_for_shift, paired_block_test
+from dynax.internal import length_for_shift, paired_block_test
 
 PHI, SIGMA, LAGS, RUNS, WINDOWS = 0.5, 1.0, 4, 3, 40  # three short runs: few degrees of freedom
 ALPHA, POWER = 0.005, 0.8
