@@ -141,19 +141,21 @@ def direct_rows(runs, past, steps=PREDICT_STEPS, every=2, quadratic=False):
     return np.concatenate(xs), np.concatenate(ys), np.concatenate(w0)
 
 
-def direct_mae(train, test, past, quadratic=False):
-    """Body-rate MAE at 0.5 s of the best linear predictor of the rate change from the commands over the window
-    (and `past` samples before it) and the start rate, fitted on `train` with the ridge, scored on `test`."""
-    x, y, _ = direct_rows(train, past, quadratic=quadratic)
+def direct_mae(train, test, past, quadratic=False, steps=PREDICT_STEPS):
+    """Body-rate MAE `steps` samples ahead of the best linear predictor of the rate change from the commands over
+    the window (and `past` samples before it) and the start rate, fitted on `train` with the ridge, scored on
+    `test`: `(training, held out, holding the start rate on the same held-out starts)`."""
+    x, y, _ = direct_rows(train, past, steps=steps, quadratic=quadratic)
     mu, sd = x.mean(axis=0), x.std(axis=0)
     mu[-1], sd[-1] = 0.0, 1.0
     sd[sd == 0] = 1.0
     z = (x - mu) / sd
     gram = z.T @ z
     coef = np.linalg.solve(gram + RIDGE * np.trace(gram) / len(gram) * np.eye(len(gram)), z.T @ y)
-    xt, yt, _ = direct_rows(test, past, quadratic=quadratic)
+    xt, yt, _ = direct_rows(test, past, steps=steps, quadratic=quadratic)
     fitted = np.mean(np.linalg.norm(y - z @ coef, axis=1))
-    return float(fitted), float(np.mean(np.linalg.norm(yt - (xt - mu) / sd @ coef, axis=1)))
+    held = np.mean(np.linalg.norm(yt - (xt - mu) / sd @ coef, axis=1))
+    return float(fitted), float(held), float(np.mean(np.linalg.norm(yt, axis=1)))
 
 
 def main():
@@ -191,14 +193,14 @@ def main():
         result[name] = rows
     direct = []
     for k in (0, 5, 20):
-        fitted, held = direct_mae(train, test, k)
+        fitted, held, _ = direct_mae(train, test, k)
         direct.append({"past_samples": k, "rate_mae_train": fitted, "rate_mae_heldout": held})
         print(
             f"[{time.perf_counter() - start:6.1f} s] direct 0.5 s regression on the window's commands and "
             f"{k * 10} ms before: body-rate MAE at 0.5 s {held:.4f} held out ({fitted:.4f} training)",
             flush=True,
         )
-    fitted, held = direct_mae(train, test, 0, quadratic=True)
+    fitted, held, _ = direct_mae(train, test, 0, quadratic=True)
     direct.append({"past_samples": 0, "quadratic": True, "rate_mae_train": fitted, "rate_mae_heldout": held})
     print(
         f"[{time.perf_counter() - start:6.1f} s] direct, with the start rate's products (with itself and the window's "
@@ -206,6 +208,16 @@ def main():
         flush=True,
     )
     result["direct"] = direct
+    by_horizon = []
+    for h in (1, 10, 50):  # the protocol's horizons: what the best linear map gains over holding the rate
+        fitted, held, holding = direct_mae(train, test, 0, steps=h)
+        by_horizon.append({"steps": h, "rate_mae_heldout": held, "rate_mae_hold": holding})
+        print(
+            f"[{time.perf_counter() - start:6.1f} s] direct, {h} step(s) ahead: body-rate MAE {held:.4f} held out, "
+            f"holding the rate {holding:.4f} ({holding / held:.2f}x)",
+            flush=True,
+        )
+    result["direct_by_horizon"] = by_horizon
     result["seconds"] = time.perf_counter() - start
     write_json(out / "history.json", result)
 
