@@ -73,8 +73,12 @@ def stack(runs, past, future=0, rates=False):
 
 
 def fit(train, **kw):
-    """Ridge coefficients on standardised columns (the constant left as is): `(coef, mu, sd)`."""
-    x, y = stack(train, **kw)
+    """The acceleration's ridge regression on the training runs' rows (`stack`)."""
+    return ridge(*stack(train, **kw))
+
+
+def ridge(x, y):
+    """Ridge coefficients on standardised columns (the last, the constant, left as is): `(coef, mu, sd)`."""
     mu, sd = x.mean(axis=0), x.std(axis=0)
     mu[-1], sd[-1] = 0.0, 1.0
     sd[sd == 0] = 1.0
@@ -146,12 +150,8 @@ def direct_mae(train, test, past, quadratic=False, steps=PREDICT_STEPS):
     the window (and `past` samples before it) and the start rate, fitted on `train` with the ridge, scored on
     `test`: `(training, held out, holding the start rate on the same held-out starts)`."""
     x, y, _ = direct_rows(train, past, steps=steps, quadratic=quadratic)
-    mu, sd = x.mean(axis=0), x.std(axis=0)
-    mu[-1], sd[-1] = 0.0, 1.0
-    sd[sd == 0] = 1.0
+    coef, mu, sd = ridge(x, y)
     z = (x - mu) / sd
-    gram = z.T @ z
-    coef = np.linalg.solve(gram + RIDGE * np.trace(gram) / len(gram) * np.eye(len(gram)), z.T @ y)
     xt, yt, _ = direct_rows(test, past, steps=steps, quadratic=quadratic)
     fitted = np.mean(np.linalg.norm(y - z @ coef, axis=1))
     held = np.mean(np.linalg.norm(yt - (xt - mu) / sd @ coef, axis=1))
