@@ -16,13 +16,17 @@ Run: `python experiments/power_length.py [--trials N]` (about a minute); writes
 import argparse
 import json
 import pathlib
+import sys
 
 import numpy as np
 
 from dynax.internal import detectable_shift, length_for_shift, paired_block_test
 
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
+from tests.reference import ar1_runs  # noqa: E402
+
 OUT = pathlib.Path(__file__).parent / "results" / "power_length"
-PHI, SIGMA, LAGS, POWER = 0.5, 1.0, 4, 0.8
+PHI, LAGS, POWER = 0.5, 4, 0.8
 SHIFT = -np.log(0.75)  # a 25 % gain in mean squared window error
 CONFIGS = [  # (held-out runs, windows per run, level: 0.01 over the candidates tested)
     (1, 40, 0.01 / 10),
@@ -36,17 +40,9 @@ CONFIGS = [  # (held-out runs, windows per run, level: 0.01 over the candidates 
 ]
 
 
-def record(rng, runs, windows, mean):
-    e = rng.normal(0.0, SIGMA, (runs, windows + 50))
-    x = np.zeros_like(e)
-    for k in range(1, e.shape[1]):
-        x[:, k] = PHI * x[:, k - 1] + e[:, k]
-    return (mean + x[:, 50:]).ravel(), np.repeat(np.arange(runs), windows)
-
-
 def rate(rng, runs, windows, level, trials):
     hits = sum(
-        paired_block_test(*record(rng, runs, windows, SHIFT), overlap=1, batch=LAGS).p_value < level
+        paired_block_test(*ar1_runs(rng, runs, windows, PHI, SHIFT), overlap=1, batch=LAGS).p_value < level
         for _ in range(trials)
     )
     return hits / trials
@@ -59,8 +55,8 @@ def main():
     rng = np.random.default_rng(2026)
     rows = []
     for i, (runs, windows, level) in enumerate(CONFIGS, 1):
-        pilot = paired_block_test(*record(rng, runs, windows, 0.0), overlap=1, batch=LAGS)
-        se = np.sqrt(SIGMA**2 / (1 - PHI) ** 2 / (runs * windows))
+        pilot = paired_block_test(*ar1_runs(rng, runs, windows, PHI, 0.0), overlap=1, batch=LAGS)
+        se = np.sqrt(1 / (1 - PHI) ** 2 / (runs * windows))
         now = length_for_shift(SHIFT, se, pilot.df, pilot.df_offset, level, POWER)
         held = (detectable_shift(se, pilot.df, level, POWER) / SHIFT) ** 2
         row = {

@@ -244,3 +244,15 @@ def stick_slip_arm(
         out.append(x.copy())
     stuck_out.append([j in stuck for j in range(n)])
     return np.asarray(out), np.asarray(stuck_out)
+
+
+def ar1_runs(rng, runs: int, windows: int, phi: float, mean: float, burn_in: int = 50):
+    """Paired window differences of `runs` held-out runs of `windows` windows each: `mean` plus an AR(1) of
+    coefficient `phi` and unit innovations, started at zero `burn_in` windows before the first kept one. Returns
+    `(d, run_index)` as `paired_block_test` takes them. Its long-run variance is $1/(1-\\phi)^2$."""
+    import scipy.signal
+
+    e = rng.normal(0.0, 1.0, (runs, windows + burn_in))
+    e[:, 0] = 0.0  # the series starts at zero
+    x = scipy.signal.lfilter([1.0], [1.0, -phi], e, axis=1)
+    return (mean + x[:, burn_in:]).ravel(), np.repeat(np.arange(runs), windows)

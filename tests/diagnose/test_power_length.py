@@ -5,26 +5,23 @@ import numpy as np
 import scipy.stats
 
 from dynax.internal import length_for_shift, paired_block_test
+from tests.reference import ar1_runs
 
-PHI, SIGMA, LAGS, RUNS, WINDOWS = 0.5, 1.0, 4, 3, 40  # three short runs: few degrees of freedom
+PHI, LAGS, RUNS, WINDOWS = 0.5, 4, 3, 40  # three short runs: few degrees of freedom
 ALPHA, POWER = 0.005, 0.8
 SHIFT = -np.log(0.75)  # a 25 % gain in mean squared window error
 
 
 def _record(rng, windows, mean):
-    e = rng.normal(0.0, SIGMA, (RUNS, windows + 50))
-    x = np.zeros_like(e)
-    for k in range(1, e.shape[1]):
-        x[:, k] = PHI * x[:, k - 1] + e[:, k]
-    return (mean + x[:, 50:]).ravel(), np.repeat(np.arange(RUNS), windows)
+    return ar1_runs(rng, RUNS, windows, PHI, mean)
 
 
 def test_stated_length_detects_with_the_stated_power():
     rng = np.random.default_rng(7)
     pilot = paired_block_test(*_record(rng, WINDOWS, 0.0), overlap=1, batch=LAGS)
     assert pilot.df < 12 and pilot.df_offset == RUNS  # the regime where holding df fixed goes wrong
-    # The true standard error of the mean of an AR(1): long-run variance sigma^2 / (1 - phi)^2.
-    se = np.sqrt(SIGMA**2 / (1 - PHI) ** 2 / (RUNS * WINDOWS))
+    # The true standard error of the mean of an AR(1): long-run variance 1 / (1 - phi)^2.
+    se = np.sqrt(1 / (1 - PHI) ** 2 / (RUNS * WINDOWS))
     factor = length_for_shift(SHIFT, se, pilot.df, pilot.df_offset, ALPHA, POWER)
     longer = int(round(factor * WINDOWS))
     trials = 300
