@@ -412,6 +412,8 @@ def length_for_shift(
     """
     import scipy.optimize
 
+    if not np.isfinite(shift):
+        return float("nan")  # no length detects an undefined shift
     if not (np.isfinite(std_error) and std_error > 0 and shift > 0 and df > 0):
         return np.inf if shift > 0 else 0.0
     offset = max(float(df_offset), 0.0)

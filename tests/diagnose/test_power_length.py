@@ -42,3 +42,8 @@ def test_many_degrees_of_freedom_give_the_normal_length():
 
 def test_enough_record_gives_a_factor_below_one():
     assert length_for_shift(SHIFT, 0.01, 200.0, 3.0, ALPHA, POWER) < 0.5
+
+
+def test_undefined_inputs_state_no_length():
+    assert np.isnan(length_for_shift(np.nan, 0.1, 5.0, 3.0, ALPHA, POWER))
+    assert length_for_shift(SHIFT, np.nan, 5.0, 3.0, ALPHA, POWER) == np.inf  # no variance known: no length is enough
