@@ -42,7 +42,8 @@ What is checked (`Check` names them):
 - `constant`, `zero`: a column that never changes (a dead sensor, a joint that never moves) or an
   input that is zero or constant throughout (nothing excites the dynamics, or a constant force that
   cannot be told from the offset a fit estimates): the parameters' scale is then not determined.
-- `duplicate`: the same record given twice, or as its own validation (held-out error in-sample).
+- `duplicate`: the same record given twice, or as its own validation (held-out error in-sample); two
+  columns of one record equal in every sample (one file column mapped to two coordinates or inputs).
 
 Inputs the system ignores (a non-zero `tau1` in a file read as `acrobot`) are refused by
 `load_trajectory`, which alone sees the file's other columns.
@@ -761,6 +762,36 @@ def _constant(tr, ts, source, system):
     return out
 
 
+def _repeated_columns(tr, ts, source):
+    """Two columns of one record equal in every sample (one file column read twice: a `--map` that names the
+    same column for two coordinates, a logger that wrote one channel twice). No two coordinates or inputs of
+    these machines move alike throughout, and a fit ascribes the one's effect to the other. Columns that never
+    change are `_constant`'s."""
+    columns = [(n, np.asarray(tr.xs, dtype=float)[:, i]) for i, n in enumerate(tr.state_names)]
+    columns += [(n, np.asarray(tr.us, dtype=float)[:, i]) for i, n in enumerate(tr.input_names)]
+    out = []
+    for j, (name, x) in enumerate(columns):
+        if np.ptp(x) == 0:
+            continue
+        same = next((other for other, y in columns[:j] if np.array_equal(x, y)), None)
+        if same is not None:
+            out.append(
+                Finding(
+                    Check.DUPLICATE,
+                    Severity.REFUSE,
+                    source,
+                    name,
+                    (1, len(ts)),
+                    (float(ts[0]), float(ts[-1])),
+                    f"is the same as column '{same}' in every sample: one column read twice (a --map that names "
+                    f"one file column for both?); no two coordinates or inputs of a machine move alike throughout, "
+                    f"and a fit would ascribe the one's effect to the other",
+                    f"map {name} to its own column",
+                )
+            )
+    return out
+
+
 def estimated_velocities(trajectory: Trajectory) -> tuple[str, ...]:
     """The velocity columns that are the central differences of their positions (to round-off): estimated
     from encoder angles by `load_trajectory`, not measured."""
@@ -806,6 +837,7 @@ def check_record(trajectory: Trajectory, *, estimated: Sequence[str] | None = No
     measured = {v: q for v, q in pairs.items() if v not in estimated}
     paired_estimated = {q for v, q in pairs.items() if v in estimated}
     findings += _constant(trajectory, ts, source, trajectory.system)
+    findings += _repeated_columns(trajectory, ts, source)
     columns = [(n, xs[:, i], False) for i, n in enumerate(names) if n not in estimated]
     columns += [(n, us[:, i], True) for i, n in enumerate(trajectory.input_names)]
     glitches = glitch_findings(trajectory, ts, source, columns, {v: values[q] for v, q in measured.items()})

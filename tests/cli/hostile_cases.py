@@ -710,6 +710,22 @@ CASES = [
         "refuse",
         ("in-sample",),
     ),
+    # One file column read as two (a --map slip): it ran to exit 0 with every parameter at its bound, NaN standard
+    # errors and an infinite held-out error.
+    C(
+        "one-column-mapped-twice",
+        "duplicate",
+        lambda d, fx: _identify(_acrobot(d, fx), "--map", "q2=q1,dq2=dq1", method="dynamic"),
+        "refuse",
+        ("column 'q2'", "same as column 'q1'", "column 'dq2'", "map q2 to its own column"),
+    ),
+    C(
+        "diagnose-one-column-mapped-twice",
+        "duplicate",
+        lambda d, fx: _diagnose(_acrobot(d, fx, name="elbow.csv"), "--map", "q2=q1,dq2=dq1"),
+        "refuse",
+        ("elbow.csv", "column 'q2'", "same as column 'q1'"),
+    ),
     # Non-finite values, unsorted time, absurd magnitudes.
     C(
         "nan-in-dq2",
