@@ -60,6 +60,7 @@ from ._flight_kinematics import (
     check_quaternion_order,
     check_rate_frame,
     check_thrust_frame,
+    check_up_axis,
     check_velocity_frame,
 )
 from ._io import load_trajectory, Sampling
@@ -620,6 +621,7 @@ def load_flight(
         motors = np.asarray(data.us[a : b + 1, :4], dtype=float)
         check_quaternion_order(rel[a : b + 1], flown, path=path, columns=columns)
         check_rate_frame(rel[a : b + 1], flown, motors, path=path, columns=columns, scale=scale)
+        check_up_axis(rel[a : b + 1], flown, path=path, columns=columns)
         check_velocity_frame(rel[a : b + 1], flown, path=path, columns=columns)
         check_position_units(rel[a : b + 1], flown, motors, path=path, columns=columns, scale=scale)
         check_thrust_frame(rel[a : b + 1], flown, motors, path=path, columns=columns)

@@ -28,7 +28,10 @@ record states each quantity twice, so `load_flight` compares the two:
   the lean of body z and its vertical acceleration rises with the motors' thrust
   (`check_thrust_frame`). A north-east-down log, a forward-right-down body or a world-to-body
   quaternion breaks one of the two; such a frame takes more than a scale to convert, and the error
-  says which.
+  says which;
+- the up axis: body z's mean direction over the flight points up (`check_up_axis`). A world frame with
+  y up (a Y-up motion-capture frame) passes the thrust's checks, since the horizontal acceleration
+  still follows the lean, and is refused here.
 
 Only a fault that holds for the whole record is refused with a `scale` to fix it (a unit, a sign or
 a swap): a gain that is wrong in some stretches only is no unit (see `gain_holds_everywhere` in
@@ -415,6 +418,50 @@ def check_thrust_frame(ts, values: dict, motors: np.ndarray, *, path=None, colum
             path=path,
             column=columns.get("z", "z"),
         )
+
+
+MIN_MEAN_UPRIGHT = 0.3  # a flight whose body z axis' mean vertical component is below this is in another frame
+
+
+def check_up_axis(ts, values: dict, *, path=None, columns=None) -> None:
+    r"""Refuse a flight record whose body z axis does not point up on average: a world frame with another up.
+
+    A multirotor holds its thrust axis, body z, near the vertical: its mean direction over a flight,
+    $\overline{R e_z}$, has a vertical component $\overline{\cos\theta}$ of 0.9 or more at the tilts
+    multirotors fly (under 0.5 only at a sustained tilt past 60 degrees). A log whose world frame has another
+    axis up (a Y-up motion-capture frame, the default of OptiTrack's Motive and of Unity) reads the same flight
+    with body z horizontal on average; every check of the thrust's direction passes it (the horizontal
+    acceleration still follows the lean), the ground segments are read from the wrong axis, and a fit puts
+    gravity across the flight. Refused below `MIN_MEAN_UPRIGHT`, naming the world axis body z points along.
+
+    **Arguments:** `ts` (seconds from the record's start); `values` (contract name -> column: `qw..qz`);
+    `path`, `columns` (contract name -> file column) named in the error.
+
+    **Raises:** `DataError` naming the file and the attitude's column.
+    """
+    columns = columns or {}
+    qw, qx, qy, qz = (np.asarray(values[c], dtype=float) for c in ("qw", "qx", "qy", "qz"))
+    if len(qw) == 0:
+        return
+    body_z = np.stack([2 * (qx * qz + qw * qy), 2 * (qy * qz - qw * qx), 1 - 2 * (qx**2 + qy**2)], axis=1)
+    mean = body_z.mean(axis=0)
+    if not mean[2] < MIN_MEAN_UPRIGHT:
+        return
+    k = int(np.argmax(np.abs(mean)))
+    along = ("-" if mean[k] < 0 else "+") + "xyz"[k]
+    why = (
+        "a world frame whose up is y (a Y-up motion-capture frame, as OptiTrack's Motive and Unity log by default?)"
+        if k == 1
+        else "a world frame with another axis up"
+    )
+    raise DataError(
+        f"the body z axis points along world {along} on average over the flight from t = {float(ts[0]):.2f} to "
+        f"{float(ts[-1]):.2f} s (mean direction {mean[0]:+.2f}, {mean[1]:+.2f}, {mean[2]:+.2f}), not up: a "
+        f"multirotor holds its thrust axis near the vertical, so this is {why}; the contract's world frame has z "
+        "up, so rotate the position, velocity and attitude to a z-up frame before loading",
+        path=path,
+        column=columns.get("qw", "qw"),
+    )
 
 
 def _slope(x, y) -> tuple[float, float]:

@@ -239,6 +239,20 @@ def _turned(degrees):
     return edit
 
 
+def _y_up(t):
+    """The flight as a Y-up motion-capture frame logs it (OptiTrack's Motive, Unity): the world turned by -90 degrees
+    about x, so y is up and z points where -y did (position, velocity and attitude rotated; body rates and motors
+    unchanged)."""
+    for y, z in (("y", "z"), ("vy", "vz")):
+        iy, iz = _column(y), _column(z)
+        t[:, [iy, iz]] = np.stack([t[:, iz], -t[:, iy]], axis=1)
+    c, s = np.cos(-np.pi / 4), np.sin(-np.pi / 4)
+    w, x, y, z = (t[:, _column(n)].copy() for n in ("qw", "qx", "qy", "qz"))
+    for n, v in zip(("qw", "qx", "qy", "qz"), (c * w - s * x, c * x + s * w, c * y - s * z, c * z + s * y)):
+        t[:, _column(n)] = v
+    return t
+
+
 def _world_to_body(degrees):
     """The flight turned by `degrees` (`_turned`) with its quaternion logged world-to-body (conjugated)."""
     return lambda t: _set(["qx", "qy", "qz"], slice(None), lambda v: -v)(_turned(degrees)(t))
@@ -617,6 +631,15 @@ CASES = [
         "refuse",
         ("column 'qw'", "world-to-body", "qx=-1,qy=-1,qz=-1"),
         ("swapped",),
+    ),
+    C(  # every other frame check passes it (the horizontal acceleration still follows the lean): it was fitted,
+        # exit 0, with gravity across the flight and ground segments read from the wrong axis
+        "flight-world-y-up",
+        "frame",
+        lambda d, fx: _fit_argv(_flight(d, fx, _y_up)),
+        "refuse",
+        ("column 'qw'", "world +y", "Y-up", "z-up frame"),
+        ("--scale",),
     ),
     C(
         "flight-rates-world-axes-heading-90",

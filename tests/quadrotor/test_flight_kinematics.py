@@ -109,9 +109,14 @@ def test_the_clean_flight_loads_with_the_gyro_as_its_rates():
 def _turned(header, table, degrees):
     """The star flight with the motion capture's x axis turned by `degrees` about z: position, velocity and
     the (scalar-last) attitude rotated, the body rates left as they are; the same flight at another heading."""
+    return _rotated(header, table, Rotation.from_euler("z", degrees, degrees=True))
+
+
+def _rotated(header, table, turn):
+    """The star flight in a world frame turned by `turn` (a scipy `Rotation`): position, velocity and the
+    (scalar-last) attitude rotated, the body rates left as they are."""
     c = header.index
     table = table.copy()
-    turn = Rotation.from_euler("z", degrees, degrees=True)
     for group in (("px", "py", "pz"), ("vx", "vy", "vz")):
         table[:, [c(g) for g in group]] = turn.apply(table[:, [c(g) for g in group]])
     xyzw = [c("qx"), c("qy"), c("qz"), c("qw")]
@@ -136,6 +141,23 @@ def test_a_world_to_body_quaternion_is_named_at_any_heading(tmp_path, star_table
     fixed, _ = dynax.load_flight(faulty_path, mapping=NANOBENCH_MAP, scale={"qx": -1, "qy": -1, "qz": -1})
     clean, _ = dynax.load_flight(clean_path, mapping=NANOBENCH_MAP)
     np.testing.assert_allclose(np.asarray(fixed.xs), np.asarray(clean.xs), rtol=1e-12, atol=1e-12)
+
+
+def test_a_y_up_world_frame_is_named_and_the_flight_turned_back_loads(tmp_path, star_table):
+    # OptiTrack's Motive and Unity log y up: the star flight in such a frame (the world turned -90 degrees about x)
+    # passes every check of the thrust's direction, and was fitted with gravity across the flight
+    header, table = star_table
+    y_up = _rotated(header, table, Rotation.from_euler("x", -90, degrees=True))
+    path = tmp_path / "y_up.csv.gz"
+    _write(path, header, y_up)
+    with pytest.raises(dynax.DataError, match=r"world \+y on average.*Y-up.*z-up frame") as refused:
+        dynax.load_flight(path, mapping=NANOBENCH_MAP)
+    assert refused.value.column == "qw" and "--scale" not in str(refused.value)
+    back = tmp_path / "back.csv.gz"
+    _write(back, header, _rotated(header, y_up, Rotation.from_euler("x", 90, degrees=True)))
+    turned_back, _ = dynax.load_flight(back, mapping=NANOBENCH_MAP)
+    clean, _ = dynax.load_flight(STAR, mapping=NANOBENCH_MAP)
+    np.testing.assert_allclose(np.asarray(turned_back.xs), np.asarray(clean.xs), rtol=0, atol=1e-9)
 
 
 def test_body_rates_in_world_axes_are_named(tmp_path, star_table):
