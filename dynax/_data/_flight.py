@@ -426,9 +426,17 @@ def _with_gaps(notes: FlightNotes, ts: np.ndarray, gaps) -> FlightNotes:
     return FlightNotes(notes.ground, tuple(found), usable, notes.source)
 
 
-def check_input_columns(data: Trajectory, *, path=None, columns=None) -> None:
+# A battery's voltage while the motors run stays within this factor of itself over a flight: a lithium cell from
+# full charge (4.35 V for high-voltage cells) to the deepest sag under load a flight logs (2.0 V, a NanoBench
+# flight whose battery is dying: 1.66 between its 1st and 99th percentiles in flight; 1.08-1.17 on the others).
+# A column that spans more is no voltage (a state of charge in percent, a current).
+MAX_VBAT_SPAN = 3.0
+
+
+def check_input_columns(data: Trajectory, *, path=None, columns=None, checks=None) -> None:
     """Refuse motor and battery columns that no flight logs: a motor zero while the others run, constant, or the
-    copy of another motor, throughout; a battery at 0 V or below throughout. Each makes the motor map's
+    copy of another motor, throughout; a battery at 0 V or below throughout, or at 0 V or below, or spanning
+    more than `MAX_VBAT_SPAN` (1st to 99th percentile), while the motors run. Each makes the motor map's
     features collinear or void, so a fit returns numbers that mean nothing.
 
     **Raises:** `DataError` naming the file and the column (as the file names it)."""
@@ -468,6 +476,21 @@ def check_input_columns(data: Trajectory, *, path=None, columns=None) -> None:
                 path=path,
                 column=named("vbat"),
             )
+        running = ~_motors_off(data, checks or FlightChecks())[0]
+        if running.sum() >= 3:
+            low, high = np.percentile(vbat[running], [1, 99])
+            if not (low > 0 and high <= MAX_VBAT_SPAN * low):
+                ts = np.asarray(data.ts, dtype=float)
+                rows = np.flatnonzero(running)
+                raise DataError(
+                    f"reads {low:.4g} to {high:.4g} (1st to 99th percentile) while the motors run (t = "
+                    f"{ts[rows[0]] - ts[0]:.2f} to {ts[rows[-1]] - ts[0]:.2f} s): a battery's voltage under load stays "
+                    f"within a factor of {MAX_VBAT_SPAN:g} of itself over a flight and above 0, so this is no voltage "
+                    "(a state of charge in percent? a current?); map vbat to the battery voltage's column "
+                    "(`--map vbat=COLUMN`), or leave it out",
+                    path=path,
+                    column=named("vbat"),
+                )
 
 
 # Flights of one vehicle given together whose in-flight motor or battery levels differ by more than this factor
@@ -563,14 +586,13 @@ def load_flight(
 ) -> tuple[Trajectory, FlightNotes]:
     """Load a quadrotor flight log: the contract's `quadrotor` columns, on a uniform grid, with notes.
 
-    Reads the file (`load_trajectory(path, "quadrotor", ...)`, `.csv.gz` included), refuses a
-    quaternion that is not of unit norm (tolerance 0.01, naming the row) and a motor or battery
-    column that no flight logs (a motor zero, constant or another motor's copy throughout, a
-    battery at 0 V or below), makes the quaternion's sign continuous, resamples a record with
-    missed frames onto its median interval (states interpolated, inputs held; the samples inside a
-    gap of more than `MAX_FLIGHT_GAP` intervals are noted as a `gap` and left out), normalises the
-    quaternions, runs `inspect_flight`, and refuses columns that contradict each other
-    (`dynax._data._flight_kinematics`).
+    Reads the file (`load_trajectory(path, "quadrotor", ...)`, `.csv.gz` included), refuses a quaternion that is
+    not of unit norm (tolerance 0.01, naming the row) and a motor or battery column that no flight logs (a motor
+    zero, constant or another motor's copy throughout, a battery at 0 V or below, or one that is no voltage in
+    flight), makes the quaternion's sign continuous, resamples a record with missed frames onto its median
+    interval (states interpolated, inputs held; the samples inside a gap of more than `MAX_FLIGHT_GAP` intervals
+    are noted as a `gap` and left out), normalises the quaternions, runs `inspect_flight`, and refuses columns
+    that contradict each other (`dynax._data._flight_kinematics`).
 
     **Arguments:** `path`; `mapping`, `scale`, `offset` as for `load_trajectory`; `checks`.
 
@@ -582,7 +604,7 @@ def load_flight(
     data = load_trajectory(
         path, "quadrotor", mapping=mapping, scale=scale, offset=offset, sampling=sampling, check=False
     )
-    check_input_columns(data, path=path, columns=dict(mapping or {}))
+    check_input_columns(data, path=path, columns=dict(mapping or {}), checks=checks)
     quats = np.asarray(data.xs[:, 3:7], dtype=float)
     norms = check_unit_quaternions(quats, path, mapping)
     xs = np.asarray(data.xs, dtype=float).copy()

@@ -900,6 +900,14 @@ CASES = [
         "refuse",
         ("column 'vbat'",),
     ),
+    C(  # the battery's state of charge, 95 % falling to 15 %, mapped as vbat: it was fitted, exit 0, as a voltage
+        "flight-vbat-percent",
+        "motors",
+        lambda d, fx: _fit_argv(_flight(d, fx, _set(["vbat"], slice(None), lambda v: np.linspace(95.0, 15.0, len(v))))),
+        "refuse",
+        ("column 'vbat'", "no voltage", "percent"),
+        ("--scale",),
+    ),
     C(
         "flight-vbat-absent",
         "motors",
