@@ -173,7 +173,8 @@ def check_velocities(
 
     A gain that is wrong in some stretches of the record only (`gain_holds_everywhere`) is no unit, and
     is not refused here: `dynax._data._sanity` names the stretch. A gain of 1000 (or $10^6$) with a
-    median interval of 0.1 or more is time in milliseconds (microseconds), and the error says so.
+    median interval of 0.1 or more is time in milliseconds (microseconds), one of 1/60 with an interval
+    under 1/600 time in minutes, and the error says so.
 
     **Raises:** `DataError` naming the file and the velocity column, its gain on the position's
     derivative with its standard error, the unit mix-up that gain matches where one does, the
@@ -203,8 +204,8 @@ def check_velocities(
         if not follows_another and not gain_holds_everywhere(ts, values[position], values[velocity], gain):
             continue  # wrong in some stretches only: no scale is right; the sanity check names the stretch
         dt = float(np.median(np.diff(np.asarray(ts, dtype=float))))
-        for factor, unit in ((1e3, "milliseconds"), (1e6, "microseconds")):
-            if abs(gain / factor - 1.0) < 0.05 and dt >= 0.1:
+        for factor, unit in ((1e3, "milliseconds"), (1e6, "microseconds"), (1 / 60, "minutes")):
+            if abs(gain / factor - 1.0) < 0.05 and (dt >= 0.1 if factor > 1 else dt < 0.1 * factor):
                 raise DataError(
                     f"the time column reads as {unit}: the velocity {named(velocity)} is {gain:.4g} times its "
                     f"position's change per time unit and the median interval is {dt:.6g}; scale the time, not the "

@@ -643,6 +643,14 @@ CASES = [
         ("--scale t=0.001",),
         ("dq1=0.001", "dq2=0.001"),
     ),
+    C(  # refused before too, naming the velocity's gain of 1/60 but not the time
+        "time-minutes-with-velocities",
+        "time_units",
+        lambda d, fx: _identify(_acrobot(d, fx, _time_scale(1 / 60))),
+        "refuse",
+        ("column 't'", "minutes", "--scale t=60"),
+        ("--scale dq",),
+    ),
     C(
         "time-ms-encoder-only",
         "time_units",
