@@ -174,6 +174,7 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
         reversed_named = _warn_if_inputs_reversed(system, names, (a, y), solve, qs, error, trajectories[0].input_names)
         _warn_if_degrees(given, trajectories, error)
         _warn_if_swapped(given, trajectories, error)
+        _warn_if_absolute(given, trajectories, error)
         plain_std = _serially_robust(fit, a, y, weights, estimate, record_rows)[0].std_errors
         _warn_if_zero_upright(fitted, names, estimate, plain_std, qs)
     if counts and consistency != "off" and rests is None and not reversed_named:  # not a refit of this stage
@@ -818,6 +819,44 @@ def _warn_if_swapped(given, trajectories, error) -> None:
         f"falls from {error:.0%} to {refit:.0%}. A mapping that reads one joint's (or motor's) column as the "
         f"other's? If so, swap them back (`--map {mapping}` for a file with the contract's names; in Python "
         "`mapping=`).",
+        InconsistentEstimateWarning,
+        stacklevel=7,
+    )
+
+
+def _warn_if_absolute(given, trajectories, error) -> None:
+    """Where a two-link arm's estimate is inconsistent, refit the records with `q2, dq2` read as link 2's absolute
+    angle and rate (from the vertical, as a motion-capture system or an IMU on the link measures them): the elbow's
+    `q2 - q1`, `dq2 - dq1`. If that gives a consistent estimate and at most `REVERSED_GAIN` of the equation error,
+    warn that `q2` looks absolute. The contract's `q2` is the elbow's angle relative to link 1; an absolute one
+    passes every check of the data and meets least squares with an estimate that names no cause. One more
+    least-squares stage, built from the converted records."""
+    system, method, friction, weights, rcond = given
+    names = tuple(trajectories[0].state_names)
+    if not all(n in names for n in ("q1", "q2", "dq1", "dq2")):
+        return
+    convert = np.eye(len(names))
+    convert[names.index("q1"), names.index("q2")] = -1.0  # new[:, q2] = q2 - q1 (x @ convert)
+    convert[names.index("dq1"), names.index("dq2")] = -1.0
+    relative = [
+        Trajectory(
+            t.ts, t.xs @ jnp.asarray(convert, t.xs.dtype), t.us, t.state_names, t.input_names, t.system, t.source
+        )
+        for t in trajectories
+    ]
+    try:
+        with set_within(SEEN, None):
+            stage = least_squares_stage(system, relative, method, friction, weights, rcond, "off")
+    except (IdentifiabilityError, UsageError):
+        return
+    refit = float(relative_equation_error(stage.a, stage.y, stage.estimate))
+    if not (stage.consistency.consistent and refit <= REVERSED_GAIN * error):
+        return
+    warnings.warn(
+        f"q2 looks like link 2's absolute angle (from the vertical), not the elbow's angle relative to link 1: the "
+        f"least-squares estimate is physically inconsistent, and with q2 - q1 and dq2 - dq1 in their place it is "
+        f"consistent and the equation error falls from {error:.0%} to {refit:.0%}. The contract's q2 is relative: "
+        "subtract q1 from q2 and dq1 from dq2 in the records before loading (no --scale or --map does it).",
         InconsistentEstimateWarning,
         stacklevel=7,
     )

@@ -350,6 +350,13 @@ def _swapped(*pairs, header=ACROBOT):
     return edit
 
 
+def _absolute_q2(t, header=ACROBOT):
+    """Link 2's absolute angle and rate in place of the elbow's: q2 + q1, dq2 + dq1."""
+    for a, b in (("q2", "q1"), ("dq2", "dq1")):
+        t[:, header.index(a)] += t[:, header.index(b)]
+    return t
+
+
 def _written(out):
     """The output is there and holds finite parameters (for a warned case whose data are mislabelled)."""
     obj = json.loads(pathlib.Path(out).read_text())["parameters"]
@@ -995,6 +1002,16 @@ CASES = [
         lambda d, fx: _identify(_acrobot(d, fx, _swapped(("q1", "q2"), ("dq1", "dq2"))), method="dynamic"),
         "warn",
         ("q1, q2 and dq1, dq2", "look swapped", "--map q1=q2,q2=q1,dq1=dq2,dq2=dq1"),
+        check=_written,
+        heavy=True,
+    ),
+    C(  # link 2's angle from the vertical, as motion capture or an IMU on the link logs it: warned before only as an
+        # inconsistent estimate that named no cause
+        "absolute-q2-acrobot",
+        "swapped",
+        lambda d, fx: _identify(_acrobot(d, fx, _absolute_q2), method="dynamic"),
+        "warn",
+        ("q2 looks like link 2's absolute angle", "q2 - q1"),
         check=_written,
         heavy=True,
     ),
