@@ -525,7 +525,8 @@ def test_one_dfki_run_alone_is_said_to_determine_the_size_parameters_poorly(data
     with pytest.warns(PoorlyDeterminedWarning, match="theta1") as caught:
         result = identify(dynax.DoublePendulum(), record, Dynamic(offsets=True), friction="coulomb")
     assert result.angle_zeros is None
-    assert "more records" in str(caught[0].message)
+    poorly = [w for w in caught if issubclass(w.category, PoorlyDeterminedWarning)]  # the data checks warn too
+    assert "more records" in str(poorly[0].message)
     least_squares = result.to_json()["stages"]["least_squares"]
     assert least_squares["poorly_determined"] == {}
     assert least_squares["parameters"]["theta5"] < 0.7 * lab["theta5"]
