@@ -766,6 +766,18 @@ def _warn_if_degrees(given, trajectories, error) -> None:
     )
 
 
+def _consistent_refit(given, records) -> float | None:
+    """The relative equation error of the least-squares stage on `records` (another reading of the data: columns
+    swapped, an angle made relative), or `None` where that estimate is inconsistent or not identifiable."""
+    system, method, friction, weights, rcond = given
+    try:
+        with set_within(SEEN, None):
+            stage = least_squares_stage(system, records, method, friction, weights, rcond, "off")
+    except (IdentifiabilityError, UsageError):
+        return None
+    return float(relative_equation_error(stage.a, stage.y, stage.estimate)) if stage.consistency.consistent else None
+
+
 def _warn_if_swapped(given, trajectories, error) -> None:
     """Where the estimate is inconsistent, refit the records with the two joints' columns swapped (`q1, dq1`
     for `q2, dq2`) and, where there are two inputs, with the inputs swapped (`tau1` for `tau2`), and with both
@@ -778,7 +790,6 @@ def _warn_if_swapped(given, trajectories, error) -> None:
     with an estimate the consistency constraint squeezes towards zero, which names no cause. One more
     least-squares stage per candidate, built from the swapped records.
     """
-    system, method, friction, weights, rcond = given
     names, inputs = tuple(trajectories[0].state_names), tuple(trajectories[0].input_names)
     states, same_inputs = list(range(len(names))), list(range(len(inputs)))
     candidates = []
@@ -800,13 +811,8 @@ def _warn_if_swapped(given, trajectories, error) -> None:
             )
             for t in trajectories
         ]
-        try:
-            with set_within(SEEN, None):
-                stage = least_squares_stage(system, swapped, method, friction, weights, rcond, "off")
-        except (IdentifiabilityError, UsageError):
-            continue
-        refit = float(relative_equation_error(stage.a, stage.y, stage.estimate))
-        if stage.consistency.consistent and refit <= REVERSED_GAIN * error:
+        refit = _consistent_refit(given, swapped)
+        if refit is not None and refit <= REVERSED_GAIN * error:
             found.append((refit, columns))
     if not found:
         return
@@ -831,7 +837,6 @@ def _warn_if_absolute(given, trajectories, error) -> None:
     warn that `q2` looks absolute. The contract's `q2` is the elbow's angle relative to link 1; an absolute one
     passes every check of the data and meets least squares with an estimate that names no cause. One more
     least-squares stage, built from the converted records."""
-    system, method, friction, weights, rcond = given
     names = tuple(trajectories[0].state_names)
     if not all(n in names for n in ("q1", "q2", "dq1", "dq2")):
         return
@@ -844,13 +849,8 @@ def _warn_if_absolute(given, trajectories, error) -> None:
         )
         for t in trajectories
     ]
-    try:
-        with set_within(SEEN, None):
-            stage = least_squares_stage(system, relative, method, friction, weights, rcond, "off")
-    except (IdentifiabilityError, UsageError):
-        return
-    refit = float(relative_equation_error(stage.a, stage.y, stage.estimate))
-    if not (stage.consistency.consistent and refit <= REVERSED_GAIN * error):
+    refit = _consistent_refit(given, relative)
+    if refit is None or refit > REVERSED_GAIN * error:
         return
     warnings.warn(
         f"q2 looks like link 2's absolute angle (from the vertical), not the elbow's angle relative to link 1: the "
