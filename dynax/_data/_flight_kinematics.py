@@ -343,6 +343,12 @@ def _fault_holds_everywhere(ts, angle, rate, gain: float) -> bool:
     return seen > 0
 
 
+def body_z_in_world(values: dict) -> np.ndarray:
+    """The body z axis in world coordinates, $R(q) e_z$, `(n, 3)`, of the body-to-world quaternions `qw..qz`."""
+    qw, qx, qy, qz = (np.asarray(values[c], dtype=float) for c in ("qw", "qx", "qy", "qz"))
+    return np.stack([2 * (qx * qz + qw * qy), 2 * (qy * qz - qw * qx), 1 - 2 * (qx**2 + qy**2)], axis=1)
+
+
 def thrust_frame_slopes(ts, values: dict, motors: np.ndarray) -> tuple[float, float, float, float] | None:
     """`(c, c_std, k, k_std)` of `check_thrust_frame`: the horizontal acceleration's gain on the lean of
     body z [m/s^2] and the vertical acceleration's slope on the motors' thrust, with standard errors;
@@ -354,8 +360,7 @@ def thrust_frame_slopes(ts, values: dict, motors: np.ndarray) -> tuple[float, fl
     start, stop = edges[:-1], edges[1:]
     velocity = np.stack([np.asarray(values[c], dtype=float) for c in ("vx", "vy", "vz")], axis=1)
     acceleration = (velocity[stop] - velocity[start]) / (ts[stop] - ts[start])[:, None]
-    qw, qx, qy, qz = (np.asarray(values[c], dtype=float) for c in ("qw", "qx", "qy", "qz"))
-    lean = np.stack([2 * (qx * qz + qw * qy), 2 * (qy * qz - qw * qx)], axis=1)  # (R e_z) horizontal
+    lean = body_z_in_world(values)[:, :2]  # (R e_z) horizontal
     thrust = np.sum(np.asarray(motors, dtype=float) ** 2, axis=1)
 
     def block_mean(x):
@@ -440,10 +445,9 @@ def check_up_axis(ts, values: dict, *, path=None, columns=None) -> None:
     **Raises:** `DataError` naming the file and the attitude's column.
     """
     columns = columns or {}
-    qw, qx, qy, qz = (np.asarray(values[c], dtype=float) for c in ("qw", "qx", "qy", "qz"))
-    if len(qw) == 0:
+    body_z = body_z_in_world(values)
+    if len(body_z) == 0:
         return
-    body_z = np.stack([2 * (qx * qz + qw * qy), 2 * (qy * qz - qw * qx), 1 - 2 * (qx**2 + qy**2)], axis=1)
     mean = body_z.mean(axis=0)
     if not mean[2] < MIN_MEAN_UPRIGHT:
         return

@@ -767,8 +767,9 @@ def _repeated_columns(tr, ts, source):
     same column for two coordinates, a logger that wrote one channel twice). No two coordinates or inputs of
     these machines move alike throughout, and a fit ascribes the one's effect to the other. Columns that never
     change are `_constant`'s."""
-    columns = [(n, np.asarray(tr.xs, dtype=float)[:, i]) for i, n in enumerate(tr.state_names)]
-    columns += [(n, np.asarray(tr.us, dtype=float)[:, i]) for i, n in enumerate(tr.input_names)]
+    xs, us = np.asarray(tr.xs, dtype=float), np.asarray(tr.us, dtype=float)
+    columns = [(n, xs[:, i]) for i, n in enumerate(tr.state_names)]
+    columns += [(n, us[:, i]) for i, n in enumerate(tr.input_names)]
     out = []
     for j, (name, x) in enumerate(columns):
         if np.ptp(x) == 0:

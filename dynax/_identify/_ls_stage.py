@@ -714,8 +714,7 @@ def _warn_if_degrees(given, trajectories, error) -> None:
     near-zeros with small negative terms). One more least-squares
     stage per set, built from scaled records.
     """
-    system, method, friction, weights, rcond = given
-    base = split_terms(system)[0]
+    base = split_terms(given[0])[0]
     names = tuple(trajectories[0].state_names)
     angles = [base.joint_names[k] for k in base.angle_indices if k < len(base.joint_names)]
     if not angles or any("d" + q not in names for q in angles):
@@ -737,12 +736,8 @@ def _warn_if_degrees(given, trajectories, error) -> None:
             )
             for t in trajectories
         ]
-        try:
-            with set_within(SEEN, None):
-                stage = least_squares_stage(system, scaled, method, friction, weights, rcond, "off")
-        except (IdentifiabilityError, UsageError):
-            return None
-        return stage.consistency.consistent, float(relative_equation_error(stage.a, stage.y, stage.estimate)), False
+        refit = _consistent_refit(given, scaled)  # an inconsistent refit explains nothing (`_best_subset`)
+        return None if refit is None else (True, refit, False)
 
     best = _best_subset(len(joints), refit, error)
     if best is None:
