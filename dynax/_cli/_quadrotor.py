@@ -36,7 +36,7 @@ def load_flights(
 
     from .._data._flight import check_input_levels, input_levels, load_flight, usable_segments
     from .._data._motor_order import MotorNumbering
-    from .._data._sanity import same_data
+    from .._data._sanity import DataCheck, same_data, shared_stretch_findings
 
     mapping, scale, offset = options
     runs, notes, seen = [], [], {}
@@ -52,11 +52,18 @@ def load_flights(
                     + (
                         "held-out error on the training data is in-sample, no validation; give another flight"
                         if held
-                        else "the same flight counted twice doubles its weight and halves every standard error; "
+                        else "the same flight counted twice doubles its weight and shrinks every standard error by "
+                        "about 1.4 (the square root of 2); "
                         "give it once"
                     ),
                     path=path,
                 )
+            # an excerpt of a flight given beside it (a held-out flight cut from a training one, logs that overlap)
+            held = earlier not in seen
+            kinds = ("training flight" if held else "flight", "held-out flight" if held else "flight")
+            DataCheck(
+                tuple(shared_stretch_findings(kinds[0], other, 0, kinds[1], trajectory, exclude=False))
+            ).raise_refusals()
         seen[str(path)] = trajectory
         _note_flight(path, found)
         numbering.check(trajectory, found.usable, path, dict(mapping or {}))

@@ -42,8 +42,11 @@ What is checked (`Check` names them):
 - `constant`, `zero`: a column that never changes (a dead sensor, a joint that never moves) or an
   input that is zero or constant throughout (nothing excites the dynamics, or a constant force that
   cannot be told from the offset a fit estimates): the parameters' scale is then not determined.
-- `duplicate`: the same record given twice, or as its own validation (held-out error in-sample); two
-  columns of one record equal in every sample (one file column mapped to two coordinates or inputs).
+- `duplicate`: the same record given twice, or as its own validation (held-out error in-sample); a
+  stretch of one record that is rows of another, one for one (an excerpt given beside the record it was
+  cut from, logs that overlap, a copy saved with fewer digits: `dynax._data._overlap`), located in both
+  and cut from the training record; two columns of one record equal in every sample (one file column
+  mapped to two coordinates or inputs).
 
 Inputs the system ignores (a non-zero `tau1` in a file read as `acrobot`) are refused by
 `load_trajectory`, which alone sees the file's other columns.
@@ -57,11 +60,13 @@ from collections.abc import Sequence
 import dataclasses
 import enum
 import math
+import pathlib
 import warnings
 
 import numpy as np
 
 from .._errors import DataError, UsageError
+from ._overlap import shared_stretches
 from ._sampling import time_label
 from ._screens import SCREENS
 from ._trajectory import Trajectory
@@ -895,7 +900,8 @@ def check_records(
                 message = f"is the same data as the {ka} {ra.source or a + 1}: " + (
                     "held-out error on the training data is in-sample, no validation"
                     if held
-                    else "the same record counted twice doubles its weight and halves every standard error"
+                    else "the same record counted twice doubles its weight and shrinks every standard error by about "
+                    "1.4 (the square root of 2)"
                 )
                 findings.append(
                     Finding(
@@ -910,7 +916,60 @@ def check_records(
                         + (" for validation (or none: the tail is held out)" if held else ", or this one once"),
                     )
                 )
+            else:
+                findings += shared_stretch_findings(ka, ra, a + 1, kb, rb)
     return DataCheck(tuple(findings))
+
+
+def _file_name(record: Trajectory) -> str:
+    """The file a record (or a piece `--exclude` left of it) was read from, as `--exclude FILE@` names it."""
+    source = record.source or ""
+    if source.endswith(" s]") and " [" in source:
+        source = source.rsplit(" [", 1)[0]
+    return pathlib.Path(source).name if source else ""
+
+
+def shared_stretch_findings(
+    ka: str, ra: Trajectory, number: int, kb: str, rb: Trajectory, *, exclude: bool = True
+) -> list[Finding]:
+    """A refusal for each stretch of `rb` that is rows of `ra` (`shared_stretches`): held-out error there is
+    in-sample (`rb` held out, `ra` not: `ka != kb`), or the stretch is counted twice. The fix cuts it from
+    the training record (`ra` when `rb` is held out; else `rb`) with `--exclude`, or where the command has
+    none (`exclude=False`), asks for other records."""
+    held = ka != kb
+    findings = []
+    for shared in shared_stretches(ra, rb):
+        (i, j), (k, m) = shared.rows_a, shared.rows_b
+        ta, tb = np.asarray(ra.ts, float), np.asarray(rb.ts, float)
+        resolution = float(np.median(np.diff(ta))) / 10
+        there = f"{time_label(float(ta[i]), resolution)} to {time_label(float(ta[j]), resolution)} s"
+        message = (
+            f"holds {m - k + 1} samples that are the {ka} {ra.source or number}'s, one for one (its rows "
+            f"{i + 1}-{j + 1}, t = {there}): "
+            + (
+                "held-out error there is in-sample, not validation"
+                if held
+                else "that stretch counted twice doubles its weight; the standard errors shrink as if it were new"
+            )
+        )
+        cut, (first, last), times = (ra, (i, j), ta) if held else (rb, (k, m), tb)
+        whole = first == 0 and last == len(cut) - 1
+        if whole or not exclude:  # nothing is left to fit once it is cut, or the command cuts nothing
+            fix = (
+                "give a held-out record that holds none of the training records' samples"
+                if held
+                else "give the record once"
+                if whole
+                else "give each stretch in one record only"
+            )
+        else:
+            name = _file_name(cut)
+            fix = _span(times, first, last).replace("--exclude ", f"--exclude {name}@" if name else "--exclude ")
+            fix += f" (cuts it from the {'training ' if held else ''}record" + (
+                f" {cut.source})" if cut.source else ")"
+            )
+        findings.append(_row_time(tb, (k, m), rb.source or "", Check.DUPLICATE, Severity.REFUSE, None, message, fix))
+    return findings
 
 
 # --- cutting stretches out -----------------------------------------------------------------------

@@ -124,6 +124,17 @@ def _star(folder, fx, edit, name="star.csv.gz"):
     return str(path)
 
 
+def _excerpt(first):
+    """An edit that keeps rows `first:`, re-stamped from zero (an excerpt saved as a file of its own)."""
+
+    def edit(t):
+        t = t[first:].copy()
+        t[:, 0] -= t[0, 0]
+        return t
+
+    return edit
+
+
 def _set(columns, rows, value):
     """Set `columns` (names) at `rows` (an index or a slice) to `value` (a number, an array, or a function of
     the old values)."""
@@ -994,6 +1005,35 @@ CASES = [
         ],
         "refuse",
         ("same data",),
+    ),
+    # An excerpt of a flight given beside it: compared sample for sample, it ran to exit 0 with in-sample validation.
+    C(
+        "flight-diagnose-validation-cut-from-training",
+        "duplicate",
+        lambda d, fx: [
+            "diagnose",
+            "quadrotor",
+            fx["train_csv"],
+            "--validation",
+            _flight(d, fx, _excerpt(600), name="last6s.csv"),
+            "--out",
+            "report",
+        ],
+        "refuse",
+        ("last6s.csv", "rows 1-", "in-sample", "training flight"),
+    ),
+    C(
+        "flight-fit-logs-that-overlap",
+        "duplicate",
+        lambda d, fx: [
+            "fit",
+            "quadrotor",
+            _flight(d, fx, lambda t: t[:800].copy(), name="first.csv"),
+            _flight(d, fx, lambda t: t[500:].copy(), name="second.csv"),
+            *_fit_argv("")[3:],
+        ],
+        "refuse",
+        ("second.csv", "rows 1-300", "t = 5 to 7.99 s", "counted twice"),
     ),
     C(
         "flight-diagnose-validation-is-the-data",

@@ -1,0 +1,109 @@
+r"""Stretches that two records share, sample for sample: an excerpt of a record given beside it.
+
+A validation record cut out of a training record that is still given whole (the last ten seconds saved
+to a file of their own, re-stamped from zero or not), two logs that overlap because a logger's files
+overlap, or a record saved again with fewer digits are not new data: held-out error on such a stretch is
+in-sample, and a stretch counted twice doubles its weight in a fit. Equality of whole records misses all
+three, so the records are compared row by row on their states and inputs (times are not compared: an
+excerpt may be re-stamped).
+
+Two rows are the same sample when every column agrees within its tolerance: $10^{-4}$ of the column's
+spread, or half the coarser of the two records' quanta where a record is stored with fewer digits.
+Two repeats of one motion on a real rig never agree that closely in every state and input at once (the
+sensors' noise alone parts them), while a copy agrees to its rounding. A shared stretch is a run of
+at least `min_samples` rows that agree one for one in order, over which the record moves (its states
+span 5 % of their spread or more): rows at rest, where two records may both read the same quantised pose
+at zero input, share nothing that matters and are not counted.
+
+Rows are matched through a k-d tree on the scaled columns (`scipy.spatial.cKDTree`, max-norm), probing
+at most about 5,000 rows of each record, and each run found is extended row by row to its exact ends.
+"""
+
+import dataclasses
+
+import numpy as np
+
+from ._trajectory import Trajectory
+
+RELATIVE_TOLERANCE = 1e-4  # rows agree within this fraction of each column's spread ...
+MOVING = 0.05  # ... over a stretch whose states span this fraction of their spread (not rest)
+PROBES = 5000  # rows of the second record probed per pair (a stride over longer records)
+
+
+@dataclasses.dataclass(frozen=True)
+class SharedStretch:
+    """Rows `rows_b` (first, last; 0-based, inclusive) of record `b` are rows `rows_a` of record `a`."""
+
+    rows_a: tuple[int, int]
+    rows_b: tuple[int, int]
+
+
+def _table(record: Trajectory) -> np.ndarray:
+    return np.column_stack([np.asarray(record.xs, float), np.asarray(record.us, float).reshape(len(record), -1)])
+
+
+def _quantum(column: np.ndarray) -> float:
+    """The smallest step between the column's distinct values (its storage's resolution, where rounded)."""
+    steps = np.diff(np.unique(column[np.isfinite(column)]))
+    return float(steps.min()) if steps.size else 0.0
+
+
+def shared_stretches(a: Trajectory, b: Trajectory, *, min_samples: int = 20) -> list[SharedStretch]:
+    """The stretches of `b` that are rows of `a`, one for one and in order, while the record moves.
+
+    **Arguments:** two records of one system (records of other shapes share nothing); `min_samples`, the
+    shortest stretch reported.
+
+    **Returns:** the shared stretches, in `b`'s order (empty when none).
+    """
+    if a.state_names != b.state_names or a.input_names != b.input_names or len(a) < min_samples or len(b) < min_samples:
+        return []
+    ta, tb = _table(a), _table(b)
+    finite = np.isfinite(ta).all(1)
+    spread = np.array([np.std(c[np.isfinite(c)]) if np.isfinite(c).any() else 0.0 for c in ta.T])
+    quantum = np.array([max(_quantum(ca), _quantum(cb)) for ca, cb in zip(ta.T, tb.T)])
+    tolerance = np.maximum(RELATIVE_TOLERANCE * spread, 0.5 * quantum * (1 + 1e-9))
+    tolerance = np.where(tolerance > 0, tolerance, 1e-12)  # a constant column: exact agreement
+    from scipy.spatial import cKDTree
+
+    index = np.flatnonzero(finite)
+    if not index.size:
+        return []
+    tree = cKDTree(ta[index] / tolerance)
+    stride = max(1, len(b) // PROBES)
+    probes = np.arange(0, len(b), stride)
+    probes = probes[np.isfinite(tb[probes]).all(1)]
+    distance, found = tree.query(tb[probes] / tolerance, p=np.inf, distance_upper_bound=1.0)
+    matched = np.isfinite(distance)
+    rows = np.where(matched, index[np.minimum(found, len(index) - 1)], -1)
+
+    def same(i, j):
+        return 0 <= i < len(b) and 0 <= j < len(a) and bool(np.all(np.abs(tb[i] - ta[j]) <= tolerance))
+
+    states = a.xs.shape[1]
+    shared, k = [], 0
+    while k < len(probes):
+        if not matched[k]:
+            k += 1
+            continue
+        # a run of probes whose matches step through `a` as they step through `b`
+        end = k
+        while end + 1 < len(probes) and matched[end + 1] and rows[end + 1] - rows[end] == probes[end + 1] - probes[end]:
+            end += 1
+        i0, i1, j0 = int(probes[k]), int(probes[end]), int(rows[k])
+        k = end + 1
+        if not all(same(i, j0 + i - i0) for i in range(i0, i1 + 1)):
+            continue  # probes matched a stride apart, not every row between
+        while same(i0 - 1, j0 - 1):
+            i0, j0 = i0 - 1, j0 - 1
+        while same(i1 + 1, j0 + i1 + 1 - i0):
+            i1 += 1
+        if i1 - i0 + 1 < min_samples:
+            continue
+        span = np.ptp(tb[i0 : i1 + 1, :states], axis=0) / np.where(spread[:states] > 0, spread[:states], np.inf)
+        if span.max() < MOVING:
+            continue
+        if shared and i0 <= shared[-1].rows_b[1]:
+            continue  # the run a probe stride inside the one before
+        shared.append(SharedStretch((j0, j0 + i1 - i0), (i0, i1)))
+    return shared

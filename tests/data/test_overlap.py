@@ -1,0 +1,80 @@
+"""Stretches two records share, sample for sample: found at their rows in copies, and never in real repeats."""
+
+import re
+
+import numpy as np
+
+import dynax
+from tests.conftest import DFKI_MAPPING
+from tests.quadrotor.test_flight_data import NANOBENCH_MAP
+
+
+def _shared(records, validation=()):
+    """The `duplicate` findings of `check_records` (the records' other findings, such as the DFKI velocities'
+    lag, are not what is tested here)."""
+    return [f for f in dynax.check_records(records, validation).findings if f.kind == "duplicate"]
+
+
+def _record(ts, xs, us, source):
+    names = ("q1", "q2", "dq1", "dq2")
+    return dynax.Trajectory(ts, np.asarray(xs), np.asarray(us)[:, None], names, ("tau2",), "acrobot", source)
+
+
+def test_an_excerpt_restamped_and_saved_with_fewer_digits_is_found_at_its_rows(datasets, tmp_path):
+    # 20 s of DFKI run 00 cut out, its clock started from zero, saved with five significant digits: the
+    # encoders' own quantum is finer than that rounding, so only the tolerance for a coarser copy finds it
+    run = dynax.load_trajectory(
+        datasets / "dfki_double_pendulum" / "sys_id" / "trajectory_00.csv",
+        "double_pendulum",
+        mapping=DFKI_MAPPING,
+        check=False,
+    )
+    ts, xs, us = (np.asarray(a, float) for a in (run.ts, run.xs, run.us))
+    cut = slice(2000, 4001)
+    table = np.column_stack([ts[cut] - ts[cut][0], xs[cut], us[cut]])
+    path = tmp_path / "excerpt.csv"
+    header = "t,q1,q2,dq1,dq2,tau1,tau2"
+    path.write_text(header + "\n" + "\n".join(",".join(f"{v:.5g}" for v in row) for row in table) + "\n")
+    excerpt = dynax.load_trajectory(path, "double_pendulum", check=False)
+    [finding] = _shared([run], [excerpt])
+    assert finding.severity == "refuse" and finding.rows == (1, 2001)
+    assert "rows 2001-4001" in finding.message and "in-sample" in finding.message
+    # the cut it offers takes the excerpt's rows out of the training run, and at most a sample either side
+    t0, t1 = (float(v) for v in re.match(r"--exclude trajectory_00\.csv@([\d.]+):([\d.]+) ", finding.fix).groups())
+    assert ts[1998] < t0 <= ts[2000] and ts[4000] <= t1 < ts[4002], (finding.fix, ts[1998:2001], ts[4000:4003])
+
+
+def test_real_repeats_of_one_motion_share_no_stretch(datasets):
+    # the six DFKI runs (trajectories the rig ran more than once among them), and NanoBench's flights of one
+    # shape at other speeds and repetitions: their sensors' noise parts every row
+    runs = [
+        dynax.load_trajectory(path, "double_pendulum", mapping=DFKI_MAPPING, check=False)
+        for path in sorted((datasets / "dfki_double_pendulum" / "sys_id").glob("trajectory_*.csv"))
+    ]
+    assert _shared(runs[:3], runs[3:]) == [] and _shared(runs) == []
+    names = ("B2_circle_fast_rep2", "B2_circle_medium_rep3", "B2_circle_slow_rep2", "B6_linear_ramp_rep1")
+    flights = [dynax.load_flight(datasets / "nanobench" / f"{n}.csv.gz", mapping=NANOBENCH_MAP)[0] for n in names]
+    flights.append(dynax.load_flight(datasets / "nanobench" / "B6_linear_ramp_rep2.csv.gz", mapping=NANOBENCH_MAP)[0])
+    assert _shared(flights) == []
+
+
+def test_records_that_rest_at_one_pose_then_move_apart_share_nothing():
+    # both rest 2 s at the bottom under zero torque, read by the same quantised encoder (the rows agree exactly),
+    # then swing under other torques; a third repeats the first's motion with encoder noise of one count
+    ts = np.arange(0.0, 6.0, 0.01)
+    quantum = 2 * np.pi / 4096
+    records = []
+    for k, (amplitude, noise) in enumerate(((0.8, 0.0), (0.5, 0.0), (0.8, 1.0))):
+        moving = ts >= 2.0
+        q1 = np.where(moving, amplitude * np.sin(2.1 * (ts - 2.0)) * (1 - np.exp(-(ts - 2.0))), 0.0)
+        q2 = np.where(moving, 0.5 * amplitude * np.sin(3.3 * (ts - 2.0)), 0.0)
+        rng = np.random.default_rng(k)
+        q1 = quantum * np.round(q1 / quantum + noise * rng.integers(-1, 2, len(ts)) * moving)
+        q2 = quantum * np.round(q2 / quantum)
+        xs = np.column_stack([q1, q2, np.gradient(q1, ts), np.gradient(q2, ts)])
+        records.append(_record(ts, xs, np.where(moving, amplitude * np.cos(ts), 0.0), f"run{k}.csv"))
+    assert _shared(records[:1], records[1:]) == [] and _shared(records) == []
+    # ... while the first record's swing given again is found, and only the swing (the rest is not evidence)
+    copy = _record(ts[300:] - 3.0, np.asarray(records[0].xs)[300:], np.asarray(records[0].us)[300:, 0], "copy.csv")
+    [finding] = _shared(records[:1], [copy])
+    assert finding.rows == (1, 300) and "rows 301-600" in finding.message
