@@ -702,17 +702,33 @@ def _leaves_sizes_to_noise(system, names, equations, solve, estimate, record_row
     return bool(poorly_determined(names, np.asarray(estimate), np.asarray(std), sizes)) if sizes else False
 
 
+# Angle units a logger writes instead of radians, each with the factor that makes radians: degrees, gradians,
+# milliradians, and encoder counts (binary and decimal resolutions per turn, quadrature included).
+_COUNTS_PER_TURN = (*(2**n for n in range(8, 25)), 1000, 2000, 2500, 4000, 5000, 10000, 20000, 40000, 100000)
+ANGLE_UNITS = (
+    ("degrees", np.pi / 180.0),
+    ("gradians", np.pi / 200.0),
+    ("milliradians", 1e-3),
+    *((f"encoder counts ({n} a turn)", 2 * np.pi / n) for n in _COUNTS_PER_TURN),
+)
+MANY_TURNS = 4 * np.pi  # an angle's range beyond two turns: another unit is tried beside degrees
+
+
 def _warn_if_degrees(given, trajectories, error) -> None:
     """Where the estimate is inconsistent, refit the records with each set of the system's joint
-    angles (`angle_indices`; a two-link arm's both, a linear axis none) and their velocities read as
-    degrees: if one gives a consistent estimate and at most `REVERSED_GAIN` of the equation error,
-    warn that those angles look like degrees.
+    angles (`angle_indices`; a two-link arm's both, a linear axis none) and their velocities read in
+    another unit (degrees; where an angle spans more than two turns, also gradians, milliradians and
+    encoder counts of the common resolutions, `ANGLE_UNITS`): if one gives a consistent estimate and at
+    most `REVERSED_GAIN` of the equation error, warn that those angles look like that unit (the one of
+    least equation error, where several explain it).
 
     Velocities are checked against their positions at load (`dynax._data._velocities`), but a file
-    with both in degrees passes that check, and the arm's equations, whose gravity and Coriolis terms
-    are trigonometric in the angles, then fit nothing (a large equation error, and an estimate of
-    near-zeros with small negative terms). One more least-squares
-    stage per set, built from scaled records.
+    with both in degrees (or counts) passes that check, and the arm's equations, whose gravity and
+    Coriolis terms are trigonometric in the angles, then fit nothing (a large equation error, and an
+    estimate of near-zeros with small negative terms). One more least-squares stage per unit and set,
+    built from scaled records; the units beyond degrees are tried only where an angle spans more than
+    two turns, which an arm whose estimate is inconsistent rarely does in radians, and where they would
+    make its span a readable motion (3 degrees to 30 turns).
     """
     base = split_terms(given[0])[0]
     names = tuple(trajectories[0].state_names)
@@ -720,10 +736,14 @@ def _warn_if_degrees(given, trajectories, error) -> None:
     if not angles or any("d" + q not in names for q in angles):
         return
     joints = [(names.index(q), names.index("d" + q)) for q in angles]
+    span = max(float(np.ptp(np.concatenate([np.asarray(t.xs[:, i]) for t in trajectories]))) for i, _ in joints)
+    # degrees always; another unit where an angle spans two turns or more and would span between a few degrees
+    # and about 30 turns in radians (a motion a fit can read, of an arm)
+    units = [u for k, u in enumerate(ANGLE_UNITS) if k == 0 or (span > MANY_TURNS and 0.05 <= span * u[1] <= 200.0)]
 
-    def refit(chosen):
+    def refit(chosen, unit):
         factor = np.ones(len(names))
-        factor[[c for j in chosen for c in joints[j]]] = np.pi / 180.0
+        factor[[c for j in chosen for c in joints[j]]] = unit
         scaled = [
             Trajectory(
                 t.ts,
@@ -739,18 +759,24 @@ def _warn_if_degrees(given, trajectories, error) -> None:
         refit = _consistent_refit(given, scaled)  # an inconsistent refit explains nothing (`_best_subset`)
         return None if refit is None else (True, refit, False)
 
-    best = _best_subset(len(joints), refit, error)
-    if best is None:
+    found = []
+    for label, unit in units:
+        best = _best_subset(len(joints), functools.partial(refit, unit=unit), error)
+        if best is not None:
+            found.append((best[1], label, unit, best[0]))
+    if not found:
         return
-    which = [angles[j] for j in best[0]]
-    columns = [c for j in best[0] for c in (angles[j], "d" + angles[j])]
-    factor = f"{np.pi / 180.0:.7g}"
+    explained, label, unit, chosen = min(found, key=lambda f: f[0])
+    which = [angles[j] for j in chosen]
+    columns = [c for j in chosen for c in (angles[j], "d" + angles[j])]
+    factor = f"{unit:.7g}"
+    many = len(which) > 1
     warnings.warn(
-        f"the joint angle{'s' if len(which) > 1 else ''} {', '.join(which)} look{'' if len(which) > 1 else 's'} "
-        "like degrees: the least-squares estimate is physically inconsistent, and with "
-        f"{'them' if len(which) > 1 else 'it'} "
-        f"(and {'their' if len(which) > 1 else 'its'} velocit{'ies' if len(which) > 1 else 'y'}) read as degrees the "
-        f"estimate is consistent and the equation error falls from {error:.0%} to {best[1]:.0%}. The contract's angles "
+        f"the joint angle{'s' if many else ''} {', '.join(which)} look{'' if many else 's'} "
+        f"like {label}: the least-squares estimate is physically inconsistent, and with "
+        f"{'them' if many else 'it'} "
+        f"(and {'their' if many else 'its'} velocit{'ies' if many else 'y'}) read as {label} the "
+        f"estimate is consistent and the equation error falls from {error:.0%} to {explained:.0%}. The contract's angles "
         "are radians: load the records with scale={"
         + ", ".join(f"'{c}': {factor}" for c in columns)
         + "} (`--scale "

@@ -144,6 +144,43 @@ def _set(rows, column, value, header=ACROBOT):
     return edit
 
 
+def _excerpt(first):
+    """An edit that keeps rows `first:`, re-stamped from zero (an excerpt saved as a file of its own)."""
+
+    def edit(t):
+        t = t[first:].copy()
+        t[:, 0] -= t[0, 0]
+        return t
+
+    return edit
+
+
+def _rows(first, stop):
+    """An edit that keeps rows `first:stop`, stamps and all (one of two logs that overlap)."""
+    return lambda t: t[first:stop].copy()
+
+
+def _rounded(folder, fx, digits, name):
+    """The acrobot record saved again with `digits` significant digits."""
+    table = np.array(fx["acrobot"], copy=True)
+    lines = [",".join(ACROBOT)] + [",".join(f"{v:.{digits}g}" for v in row) for row in table]
+    path = pathlib.Path(folder) / name
+    path.write_text("\n".join(lines) + "\n")
+    return str(path)
+
+
+def _counts(joints, per_turn):
+    """An edit that writes the angles of `joints`, and their velocities, in encoder counts (`per_turn` a turn)."""
+
+    def edit(t):
+        for q in joints:
+            for c in (q, "d" + q):
+                t[:, ACROBOT.index(c)] *= per_turn / (2 * np.pi)
+        return t
+
+    return edit
+
+
 def _identify(path, *extra, out="out.json", system="acrobot", method="power"):
     return ["identify", system, str(path), "--method", method, *extra, "--out", out]
 
@@ -725,6 +762,54 @@ CASES = [
         "refuse",
         ("in-sample",),
     ),
+    # An excerpt of a record given beside it: it ran to exit 0, held-out error in-sample, the stretch's weight doubled.
+    C(
+        "validation-cut-from-the-data",
+        "duplicate",
+        lambda d, fx: _diagnose(fx["acrobot_csv"], "--validation", _acrobot(d, fx, _excerpt(500), name="v.csv")),
+        "refuse",
+        ("v.csv", "rows 1-301", "in-sample", "rows 501-801", "--exclude acrobot.csv@4.99:"),
+    ),
+    C(
+        "logs-that-overlap",
+        "duplicate",
+        lambda d, fx: _identify(
+            _acrobot(d, fx, _rows(0, 601), name="first.csv"),
+            "--validation",
+            _acrobot(d, fx, _rows(400, 801), name="second.csv"),
+        ),
+        "refuse",
+        ("second.csv", "rows 1-201", "t = 4 to 6 s", "in-sample", "--exclude first.csv@3.99:"),
+    ),
+    C(
+        "copy-saved-with-six-digits",
+        "duplicate",
+        lambda d, fx: [
+            "identify",
+            "acrobot",
+            fx["acrobot_csv"],
+            _rounded(d, fx, 6, "rounded.csv"),
+            "--out",
+            "out.json",
+        ],
+        "refuse",
+        ("rounded.csv", "rows 1-801", "counted twice", "give the record once"),
+    ),
+    C(
+        "validation-cut-and-excluded",
+        "duplicate",
+        lambda d, fx: _identify(
+            fx["acrobot_csv"],
+            "--validation",
+            _acrobot(d, fx, _excerpt(500), name="v.csv"),
+            "--exclude",
+            "acrobot.csv@4.99:",
+            method="dynamic",
+        ),
+        "accept",
+        check=params_close(),
+        heavy=True,
+    ),
     # One file column read as two (a --map slip): it ran to exit 0 with every parameter at its bound, NaN standard
     # errors and an infinite held-out error.
     C(
@@ -1013,6 +1098,39 @@ CASES = [
         "warn",
         ("q2 looks like link 2's absolute angle", "q2 - q1"),
         check=_written,
+        heavy=True,
+    ),
+    # Angles (and their velocities, so that the two agree) logged in encoder counts: it ran to exit 0 with every
+    # parameter near zero and a warning that the data determine them poorly, naming no cause.
+    C(
+        "angles-in-encoder-counts",
+        "angle_units",
+        lambda d, fx: _identify(_acrobot(d, fx, _counts(("q1", "q2"), 4096)), method="dynamic"),
+        "warn",
+        ("look like encoder counts (4096 a turn)", "--scale q1=0.001533981,dq1=0.001533981,q2=0.001533981"),
+        check=_written,
+        heavy=True,
+    ),
+    C(
+        "elbow-in-encoder-counts",
+        "angle_units",
+        lambda d, fx: _identify(_acrobot(d, fx, _counts(("q2",), 10000)), method="dynamic"),
+        "warn",
+        ("q2 looks like encoder counts (10000 a turn)", "--scale q2=0.0006283185,dq2=0.0006283185"),
+        check=_written,
+        heavy=True,
+    ),
+    C(
+        "angles-in-encoder-counts-scaled-back",
+        "angle_units",
+        lambda d, fx: _identify(
+            _acrobot(d, fx, _counts(("q1", "q2"), 4096)),
+            "--scale",
+            "q1=0.001533981,dq1=0.001533981,q2=0.001533981,dq2=0.001533981",
+            method="dynamic",
+        ),
+        "accept",
+        check=params_close(),
         heavy=True,
     ),
     C(

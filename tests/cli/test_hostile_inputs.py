@@ -55,6 +55,7 @@ def test_the_corpus_covers_every_class_of_fault():
         "zero",
         "ignored_input",
         "time_units",
+        "angle_units",
         "duplicate",
         "non_finite",
         "time",

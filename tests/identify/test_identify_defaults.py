@@ -732,7 +732,11 @@ def test_reversed_inputs_and_angles_in_degrees_or_from_upright_of_real_records_a
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             identify(system, records, Dynamic(), friction="coulomb", refine=False, validation=dynax.Validate(holdout=0))
-        return [str(w.message) for w in caught if any(k in str(w.message) for k in ("reversed", "degrees", "upright"))]
+        return [
+            str(w.message)
+            for w in caught
+            if any(k in str(w.message) for k in ("reversed", "degrees", "encoder counts", "upright"))
+        ]
 
     folder = datasets / "dfki_double_pendulum" / "sys_id"
 
@@ -758,6 +762,11 @@ def test_reversed_inputs_and_angles_in_degrees_or_from_upright_of_real_records_a
     assert "'q1': 0.01745329, 'dq1': 0.01745329, 'q2': 0.01745329, 'dq2': 0.01745329" in hints[0]
     hints = said(dynax.DoublePendulum(), dfki_runs({"q2": degrees, "dq2": degrees}))
     assert len(hints) == 1 and hints[0].startswith("the joint angle q2 looks like degrees"), hints
+    # ... and in an absolute encoder's counts (17 bits a turn), which no other unit of the list explains as well
+    counts = 2**17 / (2 * np.pi)
+    hints = said(dynax.DoublePendulum(), dfki_runs({"q1": counts, "dq1": counts, "q2": counts, "dq2": counts}))
+    assert len(hints) == 1 and hints[0].startswith("the joint angles q1, q2 look like encoder counts (131072 a turn)")
+    assert "--scale q1=4.79369e-05,dq1=4.79369e-05,q2=4.79369e-05,dq2=4.79369e-05" in hints[0], hints
     assert said(dynax.DoublePendulum(), dfki_runs({})) == []
     # Angles measured from upright (a rig calibrated for balancing): an exact change of sign of two terms.
     for shift, joints, terms in (
