@@ -115,6 +115,7 @@ from ._data._motor_order import MotorSignature as MotorSignature
 from ._data._motor_order import order_text as order_text
 from ._data._motor_order import PERMUTATIONS as PERMUTATIONS
 from ._data._motor_order import warn_if_numbered_otherwise as warn_if_numbered_otherwise
+from ._data._sampling import steady_ticks as steady_ticks
 from ._data._sanity import GLITCH_STEPS as GLITCH_STEPS
 from ._data._sanity import median_reach as median_reach
 from ._data._sanity import typical_step_covers as typical_step_covers
@@ -919,6 +920,7 @@ __all__ = [
     "static_friction_rests",
     "StaticFriction",
     "Statistics",
+    "steady_ticks",
     "stiction_not_proposed",
     "stlsq",
     "StrictTrustRegion",

@@ -35,6 +35,17 @@ def add_data_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_time_option(parser: argparse.ArgumentParser) -> None:
+    """Add `--even-times` (`identify`, `diagnose`): re-stamp each record's samples evenly."""
+    parser.add_argument(
+        "--even-times",
+        action="store_true",
+        help="the samples are evenly spaced and their time stamps jitter (a logger that stamps each sample "
+        "when it receives or writes it): re-stamp them evenly from each record's first stamp to its last "
+        "(refused where samples were dropped)",
+    )
+
+
 def add_velocity_option(parser: argparse.ArgumentParser) -> None:
     """Add `--velocities measured|positions` (`identify`; `diagnose` has its own, with `auto`)."""
     parser.add_argument(
@@ -352,7 +363,7 @@ def load_records(args, system: str, *, min_samples: int, lenient: tuple = ()) ->
                     mapping=mapping,
                     scale=scale,
                     offset=offset,
-                    sampling=Sampling(min_samples=min_samples),
+                    sampling=Sampling(min_samples=min_samples, even=bool(getattr(args, "even_times", False))),
                     check=False,
                     velocities="positions" if getattr(args, "velocities", None) == "positions" else "measured",
                 )

@@ -10,6 +10,7 @@ from .._errors import UsageError
 from ._common import (
     add_data_options,
     add_exclude_option,
+    add_time_option,
     data_options,
     load_records,
     read_nominal_parameters,
@@ -39,6 +40,7 @@ def register(subparsers):
     )
     parser.add_argument("--validation", nargs="+", default=None, metavar="VAL", help="held-out run(s) (same columns)")
     add_data_options(parser)
+    add_time_option(parser)
     add_exclude_option(parser)
     parser.add_argument(
         "--mode",

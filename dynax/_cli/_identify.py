@@ -15,6 +15,7 @@ from .._errors import UsageError
 from ._common import (
     add_data_options,
     add_exclude_option,
+    add_time_option,
     add_velocity_option,
     data_options,
     load_records,
@@ -74,6 +75,7 @@ def register(subparsers):
         help="friction model (default: coulomb for linear_axis, viscous otherwise)",
     )
     add_data_options(parser)
+    add_time_option(parser)
     add_exclude_option(parser)
     add_velocity_option(parser)
     parser.add_argument(

@@ -306,6 +306,11 @@ def run_diagnose(args) -> int:
         )
     if args.velocities != "auto":
         raise UsageError("--velocities applies to joint records; a quadrotor's velocities are used as logged")
+    if getattr(args, "even_times", False):
+        raise UsageError(
+            "--even-times does not apply to quadrotor flights: dynax.load_flight resamples each log to its "
+            "median interval"
+        )
     if getattr(args, "exclude", None):
         raise UsageError(
             "--exclude does not apply to quadrotor flights: dynax.load_flight finds their glitches and "

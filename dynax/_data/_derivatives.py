@@ -111,6 +111,38 @@ def _interpolants(ts: np.ndarray, qs: np.ndarray, rows: np.ndarray, at: np.ndarr
     return cubic, velocity, np.sum(value**2, axis=1), differences
 
 
+def even_grid_fit(ts: ArrayLike, qs: ArrayLike) -> tuple[float, float]:
+    """How much better the positions `qs` (time x positions) follow the ticks of a steady clock (`steady_ticks`:
+    an even grid fitted to the stamps, a dropped sample leaving its tick out) than the stamps `ts` themselves:
+    `(ratio, stray)`, the ratio of the typical (median-square) residual of each interior sample from the cubic
+    through its four neighbours on the ticks to that on the stamps (pooled over the positions, each by its
+    residual on the stamps), and the stamps' RMS distance from their ticks in median intervals. A logger whose
+    samples are evenly spaced but whose stamps jitter (stamped when received, not when read) gives a ratio far
+    below one; a clean record, or one read at jittered times that its stamps tell truly, about one or above.
+    Host numpy."""
+    ts = np.asarray(ts, dtype=float)
+    qs = np.asarray(qs, dtype=float).reshape(len(ts), -1)
+    if len(ts) < 7:
+        return 1.0, 0.0
+    from ._sampling import steady_ticks
+
+    ticks = steady_ticks(ts)
+    if ticks is None:
+        return 1.0, 0.0
+    times, even = ts - ts[0], ticks[0] - ts[0]
+    interior = np.arange(2, len(ts) - 2)
+    typical = [
+        np.median((qs[interior] - _interpolants(t, qs, interior, t[interior])[0]) ** 2, axis=0) for t in (times, even)
+    ]
+    stamps, grid = typical
+    moving = stamps > 0
+    if not moving.any():
+        return 1.0, 0.0
+    ratio = float(np.sqrt(np.mean(grid[moving] / stamps[moving])))
+    interval = float(np.median(np.diff(ts)))
+    return ratio, float(np.sqrt(np.mean((times - even) ** 2)) / interval)
+
+
 def _time_shift(qs, rows, cubic, velocity):
     """The time shift that moves the cubic onto the rows' positions along the motion (one Newton step)."""
     speed2 = np.sum(velocity**2, axis=1)

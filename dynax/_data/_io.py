@@ -171,11 +171,17 @@ class Sampling(eqx.Module):
       `None` accepts gaps; then cut the record with `split_at_gaps`.
     - `min_step`: refuse a time step shorter than this fraction of the median interval (default
       0.01): a near-duplicate stamp, across which derivatives are noise. `None` accepts it.
+    - `even`: the samples are evenly spaced and their stamps jitter (a logger that stamps each sample
+      when it receives or writes it, not when it was read): re-stamp them evenly from the first stamp to
+      the last, each to its tick of the steady clock fitted to them (a sample dropped leaves its tick out;
+      default `False`: kept as recorded). Refused where two samples fall on one tick (stamps that jitter by
+      half an interval or more). `check_records` says when a record needs it.
     """
 
     min_samples: int = 2
     max_gap: float | None = MAX_GAP
     min_step: float | None = MIN_STEP
+    even: bool = False
 
 
 def load_trajectory(
@@ -334,6 +340,8 @@ def load_trajectory(
     ts = values[TIME]
     column = mapping.get(TIME, TIME)
     check_time_stamps(ts, path=path, column=column, max_gap=sampling.max_gap, min_step=sampling.min_step)
+    if sampling.even:
+        ts = values[TIME] = even_stamps(ts, path=path, column=column)
     from ._derivatives import backward_difference, central_difference, sample_times_from_positions
 
     difference = {"backward": backward_difference, "central": central_difference}
@@ -354,6 +362,23 @@ def load_trajectory(
 
         check_record(trajectory, estimated=tuple(optional)).warn(stacklevel=2)
     return trajectory
+
+
+def even_stamps(ts: np.ndarray, *, path=None, column: str = TIME) -> np.ndarray:
+    """The ticks of the steady clock the stamps jitter about (`Sampling(even=True)`; `steady_ticks`): evenly
+    spaced, a sample dropped leaving its tick out. Refused (`DataError`) where two samples fall on one tick:
+    the stamps jitter by half an interval or more, and no steady clock can be read from them."""
+    from ._sampling import steady_ticks
+
+    found = steady_ticks(ts)
+    if found is None:
+        raise DataError(
+            "even time stamps asked for, but the stamps cannot be read as a steady clock's ticks: two samples "
+            "fall on one tick (stamps that jitter by half an interval or more); keep the stamps as recorded",
+            path=path,
+            column=column,
+        )
+    return found[0]
 
 
 # Contract input columns a system ignores: a file that holds them non-zero was recorded on another system.

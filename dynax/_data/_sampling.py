@@ -85,6 +85,33 @@ def check_time_stamps(
             )
 
 
+def steady_ticks(ts) -> tuple[np.ndarray, np.ndarray] | None:
+    """The ticks of a steady clock that the stamps `ts` jitter about: `(ticks, k)`, each sample's tick time
+    `start + k * interval` and its tick count `k`, with `start` and `interval` fitted by least squares to the
+    stamps and each stamp taken to its nearest tick. A sample dropped leaves a tick out (a step of two
+    intervals), where an even grid between the first and last stamps would shift every later sample. `None`
+    where two samples fall on one tick or the record is too short to fit (stamps jittered by half an interval or
+    more: a steady clock cannot be read from them). Host numpy, float64, relative to the first stamp."""
+    ts = np.asarray(ts, dtype=float)
+    if len(ts) < 3:
+        return None
+    times = ts - ts[0]
+    interval = float(np.median(np.diff(times)))
+    if not interval > 0:
+        return None
+    # counts from sample to sample (a step of about one interval is one tick, of about two a dropped sample), then
+    # the clock's start and interval fitted to them, then every stamp to its nearest tick of that clock, twice
+    k = np.concatenate([[0.0], np.cumsum(np.maximum(np.round(np.diff(times) / interval), 1.0))])
+    for _ in range(2):
+        interval, start = (float(c) for c in np.polyfit(k, times, 1))
+        if not interval > 0:
+            return None
+        k = np.round((times - start) / interval)
+    if np.any(np.diff(k) < 1):
+        return None
+    return ts[0] + start + k * interval, k.astype(np.int64)
+
+
 def split_at_gaps(trajectory: Trajectory, max_gap: float = MAX_GAP) -> list[Trajectory]:
     """Split a record into runs at every step longer than `max_gap` median intervals.
 

@@ -776,8 +776,8 @@ def _warn_if_degrees(given, trajectories, error) -> None:
         f"like {label}: the least-squares estimate is physically inconsistent, and with "
         f"{'them' if many else 'it'} "
         f"(and {'their' if many else 'its'} velocit{'ies' if many else 'y'}) read as {label} the "
-        f"estimate is consistent and the equation error falls from {error:.0%} to {explained:.0%}. The contract's angles "
-        "are radians: load the records with scale={"
+        f"estimate is consistent and the equation error falls from {error:.0%} to {explained:.0%}. The contract's "
+        "angles are radians: load the records with scale={"
         + ", ".join(f"'{c}': {factor}" for c in columns)
         + "} (`--scale "
         + ",".join(f"{c}={factor}" for c in columns)

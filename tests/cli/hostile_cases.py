@@ -181,6 +181,17 @@ def _counts(joints, per_turn):
     return edit
 
 
+def _jittered(spread, seed=0):
+    """An edit that moves every stamp by up to `spread` seconds either way (stamped on receipt), the samples
+    staying where they were read."""
+
+    def edit(t):
+        t[:, 0] += np.random.default_rng(seed).uniform(-spread, spread, len(t))
+        return t
+
+    return edit
+
+
 def _identify(path, *extra, out="out.json", system="acrobot", method="power"):
     return ["identify", system, str(path), "--method", method, *extra, "--out", out]
 
@@ -1050,6 +1061,40 @@ CASES = [
         ("column 't'", "rows 151, 321, 481, 651", "ms late", "only the stamps are off"),
         forbidden=("--velocities positions",),
         check=params_close(0.05, ("theta1", "theta2", "theta3", "theta4", "theta5")),
+        heavy=True,
+    ),
+    # Stamps taken on receipt about samples read on a steady clock (a message's arrival time): it ran to exit 0
+    # with the dampings 13 % off and nothing said.
+    C(
+        "stamps-jitter-on-receipt",
+        "stamps",
+        lambda d, fx: _identify(_acrobot(d, fx, _jittered(0.002))),
+        "refuse",
+        ("column 't'", "rows 1-801", "jitter", "--even-times"),
+    ),
+    C(
+        "stamps-jitter-diagnose",
+        "stamps",
+        lambda d, fx: _diagnose(_acrobot(d, fx, _jittered(0.002))),
+        "refuse",
+        ("column 't'", "jitter", "--even-times"),
+    ),
+    C(
+        "stamps-jitter-even-times",
+        "stamps",
+        lambda d, fx: _identify(_acrobot(d, fx, _jittered(0.002)), "--even-times", method="dynamic"),
+        "accept",
+        check=params_close(),
+        heavy=True,
+    ),
+    C(  # a sample dropped as well: its tick is left out, every other sample keeps its own
+        "even-times-with-a-dropped-sample",
+        "stamps",
+        lambda d, fx: _identify(
+            _acrobot(d, fx, lambda t: np.delete(_jittered(0.002)(t), 400, axis=0)), "--even-times", method="dynamic"
+        ),
+        "accept",
+        check=params_close(),
         heavy=True,
     ),
     C(
