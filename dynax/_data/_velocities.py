@@ -27,17 +27,18 @@ MAX_GAIN_ERROR = 0.2  # |g - 1| above this (and significant) refuses the record
 SIGNIFICANCE = 5.0  # ... by this many standard errors of g
 
 # Factors a velocity's gain takes when its unit differs from its position's (velocity unit per
-# position unit per second), named in the error.
+# position unit per second), named in the error, with the scales that make both the contract's units
+# (radians or metres, per second): the velocity's, and the position's where the position is the one off.
 _KNOWN_FACTORS = {
-    "degrees per second, the position in radians": 180.0 / np.pi,
-    "radians per second, the position in degrees": np.pi / 180.0,
-    "revolutions per second, the position in radians": 1.0 / (2.0 * np.pi),
-    "radians per second, the position in revolutions": 2.0 * np.pi,
-    "rpm, the position in radians": 60.0 / (2.0 * np.pi),
-    "rpm, the position in degrees": 60.0 / 360.0,
-    "millimetres per second, the position in metres": 1000.0,
-    "metres per second, the position in millimetres": 1e-3,
-    "the opposite sign (an encoder or a velocity counted the other way)": -1.0,
+    "degrees per second, the position in radians": (180.0 / np.pi, np.pi / 180.0, None),
+    "radians per second, the position in degrees": (np.pi / 180.0, None, np.pi / 180.0),
+    "revolutions per second, the position in radians": (1.0 / (2.0 * np.pi), 2.0 * np.pi, None),
+    "radians per second, the position in revolutions": (2.0 * np.pi, None, 2.0 * np.pi),
+    "rpm, the position in radians": (60.0 / (2.0 * np.pi), 2.0 * np.pi / 60.0, None),
+    "rpm, the position in degrees": (60.0 / 360.0, 2.0 * np.pi / 60.0, np.pi / 180.0),
+    "millimetres per second, the position in metres": (1000.0, 1e-3, None),
+    "metres per second, the position in millimetres": (1e-3, None, 1e-3),
+    "the opposite sign (an encoder or a velocity counted the other way)": (-1.0, -1.0, None),
 }
 
 
@@ -218,11 +219,12 @@ def check_velocities(
             f"{gain:.4g} +- {std:.2g} times the position's change per second (correlation {corr:.2f}; 1 is "
             "the same quantity in the same units)"
         ]
-        factor, matched = 1.0 / gain if gain != 0 else None, False
-        for meaning, known in _KNOWN_FACTORS.items():
+        factor, matched = 1.0 / gain if gain != 0 else None, None
+        for meaning, (known, velocity_factor, position_factor) in _KNOWN_FACTORS.items():
             if abs(gain / known - 1.0) < (MAX_GAIN_ERROR if known < 0 else 0.03):
                 what.append(f"it reads as {meaning}" if known > 0 else f"it has {meaning}")
-                factor, matched = 1.0 / known, True
+                matched = {velocity: velocity_factor, position: position_factor}
+                matched = {c: f * float(scale.get(c, 1.0)) for c, f in matched.items() if f is not None}
         swapped = False
         for other_velocity, other in pairs.items():
             if other != position:
@@ -233,14 +235,24 @@ def check_velocities(
                         f"it is the derivative of {named(other)} (gain {match[0]:.4g}): are the columns "
                         f"of {velocity} and {other_velocity} swapped?"
                     )
-        if not swapped and abs(gain) < MAX_GAIN_ERROR:
+        if not swapped and matched:
+            what.append(
+                "if so, scale "
+                + ("it" if list(matched) == [velocity] else "them" if len(matched) > 1 else "the position")
+                + " (`scale={"
+                + ", ".join(f"'{c}': {f:.6g}" for c, f in matched.items())
+                + "}`, `--scale "
+                + ",".join(f"{c}={f:.6g}" for c, f in matched.items())
+                + "`)"
+            )
+        elif not swapped and abs(gain) < MAX_GAIN_ERROR:
             what.append(
                 "if the record has no velocity, leave its columns out (unmapped): `load_trajectory` then "
                 "estimates every velocity from the positions"
             )
         elif not swapped and factor is not None:
             factor *= float(scale.get(velocity, 1.0))
-            lead = "if so, scale it" if matched else "if that is a unit or a gear ratio, scale it"
+            lead = "if that is a unit or a gear ratio, scale it"
             what.append(f"{lead} (`scale={{'{velocity}': {factor:.6g}}}`, `--scale {velocity}={factor:.6g}`)")
         raise DataError("; ".join(what), path=path, column=columns.get(velocity, velocity))
 

@@ -606,6 +606,14 @@ CASES = [
         "refuse",
         ("column 'dq1'", "--scale dq1=0.0174533"),
     ),
+    C(  # the angle in degrees, its velocity in rad/s: it advised leaving the velocity out (the angle stays in degrees)
+        "position-degrees-velocity-radians",
+        "velocity",
+        lambda d, fx: _identify(_acrobot(d, fx, _set(slice(None), "q1", np.degrees))),
+        "refuse",
+        ("column 'dq1'", "the position in degrees", "--scale q1=0.0174533"),
+        forbidden=("leave its columns out",),
+    ),
     C(
         "velocity-tail-cut-with-exclude",
         "velocity",

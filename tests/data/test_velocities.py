@@ -84,6 +84,29 @@ def test_a_velocity_of_the_opposite_sign_or_in_rpm_is_refused(tmp_path):
         load(write(tmp_path, columns, "rpm.csv"))
 
 
+def test_a_position_in_degrees_or_millimetres_beside_its_velocity_in_si_units_is_the_one_scaled(tmp_path):
+    # the velocity is right and its position is not: the fix scales the position (it advised leaving the velocity
+    # columns out, which keeps the position in degrees)
+    columns = arm_columns()
+    columns["pos2"] = np.degrees(columns["pos2"])
+    path = write(tmp_path, columns)
+    with pytest.raises(
+        dynax.DataError,
+        match=r"column 'vel2'.*radians per second, the position in degrees; if so, scale the position "
+        r"\(`scale=\{'q2': 0\.0174533\}`, `--scale q2=0\.0174533`\)",
+    ):
+        load(path)
+    run = load(path, scale={"q2": np.pi / 180})  # the fix it names
+    np.testing.assert_allclose(run.state("q2"), np.radians(columns["pos2"]), rtol=1e-12)
+    # both off: rpm against a position in degrees
+    columns = arm_columns()
+    columns["pos1"], columns["vel1"] = np.degrees(columns["pos1"]), columns["vel1"] * 60 / (2 * np.pi)
+    with pytest.raises(
+        dynax.DataError, match=r"rpm, the position in degrees; if so, scale them .*dq1=0\.10472,q1=0\.0174533"
+    ):
+        load(write(tmp_path, columns, "both.csv"))
+
+
 def test_a_placeholder_velocity_column_of_zeros_is_refused_with_the_way_out(tmp_path):
     columns = arm_columns()
     columns["vel1"] = np.zeros_like(columns["vel1"])
