@@ -15,7 +15,7 @@ at least `min_samples` rows that agree one for one in order, over which the reco
 span 5 % of their spread or more): rows at rest, where two records may both read the same quantised pose
 at zero input, share nothing that matters and are not counted.
 
-Rows are matched through a k-d tree on the scaled columns (`scipy.spatial.cKDTree`, max-norm), probing
+Rows are matched through a k-d tree on the scaled columns (`scipy.spatial.KDTree`, max-norm), probing
 at most about 5,000 rows of each record, and each run found is extended row by row to its exact ends.
 """
 
@@ -64,12 +64,12 @@ def shared_stretches(a: Trajectory, b: Trajectory, *, min_samples: int = 20) -> 
     quantum = np.array([max(_quantum(ca), _quantum(cb)) for ca, cb in zip(ta.T, tb.T)])
     tolerance = np.maximum(RELATIVE_TOLERANCE * spread, 0.5 * quantum * (1 + 1e-9))
     tolerance = np.where(tolerance > 0, tolerance, 1e-12)  # a constant column: exact agreement
-    from scipy.spatial import cKDTree
+    from scipy.spatial import KDTree
 
     index = np.flatnonzero(finite)
     if not index.size:
         return []
-    tree = cKDTree(ta[index] / tolerance)
+    tree = KDTree(ta[index] / tolerance)
     stride = max(1, len(b) // PROBES)
     probes = np.arange(0, len(b), stride)
     probes = probes[np.isfinite(tb[probes]).all(1)]
