@@ -41,8 +41,8 @@ def add_time_option(parser: argparse.ArgumentParser) -> None:
         "--even-times",
         action="store_true",
         help="the samples are evenly spaced and their time stamps jitter (a logger that stamps each sample "
-        "when it receives or writes it): re-stamp them evenly from each record's first stamp to its last "
-        "(refused where samples were dropped)",
+        "when it receives or writes it): re-stamp each on its tick of the steady clock fitted to the record's "
+        "stamps (a dropped sample leaves its tick out)",
     )
 
 

@@ -172,10 +172,10 @@ class Sampling(eqx.Module):
     - `min_step`: refuse a time step shorter than this fraction of the median interval (default
       0.01): a near-duplicate stamp, across which derivatives are noise. `None` accepts it.
     - `even`: the samples are evenly spaced and their stamps jitter (a logger that stamps each sample
-      when it receives or writes it, not when it was read): re-stamp them evenly from the first stamp to
-      the last, each to its tick of the steady clock fitted to them (a sample dropped leaves its tick out;
-      default `False`: kept as recorded). Refused where two samples fall on one tick (stamps that jitter by
-      half an interval or more). `check_records` says when a record needs it.
+      when it receives or writes it, not when it was read): re-stamp each on its tick of the steady clock
+      fitted to the stamps (`steady_ticks`; a sample dropped leaves its tick out; default `False`: kept as
+      recorded). Refused where two samples fall on one tick (stamps that jitter by half an interval or
+      more). `check_records` says when a record needs it.
     """
 
     min_samples: int = 2
