@@ -115,8 +115,9 @@ def even_grid_fit(ts: ArrayLike, qs: ArrayLike) -> tuple[float, float]:
     """How much better the positions `qs` (time x positions) follow the ticks of a steady clock (`steady_ticks`:
     an even grid fitted to the stamps, a dropped sample leaving its tick out) than the stamps `ts` themselves:
     `(ratio, stray)`, the ratio of the typical (median-square) residual of each interior sample from the cubic
-    through its four neighbours on the ticks to that on the stamps (pooled over the positions, each by its
-    residual on the stamps), and the stamps' RMS distance from their ticks in median intervals. A logger whose
+    through its four neighbours on the ticks to that on the stamps (the least over the positions that move: one
+    that barely does, its residual its noise on either time base, cannot hide the others), and the stamps'
+    RMS distance from their ticks in median intervals. A logger whose
     samples are evenly spaced but whose stamps jitter (stamped when received, not when read) gives a ratio far
     below one; a clean record, or one read at jittered times that its stamps tell truly, about one or above.
     Host numpy."""
@@ -138,7 +139,7 @@ def even_grid_fit(ts: ArrayLike, qs: ArrayLike) -> tuple[float, float]:
     moving = stamps > 0
     if not moving.any():
         return 1.0, 0.0
-    ratio = float(np.sqrt(np.mean(grid[moving] / stamps[moving])))
+    ratio = float(np.sqrt(np.min(grid[moving] / stamps[moving])))
     interval = float(np.median(np.diff(ts)))
     return ratio, float(np.sqrt(np.mean((times - even) ** 2)) / interval)
 

@@ -35,9 +35,9 @@ What is checked (`Check` names them):
 - `lag`: a measured velocity that lags (or leads) its position throughout or in a run of stretches (a
   driver's causal filter or backward difference): its error follows the acceleration, and a fit trades
   damping for inertia (`lag_findings`).
-- `stamps`: time stamps that jitter about evenly spaced samples (the positions follow an even grid far more
-  closely than their stamps: a logger that stamps on receipt; `jitter_findings`, fixed by re-stamping
-  evenly), or that disagree with the positions read at them (`sample_times_from_positions`): a
+- `stamps`: time stamps that jitter about evenly spaced samples (the positions follow a steady clock's ticks
+  far more closely than their stamps: a logger that stamps on receipt; `jitter_findings`, fixed by putting
+  each sample on its tick), or that disagree with the positions read at them (`sample_times_from_positions`): a
   logger that stalls between reading its sensors and its clock stamps them late, and every difference
   over such an interval (a logged backward difference, central differences on the stamps) reads the
   velocity wrong there, by several rad/s in a fast spin (`stamp_findings`).
