@@ -47,6 +47,12 @@ def test_stamps_jittered_about_even_samples_are_refused_and_samples_read_at_jitt
     [finding] = _stamps_findings(_record(even + jitter, xs, us))
     assert finding.severity == "refuse" and finding.column == "t" and "--even-times" in finding.fix
     assert "jitter by 0.1" in finding.message, finding.message
+    # ... also where one joint barely moves (its encoder flickers between two counts: noise on either time base)
+    held = np.array(xs, copy=True)
+    held[:, 0] = 0.3 + 0.0015 * rng.integers(0, 2, len(even))
+    held[:, 2] = 0.0
+    [finding] = _stamps_findings(_record(even + jitter, held, us))
+    assert finding.severity == "refuse"
     # read at jittered times and stamped truly: nothing to say
     xs_jittered, us_jittered = _arm(even + jitter)
     assert _stamps_findings(_record(even + jitter, xs_jittered, us_jittered)) == []
