@@ -16,7 +16,10 @@ span 5 % of their spread or more): rows at rest, where two records may both read
 at zero input, share nothing that matters and are not counted.
 
 Rows are matched through a k-d tree on the scaled columns (`scipy.spatial.KDTree`, max-norm), probing
-at most about 5,000 rows of each record, and each run found is extended row by row to its exact ends.
+at most about 5,000 rows of each record, and each run found is extended row by row to its exact ends. A copy
+at a whole fraction of the rate (every second row kept) matches every `step`-th row of the original, and a
+copy at a whole multiple of it (samples interpolated between the original's) holds every row of the original
+at every `step`-th of its own (`shared_either_way`); a copy resampled at another ratio shares no row.
 """
 
 import dataclasses
@@ -32,10 +35,12 @@ PROBES = 5000  # rows of the second record probed per pair (a stride over longer
 
 @dataclasses.dataclass(frozen=True)
 class SharedStretch:
-    """Rows `rows_b` (first, last; 0-based, inclusive) of record `b` are rows `rows_a` of record `a`."""
+    """Rows `rows_b` (first, last; 0-based, inclusive) of record `b` are rows `rows_a` of record `a`, every
+    `step`-th of them (1: one for one; 2: `b` holds every other row of `a`'s stretch, a copy at half the rate)."""
 
     rows_a: tuple[int, int]
     rows_b: tuple[int, int]
+    step: int = 1
 
 
 def _table(record: Trajectory) -> np.ndarray:
@@ -80,23 +85,29 @@ def shared_stretches(a: Trajectory, b: Trajectory, *, min_samples: int = 20) -> 
     def same(i, j):
         return 0 <= i < len(b) and 0 <= j < len(a) and bool(np.all(np.abs(tb[i] - ta[j]) <= tolerance))
 
+    def step_between(k):  # rows of `a` per row of `b` from probe k to k + 1, where a whole number
+        di, dj = probes[k + 1] - probes[k], rows[k + 1] - rows[k]
+        return int(dj // di) if dj > 0 and dj % di == 0 else 0
+
     states = a.xs.shape[1]
     shared, k = [], 0
     while k < len(probes):
         if not matched[k]:
             k += 1
             continue
-        # a run of probes whose matches step through `a` as they step through `b`
+        # a run of probes whose matches step through `a` as they step through `b`, `step` rows of `a` a row of `b`
+        step = step_between(k) if k + 1 < len(probes) and matched[k + 1] else 1
+        step = step or 1
         end = k
-        while end + 1 < len(probes) and matched[end + 1] and rows[end + 1] - rows[end] == probes[end + 1] - probes[end]:
+        while end + 1 < len(probes) and matched[end + 1] and step_between(end) == step:
             end += 1
         i0, i1, j0 = int(probes[k]), int(probes[end]), int(rows[k])
         k = end + 1
-        if not all(same(i, j0 + i - i0) for i in range(i0, i1 + 1)):
+        if not all(same(i, j0 + step * (i - i0)) for i in range(i0, i1 + 1)):
             continue  # probes matched a stride apart, not every row between
-        while same(i0 - 1, j0 - 1):
-            i0, j0 = i0 - 1, j0 - 1
-        while same(i1 + 1, j0 + i1 + 1 - i0):
+        while same(i0 - 1, j0 - step):
+            i0, j0 = i0 - 1, j0 - step
+        while same(i1 + 1, j0 + step * (i1 + 1 - i0)):
             i1 += 1
         if i1 - i0 + 1 < min_samples:
             continue
@@ -105,5 +116,20 @@ def shared_stretches(a: Trajectory, b: Trajectory, *, min_samples: int = 20) -> 
             continue
         if shared and i0 <= shared[-1].rows_b[1]:
             continue  # the run a probe stride inside the one before
-        shared.append(SharedStretch((j0, j0 + i1 - i0), (i0, i1)))
+        shared.append(SharedStretch((j0, j0 + step * (i1 - i0)), (i0, i1), step))
     return shared
+
+
+def shared_either_way(a: Trajectory, b: Trajectory, *, min_samples: int = 20) -> list[SharedStretch]:
+    """`shared_stretches(a, b)`, and where that finds nothing, the stretches of `a` that are every `step`-th row
+    of `b` (`b` a copy of `a` at a whole multiple of its rate: interpolated between `a`'s samples), each given
+    from `b`'s side: `rows_b` the span of `b` that holds them, `rows_a` `a`'s rows, `step` as negative (`b`'s
+    rows per row of `a`)."""
+    found = shared_stretches(a, b, min_samples=min_samples)
+    if found:
+        return found
+    return [
+        SharedStretch(s.rows_b, s.rows_a, -s.step)
+        for s in shared_stretches(b, a, min_samples=min_samples)
+        if s.step > 1
+    ]

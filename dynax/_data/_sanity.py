@@ -68,7 +68,7 @@ import warnings
 import numpy as np
 
 from .._errors import DataError, UsageError
-from ._overlap import shared_stretches
+from ._overlap import shared_either_way
 from ._sampling import time_label
 from ._screens import SCREENS
 from ._trajectory import Trajectory
@@ -969,23 +969,44 @@ def _file_name(record: Trajectory) -> str:
     return pathlib.Path(source).name if source else ""
 
 
+def _ordinal(n: int) -> str:
+    return f"{n}{'nd' if n == 2 else 'rd' if n == 3 else 'th'}"
+
+
 def shared_stretch_findings(
     ka: str, ra: Trajectory, number: int, kb: str, rb: Trajectory, *, exclude: bool = True
 ) -> list[Finding]:
-    """A refusal for each stretch of `rb` that is rows of `ra` (`shared_stretches`): held-out error there is
+    """A refusal for each stretch of `rb` that is rows of `ra` (`shared_either_way`: one for one, or a copy at a
+    whole fraction or multiple of the rate): held-out error there is
     in-sample (`rb` held out, `ra` not: `ka != kb`), or the stretch is counted twice. The fix cuts it from
     the training record (`ra` when `rb` is held out; else `rb`) with `--exclude`, or where the command has
     none (`exclude=False`), asks for other records."""
     held = ka != kb
     findings = []
-    for shared in shared_stretches(ra, rb):
+    for shared in shared_either_way(ra, rb):
         (i, j), (k, m) = shared.rows_a, shared.rows_b
         ta, tb = np.asarray(ra.ts, float), np.asarray(rb.ts, float)
         resolution = float(np.median(np.diff(ta))) / 10
         there = f"{time_label(float(ta[i]), resolution)} to {time_label(float(ta[j]), resolution)} s"
+        source = ra.source or number
+        if shared.step == 1:
+            what = (
+                f"holds {m - k + 1} samples that are the {ka} {source}'s, one for one (its rows {i + 1}-{j + 1}, "
+                f"t = {there})"
+            )
+        elif shared.step > 1:
+            what = (
+                f"holds {m - k + 1} samples that are every {_ordinal(shared.step)} row of the {ka} {source}'s rows "
+                f"{i + 1}-{j + 1} (t = {there}; a copy at a lower rate)"
+            )
+        else:
+            what = (
+                f"holds the {ka} {source}'s rows {i + 1}-{j + 1} (t = {there}) at every {_ordinal(-shared.step)} of "
+                f"its own rows (a copy at a higher rate)"
+            )
         message = (
-            f"holds {m - k + 1} samples that are the {ka} {ra.source or number}'s, one for one (its rows "
-            f"{i + 1}-{j + 1}, t = {there}): "
+            what
+            + ": "
             + (
                 "held-out error there is in-sample, not validation"
                 if held

@@ -78,3 +78,32 @@ def test_records_that_rest_at_one_pose_then_move_apart_share_nothing():
     copy = _record(ts[300:] - 3.0, np.asarray(records[0].xs)[300:], np.asarray(records[0].us)[300:, 0], "copy.csv")
     [finding] = _shared(records[:1], [copy])
     assert finding.rows == (1, 300) and "rows 301-600" in finding.message
+
+
+def test_a_copy_at_half_or_twice_the_rate_is_found_either_way_round():
+    # every other row kept (a log decimated to 50 Hz), or samples interpolated between the rows (resampled to
+    # 200 Hz): the rows the two share are found whichever is the training record
+    ts = np.arange(0.0, 6.0, 0.01)
+    q1, q2 = 0.8 * np.sin(2.1 * ts), 0.4 * np.sin(3.3 * ts + 0.5)
+    xs = np.column_stack([q1, q2, np.gradient(q1, ts), np.gradient(q2, ts)])
+    us = np.cos(1.7 * ts)
+    full = _record(ts, xs, us, "full.csv")
+    half = _record(ts[::2], xs[::2], us[::2], "half.csv")
+    fine = np.arange(0.0, ts[-1] + 1e-9, 0.005)
+    double = _record(
+        fine, np.column_stack([np.interp(fine, ts, c) for c in xs.T]), np.interp(fine, ts, us), "double.csv"
+    )
+    for training, held_out, rows, said in (
+        (full, half, (1, 300), "every 2nd row of the record full.csv's rows 1-599"),
+        (half, full, (1, 599), "holds the record half.csv's rows 1-300"),
+        (full, double, (1, 1199), "holds the record full.csv's rows 1-600"),
+        (double, full, (1, 600), "every 2nd row of the record double.csv's rows 1-1199"),
+    ):
+        [finding] = _shared([training], [held_out])
+        assert finding.rows == rows and said in finding.message and "in-sample" in finding.message, finding.message
+    # a copy resampled at another ratio (150 Hz) shares no row: not found, as documented
+    other = np.arange(0.0, ts[-1], 1 / 150)
+    resampled = _record(
+        other, np.column_stack([np.interp(other, ts, c) for c in xs.T]), np.interp(other, ts, us), "r.csv"
+    )
+    assert _shared([full], [resampled]) == []
