@@ -815,6 +815,15 @@ CASES = [
         ("rounded.csv", "rows 1-801", "counted twice", "give the record once"),
     ),
     C(
+        "validation-at-half-the-rate",
+        "duplicate",
+        lambda d, fx: _diagnose(
+            fx["acrobot_csv"], "--validation", _acrobot(d, fx, lambda t: t[::2].copy(), name="v50.csv")
+        ),
+        "refuse",
+        ("v50.csv", "every 2nd row", "in-sample"),
+    ),
+    C(
         "validation-cut-and-excluded",
         "duplicate",
         lambda d, fx: _identify(
