@@ -144,7 +144,7 @@ def _set(rows, column, value, header=ACROBOT):
     return edit
 
 
-def _excerpt(first):
+def excerpt(first):
     """An edit that keeps rows `first:`, re-stamped from zero (an excerpt saved as a file of its own)."""
 
     def edit(t):
@@ -785,7 +785,7 @@ CASES = [
     C(
         "validation-cut-from-the-data",
         "duplicate",
-        lambda d, fx: _diagnose(fx["acrobot_csv"], "--validation", _acrobot(d, fx, _excerpt(500), name="v.csv")),
+        lambda d, fx: _diagnose(fx["acrobot_csv"], "--validation", _acrobot(d, fx, excerpt(500), name="v.csv")),
         "refuse",
         ("v.csv", "rows 1-301", "in-sample", "rows 501-801", "--exclude acrobot.csv@4.99:"),
     ),
@@ -829,7 +829,7 @@ CASES = [
         lambda d, fx: _identify(
             fx["acrobot_csv"],
             "--validation",
-            _acrobot(d, fx, _excerpt(500), name="v.csv"),
+            _acrobot(d, fx, excerpt(500), name="v.csv"),
             "--exclude",
             "acrobot.csv@4.99:",
             method="dynamic",

@@ -35,7 +35,7 @@ import pathlib
 
 import numpy as np
 
-from tests.cli.hostile_cases import Case, helicopter_model_file, write_table
+from tests.cli.hostile_cases import Case, excerpt, helicopter_model_file, write_table
 
 NANOBENCH = pathlib.Path(__file__).resolve().parents[2] / ".." / "shared" / "datasets" / "nanobench"
 STAR = NANOBENCH / "B8_star_fast_rep1.csv.gz"
@@ -122,17 +122,6 @@ def _star(folder, fx, edit, name="star.csv.gz"):
         f.write(",".join(header) + "\n")
         f.writelines(",".join(f"{v:.17g}" for v in row) + "\n" for row in table)
     return str(path)
-
-
-def _excerpt(first):
-    """An edit that keeps rows `first:`, re-stamped from zero (an excerpt saved as a file of its own)."""
-
-    def edit(t):
-        t = t[first:].copy()
-        t[:, 0] -= t[0, 0]
-        return t
-
-    return edit
 
 
 def _set(columns, rows, value):
@@ -1015,7 +1004,7 @@ CASES = [
             "quadrotor",
             fx["train_csv"],
             "--validation",
-            _flight(d, fx, _excerpt(600), name="last6s.csv"),
+            _flight(d, fx, excerpt(600), name="last6s.csv"),
             "--out",
             "report",
         ],
