@@ -172,7 +172,7 @@ def least_squares_stage(system, trajectories, method, friction, weights, rcond, 
     if check.violated and consistency != "off":
         solve = functools.partial(least_squares, a, names=names, weights=weights, rcond=rcond)
         reversed_named = _warn_if_inputs_reversed(system, names, (a, y), solve, qs, error, trajectories[0].input_names)
-        _warn_if_degrees(given, trajectories, error)
+        _warn_if_angle_unit(given, trajectories, error)
         _warn_if_swapped(given, trajectories, error)
         _warn_if_absolute(given, trajectories, error)
         plain_std = _serially_robust(fit, a, y, weights, estimate, record_rows)[0].std_errors
@@ -714,7 +714,7 @@ ANGLE_UNITS = (
 MANY_TURNS = 4 * np.pi  # an angle's range beyond two turns: another unit is tried beside degrees
 
 
-def _warn_if_degrees(given, trajectories, error) -> None:
+def _warn_if_angle_unit(given, trajectories, error) -> None:
     """Where the estimate is inconsistent, refit the records with each set of the system's joint
     angles (`angle_indices`; a two-link arm's both, a linear axis none) and their velocities read in
     another unit (degrees; where an angle spans more than two turns, also gradians, milliradians and
