@@ -19,7 +19,14 @@ Rows are matched through a k-d tree on the scaled columns (`scipy.spatial.KDTree
 at most about 5,000 rows of each record, and each run found is extended row by row to its exact ends. A copy
 at a whole fraction of the rate (every second row kept) matches every `step`-th row of the original, and a
 copy at a whole multiple of it (samples interpolated between the original's) holds every row of the original
-at every `step`-th of its own (`shared_either_way`); a copy resampled at another ratio shares no row.
+at every `step`-th of its own (`shared_either_way`).
+
+A copy resampled at another ratio (100 Hz read onto a 150 Hz or a jittered clock) shares no row: its rows lie
+*between* the original's, on the path the original traces. `resampled_stretches` finds those: each probed row
+of the copy is placed on the original's path, on the chord between two neighbouring rows (linear
+interpolation) or on the cubic through four (a spline's, to within $h^4$), within the same tolerance in every
+column; a stretch is a run of at least `min_samples` rows placed in order at one steady rate ratio. Two real
+records never trace one path that closely in every state and input at once, any more than they share a row.
 """
 
 import dataclasses
@@ -36,11 +43,13 @@ PROBES = 5000  # rows of the second record probed per pair (a stride over longer
 @dataclasses.dataclass(frozen=True)
 class SharedStretch:
     """Rows `rows_b` (first, last; 0-based, inclusive) of record `b` are rows `rows_a` of record `a`, every
-    `step`-th of them (1: one for one; 2: `b` holds every other row of `a`'s stretch, a copy at half the rate)."""
+    `step`-th of them (1: one for one; 2: `b` holds every other row of `a`'s stretch, a copy at half the rate;
+    0: `b`'s rows lie between `a`'s, `ratio` rows of `a` per row of `b`, a copy resampled at another rate)."""
 
     rows_a: tuple[int, int]
     rows_b: tuple[int, int]
     step: int = 1
+    ratio: float | None = None  # a resampled copy (`step` 0): rows of `a` per row of `b`, not a whole number
 
 
 def _table(record: Trajectory) -> np.ndarray:
@@ -51,6 +60,14 @@ def _quantum(column: np.ndarray) -> float:
     """The smallest step between the column's distinct values (its storage's resolution, where rounded)."""
     steps = np.diff(np.unique(column[np.isfinite(column)]))
     return float(steps.min()) if steps.size else 0.0
+
+
+def _tolerance(ta: np.ndarray, tb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`(spread, tolerance)` per column: `a`'s spread, and how closely two rows agree when they are one sample."""
+    spread = np.array([np.std(c[np.isfinite(c)]) if np.isfinite(c).any() else 0.0 for c in ta.T])
+    quantum = np.array([max(_quantum(ca), _quantum(cb)) for ca, cb in zip(ta.T, tb.T)])
+    tolerance = np.maximum(RELATIVE_TOLERANCE * spread, 0.5 * quantum * (1 + 1e-9))
+    return spread, np.where(tolerance > 0, tolerance, 1e-12)  # a constant column: exact agreement
 
 
 def shared_stretches(a: Trajectory, b: Trajectory, *, min_samples: int = 20) -> list[SharedStretch]:
@@ -65,10 +82,7 @@ def shared_stretches(a: Trajectory, b: Trajectory, *, min_samples: int = 20) -> 
         return []
     ta, tb = _table(a), _table(b)
     finite = np.isfinite(ta).all(1)
-    spread = np.array([np.std(c[np.isfinite(c)]) if np.isfinite(c).any() else 0.0 for c in ta.T])
-    quantum = np.array([max(_quantum(ca), _quantum(cb)) for ca, cb in zip(ta.T, tb.T)])
-    tolerance = np.maximum(RELATIVE_TOLERANCE * spread, 0.5 * quantum * (1 + 1e-9))
-    tolerance = np.where(tolerance > 0, tolerance, 1e-12)  # a constant column: exact agreement
+    spread, tolerance = _tolerance(ta, tb)
     from scipy.spatial import KDTree
 
     index = np.flatnonzero(finite)
@@ -120,16 +134,134 @@ def shared_stretches(a: Trajectory, b: Trajectory, *, min_samples: int = 20) -> 
     return shared
 
 
+def _on_path(A: np.ndarray, B: np.ndarray, near: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`(residual, s)` for each row of `B` (scaled columns): the largest column's distance to `A`'s path near row
+    `near` of `A`, on the chord or the cubic of the segment before or after it, and the fractional row of `A`
+    (`s`) where it is closest. A row on the path has a residual of at most 1."""
+    n = len(A)
+    best_r, best_s = np.full(len(B), np.inf), np.zeros(len(B))
+    for j in (near - 1, near):  # the segment from row j to j + 1
+        j = np.clip(j, 0, n - 2)
+        u, v = A[j], A[j + 1]
+        d = v - u
+        lam = np.clip(np.einsum("ij,ij->i", B - u, d) / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300), 0.0, 1.0)
+        r = np.abs(B - u - lam[:, None] * d).max(1)
+        # the cubic through rows j - 1 .. j + 2 (Lagrange, parameter lam on the segment), refined by Gauss-Newton
+        p0, p3 = A[np.clip(j - 1, 0, n - 1)], A[np.clip(j + 2, 0, n - 1)]
+        lc = lam.copy()
+        for _ in range(3):
+            x = lc[:, None]
+            c = (
+                -x * (x - 1) * (x - 2) * p0
+                + 3 * (x + 1) * (x - 1) * (x - 2) * u
+                - 3 * (x + 1) * x * (x - 2) * v
+                + (x + 1) * x * (x - 1) * p3
+            ) / 6
+            dc = (
+                -(3 * x**2 - 6 * x + 2) * p0
+                + 3 * (3 * x**2 - 4 * x - 1) * u
+                - 3 * (3 * x**2 - 2 * x - 2) * v
+                + (3 * x**2 - 1) * p3
+            ) / 6
+            step = np.einsum("ij,ij->i", c - B, dc) / np.maximum(np.einsum("ij,ij->i", dc, dc), 1e-300)
+            lc = np.clip(lc - step, 0.0, 1.0)
+        x = lc[:, None]
+        c = (
+            -x * (x - 1) * (x - 2) * p0
+            + 3 * (x + 1) * (x - 1) * (x - 2) * u
+            - 3 * (x + 1) * x * (x - 2) * v
+            + (x + 1) * x * (x - 1) * p3
+        ) / 6
+        rc = np.abs(B - c).max(1)
+        use_cubic = rc < r
+        r, lam = np.where(use_cubic, rc, r), np.where(use_cubic, lc, lam)
+        better = r < best_r
+        best_r, best_s = np.where(better, r, best_r), np.where(better, j + lam, best_s)
+    return best_r, best_s
+
+
+def resampled_stretches(a: Trajectory, b: Trajectory, *, min_samples: int = 20) -> list[SharedStretch]:
+    """The stretches of `b` whose rows lie on `a`'s path between its samples, in order at a steady rate ratio (`b`
+    a copy of `a` resampled at another rate), while the record moves: `step` 0, `ratio` rows of `a` per row of
+    `b`, `rows_a` the rows of `a` the stretch spans (see the module)."""
+    if a.state_names != b.state_names or a.input_names != b.input_names or len(a) < 4 or len(b) < min_samples:
+        return []
+    ta, tb = _table(a), _table(b)
+    if not (np.isfinite(ta).all() and np.isfinite(tb).all()):
+        return []  # gaps are the other checks' to report; a path through them is not defined
+    spread, tolerance = _tolerance(ta, tb)
+    A, B = ta / tolerance, tb / tolerance
+    from scipy.spatial import KDTree
+
+    # A row on a segment is within half the segment (and the tolerance) of one of its ends in every column. The
+    # tree searches in columns scaled by their longest steps (99 % of them: a glitch's are not searched from; a
+    # run broken there is rejoined below), where that is 0.5 to 1.5 whatever the column's noise, so probes far
+    # from every row of `a` in any column (nearly all, in a record that is not a copy) are rejected at once.
+    steps = np.maximum(np.quantile(np.abs(np.diff(A, axis=0)), 0.99, axis=0), 1.0)
+    tree = KDTree(A / steps)
+    stride = max(1, len(b) // PROBES)
+    probes = np.arange(0, len(b), stride)
+    distance, near = tree.query(B[probes] / steps, p=np.inf, distance_upper_bound=1.5 + 1e-9)
+    found = np.isfinite(distance)
+    residual, s = _on_path(A, B[probes], np.where(found, near, 0))
+    matched = found & (residual <= 1.0)
+
+    def placed(rows: np.ndarray, s_expected: np.ndarray) -> np.ndarray:
+        """Whether each row of `b` lies on `a`'s path within a row of where the stretch's ratio puts it."""
+        ok = (rows >= 0) & (rows < len(b)) & (s_expected >= 0) & (s_expected <= len(a) - 1)
+        rows_, near_ = np.clip(rows, 0, len(b) - 1), np.clip(np.round(s_expected).astype(int), 0, len(a) - 1)
+        r, s_ = _on_path(A, B[rows_], near_)
+        return ok & (r <= 1.0) & (np.abs(s_ - s_expected) <= 1.0)
+
+    states = a.xs.shape[1]
+    shared, k = [], 0
+    while k + 1 < len(probes):
+        if not (matched[k] and matched[k + 1]):
+            k += 1
+            continue
+        ratio = (s[k + 1] - s[k]) / (probes[k + 1] - probes[k])
+        end = k + 1
+        while (
+            end + 1 < len(probes)
+            and matched[end + 1]
+            and abs((s[end + 1] - s[k]) / (probes[end + 1] - probes[k]) - ratio) <= 0.01 * abs(ratio)
+        ):
+            end += 1
+        i0, i1, s0 = int(probes[k]), int(probes[end]), float(s[k])
+        k = end + 1
+        if ratio <= 0:
+            continue
+        ratio = (float(s[end]) - s0) / max(i1 - i0, 1)  # over the whole run of probes
+        rows = np.arange(i0, i1 + 1)
+        if not placed(rows, s0 + ratio * (rows - i0)).all():
+            continue
+        while i0 > 0 and placed(np.array([i0 - 1]), np.array([s0 - ratio]))[0]:
+            i0, s0 = i0 - 1, s0 - ratio
+        while i1 + 1 < len(b) and placed(np.array([i1 + 1]), np.array([s0 + ratio * (i1 + 1 - i0)]))[0]:
+            i1 += 1
+        if i1 - i0 + 1 < min_samples:
+            continue
+        span = np.ptp(tb[i0 : i1 + 1, :states], axis=0) / np.where(spread[:states] > 0, spread[:states], np.inf)
+        if span.max() < MOVING:
+            continue
+        if shared and i0 <= shared[-1].rows_b[1]:
+            continue
+        s1 = s0 + ratio * (i1 - i0)
+        shared.append(SharedStretch((int(np.floor(s0)), int(np.ceil(s1))), (i0, i1), 0, float(ratio)))
+    return shared
+
+
 def shared_either_way(a: Trajectory, b: Trajectory, *, min_samples: int = 20) -> list[SharedStretch]:
     """`shared_stretches(a, b)`, and where that finds nothing, the stretches of `a` that are every `step`-th row
     of `b` (`b` a copy of `a` at a whole multiple of its rate: interpolated between `a`'s samples), each given
     from `b`'s side: `rows_b` the span of `b` that holds them, `rows_a` `a`'s rows, `step` as negative (`b`'s
-    rows per row of `a`)."""
+    rows per row of `a`); where neither finds any, `resampled_stretches(a, b)` (`step` 0)."""
     found = shared_stretches(a, b, min_samples=min_samples)
     if found:
         return found
-    return [
+    found = [
         SharedStretch(s.rows_b, s.rows_a, -s.step)
         for s in shared_stretches(b, a, min_samples=min_samples)
         if s.step > 1
     ]
+    return found or resampled_stretches(a, b, min_samples=min_samples)

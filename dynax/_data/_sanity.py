@@ -976,8 +976,8 @@ def _ordinal(n: int) -> str:
 def shared_stretch_findings(
     ka: str, ra: Trajectory, number: int, kb: str, rb: Trajectory, *, exclude: bool = True
 ) -> list[Finding]:
-    """A refusal for each stretch of `rb` that is rows of `ra` (`shared_either_way`: one for one, or a copy at a
-    whole fraction or multiple of the rate): held-out error there is
+    """A refusal for each stretch of `rb` that is rows of `ra` (`shared_either_way`: one for one, a copy at a
+    whole fraction or multiple of the rate, or one resampled between its rows): held-out error there is
     in-sample (`rb` held out, `ra` not: `ka != kb`), or the stretch is counted twice. The fix cuts it from
     the training record (`ra` when `rb` is held out; else `rb`) with `--exclude`, or where the command has
     none (`exclude=False`), asks for other records."""
@@ -999,10 +999,15 @@ def shared_stretch_findings(
                 f"holds {m - k + 1} samples that are every {_ordinal(shared.step)} row of the {ka} {source}'s rows "
                 f"{i + 1}-{j + 1} (t = {there}; a copy at a lower rate)"
             )
-        else:
+        elif shared.step < 0:
             what = (
                 f"holds the {ka} {source}'s rows {i + 1}-{j + 1} (t = {there}) at every {_ordinal(-shared.step)} of "
                 f"its own rows (a copy at a higher rate)"
+            )
+        else:
+            what = (
+                f"holds {m - k + 1} samples that lie on the path of the {ka} {source}'s rows {i + 1}-{j + 1} "
+                f"(t = {there}), {shared.ratio:.4g} of its rows a row: a copy resampled at another rate"
             )
         message = (
             what

@@ -155,6 +155,18 @@ def excerpt(first):
     return edit
 
 
+def resampled(rate, first=0):
+    """An edit that reads rows `first:` onto a clock of `rate` Hz by linear interpolation, re-stamped from zero (a
+    copy resampled at another rate, as `np.interp` or pandas would make it)."""
+
+    def edit(t):
+        t = t[first:]
+        ts = np.arange(t[0, 0], t[-1, 0], 1.0 / rate)
+        return np.column_stack([ts - ts[0]] + [np.interp(ts, t[:, 0], c) for c in t[:, 1:].T])
+
+    return edit
+
+
 def _rows(first, stop):
     """An edit that keeps rows `first:stop`, stamps and all (one of two logs that overlap)."""
     return lambda t: t[first:stop].copy()
@@ -822,6 +834,15 @@ CASES = [
         ),
         "refuse",
         ("v50.csv", "every 2nd row", "in-sample"),
+    ),
+    C(
+        "validation-resampled-at-75-hz",
+        "duplicate",
+        lambda d, fx: _diagnose(
+            fx["acrobot_csv"], "--validation", _acrobot(d, fx, resampled(75.0, first=500), name="v75.csv")
+        ),
+        "refuse",
+        ("v75.csv", "resampled at another rate", "in-sample", "--exclude acrobot.csv@"),
     ),
     C(
         "validation-cut-and-excluded",

@@ -101,9 +101,36 @@ def test_a_copy_at_half_or_twice_the_rate_is_found_either_way_round():
     ):
         [finding] = _shared([training], [held_out])
         assert finding.rows == rows and said in finding.message and "in-sample" in finding.message, finding.message
-    # a copy resampled at another ratio (150 Hz) shares no row: not found, as documented
-    other = np.arange(0.0, ts[-1], 1 / 150)
-    resampled = _record(
-        other, np.column_stack([np.interp(other, ts, c) for c in xs.T]), np.interp(other, ts, us), "r.csv"
+
+
+def test_a_copy_resampled_at_another_rate_is_found_on_the_originals_path():
+    # 100 Hz read onto 150 Hz and 60 Hz clocks, linearly (numpy, pandas' default) or by a cubic spline (scipy),
+    # a stretch of it re-stamped from zero: no row is shared, every row lies between two of the original's
+    from scipy.interpolate import CubicSpline
+
+    ts = np.arange(0.0, 8.0, 0.01)
+    q1, q2 = 0.8 * np.sin(2.1 * ts) + 0.2 * np.sin(5.3 * ts), 0.4 * np.sin(3.3 * ts + 0.5)
+    xs = np.column_stack([q1, q2, np.gradient(q1, ts), np.gradient(q2, ts)])
+    us = np.cos(1.7 * ts) + 0.3 * np.sin(4.1 * ts)
+    full = _record(ts, xs, us, "full.csv")
+    for rate, how in ((150.0, "linear"), (60.0, "linear"), (150.0, "cubic"), (73.0, "cubic")):
+        other = np.arange(2.0, 6.0, 1 / rate)
+        if how == "linear":
+            ys, u = np.column_stack([np.interp(other, ts, c) for c in xs.T]), np.interp(other, ts, us)
+        else:
+            ys, u = CubicSpline(ts, xs)(other), CubicSpline(ts, us)(other)
+        copy = _record(other - 2.0, ys, u, "copy.csv")
+        [finding] = _shared([full], [copy])
+        assert finding.severity == "refuse" and finding.rows == (1, len(other)), (rate, how, finding.rows)
+        assert "resampled at another rate" in finding.message and "in-sample" in finding.message, finding.message
+        first, last = (int(v) for v in re.search(r"rows (\d+)-(\d+) \(t", finding.message).groups())
+        assert first in (200, 201) and last in (600, 601), (rate, how, finding.message)
+        assert "--exclude full.csv@" in finding.fix
+    # ... and a record of the same motion measured again (encoder noise of a thousandth of its spread) is not
+    rng = np.random.default_rng(3)
+    noisy = xs + 1e-3 * np.std(xs, 0) * rng.standard_normal(xs.shape)
+    other = np.arange(2.0, 6.0, 1 / 150)
+    again = _record(
+        other - 2.0, np.column_stack([np.interp(other, ts, c) for c in noisy.T]), np.interp(other, ts, us), "again.csv"
     )
-    assert _shared([full], [resampled]) == []
+    assert _shared([full], [again]) == []
