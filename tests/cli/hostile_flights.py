@@ -35,7 +35,7 @@ import pathlib
 
 import numpy as np
 
-from tests.cli.hostile_cases import Case, excerpt, helicopter_model_file, write_table
+from tests.cli.hostile_cases import Case, excerpt, helicopter_model_file, resampled, write_table
 
 NANOBENCH = pathlib.Path(__file__).resolve().parents[2] / ".." / "shared" / "datasets" / "nanobench"
 STAR = NANOBENCH / "B8_star_fast_rep1.csv.gz"
@@ -1010,6 +1010,21 @@ CASES = [
         ],
         "refuse",
         ("last6s.csv", "rows 1-", "in-sample", "training flight"),
+    ),
+    C(
+        "flight-diagnose-validation-resampled-at-60-hz",
+        "duplicate",
+        lambda d, fx: [
+            "diagnose",
+            "quadrotor",
+            fx["train_csv"],
+            "--validation",
+            _flight(d, fx, resampled(60.0, first=600), name="last6s_60hz.csv"),
+            "--out",
+            "report",
+        ],
+        "refuse",
+        ("last6s_60hz.csv", "resampled at another rate", "in-sample", "training flight"),
     ),
     C(
         "flight-fit-logs-that-overlap",
