@@ -5,6 +5,8 @@ The truth's gain is only as good as its rollout: on flights without noise, the w
 state under the logged commands must land on the recorded states (the generator integrates each sample by scipy's
 DOP853; the rollout by RK4), with each effect as the generator wrote it, and the effect-free rollout must not."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -82,3 +84,18 @@ def test_every_quadrotor_case_flies_its_plan():
             assert len({kw.get("sag") for kw in p["train"] + p["validation"]}) in (1, 3)
         if case.cause == "ground_effect" or case.law == "over the floor":
             assert p["floor"] == 0.0 and p["thrust"]
+
+
+@pytest.mark.heavy
+def test_a_motor_lag_under_the_one_step_bar_is_refitted_from_its_one_step_optimum():
+    # The battery's 80 ms lag of one motor flown from another seed: the map refitted one step through the lag fits
+    # best at 80 ms, by a likelihood ratio under the bar that would shortlist it. Screened first anyway, it was refitted
+    # from the default start against the held map, which had taken up part of the lag, and stopped at 24 ms with a
+    # 5 % gain: `none`, where the truth gains 62 % (`hf.truth_gains`). From the one-step optimum it is refitted near
+    # its size and gains what the truth gains; with 20 s held out the test may still want more flight.
+    case = dataclasses.replace({c.name: c for c in CASES}["quadrotor-input_lag@m3-0.08-first_order"], seed=566)
+    found = outcome(case, hf.diagnose_flights(case).to_json())
+    assert found["verdict"] in ("explained", "inconclusive"), found
+    assert found["best_candidate"] == "input_lag@m3" and 0.064 <= found["best_coefficient"] <= 0.096, found
+    assert found["best_gain"] > 0.4, found
+    assert not found["findings"] or found["named_first"], found  # nothing named, or the lag first
