@@ -187,9 +187,12 @@ def resampled_stretches(a: Trajectory, b: Trajectory, *, min_samples: int = 20) 
     if a.state_names != b.state_names or a.input_names != b.input_names or len(a) < 4 or len(b) < min_samples:
         return []
     ta, tb = _table(a), _table(b)
-    if not (np.isfinite(ta).all() and np.isfinite(tb).all()):
-        return []  # gaps are the other checks' to report; a path through them is not defined
+    finite_a = np.isfinite(ta).all(1)
+    if finite_a.sum() < 4 or not np.isfinite(tb).all(1).any():
+        return []
     spread, tolerance = _tolerance(ta, tb)
+    # Rows with a gap (a dropout's NaN) are off every path: no segment ends there, no probe starts there, and a
+    # stretch ends at one (its comparisons are false).
     A, B = ta / tolerance, tb / tolerance
     from scipy.spatial import KDTree
 
@@ -197,21 +200,27 @@ def resampled_stretches(a: Trajectory, b: Trajectory, *, min_samples: int = 20) 
     # tree searches in columns scaled by their longest steps (99 % of them: a glitch's are not searched from; a
     # run broken there is rejoined below), where that is 0.5 to 1.5 whatever the column's noise, so probes far
     # from every row of `a` in any column (nearly all, in a record that is not a copy) are rejected at once.
-    steps = np.maximum(np.quantile(np.abs(np.diff(A, axis=0)), 0.99, axis=0), 1.0)
-    tree = KDTree(A / steps)
+    jumps = np.abs(np.diff(A, axis=0))
+    steps = np.maximum(np.quantile(jumps[np.isfinite(jumps).all(1)], 0.99, axis=0), 1.0)
+    index = np.flatnonzero(finite_a)
+    tree = KDTree(A[index] / steps)
     stride = max(1, len(b) // PROBES)
     probes = np.arange(0, len(b), stride)
-    distance, near = tree.query(B[probes] / steps, p=np.inf, distance_upper_bound=1.5 + 1e-9)
+    usable = np.isfinite(B[probes]).all(1)  # a probe in a gap is unmatched: a run of probes breaks there
+    distance, near = np.full(len(probes), np.inf), np.zeros(len(probes), int)
+    distance[usable], near[usable] = tree.query(B[probes[usable]] / steps, p=np.inf, distance_upper_bound=1.5 + 1e-9)
     found = np.isfinite(distance)
-    residual, s = _on_path(A, B[probes], np.where(found, near, 0))
-    matched = found & (residual <= 1.0)
+    with np.errstate(invalid="ignore"):
+        residual, s = _on_path(A, B[probes], np.where(found, index[np.minimum(near, len(index) - 1)], 0))
+        matched = found & (residual <= 1.0)
 
     def placed(rows: np.ndarray, s_expected: np.ndarray) -> np.ndarray:
         """Whether each row of `b` lies on `a`'s path within a row of where the stretch's ratio puts it."""
         ok = (rows >= 0) & (rows < len(b)) & (s_expected >= 0) & (s_expected <= len(a) - 1)
         rows_, near_ = np.clip(rows, 0, len(b) - 1), np.clip(np.round(s_expected).astype(int), 0, len(a) - 1)
-        r, s_ = _on_path(A, B[rows_], near_)
-        return ok & (r <= 1.0) & (np.abs(s_ - s_expected) <= 1.0)
+        with np.errstate(invalid="ignore"):
+            r, s_ = _on_path(A, B[rows_], near_)
+            return ok & (r <= 1.0) & (np.abs(s_ - s_expected) <= 1.0)
 
     states = a.xs.shape[1]
     shared, k = [], 0

@@ -849,7 +849,9 @@ def estimated_velocities(trajectory: Trajectory) -> tuple[str, ...]:
     for v, q in velocity_pairs(names).items():
         c = np.gradient(xs[:, names.index(q)], ts - ts[0])  # `central_difference`'s formula, on the host
         x = xs[:, names.index(v)]
-        if np.allclose(x, c, rtol=1e-9, atol=1e-12 * (1.0 + float(np.max(np.abs(c))))):
+        if np.allclose(
+            x, c, rtol=1e-9, atol=1e-12 * (1.0 + float(np.max(np.abs(c), initial=0.0, where=np.isfinite(c))))
+        ):
             out.append(v)
     return tuple(out)
 

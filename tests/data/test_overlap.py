@@ -134,3 +134,22 @@ def test_a_copy_resampled_at_another_rate_is_found_on_the_originals_path():
         other - 2.0, np.column_stack([np.interp(other, ts, c) for c in noisy.T]), np.interp(other, ts, us), "again.csv"
     )
     assert _shared([full], [again]) == []
+
+
+def test_a_resampled_copy_of_a_record_with_a_dropout_is_found_either_side_of_the_gap():
+    # a motion-capture dropout logged as NaN rows in the original (left out of a flight with a note, not refused):
+    # the copy read onto 150 Hz carries the gap; the stretches either side of it are still found
+    ts = np.arange(0.0, 8.0, 0.01)
+    q1, q2 = 0.8 * np.sin(2.1 * ts) + 0.2 * np.sin(5.3 * ts), 0.4 * np.sin(3.3 * ts + 0.5)
+    xs = np.column_stack([q1, q2, np.gradient(q1, ts), np.gradient(q2, ts)])
+    us = np.cos(1.7 * ts) + 0.3 * np.sin(4.1 * ts)
+    xs[400:405] = np.nan
+    other = np.arange(2.0, 6.0, 1 / 150)
+    copy = _record(
+        other - 2.0, np.column_stack([np.interp(other, ts, c) for c in xs.T]), np.interp(other, ts, us), "copy.csv"
+    )
+    found = _shared([_record(ts, xs, us, "full.csv")], [copy])
+    gap = np.flatnonzero(~np.isfinite(np.asarray(copy.xs)).all(1)) + 1  # 1-based rows
+    assert len(found) == 2 and all("resampled at another rate" in f.message for f in found), found
+    (a0, a1), (b0, b1) = found[0].rows, found[1].rows
+    assert a0 == 1 and a1 < gap[0] and b0 > gap[-1] and b1 == len(other), (found[0].rows, found[1].rows, gap)
