@@ -201,7 +201,10 @@ def resampled_stretches(a: Trajectory, b: Trajectory, *, min_samples: int = 20) 
     # run broken there is rejoined below), where that is 0.5 to 1.5 whatever the column's noise, so probes far
     # from every row of `a` in any column (nearly all, in a record that is not a copy) are rejected at once.
     jumps = np.abs(np.diff(A, axis=0))
-    steps = np.maximum(np.quantile(jumps[np.isfinite(jumps).all(1)], 0.99, axis=0), 1.0)
+    jumps = jumps[np.isfinite(jumps).all(1)]
+    if len(jumps) < 3:
+        return []  # no path to lie on: no two rows in a row without a gap
+    steps = np.maximum(np.quantile(jumps, 0.99, axis=0), 1.0)
     index = np.flatnonzero(finite_a)
     tree = KDTree(A[index] / steps)
     stride = max(1, len(b) // PROBES)

@@ -153,3 +153,7 @@ def test_a_resampled_copy_of_a_record_with_a_dropout_is_found_either_side_of_the
     assert len(found) == 2 and all("resampled at another rate" in f.message for f in found), found
     (a0, a1), (b0, b1) = found[0].rows, found[1].rows
     assert a0 == 1 and a1 < gap[0] and b0 > gap[-1] and b1 == len(other), (found[0].rows, found[1].rows, gap)
+    # ... and a record whose every other row is a gap has no path to lie on: nothing found, nothing raised
+    holes = xs.copy()
+    holes[::2] = np.nan
+    assert _shared([_record(ts, holes, us, "holes.csv")], [copy]) == []
