@@ -134,6 +134,30 @@ def shared_stretches(a: Trajectory, b: Trajectory, *, min_samples: int = 20) -> 
     return shared
 
 
+def _rows_dot(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return np.einsum("ij,ij->i", x, y)
+
+
+def _cubic(lam: np.ndarray, points: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """The Lagrange cubic through `points` (rows j - 1 .. j + 2, at parameters -1, 0, 1, 2) at `lam` on the segment
+    from row j to j + 1, and its derivative in `lam`."""
+    p0, u, v, p3 = points
+    x = lam[:, None]
+    c = (
+        -x * (x - 1) * (x - 2) * p0
+        + 3 * (x + 1) * (x - 1) * (x - 2) * u
+        - 3 * (x + 1) * x * (x - 2) * v
+        + (x + 1) * x * (x - 1) * p3
+    ) / 6
+    dc = (
+        -(3 * x**2 - 6 * x + 2) * p0
+        + 3 * (3 * x**2 - 4 * x - 1) * u
+        - 3 * (3 * x**2 - 2 * x - 2) * v
+        + (3 * x**2 - 1) * p3
+    ) / 6
+    return c, dc
+
+
 def _on_path(A: np.ndarray, B: np.ndarray, near: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """`(residual, s)` for each row of `B` (scaled columns): the largest column's distance to `A`'s path near row
     `near` of `A`, on the chord or the cubic of the segment before or after it, and the fractional row of `A`
@@ -144,35 +168,15 @@ def _on_path(A: np.ndarray, B: np.ndarray, near: np.ndarray) -> tuple[np.ndarray
         j = np.clip(j, 0, n - 2)
         u, v = A[j], A[j + 1]
         d = v - u
-        lam = np.clip(np.einsum("ij,ij->i", B - u, d) / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300), 0.0, 1.0)
+        lam = np.clip(_rows_dot(B - u, d) / np.maximum(_rows_dot(d, d), 1e-300), 0.0, 1.0)
         r = np.abs(B - u - lam[:, None] * d).max(1)
-        # the cubic through rows j - 1 .. j + 2 (Lagrange, parameter lam on the segment), refined by Gauss-Newton
-        p0, p3 = A[np.clip(j - 1, 0, n - 1)], A[np.clip(j + 2, 0, n - 1)]
+        # the cubic through rows j - 1 .. j + 2 (parameter lam on the segment), refined by Gauss-Newton
+        points = (A[np.clip(j - 1, 0, n - 1)], u, v, A[np.clip(j + 2, 0, n - 1)])
         lc = lam.copy()
         for _ in range(3):
-            x = lc[:, None]
-            c = (
-                -x * (x - 1) * (x - 2) * p0
-                + 3 * (x + 1) * (x - 1) * (x - 2) * u
-                - 3 * (x + 1) * x * (x - 2) * v
-                + (x + 1) * x * (x - 1) * p3
-            ) / 6
-            dc = (
-                -(3 * x**2 - 6 * x + 2) * p0
-                + 3 * (3 * x**2 - 4 * x - 1) * u
-                - 3 * (3 * x**2 - 2 * x - 2) * v
-                + (3 * x**2 - 1) * p3
-            ) / 6
-            step = np.einsum("ij,ij->i", c - B, dc) / np.maximum(np.einsum("ij,ij->i", dc, dc), 1e-300)
-            lc = np.clip(lc - step, 0.0, 1.0)
-        x = lc[:, None]
-        c = (
-            -x * (x - 1) * (x - 2) * p0
-            + 3 * (x + 1) * (x - 1) * (x - 2) * u
-            - 3 * (x + 1) * x * (x - 2) * v
-            + (x + 1) * x * (x - 1) * p3
-        ) / 6
-        rc = np.abs(B - c).max(1)
+            c, dc = _cubic(lc, points)
+            lc = np.clip(lc - _rows_dot(c - B, dc) / np.maximum(_rows_dot(dc, dc), 1e-300), 0.0, 1.0)
+        rc = np.abs(B - _cubic(lc, points)[0]).max(1)
         use_cubic = rc < r
         r, lam = np.where(use_cubic, rc, r), np.where(use_cubic, lc, lam)
         better = r < best_r
