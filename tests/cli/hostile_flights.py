@@ -65,6 +65,11 @@ def _fit_argv(path, *extra, out="model.json"):
     return ["fit", "quadrotor", str(path), "--model", "nominal", "--criterion", "one-step", *extra, "--out", out]
 
 
+def _diagnose_argv(fx, validation):
+    """`dynax diagnose quadrotor` of the training flight against `validation`."""
+    return ["diagnose", "quadrotor", fx["train_csv"], "--validation", validation, "--out", "report"]
+
+
 def _scores(main, model, data, folder, *extra):
     """`dynax evaluate`'s MAE per group at 1 and 10 steps of `model` on `data`, and constant velocity's."""
     out = pathlib.Path(folder) / "scores.json"
@@ -786,15 +791,7 @@ CASES = [
     C(
         "diagnose-validation-motors-numbered-otherwise",
         "motors",
-        lambda d, fx: [
-            "diagnose",
-            "quadrotor",
-            fx["train_csv"],
-            "--validation",
-            _validation(d, fx, _motors_turned),
-            "--out",
-            "report",
-        ],
+        lambda d, fx: _diagnose_argv(fx, _validation(d, fx, _motors_turned)),
         "refuse",
         ("validation.csv", "read like m2,m3,m4,m1", "--map"),
     ),
@@ -999,30 +996,14 @@ CASES = [
     C(
         "flight-diagnose-validation-cut-from-training",
         "duplicate",
-        lambda d, fx: [
-            "diagnose",
-            "quadrotor",
-            fx["train_csv"],
-            "--validation",
-            _flight(d, fx, excerpt(600), name="last6s.csv"),
-            "--out",
-            "report",
-        ],
+        lambda d, fx: _diagnose_argv(fx, _flight(d, fx, excerpt(600), name="last6s.csv")),
         "refuse",
         ("last6s.csv", "rows 1-", "in-sample", "training flight"),
     ),
     C(
         "flight-diagnose-validation-resampled-at-60-hz",
         "duplicate",
-        lambda d, fx: [
-            "diagnose",
-            "quadrotor",
-            fx["train_csv"],
-            "--validation",
-            _flight(d, fx, resampled(60.0, first=600), name="last6s_60hz.csv"),
-            "--out",
-            "report",
-        ],
+        lambda d, fx: _diagnose_argv(fx, _flight(d, fx, resampled(60.0, first=600), name="last6s_60hz.csv")),
         "refuse",
         ("last6s_60hz.csv", "resampled at another rate", "in-sample", "training flight"),
     ),
@@ -1042,15 +1023,7 @@ CASES = [
     C(
         "flight-diagnose-validation-is-the-data",
         "duplicate",
-        lambda d, fx: [
-            "diagnose",
-            "quadrotor",
-            fx["train_csv"],
-            "--validation",
-            _flight(d, fx, name="copy.csv"),
-            "--out",
-            "report",
-        ],
+        lambda d, fx: _diagnose_argv(fx, _flight(d, fx, name="copy.csv")),
         "refuse",
         ("in-sample",),
     ),
