@@ -39,7 +39,7 @@ import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from dynax.internal import ProgressBar
-from tests.hidden_cases import CASES, STICK_SLIP, diagnose_case, outcome, refit_truth_gain, truth_gain
+from tests.hidden_cases import CASES, diagnose_case, outcome, refit_truth_gain, STICK_SLIP, truth_gain
 from tests.hidden_flights import truth_gains
 
 VERDICTS = ("explained", "unexplained", "inconclusive", "none")
