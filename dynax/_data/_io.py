@@ -7,6 +7,7 @@ import io
 import os
 import pathlib
 import re
+import shlex
 from typing import Literal
 import zipfile
 import zlib
@@ -70,9 +71,24 @@ def _open_text(path):
 
 
 def _read_csv(path):
+    """The columns of a CSV file as lists of cells. Comment lines (`#`) before the header are skipped, as numpy's
+    and pandas' readers can (the last one is the header where numbers follow it, as `numpy.savetxt` writes); a
+    header with no comma but semicolons or tabs sets the separator (a spreadsheet's export in a locale whose
+    decimal mark is the comma, or a tab-separated log)."""
     text = _open_text(path)
+    lines = text.splitlines(keepends=True)
+    skipped = 0
+    while skipped < len(lines) and lines[skipped].lstrip().startswith("#"):
+        skipped += 1
+    first = lines[skipped] if skipped < len(lines) else ""
+    delimiter = next((d for d in (";", "\t") if "," not in first and d in first), ",")
+    if skipped and all(_NUMBER.fullmatch(c) for c in first.strip().split(delimiter)):
+        # numpy's `savetxt(..., header=...)` writes the header as the last comment line
+        skipped -= 1
+        lines[skipped] = lines[skipped].lstrip().removeprefix("#").lstrip()
+    text = "".join(lines[skipped:])
     try:
-        reader = csv.reader(io.StringIO(text, newline=""))
+        reader = csv.reader(io.StringIO(text, newline=""), delimiter=delimiter)
         try:
             header = next(reader)
         except StopIteration:
@@ -85,14 +101,42 @@ def _read_csv(path):
         rows.pop()  # trailing blank lines
     _check_unique(path, header)
     for i, row in enumerate(rows):
+        if [c.strip() for c in row] == header:
+            raise DataError(
+                f"the header repeats at file line {i + 2 + skipped}: two logs joined into one file? split it there "
+                "and give the parts as two records",
+                path=path,
+                row=i + 1,
+            )
         if len(row) != len(header):
             raise DataError(
-                f"has {len(row)} fields but the header has {len(header)} (file line {i + 2})", path=path, row=i + 1
+                f"has {len(row)} fields but the header has {len(header)} (file line {i + 2 + skipped})",
+                path=path,
+                row=i + 1,
             )
     columns = {}
     for j, name in enumerate(header):
         columns[name] = [row[j] for row in rows]
     return columns
+
+
+def _plain_name(column: str) -> str:
+    """A column name without case, spaces or a unit in brackets: `"Q1 [rad]"` -> `"q1"`."""
+    return re.sub(r"[\[(].*?[\])]", "", column).strip().lower().replace(" ", "")
+
+
+def _alike_columns(wanted, raw, mapping) -> dict:
+    """For the wanted names the file lacks (and no mapping names), the one column of the file that differs from the
+    name only by case, spaces or a unit in brackets (time also as `time`): the `--map` a refusal can suggest whole."""
+    out = {}
+    for name in wanted:
+        if name in mapping or name in raw:
+            continue
+        plain = {name.lower(), "time"} if name == TIME else {name.lower()}
+        alike = [c for c in raw if _plain_name(c) in plain and not set(c) & set(",=")]
+        if len(alike) == 1:
+            out[name] = alike[0]
+    return out
 
 
 def _check_unique(path, names):
@@ -113,8 +157,14 @@ def _to_float(path, name, values):
     if arr.dtype.kind in "US":  # text: the CSV's cells, or strings stored in an .npz
         arr = arr.reshape(-1)
         for i, v in enumerate(arr.tolist()):
-            if not _NUMBER.fullmatch(v if isinstance(v, str) else v.decode("latin-1")):
-                raise DataError(f"non-numeric value {str(v)!r}", path=path, column=name, row=i + 1)
+            text = v if isinstance(v, str) else v.decode("latin-1")
+            if not _NUMBER.fullmatch(text):
+                hint = (
+                    " (a decimal comma: write numbers with a decimal point, e.g. export the CSV in an English locale)"
+                    if _NUMBER.fullmatch(text.replace(",", ".", 1))
+                    else ""
+                )
+                raise DataError(f"non-numeric value {str(v)!r}{hint}", path=path, column=name, row=i + 1)
         return arr.astype(np.float64)
     if arr.dtype.kind == "c":
         raise DataError("holds complex numbers; a measured column must be real", path=path, column=name)
@@ -313,12 +363,12 @@ def load_trajectory(
             if name in optional:
                 continue
             mapped = f" (mapped from '{name}')" if column != name else ""
-            raise DataError(
-                f"missing column{mapped}; the file has {sorted(raw)}"
-                + ("" if name in mapping else "; use a mapping (--map NAME=COLUMN) if it is named otherwise"),
-                path=path,
-                column=column,
-            )
+            advice = "" if name in mapping else "; use a mapping (--map NAME=COLUMN) if it is named otherwise"
+            alike = _alike_columns(wanted, raw, mapping)
+            if alike:
+                given = ",".join(f"{k}={v}" for k, v in alike.items())
+                advice += f"; columns named alike but for case, spaces or a unit: --map {shlex.quote(given)}"
+            raise DataError(f"missing column{mapped}; the file has {sorted(raw)}{advice}", path=path, column=column)
         arr = _to_float(path, column, raw[column])
         _check_finite(path, column, arr, "")
         factor = float(scale.get(name, 1.0))

@@ -127,6 +127,16 @@ def _encoders(folder, fx, edit=None, name="encoders.csv"):
     return write_table(folder / name, ENCODERS, t)
 
 
+def _reformatted(folder, fx, delimiter, decimal=".", header_prefix="", rename=None, name="exported.csv"):
+    """The clean acrobot record written another way: `delimiter`, a decimal mark, a prefix to the header line
+    (numpy's `savetxt` writes `# `), column names renamed."""
+    header = [rename(c) if rename else c for c in ACROBOT]
+    rows = [delimiter.join(f"{v:.17g}".replace(".", decimal) for v in row) for row in fx["acrobot"]]
+    path = pathlib.Path(folder) / name
+    path.write_text(header_prefix + delimiter.join(header) + "\n" + "\n".join(rows) + "\n")
+    return str(path)
+
+
 def _heli(folder, fx, edit, name="heli_bad.csv"):
     header = fx["heli_header"]
     t = edit(header, np.array(fx["heli"], copy=True))
@@ -1318,6 +1328,37 @@ CASES = [
         "accept",
         check=params_close(),
         heavy=True,
+    ),
+    # The file formats spreadsheets, loggers and numpy write: read where unambiguous, else the cell named.
+    C(
+        "csv-semicolons",
+        "format",
+        lambda d, fx: _identify(_reformatted(d, fx, ";"), method="dynamic"),
+        "accept",
+        check=params_close(),
+        heavy=True,
+    ),
+    C(
+        "csv-savetxt-header-as-comment",
+        "format",
+        lambda d, fx: _identify(_reformatted(d, fx, ",", header_prefix="# "), method="dynamic"),
+        "accept",
+        check=params_close(),
+        heavy=True,
+    ),
+    C(
+        "csv-decimal-comma",
+        "format",
+        lambda d, fx: _identify(_reformatted(d, fx, ";", decimal=","), method="dynamic"),
+        "refuse",
+        needles=("column 't', row 2", "'0,01'", "decimal comma"),
+    ),
+    C(
+        "csv-header-in-capitals-with-units",
+        "format",
+        lambda d, fx: _identify(_reformatted(d, fx, ",", rename=lambda c: f"{c.upper()} [SI]"), method="dynamic"),
+        "refuse",
+        needles=("missing column", "--map 't=T [SI],q1=Q1 [SI]"),
     ),
     # Clean records must keep their right answers.
     C(

@@ -36,6 +36,48 @@ def test_missing_column_names_file_and_column(tmp_path):
         dynax.load_trajectory(path, "acrobot")
 
 
+@pytest.mark.parametrize(
+    "text",
+    [
+        HEADER.replace(",", ";") + "\n" + good_rows().replace(",", ";"),  # a spreadsheet's export, comma locale
+        HEADER.replace(",", "\t") + "\n" + good_rows().replace(",", "\t"),  # a tab-separated log
+        "# rig 2, run 7\n# operator: A\n" + HEADER + "\n" + good_rows(),  # comment lines above the header
+        "# " + HEADER + "\n" + good_rows(),  # numpy.savetxt(..., header=HEADER)
+    ],
+    ids=["semicolons", "tabs", "comments", "savetxt"],
+)
+def test_other_separators_and_comment_lines_read_as_the_csv(tmp_path, text):
+    reference = dynax.load_trajectory(write(tmp_path, HEADER + "\n" + good_rows(), "plain.csv"), "acrobot")
+    tr = dynax.load_trajectory(write(tmp_path, text), "acrobot")
+    np.testing.assert_array_equal(tr.xs, reference.xs)
+    np.testing.assert_array_equal(tr.us, reference.us)
+
+
+def test_a_header_repeated_inside_the_file_is_named_as_two_logs_joined(tmp_path):
+    path = write(tmp_path, HEADER + "\n" + good_rows() + "\n" + HEADER + "\n" + good_rows())
+    with pytest.raises(dynax.DataError, match=r"row 6: the header repeats at file line 7: two logs joined"):
+        dynax.load_trajectory(path, "acrobot")
+
+
+def test_a_decimal_comma_is_named_with_its_cell(tmp_path):
+    rows = "\n".join(";".join(v.replace(".", ",") for v in row.split(",")) for row in good_rows().split("\n"))
+    path = write(tmp_path, HEADER.replace(",", ";") + "\n" + rows)
+    with pytest.raises(dynax.DataError, match=r"column 't', row 1: non-numeric value '0,0' \(a decimal comma"):
+        dynax.load_trajectory(path, "acrobot")
+
+
+def test_columns_named_with_case_or_units_get_the_whole_mapping_suggested(tmp_path):
+    header = "Time [s],Q1 [rad],Q2 [rad],dq1,DQ2,tau2 (N m)"
+    path = write(tmp_path, header + "\n" + good_rows())
+    with pytest.raises(dynax.DataError, match="missing column") as e:
+        dynax.load_trajectory(path, "acrobot")
+    # every column the file names alike is suggested at once, quoted for the shell (`dq1` is the contract's own)
+    assert "--map 't=Time [s],q1=Q1 [rad],q2=Q2 [rad],dq2=DQ2,tau2=tau2 (N m)'" in str(e.value)
+    mapping = {"t": "Time [s]", "q1": "Q1 [rad]", "q2": "Q2 [rad]", "dq2": "DQ2", "tau2": "tau2 (N m)"}
+    tr = dynax.load_trajectory(path, "acrobot", mapping=mapping)
+    np.testing.assert_allclose(tr.state("q1"), 0.1 * np.arange(5))
+
+
 def test_non_numeric_value_names_row(tmp_path):
     rows = good_rows().split("\n")
     rows[2] = "0.02,abc,0,0,0,1"
