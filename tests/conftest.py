@@ -30,9 +30,16 @@ jax.config.update("jax_enable_x64", True)
 # out (`jnp.broadcast_to`, explicit indexing), so a shape bug cannot hide behind broadcasting.
 jax.config.update("jax_numpy_rank_promotion", "raise")
 
+from hypothesis import settings as hypothesis_settings  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+
+# Property tests draw the same examples on every run (a seed derived from each test), so that a red CI is the
+# code's and not the draw's; `HYPOTHESIS_PROFILE=explore` draws anew, keeping what fails in `.hypothesis/`.
+hypothesis_settings.register_profile("dynax", derandomize=True, database=None)
+hypothesis_settings.register_profile("explore", derandomize=False)
+hypothesis_settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dynax"))
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 DATASETS = REPO.parent / "shared" / "datasets"

@@ -19,9 +19,12 @@ so that the edge does not jump a whole bin when one bin's density crosses the th
 
 A record whose velocity noise is negligible gets no filter: when the noise the floor implies,
 differenced into $\ddot q$ ($\sigma f_s/\sqrt 2$ for a central difference), is under 1 % of the
-acceleration's rms, the errors-in-variables bias it causes (of the order of its square) is under
-$10^{-4}$ and filtering would only distort the model (simulated data fall here: their "floor" is
-the spectral tail of the motion itself).
+acceleration's rms, the errors-in-variables bias it causes relative to the accelerations (of the
+order of its square) is under $10^{-4}$ and filtering would only distort the model (simulated data
+fall here: their "floor" is the spectral tail of the motion itself). Relative to the forces the
+parameters are read from it can be far larger (an arm swinging under gravity, a small torque
+balancing large accelerations): `identify` checks the estimate against it and filters such a record
+at its band where it does not hold (`dynax._identify._noise_bias`, `band_filter`).
 
 ??? cite
 
@@ -158,6 +161,10 @@ def trim_and_decimation(sample_rate_hz: float, cutoff_hz: float, n_samples: int)
 
 
 CENTRAL_MATCH = 0.25  # see `_noise_reading`
+# A velocity read as its position's central difference whose own floor is above the backward difference's by more
+# than this (in density) carries noise of its own: a central difference's floor lies below the backward
+# difference's (their responses' ratio, cos^2 of pi f dt, is at most 1 and falls to 0 at the Nyquist frequency).
+OWN_NOISE = 4.0
 
 
 def _noise_reading(q, v, fs: float) -> np.ndarray:
@@ -249,6 +256,14 @@ def _spectral_choice(trajectory: Trajectory, snr: float) -> FilterChoice:
     for k, name in enumerate(velocities):
         reading = xs[:, n + k] if _reads_itself(trajectory) else _noise_reading(xs[:, k], xs[:, n + k], fs)
         floor, band = noise_floor_and_band(reading, fs, snr=snr)
+        if reading is not xs[:, n + k]:
+            # Read as its position's central difference, a velocity may still carry noise of its own that its
+            # clean position does not (a velocity measured apart, at a rate where the difference's truncation
+            # outweighs that noise): where its own floor is above the difference's by more than a central
+            # difference's can be, it is the velocity's noise, and it is read from the velocity.
+            own_floor, own_band = noise_floor_and_band(xs[:, n + k], fs, snr=snr)
+            if own_floor > OWN_NOISE * floor:
+                floor, band = own_floor, own_band
         bands[name] = band
         noise[name] = float(np.sqrt(max(floor, 0.0) * nyquist))
     band = max(bands.values())
@@ -265,14 +280,33 @@ def _spectral_choice(trajectory: Trajectory, snr: float) -> FilterChoice:
         )
     if band >= 0.5 * nyquist:
         return no_filter(bands, noise, f"no noise floor below {0.5 * nyquist:.3g} Hz in the velocities")
-    trim, decimate = trim_and_decimation(fs, band, len(trajectory))
+    return _band_choice(bands, noise, fs, len(trajectory), snr, order)
+
+
+def _band_choice(bands, noise, fs, n_samples, snr, order, why="") -> FilterChoice:
+    """The filter at the widest signal band `bands` (the velocities' floors `noise`), `why` before its reason."""
+    band = max(bands.values())
+    trim, decimate = trim_and_decimation(fs, band, n_samples)
     worst = max(noise, key=noise.get)
     reason = (
-        f"velocity signal band ends at {band:.3g} Hz (density {snr:g} x above the noise floor; "
+        f"{why}velocity signal band ends at {band:.3g} Hz (density {snr:g} x above the noise floor; "
         f"noisiest channel {worst}, {noise[worst]:.3g} rms): order-{order} zero-phase Butterworth at "
         f"{band:.3g} Hz, {trim} samples trimmed (one cut-off period), parallel decimation by {decimate}"
     )
     return FilterChoice(band, order, trim, decimate, fs, bands, noise, reason)
+
+
+def band_filter(trajectory: Trajectory, choice: FilterChoice, *, snr: float = 100.0, why: str = "") -> FilterChoice:
+    """The filter at the signal band for a record whose `choice` (from `choose_filter`) is no filter because its
+    velocity noise was read as negligible; `choice` itself for any other (already filtered, or no noise floor below
+    half the Nyquist frequency: nothing to cut). `why` opens the reason."""
+    if choice.cutoff_hz is not None or not choice.band_hz or not choice.noise_std:
+        return choice
+    if max(choice.band_hz.values()) >= 0.25 * choice.sample_rate_hz:
+        return choice
+    return _band_choice(
+        choice.band_hz, choice.noise_std, choice.sample_rate_hz, len(trajectory), snr, choice.order, why
+    )
 
 
 def position_fit_window(band_hz: float, dt: float) -> int:

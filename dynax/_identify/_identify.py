@@ -13,11 +13,13 @@ the vehicle criteria score flights by the vehicle horizon error), returning an `
 """
 
 from collections.abc import Sequence
+import contextlib
 import dataclasses
 from typing import Literal
 import warnings
 
 from .._data._sampling import check_time_stamps
+from .._data._spectra import filter_rule
 from .._data._trajectory import check_record_columns, check_record_values, Trajectory
 from .._data._velocities import check_trajectory_velocities
 from .._errors import DataError, UsageError
@@ -276,7 +278,10 @@ def identify(
         system_name=_system_name(system),
     )
     prepared = method.prepare(system, fitted, job)  # the records as the method fits them
-    stages = prepared.method.fit_stage(system, prepared)
+    # A rule (noise read as negligible that biases the least squares) filters the least-squares stage; the
+    # refinement then follows the records' own spectra (noise that small needs no output-error fit).
+    with contextlib.nullcontext() if prepared.filter_rule is None else filter_rule(prepared.filter_rule):
+        stages = prepared.method.fit_stage(system, prepared)
     stages = prepared.method.refine(system, prepared, stages)
     result = _validated(stages, prepared.job.held_out)
     warn_if_refinement_left_equations(result)  # a refinement that left the equations: said, with what moved

@@ -45,6 +45,7 @@ from ._ls_stage import (
     relative_equation_error,
 )
 from ._method import AbstractMethod, Fitted, IdentifyJob, Prepared
+from ._noise_bias import noise_bias_rule
 from ._offsets import record_labels, without_offsets
 from ._refine import refine_by_simulation, REFINEMENT_OPTIONS, RefinementStatistics
 from ._regressors import split_terms
@@ -99,10 +100,12 @@ class LeastSquaresState(eqx.Module):
 def least_squares_prepare(method: AbstractLeastSquares, system, records, job: IdentifyJob) -> Prepared:
     """A least-squares method's records as its stages fit them: each record's angle zeros where they
     apply and are chosen, fitted out of the records and of the held-out tails (read from their
-    record's zero), with the method then fitting no force offsets; else the records as given."""
+    record's zero), with the method then fitting no force offsets; else the records as given. Records whose
+    velocity noise the spectra read as negligible but which biases the fit are filtered (`_noise_bias.py`)."""
     zeros = _record_angle_zeros(system, records, method, job.settings.friction, method.rcond)
     if zeros is None or not zeros.chosen:
-        return Prepared(method, records, job, zeros)
+        rule = noise_bias_rule(system, records, method, job.settings.friction, job.settings.weights, method.rcond)
+        return Prepared(method, records, job, zeros, rule)
     held_out = job.held_out  # both stages fit the records less their angle zeros
     if held_out.tails_of is not None and held_out.records:  # a held-out tail is read from its record's zero
         held_out = HeldOut(
@@ -111,12 +114,10 @@ def least_squares_prepare(method: AbstractLeastSquares, system, records, job: Id
             held_out.source + "; each tail less its record's angle zeros, fitted on its head",
             held_out.tails_of,
         )
-    return Prepared(
-        dataclasses.replace(method, offsets=False),
-        zeros.corrected(records, system),
-        dataclasses.replace(job, held_out=held_out),
-        zeros,
-    )
+    method = dataclasses.replace(method, offsets=False)
+    records = zeros.corrected(records, system)
+    rule = noise_bias_rule(system, records, method, job.settings.friction, job.settings.weights, method.rcond)
+    return Prepared(method, records, dataclasses.replace(job, held_out=held_out), zeros, rule)
 
 
 def least_squares_fit(method: AbstractLeastSquares, system, prepared: Prepared) -> Fitted:

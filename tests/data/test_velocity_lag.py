@@ -98,7 +98,12 @@ def test_a_lag_that_starts_part_way_is_placed_to_a_few_samples(seed, start_s, ra
     late[start:, 0] = dq[start - k : len(ts) - k, 0]
     found = _lags(dynax.check_records([_record(ts, q, late)], estimated=()))
     assume(found)
-    assert abs(found[0].times[0] - ts[start]) <= 0.1 and found[0].times[1] >= ts[-1] - 0.1, found[0].times
+    t0, t1 = found[0].times
+    # The lag runs to the end; it shows where the motion is brisk (its error is the lag times the acceleration),
+    # so the stretch found reaches the end unless what follows it moves far more slowly than the stretch itself.
+    acc = np.abs(np.gradient(dq[:, 0], ts))
+    quiet_tail = np.sqrt(np.mean(acc[ts > t1] ** 2)) < 0.25 * np.sqrt(np.mean(acc[(ts >= t0) & (ts <= t1)] ** 2))
+    assert abs(t0 - ts[start]) <= 0.1 and (t1 >= ts[-1] - 0.1 or quiet_tail), found[0].times
 
 
 @settings(max_examples=20, deadline=None)
