@@ -73,9 +73,7 @@ def main():
         )
         rows[label] = {
             "relative_error": {k: result.parameters[k] / v - 1 for k, v in TRUTH.items()},
-            "in_standard_errors": {
-                k: (result.parameters[k] - v) / result.standard_errors[k] for k, v in TRUTH.items()
-            },
+            "in_standard_errors": {k: (result.parameters[k] - v) / result.standard_errors[k] for k, v in TRUTH.items()},
             "settings": result.settings[0]["reason"],
             "seconds": time.perf_counter() - start,
         }
