@@ -22,11 +22,10 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 import dynax
-from tests.reference import arm_reference
+from tests.reference import arm_run
 
 TRUTH = {"theta1": 1.333, "theta2": 1.33, "theta3": 1.0, "theta4": 14.715, "theta5": 9.81, "theta6": 0.1, "theta7": 0.1}
 
@@ -38,18 +37,10 @@ def record(minutes: float, noise: float) -> dynax.Trajectory:
     def elbow(t):
         return 3.0 * float(np.sum(np.sin(2 * np.pi * freqs * t + phases))) / np.sqrt(6)
 
-    ts = np.arange(0.0, 60.0 * minutes + 5e-4, 1e-3)
-    sol = solve_ivp(
-        lambda t, x: arm_reference(tuple(TRUTH.values()), x, (0.0, elbow(t))),
-        (0.0, ts[-1]),
-        [0.2, 0.0, 0.0, 0.0],
-        t_eval=ts,
-        method="DOP853",
-        rtol=1e-9,
-        atol=1e-10,
-    )
-    xs = sol.y.T + noise * rng.standard_normal((len(ts), 4))
-    us = np.array([[elbow(t)] for t in ts])
+    drive = lambda t: (0.0, elbow(t))  # noqa: E731
+    ts, xs, taus = arm_run(tuple(TRUTH.values()), 60.0 * minutes, 1000.0, drive, rtol=1e-9, atol=1e-10)
+    xs = xs + noise * rng.standard_normal((len(ts), 4))
+    us = taus[:, 1:]
     return dynax.Trajectory(ts, xs, us, ("q1", "q2", "dq1", "dq2"), ("tau2",), "acrobot", "acrobot-1khz")
 
 

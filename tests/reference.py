@@ -73,6 +73,22 @@ def arm_reference(theta, x, tau, coulomb=(0.0, 0.0), velocity_scale=0.01, rotor=
     return np.array([dq1, dq2, (m22 * h1 - m12 * h2) / det, (m11 * h2 - m12 * h1) / det])
 
 
+def arm_run(theta, duration, rate_hz, drive, x0=(0.2, 0.0, 0.0, 0.0), rtol=1e-10, atol=1e-11):
+    """`(ts, xs, taus)`: `arm_reference` under the torques `drive(t)` (a pair), integrated by scipy's DOP853 and
+    sampled at `rate_hz` for `duration` seconds from `x0`; `taus` is `drive` at the sample times."""
+    ts = np.arange(0.0, duration + 0.5 / rate_hz, 1.0 / rate_hz)
+    sol = solve_ivp(
+        lambda t, x: arm_reference(theta, x, drive(t)),
+        (0.0, ts[-1]),
+        list(x0),
+        t_eval=ts,
+        method="DOP853",
+        rtol=rtol,
+        atol=atol,
+    )
+    return ts, sol.y.T, np.array([drive(t) for t in ts])
+
+
 def _arm_pieces(theta, x, tau, fc, fs, vst, direction):
     """Mass matrix and the generalised force of the arm with each joint's friction as the Stribeck curve
     $-[f_c + (f_s - f_c) e^{-(\\dot q/v_{st})^2}]\\,s$ in the direction `s` it slips (0 where it sticks)."""

@@ -59,21 +59,9 @@ class Case:
 
 
 def _arm(theta, duration, rate_hz, drive, x0=(0.2, 0.0, 0.0, 0.0)):
-    from scipy.integrate import solve_ivp
+    from tests.reference import arm_run
 
-    from tests.reference import arm_reference
-
-    ts = np.arange(0.0, duration + 0.5 / rate_hz, 1.0 / rate_hz)
-    sol = solve_ivp(
-        lambda t, x: arm_reference(theta, x, drive(t)),
-        (0.0, ts[-1]),
-        list(x0),
-        t_eval=ts,
-        method="DOP853",
-        rtol=1e-10,
-        atol=1e-11,
-    )
-    return ts, sol.y.T, np.array([drive(t) for t in ts])
+    return arm_run(theta, duration, rate_hz, drive, x0)
 
 
 def _multisine(seed, amplitude=3.0):

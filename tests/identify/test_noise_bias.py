@@ -9,10 +9,9 @@ import functools
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 
 import dynax
-from tests.reference import arm_reference
+from tests.reference import arm_run
 
 TRUTH = (1.333, 1.33, 1.0, 14.715, 9.81, 0.1, 0.1)
 NAMES = tuple(f"theta{i}" for i in range(1, 8))
@@ -26,17 +25,8 @@ def _motion(duration=30.0, rate_hz=1000.0):
     def elbow(t):
         return 3.0 * float(np.sum(np.sin(2 * np.pi * freqs * t + phases))) / np.sqrt(6)
 
-    ts = np.arange(0.0, duration + 0.5 / rate_hz, 1.0 / rate_hz)
-    sol = solve_ivp(
-        lambda t, x: arm_reference(TRUTH, x, (0.0, elbow(t))),
-        (0.0, ts[-1]),
-        [0.2, 0.0, 0.0, 0.0],
-        t_eval=ts,
-        method="DOP853",
-        rtol=1e-10,
-        atol=1e-11,
-    )
-    return ts, sol.y.T, np.array([[elbow(t)] for t in ts])
+    ts, xs, taus = arm_run(TRUTH, duration, rate_hz, lambda t: (0.0, elbow(t)))
+    return ts, xs, taus[:, 1:]
 
 
 def _record(velocity_noise):
