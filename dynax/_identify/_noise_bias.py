@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._data._spectra import band_filter, choose_filter, FILTER_RULE
-from .._errors import DataError
+from .._errors import DataError, UsageError
 from ._equations import Dynamic, uniformly_sampled
 from ._ls_stage import least_squares_stage
 
@@ -41,11 +41,12 @@ SEED = 20250101  # the added noise's draw (fixed: the same records give the same
 def noise_bias_rule(system, records, method, friction, weights, rcond):
     """A `filter_rule` that filters at their signal band the records whose velocity noise, read as negligible,
     biases `method`'s least-squares estimate (see the module notes), or `None` where none does (or the check does
-    not apply: a method other than `Dynamic` with its cut-off chosen from the data, or a rule already in force).
+    not apply: a method other than `Dynamic` with its cut-off chosen from the data, row `weights` given, or a rule
+    already in force).
     """
     if not isinstance(method, Dynamic) or not (isinstance(method.lowpass_hz, str) and method.lowpass_hz == "auto"):
         return None
-    if FILTER_RULE.get() is not None:
+    if FILTER_RULE.get() is not None or weights is not None:  # a rule in force; row weights fit one set of rows
         return None
     choices = [choose_filter(uniformly_sampled(r)) for r in records]
     probed = [
@@ -61,9 +62,9 @@ def noise_bias_rule(system, records, method, friction, weights, rcond):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
-            plain = least_squares_stage(system, plain_records, unfiltered, friction, weights, rcond, "off")
-            again = least_squares_stage(system, noisier, unfiltered, friction, weights, rcond, "off")
-        except DataError:  # too few rows, unidentifiable: the fit itself says so
+            plain = least_squares_stage(system, plain_records, unfiltered, friction, None, rcond, "off")
+            again = least_squares_stage(system, noisier, unfiltered, friction, None, rcond, "off")
+        except (DataError, UsageError):  # too few rows, unidentifiable: the fit itself says so
             return None
     value, std = np.asarray(plain.estimate, float), np.asarray(plain.fit.std_errors, float)
     shift = np.asarray(again.estimate, float) - value
