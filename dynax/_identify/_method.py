@@ -81,8 +81,8 @@ class Prepared(eqx.Module):
     """What a method's `prepare` hands its fit: the method that fits (a least-squares method without
     force offsets where each record's angle zeros are fitted out), the records to fit, the `job`
     (whose `held_out` records are then read as the fit reads its own), the `angle_zeros`
-    (`AngleZeros`, or `None` where not looked for) and a `filter_rule` the fit and its refinement run under
-    (`dynax._data._spectra.filter_rule`; `None`: the filters the spectra choose)."""
+    (`AngleZeros`, or `None` where not looked for) and a `filter_rule` the first stage runs under
+    (`dynax._data._spectra.filter_rule`; `None`: the filters the spectra choose; the refinement follows them)."""
 
     method: "AbstractMethod"
     records: list[Trajectory]
