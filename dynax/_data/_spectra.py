@@ -267,20 +267,28 @@ def _spectral_choice(trajectory: Trajectory, snr: float) -> FilterChoice:
         bands[name] = band
         noise[name] = float(np.sqrt(max(floor, 0.0) * nyquist))
     band = max(bands.values())
-    negligible = []
-    for k, name in enumerate(velocities):
-        dq = np.asarray(trajectory.xs[:, n + k], dtype=float)
-        accel_rms = np.sqrt(np.mean(((dq[2:] - dq[:-2]) * 0.5 * fs) ** 2))
-        noise_accel = noise[name] * fs / np.sqrt(2.0)
-        signal = np.sqrt(max(accel_rms**2 - noise_accel**2, 0.0))
-        negligible.append(noise_accel < 0.01 * signal)
-    if all(negligible):
+    if all(ratio < 0.01 for ratio in differenced_noise_ratios(trajectory, noise, fs).values()):
         return no_filter(
             bands, noise, "velocity noise negligible (differenced into accelerations it is under 1 % of their rms)"
         )
     if band >= 0.5 * nyquist:
         return no_filter(bands, noise, f"no noise floor below {0.5 * nyquist:.3g} Hz in the velocities")
     return _band_choice(bands, noise, fs, len(trajectory), snr, order)
+
+
+def differenced_noise_ratios(trajectory: Trajectory, noise: dict, fs: float) -> dict[str, float]:
+    r"""Per velocity of `trajectory`, its white-noise level `noise[name]` differenced into accelerations (a central
+    difference at `fs`: $\sigma f_s/\sqrt 2$) over the accelerations' rms without it (`inf` where nothing is left)."""
+    n = len(trajectory.state_names) // 2
+    xs = np.asarray(trajectory.xs, dtype=float)
+    ratios = {}
+    for k, name in enumerate(trajectory.state_names[n:]):
+        dq = xs[:, n + k]
+        accel_rms = np.sqrt(np.mean(((dq[2:] - dq[:-2]) * 0.5 * fs) ** 2))
+        noise_accel = noise.get(name, 0.0) * fs / np.sqrt(2.0)
+        signal = np.sqrt(max(accel_rms**2 - noise_accel**2, 0.0))
+        ratios[name] = float(noise_accel / signal) if signal > 0 else float("inf")
+    return ratios
 
 
 def _band_choice(bands, noise, fs, n_samples, snr, order, why="") -> FilterChoice:

@@ -28,7 +28,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._data._spectra import band_filter, choose_filter, FILTER_RULE
+from .._data._spectra import band_filter, choose_filter, differenced_noise_ratios, FILTER_RULE
 from .._errors import DataError, UsageError
 from ._equations import Dynamic, uniformly_sampled
 from ._ls_stage import least_squares_stage
@@ -53,7 +53,8 @@ def noise_bias_rule(system, records, method, friction, weights, rcond):
     probed = [
         i
         for i, (r, c) in enumerate(zip(records, choices))
-        if band_filter(r, c) is not c and _noise_ratio(r, c) > PROBED_RATIO
+        if band_filter(r, c) is not c
+        and max(differenced_noise_ratios(r, c.noise_std, c.sample_rate_hz).values()) > PROBED_RATIO
     ]
     if not probed:
         return None
@@ -84,18 +85,6 @@ def noise_bias_rule(system, records, method, friction, weights, rcond):
         return band_filter(trajectory, choice, snr=snr, why=why)
 
     return rule
-
-
-def _noise_ratio(record, choice) -> float:
-    """The largest ratio over the velocities of the noise floor, differenced into accelerations, to their rms."""
-    n = len(record.state_names) // 2
-    xs, fs = np.asarray(record.xs, float), choice.sample_rate_hz
-    ratios = [0.0]
-    for k, name in enumerate(record.state_names[n:]):
-        accel = (xs[2:, n + k] - xs[:-2, n + k]) * 0.5 * fs
-        rms = float(np.sqrt(np.mean(accel**2)))
-        ratios.append(choice.noise_std.get(name, 0.0) * fs / np.sqrt(2.0) / max(rms, np.finfo(float).tiny))
-    return max(ratios)
 
 
 def _with_noise_again(record, choice, k: int):
