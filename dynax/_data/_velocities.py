@@ -12,6 +12,15 @@ regression's output); noise in $s$ is the encoder's, divided by the block's dura
 of the motion for a 1e-4 rad encoder, even without averaging). A record is refused where $g$ is
 off by more than `MAX_GAIN_ERROR` and by more than `SIGNIFICANCE` of its own standard errors: a
 record that barely moves cannot tell, and is let through.
+
+Where the position's noise is not small against its change over a block (a flight held level within a
+few centimetres under millimetre motion-capture noise), the noise in $s$ pulls $g$ towards zero: the
+regression's errors in the variables (Fuller 1987, sec. 1.1). Then $s \cdot s$ holds, besides the
+motion, the slopes' noise $\sum_k 2\sigma_q^2 / T_k^2$, with $\sigma_q$ the position's white noise
+read from its third differences (`position_noise_std`), and the gain read without it
+(`corrected_gain`) is what the record says. A record is refused only where both readings are off (a
+velocity computed by the logger from the same noisy positions carries the same noise, and its
+uncorrected gain is the right one); one whose slopes are no larger than their noise cannot tell.
 """
 
 from typing import NamedTuple
@@ -129,6 +138,29 @@ def velocity_gain(ts, q, v) -> tuple[float, float, float] | None:
     return gain, std, corr
 
 
+def position_noise_std(q) -> float:
+    r"""The standard deviation of a position's white measurement noise, from the median absolute deviation
+    of its third differences ($\sqrt{20}\,\sigma$ for white noise; a smooth motion's jerk times $\Delta t^3$
+    adds little at the rates motion is logged at, and the median ignores the few samples where it does)."""
+    d3 = np.diff(np.asarray(q, dtype=float), 3)
+    if d3.size < 8:
+        return 0.0
+    return 1.4826 * float(np.median(np.abs(d3 - np.median(d3)))) / np.sqrt(20.0)
+
+
+def corrected_gain(ts, q, slopes, means, edges) -> tuple[float, float] | None:
+    """`(gain, factor)`: the gain of `velocity_gain` with the position's noise taken out of the slopes' sum of
+    squares (see the module notes) and the factor that took it out (it scales the gain's standard error too),
+    or `None` where the slopes are no larger than their noise (the record cannot tell)."""
+    ts = np.asarray(ts, dtype=float)
+    durations = ts[edges[1:]] - ts[edges[:-1]]
+    noise = 2.0 * position_noise_std(q) ** 2 * float(np.sum(1.0 / durations**2))
+    ss = float(slopes @ slopes)
+    if not ss > 2.0 * noise:
+        return None
+    return float(slopes @ means) / (ss - noise), ss / (ss - noise)
+
+
 def _refused(gain: float, std: float) -> bool:
     return abs(gain - 1.0) > MAX_GAIN_ERROR and abs(gain - 1.0) > SIGNIFICANCE * std
 
@@ -157,6 +189,20 @@ def gain_holds_everywhere(ts, q, v, gain: float) -> bool:
         if abs(found[0] - gain) > MAX_GAIN_ERROR * max(abs(gain), 1.0):
             return False
     return seen > 0
+
+
+def wrong_in_every_stretch(ts, q, v) -> list[float] | None:
+    """The gains of `stretch_gains` where the velocity is off its position's derivative (`_refused`) in every
+    stretch that moves enough to tell, at least two: a column that is no derivative of this position anywhere
+    (another joint's, another signal), by no one gain; `None` where some stretch agrees or too few can tell."""
+    gains = []
+    for found in stretch_gains(ts, q, v):
+        if found is None or not found[1] < MAX_GAIN_ERROR:
+            continue  # too short or too still to tell
+        if not _refused(found[0], found[1]):
+            return None
+        gains.append(found[0])
+    return gains if len(gains) >= 2 else None
 
 
 def check_velocities(
@@ -197,13 +243,29 @@ def check_velocities(
         if found is None or not _refused(found[0], found[1]):
             continue
         gain, std, corr = found
+        if abs(gain) < 1.0 - MAX_GAIN_ERROR:  # attenuated by the position's noise?
+            corrected = corrected_gain(ts, values[position], *blocks, edges)
+            if corrected is None or not _refused(corrected[0], std * corrected[1]):
+                continue
         follows_another = any(
             (m := velocity_gain(ts, values[other], values[velocity])) is not None and abs(m[0] - 1.0) <= MAX_GAIN_ERROR
             for other in pairs.values()
             if other != position
         )
         if not follows_another and not gain_holds_everywhere(ts, values[position], values[velocity], gain):
-            continue  # wrong in some stretches only: no scale is right; the sanity check names the stretch
+            gains = wrong_in_every_stretch(ts, values[position], values[velocity])
+            if gains is None:
+                continue  # wrong in some stretches only: no scale is right; the sanity check names the stretch
+            raise DataError(
+                f"it is not the derivative of {named(position)} in any stretch of the record: over "
+                f"{BLOCK_S * 1e3:g} ms blocks its mean is {gain:.4g} +- {std:.2g} times the position's change per "
+                f"second (correlation {corr:.2f}), and from {min(gains):.3g} to {max(gains):.3g} times it in the "
+                f"record's {STRETCHES} stretches: no one scale fixes that; is {columns.get(velocity, velocity)!r} "
+                f"the velocity of {columns.get(position, position)!r}? If the record has no velocity, leave its "
+                "columns out (unmapped): `load_trajectory` then estimates every velocity from the positions",
+                path=path,
+                column=columns.get(velocity, velocity),
+            )
         dt = float(np.median(np.diff(np.asarray(ts, dtype=float))))
         for factor, unit in ((1e3, "milliseconds"), (1e6, "microseconds"), (1 / 60, "minutes")):
             if abs(gain / factor - 1.0) < 0.05 and (dt >= 0.1 if factor > 1 else dt < 0.1 * factor):

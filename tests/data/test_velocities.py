@@ -169,3 +169,47 @@ def test_identify_and_diagnose_check_records_built_in_python_too(tmp_path):
         dynax.identify(dynax.DoublePendulum(), run, dynax.Dynamic())
     with pytest.raises(dynax.DataError, match=r"column 'dq1'.*degrees"):
         dynax.diagnose(dynax.DoublePendulum(), run, progress=False)
+
+
+def _slow_axis(seed=0, motion=0.04, noise=1e-3, seconds=30.0, rate=100.0, freqs=(0.21, 0.37, 0.53, 0.8)):
+    """A linear axis that barely moves (speed `motion` m/s rms) under motion-capture noise of `noise` m, logged
+    at `rate`, its velocity the exact derivative plus 5 mm/s of noise: the position's change over a 50 ms block
+    is about as noisy as it is large."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, seconds, 1.0 / rate)
+    freqs = np.asarray(freqs)
+    phases = rng.uniform(0, 2 * np.pi, freqs.size)
+    q = np.sin(2 * np.pi * freqs[:, None] * t + phases[:, None]).sum(0) / freqs.size
+    dq = (2 * np.pi * freqs[:, None] * np.cos(2 * np.pi * freqs[:, None] * t + phases[:, None])).sum(0) / freqs.size
+    k = motion / float(np.sqrt(np.mean(dq**2)))
+    return {
+        "t": t,
+        "q": k * q + noise * rng.normal(size=t.size),
+        "dq": k * dq + 5e-3 * rng.normal(size=t.size),
+        "force": np.sin(t),
+    }
+
+
+def test_a_velocity_beside_a_position_noisy_against_its_motion_is_not_refused(tmp_path):
+    # Noise in the position's change over a block pulls the gain towards zero (errors in the variables): here to
+    # about 0.67, which read alone refuses a right velocity. With that noise taken out it reads 1.
+    table = _slow_axis()
+    run = dynax.load_trajectory(write(tmp_path, table), "linear_axis")
+    gain, std, _ = velocity_gain(run.ts, run.state("q"), run.state("dq"))
+    assert gain < 0.8 and abs(gain - 1) > 5 * std  # what the uncorrected reading says
+    # so noisy that the position's change is no larger than its noise: the record cannot tell
+    dynax.load_trajectory(write(tmp_path, _slow_axis(noise=4e-3), "noisier.csv"), "linear_axis")
+    # a velocity the logger differenced from the same noisy positions shares their noise, and its gain is 1
+    central = dict(table, dq=np.gradient(table["q"], table["t"]))
+    dynax.load_trajectory(write(tmp_path, central, "central.csv"), "linear_axis")
+
+
+def test_a_wrong_velocity_beside_a_noisy_position_is_still_refused(tmp_path):
+    table = _slow_axis()
+    with pytest.raises(dynax.DataError, match=r"column 'dq'.*centimetres|column 'dq'.*not the derivative"):
+        dynax.load_trajectory(write(tmp_path, dict(table, dq=100 * table["dq"]), "cm.csv"), "linear_axis")
+    with pytest.raises(dynax.DataError, match=r"column 'dq'.*not the derivative"):
+        dynax.load_trajectory(write(tmp_path, dict(table, dq=0.5 * table["dq"]), "half.csv"), "linear_axis")
+    other = _slow_axis(seed=1, freqs=(0.29, 0.43, 0.61, 0.9))  # another axis's velocity, of the same size
+    with pytest.raises(dynax.DataError, match=r"column 'dq'.*not the derivative"):
+        dynax.load_trajectory(write(tmp_path, dict(table, dq=other["dq"]), "other.csv"), "linear_axis")
