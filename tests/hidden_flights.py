@@ -32,6 +32,8 @@ def effects(case) -> dict:
         return {"delay": case.size}
     if case.cause == "input_lag":
         return {"lag": (MOTORS.index(case.where), case.size)}
+    if case.cause == "motor_lag":
+        return {"lag": ("all", case.size)}
     if case.cause == "input_gain":
         return {"gain": (MOTORS.index(case.where), case.size)}
     if case.cause == "ground_effect":
@@ -141,11 +143,11 @@ def _rollout(x0, commands, late, effects_, battery, rotor0, n_steps, substeps=1,
     dt = 0.01
     h = dt / substeps
     s = np.concatenate([x0, rotor0])
-    lagged = effects_.get("lag", (-1, 0.0))[0]
+    lagged = sf.lagging(effects_)
     out = []
     for j in range(n_steps):
         received = commands[j]
-        s[13:17] = np.where(np.arange(4) != lagged, received, s[13:17])
+        s[13:17] = np.where(lagged, s[13:17], received)
         for _ in range(substeps):
             # private: the generator's own law (tests/quadrotor/synthetic_flight.py, not dynax)
             f = lambda y: sf._field(0.0, y, received, effects_, battery[j], vehicle)  # noqa: E731

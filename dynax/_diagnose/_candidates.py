@@ -46,6 +46,7 @@ def host_nominal_values(system, names: tuple[str, ...]) -> np.ndarray:
 LOOK_ALIKES = (
     frozenset({"coulomb_friction", "viscous_friction", "quadratic_drag"}),
     frozenset({"input_delay", "input_lag"}),
+    frozenset({"motor_delay", "motor_lag"}),  # at `motors`: the shared dead time and the shared lag
     frozenset({"wind", "body_bias"}),
     frozenset({"rotor_drag", "quadratic_drag"}),
     # A static level holds at rest where a Coulomb friction creeps; an offset acts at rest and in motion alike.

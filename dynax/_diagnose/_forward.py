@@ -369,6 +369,8 @@ def _refit(problem: Problem, round_: Round, short, say) -> tuple[np.ndarray, _Ba
         if k >= 0:
             start = problem.inits[k] - problem.neutral[k]
             p_init[i, -1] = _start_value(problem, k, round_.deltas[round_.remaining.index(k)], start)
+            if through is not None and k in through.alike_starts:  # a look-alike on the same inputs: its own
+                p_init[i] = through.alike_starts[k]
             if through is not None and through.candidate == k:
                 p_init[i] = through.p
                 c = problem.neutral[k] + through.p[-1]
@@ -390,13 +392,16 @@ class Through:
     """The lag or delay the held one-step map is refitted through (`_through_inputs`): the `candidate`, the start `p`
     of its configuration (the refitted map, its coefficient in the last place), and the test that chose it: the
     likelihood `ratio` of the one extra coefficient, the `bar`, and whether it passed it (`evidence`: only then is
-    it a place on the shortlist; below the bar it is the candidate's start where the screening shortlisted it)."""
+    it a place on the shortlist; below the bar it is the candidate's start where the screening shortlisted it).
+    `alike_starts`: the start of each look-alike with input dynamics on the same inputs (a lag beside a dead
+    time), from the map refitted one step through it at its own best coefficient."""
 
     candidate: int
     p: np.ndarray
     ratio: float
     bar: float
     evidence: bool = True
+    alike_starts: dict = dataclasses.field(default_factory=dict)
 
 
 def _through_inputs(problem: Problem, slots, p, remaining) -> Through | None:
@@ -433,12 +438,14 @@ def _through_inputs(problem: Problem, slots, p, remaining) -> Through | None:
         if selected is not None and input_dynamics(selected, problem.system):
             held.append(_at(selected, problem.neutral[slot] + p[n_nominal + j]))
     _, held_loss, n_residuals = problem.nominal_through(tuple(held))
-    best = None
+    best, each = None, {}
     for k in dynamic:
         for c in problem.neutral[k] + problem.dt * np.asarray(THROUGH_SAMPLES, float):
             values, loss, _ = problem.nominal_through((*held, _at(problem.candidates[k], c)))
             if best is None or loss < best[0]:
                 best = (loss, k, c, values)
+            if k not in each or loss < each[k][0]:
+                each[k] = (loss, k, c, values)
     # The likelihood ratio of the one extra coefficient, Bonferroni over every candidate and coefficient tried:
     # the one-step residual is mostly measurement noise, and the least of many tries is below the held map's by
     # chance about as often as not.
@@ -449,10 +456,24 @@ def _through_inputs(problem: Problem, slots, p, remaining) -> Through | None:
     ratio = float(n_residuals * np.log(held_loss / best[0]))
     if not ratio > 0:
         return None
-    _, k, c, values = best
-    start = np.asarray(p, float).copy()
-    start[:n_nominal], start[-1] = values, c - problem.neutral[k]
-    return Through(k, start, ratio, float(bar), ratio > bar)
+
+    def start_of(found):
+        _, k, c, values = found
+        start = np.asarray(p, float).copy()
+        start[:n_nominal], start[-1] = values, c - problem.neutral[k]
+        return start
+
+    k = best[1]
+    # A look-alike on the same inputs (the motors' shared lag beside their shared dead time) takes the map refitted
+    # through itself: the held map has taken up part of it as much as of the chosen one, and from the default
+    # start against that map the refit walks out of its physical range (a 40 ms lag of every motor: to -25 ms,
+    # where the dead time it looks like gained 39 %).
+    alikes = {
+        j: start_of(each[j])
+        for j in problem.look_alikes(k)
+        if j in each and set(problem.candidates[j].inputs) == set(problem.candidates[k].inputs)
+    }
+    return Through(k, start_of(best), ratio, float(bar), ratio > bar, alikes)
 
 
 #: The lags and dead times [samples] at which the held one-step map is refitted through a candidate (`_through_inputs`).

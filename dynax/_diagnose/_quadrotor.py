@@ -20,6 +20,8 @@ The vocabulary for a multirotor (`quadrotor_candidates`):
   its thrust (the speed controller, the motors' spin-up, the logging chain's latency); the rotors'
   moments then answer the commands late, which a rigid body driven by the commands of the same sample
   cannot follow;
+- `motor_lag` at `motors` (`MotorLag`): one first-order lag shared by every motor (identical motors and speed
+  controllers spin up alike); told apart from `motor_delay` by the response's shape (look-alikes);
 - `input_lag` per motor (`InputLag` at `m1..m4`): the motor's first-order lag behind its command;
 - `battery_sag` at `vbat` (`BatterySag`, where the flights log `vbat`): thrust and moments per command that
   change with the battery voltage, which a motor map that does not read `vbat` misses;
@@ -58,7 +60,7 @@ from .._data._flight import warn_if_units_differ
 from .._data._motor_order import warn_if_numbered_otherwise
 from .._data._trajectory import Trajectory
 from .._errors import UsageError
-from .._model._extensions import AbstractTerm, InputGain, InputLag, MotorDelay
+from .._model._extensions import AbstractTerm, InputGain, InputLag, MotorDelay, MotorLag
 from .._model._extensions._vehicle_terms import BatterySag, BodyBias, GroundEffect, PlanarRotorDrag, RotorDrag
 from .._model._helicopter import ANGULAR_RATE, BODY, Helicopter, QUATERNION, quaternion_to_rotation
 from .._model._quadrotor import (
@@ -109,8 +111,8 @@ def as_quadrotor(body: BodyFrameQuadrotor, like: Quadrotor) -> Quadrotor:
 def quadrotor_candidates(system, floor: float | None = None) -> tuple:
     """The multirotor vocabulary at neutral values (see the module docs): `rotor_drag` on `u` ... `r` and `u+v`,
     `body_bias` on `u, v, w, p, q, r`, `battery_sag` where the system has `vbat`, `ground_effect` over a
-    floor at height `floor` (world `z`) where one is given, `motor_delay` on all motors, `input_lag` and
-    `input_gain` at each motor `m1..m4`."""
+    floor at height `floor` (world `z`) where one is given, `motor_delay` and `motor_lag` on all motors,
+    `input_lag` and `input_gain` at each motor `m1..m4`."""
     terms: list[AbstractTerm] = [RotorDrag(i) for i in range(6)]
     terms.append(PlanarRotorDrag())  # u and v as one: the drag of the rotor plane
     terms += [BodyBias(i) for i in range(6)]
@@ -119,6 +121,7 @@ def quadrotor_candidates(system, floor: float | None = None) -> tuple:
     if floor is not None:
         terms.append(GroundEffect(floor=float(floor)))
     terms.append(MotorDelay(tuple(range(len(MOTORS)))))
+    terms.append(MotorLag(tuple(range(len(MOTORS)))))
     terms += [InputLag(i) for i in range(len(MOTORS))]
     terms += [InputGain(i) for i in range(len(MOTORS))]
     return tuple(terms)

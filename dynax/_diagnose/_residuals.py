@@ -124,6 +124,8 @@ def _held_average(ts, u, a, b):
 
 #: The causes that are a dead time on their inputs (`InputDelay`, `MotorDelay`): run as the shifted input.
 DEAD_TIMES = ("input_delay", "motor_delay")
+#: The causes that are a first-order lag on their inputs (`InputLag`, `MotorLag`).
+LAGS = ("input_lag", "motor_lag")
 
 
 def input_dynamics(term, system) -> bool:

@@ -37,6 +37,7 @@ from ._residuals import (
     DEAD_TIMES,
     hidden_trajectory,
     input_dynamics,
+    LAGS,
     padded,
     sg_window,
     shared_length,
@@ -121,13 +122,13 @@ def screening_data(family, values, coefficients, trajectory, residual_fn, length
     grid = screening_grid(trajectory.dt)
     J_grid = {}
     for k, term in enumerate(family.model.terms):
-        if input_dynamics(term, system) and term.cause in DEAD_TIMES + ("input_lag",):
+        if input_dynamics(term, system) and term.cause in DEAD_TIMES + LAGS:
             change = 0.0  # a term on several inputs moves each of them
             for i in term.inputs:
                 J_u_k = np.asarray(J_u)[:, :, i]
                 u = np.asarray(us)[:, i]
                 shifted = np.stack(
-                    [_lagged(ts, u, tau) if term.cause == "input_lag" else _delayed(ts, u, tau) for tau in grid], axis=1
+                    [_lagged(ts, u, tau) if term.cause in LAGS else _delayed(ts, u, tau) for tau in grid], axis=1
                 )
                 change = change + J_u_k[:, :, None] * (shifted - u[:, None])[:, None, :]
             J_grid[k] = smooth(change)[keep]  # (time, n_vel, n_grid)

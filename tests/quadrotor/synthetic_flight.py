@@ -10,7 +10,8 @@ effects, each written here independently of dynax:
 - `drag=(du, dv, dw)`: rotor drag, a body-frame force -m D nu (nu the body velocity);
 - `bias=(axis, b)`: a constant body-frame acceleration (axis 0..2, m/s^2) or angular acceleration
   (axis 3..5, rad/s^2);
-- `lag=(motor, tau)`: that motor's rotor command follows the logged one with a first-order lag tau [s];
+- `lag=(motor, tau)`: that motor's rotor command follows the logged one with a first-order lag tau [s]
+  (`motor="all"`: every motor's, with one time constant);
 - `delay=T`: every rotor receives the logged commands T seconds late (a whole number of samples: the
   command logged at sample k acts from sample k + T / dt);
 - `sag=(v0, v1)`: the battery voltage falls linearly from v0 to v1 [V] over the flight, logged as `vbat`
@@ -117,6 +118,12 @@ def _controller(t, s, c, vehicle):
     return np.sqrt(thrusts / kf)
 
 
+def lagging(effects) -> np.ndarray:
+    """Which of the four rotors lag their commands under `effects` (`lag=(motor, tau)`, `motor` an index or "all")."""
+    motor = effects.get("lag", (-1, 0.0))[0]
+    return np.ones(4, bool) if motor == "all" else np.arange(4) == motor
+
+
 def _field(t, s, command, effects, battery, vehicle):
     q, v, om = s[3:7], s[7:10], s[10:13]
     rotor = s[13:17]
@@ -151,8 +158,8 @@ def _field(t, s, command, effects, battery, vehicle):
     )
     drotor = np.zeros(4)
     if "lag" in effects:
-        motor, tau = effects["lag"]
-        drotor[motor] = (command[motor] - rotor[motor]) / tau
+        tau, lags = effects["lag"][1], lagging(effects)
+        drotor[lags] = (command[lags] - rotor[lags]) / tau
     return np.concatenate([v, dq, dv, dom, drotor])
 
 
@@ -182,8 +189,7 @@ def quadrotor_flight(
         command = _controller(k * dt, s, c, vehicle)
         sent.append(command)
         received = sent[max(k - late, 0)]
-        follows = np.arange(4) != effects.get("lag", (-1, 0.0))[0]
-        s[13:17] = np.where(follows, received, s[13:17])  # the other rotors follow their commands at once
+        s[13:17] = np.where(lagging(effects), s[13:17], received)  # the other rotors follow their commands at once
         xs[k], us[k] = s[:13], command
         if k + 1 < n:
             sol = solve_ivp(

@@ -21,6 +21,9 @@ from ._inputs import (
 from ._inputs import (
     MotorDelay as MotorDelay,
 )
+from ._inputs import (
+    MotorLag as MotorLag,
+)
 from ._stiction import Stiction as Stiction
 from ._terms import (
     AbstractJointTerm as AbstractJointTerm,

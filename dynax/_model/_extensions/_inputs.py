@@ -1,5 +1,5 @@
-"""Input-side model extensions: gain, offset, first-order lag and dead time of one input; one dead time
-shared by several inputs (a multirotor's motors)."""
+"""Input-side model extensions: gain, offset, first-order lag and dead time of one input; one dead time and
+one first-order lag shared by several inputs (a multirotor's motors)."""
 
 from typing import ClassVar
 
@@ -126,6 +126,37 @@ class InputOffset(AbstractInputTerm):
         return u + self.coefficient
 
 
+def _lag_applied(tau, u, z):
+    """The applied input of a first-order lag of time constant `tau` (its state `z[0]`; `u` for `tau` zero)."""
+    return jnp.where(tau > _TINY_TIME, z[0], u)
+
+
+def _lag_derivative(tau, u, z):
+    r"""$\dot z = (u - z) / \tau$ of a first-order lag (zero for `tau` zero)."""
+    return jnp.where(tau > _TINY_TIME, (u - z) / jnp.maximum(tau, _TINY_TIME), 0.0 * z)
+
+
+def _motor_indices(term: str, inputs) -> tuple[int, ...]:
+    """The distinct input indices of a term on several motors, refused otherwise."""
+    inputs = tuple(inputs)
+    if not inputs or len(set(inputs)) != len(inputs):
+        raise UsageError(f"{term}: `inputs` must be distinct input indices, got {inputs!r}")
+    return inputs
+
+
+def _check_motors(term) -> None:
+    if not all(isinstance(i, int) and i >= 0 for i in term.motors):
+        raise UsageError(f"{type(term).__name__}: `inputs` must be non-negative int indices, got {term.motors!r}")
+
+
+def _motors_where(term, system) -> str:
+    if max(term.motors) >= system.n_inputs:
+        raise UsageError(
+            f"{type(term).__name__}: `inputs={term.motors}` but {type(system).__name__} has inputs {system.input_names}"
+        )
+    return "motors"
+
+
 class InputLag(AbstractInputTerm):
     r"""The input acts through a first-order lag $\tau \dot a = u - a$ (motor current or drive dynamics).
 
@@ -148,11 +179,10 @@ class InputLag(AbstractInputTerm):
         self.coefficient = _time("InputLag", "time_constant", time_constant)
 
     def applied(self, u, z):
-        return jnp.where(self.coefficient > _TINY_TIME, z[0], u)
+        return _lag_applied(self.coefficient, u, z)
 
     def hidden_derivative(self, u, z):
-        tau = jnp.maximum(self.coefficient, _TINY_TIME)
-        return jnp.where(self.coefficient > _TINY_TIME, (u - z) / tau, 0.0 * z)
+        return _lag_derivative(self.coefficient, u, z)
 
     def steady_state(self, u):
         return jnp.reshape(u, (1,)).astype(jnp.result_type(u, self.coefficient))
@@ -263,29 +293,73 @@ class MotorDelay(_AbstractPadeDelay):
     n_hidden: ClassVar[int] = 2
 
     def __init__(self, inputs: tuple[int, ...] = (0, 1, 2, 3), delay: ArrayLike = 0.0):
-        inputs = tuple(inputs)
-        if not inputs or len(set(inputs)) != len(inputs):
-            raise UsageError(f"MotorDelay: `inputs` must be distinct input indices, got {inputs!r}")
-        self.input = inputs[0]
-        self.motors = inputs
+        self.motors = _motor_indices("MotorDelay", inputs)
+        self.input = self.motors[0]
         self.coefficient = _time("MotorDelay", "delay", delay)
 
     def __check_init__(self):
-        if not all(isinstance(i, int) and i >= 0 for i in self.motors):
-            raise UsageError(f"MotorDelay: `inputs` must be non-negative int indices, got {self.motors!r}")
+        _check_motors(self)
 
     @property
     def inputs(self) -> tuple[int, ...]:
         return self.motors
 
     def where(self, system) -> str:
-        if max(self.motors) >= system.n_inputs:
-            raise UsageError(
-                f"MotorDelay: `inputs={self.motors}` but {type(system).__name__} has inputs {system.input_names}"
-            )
-        return "motors"
+        return _motors_where(self, system)
 
     def hidden_names(self, system) -> tuple[str, ...]:
         self.where(system)
         names = system.input_names
         return tuple(f"{names[i]}_{self.prefix}{k + 1}" for i in self.motors for k in range(self.n_hidden))
+
+
+class MotorLag(AbstractInputTerm):
+    r"""One first-order lag $\tau$ on several inputs at once, $\tau \dot a_i = u_i - a_i$: the spin-up of a
+    multirotor's rotors behind their commands, which identical motors and speed controllers share.
+
+    A per-motor `InputLag` lags one motor; this term lags every motor by the same time constant, as
+    `MotorDelay` delays them all by one dead time. The two are told apart by the shape of the response: a lag
+    answers a step at once and settles exponentially, a dead time answers nothing until it has passed.
+
+    One internal state per input, its applied input. A time constant of zero passes the inputs through.
+
+    **Arguments:** `inputs` (0-based indices, default the four motors `(0, 1, 2, 3)`), `time_constant`
+    $\tau$ [s].
+    """
+
+    input: int = eqx.field(static=True)
+    motors: tuple[int, ...] = eqx.field(static=True)
+    coefficient: Float[Array, ""]
+    cause: ClassVar[str] = "motor_lag"
+    prefix: ClassVar[str] = "lag"
+    neutral: ClassVar[float] = 0.0
+    sign: ClassVar[int] = 1
+    n_hidden: ClassVar[int] = 1
+
+    def __init__(self, inputs: tuple[int, ...] = (0, 1, 2, 3), time_constant: ArrayLike = 0.0):
+        self.motors = _motor_indices("MotorLag", inputs)
+        self.input = self.motors[0]
+        self.coefficient = _time("MotorLag", "time_constant", time_constant)
+
+    def __check_init__(self):
+        _check_motors(self)
+
+    @property
+    def inputs(self) -> tuple[int, ...]:
+        return self.motors
+
+    def where(self, system) -> str:
+        return _motors_where(self, system)
+
+    def hidden_names(self, system) -> tuple[str, ...]:
+        self.where(system)
+        return tuple(f"{system.input_names[i]}_motor_lag" for i in self.motors)
+
+    def applied(self, u, z):
+        return _lag_applied(self.coefficient, u, z)
+
+    def hidden_derivative(self, u, z):
+        return _lag_derivative(self.coefficient, u, z)
+
+    def steady_state(self, u):
+        return jnp.reshape(u, (1,)).astype(jnp.result_type(u, self.coefficient))
