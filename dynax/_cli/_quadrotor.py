@@ -84,6 +84,7 @@ def load_flights(
                 "file": str(path),
                 "ground_s": [list(g) for g in found.ground],
                 "glitches": [g.describe() for g in found.glitches],
+                "resampled": found.resampled,
                 "usable_samples": int(found.usable.sum()),
                 "samples": len(trajectory),
             }
@@ -102,6 +103,8 @@ def load_flights(
 def _note_flight(path, found) -> None:
     """Print (stdout) and keep the ground segments and glitches `load_flight` found in `path` and left out."""
     said = current()
+    if found.resampled:
+        said.note("resampled", f"{path}: {found.resampled}", file=path, stream=sys.stdout, category="data")
     for line, (t0, t1) in zip(found.describe(), found.ground):
         said.note("ground", f"{path}: {line}", file=path, t0=t0, t1=t1, stream=sys.stdout, category="data")
     for line, g in zip(found.describe()[len(found.ground) :], found.glitches):

@@ -345,7 +345,9 @@ def resample(trajectory: Trajectory, dt: float, *, inputs: str | None = None) ->
         at = [np.stack([np.interp(t, ends, col) for col in integral.T], axis=1) for t in (grid, grid + dt)]
         us = ((at[1] - at[0]) / dt).reshape(len(grid), -1)
     else:
-        us = recorded[np.clip(np.searchsorted(ts, grid, side="right") - 1, 0, len(ts) - 1)]
+        # a stamp on a grid point is in force there, however the grid's sums round (1e-6 of an interval: far
+        # below any clock's jitter, far above round-off)
+        us = recorded[np.clip(np.searchsorted(ts, grid + 1e-6 * dt, side="right") - 1, 0, len(ts) - 1)]
     return Trajectory(
         grid,
         jnp.asarray(xs),

@@ -157,18 +157,40 @@ class FlightNotes:
     - `glitches`: the flagged runs (`Glitch`), in time order.
     - `usable`: per sample, `True` where the vehicle flies and nothing is flagged.
     - `source`: the file.
+    - `resampled`: how `load_flight` put an unevenly stamped record on its grid (`resampling_note`), or `""`.
     """
 
     ground: tuple[tuple[float, float], ...]
     glitches: tuple[Glitch, ...]
     usable: np.ndarray
     source: str = ""
+    resampled: str = ""
 
     def describe(self) -> list[str]:
-        """One line per ground segment and glitch, for a note on the terminal or in a report."""
+        """One line per ground segment and glitch, for a note on the terminal or in a report (the resampling,
+        which `load_flight` says apart, is `resampled`)."""
         lines = [f"ground segment from t = {a:.2f} to {b:.2f} s: left out" for a, b in self.ground]
         lines += [f"glitch in {g.describe()}: left out" for g in self.glitches]
         return lines
+
+
+def resampling_note(recorded: np.ndarray, dt: float) -> str:
+    """What resampling a record stamped at `recorded` onto its median interval `dt` did, in one line: the frames
+    missed (whole intervals with no sample) and the longest interval, and how far the stamps stray from the
+    grid's whole intervals (jitter)."""
+    steps = np.diff(np.asarray(recorded, dtype=float))
+    whole = np.maximum(np.rint(steps / dt), 1.0)
+    missed = int(np.sum(whole - 1.0))
+    jitter = float(np.max(np.abs(steps - whole * dt))) if steps.size else 0.0
+    said = []
+    if missed:
+        said.append(f"{missed} frame(s) missed, the longest interval {steps.max() * 1e3:.3g} ms")
+    if jitter > 1e-6 * dt:
+        said.append(f"stamps off the grid by up to {jitter * 1e3:.3g} ms")
+    return (
+        f"t: unevenly stamped ({'; '.join(said) or 'intervals differ'}): resampled onto its median interval of "
+        f"{dt * 1e3:.4g} ms, states interpolated and inputs averaged over each interval"
+    )
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -423,7 +445,7 @@ def _with_gaps(notes: FlightNotes, ts: np.ndarray, gaps) -> FlightNotes:
             start, stop, n = float(before - ts[0]), float(after - ts[0]), int(inside.size)
             found.append(Glitch("t", "gap", start, stop, int(inside[0]) + 1, n, float(after - before)))
     found.sort(key=lambda g: (g.start, g.column))
-    return FlightNotes(notes.ground, tuple(found), usable, notes.source)
+    return FlightNotes(notes.ground, tuple(found), usable, notes.source, notes.resampled)
 
 
 # A battery's voltage while the motors run stays within this factor of itself over a flight: a lithium cell from
@@ -589,10 +611,13 @@ def load_flight(
     Reads the file (`load_trajectory(path, "quadrotor", ...)`, `.csv.gz` included), refuses a quaternion that is
     not of unit norm (tolerance 0.01, naming the row) and a motor or battery column that no flight logs (a motor
     zero, constant or another motor's copy throughout, a battery at 0 V or below, or one that is no voltage in
-    flight), makes the quaternion's sign continuous, resamples a record with missed frames onto its median
-    interval (states interpolated, inputs held; the samples inside a gap of more than `MAX_FLIGHT_GAP` intervals
-    are noted as a `gap` and left out), normalises the quaternions, runs `inspect_flight`, and refuses columns
-    that contradict each other (`dynax._data._flight_kinematics`).
+    flight), makes the quaternion's sign continuous, resamples a record with missed frames or uneven stamps onto
+    its median interval, and says so in the notes (`FlightNotes.resampled`; states interpolated, inputs the
+    interval's mean of the logged hold, `resample(..., inputs="average")`, whatever `input_resampling` says: a
+    hold read at each grid point takes the previous command wherever a stamp falls a hair after its grid point;
+    the samples inside a gap of more than `MAX_FLIGHT_GAP` intervals are noted as a `gap` and left out),
+    normalises the quaternions, runs `inspect_flight`, and refuses columns that contradict each other
+    (`dynax._data._flight_kinematics`).
 
     **Arguments:** `path`; `mapping`, `scale`, `offset` as for `load_trajectory`; `checks`.
 
@@ -612,12 +637,13 @@ def load_flight(
     data = Trajectory(
         data.ts, jnp.asarray(xs, data.xs.dtype), data.us, data.state_names, data.input_names, data.system, data.source
     )
-    gaps = []
+    gaps, resampled = [], ""
     if not data.is_uniform:
         recorded = np.asarray(data.ts, dtype=float)
+        resampled = resampling_note(recorded, data.dt)
         long = np.flatnonzero(np.rint(np.diff(recorded) / data.dt) > MAX_FLIGHT_GAP)  # whole intervals: jitter aside
         gaps = [(recorded[k], recorded[k + 1]) for k in long]
-        data = resample(data, data.dt)
+        data = resample(data, data.dt, inputs="average")  # each interval's mean of the logged hold
         q = np.asarray(data.xs[:, 3:7])
         data = Trajectory(
             data.ts,
@@ -631,6 +657,7 @@ def load_flight(
     values = {n: np.asarray(data.xs[:, i], dtype=float) for i, n in enumerate(data.state_names)}
     columns = dict(mapping or {})
     notes = _with_gaps(inspect_flight(data, checks), np.asarray(data.ts, dtype=float), gaps)
+    notes = dataclasses.replace(notes, resampled=resampled)
     # The columns' agreement on the longest run with the motors running (glitches kept: a column in the
     # wrong unit is flagged as glitches throughout, and the check must see it to name it; the height is
     # not used, as a z axis pointing down is one of the faults).
