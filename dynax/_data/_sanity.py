@@ -354,6 +354,21 @@ def glitch_findings(tr, ts, source, columns, positions=None):
     return out
 
 
+def held_still(ts, x, v) -> bool:
+    """Whether a position `x` that repeats one value over a stretch was held there, by its measured velocity `v`
+    over the same samples: the velocity's running integral never leaves the position's resolution (its smallest
+    step in the record, an encoder's count) or the reach of the velocity's own noise (four times its robust
+    standard deviation, read from its differences, integrated over the stretch: a random walk's). A sensor stuck while its joint moves reads
+    a velocity that carries the joint away; a joint held by friction reads noise about zero."""
+    steps = np.abs(np.diff(x))
+    quantum = float(steps[steps > 0].min()) if np.any(steps > 0) else 0.0
+    span = np.diff(ts)
+    reach = np.abs(np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * span)]))
+    dv = np.diff(v)  # the noise from sample to sample (a motion's spread is not noise)
+    noise = 1.4826 * float(np.median(np.abs(dv - np.median(dv)))) / np.sqrt(2.0) if dv.size else 0.0
+    return float(reach.max()) <= max(2.0 * quantum, 4.0 * noise * float(np.sqrt(np.sum(span**2))))
+
+
 def stuck_findings(tr, ts, source, names, xs, paired_estimated, dt):
     out = []
     need = max(STUCK_SAMPLES, math.ceil(STUCK_S / dt))
@@ -373,6 +388,13 @@ def stuck_findings(tr, ts, source, names, xs, paired_estimated, dt):
             others = [o for o in range(xs.shape[1]) if o != c and np.ptp(xs[i : j + 1, o]) > 0]
             if not others:
                 continue  # everything at rest: a record that holds still, not a stuck sensor
+            own = f"d{name}"
+            if (
+                own in names
+                and name not in paired_estimated
+                and held_still(ts[i : j + 1], x, xs[i : j + 1, names.index(own)])
+            ):
+                continue  # its own measured velocity says the joint stood still there (friction holding it)
             reason = (
                 " (or a joint held still by friction while the others move: its velocity is estimated from "
                 "it, so the two cannot be told apart; cut the stretch either way, a fit across it would "

@@ -156,3 +156,39 @@ def test_the_velocity_unit_check_refuses_alike_with_and_without_the_screen(kind,
         full = outcome()
     assert screened == full
     assert (screened is not None) == (kind == "unit")
+
+
+def _elbow_held_by_friction():
+    """A two-link arm whose elbow, undriven and under a static friction of 0.6 N m, stands still for seconds while
+    the shoulder swings (`tests.reference.stick_slip_arm`: an event-based integrator, no dynax code); encoders of
+    14 bits (the angle repeats one count exactly while the joint stands), velocities measured with 1e-3 rad/s of
+    noise."""
+    from tests.reference import stick_slip_arm
+
+    arm = dict(m1=0.6, m2=0.5, l1=0.3, lc1=0.3, lc2=0.25, I1=0.05, I2=0.04, b1=0.01, b2=0.01)
+    theta = [float(v) for v in dynax.DoublePendulum.from_physical(**arm).base_parameters.values()]
+    ts = np.arange(0, 6, 0.005)
+    us = np.stack([0.9 * np.sin(2 * np.pi * 0.7 * ts), 0.0 * ts], 1)
+    xs, stuck = stick_slip_arm(theta, np.zeros(4), ts, us, fc=(0.01, 0.3), fs=(0.02, 0.6), vst=0.05)
+    count = 2 * np.pi / 2**14
+    xs[:, :2] = np.round(xs[:, :2] / count) * count
+    xs[:, 2:] += 1e-3 * np.random.default_rng(0).standard_normal((len(ts), 2))
+    return ts, xs, us, stuck
+
+
+def test_a_joint_held_still_by_friction_is_no_stuck_sensor_when_its_velocity_is_measured():
+    ts, xs, us, stuck = _elbow_held_by_friction()
+    assert stuck[:, 1].mean() > 0.5  # the elbow stands still most of the record, for seconds at a time
+    names = ("q1", "q2", "dq1", "dq2")
+    record = dynax.Trajectory(ts, xs, us, names, ("tau1", "tau2"), "double_pendulum", "held.csv")
+    assert not [f for f in dynax.check_records([record], estimated=()).findings if str(f.kind) == "stuck"]
+    # the same stretch with the elbow's velocity estimated from its angle cannot tell the two apart: refused
+    estimated = dynax.check_records([record], estimated=("dq2",)).findings
+    assert [f for f in estimated if str(f.kind) == "stuck" and f.column == "q2"]
+    # a sensor that stops while its joint moves: its measured velocity carries the joint away
+    frozen = xs.copy()
+    k = int(np.argmax(np.abs(xs[:, 2]) > 1.0))
+    frozen[k : k + 120, 0] = frozen[k, 0]
+    record = dynax.Trajectory(ts, frozen, us, names, ("tau1", "tau2"), "double_pendulum", "frozen.csv")
+    found = [f for f in dynax.check_records([record], estimated=()).findings if str(f.kind) == "stuck"]
+    assert [f.column for f in found] == ["q1"]
