@@ -645,6 +645,7 @@ def _warn_scaled_stretch(where, gain, errors, record) -> None:
     g, g_std = gain
     error, inconsistent, corrected, _ = errors
     turned = abs(g + 1.0) <= SIGN_TURN
+    whole = False  # a stretch over nearly the whole of one record: the input's gain against the others
     if at == 0:
         where_text = "throughout"
         fix = (
@@ -665,6 +666,22 @@ def _warn_scaled_stretch(where, gain, errors, record) -> None:
             f"no scale is right for the whole record: leave the stretch out (`--exclude {span}`; in Python "
             f"`exclude_stretches`), or correct its {'sign' if turned else 'scale'} in the file"
         )
+        rows = int(record[2][0])
+        if 0 < (at if after else rows - at) <= rows / FLIP_STRETCHES:
+            # The rest is shorter than the search's coarsest stretch: no change part way, the input's gain against
+            # the other inputs throughout; leaving the stretch out would leave nothing.
+            where_text, whole = f"over nearly the whole record ({where_text})", True
+            factor = 1.0 / g
+            fix = (
+                "one record shows only its gain against the other inputs, and no stretch is at fault: if "
+                f"{input_name}'s {'sign' if turned else 'torque constant or unit'} is off, "
+                + (
+                    f"negate it (`--scale {input_name}=-1`)"
+                    if turned
+                    else f"multiply it by {factor:.4g} (`--scale {input_name}={factor:.4g}`)"
+                )
+                + "; if another input's is, correct that one instead"
+            )
     inconsistency = " and is physically inconsistent" if inconsistent else ""
     if turned:
         text = (
@@ -674,15 +691,21 @@ def _warn_scaled_stretch(where, gain, errors, record) -> None:
             f"{corrected:.0%}. A motor's direction or a current's sign that changed while recording? If so, {fix}."
         )
     else:
-        against = "the other records" if at == 0 else "the rest of the record"
+        against = "the other inputs" if whole else "the other records" if at == 0 else "the rest of the record"
+        cause = (
+            "A torque constant, a unit or a gear of one input that is off?"
+            if whole
+            else "A current limit, a unit, a gear or a torque constant that changed while recording?"
+        )
         text = (
             f"file {label}: the recorded {input_name} looks scaled by {g:.3g} +- {g_std:.2g} {where_text} against "
             f"{against} (it reads {g:.3g} times what the model's joint positions need there): the least-squares "
             f"estimate leaves an equation error of {error:.0%}{inconsistency}, and with {input_name} divided by "
-            f"{g:.3g} there a consistent estimate's falls to {corrected:.0%}. A current limit, a unit, a gear or a "
-            f"torque constant that changed while recording? If so, {fix}."
+            f"{g:.3g} there a consistent estimate's falls to {corrected:.0%}. {cause} If so, {fix}."
         )
-    span = None if at == 0 else (t, None) if after else (None, t)  # the open end: the record's (its held-out part too)
+    span = (
+        None if at == 0 or whole else (t, None) if after else (None, t)
+    )  # the open end: the record's (its held-out part too)
     warnings.warn(  # located: the command line writes the file, the input and the stretch into its JSON
         located(InconsistentEstimateWarning(text), file=label, column=input_name, times=span, fix=fix), stacklevel=8
     )

@@ -335,6 +335,25 @@ def test_a_torque_whose_scale_changes_part_way_is_located_with_its_gain():
     assert len(seen) == 1 and seen[0].ratio > 0.5, seen  # the best stretch of clean records keeps most of the error
 
 
+def test_a_torque_scaled_throughout_one_record_gets_a_scale_not_a_cut_of_nearly_all_of_it():
+    # One record with the elbow's torque logged at three times its size throughout: the partway search's best
+    # stretch starts a fraction of a second in (the first samples tell little), and leaving it out would leave
+    # nothing. The warning reads it as the input's gain against the other inputs, with the scale that corrects it.
+    model = rig_model()
+    record = recorded(model, 10.0, 21)
+    scaled = Trajectory(
+        record.ts, record.xs, record.us * jnp.asarray([[1.0, 3.0]]), NAMES, ("tau1", "tau2"), source="rig.csv"
+    )
+    _, said = _least_squares_with_warnings(scaled)
+    said = [m for m in said if "looks scaled" in m]
+    assert len(said) == 1 and "tau2 looks scaled by" in said[0] and "over nearly the whole record" in said[0], said
+    gain, std = _stated_gain(said[0])
+    assert 2.5 < gain < 4.0, said
+    assert "--exclude" not in said[0] and "`--scale tau2=" in said[0], said
+    factor = float(said[0].split("`--scale tau2=")[1].split("`")[0])
+    assert abs(factor * gain - 1.0) < 0.01, said  # the factor undoes the stated gain (rounded to three digits)
+
+
 def test_a_refinement_that_leaves_the_equations_is_named_with_what_moved():
     # A least-squares fit of the rig's records, given an output-error stage whose estimate has theta5 a thousand
     # times the least-squares one (what a refinement of a record whose elbow torque turns part way ends at) and an
