@@ -229,9 +229,6 @@ from ._model._extensions import (
     MotorDelay as MotorDelay,
 )
 from ._model._extensions import (
-    MotorLag as MotorLag,
-)
-from ._model._extensions import (
     QuadraticDrag as QuadraticDrag,
 )
 from ._model._extensions import (

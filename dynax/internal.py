@@ -550,6 +550,9 @@ from ._model._extensions import (
     Feature as Feature,
 )
 from ._model._extensions import (
+    MotorLag as MotorLag,
+)
+from ._model._extensions import (
     PlanarRotorDrag as PlanarRotorDrag,
 )
 from ._model._extensions._terms import float_scalar as float_scalar
@@ -796,6 +799,7 @@ __all__ = [
     "motion_records",
     "motor_order",
     "motor_signature",
+    "MotorLag",
     "MotorNumbering",
     "motors_running_run",
     "MotorSignature",

@@ -358,8 +358,9 @@ def held_still(ts, x, v) -> bool:
     """Whether a position `x` that repeats one value over a stretch was held there, by its measured velocity `v`
     over the same samples: the velocity's running integral never leaves the position's resolution (its smallest
     step in the record, an encoder's count) or the reach of the velocity's own noise (four times its robust
-    standard deviation, read from its differences, integrated over the stretch: a random walk's). A sensor stuck while its joint moves reads
-    a velocity that carries the joint away; a joint held by friction reads noise about zero."""
+    standard deviation, read from its differences, integrated over the stretch: a random walk's). A sensor
+    stuck while its joint moves reads a velocity that carries the joint away; a joint held by friction reads
+    noise about zero."""
     steps = np.abs(np.diff(x))
     quantum = float(steps[steps > 0].min()) if np.any(steps > 0) else 0.0
     span = np.diff(ts)

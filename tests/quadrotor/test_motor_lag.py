@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from dynax import Extended, InputLag, MotorLag, Quadrotor
-from dynax.internal import body_frame_system, cli_main, quadrotor_candidates
+from dynax import Extended, InputLag, Quadrotor
+from dynax.internal import body_frame_system, cli_main, MotorLag, quadrotor_candidates
 
 from .synthetic_flight import quadrotor_flight
 
