@@ -19,7 +19,8 @@ from dynax.internal import body_frame_system, quadrotor_candidates
 from .synthetic_flight import quadrotor_flight
 
 
-def _body():
+def random_body():
+    """A body-frame quadrotor with random motor-map weights (the dynamics of a term are checked, not a fit)."""
     flight = quadrotor_flight(1.0, seed=0, noise=False)
     quad = Quadrotor.from_flights("nominal", [flight], battery=False)
     weights = jnp.asarray(np.random.default_rng(0).normal(size=quad.body_model.weights.shape))
@@ -42,7 +43,7 @@ def _dop853(rhs, x0, ts):
 
 def test_the_motors_act_the_delay_late():
     jax.config.update("jax_enable_x64", True)
-    body, delay = _body(), 0.04
+    body, delay = random_body(), 0.04
     x0 = np.array([0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.1, -0.1, 0.0, 0.05, -0.05, 0.02])
     ts = np.linspace(0.0, 0.6, 61)
     model = Extended(body, (MotorDelay(delay=delay),))
@@ -58,7 +59,7 @@ def test_the_motors_act_the_delay_late():
 
 
 def test_one_delay_on_every_motor_is_four_single_input_delays():
-    body = _body()
+    body = random_body()
     shared = Extended(body, (MotorDelay(delay=0.03),))
     single = Extended(body, tuple(InputDelay(i, 0.03) for i in range(4)))
     assert shared.state_names == single.state_names  # m1_delay1, m1_delay2, ..., m4_delay2
@@ -75,8 +76,8 @@ def test_the_motor_delay_refuses_inputs_it_cannot_act_on_and_is_a_quadrotor_cand
     with pytest.raises(ValueError, match="distinct"):
         MotorDelay((0, 0))
     with pytest.raises(ValueError, match="inputs"):
-        Extended(_body(), (MotorDelay((0, 1, 2, 7)),))
-    (delay,) = [t for t in quadrotor_candidates(_body()) if t.cause == "motor_delay"]
+        Extended(random_body(), (MotorDelay((0, 1, 2, 7)),))
+    (delay,) = [t for t in quadrotor_candidates(random_body()) if t.cause == "motor_delay"]
     assert delay.inputs == (0, 1, 2, 3)
 
 

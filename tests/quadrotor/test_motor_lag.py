@@ -21,18 +21,10 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from dynax import Extended, InputLag, Quadrotor
-from dynax.internal import body_frame_system, cli_main, MotorLag, quadrotor_candidates
+from dynax import Extended, InputLag
+from dynax.internal import cli_main, MotorLag, quadrotor_candidates
 
-from .synthetic_flight import quadrotor_flight
-
-
-def _body():
-    flight = quadrotor_flight(1.0, seed=0, noise=False)
-    quad = Quadrotor.from_flights("nominal", [flight], battery=False)
-    weights = jnp.asarray(np.random.default_rng(0).normal(size=quad.body_model.weights.shape))
-    quad = quad.with_body_model(type(quad.body_model)(weights, quad.body_model.feature_names, quad.body_model.mask))
-    return body_frame_system(quad, flight.input_names)
+from .test_motor_delay import random_body
 
 
 def _commands(t):
@@ -44,7 +36,7 @@ def _commands(t):
 
 def test_the_motors_follow_their_commands_through_the_lag():
     jax.config.update("jax_enable_x64", True)
-    body, tau = _body(), 0.04
+    body, tau = random_body(), 0.04
     x0 = np.array([0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.1, -0.1, 0.0, 0.05, -0.05, 0.02])
     ts = np.linspace(0.0, 0.5, 51)
     model = Extended(body, (MotorLag(time_constant=tau),))
@@ -69,7 +61,7 @@ def test_the_motors_follow_their_commands_through_the_lag():
 
 
 def test_one_lag_on_every_motor_is_four_single_input_lags():
-    body = _body()
+    body = random_body()
     shared = Extended(body, (MotorLag(time_constant=0.03),))
     single = Extended(body, tuple(InputLag(i, 0.03) for i in range(4)))
     x = jnp.concatenate([jnp.full(13, 0.1).at[3].set(1.0), jnp.linspace(0.9, 1.1, 4)])
@@ -88,8 +80,8 @@ def test_the_motor_lag_refuses_what_it_cannot_be_and_is_a_quadrotor_candidate():
     with pytest.raises(ValueError, match="time"):
         MotorLag(time_constant=-0.01)
     with pytest.raises(ValueError, match="inputs"):
-        Extended(_body(), (MotorLag((0, 1, 2, 7)),))
-    (lag,) = [t for t in quadrotor_candidates(_body()) if t.cause == "motor_lag"]
+        Extended(random_body(), (MotorLag((0, 1, 2, 7)),))
+    (lag,) = [t for t in quadrotor_candidates(random_body()) if t.cause == "motor_lag"]
     assert lag.inputs == (0, 1, 2, 3)
 
 

@@ -126,14 +126,44 @@ class InputOffset(AbstractInputTerm):
         return u + self.coefficient
 
 
-def _lag_applied(tau, u, z):
-    """The applied input of a first-order lag of time constant `tau` (its state `z[0]`; `u` for `tau` zero)."""
-    return jnp.where(tau > _TINY_TIME, z[0], u)
+class _AbstractLag(AbstractInputTerm):
+    r"""A first-order lag $\tau \dot a = u - a$ on each of its inputs (the term's `coefficient` $\tau$), one internal
+    state per input, the applied input; a time constant of zero passes the input through."""
+
+    coefficient: eqx.AbstractVar[Float[Array, ""]]
+
+    def applied(self, u, z):
+        return jnp.where(self.coefficient > _TINY_TIME, z[0], u)
+
+    def hidden_derivative(self, u, z):
+        tau = jnp.maximum(self.coefficient, _TINY_TIME)
+        return jnp.where(self.coefficient > _TINY_TIME, (u - z) / tau, 0.0 * z)
+
+    def steady_state(self, u):
+        return jnp.reshape(u, (1,)).astype(jnp.result_type(u, self.coefficient))
 
 
-def _lag_derivative(tau, u, z):
-    r"""$\dot z = (u - z) / \tau$ of a first-order lag (zero for `tau` zero)."""
-    return jnp.where(tau > _TINY_TIME, (u - z) / jnp.maximum(tau, _TINY_TIME), 0.0 * z)
+class _AbstractMotors(AbstractInputTerm):
+    """A term on several inputs at once, `motors` (0-based, distinct; the first is its `input`), placed at
+    `motors`."""
+
+    motors: eqx.AbstractVar[tuple[int, ...]]
+
+    def __check_init__(self):
+        if not all(isinstance(i, int) and i >= 0 for i in self.motors):
+            raise UsageError(f"{type(self).__name__}: `inputs` must be non-negative int indices, got {self.motors!r}")
+
+    @property
+    def inputs(self) -> tuple[int, ...]:
+        return self.motors
+
+    def where(self, system) -> str:
+        if max(self.motors) >= system.n_inputs:
+            raise UsageError(
+                f"{type(self).__name__}: `inputs={self.motors}` but {type(system).__name__} has inputs "
+                f"{system.input_names}"
+            )
+        return "motors"
 
 
 def _motor_indices(term: str, inputs) -> tuple[int, ...]:
@@ -144,20 +174,7 @@ def _motor_indices(term: str, inputs) -> tuple[int, ...]:
     return inputs
 
 
-def _check_motors(term) -> None:
-    if not all(isinstance(i, int) and i >= 0 for i in term.motors):
-        raise UsageError(f"{type(term).__name__}: `inputs` must be non-negative int indices, got {term.motors!r}")
-
-
-def _motors_where(term, system) -> str:
-    if max(term.motors) >= system.n_inputs:
-        raise UsageError(
-            f"{type(term).__name__}: `inputs={term.motors}` but {type(system).__name__} has inputs {system.input_names}"
-        )
-    return "motors"
-
-
-class InputLag(AbstractInputTerm):
+class InputLag(_AbstractLag):
     r"""The input acts through a first-order lag $\tau \dot a = u - a$ (motor current or drive dynamics).
 
     One internal state, the applied input $a$. A time constant of zero passes the input through.
@@ -177,15 +194,6 @@ class InputLag(AbstractInputTerm):
     def __init__(self, input: int, time_constant: ArrayLike = 0.0):
         self.input = input
         self.coefficient = _time("InputLag", "time_constant", time_constant)
-
-    def applied(self, u, z):
-        return _lag_applied(self.coefficient, u, z)
-
-    def hidden_derivative(self, u, z):
-        return _lag_derivative(self.coefficient, u, z)
-
-    def steady_state(self, u):
-        return jnp.reshape(u, (1,)).astype(jnp.result_type(u, self.coefficient))
 
 
 class _AbstractPadeDelay(AbstractInputTerm):
@@ -271,7 +279,7 @@ class InputDelay(_AbstractPadeDelay):
         self.coefficient = _time("InputDelay", "delay", delay)
 
 
-class MotorDelay(_AbstractPadeDelay):
+class MotorDelay(_AbstractPadeDelay, _AbstractMotors):
     r"""One dead time $T$ on several inputs at once, $a_i(t) = u_i(t - T)$: the latency between a
     multirotor's logged motor commands and the rotors' thrust (the speed controller, the motor's
     spin-up, the log's own latency), which all motors share.
@@ -297,23 +305,13 @@ class MotorDelay(_AbstractPadeDelay):
         self.input = self.motors[0]
         self.coefficient = _time("MotorDelay", "delay", delay)
 
-    def __check_init__(self):
-        _check_motors(self)
-
-    @property
-    def inputs(self) -> tuple[int, ...]:
-        return self.motors
-
-    def where(self, system) -> str:
-        return _motors_where(self, system)
-
     def hidden_names(self, system) -> tuple[str, ...]:
         self.where(system)
         names = system.input_names
         return tuple(f"{names[i]}_{self.prefix}{k + 1}" for i in self.motors for k in range(self.n_hidden))
 
 
-class MotorLag(AbstractInputTerm):
+class MotorLag(_AbstractLag, _AbstractMotors):
     r"""One first-order lag $\tau$ on several inputs at once, $\tau \dot a_i = u_i - a_i$: the spin-up of a
     multirotor's rotors behind their commands, which identical motors and speed controllers share.
 
@@ -341,25 +339,6 @@ class MotorLag(AbstractInputTerm):
         self.input = self.motors[0]
         self.coefficient = _time("MotorLag", "time_constant", time_constant)
 
-    def __check_init__(self):
-        _check_motors(self)
-
-    @property
-    def inputs(self) -> tuple[int, ...]:
-        return self.motors
-
-    def where(self, system) -> str:
-        return _motors_where(self, system)
-
     def hidden_names(self, system) -> tuple[str, ...]:
         self.where(system)
         return tuple(f"{system.input_names[i]}_motor_lag" for i in self.motors)
-
-    def applied(self, u, z):
-        return _lag_applied(self.coefficient, u, z)
-
-    def hidden_derivative(self, u, z):
-        return _lag_derivative(self.coefficient, u, z)
-
-    def steady_state(self, u):
-        return jnp.reshape(u, (1,)).astype(jnp.result_type(u, self.coefficient))
