@@ -41,12 +41,18 @@ import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
 
-from .._data._derivatives import savitzky_golay
 from .._identify._simulation_fit import fit_simulation_error, SimulationFit
 from .._model._extensions import Discovered, Extended
 from ._fit import nominal_parameter_names
 from ._library import evaluate_features, feature_library, is_angle, named_equivalent, physical_readings, search_period
-from ._residuals import acceleration_residuals, predicted_accelerations, sg_window, velocity_indices
+from ._residuals import (
+    acceleration_residuals,
+    as_measured,
+    predicted_accelerations,
+    sg_window,
+    smoothed_states,
+    velocity_indices,
+)
 from ._sparse import group_cv_r2, SparseSearch, SparseStatistics, Stability
 from ._statistics import typical_gain
 
@@ -127,14 +133,12 @@ def force_residuals(model, records, refit: Sequence[str] = ()) -> tuple[np.ndarr
         m = _mass_matrices(model, xs[:, :n])
         out.append(np.einsum("tij,tj->ti", m, resid))
         ts = traj.ts
-        smooth = savitzky_golay(ts, traj.xs, window=sg_window(traj.dt), order=3)
+        smooth = smoothed_states(traj)
         us_before = jnp.concatenate([traj.us[:1], traj.us[:-1]])  # the held input's left limit, as the residuals use
         sens = np.asarray(_acceleration_sensitivities(fitted, fixed, ts, smooth, traj.us, idx, us_before))
-        if sens.shape[-1]:  # the residual machinery smooths the prediction; its sensitivities alike
+        if sens.shape[-1]:  # the residuals filter the prediction (`as_measured`); its sensitivities alike
             flat = sens.reshape(len(ts), -1)
-            sens = np.asarray(savitzky_golay(ts, jnp.asarray(flat), window=sg_window(traj.dt), order=3)).reshape(
-                sens.shape
-            )
+            sens = as_measured(ts, flat, sg_window(traj.dt)).reshape(sens.shape)
         nuisance.append(-np.einsum("tij,tjp->tip", m, sens[keep]))
         xs_all.append(xs)
         us_all.append(np.asarray(traj.us)[keep])

@@ -34,6 +34,7 @@ import numpy as np
 
 from .._data._derivatives import savitzky_golay
 from ._residuals import (
+    as_measured,
     DEAD_TIMES,
     hidden_trajectory,
     input_dynamics,
@@ -41,6 +42,7 @@ from ._residuals import (
     padded,
     sg_window,
     shared_length,
+    smoothed_states,
     velocity_indices,
 )
 
@@ -91,7 +93,7 @@ def screening_data(family, values, coefficients, trajectory, residual_fn, length
     r, _, _, keep = residual_fn(model, trajectory, length=length)
     ts = trajectory.ts
     w = sg_window(trajectory.dt)
-    xs = savitzky_golay(ts, trajectory.xs, window=w, order=3)
+    xs = smoothed_states(trajectory)
     n = len(ts)  # the jitted per-sample functions run on the padded record (`padded`), cut back to its samples
     ts_p, us_p, xs_p = padded(ts, trajectory.us, xs, length=length)
     # Cut and shifted on the host: in JAX each slice would compile a program for its record's length.
@@ -118,7 +120,7 @@ def screening_data(family, values, coefficients, trajectory, residual_fn, length
     for k, term in enumerate(family.model.terms):
         if input_dynamics(term, system) and not np.any(J_c[:, :, k]):
             J_c[:, :, k] = -sum(np.asarray(J_u)[:, :, i] * np.asarray(du)[:, None, i] for i in term.inputs)
-    smooth = lambda a: np.asarray(savitzky_golay(ts, a, window=w, order=3))  # noqa: E731
+    smooth = lambda a: as_measured(ts, a, w)  # noqa: E731  # as the residuals' prediction
     grid = screening_grid(trajectory.dt)
     J_grid = {}
     for k, term in enumerate(family.model.terms):

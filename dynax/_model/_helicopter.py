@@ -541,10 +541,6 @@ class Helicopter(AbstractSystem):
     def body_axes(self) -> tuple[str, ...]:
         return BODY_AXES
 
-    # Its rates answer the inputs within a sample (the held input makes the acceleration jump at
-    # every sample, and a stiff flight controller moves the input every sample).
-    fast_input_response: ClassVar[bool] = True
-
     def residual_features(self, xs, accelerations):
         """Body velocities and rates with their signs and squares and the model's accelerations, and
         the world's axes seen in the body frame (gravity's direction, and north and east: what a

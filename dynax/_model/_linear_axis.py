@@ -33,10 +33,6 @@ class LinearAxis(AbstractManipulator, AbstractLinearInParameters):
     state_names: ClassVar[tuple[str, ...]] = ("q", "dq")
     n_joints: ClassVar[int] = 1
     input_names: ClassVar[tuple[str, ...]] = ("force",)
-    #: The force drives the mass directly, so the acceleration jumps by the held force's step at every
-    #: sample; with encoders this fine, the residual analysis compares velocity increments under the held
-    #: input (exact), not filtered accelerations at the samples, whose mismatch the probe would read as structure.
-    fast_input_response: ClassVar[bool] = True
 
     @property
     def angle_indices(self) -> tuple[int, ...]:

@@ -252,8 +252,6 @@ class Quadrotor(AbstractSystem):
     def velocity_indices(self) -> tuple[int, ...]:
         return tuple(range(7, 13))  # world velocity and body rates
 
-    fast_input_response: ClassVar[bool] = True
-
     def vector_field(self, t, x, u):
         rotation, nu = _rotation_and_body(x)
         omega = x[ANGULAR_RATE]

@@ -110,13 +110,6 @@ class AbstractSystem(eqx.Module):
         Default: none."""
         return ()
 
-    #: Whether the rates answer a held input within one sample (a helicopter under a stiff flight
-    #: controller, a mass driven directly by a force). The residual analysis then compares velocity
-    #: increments over each sample interval, integrated under the held input, instead of accelerations at
-    #: the samples: exact under the held input, where comparing accelerations leaves the filter's
-    #: mismatch at every input step, which clean records show as structure.
-    fast_input_response: ClassVar[bool] = False
-
     def residual_features(
         self, xs: Float[np.ndarray, "time n_states"], accelerations: Float[np.ndarray, "time n_velocities"]
     ) -> tuple[list[np.ndarray], list[str]]:
