@@ -27,7 +27,7 @@ import numpy as np
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 
 from dynax import DoublePendulum, Trajectory
-import dynax._diagnose._residuals as residuals_module
+import dynax._diagnose._residuals as residuals_module  # private: the window every reader looks up, set per row
 from dynax.internal import acceleration_residuals, structure_test
 from tests import hidden_cases
 
