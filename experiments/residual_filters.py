@@ -21,36 +21,14 @@ import sys
 import jax
 
 jax.config.update("jax_enable_x64", True)
-import jax.numpy as jnp
 import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 
-from dynax import DoublePendulum, Trajectory
+from dynax import DoublePendulum
 import dynax._diagnose._residuals as residuals_module  # private: the window every reader looks up, set per row
 from dynax.internal import acceleration_residuals, structure_test
 from tests import hidden_cases
-
-
-def records(scale: float, seed: int = 3):
-    theta = np.asarray(hidden_cases.THETA) * scale ** np.array([3, 3, 3, 2, 2, 2.5, 2.5])
-    case = hidden_cases.Case("scaled-arm", "double_pendulum", None, None, 0.0, "", "refit", seed)
-    rhs, _ = hidden_cases.arm_rhs(theta, case, (0, 1))
-    n = round(30.0 / hidden_cases.DT) + 1
-    ts = np.arange(n) * hidden_cases.DT
-    us = hidden_cases.multisine(n, 2, seed, 1.0) * 1.5 * scale**2
-    xs = hidden_cases.integrate(rhs, np.zeros(4), ts, us)
-    xs = xs + np.array([1e-3, 1e-3, 1e-2, 1e-2]) * np.random.default_rng(seed).standard_normal(xs.shape)
-    k = round(20.0 / hidden_cases.DT) + 1
-
-    def record(a, b):
-        return Trajectory(
-            jnp.asarray(ts[a:b]), jnp.asarray(xs[a:b]), jnp.asarray(us[a:b]),
-            ("q1", "q2", "dq1", "dq2"), ("tau1", "tau2"), "double_pendulum", f"arm {scale} m",
-        )  # fmt: skip
-
-    truth = DoublePendulum(**{f"theta{i + 1}": float(v) for i, v in enumerate(theta)})
-    return truth, record(0, k), record(k, n), xs
 
 
 def main():
@@ -62,7 +40,8 @@ def main():
     rows = []
     chosen = residuals_module.sg_window
     for scale in (float(s) for s in args.scales.split(",")):
-        truth, train, held_out, xs = records(scale)
+        theta, train, held_out, xs = hidden_cases.scaled_arm(scale)
+        truth = DoublePendulum(**{f"theta{i + 1}": float(v) for i, v in enumerate(theta)})
         speed = np.sqrt((xs[:, 2:] ** 2).mean())
         for w in (int(s) for s in args.windows.split(",")):
             residuals_module.sg_window = lambda dt, w=w: w  # every reader of the window looks it up here

@@ -403,6 +403,32 @@ def records(case: Case, noise_seed: int | None = None, noise_scale: float = 1.0)
     return record(0, k, f"{case.name}-train"), record(k, n, f"{case.name}-held-out")
 
 
+def scaled_arm(scale: float, seed: int = 3, duration: float = 30.0, train_s: float = 20.0):
+    """The nominal arm (`THETA`, 1 m and 1 kg links) scaled to links of `scale` metres and kilograms, driven at both
+    joints by the battery's multisine, integrated by DOP853 at `DT` with the battery's noise (1e-3 rad, 1e-2 rad/s).
+
+    Base parameters scale as m l^2 (inertias), m l (gravity) and m l^1.5 (the damping: the same damping ratio), the
+    torques as m l. **Returns:** `(theta, train, held_out, xs)`: the truth's base parameters, the first `train_s`
+    seconds and the rest as double-pendulum records, and the measured states."""
+    theta = np.asarray(THETA) * scale ** np.array([3, 3, 3, 2, 2, 2.5, 2.5])
+    case = Case("scaled-arm", "double_pendulum", None, None, 0.0, "", "refit", seed)
+    rhs, _ = arm_rhs(theta, case, (0, 1))
+    n = round(duration / DT) + 1
+    ts = np.arange(n) * DT
+    us = multisine(n, 2, seed, 1.0) * 1.5 * scale**2
+    xs = integrate(rhs, np.zeros(4), ts, us)
+    xs = xs + np.array([1e-3, 1e-3, 1e-2, 1e-2]) * np.random.default_rng(seed).standard_normal(xs.shape)
+    k = round(train_s / DT) + 1
+
+    def record(a, b):
+        return Trajectory(
+            jnp.asarray(ts[a:b]), jnp.asarray(xs[a:b]), jnp.asarray(us[a:b]),
+            ("q1", "q2", "dq1", "dq2"), ("tau1", "tau2"), "double_pendulum", f"arm of {scale} m",
+        )  # fmt: skip
+
+    return theta, record(0, k), record(k, n), xs
+
+
 def _cases():
     rows = [  # system, cause, where, size, law, mode, near
         ("acrobot", "coulomb_friction", "q2", 0.25, "tanh", "refit", False),

@@ -6,43 +6,21 @@ and a cubic smoothing of the model's accelerations, the true model left a residu
 (p = 0.003): a fast arm without any missing effect was called `unexplained`.
 """
 
-import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dynax import DoublePendulum, Trajectory
+from dynax import DoublePendulum
 from dynax.internal import acceleration_residuals, structure_test
 from tests import hidden_cases
 
 SCALE = 0.05  # link length [m] and mass [kg] of each link, against the nominal arm's 1 m and 1 kg
 
 
-def _records(seed=3, duration=30.0, train_s=20.0):
-    # Base parameters scale as m l^2 (inertias), m l (gravity), and the damping as m l^1.5 (the same damping ratio).
-    powers = np.array([3, 3, 3, 2, 2, 2.5, 2.5])
-    theta = np.asarray(hidden_cases.THETA) * SCALE**powers
-    case = hidden_cases.Case("small-arm", "double_pendulum", None, None, 0.0, "", "refit", seed)
-    rhs, _ = hidden_cases.arm_rhs(theta, case, (0, 1))
-    n = round(duration / hidden_cases.DT) + 1
-    ts = np.arange(n) * hidden_cases.DT
-    us = hidden_cases.multisine(n, 2, seed, 1.0) * 1.5 * SCALE**2
-    xs = hidden_cases.integrate(rhs, np.zeros(4), ts, us)
-    xs = xs + np.array([1e-3, 1e-3, 1e-2, 1e-2]) * np.random.default_rng(seed).standard_normal(xs.shape)
-    k = round(train_s / hidden_cases.DT) + 1
-
-    def record(a, b):
-        return Trajectory(
-            jnp.asarray(ts[a:b]), jnp.asarray(xs[a:b]), jnp.asarray(us[a:b]),
-            ("q1", "q2", "dq1", "dq2"), ("tau1", "tau2"), "double_pendulum", "small arm",
-        )  # fmt: skip
-
-    truth = DoublePendulum(**{f"theta{i + 1}": float(v) for i, v in enumerate(theta)})
-    return truth, record(0, k), record(k, n)
-
-
 @pytest.fixture(scope="module")
 def small_arm():
-    return _records()
+    theta, train, held_out, _ = hidden_cases.scaled_arm(SCALE)
+    truth = DoublePendulum(**{f"theta{i + 1}": float(v) for i, v in enumerate(theta)})
+    return truth, train, held_out
 
 
 def test_the_true_model_of_a_fast_arm_leaves_no_structure(small_arm):
