@@ -214,7 +214,7 @@ def test_windowed_rollouts_shift_the_input_by_a_dead_time_of_any_size():
 
 def test_the_dead_time_shift_agrees_with_the_residual_probes_interval_means():
     # Two implementations of one mean, written apart: the traced shift of the windowed rollouts
-    # (`Extended.with_shifted_inputs`) and the host-side one of the one-step residuals (`exact_delays(interval=True)`),
+    # (`Extended.with_shifted_inputs`) and the host-side one of the one-step residuals (`exact_delays`),
     # on a record's inputs, a fraction of a sample and a sample and a half late.
     from dynax import Trajectory
     from dynax.internal import exact_delays
@@ -224,6 +224,6 @@ def test_the_dead_time_shift_agrees_with_the_residual_probes_interval_means():
     run = Trajectory(ts, jnp.zeros((300, 4)), us, ("q1", "q2", "dq1", "dq2"), ("tau2",))
     for delay in (0.0037, 0.015):
         model = Extended(Acrobot(), (InputDelay(0, delay),))
-        _, probe, _ = exact_delays(model, run, interval=True)
+        _, probe = exact_delays(model, run)
         _, shifted = model.with_shifted_inputs(us, 0.01)
         np.testing.assert_allclose(np.asarray(shifted)[5:], np.asarray(probe)[5:], atol=1e-12)
