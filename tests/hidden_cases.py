@@ -121,7 +121,7 @@ def arm_rhs(theta, case, driven):
     rotor = np.zeros(2)
     if case.cause == "rotor_inertia":
         rotor[joint] = case.size
-    n_lag = 1 if case.cause == "input_lag" else 0
+    n_lag = {"input_lag": 1, "motor_lag": len(driven)}.get(case.cause, 0)
 
     def rhs(y, u):
         q1, q2, dq1, dq2 = y[:4]
@@ -135,6 +135,10 @@ def arm_rhs(theta, case, driven):
             lagged = y[4]
             dz = (tau[joint] - lagged) / case.size
             tau[joint] = lagged
+        elif case.cause == "motor_lag":  # one time constant on every driven joint's torque
+            lagged = y[4 : 4 + n_lag]
+            dz = (tau[list(driven)] - lagged) / case.size
+            tau[list(driven)] = lagged
         c2, s2, s1, s12 = np.cos(q2), np.sin(q2), np.sin(q1), np.sin(q1 + q2)
         m11, m12, m22 = t1 + t2 + 2 * t3 * c2 + rotor[0], t2 + t3 * c2, t2 + rotor[1]
         extra = np.zeros(2)
@@ -144,7 +148,7 @@ def arm_rhs(theta, case, driven):
         h2 = tau[1] - t3 * s2 * dq1**2 - t5 * s12 - t7 * dq2 - extra[1]
         det = m11 * m22 - m12 * m12
         d = [dq1, dq2, (m22 * h1 - m12 * h2) / det, (m11 * h2 - m12 * h1) / det]
-        return np.array(d + ([dz] if n_lag else []))
+        return np.concatenate([d, np.atleast_1d(dz) if n_lag else []])
 
     return rhs, n_lag
 
@@ -376,12 +380,13 @@ def records(case: Case, noise_seed: int | None = None, noise_scale: float = 1.0)
         x0[3] = 1.0
         x0[7] = 0.5  # flying forward at 0.5 m/s: the drag and the wind act from the start
     if n_hidden:  # a lag starts settled on the first input
-        x0 = np.concatenate([x0, [us[0, spec["inputs"].index(case.where)]]])
-    delay = case.size if case.cause == "input_delay" else 0.0
+        lagged = list(range(len(spec["inputs"]))) if case.where == "motors" else [spec["inputs"].index(case.where)]
+        x0 = np.concatenate([x0, us[0, lagged]])
+    delay = case.size if case.cause in ("input_delay", "motor_delay") else 0.0
     if case.law in STICK_SLIP:
         xs, us = stick_slip_record(case, truth_theta(case), ts)
     else:
-        delayed = spec["inputs"].index(case.where) if case.cause == "input_delay" else None
+        delayed = spec["inputs"].index(case.where) if case.cause == "input_delay" else None  # motor_delay: all
         xs = integrate(rhs, x0, ts, us, delay, delayed)[:, : len(spec["states"])]
     if case.system == "helicopter":
         xs[:, 3:7] /= np.linalg.norm(xs[:, 3:7], axis=1, keepdims=True)
@@ -499,6 +504,11 @@ def _cases():
         ("double_pendulum", "stiction", "q1", 0.8, "stick-slip", "refit", False),
         ("double_pendulum", "coulomb_friction", "q2", 0.5, "sticking coulomb", "refit", False),
         ("double_pendulum", "input_offset", "tau2", 0.2, HELD_OFFSET, "refit", False),
+    ]
+    rows += [  # one dead time, one lag on both drives of an arm (a rig's command chain)
+        ("double_pendulum", "motor_delay", "motors", 0.02, "dead time", "refit", False),
+        ("double_pendulum", "motor_lag", "motors", 0.04, "first order", "refit", False),
+        ("double_pendulum", "motor_delay", "motors", 0.008, "dead time", "refit", True),
     ]
     controls = (
         [("acrobot", "refit")] * 3

@@ -15,6 +15,8 @@ from .._model._extensions import (
     InputGain,
     InputLag,
     InputOffset,
+    MotorDelay,
+    MotorLag,
     QuadraticDrag,
     RotorInertia,
     Stiction,
@@ -90,7 +92,9 @@ def default_candidates(system, trajectories=None) -> tuple[AbstractTerm, ...]:
     `rotor_inertia` (and `stiction` where it rests under load); for a `Helicopter`, `quadratic_drag` on each
     translational body axis (`u, v, w`), `wind` (its north, east and down components, each a candidate at
     `world`) and `body_bias` on each body axis (`u, v, w, p, q, r`); for every system, per input:
-    `input_delay`, `input_lag`, `input_gain`, `input_offset`.
+    `input_delay`, `input_lag`, `input_gain`, `input_offset`; for a manipulator with more than one input,
+    `motor_delay` and `motor_lag` at `motors` (one dead time, one lag on every input: drives commanded through
+    one chain, as a rig's bus or controller, share its latency).
     """
     terms: list[AbstractTerm] = []
     if system.joints:
@@ -111,6 +115,9 @@ def default_candidates(system, trajectories=None) -> tuple[AbstractTerm, ...]:
         terms += [BodyBias(i) for i in range(6)]
     for i in range(system.n_inputs):
         terms += [InputDelay(i), InputLag(i), InputGain(i), InputOffset(i)]
+    if system.joints and system.n_inputs > 1:  # drives commanded through one chain share its latency and lag
+        every = tuple(range(system.n_inputs))
+        terms += [MotorDelay(every), MotorLag(every)]
     return tuple(terms)
 
 
