@@ -127,6 +127,20 @@ def test_look_alikes_are_at_the_same_place():
     assert {candidates[k].label(system) for k in look_alikes(system, delay, candidates)} == {"input_lag@tau2"}
 
 
+def test_an_arm_with_two_drives_has_one_shared_dead_time_and_lag():
+    """Drives commanded through one chain share its latency: a double pendulum's vocabulary has `motor_delay` and
+    `motor_lag` at `motors` beside the per-input terms (look-alikes of each other only); the acrobot, with one
+    drive, has neither."""
+    system = DoublePendulum()
+    candidates = default_candidates(system)
+    labels = [t.label(system) for t in candidates]
+    assert {"motor_delay@motors", "motor_lag@motors", "input_delay@tau1", "input_delay@tau2"} <= set(labels)
+    shared = candidates[labels.index("motor_delay@motors")]
+    assert shared.inputs == (0, 1)
+    assert {labels[k] for k in look_alikes(system, shared, candidates)} == {"motor_lag@motors"}
+    assert not any(t.cause.startswith("motor_") for t in default_candidates(Acrobot()))
+
+
 def test_gains_on_the_two_motors_are_one_model_when_the_base_parameters_are_refitted():
     """Scaling every torque-side base parameter and both torque gains by one factor leaves the double
     pendulum's motion unchanged (M qdd + ... = G tau), so with the base parameters refitted a gain on tau1

@@ -236,6 +236,17 @@ def test_effect_free_control_claims_no_cause():
     assert not o["none_with_gain"], j["candidates"][:3]
 
 
+@pytest.mark.heavy  # an end-to-end diagnosis: in `make test`, not `make quick`
+def test_one_dead_time_on_both_drives_is_named_once_at_motors():
+    # Both torques of a double pendulum 20 ms late (DOP853, the recorded inputs shifted in time): one latency of
+    # the rig's command chain. Per input it was named as two lags, one at each torque.
+    case = next(c for c in CASES if c.name == "double_pendulum-motor_delay@motors-0.02-dead_time")
+    j = diagnose_case(case).to_json()
+    assert j["verdict"] == "explained", (j["verdict"], j["findings"])
+    assert [(f["cause"], f["where"]) for f in j["findings"]] == [("motor_delay", "motors")], j["findings"]
+    assert abs(j["findings"][0]["coefficient"] - 0.02) < 0.002
+
+
 @pytest.mark.slow  # about 3 min; the suite's helicopter control: test_helicopter_candidates.py
 def test_a_helicopter_control_claims_no_cause():
     case = next(c for c in CASES if c.name == "helicopter-control-known-9")

@@ -227,3 +227,17 @@ def test_the_dead_time_shift_agrees_with_the_residual_probes_interval_means():
         _, probe = exact_delays(model, run)
         _, shifted = model.with_shifted_inputs(us, 0.01)
         np.testing.assert_allclose(np.asarray(shifted)[5:], np.asarray(probe)[5:], atol=1e-12)
+    # Two dead times on one input (a per-input one and the drives' shared one) act one after the other, as in the
+    # rollouts; a lag before them changes nothing of the shifts.
+    from dynax import DoublePendulum, MotorDelay
+
+    us2 = jnp.asarray(np.random.default_rng(5).normal(size=(300, 2)))
+    run2 = Trajectory(ts, jnp.zeros((300, 4)), us2, ("q1", "q2", "dq1", "dq2"), ("tau1", "tau2"))
+    model = Extended(DoublePendulum(), (InputLag(0, 0.05), InputDelay(0, 0.0137), MotorDelay((0, 1), 0.021)))
+    _, probe = exact_delays(model, run2)
+    _, shifted = model.with_shifted_inputs(us2, 0.01)
+    np.testing.assert_allclose(np.asarray(shifted)[6:], np.asarray(probe)[6:], atol=1e-12)
+    # Whole samples compose exactly: 1 + 2 samples on tau1, 2 on tau2.
+    model = Extended(DoublePendulum(), (InputDelay(0, 0.01), MotorDelay((0, 1), 0.02)))
+    _, probe = exact_delays(model, run2)
+    np.testing.assert_allclose(np.asarray(probe)[6:], np.stack([us2[3:-3, 0], us2[4:-2, 1]], axis=1), atol=1e-12)
