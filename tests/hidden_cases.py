@@ -380,8 +380,7 @@ def records(case: Case, noise_seed: int | None = None, noise_scale: float = 1.0)
         x0[3] = 1.0
         x0[7] = 0.5  # flying forward at 0.5 m/s: the drag and the wind act from the start
     if n_hidden:  # a lag starts settled on the first input
-        lagged = list(range(len(spec["inputs"]))) if case.where == "motors" else [spec["inputs"].index(case.where)]
-        x0 = np.concatenate([x0, us[0, lagged]])
+        x0 = np.concatenate([x0, us[0, effect_inputs(case)]])
     delay = case.size if case.cause in ("input_delay", "motor_delay") else 0.0
     if case.law in STICK_SLIP:
         xs, us = stick_slip_record(case, truth_theta(case), ts)
@@ -640,25 +639,33 @@ def _rhs_of(case: Case, model: Case, theta=None):
     return heli_rhs(model)
 
 
+def effect_inputs(case: Case) -> list[int]:
+    """The input columns `case`'s effect acts on: every one at `motors`, its own at an input, none elsewhere."""
+    names = SYSTEMS[case.system]["inputs"]
+    if case.where == "motors":
+        return list(range(len(names)))
+    return [names.index(case.where)] if case.where in names else []
+
+
 def _window_scores(case: Case, horizon_s: float, stride_s: float, models) -> list[float]:
     """The mean window score (see `truth_gain`) on `case`'s held-out record of each of `models`, `(rhs, n_hidden,
-    delay)` triples: `delay` shifts the recorded input of the case's column by that time (a true dead time)."""
+    delay)` triples: `delay` shifts the recorded input of the case's columns by that time (a true dead time)."""
     spec = SYSTEMS[case.system]
     train, held_out = records(case)
     xs, us = np.asarray(held_out.xs, float), np.asarray(held_out.us, float)
     scale = np.maximum(np.asarray(train.xs).std(axis=0), 1e-9)
-    column = spec["inputs"].index(case.where) if case.where in spec["inputs"] else None
+    columns = effect_inputs(case)
     substeps = 10 if any(m[2] for m in models) else 2
     n_ref, stride, h = round(horizon_s / DT), max(1, round(stride_s / DT)), DT / substeps
 
     def rollout(rhs, n_hidden, k, delay):
-        def u_at(t):  # the zero-order-hold input at time t after the window's start (a dead time shifts one column)
+        def u_at(t):  # the zero-order-hold input at time t after the window's start (a dead time shifts its columns)
             u = us[min(k + int(np.floor(t / DT + 1e-9)), len(us) - 1)].copy()
             if delay:
-                u[column] = us[max(min(k + int(np.floor((t - delay) / DT + 1e-9)), len(us) - 1), 0)][column]
+                u[columns] = us[max(min(k + int(np.floor((t - delay) / DT + 1e-9)), len(us) - 1), 0)][columns]
             return u
 
-        y = np.concatenate([xs[k], [u_at(0.0)[column]] * n_hidden])
+        y = np.concatenate([xs[k], u_at(0.0)[columns]]) if n_hidden else xs[k]
         out = []
         for j in range(n_ref * substeps):
             t = j * h
@@ -682,7 +689,7 @@ def _window_scores(case: Case, horizon_s: float, stride_s: float, models) -> lis
 def _gain_over(case: Case, horizon_s: float, stride_s: float, rhs, n_hidden: int) -> float:
     """The truth's held-out gain over the model `(rhs, n_hidden)` (see `truth_gain`)."""
     truth, n_truth = _rhs_of(case, case)
-    delay = case.size if case.cause == "input_delay" else 0.0
+    delay = case.size if case.cause in ("input_delay", "motor_delay") else 0.0
     with_effect, without = _window_scores(case, horizon_s, stride_s, [(truth, n_truth, delay), (rhs, n_hidden, 0.0)])
     return float(1.0 - with_effect / without)
 
@@ -698,7 +705,7 @@ def refit_theta(case: Case) -> np.ndarray:
     t6, t7 = truth_theta(case)[5:]
     rows, rhs_ = [], []
     for x, u in zip(xs, us):
-        y = np.concatenate([x, [u[spec["inputs"].index(case.where)]] * n_hidden]) if n_hidden else x
+        y = np.concatenate([x, u[effect_inputs(case)]]) if n_hidden else x
         ddq1, ddq2 = truth(y, u)[2:4]
         q1, q2, dq1, dq2 = x
         tau = np.zeros(2)
@@ -775,7 +782,8 @@ def look_alike_gain(case: Case, horizon_s: float, stride_s: float = 0.05) -> tup
     ref = _window_scores(case, horizon_s, stride_s, [(truth, n_truth, case.size)])[0]
 
     def score(tau):
-        rhs, n_hidden = _rhs_of(case, dataclasses.replace(case, cause="input_lag", size=float(tau)))
+        lag = "motor_lag" if case.where == "motors" else "input_lag"
+        rhs, n_hidden = _rhs_of(case, dataclasses.replace(case, cause=lag, size=float(tau)))
         return _window_scores(case, horizon_s, stride_s, [(rhs, n_hidden, 0.0)])[0]
 
     best = minimize_scalar(score, bounds=(0.2 * case.size, 3.0 * case.size), method="bounded", options={"xatol": 1e-4})
