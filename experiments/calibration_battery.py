@@ -1,6 +1,6 @@
 """The verdicts' calibration battery: hidden-effect cases made outside dynax's model code, diagnosed one by one.
 
-The cases (`tests/hidden_cases.py`: 76 hidden effects over every cause of the vocabulary on the acrobot, the
+The cases (`tests/hidden_cases.py`: 79 hidden effects over every cause of the vocabulary on the acrobot, the
 double pendulum, the linear axis, the helicopter and the quadrotor, with friction laws of other shapes, true dead
 times and body-frame drag and wind, near-threshold sizes, and 15 effect-free controls) are integrated by scipy's
 DOP853; the stick-slip cases (stiction, and Coulomb friction that sticks at its sliding level) by the event-based

@@ -497,7 +497,7 @@ def _dead_times_as_shifted_commands(model, flights) -> tuple:
         return model, flights
     shifted = []
     for f in flights:
-        _, us = exact_delays(model, f)
+        _, us, _ = exact_delays(model, f, interval=True)
         shifted.append(Trajectory(f.ts, f.xs, us, f.state_names, f.input_names, f.system, f.source))
     kept = tuple(t for t in model.terms if not (isinstance(t, AbstractInputTerm) and t.cause in DEAD_TIMES))
     return (eqx.tree_at(lambda m: m.terms, model, kept) if kept else model.system), shifted

@@ -1,10 +1,9 @@
 r"""Residual analysis of one-step accelerations, and a probe for structure left in them.
 
 The measured acceleration is the Savitzky-Golay derivative of the measured velocities; the
-model's is its velocity change over each sample interval, integrated under the held input from the
-(smoothed) measured state with the terms' internal states driven along the record (`hidden_trajectory`),
-accumulated and read by the same derivative filter. What is left, $r_k = D(v^{\text{meas}} -
-v^{\text{model}})_k$, should be noise if the model is right.
+model's is its vector field at the (equally smoothed) measured state, with the terms' internal states
+driven along the record (`hidden_trajectory`). What is left,
+$r_k = \dot v_k^{\text{meas}} - f_v(x_k, u_k)$, should be noise if the model is right.
 
 The *structure probe* regresses the residuals of the training record on a generic library of
 features of state and input (velocity, its sign, $|v|v$, position, $\sin q$, $\cos q$, the
@@ -53,19 +52,21 @@ def smoothed_states(trajectory) -> jax.Array:
     return savitzky_golay(trajectory.ts, trajectory.xs, window=sg_window(trajectory.dt), order=STATE_ORDER)
 
 
-def as_measured(ts, accelerations, window: int) -> np.ndarray:
+def as_measured(ts, accelerations, window: int, left=None) -> np.ndarray:
     r"""Model accelerations (`(time, ...)`, at the samples) through the filter the measured ones pass.
 
     The measured acceleration is the cubic Savitzky-Golay derivative $D$ of the measured velocity. The model's
-    is integrated along the record (trapezoids) and passed through the same $D$, so that both see one frequency
-    response: smoothing the model's acceleration instead (a cubic fit of it) leaves the difference of two
-    responses, $(H_D - H_S)\,a$, structured in the accelerations themselves. Sensitivities of the accelerations
-    go through the same filter (the operator is linear).
+    is integrated along the record (trapezoids: the held input's two limits averaged at each sample) and passed
+    through the same $D$, so that both see one frequency response: smoothing the model's acceleration instead
+    (a cubic fit of it) leaves the difference of two responses, $(H_D - H_S)\,a$, structured in the accelerations
+    themselves. Sensitivities of the accelerations go through the same filter (the operator is linear).
     """
     ts = np.asarray(ts)
-    a = np.asarray(accelerations)
-    h = np.diff(ts).reshape((-1,) + (1,) * (a.ndim - 1))
-    velocity = np.concatenate([np.zeros_like(a[:1]), np.cumsum(0.5 * h * (a[:-1] + a[1:]), axis=0)])
+    right = np.asarray(accelerations)
+    left = right if left is None else np.asarray(left)
+    h = np.diff(ts).reshape((-1,) + (1,) * (right.ndim - 1))
+    increments = 0.5 * h * (right[:-1] + left[1:])  # each interval under its own held input
+    velocity = np.concatenate([np.zeros_like(right[:1]), np.cumsum(increments, axis=0)])
     return np.asarray(savitzky_golay(ts, velocity, window=window, order=3, deriv=1))
 
 
@@ -95,9 +96,9 @@ def hidden_trajectory(model, ts, us, xs=None):
 
 
 @eqx.filter_jit
-def predicted_accelerations(model, ts, xs_smooth, us, idx, us_before):
-    """The model's acceleration at each sample: the mean of its left and right limits under the held input (the
-    sensitivities' linearisation point; the residuals themselves integrate each interval, `interval_increments`).
+def predicted_accelerations(model, ts, xs_smooth, us, idx, us_before, limits: bool = False):
+    """The model's acceleration at each sample: the mean of its left and right limits under the held input
+    (with `limits`, the two: `(right, left)`).
 
     The input is a zero-order hold, so the true acceleration jumps at every sample: at t_k it is
     the mean of the left limit (input u_{k-1}) and the right limit (u_k).
@@ -105,7 +106,8 @@ def predicted_accelerations(model, ts, xs_smooth, us, idx, us_before):
     zs = hidden_trajectory(model, ts, us, xs_smooth)
     full = jnp.concatenate([xs_smooth, zs], axis=1)
     field = jax.vmap(lambda t, x, u: model.vector_field(t, x, u))
-    return 0.5 * (field(ts, full, us)[:, idx] + field(ts, full, us_before)[:, idx])
+    right, left = field(ts, full, us)[:, idx], field(ts, full, us_before)[:, idx]
+    return (right, left) if limits else 0.5 * (right + left)
 
 
 _INTERVAL_SUBSTEPS = 4  # RK4 steps per sample interval of the one-step increments
@@ -208,35 +210,41 @@ def padded(ts, *samples, length: int = 0) -> tuple:
     return tuple(jax.device_put(a) for a in out)  # not `jnp.asarray`: that compiles a copy for every new shape
 
 
-def exact_delays(model, trajectory):
+def exact_delays(model, trajectory, interval: bool = False):
     """Run an active input delay as the dead time it stands for, not as its Pade filter.
 
     A model found with `input_delay` or `motor_delay` simulates it with a Pade approximant, which passes a held
     input's every step through at once (its high-frequency gain is one) and then rings. Judged on
     one-step residuals, that model would still show `du/dt` structure where the rig has a pure
     dead time. Here each active delay is replaced by the recorded input itself, shifted by the delay (several
-    delays on one input, one after the other): the held input's mean over the sample interval that starts at
-    `t - T` (what acts over `[t, t + dt]`: the one-step increments integrate each interval under it; continuous
-    in `T`), and the term is set to zero delay (it then passes the shifted input through).
+    delays on one input one after the other, as `Extended.with_shifted_inputs` shifts them: a dead time commutes
+    with the other input terms, a gain, an offset, a lag): the held input's mean over the sample interval
+    centred on `t - T` (what the left and right limits average to at `T` a whole number of samples, and
+    continuous in `T` in between), and the term is set to zero delay (it then passes the shifted input through).
 
-    **Returns:** `(model, us)`: the model to evaluate, and the inputs held over each sample interval.
+    With `interval`, a delayed input is instead its mean over the sample interval that starts at
+    `t - T` (what acts over `[t, t + dt]`), for comparisons of velocity increments over the intervals.
+
+    **Returns:** `(model, us, us_before)`: the model to evaluate, and the input's right and left
+    limits at each sample (equal, the interval mean, for a delayed input).
     """
     ts = np.asarray(trajectory.ts)
     us = np.array(trajectory.us)
+    us_before = np.concatenate([us[:1], us[:-1]])
     if not isinstance(model, Extended):
-        return model, jnp.asarray(us)
-    dt = float(np.median(np.diff(ts)))
-    # Each dead time in turn, on the inputs as the ones before it left them (`Extended.with_shifted_inputs` alike):
-    # a dead time commutes with the other input terms (a gain, an offset, a lag: linear and time-invariant).
+        return model, jnp.asarray(us), jnp.asarray(us_before)
+    half = 0.5 * float(np.median(np.diff(ts)))
+    shifted = np.array(trajectory.us)  # each delayed input as the delays before it left it
     for k, term in enumerate(model.terms):
         if not (isinstance(term, AbstractInputTerm) and term.cause in DEAD_TIMES and float(term.coefficient) > 0):
             continue
-        start = ts - float(term.coefficient)
+        centre = ts - float(term.coefficient) + (half if interval else 0.0)
         for i in term.inputs:
-            us[:, i] = _held_average(ts, us[:, i].copy(), start, start + dt)
+            shifted[:, i] = _held_average(ts, shifted[:, i].copy(), centre - half, centre + half)
+            us[:, i] = us_before[:, i] = shifted[:, i]
         model = eqx.tree_at(lambda m: m.terms[k].coefficient, model, jnp.zeros_like(term.coefficient))
     dtype = jax.dtypes.canonicalize_dtype(trajectory.us.dtype)  # float32 where JAX's float64 mode is off, silently
-    return model, jnp.asarray(us, dtype)
+    return model, jnp.asarray(us, dtype), jnp.asarray(us_before, dtype)
 
 
 def applied_inputs(system, terms, trajectory) -> np.ndarray:
@@ -245,7 +253,7 @@ def applied_inputs(system, terms, trajectory) -> np.ndarray:
     interval mean (`exact_delays`), a lag as its output's mean over the interval (trapezoid of the internal
     state at the interval's ends, `hidden_trajectory`). Other inputs as recorded. **Returns:** `(time, n_inputs)`."""
     extended = Extended(system, tuple(terms))  # pyright: ignore[reportCallIssue]
-    model, us = exact_delays(extended, trajectory)
+    model, us, _ = exact_delays(extended, trajectory, interval=True)
     us = np.array(us)
     ts = jnp.asarray(trajectory.ts, us.dtype)
     for term in model.input_terms:
@@ -277,22 +285,23 @@ def acceleration_residuals(model, trajectory, *, length: int = 0):
     w = sg_window(dt)
     xs_smooth = smoothed_states(trajectory)
     idx = velocity_indices(nominal)
+    given = model  # before its delays are replaced by the shifted inputs
+    model, us, us_before = exact_delays(model, trajectory)
     n = len(ts)  # evaluated on the padded record (one compilation for records of any length near it), cut back
-    # The model's velocity change over each sample interval, integrated under the held input from the interval's
-    # start (exact where accelerations at the samples are not: the input jumps at every sample, and the
-    # acceleration curves within the interval). A dead time runs as its shifted input's mean over the interval.
-    interval_model, interval_us = exact_delays(model, trajectory)
-    ts_p, xs_p, interval_p = padded(ts, xs_smooth, interval_us, length=length)
+    ts_p, xs_p, us_p, before_p = padded(ts, xs_smooth, us, us_before, length=length)
     # Cut on the host (in JAX the slice compiles a program per record length).
+    right, left = predicted_accelerations(model, ts_p, xs_p, us_p, jnp.asarray(idx), before_p, limits=True)
+    # The model's acceleration as the measured one is read (the probe's feature, the report's prediction).
+    predicted = as_measured(ts, np.asarray(right)[:n], w, np.asarray(left)[:n])
+    # The residual: the measured velocity's change over each sample interval less the model's, integrated under
+    # the held input from the interval's start (exact where accelerations at the samples are not: the input jumps
+    # at every sample, and the acceleration curves within the interval), accumulated and differentiated by the
+    # filter the measured acceleration is read with.
+    interval_model, interval_us, _ = exact_delays(given, trajectory, interval=True)
+    _, interval_p = padded(ts, interval_us, length=length)
     increments = np.asarray(interval_increments(interval_model, ts_p, xs_p, interval_p, jnp.asarray(idx)))[: n - 1]
-    # The model's accumulated increments read by the measured acceleration's derivative filter: its acceleration
-    # as the measured one is read (the probe's feature, the report's prediction). The residual: the drift of the
-    # measured velocity's changes from the model's, accumulated and read by the same filter.
-    zero = np.zeros((1, len(idx)), increments.dtype)
-    modelled = np.concatenate([zero, np.cumsum(increments, axis=0)])
-    predicted = np.asarray(savitzky_golay(ts, modelled, window=w, order=3, deriv=1))
     drift = np.diff(np.asarray(trajectory.xs)[:, idx], axis=0) - increments
-    accumulated = np.concatenate([zero.astype(drift.dtype), np.cumsum(drift, axis=0)])
+    accumulated = np.concatenate([np.zeros((1, len(idx)), drift.dtype), np.cumsum(drift, axis=0)])
     drift_rate = np.asarray(savitzky_golay(ts, accumulated, window=w, order=3, deriv=1))
     # The filter's start-up and run-out samples are not trusted.
     keep = slice(w, len(ts) - w)

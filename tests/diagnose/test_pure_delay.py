@@ -31,14 +31,15 @@ def dead_time_run(seed: int, duration: float = 30.0):
 def test_exact_delay_shifts_the_held_input():
     run = dead_time_run(seed=1, duration=2.0)
     model = Extended(Acrobot(), (InputDelay(0, 0.03),))
-    evaluated, us = exact_delays(model, run)
+    evaluated, us, us_before = exact_delays(model, run)
     assert float(evaluated.terms[0].coefficient) == 0.0  # the Pade filter passes the shifted input through
     raw = np.asarray(run.us)[:, 0]
-    # At a whole number of samples the interval [t, t + dt] is held at the sample that many samples earlier.
-    assert np.allclose(np.asarray(us)[10:, 0], raw[7:-3])
-    # A quarter sample later a quarter of the interval is held at the sample before: continuous in the delay.
-    _, us_later = exact_delays(Extended(Acrobot(), (InputDelay(0, 0.0325),)), run)
-    assert np.allclose(np.asarray(us_later)[10:, 0], 0.75 * raw[7:-3] + 0.25 * raw[6:-4])
+    # At a whole number of samples the interval mean is the mean of the left and right limits.
+    assert np.allclose(np.asarray(us)[10:, 0], 0.5 * (raw[7:-3] + raw[6:-4]))
+    assert np.allclose(np.asarray(us_before), np.asarray(us))
+    # A quarter sample later it moves a quarter of the way: continuous in the delay.
+    _, us_later, _ = exact_delays(Extended(Acrobot(), (InputDelay(0, 0.0325),)), run)
+    assert np.allclose(np.asarray(us_later)[10:, 0], 0.25 * raw[7:-3] + 0.75 * raw[6:-4])
 
 
 def test_the_right_delay_leaves_white_residuals_where_the_pade_filter_would_not():

@@ -214,7 +214,7 @@ def test_windowed_rollouts_shift_the_input_by_a_dead_time_of_any_size():
 
 def test_the_dead_time_shift_agrees_with_the_residual_probes_interval_means():
     # Two implementations of one mean, written apart: the traced shift of the windowed rollouts
-    # (`Extended.with_shifted_inputs`) and the host-side one of the one-step residuals (`exact_delays`),
+    # (`Extended.with_shifted_inputs`) and the host-side one of the one-step residuals (`exact_delays(interval=True)`),
     # on a record's inputs, a fraction of a sample and a sample and a half late.
     from dynax import Trajectory
     from dynax.internal import exact_delays
@@ -224,7 +224,7 @@ def test_the_dead_time_shift_agrees_with_the_residual_probes_interval_means():
     run = Trajectory(ts, jnp.zeros((300, 4)), us, ("q1", "q2", "dq1", "dq2"), ("tau2",))
     for delay in (0.0037, 0.015):
         model = Extended(Acrobot(), (InputDelay(0, delay),))
-        _, probe = exact_delays(model, run)
+        _, probe, _ = exact_delays(model, run, interval=True)
         _, shifted = model.with_shifted_inputs(us, 0.01)
         np.testing.assert_allclose(np.asarray(shifted)[5:], np.asarray(probe)[5:], atol=1e-12)
     # Two dead times on one input (a per-input one and the drives' shared one) act one after the other, as in the
@@ -234,10 +234,10 @@ def test_the_dead_time_shift_agrees_with_the_residual_probes_interval_means():
     us2 = jnp.asarray(np.random.default_rng(5).normal(size=(300, 2)))
     run2 = Trajectory(ts, jnp.zeros((300, 4)), us2, ("q1", "q2", "dq1", "dq2"), ("tau1", "tau2"))
     model = Extended(DoublePendulum(), (InputLag(0, 0.05), InputDelay(0, 0.0137), MotorDelay((0, 1), 0.021)))
-    _, probe = exact_delays(model, run2)
+    _, probe, _ = exact_delays(model, run2, interval=True)
     _, shifted = model.with_shifted_inputs(us2, 0.01)
     np.testing.assert_allclose(np.asarray(shifted)[6:], np.asarray(probe)[6:], atol=1e-12)
     # Whole samples compose exactly: 1 + 2 samples on tau1, 2 on tau2.
     model = Extended(DoublePendulum(), (InputDelay(0, 0.01), MotorDelay((0, 1), 0.02)))
-    _, probe = exact_delays(model, run2)
+    _, probe, _ = exact_delays(model, run2, interval=True)
     np.testing.assert_allclose(np.asarray(probe)[6:], np.stack([us2[3:-3, 0], us2[4:-2, 1]], axis=1), atol=1e-12)
