@@ -234,14 +234,12 @@ def exact_delays(model, trajectory, interval: bool = False):
     if not isinstance(model, Extended):
         return model, jnp.asarray(us), jnp.asarray(us_before)
     half = 0.5 * float(np.median(np.diff(ts)))
-    shifted = np.array(trajectory.us)  # each delayed input as the delays before it left it
     for k, term in enumerate(model.terms):
         if not (isinstance(term, AbstractInputTerm) and term.cause in DEAD_TIMES and float(term.coefficient) > 0):
             continue
         centre = ts - float(term.coefficient) + (half if interval else 0.0)
-        for i in term.inputs:
-            shifted[:, i] = _held_average(ts, shifted[:, i].copy(), centre - half, centre + half)
-            us[:, i] = us_before[:, i] = shifted[:, i]
+        for i in term.inputs:  # on the input as the delays before this one left it
+            us[:, i] = us_before[:, i] = _held_average(ts, us[:, i].copy(), centre - half, centre + half)
         model = eqx.tree_at(lambda m: m.terms[k].coefficient, model, jnp.zeros_like(term.coefficient))
     dtype = jax.dtypes.canonicalize_dtype(trajectory.us.dtype)  # float32 where JAX's float64 mode is off, silently
     return model, jnp.asarray(us, dtype), jnp.asarray(us_before, dtype)
