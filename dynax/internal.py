@@ -30,6 +30,8 @@ from ._cli._nominal import (
 from ._cli._notes import collecting as command_warnings
 from ._cli._output import staged_directory as staged_directory
 from ._cli._output import write_json as write_json
+from ._compiled_code import map_usage as map_usage
+from ._compiled_code import release_compiled_code as release_compiled_code
 from ._control._closed_loop import closed_loop_rollout as closed_loop_rollout
 
 # Control: the leaderboard's rollout and the swing-up reference's pieces.
@@ -845,6 +847,8 @@ __all__ = [
     "Problem",
     "progress_enabled",
     "PROGRESS_MODE",
+    "map_usage",
+    "release_compiled_code",
     "progress_mode",
     "progress_report",
     "ProgressBar",

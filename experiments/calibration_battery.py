@@ -45,23 +45,6 @@ from tests.hidden_flights import truth_gains
 VERDICTS = ("explained", "unexplained", "inconclusive", "none")
 
 
-def _release_compiled_code(share: float = 0.5) -> None:
-    """Drop JAX's compiled programs once this process holds more than `share` of the memory maps Linux allows it.
-
-    Every compiled CPU program keeps its code in maps of its own, and each case compiles its own models' programs:
-    about 50 cases in, a run met `vm.max_map_count` (65,530) and LLVM aborted the process ("Unable to allocate
-    section memory"). The cases after a clear compile again (from the persistent cache where one is set)."""
-    try:
-        with open("/proc/self/maps") as maps:
-            used = sum(1 for _ in maps)
-        with open("/proc/sys/vm/max_map_count") as limit:
-            allowed = int(limit.read())
-    except OSError:  # not Linux
-        return
-    if used > share * allowed:
-        jax.clear_caches()
-
-
 def interleaved(cases):
     """Round-robin over (system, cause) groups, so that any prefix is a stratified subset."""
     groups: dict = {}
@@ -340,7 +323,6 @@ def main():
             }
             rows.append(row)
             path.write_text(json.dumps(rows, indent=1))
-            _release_compiled_code()
             bar.say(
                 f"{case.name}: {row['verdict']} {row['findings']} gain {row['gain']:.0%} "
                 f"best {row['best_gain'] if row['best_gain'] is None else round(row['best_gain'], 2)} "

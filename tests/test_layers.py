@@ -36,6 +36,7 @@ LAYERS = (
 LAYER_OF = {
     "_version": "utilities",
     "_errors": "utilities",
+    "_compiled_code": "utilities",
     "_precision": "utilities",
     "_progress": "utilities",
     "_context": "utilities",

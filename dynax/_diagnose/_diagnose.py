@@ -19,6 +19,7 @@ import dataclasses
 import equinox as eqx
 import numpy as np
 
+from .._compiled_code import release_compiled_code
 from .._data._trajectory import check_record_columns, check_record_values, Trajectory
 from .._errors import DataError, UsageError
 from .._model._extensions import AbstractTerm, Extended
@@ -379,6 +380,7 @@ def diagnose(
         Analysis*, 3rd ed., 1998, ch. 15 (forward selection).
     """
     warn_if_float32("diagnosis")  # the float64 policy: say so, once, naming the switch
+    release_compiled_code()  # many diagnoses in one process: below Linux's memory-map limit (`_compiled_code`)
     check_arguments(system, mode, horizons, selection)
     _check_record_values(system, train, validation)
     framed = None

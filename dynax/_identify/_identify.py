@@ -18,6 +18,7 @@ import dataclasses
 from typing import Literal
 import warnings
 
+from .._compiled_code import release_compiled_code
 from .._data._sampling import check_time_stamps
 from .._data._spectra import filter_rule
 from .._data._trajectory import check_record_columns, check_record_values, Trajectory
@@ -243,6 +244,7 @@ def identify(
     or a record of other columns or of integers.
     """
     warn_if_float32("identification")  # the float64 policy: say so, once, naming the switch
+    release_compiled_code()  # many identifications in one process: below Linux's memory-map limit
     if not isinstance(method, AbstractMethod):
         raise UsageError(
             f"identify: `method` must be Dynamic(), Power(), Energy(), SimulationFit() or another AbstractMethod, "
