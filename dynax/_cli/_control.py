@@ -2,6 +2,7 @@
 
 import argparse
 import json
+import math
 import pathlib
 import time
 
@@ -71,6 +72,7 @@ def run_tune(args: argparse.Namespace) -> int:
 
     from .._control._collocation import PumpingStarts, ReferenceSearch
     from .._control._from_rest import design_swing_up, load_controller, SwingUpDesign
+    from .._control._leaderboard import LeaderboardRules
 
     out = _check_out(args.out, ".npz", "--out")
     reference = None
@@ -81,8 +83,11 @@ def run_tune(args: argparse.Namespace) -> int:
         reference = (jnp.asarray(saved.x_ref), jnp.asarray(saved.u_ref))
     for name in ("horizon", "starts", "iterations"):
         value = getattr(args, name)
-        if value is not None and value <= 0:
-            raise UsageError(f"--{name} must be positive, got {value}")
+        if value is not None and not (value > 0 and math.isfinite(value)):  # NaN compares False both ways
+            raise UsageError(f"--{name} must be a positive number, got {value}")
+    episode = LeaderboardRules().t_final
+    if args.horizon is not None and args.horizon > episode:
+        raise UsageError(f"--horizon must be at most the leaderboard's episode, {episode} s, got {args.horizon}")
     if args.seed < 0:
         raise UsageError(f"--seed must be a non-negative integer, got {args.seed}")
     search = ReferenceSearch(starts=PumpingStarts(number=args.starts, seed=args.seed))

@@ -12,6 +12,7 @@ from ._common import (
     add_exclude_option,
     add_time_option,
     data_options,
+    finite_seconds,
     load_records,
     read_nominal_parameters,
 )
@@ -117,10 +118,10 @@ def run(args: argparse.Namespace) -> int:
 
         return run_diagnose(args)
     data_options(args)  # a malformed --map, --scale or --offset is refused before any work
-    if args.dt is not None and not args.dt > 0:
-        raise UsageError(f"--dt must be positive, got {args.dt}")
-    if args.reference_horizon is not None and not args.reference_horizon > 0:
-        raise UsageError(f"--reference-horizon must be positive, got {args.reference_horizon}")
+    if args.dt is not None:
+        finite_seconds(args.dt, "--dt")
+    if args.reference_horizon is not None:
+        finite_seconds(args.reference_horizon, "--reference-horizon")
     if args.max_terms < 1:
         raise UsageError(f"--max-terms must be at least 1, got {args.max_terms}")
     parameters, cli_notes = None, []

@@ -27,7 +27,7 @@ def register(subparsers):
     )
     parser.add_argument(
         "--horizons",
-        default="0.1,0.5,1,2",
+        default=None,
         help="helicopter: comma-separated horizons in seconds (default 0.1,0.5,1,2)",
     )
     parser.add_argument(
@@ -39,7 +39,11 @@ def register(subparsers):
     )
     parser.add_argument("--metric", default="mae,rmse", help="quadrotor: mae, rmse or mae,rmse (default both)")
     parser.add_argument(
-        "--stride", type=int, default=1, metavar="N", help="use every N-th start sample (default 1: every)"
+        "--stride",
+        type=int,
+        default=None,
+        metavar="N",
+        help="helicopter: use every N-th start sample (default 1: every; a quadrotor is scored from every sample)",
     )
     add_data_options(parser)
     parser.add_argument("--out", required=True, help="output metrics file (JSON)")
@@ -129,7 +133,13 @@ def run(args: argparse.Namespace) -> int:
     from ._fit import load_helicopter_data
 
     model_obj = read_json_object(args.model, "a model file written by `dynax fit`")
-    if model_obj.get("system") == "quadrotor":
+    if model_obj.get("system") == "quadrotor":  # the field's protocol: every start sample, horizons in samples
+        for option, value in (("--horizons", args.horizons), ("--stride", args.stride)):
+            if value is not None:
+                raise UsageError(
+                    f"{option} applies to helicopter models; a quadrotor model is scored from every start sample "
+                    "at --steps (samples, default 1,10,50)"
+                )
         from .._data._motor_order import MotorSignature
         from .._identify._vehicle._quadrotor import quadrotor_from_json
         from ._quadrotor import run_evaluate
@@ -141,7 +151,8 @@ def run(args: argparse.Namespace) -> int:
     if len(args.data) != 1:
         raise UsageError(f"evaluating a helicopter model takes one data file, got {len(args.data)}")
     args.data = args.data[0]
-    horizons = _horizons(args.horizons)
+    horizons = _horizons("0.1,0.5,1,2" if args.horizons is None else args.horizons)
+    args.stride = 1 if args.stride is None else args.stride
     if args.stride < 1:
         raise UsageError(f"--stride must be at least 1, got {args.stride}")
     out = output_file(args.out, "metrics.json")

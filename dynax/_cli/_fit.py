@@ -21,7 +21,7 @@ _CRITERIA = ("one-step", "frequency", "lagged", "backprop")
 def register(subparsers):
     parser = subparsers.add_parser(
         "fit",
-        help="learn a vehicle dynamics model (helicopter) from flight data",
+        help="learn a vehicle dynamics model (helicopter, quadrotor) from flight data",
         description=(
             "Learn the body-frame model of a helicopter from the record DATA (Abbeel, Ganapathi and Ng 2005) "
             "and write it to --out. Models: acceleration (body accelerations linear in a few features, gravity "

@@ -18,6 +18,7 @@ from ._common import (
     add_time_option,
     add_velocity_option,
     data_options,
+    finite_seconds,
     load_records,
     min_fit_samples,
     output_file,
@@ -185,8 +186,7 @@ def _method(args):
     trim = _setting(args.trim, "--trim", minimum=0)
     if args.window < 1:
         raise UsageError(f"--window must be at least 1 sample, got {args.window}")
-    if not args.segment > 0:
-        raise UsageError(f"--segment must be positive, got {args.segment}")
+    finite_seconds(args.segment, "--segment")
     if args.method == "dynamic":
         assert order is not None and trim is not None and decimate is not None  # `none` is refused for these three
         return Dynamic(

@@ -5,7 +5,7 @@ import sys
 import time
 
 from .._errors import DataError, UsageError
-from ._common import data_options, output_file
+from ._common import data_options, finite_seconds, output_file
 from ._notes import current, with_warnings
 from ._output import write_json
 
@@ -224,7 +224,7 @@ def _signature_entry(reference) -> dict:
 
 def parse_steps(text: str) -> tuple[int, ...]:
     try:
-        steps = tuple(int(v) for v in text.split(",") if v.strip())
+        steps = tuple(int(v) for v in text.split(","))
     except ValueError:
         raise UsageError(f"--steps must be comma-separated whole numbers of samples, got {text!r}") from None
     if not steps or min(steps) < 1:
@@ -319,8 +319,8 @@ def run_diagnose(args) -> int:
             "--exclude does not apply to quadrotor flights: dynax.load_flight finds their glitches and "
             "ground segments and leaves them out"
         )
-    if args.reference_horizon is not None and not args.reference_horizon > 0:
-        raise UsageError(f"--reference-horizon must be positive, got {args.reference_horizon}")
+    if args.reference_horizon is not None:
+        finite_seconds(args.reference_horizon, "--reference-horizon")
     if args.max_terms < 1:
         raise UsageError(f"--max-terms must be at least 1, got {args.max_terms}")
     if args.mode == "known" and args.nominal is None:

@@ -74,3 +74,22 @@ def test_write_json_never_writes_a_non_finite_number_as_one(tmp_path, capsys):
     mask = os.umask(0o022)
     os.umask(mask)
     assert (path.stat().st_mode & 0o777) == (0o666 & ~mask)
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["diagnose", "acrobot", "{acrobot}", "--dt", "inf", "--out", "{out}"],
+        ["diagnose", "acrobot", "{acrobot}", "--reference-horizon", "nan", "--out", "{out}"],
+        ["identify", "acrobot", "{acrobot}", "--method", "simulation", "--segment", "inf", "--out", "{out}.json"],
+    ],
+    ids=["diagnose-dt-inf", "diagnose-reference-nan", "identify-segment-inf"],
+)
+def test_a_non_finite_number_of_seconds_is_refused_by_name(argv, fixtures, tmp_path, capsys):
+    """`inf` passes a `> 0` check and `nan` fails none: each is refused naming its option, before any fit."""
+    out = tmp_path / "out"
+    argv = [a.format(acrobot=fixtures["acrobot"], out=out) for a in argv]
+    assert cli_main(argv) == 2
+    err = capsys.readouterr().err
+    assert argv[argv.index("--out") - 2] in err and "finite" in err
+    assert not list(tmp_path.iterdir())

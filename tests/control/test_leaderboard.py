@@ -196,6 +196,9 @@ def test_load_controller_refuses_bad_files(tmp_path):
         ["control", "evaluate", "missing.npz"],
         ["control", "acrobot", "--out", "policy.json"],
         ["control", "acrobot", "--out", "p.npz", "--starts", "0"],
+        ["control", "acrobot", "--out", "p.npz", "--horizon", "nan"],
+        ["control", "acrobot", "--out", "p.npz", "--horizon", "inf"],
+        ["control", "acrobot", "--out", "p.npz", "--horizon", "20"],  # past the 10 s episode
         ["control", "acrobot", "--out", "no/such/dir/p.npz"],
         ["control", "acrobot", "--out", "p.npz", "--reference", "missing.npz"],
         ["control"],

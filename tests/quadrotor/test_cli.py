@@ -132,6 +132,15 @@ def test_usage_errors(short_flight, tmp_path, capsys):
         main(["evaluate", str(model), str(short_flight), "--map", MAP, "--steps", "0,10", "--out", str(metrics)]) == 2
     )
     assert "--steps" in capsys.readouterr().err
+    # The helicopter's options would be ignored for a quadrotor (every start is scored, at --steps): refused, named.
+    for extra, named in (
+        (["--stride", "5"], "--stride"),
+        (["--horizons", "0.5"], "--horizons"),
+        (["--steps", "1,,10"], "--steps"),
+    ):
+        argv = ["evaluate", str(model), str(short_flight), "--map", MAP, *extra, "--out", str(metrics)]
+        assert main(argv) == 2
+        assert named in capsys.readouterr().err
     assert not metrics.exists()
 
 
