@@ -85,6 +85,7 @@ def load_flights(
                 "ground_s": [list(g) for g in found.ground],
                 "glitches": [g.describe() for g in found.glitches],
                 "resampled": found.resampled,
+                "estimated": found.estimated,
                 "usable_samples": int(found.usable.sum()),
                 "samples": len(trajectory),
             }
@@ -105,6 +106,8 @@ def _note_flight(path, found) -> None:
     said = current()
     if found.resampled:
         said.note("resampled", f"{path}: {found.resampled}", file=path, stream=sys.stdout, category="data")
+    if found.estimated:
+        said.note("estimated", f"{path}: {found.estimated}", file=path, stream=sys.stdout, category="data")
     for line, (t0, t1) in zip(found.describe(), found.ground):
         said.note("ground", f"{path}: {line}", file=path, t0=t0, t1=t1, stream=sys.stdout, category="data")
     for line, g in zip(found.describe()[len(found.ground) :], found.glitches):

@@ -24,11 +24,31 @@ OPTIONAL_INPUTS: dict[str, tuple[str, ...]] = {"quadrotor": ("vbat",)}
 # backward difference lags half a sample, which biases every parameter fitted to it; `choose_filter`
 # reads such a velocity's noise floor from the angle's backward difference, as a logger's velocity
 # reads). Estimated only when the file has none of a system's velocities and none is mapped.
+# A quadrotor log may lack its world velocities (estimated from x, y, z) or its body rates (a motion-capture
+# log of poses alone: estimated from the attitude, `ATTITUDE`, by central differences of its body-frame
+# steps); each group is estimated only when the file has none of it.
+ATTITUDE = "attitude"
 OPTIONAL_STATES: dict[str, dict[str, tuple[str, str]]] = {
     "linear_axis": {"dq": ("q", "central")},
     "acrobot": {"dq1": ("q1", "central"), "dq2": ("q2", "central")},
     "double_pendulum": {"dq1": ("q1", "central"), "dq2": ("q2", "central")},
+    "quadrotor": {
+        "vx": ("x", "central"),
+        "vy": ("y", "central"),
+        "vz": ("z", "central"),
+        "p": (ATTITUDE, "central"),
+        "q": (ATTITUDE, "central"),
+        "r": (ATTITUDE, "central"),
+    },
 }
+
+
+def optional_groups(system: str) -> list[dict[str, tuple[str, str]]]:
+    """The optional states of `system` (`OPTIONAL_STATES`) in groups that a file has whole or not at all: those
+    estimated from the attitude, and those estimated from positions."""
+    optional = OPTIONAL_STATES.get(system, {})
+    groups = [{n: s for n, s in optional.items() if (s[0] == ATTITUDE) is kind} for kind in (False, True)]
+    return [g for g in groups if g]
 
 
 def columns_for(system: str) -> tuple[tuple[str, ...], tuple[str, ...]]:

@@ -63,7 +63,7 @@ from ._flight_kinematics import (
     check_up_axis,
     check_velocity_frame,
 )
-from ._io import load_trajectory, Sampling
+from ._io import load_columns, Sampling
 from ._sanity import Check, DataWarning, glitch_findings, stuck_findings, velocity_stretch_findings
 from ._trajectory import Trajectory
 from ._velocities import block_slopes, stretch_edges
@@ -158,6 +158,7 @@ class FlightNotes:
     - `usable`: per sample, `True` where the vehicle flies and nothing is flagged.
     - `source`: the file.
     - `resampled`: how `load_flight` put an unevenly stamped record on its grid (`resampling_note`), or `""`.
+    - `estimated`: the states the file does not have and `load_flight` estimated (`estimated_note`), or `""`.
     """
 
     ground: tuple[tuple[float, float], ...]
@@ -165,6 +166,7 @@ class FlightNotes:
     usable: np.ndarray
     source: str = ""
     resampled: str = ""
+    estimated: str = ""
 
     def describe(self) -> list[str]:
         """One line per ground segment and glitch, for a note on the terminal or in a report (the resampling,
@@ -172,6 +174,21 @@ class FlightNotes:
         lines = [f"ground segment from t = {a:.2f} to {b:.2f} s: left out" for a, b in self.ground]
         lines += [f"glitch in {g.describe()}: left out" for g in self.glitches]
         return lines
+
+
+def estimated_note(names) -> str:
+    """What `load_flight` estimated of the states a log does not have, in one line (`""`: none)."""
+    said = []
+    if "vx" in names:
+        said.append("vx, vy, vz from x, y, z")
+    if "p" in names:
+        said.append("p, q, r from the attitude (its body-frame steps, qw..qz)")
+    if not said:
+        return ""
+    return (
+        f"not in the file, estimated by central differences (zero phase; they carry the differenced noise): "
+        f"{'; '.join(said)}"
+    )
 
 
 def resampling_note(recorded: np.ndarray, dt: float) -> str:
@@ -445,7 +462,7 @@ def _with_gaps(notes: FlightNotes, ts: np.ndarray, gaps) -> FlightNotes:
             start, stop, n = float(before - ts[0]), float(after - ts[0]), int(inside.size)
             found.append(Glitch("t", "gap", start, stop, int(inside[0]) + 1, n, float(after - before)))
     found.sort(key=lambda g: (g.start, g.column))
-    return FlightNotes(notes.ground, tuple(found), usable, notes.source, notes.resampled)
+    return FlightNotes(notes.ground, tuple(found), usable, notes.source, notes.resampled, notes.estimated)
 
 
 # A battery's voltage while the motors run stays within this factor of itself over a flight: a lithium cell from
@@ -608,14 +625,15 @@ def load_flight(
 ) -> tuple[Trajectory, FlightNotes]:
     """Load a quadrotor flight log: the contract's `quadrotor` columns, on a uniform grid, with notes.
 
-    Reads the file (`load_trajectory(path, "quadrotor", ...)`, `.csv.gz` included), refuses a quaternion that is
-    not of unit norm (tolerance 0.01, naming the row) and a motor or battery column that no flight logs (a motor
-    zero, constant or another motor's copy throughout, a battery at 0 V or below, or one that is no voltage in
-    flight), makes the quaternion's sign continuous, resamples a record with missed frames or uneven stamps onto
-    its median interval, and says so in the notes (`FlightNotes.resampled`; states interpolated, inputs the
-    interval's mean of the logged hold, `resample(..., inputs="average")`, whatever `input_resampling` says: a
-    hold read at each grid point takes the previous command wherever a stamp falls a hair after its grid point;
-    the samples inside a gap of more than `MAX_FLIGHT_GAP` intervals are noted as a `gap` and left out),
+    Reads the file (`load_trajectory(path, "quadrotor", ...)`, `.csv.gz` included; world velocities or body rates
+    the file does not have are estimated from the positions or the attitude, `FlightNotes.estimated`), refuses a
+    quaternion that is not of unit norm (tolerance 0.01, naming the row) and a motor or battery column that no
+    flight logs (a motor zero, constant or another motor's copy throughout, a battery at 0 V or below, or one that
+    is no voltage in flight), makes the quaternion's sign continuous, resamples a record with missed frames or
+    uneven stamps onto its median interval, and says so in the notes (`FlightNotes.resampled`; states interpolated,
+    inputs the interval's mean of the logged hold, `resample(..., inputs="average")`, whatever `input_resampling`
+    says: a hold read at each grid point takes the previous command wherever a stamp falls a hair after its grid
+    point; the samples inside a gap of more than `MAX_FLIGHT_GAP` intervals are noted as a `gap` and left out),
     normalises the quaternions, runs `inspect_flight`, and refuses columns that contradict each other
     (`dynax._data._flight_kinematics`).
 
@@ -626,7 +644,7 @@ def load_flight(
     path = str(path)
     # gaps are kept (and left out below), and the located checks are `inspect_flight`'s, said once as notes
     sampling = Sampling(3, max_gap=None)
-    data = load_trajectory(
+    data, estimated = load_columns(
         path, "quadrotor", mapping=mapping, scale=scale, offset=offset, sampling=sampling, check=False
     )
     check_input_columns(data, path=path, columns=dict(mapping or {}), checks=checks)
@@ -657,7 +675,7 @@ def load_flight(
     values = {n: np.asarray(data.xs[:, i], dtype=float) for i, n in enumerate(data.state_names)}
     columns = dict(mapping or {})
     notes = _with_gaps(inspect_flight(data, checks), np.asarray(data.ts, dtype=float), gaps)
-    notes = dataclasses.replace(notes, resampled=resampled)
+    notes = dataclasses.replace(notes, resampled=resampled, estimated=estimated_note(estimated))
     # The columns' agreement on the longest run with the motors running (glitches kept: a column in the
     # wrong unit is flagged as glitches throughout, and the check must see it to name it; the height is
     # not used, as a z axis pointing down is one of the faults).
@@ -668,8 +686,9 @@ def load_flight(
         flown = {n: v[a : b + 1] for n, v in values.items()}
         # the frame first: in another frame the rates disagree with the attitude too, and a scale is no fix
         motors = np.asarray(data.us[a : b + 1, :4], dtype=float)
-        check_quaternion_order(rel[a : b + 1], flown, path=path, columns=columns)
-        check_rate_frame(rel[a : b + 1], flown, motors, path=path, columns=columns, scale=scale)
+        if "p" not in estimated:  # rates estimated from the attitude agree with it whatever its order or frame
+            check_quaternion_order(rel[a : b + 1], flown, path=path, columns=columns)
+            check_rate_frame(rel[a : b + 1], flown, motors, path=path, columns=columns, scale=scale)
         check_up_axis(rel[a : b + 1], flown, path=path, columns=columns)
         check_velocity_frame(rel[a : b + 1], flown, path=path, columns=columns)
         check_position_units(rel[a : b + 1], flown, motors, path=path, columns=columns, scale=scale)

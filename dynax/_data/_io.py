@@ -18,7 +18,8 @@ import numpy as np
 
 from .._errors import DataError, UsageError
 from .._precision import check_times_for_float32
-from ._columns import columns_for, OPTIONAL_INPUTS, OPTIONAL_STATES
+from ._columns import ATTITUDE, columns_for, optional_groups, OPTIONAL_INPUTS
+from ._flight_kinematics import attitude_angles
 from ._matlab import read_mat_columns
 from ._sampling import check_time_stamps, MAX_GAP, MIN_STEP
 from ._trajectory import Trajectory
@@ -298,7 +299,8 @@ def load_trajectory(
 
     Velocities that are not in the file (encoder positions alone) are estimated from the
     positions, when the file has none of the system's velocities and none is mapped (one present
-    and another absent is a misnamed column, and an error):
+    and another absent is a misnamed column, and an error); a quadrotor's world velocities and its body rates
+    are two such groups, the rates estimated from the attitude (`attitude_angles`: its summed body-frame steps):
 
     - every system: by second-order central differences (`central_difference`), which do not lag, on
       the recorded time stamps but where a stamp disagrees with the positions (a logger that stalls
@@ -308,6 +310,23 @@ def load_trajectory(
       every parameter fitted to it. `choose_filter` reads the noise floor of such a velocity from
       the angle's backward difference, so the filter band is the one the logged velocities would give.
     """
+    return load_columns(
+        path, system, mapping=mapping, scale=scale, offset=offset, sampling=sampling, check=check, velocities=velocities
+    )[0]
+
+
+def load_columns(
+    path: str | os.PathLike,
+    system: str,
+    *,
+    mapping: Mapping[str, str] | None = None,
+    scale: Mapping[str, float] | None = None,
+    offset: Mapping[str, float] | None = None,
+    sampling: Sampling = Sampling(),
+    check: bool = True,
+    velocities: Literal["measured", "positions"] = "measured",
+) -> tuple[Trajectory, tuple[str, ...]]:
+    """`load_trajectory`, and the names of the states it estimated (`OPTIONAL_STATES`: not in the file)."""
     path = str(path)
     state_names, input_names = columns_for(system)
     wanted = (TIME, *state_names, *input_names)
@@ -344,14 +363,16 @@ def load_trajectory(
     if absent_inputs:
         input_names = tuple(name for name in input_names if name not in absent_inputs)
         wanted = (TIME, *state_names, *input_names)
-    optional = OPTIONAL_STATES.get(system, {})
     # Velocities are estimated only when the file has none of them: one present and another absent
-    # is a misnamed column, not a record of positions alone.
+    # is a misnamed column, not a record of positions alone (likewise a quadrotor's body rates).
     if velocities not in ("measured", "positions"):
         raise UsageError(f"`velocities` must be 'measured' or 'positions', got {velocities!r}")
     from_positions = velocities == "positions"
-    if any(name in mapping or name in raw for name in optional) and not from_positions:
-        optional = {}
+    optional = {}
+    for group in optional_groups(system):
+        from_attitude = any(source == ATTITUDE for source, _ in group.values())
+        if (from_positions and not from_attitude) or not any(name in mapping or name in raw for name in group):
+            optional.update(group)
     if from_positions and not optional:
         raise UsageError(f"`velocities='positions'`: '{system}' has no velocity that is estimated from a position")
     values = {}
@@ -397,10 +418,16 @@ def load_trajectory(
     difference = {"backward": backward_difference, "central": central_difference}
     # differenced on the times the positions were read at: a stamp taken late (a logger's stall between
     # reading the encoders and the clock) would divide their steps by the wrong intervals
-    sources = [values[source] for source, _ in optional.values()]
+    sources = [values[source] for source, _ in optional.values() if source != ATTITUDE]
     sampled = sample_times_from_positions(ts, np.stack(sources, 1))[0] if sources else ts
+    angles = None
     for name, (source, how) in optional.items():
-        values[name] = np.asarray(difference[how](sampled, values[source]))
+        if source == ATTITUDE:  # a body rate: the derivative of the attitude's summed body-frame steps
+            if angles is None:
+                angles = attitude_angles(np.stack([values[c] for c in ("qw", "qx", "qy", "qz")], axis=1))
+            values[name] = np.asarray(difference[how](sampled, angles[:, ("p", "q", "r").index(name)]))
+        else:
+            values[name] = np.asarray(difference[how](sampled, values[source]))
     measured = {v: q for v, q in velocity_pairs(state_names).items() if v not in optional}
     check_velocities(ts, values, measured, path=path, columns={n: mapping.get(n, n) for n in wanted}, scale=scale)
     xs = np.stack([values[s] for s in state_names], axis=1)
@@ -410,8 +437,8 @@ def load_trajectory(
     if check:
         from ._sanity import check_record
 
-        check_record(trajectory, estimated=tuple(optional)).warn(stacklevel=2)
-    return trajectory
+        check_record(trajectory, estimated=tuple(optional)).warn(stacklevel=3)
+    return trajectory, tuple(optional)
 
 
 def even_stamps(ts: np.ndarray, *, path=None, column: str = TIME) -> np.ndarray:
