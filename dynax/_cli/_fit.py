@@ -124,7 +124,7 @@ def load_helicopter_data(path, mapping=None, scale=None, offset=None, *, min_sam
     import numpy as np
 
     from .._data import check_records, exclude_stretches, load_trajectory, parse_exclude, resample, Sampling
-    from .._data._flight import check_unit_quaternions
+    from .._data._flight_kinematics import check_unit_quaternions
 
     with warnings.catch_warnings():  # checked below, on what --exclude leaves
         warnings.simplefilter("ignore")

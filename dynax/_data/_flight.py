@@ -60,6 +60,7 @@ from ._flight_kinematics import (
     check_quaternion_order,
     check_rate_frame,
     check_thrust_frame,
+    check_unit_quaternions,
     check_up_axis,
     check_velocity_frame,
 )
@@ -76,27 +77,6 @@ STRETCH_FACTOR = 2.0  # a velocity off its position's change by this factor in a
 
 # A gap of more than this many sample intervals is noted and its interpolated samples left out (module notes).
 MAX_FLIGHT_GAP = 3
-
-# A body-to-world quaternion further than this from unit norm is not an attitude measurement.
-QUATERNION_TOLERANCE = 0.01
-
-
-def check_unit_quaternions(quats, path, mapping=None) -> np.ndarray:
-    """The norms of a record's body-to-world quaternions (rows `qw, qx, qy, qz`); a `DataError` naming the file,
-    the column (as `mapping` maps it) and the first row where one is further than `QUATERNION_TOLERANCE` from 1."""
-    norms = np.linalg.norm(quats, axis=1)
-    bad = np.flatnonzero(np.abs(norms - 1) > QUATERNION_TOLERANCE)
-    if bad.size:
-        k = int(bad[0])
-        raise DataError(
-            f"the quaternion (qw, qx, qy, qz) has norm {norms[k]:.6g}, not 1 (tolerance "
-            f"{QUATERNION_TOLERANCE:g}; {bad.size} such rows): the contract's attitude is a unit "
-            "quaternion",
-            path=path,
-            column=(mapping or {}).get("qw", "qw"),
-            row=k + 1,
-        )
-    return norms
 
 
 @dataclasses.dataclass(frozen=True)

@@ -67,6 +67,28 @@ _OPPOSITE_SIGN = "the opposite sign (a gyro axis counted the other way: forward-
 STANDARD_GRAVITY = 9.80665
 
 
+# A body-to-world quaternion further than this from unit norm is not an attitude measurement.
+QUATERNION_TOLERANCE = 0.01
+
+
+def check_unit_quaternions(quats, path, mapping=None) -> np.ndarray:
+    """The norms of a record's body-to-world quaternions (rows `qw, qx, qy, qz`); a `DataError` naming the file,
+    the column (as `mapping` maps it) and the first row where one is further than `QUATERNION_TOLERANCE` from 1."""
+    norms = np.linalg.norm(quats, axis=1)
+    bad = np.flatnonzero(np.abs(norms - 1) > QUATERNION_TOLERANCE)
+    if bad.size:
+        k = int(bad[0])
+        raise DataError(
+            f"the quaternion (qw, qx, qy, qz) has norm {norms[k]:.6g}, not 1 (tolerance "
+            f"{QUATERNION_TOLERANCE:g}; {bad.size} such rows): the contract's attitude is a unit "
+            "quaternion",
+            path=path,
+            column=(mapping or {}).get("qw", "qw"),
+            row=k + 1,
+        )
+    return norms
+
+
 class _RateRecord(NamedTuple):
     """What the per-axis rate checks weigh and name: the times, the quaternions `(n, 4)` and the rates `(n, 3)`
     as logged, and the file, its columns (contract name -> file column) and the factors already applied."""

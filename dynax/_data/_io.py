@@ -19,7 +19,7 @@ import numpy as np
 from .._errors import DataError, UsageError
 from .._precision import check_times_for_float32
 from ._columns import ATTITUDE, columns_for, optional_groups, OPTIONAL_INPUTS
-from ._flight_kinematics import attitude_angles
+from ._flight_kinematics import attitude_angles, check_unit_quaternions
 from ._matlab import read_mat_columns
 from ._sampling import check_time_stamps, MAX_GAP, MIN_STEP
 from ._trajectory import Trajectory
@@ -423,8 +423,10 @@ def load_columns(
     angles = None
     for name, (source, how) in optional.items():
         if source == ATTITUDE:  # a body rate: the derivative of the attitude's summed body-frame steps
-            if angles is None:
-                angles = attitude_angles(np.stack([values[c] for c in ("qw", "qx", "qy", "qz")], axis=1))
+            if angles is None:  # from unit quaternions only (a zero row would differentiate into NaN)
+                quats = np.stack([values[c] for c in ("qw", "qx", "qy", "qz")], axis=1)
+                check_unit_quaternions(quats, path, mapping)
+                angles = attitude_angles(quats)
             values[name] = np.asarray(difference[how](sampled, angles[:, ("p", "q", "r").index(name)]))
         else:
             values[name] = np.asarray(difference[how](sampled, values[source]))

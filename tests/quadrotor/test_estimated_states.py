@@ -81,3 +81,15 @@ def test_rates_estimated_from_a_real_flights_attitude_follow_its_logged_rates():
     for k in range(10, 13):
         a, b = np.asarray(estimated.xs)[flying, k], np.asarray(logged.xs)[flying, k]
         assert np.corrcoef(a, b)[0, 1] > 0.9
+
+
+def test_a_zero_quaternion_in_a_pose_log_is_refused_at_its_row_not_differentiated(flight, tmp_path):
+    path = _write(tmp_path / "poses.csv", flight, POSES)
+    lines = path.read_text().splitlines()
+    row = lines[100].split(",")
+    row[4:8] = ["0"] * 4  # qw..qz of data row 100
+    lines[100] = ",".join(row)
+    path.write_text("\n".join(lines) + "\n")
+    for load in (lambda: dynax.load_flight(path), lambda: dynax.load_trajectory(path, "quadrotor")):
+        with pytest.raises(dynax.DataError, match="row 100: the quaternion"):
+            load()
