@@ -12,6 +12,7 @@ confusion matrix of the hidden cause against the verdict and the first named cau
     nice -n 5 python experiments/calibration_battery.py [OUT] [--only SUBSTRING] [--every K] [--budget-s S]
         [--names "NAME;NAME;..."]
     python experiments/calibration_battery.py OUT --reruns "DIR;DIR;..."
+    nice -n 5 python experiments/calibration_battery.py OUT --controls N
 
 OUT defaults to `experiments/results/calibration_battery`. Cases run in an order that interleaves systems and
 causes, and `OUT/cases.json` is rewritten after each (a rerun skips the cases already there), so a run cut
@@ -20,6 +21,8 @@ runs every K-th case of that order. `--names` runs the named cases in the order 
 change touches, most telling first). `--reruns` runs nothing: it tallies OUT's rows with those of the named
 folders' `cases.json` in place of the rows of the same name (later folders win) into `OUT/with_reruns/`
 (`summary.json`, `confusion.png`, `confusion.md`): the stored battery with the rows a change made run again.
+`--controls N` runs `N` more effect-free controls instead (`tests.hidden_cases.extra_controls`: the arms', the
+axis's and the helicopter's rigs with other seeds), whose false claims bound the false-claim rate more tightly.
 """
 
 import json
@@ -39,7 +42,7 @@ import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
 from dynax.internal import ProgressBar
-from tests.hidden_cases import CASES, diagnose_case, outcome, refit_truth_gain, STICK_SLIP, truth_gain
+from tests.hidden_cases import CASES, diagnose_case, extra_controls, outcome, refit_truth_gain, STICK_SLIP, truth_gain
 from tests.hidden_flights import truth_gains
 
 VERDICTS = ("explained", "unexplained", "inconclusive", "none")
@@ -96,6 +99,16 @@ def _named_as_inconclusive_best(row) -> bool:
     if row["verdict"] != "inconclusive" or best is None:
         return False
     return f"{best['cause']}@{best['where']}" == row["expected"]
+
+
+def claim_bound(controls) -> float | None:
+    """The one-sided 95 % upper confidence bound (Clopper-Pearson) on the false-claim rate of `controls`."""
+    if not controls:
+        return None
+    from scipy.stats import beta
+
+    k, n = sum(bool(r["false_claim"]) for r in controls), len(controls)
+    return 1.0 if k == n else float(beta.ppf(0.95, k + 1, n - k))
 
 
 def summary(rows):
@@ -159,6 +172,8 @@ def summary(rows):
             else None
         ),
         "false_claim_controls": share(controls, "false_claim"),
+        # the one-sided 95 % Clopper-Pearson bound on the rate: what the controls run can show of it
+        "false_claim_controls_upper_95": claim_bound(controls),
         "none_where_best_gains_25": share(gained, "none_with_gain"),
         "cases_best_gains_25": len(gained),
         "spurious_extra": share(effects, "extra"),
@@ -256,7 +271,7 @@ def markdown(c, rows) -> str:
 def main():
     args = sys.argv[1:]
     opts = {}
-    for flag in ("--only", "--every", "--budget-s", "--names", "--reruns"):
+    for flag in ("--only", "--every", "--budget-s", "--names", "--reruns", "--controls"):
         if flag in args:
             i = args.index(flag)
             opts[flag] = args[i + 1]
@@ -271,6 +286,8 @@ def main():
         return
     done = {r["name"] for r in rows}
     cases = interleaved(CASES)[:: int(opts.get("--every", 1))]
+    if "--controls" in opts:  # only effect-free controls, more of them: the false-claim rate's bound
+        cases = list(extra_controls(int(opts["--controls"])))
     if "--only" in opts:
         cases = [c for c in cases if opts["--only"] in c.name]
     if "--names" in opts:
