@@ -27,7 +27,7 @@ from typing import Literal
 
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Int
+from jaxtyping import Array, ArrayLike, Float, Int
 import numpy as np
 
 from ._context import set_within
@@ -116,7 +116,7 @@ class ProgressBar:
         self._merge(values)
         self._bar.update(n)
 
-    def reach(self, step: int, **values: float) -> None:
+    def reach(self, step: int, **values: float | Float[ArrayLike, ""]) -> None:
         """Move to step `step` (steps done; never backwards) and show `values`."""
         if self._bar is None:
             return
@@ -176,7 +176,7 @@ def _host_report(token, step, values):
         bar.reach(int(np.max(step)) + 1, **values)
 
 
-def report(token: Int[ArrayLike, ""], step: Int[ArrayLike, ""], **values: ArrayLike) -> None:
+def report(token: Int[ArrayLike, ""], step: Int[ArrayLike, ""] | Float[ArrayLike, ""], **values: ArrayLike) -> None:
     """From inside compiled code, tell the bar with `token` that step `step` (0-based) is done.
 
     Emits a `jax.debug.callback`; with `token == 0` (no bar) the host side does nothing. Call it

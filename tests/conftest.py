@@ -81,34 +81,26 @@ def acrobot_csv(tmp_path_factory):
     return path
 
 
-def _memory_maps() -> int:
-    try:
-        with open("/proc/self/maps") as f:
-            return sum(1 for _ in f)
-    except OSError:  # not Linux
-        return 0
+@pytest.fixture(autouse=True)
+def _release_compiled_code():
+    """Drop JAX's compiled executables when this worker holds half the memory maps a process may
+    (`dynax.internal.release_compiled_code`): a worker that compiles several hundred programs (the whole
+    suite on two workers) would otherwise reach `vm.max_map_count` and die in the next compilation."""
+    from dynax.internal import release_compiled_code
 
-
-def _max_memory_maps() -> int:
-    try:
-        return int(pathlib.Path("/proc/sys/vm/max_map_count").read_text())
-    except (OSError, ValueError):
-        return 65530
-
-
-_MAP_LIMIT = _max_memory_maps() // 2
+    yield
+    if release_compiled_code():
+        gc.collect()
 
 
 @pytest.fixture(autouse=True)
-def _release_compiled_code():
-    """Drop JAX's compiled executables when this worker holds many memory maps.
+def _wrong_types(request):
+    """The test-time type checker (`tests/typecheck.py`) stands aside for a test marked `wrong_types`, which passes
+    a wrong type or shape on purpose to see dynax's own refusal."""
+    if request.node.get_closest_marker("wrong_types") is None:
+        yield
+        return
+    from tests.typecheck import standing_aside
 
-    XLA's CPU backend maps each compiled executable into memory of its own; a test worker that
-    compiles several hundred programs (the whole suite on two workers) reaches the kernel's limit
-    on memory maps per process (`vm.max_map_count`, 65530 by default) and the next compilation
-    dies with a segmentation fault. `jax.clear_caches()` unmaps them; later tests compile again.
-    """
-    yield
-    if _memory_maps() > _MAP_LIMIT:
-        jax.clear_caches()
-        gc.collect()
+    with standing_aside():
+        yield

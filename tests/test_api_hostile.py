@@ -342,6 +342,7 @@ BEHAVED = [
 ]
 
 
+@pytest.mark.wrong_types
 @pytest.mark.parametrize(
     "call, error, pattern, attributes", [case[1:] for case in FIXED + BEHAVED], ids=[c[0] for c in FIXED + BEHAVED]
 )

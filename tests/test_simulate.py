@@ -179,6 +179,7 @@ def test_float32_is_respected():
     assert xs.dtype == jnp.float32
 
 
+@pytest.mark.wrong_types
 def test_bad_arguments_are_named():
     with pytest.raises(ValueError, match="`us` must have shape \\(time, 1\\)"):
         dynax.simulate(dynax.Acrobot(), X0, TS, jnp.zeros((501, 2)))

@@ -5,6 +5,7 @@ from hypothesis import given, HealthCheck, settings
 from hypothesis import strategies as st
 import jax.numpy as jnp
 import numpy as np
+import pytest
 import scipy.linalg
 
 import dynax
@@ -43,6 +44,7 @@ def arguments(draw):
     return np.asarray(x0, float), ts, us
 
 
+@pytest.mark.wrong_types
 @settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(arguments())
 def test_simulate_refuses_or_returns_the_exact_solution(args):

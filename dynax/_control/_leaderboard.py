@@ -25,7 +25,7 @@ import time
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float, PRNGKeyArray
+from jaxtyping import Array, Float, Key, UInt32
 import numpy as np
 
 # ---------------------------------------------------------------- the plant
@@ -42,22 +42,22 @@ class LeaderboardPlant(eqx.Module):
     the benchmark's design C.1, model 1.0. Every field is an array, so plants stack and `vmap`.
     """
 
-    m1: Float[Array, ""]
-    m2: Float[Array, ""]
-    l1: Float[Array, ""]
-    l2: Float[Array, ""]
-    r1: Float[Array, ""]
-    r2: Float[Array, ""]
-    I1: Float[Array, ""]
-    I2: Float[Array, ""]
-    Ir: Float[Array, ""]
-    gr: Float[Array, ""]
-    b1: Float[Array, ""]
-    b2: Float[Array, ""]
-    cf1: Float[Array, ""]
-    cf2: Float[Array, ""]
-    g: Float[Array, ""]
-    torque_limit: Float[Array, ""]
+    m1: Float[Array, "*batch"]
+    m2: Float[Array, "*batch"]
+    l1: Float[Array, "*batch"]
+    l2: Float[Array, "*batch"]
+    r1: Float[Array, "*batch"]
+    r2: Float[Array, "*batch"]
+    I1: Float[Array, "*batch"]
+    I2: Float[Array, "*batch"]
+    Ir: Float[Array, "*batch"]
+    gr: Float[Array, "*batch"]
+    b1: Float[Array, "*batch"]
+    b2: Float[Array, "*batch"]
+    cf1: Float[Array, "*batch"]
+    cf2: Float[Array, "*batch"]
+    g: Float[Array, "*batch"]
+    torque_limit: Float[Array, "*batch"]
 
     @classmethod
     def nominal(cls, **changes) -> "LeaderboardPlant":
@@ -265,14 +265,14 @@ class Case(eqx.Module):
     """
 
     plant: LeaderboardPlant
-    velocity_noise: Float[Array, ""]
-    torque_noise: Float[Array, ""]
-    responsiveness: Float[Array, ""]
+    velocity_noise: Float[Array, "*batch"]
+    torque_noise: Float[Array, "*batch"]
+    responsiveness: Float[Array, "*batch"]
     delay_steps: Array
-    pulse_centre: Float[Array, "2 n"]
-    pulse_width: Float[Array, "2 n"]
-    pulse_amplitude: Float[Array, "2 n"]
-    key: PRNGKeyArray
+    pulse_centre: Float[Array, "*batch 2 n"]
+    pulse_width: Float[Array, "*batch 2 n"]
+    pulse_amplitude: Float[Array, "*batch 2 n"]
+    key: Key[Array, "*batch"] | UInt32[Array, "*batch 2"]
 
 
 def nominal_case(plant: LeaderboardPlant | None = None, n_pulses: int = 3) -> Case:

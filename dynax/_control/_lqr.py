@@ -102,14 +102,18 @@ def _costs(system, q, r, dtype):
 
 
 def lqr(
-    system: AbstractSystem,
-    x_eq: Float[ArrayLike, " n_states"],
-    u_eq: Float[ArrayLike, " n_inputs"],
-    q: Float[ArrayLike, "n_states n_states"] | None = None,
-    r: Float[ArrayLike, "n_inputs n_inputs"] | None = None,
+    system: AbstractSystem | Float[ArrayLike, "n_states n_states"],  # or python-control's A
+    x_eq: Float[ArrayLike, " n_states"] | Float[ArrayLike, "n_states n_inputs"],  # or B
+    u_eq: Float[ArrayLike, " n_inputs"] | Float[ArrayLike, "n_states n_states"],  # or Q
+    q: Float[ArrayLike, "n_states n_states"]
+    | Float[ArrayLike, " n_states"]
+    | Float[ArrayLike, "n_inputs n_inputs"]  # or R
+    | Float[ArrayLike, ""]
+    | None = None,
+    r: Float[ArrayLike, "n_inputs n_inputs"] | Float[ArrayLike, ""] | None = None,
     *,
     angles: tuple[int, ...] = (),
-) -> LQR:
+) -> LQR | tuple[Array, Array, Array]:
     r"""The continuous-time infinite-horizon LQR of `system` linearised about `(x_eq, u_eq)`.
 
     Also python-control's matrix form: `lqr(A, B, Q, R) -> (K, S, E)` (positional, four

@@ -14,7 +14,7 @@ import jax
 import jax.flatten_util
 import jax.numpy as jnp
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
-from jaxtyping import Array, ArrayLike, Float, Int, PRNGKeyArray
+from jaxtyping import Array, ArrayLike, Float, Int, Key, PRNGKeyArray, UInt32
 import optax
 
 from .._distributed import multi_process, replicate_in_jit
@@ -277,10 +277,10 @@ class PGPEHistory(eqx.Module):
     """Per-iteration record of `run`: `reward` (population average), `best_reward` (so far),
     `mean_params` (parameter units, before the iteration's update) and `sigma` (normalised)."""
 
-    reward: Float[Array, " iterations"]
-    best_reward: Float[Array, " iterations"]
-    mean_params: Float[Array, "iterations n_params"]
-    sigma: Float[Array, "iterations n_params"]
+    reward: Float[Array, " *iterations"]
+    best_reward: Float[Array, " *iterations"]
+    mean_params: Float[Array, "*iterations n_params"]
+    sigma: Float[Array, "*iterations n_params"]
 
 
 def population_sharding(population_size: int) -> NamedSharding | None:
@@ -299,7 +299,7 @@ def population_sharding(population_size: int) -> NamedSharding | None:
 def evaluate_population(
     objective: Objective,
     population: Float[Array, "population n_params"],
-    keys: PRNGKeyArray,
+    keys: Key[Array, " population"] | UInt32[Array, "population 2"],
     *,
     shard: bool = True,
 ) -> Float[Array, " population"]:
@@ -427,7 +427,7 @@ def sweep_pgpe(
     pgpe: PGPE,
     objective: Objective,
     params: Float[ArrayLike, " n_params"],
-    keys: PRNGKeyArray,
+    keys: Key[Array, " runs"] | UInt32[Array, "runs 2"],
     n_iterations: int,
     *,
     shard: bool = True,

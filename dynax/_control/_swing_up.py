@@ -32,7 +32,9 @@ def balancing_lqr(system: Acrobot) -> LQR:
     """
     dtype = jnp.result_type(system.theta1, float)
     x_eq = jnp.asarray(UPRIGHT, dtype)
-    return lqr(system, x_eq, jnp.zeros(1, dtype), jnp.array([10.0, 10.0, 1.0, 1.0], dtype), 1.0, angles=(0, 1))
+    balance = lqr(system, x_eq, jnp.zeros(1, dtype), jnp.array([10.0, 10.0, 1.0, 1.0], dtype), 1.0, angles=(0, 1))
+    assert isinstance(balance, LQR)  # the system form (the matrix form returns python-control's tuple)
+    return balance
 
 
 class AbstractSwitchingRule(eqx.Module):

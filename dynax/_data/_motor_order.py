@@ -304,7 +304,7 @@ def power_note(found: MotorOrder | None, reference: str) -> str:
     )
 
 
-def order_text(order: Sequence[int]) -> str:
+def order_text(order: Sequence[int] | np.ndarray) -> str:
     """The reference's motor names that the logged columns `m1..m4` read like under `order`."""
     inverse = np.argsort(order)
     return ",".join(f"m{int(inverse[j]) + 1}" for j in range(4))

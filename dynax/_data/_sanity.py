@@ -367,7 +367,7 @@ def held_still(ts, x, v) -> bool:
     reach = np.abs(np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * span)]))
     dv = np.diff(v)  # the noise from sample to sample (a motion's spread is not noise)
     noise = 1.4826 * float(np.median(np.abs(dv - np.median(dv)))) / np.sqrt(2.0) if dv.size else 0.0
-    return float(reach.max()) <= max(2.0 * quantum, 4.0 * noise * float(np.sqrt(np.sum(span**2))))
+    return bool(float(reach.max()) <= max(2.0 * quantum, 4.0 * noise * float(np.sqrt(np.sum(span**2)))))
 
 
 def stuck_findings(tr, ts, source, names, xs, paired_estimated, dt):

@@ -3,7 +3,7 @@
 import equinox as eqx
 from jax.core import Tracer
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, Real
 import numpy as np
 
 from .._errors import DataError, UsageError
@@ -27,11 +27,11 @@ class Trajectory(eqx.Module):
     - `source`: where the data came from (a file path), or `""` (static).
     """
 
-    ts: Float[Array | np.ndarray, " time"]
-    xs: Float[Array | np.ndarray, "time n_states"]
-    us: Float[Array | np.ndarray, "time n_inputs"]
-    state_names: tuple[str, ...] = eqx.field(static=True)
-    input_names: tuple[str, ...] = eqx.field(static=True)
+    ts: Real[Array | np.ndarray, " time"]  # integers too (`__check_init__`)
+    xs: Real[Array | np.ndarray, "time n_states"]
+    us: Real[Array | np.ndarray, "time n_inputs"]
+    state_names: tuple[str, ...] | list[str] = eqx.field(static=True)
+    input_names: tuple[str, ...] | list[str] = eqx.field(static=True)
     system: str = eqx.field(static=True, default="")
     source: str = eqx.field(static=True, default="")
 

@@ -162,7 +162,7 @@ def corrected_gain(ts, q, slopes, means, edges) -> tuple[float, float] | None:
 
 
 def _refused(gain: float, std: float) -> bool:
-    return abs(gain - 1.0) > MAX_GAIN_ERROR and abs(gain - 1.0) > SIGNIFICANCE * std
+    return bool(abs(gain - 1.0) > MAX_GAIN_ERROR and abs(gain - 1.0) > SIGNIFICANCE * std)
 
 
 STRETCHES = 8  # the record is cut into this many stretches to ask whether a wrong gain holds in all of them

@@ -111,7 +111,7 @@ class Windows(eqx.Module):
     xs_before: Float[Array, "window before n_states"]
     # (record index, start sample) per window, read on the host only. An array, not a static
     # field: a static field would compile every fit anew for records cut at other places.
-    starts: Int[Array, "window 2"]
+    starts: Int[Array, "window 2"] | Int[np.ndarray, "window 2"]
     # Each window's weight in a fit (1 by default; 0 leaves it out). Cross-fitting leaves a record
     # out by zero weights rather than by cutting its windows out: the same shapes, so the same
     # compiled fit serves every fold.

@@ -26,7 +26,7 @@ import equinox as eqx
 import jax
 from jax.custom_derivatives import SymbolicZero
 import jax.numpy as jnp
-from jaxtyping import Array, Float, PyTree
+from jaxtyping import Array, ArrayLike, Float, PyTree
 import optimistix as optx
 
 from .._progress import report
@@ -140,7 +140,7 @@ def fit_least_squares(
     args: PyTree[Any] = None,
     *,
     solver: optx.AbstractLeastSquaresSolver = DEFAULT_LEAST_SQUARES,
-    scale: Float[Array, " n"] | None = None,
+    scale: Float[ArrayLike, " n"] | Float[ArrayLike, ""] | None = None,
     max_steps: int = 256,
     options: LeastSquaresOptions = LeastSquaresOptions(),
 ) -> Solution:
@@ -262,7 +262,7 @@ def fit_minimise(
     args: PyTree[Any] = None,
     *,
     solver: optx.AbstractMinimiser = DEFAULT_MINIMISER,
-    scale: Float[Array, " n"] | None = None,
+    scale: Float[ArrayLike, " n"] | Float[ArrayLike, ""] | None = None,
     max_steps: int = 256,
     covariance: bool = True,
 ) -> Solution:

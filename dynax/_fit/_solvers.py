@@ -18,7 +18,7 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Float, Int, PyTree, Scalar
+from jaxtyping import Array, ArrayLike, Bool, Float, Int, PyTree, Scalar
 import numpy as np
 import optax
 import optimistix as optx
@@ -56,7 +56,9 @@ def _host_notify(token, step, loss, accepted):
         callback(int(np.max(step)), float(np.min(loss)))
 
 
-def notify(token: Int[Array, ""], step: Int[Array, ""], loss: Scalar, accepted: Bool[Array, ""] | bool = True) -> None:
+def notify(
+    token: Int[ArrayLike, ""], step: Int[ArrayLike, ""], loss: Scalar, accepted: Bool[Array, ""] | bool = True
+) -> None:
     """From compiled code: tell the callback registered under `token` that `step` ended at `loss`
     (skipped on the host when `accepted` is false)."""
     jax.debug.callback(_host_notify, token, step, loss, jnp.asarray(accepted))

@@ -260,7 +260,7 @@ def record_angle_zeros(
     else:
         chosen, reason = True, "asked for (Dynamic(offsets='angles'))"
     return AngleZeros(
-        record_labels(trajectories), names, zeros, halves, error, force_error, steps, converged, chosen, reason
+        tuple(record_labels(trajectories)), names, zeros, halves, error, force_error, steps, converged, chosen, reason
     )
 
 

@@ -192,8 +192,8 @@ def applied_force(system: AbstractSystem, us) -> np.ndarray:
 
 def dynamic_regressor(
     system: AbstractSystem,
-    xs: Float[Array, "time n_states"],
-    ddq: Float[Array, "time n_joints"],
+    xs: Float[Array | np.ndarray, "time n_states"],
+    ddq: Float[Array | np.ndarray, "time n_joints"],
     friction: Friction = "viscous",
 ) -> Float[Array, "time n_joints n_params"]:
     r"""The inverse-dynamics regressor $Y(q, \dot q, \ddot q)$ with $Y\theta = M\ddot q + h + F = B u$.

@@ -364,8 +364,8 @@ def fit_simulation_error(
     method: SimulationFit = SimulationFit(),
     *,
     filter_spec: PyTree[bool] | Parameters | None = None,
-    state_scale: Float[Array, " n_states"] | None = None,
-    record_weights: Float[Array, " n_records"] | None = None,
+    state_scale: Float[Array | np.ndarray, " n_states"] | None = None,
+    record_weights: Float[Array | np.ndarray, " n_records"] | None = None,
     progress: bool | None = None,
     solver=None,
 ) -> Solution:

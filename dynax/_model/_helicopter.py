@@ -228,12 +228,12 @@ class AbstractBodyModel(eqx.Module):
     # The contract's name of the model (`MODEL.json`'s "model", the CLI's `--model`).
     kind: eqx.AbstractClassVar[str]
 
-    def known(self, quat: Float[Array, "4"], s: Float[Array, "6"], u: Float[Array, "4"]) -> Float[Array, "6"]:
+    def known(self, quat: Float[Array, "4"], s: Float[Array, "6"], u: Float[Array, " n_inputs"]) -> Float[Array, "6"]:
         """The part of $(\\dot\\nu, \\dot\\omega)$ fixed by physics (zero unless overridden)."""
         return jnp.zeros_like(s)
 
     def features(
-        self, quat: Float[Array, "4"], s: Float[Array, "6"], u: Float[Array, "4"]
+        self, quat: Float[Array, "4"], s: Float[Array, "6"], u: Float[Array, " n_inputs"]
     ) -> Float[Array, " n_features"]:
         r"""The feature vector $\phi(q, \nu, \omega, u)$, ordered as `feature_names`."""
         return jnp.stack([FEATURES[name](quat, s, u).astype(s.dtype) for name in self.feature_names])

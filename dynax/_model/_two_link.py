@@ -88,7 +88,7 @@ PHYSICAL_REQUIRED = ("m1", "m2", "l1", "lc1", "lc2", "b1", "b2")
 PHYSICAL_OPTIONAL = ("Ic1", "Ic2", "I1", "I2", "g")
 
 
-def base_parameters_from_physical(physical: Mapping[str, float]) -> dict[str, float]:
+def base_parameters_from_physical(physical: Mapping[str, ArrayLike]) -> dict[str, ArrayLike]:
     r"""Map physical parameters to the base parameters theta1..theta7.
 
     **Arguments:** `physical`, a mapping (a dict, or a lab's parameter file as read) of: masses

@@ -36,6 +36,7 @@ def test_malformed_input_is_refused_or_answered_correctly(case, fixtures, tmp_pa
         assert "np." not in outcome.message  # numbers and names as the user wrote them, not numpy reprs
 
 
+@pytest.mark.wrong_types
 @pytest.mark.parametrize("case", simulate_cases(), ids=[c[0] for c in simulate_cases()])
 def test_simulate_refuses_invalid_arguments(case):
     _, call, message = case

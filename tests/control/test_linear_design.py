@@ -7,6 +7,7 @@ import pytest
 import scipy.linalg
 
 import dynax
+from tests.typecheck import standing_aside
 
 
 def _problem(seed, n=4, m=2):
@@ -104,7 +105,7 @@ def test_ctrb_and_obsv_detect_an_uncontrollable_mode():
         6,
         3,
     )
-    with pytest.raises(ValueError, match="`b` must have shape"):
+    with standing_aside(), pytest.raises(ValueError, match="`b` must have shape"):  # a wrong shape on purpose
         dynax.control.ctrb(a, np.ones((2, 1)))
 
 

@@ -129,6 +129,7 @@ def test_riccati_solvers_vmap():
         np.testing.assert_allclose(x, scipy.linalg.solve_continuous_are(*p), rtol=1e-9)
 
 
+@pytest.mark.wrong_types
 def test_shape_errors_name_the_argument():
     a, b, q, r = _random_problem(0)
     with pytest.raises(ValueError, match="`q`"):

@@ -36,6 +36,7 @@ def test_settings_keep_what_is_given_and_say_the_defaults():
     assert hash(s) == hash(Selection(max_terms=1, cross_fit=False))  # static: usable as a jit-static argument
 
 
+@pytest.mark.wrong_types
 def test_diagnose_refuses_settings_of_the_wrong_type_before_reading_the_records():
     with pytest.raises(UsageError, match="`selection` must be a dynax.Selection"):
         diagnose(Acrobot(), [], selection={"max_terms": 2})  # type: ignore[arg-type]

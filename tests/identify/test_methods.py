@@ -119,6 +119,7 @@ def test_least_squares_fit_reads_friction_and_weights_from_its_settings(records)
     assert isinstance(fit.model, dynax.Extended)  # the model carries the Coulomb terms it fitted
 
 
+@pytest.mark.wrong_types
 def test_methods_are_asked_not_checked():
     with pytest.raises(UsageError, match="AbstractMethod"):
         identify(

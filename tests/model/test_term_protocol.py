@@ -100,6 +100,7 @@ def test_vehicle_terms_act_on_the_helicopter():
     np.testing.assert_allclose(no_wind[:7], nominal[:7], rtol=1e-12)
 
 
+@pytest.mark.wrong_types
 @pytest.mark.parametrize("system", [DoublePendulum(), LinearAxis(), Extended(Acrobot(), (CoulombFriction(1, 0.1),))])
 def test_spong_controller_needs_an_acrobot(system):
     with pytest.raises(ValueError, match="SpongController: `system` must be an Acrobot"):

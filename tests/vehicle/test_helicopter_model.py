@@ -93,6 +93,7 @@ def test_quaternion_angle_is_sign_invariant_and_exact():
     assert quaternion_angle(a, a) == pytest.approx(0.0, abs=1e-7)
 
 
+@pytest.mark.wrong_types
 def test_bad_body_model_is_refused():
     with pytest.raises(ValueError, match="body_model"):
         Helicopter(body_model="tempest")

@@ -67,7 +67,9 @@ def _solver_step(system: Helicopter, x, u, dt):
     return y
 
 
-def rollout(system: Helicopter, x0: Float[Array, " 13"], us: Float[Array, "lag 4"], dt) -> Float[Array, "lag+1 13"]:
+def rollout(
+    system: Helicopter, x0: Float[Array, " 13"], us: Float[Array, "lag n_inputs"], dt
+) -> Float[Array, "steps 13"]:  # steps = lag + 1
     """Open-loop states `x0, x1, ..., x_H` under the zero-order-hold inputs `us` (one Tsit5 step each)."""
 
     def step(x, u):
@@ -181,7 +183,7 @@ def lagged_loss(
 
 def predict_windows(
     system: Helicopter, trajectory: Trajectory, starts: Int[Array, " window"], n_steps: int
-) -> tuple[Float[Array, "window lag+1 13"], Float[Array, "window lag+1 13"], Float[Array, "window lag 4"]]:
+) -> tuple[Float[Array, "window steps 13"], Float[Array, "window steps 13"], Float[Array, "window lag n_inputs"]]:
     """Rollouts from `starts` over `n_steps`: the predicted states, the measured states and the inputs."""
     dt = trajectory.ts[1] - trajectory.ts[0]
 

@@ -152,7 +152,7 @@ class Stiction(AbstractJointTerm):
         velocity_scale: ArrayLike = 0.01,
         hold_time: ArrayLike = 0.01,
         held_force: ArrayLike = 0.0,
-        held_position: ArrayLike | None = None,
+        held_position: ArrayLike | tuple[float, ...] | None = None,
         dwell_time: ArrayLike | None = None,
         slip_distance: ArrayLike = 0.005,
     ):

@@ -74,7 +74,7 @@ class AbstractVehicleTerm(AbstractTerm):
         system: Helicopter,
         terms: tuple["AbstractVehicleTerm", ...],
         x: Float[Array, " 13"],
-        u: Float[Array, "4"],
+        u: Float[Array, " n_inputs"],
         hidden: tuple[Float[Array, " _"], ...] | None = None,
     ) -> Float[Array, " 13"]:
         """The helicopter's vector field with vehicle terms added (see the module docs; used by `Extended`).
@@ -116,7 +116,7 @@ class AbstractVehicleTerm(AbstractTerm):
         self,
         quat: Float[Array, "4"],
         air: Float[Array, "6"],
-        u: Float[Array, "4"],
+        u: Float[Array, " n_inputs"],
         z: Float[Array, " n_hidden"] | None = None,
     ) -> Float[Array, "6"]:
         """The body-frame acceleration `(du, dv, dw, dp, dq, dr)` the term adds, at the air-relative body state
